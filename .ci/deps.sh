@@ -1,0 +1,22 @@
+#!/bin/sh
+# Install the Debian 12 packages gridsurvey needs, only those that are missing.
+# Called by `make deps` (and so by `make`, `make check`, `make demo`); needs root to install.
+set -eu
+PKGS="gcc g++ make pkg-config sqlite3 libsqlite3-dev libfftw3-dev libsndfile1-dev libjansson-dev
+libplplot-dev plplot-driver-cairo libopenblas-dev libopencv-dev libgeographiclib-dev
+geographiclib-tools libgpiod-dev gcc-avr avr-libc simavr libsimavr-dev libelf-dev gdal-bin
+python3-gdal python3-numpy python3-opencv"
+missing=""
+for p in $PKGS; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
+done
+[ -z "$missing" ] && exit 0
+echo "deps: installing missing Debian packages:$missing"
+if [ "$(id -u)" -ne 0 ]; then
+  echo "deps: missing packages:$missing (run 'make deps' as root, or: sudo apt-get install$missing)" >&2
+  exit 1
+fi
+export DEBIAN_FRONTEND=noninteractive
+apt-get update -qq
+# shellcheck disable=SC2086
+apt-get install -y -qq $missing

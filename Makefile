@@ -1,0 +1,84 @@
+# gridsurvey - GNU make, one out-of-tree build folder ($(BUILD)).
+#   make          build the gridsurvey binary
+#   make check    install missing Debian packages, build, run every test (plain and ASan+UBSan)
+#   make demo     install, build, run the main job on the built-in scene
+#   make bench    performance tables (docs/bench.md)
+BUILD ?= build
+SAN ?=
+CC := gcc
+CXX := g++
+PKGS := sqlite3 fftw3 sndfile jansson plplot
+WARN := -Wall -Wextra -Wpedantic -Wshadow -Werror
+OPT := -O2 -g
+SANFLAGS :=
+ifeq ($(SAN),1)
+SANFLAGS := -fsanitize=address,undefined -fno-sanitize-recover=all
+OPT := -O1 -g -fno-omit-frame-pointer $(SANFLAGS)
+endif
+CPPFLAGS := -D_DEFAULT_SOURCE -I. -MMD -MP
+CFLAGS := -std=c11 $(WARN) $(OPT) $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
+CXXFLAGS := -std=c++17 $(WARN) $(OPT) $(shell pkg-config --cflags opencv4 geographiclib 2>/dev/null)
+LDFLAGS := $(SANFLAGS)
+# OpenCV: only core, imgproc and imgcodecs (videoio pulls ~245 libraries; capture/ adds it).
+LDLIBS := $(shell pkg-config --libs $(PKGS) 2>/dev/null) -lopencv_imgcodecs -lopencv_imgproc \
+	-lopencv_core -lGeographicLib -lopenblas -lm
+
+MODULES := survey gis capture recognize
+lib_srcs = $(filter-out survey/main.c,$(wildcard $(1)/*.c $(1)/*.cpp))
+lib_objs = $(patsubst %,$(BUILD)/%.o,$(basename $(call lib_srcs,$(1))))
+LIBS := $(foreach m,$(MODULES),$(if $(call lib_srcs,$(m)),$(BUILD)/lib$(m).a))
+TEST_SRCS := $(wildcard tests/*.c)
+TEST_OBJS := $(patsubst %.c,$(BUILD)/%.o,$(TEST_SRCS))
+BIN := $(BUILD)/gridsurvey
+TEST_BIN := $(BUILD)/run_tests
+DELIGHT_DB := $(BUILD)/delight.sqlite
+SHARED ?= ../shared
+
+.PHONY: all deps check test test-asan demo bench clean
+all: $(BIN) $(DELIGHT_DB)
+
+deps:
+	@sh .ci/deps.sh
+
+$(BUILD)/%.o: %.c
+	@mkdir -p $(dir $@)
+	$(CC) $(CPPFLAGS) $(CFLAGS) -c $< -o $@
+$(BUILD)/%.o: %.cpp
+	@mkdir -p $(dir $@)
+	$(CXX) $(CPPFLAGS) $(CXXFLAGS) -c $< -o $@
+
+define lib_rule
+$(BUILD)/lib$(1).a: $(call lib_objs,$(1))
+	@rm -f $$@
+	ar rcs $$@ $$^
+endef
+$(foreach m,$(MODULES),$(eval $(call lib_rule,$(m))))
+
+$(BIN): $(BUILD)/survey/main.o $(LIBS)
+	$(CXX) $(LDFLAGS) $^ $(LDLIBS) -o $@
+$(TEST_BIN): $(TEST_OBJS) $(LIBS)
+	$(CXX) $(LDFLAGS) $^ $(LDLIBS) -o $@
+$(DELIGHT_DB): $(BIN)
+	$(BIN) delight generate -o $@
+
+test: $(TEST_BIN) $(BIN)
+	GS_SHARED=$(SHARED) GS_BIN=$(BIN) GS_SAN=$(SAN) \
+	LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp:print_suppressions=0 $(TEST_BIN)
+test-asan:
+	$(MAKE) --no-print-directory BUILD=$(BUILD)/asan SAN=1 test
+check: deps
+	$(MAKE) --no-print-directory all
+	$(MAKE) --no-print-directory test
+	$(MAKE) --no-print-directory test-asan
+demo: deps
+	$(MAKE) --no-print-directory all
+	$(BIN) delight list --delight $(DELIGHT_DB)
+	$(BIN) delight plot --delight $(DELIGHT_DB) --grid 50 -o $(BUILD)/delight_50hz.png
+	@echo "demo: wrote $(BUILD)/delight_50hz.png"
+clean:
+	rm -rf $(BUILD)
+
+# Module fragments (e.g. firmware/module.mk) add their own targets.
+include $(wildcard */module.mk)
+
+-include $(patsubst %.o,%.d,$(foreach m,$(MODULES),$(call lib_objs,$(m))) $(TEST_OBJS) $(BUILD)/survey/main.o)

@@ -1,0 +1,437 @@
+/* ac.c - the AC model of the grid (paper Sec. 2.1, Eq. 1: f = 1/(2 Delta), Delta the time
+ * between successive zero crossings): sub-sample zero crossings of a sampled mains voltage,
+ * the grid frequency with a robust mean and an honest standard error, the slow frequency
+ * wander of long recordings, and reading mains recordings with libsndfile.
+ *
+ * Error model of the standard error: crossing times carry independent errors of one std
+ * sigma_t (noise, quantisation). A mean of full periods telescopes, so only the crossings at
+ * the ends of each run of accepted periods contribute; sigma_t is estimated from second
+ * differences of full periods, which cancel the (slow) frequency wander. */
+#include "recognize/recognize.h"
+
+#include <errno.h>
+#include <math.h>
+#include <sndfile.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* ------------------------------------------------------------ zero crossings */
+
+/* The root in [lo, hi] of the cubic through y[m..m+3] at u = 0..3 (u = index - m), given
+ * dir * p(lo) <= 0 < dir * p(hi): Newton's method safeguarded by bisection. */
+static double cubic_root(const double *y, double lo, double hi, int dir)
+{
+    /* Newton's forward differences -> monomial coefficients p(u) = a0 + a1 u + a2 u^2 + a3 u^3 */
+    double d1 = y[1] - y[0], d2 = y[2] - 2 * y[1] + y[0], d3 = y[3] - 3 * y[2] + 3 * y[1] - y[0];
+    double a0 = y[0], a1 = d1 - d2 / 2 + d3 / 3, a2 = d2 / 2 - d3 / 2, a3 = d3 / 6;
+    double u = 0.5 * (lo + hi);
+    for (int it = 0; it < 100 && hi - lo > 1e-15; it++) {
+        double g = dir * (a0 + u * (a1 + u * (a2 + u * a3)));
+        double dg = dir * (a1 + u * (2 * a2 + u * 3 * a3));
+        if (g <= 0) lo = u;
+        else hi = u;
+        double next = dg > 0 ? u - g / dg : 0.5 * (lo + hi);
+        if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
+        if (fabs(next - u) < 1e-15) break;
+        u = next;
+    }
+    return u;
+}
+
+/* Sub-sample index of the sign change between samples j and j+1 of y[0..n). */
+static double crossing_index(const double *y, size_t n, size_t j, int dir)
+{
+    if (n < 4) /* too short for a cubic: linear */
+        return (double)j + y[j] / (y[j] - y[j + 1]);
+    size_t m = j > 0 ? j - 1 : 0; /* nodes j-1..j+2, clamped inside the record */
+    if (m > n - 4) m = n - 4;
+    return (double)m + cubic_root(y + m, (double)(j - m), (double)(j - m) + 1.0, dir);
+}
+
+gs_status rec_zero_crossings(const double *x, size_t n, double rate_hz, double hysteresis,
+                             double **t_s, size_t *count, int *rising_first)
+{
+    if (!t_s || !count || !rising_first || (!x && n > 0))
+        return gs_fail(GS_EINVAL, "zero crossings: NULL argument");
+    *t_s = NULL;
+    *count = 0;
+    *rising_first = 0;
+    if (!(isfinite(rate_hz) && rate_hz > 0))
+        return gs_fail(GS_EINVAL, "zero crossings: rate_hz = %g: expected a finite rate > 0", rate_hz);
+    if (!(isfinite(hysteresis) && hysteresis >= 0))
+        return gs_fail(GS_EINVAL, "zero crossings: hysteresis = %g: expected a finite value >= 0",
+                       hysteresis);
+    double sum = 0;
+    for (size_t i = 0; i < n; i++) {
+        if (!isfinite(x[i]))
+            return gs_fail(GS_ENUMERIC, "zero crossings: sample %zu is %g: expected a finite value",
+                           i, x[i]);
+        sum += x[i];
+    }
+    if (n < 2) return GS_OK;
+    double *y = malloc(n * sizeof *y);
+    double *t = malloc(n * sizeof *t); /* at most n - 1 crossings */
+    if (!y || !t) {
+        free(y);
+        free(t);
+        return gs_fail(GS_ENOMEM, "zero crossings: cannot allocate %zu samples", n);
+    }
+    double mean = sum / (double)n;
+    for (size_t i = 0; i < n; i++) y[i] = x[i] - mean;
+
+    /* Schmitt trigger: the state flips only when y passes the opposite threshold; the crossing
+     * is the midpoint of the first and last sign changes in the transition (one when clean). */
+    int state = 0;      /* +1 above +h, -1 below -h, 0 not yet known */
+    size_t since = 0;   /* last sample that confirmed the current state */
+    size_t c = 0;
+    for (size_t k = 0; k < n; k++) {
+        int s = y[k] > hysteresis ? 1 : y[k] < -hysteresis ? -1 : 0;
+        if (s == 0) continue;
+        if (s == state || state == 0) {
+            state = s;
+            since = k;
+            continue;
+        }
+        /* transition since -> k in direction s: first and last sign change in direction s */
+        size_t first = k, last = k;
+        for (size_t j = since; j < k; j++)
+            if (s * y[j] <= 0 && s * y[j + 1] > 0) {
+                if (first == k) first = j;
+                last = j;
+            }
+        double u = crossing_index(y, n, first, s);
+        if (last != first) u = 0.5 * (u + crossing_index(y, n, last, s));
+        if (c == 0) *rising_first = s;
+        t[c++] = u / rate_hz;
+        state = s;
+        since = k;
+    }
+    free(y);
+    if (c == 0) {
+        free(t);
+        return GS_OK;
+    }
+    *t_s = t;
+    *count = c;
+    return GS_OK;
+}
+
+/* ------------------------------------------------------------ grid frequency */
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+/* Median of v[0..n) (n > 0), using scratch[0..n). */
+static double median(const double *v, size_t n, double *scratch)
+{
+    memcpy(scratch, v, n * sizeof *v);
+    qsort(scratch, n, sizeof *scratch, cmp_double);
+    return n % 2 ? scratch[n / 2] : 0.5 * (scratch[n / 2 - 1] + scratch[n / 2]);
+}
+
+/* Validates t[0..n) (finite, increasing, n >= 3) and computes the full-period frequencies
+ * F[i] = 1/(t[i+2] - t[i]), i < n-2, their median and ok[i] = |F[i] - median| <= 5 robust
+ * sigmas (1.4826 MAD; at least 1e-9 of the median so that exact data keep every period).
+ * F and ok are allocated (free()). */
+static gs_status full_periods(const char *who, const double *t, size_t n, double **F_out,
+                              unsigned char **ok_out, double *median_hz)
+{
+    *F_out = NULL;
+    *ok_out = NULL;
+    if (n < 3)
+        return gs_fail(GS_EINVAL, "%s: %zu zero crossings: expected at least 3 (one full AC period)",
+                       who, n);
+    if (!t) return gs_fail(GS_EINVAL, "%s: NULL crossing times", who);
+    for (size_t i = 0; i < n; i++) {
+        if (!isfinite(t[i]))
+            return gs_fail(GS_ENUMERIC, "%s: t_s[%zu] = %g: expected a finite time", who, i, t[i]);
+        if (i > 0 && !(t[i] > t[i - 1]))
+            return gs_fail(GS_EINVAL, "%s: t_s[%zu] = %.17g: expected > t_s[%zu] = %.17g", who, i,
+                           t[i], i - 1, t[i - 1]);
+    }
+    size_t np = n - 2;
+    double *F = malloc(np * sizeof *F), *tmp = malloc(np * sizeof *tmp);
+    unsigned char *ok = malloc(np);
+    if (!F || !tmp || !ok) {
+        free(F);
+        free(tmp);
+        free(ok);
+        return gs_fail(GS_ENOMEM, "%s: cannot allocate %zu periods", who, np);
+    }
+    for (size_t i = 0; i < np; i++) F[i] = 1.0 / (t[i + 2] - t[i]);
+    double med = median(F, np, tmp);
+    for (size_t i = 0; i < np; i++) tmp[i] = fabs(F[i] - med);
+    double mad = median(tmp, np, tmp);
+    double tol = fmax(5 * 1.4826 * mad, 1e-9 * med);
+    for (size_t i = 0; i < np; i++) ok[i] = fabs(F[i] - med) <= tol;
+    free(tmp);
+    *F_out = F;
+    *ok_out = ok;
+    *median_hz = med;
+    return GS_OK;
+}
+
+gs_status rec_grid_frequency(const double *t_s, size_t n, double *f_cycle_hz,
+                             rec_freq_stats *stats)
+{
+    if (!stats) return gs_fail(GS_EINVAL, "grid frequency: NULL stats");
+    memset(stats, 0, sizeof *stats);
+    double *F;
+    unsigned char *ok;
+    double med;
+    gs_status st = full_periods("grid frequency", t_s, n, &F, &ok, &med);
+    if (st != GS_OK) return st;
+    size_t np = n - 2;
+    /* Eq. 1 per flicker cycle */
+    if (f_cycle_hz)
+        for (size_t i = 0; i + 1 < n; i++) f_cycle_hz[i] = 1.0 / (2.0 * (t_s[i + 1] - t_s[i]));
+
+    /* Robust mean: Eq. 1 on the mean accepted full period 2 Delta. */
+    double sum_p = 0, sum_f = 0, sum_ff = 0;
+    size_t acc = 0;
+    for (size_t i = 0; i < np; i++)
+        if (ok[i]) {
+            sum_p += t_s[i + 2] - t_s[i];
+            sum_f += F[i];
+            acc++;
+        }
+    double mean_p = sum_p / (double)acc, mean_f = sum_f / (double)acc;
+    for (size_t i = 0; i < np; i++)
+        if (ok[i]) sum_ff += (F[i] - mean_f) * (F[i] - mean_f);
+
+    /* Crossing-time error sigma_t from second differences of accepted full periods:
+     * (t[i+4] - t[i+2]) - (t[i+2] - t[i]) has variance 6 sigma_t^2. */
+    double sd = 0, sdd = 0;
+    size_t nd = 0;
+    for (size_t i = 0; i + 2 < np; i++)
+        if (ok[i] && ok[i + 2]) {
+            double d = (t_s[i + 4] - t_s[i + 2]) - (t_s[i + 2] - t_s[i]);
+            sd += d;
+            sdd += d * d;
+            nd++;
+        }
+    /* The mean period is sum_j c_j t_j / acc: c_j = (#accepted periods ending at j) - (#starting
+     * at j), non-zero only at the ends of runs, so var(mean_p) = sigma_t^2 sum c_j^2 / acc^2. */
+    double sum_c2 = 0;
+    for (size_t j = 0; j < n; j++) {
+        int cj = (j >= 2 && ok[j - 2]) - (j < np && ok[j]);
+        sum_c2 += (double)(cj * cj);
+    }
+    double sigma_mean = NAN;
+    if (nd >= 2) {
+        double var_d = (sdd - sd * sd / (double)nd) / (double)(nd - 1);
+        double sigma_t = sqrt(fmax(var_d, 0) / 6.0);
+        sigma_mean = sigma_t * sqrt(sum_c2) / (double)acc / (mean_p * mean_p);
+    }
+    stats->mean_hz = 1.0 / mean_p;
+    stats->sigma_mean_hz = sigma_mean;
+    stats->median_hz = med;
+    stats->std_hz = acc >= 2 ? sqrt(sum_ff / (double)(acc - 1)) : NAN;
+    stats->periods = acc;
+    stats->rejected = np - acc;
+    free(F);
+    free(ok);
+    return GS_OK;
+}
+
+/* ---------------------------------------------------------- frequency wander */
+
+/* Pearson correlation of the pairs (x[w], x[w + lag]) with both finite; NaN if < 3 pairs. */
+static double lag_corr(const double *x, size_t nw, size_t lag)
+{
+    double sa = 0, sb = 0, saa = 0, sbb = 0, sab = 0;
+    size_t m = 0;
+    for (size_t w = 0; w + lag < nw; w++) {
+        double a = x[w], b = x[w + lag];
+        if (isnan(a) || isnan(b)) continue;
+        sa += a;
+        sb += b;
+        m++;
+    }
+    if (m < 3) return NAN;
+    double ma = sa / (double)m, mb = sb / (double)m;
+    for (size_t w = 0; w + lag < nw; w++) {
+        double a = x[w], b = x[w + lag];
+        if (isnan(a) || isnan(b)) continue;
+        saa += (a - ma) * (a - ma);
+        sbb += (b - mb) * (b - mb);
+        sab += (a - ma) * (b - mb);
+    }
+    return saa > 0 && sbb > 0 ? sab / sqrt(saa * sbb) : NAN;
+}
+
+gs_status rec_frequency_wander(const double *t_s, size_t n, double window_s, rec_wander *w)
+{
+    if (!w) return gs_fail(GS_EINVAL, "frequency wander: NULL result");
+    memset(w, 0, sizeof *w);
+    if (!(isfinite(window_s) && window_s > 0 && window_s <= 10))
+        return gs_fail(GS_EINVAL, "frequency wander: window_s = %g: expected (0, 10] s", window_s);
+    double *F;
+    unsigned char *ok;
+    double med;
+    gs_status st = full_periods("frequency wander", t_s, n, &F, &ok, &med);
+    if (st != GS_OK) return st;
+    double span = t_s[n - 1] - t_s[0];
+    if (span < 120) {
+        free(F);
+        free(ok);
+        return gs_fail(GS_EINVAL, "frequency wander: crossings span %.3f s: expected >= 120 s", span);
+    }
+    size_t nw = (size_t)floor(span / window_s), np = n - 2;
+    double *sum_p = calloc(nw, sizeof *sum_p), *x = malloc(nw * sizeof *x);
+    size_t *cnt = calloc(nw, sizeof *cnt);
+    if (!sum_p || !x || !cnt) {
+        free(F);
+        free(ok);
+        free(sum_p);
+        free(x);
+        free(cnt);
+        return gs_fail(GS_ENOMEM, "frequency wander: cannot allocate %zu windows", nw);
+    }
+    /* Each accepted full period belongs to the window holding its midpoint; a window's
+     * frequency is Eq. 1 on its mean full period (NaN for a window without any). */
+    for (size_t i = 0; i < np; i++) {
+        if (!ok[i]) continue;
+        double mid = 0.5 * (t_s[i] + t_s[i + 2]) - t_s[0];
+        size_t k = (size_t)(mid / window_s);
+        if (k >= nw) continue;
+        sum_p[k] += t_s[i + 2] - t_s[i];
+        cnt[k]++;
+    }
+    double s = 0, ss = 0, sd = 0, sdd = 0;
+    size_t m = 0, md = 0;
+    for (size_t k = 0; k < nw; k++) {
+        x[k] = cnt[k] ? (double)cnt[k] / sum_p[k] : NAN;
+        if (cnt[k]) {
+            s += x[k];
+            m++;
+        }
+        if (k > 0 && cnt[k] && cnt[k - 1]) {
+            sd += x[k] - x[k - 1];
+            md++;
+        }
+    }
+    st = GS_OK;
+    if (m < 3 || md < 3) {
+        st = gs_fail(GS_EINVAL, "frequency wander: %zu of %zu windows hold accepted periods: "
+                     "expected at least 3 consecutive", m, nw);
+    } else {
+        double mean = s / (double)m, dmean = sd / (double)md;
+        for (size_t k = 0; k < nw; k++) {
+            if (cnt[k]) ss += (x[k] - mean) * (x[k] - mean);
+            if (k > 0 && cnt[k] && cnt[k - 1]) {
+                double d = x[k] - x[k - 1] - dmean;
+                sdd += d * d;
+            }
+        }
+        w->mean_hz = mean;
+        w->sigma_hz = sqrt(ss / (double)(m - 1));
+        w->step_sigma_hz = sqrt(sdd / (double)(md - 1));
+        w->corr_10s = lag_corr(x, nw, (size_t)lround(10.0 / window_s));
+        w->corr_60s = lag_corr(x, nw, (size_t)lround(60.0 / window_s));
+        w->windows = nw;
+    }
+    free(F);
+    free(ok);
+    free(sum_p);
+    free(x);
+    free(cnt);
+    return st;
+}
+
+/* ------------------------------------------------------------ mains recordings */
+
+static uint32_t le32(const unsigned char *b)
+{
+    return (uint32_t)b[0] | (uint32_t)b[1] << 8 | (uint32_t)b[2] << 16 | (uint32_t)b[3] << 24;
+}
+
+/* A RIFF/WAVE file's declared lengths against its size: libsndfile reads a truncated WAV
+ * without complaint. Other formats are left to libsndfile. Sizes 0 and 0xFFFFFFFF mean
+ * "unknown" (streamed WAV) and are not checked. */
+static gs_status riff_check(const char *path, FILE *f, long size)
+{
+    unsigned char h[12];
+    if (fseek(f, 0, SEEK_SET) != 0 || fread(h, 1, 12, f) != 12) return GS_OK;
+    if (memcmp(h, "RIFF", 4) != 0 || memcmp(h + 8, "WAVE", 4) != 0) return GS_OK;
+    uint32_t riff = le32(h + 4);
+    if (riff != 0 && riff != 0xFFFFFFFFu && (long long)riff + 8 > (long long)size)
+        return gs_fail(GS_EFORMAT, "%s: truncated: RIFF chunk size declares %lld bytes, file has %ld",
+                       path, (long long)riff + 8, size);
+    for (long long off = 12; off + 8 <= (long long)size;) {
+        if (fseek(f, (long)off, SEEK_SET) != 0 || fread(h, 1, 8, f) != 8) break;
+        uint32_t len = le32(h + 4);
+        if (memcmp(h, "data", 4) == 0) {
+            if (len != 0 && len != 0xFFFFFFFFu && off + 8 + len > (long long)size)
+                return gs_fail(GS_EFORMAT, "%s: truncated: data chunk size declares %lu bytes, "
+                               "file has %lld after the chunk header", path, (unsigned long)len,
+                               (long long)size - off - 8);
+            return GS_OK;
+        }
+        off += 8 + (long long)len + (len & 1);
+    }
+    return gs_fail(GS_EFORMAT, "%s: truncated: no data chunk in the file's %ld bytes", path, size);
+}
+
+gs_status rec_mains_read(const char *path, double **x, size_t *n, double *rate_hz)
+{
+    if (!path || !x || !n || !rate_hz) return gs_fail(GS_EINVAL, "mains read: NULL argument");
+    *x = NULL;
+    *n = 0;
+    *rate_hz = 0;
+    FILE *f = fopen(path, "rb");
+    if (!f) return gs_fail(GS_EIO, "%s: cannot open: %s", path, strerror(errno));
+    long size = fseek(f, 0, SEEK_END) == 0 ? ftell(f) : -1;
+    gs_status st = size < 0 ? gs_fail(GS_EIO, "%s: cannot determine the file size", path)
+                   : size == 0 ? gs_fail(GS_EFORMAT, "%s: empty file (0 bytes): expected an audio file", path)
+                   : riff_check(path, f, size);
+    fclose(f);
+    if (st != GS_OK) return st;
+    SF_INFO info;
+    memset(&info, 0, sizeof info);
+    SNDFILE *sf = sf_open(path, SFM_READ, &info);
+    if (!sf) {
+        int e = sf_error(NULL);
+        return gs_fail(e == SF_ERR_SYSTEM ? GS_EIO : GS_EFORMAT,
+                       "%s: header: not a readable audio file (libsndfile: %s)", path,
+                       sf_strerror(NULL));
+    }
+    if (info.channels != 1)
+        st = gs_fail(GS_EFORMAT, "%s: channels = %d: expected 1 (mono)", path, info.channels);
+    else if (info.samplerate <= 0)
+        st = gs_fail(GS_EFORMAT, "%s: sample rate = %d Hz: expected > 0", path, info.samplerate);
+    else if (info.frames <= 0)
+        st = gs_fail(GS_EFORMAT, "%s: frames = %lld: expected at least 1 sample", path,
+                     (long long)info.frames);
+    else if ((unsigned long long)info.frames > SIZE_MAX / sizeof(double))
+        st = gs_fail(GS_ELIMIT, "%s: frames = %lld: too many to hold in memory", path,
+                     (long long)info.frames);
+    double *v = NULL;
+    if (st == GS_OK) {
+        v = malloc((size_t)info.frames * sizeof *v);
+        if (!v) st = gs_fail(GS_ENOMEM, "%s: cannot allocate %lld samples", path, (long long)info.frames);
+    }
+    if (st == GS_OK) {
+        sf_count_t r = sf_readf_double(sf, v, info.frames);
+        if (r != info.frames)
+            st = gs_fail(GS_EFORMAT, "%s: truncated: read %lld samples, header declares %lld", path,
+                         (long long)r, (long long)info.frames);
+    }
+    for (sf_count_t i = 0; st == GS_OK && i < info.frames; i++)
+        if (!isfinite(v[i]))
+            st = gs_fail(GS_EFORMAT, "%s: sample %lld is %g: expected a finite value", path,
+                         (long long)i, v[i]);
+    sf_close(sf);
+    if (st != GS_OK) {
+        free(v);
+        return st;
+    }
+    *x = v;
+    *n = (size_t)info.frames;
+    *rate_hz = info.samplerate;
+    return GS_OK;
+}

@@ -1,0 +1,568 @@
+/* delight_store.c - DELIGHT (paper Sec. 3) on disk: a versioned SQLite table set and CSV.
+ *
+ * SQLite schema, version REC_DELIGHT_SCHEMA_VERSION (= PRAGMA user_version):
+ *   delight_meta(key TEXT PRIMARY KEY, value TEXT)  -- format = gridsurvey-delight, schema_version
+ *   delight_bulbs(bulb_id, grid_hz, sensor, ref, type, name, watts, bands, n,
+ *                 PRIMARY KEY (bulb_id, grid_hz, sensor))         -- rowid keeps the order
+ *   delight_brf_bands(bulb_id, grid_hz, sensor, band, chromaticity, n, samples,
+ *                     PRIMARY KEY (bulb_id, grid_hz, sensor, band),
+ *                     FOREIGN KEY (bulb_id, grid_hz, sensor) REFERENCES delight_bulbs)
+ * samples is a BLOB of n little-endian IEEE-754 doubles.
+ *
+ * Loading and importing build a temporary collection (every entry checked by rec_delight_add)
+ * and append it to d only when the whole file is good. */
+#include "recognize/internal.h"
+
+#include <math.h>
+#include <sqlite3.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define FORMAT_NAME "gridsurvey-delight"
+
+static const char *band_name(int bands, int band)
+{
+    static const char *const rgb[3] = {"R", "G", "B"};
+    return bands == 1 ? "mono" : rgb[band];
+}
+
+static int same_key(const rec_bulb *a, const rec_bulb *b)
+{
+    return strcmp(a->id, b->id) == 0 && a->grid_hz == b->grid_hz && strcmp(a->sensor, b->sensor) == 0;
+}
+
+/* Append every bulb of src to d; a clash with an entry of d adds nothing. Only running out of
+ * memory half-way could leave a prefix of src in d. */
+static gs_status append_all(rec_delight *d, const rec_delight *src, const char *path)
+{
+    for (size_t i = 0; i < rec_delight_count(src); i++)
+        for (size_t j = 0; j < rec_delight_count(d); j++) {
+            const rec_bulb *a = rec_delight_get(src, i), *b = rec_delight_get(d, j);
+            if (same_key(a, b))
+                return gs_fail(GS_EINVAL, "%s: bulb %s at %d Hz with sensor %s: already in the "
+                               "database", path, a->id, a->grid_hz, a->sensor);
+        }
+    for (size_t i = 0; i < rec_delight_count(src); i++) {
+        gs_status s = rec_delight_add(d, rec_delight_get(src, i));
+        if (s != GS_OK) return s;
+    }
+    return GS_OK;
+}
+
+/* Prefix the current detail with a location ("FILE" or "FILE:LINE"). */
+static gs_status with_location(gs_status s, const char *path, size_t line)
+{
+    char msg[512];
+    snprintf(msg, sizeof msg, "%s", gs_detail());
+    if (line) return gs_fail(s, "%s:%zu: %s", path, line, msg);
+    return gs_fail(s, "%s: %s", path, msg);
+}
+
+static int parse_ref(const char *s, rec_ref *r)
+{
+    for (int i = REC_REF_VOLTAGE; i <= REC_REF_UNLOCKED; i++)
+        if (strcmp(s, rec_ref_name((rec_ref)i)) == 0) {
+            *r = (rec_ref)i;
+            return 1;
+        }
+    return 0;
+}
+
+/* Copy a bounded string; 0 if it does not fit. */
+static int copy_str(char *dst, size_t cap, const char *src)
+{
+    size_t len = strlen(src);
+    if (len >= cap) return 0;
+    memcpy(dst, src, len + 1);
+    return 1;
+}
+
+/* ------------------------------------------------------------------ SQLite */
+
+static const char *const schema_sql =
+    "DROP TABLE IF EXISTS delight_brf_bands;"
+    "DROP TABLE IF EXISTS delight_bulbs;"
+    "DROP TABLE IF EXISTS delight_meta;"
+    "CREATE TABLE delight_meta(key TEXT PRIMARY KEY, value TEXT NOT NULL);"
+    "CREATE TABLE delight_bulbs("
+    " bulb_id TEXT NOT NULL, grid_hz INTEGER NOT NULL CHECK (grid_hz IN (50, 60)),"
+    " sensor TEXT NOT NULL, ref TEXT NOT NULL CHECK (ref IN ('voltage', 'none', 'unlocked')),"
+    " type TEXT NOT NULL, name TEXT NOT NULL, watts REAL NOT NULL,"
+    " bands INTEGER NOT NULL CHECK (bands IN (1, 3)), n INTEGER NOT NULL,"
+    " PRIMARY KEY (bulb_id, grid_hz, sensor));"
+    "CREATE TABLE delight_brf_bands("
+    " bulb_id TEXT NOT NULL, grid_hz INTEGER NOT NULL, sensor TEXT NOT NULL,"
+    " band INTEGER NOT NULL, chromaticity REAL NOT NULL, n INTEGER NOT NULL,"
+    " samples BLOB NOT NULL CHECK (length(samples) = 8 * n),"
+    " PRIMARY KEY (bulb_id, grid_hz, sensor, band),"
+    " FOREIGN KEY (bulb_id, grid_hz, sensor) REFERENCES delight_bulbs (bulb_id, grid_hz, sensor)"
+    "  ON DELETE CASCADE);"
+    "INSERT INTO delight_meta VALUES ('format', '" FORMAT_NAME "');";
+
+static gs_status sql_fail(sqlite3 *db, const char *path, const char *what)
+{
+    int code = db ? sqlite3_errcode(db) : SQLITE_NOMEM;
+    const char *msg = db ? sqlite3_errmsg(db) : "out of memory";
+    if (code == SQLITE_NOTADB)
+        return gs_fail(GS_EFORMAT, "%s: not a DELIGHT database: expected an SQLite file with format "
+                       "'%s', schema version %d (%s)", path, FORMAT_NAME, REC_DELIGHT_SCHEMA_VERSION, msg);
+    if (code == SQLITE_CANTOPEN) return gs_fail(GS_EIO, "%s: cannot open: %s", path, msg);
+    return gs_fail(GS_ESQL, "%s: %s: %s", path, what, msg);
+}
+
+/* PRAGMA user_version of db into *v. */
+static gs_status user_version(sqlite3 *db, const char *path, int *v)
+{
+    sqlite3_stmt *q = NULL;
+    if (sqlite3_prepare_v2(db, "PRAGMA user_version", -1, &q, NULL) != SQLITE_OK ||
+        sqlite3_step(q) != SQLITE_ROW) {
+        gs_status s = sql_fail(db, path, "reading the schema version");
+        sqlite3_finalize(q);
+        return s;
+    }
+    *v = sqlite3_column_int(q, 0);
+    sqlite3_finalize(q);
+    return GS_OK;
+}
+
+static void put_le(unsigned char *p, double v)
+{
+    uint64_t u;
+    memcpy(&u, &v, sizeof u);
+    for (int k = 0; k < 8; k++) p[k] = (unsigned char)(u >> (8 * k));
+}
+
+static double get_le(const unsigned char *p)
+{
+    uint64_t u = 0;
+    for (int k = 0; k < 8; k++) u |= (uint64_t)p[k] << (8 * k);
+    double v;
+    memcpy(&v, &u, sizeof v);
+    return v;
+}
+
+gs_status rec_delight_save(const rec_delight *d, const char *path)
+{
+    sqlite3 *db = NULL;
+    sqlite3_stmt *ins_bulb = NULL, *ins_band = NULL;
+    unsigned char *blob = NULL;
+    int in_txn = 0, version = 0;
+    gs_status s = GS_OK;
+    if (sqlite3_open_v2(path, &db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, NULL) != SQLITE_OK) {
+        s = sql_fail(db, path, "open");
+        goto done;
+    }
+    if ((s = user_version(db, path, &version)) != GS_OK) goto done;
+    if (version != 0 && version != REC_DELIGHT_SCHEMA_VERSION) {
+        s = gs_fail(GS_EFORMAT, "%s: schema version %d: expected a new file or a DELIGHT database "
+                    "(version %d); not overwriting", path, version, REC_DELIGHT_SCHEMA_VERSION);
+        goto done;
+    }
+    if (sqlite3_exec(db, "PRAGMA foreign_keys = ON; BEGIN IMMEDIATE", NULL, NULL, NULL) != SQLITE_OK) {
+        s = sql_fail(db, path, "begin");
+        goto done;
+    }
+    in_txn = 1;
+    char pragma[96];
+    snprintf(pragma, sizeof pragma,
+             "INSERT INTO delight_meta VALUES ('schema_version', '%d'); PRAGMA user_version = %d",
+             REC_DELIGHT_SCHEMA_VERSION, REC_DELIGHT_SCHEMA_VERSION);
+    if (sqlite3_exec(db, schema_sql, NULL, NULL, NULL) != SQLITE_OK ||
+        sqlite3_exec(db, pragma, NULL, NULL, NULL) != SQLITE_OK) {
+        s = sql_fail(db, path, "creating the DELIGHT tables");
+        goto done;
+    }
+    if (sqlite3_prepare_v2(db, "INSERT INTO delight_bulbs VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)", -1,
+                           &ins_bulb, NULL) != SQLITE_OK ||
+        sqlite3_prepare_v2(db, "INSERT INTO delight_brf_bands VALUES (?, ?, ?, ?, ?, ?, ?)", -1,
+                           &ins_band, NULL) != SQLITE_OK) {
+        s = sql_fail(db, path, "preparing inserts");
+        goto done;
+    }
+    for (size_t i = 0; i < rec_delight_count(d); i++) {
+        const rec_bulb *b = rec_delight_get(d, i);
+        int n = b->brf.n;
+        sqlite3_reset(ins_bulb);
+        sqlite3_bind_text(ins_bulb, 1, b->id, -1, SQLITE_STATIC);
+        sqlite3_bind_int(ins_bulb, 2, b->grid_hz);
+        sqlite3_bind_text(ins_bulb, 3, b->sensor, -1, SQLITE_STATIC);
+        sqlite3_bind_text(ins_bulb, 4, rec_ref_name(b->ref), -1, SQLITE_STATIC);
+        sqlite3_bind_text(ins_bulb, 5, rec_tech_name(b->type), -1, SQLITE_STATIC);
+        sqlite3_bind_text(ins_bulb, 6, b->name, -1, SQLITE_STATIC);
+        sqlite3_bind_double(ins_bulb, 7, b->watts);
+        sqlite3_bind_int(ins_bulb, 8, b->brf.bands);
+        sqlite3_bind_int(ins_bulb, 9, n);
+        if (sqlite3_step(ins_bulb) != SQLITE_DONE) {
+            s = sql_fail(db, path, "inserting a bulb");
+            goto done;
+        }
+        unsigned char *nb = realloc(blob, 8 * (size_t)n);
+        if (!nb) {
+            s = gs_fail(GS_ENOMEM, "%s: cannot allocate a %d-sample BRF", path, n);
+            goto done;
+        }
+        blob = nb;
+        for (int band = 0; band < b->brf.bands; band++) {
+            for (int j = 0; j < n; j++) put_le(blob + 8 * (size_t)j, b->brf.v[(size_t)band * n + j]);
+            sqlite3_reset(ins_band);
+            sqlite3_bind_text(ins_band, 1, b->id, -1, SQLITE_STATIC);
+            sqlite3_bind_int(ins_band, 2, b->grid_hz);
+            sqlite3_bind_text(ins_band, 3, b->sensor, -1, SQLITE_STATIC);
+            sqlite3_bind_int(ins_band, 4, band);
+            sqlite3_bind_double(ins_band, 5, b->chroma[band]);
+            sqlite3_bind_int(ins_band, 6, n);
+            sqlite3_bind_blob(ins_band, 7, blob, 8 * n, SQLITE_STATIC);
+            if (sqlite3_step(ins_band) != SQLITE_DONE) {
+                s = sql_fail(db, path, "inserting a BRF band");
+                goto done;
+            }
+        }
+    }
+    if (sqlite3_exec(db, "COMMIT", NULL, NULL, NULL) != SQLITE_OK) {
+        s = sql_fail(db, path, "commit");
+        goto done;
+    }
+    in_txn = 0;
+done:
+    sqlite3_finalize(ins_band);
+    sqlite3_finalize(ins_bulb);
+    if (in_txn) sqlite3_exec(db, "ROLLBACK", NULL, NULL, NULL);
+    sqlite3_close(db);
+    free(blob);
+    return s;
+}
+
+/* The BRF bands of bulb b (id, grid_hz, sensor, bands and n set) from the band query q. */
+static gs_status load_bands(sqlite3 *db, sqlite3_stmt *q, const char *path, rec_bulb *b)
+{
+    sqlite3_reset(q);
+    sqlite3_bind_text(q, 1, b->id, -1, SQLITE_STATIC);
+    sqlite3_bind_int(q, 2, b->grid_hz);
+    sqlite3_bind_text(q, 3, b->sensor, -1, SQLITE_STATIC);
+    int got = 0, rc;
+    while ((rc = sqlite3_step(q)) == SQLITE_ROW) {
+        int band = sqlite3_column_int(q, 0), n = sqlite3_column_int(q, 2);
+        const unsigned char *p = sqlite3_column_blob(q, 3);
+        int bytes = sqlite3_column_bytes(q, 3);
+        if (band != got || band >= b->brf.bands || n != b->brf.n || bytes != 8 * n || !p)
+            return gs_fail(GS_EFORMAT, "%s: bulb %s at %d Hz, sensor %s: band %d (n %d, %d bytes): "
+                           "expected band %d of %d with %d samples", path, b->id, b->grid_hz,
+                           b->sensor, band, n, bytes, got, b->brf.bands, b->brf.n);
+        b->chroma[band] = sqlite3_column_double(q, 1);
+        for (int j = 0; j < n; j++) b->brf.v[(size_t)band * n + j] = get_le(p + 8 * (size_t)j);
+        got++;
+    }
+    if (rc != SQLITE_DONE) return sql_fail(db, path, "reading BRF bands");
+    if (got != b->brf.bands)
+        return gs_fail(GS_EFORMAT, "%s: bulb %s at %d Hz, sensor %s: %d BRF bands: expected %d", path,
+                       b->id, b->grid_hz, b->sensor, got, b->brf.bands);
+    return GS_OK;
+}
+
+/* One row of the bulb query q into *b (BRF allocated, bands not yet read). */
+static gs_status load_bulb(sqlite3_stmt *q, const char *path, rec_bulb *b)
+{
+    memset(b, 0, sizeof *b);
+    const char *id = (const char *)sqlite3_column_text(q, 0);
+    const char *sensor = (const char *)sqlite3_column_text(q, 2);
+    const char *ref = (const char *)sqlite3_column_text(q, 3);
+    const char *type = (const char *)sqlite3_column_text(q, 4);
+    const char *name = (const char *)sqlite3_column_text(q, 5);
+    if (!id || !sensor || !ref || !type || !name || !copy_str(b->id, sizeof b->id, id) ||
+        !copy_str(b->sensor, sizeof b->sensor, sensor) || !copy_str(b->name, sizeof b->name, name))
+        return gs_fail(GS_EFORMAT, "%s: bulb '%s': expected bulb_id, sensor and name of at most %d, "
+                       "%d and %d characters", path, id ? id : "", REC_ID_MAX - 1,
+                       REC_SENSOR_MAX - 1, REC_NAME_MAX - 1);
+    b->grid_hz = sqlite3_column_int(q, 1);
+    if (!parse_ref(ref, &b->ref))
+        return gs_fail(GS_EFORMAT, "%s: bulb %s: ref '%s': expected voltage, none or unlocked", path,
+                       b->id, ref);
+    if (rec_tech_parse(type, &b->type) != GS_OK) return with_location(GS_EFORMAT, path, 0);
+    b->watts = sqlite3_column_double(q, 6);
+    return rec_brf_init(&b->brf, sqlite3_column_int(q, 8), sqlite3_column_int(q, 7));
+}
+
+gs_status rec_delight_load(rec_delight *d, const char *path)
+{
+    sqlite3 *db = NULL;
+    sqlite3_stmt *meta = NULL, *bulbs = NULL, *bands = NULL;
+    rec_delight *tmp = rec_delight_new();
+    rec_bulb b = {0};
+    int version = 0;
+    gs_status s = GS_OK;
+    if (!tmp) return gs_fail(GS_ENOMEM, "%s: cannot allocate a DELIGHT database", path);
+    if (sqlite3_open_v2(path, &db, SQLITE_OPEN_READONLY, NULL) != SQLITE_OK) {
+        s = sql_fail(db, path, "open");
+        goto done;
+    }
+    if ((s = user_version(db, path, &version)) != GS_OK) goto done;
+    const char *format = NULL;
+    if (version == REC_DELIGHT_SCHEMA_VERSION &&
+        sqlite3_prepare_v2(db, "SELECT value FROM delight_meta WHERE key = 'format'", -1, &meta,
+                           NULL) == SQLITE_OK &&
+        sqlite3_step(meta) == SQLITE_ROW)
+        format = (const char *)sqlite3_column_text(meta, 0);
+    if (!format || strcmp(format, FORMAT_NAME) != 0) {
+        s = gs_fail(GS_EFORMAT, "%s: not a DELIGHT database: expected format '%s' with schema version "
+                    "%d (found user_version %d, format '%s')", path, FORMAT_NAME,
+                    REC_DELIGHT_SCHEMA_VERSION, version, format ? format : "none");
+        goto done;
+    }
+    if (sqlite3_prepare_v2(db, "SELECT bulb_id, grid_hz, sensor, ref, type, name, watts, bands, n "
+                           "FROM delight_bulbs ORDER BY rowid", -1, &bulbs, NULL) != SQLITE_OK ||
+        sqlite3_prepare_v2(db, "SELECT band, chromaticity, n, samples FROM delight_brf_bands "
+                           "WHERE bulb_id = ? AND grid_hz = ? AND sensor = ? ORDER BY band", -1,
+                           &bands, NULL) != SQLITE_OK) {
+        s = sql_fail(db, path, "reading the DELIGHT tables");
+        goto done;
+    }
+    int rc;
+    while ((rc = sqlite3_step(bulbs)) == SQLITE_ROW) {
+        if ((s = load_bulb(bulbs, path, &b)) != GS_OK) goto done;
+        if ((s = load_bands(db, bands, path, &b)) != GS_OK) goto done;
+        if ((s = rec_delight_add(tmp, &b)) != GS_OK) {
+            s = with_location(s, path, 0);
+            goto done;
+        }
+        rec_bulb_release(&b);
+    }
+    if (rc != SQLITE_DONE) {
+        s = sql_fail(db, path, "reading bulbs");
+        goto done;
+    }
+    s = append_all(d, tmp, path);
+done:
+    rec_bulb_release(&b);
+    sqlite3_finalize(meta);
+    sqlite3_finalize(bulbs);
+    sqlite3_finalize(bands);
+    sqlite3_close(db);
+    rec_delight_free(tmp);
+    return s;
+}
+
+/* --------------------------------------------------------------------- CSV */
+
+static const char *const csv_columns[] = {"bulb_id", "type", "name", "watts", "grid_hz",
+                                          "sensor", "band", "chromaticity", "n"};
+#define CSV_FIXED 9
+
+gs_status rec_delight_export_csv(const rec_delight *d, FILE *out)
+{
+    int max_n = 0;
+    for (size_t i = 0; i < rec_delight_count(d); i++)
+        if (rec_delight_get(d, i)->brf.n > max_n) max_n = rec_delight_get(d, i)->brf.n;
+    for (int c = 0; c < CSV_FIXED; c++) fprintf(out, "%s%s", c ? "," : "", csv_columns[c]);
+    for (int j = 0; j < max_n; j++) fprintf(out, ",v%d", j);
+    fputc('\n', out);
+    for (size_t i = 0; i < rec_delight_count(d); i++) {
+        const rec_bulb *b = rec_delight_get(d, i);
+        for (int band = 0; band < b->brf.bands; band++) {
+            fprintf(out, "%s,%s,%s,%.17g,%d,%s/%s,%s,%.17g,%d", b->id, rec_tech_name(b->type),
+                    b->name, b->watts, b->grid_hz, b->sensor, rec_ref_name(b->ref),
+                    band_name(b->brf.bands, band), b->chroma[band], b->brf.n);
+            const double *v = b->brf.v + (size_t)band * (size_t)b->brf.n;
+            for (int j = 0; j < b->brf.n; j++) fprintf(out, ",%.17g", v[j]);
+            fputc('\n', out);
+        }
+    }
+    if (fflush(out) != 0 || ferror(out)) return gs_fail(GS_EIO, "DELIGHT CSV export: write failed");
+    return GS_OK;
+}
+
+/* One CSV line split in place at commas. */
+typedef struct {
+    char **f;
+    size_t count, cap;
+} fields;
+
+static gs_status split(char *line, fields *fs)
+{
+    fs->count = 0;
+    for (char *p = line;;) {
+        if (fs->count == fs->cap) {
+            size_t cap = fs->cap ? 2 * fs->cap : 2048;
+            char **nf = realloc(fs->f, cap * sizeof *nf);
+            if (!nf) return gs_fail(GS_ENOMEM, "DELIGHT CSV: cannot split a line of %zu fields", cap);
+            fs->f = nf;
+            fs->cap = cap;
+        }
+        fs->f[fs->count++] = p;
+        char *comma = strchr(p, ',');
+        if (!comma) return GS_OK;
+        *comma = '\0';
+        p = comma + 1;
+    }
+}
+
+static int parse_double(const char *s, double *v)
+{
+    char *end;
+    if (!*s) return 0;
+    *v = strtod(s, &end);
+    return *end == '\0' && isfinite(*v);
+}
+
+static int parse_int(const char *s, long lo, long hi, int *v)
+{
+    char *end;
+    if (!*s) return 0;
+    long x = strtol(s, &end, 10);
+    if (*end != '\0' || x < lo || x > hi) return 0;
+    *v = (int)x;
+    return 1;
+}
+
+/* The import state: the bulb being assembled from consecutive rows. */
+typedef struct {
+    const char *path;
+    size_t line, first_line;
+    int header_n;      /* v columns in the header */
+    int active;        /* a bulb is being assembled */
+    int next_band;
+    rec_bulb b;
+} csv_state;
+
+static gs_status bad_field(const csv_state *st, const char *name, const char *expected)
+{
+    return gs_fail(GS_EFORMAT, "%s:%zu: field %s: expected %s", st->path, st->line, name, expected);
+}
+
+static gs_status check_header(csv_state *st, const fields *fs)
+{
+    size_t cols = fs->count > CSV_FIXED ? fs->count : CSV_FIXED;
+    for (size_t c = 0; c < cols; c++) {
+        char want[32], msg[192];
+        if (c < CSV_FIXED) snprintf(want, sizeof want, "%s", csv_columns[c]);
+        else snprintf(want, sizeof want, "v%zu", c - CSV_FIXED);
+        if (c >= fs->count || strcmp(fs->f[c], want) != 0) {
+            snprintf(msg, sizeof msg, "header column %zu to be '%s' (header bulb_id,type,name,watts,"
+                     "grid_hz,sensor,band,chromaticity,n,v0,...)", c + 1, want);
+            return bad_field(st, want, msg);
+        }
+    }
+    st->header_n = (int)(fs->count - CSV_FIXED);
+    return GS_OK;
+}
+
+/* Finish the bulb being assembled: add it to tmp. */
+static gs_status finish_bulb(csv_state *st, rec_delight *tmp)
+{
+    gs_status s = rec_delight_add(tmp, &st->b);
+    rec_bulb_release(&st->b);
+    st->active = 0;
+    return s == GS_OK ? s : with_location(s, st->path, st->first_line);
+}
+
+static gs_status import_row(csv_state *st, fields *fs, rec_delight *tmp)
+{
+    if (fs->count < CSV_FIXED) return bad_field(st, csv_columns[fs->count], "a value (truncated row)");
+    char **f = fs->f;
+    rec_bulb r = {0};
+    if (!*f[0] || !copy_str(r.id, sizeof r.id, f[0])) return bad_field(st, "bulb_id", "1 to 47 characters");
+    if (rec_tech_parse(f[1], &r.type) != GS_OK)
+        return bad_field(st, "type", "a technology (incandescent, halogen, cfl, led_pwm, ..., unknown)");
+    if (!copy_str(r.name, sizeof r.name, f[2])) return bad_field(st, "name", "at most 95 characters");
+    if (!parse_double(f[3], &r.watts)) return bad_field(st, "watts", "a finite number");
+    if (!parse_int(f[4], 50, 60, &r.grid_hz) || (r.grid_hz != 50 && r.grid_hz != 60))
+        return bad_field(st, "grid_hz", "50 or 60");
+    char *slash = strrchr(f[5], '/');
+    if (slash) *slash = '\0';
+    if (!slash || !*f[5] || !copy_str(r.sensor, sizeof r.sensor, f[5]) || !parse_ref(slash + 1, &r.ref))
+        return bad_field(st, "sensor", "SENSOR/REF with REF voltage, none or unlocked");
+    double chroma;
+    if (!parse_double(f[7], &chroma)) return bad_field(st, "chromaticity", "a finite number");
+    int n;
+    if (!parse_int(f[8], 4, st->header_n, &n) || n % 2)
+        return bad_field(st, "n", "an even sample count from 4 to the header's v columns");
+    if (fs->count != (size_t)CSV_FIXED + (size_t)n) {
+        char name[16], msg[80];
+        snprintf(name, sizeof name, "v%zu", fs->count > (size_t)CSV_FIXED + n ? (size_t)n
+                                                                              : fs->count - CSV_FIXED);
+        snprintf(msg, sizeof msg, "exactly %d values v0..v%d (row has %zu)", n, n - 1, fs->count - CSV_FIXED);
+        return bad_field(st, name, msg);
+    }
+
+    if (st->active && !same_key(&st->b, &r)) {
+        char msg[96];
+        snprintf(msg, sizeof msg, "band %s of bulb %s from line %zu",
+                 band_name(st->b.brf.bands, st->next_band), st->b.id, st->first_line);
+        return bad_field(st, "band", msg);
+    }
+    if (!st->active) {
+        int bands = strcmp(f[6], "mono") == 0 ? 1 : strcmp(f[6], "R") == 0 ? 3 : 0;
+        if (!bands) return bad_field(st, "band", "mono or R (the first band of a bulb)");
+        for (size_t i = 0; i < rec_delight_count(tmp); i++)
+            if (same_key(rec_delight_get(tmp, i), &r))
+                return bad_field(st, "bulb_id", "the rows of one bulb, grid and sensor to be consecutive");
+        st->b = r;
+        gs_status s = rec_brf_init(&st->b.brf, n, bands);
+        if (s != GS_OK) return s;
+        st->active = 1;
+        st->next_band = 0;
+        st->first_line = st->line;
+    } else {
+        const rec_bulb *b = &st->b;
+        if (strcmp(f[6], band_name(b->brf.bands, st->next_band)) != 0)
+            return bad_field(st, "band", band_name(b->brf.bands, st->next_band));
+        if (r.type != b->type) return bad_field(st, "type", "the same type in every band of a bulb");
+        if (strcmp(r.name, b->name) != 0) return bad_field(st, "name", "the same name in every band");
+        if (r.watts != b->watts) return bad_field(st, "watts", "the same watts in every band");
+        if (r.ref != b->ref) return bad_field(st, "sensor", "the same SENSOR/REF in every band");
+        if (n != b->brf.n) return bad_field(st, "n", "the same n in every band");
+    }
+    st->b.chroma[st->next_band] = chroma;
+    double *v = st->b.brf.v + (size_t)st->next_band * (size_t)n;
+    for (int j = 0; j < n; j++)
+        if (!parse_double(f[CSV_FIXED + j], &v[j])) {
+            char name[16];
+            snprintf(name, sizeof name, "v%d", j);
+            return bad_field(st, name, "a finite number");
+        }
+    if (++st->next_band == st->b.brf.bands) return finish_bulb(st, tmp);
+    return GS_OK;
+}
+
+gs_status rec_delight_import_csv(rec_delight *d, const char *path)
+{
+    FILE *in = fopen(path, "r");
+    if (!in) return gs_fail(GS_EIO, "%s: cannot open", path);
+    rec_delight *tmp = rec_delight_new();
+    csv_state st = {.path = path};
+    fields fs = {0};
+    char *line = NULL;
+    size_t cap = 0;
+    ssize_t len;
+    int have_header = 0;
+    gs_status s = tmp ? GS_OK : gs_fail(GS_ENOMEM, "%s: cannot allocate a DELIGHT database", path);
+    while (s == GS_OK && (len = getline(&line, &cap, in)) >= 0) {
+        st.line++;
+        while (len > 0 && (line[len - 1] == '\n' || line[len - 1] == '\r')) line[--len] = '\0';
+        char *p = line;
+        if (st.line == 1 && strncmp(p, "\xEF\xBB\xBF", 3) == 0) p += 3;
+        if (!*p && have_header) continue;   /* blank line */
+        if ((s = split(p, &fs)) != GS_OK) break;
+        if (!have_header) {
+            s = check_header(&st, &fs);
+            have_header = 1;
+        } else {
+            s = import_row(&st, &fs, tmp);
+        }
+    }
+    if (s == GS_OK && ferror(in)) s = gs_fail(GS_EIO, "%s: read error", path);
+    if (s == GS_OK && !have_header)
+        s = gs_fail(GS_EFORMAT, "%s:1: field bulb_id: expected the header bulb_id,type,name,watts,"
+                    "grid_hz,sensor,band,chromaticity,n,v0,... (the file is empty)", path);
+    if (s == GS_OK && st.active) {
+        st.line++;
+        s = bad_field(&st, "band", band_name(st.b.brf.bands, st.next_band));
+    }
+    if (s == GS_OK) s = append_all(d, tmp, path);
+    rec_bulb_release(&st.b);
+    free(fs.f);
+    free(line);
+    fclose(in);
+    rec_delight_free(tmp);
+    return s;
+}

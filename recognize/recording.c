@@ -1,0 +1,502 @@
+/* recording.c - a measured bulb from a photodiode recording (paper Sec. 3 and Fig. 2: DELIGHT's
+ * BRFs are photodiode signals averaged over many flicker cycles, cropped to t in [0, Delta],
+ * normalised by their temporal average, Eq. 4).
+ *
+ * Steps: read `time,value[,voltage]` rows as oscilloscopes write them; find the flicker
+ * fundamental from the Hann-windowed spectrum (coarse), refined by phase dispersion
+ * minimisation (Stellingwerf 1978: the frequency whose fold leaves the least within-bin
+ * variance; exact for any waveform shape and for partial cycles); with a voltage column, fit a
+ * sine to the voltage (as the paper's Fig. 2) for the grid frequency and time zero; fold every
+ * sample into n phase bins and average; keep the harmonics that stand above the fold's noise
+ * (band-limited BRF, brf.c); normalise to mean 1. */
+#include "recognize/internal.h"
+
+#include <complex.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+static const double two_pi = 6.283185307179586476925286766559;
+
+/* Search range of the flicker fundamental: at least 2 cycles in the recording and 8 samples a
+ * cycle, at most 10 kHz (mains flicker is 100/120 Hz, LED PWM up to a few kHz; faster ripple,
+ * such as an electronic ballast's tens of kHz, averages out in a camera window). */
+#define FLICKER_MAX_HZ 10000.0
+/* Locked flicker is twice a 50/60 Hz grid within 3 % (the brief of recognize.h). */
+#define LOCK_TOLERANCE 0.03
+/* A harmonic is kept when its amplitude exceeds 4 noise scales (a false alarm probability of
+ * e^-8 per harmonic for Gaussian noise); the search stops after 5 harmonics in a row below. */
+#define HARMONIC_SNR 4.0
+#define HARMONIC_GAP 5
+/* A subharmonic with at least 10 % of the peak's power is the true fundamental. */
+#define SUBHARMONIC_POWER 0.1
+#define PDM_BINS 64
+
+/* ------------------------------------------------------------------ reading */
+
+typedef struct {
+    double *t, *x, *volt;   /* times (s), values and (optional) voltages, as read */
+    double t0, dt;          /* time of sample 0 and the sampling step, s */
+    size_t n, cap;
+} series;
+
+/* Whole range [p, end) is one finite number. */
+static int number(const char *p, const char *end, double *out)
+{
+    if (p == end) return 0;
+    char *stop;
+    double v = strtod(p, &stop);
+    if (stop != end || !isfinite(v)) return 0;
+    *out = v;
+    return 1;
+}
+
+/* Parse one row: column 1 time, 2 value, vcol voltage (0: none); other columns are ignored, a
+ * trailing comma too. Returns 0, or the 1-based column that is missing or not a number. */
+static int parse_row(const char *line, int vcol, double *t, double *x, double *v)
+{
+    const char *stop = line + strlen(line);
+    if (stop > line && stop[-1] == ',') stop--;
+    int col = 0, bad = 0;
+    for (const char *p = line;; p++) {
+        const char *end = memchr(p, ',', (size_t)(stop - p));
+        if (!end) end = stop;
+        col++;
+        double *dst = col == 1 ? t : col == 2 ? x : col == vcol ? v : NULL;
+        if (dst && !number(p, end, dst) && !bad) bad = col;
+        if (end == stop) break;
+        p = end;
+    }
+    int need = vcol > 2 ? vcol : 2;
+    return bad ? bad : col < need ? col + 1 : 0;
+}
+
+/* A header that runs into the first sample ("ch1_time(s),ch1_value(V)-0.014,0.992"): a line of
+ * 2k-1 fields whose k-th field ends in a number. Returns the start of the sample or NULL. */
+static const char *header_run_in(const char *line)
+{
+    int commas = 0;
+    for (const char *c = line; *c; c++) commas += *c == ',';
+    if (commas < 2 || commas % 2) return NULL;
+    const char *p = line;
+    for (int k = 0; k < commas / 2; k++) p = strchr(p, ',') + 1;
+    const char *end = strchr(p, ',');
+    for (const char *s = p + 1; s < end; s++) {   /* longest numeric suffix, non-empty prefix */
+        double v;
+        if (number(s, end, &v) && strchr("+-.0123456789", *s)) return s;
+    }
+    return NULL;
+}
+
+static gs_status push(const char *path, series *s, double t, double x, double v)
+{
+    if (s->n == s->cap) {
+        size_t cap = s->cap ? 2 * s->cap : 4096;
+        double *nt = realloc(s->t, cap * sizeof *nt);
+        if (nt) s->t = nt;
+        double *nx = realloc(s->x, cap * sizeof *nx);
+        if (nx) s->x = nx;
+        double *nv = realloc(s->volt, cap * sizeof *nv);
+        if (nv) s->volt = nv;
+        if (!nt || !nx || !nv) return gs_fail(GS_ENOMEM, "%s: cannot hold %zu samples", path, cap);
+        s->cap = cap;
+    }
+    s->t[s->n] = t;
+    s->x[s->n] = x;
+    s->volt[s->n] = v;
+    s->n++;
+    return GS_OK;
+}
+
+static const char *column_name(int col, int vcol)
+{
+    return col == 1 ? "time" : col == 2 ? "value" : col == vcol ? "voltage" : "column";
+}
+
+static gs_status read_series(const char *path, int vcol, series *s)
+{
+    FILE *f = fopen(path, "r");
+    if (!f) return gs_fail(GS_EIO, "%s: cannot open", path);
+    char *line = NULL;
+    size_t line_cap = 0, lineno = 0;
+    gs_status st = GS_OK;
+    ssize_t len;
+    while ((len = getline(&line, &line_cap, f)) >= 0) {
+        lineno++;
+        while (len > 0 && (line[len - 1] == '\n' || line[len - 1] == '\r')) line[--len] = '\0';
+        char *p = line;
+        if (lineno == 1 && strncmp(p, "\xEF\xBB\xBF", 3) == 0) p += 3;
+        if (!*p) continue;
+        double t = 0, x = 0, v = 0;
+        int bad = parse_row(p, vcol, &t, &x, &v);
+        if (bad == 1 && s->n == 0) {
+            /* Before the data: metadata (`Key:value,`) or the header, which may run into the
+             * first sample. */
+            const char *sample = header_run_in(p);
+            if (!sample || parse_row(sample, vcol, &t, &x, &v)) continue;
+            bad = 0;
+        }
+        if (bad) {
+            st = gs_fail(GS_EFORMAT, "%s:%zu: field %s (column %d): expected a finite number", path,
+                         lineno, column_name(bad, vcol), bad);
+            break;
+        }
+        if ((st = push(path, s, t, x, v)) != GS_OK) break;
+    }
+    if (st == GS_OK && ferror(f)) st = gs_fail(GS_EIO, "%s: read error", path);
+    free(line);
+    fclose(f);
+    if (st == GS_OK && s->n < 64)
+        st = gs_fail(GS_EFORMAT, "%s: %zu samples: expected at least 64 rows of time,value", path, s->n);
+    if (st == GS_OK) {
+        /* Uniform sampling: every time within half a step of t0 + i dt. */
+        s->t0 = s->t[0];
+        s->dt = (s->t[s->n - 1] - s->t[0]) / (double)(s->n - 1);
+        for (size_t i = 0; i < s->n && st == GS_OK; i++)
+            if (!(s->dt > 0) || fabs(s->t[i] - (s->t0 + (double)i * s->dt)) > 0.5 * s->dt)
+                st = gs_fail(GS_EFORMAT, "%s: sample %zu: time %g s: expected uniform increasing "
+                             "times (step %g s)", path, i + 1, s->t[i], s->dt);
+    }
+    return st;
+}
+
+/* ------------------------------------------------------------ frequency */
+
+/* Coarse spectral peak of x in [f_lo, f_hi] (Hann window, zero-padded 2x), moved to a
+ * subharmonic f/k (k = 4..2) that holds at least SUBHARMONIC_POWER of its power. */
+static gs_status spectral_peak(const char *path, const double *x, size_t N, double dt, double f_lo,
+                               double f_hi, double *f_peak)
+{
+    size_t P = 2 * N;
+    double *buf = calloc(P, sizeof *buf);
+    double complex *C = malloc((P / 2 + 1) * sizeof *C);
+    double *pw = malloc((P / 2 + 1) * sizeof *pw);
+    gs_status st = GS_OK;
+    if (!buf || !C || !pw) st = gs_fail(GS_ENOMEM, "%s: cannot allocate a %zu-point DFT", path, P);
+    if (st == GS_OK) {
+        double mean = 0;
+        for (size_t i = 0; i < N; i++) mean += x[i] / (double)N;
+        for (size_t i = 0; i < N; i++)
+            buf[i] = (x[i] - mean) * (0.5 - 0.5 * cos(two_pi * (double)i / (double)(N - 1)));
+        st = rec_brf_spectrum(buf, (int)P, C);
+    }
+    if (st == GS_OK) {
+        double df = 1.0 / ((double)P * dt);
+        size_t lo = (size_t)ceil(f_lo / df), hi = (size_t)floor(f_hi / df), best = lo;
+        if (hi > P / 2) hi = P / 2;
+        if (hi < lo) hi = lo;
+        for (size_t k = lo; k <= hi; k++) {
+            pw[k] = creal(C[k]) * creal(C[k]) + cimag(C[k]) * cimag(C[k]);
+            if (pw[k] > pw[best]) best = k;
+        }
+        size_t span = P / N;   /* +-1/T in bins */
+        for (size_t div = 4, done = 0; div >= 2 && !done; div--) {
+            size_t c = best / div;
+            if (c < lo + span) continue;
+            size_t sub = c - span;
+            for (size_t k = c - span; k <= c + span && k <= hi; k++)
+                if (pw[k] > pw[sub]) sub = k;
+            if (pw[sub] >= SUBHARMONIC_POWER * pw[best]) {
+                best = sub;
+                done = 1;
+            }
+        }
+        *f_peak = (double)best * df;
+    }
+    free(buf);
+    free(C);
+    free(pw);
+    return st;
+}
+
+/* Phase of sample i at frequency f (cycles, [0,1)) relative to time offset t_ref from sample 0. */
+static double phase_of(size_t i, double dt, double t_ref, double f)
+{
+    double ph = fmod(((double)i * dt - t_ref) * f, 1.0);
+    return ph < 0 ? ph + 1.0 : ph;
+}
+
+/* Phase dispersion: the within-bin sum of squares of x folded at f into PDM_BINS bins. */
+static double dispersion(const double *x, size_t N, double dt, double f)
+{
+    double s[PDM_BINS] = {0}, s2[PDM_BINS] = {0}, c[PDM_BINS] = {0};
+    for (size_t i = 0; i < N; i++) {
+        int b = (int)(phase_of(i, dt, 0.0, f) * PDM_BINS) % PDM_BINS;
+        s[b] += x[i];
+        s2[b] += x[i] * x[i];
+        c[b] += 1;
+    }
+    double d = 0;
+    for (int b = 0; b < PDM_BINS; b++)
+        if (c[b] > 0) d += s2[b] - s[b] * s[b] / c[b];
+    return d;
+}
+
+/* Residual sum of squares of the least-squares fit x ~ c + a cos(2 pi f t) + b sin(2 pi f t);
+ * a, b and c out unless NULL (t = i dt). */
+static double sine_fit(const double *x, size_t N, double dt, double f, double *a, double *b, double *c)
+{
+    double M[3][4] = {{0}}, xx = 0;
+    for (size_t i = 0; i < N; i++) {
+        double w = two_pi * fmod(f * (double)i * dt, 1.0), r[3] = {1.0, cos(w), sin(w)};
+        for (int j = 0; j < 3; j++) {
+            for (int k = 0; k < 3; k++) M[j][k] += r[j] * r[k];
+            M[j][3] += r[j] * x[i];
+        }
+        xx += x[i] * x[i];
+    }
+    double rhs[3] = {M[0][3], M[1][3], M[2][3]};
+    for (int p = 0; p < 3; p++)   /* Gaussian elimination; M is symmetric positive definite */
+        for (int r = p + 1; r < 3; r++) {
+            double m = M[r][p] / M[p][p];
+            for (int k = p; k < 4; k++) M[r][k] -= m * M[p][k];
+        }
+    double sol[3];
+    for (int r = 2; r >= 0; r--) {
+        double acc = M[r][3];
+        for (int k = r + 1; k < 3; k++) acc -= M[r][k] * sol[k];
+        sol[r] = acc / M[r][r];
+    }
+    if (c) *c = sol[0];
+    if (a) *a = sol[1];
+    if (b) *b = sol[2];
+    return xx - sol[0] * rhs[0] - sol[1] * rhs[1] - sol[2] * rhs[2];   /* x'x - beta'X'x */
+}
+
+/* Golden-section minimum of cost over [lo, hi]. */
+static double golden_min(double (*cost)(const double *, size_t, double, double), const double *x,
+                         size_t N, double dt, double lo, double hi)
+{
+    const double g = 0.6180339887498949;
+    double c = hi - g * (hi - lo), d = lo + g * (hi - lo);
+    double fc = cost(x, N, dt, c), fd = cost(x, N, dt, d);
+    while (hi - lo > 1e-10 * hi) {
+        if (fc < fd) {
+            hi = d, d = c, fd = fc;
+            c = hi - g * (hi - lo), fc = cost(x, N, dt, c);
+        } else {
+            lo = c, c = d, fc = fd;
+            d = lo + g * (hi - lo), fd = cost(x, N, dt, d);
+        }
+    }
+    return 0.5 * (lo + hi);
+}
+
+static double sine_cost(const double *x, size_t N, double dt, double f)
+{
+    return sine_fit(x, N, dt, f, NULL, NULL, NULL);
+}
+
+/* The nominal grid (50 or 60) whose frequency times mult is within LOCK_TOLERANCE of f, or 0. */
+static int nominal_grid(double f, double mult)
+{
+    for (int g = 50; g <= 60; g += 10)
+        if (fabs(f - mult * g) <= LOCK_TOLERANCE * mult * g) return g;
+    return 0;
+}
+
+/* --------------------------------------------------------------- folding */
+
+static int bin_of(size_t i, double dt, double t_ref, double f, int n)
+{
+    return (int)floor(phase_of(i, dt, t_ref, f) * n + 0.5) % n;   /* bins centred on j/n */
+}
+
+/* Fold x at f_fold with time zero t_ref (s from sample 0) into n bins and average each bin;
+ * write the band-limited average to out[0..n) and the harmonics kept to *harmonics.
+ * The harmonic coefficients are sums over the samples at their exact phases, each weighted by
+ * 1/(samples in its bin): the DFT of the bin means without the bins' jitter and box-car
+ * attenuation, and unbiased by partial cycles. */
+static gs_status fold(const char *path, const double *x, size_t N, double dt, double f_fold,
+                      double t_ref, int n, double *out, int *harmonics)
+{
+    double *mean = calloc((size_t)n, sizeof *mean), *cnt = calloc((size_t)n, sizeof *cnt);
+    double complex *C = calloc((size_t)(n / 2 + 1), sizeof *C);
+    if (!mean || !cnt || !C) {
+        free(mean);
+        free(cnt);
+        free(C);
+        return gs_fail(GS_ENOMEM, "%s: cannot fold into %d bins", path, n);
+    }
+    for (size_t i = 0; i < N; i++) {
+        int b = bin_of(i, dt, t_ref, f_fold, n);
+        mean[b] += x[i];
+        cnt[b] += 1;
+    }
+    int filled = 0;
+    double inv_cnt = 0, rss = 0;
+    for (int j = 0; j < n; j++)
+        if (cnt[j] > 0) {
+            mean[j] /= cnt[j];
+            filled++;
+            inv_cnt += 1.0 / cnt[j];
+        }
+    /* C_0 from the bin means; the other sums use x minus that mean, so that the bins' phase
+     * jitter does not leak the (large) mean into the harmonics. */
+    double dc = 0;
+    for (int j = 0; j < n; j++) dc += mean[j] / filled;
+    C[0] = dc * n;
+    int h_max = filled / 2 - 1, H = 0;
+    for (size_t i = 0; i < N; i++) {
+        int b = bin_of(i, dt, t_ref, f_fold, n);
+        rss += (x[i] - mean[b]) * (x[i] - mean[b]);
+        double w = (x[i] - dc) / cnt[b] * n / filled;
+        double complex e = cexp(-I * two_pi * phase_of(i, dt, t_ref, f_fold)), z = 1.0;
+        for (int h = 1; h <= h_max; h++) {
+            z *= e;
+            C[h] += w * z;
+        }
+    }
+    /* Noise of a harmonic's amplitude 2|C_h|/n: each quadrature has variance
+     * (2 sigma^2 / filled^2) sum_j 1/c_j, sigma^2 the within-bin variance. Harmonics are kept up
+     * to the last one above HARMONIC_SNR noise scales (or above rounding, for noise-free data). */
+    double dof = (double)N - filled;
+    double scale = dof > 0 ? sqrt(2.0 * rss / dof * inv_cnt) / filled : 0.0;
+    double floor_amp = fmax(HARMONIC_SNR * scale, 1e-12 * fabs(creal(C[0])) / n);
+    for (int h = 1; h <= h_max && h - H <= HARMONIC_GAP; h++)
+        if (2.0 * cabs(C[h]) / n > floor_amp) H = h;
+    /* The trigonometric polynomial of harmonics 0..H at t = j/n (no Nyquist term). */
+    for (int j = 0; j < n; j++) {
+        double acc = creal(C[0]);
+        for (int h = 1; h <= H; h++) {
+            double turns = (double)(((long long)h * j) % n) / n;
+            acc += 2.0 * creal(C[h] * cexp(I * two_pi * turns));
+        }
+        out[j] = acc / n;
+    }
+    *harmonics = H;
+    free(mean);
+    free(cnt);
+    free(C);
+    if (filled < 4)
+        return gs_fail(GS_EFORMAT, "%s: %d of %d phase bins hold samples: expected at least 4",
+                       path, filled, n);
+    return GS_OK;
+}
+
+/* -------------------------------------------------------------- the bulb */
+
+static void names_from_path(const char *path, rec_bulb *out)
+{
+    const char *base = strrchr(path, '/');
+    base = base ? base + 1 : path;
+    size_t len = strlen(base);
+    const char *dot = strrchr(base, '.');
+    if (dot && dot > base) len = (size_t)(dot - base);
+    size_t k = 0;
+    for (size_t i = 0; i < len && k + 1 < REC_ID_MAX; i++) {
+        char c = base[i];
+        int ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
+                 c == '_' || c == '-' || c == '.';
+        out->id[k++] = ok ? c : '_';
+    }
+    out->id[k] = '\0';
+    if (k == 0) strcpy(out->id, "recording");
+    k = 0;
+    for (size_t i = 0; i < len && k + 1 < REC_NAME_MAX; i++)
+        out->name[k++] = strchr(",\"\r\n", base[i]) ? ' ' : base[i];
+    out->name[k] = '\0';
+}
+
+gs_status rec_recording_to_bulb(const char *path, int voltage_column, int n, rec_bulb *out,
+                                rec_recording_info *info)
+{
+    memset(out, 0, sizeof *out);
+    if (voltage_column == 1 || voltage_column == 2)
+        return gs_fail(GS_EINVAL, "%s: voltage column %d: expected 0 (none) or a column after time "
+                       "and value (>= 3)", path, voltage_column);
+    if (voltage_column < 0) voltage_column = 0;
+    rec_brf brf;
+    gs_status st = rec_brf_init(&brf, n, 1);
+    if (st != GS_OK) return st;
+    series s = {0};
+    if ((st = read_series(path, voltage_column, &s)) != GS_OK) goto done;
+
+    size_t N = s.n;
+    double dt = s.dt, T = (double)N * dt, rate = 1.0 / dt;
+    double f_hi = fmin(rate / 8.0, FLICKER_MAX_HZ), f_lo = 2.0 / T;
+    if (f_lo >= f_hi) {
+        st = gs_fail(GS_EFORMAT, "%s: %.3g s at %.3g Hz: too short for two flicker cycles", path, T, rate);
+        goto done;
+    }
+    double f_coarse, f;
+    if ((st = spectral_peak(path, s.x, N, dt, f_lo, f_hi, &f_coarse)) != GS_OK) goto done;
+    f = golden_min(dispersion, s.x, N, dt, fmax(f_coarse - 1.0 / T, 0.5 * f_coarse), f_coarse + 1.0 / T);
+
+    /* Reference: a sine fitted to the outlet voltage gives the grid frequency and, at its first
+     * negative-to-positive crossing, time zero (paper Fig. 2). */
+    int grid = nominal_grid(f, 2.0), voltage_grid = 0;
+    double f_fold = f, t_ref = 0.0;
+    rec_ref ref = grid ? REC_REF_NONE : REC_REF_UNLOCKED;
+    if (voltage_column) {
+        double v_lo = fmax(40.0, 1.0 / T), fv;
+        if (v_lo >= 70.0) {
+            st = gs_fail(GS_EFORMAT, "%s: %.3g s: too short for one AC cycle of the voltage", path, T);
+            goto done;
+        }
+        if ((st = spectral_peak(path, s.volt, N, dt, v_lo, 70.0, &fv)) != GS_OK) goto done;
+        fv = golden_min(sine_cost, s.volt, N, dt, fmax(fv - 1.0 / T, 0.5 * fv), fv + 1.0 / T);
+        voltage_grid = nominal_grid(fv, 1.0);
+        if (!voltage_grid) {
+            st = gs_fail(GS_EFORMAT, "%s: field voltage (column %d): %.4g Hz: expected a 50 or 60 Hz "
+                         "mains voltage (+-3 %%)", path, voltage_column, fv);
+            goto done;
+        }
+        if (grid == voltage_grid) {
+            double a, b;
+            sine_fit(s.volt, N, dt, fv, &a, &b, NULL);
+            /* a cos w + b sin w = R sin(w + phi), phi = atan2(a, b): rising zero at w = -phi. */
+            double cyc = -atan2(a, b) / two_pi;
+            t_ref = (cyc - floor(cyc)) / fv;
+            f_fold = 2.0 * fv;
+            ref = REC_REF_VOLTAGE;
+        } else {
+            grid = 0;
+            ref = REC_REF_UNLOCKED;
+        }
+    }
+
+    int harmonics = 0;
+    if ((st = fold(path, s.x, N, dt, f_fold, t_ref, n, brf.v, &harmonics)) != GS_OK) goto done;
+    /* A photodiode sees no negative light: a negative minimum is the scope's offset (the Hue
+     * file sits at -16 mV when dark) or ringing, so raise the waveform to a minimum of 0. */
+    double lo = brf.v[0];
+    for (int j = 1; j < n; j++) lo = fmin(lo, brf.v[j]);
+    if (lo < 0)
+        for (int j = 0; j < n; j++) brf.v[j] -= lo;
+    if (rec_brf_normalize(&brf, NULL) != GS_OK) {
+        st = gs_fail(GS_ENUMERIC, "%s: field value: mean light level is not positive: expected a "
+                     "lit photodiode", path);
+        goto done;
+    }
+    if (harmonics == 0) {
+        /* No flicker above the noise: a flat BRF, valid at any phase; its frequency is unknown. */
+        f_fold = NAN;
+        grid = voltage_grid;
+        ref = voltage_grid ? REC_REF_VOLTAGE : REC_REF_NONE;
+    }
+
+    names_from_path(path, out);
+    out->type = REC_TECH_UNKNOWN;
+    out->watts = 0.0;
+    out->grid_hz = grid ? grid : voltage_grid;
+    strcpy(out->sensor, "photodiode");
+    out->ref = ref;
+    out->chroma[0] = 1.0;
+    out->brf = brf;
+    brf.v = NULL;
+    if (info) {
+        info->samples = N;
+        info->sample_rate_hz = rate;
+        info->flicker_hz = f_fold;
+        info->cycles = T * f_fold;
+        info->percent_flicker = rec_brf_percent_flicker(&out->brf, 0);
+        info->grid_hz = grid;
+    }
+done:
+    rec_brf_release(&brf);
+    free(s.t);
+    free(s.x);
+    free(s.volt);
+    return st;
+}

@@ -1,0 +1,37 @@
+/* status.c - the tool's one status enum and its thread-local detail string (gs_*). */
+#include "recognize/recognize.h"
+
+#include <stdarg.h>
+#include <stdio.h>
+
+static _Thread_local char detail[512];
+
+const char *gs_strerror(gs_status s)
+{
+    switch (s) {
+    case GS_OK: return "ok";
+    case GS_EINVAL: return "invalid argument";
+    case GS_EIO: return "input/output error";
+    case GS_EFORMAT: return "bad file format";
+    case GS_ENOMEM: return "out of memory";
+    case GS_ESQL: return "database error";
+    case GS_ENOTFOUND: return "not found";
+    case GS_ENUMERIC: return "numerical error";
+    case GS_ELIMIT: return "limit exceeded";
+    }
+    return "unknown status";
+}
+
+const char *gs_detail(void)
+{
+    return detail;
+}
+
+gs_status gs_fail(gs_status s, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(detail, sizeof detail, fmt, ap);
+    va_end(ap);
+    return s;
+}

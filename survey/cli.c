@@ -1,0 +1,47 @@
+/* cli.c - gridsurvey's git-style subcommand dispatch and shared option helpers. */
+#include "survey/internal.h"
+
+#include <stdio.h>
+#include <string.h>
+
+static const struct {
+    const char *name;
+    int (*run)(int argc, char **argv);
+    const char *summary;
+} commands[] = {
+    {"delight", srv_cmd_delight, "the DELIGHT bulb database: list, show, export, import, add, plot, generate"},
+};
+
+static void usage(FILE *f)
+{
+    fprintf(f, "usage: gridsurvey COMMAND [ARGS]   (gridsurvey COMMAND --help for details)\n\n"
+               "Surveys a city's electric grid from its lights at night (bulb type and grid phase\n"
+               "of every light, from an AC-locked coded-exposure camera).\n\ncommands:\n");
+    for (size_t i = 0; i < sizeof commands / sizeof *commands; i++)
+        fprintf(f, "  %-10s %s\n", commands[i].name, commands[i].summary);
+}
+
+int srv_main(int argc, char **argv)
+{
+    if (argc < 2) {
+        usage(stderr);
+        return 2;
+    }
+    if (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h") || !strcmp(argv[1], "help")) {
+        usage(stdout);
+        return 0;
+    }
+    for (size_t i = 0; i < sizeof commands / sizeof *commands; i++)
+        if (!strcmp(argv[1], commands[i].name)) return commands[i].run(argc - 1, argv + 1);
+    fprintf(stderr, "gridsurvey: '%s' is not a command: expected one of", argv[1]);
+    for (size_t i = 0; i < sizeof commands / sizeof *commands; i++)
+        fprintf(stderr, " %s", commands[i].name);
+    fprintf(stderr, " (see gridsurvey --help)\n");
+    return 2;
+}
+
+int srv_error(gs_status s)
+{
+    fprintf(stderr, "gridsurvey: %s: %s\n", gs_strerror(s), gs_detail());
+    return 1;
+}

@@ -1,0 +1,332 @@
+/* cmd_delight.c - `gridsurvey delight`: list, show, export, import, add, plot and generate the
+ * DELIGHT bulb database (paper Sec. 3; our substitute is described in docs/delight.md). */
+#include "survey/internal.h"
+
+#include <getopt.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static const char delight_usage[] =
+    "usage: gridsurvey delight SUBCOMMAND [OPTIONS]\n"
+    "\n"
+    "  list      [--grid 50|60] [--sensor S]     one line per entry with its percent flicker\n"
+    "  show      ID [--grid 50|60] [--sensor S]  an entry's metadata and its BRF at K=26\n"
+    "  export    [-o FILE.csv]                   CSV (docs/delight.md) to FILE or stdout\n"
+    "  import    FILE.csv...  --delight DB       add CSV entries to DB (created if missing)\n"
+    "  add       --from-recording FILE [--voltage-column C] [--id ID] [--name NAME]\n"
+    "            [--type TECH] [--watts W] [--grid 50|60] --delight DB\n"
+    "                                            a photodiode recording (time,value CSV) as a BRF\n"
+    "  plot      -o FILE.png [--ids A,B,...] [--grid 50|60] [--sensor S]\n"
+    "                                            BRFs over one cycle per band (paper Fig. 2)\n"
+    "  generate  -o DB [--n N]                   write the built-in database to a SQLite file\n"
+    "\n"
+    "Common options:\n"
+    "  --delight DB   the DELIGHT SQLite file (default: $GRIDSURVEY_DELIGHT, else the built-in\n"
+    "                 database generated in memory from the lamp models)\n"
+    "  --help         this text\n";
+
+typedef struct {
+    const char *db, *out, *ids, *recording, *id, *name, *type, *sensor;
+    int grid_hz, voltage_column, n;
+    double watts;
+} delight_opts;
+
+/* Parse the options shared by the subcommands; positional arguments stay in argv[optind..). */
+static int parse_opts(int argc, char **argv, delight_opts *o)
+{
+    static const struct option longs[] = {
+        {"delight", required_argument, 0, 'd'}, {"output", required_argument, 0, 'o'},
+        {"ids", required_argument, 0, 'i'},     {"from-recording", required_argument, 0, 'r'},
+        {"id", required_argument, 0, 'I'},      {"name", required_argument, 0, 'N'},
+        {"type", required_argument, 0, 't'},    {"grid", required_argument, 0, 'g'},
+        {"sensor", required_argument, 0, 's'},  {"voltage-column", required_argument, 0, 'v'},
+        {"n", required_argument, 0, 'n'},       {"watts", required_argument, 0, 'w'},
+        {"help", no_argument, 0, 'h'},          {0, 0, 0, 0},
+    };
+    memset(o, 0, sizeof *o);
+    o->db = getenv("GRIDSURVEY_DELIGHT");
+    if (o->db && !*o->db) o->db = NULL;
+    o->n = REC_BRF_N_DEFAULT;
+    optind = 1;
+    int c;
+    char *end;
+    while ((c = getopt_long(argc, argv, "o:h", longs, NULL)) != -1) {
+        switch (c) {
+        case 'd': o->db = optarg; break;
+        case 'o': o->out = optarg; break;
+        case 'i': o->ids = optarg; break;
+        case 'r': o->recording = optarg; break;
+        case 'I': o->id = optarg; break;
+        case 'N': o->name = optarg; break;
+        case 't': o->type = optarg; break;
+        case 's': o->sensor = optarg; break;
+        case 'g':
+            o->grid_hz = (int)strtol(optarg, &end, 10);
+            if (*end || (o->grid_hz != 50 && o->grid_hz != 60)) {
+                fprintf(stderr, "gridsurvey delight: --grid '%s': expected 50 or 60\n", optarg);
+                return 2;
+            }
+            break;
+        case 'v':
+            o->voltage_column = (int)strtol(optarg, &end, 10);
+            if (*end || o->voltage_column < 2) {
+                fprintf(stderr, "gridsurvey delight: --voltage-column '%s': expected a column number >= 2\n", optarg);
+                return 2;
+            }
+            break;
+        case 'n':
+            o->n = (int)strtol(optarg, &end, 10);
+            if (*end || o->n < 256 || o->n % 2) {
+                fprintf(stderr, "gridsurvey delight: --n '%s': expected an even number >= 256\n", optarg);
+                return 2;
+            }
+            break;
+        case 'w':
+            o->watts = strtod(optarg, &end);
+            if (*end || !(o->watts > 0)) {
+                fprintf(stderr, "gridsurvey delight: --watts '%s': expected a power in W > 0\n", optarg);
+                return 2;
+            }
+            break;
+        case 'h': fputs(delight_usage, stdout); return 0;
+        default: fputs(delight_usage, stderr); return 2;
+        }
+    }
+    return -1;
+}
+
+/* The database to read: the --delight file, or the built-in one. */
+static gs_status open_delight(const delight_opts *o, rec_delight **out)
+{
+    rec_delight *d = rec_delight_new();
+    if (!d) return gs_fail(GS_ENOMEM, "cannot allocate the DELIGHT database");
+    gs_status s = o->db ? rec_delight_load(d, o->db) : rec_delight_generate(d, o->n);
+    if (s != GS_OK) {
+        rec_delight_free(d);
+        return s;
+    }
+    *out = d;
+    return GS_OK;
+}
+
+static int matches(const rec_bulb *b, const delight_opts *o)
+{
+    return (!o->grid_hz || b->grid_hz == o->grid_hz) && (!o->sensor || !strcmp(b->sensor, o->sensor));
+}
+
+static int cmd_list(const rec_delight *d, const delight_opts *o)
+{
+    printf("%-22s %-22s %4s %-10s %-8s %7s  %-28s %s\n", "bulb_id", "type", "Hz", "sensor", "ref",
+           "watts", "percent flicker (per band)", "name");
+    size_t shown = 0;
+    for (size_t i = 0; i < rec_delight_count(d); i++) {
+        const rec_bulb *b = rec_delight_get(d, i);
+        if (!matches(b, o)) continue;
+        char pf[64] = "";
+        for (int band = 0; band < b->brf.bands; band++) {
+            size_t used = strlen(pf);
+            snprintf(pf + used, sizeof pf - used, "%s%.1f", band ? " / " : "",
+                     rec_brf_percent_flicker(&b->brf, band));
+        }
+        printf("%-22s %-22s %4d %-10s %-8s %7.1f  %-28s %s\n", b->id, rec_tech_name(b->type),
+               b->grid_hz, b->sensor, rec_ref_name(b->ref), b->watts, pf, b->name);
+        shown++;
+    }
+    int techs[REC_TECH_COUNT] = {0}, n_tech = 0;
+    for (size_t i = 0; i < rec_delight_count(d); i++) {
+        const rec_bulb *b = rec_delight_get(d, i);
+        if (matches(b, o) && !techs[b->type]++) n_tech++;
+    }
+    printf("%zu entries over %d technologies\n", shown, n_tech);
+    return 0;
+}
+
+static int cmd_show(const rec_delight *d, const delight_opts *o, const char *id)
+{
+    int shown = 0;
+    for (size_t i = 0; i < rec_delight_count(d); i++) {
+        const rec_bulb *b = rec_delight_get(d, i);
+        if (strcmp(b->id, id) || !matches(b, o)) continue;
+        printf("%s: %s, %s, %.1f W, %d Hz, sensor %s, reference %s, %d samples per cycle\n", b->id,
+               b->name, rec_tech_name(b->type), b->watts, b->grid_hz, b->sensor,
+               rec_ref_name(b->ref), b->brf.n);
+        enum { K = 26 };
+        double w[REC_MAX_BANDS * K];
+        gs_status s = rec_brf_integrate(&b->brf, 0.0, K, w);
+        if (s != GS_OK) return srv_error(s);
+        for (int band = 0; band < b->brf.bands; band++) {
+            printf("  band %d: chromaticity %.4f, percent flicker %.2f, K=26 windows:", band,
+                   b->chroma[band], rec_brf_percent_flicker(&b->brf, band));
+            for (int k = 0; k < K; k++) printf(" %.4f", w[band * K + k]);
+            putchar('\n');
+        }
+        shown++;
+    }
+    if (!shown) return srv_error(gs_fail(GS_ENOTFOUND, "bulb '%s': no such entry in the database", id));
+    return 0;
+}
+
+static int cmd_export(const rec_delight *d, const delight_opts *o)
+{
+    FILE *f = o->out ? fopen(o->out, "w") : stdout;
+    if (!f) return srv_error(gs_fail(GS_EIO, "%s: cannot open for writing", o->out));
+    gs_status s = rec_delight_export_csv(d, f);
+    if (o->out && fclose(f) != 0 && s == GS_OK) s = gs_fail(GS_EIO, "%s: write failed", o->out);
+    return s == GS_OK ? 0 : srv_error(s);
+}
+
+/* Load DB if it exists (else start empty), let add() change it, save it back. */
+static int modify_db(const char *db, gs_status (*add)(rec_delight *, const void *), const void *arg)
+{
+    rec_delight *d = rec_delight_new();
+    if (!d) return srv_error(gs_fail(GS_ENOMEM, "cannot allocate the DELIGHT database"));
+    FILE *exists = fopen(db, "rb");
+    gs_status s = GS_OK;
+    if (exists) {
+        fclose(exists);
+        s = rec_delight_load(d, db);
+    }
+    if (s == GS_OK) s = add(d, arg);
+    if (s == GS_OK) s = rec_delight_save(d, db);
+    rec_delight_free(d);
+    return s == GS_OK ? 0 : srv_error(s);
+}
+
+typedef struct {
+    char **files;
+    int count;
+} csv_list;
+
+static gs_status add_csvs(rec_delight *d, const void *arg)
+{
+    const csv_list *l = arg;
+    for (int i = 0; i < l->count; i++) {
+        gs_status s = rec_delight_import_csv(d, l->files[i]);
+        if (s != GS_OK) return s;
+    }
+    return GS_OK;
+}
+
+static gs_status add_recording(rec_delight *d, const void *arg)
+{
+    const delight_opts *o = arg;
+    rec_bulb b;
+    rec_recording_info info;
+    gs_status s = rec_recording_to_bulb(o->recording, o->voltage_column, o->n, &b, &info);
+    if (s != GS_OK) return s;
+    if (o->id) snprintf(b.id, sizeof b.id, "%s", o->id);
+    if (o->name) snprintf(b.name, sizeof b.name, "%s", o->name);
+    if (o->watts > 0) b.watts = o->watts;
+    if (o->grid_hz && b.grid_hz && o->grid_hz != b.grid_hz)
+        s = gs_fail(GS_EINVAL, "%s: --grid %d, but the flicker at %.2f Hz says a %d Hz grid",
+                    o->recording, o->grid_hz, info.flicker_hz, b.grid_hz);
+    else if (!b.grid_hz && !o->grid_hz)
+        s = gs_fail(GS_EINVAL, "%s: flicker at %.2f Hz is not locked to a 50/60 Hz grid: "
+                    "expected --grid 50|60 to file it", o->recording, info.flicker_hz);
+    else if (!b.grid_hz)
+        b.grid_hz = o->grid_hz;
+    if (s == GS_OK && o->type) s = rec_tech_parse(o->type, &b.type);
+    if (s == GS_OK) s = rec_delight_add(d, &b);
+    if (s == GS_OK)
+        printf("added %s: %zu samples at %.0f Hz, %s %.2f Hz over %.1f cycles, grid %d Hz, "
+               "percent flicker %.1f, reference %s\n",
+               b.id, info.samples, info.sample_rate_hz,
+               isfinite(info.flicker_hz) ? "flicker" : "no flicker found, nominal",
+               isfinite(info.flicker_hz) ? info.flicker_hz : 2.0 * b.grid_hz, info.cycles,
+               b.grid_hz, info.percent_flicker, rec_ref_name(b.ref));
+    rec_bulb_release(&b);
+    return s;
+}
+
+static int cmd_plot(const rec_delight *d, const delight_opts *o)
+{
+    if (!o->out) return srv_error(gs_fail(GS_EINVAL, "delight plot: -o FILE.png is required"));
+    enum { MAX_PLOT = 15 };
+    const rec_bulb *pick[MAX_PLOT];
+    size_t count = 0;
+    if (o->ids) {
+        char *list = strdup(o->ids), *save = NULL;
+        for (char *tok = strtok_r(list, ",", &save); tok; tok = strtok_r(NULL, ",", &save)) {
+            const rec_bulb *b = NULL;
+            for (size_t i = 0; i < rec_delight_count(d) && !b; i++) {
+                const rec_bulb *c = rec_delight_get(d, i);
+                if (!strcmp(c->id, tok) && matches(c, o) && (o->sensor || c->brf.bands == 1)) b = c;
+            }
+            if (!b || count == MAX_PLOT) {
+                free(list);
+                return srv_error(b ? gs_fail(GS_ELIMIT, "delight plot: at most %d bulbs", MAX_PLOT)
+                                   : gs_fail(GS_ENOTFOUND, "delight plot: --ids: bulb '%s' not in the database", tok));
+            }
+            pick[count++] = b;
+        }
+        free(list);
+    } else {
+        /* One bulb of each technology, as in the paper's Fig. 2. */
+        int seen[REC_TECH_COUNT] = {0};
+        for (size_t i = 0; i < rec_delight_count(d) && count < MAX_PLOT; i++) {
+            const rec_bulb *b = rec_delight_get(d, i);
+            if (!matches(b, o) || (!o->sensor && b->brf.bands != 1) || seen[b->type]++) continue;
+            if (count && b->grid_hz != pick[0]->grid_hz) continue;
+            pick[count++] = b;
+        }
+    }
+    if (!count) return srv_error(gs_fail(GS_ENOTFOUND, "delight plot: no bulb matches"));
+    char title[128];
+    snprintf(title, sizeof title, "DELIGHT BRFs, %d Hz grid", pick[0]->grid_hz);
+    gs_status s = rec_plot_brfs(pick, count, o->out, title);
+    if (s != GS_OK) return srv_error(s);
+    printf("wrote %s (%zu bulbs)\n", o->out, count);
+    return 0;
+}
+
+int srv_cmd_delight(int argc, char **argv)
+{
+    if (argc < 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
+        fputs(delight_usage, argc < 2 ? stderr : stdout);
+        return argc < 2 ? 2 : 0;
+    }
+    const char *sub = argv[1];
+    delight_opts o;
+    int rc = parse_opts(argc - 1, argv + 1, &o);
+    if (rc >= 0) return rc;
+    int npos = argc - 1 - optind;
+    char **pos = argv + 1 + optind;
+
+    if (!strcmp(sub, "import")) {
+        if (!o.db || npos < 1)
+            return srv_error(gs_fail(GS_EINVAL, "delight import: expected FILE.csv... and --delight DB"));
+        csv_list l = {pos, npos};
+        return modify_db(o.db, add_csvs, &l);
+    }
+    if (!strcmp(sub, "add")) {
+        if (!o.db || !o.recording)
+            return srv_error(gs_fail(GS_EINVAL, "delight add: expected --from-recording FILE and --delight DB"));
+        return modify_db(o.db, add_recording, &o);
+    }
+    if (!strcmp(sub, "generate")) {
+        if (!o.out) return srv_error(gs_fail(GS_EINVAL, "delight generate: -o DB is required"));
+        rec_delight *d = rec_delight_new();
+        gs_status s = d ? rec_delight_generate(d, o.n) : gs_fail(GS_ENOMEM, "out of memory");
+        if (s == GS_OK) s = rec_delight_save(d, o.out);
+        rec_delight_free(d);
+        return s == GS_OK ? 0 : srv_error(s);
+    }
+    int is_show = !strcmp(sub, "show");
+    if (strcmp(sub, "list") && !is_show && strcmp(sub, "export") && strcmp(sub, "plot")) {
+        fprintf(stderr, "gridsurvey delight: '%s' is not a subcommand: expected list, show, export, "
+                        "import, add, plot or generate\n", sub);
+        return 2;
+    }
+    if (is_show && npos != 1) return srv_error(gs_fail(GS_EINVAL, "delight show: expected one bulb id"));
+    rec_delight *d = NULL;
+    gs_status s = open_delight(&o, &d);
+    if (s != GS_OK) return srv_error(s);
+    if (!strcmp(sub, "list")) rc = cmd_list(d, &o);
+    else if (is_show) rc = cmd_show(d, &o, pos[0]);
+    else if (!strcmp(sub, "export")) rc = cmd_export(d, &o);
+    else rc = cmd_plot(d, &o);
+    rec_delight_free(d);
+    return rc;
+}

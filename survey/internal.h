@@ -1,0 +1,14 @@
+/* internal.h - survey/ internals: subcommands and CLI helpers. */
+#ifndef GRIDSURVEY_SURVEY_INTERNAL_H
+#define GRIDSURVEY_SURVEY_INTERNAL_H
+
+#include "recognize/recognize.h"
+#include "survey/survey.h"
+
+/* Subcommands: argv[0] is the command name; return the exit status. */
+int srv_cmd_delight(int argc, char **argv);
+
+/* Print "gridsurvey: STATUS: DETAIL" on stderr and return 1. */
+int srv_error(gs_status s);
+
+#endif

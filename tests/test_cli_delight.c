@@ -1,0 +1,138 @@
+/* test_cli_delight.c - `gridsurvey delight` end to end: the built-in database's coverage through
+ * `export`, export -> import -> export identity, `add` of a real recording, `plot` writing a
+ * real PNG, --help everywhere, and bad input as one-line errors with a non-zero exit. */
+#include "recognize/recognize.h"
+#include "tests/test.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static char out[1 << 20];
+
+static int run(const char *fmt, const char *a, const char *b)
+{
+    char cmd[4096];
+    snprintf(cmd, sizeof cmd, fmt, test_bin(), a ? a : "", b ? b : "");
+    return test_run(cmd, out, sizeof out);
+}
+
+static int count_lines(const char *s)
+{
+    int n = 0;
+    for (; *s; s++) n += *s == '\n';
+    return n;
+}
+
+TEST(cli_delight_export_covers_30_bulbs_9_technologies)
+{
+    /* The export is parsed here independently of the library's CSV reader. */
+    char path[1024];
+    snprintf(path, sizeof path, "%s/d.csv", test_tmpdir());
+    CHECK(run("%s delight export -o %s", path, NULL) == 0);
+    FILE *f = fopen(path, "r");
+    CHECK(f != NULL);
+    if (!f) return;
+    char *line = NULL;
+    size_t cap = 0;
+    CHECK(getline(&line, &cap, f) > 0 && !strncmp(line, "bulb_id,type,name,watts,grid_hz,sensor,band,chromaticity,n,v0,v1,", 65));
+    enum { MAXB = 512 };
+    static char ids[2][MAXB][64], techs[2][MAXB][64];
+    int nid[2] = {0, 0}, ntech[2] = {0, 0};
+    while (getline(&line, &cap, f) > 0) {
+        char id[64], type[64];
+        int hz;
+        if (sscanf(line, "%63[^,],%63[^,],%*[^,],%*[^,],%d,", id, type, &hz) != 3) continue;
+        int g = hz == 60;
+        int seen = 0;
+        for (int i = 0; i < nid[g] && !seen; i++) seen = !strcmp(ids[g][i], id);
+        if (!seen && nid[g] < MAXB) strcpy(ids[g][nid[g]++], id);
+        seen = 0;
+        for (int i = 0; i < ntech[g] && !seen; i++) seen = !strcmp(techs[g][i], type);
+        if (!seen && ntech[g] < MAXB) strcpy(techs[g][ntech[g]++], type);
+    }
+    free(line);
+    fclose(f);
+    for (int g = 0; g < 2; g++) {
+        CHECK_MSG(nid[g] >= 30, "%d Hz: %d bulbs, expected >= 30", g ? 60 : 50, nid[g]);
+        CHECK_MSG(ntech[g] >= 9, "%d Hz: %d technologies, expected >= 9", g ? 60 : 50, ntech[g]);
+    }
+}
+
+TEST(cli_delight_import_export_identity)
+{
+    char csv1[1024], csv2[1024], db[1024];
+    snprintf(csv1, sizeof csv1, "%s/a.csv", test_tmpdir());
+    snprintf(csv2, sizeof csv2, "%s/b.csv", test_tmpdir());
+    snprintf(db, sizeof db, "%s/d.sqlite", test_tmpdir());
+    CHECK(run("%s delight export -o %s", csv1, NULL) == 0);
+    CHECK(run("%s delight import %s --delight %s", csv1, db) == 0);
+    CHECK(run("%s delight export --delight %s -o %s", db, csv2) == 0);
+    char cmd[3000];
+    snprintf(cmd, sizeof cmd, "cmp %s %s", csv1, csv2);
+    CHECK(test_run(cmd, out, sizeof out) == 0);
+    /* importing the same entries again is refused and leaves the database as it was */
+    CHECK(run("%s delight import %s --delight %s", csv1, db) == 1);
+    CHECK(strstr(out, "already in the database") != NULL);
+    CHECK(run("%s delight export --delight %s -o %s", db, csv2) == 0);
+    CHECK(test_run(cmd, out, sizeof out) == 0);
+}
+
+TEST(cli_delight_add_real_recording)
+{
+    char db[1024];
+    snprintf(db, sizeof db, "%s/m.sqlite", test_tmpdir());
+    const char *rec = test_shared_path("data/flicker/Feit 60W.csv");
+    char quoted[1100];
+    snprintf(quoted, sizeof quoted, "'%s'", rec);
+    CHECK(run("%s delight add --from-recording %s --id feit-60w --type incandescent --delight %s", quoted, db) == 0);
+    CHECK(strstr(out, "reference none") != NULL);
+    CHECK(run("%s delight list --delight %s", db, NULL) == 0);
+    CHECK(strstr(out, "feit-60w") && strstr(out, "incandescent") && strstr(out, "1 entries"));
+}
+
+TEST(cli_delight_plot_writes_png)
+{
+    char png[1024];
+    snprintf(png, sizeof png, "%s/brf.png", test_tmpdir());
+    CHECK(run("%s delight plot --grid 50 -o %s", png, NULL) == 0);
+    FILE *f = fopen(png, "rb");
+    CHECK(f != NULL);
+    if (!f) return;
+    unsigned char sig[8] = {0};
+    CHECK(fread(sig, 1, 8, f) == 8);
+    CHECK(!memcmp(sig, "\x89PNG\r\n\x1a\n", 8));
+    fseek(f, 0, SEEK_END);
+    CHECK(ftell(f) > 20000); /* axes, labels, legend and curves, not an empty canvas */
+    fclose(f);
+}
+
+TEST(cli_help_everywhere)
+{
+    CHECK(run("%s --help", NULL, NULL) == 0 && strstr(out, "delight"));
+    CHECK(run("%s delight --help", NULL, NULL) == 0 && strstr(out, "usage: gridsurvey delight"));
+    CHECK(run("%s delight list --help", NULL, NULL) == 0 && strstr(out, "usage"));
+}
+
+TEST(cli_bad_input_one_line_errors)
+{
+    char bad[1024];
+    snprintf(bad, sizeof bad, "%s/bad.csv", test_tmpdir());
+    FILE *f = fopen(bad, "w");
+    fputs("bulb_id,type,name\nx,y,z\n", f);
+    fclose(f);
+    char db[1024];
+    snprintf(db, sizeof db, "%s/d.sqlite", test_tmpdir());
+    CHECK(run("%s delight import %s --delight %s", bad, db) == 1);
+    CHECK(count_lines(out) == 1 && strstr(out, "bad.csv"));
+    FILE *exists = fopen(db, "r");
+    CHECK(exists == NULL); /* nothing written */
+    if (exists) fclose(exists);
+    CHECK(run("%s delight show no-such-bulb", NULL, NULL) == 1);
+    CHECK(count_lines(out) == 1 && strstr(out, "no-such-bulb"));
+    CHECK(run("%s delight list --delight %s", bad, NULL) == 1);
+    CHECK(count_lines(out) == 1 && strstr(out, "bad.csv"));
+    CHECK(run("%s delight frobnicate", NULL, NULL) == 2);
+    CHECK(run("%s frobnicate", NULL, NULL) == 2);
+    CHECK(run("%s delight list --grid 55", NULL, NULL) == 2);
+}
