@@ -10,6 +10,7 @@ static const struct {
     const char *summary;
 } commands[] = {
     {"delight", srv_cmd_delight, "the DELIGHT bulb database: list, show, export, import, add, plot, generate"},
+    {"locate", srv_cmd_locate, "locate lights from one station's pixels; GeoJSON, KML, GeoPackage, CSV, map"},
 };
 
 static void usage(FILE *f)

@@ -1,0 +1,589 @@
+/* export.c - exports of located lights (gis.h): GeoJSON (RFC 7946), KML 2.2, GeoPackage 1.3
+ * (OGC 12-128r18) and CSV (RFC 4180), each written atomically (temporary file + rename). */
+#include "gis/internal.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <jansson.h>
+#include <math.h>
+#include <sqlite3.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+#include <unistd.h>
+
+/* ---------------------------------------------------------------- atomic files */
+
+gs_status gis_atomic_open(gis_atomic *a, const char *path, int want_stream)
+{
+    static _Thread_local unsigned seq;
+    memset(a, 0, sizeof *a);
+    a->path = path;
+    if (!path || !*path) return gs_fail(GS_EINVAL, "export: empty output path");
+    /* A fresh name beside path (pid, a per-thread counter and a per-thread address make it
+     * unique; O_EXCL makes sure), created with mode 0666 so the umask applies as usual. */
+    int fd = -1;
+    for (int tries = 0; tries < 100 && fd < 0; tries++) {
+        int n = snprintf(a->tmp, sizeof a->tmp, "%s.tmp.%ld.%u.%lx", path, (long)getpid(), seq++,
+                         (unsigned long)(uintptr_t)&seq);
+        if (n < 0 || (size_t)n >= sizeof a->tmp) {
+            a->tmp[0] = '\0';
+            return gs_fail(GS_EINVAL, "%s: path too long", path);
+        }
+        fd = open(a->tmp, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+        if (fd < 0 && errno != EEXIST) break;
+    }
+    if (fd < 0) {
+        int e = errno;
+        a->tmp[0] = '\0';
+        return gs_fail(GS_EIO, "%s: cannot create a temporary file beside it: %s", path, strerror(e));
+    }
+    if (!want_stream) {
+        close(fd);
+        return GS_OK;
+    }
+    a->f = fdopen(fd, "wb");
+    if (!a->f) {
+        int e = errno;
+        close(fd);
+        unlink(a->tmp);
+        a->tmp[0] = '\0';
+        return gs_fail(GS_EIO, "%s: %s", path, strerror(e));
+    }
+    return GS_OK;
+}
+
+void gis_atomic_abort(gis_atomic *a)
+{
+    if (a->f) fclose(a->f);
+    a->f = NULL;
+    if (a->tmp[0]) unlink(a->tmp);
+    a->tmp[0] = '\0';
+}
+
+gs_status gis_atomic_commit(gis_atomic *a)
+{
+    if (a->f) {
+        int bad = ferror(a->f) || fflush(a->f) != 0 || fsync(fileno(a->f)) != 0;
+        int e = errno;
+        if (fclose(a->f) != 0 && !bad) {
+            bad = 1;
+            e = errno;
+        }
+        a->f = NULL;
+        if (bad) {
+            gis_atomic_abort(a);
+            return gs_fail(GS_EIO, "%s: write failed: %s", a->path, strerror(e));
+        }
+    }
+    if (rename(a->tmp, a->path) != 0) {
+        int e = errno;
+        gis_atomic_abort(a);
+        return gs_fail(GS_EIO, "%s: cannot replace it: %s", a->path, strerror(e));
+    }
+    a->tmp[0] = '\0';
+    return GS_OK;
+}
+
+/* ---------------------------------------------------------------- lights */
+
+void gis_light_init(gis_light *l)
+{
+    memset(l, 0, sizeof *l);
+    l->lat_deg = l->lon_deg = l->height_m = NAN;
+    l->ellipse = gis_ellipse_nan();
+    l->phase_deg = l->confidence = NAN;
+}
+
+void gis_light_set_fix(gis_light *l, const gis_fix *f)
+{
+    l->lat_deg = f->lat_deg;
+    l->lon_deg = f->lon_deg;
+    l->height_m = f->height_m;
+    l->ellipse = f->ellipse;
+    l->flags = f->flags;
+}
+
+gis_phase_class gis_phase_classify(double phase_deg)
+{
+    if (!isfinite(phase_deg)) return GIS_PHASE_UNKNOWN;
+    double p = gis_wrap360(phase_deg);
+    static const double centre[3] = {0.0, 120.0, 240.0};
+    for (int i = 0; i < 3; i++)
+        if (fabs(gis_wrap180(p - centre[i])) <= 20.0) return (gis_phase_class)i;
+    return GIS_PHASE_OTHER;
+}
+
+void gis_phase_rgb(gis_phase_class c, unsigned char rgb[3])
+{
+    static const unsigned char col[5][3] = {
+        {213, 94, 0}, {0, 158, 115}, {0, 114, 178}, {204, 121, 167}, {128, 128, 128},
+    };
+    int i = (int)c < 0 || (int)c > 4 ? 4 : (int)c;
+    memcpy(rgb, col[i], 3);
+}
+
+gs_status gis_format_parse(const char *name, gis_format *f)
+{
+    static const struct {
+        const char *name;
+        gis_format f;
+    } names[] = {{"geojson", GIS_FORMAT_GEOJSON}, {"kml", GIS_FORMAT_KML},
+                 {"gpkg", GIS_FORMAT_GPKG}, {"csv", GIS_FORMAT_CSV}};
+    for (size_t i = 0; name && i < sizeof names / sizeof *names; i++)
+        if (!strcasecmp(name, names[i].name)) {
+            *f = names[i].f;
+            return GS_OK;
+        }
+    return gs_fail(GS_EINVAL, "format '%s': expected geojson, kml, gpkg or csv", name ? name : "");
+}
+
+gs_status gis_format_from_path(const char *path, gis_format *f)
+{
+    const char *dot = path ? strrchr(path, '.') : NULL;
+    if (dot && !strcasecmp(dot, ".json")) {
+        *f = GIS_FORMAT_GEOJSON;
+        return GS_OK;
+    }
+    if (dot && gis_format_parse(dot + 1, f) == GS_OK) return GS_OK;
+    return gs_fail(GS_EINVAL, "%s: cannot tell the format from the extension: expected .geojson, "
+                   ".json, .kml, .gpkg or .csv (or give the format)", path ? path : "");
+}
+
+static int utf8_clean(const char *s)
+{
+    const unsigned char *p = (const unsigned char *)s;
+    while (*p) {
+        unsigned c = *p;
+        int extra;
+        if (c < 0x20 || c == 0x7f) return 0;
+        if (c < 0x80) extra = 0;
+        else if (c >= 0xc2 && c <= 0xdf) extra = 1;
+        else if (c >= 0xe0 && c <= 0xef) extra = 2;
+        else if (c >= 0xf0 && c <= 0xf4) extra = 3;
+        else return 0;
+        p++;
+        for (int i = 0; i < extra; i++, p++)
+            if ((*p & 0xc0) != 0x80) return 0;
+    }
+    return 1;
+}
+
+static int located(const gis_light *l)
+{
+    return isfinite(l->lat_deg) && isfinite(l->lon_deg);
+}
+
+static gs_status check_lights(const gis_light *lights, size_t n)
+{
+    if (n && !lights) return gs_fail(GS_EINVAL, "export: NULL lights");
+    for (size_t i = 0; i < n; i++) {
+        const gis_light *l = &lights[i];
+        const struct {
+            const char *s;
+            size_t size;
+            const char *name;
+        } str[] = {{l->id, sizeof l->id, "id"},
+                   {l->bulb_id, sizeof l->bulb_id, "bulb"},
+                   {l->technology, sizeof l->technology, "technology"},
+                   {l->survey, sizeof l->survey, "survey"},
+                   {l->time_utc, sizeof l->time_utc, "time"}};
+        for (size_t k = 0; k < sizeof str / sizeof *str; k++)
+            if (!memchr(str[k].s, '\0', str[k].size) || !utf8_clean(str[k].s))
+                return gs_fail(GS_EINVAL, "export: light %zu: %s: expected NUL-terminated UTF-8 "
+                               "text without control characters", i, str[k].name);
+        if (isnan(l->lat_deg) != isnan(l->lon_deg))
+            return gs_fail(GS_EINVAL, "export: light %zu (%s): latitude %g, longitude %g: both or "
+                           "neither must be NaN", i, l->id, l->lat_deg, l->lon_deg);
+        if (isinf(l->lat_deg) || isinf(l->lon_deg) || fabs(l->lat_deg) > 90.0 || isinf(l->height_m))
+            return gs_fail(GS_ENUMERIC, "export: light %zu (%s): position (%g, %g, %g): expected "
+                           "latitude in [-90, 90], finite values or NaN", i, l->id, l->lat_deg,
+                           l->lon_deg, l->height_m);
+        if (isinf(l->phase_deg) || !(isnan(l->confidence) || (l->confidence >= 0.0 && l->confidence <= 1.0)))
+            return gs_fail(GS_EINVAL, "export: light %zu (%s): phase %g, confidence %g: expected a "
+                           "finite phase or NaN, confidence in [0, 1] or NaN", i, l->id,
+                           l->phase_deg, l->confidence);
+    }
+    return GS_OK;
+}
+
+/* Attributes shared by every format, in this order. */
+typedef enum { A_TEXT, A_REAL } akind;
+typedef struct {
+    const char *name;
+    akind kind;
+    const char *kml_type;
+} attr;
+static const attr attrs[] = {
+    {"id", A_TEXT, "string"},          {"bulb", A_TEXT, "string"},
+    {"technology", A_TEXT, "string"},  {"phase", A_REAL, "double"},
+    {"confidence", A_REAL, "double"},  {"survey", A_TEXT, "string"},
+    {"time", A_TEXT, "string"},        {"height_m", A_REAL, "double"},
+    {"err_major_m", A_REAL, "double"}, {"err_minor_m", A_REAL, "double"},
+    {"err_azimuth_deg", A_REAL, "double"}, {"flags", A_TEXT, "string"},
+};
+#define N_ATTRS (sizeof attrs / sizeof *attrs)
+
+/* Attribute k of light l: a string (NULL when empty/unknown) or a number (NaN when unknown). */
+static const char *attr_text(const gis_light *l, size_t k, char *buf, size_t size)
+{
+    const char *s = NULL;
+    switch (k) {
+    case 0: s = l->id; break;
+    case 1: s = l->bulb_id; break;
+    case 2: s = l->technology; break;
+    case 5: s = l->survey; break;
+    case 6: s = l->time_utc; break;
+    case 11: s = gis_flags_str(l->flags, buf, size); break;
+    default: break;
+    }
+    return s && *s ? s : NULL;
+}
+
+static double attr_real(const gis_light *l, size_t k)
+{
+    double v = NAN;
+    switch (k) {
+    case 3: v = isfinite(l->phase_deg) ? gis_wrap360(l->phase_deg) : NAN; break;
+    case 4: v = l->confidence; break;
+    case 7: v = l->height_m; break;
+    case 8: v = l->ellipse.semi_major_m; break;
+    case 9: v = l->ellipse.semi_minor_m; break;
+    case 10: v = l->ellipse.azimuth_deg; break;
+    default: break;
+    }
+    return isfinite(v) ? v : NAN;   /* an unbounded ellipse is "unknown" in files */
+}
+
+/* ---------------------------------------------------------------- GeoJSON */
+
+gs_status gis_export_geojson(const gis_light *lights, size_t n, const char *path)
+{
+    gs_status s = check_lights(lights, n);
+    if (s != GS_OK) return s;
+    json_t *root = json_object(), *features = json_array();
+    char *text = NULL;
+    if (!root || !features) goto nomem;
+    if (json_object_set_new(root, "type", json_string("FeatureCollection")) ||
+        json_object_set(root, "features", features))
+        goto nomem;
+    for (size_t i = 0; i < n; i++) {
+        const gis_light *l = &lights[i];
+        json_t *f = json_object(), *props = json_object(), *geom = json_null();
+        if (!f || !props) {
+            json_decref(f);
+            json_decref(props);
+            goto nomem;
+        }
+        if (located(l)) {
+            json_t *c = json_array();
+            json_array_append_new(c, json_real(gis_wrap180(l->lon_deg)));   /* RFC 7946: lon, lat */
+            json_array_append_new(c, json_real(l->lat_deg));
+            if (isfinite(l->height_m)) json_array_append_new(c, json_real(l->height_m));
+            geom = json_pack("{s:s, s:o}", "type", "Point", "coordinates", c);
+        }
+        char buf[128];
+        for (size_t k = 0; k < N_ATTRS; k++) {
+            json_t *v;
+            if (attrs[k].kind == A_TEXT) {
+                const char *t = attr_text(l, k, buf, sizeof buf);
+                v = t ? json_string(t) : json_null();
+            } else {
+                double d = attr_real(l, k);
+                v = isnan(d) ? json_null() : json_real(d);
+            }
+            json_object_set_new(props, attrs[k].name, v);
+        }
+        json_object_set_new(f, "type", json_string("Feature"));
+        json_object_set_new(f, "geometry", geom ? geom : json_null());
+        json_object_set_new(f, "properties", props);
+        if (json_array_append_new(features, f)) goto nomem;
+    }
+    text = json_dumps(root, JSON_INDENT(1) | JSON_PRESERVE_ORDER | JSON_REAL_PRECISION(15));
+    if (!text) goto nomem;
+    json_decref(features);
+    json_decref(root);
+    gis_atomic a;
+    s = gis_atomic_open(&a, path, 1);
+    if (s == GS_OK) {
+        fputs(text, a.f);
+        fputc('\n', a.f);
+        s = gis_atomic_commit(&a);
+    }
+    free(text);
+    return s;
+nomem:
+    json_decref(features);
+    json_decref(root);
+    return gs_fail(GS_ENOMEM, "%s: out of memory building the GeoJSON", path);
+}
+
+/* ---------------------------------------------------------------- KML */
+
+static void xml_text(FILE *f, const char *s)
+{
+    for (; *s; s++) {
+        switch (*s) {
+        case '<': fputs("&lt;", f); break;
+        case '>': fputs("&gt;", f); break;
+        case '&': fputs("&amp;", f); break;
+        case '"': fputs("&quot;", f); break;
+        case '\'': fputs("&apos;", f); break;
+        default: fputc(*s, f);
+        }
+    }
+}
+
+gs_status gis_export_kml(const gis_light *lights, size_t n, const char *path)
+{
+    gs_status s = check_lights(lights, n);
+    if (s != GS_OK) return s;
+    gis_atomic a;
+    s = gis_atomic_open(&a, path, 1);
+    if (s != GS_OK) return s;
+    FILE *f = a.f;
+    static const char *const style_id[5] = {"phase0", "phase120", "phase240", "phase_other", "phase_unknown"};
+    fputs("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
+          "<kml xmlns=\"http://www.opengis.net/kml/2.2\">\n<Document>\n"
+          "<name>gridsurvey lights</name>\n", f);
+    for (int c = 0; c < 5; c++) {
+        unsigned char rgb[3];
+        gis_phase_rgb((gis_phase_class)c, rgb);
+        /* KML colours are aabbggrr */
+        fprintf(f, "<Style id=\"%s\"><IconStyle><color>ff%02x%02x%02x</color><scale>0.8</scale>"
+                   "<Icon><href>http://maps.google.com/mapfiles/kml/shapes/shaded_dot.png</href>"
+                   "</Icon></IconStyle></Style>\n", style_id[c], rgb[2], rgb[1], rgb[0]);
+    }
+    fputs("<Schema name=\"light\" id=\"light\">\n", f);
+    for (size_t k = 1; k < N_ATTRS; k++)   /* id is the Placemark's name */
+        fprintf(f, " <SimpleField name=\"%s\" type=\"%s\"/>\n", attrs[k].name, attrs[k].kml_type);
+    fputs("</Schema>\n", f);
+    char buf[128];
+    for (size_t i = 0; i < n; i++) {
+        const gis_light *l = &lights[i];
+        fputs("<Placemark>\n <name>", f);
+        xml_text(f, l->id);
+        fprintf(f, "</name>\n <styleUrl>#%s</styleUrl>\n", style_id[gis_phase_classify(l->phase_deg)]);
+        fputs(" <ExtendedData><SchemaData schemaUrl=\"#light\">\n", f);
+        for (size_t k = 1; k < N_ATTRS; k++) {
+            if (attrs[k].kind == A_TEXT) {
+                const char *t = attr_text(l, k, buf, sizeof buf);
+                if (!t) continue;
+                fprintf(f, "  <SimpleData name=\"%s\">", attrs[k].name);
+                xml_text(f, t);
+                fputs("</SimpleData>\n", f);
+            } else {
+                double d = attr_real(l, k);
+                if (!isnan(d)) fprintf(f, "  <SimpleData name=\"%s\">%.10g</SimpleData>\n", attrs[k].name, d);
+            }
+        }
+        fputs(" </SchemaData></ExtendedData>\n", f);
+        if (located(l))
+            fprintf(f, " <Point><coordinates>%.10f,%.10f</coordinates></Point>\n",
+                    gis_wrap180(l->lon_deg), l->lat_deg);
+        fputs("</Placemark>\n", f);
+    }
+    fputs("</Document>\n</kml>\n", f);
+    return gis_atomic_commit(&a);
+}
+
+/* ---------------------------------------------------------------- CSV */
+
+static void csv_text(FILE *f, const char *s)
+{
+    if (!s) return;
+    if (!strpbrk(s, ",\"\r\n")) {
+        fputs(s, f);
+        return;
+    }
+    fputc('"', f);
+    for (; *s; s++) {
+        if (*s == '"') fputc('"', f);
+        fputc(*s, f);
+    }
+    fputc('"', f);
+}
+
+gs_status gis_export_csv(const gis_light *lights, size_t n, const char *path)
+{
+    gs_status s = check_lights(lights, n);
+    if (s != GS_OK) return s;
+    gis_atomic a;
+    s = gis_atomic_open(&a, path, 1);
+    if (s != GS_OK) return s;
+    FILE *f = a.f;
+    fputs("id,lat_deg,lon_deg", f);
+    for (size_t k = 1; k < N_ATTRS; k++) fprintf(f, ",%s", attrs[k].name);
+    fputs("\r\n", f);
+    char buf[128];
+    for (size_t i = 0; i < n; i++) {
+        const gis_light *l = &lights[i];
+        csv_text(f, l->id);
+        if (located(l)) fprintf(f, ",%.10f,%.10f", l->lat_deg, gis_wrap180(l->lon_deg));
+        else fputs(",,", f);
+        for (size_t k = 1; k < N_ATTRS; k++) {
+            fputc(',', f);
+            if (attrs[k].kind == A_TEXT) {
+                csv_text(f, attr_text(l, k, buf, sizeof buf));
+            } else {
+                double d = attr_real(l, k);
+                if (!isnan(d)) fprintf(f, "%.10g", d);
+            }
+        }
+        fputs("\r\n", f);
+    }
+    return gis_atomic_commit(&a);
+}
+
+/* ---------------------------------------------------------------- GeoPackage */
+
+/* A GeoPackage point blob (GeoPackage 1.3 Sec. 2.1.3): "GP", version 0, flags 0x01 (little
+ * endian, no envelope, not empty), int32 srs_id, then WKB Point (little endian, type 1,
+ * x = longitude, y = latitude): 8 + 21 = 29 bytes. */
+static void gpkg_point(unsigned char blob[29], double lon, double lat)
+{
+    int32_t srs = 4326;
+    uint32_t type = 1;
+    blob[0] = 'G';
+    blob[1] = 'P';
+    blob[2] = 0;
+    blob[3] = 0x01;
+    for (int i = 0; i < 4; i++) blob[4 + i] = (unsigned char)(((uint32_t)srs >> (8 * i)) & 0xff);
+    blob[8] = 1;
+    for (int i = 0; i < 4; i++) blob[9 + i] = (unsigned char)((type >> (8 * i)) & 0xff);
+    uint64_t u;
+    memcpy(&u, &lon, 8);
+    for (int i = 0; i < 8; i++) blob[13 + i] = (unsigned char)((u >> (8 * i)) & 0xff);
+    memcpy(&u, &lat, 8);
+    for (int i = 0; i < 8; i++) blob[21 + i] = (unsigned char)((u >> (8 * i)) & 0xff);
+}
+
+static const char gpkg_schema[] =
+    "PRAGMA application_id = 1196444487;\n"   /* 'GPKG' */
+    "PRAGMA user_version = 10300;\n"          /* 1.3.0 (GDAL 3.6 warns on 10400) */
+    "CREATE TABLE gpkg_spatial_ref_sys (srs_name TEXT NOT NULL, srs_id INTEGER PRIMARY KEY, "
+    "organization TEXT NOT NULL, organization_coordsys_id INTEGER NOT NULL, "
+    "definition TEXT NOT NULL, description TEXT);\n"
+    "INSERT INTO gpkg_spatial_ref_sys VALUES ('Undefined cartesian SRS', -1, 'NONE', -1, "
+    "'undefined', 'undefined cartesian coordinate reference system');\n"
+    "INSERT INTO gpkg_spatial_ref_sys VALUES ('Undefined geographic SRS', 0, 'NONE', 0, "
+    "'undefined', 'undefined geographic coordinate reference system');\n"
+    "INSERT INTO gpkg_spatial_ref_sys VALUES ('WGS 84 geodetic', 4326, 'EPSG', 4326, "
+    "'GEOGCS[\"WGS 84\",DATUM[\"WGS_1984\",SPHEROID[\"WGS 84\",6378137,298.257223563,"
+    "AUTHORITY[\"EPSG\",\"7030\"]],AUTHORITY[\"EPSG\",\"6326\"]],PRIMEM[\"Greenwich\",0,"
+    "AUTHORITY[\"EPSG\",\"8901\"]],UNIT[\"degree\",0.0174532925199433,AUTHORITY[\"EPSG\",\"9122\"]],"
+    "AXIS[\"Latitude\",NORTH],AXIS[\"Longitude\",EAST],AUTHORITY[\"EPSG\",\"4326\"]]', "
+    "'longitude/latitude coordinates in decimal degrees on the WGS 84 spheroid');\n"
+    "CREATE TABLE gpkg_contents (table_name TEXT NOT NULL PRIMARY KEY, data_type TEXT NOT NULL, "
+    "identifier TEXT UNIQUE, description TEXT DEFAULT '', last_change DATETIME NOT NULL DEFAULT "
+    "(strftime('%Y-%m-%dT%H:%M:%fZ','now')), min_x DOUBLE, min_y DOUBLE, max_x DOUBLE, "
+    "max_y DOUBLE, srs_id INTEGER, CONSTRAINT fk_gc_r_srs_id FOREIGN KEY (srs_id) REFERENCES "
+    "gpkg_spatial_ref_sys(srs_id));\n"
+    "CREATE TABLE gpkg_geometry_columns (table_name TEXT NOT NULL, column_name TEXT NOT NULL, "
+    "geometry_type_name TEXT NOT NULL, srs_id INTEGER NOT NULL, z TINYINT NOT NULL, "
+    "m TINYINT NOT NULL, CONSTRAINT pk_geom_cols PRIMARY KEY (table_name, column_name), "
+    "CONSTRAINT uk_gc_table_name UNIQUE (table_name), CONSTRAINT fk_gc_tn FOREIGN KEY "
+    "(table_name) REFERENCES gpkg_contents(table_name), CONSTRAINT fk_gc_srs FOREIGN KEY "
+    "(srs_id) REFERENCES gpkg_spatial_ref_sys (srs_id));\n"
+    "CREATE TABLE lights (fid INTEGER PRIMARY KEY AUTOINCREMENT NOT NULL, geom POINT, "
+    "id TEXT, bulb TEXT, technology TEXT, phase REAL, confidence REAL, survey TEXT, time TEXT, "
+    "height_m REAL, err_major_m REAL, err_minor_m REAL, err_azimuth_deg REAL, flags TEXT);\n"
+    "INSERT INTO gpkg_geometry_columns VALUES ('lights', 'geom', 'POINT', 4326, 0, 0);\n";
+
+gs_status gis_export_gpkg(const gis_light *lights, size_t n, const char *path)
+{
+    gs_status s = check_lights(lights, n);
+    if (s != GS_OK) return s;
+    gis_atomic a;
+    s = gis_atomic_open(&a, path, 0);
+    if (s != GS_OK) return s;
+    sqlite3 *db = NULL;
+    sqlite3_stmt *st = NULL;
+    char *err = NULL;
+    if (sqlite3_open_v2(a.tmp, &db, SQLITE_OPEN_READWRITE, NULL) != SQLITE_OK) goto sql_error;
+    if (sqlite3_exec(db, "BEGIN", NULL, NULL, &err) != SQLITE_OK) goto sql_error;
+    if (sqlite3_exec(db, gpkg_schema, NULL, NULL, &err) != SQLITE_OK) goto sql_error;
+    double minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
+    if (sqlite3_prepare_v2(db,
+                           "INSERT INTO lights (geom, id, bulb, technology, phase, confidence, "
+                           "survey, time, height_m, err_major_m, err_minor_m, err_azimuth_deg, "
+                           "flags) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                           -1, &st, NULL) != SQLITE_OK)
+        goto sql_error;
+    char buf[128];
+    for (size_t i = 0; i < n; i++) {
+        const gis_light *l = &lights[i];
+        sqlite3_reset(st);
+        sqlite3_clear_bindings(st);
+        if (located(l)) {
+            unsigned char blob[29];
+            double lon = gis_wrap180(l->lon_deg);
+            gpkg_point(blob, lon, l->lat_deg);
+            sqlite3_bind_blob(st, 1, blob, (int)sizeof blob, SQLITE_TRANSIENT);
+            if (lon < minx) minx = lon;
+            if (lon > maxx) maxx = lon;
+            if (l->lat_deg < miny) miny = l->lat_deg;
+            if (l->lat_deg > maxy) maxy = l->lat_deg;
+        } else {
+            sqlite3_bind_null(st, 1);
+        }
+        for (size_t k = 0; k < N_ATTRS; k++) {
+            int col = (int)k + 2;
+            if (attrs[k].kind == A_TEXT) {
+                const char *t = attr_text(l, k, buf, sizeof buf);
+                if (t) sqlite3_bind_text(st, col, t, -1, SQLITE_TRANSIENT);
+                else sqlite3_bind_null(st, col);
+            } else {
+                double d = attr_real(l, k);
+                if (isnan(d)) sqlite3_bind_null(st, col);
+                else sqlite3_bind_double(st, col, d);
+            }
+        }
+        if (sqlite3_step(st) != SQLITE_DONE) goto sql_error;
+    }
+    sqlite3_finalize(st);
+    st = NULL;
+    if (sqlite3_prepare_v2(db,
+                           "INSERT INTO gpkg_contents (table_name, data_type, identifier, "
+                           "description, min_x, min_y, max_x, max_y, srs_id) VALUES ('lights', "
+                           "'features', 'lights', 'gridsurvey located lights (heights are "
+                           "ellipsoidal, WGS84)', ?, ?, ?, ?, 4326)",
+                           -1, &st, NULL) != SQLITE_OK)
+        goto sql_error;
+    if (isfinite(minx)) {
+        sqlite3_bind_double(st, 1, minx);
+        sqlite3_bind_double(st, 2, miny);
+        sqlite3_bind_double(st, 3, maxx);
+        sqlite3_bind_double(st, 4, maxy);
+    }
+    if (sqlite3_step(st) != SQLITE_DONE) goto sql_error;
+    sqlite3_finalize(st);
+    st = NULL;
+    if (sqlite3_exec(db, "COMMIT", NULL, NULL, &err) != SQLITE_OK) goto sql_error;
+    if (sqlite3_close(db) != SQLITE_OK) {
+        db = NULL;
+        gis_atomic_abort(&a);
+        return gs_fail(GS_ESQL, "%s: cannot close the GeoPackage", path);
+    }
+    return gis_atomic_commit(&a);
+sql_error:
+    s = gs_fail(GS_ESQL, "%s: SQLite: %s", path, err ? err : db ? sqlite3_errmsg(db) : "cannot open");
+    sqlite3_free(err);
+    sqlite3_finalize(st);
+    sqlite3_close(db);
+    gis_atomic_abort(&a);
+    return s;
+}
+
+gs_status gis_export(const gis_light *lights, size_t n, gis_format f, const char *path)
+{
+    switch (f) {
+    case GIS_FORMAT_GEOJSON: return gis_export_geojson(lights, n, path);
+    case GIS_FORMAT_KML: return gis_export_kml(lights, n, path);
+    case GIS_FORMAT_GPKG: return gis_export_gpkg(lights, n, path);
+    case GIS_FORMAT_CSV: return gis_export_csv(lights, n, path);
+    }
+    return gs_fail(GS_EINVAL, "export: unknown format %d", (int)f);
+}

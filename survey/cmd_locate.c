@@ -1,0 +1,277 @@
+/* cmd_locate.c - `gridsurvey locate`: one-station location of lights from their pixels
+ * (gis_locate: sight line -> surface at the lights' height above the WGS84 ellipsoid), written
+ * as GeoJSON, KML, GeoPackage or CSV, optionally with a PNG map (docs/gis.md). */
+#include "survey/internal.h"
+#include "gis/gis.h"
+
+#include <errno.h>
+#include <getopt.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static const char locate_usage[] =
+    "usage: gridsurvey locate --station STATION.json --pixels PIXELS.csv -o FILE\n"
+    "                         [--height-m H] [--format geojson|kml|gpkg|csv] [--map MAP.png]\n"
+    "                         [--survey NAME] [--refraction] [--max-error-ratio R]\n"
+    "\n"
+    "Locates each light seen by one camera station: its sight line is intersected with the\n"
+    "surface H metres above the WGS84 ellipsoid (Earth curvature exact), with a 1-sigma error\n"
+    "ellipse from the pixel and pose sigmas. Lights whose sight line does not reach that\n"
+    "surface, or whose ellipse exceeds R x range, are written without a position and flagged.\n"
+    "\n"
+    "  --station FILE   station JSON (gridsurvey-station/1): lat_deg, lon_deg, height_m,\n"
+    "                   heading_deg, pitch_deg, [roll_deg], focal_px, cx_px, cy_px, [k1, k2,\n"
+    "                   width_px, height_px, sigma_px, sigma_heading_deg, sigma_pitch_deg,\n"
+    "                   sigma_roll_deg, refraction_k, id, time_utc]  (docs/gis.md)\n"
+    "  --pixels FILE    CSV with header id,x_px,y_px[,sigma_px]; image x right, y down, pixel\n"
+    "                   centres at integers; sigma_px defaults to the station's (else 1)\n"
+    "  --height-m H     the lights' height above the ellipsoid, metres (default 0; note that\n"
+    "                   ellipsoidal heights differ from heights above sea level by the geoid\n"
+    "                   undulation, up to +-100 m)\n"
+    "  --format F       geojson, kml, gpkg or csv (default: from the -o extension)\n"
+    "  -o FILE          output file (replaced atomically)\n"
+    "  --map FILE.png   also draw a map of the located lights\n"
+    "  --survey NAME    survey name stored with every light\n"
+    "  --refraction     standard atmospheric refraction (k = 0.13) unless the station sets\n"
+    "                   refraction_k\n"
+    "  --max-error-ratio R  flag a light whose error ellipse exceeds R x range (0.25)\n"
+    "  --help           this text\n";
+
+#define LINE_MAX_LEN 4096
+
+/* Split a CSV line (no quoting: ids are plain tokens) at commas, trimming spaces and CR. */
+static int split(char *line, char **f, int max)
+{
+    int n = 0;
+    char *p = line;
+    for (;;) {
+        while (*p == ' ' || *p == '\t') p++;
+        char *start = p;
+        while (*p && *p != ',') p++;
+        char *end = p;
+        while (end > start && (end[-1] == ' ' || end[-1] == '\t' || end[-1] == '\r' || end[-1] == '\n')) end--;
+        int last = *p == '\0';
+        *end = '\0';
+        if (n < max) f[n] = start;
+        n++;
+        if (last) break;
+        p++;
+    }
+    return n;
+}
+
+typedef struct {
+    char id[GIS_TEXT_MAX];
+    double x_px, y_px, sigma_px;   /* sigma NaN = not given */
+} pixel_row;
+
+static gs_status parse_number(const char *path, int line, const char *field, const char *text,
+                              double *v)
+{
+    char *end;
+    errno = 0;
+    *v = strtod(text, &end);
+    if (!*text || *end || errno == ERANGE || !isfinite(*v))
+        return gs_fail(GS_EFORMAT, "%s:%d: %s: expected a finite number, got '%s'", path, line, field, text);
+    return GS_OK;
+}
+
+static gs_status read_pixels(const char *path, pixel_row **rows, size_t *count)
+{
+    *rows = NULL;
+    *count = 0;
+    FILE *f = fopen(path, "r");
+    if (!f) return gs_fail(GS_EIO, "%s: cannot open: %s", path, strerror(errno));
+    char line[LINE_MAX_LEN];
+    int lineno = 0, header = 0;
+    size_t cap = 0;
+    gs_status s = GS_OK;
+    while (fgets(line, sizeof line, f)) {
+        lineno++;
+        size_t len = strlen(line);
+        if (len == sizeof line - 1 && line[len - 1] != '\n') {
+            s = gs_fail(GS_EFORMAT, "%s:%d: line longer than %d bytes", path, lineno, LINE_MAX_LEN - 2);
+            break;
+        }
+        char *p = line;
+        if (lineno == 1 && !strncmp(p, "\xef\xbb\xbf", 3)) p += 3;   /* UTF-8 BOM */
+        while (*p == ' ' || *p == '\t') p++;
+        if (*p == '#' || *p == '\n' || *p == '\r' || *p == '\0') continue;
+        char *fld[5];
+        int n = split(p, fld, 5);
+        if (!header) {
+            static const char *const want[4] = {"id", "x_px", "y_px", "sigma_px"};
+            if (n < 3 || n > 4) {
+                s = gs_fail(GS_EFORMAT, "%s:%d: header: expected id,x_px,y_px[,sigma_px]", path, lineno);
+                break;
+            }
+            for (int i = 0; i < n; i++)
+                if (strcmp(fld[i], want[i])) {
+                    s = gs_fail(GS_EFORMAT, "%s:%d: header column %d is '%s': expected '%s' "
+                                "(id,x_px,y_px[,sigma_px])", path, lineno, i + 1, fld[i], want[i]);
+                    break;
+                }
+            if (s != GS_OK) break;
+            header = n;
+            continue;
+        }
+        if (n != header) {
+            s = gs_fail(GS_EFORMAT, "%s:%d: %d fields: expected %d like the header", path, lineno, n, header);
+            break;
+        }
+        if (*count == cap) {
+            size_t nc = cap ? 2 * cap : 64;
+            pixel_row *nr = realloc(*rows, nc * sizeof *nr);
+            if (!nr) {
+                s = gs_fail(GS_ENOMEM, "%s: out of memory", path);
+                break;
+            }
+            *rows = nr;
+            cap = nc;
+        }
+        pixel_row *r = &(*rows)[*count];
+        if (!*fld[0] || strlen(fld[0]) >= sizeof r->id || strchr(fld[0], '"')) {
+            s = gs_fail(GS_EFORMAT, "%s:%d: id: expected 1 to %zu characters without quotes", path,
+                        lineno, sizeof r->id - 1);
+            break;
+        }
+        strcpy(r->id, fld[0]);
+        r->sigma_px = NAN;
+        if ((s = parse_number(path, lineno, "x_px", fld[1], &r->x_px)) != GS_OK) break;
+        if ((s = parse_number(path, lineno, "y_px", fld[2], &r->y_px)) != GS_OK) break;
+        if (header == 4) {
+            if ((s = parse_number(path, lineno, "sigma_px", fld[3], &r->sigma_px)) != GS_OK) break;
+            if (r->sigma_px < 0.0) {
+                s = gs_fail(GS_EFORMAT, "%s:%d: sigma_px: expected a value >= 0, got %s", path, lineno, fld[3]);
+                break;
+            }
+        }
+        (*count)++;
+    }
+    if (s == GS_OK && ferror(f)) s = gs_fail(GS_EIO, "%s: read error", path);
+    if (s == GS_OK && !header) s = gs_fail(GS_EFORMAT, "%s: no header line (id,x_px,y_px[,sigma_px])", path);
+    fclose(f);
+    if (s != GS_OK) {
+        free(*rows);
+        *rows = NULL;
+        *count = 0;
+    }
+    return s;
+}
+
+int srv_cmd_locate(int argc, char **argv)
+{
+    static const struct option longs[] = {
+        {"station", required_argument, 0, 's'}, {"pixels", required_argument, 0, 'p'},
+        {"height-m", required_argument, 0, 'H'}, {"format", required_argument, 0, 'f'},
+        {"output", required_argument, 0, 'o'},  {"map", required_argument, 0, 'm'},
+        {"survey", required_argument, 0, 'S'},  {"refraction", no_argument, 0, 'r'},
+        {"max-error-ratio", required_argument, 0, 'R'}, {"help", no_argument, 0, 'h'},
+        {0, 0, 0, 0},
+    };
+    const char *station_path = NULL, *pixels_path = NULL, *out = NULL, *format = NULL,
+               *map = NULL, *survey = NULL;
+    double height_m = 0.0;
+    int refraction = 0;
+    gis_locate_opts lo;
+    gis_locate_opts_default(&lo);
+    optind = 1;
+    int c;
+    char *end;
+    while ((c = getopt_long(argc, argv, "o:h", longs, NULL)) != -1) {
+        switch (c) {
+        case 's': station_path = optarg; break;
+        case 'p': pixels_path = optarg; break;
+        case 'o': out = optarg; break;
+        case 'f': format = optarg; break;
+        case 'm': map = optarg; break;
+        case 'S': survey = optarg; break;
+        case 'r': refraction = 1; break;
+        case 'H':
+            height_m = strtod(optarg, &end);
+            if (!*optarg || *end || !isfinite(height_m) || height_m < GIS_MIN_HEIGHT_M || height_m > GIS_MAX_HEIGHT_M) {
+                fprintf(stderr, "gridsurvey locate: --height-m '%s': expected metres in [%g, %g]\n",
+                        optarg, GIS_MIN_HEIGHT_M, GIS_MAX_HEIGHT_M);
+                return 2;
+            }
+            break;
+        case 'R':
+            lo.max_error_ratio = strtod(optarg, &end);
+            if (!*optarg || *end || !(lo.max_error_ratio > 0.0) || !isfinite(lo.max_error_ratio)) {
+                fprintf(stderr, "gridsurvey locate: --max-error-ratio '%s': expected a number > 0\n", optarg);
+                return 2;
+            }
+            break;
+        case 'h': fputs(locate_usage, stdout); return 0;
+        default: fputs(locate_usage, stderr); return 2;
+        }
+    }
+    if (optind < argc) {
+        fprintf(stderr, "gridsurvey locate: unexpected argument '%s'\n%s", argv[optind], locate_usage);
+        return 2;
+    }
+    if (!station_path || !pixels_path || !out) {
+        fprintf(stderr, "gridsurvey locate: --station, --pixels and -o are required\n%s", locate_usage);
+        return 2;
+    }
+    if (survey && strlen(survey) >= GIS_TEXT_MAX) {
+        fprintf(stderr, "gridsurvey locate: --survey: at most %d bytes\n", GIS_TEXT_MAX - 1);
+        return 2;
+    }
+    gis_format fmt;
+    gs_status s = format ? gis_format_parse(format, &fmt) : gis_format_from_path(out, &fmt);
+    if (s != GS_OK) return srv_error(s);
+
+    gis_station st;
+    s = gis_station_read(station_path, &st);
+    if (s != GS_OK) return srv_error(s);
+    if (refraction && st.cam.refraction_k == 0.0) st.cam.refraction_k = GIS_REFRACTION_K_STANDARD;
+    pixel_row *rows;
+    size_t n;
+    s = read_pixels(pixels_path, &rows, &n);
+    if (s != GS_OK) return srv_error(s);
+    gis_light *lights = calloc(n ? n : 1, sizeof *lights);
+    if (!lights) {
+        free(rows);
+        return srv_error(gs_fail(GS_ENOMEM, "locate: out of memory for %zu lights", n));
+    }
+    size_t nloc = 0, nflag = 0;
+    for (size_t i = 0; i < n && s == GS_OK; i++) {
+        gis_fix fx;
+        double sig = isnan(rows[i].sigma_px) ? st.sigma_px : rows[i].sigma_px;
+        s = gis_locate(&st.cam, rows[i].x_px, rows[i].y_px, sig, height_m, &lo, &fx);
+        if (s != GS_OK) {
+            s = gs_fail(s, "%s: light %s: %s", pixels_path, rows[i].id, gs_detail());
+            break;
+        }
+        gis_light_init(&lights[i]);
+        gis_light_set_fix(&lights[i], &fx);
+        snprintf(lights[i].id, sizeof lights[i].id, "%s", rows[i].id);
+        if (survey) snprintf(lights[i].survey, sizeof lights[i].survey, "%s", survey);
+        snprintf(lights[i].time_utc, sizeof lights[i].time_utc, "%s", st.time_utc);
+        if (fx.flags) {
+            char fl[128];
+            fprintf(stderr, "gridsurvey locate: light %s: not located (%s)\n", rows[i].id,
+                    gis_flags_str(fx.flags, fl, sizeof fl));
+            nflag++;
+        } else {
+            nloc++;
+        }
+    }
+    if (s == GS_OK) s = gis_export(lights, n, fmt, out);
+    if (s == GS_OK && map) {
+        gis_map_opts mo;
+        gis_map_opts_default(&mo);
+        mo.stations = &st.cam;
+        mo.n_stations = 1;
+        mo.title = "gridsurvey locate";
+        s = gis_map_png(lights, n, &mo, map);
+    }
+    free(rows);
+    free(lights);
+    if (s != GS_OK) return srv_error(s);
+    printf("located %zu of %zu lights (%zu flagged) -> %s\n", nloc, n, nflag, out);
+    return 0;
+}

@@ -1,0 +1,407 @@
+/* test_gis_export.c - gis/ exports read back by independent readers: GDAL's ogrinfo (GeoJSON,
+ * KML, GeoPackage, CSV: feature counts, WKT positions in lon/lat order, attributes),
+ * validate_gpkg.py --extra, SQLite itself for the GeoPackage header and blobs, Jansson for the
+ * RFC 7946 structure, OpenCV (python3-opencv) for the map's colours; atomic replacement; and
+ * `gridsurvey locate` end to end. */
+#include "gis/gis.h"
+#include "tests/test.h"
+
+#include <dirent.h>
+#include <jansson.h>
+#include <math.h>
+#include <sqlite3.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static char out[1 << 18];
+
+static const char *tmp(const char *name)
+{
+    static char buf[4][1024];
+    static int k;
+    k = (k + 1) % 4;
+    snprintf(buf[k], sizeof buf[k], "%s/%s", test_tmpdir(), name);
+    return buf[k];
+}
+
+/* Six lights: the three phases, another phase, an unknown phase, and one not located; two
+ * near the antimeridian; a survey name that needs escaping in every format. */
+static size_t sample_lights(gis_light *l)
+{
+    static const struct {
+        const char *id;
+        double lat, lon, h, phase, conf;
+        const char *bulb, *tech;
+    } s[6] = {
+        {"L1", 40.1, -75.2, 30.5, 0.0, 0.97, "cfl_1", "cfl"},
+        {"L2", 40.1005, -75.2004, 31.0, 120.0, 0.91, "sodium_hp_2", "sodium_hp"},
+        {"L3", 40.1010, -75.1996, 29.0, 240.0, 0.88, "led_lin_3", "led_linear"},
+        {"L4", -16.5, 179.99995, 12.0, 57.0, 0.5, "inc_4", "incandescent"},
+        {"L5", -16.5001, -179.99995, 12.5, NAN, NAN, "", ""},
+        {"L6", NAN, NAN, NAN, 240.0, 0.7, "cfl_1", "cfl"},
+    };
+    for (int i = 0; i < 6; i++) {
+        gis_light_init(&l[i]);
+        snprintf(l[i].id, sizeof l[i].id, "%s", s[i].id);
+        l[i].lat_deg = s[i].lat;
+        l[i].lon_deg = s[i].lon;
+        l[i].height_m = s[i].h;
+        l[i].phase_deg = s[i].phase;
+        l[i].confidence = s[i].conf;
+        snprintf(l[i].bulb_id, sizeof l[i].bulb_id, "%s", s[i].bulb);
+        snprintf(l[i].technology, sizeof l[i].technology, "%s", s[i].tech);
+        snprintf(l[i].survey, sizeof l[i].survey, "%s", "Main St & <Elm>, \"north\"");
+        snprintf(l[i].time_utc, sizeof l[i].time_utc, "%s", "2024-05-01T21:30:00Z");
+        if (isfinite(s[i].lat)) {
+            l[i].ellipse.semi_major_m = 2.5 + i;
+            l[i].ellipse.semi_minor_m = 0.5;
+            l[i].ellipse.azimuth_deg = 30.0;
+        } else {
+            l[i].flags = GIS_FIX_ABOVE_HORIZON;
+        }
+    }
+    return 6;
+}
+
+static int contains(const char *hay, const char *needle)
+{
+    return strstr(hay, needle) != NULL;
+}
+
+static int count_of(const char *hay, const char *needle)
+{
+    int n = 0;
+    for (const char *p = strstr(hay, needle); p; p = strstr(p + 1, needle)) n++;
+    return n;
+}
+
+/* Point WKT of light i as ogrinfo prints it (lon first), or "" when not located. */
+static void check_ogr_points(const char *text, int z)
+{
+    CHECK_MSG(contains(text, z ? "POINT Z (-75.2 40.1 30.5)" : "POINT (-75.2 40.1)"), "%s", text);
+    CHECK(contains(text, z ? "POINT Z (-75.2004 40.1005 31)" : "POINT (-75.2004 40.1005)"));
+    CHECK(contains(text, z ? "POINT Z (179.99995 -16.5 12)" : "POINT (179.99995 -16.5)"));
+    CHECK(contains(text, z ? "POINT Z (-179.99995 -16.5001 12.5)" : "POINT (-179.99995 -16.5001)"));
+    CHECK(count_of(text, "POINT") == 5);
+}
+
+static void check_ogr_attributes(const char *text)
+{
+    CHECK_MSG(count_of(text, "Main St & <Elm>, \"north\"") == 6, "%s", text);
+    CHECK(contains(text, "bulb (String) = sodium_hp_2"));
+    CHECK(contains(text, "technology (String) = led_linear"));
+    CHECK(contains(text, "phase (Real) = 240"));
+    CHECK(contains(text, "confidence (Real) = 0.91"));
+    /* GDAL's GeoJSON reader recognises the ISO 8601 text as a DateTime */
+    CHECK(contains(text, "time (String) = 2024-05-01T21:30:00Z") ||
+          contains(text, "time (DateTime) = 2024/05/01 21:30:00+00"));
+    CHECK(contains(text, "flags (String) = above_horizon"));
+}
+
+TEST(gis_export_geojson_ogrinfo_rfc7946)
+{
+    gis_light l[6];
+    size_t n = sample_lights(l);
+    const char *path = tmp("lights.geojson");
+    CHECK_OK(gis_export_geojson(l, n, path));
+    char cmd[2048];
+    snprintf(cmd, sizeof cmd, "ogrinfo -ro -al -so '%s'", path);
+    CHECK(test_run(cmd, out, sizeof out) == 0);
+    CHECK_MSG(contains(out, "Feature Count: 6"), "%s", out);
+    snprintf(cmd, sizeof cmd, "ogrinfo -ro -al '%s'", path);
+    CHECK(test_run(cmd, out, sizeof out) == 0);
+    check_ogr_points(out, 1);
+    check_ogr_attributes(out);
+    /* RFC 7946 structure, read independently */
+    json_error_t e;
+    json_t *root = json_load_file(path, 0, &e);
+    CHECK(root != NULL);
+    if (!root) return;
+    CHECK(!strcmp(json_string_value(json_object_get(root, "type")), "FeatureCollection"));
+    CHECK(json_object_get(root, "crs") == NULL);   /* RFC 7946: no crs member */
+    json_t *fs = json_object_get(root, "features");
+    CHECK(json_array_size(fs) == 6);
+    json_t *c = json_object_get(json_object_get(json_array_get(fs, 0), "geometry"), "coordinates");
+    CHECK_NEAR(json_real_value(json_array_get(c, 0)), -75.2, 1e-12);   /* longitude first */
+    CHECK_NEAR(json_real_value(json_array_get(c, 1)), 40.1, 1e-12);
+    CHECK_NEAR(json_real_value(json_array_get(c, 2)), 30.5, 1e-12);
+    CHECK(json_is_null(json_object_get(json_array_get(fs, 5), "geometry")));
+    CHECK(json_is_null(json_object_get(json_object_get(json_array_get(fs, 4), "properties"), "phase")));
+    json_decref(root);
+}
+
+TEST(gis_export_kml_ogrinfo)
+{
+    gis_light l[6];
+    size_t n = sample_lights(l);
+    const char *path = tmp("lights.kml");
+    CHECK_OK(gis_export_kml(l, n, path));
+    char cmd[2048];
+    snprintf(cmd, sizeof cmd, "ogrinfo -ro -al '%s'", path);
+    CHECK(test_run(cmd, out, sizeof out) == 0);
+    CHECK_MSG(contains(out, "Feature Count: 6") || count_of(out, "OGRFeature(") == 6, "%s", out);
+    CHECK(count_of(out, "OGRFeature(") == 6);
+    check_ogr_points(out, 0);
+    check_ogr_attributes(out);
+    /* styles: a placemark of each phase class */
+    FILE *f = fopen(path, "r");
+    CHECK(f != NULL);
+    if (!f) return;
+    size_t got = fread(out, 1, sizeof out - 1, f);
+    out[got] = '\0';
+    fclose(f);
+    CHECK(count_of(out, "<styleUrl>#phase0</styleUrl>") == 1);
+    CHECK(count_of(out, "<styleUrl>#phase240</styleUrl>") == 2);
+    CHECK(count_of(out, "<styleUrl>#phase_other</styleUrl>") == 1);
+    CHECK(count_of(out, "<styleUrl>#phase_unknown</styleUrl>") == 1);
+    CHECK(contains(out, "<color>ff005ed5</color>"));   /* 0 deg: vermillion (213, 94, 0), aabbggrr */
+}
+
+TEST(gis_export_gpkg_validates)
+{
+    gis_light l[6];
+    size_t n = sample_lights(l);
+    const char *path = tmp("lights.gpkg");
+    CHECK_OK(gis_export_gpkg(l, n, path));
+    char cmd[2048];
+    snprintf(cmd, sizeof cmd, "/usr/bin/python3 /usr/lib/python3/dist-packages/osgeo_utils/samples/"
+                              "validate_gpkg.py --extra '%s'", path);
+    int rc = test_run(cmd, out, sizeof out);
+    CHECK_MSG(rc == 0 && !contains(out, "rror") && !contains(out, "arning"), "validate_gpkg: %d: %s", rc, out);
+    snprintf(cmd, sizeof cmd, "ogrinfo -ro -al -so '%s'", path);
+    CHECK(test_run(cmd, out, sizeof out) == 0);
+    CHECK_MSG(contains(out, "Feature Count: 6") && contains(out, "Geometry: Point") &&
+              contains(out, "WGS 84") && !contains(out, "arning"), "%s", out);
+    snprintf(cmd, sizeof cmd, "ogrinfo -ro -al '%s'", path);
+    CHECK(test_run(cmd, out, sizeof out) == 0);
+    check_ogr_points(out, 0);
+    check_ogr_attributes(out);
+    /* header and blobs, read with SQLite */
+    sqlite3 *db;
+    CHECK(sqlite3_open_v2(path, &db, SQLITE_OPEN_READONLY, NULL) == SQLITE_OK);
+    sqlite3_stmt *st;
+    const char *q[4] = {"PRAGMA application_id", "PRAGMA user_version",
+                        "SELECT count(*) FROM lights WHERE length(geom) = 29",
+                        "SELECT count(*) FROM lights WHERE geom IS NULL"};
+    const long long want[4] = {1196444487, 10300, 5, 1};
+    for (int i = 0; i < 4; i++) {
+        CHECK(sqlite3_prepare_v2(db, q[i], -1, &st, NULL) == SQLITE_OK);
+        CHECK(sqlite3_step(st) == SQLITE_ROW);
+        CHECK_MSG(sqlite3_column_int64(st, 0) == want[i], "%s = %lld, expected %lld", q[i],
+                  sqlite3_column_int64(st, 0), want[i]);
+        sqlite3_finalize(st);
+    }
+    CHECK(sqlite3_prepare_v2(db, "SELECT geom FROM lights WHERE id = 'L1'", -1, &st, NULL) == SQLITE_OK);
+    CHECK(sqlite3_step(st) == SQLITE_ROW);
+    const unsigned char *b = sqlite3_column_blob(st, 0);
+    double x, y;
+    CHECK(b && b[0] == 'G' && b[1] == 'P' && b[2] == 0 && b[3] == 1 && b[4] == 0xe6 && b[5] == 0x10);
+    if (b) {
+        memcpy(&x, b + 13, 8);   /* little-endian host */
+        memcpy(&y, b + 21, 8);
+        CHECK_NEAR(x, -75.2, 0);   /* x = longitude */
+        CHECK_NEAR(y, 40.1, 0);
+    }
+    sqlite3_finalize(st);
+    sqlite3_close(db);
+}
+
+TEST(gis_export_csv_ogrinfo)
+{
+    gis_light l[6];
+    size_t n = sample_lights(l);
+    const char *path = tmp("lights.csv");
+    CHECK_OK(gis_export_csv(l, n, path));
+    char cmd[2048];
+    snprintf(cmd, sizeof cmd, "ogrinfo -ro -al -oo X_POSSIBLE_NAMES=lon_deg -oo Y_POSSIBLE_NAMES=lat_deg "
+                              "-oo AUTODETECT_TYPE=YES '%s'", path);
+    CHECK(test_run(cmd, out, sizeof out) == 0);
+    CHECK(count_of(out, "OGRFeature(") == 6);
+    check_ogr_points(out, 0);
+    CHECK_MSG(count_of(out, "Main St & <Elm>, \"north\"") == 6, "%s", out);
+    CHECK(contains(out, "bulb (String) = sodium_hp_2"));
+    CHECK(contains(out, "flags (String) = above_horizon"));
+}
+
+static int count_tmp_files(const char *dir)
+{
+    DIR *d = opendir(dir);
+    int n = 0;
+    if (!d) return -1;
+    struct dirent *e;
+    while ((e = readdir(d))) n += strstr(e->d_name, ".tmp.") != NULL;
+    closedir(d);
+    return n;
+}
+
+TEST(gis_export_atomic_replace)
+{
+    gis_light l[6];
+    size_t n = sample_lights(l);
+    const char *path = tmp("a.geojson");
+    FILE *f = fopen(path, "w");
+    fputs("old content\n", f);
+    fclose(f);
+    /* a failing export (control character) leaves the old file */
+    gis_light bad[6];
+    memcpy(bad, l, sizeof bad);
+    bad[2].survey[0] = '\n';
+    const gis_format fmts[4] = {GIS_FORMAT_GEOJSON, GIS_FORMAT_KML, GIS_FORMAT_GPKG, GIS_FORMAT_CSV};
+    for (int k = 0; k < 4; k++) CHECK(gis_export(bad, n, fmts[k], path) == GS_EINVAL);
+    f = fopen(path, "r");
+    char line[64] = "";
+    CHECK(f && fgets(line, sizeof line, f) && !strcmp(line, "old content\n"));
+    if (f) fclose(f);
+    /* success replaces it; no temporary file is left */
+    CHECK_OK(gis_export(l, n, GIS_FORMAT_GEOJSON, path));
+    f = fopen(path, "r");
+    CHECK(f && fgets(line, sizeof line, f) && !strcmp(line, "{\n"));
+    if (f) fclose(f);
+    /* an unwritable place fails with GS_EIO and creates nothing */
+    for (int k = 0; k < 4; k++) CHECK(gis_export(l, n, fmts[k], tmp("missing/dir/x.out")) == GS_EIO);
+    CHECK(count_tmp_files(test_tmpdir()) == 0);
+    /* formats by name and by extension */
+    gis_format fm;
+    CHECK_OK(gis_format_from_path("x/y.GPKG", &fm));
+    CHECK(fm == GIS_FORMAT_GPKG);
+    CHECK_OK(gis_format_from_path("y.json", &fm));
+    CHECK(fm == GIS_FORMAT_GEOJSON);
+    CHECK(gis_format_from_path("y.shp", &fm) == GS_EINVAL);
+    CHECK(gis_format_parse("KML", &fm) == GS_OK && fm == GIS_FORMAT_KML);
+    /* NaN latitude with a finite longitude is inconsistent */
+    l[0].lat_deg = NAN;
+    CHECK(gis_export_csv(l, n, tmp("b.csv")) == GS_EINVAL);
+    l[0].lat_deg = INFINITY;
+    CHECK(gis_export_csv(l, n, tmp("b.csv")) == GS_ENUMERIC);
+}
+
+TEST(gis_map_png_phase_colours)
+{
+    gis_light l[6];
+    size_t n = sample_lights(l);
+    /* a local cluster: move the two antimeridian lights next to the others */
+    l[3].lat_deg = 40.0995;
+    l[3].lon_deg = -75.2008;
+    l[4].lat_deg = 40.1008;
+    l[4].lon_deg = -75.2010;
+    gis_camera st;
+    memset(&st, 0, sizeof st);
+    st.lat_deg = 40.098;
+    st.lon_deg = -75.201;
+    st.height_m = 50;
+    st.focal_px = 1000;
+    gis_map_opts o;
+    gis_map_opts_default(&o);
+    o.stations = &st;
+    o.n_stations = 1;
+    o.width_px = 900;
+    o.height_px = 700;
+    const char *path = tmp("map.png");
+    CHECK_OK(gis_map_png(l, n, &o, path));
+    /* count pixels of each class colour (exact RGB inside the discs) with OpenCV */
+    char cmd[2048];
+    snprintf(cmd, sizeof cmd,
+             "/usr/bin/python3 -c \"import cv2, numpy as np\n"
+             "im = cv2.imread('%s', cv2.IMREAD_COLOR)\n"
+             "print('size', im.shape[1], im.shape[0])\n"
+             "for r, g, b in [(213, 94, 0), (0, 158, 115), (0, 114, 178), (204, 121, 167), (128, 128, 128)]:\n"
+             "    print('count', int(np.all(im == (b, g, r), axis=2).sum()))\n\"", path);
+    CHECK(test_run(cmd, out, sizeof out) == 0);
+    int w = 0, h = 0, c[5] = {0};
+    const char *p = strstr(out, "size");
+    CHECK(p && sscanf(p, "size %d %d", &w, &h) == 2);
+    CHECK(w == 900 && h == 700);
+    for (int k = 0; k < 5 && p; k++) {
+        p = strstr(p + 1, "count");
+        if (p) sscanf(p, "count %d", &c[k]);
+    }
+    /* each class appears: a disc (plus its legend box) */
+    for (int k = 0; k < 5; k++) CHECK_MSG(c[k] > 50, "class %d: %d pixels\n%s", k, c[k], out);
+    /* nothing to draw is an error, not an empty picture */
+    CHECK(gis_map_png(l + 5, 1, NULL, tmp("empty.png")) == GS_EINVAL);
+}
+
+/* ------------------------------------------------------------- the CLI */
+
+static void write_file(const char *path, const char *text)
+{
+    FILE *f = fopen(path, "w");
+    CHECK(f != NULL);
+    if (!f) return;
+    fputs(text, f);
+    fclose(f);
+}
+
+TEST(gis_cli_locate)
+{
+    char st[1024], px[1024], res[1024];
+    snprintf(st, sizeof st, "%s", tmp("station.json"));
+    snprintf(px, sizeof px, "%s", tmp("pixels.csv"));
+    snprintf(res, sizeof res, "%s", tmp("out.geojson"));
+    write_file(st, "{\"format\": \"gridsurvey-station/1\", \"lat_deg\": 40.0, \"lon_deg\": -75.0,\n"
+                   " \"height_m\": 120.0, \"heading_deg\": 30, \"pitch_deg\": -5, \"roll_deg\": 1,\n"
+                   " \"focal_px\": 2000, \"cx_px\": 959.5, \"cy_px\": 539.5, \"k1\": -0.05, \"k2\": 0.01,\n"
+                   " \"sigma_px\": 0.5, \"sigma_heading_deg\": 0.05, \"sigma_pitch_deg\": 0.05,\n"
+                   " \"time_utc\": \"2024-05-01T21:30:00Z\"}\n");
+    write_file(px, "id,x_px,y_px,sigma_px\nA,959.5,539.5,0.3\nB,100,800,1\nUP,959.5,100,1\n");
+    /* PLplot's cairo driver leaves fontconfig's caches allocated at exit: suppress those
+     * (third-party) leaks only, when this runs under LeakSanitizer */
+    char supp[1024], cmd[8192];
+    snprintf(supp, sizeof supp, "%s", tmp("lsan.supp"));
+    write_file(supp, "leak:libfontconfig.so\nleak:libltdl.so\n");
+    snprintf(cmd, sizeof cmd, "LSAN_OPTIONS=suppressions=%s %s locate --station %s --pixels %s "
+             "--height-m 30 --survey s1 -o %s --map %s", supp, test_bin(), st, px, res, tmp("m.png"));
+    int rc = test_run(cmd, out, sizeof out);
+    CHECK_MSG(rc == 0 && contains(out, "located 2 of 3 lights"), "%d: %s", rc, out);
+    CHECK(contains(out, "light UP: not located (above_horizon)"));
+    /* the file holds what the library computes for the same input */
+    gis_station s;
+    CHECK_OK(gis_station_read(st, &s));
+    gis_fix fx;
+    CHECK_OK(gis_locate(&s.cam, 100, 800, 1.0, 30.0, NULL, &fx));
+    json_error_t e;
+    json_t *root = json_load_file(res, 0, &e);
+    CHECK(root != NULL);
+    if (root) {
+        json_t *fs = json_object_get(root, "features");
+        CHECK(json_array_size(fs) == 3);
+        json_t *f1 = json_array_get(fs, 1), *pr = json_object_get(f1, "properties");
+        json_t *c = json_object_get(json_object_get(f1, "geometry"), "coordinates");
+        CHECK(!strcmp(json_string_value(json_object_get(pr, "id")), "B"));
+        CHECK(!strcmp(json_string_value(json_object_get(pr, "survey")), "s1"));
+        CHECK(!strcmp(json_string_value(json_object_get(pr, "time")), "2024-05-01T21:30:00Z"));
+        CHECK_NEAR(json_real_value(json_array_get(c, 0)), fx.lon_deg, 1e-11);
+        CHECK_NEAR(json_real_value(json_array_get(c, 1)), fx.lat_deg, 1e-11);
+        CHECK_NEAR(json_real_value(json_object_get(pr, "err_major_m")), fx.ellipse.semi_major_m, 1e-9);
+        CHECK(json_is_null(json_object_get(json_array_get(fs, 2), "geometry")));
+        json_decref(root);
+    }
+    /* GeoPackage through the CLI validates too */
+    const char *gpkg = tmp("o.gpkg");
+    snprintf(cmd, sizeof cmd, "%s locate --station %s --pixels %s --format gpkg -o %s && "
+             "/usr/bin/python3 /usr/lib/python3/dist-packages/osgeo_utils/samples/validate_gpkg.py --extra %s",
+             test_bin(), st, px, gpkg, gpkg);
+    rc = test_run(cmd, out, sizeof out);
+    CHECK_MSG(rc == 0, "%s", out);
+    /* --help, usage errors (2) and bad input (1, one line naming file, line and field) */
+    snprintf(cmd, sizeof cmd, "%s locate --help", test_bin());
+    CHECK(test_run(cmd, out, sizeof out) == 0 && contains(out, "usage: gridsurvey locate"));
+    snprintf(cmd, sizeof cmd, "%s locate --station %s -o %s", test_bin(), st, res);
+    CHECK(test_run(cmd, out, sizeof out) == 2);
+    write_file(px, "id,x_px,y_px\nA,1,2\nB,1e,2\n");
+    snprintf(cmd, sizeof cmd, "%s locate --station %s --pixels %s -o %s", test_bin(), st, px, res);
+    rc = test_run(cmd, out, sizeof out);
+    CHECK_MSG(rc == 1 && contains(out, "pixels.csv:3: x_px: expected a finite number, got '1e'"), "%d: %s", rc, out);
+    write_file(px, "id,x,y\nA,1,2\n");
+    rc = test_run(cmd, out, sizeof out);
+    CHECK_MSG(rc == 1 && contains(out, "pixels.csv:1: header column 2 is 'x'"), "%d: %s", rc, out);
+    write_file(px, "id,x_px,y_px\nA,1,2\n");
+    write_file(st, "{\"lat_deg\": 40.0, \"lon_deg\": -75.0,\n \"height_m\": 120.0,\n \"heading_deg\": 30,\n"
+                   " \"pitch_deg\": -95, \"focal_px\": 2000, \"cx_px\": 959.5, \"cy_px\": 539.5}\n");
+    rc = test_run(cmd, out, sizeof out);
+    CHECK_MSG(rc == 1 && contains(out, "station.json:4: pitch_deg = -95"), "%d: %s", rc, out);
+    CHECK(count_of(out, "\n") == 1);
+    snprintf(cmd, sizeof cmd, "%s locate --station %s --pixels %s -o %s", test_bin(), st, px, tmp("x.shp"));
+    CHECK(test_run(cmd, out, sizeof out) == 1 && contains(out, "cannot tell the format"));
+}
