@@ -270,4 +270,167 @@ gs_status rec_recording_to_bulb(const char *path, int voltage_column, int n, rec
 gs_status rec_plot_brfs(const rec_bulb *const *bulbs, size_t count, const char *png_path,
                         const char *title);
 
+/* --------------------------------------------------------- capture directory */
+
+/* A capture directory, format "gridsurvey-capture/1" (docs/formats.md is the specification):
+ * capture.json plus K frames as 16-bit PNGs (grey for 1 band, RGB for 3), and optional 8-bit
+ * grey HDR maps holding each pixel's halving count h (0..16): in that frame the pixel integrated
+ * cycles / 2^h cycles, for all its bands (paper Sec. 6, the ACam's HDR loop). This is the one
+ * reader and writer of the format; capture/ writes with it, recognize/ reads with it.
+ *
+ * Lifecycle: a rec_capture is a plain struct. Zero it, set the scalar fields, rec_capture_alloc
+ * (and rec_capture_alloc_hdr for HDR maps), set frames[k].cycles and the pixels, then
+ * rec_capture_write_frame for every k and rec_capture_write_json last. Or rec_capture_read.
+ * Either way rec_capture_release frees everything (it accepts NULL and a zeroed struct). */
+#define REC_CAPTURE_FORMAT "gridsurvey-capture/1"
+#define REC_PATH_MAX 256
+#define REC_MAX_HALVINGS 16
+
+typedef struct {
+    char file[REC_PATH_MAX];      /* frame PNG in the directory: [A-Za-z0-9._-]+ ending ".png" */
+    int k;                        /* window index 0..K-1: [k Delta/K, (k+1) Delta/K) */
+    double cycles;                /* C, flicker cycles integrated before any HDR halving (> 0) */
+    char hdr_map[REC_PATH_MAX];   /* 8-bit PNG of halving counts, "" when the frame has none */
+} rec_frame_info;
+
+typedef struct {
+    int grid_hz;                  /* 50 or 60 */
+    int K;                        /* frames per cycle, 2..1024 */
+    int bands;                    /* 1 or 3 (R, G, B) */
+    int width, height;            /* pixels, 1..32768 each */
+    double saturation_dn;         /* raw level at or above which a sample is saturated,
+                                   * (black_level_dn, 65536]; 65536: nothing saturates */
+    double black_level_dn;        /* raw pedestal, [0, 65536) (file default 0) */
+    double gain_e_per_dn;         /* electrons per DN for shot noise, >= 0 (0 = unknown: read
+                                   * noise only; file default 0) */
+    double read_noise_dn;         /* read noise std per sample and frame, DN, >= 0 (file
+                                   * default 1) */
+    int locked;                   /* 1 if AC-locked, else 0 (file default 1) */
+    char utc[40];                 /* acquisition time, ISO 8601 (YYYY-MM-DDThh:mm:ss[.f](Z|+hh:mm)),
+                                   * "" if unknown */
+    rec_frame_info *frames;       /* K entries, frames[k].k == k (owned, malloc) */
+    /* Pixels (owned, malloc; NULL until allocated or read):
+     * raw[((k * height + y) * width + x) * bands + band] in DN as stored (black level included);
+     * halvings[(k * height + y) * width + x] (0..16), or NULL if no frame has an HDR map (then
+     * h = 0 everywhere; a frame without a map reads as h = 0). */
+    unsigned short *raw;
+    unsigned char *halvings;
+    char *station_json;           /* the optional "station" object as compact JSON text (owned,
+                                   * malloc) or NULL. Kept semantically verbatim: Jansson
+                                   * re-serialises it (key order kept, reals to 17 digits). */
+} rec_capture;
+
+/* Read dir/capture.json and every frame and HDR map into *cap (its previous content is ignored
+ * and not freed; on failure *cap is left zeroed). Everything is validated: GS_ENOTFOUND for a
+ * missing capture.json or frame file, GS_EFORMAT for bad JSON ("DIR/capture.json:LINE:COL: JSON
+ * syntax: ..."), a bad field ("DIR/capture.json:LINE: field frames[3].k: expected ..."), a
+ * frame PNG that is truncated, not 16-bit, of the wrong colour type or size (the detail names
+ * the file and the capture.json line that names it). */
+gs_status rec_capture_read(const char *dir, rec_capture *cap);
+/* For a zeroed capture whose K, bands, width and height are set (GS_EINVAL otherwise, or if
+ * frames, raw or halvings are already set): allocate frames (file "frame_NNN.png", k, cycles 0:
+ * set them, hdr_map "") and zeroed raw pixels. */
+gs_status rec_capture_alloc(rec_capture *cap);
+/* After rec_capture_alloc: allocate zeroed halvings and name every frame's map "hdr_NNN.png"
+ * (unless already named). */
+gs_status rec_capture_alloc_hdr(rec_capture *cap);
+/* Write frame k as dir/frames[k].file (and its HDR map as dir/frames[k].hdr_map when that is
+ * not "") atomically: a temporary file in dir, fsync, rename. Creates dir (one level) if needed.
+ * GS_EINVAL for a bad k or name, halvings > 16, or a halved pixel in a frame without a map. */
+gs_status rec_capture_write_frame(const char *dir, const rec_capture *cap, int k);
+/* Write dir/capture.json atomically, after validating every field with the reader's rules
+ * (GS_EINVAL naming the field). Frames must have been written first (GS_ENOTFOUND naming the
+ * missing file), so a capture.json never names a file that is not there. */
+gs_status rec_capture_write_json(const char *dir, const rec_capture *cap);
+/* Free frames, pixels and station_json and zero the struct. Accepts NULL. */
+void rec_capture_release(rec_capture *cap);
+/* The per-cycle intensity of one pixel sample, in DN per flicker cycle: black level removed,
+ * divided by the cycles it integrated, (raw - black_level_dn) * (2^h / cycles). NaN when the
+ * sample is saturated (raw >= saturation_dn), when an index is out of range or the capture has
+ * no pixels. May be negative (noise below the black level). */
+double rec_capture_value(const rec_capture *cap, int k, int y, int x, int band);
+
+/* ------------------------------------------------------- blobs (per light) */
+
+/* Lights as blobs of a capture, SEP-style (Barbary 2016, after SExtractor), with per-frame
+ * photometry for Eq. 7. Steps (recognize/blobs.c):
+ *  1. per-cycle values (rec_capture_value); the mean image M = mean over k of the sum over
+ *     bands (saturated samples enter M clipped at the saturation level: they are bright);
+ *  2. background of M: a mesh of boxes of background_px, each the median of its pixels after
+ *     two 3-sigma clips, a 3x3 median over the mesh, bilinear interpolation (linear
+ *     extrapolation at the borders, so a pedestal or linear gradient is removed exactly);
+ *  3. noise of M per pixel from the capture's noise model: per sample
+ *     var(DN) = read_noise_dn^2 + 1/12 (quantisation) + max(DN - black, 0) / gain_e_per_dn,
+ *     var(value) = var(DN) / c_eff^2 with c_eff = cycles / 2^h, at the background level;
+ *  4. detection: M - background > threshold_sigma noise sigmas, or saturated in any frame;
+ *     8-connected components; components smaller than min_area_px are dropped, and so are
+ *     components larger than 4 max_area_px (not deblended);
+ *  5. deblending: local maxima of M (5x5) in a component, at most 32; each peak's temporal
+ *     signal from its 3x3 neighbourhood, normalised by its mean over k (summed over bands);
+ *     peaks are grouped (brightest first) while their normalised signals agree within
+ *     deblend_sigma (chi-square over bands * K values, as a Gaussian sigma by Wilson-Hilferty);
+ *     two or more groups split the component by a watershed on M from the groups' peaks
+ *     (REC_BLOB_DEBLENDED). Lights whose footprint is outside [min_area_px, max_area_px] are
+ *     dropped;
+ *  6. photometry aperture: the footprint grown by grow_px pixels (8-connected, into pixels of
+ *     no other light; the nearer light wins);
+ *  7. per frame and band: the sum over the aperture's usable pixels (unsaturated in every frame
+ *     and band, Eq. 17) of value - background, where the per-frame background is a mesh of the
+ *     same boxes holding the mean of each box's pixels outside every detection (dilated by
+ *     grow_px + 2) in that frame and band. sigma adds the pixels' noise (3.) and the variance of
+ *     the mesh nodes used (each node's mean of its pixels' noise / n);
+ *  8. position: the windowed centroid (SExtractor's XWIN_IMAGE): a Gaussian window whose sigma
+ *     comes from the aperture's second moment, iterated from the aperture's intensity-weighted
+ *     centroid; unbiased for any symmetric PSF (at most 0.013 px of pixel-sampling error for
+ *     1-1.5 px Gaussian PSFs without noise, tests/test_blobs.c).
+ * Works in O(K * bands * pixels), with OpenCV for components and morphology: 0.35 s for a
+ * 1024 x 1024, K = 26, RGB capture (one core). */
+enum {
+    REC_BLOB_EDGE = 1u << 0,        /* aperture touches the image border: the light may be cut */
+    REC_BLOB_SATURATED = 1u << 1,   /* some pixel saturated in some frame (excluded from sums) */
+    REC_BLOB_DEBLENDED = 1u << 2,   /* split from touching lights with different signals */
+    REC_BLOB_HDR = 1u << 3,         /* some aperture pixel was HDR-halved in some frame */
+    REC_BLOB_NO_SIGNAL = 1u << 4    /* every aperture pixel saturated: signal 0, sigma +Inf */
+};
+
+typedef struct {
+    double threshold_sigma;   /* detection threshold over the background, noise sigmas, > 0 (5) */
+    int min_area_px;          /* smallest footprint kept, >= 1 (1) */
+    int max_area_px;          /* largest footprint kept, >= min_area_px (5000) */
+    int background_px;        /* background box side, pixels, 3..65535 (31) */
+    double deblend_sigma;     /* signal difference, in noise sigmas, that splits a blob, > 0;
+                               * INFINITY never splits (5) */
+    int grow_px;              /* photometry aperture = footprint grown by this, 0..64 (2) */
+    int labels;               /* 1: also return the aperture label image (0) */
+} rec_blob_opts;
+void rec_blob_opts_default(rec_blob_opts *o);
+
+/* The light catalog, a struct of arrays (one entry per light, in raster order of each light's
+ * first footprint pixel). signal and sigma hold count * bands * K values,
+ * [(i * bands + band) * K + k]: the per-cycle flux of light i (DN per cycle) summed over its
+ * aperture pixels that are unsaturated in every frame, background removed, and its noise std
+ * (shot + read + quantisation + background estimate), always finite except sigma = +Inf for
+ * REC_BLOB_NO_SIGNAL. Every array is a separate malloc (NULL when count is 0), owned by the
+ * catalog; rec_catalog_release frees each and zeroes the struct (a hand-built catalog whose
+ * arrays are malloc'd or NULL may be released too). */
+typedef struct {
+    size_t count;
+    int bands, K;
+    double *x_px, *y_px;      /* windowed centroid on M - background (pixel centres at integers,
+                               * x right, y down); see step 8 */
+    int *area_px;             /* footprint pixels (detected, after deblending) */
+    double *peak_dn;          /* brightest raw sample of the footprint, DN as stored */
+    int *saturated_px;        /* aperture pixels saturated in at least one frame */
+    unsigned *flags;          /* REC_BLOB_* */
+    double *signal, *sigma;
+    int width, height;        /* of the capture */
+    int *labels;              /* opts.labels: width * height, the light owning each aperture
+                               * pixel, -1 elsewhere; else NULL */
+} rec_catalog;
+/* *cat is overwritten (not freed); on failure it is zeroed. GS_EINVAL for options outside
+ * their ranges or a capture whose fields break docs/formats.md (NaN, Inf, negative noise,
+ * cycles <= 0, halvings > 16), GS_ENOMEM. A scene with no light gives count 0 and GS_OK. */
+gs_status rec_blobs_extract(const rec_capture *cap, const rec_blob_opts *o, rec_catalog *cat);
+void rec_catalog_release(rec_catalog *cat);
+
 #endif
