@@ -2,7 +2,7 @@
 #   make          build the gridsurvey binary
 #   make check    install missing Debian packages, build, run every test (plain and ASan+UBSan)
 #   make demo     install, build, run the main job on the built-in scene
-#   make bench    performance tables (docs/bench.md)
+#   make bench    performance tables (docs/bench-recognize.md, docs/bench-db.md)
 BUILD ?= build
 SAN ?=
 CC := gcc
@@ -75,6 +75,14 @@ demo: deps
 	$(BIN) delight list --delight $(DELIGHT_DB)
 	$(BIN) delight plot --delight $(DELIGHT_DB) --grid 50 -o $(BUILD)/delight_50hz.png
 	@echo "demo: wrote $(BUILD)/delight_50hz.png"
+# Performance tables, printed and kept in docs/: Eq. 7 throughput on one core
+# (survey/bench.c) and the survey database's ingest and query times (survey/bench_db.c).
+bench: $(BIN)
+	$(BIN) bench recognize > docs/bench-recognize.md.tmp
+	mv docs/bench-recognize.md.tmp docs/bench-recognize.md
+	$(BIN) bench db > docs/bench-db.md.tmp
+	mv docs/bench-db.md.tmp docs/bench-db.md
+	@cat docs/bench-recognize.md docs/bench-db.md
 clean:
 	rm -rf $(BUILD)
 

@@ -1080,17 +1080,27 @@ static gs_status photometry(state *s, const int *area, rec_catalog *cat)
         }
         double *sv = acc, *vv = acc + BK;
         memset(acc, 0, sizeof(double) * (size_t)BK * 2);
-        for (int k = 0; k < K; k++) {
-            const double *sc = s->scale + (size_t)k * HS;
-            const unsigned char *hk = c->halvings ? c->halvings + s->N * (size_t)k : NULL;
-            for (int a = 0; a < na; a++) {
-                int p = ap[a];
-                if (s->sat[p]) continue;
-                double f = sc[hk ? hk[p] : 0];
+        /* Shot noise from each pixel's mean level over the K windows, not from each sample's
+         * own value: a sample's own value correlates its weight with its noise and biases
+         * Eq. 7 at low photon counts (docs/recognition.md). */
+        for (int a = 0; a < na; a++) {
+            int p = ap[a];
+            if (s->sat[p]) continue;
+            double mean_flux[REC_MAX_BANDS] = {0};
+            for (int k = 0; k < K; k++) {
+                double f = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[s->N * (size_t)k + (size_t)p] : 0)];
                 const unsigned short *r = c->raw + (s->N * (size_t)k + (size_t)p) * (size_t)B;
                 for (int b = 0; b < B; b++) {
-                    sv[b * K + k] += ((double)r[b] - s->black) * f;
-                    vv[b * K + k] += sample_var(s, r[b], f);
+                    double v = ((double)r[b] - s->black) * f;
+                    sv[b * K + k] += v;
+                    mean_flux[b] += v / K;
+                }
+            }
+            for (int k = 0; k < K; k++) {
+                double f = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[s->N * (size_t)k + (size_t)p] : 0)];
+                for (int b = 0; b < B; b++) {
+                    double dn = mean_flux[b] / f;   /* expected raw level above black */
+                    vv[b * K + k] += (s->var0 + (dn > 0 ? dn * s->inv_gain : 0)) * f * f;
                 }
             }
         }

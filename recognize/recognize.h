@@ -433,4 +433,245 @@ typedef struct {
 gs_status rec_blobs_extract(const rec_capture *cap, const rec_blob_opts *o, rec_catalog *cat);
 void rec_catalog_release(rec_catalog *cat);
 
+/* ------------------------------------------------------- Eq. 7 recognition */
+
+/* Eq. 7 (paper Sec. 4) as a maximum-likelihood / Bayesian estimator; docs/recognition.md has the
+ * derivation, the flags and the measured accuracy and calibration.
+ * Model: sample d of a light is a * t(beta, phi)[d] + noise, noise Gaussian with the given std,
+ * independent; t = Q_beta(sigma) shift(phi, b_beta(sigma)) integrated to the K windows (Eq. 5),
+ * so a is the brightness (sum over bands of the mean per-cycle flux, Eq. 6). The paper's
+ * normalisation by the mean brightness is the maximum-likelihood scale a* = S/T
+ * (S = sum w x t, T = sum w t^2, w = 1/sigma^2), and Eq. 7's residual is
+ * chi2 = sum w x^2 - S^2/T. The posterior over (bulb, phase) has uniform priors and the scale
+ * marginalised over a > 0 (flat prior):
+ *   log p(beta, phi | x) = -chi2/2 - log(T)/2 + log Phi(S/sqrt(T)) + const.
+ * Thread safety: a matcher is read-only after rec_matcher_new; rec_match_* may run on several
+ * threads with the same matcher (rec_match_pixels calls OpenBLAS, whose own threading applies;
+ * rec_matcher_new plans FFTs, so do not create matchers concurrently with other FFTW planners). */
+typedef enum {
+    REC_PHASES_3,            /* {0, 120, 240} deg (default) */
+    REC_PHASES_6,            /* those and the same + transformer_deg (a delta-wye transformer) */
+    REC_PHASES_CONTINUOUS    /* any phase, sub-sample, with its uncertainty */
+} rec_phase_set;
+
+typedef struct {
+    rec_phase_set phases;
+    double transformer_deg;  /* AC phase shift of a delta-wye transformer, deg (30); with
+                              * REC_PHASES_6 it must not be a multiple of 60 (its shift would
+                              * repeat one of 0/120/240: GS_EINVAL) */
+    double unknown_p;        /* chi-square p-value below which no bulb fits: unknown (1e-3);
+                              * [0, 1), 0 disables the test */
+    double ambiguous_conf;   /* bulb or phase posterior below which it is ambiguous (0.8), [0, 1] */
+    double min_snr;          /* brightness / its std below which a light is too dim (3), >= 0 */
+} rec_eq7_opts;
+/* Fill *o with the defaults in parentheses above. */
+void rec_eq7_opts_default(rec_eq7_opts *o);
+
+enum {
+    REC_MATCH_UNKNOWN = 1u << 0,          /* no bulb fits: p_value < unknown_p (bulb -1) */
+    REC_MATCH_PHASE_AMBIGUOUS = 1u << 1,  /* phase_confidence < ambiguous_conf, or no phase */
+    REC_MATCH_BULB_AMBIGUOUS = 1u << 2,   /* bulb_confidence < ambiguous_conf, or no bulb */
+    REC_MATCH_DIM = 1u << 3,              /* brightness below min_snr of its std (bulb -1) */
+    REC_MATCH_BAD_INPUT = 1u << 4         /* some sample non-finite / sigma <= 0 (dropped), or
+                                           * no usable sample at all (bulb -1) */
+};
+
+/* The answer for one light. No field is ever NaN or infinite.
+ * - bulb >= 0: the best (bulb, phase) pair by posterior. Pairs are (bulb, phase) for a
+ *   discrete phase set; for REC_PHASES_CONTINUOUS (bulb, the +-30 deg of phase around the
+ *   bulb's best phase); a REC_REF_NONE (shape-only) bulb is one pair whatever its shift, and
+ *   when it wins phase_deg = 0, phase_confidence = 0 and PHASE_AMBIGUOUS is set.
+ * - bulb = -1: BAD_INPUT without usable samples (every number 0), or DIM or UNKNOWN: then the
+ *   best fit within the database is in runner_bulb / runner_phase_deg / runner_confidence
+ *   (its posterior if the light were in the database), and brightness, chi2, dof, p_value
+ *   describe that fit; confidence, bulb_confidence and phase_confidence are 0. */
+typedef struct {
+    int bulb;                 /* index into the matcher's bulbs, -1 when there is no answer */
+    double phase_deg;         /* grid phase, [0, 360): the phase of the set (discrete), or
+                               * rec_shift_to_phase of the fitted shift (continuous) */
+    double phase_sigma_deg;   /* continuous: 1-sigma of the phase from the chi2 curvature
+                               * (Delta chi2 = 1), at most 51.96 (uniform); discrete: 0 */
+    double brightness;        /* fitted sum over bands of the mean per-cycle flux (a* >= 0) */
+    double chi2;              /* weighted residual of the best fit, sum w (x - a* t)^2 */
+    int dof;                  /* usable samples - 2 (scale and phase), >= 0 */
+    double p_value;           /* chi-square tail probability of chi2 at dof (1 when dof = 0) */
+    double confidence;        /* posterior of the best pair */
+    double bulb_confidence;   /* posterior of the best bulb, summed over phases */
+    double phase_confidence;  /* posterior of the best phase, summed over voltage-referenced
+                               * bulbs (continuous: of phases within +-30 deg of it) */
+    int runner_bulb;          /* second most probable pair (different bulb or phase), -1 if none */
+    double runner_phase_deg;
+    double runner_confidence;
+    unsigned flags;           /* REC_MATCH_* */
+} rec_match;
+
+/* Templates Q_b(sigma) shift(phi, b_b(sigma)) at K windows for the DELIGHT entries with this
+ * grid frequency and band count (REC_REF_UNLOCKED entries excluded; REC_REF_NONE entries are
+ * searched over every shift (max(8K, 96) per cycle) and take part in the bulb decision but
+ * never decide a phase). REC_PHASES_CONTINUOUS uses the same grid for every bulb, refined to
+ * sub-sample precision. 2 <= K <= 4096; o NULL = defaults. GS_ENOTFOUND when no entry fits,
+ * GS_ELIMIT when the templates would exceed 64 Mi values. The matcher borrows nothing from d;
+ * free it with rec_matcher_free. */
+typedef struct rec_matcher rec_matcher;
+gs_status rec_matcher_new(const rec_delight *d, int grid_hz, int bands, int K,
+                          const rec_eq7_opts *o, rec_matcher **out);
+void rec_matcher_free(rec_matcher *m);
+size_t rec_matcher_bulb_count(const rec_matcher *m);
+/* Borrowed: the i-th candidate bulb (a copy owned by the matcher), NULL if out of range. */
+const rec_bulb *rec_matcher_bulb(const rec_matcher *m, size_t i);
+
+/* Eq. 7 for one light: signal and sigma hold bands * K values ([band * K + k]), any units
+ * (the same for both); negative signal values are legal (noise after background removal).
+ * sigma = +INFINITY drops a sample silently (saturated, masked); a non-finite signal with a
+ * finite sigma, or sigma NaN or <= 0, drops the sample and sets REC_MATCH_BAD_INPUT. The
+ * brightness is fitted jointly (maximum likelihood under Gaussian noise of std sigma).
+ * GS_EINVAL for NULL arguments; bad samples are reported in out->flags, not as an error. */
+gs_status rec_match_light(const rec_matcher *m, const double *signal, const double *sigma,
+                          rec_match *out);
+/* Eq. 7 for every light of a catalog (bands and K must match the matcher's: GS_EINVAL); out
+ * has cat->count entries. Lights flagged REC_BLOB_NO_SIGNAL get bulb -1 and BAD_INPUT. */
+gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_match *out);
+
+/* Eq. 7 per pixel, as matrix products (OpenBLAS SGEMMs per block of 1024 rows; a rigorous
+ * prefilter first sets aside rows that are dim for every template): x holds P rows of
+ * bands * K values, noise_sigma one std per row (uniform over the row). Writes the best bulb,
+ * the phase in degrees (0 for a REC_REF_NONE bulb) and the posterior of the best pair (same
+ * model, pairs and posterior code as rec_match_light; float scores are rescored in double when
+ * their rounding could exceed 1e-3 nats; continuous phases by parabolic refinement of the grid
+ * scores, exact Newton refinement for bright rows). bulb is -1, phase 0 and confidence 0 for
+ * rows with a non-finite value or a sigma that is not finite and > 0, and for dim (min_snr) or
+ * unknown (unknown_p at dof = bands * K - 2) rows. phase_deg and confidence may be NULL.
+ * docs/recognition.md gives the throughput (one core: ~3-5 Mpixel/s for 1 Mpixel RGB K = 26
+ * with three phases when most pixels are dark). */
+gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *noise_sigma,
+                           size_t P, int *bulb, float *phase_deg, float *confidence);
+
+/* Chi-square tail probability Q(dof/2, chi2/2) (regularised upper incomplete gamma: series or
+ * continued fraction, relative error < 1e-12 where the result is > 1e-300). 1 for chi2 <= 0 or
+ * dof < 1, 0 for chi2 = +inf, NaN for NaN. */
+double rec_chi2_sf(double chi2, int dof);
+
+/* Throughput of rec_match_pixels (for `make bench` / `gridsurvey bench`): synthesises `pixels`
+ * rows (a fraction lit_fraction lit by a random template of m at mean sample snr noise sigmas,
+ * the rest pure noise of std 1; deterministic for a seed), times one rec_match_pixels call and
+ * checks the lit rows. Call openblas_set_num_threads(1) first for a one-core figure. */
+typedef struct {
+    size_t pixels, lit, templates;
+    int values_per_pixel;     /* bands * K */
+    int prefilter_dim;        /* R of the dark-row prefilter (docs/recognition.md), 0 = none */
+    double seconds;           /* wall time of rec_match_pixels */
+    double pixels_per_s;
+    double cpu_seconds;       /* CPU time of the process during the call (all threads) */
+    double pixels_per_cpu_s;  /* the one-core figure on a busy machine */
+    double lit_accuracy;      /* lit rows with the true bulb and phase */
+} rec_eq7_bench;
+gs_status rec_bench_eq7(const rec_matcher *m, size_t pixels, double lit_fraction, double snr,
+                        unsigned long seed, rec_eq7_bench *out);
+
+/* ------------------------------------------------------------ maps and plots */
+
+/* Per-pixel recognition maps like the paper's Fig. 1 and per-light signal plots like its Fig. 3
+ * (recognize/maps.c; docs/recognize-cli.md shows them).
+ *
+ * rec_pixel_maps_compute: every pixel's per-cycle values (docs/formats.md: (raw - black_level)
+ * 2^h / cycles) minus a background: per frame and band, a mesh of 64-pixel boxes (SExtractor's
+ * default), each the median of (at most 256 evenly spaced of) its unsaturated values,
+ * interpolated bilinearly between box centres (constant beyond the outer centres). The pixel's
+ * brightness B is the sum over bands of the mean over k of those values; its noise comes from the
+ * capture's noise model (docs/formats.md), per sample. A pixel is mapped when B exceeds
+ * threshold_sigma times the std of B; a pixel with a saturated sample in any frame or band is
+ * REC_PIX_SATURATED and not matched (Eq. 17). Mapped pixels go through rec_match_pixels (Eq. 7
+ * as SGEMM blocks, 16384 pixels per call) with one noise std per pixel, the RMS over its samples
+ * (exact when the read noise dominates). Cost: one pass over the samples (integer sums when the
+ * capture has no HDR maps and no shot-noise gain), the mesh medians, and rec_match_pixels on the
+ * mapped pixels only: a 1024 x 1024, K = 26, RGB capture with 5 % of its pixels lit takes about
+ * 0.2 s on one core (docs/bench-recognize.md). */
+enum {
+    REC_PIX_DARK = 0,       /* B below the threshold: not matched */
+    REC_PIX_MATCHED,        /* matched: bulb >= 0 */
+    REC_PIX_NO_ANSWER,      /* above the threshold, but dim, unknown or bad input (bulb -1) */
+    REC_PIX_SATURATED       /* some sample saturated: not matched */
+};
+
+typedef struct {
+    double threshold_sigma;   /* mapping threshold on B in noise sigmas, finite and > 0 (5) */
+    void (*progress)(void *ctx, double fraction);  /* after each block: fraction of the mapped
+                                                    * pixels done; NULL = none (NULL) */
+    void *progress_ctx;       /* passed to progress (NULL) */
+} rec_map_opts;
+/* Fill *o with the defaults in parentheses above. */
+void rec_map_opts_default(rec_map_opts *o);
+
+/* Per-pixel results, row-major width * height arrays, each a separate malloc owned by the struct;
+ * rec_pixel_maps_release frees them and zeroes the struct (it accepts NULL and a zeroed struct). */
+typedef struct {
+    int width, height;
+    rec_phase_set phases;     /* the phase set of the Eq. 7 options given (for the legend) */
+    double transformer_deg;
+    double ambiguous_conf;    /* matched pixels below this confidence are drawn as ambiguous */
+    double threshold_sigma;
+    size_t mapped;            /* pixels not REC_PIX_DARK */
+    size_t matched;           /* REC_PIX_MATCHED pixels */
+    unsigned char *state;     /* REC_PIX_* */
+    int *bulb;                /* index into the matcher's bulbs; -1 unless REC_PIX_MATCHED */
+    float *phase_deg;         /* grid phase in [0, 360) (0 for a REC_REF_NONE bulb); 0 unless
+                               * matched */
+    float *confidence;        /* posterior of the best (bulb, phase) pair; 0 unless matched */
+    float *brightness;        /* B, DN per flicker cycle, background removed (every pixel) */
+    float *snr;               /* B / its noise std (every pixel; 0 if the std is 0) */
+} rec_pixel_maps;
+
+/* Compute the maps of cap with matcher m (built for cap's grid_hz, bands and K). eq7 must be the
+ * options m was built with (NULL = defaults): the maps keep its phase set and ambiguous_conf for
+ * drawing. o NULL = defaults. *pm is overwritten (not freed); on failure it is zeroed.
+ * GS_EINVAL for a capture that breaks docs/formats.md, a matcher of other bands, or a bad
+ * threshold; GS_ENOMEM. Memory besides the capture: 21 bytes per pixel kept, 16 more while it
+ * runs, and a block of 16384 x bands x K floats. */
+gs_status rec_pixel_maps_compute(const rec_capture *cap, const rec_matcher *m,
+                                 const rec_eq7_opts *eq7, const rec_map_opts *o,
+                                 rec_pixel_maps *pm);
+void rec_pixel_maps_release(rec_pixel_maps *pm);
+
+/* The map PNGs: 8-bit RGB. The map is drawn at the integer scale s = rec_map_scale(width,
+ * height) = clamp(floor(640 / max(width, height)), 1, 16): map pixel (x, y) fills the s x s block
+ * with top-left corner (s x, s y). The image is max(s width, 480) pixels wide and s height + L
+ * high, with a legend (title and colour key, white background, text by PLplot's memcairo driver)
+ * in the L rows below the map; columns right of the map are legend background. Pixels below the
+ * threshold are black, saturated pixels white, unknown/dim/bad-input pixels grey
+ * (HSV value V/2, see below).
+ * - Phase map (Fig. 1): hue = phase_deg on the HSV colour wheel (0 deg pure red, 120 pure green,
+ *   240 pure blue; REC_PHASES_6 adds 0/120/240 + transformer_deg, continuous phases use the whole
+ *   wheel), saturation 1, value V = 0.35 + 0.65 t, t = log(snr / threshold) / log(snr99 /
+ *   threshold) clamped to [0, 1], snr99 the 99th percentile of the mapped pixels' snr (1 when
+ *   that is not above the threshold). A matched pixel whose confidence is below ambiguous_conf
+ *   is ambiguous: grey. Legend: a swatch per phase of the set (continuous: a hue bar with ticks
+ *   every 60 deg), ambiguous/unknown, saturated, below threshold.
+ * - Bulb map: the bulbs present, ranked by pixel count, take the colours of a fixed 20-colour
+ *   palette in that order (cycled beyond 20), times V; the legend lists them (id, technology,
+ *   pixel count), most pixels first.
+ * - Confidence map: confidence on a viridis-like scale (0 dark violet .. 1 yellow), flat; the
+ *   legend is a colour bar with ticks every 0.25.
+ * GS_EIO when path cannot be written (nothing is left behind), GS_ELIMIT beyond 65535 pixels a
+ * side, GS_ENOMEM. Not thread-safe (PLplot has global state). */
+int rec_map_scale(int width, int height);
+gs_status rec_map_write_phase_png(const rec_pixel_maps *pm, const char *path);
+gs_status rec_map_write_bulb_png(const rec_pixel_maps *pm, const rec_matcher *m, const char *path);
+gs_status rec_map_write_confidence_png(const rec_pixel_maps *pm, const char *path);
+
+/* Fig. 3 as one PNG (PLplot, cairo PNG driver; 1500 x 620 pixels for 1 band, 1500 x 1500 for 3):
+ * one row of two panels per band. Left: each drawn light's measured signal divided by its fitted
+ * brightness (match[i].brightness), signal / brightness at the window centres (k + 1/2)/K with
+ * error bars sigma / brightness, and its best template's curve: the chromaticity-scaled BRF of the
+ * best bulb at the recognised phase, averaged over a window of Delta/K centred at each time (so
+ * the curve passes through the template values of Eq. 7 at the window centres). Right: the same
+ * samples shifted by minus the light's phase shift (onto grid phase 0), over the phase-0 curves
+ * (lights without a voltage-referenced phase are left out). Colours by bulb (as the paper's
+ * figure), one symbol per light; a legend names each light (catalog index), its bulb and phase.
+ * Drawn: the recognised lights (bulb >= 0), at most max_lights (1..16) of them, highest
+ * sum(signal) / sqrt(sum(sigma^2)) first; with none, empty axes and a note. cat and match are
+ * rec_match_catalog's input and output for m. GS_EIO when png_path cannot be written, GS_EINVAL
+ * for bad arguments or bands that differ from m's. Not thread-safe (PLplot). */
+gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const rec_match *match,
+                           int max_lights, const char *png_path, const char *title);
+
 #endif

@@ -11,6 +11,11 @@ static const struct {
 } commands[] = {
     {"delight", srv_cmd_delight, "the DELIGHT bulb database: list, show, export, import, add, plot, generate"},
     {"locate", srv_cmd_locate, "locate lights from one station's pixels; GeoJSON, KML, GeoPackage, CSV, map"},
+    {"stats", srv_cmd_stats, "phase-balance statistics of a survey database (shares, Wilson CIs, chi-square)"},
+    {"export", srv_cmd_export, "export a survey database's lights as GeoJSON, KML, GeoPackage or CSV"},
+    {"db", srv_cmd_db, "survey database tools: init, migrate, check, ingest-synthetic"},
+    {"recognize", srv_cmd_recognize, "bulb type and grid phase of every light in a capture (Eq. 7); maps, plots"},
+    {"bench", srv_cmd_bench, "performance tables: bench recognize (Eq. 7 throughput), bench db"},
 };
 
 static void usage(FILE *f)

@@ -3,8 +3,383 @@
 #ifndef GRIDSURVEY_SURVEY_H
 #define GRIDSURVEY_SURVEY_H
 
+#include "gis/gis.h"
+#include "recognize/recognize.h"
+
+#include <stddef.h>
+#include <stdint.h>
+
 /* Run the gridsurvey command line; returns the process exit status (0 ok, 1 failure with a
  * one-line message on stderr, 2 usage error). */
 int srv_main(int argc, char **argv);
+
+/* =====================================================================================
+ * Survey database (survey/db.c; docs/survey-db.md is the specification)
+ *
+ * One SQLite file per project holding surveys, stations, captures (with their frames and grid
+ * frequency log), lights (pixel, signal quality, recognized bulb and phase with confidences
+ * and runner-up) and their locations (WGS84 position, error ellipse) with an R*Tree index,
+ * and SQL views for phase-balance statistics.
+ *
+ * Identification: PRAGMA application_id = SRV_DB_APPLICATION_ID ('GSDB') and
+ * PRAGMA user_version = schema version; meta('format') = SRV_DB_FORMAT. A file is refused
+ * (GS_EFORMAT, one line naming the file, what was expected and what was found, nothing
+ * written) unless it is such a database, or an empty SQLite file / a missing path when
+ * creating. Migrations: an ordered list of SQL scripts; opening for writing applies the
+ * missing ones, each in its own transaction that also sets user_version and adds a row to the
+ * `migrations` table. A file of a newer schema is refused; a file of an older schema opened
+ * read-only is refused with a hint to open it for writing once.
+ *
+ * Transactions and crash safety: WAL journal while a writer is open (synchronous = NORMAL;
+ * the last writer to close checkpoints and returns the file to rollback mode, so at rest it
+ * is one self-contained file), foreign keys on, a busy timeout of 10 s. Every write runs
+ * inside a transaction; a capture's row, frames, lights,
+ * locations and frequency log are committed together (srv_db_add_capture), so after a crash
+ * (SIGKILL, power loss) each capture is either fully present or absent, and a re-run skips
+ * the captures already committed (natural UNIQUE keys: a re-run never duplicates a row).
+ * WAL + NORMAL survives any process crash; on power loss the last commits may roll back
+ * (never corrupt), and a re-run redoes them.
+ *
+ * Thread safety: a handle is one SQLite connection; use it from one thread at a time.
+ * Strings in the row structs are borrowed for the duration of the call; NULL or "" stores
+ * SQL NULL. Non-finite doubles (NaN, +-Inf) store NULL.
+ * ===================================================================================== */
+
+#define SRV_DB_SCHEMA_VERSION 2
+#define SRV_DB_APPLICATION_ID 0x47534442   /* 'GSDB' (GeoPackage uses 'GPKG' = 0x47504B47) */
+#define SRV_DB_FORMAT "gridsurvey-survey"
+/* Written to migrations.generator and delight_versions.generator. */
+#define SRV_GENERATOR "gridsurvey 0.1"
+/* Phase classes: a phase within this many degrees of 0, 120 or 240 counts as that phase
+ * (the same rule as gis_phase_classify); any other finite phase is "other". */
+#define SRV_PHASE_TOL_DEG 20.0
+
+typedef struct srv_db srv_db;
+struct sqlite3;
+
+typedef enum {
+    SRV_DB_READ,     /* read-only (SQLITE_OPEN_READONLY): every write fails with GS_EIO */
+    SRV_DB_WRITE,    /* read-write; the file must exist; an older schema is migrated */
+    SRV_DB_CREATE    /* read-write; a missing file is created (never its directory) */
+} srv_db_mode;
+
+/* Open (or create) a survey database. Errors, all one line naming path: GS_ENOTFOUND (missing
+ * file and mode != SRV_DB_CREATE), GS_EIO (cannot open or create: missing directory, parent
+ * that is not a directory, no permission; a read-only file opened for writing), GS_EFORMAT (not
+ * a survey database, or a newer / older schema as above), GS_ESQL. On any error nothing is
+ * left on disk that was not there before (a file created by this call is removed). */
+gs_status srv_db_open(const char *path, srv_db_mode mode, srv_db **out);
+/* Roll back an open transaction, finalize statements, close. Accepts NULL. */
+void srv_db_close(srv_db *db);
+/* The path given to srv_db_open (borrowed). */
+const char *srv_db_path(const srv_db *db);
+/* The SQLite connection, borrowed, for read queries (views, tests). Write through the API. */
+struct sqlite3 *srv_db_sqlite(srv_db *db);
+/* For migration tests and tools only: create a new database at schema version 1..
+ * SRV_DB_SCHEMA_VERSION (GS_EINVAL otherwise; GS_EIO if path exists). */
+gs_status srv_db_create_at_version(const char *path, int version);
+
+/* BEGIN IMMEDIATE / COMMIT / ROLLBACK. begin inside a transaction is GS_EINVAL; rollback
+ * without one is a no-op. GS_EIO on a read-only handle. */
+gs_status srv_db_begin(srv_db *db);
+gs_status srv_db_commit(srv_db *db);
+gs_status srv_db_rollback(srv_db *db);
+int srv_db_in_transaction(const srv_db *db);
+
+/* --- rows. Each srv_*_init sets every number to NaN (integers to 0 or -1 as noted) and
+ * every string to NULL. */
+
+/* The DELIGHT database used: sha256 of its CSV export (srv_delight_fingerprint). */
+typedef struct {
+    char sha256[65];           /* 64 lower-case hex digits */
+    const char *source;        /* file path, or "built-in" */
+    const char *generator;     /* NULL = SRV_GENERATOR */
+    long bulbs;                /* entries */
+} srv_delight_row;
+/* sha256 of rec_delight_export_csv(d) (byte-exact, so equal databases hash equally) and the
+ * entry count. */
+gs_status srv_delight_fingerprint(const rec_delight *d, const char *source, srv_delight_row *r);
+/* FIPS 180-4 SHA-256 of data[0..n) as 64 hex digits + NUL. */
+void srv_sha256_hex(const void *data, size_t n, char hex[65]);
+
+typedef struct {
+    const char *name;          /* required, unique (the natural key) */
+    const char *city, *started_utc, *notes;
+    int grid_hz;               /* 50, 60, or 0 = unknown */
+} srv_survey_row;
+
+typedef struct {
+    int64_t survey_id;
+    const char *name;          /* required, unique within the survey */
+    gis_camera cam;            /* all numbers NaN = unknown (after srv_station_row_init) */
+    double sigma_px;
+    const char *time_utc;
+} srv_station_row;
+
+typedef struct {
+    int64_t survey_id;         /* required */
+    int64_t station_id;        /* 0 = none */
+    int64_t delight_id;        /* 0 = none */
+    const char *key;           /* required, unique within the survey: the resume key (e.g.
+                                * the capture directory's name or a content hash) */
+    const char *path, *utc;
+    int grid_hz, K, bands, width_px, height_px;   /* 0 = unknown */
+    int locked;                /* 1, 0, or -1 = unknown */
+    double mean_frequency_hz, sigma_frequency_hz;
+} srv_capture_row;
+
+typedef struct {
+    int k;                     /* window index >= 0, unique within the capture */
+    const char *file, *hdr_map;
+    double cycles;
+} srv_frame_row;
+
+/* One recognized light (recognize/: rec_catalog entry + rec_match). */
+typedef struct {
+    int index;                 /* >= 0, unique within the capture (catalog index) */
+    double x_px, y_px;         /* required, finite */
+    int area_px, saturated_px; /* -1 = unknown */
+    double peak_dn, brightness;
+    double snr;                /* sum of signal / sqrt(sum of sigma^2) over usable samples */
+    double chi2;
+    int dof;                   /* -1 = unknown */
+    double p_value;            /* [0, 1] */
+    const char *bulb_id;       /* DELIGHT id, NULL = no answer */
+    const char *technology;    /* rec_tech_name(), NULL = no answer */
+    double phase_deg;          /* [0, 360) (wrapped); NaN = ambiguous or unknown */
+    double phase_fit_deg;      /* the best fit's phase whatever its confidence; NaN = none */
+    double phase_sigma_deg;
+    double confidence;         /* [0, 1] posterior of (bulb, phase); NaN stores 0 */
+    double bulb_confidence, phase_confidence;   /* [0, 1]; NaN stores 0 */
+    const char *runner_bulb_id;
+    double runner_phase_deg, runner_confidence;
+    unsigned blob_flags;       /* REC_BLOB_* */
+    unsigned match_flags;      /* REC_MATCH_* */
+} srv_light_row;
+
+typedef enum {
+    SRV_LOC_NONE,              /* no location row */
+    SRV_LOC_ONE_STATION,       /* gis_locate */
+    SRV_LOC_TRIANGULATED,      /* gis_triangulate */
+    SRV_LOC_TRUTH              /* from a simulator's truth.json */
+} srv_loc_method;
+
+typedef struct {
+    srv_loc_method method;
+    double lat_deg, lon_deg;   /* NaN = not located (flags say why); lon wrapped to [-180,180) */
+    double height_m;
+    gis_ellipse ellipse;       /* non-finite semi-axes store NULL */
+    double range_m;
+    unsigned flags;            /* GIS_FIX_* */
+} srv_location_row;
+
+typedef struct {
+    double t_s;                /* start of the window, seconds from the capture's start */
+    double window_s;           /* > 0: one cycle (1 / (2 f)) ... or 1 s */
+    double frequency_hz;       /* > 0 */
+    double sigma_hz;           /* NaN = unknown */
+} srv_freq_row;
+
+void srv_station_row_init(srv_station_row *r);
+void srv_capture_row_init(srv_capture_row *r);
+void srv_light_row_init(srv_light_row *r);
+void srv_location_row_init(srv_location_row *r);
+
+/* Fill the signal part of r (index, position, area, peak, saturated_px, blob flags, snr)
+ * from light i of a blob catalog. */
+void srv_light_from_catalog(srv_light_row *r, const rec_catalog *cat, size_t i);
+/* Fill the recognition part from an Eq. 7 answer: bulb id and technology from the matcher's
+ * bulb (NULL when m->bulb < 0); phase_deg NaN when m->flags has REC_MATCH_PHASE_AMBIGUOUS or
+ * there is no bulb; runner-up likewise. The strings point into the matcher (borrowed: keep it
+ * alive until the row is inserted). */
+void srv_light_from_match(srv_light_row *r, const rec_match *m, const rec_matcher *mt);
+/* A one-station fix (method SRV_LOC_ONE_STATION). */
+void srv_location_from_fix(srv_location_row *r, const gis_fix *f);
+
+/* --- inserts. "Get or add" by natural key: an existing row is not changed, its id returned. */
+gs_status srv_db_add_delight(srv_db *db, const srv_delight_row *r, int64_t *id);
+gs_status srv_db_add_survey(srv_db *db, const srv_survey_row *r, int64_t *id);
+gs_status srv_db_add_station(srv_db *db, const srv_station_row *r, int64_t *id);
+/* GS_ENOTFOUND when there is no survey of that name. */
+gs_status srv_db_find_survey(srv_db *db, const char *name, int64_t *id);
+
+/* Everything recognized in one capture, inserted atomically by srv_db_add_capture. */
+typedef struct {
+    srv_capture_row capture;
+    const srv_frame_row *frames;
+    size_t n_frames;
+    const srv_light_row *lights;
+    const srv_location_row *locations;   /* n_lights entries, parallel to lights; NULL = none */
+    size_t n_lights;
+    const srv_freq_row *frequency;       /* the grid frequency log, in time order */
+    size_t n_frequency;
+} srv_capture_data;
+
+/* The resumable ingest: 1 in *done if the capture (survey_id, key) is committed. */
+gs_status srv_db_capture_done(srv_db *db, int64_t survey_id, const char *key, int *done);
+/* Insert a whole capture in one transaction (its own, or a SAVEPOINT inside the caller's), or
+ * nothing: if (survey_id, key) is already present nothing is written and *skipped = 1
+ * (either output may be NULL). Validation failures (GS_EINVAL naming the field and row) and
+ * SQL errors roll back every row of this capture. */
+gs_status srv_db_add_capture(srv_db *db, const srv_capture_data *c, int64_t *capture_id,
+                             int *skipped);
+/* Delete a capture and everything under it (cascades, R*Tree included); *deleted 0 if absent. */
+gs_status srv_db_delete_capture(srv_db *db, int64_t survey_id, const char *key, int *deleted);
+
+/* Low-level prepared-statement inserts; each requires an open transaction (GS_EINVAL
+ * otherwise) and is idempotent (INSERT ... ON CONFLICT DO NOTHING on the natural key; an
+ * existing row's id is returned). srv_db_add_capture is built on them. */
+gs_status srv_db_insert_capture(srv_db *db, const srv_capture_row *r, size_t n_lights,
+                                size_t n_frames, size_t n_frequency, int64_t *id);
+gs_status srv_db_insert_frame(srv_db *db, int64_t capture_id, const srv_frame_row *r);
+gs_status srv_db_insert_light(srv_db *db, int64_t capture_id, const srv_light_row *r,
+                              int64_t *light_id);
+gs_status srv_db_insert_location(srv_db *db, int64_t light_id, const srv_location_row *r);
+gs_status srv_db_insert_frequency(srv_db *db, int64_t capture_id, int seq, const srv_freq_row *r);
+
+/* Consistency report (`gridsurvey db check`): integrity_check, foreign_key_check, the R*Tree
+ * against the located locations, and each capture's stored counts against its rows. */
+typedef struct {
+    int integrity_ok;          /* PRAGMA integrity_check = 'ok' */
+    long fk_violations;        /* rows of PRAGMA foreign_key_check */
+    long rtree_rows, located;  /* R*Tree entries; locations with a position */
+    long rtree_mismatch;       /* entries without an equal located location, or vice versa */
+    long incomplete_captures;  /* captures whose lights, frames or frequency rows differ from
+                                * the counts recorded with them */
+    long surveys, captures, lights, locations, frequency_rows;
+} srv_db_report;
+gs_status srv_db_check(srv_db *db, srv_db_report *r);
+/* 1 when every check passed. */
+int srv_db_report_ok(const srv_db_report *r);
+
+/* =====================================================================================
+ * Phase-balance statistics (survey/stats.c; definitions in docs/survey-db.md)
+ * ===================================================================================== */
+
+/* The 95 % two-sided normal quantile used by the Wilson intervals. */
+#define SRV_Z95 1.959963984540054
+
+/* Wilson score interval (E. B. Wilson, JASA 22, 209-212 (1927)) for k successes out of n at
+ * normal quantile z (> 0): lo and hi in [0, 1]. Returns k/n; NaN (and NaN bounds) for n = 0,
+ * k < 0 or k > n. */
+double srv_wilson(long k, long n, double z, double *lo, double *hi);
+/* Chi-square survival function P(X > x) for dof degrees of freedom: exactly exp(-x/2) for
+ * dof = 2; otherwise the regularised upper incomplete gamma Q(dof/2, x/2) (rec_chi2_sf,
+ * relative error < 1e-12). 1 for x <= 0, NaN for NaN x or dof < 1. */
+double srv_chi2_sf(double x, int dof);
+/* The phase class of a phase in degrees: 0, 1, 2 for 0/120/240 (within SRV_PHASE_TOL_DEG),
+ * 3 for another finite phase, -1 for NaN (unknown/ambiguous). */
+int srv_phase_class(double phase_deg);
+
+typedef enum {
+    SRV_BY_ALL,          /* one group */
+    SRV_BY_TECHNOLOGY,   /* per technology ("none" for lights without a bulb) */
+    SRV_BY_SURVEY,       /* per survey name */
+    SRV_BY_CELL,         /* per cell of a local metric grid (located lights only) */
+    SRV_BY_RADIUS        /* one group: located lights within radius_m of (lat, lon) */
+} srv_group_by;
+
+typedef struct {
+    srv_group_by by;
+    double cell_m;             /* SRV_BY_CELL: cell side, metres (> 0) */
+    double lat_deg, lon_deg;   /* SRV_BY_RADIUS: centre */
+    double radius_m;           /* SRV_BY_RADIUS: > 0, spherical distance (see stats.c) */
+    double min_confidence;     /* lights with phase_confidence below it are excluded (0) */
+    const char *survey;        /* only this survey (NULL = all) */
+} srv_stats_opts;
+void srv_stats_opts_default(srv_stats_opts *o);
+/* "technology" | "survey" | "all" | "cell:SIZE_m" | "radius:LAT,LON,R_m" into o (GS_EINVAL
+ * naming the text and what is expected). */
+gs_status srv_stats_parse_by(const char *text, srv_stats_opts *o);
+
+enum {
+    SRV_STATS_EMPTY = 1u << 0,   /* no light of a known 0/120/240 phase: shares NaN */
+    SRV_STATS_FEW = 1u << 1      /* expected count n/3 < 5: the chi-square p-value is only
+                                  * approximate (Cochran's rule) */
+};
+
+typedef struct {
+    char group[96];            /* "all", a technology, a survey, "E,N" cell indices, "radius" */
+    double lat_deg, lon_deg;   /* cell centre (SRV_BY_CELL), centre (SRV_BY_RADIUS), else NaN */
+    long lights;               /* lights in the group */
+    long below;                /* ... with phase_confidence < min_confidence (excluded) */
+    long unknown;              /* ... kept, phase NULL (ambiguous / unknown) */
+    long other;                /* ... kept, phase not within SRV_PHASE_TOL_DEG of 0/120/240 */
+    long n[3];                 /* ... kept, phase 0, 120, 240 */
+    long total;                /* n[0] + n[1] + n[2]: the denominator of the shares */
+    double share[3];           /* n[i] / total */
+    double lo[3], hi[3];       /* 95 % Wilson interval of each share */
+    double chi2;               /* sum (n_i - total/3)^2 / (total/3): uniformity test, 2 dof */
+    double p_value;            /* srv_chi2_sf(chi2, 2) */
+    double imbalance;          /* max_i |share_i - 1/3| / (1/3), [0, 2]: 0 balanced, 2 all on
+                                * one phase (NEMA MG-1 "max deviation from the mean / mean",
+                                * applied to light counts) */
+    unsigned flags;            /* SRV_STATS_* */
+} srv_phase_stats;
+
+/* Shares, intervals, chi2, p-value, imbalance and flags of g from its counts. */
+void srv_phase_stats_finish(srv_phase_stats *g);
+
+/* Phase-balance statistics per group, sorted by group name (cells by north then east index).
+ * *groups is allocated (free()); *count may be 0. *ungrouped (may be NULL) receives the lights
+ * left out of SRV_BY_CELL because they have no position (0 for the other groupings). */
+gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats **groups,
+                            size_t *count, long *ungrouped);
+
+/* =====================================================================================
+ * Export (survey/cmd_export.c): database rows -> gis_light -> gis_export
+ * ===================================================================================== */
+
+typedef struct {
+    const char *survey;        /* only this survey (NULL = all) */
+    const char *technology;    /* only this technology ("none": no bulb), NULL = all */
+    int phase;                 /* -2 = all (default); 0, 1, 2 = 0/120/240; 3 = other;
+                                * -1 = unknown (NULL phase) */
+    int use_bbox;              /* filter by bbox (located lights only; R*Tree) */
+    double bbox[4];            /* min_lon, min_lat, max_lon, max_lat; min_lon > max_lon crosses
+                                * the antimeridian */
+    double min_confidence;     /* lights.confidence >= this (0 = all) */
+} srv_export_opts;
+void srv_export_opts_default(srv_export_opts *o);
+/* The selected lights as gis_light (id = the light's database id; survey, capture time,
+ * bulb, technology, phase (NaN when NULL), confidence, position, ellipse, GIS_FIX_* flags),
+ * ordered by id. *lights is allocated (free()). */
+gs_status srv_db_read_lights(srv_db *db, const srv_export_opts *o, gis_light **lights,
+                             size_t *count);
+
+/* =====================================================================================
+ * Synthetic surveys and the database benchmark (survey/bench_db.c; developer tools)
+ * ===================================================================================== */
+
+typedef struct {
+    const char *survey;        /* survey name ("synthetic") */
+    size_t captures;           /* captures (100) */
+    size_t lights_per_capture; /* lights in every capture (100) */
+    size_t batch;              /* captures per transaction, >= 1 (1) */
+    unsigned long long seed;   /* (1) */
+    double phase_weights[3];   /* relative frequency of 0/120/240 (1, 1, 1) */
+    double ambiguous_fraction; /* lights stored with a NULL phase (0.05) */
+    double lat_deg, lon_deg;   /* centre (Haifa bay: 32.80, 35.02) */
+    double half_width_m;       /* capture view centres uniform in a square of this half-width
+                                * around (lat, lon) (2000) */
+    double view_half_width_m;  /* a capture's lights uniform in a square of this half-width
+                                * around its view centre (250); a camera sees one district */
+} srv_synth_opts;
+void srv_synth_opts_default(srv_synth_opts *o);
+/* Deterministic structure (so tests know the exact final counts): capture c has key
+ * "synth-%06zu", SRV_SYNTH_FRAMES frames, SRV_SYNTH_FREQ frequency rows and
+ * lights_per_capture lights; each light has a location row, unlocated (NULL position,
+ * GIS_FIX_ABOVE_HORIZON) when index % SRV_SYNTH_UNLOCATED_EVERY == SRV_SYNTH_UNLOCATED_EVERY - 1.
+ * The content (positions, technologies, phases, confidences) comes from the seed and c alone,
+ * so an interrupted run resumed with the same options yields the same database. Captures
+ * already present are skipped; *added (may be NULL) counts the new ones. */
+#define SRV_SYNTH_FRAMES 8
+#define SRV_SYNTH_FREQ 10
+#define SRV_SYNTH_UNLOCATED_EVERY 25
+gs_status srv_synth_ingest(srv_db *db, const srv_synth_opts *o, size_t *added);
+
+/* `gridsurvey bench db [--quick] [--dir DIR] [--max N]`: ingest rate and query times at 1e4,
+ * 1e5 and 1e6 lights (--quick: 1e4 only) as a Markdown table on stdout. argv[0] is "db". */
+int srv_bench_db(int argc, char **argv);
 
 #endif

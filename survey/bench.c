@@ -1,0 +1,750 @@
+/* bench.c - `gridsurvey bench`: performance tables as Markdown (make bench writes docs/bench-*.md).
+ *   bench recognize [--quick]  Eq. 7 throughput (paper Sec. 4): rec_match_pixels in pixels/s and
+ *                              rec_match_catalog in lights/s against K, bands, database size and
+ *                              pixel count, next to a plain triple-loop reference of the same
+ *                              search written here (independent of recognize/eq7.c), with the
+ *                              agreement of the two and each configuration's peak memory.
+ *   bench db ...               the survey database (survey/bench_db.c).
+ * One core: OpenBLAS runs single-threaded (openblas_set_num_threads(1)). Each configuration runs
+ * in a child process so that its getrusage ru_maxrss is its own peak. */
+#include "survey/internal.h"
+
+#include <cblas.h>
+#include <getopt.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+static const char bench_usage[] =
+    "usage: gridsurvey bench recognize [--quick]   Eq. 7 throughput tables (Markdown on stdout)\n"
+    "       gridsurvey bench db [--quick] ...       survey database tables (bench db --help)\n"
+    "\n"
+    "bench recognize: rec_match_pixels (pixels/s) and rec_match_catalog (lights/s) against K,\n"
+    "bands, DELIGHT size and pixel count, one core, next to a plain triple-loop reference of the\n"
+    "same search; --quick runs a small subset (seconds).\n";
+
+/* ------------------------------------------------------------------ helpers */
+
+static double now_s(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
+static uint64_t mix64(uint64_t *s)
+{
+    uint64_t z = (*s += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+}
+
+static double unif(uint64_t *s)
+{
+    return ((double)(mix64(s) >> 11) + 0.5) * 0x1p-53;
+}
+
+static double gauss(uint64_t *s)
+{
+    return sqrt(-2.0 * log(unif(s))) * cos(6.283185307179586 * unif(s));
+}
+
+/* log Phi(z), the standard normal CDF, accurate in the far left tail. */
+static double log_phi(double z)
+{
+    if (z > -30.0) return log(0.5 * erfc(-z / sqrt(2.0)));
+    return -0.5 * z * z - log(-z) - 0.91893853320467274;   /* Mills ratio, leading term */
+}
+
+/* The chi-square value whose tail probability at dof is p (bisection on rec_chi2_sf). */
+static double chi2_isf(double p, int dof)
+{
+    double lo = 0.0, hi = dof + 20.0 * sqrt(2.0 * dof) + 100.0;
+    for (int i = 0; i < 200; i++) {
+        double mid = 0.5 * (lo + hi);
+        if (rec_chi2_sf(mid, dof) > p) lo = mid;
+        else hi = mid;
+    }
+    return 0.5 * (lo + hi);
+}
+
+/* ------------------------------------------------------------------ the reference */
+
+/* Templates of Eq. 7, built here from the bulbs: t[d] = Q_b(band) * (the BRF delayed by the
+ * phase's shift, averaged over window k) (Eq. 5), d = band * K + k, for the phases 0/120/240. */
+typedef struct {
+    size_t M;
+    int D;
+    double *t;          /* [M * D] */
+    double *norm;       /* [M] |t| */
+    int *bulb;          /* [M] */
+    double *phase;      /* [M] deg */
+} ref_templates;
+
+static void ref_free(ref_templates *r)
+{
+    free(r->t);
+    free(r->norm);
+    free(r->bulb);
+    free(r->phase);
+}
+
+static gs_status ref_build(const rec_matcher *m, int K, ref_templates *r)
+{
+    memset(r, 0, sizeof *r);
+    size_t nb = rec_matcher_bulb_count(m);
+    int bands = rec_matcher_bulb(m, 0)->brf.bands;
+    r->D = bands * K;
+    r->M = 3 * nb;
+    r->t = malloc(sizeof *r->t * r->M * (size_t)r->D);
+    r->norm = malloc(sizeof *r->norm * r->M);
+    r->bulb = malloc(sizeof *r->bulb * r->M);
+    r->phase = malloc(sizeof *r->phase * r->M);
+    if (!r->t || !r->norm || !r->bulb || !r->phase) {
+        ref_free(r);
+        return gs_fail(GS_ENOMEM, "bench: cannot allocate reference templates");
+    }
+    for (size_t b = 0; b < nb; b++) {
+        const rec_bulb *bb = rec_matcher_bulb(m, b);
+        if (bb->ref != REC_REF_VOLTAGE) {
+            ref_free(r);
+            return gs_fail(GS_EINVAL, "bench: bulb %s is not voltage-referenced: the reference "
+                           "search covers 0/120/240 only", bb->id);
+        }
+        for (int p = 0; p < 3; p++) {
+            size_t j = 3 * b + (size_t)p;
+            double *t = r->t + j * (size_t)r->D;
+            gs_status st = rec_brf_integrate(&bb->brf, rec_phase_to_shift(120.0 * p), K, t);
+            if (st != GS_OK) {
+                ref_free(r);
+                return st;
+            }
+            double n2 = 0.0;
+            for (int band = 0; band < bands; band++)
+                for (int k = 0; k < K; k++) {
+                    t[band * K + k] *= bb->chroma[band];
+                    n2 += t[band * K + k] * t[band * K + k];
+                }
+            r->norm[j] = sqrt(n2);
+            r->bulb[j] = (int)b;
+            r->phase[j] = 120.0 * p;
+        }
+    }
+    return GS_OK;
+}
+
+/* The same search, plainly: for every row, every template, every value. w = per-value weights
+ * (1/sigma^2). The posterior of (bulb, phase) with the scale marginalised (recognize.h):
+ * L = -chi2/2 - log(T)/2 + log Phi(S/sqrt(T)); the answer is the maximum, unless its z = S/sqrt(T)
+ * is below min_snr (dim) or its chi2 above the unknown threshold at dof = D - 2. */
+static void ref_search(const ref_templates *r, const float *x, const double *w, double min_snr,
+                       double chi2_thr, int *bulb, double *phase)
+{
+    size_t D = (size_t)r->D;
+    double Sxx = 0.0;
+    for (size_t d = 0; d < D; d++) Sxx += w[d] * (double)x[d] * (double)x[d];
+    double best = -INFINITY, bz = 0.0;
+    size_t bj = 0;
+    for (size_t j = 0; j < r->M; j++) {
+        const double *t = r->t + j * D;
+        double S = 0.0, T = 0.0;
+        for (size_t d = 0; d < D; d++) {
+            S += w[d] * (double)x[d] * t[d];
+            T += w[d] * t[d] * t[d];
+        }
+        double z = S / sqrt(T);
+        double L = -0.5 * (Sxx - z * z) - 0.5 * log(T) + log_phi(z);
+        if (L > best) {
+            best = L;
+            bj = j;
+            bz = z;
+        }
+    }
+    *bulb = -1;
+    *phase = 0.0;
+    if (!(bz >= min_snr) || Sxx - bz * bz > chi2_thr) return;
+    *bulb = r->bulb[bj];
+    *phase = r->phase[bj];
+}
+
+/* ------------------------------------------------------------------ one configuration */
+
+typedef struct {
+    int K, bands, bulbs, continuous;
+    size_t pixels;          /* 0: a lights or capture row */
+    double lit;
+    size_t lights;          /* lights row: lights matched; capture row: lights rendered */
+    int side;               /* capture row: a side x side capture through rec_pixel_maps_compute */
+} config;
+
+typedef struct {
+    int ok;
+    char detail[256];
+    size_t templates;
+    double seconds, rate;          /* rec_match_* */
+    double ref_seconds, ref_rate;  /* triple loop, on ref_rows rows */
+    size_t ref_rows;
+    double agree;                  /* fraction of ref rows with the same answer */
+    double sgemm_rate;             /* pixels/s of the SGEMM alone (scores of every template) */
+    size_t mapped, matched;        /* capture row: pixels above the threshold, with a bulb */
+    double lit_correct;            /* lit rows with the true bulb and phase (fast path) */
+    long maxrss_kib;
+} result;
+
+/* A DELIGHT with `count` of d's entries for 50 Hz and this band count, spread evenly over them
+ * (the entries come grouped by technology). count 0 = all. */
+static gs_status subset(const rec_delight *d, int bands, int count, rec_delight **out, int *got)
+{
+    const char *sensor = bands == 3 ? "rgb" : "photodiode";
+    size_t n = 0;
+    for (size_t i = 0; i < rec_delight_count(d); i++) {
+        const rec_bulb *b = rec_delight_get(d, i);
+        n += b->grid_hz == 50 && !strcmp(b->sensor, sensor) && b->ref == REC_REF_VOLTAGE;
+    }
+    size_t want = count <= 0 || (size_t)count > n ? n : (size_t)count;
+    rec_delight *s = rec_delight_new();
+    if (!s) return gs_fail(GS_ENOMEM, "bench: cannot allocate a database");
+    size_t seen = 0, added = 0;
+    for (size_t i = 0; i < rec_delight_count(d) && added < want; i++) {
+        const rec_bulb *b = rec_delight_get(d, i);
+        if (b->grid_hz != 50 || strcmp(b->sensor, sensor) || b->ref != REC_REF_VOLTAGE) continue;
+        /* take entry `seen` when it is the next of want evenly spaced picks */
+        if (seen++ != added * n / want) continue;
+        gs_status st = rec_delight_add(s, b);
+        if (st != GS_OK) {
+            rec_delight_free(s);
+            return st;
+        }
+        added++;
+    }
+    *out = s;
+    *got = (int)added;
+    return GS_OK;
+}
+
+#define REF_ROWS_MAX 4096
+#define REPS 3              /* timings are the best of REPS runs (the machine may be shared) */
+#define SNR 10.0            /* lit rows and lights: mean sample = SNR noise sigmas */
+#define POOL (1u << 20)
+
+static gs_status run_pixels(const config *c, rec_matcher *m, result *res)
+{
+    rec_eq7_opts eo;
+    rec_eq7_opts_default(&eo);
+    size_t P = c->pixels, D = (size_t)c->bands * (size_t)c->K;
+    float *x = malloc(sizeof *x * P * D), *sg = malloc(sizeof *sg * P), *pool = malloc(sizeof *pool * POOL);
+    int *truth = malloc(sizeof *truth * P), *bulb = malloc(sizeof *bulb * P);
+    float *ph = malloc(sizeof *ph * P), *cf = malloc(sizeof *cf * P);
+    ref_templates r;
+    memset(&r, 0, sizeof r);
+    gs_status st = GS_OK;
+    if (!x || !sg || !pool || !truth || !bulb || !ph || !cf)
+        st = gs_fail(GS_ENOMEM, "bench: cannot allocate %zu pixels", P);
+    if (st == GS_OK) st = ref_build(m, c->K, &r);
+    if (st == GS_OK) {
+        uint64_t rs = 12345;
+        for (size_t i = 0; i < POOL; i++) pool[i] = (float)gauss(&rs);
+        double a = SNR * c->bands;   /* a template's mean sample is 1 / bands */
+        for (size_t p = 0; p < P; p++) {
+            sg[p] = 1.0f;
+            const float *noise = pool + mix64(&rs) % (POOL - D);
+            int on = unif(&rs) < c->lit;
+            size_t j = (size_t)(unif(&rs) * (double)r.M) % r.M;
+            truth[p] = on ? (int)j : -1;
+            const double *t = r.t + j * D;
+            for (size_t d = 0; d < D; d++) x[p * D + d] = (float)((on ? a * t[d] : 0.0) + noise[d]);
+        }
+        res->seconds = INFINITY;
+        for (int rep = 0; rep < REPS && st == GS_OK; rep++) {
+            double t0 = now_s();
+            st = rec_match_pixels(m, x, sg, P, bulb, ph, cf);
+            res->seconds = fmin(res->seconds, now_s() - t0);
+        }
+        res->rate = (double)P / res->seconds;
+        res->templates = r.M;
+    }
+    if (st == GS_OK && !c->continuous) {
+        /* the floor of any matrix-product implementation: the scores alone, one SGEMM per block
+         * of 4096 rows as recognize.h describes, no decision */
+        size_t B = 4096, M = r.M;
+        float *tf = malloc(sizeof *tf * M * D), *sc = malloc(sizeof *sc * B * M);
+        if (tf && sc) {
+            for (size_t i = 0; i < M * D; i++) tf[i] = (float)r.t[i];
+            double best = INFINITY;
+            for (int rep = 0; rep < REPS; rep++) {
+                double t0 = now_s();
+                for (size_t r0 = 0; r0 < P; r0 += B) {
+                    size_t nr = P - r0 < B ? P - r0 : B;
+                    cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)nr, (int)M, (int)D,
+                                1.0f, x + r0 * D, (int)D, tf, (int)D, 0.0f, sc, (int)M);
+                }
+                best = fmin(best, now_s() - t0);
+            }
+            res->sgemm_rate = (double)P / best;
+        }
+        free(tf);
+        free(sc);
+    }
+    if (st == GS_OK && !c->continuous) {
+        size_t nref = P < REF_ROWS_MAX ? P : REF_ROWS_MAX, same = 0;
+        double *w = malloc(sizeof *w * D);
+        if (!w) st = gs_fail(GS_ENOMEM, "bench: cannot allocate weights");
+        for (size_t d = 0; w && d < D; d++) w[d] = 1.0;
+        double thr = chi2_isf(eo.unknown_p, (int)D - 2);
+        double t0 = now_s();
+        for (size_t p = 0; w && p < nref; p++) {
+            int b;
+            double phase;
+            ref_search(&r, x + p * D, w, eo.min_snr, thr, &b, &phase);
+            same += b == bulb[p] && (b < 0 || fabs(phase - ph[p]) < 1e-3);
+        }
+        res->ref_seconds = now_s() - t0;
+        res->ref_rows = nref;
+        res->ref_rate = (double)nref / res->ref_seconds;
+        res->agree = (double)same / (double)nref;
+        free(w);
+    }
+    if (st == GS_OK) {
+        size_t lit = 0, right = 0;
+        for (size_t p = 0; p < P; p++) {
+            if (truth[p] < 0) continue;
+            lit++;
+            size_t j = (size_t)truth[p];
+            double dphi = fabs(fmod(ph[p] - r.phase[j] + 540.0, 360.0) - 180.0);
+            right += bulb[p] == r.bulb[j] && dphi < (c->continuous ? 2.0 : 1e-3);
+        }
+        res->lit_correct = lit ? (double)right / (double)lit : NAN;
+    }
+    ref_free(&r);
+    free(x); free(sg); free(pool); free(truth); free(bulb); free(ph); free(cf);
+    return st;
+}
+
+static gs_status run_lights(const config *c, rec_matcher *m, result *res)
+{
+    rec_eq7_opts eo;
+    rec_eq7_opts_default(&eo);
+    size_t N = c->lights, D = (size_t)c->bands * (size_t)c->K;
+    rec_catalog cat;
+    memset(&cat, 0, sizeof cat);
+    cat.count = N;
+    cat.bands = c->bands;
+    cat.K = c->K;
+    cat.x_px = calloc(N, sizeof *cat.x_px);
+    cat.y_px = calloc(N, sizeof *cat.y_px);
+    cat.area_px = calloc(N, sizeof *cat.area_px);
+    cat.peak_dn = calloc(N, sizeof *cat.peak_dn);
+    cat.saturated_px = calloc(N, sizeof *cat.saturated_px);
+    cat.flags = calloc(N, sizeof *cat.flags);
+    cat.signal = malloc(sizeof *cat.signal * N * D);
+    cat.sigma = malloc(sizeof *cat.sigma * N * D);
+    rec_match *mt = malloc(sizeof *mt * N);
+    int *truth = malloc(sizeof *truth * N);
+    float *xf = malloc(sizeof *xf * D);
+    double *w = malloc(sizeof *w * D);
+    ref_templates r;
+    memset(&r, 0, sizeof r);
+    gs_status st = GS_OK;
+    if (!cat.x_px || !cat.y_px || !cat.area_px || !cat.peak_dn || !cat.saturated_px ||
+        !cat.flags || !cat.signal || !cat.sigma || !mt || !truth || !xf || !w)
+        st = gs_fail(GS_ENOMEM, "bench: cannot allocate %zu lights", N);
+    if (st == GS_OK) st = ref_build(m, c->K, &r);
+    if (st == GS_OK) {
+        uint64_t rs = 777;
+        for (size_t i = 0; i < N; i++) {
+            size_t j = (size_t)(unif(&rs) * (double)r.M) % r.M;
+            truth[i] = (int)j;
+            double a = 1000.0 * c->bands;   /* brightness, sum over bands of the mean */
+            for (size_t d = 0; d < D; d++) {
+                /* noise std varies per sample (a light's samples differ in shot noise) */
+                double s = (1000.0 / SNR) * (0.5 + unif(&rs));
+                cat.sigma[i * D + d] = s;
+                cat.signal[i * D + d] = a * r.t[j * D + d] + s * gauss(&rs);
+            }
+        }
+        res->seconds = INFINITY;
+        for (int rep = 0; rep < REPS && st == GS_OK; rep++) {
+            double t0 = now_s();
+            st = rec_match_catalog(m, &cat, mt);
+            res->seconds = fmin(res->seconds, now_s() - t0);
+        }
+        res->rate = (double)N / res->seconds;
+        res->templates = r.M;
+    }
+    if (st == GS_OK && !c->continuous) {
+        size_t nref = N < REF_ROWS_MAX ? N : REF_ROWS_MAX, same = 0;
+        double thr = chi2_isf(eo.unknown_p, (int)D - 2);
+        double t0 = now_s();
+        for (size_t i = 0; i < nref; i++) {
+            for (size_t d = 0; d < D; d++) {
+                xf[d] = (float)cat.signal[i * D + d];
+                w[d] = 1.0 / (cat.sigma[i * D + d] * cat.sigma[i * D + d]);
+            }
+            int b;
+            double phase;
+            ref_search(&r, xf, w, eo.min_snr, thr, &b, &phase);
+            int fast_b = mt[i].bulb >= 0 ? mt[i].bulb : -1;
+            same += b == fast_b && (b < 0 || fabs(phase - mt[i].phase_deg) < 1e-3);
+        }
+        res->ref_seconds = now_s() - t0;
+        res->ref_rows = nref;
+        res->ref_rate = (double)nref / res->ref_seconds;
+        res->agree = (double)same / (double)nref;
+    }
+    if (st == GS_OK) {
+        size_t right = 0;
+        for (size_t i = 0; i < N; i++) {
+            size_t j = (size_t)truth[i];
+            double dphi = fabs(fmod(mt[i].phase_deg - r.phase[j] + 540.0, 360.0) - 180.0);
+            right += mt[i].bulb == r.bulb[j] && dphi < (c->continuous ? 2.0 : 1e-3);
+        }
+        res->lit_correct = (double)right / (double)N;
+    }
+    ref_free(&r);
+    rec_catalog_release(&cat);
+    free(mt); free(truth); free(xf); free(w);
+    return st;
+}
+
+/* A side x side capture of c->lights Gaussian lights (PSF sigma 1.3 px, random template of m,
+ * flux 200..2000 DN per cycle) over a sky of 0.5 DN per cycle with read noise 3 DN at 50 cycles,
+ * through rec_pixel_maps_compute (background, threshold, Eq. 7 on the pixels above it). */
+static gs_status run_capture(const config *c, rec_matcher *m, result *res)
+{
+    rec_eq7_opts eo;
+    rec_eq7_opts_default(&eo);
+    rec_capture cap;
+    memset(&cap, 0, sizeof cap);
+    cap.grid_hz = 50;
+    cap.K = c->K;
+    cap.bands = c->bands;
+    cap.width = cap.height = c->side;
+    cap.saturation_dn = 65536;
+    cap.black_level_dn = 64;
+    cap.read_noise_dn = 3;
+    cap.locked = 1;
+    ref_templates r;
+    memset(&r, 0, sizeof r);
+    float *pool = malloc(sizeof *pool * POOL);
+    gs_status st = pool ? rec_capture_alloc(&cap) : gs_fail(GS_ENOMEM, "bench: capture");
+    if (st == GS_OK) st = ref_build(m, c->K, &r);
+    if (st == GS_OK) {
+        const double cycles = 50.0, sky = 0.5;
+        size_t np = (size_t)c->side * (size_t)c->side, D = (size_t)r.D;
+        size_t n = np * (size_t)c->K * (size_t)c->bands;
+        uint64_t rs = 4242;
+        for (size_t i = 0; i < POOL; i++) pool[i] = (float)gauss(&rs);
+        for (int k = 0; k < c->K; k++) cap.frames[k].cycles = cycles;
+        /* sky and read noise, then the lights added (rounded to DN) */
+        for (size_t i = 0; i < n; i += 4096) {
+            const float *noise = pool + mix64(&rs) % (POOL - 4096);
+            size_t e = i + 4096 < n ? i + 4096 : n;
+            for (size_t q = i; q < e; q++)
+                cap.raw[q] = (unsigned short)lround(fmax(0.0, 64.0 + cycles * sky + 3.0 * noise[q - i]));
+        }
+        for (size_t l = 0; l < c->lights; l++) {
+            double x0 = 4 + unif(&rs) * (c->side - 8), y0 = 4 + unif(&rs) * (c->side - 8);
+            double F = 200.0 + 1800.0 * unif(&rs);
+            size_t j = (size_t)(unif(&rs) * (double)r.M) % r.M;
+            for (int y = (int)y0 - 4; y <= (int)y0 + 4; y++)
+                for (int x = (int)x0 - 4; x <= (int)x0 + 4; x++) {
+                    double g = exp(-((x - x0) * (x - x0) + (y - y0) * (y - y0)) / (2 * 1.69)) / (2 * 3.14159265 * 1.69);
+                    size_t p = (size_t)y * (size_t)c->side + (size_t)x;
+                    for (size_t d = 0; d < D; d++) {
+                        size_t band = d / (size_t)c->K, k = d % (size_t)c->K;
+                        unsigned short *q = &cap.raw[(k * np + p) * (size_t)c->bands + band];
+                        double v = *q + cycles * F * g * r.t[j * D + d];
+                        *q = (unsigned short)lround(fmin(v, 65535.0));
+                    }
+                }
+        }
+        res->seconds = INFINITY;
+        for (int rep = 0; rep < REPS && st == GS_OK; rep++) {
+            rec_pixel_maps pm;
+            double t0 = now_s();
+            st = rec_pixel_maps_compute(&cap, m, &eo, NULL, &pm);
+            res->seconds = fmin(res->seconds, now_s() - t0);
+            res->mapped = pm.mapped;
+            res->matched = pm.matched;
+            rec_pixel_maps_release(&pm);
+        }
+        res->rate = (double)np / res->seconds;
+        res->templates = r.M;
+    }
+    ref_free(&r);
+    free(pool);
+    rec_capture_release(&cap);
+    return st;
+}
+
+/* Run one configuration in a child process; its result comes back through a pipe. */
+static void run_config(const rec_delight *all, const config *c, result *res)
+{
+    memset(res, 0, sizeof *res);
+    int fd[2];
+    if (pipe(fd) != 0) {
+        snprintf(res->detail, sizeof res->detail, "pipe failed");
+        return;
+    }
+    fflush(stdout);
+    pid_t pid = fork();
+    if (pid == 0) {
+        close(fd[0]);
+        result r;
+        memset(&r, 0, sizeof r);
+        openblas_set_num_threads(1);
+        rec_delight *d = NULL;
+        rec_matcher *m = NULL;
+        int got = 0;
+        gs_status st = subset(all, c->bands, c->bulbs, &d, &got);
+        rec_eq7_opts eo;
+        rec_eq7_opts_default(&eo);
+        if (c->continuous) eo.phases = REC_PHASES_CONTINUOUS;
+        if (st == GS_OK) st = rec_matcher_new(d, 50, c->bands, c->K, &eo, &m);
+        if (st == GS_OK)
+            st = c->side ? run_capture(c, m, &r) : c->pixels ? run_pixels(c, m, &r) : run_lights(c, m, &r);
+        if (c->continuous && st == GS_OK)   /* one template per grid shift and bulb */
+            r.templates = (size_t)got * (size_t)(8 * c->K > 96 ? 8 * c->K : 96);
+        r.ok = st == GS_OK;
+        if (!r.ok) snprintf(r.detail, sizeof r.detail, "%s: %s", gs_strerror(st), gs_detail());
+        struct rusage ru;
+        getrusage(RUSAGE_SELF, &ru);
+        r.maxrss_kib = ru.ru_maxrss;
+        rec_matcher_free(m);
+        rec_delight_free(d);
+        ssize_t wr = write(fd[1], &r, sizeof r);
+        _exit(wr == (ssize_t)sizeof r ? 0 : 1);
+    }
+    close(fd[1]);
+    if (pid < 0) {
+        close(fd[0]);
+        snprintf(res->detail, sizeof res->detail, "fork failed");
+        return;
+    }
+    size_t got = 0;
+    while (got < sizeof *res) {
+        ssize_t n = read(fd[0], (char *)res + got, sizeof *res - got);
+        if (n <= 0) break;
+        got += (size_t)n;
+    }
+    close(fd[0]);
+    int wst;
+    waitpid(pid, &wst, 0);
+    if (got != sizeof *res) {
+        memset(res, 0, sizeof *res);
+        snprintf(res->detail, sizeof res->detail, "the benchmark process died (status %d)", wst);
+    }
+}
+
+/* ------------------------------------------------------------------ tables */
+
+static const char *bulbs_label(int bulbs, char *buf, size_t n)
+{
+    if (bulbs <= 0) snprintf(buf, n, "all");
+    else snprintf(buf, n, "%d", bulbs);
+    return buf;
+}
+
+static void pixel_row(const rec_delight *all, const config *c, int *failed)
+{
+    result r;
+    run_config(all, c, &r);
+    char bl[16];
+    if (!r.ok) {
+        printf("| %d | %d | %s | | %zu | %.2f | failed: %s | | | | | | | |\n", c->K, c->bands,
+               bulbs_label(c->bulbs, bl, sizeof bl), c->pixels, c->lit, r.detail);
+        (*failed)++;
+        return;
+    }
+    char ref[64] = "-", speed[32] = "-", agree[32] = "-";
+    if (r.ref_rows) {
+        snprintf(ref, sizeof ref, "%.3f", r.ref_rate / 1e6);
+        snprintf(speed, sizeof speed, "%.1fx", r.rate / r.ref_rate);
+        snprintf(agree, sizeof agree, "%.4f", r.agree);
+    }
+    char lit[32] = "-", sgemm[32] = "-";
+    if (isfinite(r.lit_correct)) snprintf(lit, sizeof lit, "%.3f", r.lit_correct);
+    if (r.sgemm_rate > 0) snprintf(sgemm, sizeof sgemm, "%.2f", r.sgemm_rate / 1e6);
+    printf("| %d | %d | %s%s | %zu | 2^%d | %.2f | %.3f | **%.3f** | %s | %s | %s | %s | %s | %.0f |\n",
+           c->K, c->bands, bulbs_label(c->bulbs, bl, sizeof bl),
+           c->continuous ? " (continuous)" : "", r.templates,
+           (int)lround(log2((double)c->pixels)), c->lit, r.seconds, r.rate / 1e6, sgemm, ref, speed,
+           agree, lit, r.maxrss_kib / 1024.0);
+    fflush(stdout);
+}
+
+static void light_row(const rec_delight *all, const config *c, int *failed)
+{
+    result r;
+    run_config(all, c, &r);
+    char bl[16];
+    if (!r.ok) {
+        printf("| %d | %d | %s | | %zu | failed: %s | | | | | |\n", c->K, c->bands,
+               bulbs_label(c->bulbs, bl, sizeof bl), c->lights, r.detail);
+        (*failed)++;
+        return;
+    }
+    char ref[64] = "-", speed[32] = "-", agree[32] = "-";
+    if (r.ref_rows) {
+        snprintf(ref, sizeof ref, "%.0f", r.ref_rate);
+        snprintf(speed, sizeof speed, "%.1fx", r.rate / r.ref_rate);
+        snprintf(agree, sizeof agree, "%.4f", r.agree);
+    }
+    printf("| %d | %d | %s%s | %zu | %zu | %.3f | **%.0f** | %s | %s | %s | %.3f | %.0f |\n", c->K,
+           c->bands, bulbs_label(c->bulbs, bl, sizeof bl), c->continuous ? " (continuous)" : "",
+           r.templates, c->lights, r.seconds, r.rate, ref, speed,
+           agree, r.lit_correct, r.maxrss_kib / 1024.0);
+    fflush(stdout);
+}
+
+static void capture_row(const rec_delight *all, const config *c, int *failed)
+{
+    result r;
+    run_config(all, c, &r);
+    if (!r.ok) {
+        printf("| %dx%d | %zu | failed: %s | | | | |\n", c->side, c->side, c->lights, r.detail);
+        (*failed)++;
+        return;
+    }
+    double np = (double)c->side * c->side;
+    printf("| %dx%d | %zu | %zu (%.1f %%) | %zu | %.3f | **%.2f** | %.0f |\n", c->side, c->side,
+           c->lights, r.mapped, 100.0 * (double)r.mapped / np, r.matched, r.seconds, r.rate / 1e6,
+           r.maxrss_kib / 1024.0);
+    fflush(stdout);
+}
+
+static void pixel_header(void)
+{
+    printf("| K | bands | bulbs | templates | pixels | lit | seconds | Mpixel/s | SGEMM only Mpixel/s "
+           "| reference Mpixel/s | speed-up | agree | lit correct | peak RSS MiB |\n");
+    printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+}
+
+static int bench_recognize(int argc, char **argv)
+{
+    static const struct option longs[] = {
+        {"quick", no_argument, 0, 'q'}, {"help", no_argument, 0, 'h'}, {0, 0, 0, 0}};
+    int quick = 0, c;
+    optind = 1;
+    opterr = 0;
+    while ((c = getopt_long(argc, argv, "h", longs, NULL)) != -1) {
+        if (c == 'q') quick = 1;
+        else if (c == 'h') {
+            fputs(bench_usage, stdout);
+            return 0;
+        } else {
+            fprintf(stderr, "gridsurvey bench recognize: unknown option '%s' (see --help)\n", argv[optind - 1]);
+            return 2;
+        }
+    }
+    if (optind != argc) {
+        fprintf(stderr, "gridsurvey bench recognize: unexpected argument '%s' (see --help)\n", argv[optind]);
+        return 2;
+    }
+    rec_delight *all = rec_delight_new();
+    gs_status st = all ? rec_delight_generate(all, REC_BRF_N_DEFAULT) : gs_fail(GS_ENOMEM, "out of memory");
+    if (st != GS_OK) {
+        rec_delight_free(all);
+        return srv_error(st);
+    }
+    int failed = 0;
+    static const int Ks[] = {8, 13, 26}, bandss[] = {1, 3}, bulbss[] = {10, 25, 0};
+    double t_start = now_s();
+
+    printf("# Eq. 7 throughput (`gridsurvey bench recognize%s`)\n\n", quick ? " --quick" : "");
+    printf("One core (OpenBLAS single-threaded), built-in DELIGHT at 50 Hz (all = every voltage-"
+           "referenced entry of the sensor), phases 0/120/240 unless marked continuous. Synthetic "
+           "data: a lit row/light is a random template at a mean sample of %.0f noise sigmas "
+           "plus Gaussian noise. *reference* is a plain triple loop (rows x templates x values, "
+           "double precision) of the same search written in survey/bench.c, independent of "
+           "recognize/eq7.c, timed on the first min(rows, %d) rows; *agree* is the fraction of "
+           "those rows where both give the same answer (bulb and phase, or no answer). Peak RSS is "
+           "getrusage ru_maxrss of the process running that row (inputs included: 4 bytes x "
+           "values x pixels). Times are the best of %d runs. *SGEMM only* times the score matrix alone (rows x templates, one "
+           "cblas_sgemm per 4096 rows, no decision): the floor of a matrix-product "
+           "implementation on this machine. *lit correct*: lit rows answered with their true "
+           "bulb and phase.\n\n", SNR, REF_ROWS_MAX, REPS);
+
+    printf("## Per pixel: rec_match_pixels\n\n");
+    pixel_header();
+    size_t P0 = quick ? (size_t)1 << 14 : (size_t)1 << 18;
+    for (size_t ki = 0; ki < 3; ki++)
+        for (size_t bi = 0; bi < 2; bi++)
+            for (size_t di = 0; di < 3; di++) {
+                if (quick && !(ki == 2 || (bi == 1 && di == 2))) continue;
+                config cf = {Ks[ki], bandss[bi], bulbss[di], 0, P0, 0.1, 0, 0};
+                pixel_row(all, &cf, &failed);
+            }
+    printf("\n### The issue's case: 1-megapixel RGB capture, K = 26, whole database\n\n");
+    pixel_header();
+    static const double lits[] = {0.0, 0.1, 1.0};
+    for (int e = quick ? 14 : 16; e <= (quick ? 16 : 20); e += 2)
+        for (size_t li = 0; li < 3; li++) {
+            if (quick && li != 1) continue;
+            config cf = {26, 3, 0, 0, (size_t)1 << e, lits[li], 0, 0};
+            pixel_row(all, &cf, &failed);
+        }
+    {
+        config cf = {26, 3, 0, 1, (size_t)1 << (quick ? 10 : 14), 0.1, 0, 0};
+        pixel_row(all, &cf, &failed);
+    }
+
+    printf("\n### A whole capture through the per-pixel maps: rec_pixel_maps_compute\n\n");
+    printf("K = 26, RGB, whole database, phases 0/120/240. The capture is rendered in memory: "
+           "Gaussian lights (PSF sigma 1.3 px) of random templates over a sky with read noise; "
+           "the maps compute a background mesh, threshold every pixel at 5 sigma and run "
+           "rec_match_pixels on the pixels above it only. Mpixel/s counts every pixel of the "
+           "capture.\n\n");
+    printf("| capture | lights | pixels above threshold | with a bulb | seconds | capture Mpixel/s | "
+           "peak RSS MiB |\n|---|---|---|---|---|---|---|\n");
+    static const size_t nlights[] = {200, 2000, 20000};
+    for (size_t li = 0; li < 3; li++) {
+        if (quick && li == 2) continue;
+        config cf = {26, 3, 0, 0, 0, 0.0, quick ? nlights[li] / 16 : nlights[li], quick ? 256 : 1024};
+        capture_row(all, &cf, &failed);
+    }
+
+    printf("\n## Per light: rec_match_catalog\n\n");
+    printf("Each light: a random template at a mean sample of 1000, per-sample noise std uniform in "
+           "50..150 (so the weights differ by up to 9x within a light), %d lights per row; "
+           "*correct*: lights answered with their true bulb and phase.\n\n", quick ? 1000 : 20000);
+    printf("| K | bands | bulbs | templates | lights | seconds | lights/s | reference lights/s | "
+           "speed-up | agree | correct | peak RSS MiB |\n");
+    printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    size_t L0 = quick ? 1000 : 20000;
+    for (size_t ki = 0; ki < 3; ki++)
+        for (size_t bi = 0; bi < 2; bi++)
+            for (size_t di = 0; di < 3; di++) {
+                if (quick && !(ki == 2 && (di == 2 || bi == 1))) continue;
+                config cf = {Ks[ki], bandss[bi], bulbss[di], 0, 0, 0.0, L0, 0};
+                light_row(all, &cf, &failed);
+            }
+    {
+        config cf = {26, 3, 0, 1, 0, 0.0, quick ? 50 : 300, 0};
+        light_row(all, &cf, &failed);
+    }
+    printf("\n*continuous* rows search every phase (a grid of max(8K, 96) shifts per cycle, refined); "
+           "their templates column counts those grid shifts and there is no triple-loop reference. Total %.0f s.\n",
+           now_s() - t_start);
+    rec_delight_free(all);
+    return failed ? 1 : 0;
+}
+
+int srv_cmd_bench(int argc, char **argv)
+{
+    if (argc < 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
+        fputs(bench_usage, argc < 2 ? stderr : stdout);
+        return argc < 2 ? 2 : 0;
+    }
+    if (!strcmp(argv[1], "recognize")) return bench_recognize(argc - 1, argv + 1);
+    if (!strcmp(argv[1], "db")) return srv_bench_db(argc - 1, argv + 1);
+    fprintf(stderr, "gridsurvey bench: '%s' is not a benchmark: expected recognize or db\n", argv[1]);
+    return 2;
+}

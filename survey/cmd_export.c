@@ -1,0 +1,268 @@
+/* cmd_export.c - `gridsurvey export`: lights of a survey database as GeoJSON, KML, GeoPackage
+ * or CSV. Rows become gis_light values and gis/'s writers do the rest (gis_export: atomic
+ * replacement, every format's conventions in docs/gis.md). The bounding-box filter uses the
+ * R*Tree (locations_rtree) and then the exact stored coordinates. */
+#include "survey/internal.h"
+
+#include <getopt.h>
+#include <math.h>
+#include <sqlite3.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static const char export_usage[] =
+    "usage: gridsurvey export --db DB -o FILE [--format geojson|kml|gpkg|csv] [--survey NAME]\n"
+    "                         [--technology TECH] [--phase 0|120|240|other|unknown]\n"
+    "                         [--bbox MINLON,MINLAT,MAXLON,MAXLAT] [--min-confidence X]\n"
+    "\n"
+    "Writes the lights of a survey database with their bulb, technology, phase, confidence,\n"
+    "position and error ellipse (docs/gis.md has each format). Lights without a position are\n"
+    "written without a geometry unless --bbox is given.\n"
+    "\n"
+    "  --db DB             the survey database (read-only)\n"
+    "  -o FILE             output file (replaced atomically)\n"
+    "  --format F          geojson, kml, gpkg or csv (default: from the -o extension)\n"
+    "  --survey NAME       only this survey\n"
+    "  --technology TECH   only this technology (sodium_hp, led_linear, ...; none = no bulb)\n"
+    "  --phase P           only lights on phase 0, 120 or 240 (within 20 deg), another phase\n"
+    "                      (other), or an ambiguous/unknown one (unknown)\n"
+    "  --bbox A,B,C,D      only located lights with MINLON <= lon <= MAXLON and MINLAT <= lat\n"
+    "                      <= MAXLAT, degrees (MINLON > MAXLON crosses the antimeridian)\n"
+    "  --min-confidence X  only lights whose confidence (posterior of bulb and phase) is >= X\n"
+    "  --help              this text\n";
+
+void srv_export_opts_default(srv_export_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    o->phase = -2;
+    o->min_confidence = 0.0;
+}
+
+static const char select_sql[] =
+    "SELECT l.id, s.name, c.utc, l.bulb_id, l.technology, l.phase_deg, l.confidence, loc.lat_deg, "
+    "loc.lon_deg, loc.height_m, loc.semi_major_m, loc.semi_minor_m, loc.azimuth_deg, loc.flags ";
+static const char plain_from[] =
+    "FROM lights l JOIN captures c ON c.id = l.capture_id JOIN surveys s ON s.id = c.survey_id "
+    "LEFT JOIN locations loc ON loc.light_id = l.id WHERE 1 ";
+/* The R*Tree first (CROSS JOIN fixes the order); bounds ?4..?7 = min_lon, max_lon, min_lat,
+ * max_lat as an overlap test (the R*Tree's 32-bit boxes are rounded outward). */
+static const char rtree_from[] =
+    "FROM locations_rtree r CROSS JOIN locations loc ON loc.light_id = r.id "
+    "CROSS JOIN lights l ON l.id = r.id CROSS JOIN captures c ON c.id = l.capture_id "
+    "CROSS JOIN surveys s ON s.id = c.survey_id "
+    "WHERE r.max_lon >= ?4 AND r.min_lon <= ?5 AND r.max_lat >= ?6 AND r.min_lat <= ?7 ";
+static const char filters[] =
+    "AND (?1 IS NULL OR s.name = ?1) AND (?2 IS NULL OR coalesce(l.technology, 'none') = ?2) "
+    "AND l.confidence >= ?3 ORDER BY l.id";
+
+static double col_real(sqlite3_stmt *q, int i)
+{
+    return sqlite3_column_type(q, i) == SQLITE_NULL ? NAN : sqlite3_column_double(q, i);
+}
+
+static void col_text(sqlite3_stmt *q, int i, char *dst, size_t size)
+{
+    const char *t = (const char *)sqlite3_column_text(q, i);
+    snprintf(dst, size, "%s", t ? t : "");
+}
+
+static int in_bbox(const srv_export_opts *o, double lat, double lon)
+{
+    if (!(lat >= o->bbox[1] && lat <= o->bbox[3])) return 0;
+    if (o->bbox[0] <= o->bbox[2]) return lon >= o->bbox[0] && lon <= o->bbox[2];
+    return lon >= o->bbox[0] || lon <= o->bbox[2];
+}
+
+gs_status srv_db_read_lights(srv_db *db, const srv_export_opts *o, gis_light **lights,
+                             size_t *count)
+{
+    if (!db || !o || !lights || !count) return gs_fail(GS_EINVAL, "srv_db_read_lights: NULL argument");
+    *lights = NULL;
+    *count = 0;
+    if (o->phase < -2 || o->phase > 3)
+        return gs_fail(GS_EINVAL, "export: phase filter %d: expected -2 (all), -1 (unknown), 0..2 "
+                       "(0/120/240) or 3 (other)", o->phase);
+    if (!(o->min_confidence >= 0.0 && o->min_confidence <= 1.0))
+        return gs_fail(GS_EINVAL, "--min-confidence %g: expected [0, 1]", o->min_confidence);
+    if (o->use_bbox) {
+        for (int i = 0; i < 4; i++)
+            if (!isfinite(o->bbox[i]))
+                return gs_fail(GS_EINVAL, "--bbox: expected 4 finite numbers");
+        if (o->bbox[1] > o->bbox[3] || fabs(o->bbox[1]) > 90.0 || fabs(o->bbox[3]) > 90.0 ||
+            fabs(o->bbox[0]) > 180.0 || fabs(o->bbox[2]) > 180.0)
+            return gs_fail(GS_EINVAL, "--bbox %g,%g,%g,%g: expected MINLON,MINLAT,MAXLON,MAXLAT "
+                           "with longitudes in [-180, 180] and -90 <= MINLAT <= MAXLAT <= 90",
+                           o->bbox[0], o->bbox[1], o->bbox[2], o->bbox[3]);
+    }
+    sqlite3 *h = srv_db_sqlite(db);
+    char sql[2048];
+    snprintf(sql, sizeof sql, "%s%s%s", select_sql, o->use_bbox ? rtree_from : plain_from, filters);
+    sqlite3_stmt *q = NULL;
+    if (sqlite3_prepare_v2(h, sql, -1, &q, NULL) != SQLITE_OK)
+        return gs_fail(GS_ESQL, "%s: export query: %s", srv_db_path(db), sqlite3_errmsg(h));
+    if (o->survey) sqlite3_bind_text(q, 1, o->survey, -1, SQLITE_STATIC);
+    if (o->technology) sqlite3_bind_text(q, 2, o->technology, -1, SQLITE_STATIC);
+    sqlite3_bind_double(q, 3, o->min_confidence);
+    if (o->use_bbox) {
+        int wraps = o->bbox[0] > o->bbox[2];
+        sqlite3_bind_double(q, 4, wraps ? -180.0 : o->bbox[0]);
+        sqlite3_bind_double(q, 5, wraps ? 180.0 : o->bbox[2]);
+        sqlite3_bind_double(q, 6, o->bbox[1]);
+        sqlite3_bind_double(q, 7, o->bbox[3]);
+    }
+    gis_light *v = NULL;
+    size_t n = 0, cap = 0;
+    gs_status s = GS_OK;
+    int rc;
+    while ((rc = sqlite3_step(q)) == SQLITE_ROW) {
+        double phase = col_real(q, 5), lat = col_real(q, 7), lon = col_real(q, 8);
+        if (o->phase != -2 && srv_phase_class(phase) != o->phase) continue;
+        if (o->use_bbox && !in_bbox(o, lat, lon)) continue;
+        if (n == cap) {
+            size_t nc = cap ? 2 * cap : 256;
+            gis_light *nv = realloc(v, nc * sizeof *nv);
+            if (!nv) {
+                s = gs_fail(GS_ENOMEM, "export: out of memory for %zu lights", nc);
+                break;
+            }
+            v = nv;
+            cap = nc;
+        }
+        gis_light *l = &v[n++];
+        gis_light_init(l);
+        snprintf(l->id, sizeof l->id, "%lld", (long long)sqlite3_column_int64(q, 0));
+        col_text(q, 1, l->survey, sizeof l->survey);
+        col_text(q, 2, l->time_utc, sizeof l->time_utc);
+        col_text(q, 3, l->bulb_id, sizeof l->bulb_id);
+        col_text(q, 4, l->technology, sizeof l->technology);
+        l->phase_deg = phase;
+        l->confidence = col_real(q, 6);
+        l->lat_deg = lat;
+        l->lon_deg = lon;
+        l->height_m = col_real(q, 9);
+        l->ellipse.semi_major_m = col_real(q, 10);
+        l->ellipse.semi_minor_m = col_real(q, 11);
+        l->ellipse.azimuth_deg = col_real(q, 12);
+        l->flags = (unsigned)sqlite3_column_int64(q, 13);
+    }
+    if (s == GS_OK && rc != SQLITE_DONE)
+        s = gs_fail(GS_ESQL, "%s: export query: %s", srv_db_path(db), sqlite3_errmsg(h));
+    sqlite3_finalize(q);
+    if (s != GS_OK) {
+        free(v);
+        return s;
+    }
+    *lights = v;
+    *count = n;
+    return GS_OK;
+}
+
+static int parse_bbox(const char *text, double b[4])
+{
+    const char *p = text;
+    char *end;
+    for (int i = 0; i < 4; i++) {
+        b[i] = strtod(p, &end);
+        if (end == p || !isfinite(b[i]) || (i < 3 && *end != ',') || (i == 3 && *end)) return 0;
+        p = end + 1;
+    }
+    return 1;
+}
+
+int srv_cmd_export(int argc, char **argv)
+{
+    static const struct option longs[] = {
+        {"db", required_argument, 0, 'd'},         {"output", required_argument, 0, 'o'},
+        {"format", required_argument, 0, 'f'},     {"survey", required_argument, 0, 'S'},
+        {"technology", required_argument, 0, 't'}, {"phase", required_argument, 0, 'p'},
+        {"bbox", required_argument, 0, 'b'},       {"min-confidence", required_argument, 0, 'c'},
+        {"help", no_argument, 0, 'h'},             {0, 0, 0, 0},
+    };
+    const char *path = NULL, *out = NULL, *format = NULL;
+    srv_export_opts o;
+    srv_export_opts_default(&o);
+    optind = 1;
+    int c;
+    char *end;
+    while ((c = getopt_long(argc, argv, "o:h", longs, NULL)) != -1) {
+        switch (c) {
+        case 'd': path = optarg; break;
+        case 'o': out = optarg; break;
+        case 'f': format = optarg; break;
+        case 'S': o.survey = optarg; break;
+        case 't':
+            if (strcmp(optarg, "none")) {
+                rec_tech t;
+                if (rec_tech_parse(optarg, &t) != GS_OK) {
+                    fprintf(stderr, "gridsurvey export: --technology '%s': expected a technology "
+                            "name (sodium_hp, led_linear, cfl, ...) or none\n", optarg);
+                    return 2;
+                }
+            }
+            o.technology = optarg;
+            break;
+        case 'p':
+            if (!strcmp(optarg, "0")) o.phase = 0;
+            else if (!strcmp(optarg, "120")) o.phase = 1;
+            else if (!strcmp(optarg, "240")) o.phase = 2;
+            else if (!strcmp(optarg, "other")) o.phase = 3;
+            else if (!strcmp(optarg, "unknown")) o.phase = -1;
+            else {
+                fprintf(stderr, "gridsurvey export: --phase '%s': expected 0, 120, 240, other or unknown\n", optarg);
+                return 2;
+            }
+            break;
+        case 'b':
+            if (!parse_bbox(optarg, o.bbox) || o.bbox[1] > o.bbox[3] || fabs(o.bbox[1]) > 90.0 ||
+                fabs(o.bbox[3]) > 90.0 || fabs(o.bbox[0]) > 180.0 || fabs(o.bbox[2]) > 180.0) {
+                fprintf(stderr, "gridsurvey export: --bbox '%s': expected MINLON,MINLAT,MAXLON,MAXLAT "
+                        "in degrees with MINLAT <= MAXLAT\n", optarg);
+                return 2;
+            }
+            o.use_bbox = 1;
+            break;
+        case 'c':
+            o.min_confidence = strtod(optarg, &end);
+            if (!*optarg || *end || !(o.min_confidence >= 0.0 && o.min_confidence <= 1.0)) {
+                fprintf(stderr, "gridsurvey export: --min-confidence '%s': expected a number in [0, 1]\n", optarg);
+                return 2;
+            }
+            break;
+        case 'h': fputs(export_usage, stdout); return 0;
+        default: fputs(export_usage, stderr); return 2;
+        }
+    }
+    if (optind < argc) {
+        fprintf(stderr, "gridsurvey export: unexpected argument '%s'\n%s", argv[optind], export_usage);
+        return 2;
+    }
+    if (!path || !out) {
+        fprintf(stderr, "gridsurvey export: --db and -o are required\n%s", export_usage);
+        return 2;
+    }
+    gis_format fmt;
+    gs_status s = format ? gis_format_parse(format, &fmt) : gis_format_from_path(out, &fmt);
+    if (s != GS_OK) {
+        fprintf(stderr, "gridsurvey export: %s\n", gs_detail());
+        return 2;
+    }
+    srv_db *db;
+    if ((s = srv_db_open(path, SRV_DB_READ, &db)) != GS_OK) return srv_error(s);
+    if (o.survey) {
+        int64_t id;
+        if ((s = srv_db_find_survey(db, o.survey, &id)) != GS_OK) {
+            srv_db_close(db);
+            return srv_error(s);
+        }
+    }
+    gis_light *lights = NULL;
+    size_t n = 0;
+    s = srv_db_read_lights(db, &o, &lights, &n);
+    srv_db_close(db);
+    if (s == GS_OK) s = gis_export(lights, n, fmt, out);
+    free(lights);
+    if (s != GS_OK) return srv_error(s);
+    printf("exported %zu lights -> %s\n", n, out);
+    return 0;
+}

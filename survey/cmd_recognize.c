@@ -1,0 +1,435 @@
+/* cmd_recognize.c - `gridsurvey recognize CAPDIR`: the bulb type and grid phase of every light in
+ * a capture directory (paper Sec. 4, Eq. 7): blobs and their per-frame photometry, Eq. 7 over
+ * DELIGHT, a table or a "gridsurvey-lights/1" JSON document (docs/recognize-cli.md), and with
+ * --maps the per-pixel maps (Fig. 1) and signal plots (Fig. 3). */
+#include "survey/internal.h"
+
+#include <errno.h>
+#include <getopt.h>
+#include <jansson.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#define LIGHTS_FORMAT "gridsurvey-lights/1"
+#define SIGNAL_PLOT_LIGHTS 12
+
+static const char recognize_usage[] =
+    "usage: gridsurvey recognize CAPDIR [OPTIONS]\n"
+    "\n"
+    "Recognizes the bulb type and electric-grid phase of every light in a capture directory\n"
+    "(docs/formats.md, gridsurvey-capture/1): lights as blobs with per-frame photometry, then\n"
+    "the paper's Eq. 7 against DELIGHT. Prints a table, or JSON (docs/recognize-cli.md).\n"
+    "\n"
+    "  --json                  print a gridsurvey-lights/1 JSON document instead of the table\n"
+    "  --phases 3|6|continuous candidate grid phases: 3 = 0/120/240 deg (default); 6 = those\n"
+    "                          and the same + --transformer-deg (delta-wye transformers);\n"
+    "                          continuous = any phase, with its 1-sigma uncertainty\n"
+    "  --transformer-deg D     AC phase shift of a delta-wye transformer, deg (default 30; with\n"
+    "                          --phases 6 not a multiple of 60)\n"
+    "  --min-confidence X      posterior below which a bulb or phase is reported ambiguous\n"
+    "                          (phase null in JSON), 0..1 (default 0.8)\n"
+    "  --threshold S           detection threshold of lights and mapped pixels, noise sigmas > 0\n"
+    "                          (default 5)\n"
+    "  --delight DB            the DELIGHT SQLite file (default: $GRIDSURVEY_DELIGHT, else the\n"
+    "                          built-in database generated from the lamp models)\n"
+    "  --maps DIR              also write DIR/phase_map.png, bulb_map.png, confidence_map.png\n"
+    "                          (per-pixel Eq. 7, paper Fig. 1) and signals.png (Fig. 3)\n"
+    "  --help                  this text\n"
+    "\n"
+    "Exit status: 0 done, 1 failure (one line on stderr), 2 usage error.\n";
+
+typedef struct {
+    const char *capdir, *db, *maps;
+    int json;
+    rec_eq7_opts eq7;
+    double threshold;
+} recognize_opts;
+
+/* Progress on stderr when it is a terminal; each call overwrites the line. */
+static int progress_on;
+
+static void progress(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
+
+static void progress(const char *fmt, ...)
+{
+    if (!progress_on) return;
+    va_list ap;
+    va_start(ap, fmt);
+    fputs("\r\033[Kgridsurvey recognize: ", stderr);
+    vfprintf(stderr, fmt, ap);
+    va_end(ap);
+    fflush(stderr);
+}
+
+static void progress_done(void)
+{
+    if (!progress_on) return;
+    fputs("\r\033[K", stderr);
+    fflush(stderr);
+}
+
+static void map_progress(void *ctx, double fraction)
+{
+    (void)ctx;
+    progress("per-pixel Eq. 7: %3.0f %% of the lit pixels", 100.0 * fraction);
+}
+
+static int usage_error(const char *fmt, const char *arg)
+{
+    fputs("gridsurvey recognize: ", stderr);
+    fprintf(stderr, fmt, arg);
+    fputs(" (see gridsurvey recognize --help)\n", stderr);
+    return 2;
+}
+
+/* Returns -1 to go on, else the exit status. */
+static int parse_opts(int argc, char **argv, recognize_opts *o)
+{
+    static const struct option longs[] = {
+        {"json", no_argument, 0, 'j'},
+        {"phases", required_argument, 0, 'p'},
+        {"transformer-deg", required_argument, 0, 't'},
+        {"min-confidence", required_argument, 0, 'c'},
+        {"threshold", required_argument, 0, 's'},
+        {"delight", required_argument, 0, 'd'},
+        {"maps", required_argument, 0, 'm'},
+        {"help", no_argument, 0, 'h'},
+        {0, 0, 0, 0},
+    };
+    memset(o, 0, sizeof *o);
+    rec_eq7_opts_default(&o->eq7);
+    o->threshold = 5.0;
+    o->db = getenv("GRIDSURVEY_DELIGHT");
+    if (o->db && !*o->db) o->db = NULL;
+    optind = 1;
+    opterr = 0;
+    int c;
+    char *end;
+    while ((c = getopt_long(argc, argv, ":h", longs, NULL)) != -1) {
+        switch (c) {
+        case 'j': o->json = 1; break;
+        case 'd': o->db = optarg; break;
+        case 'm': o->maps = optarg; break;
+        case 'p':
+            if (!strcmp(optarg, "3")) o->eq7.phases = REC_PHASES_3;
+            else if (!strcmp(optarg, "6")) o->eq7.phases = REC_PHASES_6;
+            else if (!strcmp(optarg, "continuous")) o->eq7.phases = REC_PHASES_CONTINUOUS;
+            else return usage_error("--phases '%s': expected 3, 6 or continuous", optarg);
+            break;
+        case 't':
+            o->eq7.transformer_deg = strtod(optarg, &end);
+            if (end == optarg || *end || !isfinite(o->eq7.transformer_deg))
+                return usage_error("--transformer-deg '%s': expected a finite angle in degrees", optarg);
+            break;
+        case 'c':
+            o->eq7.ambiguous_conf = strtod(optarg, &end);
+            if (end == optarg || *end || !(o->eq7.ambiguous_conf >= 0.0 && o->eq7.ambiguous_conf <= 1.0))
+                return usage_error("--min-confidence '%s': expected a number from 0 to 1", optarg);
+            break;
+        case 's':
+            o->threshold = strtod(optarg, &end);
+            if (end == optarg || *end || !(o->threshold > 0.0) || !isfinite(o->threshold))
+                return usage_error("--threshold '%s': expected a number of noise sigmas > 0", optarg);
+            break;
+        case 'h': fputs(recognize_usage, stdout); return 0;
+        case ':': return usage_error("option '%s' needs a value", argv[optind - 1]);
+        default: return usage_error("unknown option '%s'", argv[optind - 1]);
+        }
+    }
+    if (argc - optind != 1)
+        return usage_error("%s", argc - optind < 1 ? "expected a capture directory"
+                                                   : "expected exactly one capture directory");
+    o->capdir = argv[optind];
+    return -1;
+}
+
+/* ------------------------------------------------------------------ output */
+
+static const struct {
+    unsigned bit;
+    int match;   /* 0: REC_BLOB_*, 1: REC_MATCH_* */
+    const char *name;
+} flag_names[] = {
+    {REC_BLOB_EDGE, 0, "edge"},
+    {REC_BLOB_SATURATED, 0, "saturated"},
+    {REC_BLOB_DEBLENDED, 0, "deblended"},
+    {REC_BLOB_HDR, 0, "hdr"},
+    {REC_BLOB_NO_SIGNAL, 0, "no_signal"},
+    {REC_MATCH_UNKNOWN, 1, "unknown"},
+    {REC_MATCH_PHASE_AMBIGUOUS, 1, "phase_ambiguous"},
+    {REC_MATCH_BULB_AMBIGUOUS, 1, "bulb_ambiguous"},
+    {REC_MATCH_DIM, 1, "dim"},
+    {REC_MATCH_BAD_INPUT, 1, "bad_input"},
+};
+#define N_FLAGS (sizeof flag_names / sizeof *flag_names)
+
+static int has_flag(size_t f, unsigned blob_flags, const rec_match *mt)
+{
+    return (flag_names[f].match ? mt->flags : blob_flags) & flag_names[f].bit;
+}
+
+static const char *phases_name(rec_phase_set p)
+{
+    return p == REC_PHASES_6 ? "6" : p == REC_PHASES_CONTINUOUS ? "continuous" : "3";
+}
+
+/* The phase is reported when a voltage-referenced bulb won without PHASE_AMBIGUOUS. */
+static int phase_known(const rec_matcher *m, const rec_match *mt)
+{
+    const rec_bulb *b = mt->bulb >= 0 ? rec_matcher_bulb(m, (size_t)mt->bulb) : NULL;
+    return b && b->ref == REC_REF_VOLTAGE && !(mt->flags & REC_MATCH_PHASE_AMBIGUOUS);
+}
+
+static void print_table(const recognize_opts *o, const rec_capture *cap, const rec_matcher *m,
+                        const rec_catalog *cat, const rec_match *mt)
+{
+    printf("capture %s: %d Hz grid, K = %d, %d band%s, %dx%d pixels%s; DELIGHT %s (%zu candidate "
+           "bulbs); phases %s\n",
+           o->capdir, cap->grid_hz, cap->K, cap->bands, cap->bands == 1 ? "" : "s", cap->width,
+           cap->height, cap->locked ? "" : " (NOT AC-locked: phases are meaningless)",
+           o->db ? o->db : "built-in", rec_matcher_bulb_count(m),
+           o->eq7.phases == REC_PHASES_3 ? "0/120/240 deg"
+           : o->eq7.phases == REC_PHASES_6 ? "0/120/240 deg and + transformer" : "continuous");
+    printf("%4s %8s %8s %5s  %-22s %-22s %15s %6s  %-28s %9s %9s  %s\n", "id", "x", "y", "area",
+           "bulb", "technology", "phase (deg)", "conf", "runner-up (conf)", "chi2/dof", "p-value",
+           "flags");
+    size_t with_bulb = 0, with_phase = 0;
+    for (size_t i = 0; i < cat->count; i++) {
+        const rec_match *r = &mt[i];
+        const rec_bulb *b = r->bulb >= 0 ? rec_matcher_bulb(m, (size_t)r->bulb) : NULL;
+        const rec_bulb *rb = r->runner_bulb >= 0 ? rec_matcher_bulb(m, (size_t)r->runner_bulb) : NULL;
+        char phase[32] = "-", runner[64] = "-", flags[160] = "", chi[32];
+        if (phase_known(m, r)) {
+            snprintf(phase, sizeof phase, "%.1f +- %.1f", r->phase_deg, r->phase_sigma_deg);
+            with_phase++;
+        }
+        if (b) with_bulb++;
+        if (rb)
+            snprintf(runner, sizeof runner, "%s @ %.0f (%.3f)", rb->id, r->runner_phase_deg,
+                     r->runner_confidence);
+        for (size_t f = 0; f < N_FLAGS; f++)
+            if (has_flag(f, cat->flags[i], r)) {
+                size_t used = strlen(flags);
+                snprintf(flags + used, sizeof flags - used, "%s%s", used ? "," : "", flag_names[f].name);
+            }
+        snprintf(chi, sizeof chi, "%.2f", r->dof > 0 ? r->chi2 / r->dof : r->chi2);
+        printf("%4zu %8.2f %8.2f %5d  %-22s %-22s %15s %6.3f  %-28s %9s %9.3g  %s\n", i,
+               cat->x_px[i], cat->y_px[i], cat->area_px[i], b ? b->id : "unknown",
+               b ? rec_tech_name(b->type) : "-", phase, r->confidence, runner, chi, r->p_value,
+               *flags ? flags : "-");
+    }
+    printf("%zu lights: %zu with a bulb, %zu with a phase\n", cat->count, with_bulb, with_phase);
+}
+
+/* json_real that never holds NaN/Inf (the library's fields are finite; this is a guard). */
+static json_t *jreal(double v)
+{
+    return isfinite(v) ? json_real(v) : json_null();
+}
+
+static json_t *light_json(const rec_matcher *m, const rec_catalog *cat, const rec_match *r, size_t i)
+{
+    const rec_bulb *b = r->bulb >= 0 ? rec_matcher_bulb(m, (size_t)r->bulb) : NULL;
+    const rec_bulb *rb = r->runner_bulb >= 0 ? rec_matcher_bulb(m, (size_t)r->runner_bulb) : NULL;
+    int ph = phase_known(m, r);
+    json_t *l = json_object();
+    json_object_set_new(l, "id", json_integer((json_int_t)i));
+    json_object_set_new(l, "x", jreal(cat->x_px[i]));
+    json_object_set_new(l, "y", jreal(cat->y_px[i]));
+    json_object_set_new(l, "area_px", json_integer(cat->area_px[i]));
+    json_object_set_new(l, "peak_dn", jreal(cat->peak_dn[i]));
+    json_object_set_new(l, "saturated_px", json_integer(cat->saturated_px[i]));
+    json_object_set_new(l, "brightness", jreal(r->brightness));
+    json_object_set_new(l, "bulb", b ? json_string(b->id) : json_null());
+    json_object_set_new(l, "technology", b ? json_string(rec_tech_name(b->type)) : json_null());
+    json_object_set_new(l, "phase_deg", ph ? jreal(r->phase_deg) : json_null());
+    json_object_set_new(l, "phase_sigma_deg", ph ? jreal(r->phase_sigma_deg) : json_null());
+    json_object_set_new(l, "confidence", jreal(r->confidence));
+    json_object_set_new(l, "bulb_confidence", jreal(r->bulb_confidence));
+    json_object_set_new(l, "phase_confidence", jreal(r->phase_confidence));
+    if (rb) {
+        json_t *ru = json_object();
+        json_object_set_new(ru, "bulb", json_string(rb->id));
+        json_object_set_new(ru, "technology", json_string(rec_tech_name(rb->type)));
+        json_object_set_new(ru, "phase_deg", jreal(r->runner_phase_deg));
+        json_object_set_new(ru, "confidence", jreal(r->runner_confidence));
+        json_object_set_new(l, "runner_up", ru);
+    } else {
+        json_object_set_new(l, "runner_up", json_null());
+    }
+    json_object_set_new(l, "chi2", jreal(r->chi2));
+    json_object_set_new(l, "dof", json_integer(r->dof));
+    json_object_set_new(l, "p_value", jreal(r->p_value));
+    json_t *fl = json_array();
+    for (size_t f = 0; f < N_FLAGS; f++)
+        if (has_flag(f, cat->flags[i], r)) json_array_append_new(fl, json_string(flag_names[f].name));
+    json_object_set_new(l, "flags", fl);
+    return l;
+}
+
+static gs_status print_json(const recognize_opts *o, const rec_capture *cap, const rec_matcher *m,
+                            const rec_catalog *cat, const rec_match *mt)
+{
+    json_t *root = json_object();
+    json_object_set_new(root, "format", json_string(LIGHTS_FORMAT));
+    json_t *c = json_object();
+    json_object_set_new(c, "dir", json_string(o->capdir));
+    json_object_set_new(c, "grid_hz", json_integer(cap->grid_hz));
+    json_object_set_new(c, "K", json_integer(cap->K));
+    json_object_set_new(c, "bands", json_integer(cap->bands));
+    json_object_set_new(c, "width", json_integer(cap->width));
+    json_object_set_new(c, "height", json_integer(cap->height));
+    json_object_set_new(c, "locked", json_boolean(cap->locked));
+    json_object_set_new(c, "utc", cap->utc[0] ? json_string(cap->utc) : json_null());
+    json_t *station = cap->station_json ? json_loads(cap->station_json, 0, NULL) : NULL;
+    json_object_set_new(c, "station", station ? station : json_null());
+    json_object_set_new(root, "capture", c);
+    json_t *r = json_object();
+    json_object_set_new(r, "delight", o->db ? json_string(o->db) : json_string("built-in"));
+    json_object_set_new(r, "candidates", json_integer((json_int_t)rec_matcher_bulb_count(m)));
+    json_object_set_new(r, "phases", json_string(phases_name(o->eq7.phases)));
+    json_object_set_new(r, "transformer_deg", jreal(o->eq7.transformer_deg));
+    json_object_set_new(r, "min_confidence", jreal(o->eq7.ambiguous_conf));
+    json_object_set_new(r, "unknown_p", jreal(o->eq7.unknown_p));
+    json_object_set_new(r, "min_snr", jreal(o->eq7.min_snr));
+    json_object_set_new(r, "threshold_sigma", jreal(o->threshold));
+    json_object_set_new(root, "recognition", r);
+    size_t with_bulb = 0, with_phase = 0;
+    json_t *lights = json_array();
+    for (size_t i = 0; i < cat->count; i++) {
+        with_bulb += mt[i].bulb >= 0;
+        with_phase += (size_t)phase_known(m, &mt[i]);
+        json_array_append_new(lights, light_json(m, cat, &mt[i], i));
+    }
+    json_t *s = json_object();
+    json_object_set_new(s, "lights", json_integer((json_int_t)cat->count));
+    json_object_set_new(s, "with_bulb", json_integer((json_int_t)with_bulb));
+    json_object_set_new(s, "with_phase", json_integer((json_int_t)with_phase));
+    json_object_set_new(root, "summary", s);
+    json_object_set_new(root, "lights", lights);
+    gs_status st = GS_OK;
+    if (json_dumpf(root, stdout, JSON_INDENT(2) | JSON_PRESERVE_ORDER | JSON_REAL_PRECISION(12)) != 0)
+        st = gs_fail(GS_EIO, "stdout: cannot write the JSON document");
+    else
+        putchar('\n');
+    json_decref(root);
+    return st;
+}
+
+/* ------------------------------------------------------------------ maps */
+
+/* Create the --maps directory (one level) up front, so a bad path fails before any work. */
+static gs_status maps_dir(const char *dir)
+{
+    if (mkdir(dir, 0777) != 0 && errno != EEXIST)
+        return gs_fail(GS_EIO, "%s: cannot create the maps directory: %s", dir, strerror(errno));
+    struct stat sb;
+    if (stat(dir, &sb) != 0 || !S_ISDIR(sb.st_mode))
+        return gs_fail(GS_EIO, "%s: not a directory (--maps)", dir);
+    return GS_OK;
+}
+
+static gs_status write_maps(const recognize_opts *o, const rec_capture *cap, const rec_matcher *m,
+                            const rec_catalog *cat, const rec_match *mt)
+{
+    char path[4096];
+    rec_pixel_maps pm;
+    rec_map_opts mo;
+    rec_map_opts_default(&mo);
+    mo.threshold_sigma = o->threshold;
+    mo.progress = map_progress;
+    progress("per-pixel Eq. 7 ...");
+    gs_status st = rec_pixel_maps_compute(cap, m, &o->eq7, &mo, &pm);
+    if (st != GS_OK) return st;
+    progress("drawing maps ...");
+    snprintf(path, sizeof path, "%s/phase_map.png", o->maps);
+    st = rec_map_write_phase_png(&pm, path);
+    if (st == GS_OK) {
+        snprintf(path, sizeof path, "%s/bulb_map.png", o->maps);
+        st = rec_map_write_bulb_png(&pm, m, path);
+    }
+    if (st == GS_OK) {
+        snprintf(path, sizeof path, "%s/confidence_map.png", o->maps);
+        st = rec_map_write_confidence_png(&pm, path);
+    }
+    if (st == GS_OK) {
+        snprintf(path, sizeof path, "%s/signals.png", o->maps);
+        char title[160];
+        snprintf(title, sizeof title, "%d Hz, K = %d", cap->grid_hz, cap->K);
+        st = rec_plot_signals(m, cat, mt, SIGNAL_PLOT_LIGHTS, path, title);
+    }
+    rec_pixel_maps_release(&pm);
+    return st;
+}
+
+/* ------------------------------------------------------------------ command */
+
+int srv_cmd_recognize(int argc, char **argv)
+{
+    recognize_opts o;
+    int rc = parse_opts(argc, argv, &o);
+    if (rc >= 0) return rc;
+    progress_on = isatty(2);
+
+    rec_capture cap;
+    memset(&cap, 0, sizeof cap);
+    rec_catalog cat;
+    memset(&cat, 0, sizeof cat);
+    rec_delight *d = NULL;
+    rec_matcher *m = NULL;
+    rec_match *mt = NULL;
+
+    gs_status st = o.maps ? maps_dir(o.maps) : GS_OK;
+    if (st == GS_OK) {
+        progress("reading %s ...", o.capdir);
+        st = rec_capture_read(o.capdir, &cap);
+    }
+    if (st == GS_OK) {
+        progress("loading DELIGHT ...");
+        d = rec_delight_new();
+        st = !d ? gs_fail(GS_ENOMEM, "cannot allocate the DELIGHT database")
+             : o.db ? rec_delight_load(d, o.db) : rec_delight_generate(d, REC_BRF_N_DEFAULT);
+    }
+    if (st == GS_OK) {
+        progress("building Eq. 7 templates ...");
+        st = rec_matcher_new(d, cap.grid_hz, cap.bands, cap.K, &o.eq7, &m);
+        if (st == GS_ENOTFOUND) {
+            char why[512];
+            snprintf(why, sizeof why, "%s", gs_detail());
+            st = gs_fail(GS_ENOTFOUND, "DELIGHT %s: no usable %s entry for the capture's %d Hz "
+                         "grid (%s)", o.db ? o.db : "built-in",
+                         cap.bands == 3 ? "RGB" : "monochrome", cap.grid_hz, why);
+        }
+    }
+    if (st == GS_OK) {
+        progress("extracting lights ...");
+        rec_blob_opts bo;
+        rec_blob_opts_default(&bo);
+        bo.threshold_sigma = o.threshold;
+        st = rec_blobs_extract(&cap, &bo, &cat);
+    }
+    if (st == GS_OK) {
+        progress("matching %zu lights ...", cat.count);
+        mt = calloc(cat.count ? cat.count : 1, sizeof *mt);
+        st = mt ? rec_match_catalog(m, &cat, mt)
+                : gs_fail(GS_ENOMEM, "cannot hold %zu matches", cat.count);
+    }
+    if (st == GS_OK && o.maps) st = write_maps(&o, &cap, m, &cat, mt);
+    progress_done();
+    if (st == GS_OK) {
+        if (o.json) st = print_json(&o, &cap, m, &cat, mt);
+        else print_table(&o, &cap, m, &cat, mt);
+        if (fflush(stdout) != 0 && st == GS_OK) st = gs_fail(GS_EIO, "stdout: write failed");
+    }
+    free(mt);
+    rec_matcher_free(m);
+    rec_delight_free(d);
+    rec_catalog_release(&cat);
+    rec_capture_release(&cap);
+    return st == GS_OK ? 0 : srv_error(st);
+}

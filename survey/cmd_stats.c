@@ -1,0 +1,248 @@
+/* cmd_stats.c - `gridsurvey stats`: phase-balance statistics of a survey database
+ * (survey/stats.c; definitions in docs/survey-db.md). */
+#include "survey/internal.h"
+
+#include <getopt.h>
+#include <jansson.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static const char stats_usage[] =
+    "usage: gridsurvey stats --db DB [--by technology|survey|all|cell:SIZE_m|radius:LAT,LON,R_m]\n"
+    "                        [--survey NAME] [--min-confidence X] [--format table|json|csv]\n"
+    "\n"
+    "Phase balance of the surveyed lights: per group, the lights on each grid phase (0, 120,\n"
+    "240 deg, within 20 deg), their shares with 95 % Wilson intervals, a chi-square test of the\n"
+    "uniform split (2 dof) and the imbalance index max |share - 1/3| / (1/3) (0 = balanced,\n"
+    "2 = all on one phase). Lights whose phase is ambiguous or unknown, or another phase, are\n"
+    "counted apart and not in the shares.\n"
+    "\n"
+    "  --db DB             the survey database (read-only)\n"
+    "  --by G              all (default), technology, survey, cell:SIZE_m (a local metric grid\n"
+    "                      of SIZE_m cells around the lights' mean latitude; located lights\n"
+    "                      only) or radius:LAT,LON,R_m (located lights within R_m metres,\n"
+    "                      spherical distance)\n"
+    "  --survey NAME       only this survey\n"
+    "  --min-confidence X  leave out lights whose phase confidence (posterior of the phase)\n"
+    "                      is below X, in [0, 1] (default 0)\n"
+    "  --format F          table (Markdown, default), json or csv\n"
+    "  --help              this text\n";
+
+typedef enum { FMT_TABLE, FMT_JSON, FMT_CSV } out_format;
+
+static const char *by_name(const srv_stats_opts *o, char *buf, size_t size)
+{
+    switch (o->by) {
+    case SRV_BY_ALL: return "all";
+    case SRV_BY_TECHNOLOGY: return "technology";
+    case SRV_BY_SURVEY: return "survey";
+    case SRV_BY_CELL: snprintf(buf, size, "cell:%g", o->cell_m); return buf;
+    case SRV_BY_RADIUS:
+        snprintf(buf, size, "radius:%.7f,%.7f,%g", o->lat_deg, o->lon_deg, o->radius_m);
+        return buf;
+    }
+    return "?";
+}
+
+static void pct(char *buf, size_t size, const srv_phase_stats *g, int i)
+{
+    if (g->total <= 0) snprintf(buf, size, "- (0)");
+    else
+        snprintf(buf, size, "%.1f %% [%.1f, %.1f] (%ld)", 100.0 * g->share[i], 100.0 * g->lo[i],
+                 100.0 * g->hi[i], g->n[i]);
+}
+
+static void print_table(const srv_phase_stats *g, size_t n, const srv_stats_opts *o, long ungrouped)
+{
+    int cells = o->by == SRV_BY_CELL || o->by == SRV_BY_RADIUS;
+    printf("| group |%s lights | below | unknown | other | n | 0 deg | 120 deg | 240 deg | chi2 | p | imbalance |\n",
+           cells ? " lat, lon |" : "");
+    printf("|---|%s---:|---:|---:|---:|---:|---|---|---|---:|---:|---:|\n", cells ? "---|" : "");
+    for (size_t i = 0; i < n; i++) {
+        char c[3][64], ll[64] = "";
+        for (int k = 0; k < 3; k++) pct(c[k], sizeof c[k], &g[i], k);
+        if (cells) snprintf(ll, sizeof ll, " %.6f, %.6f |", g[i].lat_deg, g[i].lon_deg);
+        printf("| %s |%s %ld | %ld | %ld | %ld | %ld | %s | %s | %s |", g[i].group, ll, g[i].lights,
+               g[i].below, g[i].unknown, g[i].other, g[i].total, c[0], c[1], c[2]);
+        if (g[i].total > 0)
+            printf(" %.2f | %.3g%s | %.3f |\n", g[i].chi2, g[i].p_value,
+                   g[i].flags & SRV_STATS_FEW ? " (few)" : "", g[i].imbalance);
+        else
+            printf(" - | - | - |\n");
+    }
+    printf("\nShares of the lights on a known 0/120/240 deg phase (n), 95 %% Wilson intervals; "
+           "chi2: uniformity test (2 dof), p = exp(-chi2/2); imbalance = max |share - 1/3| / (1/3).\n");
+    printf("below: phase confidence < %g (left out); unknown: ambiguous or unrecognized phase; "
+           "other: a phase not within 20 deg of 0/120/240.", o->min_confidence);
+    if (ungrouped > 0) printf(" %ld lights without a position are in no cell.", ungrouped);
+    int few = 0;
+    for (size_t i = 0; i < n; i++) few |= (g[i].flags & SRV_STATS_FEW) != 0;
+    printf("%s\n", few ? " (few): fewer than 5 expected per phase, p approximate." : "");
+}
+
+static void print_csv(const srv_phase_stats *g, size_t n)
+{
+    printf("group,lat_deg,lon_deg,lights,below_confidence,unknown,other,n0,n120,n240,n,"
+           "share0,lo0,hi0,share120,lo120,hi120,share240,lo240,hi240,chi2,p_value,imbalance,flags\n");
+    for (size_t i = 0; i < n; i++) {
+        const srv_phase_stats *x = &g[i];
+        int quote = strpbrk(x->group, ",\"\n") != NULL;
+        if (quote) {
+            putchar('"');
+            for (const char *p = x->group; *p; p++) {
+                if (*p == '"') putchar('"');
+                putchar(*p);
+            }
+            putchar('"');
+        } else {
+            fputs(x->group, stdout);
+        }
+        double v[] = {x->lat_deg, x->lon_deg};
+        for (int k = 0; k < 2; k++) isnan(v[k]) ? printf(",") : printf(",%.7f", v[k]);
+        printf(",%ld,%ld,%ld,%ld,%ld,%ld,%ld,%ld", x->lights, x->below, x->unknown, x->other, x->n[0],
+               x->n[1], x->n[2], x->total);
+        double r[] = {x->share[0], x->lo[0], x->hi[0], x->share[1], x->lo[1], x->hi[1], x->share[2],
+                      x->lo[2], x->hi[2], x->chi2, x->p_value, x->imbalance};
+        for (int k = 0; k < 12; k++) isnan(r[k]) ? printf(",") : printf(",%.10g", r[k]);
+        printf(",%u\n", x->flags);
+    }
+}
+
+static json_t *real_or_null(double v)
+{
+    return isfinite(v) ? json_real(v) : json_null();
+}
+
+static int print_json(const srv_phase_stats *g, size_t n, const srv_stats_opts *o, const char *db,
+                      long ungrouped)
+{
+    char buf[128];
+    json_t *root = json_object(), *arr = json_array();
+    json_object_set_new(root, "db", json_string(db));
+    json_object_set_new(root, "by", json_string(by_name(o, buf, sizeof buf)));
+    json_object_set_new(root, "survey", o->survey ? json_string(o->survey) : json_null());
+    json_object_set_new(root, "min_phase_confidence", json_real(o->min_confidence));
+    json_object_set_new(root, "confidence_level", json_real(0.95));
+    json_object_set_new(root, "lights_without_position", json_integer(ungrouped));
+    static const char *const ph[3] = {"0", "120", "240"};
+    for (size_t i = 0; i < n; i++) {
+        const srv_phase_stats *x = &g[i];
+        json_t *e = json_object(), *counts = json_object(), *shares = json_object(),
+               *ci = json_object();
+        json_object_set_new(e, "group", json_string(x->group));
+        if (!isnan(x->lat_deg)) {
+            json_object_set_new(e, "lat_deg", json_real(x->lat_deg));
+            json_object_set_new(e, "lon_deg", json_real(x->lon_deg));
+        }
+        json_object_set_new(e, "lights", json_integer(x->lights));
+        json_object_set_new(e, "below_confidence", json_integer(x->below));
+        json_object_set_new(e, "unknown", json_integer(x->unknown));
+        json_object_set_new(e, "other", json_integer(x->other));
+        for (int k = 0; k < 3; k++) {
+            json_object_set_new(counts, ph[k], json_integer(x->n[k]));
+            json_object_set_new(shares, ph[k], real_or_null(x->share[k]));
+            json_t *pair = json_array();
+            json_array_append_new(pair, real_or_null(x->lo[k]));
+            json_array_append_new(pair, real_or_null(x->hi[k]));
+            json_object_set_new(ci, ph[k], pair);
+        }
+        json_object_set_new(e, "counts", counts);
+        json_object_set_new(e, "n", json_integer(x->total));
+        json_object_set_new(e, "shares", shares);
+        json_object_set_new(e, "wilson95", ci);
+        json_object_set_new(e, "chi2", real_or_null(x->chi2));
+        json_object_set_new(e, "dof", json_integer(2));
+        json_object_set_new(e, "p_value", real_or_null(x->p_value));
+        json_object_set_new(e, "imbalance", real_or_null(x->imbalance));
+        json_object_set_new(e, "few", json_boolean(x->flags & SRV_STATS_FEW));
+        json_array_append_new(arr, e);
+    }
+    json_object_set_new(root, "groups", arr);
+    int rc = json_dumpf(root, stdout, JSON_INDENT(2) | JSON_REAL_PRECISION(10));
+    putchar('\n');
+    json_decref(root);
+    return rc;
+}
+
+int srv_cmd_stats(int argc, char **argv)
+{
+    static const struct option longs[] = {
+        {"db", required_argument, 0, 'd'},     {"by", required_argument, 0, 'b'},
+        {"survey", required_argument, 0, 'S'}, {"min-confidence", required_argument, 0, 'c'},
+        {"format", required_argument, 0, 'f'}, {"help", no_argument, 0, 'h'},
+        {0, 0, 0, 0},
+    };
+    const char *path = NULL;
+    srv_stats_opts o;
+    srv_stats_opts_default(&o);
+    out_format fmt = FMT_TABLE;
+    optind = 1;
+    int c;
+    char *end;
+    while ((c = getopt_long(argc, argv, "h", longs, NULL)) != -1) {
+        switch (c) {
+        case 'd': path = optarg; break;
+        case 'S': o.survey = optarg; break;
+        case 'b':
+            if (srv_stats_parse_by(optarg, &o) != GS_OK) {
+                fprintf(stderr, "gridsurvey stats: %s\n", gs_detail());
+                return 2;
+            }
+            break;
+        case 'c':
+            o.min_confidence = strtod(optarg, &end);
+            if (!*optarg || *end || !(o.min_confidence >= 0.0 && o.min_confidence <= 1.0)) {
+                fprintf(stderr, "gridsurvey stats: --min-confidence '%s': expected a number in [0, 1]\n", optarg);
+                return 2;
+            }
+            break;
+        case 'f':
+            if (!strcmp(optarg, "table")) fmt = FMT_TABLE;
+            else if (!strcmp(optarg, "json")) fmt = FMT_JSON;
+            else if (!strcmp(optarg, "csv")) fmt = FMT_CSV;
+            else {
+                fprintf(stderr, "gridsurvey stats: --format '%s': expected table, json or csv\n", optarg);
+                return 2;
+            }
+            break;
+        case 'h': fputs(stats_usage, stdout); return 0;
+        default: fputs(stats_usage, stderr); return 2;
+        }
+    }
+    if (optind < argc) {
+        fprintf(stderr, "gridsurvey stats: unexpected argument '%s'\n%s", argv[optind], stats_usage);
+        return 2;
+    }
+    if (!path) {
+        fprintf(stderr, "gridsurvey stats: --db is required\n%s", stats_usage);
+        return 2;
+    }
+    srv_db *db;
+    gs_status s = srv_db_open(path, SRV_DB_READ, &db);
+    if (s != GS_OK) return srv_error(s);
+    if (o.survey) {
+        int64_t id;
+        if ((s = srv_db_find_survey(db, o.survey, &id)) != GS_OK) {
+            srv_db_close(db);
+            return srv_error(s);
+        }
+    }
+    srv_phase_stats *g = NULL;
+    size_t n = 0;
+    long ungrouped = 0;
+    s = srv_stats_compute(db, &o, &g, &n, &ungrouped);
+    srv_db_close(db);
+    if (s != GS_OK) return srv_error(s);
+    int rc = 0;
+    if (fmt == FMT_TABLE) print_table(g, n, &o, ungrouped);
+    else if (fmt == FMT_CSV) print_csv(g, n);
+    else rc = print_json(g, n, &o, path, ungrouped);
+    free(g);
+    if (rc != 0 || fflush(stdout) != 0 || ferror(stdout)) {
+        fprintf(stderr, "gridsurvey stats: cannot write the output\n");
+        return 1;
+    }
+    return 0;
+}
