@@ -23,7 +23,7 @@ LDFLAGS := $(SANFLAGS)
 LDLIBS := $(shell pkg-config --libs $(PKGS) 2>/dev/null) -lopencv_imgcodecs -lopencv_imgproc \
 	-lopencv_core -lGeographicLib -lopenblas -lm
 
-MODULES := survey gis capture recognize
+MODULES := survey capture gis recognize
 lib_srcs = $(filter-out survey/main.c,$(wildcard $(1)/*.c $(1)/*.cpp))
 lib_objs = $(patsubst %,$(BUILD)/%.o,$(basename $(call lib_srcs,$(1))))
 LIBS := $(foreach m,$(MODULES),$(if $(call lib_srcs,$(m)),$(BUILD)/lib$(m).a))
@@ -58,6 +58,10 @@ $(BIN): $(BUILD)/survey/main.o $(LIBS)
 	$(CXX) $(LDFLAGS) $^ $(LDLIBS) -o $@
 $(TEST_BIN): $(TEST_OBJS) $(LIBS)
 	$(CXX) $(LDFLAGS) $^ $(LDLIBS) -o $@
+# capture/'s hardware backend: libgpiod v1.6 for the binary only (the test binary links
+# tests/fake_gpiod.c instead), and opencv_videoio (capture/videoio_shim.cpp).
+$(BIN): LDLIBS += -lgpiod -lopencv_videoio
+$(TEST_BIN): LDLIBS += -lopencv_videoio
 $(DELIGHT_DB): $(BIN)
 	$(BIN) delight generate -o $@
 

@@ -11,6 +11,8 @@ static const struct {
 } commands[] = {
     {"delight", srv_cmd_delight, "the DELIGHT bulb database: list, show, export, import, add, plot, generate"},
     {"locate", srv_cmd_locate, "locate lights from one station's pixels; GeoJSON, KML, GeoPackage, CSV, map"},
+    {"simulate", srv_cmd_simulate, "render a scene into a capture directory and truth.json (ACam simulator)"},
+    {"capture", srv_cmd_capture, "run the ACam acquisition loop: --backend sim, replay or hardware"},
     {"stats", srv_cmd_stats, "phase-balance statistics of a survey database (shares, Wilson CIs, chi-square)"},
     {"export", srv_cmd_export, "export a survey database's lights as GeoJSON, KML, GeoPackage or CSV"},
     {"db", srv_cmd_db, "survey database tools: init, migrate, check, ingest-synthetic"},

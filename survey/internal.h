@@ -8,6 +8,8 @@
 /* Subcommands: argv[0] is the command name; return the exit status. */
 int srv_cmd_delight(int argc, char **argv);
 int srv_cmd_locate(int argc, char **argv);
+int srv_cmd_simulate(int argc, char **argv);
+int srv_cmd_capture(int argc, char **argv);
 int srv_cmd_stats(int argc, char **argv);
 int srv_cmd_export(int argc, char **argv);
 int srv_cmd_db(int argc, char **argv);

@@ -1,0 +1,515 @@
+/* effects.c - the simulator's effects, one stage each (docs/capture.md has the physics and the
+ * sources of every constant). A stage exists in a simulator's pipeline only when its scene lists
+ * the effect; each implementation counts its own calls (cap_sim_effect_calls) so tests can prove
+ * that a disabled effect never ran. */
+#include "capture/sim.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+/* ------------------------------------------------------------------ timing */
+
+/* The grid follows the scene's frequency model: the timeline (cap_ac) was built from it when
+ * the simulator was; windows re-anchor (locked) or drift (free running) against it. */
+gs_status cap_fx_frequency_wander(cap_sim *s, cap_render *r)
+{
+    s->fx_calls[CAP_FX_FREQUENCY_WANDER]++;
+    r->timing = 1;
+    r->items = (unsigned long long)s->C;
+    return GS_OK;
+}
+
+/* The free-running controller's clock error: its period is off by clock_ppm. */
+gs_status cap_fx_free_running_drift(cap_sim *s, cap_render *r)
+{
+    s->fx_calls[CAP_FX_FREE_RUNNING_DRIFT]++;
+    r->timing = 1;
+    r->wcfg.clock_ppm = s->sc.fx.drift.clock_ppm;
+    r->items = (unsigned long long)s->C;
+    return GS_OK;
+}
+
+/* Each window edge lands sigma_us (Gaussian) from where it should: DMD switching and the
+ * controller's interrupt latency. */
+gs_status cap_fx_dmd_jitter(cap_sim *s, cap_render *r)
+{
+    s->fx_calls[CAP_FX_DMD_JITTER]++;
+    r->timing = 1;
+    r->wcfg.jitter_us = s->sc.fx.jitter.sigma_us;
+    r->items = (unsigned long long)s->C;
+    return GS_OK;
+}
+
+/* ------------------------------------------------------------------ extinction */
+
+/* Koschmieder: beta(550 nm) = 3.912 / visibility; Angstrom: beta(lambda) = beta(550)
+ * (lambda / 550)^-alpha; transmission exp(-beta d) per band (shared/BULBS.md). */
+gs_status cap_fx_prepare_extinction(cap_sim *s)
+{
+    s->trans = malloc(sizeof *s->trans * (s->n ? s->n : 1) * (size_t)s->B);
+    if (!s->trans) return gs_fail(GS_ENOMEM, "extinction: out of memory");
+    const cap_effects *fx = &s->sc.fx;
+    double beta550 = 3.912 / fx->extinction.visibility_km;   /* per km */
+    for (size_t l = 0; l < s->n; l++) {
+        double d_km = s->sc.lights[l].distance_m * 1e-3;
+        for (int b = 0; b < s->B; b++) {
+            double beta = beta550 * pow(fx->extinction.wavelength_nm[b] / 550.0, -fx->extinction.angstrom);
+            s->trans[l * (size_t)s->B + (size_t)b] = exp(-beta * d_km);
+        }
+    }
+    return GS_OK;
+}
+
+gs_status cap_fx_extinction(cap_sim *s, cap_render *r)
+{
+    s->fx_calls[CAP_FX_EXTINCTION]++;
+    int B = s->B, L = s->L;
+    for (size_t l = 0; l < s->n; l++)
+        for (int h = 0; h < L; h++)
+            for (int b = 0; b < B; b++)
+                s->E[(l * (size_t)L + (size_t)h) * (size_t)B + (size_t)b] *= s->trans[l * (size_t)B + (size_t)b];
+    r->items = s->n;
+    return GS_OK;
+}
+
+/* ------------------------------------------------------------------ scintillation */
+
+double cap_scintillation_index(const cap_effects *fx, double aperture_mm, double L)
+{
+    if (fx->scint.sigma2 >= 0) return fx->scint.sigma2;
+    if (!(L > 0) || !(fx->scint.cn2 > 0)) return 0.0;
+    double lambda = fx->scint.wavelength_nm * 1e-9, k = 2.0 * M_PI / lambda;
+    /* spherical-wave Rytov variance (Andrews and Phillips, Laser Beam Propagation through
+     * Random Media, 2nd ed., SPIE 2005, Eq. 8.xx): beta0^2 = 0.5 Cn^2 k^(7/6) L^(11/6) */
+    double b2 = 0.5 * fx->scint.cn2 * pow(k, 7.0 / 6.0) * pow(L, 11.0 / 6.0);
+    double b125 = pow(b2, 1.2);
+    /* weak to strong fluctuations (the same book, point source): saturates near 1.6 at 5 km */
+    double s2 = exp(0.49 * b2 / pow(1.0 + 0.56 * b125, 7.0 / 6.0) +
+                    0.51 * b2 / pow(1.0 + 0.69 * b125, 5.0 / 6.0)) - 1.0;
+    if (fx->scint.aperture && aperture_mm > 0) {
+        double D = aperture_mm * 1e-3;
+        s2 /= 1.0 + 0.33 * pow(k * D * D / (4.0 * L), 7.0 / 6.0);
+    }
+    if (fx->scint.source_size_m > 0) {
+        double rho_f = sqrt(lambda * L);   /* Fresnel scale: 2.3 cm at 1 km */
+        double q = fx->scint.source_size_m / rho_f;
+        s2 /= pow(1.0 + q * q, 7.0 / 6.0);
+    }
+    return s2;
+}
+
+gs_status cap_fx_prepare_scintillation(cap_sim *s)
+{
+    s->scint_s2 = malloc(sizeof *s->scint_s2 * (s->n ? s->n : 1));
+    s->scint_rho = malloc(sizeof *s->scint_rho * (s->n ? s->n : 1));
+    if (!s->scint_s2 || !s->scint_rho) return gs_fail(GS_ENOMEM, "scintillation: out of memory");
+    const cap_effects *fx = &s->sc.fx;
+    for (size_t l = 0; l < s->n; l++) {
+        double L = s->sc.lights[l].distance_m;
+        double si = cap_scintillation_index(fx, s->sc.aperture_mm, L);
+        s->scint_s2[l] = log1p(si);   /* log-normal: var(I) / <I>^2 = e^{s2} - 1 */
+        /* spectrum flat to v / rho_F, then falling: a first-order process with that corner,
+         * sampled once per flicker cycle (the windows are far shorter than 1 / corner) */
+        double rho_f = L > 0 ? sqrt(fx->scint.wavelength_nm * 1e-9 * L) : 1.0;
+        double fc = fx->scint.crosswind_m_s / rho_f;
+        s->scint_rho[l] = exp(-2.0 * M_PI * fc * s->half_s);
+    }
+    return GS_OK;
+}
+
+gs_status cap_fx_scintillation(cap_sim *s, cap_render *r)
+{
+    s->fx_calls[CAP_FX_SCINTILLATION]++;
+    int B = s->B, L = s->L;
+    long C = s->C;
+    unsigned long long items = 0;
+    for (size_t l = 0; l < s->n; l++) {
+        double s2 = s->scint_s2[l];
+        if (!(s2 > 0) || !s->fp[l].w) continue;
+        cap_rng rng;
+        cap_rng_init(&rng, s->sc.seed, CAP_TAG_SCINT, ((uint64_t)r->k << 32) | (uint64_t)r->pass, l);
+        double sd = sqrt(s2), rho = s->scint_rho[l], innov = sd * sqrt(1.0 - rho * rho);
+        double x = sd * cap_rng_normal(&rng);
+        for (long c = 0; c < C; c++) {
+            if (c) x = rho * x + innov * cap_rng_normal(&rng);
+            s->scin[c] = exp(x - 0.5 * s2);
+        }
+        items += (unsigned long long)C;
+        double *E = s->E + l * (size_t)L * (size_t)B;
+        if (!s->wcyc) {
+            /* exact windows: every cycle of a level weighs the same */
+            double S[CAP_MAX_LEVELS] = {0};
+            for (long c = 0; c < C; c++) S[r->lev[c]] += s->scin[c];
+            for (int h = L - 2; h >= 0; h--) S[h] += S[h + 1];
+            for (int h = 0; h < L; h++) {
+                double f = r->n_exposed[h] ? S[h] / (double)r->n_exposed[h] : 0.0;
+                for (int b = 0; b < B; b++) E[h * B + b] *= f;
+            }
+        } else {
+            size_t sp = (size_t)s->species[l];
+            for (int b = 0; b < B; b++) {
+                const double *w = s->wcyc + (sp * (size_t)B + (size_t)b) * (size_t)C;
+                double S[CAP_MAX_LEVELS] = {0};
+                for (long c = 0; c < C; c++) S[r->lev[c]] += s->scin[c] * w[c];
+                for (int h = L - 2; h >= 0; h--) S[h] += S[h + 1];
+                for (int h = 0; h < L; h++) {
+                    double Wt = s->Wsp[(sp * (size_t)L + (size_t)h) * (size_t)B + (size_t)b];
+                    E[h * B + b] *= Wt != 0 ? S[h] / Wt : 0.0;
+                }
+            }
+        }
+    }
+    r->items = items;
+    return GS_OK;
+}
+
+/* ------------------------------------------------------------------ PSF */
+
+/* A Gaussian integrated over each pixel, truncated at radius_sigma sigmas and renormalised so
+ * the light's flux is kept (cap_fx_psf deposits through it; sim.c). */
+gs_status cap_fx_prepare_psf(cap_sim *s)
+{
+    double sigma = s->sc.fx.psf.sigma_px;
+    int R = (int)ceil(s->sc.fx.psf.radius_sigma * sigma);
+    if (R > 64) R = 64;
+    int n = 2 * R + 1;
+    s->fp = calloc(s->n ? s->n : 1, sizeof *s->fp);
+    s->fp_w = malloc(sizeof *s->fp_w * (s->n ? s->n : 1) * (size_t)n * (size_t)n);
+    double *box = malloc(sizeof *box * (size_t)n * (size_t)n);
+    if (!s->fp || !s->fp_w || !box) {
+        free(box);
+        return gs_fail(GS_ENOMEM, "psf: out of memory");
+    }
+    size_t off = 0;
+    for (size_t l = 0; l < s->n; l++) {
+        const cap_light *li = &s->sc.lights[l];
+        if (!isfinite(li->x_px) || !isfinite(li->y_px) || li->x_px < -R - 1 ||
+            li->y_px < -R - 1 || li->x_px > s->W + R || li->y_px > s->H + R)
+            continue;
+        int bx, by;
+        cap_sim_gauss_box(li->x_px, li->y_px, sigma, R, box, &bx, &by);
+        int x0 = bx < 0 ? 0 : bx, y0 = by < 0 ? 0 : by;
+        int x1 = bx + n > s->W ? s->W : bx + n, y1 = by + n > s->H ? s->H : by + n;
+        if (x1 <= x0 || y1 <= y0) continue;
+        cap_footprint *f = &s->fp[l];
+        f->x0 = x0;
+        f->y0 = y0;
+        f->w = x1 - x0;
+        f->h = y1 - y0;
+        f->off = off;
+        for (int y = y0; y < y1; y++)
+            for (int x = x0; x < x1; x++) s->fp_w[off++] = box[(y - by) * n + (x - bx)];
+    }
+    free(box);
+    s->fp_n = off;
+    return GS_OK;
+}
+
+/* ------------------------------------------------------------------ skyglow */
+
+/* Forward scattering and glare: a halo of `fraction` of each light's flux, exp(-r / scale),
+ * truncated at radius_scale scales and normalised; flat (no flicker), the same flicker as the
+ * light, or mixed (the light's bulb averaged over the three grid phases). */
+gs_status cap_fx_prepare_skyglow(cap_sim *s)
+{
+    double scale = s->sc.fx.skyglow.scale_px;
+    int R = (int)ceil(s->sc.fx.skyglow.radius_scale * scale);
+    if (R > 256) R = 256;
+    int n = 2 * R + 1;
+    s->glow_r = R;
+    s->glow_k = malloc(sizeof *s->glow_k * (size_t)n * (size_t)n);
+    if (!s->glow_k) return gs_fail(GS_ENOMEM, "skyglow: out of memory");
+    double sum = 0;
+    for (int y = -R; y <= R; y++)
+        for (int x = -R; x <= R; x++) {
+            double r = sqrt((double)(x * x + y * y));
+            double v = r <= R ? exp(-r / scale) : 0.0;
+            s->glow_k[(y + R) * n + (x + R)] = v;
+            sum += v;
+        }
+    for (int i = 0; i < n * n; i++) s->glow_k[i] /= sum;
+    return GS_OK;
+}
+
+gs_status cap_fx_skyglow(cap_sim *s, cap_render *r)
+{
+    s->fx_calls[CAP_FX_SKYGLOW]++;
+    int B = s->B, L = s->L, R = s->glow_r, n = 2 * R + 1;
+    double frac = s->sc.fx.skyglow.fraction;
+    int mode = s->sc.fx.skyglow.flicker;
+    unsigned long long items = 0;
+    double g[CAP_MAX_LEVELS * REC_MAX_BANDS];
+    for (size_t l = 0; l < s->n; l++) {
+        const cap_light *li = &s->sc.lights[l];
+        double cx = floor(li->x_px + 0.5), cy = floor(li->y_px + 0.5);
+        if (!isfinite(cx) || !isfinite(cy) || cx < -R || cy < -R || cx >= s->W + R || cy >= s->H + R)
+            continue;
+        for (int h = 0; h < L; h++)
+            for (int b = 0; b < B; b++) {
+                double t = s->trans ? s->trans[l * (size_t)B + (size_t)b] : 1.0;
+                double f = s->flux[l * (size_t)B + (size_t)b];
+                double v;
+                if (mode == CAP_GLOW_SAME) v = s->E[(l * (size_t)L + (size_t)h) * (size_t)B + (size_t)b];
+                else if (mode == CAP_GLOW_MIXED) {
+                    double w = 0;
+                    for (int j = 0; j < 3; j++)
+                        w += s->Wsp[((size_t)s->glow_sp[l * 3 + (size_t)j] * (size_t)L + (size_t)h) * (size_t)B + (size_t)b];
+                    v = f * t * w / 3.0;
+                } else v = f * t * r->ex[h];
+                g[h * B + b] = frac * v;
+            }
+        int x0 = (int)cx - R, y0 = (int)cy - R;
+        for (int y = y0 < 0 ? 0 : y0; y < y0 + n && y < s->H; y++)
+            for (int x = x0 < 0 ? 0 : x0; x < x0 + n && x < s->W; x++) {
+                size_t p = (size_t)y * (size_t)s->W + (size_t)x;
+                double k = s->glow_k[(y - y0) * n + (x - x0)];
+                int h = r->halv ? r->halv[p] : 0;
+                for (int b = 0; b < B; b++) s->img[p * (size_t)B + (size_t)b] += k * g[h * B + b];
+                items++;
+            }
+    }
+    r->items = items;
+    return GS_OK;
+}
+
+/* ------------------------------------------------------------------ distractors */
+
+/* Signs blinking at their own period (not mains-locked): on during [phase, phase + duty P)
+ * modulo P, sampled at the middle of each exposed window. */
+gs_status cap_fx_blinking_sign(cap_sim *s, cap_render *r)
+{
+    s->fx_calls[CAP_FX_BLINKING_SIGN]++;
+    int B = s->B, L = s->L;
+    unsigned long long items = 0;
+    for (size_t i = 0; i < s->sc.fx.signs.count; i++) {
+        const cap_sign *g = &s->sc.fx.signs.items[i];
+        double on[CAP_MAX_LEVELS] = {0};
+        for (long c = 0; c < s->C; c++) {
+            double t0, t1;
+            cap_sim_cycle_time(s, r, c, &t0, &t1);
+            double ph = fmod(0.5 * (t0 + t1) - g->phase_s, g->period_s);
+            if (ph < 0) ph += g->period_s;
+            if (ph < g->duty * g->period_s) on[r->lev[c]] += (t1 - t0) / s->half_s;
+        }
+        for (int h = L - 2; h >= 0; h--) on[h] += on[h + 1];
+        int x0 = (int)floor(g->x_px), y0 = (int)floor(g->y_px);
+        int w = (int)ceil(g->width_px), hgt = (int)ceil(g->height_px);
+        double per_px = g->flux_e_per_cycle / ((double)w * hgt);
+        for (int y = y0 < 0 ? 0 : y0; y < y0 + hgt && y < s->H; y++)
+            for (int x = x0 < 0 ? 0 : x0; x < x0 + w && x < s->W; x++) {
+                size_t p = (size_t)y * (size_t)s->W + (size_t)x;
+                int h = r->halv ? r->halv[p] : 0;
+                for (int b = 0; b < B; b++)
+                    s->img[p * (size_t)B + (size_t)b] += per_px * g->chroma[b] * on[h];
+                items++;
+            }
+        items += (unsigned long long)s->C;
+    }
+    r->items = items;
+    return GS_OK;
+}
+
+/* Cars driving along a path at constant speed, a new one every period_s: during each exposed
+ * window a car is a point at its position then (through the PSF when the scene has one). */
+gs_status cap_fx_headlights(cap_sim *s, cap_render *r)
+{
+    s->fx_calls[CAP_FX_HEADLIGHTS]++;
+    int B = s->B;
+    int psf = (s->fx >> CAP_FX_PSF) & 1u;
+    double sigma = psf ? s->sc.fx.psf.sigma_px : 0;
+    int R = psf ? (int)ceil(s->sc.fx.psf.radius_sigma * sigma) : 0;
+    if (R > 64) R = 64;
+    int n = 2 * R + 1;
+    double *box = malloc(sizeof *box * (size_t)n * (size_t)n);
+    if (!box) return gs_fail(GS_ENOMEM, "headlights: out of memory");
+    unsigned long long items = 0;
+    for (size_t i = 0; i < s->sc.fx.cars.count; i++) {
+        const cap_car *g = &s->sc.fx.cars.items[i];
+        double dx = g->x1_px - g->x0_px, dy = g->y1_px - g->y0_px;
+        double len = sqrt(dx * dx + dy * dy);
+        for (long c = 0; c < s->C; c++) {
+            double t0, t1;
+            cap_sim_cycle_time(s, r, c, &t0, &t1);
+            double u = fmod(0.5 * (t0 + t1) - g->offset_s, g->period_s);
+            if (u < 0) u += g->period_s;
+            double pos = u * g->speed_px_s;
+            if (pos > len) continue;
+            double x = g->x0_px + (len > 0 ? dx * pos / len : 0);
+            double y = g->y0_px + (len > 0 ? dy * pos / len : 0);
+            double e = g->flux_e_per_cycle * (t1 - t0) / s->half_s;
+            int lev = r->lev[c], bx, by;
+            if (psf) cap_sim_gauss_box(x, y, sigma, R, box, &bx, &by);
+            else {
+                bx = (int)floor(x + 0.5);
+                by = (int)floor(y + 0.5);
+                box[0] = 1.0;
+            }
+            for (int yy = 0; yy < n; yy++) {
+                int py = by + yy;
+                if (py < 0 || py >= s->H) continue;
+                for (int xx = 0; xx < n; xx++) {
+                    int px = bx + xx;
+                    if (px < 0 || px >= s->W) continue;
+                    size_t p = (size_t)py * (size_t)s->W + (size_t)px;
+                    if (r->halv && r->halv[p] > lev) continue;
+                    double wgt = box[yy * n + xx] * e;
+                    for (int b = 0; b < B; b++) s->img[p * (size_t)B + (size_t)b] += wgt * g->chroma[b];
+                    items++;
+                }
+            }
+        }
+    }
+    free(box);
+    r->items = items;
+    return GS_OK;
+}
+
+/* ------------------------------------------------------------------ ambient */
+
+/* Daylight or room light: a pedestal with BRF = 1 (paper Sec. 5.3), e_per_px_cycle per pixel
+ * and flicker cycle, scaled linearly from `top` (row 0) to `bottom` (last row). */
+gs_status cap_fx_ambient(cap_sim *s, cap_render *r)
+{
+    s->fx_calls[CAP_FX_AMBIENT]++;
+    const cap_effects *fx = &s->sc.fx;
+    int B = s->B;
+    for (int y = 0; y < s->H; y++) {
+        double g = s->H > 1 ? fx->ambient.top + (fx->ambient.bottom - fx->ambient.top) * y / (s->H - 1.0)
+                            : fx->ambient.top;
+        double lvl = fx->ambient.e_per_px_cycle * g;
+        s->amb_row[y] = lvl;
+        for (int x = 0; x < s->W; x++) {
+            size_t p = (size_t)y * (size_t)s->W + (size_t)x;
+            double e = lvl * r->ex[r->halv ? r->halv[p] : 0];
+            for (int b = 0; b < B; b++) s->img[p * (size_t)B + (size_t)b] += e * fx->ambient.chroma[b];
+        }
+    }
+    r->items = (unsigned long long)s->W * (unsigned long long)s->H;
+    return GS_OK;
+}
+
+/* ------------------------------------------------------------------ sensor */
+
+/* Photo-electrons are Poisson (one stream per row, so a frame renders the same in any order).
+ * A Poisson count of mean a + b is the sum of independent counts of means a and b, which this
+ * uses for speed without leaving the law: the ambient pedestal (the same mean along a row, per
+ * band and halving level) is drawn by inversion from a cached CDF, the rest (lights, halos,
+ * distractors) separately; a rest below 40 by inversion (with the bound e^-x >= 1 - x
+ * deciding most zeros without an exponential), above by Hormann's PTRS. */
+enum { CAP_POISSON_CDF = 160 };   /* reaches 1 - 1e-16 for means below 40 */
+
+typedef struct {
+    double lam;
+    int n;
+    double cdf[CAP_POISSON_CDF];
+} poisson_cache;
+
+static double poisson_cached(poisson_cache *pc, cap_rng *rng, double lam)
+{
+    if (lam != pc->lam) {
+        double p = exp(-lam), F = p;
+        int k = 0;
+        for (; k < CAP_POISSON_CDF; k++) {
+            pc->cdf[k] = F;
+            if (F >= 1.0) break;
+            p *= lam / (k + 1);
+            F += p;
+        }
+        pc->n = k < CAP_POISSON_CDF ? k + 1 : CAP_POISSON_CDF;
+        pc->lam = lam;
+    }
+    double u = cap_rng_uniform(rng);
+    int k = 0;
+    while (k < pc->n - 1 && u > pc->cdf[k]) k++;
+    return k;
+}
+
+static double poisson_rest(cap_rng *rng, double lam)
+{
+    if (!(lam > 0)) return 0;
+    if (lam >= 40.0) return cap_rng_poisson(rng, lam);
+    double u = cap_rng_uniform(rng);
+    if (u <= 1.0 - lam) return 0;   /* u <= 1 - lam <= e^-lam */
+    double p = exp(-lam), F = p;
+    int k = 0;
+    while (u > F && k < 400) {
+        k++;
+        p *= lam / k;
+        F += p;
+    }
+    return k;
+}
+
+gs_status cap_fx_shot_noise(cap_sim *s, cap_render *r)
+{
+    s->fx_calls[CAP_FX_SHOT_NOISE]++;
+    int B = s->B, L = s->L;
+    size_t row = (size_t)s->W * (size_t)B;
+    poisson_cache *pc = malloc(sizeof *pc * (size_t)B * (size_t)L);
+    if (!pc) return gs_fail(GS_ENOMEM, "shot noise: out of memory");
+    for (int i = 0; i < B * L; i++) pc[i].lam = -1;
+    int amb = (s->fx >> CAP_FX_AMBIENT) & 1u;
+    for (int y = 0; y < s->H; y++) {
+        cap_rng rng;
+        cap_rng_init(&rng, s->sc.seed, CAP_TAG_SHOT, ((uint64_t)r->k << 32) | (uint64_t)r->pass, (uint64_t)y);
+        double *v = s->img + (size_t)y * row;
+        double base_row = amb ? s->amb_row[y] : 0.0;
+        for (int x = 0; x < s->W; x++) {
+            int h = r->halv ? r->halv[(size_t)y * (size_t)s->W + (size_t)x] : 0;
+            for (int b = 0; b < B; b++) {
+                double *px = &v[(size_t)x * (size_t)B + (size_t)b];
+                double lam = *px;
+                if (!(lam > 0)) continue;
+                double base = base_row * s->sc.fx.ambient.chroma[b] * r->ex[h];
+                if (base > lam) base = lam;
+                double n = base > 0 ? poisson_cached(&pc[h * B + b], &rng, base) : 0.0;
+                *px = n + poisson_rest(&rng, lam - base);
+            }
+        }
+    }
+    free(pc);
+    r->items = (unsigned long long)s->H * row;
+    return GS_OK;
+}
+
+/* The pixel's well holds full_well_e electrons at most. */
+gs_status cap_fx_saturation(cap_sim *s, cap_render *r)
+{
+    s->fx_calls[CAP_FX_SATURATION]++;
+    size_t n = (size_t)s->W * (size_t)s->H * (size_t)s->B;
+    double fw = s->sc.full_well_e;
+    for (size_t i = 0; i < n; i++)
+        if (s->img[i] > fw) s->img[i] = fw;
+    r->items = n;
+    return GS_OK;
+}
+
+/* Gaussian read noise, sigma_e / gain DN per sample (one stream per row). */
+gs_status cap_fx_read_noise(cap_sim *s, cap_render *r)
+{
+    s->fx_calls[CAP_FX_READ_NOISE]++;
+    size_t row = (size_t)s->W * (size_t)s->B;
+    double sd = s->read_dn;
+    for (int y = 0; y < s->H; y++) {
+        cap_rng rng;
+        cap_rng_init(&rng, s->sc.seed, CAP_TAG_READ, ((uint64_t)r->k << 32) | (uint64_t)r->pass, (uint64_t)y);
+        double *v = s->img + (size_t)y * row;
+        for (size_t i = 0; i < row; i++) v[i] += sd * cap_rng_normal(&rng);
+    }
+    r->items = (unsigned long long)s->H * row;
+    return GS_OK;
+}
+
+/* The ADC: integer DN (round half up), clipped to 0 .. 2^bit_depth - 1. */
+gs_status cap_fx_adc(cap_sim *s, cap_render *r)
+{
+    s->fx_calls[CAP_FX_ADC]++;
+    size_t n = (size_t)s->W * (size_t)s->H * (size_t)s->B;
+    double mx = s->adc_max;
+    for (size_t i = 0; i < n; i++) {
+        double v = floor(s->img[i] + 0.5);
+        s->img[i] = v < 0 ? 0 : v > mx ? mx : v;
+    }
+    r->items = n;
+    return GS_OK;
+}

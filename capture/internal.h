@@ -1,0 +1,139 @@
+/* internal.h - capture/ internals shared between its own files; other modules never include it
+ * (tests may). Random streams, the BRF integral tables, the backend vtable, the JSON line
+ * locator of the scene parser and the videoio shim's C interface. */
+#ifndef GRIDSURVEY_CAPTURE_INTERNAL_H
+#define GRIDSURVEY_CAPTURE_INTERNAL_H
+
+#include "capture/capture.h"
+
+#include <math.h>
+#include <stdint.h>
+
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
+
+/* ------------------------------------------------------------------ random streams */
+
+/* xoshiro256** (Blackman and Vigna, 2018) seeded through splitmix64. Every random process of
+ * the simulator draws from its own stream, keyed by (scene seed, process tag, indices), so that
+ * enabling one effect never changes another's numbers and a resumed capture re-renders a frame
+ * bit for bit. */
+typedef struct {
+    uint64_t s[4];
+} cap_rng;
+
+static inline uint64_t cap_splitmix64(uint64_t *x)
+{
+    uint64_t z = (*x += 0x9e3779b97f4a7c15ull);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+    return z ^ (z >> 31);
+}
+
+/* Stream for (seed, tag, a, b): distinct tags / indices give independent streams. */
+void cap_rng_init(cap_rng *r, uint64_t seed, uint32_t tag, uint64_t a, uint64_t b);
+
+static inline uint64_t cap_rng_u64(cap_rng *r)
+{
+    uint64_t *s = r->s;
+    uint64_t x = s[1] * 5u;
+    uint64_t result = ((x << 7) | (x >> 57)) * 9u;
+    uint64_t t = s[1] << 17;
+    s[2] ^= s[0];
+    s[3] ^= s[1];
+    s[1] ^= s[2];
+    s[0] ^= s[3];
+    s[2] ^= t;
+    s[3] = (s[3] << 45) | (s[3] >> 19);
+    return result;
+}
+
+/* Uniform in (0, 1): never 0 or 1. */
+static inline double cap_rng_uniform(cap_rng *r)
+{
+    return ((double)(cap_rng_u64(r) >> 11) + 0.5) * 0x1.0p-53;
+}
+
+/* Standard normal (Marsaglia and Tsang's ziggurat, 128 layers). */
+double cap_rng_normal(cap_rng *r);
+/* Poisson with mean lambda >= 0 (inversion below 12, Hormann's PTRS above: exact in law). */
+double cap_rng_poisson(cap_rng *r, double lambda);
+
+/* Stream tags (one per random process). */
+enum {
+    CAP_TAG_FREQ = 1,      /* random-walk grid frequency */
+    CAP_TAG_JITTER,        /* DMD edge jitter, per acquisition */
+    CAP_TAG_SCINT,         /* scintillation, per acquisition */
+    CAP_TAG_SHOT,          /* photon shot noise, per acquisition */
+    CAP_TAG_READ,          /* read noise, per acquisition */
+    CAP_TAG_GRID_GEN,      /* street-grid light generator */
+    CAP_TAG_HEADLIGHTS     /* car start offsets */
+};
+
+/* ------------------------------------------------------- BRF integral tables (Eq. 5) */
+
+/* The antiderivative of a BRF band as a periodic table: the BRF is the trigonometric
+ * polynomial of its samples (recognize.h), B(x) = 1 + sum_h ..., and
+ *   F(x) = int_0^x B = x + G(x) - G(0),  G periodic with G' = B - 1,
+ * tabulated with B at `n` points per cycle (zero-padded inverse DFT: exact at the nodes) and
+ * evaluated between them by cubic Hermite interpolation (error <= h^4 max|B'''| / 384). */
+typedef struct {
+    int n;          /* table points per cycle */
+    int bands;
+    double *G, *B;  /* bands * n each, owned: G and B - mean at x = j / n */
+    double mean[REC_MAX_BANDS];
+} cap_brf_table;
+
+gs_status cap_brf_table_init(cap_brf_table *t, const rec_brf *b, int n);
+void cap_brf_table_release(cap_brf_table *t);
+/* int_a^b B(x - shift) dx for one band (any real a <= b, in cycles). */
+double cap_brf_table_integral(const cap_brf_table *t, int band, double shift, double a, double b);
+
+/* ------------------------------------------------------------------ backends */
+
+typedef struct {
+    const char *name;
+    gs_status (*info)(void *self, cap_acq_info *info);
+    gs_status (*acquire)(void *self, const cap_acquisition *a, unsigned char *halvings,
+                         unsigned short *raw, double *cycles);
+    void (*free)(void *self);
+} cap_backend_ops;
+
+/* Wraps self with ops into a backend handle (takes ownership of self, also on failure). */
+gs_status cap_backend_wrap(const cap_backend_ops *ops, void *self, cap_backend **out);
+/* The backend's self pointer when it was made with ops, else NULL. */
+void *cap_backend_self(cap_backend *b, const cap_backend_ops *ops);
+
+/* 64-bit FNV-1a (progress file checksums and configuration fingerprints). */
+uint64_t cap_fnv1a(uint64_t h, const void *data, size_t n);
+#define CAP_FNV_INIT 0xcbf29ce484222325ull
+
+/* Read a whole file (malloc'd, NUL-terminated); GS_EIO / GS_ENOTFOUND naming it. */
+gs_status cap_slurp(const char *path, char **text, size_t *size);
+/* Write data to dir/name atomically (temporary file, fsync, rename). */
+gs_status cap_write_atomic(const char *dir, const char *name, const void *data, size_t size);
+
+/* -------------------------------------------------- the videoio shim (videoio_shim.cpp) */
+
+/* A camera through OpenCV VideoCapture (opencv_videoio). Every C++ exception is caught at the
+ * boundary. source: a device index ("0"), a device path or URL, or, with images = 1, an image
+ * sequence pattern ("dir/img_%03d.png", CAP_IMAGES; 16-bit PNGs are read as they are). */
+typedef struct cap_vio cap_vio;
+#ifdef __cplusplus
+extern "C" {
+#endif
+gs_status cap_vio_open(const char *source, int images, cap_vio **out);
+void cap_vio_close(cap_vio *v);
+/* Sets CAP_PROP_EXPOSURE (the backend's unit: seconds for most V4L2 drivers through OpenCV's
+ * mapping) and reads it back into *actual (NaN when the backend has no exposure control). */
+gs_status cap_vio_set_exposure(cap_vio *v, double exposure, double *actual);
+/* Grabs the next frame as width x height x bands 16-bit samples (R, G, B order for 3 bands; an
+ * 8-bit camera is scaled by 257). GS_EIO when no frame comes, GS_EFORMAT for another size or
+ * channel count. */
+gs_status cap_vio_read(cap_vio *v, int width, int height, int bands, unsigned short *out);
+#ifdef __cplusplus
+}
+#endif
+
+#endif

@@ -1,0 +1,452 @@
+/* loop.c - the acquisition loop behind one backend interface (sim, replay, hardware): frames
+ * 0..K-1, each with the ACam's HDR loop (paper Sec. 6: repeat with the rows of saturated pixels
+ * halved until few pixels saturate or rows cannot be halved), written to the capture directory
+ * as soon as it is acquired (rec_capture_write_frame: atomic), then capture.json. Progress on a
+ * TTY. acquisition.json makes an interrupted capture resumable: it holds the configuration's
+ * fingerprint and each finished frame's files with sizes and FNV-1a checksums and the index of
+ * its first acquisition on the capture's timeline, so a frame that is re-acquired comes out the
+ * same as it would have (deterministic backends) and intact frames are never acquired again. */
+#include "capture/internal.h"
+
+#include <dirent.h>
+#include <errno.h>
+#include <jansson.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <time.h>
+#include <unistd.h>
+
+#define PROGRESS_FILE "acquisition.json"
+#define PROGRESS_FORMAT "gridsurvey-acquisition/1"
+
+struct cap_backend {
+    const cap_backend_ops *ops;
+    void *self;
+};
+
+gs_status cap_backend_wrap(const cap_backend_ops *ops, void *self, cap_backend **out)
+{
+    *out = NULL;
+    cap_backend *b = calloc(1, sizeof *b);
+    if (!b) {
+        ops->free(self);
+        return gs_fail(GS_ENOMEM, "backend: out of memory");
+    }
+    b->ops = ops;
+    b->self = self;
+    *out = b;
+    return GS_OK;
+}
+
+void *cap_backend_self(cap_backend *b, const cap_backend_ops *ops)
+{
+    return b && b->ops == ops ? b->self : NULL;
+}
+
+void cap_backend_free(cap_backend *b)
+{
+    if (!b) return;
+    b->ops->free(b->self);
+    free(b);
+}
+
+const char *cap_backend_name(const cap_backend *b)
+{
+    return b ? b->ops->name : "(none)";
+}
+
+gs_status cap_backend_info(cap_backend *b, cap_acq_info *info)
+{
+    return b->ops->info(b->self, info);
+}
+
+gs_status cap_backend_acquire(cap_backend *b, const cap_acquisition *a, unsigned char *halvings,
+                              unsigned short *raw, double *cycles)
+{
+    return b->ops->acquire(b->self, a, halvings, raw, cycles);
+}
+
+void cap_loop_opts_default(cap_loop_opts *o)
+{
+    o->progress = -1;
+    o->stop_after = 0;
+    o->force = 0;
+    o->hdr = -1;
+    o->hdr_max_rounds = -1;
+    o->hdr_max_saturated_px = -1;
+}
+
+/* ------------------------------------------------------------------ progress file */
+
+typedef struct {
+    int done;                  /* listed and its files intact */
+    long index;                /* its first acquisition */
+    long old_index;            /* listed but damaged: the index to acquire it at again (or -1) */
+    int passes;
+    double cycles;
+    long bytes, hdr_bytes;
+    uint64_t fnv, hdr_fnv;
+} frame_state;
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* Size and checksum of dir/name; -1 bytes when it cannot be read. */
+static void file_sum(const char *dir, const char *name, long *bytes, uint64_t *fnv)
+{
+    char path[CAP_PATH_MAX + REC_PATH_MAX + 2], *text = NULL;
+    size_t n = 0;
+    *bytes = -1;
+    *fnv = 0;
+    snprintf(path, sizeof path, "%s/%s", dir, name);
+    if (cap_slurp(path, &text, &n) != GS_OK) return;
+    *bytes = (long)n;
+    *fnv = cap_fnv1a(CAP_FNV_INIT, text, n);
+    free(text);
+}
+
+static gs_status write_progress(const char *dir, uint64_t fp, long acquisitions, int K,
+                                const rec_capture *cap, const frame_state *fs, int complete)
+{
+    /* plain text, one frame a line, deterministic */
+    size_t cap_n = 512 + (size_t)K * 256;
+    char *t = malloc(cap_n);
+    if (!t) return gs_fail(GS_ENOMEM, "progress: out of memory");
+    size_t u = 0;
+    u += (size_t)snprintf(t + u, cap_n - u,
+                          "{\n  \"format\": \"%s\",\n  \"fingerprint\": \"%016llx\",\n"
+                          "  \"acquisitions\": %ld,\n  \"complete\": %s,\n  \"frames\": [",
+                          PROGRESS_FORMAT, (unsigned long long)fp, acquisitions,
+                          complete ? "true" : "false");
+    int first = 1;
+    for (int k = 0; k < K; k++) {
+        if (!fs[k].done) continue;
+        u += (size_t)snprintf(t + u, cap_n - u,
+                              "%s\n    {\"k\": %d, \"index\": %ld, \"passes\": %d, \"cycles\": %.17g, "
+                              "\"file\": \"%s\", \"bytes\": %ld, \"fnv\": \"%016llx\"",
+                              first ? "" : ",", k, fs[k].index, fs[k].passes, fs[k].cycles,
+                              cap->frames[k].file, fs[k].bytes, (unsigned long long)fs[k].fnv);
+        if (cap->frames[k].hdr_map[0])
+            u += (size_t)snprintf(t + u, cap_n - u,
+                                  ", \"hdr_map\": \"%s\", \"hdr_bytes\": %ld, \"hdr_fnv\": \"%016llx\"",
+                                  cap->frames[k].hdr_map, fs[k].hdr_bytes,
+                                  (unsigned long long)fs[k].hdr_fnv);
+        u += (size_t)snprintf(t + u, cap_n - u, "}");
+        first = 0;
+    }
+    u += (size_t)snprintf(t + u, cap_n - u, "\n  ]\n}\n");
+    gs_status s = cap_write_atomic(dir, PROGRESS_FILE, t, u);
+    free(t);
+    return s;
+}
+
+/* Reads dir/acquisition.json: frames whose files are intact become done. *found = 0 when there
+ * is none. */
+static gs_status read_progress(const char *dir, uint64_t fp, int K, const rec_capture *cap,
+                               frame_state *fs, long *acquisitions, int *complete, int *found)
+{
+    char path[CAP_PATH_MAX + 32], *text = NULL;
+    snprintf(path, sizeof path, "%s/%s", dir, PROGRESS_FILE);
+    *found = 0;
+    *complete = 0;
+    gs_status s = cap_slurp(path, &text, NULL);
+    if (s == GS_ENOTFOUND) return GS_OK;
+    if (s != GS_OK) return s;
+    json_error_t err;
+    json_t *root = json_loads(text, 0, &err);
+    free(text);
+    if (!root) return gs_fail(GS_EFORMAT, "%s:%d:%d: JSON syntax: %s", path, err.line, err.column, err.text);
+    const char *f = json_string_value(json_object_get(root, "format"));
+    const char *fps = json_string_value(json_object_get(root, "fingerprint"));
+    json_t *frames = json_object_get(root, "frames");
+    if (!f || strcmp(f, PROGRESS_FORMAT) || !fps || !json_is_array(frames)) {
+        json_decref(root);
+        return gs_fail(GS_EFORMAT, "%s: field format: expected \"%s\" with fingerprint and frames",
+                       path, PROGRESS_FORMAT);
+    }
+    char want[20];
+    snprintf(want, sizeof want, "%016llx", (unsigned long long)fp);
+    if (strcmp(fps, want)) {
+        char had[40];
+        snprintf(had, sizeof had, "%s", fps);
+        json_decref(root);
+        return gs_fail(GS_EINVAL, "%s holds an acquisition of another configuration (%s: "
+                       "fingerprint %s, this one %s): use another directory or --force to "
+                       "start again", dir, PROGRESS_FILE, had, want);
+    }
+    *found = 1;
+    *acquisitions = (long)json_integer_value(json_object_get(root, "acquisitions"));
+    *complete = json_is_true(json_object_get(root, "complete"));
+    for (size_t i = 0; i < json_array_size(frames); i++) {
+        json_t *o = json_array_get(frames, i);
+        json_int_t k = json_integer_value(json_object_get(o, "k"));
+        if (k < 0 || k >= K) continue;
+        frame_state *e = &fs[k];
+        e->index = (long)json_integer_value(json_object_get(o, "index"));
+        e->passes = (int)json_integer_value(json_object_get(o, "passes"));
+        e->cycles = json_number_value(json_object_get(o, "cycles"));
+        long bytes = (long)json_integer_value(json_object_get(o, "bytes"));
+        const char *fnv = json_string_value(json_object_get(o, "fnv"));
+        const char *file = json_string_value(json_object_get(o, "file"));
+        uint64_t got;
+        long got_bytes;
+        int ok = file && fnv && !strcmp(file, cap->frames[k].file);
+        if (ok) {
+            file_sum(dir, file, &got_bytes, &got);
+            char hex[20];
+            snprintf(hex, sizeof hex, "%016llx", (unsigned long long)got);
+            ok = got_bytes == bytes && !strcmp(hex, fnv);
+            e->bytes = bytes;
+            e->fnv = got;
+        }
+        if (ok && cap->frames[k].hdr_map[0]) {
+            const char *hm = json_string_value(json_object_get(o, "hdr_map"));
+            const char *hf = json_string_value(json_object_get(o, "hdr_fnv"));
+            long hb = (long)json_integer_value(json_object_get(o, "hdr_bytes"));
+            ok = hm && hf && !strcmp(hm, cap->frames[k].hdr_map);
+            if (ok) {
+                file_sum(dir, hm, &got_bytes, &got);
+                char hex[20];
+                snprintf(hex, sizeof hex, "%016llx", (unsigned long long)got);
+                ok = got_bytes == hb && !strcmp(hex, hf);
+                e->hdr_bytes = hb;
+                e->hdr_fnv = got;
+            }
+        }
+        e->done = ok && e->cycles > 0;
+        e->old_index = e->done || e->index < 0 ? -1 : e->index;
+    }
+    json_decref(root);
+    return GS_OK;
+}
+
+/* Temporary files a killed writer left behind (".NAME.<...>tmp<...>" for the files the loop
+ * writes: frames, maps, capture.json, acquisition.json, truth.json). */
+static void remove_stale_temporaries(const char *dir)
+{
+    DIR *d = opendir(dir);
+    if (!d) return;
+    struct dirent *e;
+    while ((e = readdir(d))) {
+        const char *n = e->d_name;
+        if (n[0] != '.' || !strstr(n, "tmp")) continue;
+        int ours = !strncmp(n + 1, "frame_", 6) || !strncmp(n + 1, "hdr_", 4) ||
+                   !strncmp(n + 1, "capture.json.", 13) || !strncmp(n + 1, PROGRESS_FILE ".", 17) ||
+                   !strncmp(n + 1, "truth.json.", 11);
+        if (!ours) continue;
+        char path[CAP_PATH_MAX + 300];
+        snprintf(path, sizeof path, "%s/%s", dir, n);
+        unlink(path);
+    }
+    closedir(d);
+}
+
+/* ------------------------------------------------------------------ the loop */
+
+gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_in,
+                       cap_loop_report *rep)
+{
+    cap_loop_opts o;
+    if (o_in) o = *o_in;
+    else cap_loop_opts_default(&o);
+    cap_loop_report dummy;
+    if (!rep) rep = &dummy;
+    memset(rep, 0, sizeof *rep);
+    double t_start = now_s();
+    cap_acq_info info;
+    gs_status s = cap_backend_info(b, &info);
+    if (s != GS_OK) return s;
+    int hdr = o.hdr < 0 ? info.hdr : o.hdr;
+    if (info.fixed_halvings) hdr = 0;
+    if (hdr && info.max_halvings < 1)
+        return gs_fail(GS_EINVAL, "%s backend: HDR needs masks that can be halved (this "
+                       "configuration allows %d rounds)", cap_backend_name(b), info.max_halvings);
+    int rounds = o.hdr_max_rounds >= 0 ? o.hdr_max_rounds : info.hdr_max_rounds;
+    if (rounds <= 0 || rounds > info.max_halvings) rounds = info.max_halvings;
+    int max_sat = o.hdr_max_saturated_px >= 0 ? o.hdr_max_saturated_px : info.hdr_max_saturated_px;
+    if (!hdr) rounds = 0;
+    uint64_t fp = info.fingerprint;
+    int cfg[3] = {hdr, rounds, max_sat};
+    fp = cap_fnv1a(fp, cfg, sizeof cfg);
+    int progress = o.progress < 0 ? isatty(STDERR_FILENO) : o.progress;
+    int K = info.K;
+    size_t plane = (size_t)info.width * (size_t)info.height;
+    size_t nraw = plane * (size_t)info.bands;
+
+    rec_capture cap;
+    memset(&cap, 0, sizeof cap);
+    cap.grid_hz = info.grid_hz;
+    cap.K = K;
+    cap.bands = info.bands;
+    cap.width = info.width;
+    cap.height = info.height;
+    cap.saturation_dn = info.saturation_dn;
+    cap.black_level_dn = info.black_level_dn;
+    cap.gain_e_per_dn = info.gain_e_per_dn;
+    cap.read_noise_dn = info.read_noise_dn;
+    cap.locked = info.locked;
+    snprintf(cap.utc, sizeof cap.utc, "%s", info.utc);
+    unsigned short *raw = malloc(nraw * sizeof *raw);
+    unsigned char *halv = calloc(plane ? plane : 1, 1);
+    cap.frames = calloc((size_t)K, sizeof *cap.frames);
+    frame_state *fs = calloc((size_t)K, sizeof *fs);
+    if (info.station_json) cap.station_json = strdup(info.station_json);
+    if (!raw || !halv || !cap.frames || !fs || (info.station_json && !cap.station_json)) {
+        s = gs_fail(GS_ENOMEM, "capture loop: cannot hold a %d x %d x %d frame", info.width,
+                    info.height, info.bands);
+        goto done;
+    }
+    int maps = hdr || info.fixed_halvings;
+    for (int k = 0; k < K; k++) {
+        snprintf(cap.frames[k].file, REC_PATH_MAX, "frame_%03d.png", k);
+        cap.frames[k].k = k;
+        cap.frames[k].cycles = (double)info.cycles;
+        if (maps) snprintf(cap.frames[k].hdr_map, REC_PATH_MAX, "hdr_%03d.png", k);
+        fs[k].index = -1;
+        fs[k].old_index = -1;
+    }
+    /* resume */
+    remove_stale_temporaries(dir);
+    long acquisitions = 0;
+    int complete = 0, found = 0;
+    if (!o.force) {
+        s = read_progress(dir, fp, K, &cap, fs, &acquisitions, &complete, &found);
+        if (s != GS_OK) goto done;
+    }
+    if (!found) {
+        for (int k = 0; k < K; k++) {
+            memset(&fs[k], 0, sizeof fs[k]);
+            fs[k].index = fs[k].old_index = -1;
+        }
+        acquisitions = 0;
+    }
+    for (int k = 0; k < K; k++)
+        if (fs[k].done) {
+            cap.frames[k].cycles = fs[k].cycles;
+            rep->frames_kept++;
+        }
+    if (found && complete && rep->frames_kept == K) {
+        char path[CAP_PATH_MAX + 32];
+        struct stat sb;
+        snprintf(path, sizeof path, "%s/capture.json", dir);
+        if (stat(path, &sb) == 0) {
+            rep->complete = 1;
+            rep->acquisitions = acquisitions;
+            if (progress) fprintf(stderr, "capture: %s is complete (%d frames); nothing to do\n", dir, K);
+            s = GS_OK;
+            goto done;
+        }
+    }
+    /* a 2-frame view of the capture writes one frame from the single frame buffer */
+    rec_frame_info view_frames[2];
+    rec_capture view = cap;
+    view.K = 2;
+    view.frames = view_frames;
+    view.raw = raw;
+    view.halvings = maps ? halv : NULL;
+    view.station_json = NULL;
+    int stopped = 0;
+    for (int k = 0; k < K; k++) {
+        if (fs[k].done) continue;
+        if (o.stop_after > 0 && rep->frames_acquired >= o.stop_after) {
+            stopped = 1;
+            break;
+        }
+        /* a frame listed but damaged keeps its place on the timeline */
+        long index = fs[k].old_index >= 0 ? fs[k].old_index : acquisitions;
+        memset(halv, 0, plane);
+        int pass = 0;
+        size_t n_sat = 0;
+        double cycles = (double)info.cycles;
+        for (;;) {
+            cap_acquisition a = {k, pass, index + pass};
+            s = cap_backend_acquire(b, &a, halv, raw, &cycles);
+            if (s != GS_OK) goto done;
+            if (!hdr) {
+                if (progress) {
+                    n_sat = 0;
+                    for (size_t p = 0; p < plane; p++) {
+                        int sat = 0;
+                        for (int bd = 0; bd < info.bands; bd++)
+                            sat |= raw[p * (size_t)info.bands + (size_t)bd] >= info.saturation_dn;
+                        n_sat += (size_t)sat;
+                    }
+                }
+                break;
+            }
+            size_t halved = 0;
+            /* the HDR loop: halve the rows of saturated pixels (paper Sec. 6) */
+            if (pass >= rounds) {
+                s = cap_hdr_update(raw, info.width, info.height, info.bands, info.saturation_dn,
+                                   0, halv, &n_sat, &halved);
+                if (s != GS_OK) goto done;
+                break;
+            }
+            unsigned char *trial = malloc(plane);
+            if (!trial) {
+                s = gs_fail(GS_ENOMEM, "capture loop: out of memory");
+                goto done;
+            }
+            memcpy(trial, halv, plane);
+            s = cap_hdr_update(raw, info.width, info.height, info.bands, info.saturation_dn,
+                               rounds, trial, &n_sat, &halved);
+            if (s != GS_OK || n_sat <= (size_t)max_sat || halved == 0) {
+                free(trial);
+                if (s != GS_OK) goto done;
+                break;
+            }
+            memcpy(halv, trial, plane);
+            free(trial);
+            pass++;
+            if (progress)
+                fprintf(stderr, "\rcapture: frame %d/%d  HDR round %d: %zu saturated px, %zu halved   ",
+                        k + 1, K, pass, n_sat, halved);
+        }
+        rep->saturated_px += n_sat;
+        if (pass + 1 > rep->max_passes) rep->max_passes = pass + 1;
+        if (index + pass + 1 > acquisitions) acquisitions = index + pass + 1;
+        cap.frames[k].cycles = cycles;
+        view_frames[0] = cap.frames[k];
+        view_frames[1] = cap.frames[k];
+        snprintf(view_frames[1].file, REC_PATH_MAX, "unused_%03d.png", k);
+        view_frames[1].hdr_map[0] = '\0';
+        s = rec_capture_write_frame(dir, &view, 0);
+        if (s != GS_OK) goto done;
+        fs[k].done = 1;
+        fs[k].index = index;
+        fs[k].passes = pass + 1;
+        fs[k].cycles = cycles;
+        file_sum(dir, cap.frames[k].file, &fs[k].bytes, &fs[k].fnv);
+        if (maps) file_sum(dir, cap.frames[k].hdr_map, &fs[k].hdr_bytes, &fs[k].hdr_fnv);
+        s = write_progress(dir, fp, acquisitions, K, &cap, fs, 0);
+        if (s != GS_OK) goto done;
+        rep->frames_acquired++;
+        if (progress)
+            fprintf(stderr, "\rcapture: frame %d/%d acquired (%d pass%s, %zu saturated px)  %.1f s   ",
+                    k + 1, K, pass + 1, pass ? "es" : "", n_sat, now_s() - t_start);
+    }
+    if (progress) fputc('\n', stderr);
+    rep->acquisitions = acquisitions;
+    if (stopped) {
+        s = GS_OK;
+        goto done;
+    }
+    s = rec_capture_write_json(dir, &cap);
+    if (s != GS_OK) goto done;
+    s = write_progress(dir, fp, acquisitions, K, &cap, fs, 1);
+    if (s != GS_OK) goto done;
+    rep->complete = 1;
+done:
+    rep->seconds = now_s() - t_start;
+    free(raw);
+    free(halv);
+    free(fs);
+    rec_capture_release(&cap);
+    return s;
+}

@@ -1,0 +1,673 @@
+/* sim.c - the scene simulator: builds, once per scene, the per-light tables and a pipeline of
+ * stages holding exactly the effects the scene lists (docs/capture.md), then renders each
+ * acquisition through it. Without effects a frame is the exact Eq. 5 integral through the
+ * mask matrix (acam.c): value = C/2^h * Q(sigma) * i_k(sigma) * flux / K per light. */
+#include "capture/sim.h"
+
+#include <jansson.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static gs_status scene_copy(cap_scene *dst, const cap_scene *src)
+{
+    *dst = *src;
+    dst->lights = NULL;
+    dst->fx.signs.items = NULL;
+    dst->fx.cars.items = NULL;
+    if (src->n_lights) {
+        dst->lights = malloc(src->n_lights * sizeof *dst->lights);
+        if (!dst->lights) return gs_fail(GS_ENOMEM, "simulator: out of memory");
+        memcpy(dst->lights, src->lights, src->n_lights * sizeof *dst->lights);
+    }
+    if (src->fx.signs.count) {
+        dst->fx.signs.items = malloc(src->fx.signs.count * sizeof *dst->fx.signs.items);
+        if (!dst->fx.signs.items) return gs_fail(GS_ENOMEM, "simulator: out of memory");
+        memcpy(dst->fx.signs.items, src->fx.signs.items,
+               src->fx.signs.count * sizeof *dst->fx.signs.items);
+    }
+    if (src->fx.cars.count) {
+        dst->fx.cars.items = malloc(src->fx.cars.count * sizeof *dst->fx.cars.items);
+        if (!dst->fx.cars.items) return gs_fail(GS_ENOMEM, "simulator: out of memory");
+        memcpy(dst->fx.cars.items, src->fx.cars.items,
+               src->fx.cars.count * sizeof *dst->fx.cars.items);
+    }
+    return GS_OK;
+}
+
+/* ------------------------------------------------------------------ base stages */
+
+static gs_status st_windows(cap_sim *s, cap_render *r)
+{
+    if (!r->timing) return GS_OK;
+    r->items = (unsigned long long)s->C;
+    return cap_ac_windows(s->ac, &r->wcfg, &r->win);
+}
+
+static gs_status st_eq5(cap_sim *s, cap_render *r)
+{
+    int B = s->B, L = s->L, K = s->K;
+    for (int h = 0; h < L; h++) r->n_exposed[h] = cap_exposed_cycles(s->M, 0, s->C, h);
+    if (!r->timing) {
+        for (int h = 0; h < L; h++) r->ex[h] = (double)r->n_exposed[h] / K;
+        for (size_t i = 0; i < s->n_sp; i++)
+            for (int h = 0; h < L; h++)
+                for (int b = 0; b < B; b++)
+                    s->Wsp[(i * (size_t)L + (size_t)h) * (size_t)B + (size_t)b] =
+                        (double)r->n_exposed[h] * s->sp[i].i_k[b * K + r->k] / K;
+        return GS_OK;
+    }
+    memset(s->Wsp, 0, sizeof *s->Wsp * s->n_sp * (size_t)L * (size_t)B);
+    for (int h = 0; h < L; h++) r->ex[h] = 0;
+    for (long c = 0; c < s->C; c++) {
+        int lev = r->lev[c];
+        double t0 = r->win.t0_s[c], t1 = r->win.t1_s[c];
+        double p0 = r->win.phase0[c], p1 = r->win.phase1[c];
+        double dur = (t1 - t0) / s->half_s;
+        for (int h = 0; h <= lev; h++) r->ex[h] += dur;
+        double scale = (t1 - t0) / ((p1 - p0) * s->half_s);
+        for (size_t i = 0; i < s->n_sp; i++) {
+            const cap_brf_table *t = &s->tables[s->sp[i].bulb];
+            for (int b = 0; b < B; b++) {
+                double w = scale * cap_brf_table_integral(t, b, s->sp[i].shift, p0, p1);
+                if (s->wcyc) s->wcyc[(i * (size_t)B + (size_t)b) * (size_t)s->C + (size_t)c] = w;
+                for (int h = 0; h <= lev; h++)
+                    s->Wsp[(i * (size_t)L + (size_t)h) * (size_t)B + (size_t)b] += w;
+            }
+        }
+    }
+    return GS_OK;
+}
+
+static gs_status st_lights(cap_sim *s, cap_render *r)
+{
+    (void)r;
+    int B = s->B, L = s->L;
+    for (size_t l = 0; l < s->n; l++) {
+        size_t sp = (size_t)s->species[l];
+        for (int h = 0; h < L; h++)
+            for (int b = 0; b < B; b++)
+                s->E[(l * (size_t)L + (size_t)h) * (size_t)B + (size_t)b] =
+                    s->flux[l * (size_t)B + (size_t)b] *
+                    s->Wsp[(sp * (size_t)L + (size_t)h) * (size_t)B + (size_t)b];
+    }
+    return GS_OK;
+}
+
+/* Deposit every light's E through its footprint (point or PSF). */
+static unsigned long long splat(cap_sim *s, cap_render *r)
+{
+    int B = s->B, L = s->L;
+    unsigned long long items = 0;
+    for (size_t l = 0; l < s->n; l++) {
+        const cap_footprint *f = &s->fp[l];
+        if (!f->w) continue;
+        const double *w = s->fp_w + f->off;
+        const double *E = s->E + l * (size_t)L * (size_t)B;
+        for (int y = 0; y < f->h; y++) {
+            size_t row = (size_t)(f->y0 + y) * (size_t)s->W + (size_t)f->x0;
+            for (int x = 0; x < f->w; x++) {
+                size_t p = row + (size_t)x;
+                int h = r->halv ? r->halv[p] : 0;
+                double wt = w[y * f->w + x];
+                for (int b = 0; b < B; b++) s->img[p * (size_t)B + (size_t)b] += wt * E[h * B + b];
+            }
+        }
+        items += (unsigned long long)f->w * (unsigned long long)f->h;
+    }
+    return items;
+}
+
+static gs_status st_splat(cap_sim *s, cap_render *r)
+{
+    r->items = splat(s, r);
+    return GS_OK;
+}
+
+gs_status cap_fx_psf(cap_sim *s, cap_render *r)
+{
+    s->fx_calls[CAP_FX_PSF]++;
+    r->items = splat(s, r);
+    return GS_OK;
+}
+
+static gs_status st_to_dn(cap_sim *s, cap_render *r)
+{
+    (void)r;
+    size_t n = (size_t)s->W * (size_t)s->H * (size_t)s->B;
+    double g = 1.0 / s->sc.gain_e_per_dn, black = s->sc.black_level_dn;
+    for (size_t i = 0; i < n; i++) s->img[i] = s->img[i] * g + black;
+    return GS_OK;
+}
+
+static gs_status st_store(cap_sim *s, cap_render *r)
+{
+    size_t n = (size_t)s->W * (size_t)s->H * (size_t)s->B;
+    if (r->dn) memcpy(r->dn, s->img, n * sizeof *r->dn);
+    if (r->raw)
+        for (size_t i = 0; i < n; i++) {
+            double v = floor(s->img[i] + 0.5);
+            r->raw[i] = (unsigned short)(v < 0 ? 0 : v > 65535 ? 65535 : v);
+        }
+    return GS_OK;
+}
+
+/* ------------------------------------------------------------------ construction */
+
+static void add_stage(cap_sim *s, const char *name, int effect,
+                      gs_status (*run)(cap_sim *, cap_render *))
+{
+    cap_stage *st = &s->stages[s->n_stages++];
+    memset(st, 0, sizeof *st);
+    st->name = name;
+    st->effect = effect;
+    st->run = run;
+}
+
+static int has(const cap_sim *s, cap_effect e)
+{
+    return (s->fx >> e) & 1u;
+}
+
+static gs_status find_species(cap_sim *s, int bulb, double shift, int *out)
+{
+    for (size_t i = 0; i < s->n_sp; i++)
+        if (s->sp[i].bulb == bulb && fabs(s->sp[i].shift - shift) < 1e-12) {
+            *out = (int)i;
+            return GS_OK;
+        }
+    cap_species *ns = realloc(s->sp, (s->n_sp + 1) * sizeof *ns);
+    if (!ns) return gs_fail(GS_ENOMEM, "simulator: out of memory");
+    s->sp = ns;
+    cap_species *p = &s->sp[s->n_sp];
+    p->bulb = bulb;
+    p->shift = shift;
+    p->i_k = malloc(sizeof *p->i_k * (size_t)s->K * (size_t)s->B);
+    if (!p->i_k) return gs_fail(GS_ENOMEM, "simulator: out of memory");
+    s->n_sp++;
+    *out = (int)(s->n_sp - 1);
+    return rec_brf_integrate(&s->bulbs[bulb].brf, shift, s->K, p->i_k);
+}
+
+static gs_status load_bulbs(cap_sim *s, const rec_delight *d)
+{
+    const cap_scene *sc = &s->sc;
+    s->species = calloc(s->n ? s->n : 1, sizeof *s->species);
+    s->flux = calloc(s->n ? s->n * (size_t)s->B : 1, sizeof *s->flux);
+    s->bulbs = calloc(s->n ? s->n : 1, sizeof *s->bulbs);
+    if (!s->species || !s->flux || !s->bulbs) return gs_fail(GS_ENOMEM, "simulator: out of memory");
+    for (size_t l = 0; l < s->n; l++) {
+        const cap_light *li = &sc->lights[l];
+        const rec_bulb *b = rec_delight_find(d, li->bulb, sc->grid_hz, s->B);
+        if (!b)
+            return gs_fail(GS_ENOTFOUND, "%s:%d: field lights (light %s): bulb '%s': expected a "
+                           "DELIGHT bulb id with a %d Hz, %d-band entry (gridsurvey delight list)",
+                           sc->path[0] ? sc->path : "<scene>", li->line, li->id, li->bulb,
+                           sc->grid_hz, s->B);
+        size_t bi = 0;
+        while (bi < s->n_bulbs && strcmp(s->bulbs[bi].id, b->id)) bi++;
+        if (bi == s->n_bulbs) {
+            rec_bulb *nb = &s->bulbs[s->n_bulbs];
+            *nb = *b;
+            memset(&nb->brf, 0, sizeof nb->brf);
+            gs_status st = rec_brf_copy(&nb->brf, &b->brf);
+            if (st != GS_OK) return st;
+            s->n_bulbs++;
+        }
+        int sp;
+        gs_status st = find_species(s, (int)bi, rec_phase_to_shift(li->phase_deg), &sp);
+        if (st != GS_OK) return st;
+        s->species[l] = sp;
+        for (int band = 0; band < s->B; band++)
+            s->flux[l * (size_t)s->B + (size_t)band] = li->flux_e_per_cycle * s->bulbs[bi].chroma[band];
+    }
+    if (has(s, CAP_FX_SKYGLOW) && s->sc.fx.skyglow.flicker == CAP_GLOW_MIXED) {
+        s->glow_sp = malloc(sizeof *s->glow_sp * (s->n ? s->n : 1) * 3);
+        if (!s->glow_sp) return gs_fail(GS_ENOMEM, "simulator: out of memory");
+        for (size_t l = 0; l < s->n; l++) {
+            int bulb = s->sp[s->species[l]].bulb;
+            double sh = s->sp[s->species[l]].shift;
+            for (int j = 0; j < 3; j++) {
+                int sp;
+                gs_status st = find_species(s, bulb, fmod(sh + j / 3.0, 1.0), &sp);
+                if (st != GS_OK) return st;
+                s->glow_sp[l * 3 + (size_t)j] = sp;
+            }
+        }
+    }
+    return GS_OK;
+}
+
+/* Point footprints: the nearest pixel. */
+static gs_status point_footprints(cap_sim *s)
+{
+    s->fp = calloc(s->n ? s->n : 1, sizeof *s->fp);
+    s->fp_w = malloc(sizeof *s->fp_w * (s->n ? s->n : 1));
+    if (!s->fp || !s->fp_w) return gs_fail(GS_ENOMEM, "simulator: out of memory");
+    for (size_t l = 0; l < s->n; l++) {
+        const cap_light *li = &s->sc.lights[l];
+        double x = floor(li->x_px + 0.5), y = floor(li->y_px + 0.5);
+        s->fp_w[l] = 1.0;
+        if (x < 0 || y < 0 || x >= s->W || y >= s->H) continue;
+        s->fp[l] = (cap_footprint){(int)x, (int)y, 1, 1, l};
+    }
+    return GS_OK;
+}
+
+void cap_sim_gauss_box(double x, double y, double sigma, int R, double *w, int *bx, int *by)
+{
+    double cx = floor(x + 0.5), cy = floor(y + 0.5);
+    *bx = (int)cx - R;
+    *by = (int)cy - R;
+    int n = 2 * R + 1;
+    double wx[2 * 64 + 1], wy[2 * 64 + 1], sx = 0, sy = 0;
+    double k = 1.0 / (sigma * sqrt(2.0));
+    for (int i = 0; i < n; i++) {
+        double px = cx - R + i, py = cy - R + i;
+        wx[i] = 0.5 * (erf((px + 0.5 - x) * k) - erf((px - 0.5 - x) * k));
+        wy[i] = 0.5 * (erf((py + 0.5 - y) * k) - erf((py - 0.5 - y) * k));
+        sx += wx[i];
+        sy += wy[i];
+    }
+    for (int j = 0; j < n; j++)
+        for (int i = 0; i < n; i++) w[j * n + i] = wx[i] * wy[j] / (sx * sy);
+}
+
+void cap_sim_cycle_time(const cap_sim *s, const cap_render *r, long c, double *t0, double *t1)
+{
+    if (r->timing) {
+        *t0 = r->win.t0_s[c];
+        *t1 = r->win.t1_s[c];
+        return;
+    }
+    double base = (double)(r->first_cycle + c) * s->half_s;
+    *t0 = base + r->k * s->half_s / s->K;
+    *t1 = base + (r->k + 1) * s->half_s / s->K;
+}
+
+void cap_sim_free(cap_sim *s)
+{
+    if (!s) return;
+    for (size_t i = 0; i < s->n_bulbs; i++) rec_bulb_release(&s->bulbs[i]);
+    free(s->bulbs);
+    if (s->tables)
+        for (size_t i = 0; i < s->n_bulbs; i++) cap_brf_table_release(&s->tables[i]);
+    free(s->tables);
+    for (size_t i = 0; i < s->n_sp; i++) free(s->sp[i].i_k);
+    free(s->sp);
+    free(s->species);
+    free(s->glow_sp);
+    free(s->flux);
+    free(s->trans);
+    free(s->scint_s2);
+    free(s->scint_rho);
+    free(s->fp);
+    free(s->fp_w);
+    free(s->glow_k);
+    cap_ac_free(s->ac);
+    free(s->img);
+    free(s->E);
+    free(s->Wsp);
+    free(s->wcyc);
+    free(s->scin);
+    free(s->lev);
+    free(s->amb_row);
+    cap_scene_release(&s->sc);
+    free(s);
+}
+
+gs_status cap_sim_new(const cap_scene *sc, const rec_delight *d_in, cap_sim **out)
+{
+    *out = NULL;
+    cap_sim *s = calloc(1, sizeof *s);
+    if (!s) return gs_fail(GS_ENOMEM, "simulator: out of memory");
+    rec_delight *own = NULL;
+    gs_status st = scene_copy(&s->sc, sc);
+    if (st != GS_OK) goto fail;
+    s->W = sc->cam.width_px;
+    s->H = sc->cam.height_px;
+    s->B = sc->bands;
+    s->K = sc->acam.K;
+    s->C = sc->acam.cycles;
+    s->M = sc->acam.masks;
+    s->hmax = sc->acam.hdr ? (sc->acam.hdr_max_rounds ? sc->acam.hdr_max_rounds
+                                                      : cap_acam_max_halvings(s->M))
+                           : 0;
+    s->L = s->hmax + 1;
+    s->half_s = 1.0 / (2.0 * sc->grid_hz);
+    s->fx = sc->fx.enabled;
+    s->n = sc->n_lights;
+    s->timing = has(s, CAP_FX_FREQUENCY_WANDER) || has(s, CAP_FX_FREE_RUNNING_DRIFT) ||
+                has(s, CAP_FX_DMD_JITTER);
+    if ((st = cap_acam_check(&sc->acam)) != GS_OK) goto fail;
+    /* DELIGHT */
+    const rec_delight *d = d_in;
+    if (!d) {
+        own = rec_delight_new();
+        if (!own) {
+            st = gs_fail(GS_ENOMEM, "simulator: out of memory");
+            goto fail;
+        }
+        st = sc->delight[0] ? rec_delight_load(own, sc->delight)
+                            : rec_delight_generate(own, REC_BRF_N_DEFAULT);
+        if (st != GS_OK) goto fail;
+        d = own;
+    }
+    if ((st = load_bulbs(s, d)) != GS_OK) goto fail;
+    rec_delight_free(own);
+    own = NULL;
+    /* cycle levels of the mask rows */
+    s->lev = malloc((size_t)s->C);
+    if (!s->lev) {
+        st = gs_fail(GS_ENOMEM, "simulator: out of memory");
+        goto fail;
+    }
+    for (long c = 0; c < s->C; c++) s->lev[c] = (unsigned char)cap_cycle_level(s->M, s->hmax, c);
+    /* timing machinery, only for the timing effects */
+    if (s->timing) {
+        s->tables = calloc(s->n_bulbs ? s->n_bulbs : 1, sizeof *s->tables);
+        if (!s->tables) {
+            st = gs_fail(GS_ENOMEM, "simulator: out of memory");
+            goto fail;
+        }
+        for (size_t i = 0; i < s->n_bulbs; i++)
+            if ((st = cap_brf_table_init(&s->tables[i], &s->bulbs[i].brf, 4096)) != GS_OK) goto fail;
+        cap_freq_config f = sc->freq;
+        if (!has(s, CAP_FX_FREQUENCY_WANDER)) {
+            memset(&f, 0, sizeof f);
+            f.model = CAP_FREQ_CONSTANT;
+            f.hz = sc->grid_hz;
+        }
+        if ((st = cap_ac_new(&f, sc->grid_hz, &s->ac)) != GS_OK) goto fail;
+        if (has(s, CAP_FX_SCINTILLATION)) {
+            s->wcyc = malloc(sizeof *s->wcyc * (s->n_sp ? s->n_sp : 1) * (size_t)s->B * (size_t)s->C);
+            if (!s->wcyc) {
+                st = gs_fail(GS_ENOMEM, "simulator: out of memory");
+                goto fail;
+            }
+        }
+    }
+    /* effects that prepare once */
+    if (has(s, CAP_FX_EXTINCTION) && (st = cap_fx_prepare_extinction(s)) != GS_OK) goto fail;
+    if (has(s, CAP_FX_SCINTILLATION) && (st = cap_fx_prepare_scintillation(s)) != GS_OK) goto fail;
+    st = has(s, CAP_FX_PSF) ? cap_fx_prepare_psf(s) : point_footprints(s);
+    if (st != GS_OK) goto fail;
+    if (has(s, CAP_FX_SKYGLOW) && (st = cap_fx_prepare_skyglow(s)) != GS_OK) goto fail;
+    /* capture-level numbers */
+    double adc_max = has(s, CAP_FX_ADC) ? (double)((1 << sc->bit_depth) - 1) : 65535.0;
+    s->adc_max = adc_max;
+    s->read_dn = has(s, CAP_FX_READ_NOISE) ? sc->fx.read_noise.sigma_e / sc->gain_e_per_dn : 0.0;
+    s->sat_dn = adc_max;
+    if (has(s, CAP_FX_SATURATION)) {
+        /* clipped pixels sit at the full well, then get read noise: flag from 4 sigma below */
+        double fw = sc->black_level_dn + sc->full_well_e / sc->gain_e_per_dn - 4.0 * s->read_dn;
+        if (fw < s->sat_dn) s->sat_dn = floor(fw);
+    }
+    if (!(s->sat_dn > sc->black_level_dn + 1)) {
+        st = gs_fail(GS_EINVAL, "%s: the saturation level %.1f DN is not above the black level "
+                     "%.1f DN (full well, gain and read noise)", sc->path, s->sat_dn,
+                     sc->black_level_dn);
+        goto fail;
+    }
+    /* scratch */
+    size_t npx = (size_t)s->W * (size_t)s->H * (size_t)s->B;
+    s->img = malloc(sizeof *s->img * npx);
+    s->E = malloc(sizeof *s->E * (s->n ? s->n : 1) * (size_t)s->L * (size_t)s->B);
+    s->Wsp = malloc(sizeof *s->Wsp * (s->n_sp ? s->n_sp : 1) * (size_t)s->L * (size_t)s->B);
+    s->scin = malloc(sizeof *s->scin * (size_t)s->C);
+    s->amb_row = calloc((size_t)s->H, sizeof *s->amb_row);
+    if (!s->img || !s->E || !s->Wsp || !s->scin || !s->amb_row) {
+        st = gs_fail(GS_ENOMEM, "simulator: cannot hold a %d x %d x %d frame", s->W, s->H, s->B);
+        goto fail;
+    }
+    /* the pipeline: exactly the listed effects, in physical order */
+    if (has(s, CAP_FX_FREQUENCY_WANDER))
+        add_stage(s, "frequency_wander", CAP_FX_FREQUENCY_WANDER, cap_fx_frequency_wander);
+    if (has(s, CAP_FX_FREE_RUNNING_DRIFT))
+        add_stage(s, "free_running_drift", CAP_FX_FREE_RUNNING_DRIFT, cap_fx_free_running_drift);
+    if (has(s, CAP_FX_DMD_JITTER)) add_stage(s, "dmd_jitter", CAP_FX_DMD_JITTER, cap_fx_dmd_jitter);
+    if (s->timing) add_stage(s, "windows", -1, st_windows);
+    add_stage(s, "eq5", -1, st_eq5);
+    add_stage(s, "lights", -1, st_lights);
+    if (has(s, CAP_FX_EXTINCTION)) add_stage(s, "extinction", CAP_FX_EXTINCTION, cap_fx_extinction);
+    if (has(s, CAP_FX_SCINTILLATION))
+        add_stage(s, "scintillation", CAP_FX_SCINTILLATION, cap_fx_scintillation);
+    if (has(s, CAP_FX_PSF)) add_stage(s, "psf", CAP_FX_PSF, cap_fx_psf);
+    else add_stage(s, "splat", -1, st_splat);
+    if (has(s, CAP_FX_SKYGLOW)) add_stage(s, "skyglow", CAP_FX_SKYGLOW, cap_fx_skyglow);
+    if (has(s, CAP_FX_BLINKING_SIGN))
+        add_stage(s, "blinking_sign", CAP_FX_BLINKING_SIGN, cap_fx_blinking_sign);
+    if (has(s, CAP_FX_HEADLIGHTS)) add_stage(s, "headlights", CAP_FX_HEADLIGHTS, cap_fx_headlights);
+    if (has(s, CAP_FX_AMBIENT)) add_stage(s, "ambient", CAP_FX_AMBIENT, cap_fx_ambient);
+    if (has(s, CAP_FX_SHOT_NOISE)) add_stage(s, "shot_noise", CAP_FX_SHOT_NOISE, cap_fx_shot_noise);
+    if (has(s, CAP_FX_SATURATION)) add_stage(s, "saturation", CAP_FX_SATURATION, cap_fx_saturation);
+    add_stage(s, "to_dn", -1, st_to_dn);
+    if (has(s, CAP_FX_READ_NOISE)) add_stage(s, "read_noise", CAP_FX_READ_NOISE, cap_fx_read_noise);
+    if (has(s, CAP_FX_ADC)) add_stage(s, "adc", CAP_FX_ADC, cap_fx_adc);
+    add_stage(s, "store", -1, st_store);
+    *out = s;
+    return GS_OK;
+fail:
+    rec_delight_free(own);
+    cap_sim_free(s);
+    return st;
+}
+
+const cap_scene *cap_sim_scene(const cap_sim *s)
+{
+    return &s->sc;
+}
+
+double cap_sim_saturation_dn(const cap_sim *s)
+{
+    return s->sat_dn;
+}
+
+double cap_sim_read_noise_dn(const cap_sim *s)
+{
+    return s->read_dn;
+}
+
+size_t cap_sim_stage_count(const cap_sim *s)
+{
+    return s->n_stages;
+}
+
+gs_status cap_sim_stage(const cap_sim *s, size_t i, cap_stage_info *info)
+{
+    if (i >= s->n_stages) return gs_fail(GS_EINVAL, "stage %zu of %zu", i, s->n_stages);
+    const cap_stage *st = &s->stages[i];
+    info->name = st->name;
+    info->effect = st->effect;
+    info->calls = st->calls;
+    info->items = st->items;
+    info->seconds = st->seconds;
+    return GS_OK;
+}
+
+unsigned long long cap_sim_effect_calls(const cap_sim *s, cap_effect e)
+{
+    return (int)e >= 0 && e < CAP_FX_COUNT ? s->fx_calls[e] : 0;
+}
+
+gs_status cap_sim_render(cap_sim *s, int k, int pass, long index, const unsigned char *halvings,
+                         unsigned short *raw, double *dn)
+{
+    if (k < 0 || k >= s->K || pass < 0 || index < 0)
+        return gs_fail(GS_EINVAL, "render: k %d of K %d, pass %d, index %ld", k, s->K, pass, index);
+    size_t plane = (size_t)s->W * (size_t)s->H;
+    if (halvings)
+        for (size_t p = 0; p < plane; p++)
+            if (halvings[p] > s->hmax)
+                return gs_fail(GS_EINVAL, "render: pixel (%zu, %zu) halved %d times: the masks "
+                               "allow %d", p % (size_t)s->W, p / (size_t)s->W, halvings[p], s->hmax);
+    cap_render r;
+    memset(&r, 0, sizeof r);
+    r.k = k;
+    r.pass = pass;
+    r.index = index;
+    /* the timeline starts 64 crossings in, so a measured free-running period has a history */
+    r.first_cycle = 64 + index * (s->C + s->sc.readout_cycles);
+    r.halv = halvings;
+    r.lev = s->lev;
+    r.raw = raw;
+    r.dn = dn;
+    r.wcfg.K = s->K;
+    r.wcfg.k = k;
+    r.wcfg.cycles = s->C;
+    r.wcfg.first_cycle = r.first_cycle;
+    r.wcfg.mode = s->sc.locked ? CAP_LOCKED : CAP_FREE_RUNNING;
+    r.wcfg.free_period_measured = s->sc.free_period_measured;
+    r.wcfg.jitter_seed = s->sc.seed ^ (0x5851f42d4c957f2dull * (unsigned long long)(pass + 1));
+    memset(s->img, 0, sizeof *s->img * plane * (size_t)s->B);
+    gs_status st = GS_OK;
+    for (size_t i = 0; i < s->n_stages && st == GS_OK; i++) {
+        cap_stage *sg = &s->stages[i];
+        double t0 = now_s();
+        r.items = 0;
+        st = sg->run(s, &r);
+        sg->seconds += now_s() - t0;
+        sg->calls++;
+        sg->items += r.items;
+    }
+    cap_windows_release(&r.win);
+    return st;
+}
+
+/* ------------------------------------------------------------------ truth */
+
+static json_t *jnum(double v)
+{
+    return isfinite(v) ? json_real(v) : json_null();
+}
+
+gs_status cap_sim_write_truth(const cap_sim *s, const char *dir)
+{
+    const cap_scene *sc = &s->sc;
+    json_t *root = json_object(), *lights = json_array();
+    if (!root || !lights) {
+        json_decref(root);
+        json_decref(lights);
+        return gs_fail(GS_ENOMEM, "truth: out of memory");
+    }
+    json_object_set_new(root, "format", json_string(CAP_TRUTH_FORMAT));
+    json_object_set_new(root, "scene", json_string(sc->name));
+    json_object_set_new(root, "seed", json_integer((json_int_t)sc->seed));
+    json_object_set_new(root, "grid_hz", json_integer(sc->grid_hz));
+    json_object_set_new(root, "K", json_integer(s->K));
+    json_object_set_new(root, "bands", json_integer(s->B));
+    json_object_set_new(root, "width", json_integer(s->W));
+    json_object_set_new(root, "height", json_integer(s->H));
+    size_t in_image = 0;
+    for (size_t l = 0; l < s->n; l++) {
+        const cap_light *li = &sc->lights[l];
+        const rec_bulb *b = &s->bulbs[s->sp[s->species[l]].bulb];
+        json_t *o = json_object();
+        json_object_set_new(o, "id", json_string(li->id));
+        json_object_set_new(o, "x_px", jnum(li->x_px));
+        json_object_set_new(o, "y_px", jnum(li->y_px));
+        json_object_set_new(o, "in_image", json_boolean(li->in_image));
+        if (li->geographic) {
+            json_object_set_new(o, "lat_deg", jnum(li->lat_deg));
+            json_object_set_new(o, "lon_deg", jnum(li->lon_deg));
+            json_object_set_new(o, "height_m", jnum(li->height_m));
+        }
+        if (li->distance_m > 0) json_object_set_new(o, "distance_m", jnum(li->distance_m));
+        json_object_set_new(o, "bulb", json_string(li->bulb));
+        json_object_set_new(o, "technology", json_string(rec_tech_name(b->type)));
+        json_object_set_new(o, "phase_deg", jnum(li->phase_deg));
+        json_object_set_new(o, "shift_cycles", jnum(rec_phase_to_shift(li->phase_deg)));
+        json_object_set_new(o, "flux_e_per_cycle", jnum(li->flux_e_per_cycle));
+        if (li->lumens > 0) json_object_set_new(o, "lumens", jnum(li->lumens));
+        json_array_append_new(lights, o);
+        in_image += li->in_image != 0;
+    }
+    json_object_set_new(root, "lights_in_image", json_integer((json_int_t)in_image));
+    json_object_set_new(root, "lights", lights);
+    json_t *dis = json_object();
+    if (has(s, CAP_FX_BLINKING_SIGN)) {
+        json_t *a = json_array();
+        for (size_t i = 0; i < sc->fx.signs.count; i++) {
+            const cap_sign *g = &sc->fx.signs.items[i];
+            json_t *o = json_object();
+            json_object_set_new(o, "x_px", jnum(g->x_px));
+            json_object_set_new(o, "y_px", jnum(g->y_px));
+            json_object_set_new(o, "width_px", jnum(g->width_px));
+            json_object_set_new(o, "height_px", jnum(g->height_px));
+            json_object_set_new(o, "period_s", jnum(g->period_s));
+            json_array_append_new(a, o);
+        }
+        json_object_set_new(dis, "blinking_signs", a);
+    }
+    if (has(s, CAP_FX_HEADLIGHTS)) {
+        json_t *a = json_array();
+        for (size_t i = 0; i < sc->fx.cars.count; i++) {
+            const cap_car *g = &sc->fx.cars.items[i];
+            json_t *o = json_object(), *from = json_array(), *to = json_array();
+            json_array_append_new(from, jnum(g->x0_px));
+            json_array_append_new(from, jnum(g->y0_px));
+            json_array_append_new(to, jnum(g->x1_px));
+            json_array_append_new(to, jnum(g->y1_px));
+            json_object_set_new(o, "from", from);
+            json_object_set_new(o, "to", to);
+            json_array_append_new(a, o);
+        }
+        json_object_set_new(dis, "headlights", a);
+    }
+    json_object_set_new(root, "distractors", dis);
+    char *text = json_dumps(root, JSON_INDENT(1) | JSON_PRESERVE_ORDER | JSON_REAL_PRECISION(15));
+    json_decref(root);
+    if (!text) return gs_fail(GS_ENOMEM, "truth: cannot serialise");
+    size_t len = strlen(text);
+    char *withnl = realloc(text, len + 2);
+    if (!withnl) {
+        free(text);
+        return gs_fail(GS_ENOMEM, "truth: out of memory");
+    }
+    withnl[len] = '\n';
+    withnl[len + 1] = '\0';
+    gs_status st = cap_write_atomic(dir, "truth.json", withnl, len + 1);
+    free(withnl);
+    return st;
+}
+
+/* ------------------------------------------------------------------ bench */
+
+gs_status cap_bench_render(const cap_scene *sc, unsigned effects_mask, int frames,
+                           cap_bench_result *out)
+{
+    memset(out, 0, sizeof *out);
+    if (frames < 1) return gs_fail(GS_EINVAL, "bench: %d frames", frames);
+    cap_scene tmp = *sc;
+    tmp.fx.enabled &= effects_mask;
+    if (!((tmp.fx.enabled >> CAP_FX_READ_NOISE) & 1)) tmp.fx.read_noise.sigma_e = 0;
+    cap_sim *s = NULL;
+    gs_status st = cap_sim_new(&tmp, NULL, &s);
+    if (st != GS_OK) return st;
+    size_t npx = (size_t)s->W * (size_t)s->H * (size_t)s->B;
+    unsigned short *raw = malloc(npx * sizeof *raw);
+    if (!raw) {
+        cap_sim_free(s);
+        return gs_fail(GS_ENOMEM, "bench: out of memory");
+    }
+    double t0 = now_s();
+    for (int i = 0; i < frames && st == GS_OK; i++)
+        st = cap_sim_render(s, i % s->K, 0, i, NULL, raw, NULL);
+    double dt = now_s() - t0;
+    out->frames = frames;
+    out->seconds_per_frame = dt / frames;
+    out->effects = tmp.fx.enabled;
+    out->lights = s->n;
+    out->pixels = (size_t)s->W * (size_t)s->H;
+    free(raw);
+    cap_sim_free(s);
+    return st;
+}

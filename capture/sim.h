@@ -1,0 +1,121 @@
+/* sim.h - the simulator's private state, shared by sim.c (construction, base stages, render
+ * driver, truth) and effects.c (one stage per effect). Not included outside capture/ (tests
+ * may). */
+#ifndef GRIDSURVEY_CAPTURE_SIM_H
+#define GRIDSURVEY_CAPTURE_SIM_H
+
+#include "capture/internal.h"
+
+/* A (bulb, grid phase) pair: all lights of a species share their window integrals. */
+typedef struct {
+    int bulb;          /* index into cap_sim.bulbs */
+    double shift;      /* BRF delay, cycles */
+    double *i_k;       /* bands * K exact Eq. 5 window means (rec_brf_integrate) */
+} cap_species;
+
+/* The pixels a light deposits into: a rectangle clipped to the image, with weights. */
+typedef struct {
+    int x0, y0, w, h;  /* w = 0: nothing on the sensor */
+    size_t off;        /* into cap_sim.fp_w */
+} cap_footprint;
+
+typedef struct cap_render cap_render;
+typedef struct cap_stage cap_stage;
+struct cap_stage {
+    const char *name;
+    int effect;        /* cap_effect or -1 */
+    gs_status (*run)(cap_sim *s, cap_render *r);
+    unsigned long long calls, items;
+    double seconds;
+};
+
+#define CAP_MAX_STAGES 32
+#define CAP_MAX_LEVELS (REC_MAX_HALVINGS + 1)
+
+/* Per-acquisition state. */
+struct cap_render {
+    int k, pass;
+    long index, first_cycle;
+    const unsigned char *halv;      /* NULL: all 0 */
+    cap_window_config wcfg;         /* set by the timing stages */
+    int timing;                     /* a timing stage ran: windows are computed */
+    cap_windows win;
+    double ex[CAP_MAX_LEVELS];      /* DC exposure per level, nominal cycles */
+    long n_exposed[CAP_MAX_LEVELS]; /* cycles per level */
+    unsigned char *lev;             /* [C] highest level exposed in cycle c (cap_cycle_level) */
+    unsigned long long items;       /* set by the running stage: elements it processed */
+    unsigned short *raw;            /* outputs (may be NULL) */
+    double *dn;
+};
+
+struct cap_sim {
+    cap_scene sc;                   /* deep copy */
+    int W, H, B, K, M, L, hmax;
+    long C;
+    double half_s;                  /* nominal Delta */
+    unsigned fx;                    /* enabled effects */
+    int timing;                     /* any timing effect */
+    rec_bulb *bulbs;                /* copies of the DELIGHT entries used */
+    size_t n_bulbs;
+    cap_brf_table *tables;          /* per bulb, only with timing effects */
+    cap_species *sp;
+    size_t n_sp;
+    /* lights */
+    size_t n;                       /* scene lights */
+    int *species;                   /* [n] */
+    int *glow_sp;                   /* [n * 3] species of the 3 phases (skyglow mixed) */
+    double *flux;                   /* [n * B] photo-electrons per cycle per band (Q_b flux) */
+    double *trans;                  /* [n * B] extinction transmission (extinction stage) */
+    double *scint_s2, *scint_rho;   /* [n] log-variance and cycle-to-cycle correlation */
+    cap_footprint *fp;              /* [n] */
+    double *fp_w;
+    size_t fp_n;
+    double *glow_k;                 /* skyglow kernel, (2R+1)^2 */
+    int glow_r;
+    cap_ac *ac;                     /* timeline (timing effects only) */
+    /* pipeline */
+    cap_stage stages[CAP_MAX_STAGES];
+    size_t n_stages;
+    unsigned long long fx_calls[CAP_FX_COUNT];
+    double sat_dn, read_dn, adc_max;
+    /* scratch */
+    double *img;                    /* W * H * B, electrons then DN */
+    double *E;                      /* [n * L * B] */
+    double *Wsp;                    /* [n_sp * L * B] species sums (flux-per-cycle units) */
+    double *wcyc;                   /* [n_sp * B * C] per-cycle window integrals (scintillation) */
+    double *scin;                   /* [C] */
+    unsigned char *lev;             /* [C] cap_cycle_level of each cycle of an exposure */
+    double *amb_row;                /* [H] ambient electrons per pixel and nominal cycle (ambient) */
+};
+
+/* Timing of exposed cycle c in [0, C) of this acquisition: window [t0, t1) s. */
+void cap_sim_cycle_time(const cap_sim *s, const cap_render *r, long c, double *t0, double *t1);
+/* Gaussian pixel-integrated weights of a point at (x, y) with sigma over a (2R+1)^2 box
+ * centred on its nearest pixel; writes to w and returns the box's top-left corner. */
+void cap_sim_gauss_box(double x, double y, double sigma, int R, double *w, int *bx, int *by);
+
+/* Effect stages (effects.c). Each increments s->fx_calls[its effect] first. */
+gs_status cap_fx_frequency_wander(cap_sim *s, cap_render *r);
+gs_status cap_fx_free_running_drift(cap_sim *s, cap_render *r);
+gs_status cap_fx_dmd_jitter(cap_sim *s, cap_render *r);
+gs_status cap_fx_extinction(cap_sim *s, cap_render *r);
+gs_status cap_fx_scintillation(cap_sim *s, cap_render *r);
+gs_status cap_fx_psf(cap_sim *s, cap_render *r);
+gs_status cap_fx_skyglow(cap_sim *s, cap_render *r);
+gs_status cap_fx_blinking_sign(cap_sim *s, cap_render *r);
+gs_status cap_fx_headlights(cap_sim *s, cap_render *r);
+gs_status cap_fx_ambient(cap_sim *s, cap_render *r);
+gs_status cap_fx_shot_noise(cap_sim *s, cap_render *r);
+gs_status cap_fx_saturation(cap_sim *s, cap_render *r);
+gs_status cap_fx_read_noise(cap_sim *s, cap_render *r);
+gs_status cap_fx_adc(cap_sim *s, cap_render *r);
+/* Once-per-sim preparation of the effects that need it (only the listed ones are called). */
+gs_status cap_fx_prepare_extinction(cap_sim *s);
+gs_status cap_fx_prepare_scintillation(cap_sim *s);
+gs_status cap_fx_prepare_psf(cap_sim *s);
+gs_status cap_fx_prepare_skyglow(cap_sim *s);
+/* Intensity variance of scintillation of a point source at distance L (Andrews-Phillips,
+ * spherical wave, with aperture averaging and source-size reduction): docs/capture.md. */
+double cap_scintillation_index(const cap_effects *fx, double aperture_mm, double L_m);
+
+#endif

@@ -1,0 +1,299 @@
+/* util.c - capture/ helpers: random streams (xoshiro256**, polar normals, Hormann's PTRS
+ * Poisson), BRF antiderivative tables for windows at any position (Eq. 5 generalised), FNV-1a,
+ * whole-file reads and atomic writes. */
+#include "capture/internal.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <fftw3.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <threads.h>
+#include <unistd.h>
+
+/* ------------------------------------------------------------------ random streams */
+
+void cap_rng_init(cap_rng *r, uint64_t seed, uint32_t tag, uint64_t a, uint64_t b)
+{
+    uint64_t x = seed;
+    uint64_t h = cap_splitmix64(&x);
+    x = h ^ ((uint64_t)tag * 0xd1b54a32d192ed03ull);
+    h = cap_splitmix64(&x);
+    x = h ^ (a * 0x8cb92ba72f3d8dd7ull);
+    h = cap_splitmix64(&x);
+    x = h ^ (b * 0x9fb21c651e98df25ull);
+    for (int i = 0; i < 4; i++) r->s[i] = cap_splitmix64(&x);
+    if (!(r->s[0] | r->s[1] | r->s[2] | r->s[3])) r->s[0] = 1;
+}
+
+/* Ziggurat tables (G. Marsaglia and W. W. Tsang, "The Ziggurat Method for Generating Random
+ * Variables", J. Stat. Softw. 5(8), 2000; 128 layers), computed once. */
+static uint32_t zig_k[128];
+static double zig_w[128], zig_f[128];
+static once_flag zig_once = ONCE_FLAG_INIT;
+
+static void zig_init(void)
+{
+    const double m1 = 2147483648.0, vn = 9.91256303526217e-3;
+    double dn = 3.442619855899, tn = dn;
+    double q = vn / exp(-0.5 * dn * dn);
+    zig_k[0] = (uint32_t)((dn / q) * m1);
+    zig_k[1] = 0;
+    zig_w[0] = q / m1;
+    zig_w[127] = dn / m1;
+    zig_f[0] = 1.0;
+    zig_f[127] = exp(-0.5 * dn * dn);
+    for (int i = 126; i >= 1; i--) {
+        dn = sqrt(-2.0 * log(vn / dn + exp(-0.5 * dn * dn)));
+        zig_k[i + 1] = (uint32_t)((dn / tn) * m1);
+        tn = dn;
+        zig_f[i] = exp(-0.5 * dn * dn);
+        zig_w[i] = dn / m1;
+    }
+}
+
+double cap_rng_normal(cap_rng *r)
+{
+    call_once(&zig_once, zig_init);
+    for (;;) {
+        uint64_t u = cap_rng_u64(r);
+        int32_t hz = (int32_t)(uint32_t)(u >> 32);
+        int iz = (int)(u & 127u);
+        uint32_t ahz = hz < 0 ? (uint32_t)(-(int64_t)hz) : (uint32_t)hz;
+        if (ahz < zig_k[iz]) return hz * zig_w[iz];
+        /* the tail and the wedges */
+        double x = hz * zig_w[iz];
+        if (iz == 0) {
+            const double rr = 3.442620;
+            double y;
+            do {
+                x = -log(cap_rng_uniform(r)) / rr;
+                y = -log(cap_rng_uniform(r));
+            } while (y + y < x * x);
+            return hz > 0 ? rr + x : -rr - x;
+        }
+        if (zig_f[iz] + cap_rng_uniform(r) * (zig_f[iz - 1] - zig_f[iz]) < exp(-0.5 * x * x))
+            return x;
+    }
+}
+
+double cap_rng_poisson(cap_rng *r, double lambda)
+{
+    if (!(lambda > 0.0)) return 0.0;
+    if (lambda < 12.0) {
+        /* inversion by sequential search */
+        double p = exp(-lambda), F = p, u = cap_rng_uniform(r);
+        double k = 0.0;
+        while (u > F && k < 1000.0) {
+            k += 1.0;
+            p *= lambda / k;
+            F += p;
+        }
+        return k;
+    }
+    /* W. Hormann, "The transformed rejection method for generating Poisson random variables",
+     * Insurance: Mathematics and Economics 12 (1993) 39-45 (PTRS). */
+    double slam = sqrt(lambda), loglam = log(lambda);
+    double b = 0.931 + 2.53 * slam, a = -0.059 + 0.02483 * b;
+    double invalpha = 1.1239 + 1.1328 / (b - 3.4), vr = 0.9277 - 3.6224 / (b - 2.0);
+    for (;;) {
+        double U = cap_rng_uniform(r) - 0.5, V = cap_rng_uniform(r);
+        double us = 0.5 - fabs(U);
+        double k = floor((2.0 * a / us + b) * U + lambda + 0.43);
+        if (us >= 0.07 && V <= vr) return k;
+        if (k < 0.0 || (us < 0.013 && V > us)) continue;
+        if (log(V) + log(invalpha) - log(a / (us * us) + b) <=
+            -lambda + k * loglam - lgamma(k + 1.0))
+            return k;
+    }
+}
+
+/* ------------------------------------------------------------------ BRF tables */
+
+gs_status cap_brf_table_init(cap_brf_table *t, const rec_brf *b, int n_min)
+{
+    memset(t, 0, sizeof *t);
+    int n = b->n;
+    if (n < 4 || n % 2 || b->bands < 1 || b->bands > REC_MAX_BANDS || !b->v)
+        return gs_fail(GS_EINVAL, "BRF table: a BRF of %d x %d samples", b->bands, n);
+    int T = n_min > 2 * n ? n_min : 2 * n;
+    if (T % 2) T++;
+    t->n = T;
+    t->bands = b->bands;
+    t->G = malloc(sizeof *t->G * (size_t)T * (size_t)b->bands);
+    t->B = malloc(sizeof *t->B * (size_t)T * (size_t)b->bands);
+    double *x = fftw_malloc(sizeof *x * (size_t)(n > T ? n : T));
+    fftw_complex *C = fftw_malloc(sizeof *C * (size_t)(n / 2 + 1));
+    fftw_complex *Y = fftw_malloc(sizeof *Y * (size_t)(T / 2 + 1));
+    if (!t->G || !t->B || !x || !C || !Y) {
+        fftw_free(x);
+        fftw_free(C);
+        fftw_free(Y);
+        cap_brf_table_release(t);
+        return gs_fail(GS_ENOMEM, "BRF table: out of memory");
+    }
+    fftw_plan fwd = fftw_plan_dft_r2c_1d(n, x, C, FFTW_ESTIMATE);
+    fftw_plan inv = fftw_plan_dft_c2r_1d(T, Y, x, FFTW_ESTIMATE);
+    for (int band = 0; band < b->bands; band++) {
+        memcpy(x, b->v + (size_t)band * (size_t)n, sizeof *x * (size_t)n);
+        fftw_execute(fwd);
+        /* B: Y_h = C_h / n; the Nyquist term cos(pi n x) C_{n/2} / n splits into +-n/2 */
+        memset(Y, 0, sizeof *Y * (size_t)(T / 2 + 1));
+        for (int h = 0; h < n / 2; h++) {
+            Y[h][0] = C[h][0] / n;
+            Y[h][1] = C[h][1] / n;
+        }
+        Y[0][1] = 0.0;
+        Y[n / 2][0] = C[n / 2][0] / (2.0 * n);
+        Y[n / 2][1] = 0.0;
+        fftw_execute(inv);
+        memcpy(t->B + (size_t)band * (size_t)T, x, sizeof *x * (size_t)T);
+        /* G: Y_h = C_h / (n 2 pi i h); Nyquist: C_{n/2} sin(pi n x) / (pi n^2) */
+        memset(Y, 0, sizeof *Y * (size_t)(T / 2 + 1));
+        for (int h = 1; h < n / 2; h++) {
+            double w = 1.0 / (n * 2.0 * M_PI * h);
+            /* (re + i im) / i = im - i re */
+            Y[h][0] = C[h][1] * w;
+            Y[h][1] = -C[h][0] * w;
+        }
+        Y[n / 2][0] = 0.0;
+        Y[n / 2][1] = -C[n / 2][0] / (2.0 * M_PI * (double)n * (double)n);
+        fftw_execute(inv);
+        memcpy(t->G + (size_t)band * (size_t)T, x, sizeof *x * (size_t)T);
+        /* the table keeps B - mean as G's derivative; the mean is B's C_0 / n */
+        double mean = C[0][0] / n;
+        double *Bb = t->B + (size_t)band * (size_t)T;
+        for (int j = 0; j < T; j++) Bb[j] -= mean;
+        t->mean[band] = mean;
+    }
+    fftw_destroy_plan(fwd);
+    fftw_destroy_plan(inv);
+    fftw_free(x);
+    fftw_free(C);
+    fftw_free(Y);
+    return GS_OK;
+}
+
+void cap_brf_table_release(cap_brf_table *t)
+{
+    if (!t) return;
+    free(t->G);
+    free(t->B);
+    memset(t, 0, sizeof *t);
+}
+
+/* G(x) by cubic Hermite interpolation on the periodic table. */
+static double table_G(const cap_brf_table *t, int band, double x)
+{
+    double u = (x - floor(x)) * t->n;
+    long j = (long)u;
+    if (j >= t->n) j = t->n - 1;
+    double f = u - (double)j;
+    long j1 = j + 1 == t->n ? 0 : j + 1;
+    const double *G = t->G + (size_t)band * (size_t)t->n;
+    const double *D = t->B + (size_t)band * (size_t)t->n;
+    double h = 1.0 / t->n;
+    double f2 = f * f, f3 = f2 * f;
+    double h00 = 2 * f3 - 3 * f2 + 1, h10 = f3 - 2 * f2 + f, h01 = -2 * f3 + 3 * f2,
+           h11 = f3 - f2;
+    return h00 * G[j] + h10 * h * D[j] + h01 * G[j1] + h11 * h * D[j1];
+}
+
+double cap_brf_table_integral(const cap_brf_table *t, int band, double shift, double a, double b)
+{
+    /* F(x) = mean x + G(x) - G(0); BRFs have mean 1 (Eq. 4) */
+    return t->mean[band] * (b - a) + table_G(t, band, b - shift) - table_G(t, band, a - shift);
+}
+
+/* ------------------------------------------------------------------ files */
+
+uint64_t cap_fnv1a(uint64_t h, const void *data, size_t n)
+{
+    const unsigned char *p = data;
+    for (size_t i = 0; i < n; i++) {
+        h ^= p[i];
+        h *= 0x100000001b3ull;
+    }
+    return h;
+}
+
+gs_status cap_slurp(const char *path, char **text, size_t *size)
+{
+    *text = NULL;
+    if (size) *size = 0;
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        return gs_fail(errno == ENOENT ? GS_ENOTFOUND : GS_EIO, "%s: %s", path, strerror(errno));
+    size_t cap = 1 << 16, n = 0;
+    char *buf = malloc(cap);
+    if (!buf) {
+        fclose(f);
+        return gs_fail(GS_ENOMEM, "%s: out of memory", path);
+    }
+    for (;;) {
+        if (n + 1 >= cap) {
+            char *nb = realloc(buf, cap * 2);
+            if (!nb) {
+                free(buf);
+                fclose(f);
+                return gs_fail(GS_ENOMEM, "%s: out of memory", path);
+            }
+            buf = nb;
+            cap *= 2;
+        }
+        size_t got = fread(buf + n, 1, cap - 1 - n, f);
+        n += got;
+        if (got == 0) break;
+    }
+    int err = ferror(f);
+    fclose(f);
+    if (err) {
+        free(buf);
+        return gs_fail(GS_EIO, "%s: read error", path);
+    }
+    buf[n] = '\0';
+    *text = buf;
+    if (size) *size = n;
+    return GS_OK;
+}
+
+gs_status cap_write_atomic(const char *dir, const char *name, const void *data, size_t size)
+{
+    static atomic_uint seq;
+    char path[CAP_PATH_MAX + 64], tmp[CAP_PATH_MAX + 96];
+    if (snprintf(path, sizeof path, "%s/%s", dir, name) >= (int)sizeof path)
+        return gs_fail(GS_EINVAL, "%s/%s: path too long", dir, name);
+    snprintf(tmp, sizeof tmp, "%s/.%s.%ld.%u.tmp", dir, name, (long)getpid(),
+             atomic_fetch_add(&seq, 1u));
+    if (mkdir(dir, 0777) != 0 && errno != EEXIST)
+        return gs_fail(GS_EIO, "%s: cannot create the directory: %s", dir, strerror(errno));
+    int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+    if (fd < 0) return gs_fail(GS_EIO, "%s: %s", tmp, strerror(errno));
+    const char *p = data;
+    size_t off = 0;
+    while (off < size) {
+        ssize_t w = write(fd, p + off, size - off);
+        if (w < 0 && errno == EINTR) continue;
+        if (w < 0) {
+            int e = errno;
+            close(fd);
+            unlink(tmp);
+            return gs_fail(GS_EIO, "%s: write: %s", path, strerror(e));
+        }
+        off += (size_t)w;
+    }
+    if (fsync(fd) != 0 || close(fd) != 0) {
+        int e = errno;
+        unlink(tmp);
+        return gs_fail(GS_EIO, "%s: %s", path, strerror(e));
+    }
+    if (rename(tmp, path) != 0) {
+        int e = errno;
+        unlink(tmp);
+        return gs_fail(GS_EIO, "%s: rename: %s", path, strerror(e));
+    }
+    return GS_OK;
+}

@@ -1,0 +1,322 @@
+/* test_capture_hw.c - the hardware backend (capture/backend_hardware.c) against fakes: the fake
+ * libgpiod (tests/fake_gpiod.c) replays zero crossings taken from a real mains recording and
+ * records the shutter and trigger outputs; a forked fake ACam controller speaks the firmware's
+ * serial protocol on a socketpair; the camera is OpenCV VideoCapture on a 16-bit PNG sequence
+ * (CAP_IMAGES). The production code path runs unchanged. */
+#include "tests/test.h"
+#include "tests/fake_gpiod.h"
+#include "capture/capture.h"
+
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#define HW_K 4
+#define HW_C 50
+#define HW_W 32
+#define HW_H 24
+
+static void send_line(int fd, const char *text)
+{
+    unsigned x = 0;
+    for (const char *p = text; *p; p++) x ^= (unsigned char)*p;
+    char buf[256];
+    int n = snprintf(buf, sizeof buf, "%s*%02X\n", text, x);
+    if (write(fd, buf, (size_t)n) != n) _exit(3);
+}
+
+/* The fake controller: PING, CFG, START (then one D line per cycle and EV DONE), STOP. */
+static void fake_controller(int fd, const char *log_path)
+{
+    FILE *log = fopen(log_path, "w");
+    char line[256];
+    size_t n = 0;
+    long C = 0;
+    for (;;) {
+        char c;
+        ssize_t got = read(fd, &c, 1);
+        if (got <= 0) break;
+        if (c != '\n') {
+            if (n + 1 < sizeof line) line[n++] = c;
+            continue;
+        }
+        line[n] = '\0';
+        n = 0;
+        char *star = strrchr(line, '*');
+        if (star) *star = '\0';
+        if (log) {
+            fprintf(log, "%s\n", line);
+            fflush(log);
+        }
+        if (!strcmp(line, "PING")) send_line(fd, "OK PING");
+        else if (!strncmp(line, "CFG ", 4)) {
+            int K, k;
+            char mode;
+            if (sscanf(line + 4, "%d %d %ld %c", &K, &k, &C, &mode) == 4) send_line(fd, "OK CFG");
+            else send_line(fd, "ERR SYNTAX");
+        } else if (!strcmp(line, "START")) {
+            send_line(fd, "OK START");
+            send_line(fd, "EV START grid=50 half_ns=10000000");
+            for (long i = 0; i < C; i++) {
+                char d[64];
+                snprintf(d, sizeof d, "D %ld %ld", i, 10000000L + (i % 2 ? 1500L : -1500L));
+                send_line(fd, d);
+            }
+            send_line(fd, "EV DONE");
+        } else if (!strcmp(line, "STOP")) send_line(fd, "OK STOP cycles=0");
+        else send_line(fd, "ERR SYNTAX");
+    }
+    if (log) fclose(log);
+    _exit(0);
+}
+
+static int masks_loaded;
+static int load_masks(void *user, int masks, const unsigned char *halvings, int w, int h)
+{
+    (void)user;
+    (void)halvings;
+    if (masks != 2 || w != HW_W || h != HW_H) return 1;
+    masks_loaded++;
+    return 0;
+}
+
+/* Zero crossings of a real mains recording as a GPIO event file. */
+static int write_events(const char *path, size_t count)
+{
+    double *x = NULL, *t = NULL, rate;
+    size_t n = 0, nc = 0;
+    int rising;
+    if (rec_mains_read(test_shared_path("data/mains/whu_002_ref.wav"), &x, &n, &rate) != GS_OK) return 0;
+    gs_status s = rec_zero_crossings(x, n, rate, 0.05, &t, &nc, &rising);
+    free(x);
+    if (s != GS_OK || nc < count) {
+        free(t);
+        return 0;
+    }
+    FILE *f = fopen(path, "w");
+    for (size_t i = 0; i < count; i++) {
+        double ts = 5000.0 + t[i];
+        long long sec = (long long)ts;
+        fprintf(f, "%lld %lld %d\n", sec, (long long)((ts - (double)sec) * 1e9),
+                ((i % 2 == 0) == (rising > 0)) ? 1 : 2);
+    }
+    fclose(f);
+    free(t);
+    return 1;
+}
+
+/* K 16-bit RGB frames cam_000.png ... with a known pattern. */
+static void write_camera(const char *dir)
+{
+    rec_capture c;
+    memset(&c, 0, sizeof c);
+    c.K = HW_K;
+    c.bands = 3;
+    c.width = HW_W;
+    c.height = HW_H;
+    CHECK_OK(rec_capture_alloc(&c));
+    for (int k = 0; k < HW_K; k++) {
+        snprintf(c.frames[k].file, REC_PATH_MAX, "cam_%03d.png", k);
+        for (int y = 0; y < HW_H; y++)
+            for (int x = 0; x < HW_W; x++)
+                for (int b = 0; b < 3; b++)
+                    c.raw[(((size_t)k * HW_H + (size_t)y) * HW_W + (size_t)x) * 3 + (size_t)b] =
+                        (unsigned short)(64 + 1000 * k + 31 * x + 7 * y + 300 * b);
+    }
+    for (int k = 0; k < HW_K; k++) CHECK_OK(rec_capture_write_frame(dir, &c, k));
+    rec_capture_release(&c);
+}
+
+static pid_t start_controller(int *fd, const char *log_path)
+{
+    int sv[2];
+    if (socketpair(AF_UNIX, SOCK_STREAM, 0, sv) != 0) return -1;
+    fflush(stdout);
+    pid_t pid = fork();
+    if (pid == 0) {
+        close(sv[0]);
+        fake_controller(sv[1], log_path);
+    }
+    close(sv[1]);
+    *fd = sv[0];
+    return pid;
+}
+
+TEST(capture_hardware_backend_with_fakes)
+{
+    const char *tmp = test_tmpdir();
+    char events[1024], camdir[1024], pattern[1100], log_path[1024], out[1024];
+    snprintf(events, sizeof events, "%s/zc.events", tmp);
+    snprintf(camdir, sizeof camdir, "%s/cam", tmp);
+    snprintf(pattern, sizeof pattern, "%s/cam_%%03d.png", camdir);
+    snprintf(log_path, sizeof log_path, "%s/controller.log", tmp);
+    snprintf(out, sizeof out, "%s/capture", tmp);
+    CHECK(write_events(events, HW_K * (HW_C + 1) + 10));
+    CHECK(fake_gpiod_load_events(events, HW_C + 1) == HW_K * (HW_C + 1) + 10);
+    write_camera(camdir);
+    int fd = -1;
+    pid_t child = start_controller(&fd, log_path);
+    CHECK(child > 0);
+
+    cap_hw_config hw;
+    cap_hw_config_default(&hw);
+    hw.camera = pattern;
+    hw.camera_images = 1;
+    hw.serial_fd = fd;
+    hw.gpio_chip = "gpiochip0";
+    hw.zc_line = 17;
+    hw.shutter_line = 22;
+    hw.trigger_line = 27;
+    hw.width = HW_W;
+    hw.height = HW_H;
+    hw.bands = 3;
+    hw.K = HW_K;
+    hw.cycles = HW_C;
+    hw.saturation_dn = 65535;
+    hw.load_masks = load_masks;
+    cap_backend *be = NULL;
+    CHECK_OK(cap_backend_hardware_new(&hw, &be));
+    if (be) {
+        CHECK(!strcmp(cap_backend_name(be), "hardware"));
+        cap_loop_opts o;
+        cap_loop_opts_default(&o);
+        o.progress = 0;
+        cap_loop_report rep;
+        CHECK_OK(cap_loop_run(be, out, &o, &rep));
+        CHECK(rep.complete && rep.frames_acquired == HW_K && rep.acquisitions == HW_K);
+        cap_hw_log log;
+        CHECK_OK(cap_backend_hardware_log(be, &log));
+        printf("    last frame: %zu crossings on the GPIO (mean half period %.6f s), %zu cycles "
+               "logged by the controller (%.6f s)\n", log.crossings, log.mean_half_period_s,
+               log.link_cycles, log.link_mean_half_period_s);
+        CHECK(log.crossings == HW_C);
+        CHECK_NEAR(log.mean_half_period_s, 0.01, 2e-5);
+        CHECK(log.link_cycles == HW_C);
+        CHECK_NEAR(log.link_mean_half_period_s, 0.01, 1e-9);
+        CHECK(masks_loaded == HW_K);
+        CHECK(fake_gpiod_events_left() == 10);
+        cap_backend_free(be);
+    }
+    CHECK(fake_gpiod_open_handles() == 0);
+    int st = 0;
+    waitpid(child, &st, 0);
+    CHECK(WIFEXITED(st) && WEXITSTATUS(st) == 0);
+    /* outputs: both idle low, then per frame shutter up/down and a trigger pulse */
+    CHECK(fake_gpiod_output_count() == 2 + 4 * HW_K);
+    static const int expect[4][2] = {{22, 1}, {22, 0}, {27, 1}, {27, 0}};
+    for (int k = 0; k < HW_K; k++)
+        for (int j = 0; j < 4; j++) {
+            fake_gpiod_output e = fake_gpiod_output_get(2 + 4 * (size_t)k + (size_t)j);
+            CHECK_MSG(e.offset == (unsigned)expect[j][0] && e.value == expect[j][1],
+                      "output %d of frame %d: line %u value %d", j, k, e.offset, e.value);
+        }
+    /* the controller saw PING and one CFG per frame: window k of K, C cycles, locked */
+    FILE *f = fopen(log_path, "r");
+    char line[256];
+    int cfg = 0, starts = 0, ping = 0;
+    while (f && fgets(line, sizeof line, f)) {
+        char want[64];
+        snprintf(want, sizeof want, "CFG %d %d %d L\n", HW_K, cfg, HW_C);
+        if (!strncmp(line, "CFG", 3)) {
+            CHECK_MSG(!strcmp(line, want), "got %s wanted %s", line, want);
+            cfg++;
+        }
+        starts += !strcmp(line, "START\n");
+        ping += !strcmp(line, "PING\n");
+    }
+    if (f) fclose(f);
+    CHECK(cfg == HW_K && starts == HW_K && ping == 1);
+    /* the frames are the camera's */
+    rec_capture cap, cam;
+    CHECK_OK(rec_capture_read(out, &cap));
+    memset(&cam, 0, sizeof cam);
+    cam.K = HW_K;
+    cam.bands = 3;
+    cam.width = HW_W;
+    cam.height = HW_H;
+    CHECK_OK(rec_capture_alloc(&cam));
+    if (cap.raw) {
+        size_t n = (size_t)HW_K * HW_W * HW_H * 3;
+        size_t bad = 0;
+        for (int k = 0; k < HW_K; k++)
+            for (int y = 0; y < HW_H; y++)
+                for (int x = 0; x < HW_W; x++)
+                    for (int b = 0; b < 3; b++) {
+                        size_t i = (((size_t)k * HW_H + (size_t)y) * HW_W + (size_t)x) * 3 + (size_t)b;
+                        bad += cap.raw[i] != (unsigned short)(64 + 1000 * k + 31 * x + 7 * y + 300 * b);
+                    }
+        CHECK_MSG(bad == 0, "%zu of %zu samples differ from the camera's", bad, n);
+        CHECK(cap.locked == 1 && cap.utc[0] != '\0');
+    }
+    rec_capture_release(&cap);
+    rec_capture_release(&cam);
+}
+
+TEST(capture_hardware_backend_failures)
+{
+    const char *tmp = test_tmpdir();
+    char events[1024], camdir[1024], pattern[1100], log_path[1024];
+    snprintf(events, sizeof events, "%s/zc.events", tmp);
+    snprintf(camdir, sizeof camdir, "%s/cam", tmp);
+    snprintf(pattern, sizeof pattern, "%s/cam_%%03d.png", camdir);
+    snprintf(log_path, sizeof log_path, "%s/controller.log", tmp);
+    write_camera(camdir);
+    cap_hw_config hw;
+    cap_hw_config_default(&hw);
+    hw.camera = pattern;
+    hw.camera_images = 1;
+    hw.gpio_chip = "missing";
+    hw.zc_line = 17;
+    hw.width = HW_W;
+    hw.height = HW_H;
+    hw.bands = 3;
+    hw.K = HW_K;
+    hw.cycles = HW_C;
+    int fd;
+    pid_t child = start_controller(&fd, log_path);
+    hw.serial_fd = fd;
+    cap_backend *be = NULL;
+    CHECK(cap_backend_hardware_new(&hw, &be) == GS_EIO && !be);
+    CHECK_MSG(strstr(gs_detail(), "gpio chip missing"), "%s", gs_detail());
+    waitpid(child, NULL, 0);
+    /* no crossings at all: the mains is not sensed */
+    FILE *f = fopen(events, "w");
+    fclose(f);
+    CHECK(fake_gpiod_load_events(events, 10) == 0);
+    child = start_controller(&fd, log_path);
+    hw.serial_fd = fd;
+    hw.gpio_chip = "gpiochip0";
+    CHECK_OK(cap_backend_hardware_new(&hw, &be));
+    if (be) {
+        unsigned char halv[HW_W * HW_H] = {0};
+        unsigned short *raw = malloc(sizeof *raw * HW_W * HW_H * 3);
+        cap_acquisition a = {0, 0, 0};
+        CHECK(cap_backend_acquire(be, &a, halv, raw, NULL) == GS_EIO);
+        CHECK_MSG(strstr(gs_detail(), "no mains zero crossing on gpio line 17"), "%s", gs_detail());
+        free(raw);
+        cap_backend_free(be);
+    }
+    waitpid(child, NULL, 0);
+    /* a wrong camera size */
+    CHECK(write_events(events, 200));
+    CHECK(fake_gpiod_load_events(events, 60) == 200);
+    child = start_controller(&fd, log_path);
+    hw.serial_fd = fd;
+    hw.width = HW_W + 1;
+    CHECK_OK(cap_backend_hardware_new(&hw, &be));
+    if (be) {
+        unsigned char halv[(HW_W + 1) * HW_H] = {0};
+        unsigned short *raw = malloc(sizeof *raw * (HW_W + 1) * HW_H * 3);
+        cap_acquisition a = {0, 0, 0};
+        CHECK(cap_backend_acquire(be, &a, halv, raw, NULL) == GS_EFORMAT);
+        CHECK_MSG(strstr(gs_detail(), "expected 33x24"), "%s", gs_detail());
+        free(raw);
+        cap_backend_free(be);
+    }
+    waitpid(child, NULL, 0);
+    CHECK(fake_gpiod_open_handles() == 0);
+}

@@ -1,0 +1,208 @@
+/* test_capture_loop.c - the acquisition loop (capture/loop.c): frames written as acquired, an
+ * interrupted capture (stopped after N frames, killed, or with a damaged frame) resumes to the
+ * same files as an uninterrupted run; another configuration is refused; replay round trip. */
+#include "tests/test.h"
+#include "capture/capture.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#define SMALL_K 8
+
+static const char *small_scene =
+    "{\"format\": \"gridsurvey-scene/1\", \"name\": \"small\", \"seed\": %d,\n"
+    " \"grid\": {\"nominal_hz\": 50, \"frequency\": {\"model\": \"random_walk\"}},\n"
+    " \"camera\": {\"width_px\": 96, \"height_px\": 64,\n"
+    "   \"sensor\": {\"bands\": 3, \"bit_depth\": 12, \"full_well_e\": 20000, \"read_noise_e\": 3, \"gain_e_per_dn\": 5, \"black_level_dn\": 64}},\n"
+    " \"acam\": {\"K\": 8, \"cycles\": 64, \"masks\": 16, \"hdr\": true},\n"
+    " \"lights\": [\n"
+    "  {\"bulb\": \"hps-150w\", \"x_px\": 20.2, \"y_px\": 20.7, \"distance_m\": 3000, \"flux_e_per_cycle\": 90000},\n"
+    "  {\"bulb\": \"mh-250w\", \"phase_deg\": 120, \"x_px\": 70.5, \"y_px\": 40.1, \"distance_m\": 5000, \"flux_e_per_cycle\": 20000},\n"
+    "  {\"bulb\": \"led-street-60w-lin3\", \"phase_deg\": 240, \"x_px\": 50, \"y_px\": 12, \"distance_m\": 4000, \"flux_e_per_cycle\": 5000}],\n"
+    " \"effects\": {\"frequency_wander\": {}, \"scintillation\": {\"intensity_variance\": 0.2}, \"psf\": {\"sigma_px\": 1.0},\n"
+    "   \"ambient\": {\"e_per_px_cycle\": 2}, \"shot_noise\": {}, \"saturation\": {}, \"read_noise\": {}, \"adc\": {}}}\n";
+
+static void write_small(const char *path, int seed)
+{
+    FILE *f = fopen(path, "w");
+    fprintf(f, small_scene, seed);
+    fclose(f);
+}
+
+/* 1 if dir_a/name and dir_b/name have the same bytes. */
+static int same_file(const char *a, const char *b, const char *name)
+{
+    char pa[1024], pb[1024];
+    snprintf(pa, sizeof pa, "%s/%s", a, name);
+    snprintf(pb, sizeof pb, "%s/%s", b, name);
+    FILE *fa = fopen(pa, "rb"), *fb = fopen(pb, "rb");
+    int same = fa && fb;
+    while (same) {
+        int ca = fgetc(fa), cb = fgetc(fb);
+        if (ca != cb) same = 0;
+        if (ca == EOF || cb == EOF) break;
+    }
+    if (fa) fclose(fa);
+    if (fb) fclose(fb);
+    return same;
+}
+
+static int same_capture(const char *a, const char *b, int with_progress)
+{
+    int ok = same_file(a, b, "capture.json");
+    if (with_progress) ok &= same_file(a, b, "acquisition.json");
+    for (int k = 0; k < SMALL_K; k++) {
+        char n[32];
+        snprintf(n, sizeof n, "frame_%03d.png", k);
+        ok &= same_file(a, b, n);
+        snprintf(n, sizeof n, "hdr_%03d.png", k);
+        ok &= same_file(a, b, n);
+    }
+    return ok;
+}
+
+static gs_status run(const char *scene_path, const char *dir, int stop_after, int force,
+                     cap_loop_report *rep)
+{
+    cap_scene sc;
+    gs_status s = cap_scene_read(scene_path, &sc);
+    cap_backend *be = NULL;
+    if (s == GS_OK) s = cap_backend_sim_new(&sc, &be);
+    cap_scene_release(&sc);
+    if (s != GS_OK) return s;
+    cap_loop_opts o;
+    cap_loop_opts_default(&o);
+    o.progress = 0;
+    o.stop_after = stop_after;
+    o.force = force;
+    s = cap_loop_run(be, dir, &o, rep);
+    cap_backend_free(be);
+    return s;
+}
+
+TEST(capture_resume_after_stop_and_damage_identical)
+{
+    char scene[1024], other[1024], a[1024], b[1024];
+    const char *tmp = test_tmpdir();
+    snprintf(scene, sizeof scene, "%s/small.json", tmp);
+    snprintf(other, sizeof other, "%s/other.json", tmp);
+    snprintf(a, sizeof a, "%s/a", tmp);
+    snprintf(b, sizeof b, "%s/b", tmp);
+    write_small(scene, 21);
+    write_small(other, 22);
+    cap_loop_report r;
+    CHECK_OK(run(scene, a, 0, 0, &r));
+    CHECK(r.complete && r.frames_acquired == SMALL_K && r.max_passes >= 2);
+    long acquisitions = r.acquisitions;
+    /* stop after 3 frames: a partial directory without capture.json */
+    CHECK_OK(run(scene, b, 3, 0, &r));
+    CHECK(!r.complete && r.frames_acquired == 3);
+    CHECK(access(b, F_OK) == 0);
+    char cj[1100];
+    snprintf(cj, sizeof cj, "%s/capture.json", b);
+    CHECK(access(cj, F_OK) != 0);
+    /* another configuration refuses to mix with it */
+    CHECK(run(other, b, 0, 0, &r) == GS_EINVAL);
+    CHECK_MSG(strstr(gs_detail(), "another configuration"), "%s", gs_detail());
+    /* resume: the 3 frames are kept, the rest acquired, the files are those of run a */
+    CHECK_OK(run(scene, b, 0, 0, &r));
+    CHECK(r.complete && r.frames_kept == 3 && r.frames_acquired == SMALL_K - 3);
+    CHECK(r.acquisitions == acquisitions);
+    CHECK_MSG(same_capture(a, b, 1), "a resumed capture differs from an uninterrupted one");
+    /* complete: nothing to do */
+    CHECK_OK(run(scene, b, 0, 0, &r));
+    CHECK(r.complete && r.frames_kept == SMALL_K && r.frames_acquired == 0);
+    /* a damaged frame (truncated) and a damaged map are acquired again, identically */
+    char f2[1100];
+    snprintf(f2, sizeof f2, "%s/frame_002.png", b);
+    CHECK(truncate(f2, 100) == 0);
+    snprintf(f2, sizeof f2, "%s/hdr_006.png", b);
+    FILE *f = fopen(f2, "r+b");
+    if (f) {
+        fseek(f, 40, SEEK_SET);
+        fputc(0x55, f);
+        fclose(f);
+    }
+    CHECK_OK(run(scene, b, 0, 0, &r));
+    CHECK_MSG(r.complete && r.frames_acquired == 2 && r.frames_kept == SMALL_K - 2,
+              "acquired %d kept %d", r.frames_acquired, r.frames_kept);
+    CHECK_MSG(same_capture(a, b, 1), "frames re-acquired after damage differ");
+    /* force: starts again (same result) */
+    CHECK_OK(run(scene, b, 0, 1, &r));
+    CHECK(r.frames_acquired == SMALL_K);
+    CHECK(same_capture(a, b, 1));
+    /* the capture reads back */
+    rec_capture cap;
+    CHECK_OK(rec_capture_read(b, &cap));
+    CHECK(cap.K == SMALL_K && cap.bands == 3 && cap.halvings != NULL);
+    rec_capture_release(&cap);
+}
+
+TEST(capture_resume_after_kill_cli)
+{
+    char cmd[16384], out[4096], bin[2048];
+    const char *tmp = test_tmpdir();
+    if (!realpath(test_bin(), bin)) snprintf(bin, sizeof bin, "%s", test_bin());
+    char scene[1024];
+    snprintf(scene, sizeof scene, "%s/small.json", tmp);
+    write_small(scene, 5);
+    /* kill -9 as soon as the first frame is recorded, then resume */
+    snprintf(cmd, sizeof cmd,
+             "cd %s && %s simulate small.json -o full --no-progress >/dev/null && "
+             "(%s simulate small.json -o killed --no-progress >/dev/null & pid=$!; "
+             " while ! grep -q '\"k\": 0' killed/acquisition.json 2>/dev/null; do sleep 0.005; done; "
+             " kill -9 $pid; wait $pid; echo \"exit $?\"; "
+             " if [ -f killed/capture.json ]; then echo finished-before-kill; else echo interrupted; fi; "
+             " grep -c '\"k\":' killed/acquisition.json) && "
+             "%s simulate small.json -o killed --no-progress && diff -r full killed && echo SAME",
+             tmp, bin, bin, bin);
+    int rc = test_run(cmd, out, sizeof out);
+    printf("    %s", out);
+    CHECK_MSG(rc == 0 && strstr(out, "SAME"), "rc %d: %s", rc, out);
+    CHECK(strstr(out, "kept") != NULL);
+}
+
+TEST(capture_replay_roundtrip)
+{
+    char scene[1024], a[1024], c[1024];
+    const char *tmp = test_tmpdir();
+    snprintf(scene, sizeof scene, "%s/small.json", tmp);
+    snprintf(a, sizeof a, "%s/a", tmp);
+    snprintf(c, sizeof c, "%s/c", tmp);
+    write_small(scene, 9);
+    cap_loop_report r;
+    CHECK_OK(run(scene, a, 0, 0, &r));
+    cap_backend *be = NULL;
+    CHECK_OK(cap_backend_replay_new(a, &be));
+    if (!be) return;
+    CHECK(!strcmp(cap_backend_name(be), "replay"));
+    cap_acq_info info;
+    CHECK_OK(cap_backend_info(be, &info));
+    CHECK(info.K == SMALL_K && info.fixed_halvings && info.max_halvings == 0);
+    cap_loop_opts o;
+    cap_loop_opts_default(&o);
+    o.progress = 0;
+    o.stop_after = 4;
+    CHECK_OK(cap_loop_run(be, c, &o, &r));
+    CHECK(!r.complete);
+    o.stop_after = 0;
+    CHECK_OK(cap_loop_run(be, c, &o, &r));
+    CHECK(r.complete && r.frames_kept == 4);
+    CHECK_MSG(same_capture(a, c, 0), "a replayed capture differs from its source");
+    cap_backend_free(be);
+    /* the CLI route */
+    char cmd[4096], out[2048];
+    snprintf(cmd, sizeof cmd, "%s capture --backend replay --from %s -o %s/d --no-progress && diff %s/frame_005.png %s/d/frame_005.png && echo SAME",
+             test_bin(), a, tmp, a, tmp);
+    int rc = test_run(cmd, out, sizeof out);
+    CHECK_MSG(rc == 0 && strstr(out, "SAME"), "%s", out);
+    snprintf(cmd, sizeof cmd, "%s capture --backend sim --scene %s -o %s/e --no-progress",
+             test_bin(), scene, tmp);
+    rc = test_run(cmd, out, sizeof out);
+    CHECK_MSG(rc == 0, "%s", out);
+    char e[1100];
+    snprintf(e, sizeof e, "%s/e", tmp);
+    CHECK_MSG(same_capture(a, e, 1), "capture --backend sim differs from the loop");
+}

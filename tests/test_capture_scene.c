@@ -1,0 +1,180 @@
+/* test_capture_scene.c - scene files (capture/scene.c, docs/scene.md): every error names the
+ * file, the line and the field; GeoJSON lights; the built-in scenes (lab, metro). */
+#include "tests/test.h"
+#include "capture/sim.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static const char *head =
+    "{\"format\": \"gridsurvey-scene/1\",\n"               /* 1 */
+    " \"grid\": {\"nominal_hz\": 50},\n"                   /* 2 */
+    " \"camera\": {\"width_px\": 64, \"height_px\": 48,\n" /* 3 */
+    "   \"sensor\": {\"bands\": 3}},\n"                    /* 4 */
+    " \"acam\": {\"K\": 10, \"cycles\": 40},\n";           /* 5 */
+
+/* Parses head + rest; expects failure with a detail holding want. */
+static void expect_error(const char *rest, const char *want, gs_status st_want)
+{
+    char text[4096];
+    snprintf(text, sizeof text, "%s%s", head, rest);
+    cap_scene sc;
+    gs_status st = cap_scene_parse(text, "bad.json", test_tmpdir(), &sc);
+    CHECK_MSG(st == st_want && strstr(gs_detail(), want), "wanted %s '%s', got %s '%s'",
+              gs_strerror(st_want), want, gs_strerror(st), gs_detail());
+    cap_scene_release(&sc);
+}
+
+TEST(scene_parse_errors_name_file_line_field)
+{
+    /* syntax: line and column */
+    expect_error(" \"lights\": [\n  {\"bulb\": \"hps-150w\",, \"x_px\": 1}]}\n", "bad.json:7:", GS_EFORMAT);
+    expect_error(" \"lights\": [\n  {\"bulb\": \"hps-150w\",, \"x_px\": 1}]}\n", "JSON syntax", GS_EFORMAT);
+    /* a typo in a key */
+    expect_error(" \"lihgts\": []}\n", "bad.json:6: field lihgts: unknown field", GS_EFORMAT);
+    /* required field missing: the line of its parent */
+    expect_error(" \"lights\": [\n  {\"x_px\": 1, \"y_px\": 2,\n   \"flux_e_per_cycle\": 5}]}\n",
+                 "bad.json:7: field lights[0].bulb: expected a string (required)", GS_EFORMAT);
+    /* a value out of range: the line of the value */
+    expect_error(" \"lights\": [\n  {\"bulb\": \"hps-150w\", \"x_px\": 1, \"y_px\": 2, \"flux_e_per_cycle\": 5},\n"
+                 "  {\"bulb\": \"hps-150w\", \"x_px\": 1,\n   \"y_px\": 2, \"flux_e_per_cycle\": -5}]}\n",
+                 "bad.json:9: field lights[1].flux_e_per_cycle: -5: expected a number from 0", GS_EFORMAT);
+    expect_error(" \"lights\": [{\"bulb\": \"hps-150w\", \"x_px\": 1, \"y_px\": 2, \"lat_deg\": 3, \"flux_e_per_cycle\": 5}]}\n",
+                 "field lights[0].x_px: expected either x_px and y_px", GS_EFORMAT);
+    expect_error(" \"lights\": [{\"bulb\": \"hps-150w\", \"x_px\": 1, \"y_px\": 2, \"lumens\": 5}]}\n",
+                 "field lights[0].lumens: a light given in lumens needs its distance", GS_EFORMAT);
+    expect_error(" \"lights\": [{\"bulb\": \"hps-150w\", \"lat_deg\": 32, \"lon_deg\": 35, \"height_m\": 10, \"lumens\": 5}]}\n",
+                 "field lights[0].lat_deg: a geographic light needs camera.station", GS_EFORMAT);
+    /* effects */
+    expect_error(" \"lights\": [],\n \"effects\": {\"shot_nois\": {}}}\n",
+                 "bad.json:7: field effects.shot_nois: unknown effect; expected one of: frequency_wander", GS_EFORMAT);
+    expect_error(" \"lights\": [],\n \"effects\": {\n  \"psf\": {\"sigma_px\": -1}}}\n",
+                 "bad.json:8: field effects.psf.sigma_px: -1: expected a number from 0.05 to 50", GS_EFORMAT);
+    expect_error(" \"lights\": [],\n \"effects\": {\"free_running_drift\": {}}}\n",
+                 "field effects.free_running_drift: expected acam.locked false", GS_EFORMAT);
+    expect_error(" \"lights\": [],\n \"effects\": {\"blinking_sign\": {\"signs\": [{\"x_px\": 1, \"y_px\": 1, \"flux_e_per_cycle\": 4}]}}}\n",
+                 "field effects.blinking_sign.signs[0].period_s: expected a number", GS_EFORMAT);
+    /* whole-file checks */
+    {
+        cap_scene sc;
+        CHECK(cap_scene_parse("{\"grid\": {}}", "nofmt.json", ".", &sc) == GS_EFORMAT);
+        CHECK_MSG(strstr(gs_detail(), "nofmt.json:1: field format: expected a string (required)"), "%s", gs_detail());
+        cap_scene_release(&sc);
+        const char *t = "{\"format\": \"gridsurvey-scene/1\",\n \"grid\": {\"nominal_hz\": 50,\n  \"frequency\": {\"model\": \"random_walk\"}},\n"
+                        " \"camera\": {\"width_px\": 8, \"height_px\": 8}, \"acam\": {\"K\": 4, \"cycles\": 8}, \"lights\": []}";
+        CHECK(cap_scene_parse(t, "wander.json", ".", &sc) == GS_EFORMAT);
+        CHECK_MSG(strstr(gs_detail(), "wander.json:3: field grid.frequency: a grid that deviates"), "%s", gs_detail());
+        cap_scene_release(&sc);
+        CHECK(cap_scene_read("/nonexistent/scene.json", &sc) == GS_ENOTFOUND);
+        CHECK_MSG(strstr(gs_detail(), "/nonexistent/scene.json"), "%s", gs_detail());
+        cap_scene_release(&sc);
+    }
+    /* an unknown bulb is found when the simulator looks it up: file, line, light */
+    {
+        char text[2048];
+        snprintf(text, sizeof text, "%s \"lights\": [\n  {\"id\": \"x1\", \"bulb\": \"no-such-bulb\", \"x_px\": 1, \"y_px\": 2, \"flux_e_per_cycle\": 5}]}\n", head);
+        char path[1024];
+        snprintf(path, sizeof path, "%s/unknown.json", test_tmpdir());
+        FILE *f = fopen(path, "w");
+        fputs(text, f);
+        fclose(f);
+        cap_scene sc;
+        CHECK_OK(cap_scene_read(path, &sc));
+        cap_sim *s = NULL;
+        CHECK(cap_sim_new(&sc, NULL, &s) == GS_ENOTFOUND);
+        CHECK_MSG(strstr(gs_detail(), "unknown.json:7: field lights (light x1): bulb 'no-such-bulb'"), "%s", gs_detail());
+        cap_scene_release(&sc);
+    }
+}
+
+TEST(scene_geojson_lights_projected_with_gis)
+{
+    char gj[1024], scene[4096];
+    snprintf(gj, sizeof gj, "%s/lights.geojson", test_tmpdir());
+    FILE *f = fopen(gj, "w");
+    fputs("{\"type\": \"FeatureCollection\", \"features\": [\n"
+          " {\"type\": \"Feature\", \"geometry\": {\"type\": \"Point\", \"coordinates\": [35.0300, 32.8200, 25]},\n"
+          "  \"properties\": {\"id\": \"a\", \"bulb\": \"hps-150w\", \"phase_deg\": 120, \"lumens\": 15000}},\n"
+          " {\"type\": \"Feature\", \"geometry\": {\"type\": \"Point\", \"coordinates\": [35.0250, 32.8150]},\n"
+          "  \"properties\": {\"id\": \"b\", \"lumens\": 6000}}\n"
+          "]}\n", f);
+    fclose(f);
+    const char *body =
+        "{\"format\": \"gridsurvey-scene/1\",\n"
+        " \"grid\": {\"nominal_hz\": 50},\n"
+        " \"camera\": {\"width_px\": 800, \"height_px\": 600,\n"
+        "   \"station\": {\"lat_deg\": 32.7940, \"lon_deg\": 34.9900, \"height_m\": 470},\n"
+        "   \"pose\": {\"heading_deg\": 52, \"pitch_deg\": -5}, \"intrinsics\": {\"focal_px\": 2000}},\n"
+        " \"acam\": {\"K\": 10, \"cycles\": 40},\n"
+        " \"lights\": [{\"type\": \"geojson\", \"file\": \"lights.geojson\",\n"
+        "              \"defaults\": {\"bulb\": \"mh-250w\", \"height_m\": 30}}]}\n";
+    snprintf(scene, sizeof scene, "%s", body);
+    cap_scene sc;
+    CHECK_OK(cap_scene_parse(scene, "geo.json", test_tmpdir(), &sc));
+    CHECK(sc.n_lights == 2);
+    if (sc.n_lights == 2) {
+        CHECK(!strcmp(sc.lights[0].bulb, "hps-150w") && !strcmp(sc.lights[1].bulb, "mh-250w"));
+        CHECK(sc.lights[0].height_m == 25 && sc.lights[1].height_m == 30);
+        for (int i = 0; i < 2; i++) {
+            double x, y;
+            int front;
+            CHECK_OK(gis_project(&sc.cam, sc.lights[i].lat_deg, sc.lights[i].lon_deg, sc.lights[i].height_m, &x, &y, &front));
+            CHECK(x == sc.lights[i].x_px && y == sc.lights[i].y_px && sc.lights[i].in_image);
+            CHECK(sc.lights[i].distance_m > 3000 && sc.lights[i].distance_m < 6000);
+            CHECK_NEAR(sc.lights[i].flux_e_per_cycle,
+                       cap_scene_flux_from_lumens(&sc, sc.lights[i].lumens, sc.lights[i].distance_m), 1e-9);
+        }
+    }
+    cap_scene_release(&sc);
+    /* errors inside the GeoJSON name the GeoJSON file */
+    f = fopen(gj, "w");
+    fputs("{\"type\": \"FeatureCollection\", \"features\": [\n"
+          " {\"type\": \"Feature\", \"geometry\": {\"type\": \"Point\", \"coordinates\": [35.03, 32.82, 25]},\n"
+          "  \"properties\": {\"id\": \"a\", \"lumens\": 15000}}]}\n", f);
+    fclose(f);
+    snprintf(scene, sizeof scene, "%s", body);
+    char *p = strstr(scene, ",\n              \"defaults\"");
+    if (p) strcpy(p, "}]}\n");
+    CHECK(cap_scene_parse(scene, "geo.json", test_tmpdir(), &sc) == GS_EFORMAT);
+    CHECK_MSG(strstr(gs_detail(), "lights.geojson:3: field features[0].properties.bulb"), "%s", gs_detail());
+    cap_scene_release(&sc);
+}
+
+TEST(scene_builtin_lab_and_metro)
+{
+    rec_delight *d = rec_delight_new();
+    CHECK_OK(rec_delight_generate(d, REC_BRF_N_DEFAULT));
+    cap_scene sc;
+    CHECK_OK(cap_scene_read("capture/scenes/lab.json", &sc));
+    CHECK(sc.n_lights >= 6);
+    CHECK(sc.acam.hdr);
+    cap_scene_release(&sc);
+
+    CHECK_OK(cap_scene_read("capture/scenes/metro.json", &sc));
+    size_t in_image = 0;
+    int tech[REC_TECH_COUNT] = {0}, n_tech = 0;
+    double dmin = 1e9, dmax = 0;
+    for (size_t i = 0; i < sc.n_lights; i++) {
+        const cap_light *l = &sc.lights[i];
+        in_image += l->in_image != 0;
+        if (l->distance_m < dmin) dmin = l->distance_m;
+        if (l->distance_m > dmax) dmax = l->distance_m;
+        const rec_bulb *b = rec_delight_find(d, l->bulb, 50, 3);
+        CHECK(b != NULL);
+        if (b && !tech[b->type]++) n_tech++;
+    }
+    printf("    metro: %zu lights in the image, %d technologies, %.0f to %.0f m from the station\n",
+           in_image, n_tech, dmin, dmax);
+    CHECK(in_image >= 5000);
+    CHECK(n_tech >= 6);
+    CHECK(dmin >= 2000 && dmax <= 8000);
+    CHECK(sc.acam.K >= 13 && sc.cam.width_px <= 2048);
+    /* only what a city at night needs */
+    CHECK(!(sc.fx.enabled & (1u << CAP_FX_HEADLIGHTS)) && !(sc.fx.enabled & (1u << CAP_FX_DMD_JITTER)));
+    cap_sim *s = NULL;
+    CHECK_OK(cap_sim_new(&sc, d, &s));
+    cap_sim_free(s);
+    cap_scene_release(&sc);
+    rec_delight_free(d);
+}

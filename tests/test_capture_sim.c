@@ -1,0 +1,451 @@
+/* test_capture_sim.c - the scene simulator (capture/sim.c, effects.c): without effects a frame
+ * is the exact Eq. 5 integral through the masks (checked against brute-force numerical
+ * integration of the BRF's trigonometric polynomial); an effect the scene does not list is never
+ * executed (pipeline list and the effects' own call counters); the HDR loop recovers saturated
+ * lights; the effects' physics numbers (shared/BULBS.md); determinism. */
+#include "tests/test.h"
+#include "capture/sim.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static int san(void)
+{
+    const char *s = getenv("GS_SAN");
+    return s && *s && strcmp(s, "0");
+}
+
+static rec_delight *delight(void)
+{
+    rec_delight *d = rec_delight_new();
+    if (d && rec_delight_generate(d, REC_BRF_N_DEFAULT) != GS_OK) {
+        rec_delight_free(d);
+        return NULL;
+    }
+    return d;
+}
+
+/* ------------------------------------------------------------ brute-force Eq. 5 */
+
+/* The BRF band as its trigonometric polynomial (naive DFT, no FFTW), evaluated at any t. */
+typedef struct {
+    int n;
+    double c0, nyq;
+    double *re, *im;   /* C_h, h = 1 .. n/2 - 1 */
+} trig;
+
+static void trig_init(trig *t, const double *x, int n)
+{
+    t->n = n;
+    t->re = calloc((size_t)n / 2, sizeof *t->re);
+    t->im = calloc((size_t)n / 2, sizeof *t->im);
+    t->c0 = 0;
+    t->nyq = 0;
+    for (int j = 0; j < n; j++) {
+        t->c0 += x[j];
+        t->nyq += (j % 2 ? -1.0 : 1.0) * x[j];
+    }
+    for (int h = 1; h < n / 2; h++)
+        for (int j = 0; j < n; j++) {
+            double a = -2.0 * M_PI * (double)((long)h * j % n) / n;
+            t->re[h] += x[j] * cos(a);
+            t->im[h] += x[j] * sin(a);
+        }
+}
+
+static double trig_eval(const trig *t, double x)
+{
+    /* (C0 + 2 sum Re(C_h e^{2 pi i h x}) + C_{n/2} cos(pi n x)) / n, by rotation */
+    double cr = cos(2 * M_PI * x), ci = sin(2 * M_PI * x), zr = 1, zi = 0, acc = 0;
+    for (int h = 1; h < t->n / 2; h++) {
+        double nr = zr * cr - zi * ci;
+        zi = zr * ci + zi * cr;
+        zr = nr;
+        acc += t->re[h] * zr - t->im[h] * zi;
+    }
+    return (t->c0 + 2 * acc + t->nyq * cos(M_PI * t->n * x)) / t->n;
+}
+
+/* Mean of B(t - shift) over [a, b] by composite Simpson with m (even) intervals. */
+static double brute_mean(const trig *t, double shift, double a, double b, int m)
+{
+    double h = (b - a) / m, s = 0;
+    for (int i = 0; i <= m; i++) {
+        double w = i == 0 || i == m ? 1 : (i % 2 ? 4 : 2);
+        s += w * trig_eval(t, a + i * h - shift);
+    }
+    return s * h / 3 / (b - a);
+}
+
+static const char *exact_scene =
+    "{\"format\": \"gridsurvey-scene/1\", \"seed\": 3,\n"
+    " \"grid\": {\"nominal_hz\": 50},\n"
+    " \"camera\": {\"width_px\": 40, \"height_px\": 30,\n"
+    "   \"sensor\": {\"bands\": 3, \"gain_e_per_dn\": 2.5, \"black_level_dn\": 10}},\n"
+    " \"acam\": {\"K\": 13, \"cycles\": 64, \"masks\": 16, \"hdr\": true},\n"
+    " \"lights\": [\n"
+    "  {\"bulb\": \"hps-150w\", \"phase_deg\": 0, \"x_px\": 5, \"y_px\": 5, \"flux_e_per_cycle\": 1500},\n"
+    "  {\"bulb\": \"led-street-60w-lin3\", \"phase_deg\": 120, \"x_px\": 20, \"y_px\": 8, \"flux_e_per_cycle\": 2600},\n"
+    "  {\"bulb\": \"fl-t8-36w-tri\", \"phase_deg\": 240, \"x_px\": 33, \"y_px\": 21, \"flux_e_per_cycle\": 900},\n"
+    "  {\"bulb\": \"mh-250w\", \"phase_deg\": 47.5, \"x_px\": 12, \"y_px\": 25, \"flux_e_per_cycle\": 1234.5},\n"
+    "  {\"bulb\": \"cfl-20w\", \"phase_deg\": 120, \"x_px\": 12, \"y_px\": 25, \"flux_e_per_cycle\": 321}\n"
+    " ]}\n";
+
+TEST(sim_no_effects_is_exact_eq5_vs_brute_force)
+{
+    rec_delight *d = delight();
+    CHECK(d != NULL);
+    cap_scene sc;
+    CHECK_OK(cap_scene_parse(exact_scene, "exact.json", ".", &sc));
+    cap_sim *s = NULL;
+    CHECK_OK(cap_sim_new(&sc, d, &s));
+    if (!s) return;
+    int W = 40, H = 30, B = 3, K = 13;
+    size_t n = (size_t)W * H * B;
+    double *dn = malloc(n * sizeof *dn);
+    unsigned short *raw = malloc(n * sizeof *raw);
+    unsigned char *halv = calloc((size_t)W * H, 1);
+    /* two lights halved (HDR rows), exposing C/2 and C/8 cycles */
+    halv[5 * W + 5] = 1;
+    halv[8 * W + 20] = 3;
+    /* the brute-force model of every light */
+    trig t[5][3];
+    const rec_bulb *bulbs[5];
+    for (size_t l = 0; l < 5; l++) {
+        bulbs[l] = rec_delight_find(d, sc.lights[l].bulb, 50, 3);
+        CHECK(bulbs[l] != NULL);
+        for (int b = 0; b < B; b++)
+            trig_init(&t[l][b], bulbs[l]->brf.v + (size_t)b * (size_t)bulbs[l]->brf.n, bulbs[l]->brf.n);
+    }
+    double worst = 0;
+    int ks[3] = {0, 6, 12};
+    for (int ki = 0; ki < (san() ? 1 : 3); ki++) {
+        int k = ks[ki];
+        CHECK_OK(cap_sim_render(s, k, 0, ki, halv, raw, dn));
+        double expect[30][40][3];
+        for (int y = 0; y < H; y++)
+            for (int x = 0; x < W; x++)
+                for (int b = 0; b < B; b++) expect[y][x][b] = 10.0;
+        for (size_t l = 0; l < 5; l++) {
+            int x = (int)sc.lights[l].x_px, y = (int)sc.lights[l].y_px;
+            int h = halv[y * W + x];
+            double cycles = 64.0 / (1 << h);   /* C / 2^h (Sec. 6) */
+            double shift = rec_phase_to_shift(sc.lights[l].phase_deg);
+            for (int b = 0; b < B; b++) {
+                double m = brute_mean(&t[l][b], shift, (double)k / K, (double)(k + 1) / K, 600);
+                expect[y][x][b] += sc.lights[l].flux_e_per_cycle * bulbs[l]->chroma[b] * cycles * m / K / 2.5;
+            }
+        }
+        for (int y = 0; y < H; y++)
+            for (int x = 0; x < W; x++)
+                for (int b = 0; b < B; b++) {
+                    size_t i = ((size_t)y * W + x) * B + b;
+                    double e = expect[y][x][b], rel = fabs(dn[i] - e) / e;
+                    if (rel > worst) worst = rel;
+                    CHECK_MSG(rel < 1e-9, "k %d pixel (%d, %d) band %d: %.12g vs brute force %.12g", k, x, y, b, dn[i], e);
+                    CHECK(raw[i] == (unsigned short)floor(e + 0.5) || fabs(e - floor(e) - 0.5) < 1e-6);
+                }
+    }
+    printf("    no effects vs brute-force Eq. 5 (Simpson, 600 intervals): worst relative error %.2e\n", worst);
+    /* no stage but the base ones */
+    for (size_t i = 0; i < cap_sim_stage_count(s); i++) {
+        cap_stage_info si;
+        CHECK_OK(cap_sim_stage(s, i, &si));
+        CHECK_MSG(si.effect < 0, "stage %s is an effect", si.name);
+    }
+    for (size_t l = 0; l < 5; l++)
+        for (int b = 0; b < B; b++) {
+            free(t[l][b].re);
+            free(t[l][b].im);
+        }
+    free(dn);
+    free(raw);
+    free(halv);
+    cap_sim_free(s);
+    cap_scene_release(&sc);
+    rec_delight_free(d);
+}
+
+/* ------------------------------------------------------------ disabled effects */
+
+/* Parameters that make each effect valid on its own. */
+static const char *const fx_params[CAP_FX_COUNT] = {
+    "\"frequency_wander\": {}",
+    "\"free_running_drift\": {\"clock_ppm\": 20}",
+    "\"dmd_jitter\": {\"sigma_us\": 5}",
+    "\"extinction\": {\"visibility_km\": 20}",
+    "\"scintillation\": {\"intensity_variance\": 0.3}",
+    "\"psf\": {\"sigma_px\": 1.0}",
+    "\"skyglow\": {\"fraction\": 0.05, \"scale_px\": 2}",
+    "\"blinking_sign\": {\"signs\": [{\"x_px\": 3, \"y_px\": 3, \"width_px\": 2, \"height_px\": 2, \"period_s\": 0.7, \"flux_e_per_cycle\": 500}]}",
+    "\"headlights\": {\"cars\": [{\"from\": [0, 20], \"to\": [39, 20], \"speed_px_s\": 20, \"period_s\": 3, \"flux_e_per_cycle\": 800}]}",
+    "\"ambient\": {\"e_per_px_cycle\": 3}",
+    "\"shot_noise\": {}",
+    "\"saturation\": {}",
+    "\"read_noise\": {}",
+    "\"adc\": {}",
+};
+
+static char *scene_with(unsigned mask)
+{
+    size_t cap = 8192;
+    char *t = malloc(cap);
+    int locked = !(mask & (1u << CAP_FX_FREE_RUNNING_DRIFT));
+    int u = snprintf(t, cap,
+                     "{\"format\": \"gridsurvey-scene/1\", \"seed\": 5,\n"
+                     " \"grid\": {\"nominal_hz\": 50%s},\n"
+                     " \"camera\": {\"width_px\": 40, \"height_px\": 30, \"sensor\": {\"bands\": 3}},\n"
+                     " \"acam\": {\"K\": 10, \"cycles\": 40, \"locked\": %s},\n"
+                     " \"lights\": [{\"bulb\": \"hps-150w\", \"x_px\": 10.3, \"y_px\": 12.6, \"distance_m\": 3000, \"flux_e_per_cycle\": 900},\n"
+                     "            {\"bulb\": \"mh-250w\", \"phase_deg\": 120, \"x_px\": 30, \"y_px\": 5, \"distance_m\": 5000, \"flux_e_per_cycle\": 700}],\n"
+                     " \"effects\": {",
+                     mask & (1u << CAP_FX_FREQUENCY_WANDER) ? ", \"frequency\": {\"model\": \"random_walk\"}" : "",
+                     locked ? "true" : "false");
+    int first = 1;
+    for (int e = 0; e < CAP_FX_COUNT; e++)
+        if (mask & (1u << e)) {
+            u += snprintf(t + u, cap - (size_t)u, "%s\n  %s", first ? "" : ",", fx_params[e]);
+            first = 0;
+        }
+    snprintf(t + u, cap - (size_t)u, "}}\n");
+    return t;
+}
+
+/* Renders `frames` acquisitions of the scene with exactly `mask` and checks the pipeline and
+ * the counters: listed effects ran once per acquisition, the others never. */
+static void check_mask(const rec_delight *d, unsigned mask, int frames)
+{
+    char *text = scene_with(mask);
+    cap_scene sc;
+    gs_status st = cap_scene_parse(text, "mask.json", ".", &sc);
+    CHECK_MSG(st == GS_OK, "mask %#x: %s", mask, gs_detail());
+    cap_sim *s = NULL;
+    if (st == GS_OK) CHECK_OK(cap_sim_new(&sc, d, &s));
+    if (s) {
+        unsigned short *raw = malloc(40 * 30 * 3 * sizeof *raw);
+        for (int i = 0; i < frames; i++) CHECK_OK(cap_sim_render(s, i % 10, 0, i, NULL, raw, NULL));
+        unsigned in_pipeline = 0;
+        for (size_t i = 0; i < cap_sim_stage_count(s); i++) {
+            cap_stage_info si;
+            CHECK_OK(cap_sim_stage(s, i, &si));
+            CHECK(si.calls == (unsigned long long)frames);
+            if (si.effect >= 0) {
+                in_pipeline |= 1u << si.effect;
+                CHECK(!strcmp(si.name, cap_effect_name((cap_effect)si.effect)));
+            }
+        }
+        CHECK_MSG(in_pipeline == mask, "mask %#x: pipeline holds %#x", mask, in_pipeline);
+        for (int e = 0; e < CAP_FX_COUNT; e++) {
+            unsigned long long calls = cap_sim_effect_calls(s, (cap_effect)e);
+            if (mask & (1u << e))
+                CHECK_MSG(calls == (unsigned long long)frames, "%s listed: %llu calls for %d frames",
+                          cap_effect_name((cap_effect)e), calls, frames);
+            else
+                CHECK_MSG(calls == 0, "%s not listed but ran %llu times", cap_effect_name((cap_effect)e), calls);
+        }
+        free(raw);
+    }
+    cap_sim_free(s);
+    cap_scene_release(&sc);
+    free(text);
+}
+
+TEST(sim_disabled_effect_never_runs)
+{
+    rec_delight *d = delight();
+    CHECK(d != NULL);
+    check_mask(d, 0, 3);                                   /* none */
+    for (int e = 0; e < CAP_FX_COUNT; e++) check_mask(d, 1u << e, 2);   /* each alone */
+    check_mask(d, (1u << CAP_FX_COUNT) - 1, 2);            /* all */
+    /* all but one, for each */
+    for (int e = 0; e < CAP_FX_COUNT; e++) check_mask(d, ((1u << CAP_FX_COUNT) - 1) & ~(1u << e), 1);
+    rec_delight_free(d);
+}
+
+TEST(sim_bench_render_grows_only_with_enabled_effects)
+{
+    rec_delight *d = delight();
+    char *text = scene_with((1u << CAP_FX_COUNT) - 1);
+    cap_scene sc;
+    CHECK_OK(cap_scene_parse(text, "bench.json", ".", &sc));
+    cap_bench_result none, one, all;
+    CHECK_OK(cap_bench_render(&sc, 0, 2, &none));
+    CHECK_OK(cap_bench_render(&sc, 1u << CAP_FX_PSF, 2, &one));
+    CHECK_OK(cap_bench_render(&sc, ~0u, 2, &all));
+    CHECK(none.effects == 0);
+    CHECK(one.effects == 1u << CAP_FX_PSF);
+    CHECK(all.effects == (1u << CAP_FX_COUNT) - 1);
+    CHECK(none.lights == 2 && none.pixels == 1200);
+    printf("    bench (40x30, 2 frames): none %.2e s, psf %.2e s, all %.2e s per frame\n",
+           none.seconds_per_frame, one.seconds_per_frame, all.seconds_per_frame);
+    cap_scene_release(&sc);
+    free(text);
+    rec_delight_free(d);
+}
+
+/* ------------------------------------------------------------ HDR */
+
+TEST(sim_hdr_recovers_saturated_lights_within_2_percent)
+{
+    const char *text =
+        "{\"format\": \"gridsurvey-scene/1\", \"seed\": 11,\n"
+        " \"grid\": {\"nominal_hz\": 50},\n"
+        " \"camera\": {\"width_px\": 64, \"height_px\": 48,\n"
+        "   \"sensor\": {\"bands\": 3, \"bit_depth\": 12, \"full_well_e\": 20000, \"read_noise_e\": 3, \"gain_e_per_dn\": 5, \"black_level_dn\": 64}},\n"
+        " \"acam\": {\"K\": 8, \"cycles\": 256, \"masks\": 64, \"hdr\": {\"enabled\": true, \"max_saturated_px\": 0}},\n"
+        " \"lights\": [\n"
+        "  {\"id\": \"bright\", \"bulb\": \"hps-150w\", \"phase_deg\": 0, \"x_px\": 15.2, \"y_px\": 14.7, \"flux_e_per_cycle\": 30000},\n"
+        "  {\"id\": \"brighter\", \"bulb\": \"mh-250w\", \"phase_deg\": 120, \"x_px\": 45.6, \"y_px\": 30.3, \"flux_e_per_cycle\": 90000},\n"
+        "  {\"id\": \"dim\", \"bulb\": \"fl-t8-36w-tri\", \"phase_deg\": 240, \"x_px\": 40.1, \"y_px\": 10.9, \"flux_e_per_cycle\": 2000}\n"
+        " ],\n"
+        " \"effects\": {\"psf\": {\"sigma_px\": 1.2}, \"shot_noise\": {}, \"saturation\": {}, \"read_noise\": {}, \"adc\": {}}}\n";
+    cap_scene sc;
+    CHECK_OK(cap_scene_parse(text, "hdr.json", ".", &sc));
+    cap_backend *be = NULL;
+    CHECK_OK(cap_backend_sim_new(&sc, &be));
+    if (!be) return;
+    char dir[1024];
+    snprintf(dir, sizeof dir, "%s/hdr", test_tmpdir());
+    cap_loop_opts o;
+    cap_loop_opts_default(&o);
+    o.progress = 0;
+    cap_loop_report rep;
+    CHECK_OK(cap_loop_run(be, dir, &o, &rep));
+    CHECK(rep.complete);
+    CHECK(rep.max_passes >= 3);
+    CHECK(rep.saturated_px == 0);
+    rec_capture cap;
+    CHECK_OK(rec_capture_read(dir, &cap));
+    rec_delight *d = delight();
+    double worst = 0;
+    int max_h = 0;
+    for (size_t l = 0; l < sc.n_lights; l++) {
+        const cap_light *li = &sc.lights[l];
+        const rec_bulb *b = rec_delight_find(d, li->bulb, 50, 3);
+        double i_k[3 * 8];
+        CHECK_OK(rec_brf_integrate(&b->brf, rec_phase_to_shift(li->phase_deg), 8, i_k));
+        int cx = (int)floor(li->x_px + 0.5), cy = (int)floor(li->y_px + 0.5);
+        for (int k = 0; k < 8; k++) {
+            double got = 0, truth = 0;
+            for (int band = 0; band < 3; band++) {
+                for (int y = cy - 5; y <= cy + 5; y++)
+                    for (int x = cx - 5; x <= cx + 5; x++) {
+                        double v = rec_capture_value(&cap, k, y, x, band);
+                        CHECK_MSG(isfinite(v), "light %s frame %d pixel (%d, %d) saturated", li->id, k, x, y);
+                        got += v;
+                        int h = cap.halvings[((size_t)k * 48 + (size_t)y) * 64 + (size_t)x];
+                        if (h > max_h) max_h = h;
+                    }
+                truth += li->flux_e_per_cycle * b->chroma[band] * i_k[band * 8 + k] / 8 / 5.0;
+            }
+            double rel = fabs(got - truth) / truth;
+            if (rel > worst) worst = rel;
+            CHECK_MSG(rel < 0.02, "light %s frame %d: %.2f DN/cycle vs truth %.2f (%.2f %%)", li->id, k,
+                      got, truth, 100 * rel);
+        }
+    }
+    printf("    HDR: %d passes at most, pixels halved up to %d times, worst light error %.2f %%\n",
+           rep.max_passes, max_h, 100 * worst);
+    CHECK(max_h >= 2);
+    rec_capture_release(&cap);
+    rec_delight_free(d);
+    cap_backend_free(be);
+    cap_scene_release(&sc);
+}
+
+/* ------------------------------------------------------------ physics of the effects */
+
+TEST(sim_effect_physics_matches_bulbs_md)
+{
+    /* extinction (Koschmieder + Angstrom 1.3, shared/BULBS.md): 0.82 over 1 km, 0.38 over 5 km,
+     * blue/red 0.82 over 2 km at 20 km visibility */
+    double beta = 3.912 / 20.0;
+    CHECK_NEAR(exp(-beta * 1), 0.82, 0.005);
+    CHECK_NEAR(exp(-beta * 5), 0.38, 0.005);
+    CHECK_NEAR(exp(-beta * pow(450 / 550.0, -1.3) * 2) / exp(-beta * pow(650 / 550.0, -1.3) * 2), 0.82, 0.01);
+    /* ... and the same numbers through the simulator's extinction stage */
+    rec_delight *d = delight();
+    char *text = scene_with(1u << CAP_FX_EXTINCTION);
+    cap_scene sc;
+    CHECK_OK(cap_scene_parse(text, "ext.json", ".", &sc));
+    cap_sim *s = NULL;
+    CHECK_OK(cap_sim_new(&sc, d, &s));
+    if (s) {
+        CHECK_NEAR(s->trans[0 * 3 + 1], exp(-beta * 3), 1e-12);          /* 3 km, 550 nm */
+        CHECK_NEAR(s->trans[1 * 3 + 1], exp(-beta * 5), 1e-12);          /* 5 km */
+        CHECK(s->trans[2] < s->trans[1] && s->trans[1] < s->trans[0]);   /* blue < green < red */
+    }
+    cap_sim_free(s);
+    cap_scene_release(&sc);
+    free(text);
+    /* scintillation index (Andrews-Phillips, point source, Cn2 = 1e-14): 0.27-0.30 at 1 km,
+     * 0.84 at 2 km, ~1.6 at 5 km; a 25 mm aperture cuts 1 km to ~58-61 % */
+    cap_effects fx;
+    memset(&fx, 0, sizeof fx);
+    fx.scint.cn2 = 1e-14;
+    fx.scint.wavelength_nm = 550;
+    fx.scint.sigma2 = -1;
+    double s1 = cap_scintillation_index(&fx, 0, 1000), s2 = cap_scintillation_index(&fx, 0, 2000),
+           s5 = cap_scintillation_index(&fx, 0, 5000);
+    fx.scint.aperture = 1;
+    double a1 = cap_scintillation_index(&fx, 25, 1000);
+    printf("    scintillation index: 1 km %.3f, 2 km %.3f, 5 km %.3f; 25 mm aperture at 1 km: %.0f %%\n",
+           s1, s2, s5, 100 * a1 / s1);
+    CHECK(s1 > 0.26 && s1 < 0.31);
+    CHECK_NEAR(s2, 0.84, 0.03);
+    CHECK(s5 > 1.4 && s5 < 1.8);
+    CHECK(a1 / s1 > 0.55 && a1 / s1 < 0.65);
+    /* random-walk frequency: the statistics of shared/data/README.md */
+    cap_freq_config f;
+    memset(&f, 0, sizeof f);
+    f.model = CAP_FREQ_RANDOM_WALK;
+    f.hz = 50;
+    f.sigma_hz = 0.02;
+    f.corr_time_s = 18.8;
+    f.fast_sigma_hz = 0.002;
+    f.fast_corr_time_s = 1.0;
+    f.seed = 7;
+    cap_ac *ac = NULL;
+    CHECK_OK(cap_ac_new(&f, 50, &ac));
+    long n = san() ? 60000 : 360000;   /* 10 / 60 minutes */
+    double *t = malloc(sizeof *t * (size_t)n);
+    for (long c = 0; c < n; c++) CHECK_OK(cap_ac_time(ac, c, &t[c]));
+    rec_wander w;
+    CHECK_OK(rec_frequency_wander(t, (size_t)n, 1.0, &w));
+    printf("    random walk (%ld s): mean %.4f Hz, sigma %.1f mHz, 1-s steps %.2f mHz, corr 10 s %.2f, 60 s %.2f\n",
+           (long)t[n - 1], w.mean_hz, 1e3 * w.sigma_hz, 1e3 * w.step_sigma_hz, w.corr_10s, w.corr_60s);
+    CHECK(w.sigma_hz > 0.008 && w.sigma_hz < 0.035);
+    CHECK(w.step_sigma_hz > 0.0015 && w.step_sigma_hz < 0.0035);
+    CHECK(w.corr_10s > 0.7);
+    free(t);
+    cap_ac_free(ac);
+    rec_delight_free(d);
+}
+
+/* ------------------------------------------------------------ determinism */
+
+TEST(sim_same_seed_identical_files)
+{
+    char cmd[8192], out[4096], scene[1024];
+    const char *tmp = test_tmpdir();
+    /* a small scene with every random effect and HDR */
+    snprintf(scene, sizeof scene, "%s/det.json", tmp);
+    char *text = scene_with(((1u << CAP_FX_COUNT) - 1) & ~(1u << CAP_FX_FREE_RUNNING_DRIFT));
+    FILE *f = fopen(scene, "w");
+    fputs(text, f);
+    fclose(f);
+    free(text);
+    snprintf(cmd, sizeof cmd,
+             "%s simulate %s -o %s/a --no-progress && %s simulate %s -o %s/b --no-progress && "
+             "diff -r %s/a %s/b && echo SAME",
+             test_bin(), scene, tmp, test_bin(), scene, tmp, tmp, tmp);
+    int rc = test_run(cmd, out, sizeof out);
+    CHECK_MSG(rc == 0 && strstr(out, "SAME"), "rc %d: %s", rc, out);
+    snprintf(cmd, sizeof cmd,
+             "%s simulate %s -o %s/c --seed 99 --no-progress >/dev/null && "
+             "cmp -s %s/a/frame_003.png %s/c/frame_003.png || echo DIFFERENT",
+             test_bin(), scene, tmp, tmp, tmp);
+    rc = test_run(cmd, out, sizeof out);
+    CHECK_MSG(strstr(out, "DIFFERENT"), "another seed gave the same frame: %s", out);
+}
