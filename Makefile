@@ -2,7 +2,7 @@
 #   make          build the gridsurvey binary
 #   make check    install missing Debian packages, build, run every test (plain and ASan+UBSan)
 #   make demo     install, build, run the main job on the built-in scene
-#   make bench    performance tables (docs/bench-recognize.md, docs/bench-db.md)
+#   make bench    performance tables (docs/bench-*.md)
 BUILD ?= build
 SAN ?=
 CC := gcc
@@ -86,7 +86,9 @@ bench: $(BIN)
 	mv docs/bench-recognize.md.tmp docs/bench-recognize.md
 	$(BIN) bench db > docs/bench-db.md.tmp
 	mv docs/bench-db.md.tmp docs/bench-db.md
-	@cat docs/bench-recognize.md docs/bench-db.md
+	$(BIN) bench render > docs/bench-render.md.tmp
+	mv docs/bench-render.md.tmp docs/bench-render.md
+	@cat docs/bench-recognize.md docs/bench-db.md docs/bench-render.md
 clean:
 	rm -rf $(BUILD)
 

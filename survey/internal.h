@@ -16,6 +16,9 @@ int srv_cmd_db(int argc, char **argv);
 int srv_cmd_recognize(int argc, char **argv);
 int srv_cmd_bench(int argc, char **argv);
 
+/* `gridsurvey bench render` (survey/bench_render.c). */
+int srv_bench_render(int argc, char **argv);
+
 /* Print "gridsurvey: STATUS: DETAIL" on stderr and return 1. */
 int srv_error(gs_status s);
 

@@ -17,6 +17,7 @@
  * Free running: edge - (t_0 + n Delta_0 + j Delta_0 / K), Delta_0 = (t_{-1} - t_{-65}) / 64. */
 #include "capture/capture.h"
 #include "recognize/recognize.h"
+#include "tests/fake_gpiod.h"
 #include "tests/test.h"
 
 #include <avr_ioport.h>
@@ -1289,9 +1290,17 @@ TEST(firmware_link_client_scripted)
     CHECK(cap_link_open("/nonexistent/tty", &l) == GS_EIO && l == NULL);
 }
 
+/* What the bridge reports on its report descriptor after each EV DONE: the crossing (index into
+ * the injected edges) that started the exposure, and its cycles. */
+typedef struct {
+    long start_crossing;
+    long cycles;
+} bridge_report;
+
 /* The simulation as a serial device: runs the firmware and shuttles bytes between its UART
- * and the pty master, no faster than 20 x real time, until the slave side is closed. */
-static void bridge_child(int master, const trace *tr)
+ * and the pty master, no faster than 20 x real time, until the slave side is closed. With
+ * report_fd >= 0, writes one bridge_report there per completed exposure. */
+static void bridge_child(int master, const trace *tr, int report_fd)
 {
     fwsim *s = fwsim_new(tr->edges, tr->n, tr->rising_first);
     if (!s) _exit(3);
@@ -1299,8 +1308,17 @@ static void bridge_child(int master, const trace *tr)
     fcntl(master, F_SETFL, fcntl(master, F_GETFL) | O_NONBLOCK);
     struct timespec t0, t1;
     clock_gettime(CLOCK_MONOTONIC, &t0);
+    size_t scanned = 0;
     for (;;) {
         if (fwsim_run_until(s, s->avr->cycle + 16000) != 0) _exit(4); /* 1 ms */
+        for (; report_fd >= 0 && scanned < s->n_lines; scanned++) {
+            const char *t = s->lines[scanned].text;
+            if (strncmp(t, "EV DONE", 7) != 0 || !s->shut_rise.n) continue;
+            /* the shutter pin rises at START; the exposure starts at the next crossing */
+            bridge_report r = {u64vec_last_le(&s->applied, s->shut_rise.v[s->shut_rise.n - 1]) + 1,
+                               (long)field(t, "cycles")};
+            if (write(report_fd, &r, sizeof r) != (ssize_t)sizeof r) _exit(6);
+        }
         char buf[256];
         ssize_t r = read(master, buf, sizeof buf);
         if (r > 0) fwsim_send_bytes(s, buf, (size_t)r);
@@ -1347,7 +1365,7 @@ TEST(firmware_link_pty_exposure_matches_trace)
     pid_t pid = fork();
     if (pid == 0) {
         close(slave);
-        bridge_child(master, &tr);
+        bridge_child(master, &tr, -1);
     }
     close(master);
     cap_link *l = NULL;
@@ -1394,4 +1412,238 @@ TEST(firmware_link_pty_exposure_matches_trace)
     CHECK_MSG(w == pid && WIFEXITED(st) && WEXITSTATUS(st) == 0, "bridge exit %d",
               WIFEXITED(st) ? WEXITSTATUS(st) : -1);
     trace_free(&tr);
+}
+
+/* ------------------------------------------------------------------ capture loop, end to end */
+
+#define E2E_K 4
+#define E2E_C 50
+#define E2E_W 16
+#define E2E_H 12
+#define E2E_GPIO_T0_S 1000.0 /* timestamp of the first crossing on the fake GPIO line */
+
+static unsigned short e2e_pixel(int k, int x, int y, int b)
+{
+    return (unsigned short)(100 + 2000 * k + 37 * x + 11 * y + 500 * b);
+}
+
+/* The fake camera (as tests/test_capture_hw.c): K 16-bit RGB frames cam_000.png, ... */
+static void e2e_write_camera(const char *dir)
+{
+    rec_capture c;
+    memset(&c, 0, sizeof c);
+    c.K = E2E_K;
+    c.bands = 3;
+    c.width = E2E_W;
+    c.height = E2E_H;
+    CHECK_OK(rec_capture_alloc(&c));
+    if (!c.raw) return;
+    for (int k = 0; k < E2E_K; k++) {
+        snprintf(c.frames[k].file, REC_PATH_MAX, "cam_%03d.png", k);
+        for (int y = 0; y < E2E_H; y++)
+            for (int x = 0; x < E2E_W; x++)
+                for (int b = 0; b < 3; b++)
+                    c.raw[(((size_t)k * E2E_H + (size_t)y) * E2E_W + (size_t)x) * 3 + (size_t)b] =
+                        e2e_pixel(k, x, y, b);
+    }
+    for (int k = 0; k < E2E_K; k++) CHECK_OK(rec_capture_write_frame(dir, &c, k));
+    rec_capture_release(&c);
+}
+
+/* The trace's first `count` crossings as a fake-GPIO event file (tests/fake_gpiod.h): the
+ * same edges the simulation injects, in seconds from E2E_GPIO_T0_S, rising/falling in turn. */
+static int e2e_write_events(const trace *tr, size_t count, const char *path)
+{
+    FILE *f = fopen(path, "w");
+    if (!f || count > tr->n) {
+        if (f) fclose(f);
+        return -1;
+    }
+    for (size_t i = 0; i < count; i++) {
+        long long ns = llround((double)(tr->edges[i] - tr->edges[0]) / CYCLES_PER_S * 1e9);
+        long long sec = (long long)E2E_GPIO_T0_S + ns / 1000000000LL;
+        int rising = (i % 2 == 0) == (tr->rising_first != 0);
+        fprintf(f, "%lld %lld %d\n", sec, ns % 1000000000LL, rising ? 1 : 2);
+    }
+    fclose(f);
+    return 0;
+}
+
+/* Mean half period (s) of the trace's half periods [from, from + n). */
+static double trace_mean_half_s(const trace *tr, long from, long n)
+{
+    return (double)(tr->edges[from + n] - tr->edges[from]) / (double)n / CYCLES_PER_S;
+}
+
+/* Waits (at most timeout_ms) for one report of the bridge. 0, or -1. */
+static int read_report(int fd, bridge_report *r, int timeout_ms)
+{
+    struct pollfd p = {fd, POLLIN, 0};
+    if (poll(&p, 1, timeout_ms) != 1) return -1;
+    return read(fd, r, sizeof *r) == (ssize_t)sizeof *r ? 0 : -1;
+}
+
+/* End to end: the acquisition loop (cap_loop_run) with the hardware backend, whose controller is
+ * the real firmware ELF in simavr behind a pseudo-terminal (the forked bridge), its GPIO the
+ * fake libgpiod replaying the same mains crossings, its camera an image sequence. The loop runs
+ * one frame at a time (stop_after = 1, then resumed) so that every acquisition's
+ * cap_backend_hardware_log is seen: C cycles logged by the firmware, whose mean half period is
+ * that of the injected crossings the exposure covered (reported by the bridge) within the
+ * firmware's 0.5 us tick. */
+TEST(firmware_hardware_backend_loop_e2e)
+{
+    struct timespec w0, w1;
+    clock_gettime(CLOCK_MONOTONIC, &w0);
+    const char *rec = "data/mains/whu_002_ref.wav";
+    trace tr;
+    if (trace_from_mains(rec, 20000, &tr) != 0) return;
+    const char *tmp = test_tmpdir();
+    char events[1024], camdir[1024], pattern[1100], out[1024];
+    snprintf(events, sizeof events, "%s/zc.events", tmp);
+    snprintf(camdir, sizeof camdir, "%s/cam", tmp);
+    snprintf(pattern, sizeof pattern, "%s/cam_%%03d.png", camdir);
+    snprintf(out, sizeof out, "%s/capture", tmp);
+    size_t n_events = (size_t)E2E_K * (E2E_C + 1) + 10;
+    CHECK(e2e_write_events(&tr, n_events, events) == 0);
+    CHECK(fake_gpiod_load_events(events, E2E_C + 1) == (int)n_events);
+    size_t outputs0 = fake_gpiod_output_count(); /* the fake records across tests */
+    e2e_write_camera(camdir);
+
+    int master = -1, slave = -1, rep[2] = {-1, -1};
+    CHECK(openpty(&master, &slave, NULL, NULL, NULL) == 0);
+    CHECK(pipe(rep) == 0);
+    if (master < 0 || rep[0] < 0) {
+        trace_free(&tr);
+        return;
+    }
+    struct termios tio;
+    tcgetattr(slave, &tio);
+    cfmakeraw(&tio); /* before any byte flows: no echo of the firmware's lines */
+    tcsetattr(slave, TCSANOW, &tio);
+    fflush(stdout);
+    pid_t pid = fork();
+    if (pid == 0) {
+        close(slave);
+        close(rep[0]);
+        bridge_child(master, &tr, rep[1]);
+    }
+    close(master);
+    close(rep[1]);
+
+    cap_hw_config hw;
+    cap_hw_config_default(&hw);
+    hw.camera = pattern;
+    hw.camera_images = 1;
+    hw.serial_fd = slave; /* the backend owns it from here */
+    hw.link_timeout_ms = 3000;
+    hw.gpio_chip = "gpiochip0";
+    hw.zc_line = 17;
+    hw.shutter_line = 22;
+    hw.trigger_line = 27;
+    hw.width = E2E_W;
+    hw.height = E2E_H;
+    hw.bands = 3;
+    hw.K = E2E_K;
+    hw.cycles = E2E_C;
+    hw.locked = 1;
+    cap_backend *be = NULL;
+    CHECK_OK(cap_backend_hardware_new(&hw, &be));
+    long prev_end = -1;
+    double err_max_ns = 0, gpio_link_max_us = 0;
+    int acquired = 0;
+    for (int k = 0; be && k < E2E_K; k++) {
+        cap_loop_opts o;
+        cap_loop_opts_default(&o);
+        o.progress = 0;
+        o.stop_after = 1;
+        cap_loop_report r;
+        gs_status st = cap_loop_run(be, out, &o, &r);
+        CHECK_MSG(st == GS_OK, "frame %d: %s: %s", k, gs_strerror(st), gs_detail());
+        if (st != GS_OK) break;
+        CHECK_MSG(r.frames_acquired == 1 && r.frames_kept == k && r.complete == (k == E2E_K - 1),
+                  "frame %d: acquired %d kept %d complete %d", k, r.frames_acquired,
+                  r.frames_kept, r.complete);
+        cap_hw_log log;
+        CHECK_OK(cap_backend_hardware_log(be, &log));
+        bridge_report br = {-1, -1};
+        CHECK_MSG(read_report(rep[0], &br, 5000) == 0, "frame %d: no report of the bridge", k);
+        CHECK_MSG(br.cycles == E2E_C && log.link_cycles == E2E_C,
+                  "frame %d: firmware EV DONE cycles=%ld, link logged %zu, C = %d", k, br.cycles,
+                  log.link_cycles, E2E_C);
+        /* each exposure after the lock (64 half periods) and after the previous one */
+        CHECK_MSG(br.start_crossing >= 64 && br.start_crossing > prev_end &&
+                      (size_t)(br.start_crossing + E2E_C) < tr.n,
+                  "frame %d starts at crossing %ld (previous ended at %ld)", k, br.start_crossing,
+                  prev_end);
+        if (br.start_crossing < 0 || (size_t)(br.start_crossing + E2E_C) >= tr.n) break;
+        prev_end = br.start_crossing + E2E_C;
+        double truth = trace_mean_half_s(&tr, br.start_crossing, E2E_C);
+        double err_ns = (log.link_mean_half_period_s - truth) * 1e9;
+        CHECK_MSG(fabs(err_ns) <= 500.0, /* each D line is within one 0.5 us tick */
+                  "frame %d: link mean half period %.4f us, injected %.4f us (crossings %ld..%ld "
+                  "of %s)", k, log.link_mean_half_period_s * 1e6, truth * 1e6, br.start_crossing,
+                  prev_end, rec);
+        if (fabs(err_ns) > err_max_ns) err_max_ns = fabs(err_ns);
+        /* the GPIO side: one crossing awaited, then the C queued during the exposure */
+        long g0 = (long)k * (E2E_C + 1) + 1;
+        CHECK(log.crossings == E2E_C);
+        CHECK_NEAR(log.mean_half_period_s, trace_mean_half_s(&tr, g0, E2E_C - 1), 1e-9);
+        double gl_us = fabs(log.mean_half_period_s - log.link_mean_half_period_s) * 1e6;
+        if (gl_us > gpio_link_max_us) gpio_link_max_us = gl_us;
+        printf("    frame %d: crossings %ld..%ld, link mean half period %.4f us (%.4f Hz), "
+               "injected %.4f us, error %+.1f ns; GPIO %zu crossings %.4f us\n",
+               k, br.start_crossing, prev_end, log.link_mean_half_period_s * 1e6,
+               0.5 / log.link_mean_half_period_s, truth * 1e6, err_ns, log.crossings,
+               log.mean_half_period_s * 1e6);
+        acquired++;
+    }
+    /* the same mains on both sides (other moments of it): within 0.1 Hz at 50 Hz */
+    CHECK_MSG(gpio_link_max_us <= 20.0, "GPIO and link mean half periods differ by %.2f us",
+              gpio_link_max_us);
+    CHECK(acquired == E2E_K);
+    cap_backend_free(be); /* closes the pty: the bridge ends */
+    CHECK(fake_gpiod_open_handles() == 0);
+    CHECK(fake_gpiod_events_left() == 10);
+    /* both outputs idle low, then per frame shutter up/down and a trigger pulse */
+    CHECK_MSG(fake_gpiod_output_count() - outputs0 == 2 + 4 * E2E_K, "%zu GPIO writes",
+              fake_gpiod_output_count() - outputs0);
+    int st = 0;
+    pid_t w = 0;
+    for (int i = 0; i < 500 && w == 0; i++) {
+        w = waitpid(pid, &st, WNOHANG);
+        if (w == 0) usleep(10000);
+    }
+    if (w == 0) {
+        kill(pid, SIGKILL);
+        waitpid(pid, &st, 0);
+    }
+    CHECK_MSG(w == pid && WIFEXITED(st) && WEXITSTATUS(st) == 0, "bridge exit %d",
+              WIFEXITED(st) ? WEXITSTATUS(st) : -1);
+    close(rep[0]);
+    /* the frames in the capture directory are the camera's */
+    char path[1100];
+    snprintf(path, sizeof path, "%s/capture.json", out);
+    CHECK_MSG(access(path, R_OK) == 0, "no %s", path);
+    rec_capture cap;
+    memset(&cap, 0, sizeof cap);
+    CHECK_OK(rec_capture_read(out, &cap));
+    if (cap.raw) {
+        CHECK(cap.K == E2E_K && cap.width == E2E_W && cap.height == E2E_H && cap.bands == 3);
+        size_t bad = 0;
+        for (int k = 0; k < E2E_K && cap.K == E2E_K; k++)
+            for (int y = 0; y < E2E_H; y++)
+                for (int x = 0; x < E2E_W; x++)
+                    for (int b = 0; b < 3; b++)
+                        bad += cap.raw[(((size_t)k * E2E_H + (size_t)y) * E2E_W + (size_t)x) * 3 +
+                                       (size_t)b] != e2e_pixel(k, x, y, b);
+        CHECK_MSG(bad == 0, "%zu samples differ from the camera's", bad);
+        CHECK(cap.locked == 1);
+    }
+    rec_capture_release(&cap);
+    trace_free(&tr);
+    clock_gettime(CLOCK_MONOTONIC, &w1);
+    double wall = (double)(w1.tv_sec - w0.tv_sec) + 1e-9 * (double)(w1.tv_nsec - w0.tv_nsec);
+    printf("    e2e: %d frames of C = %d, max |link - injected| %.1f ns, max |GPIO - link| %.2f "
+           "us, %.2f s\n", acquired, E2E_C, err_max_ns, gpio_link_max_us, wall);
+    CHECK_MSG(wall < 15.0, "took %.1f s", wall);
 }
