@@ -145,6 +145,24 @@ extern "C" int gis_gl_inverse(double lat1, double lon1, double lat2, double lon2
     }
 }
 
+// The public geodesic distance (gis.h): argument checks, then gis_gl_inverse.
+extern "C" gs_status gis_geodesic_inverse(double lat1_deg, double lon1_deg, double lat2_deg,
+                                          double lon2_deg, double *s12_m, double *azi1_deg,
+                                          double *azi2_deg)
+{
+    if (!finite_all({lat1_deg, lon1_deg, lat2_deg, lon2_deg}))
+        return gs_fail(GS_ENUMERIC, "gis_geodesic_inverse: non-finite coordinate");
+    if (std::fabs(lat1_deg) > 90.0 || std::fabs(lat2_deg) > 90.0)
+        return gs_fail(GS_EINVAL, "gis_geodesic_inverse: latitude %g / %g: expected [-90, 90]",
+                       lat1_deg, lat2_deg);
+    double s = 0.0, a1 = 0.0, a2 = 0.0;
+    if (gis_gl_inverse(lat1_deg, lon1_deg, lat2_deg, lon2_deg, &s, &a1, &a2)) return GS_ENUMERIC;
+    if (s12_m) *s12_m = s;
+    if (azi1_deg) *azi1_deg = a1;
+    if (azi2_deg) *azi2_deg = a2;
+    return GS_OK;
+}
+
 extern "C" int gis_gl_gnomonic_fwd(double lat0, double lon0, double lat, double lon, double *x,
                                    double *y)
 {

@@ -204,6 +204,15 @@ typedef struct {
 gs_status gis_triangulate(const gis_bearing *a, const gis_bearing *b,
                           const gis_triangulate_opts *o, gis_intersection *out);
 
+/* ------------------------------------------------------------------- geodesics */
+
+/* The geodesic between two points on the WGS84 ellipsoid (GeographicLib Geodesic::Inverse,
+ * Karney 2013: accurate to 15 nm): its length s12_m (metres) and the azimuths at both ends
+ * (degrees clockwise from north, [-180, 180]). Any output may be NULL. GS_ENUMERIC for a
+ * non-finite coordinate, GS_EINVAL for a latitude outside [-90, 90]. */
+gs_status gis_geodesic_inverse(double lat1_deg, double lon1_deg, double lat2_deg, double lon2_deg,
+                               double *s12_m, double *azi1_deg, double *azi2_deg);
+
 /* ------------------------------------------------------------ station files */
 
 #define GIS_STATION_FORMAT "gridsurvey-station/1"

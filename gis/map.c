@@ -154,9 +154,9 @@ gs_status gis_map_png(const gis_light *lights, size_t n, const gis_map_opts *o, 
     plinit();
     plcol0(1);
     pladv(0);
-    plvpas(0.10, 0.70, 0.10, 0.90, 1.0);   /* equal scales; the legend goes to the right */
+    plvpas(0.13, 0.70, 0.10, 0.90, 1.0);   /* equal scales; the legend goes to the right */
     plwind(-hx, hx, -hy, hy);
-    plbox("bcnst", 0.0, 0, "bcnstv", 0.0, 0);
+    plbox("bcfnst", 0.0, 0, "bcfnstv", 0.0, 0); /* fixed-point labels: no (x10^3) over the axis titles */
     char title[300], sub[200];
     snprintf(title, sizeof title, "%s", o->title ? o->title : "gridsurvey: located lights");
     snprintf(sub, sizeof sub, "east (m) from %.6f\u00b0, %.6f\u00b0 (WGS84)", lat0, gis_wrap180(lon0));

@@ -19,9 +19,15 @@
  *   The posterior integrates over s: grid cells (periodic trapezoid rule, spectrally accurate for
  *   peaks wider than a cell) with the cells around each bulb's peak replaced by the Gaussian
  *   (Laplace) integral when the peak is narrower than a cell.
+ * - Band gains (opts.band_gains, 3 bands): one brightness a_b per band, templates of mean 1 per
+ *   band (no Q_beta): chi2 = sum w x^2 - sum_b S_b^2/T_b, log p_m sums -log(T_b)/2 +
+ *   log Phi(S_b/sqrt(T_b)) over bands; a per-band gain (extinction reddening) cancels.
+ * - Model error (opts.model_error): w_d = 1/(sigma_d^2 + (model_error mu_b)^2), mu_b the band's
+ *   RMS signal level, the same for every template.
  * - Pixels (rec_match_pixels): one weight per row, so every score is a dot product x . t_m/|t_m|,
  *   computed for blocks of rows with one SGEMM (OpenBLAS), after a rigorous prefilter (a bound
  *   from the templates' principal subspace) has set aside the rows that are dim for every template.
+ *   With band gains or a model error the scores are per band (one SGEMM of K columns per band).
  */
 #include "recognize/recognize.h"
 #include "recognize/internal.h"
@@ -170,7 +176,17 @@ struct rec_matcher {
     double *nyq;                        /* [nb * bands] Nyquist coefficient */
     int *nfine;                         /* [nb] BRF samples per cycle */
     double complex *wk;                 /* [K] e^{2 pi i j / K} */
-    double chi2_thr;                    /* pixels: chi2 at p = unknown_p, dof D - 2 */
+    double chi2_thr;                    /* pixels: chi2 at p = unknown_p, dof D - nfit - 1 */
+    /* per-band brightness (band_gains) and model error */
+    int bg;                             /* one brightness per band (band_gains and bands > 1) */
+    int nfit;                           /* brightness parameters: bands (bg) or 1 */
+    int bandpath;                       /* pixels: per-band scores (bands > 1, bg or model error) */
+    double *bnorm;                      /* [M * bands] |t_j| over band b's K values */
+    double *blog;                       /* [M] sum over bands of log |t_jb| */
+    double *tbn;                        /* [M * D] templates, each band of unit norm */
+    float *tbnf;                        /* [Mp * D] the same in float, zero padded */
+    float *blnf;                        /* [Mp] blog as float, 1e30 for padding */
+    float *bib, *bib2;                  /* [bands * Mp] 1/|t_jb|, 1/|t_jb|^2 (padding 0, 1) */
     double logphi_tab[2 * (int)LOGPHI_ZMAX * LOGPHI_STEPS + 2];
 };
 
@@ -182,6 +198,8 @@ void rec_eq7_opts_default(rec_eq7_opts *o)
     o->unknown_p = 1e-3;
     o->ambiguous_conf = 0.8;
     o->min_snr = 3.0;
+    o->band_gains = 1;
+    o->model_error = 0.04;
 }
 
 void rec_matcher_free(rec_matcher *m)
@@ -214,6 +232,13 @@ void rec_matcher_free(rec_matcher *m)
     free(m->nyq);
     free(m->nfine);
     free(m->wk);
+    free(m->bnorm);
+    free(m->blog);
+    free(m->tbn);
+    free(m->tbnf);
+    free(m->blnf);
+    free(m->bib);
+    free(m->bib2);
     free(m);
 }
 
@@ -241,6 +266,10 @@ static gs_status check_opts(const rec_eq7_opts *o)
         return gs_fail(GS_EINVAL, "Eq. 7 options: ambiguous_conf=%g: expected [0, 1]", o->ambiguous_conf);
     if (!(o->min_snr >= 0.0 && o->min_snr < 1e6))
         return gs_fail(GS_EINVAL, "Eq. 7 options: min_snr=%g: expected [0, 1e6)", o->min_snr);
+    if (o->band_gains != 0 && o->band_gains != 1)
+        return gs_fail(GS_EINVAL, "Eq. 7 options: band_gains=%d: expected 0 or 1", o->band_gains);
+    if (!(o->model_error >= 0.0 && o->model_error < 1.0))
+        return gs_fail(GS_EINVAL, "Eq. 7 options: model_error=%g: expected [0, 1)", o->model_error);
     return GS_OK;
 }
 
@@ -280,7 +309,7 @@ static gs_status fourier_setup(rec_matcher *m, size_t b)
             free(F);
             return s;
         }
-        double q = bu->chroma[band];
+        double q = m->bg ? 1.0 : bu->chroma[band];   /* band gains: each band of mean 1 */
         F[(size_t)band * (size_t)(H + 1)] = q * creal(C[0]) / n;
         for (int h = 1; h <= H; h++) {
             double complex w =
@@ -581,6 +610,9 @@ gs_status rec_matcher_new(const rec_delight *d, int grid_hz, int bands, int K,
     m->D = bands * K;
     m->o = opts;
     m->G = 8 * K > 96 ? 8 * K : 96;
+    m->bg = opts.band_gains && bands > 1;
+    m->nfit = m->bg ? bands : 1;
+    m->bandpath = bands > 1 && (m->bg || opts.model_error > 0.0);
     size_t D = (size_t)m->D;
 
     /* candidate bulbs */
@@ -670,10 +702,18 @@ gs_status rec_matcher_new(const rec_delight *d, int grid_hz, int bands, int K,
     m->tphase = malloc(sizeof *m->tphase * M);
     m->tbulb = malloc(sizeof *m->tbulb * M);
     m->tcell = malloc(sizeof *m->tcell * M);
+    m->bnorm = malloc(sizeof *m->bnorm * M * (size_t)bands);
+    m->blog = malloc(sizeof *m->blog * M);
+    m->tbn = malloc(sizeof *m->tbn * M * D);
+    m->tbnf = calloc(m->Mp * D, sizeof *m->tbnf);
+    m->blnf = malloc(sizeof *m->blnf * m->Mp);
+    m->bib = malloc(sizeof *m->bib * m->Mp * (size_t)bands);
+    m->bib2 = malloc(sizeof *m->bib2 * m->Mp * (size_t)bands);
     double *raw = malloc(sizeof *raw * D);
     double complex *acc = malloc(sizeof *acc * 3 * (size_t)K);
     if (!m->t || !m->tsq || !m->tn || !m->lnf || !m->tnd || !m->lognorm || !m->cellw || !m->shift || !m->tphase ||
-        !m->tbulb || !m->tcell || !raw || !acc) {
+        !m->tbulb || !m->tcell || !m->bnorm || !m->blog || !m->tbn || !m->tbnf || !m->blnf || !m->bib || !m->bib2 || !raw ||
+        !acc) {
         free(raw);
         free(acc);
         rec_matcher_free(m);
@@ -714,8 +754,9 @@ gs_status rec_matcher_new(const rec_delight *d, int grid_hz, int bands, int K,
                     rec_matcher_free(m);
                     return s;
                 }
-                for (int band = 0; band < bands; band++)
-                    for (int k = 0; k < K; k++) raw[band * K + k] *= bu->chroma[band];
+                if (!m->bg)   /* band gains: each band keeps its mean of 1 */
+                    for (int band = 0; band < bands; band++)
+                        for (int k = 0; k < K; k++) raw[band * K + k] *= bu->chroma[band];
             }
             double n2 = 0.0;
             for (int band = 0; band < bands; band++)
@@ -739,6 +780,41 @@ gs_status rec_matcher_new(const rec_delight *d, int grid_hz, int bands, int K,
                 m->tnd[j * D + dd] = m->t[j * D + dd] * inv;
                 m->tn[j * D + dd] = (float)m->tnd[j * D + dd];
             }
+            /* per band: norms, unit templates; with band gains the dim test (and the prefilter)
+             * uses the unit vector of the summed brightness, sum_b t_b / |t_b|^2 */
+            m->blog[j] = 0.0;
+            double vv = 0.0;
+            for (int band = 0; band < bands; band++) {
+                double nb2 = 0.0;
+                for (int k = 0; k < K; k++) nb2 += raw[band * K + k] * raw[band * K + k];
+                double bn = sqrt(nb2);
+                if (!(bn > 0.0) || !isfinite(bn)) {
+                    s = gs_fail(GS_ENUMERIC, "Eq. 7 matcher: bulb %s has an all-zero band %d", bu->id, band);
+                    free(raw);
+                    free(acc);
+                    rec_matcher_free(m);
+                    return s;
+                }
+                m->bnorm[j * (size_t)bands + (size_t)band] = bn;
+                m->blog[j] += log(bn);
+                for (int k = 0; k < K; k++) {
+                    size_t dd = (size_t)band * (size_t)K + (size_t)k;
+                    m->tbn[j * D + dd] = raw[dd] / bn;
+                    m->tbnf[j * D + dd] = (float)m->tbn[j * D + dd];
+                    vv += raw[dd] * raw[dd] / (nb2 * nb2);
+                }
+            }
+            if (m->bg) {
+                double iv = 1.0 / sqrt(vv);
+                for (int band = 0; band < bands; band++) {
+                    double bn = m->bnorm[j * (size_t)bands + (size_t)band];
+                    for (int k = 0; k < K; k++) {
+                        size_t dd = (size_t)band * (size_t)K + (size_t)k;
+                        m->tnd[j * D + dd] = raw[dd] / (bn * bn) * iv;
+                        m->tn[j * D + dd] = (float)m->tnd[j * D + dd];
+                    }
+                }
+            }
             m->lognorm[j] = 0.5 * log(n2);
             m->shift[j] = sh;
             m->tphase[j] = ph;
@@ -748,14 +824,25 @@ gs_status rec_matcher_new(const rec_delight *d, int grid_hz, int bands, int K,
     }
     free(raw);
     free(acc);
-    for (size_t j = 0; j < m->Mp; j++) m->lnf[j] = j < M ? (float)m->lognorm[j] : 1e30f;
+    for (size_t j = 0; j < m->Mp; j++) {
+        m->lnf[j] = j < M ? (float)m->lognorm[j] : 1e30f;
+        m->blnf[j] = j < M ? (float)m->blog[j] : 1e30f;
+        for (int band = 0; band < bands; band++) {
+            double bn = j < M ? m->bnorm[j * (size_t)bands + (size_t)band] : 0.0;
+            m->bib[(size_t)band * m->Mp + j] = j < M ? (float)(1.0 / bn) : 0.0f;
+            m->bib2[(size_t)band * m->Mp + j] = j < M ? (float)(1.0 / (bn * bn)) : 1.0f;
+        }
+    }
     for (size_t b = 0; b < m->nb; b++) m->ncont += m->cont[b];
-    s = prefilter_setup(m);
+    /* the prefilter bounds x . tnd_j; that bounds the dim statistic of the one-gain model with
+     * one sigma per row, and of the band-gain model with any per-band sigma >= the row's (its
+     * unit vector is tnd_j), but not of one gain with per-band sigmas: no prefilter then */
+    s = (m->bandpath && !m->bg) ? GS_OK : prefilter_setup(m);
     if (s != GS_OK) {
         rec_matcher_free(m);
         return s;
     }
-    m->chi2_thr = chi2_quantile_upper(opts.unknown_p, m->D - 2);
+    m->chi2_thr = chi2_quantile_upper(opts.unknown_p, m->D - m->nfit - 1);
     int nt = 2 * (int)LOGPHI_ZMAX * LOGPHI_STEPS + 1;
     for (int i = 0; i < nt; i++) m->logphi_tab[i] = log_phi(-LOGPHI_ZMAX + (double)i / LOGPHI_STEPS);
     m->logphi_tab[nt] = m->logphi_tab[nt - 1];
@@ -787,10 +874,11 @@ typedef struct {
     double *wmass;          /* [nb] mass within +-1/6 cycle of the bulb's peak (continuous) */
     unsigned char *has_peak;/* [nb] */
     double *peak_s, *peak_L, *peak_sig;   /* [nb] refined peak: shift, log lik, std (cycles) */
-    double *peak_z;                        /* [nb] S/sqrt(T) at the peak */
+    double *peak_z;                        /* [nb] brightness / its std at the peak */
+    double *peak_gain;                     /* [nb] Sxx - chi2 at the peak */
     size_t *peak_cell;      /* [nb] template of the best grid cell */
     /* light path */
-    double *S, *T, *w, *wx, *xs;           /* [M], [M], [D], [D], [D] */
+    double *S, *T, *w, *wx, *xs;           /* [nfit * M] ([f * M + j]), [nfit * M], [D] x 3 */
     double *tt, *dt, *d2t;                 /* [D] */
     double complex *acc;                   /* [3 K] */
 } work;
@@ -808,6 +896,7 @@ static void work_free(work *w)
     free(w->peak_L);
     free(w->peak_sig);
     free(w->peak_z);
+    free(w->peak_gain);
     free(w->peak_cell);
     free(w->S);
     free(w->T);
@@ -836,9 +925,10 @@ static gs_status work_alloc(const rec_matcher *m, work *w)
     w->peak_L = malloc(sizeof *w->peak_L * nb);
     w->peak_sig = malloc(sizeof *w->peak_sig * nb);
     w->peak_z = malloc(sizeof *w->peak_z * nb);
+    w->peak_gain = malloc(sizeof *w->peak_gain * nb);
     w->peak_cell = malloc(sizeof *w->peak_cell * nb);
-    w->S = malloc(sizeof *w->S * M);
-    w->T = malloc(sizeof *w->T * M);
+    w->S = malloc(sizeof *w->S * M * (size_t)m->nfit);
+    w->T = malloc(sizeof *w->T * M * (size_t)m->nfit);
     w->w = malloc(sizeof *w->w * D);
     w->wx = malloc(sizeof *w->wx * D);
     w->xs = malloc(sizeof *w->xs * D);
@@ -847,7 +937,7 @@ static gs_status work_alloc(const rec_matcher *m, work *w)
     w->d2t = malloc(sizeof *w->d2t * D);
     w->acc = malloc(sizeof *w->acc * 3 * (size_t)m->K);
     if (!w->L || !w->mass || !w->cand || !w->mark || !w->bmass || !w->wmass || !w->has_peak ||
-        !w->peak_s || !w->peak_L || !w->peak_sig || !w->peak_z || !w->peak_cell || !w->S || !w->T || !w->w ||
+        !w->peak_s || !w->peak_L || !w->peak_sig || !w->peak_z || !w->peak_gain || !w->peak_cell || !w->S || !w->T || !w->w ||
         !w->wx || !w->xs || !w->tt || !w->dt || !w->d2t || !w->acc) {
         work_free(w);
         return gs_fail(GS_ENOMEM, "Eq. 7: cannot allocate scratch for %zu templates", M);
@@ -1030,47 +1120,47 @@ done:
 
 /* ------------------------------------------------------------ one light */
 
-/* chi2(s) of continuous bulb b with the scale profiled (a >= 0), and its derivatives. */
+/* chi2(s) of continuous bulb b with the scale(s) profiled (a >= 0), and its derivatives. */
 typedef struct {
     double chi2, d1, d2;     /* chi2 and its first two derivatives in s */
-    double S, T;             /* sum w x t, sum w t^2 */
+    int nf;                  /* brightness parameters */
+    double S[REC_MAX_BANDS], T[REC_MAX_BANDS];   /* sum w x t, sum w t^2 (per band with gains) */
 } chi2_eval;
 
 static void chi2_at(const rec_matcher *m, work *w, size_t b, double s, double Sxx, chi2_eval *e)
 {
-    size_t D = (size_t)m->D;
+    size_t K = (size_t)m->K;
+    int nf = m->nfit;
+    size_t span = m->bg ? K : (size_t)m->D;   /* samples of one brightness parameter */
     template_at(m, b, s, w->tt, w->dt, w->d2t, w->acc);
-    double S = 0, S1 = 0, S2 = 0, T = 0, T1 = 0, T2 = 0;
-    for (size_t d = 0; d < D; d++) {
-        double t = w->tt[d], t1 = w->dt[d], t2 = w->d2t[d];
-        S += w->wx[d] * t;
-        S1 += w->wx[d] * t1;
-        S2 += w->wx[d] * t2;
-        T += w->w[d] * t * t;
-        T1 += 2.0 * w->w[d] * t * t1;
-        T2 += 2.0 * w->w[d] * (t1 * t1 + t * t2);
+    e->nf = nf;
+    e->chi2 = Sxx;
+    e->d1 = e->d2 = 0.0;
+    for (int f = 0; f < nf; f++) {
+        double S = 0, S1 = 0, S2 = 0, T = 0, T1 = 0, T2 = 0;
+        for (size_t d = (size_t)f * span; d < (size_t)(f + 1) * span; d++) {
+            double t = w->tt[d], t1 = w->dt[d], t2 = w->d2t[d];
+            S += w->wx[d] * t;
+            S1 += w->wx[d] * t1;
+            S2 += w->wx[d] * t2;
+            T += w->w[d] * t * t;
+            T1 += 2.0 * w->w[d] * t * t1;
+            T2 += 2.0 * w->w[d] * (t1 * t1 + t * t2);
+        }
+        e->S[f] = S;
+        e->T[f] = T;
+        /* a* <= 0 (or no samples): the constrained fit is a = 0, this part of chi2 flat */
+        if (!(T > 0.0) || S <= 0.0) continue;
+        /* f = S^2/T, chi2 = Sxx - sum f */
+        double f0 = S * S / T;
+        double f1 = 2.0 * S * S1 / T - S * S * T1 / (T * T);
+        double f2 = (2.0 * S1 * S1 + 2.0 * S * S2) / T - 4.0 * S * S1 * T1 / (T * T) -
+                    S * S * T2 / (T * T) + 2.0 * S * S * T1 * T1 / (T * T * T);
+        e->chi2 -= f0;
+        e->d1 -= f1;
+        e->d2 -= f2;
     }
-    e->S = S;
-    e->T = T;
-    if (!(T > 0.0)) {
-        e->chi2 = Sxx;
-        e->d1 = e->d2 = 0.0;
-        return;
-    }
-    if (S <= 0.0) {   /* a* <= 0: the constrained fit is a = 0, chi2 = Sxx, flat */
-        e->chi2 = Sxx;
-        e->d1 = e->d2 = 0.0;
-        return;
-    }
-    /* f = S^2/T, chi2 = Sxx - f */
-    double f = S * S / T;
-    double f1 = 2.0 * S * S1 / T - S * S * T1 / (T * T);
-    double f2 = (2.0 * S1 * S1 + 2.0 * S * S2) / T - 4.0 * S * S1 * T1 / (T * T) - S * S * T2 / (T * T) +
-                2.0 * S * S * T1 * T1 / (T * T * T);
-    e->chi2 = Sxx - f;
     if (e->chi2 < 0.0) e->chi2 = 0.0;
-    e->d1 = -f1;
-    e->d2 = -f2;
 }
 
 /* Log likelihood (no prior) for sums S, T: -chi2/2 - log(T)/2 + log Phi(S/sqrt(T)). */
@@ -1083,6 +1173,59 @@ static double loglik(double Sxx, double S, double T)
     return -0.5 * chi2 - 0.5 * log(T) + log_phi(z);
 }
 
+/* The same with nf brightness parameters (one per band, each marginalised over a_b > 0 with a
+ * flat prior): -chi2/2 + sum_b (-log(T_b)/2 + log Phi(S_b/sqrt(T_b))); a band without usable
+ * samples (T_b = 0 for every template) has no parameter. */
+static double loglik_n(int nf, double Sxx, const double *S, const double *T)
+{
+    if (nf == 1) return loglik(Sxx, S[0], T[0]);
+    double chi2 = Sxx, l = 0.0;
+    int any = 0;
+    for (int f = 0; f < nf; f++) {
+        if (!(T[f] > 0.0)) continue;
+        double z = S[f] / sqrt(T[f]);
+        chi2 -= z * z;
+        l += -0.5 * log(T[f]) + log_phi(z);
+        any = 1;
+    }
+    if (!any) return -INFINITY;
+    if (chi2 < 0.0) chi2 = 0.0;
+    return -0.5 * chi2 + l;
+}
+
+/* Brightness / its std: S/sqrt(T) for one gain; with band gains sum_b a_b / sqrt(sum_b 1/T_b),
+ * a_b = S_b/T_b (unconstrained: a linear statistic, as the one-gain z); 0 when not positive. */
+static double snr_n(int nf, const double *S, const double *T)
+{
+    if (nf == 1) return (S[0] > 0.0 && T[0] > 0.0) ? S[0] / sqrt(T[0]) : 0.0;
+    double num = 0.0, den = 0.0;
+    for (int f = 0; f < nf; f++) {
+        if (!(T[f] > 0.0)) continue;
+        num += S[f] / T[f];
+        den += 1.0 / T[f];
+    }
+    double z = den > 0.0 ? num / sqrt(den) : 0.0;
+    return z > 0.0 ? z : 0.0;
+}
+
+/* Sxx - chi2 of the constrained fit (a_b >= 0) from the sums. */
+static double gain_n(int nf, const double *S, const double *T)
+{
+    double g = 0.0;
+    for (int f = 0; f < nf; f++)
+        if (S[f] > 0.0 && T[f] > 0.0) g += S[f] * S[f] / T[f];
+    return g;
+}
+
+/* The sums of template j from the work arrays ([f * M + j]). */
+static void sums_of(const rec_matcher *m, const work *w, size_t j, double *S, double *T)
+{
+    for (int f = 0; f < m->nfit; f++) {
+        S[f] = w->S[(size_t)f * m->M + j];
+        T[f] = w->T[(size_t)f * m->M + j];
+    }
+}
+
 /* Refine continuous bulb b around its best grid cell j0: safeguarded Newton on the exact chi2(s)
  * within +-1 cell, then the peak's log likelihood and std. */
 static void refine_peak(const rec_matcher *m, work *w, size_t b, size_t j0, double Sxx)
@@ -1092,11 +1235,11 @@ static void refine_peak(const rec_matcher *m, work *w, size_t b, size_t j0, doub
     size_t jm = m->first[b] + (c0 + G - 1) % G, jp = m->first[b] + (c0 + 1) % G;
     double sc = (double)c0 / m->G;
     /* grid chi2 (profiled, a >= 0) at the three cells */
-    double q[3];
+    double q[3], Sv[REC_MAX_BANDS], Tv[REC_MAX_BANDS];
     size_t js[3] = {jm, j0, jp};
     for (int i = 0; i < 3; i++) {
-        double S = w->S[js[i]], T = w->T[js[i]];
-        q[i] = (S > 0.0 && T > 0.0) ? Sxx - S * S / T : Sxx;
+        sums_of(m, w, js[i], Sv, Tv);
+        q[i] = Sxx - gain_n(m->nfit, Sv, Tv);
     }
     double den = q[0] - 2.0 * q[1] + q[2];
     double u = den > 0.0 ? 0.5 * cell * (q[0] - q[2]) / den : 0.0;
@@ -1122,18 +1265,24 @@ static void refine_peak(const rec_matcher *m, work *w, size_t b, size_t j0, doub
     chi2_at(m, w, b, sc + u, Sxx, &e);
     double sig = (e.d2 > 0.0) ? sqrt(2.0 / e.d2) : INV_SQRT12;
     if (!(sig < INV_SQRT12)) sig = INV_SQRT12;
-    double Lp = loglik(Sxx, e.S, e.T);
+    double Lp = loglik_n(e.nf, Sxx, e.S, e.T);
+    double gp = Sxx - e.chi2;
     /* never below the grid: if the refinement did not improve, keep the best cell */
     if (!(Lp >= w->L[j0])) {
         u = 0.0;
         Lp = w->L[j0];
+        gp = Sxx - q[1];
         double den2 = q[0] - 2.0 * q[1] + q[2];
         sig = den2 > 0.0 ? cell * sqrt(2.0 / den2) : INV_SQRT12;
         if (!(sig < INV_SQRT12)) sig = INV_SQRT12;
     }
     w->has_peak[b] = 1;
-    w->peak_z[b] = (e.S > 0.0 && e.T > 0.0) ? e.S / sqrt(e.T) : 0.0;
-    if (u == 0.0) w->peak_z[b] = w->S[j0] > 0.0 ? w->S[j0] / sqrt(w->T[j0]) : 0.0;
+    w->peak_z[b] = snr_n(e.nf, e.S, e.T);
+    if (u == 0.0) {
+        sums_of(m, w, j0, Sv, Tv);
+        w->peak_z[b] = snr_n(m->nfit, Sv, Tv);
+    }
+    w->peak_gain[b] = gp;
     w->peak_s[b] = wrap01(sc + u);
     w->peak_L[b] = Lp;
     w->peak_sig[b] = sig;
@@ -1165,11 +1314,32 @@ static gs_status match_light_ws(const rec_matcher *m, work *w, const double *sig
         }
         if (s > c) c = s;
     }
+    /* model error: the variance of each sample gains (model_error mu_b)^2, mu_b the RMS signal
+     * level of the band: mu_b^2 = mean(x^2 - sigma^2) over its usable samples (>= 0), in units of
+     * c. A multiplicative error of model_error per sample then adds, on average over the band,
+     * exactly the variance assumed (E chi2 = dof), though spread evenly over the K windows. */
+    double mu[REC_MAX_BANDS] = {0.0, 0.0, 0.0};
+    const double fe = m->o.model_error;
+    if (fe > 0.0) {
+        size_t K = (size_t)m->K;
+        for (int band = 0; band < m->bands; band++) {
+            double sum = 0.0;
+            int n = 0;
+            for (size_t d = (size_t)band * K; d < (size_t)(band + 1) * K; d++) {
+                double x = signal[d], s = sigma[d];
+                if (!isfinite(x) || !isfinite(s) || !(s > 0.0)) continue;
+                sum += (x / c) * (x / c) - (s / c) * (s / c);
+                n++;
+            }
+            mu[band] = (n > 0 && sum > 0.0 && isfinite(sum)) ? fe * sqrt(sum / n) : 0.0;
+        }
+    }
     for (size_t d = 0; d < D; d++) {
         double x = signal[d], s = sigma[d];
         w->w[d] = w->wx[d] = w->xs[d] = 0.0;
         if (!isfinite(x) || !isfinite(s) || !(s > 0.0)) continue;
-        double ws = 1.0 / ((s / c) * (s / c)), xs = x / c;
+        double me = mu[d / (size_t)m->K];
+        double ws = 1.0 / ((s / c) * (s / c) + me * me), xs = x / c;
         if (!isfinite(ws) || !isfinite(ws * xs * xs)) {
             flags |= REC_MATCH_BAD_INPUT;
             continue;
@@ -1189,13 +1359,29 @@ static gs_status match_light_ws(const rec_matcher *m, work *w, const double *sig
         no_answer(out, flags | REC_MATCH_BAD_INPUT);
         return GS_OK;
     }
-    /* all templates: S = T_mat wx, T = T_sq w */
-    cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, (int)D, 1.0, m->t, (int)D, w->wx, 1, 0.0, w->S, 1);
-    cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, (int)D, 1.0, m->tsq, (int)D, w->w, 1, 0.0, w->T, 1);
+    /* all templates: S = T_mat wx, T = T_sq w (per band with band gains) */
     double Lmax = -INFINITY;
-    for (size_t j = 0; j < M; j++) {
-        w->L[j] = loglik(Sxx, w->S[j], w->T[j]);
-        if (w->L[j] > Lmax) Lmax = w->L[j];
+    if (!m->bg) {
+        cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, (int)D, 1.0, m->t, (int)D, w->wx, 1, 0.0, w->S, 1);
+        cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, (int)D, 1.0, m->tsq, (int)D, w->w, 1, 0.0, w->T, 1);
+        for (size_t j = 0; j < M; j++) {
+            w->L[j] = loglik(Sxx, w->S[j], w->T[j]);
+            if (w->L[j] > Lmax) Lmax = w->L[j];
+        }
+    } else {
+        int K = m->K;
+        for (int band = 0; band < m->bands; band++) {
+            cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, K, 1.0, m->t + (size_t)band * (size_t)K,
+                        (int)D, w->wx + (size_t)band * (size_t)K, 1, 0.0, w->S + (size_t)band * M, 1);
+            cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, K, 1.0, m->tsq + (size_t)band * (size_t)K,
+                        (int)D, w->w + (size_t)band * (size_t)K, 1, 0.0, w->T + (size_t)band * M, 1);
+        }
+        double Sv[REC_MAX_BANDS], Tv[REC_MAX_BANDS];
+        for (size_t j = 0; j < M; j++) {
+            sums_of(m, w, j, Sv, Tv);
+            w->L[j] = loglik_n(m->nfit, Sxx, Sv, Tv);
+            if (w->L[j] > Lmax) Lmax = w->L[j];
+        }
     }
     /* continuous bulbs near the top: refine their peaks exactly */
     for (size_t b = 0; b < m->nb; b++) {
@@ -1234,22 +1420,34 @@ static gs_status match_light_ws(const rec_matcher *m, work *w, const double *sig
     } else {
         tb = m->t + dec.tmpl * D;
     }
-    double S = 0.0, T = 0.0;
-    for (size_t d = 0; d < D; d++) {
-        S += w->wx[d] * tb[d];
-        T += w->w[d] * tb[d] * tb[d];
+    /* one brightness (or one per band) a_f = S_f/T_f >= 0 */
+    int nf = m->nfit, nfree = 0;
+    size_t span = D / (size_t)nf;
+    double a_sum = 0.0, chi2 = 0.0, Sv[REC_MAX_BANDS], Tv[REC_MAX_BANDS];
+    for (int f = 0; f < nf; f++) {
+        double S = 0.0, T = 0.0;
+        for (size_t d = (size_t)f * span; d < (size_t)(f + 1) * span; d++) {
+            S += w->wx[d] * tb[d];
+            T += w->w[d] * tb[d] * tb[d];
+        }
+        Sv[f] = S;
+        Tv[f] = T;
+        double a = (T > 0.0 && S > 0.0) ? S / T : 0.0;
+        nfree += T > 0.0;
+        a_sum += a;
+        for (size_t d = (size_t)f * span; d < (size_t)(f + 1) * span; d++) {
+            double r = w->xs[d] - a * tb[d];
+            chi2 += w->w[d] * r * r;
+        }
     }
-    double a = (T > 0.0 && S > 0.0) ? S / T : 0.0;
-    double chi2 = 0.0;
-    for (size_t d = 0; d < D; d++) {
-        double r = w->xs[d] - a * tb[d];
-        chi2 += w->w[d] * r * r;
-    }
-    double snr = T > 0.0 ? a * sqrt(T) : 0.0;   /* a / sigma_a, sigma_a = 1/sqrt(T) */
+    /* a / sigma_a (one gain: a sqrt(T), sigma_a = 1/sqrt(T)) */
+    double snr = nf == 1 ? (Tv[0] > 0.0 ? a_sum * sqrt(Tv[0]) : 0.0) : snr_n(nf, Sv, Tv);
+    int npar = nfree + 1;   /* brightness(es) and phase */
+    if (nf == 1) npar = 2;
     memset(out, 0, sizeof *out);
-    out->brightness = a * c;
+    out->brightness = a_sum * c;
     out->chi2 = chi2;
-    out->dof = used > 2 ? used - 2 : 0;
+    out->dof = used > npar ? used - npar : 0;
     out->p_value = rec_chi2_sf(chi2, out->dof);
     out->bulb = bb;
     out->phase_deg = report_phase(m, bb, dec.tmpl, dec.shift);
@@ -1423,7 +1621,8 @@ typedef struct {
     size_t *rows;    /* [B] their row indices */
     float *y, *sh;   /* [B * r], [B * Mp] prefilter projections and approximate scores */
     float *ub;       /* [Mp] bounds of one row */
-    double *zz;      /* [M] normalised scores of one row */
+    double *zz;      /* [M] normalised scores of one row (band path: brightness / its std) */
+    double *gg;      /* [M] band path: Sxx - chi2 of the constrained fit */
     double *xd;      /* [D] one row in double */
 } pix_work;
 
@@ -1437,6 +1636,7 @@ static void pix_free(pix_work *p)
     free(p->sh);
     free(p->ub);
     free(p->zz);
+    free(p->gg);
     free(p->xd);
 }
 
@@ -1562,6 +1762,244 @@ static void pixel_row(const rec_matcher *m, pix_work *pw, const float *xr, const
     if (conf_out) *conf_out = (float)dec.conf;
 }
 
+/* Band path of one template: p[b] = x_b . u_jb (u_jb the unit template of band b), var[b] the
+ * band's noise variance (the row's sigma^2 plus model error). Returns the log likelihood up to a
+ * row constant; *gain = Sxx - chi2 of the constrained fit, *snr = brightness / its std. */
+static double band_terms(const rec_matcher *m, size_t j, const double *p, const double *var,
+                         double Sxx, double *gain, double *snr)
+{
+    int nb = m->bands;
+    const double *bn = m->bnorm + j * (size_t)nb;
+    if (m->bg) {
+        double L = 0.0, zz = 0.0, g = 0.0, num = 0.0, den = 0.0;
+        for (int b = 0; b < nb; b++) {
+            double z = p[b] * (1.0 / sqrt(var[b]));
+            L += log_phi_fast(m, z);
+            zz += z * z;
+            g += z > 0.0 ? z * z : 0.0;
+            num += p[b] / bn[b];                 /* a_b = x_b . t_b / |t_b|^2 */
+            den += var[b] / (bn[b] * bn[b]);     /* var(a_b) */
+        }
+        *gain = g;
+        *snr = num / sqrt(den);
+        return L - 0.5 * (Sxx - zz) - m->blog[j];
+    }
+    double S = 0.0, T = 0.0;
+    for (int b = 0; b < nb; b++) {
+        S += p[b] * bn[b] / var[b];
+        T += bn[b] * bn[b] / var[b];
+    }
+    double z = S / sqrt(T);
+    *gain = z > 0.0 ? z * z : 0.0;
+    *snr = z;
+    return -0.5 * (Sxx - z * z) - 0.5 * log(T) + log_phi_fast(m, z);
+}
+
+/* rec_match_pixels for matchers with per-band brightness or model error (m->bandpath): srow
+ * holds the row's float scores per band (bands blocks of Mp). The same decision as pixel_row,
+ * with the band model of match_light_ws (per-band sigma^2 = sg^2 + (model_error mu_b)^2). */
+static void pixel_row_band(const rec_matcher *m, pix_work *pw, const float *xr, const float *srow,
+                           double sg, int *bulb_out, float *phase_out, float *conf_out)
+{
+    size_t D = (size_t)m->D, M = m->M, Mp = m->Mp, K = (size_t)m->K;
+    int nb = m->bands;
+    work *w = &pw->w;
+    double *zz = pw->zz, *gg = pw->gg, *xd = pw->xd;
+    float *ub = pw->ub;
+    const double min_snr = m->o.min_snr, fe = m->o.model_error;
+    double var[REC_MAX_BANDS], inv[REC_MAX_BANDS], Sxx = 0.0;
+    for (int b = 0; b < nb; b++) {
+        const float *xb = xr + (size_t)b * K;
+        double ssb = sumsq_f(xb, K), ms = ssb / (double)K - sg * sg;   /* RMS signal level^2 */
+        double mu2 = ms > 0.0 ? fe * fe * ms : 0.0;
+        var[b] = sg * sg + mu2;
+        inv[b] = 1.0 / sqrt(var[b]);
+        Sxx += ssb / var[b];
+    }
+    if (!isfinite(Sxx)) return;
+    /* the dim test and upper bounds U_j >= L_j + Sxx/2 from the float scores */
+    double smax = -INFINITY;
+    float umax = -FLT_MAX;
+    size_t ju = 0;
+    double p[REC_MAX_BANDS];
+    if (m->bg) {
+        /* in float, 16 lanes (vectorised): the bound and snr^2 sign-kept (num |num| / den) */
+        float fi[REC_MAX_BANDS], fv[REC_MAX_BANDS];
+        for (int b = 0; b < nb; b++) {
+            fi[b] = (float)inv[b];
+            fv[b] = (float)var[b];
+        }
+        float mxs[LANES];
+        for (int q = 0; q < LANES; q++) mxs[q] = -FLT_MAX;
+        for (size_t j0 = 0; j0 < Mp; j0 += LANES) {
+            float num[LANES], den[LANES], uu[LANES];
+            for (int q = 0; q < LANES; q++) {
+                num[q] = 0.0f;
+                den[q] = 0.0f;
+                uu[q] = -m->blnf[j0 + (size_t)q];
+            }
+            for (int b = 0; b < nb; b++) {
+                const float *sb = srow + (size_t)b * Mp + j0, *ib = m->bib + (size_t)b * Mp + j0,
+                            *ib2 = m->bib2 + (size_t)b * Mp + j0;
+                for (int q = 0; q < LANES; q++) {
+                    float z = sb[q] * fi[b], zp = z > 0.0f ? z : 0.0f;
+                    uu[q] += 0.5f * zp * zp;
+                    num[q] += sb[q] * ib[q];
+                    den[q] += fv[b] * ib2[q];
+                }
+            }
+            for (int q = 0; q < LANES; q++) {
+                ub[j0 + (size_t)q] = uu[q];
+                float s2 = num[q] * (num[q] > 0.0f ? num[q] : -num[q]) / den[q];
+                mxs[q] = s2 > mxs[q] ? s2 : mxs[q];
+            }
+        }
+        float s2max = mxs[0];
+        for (int q = 1; q < LANES; q++) s2max = mxs[q] > s2max ? mxs[q] : s2max;
+        smax = s2max > 0.0f ? sqrt((double)s2max) * (1.0 + 1e-5) : 0.0;   /* float slack */
+        umax = row_max(ub, Mp);
+        while (ju + 1 < M && ub[ju] != umax) ju++;
+    } else {
+        /* one gain with per-band sigmas: exact terms for every template (no bound needed) */
+        for (size_t j = 0; j < M; j++) {
+            for (int b = 0; b < nb; b++) p[b] = srow[(size_t)b * Mp + j];
+            double g, sn;
+            double L = band_terms(m, j, p, var, Sxx, &g, &sn);
+            ub[j] = (float)(L + 0.5 * Sxx + 1e-3 * (1.0 + fabs(L + 0.5 * Sxx)));
+            if (ub[j] > umax) {
+                umax = ub[j];
+                ju = j;
+            }
+            if (sn > smax) smax = sn;
+        }
+    }
+    if (!(smax >= min_snr) || !(smax > 0.0)) return;   /* every template too dim (or NaN) */
+    double err = FLOAT_ERR * Sxx + 1e-6;
+    int exact = err > 1e-3;
+    if (exact)
+        for (size_t d = 0; d < D; d++) xd[d] = xr[d];
+    if (exact)
+        for (int b = 0; b < nb; b++) p[b] = dot_dd(xd + (size_t)b * K, m->tbn + ju * D + (size_t)b * K, K);
+    else
+        for (int b = 0; b < nb; b++) p[b] = srow[(size_t)b * Mp + ju];
+    double g0, s0;
+    double thr = band_terms(m, ju, p, var, Sxx, &g0, &s0) + 0.5 * Sxx - CUT_PIXEL - 2.0 * err;
+    w->ncand = 0;
+    for (size_t j = 0; j < M; j++)
+        if ((double)ub[j] + err >= thr) add_cand(m, w, j);
+    double Lmax = -INFINITY;
+    for (size_t ci = 0; ci < w->ncand; ci++) {
+        size_t j = w->cand[ci];
+        if (exact)
+            for (int b = 0; b < nb; b++) p[b] = dot_dd(xd + (size_t)b * K, m->tbn + j * D + (size_t)b * K, K);
+        else
+            for (int b = 0; b < nb; b++) p[b] = srow[(size_t)b * Mp + j];
+        w->L[j] = band_terms(m, j, p, var, Sxx, &gg[j], &zz[j]);
+        if (w->L[j] > Lmax) Lmax = w->L[j];
+    }
+    if (m->ncont) {
+        for (size_t b = 0; b < m->nb; b++) w->has_peak[b] = 0;
+        for (size_t ci = 0; ci < w->ncand; ci++) {
+            size_t j = w->cand[ci];
+            size_t b = (size_t)m->tbulb[j];
+            if (!m->cont[b]) continue;
+            if (!w->has_peak[b] || w->L[j] > w->L[w->peak_cell[b]]) {
+                w->has_peak[b] = 1;
+                w->peak_cell[b] = j;
+            }
+        }
+        size_t lead = m->nb;
+        for (size_t b = 0; b < m->nb; b++)
+            if (m->cont[b] && w->has_peak[b] && (lead == m->nb || w->L[w->peak_cell[b]] > w->L[w->peak_cell[lead]]))
+                lead = b;
+        int wset = 0;
+        for (size_t b = 0; b < m->nb; b++) {
+            if (!m->cont[b] || !w->has_peak[b]) continue;
+            size_t j0 = w->peak_cell[b], G = (size_t)m->G, c0 = (size_t)m->tcell[j0];
+            size_t jm = m->first[b] + (c0 + G - 1) % G, jp = m->first[b] + (c0 + 1) % G;
+            if (Sxx > 1e4 && (b == lead || w->L[j0] >= Lmax - 2.0)) {
+                /* bright: Newton on the exact templates, as for one light. Band gains: each band
+                 * scaled to unit noise (the scale is absorbed by a_b, and T_b = |t_b|^2 matches
+                 * band_terms); one gain: weights 1/var_b */
+                if (!wset) {
+                    for (size_t d = 0; d < D; d++) {
+                        double iv = inv[d / K];
+                        if (m->bg) {
+                            w->xs[d] = w->wx[d] = xr[d] * iv;
+                            w->w[d] = 1.0;
+                        } else {
+                            w->xs[d] = xr[d];
+                            w->w[d] = iv * iv;
+                            w->wx[d] = w->w[d] * xr[d];
+                        }
+                    }
+                    wset = 1;
+                }
+                size_t js[3] = {jm, j0, jp};
+                for (int q = 0; q < 3; q++) {
+                    const double *tj = m->t + js[q] * D;
+                    if (m->bg) {
+                        for (int band = 0; band < nb; band++) {
+                            w->S[(size_t)band * M + js[q]] = dot_fd(xr + (size_t)band * K, tj + (size_t)band * K, K) * inv[band];
+                            double bnv = m->bnorm[js[q] * (size_t)nb + (size_t)band];
+                            w->T[(size_t)band * M + js[q]] = bnv * bnv;
+                        }
+                    } else {
+                        double S = 0.0, T = 0.0;
+                        for (int band = 0; band < nb; band++) {
+                            double bnv = m->bnorm[js[q] * (size_t)nb + (size_t)band];
+                            S += dot_fd(xr + (size_t)band * K, tj + (size_t)band * K, K) / var[band];
+                            T += bnv * bnv / var[band];
+                        }
+                        w->S[js[q]] = S;
+                        w->T[js[q]] = T;
+                    }
+                }
+                refine_peak(m, w, b, j0, Sxx);
+                zz[j0] = w->peak_z[b];
+                gg[j0] = w->peak_gain[b];
+                if (w->peak_L[b] > Lmax) Lmax = w->peak_L[b];
+                continue;
+            }
+            /* parabola through the grid's fit gains */
+            double gm, gp, sm, sp;
+            for (int q = 0; q < 2; q++) {
+                size_t jj = q ? jp : jm;
+                if (exact)
+                    for (int band = 0; band < nb; band++)
+                        p[band] = dot_dd(xd + (size_t)band * K, m->tbn + jj * D + (size_t)band * K, K);
+                else
+                    for (int band = 0; band < nb; band++) p[band] = srow[(size_t)band * Mp + jj];
+                band_terms(m, jj, p, var, Sxx, q ? &gp : &gm, q ? &sp : &sm);
+            }
+            double q0 = gg[j0], cell = 1.0 / m->G, den = gm - 2.0 * q0 + gp, u = 0.0, qpk = q0,
+                   sig = INV_SQRT12;
+            if (den < 0.0) {
+                u = 0.5 * cell * (gm - gp) / den;
+                if (u < -cell) u = -cell;
+                if (u > cell) u = cell;
+                qpk = q0 - (gp - gm) * (gp - gm) / (8.0 * den);
+                sig = cell * sqrt(-2.0 / den);
+                if (!(sig < INV_SQRT12)) sig = INV_SQRT12;
+            }
+            if (qpk < q0) qpk = q0;
+            w->peak_s[b] = wrap01((double)c0 / m->G + u);
+            w->peak_L[b] = w->L[j0] + 0.5 * (qpk - q0);
+            w->peak_sig[b] = sig;
+            if (w->peak_L[b] > Lmax) Lmax = w->peak_L[b];
+            gg[j0] = qpk;
+        }
+    }
+    decision dec;
+    decide(m, w, Lmax, &dec);
+    if (dec.bulb < 0) return;
+    if (!(zz[dec.tmpl] >= min_snr)) return;                          /* dim */
+    if (Sxx - gg[dec.tmpl] > m->chi2_thr) return;                    /* unknown */
+    *bulb_out = dec.bulb;
+    if (phase_out) *phase_out = phase_f(report_phase(m, dec.bulb, dec.tmpl, dec.shift));
+    if (conf_out) *conf_out = (float)dec.conf;
+}
+
 gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *noise_sigma,
                            size_t P, int *bulb, float *phase_deg, float *confidence)
 {
@@ -1574,15 +2012,17 @@ gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *no
     memset(&pw, 0, sizeof pw);
     gs_status st = work_alloc(m, &pw.w);
     if (st != GS_OK) return st;
-    pw.sc = malloc(sizeof *pw.sc * B * Mp);
+    size_t nsc = m->bandpath ? (size_t)m->bands : 1;   /* score blocks: one per band */
+    pw.sc = malloc(sizeof *pw.sc * B * Mp * nsc);
     pw.xs = malloc(sizeof *pw.xs * B * D);
     pw.rows = malloc(sizeof *pw.rows * B);
     pw.y = malloc(sizeof *pw.y * B * (R ? R : 1));
     pw.sh = malloc(sizeof *pw.sh * B * Mp);
     pw.ub = malloc(sizeof *pw.ub * Mp);
     pw.zz = malloc(sizeof *pw.zz * m->M);
+    pw.gg = malloc(sizeof *pw.gg * m->M);
     pw.xd = malloc(sizeof *pw.xd * D);
-    if (!pw.sc || !pw.xs || !pw.rows || !pw.y || !pw.sh || !pw.ub || !pw.zz || !pw.xd) {
+    if (!pw.sc || !pw.xs || !pw.rows || !pw.y || !pw.sh || !pw.ub || !pw.zz || !pw.gg || !pw.xd) {
         pix_free(&pw);
         return gs_fail(GS_ENOMEM, "Eq. 7 pixels: cannot allocate a %zu x %zu score block", B, Mp);
     }
@@ -1628,6 +2068,21 @@ gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *no
             for (size_t k = 0; k < ns; k++)
                 memcpy(pw.xs + k * D, x + pw.rows[k] * D, sizeof *pw.xs * D);
             xs = pw.xs;
+        }
+        if (m->bandpath) {
+            /* per-band scores x_b . u_jb: one SGEMM of K columns per band, scores of row k at
+             * sc[k * bands * Mp + b * Mp + j] */
+            size_t K = (size_t)m->K, ld = nsc * Mp;
+            for (size_t band = 0; band < nsc; band++)
+                cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)ns, (int)Mp, (int)K, 1.0f,
+                            xs + band * K, (int)D, m->tbnf + band * K, (int)D, 0.0f, pw.sc + band * Mp,
+                            (int)ld);
+            for (size_t k = 0; k < ns; k++) {
+                size_t r = pw.rows[k];
+                pixel_row_band(m, &pw, xs + k * D, pw.sc + k * ld, noise_sigma[r], &bulb[r],
+                               phase_deg ? &phase_deg[r] : NULL, confidence ? &confidence[r] : NULL);
+            }
+            continue;
         }
         cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)ns, (int)Mp, (int)D, 1.0f, xs,
                     (int)D, m->tn, (int)D, 0.0f, pw.sc, (int)Mp);

@@ -445,6 +445,12 @@ void rec_catalog_release(rec_catalog *cat);
  * chi2 = sum w x^2 - S^2/T. The posterior over (bulb, phase) has uniform priors and the scale
  * marginalised over a > 0 (flat prior):
  *   log p(beta, phi | x) = -chi2/2 - log(T)/2 + log Phi(S/sqrt(T)) + const.
+ * With band_gains (the default for 3 bands) each band b has its own brightness a_b and its
+ * template is shift(phi, b_beta(b)) of mean 1 (no Q_beta), so a per-band gain such as extinction
+ * reddening cancels: chi2 = sum w x^2 - sum_b S_b^2/T_b, the log posterior sums
+ * -log(T_b)/2 + log Phi(S_b/sqrt(T_b)) over bands, the brightness is sum_b a_b and dof =
+ * usable samples - bands - 1. model_error adds (model_error mu_b)^2 to every sample's variance
+ * (docs/recognition.md, "Band gains and model error").
  * Thread safety: a matcher is read-only after rec_matcher_new; rec_match_* may run on several
  * threads with the same matcher (rec_match_pixels calls OpenBLAS, whose own threading applies;
  * rec_matcher_new plans FFTs, so do not create matchers concurrently with other FFTW planners). */
@@ -463,6 +469,14 @@ typedef struct {
                               * [0, 1), 0 disables the test */
     double ambiguous_conf;   /* bulb or phase posterior below which it is ambiguous (0.8), [0, 1] */
     double min_snr;          /* brightness / its std below which a light is too dim (3), >= 0 */
+    int band_gains;          /* 1: one brightness per band (each band of the template mean 1,
+                              * the chromaticity Q_beta not used), so a per-band gain (extinction
+                              * reddening, white balance) cancels; 0: one brightness times Q_beta
+                              * (the paper's Eq. 7). Ignored for 1 band. 0 or 1 (1) */
+    double model_error;      /* fractional model error (scintillation, template mismatch): each
+                              * sample's variance is sigma^2 + (model_error * mu_b)^2, mu_b the
+                              * band's RMS signal level, mu_b^2 = mean over the band's usable
+                              * samples of x^2 - sigma^2 (>= 0). [0, 1) (0.04) */
 } rec_eq7_opts;
 /* Fill *o with the defaults in parentheses above. */
 void rec_eq7_opts_default(rec_eq7_opts *o);
@@ -491,9 +505,12 @@ typedef struct {
                                * rec_shift_to_phase of the fitted shift (continuous) */
     double phase_sigma_deg;   /* continuous: 1-sigma of the phase from the chi2 curvature
                                * (Delta chi2 = 1), at most 51.96 (uniform); discrete: 0 */
-    double brightness;        /* fitted sum over bands of the mean per-cycle flux (a* >= 0) */
-    double chi2;              /* weighted residual of the best fit, sum w (x - a* t)^2 */
-    int dof;                  /* usable samples - 2 (scale and phase), >= 0 */
+    double brightness;        /* fitted sum over bands of the mean per-cycle flux (a* >= 0; with
+                               * band gains sum_b a_b*, each >= 0) */
+    double chi2;              /* weighted residual of the best fit, sum w (x - a* t)^2 (w with
+                               * the model error) */
+    int dof;                  /* usable samples - 2 (scale and phase); with band gains usable
+                               * samples - bands with a usable sample - 1; >= 0 */
     double p_value;           /* chi-square tail probability of chi2 at dof (1 when dof = 0) */
     double confidence;        /* posterior of the best pair */
     double bulb_confidence;   /* posterior of the best bulb, summed over phases */
@@ -534,13 +551,16 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
 
 /* Eq. 7 per pixel, as matrix products (OpenBLAS SGEMMs per block of 1024 rows; a rigorous
  * prefilter first sets aside rows that are dim for every template): x holds P rows of
- * bands * K values, noise_sigma one std per row (uniform over the row). Writes the best bulb,
+ * bands * K values, noise_sigma one std per row (uniform over the row; the model error adds per
+ * band, as for one light). With band gains or a model error (3 bands) the scores are per band:
+ * one SGEMM of K columns per band. Writes the best bulb,
  * the phase in degrees (0 for a REC_REF_NONE bulb) and the posterior of the best pair (same
  * model, pairs and posterior code as rec_match_light; float scores are rescored in double when
  * their rounding could exceed 1e-3 nats; continuous phases by parabolic refinement of the grid
  * scores, exact Newton refinement for bright rows). bulb is -1, phase 0 and confidence 0 for
  * rows with a non-finite value or a sigma that is not finite and > 0, and for dim (min_snr) or
- * unknown (unknown_p at dof = bands * K - 2) rows. phase_deg and confidence may be NULL.
+ * unknown (unknown_p at dof = bands * K - 2, with band gains bands * K - bands - 1) rows.
+ * phase_deg and confidence may be NULL.
  * docs/recognition.md gives the throughput (one core: ~3-5 Mpixel/s for 1 Mpixel RGB K = 26
  * with three phases when most pixels are dark). */
 gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *noise_sigma,
@@ -673,5 +693,37 @@ gs_status rec_map_write_confidence_png(const rec_pixel_maps *pm, const char *pat
  * for bad arguments or bands that differ from m's. Not thread-safe (PLplot). */
 gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const rec_match *match,
                            int max_lights, const char *png_path, const char *title);
+
+/* ---------------------------------------------- maximum-likelihood oracle (recognize/ml_oracle.c) */
+
+/* The optimum that Eq. 7 is judged against (tests/test_eq7_accuracy.c, `gridsurvey bench
+ * accuracy`): the maximum-likelihood (template, brightness) under the exact noise of a camera,
+ * written without anything from eq7.c. A sample x (any linear unit: DN, DN per cycle, a sum over
+ * an aperture) of a light of mean mu is
+ *   x = (n - bg_e) / gain + read_dn * N(0, 1),   n ~ Poisson(gain * mu + bg_e),
+ * i.e. Poisson photo-electrons of the light and a known background that was subtracted, plus
+ * Gaussian read noise. */
+typedef struct {
+    double gain;       /* electrons per unit of x, finite and > 0 */
+    double read_dn;    /* Gaussian read noise std, units of x, finite and > 0 */
+    double bg_e;       /* background electrons in the sample (subtracted from x), >= 0 */
+} rec_pg_noise;
+
+/* log p(x | mu), exact: the sum over electron counts n of Pois(n; gain mu + bg_e) N(x - (n -
+ * bg_e)/gain; 0, read_dn^2), from its mode outwards until the terms fall below 1e-17 of the
+ * largest (mu < 0 counts as 0). Any electron count (log n! by lgamma). Thread-safe. */
+double rec_pg_log_likelihood(const rec_pg_noise *c, double x, double mu);
+
+/* The maximum-likelihood template for one light: for each of the M templates (templates[j * D
+ * + d], d = band * K + k as Eq. 7's), the log-likelihood sum_d rec_pg_log_likelihood(x_d, a t_d)
+ * maximised over the brightness a > 0 (golden-section search, 18 steps in a bracket of +-6
+ * standard deviations around the least-squares a: ~1e-6 nats from the top; templates 30 nats
+ * below the best at their least-squares a are not refined). noise: one entry for every sample
+ * (per_sample 0) or D entries (per_sample 1). *best = the winning template's index, *loglik (may
+ * be NULL) its log-likelihood. Cost: M x D likelihoods of a few to a few hundred terms each, plus
+ * 20 D per refined template: milliseconds per light, for accuracy studies only.
+ * GS_EINVAL for NULL arguments, M or D < 1, a non-finite x or bad noise; GS_ENOMEM. */
+gs_status rec_ml_oracle(const rec_pg_noise *noise, int per_sample, const double *x,
+                        const double *templates, int M, int D, int *best, double *loglik);
 
 #endif

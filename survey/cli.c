@@ -17,6 +17,8 @@ static const struct {
     {"export", srv_cmd_export, "export a survey database's lights as GeoJSON, KML, GeoPackage or CSV"},
     {"db", srv_cmd_db, "survey database tools: init, migrate, check, ingest-synthetic"},
     {"recognize", srv_cmd_recognize, "bulb type and grid phase of every light in a capture (Eq. 7); maps, plots"},
+    {"run", srv_cmd_run, "the whole job: capture (or a capture directory), recognize, locate, store; stats, maps"},
+    {"evaluate", srv_cmd_evaluate, "compare a survey database with a simulator's truth.json (rates, errors)"},
     {"bench", srv_cmd_bench, "performance tables: bench recognize (Eq. 7 throughput), bench db"},
 };
 

@@ -382,4 +382,154 @@ gs_status srv_synth_ingest(srv_db *db, const srv_synth_opts *o, size_t *added);
  * 1e5 and 1e6 lights (--quick: 1e4 only) as a Markdown table on stdout. argv[0] is "db". */
 int srv_bench_db(int argc, char **argv);
 
+/* =====================================================================================
+ * The pipeline (survey/pipeline.c; docs/pipeline.md): `gridsurvey run`
+ *
+ * One capture from acquisition to the database:
+ *   capture    a scene (gridsurvey-scene/1) is rendered by the sim backend through the
+ *              acquisition loop (cap_loop_run: resumable) into a capture directory, with its
+ *              truth.json; a capture directory is read as it is (rec_capture_read);
+ *   recognize  lights as blobs with per-frame photometry (rec_blobs_extract), then Eq. 7 over
+ *              DELIGHT (rec_match_catalog);
+ *   locate     with a station (the capture's "station" object, or a station file), each light
+ *              at the survey's light height (gis_locate); without one, lights are stored
+ *              without a location;
+ *   store      the capture, its frames, lights and locations in one transaction
+ *              (srv_db_add_capture).
+ * Resumable and idempotent: the capture's resume key is a content hash of its capture.json
+ * and every file it names, so a re-run finds a committed capture (srv_db_capture_done) and
+ * skips recognition; an interrupted acquisition resumes frame by frame; a process killed at
+ * any point leaves a consistent database (no capture is ever partly stored).
+ * Bad input is refused before anything is written: the scene or capture directory, the
+ * station and DELIGHT files, the light height and the output locations are all checked before
+ * the database is opened, and srv_db_open itself leaves nothing behind on failure.
+ * ===================================================================================== */
+
+typedef enum {
+    SRV_STAGE_CAPTURE,       /* acquisition loop (scene input) */
+    SRV_STAGE_READ,          /* reading the capture directory, hashing its files */
+    SRV_STAGE_BLOBS,         /* rec_blobs_extract */
+    SRV_STAGE_MATCH,         /* DELIGHT, rec_matcher_new, rec_match_catalog */
+    SRV_STAGE_LOCATE,        /* gis_locate per light */
+    SRV_STAGE_STORE,         /* srv_db_add_capture (one transaction) */
+    SRV_STAGE_COUNT
+} srv_stage;
+/* "capture", "read", "blobs", "match", "locate", "store"; NULL out of range. */
+const char *srv_stage_name(srv_stage s);
+
+typedef struct {
+    const char *input;          /* SCENE.json or a capture directory (required) */
+    const char *db_path;        /* the survey database; created when missing (required) */
+    const char *station_path;   /* a gridsurvey-station/1 file overriding the capture's
+                                 * "station" object (NULL: the capture's, if any) */
+    const char *survey;         /* survey name, 1..63 bytes (NULL: the scene's "name", else the
+                                 * scene file's stem; for a directory, its base name) */
+    const char *capture_dir;    /* scene input: where the capture is acquired (NULL:
+                                 * DBDIR/STEM-capture, STEM the scene file's stem); refused for
+                                 * a directory input */
+    double light_height_m;      /* height of the lights above the WGS84 ellipsoid, metres, in
+                                 * [GIS_MIN_HEIGHT_M, GIS_MAX_HEIGHT_M]; NaN (default): a scene's
+                                 * median height of its geographic lights. Required (GS_EINVAL)
+                                 * when there is a station and no default. */
+    const char *delight_path;   /* DELIGHT SQLite file (NULL: a scene's "delight", else the
+                                 * built-in database, rec_delight_generate) */
+    rec_eq7_opts eq7;           /* Eq. 7 options (rec_eq7_opts_default) */
+    double threshold_sigma;     /* blob detection threshold, noise sigmas > 0 (5) */
+    int capture_progress;       /* the acquisition loop's own progress line on stderr (0) */
+    /* Called at the start of each stage, and once more in SRV_STAGE_STORE right before the
+     * capture's transaction (detail starting "capture:"); NULL = none. detail is a short
+     * borrowed text. */
+    void (*progress)(void *ctx, srv_stage stage, const char *detail);
+    void *progress_ctx;
+} srv_run_opts;
+/* Defaults as in parentheses above; input and db_path NULL. */
+void srv_run_opts_default(srv_run_opts *o);
+
+typedef struct {
+    char survey[64];
+    int64_t survey_id, capture_id;   /* database ids */
+    char key[72];                    /* the capture's resume key: "sha256:" + 64 hex digits */
+    char capture_dir[4096];          /* the capture directory used */
+    char truth_path[4096];           /* CAPDIR/truth.json when present, else "" */
+    int scene;                       /* 1: the input was a scene */
+    int skipped;                     /* 1: the capture was already committed: nothing written */
+    int frames_acquired, frames_kept;   /* scene input: this run's acquisition loop */
+    size_t lights;                   /* lights of the capture (as stored) */
+    size_t with_bulb, with_phase;    /* ... with a recognised bulb, with a phase */
+    size_t located;                  /* ... with a position */
+    int has_station;                 /* a station was used */
+    gis_station station;             /* that station (when has_station) */
+    double light_height_m;           /* used (NaN when nothing was located) */
+    char height_source[32];          /* "--light-height-m", "scene median", or "" */
+    double seconds[SRV_STAGE_COUNT]; /* wall time per stage (0 for stages skipped) */
+} srv_run_report;
+
+/* Run the pipeline on one input (see above). *r is always filled as far as the run got.
+ * Errors carry a one-line gs_detail() naming the file and what was expected: GS_EFORMAT (a
+ * malformed scene, capture directory, station or DELIGHT file, a database that is not a
+ * survey database), GS_ENOTFOUND (a missing input, frame or bulb), GS_EINVAL (options),
+ * GS_EIO (unwritable locations), GS_ESQL. Not thread-safe (the acquisition loop and PLplot
+ * are not). */
+gs_status srv_run(const srv_run_opts *o, srv_run_report *r);
+
+/* =====================================================================================
+ * Evaluation against a simulator's truth (survey/evaluate.c; definitions in docs/pipeline.md)
+ * ===================================================================================== */
+
+typedef struct {
+    const char *survey;          /* NULL: any survey */
+    const char *capture_key;     /* NULL: the capture whose stored path is the truth file's
+                                  * directory, else the only capture of the selection */
+    double match_px;             /* match radius, pixels, finite and > 0 (2) */
+} srv_eval_opts;
+void srv_eval_opts_default(srv_eval_opts *o);
+
+/* Phase classes of the confusion matrix: 0, 120, 240 deg (within SRV_PHASE_TOL_DEG), another
+ * phase, and (stored side only) none = ambiguous or unknown. */
+#define SRV_EVAL_PHASE_CLASSES 5
+
+typedef struct {
+    char survey[64];
+    char capture_key[72];
+    int64_t capture_id;
+    double match_px;
+    long truth_lights;           /* lights in truth.json */
+    long truth_in_image;         /* ... on the sensor (in_image): the detection denominator */
+    long stored;                 /* lights stored for the capture */
+    long matched;                /* one-to-one pairs within match_px */
+    long false_detections;       /* stored lights matched to no truth light: stored - matched */
+    long bulb_answered;          /* matched lights with a bulb */
+    long bulb_correct;           /* ... the truth's bulb id */
+    long bulb_ambiguous;         /* ... flagged REC_MATCH_BULB_AMBIGUOUS (a bulb, not sure) */
+    long tech_answered, tech_correct;   /* the same for the technology */
+    long phase_answered;         /* matched lights with a phase (not ambiguous or unknown) */
+    long phase_correct;          /* ... within SRV_PHASE_TOL_DEG of the truth's phase (for a
+                                  * truth on 0/120/240: the same phase class) */
+    long all_correct;            /* matched lights with the right bulb and the right phase */
+    long confusion[4][SRV_EVAL_PHASE_CLASSES];  /* [truth class][stored class] of matched
+                                  * lights: classes 0, 120, 240, other (, none) */
+    long loc_pairs;              /* matched lights with a stored and a truth position */
+    long loc_unlocated;          /* matched lights without a stored position */
+    double loc_median_m, loc_p95_m, loc_max_m;  /* geodesic distance stored -> truth over the
+                                  * loc_pairs (percentiles interpolated linearly between order
+                                  * statistics, position (n - 1) q); NaN when loc_pairs = 0 */
+    /* Rates (NaN when the denominator is 0) */
+    double detection_rate;       /* matched / truth_in_image */
+    double false_rate;           /* false_detections / stored */
+    double bulb_accuracy;        /* bulb_correct / bulb_answered */
+    double tech_accuracy;        /* tech_correct / tech_answered */
+    double phase_accuracy;       /* phase_correct / phase_answered */
+    double bulb_unknown_rate;    /* (matched - bulb_answered) / matched */
+    double phase_unknown_rate;   /* (matched - phase_answered) / matched */
+    double all_correct_rate;     /* all_correct / truth_in_image */
+} srv_eval_report;
+
+/* Match the capture's stored lights to truth_path (gridsurvey-truth/1) by pixel position:
+ * every (stored, truth in_image) pair closer than match_px, taken in increasing distance
+ * (ties by stored then truth index), each light used at most once. Then the counts and rates
+ * above. Errors: GS_ENOTFOUND (truth file, survey, capture), GS_EFORMAT (truth file, naming
+ * the field), GS_EINVAL (several captures and no way to choose: the detail lists them). */
+gs_status srv_evaluate(srv_db *db, const char *truth_path, const srv_eval_opts *o,
+                       srv_eval_report *r);
+
 #endif

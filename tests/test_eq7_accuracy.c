@@ -2,8 +2,9 @@
  * synthetic lights with the real noise of a camera: Poisson shot noise (known gain) on the light
  * and a subtracted sky background, plus Gaussian read noise.
  *
- * Oracle: the maximum-likelihood decision under the exact noise model, written here without
- * anything from eq7.c: for every (bulb, phase) the exact Poisson-Gaussian likelihood
+ * Oracle: the maximum-likelihood decision under the exact noise model (rec_ml_oracle,
+ * recognize/ml_oracle.c, written without anything from eq7.c): for every (bulb, phase) the exact
+ * Poisson-Gaussian likelihood
  *   p(x | mu) = sum_n Pois(n; g (mu + bg)) N(x + bg - n/g; 0, r^2),
  * the brightness profiled by golden-section search, the best pair kept. eq7.c instead assumes
  * Gaussian noise with the plug-in std sigma^2 = r^2 + max(x + bg, 0)/g that a blob extractor
@@ -79,136 +80,27 @@ static long rng_poisson(uint64_t *s, double lam)
 }
 
 /* The camera: gain (electrons per DN), read noise (DN), sky background (electrons per sample,
- * subtracted from the data as a known level). */
-typedef struct {
-    double gain, read_dn, bg_e;
-    double cq, log_norm;   /* derived: exp(-1/(g r)^2), log(r sqrt(2 pi)) */
-} camera;
+ * subtracted from the data as a known level): rec_pg_noise, the same for every sample. */
+typedef rec_pg_noise camera;
 
 static void camera_init(camera *c, double gain, double read_dn, double bg_e)
 {
     c->gain = gain;
     c->read_dn = read_dn;
     c->bg_e = bg_e;
-    c->cq = exp(-1.0 / (gain * gain * read_dn * read_dn));
-    c->log_norm = log(read_dn * sqrt(2.0 * M_PI));
 }
 
-/* log p(x | mean mu DN of the light) for one sample, exact: the sum over electron counts n of
- * Pois(n; g mu + bg) N(x - (n - bg)/g; 0, r^2), evaluated from its mode outwards until the terms
- * fall below 1e-17 of the largest (the summand is log-concave in n). Successive terms by their
- * ratio: e_{n+1}/e_n = lambda/(n+1) q_n, q_n = exp((2 xe - (2n+1)/g)/(2 g r^2)),
- * q_{n+1} = q_n exp(-1/(g r)^2). */
+/* log p(x | mean mu DN of the light) for one sample, exact (recognize/ml_oracle.c). */
 static double log_pg(const camera *c, double x, double mu)
 {
-    double lam = c->gain * (mu > 0 ? mu : 0) + c->bg_e, g = c->gain, r = c->read_dn;
-    double xe = x + c->bg_e / g;   /* DN including the background */
-    double inv2r2 = 1.0 / (2.0 * r * r);
-    double loglam = lam > 0 ? log(lam) : 0;
-#define TERM(n_) ((lam > 0 ? -lam + (double)(n_) * loglam - lfact[(n_)] : ((n_) == 0 ? 0.0 : -INFINITY)) - \
-                  (xe - (double)(n_) / g) * (xe - (double)(n_) / g) * inv2r2)
-    /* mode of the product of the Poisson and the Gaussian in n */
-    double gr2 = g * g * r * r;
-    double nstart = lam > 0 ? (lam * gr2 + g * xe * lam) / (lam + gr2) : 0;
-    long n = nstart < 0 ? 0 : (long)floor(nstart + 0.5);
-    if (n >= NFACT - 2) n = NFACT - 3;
-    double tn = TERM(n);
-    while (n + 1 < NFACT - 1 && TERM(n + 1) > tn) {
-        n++;
-        tn = TERM(n);
-    }
-    while (n > 0 && TERM(n - 1) > tn) {
-        n--;
-        tn = TERM(n);
-    }
-#undef TERM
-    double sum = 1.0;
-    if (lam > 0) {
-        double cq = c->cq;   /* exp(-1/(g r)^2) */
-        double q0 = exp((2.0 * xe - (2.0 * n + 1.0) / g) / g * inv2r2), q = q0, e = 1.0;
-        for (long k = n; k < NFACT - 2; k++) {   /* upwards: e_{k+1} = e_k lam/(k+1) q_k */
-            e *= lam / (double)(k + 1) * q;
-            q *= cq;
-            sum += e;
-            if (e < 1e-17) break;
-        }
-        q = q0 / cq;   /* q_{n-1} */
-        e = 1.0;
-        for (long k = n; k > 0; k--) {   /* downwards: e_{k-1} = e_k k / (lam q_{k-1}) */
-            e *= (double)k / (lam * q);
-            q /= cq;
-            sum += e;
-            if (e < 1e-17) break;
-        }
-    }
-    return tn + log(sum) - c->log_norm;
+    return rec_pg_log_likelihood(c, x, mu);
 }
 
-static double loglik_pg(const camera *c, const double *x, const double *t, int D, double a)
-{
-    double l = 0.0;
-    for (int k = 0; k < D; k++) l += log_pg(c, x[k], a * t[k]);
-    return l;
-}
-
-/* The oracle: max over templates of the likelihood profiled over a > 0 by golden section.
- * Templates whose likelihood at the least-squares brightness is 30 nats below the best such
- * value are not profiled (optimising a gains a few nats at most). */
+/* The oracle: max over templates of the likelihood profiled over a > 0 (rec_ml_oracle). */
 static int oracle_ml(const camera *c, const double *x, const double *tab, int M, int D)
 {
-    double lb[512], alsq[512], best_lb = -INFINITY;
-    for (int j = 0; j < M; j++) {
-        const double *t = tab + (size_t)j * (size_t)D;
-        double num = 0, den = 0;
-        for (int k = 0; k < D; k++) {
-            num += x[k] * t[k];
-            den += t[k] * t[k];
-        }
-        double a = num / den;
-        if (!(a > 1e-9)) a = 1e-9;
-        alsq[j] = a;
-        lb[j] = loglik_pg(c, x, t, D, a);
-        if (lb[j] > best_lb) best_lb = lb[j];
-    }
-    int best = 0;
-    double bestv = -INFINITY;
-    const double gr = (sqrt(5.0) - 1.0) / 2.0;
-    for (int j = 0; j < M; j++) {
-        if (lb[j] < best_lb - 30.0) continue;
-        const double *t = tab + (size_t)j * (size_t)D;
-        /* bracket: +-6 standard deviations of a at the least-squares value */
-        double a0 = alsq[j], den = 0, var = 0;
-        for (int k = 0; k < D; k++) {
-            den += t[k] * t[k];
-            var += t[k] * t[k] * (c->read_dn * c->read_dn + (a0 * t[k] * c->gain + c->bg_e) / (c->gain * c->gain));
-        }
-        double sa = sqrt(var) / den;
-        double lo = a0 - 6 * sa, hi = a0 + 6 * sa;
-        if (lo < 1e-9) lo = 1e-9;
-        double p = hi - gr * (hi - lo), q = lo + gr * (hi - lo);
-        double fp = loglik_pg(c, x, t, D, p), fq = loglik_pg(c, x, t, D, q);
-        for (int it = 0; it < 18; it++) {   /* bracket / 5800: ~1e-6 nats from the top */
-            if (fp > fq) {
-                hi = q;
-                q = p;
-                fq = fp;
-                p = hi - gr * (hi - lo);
-                fp = loglik_pg(c, x, t, D, p);
-            } else {
-                lo = p;
-                p = q;
-                fp = fq;
-                q = lo + gr * (hi - lo);
-                fq = loglik_pg(c, x, t, D, q);
-            }
-        }
-        double v = fp > fq ? fp : fq;
-        if (lb[j] > v) v = lb[j];
-        if (v > bestv) {
-            bestv = v;
-            best = j;
-        }
-    }
+    int best = -1;
+    CHECK_OK(rec_ml_oracle(c, 0, x, tab, M, D, &best, NULL));
     return best;
 }
 
@@ -281,6 +173,8 @@ static void run_level(const rec_delight *d, const camera *cam, double mean_e, in
     rec_eq7_opts_default(&o);
     o.min_snr = 0;      /* compare the estimators, not the flags */
     o.unknown_p = 0;
+    o.band_gains = 0;   /* the oracle's model: one brightness times Q_beta, exact templates */
+    o.model_error = 0.0;
     rec_matcher *m = NULL, *mdef = NULL;
     CHECK_OK(rec_matcher_new(d, 50, 3, K, &o, &m));
     CHECK_OK(rec_matcher_new(d, 50, 3, K, NULL, &mdef));

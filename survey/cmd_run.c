@@ -1,0 +1,300 @@
+/* cmd_run.c - `gridsurvey run`: the whole job on one capture (survey/pipeline.c), then the
+ * survey's phase-balance table (srv_stats_compute), its lights as GeoJSON and a PNG map
+ * (gis_export, gis_map_png), and, when the capture directory holds the simulator's
+ * truth.json, the evaluation (survey/evaluate.c). docs/pipeline.md. */
+#include "survey/internal.h"
+
+#include <errno.h>
+#include <getopt.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+static const char run_usage[] =
+    "usage: gridsurvey run SCENE.json|CAPDIR --db survey.sqlite [--station FILE] [--survey NAME]\n"
+    "                      [--capture-dir DIR] [--light-height-m H] [--phases 3|6|continuous]\n"
+    "                      [--unknown-p P] [--delight DB] [--out DIR]\n"
+    "\n"
+    "The whole job on one capture: a scene (gridsurvey-scene/1) is acquired by the simulator\n"
+    "through the ACam acquisition loop into a capture directory (resumable), a capture directory\n"
+    "is read as it is; then lights and their per-frame photometry, bulb and grid phase by the\n"
+    "paper's Eq. 7 against DELIGHT, each light located from the station at the lights' height,\n"
+    "and everything stored in the survey database in one transaction. A capture already in the\n"
+    "database is skipped (never stored twice); an interrupted run resumes. Then prints the\n"
+    "survey's phase balance, writes OUT/SURVEY.geojson and OUT/SURVEY-map.png, and when the\n"
+    "capture directory holds the simulator's truth.json, prints the evaluation against it.\n"
+    "\n"
+    "  --db FILE            the survey database (created if missing)\n"
+    "  --station FILE       the station (gridsurvey-station/1, docs/gis.md) instead of the\n"
+    "                       capture's \"station\" object; without any, lights are stored\n"
+    "                       without a location\n"
+    "  --survey NAME        survey name (default: the scene's name, or the capture directory's)\n"
+    "  --capture-dir DIR    scene input: the capture directory (default: next to the database,\n"
+    "                       SCENE-capture)\n"
+    "  --light-height-m H   the lights' height above the WGS84 ellipsoid, m (default for a scene:\n"
+    "                       the median height of its geographic lights; required for a capture\n"
+    "                       directory with a station)\n"
+    "  --phases P           candidate grid phases: 3 = 0/120/240 deg (default), 6 = those and\n"
+    "                       + 30 deg (delta-wye transformers), continuous\n"
+    "  --unknown-p P        Eq. 7's goodness-of-fit gate: a light whose best fit has a chi-square\n"
+    "                       p-value below P gets no bulb (unknown), in [0, 1); 0 turns the gate\n"
+    "                       off (default 0.001)\n"
+    "  --delight DB         DELIGHT SQLite file (default: $GRIDSURVEY_DELIGHT, else the scene's,\n"
+    "                       else the built-in database)\n"
+    "  --out DIR            where the GeoJSON and the map go (default: the database's directory)\n"
+    "  --help               this text\n"
+    "\n"
+    "Progress goes to stderr when it is a terminal. Exit status: 0 done, 1 failure (one line on\n"
+    "stderr; bad input changes nothing on disk), 2 usage error.\n";
+
+static int usage_error(const char *fmt, const char *arg)
+{
+    fputs("gridsurvey run: ", stderr);
+    fprintf(stderr, fmt, arg);
+    fputs(" (see gridsurvey run --help)\n", stderr);
+    return 2;
+}
+
+static void tty_progress(void *ctx, srv_stage stage, const char *detail)
+{
+    (void)ctx;
+    fprintf(stderr, "gridsurvey run: %s: %s\n", srv_stage_name(stage), detail);
+    fflush(stderr);
+}
+
+/* A file-name-safe copy of a survey name. */
+static void safe_name(const char *name, char *buf, size_t size)
+{
+    size_t n = 0;
+    for (const char *p = name; *p && n + 1 < size; p++) {
+        unsigned char ch = (unsigned char)*p;
+        int ok = (ch >= 'a' && ch <= 'z') || (ch >= 'A' && ch <= 'Z') || (ch >= '0' && ch <= '9') ||
+                 ch == '-' || ch == '_' || (ch == '.' && n > 0);
+        buf[n++] = ok ? (char)ch : '_';
+    }
+    buf[n] = '\0';
+    if (!n) snprintf(buf, size, "survey");
+}
+
+static void dir_of(const char *path, char *buf, size_t size)
+{
+    snprintf(buf, size, "%s", path);
+    char *slash = strrchr(buf, '/');
+    if (!slash) snprintf(buf, size, ".");
+    else if (slash == buf) buf[1] = '\0';
+    else *slash = '\0';
+}
+
+/* The --out directory: exists and is writable, or its parent is a writable directory. */
+static gs_status check_out_dir(const char *path)
+{
+    struct stat sb;
+    if (stat(path, &sb) == 0) {
+        if (!S_ISDIR(sb.st_mode)) return gs_fail(GS_EIO, "%s: --out exists and is not a directory", path);
+        if (access(path, W_OK | X_OK) != 0)
+            return gs_fail(GS_EIO, "%s: --out is not writable: %s", path, strerror(errno));
+        return GS_OK;
+    }
+    if (errno != ENOENT) return gs_fail(GS_EIO, "%s: --out: %s", path, strerror(errno));
+    char parent[4096];
+    dir_of(path, parent, sizeof parent);
+    if (stat(parent, &sb) != 0 || !S_ISDIR(sb.st_mode) || access(parent, W_OK | X_OK) != 0)
+        return gs_fail(GS_EIO, "%s: cannot create the --out directory: %s is not a writable directory",
+                       path, parent);
+    return GS_OK;
+}
+
+static void pct(char *buf, size_t size, const srv_phase_stats *g, int i)
+{
+    if (g->total <= 0) snprintf(buf, size, "- (0)");
+    else
+        snprintf(buf, size, "%.1f %% [%.1f, %.1f] (%ld)", 100.0 * g->share[i], 100.0 * g->lo[i],
+                 100.0 * g->hi[i], g->n[i]);
+}
+
+/* The phase-balance table of the survey: all its lights, then per technology. */
+static gs_status print_balance(srv_db *db, const char *survey)
+{
+    srv_phase_stats *all = NULL, *tech = NULL;
+    size_t n_all = 0, n_tech = 0;
+    srv_stats_opts o;
+    srv_stats_opts_default(&o);
+    o.survey = survey;
+    gs_status s = srv_stats_compute(db, &o, &all, &n_all, NULL);
+    if (s == GS_OK && (s = srv_stats_parse_by("technology", &o)) == GS_OK)
+        s = srv_stats_compute(db, &o, &tech, &n_tech, NULL);
+    if (s == GS_OK) {
+        printf("\nPhase balance of survey %s (srv_stats_compute; gridsurvey stats --db DB --survey %s "
+               "--by technology):\n\n", survey, survey);
+        printf("| group | lights | unknown | other | n | 0 deg | 120 deg | 240 deg | chi2 | p | imbalance |\n");
+        printf("|---|---:|---:|---:|---:|---|---|---|---:|---:|---:|\n");
+        int few = 0;
+        for (size_t i = 0; i < n_all + n_tech; i++) {
+            const srv_phase_stats *g = i < n_all ? &all[i] : &tech[i - n_all];
+            char c[3][64];
+            for (int k = 0; k < 3; k++) pct(c[k], sizeof c[k], g, k);
+            printf("| %s%s | %ld | %ld | %ld | %ld | %s | %s | %s |", i < n_all ? "" : "technology ",
+                   g->group, g->lights, g->unknown, g->other, g->total, c[0], c[1], c[2]);
+            if (g->total > 0)
+                printf(" %.2f | %.3g%s | %.3f |\n", g->chi2, g->p_value,
+                       g->flags & SRV_STATS_FEW ? " (few)" : "", g->imbalance);
+            else
+                printf(" - | - | - |\n");
+            few |= (g->flags & SRV_STATS_FEW) != 0;
+        }
+        printf("\nShares of the lights on a known 0/120/240 deg phase (n), 95 %% Wilson intervals; chi2: "
+               "uniformity test (2 dof); imbalance = max |share - 1/3| / (1/3); unknown: ambiguous or "
+               "unrecognized phase; other: not within 20 deg of 0/120/240.%s\n",
+               few ? " (few): fewer than 5 expected per phase, p approximate." : "");
+    }
+    free(all);
+    free(tech);
+    return s;
+}
+
+/* GeoJSON of the survey's lights and the PNG map of the located ones. */
+static gs_status write_outputs(srv_db *db, const srv_run_report *r, const char *out_dir)
+{
+    if (mkdir(out_dir, 0777) != 0 && errno != EEXIST)
+        return gs_fail(GS_EIO, "%s: cannot create the --out directory: %s", out_dir, strerror(errno));
+    srv_export_opts eo;
+    srv_export_opts_default(&eo);
+    eo.survey = r->survey;
+    gis_light *lights = NULL;
+    size_t n = 0, located = 0;
+    gs_status s = srv_db_read_lights(db, &eo, &lights, &n);
+    if (s != GS_OK) return s;
+    for (size_t i = 0; i < n; i++) located += isfinite(lights[i].lat_deg);
+    char name[128], path[4400];
+    safe_name(r->survey, name, sizeof name);
+    snprintf(path, sizeof path, "%s/%s.geojson", out_dir, name);
+    s = gis_export(lights, n, GIS_FORMAT_GEOJSON, path);
+    if (s == GS_OK) printf("\nwrote %s (%zu lights, %zu located)\n", path, n, located);
+    if (s == GS_OK && (located > 0 || r->has_station)) {
+        char title[160];
+        snprintf(title, sizeof title, "gridsurvey: survey %s, %zu located lights by phase", r->survey, located);
+        gis_map_opts mo;
+        gis_map_opts_default(&mo);
+        mo.title = title;
+        mo.stations = r->has_station ? &r->station.cam : NULL;
+        mo.n_stations = r->has_station ? 1 : 0;
+        snprintf(path, sizeof path, "%s/%s-map.png", out_dir, name);
+        s = gis_map_png(lights, n, &mo, path);
+        if (s == GS_OK) printf("wrote %s\n", path);
+    } else if (s == GS_OK) {
+        printf("map: none (no located light and no station: the capture has no \"station\"; see --station)\n");
+    }
+    free(lights);
+    return s;
+}
+
+int srv_cmd_run(int argc, char **argv)
+{
+    static const struct option longs[] = {
+        {"db", required_argument, 0, 'd'},          {"station", required_argument, 0, 's'},
+        {"survey", required_argument, 0, 'S'},      {"capture-dir", required_argument, 0, 'c'},
+        {"light-height-m", required_argument, 0, 'H'}, {"phases", required_argument, 0, 'p'},
+        {"delight", required_argument, 0, 'D'},     {"out", required_argument, 0, 'o'},
+        {"unknown-p", required_argument, 0, 'u'},
+        {"help", no_argument, 0, 'h'},              {0, 0, 0, 0},
+    };
+    srv_run_opts o;
+    srv_run_opts_default(&o);
+    const char *out = NULL;
+    o.delight_path = getenv("GRIDSURVEY_DELIGHT");
+    if (o.delight_path && !*o.delight_path) o.delight_path = NULL;
+    optind = 1;
+    opterr = 0;
+    int c;
+    char *end;
+    while ((c = getopt_long(argc, argv, ":h", longs, NULL)) != -1) {
+        switch (c) {
+        case 'd': o.db_path = optarg; break;
+        case 's': o.station_path = optarg; break;
+        case 'S': o.survey = optarg; break;
+        case 'c': o.capture_dir = optarg; break;
+        case 'D': o.delight_path = optarg; break;
+        case 'o': out = optarg; break;
+        case 'H':
+            o.light_height_m = strtod(optarg, &end);
+            if (!*optarg || *end || !isfinite(o.light_height_m))
+                return usage_error("--light-height-m '%s': expected a height in metres", optarg);
+            break;
+        case 'u':
+            o.eq7.unknown_p = strtod(optarg, &end);
+            if (!*optarg || *end || !(o.eq7.unknown_p >= 0.0 && o.eq7.unknown_p < 1.0))
+                return usage_error("--unknown-p '%s': expected a p-value in [0, 1)", optarg);
+            break;
+        case 'p':
+            if (!strcmp(optarg, "3")) o.eq7.phases = REC_PHASES_3;
+            else if (!strcmp(optarg, "6")) o.eq7.phases = REC_PHASES_6;
+            else if (!strcmp(optarg, "continuous")) o.eq7.phases = REC_PHASES_CONTINUOUS;
+            else return usage_error("--phases '%s': expected 3, 6 or continuous", optarg);
+            break;
+        case 'h': fputs(run_usage, stdout); return 0;
+        case ':': return usage_error("option '%s' needs a value", argv[optind - 1]);
+        default: return usage_error("unknown option '%s'", argv[optind - 1]);
+        }
+    }
+    if (argc - optind != 1)
+        return usage_error("%s", argc - optind < 1 ? "expected a scene file or a capture directory"
+                                                   : "expected exactly one scene or capture directory");
+    o.input = argv[optind];
+    if (!o.db_path) return usage_error("%s", "--db is required");
+    /* --out is checked before anything is written; the default, the database's directory, is
+     * checked by opening the database */
+    char out_dir[4096];
+    if (out) snprintf(out_dir, sizeof out_dir, "%s", out);
+    else dir_of(o.db_path, out_dir, sizeof out_dir);
+    gs_status s = out ? check_out_dir(out_dir) : GS_OK;
+    if (s != GS_OK) return srv_error(s);
+    if (isatty(2)) {
+        o.progress = tty_progress;
+        o.capture_progress = 1;
+    }
+
+    srv_run_report r;
+    s = srv_run(&o, &r);
+    if (s != GS_OK) return srv_error(s);
+    printf("run: survey %s, capture %s (key %.19s...)", r.survey, r.capture_dir, r.key);
+    if (r.scene) printf(": %d frames acquired, %d kept from an earlier run", r.frames_acquired, r.frames_kept);
+    printf("\n");
+    printf("run: %zu lights, %zu with a bulb, %zu with a phase, %zu located", r.lights, r.with_bulb,
+           r.with_phase, r.located);
+    if (isfinite(r.light_height_m))
+        printf(" at %.2f m above the ellipsoid (%s)", r.light_height_m, r.height_source);
+    else if (!r.has_station)
+        printf(" (no station: stored without a location)");
+    printf("\n");
+    if (r.skipped) {
+        printf("run: already in %s (capture id %lld): nothing stored\n", o.db_path, (long long)r.capture_id);
+    } else {
+        printf("run: stored as capture %lld in %s; seconds:", (long long)r.capture_id, o.db_path);
+        for (int k = 0; k < SRV_STAGE_COUNT; k++)
+            if (r.seconds[k] > 0.0) printf(" %s %.2f", srv_stage_name((srv_stage)k), r.seconds[k]);
+        printf("\n");
+    }
+
+    srv_db *db = NULL;
+    s = srv_db_open(o.db_path, SRV_DB_READ, &db);
+    if (s == GS_OK) s = print_balance(db, r.survey);
+    if (s == GS_OK) s = write_outputs(db, &r, out_dir);
+    if (s == GS_OK && r.truth_path[0]) {
+        srv_eval_opts eo;
+        srv_eval_opts_default(&eo);
+        eo.survey = r.survey;
+        eo.capture_key = r.key;
+        srv_eval_report er;
+        s = srv_evaluate(db, r.truth_path, &eo, &er);
+        if (s == GS_OK) {
+            printf("\n");
+            s = srv_eval_print(&er, r.truth_path, 0, stdout);
+        }
+    }
+    srv_db_close(db);
+    if (s == GS_OK && fflush(stdout) != 0) s = gs_fail(GS_EIO, "stdout: write failed");
+    return s == GS_OK ? 0 : srv_error(s);
+}

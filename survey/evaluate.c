@@ -1,0 +1,562 @@
+/* evaluate.c - a survey database against a simulator's truth.json (gridsurvey-truth/1,
+ * capture/sim.c): the stored lights of one capture are matched one-to-one to the truth's
+ * lights by pixel position, then detection, false detections, bulb, technology and phase
+ * accuracy, the share left unknown or ambiguous, and the location error (geodesic distance on
+ * WGS84, gis_geodesic_inverse). Definitions: survey.h (srv_eval_report) and docs/pipeline.md. */
+#include "survey/internal.h"
+#include "capture/capture.h"
+
+#include <errno.h>
+#include <jansson.h>
+#include <limits.h>
+#include <math.h>
+#include <sqlite3.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define EVAL_FORMAT "gridsurvey-evaluation/1"
+
+void srv_eval_opts_default(srv_eval_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    o->match_px = 2.0;
+}
+
+/* One light, stored or true. */
+typedef struct {
+    double x, y;
+    char bulb[REC_ID_MAX];      /* "" = none */
+    char tech[32];              /* "" = none */
+    double phase_deg;           /* NaN = none */
+    double lat, lon;            /* NaN = none */
+    unsigned flags;             /* stored: match_flags */
+    int partner;                /* index of the matched light on the other side, -1 */
+} ev_light;
+
+/* ------------------------------------------------------------------ truth.json */
+
+static gs_status truth_text(const char *path, json_t *o, const char *key, size_t i, int required,
+                            char *dst, size_t size)
+{
+    json_t *v = json_object_get(o, key);
+    dst[0] = '\0';
+    if (!v || json_is_null(v)) {
+        if (required)
+            return gs_fail(GS_EFORMAT, "%s: field lights[%zu].%s: expected a string (required)", path, i, key);
+        return GS_OK;
+    }
+    if (!json_is_string(v) || strlen(json_string_value(v)) >= size)
+        return gs_fail(GS_EFORMAT, "%s: field lights[%zu].%s: expected a string of at most %zu bytes",
+                       path, i, key, size - 1);
+    snprintf(dst, size, "%s", json_string_value(v));
+    return GS_OK;
+}
+
+/* A number, or NaN when absent or null (optional fields). */
+static gs_status truth_number(const char *path, json_t *o, const char *key, size_t i, double *out)
+{
+    json_t *v = json_object_get(o, key);
+    *out = NAN;
+    if (!v || json_is_null(v)) return GS_OK;
+    if (!json_is_number(v) || !isfinite(json_number_value(v)))
+        return gs_fail(GS_EFORMAT, "%s: field lights[%zu].%s: expected a finite number or null", path, i, key);
+    *out = json_number_value(v);
+    return GS_OK;
+}
+
+/* The in-image lights of truth_path into *out (allocated); *total counts every light. */
+static gs_status read_truth(const char *path, ev_light **out, size_t *count, long *total)
+{
+    *out = NULL;
+    *count = 0;
+    *total = 0;
+    json_error_t err;
+    json_t *root = json_load_file(path, JSON_REJECT_DUPLICATES, &err);
+    if (!root) {
+        FILE *f = fopen(path, "rb");
+        if (!f) return gs_fail(errno == ENOENT ? GS_ENOTFOUND : GS_EIO, "%s: %s", path, strerror(errno));
+        fclose(f);
+        return gs_fail(GS_EFORMAT, "%s:%d:%d: JSON syntax: %s", path, err.line, err.column, err.text);
+    }
+    gs_status s = GS_OK;
+    json_t *fmt = json_object_get(root, "format"), *arr = json_object_get(root, "lights");
+    ev_light *v = NULL;
+    size_t n = 0;
+    if (!json_is_object(root) || !json_is_string(fmt) || strcmp(json_string_value(fmt), CAP_TRUTH_FORMAT)) {
+        s = gs_fail(GS_EFORMAT, "%s: field format: expected \"%s\" (a simulator's truth.json)", path,
+                    CAP_TRUTH_FORMAT);
+        goto done;
+    }
+    if (!json_is_array(arr)) {
+        s = gs_fail(GS_EFORMAT, "%s: field lights: expected an array", path);
+        goto done;
+    }
+    size_t total_n = json_array_size(arr);
+    v = calloc(total_n ? total_n : 1, sizeof *v);
+    if (!v) {
+        s = gs_fail(GS_ENOMEM, "%s: out of memory for %zu lights", path, total_n);
+        goto done;
+    }
+    for (size_t i = 0; i < total_n; i++) {
+        json_t *o = json_array_get(arr, i), *in = json_object_get(o, "in_image");
+        if (!json_is_object(o)) {
+            s = gs_fail(GS_EFORMAT, "%s: field lights[%zu]: expected an object", path, i);
+            goto done;
+        }
+        if (!json_is_boolean(in)) {
+            s = gs_fail(GS_EFORMAT, "%s: field lights[%zu].in_image: expected true or false", path, i);
+            goto done;
+        }
+        ev_light *l = &v[n];
+        memset(l, 0, sizeof *l);
+        l->partner = -1;
+        if ((s = truth_number(path, o, "x_px", i, &l->x)) != GS_OK ||
+            (s = truth_number(path, o, "y_px", i, &l->y)) != GS_OK ||
+            (s = truth_number(path, o, "phase_deg", i, &l->phase_deg)) != GS_OK ||
+            (s = truth_number(path, o, "lat_deg", i, &l->lat)) != GS_OK ||
+            (s = truth_number(path, o, "lon_deg", i, &l->lon)) != GS_OK ||
+            (s = truth_text(path, o, "bulb", i, 1, l->bulb, sizeof l->bulb)) != GS_OK ||
+            (s = truth_text(path, o, "technology", i, 0, l->tech, sizeof l->tech)) != GS_OK)
+            goto done;
+        if (!json_is_true(in)) continue;
+        if (!isfinite(l->x) || !isfinite(l->y)) {
+            s = gs_fail(GS_EFORMAT, "%s: field lights[%zu]: in_image but x_px/y_px not numbers", path, i);
+            goto done;
+        }
+        if (isnan(l->lat) != isnan(l->lon)) {
+            s = gs_fail(GS_EFORMAT, "%s: field lights[%zu]: lat_deg without lon_deg or the reverse", path, i);
+            goto done;
+        }
+        n++;
+    }
+    *total = (long)total_n;
+done:
+    json_decref(root);
+    if (s != GS_OK) {
+        free(v);
+        return s;
+    }
+    *out = v;
+    *count = n;
+    return GS_OK;
+}
+
+/* ------------------------------------------------------------------ the capture */
+
+static void dir_of(const char *path, char *buf, size_t size)
+{
+    snprintf(buf, size, "%s", path);
+    char *slash = strrchr(buf, '/');
+    if (!slash) snprintf(buf, size, ".");
+    else if (slash == buf) buf[1] = '\0';
+    else *slash = '\0';
+}
+
+/* Which capture the truth describes (see srv_eval_opts). */
+static gs_status find_capture(srv_db *db, const char *truth_path, const srv_eval_opts *o,
+                              srv_eval_report *r)
+{
+    sqlite3 *h = srv_db_sqlite(db);
+    if (o->survey) {
+        int64_t sid;
+        gs_status s = srv_db_find_survey(db, o->survey, &sid);
+        if (s != GS_OK) return s;
+    }
+    char dir[4096], abs_dir[PATH_MAX];
+    dir_of(truth_path, dir, sizeof dir);
+    const char *path = realpath(dir, abs_dir) ? abs_dir : dir;
+    static const char base[] =
+        "SELECT c.id, s.name, c.capture_key FROM captures c JOIN surveys s ON s.id = c.survey_id "
+        "WHERE (?1 IS NULL OR s.name = ?1) ";
+    const char *const where[3] = {"AND c.capture_key = ?2 ORDER BY c.id", "AND c.path = ?2 ORDER BY c.id",
+                                  "ORDER BY c.id"};
+    /* by key when one is given; else by the truth's directory, then the only capture */
+    int first = o->capture_key ? 0 : 1, last = o->capture_key ? 0 : 2;
+    for (int w = first; w <= last; w++) {
+        char sql[512];
+        snprintf(sql, sizeof sql, "%s%s", base, where[w]);
+        sqlite3_stmt *q = NULL;
+        if (sqlite3_prepare_v2(h, sql, -1, &q, NULL) != SQLITE_OK)
+            return gs_fail(GS_ESQL, "%s: %s", srv_db_path(db), sqlite3_errmsg(h));
+        if (o->survey) sqlite3_bind_text(q, 1, o->survey, -1, SQLITE_STATIC);
+        if (w == 0) sqlite3_bind_text(q, 2, o->capture_key, -1, SQLITE_STATIC);
+        if (w == 1) sqlite3_bind_text(q, 2, path, -1, SQLITE_STATIC);
+        int found = 0, rc;
+        char list[1024] = "";
+        while ((rc = sqlite3_step(q)) == SQLITE_ROW) {
+            if (!found) {
+                r->capture_id = sqlite3_column_int64(q, 0);
+                snprintf(r->survey, sizeof r->survey, "%s", (const char *)sqlite3_column_text(q, 1));
+                snprintf(r->capture_key, sizeof r->capture_key, "%s", (const char *)sqlite3_column_text(q, 2));
+            }
+            size_t used = strlen(list);
+            if (found < 4)
+                snprintf(list + used, sizeof list - used, "%s%s/%.15s", found ? ", " : "",
+                         (const char *)sqlite3_column_text(q, 1), (const char *)sqlite3_column_text(q, 2));
+            found++;
+        }
+        sqlite3_finalize(q);
+        if (rc != SQLITE_DONE) return gs_fail(GS_ESQL, "%s: %s", srv_db_path(db), sqlite3_errmsg(h));
+        if (found == 1) return GS_OK;
+        if (found > 1)
+            return gs_fail(GS_EINVAL, "%s: %d captures could be the one %s describes (%s%s): give "
+                           "--survey", srv_db_path(db), found, truth_path, list, found > 4 ? ", ..." : "");
+    }
+    if (o->capture_key)
+        return gs_fail(GS_ENOTFOUND, "%s: no capture with key %s%s%s", srv_db_path(db), o->capture_key,
+                       o->survey ? " in survey " : "", o->survey ? o->survey : "");
+    return gs_fail(GS_ENOTFOUND, "%s: no capture%s%s to evaluate", srv_db_path(db),
+                   o->survey ? " in survey " : "", o->survey ? o->survey : "");
+}
+
+static gs_status read_stored(srv_db *db, int64_t capture_id, ev_light **out, size_t *count)
+{
+    static const char sql[] =
+        "SELECT l.x_px, l.y_px, l.bulb_id, l.technology, l.phase_deg, l.match_flags, loc.lat_deg, "
+        "loc.lon_deg FROM lights l LEFT JOIN locations loc ON loc.light_id = l.id "
+        "WHERE l.capture_id = ?1 ORDER BY l.light_index";
+    sqlite3 *h = srv_db_sqlite(db);
+    sqlite3_stmt *q = NULL;
+    *out = NULL;
+    *count = 0;
+    if (sqlite3_prepare_v2(h, sql, -1, &q, NULL) != SQLITE_OK)
+        return gs_fail(GS_ESQL, "%s: %s", srv_db_path(db), sqlite3_errmsg(h));
+    sqlite3_bind_int64(q, 1, capture_id);
+    ev_light *v = NULL;
+    size_t n = 0, cap = 0;
+    gs_status s = GS_OK;
+    int rc;
+    while ((rc = sqlite3_step(q)) == SQLITE_ROW) {
+        if (n == cap) {
+            size_t nc = cap ? 2 * cap : 256;
+            ev_light *nv = realloc(v, nc * sizeof *nv);
+            if (!nv) {
+                s = gs_fail(GS_ENOMEM, "evaluate: out of memory for %zu lights", nc);
+                break;
+            }
+            v = nv;
+            cap = nc;
+        }
+        ev_light *l = &v[n++];
+        memset(l, 0, sizeof *l);
+        l->partner = -1;
+        l->x = sqlite3_column_double(q, 0);
+        l->y = sqlite3_column_double(q, 1);
+        const char *b = (const char *)sqlite3_column_text(q, 2);
+        snprintf(l->bulb, sizeof l->bulb, "%s", b ? b : "");
+        const char *t = (const char *)sqlite3_column_text(q, 3);
+        snprintf(l->tech, sizeof l->tech, "%s", t ? t : "");
+        l->phase_deg = sqlite3_column_type(q, 4) == SQLITE_NULL ? NAN : sqlite3_column_double(q, 4);
+        l->flags = (unsigned)sqlite3_column_int64(q, 5);
+        l->lat = sqlite3_column_type(q, 6) == SQLITE_NULL ? NAN : sqlite3_column_double(q, 6);
+        l->lon = sqlite3_column_type(q, 7) == SQLITE_NULL ? NAN : sqlite3_column_double(q, 7);
+    }
+    if (s == GS_OK && rc != SQLITE_DONE) s = gs_fail(GS_ESQL, "%s: %s", srv_db_path(db), sqlite3_errmsg(h));
+    sqlite3_finalize(q);
+    if (s != GS_OK) {
+        free(v);
+        return s;
+    }
+    *out = v;
+    *count = n;
+    return GS_OK;
+}
+
+/* ------------------------------------------------------------------ matching */
+
+typedef struct {
+    double d;
+    size_t a, b;   /* stored, truth */
+} ev_pair;
+
+static int cmp_pair(const void *p, const void *q)
+{
+    const ev_pair *x = p, *y = q;
+    if (x->d != y->d) return x->d < y->d ? -1 : 1;
+    if (x->a != y->a) return x->a < y->a ? -1 : 1;
+    return (x->b > y->b) - (x->b < y->b);
+}
+
+typedef struct {
+    double x;
+    size_t j;
+} ev_key;
+
+static int cmp_key(const void *p, const void *q)
+{
+    const ev_key *a = p, *b = q;
+    if (a->x != b->x) return a->x < b->x ? -1 : 1;
+    return (a->j > b->j) - (a->j < b->j);
+}
+
+static gs_status add_pair(ev_pair **pairs, size_t *np, size_t *cap, ev_pair p)
+{
+    if (*np == *cap) {
+        size_t nc = *cap ? 2 * *cap : 1024;
+        ev_pair *n2 = realloc(*pairs, nc * sizeof *n2);
+        if (!n2) return gs_fail(GS_ENOMEM, "evaluate: out of memory for %zu pairs", nc);
+        *pairs = n2;
+        *cap = nc;
+    }
+    (*pairs)[(*np)++] = p;
+    return GS_OK;
+}
+
+/* One-to-one: all pairs within R (truth sorted by x, a window of +-R per stored light), in
+ * increasing distance, each light taken once. */
+static gs_status match(ev_light *st, size_t ns, ev_light *tr, size_t nt, double R, long *matched)
+{
+    *matched = 0;
+    ev_key *order = malloc((nt ? nt : 1) * sizeof *order);
+    ev_pair *pairs = NULL;
+    size_t np = 0, cap = 0;
+    if (!order) return gs_fail(GS_ENOMEM, "evaluate: out of memory");
+    for (size_t j = 0; j < nt; j++) order[j] = (ev_key){tr[j].x, j};
+    qsort(order, nt, sizeof *order, cmp_key);
+    gs_status s = GS_OK;
+    for (size_t i = 0; i < ns && s == GS_OK; i++) {
+        size_t lo = 0, hi = nt;   /* the first truth light with x >= st.x - R */
+        while (lo < hi) {
+            size_t mid = lo + (hi - lo) / 2;
+            if (order[mid].x < st[i].x - R) lo = mid + 1;
+            else hi = mid;
+        }
+        for (size_t k = lo; k < nt && order[k].x <= st[i].x + R && s == GS_OK; k++) {
+            size_t j = order[k].j;
+            double d = hypot(st[i].x - tr[j].x, st[i].y - tr[j].y);
+            if (d <= R) s = add_pair(&pairs, &np, &cap, (ev_pair){d, i, j});
+        }
+    }
+    if (s == GS_OK) {
+        if (np) qsort(pairs, np, sizeof *pairs, cmp_pair);
+        for (size_t p = 0; p < np; p++) {
+            ev_light *a = &st[pairs[p].a], *b = &tr[pairs[p].b];
+            if (a->partner >= 0 || b->partner >= 0) continue;
+            a->partner = (int)pairs[p].b;
+            b->partner = (int)pairs[p].a;
+            (*matched)++;
+        }
+    }
+    free(order);
+    free(pairs);
+    return s;
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+/* Linear interpolation between order statistics at position (n - 1) q of sorted v. */
+static double quantile(const double *v, size_t n, double q)
+{
+    if (n == 0) return NAN;
+    double pos = (double)(n - 1) * q;
+    size_t i = (size_t)floor(pos);
+    if (i + 1 >= n) return v[n - 1];
+    return v[i] + (pos - (double)i) * (v[i + 1] - v[i]);
+}
+
+static double rate(long k, long n)
+{
+    return n > 0 ? (double)k / (double)n : NAN;
+}
+
+/* Class 0..3 of a phase (0, 120, 240, other), 4 for NaN. */
+static int phase_col(double phase_deg)
+{
+    int c = srv_phase_class(phase_deg);
+    return c < 0 ? 4 : c;
+}
+
+static double phase_diff_deg(double a, double b)
+{
+    double d = fmod(fabs(a - b), 360.0);
+    return d > 180.0 ? 360.0 - d : d;
+}
+
+gs_status srv_evaluate(srv_db *db, const char *truth_path, const srv_eval_opts *o,
+                       srv_eval_report *r)
+{
+    if (!db || !truth_path || !r) return gs_fail(GS_EINVAL, "srv_evaluate: NULL argument");
+    srv_eval_opts def;
+    if (!o) {
+        srv_eval_opts_default(&def);
+        o = &def;
+    }
+    memset(r, 0, sizeof *r);
+    r->match_px = o->match_px;
+    r->loc_median_m = r->loc_p95_m = r->loc_max_m = NAN;
+    if (!(o->match_px > 0.0) || !isfinite(o->match_px))
+        return gs_fail(GS_EINVAL, "--match-px %g: expected a finite radius > 0 pixels", o->match_px);
+    ev_light *tr = NULL, *st = NULL;
+    size_t nt = 0, ns = 0;
+    double *err = NULL;
+    gs_status s = read_truth(truth_path, &tr, &nt, &r->truth_lights);
+    if (s == GS_OK) s = find_capture(db, truth_path, o, r);
+    if (s == GS_OK) s = read_stored(db, r->capture_id, &st, &ns);
+    if (s == GS_OK) s = match(st, ns, tr, nt, o->match_px, &r->matched);
+    if (s == GS_OK && !(err = malloc((ns ? ns : 1) * sizeof *err)))
+        s = gs_fail(GS_ENOMEM, "evaluate: out of memory");
+    if (s != GS_OK) goto done;
+    r->truth_in_image = (long)nt;
+    r->stored = (long)ns;
+    r->false_detections = r->stored - r->matched;
+    for (size_t i = 0; i < ns; i++) {
+        const ev_light *a = &st[i];
+        if (a->partner < 0) continue;
+        const ev_light *t = &tr[a->partner];
+        int bulb_ok = 0, phase_ok = 0;
+        if (a->bulb[0]) {
+            r->bulb_answered++;
+            bulb_ok = !strcmp(a->bulb, t->bulb);
+            r->bulb_correct += bulb_ok;
+            r->bulb_ambiguous += (a->flags & REC_MATCH_BULB_AMBIGUOUS) != 0;
+        }
+        if (a->tech[0]) {
+            r->tech_answered++;
+            r->tech_correct += !strcmp(a->tech, t->tech);
+        }
+        if (isfinite(a->phase_deg)) {
+            r->phase_answered++;
+            phase_ok = isfinite(t->phase_deg) && phase_diff_deg(a->phase_deg, t->phase_deg) <= SRV_PHASE_TOL_DEG;
+            r->phase_correct += phase_ok;
+        }
+        r->all_correct += bulb_ok && phase_ok;
+        int tc = phase_col(t->phase_deg);
+        if (tc < 4) r->confusion[tc][phase_col(a->phase_deg)]++;
+        if (isfinite(a->lat) && isfinite(t->lat)) {
+            double d;
+            if ((s = gis_geodesic_inverse(t->lat, t->lon, a->lat, a->lon, &d, NULL, NULL)) != GS_OK) goto done;
+            err[r->loc_pairs++] = d;
+        } else if (!isfinite(a->lat)) {
+            r->loc_unlocated++;
+        }
+    }
+    if (r->loc_pairs > 0) {
+        qsort(err, (size_t)r->loc_pairs, sizeof *err, cmp_double);
+        r->loc_median_m = quantile(err, (size_t)r->loc_pairs, 0.5);
+        r->loc_p95_m = quantile(err, (size_t)r->loc_pairs, 0.95);
+        r->loc_max_m = err[r->loc_pairs - 1];
+    }
+    r->detection_rate = rate(r->matched, r->truth_in_image);
+    r->false_rate = rate(r->false_detections, r->stored);
+    r->bulb_accuracy = rate(r->bulb_correct, r->bulb_answered);
+    r->tech_accuracy = rate(r->tech_correct, r->tech_answered);
+    r->phase_accuracy = rate(r->phase_correct, r->phase_answered);
+    r->bulb_unknown_rate = rate(r->matched - r->bulb_answered, r->matched);
+    r->phase_unknown_rate = rate(r->matched - r->phase_answered, r->matched);
+    r->all_correct_rate = rate(r->all_correct, r->truth_in_image);
+done:
+    free(err);
+    free(st);
+    free(tr);
+    return s;
+}
+
+/* ------------------------------------------------------------------ printing */
+
+static void pct_row(FILE *f, const char *metric, double v, long k, long n, const char *of)
+{
+    if (isnan(v)) fprintf(f, "| %s | - | %ld / %ld %s |\n", metric, k, n, of);
+    else fprintf(f, "| %s | %.1f %% | %ld / %ld %s |\n", metric, 100.0 * v, k, n, of);
+}
+
+static json_t *jnum(double v)
+{
+    return isfinite(v) ? json_real(v) : json_null();
+}
+
+static json_t *jrate(double v, long k, long n)
+{
+    json_t *o = json_object();
+    json_object_set_new(o, "rate", jnum(v));
+    json_object_set_new(o, "count", json_integer(k));
+    json_object_set_new(o, "of", json_integer(n));
+    return o;
+}
+
+static const char *const class_names[SRV_EVAL_PHASE_CLASSES] = {"0", "120", "240", "other", "none"};
+
+gs_status srv_eval_print(const srv_eval_report *r, const char *truth_path, int json, FILE *f)
+{
+    if (json) {
+        json_t *root = json_object();
+        json_object_set_new(root, "format", json_string(EVAL_FORMAT));
+        json_object_set_new(root, "truth", json_string(truth_path));
+        json_object_set_new(root, "survey", json_string(r->survey));
+        json_object_set_new(root, "capture_key", json_string(r->capture_key));
+        json_object_set_new(root, "match_px", jnum(r->match_px));
+        json_object_set_new(root, "truth_lights", json_integer(r->truth_lights));
+        json_object_set_new(root, "truth_in_image", json_integer(r->truth_in_image));
+        json_object_set_new(root, "stored", json_integer(r->stored));
+        json_object_set_new(root, "matched", json_integer(r->matched));
+        json_object_set_new(root, "detection", jrate(r->detection_rate, r->matched, r->truth_in_image));
+        json_object_set_new(root, "false_detections", jrate(r->false_rate, r->false_detections, r->stored));
+        json_object_set_new(root, "bulb", jrate(r->bulb_accuracy, r->bulb_correct, r->bulb_answered));
+        json_object_set_new(root, "bulb_ambiguous", json_integer(r->bulb_ambiguous));
+        json_object_set_new(root, "technology", jrate(r->tech_accuracy, r->tech_correct, r->tech_answered));
+        json_object_set_new(root, "phase", jrate(r->phase_accuracy, r->phase_correct, r->phase_answered));
+        json_object_set_new(root, "bulb_unknown",
+                            jrate(r->bulb_unknown_rate, r->matched - r->bulb_answered, r->matched));
+        json_object_set_new(root, "phase_unknown",
+                            jrate(r->phase_unknown_rate, r->matched - r->phase_answered, r->matched));
+        json_object_set_new(root, "bulb_and_phase", jrate(r->all_correct_rate, r->all_correct, r->truth_in_image));
+        json_t *conf = json_object();
+        for (int t = 0; t < 4; t++) {
+            json_t *row = json_object();
+            for (int c = 0; c < SRV_EVAL_PHASE_CLASSES; c++)
+                json_object_set_new(row, class_names[c], json_integer(r->confusion[t][c]));
+            json_object_set_new(conf, class_names[t], row);
+        }
+        json_object_set_new(root, "phase_confusion", conf);
+        json_t *loc = json_object();
+        json_object_set_new(loc, "pairs", json_integer(r->loc_pairs));
+        json_object_set_new(loc, "unlocated", json_integer(r->loc_unlocated));
+        json_object_set_new(loc, "median_m", jnum(r->loc_median_m));
+        json_object_set_new(loc, "p95_m", jnum(r->loc_p95_m));
+        json_object_set_new(loc, "max_m", jnum(r->loc_max_m));
+        json_object_set_new(root, "location_error", loc);
+        int rc = json_dumpf(root, f, JSON_INDENT(2) | JSON_PRESERVE_ORDER | JSON_REAL_PRECISION(10));
+        json_decref(root);
+        if (rc != 0 || fputc('\n', f) == EOF) return gs_fail(GS_EIO, "cannot write the evaluation");
+        return GS_OK;
+    }
+    fprintf(f, "Evaluation against %s: survey %s, capture %.19s%s, stored lights matched to the "
+               "truth's lights in the image within %g px (one-to-one, nearest first)\n\n",
+            truth_path, r->survey, r->capture_key, strlen(r->capture_key) > 19 ? "..." : "", r->match_px);
+    fprintf(f, "| metric | value | counts |\n|---|---:|---|\n");
+    pct_row(f, "detection rate", r->detection_rate, r->matched, r->truth_in_image, "truth lights in the image");
+    pct_row(f, "false detections", r->false_rate, r->false_detections, r->stored, "stored lights");
+    pct_row(f, "bulb accuracy", r->bulb_accuracy, r->bulb_correct, r->bulb_answered, "matched lights with a bulb");
+    pct_row(f, "technology accuracy", r->tech_accuracy, r->tech_correct, r->tech_answered,
+            "matched lights with a technology");
+    pct_row(f, "phase accuracy", r->phase_accuracy, r->phase_correct, r->phase_answered,
+            "matched lights with a phase");
+    pct_row(f, "bulb unknown", r->bulb_unknown_rate, r->matched - r->bulb_answered, r->matched, "matched lights");
+    pct_row(f, "phase ambiguous or unknown", r->phase_unknown_rate, r->matched - r->phase_answered,
+            r->matched, "matched lights");
+    pct_row(f, "bulb and phase right", r->all_correct_rate, r->all_correct, r->truth_in_image,
+            "truth lights in the image");
+    if (r->loc_pairs > 0) {
+        fprintf(f, "| location error, median | %.2f m | %ld located matched lights (%ld not located) |\n",
+                r->loc_median_m, r->loc_pairs, r->loc_unlocated);
+        fprintf(f, "| location error, 95th percentile | %.2f m | max %.2f m |\n", r->loc_p95_m, r->loc_max_m);
+    } else {
+        fprintf(f, "| location error | - | no located matched light with a true position (%ld not located) |\n",
+                r->loc_unlocated);
+    }
+    fprintf(f, "\nbulb accuracy counts %ld bulbs flagged ambiguous (posterior < the ambiguity threshold) "
+               "as answers. Phase of matched lights, truth (rows) against stored (columns; none = "
+               "ambiguous or unknown):\n\n", r->bulb_ambiguous);
+    fprintf(f, "| truth \\ stored | 0 | 120 | 240 | other | none |\n|---|---:|---:|---:|---:|---:|\n");
+    for (int t = 0; t < 4; t++) {
+        fprintf(f, "| %s |", class_names[t]);
+        for (int c = 0; c < SRV_EVAL_PHASE_CLASSES; c++) fprintf(f, " %ld |", r->confusion[t][c]);
+        fputc('\n', f);
+    }
+    if (ferror(f)) return gs_fail(GS_EIO, "cannot write the evaluation");
+    return GS_OK;
+}

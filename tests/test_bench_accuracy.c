@@ -1,0 +1,114 @@
+/* test_bench_accuracy.c - `gridsurvey bench accuracy --quick` (survey/bench_accuracy.c): the
+ * sweep runs and its numbers are consistent. No timing asserts. */
+#include "tests/test.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct {
+    char scene[32], phases[16];
+    int K, C, hdr, locked;
+    long acq;
+    double exposure, readout, capture, compute;
+    double rates[8];   /* detection, false, bulb, phase, right, unknown, pipeline subset, oracle */
+    double snr, ece;
+    long oracle_n;
+} row;
+
+static int file_size_ok(const char *path, const char *magic)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f) return 0;
+    char b[8] = {0};
+    size_t n = fread(b, 1, sizeof b, f);
+    fclose(f);
+    return n >= strlen(magic) && !memcmp(b, magic, strlen(magic));
+}
+
+static double num(const char *s)
+{
+    return strcmp(s, "nan") ? atof(s) : NAN;
+}
+
+TEST(bench_accuracy_quick_consistent)
+{
+    char out[2048], cmd[4096], log[8192];
+    snprintf(out, sizeof out, "%s/acc", test_tmpdir());
+    snprintf(cmd, sizeof cmd, "%s bench accuracy --quick --out %s", test_bin(), out);
+    int rc = test_run(cmd, log, sizeof log);
+    CHECK_MSG(rc == 0, "%s -> %d:\n%s", cmd, rc, log);
+    char path[2200];
+    snprintf(path, sizeof path, "%s/accuracy_vs_time.png", out);
+    CHECK_MSG(file_size_ok(path, "\x89PNG"), "%s: not a PNG", path);
+    snprintf(path, sizeof path, "%s/calibration.png", out);
+    CHECK_MSG(file_size_ok(path, "\x89PNG"), "%s: not a PNG", path);
+    snprintf(path, sizeof path, "%s.md", out);
+    CHECK_MSG(file_size_ok(path, "# What"), "%s: no report", path);
+    snprintf(path, sizeof path, "%s/accuracy.csv", out);
+    FILE *f = fopen(path, "r");
+    CHECK_MSG(f != NULL, "%s: missing", path);
+    if (!f) return;
+    char line[4096];
+    row rows[32];
+    int n = 0;
+    CHECK(fgets(line, sizeof line, f) && !strncmp(line, "scene,K,C,", 10));
+    while (n < 32 && fgets(line, sizeof line, f)) {
+        char *fld[32];
+        int nf = 0;
+        for (char *t = strtok(line, ",\n"); t && nf < 32; t = strtok(NULL, ",\n")) fld[nf++] = t;
+        CHECK_MSG(nf == 27, "CSV row with %d fields", nf);
+        if (nf != 27) continue;
+        row *r = &rows[n++];
+        snprintf(r->scene, sizeof r->scene, "%s", fld[0]);
+        r->K = atoi(fld[1]);
+        r->C = atoi(fld[2]);
+        r->hdr = atoi(fld[3]);
+        r->locked = atoi(fld[4]);
+        snprintf(r->phases, sizeof r->phases, "%s", fld[5]);
+        r->acq = atol(fld[6]);
+        r->exposure = num(fld[7]);
+        r->readout = num(fld[8]);
+        r->capture = num(fld[9]);
+        r->compute = num(fld[10]);
+        int ri[8] = {14, 15, 16, 17, 18, 19, 25, 26};
+        for (int k = 0; k < 8; k++) r->rates[k] = num(fld[ri[k]]);
+        r->snr = num(fld[22]);
+        r->ece = num(fld[23]);
+        r->oracle_n = atol(fld[24]);
+    }
+    fclose(f);
+    CHECK_MSG(n >= 4, "%d rows", n);
+    const double delta = 0.01, readout_cycles = 10;   /* 50 Hz; the scene's readout_cycles */
+    for (int i = 0; i < n; i++) {
+        row *r = &rows[i];
+        /* rates in [0, 1] (NaN: no denominator) */
+        for (int k = 0; k < 8; k++)
+            CHECK_MSG(isnan(r->rates[k]) || (r->rates[k] >= 0 && r->rates[k] <= 1), "%s C=%d: rate %d = %g",
+                      r->scene, r->C, k, r->rates[k]);
+        CHECK(isnan(r->ece) || (r->ece >= 0 && r->ece <= 1));
+        CHECK(r->rates[0] > 0.5);   /* the window's lights are found */
+        /* capture time: A (C + R) Delta exactly, A = K frames + HDR repeats */
+        CHECK_MSG(r->acq >= r->K && (r->hdr || r->acq == r->K), "%s C=%d: %ld acquisitions for K = %d",
+                  r->scene, r->C, r->acq, r->K);
+        CHECK_NEAR(r->exposure, (double)r->acq * r->C * delta, 0.006);
+        CHECK_NEAR(r->readout, (double)r->acq * readout_cycles * delta, 0.006);
+        CHECK_NEAR(r->capture, r->exposure + r->readout, 0.011);
+        CHECK_NEAR(r->capture, (double)r->acq * (r->C + readout_cycles) * delta, 0.006);
+        CHECK(r->compute >= 0);
+        /* the oracle is at least as good as the pipeline on the same lights (8 lights: a
+         * tolerance of 2 lights) */
+        if (r->oracle_n > 0)
+            CHECK_MSG(r->rates[7] >= r->rates[6] - 2.0 / (double)r->oracle_n - 1e-9,
+                      "%s C=%d: oracle %.3f, pipeline %.3f", r->scene, r->C, r->rates[7], r->rates[6]);
+        /* more cycles never reduce the SNR (same scene and setting) */
+        for (int j = 0; j < n; j++) {
+            row *q = &rows[j];
+            if (strcmp(q->scene, r->scene) || strcmp(q->phases, r->phases) || q->K != r->K || q->hdr != r->hdr ||
+                q->locked != r->locked || q->C <= r->C)
+                continue;
+            CHECK_MSG(q->snr >= r->snr, "%s K=%d: SNR %.1f at C=%d, %.1f at C=%d", r->scene, r->K, r->snr, r->C,
+                      q->snr, q->C);
+        }
+    }
+}

@@ -1,0 +1,998 @@
+/* test_pipeline.c - `gridsurvey run` (survey/pipeline.c, survey/cmd_run.c) and `gridsurvey
+ * evaluate` (survey/evaluate.c).
+ *
+ * Oracles are independent of the code under test: stored lights are read with plain SQLite
+ * queries and the simulator's truth.json with Jansson, and matched here by their own rule;
+ * after each SIGKILL the database is inspected through a raw SQLite connection
+ * (integrity_check, foreign_key_check, each capture complete); a resumed run is compared with
+ * an uninterrupted one row by row; bad input is checked against the bytes of the database and a
+ * listing of every file in the test directory; the evaluation of a hand-made database is
+ * checked against answers worked out by hand, with positions placed by GeographicLib's
+ * GeodSolve (a separate program) at known geodesic distances.
+ *
+ * Cost: the built-in lab scene once (`pipeline_lab_end_to_end_matches_truth`, ~5 s), and a
+ * half-size lab scene (320 x 240, C = 128, ~1 s per run) for everything else. */
+#include "survey/survey.h"
+#include "tests/test.h"
+
+#include <errno.h>
+#include <jansson.h>
+#include <math.h>
+#include <signal.h>
+#include <sqlite3.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+static char out[1 << 17];
+
+/* "TMPDIR/name" in a ring of 64 buffers (long-lived paths are copied by the caller). */
+static const char *tmp(const char *name)
+{
+    static char buf[64][1024];
+    static int k;
+    k = (k + 1) % 64;
+    snprintf(buf[k], sizeof buf[k], "%s/%s", test_tmpdir(), name);
+    return buf[k];
+}
+
+static void write_text(const char *path, const char *text)
+{
+    FILE *f = fopen(path, "w");
+    CHECK_MSG(f != NULL, "%s: %s", path, strerror(errno));
+    if (!f) return;
+    fputs(text, f);
+    fclose(f);
+}
+
+static int exists(const char *path)
+{
+    struct stat st;
+    return stat(path, &st) == 0;
+}
+
+static int count_lines(const char *s)
+{
+    int n = 0;
+    for (; *s; s++) n += *s == '\n';
+    return n;
+}
+
+/* test_run with a printf-style command. */
+static int sh(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
+static int sh(const char *fmt, ...)
+{
+    char cmd[8192];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(cmd, sizeof cmd, fmt, ap);
+    va_end(ap);
+    return test_run(cmd, out, sizeof out);
+}
+
+/* The lab scene (capture/scenes/lab.json) made small: the same eight bulbs, phases, fluxes and
+ * effects at `scale` times the pixel coordinates and image size (1/2: 320 x 240, 1/4: 160 x 120;
+ * the focal length scales too, so the lights' angles are the lab's), C = 128 cycles instead of
+ * 256. BULB replaces the first light's bulb (for the unknown-bulb case; NULL: the lab's). */
+static void write_small_lab(const char *path, double scale, const char *bulb)
+{
+    static const struct {
+        const char *id, *bulb;
+        int phase;
+        double x, y, d, lm;
+    } L[8] = {
+        {"inc60", "inc-a60-60w-230v", 0, 110.3, 140.6, 3.0, 710},
+        {"cfl20", "cfl-20w", 120, 250.7, 120.2, 3.5, 1200},
+        {"led9", "led-a60-9w-cap", 240, 390.1, 135.9, 3.0, 806},
+        {"fl36", "fl-t8-36w-tri", 0, 530.4, 150.3, 4.0, 3350},
+        {"hps70", "hps-70w", 120, 140.8, 330.5, 8.0, 6000},
+        {"ledfil", "led-fil-4w-lin", 240, 280.2, 345.1, 2.0, 470},
+        {"hal42", "hal-a60-42w-230v", 120, 420.6, 320.8, 2.5, 630},
+        {"mh70", "mh-70w", 240, 545.5, 360.2, 10.0, 5500},
+    };
+    char lights[2048] = "";
+    for (int i = 0; i < 8; i++) {
+        size_t used = strlen(lights);
+        snprintf(lights + used, sizeof lights - used,
+                 "%s    {\"id\": \"%s\", \"bulb\": \"%s\", \"phase_deg\": %d, \"x_px\": %.4f, \"y_px\": %.4f, "
+                 "\"distance_m\": %g, \"lumens\": %g}", i ? ",\n" : "", L[i].id,
+                 i == 0 && bulb ? bulb : L[i].bulb, L[i].phase, (L[i].x + 0.5) * scale - 0.5,
+                 (L[i].y + 0.5) * scale - 0.5, L[i].d, L[i].lm);
+    }
+    char text[4096];
+    snprintf(text, sizeof text,
+        "{\n"
+        "  \"format\": \"gridsurvey-scene/1\",\n"
+        "  \"name\": \"lab\",\n"
+        "  \"seed\": 4,\n"
+        "  \"grid\": {\"nominal_hz\": 50},\n"
+        "  \"camera\": {\n"
+        "    \"width_px\": %d, \"height_px\": %d,\n"
+        "    \"intrinsics\": {\"focal_px\": %g},\n"
+        "    \"optics\": {\"aperture_mm\": 1.0, \"transmission\": 3e-4},\n"
+        "    \"sensor\": {\"bands\": 3, \"bit_depth\": 12, \"full_well_e\": 20000, \"read_noise_e\": 4,\n"
+        "               \"qe\": 0.6, \"gain_e_per_dn\": 5, \"black_level_dn\": 64}\n"
+        "  },\n"
+        "  \"acam\": {\"K\": 26, \"cycles\": 128, \"locked\": true, \"masks\": 64,\n"
+        "           \"hdr\": {\"enabled\": true, \"max_saturated_px\": 0}},\n"
+        "  \"lights\": [\n%s\n  ],\n"
+        "  \"effects\": {\"psf\": {\"sigma_px\": 1.5}, \"ambient\": {\"e_per_px_cycle\": 0.5},\n"
+        "              \"shot_noise\": {}, \"saturation\": {}, \"read_noise\": {}, \"adc\": {}}\n"
+        "}\n", (int)(640 * scale), (int)(480 * scale), 800 * scale, lights);
+    write_text(path, text);
+}
+
+/* ------------------------------------------------------------------ independent readers */
+
+typedef struct {
+    double x, y, phase;
+    char bulb[64], tech[64];
+    int in_image;
+} light;
+
+/* Stored lights of a database (every capture), read with plain SQL. */
+static size_t db_lights(const char *path, light *v, size_t max)
+{
+    sqlite3 *h = NULL;
+    size_t n = 0;
+    if (sqlite3_open_v2(path, &h, SQLITE_OPEN_READONLY, NULL) != SQLITE_OK) {
+        test_failed(__FILE__, __LINE__, "%s: %s", path, sqlite3_errmsg(h));
+        sqlite3_close(h);
+        return 0;
+    }
+    sqlite3_stmt *q = NULL;
+    if (sqlite3_prepare_v2(h, "SELECT x_px, y_px, coalesce(bulb_id, ''), coalesce(technology, ''), "
+                              "phase_deg FROM lights ORDER BY id", -1, &q, NULL) == SQLITE_OK) {
+        while (sqlite3_step(q) == SQLITE_ROW && n < max) {
+            light *l = &v[n++];
+            l->x = sqlite3_column_double(q, 0);
+            l->y = sqlite3_column_double(q, 1);
+            snprintf(l->bulb, sizeof l->bulb, "%s", (const char *)sqlite3_column_text(q, 2));
+            snprintf(l->tech, sizeof l->tech, "%s", (const char *)sqlite3_column_text(q, 3));
+            l->phase = sqlite3_column_type(q, 4) == SQLITE_NULL ? NAN : sqlite3_column_double(q, 4);
+            l->in_image = 1;
+        }
+    }
+    sqlite3_finalize(q);
+    sqlite3_close(h);
+    return n;
+}
+
+/* The lights of a truth.json, read with Jansson. */
+static size_t truth_lights(const char *path, light *v, size_t max)
+{
+    json_error_t err;
+    json_t *root = json_load_file(path, 0, &err), *arr = json_object_get(root, "lights");
+    CHECK_MSG(root && json_is_array(arr), "%s: %s", path, err.text);
+    size_t n = 0, i;
+    json_t *o;
+    json_array_foreach(arr, i, o) {
+        if (n == max) break;
+        light *l = &v[n++];
+        l->x = json_number_value(json_object_get(o, "x_px"));
+        l->y = json_number_value(json_object_get(o, "y_px"));
+        l->phase = json_number_value(json_object_get(o, "phase_deg"));
+        snprintf(l->bulb, sizeof l->bulb, "%s", json_string_value(json_object_get(o, "bulb")));
+        snprintf(l->tech, sizeof l->tech, "%s", json_string_value(json_object_get(o, "technology")));
+        l->in_image = json_is_true(json_object_get(o, "in_image"));
+    }
+    json_decref(root);
+    return n;
+}
+
+static double phase_diff(double a, double b)
+{
+    double d = fmod(fabs(a - b), 360.0);
+    return d > 180.0 ? 360.0 - d : d;
+}
+
+/* Every truth light in the image has a stored light within 2 px with its bulb, technology and
+ * phase (within 20 deg); every stored light with a bulb is one of them. Returns lights right. */
+static int check_against_truth(const char *db, const char *truth, int expect_in_image)
+{
+    light st[64], tr[64];
+    size_t ns = db_lights(db, st, 64), nt = truth_lights(truth, tr, 64);
+    int in_image = 0, right = 0, used[64] = {0};
+    for (size_t j = 0; j < nt; j++) {
+        if (!tr[j].in_image) continue;
+        in_image++;
+        int best = -1;
+        double bd = 2.0;
+        for (size_t i = 0; i < ns; i++) {
+            double d = hypot(st[i].x - tr[j].x, st[i].y - tr[j].y);
+            if (d <= bd) {
+                bd = d;
+                best = (int)i;
+            }
+        }
+        CHECK_MSG(best >= 0, "%s: truth light at (%.1f, %.1f) was not detected", truth, tr[j].x, tr[j].y);
+        if (best < 0) continue;
+        used[best] = 1;
+        const light *s = &st[best];
+        int ok = !strcmp(s->bulb, tr[j].bulb) && !strcmp(s->tech, tr[j].tech) && isfinite(s->phase) &&
+                 phase_diff(s->phase, tr[j].phase) <= 20.0;
+        CHECK_MSG(ok, "light at (%.1f, %.1f): stored %s/%s/%.1f, truth %s/%s/%.1f", tr[j].x, tr[j].y,
+                  s->bulb, s->tech, s->phase, tr[j].bulb, tr[j].tech, tr[j].phase);
+        right += ok;
+    }
+    CHECK(in_image == expect_in_image);
+    for (size_t i = 0; i < ns; i++)
+        CHECK_MSG(used[i] || !st[i].bulb[0], "stored light %zu at (%.1f, %.1f) has bulb %s but no truth light",
+                  i, st[i].x, st[i].y, st[i].bulb);
+    return right;
+}
+
+/* Every row of the content tables as text, without ids, paths and timestamps (which differ
+ * between two runs into different places), in a fixed order. */
+static char *dump_db(const char *path)
+{
+    static const char *const queries[] = {
+        "SELECT name, city, grid_hz, started_utc, notes FROM surveys ORDER BY name",
+        "SELECT sha256, generator, source, bulbs FROM delight_versions ORDER BY sha256",
+        "SELECT name, lat_deg, lon_deg, height_m, heading_deg, pitch_deg, roll_deg, focal_px, cx_px, "
+        "cy_px, width_px, height_px, refraction_k, sigma_px, time_utc FROM stations ORDER BY name",
+        "SELECT capture_key, utc, grid_hz, K, bands, width_px, height_px, locked, light_count, "
+        "frame_count, frequency_count FROM captures ORDER BY capture_key",
+        "SELECT k, file, cycles, hdr_map FROM frames ORDER BY capture_id, k",
+        "SELECT light_index, x_px, y_px, area_px, peak_dn, saturated_px, blob_flags, brightness, snr, "
+        "chi2, dof, p_value, bulb_id, technology, phase_deg, phase_fit_deg, phase_sigma_deg, "
+        "confidence, bulb_confidence, phase_confidence, runner_bulb_id, runner_phase_deg, "
+        "runner_confidence, match_flags FROM lights ORDER BY capture_id, light_index",
+        "SELECT l.light_index, method, lat_deg, lon_deg, height_m, semi_major_m, semi_minor_m, "
+        "azimuth_deg, range_m, flags FROM locations JOIN lights l ON l.id = light_id "
+        "ORDER BY l.capture_id, l.light_index",
+    };
+    sqlite3 *h = NULL;
+    if (sqlite3_open_v2(path, &h, SQLITE_OPEN_READONLY, NULL) != SQLITE_OK) {
+        sqlite3_close(h);
+        return NULL;
+    }
+    char *buf = NULL;
+    size_t len = 0;
+    FILE *f = open_memstream(&buf, &len);
+    for (size_t k = 0; k < sizeof queries / sizeof *queries; k++) {
+        sqlite3_stmt *q = NULL;
+        if (sqlite3_prepare_v2(h, queries[k], -1, &q, NULL) != SQLITE_OK) {
+            test_failed(__FILE__, __LINE__, "%s: %s", queries[k], sqlite3_errmsg(h));
+            continue;
+        }
+        fprintf(f, "## %zu\n", k);
+        while (sqlite3_step(q) == SQLITE_ROW) {
+            for (int c = 0; c < sqlite3_column_count(q); c++) {
+                const unsigned char *t = sqlite3_column_text(q, c);
+                fprintf(f, "%s%s", c ? "|" : "", t ? (const char *)t : "NULL");
+            }
+            fputc('\n', f);
+        }
+        sqlite3_finalize(q);
+    }
+    fclose(f);
+    sqlite3_close(h);
+    return buf;
+}
+
+/* A file's bytes (malloc, NUL-terminated) and size; NULL when it cannot be read. */
+static char *file_bytes(const char *path, size_t *size)
+{
+    FILE *f = fopen(path, "rb");
+    *size = 0;
+    if (!f) return NULL;
+    size_t cap = 1 << 16, n = 0, got;
+    char *buf = malloc(cap + 1);
+    while (buf && (got = fread(buf + n, 1, cap - n, f)) > 0) {
+        n += got;
+        if (n == cap) {
+            char *nb = realloc(buf, 2 * cap + 1);
+            if (!nb) {
+                free(buf);
+                buf = NULL;
+                break;
+            }
+            buf = nb;
+            cap *= 2;
+        }
+    }
+    fclose(f);
+    if (buf) buf[n] = '\0';
+    *size = n;
+    return buf;
+}
+
+static long query_long(const char *path, const char *sql)
+{
+    sqlite3 *h = NULL;
+    long v = -1;
+    if (sqlite3_open_v2(path, &h, SQLITE_OPEN_READONLY, NULL) == SQLITE_OK) {
+        sqlite3_stmt *q = NULL;
+        if (sqlite3_prepare_v2(h, sql, -1, &q, NULL) == SQLITE_OK && sqlite3_step(q) == SQLITE_ROW)
+            v = (long)sqlite3_column_int64(q, 0);
+        else
+            test_failed(__FILE__, __LINE__, "%s: %s", sql, sqlite3_errmsg(h));
+        sqlite3_finalize(q);
+    }
+    sqlite3_close(h);
+    return v;
+}
+
+/* Row counts of every table, as one string. */
+static void counts(const char *db, char *buf, size_t size)
+{
+    snprintf(buf, size, "surveys %ld stations %ld delight %ld captures %ld frames %ld lights %ld locations %ld",
+             query_long(db, "SELECT count(*) FROM surveys"), query_long(db, "SELECT count(*) FROM stations"),
+             query_long(db, "SELECT count(*) FROM delight_versions"),
+             query_long(db, "SELECT count(*) FROM captures"), query_long(db, "SELECT count(*) FROM frames"),
+             query_long(db, "SELECT count(*) FROM lights"), query_long(db, "SELECT count(*) FROM locations"));
+}
+
+/* ------------------------------------------------------------------ end to end */
+
+/* The built-in lab scene through `gridsurvey run` (under ASan, GS_SAN=1, the same scene at half
+ * size): the eight lights are stored with the truth's bulb, technology and phase (read back
+ * with SQL and Jansson); the run prints the phase balance and the evaluation and writes the
+ * GeoJSON (no map: the lab has no station). A second run, and a run on the capture directory
+ * itself, store nothing new. */
+TEST(pipeline_lab_end_to_end_matches_truth)
+{
+    char db[1024], cap[1024], truth[1024], scene[1024] = "capture/scenes/lab.json";
+    snprintf(db, sizeof db, "%s", tmp("lab.sqlite"));
+    snprintf(cap, sizeof cap, "%s", tmp("lab-capture"));
+    snprintf(truth, sizeof truth, "%s", tmp("lab-capture/truth.json"));
+    const char *san = getenv("GS_SAN");
+    if (san && *san == '1') {
+        snprintf(scene, sizeof scene, "%s", tmp("lab.json"));
+        write_small_lab(scene, 0.5, NULL);
+    }
+    int rc = sh("%s run %s --db %s", test_bin(), scene, db);
+    CHECK_MSG(rc == 0, "run: %d: %s", rc, out);
+    if (rc != 0) return;
+    CHECK(strstr(out, "run: survey lab, capture ") != NULL);
+    CHECK(strstr(out, "no station: stored without a location") != NULL);
+    CHECK(strstr(out, "| all | ") != NULL);                               /* phase balance */
+    CHECK(strstr(out, "| detection rate | 100.0 % | 8 / 8 ") != NULL);      /* evaluation */
+    CHECK(strstr(out, "| bulb accuracy | 100.0 % | 8 / 8 ") != NULL);
+    CHECK(strstr(out, "| phase accuracy | 100.0 % | 8 / 8 ") != NULL);
+    CHECK(exists(tmp("lab.geojson")) && !exists(tmp("lab-map.png")));
+    CHECK(check_against_truth(db, truth, 8) == 8);
+    /* the GeoJSON holds every stored light, without a geometry */
+    json_error_t err;
+    json_t *g = json_load_file(tmp("lab.geojson"), 0, &err);
+    json_t *features = json_object_get(g, "features");
+    CHECK(json_is_array(features) &&
+          (long)json_array_size(features) == query_long(db, "SELECT count(*) FROM lights"));
+    json_t *f0 = json_array_get(features, 0);
+    CHECK(json_is_null(json_object_get(f0, "geometry")));
+    json_decref(g);
+
+    char before[512], after[512];
+    counts(db, before, sizeof before);
+    CHECK(query_long(db, "SELECT count(*) FROM captures") == 1);
+    CHECK(query_long(db, "SELECT count(*) FROM locations") == 0);
+    rc = sh("%s run %s --db %s", test_bin(), scene, db);
+    CHECK_MSG(rc == 0 && strstr(out, "already in"), "second run: %d: %s", rc, out);
+    CHECK(strstr(out, "| detection rate | 100.0 % | 8 / 8 ") != NULL);
+    rc = sh("%s run %s --db %s --survey lab", test_bin(), cap, db);
+    CHECK_MSG(rc == 0 && strstr(out, "already in"), "capture directory run: %d: %s", rc, out);
+    counts(db, after, sizeof after);
+    CHECK_MSG(!strcmp(before, after), "%s -> %s", before, after);
+    CHECK(query_long(db, "SELECT count(*) FROM (SELECT survey_id, capture_key FROM captures "
+                         "GROUP BY 1, 2 HAVING count(*) > 1)") == 0);
+    /* `gridsurvey evaluate` on its own agrees with the run */
+    rc = sh("%s evaluate --db %s --truth %s --format json", test_bin(), db, truth);
+    CHECK(rc == 0);
+    json_t *ev = json_loads(out, 0, &err);
+    CHECK(json_integer_value(json_object_get(json_object_get(ev, "detection"), "count")) == 8);
+    CHECK(json_integer_value(json_object_get(json_object_get(ev, "phase"), "count")) == 8);
+    json_decref(ev);
+}
+
+/* A scene of geographic lights seen from a station: located at the scene's median height,
+ * GeoJSON coordinates and the map written, location errors small against the truth. */
+TEST(pipeline_geographic_scene_locates_lights)
+{
+    const char *scene = tmp("geo.json"), *db = tmp("geo.sqlite");
+    /* a station 120 m above the ellipsoid looking north, lights 10 m up, 450-850 m away */
+    static const struct {
+        double north_m, east_m;
+        const char *bulb;
+        int phase;
+    } L[] = {
+        {450, -40, "inc-a60-60w-230v", 0}, {500, 30, "cfl-20w", 120}, {600, -60, "led-a60-9w-cap", 240},
+        {650, 50, "fl-t8-36w-tri", 0},    {750, 0, "hps-70w", 120},  {850, -80, "mh-70w", 240},
+    };
+    char lights[4096] = "";
+    for (size_t i = 0; i < 6; i++) {
+        size_t used = strlen(lights);
+        snprintf(lights + used, sizeof lights - used,
+                 "%s{\"id\": \"g%zu\", \"bulb\": \"%s\", \"phase_deg\": %d, \"lat_deg\": %.9f, "
+                 "\"lon_deg\": %.9f, \"height_m\": 10, \"flux_e_per_cycle\": 40000}",
+                 i ? ",\n" : "", i, L[i].bulb, L[i].phase, 32.8 + L[i].north_m / 110900.0,
+                 35.0 + L[i].east_m / 93400.0);
+    }
+    char text[8192];
+    snprintf(text, sizeof text,
+             "{\"format\": \"gridsurvey-scene/1\", \"name\": \"geo\", \"seed\": 3,\n"
+             " \"grid\": {\"nominal_hz\": 50},\n"
+             " \"camera\": {\"width_px\": 320, \"height_px\": 240,\n"
+             "   \"station\": {\"lat_deg\": 32.8, \"lon_deg\": 35.0, \"height_m\": 120},\n"
+             "   \"pose\": {\"heading_deg\": 0, \"pitch_deg\": -9, \"roll_deg\": 0},\n"
+             "   \"intrinsics\": {\"focal_px\": 800},\n"
+             "   \"sensor\": {\"bands\": 3, \"bit_depth\": 12, \"full_well_e\": 60000, \"read_noise_e\": 4,\n"
+             "              \"qe\": 0.6, \"gain_e_per_dn\": 15, \"black_level_dn\": 64}},\n"
+             " \"acam\": {\"K\": 26, \"cycles\": 128, \"locked\": true, \"masks\": 64,\n"
+             "          \"hdr\": {\"enabled\": true, \"max_saturated_px\": 0}},\n"
+             " \"lights\": [%s],\n"
+             " \"effects\": {\"psf\": {\"sigma_px\": 1.2}, \"shot_noise\": {}, \"saturation\": {},\n"
+             "             \"read_noise\": {}, \"adc\": {}}}\n", lights);
+    write_text(scene, text);
+    int rc = sh("%s run %s --db %s", test_bin(), scene, db);
+    CHECK_MSG(rc == 0, "run: %d: %s", rc, out);
+    if (rc != 0) return;
+    CHECK(strstr(out, "at 10.00 m above the ellipsoid (scene median)") != NULL);
+    CHECK(strstr(out, "| detection rate | 100.0 % | 6 / 6 ") != NULL);
+    CHECK(exists(tmp("geo-map.png")) && exists(tmp("geo.geojson")));
+    CHECK(check_against_truth(db, tmp("geo-capture/truth.json"), 6) == 6);
+    CHECK(query_long(db, "SELECT count(*) FROM locations WHERE lat_deg IS NOT NULL AND height_m = 10") == 6);
+    CHECK(query_long(db, "SELECT count(*) FROM stations WHERE name = 'geo' AND lat_deg = 32.8") == 1);
+    rc = sh("%s evaluate --db %s --truth %s --format json", test_bin(), db, tmp("geo-capture/truth.json"));
+    json_error_t err;
+    json_t *ev = json_loads(out, 0, &err), *loc = json_object_get(ev, "location_error");
+    CHECK_MSG(rc == 0 && loc, "%s", out);
+    CHECK(json_integer_value(json_object_get(loc, "pairs")) == 6);
+    double med = json_number_value(json_object_get(loc, "median_m")),
+           mx = json_number_value(json_object_get(loc, "max_m"));
+    /* 0.05 px of centroid error at 8-15 deg below the horizon and 0.5-0.9 km: ~0.1-0.3 m */
+    CHECK_MSG(med < 0.5 && mx < 1.5, "location error median %.3f m, max %.3f m", med, mx);
+    json_decref(ev);
+    /* the GeoJSON's positions are the stored ones */
+    json_t *g = json_load_file(tmp("geo.geojson"), 0, &err), *features = json_object_get(g, "features");
+    size_t i;
+    json_t *f;
+    int with_geometry = 0;
+    json_array_foreach(features, i, f) {
+        json_t *c = json_object_get(json_object_get(f, "geometry"), "coordinates");
+        with_geometry += json_is_array(c) && fabs(json_number_value(json_array_get(c, 1)) - 32.805) < 0.01;
+    }
+    CHECK(with_geometry >= 6);
+    json_decref(g);
+    /* a capture directory with a station needs the lights' height */
+    rc = sh("%s run %s --db %s --survey other", test_bin(), tmp("geo-capture"), db);
+    CHECK_MSG(rc == 1 && count_lines(out) == 1 && strstr(out, "--light-height-m"), "%d: %s", rc, out);
+    rc = sh("%s run %s --db %s --light-height-m 10", test_bin(), tmp("geo-capture"), db);
+    CHECK_MSG(rc == 0, "%d: %s", rc, out);
+    CHECK(query_long(db, "SELECT count(*) FROM captures") == 2);   /* survey geo-capture */
+}
+
+/* ------------------------------------------------------------------ SIGKILL and resume */
+
+/* The child's progress callback: reports each stage on a pipe, and stops itself (SIGSTOP) at
+ * the point the parent chose, so the parent's kill lands where it is meant to. */
+typedef struct {
+    int fd;
+    int stop_stage;            /* -1: never */
+    const char *stop_detail;   /* prefix of the detail to stop at ("" = any) */
+} child_ctx;
+
+static void pipe_progress(void *ctx, srv_stage stage, const char *detail)
+{
+    const child_ctx *c = ctx;
+    char b = (char)('0' + (int)stage);
+    if (write(c->fd, &b, 1) != 1) _exit(7);
+    if ((int)stage == c->stop_stage && !strncmp(detail, c->stop_detail, strlen(c->stop_detail)))
+        raise(SIGSTOP);
+}
+
+static void run_child(const char *scene, const char *db, const char *capdir, child_ctx *c)
+{
+    srv_run_opts o;
+    srv_run_opts_default(&o);
+    o.input = scene;
+    o.db_path = db;
+    o.capture_dir = capdir;
+    o.progress = pipe_progress;
+    o.progress_ctx = c;
+    srv_run_report r;
+    gs_status s = srv_run(&o, &r);
+    _exit(s == GS_OK ? 0 : 5);
+}
+
+/* After a kill: through a raw connection, integrity_check ok, no foreign-key violation, every
+ * capture complete (its lights and frames as counted when it was stored), at most one. */
+static void check_after_kill(const char *db, int kill_no)
+{
+    if (!exists(db)) return;
+    sqlite3 *h = NULL;
+    if (sqlite3_open_v2(db, &h, SQLITE_OPEN_READWRITE, NULL) != SQLITE_OK) {
+        test_failed(__FILE__, __LINE__, "kill %d: %s: %s", kill_no, db, sqlite3_errmsg(h));
+        sqlite3_close(h);
+        return;
+    }
+    sqlite3_stmt *q = NULL;
+    const char *ok = NULL;
+    if (sqlite3_prepare_v2(h, "PRAGMA integrity_check", -1, &q, NULL) == SQLITE_OK && sqlite3_step(q) == SQLITE_ROW)
+        ok = (const char *)sqlite3_column_text(q, 0);
+    CHECK_MSG(ok && !strcmp(ok, "ok"), "kill %d: integrity_check: %s", kill_no, ok ? ok : "(none)");
+    sqlite3_finalize(q);
+    static const char *const zero[] = {
+        "SELECT count(*) FROM pragma_foreign_key_check",
+        "SELECT count(*) FROM captures c WHERE light_count != (SELECT count(*) FROM lights WHERE "
+        "capture_id = c.id) OR frame_count != (SELECT count(*) FROM frames WHERE capture_id = c.id)",
+        "SELECT count(*) > 1 FROM captures",
+    };
+    int has_schema = 0;
+    if (sqlite3_prepare_v2(h, "SELECT count(*) FROM sqlite_master WHERE name = 'captures'", -1, &q, NULL) == SQLITE_OK &&
+        sqlite3_step(q) == SQLITE_ROW)
+        has_schema = sqlite3_column_int(q, 0);
+    sqlite3_finalize(q);
+    for (size_t k = 0; has_schema && k < sizeof zero / sizeof *zero; k++) {
+        long v = -1;
+        if (sqlite3_prepare_v2(h, zero[k], -1, &q, NULL) == SQLITE_OK && sqlite3_step(q) == SQLITE_ROW)
+            v = sqlite3_column_int64(q, 0);
+        sqlite3_finalize(q);
+        CHECK_MSG(v == 0, "kill %d: %s -> %ld", kill_no, zero[k], v);
+    }
+    sqlite3_close(h);
+}
+
+/* SIGKILL `run` 8 times at increasing points: at start-up; three times during the acquisition
+ * (which resumes, so each kill lands further into it); at the start of blob extraction and
+ * during Eq. 7; and twice in the database write: right before the capture's transaction and
+ * shortly after it began (which may be after its commit). The child stops itself at the chosen stage (its progress callback),
+ * the parent resumes it and kills it after a random delay scaled by that stage's duration in an
+ * uninterrupted reference run, so the kills land where intended on any machine, loaded or
+ * under ASan. After each kill the database is consistent; a final run through the CLI resumes
+ * and yields exactly the reference's rows and capture files (the same content key); one more
+ * run adds nothing. */
+TEST(pipeline_sigkill_resumes_to_same_content)
+{
+    char scene[1024], ref_db[1024], db[1024], ref_cap[1024], cap[1024];
+    snprintf(scene, sizeof scene, "%s", tmp("small.json"));
+    snprintf(ref_db, sizeof ref_db, "%s", tmp("ref.sqlite"));
+    snprintf(db, sizeof db, "%s", tmp("crash.sqlite"));
+    snprintf(ref_cap, sizeof ref_cap, "%s", tmp("ref-cap"));
+    snprintf(cap, sizeof cap, "%s", tmp("crash-cap"));
+    write_small_lab(scene, 0.25, NULL);
+    srv_run_opts o;
+    srv_run_opts_default(&o);
+    o.input = scene;
+    o.db_path = ref_db;
+    o.capture_dir = ref_cap;
+    srv_run_report ref;
+    CHECK_OK(srv_run(&o, &ref));
+    CHECK(check_against_truth(ref_db, tmp("ref-cap/truth.json"), 8) == 8);
+    static const struct {
+        int stage;            /* where the child stops; -1: it does not */
+        const char *detail;   /* ... at the call whose detail starts so */
+        double lo, hi;        /* then the kill after a delay uniform in [lo, hi] x the stage's
+                               * reference duration (start-up: seconds) */
+    } plan[8] = {
+        {-1, "", 0.001, 0.003},
+        {SRV_STAGE_CAPTURE, "", 0.1, 0.2}, {SRV_STAGE_CAPTURE, "", 0.15, 0.25},
+        {SRV_STAGE_CAPTURE, "", 0.15, 0.25},
+        {SRV_STAGE_BLOBS, "", 0.0, 0.0},   {SRV_STAGE_MATCH, "", 0.0, 0.5},
+        {SRV_STAGE_STORE, "capture:", 0.0, 0.0}, {SRV_STAGE_STORE, "capture:", 0.0, 1.0},
+    };
+    double store_tx_s = 0.002;   /* the capture's transaction: a few ms (lights are few) */
+    int killed_in[SRV_STAGE_COUNT + 1] = {0};
+    char trace[512] = "";
+    uint64_t rng = 0x9e3779b97f4a7c15ull;
+    for (int k = 0; k < 8; k++) {
+        rng = rng * 6364136223846793005ull + 1442695040888963407ull;
+        double u = (double)(rng >> 11) / 9007199254740992.0;
+        double span = plan[k].stage < 0 ? 1.0
+                      : plan[k].stage == SRV_STAGE_STORE ? store_tx_s : ref.seconds[plan[k].stage];
+        double wait_s = (plan[k].lo + u * (plan[k].hi - plan[k].lo)) * span;
+        child_ctx cc = {-1, plan[k].stage, plan[k].detail};
+        int fds[2];
+        CHECK(pipe(fds) == 0);
+        fflush(stdout);
+        pid_t pid = fork();
+        if (pid == 0) {
+            close(fds[0]);
+            cc.fd = fds[1];
+            run_child(scene, db, cap, &cc);
+        }
+        close(fds[1]);
+        int status = 0, last = -1, gone = 0;
+        char c;
+        if (plan[k].stage >= 0) {
+            /* wait until it stops itself (or ends: a stage it never reaches) */
+            if (waitpid(pid, &status, WUNTRACED) == pid && !WIFSTOPPED(status)) gone = 1;
+            while (read(fds[0], &c, 1) == 1 && !gone) {
+                last = c - '0';
+                if (last == plan[k].stage) break;
+            }
+            /* a zero delay kills it where it stopped; otherwise it runs on for wait_s */
+            if (!gone && plan[k].hi > 0.0) kill(pid, SIGCONT);
+        }
+        if (!gone) {
+            usleep((useconds_t)(wait_s * 1e6));
+            kill(pid, SIGKILL);
+            waitpid(pid, &status, 0);
+        }
+        while (read(fds[0], &c, 1) == 1) last = c - '0';   /* where it got to */
+        close(fds[0]);
+        int was_killed = WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL;
+        CHECK_MSG(was_killed || (WIFEXITED(status) && WEXITSTATUS(status) == 0),
+                  "kill %d: the child exited with %d", k, WIFEXITED(status) ? WEXITSTATUS(status) : -1);
+        if (was_killed) killed_in[last + 1]++;
+        size_t used = strlen(trace);
+        snprintf(trace + used, sizeof trace - used, " %s%s", last >= 0 ? srv_stage_name((srv_stage)last) : "start",
+                 was_killed ? "" : "(done)");
+        check_after_kill(db, k);
+    }
+    if (getenv("GS_TEST_VERBOSE")) printf("    killed in:%s\n", trace);
+    CHECK_MSG(killed_in[SRV_STAGE_CAPTURE + 1] >= 2, "kills during the capture: %d (%s)",
+              killed_in[SRV_STAGE_CAPTURE + 1], trace);
+    CHECK_MSG(killed_in[SRV_STAGE_BLOBS + 1] + killed_in[SRV_STAGE_MATCH + 1] >= 1, "no kill during "
+              "recognition (%s)", trace);
+    CHECK_MSG(killed_in[SRV_STAGE_STORE + 1] >= 1, "no kill during the database write (%s)", trace);
+    /* resume through the CLI, then once more */
+    int rc = sh("%s run %s --db %s --capture-dir %s", test_bin(), scene, db, cap);
+    CHECK_MSG(rc == 0, "resume: %d: %s", rc, out);
+    rc = sh("%s run %s --db %s --capture-dir %s", test_bin(), scene, db, cap);
+    CHECK_MSG(rc == 0 && strstr(out, "already in"), "last run: %d: %s", rc, out);
+    char *a = dump_db(ref_db), *b = dump_db(db);
+    CHECK_MSG(a && b && !strcmp(a, b), "the resumed database differs from the uninterrupted one");
+    CHECK(b && strstr(b, ref.key) != NULL);
+    free(a);
+    free(b);
+    CHECK(sh("cmp -s %s/frame_013.png %s/frame_013.png && cmp -s %s/truth.json %s/truth.json", ref_cap,
+             cap, ref_cap, cap) == 0);
+}
+
+/* ------------------------------------------------------------------ bad input */
+
+/* Every bad input gets one line on stderr and a non-zero exit, and nothing changes on disk:
+ * the database's bytes, and the listing (path, size, mtime, mode) of every file around it. */
+TEST(pipeline_bad_input_changes_nothing)
+{
+    const char *dir = test_tmpdir();
+    const char *scene = tmp("small.json"), *db = tmp("ok.sqlite"), *cap = tmp("ok-cap");
+    write_small_lab(scene, 0.25, NULL);
+    int rc = sh("%s run %s --db %s --capture-dir %s", test_bin(), scene, db, cap);
+    CHECK_MSG(rc == 0, "%d: %s", rc, out);
+    if (rc != 0) return;
+    /* the bad inputs */
+    write_text(tmp("syntax.json"), "{\"format\": \"gridsurvey-scene/1\", \"grid\": {\"nominal_hz\": 50,,}\n");
+    write_small_lab(tmp("bulb.json"), 0.25, "no-such-bulb-9w");
+    write_text(tmp("notes.txt"), "not a database\n");
+    write_text(tmp("afile"), "a regular file\n");
+    write_text(tmp("station-bad.json"), "{\"format\": \"gridsurvey-station/1\", \"lat_deg\": 32.8,\n \"lon\": }\n");
+    write_text(tmp("station-ok.json"),
+               "{\"lat_deg\": 32.8, \"lon_deg\": 35, \"height_m\": 100, \"heading_deg\": 0, \"pitch_deg\": -5, "
+               "\"focal_px\": 200, \"cx_px\": 79.5, \"cy_px\": 59.5, \"width_px\": 160, \"height_px\": 120}\n");
+    write_text(tmp("station-size.json"),
+               "{\"lat_deg\": 32.8, \"lon_deg\": 35, \"height_m\": 100, \"heading_deg\": 0, \"pitch_deg\": -5, "
+               "\"focal_px\": 400, \"cx_px\": 159.5, \"cy_px\": 119.5, \"width_px\": 640, \"height_px\": 480}\n");
+    sqlite3 *h = NULL;
+    CHECK(sqlite3_open(tmp("other.sqlite"), &h) == SQLITE_OK);
+    CHECK(sqlite3_exec(h, "CREATE TABLE t(x); INSERT INTO t VALUES (1)", NULL, NULL, NULL) == SQLITE_OK);
+    sqlite3_close(h);
+    CHECK(sh("cd %s && cp -r ok-cap missing && rm missing/frame_003.png && cp -r ok-cap trunc && "
+             "truncate -s 900 trunc/frame_005.png && cp -r ok-cap wrongk && "
+             "sed -i 's/\"K\": 26/\"K\": 25/' wrongk/capture.json && grep -q '\"K\": 25' wrongk/capture.json",
+             dir) == 0);
+    if (geteuid() != 0) CHECK(mkdir(tmp("ro"), 0555) == 0);
+    char listing[1 << 15];
+    snprintf(out, sizeof out, "cd %s && find . -printf '%%p %%s %%T@ %%m\\n' | sort", dir);
+    CHECK(test_run(out, listing, sizeof listing) == 0);
+    size_t size_before, size_after;
+    char *db_bytes = file_bytes(db, &size_before);
+    char bin[4096];
+    CHECK(realpath(test_bin(), bin) != NULL);
+    struct {
+        const char *args;
+        const char *expect;   /* in the one line */
+    } cases[] = {
+        {"syntax.json --db ok.sqlite", "syntax.json:1:"},
+        {"bulb.json --db ok.sqlite", "no-such-bulb-9w"},
+        {"missing --db ok.sqlite", "frame_003.png"},
+        {"trunc --db ok.sqlite", "frame_005.png"},
+        {"wrongk --db ok.sqlite", "capture.json"},
+        {"no-such-dir --db ok.sqlite", "no-such-dir"},
+        {"ok-cap --db notes.txt", "not a survey database"},
+        {"ok-cap --db other.sqlite", "not a survey database"},
+        {"ok-cap --db afile/survey.sqlite", "afile/survey.sqlite"},
+        {"ok-cap --db missing-dir/survey.sqlite", "missing-dir/survey.sqlite"},
+        {"small.json --db ok.sqlite --capture-dir afile/cap", "afile/cap"},
+        {"ok-cap --db ok.sqlite --out afile/out", "afile/out"},
+        {"ok-cap --db new.sqlite --station station-bad.json", "station-bad.json:2"},
+        {"ok-cap --db new.sqlite --station station-size.json --light-height-m 5", "640x480"},
+        {"ok-cap --db new.sqlite --station station-ok.json", "--light-height-m"},
+        {"ok-cap --db new.sqlite --station station-ok.json --light-height-m 1e6", "--light-height-m"},
+        {"ok-cap --db new.sqlite --capture-dir elsewhere", "--capture-dir"},
+        {"ok-cap --db new.sqlite --delight notes.txt", "notes.txt"},
+        {"ok-cap --db ro/new.sqlite", "ro/new.sqlite"},
+    };
+    size_t n_cases = sizeof cases / sizeof *cases - (geteuid() == 0);
+    for (size_t i = 0; i < n_cases; i++) {
+        rc = sh("cd %s && %s run %s", dir, bin, cases[i].args);
+        CHECK_MSG(rc == 1 && count_lines(out) == 1 && strstr(out, cases[i].expect) &&
+                  strstr(out, "gridsurvey: "),
+                  "run %s: exit %d, output: %s", cases[i].args, rc, out);
+    }
+    /* usage errors: exit 2 */
+    rc = sh("%s run %s", test_bin(), scene);
+    CHECK(rc == 2 && count_lines(out) == 1 && strstr(out, "--db"));
+    rc = sh("%s run %s --db %s --phases 4", test_bin(), scene, db);
+    CHECK(rc == 2 && count_lines(out) == 1);
+    char listing2[1 << 15];
+    snprintf(out, sizeof out, "cd %s && find . -printf '%%p %%s %%T@ %%m\\n' | sort", dir);
+    CHECK(test_run(out, listing2, sizeof listing2) == 0);
+    CHECK_MSG(!strcmp(listing, listing2), "files changed:\nbefore:\n%s\nafter:\n%s", listing, listing2);
+    char *db_after = file_bytes(db, &size_after);
+    CHECK(db_bytes && db_after && size_before == size_after && !memcmp(db_bytes, db_after, size_after));
+    free(db_bytes);
+    free(db_after);
+}
+
+/* ------------------------------------------------------------------ evaluation */
+
+/* GeodSolve (GeographicLib's own program): the point s12_m from (lat, lon) at azimuth azi. */
+static int geod_direct(double lat, double lon, double azi, double s12, double *lat2, double *lon2)
+{
+    char cmd[256], res[256];
+    snprintf(cmd, sizeof cmd, "echo %.12f %.12f %.12f %.12f | GeodSolve -p 9", lat, lon, azi, s12);
+    if (test_run(cmd, res, sizeof res) != 0) return 0;
+    return sscanf(res, "%lf %lf", lat2, lon2) == 2;
+}
+
+typedef struct {
+    double x, y;
+    const char *bulb, *tech;
+    double phase;            /* NaN: ambiguous */
+    int loc;                 /* 0: no location row, 1: unlocated row, 2: located */
+    double lat, lon;
+} hand_light;
+
+/* A hand-made capture with known answers (worked out in the comments), evaluated by the API
+ * and by the CLI (table and JSON). */
+TEST(evaluate_hand_made_db_known_answers)
+{
+    if (sh("echo 0 0 0 1 | GeodSolve") != 0) {
+        printf("    (GeodSolve not installed: geographiclib-tools)\n");
+        CHECK(0);
+        return;
+    }
+    char capdir[1024], truth[1024], db[1024];
+    snprintf(capdir, sizeof capdir, "%s", tmp("cap"));
+    snprintf(truth, sizeof truth, "%s", tmp("cap/truth.json"));
+    snprintf(db, sizeof db, "%s", tmp("ev.sqlite"));
+    CHECK(mkdir(capdir, 0777) == 0);
+    /* Truth: T0..T6; T5 is off the image. T6 sits 1.5 px from T0 (one-to-one, nearest first). */
+    const double T[7][2] = {{100, 100}, {200, 100}, {300, 100}, {400, 100}, {500, 100}, {600, 100}, {101.5, 100}};
+    const double Tlat[7] = {32.80, 32.81, 32.82, 32.83, 32.84, 32.85, 32.86}, Tlon = 35.0;
+    char text[4096];
+    snprintf(text, sizeof text,
+             "{\"format\": \"gridsurvey-truth/1\", \"scene\": \"hand\", \"lights\": [\n"
+             "{\"id\": \"T0\", \"x_px\": %g, \"y_px\": %g, \"in_image\": true, \"lat_deg\": %.2f, \"lon_deg\": 35.0, \"bulb\": \"bulbA\", \"technology\": \"incandescent\", \"phase_deg\": 0.0},\n"
+             "{\"id\": \"T1\", \"x_px\": %g, \"y_px\": %g, \"in_image\": true, \"lat_deg\": %.2f, \"lon_deg\": 35.0, \"bulb\": \"bulbB\", \"technology\": \"cfl\", \"phase_deg\": 120.0},\n"
+             "{\"id\": \"T2\", \"x_px\": %g, \"y_px\": %g, \"in_image\": true, \"lat_deg\": %.2f, \"lon_deg\": 35.0, \"bulb\": \"bulbC\", \"technology\": \"sodium_hp\", \"phase_deg\": 240.0},\n"
+             "{\"id\": \"T3\", \"x_px\": %g, \"y_px\": %g, \"in_image\": true, \"lat_deg\": %.2f, \"lon_deg\": 35.0, \"bulb\": \"bulbC\", \"technology\": \"sodium_hp\", \"phase_deg\": 30.0},\n"
+             "{\"id\": \"T4\", \"x_px\": %g, \"y_px\": %g, \"in_image\": true, \"bulb\": \"bulbA\", \"technology\": \"incandescent\", \"phase_deg\": 0.0},\n"
+             "{\"id\": \"T5\", \"x_px\": %g, \"y_px\": %g, \"in_image\": false, \"bulb\": \"bulbA\", \"technology\": \"incandescent\", \"phase_deg\": 0.0},\n"
+             "{\"id\": \"T6\", \"x_px\": %g, \"y_px\": %g, \"in_image\": true, \"lat_deg\": %.2f, \"lon_deg\": 35.0, \"bulb\": \"bulbB\", \"technology\": \"cfl\", \"phase_deg\": 240.0}\n"
+             "]}\n",
+             T[0][0], T[0][1], Tlat[0], T[1][0], T[1][1], Tlat[1], T[2][0], T[2][1], Tlat[2], T[3][0], T[3][1],
+             Tlat[3], T[4][0], T[4][1], T[5][0], T[5][1], T[6][0], T[6][1], Tlat[6]);
+    write_text(truth, text);
+    /* Stored: S0 -> T0 (0.54 px; T6 is 1.01 px away but S1 takes it at 0.4 px), right bulb, phase
+     * 350 vs 0 (10 deg: right), located 3 m from T0. S1 -> T6: right bulb, phase 215 vs 240
+     * (25 deg: wrong, class "other"), located 10 m away. S2 -> T1 (1.41 px): wrong bulb of the
+     * right technology, phase 125 (right), located 20 m away. S3: 2.5 px from T2 (matched only
+     * with R = 3: right bulb and phase, unlocated row). S4 -> T3: right bulb, ambiguous phase, no
+     * location row. S5: nothing near. S6: next to T5, which is off the image. */
+    hand_light S[7] = {
+        {100.5, 100.2, "bulbA", "incandescent", 350.0, 2, 0, 0},
+        {101.9, 100.0, "bulbB", "cfl", 215.0, 2, 0, 0},
+        {201.0, 101.0, "bulbX", "cfl", 125.0, 2, 0, 0},
+        {300.0, 102.5, "bulbC", "sodium_hp", 240.0, 1, NAN, NAN},
+        {400.3, 99.8, "bulbC", "sodium_hp", NAN, 0, NAN, NAN},
+        {700.0, 700.0, NULL, NULL, NAN, 1, NAN, NAN},
+        {599.5, 100.0, "bulbA", "incandescent", 0.0, 1, NAN, NAN},
+    };
+    CHECK(geod_direct(Tlat[0], Tlon, 90.0, 3.0, &S[0].lat, &S[0].lon));
+    CHECK(geod_direct(Tlat[6], Tlon, 0.0, 10.0, &S[1].lat, &S[1].lon));
+    CHECK(geod_direct(Tlat[1], Tlon, 45.0, 20.0, &S[2].lat, &S[2].lon));
+    srv_db *h = NULL;
+    CHECK_OK(srv_db_open(db, SRV_DB_CREATE, &h));
+    if (!h) return;
+    int64_t sid = 0, sid2 = 0, cid = 0;
+    srv_survey_row sv = {.name = "hand", .grid_hz = 50};
+    CHECK_OK(srv_db_add_survey(h, &sv, &sid));
+    srv_light_row L[7];
+    srv_location_row loc[7];
+    for (int i = 0; i < 7; i++) {
+        srv_light_row_init(&L[i]);
+        L[i].index = i;
+        L[i].x_px = S[i].x;
+        L[i].y_px = S[i].y;
+        L[i].bulb_id = S[i].bulb;
+        L[i].technology = S[i].tech;
+        L[i].phase_deg = S[i].phase;
+        L[i].confidence = L[i].bulb_confidence = L[i].phase_confidence = 0.9;
+        L[i].match_flags = i == 2 ? REC_MATCH_BULB_AMBIGUOUS : 0;
+        srv_location_row_init(&loc[i]);
+        loc[i].method = S[i].loc ? SRV_LOC_ONE_STATION : SRV_LOC_NONE;
+        if (S[i].loc == 2) {
+            loc[i].lat_deg = S[i].lat;
+            loc[i].lon_deg = S[i].lon;
+            loc[i].height_m = 10.0;
+        } else if (S[i].loc == 1) {
+            loc[i].flags = GIS_FIX_ABOVE_HORIZON;
+        }
+    }
+    char abs_dir[4096];
+    CHECK(realpath(capdir, abs_dir) != NULL);
+    srv_capture_data cd;
+    memset(&cd, 0, sizeof cd);
+    srv_capture_row_init(&cd.capture);
+    cd.capture.survey_id = sid;
+    cd.capture.key = "hand-1";
+    cd.capture.path = abs_dir;
+    cd.capture.grid_hz = 50;
+    cd.lights = L;
+    cd.locations = loc;
+    cd.n_lights = 7;
+    CHECK_OK(srv_db_add_capture(h, &cd, &cid, NULL));
+    /* a second survey with another capture elsewhere: not the one the truth describes */
+    srv_survey_row sv2 = {.name = "other", .grid_hz = 50};
+    CHECK_OK(srv_db_add_survey(h, &sv2, &sid2));
+    srv_capture_row_init(&cd.capture);
+    cd.capture.survey_id = sid2;
+    cd.capture.key = "other-1";
+    cd.capture.path = "/nowhere";
+    cd.capture.grid_hz = 50;
+    cd.locations = NULL;
+    cd.n_lights = 2;
+    CHECK_OK(srv_db_add_capture(h, &cd, NULL, NULL));
+
+    srv_eval_opts o;
+    srv_eval_opts_default(&o);
+    CHECK(o.match_px == 2.0);
+    srv_eval_report r;
+    CHECK_OK(srv_evaluate(h, truth, &o, &r));
+    CHECK(!strcmp(r.survey, "hand") && !strcmp(r.capture_key, "hand-1") && r.capture_id == cid);
+    CHECK(r.truth_lights == 7 && r.truth_in_image == 6 && r.stored == 7);
+    CHECK(r.matched == 4 && r.false_detections == 3);   /* S0, S1, S2, S4; false S3, S5, S6 */
+    CHECK_NEAR(r.detection_rate, 4.0 / 6.0, 1e-15);
+    CHECK_NEAR(r.false_rate, 3.0 / 7.0, 1e-15);
+    CHECK(r.bulb_answered == 4 && r.bulb_correct == 3 && r.bulb_ambiguous == 1);
+    CHECK(r.tech_answered == 4 && r.tech_correct == 4);
+    CHECK(r.phase_answered == 3 && r.phase_correct == 2);
+    CHECK_NEAR(r.phase_accuracy, 2.0 / 3.0, 1e-15);
+    CHECK_NEAR(r.bulb_unknown_rate, 0.0, 0.0);
+    CHECK_NEAR(r.phase_unknown_rate, 0.25, 1e-15);
+    CHECK(r.all_correct == 1);   /* S0 only */
+    CHECK_NEAR(r.all_correct_rate, 1.0 / 6.0, 1e-15);
+    CHECK(r.confusion[0][0] == 1 && r.confusion[2][3] == 1 && r.confusion[1][1] == 1 && r.confusion[3][4] == 1);
+    long total = 0;
+    for (int t = 0; t < 4; t++)
+        for (int c = 0; c < SRV_EVAL_PHASE_CLASSES; c++) total += r.confusion[t][c];
+    CHECK(total == 4);
+    /* location errors 3, 10, 20 m: median 10, 95th percentile 10 + 0.9 * 10 = 19 (position
+     * 0.95 * 2 = 1.9), max 20; S4 has no location */
+    CHECK(r.loc_pairs == 3 && r.loc_unlocated == 1);
+    CHECK_NEAR(r.loc_median_m, 10.0, 1e-6);
+    CHECK_NEAR(r.loc_p95_m, 19.0, 1e-6);
+    CHECK_NEAR(r.loc_max_m, 20.0, 1e-6);
+    /* R = 3 takes in S3 -> T2: right bulb and phase; its location row is unlocated */
+    o.match_px = 3.0;
+    CHECK_OK(srv_evaluate(h, truth, &o, &r));
+    CHECK(r.matched == 5 && r.false_detections == 2 && r.bulb_correct == 4 && r.phase_correct == 3);
+    CHECK(r.phase_answered == 4 && r.all_correct == 2 && r.loc_unlocated == 2 && r.loc_pairs == 3);
+    /* an explicit capture key or survey chooses the same capture */
+    o.match_px = 2.0;
+    o.survey = "hand";
+    CHECK_OK(srv_evaluate(h, truth, &o, &r));
+    CHECK(r.matched == 4);
+    o.survey = NULL;
+    o.capture_key = "other-1";
+    CHECK_OK(srv_evaluate(h, truth, &o, &r));
+    CHECK(r.stored == 2 && !strcmp(r.survey, "other"));
+    /* errors: a key that is not there (not a fallback to the truth's directory), a survey */
+    o.capture_key = "nope-1";
+    CHECK(srv_evaluate(h, truth, &o, &r) == GS_ENOTFOUND && strstr(gs_detail(), "nope-1"));
+    o.capture_key = NULL;
+    o.survey = "nope";
+    CHECK(srv_evaluate(h, truth, &o, &r) == GS_ENOTFOUND);
+    o.survey = NULL;
+    o.match_px = 0.0;
+    CHECK(srv_evaluate(h, truth, &o, &r) == GS_EINVAL);
+    srv_db_close(h);
+
+    /* the CLI: the same numbers as a table and as JSON */
+    int rc = sh("%s evaluate --db %s --truth %s", test_bin(), db, truth);
+    CHECK_MSG(rc == 0, "%d: %s", rc, out);
+    CHECK(strstr(out, "| detection rate | 66.7 % | 4 / 6 truth lights in the image |") != NULL);
+    CHECK(strstr(out, "| false detections | 42.9 % | 3 / 7 stored lights |") != NULL);
+    CHECK(strstr(out, "| bulb accuracy | 75.0 % | 3 / 4 ") != NULL);
+    CHECK(strstr(out, "| phase accuracy | 66.7 % | 2 / 3 ") != NULL);
+    CHECK(strstr(out, "| location error, median | 10.00 m |") != NULL);
+    CHECK(strstr(out, "| location error, 95th percentile | 19.00 m |") != NULL);
+    CHECK(strstr(out, "| 240 | 0 | 0 | 0 | 1 | 0 |") != NULL);
+    rc = sh("%s evaluate --db %s --truth %s --match-px 3 --format json", test_bin(), db, truth);
+    json_error_t err;
+    json_t *j = json_loads(out, 0, &err);
+    CHECK_MSG(rc == 0 && j, "%d: %s", rc, out);
+    CHECK(!strcmp(json_string_value(json_object_get(j, "format")), "gridsurvey-evaluation/1"));
+    CHECK(json_integer_value(json_object_get(j, "matched")) == 5);
+    CHECK_NEAR(json_number_value(json_object_get(json_object_get(j, "detection"), "rate")), 5.0 / 6.0, 1e-9);
+    CHECK_NEAR(json_number_value(json_object_get(json_object_get(j, "location_error"), "p95_m")), 19.0, 1e-6);
+    CHECK(json_integer_value(json_object_get(json_object_get(json_object_get(j, "phase_confusion"), "other"),
+                                             "none")) == 1);
+    json_decref(j);
+    /* CLI errors: one line, exit 1 (failures) or 2 (usage) */
+    write_text(tmp("bad-truth.json"), "{\"format\": \"gridsurvey-scene/1\", \"lights\": []}\n");
+    CHECK(sh("%s evaluate --db %s --truth %s", test_bin(), db, tmp("bad-truth.json")) == 1 &&
+          count_lines(out) == 1 && strstr(out, "gridsurvey-truth/1"));
+    write_text(tmp("bad-truth2.json"), "{\"format\": \"gridsurvey-truth/1\", \"lights\": [{\"x_px\": 1}]}\n");
+    CHECK(sh("%s evaluate --db %s --truth %s", test_bin(), db, tmp("bad-truth2.json")) == 1 &&
+          count_lines(out) == 1 && strstr(out, "lights[0].in_image"));
+    CHECK(sh("%s evaluate --db %s --truth %s", test_bin(), db, tmp("none.json")) == 1 && count_lines(out) == 1);
+    CHECK(sh("%s evaluate --db %s --truth %s", test_bin(), tmp("bad-truth.json"), truth) == 1 &&
+          strstr(out, "not a survey database"));
+    CHECK(sh("%s evaluate --db %s --truth %s --match-px -1", test_bin(), db, truth) == 2 && count_lines(out) == 1);
+    CHECK(sh("%s evaluate --db %s", test_bin(), db) == 2 && count_lines(out) == 1);
+    /* a truth elsewhere and two captures to choose from: refused, naming them */
+    CHECK(mkdir(tmp("elsewhere"), 0777) == 0);
+    CHECK(sh("cp %s %s/", truth, tmp("elsewhere")) == 0);
+    CHECK(sh("%s evaluate --db %s --truth %s/truth.json", test_bin(), db, tmp("elsewhere")) == 1 &&
+          count_lines(out) == 1 && strstr(out, "hand/hand-1") && strstr(out, "--survey"));
+    CHECK(sh("%s evaluate --db %s --truth %s/truth.json --survey hand", test_bin(), db, tmp("elsewhere")) == 0);
+}
+
+/* Matching is one-to-one and nearest first, whatever the order of the rows: a crowded cluster
+ * (every stored light within R of every truth light) matches all of them once, and the pair
+ * taken first is the closest. */
+TEST(evaluate_matching_one_to_one_nearest_first)
+{
+    const char *capdir = tmp("c"), *truth = tmp("c/truth.json"), *db = tmp("m.sqlite");
+    CHECK(mkdir(capdir, 0777) == 0);
+    write_text(truth,
+               "{\"format\": \"gridsurvey-truth/1\", \"lights\": [\n"
+               "{\"x_px\": 10.0, \"y_px\": 10.0, \"in_image\": true, \"bulb\": \"a\", \"technology\": \"cfl\", \"phase_deg\": 0},\n"
+               "{\"x_px\": 10.8, \"y_px\": 10.0, \"in_image\": true, \"bulb\": \"b\", \"technology\": \"cfl\", \"phase_deg\": 120},\n"
+               "{\"x_px\": 11.6, \"y_px\": 10.0, \"in_image\": true, \"bulb\": \"c\", \"technology\": \"cfl\", \"phase_deg\": 240}]}\n");
+    /* stored in reverse order; each 0.1 px right of its truth light */
+    const double xs[3] = {11.7, 10.9, 10.1};
+    const char *bulbs[3] = {"c", "b", "a"};
+    const double ph[3] = {240, 120, 0};
+    srv_db *h = NULL;
+    CHECK_OK(srv_db_open(db, SRV_DB_CREATE, &h));
+    if (!h) return;
+    int64_t sid;
+    srv_survey_row sv = {.name = "m"};
+    CHECK_OK(srv_db_add_survey(h, &sv, &sid));
+    srv_light_row L[3];
+    for (int i = 0; i < 3; i++) {
+        srv_light_row_init(&L[i]);
+        L[i].index = i;
+        L[i].x_px = xs[i];
+        L[i].y_px = 10.0;
+        L[i].bulb_id = bulbs[i];
+        L[i].technology = "cfl";
+        L[i].phase_deg = ph[i];
+        L[i].confidence = L[i].bulb_confidence = L[i].phase_confidence = 1.0;
+    }
+    srv_capture_data cd;
+    memset(&cd, 0, sizeof cd);
+    srv_capture_row_init(&cd.capture);
+    cd.capture.survey_id = sid;
+    cd.capture.key = "k";
+    cd.lights = L;
+    cd.n_lights = 3;
+    CHECK_OK(srv_db_add_capture(h, &cd, NULL, NULL));
+    srv_eval_opts o;
+    srv_eval_opts_default(&o);
+    o.match_px = 5.0;
+    srv_eval_report r;
+    CHECK_OK(srv_evaluate(h, truth, &o, &r));
+    CHECK(r.matched == 3 && r.bulb_correct == 3 && r.phase_correct == 3 && r.false_detections == 0);
+    srv_db_close(h);
+}
