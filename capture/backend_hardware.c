@@ -9,6 +9,7 @@
 
 #include <errno.h>
 #include <gpiod.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -25,6 +26,8 @@ typedef struct {
     struct gpiod_chip *chip;
     struct gpiod_line *zc, *shutter, *trigger;
     cap_hw_log log;
+    cap_acq_timing timing;      /* of the last acquisition */
+    double origin_s;            /* start of the capture's first exposure (index 0), NaN: unseen */
     char utc[40];
     uint64_t fingerprint;
 } hw_backend;
@@ -97,6 +100,9 @@ static gs_status hw_acquire(void *self, const cap_acquisition *a, unsigned char 
     memset(&b->log, 0, sizeof b->log);
     b->log.mean_half_period_s = NAN;
     b->log.link_mean_half_period_s = NAN;
+    b->timing.grid_hz_measured = b->timing.start_s = NAN;
+    struct timespec t_open;
+    clock_gettime(CLOCK_MONOTONIC, &t_open);
     /* 1. the DMD's masks: the HDR loop's halvings are the rows of M */
     if (c->load_masks && c->load_masks(c->load_masks_user, c->masks, halvings, c->width, c->height))
         return gs_fail(GS_EIO, "hardware: loading the DMD masks for frame %d pass %d failed",
@@ -111,6 +117,7 @@ static gs_status hw_acquire(void *self, const cap_acquisition *a, unsigned char 
                            c->zc_line, c->zc_timeout_ms);
         struct gpiod_line_event ev;
         if (gpiod_line_event_read(b->zc, &ev) != 0) return gpio_fail("event read", c->zc_line);
+        t_open = ev.ts;   /* the exposure starts at this crossing */
     }
     /* 3. shutter open, 4. C cycles of window k through the controller, 5. shutter closed */
     if ((s = set_line(b->shutter, c->shutter_line, 1)) != GS_OK) return s;
@@ -154,6 +161,17 @@ static gs_status hw_acquire(void *self, const cap_acquisition *a, unsigned char 
     s = cap_vio_read(b->cam, c->width, c->height, c->bands, raw);
     if (s != GS_OK) return gs_fail(s, "hardware: frame %d: %s", a->k, gs_detail());
     if (cycles) *cycles = (double)c->cycles;
+    /* the grid frequency during the exposure: f = 1 / (2 Delta) over the controller's log */
+    double d = b->log.link_mean_half_period_s;
+    if (isfinite(d) && d > 0) b->timing.grid_hz_measured = 1.0 / (2.0 * d);
+    if (a->index == 0 && a->pass == 0) b->origin_s = ts_s(&t_open);
+    if (isfinite(b->origin_s)) b->timing.start_s = ts_s(&t_open) - b->origin_s;
+    return GS_OK;
+}
+
+static gs_status hw_timing(void *self, cap_acq_timing *t)
+{
+    *t = ((hw_backend *)self)->timing;
     return GS_OK;
 }
 
@@ -170,7 +188,8 @@ static void hw_free(void *self)
     free(b);
 }
 
-static const cap_backend_ops hw_ops = {"hardware", hw_info, hw_acquire, hw_free};
+static const cap_backend_ops hw_ops = {"hardware", hw_info, hw_acquire, hw_free,
+                                         hw_timing};
 
 gs_status cap_backend_hardware_new(const cap_hw_config *c, cap_backend **out)
 {
@@ -206,6 +225,8 @@ gs_status cap_backend_hardware_new(const cap_hw_config *c, cap_backend **out)
         return gs_fail(GS_ENOMEM, "hardware: out of memory");
     }
     b->cfg = *c;
+    b->origin_s = NAN;
+    b->timing.grid_hz_measured = b->timing.start_s = NAN;
     snprintf(b->camera, sizeof b->camera, "%s", c->camera);
     b->cfg.camera = b->camera;
     if (c->serial) snprintf(b->serial, sizeof b->serial, "%s", c->serial);

@@ -9,6 +9,7 @@
 typedef struct {
     rec_capture cap;
     uint64_t fingerprint;
+    int last_k;                 /* the last frame served, -1: none */
 } replay_backend;
 
 static gs_status replay_info(void *self, cap_acq_info *info)
@@ -49,6 +50,17 @@ static gs_status replay_acquire(void *self, const cap_acquisition *a, unsigned c
         else memset(halvings, 0, plane);
     }
     if (cycles) *cycles = c->frames[a->k].cycles;
+    b->last_k = a->k;
+    return GS_OK;
+}
+
+/* what the source capture.json holds for the frame (NaN when absent) */
+static gs_status replay_timing(void *self, cap_acq_timing *t)
+{
+    replay_backend *b = self;
+    if (b->last_k < 0) return GS_OK;
+    t->grid_hz_measured = b->cap.frames[b->last_k].grid_hz_measured;
+    t->start_s = b->cap.frames[b->last_k].start_s;
     return GS_OK;
 }
 
@@ -60,13 +72,15 @@ static void replay_free(void *self)
     free(b);
 }
 
-static const cap_backend_ops replay_ops = {"replay", replay_info, replay_acquire, replay_free};
+static const cap_backend_ops replay_ops = {"replay", replay_info, replay_acquire, replay_free,
+                                            replay_timing};
 
 gs_status cap_backend_replay_new(const char *dir, cap_backend **out)
 {
     *out = NULL;
     replay_backend *b = calloc(1, sizeof *b);
     if (!b) return gs_fail(GS_ENOMEM, "replay backend: out of memory");
+    b->last_k = -1;
     gs_status s = rec_capture_read(dir, &b->cap);
     if (s != GS_OK) {
         free(b);

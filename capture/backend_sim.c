@@ -2,12 +2,14 @@
 #include "capture/sim.h"
 
 #include <jansson.h>
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
 typedef struct {
     cap_sim *sim;
     char *station_json;
+    cap_acq_timing timing;      /* of the last acquisition */
 } sim_backend;
 
 static gs_status sim_info(void *self, cap_acq_info *info)
@@ -44,8 +46,25 @@ static gs_status sim_acquire(void *self, const cap_acquisition *a, unsigned char
                              unsigned short *raw, double *cycles)
 {
     sim_backend *b = self;
+    b->timing.grid_hz_measured = b->timing.start_s = NAN;
     if (cycles) *cycles = (double)b->sim->C;
-    return cap_sim_render(b->sim, a->k, a->pass, a->index, halvings, raw, NULL);
+    gs_status st = cap_sim_render(b->sim, a->k, a->pass, a->index, halvings, raw, NULL);
+    if (st != GS_OK) return st;
+    /* the exposure's crossings on the sim's timeline: f = C / (2 (t_end - t_start)) (Eq. 1),
+     * its start from the capture's first exposure (index 0) */
+    double t0, t1, origin, unused;
+    if ((st = cap_sim_exposure_span(b->sim, a->index, &t0, &t1)) != GS_OK ||
+        (st = cap_sim_exposure_span(b->sim, 0, &origin, &unused)) != GS_OK)
+        return st;
+    if (t1 > t0) b->timing.grid_hz_measured = (double)b->sim->C / (2.0 * (t1 - t0));
+    b->timing.start_s = t0 - origin;
+    return GS_OK;
+}
+
+static gs_status sim_timing(void *self, cap_acq_timing *t)
+{
+    *t = ((sim_backend *)self)->timing;
+    return GS_OK;
 }
 
 static void sim_free(void *self)
@@ -57,7 +76,8 @@ static void sim_free(void *self)
     free(b);
 }
 
-static const cap_backend_ops sim_ops = {"sim", sim_info, sim_acquire, sim_free};
+static const cap_backend_ops sim_ops = {"sim", sim_info, sim_acquire, sim_free,
+                                         sim_timing};
 
 /* The camera as a gridsurvey-station/1 object (docs/gis.md), for capture.json. */
 static char *station_text(const cap_scene *sc)

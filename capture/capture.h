@@ -390,6 +390,10 @@ const cap_scene *cap_sim_scene(const cap_sim *s);   /* borrowed copy held by the
  * halvings). */
 gs_status cap_sim_render(cap_sim *s, int k, int pass, long index, const unsigned char *halvings,
                          unsigned short *raw, double *dn);
+/* Times (s, on the sim's grid timeline: the cap_ac crossings with timing effects, else
+ * nominal half periods) of the crossings that start and end the C cycles of acquisition index:
+ * crossings first_cycle and first_cycle + C. Index 0 starts the capture. */
+gs_status cap_sim_exposure_span(cap_sim *s, long index, double *t_start_s, double *t_end_s);
 /* The capture-level numbers of the simulated camera. */
 double cap_sim_saturation_dn(const cap_sim *s);
 double cap_sim_read_noise_dn(const cap_sim *s);
@@ -458,6 +462,17 @@ gs_status cap_backend_info(cap_backend *b, cap_acq_info *info);
  * NULL) gets the frame's C (info.cycles unless the backend knows better, e.g. replay). */
 gs_status cap_backend_acquire(cap_backend *b, const cap_acquisition *a, unsigned char *halvings,
                               unsigned short *raw, double *cycles);
+
+/* The timing of the exposure of the backend's last successful acquisition (NaN: unknown). */
+typedef struct {
+    double grid_hz_measured;      /* mean grid frequency during the exposure, Hz */
+    double start_s;               /* its start, s from the capture's first exposure (index 0) */
+} cap_acq_timing;
+/* After cap_backend_acquire: sim from its timeline (C / (2 (t_end - t_start)) between the
+ * exposure's first and last crossings, Eq. 1), hardware from the controller's per-cycle log
+ * (1 / (2 mean half period); start_s from the capture's first acquisition in this process,
+ * else NaN), replay what the source capture.json holds. Always GS_OK for a valid backend. */
+gs_status cap_backend_timing(cap_backend *b, cap_acq_timing *t);
 
 /* sim: renders sc (copied). cap_backend_sim_handle gives its simulator (borrowed). */
 gs_status cap_backend_sim_new(const cap_scene *sc, cap_backend **out);

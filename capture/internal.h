@@ -98,6 +98,7 @@ typedef struct {
     gs_status (*acquire)(void *self, const cap_acquisition *a, unsigned char *halvings,
                          unsigned short *raw, double *cycles);
     void (*free)(void *self);
+    gs_status (*timing)(void *self, cap_acq_timing *t);   /* NULL: nothing known */
 } cap_backend_ops;
 
 /* Wraps self with ops into a backend handle (takes ownership of self, also on failure). */

@@ -11,6 +11,7 @@
 #include <dirent.h>
 #include <errno.h>
 #include <jansson.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -68,6 +69,13 @@ gs_status cap_backend_acquire(cap_backend *b, const cap_acquisition *a, unsigned
     return b->ops->acquire(b->self, a, halvings, raw, cycles);
 }
 
+gs_status cap_backend_timing(cap_backend *b, cap_acq_timing *t)
+{
+    t->grid_hz_measured = NAN;
+    t->start_s = NAN;
+    return b->ops->timing ? b->ops->timing(b->self, t) : GS_OK;
+}
+
 void cap_loop_opts_default(cap_loop_opts *o)
 {
     o->progress = -1;
@@ -86,6 +94,7 @@ typedef struct {
     long old_index;            /* listed but damaged: the index to acquire it at again (or -1) */
     int passes;
     double cycles;
+    double grid_hz_measured, start_s;   /* NaN: unknown */
     long bytes, hdr_bytes;
     uint64_t fnv, hdr_fnv;
 } frame_state;
@@ -115,7 +124,7 @@ static gs_status write_progress(const char *dir, uint64_t fp, long acquisitions,
                                 const rec_capture *cap, const frame_state *fs, int complete)
 {
     /* plain text, one frame a line, deterministic */
-    size_t cap_n = 512 + (size_t)K * 256;
+    size_t cap_n = 512 + (size_t)K * 512;
     char *t = malloc(cap_n);
     if (!t) return gs_fail(GS_ENOMEM, "progress: out of memory");
     size_t u = 0;
@@ -132,6 +141,11 @@ static gs_status write_progress(const char *dir, uint64_t fp, long acquisitions,
                               "\"file\": \"%s\", \"bytes\": %ld, \"fnv\": \"%016llx\"",
                               first ? "" : ",", k, fs[k].index, fs[k].passes, fs[k].cycles,
                               cap->frames[k].file, fs[k].bytes, (unsigned long long)fs[k].fnv);
+        if (isfinite(fs[k].grid_hz_measured))
+            u += (size_t)snprintf(t + u, cap_n - u, ", \"grid_hz_measured\": %.17g",
+                                  fs[k].grid_hz_measured);
+        if (isfinite(fs[k].start_s))
+            u += (size_t)snprintf(t + u, cap_n - u, ", \"start_s\": %.17g", fs[k].start_s);
         if (cap->frames[k].hdr_map[0])
             u += (size_t)snprintf(t + u, cap_n - u,
                                   ", \"hdr_map\": \"%s\", \"hdr_bytes\": %ld, \"hdr_fnv\": \"%016llx\"",
@@ -191,6 +205,10 @@ static gs_status read_progress(const char *dir, uint64_t fp, int K, const rec_ca
         e->index = (long)json_integer_value(json_object_get(o, "index"));
         e->passes = (int)json_integer_value(json_object_get(o, "passes"));
         e->cycles = json_number_value(json_object_get(o, "cycles"));
+        json_t *jt = json_object_get(o, "grid_hz_measured");
+        e->grid_hz_measured = json_is_number(jt) ? json_number_value(jt) : NAN;
+        jt = json_object_get(o, "start_s");
+        e->start_s = json_is_number(jt) ? json_number_value(jt) : NAN;
         long bytes = (long)json_integer_value(json_object_get(o, "bytes"));
         const char *fnv = json_string_value(json_object_get(o, "fnv"));
         const char *file = json_string_value(json_object_get(o, "file"));
@@ -307,9 +325,12 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
         snprintf(cap.frames[k].file, REC_PATH_MAX, "frame_%03d.png", k);
         cap.frames[k].k = k;
         cap.frames[k].cycles = (double)info.cycles;
+        cap.frames[k].grid_hz_measured = NAN;
+        cap.frames[k].start_s = NAN;
         if (maps) snprintf(cap.frames[k].hdr_map, REC_PATH_MAX, "hdr_%03d.png", k);
         fs[k].index = -1;
         fs[k].old_index = -1;
+        fs[k].grid_hz_measured = fs[k].start_s = NAN;
     }
     /* resume */
     remove_stale_temporaries(dir);
@@ -323,12 +344,15 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
         for (int k = 0; k < K; k++) {
             memset(&fs[k], 0, sizeof fs[k]);
             fs[k].index = fs[k].old_index = -1;
+            fs[k].grid_hz_measured = fs[k].start_s = NAN;
         }
         acquisitions = 0;
     }
     for (int k = 0; k < K; k++)
         if (fs[k].done) {
             cap.frames[k].cycles = fs[k].cycles;
+            cap.frames[k].grid_hz_measured = fs[k].grid_hz_measured;
+            cap.frames[k].start_s = fs[k].start_s;
             rep->frames_kept++;
         }
     if (found && complete && rep->frames_kept == K) {
@@ -364,10 +388,13 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
         int pass = 0;
         size_t n_sat = 0;
         double cycles = (double)info.cycles;
+        cap_acq_timing tm;
         for (;;) {
             cap_acquisition a = {k, pass, index + pass};
             s = cap_backend_acquire(b, &a, halv, raw, &cycles);
             if (s != GS_OK) goto done;
+            /* the timing of the exposure that is kept: the last one */
+            if ((s = cap_backend_timing(b, &tm)) != GS_OK) goto done;
             if (!hdr) {
                 if (progress) {
                     n_sat = 0;
@@ -412,6 +439,11 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
         if (pass + 1 > rep->max_passes) rep->max_passes = pass + 1;
         if (index + pass + 1 > acquisitions) acquisitions = index + pass + 1;
         cap.frames[k].cycles = cycles;
+        /* only what capture.json accepts (docs/formats.md); anything else is unknown */
+        cap.frames[k].grid_hz_measured =
+            isfinite(tm.grid_hz_measured) && tm.grid_hz_measured >= 45 && tm.grid_hz_measured <= 65
+                ? tm.grid_hz_measured : NAN;
+        cap.frames[k].start_s = isfinite(tm.start_s) && tm.start_s >= 0 ? tm.start_s : NAN;
         view_frames[0] = cap.frames[k];
         view_frames[1] = cap.frames[k];
         snprintf(view_frames[1].file, REC_PATH_MAX, "unused_%03d.png", k);
@@ -422,6 +454,8 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
         fs[k].index = index;
         fs[k].passes = pass + 1;
         fs[k].cycles = cycles;
+        fs[k].grid_hz_measured = cap.frames[k].grid_hz_measured;
+        fs[k].start_s = cap.frames[k].start_s;
         file_sum(dir, cap.frames[k].file, &fs[k].bytes, &fs[k].fnv);
         if (maps) file_sum(dir, cap.frames[k].hdr_map, &fs[k].hdr_bytes, &fs[k].hdr_fnv);
         s = write_progress(dir, fp, acquisitions, K, &cap, fs, 0);

@@ -498,6 +498,28 @@ unsigned long long cap_sim_effect_calls(const cap_sim *s, cap_effect e)
     return (int)e >= 0 && e < CAP_FX_COUNT ? s->fx_calls[e] : 0;
 }
 
+/* The crossing that starts acquisition index; the timeline starts 64 crossings in, so a
+ * measured free-running period has a history. */
+static long first_cycle_of(const cap_sim *s, long index)
+{
+    return 64 + index * (s->C + s->sc.readout_cycles);
+}
+
+gs_status cap_sim_exposure_span(cap_sim *s, long index, double *t_start_s, double *t_end_s)
+{
+    if (index < 0) return gs_fail(GS_EINVAL, "exposure span: index %ld", index);
+    long c0 = first_cycle_of(s, index), c1 = c0 + s->C;
+    if (!s->ac) {
+        /* no timing effect: the nominal timeline of cap_sim_cycle_time */
+        *t_start_s = (double)c0 * s->half_s;
+        *t_end_s = (double)c1 * s->half_s;
+        return GS_OK;
+    }
+    gs_status st = cap_ac_time(s->ac, c0, t_start_s);
+    if (st == GS_OK) st = cap_ac_time(s->ac, c1, t_end_s);
+    return st;
+}
+
 gs_status cap_sim_render(cap_sim *s, int k, int pass, long index, const unsigned char *halvings,
                          unsigned short *raw, double *dn)
 {
@@ -514,8 +536,7 @@ gs_status cap_sim_render(cap_sim *s, int k, int pass, long index, const unsigned
     r.k = k;
     r.pass = pass;
     r.index = index;
-    /* the timeline starts 64 crossings in, so a measured free-running period has a history */
-    r.first_cycle = 64 + index * (s->C + s->sc.readout_cycles);
+    r.first_cycle = first_cycle_of(s, index);
     r.halv = halvings;
     r.lev = s->lev;
     r.raw = raw;

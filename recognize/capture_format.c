@@ -204,6 +204,8 @@ static gs_status write_atomic(const char *dir, const char *name, const void *dat
 #define EXP_FILE "a file name of letters, digits, '.', '_' or '-' that ends in \".png\", does not " \
                  "start with '.' and has at most 255 characters"
 #define EXP_CYCLES "a finite number > 0"
+#define EXP_HZ_MEASURED "a finite number from 45 to 65 (Hz)"
+#define EXP_START "a finite number >= 0 (s)"
 
 /* One problem of a capture: the field (e.g. "frames[3].cycles") and the expected value. */
 typedef struct {
@@ -258,6 +260,14 @@ static int check_capture(const rec_capture *c, problem *pr)
         if (f->k != k) return set_problem(pr, field, "%d (frames are held in k order)", k);
         snprintf(field, sizeof field, "frames[%d].cycles", k);
         if (!(isfinite(f->cycles) && f->cycles > 0)) return set_problem(pr, field, EXP_CYCLES);
+        snprintf(field, sizeof field, "frames[%d].grid_hz_measured", k);
+        if (!isnan(f->grid_hz_measured) &&
+            !(isfinite(f->grid_hz_measured) && f->grid_hz_measured >= 45 &&
+              f->grid_hz_measured <= 65))
+            return set_problem(pr, field, EXP_HZ_MEASURED);
+        snprintf(field, sizeof field, "frames[%d].start_s", k);
+        if (!isnan(f->start_s) && !(isfinite(f->start_s) && f->start_s >= 0))
+            return set_problem(pr, field, EXP_START);
         snprintf(field, sizeof field, "frames[%d].file", k);
         if (!valid_file_name(f->file)) return set_problem(pr, field, EXP_FILE);
         snprintf(field, sizeof field, "frames[%d].hdr_map", k);
@@ -616,7 +626,8 @@ static gs_status check_keys(const reader *r, json_t *obj, const char *prefix,
 static const char *const top_keys[] = {
     "format", "grid_hz", "K", "bands", "width", "height", "saturation", "black_level",
     "gain_e_per_dn", "read_noise_dn", "locked", "utc", "station", "frames", NULL};
-static const char *const frame_keys[] = {"file", "k", "cycles", "hdr_map", NULL};
+static const char *const frame_keys[] = {"file", "k", "cycles", "hdr_map", "grid_hz_measured",
+                                         "start_s", NULL};
 
 /* Fill the scalar fields and the frames table of cap from the parsed document. */
 static gs_status parse_capture(reader *r, json_t *root, rec_capture *cap)
@@ -706,6 +717,14 @@ static gs_status parse_capture(reader *r, json_t *root, rec_capture *cap)
         json_t *hm = json_object_get(f, "hdr_map");
         if (hm && json_is_string(hm) && json_string_value(hm)[0] == '\0') info.hdr_map[0] = '\0';
         else if ((st = get_file_name(r, f, "hdr_map", field, 0, info.hdr_map)) != GS_OK) break;
+        /* optional; the ranges are checked by check_capture */
+        snprintf(field, sizeof field, "frames[%d].grid_hz_measured", i);
+        if ((st = get_number(r, f, "grid_hz_measured", field, 0, NAN, EXP_HZ_MEASURED,
+                             &info.grid_hz_measured)) != GS_OK)
+            break;
+        snprintf(field, sizeof field, "frames[%d].start_s", i);
+        if ((st = get_number(r, f, "start_s", field, 0, NAN, EXP_START, &info.start_s)) != GS_OK)
+            break;
         cap->frames[k] = info;
     }
     if (st == GS_OK) {
@@ -964,6 +983,8 @@ gs_status rec_capture_alloc(rec_capture *cap)
     for (int k = 0; k < cap->K; k++) {
         snprintf(cap->frames[k].file, REC_PATH_MAX, "frame_%03d.png", k);
         cap->frames[k].k = k;
+        cap->frames[k].grid_hz_measured = NAN;
+        cap->frames[k].start_s = NAN;
     }
     return GS_OK;
 }
@@ -1102,6 +1123,14 @@ gs_status rec_capture_write_json(const char *dir, const rec_capture *cap)
         if (f->hdr_map[0]) {
             tb_printf(&t, ", \"hdr_map\": ");
             tb_string(&t, f->hdr_map);
+        }
+        if (!isnan(f->grid_hz_measured)) {
+            fmt_real(num, sizeof num, f->grid_hz_measured);
+            tb_printf(&t, ", \"grid_hz_measured\": %s", num);
+        }
+        if (!isnan(f->start_s)) {
+            fmt_real(num, sizeof num, f->start_s);
+            tb_printf(&t, ", \"start_s\": %s", num);
         }
         tb_printf(&t, "}%s\n", k + 1 < cap->K ? "," : "");
     }

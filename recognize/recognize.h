@@ -291,6 +291,10 @@ typedef struct {
     int k;                        /* window index 0..K-1: [k Delta/K, (k+1) Delta/K) */
     double cycles;                /* C, flicker cycles integrated before any HDR halving (> 0) */
     char hdr_map[REC_PATH_MAX];   /* 8-bit PNG of halving counts, "" when the frame has none */
+    double grid_hz_measured;      /* mean grid frequency during the exposure, Hz, 45..65 (NaN:
+                                   * unknown; file field "grid_hz_measured", optional) */
+    double start_s;               /* the exposure's start, s from the capture's first exposure,
+                                   * >= 0 (NaN: unknown; file field "start_s", optional) */
 } rec_frame_info;
 
 typedef struct {
@@ -329,7 +333,7 @@ typedef struct {
 gs_status rec_capture_read(const char *dir, rec_capture *cap);
 /* For a zeroed capture whose K, bands, width and height are set (GS_EINVAL otherwise, or if
  * frames, raw or halvings are already set): allocate frames (file "frame_NNN.png", k, cycles 0:
- * set them, hdr_map "") and zeroed raw pixels. */
+ * set them, hdr_map "", grid_hz_measured and start_s NaN) and zeroed raw pixels. */
 gs_status rec_capture_alloc(rec_capture *cap);
 /* After rec_capture_alloc: allocate zeroed halvings and name every frame's map "hdr_NNN.png"
  * (unless already named). */

@@ -555,7 +555,7 @@ static void plot_accuracy(const char *path, const point *pts, size_t np, const i
     for (int hard = 0; hard < 3; hard++)
         for (int panel = 0; panel < 2; panel++) {
             pladv(0);
-            plvpor(0.12, 0.95, 0.14, 0.88);
+            plvpor(0.16, 0.95, 0.14, 0.88);
             plwind(lx0, lx1, 0.0, 1.0);
             plcol0(1);
             plwidth(1.0);

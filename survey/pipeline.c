@@ -308,6 +308,7 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
     srv_light_row *lights = NULL;
     srv_location_row *locs = NULL;
     srv_frame_row *frames = NULL;
+    srv_freq_row *freq = NULL;
     const char *delight_path = o->delight_path;
     char delight_buf[CAP_PATH_MAX];
     int grid_hz = 0, bands = 0, K = 0, width = 0, height = 0;
@@ -501,7 +502,8 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
     lights = calloc(n ? n : 1, sizeof *lights);
     locs = calloc(n ? n : 1, sizeof *locs);
     frames = calloc((size_t)K, sizeof *frames);
-    if (!mt || !lights || !locs || !frames) {
+    freq = calloc((size_t)K, sizeof *freq);
+    if (!mt || !lights || !locs || !frames || !freq) {
         s = gs_fail(GS_ENOMEM, "out of memory for %zu lights", n);
         goto done;
     }
@@ -565,6 +567,23 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
         frames[k].hdr_map = cap.frames[k].hdr_map[0] ? cap.frames[k].hdr_map : NULL;
         frames[k].cycles = cap.frames[k].cycles;
     }
+    /* the grid frequency log: one row per frame whose exposure's frequency and start are
+     * known (capture.json), in time order; the capture's mean and std from them */
+    size_t n_freq = 0;
+    double f_sum = 0, f_sum2 = 0;
+    for (int k = 0; k < K; k++) {
+        const rec_frame_info *fi = &cap.frames[k];
+        if (!isfinite(fi->grid_hz_measured) || !isfinite(fi->start_s)) continue;
+        srv_freq_row fr = {fi->start_s, fi->cycles / (2.0 * fi->grid_hz_measured),
+                           fi->grid_hz_measured, NAN};
+        size_t j = n_freq++;
+        for (; j > 0 && freq[j - 1].t_s > fr.t_s; j--) freq[j] = freq[j - 1];
+        freq[j] = fr;
+        f_sum += fr.frequency_hz;
+    }
+    double f_mean = n_freq ? f_sum / (double)n_freq : NAN;
+    for (size_t j = 0; j < n_freq; j++)
+        f_sum2 += (freq[j].frequency_hz - f_mean) * (freq[j].frequency_hz - f_mean);
     char abs_dir[4096];
     const char *path = realpath(r->capture_dir, abs_dir) ? abs_dir : r->capture_dir;
     srv_capture_data cd;
@@ -582,19 +601,25 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
     cd.capture.width_px = width;
     cd.capture.height_px = height;
     cd.capture.locked = cap.locked ? 1 : 0;
+    cd.capture.mean_frequency_hz = f_mean;
+    cd.capture.sigma_frequency_hz = n_freq >= 2 ? sqrt(f_sum2 / (double)(n_freq - 1)) : NAN;
     cd.frames = frames;
     cd.n_frames = (size_t)K;
+    cd.frequency = n_freq ? freq : NULL;
+    cd.n_frequency = n_freq;
     cd.lights = lights;
     cd.locations = r->has_station ? locs : NULL;
     cd.n_lights = n;
     int skipped = 0;
-    stage(o, SRV_STAGE_STORE, "capture: %zu lights, %d frames in one transaction", n, K);
+    stage(o, SRV_STAGE_STORE, "capture: %zu lights, %d frames, %zu frequency rows in one "
+          "transaction", n, K, n_freq);
     s = srv_db_add_capture(db, &cd, &r->capture_id, &skipped);
     r->seconds[SRV_STAGE_STORE] = now_s() - t0;
     if (s != GS_OK) goto done;
     r->skipped = skipped;
 
 done:
+    free(freq);
     free(frames);
     free(locs);
     free(lights);

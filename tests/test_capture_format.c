@@ -112,6 +112,11 @@ static void check_same(const rec_capture *a, const rec_capture *b)
         CHECK(strcmp(a->frames[k].hdr_map, b->frames[k].hdr_map) == 0);
         CHECK(a->frames[k].k == k && b->frames[k].k == k);
         CHECK(a->frames[k].cycles == b->frames[k].cycles);
+        /* exact, NaN (absent) included */
+        CHECK(a->frames[k].grid_hz_measured == b->frames[k].grid_hz_measured ||
+              (isnan(a->frames[k].grid_hz_measured) && isnan(b->frames[k].grid_hz_measured)));
+        CHECK(a->frames[k].start_s == b->frames[k].start_s ||
+              (isnan(a->frames[k].start_s) && isnan(b->frames[k].start_s)));
     }
     size_t n = (size_t)a->K * a->width * a->height;
     CHECK(memcmp(a->raw, b->raw, n * a->bands * sizeof *a->raw) == 0);
@@ -422,6 +427,71 @@ TEST(capture_format_field_errors)
     rec_capture c;
     CHECK_OK(rec_capture_read(small_capture("ext", 8, "  \"saturation\": 4095, \"x_scene\": {\"a\": 1},"), &c));
     rec_capture_release(&c);
+}
+
+/* The optional per-frame "grid_hz_measured" and "start_s": absent = NaN, exact round trip,
+ * out-of-range values refused by the reader (naming file, line and field) and the writer. */
+TEST(capture_format_grid_frequency_fields)
+{
+    const char *dir = subdir("freq");
+    rec_capture a, b;
+    make_capture(&a, 4, 1, 3, 2, 0);
+    for (int k = 0; k < 4; k++) CHECK(isnan(a.frames[k].grid_hz_measured) && isnan(a.frames[k].start_s));
+    a.frames[0].grid_hz_measured = 50.036686617969742;
+    a.frames[0].start_s = 0;
+    a.frames[2].grid_hz_measured = 59.99;
+    a.frames[2].start_s = 6.1953800000000001;
+    a.frames[3].start_s = 9.25;               /* a start without a frequency */
+    write_capture(dir, &a);
+    char path[1100];
+    snprintf(path, sizeof path, "%s/capture.json", dir);
+    char *text = read_text(path, NULL);
+    CHECK(text && strstr(text, "\"grid_hz_measured\": 50.0366866179697") &&
+          strstr(text, "\"start_s\": 0"));
+    free(text);
+    CHECK_OK(rec_capture_read(dir, &b));
+    check_same(&a, &b);
+    CHECK(b.frames[0].grid_hz_measured == 50.036686617969742 && b.frames[2].start_s == 6.1953800000000001);
+    CHECK(isnan(b.frames[1].grid_hz_measured) && isnan(b.frames[1].start_s));
+    CHECK(isnan(b.frames[3].grid_hz_measured) && b.frames[3].start_s == 9.25);
+    rec_capture_release(&b);
+    /* the writer validates too */
+    a.frames[1].grid_hz_measured = 70;
+    CHECK(rec_capture_write_json(dir, &a) == GS_EINVAL);
+    CHECK(strstr(gs_detail(), "field frames[1].grid_hz_measured") != NULL);
+    a.frames[1].grid_hz_measured = NAN;
+    a.frames[1].start_s = -0.5;
+    CHECK(rec_capture_write_json(dir, &a) == GS_EINVAL);
+    CHECK(strstr(gs_detail(), "field frames[1].start_s") != NULL);
+    rec_capture_release(&a);
+
+    /* a capture without them (the small one) reads NaN */
+    rec_capture c;
+    CHECK_OK(rec_capture_read(small_capture("freq_absent", 0, NULL), &c));
+    for (int k = 0; k < c.K; k++) CHECK(isnan(c.frames[k].grid_hz_measured) && isnan(c.frames[k].start_s));
+    rec_capture_release(&c);
+    CHECK_OK(rec_capture_read(small_capture("freq_ok", 11, "    {\"file\": \"frame_001.png\", \"k\": 1, "
+                                            "\"cycles\": 100, \"grid_hz_measured\": 45, \"start_s\": 2},"), &c));
+    CHECK(c.frames[1].grid_hz_measured == 45 && c.frames[1].start_s == 2);
+    rec_capture_release(&c);
+    static const struct {
+        const char *text, *want;
+    } cases[] = {
+        {"    {\"file\": \"frame_001.png\", \"k\": 1, \"cycles\": 100, \"grid_hz_measured\": 70},",
+         "capture.json:11: field frames[1].grid_hz_measured: expected a finite number from 45 to 65"},
+        {"    {\"file\": \"frame_001.png\", \"k\": 1, \"cycles\": 100, \"grid_hz_measured\": \"50\"},",
+         "capture.json:11: field frames[1].grid_hz_measured"},
+        {"    {\"file\": \"frame_001.png\", \"k\": 1, \"cycles\": 100, \"grid_hz_measured\": null},",
+         "capture.json:11: field frames[1].grid_hz_measured"},
+        {"    {\"file\": \"frame_001.png\", \"k\": 1, \"cycles\": 100, \"start_s\": -1},",
+         "capture.json:11: field frames[1].start_s: expected a finite number >= 0"},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
+        char name[32];
+        snprintf(name, sizeof name, "freq_bad%zu", i);
+        expect_error(small_capture(name, 11, cases[i].text), GS_EFORMAT,
+                     (const char *[]){cases[i].want, NULL});
+    }
 }
 
 /* ------------------------------------------------------- malformed frames */

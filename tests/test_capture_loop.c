@@ -3,7 +3,9 @@
  * same files as an uninterrupted run; another configuration is refused; replay round trip. */
 #include "tests/test.h"
 #include "capture/capture.h"
+#include "recognize/recognize.h"
 
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -205,4 +207,116 @@ TEST(capture_replay_roundtrip)
     char e[1100];
     snprintf(e, sizeof e, "%s/e", tmp);
     CHECK_MSG(same_capture(a, e, 1), "capture --backend sim differs from the loop");
+}
+
+/* ------------------------------------------------------------------ grid frequency per frame */
+
+static gs_status run_text(const char *text, const char *dir, cap_scene *sc_out)
+{
+    cap_scene sc;
+    gs_status s = cap_scene_parse(text, "freq.json", ".", &sc);
+    if (s != GS_OK) return s;
+    cap_backend *be = NULL;
+    s = cap_backend_sim_new(&sc, &be);
+    if (s == GS_OK) {
+        cap_loop_opts o;
+        cap_loop_opts_default(&o);
+        o.progress = 0;
+        s = cap_loop_run(be, dir, &o, NULL);
+    }
+    cap_backend_free(be);
+    if (sc_out && s == GS_OK) *sc_out = sc;
+    else cap_scene_release(&sc);
+    return s;
+}
+
+static const char *freq_scene =
+    "{\"format\": \"gridsurvey-scene/1\", \"seed\": 3,\n"
+    " \"grid\": {\"nominal_hz\": 50, \"frequency\": %s},\n"
+    " \"camera\": {\"width_px\": 8, \"height_px\": 8, \"sensor\": {\"bands\": 1}},\n"
+    " \"acam\": {\"K\": 4, \"cycles\": %d},\n"
+    " \"lights\": [{\"bulb\": \"hps-150w\", \"x_px\": 3, \"y_px\": 3, \"flux_e_per_cycle\": 5000}],\n"
+    " \"effects\": {%s}}\n";
+
+/* capture.json carries each exposure's mean grid frequency and start: the frequency model's
+ * exactly for a constant grid, and for a real mains recording C / (2 (t_end - t_start)) of the
+ * recording's own crossings (Eq. 1), computed here from rec_mains_read + rec_zero_crossings. */
+TEST(capture_records_grid_frequency_per_frame)
+{
+    const char *tmp = test_tmpdir();
+    char text[2048], dir[1024];
+    rec_capture cap;
+    /* constant 50.02 Hz (frequency_wander on) and nominal 50 Hz (no timing effect) */
+    const double want_hz[2] = {50.02, 50.0};
+    for (int v = 0; v < 2; v++) {
+        snprintf(text, sizeof text, freq_scene,
+                 v == 0 ? "{\"model\": \"constant\", \"hz\": 50.02}" : "{\"model\": \"constant\"}",
+                 50, v == 0 ? "\"frequency_wander\": {}" : "");
+        snprintf(dir, sizeof dir, "%s/freq_const_%d", tmp, v);
+        cap_scene sc;
+        CHECK_OK(run_text(text, dir, &sc));
+        long step = sc.acam.cycles + sc.readout_cycles;
+        cap_scene_release(&sc);
+        memset(&cap, 0, sizeof cap);
+        CHECK_OK(rec_capture_read(dir, &cap));
+        for (int k = 0; k < cap.K; k++) {
+            CHECK_NEAR(cap.frames[k].grid_hz_measured, want_hz[v], 1e-9);
+            /* acquisition k starts k (C + readout) crossings after the first */
+            CHECK_NEAR(cap.frames[k].start_s, (double)(k * step) / (2.0 * want_hz[v]), 1e-9);
+        }
+        rec_capture_release(&cap);
+    }
+
+    /* a real mains recording */
+    const char *wav = test_shared_path("data/mains/whu_001_ref.wav");
+    char wav_path[1024];
+    snprintf(wav_path, sizeof wav_path, "%s", wav);
+    char freq[1200];
+    snprintf(freq, sizeof freq, "{\"model\": \"trace\", \"wav\": \"%s\"}", wav_path);
+    int C = 300;
+    snprintf(text, sizeof text, freq_scene, freq, C, "\"frequency_wander\": {}");
+    snprintf(dir, sizeof dir, "%s/freq_trace", tmp);
+    cap_scene sc;
+    CHECK_OK(run_text(text, dir, &sc));
+    long step = sc.acam.cycles + sc.readout_cycles;
+    cap_scene_release(&sc);
+    memset(&cap, 0, sizeof cap);
+    CHECK_OK(rec_capture_read(dir, &cap));
+    if (!cap.frames) return;
+    /* the recording's crossings as docs/scene.md defines the trace timeline: crossing 0 is the
+     * first rising crossing with a neighbour on each side, each time (t[i-1] + 2 t[i] +
+     * t[i+1]) / 4 */
+    double *x = NULL, *tc = NULL, rate = 0, mean = 0, rms = 0;
+    size_t n = 0, count = 0;
+    int rising_first = 0;
+    CHECK_OK(rec_mains_read(wav_path, &x, &n, &rate));
+    for (size_t i = 0; i < n; i++) mean += x[i];
+    mean /= n ? (double)n : 1.0;
+    for (size_t i = 0; i < n; i++) rms += (x[i] - mean) * (x[i] - mean);
+    rms = n ? sqrt(rms / (double)n) : 0;
+    CHECK_OK(rec_zero_crossings(x, n, rate, 0.1 * rms, &tc, &count, &rising_first));
+    free(x);
+    size_t i0 = 1;
+    while (i0 < count && (i0 % 2 == 0) != (rising_first > 0)) i0++;
+    double worst = 0, t_first = 0;
+    for (int k = 0; k < cap.K && tc; k++) {
+        size_t c0 = i0 + 64 + (size_t)(k * step), c1 = c0 + (size_t)C;
+        CHECK(c1 + 1 < count);
+        if (c1 + 1 >= count) break;
+        double t0 = 0.25 * (tc[c0 - 1] + 2.0 * tc[c0] + tc[c0 + 1]);
+        double t1 = 0.25 * (tc[c1 - 1] + 2.0 * tc[c1] + tc[c1 + 1]);
+        if (k == 0) t_first = t0;
+        double f = (double)C / (2.0 * (t1 - t0));
+        double got = cap.frames[k].grid_hz_measured;
+        printf("    frame %d: start %.6f s, %.6f Hz (recording's crossings %.6f Hz)\n", k,
+               cap.frames[k].start_s, got, f);
+        CHECK(got > 49.9 && got < 50.1);
+        CHECK_NEAR(got, f, 1e-9);
+        CHECK_NEAR(cap.frames[k].start_s, t0 - t_first, 1e-9);
+        if (fabs(got - f) > worst) worst = fabs(got - f);
+        if (k > 0) CHECK(got != cap.frames[k - 1].grid_hz_measured);
+    }
+    printf("    trace: largest |capture.json - recording| %.2e Hz\n", worst);
+    free(tc);
+    rec_capture_release(&cap);
 }

@@ -367,6 +367,48 @@ TEST(pipeline_lab_end_to_end_matches_truth)
     json_t *f0 = json_array_get(features, 0);
     CHECK(json_is_null(json_object_get(f0, "geometry")));
     json_decref(g);
+    /* the grid frequency log: one row per frame, the values of capture.json (read with Jansson),
+     * committed with the capture; its mean on the capture row */
+    char capjson[1100];
+    snprintf(capjson, sizeof capjson, "%s/capture.json", cap);
+    json_t *cj = json_load_file(capjson, 0, &err);
+    json_t *cframes = json_object_get(cj, "frames");
+    long n_frames = (long)json_array_size(cframes);
+    CHECK(n_frames == 26);
+    CHECK(query_long(db, "SELECT count(*) FROM grid_frequency") == n_frames);
+    CHECK(query_long(db, "SELECT frequency_count FROM captures") == n_frames);
+    sqlite3 *h = NULL;
+    CHECK(sqlite3_open_v2(db, &h, SQLITE_OPEN_READONLY, NULL) == SQLITE_OK);
+    sqlite3_stmt *q = NULL;
+    CHECK(sqlite3_prepare_v2(h, "SELECT t_s, window_s, frequency_hz, sigma_hz FROM grid_frequency "
+                             "WHERE capture_id = (SELECT id FROM captures) AND seq = ?",
+                             -1, &q, NULL) == SQLITE_OK);
+    double sum = 0, last_t = -1;
+    for (long i = 0; q && i < n_frames; i++) {
+        json_t *fr = json_array_get(cframes, (size_t)i);
+        double hz = json_number_value(json_object_get(fr, "grid_hz_measured"));
+        double t = json_number_value(json_object_get(fr, "start_s"));
+        double cyc = json_number_value(json_object_get(fr, "cycles"));
+        CHECK(json_is_number(json_object_get(fr, "grid_hz_measured")) &&
+              json_is_number(json_object_get(fr, "start_s")));
+        CHECK_NEAR(hz, 50.0, 1e-9);   /* the lab's grid: constant at nominal */
+        sum += hz;
+        /* rows are in time order; the lab's frames are acquired in k order */
+        sqlite3_reset(q);
+        sqlite3_bind_int64(q, 1, i);
+        CHECK(sqlite3_step(q) == SQLITE_ROW);
+        CHECK(sqlite3_column_double(q, 0) == t && t > last_t);
+        CHECK_NEAR(sqlite3_column_double(q, 1), cyc / (2.0 * hz), 1e-12);
+        CHECK(sqlite3_column_double(q, 2) == hz);
+        CHECK(sqlite3_column_type(q, 3) == SQLITE_NULL);
+        last_t = t;
+    }
+    sqlite3_finalize(q);
+    sqlite3_close(h);
+    json_decref(cj);
+    CHECK(query_long(db, "SELECT abs(mean_frequency_hz - 50.0) < 1e-9 AND "
+                         "abs(sigma_frequency_hz) < 1e-9 FROM captures") == 1);
+    CHECK_NEAR(sum / (double)n_frames, 50.0, 1e-9);
 
     char before[512], after[512];
     counts(db, before, sizeof before);
