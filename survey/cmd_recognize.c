@@ -33,6 +33,11 @@ static const char recognize_usage[] =
     "                          --phases 6 not a multiple of 60)\n"
     "  --min-confidence X      posterior below which a bulb or phase is reported ambiguous\n"
     "                          (phase null in JSON), 0..1 (default 0.8)\n"
+    "  --band-gains on|off     one brightness per band (on, default for RGB: extinction reddens\n"
+    "                          distant lights) or one brightness times the template chromaticity\n"
+    "                          (off: the paper's Eq. 7)\n"
+    "  --model-error F         fractional model error added to every sample's noise, 0..1\n"
+    "                          (default 0.04: scintillation, template mismatch; 0: none)\n"
     "  --threshold S           detection threshold of lights and mapped pixels, noise sigmas > 0\n"
     "                          (default 5)\n"
     "  --delight DB            the DELIGHT SQLite file (default: $GRIDSURVEY_DELIGHT, else the\n"
@@ -96,6 +101,8 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
         {"transformer-deg", required_argument, 0, 't'},
         {"min-confidence", required_argument, 0, 'c'},
         {"threshold", required_argument, 0, 's'},
+        {"band-gains", required_argument, 0, 'g'},
+        {"model-error", required_argument, 0, 'e'},
         {"delight", required_argument, 0, 'd'},
         {"maps", required_argument, 0, 'm'},
         {"help", no_argument, 0, 'h'},
@@ -130,6 +137,16 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
             o->eq7.ambiguous_conf = strtod(optarg, &end);
             if (end == optarg || *end || !(o->eq7.ambiguous_conf >= 0.0 && o->eq7.ambiguous_conf <= 1.0))
                 return usage_error("--min-confidence '%s': expected a number from 0 to 1", optarg);
+            break;
+        case 'g':
+            if (!strcmp(optarg, "on")) o->eq7.band_gains = 1;
+            else if (!strcmp(optarg, "off")) o->eq7.band_gains = 0;
+            else return usage_error("--band-gains '%s': expected on or off", optarg);
+            break;
+        case 'e':
+            o->eq7.model_error = strtod(optarg, &end);
+            if (end == optarg || *end || !(o->eq7.model_error >= 0.0 && o->eq7.model_error <= 1.0))
+                return usage_error("--model-error '%s': expected a fraction from 0 to 1", optarg);
             break;
         case 's':
             o->threshold = strtod(optarg, &end);
@@ -298,6 +315,8 @@ static gs_status print_json(const recognize_opts *o, const rec_capture *cap, con
     json_object_set_new(r, "unknown_p", jreal(o->eq7.unknown_p));
     json_object_set_new(r, "min_snr", jreal(o->eq7.min_snr));
     json_object_set_new(r, "threshold_sigma", jreal(o->threshold));
+    json_object_set_new(r, "band_gains", json_boolean(o->eq7.band_gains && cap->bands > 1));
+    json_object_set_new(r, "model_error", jreal(o->eq7.model_error));
     json_object_set_new(root, "recognition", r);
     size_t with_bulb = 0, with_phase = 0;
     json_t *lights = json_array();

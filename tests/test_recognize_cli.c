@@ -356,6 +356,39 @@ TEST(recognize_cli_json_bulbs_and_phases)
     json_decref(root);
 }
 
+/* --band-gains off --model-error 0 is the paper's Eq. 7: these unreddened lights are recognized
+ * just the same, and the JSON says which model ran. */
+TEST(recognize_cli_paper_model_flags)
+{
+    cached_delight();
+    const char *dir = render(&scene_a);
+    char args[1200];
+    snprintf(args, sizeof args, "%s --band-gains off --model-error 0", dir);
+    int rc;
+    char err[4096];
+    json_t *root = recognize_json(args, &rc, err, sizeof err);
+    CHECK_MSG(rc == 0, "exit %d: %s", rc, err);
+    if (!root) return;
+    check_discrete(root, &scene_a);
+    json_t *rcg = json_object_get(root, "recognition");
+    CHECK(json_is_false(json_object_get(rcg, "band_gains")));
+    CHECK(json_number_value(json_object_get(rcg, "model_error")) == 0.0);
+    json_decref(root);
+    snprintf(args, sizeof args, "%s --model-error 0.1", dir);
+    root = recognize_json(args, &rc, err, sizeof err);
+    CHECK_MSG(rc == 0, "exit %d: %s", rc, err);
+    if (!root) return;
+    rcg = json_object_get(root, "recognition");
+    CHECK(json_is_true(json_object_get(rcg, "band_gains")));
+    CHECK_NEAR(json_number_value(json_object_get(rcg, "model_error")), 0.1, 1e-15);
+    json_decref(root);
+    char cmd[2048];
+    snprintf(cmd, sizeof cmd, "%s recognize %s --band-gains maybe", test_bin(), dir);
+    CHECK(test_run(cmd, out, sizeof out) == 2 && strstr(out, "--band-gains"));
+    snprintf(cmd, sizeof cmd, "%s recognize %s --model-error 2", test_bin(), dir);
+    CHECK(test_run(cmd, out, sizeof out) == 2 && strstr(out, "--model-error"));
+}
+
 TEST(recognize_cli_mono_60hz_table)
 {
     cached_delight();
