@@ -1569,6 +1569,22 @@ static float row_bound_perp(const float *sh, const float *rho, float xp, size_t 
     return r;
 }
 
+/* For every continuous-phase bulb among the candidates, the grid cell of highest likelihood
+ * (w->peak_cell, w->has_peak), where the sub-cell refinement starts. */
+static void continuous_peaks(const rec_matcher *m, work *w)
+{
+    for (size_t b = 0; b < m->nb; b++) w->has_peak[b] = 0;
+    for (size_t ci = 0; ci < w->ncand; ci++) {
+        size_t j = w->cand[ci];
+        size_t b = (size_t)m->tbulb[j];
+        if (!m->cont[b]) continue;
+        if (!w->has_peak[b] || w->L[j] > w->L[w->peak_cell[b]]) {
+            w->has_peak[b] = 1;
+            w->peak_cell[b] = j;
+        }
+    }
+}
+
 /* Pixel log likelihood (as loglik() with T = |t|^2 / sigma^2, up to a row constant) from the
  * normalised score z = x.t/(|t| sigma); Sxx = |x|^2 / sigma^2. */
 static double pix_L(const rec_matcher *m, size_t j, double z, double Sxx)
@@ -1689,16 +1705,7 @@ static void pixel_row(const rec_matcher *m, pix_work *pw, const float *xr, const
     }
     /* continuous bulbs: refine around their best candidate cell */
     if (m->ncont) {
-        for (size_t b = 0; b < m->nb; b++) w->has_peak[b] = 0;
-        for (size_t ci = 0; ci < w->ncand; ci++) {
-            size_t j = w->cand[ci];
-            size_t b = (size_t)m->tbulb[j];
-            if (!m->cont[b]) continue;
-            if (!w->has_peak[b] || w->L[j] > w->L[w->peak_cell[b]]) {
-                w->has_peak[b] = 1;
-                w->peak_cell[b] = j;
-            }
-        }
+        continuous_peaks(m, w);
         int wset = 0;
         /* the leading continuous bulb (by its best cell) */
         size_t lead = m->nb;
@@ -1898,16 +1905,7 @@ static void pixel_row_band(const rec_matcher *m, pix_work *pw, const float *xr, 
         if (w->L[j] > Lmax) Lmax = w->L[j];
     }
     if (m->ncont) {
-        for (size_t b = 0; b < m->nb; b++) w->has_peak[b] = 0;
-        for (size_t ci = 0; ci < w->ncand; ci++) {
-            size_t j = w->cand[ci];
-            size_t b = (size_t)m->tbulb[j];
-            if (!m->cont[b]) continue;
-            if (!w->has_peak[b] || w->L[j] > w->L[w->peak_cell[b]]) {
-                w->has_peak[b] = 1;
-                w->peak_cell[b] = j;
-            }
-        }
+        continuous_peaks(m, w);
         size_t lead = m->nb;
         for (size_t b = 0; b < m->nb; b++)
             if (m->cont[b] && w->has_peak[b] && (lead == m->nb || w->L[w->peak_cell[b]] > w->L[w->peak_cell[lead]]))
