@@ -7,7 +7,7 @@ BUILD ?= build
 SAN ?=
 CC := gcc
 CXX := g++
-PKGS := sqlite3 fftw3 sndfile jansson plplot
+PKGS := sqlite3 fftw3 sndfile jansson plplot spng
 WARN := -Wall -Wextra -Wpedantic -Wshadow -Werror
 OPT := -O2 -g
 SANFLAGS :=
@@ -23,10 +23,13 @@ LDFLAGS := $(SANFLAGS)
 LDLIBS := $(shell pkg-config --libs $(PKGS) 2>/dev/null) -lopencv_imgcodecs -lopencv_imgproc \
 	-lopencv_core -lGeographicLib -lopenblas -lm
 
-MODULES := survey capture gis recognize
+# Static libraries in link order (each depends only on those after it): the lowest layer,
+# recognize/base (status, format kit, AC/BRF, DELIGHT, capture format), is libbase.a.
+MODULES := survey capture recognize gis recognize/base
 lib_srcs = $(filter-out survey/main.c,$(wildcard $(1)/*.c $(1)/*.cpp))
 lib_objs = $(patsubst %,$(BUILD)/%.o,$(basename $(call lib_srcs,$(1))))
-LIBS := $(foreach m,$(MODULES),$(if $(call lib_srcs,$(m)),$(BUILD)/lib$(m).a))
+lib_name = $(BUILD)/lib$(notdir $(1)).a
+LIBS := $(foreach m,$(MODULES),$(if $(call lib_srcs,$(m)),$(call lib_name,$(m))))
 TEST_SRCS := $(wildcard tests/*.c)
 TEST_OBJS := $(patsubst %.c,$(BUILD)/%.o,$(TEST_SRCS))
 BIN := $(BUILD)/gridsurvey
@@ -48,7 +51,7 @@ $(BUILD)/%.o: %.cpp
 	$(CXX) $(CPPFLAGS) $(CXXFLAGS) -c $< -o $@
 
 define lib_rule
-$(BUILD)/lib$(1).a: $(call lib_objs,$(1))
+$(call lib_name,$(1)): $(call lib_objs,$(1))
 	@rm -f $$@
 	ar rcs $$@ $$^
 endef

@@ -118,7 +118,7 @@ gs_status cap_hdr_update(const unsigned short *raw, int width, int height, int b
                          size_t *saturated, size_t *halved)
 {
     if (!raw || !halvings || width < 1 || height < 1 || bands < 1 || max_halvings < 0 ||
-        max_halvings > REC_MAX_HALVINGS)
+        max_halvings > GS_MAX_HALVINGS)
         return gs_fail(GS_EINVAL, "HDR update: bad arguments");
     size_t n_sat = 0, n_half = 0, plane = (size_t)width * (size_t)height;
     for (size_t p = 0; p < plane; p++) {
@@ -136,13 +136,13 @@ gs_status cap_hdr_update(const unsigned short *raw, int width, int height, int b
     return GS_OK;
 }
 
-gs_status cap_acam_expected(const rec_brf *b, double shift_cycles, const cap_acam_config *c,
+gs_status cap_acam_expected(const gs_brf *b, double shift_cycles, const cap_acam_config *c,
                             int k, int halvings, double *out)
 {
     if (k < 0 || k >= c->K) return gs_fail(GS_EINVAL, "window k = %d of K = %d", k, c->K);
     double *i_k = malloc(sizeof *i_k * (size_t)c->K * (size_t)b->bands);
     if (!i_k) return gs_fail(GS_ENOMEM, "out of memory");
-    gs_status s = rec_brf_integrate(b, shift_cycles, c->K, i_k);
+    gs_status s = gs_brf_integrate(b, shift_cycles, c->K, i_k);
     if (s == GS_OK) {
         double n = (double)cap_exposed_cycles(c->masks, 0, c->cycles, halvings);
         for (int band = 0; band < b->bands; band++)

@@ -40,14 +40,14 @@ static gs_status load_trace(cap_ac *ac, const cap_freq_config *f)
     double *x = NULL, *tc = NULL, rate;
     size_t n = 0, count = 0;
     int rising_first = 0;
-    gs_status s = rec_mains_read(f->wav, &x, &n, &rate);
+    gs_status s = gs_mains_read(f->wav, &x, &n, &rate);
     if (s != GS_OK) return s;
     double mean = 0, rms = 0;
     for (size_t i = 0; i < n; i++) mean += x[i];
     mean /= n ? (double)n : 1.0;
     for (size_t i = 0; i < n; i++) rms += (x[i] - mean) * (x[i] - mean);
     rms = n ? sqrt(rms / (double)n) : 0;
-    s = rec_zero_crossings(x, n, rate, 0.1 * rms, &tc, &count, &rising_first);
+    s = gs_zero_crossings(x, n, rate, 0.1 * rms, &tc, &count, &rising_first);
     free(x);
     if (s != GS_OK) return gs_fail(s, "%s: %s", f->wav, gs_detail());
     /* first rising crossing at or after start_s with a neighbour on each side */
@@ -326,7 +326,7 @@ gs_status cap_windows_blur(const cap_windows *w, cap_blur *out)
     return GS_OK;
 }
 
-gs_status cap_brf_expose(const rec_brf *b, double shift_cycles, const cap_windows *w, double *out)
+gs_status cap_brf_expose(const gs_brf *b, double shift_cycles, const cap_windows *w, double *out)
 {
     if (!w || w->cycles < 1) return gs_fail(GS_EINVAL, "expose: no windows");
     cap_brf_table t;

@@ -1,5 +1,5 @@
 /* backend_replay.c - the `replay` backend: serves the frames and HDR maps of an existing
- * capture directory (rec_capture_read validates it), e.g. to re-run the loop's bookkeeping, to
+ * capture directory (gs_capture_read validates it), e.g. to re-run the loop's bookkeeping, to
  * copy a capture, or to test consumers without a camera. */
 #include "capture/internal.h"
 
@@ -7,7 +7,7 @@
 #include <string.h>
 
 typedef struct {
-    rec_capture cap;
+    gs_capture cap;
     uint64_t fingerprint;
     int last_k;                 /* the last frame served, -1: none */
 } replay_backend;
@@ -15,7 +15,7 @@ typedef struct {
 static gs_status replay_info(void *self, cap_acq_info *info)
 {
     replay_backend *b = self;
-    const rec_capture *c = &b->cap;
+    const gs_capture *c = &b->cap;
     memset(info, 0, sizeof *info);
     info->grid_hz = c->grid_hz;
     info->K = c->K;
@@ -40,10 +40,10 @@ static gs_status replay_acquire(void *self, const cap_acquisition *a, unsigned c
                                 unsigned short *raw, double *cycles)
 {
     replay_backend *b = self;
-    const rec_capture *c = &b->cap;
+    const gs_capture *c = &b->cap;
     if (a->k < 0 || a->k >= c->K) return gs_fail(GS_EINVAL, "replay: frame %d of %d", a->k, c->K);
     size_t plane = (size_t)c->width * (size_t)c->height;
-    /* rec_capture_read orders frames by their k */
+    /* gs_capture_read orders frames by their k */
     memcpy(raw, c->raw + plane * (size_t)c->bands * (size_t)a->k, plane * (size_t)c->bands * sizeof *raw);
     if (halvings) {
         if (c->halvings) memcpy(halvings, c->halvings + plane * (size_t)a->k, plane);
@@ -68,7 +68,7 @@ static void replay_free(void *self)
 {
     replay_backend *b = self;
     if (!b) return;
-    rec_capture_release(&b->cap);
+    gs_capture_release(&b->cap);
     free(b);
 }
 
@@ -81,7 +81,7 @@ gs_status cap_backend_replay_new(const char *dir, cap_backend **out)
     replay_backend *b = calloc(1, sizeof *b);
     if (!b) return gs_fail(GS_ENOMEM, "replay backend: out of memory");
     b->last_k = -1;
-    gs_status s = rec_capture_read(dir, &b->cap);
+    gs_status s = gs_capture_read(dir, &b->cap);
     if (s != GS_OK) {
         free(b);
         return s;

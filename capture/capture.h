@@ -12,7 +12,7 @@
 #ifndef GRIDSURVEY_CAPTURE_H
 #define GRIDSURVEY_CAPTURE_H
 
-#include "recognize/recognize.h"
+#include "recognize/base/base.h"
 
 #include <stddef.h>
 
@@ -164,8 +164,8 @@ gs_status cap_hdr_update(const unsigned short *raw, int width, int height, int b
 /* The exact model value of one light in frame k (Eq. 5 through the masks): the BRF b delayed
  * by shift_cycles, its mean over window k of each of the cycles a pixel halved h times
  * integrates, summed: out[band] = exposed_cycles * i_k / K in units of "flux per cycle", with
- * i_k the Eq. 5 window mean (rec_brf_integrate). */
-gs_status cap_acam_expected(const rec_brf *b, double shift_cycles, const cap_acam_config *c,
+ * i_k the Eq. 5 window mean (gs_brf_integrate). */
+gs_status cap_acam_expected(const gs_brf *b, double shift_cycles, const cap_acam_config *c,
                             int k, int halvings, double *out);
 
 /* ------------------------------------------------------------ AC lock (paper Fig. 9) */
@@ -176,7 +176,7 @@ typedef enum {
     CAP_FREQ_CONSTANT = 0,   /* hz, exactly */
     CAP_FREQ_RANDOM_WALK,    /* mean_hz + a smooth (2nd-order) and a fast (1st-order)
                               * Gauss-Markov process: statistics of shared/data/README.md */
-    CAP_FREQ_TRACE           /* the crossings of a real mains recording (rec_mains_read) */
+    CAP_FREQ_TRACE           /* the crossings of a real mains recording (gs_mains_read) */
 } cap_freq_model;
 
 #define CAP_PATH_MAX 1024
@@ -245,7 +245,7 @@ gs_status cap_windows_blur(const cap_windows *w, cap_blur *out);
 /* The BRF (delayed by shift_cycles) averaged over all the exposure's windows, per band
  * (integral over the windows / their total length): the Eq. 5 value i_k of window k when
  * nothing blurs. */
-gs_status cap_brf_expose(const rec_brf *b, double shift_cycles, const cap_windows *w,
+gs_status cap_brf_expose(const gs_brf *b, double shift_cycles, const cap_windows *w,
                          double *out);
 
 /* ------------------------------------------------------------------ scenes */
@@ -314,8 +314,8 @@ typedef struct {
 /* One AC light of a scene (inline, from a GeoJSON file, or generated). */
 typedef struct {
     char id[48];
-    char bulb[REC_ID_MAX];        /* DELIGHT bulb id */
-    double phase_deg;             /* grid phase (shift = rec_phase_to_shift) */
+    char bulb[GS_ID_MAX];        /* DELIGHT bulb id */
+    double phase_deg;             /* grid phase (shift = gs_phase_to_shift) */
     double x_px, y_px;            /* image position (projected with gis_project if geographic) */
     int geographic;               /* 1: lat/lon/height given */
     double lat_deg, lon_deg, height_m;
@@ -379,7 +379,7 @@ typedef struct cap_sim cap_sim;
 
 /* d: the DELIGHT database to draw bulbs from (borrowed during the call only); NULL = the scene's
  * "delight" file or the built-in database. GS_ENOTFOUND naming the light for an unknown bulb. */
-gs_status cap_sim_new(const cap_scene *sc, const rec_delight *d, cap_sim **out);
+gs_status cap_sim_new(const cap_scene *sc, const gs_delight *d, cap_sim **out);
 void cap_sim_free(cap_sim *s);
 const cap_scene *cap_sim_scene(const cap_sim *s);   /* borrowed copy held by the sim */
 
@@ -522,7 +522,7 @@ gs_status cap_backend_hardware_log(cap_backend *b, cap_hw_log *log);
 /* ------------------------------------------------------------------ acquisition loop */
 
 /* Acquires frames 0..K-1 into a capture directory (docs/formats.md), each frame written as
- * soon as it is acquired (rec_capture_write_frame, atomic), with the HDR loop when enabled,
+ * soon as it is acquired (gs_capture_write_frame, atomic), with the HDR loop when enabled,
  * then capture.json. The directory's acquisition.json records the configuration fingerprint
  * and each finished frame's files with their sizes and FNV-1a checksums: a later run with the
  * same configuration keeps the frames that are present and intact, acquires the rest and

@@ -238,7 +238,7 @@ gs_status cap_fx_skyglow(cap_sim *s, cap_render *r)
     double frac = s->sc.fx.skyglow.fraction;
     int mode = s->sc.fx.skyglow.flicker;
     unsigned long long items = 0;
-    double g[CAP_MAX_LEVELS * REC_MAX_BANDS];
+    double g[CAP_MAX_LEVELS * GS_MAX_BANDS];
     for (size_t l = 0; l < s->n; l++) {
         const cap_light *li = &s->sc.lights[l];
         double cx = floor(li->x_px + 0.5), cy = floor(li->y_px + 0.5);

@@ -82,10 +82,10 @@ typedef struct {
     int n;          /* table points per cycle */
     int bands;
     double *G, *B;  /* bands * n each, owned: G and B - mean at x = j / n */
-    double mean[REC_MAX_BANDS];
+    double mean[GS_MAX_BANDS];
 } cap_brf_table;
 
-gs_status cap_brf_table_init(cap_brf_table *t, const rec_brf *b, int n);
+gs_status cap_brf_table_init(cap_brf_table *t, const gs_brf *b, int n);
 void cap_brf_table_release(cap_brf_table *t);
 /* int_a^b B(x - shift) dx for one band (any real a <= b, in cycles). */
 double cap_brf_table_integral(const cap_brf_table *t, int band, double shift, double a, double b);

@@ -1,7 +1,7 @@
 /* loop.c - the acquisition loop behind one backend interface (sim, replay, hardware): frames
  * 0..K-1, each with the ACam's HDR loop (paper Sec. 6: repeat with the rows of saturated pixels
  * halved until few pixels saturate or rows cannot be halved), written to the capture directory
- * as soon as it is acquired (rec_capture_write_frame: atomic), then capture.json. Progress on a
+ * as soon as it is acquired (gs_capture_write_frame: atomic), then capture.json. Progress on a
  * TTY. acquisition.json makes an interrupted capture resumable: it holds the configuration's
  * fingerprint and each finished frame's files with sizes and FNV-1a checksums and the index of
  * its first acquisition on the capture's timeline, so a frame that is re-acquired comes out the
@@ -109,7 +109,7 @@ static double now_s(void)
 /* Size and checksum of dir/name; -1 bytes when it cannot be read. */
 static void file_sum(const char *dir, const char *name, long *bytes, uint64_t *fnv)
 {
-    char path[CAP_PATH_MAX + REC_PATH_MAX + 2], *text = NULL;
+    char path[CAP_PATH_MAX + GS_PATH_MAX + 2], *text = NULL;
     size_t n = 0;
     *bytes = -1;
     *fnv = 0;
@@ -121,7 +121,7 @@ static void file_sum(const char *dir, const char *name, long *bytes, uint64_t *f
 }
 
 static gs_status write_progress(const char *dir, uint64_t fp, long acquisitions, int K,
-                                const rec_capture *cap, const frame_state *fs, int complete)
+                                const gs_capture *cap, const frame_state *fs, int complete)
 {
     /* plain text, one frame a line, deterministic */
     size_t cap_n = 512 + (size_t)K * 512;
@@ -162,7 +162,7 @@ static gs_status write_progress(const char *dir, uint64_t fp, long acquisitions,
 
 /* Reads dir/acquisition.json: frames whose files are intact become done. *found = 0 when there
  * is none. */
-static gs_status read_progress(const char *dir, uint64_t fp, int K, const rec_capture *cap,
+static gs_status read_progress(const char *dir, uint64_t fp, int K, const gs_capture *cap,
                                frame_state *fs, long *acquisitions, int *complete, int *found)
 {
     char path[CAP_PATH_MAX + 32], *text = NULL;
@@ -297,7 +297,7 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
     size_t plane = (size_t)info.width * (size_t)info.height;
     size_t nraw = plane * (size_t)info.bands;
 
-    rec_capture cap;
+    gs_capture cap;
     memset(&cap, 0, sizeof cap);
     cap.grid_hz = info.grid_hz;
     cap.K = K;
@@ -322,12 +322,12 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
     }
     int maps = hdr || info.fixed_halvings;
     for (int k = 0; k < K; k++) {
-        snprintf(cap.frames[k].file, REC_PATH_MAX, "frame_%03d.png", k);
+        snprintf(cap.frames[k].file, GS_PATH_MAX, "frame_%03d.png", k);
         cap.frames[k].k = k;
         cap.frames[k].cycles = (double)info.cycles;
         cap.frames[k].grid_hz_measured = NAN;
         cap.frames[k].start_s = NAN;
-        if (maps) snprintf(cap.frames[k].hdr_map, REC_PATH_MAX, "hdr_%03d.png", k);
+        if (maps) snprintf(cap.frames[k].hdr_map, GS_PATH_MAX, "hdr_%03d.png", k);
         fs[k].index = -1;
         fs[k].old_index = -1;
         fs[k].grid_hz_measured = fs[k].start_s = NAN;
@@ -368,8 +368,8 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
         }
     }
     /* a 2-frame view of the capture writes one frame from the single frame buffer */
-    rec_frame_info view_frames[2];
-    rec_capture view = cap;
+    gs_frame_info view_frames[2];
+    gs_capture view = cap;
     view.K = 2;
     view.frames = view_frames;
     view.raw = raw;
@@ -446,9 +446,9 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
         cap.frames[k].start_s = isfinite(tm.start_s) && tm.start_s >= 0 ? tm.start_s : NAN;
         view_frames[0] = cap.frames[k];
         view_frames[1] = cap.frames[k];
-        snprintf(view_frames[1].file, REC_PATH_MAX, "unused_%03d.png", k);
+        snprintf(view_frames[1].file, GS_PATH_MAX, "unused_%03d.png", k);
         view_frames[1].hdr_map[0] = '\0';
-        s = rec_capture_write_frame(dir, &view, 0);
+        s = gs_capture_write_frame(dir, &view, 0);
         if (s != GS_OK) goto done;
         fs[k].done = 1;
         fs[k].index = index;
@@ -471,7 +471,7 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
         s = GS_OK;
         goto done;
     }
-    s = rec_capture_write_json(dir, &cap);
+    s = gs_capture_write_json(dir, &cap);
     if (s != GS_OK) goto done;
     s = write_progress(dir, fp, acquisitions, K, &cap, fs, 1);
     if (s != GS_OK) goto done;
@@ -481,6 +481,6 @@ done:
     free(raw);
     free(halv);
     free(fs);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
     return s;
 }

@@ -656,7 +656,7 @@ static gs_status parse_street_grid(const pctx *c, const cap_scene *sc, json_t *b
     if (!json_is_array(techs) || json_array_size(techs) < 1 || json_array_size(techs) > 64)
         return bad(c, GS_EFORMAT, tp, "expected an array of 1 to 64 {bulb, weight, lumens}");
     size_t nt = json_array_size(techs);
-    char tbulb[64][REC_ID_MAX];
+    char tbulb[64][GS_ID_MAX];
     double tw[64], tlm[64], wsum = 0;
     for (size_t i = 0; i < nt; i++) {
         char ip[600];
@@ -664,7 +664,7 @@ static gs_status parse_street_grid(const pctx *c, const cap_scene *sc, json_t *b
         json_t *t = json_array_get(techs, i);
         if (!json_is_object(t)) return bad(c, GS_EFORMAT, ip, "expected an object {bulb, weight, lumens}");
         if ((s = check_keys(c, t, ip, tkeys)) != GS_OK ||
-            (s = get_str(c, t, ip, "bulb", 1, NULL, tbulb[i], REC_ID_MAX)) != GS_OK ||
+            (s = get_str(c, t, ip, "bulb", 1, NULL, tbulb[i], GS_ID_MAX)) != GS_OK ||
             (s = get_num(c, t, ip, "weight", 0, 1, 0, 1e9, &tw[i])) != GS_OK ||
             (s = get_num(c, t, ip, "lumens", 1, 0, 0, 1e9, &tlm[i])) != GS_OK)
             return s;

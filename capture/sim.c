@@ -194,10 +194,10 @@ static gs_status find_species(cap_sim *s, int bulb, double shift, int *out)
     if (!p->i_k) return gs_fail(GS_ENOMEM, "simulator: out of memory");
     s->n_sp++;
     *out = (int)(s->n_sp - 1);
-    return rec_brf_integrate(&s->bulbs[bulb].brf, shift, s->K, p->i_k);
+    return gs_brf_integrate(&s->bulbs[bulb].brf, shift, s->K, p->i_k);
 }
 
-static gs_status load_bulbs(cap_sim *s, const rec_delight *d)
+static gs_status load_bulbs(cap_sim *s, const gs_delight *d)
 {
     const cap_scene *sc = &s->sc;
     s->species = calloc(s->n ? s->n : 1, sizeof *s->species);
@@ -206,7 +206,7 @@ static gs_status load_bulbs(cap_sim *s, const rec_delight *d)
     if (!s->species || !s->flux || !s->bulbs) return gs_fail(GS_ENOMEM, "simulator: out of memory");
     for (size_t l = 0; l < s->n; l++) {
         const cap_light *li = &sc->lights[l];
-        const rec_bulb *b = rec_delight_find(d, li->bulb, sc->grid_hz, s->B);
+        const gs_bulb *b = gs_delight_find(d, li->bulb, sc->grid_hz, s->B);
         if (!b)
             return gs_fail(GS_ENOTFOUND, "%s:%d: field lights (light %s): bulb '%s': expected a "
                            "DELIGHT bulb id with a %d Hz, %d-band entry (gridsurvey delight list)",
@@ -215,15 +215,15 @@ static gs_status load_bulbs(cap_sim *s, const rec_delight *d)
         size_t bi = 0;
         while (bi < s->n_bulbs && strcmp(s->bulbs[bi].id, b->id)) bi++;
         if (bi == s->n_bulbs) {
-            rec_bulb *nb = &s->bulbs[s->n_bulbs];
+            gs_bulb *nb = &s->bulbs[s->n_bulbs];
             *nb = *b;
             memset(&nb->brf, 0, sizeof nb->brf);
-            gs_status st = rec_brf_copy(&nb->brf, &b->brf);
+            gs_status st = gs_brf_copy(&nb->brf, &b->brf);
             if (st != GS_OK) return st;
             s->n_bulbs++;
         }
         int sp;
-        gs_status st = find_species(s, (int)bi, rec_phase_to_shift(li->phase_deg), &sp);
+        gs_status st = find_species(s, (int)bi, gs_phase_to_shift(li->phase_deg), &sp);
         if (st != GS_OK) return st;
         s->species[l] = sp;
         for (int band = 0; band < s->B; band++)
@@ -296,7 +296,7 @@ void cap_sim_cycle_time(const cap_sim *s, const cap_render *r, long c, double *t
 void cap_sim_free(cap_sim *s)
 {
     if (!s) return;
-    for (size_t i = 0; i < s->n_bulbs; i++) rec_bulb_release(&s->bulbs[i]);
+    for (size_t i = 0; i < s->n_bulbs; i++) gs_bulb_release(&s->bulbs[i]);
     free(s->bulbs);
     if (s->tables)
         for (size_t i = 0; i < s->n_bulbs; i++) cap_brf_table_release(&s->tables[i]);
@@ -324,12 +324,12 @@ void cap_sim_free(cap_sim *s)
     free(s);
 }
 
-gs_status cap_sim_new(const cap_scene *sc, const rec_delight *d_in, cap_sim **out)
+gs_status cap_sim_new(const cap_scene *sc, const gs_delight *d_in, cap_sim **out)
 {
     *out = NULL;
     cap_sim *s = calloc(1, sizeof *s);
     if (!s) return gs_fail(GS_ENOMEM, "simulator: out of memory");
-    rec_delight *own = NULL;
+    gs_delight *own = NULL;
     gs_status st = scene_copy(&s->sc, sc);
     if (st != GS_OK) goto fail;
     s->W = sc->cam.width_px;
@@ -349,20 +349,20 @@ gs_status cap_sim_new(const cap_scene *sc, const rec_delight *d_in, cap_sim **ou
                 has(s, CAP_FX_DMD_JITTER);
     if ((st = cap_acam_check(&sc->acam)) != GS_OK) goto fail;
     /* DELIGHT */
-    const rec_delight *d = d_in;
+    const gs_delight *d = d_in;
     if (!d) {
-        own = rec_delight_new();
+        own = gs_delight_new();
         if (!own) {
             st = gs_fail(GS_ENOMEM, "simulator: out of memory");
             goto fail;
         }
-        st = sc->delight[0] ? rec_delight_load(own, sc->delight)
-                            : rec_delight_generate(own, REC_BRF_N_DEFAULT);
+        st = sc->delight[0] ? gs_delight_load(own, sc->delight)
+                            : gs_delight_generate(own, GS_BRF_N_DEFAULT);
         if (st != GS_OK) goto fail;
         d = own;
     }
     if ((st = load_bulbs(s, d)) != GS_OK) goto fail;
-    rec_delight_free(own);
+    gs_delight_free(own);
     own = NULL;
     /* cycle levels of the mask rows */
     s->lev = malloc((size_t)s->C);
@@ -456,7 +456,7 @@ gs_status cap_sim_new(const cap_scene *sc, const rec_delight *d_in, cap_sim **ou
     *out = s;
     return GS_OK;
 fail:
-    rec_delight_free(own);
+    gs_delight_free(own);
     cap_sim_free(s);
     return st;
 }
@@ -590,7 +590,7 @@ gs_status cap_sim_write_truth(const cap_sim *s, const char *dir)
     size_t in_image = 0;
     for (size_t l = 0; l < s->n; l++) {
         const cap_light *li = &sc->lights[l];
-        const rec_bulb *b = &s->bulbs[s->sp[s->species[l]].bulb];
+        const gs_bulb *b = &s->bulbs[s->sp[s->species[l]].bulb];
         json_t *o = json_object();
         json_object_set_new(o, "id", json_string(li->id));
         json_object_set_new(o, "x_px", jnum(li->x_px));
@@ -603,9 +603,9 @@ gs_status cap_sim_write_truth(const cap_sim *s, const char *dir)
         }
         if (li->distance_m > 0) json_object_set_new(o, "distance_m", jnum(li->distance_m));
         json_object_set_new(o, "bulb", json_string(li->bulb));
-        json_object_set_new(o, "technology", json_string(rec_tech_name(b->type)));
+        json_object_set_new(o, "technology", json_string(gs_tech_name(b->type)));
         json_object_set_new(o, "phase_deg", jnum(li->phase_deg));
-        json_object_set_new(o, "shift_cycles", jnum(rec_phase_to_shift(li->phase_deg)));
+        json_object_set_new(o, "shift_cycles", jnum(gs_phase_to_shift(li->phase_deg)));
         json_object_set_new(o, "flux_e_per_cycle", jnum(li->flux_e_per_cycle));
         if (li->lumens > 0) json_object_set_new(o, "lumens", jnum(li->lumens));
         json_array_append_new(lights, o);

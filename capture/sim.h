@@ -10,7 +10,7 @@
 typedef struct {
     int bulb;          /* index into cap_sim.bulbs */
     double shift;      /* BRF delay, cycles */
-    double *i_k;       /* bands * K exact Eq. 5 window means (rec_brf_integrate) */
+    double *i_k;       /* bands * K exact Eq. 5 window means (gs_brf_integrate) */
 } cap_species;
 
 /* The pixels a light deposits into: a rectangle clipped to the image, with weights. */
@@ -30,7 +30,7 @@ struct cap_stage {
 };
 
 #define CAP_MAX_STAGES 32
-#define CAP_MAX_LEVELS (REC_MAX_HALVINGS + 1)
+#define CAP_MAX_LEVELS (GS_MAX_HALVINGS + 1)
 
 /* Per-acquisition state. */
 struct cap_render {
@@ -55,7 +55,7 @@ struct cap_sim {
     double half_s;                  /* nominal Delta */
     unsigned fx;                    /* enabled effects */
     int timing;                     /* any timing effect */
-    rec_bulb *bulbs;                /* copies of the DELIGHT entries used */
+    gs_bulb *bulbs;                /* copies of the DELIGHT entries used */
     size_t n_bulbs;
     cap_brf_table *tables;          /* per bulb, only with timing effects */
     cap_species *sp;

@@ -113,11 +113,11 @@ double cap_rng_poisson(cap_rng *r, double lambda)
 
 /* ------------------------------------------------------------------ BRF tables */
 
-gs_status cap_brf_table_init(cap_brf_table *t, const rec_brf *b, int n_min)
+gs_status cap_brf_table_init(cap_brf_table *t, const gs_brf *b, int n_min)
 {
     memset(t, 0, sizeof *t);
     int n = b->n;
-    if (n < 4 || n % 2 || b->bands < 1 || b->bands > REC_MAX_BANDS || !b->v)
+    if (n < 4 || n % 2 || b->bands < 1 || b->bands > GS_MAX_BANDS || !b->v)
         return gs_fail(GS_EINVAL, "BRF table: a BRF of %d x %d samples", b->bands, n);
     int T = n_min > 2 * n ? n_min : 2 * n;
     if (T % 2) T++;

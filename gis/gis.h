@@ -42,7 +42,7 @@
 #ifndef GRIDSURVEY_GIS_H
 #define GRIDSURVEY_GIS_H
 
-#include "recognize/recognize.h"
+#include "recognize/base/base.h"
 
 #include <stddef.h>
 
@@ -240,8 +240,8 @@ typedef struct {
     double lat_deg, lon_deg;         /* NaN: not located (null geometry / empty fields) */
     double height_m;                 /* ellipsoidal, NaN if unknown */
     gis_ellipse ellipse;             /* NaN fields if unknown */
-    char bulb_id[REC_ID_MAX];        /* recognized DELIGHT bulb, "" if unknown */
-    char technology[32];             /* rec_tech_name(), "" if unknown */
+    char bulb_id[GS_ID_MAX];        /* recognized DELIGHT bulb, "" if unknown */
+    char technology[32];             /* gs_tech_name(), "" if unknown */
     double phase_deg;                /* grid phase [0, 360), NaN = unknown/ambiguous */
     double confidence;               /* [0, 1], NaN if unknown */
     char survey[GIS_TEXT_MAX];       /* survey name, "" if none */

@@ -7,7 +7,7 @@
  * here are about how.
  *
  * Units: every image here is per-cycle intensity (DN per flicker cycle, black removed):
- * v = (raw - black) * 2^h / cycles (rec_capture_value). Noise per sample (DN^2):
+ * v = (raw - black) * 2^h / cycles (gs_capture_value). Noise per sample (DN^2):
  * var(raw) = read^2 + 1/12 + max(raw - black, 0) / gain, so var(v) = var(raw) * (2^h/cycles)^2.
  * The 1/12 DN^2 is the quantisation of an integer sample (uniform over one DN); it also keeps
  * the noise map > 0 for noise-free data.
@@ -257,7 +257,7 @@ static void mesh_median3(double *g, int nx, int ny, double *tmp)
 /* ------------------------------------------------------------------ state */
 
 typedef struct {
-    const rec_capture *cap;
+    const gs_capture *cap;
     const rec_blob_opts *o;
     int W, H, K, bands;
     size_t N;
@@ -265,7 +265,7 @@ typedef struct {
     float black;
     double var0;             /* read^2 + 1/12, DN^2 */
     double inv_gain;         /* 1 / gain, or 0 (no shot noise) */
-    double *scale;           /* [k * (REC_MAX_HALVINGS + 1) + h] = 2^h / cycles_k */
+    double *scale;           /* [k * (GS_MAX_HALVINGS + 1) + h] = 2^h / cycles_k */
 
     float *M;                /* mean image, then M - background */
     unsigned char *sat;      /* saturated in some frame and band */
@@ -315,8 +315,8 @@ static inline double sample_var(const state *s, unsigned raw, double scale)
 
 static gs_status mean_image(state *s)
 {
-    const rec_capture *c = s->cap;
-    const int HS = REC_MAX_HALVINGS + 1;
+    const gs_capture *c = s->cap;
+    const int HS = GS_MAX_HALVINGS + 1;
     const int B = s->bands;
     for (int k = 0; k < s->K; k++) {
         const unsigned short *rk = c->raw + s->N * (size_t)B * (size_t)k;
@@ -334,10 +334,10 @@ static gs_status mean_image(state *s)
             s->sat[p] |= (unsigned char)satp;
             if (hk) {
                 unsigned h = hk[p];
-                if (h > REC_MAX_HALVINGS)
+                if (h > GS_MAX_HALVINGS)
                     return gs_fail(GS_EINVAL, "blobs: frame %d pixel (x %zu, y %zu): %u halvings: "
                                    "expected 0 to %d", k, p % (size_t)s->W, p / (size_t)s->W, h,
-                                   REC_MAX_HALVINGS);
+                                   GS_MAX_HALVINGS);
                 float f = (float)sc[h];
                 s->M[p] += acc * f;
                 s->sumA[p] += f * f;
@@ -390,7 +390,7 @@ static gs_status detect(state *s)
     /* noise of M at the background level (recognize.h, step 3) and the threshold */
     double A = 0, Bq = 0;
     for (int k = 0; k < s->K; k++) {
-        double sc = s->scale[(size_t)k * (REC_MAX_HALVINGS + 1)];
+        double sc = s->scale[(size_t)k * (GS_MAX_HALVINGS + 1)];
         A += sc * sc;
         Bq += sc;
     }
@@ -416,9 +416,9 @@ static gs_status detect(state *s)
  * unsaturated pixel (the fallback when detections cover nearly everything). */
 static gs_status frame_mesh(state *s, const unsigned char *mask, int use_mask)
 {
-    const rec_capture *c = s->cap;
+    const gs_capture *c = s->cap;
     const mesh *m = &s->mesh;
-    const int nodes = m->nx * m->ny, B = s->bands, HS = REC_MAX_HALVINGS + 1;
+    const int nodes = m->nx * m->ny, B = s->bands, HS = GS_MAX_HALVINGS + 1;
     const size_t planes = (size_t)s->K * (size_t)B;
     int *cnt = calloc((size_t)nodes, sizeof *cnt);
     unsigned char *good = malloc((size_t)nodes);
@@ -548,8 +548,8 @@ static int cmp_peak(const void *a, const void *b)
  * u and su hold bands * K values. 0 when unusable. */
 static int peak_signal(const state *s, int label, int p, double *u, double *su)
 {
-    const rec_capture *c = s->cap;
-    const int B = s->bands, K = s->K, HS = REC_MAX_HALVINGS + 1;
+    const gs_capture *c = s->cap;
+    const int B = s->bands, K = s->K, HS = GS_MAX_HALVINGS + 1;
     const int px = (int)(p % (size_t)s->W), py = (int)(p / (size_t)s->W);
     int used = 0;
     for (int r = 1; r <= PEAK_WINDOW_MAX && !used; r++) {
@@ -934,8 +934,8 @@ static void win_centroid(const state *s, int light, double r2, double *xc, doubl
 /* The catalog: lights in raster order of their first footprint pixel. */
 static gs_status photometry(state *s, const int *area, rec_catalog *cat)
 {
-    const rec_capture *c = s->cap;
-    const int B = s->bands, K = s->K, HS = REC_MAX_HALVINGS + 1, BK = B * K;
+    const gs_capture *c = s->cap;
+    const int B = s->bands, K = s->K, HS = GS_MAX_HALVINGS + 1, BK = B * K;
     const int nodes = s->mesh.nx * s->mesh.ny;
     const int W = s->W, H = s->H;
     gs_status st = GS_OK;
@@ -1086,7 +1086,7 @@ static gs_status photometry(state *s, const int *area, rec_catalog *cat)
         for (int a = 0; a < na; a++) {
             int p = ap[a];
             if (s->sat[p]) continue;
-            double mean_flux[REC_MAX_BANDS] = {0};
+            double mean_flux[GS_MAX_BANDS] = {0};
             for (int k = 0; k < K; k++) {
                 double f = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[s->N * (size_t)k + (size_t)p] : 0)];
                 const unsigned short *r = c->raw + (s->N * (size_t)k + (size_t)p) * (size_t)B;
@@ -1153,14 +1153,14 @@ static gs_status check_opts(const rec_blob_opts *o)
     return GS_OK;
 }
 
-gs_status rec_blobs_extract(const rec_capture *cap, const rec_blob_opts *o, rec_catalog *cat)
+gs_status rec_blobs_extract(const gs_capture *cap, const rec_blob_opts *o, rec_catalog *cat)
 {
     if (!cat) return gs_fail(GS_EINVAL, "rec_blobs_extract: NULL catalog");
     memset(cat, 0, sizeof *cat);
     if (!cap || !o) return gs_fail(GS_EINVAL, "rec_blobs_extract: NULL capture or options");
     gs_status st = check_opts(o);
     if (st != GS_OK) return st;
-    if ((st = rec_capture_check(cap, "rec_blobs_extract")) != GS_OK) return st;
+    if ((st = gs_capture_check(cap, "rec_blobs_extract")) != GS_OK) return st;
     if (!cap->raw) return gs_fail(GS_EINVAL, "rec_blobs_extract: the capture has no pixels");
 
     state s;
@@ -1176,7 +1176,7 @@ gs_status rec_blobs_extract(const rec_capture *cap, const rec_blob_opts *o, rec_
     s.black = (float)cap->black_level_dn;
     s.var0 = cap->read_noise_dn * cap->read_noise_dn + 1.0 / 12.0;
     s.inv_gain = cap->gain_e_per_dn > 0 ? 1.0 / cap->gain_e_per_dn : 0;
-    const int HS = REC_MAX_HALVINGS + 1;
+    const int HS = GS_MAX_HALVINGS + 1;
     s.scale = malloc(sizeof(double) * (size_t)s.K * HS);
     s.M = calloc(s.N, sizeof(float));
     s.sat = calloc(s.N, 1);

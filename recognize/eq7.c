@@ -4,7 +4,7 @@
  *
  * The estimator (docs/recognition.md has the derivation and the measured accuracy):
  * - Templates t_m = Q_beta(sigma) b_beta(sigma, shift) integrated to the K camera windows (Eq. 5:
- *   rec_brf_integrate for discrete phases; for continuous shifts the same window means from each
+ *   gs_brf_integrate for discrete phases; for continuous shifts the same window means from each
  *   bulb's Fourier series, which also gives exact derivatives in the shift) for every candidate
  *   bulb and phase. A template's mean over k, summed over bands, is 1, so the fitted scale a is the
  *   light's brightness (Eq. 6).
@@ -146,7 +146,7 @@ struct rec_matcher {
     int grid_hz, bands, K, D;           /* D = bands * K values per light */
     rec_eq7_opts o;
     size_t nb;                          /* candidate bulbs */
-    rec_bulb *bulbs;                    /* owned copies */
+    gs_bulb *bulbs;                    /* owned copies */
     int np;                             /* discrete phases (3 or 6), 0 in continuous mode */
     double phase_deg[6];
     int G;                              /* grid cells per cycle for continuous bulbs */
@@ -167,7 +167,7 @@ struct rec_matcher {
     double *lognorm;                    /* [M] log |t| */
     double *cellw;                      /* [M] prior mass of the template within its bulb */
     double *shift;                      /* [M] cycles */
-    double *tphase;                     /* [M] grid phase, deg (0 for REC_REF_NONE bulbs) */
+    double *tphase;                     /* [M] grid phase, deg (0 for GS_REF_NONE bulbs) */
     int *tbulb, *tcell;                 /* [M] bulb, index among the bulb's templates */
     /* Fourier series of the window means, continuous bulbs only:
      * t_k(s) = F0 + sum_h Re(F_h e^{2 pi i h (k/K - s)}) + nyquist term. */
@@ -206,7 +206,7 @@ void rec_matcher_free(rec_matcher *m)
 {
     if (!m) return;
     for (size_t b = 0; b < m->nb; b++) {
-        rec_bulb_release(&m->bulbs[b]);
+        gs_bulb_release(&m->bulbs[b]);
         if (m->F) free(m->F[b]);
     }
     free(m->bulbs);
@@ -247,7 +247,7 @@ size_t rec_matcher_bulb_count(const rec_matcher *m)
     return m ? m->nb : 0;
 }
 
-const rec_bulb *rec_matcher_bulb(const rec_matcher *m, size_t i)
+const gs_bulb *rec_matcher_bulb(const rec_matcher *m, size_t i)
 {
     return (m && i < m->nb) ? &m->bulbs[i] : NULL;
 }
@@ -288,10 +288,10 @@ static double chi2_quantile_upper(double p, int dof)
     return hi;
 }
 
-/* Fourier coefficients of bulb b's window means (same algebra as rec_brf_integrate). */
+/* Fourier coefficients of bulb b's window means (same algebra as gs_brf_integrate). */
 static gs_status fourier_setup(rec_matcher *m, size_t b)
 {
-    const rec_bulb *bu = &m->bulbs[b];
+    const gs_bulb *bu = &m->bulbs[b];
     int n = bu->brf.n, K = m->K, bands = m->bands;
     double complex *C = malloc(sizeof *C * (size_t)(n / 2 + 1));
     if (!C) return gs_fail(GS_ENOMEM, "Eq. 7: cannot allocate a %d-point spectrum", n);
@@ -303,7 +303,7 @@ static gs_status fourier_setup(rec_matcher *m, size_t b)
     }
     int hmax = 0;
     for (int band = 0; band < bands; band++) {
-        gs_status s = rec_brf_spectrum(bu->brf.v + (size_t)band * (size_t)n, n, C);
+        gs_status s = gs_brf_spectrum(bu->brf.v + (size_t)band * (size_t)n, n, C);
         if (s != GS_OK) {
             free(C);
             free(F);
@@ -584,7 +584,7 @@ static gs_status prefilter_setup(rec_matcher *m)
     return st;
 }
 
-gs_status rec_matcher_new(const rec_delight *d, int grid_hz, int bands, int K,
+gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
                           const rec_eq7_opts *o, rec_matcher **out)
 {
     if (!out) return gs_fail(GS_EINVAL, "Eq. 7 matcher: out is NULL");
@@ -616,10 +616,10 @@ gs_status rec_matcher_new(const rec_delight *d, int grid_hz, int bands, int K,
     size_t D = (size_t)m->D;
 
     /* candidate bulbs */
-    size_t nd = rec_delight_count(d), nb = 0;
+    size_t nd = gs_delight_count(d), nb = 0;
     for (size_t i = 0; i < nd; i++) {
-        const rec_bulb *b = rec_delight_get(d, i);
-        if (b->grid_hz == grid_hz && b->brf.bands == bands && b->ref != REC_REF_UNLOCKED) nb++;
+        const gs_bulb *b = gs_delight_get(d, i);
+        if (b->grid_hz == grid_hz && b->brf.bands == bands && b->ref != GS_REF_UNLOCKED) nb++;
     }
     if (nb == 0) {
         rec_matcher_free(m);
@@ -643,12 +643,12 @@ gs_status rec_matcher_new(const rec_delight *d, int grid_hz, int bands, int K,
     }
     for (int j = 0; j < K; j++) m->wk[j] = cexp(I * two_pi * (double)j / K);
     for (size_t i = 0; i < nd; i++) {
-        const rec_bulb *b = rec_delight_get(d, i);
-        if (!(b->grid_hz == grid_hz && b->brf.bands == bands && b->ref != REC_REF_UNLOCKED)) continue;
-        rec_bulb *dst = &m->bulbs[m->nb];
+        const gs_bulb *b = gs_delight_get(d, i);
+        if (!(b->grid_hz == grid_hz && b->brf.bands == bands && b->ref != GS_REF_UNLOCKED)) continue;
+        gs_bulb *dst = &m->bulbs[m->nb];
         *dst = *b;
         dst->brf.v = NULL;
-        s = rec_brf_copy(&dst->brf, &b->brf);
+        s = gs_brf_copy(&dst->brf, &b->brf);
         if (s != GS_OK) {
             rec_matcher_free(m);
             return s;
@@ -669,7 +669,7 @@ gs_status rec_matcher_new(const rec_delight *d, int grid_hz, int bands, int K,
         }
         for (int p = 0; p < m->np; p++)
             for (int q = 0; q < p; q++)
-                if (circ_dist(rec_phase_to_shift(m->phase_deg[p]), rec_phase_to_shift(m->phase_deg[q])) < 1e-9) {
+                if (circ_dist(gs_phase_to_shift(m->phase_deg[p]), gs_phase_to_shift(m->phase_deg[q])) < 1e-9) {
                     double dp = m->phase_deg[p], dq = m->phase_deg[q];
                     rec_matcher_free(m);
                     return gs_fail(GS_EINVAL, "Eq. 7 matcher: transformer_deg=%g: phase %g deg gives the "
@@ -679,7 +679,7 @@ gs_status rec_matcher_new(const rec_delight *d, int grid_hz, int bands, int K,
     }
     size_t M = 0;
     for (size_t b = 0; b < m->nb; b++) {
-        m->cont[b] = opts.phases == REC_PHASES_CONTINUOUS || m->bulbs[b].ref == REC_REF_NONE;
+        m->cont[b] = opts.phases == REC_PHASES_CONTINUOUS || m->bulbs[b].ref == GS_REF_NONE;
         m->first[b] = M;
         m->count[b] = m->cont[b] ? (size_t)m->G : (size_t)m->np;
         M += m->count[b];
@@ -720,7 +720,7 @@ gs_status rec_matcher_new(const rec_delight *d, int grid_hz, int bands, int K,
         return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate %zu templates", M);
     }
     for (size_t b = 0; b < m->nb; b++) {
-        const rec_bulb *bu = &m->bulbs[b];
+        const gs_bulb *bu = &m->bulbs[b];
         if (m->cont[b]) {
             s = fourier_setup(m, b);
             if (s != GS_OK) {
@@ -735,19 +735,19 @@ gs_status rec_matcher_new(const rec_delight *d, int grid_hz, int bands, int K,
             double sh, ph;
             if (m->cont[b]) {
                 sh = (double)c / m->G;
-                ph = bu->ref == REC_REF_NONE ? 0.0 : rec_shift_to_phase(sh);
+                ph = bu->ref == GS_REF_NONE ? 0.0 : gs_shift_to_phase(sh);
                 m->cellw[j] = 1.0 / m->G;
             } else {
                 ph = m->phase_deg[c];
-                sh = rec_phase_to_shift(ph);
+                sh = gs_phase_to_shift(ph);
                 m->cellw[j] = 1.0 / m->np;
             }
             if (m->cont[b]) {
                 /* the grid of a continuous bulb from its Fourier series (the same exact Eq. 5
-                 * window means as rec_brf_integrate, ~100x cheaper per shift; chroma included) */
+                 * window means as gs_brf_integrate, ~100x cheaper per shift; chroma included) */
                 template_at(m, b, sh, raw, NULL, NULL, acc);
             } else {
-                s = rec_brf_integrate(&bu->brf, sh, K, raw);
+                s = gs_brf_integrate(&bu->brf, sh, K, raw);
                 if (s != GS_OK) {
                     free(raw);
                     free(acc);
@@ -958,9 +958,9 @@ typedef struct {
 /* The phase (deg) to report for bulb b at shift s via template j. */
 static double report_phase(const rec_matcher *m, int b, size_t j, double s)
 {
-    if (m->bulbs[b].ref == REC_REF_NONE) return 0.0;
+    if (m->bulbs[b].ref == GS_REF_NONE) return 0.0;
     if (!m->cont[b]) return m->tphase[j];
-    return rec_shift_to_phase(s);
+    return gs_shift_to_phase(s);
 }
 
 static void add_cand(const rec_matcher *m, work *w, size_t j)
@@ -1058,7 +1058,7 @@ static void decide(const rec_matcher *m, work *w, double Lmax, decision *dec)
     }
     for (size_t b = 0; m->ncont && b < nb; b++) {
         if (!m->cont[b] || !w->has_peak[b]) continue;
-        double pm = m->bulbs[b].ref == REC_REF_NONE ? w->bmass[b] : w->wmass[b];
+        double pm = m->bulbs[b].ref == GS_REF_NONE ? w->bmass[b] : w->wmass[b];
         double sg = w->peak_sig[b] < cell ? w->peak_sig[b] * sqrt(2.0 * M_PI) : cell;
         consider(&best, &second, log_mass(pm, w->peak_L[b] - Lmax + log(sg)), (int)b,
                  w->peak_cell[b], w->peak_s[b]);
@@ -1066,7 +1066,7 @@ static void decide(const rec_matcher *m, work *w, double Lmax, decision *dec)
     if (best.bulb < 0) goto done;
     int bb = best.bulb;
     /* a continuous voltage winner's mass outside its window is a runner-up candidate */
-    if (m->cont[bb] && m->bulbs[bb].ref != REC_REF_NONE) {
+    if (m->cont[bb] && m->bulbs[bb].ref != GS_REF_NONE) {
         double out_mass = 0.0, top = -INFINITY;
         size_t jt = 0;
         for (size_t i = 0; i < w->ncand; i++) {
@@ -1095,12 +1095,12 @@ static void decide(const rec_matcher *m, work *w, double Lmax, decision *dec)
         dec->runner_shift = second.shift;
         dec->runner_conf = exp(second.lm) / Z;
     }
-    if (m->bulbs[bb].ref != REC_REF_NONE) {
+    if (m->bulbs[bb].ref != GS_REF_NONE) {
         double pc = 0.0;
         for (size_t i = 0; i < w->ncand; i++) {
             size_t j = w->cand[i];
             int b = m->tbulb[j];
-            if (m->bulbs[b].ref == REC_REF_NONE) continue;
+            if (m->bulbs[b].ref == GS_REF_NONE) continue;
             if (m->cont[bb]) {
                 if (circ_dist(m->shift[j], dec->shift) <= PHASE_WINDOW) pc += w->mass[j];
             } else if (m->tcell[j] == m->tcell[dec->tmpl]) {
@@ -1124,7 +1124,7 @@ done:
 typedef struct {
     double chi2, d1, d2;     /* chi2 and its first two derivatives in s */
     int nf;                  /* brightness parameters */
-    double S[REC_MAX_BANDS], T[REC_MAX_BANDS];   /* sum w x t, sum w t^2 (per band with gains) */
+    double S[GS_MAX_BANDS], T[GS_MAX_BANDS];   /* sum w x t, sum w t^2 (per band with gains) */
 } chi2_eval;
 
 static void chi2_at(const rec_matcher *m, work *w, size_t b, double s, double Sxx, chi2_eval *e)
@@ -1235,7 +1235,7 @@ static void refine_peak(const rec_matcher *m, work *w, size_t b, size_t j0, doub
     size_t jm = m->first[b] + (c0 + G - 1) % G, jp = m->first[b] + (c0 + 1) % G;
     double sc = (double)c0 / m->G;
     /* grid chi2 (profiled, a >= 0) at the three cells */
-    double q[3], Sv[REC_MAX_BANDS], Tv[REC_MAX_BANDS];
+    double q[3], Sv[GS_MAX_BANDS], Tv[GS_MAX_BANDS];
     size_t js[3] = {jm, j0, jp};
     for (int i = 0; i < 3; i++) {
         sums_of(m, w, js[i], Sv, Tv);
@@ -1318,7 +1318,7 @@ static gs_status match_light_ws(const rec_matcher *m, work *w, const double *sig
      * level of the band: mu_b^2 = mean(x^2 - sigma^2) over its usable samples (>= 0), in units of
      * c. A multiplicative error of model_error per sample then adds, on average over the band,
      * exactly the variance assumed (E chi2 = dof), though spread evenly over the K windows. */
-    double mu[REC_MAX_BANDS] = {0.0, 0.0, 0.0};
+    double mu[GS_MAX_BANDS] = {0.0, 0.0, 0.0};
     const double fe = m->o.model_error;
     if (fe > 0.0) {
         size_t K = (size_t)m->K;
@@ -1376,7 +1376,7 @@ static gs_status match_light_ws(const rec_matcher *m, work *w, const double *sig
             cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, K, 1.0, m->tsq + (size_t)band * (size_t)K,
                         (int)D, w->w + (size_t)band * (size_t)K, 1, 0.0, w->T + (size_t)band * M, 1);
         }
-        double Sv[REC_MAX_BANDS], Tv[REC_MAX_BANDS];
+        double Sv[GS_MAX_BANDS], Tv[GS_MAX_BANDS];
         for (size_t j = 0; j < M; j++) {
             sums_of(m, w, j, Sv, Tv);
             w->L[j] = loglik_n(m->nfit, Sxx, Sv, Tv);
@@ -1423,7 +1423,7 @@ static gs_status match_light_ws(const rec_matcher *m, work *w, const double *sig
     /* one brightness (or one per band) a_f = S_f/T_f >= 0 */
     int nf = m->nfit, nfree = 0;
     size_t span = D / (size_t)nf;
-    double a_sum = 0.0, chi2 = 0.0, Sv[REC_MAX_BANDS], Tv[REC_MAX_BANDS];
+    double a_sum = 0.0, chi2 = 0.0, Sv[GS_MAX_BANDS], Tv[GS_MAX_BANDS];
     for (int f = 0; f < nf; f++) {
         double S = 0.0, T = 0.0;
         for (size_t d = (size_t)f * span; d < (size_t)(f + 1) * span; d++) {
@@ -1453,7 +1453,7 @@ static gs_status match_light_ws(const rec_matcher *m, work *w, const double *sig
     out->phase_deg = report_phase(m, bb, dec.tmpl, dec.shift);
     out->phase_sigma_deg = 0.0;
     if (m->cont[bb]) {
-        double sg = m->bulbs[bb].ref == REC_REF_NONE ? INV_SQRT12 : w->peak_sig[bb];
+        double sg = m->bulbs[bb].ref == GS_REF_NONE ? INV_SQRT12 : w->peak_sig[bb];
         out->phase_sigma_deg = 180.0 * sg;
     }
     out->confidence = dec.conf;
@@ -1463,7 +1463,7 @@ static gs_status match_light_ws(const rec_matcher *m, work *w, const double *sig
     out->runner_phase_deg =
         dec.runner_bulb >= 0 ? report_phase(m, dec.runner_bulb, dec.runner_tmpl, dec.runner_shift) : 0.0;
     out->runner_confidence = dec.runner_bulb >= 0 ? dec.runner_conf : 0.0;
-    if (m->bulbs[bb].ref == REC_REF_NONE) flags |= REC_MATCH_PHASE_AMBIGUOUS;
+    if (m->bulbs[bb].ref == GS_REF_NONE) flags |= REC_MATCH_PHASE_AMBIGUOUS;
     if (out->bulb_confidence < m->o.ambiguous_conf) flags |= REC_MATCH_BULB_AMBIGUOUS;
     if (out->phase_confidence < m->o.ambiguous_conf) flags |= REC_MATCH_PHASE_AMBIGUOUS;
     if (out->dof > 0 && out->p_value < m->o.unknown_p) flags |= REC_MATCH_UNKNOWN;
@@ -1814,7 +1814,7 @@ static void pixel_row_band(const rec_matcher *m, pix_work *pw, const float *xr, 
     double *zz = pw->zz, *gg = pw->gg, *xd = pw->xd;
     float *ub = pw->ub;
     const double min_snr = m->o.min_snr, fe = m->o.model_error;
-    double var[REC_MAX_BANDS], inv[REC_MAX_BANDS], Sxx = 0.0;
+    double var[GS_MAX_BANDS], inv[GS_MAX_BANDS], Sxx = 0.0;
     for (int b = 0; b < nb; b++) {
         const float *xb = xr + (size_t)b * K;
         double ssb = sumsq_f(xb, K), ms = ssb / (double)K - sg * sg;   /* RMS signal level^2 */
@@ -1828,10 +1828,10 @@ static void pixel_row_band(const rec_matcher *m, pix_work *pw, const float *xr, 
     double smax = -INFINITY;
     float umax = -FLT_MAX;
     size_t ju = 0;
-    double p[REC_MAX_BANDS];
+    double p[GS_MAX_BANDS];
     if (m->bg) {
         /* in float, 16 lanes (vectorised): the bound and snr^2 sign-kept (num |num| / den) */
-        float fi[REC_MAX_BANDS], fv[REC_MAX_BANDS];
+        float fi[GS_MAX_BANDS], fv[GS_MAX_BANDS];
         for (int b = 0; b < nb; b++) {
             fi[b] = (float)inv[b];
             fv[b] = (float)var[b];
@@ -2147,8 +2147,8 @@ gs_status rec_bench_eq7(const rec_matcher *m, size_t pixels, double lit_fraction
     for (size_t r = 0; r < pixels && s == GS_OK; r++) {
         if (truth[r] < 0) continue;
         size_t j = (size_t)truth[r];
-        int phase_ok = m->bulbs[m->tbulb[j]].ref == REC_REF_NONE ||
-                       circ_dist(rec_phase_to_shift(ph[r]), m->shift[j]) < (m->np ? 1e-6 : 0.02);
+        int phase_ok = m->bulbs[m->tbulb[j]].ref == GS_REF_NONE ||
+                       circ_dist(gs_phase_to_shift(ph[r]), m->shift[j]) < (m->np ? 1e-6 : 0.02);
         if (bulb[r] == m->tbulb[j] && phase_ok) right++;
     }
     out->pixels = pixels;

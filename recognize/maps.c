@@ -93,7 +93,7 @@ static float median_f(float *v, size_t n)
 
 /* Sample (k, y, x, band) of the capture as per-cycle DN (docs/formats.md), NaN when saturated;
  * *var_out its noise variance. Reads cap->raw directly (the hot loop). */
-static inline double sample_value(const rec_capture *cap, const double *inv_cycles, size_t k,
+static inline double sample_value(const gs_capture *cap, const double *inv_cycles, size_t k,
                                   size_t pix, int band, double *var_out)
 {
     size_t np = (size_t)cap->width * (size_t)cap->height;
@@ -158,7 +158,7 @@ static void mesh_axis(int n, int nb, int *i0, int *i1, float *f)
     }
 }
 
-static gs_status mesh_build(const rec_capture *cap, const double *inv_cycles, mesh *m)
+static gs_status mesh_build(const gs_capture *cap, const double *inv_cycles, mesh *m)
 {
     memset(m, 0, sizeof *m);
     int W = cap->width, H = cap->height, K = cap->K, bands = cap->bands;
@@ -241,7 +241,7 @@ static gs_status check_matcher(const rec_matcher *m, int bands, int K)
                    bands, K, why);
 }
 
-gs_status rec_pixel_maps_compute(const rec_capture *cap, const rec_matcher *m,
+gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
                                  const rec_eq7_opts *eq7, const rec_map_opts *o,
                                  rec_pixel_maps *pm)
 {
@@ -258,7 +258,7 @@ gs_status rec_pixel_maps_compute(const rec_capture *cap, const rec_matcher *m,
     if (!(o->threshold_sigma > 0.0) || !isfinite(o->threshold_sigma))
         return gs_fail(GS_EINVAL, "maps: threshold_sigma %g: expected a finite number > 0",
                        o->threshold_sigma);
-    gs_status st = rec_capture_check(cap, "maps: capture");
+    gs_status st = gs_capture_check(cap, "maps: capture");
     if (st != GS_OK) return st;
     st = check_matcher(m, cap->bands, cap->K);
     if (st != GS_OK) return st;
@@ -539,7 +539,7 @@ static gs_status canvas_write(canvas *c, const char *path)
     }
     unsigned char *png = NULL;
     size_t size = 0;
-    gs_status st = rec_cv_png_encode(c->rgb, c->w, c->h, 3, 0, &png, &size);
+    gs_status st = gs_png_encode(c->rgb, c->w, c->h, 3, 8, &png, &size);
     if (st == GS_OK && fwrite(png, 1, size, f) != size) st = gs_fail(GS_EIO, "%s: write failed", path);
     if (fclose(f) != 0 && st == GS_OK) st = gs_fail(GS_EIO, "%s: write failed", path);
     free(png);
@@ -796,11 +796,11 @@ gs_status rec_map_write_bulb_png(const rec_pixel_maps *pm, const rec_matcher *m,
     qsort(cnt, nb, sizeof *cnt, cmp_bulb_count);
     size_t n = 0;
     for (size_t i = 0; i < nb && cnt[i].pixels; i++) {
-        const rec_bulb *b = rec_matcher_bulb(m, (size_t)cnt[i].bulb);
+        const gs_bulb *b = rec_matcher_bulb(m, (size_t)cnt[i].bulb);
         colour[cnt[i].bulb] = (int)(i % 20);   /* by rank: the 20 commonest bulbs differ */
         memcpy(items[n].rgb, bulb_palette[colour[cnt[i].bulb]], 3);
         snprintf(items[n++].text, sizeof items[0].text, "%s (%s), %zu px", b->id,
-                 rec_tech_name(b->type), cnt[i].pixels);
+                 gs_tech_name(b->type), cnt[i].pixels);
     }
     memcpy(items[n].rgb, grey_col, 3);
     snprintf(items[n++].text, sizeof items[0].text, "unknown, dim or bad input");
@@ -904,11 +904,11 @@ gs_status rec_map_write_confidence_png(const rec_pixel_maps *pm, const char *pat
  * BRF's Fourier series (each harmonic h times sinc(h / K)); exactly the template value (Eq. 5) at
  * the window centres u = (k + 1/2) / K (a Nyquist component, which the built-in DELIGHT does not
  * have, is left out). C holds n/2 + 1 values of scratch. */
-static gs_status template_curve(const rec_bulb *b, double shift, int K, int band, double *u,
+static gs_status template_curve(const gs_bulb *b, double shift, int K, int band, double *u,
                                 double *c, double complex *C)
 {
     int n = b->brf.n;
-    gs_status st = rec_brf_spectrum(b->brf.v + (size_t)band * (size_t)n, n, C);
+    gs_status st = gs_brf_spectrum(b->brf.v + (size_t)band * (size_t)n, n, C);
     if (st != GS_OK) return st;
     const double pi = 3.14159265358979323846;
     for (int h = 1; h < n / 2; h++) {
@@ -953,12 +953,12 @@ gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const r
     if (max_lights < 1 || max_lights > MAX_SIGNAL_LIGHTS)
         return gs_fail(GS_EINVAL, "signal plot: max_lights %d: expected 1 to %d", max_lights,
                        MAX_SIGNAL_LIGHTS);
-    const rec_bulb *first = rec_matcher_bulb(m, 0);
+    const gs_bulb *first = rec_matcher_bulb(m, 0);
     int K = cat->K, bands = cat->bands;
     if (cat->count && (!first || first->brf.bands != bands))
         return gs_fail(GS_EINVAL, "signal plot: the catalog has %d bands, the matcher %d", bands,
                        first ? first->brf.bands : 0);
-    if (bands < 1 || bands > REC_MAX_BANDS) bands = first ? first->brf.bands : 1;
+    if (bands < 1 || bands > GS_MAX_BANDS) bands = first ? first->brf.bands : 1;
     if (K < 2) K = 2;
     /* the lights to draw: recognised, highest SNR first */
     light_rank rank[MAX_SIGNAL_LIGHTS];
@@ -1009,7 +1009,7 @@ gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const r
     }
     gs_status st = GS_OK;
     for (size_t l = 0; l < nl && st == GS_OK; l++) {
-        const rec_bulb *b = rec_matcher_bulb(m, (size_t)match[rank[l].light].bulb);
+        const gs_bulb *b = rec_matcher_bulb(m, (size_t)match[rank[l].light].bulb);
         for (int band = 0; band < bands && st == GS_OK; band++) {
             st = template_curve(b, 0.0, K, band, u, cv, tmp);
             for (int j = 0; j < CURVE_N && st == GS_OK; j++)
@@ -1078,9 +1078,9 @@ gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const r
                 for (size_t l = 0; l < nl && st == GS_OK; l++) {
                     size_t i = rank[l].light;
                     const rec_match *mt = &match[i];
-                    const rec_bulb *b = rec_matcher_bulb(m, (size_t)mt->bulb);
-                    int phase_known = b->ref == REC_REF_VOLTAGE && !(mt->flags & REC_MATCH_PHASE_AMBIGUOUS);
-                    double sh = rec_phase_to_shift(mt->phase_deg);
+                    const gs_bulb *b = rec_matcher_bulb(m, (size_t)mt->bulb);
+                    int phase_known = b->ref == GS_REF_VOLTAGE && !(mt->flags & REC_MATCH_PHASE_AMBIGUOUS);
+                    double sh = gs_phase_to_shift(mt->phase_deg);
                     if (panel == 1 && !phase_known) continue;
                     /* the template (panel 0: at the light's phase; panel 1: at phase 0) */
                     st = template_curve(b, panel ? 0.0 : sh, K, band, u, cv, tmp);
@@ -1111,8 +1111,8 @@ gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const r
             if (band == 0) {
                 for (size_t l = 0; l < nl; l++) {
                     const rec_match *mt = &match[rank[l].light];
-                    const rec_bulb *b = rec_matcher_bulb(m, (size_t)mt->bulb);
-                    if (b->ref == REC_REF_VOLTAGE && !(mt->flags & REC_MATCH_PHASE_AMBIGUOUS))
+                    const gs_bulb *b = rec_matcher_bulb(m, (size_t)mt->bulb);
+                    if (b->ref == GS_REF_VOLTAGE && !(mt->flags & REC_MATCH_PHASE_AMBIGUOUS))
                         snprintf(text[l], sizeof text[l], "light %zu: %s, %.0f" DEG, rank[l].light, b->id,
                                  mt->phase_deg);
                     else

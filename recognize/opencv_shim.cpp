@@ -1,4 +1,4 @@
-/* opencv_shim.cpp - the one C++ file of recognize/: OpenCV 4.6 (core, imgproc, imgcodecs)
+/* opencv_shim.cpp - the one C++ file of recognize/: OpenCV 4.6 (core, imgproc)
  * behind plain C functions (shared/TOOLCHAIN.md: OpenCV's C API is gone).
  *
  * Every function catches every exception at this boundary and returns a gs_status with a
@@ -7,8 +7,6 @@
  * which is not C++: keep the two in step).
  *
  * Notes on OpenCV used here:
- * - PNGs are decoded with IMREAD_ANYDEPTH | IMREAD_UNCHANGED so 16 bits and the channel count
- *   survive; OpenCV orders colour channels B, G, R, the capture format R, G, B.
  * - connectedComponentsWithStats needs 8-bit input (TOOLCHAIN.md) and gives CV_32S labels.
  * - A cv::Mat header over a caller's buffer is an output only if OpenCV does not reallocate
  *   it: every such call checks the data pointer afterwards. */
@@ -27,14 +25,9 @@ extern "C" {
 #include <vector>
 
 #include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 extern "C" {
-gs_status rec_cv_png_decode(const unsigned char *buf, size_t size, const char *name, int width,
-                            int height, int channels, int depth16, void *out);
-gs_status rec_cv_png_encode(const void *pixels, int width, int height, int channels, int depth16,
-                            unsigned char **png, size_t *size);
 gs_status rec_cv_components(const unsigned char *mask, int width, int height, int *labels,
                             int *count, int **stats);
 gs_status rec_cv_dilate_f32(const float *src, float *dst, int width, int height, int radius);
@@ -43,12 +36,6 @@ gs_status rec_cv_dilate_u8(unsigned char *mask, int width, int height, int radiu
 
 namespace {
 
-/* OpenCV type of an interleaved image with `channels` channels of 8 or 16 bits. */
-int cv_type(int channels, int depth16)
-{
-    return CV_MAKETYPE(depth16 ? CV_16U : CV_8U, channels);
-}
-
 gs_status fail_exception(const char *what, const std::exception &e)
 {
     if (dynamic_cast<const std::bad_alloc *>(&e)) return gs_fail(GS_ENOMEM, "%s: out of memory", what);
@@ -56,69 +43,6 @@ gs_status fail_exception(const char *what, const std::exception &e)
 }
 
 } // namespace
-
-extern "C" gs_status rec_cv_png_decode(const unsigned char *buf, size_t size, const char *name,
-                                       int width, int height, int channels, int depth16, void *out)
-{
-    if (!buf || !out || size == 0 || size > (size_t)INT32_MAX || width < 1 || height < 1 ||
-        (channels != 1 && channels != 3))
-        return gs_fail(GS_EINVAL, "%s: rec_cv_png_decode: bad arguments", name);
-    try {
-        const cv::Mat data(1, (int)size, CV_8U, const_cast<unsigned char *>(buf));
-        cv::Mat img = cv::imdecode(data, cv::IMREAD_ANYDEPTH | cv::IMREAD_UNCHANGED);
-        if (img.empty())
-            return gs_fail(GS_EFORMAT, "%s: the PNG data could not be decoded (corrupt file)", name);
-        if (img.cols != width || img.rows != height)
-            return gs_fail(GS_EFORMAT, "%s: image is %dx%d pixels: expected %dx%d", name, img.cols,
-                           img.rows, width, height);
-        if (img.depth() != (depth16 ? CV_16U : CV_8U))
-            return gs_fail(GS_EFORMAT, "%s: decoded sample depth is not %d bits", name,
-                           depth16 ? 16 : 8);
-        if (img.channels() != channels)
-            return gs_fail(GS_EFORMAT, "%s: decoded image has %d channels: expected %d", name,
-                           img.channels(), channels);
-        cv::Mat dst(height, width, cv_type(channels, depth16), out);
-        if (channels == 3) cv::cvtColor(img, dst, cv::COLOR_BGR2RGB);
-        else img.copyTo(dst);
-        if (dst.data != (uchar *)out)
-            return gs_fail(GS_EFORMAT, "%s: internal: OpenCV reallocated the output", name);
-        return GS_OK;
-    } catch (const std::exception &e) {
-        return fail_exception(name, e);
-    } catch (...) {
-        return gs_fail(GS_EFORMAT, "%s: unknown C++ exception while decoding", name);
-    }
-}
-
-extern "C" gs_status rec_cv_png_encode(const void *pixels, int width, int height, int channels,
-                                       int depth16, unsigned char **png, size_t *size)
-{
-    if (!pixels || !png || !size || width < 1 || height < 1 || (channels != 1 && channels != 3))
-        return gs_fail(GS_EINVAL, "rec_cv_png_encode: bad arguments");
-    *png = nullptr;
-    *size = 0;
-    try {
-        const cv::Mat src(height, width, cv_type(channels, depth16), const_cast<void *>(pixels));
-        cv::Mat bgr;
-        if (channels == 3) cv::cvtColor(src, bgr, cv::COLOR_RGB2BGR);
-        else bgr = src;
-        std::vector<uchar> enc;
-        /* zlib level 1: fast, and PNG is lossless at any level */
-        const std::vector<int> params = {cv::IMWRITE_PNG_COMPRESSION, 1};
-        if (!cv::imencode(".png", bgr, enc, params) || enc.empty())
-            return gs_fail(GS_EIO, "OpenCV could not encode a %dx%d PNG", width, height);
-        unsigned char *p = static_cast<unsigned char *>(std::malloc(enc.size()));
-        if (!p) return gs_fail(GS_ENOMEM, "cannot hold a %zu-byte PNG", enc.size());
-        std::memcpy(p, enc.data(), enc.size());
-        *png = p;
-        *size = enc.size();
-        return GS_OK;
-    } catch (const std::exception &e) {
-        return fail_exception("PNG encoding", e);
-    } catch (...) {
-        return gs_fail(GS_EIO, "unknown C++ exception while encoding a PNG");
-    }
-}
 
 extern "C" gs_status rec_cv_components(const unsigned char *mask, int width, int height,
                                        int *labels, int *count, int **stats)

@@ -20,7 +20,7 @@ static const char *band_label(int bands, int band)
     return bands == 1 ? "monochrome" : rgb[band];
 }
 
-gs_status rec_plot_brfs(const rec_bulb *const *bulbs, size_t count, const char *png_path,
+gs_status rec_plot_brfs(const gs_bulb *const *bulbs, size_t count, const char *png_path,
                         const char *title)
 {
     if (count == 0) return gs_fail(GS_EINVAL, "plot: no bulbs to plot");
@@ -38,7 +38,7 @@ gs_status rec_plot_brfs(const rec_bulb *const *bulbs, size_t count, const char *
     double ymax = 0.0;
     int nmax = 0;
     for (size_t i = 0; i < count; i++) {
-        const rec_brf *b = &bulbs[i]->brf;
+        const gs_brf *b = &bulbs[i]->brf;
         for (int j = 0; j < b->n * b->bands; j++)
             if (b->v[j] > ymax) ymax = b->v[j];
         if (b->n > nmax) nmax = b->n;
@@ -74,7 +74,7 @@ gs_status rec_plot_brfs(const rec_bulb *const *bulbs, size_t count, const char *
         snprintf(top, sizeof top, "%s (%s)", title, band_label(bands, band));
         pllab("time in the flicker cycle, t / #gD", "BRF (mean 1)", top);
         for (size_t i = 0; i < count; i++) {
-            const rec_brf *b = &bulbs[i]->brf;
+            const gs_brf *b = &bulbs[i]->brf;
             for (int j = 0; j <= b->n; j++) {   /* close the cycle: sample n is sample 0 */
                 x[j] = (double)j / b->n;
                 y[j] = b->v[(size_t)band * (size_t)b->n + (size_t)(j % b->n)];
@@ -84,7 +84,7 @@ gs_status rec_plot_brfs(const rec_bulb *const *bulbs, size_t count, const char *
             plwidth(2.0);
             plline(b->n + 1, x, y);
             snprintf(text[i], sizeof text[i], "%s (%s, %d Hz)", bulbs[i]->id,
-                     rec_tech_name(bulbs[i]->type), bulbs[i]->grid_hz);
+                     gs_tech_name(bulbs[i]->type), bulbs[i]->grid_hz);
             labels[i] = text[i];
             opts[i] = PL_LEGEND_LINE;
             colors[i] = c;

@@ -125,8 +125,8 @@ static gs_status ref_build(const rec_matcher *m, int K, ref_templates *r)
         return gs_fail(GS_ENOMEM, "bench: cannot allocate reference templates");
     }
     for (size_t b = 0; b < nb; b++) {
-        const rec_bulb *bb = rec_matcher_bulb(m, b);
-        if (bb->ref != REC_REF_VOLTAGE) {
+        const gs_bulb *bb = rec_matcher_bulb(m, b);
+        if (bb->ref != GS_REF_VOLTAGE) {
             ref_free(r);
             return gs_fail(GS_EINVAL, "bench: bulb %s is not voltage-referenced: the reference "
                            "search covers 0/120/240 only", bb->id);
@@ -134,7 +134,7 @@ static gs_status ref_build(const rec_matcher *m, int K, ref_templates *r)
         for (int p = 0; p < 3; p++) {
             size_t j = 3 * b + (size_t)p;
             double *t = r->t + j * (size_t)r->D;
-            gs_status st = rec_brf_integrate(&bb->brf, rec_phase_to_shift(120.0 * p), K, t);
+            gs_status st = gs_brf_integrate(&bb->brf, gs_phase_to_shift(120.0 * p), K, t);
             if (st != GS_OK) {
                 ref_free(r);
                 return st;
@@ -213,26 +213,26 @@ typedef struct {
 
 /* A DELIGHT with `count` of d's entries for 50 Hz and this band count, spread evenly over them
  * (the entries come grouped by technology). count 0 = all. */
-static gs_status subset(const rec_delight *d, int bands, int count, rec_delight **out, int *got)
+static gs_status subset(const gs_delight *d, int bands, int count, gs_delight **out, int *got)
 {
     const char *sensor = bands == 3 ? "rgb" : "photodiode";
     size_t n = 0;
-    for (size_t i = 0; i < rec_delight_count(d); i++) {
-        const rec_bulb *b = rec_delight_get(d, i);
-        n += b->grid_hz == 50 && !strcmp(b->sensor, sensor) && b->ref == REC_REF_VOLTAGE;
+    for (size_t i = 0; i < gs_delight_count(d); i++) {
+        const gs_bulb *b = gs_delight_get(d, i);
+        n += b->grid_hz == 50 && !strcmp(b->sensor, sensor) && b->ref == GS_REF_VOLTAGE;
     }
     size_t want = count <= 0 || (size_t)count > n ? n : (size_t)count;
-    rec_delight *s = rec_delight_new();
+    gs_delight *s = gs_delight_new();
     if (!s) return gs_fail(GS_ENOMEM, "bench: cannot allocate a database");
     size_t seen = 0, added = 0;
-    for (size_t i = 0; i < rec_delight_count(d) && added < want; i++) {
-        const rec_bulb *b = rec_delight_get(d, i);
-        if (b->grid_hz != 50 || strcmp(b->sensor, sensor) || b->ref != REC_REF_VOLTAGE) continue;
+    for (size_t i = 0; i < gs_delight_count(d) && added < want; i++) {
+        const gs_bulb *b = gs_delight_get(d, i);
+        if (b->grid_hz != 50 || strcmp(b->sensor, sensor) || b->ref != GS_REF_VOLTAGE) continue;
         /* take entry `seen` when it is the next of want evenly spaced picks */
         if (seen++ != added * n / want) continue;
-        gs_status st = rec_delight_add(s, b);
+        gs_status st = gs_delight_add(s, b);
         if (st != GS_OK) {
-            rec_delight_free(s);
+            gs_delight_free(s);
             return st;
         }
         added++;
@@ -433,7 +433,7 @@ static gs_status run_capture(const config *c, rec_matcher *m, result *res)
 {
     rec_eq7_opts eo;
     bench_eq7_opts(&eo);
-    rec_capture cap;
+    gs_capture cap;
     memset(&cap, 0, sizeof cap);
     cap.grid_hz = 50;
     cap.K = c->K;
@@ -446,7 +446,7 @@ static gs_status run_capture(const config *c, rec_matcher *m, result *res)
     ref_templates r;
     memset(&r, 0, sizeof r);
     float *pool = malloc(sizeof *pool * POOL);
-    gs_status st = pool ? rec_capture_alloc(&cap) : gs_fail(GS_ENOMEM, "bench: capture");
+    gs_status st = pool ? gs_capture_alloc(&cap) : gs_fail(GS_ENOMEM, "bench: capture");
     if (st == GS_OK) st = ref_build(m, c->K, &r);
     if (st == GS_OK) {
         const double cycles = 50.0, sky = 0.5;
@@ -493,12 +493,12 @@ static gs_status run_capture(const config *c, rec_matcher *m, result *res)
     }
     ref_free(&r);
     free(pool);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
     return st;
 }
 
 /* Run one configuration in a child process; its result comes back through a pipe. */
-static void run_config(const rec_delight *all, const config *c, result *res)
+static void run_config(const gs_delight *all, const config *c, result *res)
 {
     memset(res, 0, sizeof *res);
     int fd[2];
@@ -513,7 +513,7 @@ static void run_config(const rec_delight *all, const config *c, result *res)
         result r;
         memset(&r, 0, sizeof r);
         openblas_set_num_threads(1);
-        rec_delight *d = NULL;
+        gs_delight *d = NULL;
         rec_matcher *m = NULL;
         int got = 0;
         gs_status st = subset(all, c->bands, c->bulbs, &d, &got);
@@ -531,7 +531,7 @@ static void run_config(const rec_delight *all, const config *c, result *res)
         getrusage(RUSAGE_SELF, &ru);
         r.maxrss_kib = ru.ru_maxrss;
         rec_matcher_free(m);
-        rec_delight_free(d);
+        gs_delight_free(d);
         ssize_t wr = write(fd[1], &r, sizeof r);
         _exit(wr == (ssize_t)sizeof r ? 0 : 1);
     }
@@ -565,7 +565,7 @@ static const char *bulbs_label(int bulbs, char *buf, size_t n)
     return buf;
 }
 
-static void pixel_row(const rec_delight *all, const config *c, int *failed)
+static void pixel_row(const gs_delight *all, const config *c, int *failed)
 {
     result r;
     run_config(all, c, &r);
@@ -593,7 +593,7 @@ static void pixel_row(const rec_delight *all, const config *c, int *failed)
     fflush(stdout);
 }
 
-static void light_row(const rec_delight *all, const config *c, int *failed)
+static void light_row(const gs_delight *all, const config *c, int *failed)
 {
     result r;
     run_config(all, c, &r);
@@ -617,7 +617,7 @@ static void light_row(const rec_delight *all, const config *c, int *failed)
     fflush(stdout);
 }
 
-static void capture_row(const rec_delight *all, const config *c, int *failed)
+static void capture_row(const gs_delight *all, const config *c, int *failed)
 {
     result r;
     run_config(all, c, &r);
@@ -661,10 +661,10 @@ static int bench_recognize(int argc, char **argv)
         fprintf(stderr, "gridsurvey bench recognize: unexpected argument '%s' (see --help)\n", argv[optind]);
         return 2;
     }
-    rec_delight *all = rec_delight_new();
-    gs_status st = all ? rec_delight_generate(all, REC_BRF_N_DEFAULT) : gs_fail(GS_ENOMEM, "out of memory");
+    gs_delight *all = gs_delight_new();
+    gs_status st = all ? gs_delight_generate(all, GS_BRF_N_DEFAULT) : gs_fail(GS_ENOMEM, "out of memory");
     if (st != GS_OK) {
-        rec_delight_free(all);
+        gs_delight_free(all);
         return srv_error(st);
     }
     int failed = 0;
@@ -751,7 +751,7 @@ static int bench_recognize(int argc, char **argv)
     printf("\n*continuous* rows search every phase (a grid of max(8K, 96) shifts per cycle, refined); "
            "their templates column counts those grid shifts and there is no triple-loop reference. Total %.0f s.\n",
            now_s() - t_start);
-    rec_delight_free(all);
+    gs_delight_free(all);
     return failed ? 1 : 0;
 }
 

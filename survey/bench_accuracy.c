@@ -251,7 +251,7 @@ static gs_status eval_subset(srv_db *db, int64_t survey_id, const char *key, con
 #define ORACLE_PHASES_MAX 12
 
 static gs_status run_point(const char *base, const crop *cr, const char *work, int n_oracle,
-                           const rec_delight *dl, point *p)
+                           const gs_delight *dl, point *p)
 {
     char dir[4096], scene[4200], dbp[4200], capdir[4200];   /* paths stay below 4096 */
     int len = snprintf(dir, sizeof dir, "%s/%s-K%d-C%d-%s-%s-%s", work, scene_names[p->hard], p->K, p->C,
@@ -284,7 +284,7 @@ static gs_status run_point(const char *base, const crop *cr, const char *work, i
     p->capture_s = p->exposure_s + p->readout_s;
 
     srv_db *db = NULL;
-    rec_capture cap;
+    gs_capture cap;
     memset(&cap, 0, sizeof cap);
     rec_catalog cat;
     memset(&cat, 0, sizeof cat);
@@ -301,7 +301,7 @@ static gs_status run_point(const char *base, const crop *cr, const char *work, i
 
     /* the same lights again (deterministic: the pipeline's catalog and answers), with the
      * aperture of each for the oracle's noise model */
-    if ((s = rec_capture_read(capdir, &cap)) != GS_OK) goto done;
+    if ((s = gs_capture_read(capdir, &cap)) != GS_OK) goto done;
     rec_blob_opts bo;
     rec_blob_opts_default(&bo);
     bo.threshold_sigma = ro.threshold_sigma;
@@ -392,11 +392,11 @@ static gs_status run_point(const char *base, const crop *cr, const char *work, i
             goto done;
         }
         for (size_t b = 0; b < nb && s == GS_OK; b++) {
-            const rec_bulb *bu = rec_matcher_bulb(m, b);
-            if (bu->ref != REC_REF_VOLTAGE) continue;
+            const gs_bulb *bu = rec_matcher_bulb(m, b);
+            if (bu->ref != GS_REF_VOLTAGE) continue;
             for (int ph = 0; ph < 6 && s == GS_OK; ph++) {
                 double *t = tab + (size_t)M * (size_t)D;
-                s = rec_brf_integrate(&bu->brf, rec_phase_to_shift(phases[ph]), K, t);
+                s = gs_brf_integrate(&bu->brf, gs_phase_to_shift(phases[ph]), K, t);
                 for (int d = 0; d < D; d++) t[d] *= bu->chroma[d / K];
                 tb[M] = (int)b;
                 tp[M] = phases[ph];
@@ -437,13 +437,13 @@ static gs_status run_point(const char *base, const crop *cr, const char *work, i
             }
             int best = 0;
             if ((s = rec_ml_oracle(nz, 1, x, tab, M, D, &best, NULL)) != GS_OK) break;
-            const rec_bulb *bu = rec_matcher_bulb(m, (size_t)tb[best]);
+            const gs_bulb *bu = rec_matcher_bulb(m, (size_t)tb[best]);
             sub[k] = rows[i];
             sub[k].index = (int)k;
             orc[k] = rows[i];
             orc[k].index = (int)k;
             orc[k].bulb_id = bu->id;
-            orc[k].technology = rec_tech_name(bu->type);
+            orc[k].technology = gs_tech_name(bu->type);
             orc[k].phase_deg = tp[best];
             orc[k].phase_fit_deg = tp[best];
             orc[k].confidence = orc[k].bulb_confidence = orc[k].phase_confidence = 1.0;
@@ -481,7 +481,7 @@ done:
     free(mt);
     rec_matcher_free(m);
     rec_catalog_release(&cat);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
     srv_db_close(db);
     return s;
 }
@@ -947,10 +947,10 @@ int srv_bench_accuracy(int argc, char **argv)
         pts[np++] = (point){.hard = 2, .K = 8, .C = 64, .hdr = 1, .locked = 1};
         pts[np++] = (point){.K = 8, .C = 64, .hdr = 0, .locked = 1};
     }
-    rec_delight *dl = rec_delight_new();
-    s = dl ? rec_delight_generate(dl, REC_BRF_N_DEFAULT) : gs_fail(GS_ENOMEM, "out of memory");
+    gs_delight *dl = gs_delight_new();
+    s = dl ? gs_delight_generate(dl, GS_BRF_N_DEFAULT) : gs_fail(GS_ENOMEM, "out of memory");
     if (s != GS_OK) {
-        rec_delight_free(dl);
+        gs_delight_free(dl);
         free(pts);
         return srv_error(s);
     }
@@ -969,7 +969,7 @@ int srv_bench_accuracy(int argc, char **argv)
                 p->ok ? "ok" : p->err, now_s() - t0);
         if (!keep) rm_rf(work), mkdir(work, 0700);
     }
-    rec_delight_free(dl);
+    gs_delight_free(dl);
     char path[4400];
     snprintf(path, sizeof path, "%s/accuracy.csv", out);
     s = write_csv(path, pts, np);

@@ -48,7 +48,7 @@ static int parse_opts(int argc, char **argv, delight_opts *o)
     memset(o, 0, sizeof *o);
     o->db = getenv("GRIDSURVEY_DELIGHT");
     if (o->db && !*o->db) o->db = NULL;
-    o->n = REC_BRF_N_DEFAULT;
+    o->n = GS_BRF_N_DEFAULT;
     optind = 1;
     int c;
     char *end;
@@ -98,67 +98,67 @@ static int parse_opts(int argc, char **argv, delight_opts *o)
 }
 
 /* The database to read: the --delight file, or the built-in one. */
-static gs_status open_delight(const delight_opts *o, rec_delight **out)
+static gs_status open_delight(const delight_opts *o, gs_delight **out)
 {
-    rec_delight *d = rec_delight_new();
+    gs_delight *d = gs_delight_new();
     if (!d) return gs_fail(GS_ENOMEM, "cannot allocate the DELIGHT database");
-    gs_status s = o->db ? rec_delight_load(d, o->db) : rec_delight_generate(d, o->n);
+    gs_status s = o->db ? gs_delight_load(d, o->db) : gs_delight_generate(d, o->n);
     if (s != GS_OK) {
-        rec_delight_free(d);
+        gs_delight_free(d);
         return s;
     }
     *out = d;
     return GS_OK;
 }
 
-static int matches(const rec_bulb *b, const delight_opts *o)
+static int matches(const gs_bulb *b, const delight_opts *o)
 {
     return (!o->grid_hz || b->grid_hz == o->grid_hz) && (!o->sensor || !strcmp(b->sensor, o->sensor));
 }
 
-static int cmd_list(const rec_delight *d, const delight_opts *o)
+static int cmd_list(const gs_delight *d, const delight_opts *o)
 {
     printf("%-22s %-22s %4s %-10s %-8s %7s  %-28s %s\n", "bulb_id", "type", "Hz", "sensor", "ref",
            "watts", "percent flicker (per band)", "name");
     size_t shown = 0;
-    for (size_t i = 0; i < rec_delight_count(d); i++) {
-        const rec_bulb *b = rec_delight_get(d, i);
+    for (size_t i = 0; i < gs_delight_count(d); i++) {
+        const gs_bulb *b = gs_delight_get(d, i);
         if (!matches(b, o)) continue;
         char pf[64] = "";
         for (int band = 0; band < b->brf.bands; band++) {
             size_t used = strlen(pf);
             snprintf(pf + used, sizeof pf - used, "%s%.1f", band ? " / " : "",
-                     rec_brf_percent_flicker(&b->brf, band));
+                     gs_brf_percent_flicker(&b->brf, band));
         }
-        printf("%-22s %-22s %4d %-10s %-8s %7.1f  %-28s %s\n", b->id, rec_tech_name(b->type),
-               b->grid_hz, b->sensor, rec_ref_name(b->ref), b->watts, pf, b->name);
+        printf("%-22s %-22s %4d %-10s %-8s %7.1f  %-28s %s\n", b->id, gs_tech_name(b->type),
+               b->grid_hz, b->sensor, gs_ref_name(b->ref), b->watts, pf, b->name);
         shown++;
     }
-    int techs[REC_TECH_COUNT] = {0}, n_tech = 0;
-    for (size_t i = 0; i < rec_delight_count(d); i++) {
-        const rec_bulb *b = rec_delight_get(d, i);
+    int techs[GS_TECH_COUNT] = {0}, n_tech = 0;
+    for (size_t i = 0; i < gs_delight_count(d); i++) {
+        const gs_bulb *b = gs_delight_get(d, i);
         if (matches(b, o) && !techs[b->type]++) n_tech++;
     }
     printf("%zu entries over %d technologies\n", shown, n_tech);
     return 0;
 }
 
-static int cmd_show(const rec_delight *d, const delight_opts *o, const char *id)
+static int cmd_show(const gs_delight *d, const delight_opts *o, const char *id)
 {
     int shown = 0;
-    for (size_t i = 0; i < rec_delight_count(d); i++) {
-        const rec_bulb *b = rec_delight_get(d, i);
+    for (size_t i = 0; i < gs_delight_count(d); i++) {
+        const gs_bulb *b = gs_delight_get(d, i);
         if (strcmp(b->id, id) || !matches(b, o)) continue;
         printf("%s: %s, %s, %.1f W, %d Hz, sensor %s, reference %s, %d samples per cycle\n", b->id,
-               b->name, rec_tech_name(b->type), b->watts, b->grid_hz, b->sensor,
-               rec_ref_name(b->ref), b->brf.n);
+               b->name, gs_tech_name(b->type), b->watts, b->grid_hz, b->sensor,
+               gs_ref_name(b->ref), b->brf.n);
         enum { K = 26 };
-        double w[REC_MAX_BANDS * K];
-        gs_status s = rec_brf_integrate(&b->brf, 0.0, K, w);
+        double w[GS_MAX_BANDS * K];
+        gs_status s = gs_brf_integrate(&b->brf, 0.0, K, w);
         if (s != GS_OK) return srv_error(s);
         for (int band = 0; band < b->brf.bands; band++) {
             printf("  band %d: chromaticity %.4f, percent flicker %.2f, K=26 windows:", band,
-                   b->chroma[band], rec_brf_percent_flicker(&b->brf, band));
+                   b->chroma[band], gs_brf_percent_flicker(&b->brf, band));
             for (int k = 0; k < K; k++) printf(" %.4f", w[band * K + k]);
             putchar('\n');
         }
@@ -168,29 +168,29 @@ static int cmd_show(const rec_delight *d, const delight_opts *o, const char *id)
     return 0;
 }
 
-static int cmd_export(const rec_delight *d, const delight_opts *o)
+static int cmd_export(const gs_delight *d, const delight_opts *o)
 {
     FILE *f = o->out ? fopen(o->out, "w") : stdout;
     if (!f) return srv_error(gs_fail(GS_EIO, "%s: cannot open for writing", o->out));
-    gs_status s = rec_delight_export_csv(d, f);
+    gs_status s = gs_delight_export_csv(d, f);
     if (o->out && fclose(f) != 0 && s == GS_OK) s = gs_fail(GS_EIO, "%s: write failed", o->out);
     return s == GS_OK ? 0 : srv_error(s);
 }
 
 /* Load DB if it exists (else start empty), let add() change it, save it back. */
-static int modify_db(const char *db, gs_status (*add)(rec_delight *, const void *), const void *arg)
+static int modify_db(const char *db, gs_status (*add)(gs_delight *, const void *), const void *arg)
 {
-    rec_delight *d = rec_delight_new();
+    gs_delight *d = gs_delight_new();
     if (!d) return srv_error(gs_fail(GS_ENOMEM, "cannot allocate the DELIGHT database"));
     FILE *exists = fopen(db, "rb");
     gs_status s = GS_OK;
     if (exists) {
         fclose(exists);
-        s = rec_delight_load(d, db);
+        s = gs_delight_load(d, db);
     }
     if (s == GS_OK) s = add(d, arg);
-    if (s == GS_OK) s = rec_delight_save(d, db);
-    rec_delight_free(d);
+    if (s == GS_OK) s = gs_delight_save(d, db);
+    gs_delight_free(d);
     return s == GS_OK ? 0 : srv_error(s);
 }
 
@@ -199,22 +199,22 @@ typedef struct {
     int count;
 } csv_list;
 
-static gs_status add_csvs(rec_delight *d, const void *arg)
+static gs_status add_csvs(gs_delight *d, const void *arg)
 {
     const csv_list *l = arg;
     for (int i = 0; i < l->count; i++) {
-        gs_status s = rec_delight_import_csv(d, l->files[i]);
+        gs_status s = gs_delight_import_csv(d, l->files[i]);
         if (s != GS_OK) return s;
     }
     return GS_OK;
 }
 
-static gs_status add_recording(rec_delight *d, const void *arg)
+static gs_status add_recording(gs_delight *d, const void *arg)
 {
     const delight_opts *o = arg;
-    rec_bulb b;
-    rec_recording_info info;
-    gs_status s = rec_recording_to_bulb(o->recording, o->voltage_column, o->n, &b, &info);
+    gs_bulb b;
+    gs_recording_info info;
+    gs_status s = gs_recording_to_bulb(o->recording, o->voltage_column, o->n, &b, &info);
     if (s != GS_OK) return s;
     if (o->id) snprintf(b.id, sizeof b.id, "%s", o->id);
     if (o->name) snprintf(b.name, sizeof b.name, "%s", o->name);
@@ -227,31 +227,31 @@ static gs_status add_recording(rec_delight *d, const void *arg)
                     "expected --grid 50|60 to file it", o->recording, info.flicker_hz);
     else if (!b.grid_hz)
         b.grid_hz = o->grid_hz;
-    if (s == GS_OK && o->type) s = rec_tech_parse(o->type, &b.type);
-    if (s == GS_OK) s = rec_delight_add(d, &b);
+    if (s == GS_OK && o->type) s = gs_tech_parse(o->type, &b.type);
+    if (s == GS_OK) s = gs_delight_add(d, &b);
     if (s == GS_OK)
         printf("added %s: %zu samples at %.0f Hz, %s %.2f Hz over %.1f cycles, grid %d Hz, "
                "percent flicker %.1f, reference %s\n",
                b.id, info.samples, info.sample_rate_hz,
                isfinite(info.flicker_hz) ? "flicker" : "no flicker found, nominal",
                isfinite(info.flicker_hz) ? info.flicker_hz : 2.0 * b.grid_hz, info.cycles,
-               b.grid_hz, info.percent_flicker, rec_ref_name(b.ref));
-    rec_bulb_release(&b);
+               b.grid_hz, info.percent_flicker, gs_ref_name(b.ref));
+    gs_bulb_release(&b);
     return s;
 }
 
-static int cmd_plot(const rec_delight *d, const delight_opts *o)
+static int cmd_plot(const gs_delight *d, const delight_opts *o)
 {
     if (!o->out) return srv_error(gs_fail(GS_EINVAL, "delight plot: -o FILE.png is required"));
     enum { MAX_PLOT = 15 };
-    const rec_bulb *pick[MAX_PLOT];
+    const gs_bulb *pick[MAX_PLOT];
     size_t count = 0;
     if (o->ids) {
         char *list = strdup(o->ids), *save = NULL;
         for (char *tok = strtok_r(list, ",", &save); tok; tok = strtok_r(NULL, ",", &save)) {
-            const rec_bulb *b = NULL;
-            for (size_t i = 0; i < rec_delight_count(d) && !b; i++) {
-                const rec_bulb *c = rec_delight_get(d, i);
+            const gs_bulb *b = NULL;
+            for (size_t i = 0; i < gs_delight_count(d) && !b; i++) {
+                const gs_bulb *c = gs_delight_get(d, i);
                 if (!strcmp(c->id, tok) && matches(c, o) && (o->sensor || c->brf.bands == 1)) b = c;
             }
             if (!b || count == MAX_PLOT) {
@@ -264,9 +264,9 @@ static int cmd_plot(const rec_delight *d, const delight_opts *o)
         free(list);
     } else {
         /* One bulb of each technology, as in the paper's Fig. 2. */
-        int seen[REC_TECH_COUNT] = {0};
-        for (size_t i = 0; i < rec_delight_count(d) && count < MAX_PLOT; i++) {
-            const rec_bulb *b = rec_delight_get(d, i);
+        int seen[GS_TECH_COUNT] = {0};
+        for (size_t i = 0; i < gs_delight_count(d) && count < MAX_PLOT; i++) {
+            const gs_bulb *b = gs_delight_get(d, i);
             if (!matches(b, o) || (!o->sensor && b->brf.bands != 1) || seen[b->type]++) continue;
             if (count && b->grid_hz != pick[0]->grid_hz) continue;
             pick[count++] = b;
@@ -307,10 +307,10 @@ int srv_cmd_delight(int argc, char **argv)
     }
     if (!strcmp(sub, "generate")) {
         if (!o.out) return srv_error(gs_fail(GS_EINVAL, "delight generate: -o DB is required"));
-        rec_delight *d = rec_delight_new();
-        gs_status s = d ? rec_delight_generate(d, o.n) : gs_fail(GS_ENOMEM, "out of memory");
-        if (s == GS_OK) s = rec_delight_save(d, o.out);
-        rec_delight_free(d);
+        gs_delight *d = gs_delight_new();
+        gs_status s = d ? gs_delight_generate(d, o.n) : gs_fail(GS_ENOMEM, "out of memory");
+        if (s == GS_OK) s = gs_delight_save(d, o.out);
+        gs_delight_free(d);
         return s == GS_OK ? 0 : srv_error(s);
     }
     int is_show = !strcmp(sub, "show");
@@ -320,13 +320,13 @@ int srv_cmd_delight(int argc, char **argv)
         return 2;
     }
     if (is_show && npos != 1) return srv_error(gs_fail(GS_EINVAL, "delight show: expected one bulb id"));
-    rec_delight *d = NULL;
+    gs_delight *d = NULL;
     gs_status s = open_delight(&o, &d);
     if (s != GS_OK) return srv_error(s);
     if (!strcmp(sub, "list")) rc = cmd_list(d, &o);
     else if (is_show) rc = cmd_show(d, &o, pos[0]);
     else if (!strcmp(sub, "export")) rc = cmd_export(d, &o);
     else rc = cmd_plot(d, &o);
-    rec_delight_free(d);
+    gs_delight_free(d);
     return rc;
 }

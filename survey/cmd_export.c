@@ -193,8 +193,8 @@ int srv_cmd_export(int argc, char **argv)
         case 'S': o.survey = optarg; break;
         case 't':
             if (strcmp(optarg, "none")) {
-                rec_tech t;
-                if (rec_tech_parse(optarg, &t) != GS_OK) {
+                gs_tech t;
+                if (gs_tech_parse(optarg, &t) != GS_OK) {
                     fprintf(stderr, "gridsurvey export: --technology '%s': expected a technology "
                             "name (sodium_hp, led_linear, cfl, ...) or none\n", optarg);
                     return 2;

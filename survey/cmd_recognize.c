@@ -198,11 +198,11 @@ static const char *phases_name(rec_phase_set p)
 /* The phase is reported when a voltage-referenced bulb won without PHASE_AMBIGUOUS. */
 static int phase_known(const rec_matcher *m, const rec_match *mt)
 {
-    const rec_bulb *b = mt->bulb >= 0 ? rec_matcher_bulb(m, (size_t)mt->bulb) : NULL;
-    return b && b->ref == REC_REF_VOLTAGE && !(mt->flags & REC_MATCH_PHASE_AMBIGUOUS);
+    const gs_bulb *b = mt->bulb >= 0 ? rec_matcher_bulb(m, (size_t)mt->bulb) : NULL;
+    return b && b->ref == GS_REF_VOLTAGE && !(mt->flags & REC_MATCH_PHASE_AMBIGUOUS);
 }
 
-static void print_table(const recognize_opts *o, const rec_capture *cap, const rec_matcher *m,
+static void print_table(const recognize_opts *o, const gs_capture *cap, const rec_matcher *m,
                         const rec_catalog *cat, const rec_match *mt)
 {
     printf("capture %s: %d Hz grid, K = %d, %d band%s, %dx%d pixels%s; DELIGHT %s (%zu candidate "
@@ -218,8 +218,8 @@ static void print_table(const recognize_opts *o, const rec_capture *cap, const r
     size_t with_bulb = 0, with_phase = 0;
     for (size_t i = 0; i < cat->count; i++) {
         const rec_match *r = &mt[i];
-        const rec_bulb *b = r->bulb >= 0 ? rec_matcher_bulb(m, (size_t)r->bulb) : NULL;
-        const rec_bulb *rb = r->runner_bulb >= 0 ? rec_matcher_bulb(m, (size_t)r->runner_bulb) : NULL;
+        const gs_bulb *b = r->bulb >= 0 ? rec_matcher_bulb(m, (size_t)r->bulb) : NULL;
+        const gs_bulb *rb = r->runner_bulb >= 0 ? rec_matcher_bulb(m, (size_t)r->runner_bulb) : NULL;
         char phase[32] = "-", runner[64] = "-", flags[160] = "", chi[32];
         if (phase_known(m, r)) {
             snprintf(phase, sizeof phase, "%.1f +- %.1f", r->phase_deg, r->phase_sigma_deg);
@@ -237,7 +237,7 @@ static void print_table(const recognize_opts *o, const rec_capture *cap, const r
         snprintf(chi, sizeof chi, "%.2f", r->dof > 0 ? r->chi2 / r->dof : r->chi2);
         printf("%4zu %8.2f %8.2f %5d  %-22s %-22s %15s %6.3f  %-28s %9s %9.3g  %s\n", i,
                cat->x_px[i], cat->y_px[i], cat->area_px[i], b ? b->id : "unknown",
-               b ? rec_tech_name(b->type) : "-", phase, r->confidence, runner, chi, r->p_value,
+               b ? gs_tech_name(b->type) : "-", phase, r->confidence, runner, chi, r->p_value,
                *flags ? flags : "-");
     }
     printf("%zu lights: %zu with a bulb, %zu with a phase\n", cat->count, with_bulb, with_phase);
@@ -251,8 +251,8 @@ static json_t *jreal(double v)
 
 static json_t *light_json(const rec_matcher *m, const rec_catalog *cat, const rec_match *r, size_t i)
 {
-    const rec_bulb *b = r->bulb >= 0 ? rec_matcher_bulb(m, (size_t)r->bulb) : NULL;
-    const rec_bulb *rb = r->runner_bulb >= 0 ? rec_matcher_bulb(m, (size_t)r->runner_bulb) : NULL;
+    const gs_bulb *b = r->bulb >= 0 ? rec_matcher_bulb(m, (size_t)r->bulb) : NULL;
+    const gs_bulb *rb = r->runner_bulb >= 0 ? rec_matcher_bulb(m, (size_t)r->runner_bulb) : NULL;
     int ph = phase_known(m, r);
     json_t *l = json_object();
     json_object_set_new(l, "id", json_integer((json_int_t)i));
@@ -263,7 +263,7 @@ static json_t *light_json(const rec_matcher *m, const rec_catalog *cat, const re
     json_object_set_new(l, "saturated_px", json_integer(cat->saturated_px[i]));
     json_object_set_new(l, "brightness", jreal(r->brightness));
     json_object_set_new(l, "bulb", b ? json_string(b->id) : json_null());
-    json_object_set_new(l, "technology", b ? json_string(rec_tech_name(b->type)) : json_null());
+    json_object_set_new(l, "technology", b ? json_string(gs_tech_name(b->type)) : json_null());
     json_object_set_new(l, "phase_deg", ph ? jreal(r->phase_deg) : json_null());
     json_object_set_new(l, "phase_sigma_deg", ph ? jreal(r->phase_sigma_deg) : json_null());
     json_object_set_new(l, "confidence", jreal(r->confidence));
@@ -272,7 +272,7 @@ static json_t *light_json(const rec_matcher *m, const rec_catalog *cat, const re
     if (rb) {
         json_t *ru = json_object();
         json_object_set_new(ru, "bulb", json_string(rb->id));
-        json_object_set_new(ru, "technology", json_string(rec_tech_name(rb->type)));
+        json_object_set_new(ru, "technology", json_string(gs_tech_name(rb->type)));
         json_object_set_new(ru, "phase_deg", jreal(r->runner_phase_deg));
         json_object_set_new(ru, "confidence", jreal(r->runner_confidence));
         json_object_set_new(l, "runner_up", ru);
@@ -289,7 +289,7 @@ static json_t *light_json(const rec_matcher *m, const rec_catalog *cat, const re
     return l;
 }
 
-static gs_status print_json(const recognize_opts *o, const rec_capture *cap, const rec_matcher *m,
+static gs_status print_json(const recognize_opts *o, const gs_capture *cap, const rec_matcher *m,
                             const rec_catalog *cat, const rec_match *mt)
 {
     json_t *root = json_object();
@@ -353,7 +353,7 @@ static gs_status maps_dir(const char *dir)
     return GS_OK;
 }
 
-static gs_status write_maps(const recognize_opts *o, const rec_capture *cap, const rec_matcher *m,
+static gs_status write_maps(const recognize_opts *o, const gs_capture *cap, const rec_matcher *m,
                             const rec_catalog *cat, const rec_match *mt)
 {
     char path[4096];
@@ -395,24 +395,24 @@ int srv_cmd_recognize(int argc, char **argv)
     if (rc >= 0) return rc;
     progress_on = isatty(2);
 
-    rec_capture cap;
+    gs_capture cap;
     memset(&cap, 0, sizeof cap);
     rec_catalog cat;
     memset(&cat, 0, sizeof cat);
-    rec_delight *d = NULL;
+    gs_delight *d = NULL;
     rec_matcher *m = NULL;
     rec_match *mt = NULL;
 
     gs_status st = o.maps ? maps_dir(o.maps) : GS_OK;
     if (st == GS_OK) {
         progress("reading %s ...", o.capdir);
-        st = rec_capture_read(o.capdir, &cap);
+        st = gs_capture_read(o.capdir, &cap);
     }
     if (st == GS_OK) {
         progress("loading DELIGHT ...");
-        d = rec_delight_new();
+        d = gs_delight_new();
         st = !d ? gs_fail(GS_ENOMEM, "cannot allocate the DELIGHT database")
-             : o.db ? rec_delight_load(d, o.db) : rec_delight_generate(d, REC_BRF_N_DEFAULT);
+             : o.db ? gs_delight_load(d, o.db) : gs_delight_generate(d, GS_BRF_N_DEFAULT);
     }
     if (st == GS_OK) {
         progress("building Eq. 7 templates ...");
@@ -447,8 +447,8 @@ int srv_cmd_recognize(int argc, char **argv)
     }
     free(mt);
     rec_matcher_free(m);
-    rec_delight_free(d);
+    gs_delight_free(d);
     rec_catalog_release(&cat);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
     return st == GS_OK ? 0 : srv_error(st);
 }

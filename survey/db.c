@@ -804,7 +804,7 @@ void srv_sha256_hex(const void *data, size_t n, char hex[65])
     sha256_final(&c, hex);
 }
 
-gs_status srv_delight_fingerprint(const rec_delight *d, const char *source, srv_delight_row *r)
+gs_status srv_delight_fingerprint(const gs_delight *d, const char *source, srv_delight_row *r)
 {
     if (!d || !r) return gs_fail(GS_EINVAL, "srv_delight_fingerprint: NULL argument");
     memset(r, 0, sizeof *r);
@@ -812,13 +812,13 @@ gs_status srv_delight_fingerprint(const rec_delight *d, const char *source, srv_
     size_t len = 0;
     FILE *f = open_memstream(&buf, &len);
     if (!f) return gs_fail(GS_ENOMEM, "DELIGHT fingerprint: cannot open a memory stream");
-    gs_status s = rec_delight_export_csv(d, f);
+    gs_status s = gs_delight_export_csv(d, f);
     if (fclose(f) != 0 && s == GS_OK) s = gs_fail(GS_ENOMEM, "DELIGHT fingerprint: out of memory");
     if (s == GS_OK) {
         srv_sha256_hex(buf, len, r->sha256);
         r->source = source && *source ? source : "built-in";
         r->generator = SRV_GENERATOR;
-        r->bulbs = (long)rec_delight_count(d);
+        r->bulbs = (long)gs_delight_count(d);
     }
     free(buf);
     return s;
@@ -886,14 +886,14 @@ void srv_light_from_catalog(srv_light_row *r, const rec_catalog *cat, size_t i)
 void srv_light_from_match(srv_light_row *r, const rec_match *m, const rec_matcher *mt)
 {
     if (!r || !m) return;
-    const rec_bulb *b = m->bulb >= 0 && mt ? rec_matcher_bulb(mt, (size_t)m->bulb) : NULL;
-    const rec_bulb *rb = m->runner_bulb >= 0 && mt ? rec_matcher_bulb(mt, (size_t)m->runner_bulb) : NULL;
+    const gs_bulb *b = m->bulb >= 0 && mt ? rec_matcher_bulb(mt, (size_t)m->bulb) : NULL;
+    const gs_bulb *rb = m->runner_bulb >= 0 && mt ? rec_matcher_bulb(mt, (size_t)m->runner_bulb) : NULL;
     r->brightness = m->brightness;
     r->chi2 = m->chi2;
     r->dof = m->dof;
     r->p_value = m->p_value;
     r->bulb_id = b ? b->id : NULL;
-    r->technology = b ? rec_tech_name(b->type) : NULL;
+    r->technology = b ? gs_tech_name(b->type) : NULL;
     r->phase_fit_deg = b ? m->phase_deg : NAN;
     r->phase_deg = b && !(m->flags & REC_MATCH_PHASE_AMBIGUOUS) ? m->phase_deg : NAN;
     r->phase_sigma_deg = b ? m->phase_sigma_deg : NAN;
@@ -1144,14 +1144,14 @@ gs_status srv_db_insert_light(srv_db *db, int64_t capture_id, const srv_light_ro
                        "p_value %g: expected probabilities in [0, 1]", db->path, r->index,
                        r->confidence, r->bulb_confidence, r->phase_confidence, r->runner_confidence,
                        r->p_value);
-    rec_tech t;
-    if (r->technology && *r->technology && rec_tech_parse(r->technology, &t) != GS_OK)
-        return gs_fail(GS_EINVAL, "%s: light %d: technology '%s': expected a rec_tech_name() such "
+    gs_tech t;
+    if (r->technology && *r->technology && gs_tech_parse(r->technology, &t) != GS_OK)
+        return gs_fail(GS_EINVAL, "%s: light %d: technology '%s': expected a gs_tech_name() such "
                        "as 'sodium_hp' or 'led_linear'", db->path, r->index, r->technology);
-    if ((r->bulb_id && strlen(r->bulb_id) >= REC_ID_MAX) ||
-        (r->runner_bulb_id && strlen(r->runner_bulb_id) >= REC_ID_MAX))
+    if ((r->bulb_id && strlen(r->bulb_id) >= GS_ID_MAX) ||
+        (r->runner_bulb_id && strlen(r->runner_bulb_id) >= GS_ID_MAX))
         return gs_fail(GS_EINVAL, "%s: light %d: bulb id longer than %d bytes", db->path, r->index,
-                       REC_ID_MAX - 1);
+                       GS_ID_MAX - 1);
     sqlite3_stmt *q;
     if ((s = stmt(db, ST_ADD_LIGHT, &q)) != GS_OK) return s;
     sqlite3_bind_int64(q, 1, capture_id);

@@ -26,7 +26,7 @@ void srv_eval_opts_default(srv_eval_opts *o)
 /* One light, stored or true. */
 typedef struct {
     double x, y;
-    char bulb[REC_ID_MAX];      /* "" = none */
+    char bulb[GS_ID_MAX];      /* "" = none */
     char tech[32];              /* "" = none */
     double phase_deg;           /* NaN = none */
     double lat, lon;            /* NaN = none */

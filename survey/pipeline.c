@@ -155,15 +155,15 @@ static gs_status file_sha256(const char *dir, const char *name, char hex[65])
 /* "sha256:" + SHA-256 of a manifest listing capture.json and every file it names (frames in
  * k order, then their HDR maps) with each file's SHA-256: the capture's identity, whatever the
  * directory is called or where it lies. */
-static gs_status capture_key(const char *dir, const rec_capture *cap, char key[72])
+static gs_status capture_key(const char *dir, const gs_capture *cap, char key[72])
 {
-    size_t size = 128 + (size_t)cap->K * 2 * (REC_PATH_MAX + 70), used = 0;
+    size_t size = 128 + (size_t)cap->K * 2 * (GS_PATH_MAX + 70), used = 0;
     char *man = malloc(size), hex[65];
     if (!man) return gs_fail(GS_ENOMEM, "capture key: out of memory");
     gs_status s = file_sha256(dir, "capture.json", hex);
     if (s == GS_OK) used += (size_t)snprintf(man + used, size - used, KEY_FORMAT "\ncapture.json %s\n", hex);
     for (int k = 0; s == GS_OK && k < cap->K; k++) {
-        const rec_frame_info *fr = &cap->frames[k];
+        const gs_frame_info *fr = &cap->frames[k];
         if ((s = file_sha256(dir, fr->file, hex)) != GS_OK) break;
         used += (size_t)snprintf(man + used, size - used, "%s %s\n", fr->file, hex);
         if (fr->hdr_map[0]) {
@@ -268,10 +268,10 @@ static gs_status committed_counts(srv_db *db, int64_t survey_id, srv_run_report 
 /* DELIGHT (the file, or the built-in database when path is NULL) and its Eq. 7 templates for
  * a capture of grid_hz, bands and K. */
 static gs_status load_matcher(const char *path, int grid_hz, int bands, int K, const rec_eq7_opts *eq7,
-                              rec_delight **d, rec_matcher **m)
+                              gs_delight **d, rec_matcher **m)
 {
-    if (!(*d = rec_delight_new())) return gs_fail(GS_ENOMEM, "cannot allocate the DELIGHT database");
-    gs_status s = path ? rec_delight_load(*d, path) : rec_delight_generate(*d, REC_BRF_N_DEFAULT);
+    if (!(*d = gs_delight_new())) return gs_fail(GS_ENOMEM, "cannot allocate the DELIGHT database");
+    gs_status s = path ? gs_delight_load(*d, path) : gs_delight_generate(*d, GS_BRF_N_DEFAULT);
     if (s != GS_OK) return s;
     s = rec_matcher_new(*d, grid_hz, bands, K, eq7, m);
     if (s == GS_ENOTFOUND) {
@@ -297,11 +297,11 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
     memset(&sc, 0, sizeof sc);
     int have_scene = 0;
     cap_backend *be = NULL;
-    rec_capture cap;
+    gs_capture cap;
     memset(&cap, 0, sizeof cap);
     rec_catalog cat;
     memset(&cat, 0, sizeof cat);
-    rec_delight *d = NULL;
+    gs_delight *d = NULL;
     rec_matcher *m = NULL;
     rec_match *mt = NULL;
     srv_db *db = NULL;
@@ -378,7 +378,7 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
         snprintf(r->capture_dir, sizeof r->capture_dir, "%s", o->input);
         stage(o, SRV_STAGE_READ, "reading %s", o->input);
         t0 = now_s();
-        if ((s = rec_capture_read(o->input, &cap)) != GS_OK) goto done;
+        if ((s = gs_capture_read(o->input, &cap)) != GS_OK) goto done;
         r->seconds[SRV_STAGE_READ] += now_s() - t0;
         grid_hz = cap.grid_hz;
         bands = cap.bands;
@@ -455,10 +455,10 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
         if (s != GS_OK) goto done;
         stage(o, SRV_STAGE_READ, "reading %s", r->capture_dir);
         t0 = now_s();
-        if ((s = rec_capture_read(r->capture_dir, &cap)) != GS_OK) goto done;
+        if ((s = gs_capture_read(r->capture_dir, &cap)) != GS_OK) goto done;
         r->seconds[SRV_STAGE_READ] += now_s() - t0;
     }
-    /* (capture_dir is at most sizeof - 64 bytes long: checked above, or by rec_capture_read) */
+    /* (capture_dir is at most sizeof - 64 bytes long: checked above, or by gs_capture_read) */
     if (snprintf(r->truth_path, sizeof r->truth_path, "%.4000s/truth.json", r->capture_dir) > 0 &&
         !(stat(r->truth_path, &sb) == 0 && S_ISREG(sb.st_mode)))
         r->truth_path[0] = '\0';
@@ -572,7 +572,7 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
     size_t n_freq = 0;
     double f_sum = 0, f_sum2 = 0;
     for (int k = 0; k < K; k++) {
-        const rec_frame_info *fi = &cap.frames[k];
+        const gs_frame_info *fi = &cap.frames[k];
         if (!isfinite(fi->grid_hz_measured) || !isfinite(fi->start_s)) continue;
         srv_freq_row fr = {fi->start_s, fi->cycles / (2.0 * fi->grid_hz_measured),
                            fi->grid_hz_measured, NAN};
@@ -625,10 +625,10 @@ done:
     free(lights);
     free(mt);
     rec_matcher_free(m);
-    rec_delight_free(d);
+    gs_delight_free(d);
     srv_db_close(db);
     rec_catalog_release(&cat);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
     cap_backend_free(be);
     if (have_scene) cap_scene_release(&sc);
     return s;

@@ -96,9 +96,9 @@ typedef struct {
     const char *generator;     /* NULL = SRV_GENERATOR */
     long bulbs;                /* entries */
 } srv_delight_row;
-/* sha256 of rec_delight_export_csv(d) (byte-exact, so equal databases hash equally) and the
+/* sha256 of gs_delight_export_csv(d) (byte-exact, so equal databases hash equally) and the
  * entry count. */
-gs_status srv_delight_fingerprint(const rec_delight *d, const char *source, srv_delight_row *r);
+gs_status srv_delight_fingerprint(const gs_delight *d, const char *source, srv_delight_row *r);
 /* FIPS 180-4 SHA-256 of data[0..n) as 64 hex digits + NUL. */
 void srv_sha256_hex(const void *data, size_t n, char hex[65]);
 
@@ -145,7 +145,7 @@ typedef struct {
     int dof;                   /* -1 = unknown */
     double p_value;            /* [0, 1] */
     const char *bulb_id;       /* DELIGHT id, NULL = no answer */
-    const char *technology;    /* rec_tech_name(), NULL = no answer */
+    const char *technology;    /* gs_tech_name(), NULL = no answer */
     double phase_deg;          /* [0, 360) (wrapped); NaN = ambiguous or unknown */
     double phase_fit_deg;      /* the best fit's phase whatever its confidence; NaN = none */
     double phase_sigma_deg;
@@ -388,7 +388,7 @@ int srv_bench_db(int argc, char **argv);
  * One capture from acquisition to the database:
  *   capture    a scene (gridsurvey-scene/1) is rendered by the sim backend through the
  *              acquisition loop (cap_loop_run: resumable) into a capture directory, with its
- *              truth.json; a capture directory is read as it is (rec_capture_read);
+ *              truth.json; a capture directory is read as it is (gs_capture_read);
  *   recognize  lights as blobs with per-frame photometry (rec_blobs_extract), then Eq. 7 over
  *              DELIGHT (rec_match_catalog);
  *   locate     with a station (the capture's "station" object, or a station file), each light
@@ -432,7 +432,7 @@ typedef struct {
                                  * median height of its geographic lights. Required (GS_EINVAL)
                                  * when there is a station and no default. */
     const char *delight_path;   /* DELIGHT SQLite file (NULL: a scene's "delight", else the
-                                 * built-in database, rec_delight_generate) */
+                                 * built-in database, gs_delight_generate) */
     rec_eq7_opts eq7;           /* Eq. 7 options (rec_eq7_opts_default) */
     double threshold_sigma;     /* blob detection threshold, noise sigmas > 0 (5) */
     int capture_progress;       /* the acquisition loop's own progress line on stderr (0) */

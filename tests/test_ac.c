@@ -146,7 +146,7 @@ TEST(eq1_zc_cubic_exact)
         double *t;
         size_t c;
         int rf;
-        CHECK_OK(rec_zero_crossings(x, n, 1000.0, 0.0, &t, &c, &rf));
+        CHECK_OK(gs_zero_crossings(x, n, 1000.0, 0.0, &t, &c, &rf));
         CHECK(c == 1);
         CHECK(rf == sgn);
         if (c == 1) CHECK_NEAR(t[0] * 1000.0, 0.5 * (lo + hi), 1e-9);
@@ -170,7 +170,7 @@ TEST(eq1_zc_sine_clean_subsample)
     double *t;
     size_t c;
     int rf;
-    CHECK_OK(rec_zero_crossings(x, n, rate, 0.01, &t, &c, &rf));
+    CHECK_OK(gs_zero_crossings(x, n, rate, 0.01, &t, &c, &rf));
     double mx, rms = compare_roots(t, c, rf, root, dir, nr, rate, &mx);
     CHECK_MSG(mx < 1.5e-3, "max error %g samples", mx);
     CHECK_MSG(rms < 1.0e-3, "rms error %g samples", rms);
@@ -192,13 +192,13 @@ TEST(eq1_zc_sine_harmonic_noise)
     double *t;
     size_t c;
     int rf;
-    CHECK_OK(rec_zero_crossings(x, n, rate, 0.05, &t, &c, &rf));
+    CHECK_OK(gs_zero_crossings(x, n, rate, 0.05, &t, &c, &rf));
     double mx, rms = compare_roots(t, c, rf, root, dir, nr, rate, &mx);
     CHECK_MSG(mx < 0.04, "max error %g samples", mx);
     CHECK_MSG(rms < 0.015, "rms error %g samples", rms);
     /* Eq. 1 on these crossings recovers the frequency */
-    rec_freq_stats st;
-    CHECK_OK(rec_grid_frequency(t, c, NULL, &st));
+    gs_freq_stats st;
+    CHECK_OK(gs_grid_frequency(t, c, NULL, &st));
     CHECK_NEAR(st.mean_hz, w.f_hz, 2e-3);
     CHECK(st.rejected == 0);
     free(t);
@@ -223,16 +223,16 @@ TEST(eq1_zc_hysteresis_chatter)
     double *t;
     size_t c;
     int rf;
-    CHECK_OK(rec_zero_crossings(x, n, rate, 0.0, &t, &c, &rf));
+    CHECK_OK(gs_zero_crossings(x, n, rate, 0.0, &t, &c, &rf));
     CHECK_MSG(c > 220, "only %zu crossings without hysteresis: no chatter to reject?", c);
     free(t);
-    CHECK_OK(rec_zero_crossings(x, n, rate, 0.1, &t, &c, &rf));
+    CHECK_OK(gs_zero_crossings(x, n, rate, 0.1, &t, &c, &rf));
     double mx, rms = compare_roots(t, c, rf, root, dir, nr, rate, &mx);
     /* noise / slope = 0.02 / (2 pi 50) s = 64 us = 1.3 samples */
     CHECK_MSG(rms < 2.0, "rms error %g samples", rms);
     CHECK_MSG(mx < 5.0, "max error %g samples", mx);
-    rec_freq_stats st;
-    CHECK_OK(rec_grid_frequency(t, c, NULL, &st));
+    gs_freq_stats st;
+    CHECK_OK(gs_grid_frequency(t, c, NULL, &st));
     CHECK(st.sigma_mean_hz > 0);
     CHECK_MSG(fabs(st.mean_hz - 50.0) < 5 * st.sigma_mean_hz, "mean %.9f +- %.3g", st.mean_hz,
               st.sigma_mean_hz);
@@ -249,7 +249,7 @@ TEST(ac_zc_every_sample_alternates)
     double *t;
     size_t c;
     int rf;
-    CHECK_OK(rec_zero_crossings(x, 10, 100.0, 0.5, &t, &c, &rf));
+    CHECK_OK(gs_zero_crossings(x, 10, 100.0, 0.5, &t, &c, &rf));
     CHECK(c == 9);
     CHECK(rf == -1);
     for (size_t i = 1; i + 2 < c; i++) CHECK_NEAR(t[i] * 100.0, (double)i + 0.5, 1e-12);
@@ -268,7 +268,7 @@ TEST(ac_zc_nonfinite_sample)
         double *t = x; /* must be reset */
         size_t c = 99;
         int rf = 5;
-        CHECK(rec_zero_crossings(x, 200, 400.0, 0.0, &t, &c, &rf) == GS_ENUMERIC);
+        CHECK(gs_zero_crossings(x, 200, 400.0, 0.0, &t, &c, &rf) == GS_ENUMERIC);
         char idx[32];
         snprintf(idx, sizeof idx, "sample %zu ", where[k]);
         CHECK_MSG(contains(gs_detail(), idx), "detail: %s", gs_detail());
@@ -288,25 +288,25 @@ TEST(ac_zc_constant_and_short)
         double *t;
         size_t c = 99;
         int rf = 5;
-        CHECK_OK(rec_zero_crossings(x, 1000, 400.0, 0.0, &t, &c, &rf));
+        CHECK_OK(gs_zero_crossings(x, 1000, 400.0, 0.0, &t, &c, &rf));
         CHECK(t == NULL && c == 0 && rf == 0);
-        rec_freq_stats st;
-        CHECK(rec_grid_frequency(t, c, NULL, &st) == GS_EINVAL);
+        gs_freq_stats st;
+        CHECK(gs_grid_frequency(t, c, NULL, &st) == GS_EINVAL);
         CHECK_MSG(contains(gs_detail(), "at least 3"), "detail: %s", gs_detail());
     }
     for (int i = 0; i < 1000; i++) x[i] = 0.01 * sin(2 * pi * i / 8.0);
     double *t;
     size_t c;
     int rf;
-    CHECK_OK(rec_zero_crossings(x, 1000, 400.0, 0.02, &t, &c, &rf));
+    CHECK_OK(gs_zero_crossings(x, 1000, 400.0, 0.02, &t, &c, &rf));
     CHECK(c == 0 && t == NULL);
-    CHECK_OK(rec_zero_crossings(x, 1000, 400.0, 0.005, &t, &c, &rf));
+    CHECK_OK(gs_zero_crossings(x, 1000, 400.0, 0.005, &t, &c, &rf));
     CHECK(c == 249); /* 125 periods, crossings between samples only */
     free(t);
-    CHECK_OK(rec_zero_crossings(NULL, 0, 400.0, 0.0, &t, &c, &rf));
+    CHECK_OK(gs_zero_crossings(NULL, 0, 400.0, 0.0, &t, &c, &rf));
     CHECK(c == 0 && t == NULL);
     x[0] = 1;
-    CHECK_OK(rec_zero_crossings(x, 1, 400.0, 0.0, &t, &c, &rf));
+    CHECK_OK(gs_zero_crossings(x, 1, 400.0, 0.0, &t, &c, &rf));
     CHECK(c == 0 && t == NULL);
 }
 
@@ -315,12 +315,12 @@ TEST(ac_zc_bad_arguments)
     double x[8] = {1, -1, 1, -1, 1, -1, 1, -1}, *t;
     size_t c;
     int rf;
-    CHECK(rec_zero_crossings(x, 8, 0.0, 0.0, &t, &c, &rf) == GS_EINVAL);
-    CHECK(rec_zero_crossings(x, 8, NAN, 0.0, &t, &c, &rf) == GS_EINVAL);
-    CHECK(rec_zero_crossings(x, 8, 400.0, -1.0, &t, &c, &rf) == GS_EINVAL);
-    CHECK(rec_zero_crossings(x, 8, 400.0, NAN, &t, &c, &rf) == GS_EINVAL);
-    CHECK(rec_zero_crossings(x, 8, 400.0, 0.0, NULL, &c, &rf) == GS_EINVAL);
-    CHECK(rec_zero_crossings(NULL, 8, 400.0, 0.0, &t, &c, &rf) == GS_EINVAL);
+    CHECK(gs_zero_crossings(x, 8, 0.0, 0.0, &t, &c, &rf) == GS_EINVAL);
+    CHECK(gs_zero_crossings(x, 8, NAN, 0.0, &t, &c, &rf) == GS_EINVAL);
+    CHECK(gs_zero_crossings(x, 8, 400.0, -1.0, &t, &c, &rf) == GS_EINVAL);
+    CHECK(gs_zero_crossings(x, 8, 400.0, NAN, &t, &c, &rf) == GS_EINVAL);
+    CHECK(gs_zero_crossings(x, 8, 400.0, 0.0, NULL, &c, &rf) == GS_EINVAL);
+    CHECK(gs_zero_crossings(NULL, 8, 400.0, 0.0, &t, &c, &rf) == GS_EINVAL);
 }
 
 /* ------------------------------------------------------- grid frequency */
@@ -331,8 +331,8 @@ TEST(eq1_per_cycle_alternating_half_periods)
     const double delta = 0.01, alt = 4e-4; /* 50 Hz; half periods 10.4 and 9.6 ms */
     double t[101], f[100];
     for (int k = 0; k <= 100; k++) t[k] = 1.5 + k * delta + (k % 2 ? alt : 0);
-    rec_freq_stats st;
-    CHECK_OK(rec_grid_frequency(t, 101, f, &st));
+    gs_freq_stats st;
+    CHECK_OK(gs_grid_frequency(t, 101, f, &st));
     for (int i = 0; i < 100; i++)
         CHECK_NEAR(f[i], 1.0 / (2 * (delta + (i % 2 ? -alt : alt))), 1e-9);
     CHECK_NEAR(st.mean_hz, 50.0, 1e-9);
@@ -360,8 +360,8 @@ TEST(eq1_synthetic_jitter_honest_error)
         for (size_t i = 0; i + 2 < n; i++) sum_p += tt[i + 2] - tt[i];
         double p_true = sum_p / (double)(n - 2), truth = 1.0 / p_true;
         expect = 2 * sigma_t / (double)(n - 2) / (p_true * p_true);
-        rec_freq_stats st;
-        CHECK_OK(rec_grid_frequency(t, n, NULL, &st));
+        gs_freq_stats st;
+        CHECK_OK(gs_grid_frequency(t, n, NULL, &st));
         double z = (st.mean_hz - truth) / st.sigma_mean_hz;
         CHECK_MSG(fabs(z) < 5, "trial %zu: %.9f vs truth %.9f, sigma %.3g", k, st.mean_hz, truth,
                   st.sigma_mean_hz);
@@ -406,8 +406,8 @@ TEST(eq1_synthetic_missing_and_spurious_crossing)
             if (i == 2000) t[m++] = 0.5 * (t0[2000] + t0[2001]); /* spurious */
         }
         CHECK(m == n);
-        rec_freq_stats st;
-        CHECK_OK(rec_grid_frequency(t, m, NULL, &st));
+        gs_freq_stats st;
+        CHECK_OK(gs_grid_frequency(t, m, NULL, &st));
         CHECK_MSG(st.rejected == 5, "trial %zu: %zu rejected", k, st.rejected);
         CHECK(st.periods + st.rejected == m - 2);
         double z = (st.mean_hz - f0) / st.sigma_mean_hz;
@@ -426,13 +426,13 @@ TEST(eq1_synthetic_missing_and_spurious_crossing)
 TEST(ac_grid_too_few_crossings)
 {
     double t[3] = {0.0, 0.01, 0.02};
-    rec_freq_stats st;
+    gs_freq_stats st;
     for (size_t n = 0; n < 3; n++) {
-        CHECK(rec_grid_frequency(t, n, NULL, &st) == GS_EINVAL);
+        CHECK(gs_grid_frequency(t, n, NULL, &st) == GS_EINVAL);
         CHECK_MSG(contains(gs_detail(), "at least 3"), "detail: %s", gs_detail());
     }
     double f[2];
-    CHECK_OK(rec_grid_frequency(t, 3, f, &st));
+    CHECK_OK(gs_grid_frequency(t, 3, f, &st));
     CHECK_NEAR(st.mean_hz, 50.0, 1e-9);
     CHECK_NEAR(f[0], 50.0, 1e-9);
     CHECK_NEAR(f[1], 50.0, 1e-9);
@@ -444,17 +444,17 @@ TEST(ac_grid_bad_times)
 {
     double t[10];
     for (int i = 0; i < 10; i++) t[i] = 0.01 * i;
-    rec_freq_stats st;
+    gs_freq_stats st;
     t[4] = NAN;
-    CHECK(rec_grid_frequency(t, 10, NULL, &st) == GS_ENUMERIC);
+    CHECK(gs_grid_frequency(t, 10, NULL, &st) == GS_ENUMERIC);
     CHECK_MSG(contains(gs_detail(), "t_s[4]"), "detail: %s", gs_detail());
     t[4] = 0.04;
     t[5] = 0.04;
-    CHECK(rec_grid_frequency(t, 10, NULL, &st) == GS_EINVAL);
+    CHECK(gs_grid_frequency(t, 10, NULL, &st) == GS_EINVAL);
     CHECK_MSG(contains(gs_detail(), "t_s[5]"), "detail: %s", gs_detail());
     t[5] = 0.05;
-    CHECK(rec_grid_frequency(t, 10, NULL, NULL) == GS_EINVAL);
-    CHECK(rec_grid_frequency(NULL, 10, NULL, &st) == GS_EINVAL);
+    CHECK(gs_grid_frequency(t, 10, NULL, NULL) == GS_EINVAL);
+    CHECK(gs_grid_frequency(NULL, 10, NULL, &st) == GS_EINVAL);
 }
 
 /* ------------------------------------------------------- frequency wander */
@@ -491,8 +491,8 @@ TEST(eq1_wander_synthetic_modulation)
     double windows[] = {1.0, 0.5, 2.0};
     for (int k = 0; k < 3; k++) {
         double x = W * windows[k] / 2, sinc = sin(x) / x;
-        rec_wander wd;
-        CHECK_OK(rec_frequency_wander(t, n, windows[k], &wd));
+        gs_wander wd;
+        CHECK_OK(gs_frequency_wander(t, n, windows[k], &wd));
         CHECK(wd.windows == (size_t)floor((t[n - 1] - t[0]) / windows[k]));
         CHECK_NEAR(wd.mean_hz, f0, 2e-4);
         CHECK_NEAR(wd.sigma_hz / (A * sinc / sqrt(2)), 1.0, 0.02);
@@ -511,16 +511,16 @@ TEST(ac_wander_gap)
     size_t max = 80000;
     double *t = malloc(max * sizeof *t);
     size_t n = modulated_times(f0, A, T, dur, 0.0, t, max);
-    rec_wander full, gap;
-    CHECK_OK(rec_frequency_wander(t, n, 1.0, &full));
+    gs_wander full, gap;
+    CHECK_OK(gs_frequency_wander(t, n, 1.0, &full));
     size_t m = 0;
     for (size_t i = 0; i < n; i++)
         if (!(t[i] >= 300.0 && t[i] < 303.0)) t[m++] = t[i];
     CHECK(m < n - 290);
-    rec_freq_stats st;
-    CHECK_OK(rec_grid_frequency(t, m, NULL, &st));
+    gs_freq_stats st;
+    CHECK_OK(gs_grid_frequency(t, m, NULL, &st));
     CHECK(st.rejected == 2);
-    CHECK_OK(rec_frequency_wander(t, m, 1.0, &gap));
+    CHECK_OK(gs_frequency_wander(t, m, 1.0, &gap));
     CHECK(gap.windows == full.windows);
     CHECK_NEAR(gap.mean_hz, full.mean_hz, 1e-4);
     CHECK_NEAR(gap.sigma_hz / full.sigma_hz, 1.0, 0.01);
@@ -535,18 +535,18 @@ TEST(ac_wander_bad_input)
     size_t n = 12000; /* 119.99 s of 50 Hz crossings */
     double *t = malloc((n + 100) * sizeof *t);
     for (size_t i = 0; i < n + 100; i++) t[i] = 0.01 * (double)i;
-    rec_wander w;
-    CHECK(rec_frequency_wander(t, n, 1.0, &w) == GS_EINVAL);
+    gs_wander w;
+    CHECK(gs_frequency_wander(t, n, 1.0, &w) == GS_EINVAL);
     CHECK_MSG(contains(gs_detail(), "120 s"), "detail: %s", gs_detail());
-    CHECK_OK(rec_frequency_wander(t, n + 100, 1.0, &w));
+    CHECK_OK(gs_frequency_wander(t, n + 100, 1.0, &w));
     CHECK(w.windows == 120);
     CHECK_NEAR(w.mean_hz, 50.0, 1e-9);
     double bad[] = {0.0, -1.0, NAN, INFINITY, 10.5};
     for (int k = 0; k < 5; k++) {
-        CHECK(rec_frequency_wander(t, n + 100, bad[k], &w) == GS_EINVAL);
+        CHECK(gs_frequency_wander(t, n + 100, bad[k], &w) == GS_EINVAL);
         CHECK_MSG(contains(gs_detail(), "window_s"), "detail: %s", gs_detail());
     }
-    CHECK(rec_frequency_wander(t, 2, 1.0, &w) == GS_EINVAL);
+    CHECK(gs_frequency_wander(t, 2, 1.0, &w) == GS_EINVAL);
     free(t);
 }
 
@@ -561,26 +561,26 @@ static void check_real_mains(const char *name)
     snprintf(path, sizeof path, "%s", test_shared_path(name));
     double *x, rate;
     size_t n;
-    CHECK_OK(rec_mains_read(path, &x, &n, &rate));
+    CHECK_OK(gs_mains_read(path, &x, &n, &rate));
     if (!x) return;
     CHECK(rate == 400);
     double *t, *t0;
     size_t c, c0;
     int rf, rf0;
-    CHECK_OK(rec_zero_crossings(x, n, rate, 0.02, &t, &c, &rf));
-    CHECK_OK(rec_zero_crossings(x, n, rate, 0.0, &t0, &c0, &rf0));
+    CHECK_OK(gs_zero_crossings(x, n, rate, 0.02, &t, &c, &rf));
+    CHECK_OK(gs_zero_crossings(x, n, rate, 0.0, &t0, &c0, &rf0));
     CHECK(c0 == c && rf0 == rf); /* clean recording: hysteresis removes nothing */
     double dur = (double)n / rate;
     CHECK_MSG(fabs((double)c / dur - 100.0) < 0.5, "%zu crossings in %.1f s", c, dur);
-    rec_freq_stats st;
-    CHECK_OK(rec_grid_frequency(t, c, NULL, &st));
+    gs_freq_stats st;
+    CHECK_OK(gs_grid_frequency(t, c, NULL, &st));
     CHECK_NEAR(st.mean_hz, 50.0, 0.1);
     CHECK_NEAR(st.median_hz, 50.0, 0.1);
     CHECK_MSG(st.std_hz > 0.005 && st.std_hz < 0.06, "per-period std %g Hz", st.std_hz);
     CHECK(st.sigma_mean_hz > 0 && st.sigma_mean_hz < 1e-4);
     CHECK(st.rejected * 1000 < st.periods);
-    rec_wander w;
-    CHECK_OK(rec_frequency_wander(t, c, 1.0, &w));
+    gs_wander w;
+    CHECK_OK(gs_frequency_wander(t, c, 1.0, &w));
     printf("    %s: %zu crossings, mean %.6f +- %.2g Hz, sigma %.2f mHz, step %.2f mHz, "
            "corr10 %.3f, corr60 %.3f\n", name, c, st.mean_hz, st.sigma_mean_hz, 1e3 * w.sigma_hz,
            1e3 * w.step_sigma_hz, w.corr_10s, w.corr_60s);
@@ -658,7 +658,7 @@ static void expect_reject(const char *path, gs_status want, const char *field)
     double *x = &sentinel; /* must be reset */
     size_t n = 7;
     double rate = 1;
-    gs_status s = rec_mains_read(path, &x, &n, &rate);
+    gs_status s = gs_mains_read(path, &x, &n, &rate);
     CHECK_MSG(s == want, "%s: %s, expected %s (%s)", path, gs_strerror(s), gs_strerror(want),
               gs_detail());
     CHECK_MSG(contains(gs_detail(), path), "detail does not name the file: %s", gs_detail());
@@ -679,7 +679,7 @@ TEST(ac_wav_real_read)
     size_t data = (size_t)b[40] | (size_t)b[41] << 8 | (size_t)b[42] << 16 | (size_t)b[43] << 24;
     double *x, rate;
     size_t n;
-    CHECK_OK(rec_mains_read(path, &x, &n, &rate));
+    CHECK_OK(gs_mains_read(path, &x, &n, &rate));
     CHECK(n == data / 2);
     CHECK(rate == 400);
     for (size_t i = 0; x && i < n; i++) {
@@ -702,7 +702,7 @@ TEST(ac_wav_float_roundtrip)
     write_wav(path, SF_FORMAT_WAV | SF_FORMAT_FLOAT, 1, v, 1000);
     double *x, rate;
     size_t n;
-    CHECK_OK(rec_mains_read(path, &x, &n, &rate));
+    CHECK_OK(gs_mains_read(path, &x, &n, &rate));
     CHECK(n == 1000 && rate == 400);
     for (size_t i = 0; x && i < n; i++)
         if (x[i] != v[i]) {

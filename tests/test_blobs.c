@@ -109,7 +109,7 @@ static double lights_at(const scene *sc, int k, int b, int x, int y)
     return v;
 }
 
-static void render(const scene *sc, rec_capture *cap)
+static void render(const scene *sc, gs_capture *cap)
 {
     memset(cap, 0, sizeof *cap);
     cap->grid_hz = 50;
@@ -122,9 +122,9 @@ static void render(const scene *sc, rec_capture *cap)
     cap->gain_e_per_dn = sc->gain;
     cap->read_noise_dn = sc->read;
     cap->locked = 1;
-    CHECK_OK(rec_capture_alloc(cap));
+    CHECK_OK(gs_capture_alloc(cap));
     if (sc->halvings) {
-        CHECK_OK(rec_capture_alloc_hdr(cap));
+        CHECK_OK(gs_capture_alloc_hdr(cap));
         memcpy(cap->halvings, sc->halvings, (size_t)sc->K * sc->W * sc->H);
     }
     rng_state = sc->seed;
@@ -169,7 +169,7 @@ static void render(const scene *sc, rec_capture *cap)
 }
 
 /* Pixel p saturated in some frame and band of cap. */
-static int saturated(const rec_capture *cap, size_t p)
+static int saturated(const gs_capture *cap, size_t p)
 {
     size_t N = (size_t)cap->width * cap->height;
     for (int k = 0; k < cap->K; k++)
@@ -179,7 +179,7 @@ static int saturated(const rec_capture *cap, size_t p)
 }
 
 /* The truth of light i's sum in frame k, band b: lights' flux over its usable aperture. */
-static double truth_sum(const scene *sc, const rec_capture *cap, const rec_catalog *cat, size_t i,
+static double truth_sum(const scene *sc, const gs_capture *cap, const rec_catalog *cat, size_t i,
                         int k, int b)
 {
     double s = 0;
@@ -309,7 +309,7 @@ static double centroid_sigma(const scene *sc, const light *l)
 /* z = (signal - truth) / sigma of every frame and band of every matched light, the centroid
  * errors against centroid_sigma, and no catalog entry without a true light. Returns the
  * number of matched lights; the z statistics go to *mean, *std. */
-static int check_against_truth(const scene *sc, const rec_capture *cap, const rec_catalog *cat,
+static int check_against_truth(const scene *sc, const gs_capture *cap, const rec_catalog *cat,
                                double min_flux, double *zmean, double *zstd)
 {
     double zs = 0, zz = 0;
@@ -379,7 +379,7 @@ TEST(blobs_isolated_lights_sums_and_centroids)
     light l[NL];
     random_lights(l, NL, 0.3, 7);
     scene sc = base_scene(256, 256, l, NL, 11);
-    rec_capture cap;
+    gs_capture cap;
     render(&sc, &cap);
     rec_blob_opts o = opts_labels();
     rec_catalog cat;
@@ -405,7 +405,7 @@ TEST(blobs_isolated_lights_sums_and_centroids)
     for (size_t i = 1; i < cat.count; i++) CHECK(cat.y_px[i] > cat.y_px[i - 1] - 20);
     rec_catalog_release(&cat);
     CHECK(cat.count == 0 && cat.signal == NULL && cat.labels == NULL);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
 }
 
 /* The same lights without noise (only the rounding of raw samples; the capture says read noise
@@ -420,7 +420,7 @@ TEST(blobs_noiseless_lights)
     sc.noise = 0;
     sc.read = 0;
     sc.gain = 0;
-    rec_capture cap;
+    gs_capture cap;
     render(&sc, &cap);
     rec_blob_opts o = opts_labels();
     rec_catalog cat;
@@ -446,11 +446,11 @@ TEST(blobs_noiseless_lights)
     }
     printf("    largest centroid error (flux >= 1): %.4f px\n", worst);
     rec_catalog_release(&cat);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
 }
 
 /* Without noise and on an exactly black background the per-frame background is exactly 0, so a
- * light's sum is exactly the sum of rec_capture_value over its usable aperture pixels: the
+ * light's sum is exactly the sum of gs_capture_value over its usable aperture pixels: the
  * extractor and the format agree on black level, cycles and 2^h (HDR). */
 TEST(blobs_sum_equals_capture_values)
 {
@@ -467,7 +467,7 @@ TEST(blobs_sum_equals_capture_values)
         for (int y = 28; y < 34; y++)
             for (int x = 38; x < 43; x++) halv[(k * 48 + y) * 64 + x] = (unsigned char)(k % 3);
     sc.halvings = halv;
-    rec_capture cap;
+    gs_capture cap;
     render(&sc, &cap);
     rec_blob_opts o = opts_labels();
     rec_catalog cat;
@@ -483,12 +483,12 @@ TEST(blobs_sum_equals_capture_values)
                 double want = 0;
                 for (int y = 0; y < 48; y++)
                     for (int x = 0; x < 64; x++)
-                        if (cat.labels[y * 64 + x] == j) want += rec_capture_value(&cap, k, y, x, b);
+                        if (cat.labels[y * 64 + x] == j) want += gs_capture_value(&cap, k, y, x, b);
                 CHECK_NEAR(cat.signal[((size_t)j * 3 + b) * 8 + k], want, 1e-9 * fabs(want) + 1e-12);
             }
     }
     rec_catalog_release(&cat);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
 }
 
 TEST(blobs_background_pedestal_gradient)
@@ -501,7 +501,7 @@ TEST(blobs_background_pedestal_gradient)
     sc.bgx = 0.01;         /* +2.5 per cycle across the image */
     sc.bgy = -0.006;
     sc.bg_flicker = 0.3;   /* the sky flickers too */
-    rec_capture cap;
+    gs_capture cap;
     render(&sc, &cap);
     rec_blob_opts o = opts_labels();
     rec_catalog cat;
@@ -512,7 +512,7 @@ TEST(blobs_background_pedestal_gradient)
      * the background would shift z by several sigmas */
     CHECK_MSG(fabs(zm) < 0.15 && zsd > 0.85 && zsd < 1.15, "z mean %g std %g", zm, zsd);
     rec_catalog_release(&cat);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
 }
 
 TEST(blobs_area_limits)
@@ -524,7 +524,7 @@ TEST(blobs_area_limits)
     l[2] = (light){40.1, 60.4, 4.0, 400, 0, 0, {0}}; /* hundreds */
     scene sc = base_scene(96, 96, l, 3, 5);
     sc.bg0 = 0.3;
-    rec_capture cap;
+    gs_capture cap;
     render(&sc, &cap);
     rec_blob_opts o;
     rec_blob_opts_default(&o);
@@ -553,7 +553,7 @@ TEST(blobs_area_limits)
     CHECK_OK(rec_blobs_extract(&cap, &o, &cat));
     CHECK(cat.count == 1 && cat.count && cat.area_px[0] == area[2]);
     rec_catalog_release(&cat);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
 }
 
 TEST(blobs_edge_touching)
@@ -564,7 +564,7 @@ TEST(blobs_edge_touching)
     l[1] = (light){62.8, 47.6, 1.2, 10, 0.3, 0, {0}};  /* in the bottom-right corner */
     l[2] = (light){30.4, 20.6, 1.2, 10, 0.3, 0, {0}};  /* inside */
     scene sc = base_scene(64, 48, l, 3, 9);
-    rec_capture cap;
+    gs_capture cap;
     render(&sc, &cap);
     rec_blob_opts o;
     rec_blob_opts_default(&o);
@@ -578,7 +578,7 @@ TEST(blobs_edge_touching)
     }
     CHECK(catalog_finite(&cat));
     rec_catalog_release(&cat);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
 }
 
 TEST(blobs_saturated_some_frames)
@@ -590,7 +590,7 @@ TEST(blobs_saturated_some_frames)
     l[1] = (light){12.2, 10.7, 1.2, 3, 0.3, 0.5, {0}};
     scene sc = base_scene(64, 48, l, 2, 13);
     sc.sat = 3000;
-    rec_capture cap;
+    gs_capture cap;
     render(&sc, &cap);
     /* which frames saturate: not all of them (the test is about "some frames") */
     int sat_frames = 0;
@@ -630,7 +630,7 @@ TEST(blobs_saturated_some_frames)
         }
 out:
     rec_catalog_release(&cat);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
 }
 
 /* The ACam's HDR loop halves the exposure of pixels that saturate (paper Sec. 6): the same scene
@@ -643,7 +643,7 @@ TEST(blobs_hdr_halving)
     l[0] = (light){30.3, 25.6, 1.5, 200, 0.6, 0.25, {0.4, 0.35, 0.25}};
     scene sc = base_scene(64, 48, l, 1, 17);
     sc.sat = 3000;
-    rec_capture plain, hdr;
+    gs_capture plain, hdr;
     render(&sc, &plain);
     static unsigned char halv[8 * 64 * 48];
     size_t N = 64 * 48;
@@ -687,8 +687,8 @@ TEST(blobs_hdr_halving)
 out:
     rec_catalog_release(&a);
     rec_catalog_release(&b);
-    rec_capture_release(&plain);
-    rec_capture_release(&hdr);
+    gs_capture_release(&plain);
+    gs_capture_release(&hdr);
 }
 
 /* Two lights 4.5 px apart (PSF sigma 1.3: their footprints merge into one component). */
@@ -726,7 +726,7 @@ TEST(blobs_two_touching_different_phase)
     touching_pair(l, 1.0 / 3, 0.6); /* the second light 120 deg later (shift 1/3 cycle) */
     scene sc = base_scene(64, 48, l, 2, 31);
     sc.K = 12;
-    rec_capture cap;
+    gs_capture cap;
     render(&sc, &cap);
     rec_blob_opts o = opts_labels();
     rec_catalog cat;
@@ -757,7 +757,7 @@ TEST(blobs_two_touching_different_phase)
             }
     }
     rec_catalog_release(&cat);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
 }
 
 TEST(blobs_two_touching_same_signal)
@@ -766,7 +766,7 @@ TEST(blobs_two_touching_same_signal)
     touching_pair(l, 0.0, 0.6); /* same bulb, same phase, different brightness */
     scene sc = base_scene(64, 48, l, 2, 37);
     sc.K = 12;
-    rec_capture cap;
+    gs_capture cap;
     render(&sc, &cap);
     rec_blob_opts o = opts_labels();
     rec_catalog cat;
@@ -783,7 +783,7 @@ TEST(blobs_two_touching_same_signal)
             }
     }
     rec_catalog_release(&cat);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
 }
 
 TEST(blobs_nan_inf_negative_input)
@@ -792,7 +792,7 @@ TEST(blobs_nan_inf_negative_input)
     memset(l, 0, sizeof l);
     l[0] = (light){20.3, 15.6, 1.2, 5, 0.4, 0.1, {0}};
     scene sc = base_scene(40, 32, l, 1, 41);
-    rec_capture cap;
+    gs_capture cap;
     render(&sc, &cap);
     rec_blob_opts o;
     rec_blob_opts_default(&o);
@@ -834,17 +834,17 @@ TEST(blobs_nan_inf_negative_input)
     CHECK(rec_blobs_extract(&cap, NULL, &cat) == GS_EINVAL);
     CHECK(rec_blobs_extract(&cap, &o, NULL) == GS_EINVAL);
     /* HDR counts beyond the format's 16 */
-    CHECK_OK(rec_capture_alloc_hdr(&cap));
+    CHECK_OK(gs_capture_alloc_hdr(&cap));
     cap.halvings[5] = 17;
     CHECK(rec_blobs_extract(&cap, &o, &cat) == GS_EINVAL);
     cap.halvings[5] = 0;
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
 
     /* raw below the black level: negative per-cycle values everywhere around the light */
     sc.black = 1000;
     sc.bg0 = -0.5; /* the pedestal is under the black level: values ~ -0.5 per cycle */
     render(&sc, &cap);
-    CHECK(rec_capture_value(&cap, 0, 2, 2, 0) < 0);
+    CHECK(gs_capture_value(&cap, 0, 2, 2, 0) < 0);
     CHECK_OK(rec_blobs_extract(&cap, &o, &cat));
     CHECK(cat.count == 1 && catalog_finite(&cat));
     if (cat.count == 1) CHECK(hypot(cat.x_px[0] - 20.3, cat.y_px[0] - 15.6) < 0.5);
@@ -855,7 +855,7 @@ TEST(blobs_nan_inf_negative_input)
     CHECK_OK(rec_blobs_extract(&cap, &o, &cat));
     CHECK(cat.count >= 1 && catalog_finite(&cat));
     rec_catalog_release(&cat);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
 }
 
 TEST(blobs_dim_light_near_threshold)
@@ -870,7 +870,7 @@ TEST(blobs_dim_light_near_threshold)
         double sigma_m = sqrt(mean_image_var(&sc, (int)l[i].x, (int)l[i].y));
         l[i].flux = snr[i] * sigma_m / psf_px(&l[i], (int)l[i].x, (int)l[i].y);
     }
-    rec_capture cap;
+    gs_capture cap;
     render(&sc, &cap);
     rec_blob_opts o;
     rec_blob_opts_default(&o);
@@ -888,14 +888,14 @@ TEST(blobs_dim_light_near_threshold)
     CHECK_OK(rec_blobs_extract(&cap, &o, &cat));
     CHECK(cat.count == 0);
     rec_catalog_release(&cat);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
 }
 
 TEST(blobs_empty_scene)
 {
     /* noise over a flat background: the expected number of 5-sigma pixels is 65536 * 2.9e-7 */
     scene sc = base_scene(256, 256, NULL, 0, 47);
-    rec_capture cap;
+    gs_capture cap;
     render(&sc, &cap);
     rec_blob_opts o = opts_labels();
     rec_catalog cat;
@@ -906,7 +906,7 @@ TEST(blobs_empty_scene)
     for (size_t p = 0; cat.labels && p < 256 * 256; p++) any |= cat.labels[p] != -1;
     CHECK(!any);
     rec_catalog_release(&cat);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
 
     /* all zero (and black level 0): nothing */
     memset(&cap, 0, sizeof cap);
@@ -916,7 +916,7 @@ TEST(blobs_empty_scene)
     cap.width = 16;
     cap.height = 9;
     cap.saturation_dn = 65535;
-    CHECK_OK(rec_capture_alloc(&cap));
+    CHECK_OK(gs_capture_alloc(&cap));
     for (int k = 0; k < 4; k++) cap.frames[k].cycles = 100;
     CHECK_OK(rec_blobs_extract(&cap, &o, &cat));
     CHECK(cat.count == 0);
@@ -935,7 +935,7 @@ TEST(blobs_empty_scene)
         for (int k = 0; k < 4; k++) CHECK(cat.signal[k] == 0 && isinf(cat.sigma[k]));
     }
     rec_catalog_release(&cat);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
 }
 
 /* Degenerate geometries: one-pixel images, single rows and columns, a mesh of one box. */
@@ -944,7 +944,7 @@ TEST(blobs_tiny_images)
     static const int sizes[][2] = {{1, 1}, {1, 7}, {5, 1}, {3, 2}, {40, 1}};
     for (size_t i = 0; i < sizeof sizes / sizeof *sizes; i++)
         for (int bands = 1; bands <= 3; bands += 2) {
-            rec_capture cap;
+            gs_capture cap;
             memset(&cap, 0, sizeof cap);
             cap.grid_hz = 50;
             cap.K = 2;
@@ -953,7 +953,7 @@ TEST(blobs_tiny_images)
             cap.height = sizes[i][1];
             cap.saturation_dn = 4095;
             cap.read_noise_dn = 1;
-            CHECK_OK(rec_capture_alloc(&cap));
+            CHECK_OK(gs_capture_alloc(&cap));
             cap.frames[0].cycles = cap.frames[1].cycles = 10;
             size_t n = (size_t)2 * cap.width * cap.height * bands;
             for (size_t q = 0; q < n; q++) cap.raw[q] = (unsigned short)(10 + q % 3);
@@ -965,7 +965,7 @@ TEST(blobs_tiny_images)
             CHECK(catalog_finite(&cat));
             CHECK(cat.count <= 2);
             rec_catalog_release(&cat);
-            rec_capture_release(&cap);
+            gs_capture_release(&cap);
         }
 }
 
@@ -973,7 +973,7 @@ TEST(blobs_tiny_images)
  * Fig. 7) with 400 lights over a noisy background. The brief: well under a few seconds. */
 TEST(blobs_speed_1mp_k26_rgb)
 {
-    rec_capture cap;
+    gs_capture cap;
     memset(&cap, 0, sizeof cap);
     cap.grid_hz = 50;
     cap.K = 26;
@@ -984,7 +984,7 @@ TEST(blobs_speed_1mp_k26_rgb)
     cap.black_level_dn = 64;
     cap.gain_e_per_dn = 2;
     cap.read_noise_dn = 3;
-    CHECK_OK(rec_capture_alloc(&cap));
+    CHECK_OK(gs_capture_alloc(&cap));
     const size_t N = 1024 * 1024;
     uint32_t h = 12345;
     for (int k = 0; k < cap.K; k++) {
@@ -1026,5 +1026,5 @@ TEST(blobs_speed_1mp_k26_rgb)
     CHECK(s < 2.0);
 #endif
     rec_catalog_release(&cat);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
 }

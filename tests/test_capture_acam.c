@@ -133,11 +133,11 @@ typedef struct {
 
 /* All K windows (acquired one after the other, as the loop does) of an LED with a 100 %
  * flicker, against its exact Eq. 5 template. */
-static void run_lock(cap_ac *ac, const rec_brf *b, int K, long C, cap_lock_mode mode,
+static void run_lock(cap_ac *ac, const gs_brf *b, int K, long C, cap_lock_mode mode,
                      lock_result *out)
 {
     double *i_k = malloc(sizeof *i_k * (size_t)K), *v = malloc(sizeof *v * (size_t)K);
-    CHECK_OK(rec_brf_integrate(b, 0.0, K, i_k));
+    CHECK_OK(gs_brf_integrate(b, 0.0, K, i_k));
     double spread2 = 0, range = 0, mean = 0;
     for (int k = 0; k < K; k++) {
         cap_window_config w;
@@ -179,9 +179,9 @@ TEST(acam_lock_vs_free_running_real_mains_fig9)
     cap_ac *ac = NULL;
     CHECK_OK(cap_ac_new(&f, 50, &ac));
     if (!ac) return;
-    rec_delight *d = rec_delight_new();
-    CHECK_OK(rec_delight_generate(d, REC_BRF_N_DEFAULT));
-    const rec_bulb *led = rec_delight_find(d, "led-a19-9w-lin2", 50, 1);   /* like LED2 */
+    gs_delight *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(d, GS_BRF_N_DEFAULT));
+    const gs_bulb *led = gs_delight_find(d, "led-a19-9w-lin2", 50, 1);   /* like LED2 */
     CHECK(led != NULL);
     int K = 26;
     long C = 1500;
@@ -189,7 +189,7 @@ TEST(acam_lock_vs_free_running_real_mains_fig9)
     run_lock(ac, &led->brf, K, C, CAP_LOCKED, &L);
     run_lock(ac, &led->brf, K, C, CAP_FREE_RUNNING, &F);
     double i_k[26], hi = -1e300, t0, t1;
-    CHECK_OK(rec_brf_integrate(&led->brf, 0.0, K, i_k));
+    CHECK_OK(gs_brf_integrate(&led->brf, 0.0, K, i_k));
     for (int k = 0; k < K; k++)
         if (i_k[k] > hi) hi = i_k[k];
     CHECK_OK(cap_ac_time(ac, 64, &t0));
@@ -243,24 +243,24 @@ TEST(acam_lock_vs_free_running_real_mains_fig9)
         cap_sim_free(s);
         cap_scene_release(&sc);
     }
-    rec_delight_free(d);
+    gs_delight_free(d);
     cap_ac_free(ac);
 }
 
 /* The antiderivative tables used for windows at any position agree with the exact Eq. 5
- * integrals (rec_brf_integrate) for every DELIGHT bulb, band and window. */
+ * integrals (gs_brf_integrate) for every DELIGHT bulb, band and window. */
 TEST(acam_brf_table_matches_exact_eq5)
 {
-    rec_delight *d = rec_delight_new();
-    CHECK_OK(rec_delight_generate(d, REC_BRF_N_DEFAULT));
+    gs_delight *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(d, GS_BRF_N_DEFAULT));
     double worst = 0;
-    for (size_t i = 0; i < rec_delight_count(d); i++) {
-        const rec_bulb *b = rec_delight_get(d, i);
+    for (size_t i = 0; i < gs_delight_count(d); i++) {
+        const gs_bulb *b = gs_delight_get(d, i);
         if (b->grid_hz != 50 || b->brf.bands != 3) continue;
         cap_brf_table t;
         CHECK_OK(cap_brf_table_init(&t, &b->brf, 4096));
         double shift = 0.37 + 0.01 * (double)i, i_k[3 * 26];
-        CHECK_OK(rec_brf_integrate(&b->brf, shift, 26, i_k));
+        CHECK_OK(gs_brf_integrate(&b->brf, shift, 26, i_k));
         for (int band = 0; band < 3; band++)
             for (int k = 0; k < 26; k++) {
                 double v = cap_brf_table_integral(&t, band, shift, 5.0 + k / 26.0, 5.0 + (k + 1) / 26.0) * 26;
@@ -271,5 +271,5 @@ TEST(acam_brf_table_matches_exact_eq5)
     }
     printf("    BRF tables vs Eq. 5 (K = 26, every 50 Hz RGB bulb): worst absolute error %.2e (window means ~1)\n", worst);
     CHECK(worst < 1e-6);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }

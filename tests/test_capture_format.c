@@ -1,10 +1,10 @@
 /* test_capture_format.c - the capture directory (gridsurvey-capture/1, docs/formats.md):
- * bit-exact round trips through rec_capture_write_* / rec_capture_read, a directory written by
+ * bit-exact round trips through rec_capture_write_* / gs_capture_read, a directory written by
  * an independent program (Python with OpenCV and numpy, JSON by hand) read correctly, every
  * malformed input rejected with a detail naming the file, the JSON line and the field, the
- * writer's own validation, atomic writes, rec_capture_value, and a mutation fuzz of
+ * writer's own validation, atomic writes, gs_capture_value, and a mutation fuzz of
  * capture.json (no crash, every failure explained). */
-#include "recognize/internal.h"
+#include "recognize/base/internal.h"
 #include "tests/test.h"
 
 #include <dirent.h>
@@ -60,7 +60,7 @@ static uint64_t next_u64(void)
 }
 
 /* A capture with every field set and pixels spanning 0..65535. */
-static void make_capture(rec_capture *c, int K, int bands, int W, int H, int hdr)
+static void make_capture(gs_capture *c, int K, int bands, int W, int H, int hdr)
 {
     memset(c, 0, sizeof *c);
     c->grid_hz = 60;
@@ -75,8 +75,8 @@ static void make_capture(rec_capture *c, int K, int bands, int W, int H, int hdr
     c->locked = 0;
     snprintf(c->utc, sizeof c->utc, "2017-07-21T22:05:00.125+03:00");
     c->station_json = strdup("{\"name\":\"Haifa roof\",\"lat\":32.79,\"lon\":35.02,\"h\":[1,2.5]}");
-    CHECK_OK(rec_capture_alloc(c));
-    if (hdr) CHECK_OK(rec_capture_alloc_hdr(c));
+    CHECK_OK(gs_capture_alloc(c));
+    if (hdr) CHECK_OK(gs_capture_alloc_hdr(c));
     rng = 99;
     size_t n = (size_t)K * W * H * bands;
     for (size_t i = 0; i < n; i++) c->raw[i] = (unsigned short)next_u64();
@@ -85,20 +85,20 @@ static void make_capture(rec_capture *c, int K, int bands, int W, int H, int hdr
     for (int k = 0; k < K; k++) c->frames[k].cycles = k == 1 ? 0.1 : 500 + 0.25 * k;
     if (hdr) {
         for (size_t i = 0; i < (size_t)K * W * H; i++)
-            c->halvings[i] = (unsigned char)(next_u64() % (REC_MAX_HALVINGS + 1));
+            c->halvings[i] = (unsigned char)(next_u64() % (GS_MAX_HALVINGS + 1));
         /* frame 2 has no map: its halvings must be 0 */
         c->frames[2].hdr_map[0] = '\0';
         memset(c->halvings + (size_t)2 * W * H, 0, (size_t)W * H);
     }
 }
 
-static void write_capture(const char *dir, const rec_capture *c)
+static void write_capture(const char *dir, const gs_capture *c)
 {
-    for (int k = 0; k < c->K; k++) CHECK_OK(rec_capture_write_frame(dir, c, k));
-    CHECK_OK(rec_capture_write_json(dir, c));
+    for (int k = 0; k < c->K; k++) CHECK_OK(gs_capture_write_frame(dir, c, k));
+    CHECK_OK(gs_capture_write_json(dir, c));
 }
 
-static void check_same(const rec_capture *a, const rec_capture *b)
+static void check_same(const gs_capture *a, const gs_capture *b)
 {
     CHECK(a->grid_hz == b->grid_hz && a->K == b->K && a->bands == b->bands);
     CHECK(a->width == b->width && a->height == b->height);
@@ -129,16 +129,16 @@ static void check_same(const rec_capture *a, const rec_capture *b)
 TEST(capture_format_round_trip_rgb_hdr)
 {
     const char *dir = subdir("cap");
-    rec_capture a, b;
+    gs_capture a, b;
     make_capture(&a, 5, 3, 37, 23, 1);
     write_capture(dir, &a);
-    CHECK_OK(rec_capture_read(dir, &b));
+    CHECK_OK(gs_capture_read(dir, &b));
     check_same(&a, &b);
     /* a second write over the first (atomic replacement) and read again */
     a.raw[7] ^= 0x5555;
     write_capture(dir, &a);
-    rec_capture_release(&b);
-    CHECK_OK(rec_capture_read(dir, &b));
+    gs_capture_release(&b);
+    CHECK_OK(gs_capture_read(dir, &b));
     check_same(&a, &b);
     /* nothing but the capture's files: no temporary file left behind */
     DIR *d = opendir(dir);
@@ -150,16 +150,16 @@ TEST(capture_format_round_trip_rgb_hdr)
     }
     if (d) closedir(d);
     CHECK(files == 1 + 5 + 4); /* capture.json, 5 frames, 4 maps */
-    rec_capture_release(&a);
-    rec_capture_release(&b);
+    gs_capture_release(&a);
+    gs_capture_release(&b);
     CHECK(b.raw == NULL && b.frames == NULL && b.station_json == NULL);
-    rec_capture_release(NULL);
+    gs_capture_release(NULL);
 }
 
 TEST(capture_format_round_trip_mono_defaults)
 {
     const char *dir = subdir("mono");
-    rec_capture a, b;
+    gs_capture a, b;
     make_capture(&a, 2, 1, 1, 1, 0);
     free(a.station_json);
     a.station_json = NULL;
@@ -167,11 +167,11 @@ TEST(capture_format_round_trip_mono_defaults)
     a.saturation_dn = 65536; /* nothing saturates */
     a.black_level_dn = 0;
     write_capture(dir, &a);
-    CHECK_OK(rec_capture_read(dir, &b));
+    CHECK_OK(gs_capture_read(dir, &b));
     check_same(&a, &b);
     CHECK(b.halvings == NULL && b.station_json == NULL && b.utc[0] == '\0');
-    rec_capture_release(&a);
-    rec_capture_release(&b);
+    gs_capture_release(&a);
+    gs_capture_release(&b);
     /* defaults of the optional fields */
     const char *dir2 = subdir("defaults");
     make_capture(&a, 2, 1, 3, 2, 0);
@@ -181,13 +181,13 @@ TEST(capture_format_round_trip_mono_defaults)
                " \"width\": 3, \"height\": 2, \"saturation\": 4095, \"frames\": [\n"
                " {\"file\": \"frame_001.png\", \"k\": 1, \"cycles\": 10},\n"
                " {\"file\": \"frame_000.png\", \"k\": 0, \"cycles\": 20, \"hdr_map\": \"\"}]}\n");
-    CHECK_OK(rec_capture_read(dir2, &b));
+    CHECK_OK(gs_capture_read(dir2, &b));
     CHECK(b.black_level_dn == 0 && b.gain_e_per_dn == 0 && b.read_noise_dn == 1 && b.locked == 1);
     CHECK(b.frames[0].cycles == 20 && b.frames[1].cycles == 10 && b.halvings == NULL);
     CHECK(strcmp(b.frames[0].file, "frame_000.png") == 0);
     CHECK(memcmp(a.raw, b.raw, 2 * 3 * 2 * sizeof *a.raw) == 0);
-    rec_capture_release(&a);
-    rec_capture_release(&b);
+    gs_capture_release(&a);
+    gs_capture_release(&b);
 }
 
 /* The pixel formula the Python writer uses. */
@@ -230,8 +230,8 @@ TEST(capture_format_independent_python_writer)
     int rc = test_run(cmd, out, sizeof out);
     CHECK_MSG(rc == 0, "python writer failed (%d): %s (needs python3-opencv, python3-numpy)", rc, out);
     if (rc != 0) return;
-    rec_capture c;
-    CHECK_OK(rec_capture_read(dir, &c));
+    gs_capture c;
+    CHECK_OK(gs_capture_read(dir, &c));
     if (!c.raw) return;
     CHECK(c.K == 3 && c.bands == 3 && c.width == 13 && c.height == 7 && c.grid_hz == 60);
     CHECK(c.saturation_dn == 65535 && c.read_noise_dn == 4.5 && c.gain_e_per_dn == 1.25);
@@ -253,8 +253,8 @@ TEST(capture_format_independent_python_writer)
                 bad += c.halvings[(k * 7 + y) * 13 + x] != (k == 1 ? (x + y) % 4 : 0);
     CHECK(bad == 0);
     /* and the value of a halved sample: (raw - 0) * 2^h / 800, h = (3 + 2) % 4 = 1 */
-    CHECK_NEAR(rec_capture_value(&c, 1, 2, 3, 2), py_value(3, 2, 1, 2) * 2.0 / 800, 1e-12);
-    rec_capture_release(&c);
+    CHECK_NEAR(gs_capture_value(&c, 1, 2, 3, 2), py_value(3, 2, 1, 2) * 2.0 / 800, 1e-12);
+    gs_capture_release(&c);
 }
 
 /* ----------------------------------------------------- malformed capture.json */
@@ -288,7 +288,7 @@ static const char *const json_lines[14] = {
 static const char *small_capture(const char *name, int line, const char *text)
 {
     const char *dir = subdir(name);
-    rec_capture c;
+    gs_capture c;
     memset(&c, 0, sizeof c);
     c.grid_hz = 50;
     c.K = 3;
@@ -298,13 +298,13 @@ static const char *small_capture(const char *name, int line, const char *text)
     c.saturation_dn = 4095;
     c.read_noise_dn = 1;
     c.locked = 1;
-    CHECK_OK(rec_capture_alloc(&c));
+    CHECK_OK(gs_capture_alloc(&c));
     for (int i = 0; i < 3 * 20; i++) c.raw[i] = (unsigned short)(i * 61);
     for (int k = 0; k < 3; k++) {
         c.frames[k].cycles = 100;
-        CHECK_OK(rec_capture_write_frame(dir, &c, k));
+        CHECK_OK(gs_capture_write_frame(dir, &c, k));
     }
-    rec_capture_release(&c);
+    gs_capture_release(&c);
     char text_all[4096] = "";
     for (int i = 0; i < 14; i++) {
         strcat(text_all, i + 1 == line ? text : json_lines[i]);
@@ -314,12 +314,12 @@ static const char *small_capture(const char *name, int line, const char *text)
     return dir;
 }
 
-/* rec_capture_read fails with status st and a detail holding every string of want[]. */
+/* gs_capture_read fails with status st and a detail holding every string of want[]. */
 static void expect_error(const char *dir, gs_status st, const char *const *want)
 {
-    rec_capture c;
+    gs_capture c;
     memset(&c, 0x5a, sizeof c);
-    gs_status got = rec_capture_read(dir, &c);
+    gs_status got = gs_capture_read(dir, &c);
     CHECK_MSG(got == st, "%s: status %s, expected %s (%s)", dir, gs_strerror(got), gs_strerror(st),
               gs_detail());
     for (int i = 0; want[i]; i++)
@@ -331,10 +331,10 @@ static void expect_error(const char *dir, gs_status st, const char *const *want)
 TEST(capture_format_valid_small_reads)
 {
     const char *dir = small_capture("valid", 0, NULL);
-    rec_capture c;
-    CHECK_OK(rec_capture_read(dir, &c));
+    gs_capture c;
+    CHECK_OK(gs_capture_read(dir, &c));
     CHECK(c.K == 3 && c.raw && c.raw[59] == 59 * 61);
-    rec_capture_release(&c);
+    gs_capture_release(&c);
 }
 
 TEST(capture_format_missing_json)
@@ -424,9 +424,9 @@ TEST(capture_format_field_errors)
                      (const char *[]){cases[i].want, NULL});
     }
     /* extensions are ignored */
-    rec_capture c;
-    CHECK_OK(rec_capture_read(small_capture("ext", 8, "  \"saturation\": 4095, \"x_scene\": {\"a\": 1},"), &c));
-    rec_capture_release(&c);
+    gs_capture c;
+    CHECK_OK(gs_capture_read(small_capture("ext", 8, "  \"saturation\": 4095, \"x_scene\": {\"a\": 1},"), &c));
+    gs_capture_release(&c);
 }
 
 /* The optional per-frame "grid_hz_measured" and "start_s": absent = NaN, exact round trip,
@@ -434,7 +434,7 @@ TEST(capture_format_field_errors)
 TEST(capture_format_grid_frequency_fields)
 {
     const char *dir = subdir("freq");
-    rec_capture a, b;
+    gs_capture a, b;
     make_capture(&a, 4, 1, 3, 2, 0);
     for (int k = 0; k < 4; k++) CHECK(isnan(a.frames[k].grid_hz_measured) && isnan(a.frames[k].start_s));
     a.frames[0].grid_hz_measured = 50.036686617969742;
@@ -449,31 +449,31 @@ TEST(capture_format_grid_frequency_fields)
     CHECK(text && strstr(text, "\"grid_hz_measured\": 50.0366866179697") &&
           strstr(text, "\"start_s\": 0"));
     free(text);
-    CHECK_OK(rec_capture_read(dir, &b));
+    CHECK_OK(gs_capture_read(dir, &b));
     check_same(&a, &b);
     CHECK(b.frames[0].grid_hz_measured == 50.036686617969742 && b.frames[2].start_s == 6.1953800000000001);
     CHECK(isnan(b.frames[1].grid_hz_measured) && isnan(b.frames[1].start_s));
     CHECK(isnan(b.frames[3].grid_hz_measured) && b.frames[3].start_s == 9.25);
-    rec_capture_release(&b);
+    gs_capture_release(&b);
     /* the writer validates too */
     a.frames[1].grid_hz_measured = 70;
-    CHECK(rec_capture_write_json(dir, &a) == GS_EINVAL);
+    CHECK(gs_capture_write_json(dir, &a) == GS_EINVAL);
     CHECK(strstr(gs_detail(), "field frames[1].grid_hz_measured") != NULL);
     a.frames[1].grid_hz_measured = NAN;
     a.frames[1].start_s = -0.5;
-    CHECK(rec_capture_write_json(dir, &a) == GS_EINVAL);
+    CHECK(gs_capture_write_json(dir, &a) == GS_EINVAL);
     CHECK(strstr(gs_detail(), "field frames[1].start_s") != NULL);
-    rec_capture_release(&a);
+    gs_capture_release(&a);
 
     /* a capture without them (the small one) reads NaN */
-    rec_capture c;
-    CHECK_OK(rec_capture_read(small_capture("freq_absent", 0, NULL), &c));
+    gs_capture c;
+    CHECK_OK(gs_capture_read(small_capture("freq_absent", 0, NULL), &c));
     for (int k = 0; k < c.K; k++) CHECK(isnan(c.frames[k].grid_hz_measured) && isnan(c.frames[k].start_s));
-    rec_capture_release(&c);
-    CHECK_OK(rec_capture_read(small_capture("freq_ok", 11, "    {\"file\": \"frame_001.png\", \"k\": 1, "
+    gs_capture_release(&c);
+    CHECK_OK(gs_capture_read(small_capture("freq_ok", 11, "    {\"file\": \"frame_001.png\", \"k\": 1, "
                                             "\"cycles\": 100, \"grid_hz_measured\": 45, \"start_s\": 2},"), &c));
     CHECK(c.frames[1].grid_hz_measured == 45 && c.frames[1].start_s == 2);
-    rec_capture_release(&c);
+    gs_capture_release(&c);
     static const struct {
         const char *text, *want;
     } cases[] = {
@@ -512,7 +512,7 @@ static void replace_png(const char *dir, const char *name, int w, int h, int ch,
     void *px = calloc((size_t)w * h * ch, depth16 ? 2 : 1);
     unsigned char *png;
     size_t n;
-    CHECK_OK(rec_cv_png_encode(px, w, h, ch, depth16, &png, &n));
+    CHECK_OK(gs_png_encode(px, w, h, ch, depth16 ? 16 : 8, &png, &n));
     replace_file(dir, name, png, n);
     free(png);
     free(px);
@@ -547,11 +547,16 @@ TEST(capture_format_truncated_png)
     expect_error(dir, GS_EFORMAT, (const char *[]){"frame_002.png: not a PNG", NULL});
     replace_file(dir, "frame_002.png", "", 0);
     expect_error(dir, GS_EFORMAT, (const char *[]){"frame_002.png: not a PNG", NULL});
-    /* a corrupted byte inside the compressed data */
+    /* a corrupted byte inside the compressed data (libspng finds the broken deflate stream
+     * before the chunk's CRC) */
     b[n / 2] ^= 0x40;
     replace_file(dir, "frame_002.png", b, n);
-    expect_error(dir, GS_EFORMAT, (const char *[]){"frame_002.png: corrupt PNG: chunk", "fails its CRC",
-                                                   NULL});
+    expect_error(dir, GS_EFORMAT, (const char *[]){"frame_002.png: corrupt PNG", "IDAT", NULL});
+    /* a corrupted byte in the last chunk (IEND's CRC): only the CRC can tell */
+    b[n - 1] ^= 0x01;
+    b[n / 2] ^= 0x40;
+    replace_file(dir, "frame_002.png", b, n);
+    expect_error(dir, GS_EFORMAT, (const char *[]){"frame_002.png: corrupt PNG", "CRC", NULL});
     free(b);
 }
 
@@ -586,19 +591,19 @@ TEST(capture_format_bad_hdr_map)
     h[13] = 17;
     unsigned char *png;
     size_t n;
-    CHECK_OK(rec_cv_png_encode(h, 5, 4, 1, 0, &png, &n));
+    CHECK_OK(gs_png_encode(h, 5, 4, 1, 8, &png, &n));
     replace_file(dir, "h1.png", png, n);
     free(png);
     expect_error(dir, GS_EFORMAT, (const char *[]){"h1.png: pixel (x 3, y 2) holds 17 halvings: "
                                                    "expected 0 to 16", NULL});
     h[13] = 16;
-    CHECK_OK(rec_cv_png_encode(h, 5, 4, 1, 0, &png, &n));
+    CHECK_OK(gs_png_encode(h, 5, 4, 1, 8, &png, &n));
     replace_file(dir, "h1.png", png, n);
     free(png);
-    rec_capture c;
-    CHECK_OK(rec_capture_read(dir, &c));
+    gs_capture c;
+    CHECK_OK(gs_capture_read(dir, &c));
     CHECK(c.halvings && c.halvings[20 + 13] == 16 && c.halvings[13] == 0);
-    rec_capture_release(&c);
+    gs_capture_release(&c);
 }
 
 /* ---------------------------------------------------------------- writer */
@@ -606,61 +611,61 @@ TEST(capture_format_bad_hdr_map)
 TEST(capture_format_writer_validates)
 {
     const char *dir = subdir("w");
-    rec_capture c;
+    gs_capture c;
     make_capture(&c, 3, 1, 4, 4, 0);
     /* capture.json before its frames */
-    CHECK(rec_capture_write_json(dir, &c) == GS_ENOTFOUND);
+    CHECK(gs_capture_write_json(dir, &c) == GS_ENOTFOUND);
     CHECK(strstr(gs_detail(), "frame_000.png") != NULL);
     write_capture(dir, &c);
     c.frames[1].cycles = 0;
-    CHECK(rec_capture_write_json(dir, &c) == GS_EINVAL);
+    CHECK(gs_capture_write_json(dir, &c) == GS_EINVAL);
     CHECK(strstr(gs_detail(), "field frames[1].cycles") != NULL);
     c.frames[1].cycles = 10;
     c.K = 1;
-    CHECK(rec_capture_write_json(dir, &c) == GS_EINVAL && strstr(gs_detail(), "field K"));
+    CHECK(gs_capture_write_json(dir, &c) == GS_EINVAL && strstr(gs_detail(), "field K"));
     c.K = 3;
-    snprintf(c.frames[2].file, REC_PATH_MAX, "a/b.png");
-    CHECK(rec_capture_write_frame(dir, &c, 2) == GS_EINVAL);
-    CHECK(rec_capture_write_json(dir, &c) == GS_EINVAL && strstr(gs_detail(), "frames[2].file"));
-    snprintf(c.frames[2].file, REC_PATH_MAX, "frame_000.png");
-    CHECK(rec_capture_write_json(dir, &c) == GS_EINVAL && strstr(gs_detail(), "same file"));
-    snprintf(c.frames[2].file, REC_PATH_MAX, "frame_002.png");
+    snprintf(c.frames[2].file, GS_PATH_MAX, "a/b.png");
+    CHECK(gs_capture_write_frame(dir, &c, 2) == GS_EINVAL);
+    CHECK(gs_capture_write_json(dir, &c) == GS_EINVAL && strstr(gs_detail(), "frames[2].file"));
+    snprintf(c.frames[2].file, GS_PATH_MAX, "frame_000.png");
+    CHECK(gs_capture_write_json(dir, &c) == GS_EINVAL && strstr(gs_detail(), "same file"));
+    snprintf(c.frames[2].file, GS_PATH_MAX, "frame_002.png");
     snprintf(c.utc, sizeof c.utc, "today");
-    CHECK(rec_capture_write_json(dir, &c) == GS_EINVAL && strstr(gs_detail(), "field utc"));
+    CHECK(gs_capture_write_json(dir, &c) == GS_EINVAL && strstr(gs_detail(), "field utc"));
     c.utc[0] = '\0';
     free(c.station_json);
     c.station_json = strdup("[1, 2]");
-    CHECK(rec_capture_write_json(dir, &c) == GS_EINVAL && strstr(gs_detail(), "field station"));
+    CHECK(gs_capture_write_json(dir, &c) == GS_EINVAL && strstr(gs_detail(), "field station"));
     free(c.station_json);
     c.station_json = NULL;
     c.read_noise_dn = NAN;
-    CHECK(rec_capture_write_json(dir, &c) == GS_EINVAL && strstr(gs_detail(), "read_noise_dn"));
+    CHECK(gs_capture_write_json(dir, &c) == GS_EINVAL && strstr(gs_detail(), "read_noise_dn"));
     c.read_noise_dn = 1;
-    CHECK(rec_capture_write_frame(dir, &c, 3) == GS_EINVAL);
-    CHECK(rec_capture_write_frame(dir, &c, -1) == GS_EINVAL);
+    CHECK(gs_capture_write_frame(dir, &c, 3) == GS_EINVAL);
+    CHECK(gs_capture_write_frame(dir, &c, -1) == GS_EINVAL);
     /* a halved pixel in a frame without a map would be lost */
-    CHECK_OK(rec_capture_alloc_hdr(&c));
-    CHECK(rec_capture_alloc_hdr(&c) == GS_EINVAL);
+    CHECK_OK(gs_capture_alloc_hdr(&c));
+    CHECK(gs_capture_alloc_hdr(&c) == GS_EINVAL);
     c.frames[0].hdr_map[0] = '\0';
     c.halvings[3] = 1;
-    CHECK(rec_capture_write_frame(dir, &c, 0) == GS_EINVAL && strstr(gs_detail(), "hdr_map"));
+    CHECK(gs_capture_write_frame(dir, &c, 0) == GS_EINVAL && strstr(gs_detail(), "hdr_map"));
     c.halvings[3] = 0;
     c.halvings[16 + 3] = 17;
-    CHECK(rec_capture_write_frame(dir, &c, 1) == GS_EINVAL && strstr(gs_detail(), "halvings"));
+    CHECK(gs_capture_write_frame(dir, &c, 1) == GS_EINVAL && strstr(gs_detail(), "halvings"));
     c.halvings[16 + 3] = 0;
-    CHECK(rec_capture_alloc(&c) == GS_EINVAL); /* already allocated */
-    rec_capture_release(&c);
+    CHECK(gs_capture_alloc(&c) == GS_EINVAL); /* already allocated */
+    gs_capture_release(&c);
     memset(&c, 0, sizeof c);
     c.K = 3;
     c.bands = 2;
     c.width = c.height = 1;
-    CHECK(rec_capture_alloc(&c) == GS_EINVAL && strstr(gs_detail(), "field bands"));
-    CHECK(rec_capture_alloc(NULL) == GS_EINVAL);
+    CHECK(gs_capture_alloc(&c) == GS_EINVAL && strstr(gs_detail(), "field bands"));
+    CHECK(gs_capture_alloc(NULL) == GS_EINVAL);
 }
 
 TEST(capture_format_value)
 {
-    rec_capture c;
+    gs_capture c;
     memset(&c, 0, sizeof c);
     c.grid_hz = 50;
     c.K = 2;
@@ -669,25 +674,25 @@ TEST(capture_format_value)
     c.height = 1;
     c.saturation_dn = 4000;
     c.black_level_dn = 100;
-    CHECK(isnan(rec_capture_value(&c, 0, 0, 0, 0))); /* no pixels */
-    CHECK_OK(rec_capture_alloc(&c));
-    CHECK_OK(rec_capture_alloc_hdr(&c));
+    CHECK(isnan(gs_capture_value(&c, 0, 0, 0, 0))); /* no pixels */
+    CHECK_OK(gs_capture_alloc(&c));
+    CHECK_OK(gs_capture_alloc_hdr(&c));
     c.frames[0].cycles = 200;
     c.frames[1].cycles = 50;
     c.raw[0] = 300;                         /* k 0, x 0, R */
     c.raw[(2 + 1) * 3 + 2] = 90;            /* k 1, x 1, B: below the black level */
     c.raw[(2 + 0) * 3 + 1] = 4000;          /* k 1, x 0, G: saturated */
     c.halvings[2 + 1] = 3;                  /* k 1, x 1: 50 / 8 cycles */
-    CHECK_NEAR(rec_capture_value(&c, 0, 0, 0, 0), 1.0, 0);
-    CHECK_NEAR(rec_capture_value(&c, 1, 0, 1, 2), -10 * 8.0 / 50, 1e-15);
-    CHECK(isnan(rec_capture_value(&c, 1, 0, 0, 1)));
-    CHECK_NEAR(rec_capture_value(&c, 1, 0, 0, 0), -100 / 50.0, 1e-15);
-    CHECK(isnan(rec_capture_value(&c, 2, 0, 0, 0)) && isnan(rec_capture_value(&c, 0, 1, 0, 0)));
-    CHECK(isnan(rec_capture_value(&c, 0, 0, 2, 0)) && isnan(rec_capture_value(&c, 0, 0, 0, 3)));
-    CHECK(isnan(rec_capture_value(&c, -1, 0, 0, 0)) && isnan(rec_capture_value(NULL, 0, 0, 0, 0)));
+    CHECK_NEAR(gs_capture_value(&c, 0, 0, 0, 0), 1.0, 0);
+    CHECK_NEAR(gs_capture_value(&c, 1, 0, 1, 2), -10 * 8.0 / 50, 1e-15);
+    CHECK(isnan(gs_capture_value(&c, 1, 0, 0, 1)));
+    CHECK_NEAR(gs_capture_value(&c, 1, 0, 0, 0), -100 / 50.0, 1e-15);
+    CHECK(isnan(gs_capture_value(&c, 2, 0, 0, 0)) && isnan(gs_capture_value(&c, 0, 1, 0, 0)));
+    CHECK(isnan(gs_capture_value(&c, 0, 0, 2, 0)) && isnan(gs_capture_value(&c, 0, 0, 0, 3)));
+    CHECK(isnan(gs_capture_value(&c, -1, 0, 0, 0)) && isnan(gs_capture_value(NULL, 0, 0, 0, 0)));
     c.frames[0].cycles = 0;
-    CHECK(isnan(rec_capture_value(&c, 0, 0, 0, 0)));
-    rec_capture_release(&c);
+    CHECK(isnan(gs_capture_value(&c, 0, 0, 0, 0)));
+    gs_capture_release(&c);
 }
 
 /* Mutations of a valid capture.json (byte flips, insertions, deletions, truncations): the reader
@@ -732,12 +737,12 @@ TEST(capture_format_fuzz_json)
             }
         }
         replace_file(dir, "capture.json", buf, len);
-        rec_capture c;
-        gs_status st = rec_capture_read(dir, &c);
+        gs_capture c;
+        gs_status st = gs_capture_read(dir, &c);
         if (st == GS_OK) {
             ok++;
-            CHECK(c.raw && c.frames && c.K >= 2 && rec_capture_check(&c, "fuzz") == GS_OK);
-            rec_capture_release(&c);
+            CHECK(c.raw && c.frames && c.K >= 2 && gs_capture_check(&c, "fuzz") == GS_OK);
+            gs_capture_release(&c);
         } else {
             failed++;
             CHECK_MSG(strstr(gs_detail(), "capture.json") || strstr(gs_detail(), ".png"),

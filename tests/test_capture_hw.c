@@ -90,8 +90,8 @@ static int write_events(const char *path, size_t count)
     double *x = NULL, *t = NULL, rate;
     size_t n = 0, nc = 0;
     int rising;
-    if (rec_mains_read(test_shared_path("data/mains/whu_002_ref.wav"), &x, &n, &rate) != GS_OK) return 0;
-    gs_status s = rec_zero_crossings(x, n, rate, 0.05, &t, &nc, &rising);
+    if (gs_mains_read(test_shared_path("data/mains/whu_002_ref.wav"), &x, &n, &rate) != GS_OK) return 0;
+    gs_status s = gs_zero_crossings(x, n, rate, 0.05, &t, &nc, &rising);
     free(x);
     if (s != GS_OK || nc < count) {
         free(t);
@@ -112,23 +112,23 @@ static int write_events(const char *path, size_t count)
 /* K 16-bit RGB frames cam_000.png ... with a known pattern. */
 static void write_camera(const char *dir)
 {
-    rec_capture c;
+    gs_capture c;
     memset(&c, 0, sizeof c);
     c.K = HW_K;
     c.bands = 3;
     c.width = HW_W;
     c.height = HW_H;
-    CHECK_OK(rec_capture_alloc(&c));
+    CHECK_OK(gs_capture_alloc(&c));
     for (int k = 0; k < HW_K; k++) {
-        snprintf(c.frames[k].file, REC_PATH_MAX, "cam_%03d.png", k);
+        snprintf(c.frames[k].file, GS_PATH_MAX, "cam_%03d.png", k);
         for (int y = 0; y < HW_H; y++)
             for (int x = 0; x < HW_W; x++)
                 for (int b = 0; b < 3; b++)
                     c.raw[(((size_t)k * HW_H + (size_t)y) * HW_W + (size_t)x) * 3 + (size_t)b] =
                         (unsigned short)(64 + 1000 * k + 31 * x + 7 * y + 300 * b);
     }
-    for (int k = 0; k < HW_K; k++) CHECK_OK(rec_capture_write_frame(dir, &c, k));
-    rec_capture_release(&c);
+    for (int k = 0; k < HW_K; k++) CHECK_OK(gs_capture_write_frame(dir, &c, k));
+    gs_capture_release(&c);
 }
 
 static pid_t start_controller(int *fd, const char *log_path)
@@ -231,14 +231,14 @@ TEST(capture_hardware_backend_with_fakes)
     if (f) fclose(f);
     CHECK(cfg == HW_K && starts == HW_K && ping == 1);
     /* the frames are the camera's */
-    rec_capture cap, cam;
-    CHECK_OK(rec_capture_read(out, &cap));
+    gs_capture cap, cam;
+    CHECK_OK(gs_capture_read(out, &cap));
     memset(&cam, 0, sizeof cam);
     cam.K = HW_K;
     cam.bands = 3;
     cam.width = HW_W;
     cam.height = HW_H;
-    CHECK_OK(rec_capture_alloc(&cam));
+    CHECK_OK(gs_capture_alloc(&cam));
     if (cap.raw) {
         size_t n = (size_t)HW_K * HW_W * HW_H * 3;
         size_t bad = 0;
@@ -252,8 +252,8 @@ TEST(capture_hardware_backend_with_fakes)
         CHECK_MSG(bad == 0, "%zu of %zu samples differ from the camera's", bad, n);
         CHECK(cap.locked == 1 && cap.utc[0] != '\0');
     }
-    rec_capture_release(&cap);
-    rec_capture_release(&cam);
+    gs_capture_release(&cap);
+    gs_capture_release(&cam);
 }
 
 TEST(capture_hardware_backend_failures)

@@ -136,10 +136,10 @@ TEST(capture_resume_after_stop_and_damage_identical)
     CHECK(r.frames_acquired == SMALL_K);
     CHECK(same_capture(a, b, 1));
     /* the capture reads back */
-    rec_capture cap;
-    CHECK_OK(rec_capture_read(b, &cap));
+    gs_capture cap;
+    CHECK_OK(gs_capture_read(b, &cap));
     CHECK(cap.K == SMALL_K && cap.bands == 3 && cap.halvings != NULL);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
 }
 
 TEST(capture_resume_after_kill_cli)
@@ -240,12 +240,12 @@ static const char *freq_scene =
 
 /* capture.json carries each exposure's mean grid frequency and start: the frequency model's
  * exactly for a constant grid, and for a real mains recording C / (2 (t_end - t_start)) of the
- * recording's own crossings (Eq. 1), computed here from rec_mains_read + rec_zero_crossings. */
+ * recording's own crossings (Eq. 1), computed here from gs_mains_read + gs_zero_crossings. */
 TEST(capture_records_grid_frequency_per_frame)
 {
     const char *tmp = test_tmpdir();
     char text[2048], dir[1024];
-    rec_capture cap;
+    gs_capture cap;
     /* constant 50.02 Hz (frequency_wander on) and nominal 50 Hz (no timing effect) */
     const double want_hz[2] = {50.02, 50.0};
     for (int v = 0; v < 2; v++) {
@@ -258,13 +258,13 @@ TEST(capture_records_grid_frequency_per_frame)
         long step = sc.acam.cycles + sc.readout_cycles;
         cap_scene_release(&sc);
         memset(&cap, 0, sizeof cap);
-        CHECK_OK(rec_capture_read(dir, &cap));
+        CHECK_OK(gs_capture_read(dir, &cap));
         for (int k = 0; k < cap.K; k++) {
             CHECK_NEAR(cap.frames[k].grid_hz_measured, want_hz[v], 1e-9);
             /* acquisition k starts k (C + readout) crossings after the first */
             CHECK_NEAR(cap.frames[k].start_s, (double)(k * step) / (2.0 * want_hz[v]), 1e-9);
         }
-        rec_capture_release(&cap);
+        gs_capture_release(&cap);
     }
 
     /* a real mains recording */
@@ -281,7 +281,7 @@ TEST(capture_records_grid_frequency_per_frame)
     long step = sc.acam.cycles + sc.readout_cycles;
     cap_scene_release(&sc);
     memset(&cap, 0, sizeof cap);
-    CHECK_OK(rec_capture_read(dir, &cap));
+    CHECK_OK(gs_capture_read(dir, &cap));
     if (!cap.frames) return;
     /* the recording's crossings as docs/scene.md defines the trace timeline: crossing 0 is the
      * first rising crossing with a neighbour on each side, each time (t[i-1] + 2 t[i] +
@@ -289,12 +289,12 @@ TEST(capture_records_grid_frequency_per_frame)
     double *x = NULL, *tc = NULL, rate = 0, mean = 0, rms = 0;
     size_t n = 0, count = 0;
     int rising_first = 0;
-    CHECK_OK(rec_mains_read(wav_path, &x, &n, &rate));
+    CHECK_OK(gs_mains_read(wav_path, &x, &n, &rate));
     for (size_t i = 0; i < n; i++) mean += x[i];
     mean /= n ? (double)n : 1.0;
     for (size_t i = 0; i < n; i++) rms += (x[i] - mean) * (x[i] - mean);
     rms = n ? sqrt(rms / (double)n) : 0;
-    CHECK_OK(rec_zero_crossings(x, n, rate, 0.1 * rms, &tc, &count, &rising_first));
+    CHECK_OK(gs_zero_crossings(x, n, rate, 0.1 * rms, &tc, &count, &rising_first));
     free(x);
     size_t i0 = 1;
     while (i0 < count && (i0 % 2 == 0) != (rising_first > 0)) i0++;
@@ -318,5 +318,5 @@ TEST(capture_records_grid_frequency_per_frame)
     }
     printf("    trace: largest |capture.json - recording| %.2e Hz\n", worst);
     free(tc);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
 }

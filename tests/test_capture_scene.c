@@ -143,8 +143,8 @@ TEST(scene_geojson_lights_projected_with_gis)
 
 TEST(scene_builtin_lab_and_metro)
 {
-    rec_delight *d = rec_delight_new();
-    CHECK_OK(rec_delight_generate(d, REC_BRF_N_DEFAULT));
+    gs_delight *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(d, GS_BRF_N_DEFAULT));
     cap_scene sc;
     CHECK_OK(cap_scene_read("capture/scenes/lab.json", &sc));
     CHECK(sc.n_lights >= 6);
@@ -153,14 +153,14 @@ TEST(scene_builtin_lab_and_metro)
 
     CHECK_OK(cap_scene_read("capture/scenes/metro.json", &sc));
     size_t in_image = 0;
-    int tech[REC_TECH_COUNT] = {0}, n_tech = 0;
+    int tech[GS_TECH_COUNT] = {0}, n_tech = 0;
     double dmin = 1e9, dmax = 0;
     for (size_t i = 0; i < sc.n_lights; i++) {
         const cap_light *l = &sc.lights[i];
         in_image += l->in_image != 0;
         if (l->distance_m < dmin) dmin = l->distance_m;
         if (l->distance_m > dmax) dmax = l->distance_m;
-        const rec_bulb *b = rec_delight_find(d, l->bulb, 50, 3);
+        const gs_bulb *b = gs_delight_find(d, l->bulb, 50, 3);
         CHECK(b != NULL);
         if (b && !tech[b->type]++) n_tech++;
     }
@@ -176,5 +176,5 @@ TEST(scene_builtin_lab_and_metro)
     CHECK_OK(cap_sim_new(&sc, d, &s));
     cap_sim_free(s);
     cap_scene_release(&sc);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }

@@ -16,11 +16,11 @@ static int san(void)
     return s && *s && strcmp(s, "0");
 }
 
-static rec_delight *delight(void)
+static gs_delight *delight(void)
 {
-    rec_delight *d = rec_delight_new();
-    if (d && rec_delight_generate(d, REC_BRF_N_DEFAULT) != GS_OK) {
-        rec_delight_free(d);
+    gs_delight *d = gs_delight_new();
+    if (d && gs_delight_generate(d, GS_BRF_N_DEFAULT) != GS_OK) {
+        gs_delight_free(d);
         return NULL;
     }
     return d;
@@ -94,7 +94,7 @@ static const char *exact_scene =
 
 TEST(sim_no_effects_is_exact_eq5_vs_brute_force)
 {
-    rec_delight *d = delight();
+    gs_delight *d = delight();
     CHECK(d != NULL);
     cap_scene sc;
     CHECK_OK(cap_scene_parse(exact_scene, "exact.json", ".", &sc));
@@ -111,9 +111,9 @@ TEST(sim_no_effects_is_exact_eq5_vs_brute_force)
     halv[8 * W + 20] = 3;
     /* the brute-force model of every light */
     trig t[5][3];
-    const rec_bulb *bulbs[5];
+    const gs_bulb *bulbs[5];
     for (size_t l = 0; l < 5; l++) {
-        bulbs[l] = rec_delight_find(d, sc.lights[l].bulb, 50, 3);
+        bulbs[l] = gs_delight_find(d, sc.lights[l].bulb, 50, 3);
         CHECK(bulbs[l] != NULL);
         for (int b = 0; b < B; b++)
             trig_init(&t[l][b], bulbs[l]->brf.v + (size_t)b * (size_t)bulbs[l]->brf.n, bulbs[l]->brf.n);
@@ -131,7 +131,7 @@ TEST(sim_no_effects_is_exact_eq5_vs_brute_force)
             int x = (int)sc.lights[l].x_px, y = (int)sc.lights[l].y_px;
             int h = halv[y * W + x];
             double cycles = 64.0 / (1 << h);   /* C / 2^h (Sec. 6) */
-            double shift = rec_phase_to_shift(sc.lights[l].phase_deg);
+            double shift = gs_phase_to_shift(sc.lights[l].phase_deg);
             for (int b = 0; b < B; b++) {
                 double m = brute_mean(&t[l][b], shift, (double)k / K, (double)(k + 1) / K, 600);
                 expect[y][x][b] += sc.lights[l].flux_e_per_cycle * bulbs[l]->chroma[b] * cycles * m / K / 2.5;
@@ -164,7 +164,7 @@ TEST(sim_no_effects_is_exact_eq5_vs_brute_force)
     free(halv);
     cap_sim_free(s);
     cap_scene_release(&sc);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* ------------------------------------------------------------ disabled effects */
@@ -214,7 +214,7 @@ static char *scene_with(unsigned mask)
 
 /* Renders `frames` acquisitions of the scene with exactly `mask` and checks the pipeline and
  * the counters: listed effects ran once per acquisition, the others never. */
-static void check_mask(const rec_delight *d, unsigned mask, int frames)
+static void check_mask(const gs_delight *d, unsigned mask, int frames)
 {
     char *text = scene_with(mask);
     cap_scene sc;
@@ -253,19 +253,19 @@ static void check_mask(const rec_delight *d, unsigned mask, int frames)
 
 TEST(sim_disabled_effect_never_runs)
 {
-    rec_delight *d = delight();
+    gs_delight *d = delight();
     CHECK(d != NULL);
     check_mask(d, 0, 3);                                   /* none */
     for (int e = 0; e < CAP_FX_COUNT; e++) check_mask(d, 1u << e, 2);   /* each alone */
     check_mask(d, (1u << CAP_FX_COUNT) - 1, 2);            /* all */
     /* all but one, for each */
     for (int e = 0; e < CAP_FX_COUNT; e++) check_mask(d, ((1u << CAP_FX_COUNT) - 1) & ~(1u << e), 1);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 TEST(sim_bench_render_grows_only_with_enabled_effects)
 {
-    rec_delight *d = delight();
+    gs_delight *d = delight();
     char *text = scene_with((1u << CAP_FX_COUNT) - 1);
     cap_scene sc;
     CHECK_OK(cap_scene_parse(text, "bench.json", ".", &sc));
@@ -281,7 +281,7 @@ TEST(sim_bench_render_grows_only_with_enabled_effects)
            none.seconds_per_frame, one.seconds_per_frame, all.seconds_per_frame);
     cap_scene_release(&sc);
     free(text);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* ------------------------------------------------------------ HDR */
@@ -315,23 +315,23 @@ TEST(sim_hdr_recovers_saturated_lights_within_2_percent)
     CHECK(rep.complete);
     CHECK(rep.max_passes >= 3);
     CHECK(rep.saturated_px == 0);
-    rec_capture cap;
-    CHECK_OK(rec_capture_read(dir, &cap));
-    rec_delight *d = delight();
+    gs_capture cap;
+    CHECK_OK(gs_capture_read(dir, &cap));
+    gs_delight *d = delight();
     double worst = 0;
     int max_h = 0;
     for (size_t l = 0; l < sc.n_lights; l++) {
         const cap_light *li = &sc.lights[l];
-        const rec_bulb *b = rec_delight_find(d, li->bulb, 50, 3);
+        const gs_bulb *b = gs_delight_find(d, li->bulb, 50, 3);
         double i_k[3 * 8];
-        CHECK_OK(rec_brf_integrate(&b->brf, rec_phase_to_shift(li->phase_deg), 8, i_k));
+        CHECK_OK(gs_brf_integrate(&b->brf, gs_phase_to_shift(li->phase_deg), 8, i_k));
         int cx = (int)floor(li->x_px + 0.5), cy = (int)floor(li->y_px + 0.5);
         for (int k = 0; k < 8; k++) {
             double got = 0, truth = 0;
             for (int band = 0; band < 3; band++) {
                 for (int y = cy - 5; y <= cy + 5; y++)
                     for (int x = cx - 5; x <= cx + 5; x++) {
-                        double v = rec_capture_value(&cap, k, y, x, band);
+                        double v = gs_capture_value(&cap, k, y, x, band);
                         CHECK_MSG(isfinite(v), "light %s frame %d pixel (%d, %d) saturated", li->id, k, x, y);
                         got += v;
                         int h = cap.halvings[((size_t)k * 48 + (size_t)y) * 64 + (size_t)x];
@@ -348,8 +348,8 @@ TEST(sim_hdr_recovers_saturated_lights_within_2_percent)
     printf("    HDR: %d passes at most, pixels halved up to %d times, worst light error %.2f %%\n",
            rep.max_passes, max_h, 100 * worst);
     CHECK(max_h >= 2);
-    rec_capture_release(&cap);
-    rec_delight_free(d);
+    gs_capture_release(&cap);
+    gs_delight_free(d);
     cap_backend_free(be);
     cap_scene_release(&sc);
 }
@@ -365,7 +365,7 @@ TEST(sim_effect_physics_matches_bulbs_md)
     CHECK_NEAR(exp(-beta * 5), 0.38, 0.005);
     CHECK_NEAR(exp(-beta * pow(450 / 550.0, -1.3) * 2) / exp(-beta * pow(650 / 550.0, -1.3) * 2), 0.82, 0.01);
     /* ... and the same numbers through the simulator's extinction stage */
-    rec_delight *d = delight();
+    gs_delight *d = delight();
     char *text = scene_with(1u << CAP_FX_EXTINCTION);
     cap_scene sc;
     CHECK_OK(cap_scene_parse(text, "ext.json", ".", &sc));
@@ -411,8 +411,8 @@ TEST(sim_effect_physics_matches_bulbs_md)
     long n = san() ? 60000 : 360000;   /* 10 / 60 minutes */
     double *t = malloc(sizeof *t * (size_t)n);
     for (long c = 0; c < n; c++) CHECK_OK(cap_ac_time(ac, c, &t[c]));
-    rec_wander w;
-    CHECK_OK(rec_frequency_wander(t, (size_t)n, 1.0, &w));
+    gs_wander w;
+    CHECK_OK(gs_frequency_wander(t, (size_t)n, 1.0, &w));
     printf("    random walk (%ld s): mean %.4f Hz, sigma %.1f mHz, 1-s steps %.2f mHz, corr 10 s %.2f, 60 s %.2f\n",
            (long)t[n - 1], w.mean_hz, 1e3 * w.sigma_hz, 1e3 * w.step_sigma_hz, w.corr_10s, w.corr_60s);
     CHECK(w.sigma_hz > 0.008 && w.sigma_hz < 0.035);
@@ -420,7 +420,7 @@ TEST(sim_effect_physics_matches_bulbs_md)
     CHECK(w.corr_10s > 0.7);
     free(t);
     cap_ac_free(ac);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* ------------------------------------------------------------ determinism */

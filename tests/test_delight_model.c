@@ -1,16 +1,16 @@
-/* test_delight_model.c - the built-in DELIGHT substitute (recognize/delight_model.c) against
+/* test_delight_model.c - the built-in DELIGHT substitute (recognize/base/delight_model.c) against
  * shared/BULBS.md: coverage, validity, determinism, band limit, percent flicker per technology,
  * ballast and thermal lag inside the templates, per-channel physics, 50 vs 60 Hz consistency.
  *
  * Every oracle here is computed independently of the generator: phases and amplitudes come from
- * the DFT of the stored BRFs (rec_brf_spectrum), ranges from BULBS.md (quoted next to each).
+ * the DFT of the stored BRFs (gs_brf_spectrum), ranges from BULBS.md (quoted next to each).
  * Conventions (docs/design.md): t = 0 at a rising zero crossing of V(t) = sin(2 pi f t), so V^2
  * (the "unmediated bulb" of Sec. 2.2) peaks at t = Delta/2; a lag is the delay of the BRF's
  * fundamental peak behind that, in degrees of the flicker cycle.
  *
  * GS_VERBOSE=1 build/run_tests delight_model_percent_flicker prints the per-technology and per-bulb
  * tables that docs/delight-models.md quotes. */
-#include "recognize/internal.h"
+#include "recognize/base/internal.h"
 #include "tests/test.h"
 
 #include <stdio.h>
@@ -20,11 +20,11 @@
 #define N 1024
 static const double pi = 3.14159265358979323846;
 
-static rec_delight *generate(int n)
+static gs_delight *generate(int n)
 {
-    rec_delight *d = rec_delight_new();
+    gs_delight *d = gs_delight_new();
     CHECK(d != NULL);
-    if (d) CHECK_OK(rec_delight_generate(d, n));
+    if (d) CHECK_OK(gs_delight_generate(d, n));
     return d;
 }
 
@@ -34,7 +34,7 @@ static double complex harmonic(const double *x, int n, int h)
     double complex *C = malloc(sizeof *C * (size_t)(n / 2 + 1));
     CHECK(C != NULL);
     if (!C) return 0;
-    CHECK_OK(rec_brf_spectrum(x, n, C));
+    CHECK_OK(gs_brf_spectrum(x, n, C));
     double complex c = C[h];
     free(C);
     return c;
@@ -54,71 +54,71 @@ static double lag_deg(const double *x, int n)
     return lag < 0.0 ? lag + 360.0 : lag + 0.0;   /* + 0.0: no "-0" */
 }
 
-static const double *band(const rec_bulb *b, int k)
+static const double *band(const gs_bulb *b, int k)
 {
     return b->brf.v + (size_t)k * (size_t)b->brf.n;
 }
 
-static const rec_bulb *get(const rec_delight *d, const char *id, int hz, int bands)
+static const gs_bulb *get(const gs_delight *d, const char *id, int hz, int bands)
 {
-    const rec_bulb *b = rec_delight_find(d, id, hz, bands);
+    const gs_bulb *b = gs_delight_find(d, id, hz, bands);
     CHECK_MSG(b != NULL, "bulb %s at %d Hz with %d bands missing", id, hz, bands);
     return b;
 }
 
 /* The mono entries at 50 Hz: one per bulb (the iteration over bulbs in the tests below). */
 #define FOR_BULBS(d, b)                                                                      \
-    for (size_t i_ = 0; i_ < rec_delight_count(d); i_++)                                     \
-        for (const rec_bulb *b = rec_delight_get(d, i_); b; b = NULL)                        \
+    for (size_t i_ = 0; i_ < gs_delight_count(d); i_++)                                     \
+        for (const gs_bulb *b = gs_delight_get(d, i_); b; b = NULL)                        \
             if (b->grid_hz == 50 && b->brf.bands == 1)
 
-static int is_inductive(rec_tech t)
+static int is_inductive(gs_tech t)
 {
-    return t == REC_TECH_FLUORESCENT_MAGNETIC || t == REC_TECH_SODIUM_HP || t == REC_TECH_SODIUM_LP ||
-           t == REC_TECH_METAL_HALIDE || t == REC_TECH_MERCURY;
+    return t == GS_TECH_FLUORESCENT_MAGNETIC || t == GS_TECH_SODIUM_HP || t == GS_TECH_SODIUM_LP ||
+           t == GS_TECH_METAL_HALIDE || t == GS_TECH_MERCURY;
 }
 
 /* ------------------------------------------------------------------ coverage */
 
 TEST(delight_model_covers_technologies_grids_and_sensors)
 {
-    rec_delight *d = generate(N);
+    gs_delight *d = generate(N);
     const char *sensors[2] = {"photodiode", "rgb"};
     for (int g = 0; g < 2; g++)
         for (int s = 0; s < 2; s++) {
-            int hz = g ? 60 : 50, bulbs = 0, per_tech[REC_TECH_COUNT] = {0}, techs = 0;
-            for (size_t i = 0; i < rec_delight_count(d); i++) {
-                const rec_bulb *b = rec_delight_get(d, i);
+            int hz = g ? 60 : 50, bulbs = 0, per_tech[GS_TECH_COUNT] = {0}, techs = 0;
+            for (size_t i = 0; i < gs_delight_count(d); i++) {
+                const gs_bulb *b = gs_delight_get(d, i);
                 if (b->grid_hz != hz || strcmp(b->sensor, sensors[s])) continue;
                 bulbs++;
                 if (per_tech[b->type]++ == 0) techs++;
             }
             CHECK_MSG(bulbs >= 30, "%d Hz %s: %d bulbs, expected >= 30", hz, sensors[s], bulbs);
             CHECK_MSG(techs >= 9, "%d Hz %s: %d technologies, expected >= 9", hz, sensors[s], techs);
-            for (int t = 0; t < REC_TECH_UNKNOWN; t++)
+            for (int t = 0; t < GS_TECH_UNKNOWN; t++)
                 CHECK_MSG(per_tech[t] >= 2, "%d Hz %s: %d bulbs of %s, expected >= 2", hz, sensors[s],
-                          per_tech[t], rec_tech_name((rec_tech)t));
+                          per_tech[t], gs_tech_name((gs_tech)t));
         }
     /* every bulb has all four entries */
     size_t ids = 0;
     FOR_BULBS(d, b) {
         ids++;
-        CHECK(rec_delight_find(d, b->id, 50, 3) != NULL);
-        CHECK(rec_delight_find(d, b->id, 60, 1) != NULL);
-        CHECK(rec_delight_find(d, b->id, 60, 3) != NULL);
+        CHECK(gs_delight_find(d, b->id, 50, 3) != NULL);
+        CHECK(gs_delight_find(d, b->id, 60, 1) != NULL);
+        CHECK(gs_delight_find(d, b->id, 60, 3) != NULL);
     }
-    CHECK(rec_delight_count(d) == 4 * ids);
-    rec_delight_free(d);
+    CHECK(gs_delight_count(d) == 4 * ids);
+    gs_delight_free(d);
 }
 
 TEST(delight_model_entries_are_valid)
 {
-    rec_delight *d = generate(N);
-    for (size_t i = 0; i < rec_delight_count(d); i++) {
-        const rec_bulb *b = rec_delight_get(d, i);
-        CHECK_OK(rec_bulb_validate(b));
+    gs_delight *d = generate(N);
+    for (size_t i = 0; i < gs_delight_count(d); i++) {
+        const gs_bulb *b = gs_delight_get(d, i);
+        CHECK_OK(gs_bulb_validate(b));
         CHECK(b->brf.n == N);
-        CHECK(b->ref == REC_REF_VOLTAGE);
+        CHECK(b->ref == GS_REF_VOLTAGE);
         CHECK_MSG(b->watts > 0.0 && b->watts < 2000.0, "%s: %g W", b->id, b->watts);
         CHECK(strchr(b->name, ',') == NULL && b->name[0]);
         int mono = !strcmp(b->sensor, "photodiode");
@@ -131,15 +131,15 @@ TEST(delight_model_entries_are_valid)
             CHECK_NEAR(s / N, 1.0, 1e-12);
         }
     }
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 TEST(delight_model_is_deterministic)
 {
-    rec_delight *a = generate(N), *b = generate(N);
-    CHECK(rec_delight_count(a) == rec_delight_count(b));
-    for (size_t i = 0; i < rec_delight_count(a) && i < rec_delight_count(b); i++) {
-        const rec_bulb *x = rec_delight_get(a, i), *y = rec_delight_get(b, i);
+    gs_delight *a = generate(N), *b = generate(N);
+    CHECK(gs_delight_count(a) == gs_delight_count(b));
+    for (size_t i = 0; i < gs_delight_count(a) && i < gs_delight_count(b); i++) {
+        const gs_bulb *x = gs_delight_get(a, i), *y = gs_delight_get(b, i);
         CHECK(!strcmp(x->id, y->id) && !strcmp(x->name, y->name) && !strcmp(x->sensor, y->sensor));
         CHECK(x->type == y->type && x->grid_hz == y->grid_hz && x->ref == y->ref);
         CHECK(memcmp(&x->watts, &y->watts, sizeof x->watts) == 0);
@@ -148,24 +148,24 @@ TEST(delight_model_is_deterministic)
         CHECK_MSG(memcmp(x->brf.v, y->brf.v, sizeof(double) * (size_t)x->brf.n * (size_t)x->brf.bands) == 0,
                   "%s %d Hz %s: BRF differs between two runs", x->id, x->grid_hz, x->sensor);
     }
-    rec_delight_free(a);
-    rec_delight_free(b);
+    gs_delight_free(a);
+    gs_delight_free(b);
 }
 
 TEST(delight_model_rejects_bad_arguments_and_duplicates)
 {
-    CHECK(rec_delight_generate(NULL, N) == GS_EINVAL);
-    rec_delight *d = rec_delight_new();
-    CHECK(rec_delight_generate(d, 1023) == GS_EINVAL);
-    CHECK(rec_delight_generate(d, 2) == GS_EINVAL);
-    CHECK(rec_delight_generate(d, 0) == GS_EINVAL);
-    CHECK(rec_delight_count(d) == 0);
-    CHECK_OK(rec_delight_generate(d, 64));
-    size_t count = rec_delight_count(d);
+    CHECK(gs_delight_generate(NULL, N) == GS_EINVAL);
+    gs_delight *d = gs_delight_new();
+    CHECK(gs_delight_generate(d, 1023) == GS_EINVAL);
+    CHECK(gs_delight_generate(d, 2) == GS_EINVAL);
+    CHECK(gs_delight_generate(d, 0) == GS_EINVAL);
+    CHECK(gs_delight_count(d) == 0);
+    CHECK_OK(gs_delight_generate(d, 64));
+    size_t count = gs_delight_count(d);
     CHECK(count > 0);
-    CHECK(rec_delight_generate(d, 64) == GS_EINVAL);   /* all ids already present */
-    CHECK(rec_delight_count(d) == count);              /* and nothing was added */
-    rec_delight_free(d);
+    CHECK(gs_delight_generate(d, 64) == GS_EINVAL);   /* all ids already present */
+    CHECK(gs_delight_count(d) == count);              /* and nothing was added */
+    gs_delight_free(d);
 }
 
 /* --------------------------------------------------------------- band limit */
@@ -175,36 +175,36 @@ TEST(delight_model_has_no_nyquist_component_and_shifts_compose)
     int sizes[3] = {16, 26, N};
     for (int si = 0; si < 3; si++) {
         int n = sizes[si];
-        rec_delight *d = generate(n);
+        gs_delight *d = generate(n);
         double complex *C = malloc(sizeof *C * (size_t)(n / 2 + 1));
-        for (size_t i = 0; C && i < rec_delight_count(d); i++) {
-            const rec_bulb *b = rec_delight_get(d, i);
+        for (size_t i = 0; C && i < gs_delight_count(d); i++) {
+            const gs_bulb *b = gs_delight_get(d, i);
             CHECK(b->brf.n == n);
             for (int k = 0; k < b->brf.bands; k++) {
-                CHECK_OK(rec_brf_spectrum(band(b, k), n, C));
+                CHECK_OK(gs_brf_spectrum(band(b, k), n, C));
                 CHECK_MSG(cabs(C[n / 2]) / n < 1e-12, "%s %d Hz band %d, n=%d: Nyquist %g", b->id,
                           b->grid_hz, k, n, cabs(C[n / 2]) / n);
             }
         }
         free(C);
-        /* consequence: fractional shifts compose exactly (rec_brf_shift) */
-        const rec_bulb *b = get(d, "hps-150w", 50, 3);
+        /* consequence: fractional shifts compose exactly (gs_brf_shift) */
+        const gs_bulb *b = get(d, "hps-150w", 50, 3);
         if (b) {
-            rec_brf one, two, sum;
-            CHECK_OK(rec_brf_init(&one, n, 3));
-            CHECK_OK(rec_brf_init(&two, n, 3));
-            CHECK_OK(rec_brf_init(&sum, n, 3));
-            CHECK_OK(rec_brf_shift(&b->brf, 0.3137, &one));
-            CHECK_OK(rec_brf_shift(&one, 0.4411, &two));
-            CHECK_OK(rec_brf_shift(&b->brf, 0.3137 + 0.4411, &sum));
+            gs_brf one, two, sum;
+            CHECK_OK(gs_brf_init(&one, n, 3));
+            CHECK_OK(gs_brf_init(&two, n, 3));
+            CHECK_OK(gs_brf_init(&sum, n, 3));
+            CHECK_OK(gs_brf_shift(&b->brf, 0.3137, &one));
+            CHECK_OK(gs_brf_shift(&one, 0.4411, &two));
+            CHECK_OK(gs_brf_shift(&b->brf, 0.3137 + 0.4411, &sum));
             double err = 0;
             for (int j = 0; j < 3 * n; j++) err = fmax(err, fabs(two.v[j] - sum.v[j]));
             CHECK_MSG(err < 1e-12, "n=%d: shifts do not compose (%g)", n, err);
-            rec_brf_release(&one);
-            rec_brf_release(&two);
-            rec_brf_release(&sum);
+            gs_brf_release(&one);
+            gs_brf_release(&two);
+            gs_brf_release(&sum);
         }
-        rec_delight_free(d);
+        gs_delight_free(d);
     }
 }
 
@@ -212,77 +212,77 @@ TEST(delight_model_has_no_nyquist_component_and_shifts_compose)
 
 /* BULBS.md's percent-flicker column, per technology (all entries, both grids). */
 static const struct {
-    rec_tech tech;
+    gs_tech tech;
     double lo, hi;
     const char *source;
 } pf_rows[] = {
-    {REC_TECH_INCANDESCENT, 4, 25, "120 V 4-6 % (50-60 W), 10 % (25 W) [M]; 230 V 7-12 % (40-100 W), 15-25 % (15-25 W) [D]"},
-    {REC_TECH_HALOGEN, 1, 10, "mains 5-10 % [D/L]; 12 V on magnetic transformer 1-3 % [D]"},
-    {REC_TECH_FLUORESCENT_MAGNETIC, 15, 40, "25-40 % halophosphate, 15-25 % triphosphor [L]"},
-    {REC_TECH_FLUORESCENT_ELECTRONIC, 1, 10, "1-10 % [L]"},
-    {REC_TECH_CFL, 5, 30, "5-30 % [L], 8.9 % measured [M]"},
-    {REC_TECH_LED_CAPACITOR, 1, 40, "1-40 % [M: 2.5-36 % over 9 lamps]"},
-    {REC_TECH_LED_LINEAR, 99, 100.5, "~100 % [D] (+0.5 for the band limit's ringing)"},
-    {REC_TECH_LED_PWM, 0, 1, "100 % unlocked [M]; flat when AC-locked [D]: < 1 %"},
-    {REC_TECH_SODIUM_HP, 90, 100, "90-100 % [L]"},
-    {REC_TECH_SODIUM_LP, 80, 100, "80-100 % [L]"},
-    {REC_TECH_METAL_HALIDE, 35, 60, "35-60 % [L]"},
-    {REC_TECH_MERCURY, 35, 65, "50-65 % clear, 35-45 % coated [L]"},
+    {GS_TECH_INCANDESCENT, 4, 25, "120 V 4-6 % (50-60 W), 10 % (25 W) [M]; 230 V 7-12 % (40-100 W), 15-25 % (15-25 W) [D]"},
+    {GS_TECH_HALOGEN, 1, 10, "mains 5-10 % [D/L]; 12 V on magnetic transformer 1-3 % [D]"},
+    {GS_TECH_FLUORESCENT_MAGNETIC, 15, 40, "25-40 % halophosphate, 15-25 % triphosphor [L]"},
+    {GS_TECH_FLUORESCENT_ELECTRONIC, 1, 10, "1-10 % [L]"},
+    {GS_TECH_CFL, 5, 30, "5-30 % [L], 8.9 % measured [M]"},
+    {GS_TECH_LED_CAPACITOR, 1, 40, "1-40 % [M: 2.5-36 % over 9 lamps]"},
+    {GS_TECH_LED_LINEAR, 99, 100.5, "~100 % [D] (+0.5 for the band limit's ringing)"},
+    {GS_TECH_LED_PWM, 0, 1, "100 % unlocked [M]; flat when AC-locked [D]: < 1 %"},
+    {GS_TECH_SODIUM_HP, 90, 100, "90-100 % [L]"},
+    {GS_TECH_SODIUM_LP, 80, 100, "80-100 % [L]"},
+    {GS_TECH_METAL_HALIDE, 35, 60, "35-60 % [L]"},
+    {GS_TECH_MERCURY, 35, 65, "50-65 % clear, 35-45 % coated [L]"},
 };
 
 /* Finer BULBS.md rows, matched by id substring; hz = 0: both grids, else the bulb's home grid
  * (BULBS.md's incandescent rows are 120 V at 60 Hz and 230 V at 50 Hz). */
 static const struct {
-    rec_tech tech;
+    gs_tech tech;
     const char *id_part;
     int hz;
     double lo, hi;
     const char *source;
 } pf_subrows[] = {
-    {REC_TECH_INCANDESCENT, "-25w-120v", 60, 9, 11, "10 % (25 W, 120 V) [M], +-1"},
-    {REC_TECH_INCANDESCENT, "-40w-120v", 60, 6, 9, "between 10 % (25 W) and 4-6 % (50-60 W) [M]"},
-    {REC_TECH_INCANDESCENT, "-60w-120v", 60, 4, 6, "4-6 % (50-60 W, 120 V) [M]"},
-    {REC_TECH_INCANDESCENT, "-100w-120v", 60, 4, 6, "4-6 % (>= 50 W, 120 V) [M]"},
-    {REC_TECH_INCANDESCENT, "-25w-230v", 50, 15, 25, "15-25 % (15-25 W, 230 V) [D]"},
-    {REC_TECH_INCANDESCENT, "-40w-230v", 50, 7, 12, "7-12 % (40-100 W, 230 V) [D]"},
-    {REC_TECH_INCANDESCENT, "-60w-230v", 50, 7, 12, "7-12 % (40-100 W, 230 V) [D]"},
-    {REC_TECH_INCANDESCENT, "-100w-230v", 50, 7, 12, "7-12 % (40-100 W, 230 V) [D]"},
-    {REC_TECH_HALOGEN, "-12v", 0, 1, 3, "12 V on magnetic transformer 1-3 % [D]"},
-    {REC_TECH_HALOGEN, "0v", 0, 5, 10, "mains 5-10 % [D/L]"},   /* -120v, -230v */
-    {REC_TECH_FLUORESCENT_MAGNETIC, "-halo", 0, 25, 40, "25-40 % halophosphate [L]"},
-    {REC_TECH_FLUORESCENT_MAGNETIC, "-tri", 0, 15, 25, "15-25 % triphosphor [L]"},
-    {REC_TECH_CFL, "cfl-15w-m", 50, 8.8, 9.0, "8.9 % measured [M]"},
-    {REC_TECH_MERCURY, "-clear", 0, 50, 65, "50-65 % clear [L]"},
-    {REC_TECH_MERCURY, "-coated", 0, 35, 45, "35-45 % coated [L]"},
+    {GS_TECH_INCANDESCENT, "-25w-120v", 60, 9, 11, "10 % (25 W, 120 V) [M], +-1"},
+    {GS_TECH_INCANDESCENT, "-40w-120v", 60, 6, 9, "between 10 % (25 W) and 4-6 % (50-60 W) [M]"},
+    {GS_TECH_INCANDESCENT, "-60w-120v", 60, 4, 6, "4-6 % (50-60 W, 120 V) [M]"},
+    {GS_TECH_INCANDESCENT, "-100w-120v", 60, 4, 6, "4-6 % (>= 50 W, 120 V) [M]"},
+    {GS_TECH_INCANDESCENT, "-25w-230v", 50, 15, 25, "15-25 % (15-25 W, 230 V) [D]"},
+    {GS_TECH_INCANDESCENT, "-40w-230v", 50, 7, 12, "7-12 % (40-100 W, 230 V) [D]"},
+    {GS_TECH_INCANDESCENT, "-60w-230v", 50, 7, 12, "7-12 % (40-100 W, 230 V) [D]"},
+    {GS_TECH_INCANDESCENT, "-100w-230v", 50, 7, 12, "7-12 % (40-100 W, 230 V) [D]"},
+    {GS_TECH_HALOGEN, "-12v", 0, 1, 3, "12 V on magnetic transformer 1-3 % [D]"},
+    {GS_TECH_HALOGEN, "0v", 0, 5, 10, "mains 5-10 % [D/L]"},   /* -120v, -230v */
+    {GS_TECH_FLUORESCENT_MAGNETIC, "-halo", 0, 25, 40, "25-40 % halophosphate [L]"},
+    {GS_TECH_FLUORESCENT_MAGNETIC, "-tri", 0, 15, 25, "15-25 % triphosphor [L]"},
+    {GS_TECH_CFL, "cfl-15w-m", 50, 8.8, 9.0, "8.9 % measured [M]"},
+    {GS_TECH_MERCURY, "-clear", 0, 50, 65, "50-65 % clear [L]"},
+    {GS_TECH_MERCURY, "-coated", 0, 35, 45, "35-45 % coated [L]"},
 };
 
 TEST(delight_model_percent_flicker_in_bulbs_md_ranges)
 {
-    rec_delight *d = generate(N);
+    gs_delight *d = generate(N);
     int verbose = getenv("GS_VERBOSE") && *getenv("GS_VERBOSE");
-    double lo[REC_TECH_COUNT][2], hi[REC_TECH_COUNT][2];
-    int count[REC_TECH_COUNT] = {0};
-    for (int t = 0; t < REC_TECH_COUNT; t++) lo[t][0] = lo[t][1] = INFINITY, hi[t][0] = hi[t][1] = -INFINITY;
+    double lo[GS_TECH_COUNT][2], hi[GS_TECH_COUNT][2];
+    int count[GS_TECH_COUNT] = {0};
+    for (int t = 0; t < GS_TECH_COUNT; t++) lo[t][0] = lo[t][1] = INFINITY, hi[t][0] = hi[t][1] = -INFINITY;
     if (verbose)
         printf("| bulb | technology | W | PF 50 Hz | PF 60 Hz | FI 50 Hz | lag 50 Hz (deg) | lag 60 Hz (deg) | Q (R, G, B) |\n"
                "| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
     FOR_BULBS(d, b50) {
-        const rec_bulb *b60 = get(d, b50->id, 60, 1), *rgb = get(d, b50->id, 50, 3);
+        const gs_bulb *b60 = get(d, b50->id, 60, 1), *rgb = get(d, b50->id, 50, 3);
         if (!b60 || !rgb) continue;
         count[b50->type]++;
         int row = -1;
         for (size_t r = 0; r < sizeof pf_rows / sizeof *pf_rows; r++)
             if (pf_rows[r].tech == b50->type) row = (int)r;
-        CHECK_MSG(row >= 0, "%s: technology %s has no BULBS.md row", b50->id, rec_tech_name(b50->type));
-        const rec_bulb *e[2] = {b50, b60};
+        CHECK_MSG(row >= 0, "%s: technology %s has no BULBS.md row", b50->id, gs_tech_name(b50->type));
+        const gs_bulb *e[2] = {b50, b60};
         for (int g = 0; g < 2; g++) {
-            double pf = rec_brf_percent_flicker(&e[g]->brf, 0);
+            double pf = gs_brf_percent_flicker(&e[g]->brf, 0);
             lo[b50->type][g] = fmin(lo[b50->type][g], pf);
             hi[b50->type][g] = fmax(hi[b50->type][g], pf);
             if (row >= 0)
                 CHECK_MSG(pf >= pf_rows[row].lo && pf <= pf_rows[row].hi,
                           "%s %d Hz: PF %.2f %% outside BULBS.md %s %g-%g %% (%s)", b50->id,
-                          e[g]->grid_hz, pf, rec_tech_name(b50->type), pf_rows[row].lo,
+                          e[g]->grid_hz, pf, gs_tech_name(b50->type), pf_rows[row].lo,
                           pf_rows[row].hi, pf_rows[row].source);
             for (size_t r = 0; r < sizeof pf_subrows / sizeof *pf_subrows; r++) {
                 if (pf_subrows[r].tech != b50->type ||
@@ -298,20 +298,20 @@ TEST(delight_model_percent_flicker_in_bulbs_md_ranges)
             double fi = 0;
             for (int j = 0; j < N; j++) fi += b50->brf.v[j] > 1.0 ? b50->brf.v[j] - 1.0 : 0.0;
             printf("| %s | %s | %g | %.2f | %.2f | %.3f | %.1f | %.1f | %.3f, %.3f, %.3f |\n", b50->id,
-                   rec_tech_name(b50->type), b50->watts, rec_brf_percent_flicker(&b50->brf, 0),
-                   rec_brf_percent_flicker(&b60->brf, 0), fi / N, lag_deg(b50->brf.v, N),
+                   gs_tech_name(b50->type), b50->watts, gs_brf_percent_flicker(&b50->brf, 0),
+                   gs_brf_percent_flicker(&b60->brf, 0), fi / N, lag_deg(b50->brf.v, N),
                    lag_deg(b60->brf.v, N), rgb->chroma[0], rgb->chroma[1], rgb->chroma[2]);
         }
     }
     if (verbose) {
         printf("\n| technology | bulbs | PF 50 Hz (%%) | PF 60 Hz (%%) | BULBS.md |\n| --- | --- | --- | --- | --- |\n");
         for (size_t r = 0; r < sizeof pf_rows / sizeof *pf_rows; r++) {
-            rec_tech t = pf_rows[r].tech;
-            printf("| %s | %d | %.2f-%.2f | %.2f-%.2f | %s |\n", rec_tech_name(t), count[t], lo[t][0],
+            gs_tech t = pf_rows[r].tech;
+            printf("| %s | %d | %.2f-%.2f | %.2f-%.2f | %s |\n", gs_tech_name(t), count[t], lo[t][0],
                    hi[t][0], lo[t][1], hi[t][1], pf_rows[r].source);
         }
     }
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* ------------------------------------------------------------------ phase */
@@ -322,24 +322,24 @@ TEST(delight_model_percent_flicker_in_bulbs_md_ranges)
  * light path, atan(2 pi 2f tau_max) (phosphor or plasma afterglow), with 10 deg either side for
  * the waveform's shape (re-ignition spike, dark gap, |i|^gamma). A template referenced to the
  * lamp current instead would lag by only 0-75 deg. */
-static double tau_max_s(const rec_bulb *b)
+static double tau_max_s(const gs_bulb *b)
 {
     switch (b->type) {
-    case REC_TECH_FLUORESCENT_MAGNETIC: return 5e-3;    /* Tb green 2-5 ms [D] */
-    case REC_TECH_SODIUM_HP: return 0.5e-3;             /* afterglow 0.1-0.5 ms [L/D] */
-    case REC_TECH_SODIUM_LP: return 0.3e-3;             /* model: 0.1-0.3 ms */
-    case REC_TECH_METAL_HALIDE: return 1.0e-3;          /* model: species 0.1-1 ms */
-    case REC_TECH_MERCURY: return 2.1e-3;               /* model: arc 0.6 ms + Eu 1.5 ms */
+    case GS_TECH_FLUORESCENT_MAGNETIC: return 5e-3;    /* Tb green 2-5 ms [D] */
+    case GS_TECH_SODIUM_HP: return 0.5e-3;             /* afterglow 0.1-0.5 ms [L/D] */
+    case GS_TECH_SODIUM_LP: return 0.3e-3;             /* model: 0.1-0.3 ms */
+    case GS_TECH_METAL_HALIDE: return 1.0e-3;          /* model: species 0.1-1 ms */
+    case GS_TECH_MERCURY: return 2.1e-3;               /* model: arc 0.6 ms + Eu 1.5 ms */
     default: return 0.0;
     }
 }
 
 TEST(delight_model_ballast_lag_inside_template)
 {
-    rec_delight *d = generate(N);
+    gs_delight *d = generate(N);
     int tested = 0;
-    for (size_t i = 0; i < rec_delight_count(d); i++) {
-        const rec_bulb *b = rec_delight_get(d, i);
+    for (size_t i = 0; i < gs_delight_count(d); i++) {
+        const gs_bulb *b = gs_delight_get(d, i);
         if (!is_inductive(b->type)) continue;
         double w = 2.0 * pi * 2.0 * b->grid_hz;
         double lo = 2 * 55 - 10, hi = 2 * 65 + atan(w * tau_max_s(b)) * 180.0 / pi + 10;
@@ -351,15 +351,15 @@ TEST(delight_model_ballast_lag_inside_template)
         }
         /* prompt channels: fluorescent blue (Hg lines + fast BAM/Sb phosphor), clear mercury
          * (lines, arc afterglow <= 0.6 ms) carry only the ballast lag */
-        if (b->brf.bands == 3 && (b->type == REC_TECH_FLUORESCENT_MAGNETIC || strstr(b->id, "-clear"))) {
-            double tau = b->type == REC_TECH_MERCURY ? 0.6e-3 : 10e-6;
+        if (b->brf.bands == 3 && (b->type == GS_TECH_FLUORESCENT_MAGNETIC || strstr(b->id, "-clear"))) {
+            double tau = b->type == GS_TECH_MERCURY ? 0.6e-3 : 10e-6;
             double lag = lag_deg(band(b, 2), N), top = 2 * 65 + atan(w * tau) * 180.0 / pi + 10;
             CHECK_MSG(lag >= lo && lag <= top, "%s %d Hz blue: lag %.1f deg, expected %.0f-%.0f",
                       b->id, b->grid_hz, lag, lo, top);
         }
     }
     CHECK(tested >= 4 * 15);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* Incandescent and halogen (BULBS.md: thermal low-pass of V^2 with tau 30-60 ms [D], lag
@@ -368,11 +368,11 @@ TEST(delight_model_ballast_lag_inside_template)
  * from it (the same filament at a faster supply). */
 TEST(delight_model_filament_lag_and_time_constant)
 {
-    rec_delight *d = generate(N);
+    gs_delight *d = generate(N);
     int tested = 0;
     FOR_BULBS(d, b50) {
-        if (b50->type != REC_TECH_INCANDESCENT && b50->type != REC_TECH_HALOGEN) continue;
-        const rec_bulb *b60 = get(d, b50->id, 60, 1);
+        if (b50->type != GS_TECH_INCANDESCENT && b50->type != GS_TECH_HALOGEN) continue;
+        const gs_bulb *b60 = get(d, b50->id, 60, 1);
         if (!b60) continue;
         double lag50 = lag_deg(b50->brf.v, N), lag60 = lag_deg(b60->brf.v, N);
         CHECK_MSG(lag50 >= 85 && lag50 <= 89 && lag60 >= 85 && lag60 <= 89,
@@ -389,7 +389,7 @@ TEST(delight_model_filament_lag_and_time_constant)
                   "%s: 60/50 Hz ripple %.4f, first-order filter predicts %.4f", b50->id, ratio, pred);
         /* near-pure sinusoid at 2f: 2nd/1st harmonic <= 0.07 [M] */
         for (int g = 0; g < 2; g++) {
-            const rec_bulb *b = g ? b60 : b50;
+            const gs_bulb *b = g ? b60 : b50;
             double h21 = amp(b->brf.v, N, 2) / amp(b->brf.v, N, 1);
             CHECK_MSG(h21 <= 0.07, "%s %d Hz: 2nd/1st harmonic %.3f, BULBS.md [M] <= 0.07", b->id,
                       b->grid_hz, h21);
@@ -397,18 +397,18 @@ TEST(delight_model_filament_lag_and_time_constant)
         tested++;
     }
     CHECK(tested >= 8);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* Ripple per band ~ d ln L / d ln T ~ hc/(lambda k T): blue ~1.45x red (BULBS.md [D]); through a
  * real camera's bands 1.3-1.6, green in between, all bands in phase (one filament temperature). */
 TEST(delight_model_incandescent_blue_ripple_exceeds_red)
 {
-    rec_delight *d = generate(N);
+    gs_delight *d = generate(N);
     int tested = 0;
-    for (size_t i = 0; i < rec_delight_count(d); i++) {
-        const rec_bulb *b = rec_delight_get(d, i);
-        if ((b->type != REC_TECH_INCANDESCENT && b->type != REC_TECH_HALOGEN) || b->brf.bands != 3) continue;
+    for (size_t i = 0; i < gs_delight_count(d); i++) {
+        const gs_bulb *b = gs_delight_get(d, i);
+        if ((b->type != GS_TECH_INCANDESCENT && b->type != GS_TECH_HALOGEN) || b->brf.bands != 3) continue;
         double r = amp(band(b, 0), N, 1), g = amp(band(b, 1), N, 1), bl = amp(band(b, 2), N, 1);
         CHECK_MSG(bl / r >= 1.3 && bl / r <= 1.6, "%s %d Hz: blue/red ripple %.3f", b->id, b->grid_hz, bl / r);
         CHECK(g > r && g < bl);
@@ -417,7 +417,7 @@ TEST(delight_model_incandescent_blue_ripple_exceeds_red)
         tested++;
     }
     CHECK(tested >= 24);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* ------------------------------------------------------- 50 vs 60 Hz physics */
@@ -427,30 +427,30 @@ TEST(delight_model_incandescent_blue_ripple_exceeds_red)
  * alone, dark for (2/pi) asin(Vf/Vpk) of the cycle), so its templates must be equal instead. */
 TEST(delight_model_60hz_is_the_same_bulb_not_a_copy)
 {
-    rec_delight *d = generate(N);
+    gs_delight *d = generate(N);
     FOR_BULBS(d, b50) {
-        const rec_bulb *b60 = get(d, b50->id, 60, 1);
+        const gs_bulb *b60 = get(d, b50->id, 60, 1);
         if (!b60) continue;
         double diff = 0;
         for (int j = 0; j < N; j++) diff = fmax(diff, fabs(b50->brf.v[j] - b60->brf.v[j]));
-        if (b50->type == REC_TECH_LED_LINEAR)
+        if (b50->type == GS_TECH_LED_LINEAR)
             CHECK_MSG(diff < 1e-9, "%s: linear driver differs by %g between 50 and 60 Hz", b50->id, diff);
         else
-            CHECK_MSG(diff > (b50->type == REC_TECH_LED_PWM ? 1e-5 : 1e-3),
+            CHECK_MSG(diff > (b50->type == GS_TECH_LED_PWM ? 1e-5 : 1e-3),
                       "%s: 60 Hz template equals the 50 Hz one (max diff %g)", b50->id, diff);
     }
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* BULBS.md: dark 33/49/65 % of the cycle for Vf/Vpk 0.5/0.7/0.85, i.e. (2/pi) asin(Vf/Vpk) for
  * Vf/Vpk in 0.5-0.85: 0.333-0.646 of the cycle. Dark = below 1 % of the mean. */
 TEST(delight_model_led_linear_dark_interval)
 {
-    rec_delight *d = generate(N);
+    gs_delight *d = generate(N);
     int tested = 0;
-    for (size_t i = 0; i < rec_delight_count(d); i++) {
-        const rec_bulb *b = rec_delight_get(d, i);
-        if (b->type != REC_TECH_LED_LINEAR) continue;
+    for (size_t i = 0; i < gs_delight_count(d); i++) {
+        const gs_bulb *b = gs_delight_get(d, i);
+        if (b->type != GS_TECH_LED_LINEAR) continue;
         for (int k = 0; k < b->brf.bands; k++) {
             int dark = 0;
             for (int j = 0; j < N; j++) dark += band(b, k)[j] < 0.01;
@@ -464,7 +464,7 @@ TEST(delight_model_led_linear_dark_interval)
         tested++;
     }
     CHECK(tested >= 8);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* ------------------------------------------------------------- per-channel */
@@ -474,12 +474,12 @@ TEST(delight_model_led_linear_dark_interval)
  * atan(2 pi 2f 5 ms) (72-75 deg); for triphosphor lamps (tri, electronic, CFL) red sits between. */
 TEST(delight_model_fluorescent_green_lags_red_and_blue)
 {
-    rec_delight *d = generate(N);
+    gs_delight *d = generate(N);
     int tested = 0;
-    for (size_t i = 0; i < rec_delight_count(d); i++) {
-        const rec_bulb *b = rec_delight_get(d, i);
-        if (b->brf.bands != 3 || (b->type != REC_TECH_FLUORESCENT_MAGNETIC &&
-                                  b->type != REC_TECH_FLUORESCENT_ELECTRONIC && b->type != REC_TECH_CFL))
+    for (size_t i = 0; i < gs_delight_count(d); i++) {
+        const gs_bulb *b = gs_delight_get(d, i);
+        if (b->brf.bands != 3 || (b->type != GS_TECH_FLUORESCENT_MAGNETIC &&
+                                  b->type != GS_TECH_FLUORESCENT_ELECTRONIC && b->type != GS_TECH_CFL))
             continue;
         double lr = lag_deg(band(b, 0), N), lg = lag_deg(band(b, 1), N), lb = lag_deg(band(b, 2), N);
         double tb_lag = atan(2 * pi * 2 * b->grid_hz * 5e-3) * 180 / pi;
@@ -492,17 +492,17 @@ TEST(delight_model_fluorescent_green_lags_red_and_blue)
         tested++;
     }
     CHECK(tested >= 22);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* KSF red phosphor (tau ~8 ms [L/D]) smooths and lags red; without it R, G, B share one BRF. */
 TEST(delight_model_led_ksf_red_lags)
 {
-    rec_delight *d = generate(N);
+    gs_delight *d = generate(N);
     int ksf = 0, plain = 0;
-    for (size_t i = 0; i < rec_delight_count(d); i++) {
-        const rec_bulb *b = rec_delight_get(d, i);
-        if (b->brf.bands != 3 || (b->type != REC_TECH_LED_CAPACITOR && b->type != REC_TECH_LED_LINEAR))
+    for (size_t i = 0; i < gs_delight_count(d); i++) {
+        const gs_bulb *b = gs_delight_get(d, i);
+        if (b->brf.bands != 3 || (b->type != GS_TECH_LED_CAPACITOR && b->type != GS_TECH_LED_LINEAR))
             continue;
         if (strstr(b->id, "ksf")) {
             CHECK_MSG(lag_deg(band(b, 0), N) > lag_deg(band(b, 1), N) + 3, "%s: red does not lag", b->id);
@@ -517,23 +517,23 @@ TEST(delight_model_led_ksf_red_lags)
         }
     }
     CHECK(ksf >= 2 && plain >= 4);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* Capacitor ripple shapes: LED capacitor drivers 2nd/1st 0.2-0.3 [M], fast rise near the voltage
  * peak and slow decay [M]; CFL 2nd/1st ~0.24 [M] (taken as 0.18-0.30). */
 TEST(delight_model_capacitor_ripple_shape)
 {
-    rec_delight *d = generate(N);
+    gs_delight *d = generate(N);
     int tested = 0;
-    for (size_t i = 0; i < rec_delight_count(d); i++) {
-        const rec_bulb *b = rec_delight_get(d, i);
-        if (b->brf.bands != 1 || (b->type != REC_TECH_LED_CAPACITOR && b->type != REC_TECH_CFL)) continue;
+    for (size_t i = 0; i < gs_delight_count(d); i++) {
+        const gs_bulb *b = gs_delight_get(d, i);
+        if (b->brf.bands != 1 || (b->type != GS_TECH_LED_CAPACITOR && b->type != GS_TECH_CFL)) continue;
         double h21 = amp(b->brf.v, N, 2) / amp(b->brf.v, N, 1);
-        double lo = b->type == REC_TECH_CFL ? 0.18 : 0.2, hi = 0.3;
+        double lo = b->type == GS_TECH_CFL ? 0.18 : 0.2, hi = 0.3;
         CHECK_MSG(h21 >= lo && h21 <= hi, "%s %d Hz: 2nd/1st %.3f, expected %.2f-%.2f", b->id,
                   b->grid_hz, h21, lo, hi);
-        if (b->type == REC_TECH_LED_CAPACITOR) {
+        if (b->type == GS_TECH_LED_CAPACITOR) {
             int jmax = 0, jmin = 0;
             for (int j = 1; j < N; j++) {
                 if (b->brf.v[j] > b->brf.v[jmax]) jmax = j;
@@ -547,79 +547,79 @@ TEST(delight_model_capacitor_ripple_shape)
         tested++;
     }
     CHECK(tested >= 18);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* PWM: 100 % at 200 Hz-25 kHz but not mains-locked [M]; an AC-locked template is flat [D]. */
 TEST(delight_model_led_pwm_is_flat_when_locked)
 {
-    rec_delight *d = generate(N);
+    gs_delight *d = generate(N);
     int tested = 0;
-    for (size_t i = 0; i < rec_delight_count(d); i++) {
-        const rec_bulb *b = rec_delight_get(d, i);
-        if (b->type != REC_TECH_LED_PWM) continue;
+    for (size_t i = 0; i < gs_delight_count(d); i++) {
+        const gs_bulb *b = gs_delight_get(d, i);
+        if (b->type != GS_TECH_LED_PWM) continue;
         for (int k = 0; k < b->brf.bands; k++)
-            CHECK_MSG(rec_brf_percent_flicker(&b->brf, k) < 1.0, "%s: PF %.3f", b->id,
-                      rec_brf_percent_flicker(&b->brf, k));
-        CHECK(b->ref == REC_REF_VOLTAGE);
+            CHECK_MSG(gs_brf_percent_flicker(&b->brf, k) < 1.0, "%s: PF %.3f", b->id,
+                      gs_brf_percent_flicker(&b->brf, k));
+        CHECK(b->ref == GS_REF_VOLTAGE);
         tested++;
     }
     CHECK(tested >= 8);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* Sodium: LPS is 589 nm only, so R and G see it and B ~ 0 (BULBS.md [L]), and every band has the
  * same shape; HPS is mostly R and G with weak B [L]. */
 TEST(delight_model_sodium_colour)
 {
-    rec_delight *d = generate(N);
+    gs_delight *d = generate(N);
     int lps = 0, hps = 0;
-    for (size_t i = 0; i < rec_delight_count(d); i++) {
-        const rec_bulb *b = rec_delight_get(d, i);
+    for (size_t i = 0; i < gs_delight_count(d); i++) {
+        const gs_bulb *b = gs_delight_get(d, i);
         if (b->brf.bands != 3) continue;
-        if (b->type == REC_TECH_SODIUM_LP) {
+        if (b->type == GS_TECH_SODIUM_LP) {
             CHECK_MSG(b->chroma[2] < 0.02, "%s: blue chromaticity %.4f, expected ~0", b->id, b->chroma[2]);
             CHECK(b->chroma[0] > 0.2 && b->chroma[1] > 0.2);
             double diff = 0;
             for (int j = 0; j < N; j++) diff = fmax(diff, fabs(band(b, 0)[j] - band(b, 2)[j]));
             CHECK_MSG(diff < 1e-9, "%s: one spectral line, yet bands differ by %g", b->id, diff);
             lps++;
-        } else if (b->type == REC_TECH_SODIUM_HP) {
+        } else if (b->type == GS_TECH_SODIUM_HP) {
             CHECK_MSG(b->chroma[2] < 0.05 && b->chroma[0] > b->chroma[1], "%s: chromaticity %.3f %.3f %.3f",
                       b->id, b->chroma[0], b->chroma[1], b->chroma[2]);
             hps++;
         }
     }
     CHECK(lps >= 4 && hps >= 4);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* Metal halide: species respond differently, so per-channel shapes differ [D]; mercury: lines
  * prompt and deep, the coating's red phosphor smoothed and lagged [D]. */
 TEST(delight_model_metal_halide_and_mercury_channels)
 {
-    rec_delight *d = generate(N);
+    gs_delight *d = generate(N);
     int mh = 0, coated = 0, clear = 0;
-    for (size_t i = 0; i < rec_delight_count(d); i++) {
-        const rec_bulb *b = rec_delight_get(d, i);
+    for (size_t i = 0; i < gs_delight_count(d); i++) {
+        const gs_bulb *b = gs_delight_get(d, i);
         if (b->brf.bands != 3) continue;
-        if (b->type == REC_TECH_METAL_HALIDE) {
+        if (b->type == GS_TECH_METAL_HALIDE) {
             double diff = 0;
             for (int j = 0; j < N; j++) diff = fmax(diff, fabs(band(b, 0)[j] - band(b, 2)[j]));
             CHECK_MSG(diff > 0.05, "%s: R and B shapes differ by only %g", b->id, diff);
             mh++;
-        } else if (b->type == REC_TECH_MERCURY && strstr(b->id, "-coated")) {
+        } else if (b->type == GS_TECH_MERCURY && strstr(b->id, "-coated")) {
             CHECK_MSG(lag_deg(band(b, 0), N) > lag_deg(band(b, 2), N) + 5, "%s: red does not lag", b->id);
             CHECK(amp(band(b, 0), N, 1) < amp(band(b, 2), N, 1));
             coated++;
-        } else if (b->type == REC_TECH_MERCURY) {
+        } else if (b->type == GS_TECH_MERCURY) {
             CHECK_NEAR(lag_deg(band(b, 0), N), lag_deg(band(b, 2), N), 1e-6);
             CHECK(b->chroma[0] < 0.35);   /* clear mercury light is blue-green */
             clear++;
         }
     }
     CHECK(mh >= 4 && coated >= 2 && clear >= 2);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* ------------------------------------------------------------- consistency */
@@ -628,11 +628,11 @@ TEST(delight_model_metal_halide_and_mercury_channels)
  * sum_b Q_b B_b (Eq. 6), for every bulb at both grids. */
 TEST(delight_model_mono_is_chroma_weighted_rgb)
 {
-    rec_delight *d = generate(N);
-    for (size_t i = 0; i < rec_delight_count(d); i++) {
-        const rec_bulb *m = rec_delight_get(d, i);
+    gs_delight *d = generate(N);
+    for (size_t i = 0; i < gs_delight_count(d); i++) {
+        const gs_bulb *m = gs_delight_get(d, i);
         if (m->brf.bands != 1) continue;
-        const rec_bulb *c = get(d, m->id, m->grid_hz, 3);
+        const gs_bulb *c = get(d, m->id, m->grid_hz, 3);
         if (!c) continue;
         CHECK_NEAR(c->chroma[0] + c->chroma[1] + c->chroma[2], 1.0, 1e-12);
         double err = 0;
@@ -642,22 +642,22 @@ TEST(delight_model_mono_is_chroma_weighted_rgb)
         }
         CHECK_MSG(err < 1e-9, "%s %d Hz: mono differs from sum Q B by %g", m->id, m->grid_hz, err);
     }
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* The same bulbs at another resolution: the PF targets apply to the physical waveform, so the
  * templates at n = 4096 agree with n = 1024 (both resolve the waveform). */
 TEST(delight_model_resolution_independent)
 {
-    rec_delight *a = generate(N), *b = generate(4096);
-    CHECK(rec_delight_count(a) == rec_delight_count(b));
+    gs_delight *a = generate(N), *b = generate(4096);
+    CHECK(gs_delight_count(a) == gs_delight_count(b));
     FOR_BULBS(a, x) {
-        const rec_bulb *y = get(b, x->id, 50, 1);
+        const gs_bulb *y = get(b, x->id, 50, 1);
         if (!y) continue;
-        double pa = rec_brf_percent_flicker(&x->brf, 0), pb = rec_brf_percent_flicker(&y->brf, 0);
+        double pa = gs_brf_percent_flicker(&x->brf, 0), pb = gs_brf_percent_flicker(&y->brf, 0);
         CHECK_MSG(fabs(pa - pb) <= 0.01 * pa + 0.01, "%s: PF %.3f at n=1024, %.3f at n=4096", x->id, pa, pb);
         CHECK_NEAR(lag_deg(x->brf.v, N), lag_deg(y->brf.v, 4096), 0.05);
     }
-    rec_delight_free(a);
-    rec_delight_free(b);
+    gs_delight_free(a);
+    gs_delight_free(b);
 }

@@ -1,7 +1,7 @@
 /* test_delight_store.c - DELIGHT storage (paper Sec. 3): exact CSV and SQLite round trips,
  * rejection of files that are not DELIGHT databases, and malformed CSV rejected atomically
  * with a detail naming the file, line and field. */
-#include "recognize/internal.h"
+#include "recognize/base/internal.h"
 #include "tests/test.h"
 
 #include <sqlite3.h>
@@ -10,8 +10,8 @@
 #include <string.h>
 
 /* A band-limited BRF from a sum of cosines with awkward coefficients (so %.17g matters). */
-static void make_bulb(rec_bulb *b, const char *id, int grid_hz, const char *sensor, int bands, int n,
-                      rec_tech type, rec_ref ref, double seed)
+static void make_bulb(gs_bulb *b, const char *id, int grid_hz, const char *sensor, int bands, int n,
+                      gs_tech type, gs_ref ref, double seed)
 {
     memset(b, 0, sizeof *b);
     snprintf(b->id, sizeof b->id, "%s", id);
@@ -21,14 +21,14 @@ static void make_bulb(rec_bulb *b, const char *id, int grid_hz, const char *sens
     b->ref = ref;
     b->grid_hz = grid_hz;
     b->watts = 10 * seed + 1.0 / 3.0;
-    CHECK_OK(rec_brf_init(&b->brf, n, bands));
+    CHECK_OK(gs_brf_init(&b->brf, n, bands));
     for (int band = 0; band < bands; band++)
         for (int j = 0; j < n; j++) {
             double t = (double)j / n;
             b->brf.v[band * n + j] = 2.0 + seed * cos(2 * M_PI * (t - 0.1 * band)) +
                                      0.3 * cos(2 * M_PI * 2 * t + seed) + 0.01 * sin(2 * M_PI * 5 * t);
         }
-    CHECK_OK(rec_brf_normalize(&b->brf, NULL));
+    CHECK_OK(gs_brf_normalize(&b->brf, NULL));
     if (bands == 1) {
         b->chroma[0] = 1;
     } else {
@@ -39,27 +39,27 @@ static void make_bulb(rec_bulb *b, const char *id, int grid_hz, const char *sens
 }
 
 /* Four entries: mono and RGB, both grids, every reference kind. */
-static rec_delight *make_db(int n)
+static gs_delight *make_db(int n)
 {
-    rec_delight *d = rec_delight_new();
-    rec_bulb b;
-    make_bulb(&b, "inc-60W", 50, "photodiode", 1, n, REC_TECH_INCANDESCENT, REC_REF_VOLTAGE, 0.11);
-    CHECK_OK(rec_delight_add(d, &b));
-    rec_bulb_release(&b);
-    make_bulb(&b, "inc-60W", 50, "rgb", 3, n, REC_TECH_INCANDESCENT, REC_REF_VOLTAGE, 0.13);
-    CHECK_OK(rec_delight_add(d, &b));
-    rec_bulb_release(&b);
-    make_bulb(&b, "Sodium_HP.250", 60, "rgb", 3, n, REC_TECH_SODIUM_HP, REC_REF_NONE, 0.9);
-    CHECK_OK(rec_delight_add(d, &b));
-    rec_bulb_release(&b);
-    make_bulb(&b, "hue", 60, "photodiode", 1, n, REC_TECH_LED_PWM, REC_REF_UNLOCKED, 0.97);
-    CHECK_OK(rec_delight_add(d, &b));
-    rec_bulb_release(&b);
+    gs_delight *d = gs_delight_new();
+    gs_bulb b;
+    make_bulb(&b, "inc-60W", 50, "photodiode", 1, n, GS_TECH_INCANDESCENT, GS_REF_VOLTAGE, 0.11);
+    CHECK_OK(gs_delight_add(d, &b));
+    gs_bulb_release(&b);
+    make_bulb(&b, "inc-60W", 50, "rgb", 3, n, GS_TECH_INCANDESCENT, GS_REF_VOLTAGE, 0.13);
+    CHECK_OK(gs_delight_add(d, &b));
+    gs_bulb_release(&b);
+    make_bulb(&b, "Sodium_HP.250", 60, "rgb", 3, n, GS_TECH_SODIUM_HP, GS_REF_NONE, 0.9);
+    CHECK_OK(gs_delight_add(d, &b));
+    gs_bulb_release(&b);
+    make_bulb(&b, "hue", 60, "photodiode", 1, n, GS_TECH_LED_PWM, GS_REF_UNLOCKED, 0.97);
+    CHECK_OK(gs_delight_add(d, &b));
+    gs_bulb_release(&b);
     return d;
 }
 
 /* Every field equal, BRF samples bit for bit. */
-static int same_bulb(const rec_bulb *a, const rec_bulb *b)
+static int same_bulb(const gs_bulb *a, const gs_bulb *b)
 {
     size_t vals = (size_t)a->brf.n * (size_t)a->brf.bands;
     return strcmp(a->id, b->id) == 0 && strcmp(a->name, b->name) == 0 &&
@@ -70,11 +70,11 @@ static int same_bulb(const rec_bulb *a, const rec_bulb *b)
            memcmp(a->brf.v, b->brf.v, vals * sizeof(double)) == 0;
 }
 
-static int same_db(const rec_delight *a, const rec_delight *b)
+static int same_db(const gs_delight *a, const gs_delight *b)
 {
-    if (rec_delight_count(a) != rec_delight_count(b)) return 0;
-    for (size_t i = 0; i < rec_delight_count(a); i++)
-        if (!same_bulb(rec_delight_get(a, i), rec_delight_get(b, i))) return 0;
+    if (gs_delight_count(a) != gs_delight_count(b)) return 0;
+    for (size_t i = 0; i < gs_delight_count(a); i++)
+        if (!same_bulb(gs_delight_get(a, i), gs_delight_get(b, i))) return 0;
     return 1;
 }
 
@@ -115,12 +115,12 @@ static char *read_all(const char *path, size_t *len)
     return buf;
 }
 
-static void export_to(const rec_delight *d, const char *path)
+static void export_to(const gs_delight *d, const char *path)
 {
     FILE *f = fopen(path, "w");
     CHECK(f != NULL);
     if (!f) return;
-    CHECK_OK(rec_delight_export_csv(d, f));
+    CHECK_OK(gs_delight_export_csv(d, f));
     fclose(f);
 }
 
@@ -128,10 +128,10 @@ static void export_to(const rec_delight *d, const char *path)
 
 TEST(delight_csv_round_trip_exact)
 {
-    rec_delight *d = make_db(1024), *e = rec_delight_new();
+    gs_delight *d = make_db(1024), *e = gs_delight_new();
     const char *a = tmp_path("a.csv"), *b = tmp_path("b.csv");
     export_to(d, a);
-    CHECK_OK(rec_delight_import_csv(e, a));
+    CHECK_OK(gs_delight_import_csv(e, a));
     CHECK(same_db(d, e));
     export_to(e, b);
     size_t la, lb;
@@ -147,26 +147,26 @@ TEST(delight_csv_round_trip_exact)
     free(ta);
     free(tb);
     /* import appends */
-    rec_delight *f = make_db(8);
-    rec_delight_free(e);
-    e = rec_delight_new();
+    gs_delight *f = make_db(8);
+    gs_delight_free(e);
+    e = gs_delight_new();
     export_to(f, a);
-    rec_bulb extra;
-    make_bulb(&extra, "first", 50, "photodiode", 1, 8, REC_TECH_CFL, REC_REF_NONE, 0.2);
-    CHECK_OK(rec_delight_add(e, &extra));
-    CHECK_OK(rec_delight_import_csv(e, a));
-    CHECK(rec_delight_count(e) == 5);
-    CHECK(same_bulb(rec_delight_get(e, 0), &extra));
-    CHECK(same_bulb(rec_delight_get(e, 4), rec_delight_get(f, 3)));
-    rec_bulb_release(&extra);
-    rec_delight_free(d);
-    rec_delight_free(e);
-    rec_delight_free(f);
+    gs_bulb extra;
+    make_bulb(&extra, "first", 50, "photodiode", 1, 8, GS_TECH_CFL, GS_REF_NONE, 0.2);
+    CHECK_OK(gs_delight_add(e, &extra));
+    CHECK_OK(gs_delight_import_csv(e, a));
+    CHECK(gs_delight_count(e) == 5);
+    CHECK(same_bulb(gs_delight_get(e, 0), &extra));
+    CHECK(same_bulb(gs_delight_get(e, 4), gs_delight_get(f, 3)));
+    gs_bulb_release(&extra);
+    gs_delight_free(d);
+    gs_delight_free(e);
+    gs_delight_free(f);
 }
 
 TEST(delight_csv_crlf_bom_and_empty_database)
 {
-    rec_delight *d = make_db(16), *e = rec_delight_new();
+    gs_delight *d = make_db(16), *e = gs_delight_new();
     const char *a = tmp_path("a.csv"), *b = tmp_path("crlf.csv");
     export_to(d, a);
     char *text = read_all(a, NULL);
@@ -181,20 +181,20 @@ TEST(delight_csv_crlf_bom_and_empty_database)
     }
     if (f) fclose(f);
     free(text);
-    CHECK_OK(rec_delight_import_csv(e, b));
+    CHECK_OK(gs_delight_import_csv(e, b));
     CHECK(same_db(d, e));
     /* an empty database exports a header only, which imports as nothing */
-    rec_delight *empty = rec_delight_new(), *g = rec_delight_new();
+    gs_delight *empty = gs_delight_new(), *g = gs_delight_new();
     export_to(empty, a);
     char *h = read_all(a, NULL);
     CHECK(h && strcmp(h, "bulb_id,type,name,watts,grid_hz,sensor,band,chromaticity,n\n") == 0);
     free(h);
-    CHECK_OK(rec_delight_import_csv(g, a));
-    CHECK(rec_delight_count(g) == 0);
-    rec_delight_free(d);
-    rec_delight_free(e);
-    rec_delight_free(empty);
-    rec_delight_free(g);
+    CHECK_OK(gs_delight_import_csv(g, a));
+    CHECK(gs_delight_count(g) == 0);
+    gs_delight_free(d);
+    gs_delight_free(e);
+    gs_delight_free(empty);
+    gs_delight_free(g);
 }
 
 #define HDR "bulb_id,type,name,watts,grid_hz,sensor,band,chromaticity,n,v0,v1,v2,v3\n"
@@ -207,13 +207,13 @@ TEST(delight_csv_small_file_imports)
 {
     const char *p = tmp_path("ok.csv");
     write_file(p, HDR MONO RED GREEN BLUE);
-    rec_delight *d = rec_delight_new();
-    CHECK_OK(rec_delight_import_csv(d, p));
-    CHECK(rec_delight_count(d) == 2);
-    const rec_bulb *b = rec_delight_find(d, "b", 60, 3);
-    CHECK(b && b->ref == REC_REF_NONE && b->type == REC_TECH_LED_PWM && b->brf.v[4] == 2.0 &&
+    gs_delight *d = gs_delight_new();
+    CHECK_OK(gs_delight_import_csv(d, p));
+    CHECK(gs_delight_count(d) == 2);
+    const gs_bulb *b = gs_delight_find(d, "b", 60, 3);
+    CHECK(b && b->ref == GS_REF_NONE && b->type == GS_TECH_LED_PWM && b->brf.v[4] == 2.0 &&
           b->chroma[1] == 0.5 && strcmp(b->sensor, "rgb") == 0);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 TEST(delight_csv_malformed_rejected_atomically)
@@ -250,12 +250,12 @@ TEST(delight_csv_malformed_rejected_atomically)
         snprintf(name, sizeof name, "bad%zu.csv", i);
         const char *p = tmp_path(name);
         write_file(p, cases[i].text);
-        rec_delight *d = rec_delight_new();
-        rec_bulb keep;
-        make_bulb(&keep, "kept", 50, "photodiode", 1, 4, REC_TECH_HALOGEN, REC_REF_VOLTAGE, 0.3);
-        CHECK_OK(rec_delight_add(d, &keep));
-        rec_bulb_release(&keep);
-        gs_status s = rec_delight_import_csv(d, p);
+        gs_delight *d = gs_delight_new();
+        gs_bulb keep;
+        make_bulb(&keep, "kept", 50, "photodiode", 1, 4, GS_TECH_HALOGEN, GS_REF_VOLTAGE, 0.3);
+        CHECK_OK(gs_delight_add(d, &keep));
+        gs_bulb_release(&keep);
+        gs_status s = gs_delight_import_csv(d, p);
         char where[700], field[64];
         snprintf(where, sizeof where, "%s:%d: ", p, cases[i].line);
         snprintf(field, sizeof field, "field %s: expected ", cases[i].field);
@@ -263,9 +263,9 @@ TEST(delight_csv_malformed_rejected_atomically)
         CHECK_MSG(strncmp(gs_detail(), where, strlen(where)) == 0 && strstr(gs_detail(), field),
                   "%s: detail '%s': expected '%s... %s'", cases[i].label, gs_detail(), where, field);
         CHECK_MSG(!strchr(gs_detail(), '\n'), "%s: detail is not one line", cases[i].label);
-        CHECK_MSG(rec_delight_count(d) == 1, "%s: %zu entries after a failed import", cases[i].label,
-                  rec_delight_count(d));
-        rec_delight_free(d);
+        CHECK_MSG(gs_delight_count(d) == 1, "%s: %zu entries after a failed import", cases[i].label,
+                  gs_delight_count(d));
+        gs_delight_free(d);
     }
 }
 
@@ -274,45 +274,45 @@ TEST(delight_csv_inconsistent_entry_and_duplicates)
     /* a BRF whose mean is not 1 fails validation; the detail names the file and the line */
     const char *p = tmp_path("mean.csv");
     write_file(p, HDR MONO "c,cfl,C,13,50,photodiode/voltage,mono,1,4,2,2,2,2\n");
-    rec_delight *d = rec_delight_new();
-    CHECK(rec_delight_import_csv(d, p) == GS_EINVAL);
+    gs_delight *d = gs_delight_new();
+    CHECK(gs_delight_import_csv(d, p) == GS_EINVAL);
     char where[700];
     snprintf(where, sizeof where, "%s:3: ", p);
     CHECK_MSG(strncmp(gs_detail(), where, strlen(where)) == 0, "detail '%s'", gs_detail());
-    CHECK(rec_delight_count(d) == 0);
+    CHECK(gs_delight_count(d) == 0);
     /* importing a bulb already present adds nothing */
     const char *q = tmp_path("dup.csv");
     write_file(q, HDR RED GREEN BLUE MONO);
     write_file(p, HDR MONO);
-    CHECK_OK(rec_delight_import_csv(d, p));
-    CHECK(rec_delight_import_csv(d, q) == GS_EINVAL);
+    CHECK_OK(gs_delight_import_csv(d, p));
+    CHECK(gs_delight_import_csv(d, q) == GS_EINVAL);
     CHECK(strstr(gs_detail(), q) && strstr(gs_detail(), "already"));
-    CHECK(rec_delight_count(d) == 1);
-    CHECK(rec_delight_import_csv(d, tmp_path("missing.csv")) == GS_EIO);
-    rec_delight_free(d);
+    CHECK(gs_delight_count(d) == 1);
+    CHECK(gs_delight_import_csv(d, tmp_path("missing.csv")) == GS_EIO);
+    gs_delight_free(d);
 }
 
 /* ---------------------------------------------------------------- SQLite */
 
 TEST(delight_sqlite_round_trip_exact)
 {
-    rec_delight *d = make_db(1024), *e = rec_delight_new();
+    gs_delight *d = make_db(1024), *e = gs_delight_new();
     const char *db = tmp_path("delight.sqlite");
-    CHECK_OK(rec_delight_save(d, db));
-    CHECK_OK(rec_delight_load(e, db));
+    CHECK_OK(gs_delight_save(d, db));
+    CHECK_OK(gs_delight_load(e, db));
     CHECK(same_db(d, e));
     /* saving again replaces the tables (no duplicates); load appends */
-    rec_delight *small = make_db(8);
-    CHECK_OK(rec_delight_save(small, db));
-    rec_delight *g = rec_delight_new();
-    CHECK_OK(rec_delight_load(g, db));
+    gs_delight *small = make_db(8);
+    CHECK_OK(gs_delight_save(small, db));
+    gs_delight *g = gs_delight_new();
+    CHECK_OK(gs_delight_load(g, db));
     CHECK(same_db(small, g));
-    CHECK(rec_delight_load(g, db) == GS_EINVAL);   /* all already present */
-    CHECK(rec_delight_count(g) == 4);
-    rec_delight_free(d);
-    rec_delight_free(e);
-    rec_delight_free(small);
-    rec_delight_free(g);
+    CHECK(gs_delight_load(g, db) == GS_EINVAL);   /* all already present */
+    CHECK(gs_delight_count(g) == 4);
+    gs_delight_free(d);
+    gs_delight_free(e);
+    gs_delight_free(small);
+    gs_delight_free(g);
 }
 
 static int query_int(sqlite3 *db, const char *sql)
@@ -327,16 +327,16 @@ static int query_int(sqlite3 *db, const char *sql)
 
 TEST(delight_sqlite_schema_versioned)
 {
-    rec_delight *d = make_db(16);
+    gs_delight *d = make_db(16);
     const char *path = tmp_path("delight.sqlite");
-    CHECK_OK(rec_delight_save(d, path));
+    CHECK_OK(gs_delight_save(d, path));
     sqlite3 *db = NULL;
     CHECK(sqlite3_open(path, &db) == SQLITE_OK);
-    CHECK(query_int(db, "PRAGMA user_version") == REC_DELIGHT_SCHEMA_VERSION);
+    CHECK(query_int(db, "PRAGMA user_version") == GS_DELIGHT_SCHEMA_VERSION);
     CHECK(query_int(db, "SELECT count(*) FROM delight_meta WHERE key = 'format' AND value = "
                         "'gridsurvey-delight'") == 1);
     CHECK(query_int(db, "SELECT value FROM delight_meta WHERE key = 'schema_version'") ==
-          REC_DELIGHT_SCHEMA_VERSION);
+          GS_DELIGHT_SCHEMA_VERSION);
     CHECK(query_int(db, "SELECT count(*) FROM delight_bulbs") == 4);
     CHECK(query_int(db, "SELECT count(*) FROM delight_brf_bands") == 8);
     CHECK(query_int(db, "SELECT count(*) FROM pragma_foreign_key_check") == 0);
@@ -352,19 +352,19 @@ TEST(delight_sqlite_schema_versioned)
         for (int k = 0; k < 8; k++) u |= (unsigned long long)p[8 + k] << (8 * k);
         double v;
         memcpy(&v, &u, sizeof v);
-        CHECK(v == rec_delight_get(d, 3)->brf.v[1]);
+        CHECK(v == gs_delight_get(d, 3)->brf.v[1]);
     } else {
         CHECK(!"no samples row");
     }
     sqlite3_finalize(q);
     sqlite3_close(db);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 TEST(delight_sqlite_rejects_other_files)
 {
-    rec_delight *d = make_db(8);
-    size_t before = rec_delight_count(d);
+    gs_delight *d = make_db(8);
+    size_t before = gs_delight_count(d);
     /* an SQLite file that is not a DELIGHT database */
     const char *other = tmp_path("other.sqlite");
     sqlite3 *db = NULL;
@@ -372,11 +372,11 @@ TEST(delight_sqlite_rejects_other_files)
     CHECK(sqlite3_exec(db, "CREATE TABLE lights(id INTEGER); PRAGMA user_version = 7", NULL, NULL,
                        NULL) == SQLITE_OK);
     sqlite3_close(db);
-    CHECK(rec_delight_load(d, other) == GS_EFORMAT);
+    CHECK(gs_delight_load(d, other) == GS_EFORMAT);
     CHECK(strstr(gs_detail(), other) && strstr(gs_detail(), "gridsurvey-delight") &&
           !strchr(gs_detail(), '\n'));
     /* ... and save refuses to overwrite it */
-    CHECK(rec_delight_save(d, other) == GS_EFORMAT);
+    CHECK(gs_delight_save(d, other) == GS_EFORMAT);
     CHECK(strstr(gs_detail(), other) != NULL);
     CHECK(sqlite3_open(other, &db) == SQLITE_OK);
     CHECK(query_int(db, "PRAGMA user_version") == 7);
@@ -387,48 +387,48 @@ TEST(delight_sqlite_rejects_other_files)
     CHECK(sqlite3_open(fake, &db) == SQLITE_OK);
     CHECK(sqlite3_exec(db, "CREATE TABLE t(x); PRAGMA user_version = 1", NULL, NULL, NULL) == SQLITE_OK);
     sqlite3_close(db);
-    CHECK(rec_delight_load(d, fake) == GS_EFORMAT);
+    CHECK(gs_delight_load(d, fake) == GS_EFORMAT);
     CHECK(strstr(gs_detail(), fake) != NULL);
     /* a text file */
     const char *text = tmp_path("delight.csv");
     write_file(text, "bulb_id,type,name,watts,grid_hz,sensor,band,chromaticity,n\n"
                      "this is not an SQLite database, but it is long enough to look like one\n");
-    CHECK(rec_delight_load(d, text) == GS_EFORMAT);
+    CHECK(gs_delight_load(d, text) == GS_EFORMAT);
     CHECK(strstr(gs_detail(), text) && strstr(gs_detail(), "DELIGHT"));
     /* a missing file */
-    CHECK(rec_delight_load(d, tmp_path("missing.sqlite")) == GS_EIO);
-    CHECK(rec_delight_count(d) == before);
-    rec_delight_free(d);
+    CHECK(gs_delight_load(d, tmp_path("missing.sqlite")) == GS_EIO);
+    CHECK(gs_delight_count(d) == before);
+    gs_delight_free(d);
 }
 
 TEST(delight_sqlite_bad_entry_rejected_atomically)
 {
-    rec_delight *d = make_db(8);
+    gs_delight *d = make_db(8);
     const char *path = tmp_path("delight.sqlite");
-    CHECK_OK(rec_delight_save(d, path));
+    CHECK_OK(gs_delight_save(d, path));
     sqlite3 *db = NULL;
     CHECK(sqlite3_open(path, &db) == SQLITE_OK);
     /* the last bulb's BRF becomes all zeros (mean 0): invalid */
     CHECK(sqlite3_exec(db, "UPDATE delight_brf_bands SET samples = zeroblob(64) WHERE bulb_id = 'hue'",
                        NULL, NULL, NULL) == SQLITE_OK);
     sqlite3_close(db);
-    rec_delight *e = rec_delight_new();
-    rec_bulb keep;
-    make_bulb(&keep, "kept", 50, "photodiode", 1, 8, REC_TECH_HALOGEN, REC_REF_VOLTAGE, 0.3);
-    CHECK_OK(rec_delight_add(e, &keep));
-    rec_bulb_release(&keep);
-    CHECK(rec_delight_load(e, path) == GS_EINVAL);
+    gs_delight *e = gs_delight_new();
+    gs_bulb keep;
+    make_bulb(&keep, "kept", 50, "photodiode", 1, 8, GS_TECH_HALOGEN, GS_REF_VOLTAGE, 0.3);
+    CHECK_OK(gs_delight_add(e, &keep));
+    gs_bulb_release(&keep);
+    CHECK(gs_delight_load(e, path) == GS_EINVAL);
     CHECK(strstr(gs_detail(), path) && strstr(gs_detail(), "hue"));
-    CHECK(rec_delight_count(e) == 1);
+    CHECK(gs_delight_count(e) == 1);
     /* a missing band */
-    CHECK_OK(rec_delight_save(d, path));
+    CHECK_OK(gs_delight_save(d, path));
     CHECK(sqlite3_open(path, &db) == SQLITE_OK);
     CHECK(sqlite3_exec(db, "DELETE FROM delight_brf_bands WHERE sensor = 'rgb' AND band = 2 AND "
                            "grid_hz = 60", NULL, NULL, NULL) == SQLITE_OK);
     sqlite3_close(db);
-    CHECK(rec_delight_load(e, path) == GS_EFORMAT);
+    CHECK(gs_delight_load(e, path) == GS_EFORMAT);
     CHECK(strstr(gs_detail(), path) && strstr(gs_detail(), "Sodium_HP.250"));
-    CHECK(rec_delight_count(e) == 1);
-    rec_delight_free(d);
-    rec_delight_free(e);
+    CHECK(gs_delight_count(e) == 1);
+    gs_delight_free(d);
+    gs_delight_free(e);
 }

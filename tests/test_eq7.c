@@ -61,23 +61,23 @@ static double shape_at(int shape, double t, int band)
     return 1.0;
 }
 
-static void make_bulb(rec_bulb *b, const char *id, int shape, int grid_hz, int bands, rec_ref ref,
+static void make_bulb(gs_bulb *b, const char *id, int shape, int grid_hz, int bands, gs_ref ref,
                       const double *chroma, int n)
 {
     memset(b, 0, sizeof *b);
     snprintf(b->id, sizeof b->id, "%s", id);
     snprintf(b->name, sizeof b->name, "test bulb %s", id);
-    b->type = REC_TECH_UNKNOWN;
+    b->type = GS_TECH_UNKNOWN;
     b->watts = 10;
     b->grid_hz = grid_hz;
     snprintf(b->sensor, sizeof b->sensor, "%s", bands == 3 ? "rgb" : "photodiode");
     b->ref = ref;
-    CHECK_OK(rec_brf_init(&b->brf, n, bands));
+    CHECK_OK(gs_brf_init(&b->brf, n, bands));
     for (int band = 0; band < bands; band++) {
         for (int j = 0; j < n; j++) b->brf.v[band * n + j] = shape_at(shape, (double)j / n, band);
         b->chroma[band] = bands == 3 ? chroma[band] : 1.0;
     }
-    CHECK_OK(rec_brf_normalize(&b->brf, NULL));
+    CHECK_OK(gs_brf_normalize(&b->brf, NULL));
 }
 
 static const double chroma_tab[][3] = {
@@ -87,38 +87,38 @@ static const double chroma_tab[][3] = {
 
 /* The hand-made database: sine, saw, harm, gap, flat at grid_hz (and optionally the twin of
  * sine and shapes at the other frequency), bands 1 or 3. */
-static rec_delight *make_db(int grid_hz, int bands, int with_twin, int with_other_grid)
+static gs_delight *make_db(int grid_hz, int bands, int with_twin, int with_other_grid)
 {
-    rec_delight *d = rec_delight_new();
+    gs_delight *d = gs_delight_new();
     CHECK(d != NULL);
     const char *ids[] = {"sine", "saw", "harm", "gap", "flat"};
     int shapes[] = {SHAPE_SINE, SHAPE_SAW, SHAPE_HARM, SHAPE_GAP, SHAPE_FLAT};
     for (int i = 0; i < 5; i++) {
-        rec_bulb b;
-        make_bulb(&b, ids[i], shapes[i], grid_hz, bands, REC_REF_VOLTAGE, chroma_tab[i], 1024);
-        CHECK_OK(rec_delight_add(d, &b));
-        rec_bulb_release(&b);
+        gs_bulb b;
+        make_bulb(&b, ids[i], shapes[i], grid_hz, bands, GS_REF_VOLTAGE, chroma_tab[i], 1024);
+        CHECK_OK(gs_delight_add(d, &b));
+        gs_bulb_release(&b);
         if (with_other_grid) {
             /* the same id at the other grid, with a different shape: must never be a candidate */
-            make_bulb(&b, ids[i], SHAPE_ODD, grid_hz == 50 ? 60 : 50, bands, REC_REF_VOLTAGE,
+            make_bulb(&b, ids[i], SHAPE_ODD, grid_hz == 50 ? 60 : 50, bands, GS_REF_VOLTAGE,
                       chroma_tab[i], 1024);
-            CHECK_OK(rec_delight_add(d, &b));
-            rec_bulb_release(&b);
+            CHECK_OK(gs_delight_add(d, &b));
+            gs_bulb_release(&b);
         }
     }
     if (with_twin) {
-        rec_bulb b;
-        make_bulb(&b, "sine-twin", SHAPE_SINE_TWIN, grid_hz, bands, REC_REF_VOLTAGE, chroma_tab[5], 1024);
-        CHECK_OK(rec_delight_add(d, &b));
-        rec_bulb_release(&b);
+        gs_bulb b;
+        make_bulb(&b, "sine-twin", SHAPE_SINE_TWIN, grid_hz, bands, GS_REF_VOLTAGE, chroma_tab[5], 1024);
+        CHECK_OK(gs_delight_add(d, &b));
+        gs_bulb_release(&b);
     }
     return d;
 }
 
 /* Template of bulb b at shift s (cycles): chroma * Eq. 5 window means. */
-static void oracle_template(const rec_bulb *b, double s, int K, double *t)
+static void oracle_template(const gs_bulb *b, double s, int K, double *t)
 {
-    CHECK_OK(rec_brf_integrate(&b->brf, s, K, t));
+    CHECK_OK(gs_brf_integrate(&b->brf, s, K, t));
     for (int band = 0; band < b->brf.bands; band++)
         for (int k = 0; k < K; k++) t[band * K + k] *= b->chroma[band];
 }
@@ -146,20 +146,20 @@ typedef struct {
     double *t;
 } ttab;
 
-static void ttab_init(ttab *tb, const rec_delight *d, int grid_hz, int bands, int K, const double *ph,
+static void ttab_init(ttab *tb, const gs_delight *d, int grid_hz, int bands, int K, const double *ph,
                       int np)
 {
     tb->np = np;
     tb->D = bands * K;
     tb->K = K;
     tb->nb = 0;
-    size_t nd = rec_delight_count(d);
+    size_t nd = gs_delight_count(d);
     tb->t = malloc(sizeof *tb->t * nd * (size_t)np * (size_t)tb->D);
     for (size_t i = 0; i < nd; i++) {
-        const rec_bulb *b = rec_delight_get(d, i);
-        if (b->grid_hz != grid_hz || b->brf.bands != bands || b->ref == REC_REF_UNLOCKED) continue;
+        const gs_bulb *b = gs_delight_get(d, i);
+        if (b->grid_hz != grid_hz || b->brf.bands != bands || b->ref == GS_REF_UNLOCKED) continue;
         for (int p = 0; p < np; p++)
-            oracle_template(b, rec_phase_to_shift(ph[p]), K,
+            oracle_template(b, gs_phase_to_shift(ph[p]), K,
                             tb->t + ((size_t)tb->nb * (size_t)np + (size_t)p) * (size_t)tb->D);
         tb->nb++;
     }
@@ -244,7 +244,7 @@ static void render_t(const double *t, int D, double a, double sigma, uint64_t *r
 }
 
 /* A light: brightness a of bulb b at shift s plus Gaussian noise of std sigma (per sample). */
-static void render(const rec_bulb *b, double s, int K, double a, double sigma, uint64_t *rs,
+static void render(const gs_bulb *b, double s, int K, double a, double sigma, uint64_t *rs,
                    double *x, double *sg)
 {
     int D = b->brf.bands * K;
@@ -267,7 +267,7 @@ static int all_finite(const rec_match *r)
 
 static const double P3[3] = {0, 120, 240};
 
-static rec_matcher *new_matcher(const rec_delight *d, int grid_hz, int bands, int K,
+static rec_matcher *new_matcher(const gs_delight *d, int grid_hz, int bands, int K,
                                 rec_phase_set ps)
 {
     rec_eq7_opts o;
@@ -286,7 +286,7 @@ static rec_matcher *new_matcher(const rec_delight *d, int grid_hz, int bands, in
  * bulb and phase at several SNRs (3-phase set). */
 static void compare_with_oracle(int grid_hz, int bands, int K, int trials, uint64_t seed)
 {
-    rec_delight *d = make_db(grid_hz, bands, 1, 1);
+    gs_delight *d = make_db(grid_hz, bands, 1, 1);
     rec_matcher *m = new_matcher(d, grid_hz, bands, K, REC_PHASES_3);
     int D = bands * K;
     size_t nb = rec_matcher_bulb_count(m);
@@ -363,13 +363,13 @@ static void compare_with_oracle(int grid_hz, int bands, int K, int trials, uint6
     free(orr);
     free(tb.t);
     rec_matcher_free(m);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* Noiseless lights of every bulb at every phase are recovered with confidence ~1 (sigma 1e-7 of
  * the brightness per sample). Templates that coincide (K too small to tell them apart) must be
  * reported ambiguous instead. */
-static void exact_recovery(rec_delight *d, int grid_hz, int bands, int K, rec_phase_set ps,
+static void exact_recovery(gs_delight *d, int grid_hz, int bands, int K, rec_phase_set ps,
                            const double *phases, int np)
 {
     rec_matcher *m = new_matcher(d, grid_hz, bands, K, ps);
@@ -477,7 +477,7 @@ TEST(eq7_chi2_sf_known_values)
 
 TEST(eq7_matcher_arguments)
 {
-    rec_delight *d = make_db(50, 3, 0, 1);
+    gs_delight *d = make_db(50, 3, 0, 1);
     rec_matcher *m = (rec_matcher *)&m;
     CHECK(rec_matcher_new(d, 55, 3, 26, NULL, &m) == GS_EINVAL && m == NULL);
     CHECK(rec_matcher_new(d, 50, 2, 26, NULL, &m) == GS_EINVAL);
@@ -507,19 +507,19 @@ TEST(eq7_matcher_arguments)
     o.phases = (rec_phase_set)7;
     CHECK(rec_matcher_new(d, 50, 3, 26, &o, &m) == GS_EINVAL);
     /* unlocked entries are never candidates */
-    rec_bulb b;
-    make_bulb(&b, "pwm", SHAPE_FLAT, 50, 3, REC_REF_UNLOCKED, chroma_tab[0], 64);
-    CHECK_OK(rec_delight_add(d, &b));
-    rec_bulb_release(&b);
+    gs_bulb b;
+    make_bulb(&b, "pwm", SHAPE_FLAT, 50, 3, GS_REF_UNLOCKED, chroma_tab[0], 64);
+    CHECK_OK(gs_delight_add(d, &b));
+    gs_bulb_release(&b);
     CHECK_OK(rec_matcher_new(d, 50, 3, 26, NULL, &m));
     CHECK(rec_matcher_bulb_count(m) == 5);
     for (size_t i = 0; i < rec_matcher_bulb_count(m); i++) {
-        CHECK(rec_matcher_bulb(m, i)->ref != REC_REF_UNLOCKED);
+        CHECK(rec_matcher_bulb(m, i)->ref != GS_REF_UNLOCKED);
         CHECK(rec_matcher_bulb(m, i)->grid_hz == 50);
     }
     CHECK(rec_matcher_bulb(m, 5) == NULL);
     /* the matcher borrows nothing from d */
-    rec_delight_free(d);
+    gs_delight_free(d);
     CHECK(strcmp(rec_matcher_bulb(m, 1)->id, "saw") == 0);
     CHECK_NEAR(rec_matcher_bulb(m, 1)->brf.v[3], shape_at(SHAPE_SAW, 3.0 / 1024, 0) /
                1.0, 0.5);
@@ -549,21 +549,21 @@ TEST(eq7_matches_brute_force_mono_k13)
 
 TEST(eq7_exact_recovery_3_phases)
 {
-    rec_delight *d = make_db(50, 3, 0, 0);
+    gs_delight *d = make_db(50, 3, 0, 0);
     exact_recovery(d, 50, 3, 26, REC_PHASES_3, P3, 3);
-    rec_delight_free(d);
+    gs_delight_free(d);
     d = make_db(50, 1, 0, 0);
     exact_recovery(d, 50, 1, 26, REC_PHASES_3, P3, 3);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 TEST(eq7_exact_recovery_generated_delight)
 {
     /* every 50 Hz RGB bulb of the built-in DELIGHT at every phase, K = 26 */
-    rec_delight *d = rec_delight_new();
-    CHECK_OK(rec_delight_generate(d, 1024));
+    gs_delight *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(d, 1024));
     exact_recovery(d, 50, 3, 26, REC_PHASES_3, P3, 3);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 TEST(eq7_six_phase_transformer)
@@ -571,7 +571,7 @@ TEST(eq7_six_phase_transformer)
     /* A delta-wye transformer shifts the AC by +-30 deg (+-60 deg of flicker phase, shared/BULBS.md):
      * with REC_PHASES_6 lights at 30/150/270 are recovered exactly; with the 3-phase set the
      * same lights are not given a confident wrong phase (unknown or ambiguous). */
-    rec_delight *d = make_db(50, 3, 0, 0);
+    gs_delight *d = make_db(50, 3, 0, 0);
     double P6[6] = {0, 120, 240, 30, 150, 270};
     exact_recovery(d, 50, 3, 26, REC_PHASES_6, P6, 6);
     rec_eq7_opts o;
@@ -586,7 +586,7 @@ TEST(eq7_six_phase_transformer)
     double Pm[3] = {330, 90, 210};
     for (size_t b = 0; b < 4; b++)   /* not the flat bulb */
         for (int p = 0; p < 3; p++) {
-            render(rec_matcher_bulb(m6, b), rec_phase_to_shift(Pm[p]), 26, 100.0, 0.5, &rs, x, sg);
+            render(rec_matcher_bulb(m6, b), gs_phase_to_shift(Pm[p]), 26, 100.0, 0.5, &rs, x, sg);
             rec_match r;
             CHECK_OK(rec_match_light(m6, x, sg, &r));
             CHECK(r.bulb == (int)b && fabs(r.phase_deg - Pm[p]) < 1e-9);
@@ -597,7 +597,7 @@ TEST(eq7_six_phase_transformer)
         }
     rec_matcher_free(m6);
     rec_matcher_free(m3);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* circular distance of two shifts */
@@ -609,7 +609,7 @@ static double cdist(double a, double b)
 
 TEST(eq7_exact_recovery_continuous_subsample)
 {
-    rec_delight *d = make_db(50, 3, 0, 0);
+    gs_delight *d = make_db(50, 3, 0, 0);
     rec_matcher *m = new_matcher(d, 50, 3, 26, REC_PHASES_CONTINUOUS);
     double x[78], sg[78];
     uint64_t rs = 2;
@@ -621,12 +621,12 @@ TEST(eq7_exact_recovery_continuous_subsample)
             CHECK_OK(rec_match_light(m, x, sg, &r));
             CHECK(all_finite(&r));
             CHECK(r.bulb == (int)b);
-            double s = rec_phase_to_shift(r.phase_deg);
+            double s = gs_phase_to_shift(r.phase_deg);
             CHECK_MSG(cdist(s, shifts[i]) < 1e-7, "bulb %zu shift %g: got %.9f", b, shifts[i], s);
             CHECK(r.phase_sigma_deg < 1e-4 && r.phase_sigma_deg > 0);
             CHECK(r.confidence > 0.999);
             CHECK_NEAR(r.brightness, 80.0, 1e-5);
-            /* lights rendered with rec_brf_integrate, noise 1e-9 of the brightness: the
+            /* lights rendered with gs_brf_integrate, noise 1e-9 of the brightness: the
              * matcher's Fourier templates agree to ~1e-11 */
             CHECK_MSG(r.chi2 < 1e-2, "bulb %zu shift %g: chi2 %g", b, shifts[i], r.chi2);
         }
@@ -642,11 +642,11 @@ TEST(eq7_exact_recovery_continuous_subsample)
     CHECK_OK(rec_match_pixels(m, xf, sf, 7, pb, pp, pc));
     for (size_t i = 0; i < 7; i++) {
         CHECK(pb[i] == 2);
-        CHECK_MSG(cdist(rec_phase_to_shift(pp[i]), shifts[i]) < 0.1 / 208, "pixel shift %g: %g",
-                  shifts[i], rec_phase_to_shift(pp[i]));
+        CHECK_MSG(cdist(gs_phase_to_shift(pp[i]), shifts[i]) < 0.1 / 208, "pixel shift %g: %g",
+                  shifts[i], gs_phase_to_shift(pp[i]));
     }
     rec_matcher_free(m);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* Closed-form Eq. 5 window means of the trigonometric shapes (sine, saw, harm): the mean of
@@ -692,21 +692,21 @@ static void analytic_template(int shape, const double *chroma, double s, int K, 
 
 TEST(eq7_analytic_templates)
 {
-    /* the matcher's templates (rec_brf_integrate) against the closed form, any shift */
+    /* the matcher's templates (gs_brf_integrate) against the closed form, any shift */
     int shapes[3] = {SHAPE_SINE, SHAPE_SAW, SHAPE_HARM};
     const char *ids[3] = {"sine", "saw", "harm"};
     double t[78], ta[78];
     uint64_t rs = 31;
     for (int i = 0; i < 3; i++) {
-        rec_bulb b;
-        make_bulb(&b, ids[i], shapes[i], 50, 3, REC_REF_VOLTAGE, chroma_tab[i], 1024);
+        gs_bulb b;
+        make_bulb(&b, ids[i], shapes[i], 50, 3, GS_REF_VOLTAGE, chroma_tab[i], 1024);
         for (int trial = 0; trial < 20; trial++) {
             double sh = rng_unif(&rs);
             oracle_template(&b, sh, 26, t);
             analytic_template(shapes[i], chroma_tab[i], sh, 26, ta);
             for (int k = 0; k < 78; k++) CHECK_NEAR(t[k], ta[k], 1e-12);
         }
-        rec_bulb_release(&b);
+        gs_bulb_release(&b);
     }
 }
 
@@ -715,14 +715,14 @@ TEST(eq7_analytic_templates)
  * finite-difference curvature; the bulb posterior from the Riemann sum over the fine grid. */
 TEST(eq7_continuous_matches_fine_grid_oracle)
 {
-    rec_delight *d = rec_delight_new();
+    gs_delight *d = gs_delight_new();
     int shapes[3] = {SHAPE_SINE, SHAPE_SAW, SHAPE_HARM};
     const char *ids[3] = {"sine", "saw", "harm"};
     for (int i = 0; i < 3; i++) {
-        rec_bulb b;
-        make_bulb(&b, ids[i], shapes[i], 50, 3, REC_REF_VOLTAGE, chroma_tab[i], 1024);
-        CHECK_OK(rec_delight_add(d, &b));
-        rec_bulb_release(&b);
+        gs_bulb b;
+        make_bulb(&b, ids[i], shapes[i], 50, 3, GS_REF_VOLTAGE, chroma_tab[i], 1024);
+        CHECK_OK(gs_delight_add(d, &b));
+        gs_bulb_release(&b);
     }
     rec_matcher *m = new_matcher(d, 50, 3, 26, REC_PHASES_CONTINUOUS);
     int K = 26, D = 78, G = 2048, nb = 3;
@@ -824,7 +824,7 @@ TEST(eq7_continuous_matches_fine_grid_oracle)
         double sig_or = sqrt(2.0 / ((fp + fm - 2 * f0) / (hstep * hstep)));
 #undef CHI2_AT
         if (snr >= 3) {   /* at sample SNR 0.7 a bulb's chi2 can have two minima */
-            double s_est = rec_phase_to_shift(ph);
+            double s_est = gs_phase_to_shift(ph);
             CHECK_MSG(cdist(s_est, s_or) < 1e-7 + 1e-3 * sig_or, "trial %d: shift %.8f oracle %.8f (sigma %g)",
                       trial, s_est, s_or, sig_or);
             CHECK_NEAR(r.chi2, f0, 1e-7 * (1 + f0));
@@ -842,14 +842,14 @@ TEST(eq7_continuous_matches_fine_grid_oracle)
     free(L);
     free(tab);
     rec_matcher_free(m);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* ------------------------------------------------------------ hard cases */
 
 TEST(eq7_brightness_near_zero)
 {
-    rec_delight *d = make_db(50, 3, 0, 0);
+    gs_delight *d = make_db(50, 3, 0, 0);
     rec_matcher *m = new_matcher(d, 50, 3, 26, REC_PHASES_3);
     double x[78], sg[78];
     uint64_t rs = 9;
@@ -892,20 +892,20 @@ TEST(eq7_brightness_near_zero)
     CHECK_OK(rec_match_pixels(m, xf, &sf, 1, &pb, &pp, &pc));
     CHECK(pb == -1 && pc == 0.0f && pp == 0.0f);
     rec_matcher_free(m);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 TEST(eq7_modulation_0p1_percent)
 {
     /* The near-flat bulb (0.1 % modulation): at a good brightness SNR its type can be right but
      * its phase carries no information: never a confident phase. */
-    rec_delight *d = make_db(50, 3, 0, 0);
+    gs_delight *d = make_db(50, 3, 0, 0);
     rec_matcher *m = new_matcher(d, 50, 3, 26, REC_PHASES_3);
     double x[78], sg[78];
     uint64_t rs = 4;
     int right_type = 0;
     for (int trial = 0; trial < 300; trial++) {
-        double s = rec_phase_to_shift(P3[trial % 3]);
+        double s = gs_phase_to_shift(P3[trial % 3]);
         render(rec_matcher_bulb(m, 4), s, 26, 1000.0, 1000.0 / 3 / 30, &rs, x, sg);   /* sample SNR 30 */
         rec_match r;
         CHECK_OK(rec_match_light(m, x, sg, &r));
@@ -917,14 +917,14 @@ TEST(eq7_modulation_0p1_percent)
     }
     CHECK(right_type > 290);
     rec_matcher_free(m);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 TEST(eq7_saturated_samples_dropped)
 {
     /* Saturated samples come with sigma = +inf (their value is clipped or NaN): the answer is the
      * one on the remaining samples, and it is not flagged as bad input. */
-    rec_delight *d = make_db(50, 3, 0, 0);
+    gs_delight *d = make_db(50, 3, 0, 0);
     rec_matcher *m = new_matcher(d, 50, 3, 26, REC_PHASES_3);
     double x[78], sg[78], xr[78], sr[78];
     ttab tb;
@@ -973,17 +973,17 @@ TEST(eq7_saturated_samples_dropped)
     }
     free(tb.t);
     rec_matcher_free(m);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 TEST(eq7_nan_inf_negative_input)
 {
-    rec_delight *d = make_db(50, 3, 0, 0);
+    gs_delight *d = make_db(50, 3, 0, 0);
     rec_matcher *m = new_matcher(d, 50, 3, 26, REC_PHASES_3);
     double x[78], sg[78];
     uint64_t rs = 8;
     rec_match r;
-    render(rec_matcher_bulb(m, 1), rec_phase_to_shift(120), 26, 300.0, 1.0, &rs, x, sg);
+    render(rec_matcher_bulb(m, 1), gs_phase_to_shift(120), 26, 300.0, 1.0, &rs, x, sg);
     /* one NaN, one +inf, one sigma 0, one sigma -1, one sigma NaN: dropped and flagged */
     x[3] = NAN;
     x[10] = INFINITY;
@@ -1008,7 +1008,7 @@ TEST(eq7_nan_inf_negative_input)
     CHECK_OK(rec_match_light(m, x, sg, &r));
     CHECK(all_finite(&r) && r.bulb == -1 && (r.flags & REC_MATCH_BAD_INPUT));
     /* negative samples are legal: a dim light after background subtraction */
-    render(rec_matcher_bulb(m, 2), rec_phase_to_shift(240), 26, 78.0, 1.0, &rs, x, sg);
+    render(rec_matcher_bulb(m, 2), gs_phase_to_shift(240), 26, 78.0, 1.0, &rs, x, sg);
     int neg = 0;
     for (int k = 0; k < 78; k++) neg += x[k] < 0;
     CHECK_OK(rec_match_light(m, x, sg, &r));
@@ -1021,7 +1021,7 @@ TEST(eq7_nan_inf_negative_input)
     /* extreme scales: no overflow, no NaN */
     double scales[] = {1e-300, 1e-150, 1e150, 1e300};
     for (size_t i = 0; i < 4; i++) {
-        render(rec_matcher_bulb(m, 3), rec_phase_to_shift(0), 26, 1.0, 0.0, &rs, x, sg);
+        render(rec_matcher_bulb(m, 3), gs_phase_to_shift(0), 26, 1.0, 0.0, &rs, x, sg);
         for (int k = 0; k < 78; k++) {
             x[k] *= scales[i];
             sg[k] = 1e-3 * scales[i];
@@ -1038,7 +1038,7 @@ TEST(eq7_nan_inf_negative_input)
     CHECK(all_finite(&r));
     /* pixels: rows with NaN, Inf, sigma <= 0 or NaN are skipped, others unaffected */
     float xf[5 * 78], sf[5];
-    render(rec_matcher_bulb(m, 1), rec_phase_to_shift(120), 26, 300.0, 1.0, &rs, x, sg);
+    render(rec_matcher_bulb(m, 1), gs_phase_to_shift(120), 26, 300.0, 1.0, &rs, x, sg);
     for (int i = 0; i < 5; i++) {
         for (int k = 0; k < 78; k++) xf[i * 78 + k] = (float)x[k];
         sf[i] = 1.0f;
@@ -1053,16 +1053,16 @@ TEST(eq7_nan_inf_negative_input)
     CHECK(pb[0] == 1 && pp[0] == 120.0f && pc[0] > 0.99f);
     for (int i = 1; i < 5; i++) CHECK(pb[i] == -1 && pc[i] == 0.0f && pp[i] == 0.0f);
     rec_matcher_free(m);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 TEST(eq7_k2)
 {
     /* K = 2: one flicker number per band. Mono has dof = 0 (no chi-square test, p = 1). */
-    rec_delight *d = make_db(50, 3, 0, 0);
+    gs_delight *d = make_db(50, 3, 0, 0);
     exact_recovery(d, 50, 3, 2, REC_PHASES_3, P3, 3);
     compare_with_oracle(50, 3, 2, 120, 21);
-    rec_delight_free(d);
+    gs_delight_free(d);
     d = make_db(50, 1, 0, 0);
     rec_matcher *m = new_matcher(d, 50, 1, 2, REC_PHASES_3);
     double x[2], sg[2];
@@ -1075,27 +1075,27 @@ TEST(eq7_k2)
     /* two numbers cannot identify one of 15 (bulb, phase) pairs: ambiguous, never confident-wrong */
     CHECK(r.bulb != -1 || (r.flags & REC_MATCH_DIM));
     rec_matcher_free(m);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 TEST(eq7_k_not_multiple_of_3)
 {
     int Ks[] = {13, 7, 5};
     for (int i = 0; i < 3; i++) {
-        rec_delight *d = make_db(50, 3, 0, 0);
+        gs_delight *d = make_db(50, 3, 0, 0);
         exact_recovery(d, 50, 3, Ks[i], REC_PHASES_3, P3, 3);
         double P6[6] = {0, 120, 240, 30, 150, 270};
         exact_recovery(d, 50, 3, Ks[i], REC_PHASES_6, P6, 6);
-        rec_delight_free(d);
+        gs_delight_free(d);
         compare_with_oracle(50, 3, Ks[i], 120, 30 + (uint64_t)i);
     }
 }
 
 TEST(eq7_k26)
 {
-    rec_delight *d = make_db(50, 3, 0, 0);
+    gs_delight *d = make_db(50, 3, 0, 0);
     exact_recovery(d, 50, 3, 26, REC_PHASES_3, P3, 3);
-    rec_delight_free(d);
+    gs_delight_free(d);
     compare_with_oracle(50, 3, 26, 200, 41);
     compare_with_oracle(50, 1, 26, 200, 42);
 }
@@ -1103,26 +1103,26 @@ TEST(eq7_k26)
 TEST(eq7_60hz)
 {
     /* 60 Hz entries only (the 50 Hz entries with the same ids have another shape) */
-    rec_delight *d = make_db(60, 3, 0, 1);
+    gs_delight *d = make_db(60, 3, 0, 1);
     rec_matcher *m = new_matcher(d, 60, 3, 20, REC_PHASES_3);
     CHECK(rec_matcher_bulb_count(m) == 5);
     for (size_t b = 0; b < 5; b++) CHECK(rec_matcher_bulb(m, b)->grid_hz == 60);
     rec_matcher_free(m);
     exact_recovery(d, 60, 3, 20, REC_PHASES_3, P3, 3);
-    rec_delight_free(d);
+    gs_delight_free(d);
     compare_with_oracle(60, 3, 20, 200, 51);
     /* the generated DELIGHT at 60 Hz */
-    d = rec_delight_new();
-    CHECK_OK(rec_delight_generate(d, 1024));
+    d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(d, 1024));
     exact_recovery(d, 60, 3, 26, REC_PHASES_3, P3, 3);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 TEST(eq7_near_identical_bulbs)
 {
     /* sine and sine-twin differ by 1.5 % of their modulation depth and in chromaticity by 0: at a
      * moderate SNR the bulb is ambiguous (posterior near 1/2 each), the phase is not. */
-    rec_delight *d = make_db(50, 3, 1, 0);
+    gs_delight *d = make_db(50, 3, 1, 0);
     /* the twin's chroma equals sine's (chroma_tab[5] == chroma_tab[0]) */
     rec_matcher *m = new_matcher(d, 50, 3, 26, REC_PHASES_3);
     CHECK(strcmp(rec_matcher_bulb(m, 5)->id, "sine-twin") == 0);
@@ -1131,7 +1131,7 @@ TEST(eq7_near_identical_bulbs)
     int amb = 0, confident_bulb = 0, phase_ok = 0, n = 200;
     for (int trial = 0; trial < n; trial++) {
         size_t b = trial % 2 ? 5 : 0;
-        render(rec_matcher_bulb(m, b), rec_phase_to_shift(P3[trial % 3]), 26, 1000.0, 1000.0 / 3 / 20,
+        render(rec_matcher_bulb(m, b), gs_phase_to_shift(P3[trial % 3]), 26, 1000.0, 1000.0 / 3 / 20,
                &rs, x, sg);
         rec_match r;
         CHECK_OK(rec_match_light(m, x, sg, &r));
@@ -1148,7 +1148,7 @@ TEST(eq7_near_identical_bulbs)
     CHECK(confident_bulb <= n / 20);
     CHECK(phase_ok == n);
     rec_matcher_free(m);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 TEST(eq7_continuous_phase_wraparound)
@@ -1156,7 +1156,7 @@ TEST(eq7_continuous_phase_wraparound)
     /* True shifts just either side of 0 (phase near 0 / 180 deg): the estimate is within its
      * uncertainty in circular distance, and over many lights the normalised errors have unit
      * RMS (the reported sigma is calibrated). */
-    rec_delight *d = make_db(50, 3, 0, 0);
+    gs_delight *d = make_db(50, 3, 0, 0);
     rec_matcher *m = new_matcher(d, 50, 3, 26, REC_PHASES_CONTINUOUS);
     double x[78], sg[78];
     uint64_t rs = 13;
@@ -1176,7 +1176,7 @@ TEST(eq7_continuous_phase_wraparound)
         CHECK_MSG(r.bulb == (int)b, "trial %d: bulb %d (true %zu) flags %u conf %g", trial, r.bulb,
                   b, r.flags, r.bulb_confidence);
         if (r.bulb != (int)b) continue;
-        double s = rec_phase_to_shift(r.phase_deg), sig = r.phase_sigma_deg / 180.0;
+        double s = gs_phase_to_shift(r.phase_deg), sig = r.phase_sigma_deg / 180.0;
         double e = cdist(s, s0);
         CHECK_MSG(e < 5 * sig, "trial %d: shift %.6f true %.6f sigma %.2e", trial, s, s0, sig);
         CHECK(!(r.flags & REC_MATCH_PHASE_AMBIGUOUS));
@@ -1190,21 +1190,21 @@ TEST(eq7_continuous_phase_wraparound)
     CHECK(unknown <= 3);
     CHECK(n >= 236);
     rec_matcher_free(m);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 TEST(eq7_unknown_bulb_chi2)
 {
     /* A light from a bulb that is not in the database is UNKNOWN (bulb -1, the nearest fit in the
      * runner fields); lights from database bulbs are flagged at about the rate unknown_p. */
-    rec_delight *d = make_db(50, 3, 0, 0);
+    gs_delight *d = make_db(50, 3, 0, 0);
     rec_matcher *m = new_matcher(d, 50, 3, 26, REC_PHASES_3);
-    rec_bulb odd;
-    make_bulb(&odd, "odd", SHAPE_ODD, 50, 3, REC_REF_VOLTAGE, chroma_tab[6], 1024);
+    gs_bulb odd;
+    make_bulb(&odd, "odd", SHAPE_ODD, 50, 3, GS_REF_VOLTAGE, chroma_tab[6], 1024);
     double x[78], sg[78];
     uint64_t rs = 14;
     for (int trial = 0; trial < 30; trial++) {
-        render(&odd, rec_phase_to_shift(P3[trial % 3]), 26, 1000.0, 1000.0 / 3 / 30, &rs, x, sg);
+        render(&odd, gs_phase_to_shift(P3[trial % 3]), 26, 1000.0, 1000.0 / 3 / 30, &rs, x, sg);
         rec_match r;
         CHECK_OK(rec_match_light(m, x, sg, &r));
         CHECK(all_finite(&r));
@@ -1213,7 +1213,7 @@ TEST(eq7_unknown_bulb_chi2)
     }
     int false_alarms = 0, n = 1000;
     for (int trial = 0; trial < n; trial++) {
-        render(rec_matcher_bulb(m, (size_t)trial % 5), rec_phase_to_shift(P3[trial % 3]), 26, 1000.0,
+        render(rec_matcher_bulb(m, (size_t)trial % 5), gs_phase_to_shift(P3[trial % 3]), 26, 1000.0,
                1000.0 / 3 / 30, &rs, x, sg);
         rec_match r;
         CHECK_OK(rec_match_light(m, x, sg, &r));
@@ -1227,19 +1227,19 @@ TEST(eq7_unknown_bulb_chi2)
     int pb;
     CHECK_OK(rec_match_pixels(m, xf, &sf, 1, &pb, NULL, NULL));
     CHECK(pb == -1);
-    rec_bulb_release(&odd);
+    gs_bulb_release(&odd);
     rec_matcher_free(m);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 TEST(eq7_shape_only_bulb_never_decides_phase)
 {
-    /* A REC_REF_NONE entry (a recording without a voltage column) can win the bulb decision at
+    /* A GS_REF_NONE entry (a recording without a voltage column) can win the bulb decision at
      * any shift, but its phase is reported ambiguous, 0 deg, with phase confidence 0. */
-    rec_delight *d = make_db(50, 3, 0, 0);
-    rec_bulb b;
-    make_bulb(&b, "odd-shape", SHAPE_ODD, 50, 3, REC_REF_NONE, chroma_tab[6], 512);
-    CHECK_OK(rec_delight_add(d, &b));
+    gs_delight *d = make_db(50, 3, 0, 0);
+    gs_bulb b;
+    make_bulb(&b, "odd-shape", SHAPE_ODD, 50, 3, GS_REF_NONE, chroma_tab[6], 512);
+    CHECK_OK(gs_delight_add(d, &b));
     rec_phase_set sets[] = {REC_PHASES_3, REC_PHASES_6, REC_PHASES_CONTINUOUS};
     for (int i = 0; i < 3; i++) {
         rec_matcher *m = new_matcher(d, 50, 3, 26, sets[i]);
@@ -1262,19 +1262,19 @@ TEST(eq7_shape_only_bulb_never_decides_phase)
             CHECK(pb == 5 && pp == 0.0f && pc > 0.99f);
         }
         /* a voltage bulb's light still gets its phase */
-        render(rec_matcher_bulb(m, 2), rec_phase_to_shift(240), 26, 500.0, 1.0, &rs, x, sg);
+        render(rec_matcher_bulb(m, 2), gs_phase_to_shift(240), 26, 500.0, 1.0, &rs, x, sg);
         rec_match r;
         CHECK_OK(rec_match_light(m, x, sg, &r));
         CHECK(r.bulb == 2 && fabs(r.phase_deg - 240) < 0.5 && !(r.flags & REC_MATCH_PHASE_AMBIGUOUS));
         rec_matcher_free(m);
     }
-    rec_bulb_release(&b);
-    rec_delight_free(d);
+    gs_bulb_release(&b);
+    gs_delight_free(d);
 }
 
 TEST(eq7_catalog_equals_lights)
 {
-    rec_delight *d = make_db(50, 3, 0, 0);
+    gs_delight *d = make_db(50, 3, 0, 0);
     rec_matcher *m = new_matcher(d, 50, 3, 26, REC_PHASES_3);
     rec_catalog cat;
     memset(&cat, 0, sizeof cat);
@@ -1286,7 +1286,7 @@ TEST(eq7_catalog_equals_lights)
     cat.flags = calloc(12, sizeof(unsigned));
     uint64_t rs = 16;
     for (int i = 0; i < 12; i++)
-        render(rec_matcher_bulb(m, (size_t)i % 5), rec_phase_to_shift(P3[i % 3]), 26, 200.0 + 50 * i,
+        render(rec_matcher_bulb(m, (size_t)i % 5), gs_phase_to_shift(P3[i % 3]), 26, 200.0 + 50 * i,
                2.0, &rs, cat.signal + i * 78, cat.sigma + i * 78);
     cat.flags[7] = REC_BLOB_NO_SIGNAL;
     cat.flags[8] = REC_BLOB_SATURATED;
@@ -1310,13 +1310,13 @@ TEST(eq7_catalog_equals_lights)
     free(cat.sigma);
     free(cat.flags);
     rec_matcher_free(m);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 TEST(eq7_pixels_many_blocks)
 {
     /* more rows than one SGEMM block, mixed lit / dark / bad rows: every row as rec_match_light */
-    rec_delight *d = make_db(50, 3, 0, 0);
+    gs_delight *d = make_db(50, 3, 0, 0);
     rec_matcher *m = new_matcher(d, 50, 3, 26, REC_PHASES_3);
     size_t P = 9000;
     float *xf = malloc(sizeof *xf * P * 78), *sf = malloc(sizeof *sf * P);
@@ -1353,7 +1353,7 @@ TEST(eq7_pixels_many_blocks)
     free(pp);
     free(pc);
     rec_matcher_free(m);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* Rows of every brightness, including just around the dim threshold (z ~ 3), through the
@@ -1361,8 +1361,8 @@ TEST(eq7_pixels_many_blocks)
  * rec_match_light says. */
 TEST(eq7_pixels_prefilter_generated_delight)
 {
-    rec_delight *d = rec_delight_new();
-    CHECK_OK(rec_delight_generate(d, 1024));
+    gs_delight *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(d, 1024));
     rec_matcher *m = new_matcher(d, 50, 3, 26, REC_PHASES_3);
     rec_eq7_bench bench;
     CHECK_OK(rec_bench_eq7(m, 64, 0.5, 20.0, 1, &bench));
@@ -1409,13 +1409,13 @@ TEST(eq7_pixels_prefilter_generated_delight)
     free(pp);
     free(pc);
     rec_matcher_free(m);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 TEST(eq7_bench_smoke)
 {
-    rec_delight *d = rec_delight_new();
-    CHECK_OK(rec_delight_generate(d, 1024));
+    gs_delight *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(d, 1024));
     rec_matcher *m = new_matcher(d, 50, 3, 26, REC_PHASES_3);
     rec_eq7_bench bench;
     CHECK_OK(rec_bench_eq7(m, 5000, 0.5, 50.0, 1, &bench));
@@ -1425,13 +1425,13 @@ TEST(eq7_bench_smoke)
     CHECK_MSG(bench.lit_accuracy > 0.5, "accuracy %g", bench.lit_accuracy);
     CHECK(rec_bench_eq7(m, 0, 0.5, 50.0, 1, &bench) == GS_EINVAL);
     rec_matcher_free(m);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* ------------------------------------------------------------ band gains and model error */
 
 /* The default options (one brightness per band, model_error 0.04), phases ps. */
-static rec_matcher *new_matcher_default(const rec_delight *d, int bands, rec_phase_set ps)
+static rec_matcher *new_matcher_default(const gs_delight *d, int bands, rec_phase_set ps)
 {
     rec_eq7_opts o;
     rec_eq7_opts_default(&o);
@@ -1445,7 +1445,7 @@ static rec_matcher *new_matcher_default(const rec_delight *d, int bands, rec_pha
 /* A light of bulb b at shift s: per-band gains g[band] (extinction reddening), a per-window
  * log-normal multiplicative factor of log-std scint (the same for every band: scintillation is
  * one random flux per frame), then Gaussian noise of std sigma. */
-static void render_fx(const rec_bulb *b, double s, double a, const double *g, double scint,
+static void render_fx(const gs_bulb *b, double s, double a, const double *g, double scint,
                       double sigma, uint64_t *rs, double *x, double *sg)
 {
     int K = 26;
@@ -1466,7 +1466,7 @@ TEST(eq7_extinction_reddened_light_recognized)
      * brightness per band (the default) every bulb and phase is still recognised, not unknown,
      * at a per-sample SNR of ~100; the paper's single brightness times Q_beta calls the same
      * lights unknown. Pixels agree. */
-    rec_delight *d = make_db(50, 3, 0, 0);
+    gs_delight *d = make_db(50, 3, 0, 0);
     rec_matcher *m = new_matcher_default(d, 3, REC_PHASES_3);
     rec_matcher *m0 = new_matcher(d, 50, 3, 26, REC_PHASES_3);
     CHECK(rec_matcher_bulb_count(m) == 5);
@@ -1481,7 +1481,7 @@ TEST(eq7_extinction_reddened_light_recognized)
         for (int p = 0; p < 3; p++)
             for (int rep = 0; rep < 2; rep++) {
                 double a = 1000.0, sigma = a / 3 / 100;
-                render_fx(rec_matcher_bulb(m, b), rec_phase_to_shift(P3[p]), a, g, 0.0, sigma, &rs, x, sg);
+                render_fx(rec_matcher_bulb(m, b), gs_phase_to_shift(P3[p]), a, g, 0.0, sigma, &rs, x, sg);
                 rec_match r;
                 CHECK_OK(rec_match_light(m, x, sg, &r));
                 CHECK(all_finite(&r));
@@ -1512,7 +1512,7 @@ TEST(eq7_extinction_reddened_light_recognized)
     }
     rec_matcher_free(m);
     rec_matcher_free(m0);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 TEST(eq7_scintillation_multiplicative_noise)
@@ -1521,7 +1521,7 @@ TEST(eq7_scintillation_multiplicative_noise)
      * have 1-5 % at 1-5 km) at a per-sample SNR of 100 (without it): recognised and calibrated
      * with the default model_error 0.04; with no model error the chi-square test rejects them.
      * Continuous phases too. */
-    rec_delight *d = make_db(50, 3, 0, 0);
+    gs_delight *d = make_db(50, 3, 0, 0);
     rec_matcher *m = new_matcher_default(d, 3, REC_PHASES_3);
     rec_matcher *m0 = new_matcher(d, 50, 3, 26, REC_PHASES_3);
     const double g[3] = {1.0, 0.85, 0.7};
@@ -1533,7 +1533,7 @@ TEST(eq7_scintillation_multiplicative_noise)
         size_t b = (size_t)i % 4;
         int p = (i / 4) % 3;
         double a = 1000.0, sigma = a / 3 / 100;
-        render_fx(rec_matcher_bulb(m, b), rec_phase_to_shift(P3[p]), a, g, 0.03, sigma, &rs, x, sg);
+        render_fx(rec_matcher_bulb(m, b), gs_phase_to_shift(P3[p]), a, g, 0.03, sigma, &rs, x, sg);
         rec_match r;
         CHECK_OK(rec_match_light(m, x, sg, &r));
         CHECK(all_finite(&r));
@@ -1565,20 +1565,20 @@ TEST(eq7_scintillation_multiplicative_noise)
     int nc = 0;
     for (int i = 0; i < 60; i++) {
         size_t b = (size_t)i % 4;
-        double ph = 360.0 * rng_unif(&rs), s = rec_phase_to_shift(ph);
+        double ph = 360.0 * rng_unif(&rs), s = gs_phase_to_shift(ph);
         render_fx(rec_matcher_bulb(m, b), s, 1000.0, g, 0.03, 1000.0 / 3 / 100, &rs, x, sg);
         rec_match r;
         CHECK_OK(rec_match_light(m, x, sg, &r));
         CHECK(all_finite(&r));
         if (r.bulb != (int)b) continue;
-        double e = cdist(rec_phase_to_shift(r.phase_deg), s) * 180.0 / r.phase_sigma_deg;
+        double e = cdist(gs_phase_to_shift(r.phase_deg), s) * 180.0 / r.phase_sigma_deg;
         nerr2 += e * e;
         nc++;
     }
     CHECK_MSG(nc >= 55, "%d of 60 continuous lights recognised", nc);
     CHECK_MSG(sqrt(nerr2 / nc) < 2.0, "normalised phase error RMS %g", sqrt(nerr2 / nc));
     rec_matcher_free(m);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 TEST(eq7_unknown_bulb_still_unknown_with_model_error)
@@ -1587,10 +1587,10 @@ TEST(eq7_unknown_bulb_still_unknown_with_model_error)
      * with the defaults (band gains, model_error 0.04), reddened or not, with 2 % scintillation,
      * in lights and pixels;
      * so is a database bulb's waveform with a different shape in one band only. */
-    rec_delight *d = make_db(50, 3, 0, 0);
+    gs_delight *d = make_db(50, 3, 0, 0);
     rec_matcher *m = new_matcher_default(d, 3, REC_PHASES_3);
-    rec_bulb odd;
-    make_bulb(&odd, "odd", SHAPE_ODD, 50, 3, REC_REF_VOLTAGE, chroma_tab[6], 1024);
+    gs_bulb odd;
+    make_bulb(&odd, "odd", SHAPE_ODD, 50, 3, GS_REF_VOLTAGE, chroma_tab[6], 1024);
     const double g1[3] = {1, 1, 1}, g2[3] = {1.0, 0.8, 0.6};
     double x[78], sg[78];
     float xf[78 * 60], sf[60];
@@ -1598,7 +1598,7 @@ TEST(eq7_unknown_bulb_still_unknown_with_model_error)
     int n = 0;
     for (int trial = 0; trial < 60; trial++) {
         double snr = trial % 3 == 0 ? 30.0 : trial % 3 == 1 ? 100.0 : 300.0, a = 1000.0;
-        render_fx(&odd, rec_phase_to_shift(P3[trial % 3]), a, (trial & 1) ? g2 : g1, 0.02,
+        render_fx(&odd, gs_phase_to_shift(P3[trial % 3]), a, (trial & 1) ? g2 : g1, 0.02,
                   a / 3 / snr, &rs, x, sg);
         rec_match r;
         CHECK_OK(rec_match_light(m, x, sg, &r));
@@ -1613,20 +1613,20 @@ TEST(eq7_unknown_bulb_still_unknown_with_model_error)
     CHECK_OK(rec_match_pixels(m, xf, sf, (size_t)n, pb, NULL, NULL));
     for (int i = 0; i < n; i++) CHECK_MSG(pb[i] == -1, "pixel %d: bulb %d", i, pb[i]);
     /* a database bulb (saw) whose blue band has the harm shape: a chimera, unknown */
-    rec_bulb chim;
-    make_bulb(&chim, "chimera", SHAPE_SAW, 50, 3, REC_REF_VOLTAGE, chroma_tab[1], 1024);
+    gs_bulb chim;
+    make_bulb(&chim, "chimera", SHAPE_SAW, 50, 3, GS_REF_VOLTAGE, chroma_tab[1], 1024);
     for (int j = 0; j < 1024; j++) chim.brf.v[2 * 1024 + j] = shape_at(SHAPE_HARM, j / 1024.0, 2);
-    CHECK_OK(rec_brf_normalize(&chim.brf, NULL));
+    CHECK_OK(gs_brf_normalize(&chim.brf, NULL));
     for (int trial = 0; trial < 20; trial++) {
-        render_fx(&chim, rec_phase_to_shift(P3[trial % 3]), 1000.0, g1, 0.02, 1000.0 / 3 / 100, &rs, x, sg);
+        render_fx(&chim, gs_phase_to_shift(P3[trial % 3]), 1000.0, g1, 0.02, 1000.0 / 3 / 100, &rs, x, sg);
         rec_match r;
         CHECK_OK(rec_match_light(m, x, sg, &r));
         CHECK_MSG(r.bulb == -1 && (r.flags & REC_MATCH_UNKNOWN), "chimera %d: bulb %d", trial, r.bulb);
     }
-    rec_bulb_release(&chim);
-    rec_bulb_release(&odd);
+    gs_bulb_release(&chim);
+    gs_bulb_release(&odd);
     rec_matcher_free(m);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 TEST(eq7_band_gains_pixels_equal_lights)
@@ -1634,8 +1634,8 @@ TEST(eq7_band_gains_pixels_equal_lights)
     /* With the defaults (per-band brightness and scores, model error), rec_match_pixels gives
      * rec_match_light's answer on the generated DELIGHT, rows of every brightness (around the
      * dim threshold up to a per-sample SNR of ~100), reddened, through the prefilter. */
-    rec_delight *d = rec_delight_new();
-    CHECK_OK(rec_delight_generate(d, 1024));
+    gs_delight *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(d, 1024));
     rec_matcher *m = new_matcher_default(d, 3, REC_PHASES_3);
     size_t nb = rec_matcher_bulb_count(m);
     size_t P = getenv("GS_SAN") && *getenv("GS_SAN") == '1' ? 1500 : 6000;
@@ -1647,7 +1647,7 @@ TEST(eq7_band_gains_pixels_equal_lights)
     uint64_t rs = 61;
     for (size_t i = 0; i < P; i++) {
         double a = (i % 4 == 0) ? 0.0 : (i % 4 == 3) ? 300.0 * rng_unif(&rs) : 1.0 + 4.0 * rng_unif(&rs);
-        render_fx(rec_matcher_bulb(m, i % nb), rec_phase_to_shift(P3[(i / nb) % 3]), a, g, 0.01, 1.0,
+        render_fx(rec_matcher_bulb(m, i % nb), gs_phase_to_shift(P3[(i / nb) % 3]), a, g, 0.01, 1.0,
                   &rs, x, sg);
         for (int k = 0; k < 78; k++) xf[i * 78 + k] = (float)x[k];
         sf[i] = 1.0f;
@@ -1680,5 +1680,5 @@ TEST(eq7_band_gains_pixels_equal_lights)
     free(pp);
     free(pc);
     rec_matcher_free(m);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }

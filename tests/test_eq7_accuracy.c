@@ -165,7 +165,7 @@ typedef struct {
 #define NBINS 8
 static const double bin_edges[NBINS + 1] = {0.0, 0.4, 0.55, 0.7, 0.8, 0.9, 0.97, 0.995, 1.0001};
 
-static void run_level(const rec_delight *d, const camera *cam, double mean_e, int n, uint64_t seed,
+static void run_level(const gs_delight *d, const camera *cam, double mean_e, int n, uint64_t seed,
                       acc_row *row, double *bin_n, double *bin_conf, double *bin_right)
 {
     int K = 26, D = 78;
@@ -182,9 +182,9 @@ static void run_level(const rec_delight *d, const camera *cam, double mean_e, in
     double *tab = malloc(sizeof *tab * (size_t)M * (size_t)D);
     for (int b = 0; b < nb; b++)
         for (int p = 0; p < 3; p++) {
-            const rec_bulb *bu = rec_matcher_bulb(m, (size_t)b);
+            const gs_bulb *bu = rec_matcher_bulb(m, (size_t)b);
             double *t = tab + (size_t)(b * 3 + p) * (size_t)D;
-            CHECK_OK(rec_brf_integrate(&bu->brf, rec_phase_to_shift(120.0 * p), K, t));
+            CHECK_OK(gs_brf_integrate(&bu->brf, gs_phase_to_shift(120.0 * p), K, t));
             for (int k = 0; k < D; k++) t[k] *= bu->chroma[k / K];
         }
     uint64_t rs = seed;
@@ -274,14 +274,14 @@ static double ece_of(const double *bn, const double *bc, const double *br, doubl
 TEST(eq7_accuracy_vs_poisson_oracle)
 {
     lfact_init();
-    rec_delight *all = rec_delight_new(), *d = rec_delight_new();
-    CHECK_OK(rec_delight_generate(all, 1024));
+    gs_delight *all = gs_delight_new(), *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(all, 1024));
     for (size_t i = 0; i < NACC; i++) {
-        const rec_bulb *b = rec_delight_find(all, accuracy_ids[i], 50, 3);
+        const gs_bulb *b = gs_delight_find(all, accuracy_ids[i], 50, 3);
         CHECK_MSG(b != NULL, "generated DELIGHT has no %s", accuracy_ids[i]);
-        if (b) CHECK_OK(rec_delight_add(d, b));
+        if (b) CHECK_OK(gs_delight_add(d, b));
     }
-    rec_delight_free(all);
+    gs_delight_free(all);
     camera cam;
     camera_init(&cam, 1.0, 2.0, 4.0);   /* 1 e-/DN, 2 e- read noise, 4 e- sky per sample */
     int san = getenv("GS_SAN") && *getenv("GS_SAN") == '1';
@@ -336,7 +336,7 @@ TEST(eq7_accuracy_vs_poisson_oracle)
                    bn_all[k], bc_all[k] / bn_all[k], br_all[k] / bn_all[k]);
     CHECK_MSG(ece < (san ? 0.04 : 0.02), "overall ECE %.4f", ece);
     CHECK_MSG(worst < 0.02, "overall: a confidence bin is off by %.3f beyond 3 sigma", worst);
-    rec_delight_free(d);
+    gs_delight_free(d);
     free(lfact);
     lfact = NULL;
 }

@@ -2,7 +2,7 @@
  * switching", Figs. 7 and 9) running as its real ELF inside libsimavr.
  *
  * The harness drives ICP1 (PB0) with a square wave whose edges are the zero crossings of the
- * ENF-WHU mains recordings (rec_mains_read + rec_zero_crossings), of synthetic frequency sweeps,
+ * ENF-WHU mains recordings (gs_mains_read + gs_zero_crossings), of synthetic frequency sweeps,
  * or of those with glitches, and records the trigger (PB1) and shutter (PB2) pins in CPU cycles.
  * The UART is bridged by a small single-threaded hook (no uart_pty): bytes out are collected
  * into lines (every one must carry a valid checksum), bytes in are fed one per character time.
@@ -431,12 +431,12 @@ static int trace_from_mains(const char *rel, size_t max_crossings, trace *out)
     size_t n = 0, count = 0;
     int rising_first = 0;
     memset(out, 0, sizeof *out);
-    CHECK_OK(rec_mains_read(test_shared_path(rel), &x, &n, &rate));
+    CHECK_OK(gs_mains_read(test_shared_path(rel), &x, &n, &rate));
     if (!x) return -1;
     double ss = 0;
     for (size_t i = 0; i < n; i++) ss += x[i] * x[i];
     double hysteresis = 0.1 * sqrt(ss / (double)n); /* a tenth of the RMS */
-    CHECK_OK(rec_zero_crossings(x, n, rate, hysteresis, &t, &count, &rising_first));
+    CHECK_OK(gs_zero_crossings(x, n, rate, hysteresis, &t, &count, &rising_first));
     free(x);
     if (!t || count < 100) {
         free(t);
@@ -1430,24 +1430,24 @@ static unsigned short e2e_pixel(int k, int x, int y, int b)
 /* The fake camera (as tests/test_capture_hw.c): K 16-bit RGB frames cam_000.png, ... */
 static void e2e_write_camera(const char *dir)
 {
-    rec_capture c;
+    gs_capture c;
     memset(&c, 0, sizeof c);
     c.K = E2E_K;
     c.bands = 3;
     c.width = E2E_W;
     c.height = E2E_H;
-    CHECK_OK(rec_capture_alloc(&c));
+    CHECK_OK(gs_capture_alloc(&c));
     if (!c.raw) return;
     for (int k = 0; k < E2E_K; k++) {
-        snprintf(c.frames[k].file, REC_PATH_MAX, "cam_%03d.png", k);
+        snprintf(c.frames[k].file, GS_PATH_MAX, "cam_%03d.png", k);
         for (int y = 0; y < E2E_H; y++)
             for (int x = 0; x < E2E_W; x++)
                 for (int b = 0; b < 3; b++)
                     c.raw[(((size_t)k * E2E_H + (size_t)y) * E2E_W + (size_t)x) * 3 + (size_t)b] =
                         e2e_pixel(k, x, y, b);
     }
-    for (int k = 0; k < E2E_K; k++) CHECK_OK(rec_capture_write_frame(dir, &c, k));
-    rec_capture_release(&c);
+    for (int k = 0; k < E2E_K; k++) CHECK_OK(gs_capture_write_frame(dir, &c, k));
+    gs_capture_release(&c);
 }
 
 /* The trace's first `count` crossings as a fake-GPIO event file (tests/fake_gpiod.h): the
@@ -1624,9 +1624,9 @@ TEST(firmware_hardware_backend_loop_e2e)
     char path[1100];
     snprintf(path, sizeof path, "%s/capture.json", out);
     CHECK_MSG(access(path, R_OK) == 0, "no %s", path);
-    rec_capture cap;
+    gs_capture cap;
     memset(&cap, 0, sizeof cap);
-    CHECK_OK(rec_capture_read(out, &cap));
+    CHECK_OK(gs_capture_read(out, &cap));
     if (cap.raw) {
         CHECK(cap.K == E2E_K && cap.width == E2E_W && cap.height == E2E_H && cap.bands == 3);
         size_t bad = 0;
@@ -1639,7 +1639,7 @@ TEST(firmware_hardware_backend_loop_e2e)
         CHECK_MSG(bad == 0, "%zu samples differ from the camera's", bad);
         CHECK(cap.locked == 1);
     }
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
     trace_free(&tr);
     clock_gettime(CLOCK_MONOTONIC, &w1);
     double wall = (double)(w1.tv_sec - w0.tv_sec) + 1e-9 * (double)(w1.tv_nsec - w0.tv_nsec);

@@ -454,7 +454,7 @@ static unsigned char *read_png(const char *path, int *w, int *h)
     CHECK_MSG(buf[24] == 8 && buf[25] == 2, "%s: bit depth %d colour type %d, expected 8-bit RGB",
               path, buf[24], buf[25]);
     unsigned char *px = malloc((size_t)*w * (size_t)*h * 3);
-    gs_status s = px ? rec_cv_png_decode(buf, (size_t)size, path, *w, *h, 3, 0, px) : GS_ENOMEM;
+    gs_status s = px ? gs_png_decode(buf, (size_t)size, path, "", *w, *h, 3, 8, px) : GS_ENOMEM;
     CHECK_OK(s);
     free(buf);
     if (s != GS_OK) {
@@ -828,7 +828,7 @@ typedef struct {
 static const mem_light mem_lights[3] = {
     {12, 14, "hps-150w", 240, 60}, {40, 20, "mh-250w", 0, 50}, {25, 45, "cfl-23w", 120, 50}};
 
-static gs_status mem_capture(const rec_delight *d, rec_capture *cap)
+static gs_status mem_capture(const gs_delight *d, gs_capture *cap)
 {
     memset(cap, 0, sizeof *cap);
     cap->grid_hz = 50;
@@ -840,7 +840,7 @@ static gs_status mem_capture(const rec_delight *d, rec_capture *cap)
     cap->black_level_dn = 100;
     cap->read_noise_dn = 2;
     cap->locked = 1;
-    gs_status s = rec_capture_alloc(cap);
+    gs_status s = gs_capture_alloc(cap);
     if (s != GS_OK) return s;
     const double cycles = 40.0;
     size_t np = (size_t)cap->width * (size_t)cap->height;
@@ -848,9 +848,9 @@ static gs_status mem_capture(const rec_delight *d, rec_capture *cap)
     if (!v) return GS_ENOMEM;
     for (int k = 0; k < 13; k++) cap->frames[k].cycles = cycles;
     for (int i = 0; i < 3; i++) {
-        const rec_bulb *b = rec_delight_find(d, mem_lights[i].bulb, 50, 3);
+        const gs_bulb *b = gs_delight_find(d, mem_lights[i].bulb, 50, 3);
         double t[3 * 13];
-        if (!b || rec_brf_integrate(&b->brf, rec_phase_to_shift(mem_lights[i].phase_deg), 13, t) != GS_OK) {
+        if (!b || gs_brf_integrate(&b->brf, gs_phase_to_shift(mem_lights[i].phase_deg), 13, t) != GS_OK) {
             free(v);
             return GS_ENOTFOUND;
         }
@@ -883,7 +883,7 @@ static gs_status mem_capture(const rec_delight *d, rec_capture *cap)
 
 static const char *matcher_bulb_id(const rec_matcher *m, int i)
 {
-    const rec_bulb *b = i >= 0 ? rec_matcher_bulb(m, (size_t)i) : NULL;
+    const gs_bulb *b = i >= 0 ? rec_matcher_bulb(m, (size_t)i) : NULL;
     return b ? b->id : "none";
 }
 
@@ -891,15 +891,15 @@ TEST(maps_fast_path_matches_general)
 {
     /* Without HDR maps and shot noise the per-pixel pass takes an integer fast path; with an
      * all-zero HDR map it takes the general one. Same capture, same maps. */
-    rec_delight *d = rec_delight_new();
-    CHECK_OK(rec_delight_generate(d, 512));
+    gs_delight *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(d, 512));
     rec_matcher *m = NULL;
     CHECK_OK(rec_matcher_new(d, 50, 3, 13, NULL, &m));
-    rec_capture cap;
+    gs_capture cap;
     CHECK_OK(mem_capture(d, &cap));
     rec_pixel_maps a, b;
     CHECK_OK(rec_pixel_maps_compute(&cap, m, NULL, NULL, &a));
-    CHECK_OK(rec_capture_alloc_hdr(&cap));
+    CHECK_OK(gs_capture_alloc_hdr(&cap));
     CHECK_OK(rec_pixel_maps_compute(&cap, m, NULL, NULL, &b));
     size_t np = (size_t)cap.width * (size_t)cap.height, differ = 0;
     for (size_t p = 0; p < np && a.state && b.state; p++)
@@ -920,18 +920,18 @@ TEST(maps_fast_path_matches_general)
     rec_pixel_maps_release(&a);
     rec_pixel_maps_release(&b);
     rec_pixel_maps_release(NULL);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
     rec_matcher_free(m);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 TEST(maps_saturated_core_white_and_bad_arguments)
 {
-    rec_delight *d = rec_delight_new();
-    CHECK_OK(rec_delight_generate(d, 512));
+    gs_delight *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(d, 512));
     rec_matcher *m = NULL;
     CHECK_OK(rec_matcher_new(d, 50, 3, 13, NULL, &m));
-    rec_capture cap;
+    gs_capture cap;
     CHECK_OK(mem_capture(d, &cap));
     /* saturate the brightest light's centre: the level just below its peak sample */
     size_t np = (size_t)cap.width * (size_t)cap.height;
@@ -987,7 +987,7 @@ TEST(maps_saturated_core_white_and_bad_arguments)
     CHECK(rec_plot_signals(m, &cat, NULL, 0, "/tmp/x.png", NULL) == GS_EINVAL);
     CHECK(rec_plot_signals(m, &cat, NULL, 4, "/nonexistent-dir/s.png", NULL) == GS_EIO);
     rec_matcher_free(mono);
-    rec_capture_release(&cap);
+    gs_capture_release(&cap);
     rec_matcher_free(m);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }

@@ -2,7 +2,7 @@
  * beautiful-flicker files reproduce their listed percent flicker; synthetic recordings with a
  * voltage column give the analytic BRF at the right phase; scope file variants (BOM, metadata,
  * a header running into the first sample, CRLF, a space in the name) parse identically. */
-#include "recognize/internal.h"
+#include "recognize/base/internal.h"
 #include "tests/test.h"
 
 #include <stdio.h>
@@ -61,9 +61,9 @@ TEST(recording_real_files_percent_flicker)
     for (size_t i = 0; i < sizeof listed / sizeof *listed; i++) {
         char rel[128];
         snprintf(rel, sizeof rel, "data/flicker/%s", listed[i].file);
-        rec_bulb b;
-        rec_recording_info info;
-        gs_status s = rec_recording_to_bulb(test_shared_path(rel), 0, REC_BRF_N_DEFAULT, &b, &info);
+        gs_bulb b;
+        gs_recording_info info;
+        gs_status s = gs_recording_to_bulb(test_shared_path(rel), 0, GS_BRF_N_DEFAULT, &b, &info);
         CHECK_MSG(s == GS_OK, "%s: %s: %s", listed[i].file, gs_strerror(s), gs_detail());
         if (s != GS_OK) continue;
         int pwm = strncmp(listed[i].file, "Hue", 3) == 0;
@@ -71,26 +71,26 @@ TEST(recording_real_files_percent_flicker)
                listed[i].pf, info.percent_flicker, info.flicker_hz);
         CHECK_MSG(fabs(info.percent_flicker - listed[i].pf) <= 1.0, "%s: percent flicker %.3f, listed %.1f",
                   listed[i].file, info.percent_flicker, listed[i].pf);
-        CHECK_NEAR(rec_brf_percent_flicker(&b.brf, 0), info.percent_flicker, 1e-12);
+        CHECK_NEAR(gs_brf_percent_flicker(&b.brf, 0), info.percent_flicker, 1e-12);
         CHECK(info.samples == (pwm ? 2800u : 14000u));
         CHECK_NEAR(info.sample_rate_hz, pwm ? 1e6 : 5e5, 1e-3);
         CHECK_NEAR(info.flicker_hz, pwm ? 1000.0 : 120.0, pwm ? 10.0 : 2.0);
         CHECK(info.grid_hz == (pwm ? 0 : 60) && b.grid_hz == info.grid_hz);
-        CHECK(b.ref == (pwm ? REC_REF_UNLOCKED : REC_REF_NONE));
-        CHECK(b.brf.n == REC_BRF_N_DEFAULT && b.brf.bands == 1 && b.chroma[0] == 1.0);
-        CHECK(b.type == REC_TECH_UNKNOWN && strcmp(b.sensor, "photodiode") == 0);
+        CHECK(b.ref == (pwm ? GS_REF_UNLOCKED : GS_REF_NONE));
+        CHECK(b.brf.n == GS_BRF_N_DEFAULT && b.brf.bands == 1 && b.chroma[0] == 1.0);
+        CHECK(b.type == GS_TECH_UNKNOWN && strcmp(b.sensor, "photodiode") == 0);
         if (pwm) b.grid_hz = 60;   /* the caller's to set when the recording cannot tell */
-        CHECK_MSG(rec_bulb_validate(&b) == GS_OK, "%s: %s", listed[i].file, gs_detail());
-        rec_bulb_release(&b);
+        CHECK_MSG(gs_bulb_validate(&b) == GS_OK, "%s: %s", listed[i].file, gs_detail());
+        gs_bulb_release(&b);
     }
 }
 
 TEST(recording_id_and_name_from_file_name)
 {
-    rec_bulb b;
-    CHECK_OK(rec_recording_to_bulb(test_shared_path("data/flicker/Feit 60W.csv"), 0, 256, &b, NULL));
+    gs_bulb b;
+    CHECK_OK(gs_recording_to_bulb(test_shared_path("data/flicker/Feit 60W.csv"), 0, 256, &b, NULL));
     CHECK(strcmp(b.id, "Feit_60W") == 0 && strcmp(b.name, "Feit 60W") == 0);
-    rec_bulb_release(&b);
+    gs_bulb_release(&b);
 }
 
 /* Deterministic Gaussian noise (LCG + Box-Muller). */
@@ -132,7 +132,7 @@ static void write_synthetic(const char *path, double ac_hz, double t_zero, doubl
 }
 
 /* max |recovered - analytic delayed by shift| over the n samples */
-static double brf_error(const rec_brf *b, double shift)
+static double brf_error(const gs_brf *b, double shift)
 {
     double e = 0;
     for (int j = 0; j < b->n; j++) e = fmax(e, fabs(b->v[j] - brf_at((double)j / b->n - shift)));
@@ -152,13 +152,13 @@ TEST(recording_synthetic_voltage_brf_and_phase)
         const char *p = tmp_path("synthetic.csv");
         write_synthetic(p, cases[i].ac_hz, cases[i].t_zero, cases[i].shift, cases[i].rate_hz, 0.3,
                         cases[i].sigma);
-        rec_bulb b;
-        rec_recording_info info;
-        gs_status s = rec_recording_to_bulb(p, 3, 512, &b, &info);
+        gs_bulb b;
+        gs_recording_info info;
+        gs_status s = gs_recording_to_bulb(p, 3, 512, &b, &info);
         CHECK_MSG(s == GS_OK, "case %zu: %s", i, gs_detail());
         if (s != GS_OK) continue;
         int grid = cases[i].ac_hz < 55 ? 50 : 60;
-        CHECK(b.ref == REC_REF_VOLTAGE && b.grid_hz == grid && info.grid_hz == grid);
+        CHECK(b.ref == GS_REF_VOLTAGE && b.grid_hz == grid && info.grid_hz == grid);
         CHECK_NEAR(info.flicker_hz, 2 * cases[i].ac_hz, 1e-6 * cases[i].ac_hz);
         CHECK_NEAR(info.cycles, 0.3 * 2 * cases[i].ac_hz, 0.01);
         double err = brf_error(&b.brf, cases[i].shift);
@@ -174,8 +174,8 @@ TEST(recording_synthetic_voltage_brf_and_phase)
         }
         pf_true = 100 * (hi - lo) / (hi + lo);
         CHECK_NEAR(info.percent_flicker, pf_true, 0.5);
-        CHECK_OK(rec_bulb_validate(&b));
-        rec_bulb_release(&b);
+        CHECK_OK(gs_bulb_validate(&b));
+        gs_bulb_release(&b);
     }
 }
 
@@ -190,13 +190,13 @@ TEST(recording_pwm_is_unlocked)
         fprintf(f, "%.6f,%g\n", i * 1e-6, ph < 0.3 ? 0.9 : -0.012);
     }
     fclose(f);
-    rec_bulb b;
-    rec_recording_info info;
-    CHECK_OK(rec_recording_to_bulb(p, 0, 1024, &b, &info));
-    CHECK(b.ref == REC_REF_UNLOCKED && info.grid_hz == 0 && b.grid_hz == 0);
+    gs_bulb b;
+    gs_recording_info info;
+    CHECK_OK(gs_recording_to_bulb(p, 0, 1024, &b, &info));
+    CHECK(b.ref == GS_REF_UNLOCKED && info.grid_hz == 0 && b.grid_hz == 0);
     CHECK_NEAR(info.flicker_hz, 1030.0, 1.0);
     CHECK_NEAR(info.percent_flicker, 100.0, 1e-9);
-    rec_bulb_release(&b);
+    gs_bulb_release(&b);
 }
 
 TEST(recording_flat_lamp_has_no_frequency)
@@ -207,13 +207,13 @@ TEST(recording_flat_lamp_has_no_frequency)
     if (!f) return;
     for (int i = 0; i < 5000; i++) fprintf(f, "%.6f,0.25\n", i * 1e-5);
     fclose(f);
-    rec_bulb b;
-    rec_recording_info info;
-    CHECK_OK(rec_recording_to_bulb(p, 0, 64, &b, &info));
-    CHECK(isnan(info.flicker_hz) && b.ref == REC_REF_NONE && info.grid_hz == 0);
+    gs_bulb b;
+    gs_recording_info info;
+    CHECK_OK(gs_recording_to_bulb(p, 0, 64, &b, &info));
+    CHECK(isnan(info.flicker_hz) && b.ref == GS_REF_NONE && info.grid_hz == 0);
     CHECK_NEAR(info.percent_flicker, 0.0, 1e-9);
     for (int j = 0; j < 64; j++) CHECK_NEAR(b.brf.v[j], 1.0, 1e-12);
-    rec_bulb_release(&b);
+    gs_bulb_release(&b);
 }
 
 /* The scope's metadata block (shared/data/flicker/info.csv), with CRLF line ends. */
@@ -222,26 +222,26 @@ TEST(recording_flat_lamp_has_no_frequency)
     "Delay:0s,\r\nVertical Sensitivity:200mV/div,\r\nVertical Offset:-1.36V,\r\n"        \
     "ch1_time(s),ch1_value(V)"
 
-static int same_result(const char *path, const rec_bulb *ref_b, const rec_recording_info *ref_i)
+static int same_result(const char *path, const gs_bulb *ref_b, const gs_recording_info *ref_i)
 {
-    rec_bulb b;
-    rec_recording_info info;
-    gs_status s = rec_recording_to_bulb(path, 0, 1024, &b, &info);
+    gs_bulb b;
+    gs_recording_info info;
+    gs_status s = gs_recording_to_bulb(path, 0, 1024, &b, &info);
     CHECK_MSG(s == GS_OK, "%s: %s", path, gs_detail());
     if (s != GS_OK) return 0;
     int same = memcmp(b.brf.v, ref_b->brf.v, sizeof(double) * 1024) == 0 &&
                info.samples == ref_i->samples && info.flicker_hz == ref_i->flicker_hz &&
                info.percent_flicker == ref_i->percent_flicker && b.ref == ref_b->ref;
-    rec_bulb_release(&b);
+    gs_bulb_release(&b);
     return same;
 }
 
 TEST(recording_scope_variants_parse_identically)
 {
     const char *plain = test_shared_path("data/flicker/CFL.csv");
-    rec_bulb ref_b;
-    rec_recording_info ref_i;
-    CHECK_OK(rec_recording_to_bulb(plain, 0, 1024, &ref_b, &ref_i));
+    gs_bulb ref_b;
+    gs_recording_info ref_i;
+    CHECK_OK(gs_recording_to_bulb(plain, 0, 1024, &ref_b, &ref_i));
     char *data = read_all(plain);
     CHECK(data != NULL);
     if (!data) return;
@@ -261,18 +261,18 @@ TEST(recording_scope_variants_parse_identically)
     const char *c = tmp_path("my CFL bulb.csv");
     write_file(c, lf, "\n");
     CHECK(same_result(c, &ref_b, &ref_i));
-    rec_bulb named;
-    CHECK_OK(rec_recording_to_bulb(c, 0, 64, &named, NULL));
+    gs_bulb named;
+    CHECK_OK(gs_recording_to_bulb(c, 0, 64, &named, NULL));
     CHECK(strcmp(named.id, "my_CFL_bulb") == 0 && strcmp(named.name, "my CFL bulb") == 0);
-    rec_bulb_release(&named);
+    gs_bulb_release(&named);
     free(lf);
     free(data);
-    rec_bulb_release(&ref_b);
+    gs_bulb_release(&ref_b);
 }
 
 TEST(recording_rejects_bad_input)
 {
-    rec_bulb b;
+    gs_bulb b;
     char expect[700];
     /* a non-numeric value in the data */
     const char *p = tmp_path("bad.csv");
@@ -282,34 +282,34 @@ TEST(recording_rejects_bad_input)
     fputs("Channel:Channel1,\n", f);
     for (int i = 0; i < 1000; i++) fprintf(f, "%.6f,%s\n", i * 1e-5, i == 500 ? "0.5V" : "0.5");
     fclose(f);
-    CHECK(rec_recording_to_bulb(p, 0, 64, &b, NULL) == GS_EFORMAT);
+    CHECK(gs_recording_to_bulb(p, 0, 64, &b, NULL) == GS_EFORMAT);
     snprintf(expect, sizeof expect, "%s:502: field value (column 2): expected", p);
     CHECK_MSG(strncmp(gs_detail(), expect, strlen(expect)) == 0, "detail '%s'", gs_detail());
     /* a missing voltage column */
     f = fopen(p, "w");
     for (int i = 0; i < 1000; i++) fprintf(f, "%.6f,0.5\n", i * 1e-5);
     fclose(f);
-    CHECK(rec_recording_to_bulb(p, 3, 64, &b, NULL) == GS_EFORMAT);
+    CHECK(gs_recording_to_bulb(p, 3, 64, &b, NULL) == GS_EFORMAT);
     CHECK(strstr(gs_detail(), p) && strstr(gs_detail(), "field voltage (column 3)"));
-    CHECK(rec_recording_to_bulb(p, 2, 64, &b, NULL) == GS_EINVAL);
-    CHECK(rec_recording_to_bulb(p, 0, 63, &b, NULL) == GS_EINVAL);
+    CHECK(gs_recording_to_bulb(p, 2, 64, &b, NULL) == GS_EINVAL);
+    CHECK(gs_recording_to_bulb(p, 0, 63, &b, NULL) == GS_EINVAL);
     /* non-uniform time, empty file, metadata only, missing file */
     f = fopen(p, "w");
     for (int i = 0; i < 1000; i++) fprintf(f, "%.6f,0.5\n", (i + (i > 600 ? 20 : 0)) * 1e-5);
     fclose(f);
-    CHECK(rec_recording_to_bulb(p, 0, 64, &b, NULL) == GS_EFORMAT);
+    CHECK(gs_recording_to_bulb(p, 0, 64, &b, NULL) == GS_EFORMAT);
     CHECK(strstr(gs_detail(), p) && strstr(gs_detail(), "uniform"));
     write_file(p, "", NULL);
-    CHECK(rec_recording_to_bulb(p, 0, 64, &b, NULL) == GS_EFORMAT);
+    CHECK(gs_recording_to_bulb(p, 0, 64, &b, NULL) == GS_EFORMAT);
     CHECK(strstr(gs_detail(), p) != NULL);
-    CHECK(rec_recording_to_bulb(test_shared_path("data/flicker/info.csv"), 0, 64, &b, NULL) == GS_EFORMAT);
-    CHECK(rec_recording_to_bulb(tmp_path("missing.csv"), 0, 64, &b, NULL) == GS_EIO);
+    CHECK(gs_recording_to_bulb(test_shared_path("data/flicker/info.csv"), 0, 64, &b, NULL) == GS_EFORMAT);
+    CHECK(gs_recording_to_bulb(tmp_path("missing.csv"), 0, 64, &b, NULL) == GS_EIO);
     /* a voltage that is not mains */
     f = fopen(p, "w");
     for (int i = 0; i < 30000; i++)
         fprintf(f, "%.6f,%g,%g\n", i * 1e-5, 1 + 0.1 * cos(2 * M_PI * 100 * i * 1e-5),
                 sin(2 * M_PI * 43 * i * 1e-5));
     fclose(f);
-    CHECK(rec_recording_to_bulb(p, 3, 64, &b, NULL) == GS_EFORMAT);
+    CHECK(gs_recording_to_bulb(p, 3, 64, &b, NULL) == GS_EFORMAT);
     CHECK(strstr(gs_detail(), "field voltage") != NULL);
 }

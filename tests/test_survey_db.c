@@ -245,9 +245,9 @@ TEST(survey_db_refuses_foreign_files)
     FILE *f = fopen(text, "w");
     fputs("this is not a database\nsecond line\n", f);
     fclose(f);
-    rec_delight *d = rec_delight_new();
-    CHECK_OK(rec_delight_save(d, delight));
-    rec_delight_free(d);
+    gs_delight *d = gs_delight_new();
+    CHECK_OK(gs_delight_save(d, delight));
+    gs_delight_free(d);
     gis_light l;
     gis_light_init(&l);
     snprintf(l.id, sizeof l.id, "L1");
@@ -773,16 +773,16 @@ TEST(survey_db_sha256_and_delight_fingerprint)
     srv_sha256_hex(mill, 1000000, hex);
     CHECK(!strcmp(hex, "cdc76e5c9914fb9281a1c7e284d73e67f1809a48a497200e046d39ccc7112cd0"));
     free(mill);
-    rec_delight *d1 = rec_delight_new(), *d2 = rec_delight_new();
-    CHECK_OK(rec_delight_generate(d1, 256));
-    for (size_t i = 0; i < rec_delight_count(d1); i++) CHECK_OK(rec_delight_add(d2, rec_delight_get(d1, i)));
+    gs_delight *d1 = gs_delight_new(), *d2 = gs_delight_new();
+    CHECK_OK(gs_delight_generate(d1, 256));
+    for (size_t i = 0; i < gs_delight_count(d1); i++) CHECK_OK(gs_delight_add(d2, gs_delight_get(d1, i)));
     srv_delight_row r1, r2;
     CHECK_OK(srv_delight_fingerprint(d1, NULL, &r1));
     CHECK_OK(srv_delight_fingerprint(d2, "copy.sqlite", &r2));
-    CHECK(!strcmp(r1.sha256, r2.sha256) && r1.bulbs == (long)rec_delight_count(d1) && r1.bulbs > 0);
+    CHECK(!strcmp(r1.sha256, r2.sha256) && r1.bulbs == (long)gs_delight_count(d1) && r1.bulbs > 0);
     CHECK(!strcmp(r1.source, "built-in"));
-    rec_delight *d3 = rec_delight_new();
-    CHECK_OK(rec_delight_add(d3, rec_delight_get(d1, 0)));
+    gs_delight *d3 = gs_delight_new();
+    CHECK_OK(gs_delight_add(d3, gs_delight_get(d1, 0)));
     srv_delight_row r3;
     CHECK_OK(srv_delight_fingerprint(d3, NULL, &r3));
     CHECK(strcmp(r1.sha256, r3.sha256) != 0 && r3.bulbs == 1);
@@ -795,19 +795,19 @@ TEST(survey_db_sha256_and_delight_fingerprint)
     CHECK(a == b && a != c && a > 0 && c > 0);
     CHECK(query_long(srv_db_sqlite(db), "SELECT count(*) FROM delight_versions") == 2);
     srv_db_close(db);
-    rec_delight_free(d1);
-    rec_delight_free(d2);
-    rec_delight_free(d3);
+    gs_delight_free(d1);
+    gs_delight_free(d2);
+    gs_delight_free(d3);
 }
 
 TEST(survey_db_rows_from_recognition)
 {
-    rec_delight *d = rec_delight_new();
-    CHECK_OK(rec_delight_generate(d, 256));
+    gs_delight *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(d, 256));
     rec_matcher *mt = NULL;
     CHECK_OK(rec_matcher_new(d, 50, 1, 16, NULL, &mt));
     if (!mt) {
-        rec_delight_free(d);
+        gs_delight_free(d);
         return;
     }
     rec_match m = {0};
@@ -825,7 +825,7 @@ TEST(survey_db_rows_from_recognition)
     srv_light_row_init(&r);
     srv_light_from_match(&r, &m, mt);
     CHECK(r.bulb_id && !strcmp(r.bulb_id, rec_matcher_bulb(mt, 1)->id));
-    CHECK(r.technology && !strcmp(r.technology, rec_tech_name(rec_matcher_bulb(mt, 1)->type)));
+    CHECK(r.technology && !strcmp(r.technology, gs_tech_name(rec_matcher_bulb(mt, 1)->type)));
     CHECK(r.phase_deg == 240.0 && r.phase_fit_deg == 240.0 && r.runner_phase_deg == 120.0);
     CHECK(r.runner_bulb_id && !strcmp(r.runner_bulb_id, rec_matcher_bulb(mt, 0)->id));
     m.flags = REC_MATCH_PHASE_AMBIGUOUS;
@@ -871,7 +871,7 @@ TEST(survey_db_rows_from_recognition)
     CHECK(query_long(h, "SELECT lon_deg = -145 AND semi_major_m IS NULL AND semi_minor_m = 2 FROM locations") == 1);
     srv_db_close(db);
     rec_matcher_free(mt);
-    rec_delight_free(d);
+    gs_delight_free(d);
 }
 
 /* ------------------------------------------------------------------ export */

@@ -1,42 +1,42 @@
 /* delight.c - the in-memory DELIGHT collection (paper Sec. 3), technology names and entry
  * validation. Storage (SQLite, CSV) and the physical generator live in their own files. */
-#include "recognize/internal.h"
+#include "recognize/base/internal.h"
 
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
-struct rec_delight {
-    rec_bulb *bulbs;
+struct gs_delight {
+    gs_bulb *bulbs;
     size_t count, cap;
 };
 
-static const char *const tech_names[REC_TECH_COUNT] = {
-    [REC_TECH_INCANDESCENT] = "incandescent",
-    [REC_TECH_HALOGEN] = "halogen",
-    [REC_TECH_FLUORESCENT_MAGNETIC] = "fluorescent_magnetic",
-    [REC_TECH_FLUORESCENT_ELECTRONIC] = "fluorescent_electronic",
-    [REC_TECH_CFL] = "cfl",
-    [REC_TECH_LED_CAPACITOR] = "led_capacitor",
-    [REC_TECH_LED_LINEAR] = "led_linear",
-    [REC_TECH_LED_PWM] = "led_pwm",
-    [REC_TECH_SODIUM_HP] = "sodium_hp",
-    [REC_TECH_SODIUM_LP] = "sodium_lp",
-    [REC_TECH_METAL_HALIDE] = "metal_halide",
-    [REC_TECH_MERCURY] = "mercury",
-    [REC_TECH_UNKNOWN] = "unknown",
+static const char *const tech_names[GS_TECH_COUNT] = {
+    [GS_TECH_INCANDESCENT] = "incandescent",
+    [GS_TECH_HALOGEN] = "halogen",
+    [GS_TECH_FLUORESCENT_MAGNETIC] = "fluorescent_magnetic",
+    [GS_TECH_FLUORESCENT_ELECTRONIC] = "fluorescent_electronic",
+    [GS_TECH_CFL] = "cfl",
+    [GS_TECH_LED_CAPACITOR] = "led_capacitor",
+    [GS_TECH_LED_LINEAR] = "led_linear",
+    [GS_TECH_LED_PWM] = "led_pwm",
+    [GS_TECH_SODIUM_HP] = "sodium_hp",
+    [GS_TECH_SODIUM_LP] = "sodium_lp",
+    [GS_TECH_METAL_HALIDE] = "metal_halide",
+    [GS_TECH_MERCURY] = "mercury",
+    [GS_TECH_UNKNOWN] = "unknown",
 };
 
-const char *rec_tech_name(rec_tech t)
+const char *gs_tech_name(gs_tech t)
 {
-    return (t >= 0 && t < REC_TECH_COUNT) ? tech_names[t] : "invalid";
+    return (t >= 0 && t < GS_TECH_COUNT) ? tech_names[t] : "invalid";
 }
 
-gs_status rec_tech_parse(const char *name, rec_tech *t)
+gs_status gs_tech_parse(const char *name, gs_tech *t)
 {
-    for (int i = 0; i < REC_TECH_COUNT; i++) {
+    for (int i = 0; i < GS_TECH_COUNT; i++) {
         if (strcmp(name, tech_names[i]) == 0) {
-            *t = (rec_tech)i;
+            *t = (gs_tech)i;
             return GS_OK;
         }
     }
@@ -45,48 +45,48 @@ gs_status rec_tech_parse(const char *name, rec_tech *t)
                    "led_pwm, sodium_hp, sodium_lp, metal_halide, mercury, unknown", name);
 }
 
-const char *rec_ref_name(rec_ref r)
+const char *gs_ref_name(gs_ref r)
 {
     switch (r) {
-    case REC_REF_VOLTAGE: return "voltage";
-    case REC_REF_NONE: return "none";
-    case REC_REF_UNLOCKED: return "unlocked";
+    case GS_REF_VOLTAGE: return "voltage";
+    case GS_REF_NONE: return "none";
+    case GS_REF_UNLOCKED: return "unlocked";
     }
     return "invalid";
 }
 
-void rec_bulb_release(rec_bulb *b)
+void gs_bulb_release(gs_bulb *b)
 {
-    if (b) rec_brf_release(&b->brf);
+    if (b) gs_brf_release(&b->brf);
 }
 
-rec_delight *rec_delight_new(void)
+gs_delight *gs_delight_new(void)
 {
-    return calloc(1, sizeof(rec_delight));
+    return calloc(1, sizeof(gs_delight));
 }
 
-void rec_delight_free(rec_delight *d)
+void gs_delight_free(gs_delight *d)
 {
     if (!d) return;
-    for (size_t i = 0; i < d->count; i++) rec_bulb_release(&d->bulbs[i]);
+    for (size_t i = 0; i < d->count; i++) gs_bulb_release(&d->bulbs[i]);
     free(d->bulbs);
     free(d);
 }
 
-size_t rec_delight_count(const rec_delight *d)
+size_t gs_delight_count(const gs_delight *d)
 {
     return d->count;
 }
 
-const rec_bulb *rec_delight_get(const rec_delight *d, size_t i)
+const gs_bulb *gs_delight_get(const gs_delight *d, size_t i)
 {
     return i < d->count ? &d->bulbs[i] : NULL;
 }
 
-const rec_bulb *rec_delight_find(const rec_delight *d, const char *id, int grid_hz, int bands)
+const gs_bulb *gs_delight_find(const gs_delight *d, const char *id, int grid_hz, int bands)
 {
     for (size_t i = 0; i < d->count; i++) {
-        const rec_bulb *b = &d->bulbs[i];
+        const gs_bulb *b = &d->bulbs[i];
         if (strcmp(b->id, id) == 0 && (grid_hz <= 0 || b->grid_hz == grid_hz) &&
             (bands <= 0 || b->brf.bands == bands))
             return b;
@@ -105,11 +105,11 @@ static int valid_id(const char *id)
 }
 
 /* The checks every entry passes, whatever its source (generator, SQLite, CSV, recording). */
-gs_status rec_bulb_validate(const rec_bulb *b)
+gs_status gs_bulb_validate(const gs_bulb *b)
 {
     if (!valid_id(b->id))
         return gs_fail(GS_EINVAL, "bulb_id '%s': expected letters, digits, '_', '-' or '.'", b->id);
-    if (b->type < 0 || b->type >= REC_TECH_COUNT)
+    if (b->type < 0 || b->type >= GS_TECH_COUNT)
         return gs_fail(GS_EINVAL, "bulb %s: type %d: expected a technology", b->id, (int)b->type);
     if (strpbrk(b->name, ",\n\r\""))
         return gs_fail(GS_EINVAL, "bulb %s: name: expected no comma, quote or newline", b->id);
@@ -120,7 +120,7 @@ gs_status rec_bulb_validate(const rec_bulb *b)
     if (!b->sensor[0] || strpbrk(b->sensor, ",/\n\r\""))
         return gs_fail(GS_EINVAL, "bulb %s: sensor '%s': expected a non-empty name without ',' or '/'",
                        b->id, b->sensor);
-    if (b->ref != REC_REF_VOLTAGE && b->ref != REC_REF_NONE && b->ref != REC_REF_UNLOCKED)
+    if (b->ref != GS_REF_VOLTAGE && b->ref != GS_REF_NONE && b->ref != GS_REF_UNLOCKED)
         return gs_fail(GS_EINVAL, "bulb %s: reference %d: expected voltage, none or unlocked", b->id,
                        (int)b->ref);
     if (!b->brf.v || (b->brf.bands != 1 && b->brf.bands != 3) || b->brf.n < 4)
@@ -149,26 +149,26 @@ gs_status rec_bulb_validate(const rec_bulb *b)
     return GS_OK;
 }
 
-gs_status rec_delight_add(rec_delight *d, const rec_bulb *b)
+gs_status gs_delight_add(gs_delight *d, const gs_bulb *b)
 {
-    gs_status s = rec_bulb_validate(b);
+    gs_status s = gs_bulb_validate(b);
     if (s != GS_OK) return s;
     for (size_t i = 0; i < d->count; i++) {
-        const rec_bulb *o = &d->bulbs[i];
+        const gs_bulb *o = &d->bulbs[i];
         if (strcmp(o->id, b->id) == 0 && o->grid_hz == b->grid_hz && strcmp(o->sensor, b->sensor) == 0)
             return gs_fail(GS_EINVAL, "bulb %s at %d Hz with sensor %s: already in the database",
                            b->id, b->grid_hz, b->sensor);
     }
     if (d->count == d->cap) {
         size_t cap = d->cap ? 2 * d->cap : 64;
-        rec_bulb *nb = realloc(d->bulbs, cap * sizeof *nb);
+        gs_bulb *nb = realloc(d->bulbs, cap * sizeof *nb);
         if (!nb) return gs_fail(GS_ENOMEM, "DELIGHT: cannot grow to %zu bulbs", cap);
         d->bulbs = nb;
         d->cap = cap;
     }
-    rec_bulb *dst = &d->bulbs[d->count];
+    gs_bulb *dst = &d->bulbs[d->count];
     *dst = *b;
-    s = rec_brf_copy(&dst->brf, &b->brf);
+    s = gs_brf_copy(&dst->brf, &b->brf);
     if (s != GS_OK) return s;
     d->count++;
     return GS_OK;

@@ -7,7 +7,7 @@
  * sigma_t (noise, quantisation). A mean of full periods telescopes, so only the crossings at
  * the ends of each run of accepted periods contribute; sigma_t is estimated from second
  * differences of full periods, which cancel the (slow) frequency wander. */
-#include "recognize/recognize.h"
+#include "recognize/base/base.h"
 
 #include <errno.h>
 #include <math.h>
@@ -49,7 +49,7 @@ static double crossing_index(const double *y, size_t n, size_t j, int dir)
     return (double)m + cubic_root(y + m, (double)(j - m), (double)(j - m) + 1.0, dir);
 }
 
-gs_status rec_zero_crossings(const double *x, size_t n, double rate_hz, double hysteresis,
+gs_status gs_zero_crossings(const double *x, size_t n, double rate_hz, double hysteresis,
                              double **t_s, size_t *count, int *rising_first)
 {
     if (!t_s || !count || !rising_first || (!x && n > 0))
@@ -175,8 +175,8 @@ static gs_status full_periods(const char *who, const double *t, size_t n, double
     return GS_OK;
 }
 
-gs_status rec_grid_frequency(const double *t_s, size_t n, double *f_cycle_hz,
-                             rec_freq_stats *stats)
+gs_status gs_grid_frequency(const double *t_s, size_t n, double *f_cycle_hz,
+                             gs_freq_stats *stats)
 {
     if (!stats) return gs_fail(GS_EINVAL, "grid frequency: NULL stats");
     memset(stats, 0, sizeof *stats);
@@ -264,7 +264,7 @@ static double lag_corr(const double *x, size_t nw, size_t lag)
     return saa > 0 && sbb > 0 ? sab / sqrt(saa * sbb) : NAN;
 }
 
-gs_status rec_frequency_wander(const double *t_s, size_t n, double window_s, rec_wander *w)
+gs_status gs_frequency_wander(const double *t_s, size_t n, double window_s, gs_wander *w)
 {
     if (!w) return gs_fail(GS_EINVAL, "frequency wander: NULL result");
     memset(w, 0, sizeof *w);
@@ -377,7 +377,7 @@ static gs_status riff_check(const char *path, FILE *f, long size)
     return gs_fail(GS_EFORMAT, "%s: truncated: no data chunk in the file's %ld bytes", path, size);
 }
 
-gs_status rec_mains_read(const char *path, double **x, size_t *n, double *rate_hz)
+gs_status gs_mains_read(const char *path, double **x, size_t *n, double *rate_hz)
 {
     if (!path || !x || !n || !rate_hz) return gs_fail(GS_EINVAL, "mains read: NULL argument");
     *x = NULL;

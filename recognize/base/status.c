@@ -1,5 +1,5 @@
 /* status.c - the tool's one status enum and its thread-local detail string (gs_*). */
-#include "recognize/recognize.h"
+#include "recognize/base/base.h"
 
 #include <stdarg.h>
 #include <stdio.h>

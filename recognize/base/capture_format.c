@@ -14,7 +14,7 @@
  * colour type) before it is decoded. Writing validates with the same rules, so the writer never
  * produces a directory that the reader rejects, and replaces each file atomically (a temporary
  * name in the same directory, fsync, rename). */
-#include "recognize/internal.h"
+#include "recognize/base/internal.h"
 
 #include <errno.h>
 #include <fcntl.h>
@@ -26,13 +26,12 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
-#include <threads.h>
 #include <unistd.h>
 
 #define CAPTURE_JSON "capture.json"
 /* Ranges of the format (docs/formats.md). K: the ACam reaches 26 (paper Fig. 7); 1024 bounds
  * memory for a file that is wrong. Sides: 32768 pixels. Halvings: the ACam's DMD holds M = 96
- * masks, so at most floor(log2(M/2)) = 5..6 halvings (paper footnote 5); REC_MAX_HALVINGS = 16
+ * masks, so at most floor(log2(M/2)) = 5..6 halvings (paper footnote 5); GS_MAX_HALVINGS = 16
  * leaves room. */
 #define MAX_K 1024
 #define MAX_SIDE 32768
@@ -49,11 +48,11 @@ static int join(char *out, size_t cap, const char *dir, const char *name)
 }
 
 /* A frame or HDR-map file name: [A-Za-z0-9._-]+ ending in ".png", not starting with '.',
- * shorter than REC_PATH_MAX. No directories: the capture is one flat folder. */
+ * shorter than GS_PATH_MAX. No directories: the capture is one flat folder. */
 static int valid_file_name(const char *s)
 {
-    size_t n = strnlen(s, REC_PATH_MAX);
-    if (n < 5 || n >= REC_PATH_MAX || s[0] == '.' || strcmp(s + n - 4, ".png") != 0) return 0;
+    size_t n = strnlen(s, GS_PATH_MAX);
+    if (n < 5 || n >= GS_PATH_MAX || s[0] == '.' || strcmp(s + n - 4, ".png") != 0) return 0;
     for (size_t i = 0; i < n; i++) {
         char c = s[i];
         if (!((c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
@@ -193,7 +192,7 @@ static gs_status write_atomic(const char *dir, const char *name, const void *dat
 /* ------------------------------------------------------- capture validation */
 
 /* Expected values, in the words of docs/formats.md. */
-#define EXP_FORMAT "the string \"" REC_CAPTURE_FORMAT "\""
+#define EXP_FORMAT "the string \"" GS_CAPTURE_FORMAT "\""
 #define EXP_GRID "50 or 60 (an integer)"
 #define EXP_K "an integer from 2 to 1024"
 #define EXP_BANDS "1 or 3 (an integer)"
@@ -226,7 +225,7 @@ static int set_problem(problem *pr, const char *field, const char *fmt, ...)
 }
 
 /* The geometry fields, which size the pixel arrays. 1 if valid. */
-static int check_geometry(const rec_capture *c, problem *pr)
+static int check_geometry(const gs_capture *c, problem *pr)
 {
     if (c->K < 2 || c->K > MAX_K) return set_problem(pr, "K", EXP_K);
     if (c->bands != 1 && c->bands != 3) return set_problem(pr, "bands", EXP_BANDS);
@@ -237,7 +236,7 @@ static int check_geometry(const rec_capture *c, problem *pr)
 
 /* Every field except the pixels and station_json: the rules of docs/formats.md. frames must hold
  * K entries. 1 if valid. */
-static int check_capture(const rec_capture *c, problem *pr)
+static int check_capture(const gs_capture *c, problem *pr)
 {
     if (c->grid_hz != 50 && c->grid_hz != 60) return set_problem(pr, "grid_hz", EXP_GRID);
     if (!check_geometry(c, pr)) return 0;
@@ -254,7 +253,7 @@ static int check_capture(const rec_capture *c, problem *pr)
     if (memchr(c->utc, '\0', sizeof c->utc) == NULL || (c->utc[0] && !valid_utc(c->utc)))
         return set_problem(pr, "utc", EXP_UTC);
     for (int k = 0; k < c->K; k++) {
-        const rec_frame_info *f = &c->frames[k];
+        const gs_frame_info *f = &c->frames[k];
         char field[64];
         snprintf(field, sizeof field, "frames[%d].k", k);
         if (f->k != k) return set_problem(pr, field, "%d (frames are held in k order)", k);
@@ -276,7 +275,7 @@ static int check_capture(const rec_capture *c, problem *pr)
             return set_problem(pr, field, "\"\" (no map) or " EXP_FILE);
         /* every file of the directory is named once */
         for (int j = 0; j < k; j++) {
-            const rec_frame_info *g = &c->frames[j];
+            const gs_frame_info *g = &c->frames[j];
             if (strcmp(f->file, g->file) == 0 || strcmp(f->file, g->hdr_map) == 0 ||
                 (f->hdr_map[0] && (strcmp(f->hdr_map, g->file) == 0 ||
                                    strcmp(f->hdr_map, g->hdr_map) == 0))) {
@@ -293,7 +292,7 @@ static int check_capture(const rec_capture *c, problem *pr)
     return 1;
 }
 
-gs_status rec_capture_check(const rec_capture *cap, const char *who)
+gs_status gs_capture_check(const gs_capture *cap, const char *who)
 {
     problem pr;
     if (!cap || !cap->frames) return gs_fail(GS_EINVAL, "%s: no capture or no frames table", who);
@@ -599,7 +598,7 @@ static gs_status get_file_name(const reader *r, json_t *obj, const char *key, co
     }
     if (!json_is_string(v) || !valid_file_name(json_string_value(v)))
         return bad_field(r, field, required ? EXP_FILE : "\"\" (no map) or " EXP_FILE);
-    snprintf(out, REC_PATH_MAX, "%s", json_string_value(v));
+    snprintf(out, GS_PATH_MAX, "%s", json_string_value(v));
     return GS_OK;
 }
 
@@ -616,7 +615,7 @@ static gs_status check_keys(const reader *r, json_t *obj, const char *prefix,
         if (!known) {
             char field[64];
             snprintf(field, sizeof field, "%s%s", prefix, key);
-            return bad_field(r, field, "no such field (a field of " REC_CAPTURE_FORMAT
+            return bad_field(r, field, "no such field (a field of " GS_CAPTURE_FORMAT
                              ", or an extension named x_...)");
         }
     }
@@ -630,13 +629,13 @@ static const char *const frame_keys[] = {"file", "k", "cycles", "hdr_map", "grid
                                          "start_s", NULL};
 
 /* Fill the scalar fields and the frames table of cap from the parsed document. */
-static gs_status parse_capture(reader *r, json_t *root, rec_capture *cap)
+static gs_status parse_capture(reader *r, json_t *root, gs_capture *cap)
 {
     gs_status st;
     if (!json_is_object(root)) return bad_field(r, "(document)", "a JSON object");
     json_t *fmt = json_object_get(root, "format");
     if (!fmt) return bad_field(r, "format", EXP_FORMAT " (the field is missing)");
-    if (!json_is_string(fmt) || strcmp(json_string_value(fmt), REC_CAPTURE_FORMAT) != 0)
+    if (!json_is_string(fmt) || strcmp(json_string_value(fmt), GS_CAPTURE_FORMAT) != 0)
         return bad_field(r, "format", EXP_FORMAT);
     if ((st = check_keys(r, root, "", top_keys)) != GS_OK) return st;
     if ((st = get_int(r, root, "grid_hz", "grid_hz", 1, 0, 50, 60, EXP_GRID, &cap->grid_hz)) ||
@@ -691,7 +690,7 @@ static gs_status parse_capture(reader *r, json_t *root, rec_capture *cap)
         }
         if ((st = check_keys(r, f, prefix, frame_keys)) != GS_OK) break;
         int k;
-        rec_frame_info info;
+        gs_frame_info info;
         memset(&info, 0, sizeof info);
         snprintf(field, sizeof field, "frames[%d].k", i);
         char expect_k[64];
@@ -747,115 +746,6 @@ static gs_status parse_capture(reader *r, json_t *root, rec_capture *cap)
 
 /* ------------------------------------------------------------------- PNG */
 
-typedef struct {
-    unsigned width, height;
-    int bit_depth, color_type;
-} png_info;
-
-static uint32_t be32(const unsigned char *p)
-{
-    return (uint32_t)p[0] << 24 | (uint32_t)p[1] << 16 | (uint32_t)p[2] << 8 | p[3];
-}
-
-/* CRC-32 of PNG chunks (ISO 3309 polynomial 0xedb88320, PNG spec. Annex D), slice-by-8 so
- * checking a capture's frames costs little next to decoding them. */
-static uint32_t crc_table[8][256];
-static once_flag crc_once = ONCE_FLAG_INIT;
-
-static void crc_init(void)
-{
-    for (uint32_t n = 0; n < 256; n++) {
-        uint32_t c = n;
-        for (int k = 0; k < 8; k++) c = c & 1 ? 0xedb88320u ^ (c >> 1) : c >> 1;
-        crc_table[0][n] = c;
-    }
-    for (int t = 1; t < 8; t++)
-        for (int n = 0; n < 256; n++)
-            crc_table[t][n] = (crc_table[t - 1][n] >> 8) ^ crc_table[0][crc_table[t - 1][n] & 0xff];
-}
-
-static uint32_t crc32_png(const unsigned char *p, size_t n)
-{
-    call_once(&crc_once, crc_init);
-    uint32_t c = 0xffffffffu;
-    while (n >= 8) {
-        uint32_t a = c ^ ((uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 |
-                          (uint32_t)p[3] << 24);
-        c = crc_table[7][a & 0xff] ^ crc_table[6][(a >> 8) & 0xff] ^
-            crc_table[5][(a >> 16) & 0xff] ^ crc_table[4][a >> 24] ^ crc_table[3][p[4]] ^
-            crc_table[2][p[5]] ^ crc_table[1][p[6]] ^ crc_table[0][p[7]];
-        p += 8;
-        n -= 8;
-    }
-    while (n--) c = crc_table[0][(c ^ *p++) & 0xff] ^ (c >> 8);
-    return c ^ 0xffffffffu;
-}
-
-/* The chunk structure of a PNG: signature, IHDR first (13 bytes), every chunk inside the file
- * with a matching CRC, an IDAT, and IEND. (libpng would find most of these too, but prints to
- * stderr and says less.) */
-static gs_status png_inspect(const unsigned char *b, size_t n, const char *path, const char *ref,
-                             png_info *pi)
-{
-    static const unsigned char sig[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
-    if (n < 8 || memcmp(b, sig, 8) != 0)
-        return gs_fail(GS_EFORMAT, "%s: not a PNG file (%s)%s", path,
-                       n < 8 ? "shorter than the 8-byte signature" : "no PNG signature", ref);
-    size_t pos = 8;
-    int idat = 0, first = 1;
-    for (;;) {
-        if (pos == n)
-            return gs_fail(GS_EFORMAT, "%s: truncated PNG: the file ends at byte %zu before "
-                           "the IEND chunk%s", path, n, ref);
-        if (n - pos < 12)
-            return gs_fail(GS_EFORMAT, "%s: truncated PNG: %zu bytes at byte %zu, expected a "
-                           "chunk of at least 12%s", path, n - pos, pos, ref);
-        uint32_t len = be32(b + pos);
-        char type[5];
-        memcpy(type, b + pos + 4, 4);
-        type[4] = '\0';
-        for (int i = 0; i < 4; i++)
-            if (!((type[i] >= 'a' && type[i] <= 'z') || (type[i] >= 'A' && type[i] <= 'Z')))
-                return gs_fail(GS_EFORMAT, "%s: corrupt PNG: no chunk type at byte %zu%s", path,
-                               pos + 4, ref);
-        if (len > 0x7fffffffu || len > n - pos - 12)
-            return gs_fail(GS_EFORMAT, "%s: truncated PNG: chunk %s at byte %zu declares %u data "
-                           "bytes and a CRC, but only %zu bytes follow its header%s", path, type,
-                           pos, len, n - pos - 8, ref);
-        const unsigned char *d = b + pos + 8;
-        if (crc32_png(b + pos + 4, (size_t)len + 4) != be32(d + len))
-            return gs_fail(GS_EFORMAT, "%s: corrupt PNG: chunk %s at byte %zu fails its CRC%s",
-                           path, type, pos, ref);
-        if (first) {
-            if (strcmp(type, "IHDR") != 0 || len != 13)
-                return gs_fail(GS_EFORMAT, "%s: corrupt PNG: the first chunk is %s, expected a "
-                               "13-byte IHDR%s", path, type, ref);
-            pi->width = be32(d);
-            pi->height = be32(d + 4);
-            pi->bit_depth = d[8];
-            pi->color_type = d[9];
-            first = 0;
-        }
-        if (strcmp(type, "IDAT") == 0) idat = 1;
-        if (strcmp(type, "IEND") == 0) break;
-        pos += 12 + (size_t)len;
-    }
-    if (!idat) return gs_fail(GS_EFORMAT, "%s: corrupt PNG: no IDAT (image data) chunk%s", path, ref);
-    return GS_OK;
-}
-
-static const char *color_name(int t)
-{
-    switch (t) {
-    case 0: return "grey";
-    case 2: return "RGB";
-    case 3: return "palette";
-    case 4: return "grey+alpha";
-    case 6: return "RGBA";
-    }
-    return "unknown";
-}
-
 /* Read dir/file, which must be a width x height PNG of `channels` channels (grey or RGB) with
  * `bits` bits per sample, into out (R, G, B order). */
 static gs_status read_png(const char *dir, const char *file, const char *ref, int width,
@@ -867,27 +757,14 @@ static gs_status read_png(const char *dir, const char *file, const char *ref, in
     size_t n;
     gs_status st = slurp(path, ref, &buf, &n);
     if (st != GS_OK) return st;
-    png_info pi = {0, 0, 0, 0};
-    int want_color = channels == 3 ? 2 : 0;
-    st = png_inspect(buf, n, path, ref, &pi);
-    if (st == GS_OK && (pi.width != (unsigned)width || pi.height != (unsigned)height))
-        st = gs_fail(GS_EFORMAT, "%s: PNG is %ux%u pixels: expected width x height = %dx%d%s",
-                     path, pi.width, pi.height, width, height, ref);
-    if (st == GS_OK && pi.bit_depth != bits)
-        st = gs_fail(GS_EFORMAT, "%s: PNG has %d-bit samples: expected %d-bit%s", path,
-                     pi.bit_depth, bits, ref);
-    if (st == GS_OK && pi.color_type != want_color)
-        st = gs_fail(GS_EFORMAT, "%s: PNG colour type is %s: expected %s (%d channel%s)%s", path,
-                     color_name(pi.color_type), color_name(want_color), channels,
-                     channels == 1 ? "" : "s", ref);
-    if (st == GS_OK) st = rec_cv_png_decode(buf, n, path, width, height, channels, bits == 16, out);
+    st = gs_png_decode(buf, n, path, ref, width, height, channels, bits, out);
     free(buf);
     return st;
 }
 
-gs_status rec_capture_read(const char *dir, rec_capture *cap)
+gs_status gs_capture_read(const char *dir, gs_capture *cap)
 {
-    if (!dir || !cap) return gs_fail(GS_EINVAL, "rec_capture_read: NULL argument");
+    if (!dir || !cap) return gs_fail(GS_EINVAL, "gs_capture_read: NULL argument");
     memset(cap, 0, sizeof *cap);
     reader r;
     memset(&r, 0, sizeof r);
@@ -944,31 +821,31 @@ gs_status rec_capture_read(const char *dir, rec_capture *cap)
             snprintf(ref, sizeof ref, " (%s:%d: %s)", CAPTURE_JSON, loc_line(&r.sc, field), field);
             st = read_png(dir, cap->frames[k].hdr_map, ref, cap->width, cap->height, 1, 8, h);
             for (size_t p = 0; st == GS_OK && p < plane; p++)
-                if (h[p] > REC_MAX_HALVINGS)
+                if (h[p] > GS_MAX_HALVINGS)
                     st = gs_fail(GS_EFORMAT, "%s/%s: pixel (x %zu, y %zu) holds %d halvings: "
                                  "expected 0 to %d%s", dir, cap->frames[k].hdr_map,
                                  p % (size_t)cap->width, p / (size_t)cap->width, h[p],
-                                 REC_MAX_HALVINGS, ref);
+                                 GS_MAX_HALVINGS, ref);
         }
     }
     free(r.sc.v);
     free(r.pos);
     free(text);
-    if (st != GS_OK) rec_capture_release(cap);
+    if (st != GS_OK) gs_capture_release(cap);
     return st;
 }
 
 /* ------------------------------------------------------------------ writing */
 
-gs_status rec_capture_alloc(rec_capture *cap)
+gs_status gs_capture_alloc(gs_capture *cap)
 {
-    if (!cap) return gs_fail(GS_EINVAL, "rec_capture_alloc: NULL capture");
+    if (!cap) return gs_fail(GS_EINVAL, "gs_capture_alloc: NULL capture");
     problem pr;
     if (!check_geometry(cap, &pr))
-        return gs_fail(GS_EINVAL, "rec_capture_alloc: field %s: expected %s", pr.field, pr.expect);
+        return gs_fail(GS_EINVAL, "gs_capture_alloc: field %s: expected %s", pr.field, pr.expect);
     if (cap->frames || cap->raw || cap->halvings)
-        return gs_fail(GS_EINVAL, "rec_capture_alloc: the capture is already allocated "
-                       "(rec_capture_release it first)");
+        return gs_fail(GS_EINVAL, "gs_capture_alloc: the capture is already allocated "
+                       "(gs_capture_release it first)");
     size_t plane = (size_t)cap->width * (size_t)cap->height;
     cap->frames = calloc((size_t)cap->K, sizeof *cap->frames);
     cap->raw = calloc(plane * (size_t)cap->K * (size_t)cap->bands, sizeof *cap->raw);
@@ -977,11 +854,11 @@ gs_status rec_capture_alloc(rec_capture *cap)
         free(cap->raw);
         cap->frames = NULL;
         cap->raw = NULL;
-        return gs_fail(GS_ENOMEM, "rec_capture_alloc: cannot hold %d frames of %dx%dx%d samples",
+        return gs_fail(GS_ENOMEM, "gs_capture_alloc: cannot hold %d frames of %dx%dx%d samples",
                        cap->K, cap->width, cap->height, cap->bands);
     }
     for (int k = 0; k < cap->K; k++) {
-        snprintf(cap->frames[k].file, REC_PATH_MAX, "frame_%03d.png", k);
+        snprintf(cap->frames[k].file, GS_PATH_MAX, "frame_%03d.png", k);
         cap->frames[k].k = k;
         cap->frames[k].grid_hz_measured = NAN;
         cap->frames[k].start_s = NAN;
@@ -989,16 +866,16 @@ gs_status rec_capture_alloc(rec_capture *cap)
     return GS_OK;
 }
 
-gs_status rec_capture_alloc_hdr(rec_capture *cap)
+gs_status gs_capture_alloc_hdr(gs_capture *cap)
 {
     if (!cap || !cap->frames || !cap->raw)
-        return gs_fail(GS_EINVAL, "rec_capture_alloc_hdr: call rec_capture_alloc first");
-    if (cap->halvings) return gs_fail(GS_EINVAL, "rec_capture_alloc_hdr: already allocated");
+        return gs_fail(GS_EINVAL, "gs_capture_alloc_hdr: call gs_capture_alloc first");
+    if (cap->halvings) return gs_fail(GS_EINVAL, "gs_capture_alloc_hdr: already allocated");
     cap->halvings = calloc((size_t)cap->width * (size_t)cap->height * (size_t)cap->K, 1);
-    if (!cap->halvings) return gs_fail(GS_ENOMEM, "rec_capture_alloc_hdr: cannot hold the maps");
+    if (!cap->halvings) return gs_fail(GS_ENOMEM, "gs_capture_alloc_hdr: cannot hold the maps");
     for (int k = 0; k < cap->K; k++)
         if (!cap->frames[k].hdr_map[0])
-            snprintf(cap->frames[k].hdr_map, REC_PATH_MAX, "hdr_%03d.png", k);
+            snprintf(cap->frames[k].hdr_map, GS_PATH_MAX, "hdr_%03d.png", k);
     return GS_OK;
 }
 
@@ -1007,25 +884,25 @@ static gs_status write_png(const char *dir, const char *file, const void *pixels
 {
     unsigned char *png;
     size_t size;
-    gs_status st = rec_cv_png_encode(pixels, width, height, channels, depth16, &png, &size);
+    gs_status st = gs_png_encode(pixels, width, height, channels, depth16 ? 16 : 8, &png, &size);
     if (st != GS_OK) return gs_fail(st, "%s/%s: %s", dir, file, gs_detail());
     st = write_atomic(dir, file, png, size);
     free(png);
     return st;
 }
 
-gs_status rec_capture_write_frame(const char *dir, const rec_capture *cap, int k)
+gs_status gs_capture_write_frame(const char *dir, const gs_capture *cap, int k)
 {
     if (!dir || !cap || !cap->frames || !cap->raw)
-        return gs_fail(GS_EINVAL, "rec_capture_write_frame: NULL directory, capture or pixels");
+        return gs_fail(GS_EINVAL, "gs_capture_write_frame: NULL directory, capture or pixels");
     problem pr;
     if (!check_geometry(cap, &pr))
-        return gs_fail(GS_EINVAL, "%s: rec_capture_write_frame: field %s: expected %s", dir,
+        return gs_fail(GS_EINVAL, "%s: gs_capture_write_frame: field %s: expected %s", dir,
                        pr.field, pr.expect);
     if (k < 0 || k >= cap->K)
-        return gs_fail(GS_EINVAL, "%s: rec_capture_write_frame: k = %d: expected 0 to %d", dir, k,
+        return gs_fail(GS_EINVAL, "%s: gs_capture_write_frame: k = %d: expected 0 to %d", dir, k,
                        cap->K - 1);
-    const rec_frame_info *f = &cap->frames[k];
+    const gs_frame_info *f = &cap->frames[k];
     if (!valid_file_name(f->file))
         return gs_fail(GS_EINVAL, "%s: field frames[%d].file: expected %s", dir, k, EXP_FILE);
     size_t plane = (size_t)cap->width * (size_t)cap->height;
@@ -1036,12 +913,12 @@ gs_status rec_capture_write_frame(const char *dir, const rec_capture *cap, int k
                            "frame's own", dir, k, EXP_FILE);
         if (!h)
             return gs_fail(GS_EINVAL, "%s: field frames[%d].hdr_map names a map but the capture "
-                           "has no halvings (rec_capture_alloc_hdr)", dir, k);
+                           "has no halvings (gs_capture_alloc_hdr)", dir, k);
         for (size_t p = 0; p < plane; p++)
-            if (h[p] > REC_MAX_HALVINGS)
+            if (h[p] > GS_MAX_HALVINGS)
                 return gs_fail(GS_EINVAL, "%s: frame %d pixel (x %zu, y %zu): %d halvings: "
                                "expected 0 to %d", dir, k, p % (size_t)cap->width,
-                               p / (size_t)cap->width, h[p], REC_MAX_HALVINGS);
+                               p / (size_t)cap->width, h[p], GS_MAX_HALVINGS);
     } else if (h) {
         for (size_t p = 0; p < plane; p++)
             if (h[p])
@@ -1058,10 +935,10 @@ gs_status rec_capture_write_frame(const char *dir, const rec_capture *cap, int k
     return st;
 }
 
-gs_status rec_capture_write_json(const char *dir, const rec_capture *cap)
+gs_status gs_capture_write_json(const char *dir, const gs_capture *cap)
 {
     if (!dir || !cap || !cap->frames)
-        return gs_fail(GS_EINVAL, "rec_capture_write_json: NULL directory, capture or frames");
+        return gs_fail(GS_EINVAL, "gs_capture_write_json: NULL directory, capture or frames");
     problem pr;
     if (!check_capture(cap, &pr))
         return gs_fail(GS_EINVAL, "%s/%s (writing): field %s: expected %s", dir, CAPTURE_JSON,
@@ -1077,7 +954,7 @@ gs_status rec_capture_write_json(const char *dir, const rec_capture *cap)
         }
         station = station_text(st_obj);
         json_decref(st_obj);
-        if (!station) return gs_fail(GS_ENOMEM, "rec_capture_write_json: station");
+        if (!station) return gs_fail(GS_ENOMEM, "gs_capture_write_json: station");
     }
     /* the frames must be there: a capture.json never names a missing file */
     for (int k = 0; k < cap->K; k++) {
@@ -1089,14 +966,14 @@ gs_status rec_capture_write_json(const char *dir, const rec_capture *cap)
             if (!join(path, sizeof path, dir, names[i]) || stat(path, &sb) != 0) {
                 free(station);
                 return gs_fail(GS_ENOTFOUND, "%s: missing: write every frame "
-                               "(rec_capture_write_frame) before capture.json", path);
+                               "(gs_capture_write_frame) before capture.json", path);
             }
         }
     }
     text_buf t = {0};
     char num[40];
     tb_printf(&t, "{\n  \"format\": \"%s\",\n  \"grid_hz\": %d,\n  \"K\": %d,\n  \"bands\": %d,\n"
-              "  \"width\": %d,\n  \"height\": %d,\n", REC_CAPTURE_FORMAT, cap->grid_hz, cap->K,
+              "  \"width\": %d,\n  \"height\": %d,\n", GS_CAPTURE_FORMAT, cap->grid_hz, cap->K,
               cap->bands, cap->width, cap->height);
     fmt_real(num, sizeof num, cap->saturation_dn);
     tb_printf(&t, "  \"saturation\": %s,\n", num);
@@ -1115,7 +992,7 @@ gs_status rec_capture_write_json(const char *dir, const rec_capture *cap)
     if (station) tb_printf(&t, "  \"station\": %s,\n", station);
     tb_printf(&t, "  \"frames\": [\n");
     for (int k = 0; k < cap->K; k++) {
-        const rec_frame_info *f = &cap->frames[k];
+        const gs_frame_info *f = &cap->frames[k];
         tb_printf(&t, "    {\"file\": ");
         tb_string(&t, f->file);
         fmt_real(num, sizeof num, f->cycles);
@@ -1137,14 +1014,14 @@ gs_status rec_capture_write_json(const char *dir, const rec_capture *cap)
     tb_printf(&t, "  ]\n}\n");
     free(station);
     gs_status st;
-    if (t.oom) st = gs_fail(GS_ENOMEM, "rec_capture_write_json: cannot build the text");
+    if (t.oom) st = gs_fail(GS_ENOMEM, "gs_capture_write_json: cannot build the text");
     else st = ensure_dir(dir);
     if (st == GS_OK) st = write_atomic(dir, CAPTURE_JSON, t.s, t.n);
     free(t.s);
     return st;
 }
 
-void rec_capture_release(rec_capture *cap)
+void gs_capture_release(gs_capture *cap)
 {
     if (!cap) return;
     free(cap->frames);
@@ -1154,7 +1031,7 @@ void rec_capture_release(rec_capture *cap)
     memset(cap, 0, sizeof *cap);
 }
 
-double rec_capture_value(const rec_capture *cap, int k, int y, int x, int band)
+double gs_capture_value(const gs_capture *cap, int k, int y, int x, int band)
 {
     if (!cap || !cap->raw || !cap->frames || k < 0 || k >= cap->K || y < 0 ||
         y >= cap->height || x < 0 || x >= cap->width || band < 0 || band >= cap->bands)

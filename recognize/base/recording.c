@@ -9,7 +9,7 @@
  * sine to the voltage (as the paper's Fig. 2) for the grid frequency and time zero; fold every
  * sample into n phase bins and average; keep the harmonics that stand above the fold's noise
  * (band-limited BRF, brf.c); normalise to mean 1. */
-#include "recognize/internal.h"
+#include "recognize/base/internal.h"
 
 #include <complex.h>
 #include <math.h>
@@ -178,7 +178,7 @@ static gs_status spectral_peak(const char *path, const double *x, size_t N, doub
         for (size_t i = 0; i < N; i++) mean += x[i] / (double)N;
         for (size_t i = 0; i < N; i++)
             buf[i] = (x[i] - mean) * (0.5 - 0.5 * cos(two_pi * (double)i / (double)(N - 1)));
-        st = rec_brf_spectrum(buf, (int)P, C);
+        st = gs_brf_spectrum(buf, (int)P, C);
     }
     if (st == GS_OK) {
         double df = 1.0 / ((double)P * dt);
@@ -376,7 +376,7 @@ static gs_status fold(const char *path, const double *x, size_t N, double dt, do
 
 /* -------------------------------------------------------------- the bulb */
 
-static void names_from_path(const char *path, rec_bulb *out)
+static void names_from_path(const char *path, gs_bulb *out)
 {
     const char *base = strrchr(path, '/');
     base = base ? base + 1 : path;
@@ -384,7 +384,7 @@ static void names_from_path(const char *path, rec_bulb *out)
     const char *dot = strrchr(base, '.');
     if (dot && dot > base) len = (size_t)(dot - base);
     size_t k = 0;
-    for (size_t i = 0; i < len && k + 1 < REC_ID_MAX; i++) {
+    for (size_t i = 0; i < len && k + 1 < GS_ID_MAX; i++) {
         char c = base[i];
         int ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
                  c == '_' || c == '-' || c == '.';
@@ -393,21 +393,21 @@ static void names_from_path(const char *path, rec_bulb *out)
     out->id[k] = '\0';
     if (k == 0) strcpy(out->id, "recording");
     k = 0;
-    for (size_t i = 0; i < len && k + 1 < REC_NAME_MAX; i++)
+    for (size_t i = 0; i < len && k + 1 < GS_NAME_MAX; i++)
         out->name[k++] = strchr(",\"\r\n", base[i]) ? ' ' : base[i];
     out->name[k] = '\0';
 }
 
-gs_status rec_recording_to_bulb(const char *path, int voltage_column, int n, rec_bulb *out,
-                                rec_recording_info *info)
+gs_status gs_recording_to_bulb(const char *path, int voltage_column, int n, gs_bulb *out,
+                                gs_recording_info *info)
 {
     memset(out, 0, sizeof *out);
     if (voltage_column == 1 || voltage_column == 2)
         return gs_fail(GS_EINVAL, "%s: voltage column %d: expected 0 (none) or a column after time "
                        "and value (>= 3)", path, voltage_column);
     if (voltage_column < 0) voltage_column = 0;
-    rec_brf brf;
-    gs_status st = rec_brf_init(&brf, n, 1);
+    gs_brf brf;
+    gs_status st = gs_brf_init(&brf, n, 1);
     if (st != GS_OK) return st;
     series s = {0};
     if ((st = read_series(path, voltage_column, &s)) != GS_OK) goto done;
@@ -427,7 +427,7 @@ gs_status rec_recording_to_bulb(const char *path, int voltage_column, int n, rec
      * negative-to-positive crossing, time zero (paper Fig. 2). */
     int grid = nominal_grid(f, 2.0), voltage_grid = 0;
     double f_fold = f, t_ref = 0.0;
-    rec_ref ref = grid ? REC_REF_NONE : REC_REF_UNLOCKED;
+    gs_ref ref = grid ? GS_REF_NONE : GS_REF_UNLOCKED;
     if (voltage_column) {
         double v_lo = fmax(40.0, 1.0 / T), fv;
         if (v_lo >= 70.0) {
@@ -449,10 +449,10 @@ gs_status rec_recording_to_bulb(const char *path, int voltage_column, int n, rec
             double cyc = -atan2(a, b) / two_pi;
             t_ref = (cyc - floor(cyc)) / fv;
             f_fold = 2.0 * fv;
-            ref = REC_REF_VOLTAGE;
+            ref = GS_REF_VOLTAGE;
         } else {
             grid = 0;
-            ref = REC_REF_UNLOCKED;
+            ref = GS_REF_UNLOCKED;
         }
     }
 
@@ -464,7 +464,7 @@ gs_status rec_recording_to_bulb(const char *path, int voltage_column, int n, rec
     for (int j = 1; j < n; j++) lo = fmin(lo, brf.v[j]);
     if (lo < 0)
         for (int j = 0; j < n; j++) brf.v[j] -= lo;
-    if (rec_brf_normalize(&brf, NULL) != GS_OK) {
+    if (gs_brf_normalize(&brf, NULL) != GS_OK) {
         st = gs_fail(GS_ENUMERIC, "%s: field value: mean light level is not positive: expected a "
                      "lit photodiode", path);
         goto done;
@@ -473,11 +473,11 @@ gs_status rec_recording_to_bulb(const char *path, int voltage_column, int n, rec
         /* No flicker above the noise: a flat BRF, valid at any phase; its frequency is unknown. */
         f_fold = NAN;
         grid = voltage_grid;
-        ref = voltage_grid ? REC_REF_VOLTAGE : REC_REF_NONE;
+        ref = voltage_grid ? GS_REF_VOLTAGE : GS_REF_NONE;
     }
 
     names_from_path(path, out);
-    out->type = REC_TECH_UNKNOWN;
+    out->type = GS_TECH_UNKNOWN;
     out->watts = 0.0;
     out->grid_hz = grid ? grid : voltage_grid;
     strcpy(out->sensor, "photodiode");
@@ -490,11 +490,11 @@ gs_status rec_recording_to_bulb(const char *path, int voltage_column, int n, rec
         info->sample_rate_hz = rate;
         info->flicker_hz = f_fold;
         info->cycles = T * f_fold;
-        info->percent_flicker = rec_brf_percent_flicker(&out->brf, 0);
+        info->percent_flicker = gs_brf_percent_flicker(&out->brf, 0);
         info->grid_hz = grid;
     }
 done:
-    rec_brf_release(&brf);
+    gs_brf_release(&brf);
     free(s.t);
     free(s.x);
     free(s.volt);

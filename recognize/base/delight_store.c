@@ -1,6 +1,6 @@
 /* delight_store.c - DELIGHT (paper Sec. 3) on disk: a versioned SQLite table set and CSV.
  *
- * SQLite schema, version REC_DELIGHT_SCHEMA_VERSION (= PRAGMA user_version):
+ * SQLite schema, version GS_DELIGHT_SCHEMA_VERSION (= PRAGMA user_version):
  *   delight_meta(key TEXT PRIMARY KEY, value TEXT)  -- format = gridsurvey-delight, schema_version
  *   delight_bulbs(bulb_id, grid_hz, sensor, ref, type, name, watts, bands, n,
  *                 PRIMARY KEY (bulb_id, grid_hz, sensor))         -- rowid keeps the order
@@ -9,9 +9,9 @@
  *                     FOREIGN KEY (bulb_id, grid_hz, sensor) REFERENCES delight_bulbs)
  * samples is a BLOB of n little-endian IEEE-754 doubles.
  *
- * Loading and importing build a temporary collection (every entry checked by rec_delight_add)
+ * Loading and importing build a temporary collection (every entry checked by gs_delight_add)
  * and append it to d only when the whole file is good. */
-#include "recognize/internal.h"
+#include "recognize/base/internal.h"
 
 #include <math.h>
 #include <sqlite3.h>
@@ -27,24 +27,24 @@ static const char *band_name(int bands, int band)
     return bands == 1 ? "mono" : rgb[band];
 }
 
-static int same_key(const rec_bulb *a, const rec_bulb *b)
+static int same_key(const gs_bulb *a, const gs_bulb *b)
 {
     return strcmp(a->id, b->id) == 0 && a->grid_hz == b->grid_hz && strcmp(a->sensor, b->sensor) == 0;
 }
 
 /* Append every bulb of src to d; a clash with an entry of d adds nothing. Only running out of
  * memory half-way could leave a prefix of src in d. */
-static gs_status append_all(rec_delight *d, const rec_delight *src, const char *path)
+static gs_status append_all(gs_delight *d, const gs_delight *src, const char *path)
 {
-    for (size_t i = 0; i < rec_delight_count(src); i++)
-        for (size_t j = 0; j < rec_delight_count(d); j++) {
-            const rec_bulb *a = rec_delight_get(src, i), *b = rec_delight_get(d, j);
+    for (size_t i = 0; i < gs_delight_count(src); i++)
+        for (size_t j = 0; j < gs_delight_count(d); j++) {
+            const gs_bulb *a = gs_delight_get(src, i), *b = gs_delight_get(d, j);
             if (same_key(a, b))
                 return gs_fail(GS_EINVAL, "%s: bulb %s at %d Hz with sensor %s: already in the "
                                "database", path, a->id, a->grid_hz, a->sensor);
         }
-    for (size_t i = 0; i < rec_delight_count(src); i++) {
-        gs_status s = rec_delight_add(d, rec_delight_get(src, i));
+    for (size_t i = 0; i < gs_delight_count(src); i++) {
+        gs_status s = gs_delight_add(d, gs_delight_get(src, i));
         if (s != GS_OK) return s;
     }
     return GS_OK;
@@ -59,11 +59,11 @@ static gs_status with_location(gs_status s, const char *path, size_t line)
     return gs_fail(s, "%s: %s", path, msg);
 }
 
-static int parse_ref(const char *s, rec_ref *r)
+static int parse_ref(const char *s, gs_ref *r)
 {
-    for (int i = REC_REF_VOLTAGE; i <= REC_REF_UNLOCKED; i++)
-        if (strcmp(s, rec_ref_name((rec_ref)i)) == 0) {
-            *r = (rec_ref)i;
+    for (int i = GS_REF_VOLTAGE; i <= GS_REF_UNLOCKED; i++)
+        if (strcmp(s, gs_ref_name((gs_ref)i)) == 0) {
+            *r = (gs_ref)i;
             return 1;
         }
     return 0;
@@ -106,7 +106,7 @@ static gs_status sql_fail(sqlite3 *db, const char *path, const char *what)
     const char *msg = db ? sqlite3_errmsg(db) : "out of memory";
     if (code == SQLITE_NOTADB)
         return gs_fail(GS_EFORMAT, "%s: not a DELIGHT database: expected an SQLite file with format "
-                       "'%s', schema version %d (%s)", path, FORMAT_NAME, REC_DELIGHT_SCHEMA_VERSION, msg);
+                       "'%s', schema version %d (%s)", path, FORMAT_NAME, GS_DELIGHT_SCHEMA_VERSION, msg);
     if (code == SQLITE_CANTOPEN) return gs_fail(GS_EIO, "%s: cannot open: %s", path, msg);
     return gs_fail(GS_ESQL, "%s: %s: %s", path, what, msg);
 }
@@ -142,7 +142,7 @@ static double get_le(const unsigned char *p)
     return v;
 }
 
-gs_status rec_delight_save(const rec_delight *d, const char *path)
+gs_status gs_delight_save(const gs_delight *d, const char *path)
 {
     sqlite3 *db = NULL;
     sqlite3_stmt *ins_bulb = NULL, *ins_band = NULL;
@@ -154,9 +154,9 @@ gs_status rec_delight_save(const rec_delight *d, const char *path)
         goto done;
     }
     if ((s = user_version(db, path, &version)) != GS_OK) goto done;
-    if (version != 0 && version != REC_DELIGHT_SCHEMA_VERSION) {
+    if (version != 0 && version != GS_DELIGHT_SCHEMA_VERSION) {
         s = gs_fail(GS_EFORMAT, "%s: schema version %d: expected a new file or a DELIGHT database "
-                    "(version %d); not overwriting", path, version, REC_DELIGHT_SCHEMA_VERSION);
+                    "(version %d); not overwriting", path, version, GS_DELIGHT_SCHEMA_VERSION);
         goto done;
     }
     if (sqlite3_exec(db, "PRAGMA foreign_keys = ON; BEGIN IMMEDIATE", NULL, NULL, NULL) != SQLITE_OK) {
@@ -167,7 +167,7 @@ gs_status rec_delight_save(const rec_delight *d, const char *path)
     char pragma[96];
     snprintf(pragma, sizeof pragma,
              "INSERT INTO delight_meta VALUES ('schema_version', '%d'); PRAGMA user_version = %d",
-             REC_DELIGHT_SCHEMA_VERSION, REC_DELIGHT_SCHEMA_VERSION);
+             GS_DELIGHT_SCHEMA_VERSION, GS_DELIGHT_SCHEMA_VERSION);
     if (sqlite3_exec(db, schema_sql, NULL, NULL, NULL) != SQLITE_OK ||
         sqlite3_exec(db, pragma, NULL, NULL, NULL) != SQLITE_OK) {
         s = sql_fail(db, path, "creating the DELIGHT tables");
@@ -180,15 +180,15 @@ gs_status rec_delight_save(const rec_delight *d, const char *path)
         s = sql_fail(db, path, "preparing inserts");
         goto done;
     }
-    for (size_t i = 0; i < rec_delight_count(d); i++) {
-        const rec_bulb *b = rec_delight_get(d, i);
+    for (size_t i = 0; i < gs_delight_count(d); i++) {
+        const gs_bulb *b = gs_delight_get(d, i);
         int n = b->brf.n;
         sqlite3_reset(ins_bulb);
         sqlite3_bind_text(ins_bulb, 1, b->id, -1, SQLITE_STATIC);
         sqlite3_bind_int(ins_bulb, 2, b->grid_hz);
         sqlite3_bind_text(ins_bulb, 3, b->sensor, -1, SQLITE_STATIC);
-        sqlite3_bind_text(ins_bulb, 4, rec_ref_name(b->ref), -1, SQLITE_STATIC);
-        sqlite3_bind_text(ins_bulb, 5, rec_tech_name(b->type), -1, SQLITE_STATIC);
+        sqlite3_bind_text(ins_bulb, 4, gs_ref_name(b->ref), -1, SQLITE_STATIC);
+        sqlite3_bind_text(ins_bulb, 5, gs_tech_name(b->type), -1, SQLITE_STATIC);
         sqlite3_bind_text(ins_bulb, 6, b->name, -1, SQLITE_STATIC);
         sqlite3_bind_double(ins_bulb, 7, b->watts);
         sqlite3_bind_int(ins_bulb, 8, b->brf.bands);
@@ -234,7 +234,7 @@ done:
 }
 
 /* The BRF bands of bulb b (id, grid_hz, sensor, bands and n set) from the band query q. */
-static gs_status load_bands(sqlite3 *db, sqlite3_stmt *q, const char *path, rec_bulb *b)
+static gs_status load_bands(sqlite3 *db, sqlite3_stmt *q, const char *path, gs_bulb *b)
 {
     sqlite3_reset(q);
     sqlite3_bind_text(q, 1, b->id, -1, SQLITE_STATIC);
@@ -261,7 +261,7 @@ static gs_status load_bands(sqlite3 *db, sqlite3_stmt *q, const char *path, rec_
 }
 
 /* One row of the bulb query q into *b (BRF allocated, bands not yet read). */
-static gs_status load_bulb(sqlite3_stmt *q, const char *path, rec_bulb *b)
+static gs_status load_bulb(sqlite3_stmt *q, const char *path, gs_bulb *b)
 {
     memset(b, 0, sizeof *b);
     const char *id = (const char *)sqlite3_column_text(q, 0);
@@ -272,23 +272,23 @@ static gs_status load_bulb(sqlite3_stmt *q, const char *path, rec_bulb *b)
     if (!id || !sensor || !ref || !type || !name || !copy_str(b->id, sizeof b->id, id) ||
         !copy_str(b->sensor, sizeof b->sensor, sensor) || !copy_str(b->name, sizeof b->name, name))
         return gs_fail(GS_EFORMAT, "%s: bulb '%s': expected bulb_id, sensor and name of at most %d, "
-                       "%d and %d characters", path, id ? id : "", REC_ID_MAX - 1,
-                       REC_SENSOR_MAX - 1, REC_NAME_MAX - 1);
+                       "%d and %d characters", path, id ? id : "", GS_ID_MAX - 1,
+                       GS_SENSOR_MAX - 1, GS_NAME_MAX - 1);
     b->grid_hz = sqlite3_column_int(q, 1);
     if (!parse_ref(ref, &b->ref))
         return gs_fail(GS_EFORMAT, "%s: bulb %s: ref '%s': expected voltage, none or unlocked", path,
                        b->id, ref);
-    if (rec_tech_parse(type, &b->type) != GS_OK) return with_location(GS_EFORMAT, path, 0);
+    if (gs_tech_parse(type, &b->type) != GS_OK) return with_location(GS_EFORMAT, path, 0);
     b->watts = sqlite3_column_double(q, 6);
-    return rec_brf_init(&b->brf, sqlite3_column_int(q, 8), sqlite3_column_int(q, 7));
+    return gs_brf_init(&b->brf, sqlite3_column_int(q, 8), sqlite3_column_int(q, 7));
 }
 
-gs_status rec_delight_load(rec_delight *d, const char *path)
+gs_status gs_delight_load(gs_delight *d, const char *path)
 {
     sqlite3 *db = NULL;
     sqlite3_stmt *meta = NULL, *bulbs = NULL, *bands = NULL;
-    rec_delight *tmp = rec_delight_new();
-    rec_bulb b = {0};
+    gs_delight *tmp = gs_delight_new();
+    gs_bulb b = {0};
     int version = 0;
     gs_status s = GS_OK;
     if (!tmp) return gs_fail(GS_ENOMEM, "%s: cannot allocate a DELIGHT database", path);
@@ -298,7 +298,7 @@ gs_status rec_delight_load(rec_delight *d, const char *path)
     }
     if ((s = user_version(db, path, &version)) != GS_OK) goto done;
     const char *format = NULL;
-    if (version == REC_DELIGHT_SCHEMA_VERSION &&
+    if (version == GS_DELIGHT_SCHEMA_VERSION &&
         sqlite3_prepare_v2(db, "SELECT value FROM delight_meta WHERE key = 'format'", -1, &meta,
                            NULL) == SQLITE_OK &&
         sqlite3_step(meta) == SQLITE_ROW)
@@ -306,7 +306,7 @@ gs_status rec_delight_load(rec_delight *d, const char *path)
     if (!format || strcmp(format, FORMAT_NAME) != 0) {
         s = gs_fail(GS_EFORMAT, "%s: not a DELIGHT database: expected format '%s' with schema version "
                     "%d (found user_version %d, format '%s')", path, FORMAT_NAME,
-                    REC_DELIGHT_SCHEMA_VERSION, version, format ? format : "none");
+                    GS_DELIGHT_SCHEMA_VERSION, version, format ? format : "none");
         goto done;
     }
     if (sqlite3_prepare_v2(db, "SELECT bulb_id, grid_hz, sensor, ref, type, name, watts, bands, n "
@@ -321,11 +321,11 @@ gs_status rec_delight_load(rec_delight *d, const char *path)
     while ((rc = sqlite3_step(bulbs)) == SQLITE_ROW) {
         if ((s = load_bulb(bulbs, path, &b)) != GS_OK) goto done;
         if ((s = load_bands(db, bands, path, &b)) != GS_OK) goto done;
-        if ((s = rec_delight_add(tmp, &b)) != GS_OK) {
+        if ((s = gs_delight_add(tmp, &b)) != GS_OK) {
             s = with_location(s, path, 0);
             goto done;
         }
-        rec_bulb_release(&b);
+        gs_bulb_release(&b);
     }
     if (rc != SQLITE_DONE) {
         s = sql_fail(db, path, "reading bulbs");
@@ -333,12 +333,12 @@ gs_status rec_delight_load(rec_delight *d, const char *path)
     }
     s = append_all(d, tmp, path);
 done:
-    rec_bulb_release(&b);
+    gs_bulb_release(&b);
     sqlite3_finalize(meta);
     sqlite3_finalize(bulbs);
     sqlite3_finalize(bands);
     sqlite3_close(db);
-    rec_delight_free(tmp);
+    gs_delight_free(tmp);
     return s;
 }
 
@@ -348,19 +348,19 @@ static const char *const csv_columns[] = {"bulb_id", "type", "name", "watts", "g
                                           "sensor", "band", "chromaticity", "n"};
 #define CSV_FIXED 9
 
-gs_status rec_delight_export_csv(const rec_delight *d, FILE *out)
+gs_status gs_delight_export_csv(const gs_delight *d, FILE *out)
 {
     int max_n = 0;
-    for (size_t i = 0; i < rec_delight_count(d); i++)
-        if (rec_delight_get(d, i)->brf.n > max_n) max_n = rec_delight_get(d, i)->brf.n;
+    for (size_t i = 0; i < gs_delight_count(d); i++)
+        if (gs_delight_get(d, i)->brf.n > max_n) max_n = gs_delight_get(d, i)->brf.n;
     for (int c = 0; c < CSV_FIXED; c++) fprintf(out, "%s%s", c ? "," : "", csv_columns[c]);
     for (int j = 0; j < max_n; j++) fprintf(out, ",v%d", j);
     fputc('\n', out);
-    for (size_t i = 0; i < rec_delight_count(d); i++) {
-        const rec_bulb *b = rec_delight_get(d, i);
+    for (size_t i = 0; i < gs_delight_count(d); i++) {
+        const gs_bulb *b = gs_delight_get(d, i);
         for (int band = 0; band < b->brf.bands; band++) {
-            fprintf(out, "%s,%s,%s,%.17g,%d,%s/%s,%s,%.17g,%d", b->id, rec_tech_name(b->type),
-                    b->name, b->watts, b->grid_hz, b->sensor, rec_ref_name(b->ref),
+            fprintf(out, "%s,%s,%s,%.17g,%d,%s/%s,%s,%.17g,%d", b->id, gs_tech_name(b->type),
+                    b->name, b->watts, b->grid_hz, b->sensor, gs_ref_name(b->ref),
                     band_name(b->brf.bands, band), b->chroma[band], b->brf.n);
             const double *v = b->brf.v + (size_t)band * (size_t)b->brf.n;
             for (int j = 0; j < b->brf.n; j++) fprintf(out, ",%.17g", v[j]);
@@ -421,7 +421,7 @@ typedef struct {
     int header_n;      /* v columns in the header */
     int active;        /* a bulb is being assembled */
     int next_band;
-    rec_bulb b;
+    gs_bulb b;
 } csv_state;
 
 static gs_status bad_field(const csv_state *st, const char *name, const char *expected)
@@ -447,21 +447,21 @@ static gs_status check_header(csv_state *st, const fields *fs)
 }
 
 /* Finish the bulb being assembled: add it to tmp. */
-static gs_status finish_bulb(csv_state *st, rec_delight *tmp)
+static gs_status finish_bulb(csv_state *st, gs_delight *tmp)
 {
-    gs_status s = rec_delight_add(tmp, &st->b);
-    rec_bulb_release(&st->b);
+    gs_status s = gs_delight_add(tmp, &st->b);
+    gs_bulb_release(&st->b);
     st->active = 0;
     return s == GS_OK ? s : with_location(s, st->path, st->first_line);
 }
 
-static gs_status import_row(csv_state *st, fields *fs, rec_delight *tmp)
+static gs_status import_row(csv_state *st, fields *fs, gs_delight *tmp)
 {
     if (fs->count < CSV_FIXED) return bad_field(st, csv_columns[fs->count], "a value (truncated row)");
     char **f = fs->f;
-    rec_bulb r = {0};
+    gs_bulb r = {0};
     if (!*f[0] || !copy_str(r.id, sizeof r.id, f[0])) return bad_field(st, "bulb_id", "1 to 47 characters");
-    if (rec_tech_parse(f[1], &r.type) != GS_OK)
+    if (gs_tech_parse(f[1], &r.type) != GS_OK)
         return bad_field(st, "type", "a technology (incandescent, halogen, cfl, led_pwm, ..., unknown)");
     if (!copy_str(r.name, sizeof r.name, f[2])) return bad_field(st, "name", "at most 95 characters");
     if (!parse_double(f[3], &r.watts)) return bad_field(st, "watts", "a finite number");
@@ -493,17 +493,17 @@ static gs_status import_row(csv_state *st, fields *fs, rec_delight *tmp)
     if (!st->active) {
         int bands = strcmp(f[6], "mono") == 0 ? 1 : strcmp(f[6], "R") == 0 ? 3 : 0;
         if (!bands) return bad_field(st, "band", "mono or R (the first band of a bulb)");
-        for (size_t i = 0; i < rec_delight_count(tmp); i++)
-            if (same_key(rec_delight_get(tmp, i), &r))
+        for (size_t i = 0; i < gs_delight_count(tmp); i++)
+            if (same_key(gs_delight_get(tmp, i), &r))
                 return bad_field(st, "bulb_id", "the rows of one bulb, grid and sensor to be consecutive");
         st->b = r;
-        gs_status s = rec_brf_init(&st->b.brf, n, bands);
+        gs_status s = gs_brf_init(&st->b.brf, n, bands);
         if (s != GS_OK) return s;
         st->active = 1;
         st->next_band = 0;
         st->first_line = st->line;
     } else {
-        const rec_bulb *b = &st->b;
+        const gs_bulb *b = &st->b;
         if (strcmp(f[6], band_name(b->brf.bands, st->next_band)) != 0)
             return bad_field(st, "band", band_name(b->brf.bands, st->next_band));
         if (r.type != b->type) return bad_field(st, "type", "the same type in every band of a bulb");
@@ -524,11 +524,11 @@ static gs_status import_row(csv_state *st, fields *fs, rec_delight *tmp)
     return GS_OK;
 }
 
-gs_status rec_delight_import_csv(rec_delight *d, const char *path)
+gs_status gs_delight_import_csv(gs_delight *d, const char *path)
 {
     FILE *in = fopen(path, "r");
     if (!in) return gs_fail(GS_EIO, "%s: cannot open", path);
-    rec_delight *tmp = rec_delight_new();
+    gs_delight *tmp = gs_delight_new();
     csv_state st = {.path = path};
     fields fs = {0};
     char *line = NULL;
@@ -559,10 +559,10 @@ gs_status rec_delight_import_csv(rec_delight *d, const char *path)
         s = bad_field(&st, "band", band_name(st.b.brf.bands, st.next_band));
     }
     if (s == GS_OK) s = append_all(d, tmp, path);
-    rec_bulb_release(&st.b);
+    gs_bulb_release(&st.b);
     free(fs.f);
     free(line);
     fclose(in);
-    rec_delight_free(tmp);
+    gs_delight_free(tmp);
     return s;
 }

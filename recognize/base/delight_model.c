@@ -1,4 +1,4 @@
-/* delight_model.c - the built-in DELIGHT substitute (paper Sec. 3): rec_delight_generate().
+/* delight_model.c - the built-in DELIGHT substitute (paper Sec. 3): gs_delight_generate().
  *
  * The paper's DELIGHT database is not public, so every bulb here is a physical model of its lamp
  * technology, calibrated to shared/BULBS.md (tags: [M] measured, [L] literature, [D] derived).
@@ -17,7 +17,7 @@
  *     B*(t, sigma) = I(t, sigma) / mean I(sigma).
  *  3. Reduction to n samples: the DFT of the fine samples keeps the harmonics h < n/2 with a
  *     raised-cosine taper from n/4 to n/2. The result is a trigonometric polynomial without a
- *     Nyquist term (rec_brf_shift composes exactly) and with little Gibbs ringing at sharp edges.
+ *     Nyquist term (gs_brf_shift composes exactly) and with little Gibbs ringing at sharp edges.
  *  4. The monochrome ("photodiode") BRF is sum_sigma Q(sigma) B*(t, sigma), i.e. a sensor whose
  *     sensitivity is the sum of the three bands', so mono and RGB entries are consistent.
  *
@@ -30,7 +30,7 @@
  * amplitude for regulated drivers). The other grid's entry is the same physical bulb (time
  * constants in seconds, design ratios) at the other frequency, so it is not a resampled copy.
  */
-#include "recognize/internal.h"
+#include "recognize/base/internal.h"
 
 #include <fftw3.h>
 #include <math.h>
@@ -444,7 +444,7 @@ enum variant {
 typedef struct {
     const char *id;
     const char *name;
-    rec_tech tech;
+    gs_tech tech;
     double watts;
     double volts;      /* rated voltage (filament lamps); 0 = any mains */
     int native_hz;     /* grid whose percent flicker hits the target */
@@ -458,68 +458,68 @@ typedef struct {
 static const bulb_spec bulbs[] = {
     /* incandescent: 120 V 4-6 % (50-60 W), 10 % (25 W) [M]; 230 V 7-12 % (40-100 W),
      * 15-25 % (15-25 W) [D]. 40 W at 120 V interpolates; 100 W at 120 V takes the lower half. */
-    {"inc-a19-25w-120v", "Incandescent A19 25 W 120 V", REC_TECH_INCANDESCENT, 25, 120, 60, 9.2, 10.8, V_NONE, 0},
-    {"inc-a19-40w-120v", "Incandescent A19 40 W 120 V", REC_TECH_INCANDESCENT, 40, 120, 60, 6.5, 8.5, V_NONE, 0},
-    {"inc-a19-60w-120v", "Incandescent A19 60 W 120 V", REC_TECH_INCANDESCENT, 60, 120, 60, 4.3, 5.7, V_NONE, 0},
-    {"inc-a19-100w-120v", "Incandescent A19 100 W 120 V", REC_TECH_INCANDESCENT, 100, 120, 60, 4.1, 4.8, V_NONE, 0},
-    {"inc-a60-25w-230v", "Incandescent A60 25 W 230 V", REC_TECH_INCANDESCENT, 25, 230, 50, 16.0, 23.0, V_NONE, 0},
-    {"inc-a60-40w-230v", "Incandescent A60 40 W 230 V", REC_TECH_INCANDESCENT, 40, 230, 50, 10.0, 11.5, V_NONE, 0},
-    {"inc-a60-60w-230v", "Incandescent A60 60 W 230 V", REC_TECH_INCANDESCENT, 60, 230, 50, 8.5, 10.0, V_NONE, 0},
-    {"inc-a60-100w-230v", "Incandescent A60 100 W 230 V", REC_TECH_INCANDESCENT, 100, 230, 50, 7.3, 8.5, V_NONE, 0},
+    {"inc-a19-25w-120v", "Incandescent A19 25 W 120 V", GS_TECH_INCANDESCENT, 25, 120, 60, 9.2, 10.8, V_NONE, 0},
+    {"inc-a19-40w-120v", "Incandescent A19 40 W 120 V", GS_TECH_INCANDESCENT, 40, 120, 60, 6.5, 8.5, V_NONE, 0},
+    {"inc-a19-60w-120v", "Incandescent A19 60 W 120 V", GS_TECH_INCANDESCENT, 60, 120, 60, 4.3, 5.7, V_NONE, 0},
+    {"inc-a19-100w-120v", "Incandescent A19 100 W 120 V", GS_TECH_INCANDESCENT, 100, 120, 60, 4.1, 4.8, V_NONE, 0},
+    {"inc-a60-25w-230v", "Incandescent A60 25 W 230 V", GS_TECH_INCANDESCENT, 25, 230, 50, 16.0, 23.0, V_NONE, 0},
+    {"inc-a60-40w-230v", "Incandescent A60 40 W 230 V", GS_TECH_INCANDESCENT, 40, 230, 50, 10.0, 11.5, V_NONE, 0},
+    {"inc-a60-60w-230v", "Incandescent A60 60 W 230 V", GS_TECH_INCANDESCENT, 60, 230, 50, 8.5, 10.0, V_NONE, 0},
+    {"inc-a60-100w-230v", "Incandescent A60 100 W 230 V", GS_TECH_INCANDESCENT, 100, 230, 50, 7.3, 8.5, V_NONE, 0},
     /* halogen: mains 5-10 % [D/L]; 12 V on a magnetic transformer 1-3 % [D] */
-    {"hal-a60-42w-230v", "Halogen A60 42 W 230 V", REC_TECH_HALOGEN, 42, 230, 50, 6.3, 8.0, V_MAINS, 0},
-    {"hal-a19-72w-120v", "Halogen A19 72 W 120 V", REC_TECH_HALOGEN, 72, 120, 60, 6.3, 8.0, V_MAINS, 0},
-    {"hal-mr16-35w-12v", "Halogen MR16 35 W 12 V magnetic transformer", REC_TECH_HALOGEN, 35, 12, 50, 1.4, 2.4, V_LOWV, 0},
-    {"hal-mr16-50w-12v", "Halogen MR16 50 W 12 V magnetic transformer", REC_TECH_HALOGEN, 50, 12, 60, 1.4, 2.4, V_LOWV, 0},
+    {"hal-a60-42w-230v", "Halogen A60 42 W 230 V", GS_TECH_HALOGEN, 42, 230, 50, 6.3, 8.0, V_MAINS, 0},
+    {"hal-a19-72w-120v", "Halogen A19 72 W 120 V", GS_TECH_HALOGEN, 72, 120, 60, 6.3, 8.0, V_MAINS, 0},
+    {"hal-mr16-35w-12v", "Halogen MR16 35 W 12 V magnetic transformer", GS_TECH_HALOGEN, 35, 12, 50, 1.4, 2.4, V_LOWV, 0},
+    {"hal-mr16-50w-12v", "Halogen MR16 50 W 12 V magnetic transformer", GS_TECH_HALOGEN, 50, 12, 60, 1.4, 2.4, V_LOWV, 0},
     /* fluorescent, magnetic ballast: 25-40 % halophosphate, 15-25 % triphosphor [L] */
-    {"fl-t12-40w-halo", "Fluorescent T12 40 W cool white magnetic ballast", REC_TECH_FLUORESCENT_MAGNETIC, 40, 0, 60, 29.0, 34.0, V_HALO, 0},
-    {"fl-t8-18w-halo", "Fluorescent T8 18 W daylight magnetic ballast", REC_TECH_FLUORESCENT_MAGNETIC, 18, 0, 50, 29.0, 34.0, V_HALO, 0},
-    {"fl-t8-36w-tri", "Fluorescent T8 36 W 840 magnetic ballast", REC_TECH_FLUORESCENT_MAGNETIC, 36, 0, 50, 18.0, 21.5, V_TRI, 0},
-    {"fl-t8-58w-tri", "Fluorescent T8 58 W 830 magnetic ballast", REC_TECH_FLUORESCENT_MAGNETIC, 58, 0, 50, 18.0, 21.5, V_TRI, 0},
+    {"fl-t12-40w-halo", "Fluorescent T12 40 W cool white magnetic ballast", GS_TECH_FLUORESCENT_MAGNETIC, 40, 0, 60, 29.0, 34.0, V_HALO, 0},
+    {"fl-t8-18w-halo", "Fluorescent T8 18 W daylight magnetic ballast", GS_TECH_FLUORESCENT_MAGNETIC, 18, 0, 50, 29.0, 34.0, V_HALO, 0},
+    {"fl-t8-36w-tri", "Fluorescent T8 36 W 840 magnetic ballast", GS_TECH_FLUORESCENT_MAGNETIC, 36, 0, 50, 18.0, 21.5, V_TRI, 0},
+    {"fl-t8-58w-tri", "Fluorescent T8 58 W 830 magnetic ballast", GS_TECH_FLUORESCENT_MAGNETIC, 58, 0, 50, 18.0, 21.5, V_TRI, 0},
     /* fluorescent, electronic ballast: 1-10 % [L] */
-    {"fle-t8-32w", "Fluorescent T8 32 W electronic ballast", REC_TECH_FLUORESCENT_ELECTRONIC, 32, 0, 60, 2.5, 7.5, V_TRI, 0},
-    {"fle-t5-28w", "Fluorescent T5 28 W electronic ballast", REC_TECH_FLUORESCENT_ELECTRONIC, 28, 0, 50, 2.5, 7.5, V_TRI, 0},
-    {"fle-t5-54w", "Fluorescent T5HO 54 W electronic ballast", REC_TECH_FLUORESCENT_ELECTRONIC, 54, 0, 50, 2.5, 7.5, V_TRI, 0},
+    {"fle-t8-32w", "Fluorescent T8 32 W electronic ballast", GS_TECH_FLUORESCENT_ELECTRONIC, 32, 0, 60, 2.5, 7.5, V_TRI, 0},
+    {"fle-t5-28w", "Fluorescent T5 28 W electronic ballast", GS_TECH_FLUORESCENT_ELECTRONIC, 28, 0, 50, 2.5, 7.5, V_TRI, 0},
+    {"fle-t5-54w", "Fluorescent T5HO 54 W electronic ballast", GS_TECH_FLUORESCENT_ELECTRONIC, 54, 0, 50, 2.5, 7.5, V_TRI, 0},
     /* CFL: 5-30 % [L], 8.9 % measured [M] */
-    {"cfl-15w-m", "CFL spiral 15 W (8.9 % as measured)", REC_TECH_CFL, 15, 0, 50, 8.9, 8.9, V_TRI, 0},
-    {"cfl-11w", "CFL stick 11 W", REC_TECH_CFL, 11, 0, 50, 14.0, 22.0, V_TRI, 0},
-    {"cfl-20w", "CFL spiral 20 W", REC_TECH_CFL, 20, 0, 60, 7.0, 14.0, V_TRI, 0},
-    {"cfl-23w", "CFL spiral 23 W", REC_TECH_CFL, 23, 0, 60, 14.0, 22.0, V_TRI, 0},
+    {"cfl-15w-m", "CFL spiral 15 W (8.9 % as measured)", GS_TECH_CFL, 15, 0, 50, 8.9, 8.9, V_TRI, 0},
+    {"cfl-11w", "CFL stick 11 W", GS_TECH_CFL, 11, 0, 50, 14.0, 22.0, V_TRI, 0},
+    {"cfl-20w", "CFL spiral 20 W", GS_TECH_CFL, 20, 0, 60, 7.0, 14.0, V_TRI, 0},
+    {"cfl-23w", "CFL spiral 23 W", GS_TECH_CFL, 23, 0, 60, 14.0, 22.0, V_TRI, 0},
     /* LED, capacitor-filtered driver: 1-40 % [M: 2.5-36 % over 9 lamps] */
-    {"led-a60-9w-cap", "LED A60 9 W capacitor driver", REC_TECH_LED_CAPACITOR, 9, 0, 50, 3.0, 6.0, V_NONE, 0},
-    {"led-gu10-5w-cap", "LED GU10 5 W capacitor driver", REC_TECH_LED_CAPACITOR, 5, 0, 50, 24.0, 30.0, V_NONE, 0},
-    {"led-a19-8w-cap", "LED A19 8 W capacitor driver", REC_TECH_LED_CAPACITOR, 8, 0, 60, 8.0, 14.0, V_NONE, 0},
-    {"led-a19-11w-ksf", "LED A19 11 W high-CRI KSF capacitor driver", REC_TECH_LED_CAPACITOR, 11, 0, 60, 15.0, 22.0, V_KSF, 0},
-    {"led-br30-13w-ksf", "LED BR30 13 W KSF capacitor driver", REC_TECH_LED_CAPACITOR, 13, 0, 50, 8.0, 14.0, V_KSF, 0},
+    {"led-a60-9w-cap", "LED A60 9 W capacitor driver", GS_TECH_LED_CAPACITOR, 9, 0, 50, 3.0, 6.0, V_NONE, 0},
+    {"led-gu10-5w-cap", "LED GU10 5 W capacitor driver", GS_TECH_LED_CAPACITOR, 5, 0, 50, 24.0, 30.0, V_NONE, 0},
+    {"led-a19-8w-cap", "LED A19 8 W capacitor driver", GS_TECH_LED_CAPACITOR, 8, 0, 60, 8.0, 14.0, V_NONE, 0},
+    {"led-a19-11w-ksf", "LED A19 11 W high-CRI KSF capacitor driver", GS_TECH_LED_CAPACITOR, 11, 0, 60, 15.0, 22.0, V_KSF, 0},
+    {"led-br30-13w-ksf", "LED BR30 13 W KSF capacitor driver", GS_TECH_LED_CAPACITOR, 13, 0, 50, 8.0, 14.0, V_KSF, 0},
     /* LED, unfiltered linear AC driver: ~100 % [D] (no target: the dark interval sets it) */
-    {"led-fil-4w-lin", "LED filament 4 W linear AC driver", REC_TECH_LED_LINEAR, 4, 0, 50, 0, 0, V_NONE, 1},
-    {"led-a19-9w-lin2", "LED A19 9 W two-tap linear driver", REC_TECH_LED_LINEAR, 9, 0, 60, 0, 0, V_NONE, 2},
-    {"led-street-60w-lin3", "LED street light 60 W three-tap linear driver", REC_TECH_LED_LINEAR, 60, 0, 50, 0, 0, V_NONE, 3},
-    {"led-highbay-100w-lin4", "LED high bay 100 W four-tap linear driver", REC_TECH_LED_LINEAR, 100, 0, 60, 0, 0, V_NONE, 4},
+    {"led-fil-4w-lin", "LED filament 4 W linear AC driver", GS_TECH_LED_LINEAR, 4, 0, 50, 0, 0, V_NONE, 1},
+    {"led-a19-9w-lin2", "LED A19 9 W two-tap linear driver", GS_TECH_LED_LINEAR, 9, 0, 60, 0, 0, V_NONE, 2},
+    {"led-street-60w-lin3", "LED street light 60 W three-tap linear driver", GS_TECH_LED_LINEAR, 60, 0, 50, 0, 0, V_NONE, 3},
+    {"led-highbay-100w-lin4", "LED high bay 100 W four-tap linear driver", GS_TECH_LED_LINEAR, 100, 0, 60, 0, 0, V_NONE, 4},
     /* LED, PWM dimmed: 100 % at 200 Hz-25 kHz, not mains-locked [M]; the AC-locked BRF is the
      * driver's residual line ripple only (PF < 1 %, [D]) */
-    {"led-pwm-12w-downlight", "LED downlight 12 W PWM dimmed", REC_TECH_LED_PWM, 12, 0, 50, 0.15, 0.5, V_NONE, 0},
-    {"led-pwm-36w-panel", "LED panel 36 W PWM dimmed", REC_TECH_LED_PWM, 36, 0, 60, 0.15, 0.5, V_NONE, 0},
-    {"led-pwm-10w-rgbw", "LED RGBW 10 W PWM colour mixing", REC_TECH_LED_PWM, 10, 0, 50, 0.15, 0.5, V_RGBW, 0},
+    {"led-pwm-12w-downlight", "LED downlight 12 W PWM dimmed", GS_TECH_LED_PWM, 12, 0, 50, 0.15, 0.5, V_NONE, 0},
+    {"led-pwm-36w-panel", "LED panel 36 W PWM dimmed", GS_TECH_LED_PWM, 36, 0, 60, 0.15, 0.5, V_NONE, 0},
+    {"led-pwm-10w-rgbw", "LED RGBW 10 W PWM colour mixing", GS_TECH_LED_PWM, 10, 0, 50, 0.15, 0.5, V_RGBW, 0},
     /* high-pressure sodium, magnetic ballast: 90-100 % (FI 0.20-0.26) [L] */
-    {"hps-70w", "High-pressure sodium 70 W magnetic ballast", REC_TECH_SODIUM_HP, 70, 0, 50, 92.0, 98.0, V_NONE, 0},
-    {"hps-150w", "High-pressure sodium 150 W magnetic ballast", REC_TECH_SODIUM_HP, 150, 0, 50, 92.0, 98.0, V_NONE, 0},
-    {"hps-250w", "High-pressure sodium 250 W magnetic ballast", REC_TECH_SODIUM_HP, 250, 0, 60, 92.0, 98.0, V_NONE, 0},
-    {"hps-400w", "High-pressure sodium 400 W magnetic ballast", REC_TECH_SODIUM_HP, 400, 0, 60, 92.0, 98.0, V_NONE, 0},
+    {"hps-70w", "High-pressure sodium 70 W magnetic ballast", GS_TECH_SODIUM_HP, 70, 0, 50, 92.0, 98.0, V_NONE, 0},
+    {"hps-150w", "High-pressure sodium 150 W magnetic ballast", GS_TECH_SODIUM_HP, 150, 0, 50, 92.0, 98.0, V_NONE, 0},
+    {"hps-250w", "High-pressure sodium 250 W magnetic ballast", GS_TECH_SODIUM_HP, 250, 0, 60, 92.0, 98.0, V_NONE, 0},
+    {"hps-400w", "High-pressure sodium 400 W magnetic ballast", GS_TECH_SODIUM_HP, 400, 0, 60, 92.0, 98.0, V_NONE, 0},
     /* low-pressure sodium: 80-100 % [L] */
-    {"lps-35w", "Low-pressure sodium SOX 35 W", REC_TECH_SODIUM_LP, 35, 0, 50, 84.0, 95.0, V_NONE, 0},
-    {"lps-90w", "Low-pressure sodium SOX 90 W", REC_TECH_SODIUM_LP, 90, 0, 50, 84.0, 95.0, V_NONE, 0},
-    {"lps-180w", "Low-pressure sodium SOX 180 W", REC_TECH_SODIUM_LP, 180, 0, 60, 84.0, 95.0, V_NONE, 0},
+    {"lps-35w", "Low-pressure sodium SOX 35 W", GS_TECH_SODIUM_LP, 35, 0, 50, 84.0, 95.0, V_NONE, 0},
+    {"lps-90w", "Low-pressure sodium SOX 90 W", GS_TECH_SODIUM_LP, 90, 0, 50, 84.0, 95.0, V_NONE, 0},
+    {"lps-180w", "Low-pressure sodium SOX 180 W", GS_TECH_SODIUM_LP, 180, 0, 60, 84.0, 95.0, V_NONE, 0},
     /* metal halide, magnetic ballast: 35-60 % (FI ~0.08) [L] */
-    {"mh-70w", "Metal halide 70 W magnetic ballast", REC_TECH_METAL_HALIDE, 70, 0, 50, 40.0, 50.0, V_NONE, 0},
-    {"mh-150w", "Metal halide 150 W magnetic ballast", REC_TECH_METAL_HALIDE, 150, 0, 60, 40.0, 50.0, V_NONE, 0},
-    {"mh-250w", "Metal halide 250 W magnetic ballast", REC_TECH_METAL_HALIDE, 250, 0, 50, 40.0, 50.0, V_NONE, 0},
-    {"mh-400w", "Metal halide 400 W magnetic ballast", REC_TECH_METAL_HALIDE, 400, 0, 60, 40.0, 50.0, V_NONE, 0},
+    {"mh-70w", "Metal halide 70 W magnetic ballast", GS_TECH_METAL_HALIDE, 70, 0, 50, 40.0, 50.0, V_NONE, 0},
+    {"mh-150w", "Metal halide 150 W magnetic ballast", GS_TECH_METAL_HALIDE, 150, 0, 60, 40.0, 50.0, V_NONE, 0},
+    {"mh-250w", "Metal halide 250 W magnetic ballast", GS_TECH_METAL_HALIDE, 250, 0, 50, 40.0, 50.0, V_NONE, 0},
+    {"mh-400w", "Metal halide 400 W magnetic ballast", GS_TECH_METAL_HALIDE, 400, 0, 60, 40.0, 50.0, V_NONE, 0},
     /* mercury vapour: 50-65 % clear, 35-45 % coated [L] */
-    {"hg-125w-clear", "Mercury vapour 125 W clear", REC_TECH_MERCURY, 125, 0, 50, 54.0, 61.0, V_CLEAR, 0},
-    {"hg-250w-clear", "Mercury vapour 250 W clear", REC_TECH_MERCURY, 250, 0, 60, 54.0, 61.0, V_CLEAR, 0},
-    {"hg-125w-coated", "Mercury vapour 125 W phosphor coated", REC_TECH_MERCURY, 125, 0, 50, 38.0, 42.0, V_COATED, 0},
-    {"hg-400w-coated", "Mercury vapour 400 W phosphor coated", REC_TECH_MERCURY, 400, 0, 60, 38.0, 42.0, V_COATED, 0},
+    {"hg-125w-clear", "Mercury vapour 125 W clear", GS_TECH_MERCURY, 125, 0, 50, 54.0, 61.0, V_CLEAR, 0},
+    {"hg-250w-clear", "Mercury vapour 250 W clear", GS_TECH_MERCURY, 250, 0, 60, 54.0, 61.0, V_CLEAR, 0},
+    {"hg-125w-coated", "Mercury vapour 125 W phosphor coated", GS_TECH_MERCURY, 125, 0, 50, 38.0, 42.0, V_COATED, 0},
+    {"hg-400w-coated", "Mercury vapour 400 W phosphor coated", GS_TECH_MERCURY, 400, 0, 60, 38.0, 42.0, V_COATED, 0},
 };
 #define N_BULBS (sizeof bulbs / sizeof *bulbs)
 
@@ -579,14 +579,14 @@ static void draw_params(const bulb_spec *b, lamp *p)
     p->pf_target = b->pf_lo == b->pf_hi ? b->pf_lo : draw(&r, b->pf_lo, b->pf_hi);
     p->depth = 1.0;
     switch (b->tech) {
-    case REC_TECH_INCANDESCENT:
-    case REC_TECH_HALOGEN:
+    case GS_TECH_INCANDESCENT:
+    case GS_TECH_HALOGEN:
         p->knob = KNOB_COUPLING;
-        p->tcolor_k = b->tech == REC_TECH_HALOGEN ? draw(&r, 2900, 3100) : draw(&r, 2700, 2850);
+        p->tcolor_k = b->tech == GS_TECH_HALOGEN ? draw(&r, 2900, 3100) : draw(&r, 2700, 2850);
         p->tau_th_s = filament_tau(b, &r);
         planck_bands(p->tcolor_k, p->planck_resp, p->planck_m);
         break;
-    case REC_TECH_FLUORESCENT_MAGNETIC:
+    case GS_TECH_FLUORESCENT_MAGNETIC:
         p->knob = KNOB_PEDESTAL;
         p->lag_deg = draw(&r, 55, 65);
         p->r_choke = draw(&r, 0.05, 0.15);
@@ -607,9 +607,9 @@ static void draw_params(const bulb_spec *b, lamp *p)
             p->w[3] = draw(&r, 0.35, 0.45); /* YOX:Eu red */
         }
         break;
-    case REC_TECH_FLUORESCENT_ELECTRONIC:
-    case REC_TECH_CFL:
-        p->knob = b->tech == REC_TECH_CFL ? KNOB_CAPACITOR : KNOB_AMPLITUDE;
+    case GS_TECH_FLUORESCENT_ELECTRONIC:
+    case GS_TECH_CFL:
+        p->knob = b->tech == GS_TECH_CFL ? KNOB_CAPACITOR : KNOB_AMPLITUDE;
         p->tau_blue_s = draw(&r, 1e-6, 10e-6);
         p->tau_green_s = draw(&r, 2e-3, 5e-3);
         p->tau_red_s = draw(&r, 1e-3, 1.5e-3);
@@ -620,7 +620,7 @@ static void draw_params(const bulb_spec *b, lamp *p)
         p->h3 = draw(&r, -0.08, 0.08);
         p->rho = draw(&r, 0.01, 0.04);
         break;
-    case REC_TECH_LED_CAPACITOR:
+    case GS_TECH_LED_CAPACITOR:
         p->knob = KNOB_CAPACITOR;
         p->rho = draw(&r, 0.35, 0.6);
         p->vf = draw(&r, 0.55, 0.68);
@@ -628,7 +628,7 @@ static void draw_params(const bulb_spec *b, lamp *p)
         p->ksf_frac = b->variant == V_KSF ? draw(&r, 0.12, 0.25) : 0.0;
         p->ksf_tau_s = draw(&r, 7.5e-3, 8.5e-3);
         break;
-    case REC_TECH_LED_LINEAR: {
+    case GS_TECH_LED_LINEAR: {
         p->knob = KNOB_NONE;
         int k = b->taps;
         p->tap_v[0] = k == 1 ? draw(&r, 0.5, 0.85) : draw(&r, 0.5, 0.7);
@@ -639,14 +639,14 @@ static void draw_params(const bulb_spec *b, lamp *p)
         p->w[0] = draw(&r, 0.08, 0.22);
         break;
     }
-    case REC_TECH_LED_PWM:
+    case GS_TECH_LED_PWM:
         p->knob = KNOB_AMPLITUDE;
         p->rho = draw(&r, 0.01, 0.03);
         p->tau_d_s = draw(&r, 0.02, 0.06);
         p->w[0] = draw(&r, 0.08, 0.22);
         for (int c = 1; c < 5; c++) p->w[c] = draw(&r, 0.2, 0.9);   /* RGBW duty cycles */
         break;
-    case REC_TECH_SODIUM_HP:
+    case GS_TECH_SODIUM_HP:
         p->knob = KNOB_PEDESTAL;
         p->lag_deg = draw(&r, 55, 65);
         p->r_choke = draw(&r, 0.05, 0.15);
@@ -661,7 +661,7 @@ static void draw_params(const bulb_spec *b, lamp *p)
         p->w[3] = draw(&r, 0.01, 0.03);   /* 498 nm */
         p->w[4] = draw(&r, 0.005, 0.015); /* blue continuum */
         break;
-    case REC_TECH_SODIUM_LP:
+    case GS_TECH_SODIUM_LP:
         p->knob = KNOB_PEDESTAL;
         p->lag_deg = draw(&r, 55, 65);
         p->r_choke = draw(&r, 0.05, 0.15);
@@ -671,7 +671,7 @@ static void draw_params(const bulb_spec *b, lamp *p)
         p->spike_amp = draw(&r, 0.3, 0.6);
         p->spike_s = draw(&r, 0.2e-3, 0.4e-3);
         break;
-    case REC_TECH_METAL_HALIDE:
+    case GS_TECH_METAL_HALIDE:
         p->knob = KNOB_PEDESTAL;
         p->lag_deg = draw(&r, 55, 65);
         p->r_choke = draw(&r, 0.05, 0.15);
@@ -693,7 +693,7 @@ static void draw_params(const bulb_spec *b, lamp *p)
         p->sp_gamma[4] = 1.0;
         p->sp_tau_s[4] = draw(&r, 0.5e-3, 1.0e-3);
         break;
-    case REC_TECH_MERCURY:
+    case GS_TECH_MERCURY:
         p->knob = KNOB_PEDESTAL;
         p->lag_deg = draw(&r, 55, 65);
         p->r_choke = draw(&r, 0.05, 0.15);
@@ -987,18 +987,18 @@ static gs_status run_model(const lamp *p, sim *s)
 {
     for (int b = 0; b < 3; b++) memset(s->band[b], 0, sizeof(double) * (size_t)s->M);
     switch (p->spec->tech) {
-    case REC_TECH_INCANDESCENT:
-    case REC_TECH_HALOGEN: return model_filament(p, s);
-    case REC_TECH_FLUORESCENT_MAGNETIC: return model_fluorescent_magnetic(p, s);
-    case REC_TECH_FLUORESCENT_ELECTRONIC: return model_fluorescent_electronic(p, s);
-    case REC_TECH_CFL: return model_cfl(p, s);
-    case REC_TECH_LED_CAPACITOR: return model_led_capacitor(p, s);
-    case REC_TECH_LED_LINEAR: return model_led_linear(p, s);
-    case REC_TECH_LED_PWM: return model_led_pwm(p, s);
-    case REC_TECH_SODIUM_HP: return model_sodium_hp(p, s);
-    case REC_TECH_SODIUM_LP: return model_sodium_lp(p, s);
-    case REC_TECH_METAL_HALIDE: return model_metal_halide(p, s);
-    case REC_TECH_MERCURY: return model_mercury(p, s);
+    case GS_TECH_INCANDESCENT:
+    case GS_TECH_HALOGEN: return model_filament(p, s);
+    case GS_TECH_FLUORESCENT_MAGNETIC: return model_fluorescent_magnetic(p, s);
+    case GS_TECH_FLUORESCENT_ELECTRONIC: return model_fluorescent_electronic(p, s);
+    case GS_TECH_CFL: return model_cfl(p, s);
+    case GS_TECH_LED_CAPACITOR: return model_led_capacitor(p, s);
+    case GS_TECH_LED_LINEAR: return model_led_linear(p, s);
+    case GS_TECH_LED_PWM: return model_led_pwm(p, s);
+    case GS_TECH_SODIUM_HP: return model_sodium_hp(p, s);
+    case GS_TECH_SODIUM_LP: return model_sodium_lp(p, s);
+    case GS_TECH_METAL_HALIDE: return model_metal_halide(p, s);
+    case GS_TECH_MERCURY: return model_mercury(p, s);
     default: break;
     }
     return gs_fail(GS_EINVAL, "DELIGHT model: bulb %s has no model", p->spec->id);
@@ -1183,10 +1183,10 @@ static gs_status finish(lamp *p, sim *s, reducer *red, int solve_depth, grid_res
     return GS_OK;
 }
 
-static gs_status add_entry(rec_delight *d, const lamp *p, int grid_hz, int bands, const double *q,
+static gs_status add_entry(gs_delight *d, const lamp *p, int grid_hz, int bands, const double *q,
                            const double *v, int n)
 {
-    rec_bulb e;
+    gs_bulb e;
     memset(&e, 0, sizeof e);
     snprintf(e.id, sizeof e.id, "%s", p->spec->id);
     snprintf(e.name, sizeof e.name, "%s", p->spec->name);
@@ -1194,11 +1194,11 @@ static gs_status add_entry(rec_delight *d, const lamp *p, int grid_hz, int bands
     e.type = p->spec->tech;
     e.watts = p->spec->watts;
     e.grid_hz = grid_hz;
-    e.ref = REC_REF_VOLTAGE;
-    gs_status s = rec_brf_init(&e.brf, n, bands);
+    e.ref = GS_REF_VOLTAGE;
+    gs_status s = gs_brf_init(&e.brf, n, bands);
     if (s != GS_OK) return s;
     memcpy(e.brf.v, v, sizeof(double) * (size_t)n * (size_t)bands);
-    s = rec_brf_normalize(&e.brf, NULL);
+    s = gs_brf_normalize(&e.brf, NULL);
     if (s == GS_OK) {
         if (bands == 1) {
             e.chroma[0] = 1.0;
@@ -1207,9 +1207,9 @@ static gs_status add_entry(rec_delight *d, const lamp *p, int grid_hz, int bands
             e.chroma[1] = q[1];
             e.chroma[2] = 1.0 - q[0] - q[1];
         }
-        s = rec_delight_add(d, &e);
+        s = gs_delight_add(d, &e);
     }
-    rec_brf_release(&e.brf);
+    gs_brf_release(&e.brf);
     return s;
 }
 
@@ -1237,7 +1237,7 @@ static void trace_lamp(const lamp *p)
 }
 #endif
 
-gs_status rec_delight_generate(rec_delight *d, int n)
+gs_status gs_delight_generate(gs_delight *d, int n)
 {
     if (!d) return gs_fail(GS_EINVAL, "DELIGHT generate: no database");
     if (n < 4 || n % 2 != 0 || n > (1 << 20))
@@ -1245,8 +1245,8 @@ gs_status rec_delight_generate(rec_delight *d, int n)
     /* Refuse up front if any entry exists already. Everything is generated into a scratch
      * collection first, so that a failure adds nothing (except running out of memory while
      * copying the finished entries into d). */
-    for (size_t i = 0; i < rec_delight_count(d); i++) {
-        const rec_bulb *o = rec_delight_get(d, i);
+    for (size_t i = 0; i < gs_delight_count(d); i++) {
+        const gs_bulb *o = gs_delight_get(d, i);
         for (size_t k = 0; k < N_BULBS; k++)
             if (!strcmp(o->id, bulbs[k].id) && (!strcmp(o->sensor, "photodiode") || !strcmp(o->sensor, "rgb")))
                 return gs_fail(GS_EINVAL, "DELIGHT generate: bulb %s at %d Hz with sensor %s is "
@@ -1256,7 +1256,7 @@ gs_status rec_delight_generate(rec_delight *d, int n)
     size_t per = (size_t)(M > COARSE_M ? M : COARSE_M);
     double *mem = malloc(sizeof(double) * 8 * per);
     double *out = malloc(sizeof(double) * 8 * (size_t)n);
-    rec_delight *tmp = rec_delight_new();
+    gs_delight *tmp = gs_delight_new();
     reducer red;
     gs_status st = reducer_init(&red, n, M);
     if (st == GS_OK && (!mem || !out || !tmp)) st = gs_fail(GS_ENOMEM, "DELIGHT generate: out of memory");
@@ -1283,9 +1283,9 @@ gs_status rec_delight_generate(rec_delight *d, int n)
             if (st == GS_OK) st = add_entry(tmp, &p, hz, 3, g[which].q, g[which].rgb, n);
         }
     }
-    for (size_t i = 0; st == GS_OK && i < rec_delight_count(tmp); i++)
-        st = rec_delight_add(d, rec_delight_get(tmp, i));
-    rec_delight_free(tmp);
+    for (size_t i = 0; st == GS_OK && i < gs_delight_count(tmp); i++)
+        st = gs_delight_add(d, gs_delight_get(tmp, i));
+    gs_delight_free(tmp);
     reducer_free(&red);
     free(mem);
     free(out);

@@ -8,7 +8,7 @@
  * Nyquist term becomes cos(pi n (t - s)), which at the sample points is C_{n/2} cos(pi n s):
  * integer-sample delays are therefore exact circular shifts, and fractional delays compose
  * exactly for BRFs without a Nyquist component (the generated DELIGHT has none). */
-#include "recognize/internal.h"
+#include "recognize/base/internal.h"
 
 #include <complex.h>
 #include <fftw3.h>
@@ -18,7 +18,7 @@
 
 static const double two_pi = 6.283185307179586476925286766559;
 
-gs_status rec_brf_init(rec_brf *b, int n, int bands)
+gs_status gs_brf_init(gs_brf *b, int n, int bands)
 {
     b->n = 0;
     b->bands = 0;
@@ -34,7 +34,7 @@ gs_status rec_brf_init(rec_brf *b, int n, int bands)
     return GS_OK;
 }
 
-void rec_brf_release(rec_brf *b)
+void gs_brf_release(gs_brf *b)
 {
     if (!b) return;
     free(b->v);
@@ -43,15 +43,15 @@ void rec_brf_release(rec_brf *b)
     b->bands = 0;
 }
 
-gs_status rec_brf_copy(rec_brf *dst, const rec_brf *src)
+gs_status gs_brf_copy(gs_brf *dst, const gs_brf *src)
 {
-    gs_status s = rec_brf_init(dst, src->n, src->bands);
+    gs_status s = gs_brf_init(dst, src->n, src->bands);
     if (s != GS_OK) return s;
     memcpy(dst->v, src->v, (size_t)src->n * (size_t)src->bands * sizeof *dst->v);
     return GS_OK;
 }
 
-gs_status rec_brf_normalize(rec_brf *b, double *mean_out)
+gs_status gs_brf_normalize(gs_brf *b, double *mean_out)
 {
     for (int band = 0; band < b->bands; band++) {
         double *x = b->v + (size_t)band * (size_t)b->n;
@@ -66,7 +66,7 @@ gs_status rec_brf_normalize(rec_brf *b, double *mean_out)
     return GS_OK;
 }
 
-gs_status rec_brf_spectrum(const double *x, int n, double complex *C)
+gs_status gs_brf_spectrum(const double *x, int n, double complex *C)
 {
     double *in = fftw_malloc(sizeof *in * (size_t)n);
     fftw_complex *out = fftw_malloc(sizeof *out * (size_t)(n / 2 + 1));
@@ -92,14 +92,14 @@ static double complex delay_factor(int h, double s)
     return cexp(-I * two_pi * turns);
 }
 
-static int finite_samples(const rec_brf *b)
+static int finite_samples(const gs_brf *b)
 {
     for (size_t i = 0; i < (size_t)b->n * (size_t)b->bands; i++)
         if (!isfinite(b->v[i])) return 0;
     return 1;
 }
 
-gs_status rec_brf_shift(const rec_brf *in, double shift_cycles, rec_brf *out)
+gs_status gs_brf_shift(const gs_brf *in, double shift_cycles, gs_brf *out)
 {
     if (!isfinite(shift_cycles))
         return gs_fail(GS_EINVAL, "BRF shift: %g cycles: expected a finite number", shift_cycles);
@@ -134,7 +134,7 @@ gs_status rec_brf_shift(const rec_brf *in, double shift_cycles, rec_brf *out)
     return GS_OK;
 }
 
-gs_status rec_brf_integrate(const rec_brf *b, double shift_cycles, int K, double *out)
+gs_status gs_brf_integrate(const gs_brf *b, double shift_cycles, int K, double *out)
 {
     if (K < 2 || K > 1 << 16) return gs_fail(GS_EINVAL, "Eq. 5: K=%d: expected K >= 2", K);
     if (!isfinite(shift_cycles))
@@ -144,7 +144,7 @@ gs_status rec_brf_integrate(const rec_brf *b, double shift_cycles, int K, double
     double complex *C = malloc(sizeof *C * (size_t)(n / 2 + 1));
     if (!C) return gs_fail(GS_ENOMEM, "Eq. 5: cannot allocate a %d-point DFT", n);
     for (int band = 0; band < b->bands; band++) {
-        gs_status s = rec_brf_spectrum(b->v + (size_t)band * (size_t)n, n, C);
+        gs_status s = gs_brf_spectrum(b->v + (size_t)band * (size_t)n, n, C);
         if (s != GS_OK) {
             free(C);
             return s;
@@ -174,7 +174,7 @@ gs_status rec_brf_integrate(const rec_brf *b, double shift_cycles, int K, double
     return GS_OK;
 }
 
-double rec_brf_percent_flicker(const rec_brf *b, int band)
+double gs_brf_percent_flicker(const gs_brf *b, int band)
 {
     if (band < 0 || band >= b->bands) return NAN;
     const double *x = b->v + (size_t)band * (size_t)b->n;
@@ -186,7 +186,7 @@ double rec_brf_percent_flicker(const rec_brf *b, int band)
     return (hi + lo) > 0.0 ? 100.0 * (hi - lo) / (hi + lo) : NAN;
 }
 
-double rec_phase_to_shift(double phase_deg)
+double gs_phase_to_shift(double phase_deg)
 {
     double s = fmod(phase_deg / 180.0, 1.0);   /* phi/pi cycles (docs/design.md) */
     if (s < 0) s += 1.0;
@@ -200,7 +200,7 @@ static double off_grid_deg(double deg)
     return r < 60.0 ? r : 120.0 - r;
 }
 
-double rec_shift_to_phase(double shift_cycles)
+double gs_shift_to_phase(double shift_cycles)
 {
     /* The flicker repeats every half AC period, so a shift fixes the phase only modulo
      * 180 deg: of the two candidates, report the one nearer to 0/120/240. */
@@ -210,7 +210,7 @@ double rec_shift_to_phase(double shift_cycles)
     return off_grid_deg(a) <= off_grid_deg(b) ? a : b;
 }
 
-double rec_chromaticity(const double *mean, int bands, double *Q)
+double gs_chromaticity(const double *mean, int bands, double *Q)
 {
     double sum = 0.0;
     for (int b = 0; b < bands; b++) sum += mean[b];

@@ -1,0 +1,374 @@
+/*
+ * base.h - the lowest layer of gridsurvey (recognize/base/, prefix gs_): the vocabulary every
+ * other module shares. Implements the physics half of "Computational Imaging on the Electric
+ * Grid" (Sheinin, Schechner, Kutulakos, CVPR 2017) that does not depend on recognition: the AC
+ * model (Eq. 1), bulb response functions (Eqs. 3-6), the DELIGHT bulb database (Sec. 3; here a
+ * substitute generated from lamp physics, docs/delight.md, docs/delight-models.md) and the
+ * capture-directory format (Sec. 6, docs/formats.md); plus the one status enum (gs_status) with a
+ * thread-local detail string for one-line error messages.
+ *
+ * Conventions (docs/design.md): time t starts at a negative-to-positive zero crossing of the
+ * reference outlet. A flicker cycle lasts Delta = 1/(2 f) (Eq. 1). Shifts are in cycles
+ * (fractions of Delta), positive = delayed (the paper's shift() to the right).
+ * Ownership: functions that return allocated memory say so; free it with the named function.
+ * Every destructor accepts NULL.
+ */
+#ifndef GRIDSURVEY_BASE_H
+#define GRIDSURVEY_BASE_H
+
+#include <stddef.h>
+#include <stdio.h>
+
+/* ------------------------------------------------------------------ status */
+
+typedef enum {
+    GS_OK = 0,
+    GS_EINVAL,      /* an argument outside its documented range */
+    GS_EIO,         /* a file could not be opened, read or written */
+    GS_EFORMAT,     /* a file's content does not follow its format */
+    GS_ENOMEM,      /* allocation failed */
+    GS_ESQL,        /* SQLite reported an error */
+    GS_ENOTFOUND,   /* a named item (bulb id, file) does not exist */
+    GS_ENUMERIC,    /* NaN, Inf or an ill-conditioned computation */
+    GS_ELIMIT       /* a hardware or model limit would be exceeded */
+} gs_status;
+
+/* A static string naming the status. */
+const char *gs_strerror(gs_status s);
+/* The detail of the last failure on this thread ("file:line: field: expected ..."); never NULL. */
+const char *gs_detail(void);
+/* Record a printf-style detail for this thread and return s (for `return gs_fail(...)`). */
+gs_status gs_fail(gs_status s, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+
+/* ------------------------------------------------------------- AC (Eq. 1) */
+
+/* Zero crossings of a uniformly sampled waveform x[0..n) at rate_hz, both directions, with
+ * sub-sample times from a local cubic through the 4 samples around each sign change (exact for
+ * cubics; at most 1.3e-3 of a sample period on a clean 50 Hz sine sampled at 400 Hz, ~1e-2
+ * with a few % of 3rd harmonic, which 4 samples cannot resolve). The mean of x is removed
+ * first. hysteresis (in units of x, >= 0) is a Schmitt trigger: a crossing counts only once x
+ * has gone from below -hysteresis to above +hysteresis (or back), so noise-level sign changes
+ * are rejected; when noise makes several sign changes in one transition, the crossing is the
+ * midpoint of the first and last. Returns an allocated array of crossing times in seconds from
+ * sample 0 (free(); NULL when there are none) and its length in *count; *rising_first is the
+ * direction of the first crossing (+1 rising, -1 falling, 0 if none; they alternate).
+ * A constant signal has no crossings (GS_OK, count 0). Non-finite samples are GS_ENUMERIC
+ * naming the sample index. */
+gs_status gs_zero_crossings(const double *x, size_t n, double rate_hz, double hysteresis,
+                             double **t_s, size_t *count, int *rising_first);
+
+/* Grid frequency from successive zero-crossing times t_s[0..n) (finite, increasing, n >= 3,
+ * else GS_ENUMERIC / GS_EINVAL naming the index): per cycle f_i = 1/(2 Delta_i) with
+ * Delta_i = t_{i+1} - t_i (Eq. 1), written to f_cycle_hz[0..n-1) unless NULL.
+ * The robust mean uses full AC periods P_i = t_{i+2} - t_i (immune to the DC offset and even
+ * harmonics that make half periods alternate), rejects periods whose frequency 1/P_i is more
+ * than 5 robust sigmas (5 x 1.4826 MAD, at least 1e-9 of the median) from the median, and is
+ * Eq. 1 on the mean accepted period: mean_hz = 1/mean(P_i) (a missing crossing rejects 2
+ * periods, a spurious one up to 3). sigma_mean_hz is its standard error for independent errors in
+ * the crossing times: the mean period telescopes to the crossings at the ends of each run of
+ * accepted periods, and the crossing-time error is estimated from second differences
+ * P_{i+2} - P_i, which cancel slow frequency wander. NaN when fewer than 2 such differences
+ * exist (n < 7); std_hz is NaN for a single period. */
+typedef struct {
+    double mean_hz;         /* robust mean frequency */
+    double sigma_mean_hz;   /* standard error of mean_hz */
+    double median_hz;       /* median per-period frequency */
+    double std_hz;          /* standard deviation of accepted per-period frequencies */
+    size_t periods;         /* full AC periods used */
+    size_t rejected;        /* periods rejected as outliers (glitches, missing crossings) */
+} gs_freq_stats;
+gs_status gs_grid_frequency(const double *t_s, size_t n, double *f_cycle_hz,
+                             gs_freq_stats *stats);
+
+/* Frequency wander of a long recording (see shared/data/README.md): the accepted full periods
+ * of gs_grid_frequency, each assigned to the window of window_s seconds (0 < window_s <= 10;
+ * 1 s is the usual ENF resolution) holding its midpoint, give one frequency per window (Eq. 1
+ * on the window's mean period; a window without periods is skipped). Then the mean and
+ * standard deviation of that series, the standard deviation of its window-to-window changes,
+ * and its autocorrelation (Pearson correlation of the pairs w, w + lag) at lags of 10 s and
+ * 60 s (rounded to whole windows). Needs crossings spanning at least 120 s (GS_EINVAL). */
+typedef struct {
+    double mean_hz;
+    double sigma_hz;         /* std of the window-averaged frequency */
+    double step_sigma_hz;    /* std of successive differences of that series */
+    double corr_10s;         /* autocorrelation at lag 10 s */
+    double corr_60s;         /* autocorrelation at lag 60 s */
+    size_t windows;          /* complete windows in the span (including any skipped) */
+} gs_wander;
+gs_status gs_frequency_wander(const double *t_s, size_t n, double window_s, gs_wander *w);
+
+/* Read a mono mains-voltage recording (WAV or any format libsndfile reads) as doubles (PCM is
+ * scaled to [-1, 1), float samples are kept as they are). *x is allocated (free()).
+ * GS_EIO if the file cannot be opened; GS_EFORMAT, with a detail naming the file and the field
+ * or sample, for an empty file, an unrecognised header, a truncated WAV (declared RIFF or data
+ * chunk size beyond the end of the file), a file with no samples, more than one channel, or a
+ * non-finite sample. */
+gs_status gs_mains_read(const char *path, double **x, size_t *n, double *rate_hz);
+
+/* ------------------------------------------------------------ BRF (Eqs. 3-6) */
+
+#define GS_MAX_BANDS 3
+#define GS_BRF_N_DEFAULT 1024   /* high-resolution samples per flicker cycle */
+
+/* A bulb response function: n samples over one flicker cycle per band, v[band * n + i] at
+ * t = i/n * Delta, mean 1 per band (Eq. 4). The samples are those of a trigonometric
+ * polynomial (band-limited to n/2 harmonics), which makes fractional shifts and window
+ * integrals exact (gs_brf_shift, gs_brf_integrate). */
+typedef struct {
+    int n;        /* samples per cycle, >= 4 and even */
+    int bands;    /* 1 (monochrome) or 3 (R, G, B) */
+    double *v;    /* owned; bands * n values */
+} gs_brf;
+
+/* Allocate a zeroed BRF; release with gs_brf_release (which accepts a zeroed struct). */
+gs_status gs_brf_init(gs_brf *b, int n, int bands);
+void gs_brf_release(gs_brf *b);
+/* Deep copy into an uninitialised *dst. */
+gs_status gs_brf_copy(gs_brf *dst, const gs_brf *src);
+/* Divide each band by its mean so the mean is 1 (Eq. 4); the means go to mean_out[] unless NULL.
+ * A band whose mean is not finite and > 0 is GS_ENUMERIC. */
+gs_status gs_brf_normalize(gs_brf *b, double *mean_out);
+/* out = in delayed by shift_cycles (any real; 1 is the identity): out(t) = in(t - shift*Delta).
+ * Exact on the trigonometric polynomial, so shifts compose. out must be initialised with the
+ * same n and bands; out may equal in. */
+gs_status gs_brf_shift(const gs_brf *in, double shift_cycles, gs_brf *out);
+/* Eq. 5: the mean of the BRF (delayed by shift_cycles) over each of K windows
+ * [k Delta/K, (k+1) Delta/K), k = 0..K-1, for every band: out[band * K + k]. Any K >= 2.
+ * Exact integrals of the trigonometric polynomial; the mean over k stays 1. */
+gs_status gs_brf_integrate(const gs_brf *b, double shift_cycles, int K, double *out);
+/* DFT C[0..n/2] of x[0..n) (FFTW r2c convention: C_h = sum_j x_j e^{-2 pi i h j / n}).
+ * (C only: C++ has no _Complex.) */
+#ifndef __cplusplus
+gs_status gs_brf_spectrum(const double *x, int n, _Complex double *C);
+#endif
+/* Percent flicker of one band: 100 (max - min) / (max + min) over the samples. */
+double gs_brf_percent_flicker(const gs_brf *b, int band);
+
+/* The BRF shift (cycles, in [0,1)) of grid phase phase_deg: phi/pi cycles modulo 1
+ * (docs/design.md: 0, 120, 240 deg -> 0, 2/3, 1/3). */
+double gs_phase_to_shift(double phase_deg);
+/* Inverse: the grid phase in [0,360) deg whose shift is shift_cycles. */
+double gs_shift_to_phase(double shift_cycles);
+
+/* Eq. 6: chromaticity Q[b] = mean[b] / sum(mean), and the brightness sum(mean) returned.
+ * Returns NaN (and leaves Q untouched) when the sum is not finite and > 0. */
+double gs_chromaticity(const double *mean, int bands, double *Q);
+
+/* --------------------------------------------------------------- DELIGHT */
+
+typedef enum {
+    GS_TECH_INCANDESCENT,
+    GS_TECH_HALOGEN,
+    GS_TECH_FLUORESCENT_MAGNETIC,
+    GS_TECH_FLUORESCENT_ELECTRONIC,
+    GS_TECH_CFL,
+    GS_TECH_LED_CAPACITOR,
+    GS_TECH_LED_LINEAR,
+    GS_TECH_LED_PWM,
+    GS_TECH_SODIUM_HP,
+    GS_TECH_SODIUM_LP,
+    GS_TECH_METAL_HALIDE,
+    GS_TECH_MERCURY,
+    GS_TECH_UNKNOWN,           /* measured, technology not known */
+    GS_TECH_COUNT
+} gs_tech;
+
+/* Stable lower-case names used in files ("incandescent", "sodium_hp", ...). */
+const char *gs_tech_name(gs_tech t);
+/* GS_ENOTFOUND if name is not one of gs_tech_name's. */
+gs_status gs_tech_parse(const char *name, gs_tech *t);
+
+/* What the template's time axis is referenced to. */
+typedef enum {
+    GS_REF_VOLTAGE,   /* relative to the outlet voltage (DELIGHT's convention): phase usable */
+    GS_REF_NONE,      /* shape only, no voltage reference: never used for phase decisions */
+    GS_REF_UNLOCKED   /* flicker not locked to the mains (PWM): never used by Eq. 7 */
+} gs_ref;
+const char *gs_ref_name(gs_ref r);   /* "voltage", "none", "unlocked" */
+
+#define GS_ID_MAX 48
+#define GS_NAME_MAX 96
+#define GS_SENSOR_MAX 32
+
+/* One DELIGHT entry: one bulb measured at one grid frequency with one sensor. */
+typedef struct {
+    char id[GS_ID_MAX];           /* bulb id, [A-Za-z0-9_.-]+; unique with grid_hz and sensor */
+    gs_tech type;
+    char name[GS_NAME_MAX];       /* human-readable; no commas or newlines */
+    double watts;                  /* electrical power, W (> 0; 0 if unknown) */
+    int grid_hz;                   /* 50 or 60 */
+    char sensor[GS_SENSOR_MAX];   /* "photodiode" (mono) or "rgb" (3 bands), or a user name */
+    gs_ref ref;
+    double chroma[GS_MAX_BANDS];  /* Eq. 6 chromaticity per band, sums to 1 (mono: 1) */
+    gs_brf brf;                   /* owned by the entry */
+} gs_bulb;
+
+/* Release the BRF of a bulb (the struct itself is the caller's). */
+void gs_bulb_release(gs_bulb *b);
+
+/* A DELIGHT database in memory: an ordered collection of bulbs (opaque handle). */
+typedef struct gs_delight gs_delight;
+gs_delight *gs_delight_new(void);
+void gs_delight_free(gs_delight *d);
+/* Add a deep copy of *b. GS_EINVAL if (id, grid_hz, sensor) is already present, or if the
+ * entry is inconsistent (bands vs sensor, chroma not summing to 1, BRF mean not 1). */
+gs_status gs_delight_add(gs_delight *d, const gs_bulb *b);
+size_t gs_delight_count(const gs_delight *d);
+/* Borrowed pointer, valid until d changes or is freed; NULL when i is out of range. */
+const gs_bulb *gs_delight_get(const gs_delight *d, size_t i);
+/* First entry with this id (and grid_hz, bands when they are > 0), or NULL. */
+const gs_bulb *gs_delight_find(const gs_delight *d, const char *id, int grid_hz, int bands);
+
+/* The built-in DELIGHT substitute: physical models of each technology (docs/delight.md), with
+ * parameters drawn deterministically inside the ranges of shared/BULBS.md; every bulb at 50 and
+ * 60 Hz, with a monochrome ("photodiode") and an RGB ("rgb") entry; n samples per cycle. */
+gs_status gs_delight_generate(gs_delight *d, int n);
+
+/* SQLite storage (versioned schema, docs/delight.md; tables delight_meta, delight_bulbs,
+ * delight_brf_bands). save replaces the file's DELIGHT tables in one transaction and refuses a
+ * file whose user_version belongs to another schema; load appends the file's bulbs to d, and on
+ * any error (GS_EFORMAT for a file that is not a DELIGHT database) adds nothing. */
+#define GS_DELIGHT_SCHEMA_VERSION 1
+gs_status gs_delight_save(const gs_delight *d, const char *path);
+gs_status gs_delight_load(gs_delight *d, const char *path);
+
+/* CSV: header `bulb_id,type,name,watts,grid_hz,sensor,band,chromaticity,n,v0,...,v{n-1}`, one
+ * row per bulb and band (band: mono, R, G, B); sensor is written "SENSOR/REF" (REF as in
+ * gs_ref_name). Values are printed with %.17g, so a round trip is exact. The rows of one bulb
+ * are consecutive; each row has its own n values (the header lists the largest n). import
+ * appends to d; on any error nothing is added and the detail names file, line and field. */
+gs_status gs_delight_export_csv(const gs_delight *d, FILE *out);
+gs_status gs_delight_import_csv(gs_delight *d, const char *path);
+
+/* ------------------------------------------------- measured bulbs (delight add) */
+
+/* A photodiode recording turned into a BRF: the flicker period is found from the data, cycles
+ * are folded and averaged into n bins and normalised. With a voltage column (1-based column
+ * index > 0), time zero is the voltage's first negative-to-positive crossing and the BRF is
+ * GS_REF_VOLTAGE; without, GS_REF_NONE (shape only). A flicker frequency that is not twice a
+ * 50/60 Hz grid (+-3 %) gives GS_REF_UNLOCKED (e.g. PWM). */
+typedef struct {
+    size_t samples;            /* rows read */
+    double sample_rate_hz;
+    double flicker_hz;         /* measured flicker frequency */
+    double cycles;             /* flicker cycles covered by the recording */
+    double percent_flicker;    /* of the folded, averaged waveform */
+    int grid_hz;               /* 50 or 60 inferred from flicker_hz, 0 if unlocked */
+} gs_recording_info;
+/* Reads `time,value[,voltage...]` CSV as oscilloscopes write it: UTF-8 BOM, `Key:value,`
+ * metadata lines, a header that may run into the first sample, CRLF; uniform time steps.
+ * Without a voltage column time zero is the first sample. The BRF keeps the harmonics that
+ * stand above the fold's noise (band-limited); a waveform dipping below 0 (scope offset) is
+ * raised to a minimum of 0. A lamp without flicker above the noise gets a flat BRF and
+ * flicker_hz NaN. Fills *out (id and name from the file name; type unknown: the caller's to set
+ * afterwards; grid_hz 0 when the recording cannot tell, i.e. unlocked without a voltage column:
+ * set it before gs_delight_add) and *info unless NULL. */
+gs_status gs_recording_to_bulb(const char *path, int voltage_column, int n, gs_bulb *out,
+                                gs_recording_info *info);
+
+/* --------------------------------------------------------------------- PNG */
+
+/* Decode the PNG held in buf[0..size) (libspng) into out: exactly width x height pixels of
+ * `channels` (1 grey, 3 R G B interleaved) samples of `bits` (8: unsigned char, 16: unsigned
+ * short, host-endian). A larger image is refused before anything is allocated. Every chunk's
+ * length and CRC is checked and the file must reach IEND. name and ref (appended, may be "")
+ * go into the detail: "NAME: truncated PNG: ...", "NAME: corrupt PNG: ...", "NAME: not a PNG
+ * file ...", "NAME: PNG is 6x4 pixels: expected width x height = 5x4", "NAME: PNG has 8-bit
+ * samples: expected 16-bit", "NAME: PNG colour type is RGB: expected grey (1 channel)", all
+ * GS_EFORMAT. */
+gs_status gs_png_decode(const unsigned char *buf, size_t size, const char *name, const char *ref,
+                        int width, int height, int channels, int bits, void *out);
+/* Encode width x height pixels of `channels` (1 or 3) samples of `bits` (8 or 16, host-endian)
+ * as a PNG in memory: *png is malloc'd (the caller free()s it), *size its length. */
+gs_status gs_png_encode(const void *pixels, int width, int height, int channels, int bits,
+                        unsigned char **png, size_t *size);
+
+/* --------------------------------------------------------- capture directory */
+
+/* A capture directory, format "gridsurvey-capture/1" (docs/formats.md is the specification):
+ * capture.json plus K frames as 16-bit PNGs (grey for 1 band, RGB for 3), and optional 8-bit
+ * grey HDR maps holding each pixel's halving count h (0..16): in that frame the pixel integrated
+ * cycles / 2^h cycles, for all its bands (paper Sec. 6, the ACam's HDR loop). This is the one
+ * reader and writer of the format; capture/ writes with it, recognize/ reads with it.
+ *
+ * Lifecycle: a gs_capture is a plain struct. Zero it, set the scalar fields, gs_capture_alloc
+ * (and gs_capture_alloc_hdr for HDR maps), set frames[k].cycles and the pixels, then
+ * gs_capture_write_frame for every k and gs_capture_write_json last. Or gs_capture_read.
+ * Either way gs_capture_release frees everything (it accepts NULL and a zeroed struct). */
+#define GS_CAPTURE_FORMAT "gridsurvey-capture/1"
+#define GS_PATH_MAX 256
+#define GS_MAX_HALVINGS 16
+
+typedef struct {
+    char file[GS_PATH_MAX];      /* frame PNG in the directory: [A-Za-z0-9._-]+ ending ".png" */
+    int k;                        /* window index 0..K-1: [k Delta/K, (k+1) Delta/K) */
+    double cycles;                /* C, flicker cycles integrated before any HDR halving (> 0) */
+    char hdr_map[GS_PATH_MAX];   /* 8-bit PNG of halving counts, "" when the frame has none */
+    double grid_hz_measured;      /* mean grid frequency during the exposure, Hz, 45..65 (NaN:
+                                   * unknown; file field "grid_hz_measured", optional) */
+    double start_s;               /* the exposure's start, s from the capture's first exposure,
+                                   * >= 0 (NaN: unknown; file field "start_s", optional) */
+} gs_frame_info;
+
+typedef struct {
+    int grid_hz;                  /* 50 or 60 */
+    int K;                        /* frames per cycle, 2..1024 */
+    int bands;                    /* 1 or 3 (R, G, B) */
+    int width, height;            /* pixels, 1..32768 each */
+    double saturation_dn;         /* raw level at or above which a sample is saturated,
+                                   * (black_level_dn, 65536]; 65536: nothing saturates */
+    double black_level_dn;        /* raw pedestal, [0, 65536) (file default 0) */
+    double gain_e_per_dn;         /* electrons per DN for shot noise, >= 0 (0 = unknown: read
+                                   * noise only; file default 0) */
+    double read_noise_dn;         /* read noise std per sample and frame, DN, >= 0 (file
+                                   * default 1) */
+    int locked;                   /* 1 if AC-locked, else 0 (file default 1) */
+    char utc[40];                 /* acquisition time, ISO 8601 (YYYY-MM-DDThh:mm:ss[.f](Z|+hh:mm)),
+                                   * "" if unknown */
+    gs_frame_info *frames;       /* K entries, frames[k].k == k (owned, malloc) */
+    /* Pixels (owned, malloc; NULL until allocated or read):
+     * raw[((k * height + y) * width + x) * bands + band] in DN as stored (black level included);
+     * halvings[(k * height + y) * width + x] (0..16), or NULL if no frame has an HDR map (then
+     * h = 0 everywhere; a frame without a map reads as h = 0). */
+    unsigned short *raw;
+    unsigned char *halvings;
+    char *station_json;           /* the optional "station" object as compact JSON text (owned,
+                                   * malloc) or NULL. Kept semantically verbatim: Jansson
+                                   * re-serialises it (key order kept, reals to 17 digits). */
+} gs_capture;
+
+/* Read dir/capture.json and every frame and HDR map into *cap (its previous content is ignored
+ * and not freed; on failure *cap is left zeroed). Everything is validated: GS_ENOTFOUND for a
+ * missing capture.json or frame file, GS_EFORMAT for bad JSON ("DIR/capture.json:LINE:COL: JSON
+ * syntax: ..."), a bad field ("DIR/capture.json:LINE: field frames[3].k: expected ..."), a
+ * frame PNG that is truncated, not 16-bit, of the wrong colour type or size (the detail names
+ * the file and the capture.json line that names it). */
+gs_status gs_capture_read(const char *dir, gs_capture *cap);
+/* For a zeroed capture whose K, bands, width and height are set (GS_EINVAL otherwise, or if
+ * frames, raw or halvings are already set): allocate frames (file "frame_NNN.png", k, cycles 0:
+ * set them, hdr_map "", grid_hz_measured and start_s NaN) and zeroed raw pixels. */
+gs_status gs_capture_alloc(gs_capture *cap);
+/* After gs_capture_alloc: allocate zeroed halvings and name every frame's map "hdr_NNN.png"
+ * (unless already named). */
+gs_status gs_capture_alloc_hdr(gs_capture *cap);
+/* Write frame k as dir/frames[k].file (and its HDR map as dir/frames[k].hdr_map when that is
+ * not "") atomically: a temporary file in dir, fsync, rename. Creates dir (one level) if needed.
+ * GS_EINVAL for a bad k or name, halvings > 16, or a halved pixel in a frame without a map. */
+gs_status gs_capture_write_frame(const char *dir, const gs_capture *cap, int k);
+/* Write dir/capture.json atomically, after validating every field with the reader's rules
+ * (GS_EINVAL naming the field). Frames must have been written first (GS_ENOTFOUND naming the
+ * missing file), so a capture.json never names a file that is not there. */
+gs_status gs_capture_write_json(const char *dir, const gs_capture *cap);
+/* GS_OK if every field of cap except the pixels follows docs/formats.md (frames must be set),
+ * else GS_EINVAL with the detail "WHO: field F: expected E". */
+gs_status gs_capture_check(const gs_capture *cap, const char *who);
+/* Free frames, pixels and station_json and zero the struct. Accepts NULL. */
+void gs_capture_release(gs_capture *cap);
+/* The per-cycle intensity of one pixel sample, in DN per flicker cycle: black level removed,
+ * divided by the cycles it integrated, (raw - black_level_dn) * (2^h / cycles). NaN when the
+ * sample is saturated (raw >= saturation_dn), when an index is out of range or the capture has
+ * no pixels. May be negative (noise below the black level). */
+double gs_capture_value(const gs_capture *cap, int k, int y, int x, int band);
+
+
+#endif
