@@ -95,7 +95,7 @@ gs_status cap_backend_replay_new(const char *dir, cap_backend **out)
     char path[CAP_PATH_MAX + 16], *text = NULL;
     snprintf(path, sizeof path, "%s/capture.json", dir);
     size_t n = 0;
-    s = cap_slurp(path, &text, &n);
+    s = gs_file_read(path, 0, &text, &n);
     if (s != GS_OK) {
         replay_free(b);
         return s;

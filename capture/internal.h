@@ -110,10 +110,8 @@ void *cap_backend_self(cap_backend *b, const cap_backend_ops *ops);
 uint64_t cap_fnv1a(uint64_t h, const void *data, size_t n);
 #define CAP_FNV_INIT 0xcbf29ce484222325ull
 
-/* Read a whole file (malloc'd, NUL-terminated); GS_EIO / GS_ENOTFOUND naming it. */
-gs_status cap_slurp(const char *path, char **text, size_t *size);
-/* Write data to dir/name atomically (temporary file, fsync, rename). */
-gs_status cap_write_atomic(const char *dir, const char *name, const void *data, size_t size);
+/* Write data to dir/name atomically (gs_file_write_atomic), creating dir (one level). */
+gs_status cap_write_in(const char *dir, const char *name, const void *data, size_t size);
 
 /* -------------------------------------------------- the videoio shim (videoio_shim.cpp) */
 

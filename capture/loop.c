@@ -114,7 +114,7 @@ static void file_sum(const char *dir, const char *name, long *bytes, uint64_t *f
     *bytes = -1;
     *fnv = 0;
     snprintf(path, sizeof path, "%s/%s", dir, name);
-    if (cap_slurp(path, &text, &n) != GS_OK) return;
+    if (gs_file_read(path, 0, &text, &n) != GS_OK) return;
     *bytes = (long)n;
     *fnv = cap_fnv1a(CAP_FNV_INIT, text, n);
     free(text);
@@ -155,7 +155,7 @@ static gs_status write_progress(const char *dir, uint64_t fp, long acquisitions,
         first = 0;
     }
     u += (size_t)snprintf(t + u, cap_n - u, "\n  ]\n}\n");
-    gs_status s = cap_write_atomic(dir, PROGRESS_FILE, t, u);
+    gs_status s = cap_write_in(dir, PROGRESS_FILE, t, u);
     free(t);
     return s;
 }
@@ -165,17 +165,17 @@ static gs_status write_progress(const char *dir, uint64_t fp, long acquisitions,
 static gs_status read_progress(const char *dir, uint64_t fp, int K, const gs_capture *cap,
                                frame_state *fs, long *acquisitions, int *complete, int *found)
 {
-    char path[CAP_PATH_MAX + 32], *text = NULL;
+    char path[CAP_PATH_MAX + 32];
     snprintf(path, sizeof path, "%s/%s", dir, PROGRESS_FILE);
     *found = 0;
     *complete = 0;
-    gs_status s = cap_slurp(path, &text, NULL);
+    gs_json *doc;
+    gs_status s = gs_json_load(path, 0, &doc);
     if (s == GS_ENOTFOUND) return GS_OK;
     if (s != GS_OK) return s;
-    json_error_t err;
-    json_t *root = json_loads(text, 0, &err);
-    free(text);
-    if (!root) return gs_fail(GS_EFORMAT, "%s:%d:%d: JSON syntax: %s", path, err.line, err.column, err.text);
+    /* read leniently: an entry that does not check out only means its frame is acquired again */
+    json_t *root = json_incref(gs_json_root(doc));
+    gs_json_free(doc);
     const char *f = json_string_value(json_object_get(root, "format"));
     const char *fps = json_string_value(json_object_get(root, "fingerprint"));
     json_t *frames = json_object_get(root, "frames");

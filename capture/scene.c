@@ -11,147 +11,12 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* ------------------------------------------------------------ JSON line locator */
-
-/* Jansson does not keep positions of values, so a small scanner over the (already valid) text
- * records the line of every member and element, by path ("lights[3].bulb"). */
-typedef struct {
-    char *path;
-    int line;
-} loc_entry;
-
-typedef struct {
-    const char *s;
-    size_t i, len;
-    int line;
-    loc_entry *e;
-    size_t n, cap;
-} jscan;
-
-static void js_add(jscan *sc, const char *path, int line)
-{
-    if (sc->n == sc->cap) {
-        size_t nc = sc->cap ? sc->cap * 2 : 256;
-        loc_entry *ne = realloc(sc->e, nc * sizeof *ne);
-        if (!ne) return;
-        sc->e = ne;
-        sc->cap = nc;
-    }
-    char *p = strdup(path);
-    if (!p) return;
-    sc->e[sc->n].path = p;
-    sc->e[sc->n].line = line;
-    sc->n++;
-}
-
-static void js_ws(jscan *sc)
-{
-    while (sc->i < sc->len) {
-        char c = sc->s[sc->i];
-        if (c == '\n') sc->line++;
-        else if (c != ' ' && c != '\t' && c != '\r') break;
-        sc->i++;
-    }
-}
-
-static void js_string(jscan *sc, char *out, size_t cap)
-{
-    size_t o = 0;
-    sc->i++; /* opening quote */
-    while (sc->i < sc->len && sc->s[sc->i] != '"') {
-        char c = sc->s[sc->i];
-        if (c == '\\' && sc->i + 1 < sc->len) {
-            sc->i++;
-            c = sc->s[sc->i];
-        }
-        if (out && o + 1 < cap) out[o++] = c;
-        sc->i++;
-    }
-    sc->i++; /* closing quote */
-    if (out && cap) out[o < cap ? o : cap - 1] = '\0';
-}
-
-static void js_value(jscan *sc, const char *path, int depth)
-{
-    js_ws(sc);
-    if (sc->i >= sc->len || depth > 64) return;
-    char c = sc->s[sc->i];
-    char sub[512];
-    if (c == '{') {
-        sc->i++;
-        for (;;) {
-            js_ws(sc);
-            if (sc->i >= sc->len) return;
-            if (sc->s[sc->i] == '}') {
-                sc->i++;
-                return;
-            }
-            if (sc->s[sc->i] == ',') {
-                sc->i++;
-                continue;
-            }
-            char key[256];
-            int line = sc->line;
-            js_string(sc, key, sizeof key);
-            snprintf(sub, sizeof sub, "%s%s%s", path, *path ? "." : "", key);
-            js_add(sc, sub, line);
-            js_ws(sc);
-            if (sc->i < sc->len && sc->s[sc->i] == ':') sc->i++;
-            js_value(sc, sub, depth + 1);
-        }
-    } else if (c == '[') {
-        sc->i++;
-        int idx = 0;
-        for (;;) {
-            js_ws(sc);
-            if (sc->i >= sc->len) return;
-            if (sc->s[sc->i] == ']') {
-                sc->i++;
-                return;
-            }
-            if (sc->s[sc->i] == ',') {
-                sc->i++;
-                continue;
-            }
-            snprintf(sub, sizeof sub, "%s[%d]", path, idx++);
-            js_add(sc, sub, sc->line);
-            js_value(sc, sub, depth + 1);
-        }
-    } else if (c == '"') {
-        js_string(sc, NULL, 0);
-    } else {
-        while (sc->i < sc->len && !strchr(",]} \t\r\n", sc->s[sc->i])) sc->i++;
-    }
-}
-
-static void js_free(jscan *sc)
-{
-    for (size_t i = 0; i < sc->n; i++) free(sc->e[i].path);
-    free(sc->e);
-    memset(sc, 0, sizeof *sc);
-}
-
-/* The line of path, else of its closest recorded ancestor, else 1. */
-static int js_line(const jscan *sc, const char *path)
-{
-    char p[512];
-    snprintf(p, sizeof p, "%s", path);
-    for (;;) {
-        for (size_t i = 0; i < sc->n; i++)
-            if (!strcmp(sc->e[i].path, p)) return sc->e[i].line;
-        char *dot = strrchr(p, '.'), *br = strrchr(p, '[');
-        char *cut = dot > br ? dot : br;
-        if (!cut) return 1;
-        *cut = '\0';
-    }
-}
-
 /* ------------------------------------------------------------------ parse context */
 
+/* A scene document (or a GeoJSON file it names) and the directory relative paths resolve in. */
 typedef struct {
-    const char *source;     /* file name for messages */
+    const gs_json *doc;
     const char *base_dir;
-    jscan loc;
 } pctx;
 
 static gs_status bad(const pctx *c, gs_status s, const char *path, const char *fmt, ...)
@@ -163,87 +28,16 @@ static gs_status bad(const pctx *c, gs_status s, const char *path, const char *f
     va_start(ap, fmt);
     vsnprintf(msg, sizeof msg, fmt, ap);
     va_end(ap);
-    return gs_fail(s, "%s:%d: field %s: %s", c->source, js_line(&c->loc, path), path, msg);
-}
-
-static void join_path(char *out, size_t cap, const char *parent, const char *key)
-{
-    snprintf(out, cap, "%s%s%s", parent, *parent ? "." : "", key);
-}
-
-/* Unknown keys are errors (usually typos); "comment", "description" and "x_*" are allowed. */
-static gs_status check_keys(const pctx *c, json_t *obj, const char *path,
-                            const char *const *allowed)
-{
-    const char *key;
-    json_t *v;
-    json_object_foreach(obj, key, v) {
-        (void)v;
-        int ok = !strcmp(key, "comment") || !strcmp(key, "description") ||
-                 !strncmp(key, "x_", 2);
-        for (const char *const *a = allowed; !ok && *a; a++) ok = !strcmp(key, *a);
-        if (!ok) {
-            char p[512], list[512] = "";
-            join_path(p, sizeof p, path, key);
-            for (const char *const *a = allowed; *a; a++) {
-                size_t u = strlen(list);
-                snprintf(list + u, sizeof list - u, "%s%s", a == allowed ? "" : ", ", *a);
-            }
-            return bad(c, GS_EFORMAT, p, "unknown field; expected one of: %s", list);
-        }
-    }
-    return GS_OK;
-}
-
-static gs_status get_object(const pctx *c, json_t *parent, const char *ppath, const char *key,
-                            int required, json_t **out)
-{
-    char p[512];
-    join_path(p, sizeof p, ppath, key);
-    json_t *v = json_object_get(parent, key);
-    *out = NULL;
-    if (!v) return required ? bad(c, GS_EFORMAT, p, "expected an object (required)") : GS_OK;
-    if (!json_is_object(v)) return bad(c, GS_EFORMAT, p, "expected an object");
-    *out = v;
-    return GS_OK;
-}
-
-static gs_status get_num(const pctx *c, json_t *obj, const char *ppath, const char *key,
-                         int required, double def, double lo, double hi, double *out)
-{
-    char p[512];
-    join_path(p, sizeof p, ppath, key);
-    json_t *v = obj ? json_object_get(obj, key) : NULL;
-    if (!v) {
-        if (required) return bad(c, GS_EFORMAT, p, "expected a number from %g to %g (required)", lo, hi);
-        *out = def;
-        return GS_OK;
-    }
-    if (!json_is_number(v)) return bad(c, GS_EFORMAT, p, "expected a number from %g to %g", lo, hi);
-    double x = json_number_value(v);
-    if (!isfinite(x) || x < lo || x > hi)
-        return bad(c, GS_EFORMAT, p, "%g: expected a number from %g to %g", x, lo, hi);
-    *out = x;
-    return GS_OK;
+    return gs_json_fail(c->doc, s, path, "%s", msg);
 }
 
 static gs_status get_long(const pctx *c, json_t *obj, const char *ppath, const char *key,
                           int required, long def, long lo, long hi, long *out)
 {
-    char p[512];
-    join_path(p, sizeof p, ppath, key);
-    json_t *v = obj ? json_object_get(obj, key) : NULL;
-    if (!v) {
-        if (required) return bad(c, GS_EFORMAT, p, "expected an integer from %ld to %ld (required)", lo, hi);
-        *out = def;
-        return GS_OK;
-    }
-    if (!json_is_integer(v)) return bad(c, GS_EFORMAT, p, "expected an integer from %ld to %ld", lo, hi);
-    json_int_t x = json_integer_value(v);
-    if (x < lo || x > hi)
-        return bad(c, GS_EFORMAT, p, "%lld: expected an integer from %ld to %ld", (long long)x, lo, hi);
-    *out = (long)x;
-    return GS_OK;
+    long long v;
+    gs_status s = gs_json_get_int(c->doc, obj, ppath, key, required, def, lo, hi, NULL, &v);
+    if (s == GS_OK) *out = (long)v;
+    return s;
 }
 
 static gs_status get_int(const pctx *c, json_t *obj, const char *ppath, const char *key,
@@ -253,65 +47,6 @@ static gs_status get_int(const pctx *c, json_t *obj, const char *ppath, const ch
     gs_status s = get_long(c, obj, ppath, key, required, def, lo, hi, &v);
     if (s == GS_OK) *out = (int)v;
     return s;
-}
-
-static gs_status get_bool(const pctx *c, json_t *obj, const char *ppath, const char *key,
-                          int def, int *out)
-{
-    char p[512];
-    join_path(p, sizeof p, ppath, key);
-    json_t *v = obj ? json_object_get(obj, key) : NULL;
-    if (!v) {
-        *out = def;
-        return GS_OK;
-    }
-    if (!json_is_boolean(v)) return bad(c, GS_EFORMAT, p, "expected true or false");
-    *out = json_is_true(v);
-    return GS_OK;
-}
-
-static gs_status get_str(const pctx *c, json_t *obj, const char *ppath, const char *key,
-                         int required, const char *def, char *out, size_t cap)
-{
-    char p[512];
-    join_path(p, sizeof p, ppath, key);
-    json_t *v = obj ? json_object_get(obj, key) : NULL;
-    if (!v) {
-        if (required) return bad(c, GS_EFORMAT, p, "expected a string (required)");
-        snprintf(out, cap, "%s", def ? def : "");
-        return GS_OK;
-    }
-    if (!json_is_string(v)) return bad(c, GS_EFORMAT, p, "expected a string");
-    const char *s = json_string_value(v);
-    if (strlen(s) >= cap) return bad(c, GS_EFORMAT, p, "expected a string of at most %zu characters", cap - 1);
-    snprintf(out, cap, "%s", s);
-    return GS_OK;
-}
-
-/* Reads a numeric array of exactly n (n > 0) or 1..max (n == 0) values into out. */
-static gs_status get_array(const pctx *c, json_t *obj, const char *ppath, const char *key,
-                           size_t n, size_t max, double lo, double hi, double *out, size_t *count)
-{
-    char p[512];
-    join_path(p, sizeof p, ppath, key);
-    json_t *v = json_object_get(obj, key);
-    if (!json_is_array(v) || (n && json_array_size(v) != n) ||
-        (!n && (json_array_size(v) < 1 || json_array_size(v) > max))) {
-        if (n) return bad(c, GS_EFORMAT, p, "expected an array of %zu numbers from %g to %g", n, lo, hi);
-        return bad(c, GS_EFORMAT, p, "expected an array of 1 to %zu numbers from %g to %g", max, lo, hi);
-    }
-    for (size_t i = 0; i < json_array_size(v); i++) {
-        json_t *x = json_array_get(v, i);
-        double d = json_is_number(x) ? json_number_value(x) : NAN;
-        if (!isfinite(d) || d < lo || d > hi) {
-            char q[540];
-            snprintf(q, sizeof q, "%s[%zu]", p, i);
-            return bad(c, GS_EFORMAT, q, "expected a number from %g to %g", lo, hi);
-        }
-        out[i] = d;
-    }
-    if (count) *count = json_array_size(v);
-    return GS_OK;
 }
 
 static void resolve(const pctx *c, const char *rel, char *out, size_t cap)
@@ -411,12 +146,12 @@ static gs_status parse_light(const pctx *c, const cap_scene *sc, json_t *o, cons
 {
     gs_status s;
     memset(l, 0, sizeof *l);
-    if ((s = check_keys(c, o, path, light_keys)) != GS_OK) return s;
+    if ((s = gs_json_check_keys(c->doc, o, path, light_keys)) != GS_OK) return s;
     char def_id[48];
     snprintf(def_id, sizeof def_id, "L%d", index);
-    if ((s = get_str(c, o, path, "id", 0, def_id, l->id, sizeof l->id)) != GS_OK ||
-        (s = get_str(c, o, path, "bulb", 1, NULL, l->bulb, sizeof l->bulb)) != GS_OK ||
-        (s = get_num(c, o, path, "phase_deg", 0, 0, -360, 720, &l->phase_deg)) != GS_OK)
+    if ((s = gs_json_get_str(c->doc, o, path, "id", 0, def_id, l->id, sizeof l->id)) != GS_OK ||
+        (s = gs_json_get_str(c->doc, o, path, "bulb", 1, NULL, l->bulb, sizeof l->bulb)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, o, path, "phase_deg", 0, 0, -360, 720, NULL, &l->phase_deg)) != GS_OK)
         return s;
     int has_px = json_object_get(o, "x_px") || json_object_get(o, "y_px");
     int has_geo = json_object_get(o, "lat_deg") || json_object_get(o, "lon_deg");
@@ -427,15 +162,15 @@ static gs_status parse_light(const pctx *c, const cap_scene *sc, json_t *o, cons
                    "lon_deg and height_m (a geographic light)");
     }
     if (has_px) {
-        if ((s = get_num(c, o, path, "x_px", 1, 0, -1e6, 1e6, &l->x_px)) != GS_OK ||
-            (s = get_num(c, o, path, "y_px", 1, 0, -1e6, 1e6, &l->y_px)) != GS_OK ||
-            (s = get_num(c, o, path, "distance_m", 0, 0, 0, 1e7, &l->distance_m)) != GS_OK)
+        if ((s = gs_json_get_num(c->doc, o, path, "x_px", 1, 0, -1e6, 1e6, NULL, &l->x_px)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, path, "y_px", 1, 0, -1e6, 1e6, NULL, &l->y_px)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, path, "distance_m", 0, 0, 0, 1e7, NULL, &l->distance_m)) != GS_OK)
             return s;
     } else {
         l->geographic = 1;
-        if ((s = get_num(c, o, path, "lat_deg", 1, 0, -90, 90, &l->lat_deg)) != GS_OK ||
-            (s = get_num(c, o, path, "lon_deg", 1, 0, -540, 540, &l->lon_deg)) != GS_OK ||
-            (s = get_num(c, o, path, "height_m", 1, 0, GIS_MIN_HEIGHT_M, GIS_MAX_HEIGHT_M,
+        if ((s = gs_json_get_num(c->doc, o, path, "lat_deg", 1, 0, -90, 90, NULL, &l->lat_deg)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, path, "lon_deg", 1, 0, -540, 540, NULL, &l->lon_deg)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, path, "height_m", 1, 0, GIS_MIN_HEIGHT_M, GIS_MAX_HEIGHT_M, NULL,
                          &l->height_m)) != GS_OK)
             return s;
         if (json_object_get(o, "distance_m")) {
@@ -449,8 +184,8 @@ static gs_status parse_light(const pctx *c, const cap_scene *sc, json_t *o, cons
         return bad(c, GS_EFORMAT, p, "expected exactly one of lumens (luminous power, lm) and "
                    "flux_e_per_cycle (photo-electrons per cycle at the sensor)");
     }
-    if (has_lm) s = get_num(c, o, path, "lumens", 1, 0, 0, 1e9, &l->lumens);
-    else s = get_num(c, o, path, "flux_e_per_cycle", 1, 0, 0, 1e15, &l->flux_e_per_cycle);
+    if (has_lm) s = gs_json_get_num(c->doc, o, path, "lumens", 1, 0, 0, 1e9, NULL, &l->lumens);
+    else s = gs_json_get_num(c->doc, o, path, "flux_e_per_cycle", 1, 0, 0, 1e15, NULL, &l->flux_e_per_cycle);
     if (s != GS_OK) return s;
     return finish_light(c, sc, l, path, has_lm);
 }
@@ -462,32 +197,31 @@ static gs_status parse_geojson(const pctx *c, cap_scene *sc, json_t *blk, const 
     static const char *const keys[] = {"type", "file", "defaults", NULL};
     static const char *const dkeys[] = {"bulb", "phase_deg", "lumens", "flux_e_per_cycle",
                                         "height_m", NULL};
-    gs_status s = check_keys(c, blk, path, keys);
+    gs_status s = gs_json_check_keys(c->doc, blk, path, keys);
     if (s != GS_OK) return s;
     char rel[CAP_PATH_MAX], file[CAP_PATH_MAX * 2];
-    if ((s = get_str(c, blk, path, "file", 1, NULL, rel, sizeof rel)) != GS_OK) return s;
+    if ((s = gs_json_get_str(c->doc, blk, path, "file", 1, NULL, rel, sizeof rel)) != GS_OK) return s;
     json_t *defs = NULL;
-    if ((s = get_object(c, blk, path, "defaults", 0, &defs)) != GS_OK) return s;
+    if ((s = gs_json_get_obj(c->doc, blk, path, "defaults", 0, &defs)) != GS_OK) return s;
     char dpath[560];
     snprintf(dpath, sizeof dpath, "%s.defaults", path);
-    if (defs && (s = check_keys(c, defs, dpath, dkeys)) != GS_OK) return s;
+    if (defs && (s = gs_json_check_keys(c->doc, defs, dpath, dkeys)) != GS_OK) return s;
     resolve(c, rel, file, sizeof file);
     char *text = NULL;
-    if ((s = cap_slurp(file, &text, NULL)) != GS_OK) {
+    size_t n_text;
+    if ((s = gs_file_read(file, 0, &text, &n_text)) != GS_OK) {
         char fp[560];
         snprintf(fp, sizeof fp, "%s.file", path);
         return bad(c, s, fp, "%s", gs_detail());
     }
     /* the file is part of the scene's identity (resume refuses a changed one) */
-    sc->fingerprint = cap_fnv1a(sc->fingerprint, text, strlen(text));
-    json_error_t err;
-    json_t *root = json_loads(text, JSON_REJECT_DUPLICATES, &err);
-    pctx g = {file, c->base_dir, {text, 0, strlen(text), 1, NULL, 0, 0}};
-    if (!root) {
-        free(text);
-        return gs_fail(GS_EFORMAT, "%s:%d:%d: JSON syntax: %s", file, err.line, err.column, err.text);
-    }
-    js_value(&g.loc, "", 0);
+    sc->fingerprint = cap_fnv1a(sc->fingerprint, text, n_text);
+    gs_json *gdoc;
+    s = gs_json_parse(text, n_text, file, &gdoc);
+    free(text);
+    if (s != GS_OK) return s;
+    pctx g = {gdoc, c->base_dir};
+    json_t *root = gs_json_root(gdoc);
     json_t *feats = json_object_get(root, "features");
     const char *type = json_string_value(json_object_get(root, "type"));
     if (!type || strcmp(type, "FeatureCollection") || !json_is_array(feats)) {
@@ -595,9 +329,7 @@ static gs_status parse_geojson(const pctx *c, cap_scene *sc, json_t *blk, const 
     }
     s = GS_OK;
 done:
-    json_decref(root);
-    js_free(&g.loc);
-    free(text);
+    gs_json_free(gdoc);
     return s;
 }
 
@@ -614,7 +346,7 @@ static gs_status parse_street_grid(const pctx *c, const cap_scene *sc, json_t *b
                                        "phases_deg", "transformer_fraction", "lumens_spread",
                                        "only_in_image", NULL};
     static const char *const tkeys[] = {"bulb", "weight", "lumens", NULL};
-    gs_status s = check_keys(c, b, path, keys);
+    gs_status s = gs_json_check_keys(c->doc, b, path, keys);
     if (s != GS_OK) return s;
     long seed;
     double size[2], rot, street, spacing, jitter, ground, pole, rmin, rmax, district, tf, spread;
@@ -625,25 +357,25 @@ static gs_status parse_street_grid(const pctx *c, const cap_scene *sc, json_t *b
     char cp[560];
     snprintf(cp, sizeof cp, "%s.center", path);
     if ((s = get_long(c, b, path, "seed", 0, (long)((sc->seed + 1000003ull * (unsigned)index) & 0x7fffffff), 0, 0x7fffffffL, &seed)) != GS_OK ||
-        (s = get_object(c, b, path, "center", 1, &center)) != GS_OK ||
-        (s = get_num(c, center, cp, "lat_deg", 1, 0, -89, 89, &lat0)) != GS_OK ||
-        (s = get_num(c, center, cp, "lon_deg", 1, 0, -540, 540, &lon0)) != GS_OK ||
-        (s = get_array(c, b, path, "size_m", 2, 2, 1, 1e5, size, NULL)) != GS_OK ||
-        (s = get_num(c, b, path, "rotation_deg", 0, 0, -360, 360, &rot)) != GS_OK ||
-        (s = get_num(c, b, path, "street_spacing_m", 1, 0, 10, 1e4, &street)) != GS_OK ||
-        (s = get_num(c, b, path, "light_spacing_m", 1, 0, 5, 1e4, &spacing)) != GS_OK ||
-        (s = get_num(c, b, path, "jitter_m", 0, 0, 0, 100, &jitter)) != GS_OK ||
-        (s = get_num(c, b, path, "ground_height_m", 0, 0, GIS_MIN_HEIGHT_M, 1e4, &ground)) != GS_OK ||
-        (s = get_num(c, b, path, "pole_height_m", 0, 8, 0, 300, &pole)) != GS_OK ||
-        (s = get_num(c, b, path, "min_range_m", 0, 0, 0, 1e6, &rmin)) != GS_OK ||
-        (s = get_num(c, b, path, "max_range_m", 0, 1e6, 1, 1e7, &rmax)) != GS_OK ||
-        (s = get_num(c, b, path, "district_m", 0, 1000, 10, 1e5, &district)) != GS_OK ||
-        (s = get_num(c, b, path, "transformer_fraction", 0, 0, 0, 1, &tf)) != GS_OK ||
-        (s = get_num(c, b, path, "lumens_spread", 0, 0.1, 0, 1, &spread)) != GS_OK ||
-        (s = get_bool(c, b, path, "only_in_image", 1, &only)) != GS_OK)
+        (s = gs_json_get_obj(c->doc, b, path, "center", 1, &center)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, center, cp, "lat_deg", 1, 0, -89, 89, NULL, &lat0)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, center, cp, "lon_deg", 1, 0, -540, 540, NULL, &lon0)) != GS_OK ||
+        (s = gs_json_get_num_array(c->doc, b, path, "size_m", 2, 2, 1, 1e5, size, NULL)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, b, path, "rotation_deg", 0, 0, -360, 360, NULL, &rot)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, b, path, "street_spacing_m", 1, 0, 10, 1e4, NULL, &street)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, b, path, "light_spacing_m", 1, 0, 5, 1e4, NULL, &spacing)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, b, path, "jitter_m", 0, 0, 0, 100, NULL, &jitter)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, b, path, "ground_height_m", 0, 0, GIS_MIN_HEIGHT_M, 1e4, NULL, &ground)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, b, path, "pole_height_m", 0, 8, 0, 300, NULL, &pole)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, b, path, "min_range_m", 0, 0, 0, 1e6, NULL, &rmin)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, b, path, "max_range_m", 0, 1e6, 1, 1e7, NULL, &rmax)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, b, path, "district_m", 0, 1000, 10, 1e5, NULL, &district)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, b, path, "transformer_fraction", 0, 0, 0, 1, NULL, &tf)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, b, path, "lumens_spread", 0, 0.1, 0, 1, NULL, &spread)) != GS_OK ||
+        (s = gs_json_get_bool(c->doc, b, path, "only_in_image", 0, 1, &only)) != GS_OK)
         return s;
     if (json_object_get(b, "phases_deg")) {
-        if ((s = get_array(c, b, path, "phases_deg", 0, 12, -360, 360, phases, &n_phases)) != GS_OK)
+        if ((s = gs_json_get_num_array(c->doc, b, path, "phases_deg", 0, 12, -360, 360, phases, &n_phases)) != GS_OK)
             return s;
     } else {
         n_phases = (size_t)sc->n_phases;
@@ -663,10 +395,10 @@ static gs_status parse_street_grid(const pctx *c, const cap_scene *sc, json_t *b
         snprintf(ip, sizeof ip, "%s[%zu]", tp, i);
         json_t *t = json_array_get(techs, i);
         if (!json_is_object(t)) return bad(c, GS_EFORMAT, ip, "expected an object {bulb, weight, lumens}");
-        if ((s = check_keys(c, t, ip, tkeys)) != GS_OK ||
-            (s = get_str(c, t, ip, "bulb", 1, NULL, tbulb[i], GS_ID_MAX)) != GS_OK ||
-            (s = get_num(c, t, ip, "weight", 0, 1, 0, 1e9, &tw[i])) != GS_OK ||
-            (s = get_num(c, t, ip, "lumens", 1, 0, 0, 1e9, &tlm[i])) != GS_OK)
+        if ((s = gs_json_check_keys(c->doc, t, ip, tkeys)) != GS_OK ||
+            (s = gs_json_get_str(c->doc, t, ip, "bulb", 1, NULL, tbulb[i], GS_ID_MAX)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, t, ip, "weight", 0, 1, 0, 1e9, NULL, &tw[i])) != GS_OK ||
+            (s = gs_json_get_num(c->doc, t, ip, "lumens", 1, 0, 0, 1e9, NULL, &tlm[i])) != GS_OK)
             return s;
         wsum += tw[i];
     }
@@ -742,7 +474,7 @@ static gs_status parse_chroma(const pctx *c, json_t *o, const char *path, int ba
     for (int b = 0; b < 3; b++) q[b] = 1.0 / bands;
     if (!json_object_get(o, "chroma")) return GS_OK;
     double v[3];
-    gs_status s = get_array(c, o, path, "chroma", (size_t)bands, 3, 0, 1e6, v, NULL);
+    gs_status s = gs_json_get_num_array(c->doc, o, path, "chroma", (size_t)bands, 3, 0, 1e6, v, NULL);
     if (s != GS_OK) return s;
     double sum = 0;
     for (int b = 0; b < bands; b++) sum += v[b];
@@ -764,22 +496,22 @@ static gs_status parse_effect(const pctx *c, cap_scene *sc, cap_effect e, json_t
     case CAP_FX_SHOT_NOISE:
     case CAP_FX_SATURATION:
     case CAP_FX_ADC:
-        return check_keys(c, o, path, none);
+        return gs_json_check_keys(c->doc, o, path, none);
     case CAP_FX_FREE_RUNNING_DRIFT: {
         static const char *const k[] = {"clock_ppm", NULL};
-        if ((s = check_keys(c, o, path, k)) != GS_OK) return s;
-        return get_num(c, o, path, "clock_ppm", 0, 0, -1000, 1000, &fx->drift.clock_ppm);
+        if ((s = gs_json_check_keys(c->doc, o, path, k)) != GS_OK) return s;
+        return gs_json_get_num(c->doc, o, path, "clock_ppm", 0, 0, -1000, 1000, NULL, &fx->drift.clock_ppm);
     }
     case CAP_FX_DMD_JITTER: {
         static const char *const k[] = {"sigma_us", NULL};
-        if ((s = check_keys(c, o, path, k)) != GS_OK) return s;
-        return get_num(c, o, path, "sigma_us", 1, 0, 0, 1000, &fx->jitter.sigma_us);
+        if ((s = gs_json_check_keys(c->doc, o, path, k)) != GS_OK) return s;
+        return gs_json_get_num(c->doc, o, path, "sigma_us", 1, 0, 0, 1000, NULL, &fx->jitter.sigma_us);
     }
     case CAP_FX_EXTINCTION: {
         static const char *const k[] = {"visibility_km", "angstrom_exponent", "wavelengths_nm", NULL};
-        if ((s = check_keys(c, o, path, k)) != GS_OK ||
-            (s = get_num(c, o, path, "visibility_km", 1, 0, 0.01, 1000, &fx->extinction.visibility_km)) != GS_OK ||
-            (s = get_num(c, o, path, "angstrom_exponent", 0, 1.3, 0, 4, &fx->extinction.angstrom)) != GS_OK)
+        if ((s = gs_json_check_keys(c->doc, o, path, k)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, path, "visibility_km", 1, 0, 0.01, 1000, NULL, &fx->extinction.visibility_km)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, path, "angstrom_exponent", 0, 1.3, 0, 4, NULL, &fx->extinction.angstrom)) != GS_OK)
             return s;
         if (sc->bands == 3) {
             fx->extinction.wavelength_nm[0] = 650;
@@ -789,30 +521,30 @@ static gs_status parse_effect(const pctx *c, cap_scene *sc, cap_effect e, json_t
             fx->extinction.wavelength_nm[0] = 550;
         }
         if (json_object_get(o, "wavelengths_nm"))
-            s = get_array(c, o, path, "wavelengths_nm", (size_t)sc->bands, 3, 200, 2000,
+            s = gs_json_get_num_array(c->doc, o, path, "wavelengths_nm", (size_t)sc->bands, 3, 200, 2000,
                           fx->extinction.wavelength_nm, NULL);
         return s;
     }
     case CAP_FX_SCINTILLATION: {
         static const char *const k[] = {"cn2", "wavelength_nm", "crosswind_m_s", "source_size_m",
                                         "aperture_averaging", "intensity_variance", NULL};
-        if ((s = check_keys(c, o, path, k)) != GS_OK ||
-            (s = get_num(c, o, path, "cn2", 0, 1e-14, 0, 1e-10, &fx->scint.cn2)) != GS_OK ||
-            (s = get_num(c, o, path, "wavelength_nm", 0, 550, 200, 2000, &fx->scint.wavelength_nm)) != GS_OK ||
-            (s = get_num(c, o, path, "crosswind_m_s", 0, 2, 0.01, 100, &fx->scint.crosswind_m_s)) != GS_OK ||
-            (s = get_num(c, o, path, "source_size_m", 0, 0, 0, 100, &fx->scint.source_size_m)) != GS_OK ||
-            (s = get_bool(c, o, path, "aperture_averaging", 1, &fx->scint.aperture)) != GS_OK ||
-            (s = get_num(c, o, path, "intensity_variance", 0, -1, 0, 100, &fx->scint.sigma2)) != GS_OK)
+        if ((s = gs_json_check_keys(c->doc, o, path, k)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, path, "cn2", 0, 1e-14, 0, 1e-10, NULL, &fx->scint.cn2)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, path, "wavelength_nm", 0, 550, 200, 2000, NULL, &fx->scint.wavelength_nm)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, path, "crosswind_m_s", 0, 2, 0.01, 100, NULL, &fx->scint.crosswind_m_s)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, path, "source_size_m", 0, 0, 0, 100, NULL, &fx->scint.source_size_m)) != GS_OK ||
+            (s = gs_json_get_bool(c->doc, o, path, "aperture_averaging", 0, 1, &fx->scint.aperture)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, path, "intensity_variance", 0, -1, 0, 100, NULL, &fx->scint.sigma2)) != GS_OK)
             return s;
         return GS_OK;
     }
     case CAP_FX_PSF: {
         static const char *const k[] = {"model", "sigma_px", "radius_sigma", NULL};
         char model[32];
-        if ((s = check_keys(c, o, path, k)) != GS_OK ||
-            (s = get_str(c, o, path, "model", 0, "gaussian", model, sizeof model)) != GS_OK ||
-            (s = get_num(c, o, path, "sigma_px", 1, 0, 0.05, 50, &fx->psf.sigma_px)) != GS_OK ||
-            (s = get_num(c, o, path, "radius_sigma", 0, 4, 2, 8, &fx->psf.radius_sigma)) != GS_OK)
+        if ((s = gs_json_check_keys(c->doc, o, path, k)) != GS_OK ||
+            (s = gs_json_get_str(c->doc, o, path, "model", 0, "gaussian", model, sizeof model)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, path, "sigma_px", 1, 0, 0.05, 50, NULL, &fx->psf.sigma_px)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, path, "radius_sigma", 0, 4, 2, 8, NULL, &fx->psf.radius_sigma)) != GS_OK)
             return s;
         if (strcmp(model, "gaussian")) {
             char p[560];
@@ -824,11 +556,11 @@ static gs_status parse_effect(const pctx *c, cap_scene *sc, cap_effect e, json_t
     case CAP_FX_SKYGLOW: {
         static const char *const k[] = {"fraction", "scale_px", "radius_scale", "flicker", NULL};
         char fl[16];
-        if ((s = check_keys(c, o, path, k)) != GS_OK ||
-            (s = get_num(c, o, path, "fraction", 1, 0, 0, 10, &fx->skyglow.fraction)) != GS_OK ||
-            (s = get_num(c, o, path, "scale_px", 1, 0, 0.2, 200, &fx->skyglow.scale_px)) != GS_OK ||
-            (s = get_num(c, o, path, "radius_scale", 0, 5, 1, 20, &fx->skyglow.radius_scale)) != GS_OK ||
-            (s = get_str(c, o, path, "flicker", 0, "flat", fl, sizeof fl)) != GS_OK)
+        if ((s = gs_json_check_keys(c->doc, o, path, k)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, path, "fraction", 1, 0, 0, 10, NULL, &fx->skyglow.fraction)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, path, "scale_px", 1, 0, 0.2, 200, NULL, &fx->skyglow.scale_px)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, path, "radius_scale", 0, 5, 1, 20, NULL, &fx->skyglow.radius_scale)) != GS_OK ||
+            (s = gs_json_get_str(c->doc, o, path, "flicker", 0, "flat", fl, sizeof fl)) != GS_OK)
             return s;
         if (!strcmp(fl, "flat")) fx->skyglow.flicker = CAP_GLOW_FLAT;
         else if (!strcmp(fl, "same")) fx->skyglow.flicker = CAP_GLOW_SAME;
@@ -844,7 +576,7 @@ static gs_status parse_effect(const pctx *c, cap_scene *sc, cap_effect e, json_t
         static const char *const k[] = {"signs", NULL};
         static const char *const sk[] = {"x_px", "y_px", "width_px", "height_px", "period_s",
                                          "duty", "phase_s", "flux_e_per_cycle", "chroma", NULL};
-        if ((s = check_keys(c, o, path, k)) != GS_OK) return s;
+        if ((s = gs_json_check_keys(c->doc, o, path, k)) != GS_OK) return s;
         json_t *arr = json_object_get(o, "signs");
         char p[560];
         snprintf(p, sizeof p, "%s.signs", path);
@@ -860,15 +592,15 @@ static gs_status parse_effect(const pctx *c, cap_scene *sc, cap_effect e, json_t
             json_t *so = json_array_get(arr, i);
             cap_sign *g = &fx->signs.items[i];
             if (!json_is_object(so)) return bad(c, GS_EFORMAT, ip, "expected an object");
-            if ((s = check_keys(c, so, ip, sk)) != GS_OK ||
-                (s = get_num(c, so, ip, "x_px", 1, 0, -1e5, 1e5, &g->x_px)) != GS_OK ||
-                (s = get_num(c, so, ip, "y_px", 1, 0, -1e5, 1e5, &g->y_px)) != GS_OK ||
-                (s = get_num(c, so, ip, "width_px", 0, 1, 1, 1e4, &g->width_px)) != GS_OK ||
-                (s = get_num(c, so, ip, "height_px", 0, 1, 1, 1e4, &g->height_px)) != GS_OK ||
-                (s = get_num(c, so, ip, "period_s", 1, 0, 1e-3, 1e5, &g->period_s)) != GS_OK ||
-                (s = get_num(c, so, ip, "duty", 0, 0.5, 0, 1, &g->duty)) != GS_OK ||
-                (s = get_num(c, so, ip, "phase_s", 0, 0, -1e6, 1e6, &g->phase_s)) != GS_OK ||
-                (s = get_num(c, so, ip, "flux_e_per_cycle", 1, 0, 0, 1e15, &g->flux_e_per_cycle)) != GS_OK ||
+            if ((s = gs_json_check_keys(c->doc, so, ip, sk)) != GS_OK ||
+                (s = gs_json_get_num(c->doc, so, ip, "x_px", 1, 0, -1e5, 1e5, NULL, &g->x_px)) != GS_OK ||
+                (s = gs_json_get_num(c->doc, so, ip, "y_px", 1, 0, -1e5, 1e5, NULL, &g->y_px)) != GS_OK ||
+                (s = gs_json_get_num(c->doc, so, ip, "width_px", 0, 1, 1, 1e4, NULL, &g->width_px)) != GS_OK ||
+                (s = gs_json_get_num(c->doc, so, ip, "height_px", 0, 1, 1, 1e4, NULL, &g->height_px)) != GS_OK ||
+                (s = gs_json_get_num(c->doc, so, ip, "period_s", 1, 0, 1e-3, 1e5, NULL, &g->period_s)) != GS_OK ||
+                (s = gs_json_get_num(c->doc, so, ip, "duty", 0, 0.5, 0, 1, NULL, &g->duty)) != GS_OK ||
+                (s = gs_json_get_num(c->doc, so, ip, "phase_s", 0, 0, -1e6, 1e6, NULL, &g->phase_s)) != GS_OK ||
+                (s = gs_json_get_num(c->doc, so, ip, "flux_e_per_cycle", 1, 0, 0, 1e15, NULL, &g->flux_e_per_cycle)) != GS_OK ||
                 (s = parse_chroma(c, so, ip, sc->bands, g->chroma)) != GS_OK)
                 return s;
         }
@@ -878,7 +610,7 @@ static gs_status parse_effect(const pctx *c, cap_scene *sc, cap_effect e, json_t
         static const char *const k[] = {"cars", NULL};
         static const char *const ck[] = {"from", "to", "speed_px_s", "period_s", "offset_s",
                                          "flux_e_per_cycle", "chroma", NULL};
-        if ((s = check_keys(c, o, path, k)) != GS_OK) return s;
+        if ((s = gs_json_check_keys(c->doc, o, path, k)) != GS_OK) return s;
         json_t *arr = json_object_get(o, "cars");
         char p[560];
         snprintf(p, sizeof p, "%s.cars", path);
@@ -895,13 +627,13 @@ static gs_status parse_effect(const pctx *c, cap_scene *sc, cap_effect e, json_t
             cap_car *g = &fx->cars.items[i];
             double from[2], to[2];
             if (!json_is_object(co)) return bad(c, GS_EFORMAT, ip, "expected an object");
-            if ((s = check_keys(c, co, ip, ck)) != GS_OK ||
-                (s = get_array(c, co, ip, "from", 2, 2, -1e5, 1e5, from, NULL)) != GS_OK ||
-                (s = get_array(c, co, ip, "to", 2, 2, -1e5, 1e5, to, NULL)) != GS_OK ||
-                (s = get_num(c, co, ip, "speed_px_s", 1, 0, 1e-3, 1e6, &g->speed_px_s)) != GS_OK ||
-                (s = get_num(c, co, ip, "period_s", 1, 0, 1e-2, 1e5, &g->period_s)) != GS_OK ||
-                (s = get_num(c, co, ip, "offset_s", 0, 0, -1e6, 1e6, &g->offset_s)) != GS_OK ||
-                (s = get_num(c, co, ip, "flux_e_per_cycle", 1, 0, 0, 1e15, &g->flux_e_per_cycle)) != GS_OK ||
+            if ((s = gs_json_check_keys(c->doc, co, ip, ck)) != GS_OK ||
+                (s = gs_json_get_num_array(c->doc, co, ip, "from", 2, 2, -1e5, 1e5, from, NULL)) != GS_OK ||
+                (s = gs_json_get_num_array(c->doc, co, ip, "to", 2, 2, -1e5, 1e5, to, NULL)) != GS_OK ||
+                (s = gs_json_get_num(c->doc, co, ip, "speed_px_s", 1, 0, 1e-3, 1e6, NULL, &g->speed_px_s)) != GS_OK ||
+                (s = gs_json_get_num(c->doc, co, ip, "period_s", 1, 0, 1e-2, 1e5, NULL, &g->period_s)) != GS_OK ||
+                (s = gs_json_get_num(c->doc, co, ip, "offset_s", 0, 0, -1e6, 1e6, NULL, &g->offset_s)) != GS_OK ||
+                (s = gs_json_get_num(c->doc, co, ip, "flux_e_per_cycle", 1, 0, 0, 1e15, NULL, &g->flux_e_per_cycle)) != GS_OK ||
                 (s = parse_chroma(c, co, ip, sc->bands, g->chroma)) != GS_OK)
                 return s;
             g->x0_px = from[0];
@@ -913,18 +645,18 @@ static gs_status parse_effect(const pctx *c, cap_scene *sc, cap_effect e, json_t
     }
     case CAP_FX_AMBIENT: {
         static const char *const k[] = {"e_per_px_cycle", "top", "bottom", "chroma", NULL};
-        if ((s = check_keys(c, o, path, k)) != GS_OK ||
-            (s = get_num(c, o, path, "e_per_px_cycle", 1, 0, 0, 1e9, &fx->ambient.e_per_px_cycle)) != GS_OK ||
-            (s = get_num(c, o, path, "top", 0, 1, 0, 1e3, &fx->ambient.top)) != GS_OK ||
-            (s = get_num(c, o, path, "bottom", 0, 1, 0, 1e3, &fx->ambient.bottom)) != GS_OK ||
+        if ((s = gs_json_check_keys(c->doc, o, path, k)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, path, "e_per_px_cycle", 1, 0, 0, 1e9, NULL, &fx->ambient.e_per_px_cycle)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, path, "top", 0, 1, 0, 1e3, NULL, &fx->ambient.top)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, path, "bottom", 0, 1, 0, 1e3, NULL, &fx->ambient.bottom)) != GS_OK ||
             (s = parse_chroma(c, o, path, sc->bands, fx->ambient.chroma)) != GS_OK)
             return s;
         return GS_OK;
     }
     case CAP_FX_READ_NOISE: {
         static const char *const k[] = {"sigma_e", NULL};
-        if ((s = check_keys(c, o, path, k)) != GS_OK) return s;
-        return get_num(c, o, path, "sigma_e", 0, sc->read_noise_e, 0, 1e6, &fx->read_noise.sigma_e);
+        if ((s = gs_json_check_keys(c->doc, o, path, k)) != GS_OK) return s;
+        return gs_json_get_num(c->doc, o, path, "sigma_e", 0, sc->read_noise_e, 0, 1e6, NULL, &fx->read_noise.sigma_e);
     }
     case CAP_FX_COUNT:
         break;
@@ -965,30 +697,30 @@ static gs_status parse_freq(const pctx *c, cap_scene *sc, json_t *g)
     f->hz = sc->grid_hz;
     f->seed = sc->seed;
     json_t *o = NULL;
-    gs_status s = get_object(c, g, "grid", "frequency", 0, &o);
+    gs_status s = gs_json_get_obj(c->doc, g, "grid", "frequency", 0, &o);
     if (s != GS_OK || !o) return s;
     const char *P = "grid.frequency";
     char model[32];
-    if ((s = check_keys(c, o, P, keys)) != GS_OK ||
-        (s = get_str(c, o, P, "model", 0, "constant", model, sizeof model)) != GS_OK)
+    if ((s = gs_json_check_keys(c->doc, o, P, keys)) != GS_OK ||
+        (s = gs_json_get_str(c->doc, o, P, "model", 0, "constant", model, sizeof model)) != GS_OK)
         return s;
     double lo = 0.9 * sc->grid_hz, hi = 1.1 * sc->grid_hz;
     if (!strcmp(model, "constant")) {
-        return get_num(c, o, P, "hz", 0, sc->grid_hz, lo, hi, &f->hz);
+        return gs_json_get_num(c->doc, o, P, "hz", 0, sc->grid_hz, lo, hi, NULL, &f->hz);
     } else if (!strcmp(model, "random_walk")) {
         f->model = CAP_FREQ_RANDOM_WALK;
-        if ((s = get_num(c, o, P, "mean_hz", 0, sc->grid_hz, lo, hi, &f->hz)) != GS_OK ||
-            (s = get_num(c, o, P, "sigma_hz", 0, 0.02, 0, 1, &f->sigma_hz)) != GS_OK ||
-            (s = get_num(c, o, P, "corr_time_s", 0, 18.8, 0.01, 1e5, &f->corr_time_s)) != GS_OK ||
-            (s = get_num(c, o, P, "fast_sigma_hz", 0, 0.002, 0, 1, &f->fast_sigma_hz)) != GS_OK ||
-            (s = get_num(c, o, P, "fast_corr_time_s", 0, 1.0, 0.01, 1e5, &f->fast_corr_time_s)) != GS_OK)
+        if ((s = gs_json_get_num(c->doc, o, P, "mean_hz", 0, sc->grid_hz, lo, hi, NULL, &f->hz)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, P, "sigma_hz", 0, 0.02, 0, 1, NULL, &f->sigma_hz)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, P, "corr_time_s", 0, 18.8, 0.01, 1e5, NULL, &f->corr_time_s)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, P, "fast_sigma_hz", 0, 0.002, 0, 1, NULL, &f->fast_sigma_hz)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, P, "fast_corr_time_s", 0, 1.0, 0.01, 1e5, NULL, &f->fast_corr_time_s)) != GS_OK)
             return s;
         return GS_OK;
     } else if (!strcmp(model, "trace")) {
         f->model = CAP_FREQ_TRACE;
         char rel[CAP_PATH_MAX];
-        if ((s = get_str(c, o, P, "wav", 1, NULL, rel, sizeof rel)) != GS_OK ||
-            (s = get_num(c, o, P, "start_s", 0, 0, 0, 1e7, &f->start_s)) != GS_OK)
+        if ((s = gs_json_get_str(c->doc, o, P, "wav", 1, NULL, rel, sizeof rel)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, o, P, "start_s", 0, 0, 0, 1e7, NULL, &f->start_s)) != GS_OK)
             return s;
         char full[CAP_PATH_MAX * 2];
         resolve(c, rel, full, sizeof full);
@@ -1014,54 +746,54 @@ static gs_status parse_camera(const pctx *c, cap_scene *sc, json_t *root)
     gis_camera *g = &sc->cam;
     gs_status s;
     memset(g, 0, sizeof *g);
-    if ((s = get_object(c, root, "", "camera", 1, &cam)) != GS_OK ||
-        (s = check_keys(c, cam, "camera", keys)) != GS_OK ||
+    if ((s = gs_json_get_obj(c->doc, root, "", "camera", 1, &cam)) != GS_OK ||
+        (s = gs_json_check_keys(c->doc, cam, "camera", keys)) != GS_OK ||
         (s = get_int(c, cam, "camera", "width_px", 1, 0, 1, 32768, &g->width_px)) != GS_OK ||
         (s = get_int(c, cam, "camera", "height_px", 1, 0, 1, 32768, &g->height_px)) != GS_OK ||
-        (s = get_object(c, cam, "camera", "station", 0, &st)) != GS_OK ||
-        (s = get_object(c, cam, "camera", "pose", 0, &pose)) != GS_OK ||
-        (s = get_object(c, cam, "camera", "intrinsics", 0, &intr)) != GS_OK ||
-        (s = get_object(c, cam, "camera", "sensor", 0, &sen)) != GS_OK ||
-        (s = get_object(c, cam, "camera", "optics", 0, &opt)) != GS_OK ||
-        (s = get_num(c, cam, "camera", "refraction_k", 0, 0, -1, 0.9, &g->refraction_k)) != GS_OK)
+        (s = gs_json_get_obj(c->doc, cam, "camera", "station", 0, &st)) != GS_OK ||
+        (s = gs_json_get_obj(c->doc, cam, "camera", "pose", 0, &pose)) != GS_OK ||
+        (s = gs_json_get_obj(c->doc, cam, "camera", "intrinsics", 0, &intr)) != GS_OK ||
+        (s = gs_json_get_obj(c->doc, cam, "camera", "sensor", 0, &sen)) != GS_OK ||
+        (s = gs_json_get_obj(c->doc, cam, "camera", "optics", 0, &opt)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, cam, "camera", "refraction_k", 0, 0, -1, 0.9, NULL, &g->refraction_k)) != GS_OK)
         return s;
     if (st) {
         sc->has_station = 1;
-        if ((s = check_keys(c, st, "camera.station", stkeys)) != GS_OK ||
-            (s = get_num(c, st, "camera.station", "lat_deg", 1, 0, -90, 90, &g->lat_deg)) != GS_OK ||
-            (s = get_num(c, st, "camera.station", "lon_deg", 1, 0, -540, 540, &g->lon_deg)) != GS_OK ||
-            (s = get_num(c, st, "camera.station", "height_m", 1, 0, GIS_MIN_HEIGHT_M, GIS_MAX_HEIGHT_M, &g->height_m)) != GS_OK)
+        if ((s = gs_json_check_keys(c->doc, st, "camera.station", stkeys)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, st, "camera.station", "lat_deg", 1, 0, -90, 90, NULL, &g->lat_deg)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, st, "camera.station", "lon_deg", 1, 0, -540, 540, NULL, &g->lon_deg)) != GS_OK ||
+            (s = gs_json_get_num(c->doc, st, "camera.station", "height_m", 1, 0, GIS_MIN_HEIGHT_M, GIS_MAX_HEIGHT_M, NULL, &g->height_m)) != GS_OK)
             return s;
     }
-    if (pose && (s = check_keys(c, pose, "camera.pose", pkeys)) != GS_OK) return s;
-    if ((s = get_num(c, pose, "camera.pose", "heading_deg", 0, 0, -720, 720, &g->heading_deg)) != GS_OK ||
-        (s = get_num(c, pose, "camera.pose", "pitch_deg", 0, 0, -90, 90, &g->pitch_deg)) != GS_OK ||
-        (s = get_num(c, pose, "camera.pose", "roll_deg", 0, 0, -720, 720, &g->roll_deg)) != GS_OK)
+    if (pose && (s = gs_json_check_keys(c->doc, pose, "camera.pose", pkeys)) != GS_OK) return s;
+    if ((s = gs_json_get_num(c->doc, pose, "camera.pose", "heading_deg", 0, 0, -720, 720, NULL, &g->heading_deg)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, pose, "camera.pose", "pitch_deg", 0, 0, -90, 90, NULL, &g->pitch_deg)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, pose, "camera.pose", "roll_deg", 0, 0, -720, 720, NULL, &g->roll_deg)) != GS_OK)
         return s;
-    if (intr && (s = check_keys(c, intr, "camera.intrinsics", ikeys)) != GS_OK) return s;
-    if ((s = get_num(c, intr, "camera.intrinsics", "focal_px", 0, g->width_px, 1, 1e7, &g->focal_px)) != GS_OK ||
-        (s = get_num(c, intr, "camera.intrinsics", "cx_px", 0, 0.5 * (g->width_px - 1), -1e5, 1e5, &g->cx_px)) != GS_OK ||
-        (s = get_num(c, intr, "camera.intrinsics", "cy_px", 0, 0.5 * (g->height_px - 1), -1e5, 1e5, &g->cy_px)) != GS_OK ||
-        (s = get_num(c, intr, "camera.intrinsics", "k1", 0, 0, -10, 10, &g->k1)) != GS_OK ||
-        (s = get_num(c, intr, "camera.intrinsics", "k2", 0, 0, -10, 10, &g->k2)) != GS_OK)
+    if (intr && (s = gs_json_check_keys(c->doc, intr, "camera.intrinsics", ikeys)) != GS_OK) return s;
+    if ((s = gs_json_get_num(c->doc, intr, "camera.intrinsics", "focal_px", 0, g->width_px, 1, 1e7, NULL, &g->focal_px)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, intr, "camera.intrinsics", "cx_px", 0, 0.5 * (g->width_px - 1), -1e5, 1e5, NULL, &g->cx_px)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, intr, "camera.intrinsics", "cy_px", 0, 0.5 * (g->height_px - 1), -1e5, 1e5, NULL, &g->cy_px)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, intr, "camera.intrinsics", "k1", 0, 0, -10, 10, NULL, &g->k1)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, intr, "camera.intrinsics", "k2", 0, 0, -10, 10, NULL, &g->k2)) != GS_OK)
         return s;
-    if (sen && (s = check_keys(c, sen, "camera.sensor", skeys)) != GS_OK) return s;
+    if (sen && (s = gs_json_check_keys(c->doc, sen, "camera.sensor", skeys)) != GS_OK) return s;
     const char *S = "camera.sensor";
     if ((s = get_int(c, sen, S, "bands", 0, 3, 1, 3, &sc->bands)) != GS_OK ||
         (s = get_int(c, sen, S, "bit_depth", 0, 12, 8, 16, &sc->bit_depth)) != GS_OK ||
-        (s = get_num(c, sen, S, "full_well_e", 0, 20000, 1, 1e9, &sc->full_well_e)) != GS_OK ||
-        (s = get_num(c, sen, S, "read_noise_e", 0, 3, 0, 1e6, &sc->read_noise_e)) != GS_OK ||
-        (s = get_num(c, sen, S, "qe", 0, 0.6, 1e-6, 1, &sc->qe)) != GS_OK ||
-        (s = get_num(c, sen, S, "gain_e_per_dn", 0, 5, 1e-3, 1e6, &sc->gain_e_per_dn)) != GS_OK ||
-        (s = get_num(c, sen, S, "black_level_dn", 0, 0, 0, 60000, &sc->black_level_dn)) != GS_OK)
+        (s = gs_json_get_num(c->doc, sen, S, "full_well_e", 0, 20000, 1, 1e9, NULL, &sc->full_well_e)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, sen, S, "read_noise_e", 0, 3, 0, 1e6, NULL, &sc->read_noise_e)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, sen, S, "qe", 0, 0.6, 1e-6, 1, NULL, &sc->qe)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, sen, S, "gain_e_per_dn", 0, 5, 1e-3, 1e6, NULL, &sc->gain_e_per_dn)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, sen, S, "black_level_dn", 0, 0, 0, 60000, NULL, &sc->black_level_dn)) != GS_OK)
         return s;
     if (sc->bands == 2) return bad(c, GS_EFORMAT, "camera.sensor.bands", "2: expected 1 or 3");
     if (sc->black_level_dn >= (double)(1 << sc->bit_depth) - 1)
         return bad(c, GS_EFORMAT, "camera.sensor.black_level_dn", "%g: expected below the ADC's "
                    "range 2^bit_depth - 1 = %d", sc->black_level_dn, (1 << sc->bit_depth) - 1);
-    if (opt && (s = check_keys(c, opt, "camera.optics", okeys)) != GS_OK) return s;
-    if ((s = get_num(c, opt, "camera.optics", "aperture_mm", 0, 2, 1e-3, 1e4, &sc->aperture_mm)) != GS_OK ||
-        (s = get_num(c, opt, "camera.optics", "transmission", 0, 0.3, 1e-9, 1, &sc->transmission)) != GS_OK)
+    if (opt && (s = gs_json_check_keys(c->doc, opt, "camera.optics", okeys)) != GS_OK) return s;
+    if ((s = gs_json_get_num(c->doc, opt, "camera.optics", "aperture_mm", 0, 2, 1e-3, 1e4, NULL, &sc->aperture_mm)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, opt, "camera.optics", "transmission", 0, 0.3, 1e-9, 1, NULL, &sc->transmission)) != GS_OK)
         return s;
     if (!sc->has_station) {
         /* a pixel-only scene: any valid pose (projection is never used) */
@@ -1085,14 +817,14 @@ static gs_status parse_acam(const pctx *c, cap_scene *sc, json_t *root)
     q->grid_hz = sc->grid_hz;
     gs_status s;
     char per[16];
-    if ((s = get_object(c, root, "", "acam", 1, &a)) != GS_OK ||
-        (s = check_keys(c, a, "acam", keys)) != GS_OK ||
+    if ((s = gs_json_get_obj(c->doc, root, "", "acam", 1, &a)) != GS_OK ||
+        (s = gs_json_check_keys(c->doc, a, "acam", keys)) != GS_OK ||
         (s = get_int(c, a, "acam", "K", 1, 0, 2, 1024, &q->K)) != GS_OK ||
         (s = get_long(c, a, "acam", "cycles", 1, 0, 1, CAP_MAX_CYCLES, &q->cycles)) != GS_OK ||
-        (s = get_bool(c, a, "acam", "locked", 1, &sc->locked)) != GS_OK ||
+        (s = gs_json_get_bool(c->doc, a, "acam", "locked", 0, 1, &sc->locked)) != GS_OK ||
         (s = get_int(c, a, "acam", "masks", 0, 2, 2, 1000, &q->masks)) != GS_OK ||
-        (s = get_num(c, a, "acam", "dmd_min_hold_us", 0, CAP_DMD_MIN_HOLD_US, 1, 1e5, &q->dmd_min_hold_us)) != GS_OK ||
-        (s = get_str(c, a, "acam", "free_running_period", 0, "nominal", per, sizeof per)) != GS_OK ||
+        (s = gs_json_get_num(c->doc, a, "acam", "dmd_min_hold_us", 0, CAP_DMD_MIN_HOLD_US, 1, 1e5, NULL, &q->dmd_min_hold_us)) != GS_OK ||
+        (s = gs_json_get_str(c->doc, a, "acam", "free_running_period", 0, "nominal", per, sizeof per)) != GS_OK ||
         (s = get_long(c, a, "acam", "readout_cycles", 0, 10, 0, 1000000, &sc->readout_cycles)) != GS_OK)
         return s;
     if (!strcmp(per, "measured")) sc->free_period_measured = 1;
@@ -1102,8 +834,8 @@ static gs_status parse_acam(const pctx *c, cap_scene *sc, json_t *root)
     json_t *h = json_object_get(a, "hdr");
     if (json_is_boolean(h)) q->hdr = json_is_true(h);
     else if (json_is_object(h)) {
-        if ((s = check_keys(c, h, "acam.hdr", hkeys)) != GS_OK ||
-            (s = get_bool(c, h, "acam.hdr", "enabled", 1, &q->hdr)) != GS_OK ||
+        if ((s = gs_json_check_keys(c->doc, h, "acam.hdr", hkeys)) != GS_OK ||
+            (s = gs_json_get_bool(c->doc, h, "acam.hdr", "enabled", 0, 1, &q->hdr)) != GS_OK ||
             (s = get_int(c, h, "acam.hdr", "max_rounds", 0, 0, 0, 16, &q->hdr_max_rounds)) != GS_OK ||
             (s = get_int(c, h, "acam.hdr", "max_saturated_px", 0, 0, 0, 1 << 30, &q->hdr_max_saturated_px)) != GS_OK)
             return s;
@@ -1135,13 +867,12 @@ gs_status cap_scene_parse(const char *text, const char *source, const char *base
                                         NULL};
     memset(sc, 0, sizeof *sc);
     if (!source) source = "<scene>";
-    pctx c = {source, base_dir, {text, 0, strlen(text), 1, NULL, 0, 0}};
-    json_error_t err;
-    json_t *root = json_loads(text, JSON_REJECT_DUPLICATES, &err);
-    if (!root) return gs_fail(GS_EFORMAT, "%s:%d:%d: JSON syntax: %s", source, err.line, err.column, err.text);
-    js_value(&c.loc, "", 0);
+    gs_json *doc;
+    gs_status s = gs_json_parse(text, strlen(text), source, &doc);
+    if (s != GS_OK) return s;
+    pctx c = {doc, base_dir};
+    json_t *root = gs_json_root(doc);
     light_vec lv = {NULL, 0, 0};
-    gs_status s;
     char fmt[64];
     long seed;
     json_t *grid, *lights, *effects;
@@ -1150,16 +881,16 @@ gs_status cap_scene_parse(const char *text, const char *source, const char *base
         s = bad(&c, GS_EFORMAT, "(top level)", "expected a JSON object");
         goto done;
     }
-    if ((s = check_keys(&c, root, "", keys)) != GS_OK ||
-        (s = get_str(&c, root, "", "format", 1, NULL, fmt, sizeof fmt)) != GS_OK)
+    if ((s = gs_json_check_keys(c.doc, root, "", keys)) != GS_OK ||
+        (s = gs_json_get_str(c.doc, root, "", "format", 1, NULL, fmt, sizeof fmt)) != GS_OK)
         goto done;
     if (strcmp(fmt, CAP_SCENE_FORMAT)) {
         s = bad(&c, GS_EFORMAT, "format", "\"%s\": expected \"%s\"", fmt, CAP_SCENE_FORMAT);
         goto done;
     }
-    if ((s = get_str(&c, root, "", "name", 0, "", sc->name, sizeof sc->name)) != GS_OK ||
+    if ((s = gs_json_get_str(c.doc, root, "", "name", 0, "", sc->name, sizeof sc->name)) != GS_OK ||
         (s = get_long(&c, root, "", "seed", 0, 1, 0, 0x7fffffffL, &seed)) != GS_OK ||
-        (s = get_str(&c, root, "", "utc", 0, "", sc->utc, sizeof sc->utc)) != GS_OK)
+        (s = gs_json_get_str(c.doc, root, "", "utc", 0, "", sc->utc, sizeof sc->utc)) != GS_OK)
         goto done;
     sc->seed = (unsigned long long)seed;
     if (sc->utc[0] && (strlen(sc->utc) < 20 || sc->utc[4] != '-' || sc->utc[10] != 'T')) {
@@ -1168,7 +899,7 @@ gs_status cap_scene_parse(const char *text, const char *source, const char *base
     }
     if (json_object_get(root, "delight")) {
         char rel[CAP_PATH_MAX];
-        if ((s = get_str(&c, root, "", "delight", 1, NULL, rel, sizeof rel)) != GS_OK) goto done;
+        if ((s = gs_json_get_str(c.doc, root, "", "delight", 1, NULL, rel, sizeof rel)) != GS_OK) goto done;
         char full[CAP_PATH_MAX * 2];
         resolve(&c, rel, full, sizeof full);
         if (strlen(full) >= sizeof sc->delight) {
@@ -1178,10 +909,10 @@ gs_status cap_scene_parse(const char *text, const char *source, const char *base
         memcpy(sc->delight, full, strlen(full) + 1);
     }
     /* grid */
-    if ((s = get_object(&c, root, "", "grid", 1, &grid)) != GS_OK ||
-        (s = check_keys(&c, grid, "grid", gkeys)) != GS_OK ||
+    if ((s = gs_json_get_obj(c.doc, root, "", "grid", 1, &grid)) != GS_OK ||
+        (s = gs_json_check_keys(c.doc, grid, "grid", gkeys)) != GS_OK ||
         (s = get_int(&c, grid, "grid", "nominal_hz", 1, 0, 50, 60, &sc->grid_hz)) != GS_OK ||
-        (s = get_num(&c, grid, "grid", "transformer_deg", 0, 30, -180, 180, &sc->transformer_deg)) != GS_OK)
+        (s = gs_json_get_num(c.doc, grid, "grid", "transformer_deg", 0, 30, -180, 180, NULL, &sc->transformer_deg)) != GS_OK)
         goto done;
     if (sc->grid_hz != 50 && sc->grid_hz != 60) {
         s = bad(&c, GS_EFORMAT, "grid.nominal_hz", "%d: expected 50 or 60", sc->grid_hz);
@@ -1190,7 +921,7 @@ gs_status cap_scene_parse(const char *text, const char *source, const char *base
     if ((s = parse_freq(&c, sc, grid)) != GS_OK) goto done;
     if (json_object_get(grid, "phases_deg")) {
         size_t np = 0;
-        if ((s = get_array(&c, grid, "grid", "phases_deg", 0, 12, 0, 360, sc->phases_deg, &np)) != GS_OK)
+        if ((s = gs_json_get_num_array(c.doc, grid, "grid", "phases_deg", 0, 12, 0, 360, sc->phases_deg, &np)) != GS_OK)
             goto done;
         sc->n_phases = (int)np;
     } else {
@@ -1202,7 +933,7 @@ gs_status cap_scene_parse(const char *text, const char *source, const char *base
     if ((s = parse_camera(&c, sc, root)) != GS_OK || (s = parse_acam(&c, sc, root)) != GS_OK)
         goto done;
     /* effects (before the checks that depend on them) */
-    if ((s = get_object(&c, root, "", "effects", 0, &effects)) != GS_OK) goto done;
+    if ((s = gs_json_get_obj(c.doc, root, "", "effects", 0, &effects)) != GS_OK) goto done;
     if (effects) {
         const char *key;
         json_t *v;
@@ -1281,11 +1012,11 @@ gs_status cap_scene_parse(const char *text, const char *source, const char *base
         } else {
             cap_light l;
             s = parse_light(&c, sc, o, p, (int)lv.n, &l);
-            l.line = js_line(&c.loc, p);
+            l.line = gs_json_line(c.doc, p);
             if (s == GS_OK) s = push_light(&lv, &l);
         }
         for (size_t j = 0; j < lv.n; j++)
-            if (!lv.v[j].line) lv.v[j].line = js_line(&c.loc, p);
+            if (!lv.v[j].line) lv.v[j].line = gs_json_line(c.doc, p);
         if (s != GS_OK) goto done;
     }
     sc->lights = lv.v;
@@ -1294,8 +1025,7 @@ gs_status cap_scene_parse(const char *text, const char *source, const char *base
     s = GS_OK;
 done:
     free(lv.v);
-    json_decref(root);
-    js_free(&c.loc);
+    gs_json_free(doc);
     return s;
 }
 
@@ -1303,8 +1033,13 @@ gs_status cap_scene_read(const char *path, cap_scene *sc)
 {
     memset(sc, 0, sizeof *sc);
     char *text = NULL;
-    gs_status s = cap_slurp(path, &text, NULL);
+    size_t n;
+    gs_status s = gs_file_read(path, 0, &text, &n);
     if (s != GS_OK) return s;
+    if (strlen(text) != n) {
+        free(text);
+        return gs_fail(GS_EFORMAT, "%s: contains a NUL byte: not JSON text", path);
+    }
     char dir[CAP_PATH_MAX];
     snprintf(dir, sizeof dir, "%s", path);
     char *slash = strrchr(dir, '/');

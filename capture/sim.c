@@ -655,7 +655,7 @@ gs_status cap_sim_write_truth(const cap_sim *s, const char *dir)
     }
     withnl[len] = '\n';
     withnl[len + 1] = '\0';
-    gs_status st = cap_write_atomic(dir, "truth.json", withnl, len + 1);
+    gs_status st = cap_write_in(dir, "truth.json", withnl, len + 1);
     free(withnl);
     return st;
 }

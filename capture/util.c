@@ -1,18 +1,13 @@
 /* util.c - capture/ helpers: random streams (xoshiro256**, polar normals, Hormann's PTRS
  * Poisson), BRF antiderivative tables for windows at any position (Eq. 5 generalised), FNV-1a,
- * whole-file reads and atomic writes. */
+ * atomic writes into a capture directory. */
 #include "capture/internal.h"
 
-#include <errno.h>
-#include <fcntl.h>
 #include <fftw3.h>
-#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
 #include <threads.h>
-#include <unistd.h>
 
 /* ------------------------------------------------------------------ random streams */
 
@@ -220,80 +215,11 @@ uint64_t cap_fnv1a(uint64_t h, const void *data, size_t n)
     return h;
 }
 
-gs_status cap_slurp(const char *path, char **text, size_t *size)
+gs_status cap_write_in(const char *dir, const char *name, const void *data, size_t size)
 {
-    *text = NULL;
-    if (size) *size = 0;
-    FILE *f = fopen(path, "rb");
-    if (!f)
-        return gs_fail(errno == ENOENT ? GS_ENOTFOUND : GS_EIO, "%s: %s", path, strerror(errno));
-    size_t cap = 1 << 16, n = 0;
-    char *buf = malloc(cap);
-    if (!buf) {
-        fclose(f);
-        return gs_fail(GS_ENOMEM, "%s: out of memory", path);
-    }
-    for (;;) {
-        if (n + 1 >= cap) {
-            char *nb = realloc(buf, cap * 2);
-            if (!nb) {
-                free(buf);
-                fclose(f);
-                return gs_fail(GS_ENOMEM, "%s: out of memory", path);
-            }
-            buf = nb;
-            cap *= 2;
-        }
-        size_t got = fread(buf + n, 1, cap - 1 - n, f);
-        n += got;
-        if (got == 0) break;
-    }
-    int err = ferror(f);
-    fclose(f);
-    if (err) {
-        free(buf);
-        return gs_fail(GS_EIO, "%s: read error", path);
-    }
-    buf[n] = '\0';
-    *text = buf;
-    if (size) *size = n;
-    return GS_OK;
-}
-
-gs_status cap_write_atomic(const char *dir, const char *name, const void *data, size_t size)
-{
-    static atomic_uint seq;
-    char path[CAP_PATH_MAX + 64], tmp[CAP_PATH_MAX + 96];
-    if (snprintf(path, sizeof path, "%s/%s", dir, name) >= (int)sizeof path)
+    char path[CAP_PATH_MAX + 64];
+    if (!gs_path_join(path, sizeof path, dir, name))
         return gs_fail(GS_EINVAL, "%s/%s: path too long", dir, name);
-    snprintf(tmp, sizeof tmp, "%s/.%s.%ld.%u.tmp", dir, name, (long)getpid(),
-             atomic_fetch_add(&seq, 1u));
-    if (mkdir(dir, 0777) != 0 && errno != EEXIST)
-        return gs_fail(GS_EIO, "%s: cannot create the directory: %s", dir, strerror(errno));
-    int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
-    if (fd < 0) return gs_fail(GS_EIO, "%s: %s", tmp, strerror(errno));
-    const char *p = data;
-    size_t off = 0;
-    while (off < size) {
-        ssize_t w = write(fd, p + off, size - off);
-        if (w < 0 && errno == EINTR) continue;
-        if (w < 0) {
-            int e = errno;
-            close(fd);
-            unlink(tmp);
-            return gs_fail(GS_EIO, "%s: write: %s", path, strerror(e));
-        }
-        off += (size_t)w;
-    }
-    if (fsync(fd) != 0 || close(fd) != 0) {
-        int e = errno;
-        unlink(tmp);
-        return gs_fail(GS_EIO, "%s: %s", path, strerror(e));
-    }
-    if (rename(tmp, path) != 0) {
-        int e = errno;
-        unlink(tmp);
-        return gs_fail(GS_EIO, "%s: rename: %s", path, strerror(e));
-    }
-    return GS_OK;
+    gs_status s = gs_dir_ensure(dir);
+    return s == GS_OK ? gs_file_write_atomic(path, data, size) : s;
 }

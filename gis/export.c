@@ -1,9 +1,8 @@
 /* export.c - exports of located lights (gis.h): GeoJSON (RFC 7946), KML 2.2, GeoPackage 1.3
- * (OGC 12-128r18) and CSV (RFC 4180), each written atomically (temporary file + rename). */
+ * (OGC 12-128r18) and CSV (RFC 4180), each written atomically (gs_atomic). */
 #include "gis/internal.h"
 
 #include <errno.h>
-#include <fcntl.h>
 #include <jansson.h>
 #include <math.h>
 #include <sqlite3.h>
@@ -13,79 +12,6 @@
 #include <string.h>
 #include <strings.h>
 #include <unistd.h>
-
-/* ---------------------------------------------------------------- atomic files */
-
-gs_status gis_atomic_open(gis_atomic *a, const char *path, int want_stream)
-{
-    static _Thread_local unsigned seq;
-    memset(a, 0, sizeof *a);
-    a->path = path;
-    if (!path || !*path) return gs_fail(GS_EINVAL, "export: empty output path");
-    /* A fresh name beside path (pid, a per-thread counter and a per-thread address make it
-     * unique; O_EXCL makes sure), created with mode 0666 so the umask applies as usual. */
-    int fd = -1;
-    for (int tries = 0; tries < 100 && fd < 0; tries++) {
-        int n = snprintf(a->tmp, sizeof a->tmp, "%s.tmp.%ld.%u.%lx", path, (long)getpid(), seq++,
-                         (unsigned long)(uintptr_t)&seq);
-        if (n < 0 || (size_t)n >= sizeof a->tmp) {
-            a->tmp[0] = '\0';
-            return gs_fail(GS_EINVAL, "%s: path too long", path);
-        }
-        fd = open(a->tmp, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
-        if (fd < 0 && errno != EEXIST) break;
-    }
-    if (fd < 0) {
-        int e = errno;
-        a->tmp[0] = '\0';
-        return gs_fail(GS_EIO, "%s: cannot create a temporary file beside it: %s", path, strerror(e));
-    }
-    if (!want_stream) {
-        close(fd);
-        return GS_OK;
-    }
-    a->f = fdopen(fd, "wb");
-    if (!a->f) {
-        int e = errno;
-        close(fd);
-        unlink(a->tmp);
-        a->tmp[0] = '\0';
-        return gs_fail(GS_EIO, "%s: %s", path, strerror(e));
-    }
-    return GS_OK;
-}
-
-void gis_atomic_abort(gis_atomic *a)
-{
-    if (a->f) fclose(a->f);
-    a->f = NULL;
-    if (a->tmp[0]) unlink(a->tmp);
-    a->tmp[0] = '\0';
-}
-
-gs_status gis_atomic_commit(gis_atomic *a)
-{
-    if (a->f) {
-        int bad = ferror(a->f) || fflush(a->f) != 0 || fsync(fileno(a->f)) != 0;
-        int e = errno;
-        if (fclose(a->f) != 0 && !bad) {
-            bad = 1;
-            e = errno;
-        }
-        a->f = NULL;
-        if (bad) {
-            gis_atomic_abort(a);
-            return gs_fail(GS_EIO, "%s: write failed: %s", a->path, strerror(e));
-        }
-    }
-    if (rename(a->tmp, a->path) != 0) {
-        int e = errno;
-        gis_atomic_abort(a);
-        return gs_fail(GS_EIO, "%s: cannot replace it: %s", a->path, strerror(e));
-    }
-    a->tmp[0] = '\0';
-    return GS_OK;
-}
 
 /* ---------------------------------------------------------------- lights */
 
@@ -305,12 +231,12 @@ gs_status gis_export_geojson(const gis_light *lights, size_t n, const char *path
     if (!text) goto nomem;
     json_decref(features);
     json_decref(root);
-    gis_atomic a;
-    s = gis_atomic_open(&a, path, 1);
+    gs_atomic a;
+    s = gs_atomic_open(&a, path, 1);
     if (s == GS_OK) {
         fputs(text, a.f);
         fputc('\n', a.f);
-        s = gis_atomic_commit(&a);
+        s = gs_atomic_commit(&a);
     }
     free(text);
     return s;
@@ -340,8 +266,8 @@ gs_status gis_export_kml(const gis_light *lights, size_t n, const char *path)
 {
     gs_status s = check_lights(lights, n);
     if (s != GS_OK) return s;
-    gis_atomic a;
-    s = gis_atomic_open(&a, path, 1);
+    gs_atomic a;
+    s = gs_atomic_open(&a, path, 1);
     if (s != GS_OK) return s;
     FILE *f = a.f;
     static const char *const style_id[5] = {"phase0", "phase120", "phase240", "phase_other", "phase_unknown"};
@@ -386,7 +312,7 @@ gs_status gis_export_kml(const gis_light *lights, size_t n, const char *path)
         fputs("</Placemark>\n", f);
     }
     fputs("</Document>\n</kml>\n", f);
-    return gis_atomic_commit(&a);
+    return gs_atomic_commit(&a);
 }
 
 /* ---------------------------------------------------------------- CSV */
@@ -410,8 +336,8 @@ gs_status gis_export_csv(const gis_light *lights, size_t n, const char *path)
 {
     gs_status s = check_lights(lights, n);
     if (s != GS_OK) return s;
-    gis_atomic a;
-    s = gis_atomic_open(&a, path, 1);
+    gs_atomic a;
+    s = gs_atomic_open(&a, path, 1);
     if (s != GS_OK) return s;
     FILE *f = a.f;
     fputs("id,lat_deg,lon_deg", f);
@@ -434,7 +360,7 @@ gs_status gis_export_csv(const gis_light *lights, size_t n, const char *path)
         }
         fputs("\r\n", f);
     }
-    return gis_atomic_commit(&a);
+    return gs_atomic_commit(&a);
 }
 
 /* ---------------------------------------------------------------- GeoPackage */
@@ -496,8 +422,8 @@ gs_status gis_export_gpkg(const gis_light *lights, size_t n, const char *path)
 {
     gs_status s = check_lights(lights, n);
     if (s != GS_OK) return s;
-    gis_atomic a;
-    s = gis_atomic_open(&a, path, 0);
+    gs_atomic a;
+    s = gs_atomic_open(&a, path, 0);
     if (s != GS_OK) return s;
     sqlite3 *db = NULL;
     sqlite3_stmt *st = NULL;
@@ -564,16 +490,16 @@ gs_status gis_export_gpkg(const gis_light *lights, size_t n, const char *path)
     if (sqlite3_exec(db, "COMMIT", NULL, NULL, &err) != SQLITE_OK) goto sql_error;
     if (sqlite3_close(db) != SQLITE_OK) {
         db = NULL;
-        gis_atomic_abort(&a);
+        gs_atomic_abort(&a);
         return gs_fail(GS_ESQL, "%s: cannot close the GeoPackage", path);
     }
-    return gis_atomic_commit(&a);
+    return gs_atomic_commit(&a);
 sql_error:
     s = gs_fail(GS_ESQL, "%s: SQLite: %s", path, err ? err : db ? sqlite3_errmsg(db) : "cannot open");
     sqlite3_free(err);
     sqlite3_finalize(st);
     sqlite3_close(db);
-    gis_atomic_abort(&a);
+    gs_atomic_abort(&a);
     return s;
 }
 

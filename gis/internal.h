@@ -1,5 +1,5 @@
 /* internal.h - gis/ internals: the C interface of the GeographicLib shim
- * (geographiclib_shim.cpp), shared geometry helpers and atomic file writing. Not included
+ * (geographiclib_shim.cpp) and shared geometry helpers. Not included
  * outside gis/ (tests may include it). */
 #ifndef GRIDSURVEY_GIS_INTERNAL_H
 #define GRIDSURVEY_GIS_INTERNAL_H
@@ -65,17 +65,6 @@ gs_status gis_sight_from_axes(const gis_camera *cam, const double axes[9], doubl
  * NULL), in the frame of t and n. */
 void gis_sight_point(const gis_sight *sg, double s, double p[3], double tan[3]);
 
-/* Atomic replacement of path: gis_atomic_open creates a temporary file beside it (tmp holds its
- * name) and returns a stdio stream; gis_atomic_commit flushes, syncs, closes and renames it
- * over path; gis_atomic_abort closes (if f) and removes the temporary. */
-typedef struct {
-    char tmp[4096];
-    const char *path;
-    FILE *f;
-} gis_atomic;
-gs_status gis_atomic_open(gis_atomic *a, const char *path, int want_stream);
-gs_status gis_atomic_commit(gis_atomic *a);
-void gis_atomic_abort(gis_atomic *a);
 #endif
 
 #endif

@@ -117,8 +117,8 @@ gs_status gis_map_png(const gis_light *lights, size_t n, const gis_map_opts *o, 
         double mid[3] = {0.5 * (xmin + xmax), 0.5 * (ymin + ymax), 0.0}, h;
         if (gis_gl_local_rev(lat0, lon0, 0.0, mid, &lat0, &lon0, &h)) s = GS_ENUMERIC;
     }
-    gis_atomic a;
-    if (s == GS_OK) s = gis_atomic_open(&a, path, 0);
+    gs_atomic a;
+    if (s == GS_OK) s = gs_atomic_open(&a, path, 0);
     if (s != GS_OK) {
         free(x);
         free(y);
@@ -251,5 +251,5 @@ gs_status gis_map_png(const gis_light *lights, size_t n, const gis_map_opts *o, 
     free(y);
     free(cls);
     free(ref);
-    return gis_atomic_commit(&a);
+    return gs_atomic_commit(&a);
 }

@@ -2,8 +2,6 @@
  * intrinsics and sigmas, parsed with Jansson. Errors name the file, the line and the field. */
 #include "gis/internal.h"
 
-#include <errno.h>
-#include <jansson.h>
 #include <math.h>
 #include <stddef.h>
 #include <stdio.h>
@@ -46,28 +44,6 @@ static const field fields[] = {
 };
 #define N_FIELDS (sizeof fields / sizeof *fields)
 
-/* The 1-based line of the first `"key" :` in text, or of the first '{' (or 1). */
-static int key_line(const char *text, const char *key)
-{
-    size_t kl = key ? strlen(key) : 0;
-    const char *hit = NULL;
-    for (const char *p = key ? strchr(text, '"') : NULL; p; p = strchr(p + 1, '"')) {
-        if (!strncmp(p + 1, key, kl) && p[kl + 1] == '"') {
-            const char *q = p + kl + 2;
-            while (*q == ' ' || *q == '\t' || *q == '\r' || *q == '\n') q++;
-            if (*q == ':') {
-                hit = p;
-                break;
-            }
-        }
-    }
-    if (!hit) hit = strchr(text, '{');
-    if (!hit) return 1;
-    int line = 1;
-    for (const char *p = text; p < hit; p++) line += *p == '\n';
-    return line;
-}
-
 static const field *find_field(const char *key, int *by_alias)
 {
     for (size_t i = 0; i < N_FIELDS; i++) {
@@ -83,15 +59,31 @@ static const field *find_field(const char *key, int *by_alias)
     return NULL;
 }
 
+/* The station's fields (names and aliases) as a NULL-terminated list for gs_json_check_keys. */
+static const char *const *allowed_keys(void)
+{
+    static const char *keys[2 * N_FIELDS + 2];
+    if (!keys[0]) {
+        size_t n = 0;
+        keys[n++] = "format";
+        for (size_t i = 0; i < N_FIELDS; i++) {
+            keys[n++] = fields[i].name;
+            if (fields[i].alias) keys[n++] = fields[i].alias;
+        }
+        keys[n] = NULL;
+    }
+    return keys;
+}
+
 gs_status gis_station_parse(const char *json_text, const char *source, gis_station *st)
 {
     memset(st, 0, sizeof *st);
     st->sigma_px = 1.0;
     if (!source) source = "station";
-    json_error_t err;
-    json_t *root = json_loads(json_text, JSON_REJECT_DUPLICATES, &err);
-    if (!root) return gs_fail(GS_EFORMAT, "%s:%d:%d: %s", source, err.line, err.column, err.text);
-    gs_status s = GS_OK;
+    gs_json *doc;
+    gs_status s = gs_json_parse(json_text, strlen(json_text), source, &doc);
+    if (s != GS_OK) return s;
+    json_t *root = gs_json_root(doc);
     const char *key;
     json_t *v;
     unsigned char seen[N_FIELDS] = {0};
@@ -100,63 +92,49 @@ gs_status gis_station_parse(const char *json_text, const char *source, gis_stati
         s = gs_fail(GS_EFORMAT, "%s:1: expected a JSON object (a %s station)", source, GIS_STATION_FORMAT);
         goto done;
     }
+    if ((s = gs_json_check_keys(doc, root, "", allowed_keys())) != GS_OK) goto done;
     json_object_foreach(root, key, v) {
-        int line = key_line(json_text, key);
         if (!strcmp(key, "format")) {
             if (!json_is_string(v) || strcmp(json_string_value(v), GIS_STATION_FORMAT)) {
-                s = gs_fail(GS_EFORMAT, "%s:%d: format: expected \"%s\"", source, line, GIS_STATION_FORMAT);
+                s = gs_json_fail(doc, GS_EFORMAT, key, "expected \"%s\"", GIS_STATION_FORMAT);
                 goto done;
             }
             continue;
         }
         int by_alias = 0;
         const field *f = find_field(key, &by_alias);
-        if (!f) {
-            s = gs_fail(GS_EFORMAT, "%s:%d: unknown field \"%s\" (see docs/gis.md for the station "
-                        "fields)", source, line, key);
-            goto done;
-        }
+        if (!f) continue;   /* an extension (gs_json_check_keys let it through) */
         size_t i = (size_t)(f - fields);
         if (seen[i]) {
-            s = gs_fail(GS_EFORMAT, "%s:%d: %s: given twice (as \"%s\" and \"%s\")", source, line,
-                        f->name, used_key[i], key);
+            s = gs_json_fail(doc, GS_EFORMAT, key, "%s given twice (as \"%s\" and \"%s\")",
+                             f->name, used_key[i], key);
             goto done;
         }
         seen[i] = 1;
         used_key[i] = key;
         char *dst = (char *)st + f->offset;
         if (f->kind == F_NUM) {
-            if (!json_is_number(v)) {
-                s = gs_fail(GS_EFORMAT, "%s:%d: %s: expected a number", source, line, key);
+            double d;
+            if ((s = gs_json_get_num(doc, root, "", key, 1, 0, -HUGE_VAL, HUGE_VAL, "a number", &d)) != GS_OK)
                 goto done;
-            }
-            double d = json_number_value(v);
             memcpy(dst, &d, sizeof d);
         } else if (f->kind == F_INT) {
-            if (!json_is_integer(v) || json_integer_value(v) < 0 || json_integer_value(v) > 1000000) {
-                s = gs_fail(GS_EFORMAT, "%s:%d: %s: expected an integer in [0, 1000000]", source, line, key);
-                goto done;
-            }
-            int d = (int)json_integer_value(v);
-            memcpy(dst, &d, sizeof d);
-        } else {
-            if (!json_is_string(v) || strlen(json_string_value(v)) >= f->size) {
-                s = gs_fail(GS_EFORMAT, "%s:%d: %s: expected a string of at most %zu bytes", source,
-                            line, key, f->size - 1);
-                goto done;
-            }
-            strcpy(dst, json_string_value(v));
+            long long d;
+            if ((s = gs_json_get_int(doc, root, "", key, 1, 0, 0, 1000000, NULL, &d)) != GS_OK) goto done;
+            int di = (int)d;
+            memcpy(dst, &di, sizeof di);
+        } else if ((s = gs_json_get_str(doc, root, "", key, 1, NULL, dst, f->size)) != GS_OK) {
+            goto done;
         }
     }
     for (size_t i = 0; i < N_FIELDS; i++)
         if (fields[i].required && !seen[i]) {
-            s = gs_fail(GS_EFORMAT, "%s:%d: missing field \"%s\"", source, key_line(json_text, NULL),
-                        fields[i].name);
+            s = gs_json_fail(doc, GS_EFORMAT, fields[i].name, "expected a number (the field is "
+                             "missing; see docs/gis.md for the station fields)");
             goto done;
         }
     if (!(st->sigma_px >= 0.0)) {
-        s = gs_fail(GS_EFORMAT, "%s:%d: sigma_px: expected a value >= 0", source,
-                    key_line(json_text, "sigma_px"));
+        s = gs_json_fail(doc, GS_EFORMAT, "sigma_px", "expected a value >= 0");
         goto done;
     }
     s = gis_camera_check(&st->cam);
@@ -165,59 +143,30 @@ gs_status gis_station_parse(const char *json_text, const char *source, gis_stati
         char msg[400];
         snprintf(msg, sizeof msg, "%s", gs_detail());
         const char *rest = strncmp(msg, "camera: ", 8) ? msg : msg + 8;
-        int line = key_line(json_text, NULL);
+        const char *at = "(document)";
         for (size_t i = 0; i < N_FIELDS; i++) {
             size_t n = strlen(fields[i].name);
             if (!strncmp(rest, fields[i].name, n) && (rest[n] == ' ' || rest[n] == ':')) {
-                line = key_line(json_text, used_key[i] ? used_key[i] : fields[i].name);
+                at = used_key[i] ? used_key[i] : fields[i].name;
                 break;
             }
         }
-        s = gs_fail(GS_EFORMAT, "%s:%d: %s", source, line, rest);
+        s = gs_json_fail(doc, GS_EFORMAT, at, "%s", rest);
     }
 done:
-    json_decref(root);
+    gs_json_free(doc);
     return s;
 }
 
 gs_status gis_station_read(const char *path, gis_station *st)
 {
-    FILE *f = fopen(path, "rb");
-    if (!f) return gs_fail(GS_EIO, "%s: cannot open: %s", path, strerror(errno));
-    size_t cap = 4096, n = 0;
-    char *buf = malloc(cap);
-    gs_status s = GS_OK;
-    for (;;) {
-        if (!buf) {
-            s = gs_fail(GS_ENOMEM, "%s: out of memory", path);
-            break;
-        }
-        if (n + 1 >= cap) {
-            if (cap > (64u << 20)) {
-                s = gs_fail(GS_EFORMAT, "%s: larger than 64 MiB: not a station file", path);
-                break;
-            }
-            char *nb = realloc(buf, cap * 2);
-            if (!nb) {
-                s = gs_fail(GS_ENOMEM, "%s: out of memory", path);
-                break;
-            }
-            buf = nb;
-            cap *= 2;
-        }
-        size_t got = fread(buf + n, 1, cap - 1 - n, f);
-        n += got;
-        if (got == 0) {
-            if (ferror(f)) s = gs_fail(GS_EIO, "%s: read error", path);
-            break;
-        }
-    }
-    fclose(f);
-    if (s == GS_OK) {
-        buf[n] = '\0';
-        if (strlen(buf) != n) s = gs_fail(GS_EFORMAT, "%s: contains a NUL byte: not JSON text", path);
-        else s = gis_station_parse(buf, path, st);
-    }
+    char *buf;
+    size_t n;
+    /* a station file is a few hundred bytes: 64 MiB bounds one that is not */
+    gs_status s = gs_file_read(path, (size_t)64 << 20, &buf, &n);
+    if (s != GS_OK) return s;
+    if (strlen(buf) != n) s = gs_fail(GS_EFORMAT, "%s: contains a NUL byte: not JSON text", path);
+    else s = gis_station_parse(buf, path, st);
     free(buf);
     return s;
 }

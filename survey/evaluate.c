@@ -6,8 +6,6 @@
 #include "survey/internal.h"
 #include "capture/capture.h"
 
-#include <errno.h>
-#include <jansson.h>
 #include <limits.h>
 #include <math.h>
 #include <sqlite3.h>
@@ -36,33 +34,28 @@ typedef struct {
 
 /* ------------------------------------------------------------------ truth.json */
 
-static gs_status truth_text(const char *path, json_t *o, const char *key, size_t i, int required,
+/* Member key of light i: a string copied to dst, "" when absent or null (unless required). */
+static gs_status truth_text(const gs_json *doc, json_t *o, const char *key, size_t i, int required,
                             char *dst, size_t size)
 {
+    char path[64];
+    snprintf(path, sizeof path, "lights[%zu]", i);
     json_t *v = json_object_get(o, key);
     dst[0] = '\0';
-    if (!v || json_is_null(v)) {
-        if (required)
-            return gs_fail(GS_EFORMAT, "%s: field lights[%zu].%s: expected a string (required)", path, i, key);
-        return GS_OK;
-    }
-    if (!json_is_string(v) || strlen(json_string_value(v)) >= size)
-        return gs_fail(GS_EFORMAT, "%s: field lights[%zu].%s: expected a string of at most %zu bytes",
-                       path, i, key, size - 1);
-    snprintf(dst, size, "%s", json_string_value(v));
-    return GS_OK;
+    if ((!v || json_is_null(v)) && !required) return GS_OK;
+    return gs_json_get_str(doc, o, path, key, 1, NULL, dst, size);
 }
 
-/* A number, or NaN when absent or null (optional fields). */
-static gs_status truth_number(const char *path, json_t *o, const char *key, size_t i, double *out)
+/* A number of light i, or NaN when absent or null (optional fields). */
+static gs_status truth_number(const gs_json *doc, json_t *o, const char *key, size_t i, double *out)
 {
+    char path[64];
+    snprintf(path, sizeof path, "lights[%zu]", i);
     json_t *v = json_object_get(o, key);
     *out = NAN;
     if (!v || json_is_null(v)) return GS_OK;
-    if (!json_is_number(v) || !isfinite(json_number_value(v)))
-        return gs_fail(GS_EFORMAT, "%s: field lights[%zu].%s: expected a finite number or null", path, i, key);
-    *out = json_number_value(v);
-    return GS_OK;
+    return gs_json_get_num(doc, o, path, key, 1, 0, -HUGE_VAL, HUGE_VAL,
+                           "a finite number or null", out);
 }
 
 /* The in-image lights of truth_path into *out (allocated); *total counts every light. */
@@ -71,25 +64,20 @@ static gs_status read_truth(const char *path, ev_light **out, size_t *count, lon
     *out = NULL;
     *count = 0;
     *total = 0;
-    json_error_t err;
-    json_t *root = json_load_file(path, JSON_REJECT_DUPLICATES, &err);
-    if (!root) {
-        FILE *f = fopen(path, "rb");
-        if (!f) return gs_fail(errno == ENOENT ? GS_ENOTFOUND : GS_EIO, "%s: %s", path, strerror(errno));
-        fclose(f);
-        return gs_fail(GS_EFORMAT, "%s:%d:%d: JSON syntax: %s", path, err.line, err.column, err.text);
-    }
-    gs_status s = GS_OK;
+    gs_json *doc;
+    gs_status s = gs_json_load(path, 0, &doc);
+    if (s != GS_OK) return s;
+    json_t *root = gs_json_root(doc);
     json_t *fmt = json_object_get(root, "format"), *arr = json_object_get(root, "lights");
     ev_light *v = NULL;
     size_t n = 0;
     if (!json_is_object(root) || !json_is_string(fmt) || strcmp(json_string_value(fmt), CAP_TRUTH_FORMAT)) {
-        s = gs_fail(GS_EFORMAT, "%s: field format: expected \"%s\" (a simulator's truth.json)", path,
-                    CAP_TRUTH_FORMAT);
+        s = gs_json_fail(doc, GS_EFORMAT, "format", "expected \"%s\" (a simulator's truth.json)",
+                         CAP_TRUTH_FORMAT);
         goto done;
     }
     if (!json_is_array(arr)) {
-        s = gs_fail(GS_EFORMAT, "%s: field lights: expected an array", path);
+        s = gs_json_fail(doc, GS_EFORMAT, "lights", "expected an array");
         goto done;
     }
     size_t total_n = json_array_size(arr);
@@ -99,40 +87,40 @@ static gs_status read_truth(const char *path, ev_light **out, size_t *count, lon
         goto done;
     }
     for (size_t i = 0; i < total_n; i++) {
-        json_t *o = json_array_get(arr, i), *in = json_object_get(o, "in_image");
+        json_t *o = json_array_get(arr, i);
+        char lp[64];
+        snprintf(lp, sizeof lp, "lights[%zu]", i);
         if (!json_is_object(o)) {
-            s = gs_fail(GS_EFORMAT, "%s: field lights[%zu]: expected an object", path, i);
-            goto done;
-        }
-        if (!json_is_boolean(in)) {
-            s = gs_fail(GS_EFORMAT, "%s: field lights[%zu].in_image: expected true or false", path, i);
+            s = gs_json_fail(doc, GS_EFORMAT, lp, "expected an object");
             goto done;
         }
         ev_light *l = &v[n];
         memset(l, 0, sizeof *l);
         l->partner = -1;
-        if ((s = truth_number(path, o, "x_px", i, &l->x)) != GS_OK ||
-            (s = truth_number(path, o, "y_px", i, &l->y)) != GS_OK ||
-            (s = truth_number(path, o, "phase_deg", i, &l->phase_deg)) != GS_OK ||
-            (s = truth_number(path, o, "lat_deg", i, &l->lat)) != GS_OK ||
-            (s = truth_number(path, o, "lon_deg", i, &l->lon)) != GS_OK ||
-            (s = truth_text(path, o, "bulb", i, 1, l->bulb, sizeof l->bulb)) != GS_OK ||
-            (s = truth_text(path, o, "technology", i, 0, l->tech, sizeof l->tech)) != GS_OK)
+        int in_image;
+        if ((s = gs_json_get_bool(doc, o, lp, "in_image", 1, 0, &in_image)) != GS_OK ||
+            (s = truth_number(doc, o, "x_px", i, &l->x)) != GS_OK ||
+            (s = truth_number(doc, o, "y_px", i, &l->y)) != GS_OK ||
+            (s = truth_number(doc, o, "phase_deg", i, &l->phase_deg)) != GS_OK ||
+            (s = truth_number(doc, o, "lat_deg", i, &l->lat)) != GS_OK ||
+            (s = truth_number(doc, o, "lon_deg", i, &l->lon)) != GS_OK ||
+            (s = truth_text(doc, o, "bulb", i, 1, l->bulb, sizeof l->bulb)) != GS_OK ||
+            (s = truth_text(doc, o, "technology", i, 0, l->tech, sizeof l->tech)) != GS_OK)
             goto done;
-        if (!json_is_true(in)) continue;
+        if (!in_image) continue;
         if (!isfinite(l->x) || !isfinite(l->y)) {
-            s = gs_fail(GS_EFORMAT, "%s: field lights[%zu]: in_image but x_px/y_px not numbers", path, i);
+            s = gs_json_fail(doc, GS_EFORMAT, lp, "in_image but x_px/y_px not numbers");
             goto done;
         }
         if (isnan(l->lat) != isnan(l->lon)) {
-            s = gs_fail(GS_EFORMAT, "%s: field lights[%zu]: lat_deg without lon_deg or the reverse", path, i);
+            s = gs_json_fail(doc, GS_EFORMAT, lp, "lat_deg without lon_deg or the reverse");
             goto done;
         }
         n++;
     }
     *total = (long)total_n;
 done:
-    json_decref(root);
+    gs_json_free(doc);
     if (s != GS_OK) {
         free(v);
         return s;

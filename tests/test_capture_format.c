@@ -405,7 +405,7 @@ TEST(capture_format_field_errors)
         {8, "  \"saturation\": 4095, \"utc\": \"yesterday\",", "capture.json:8: field utc: expected an ISO 8601"},
         {8, "  \"saturation\": 4095, \"utc\": \"2017-13-01T00:00:00Z\",", "field utc"},
         {8, "  \"saturation\": 4095, \"station\": [1, 2],", "capture.json:8: field station: expected a JSON object"},
-        {8, "  \"saturation\": 4095, \"colour\": 1,", "capture.json:8: field colour: expected no such field"},
+        {8, "  \"saturation\": 4095, \"colour\": 1,", "capture.json:8: field colour: unknown field"},
         {9, "  \"frames\": {}, \"x_rest\": [", "capture.json:9: field frames: expected an array of K = 3"},
         {10, "    {\"file\": \"frame_000.png\", \"k\": 0, \"cycles\": 0},", "capture.json:10: field frames[0].cycles: expected a finite number > 0"},
         {11, "    {\"file\": \"frame_001.png\", \"k\": 1},", "capture.json:11: field frames[1].cycles", },

@@ -950,13 +950,13 @@ TEST(gis_station_parse_errors_name_line_and_field)
         gs_status s;
     } bad[] = {
         {"{\n \"lat_deg\": 45,\n \"lon_deg\": 7,\n \"height_m\": 1, \"heading_deg\": 0,\n \"pitch_deg\": 95,\n"
-         " \"focal_px\": 1, \"cx_px\": 0, \"cy_px\": 0}", "s.json:5: pitch_deg = 95", GS_EFORMAT},
-        {"{\n \"lat_deg\": 45,\n \"lon_deg\": 7,\n \"heigth_m\": 1}", "s.json:4: unknown field \"heigth_m\"", GS_EFORMAT},
-        {"{\n \"lat_deg\": 45,\n \"lon_deg\": \"7\"}", "s.json:3: lon_deg: expected a number", GS_EFORMAT},
-        {"{\n \"lat_deg\": 45, \"lat\": 46}", "s.json:2: lat_deg: given twice", GS_EFORMAT},
-        {"{\n \"lat_deg\": 45,\n \"lon_deg\": 7}", "s.json:1: missing field \"height_m\"", GS_EFORMAT},
+         " \"focal_px\": 1, \"cx_px\": 0, \"cy_px\": 0}", "s.json:5: field pitch_deg: pitch_deg = 95", GS_EFORMAT},
+        {"{\n \"lat_deg\": 45,\n \"lon_deg\": 7,\n \"heigth_m\": 1}", "s.json:4: field heigth_m: unknown field", GS_EFORMAT},
+        {"{\n \"lat_deg\": 45,\n \"lon_deg\": \"7\"}", "s.json:3: field lon_deg: expected a number", GS_EFORMAT},
+        {"{\n \"lat_deg\": 45, \"lat\": 46}", "s.json:2: field lat: lat_deg given twice", GS_EFORMAT},
+        {"{\n \"lat_deg\": 45,\n \"lon_deg\": 7}", "s.json:1: field height_m: expected a number (the field is missing", GS_EFORMAT},
         {"{\n \"lat_deg\": 45,\n \"lon_deg\": 7,,}", "s.json:3:", GS_EFORMAT},
-        {"{\"format\": \"gridsurvey-station/2\"}", "s.json:1: format", GS_EFORMAT},
+        {"{\"format\": \"gridsurvey-station/2\"}", "s.json:1: field format", GS_EFORMAT},
         {"[1, 2]", "s.json:1: expected a JSON object", GS_EFORMAT},
     };
     for (size_t i = 0; i < sizeof bad / sizeof *bad; i++) {
@@ -964,6 +964,6 @@ TEST(gis_station_parse_errors_name_line_and_field)
         CHECK_MSG(s == bad[i].s && strstr(gs_detail(), bad[i].expect), "case %zu: %s: %s (expected '%s')",
                   i, gs_strerror(s), gs_detail(), bad[i].expect);
     }
-    CHECK(gis_station_read("/nonexistent/station.json", &st) == GS_EIO);
+    CHECK(gis_station_read("/nonexistent/station.json", &st) == GS_ENOTFOUND);
     CHECK(strstr(gs_detail(), "/nonexistent/station.json") != NULL);
 }

@@ -400,7 +400,7 @@ TEST(gis_cli_locate)
     write_file(st, "{\"lat_deg\": 40.0, \"lon_deg\": -75.0,\n \"height_m\": 120.0,\n \"heading_deg\": 30,\n"
                    " \"pitch_deg\": -95, \"focal_px\": 2000, \"cx_px\": 959.5, \"cy_px\": 539.5}\n");
     rc = test_run(cmd, out, sizeof out);
-    CHECK_MSG(rc == 1 && contains(out, "station.json:4: pitch_deg = -95"), "%d: %s", rc, out);
+    CHECK_MSG(rc == 1 && contains(out, "station.json:4: field pitch_deg: pitch_deg = -95"), "%d: %s", rc, out);
     CHECK(count_of(out, "\n") == 1);
     snprintf(cmd, sizeof cmd, "%s locate --station %s --pixels %s -o %s", test_bin(), st, px, tmp("x.shp"));
     CHECK(test_run(cmd, out, sizeof out) == 1 && contains(out, "cannot tell the format"));

@@ -16,6 +16,7 @@
 #ifndef GRIDSURVEY_BASE_H
 #define GRIDSURVEY_BASE_H
 
+#include <jansson.h>
 #include <stddef.h>
 #include <stdio.h>
 
@@ -37,8 +38,102 @@ typedef enum {
 const char *gs_strerror(gs_status s);
 /* The detail of the last failure on this thread ("file:line: field: expected ..."); never NULL. */
 const char *gs_detail(void);
-/* Record a printf-style detail for this thread and return s (for `return gs_fail(...)`). */
+/* Record a printf-style detail for this thread and return s (for `return gs_fail(...)`); an
+ * argument may be gs_detail() itself, to add context to the last failure. */
 gs_status gs_fail(gs_status s, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+
+/* ------------------------------------------------------- format kit: files */
+
+/* dir + "/" + name into out[0..cap); 0 if it does not fit. */
+int gs_path_join(char *out, size_t cap, const char *dir, const char *name);
+
+/* The whole file at path in a malloc'd buffer with a NUL appended (*data: free()), its length
+ * in *size (may be NULL). GS_ENOTFOUND for a missing file, GS_EIO for one that cannot be read,
+ * GS_ELIMIT beyond max_bytes (0: GS_FILE_MAX_DEFAULT); the detail names the file. */
+#define GS_FILE_MAX_DEFAULT ((size_t)1 << 30)
+gs_status gs_file_read(const char *path, size_t max_bytes, char **data, size_t *size);
+/* Create dir if it does not exist (one level). */
+gs_status gs_dir_ensure(const char *dir);
+
+/* Atomic replacement of a file: gs_atomic_open creates ".NAME.tmp.PID.SEQ" beside path (with a
+ * stdio stream in f when want_stream, else for writing by name through tmp), gs_atomic_commit
+ * flushes, fsyncs and renames it over path, gs_atomic_abort (accepts NULL) removes it. Readers
+ * see the old file or the new one, never a partial one. */
+typedef struct {
+    char path[4096];
+    char tmp[4200];
+    FILE *f;
+} gs_atomic;
+gs_status gs_atomic_open(gs_atomic *a, const char *path, int want_stream);
+gs_status gs_atomic_commit(gs_atomic *a);
+void gs_atomic_abort(gs_atomic *a);
+/* data[0..size) as path, atomically. */
+gs_status gs_file_write_atomic(const char *path, const void *data, size_t size);
+
+/* -------------------------------------------------------- format kit: JSON */
+
+/* Every JSON format of the tool (scenes, capture.json, stations, truth files, progress files)
+ * is read through a gs_json document: Jansson's parse (duplicate keys refused; syntax errors
+ * "SOURCE:LINE:COL: JSON syntax: ...") plus the line of every member and element by its path
+ * ("lights[3].bulb", "" is the document). Every field error has one shape,
+ *   SOURCE:LINE: field PATH: expected EXPECTED[ (got VALUE)| (the field is missing)]
+ * (LINE: the field's, else its nearest enclosing element's), and one rule for unknown keys: an
+ * error, except "comment", "description" and extensions named "x_..." (ignored). */
+typedef struct gs_json gs_json;
+gs_status gs_json_parse(const char *text, size_t n, const char *source, gs_json **out);
+gs_status gs_json_load(const char *path, size_t max_bytes, gs_json **out);   /* gs_file_read */
+void gs_json_free(gs_json *j);
+json_t *gs_json_root(const gs_json *j);          /* borrowed */
+const char *gs_json_source(const gs_json *j);    /* borrowed */
+const char *gs_json_text(const gs_json *j, size_t *n);   /* the document text, borrowed */
+/* The line of path, or of its nearest recorded ancestor; 1 when none is. */
+int gs_json_line(const gs_json *j, const char *path);
+/* gs_fail(s, "SOURCE:LINE: field PATH: MESSAGE"). */
+gs_status gs_json_fail(const gs_json *j, gs_status s, const char *path, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+/* parent + "." + key (or key at the top) into out. */
+void gs_json_path(char *out, size_t cap, const char *parent, const char *key);
+/* 1 for the keys every format ignores ("comment", "description", "x_..."). */
+int gs_json_key_is_extension(const char *key);
+/* GS_EFORMAT naming the first key of obj (at path) that is neither allowed (NULL-terminated)
+ * nor an extension, with the list of allowed keys. */
+gs_status gs_json_check_keys(const gs_json *j, json_t *obj, const char *path,
+                             const char *const *allowed);
+/* Typed getters for member key of obj at path (obj NULL or not an object: absent). Absent and
+ * not required: *out = def. A number must be finite and in [lo, hi]; expect (NULL: "a number
+ * from LO to HI", "an integer from LO to HI") is the expected value the message names. */
+gs_status gs_json_get_num(const gs_json *j, json_t *obj, const char *path, const char *key,
+                          int required, double def, double lo, double hi, const char *expect,
+                          double *out);
+gs_status gs_json_get_int(const gs_json *j, json_t *obj, const char *path, const char *key,
+                          int required, long long def, long long lo, long long hi,
+                          const char *expect, long long *out);
+gs_status gs_json_get_bool(const gs_json *j, json_t *obj, const char *path, const char *key,
+                           int required, int def, int *out);
+/* A string shorter than cap bytes copied into out (def, or "", when absent). */
+gs_status gs_json_get_str(const gs_json *j, json_t *obj, const char *path, const char *key,
+                          int required, const char *def, char *out, size_t cap);
+gs_status gs_json_get_obj(const gs_json *j, json_t *obj, const char *path, const char *key,
+                          int required, json_t **out);
+/* An array of exactly n numbers (n > 0) or of 1..max (n = 0), each finite in [lo, hi]. */
+gs_status gs_json_get_num_array(const gs_json *j, json_t *obj, const char *path, const char *key,
+                                size_t n, size_t max, double lo, double hi, double *out,
+                                size_t *count);
+
+/* A growable text (zero it to start; free(t.s) when done). oom is set, and further output
+ * dropped, when memory runs out. */
+typedef struct {
+    char *s;
+    size_t n, cap;
+    int oom;
+} gs_text;
+void gs_text_printf(gs_text *t, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+/* A JSON string literal of s. */
+void gs_text_json_string(gs_text *t, const char *s);
+/* Compact JSON of v, key order kept, every real in its shortest exact form (gs_json_real). */
+void gs_text_json(gs_text *t, json_t *v);
+/* The shortest %g form of v that reads back as exactly v (cap >= 32). */
+void gs_json_real(char *buf, size_t cap, double v);
 
 /* ------------------------------------------------------------- AC (Eq. 1) */
 

@@ -3,6 +3,7 @@
 
 #include <stdarg.h>
 #include <stdio.h>
+#include <string.h>
 
 static _Thread_local char detail[512];
 
@@ -29,9 +30,12 @@ const char *gs_detail(void)
 
 gs_status gs_fail(gs_status s, const char *fmt, ...)
 {
+    /* through a copy, so an argument may be gs_detail() itself (adding context to it) */
+    char buf[sizeof detail];
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(detail, sizeof detail, fmt, ap);
+    vsnprintf(buf, sizeof buf, fmt, ap);
     va_end(ap);
+    memcpy(detail, buf, sizeof detail);
     return s;
 }
