@@ -18,7 +18,7 @@ struct cap_ac {
     long n, cap;
     /* random walk state */
     cap_freq_config cfg;
-    cap_rng rng;
+    gs_rng rng;
     double y, z, w;       /* slow cascade (y -> z) and fast part */
     double a, sy, b, sw;  /* per-cycle AR coefficients and innovations */
 };
@@ -118,12 +118,12 @@ gs_status cap_ac_new(const cap_freq_config *f, int grid_hz, cap_ac **out)
         ac->sy = sqrt(2.0) * f->sigma_hz * sqrt(1.0 - ac->a * ac->a);
         ac->b = exp(-dt / f->fast_corr_time_s);
         ac->sw = f->fast_sigma_hz * sqrt(1.0 - ac->b * ac->b);
-        cap_rng_init(&ac->rng, f->seed, CAP_TAG_FREQ, 0, 0);
+        gs_rng_init(&ac->rng, f->seed, CAP_TAG_FREQ, 0, 0);
         /* stationary start: z ~ N(0, sigma^2), y correlated 1/sqrt(2) with z, var 2 sigma^2 */
-        double e1 = cap_rng_normal(&ac->rng), e2 = cap_rng_normal(&ac->rng);
+        double e1 = gs_rng_normal(&ac->rng), e2 = gs_rng_normal(&ac->rng);
         ac->z = f->sigma_hz * e1;
         ac->y = sqrt(2.0) * f->sigma_hz * (e1 + e2) / sqrt(2.0);
-        ac->w = f->fast_sigma_hz * cap_rng_normal(&ac->rng);
+        ac->w = f->fast_sigma_hz * gs_rng_normal(&ac->rng);
         s = grow(ac, 1);
         if (s == GS_OK) {
             ac->t[0] = 0.0;
@@ -177,9 +177,9 @@ gs_status cap_ac_time(cap_ac *ac, long c, double *t_s)
             gs_status s = grow(ac, c + 1);
             if (s != GS_OK) return s;
             for (long i = ac->n; i <= c; i++) {
-                ac->y = ac->a * ac->y + ac->sy * cap_rng_normal(&ac->rng);
+                ac->y = ac->a * ac->y + ac->sy * gs_rng_normal(&ac->rng);
                 ac->z = ac->a * ac->z + (1.0 - ac->a) * ac->y;
-                ac->w = ac->b * ac->w + ac->sw * cap_rng_normal(&ac->rng);
+                ac->w = ac->b * ac->w + ac->sw * gs_rng_normal(&ac->rng);
                 double f = ac->cfg.hz + ac->z + ac->w;
                 ac->t[i] = ac->t[i - 1] + 1.0 / (2.0 * f);
             }
@@ -235,8 +235,8 @@ gs_status cap_ac_windows(cap_ac *ac, const cap_window_config *w, cap_windows *ou
     out->first_cycle = w->first_cycle;
     out->K = w->K;
     out->k = w->k;
-    cap_rng rng;
-    cap_rng_init(&rng, w->jitter_seed, CAP_TAG_JITTER, (uint64_t)w->first_cycle, (uint64_t)w->k);
+    gs_rng rng;
+    gs_rng_init(&rng, w->jitter_seed, CAP_TAG_JITTER, (uint64_t)w->first_cycle, (uint64_t)w->k);
     double K = w->K;
     gs_status s = GS_OK;
     double t_first, P = ac->nominal_half_s;
@@ -274,8 +274,8 @@ gs_status cap_ac_windows(cap_ac *ac, const cap_window_config *w, cap_windows *ou
             te = ts + P / K;
         }
         if (w->jitter_us > 0) {
-            ts += 1e-6 * w->jitter_us * cap_rng_normal(&rng);
-            te += 1e-6 * w->jitter_us * cap_rng_normal(&rng);
+            ts += 1e-6 * w->jitter_us * gs_rng_normal(&rng);
+            te += 1e-6 * w->jitter_us * gs_rng_normal(&rng);
             if (te <= ts) te = ts + 1e-9;
         }
         out->t0_s[c] = ts;

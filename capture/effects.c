@@ -126,12 +126,12 @@ gs_status cap_fx_scintillation(cap_sim *s, cap_render *r)
     for (size_t l = 0; l < s->n; l++) {
         double s2 = s->scint_s2[l];
         if (!(s2 > 0) || !s->fp[l].w) continue;
-        cap_rng rng;
-        cap_rng_init(&rng, s->sc.seed, CAP_TAG_SCINT, ((uint64_t)r->k << 32) | (uint64_t)r->pass, l);
+        gs_rng rng;
+        gs_rng_init(&rng, s->sc.seed, CAP_TAG_SCINT, ((uint64_t)r->k << 32) | (uint64_t)r->pass, l);
         double sd = sqrt(s2), rho = s->scint_rho[l], innov = sd * sqrt(1.0 - rho * rho);
-        double x = sd * cap_rng_normal(&rng);
+        double x = sd * gs_rng_normal(&rng);
         for (long c = 0; c < C; c++) {
-            if (c) x = rho * x + innov * cap_rng_normal(&rng);
+            if (c) x = rho * x + innov * gs_rng_normal(&rng);
             s->scin[c] = exp(x - 0.5 * s2);
         }
         items += (unsigned long long)C;
@@ -404,7 +404,7 @@ typedef struct {
     double cdf[CAP_POISSON_CDF];
 } poisson_cache;
 
-static double poisson_cached(poisson_cache *pc, cap_rng *rng, double lam)
+static double poisson_cached(poisson_cache *pc, gs_rng *rng, double lam)
 {
     if (lam != pc->lam) {
         double p = exp(-lam), F = p;
@@ -418,17 +418,17 @@ static double poisson_cached(poisson_cache *pc, cap_rng *rng, double lam)
         pc->n = k < CAP_POISSON_CDF ? k + 1 : CAP_POISSON_CDF;
         pc->lam = lam;
     }
-    double u = cap_rng_uniform(rng);
+    double u = gs_rng_uniform(rng);
     int k = 0;
     while (k < pc->n - 1 && u > pc->cdf[k]) k++;
     return k;
 }
 
-static double poisson_rest(cap_rng *rng, double lam)
+static double poisson_rest(gs_rng *rng, double lam)
 {
     if (!(lam > 0)) return 0;
-    if (lam >= 40.0) return cap_rng_poisson(rng, lam);
-    double u = cap_rng_uniform(rng);
+    if (lam >= 40.0) return gs_rng_poisson(rng, lam);
+    double u = gs_rng_uniform(rng);
     if (u <= 1.0 - lam) return 0;   /* u <= 1 - lam <= e^-lam */
     double p = exp(-lam), F = p;
     int k = 0;
@@ -450,8 +450,8 @@ gs_status cap_fx_shot_noise(cap_sim *s, cap_render *r)
     for (int i = 0; i < B * L; i++) pc[i].lam = -1;
     int amb = (s->fx >> CAP_FX_AMBIENT) & 1u;
     for (int y = 0; y < s->H; y++) {
-        cap_rng rng;
-        cap_rng_init(&rng, s->sc.seed, CAP_TAG_SHOT, ((uint64_t)r->k << 32) | (uint64_t)r->pass, (uint64_t)y);
+        gs_rng rng;
+        gs_rng_init(&rng, s->sc.seed, CAP_TAG_SHOT, ((uint64_t)r->k << 32) | (uint64_t)r->pass, (uint64_t)y);
         double *v = s->img + (size_t)y * row;
         double base_row = amb ? s->amb_row[y] : 0.0;
         for (int x = 0; x < s->W; x++) {
@@ -491,10 +491,10 @@ gs_status cap_fx_read_noise(cap_sim *s, cap_render *r)
     size_t row = (size_t)s->W * (size_t)s->B;
     double sd = s->read_dn;
     for (int y = 0; y < s->H; y++) {
-        cap_rng rng;
-        cap_rng_init(&rng, s->sc.seed, CAP_TAG_READ, ((uint64_t)r->k << 32) | (uint64_t)r->pass, (uint64_t)y);
+        gs_rng rng;
+        gs_rng_init(&rng, s->sc.seed, CAP_TAG_READ, ((uint64_t)r->k << 32) | (uint64_t)r->pass, (uint64_t)y);
         double *v = s->img + (size_t)y * row;
-        for (size_t i = 0; i < row; i++) v[i] += sd * cap_rng_normal(&rng);
+        for (size_t i = 0; i < row; i++) v[i] += sd * gs_rng_normal(&rng);
     }
     r->items = (unsigned long long)s->H * row;
     return GS_OK;

@@ -15,51 +15,6 @@
 
 /* ------------------------------------------------------------------ random streams */
 
-/* xoshiro256** (Blackman and Vigna, 2018) seeded through splitmix64. Every random process of
- * the simulator draws from its own stream, keyed by (scene seed, process tag, indices), so that
- * enabling one effect never changes another's numbers and a resumed capture re-renders a frame
- * bit for bit. */
-typedef struct {
-    uint64_t s[4];
-} cap_rng;
-
-static inline uint64_t cap_splitmix64(uint64_t *x)
-{
-    uint64_t z = (*x += 0x9e3779b97f4a7c15ull);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return z ^ (z >> 31);
-}
-
-/* Stream for (seed, tag, a, b): distinct tags / indices give independent streams. */
-void cap_rng_init(cap_rng *r, uint64_t seed, uint32_t tag, uint64_t a, uint64_t b);
-
-static inline uint64_t cap_rng_u64(cap_rng *r)
-{
-    uint64_t *s = r->s;
-    uint64_t x = s[1] * 5u;
-    uint64_t result = ((x << 7) | (x >> 57)) * 9u;
-    uint64_t t = s[1] << 17;
-    s[2] ^= s[0];
-    s[3] ^= s[1];
-    s[1] ^= s[2];
-    s[0] ^= s[3];
-    s[2] ^= t;
-    s[3] = (s[3] << 45) | (s[3] >> 19);
-    return result;
-}
-
-/* Uniform in (0, 1): never 0 or 1. */
-static inline double cap_rng_uniform(cap_rng *r)
-{
-    return ((double)(cap_rng_u64(r) >> 11) + 0.5) * 0x1.0p-53;
-}
-
-/* Standard normal (Marsaglia and Tsang's ziggurat, 128 layers). */
-double cap_rng_normal(cap_rng *r);
-/* Poisson with mean lambda >= 0 (inversion below 12, Hormann's PTRS above: exact in law). */
-double cap_rng_poisson(cap_rng *r, double lambda);
-
 /* Stream tags (one per random process). */
 enum {
     CAP_TAG_FREQ = 1,      /* random-walk grid frequency */

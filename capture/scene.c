@@ -420,23 +420,23 @@ static gs_status parse_street_grid(const pctx *c, const cap_scene *sc, json_t *b
             for (long j = 0; j < n_lights; j++) {
                 double along = -0.5 * len + ((double)j + 0.5) * spacing;
                 double u = dir == 0 ? along : across, v = dir == 0 ? across : along;
-                cap_rng r;
-                cap_rng_init(&r, (uint64_t)seed, CAP_TAG_GRID_GEN,
+                gs_rng r;
+                gs_rng_init(&r, (uint64_t)seed, CAP_TAG_GRID_GEN,
                              ((uint64_t)dir << 40) ^ ((uint64_t)i << 20) ^ (uint64_t)j, 1);
-                u += jitter * cap_rng_normal(&r);
-                v += jitter * cap_rng_normal(&r);
+                u += jitter * gs_rng_normal(&r);
+                v += jitter * gs_rng_normal(&r);
                 /* the district decides technology and transformer */
                 long du = (long)floor(u / district), dv = (long)floor(v / district);
-                cap_rng rd;
-                cap_rng_init(&rd, (uint64_t)seed, CAP_TAG_GRID_GEN,
+                gs_rng rd;
+                gs_rng_init(&rd, (uint64_t)seed, CAP_TAG_GRID_GEN,
                              ((uint64_t)(du + 100000) << 24) ^ (uint64_t)(dv + 100000), 2);
-                double pick = cap_rng_uniform(&rd) * wsum, acc = 0;
+                double pick = gs_rng_uniform(&rd) * wsum, acc = 0;
                 size_t ti = 0;
                 for (ti = 0; ti < nt - 1; ti++) {
                     acc += tw[ti];
                     if (pick < acc) break;
                 }
-                int transformer = cap_rng_uniform(&rd) < tf;
+                int transformer = gs_rng_uniform(&rd) < tf;
                 double e = u * crot + v * sr, nn = -u * sr + v * crot;
                 cap_light l;
                 memset(&l, 0, sizeof l);
@@ -445,10 +445,10 @@ static gs_status parse_street_grid(const pctx *c, const cap_scene *sc, json_t *b
                 l.lon_deg = lon0 + e / (Nr * cos(la)) * 180 / M_PI;
                 l.height_m = ground + pole;
                 snprintf(l.bulb, sizeof l.bulb, "%s", tbulb[ti]);
-                size_t pi = (size_t)(cap_rng_uniform(&r) * (double)n_phases);
+                size_t pi = (size_t)(gs_rng_uniform(&r) * (double)n_phases);
                 if (pi >= n_phases) pi = n_phases - 1;
                 l.phase_deg = phases[pi] + (transformer ? sc->transformer_deg : 0.0);
-                double g = 1.0 + spread * cap_rng_normal(&r);
+                double g = 1.0 + spread * gs_rng_normal(&r);
                 l.lumens = tlm[ti] * (g < 0.1 ? 0.1 : g);
                 l.distance_m = chord_m(&sc->cam, l.lat_deg, l.lon_deg, l.height_m);
                 if (l.distance_m < rmin || l.distance_m > rmax) continue;

@@ -34,12 +34,8 @@ void gis_light_set_fix(gis_light *l, const gis_fix *f)
 
 gis_phase_class gis_phase_classify(double phase_deg)
 {
-    if (!isfinite(phase_deg)) return GIS_PHASE_UNKNOWN;
-    double p = gis_wrap360(phase_deg);
-    static const double centre[3] = {0.0, 120.0, 240.0};
-    for (int i = 0; i < 3; i++)
-        if (fabs(gis_wrap180(p - centre[i])) <= 20.0) return (gis_phase_class)i;
-    return GIS_PHASE_OTHER;
+    int c = gs_phase_class(phase_deg);
+    return c < 0 ? GIS_PHASE_UNKNOWN : (gis_phase_class)c;
 }
 
 void gis_phase_rgb(gis_phase_class c, unsigned char rgb[3])

@@ -183,46 +183,20 @@ static int cmp_double(const void *a, const void *b)
     return (x > y) - (x < y);
 }
 
-/* Median of v[0..n) (reorders v). Quickselect. */
-static float median_f(float *v, size_t n)
-{
-    size_t k = n / 2, lo = 0, hi = n - 1;
-    while (lo < hi) {
-        float pivot = v[lo + (hi - lo) / 2];
-        size_t i = lo, j = hi;
-        while (i <= j) {
-            while (v[i] < pivot) i++;
-            while (v[j] > pivot) j--;
-            if (i <= j) {
-                float t = v[i];
-                v[i] = v[j];
-                v[j] = t;
-                i++;
-                if (j == 0) break;
-                j--;
-            }
-        }
-        if (k <= j) hi = j;
-        else if (k >= i) lo = i;
-        else break;
-    }
-    return v[k];
-}
-
 /* Robust level of a box: the median after CLIP_ITER clips at CLIP_SIGMA (1.4826 MAD). */
 static float robust_level(float *v, float *tmp, size_t n)
 {
-    float med = median_f(v, n);
+    float med = gs_median_f(v, n);
     for (int it = 0; it < CLIP_ITER && n > 2; it++) {
         for (size_t i = 0; i < n; i++) tmp[i] = fabsf(v[i] - med);
-        float sig = 1.4826f * median_f(tmp, n);
+        float sig = 1.4826f * gs_median_f(tmp, n);
         if (!(sig > 0)) break;
         size_t m = 0;
         for (size_t i = 0; i < n; i++)
             if (fabsf(v[i] - med) <= CLIP_SIGMA * sig) v[m++] = v[i];
         if (m == 0 || m == n) break;
         n = m;
-        med = median_f(v, n);
+        med = gs_median_f(v, n);
     }
     return med;
 }
@@ -263,8 +237,7 @@ typedef struct {
     size_t N;
     int sat_level;           /* raw >= sat_level is saturated (integer form of saturation_dn) */
     float black;
-    double var0;             /* read^2 + 1/12, DN^2 */
-    double inv_gain;         /* 1 / gain, or 0 (no shot noise) */
+    gs_noise nz;             /* the capture's noise model */
     double *scale;           /* [k * (GS_MAX_HALVINGS + 1) + h] = 2^h / cycles_k */
 
     float *M;                /* mean image, then M - background */
@@ -307,8 +280,7 @@ static void state_free(state *s)
 
 static inline double sample_var(const state *s, unsigned raw, double scale)
 {
-    double e = (double)raw - s->black;
-    return (s->var0 + (e > 0 ? e * s->inv_gain : 0)) * scale * scale;
+    return gs_noise_raw_var(&s->nz, (double)raw) * scale * scale;
 }
 
 /* ------------------------------------------------------- 1. mean image */
@@ -398,7 +370,7 @@ static gs_status detect(state *s)
     for (size_t p = 0; p < s->N; p++) {
         double a = s->sumA ? s->sumA[p] : A, bq = s->sumB ? s->sumB[p] : Bq;
         double b = bg[p] > 0 ? bg[p] : 0;
-        double var = (s->bands * s->var0 * a + b * s->inv_gain * bq) / K2;
+        double var = (s->bands * s->nz.read_var_dn2 * a + b * s->nz.inv_gain * bq) / K2;
         float r = s->M[p] - bg[p];
         s->M[p] = r;
         s->det[p] = (unsigned char)(s->sat[p] || r > thr * sqrt(var));
@@ -1100,7 +1072,7 @@ static gs_status photometry(state *s, const int *area, rec_catalog *cat)
                 double f = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[s->N * (size_t)k + (size_t)p] : 0)];
                 for (int b = 0; b < B; b++) {
                     double dn = mean_flux[b] / f;   /* expected raw level above black */
-                    vv[b * K + k] += (s->var0 + (dn > 0 ? dn * s->inv_gain : 0)) * f * f;
+                    vv[b * K + k] += (s->nz.read_var_dn2 + (dn > 0 ? dn * s->nz.inv_gain : 0)) * f * f;
                 }
             }
         }
@@ -1174,8 +1146,7 @@ gs_status rec_blobs_extract(const gs_capture *cap, const rec_blob_opts *o, rec_c
     s.N = (size_t)s.W * (size_t)s.H;
     s.sat_level = (int)ceil(cap->saturation_dn);
     s.black = (float)cap->black_level_dn;
-    s.var0 = cap->read_noise_dn * cap->read_noise_dn + 1.0 / 12.0;
-    s.inv_gain = cap->gain_e_per_dn > 0 ? 1.0 / cap->gain_e_per_dn : 0;
+    s.nz = gs_capture_noise(cap);
     const int HS = GS_MAX_HALVINGS + 1;
     s.scale = malloc(sizeof(double) * (size_t)s.K * HS);
     s.M = calloc(s.N, sizeof(float));

@@ -42,7 +42,6 @@
 #include <time.h>
 
 static const double two_pi = 6.283185307179586476925286766559;
-#define LOG_SQRT_2PI 0.91893853320467274178032973640562
 #define INV_SQRT12 0.28867513459481288225457439025098  /* std of a uniform shift, cycles */
 #define CUT_PIXEL 30.0    /* nats: pairs this far below the best are < 1e-13 of it */
 #define CUT_REFINE 30.0   /* nats: continuous bulbs this far below the best keep their grid peak */
@@ -54,71 +53,6 @@ static const double two_pi = 6.283185307179586476925286766559;
 #define LOGPHI_STEPS 32   /* table points per unit of z */
 
 /* ------------------------------------------------------------ numerics */
-
-/* log Gamma(a) for a > 0: recurrence up to a >= 15, then Stirling's series (abs. error < 1e-14). */
-static double log_gamma(double a)
-{
-    double acc = 0.0;
-    while (a < 15.0) {
-        acc -= log(a);
-        a += 1.0;
-    }
-    double a2 = a * a;
-    double series = 1.0 / (12.0 * a) - 1.0 / (360.0 * a * a2) + 1.0 / (1260.0 * a * a2 * a2) -
-                    1.0 / (1680.0 * a * a2 * a2 * a2);
-    return acc + (a - 0.5) * log(a) - a + LOG_SQRT_2PI + series;
-}
-
-/* Regularised upper incomplete gamma Q(a, x), a > 0, x >= 0: the series for P when x < a + 1,
- * else the continued fraction for Q (modified Lentz), as in Numerical Recipes 6.2. */
-static double gamma_q(double a, double x)
-{
-    if (x <= 0.0) return 1.0;
-    double lpre = a * log(x) - x - log_gamma(a);
-    if (x < a + 1.0) {
-        double ap = a, del = 1.0 / a, sum = del;
-        for (int n = 0; n < 100000; n++) {
-            ap += 1.0;
-            del *= x / ap;
-            sum += del;
-            if (fabs(del) < fabs(sum) * 1e-17) break;
-        }
-        double p = sum * exp(lpre);
-        return p >= 1.0 ? 0.0 : 1.0 - p;
-    }
-    double tiny = 1e-300;
-    double b = x + 1.0 - a, c = 1.0 / tiny, d = 1.0 / b, h = d;
-    for (int i = 1; i < 100000; i++) {
-        double an = -i * (i - a);
-        b += 2.0;
-        d = an * d + b;
-        if (fabs(d) < tiny) d = tiny;
-        c = b + an / c;
-        if (fabs(c) < tiny) c = tiny;
-        d = 1.0 / d;
-        double del = d * c;
-        h *= del;
-        if (fabs(del - 1.0) < 1e-16) break;
-    }
-    return exp(lpre) * h;
-}
-
-double rec_chi2_sf(double chi2, int dof)
-{
-    if (isnan(chi2)) return NAN;
-    if (dof < 1 || chi2 <= 0.0) return 1.0;
-    if (isinf(chi2)) return 0.0;
-    return gamma_q(0.5 * dof, 0.5 * chi2);
-}
-
-/* log Phi(z), Phi the standard normal CDF, accurate for every z. */
-static double log_phi(double z)
-{
-    if (z > 0.0) return log1p(-0.5 * erfc(z * M_SQRT1_2));
-    if (z > -20.0) return log(0.5 * erfc(-z * M_SQRT1_2));
-    double r = 1.0 / (z * z);
-    return -0.5 * z * z - log(-z) - LOG_SQRT_2PI + log1p(r * (-1.0 + r * (3.0 + r * (-15.0 + r * 105.0))));
-}
 
 /* Phi(z) */
 static double phi_cdf(double z)
@@ -273,21 +207,6 @@ static gs_status check_opts(const rec_eq7_opts *o)
     return GS_OK;
 }
 
-/* The chi-square value whose tail probability at dof is p (bisection on rec_chi2_sf). */
-static double chi2_quantile_upper(double p, int dof)
-{
-    if (p <= 0.0) return INFINITY;
-    if (dof < 1) return INFINITY;
-    double lo = 0.0, hi = dof + 10.0 * sqrt(2.0 * dof) + 100.0;
-    while (rec_chi2_sf(hi, dof) > p) hi *= 2.0;
-    for (int i = 0; i < 200 && hi - lo > 1e-12 * hi; i++) {
-        double mid = 0.5 * (lo + hi);
-        if (rec_chi2_sf(mid, dof) > p) lo = mid;
-        else hi = mid;
-    }
-    return hi;
-}
-
 /* Fourier coefficients of bulb b's window means (same algebra as gs_brf_integrate). */
 static gs_status fourier_setup(rec_matcher *m, size_t b)
 {
@@ -402,25 +321,6 @@ static void template_at(const rec_matcher *m, size_t b, double s, double *t, dou
     }
 }
 
-/* splitmix64 and Box-Muller: deterministic noise for the prefilter's cost model and the bench */
-static uint64_t bench_next(uint64_t *s)
-{
-    uint64_t z = (*s += 0x9E3779B97F4A7C15ull);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
-}
-
-static double bench_unif(uint64_t *s)
-{
-    return ((double)(bench_next(s) >> 11) + 0.5) * 0x1p-53;
-}
-
-static double bench_gauss(uint64_t *s)
-{
-    return sqrt(-2.0 * log(bench_unif(s))) * cos(two_pi * bench_unif(s));
-}
-
 /* Eigen-decomposition of the symmetric n x n matrix A (destroyed) by cyclic Jacobi rotations:
  * eigenvalues in ev[], eigenvectors in the columns of V (row-major n x n). */
 static void jacobi_eigen(double *A, int n, double *V, double *ev)
@@ -504,7 +404,7 @@ static gs_status prefilter_setup(rec_matcher *m)
                 order[k] = tmp;
             }
     uint64_t rs = 0x5eed;
-    for (size_t i = 0; i < (size_t)NR * (size_t)D; i++) X[i] = bench_gauss(&rs);
+    for (size_t i = 0; i < (size_t)NR * (size_t)D; i++) X[i] = gs_splitmix_normal(&rs);
     static const int cand_r[] = {4, 8, 12, 16, 24, 32};
     int R = 0;
     double best_cost = (double)D * (double)M, lim = m->o.min_snr;
@@ -842,9 +742,10 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
         rec_matcher_free(m);
         return s;
     }
-    m->chi2_thr = chi2_quantile_upper(opts.unknown_p, m->D - m->nfit - 1);
+    int thr_dof = m->D - m->nfit - 1;
+    m->chi2_thr = thr_dof >= 1 && opts.unknown_p > 0.0 ? gs_chi2_isf(opts.unknown_p, thr_dof) : INFINITY;
     int nt = 2 * (int)LOGPHI_ZMAX * LOGPHI_STEPS + 1;
-    for (int i = 0; i < nt; i++) m->logphi_tab[i] = log_phi(-LOGPHI_ZMAX + (double)i / LOGPHI_STEPS);
+    for (int i = 0; i < nt; i++) m->logphi_tab[i] = gs_log_phi(-LOGPHI_ZMAX + (double)i / LOGPHI_STEPS);
     m->logphi_tab[nt] = m->logphi_tab[nt - 1];
     *out = m;
     return GS_OK;
@@ -854,7 +755,7 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
 static double log_phi_fast(const rec_matcher *m, double z)
 {
     if (z >= LOGPHI_ZMAX) return 0.0;
-    if (z <= -LOGPHI_ZMAX) return log_phi(z);
+    if (z <= -LOGPHI_ZMAX) return gs_log_phi(z);
     double u = (z + LOGPHI_ZMAX) * LOGPHI_STEPS;
     int i = (int)u;
     double f = u - i;
@@ -1170,7 +1071,7 @@ static double loglik(double Sxx, double S, double T)
     double z = S / sqrt(T);
     double chi2 = Sxx - S * z / sqrt(T);
     if (chi2 < 0.0) chi2 = 0.0;
-    return -0.5 * chi2 - 0.5 * log(T) + log_phi(z);
+    return -0.5 * chi2 - 0.5 * log(T) + gs_log_phi(z);
 }
 
 /* The same with nf brightness parameters (one per band, each marginalised over a_b > 0 with a
@@ -1185,7 +1086,7 @@ static double loglik_n(int nf, double Sxx, const double *S, const double *T)
         if (!(T[f] > 0.0)) continue;
         double z = S[f] / sqrt(T[f]);
         chi2 -= z * z;
-        l += -0.5 * log(T[f]) + log_phi(z);
+        l += -0.5 * log(T[f]) + gs_log_phi(z);
         any = 1;
     }
     if (!any) return -INFINITY;
@@ -1448,7 +1349,7 @@ static gs_status match_light_ws(const rec_matcher *m, work *w, const double *sig
     out->brightness = a_sum * c;
     out->chi2 = chi2;
     out->dof = used > npar ? used - npar : 0;
-    out->p_value = rec_chi2_sf(chi2, out->dof);
+    out->p_value = out->dof >= 1 ? gs_chi2_sf(chi2, out->dof) : 1.0;
     out->bulb = bb;
     out->phase_deg = report_phase(m, bb, dec.tmpl, dec.shift);
     out->phase_sigma_deg = 0.0;
@@ -2123,13 +2024,13 @@ gs_status rec_bench_eq7(const rec_matcher *m, size_t pixels, double lit_fraction
     for (size_t r = 0; r < pixels; r++) {
         sg[r] = 1.0f;
         truth[r] = -1;
-        int on = bench_unif(&rs) < lit_fraction;
-        size_t j = (size_t)(bench_unif(&rs) * (double)m->M) % m->M;
+        int on = gs_splitmix_uniform(&rs) < lit_fraction;
+        size_t j = (size_t)(gs_splitmix_uniform(&rs) * (double)m->M) % m->M;
         /* brightness so the mean sample is snr noise sigmas */
         /* a template's mean sample is 1/bands: a = snr * bands gives a mean sample of snr */
         double a = on ? snr * m->bands : 0.0;
         for (size_t d = 0; d < D; d++)
-            x[r * D + d] = (float)(a * m->t[j * D + d] + bench_gauss(&rs));
+            x[r * D + d] = (float)(a * m->t[j * D + d] + gs_splitmix_normal(&rs));
         if (on) {
             truth[r] = (int)j;
             lit++;

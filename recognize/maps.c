@@ -60,52 +60,15 @@ int rec_map_scale(int width, int height)
 
 /* ------------------------------------------------------------ background mesh */
 
-static void swap_f(float *a, float *b)
-{
-    float t = *a;
-    *a = *b;
-    *b = t;
-}
-
-/* The median of v[0..n) (n >= 1; v is reordered): quickselect, the upper median for even n. */
-static float median_f(float *v, size_t n)
-{
-    size_t lo = 0, hi = n - 1, want = n / 2;
-    while (lo < hi) {
-        float pivot = v[lo + (hi - lo) / 2];
-        size_t i = lo, j = hi;
-        while (i <= j) {
-            while (v[i] < pivot) i++;
-            while (v[j] > pivot) j--;
-            if (i <= j) {
-                swap_f(&v[i], &v[j]);
-                i++;
-                if (j == 0) break;
-                j--;
-            }
-        }
-        if (want <= j) hi = j;
-        else if (want >= i) lo = i;
-        else return v[want];
-    }
-    return v[want];
-}
-
-/* Sample (k, y, x, band) of the capture as per-cycle DN (docs/formats.md), NaN when saturated;
- * *var_out its noise variance. Reads cap->raw directly (the hot loop). */
+/* Sample (k, y, x, band) of the capture as per-cycle DN (docs/formats.md), NaN when saturated.
+ * Reads cap->raw directly (the hot loop). */
 static inline double sample_value(const gs_capture *cap, const double *inv_cycles, size_t k,
-                                  size_t pix, int band, double *var_out)
+                                  size_t pix, int band)
 {
     size_t np = (size_t)cap->width * (size_t)cap->height;
     double raw = cap->raw[(k * np + pix) * (size_t)cap->bands + (size_t)band];
     double c = inv_cycles[k];
     if (cap->halvings) c *= (double)(1u << cap->halvings[k * np + pix]);
-    if (var_out) {
-        double e = raw - cap->black_level_dn;
-        double v = cap->read_noise_dn * cap->read_noise_dn + 1.0 / 12.0;
-        if (cap->gain_e_per_dn > 0.0 && e > 0.0) v += e / cap->gain_e_per_dn;
-        *var_out = v * c * c;
-    }
     if (raw >= cap->saturation_dn) return NAN;
     return (raw - cap->black_level_dn) * c;
 }
@@ -193,11 +156,11 @@ static gs_status mesh_build(const gs_capture *cap, const double *inv_cycles, mes
                     for (int y = y0; y < y1; y += step)
                         for (int x = x0; x < x1; x += step) {
                             double v = sample_value(cap, inv_cycles, (size_t)k,
-                                                    (size_t)y * (size_t)W + (size_t)x, band, NULL);
+                                                    (size_t)y * (size_t)W + (size_t)x, band);
                             if (isfinite(v) && n < BG_SAMPLES + 2 * BG_BOX) buf[n++] = (float)v;
                         }
                     m->node[((size_t)k * (size_t)bands + (size_t)band) * nodes + (size_t)j * (size_t)m->nbx + (size_t)i] =
-                        n ? median_f(buf, n) : 0.0f;
+                        n ? gs_median_f(buf, n) : 0.0f;
                 }
         }
     }
@@ -320,9 +283,8 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
             bg_mean[q] = (float)(acc / K);
         }
     }
-    const double v0 = cap->read_noise_dn * cap->read_noise_dn + 1.0 / 12.0;
-    const double inv_gain = cap->gain_e_per_dn > 0.0 ? 1.0 / cap->gain_e_per_dn : 0.0;
-    const double black = cap->black_level_dn;
+    const gs_noise nz = gs_capture_noise(cap);
+    const double v0 = nz.read_var_dn2, inv_gain = nz.inv_gain, black = nz.black_dn;
     const unsigned sat_dn = cap->saturation_dn > 65535.0 ? 65536u : (unsigned)ceil(cap->saturation_dn);
     /* Without HDR maps and shot noise every pixel has the same variance, and the black level
      * comes off as one constant: the inner loop only adds integers. Tiles of pixels keep the
@@ -420,7 +382,7 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
             int x = (int)(q % (size_t)W), y = (int)(q / (size_t)W);
             for (int k = 0; k < K; k++)
                 for (int band = 0; band < bands; band++) {
-                    double v = sample_value(cap, inv_cycles, (size_t)k, q, band, NULL);
+                    double v = sample_value(cap, inv_cycles, (size_t)k, q, band);
                     xb[r * D + (size_t)band * (size_t)K + (size_t)k] =
                         (float)(v - mesh_at(&bg, (size_t)k * (size_t)bands + (size_t)band, x, y));
                 }

@@ -237,11 +237,6 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
 gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *noise_sigma,
                            size_t P, int *bulb, float *phase_deg, float *confidence);
 
-/* Chi-square tail probability Q(dof/2, chi2/2) (regularised upper incomplete gamma: series or
- * continued fraction, relative error < 1e-12 where the result is > 1e-300). 1 for chi2 <= 0 or
- * dof < 1, 0 for chi2 = +inf, NaN for NaN. */
-double rec_chi2_sf(double chi2, int dof);
-
 /* Throughput of rec_match_pixels (for `make bench` / `gridsurvey bench`): synthesises `pixels`
  * rows (a fraction lit_fraction lit by a random template of m at mean sample snr noise sigmas,
  * the rest pure noise of std 1; deterministic for a seed), times one rec_match_pixels call and

@@ -51,42 +51,6 @@ static double now_s(void)
     return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
 }
 
-static uint64_t mix64(uint64_t *s)
-{
-    uint64_t z = (*s += 0x9E3779B97F4A7C15ull);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
-}
-
-static double unif(uint64_t *s)
-{
-    return ((double)(mix64(s) >> 11) + 0.5) * 0x1p-53;
-}
-
-static double gauss(uint64_t *s)
-{
-    return sqrt(-2.0 * log(unif(s))) * cos(6.283185307179586 * unif(s));
-}
-
-/* log Phi(z), the standard normal CDF, accurate in the far left tail. */
-static double log_phi(double z)
-{
-    if (z > -30.0) return log(0.5 * erfc(-z / sqrt(2.0)));
-    return -0.5 * z * z - log(-z) - 0.91893853320467274;   /* Mills ratio, leading term */
-}
-
-/* The chi-square value whose tail probability at dof is p (bisection on rec_chi2_sf). */
-static double chi2_isf(double p, int dof)
-{
-    double lo = 0.0, hi = dof + 20.0 * sqrt(2.0 * dof) + 100.0;
-    for (int i = 0; i < 200; i++) {
-        double mid = 0.5 * (lo + hi);
-        if (rec_chi2_sf(mid, dof) > p) lo = mid;
-        else hi = mid;
-    }
-    return 0.5 * (lo + hi);
-}
 
 /* ------------------------------------------------------------------ the reference */
 
@@ -173,7 +137,7 @@ static void ref_search(const ref_templates *r, const float *x, const double *w, 
             T += w[d] * t[d] * t[d];
         }
         double z = S / sqrt(T);
-        double L = -0.5 * (Sxx - z * z) - 0.5 * log(T) + log_phi(z);
+        double L = -0.5 * (Sxx - z * z) - 0.5 * log(T) + gs_log_phi(z);
         if (L > best) {
             best = L;
             bj = j;
@@ -263,13 +227,13 @@ static gs_status run_pixels(const config *c, rec_matcher *m, result *res)
     if (st == GS_OK) st = ref_build(m, c->K, &r);
     if (st == GS_OK) {
         uint64_t rs = 12345;
-        for (size_t i = 0; i < POOL; i++) pool[i] = (float)gauss(&rs);
+        for (size_t i = 0; i < POOL; i++) pool[i] = (float)gs_splitmix_normal(&rs);
         double a = SNR * c->bands;   /* a template's mean sample is 1 / bands */
         for (size_t p = 0; p < P; p++) {
             sg[p] = 1.0f;
-            const float *noise = pool + mix64(&rs) % (POOL - D);
-            int on = unif(&rs) < c->lit;
-            size_t j = (size_t)(unif(&rs) * (double)r.M) % r.M;
+            const float *noise = pool + gs_splitmix64(&rs) % (POOL - D);
+            int on = gs_splitmix_uniform(&rs) < c->lit;
+            size_t j = (size_t)(gs_splitmix_uniform(&rs) * (double)r.M) % r.M;
             truth[p] = on ? (int)j : -1;
             const double *t = r.t + j * D;
             for (size_t d = 0; d < D; d++) x[p * D + d] = (float)((on ? a * t[d] : 0.0) + noise[d]);
@@ -310,7 +274,7 @@ static gs_status run_pixels(const config *c, rec_matcher *m, result *res)
         double *w = malloc(sizeof *w * D);
         if (!w) st = gs_fail(GS_ENOMEM, "bench: cannot allocate weights");
         for (size_t d = 0; w && d < D; d++) w[d] = 1.0;
-        double thr = chi2_isf(eo.unknown_p, (int)D - 2);
+        double thr = gs_chi2_isf(eo.unknown_p, (int)D - 2);
         double t0 = now_s();
         for (size_t p = 0; w && p < nref; p++) {
             int b;
@@ -372,14 +336,14 @@ static gs_status run_lights(const config *c, rec_matcher *m, result *res)
     if (st == GS_OK) {
         uint64_t rs = 777;
         for (size_t i = 0; i < N; i++) {
-            size_t j = (size_t)(unif(&rs) * (double)r.M) % r.M;
+            size_t j = (size_t)(gs_splitmix_uniform(&rs) * (double)r.M) % r.M;
             truth[i] = (int)j;
             double a = 1000.0 * c->bands;   /* brightness, sum over bands of the mean */
             for (size_t d = 0; d < D; d++) {
                 /* noise std varies per sample (a light's samples differ in shot noise) */
-                double s = (1000.0 / SNR) * (0.5 + unif(&rs));
+                double s = (1000.0 / SNR) * (0.5 + gs_splitmix_uniform(&rs));
                 cat.sigma[i * D + d] = s;
-                cat.signal[i * D + d] = a * r.t[j * D + d] + s * gauss(&rs);
+                cat.signal[i * D + d] = a * r.t[j * D + d] + s * gs_splitmix_normal(&rs);
             }
         }
         res->seconds = INFINITY;
@@ -393,7 +357,7 @@ static gs_status run_lights(const config *c, rec_matcher *m, result *res)
     }
     if (st == GS_OK && !c->continuous) {
         size_t nref = N < REF_ROWS_MAX ? N : REF_ROWS_MAX, same = 0;
-        double thr = chi2_isf(eo.unknown_p, (int)D - 2);
+        double thr = gs_chi2_isf(eo.unknown_p, (int)D - 2);
         double t0 = now_s();
         for (size_t i = 0; i < nref; i++) {
             for (size_t d = 0; d < D; d++) {
@@ -453,19 +417,19 @@ static gs_status run_capture(const config *c, rec_matcher *m, result *res)
         size_t np = (size_t)c->side * (size_t)c->side, D = (size_t)r.D;
         size_t n = np * (size_t)c->K * (size_t)c->bands;
         uint64_t rs = 4242;
-        for (size_t i = 0; i < POOL; i++) pool[i] = (float)gauss(&rs);
+        for (size_t i = 0; i < POOL; i++) pool[i] = (float)gs_splitmix_normal(&rs);
         for (int k = 0; k < c->K; k++) cap.frames[k].cycles = cycles;
         /* sky and read noise, then the lights added (rounded to DN) */
         for (size_t i = 0; i < n; i += 4096) {
-            const float *noise = pool + mix64(&rs) % (POOL - 4096);
+            const float *noise = pool + gs_splitmix64(&rs) % (POOL - 4096);
             size_t e = i + 4096 < n ? i + 4096 : n;
             for (size_t q = i; q < e; q++)
                 cap.raw[q] = (unsigned short)lround(fmax(0.0, 64.0 + cycles * sky + 3.0 * noise[q - i]));
         }
         for (size_t l = 0; l < c->lights; l++) {
-            double x0 = 4 + unif(&rs) * (c->side - 8), y0 = 4 + unif(&rs) * (c->side - 8);
-            double F = 200.0 + 1800.0 * unif(&rs);
-            size_t j = (size_t)(unif(&rs) * (double)r.M) % r.M;
+            double x0 = 4 + gs_splitmix_uniform(&rs) * (c->side - 8), y0 = 4 + gs_splitmix_uniform(&rs) * (c->side - 8);
+            double F = 200.0 + 1800.0 * gs_splitmix_uniform(&rs);
+            size_t j = (size_t)(gs_splitmix_uniform(&rs) * (double)r.M) % r.M;
             for (int y = (int)y0 - 4; y <= (int)y0 + 4; y++)
                 for (int x = (int)x0 - 4; x <= (int)x0 + 4; x++) {
                     double g = exp(-((x - x0) * (x - x0) + (y - y0) * (y - y0)) / (2 * 1.69)) / (2 * 3.14159265 * 1.69);

@@ -413,7 +413,7 @@ static gs_status run_point(const char *base, const crop *cr, const char *work, i
         size_t want = eligible < (size_t)n_oracle ? eligible : (size_t)n_oracle, seen = 0, k = 0;
         srv_light_row *orc = calloc(want ? want : 1, sizeof *orc);
         if (!orc) s = gs_fail(GS_ENOMEM, "bench accuracy: out of memory");
-        double r2 = cap.read_noise_dn * cap.read_noise_dn + 1.0 / 12.0;
+        double r2 = gs_capture_noise(&cap).read_var_dn2;
         for (size_t i = 0; i < n && k < want && s == GS_OK; i++) {
             if ((cat.flags[i] & bad) || npix[i] <= 0) continue;
             if (seen++ != k * eligible / want) continue;

@@ -32,18 +32,10 @@ void srv_synth_opts_default(srv_synth_opts *o)
     o->view_half_width_m = 250.0;
 }
 
-/* splitmix64 (Steele, Lea, Flood 2014): fixed and portable. */
-static uint64_t splitmix(uint64_t *s)
-{
-    uint64_t z = (*s += 0x9e3779b97f4a7c15ull);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return z ^ (z >> 31);
-}
 
 static double unif(uint64_t *s)
 {
-    return (double)(splitmix(s) >> 11) * 0x1.0p-53;
+    return (double)(gs_splitmix64(s) >> 11) * 0x1.0p-53;
 }
 
 static double wrap_phase(double d)
@@ -81,7 +73,7 @@ static void synth_capture(const srv_synth_opts *o, size_t c, int64_t survey_id, 
                           synth_buf *b, srv_capture_data *d)
 {
     uint64_t rng = o->seed * 0x2545f4914f6cdd1dull ^ (uint64_t)c * 0x9e3779b97f4a7c15ull;
-    splitmix(&rng);
+    gs_splitmix64(&rng);
     snprintf(b->key, sizeof b->key, "synth-%06zu", c);
     memset(d, 0, sizeof *d);
     srv_capture_row_init(&d->capture);
@@ -117,7 +109,7 @@ static void synth_capture(const srv_synth_opts *o, size_t c, int64_t survey_id, 
         l->index = (int)j;
         l->x_px = 1024.0 * unif(&rng);
         l->y_px = 1024.0 * unif(&rng);
-        l->area_px = 4 + (int)(splitmix(&rng) % 30);
+        l->area_px = 4 + (int)(gs_splitmix64(&rng) % 30);
         l->peak_dn = 1000.0 + 60000.0 * unif(&rng);
         l->brightness = 50.0 + 5000.0 * unif(&rng);
         l->snr = 10.0 + 200.0 * unif(&rng);

@@ -117,7 +117,7 @@ gs_status srv_db_read_lights(srv_db *db, const srv_export_opts *o, gis_light **l
     int rc;
     while ((rc = sqlite3_step(q)) == SQLITE_ROW) {
         double phase = col_real(q, 5), lat = col_real(q, 7), lon = col_real(q, 8);
-        if (o->phase != -2 && srv_phase_class(phase) != o->phase) continue;
+        if (o->phase != -2 && gs_phase_class(phase) != o->phase) continue;
         if (o->use_bbox && !in_bbox(o, lat, lon)) continue;
         if (n == cap) {
             size_t nc = cap ? 2 * cap : 256;

@@ -131,7 +131,7 @@ static const char *const migration_1[] = {
     NULL};
 
 /* Version 2: phase-balance views (SQLite's math functions: sqrt, exp; Debian's libsqlite3 is
- * built with SQLITE_ENABLE_MATH_FUNCTIONS). The phase classes match srv_phase_class exactly
+ * built with SQLITE_ENABLE_MATH_FUNCTIONS). The phase classes match gs_phase_class exactly
  * (phases are stored wrapped to [0, 360)); the Wilson interval uses z = SRV_Z95. */
 #define Z95_SQL "1.959963984540054"
 static const char *const migration_2[] = {

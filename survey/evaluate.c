@@ -355,7 +355,7 @@ static double rate(long k, long n)
 /* Class 0..3 of a phase (0, 120, 240, other), 4 for NaN. */
 static int phase_col(double phase_deg)
 {
-    int c = srv_phase_class(phase_deg);
+    int c = gs_phase_class(phase_deg);
     return c < 0 ? 4 : c;
 }
 
@@ -409,7 +409,7 @@ gs_status srv_evaluate(srv_db *db, const char *truth_path, const srv_eval_opts *
         }
         if (isfinite(a->phase_deg)) {
             r->phase_answered++;
-            phase_ok = isfinite(t->phase_deg) && phase_diff_deg(a->phase_deg, t->phase_deg) <= SRV_PHASE_TOL_DEG;
+            phase_ok = isfinite(t->phase_deg) && phase_diff_deg(a->phase_deg, t->phase_deg) <= GS_PHASE_TOL_DEG;
             r->phase_correct += phase_ok;
         }
         r->all_correct += bulb_ok && phase_ok;

@@ -1,6 +1,6 @@
 /* stats.c - phase-balance statistics of a survey database (docs/survey-db.md, "Statistics").
  *
- * Per group of lights: counts per phase class (0/120/240 within SRV_PHASE_TOL_DEG, other,
+ * Per group of lights: counts per phase class (0/120/240 within GS_PHASE_TOL_DEG, other,
  * unknown), the shares of the three phases among the lights of a known 0/120/240 phase, their
  * 95 % Wilson score intervals (Wilson 1927), Pearson's chi-square test of the uniform split
  * (1/3 each; 2 degrees of freedom, survival function exp(-x/2)), and an imbalance index
@@ -47,27 +47,6 @@ double srv_wilson(long k, long n, double z, double *lo, double *hi)
     return p;
 }
 
-double srv_chi2_sf(double x, int dof)
-{
-    if (isnan(x) || dof < 1) return NAN;
-    if (x <= 0.0) return 1.0;
-    if (dof == 2) return exp(-0.5 * x);   /* Q(1, x/2) = exp(-x/2) exactly */
-    return rec_chi2_sf(x, dof);
-}
-
-int srv_phase_class(double phase_deg)
-{
-    if (!isfinite(phase_deg)) return -1;
-    double p = fmod(phase_deg, 360.0);
-    if (p < 0.0) p += 360.0;
-    if (p >= 360.0) p = 0.0;
-    /* the same comparisons as the light_phase view (phases are stored in [0, 360)) */
-    if (p <= SRV_PHASE_TOL_DEG || p >= 360.0 - SRV_PHASE_TOL_DEG) return 0;
-    if (p >= 120.0 - SRV_PHASE_TOL_DEG && p <= 120.0 + SRV_PHASE_TOL_DEG) return 1;
-    if (p >= 240.0 - SRV_PHASE_TOL_DEG && p <= 240.0 + SRV_PHASE_TOL_DEG) return 2;
-    return 3;
-}
-
 void srv_phase_stats_finish(srv_phase_stats *g)
 {
     g->total = g->n[0] + g->n[1] + g->n[2];
@@ -86,7 +65,7 @@ void srv_phase_stats_finish(srv_phase_stats *g)
         if (ds > dev) dev = ds;
     }
     g->chi2 = chi2;
-    g->p_value = srv_chi2_sf(chi2, 2);
+    g->p_value = gs_chi2_sf(chi2, 2);
     g->imbalance = 3.0 * dev;
     if (e < 5.0) g->flags |= SRV_STATS_FEW;
 }
@@ -214,7 +193,7 @@ static void add_light(srv_phase_stats *g, double phase_deg, double phase_conf, d
         g->below++;
         return;
     }
-    int c = srv_phase_class(phase_deg);
+    int c = gs_phase_class(phase_deg);
     if (c < 0) g->unknown++;
     else if (c == 3) g->other++;
     else g->n[c]++;

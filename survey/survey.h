@@ -50,9 +50,6 @@ int srv_main(int argc, char **argv);
 #define SRV_DB_FORMAT "gridsurvey-survey"
 /* Written to migrations.generator and delight_versions.generator. */
 #define SRV_GENERATOR "gridsurvey 0.1"
-/* Phase classes: a phase within this many degrees of 0, 120 or 240 counts as that phase
- * (the same rule as gis_phase_classify); any other finite phase is "other". */
-#define SRV_PHASE_TOL_DEG 20.0
 
 typedef struct srv_db srv_db;
 struct sqlite3;
@@ -263,13 +260,6 @@ int srv_db_report_ok(const srv_db_report *r);
  * normal quantile z (> 0): lo and hi in [0, 1]. Returns k/n; NaN (and NaN bounds) for n = 0,
  * k < 0 or k > n. */
 double srv_wilson(long k, long n, double z, double *lo, double *hi);
-/* Chi-square survival function P(X > x) for dof degrees of freedom: exactly exp(-x/2) for
- * dof = 2; otherwise the regularised upper incomplete gamma Q(dof/2, x/2) (rec_chi2_sf,
- * relative error < 1e-12). 1 for x <= 0, NaN for NaN x or dof < 1. */
-double srv_chi2_sf(double x, int dof);
-/* The phase class of a phase in degrees: 0, 1, 2 for 0/120/240 (within SRV_PHASE_TOL_DEG),
- * 3 for another finite phase, -1 for NaN (unknown/ambiguous). */
-int srv_phase_class(double phase_deg);
 
 typedef enum {
     SRV_BY_ALL,          /* one group */
@@ -304,13 +294,13 @@ typedef struct {
     long lights;               /* lights in the group */
     long below;                /* ... with phase_confidence < min_confidence (excluded) */
     long unknown;              /* ... kept, phase NULL (ambiguous / unknown) */
-    long other;                /* ... kept, phase not within SRV_PHASE_TOL_DEG of 0/120/240 */
+    long other;                /* ... kept, phase not within GS_PHASE_TOL_DEG of 0/120/240 */
     long n[3];                 /* ... kept, phase 0, 120, 240 */
     long total;                /* n[0] + n[1] + n[2]: the denominator of the shares */
     double share[3];           /* n[i] / total */
     double lo[3], hi[3];       /* 95 % Wilson interval of each share */
     double chi2;               /* sum (n_i - total/3)^2 / (total/3): uniformity test, 2 dof */
-    double p_value;            /* srv_chi2_sf(chi2, 2) */
+    double p_value;            /* gs_chi2_sf(chi2, 2) */
     double imbalance;          /* max_i |share_i - 1/3| / (1/3), [0, 2]: 0 balanced, 2 all on
                                 * one phase (NEMA MG-1 "max deviation from the mean / mean",
                                 * applied to light counts) */
@@ -484,7 +474,7 @@ typedef struct {
 } srv_eval_opts;
 void srv_eval_opts_default(srv_eval_opts *o);
 
-/* Phase classes of the confusion matrix: 0, 120, 240 deg (within SRV_PHASE_TOL_DEG), another
+/* Phase classes of the confusion matrix: 0, 120, 240 deg (within GS_PHASE_TOL_DEG), another
  * phase, and (stored side only) none = ambiguous or unknown. */
 #define SRV_EVAL_PHASE_CLASSES 5
 
@@ -503,7 +493,7 @@ typedef struct {
     long bulb_ambiguous;         /* ... flagged REC_MATCH_BULB_AMBIGUOUS (a bulb, not sure) */
     long tech_answered, tech_correct;   /* the same for the technology */
     long phase_answered;         /* matched lights with a phase (not ambiguous or unknown) */
-    long phase_correct;          /* ... within SRV_PHASE_TOL_DEG of the truth's phase (for a
+    long phase_correct;          /* ... within GS_PHASE_TOL_DEG of the truth's phase (for a
                                   * truth on 0/120/240: the same phase class) */
     long all_correct;            /* matched lights with the right bulb and the right phase */
     long confusion[4][SRV_EVAL_PHASE_CLASSES];  /* [truth class][stored class] of matched

@@ -121,25 +121,25 @@ TEST(stats_chi2_sf_known_values)
         {1.3862943611198906, 2, 0.5},  {0.454936423119572, 1, 0.5},
     };
     for (size_t i = 0; i < sizeof t / sizeof *t; i++)
-        CHECK_NEAR(srv_chi2_sf(t[i].x, t[i].dof), t[i].p, 1e-11 * t[i].p);
+        CHECK_NEAR(gs_chi2_sf(t[i].x, t[i].dof), t[i].p, 1e-11 * t[i].p);
     /* 2 dof is exactly exp(-x/2) */
-    for (double x = 0.01; x < 1400.0; x *= 1.7) CHECK(srv_chi2_sf(x, 2) == exp(-x / 2));
-    CHECK(srv_chi2_sf(0.0, 2) == 1.0 && srv_chi2_sf(-3.0, 5) == 1.0);
-    CHECK(isnan(srv_chi2_sf(NAN, 2)) && isnan(srv_chi2_sf(1.0, 0)));
-    CHECK(srv_chi2_sf(INFINITY, 2) == 0.0);
+    for (double x = 0.01; x < 1400.0; x *= 1.7) CHECK(gs_chi2_sf(x, 2) == exp(-x / 2));
+    CHECK(gs_chi2_sf(0.0, 2) == 1.0 && gs_chi2_sf(-3.0, 5) == 1.0);
+    CHECK(isnan(gs_chi2_sf(NAN, 2)) && isnan(gs_chi2_sf(1.0, 0)));
+    CHECK(gs_chi2_sf(INFINITY, 2) == 0.0);
 }
 
 TEST(stats_phase_class_matches_gis)
 {
     for (double p = -720.0; p <= 720.0; p += 0.125) {
-        int c = srv_phase_class(p);
+        int c = gs_phase_class(p);
         gis_phase_class g = gis_phase_classify(p);
         CHECK_MSG(c == (int)g || (c == 3 && g == GIS_PHASE_OTHER), "phase %g: %d vs gis %d", p, c, (int)g);
     }
-    CHECK(srv_phase_class(NAN) == -1);
-    CHECK(srv_phase_class(20.0) == 0 && srv_phase_class(20.000001) == 3);
-    CHECK(srv_phase_class(340.0) == 0 && srv_phase_class(339.99999) == 3);
-    CHECK(srv_phase_class(100.0) == 1 && srv_phase_class(260.0) == 2 && srv_phase_class(359.999) == 0);
+    CHECK(gs_phase_class(NAN) == -1);
+    CHECK(gs_phase_class(20.0) == 0 && gs_phase_class(20.000001) == 3);
+    CHECK(gs_phase_class(340.0) == 0 && gs_phase_class(339.99999) == 3);
+    CHECK(gs_phase_class(100.0) == 1 && gs_phase_class(260.0) == 2 && gs_phase_class(359.999) == 0);
 }
 
 /* ------------------------------------------------------------------ database */
@@ -207,14 +207,14 @@ TEST(stats_sql_views_match_c)
     cd.n_lights = NE;
     CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
     sqlite3 *h = srv_db_sqlite(db);
-    /* per light: the view's class equals srv_phase_class of the stored phase */
+    /* per light: the view's class equals gs_phase_class of the stored phase */
     sqlite3_stmt *q = NULL;
     CHECK(sqlite3_prepare_v2(h, "SELECT phase_deg, phase_class FROM light_phase", -1, &q, NULL) == SQLITE_OK);
     static const char *const names[] = {"0", "120", "240", "other"};
     long rows = 0;
     while (sqlite3_step(q) == SQLITE_ROW) {
         double p = sqlite3_column_type(q, 0) == SQLITE_NULL ? NAN : sqlite3_column_double(q, 0);
-        int c = srv_phase_class(p);
+        int c = gs_phase_class(p);
         const char *sqlc = (const char *)sqlite3_column_text(q, 1);
         CHECK_MSG(!strcmp(sqlc, c < 0 ? "unknown" : names[c]), "phase %.10g: SQL %s, C %d", p, sqlc, c);
         rows++;

@@ -18,6 +18,7 @@
 
 #include <jansson.h>
 #include <stddef.h>
+#include <stdint.h>
 #include <stdio.h>
 
 /* ------------------------------------------------------------------ status */
@@ -135,6 +136,69 @@ void gs_text_json(gs_text *t, json_t *v);
 /* The shortest %g form of v that reads back as exactly v (cap >= 32). */
 void gs_json_real(char *buf, size_t cap, double v);
 
+/* ------------------------------------------------ format kit: random numbers */
+
+/* splitmix64 (Steele, Lea, Flood 2014): a fixed, portable generator (never rand()); one step
+ * of the state *x. The tool's deterministic draws (DELIGHT parameters, benches, tests) and the
+ * seeding of gs_rng all come from it. */
+static inline uint64_t gs_splitmix64(uint64_t *x)
+{
+    uint64_t z = (*x += 0x9e3779b97f4a7c15ull);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+    return z ^ (z >> 31);
+}
+/* Uniform in (0, 1) (never 0 or 1) from 53 bits of splitmix64; a standard normal from two of
+ * them by Box-Muller, drawn in that order. */
+double gs_splitmix_uniform(uint64_t *x);
+double gs_splitmix_normal(uint64_t *x);
+
+/* xoshiro256** (Blackman and Vigna, 2018) seeded through splitmix64: the simulator's streams.
+ * Every random process draws from its own stream keyed by (seed, tag, a, b), so enabling one
+ * effect never changes another's numbers and a resumed capture re-renders a frame bit for bit. */
+typedef struct {
+    uint64_t s[4];
+} gs_rng;
+void gs_rng_init(gs_rng *r, uint64_t seed, uint32_t tag, uint64_t a, uint64_t b);
+static inline uint64_t gs_rng_u64(gs_rng *r)
+{
+    uint64_t *s = r->s;
+    uint64_t x = s[1] * 5u;
+    uint64_t result = ((x << 7) | (x >> 57)) * 9u;
+    uint64_t t = s[1] << 17;
+    s[2] ^= s[0];
+    s[3] ^= s[1];
+    s[1] ^= s[2];
+    s[0] ^= s[3];
+    s[2] ^= t;
+    s[3] = (s[3] << 45) | (s[3] >> 19);
+    return result;
+}
+/* Uniform in (0, 1): never 0 or 1. */
+static inline double gs_rng_uniform(gs_rng *r)
+{
+    return ((double)(gs_rng_u64(r) >> 11) + 0.5) * 0x1.0p-53;
+}
+/* Standard normal (Marsaglia and Tsang's ziggurat, 128 layers). */
+double gs_rng_normal(gs_rng *r);
+/* Poisson with mean lambda >= 0 (inversion below 12, Hormann's PTRS above: exact in law). */
+double gs_rng_poisson(gs_rng *r, double lambda);
+
+/* ------------------------------------------------------------------ numerics */
+
+/* Chi-square tail probability P(X > chi2) for dof degrees of freedom: the regularised upper
+ * incomplete gamma Q(dof/2, chi2/2) (series or continued fraction with libm's lgamma; relative
+ * error < 1e-12 where the result is > 1e-300; exp(-chi2/2) exactly for dof = 2). 1 for
+ * chi2 <= 0, 0 for +inf, NaN for NaN or dof < 1. */
+double gs_chi2_sf(double chi2, int dof);
+/* Its inverse: the chi2 whose tail probability is p (bisection to 1e-12 relative); +inf for
+ * p <= 0, 0 for p >= 1, NaN for NaN or dof < 1. */
+double gs_chi2_isf(double p, int dof);
+/* log Phi(z), Phi the standard normal CDF, accurate for every z (asymptotic below -20). */
+double gs_log_phi(double z);
+/* The median of v[0..n) (n >= 1; v is reordered): quickselect, the upper median for even n. */
+float gs_median_f(float *v, size_t n);
+
 /* ------------------------------------------------------------- AC (Eq. 1) */
 
 /* Zero crossings of a uniformly sampled waveform x[0..n) at rate_hz, both directions, with
@@ -244,6 +308,12 @@ double gs_brf_percent_flicker(const gs_brf *b, int band);
 double gs_phase_to_shift(double phase_deg);
 /* Inverse: the grid phase in [0,360) deg whose shift is shift_cycles. */
 double gs_shift_to_phase(double shift_cycles);
+/* The phase class of a grid phase in degrees, the one rule of statistics, maps and exports:
+ * 0, 1, 2 for 0/120/240 deg (within GS_PHASE_TOL_DEG, edges included), 3 for another finite
+ * phase, -1 for NaN (unknown/ambiguous). The survey database's light_phase view repeats the
+ * comparisons in SQL (tests/test_stats.c checks the two agree on every edge). */
+#define GS_PHASE_TOL_DEG 20.0
+int gs_phase_class(double phase_deg);
 
 /* Eq. 6: chromaticity Q[b] = mean[b] / sum(mean), and the brightness sum(mean) returned.
  * Returns NaN (and leaves Q untouched) when the sum is not finite and > 0. */
@@ -454,6 +524,22 @@ gs_status gs_capture_write_frame(const char *dir, const gs_capture *cap, int k);
  * (GS_EINVAL naming the field). Frames must have been written first (GS_ENOTFOUND naming the
  * missing file), so a capture.json never names a file that is not there. */
 gs_status gs_capture_write_json(const char *dir, const gs_capture *cap);
+/* The camera noise model of docs/formats.md ("Meaning of a sample"), the one place every
+ * estimator takes it from: a raw sample's variance, DN^2, is
+ *   read_noise_dn^2 + 1/12 (quantisation of an integer sample) + max(raw - black, 0) / gain,
+ * the last term absent when the gain is unknown (0); a per-cycle value (raw - black) 2^h / C
+ * has that times (2^h / C)^2. */
+typedef struct {
+    double read_var_dn2;   /* read_noise_dn^2 + 1/12 */
+    double inv_gain;       /* 1 / gain_e_per_dn, 0 when the gain is unknown */
+    double black_dn;       /* black_level_dn */
+} gs_noise;
+gs_noise gs_capture_noise(const gs_capture *cap);
+static inline double gs_noise_raw_var(const gs_noise *n, double raw_dn)
+{
+    double e = raw_dn - n->black_dn;
+    return n->read_var_dn2 + (e > 0.0 ? e * n->inv_gain : 0.0);
+}
 /* GS_OK if every field of cap except the pixels follows docs/formats.md (frames must be set),
  * else GS_EINVAL with the detail "WHO: field F: expected E". */
 gs_status gs_capture_check(const gs_capture *cap, const char *who);

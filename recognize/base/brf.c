@@ -218,3 +218,16 @@ double gs_chromaticity(const double *mean, int bands, double *Q)
     for (int b = 0; b < bands; b++) Q[b] = mean[b] / sum;
     return sum;
 }
+
+int gs_phase_class(double phase_deg)
+{
+    if (!isfinite(phase_deg)) return -1;
+    double p = fmod(phase_deg, 360.0);
+    if (p < 0.0) p += 360.0;
+    if (p >= 360.0) p = 0.0;
+    /* the comparisons of the survey database's light_phase view (docs/survey-db.md) */
+    if (p <= GS_PHASE_TOL_DEG || p >= 360.0 - GS_PHASE_TOL_DEG) return 0;
+    if (p >= 120.0 - GS_PHASE_TOL_DEG && p <= 120.0 + GS_PHASE_TOL_DEG) return 1;
+    if (p >= 240.0 - GS_PHASE_TOL_DEG && p <= 240.0 + GS_PHASE_TOL_DEG) return 2;
+    return 3;
+}

@@ -491,3 +491,10 @@ double gs_capture_value(const gs_capture *cap, int k, int y, int x, int band)
     /* the same expression as blobs.c: (raw - black) * (2^h / cycles) */
     return (raw - cap->black_level_dn) * (ldexp(1.0, h) / cycles);
 }
+
+gs_noise gs_capture_noise(const gs_capture *cap)
+{
+    gs_noise n = {cap->read_noise_dn * cap->read_noise_dn + 1.0 / 12.0,
+                  cap->gain_e_per_dn > 0.0 ? 1.0 / cap->gain_e_per_dn : 0.0, cap->black_level_dn};
+    return n;
+}

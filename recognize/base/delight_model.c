@@ -45,17 +45,14 @@
 
 /* ------------------------------------------------------------------ PRNG */
 
-/* splitmix64 (Steele, Lea, Flood 2014): a fixed, portable generator; never rand(). */
+/* Each bulb's own splitmix64 stream (gs_splitmix64). */
 typedef struct {
     uint64_t s;
 } rng;
 
 static uint64_t rng_next(rng *r)
 {
-    uint64_t z = (r->s += 0x9E3779B97F4A7C15ull);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
+    return gs_splitmix64(&r->s);
 }
 
 /* Uniform in [lo, hi). */
