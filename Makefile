@@ -7,7 +7,7 @@ BUILD ?= build
 SAN ?=
 CC := gcc
 CXX := g++
-PKGS := sqlite3 fftw3 sndfile jansson plplot spng
+PKGS := sqlite3 fftw3 sndfile jansson plplot spng nettle lapacke
 WARN := -Wall -Wextra -Wpedantic -Wshadow -Werror
 OPT := -O2 -g
 SANFLAGS :=
@@ -19,9 +19,10 @@ CPPFLAGS := -D_DEFAULT_SOURCE -I. -MMD -MP
 CFLAGS := -std=c11 $(WARN) $(OPT) $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 CXXFLAGS := -std=c++17 $(WARN) $(OPT) $(shell pkg-config --cflags opencv4 geographiclib 2>/dev/null)
 LDFLAGS := $(SANFLAGS)
-# OpenCV: only core, imgproc and imgcodecs (videoio pulls ~245 libraries; capture/ adds it).
-LDLIBS := $(shell pkg-config --libs $(PKGS) 2>/dev/null) -lopencv_imgcodecs -lopencv_imgproc \
-	-lopencv_core -lGeographicLib -lopenblas -lm
+# OpenCV: only core and imgproc (PNGs go through libspng; videoio pulls ~245 libraries,
+# capture/ adds it).
+LDLIBS := $(shell pkg-config --libs $(PKGS) 2>/dev/null) -lopencv_imgproc \
+	-lopencv_core -lGeographicLib -lopenblas -lcsv -lm
 
 # Static libraries in link order (each depends only on those after it): the lowest layer,
 # recognize/base (status, format kit, AC/BRF, DELIGHT, capture format), is libbase.a.

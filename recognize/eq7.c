@@ -33,6 +33,7 @@
 #include "recognize/internal.h"
 
 #include <cblas.h>
+#include <lapacke.h>
 #include <complex.h>
 #include <float.h>
 #include <math.h>
@@ -321,46 +322,6 @@ static void template_at(const rec_matcher *m, size_t b, double s, double *t, dou
     }
 }
 
-/* Eigen-decomposition of the symmetric n x n matrix A (destroyed) by cyclic Jacobi rotations:
- * eigenvalues in ev[], eigenvectors in the columns of V (row-major n x n). */
-static void jacobi_eigen(double *A, int n, double *V, double *ev)
-{
-    for (int i = 0; i < n; i++)
-        for (int j = 0; j < n; j++) V[i * n + j] = i == j;
-    for (int sweep = 0; sweep < 60; sweep++) {
-        double off = 0.0, diag = 0.0;
-        for (int p = 0; p < n; p++) {
-            diag += A[p * n + p] * A[p * n + p];
-            for (int q = p + 1; q < n; q++) off += A[p * n + q] * A[p * n + q];
-        }
-        if (off <= 1e-30 * diag || off == 0.0) break;
-        for (int p = 0; p < n - 1; p++)
-            for (int q = p + 1; q < n; q++) {
-                double apq = A[p * n + q];
-                if (fabs(apq) < 1e-300) continue;
-                double theta = (A[q * n + q] - A[p * n + p]) / (2.0 * apq);
-                double t = (theta >= 0 ? 1.0 : -1.0) / (fabs(theta) + sqrt(theta * theta + 1.0));
-                double c = 1.0 / sqrt(t * t + 1.0), sn = t * c;
-                for (int k = 0; k < n; k++) {   /* columns p, q */
-                    double akp = A[k * n + p], akq = A[k * n + q];
-                    A[k * n + p] = c * akp - sn * akq;
-                    A[k * n + q] = sn * akp + c * akq;
-                }
-                for (int k = 0; k < n; k++) {   /* rows p, q */
-                    double apk = A[p * n + k], aqk = A[q * n + k];
-                    A[p * n + k] = c * apk - sn * aqk;
-                    A[q * n + k] = sn * apk + c * aqk;
-                }
-                for (int k = 0; k < n; k++) {
-                    double vkp = V[k * n + p], vkq = V[k * n + q];
-                    V[k * n + p] = c * vkp - sn * vkq;
-                    V[k * n + q] = sn * vkp + c * vkq;
-                }
-            }
-    }
-    for (int i = 0; i < n; i++) ev[i] = A[i * n + i];
-}
-
 /* The pixel prefilter: the top-R principal directions E of the unit templates, each template's
  * coefficients c_j = E t_j and residual rho_j = |t_j - E^T c_j|. R is chosen among
  * 0, 4, 8, 12, 16, 24, 32 (at most D/3) by a cost model: the prefilter costs 2 (D R + R M)
@@ -378,15 +339,10 @@ static gs_status prefilter_setup(rec_matcher *m)
     double *ev = malloc(sizeof *ev * (size_t)D), *rho = malloc(sizeof *rho * M);
     double *C = malloc(sizeof *C * M * 32), *X = malloc(sizeof *X * (size_t)NR * (size_t)D);
     int *order = malloc(sizeof *order * (size_t)D);
+    gs_status st = GS_OK;
     if (!A || !V || !ev || !rho || !C || !X || !order) {
-        free(A);
-        free(V);
-        free(ev);
-        free(rho);
-        free(C);
-        free(X);
-        free(order);
-        return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate the pixel prefilter");
+        st = gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate the pixel prefilter");
+        goto done;
     }
     for (int a = 0; a < D; a++)
         for (int b = a; b < D; b++) {
@@ -394,7 +350,13 @@ static gs_status prefilter_setup(rec_matcher *m)
             for (size_t j = 0; j < M; j++) g += m->tnd[j * (size_t)D + (size_t)a] * m->tnd[j * (size_t)D + (size_t)b];
             A[a * D + b] = A[b * D + a] = g;
         }
-    jacobi_eigen(A, D, V, ev);
+    /* eigen-decomposition (LAPACK dsyev): the eigenvectors overwrite A, one per column */
+    if (LAPACKE_dsyev(LAPACK_ROW_MAJOR, 'V', 'U', D, A, D, ev) != 0) {
+        st = gs_fail(GS_ENUMERIC, "Eq. 7 matcher: the templates' Gram matrix has no "
+                     "eigen-decomposition (LAPACK dsyev failed)");
+        goto done;
+    }
+    memcpy(V, A, sizeof *V * (size_t)D * (size_t)D);
     for (int i = 0; i < D; i++) order[i] = i;
     for (int i = 0; i < D; i++)   /* selection sort, descending eigenvalues */
         for (int k = i + 1; k < D; k++)
@@ -446,9 +408,6 @@ static gs_status prefilter_setup(rec_matcher *m)
             R = r;
         }
     }
-    free(C);
-    free(X);
-    gs_status st = GS_OK;
     if (R > 0) {
         m->pe = malloc(sizeof *m->pe * (size_t)R * (size_t)D);
         m->pc = calloc(m->Mp * (size_t)R, sizeof *m->pc);
@@ -476,10 +435,13 @@ static gs_status prefilter_setup(rec_matcher *m)
             m->pr = R;
         }
     }
+done:
     free(A);
     free(V);
     free(ev);
     free(rho);
+    free(C);
+    free(X);
     free(order);
     return st;
 }

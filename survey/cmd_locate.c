@@ -39,29 +39,6 @@ static const char locate_usage[] =
     "  --max-error-ratio R  flag a light whose error ellipse exceeds R x range (0.25)\n"
     "  --help           this text\n";
 
-#define LINE_MAX_LEN 4096
-
-/* Split a CSV line (no quoting: ids are plain tokens) at commas, trimming spaces and CR. */
-static int split(char *line, char **f, int max)
-{
-    int n = 0;
-    char *p = line;
-    for (;;) {
-        while (*p == ' ' || *p == '\t') p++;
-        char *start = p;
-        while (*p && *p != ',') p++;
-        char *end = p;
-        while (end > start && (end[-1] == ' ' || end[-1] == '\t' || end[-1] == '\r' || end[-1] == '\n')) end--;
-        int last = *p == '\0';
-        *end = '\0';
-        if (n < max) f[n] = start;
-        n++;
-        if (last) break;
-        p++;
-    }
-    return n;
-}
-
 typedef struct {
     char id[GIS_TEXT_MAX];
     double x_px, y_px, sigma_px;   /* sigma NaN = not given */
@@ -78,86 +55,74 @@ static gs_status parse_number(const char *path, int line, const char *field, con
     return GS_OK;
 }
 
+typedef struct {
+    const char *path;
+    int header;          /* columns of the header, 0 before it */
+    pixel_row *rows;
+    size_t count, cap;
+} pixel_reader;
+
+static gs_status pixel_line(void *ctx, char **fld, size_t count, size_t line)
+{
+    pixel_reader *pr = ctx;
+    const char *path = pr->path;
+    int lineno = (int)line, n = (int)count;
+    if (n == 0 || fld[0][0] == '#' || (n == 1 && !*fld[0])) return GS_OK;   /* comment */
+    if (!pr->header) {
+        static const char *const want[4] = {"id", "x_px", "y_px", "sigma_px"};
+        if (n < 3 || n > 4)
+            return gs_fail(GS_EFORMAT, "%s:%d: header: expected id,x_px,y_px[,sigma_px]", path, lineno);
+        for (int i = 0; i < n; i++)
+            if (strcmp(fld[i], want[i]))
+                return gs_fail(GS_EFORMAT, "%s:%d: header column %d is '%s': expected '%s' "
+                               "(id,x_px,y_px[,sigma_px])", path, lineno, i + 1, fld[i], want[i]);
+        pr->header = n;
+        return GS_OK;
+    }
+    if (n != pr->header)
+        return gs_fail(GS_EFORMAT, "%s:%d: %d fields: expected %d like the header", path, lineno, n,
+                       pr->header);
+    if (pr->count == pr->cap) {
+        size_t nc = pr->cap ? 2 * pr->cap : 64;
+        pixel_row *nr = realloc(pr->rows, nc * sizeof *nr);
+        if (!nr) return gs_fail(GS_ENOMEM, "%s: out of memory", path);
+        pr->rows = nr;
+        pr->cap = nc;
+    }
+    pixel_row *r = &pr->rows[pr->count];
+    if (!*fld[0] || strlen(fld[0]) >= sizeof r->id || strchr(fld[0], '"'))
+        return gs_fail(GS_EFORMAT, "%s:%d: id: expected 1 to %zu characters without quotes", path,
+                       lineno, sizeof r->id - 1);
+    strcpy(r->id, fld[0]);
+    r->sigma_px = NAN;
+    gs_status s;
+    if ((s = parse_number(path, lineno, "x_px", fld[1], &r->x_px)) != GS_OK ||
+        (s = parse_number(path, lineno, "y_px", fld[2], &r->y_px)) != GS_OK)
+        return s;
+    if (pr->header == 4) {
+        if ((s = parse_number(path, lineno, "sigma_px", fld[3], &r->sigma_px)) != GS_OK) return s;
+        if (r->sigma_px < 0.0)
+            return gs_fail(GS_EFORMAT, "%s:%d: sigma_px: expected a value >= 0, got %s", path,
+                           lineno, fld[3]);
+    }
+    pr->count++;
+    return GS_OK;
+}
+
 static gs_status read_pixels(const char *path, pixel_row **rows, size_t *count)
 {
-    *rows = NULL;
-    *count = 0;
-    FILE *f = fopen(path, "r");
-    if (!f) return gs_fail(GS_EIO, "%s: cannot open: %s", path, strerror(errno));
-    char line[LINE_MAX_LEN];
-    int lineno = 0, header = 0;
-    size_t cap = 0;
-    gs_status s = GS_OK;
-    while (fgets(line, sizeof line, f)) {
-        lineno++;
-        size_t len = strlen(line);
-        if (len == sizeof line - 1 && line[len - 1] != '\n') {
-            s = gs_fail(GS_EFORMAT, "%s:%d: line longer than %d bytes", path, lineno, LINE_MAX_LEN - 2);
-            break;
-        }
-        char *p = line;
-        if (lineno == 1 && !strncmp(p, "\xef\xbb\xbf", 3)) p += 3;   /* UTF-8 BOM */
-        while (*p == ' ' || *p == '\t') p++;
-        if (*p == '#' || *p == '\n' || *p == '\r' || *p == '\0') continue;
-        char *fld[5];
-        int n = split(p, fld, 5);
-        if (!header) {
-            static const char *const want[4] = {"id", "x_px", "y_px", "sigma_px"};
-            if (n < 3 || n > 4) {
-                s = gs_fail(GS_EFORMAT, "%s:%d: header: expected id,x_px,y_px[,sigma_px]", path, lineno);
-                break;
-            }
-            for (int i = 0; i < n; i++)
-                if (strcmp(fld[i], want[i])) {
-                    s = gs_fail(GS_EFORMAT, "%s:%d: header column %d is '%s': expected '%s' "
-                                "(id,x_px,y_px[,sigma_px])", path, lineno, i + 1, fld[i], want[i]);
-                    break;
-                }
-            if (s != GS_OK) break;
-            header = n;
-            continue;
-        }
-        if (n != header) {
-            s = gs_fail(GS_EFORMAT, "%s:%d: %d fields: expected %d like the header", path, lineno, n, header);
-            break;
-        }
-        if (*count == cap) {
-            size_t nc = cap ? 2 * cap : 64;
-            pixel_row *nr = realloc(*rows, nc * sizeof *nr);
-            if (!nr) {
-                s = gs_fail(GS_ENOMEM, "%s: out of memory", path);
-                break;
-            }
-            *rows = nr;
-            cap = nc;
-        }
-        pixel_row *r = &(*rows)[*count];
-        if (!*fld[0] || strlen(fld[0]) >= sizeof r->id || strchr(fld[0], '"')) {
-            s = gs_fail(GS_EFORMAT, "%s:%d: id: expected 1 to %zu characters without quotes", path,
-                        lineno, sizeof r->id - 1);
-            break;
-        }
-        strcpy(r->id, fld[0]);
-        r->sigma_px = NAN;
-        if ((s = parse_number(path, lineno, "x_px", fld[1], &r->x_px)) != GS_OK) break;
-        if ((s = parse_number(path, lineno, "y_px", fld[2], &r->y_px)) != GS_OK) break;
-        if (header == 4) {
-            if ((s = parse_number(path, lineno, "sigma_px", fld[3], &r->sigma_px)) != GS_OK) break;
-            if (r->sigma_px < 0.0) {
-                s = gs_fail(GS_EFORMAT, "%s:%d: sigma_px: expected a value >= 0, got %s", path, lineno, fld[3]);
-                break;
-            }
-        }
-        (*count)++;
-    }
-    if (s == GS_OK && ferror(f)) s = gs_fail(GS_EIO, "%s: read error", path);
-    if (s == GS_OK && !header) s = gs_fail(GS_EFORMAT, "%s: no header line (id,x_px,y_px[,sigma_px])", path);
-    fclose(f);
+    pixel_reader pr = {.path = path};
+    /* pixel lists are small: 256 MiB bounds a file that is not one */
+    gs_status s = gs_csv_read(path, (size_t)256 << 20, pixel_line, &pr);
+    if (s == GS_OK && !pr.header)
+        s = gs_fail(GS_EFORMAT, "%s: no header line (id,x_px,y_px[,sigma_px])", path);
     if (s != GS_OK) {
-        free(*rows);
-        *rows = NULL;
-        *count = 0;
+        free(pr.rows);
+        pr.rows = NULL;
+        pr.count = 0;
     }
+    *rows = pr.rows;
+    *count = pr.count;
     return s;
 }
 

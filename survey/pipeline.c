@@ -119,37 +119,9 @@ static void set_name(char dst[64], const char *src)
 static gs_status file_sha256(const char *dir, const char *name, char hex[65])
 {
     char path[4352];
-    snprintf(path, sizeof path, "%s/%s", dir, name);
-    FILE *f = fopen(path, "rb");
-    if (!f) return gs_fail(GS_EIO, "%s: cannot read: %s", path, strerror(errno));
-    size_t cap = 1 << 20, len = 0, got;
-    unsigned char *buf = malloc(cap);
-    if (!buf) {
-        fclose(f);
-        return gs_fail(GS_ENOMEM, "%s: out of memory", path);
-    }
-    while ((got = fread(buf + len, 1, cap - len, f)) > 0) {
-        len += got;
-        if (len == cap) {
-            unsigned char *nb = realloc(buf, cap * 2);
-            if (!nb) {
-                free(buf);
-                fclose(f);
-                return gs_fail(GS_ENOMEM, "%s: out of memory", path);
-            }
-            buf = nb;
-            cap *= 2;
-        }
-    }
-    int bad = ferror(f);
-    fclose(f);
-    if (bad) {
-        free(buf);
-        return gs_fail(GS_EIO, "%s: read error", path);
-    }
-    srv_sha256_hex(buf, len, hex);
-    free(buf);
-    return GS_OK;
+    if (!gs_path_join(path, sizeof path, dir, name))
+        return gs_fail(GS_EINVAL, "%s/%s: path too long", dir, name);
+    return gs_sha256_file(path, hex);
 }
 
 /* "sha256:" + SHA-256 of a manifest listing capture.json and every file it names (frames in
@@ -172,7 +144,7 @@ static gs_status capture_key(const char *dir, const gs_capture *cap, char key[72
         }
     }
     if (s == GS_OK) {
-        srv_sha256_hex(man, used, hex);
+        gs_sha256_hex(man, used, hex);
         snprintf(key, 72, "sha256:%s", hex);
     }
     free(man);

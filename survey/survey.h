@@ -96,8 +96,6 @@ typedef struct {
 /* sha256 of gs_delight_export_csv(d) (byte-exact, so equal databases hash equally) and the
  * entry count. */
 gs_status srv_delight_fingerprint(const gs_delight *d, const char *source, srv_delight_row *r);
-/* FIPS 180-4 SHA-256 of data[0..n) as 64 hex digits + NUL. */
-void srv_sha256_hex(const void *data, size_t n, char hex[65]);
 
 typedef struct {
     const char *name;          /* required, unique (the natural key) */

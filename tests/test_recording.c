@@ -303,7 +303,7 @@ TEST(recording_rejects_bad_input)
     CHECK(gs_recording_to_bulb(p, 0, 64, &b, NULL) == GS_EFORMAT);
     CHECK(strstr(gs_detail(), p) != NULL);
     CHECK(gs_recording_to_bulb(test_shared_path("data/flicker/info.csv"), 0, 64, &b, NULL) == GS_EFORMAT);
-    CHECK(gs_recording_to_bulb(tmp_path("missing.csv"), 0, 64, &b, NULL) == GS_EIO);
+    CHECK(gs_recording_to_bulb(tmp_path("missing.csv"), 0, 64, &b, NULL) == GS_ENOTFOUND);
     /* a voltage that is not mains */
     f = fopen(p, "w");
     for (int i = 0; i < 30000; i++)

@@ -761,16 +761,16 @@ TEST(survey_db_sigkill_resume_no_partial_capture)
 TEST(survey_db_sha256_and_delight_fingerprint)
 {
     char hex[65];
-    srv_sha256_hex("abc", 3, hex);
+    gs_sha256_hex("abc", 3, hex);
     CHECK(!strcmp(hex, "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"));
-    srv_sha256_hex("", 0, hex);
+    gs_sha256_hex("", 0, hex);
     CHECK(!strcmp(hex, "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855"));
     const char *two = "abcdbcdecdefdefgefghfghighijhijkijkljklmklmnlmnomnopnopq";
-    srv_sha256_hex(two, strlen(two), hex);
+    gs_sha256_hex(two, strlen(two), hex);
     CHECK(!strcmp(hex, "248d6a61d20638b8e5c026930c3e6039a33ce45964ff2167f6ecedd419db06c1"));
     char *mill = malloc(1000000);
     memset(mill, 'a', 1000000);
-    srv_sha256_hex(mill, 1000000, hex);
+    gs_sha256_hex(mill, 1000000, hex);
     CHECK(!strcmp(hex, "cdc76e5c9914fb9281a1c7e284d73e67f1809a48a497200e046d39ccc7112cd0"));
     free(mill);
     gs_delight *d1 = gs_delight_new(), *d2 = gs_delight_new();

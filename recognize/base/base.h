@@ -53,6 +53,10 @@ int gs_path_join(char *out, size_t cap, const char *dir, const char *name);
  * GS_ELIMIT beyond max_bytes (0: GS_FILE_MAX_DEFAULT); the detail names the file. */
 #define GS_FILE_MAX_DEFAULT ((size_t)1 << 30)
 gs_status gs_file_read(const char *path, size_t max_bytes, char **data, size_t *size);
+/* SHA-256 (FIPS 180-4, nettle) of data[0..n), or of the file at path (streamed), as 64
+ * lower-case hex digits + NUL. */
+void gs_sha256_hex(const void *data, size_t n, char hex[65]);
+gs_status gs_sha256_file(const char *path, char hex[65]);
 /* Create dir if it does not exist (one level). */
 gs_status gs_dir_ensure(const char *dir);
 
@@ -135,6 +139,20 @@ void gs_text_json_string(gs_text *t, const char *s);
 void gs_text_json(gs_text *t, json_t *v);
 /* The shortest %g form of v that reads back as exactly v (cap >= 32). */
 void gs_json_real(char *buf, size_t cap, double v);
+
+/* --------------------------------------------------------- format kit: CSV */
+
+/* Read the CSV file at path (RFC 4180, libcsv: quoted fields may hold commas, quotes and line
+ * breaks; a UTF-8 byte-order mark is skipped; blank lines are skipped; spaces around unquoted
+ * fields are trimmed), calling fn once per row with its NUL-terminated fields (borrowed for the
+ * call; fn may modify them) and the line the row ends on. The first status that is not GS_OK
+ * (fn's, or GS_EFORMAT "PATH:LINE: CSV syntax: ...", GS_ENOTFOUND, GS_EIO, GS_ELIMIT beyond
+ * max_bytes, 0: GS_FILE_MAX_DEFAULT) stops the reading and is returned. */
+typedef gs_status (*gs_csv_row_fn)(void *ctx, char **fields, size_t count, size_t line);
+gs_status gs_csv_read(const char *path, size_t max_bytes, gs_csv_row_fn fn, void *ctx);
+/* Write one field: as it is, or quoted (RFC 4180) when it holds a comma, quote or line break.
+ * 0 on success, -1 on a write error. */
+int gs_csv_write_field(FILE *out, const char *s);
 
 /* ------------------------------------------------ format kit: random numbers */
 
@@ -359,7 +377,7 @@ const char *gs_ref_name(gs_ref r);   /* "voltage", "none", "unlocked" */
 typedef struct {
     char id[GS_ID_MAX];           /* bulb id, [A-Za-z0-9_.-]+; unique with grid_hz and sensor */
     gs_tech type;
-    char name[GS_NAME_MAX];       /* human-readable; no commas or newlines */
+    char name[GS_NAME_MAX];       /* human-readable; no control characters */
     double watts;                  /* electrical power, W (> 0; 0 if unknown) */
     int grid_hz;                   /* 50 or 60 */
     char sensor[GS_SENSOR_MAX];   /* "photodiode" (mono) or "rgb" (3 bands), or a user name */

@@ -111,8 +111,10 @@ gs_status gs_bulb_validate(const gs_bulb *b)
         return gs_fail(GS_EINVAL, "bulb_id '%s': expected letters, digits, '_', '-' or '.'", b->id);
     if (b->type < 0 || b->type >= GS_TECH_COUNT)
         return gs_fail(GS_EINVAL, "bulb %s: type %d: expected a technology", b->id, (int)b->type);
-    if (strpbrk(b->name, ",\n\r\""))
-        return gs_fail(GS_EINVAL, "bulb %s: name: expected no comma, quote or newline", b->id);
+    for (const char *c = b->name; *c; c++)
+        if ((unsigned char)*c < 0x20 || *c == 0x7f)
+            return gs_fail(GS_EINVAL, "bulb %s: name: expected no control character (line break, "
+                           "tab, ...)", b->id);
     if (!(b->watts >= 0.0 && b->watts < 1e5))
         return gs_fail(GS_EINVAL, "bulb %s: watts=%g: expected 0 <= watts < 1e5", b->id, b->watts);
     if (b->grid_hz != 50 && b->grid_hz != 60)

@@ -359,9 +359,10 @@ gs_status gs_delight_export_csv(const gs_delight *d, FILE *out)
     for (size_t i = 0; i < gs_delight_count(d); i++) {
         const gs_bulb *b = gs_delight_get(d, i);
         for (int band = 0; band < b->brf.bands; band++) {
-            fprintf(out, "%s,%s,%s,%.17g,%d,%s/%s,%s,%.17g,%d", b->id, gs_tech_name(b->type),
-                    b->name, b->watts, b->grid_hz, b->sensor, gs_ref_name(b->ref),
-                    band_name(b->brf.bands, band), b->chroma[band], b->brf.n);
+            fprintf(out, "%s,%s,", b->id, gs_tech_name(b->type));
+            gs_csv_write_field(out, b->name);   /* the one free-text field: quoted if it must be */
+            fprintf(out, ",%.17g,%d,%s/%s,%s,%.17g,%d", b->watts, b->grid_hz, b->sensor,
+                    gs_ref_name(b->ref), band_name(b->brf.bands, band), b->chroma[band], b->brf.n);
             const double *v = b->brf.v + (size_t)band * (size_t)b->brf.n;
             for (int j = 0; j < b->brf.n; j++) fprintf(out, ",%.17g", v[j]);
             fputc('\n', out);
@@ -369,31 +370,6 @@ gs_status gs_delight_export_csv(const gs_delight *d, FILE *out)
     }
     if (fflush(out) != 0 || ferror(out)) return gs_fail(GS_EIO, "DELIGHT CSV export: write failed");
     return GS_OK;
-}
-
-/* One CSV line split in place at commas. */
-typedef struct {
-    char **f;
-    size_t count, cap;
-} fields;
-
-static gs_status split(char *line, fields *fs)
-{
-    fs->count = 0;
-    for (char *p = line;;) {
-        if (fs->count == fs->cap) {
-            size_t cap = fs->cap ? 2 * fs->cap : 2048;
-            char **nf = realloc(fs->f, cap * sizeof *nf);
-            if (!nf) return gs_fail(GS_ENOMEM, "DELIGHT CSV: cannot split a line of %zu fields", cap);
-            fs->f = nf;
-            fs->cap = cap;
-        }
-        fs->f[fs->count++] = p;
-        char *comma = strchr(p, ',');
-        if (!comma) return GS_OK;
-        *comma = '\0';
-        p = comma + 1;
-    }
 }
 
 static int parse_double(const char *s, double *v)
@@ -414,14 +390,22 @@ static int parse_int(const char *s, long lo, long hi, int *v)
     return 1;
 }
 
+/* One row of the CSV: its fields. */
+typedef struct {
+    char **f;
+    size_t count;
+} fields;
+
 /* The import state: the bulb being assembled from consecutive rows. */
 typedef struct {
     const char *path;
     size_t line, first_line;
+    int have_header;
     int header_n;      /* v columns in the header */
     int active;        /* a bulb is being assembled */
     int next_band;
     gs_bulb b;
+    gs_delight *tmp;   /* the bulbs read so far */
 } csv_state;
 
 static gs_status bad_field(const csv_state *st, const char *name, const char *expected)
@@ -524,34 +508,25 @@ static gs_status import_row(csv_state *st, fields *fs, gs_delight *tmp)
     return GS_OK;
 }
 
+static gs_status import_line(void *ctx, char **f, size_t count, size_t line)
+{
+    csv_state *st = ctx;
+    st->line = line;
+    fields fs = {f, count};
+    if (!st->have_header) {
+        st->have_header = 1;
+        return check_header(st, &fs);
+    }
+    return import_row(st, &fs, st->tmp);
+}
+
 gs_status gs_delight_import_csv(gs_delight *d, const char *path)
 {
-    FILE *in = fopen(path, "r");
-    if (!in) return gs_fail(GS_EIO, "%s: cannot open", path);
     gs_delight *tmp = gs_delight_new();
-    csv_state st = {.path = path};
-    fields fs = {0};
-    char *line = NULL;
-    size_t cap = 0;
-    ssize_t len;
-    int have_header = 0;
-    gs_status s = tmp ? GS_OK : gs_fail(GS_ENOMEM, "%s: cannot allocate a DELIGHT database", path);
-    while (s == GS_OK && (len = getline(&line, &cap, in)) >= 0) {
-        st.line++;
-        while (len > 0 && (line[len - 1] == '\n' || line[len - 1] == '\r')) line[--len] = '\0';
-        char *p = line;
-        if (st.line == 1 && strncmp(p, "\xEF\xBB\xBF", 3) == 0) p += 3;
-        if (!*p && have_header) continue;   /* blank line */
-        if ((s = split(p, &fs)) != GS_OK) break;
-        if (!have_header) {
-            s = check_header(&st, &fs);
-            have_header = 1;
-        } else {
-            s = import_row(&st, &fs, tmp);
-        }
-    }
-    if (s == GS_OK && ferror(in)) s = gs_fail(GS_EIO, "%s: read error", path);
-    if (s == GS_OK && !have_header)
+    if (!tmp) return gs_fail(GS_ENOMEM, "%s: cannot allocate a DELIGHT database", path);
+    csv_state st = {.path = path, .tmp = tmp};
+    gs_status s = gs_csv_read(path, 0, import_line, &st);
+    if (s == GS_OK && !st.have_header)
         s = gs_fail(GS_EFORMAT, "%s:1: field bulb_id: expected the header bulb_id,type,name,watts,"
                     "grid_hz,sensor,band,chromaticity,n,v0,... (the file is empty)", path);
     if (s == GS_OK && st.active) {
@@ -560,9 +535,6 @@ gs_status gs_delight_import_csv(gs_delight *d, const char *path)
     }
     if (s == GS_OK) s = append_all(d, tmp, path);
     gs_bulb_release(&st.b);
-    free(fs.f);
-    free(line);
-    fclose(in);
     gs_delight_free(tmp);
     return s;
 }

@@ -4,6 +4,7 @@
 #include "recognize/base/base.h"
 
 #include <errno.h>
+#include <nettle/sha2.h>
 #include <fcntl.h>
 #include <stdatomic.h>
 #include <stdint.h>
@@ -63,6 +64,40 @@ gs_status gs_file_read(const char *path, size_t max_bytes, char **data, size_t *
     b[n] = '\0';
     *data = b;
     if (size) *size = n;
+    return GS_OK;
+}
+
+static void sha256_hex_digest(struct sha256_ctx *c, char hex[65])
+{
+    uint8_t d[SHA256_DIGEST_SIZE];
+    sha256_digest(c, sizeof d, d);
+    for (int i = 0; i < SHA256_DIGEST_SIZE; i++) snprintf(hex + 2 * i, 3, "%02x", d[i]);
+}
+
+void gs_sha256_hex(const void *data, size_t n, char hex[65])
+{
+    struct sha256_ctx c;
+    sha256_init(&c);
+    sha256_update(&c, n, data);
+    sha256_hex_digest(&c, hex);
+}
+
+gs_status gs_sha256_file(const char *path, char hex[65])
+{
+    FILE *f = fopen(path, "rb");
+    if (!f) {
+        int e = errno;
+        return gs_fail(e == ENOENT ? GS_ENOTFOUND : GS_EIO, "%s: cannot open: %s", path, strerror(e));
+    }
+    struct sha256_ctx c;
+    sha256_init(&c);
+    unsigned char buf[1 << 16];
+    size_t got;
+    while ((got = fread(buf, 1, sizeof buf, f)) > 0) sha256_update(&c, got, buf);
+    int bad = ferror(f);
+    fclose(f);
+    if (bad) return gs_fail(GS_EIO, "%s: read error", path);
+    sha256_hex_digest(&c, hex);
     return GS_OK;
 }
 

@@ -40,52 +40,48 @@ typedef struct {
     size_t n, cap;
 } series;
 
-/* Whole range [p, end) is one finite number. */
-static int number(const char *p, const char *end, double *out)
+/* The whole of field s is one finite number. */
+static int number(const char *s, double *out)
 {
-    if (p == end) return 0;
+    if (!*s) return 0;
     char *stop;
-    double v = strtod(p, &stop);
-    if (stop != end || !isfinite(v)) return 0;
+    double v = strtod(s, &stop);
+    if (*stop || !isfinite(v)) return 0;
     *out = v;
     return 1;
 }
 
-/* Parse one row: column 1 time, 2 value, vcol voltage (0: none); other columns are ignored, a
- * trailing comma too. Returns 0, or the 1-based column that is missing or not a number. */
-static int parse_row(const char *line, int vcol, double *t, double *x, double *v)
+/* Parse one row of fields: column 1 time, 2 value, vcol voltage (0: none); other columns are
+ * ignored, an empty last one (a trailing comma) too. Returns 0, or the 1-based column that is
+ * missing or not a number. */
+static int parse_row(char **f, size_t count, int vcol, double *t, double *x, double *v)
 {
-    const char *stop = line + strlen(line);
-    if (stop > line && stop[-1] == ',') stop--;
-    int col = 0, bad = 0;
-    for (const char *p = line;; p++) {
-        const char *end = memchr(p, ',', (size_t)(stop - p));
-        if (!end) end = stop;
-        col++;
+    if (count > 1 && !*f[count - 1]) count--;
+    int bad = 0;
+    for (size_t c = 0; c < count; c++) {
+        int col = (int)c + 1;
         double *dst = col == 1 ? t : col == 2 ? x : col == vcol ? v : NULL;
-        if (dst && !number(p, end, dst) && !bad) bad = col;
-        if (end == stop) break;
-        p = end;
+        if (dst && !number(f[c], dst) && !bad) bad = col;
     }
     int need = vcol > 2 ? vcol : 2;
-    return bad ? bad : col < need ? col + 1 : 0;
+    return bad ? bad : (int)count < need ? (int)count + 1 : 0;
 }
 
-/* A header that runs into the first sample ("ch1_time(s),ch1_value(V)-0.014,0.992"): a line of
- * 2k-1 fields whose k-th field ends in a number. Returns the start of the sample or NULL. */
-static const char *header_run_in(const char *line)
+/* A header that runs into the first sample ("ch1_time(s),ch1_value(V)-0.014,0.992"): a row of
+ * 2k-1 fields whose k-th field ends in a number. Splits that field at the number's start and
+ * returns the index of the first field of the sample (or 0 when the row is not one). */
+static size_t header_run_in(char **f, size_t count)
 {
-    int commas = 0;
-    for (const char *c = line; *c; c++) commas += *c == ',';
-    if (commas < 2 || commas % 2) return NULL;
-    const char *p = line;
-    for (int k = 0; k < commas / 2; k++) p = strchr(p, ',') + 1;
-    const char *end = strchr(p, ',');
-    for (const char *s = p + 1; s < end; s++) {   /* longest numeric suffix, non-empty prefix */
+    if (count < 3 || count % 2 == 0) return 0;
+    char *mid = f[count / 2];
+    for (char *s = mid + 1; *s; s++) {   /* longest numeric suffix, non-empty prefix */
         double v;
-        if (number(s, end, &v) && strchr("+-.0123456789", *s)) return s;
+        if (strchr("+-.0123456789", *s) && number(s, &v)) {
+            memmove(mid, s, strlen(s) + 1);
+            return count / 2;
+        }
     }
-    return NULL;
+    return 0;
 }
 
 static gs_status push(const char *path, series *s, double t, double x, double v)
@@ -113,39 +109,34 @@ static const char *column_name(int col, int vcol)
     return col == 1 ? "time" : col == 2 ? "value" : col == vcol ? "voltage" : "column";
 }
 
+typedef struct {
+    const char *path;
+    int vcol;
+    series *s;
+} series_reader;
+
+static gs_status series_row(void *ctx, char **f, size_t count, size_t line)
+{
+    series_reader *r = ctx;
+    double t = 0, x = 0, v = 0;
+    int bad = parse_row(f, count, r->vcol, &t, &x, &v);
+    if (bad == 1 && r->s->n == 0) {
+        /* Before the data: metadata (`Key:value,`) or the header, which may run into the
+         * first sample. */
+        size_t first = header_run_in(f, count);
+        if (!first || parse_row(f + first, count - first, r->vcol, &t, &x, &v)) return GS_OK;
+        bad = 0;
+    }
+    if (bad)
+        return gs_fail(GS_EFORMAT, "%s:%zu: field %s (column %d): expected a finite number",
+                       r->path, line, column_name(bad, r->vcol), bad);
+    return push(r->path, r->s, t, x, v);
+}
+
 static gs_status read_series(const char *path, int vcol, series *s)
 {
-    FILE *f = fopen(path, "r");
-    if (!f) return gs_fail(GS_EIO, "%s: cannot open", path);
-    char *line = NULL;
-    size_t line_cap = 0, lineno = 0;
-    gs_status st = GS_OK;
-    ssize_t len;
-    while ((len = getline(&line, &line_cap, f)) >= 0) {
-        lineno++;
-        while (len > 0 && (line[len - 1] == '\n' || line[len - 1] == '\r')) line[--len] = '\0';
-        char *p = line;
-        if (lineno == 1 && strncmp(p, "\xEF\xBB\xBF", 3) == 0) p += 3;
-        if (!*p) continue;
-        double t = 0, x = 0, v = 0;
-        int bad = parse_row(p, vcol, &t, &x, &v);
-        if (bad == 1 && s->n == 0) {
-            /* Before the data: metadata (`Key:value,`) or the header, which may run into the
-             * first sample. */
-            const char *sample = header_run_in(p);
-            if (!sample || parse_row(sample, vcol, &t, &x, &v)) continue;
-            bad = 0;
-        }
-        if (bad) {
-            st = gs_fail(GS_EFORMAT, "%s:%zu: field %s (column %d): expected a finite number", path,
-                         lineno, column_name(bad, vcol), bad);
-            break;
-        }
-        if ((st = push(path, s, t, x, v)) != GS_OK) break;
-    }
-    if (st == GS_OK && ferror(f)) st = gs_fail(GS_EIO, "%s: read error", path);
-    free(line);
-    fclose(f);
+    series_reader r = {path, vcol, s};
+    gs_status st = gs_csv_read(path, 0, series_row, &r);
     if (st == GS_OK && s->n < 64)
         st = gs_fail(GS_EFORMAT, "%s: %zu samples: expected at least 64 rows of time,value", path, s->n);
     if (st == GS_OK) {
