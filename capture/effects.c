@@ -166,7 +166,7 @@ gs_status cap_fx_scintillation(cap_sim *s, cap_render *r)
 /* ------------------------------------------------------------------ PSF */
 
 /* A Gaussian integrated over each pixel, truncated at radius_sigma sigmas and renormalised so
- * the light's flux is kept (cap_fx_psf deposits through it; sim.c). */
+ * the light's flux is kept (cap_fx_psf deposits through it). */
 gs_status cap_fx_prepare_psf(cap_sim *s)
 {
     double sigma = s->sc.fx.psf.sigma_px;
@@ -187,7 +187,7 @@ gs_status cap_fx_prepare_psf(cap_sim *s)
             li->y_px < -R - 1 || li->x_px > s->W + R || li->y_px > s->H + R)
             continue;
         int bx, by;
-        cap_sim_gauss_box(li->x_px, li->y_px, sigma, R, box, &bx, &by);
+        cap_gauss_box(li->x_px, li->y_px, sigma, R, box, &bx, &by);
         int x0 = bx < 0 ? 0 : bx, y0 = by < 0 ? 0 : by;
         int x1 = bx + n > s->W ? s->W : bx + n, y1 = by + n > s->H ? s->H : by + n;
         if (x1 <= x0 || y1 <= y0) continue;
@@ -202,6 +202,13 @@ gs_status cap_fx_prepare_psf(cap_sim *s)
     }
     free(box);
     s->fp_n = off;
+    return GS_OK;
+}
+
+gs_status cap_fx_psf(cap_sim *s, cap_render *r)
+{
+    s->fx_calls[CAP_FX_PSF]++;
+    r->items = cap_splat(s, r);
     return GS_OK;
 }
 
@@ -286,7 +293,7 @@ gs_status cap_fx_blinking_sign(cap_sim *s, cap_render *r)
         double on[CAP_MAX_LEVELS] = {0};
         for (long c = 0; c < s->C; c++) {
             double t0, t1;
-            cap_sim_cycle_time(s, r, c, &t0, &t1);
+            cap_cycle_time(s, r, c, &t0, &t1);
             double ph = fmod(0.5 * (t0 + t1) - g->phase_s, g->period_s);
             if (ph < 0) ph += g->period_s;
             if (ph < g->duty * g->period_s) on[r->lev[c]] += (t1 - t0) / s->half_s;
@@ -329,7 +336,7 @@ gs_status cap_fx_headlights(cap_sim *s, cap_render *r)
         double len = sqrt(dx * dx + dy * dy);
         for (long c = 0; c < s->C; c++) {
             double t0, t1;
-            cap_sim_cycle_time(s, r, c, &t0, &t1);
+            cap_cycle_time(s, r, c, &t0, &t1);
             double u = fmod(0.5 * (t0 + t1) - g->offset_s, g->period_s);
             if (u < 0) u += g->period_s;
             double pos = u * g->speed_px_s;
@@ -338,7 +345,7 @@ gs_status cap_fx_headlights(cap_sim *s, cap_render *r)
             double y = g->y0_px + (len > 0 ? dy * pos / len : 0);
             double e = g->flux_e_per_cycle * (t1 - t0) / s->half_s;
             int lev = r->lev[c], bx, by;
-            if (psf) cap_sim_gauss_box(x, y, sigma, R, box, &bx, &by);
+            if (psf) cap_gauss_box(x, y, sigma, R, box, &bx, &by);
             else {
                 bx = (int)floor(x + 0.5);
                 by = (int)floor(y + 0.5);
@@ -512,4 +519,43 @@ gs_status cap_fx_adc(cap_sim *s, cap_render *r)
     }
     r->items = n;
     return GS_OK;
+}
+
+/* ------------------------------------------------------------------ the table */
+
+/* The one list of effects, in pipeline order: name in scene files, parameters, once-per-sim
+ * preparation, per-acquisition stage. */
+const cap_effect_def cap_effect_defs[CAP_FX_COUNT] = {
+    [CAP_FX_FREQUENCY_WANDER] = {"frequency_wander", cap_fxp_none, NULL, cap_fx_frequency_wander},
+    [CAP_FX_FREE_RUNNING_DRIFT] = {"free_running_drift", cap_fxp_free_running_drift, NULL,
+                                   cap_fx_free_running_drift},
+    [CAP_FX_DMD_JITTER] = {"dmd_jitter", cap_fxp_dmd_jitter, NULL, cap_fx_dmd_jitter},
+    [CAP_FX_EXTINCTION] = {"extinction", cap_fxp_extinction, cap_fx_prepare_extinction,
+                           cap_fx_extinction},
+    [CAP_FX_SCINTILLATION] = {"scintillation", cap_fxp_scintillation,
+                              cap_fx_prepare_scintillation, cap_fx_scintillation},
+    [CAP_FX_PSF] = {"psf", cap_fxp_psf, cap_fx_prepare_psf, cap_fx_psf},
+    [CAP_FX_SKYGLOW] = {"skyglow", cap_fxp_skyglow, cap_fx_prepare_skyglow, cap_fx_skyglow},
+    [CAP_FX_BLINKING_SIGN] = {"blinking_sign", cap_fxp_blinking_sign, NULL, cap_fx_blinking_sign},
+    [CAP_FX_HEADLIGHTS] = {"headlights", cap_fxp_headlights, NULL, cap_fx_headlights},
+    [CAP_FX_AMBIENT] = {"ambient", cap_fxp_ambient, NULL, cap_fx_ambient},
+    [CAP_FX_SHOT_NOISE] = {"shot_noise", cap_fxp_none, NULL, cap_fx_shot_noise},
+    [CAP_FX_SATURATION] = {"saturation", cap_fxp_none, NULL, cap_fx_saturation},
+    [CAP_FX_READ_NOISE] = {"read_noise", cap_fxp_read_noise, NULL, cap_fx_read_noise},
+    [CAP_FX_ADC] = {"adc", cap_fxp_none, NULL, cap_fx_adc},
+};
+
+const char *cap_effect_name(cap_effect e)
+{
+    return (int)e >= 0 && e < CAP_FX_COUNT ? cap_effect_defs[e].name : NULL;
+}
+
+gs_status cap_effect_parse(const char *name, cap_effect *e)
+{
+    for (int i = 0; i < CAP_FX_COUNT; i++)
+        if (!strcmp(name, cap_effect_defs[i].name)) {
+            *e = (cap_effect)i;
+            return GS_OK;
+        }
+    return gs_fail(GS_ENOTFOUND, "unknown effect '%s'", name);
 }

@@ -13,6 +13,26 @@
 #define M_PI 3.14159265358979323846
 #endif
 
+/* ------------------------------------------------------------------ scene parsing */
+
+/* A scene document (or a GeoJSON file it names) and the directory relative paths resolve in. */
+typedef struct {
+    const gs_json *doc;
+    const char *base_dir;
+} cap_pctx;
+/* gs_json_fail on c's document. */
+gs_status cap_scene_bad(const cap_pctx *c, gs_status s, const char *path, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+/* gs_json_get_int into a long / an int (default expected text). */
+gs_status cap_scene_get_long(const cap_pctx *c, json_t *obj, const char *ppath, const char *key,
+                             int required, long def, long lo, long hi, long *out);
+gs_status cap_scene_get_int(const cap_pctx *c, json_t *obj, const char *ppath, const char *key,
+                            int required, int def, int lo, int hi, int *out);
+/* rel against the scene's directory (absolute paths as they are). */
+void cap_scene_resolve(const cap_pctx *c, const char *rel, char *out, size_t cap);
+/* The "lights" array (scene_lights.c) into sc->lights / n_lights. */
+gs_status cap_scene_parse_lights(const cap_pctx *c, cap_scene *sc, json_t *lights);
+
 /* ------------------------------------------------------------------ random streams */
 
 /* Stream tags (one per random process). */

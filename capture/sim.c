@@ -102,40 +102,9 @@ static gs_status st_lights(cap_sim *s, cap_render *r)
     return GS_OK;
 }
 
-/* Deposit every light's E through its footprint (point or PSF). */
-static unsigned long long splat(cap_sim *s, cap_render *r)
-{
-    int B = s->B, L = s->L;
-    unsigned long long items = 0;
-    for (size_t l = 0; l < s->n; l++) {
-        const cap_footprint *f = &s->fp[l];
-        if (!f->w) continue;
-        const double *w = s->fp_w + f->off;
-        const double *E = s->E + l * (size_t)L * (size_t)B;
-        for (int y = 0; y < f->h; y++) {
-            size_t row = (size_t)(f->y0 + y) * (size_t)s->W + (size_t)f->x0;
-            for (int x = 0; x < f->w; x++) {
-                size_t p = row + (size_t)x;
-                int h = r->halv ? r->halv[p] : 0;
-                double wt = w[y * f->w + x];
-                for (int b = 0; b < B; b++) s->img[p * (size_t)B + (size_t)b] += wt * E[h * B + b];
-            }
-        }
-        items += (unsigned long long)f->w * (unsigned long long)f->h;
-    }
-    return items;
-}
-
 static gs_status st_splat(cap_sim *s, cap_render *r)
 {
-    r->items = splat(s, r);
-    return GS_OK;
-}
-
-gs_status cap_fx_psf(cap_sim *s, cap_render *r)
-{
-    s->fx_calls[CAP_FX_PSF]++;
-    r->items = splat(s, r);
+    r->items = cap_splat(s, r);
     return GS_OK;
 }
 
@@ -262,37 +231,6 @@ static gs_status point_footprints(cap_sim *s)
     return GS_OK;
 }
 
-void cap_sim_gauss_box(double x, double y, double sigma, int R, double *w, int *bx, int *by)
-{
-    double cx = floor(x + 0.5), cy = floor(y + 0.5);
-    *bx = (int)cx - R;
-    *by = (int)cy - R;
-    int n = 2 * R + 1;
-    double wx[2 * 64 + 1], wy[2 * 64 + 1], sx = 0, sy = 0;
-    double k = 1.0 / (sigma * sqrt(2.0));
-    for (int i = 0; i < n; i++) {
-        double px = cx - R + i, py = cy - R + i;
-        wx[i] = 0.5 * (erf((px + 0.5 - x) * k) - erf((px - 0.5 - x) * k));
-        wy[i] = 0.5 * (erf((py + 0.5 - y) * k) - erf((py - 0.5 - y) * k));
-        sx += wx[i];
-        sy += wy[i];
-    }
-    for (int j = 0; j < n; j++)
-        for (int i = 0; i < n; i++) w[j * n + i] = wx[i] * wy[j] / (sx * sy);
-}
-
-void cap_sim_cycle_time(const cap_sim *s, const cap_render *r, long c, double *t0, double *t1)
-{
-    if (r->timing) {
-        *t0 = r->win.t0_s[c];
-        *t1 = r->win.t1_s[c];
-        return;
-    }
-    double base = (double)(r->first_cycle + c) * s->half_s;
-    *t0 = base + r->k * s->half_s / s->K;
-    *t1 = base + (r->k + 1) * s->half_s / s->K;
-}
-
 void cap_sim_free(cap_sim *s)
 {
     if (!s) return;
@@ -323,6 +261,32 @@ void cap_sim_free(cap_sim *s)
     cap_scene_release(&s->sc);
     free(s);
 }
+
+static int timing_wanted(const cap_sim *s)
+{
+    return s->timing;
+}
+
+static int no_psf(const cap_sim *s)
+{
+    return !has(s, CAP_FX_PSF);
+}
+
+/* The base stages and the effect each runs before (CAP_FX_COUNT: at the end), in order; wanted
+ * NULL = always. */
+static const struct {
+    const char *name;
+    gs_status (*run)(cap_sim *, cap_render *);
+    cap_effect before;
+    int (*wanted)(const cap_sim *);
+} base_stages[] = {
+    {"windows", st_windows, CAP_FX_EXTINCTION, timing_wanted},
+    {"eq5", st_eq5, CAP_FX_EXTINCTION, NULL},
+    {"lights", st_lights, CAP_FX_EXTINCTION, NULL},
+    {"splat", st_splat, CAP_FX_SKYGLOW, no_psf},
+    {"to_dn", st_to_dn, CAP_FX_READ_NOISE, NULL},
+    {"store", st_store, CAP_FX_COUNT, NULL},
+};
 
 gs_status cap_sim_new(const cap_scene *sc, const gs_delight *d_in, cap_sim **out)
 {
@@ -395,12 +359,12 @@ gs_status cap_sim_new(const cap_scene *sc, const gs_delight *d_in, cap_sim **out
             }
         }
     }
-    /* effects that prepare once */
-    if (has(s, CAP_FX_EXTINCTION) && (st = cap_fx_prepare_extinction(s)) != GS_OK) goto fail;
-    if (has(s, CAP_FX_SCINTILLATION) && (st = cap_fx_prepare_scintillation(s)) != GS_OK) goto fail;
-    st = has(s, CAP_FX_PSF) ? cap_fx_prepare_psf(s) : point_footprints(s);
-    if (st != GS_OK) goto fail;
-    if (has(s, CAP_FX_SKYGLOW) && (st = cap_fx_prepare_skyglow(s)) != GS_OK) goto fail;
+    /* effects that prepare once (without a PSF every light is a point) */
+    if (!has(s, CAP_FX_PSF) && (st = point_footprints(s)) != GS_OK) goto fail;
+    for (int e = 0; e < CAP_FX_COUNT; e++)
+        if (has(s, (cap_effect)e) && cap_effect_defs[e].prepare &&
+            (st = cap_effect_defs[e].prepare(s)) != GS_OK)
+            goto fail;
     /* capture-level numbers */
     double adc_max = has(s, CAP_FX_ADC) ? (double)((1 << sc->bit_depth) - 1) : 65535.0;
     s->adc_max = adc_max;
@@ -428,31 +392,14 @@ gs_status cap_sim_new(const cap_scene *sc, const gs_delight *d_in, cap_sim **out
         st = gs_fail(GS_ENOMEM, "simulator: cannot hold a %d x %d x %d frame", s->W, s->H, s->B);
         goto fail;
     }
-    /* the pipeline: exactly the listed effects, in physical order */
-    if (has(s, CAP_FX_FREQUENCY_WANDER))
-        add_stage(s, "frequency_wander", CAP_FX_FREQUENCY_WANDER, cap_fx_frequency_wander);
-    if (has(s, CAP_FX_FREE_RUNNING_DRIFT))
-        add_stage(s, "free_running_drift", CAP_FX_FREE_RUNNING_DRIFT, cap_fx_free_running_drift);
-    if (has(s, CAP_FX_DMD_JITTER)) add_stage(s, "dmd_jitter", CAP_FX_DMD_JITTER, cap_fx_dmd_jitter);
-    if (s->timing) add_stage(s, "windows", -1, st_windows);
-    add_stage(s, "eq5", -1, st_eq5);
-    add_stage(s, "lights", -1, st_lights);
-    if (has(s, CAP_FX_EXTINCTION)) add_stage(s, "extinction", CAP_FX_EXTINCTION, cap_fx_extinction);
-    if (has(s, CAP_FX_SCINTILLATION))
-        add_stage(s, "scintillation", CAP_FX_SCINTILLATION, cap_fx_scintillation);
-    if (has(s, CAP_FX_PSF)) add_stage(s, "psf", CAP_FX_PSF, cap_fx_psf);
-    else add_stage(s, "splat", -1, st_splat);
-    if (has(s, CAP_FX_SKYGLOW)) add_stage(s, "skyglow", CAP_FX_SKYGLOW, cap_fx_skyglow);
-    if (has(s, CAP_FX_BLINKING_SIGN))
-        add_stage(s, "blinking_sign", CAP_FX_BLINKING_SIGN, cap_fx_blinking_sign);
-    if (has(s, CAP_FX_HEADLIGHTS)) add_stage(s, "headlights", CAP_FX_HEADLIGHTS, cap_fx_headlights);
-    if (has(s, CAP_FX_AMBIENT)) add_stage(s, "ambient", CAP_FX_AMBIENT, cap_fx_ambient);
-    if (has(s, CAP_FX_SHOT_NOISE)) add_stage(s, "shot_noise", CAP_FX_SHOT_NOISE, cap_fx_shot_noise);
-    if (has(s, CAP_FX_SATURATION)) add_stage(s, "saturation", CAP_FX_SATURATION, cap_fx_saturation);
-    add_stage(s, "to_dn", -1, st_to_dn);
-    if (has(s, CAP_FX_READ_NOISE)) add_stage(s, "read_noise", CAP_FX_READ_NOISE, cap_fx_read_noise);
-    if (has(s, CAP_FX_ADC)) add_stage(s, "adc", CAP_FX_ADC, cap_fx_adc);
-    add_stage(s, "store", -1, st_store);
+    /* the pipeline: exactly the listed effects, in physical order, with the base stages */
+    for (int e = 0; e <= CAP_FX_COUNT; e++) {
+        for (size_t b = 0; b < sizeof base_stages / sizeof *base_stages; b++)
+            if ((int)base_stages[b].before == e && (!base_stages[b].wanted || base_stages[b].wanted(s)))
+                add_stage(s, base_stages[b].name, -1, base_stages[b].run);
+        if (e < CAP_FX_COUNT && has(s, (cap_effect)e))
+            add_stage(s, cap_effect_defs[e].name, e, cap_effect_defs[e].run);
+    }
     *out = s;
     return GS_OK;
 fail:

@@ -1,6 +1,6 @@
 /* sim.h - the simulator's private state, shared by sim.c (construction, base stages, render
- * driver, truth) and effects.c (one stage per effect). Not included outside capture/ (tests
- * may). */
+ * driver, truth), render.c (primitives), effects.c (one stage per effect, the effects table) and
+ * effect_params.c (their scene parameters). Not included outside capture/ (tests may). */
 #ifndef GRIDSURVEY_CAPTURE_SIM_H
 #define GRIDSURVEY_CAPTURE_SIM_H
 
@@ -88,13 +88,28 @@ struct cap_sim {
     double *amb_row;                /* [H] ambient electrons per pixel and nominal cycle (ambient) */
 };
 
+/* Rendering primitives (render.c). */
+/* Deposit every light's E through its footprint (point or PSF) into the image; returns the
+ * pixels touched. */
+unsigned long long cap_splat(cap_sim *s, cap_render *r);
 /* Timing of exposed cycle c in [0, C) of this acquisition: window [t0, t1) s. */
-void cap_sim_cycle_time(const cap_sim *s, const cap_render *r, long c, double *t0, double *t1);
+void cap_cycle_time(const cap_sim *s, const cap_render *r, long c, double *t0, double *t1);
 /* Gaussian pixel-integrated weights of a point at (x, y) with sigma over a (2R+1)^2 box
  * centred on its nearest pixel; writes to w and returns the box's top-left corner. */
-void cap_sim_gauss_box(double x, double y, double sigma, int R, double *w, int *bx, int *by);
+void cap_gauss_box(double x, double y, double sigma, int R, double *w, int *bx, int *by);
 
-/* Effect stages (effects.c). Each increments s->fx_calls[its effect] first. */
+/* The effects (effects.c, effect_params.c): the one table the scene parser and the pipeline
+ * read. parse reads the effect's object at path of the scene document into sc->fx; prepare
+ * (NULL: none) runs once when a simulator is built; run is the per-acquisition stage and
+ * increments s->fx_calls[its effect] first (so a test can prove a disabled effect never ran). */
+typedef struct {
+    const char *name;   /* in scene files: "shot_noise", ... */
+    gs_status (*parse)(const gs_json *j, cap_scene *sc, json_t *o, const char *path);
+    gs_status (*prepare)(cap_sim *s);
+    gs_status (*run)(cap_sim *s, cap_render *r);
+} cap_effect_def;
+extern const cap_effect_def cap_effect_defs[CAP_FX_COUNT];
+
 gs_status cap_fx_frequency_wander(cap_sim *s, cap_render *r);
 gs_status cap_fx_free_running_drift(cap_sim *s, cap_render *r);
 gs_status cap_fx_dmd_jitter(cap_sim *s, cap_render *r);
@@ -109,11 +124,22 @@ gs_status cap_fx_shot_noise(cap_sim *s, cap_render *r);
 gs_status cap_fx_saturation(cap_sim *s, cap_render *r);
 gs_status cap_fx_read_noise(cap_sim *s, cap_render *r);
 gs_status cap_fx_adc(cap_sim *s, cap_render *r);
-/* Once-per-sim preparation of the effects that need it (only the listed ones are called). */
 gs_status cap_fx_prepare_extinction(cap_sim *s);
 gs_status cap_fx_prepare_scintillation(cap_sim *s);
 gs_status cap_fx_prepare_psf(cap_sim *s);
 gs_status cap_fx_prepare_skyglow(cap_sim *s);
+/* Parameters (effect_params.c); cap_fxp_none: an effect without any ({} only). */
+gs_status cap_fxp_none(const gs_json *j, cap_scene *sc, json_t *o, const char *path);
+gs_status cap_fxp_free_running_drift(const gs_json *j, cap_scene *sc, json_t *o, const char *path);
+gs_status cap_fxp_dmd_jitter(const gs_json *j, cap_scene *sc, json_t *o, const char *path);
+gs_status cap_fxp_extinction(const gs_json *j, cap_scene *sc, json_t *o, const char *path);
+gs_status cap_fxp_scintillation(const gs_json *j, cap_scene *sc, json_t *o, const char *path);
+gs_status cap_fxp_psf(const gs_json *j, cap_scene *sc, json_t *o, const char *path);
+gs_status cap_fxp_skyglow(const gs_json *j, cap_scene *sc, json_t *o, const char *path);
+gs_status cap_fxp_blinking_sign(const gs_json *j, cap_scene *sc, json_t *o, const char *path);
+gs_status cap_fxp_headlights(const gs_json *j, cap_scene *sc, json_t *o, const char *path);
+gs_status cap_fxp_ambient(const gs_json *j, cap_scene *sc, json_t *o, const char *path);
+gs_status cap_fxp_read_noise(const gs_json *j, cap_scene *sc, json_t *o, const char *path);
 /* Intensity variance of scintillation of a point source at distance L (Andrews-Phillips,
  * spherical wave, with aperture averaging and source-size reduction): docs/capture.md. */
 double cap_scintillation_index(const cap_effects *fx, double aperture_mm, double L_m);

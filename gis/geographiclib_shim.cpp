@@ -51,10 +51,15 @@ int fail_unknown(const char *what)
 extern "C" int gis_gl_geocentric_fwd(double lat, double lon, double h, double xyz[3], double M[9])
 {
     try {
-        std::vector<double> m(M ? 9 : 0);
-        Geocentric::WGS84().Forward(lat, lon, h, xyz[0], xyz[1], xyz[2], m);
-        if (M)
+        // without M, the overload that takes none (an empty vector makes GeographicLib's
+        // header add an offset to a null pointer)
+        if (M) {
+            std::vector<double> m(9);
+            Geocentric::WGS84().Forward(lat, lon, h, xyz[0], xyz[1], xyz[2], m);
             for (int i = 0; i < 9; i++) M[i] = m[i];
+        } else {
+            Geocentric::WGS84().Forward(lat, lon, h, xyz[0], xyz[1], xyz[2]);
+        }
         if (!finite_all({xyz[0], xyz[1], xyz[2]})) return fail_nonfinite("Geocentric::Forward");
         return 0;
     } catch (const std::exception &e) {
@@ -68,10 +73,13 @@ extern "C" int gis_gl_geocentric_rev(const double xyz[3], double *lat, double *l
                                      double M[9])
 {
     try {
-        std::vector<double> m(M ? 9 : 0);
-        Geocentric::WGS84().Reverse(xyz[0], xyz[1], xyz[2], *lat, *lon, *h, m);
-        if (M)
+        if (M) {
+            std::vector<double> m(9);
+            Geocentric::WGS84().Reverse(xyz[0], xyz[1], xyz[2], *lat, *lon, *h, m);
             for (int i = 0; i < 9; i++) M[i] = m[i];
+        } else {
+            Geocentric::WGS84().Reverse(xyz[0], xyz[1], xyz[2], *lat, *lon, *h);
+        }
         if (!finite_all({*lat, *lon, *h})) return fail_nonfinite("Geocentric::Reverse");
         return 0;
     } catch (const std::exception &e) {
@@ -143,6 +151,19 @@ extern "C" int gis_gl_inverse(double lat1, double lon1, double lat2, double lon2
     } catch (...) {
         return fail_unknown("Geodesic::Inverse");
     }
+}
+
+// The public straight-line distance (gis.h): two geocentric points.
+extern "C" double gis_chord_m(double lat1_deg, double lon1_deg, double h1_m, double lat2_deg,
+                              double lon2_deg, double h2_m)
+{
+    double a[3], b[3];
+    if (std::fabs(lat1_deg) > 90.0 || std::fabs(lat2_deg) > 90.0 ||
+        gis_gl_geocentric_fwd(lat1_deg, lon1_deg, h1_m, a, nullptr) ||
+        gis_gl_geocentric_fwd(lat2_deg, lon2_deg, h2_m, b, nullptr))
+        return NAN;
+    return std::sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) +
+                     (a[2] - b[2]) * (a[2] - b[2]));
 }
 
 // The public geodesic distance (gis.h): argument checks, then gis_gl_inverse.

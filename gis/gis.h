@@ -212,6 +212,11 @@ gs_status gis_triangulate(const gis_bearing *a, const gis_bearing *b,
  * non-finite coordinate, GS_EINVAL for a latitude outside [-90, 90]. */
 gs_status gis_geodesic_inverse(double lat1_deg, double lon1_deg, double lat2_deg, double lon2_deg,
                                double *s12_m, double *azi1_deg, double *azi2_deg);
+/* The straight-line (chord) distance, metres, between two points given by WGS84 latitude,
+ * longitude (degrees) and ellipsoidal height (metres), through GeographicLib's Geocentric; NaN
+ * for a latitude outside [-90, 90] or a non-finite input. */
+double gis_chord_m(double lat1_deg, double lon1_deg, double h1_m, double lat2_deg,
+                   double lon2_deg, double h2_m);
 
 /* ------------------------------------------------------------ station files */
 

@@ -1,0 +1,61 @@
+/* render.c - the rendering primitives that the simulator's base stages (sim.c) and its effects
+ * (effects.c) share: depositing each light through its footprint, pixel-integrated Gaussian
+ * weights, and the timing of an exposed cycle. */
+#include "capture/sim.h"
+
+#include <math.h>
+
+/* Deposit every light's E through its footprint (point or PSF). */
+unsigned long long cap_splat(cap_sim *s, cap_render *r)
+{
+    int B = s->B, L = s->L;
+    unsigned long long items = 0;
+    for (size_t l = 0; l < s->n; l++) {
+        const cap_footprint *f = &s->fp[l];
+        if (!f->w) continue;
+        const double *w = s->fp_w + f->off;
+        const double *E = s->E + l * (size_t)L * (size_t)B;
+        for (int y = 0; y < f->h; y++) {
+            size_t row = (size_t)(f->y0 + y) * (size_t)s->W + (size_t)f->x0;
+            for (int x = 0; x < f->w; x++) {
+                size_t p = row + (size_t)x;
+                int h = r->halv ? r->halv[p] : 0;
+                double wt = w[y * f->w + x];
+                for (int b = 0; b < B; b++) s->img[p * (size_t)B + (size_t)b] += wt * E[h * B + b];
+            }
+        }
+        items += (unsigned long long)f->w * (unsigned long long)f->h;
+    }
+    return items;
+}
+
+void cap_gauss_box(double x, double y, double sigma, int R, double *w, int *bx, int *by)
+{
+    double cx = floor(x + 0.5), cy = floor(y + 0.5);
+    *bx = (int)cx - R;
+    *by = (int)cy - R;
+    int n = 2 * R + 1;
+    double wx[2 * 64 + 1], wy[2 * 64 + 1], sx = 0, sy = 0;
+    double k = 1.0 / (sigma * sqrt(2.0));
+    for (int i = 0; i < n; i++) {
+        double px = cx - R + i, py = cy - R + i;
+        wx[i] = 0.5 * (erf((px + 0.5 - x) * k) - erf((px - 0.5 - x) * k));
+        wy[i] = 0.5 * (erf((py + 0.5 - y) * k) - erf((py - 0.5 - y) * k));
+        sx += wx[i];
+        sy += wy[i];
+    }
+    for (int j = 0; j < n; j++)
+        for (int i = 0; i < n; i++) w[j * n + i] = wx[i] * wy[j] / (sx * sy);
+}
+
+void cap_cycle_time(const cap_sim *s, const cap_render *r, long c, double *t0, double *t1)
+{
+    if (r->timing) {
+        *t0 = r->win.t0_s[c];
+        *t1 = r->win.t1_s[c];
+        return;
+    }
+    double base = (double)(r->first_cycle + c) * s->half_s;
+    *t0 = base + r->k * s->half_s / s->K;
+    *t1 = base + (r->k + 1) * s->half_s / s->K;
+}
