@@ -5,8 +5,6 @@
 
 #include "recognize/recognize.h"
 
-#include <complex.h>
-
 /* OpenCV shim (recognize/opencv_shim.cpp), the only C++ in recognize/: plain C functions over
  * OpenCV 4 (core, imgproc, imgcodecs).
  * Every OpenCV or C++ exception is caught at this boundary and returned as a gs_status with a
@@ -23,6 +21,140 @@ gs_status rec_cv_components(const unsigned char *mask, int width, int height, in
 gs_status rec_cv_dilate_f32(const float *src, float *dst, int width, int height, int radius);
 /* In-place dilation of a 0/1 byte mask with a (2 radius + 1)^2 square. */
 gs_status rec_cv_dilate_u8(unsigned char *mask, int width, int height, int radius);
-/* ====================== end of capture directory, blobs and OpenCV shim ====================== */
+
+/* ================================================= Eq. 7 (eq7_*.c), shared between its files */
+
+/* complex.h before the matcher: its Fourier series are C99 double complex */
+#include <complex.h>
+#include <math.h>
+
+#define EQ7_TWO_PI 6.283185307179586476925286766559
+#define INV_SQRT12 0.28867513459481288225457439025098  /* std of a uniform shift, cycles */
+#define CUT_PIXEL 30.0    /* nats: pairs this far below the best are < 1e-13 of it */
+#define CUT_REFINE 30.0   /* nats: continuous bulbs this far below the best keep their grid peak */
+#define FLOAT_ERR 2e-6    /* error of z^2/2 from float scores, per unit |x|^2/sigma^2 */
+#define PHASE_WINDOW 0.16666666666666666  /* +-30 deg of phase = +-1/6 cycle of shift */
+#define PIX_BLOCK 1024    /* rows per SGEMM block */
+#define LANES 16          /* row loops in blocks of 16 floats (vectorised by the compiler) */
+#define LOGPHI_ZMAX 12.0
+#define LOGPHI_STEPS 32   /* table points per unit of z */
+
+struct rec_matcher {
+    int grid_hz, bands, K, D;           /* D = bands * K values per light */
+    rec_eq7_opts o;
+    size_t nb;                          /* candidate bulbs */
+    gs_bulb *bulbs;                    /* owned copies */
+    int np;                             /* discrete phases (3 or 6), 0 in continuous mode */
+    double phase_deg[6];
+    int G;                              /* grid cells per cycle for continuous bulbs */
+    unsigned char *cont;                /* [nb] bulb searched over a continuous shift */
+    size_t *first, *count;              /* [nb] its templates */
+    size_t M;                           /* templates */
+    double *t;                          /* [M * D] templates */
+    double *tsq;                        /* [M * D] squared templates */
+    size_t Mp;                          /* M rounded up to a multiple of LANES */
+    float *tn;                          /* [Mp * D] templates / |t| (pixels), zero padded */
+    float *lnf;                         /* [Mp] log |t| as float, 1e30 for padding */
+    double *tnd;                        /* [M * D] templates / |t| in double */
+    int pr;                             /* prefilter dimension R (0: no prefilter) */
+    float *pe;                          /* [R * D] orthonormal basis of the prefilter */
+    float *pc;                          /* [Mp * R] template coefficients in that basis */
+    float *prho;                        /* [Mp] residual norms of the unit templates */
+    int ncont;                          /* bulbs searched over a continuous shift */
+    double *lognorm;                    /* [M] log |t| */
+    double *cellw;                      /* [M] prior mass of the template within its bulb */
+    double *shift;                      /* [M] cycles */
+    double *tphase;                     /* [M] grid phase, deg (0 for GS_REF_NONE bulbs) */
+    int *tbulb, *tcell;                 /* [M] bulb, index among the bulb's templates */
+    /* Fourier series of the window means, continuous bulbs only:
+     * t_k(s) = F0 + sum_h Re(F_h e^{2 pi i h (k/K - s)}) + nyquist term. */
+    int *H;                             /* [nb] harmonics kept */
+    double complex **F;                 /* [nb] -> [bands * (H + 1)], F[band * (H+1) + h] */
+    double *nyq;                        /* [nb * bands] Nyquist coefficient */
+    int *nfine;                         /* [nb] BRF samples per cycle */
+    double complex *wk;                 /* [K] e^{2 pi i j / K} */
+    double chi2_thr;                    /* pixels: chi2 at p = unknown_p, dof D - nfit - 1 */
+    /* per-band brightness (band_gains) and model error */
+    int bg;                             /* one brightness per band (band_gains and bands > 1) */
+    int nfit;                           /* brightness parameters: bands (bg) or 1 */
+    int bandpath;                       /* pixels: per-band scores (bands > 1, bg or model error) */
+    double *bnorm;                      /* [M * bands] |t_j| over band b's K values */
+    double *blog;                       /* [M] sum over bands of log |t_jb| */
+    double *tbn;                        /* [M * D] templates, each band of unit norm */
+    float *tbnf;                        /* [Mp * D] the same in float, zero padded */
+    float *blnf;                        /* [Mp] blog as float, 1e30 for padding */
+    float *bib, *bib2;                  /* [bands * Mp] 1/|t_jb|, 1/|t_jb|^2 (padding 0, 1) */
+    double logphi_tab[2 * (int)LOGPHI_ZMAX * LOGPHI_STEPS + 2];
+};
+
+/* Phi(z) */
+static inline double phi_cdf(double z)
+{
+    return 0.5 * erfc(-z * M_SQRT1_2);
+}
+
+/* Circular distance of two shifts, cycles, in [0, 0.5]. */
+static inline double circ_dist(double a, double b)
+{
+    double d = fmod(fabs(a - b), 1.0);
+    return d > 0.5 ? 1.0 - d : d;
+}
+
+static inline double wrap01(double s)
+{
+    s = fmod(s, 1.0);
+    if (s < 0.0) s += 1.0;
+    return s >= 1.0 ? 0.0 : s;
+}
+
+
+/* Scratch for one light or pixel. */
+typedef struct {
+    double *L;              /* [M] log likelihood (valid for candidates) */
+    double *mass;           /* [M] posterior mass relative to the best */
+    size_t *cand;           /* [M + 3 nb] candidate templates */
+    size_t ncand;
+    unsigned char *mark;    /* [M] in cand */
+    double *bmass;          /* [nb] */
+    double *wmass;          /* [nb] mass within +-1/6 cycle of the bulb's peak (continuous) */
+    unsigned char *has_peak;/* [nb] */
+    double *peak_s, *peak_L, *peak_sig;   /* [nb] refined peak: shift, log lik, std (cycles) */
+    double *peak_z;                        /* [nb] brightness / its std at the peak */
+    double *peak_gain;                     /* [nb] Sxx - chi2 at the peak */
+    size_t *peak_cell;      /* [nb] template of the best grid cell */
+    /* light path */
+    double *S, *T, *w, *wx, *xs;           /* [nfit * M] ([f * M + j]), [nfit * M], [D] x 3 */
+    double *tt, *dt, *d2t;                 /* [D] */
+    double complex *acc;                   /* [3 K] */
+} rec_eq7_work;
+
+typedef struct {
+    int bulb;               /* -1: nothing finite */
+    size_t tmpl;            /* the fitted template (continuous: best grid cell) */
+    double shift;           /* cycles */
+    double conf, bulb_conf, phase_conf;
+    int runner_bulb;
+    double runner_shift, runner_conf;
+    size_t runner_tmpl;
+} rec_eq7_decision;
+
+/* eq7_matcher.c: the window means of continuous bulb b at shift s (and their first two
+ * derivatives when dt, d2t are not NULL; acc is scratch of 3 K); log Phi from the table. */
+void rec_eq7_template_at(const rec_matcher *m, size_t b, double s, double *t, double *dt,
+                         double *d2t, double complex *acc);
+double rec_eq7_log_phi_fast(const rec_matcher *m, double z);
+/* eq7_decide.c: scratch, and the posterior over (bulb, phase) from the candidates' scores. */
+gs_status rec_eq7_work_alloc(const rec_matcher *m, rec_eq7_work *w);
+void rec_eq7_work_free(rec_eq7_work *w);
+double rec_eq7_report_phase(const rec_matcher *m, int b, size_t j, double s);
+void rec_eq7_add_cand(const rec_matcher *m, rec_eq7_work *w, size_t j);
+void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_decision *dec);
+/* eq7_light.c: the log likelihood of one scale; Newton refinement of continuous bulb b's peak
+ * from grid cell j0; Eq. 7 for one light with caller-owned scratch. */
+double rec_eq7_loglik(double Sxx, double S, double T);
+void rec_eq7_refine_peak(const rec_matcher *m, rec_eq7_work *w, size_t b, size_t j0, double Sxx);
+gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const double *signal,
+                                 const double *sigma, rec_match *out);
+/* ============================================================================ end of Eq. 7 */
 
 #endif

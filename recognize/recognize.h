@@ -207,6 +207,13 @@ void rec_matcher_free(rec_matcher *m);
 size_t rec_matcher_bulb_count(const rec_matcher *m);
 /* Borrowed: the i-th candidate bulb (a copy owned by the matcher), NULL if out of range. */
 const gs_bulb *rec_matcher_bulb(const rec_matcher *m, size_t i);
+/* The templates of Eq. 7: count, and template j's bands * K values (borrowed, [band * K + k],
+ * NULL when j is out of range) with the index of its bulb and its BRF shift in cycles (either
+ * may be NULL). */
+size_t rec_matcher_template_count(const rec_matcher *m);
+const double *rec_matcher_template(const rec_matcher *m, size_t j, int *bulb, double *shift_cycles);
+/* The dimension R of the pixel path's dark-row prefilter (docs/recognition.md), 0 for none. */
+int rec_matcher_prefilter_dim(const rec_matcher *m);
 
 /* Eq. 7 for one light: signal and sigma hold bands * K values ([band * K + k]), any units
  * (the same for both); negative signal values are legal (noise after background removal).
@@ -237,22 +244,6 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
 gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *noise_sigma,
                            size_t P, int *bulb, float *phase_deg, float *confidence);
 
-/* Throughput of rec_match_pixels (for `make bench` / `gridsurvey bench`): synthesises `pixels`
- * rows (a fraction lit_fraction lit by a random template of m at mean sample snr noise sigmas,
- * the rest pure noise of std 1; deterministic for a seed), times one rec_match_pixels call and
- * checks the lit rows. Call openblas_set_num_threads(1) first for a one-core figure. */
-typedef struct {
-    size_t pixels, lit, templates;
-    int values_per_pixel;     /* bands * K */
-    int prefilter_dim;        /* R of the dark-row prefilter (docs/recognition.md), 0 = none */
-    double seconds;           /* wall time of rec_match_pixels */
-    double pixels_per_s;
-    double cpu_seconds;       /* CPU time of the process during the call (all threads) */
-    double pixels_per_cpu_s;  /* the one-core figure on a busy machine */
-    double lit_accuracy;      /* lit rows with the true bulb and phase */
-} rec_eq7_bench;
-gs_status rec_bench_eq7(const rec_matcher *m, size_t pixels, double lit_fraction, double snr,
-                        unsigned long seed, rec_eq7_bench *out);
 
 /* ------------------------------------------------------------ maps and plots */
 

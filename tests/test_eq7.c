@@ -1364,9 +1364,7 @@ TEST(eq7_pixels_prefilter_generated_delight)
     gs_delight *d = gs_delight_new();
     CHECK_OK(gs_delight_generate(d, 1024));
     rec_matcher *m = new_matcher(d, 50, 3, 26, REC_PHASES_3);
-    rec_eq7_bench bench;
-    CHECK_OK(rec_bench_eq7(m, 64, 0.5, 20.0, 1, &bench));
-    CHECK_MSG(bench.prefilter_dim > 0, "prefilter dimension %d", bench.prefilter_dim);
+    CHECK_MSG(rec_matcher_prefilter_dim(m) > 0, "prefilter dimension %d", rec_matcher_prefilter_dim(m));
     ttab tb;
     ttab_init(&tb, d, 50, 3, 26, P3, 3);
     size_t P = getenv("GS_SAN") && *getenv("GS_SAN") == '1' ? 3000 : 12000, nb = rec_matcher_bulb_count(m);
@@ -1408,22 +1406,6 @@ TEST(eq7_pixels_prefilter_generated_delight)
     free(pb);
     free(pp);
     free(pc);
-    rec_matcher_free(m);
-    gs_delight_free(d);
-}
-
-TEST(eq7_bench_smoke)
-{
-    gs_delight *d = gs_delight_new();
-    CHECK_OK(gs_delight_generate(d, 1024));
-    rec_matcher *m = new_matcher(d, 50, 3, 26, REC_PHASES_3);
-    rec_eq7_bench bench;
-    CHECK_OK(rec_bench_eq7(m, 5000, 0.5, 50.0, 1, &bench));
-    CHECK(bench.pixels == 5000 && bench.lit > 2000 && bench.lit < 3000);
-    CHECK(bench.values_per_pixel == 78 && bench.templates == 3 * rec_matcher_bulb_count(m));
-    CHECK(bench.pixels_per_s > 0);
-    CHECK_MSG(bench.lit_accuracy > 0.5, "accuracy %g", bench.lit_accuracy);
-    CHECK(rec_bench_eq7(m, 0, 0.5, 50.0, 1, &bench) == GS_EINVAL);
     rec_matcher_free(m);
     gs_delight_free(d);
 }

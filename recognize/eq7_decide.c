@@ -1,0 +1,239 @@
+/* eq7_decide.c - Eq. 7's decision: the posterior over (bulb, phase) pairs from the candidates'
+ * scores (docs/recognition.md), shared by the light and the pixel paths. */
+#include "recognize/internal.h"
+
+#include <cblas.h>
+#include <float.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* ------------------------------------------------------------ the rec_eq7_decision */
+
+
+void rec_eq7_work_free(rec_eq7_work *w)
+{
+    free(w->L);
+    free(w->mass);
+    free(w->cand);
+    free(w->mark);
+    free(w->bmass);
+    free(w->wmass);
+    free(w->has_peak);
+    free(w->peak_s);
+    free(w->peak_L);
+    free(w->peak_sig);
+    free(w->peak_z);
+    free(w->peak_gain);
+    free(w->peak_cell);
+    free(w->S);
+    free(w->T);
+    free(w->w);
+    free(w->wx);
+    free(w->xs);
+    free(w->tt);
+    free(w->dt);
+    free(w->d2t);
+    free(w->acc);
+    memset(w, 0, sizeof *w);
+}
+
+gs_status rec_eq7_work_alloc(const rec_matcher *m, rec_eq7_work *w)
+{
+    memset(w, 0, sizeof *w);
+    size_t M = m->M, nb = m->nb, D = (size_t)m->D;
+    w->L = malloc(sizeof *w->L * M);
+    w->mass = malloc(sizeof *w->mass * M);
+    w->cand = malloc(sizeof *w->cand * (M + 3 * nb));
+    w->mark = calloc(M, 1);
+    w->bmass = malloc(sizeof *w->bmass * nb);
+    w->wmass = malloc(sizeof *w->wmass * nb);
+    w->has_peak = calloc(nb, 1);
+    w->peak_s = malloc(sizeof *w->peak_s * nb);
+    w->peak_L = malloc(sizeof *w->peak_L * nb);
+    w->peak_sig = malloc(sizeof *w->peak_sig * nb);
+    w->peak_z = malloc(sizeof *w->peak_z * nb);
+    w->peak_gain = malloc(sizeof *w->peak_gain * nb);
+    w->peak_cell = malloc(sizeof *w->peak_cell * nb);
+    w->S = malloc(sizeof *w->S * M * (size_t)m->nfit);
+    w->T = malloc(sizeof *w->T * M * (size_t)m->nfit);
+    w->w = malloc(sizeof *w->w * D);
+    w->wx = malloc(sizeof *w->wx * D);
+    w->xs = malloc(sizeof *w->xs * D);
+    w->tt = malloc(sizeof *w->tt * D);
+    w->dt = malloc(sizeof *w->dt * D);
+    w->d2t = malloc(sizeof *w->d2t * D);
+    w->acc = malloc(sizeof *w->acc * 3 * (size_t)m->K);
+    if (!w->L || !w->mass || !w->cand || !w->mark || !w->bmass || !w->wmass || !w->has_peak ||
+        !w->peak_s || !w->peak_L || !w->peak_sig || !w->peak_z || !w->peak_gain || !w->peak_cell || !w->S || !w->T || !w->w ||
+        !w->wx || !w->xs || !w->tt || !w->dt || !w->d2t || !w->acc) {
+        rec_eq7_work_free(w);
+        return gs_fail(GS_ENOMEM, "Eq. 7: cannot allocate scratch for %zu templates", M);
+    }
+    return GS_OK;
+}
+
+
+/* The phase (deg) to report for bulb b at shift s via template j. */
+double rec_eq7_report_phase(const rec_matcher *m, int b, size_t j, double s)
+{
+    if (m->bulbs[b].ref == GS_REF_NONE) return 0.0;
+    if (!m->cont[b]) return m->tphase[j];
+    return gs_shift_to_phase(s);
+}
+
+void rec_eq7_add_cand(const rec_matcher *m, rec_eq7_work *w, size_t j)
+{
+    (void)m;
+    if (!w->mark[j]) {
+        w->mark[j] = 1;
+        w->cand[w->ncand++] = j;
+    }
+}
+
+/* A pair candidate for the best / runner-up: log of its mass relative to exp(Lmax). */
+typedef struct {
+    double lm;
+    int bulb;
+    size_t tmpl;
+    double shift;
+} pair_c;
+
+static void consider(pair_c *best, pair_c *second, double lm, int bulb, size_t tmpl, double shift)
+{
+    if (!(lm > -INFINITY)) return;
+    pair_c c = {lm, bulb, tmpl, shift};
+    if (best->bulb < 0 || lm > best->lm) {
+        *second = *best;
+        *best = c;
+    } else if (second->bulb < 0 || lm > second->lm) {
+        *second = c;
+    }
+}
+
+/* log of a summed mass, or the fallback when it underflowed (used for ranking only) */
+static double log_mass(double mass, double fallback)
+{
+    return mass > 0.0 ? log(mass) : fallback;
+}
+
+/* Posterior over (bulb, phase) from w->L of the candidates (w->cand) and the refined peaks of
+ * continuous bulbs. Lmax is the largest log likelihood (grid or peak). Pairs are ranked by
+ * their log mass, so a runner-up exists even when its posterior underflows. */
+void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_decision *dec)
+{
+    size_t nb = m->nb;
+    double cell = 1.0 / m->G;
+    dec->bulb = -1;
+    dec->runner_bulb = -1;
+    dec->conf = dec->bulb_conf = dec->phase_conf = dec->runner_conf = 0.0;
+    dec->tmpl = dec->runner_tmpl = 0;
+    dec->shift = dec->runner_shift = 0.0;
+    if (!isfinite(Lmax)) goto done;
+    for (size_t i = 0; i < w->ncand; i++) {
+        size_t j = w->cand[i];
+        w->mass[j] = isfinite(w->L[j]) ? exp(w->L[j] - Lmax) * m->cellw[j] : 0.0;
+    }
+    /* Laplace correction of the cells around narrow peaks (narrower than a cell) */
+    for (size_t b = 0; m->ncont && b < nb; b++) {
+        if (!m->cont[b] || !w->has_peak[b] || !(w->peak_sig[b] < cell)) continue;
+        size_t c0 = (size_t)m->tcell[w->peak_cell[b]];
+        double d0 = w->peak_s[b] - (double)c0 / m->G;   /* peak relative to the cell centre */
+        d0 -= floor(d0 + 0.5);
+        double amp = exp(w->peak_L[b] - Lmax) * sqrt(2.0 * M_PI) * w->peak_sig[b];
+        for (int dc = -1; dc <= 1; dc++) {
+            size_t c = (c0 + (size_t)m->G + (size_t)(long)dc) % (size_t)m->G;
+            size_t j = m->first[b] + c;
+            double lo = (dc - 0.5) * cell - d0, hi = (dc + 0.5) * cell - d0;
+            if (!w->mark[j]) {
+                rec_eq7_add_cand(m, w, j);
+                w->L[j] = -INFINITY;
+            }
+            w->mass[j] = amp * (phi_cdf(hi / w->peak_sig[b]) - phi_cdf(lo / w->peak_sig[b]));
+        }
+    }
+    for (size_t i = 0; i < w->ncand; i++) {
+        int b = m->tbulb[w->cand[i]];
+        w->bmass[b] = w->wmass[b] = 0.0;
+    }
+    double Z = 0.0;
+    for (size_t i = 0; i < w->ncand; i++) {
+        size_t j = w->cand[i];
+        Z += w->mass[j];
+        w->bmass[m->tbulb[j]] += w->mass[j];
+        int b = m->tbulb[j];
+        if (m->cont[b] && w->has_peak[b] && circ_dist(m->shift[j], w->peak_s[b]) <= PHASE_WINDOW)
+            w->wmass[b] += w->mass[j];
+    }
+    if (!(Z > 0.0) || !isfinite(Z)) goto done;
+    /* pairs: discrete (bulb, phase) templates; continuous voltage bulbs (bulb, +-30 deg around
+     * the peak); shape-only bulbs as a whole */
+    pair_c best = {-INFINITY, -1, 0, 0.0}, second = {-INFINITY, -1, 0, 0.0};
+    for (size_t i = 0; i < w->ncand; i++) {
+        size_t j = w->cand[i];
+        int b = m->tbulb[j];
+        if (m->cont[b]) continue;
+        consider(&best, &second, w->L[j] - Lmax + log(m->cellw[j]), b, j, m->shift[j]);
+    }
+    for (size_t b = 0; m->ncont && b < nb; b++) {
+        if (!m->cont[b] || !w->has_peak[b]) continue;
+        double pm = m->bulbs[b].ref == GS_REF_NONE ? w->bmass[b] : w->wmass[b];
+        double sg = w->peak_sig[b] < cell ? w->peak_sig[b] * sqrt(2.0 * M_PI) : cell;
+        consider(&best, &second, log_mass(pm, w->peak_L[b] - Lmax + log(sg)), (int)b,
+                 w->peak_cell[b], w->peak_s[b]);
+    }
+    if (best.bulb < 0) goto done;
+    int bb = best.bulb;
+    /* a continuous voltage winner's mass outside its window is a runner-up candidate */
+    if (m->cont[bb] && m->bulbs[bb].ref != GS_REF_NONE) {
+        double out_mass = 0.0, top = -INFINITY;
+        size_t jt = 0;
+        for (size_t i = 0; i < w->ncand; i++) {
+            size_t j = w->cand[i];
+            if (m->tbulb[j] != bb || circ_dist(m->shift[j], best.shift) <= PHASE_WINDOW) continue;
+            out_mass += w->mass[j];
+            if (w->L[j] > top) {
+                top = w->L[j];
+                jt = j;
+            }
+        }
+        double lmo = log_mass(out_mass, top - Lmax + log(cell));
+        if (top > -INFINITY && (second.bulb < 0 || lmo > second.lm)) {
+            pair_c c = {lmo, bb, jt, m->shift[jt]};
+            second = c;
+        }
+    }
+    dec->bulb = bb;
+    dec->tmpl = best.tmpl;
+    dec->shift = best.shift;
+    dec->conf = exp(best.lm) / Z;
+    dec->bulb_conf = w->bmass[bb] / Z;
+    if (second.bulb >= 0) {
+        dec->runner_bulb = second.bulb;
+        dec->runner_tmpl = second.tmpl;
+        dec->runner_shift = second.shift;
+        dec->runner_conf = exp(second.lm) / Z;
+    }
+    if (m->bulbs[bb].ref != GS_REF_NONE) {
+        double pc = 0.0;
+        for (size_t i = 0; i < w->ncand; i++) {
+            size_t j = w->cand[i];
+            int b = m->tbulb[j];
+            if (m->bulbs[b].ref == GS_REF_NONE) continue;
+            if (m->cont[bb]) {
+                if (circ_dist(m->shift[j], dec->shift) <= PHASE_WINDOW) pc += w->mass[j];
+            } else if (m->tcell[j] == m->tcell[dec->tmpl]) {
+                pc += w->mass[j];
+            }
+        }
+        dec->phase_conf = pc / Z;
+    }
+    if (dec->conf > 1.0) dec->conf = 1.0;
+    if (dec->bulb_conf > 1.0) dec->bulb_conf = 1.0;
+    if (dec->phase_conf > 1.0) dec->phase_conf = 1.0;
+    if (dec->runner_conf > 1.0) dec->runner_conf = 1.0;
+done:
+    for (size_t i = 0; i < w->ncand; i++) w->mark[w->cand[i]] = 0;
+    w->ncand = 0;
+}

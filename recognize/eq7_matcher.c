@@ -1,0 +1,660 @@
+/* eq7.c - recognising a light's bulb and grid phase: paper Eq. 7,
+ *   {beta, phi} = argmin_{beta in B, phi in P} sum_sigma || i_norm(sigma) - Q_beta(sigma) shift(phi, b_beta(sigma)) ||^2,
+ * Sheinin, Schechner, Kutulakos, "Computational Imaging on the Electric Grid", CVPR 2017, Sec. 4.
+ *
+ * The estimator (docs/recognition.md has the derivation and the measured accuracy):
+ * - Templates t_m = Q_beta(sigma) b_beta(sigma, shift) integrated to the K camera windows (Eq. 5:
+ *   gs_brf_integrate for discrete phases; for continuous shifts the same window means from each
+ *   bulb's Fourier series, which also gives exact derivatives in the shift) for every candidate
+ *   bulb and phase. A template's mean over k, summed over bands, is 1, so the fitted scale a is the
+ *   light's brightness (Eq. 6).
+ * - Noise: independent Gaussian samples, std sigma_d, weights w_d = 1/sigma_d^2. The paper's
+ *   normalisation by the mean brightness becomes a maximum-likelihood scale:
+ *     a* = S/T, S = sum w x t, T = sum w t^2, chi2 = sum w x^2 - S^2/T.
+ * - Posterior over (bulb, phase) with uniform priors, the scale marginalised over a > 0 with a flat
+ *   prior (exact for the Gaussian model):
+ *     log p_m = -chi2_m/2 - log(T_m)/2 + log Phi(S_m / sqrt(T_m)) + log prior.
+ * - Continuous phase: a grid of G = max(8K, 96) shifts per cycle, then Newton's method on the exact
+ *   chi2(s) (templates evaluated from their Fourier series), sigma_s from chi2'' (Delta chi2 = 1).
+ *   The posterior integrates over s: grid cells (periodic trapezoid rule, spectrally accurate for
+ *   peaks wider than a cell) with the cells around each bulb's peak replaced by the Gaussian
+ *   (Laplace) integral when the peak is narrower than a cell.
+ * - Band gains (opts.band_gains, 3 bands): one brightness a_b per band, templates of mean 1 per
+ *   band (no Q_beta): chi2 = sum w x^2 - sum_b S_b^2/T_b, log p_m sums -log(T_b)/2 +
+ *   log Phi(S_b/sqrt(T_b)) over bands; a per-band gain (extinction reddening) cancels.
+ * - Model error (opts.model_error): w_d = 1/(sigma_d^2 + (model_error mu_b)^2), mu_b the band's
+ *   RMS signal level, the same for every template.
+ * - Pixels (rec_match_pixels): one weight per row, so every score is a dot product x . t_m/|t_m|,
+ *   computed for blocks of rows with one SGEMM (OpenBLAS), after a rigorous prefilter (a bound
+ *   from the templates' principal subspace) has set aside the rows that are dim for every template.
+ *   With band gains or a model error the scores are per band (one SGEMM of K columns per band).
+ */
+#include "recognize/internal.h"
+
+#include <cblas.h>
+#include <float.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+#include <lapacke.h>
+
+/* ------------------------------------------------------------ matcher */
+
+
+void rec_eq7_opts_default(rec_eq7_opts *o)
+{
+    if (!o) return;
+    o->phases = REC_PHASES_3;
+    o->transformer_deg = 30.0;
+    o->unknown_p = 1e-3;
+    o->ambiguous_conf = 0.8;
+    o->min_snr = 3.0;
+    o->band_gains = 1;
+    o->model_error = 0.04;
+}
+
+void rec_matcher_free(rec_matcher *m)
+{
+    if (!m) return;
+    for (size_t b = 0; b < m->nb; b++) {
+        gs_bulb_release(&m->bulbs[b]);
+        if (m->F) free(m->F[b]);
+    }
+    free(m->bulbs);
+    free(m->cont);
+    free(m->first);
+    free(m->count);
+    free(m->t);
+    free(m->tsq);
+    free(m->tn);
+    free(m->lnf);
+    free(m->tnd);
+    free(m->pe);
+    free(m->pc);
+    free(m->prho);
+    free(m->lognorm);
+    free(m->cellw);
+    free(m->shift);
+    free(m->tphase);
+    free(m->tbulb);
+    free(m->tcell);
+    free(m->H);
+    free(m->F);
+    free(m->nyq);
+    free(m->nfine);
+    free(m->wk);
+    free(m->bnorm);
+    free(m->blog);
+    free(m->tbn);
+    free(m->tbnf);
+    free(m->blnf);
+    free(m->bib);
+    free(m->bib2);
+    free(m);
+}
+
+size_t rec_matcher_bulb_count(const rec_matcher *m)
+{
+    return m ? m->nb : 0;
+}
+
+size_t rec_matcher_template_count(const rec_matcher *m)
+{
+    return m ? m->M : 0;
+}
+
+const double *rec_matcher_template(const rec_matcher *m, size_t j, int *bulb, double *shift_cycles)
+{
+    if (!m || j >= m->M) return NULL;
+    if (bulb) *bulb = m->tbulb[j];
+    if (shift_cycles) *shift_cycles = m->shift[j];
+    return m->t + j * (size_t)m->D;
+}
+
+int rec_matcher_prefilter_dim(const rec_matcher *m)
+{
+    return m ? m->pr : 0;
+}
+
+const gs_bulb *rec_matcher_bulb(const rec_matcher *m, size_t i)
+{
+    return (m && i < m->nb) ? &m->bulbs[i] : NULL;
+}
+
+static gs_status check_opts(const rec_eq7_opts *o)
+{
+    if (o->phases != REC_PHASES_3 && o->phases != REC_PHASES_6 && o->phases != REC_PHASES_CONTINUOUS)
+        return gs_fail(GS_EINVAL, "Eq. 7 options: phases=%d: expected REC_PHASES_3, _6 or _CONTINUOUS",
+                       (int)o->phases);
+    if (!isfinite(o->transformer_deg))
+        return gs_fail(GS_EINVAL, "Eq. 7 options: transformer_deg=%g: expected a finite angle",
+                       o->transformer_deg);
+    if (!(o->unknown_p >= 0.0 && o->unknown_p < 1.0))
+        return gs_fail(GS_EINVAL, "Eq. 7 options: unknown_p=%g: expected [0, 1)", o->unknown_p);
+    if (!(o->ambiguous_conf >= 0.0 && o->ambiguous_conf <= 1.0))
+        return gs_fail(GS_EINVAL, "Eq. 7 options: ambiguous_conf=%g: expected [0, 1]", o->ambiguous_conf);
+    if (!(o->min_snr >= 0.0 && o->min_snr < 1e6))
+        return gs_fail(GS_EINVAL, "Eq. 7 options: min_snr=%g: expected [0, 1e6)", o->min_snr);
+    if (o->band_gains != 0 && o->band_gains != 1)
+        return gs_fail(GS_EINVAL, "Eq. 7 options: band_gains=%d: expected 0 or 1", o->band_gains);
+    if (!(o->model_error >= 0.0 && o->model_error < 1.0))
+        return gs_fail(GS_EINVAL, "Eq. 7 options: model_error=%g: expected [0, 1)", o->model_error);
+    return GS_OK;
+}
+
+/* Fourier coefficients of bulb b's window means (same algebra as gs_brf_integrate). */
+static gs_status fourier_setup(rec_matcher *m, size_t b)
+{
+    const gs_bulb *bu = &m->bulbs[b];
+    int n = bu->brf.n, K = m->K, bands = m->bands;
+    double complex *C = malloc(sizeof *C * (size_t)(n / 2 + 1));
+    if (!C) return gs_fail(GS_ENOMEM, "Eq. 7: cannot allocate a %d-point spectrum", n);
+    int H = n / 2 - 1;
+    double complex *F = calloc((size_t)bands * (size_t)(H + 1), sizeof *F);
+    if (!F) {
+        free(C);
+        return gs_fail(GS_ENOMEM, "Eq. 7: cannot allocate Fourier templates");
+    }
+    int hmax = 0;
+    for (int band = 0; band < bands; band++) {
+        gs_status s = gs_brf_spectrum(bu->brf.v + (size_t)band * (size_t)n, n, C);
+        if (s != GS_OK) {
+            free(C);
+            free(F);
+            return s;
+        }
+        double q = m->bg ? 1.0 : bu->chroma[band];   /* band gains: each band of mean 1 */
+        F[(size_t)band * (size_t)(H + 1)] = q * creal(C[0]) / n;
+        for (int h = 1; h <= H; h++) {
+            double complex w =
+                (cexp(I * EQ7_TWO_PI * fmod((double)h / K, 1.0)) - 1.0) * K / (I * EQ7_TWO_PI * h);
+            double complex f = 2.0 * q * C[h] * w / n;
+            F[(size_t)band * (size_t)(H + 1) + (size_t)h] = f;
+            if (cabs(f) > 1e-15) hmax = h > hmax ? h : hmax;
+        }
+        m->nyq[b * (size_t)bands + (size_t)band] = q * creal(C[n / 2]) / n;
+    }
+    free(C);
+    /* keep harmonics up to the last non-negligible one (the dropped ones sum to < 1e-12) */
+    if (hmax < H) {
+        double complex *F2 = calloc((size_t)bands * (size_t)(hmax + 1), sizeof *F2);
+        if (!F2) {
+            free(F);
+            return gs_fail(GS_ENOMEM, "Eq. 7: cannot allocate Fourier templates");
+        }
+        for (int band = 0; band < bands; band++)
+            memcpy(F2 + (size_t)band * (size_t)(hmax + 1), F + (size_t)band * (size_t)(H + 1),
+                   sizeof *F2 * (size_t)(hmax + 1));
+        free(F);
+        F = F2;
+        H = hmax;
+    }
+    m->F[b] = F;
+    m->H[b] = H;
+    m->nfine[b] = n;
+    return GS_OK;
+}
+
+/* Exact template of continuous bulb b at shift s and its first two derivatives in s (any of
+ * dt, d2t may be NULL). acc is scratch of 3 * K complex values. */
+void rec_eq7_template_at(const rec_matcher *m, size_t b, double s, double *t, double *dt,
+                        double *d2t, double complex *acc)
+{
+    int K = m->K, H = m->H[b], n = m->nfine[b];
+    s = wrap01(s);
+    double complex *A0 = acc, *A1 = acc + K, *A2 = acc + 2 * K;
+    double complex base = cexp(-I * EQ7_TWO_PI * s);
+    for (int band = 0; band < m->bands; band++) {
+        const double complex *F = m->F[b] + (size_t)band * (size_t)(H + 1);
+        for (int r = 0; r < K; r++) A0[r] = A1[r] = A2[r] = 0.0;
+        double complex e = 1.0;
+        int r = 0;
+        if (dt || d2t) {
+            for (int h = 1; h <= H; h++) {
+                if ((h & 31) == 0) e = cexp(-I * EQ7_TWO_PI * fmod((double)h * s, 1.0));
+                else e *= base;
+                if (++r == K) r = 0;
+                double complex g = F[h] * e;
+                double w = EQ7_TWO_PI * h;
+                A0[r] += g;
+                A1[r] += g * (-I * w);
+                A2[r] += g * (-w * w);
+            }
+        } else {
+            for (int h = 1; h <= H; h++) {
+                if ((h & 31) == 0) e = cexp(-I * EQ7_TWO_PI * fmod((double)h * s, 1.0));
+                else e *= base;
+                if (++r == K) r = 0;
+                A0[r] += F[h] * e;
+            }
+        }
+        double nq = m->nyq[b * (size_t)m->bands + (size_t)band];
+        for (int k = 0; k < K; k++) {
+            double v0 = creal(F[0]), v1 = 0.0, v2 = 0.0;
+            int rk = 0;   /* r k mod K */
+            for (int q = 0; q < K; q++) {
+                double complex wv = m->wk[rk];
+                v0 += creal(A0[q]) * creal(wv) - cimag(A0[q]) * cimag(wv);
+                if (dt || d2t) {
+                    v1 += creal(A1[q]) * creal(wv) - cimag(A1[q]) * cimag(wv);
+                    v2 += creal(A2[q]) * creal(wv) - cimag(A2[q]) * cimag(wv);
+                }
+                rk += k;
+                if (rk >= K) rk -= K;
+            }
+            if (nq != 0.0) {
+                double a = (double)k / K - s, bb = (double)(k + 1) / K - s, pn = M_PI * n;
+                v0 += nq * (sin(pn * bb) - sin(pn * a)) * K / pn;
+                v1 += nq * -(cos(pn * bb) - cos(pn * a)) * K;
+                v2 += nq * -(sin(pn * bb) - sin(pn * a)) * K * pn;
+            }
+            size_t d = (size_t)band * (size_t)K + (size_t)k;
+            t[d] = v0;
+            if (dt) dt[d] = v1;
+            if (d2t) d2t[d] = v2;
+        }
+    }
+}
+
+/* The pixel prefilter: the top-R principal directions E of the unit templates, each template's
+ * coefficients c_j = E t_j and residual rho_j = |t_j - E^T c_j|. R is chosen among
+ * 0, 4, 8, 12, 16, 24, 32 (at most D/3) by a cost model: the prefilter costs 2 (D R + R M)
+ * multiply-adds per row (small SGEMMs run at about half the speed), and the fraction f_R of rows
+ * it cannot reject costs D M more; f_R is measured on 1024 rows of pure unit Gaussian noise
+ * (a dark background) at the matcher's min_snr. No prefilter for D > 192. */
+static gs_status prefilter_setup(rec_matcher *m)
+{
+    int D = m->D;
+    size_t M = m->M;
+    const int NR = M > 1600 ? 128 : 1024;   /* rows of the cost model (~2e6 dot products) */
+    m->pr = 0;
+    if (D > 192 || D < 12) return GS_OK;
+    double *A = malloc(sizeof *A * (size_t)D * (size_t)D), *V = malloc(sizeof *V * (size_t)D * (size_t)D);
+    double *ev = malloc(sizeof *ev * (size_t)D), *rho = malloc(sizeof *rho * M);
+    double *C = malloc(sizeof *C * M * 32), *X = malloc(sizeof *X * (size_t)NR * (size_t)D);
+    int *order = malloc(sizeof *order * (size_t)D);
+    gs_status st = GS_OK;
+    if (!A || !V || !ev || !rho || !C || !X || !order) {
+        st = gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate the pixel prefilter");
+        goto done;
+    }
+    for (int a = 0; a < D; a++)
+        for (int b = a; b < D; b++) {
+            double g = 0.0;
+            for (size_t j = 0; j < M; j++) g += m->tnd[j * (size_t)D + (size_t)a] * m->tnd[j * (size_t)D + (size_t)b];
+            A[a * D + b] = A[b * D + a] = g;
+        }
+    /* eigen-decomposition (LAPACK dsyev): the eigenvectors overwrite A, one per column */
+    if (LAPACKE_dsyev(LAPACK_ROW_MAJOR, 'V', 'U', D, A, D, ev) != 0) {
+        st = gs_fail(GS_ENUMERIC, "Eq. 7 matcher: the templates' Gram matrix has no "
+                     "eigen-decomposition (LAPACK dsyev failed)");
+        goto done;
+    }
+    memcpy(V, A, sizeof *V * (size_t)D * (size_t)D);
+    for (int i = 0; i < D; i++) order[i] = i;
+    for (int i = 0; i < D; i++)   /* selection sort, descending eigenvalues */
+        for (int k = i + 1; k < D; k++)
+            if (ev[order[k]] > ev[order[i]]) {
+                int tmp = order[i];
+                order[i] = order[k];
+                order[k] = tmp;
+            }
+    uint64_t rs = 0x5eed;
+    for (size_t i = 0; i < (size_t)NR * (size_t)D; i++) X[i] = gs_splitmix_normal(&rs);
+    static const int cand_r[] = {4, 8, 12, 16, 24, 32};
+    int R = 0;
+    double best_cost = (double)D * (double)M, lim = m->o.min_snr;
+    for (size_t ci = 0; ci < sizeof cand_r / sizeof *cand_r; ci++) {
+        int r = cand_r[ci];
+        if (r > D / 3) break;
+        for (size_t j = 0; j < M; j++) {
+            const double *t = m->tnd + j * (size_t)D;
+            double cc = 0.0;
+            for (int q = 0; q < r; q++) {
+                double c = 0.0;
+                for (int d = 0; d < D; d++) c += V[d * D + order[q]] * t[d];
+                C[j * 32 + (size_t)q] = c;
+                cc += c * c;
+            }
+            rho[j] = sqrt(cc < 1.0 ? 1.0 - cc : 0.0);
+        }
+        int surv = 0;
+        for (int i = 0; i < NR; i++) {
+            const double *xr = X + (size_t)i * (size_t)D;
+            double y[32], yy = 0.0, ss = 0.0;
+            for (int d = 0; d < D; d++) ss += xr[d] * xr[d];
+            for (int q = 0; q < r; q++) {
+                y[q] = 0.0;
+                for (int d = 0; d < D; d++) y[q] += V[d * D + order[q]] * xr[d];
+                yy += y[q] * y[q];
+            }
+            double xp = sqrt(ss > yy ? ss - yy : 0.0), bound = -INFINITY;
+            for (size_t j = 0; j < M && bound < lim; j++) {
+                double v = rho[j] * xp;
+                for (int q = 0; q < r; q++) v += C[j * 32 + (size_t)q] * y[q];
+                bound = v > bound ? v : bound;
+            }
+            surv += bound >= lim;
+        }
+        double cost = 2.0 * ((double)D * r + (double)r * (double)M) + (double)surv / NR * (double)D * (double)M;
+        if (cost < best_cost) {
+            best_cost = cost;
+            R = r;
+        }
+    }
+    if (R > 0) {
+        m->pe = malloc(sizeof *m->pe * (size_t)R * (size_t)D);
+        m->pc = calloc(m->Mp * (size_t)R, sizeof *m->pc);
+        m->prho = calloc(m->Mp, sizeof *m->prho);
+        if (!m->pe || !m->pc || !m->prho) {
+            st = gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate the pixel prefilter");
+        } else {
+            for (int q = 0; q < R; q++)
+                for (int d = 0; d < D; d++) m->pe[q * D + d] = (float)V[d * D + order[q]];
+            for (size_t j = 0; j < M; j++) {
+                const double *t = m->tnd + j * (size_t)D;
+                double rr = 0.0;
+                double *res = A;   /* scratch: the residual t - E^T c */
+                for (int d = 0; d < D; d++) res[d] = t[d];
+                for (int q = 0; q < R; q++) {
+                    double c = 0.0;
+                    for (int d = 0; d < D; d++) c += V[d * D + order[q]] * t[d];
+                    m->pc[j * (size_t)R + (size_t)q] = (float)c;
+                    for (int d = 0; d < D; d++) res[d] -= c * V[d * D + order[q]];
+                }
+                for (int d = 0; d < D; d++) rr += res[d] * res[d];
+                /* rounded up: the bound must hold for the float basis too */
+                m->prho[j] = (float)(sqrt(rr) * (1.0 + 1e-6) + 1e-7);
+            }
+            m->pr = R;
+        }
+    }
+done:
+    free(A);
+    free(V);
+    free(ev);
+    free(rho);
+    free(C);
+    free(X);
+    free(order);
+    return st;
+}
+
+gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
+                          const rec_eq7_opts *o, rec_matcher **out)
+{
+    if (!out) return gs_fail(GS_EINVAL, "Eq. 7 matcher: out is NULL");
+    *out = NULL;
+    if (!d) return gs_fail(GS_EINVAL, "Eq. 7 matcher: DELIGHT is NULL");
+    if (grid_hz != 50 && grid_hz != 60)
+        return gs_fail(GS_EINVAL, "Eq. 7 matcher: grid_hz=%d: expected 50 or 60", grid_hz);
+    if (bands != 1 && bands != 3)
+        return gs_fail(GS_EINVAL, "Eq. 7 matcher: bands=%d: expected 1 or 3", bands);
+    if (K < 2 || K > 4096)
+        return gs_fail(GS_EINVAL, "Eq. 7 matcher: K=%d: expected 2 <= K <= 4096", K);
+    rec_eq7_opts opts;
+    rec_eq7_opts_default(&opts);
+    if (o) opts = *o;
+    gs_status s = check_opts(&opts);
+    if (s != GS_OK) return s;
+
+    rec_matcher *m = calloc(1, sizeof *m);
+    if (!m) return gs_fail(GS_ENOMEM, "Eq. 7 matcher: out of memory");
+    m->grid_hz = grid_hz;
+    m->bands = bands;
+    m->K = K;
+    m->D = bands * K;
+    m->o = opts;
+    m->G = 8 * K > 96 ? 8 * K : 96;
+    m->bg = opts.band_gains && bands > 1;
+    m->nfit = m->bg ? bands : 1;
+    m->bandpath = bands > 1 && (m->bg || opts.model_error > 0.0);
+    size_t D = (size_t)m->D;
+
+    /* candidate bulbs */
+    size_t nd = gs_delight_count(d), nb = 0;
+    for (size_t i = 0; i < nd; i++) {
+        const gs_bulb *b = gs_delight_get(d, i);
+        if (b->grid_hz == grid_hz && b->brf.bands == bands && b->ref != GS_REF_UNLOCKED) nb++;
+    }
+    if (nb == 0) {
+        rec_matcher_free(m);
+        return gs_fail(GS_ENOTFOUND, "Eq. 7 matcher: no DELIGHT entry at %d Hz with %d band%s "
+                       "(entries not locked to the mains are excluded)", grid_hz, bands,
+                       bands > 1 ? "s" : "");
+    }
+    m->bulbs = calloc(nb, sizeof *m->bulbs);
+    m->cont = calloc(nb, 1);
+    m->first = calloc(nb, sizeof *m->first);
+    m->count = calloc(nb, sizeof *m->count);
+    m->H = calloc(nb, sizeof *m->H);
+    m->F = calloc(nb, sizeof *m->F);
+    m->nyq = calloc(nb * (size_t)bands, sizeof *m->nyq);
+    m->nfine = calloc(nb, sizeof *m->nfine);
+    m->wk = malloc(sizeof *m->wk * (size_t)K);
+    if (!m->bulbs || !m->cont || !m->first || !m->count || !m->H || !m->F || !m->nyq ||
+        !m->nfine || !m->wk) {
+        rec_matcher_free(m);
+        return gs_fail(GS_ENOMEM, "Eq. 7 matcher: out of memory");
+    }
+    for (int j = 0; j < K; j++) m->wk[j] = cexp(I * EQ7_TWO_PI * (double)j / K);
+    for (size_t i = 0; i < nd; i++) {
+        const gs_bulb *b = gs_delight_get(d, i);
+        if (!(b->grid_hz == grid_hz && b->brf.bands == bands && b->ref != GS_REF_UNLOCKED)) continue;
+        gs_bulb *dst = &m->bulbs[m->nb];
+        *dst = *b;
+        dst->brf.v = NULL;
+        s = gs_brf_copy(&dst->brf, &b->brf);
+        if (s != GS_OK) {
+            rec_matcher_free(m);
+            return s;
+        }
+        m->nb++;
+    }
+
+    /* phase set */
+    if (opts.phases == REC_PHASES_CONTINUOUS) {
+        m->np = 0;
+    } else {
+        m->np = opts.phases == REC_PHASES_6 ? 6 : 3;
+        for (int p = 0; p < m->np; p++) {
+            double deg = 120.0 * (p % 3) + (p >= 3 ? opts.transformer_deg : 0.0);
+            deg = fmod(deg, 360.0);
+            if (deg < 0.0) deg += 360.0;
+            m->phase_deg[p] = deg >= 360.0 ? 0.0 : deg;
+        }
+        for (int p = 0; p < m->np; p++)
+            for (int q = 0; q < p; q++)
+                if (circ_dist(gs_phase_to_shift(m->phase_deg[p]), gs_phase_to_shift(m->phase_deg[q])) < 1e-9) {
+                    double dp = m->phase_deg[p], dq = m->phase_deg[q];
+                    rec_matcher_free(m);
+                    return gs_fail(GS_EINVAL, "Eq. 7 matcher: transformer_deg=%g: phase %g deg gives the "
+                                   "same BRF shift as %g deg (expected a shift that is not a multiple of 60 deg)",
+                                   opts.transformer_deg, dp, dq);
+                }
+    }
+    size_t M = 0;
+    for (size_t b = 0; b < m->nb; b++) {
+        m->cont[b] = opts.phases == REC_PHASES_CONTINUOUS || m->bulbs[b].ref == GS_REF_NONE;
+        m->first[b] = M;
+        m->count[b] = m->cont[b] ? (size_t)m->G : (size_t)m->np;
+        M += m->count[b];
+    }
+    if ((double)M * (double)D > 64.0 * 1024 * 1024) {
+        rec_matcher_free(m);
+        return gs_fail(GS_ELIMIT, "Eq. 7 matcher: %zu templates of %zu values exceed 64 Mi values "
+                       "(use fewer bulbs, a smaller K or a discrete phase set)", M, D);
+    }
+    m->M = M;
+    m->t = malloc(sizeof *m->t * M * D);
+    m->tsq = malloc(sizeof *m->tsq * M * D);
+    m->Mp = (M + LANES - 1) / LANES * LANES;
+    m->tn = calloc(m->Mp * D, sizeof *m->tn);
+    m->lnf = malloc(sizeof *m->lnf * m->Mp);
+    m->tnd = malloc(sizeof *m->tnd * M * D);
+    m->lognorm = malloc(sizeof *m->lognorm * M);
+    m->cellw = malloc(sizeof *m->cellw * M);
+    m->shift = malloc(sizeof *m->shift * M);
+    m->tphase = malloc(sizeof *m->tphase * M);
+    m->tbulb = malloc(sizeof *m->tbulb * M);
+    m->tcell = malloc(sizeof *m->tcell * M);
+    m->bnorm = malloc(sizeof *m->bnorm * M * (size_t)bands);
+    m->blog = malloc(sizeof *m->blog * M);
+    m->tbn = malloc(sizeof *m->tbn * M * D);
+    m->tbnf = calloc(m->Mp * D, sizeof *m->tbnf);
+    m->blnf = malloc(sizeof *m->blnf * m->Mp);
+    m->bib = malloc(sizeof *m->bib * m->Mp * (size_t)bands);
+    m->bib2 = malloc(sizeof *m->bib2 * m->Mp * (size_t)bands);
+    double *raw = malloc(sizeof *raw * D);
+    double complex *acc = malloc(sizeof *acc * 3 * (size_t)K);
+    if (!m->t || !m->tsq || !m->tn || !m->lnf || !m->tnd || !m->lognorm || !m->cellw || !m->shift || !m->tphase ||
+        !m->tbulb || !m->tcell || !m->bnorm || !m->blog || !m->tbn || !m->tbnf || !m->blnf || !m->bib || !m->bib2 || !raw ||
+        !acc) {
+        free(raw);
+        free(acc);
+        rec_matcher_free(m);
+        return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate %zu templates", M);
+    }
+    for (size_t b = 0; b < m->nb; b++) {
+        const gs_bulb *bu = &m->bulbs[b];
+        if (m->cont[b]) {
+            s = fourier_setup(m, b);
+            if (s != GS_OK) {
+                free(raw);
+                free(acc);
+                rec_matcher_free(m);
+                return s;
+            }
+        }
+        for (size_t c = 0; c < m->count[b]; c++) {
+            size_t j = m->first[b] + c;
+            double sh, ph;
+            if (m->cont[b]) {
+                sh = (double)c / m->G;
+                ph = bu->ref == GS_REF_NONE ? 0.0 : gs_shift_to_phase(sh);
+                m->cellw[j] = 1.0 / m->G;
+            } else {
+                ph = m->phase_deg[c];
+                sh = gs_phase_to_shift(ph);
+                m->cellw[j] = 1.0 / m->np;
+            }
+            if (m->cont[b]) {
+                /* the grid of a continuous bulb from its Fourier series (the same exact Eq. 5
+                 * window means as gs_brf_integrate, ~100x cheaper per shift; chroma included) */
+                rec_eq7_template_at(m, b, sh, raw, NULL, NULL, acc);
+            } else {
+                s = gs_brf_integrate(&bu->brf, sh, K, raw);
+                if (s != GS_OK) {
+                    free(raw);
+                    free(acc);
+                    rec_matcher_free(m);
+                    return s;
+                }
+                if (!m->bg)   /* band gains: each band keeps its mean of 1 */
+                    for (int band = 0; band < bands; band++)
+                        for (int k = 0; k < K; k++) raw[band * K + k] *= bu->chroma[band];
+            }
+            double n2 = 0.0;
+            for (int band = 0; band < bands; band++)
+                for (int k = 0; k < K; k++) {
+                    size_t dd = (size_t)band * (size_t)K + (size_t)k;
+                    double v = raw[dd];
+                    m->t[j * D + dd] = v;
+                    m->tsq[j * D + dd] = v * v;
+                    n2 += v * v;
+                }
+            if (!(n2 > 0.0) || !isfinite(n2)) {
+                s = gs_fail(GS_ENUMERIC, "Eq. 7 matcher: bulb %s has an all-zero or non-finite "
+                            "template", bu->id);
+                free(raw);
+                free(acc);
+                rec_matcher_free(m);
+                return s;
+            }
+            double inv = 1.0 / sqrt(n2);
+            for (size_t dd = 0; dd < D; dd++) {
+                m->tnd[j * D + dd] = m->t[j * D + dd] * inv;
+                m->tn[j * D + dd] = (float)m->tnd[j * D + dd];
+            }
+            /* per band: norms, unit templates; with band gains the dim test (and the prefilter)
+             * uses the unit vector of the summed brightness, sum_b t_b / |t_b|^2 */
+            m->blog[j] = 0.0;
+            double vv = 0.0;
+            for (int band = 0; band < bands; band++) {
+                double nb2 = 0.0;
+                for (int k = 0; k < K; k++) nb2 += raw[band * K + k] * raw[band * K + k];
+                double bn = sqrt(nb2);
+                if (!(bn > 0.0) || !isfinite(bn)) {
+                    s = gs_fail(GS_ENUMERIC, "Eq. 7 matcher: bulb %s has an all-zero band %d", bu->id, band);
+                    free(raw);
+                    free(acc);
+                    rec_matcher_free(m);
+                    return s;
+                }
+                m->bnorm[j * (size_t)bands + (size_t)band] = bn;
+                m->blog[j] += log(bn);
+                for (int k = 0; k < K; k++) {
+                    size_t dd = (size_t)band * (size_t)K + (size_t)k;
+                    m->tbn[j * D + dd] = raw[dd] / bn;
+                    m->tbnf[j * D + dd] = (float)m->tbn[j * D + dd];
+                    vv += raw[dd] * raw[dd] / (nb2 * nb2);
+                }
+            }
+            if (m->bg) {
+                double iv = 1.0 / sqrt(vv);
+                for (int band = 0; band < bands; band++) {
+                    double bn = m->bnorm[j * (size_t)bands + (size_t)band];
+                    for (int k = 0; k < K; k++) {
+                        size_t dd = (size_t)band * (size_t)K + (size_t)k;
+                        m->tnd[j * D + dd] = raw[dd] / (bn * bn) * iv;
+                        m->tn[j * D + dd] = (float)m->tnd[j * D + dd];
+                    }
+                }
+            }
+            m->lognorm[j] = 0.5 * log(n2);
+            m->shift[j] = sh;
+            m->tphase[j] = ph;
+            m->tbulb[j] = (int)b;
+            m->tcell[j] = (int)c;
+        }
+    }
+    free(raw);
+    free(acc);
+    for (size_t j = 0; j < m->Mp; j++) {
+        m->lnf[j] = j < M ? (float)m->lognorm[j] : 1e30f;
+        m->blnf[j] = j < M ? (float)m->blog[j] : 1e30f;
+        for (int band = 0; band < bands; band++) {
+            double bn = j < M ? m->bnorm[j * (size_t)bands + (size_t)band] : 0.0;
+            m->bib[(size_t)band * m->Mp + j] = j < M ? (float)(1.0 / bn) : 0.0f;
+            m->bib2[(size_t)band * m->Mp + j] = j < M ? (float)(1.0 / (bn * bn)) : 1.0f;
+        }
+    }
+    for (size_t b = 0; b < m->nb; b++) m->ncont += m->cont[b];
+    /* the prefilter bounds x . tnd_j; that bounds the dim statistic of the one-gain model with
+     * one sigma per row, and of the band-gain model with any per-band sigma >= the row's (its
+     * unit vector is tnd_j), but not of one gain with per-band sigmas: no prefilter then */
+    s = (m->bandpath && !m->bg) ? GS_OK : prefilter_setup(m);
+    if (s != GS_OK) {
+        rec_matcher_free(m);
+        return s;
+    }
+    int thr_dof = m->D - m->nfit - 1;
+    m->chi2_thr = thr_dof >= 1 && opts.unknown_p > 0.0 ? gs_chi2_isf(opts.unknown_p, thr_dof) : INFINITY;
+    int nt = 2 * (int)LOGPHI_ZMAX * LOGPHI_STEPS + 1;
+    for (int i = 0; i < nt; i++) m->logphi_tab[i] = gs_log_phi(-LOGPHI_ZMAX + (double)i / LOGPHI_STEPS);
+    m->logphi_tab[nt] = m->logphi_tab[nt - 1];
+    *out = m;
+    return GS_OK;
+}
+
+/* log Phi(z) from the matcher's table (error < 4e-5), for the pixel path. */
+double rec_eq7_log_phi_fast(const rec_matcher *m, double z)
+{
+    if (z >= LOGPHI_ZMAX) return 0.0;
+    if (z <= -LOGPHI_ZMAX) return gs_log_phi(z);
+    double u = (z + LOGPHI_ZMAX) * LOGPHI_STEPS;
+    int i = (int)u;
+    double f = u - i;
+    return m->logphi_tab[i] + f * (m->logphi_tab[i + 1] - m->logphi_tab[i]);
+}

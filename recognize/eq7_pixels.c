@@ -1,0 +1,583 @@
+/* eq7_pixels.c - Eq. 7 per pixel (rec_match_pixels): the scores as SGEMM blocks of rows after
+ * the rigorous dark-row prefilter, per band with band gains or a model error (docs/recognition.md). */
+#include "recognize/internal.h"
+
+#include <cblas.h>
+#include <float.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* ------------------------------------------------------------ pixels */
+
+/* Sum of squares of n floats in double, 8 partial sums (the chain would be latency bound). */
+static double sumsq_f(const float *x, size_t n)
+{
+    double a[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+    size_t i = 0;
+    for (; i + 8 <= n; i += 8)
+        for (int k = 0; k < 8; k++) a[k] += (double)x[i + k] * (double)x[i + k];
+    for (; i < n; i++) a[0] += (double)x[i] * (double)x[i];
+    return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
+}
+
+static double dot_fd(const float *x, const double *t, size_t n)
+{
+    double a[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+    size_t i = 0;
+    for (; i + 8 <= n; i += 8)
+        for (int k = 0; k < 8; k++) a[k] += (double)x[i + k] * t[i + k];
+    for (; i < n; i++) a[0] += (double)x[i] * t[i];
+    return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
+}
+
+static double dot_dd(const double *x, const double *t, size_t n)
+{
+    double a[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+    size_t i = 0;
+    for (; i + 8 <= n; i += 8)
+        for (int k = 0; k < 8; k++) a[k] += x[i + k] * t[i + k];
+    for (; i < n; i++) a[0] += x[i] * t[i];
+    return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
+}
+
+/* max_j (sh_j + rho_j xp) over n (a multiple of LANES) prefilter scores. */
+static float row_bound_perp(const float *sh, const float *rho, float xp, size_t n)
+{
+    float mx[LANES];
+    for (int q = 0; q < LANES; q++) mx[q] = -FLT_MAX;
+    for (size_t j = 0; j < n; j += LANES)
+        for (int q = 0; q < LANES; q++) {
+            float v = sh[j + q] + rho[j + q] * xp;
+            mx[q] = v > mx[q] ? v : mx[q];
+        }
+    float r = mx[0];
+    for (int q = 1; q < LANES; q++) r = mx[q] > r ? mx[q] : r;
+    return r;
+}
+
+/* For every continuous-phase bulb among the candidates, the grid cell of highest likelihood
+ * (w->peak_cell, w->has_peak), where the sub-cell refinement starts. */
+static void continuous_peaks(const rec_matcher *m, rec_eq7_work *w)
+{
+    for (size_t b = 0; b < m->nb; b++) w->has_peak[b] = 0;
+    for (size_t ci = 0; ci < w->ncand; ci++) {
+        size_t j = w->cand[ci];
+        size_t b = (size_t)m->tbulb[j];
+        if (!m->cont[b]) continue;
+        if (!w->has_peak[b] || w->L[j] > w->L[w->peak_cell[b]]) {
+            w->has_peak[b] = 1;
+            w->peak_cell[b] = j;
+        }
+    }
+}
+
+/* Pixel log likelihood (as rec_eq7_loglik() with T = |t|^2 / sigma^2, up to a row constant) from the
+ * normalised score z = x.t/(|t| sigma); Sxx = |x|^2 / sigma^2. */
+static double pix_L(const rec_matcher *m, size_t j, double z, double Sxx)
+{
+    return -0.5 * (Sxx - z * z) - m->lognorm[j] + rec_eq7_log_phi_fast(m, z);
+}
+
+/* The largest of n floats (n a multiple of LANES), in LANES partial maxima; NaN-safe in the
+ * sense that a row of NaN scores gives NaN. */
+static float row_max(const float *s, size_t n)
+{
+    float mx[LANES];
+    for (int q = 0; q < LANES; q++) mx[q] = s[q];
+    for (size_t j = LANES; j < n; j += LANES)
+        for (int q = 0; q < LANES; q++) mx[q] = s[j + q] > mx[q] ? s[j + q] : mx[q];
+    float r = mx[0];
+    for (int q = 1; q < LANES; q++) r = mx[q] > r ? mx[q] : r;
+    return r;
+}
+
+/* u[j] = max(s_j, 0)^2 hf - lnf[j] (the bound U_j in float) for n scores; returns max u. */
+static float row_bounds(const float *s, const float *lnf, float hf, float *u, size_t n)
+{
+    float mx[LANES];
+    for (int q = 0; q < LANES; q++) mx[q] = -FLT_MAX;
+    for (size_t j = 0; j < n; j += LANES)
+        for (int q = 0; q < LANES; q++) {
+            float v = s[j + q] > 0.0f ? s[j + q] : 0.0f;
+            float uu = v * v * hf - lnf[j + q];
+            u[j + q] = uu;
+            mx[q] = uu > mx[q] ? uu : mx[q];
+        }
+    float r = mx[0];
+    for (int q = 1; q < LANES; q++) r = mx[q] > r ? mx[q] : r;
+    return r;
+}
+
+/* A float phase in [0, 360) (a double just below 360 rounds up to 360.0f). */
+static float phase_f(double deg)
+{
+    float f = (float)deg;
+    return f >= 360.0f ? 0.0f : f;
+}
+
+/* Scratch of the pixel path. */
+typedef struct {
+    rec_eq7_work w;
+    float *sc;       /* [B * Mp] full scores of a block of surviving rows */
+    float *xs;       /* [B * D] surviving rows, gathered */
+    size_t *rows;    /* [B] their row indices */
+    float *y, *sh;   /* [B * r], [B * Mp] prefilter projections and approximate scores */
+    float *ub;       /* [Mp] bounds of one row */
+    double *zz;      /* [M] normalised scores of one row (band path: brightness / its std) */
+    double *gg;      /* [M] band path: Sxx - chi2 of the constrained fit */
+    double *xd;      /* [D] one row in double */
+} pix_work;
+
+static void pix_free(pix_work *p)
+{
+    rec_eq7_work_free(&p->w);
+    free(p->sc);
+    free(p->xs);
+    free(p->rows);
+    free(p->y);
+    free(p->sh);
+    free(p->ub);
+    free(p->zz);
+    free(p->gg);
+    free(p->xd);
+}
+
+/* The answer for one surviving row: x row xr, its full float scores srow, noise sigma sg. */
+static void pixel_row(const rec_matcher *m, pix_work *pw, const float *xr, const float *srow,
+                      double sg, int *bulb_out, float *phase_out, float *conf_out)
+{
+    size_t D = (size_t)m->D, M = m->M, Mp = m->Mp;
+    rec_eq7_work *w = &pw->w;
+    double *zz = pw->zz, *xd = pw->xd;
+    float *ub = pw->ub;
+    const double min_snr = m->o.min_snr;
+    /* early out: every template too dim; a row with a NaN has NaN scores and stops here too */
+    float smax = row_max(srow, Mp);
+    if (!((double)smax >= min_snr * sg) || !(smax > 0.0f)) return;
+    double ss = sumsq_f(xr, D);
+    if (!isfinite(ss)) return;
+    double inv = 1.0 / sg, Sxx = ss * inv * inv;
+    /* bounds U_j >= L_j + Sxx/2 (log Phi <= 0) from the float scores */
+    float umax = row_bounds(srow, m->lnf, (float)(0.5 * inv * inv), ub, Mp);
+    size_t ju = 0;
+    while (ju + 1 < M && ub[ju] != umax) ju++;
+    /* error of z^2/2 from the float scores (float dot products, templates rounded to float,
+     * the float bound itself): at most 8.9e-7 Sxx measured over 3e7 scores of the generated
+     * DELIGHT (K = 26, RGB); FLOAT_ERR allows twice that. Above 1e-3 nats the candidates are
+     * rescored in double, so the posterior does not depend on float rounding. */
+    double err = FLOAT_ERR * Sxx + 1e-6;
+    int exact = err > 1e-3;
+    if (exact)
+        for (size_t d = 0; d < D; d++) xd[d] = xr[d];
+    double zu = exact ? dot_dd(xd, m->tnd + ju * D, D) * inv : srow[ju] * inv;
+    /* candidates: the templates whose bound reaches within CUT_PIXEL of a template's L */
+    double thr = pix_L(m, ju, zu, Sxx) + 0.5 * Sxx - CUT_PIXEL - 2.0 * err;
+    w->ncand = 0;
+    for (size_t j = 0; j < M; j++)
+        if ((double)ub[j] + err >= thr) rec_eq7_add_cand(m, w, j);
+    if (exact && w->ncand > M / 4) {   /* many: one matrix-vector product for all templates */
+        cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, (int)D, inv, m->tnd, (int)D, xd, 1, 0.0, zz, 1);
+    } else {
+        for (size_t ci = 0; ci < w->ncand; ci++) {
+            size_t j = w->cand[ci];
+            zz[j] = exact ? dot_dd(xd, m->tnd + j * D, D) * inv : srow[j] * inv;
+        }
+    }
+    double Lmax = -INFINITY;
+    for (size_t ci = 0; ci < w->ncand; ci++) {
+        size_t j = w->cand[ci];
+        w->L[j] = pix_L(m, j, zz[j], Sxx);
+        if (w->L[j] > Lmax) Lmax = w->L[j];
+    }
+    /* continuous bulbs: refine around their best candidate cell */
+    if (m->ncont) {
+        continuous_peaks(m, w);
+        int wset = 0;
+        /* the leading continuous bulb (by its best cell) */
+        size_t lead = m->nb;
+        for (size_t b = 0; b < m->nb; b++)
+            if (m->cont[b] && w->has_peak[b] && (lead == m->nb || w->L[w->peak_cell[b]] > w->L[w->peak_cell[lead]]))
+                lead = b;
+        for (size_t b = 0; b < m->nb; b++) {
+            if (!m->cont[b] || !w->has_peak[b]) continue;
+            size_t j0 = w->peak_cell[b], G = (size_t)m->G, c0 = (size_t)m->tcell[j0];
+            size_t jm = m->first[b] + (c0 + G - 1) % G, jp = m->first[b] + (c0 + 1) % G;
+            if (Sxx > 1e4 && (b == lead || w->L[j0] >= Lmax - 2.0)) {
+                /* bright: a parabola through the grid is not exact enough for the chi-square
+                 * test, so refine on the exact templates as for one light (weights 1) */
+                if (!wset) {
+                    for (size_t d = 0; d < D; d++) {
+                        w->xs[d] = w->wx[d] = xr[d] * inv;
+                        w->w[d] = 1.0;
+                    }
+                    wset = 1;
+                }
+                size_t js[3] = {jm, j0, jp};
+                for (int q = 0; q < 3; q++) {
+                    w->S[js[q]] = dot_fd(xr, m->t + js[q] * D, D) * inv;
+                    w->T[js[q]] = exp(2.0 * m->lognorm[js[q]]);
+                }
+                rec_eq7_refine_peak(m, w, b, j0, Sxx);
+                zz[j0] = w->peak_z[b];
+                if (w->peak_L[b] > Lmax) Lmax = w->peak_L[b];
+                continue;
+            }
+            double zm = exact ? dot_fd(xr, m->tnd + jm * D, D) * inv : srow[jm] * inv;
+            double zp = exact ? dot_fd(xr, m->tnd + jp * D, D) * inv : srow[jp] * inv;
+            double q0 = zz[j0] > 0 ? zz[j0] * zz[j0] : 0, qm = zm > 0 ? zm * zm : 0,
+                   qp = zp > 0 ? zp * zp : 0;
+            double cell = 1.0 / m->G, den = qm - 2.0 * q0 + qp, u = 0.0, qpk = q0, sig = INV_SQRT12;
+            if (den < 0.0) {
+                u = 0.5 * cell * (qm - qp) / den;
+                if (u < -cell) u = -cell;
+                if (u > cell) u = cell;
+                qpk = q0 - (qp - qm) * (qp - qm) / (8.0 * den);
+                sig = cell * sqrt(-2.0 / den);
+                if (!(sig < INV_SQRT12)) sig = INV_SQRT12;
+            }
+            double zpk = sqrt(qpk > q0 ? qpk : q0);
+            w->peak_s[b] = wrap01((double)c0 / m->G + u);
+            w->peak_L[b] = pix_L(m, j0, zpk, Sxx);
+            if (w->peak_L[b] < w->L[j0]) w->peak_L[b] = w->L[j0];
+            w->peak_sig[b] = sig;
+            if (w->peak_L[b] > Lmax) Lmax = w->peak_L[b];
+            zz[j0] = zpk;   /* the z of the refined fit, for the dim and unknown tests */
+        }
+    }
+    rec_eq7_decision dec;
+    rec_eq7_decide(m, w, Lmax, &dec);
+    if (dec.bulb < 0) return;
+    double zb = zz[dec.tmpl];
+    if (!(zb >= min_snr)) return;                                    /* dim */
+    if (Sxx - zb * zb > m->chi2_thr) return;                          /* unknown */
+    *bulb_out = dec.bulb;
+    if (phase_out) *phase_out = phase_f(rec_eq7_report_phase(m, dec.bulb, dec.tmpl, dec.shift));
+    if (conf_out) *conf_out = (float)dec.conf;
+}
+
+/* Band path of one template: p[b] = x_b . u_jb (u_jb the unit template of band b), var[b] the
+ * band's noise variance (the row's sigma^2 plus model error). Returns the log likelihood up to a
+ * row constant; *gain = Sxx - chi2 of the constrained fit, *snr = brightness / its std. */
+static double band_terms(const rec_matcher *m, size_t j, const double *p, const double *var,
+                         double Sxx, double *gain, double *snr)
+{
+    int nb = m->bands;
+    const double *bn = m->bnorm + j * (size_t)nb;
+    if (m->bg) {
+        double L = 0.0, zz = 0.0, g = 0.0, num = 0.0, den = 0.0;
+        for (int b = 0; b < nb; b++) {
+            double z = p[b] * (1.0 / sqrt(var[b]));
+            L += rec_eq7_log_phi_fast(m, z);
+            zz += z * z;
+            g += z > 0.0 ? z * z : 0.0;
+            num += p[b] / bn[b];                 /* a_b = x_b . t_b / |t_b|^2 */
+            den += var[b] / (bn[b] * bn[b]);     /* var(a_b) */
+        }
+        *gain = g;
+        *snr = num / sqrt(den);
+        return L - 0.5 * (Sxx - zz) - m->blog[j];
+    }
+    double S = 0.0, T = 0.0;
+    for (int b = 0; b < nb; b++) {
+        S += p[b] * bn[b] / var[b];
+        T += bn[b] * bn[b] / var[b];
+    }
+    double z = S / sqrt(T);
+    *gain = z > 0.0 ? z * z : 0.0;
+    *snr = z;
+    return -0.5 * (Sxx - z * z) - 0.5 * log(T) + rec_eq7_log_phi_fast(m, z);
+}
+
+/* rec_match_pixels for matchers with per-band brightness or model error (m->bandpath): srow
+ * holds the row's float scores per band (bands blocks of Mp). The same rec_eq7_decision as pixel_row,
+ * with the band model of rec_eq7_match_light_ws (per-band sigma^2 = sg^2 + (model_error mu_b)^2). */
+static void pixel_row_band(const rec_matcher *m, pix_work *pw, const float *xr, const float *srow,
+                           double sg, int *bulb_out, float *phase_out, float *conf_out)
+{
+    size_t D = (size_t)m->D, M = m->M, Mp = m->Mp, K = (size_t)m->K;
+    int nb = m->bands;
+    rec_eq7_work *w = &pw->w;
+    double *zz = pw->zz, *gg = pw->gg, *xd = pw->xd;
+    float *ub = pw->ub;
+    const double min_snr = m->o.min_snr, fe = m->o.model_error;
+    double var[GS_MAX_BANDS], inv[GS_MAX_BANDS], Sxx = 0.0;
+    for (int b = 0; b < nb; b++) {
+        const float *xb = xr + (size_t)b * K;
+        double ssb = sumsq_f(xb, K), ms = ssb / (double)K - sg * sg;   /* RMS signal level^2 */
+        double mu2 = ms > 0.0 ? fe * fe * ms : 0.0;
+        var[b] = sg * sg + mu2;
+        inv[b] = 1.0 / sqrt(var[b]);
+        Sxx += ssb / var[b];
+    }
+    if (!isfinite(Sxx)) return;
+    /* the dim test and upper bounds U_j >= L_j + Sxx/2 from the float scores */
+    double smax = -INFINITY;
+    float umax = -FLT_MAX;
+    size_t ju = 0;
+    double p[GS_MAX_BANDS];
+    if (m->bg) {
+        /* in float, 16 lanes (vectorised): the bound and snr^2 sign-kept (num |num| / den) */
+        float fi[GS_MAX_BANDS], fv[GS_MAX_BANDS];
+        for (int b = 0; b < nb; b++) {
+            fi[b] = (float)inv[b];
+            fv[b] = (float)var[b];
+        }
+        float mxs[LANES];
+        for (int q = 0; q < LANES; q++) mxs[q] = -FLT_MAX;
+        for (size_t j0 = 0; j0 < Mp; j0 += LANES) {
+            float num[LANES], den[LANES], uu[LANES];
+            for (int q = 0; q < LANES; q++) {
+                num[q] = 0.0f;
+                den[q] = 0.0f;
+                uu[q] = -m->blnf[j0 + (size_t)q];
+            }
+            for (int b = 0; b < nb; b++) {
+                const float *sb = srow + (size_t)b * Mp + j0, *ib = m->bib + (size_t)b * Mp + j0,
+                            *ib2 = m->bib2 + (size_t)b * Mp + j0;
+                for (int q = 0; q < LANES; q++) {
+                    float z = sb[q] * fi[b], zp = z > 0.0f ? z : 0.0f;
+                    uu[q] += 0.5f * zp * zp;
+                    num[q] += sb[q] * ib[q];
+                    den[q] += fv[b] * ib2[q];
+                }
+            }
+            for (int q = 0; q < LANES; q++) {
+                ub[j0 + (size_t)q] = uu[q];
+                float s2 = num[q] * (num[q] > 0.0f ? num[q] : -num[q]) / den[q];
+                mxs[q] = s2 > mxs[q] ? s2 : mxs[q];
+            }
+        }
+        float s2max = mxs[0];
+        for (int q = 1; q < LANES; q++) s2max = mxs[q] > s2max ? mxs[q] : s2max;
+        smax = s2max > 0.0f ? sqrt((double)s2max) * (1.0 + 1e-5) : 0.0;   /* float slack */
+        umax = row_max(ub, Mp);
+        while (ju + 1 < M && ub[ju] != umax) ju++;
+    } else {
+        /* one gain with per-band sigmas: exact terms for every template (no bound needed) */
+        for (size_t j = 0; j < M; j++) {
+            for (int b = 0; b < nb; b++) p[b] = srow[(size_t)b * Mp + j];
+            double g, sn;
+            double L = band_terms(m, j, p, var, Sxx, &g, &sn);
+            ub[j] = (float)(L + 0.5 * Sxx + 1e-3 * (1.0 + fabs(L + 0.5 * Sxx)));
+            if (ub[j] > umax) {
+                umax = ub[j];
+                ju = j;
+            }
+            if (sn > smax) smax = sn;
+        }
+    }
+    if (!(smax >= min_snr) || !(smax > 0.0)) return;   /* every template too dim (or NaN) */
+    double err = FLOAT_ERR * Sxx + 1e-6;
+    int exact = err > 1e-3;
+    if (exact)
+        for (size_t d = 0; d < D; d++) xd[d] = xr[d];
+    if (exact)
+        for (int b = 0; b < nb; b++) p[b] = dot_dd(xd + (size_t)b * K, m->tbn + ju * D + (size_t)b * K, K);
+    else
+        for (int b = 0; b < nb; b++) p[b] = srow[(size_t)b * Mp + ju];
+    double g0, s0;
+    double thr = band_terms(m, ju, p, var, Sxx, &g0, &s0) + 0.5 * Sxx - CUT_PIXEL - 2.0 * err;
+    w->ncand = 0;
+    for (size_t j = 0; j < M; j++)
+        if ((double)ub[j] + err >= thr) rec_eq7_add_cand(m, w, j);
+    double Lmax = -INFINITY;
+    for (size_t ci = 0; ci < w->ncand; ci++) {
+        size_t j = w->cand[ci];
+        if (exact)
+            for (int b = 0; b < nb; b++) p[b] = dot_dd(xd + (size_t)b * K, m->tbn + j * D + (size_t)b * K, K);
+        else
+            for (int b = 0; b < nb; b++) p[b] = srow[(size_t)b * Mp + j];
+        w->L[j] = band_terms(m, j, p, var, Sxx, &gg[j], &zz[j]);
+        if (w->L[j] > Lmax) Lmax = w->L[j];
+    }
+    if (m->ncont) {
+        continuous_peaks(m, w);
+        size_t lead = m->nb;
+        for (size_t b = 0; b < m->nb; b++)
+            if (m->cont[b] && w->has_peak[b] && (lead == m->nb || w->L[w->peak_cell[b]] > w->L[w->peak_cell[lead]]))
+                lead = b;
+        int wset = 0;
+        for (size_t b = 0; b < m->nb; b++) {
+            if (!m->cont[b] || !w->has_peak[b]) continue;
+            size_t j0 = w->peak_cell[b], G = (size_t)m->G, c0 = (size_t)m->tcell[j0];
+            size_t jm = m->first[b] + (c0 + G - 1) % G, jp = m->first[b] + (c0 + 1) % G;
+            if (Sxx > 1e4 && (b == lead || w->L[j0] >= Lmax - 2.0)) {
+                /* bright: Newton on the exact templates, as for one light. Band gains: each band
+                 * scaled to unit noise (the scale is absorbed by a_b, and T_b = |t_b|^2 matches
+                 * band_terms); one gain: weights 1/var_b */
+                if (!wset) {
+                    for (size_t d = 0; d < D; d++) {
+                        double iv = inv[d / K];
+                        if (m->bg) {
+                            w->xs[d] = w->wx[d] = xr[d] * iv;
+                            w->w[d] = 1.0;
+                        } else {
+                            w->xs[d] = xr[d];
+                            w->w[d] = iv * iv;
+                            w->wx[d] = w->w[d] * xr[d];
+                        }
+                    }
+                    wset = 1;
+                }
+                size_t js[3] = {jm, j0, jp};
+                for (int q = 0; q < 3; q++) {
+                    const double *tj = m->t + js[q] * D;
+                    if (m->bg) {
+                        for (int band = 0; band < nb; band++) {
+                            w->S[(size_t)band * M + js[q]] = dot_fd(xr + (size_t)band * K, tj + (size_t)band * K, K) * inv[band];
+                            double bnv = m->bnorm[js[q] * (size_t)nb + (size_t)band];
+                            w->T[(size_t)band * M + js[q]] = bnv * bnv;
+                        }
+                    } else {
+                        double S = 0.0, T = 0.0;
+                        for (int band = 0; band < nb; band++) {
+                            double bnv = m->bnorm[js[q] * (size_t)nb + (size_t)band];
+                            S += dot_fd(xr + (size_t)band * K, tj + (size_t)band * K, K) / var[band];
+                            T += bnv * bnv / var[band];
+                        }
+                        w->S[js[q]] = S;
+                        w->T[js[q]] = T;
+                    }
+                }
+                rec_eq7_refine_peak(m, w, b, j0, Sxx);
+                zz[j0] = w->peak_z[b];
+                gg[j0] = w->peak_gain[b];
+                if (w->peak_L[b] > Lmax) Lmax = w->peak_L[b];
+                continue;
+            }
+            /* parabola through the grid's fit gains */
+            double gm, gp, sm, sp;
+            for (int q = 0; q < 2; q++) {
+                size_t jj = q ? jp : jm;
+                if (exact)
+                    for (int band = 0; band < nb; band++)
+                        p[band] = dot_dd(xd + (size_t)band * K, m->tbn + jj * D + (size_t)band * K, K);
+                else
+                    for (int band = 0; band < nb; band++) p[band] = srow[(size_t)band * Mp + jj];
+                band_terms(m, jj, p, var, Sxx, q ? &gp : &gm, q ? &sp : &sm);
+            }
+            double q0 = gg[j0], cell = 1.0 / m->G, den = gm - 2.0 * q0 + gp, u = 0.0, qpk = q0,
+                   sig = INV_SQRT12;
+            if (den < 0.0) {
+                u = 0.5 * cell * (gm - gp) / den;
+                if (u < -cell) u = -cell;
+                if (u > cell) u = cell;
+                qpk = q0 - (gp - gm) * (gp - gm) / (8.0 * den);
+                sig = cell * sqrt(-2.0 / den);
+                if (!(sig < INV_SQRT12)) sig = INV_SQRT12;
+            }
+            if (qpk < q0) qpk = q0;
+            w->peak_s[b] = wrap01((double)c0 / m->G + u);
+            w->peak_L[b] = w->L[j0] + 0.5 * (qpk - q0);
+            w->peak_sig[b] = sig;
+            if (w->peak_L[b] > Lmax) Lmax = w->peak_L[b];
+            gg[j0] = qpk;
+        }
+    }
+    rec_eq7_decision dec;
+    rec_eq7_decide(m, w, Lmax, &dec);
+    if (dec.bulb < 0) return;
+    if (!(zz[dec.tmpl] >= min_snr)) return;                          /* dim */
+    if (Sxx - gg[dec.tmpl] > m->chi2_thr) return;                    /* unknown */
+    *bulb_out = dec.bulb;
+    if (phase_out) *phase_out = phase_f(rec_eq7_report_phase(m, dec.bulb, dec.tmpl, dec.shift));
+    if (conf_out) *conf_out = (float)dec.conf;
+}
+
+gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *noise_sigma,
+                           size_t P, int *bulb, float *phase_deg, float *confidence)
+{
+    if (!m || (P > 0 && (!x || !noise_sigma || !bulb)))
+        return gs_fail(GS_EINVAL, "Eq. 7 pixels: matcher, x, noise_sigma and bulb must not be NULL");
+    if (P == 0) return GS_OK;
+    size_t D = (size_t)m->D, Mp = m->Mp, R = (size_t)m->pr;
+    size_t B = P < PIX_BLOCK ? P : PIX_BLOCK;
+    pix_work pw;
+    memset(&pw, 0, sizeof pw);
+    gs_status st = rec_eq7_work_alloc(m, &pw.w);
+    if (st != GS_OK) return st;
+    size_t nsc = m->bandpath ? (size_t)m->bands : 1;   /* score blocks: one per band */
+    pw.sc = malloc(sizeof *pw.sc * B * Mp * nsc);
+    pw.xs = malloc(sizeof *pw.xs * B * D);
+    pw.rows = malloc(sizeof *pw.rows * B);
+    pw.y = malloc(sizeof *pw.y * B * (R ? R : 1));
+    pw.sh = malloc(sizeof *pw.sh * B * Mp);
+    pw.ub = malloc(sizeof *pw.ub * Mp);
+    pw.zz = malloc(sizeof *pw.zz * m->M);
+    pw.gg = malloc(sizeof *pw.gg * m->M);
+    pw.xd = malloc(sizeof *pw.xd * D);
+    if (!pw.sc || !pw.xs || !pw.rows || !pw.y || !pw.sh || !pw.ub || !pw.zz || !pw.gg || !pw.xd) {
+        pix_free(&pw);
+        return gs_fail(GS_ENOMEM, "Eq. 7 pixels: cannot allocate a %zu x %zu score block", B, Mp);
+    }
+    const double min_snr = m->o.min_snr;
+    for (size_t r0 = 0; r0 < P; r0 += B) {
+        size_t nr = P - r0 < B ? P - r0 : B;
+        const float *xb = x + r0 * D;
+        for (size_t i = 0; i < nr; i++) {
+            bulb[r0 + i] = -1;
+            if (phase_deg) phase_deg[r0 + i] = 0.0f;
+            if (confidence) confidence[r0 + i] = 0.0f;
+        }
+        /* Prefilter (when the templates are close to an R-dimensional subspace E): with
+         * y = E x, x_perp = x - E^T y and t_j = E^T c_j + r_j, |r_j| = rho_j,
+         *   x . t_j <= c_j . y + rho_j |x_perp|,
+         * so a row whose bound stays below min_snr sigma is dim for every template (exactly as
+         * the full test would find) and needs no full scores. */
+        size_t ns = 0;
+        if (R) {
+            cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)nr, (int)R, (int)D, 1.0f, xb,
+                        (int)D, m->pe, (int)D, 0.0f, pw.y, (int)R);
+            cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)nr, (int)Mp, (int)R, 1.0f, pw.y,
+                        (int)R, m->pc, (int)R, 0.0f, pw.sh, (int)Mp);
+        }
+        for (size_t i = 0; i < nr; i++) {
+            double sg = noise_sigma[r0 + i];
+            if (!(sg > 0.0) || !isfinite(sg)) continue;
+            if (R) {
+                const float *xr = xb + i * D;
+                double ss = sumsq_f(xr, D), yy = 0.0;
+                for (size_t q = 0; q < R; q++) yy += (double)pw.y[i * R + q] * pw.y[i * R + q];
+                /* |x_perp| from |x|^2 - |y|^2, plus the rounding of both (an upper bound) */
+                float xp = (float)sqrt((ss > yy ? ss - yy : 0.0) + 1e-6 * ss);
+                float bound = row_bound_perp(pw.sh + i * Mp, m->prho, xp, Mp);
+                /* slack for the float scores of the prefilter */
+                if (!((double)bound + 1e-5 * sqrt(ss) >= min_snr * sg) || !isfinite(ss)) continue;
+            }
+            pw.rows[ns++] = r0 + i;
+        }
+        if (ns == 0) continue;
+        const float *xs = xb;
+        if (ns < nr) {
+            for (size_t k = 0; k < ns; k++)
+                memcpy(pw.xs + k * D, x + pw.rows[k] * D, sizeof *pw.xs * D);
+            xs = pw.xs;
+        }
+        if (m->bandpath) {
+            /* per-band scores x_b . u_jb: one SGEMM of K columns per band, scores of row k at
+             * sc[k * bands * Mp + b * Mp + j] */
+            size_t K = (size_t)m->K, ld = nsc * Mp;
+            for (size_t band = 0; band < nsc; band++)
+                cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)ns, (int)Mp, (int)K, 1.0f,
+                            xs + band * K, (int)D, m->tbnf + band * K, (int)D, 0.0f, pw.sc + band * Mp,
+                            (int)ld);
+            for (size_t k = 0; k < ns; k++) {
+                size_t r = pw.rows[k];
+                pixel_row_band(m, &pw, xs + k * D, pw.sc + k * ld, noise_sigma[r], &bulb[r],
+                               phase_deg ? &phase_deg[r] : NULL, confidence ? &confidence[r] : NULL);
+            }
+            continue;
+        }
+        cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)ns, (int)Mp, (int)D, 1.0f, xs,
+                    (int)D, m->tn, (int)D, 0.0f, pw.sc, (int)Mp);
+        for (size_t k = 0; k < ns; k++) {
+            size_t r = pw.rows[k];
+            pixel_row(m, &pw, xs + k * D, pw.sc + k * Mp, noise_sigma[r], &bulb[r],
+                      phase_deg ? &phase_deg[r] : NULL, confidence ? &confidence[r] : NULL);
+        }
+    }
+    pix_free(&pw);
+    return GS_OK;
+}
