@@ -69,114 +69,6 @@ void rec_catalog_release(rec_catalog *cat)
     memset(cat, 0, sizeof *cat);
 }
 
-/* ------------------------------------------------------------------ mesh */
-
-/* Boxes of about background_px: nx x ny, box i spans [bx[i], bx[i+1]) in x; centres cx, cy.
- * Interpolation is bilinear between box centres with linear extrapolation beyond the outer
- * ones (exact for a linear background). */
-typedef struct {
-    int nx, ny;
-    int *bx, *by;          /* nx + 1, ny + 1 */
-    double *cx, *cy;       /* centres */
-    int *ix, *iy;          /* per column / row: the box holding it */
-    int *i0, *j0;          /* per column / row: left / top node of its interpolation cell */
-    double *tx, *ty;       /* per column / row: interpolation weight of the right / lower node */
-} mesh;
-
-static void mesh_free(mesh *m)
-{
-    free(m->bx);
-    free(m->by);
-    free(m->cx);
-    free(m->cy);
-    free(m->ix);
-    free(m->iy);
-    free(m->i0);
-    free(m->j0);
-    free(m->tx);
-    free(m->ty);
-    memset(m, 0, sizeof *m);
-}
-
-/* One axis of the mesh: n boxes over len pixels. */
-static void mesh_axis(int len, int n, int *b, double *c, int *idx, int *i0, double *t)
-{
-    for (int i = 0; i <= n; i++) b[i] = (int)((long long)i * len / n);
-    for (int i = 0; i < n; i++) {
-        c[i] = 0.5 * (b[i] + b[i + 1] - 1);
-        for (int x = b[i]; x < b[i + 1]; x++) idx[x] = i;
-    }
-    for (int x = 0; x < len; x++) {
-        if (n == 1) {
-            i0[x] = 0;
-            t[x] = 0;
-            continue;
-        }
-        int i = idx[x];
-        if (x < c[i]) i--;
-        if (i < 0) i = 0;
-        if (i > n - 2) i = n - 2;
-        i0[x] = i;
-        t[x] = (x - c[i]) / (c[i + 1] - c[i]);
-    }
-}
-
-static gs_status mesh_init(mesh *m, int W, int H, int box)
-{
-    memset(m, 0, sizeof *m);
-    m->nx = (W + box / 2) / box;
-    m->ny = (H + box / 2) / box;
-    if (m->nx < 1) m->nx = 1;
-    if (m->ny < 1) m->ny = 1;
-    m->bx = malloc(sizeof(int) * (size_t)(m->nx + 1));
-    m->by = malloc(sizeof(int) * (size_t)(m->ny + 1));
-    m->cx = malloc(sizeof(double) * (size_t)m->nx);
-    m->cy = malloc(sizeof(double) * (size_t)m->ny);
-    m->ix = malloc(sizeof(int) * (size_t)W);
-    m->iy = malloc(sizeof(int) * (size_t)H);
-    m->i0 = malloc(sizeof(int) * (size_t)W);
-    m->j0 = malloc(sizeof(int) * (size_t)H);
-    m->tx = malloc(sizeof(double) * (size_t)W);
-    m->ty = malloc(sizeof(double) * (size_t)H);
-    if (!m->bx || !m->by || !m->cx || !m->cy || !m->ix || !m->iy || !m->i0 || !m->j0 || !m->tx ||
-        !m->ty) {
-        mesh_free(m);
-        return gs_fail(GS_ENOMEM, "blobs: cannot allocate the background mesh");
-    }
-    mesh_axis(W, m->nx, m->bx, m->cx, m->ix, m->i0, m->tx);
-    mesh_axis(H, m->ny, m->by, m->cy, m->iy, m->j0, m->ty);
-    return GS_OK;
-}
-
-/* The (up to) 4 nodes and weights interpolating pixel (x, y). Weights sum to 1; outside the
- * outer centres some are negative (extrapolation). Returns the count. */
-static int mesh_weights(const mesh *m, int x, int y, int *node, double *w)
-{
-    int i = m->i0[x], j = m->j0[y];
-    double tx = m->tx[x], ty = m->ty[y];
-    int n = 0;
-    int ni = m->nx > 1 ? 2 : 1, nj = m->ny > 1 ? 2 : 1;
-    for (int b = 0; b < nj; b++)
-        for (int a = 0; a < ni; a++) {
-            double wx = ni == 1 ? 1 : (a ? tx : 1 - tx);
-            double wy = nj == 1 ? 1 : (b ? ty : 1 - ty);
-            node[n] = (j + b) * m->nx + (i + a);
-            w[n] = wx * wy;
-            n++;
-        }
-    return n;
-}
-
-/* Value at (x, y) of a node grid g (stride `stride` between nodes, offset picks the plane). */
-static double mesh_at(const mesh *m, const double *g, size_t stride, int x, int y)
-{
-    int node[4];
-    double w[4], s = 0;
-    int n = mesh_weights(m, x, y, node, w);
-    for (int i = 0; i < n; i++) s += w[i] * g[(size_t)node[i] * stride];
-    return s;
-}
-
 static int cmp_double(const void *a, const void *b)
 {
     double x = *(const double *)a, y = *(const double *)b;
@@ -245,7 +137,7 @@ typedef struct {
     unsigned char *hdr;      /* halved in some frame */
     float *sumA, *sumB;      /* HDR only: sum_k scale^2, sum_k scale */
 
-    mesh mesh;
+    rec_mesh mesh;
     double *fval, *fvar;     /* per-frame mesh: [((k * bands + b) * nodes + n)] mean, var of mean */
 
     unsigned char *det;      /* detection mask */
@@ -267,7 +159,7 @@ static void state_free(state *s)
     free(s->hdr);
     free(s->sumA);
     free(s->sumB);
-    mesh_free(&s->mesh);
+    rec_mesh_free(&s->mesh);
     free(s->fval);
     free(s->fvar);
     free(s->det);
@@ -329,7 +221,7 @@ static gs_status mean_image(state *s)
 
 static gs_status detect(state *s)
 {
-    const mesh *m = &s->mesh;
+    const rec_mesh *m = &s->mesh;
     const int nodes = m->nx * m->ny;
     size_t box_max = 0;
     for (int j = 0; j < m->ny; j++)
@@ -357,7 +249,7 @@ static gs_status detect(state *s)
     mesh_median3(level, m->nx, m->ny, level + nodes);
     /* background image, by rows */
     for (int y = 0; y < s->H; y++)
-        for (int x = 0; x < s->W; x++) bg[(size_t)y * s->W + x] = (float)mesh_at(m, level, 1, x, y);
+        for (int x = 0; x < s->W; x++) bg[(size_t)y * s->W + x] = (float)rec_mesh_at(m, level, 1, x, y);
 
     /* noise of M at the background level (recognize.h, step 3) and the threshold */
     double A = 0, Bq = 0;
@@ -389,7 +281,7 @@ static gs_status detect(state *s)
 static gs_status frame_mesh(state *s, const unsigned char *mask, int use_mask)
 {
     const gs_capture *c = s->cap;
-    const mesh *m = &s->mesh;
+    const rec_mesh *m = &s->mesh;
     const int nodes = m->nx * m->ny, B = s->bands, HS = GS_MAX_HALVINGS + 1;
     const size_t planes = (size_t)s->K * (size_t)B;
     int *cnt = calloc((size_t)nodes, sizeof *cnt);
@@ -497,7 +389,7 @@ static gs_status frame_mesh(state *s, const unsigned char *mask, int use_mask)
 static double frame_bg(const state *s, int k, int b, int x, int y)
 {
     const int nodes = s->mesh.nx * s->mesh.ny;
-    return mesh_at(&s->mesh, s->fval + ((size_t)k * s->bands + (size_t)b) * nodes, 1, x, y);
+    return rec_mesh_at(&s->mesh, s->fval + ((size_t)k * s->bands + (size_t)b) * nodes, 1, x, y);
 }
 
 /* ------------------------------------------------------------- 5. deblend */
@@ -1005,7 +897,7 @@ static gs_status photometry(state *s, const int *area, rec_catalog *cat)
             nuse++;
             int node[4];
             double w[4];
-            int m = mesh_weights(&s->mesh, x, y, node, w);
+            int m = rec_mesh_weights(&s->mesh, x, y, node, w);
             for (int t = 0; t < m; t++) {
                 if (stamp[node[t]] != (int)i) {
                     stamp[node[t]] = (int)i;
@@ -1174,7 +1066,7 @@ gs_status rec_blobs_extract(const gs_capture *cap, const rec_blob_opts *o, rec_c
     for (size_t p = 0; p < s.N; p++) s.fp[p] = -1;
 
     if ((st = mean_image(&s)) != GS_OK) goto done;
-    if ((st = mesh_init(&s.mesh, s.W, s.H, o->background_px)) != GS_OK) goto done;
+    if ((st = rec_mesh_init(&s.mesh, s.W, s.H, o->background_px, 1)) != GS_OK) goto done;
     if ((st = detect(&s)) != GS_OK) goto done;
     if ((st = rec_cv_components(s.det, s.W, s.H, s.comp, &s.ncomp, &s.stats)) != GS_OK) goto done;
 

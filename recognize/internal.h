@@ -5,6 +5,27 @@
 
 #include "recognize/recognize.h"
 
+/* The background mesh (background.c) of blobs.c and maps.c: nx x ny boxes of about box_px,
+ * box i spanning [bx[i], bx[i+1]) with centre cx[i]; each caller computes one value per node
+ * (node index j * nx + i) and interpolates bilinearly between centres, linearly extrapolated
+ * beyond the outer ones (extrapolate = 1) or constant there (0). */
+typedef struct {
+    int nx, ny;
+    int *bx, *by;          /* nx + 1, ny + 1 box edges */
+    double *cx, *cy;       /* box centres */
+    int *ix, *iy;          /* per column / row: the box holding it */
+    int *i0, *j0;          /* per column / row: left / top node of its interpolation cell */
+    double *tx, *ty;       /* per column / row: interpolation weight of the right / lower node */
+} rec_mesh;
+gs_status rec_mesh_init(rec_mesh *m, int W, int H, int box_px, int extrapolate);
+void rec_mesh_free(rec_mesh *m);
+/* The (up to) 4 nodes and weights interpolating pixel (x, y); weights sum to 1 (some negative
+ * when extrapolating). Returns the count. */
+int rec_mesh_weights(const rec_mesh *m, int x, int y, int *node, double *w);
+/* The value at (x, y) of node values g (g[node * stride]); the same over a float plane. */
+double rec_mesh_at(const rec_mesh *m, const double *g, size_t stride, int x, int y);
+float rec_mesh_at_f(const rec_mesh *m, const float *g, int x, int y);
+
 /* OpenCV shim (recognize/opencv_shim.cpp), the only C++ in recognize/: plain C functions over
  * OpenCV 4 (core, imgproc, imgcodecs).
  * Every OpenCV or C++ exception is caught at this boundary and returned as a gs_status with a

@@ -73,80 +73,40 @@ static inline double sample_value(const gs_capture *cap, const double *inv_cycle
     return (raw - cap->black_level_dn) * c;
 }
 
+/* The per-frame background: node values over the shared mesh (constant beyond the outer box
+ * centres). */
 typedef struct {
-    int nbx, nby;
-    float *node;        /* [(k * bands + band) * nby * nbx + j * nbx + i] box medians */
-    int *ix0, *ix1;     /* per column: the two nodes and the weight of the second */
-    float *fx;
-    int *iy0, *iy1;
-    float *fy;
+    rec_mesh g;
+    float *node;        /* [(k * bands + band) * nodes + node] box medians */
 } mesh;
 
 static void mesh_free(mesh *m)
 {
+    rec_mesh_free(&m->g);
     free(m->node);
-    free(m->ix0);
-    free(m->ix1);
-    free(m->fx);
-    free(m->iy0);
-    free(m->iy1);
-    free(m->fy);
-}
-
-/* Bilinear weights between box centres along one axis of n pixels with nb boxes. */
-static void mesh_axis(int n, int nb, int *i0, int *i1, float *f)
-{
-    for (int p = 0; p < n; p++) {
-        /* centre of box b: b * BG_BOX + (its width - 1) / 2 */
-        double best = -1.0;
-        int b0 = 0;
-        for (int b = 0; b < nb; b++) {
-            int w = n - b * BG_BOX < BG_BOX ? n - b * BG_BOX : BG_BOX;
-            double c = b * BG_BOX + 0.5 * (w - 1);
-            if (c <= p) {
-                b0 = b;
-                best = c;
-            }
-        }
-        if (best < 0.0 || b0 == nb - 1) {   /* before the first or after the last centre */
-            i0[p] = i1[p] = best < 0.0 ? 0 : nb - 1;
-            f[p] = 0.0f;
-            continue;
-        }
-        int w1 = n - (b0 + 1) * BG_BOX < BG_BOX ? n - (b0 + 1) * BG_BOX : BG_BOX;
-        double c1 = (b0 + 1) * BG_BOX + 0.5 * (w1 - 1);
-        i0[p] = b0;
-        i1[p] = b0 + 1;
-        f[p] = (float)((p - best) / (c1 - best));
-    }
+    m->node = NULL;
 }
 
 static gs_status mesh_build(const gs_capture *cap, const double *inv_cycles, mesh *m)
 {
     memset(m, 0, sizeof *m);
     int W = cap->width, H = cap->height, K = cap->K, bands = cap->bands;
-    m->nbx = (W + BG_BOX - 1) / BG_BOX;
-    m->nby = (H + BG_BOX - 1) / BG_BOX;
-    size_t nodes = (size_t)m->nbx * (size_t)m->nby;
+    gs_status st = rec_mesh_init(&m->g, W, H, BG_BOX, 0);
+    if (st != GS_OK) return st;
+    size_t nodes = (size_t)m->g.nx * (size_t)m->g.ny;
+    /* a box of the mesh is at most 3/2 BG_BOX on a side */
+    size_t buf_n = BG_SAMPLES + 4 * BG_BOX;
     m->node = malloc(sizeof *m->node * nodes * (size_t)K * (size_t)bands);
-    m->ix0 = malloc(sizeof(int) * (size_t)W);
-    m->ix1 = malloc(sizeof(int) * (size_t)W);
-    m->fx = malloc(sizeof(float) * (size_t)W);
-    m->iy0 = malloc(sizeof(int) * (size_t)H);
-    m->iy1 = malloc(sizeof(int) * (size_t)H);
-    m->fy = malloc(sizeof(float) * (size_t)H);
-    float *buf = malloc(sizeof *buf * (BG_SAMPLES + 2 * BG_BOX));
-    if (!m->node || !m->ix0 || !m->ix1 || !m->fx || !m->iy0 || !m->iy1 || !m->fy || !buf) {
+    float *buf = malloc(sizeof *buf * buf_n);
+    if (!m->node || !buf) {
         free(buf);
         mesh_free(m);
         return gs_fail(GS_ENOMEM, "maps: cannot allocate the background mesh");
     }
-    mesh_axis(W, m->nbx, m->ix0, m->ix1, m->fx);
-    mesh_axis(H, m->nby, m->iy0, m->iy1, m->fy);
-    for (int j = 0; j < m->nby; j++) {
-        int y0 = j * BG_BOX, y1 = y0 + BG_BOX < H ? y0 + BG_BOX : H;
-        for (int i = 0; i < m->nbx; i++) {
-            int x0 = i * BG_BOX, x1 = x0 + BG_BOX < W ? x0 + BG_BOX : W;
+    for (int j = 0; j < m->g.ny; j++) {
+        int y0 = m->g.by[j], y1 = m->g.by[j + 1];
+        for (int i = 0; i < m->g.nx; i++) {
+            int x0 = m->g.bx[i], x1 = m->g.bx[i + 1];
             int area = (x1 - x0) * (y1 - y0);
             int step = 1;
             while ((area + step * step - 1) / (step * step) > BG_SAMPLES) step++;
@@ -157,9 +117,9 @@ static gs_status mesh_build(const gs_capture *cap, const double *inv_cycles, mes
                         for (int x = x0; x < x1; x += step) {
                             double v = sample_value(cap, inv_cycles, (size_t)k,
                                                     (size_t)y * (size_t)W + (size_t)x, band);
-                            if (isfinite(v) && n < BG_SAMPLES + 2 * BG_BOX) buf[n++] = (float)v;
+                            if (isfinite(v) && n < buf_n) buf[n++] = (float)v;
                         }
-                    m->node[((size_t)k * (size_t)bands + (size_t)band) * nodes + (size_t)j * (size_t)m->nbx + (size_t)i] =
+                    m->node[((size_t)k * (size_t)bands + (size_t)band) * nodes + (size_t)j * (size_t)m->g.nx + (size_t)i] =
                         n ? gs_median_f(buf, n) : 0.0f;
                 }
         }
@@ -170,12 +130,7 @@ static gs_status mesh_build(const gs_capture *cap, const double *inv_cycles, mes
 
 static inline float mesh_at(const mesh *m, size_t plane, int x, int y)
 {
-    const float *nd = m->node + plane * (size_t)m->nbx * (size_t)m->nby;
-    const float *r0 = nd + (size_t)m->iy0[y] * (size_t)m->nbx, *r1 = nd + (size_t)m->iy1[y] * (size_t)m->nbx;
-    float fx = m->fx[x], fy = m->fy[y];
-    float a = r0[m->ix0[x]] + fx * (r0[m->ix1[x]] - r0[m->ix0[x]]);
-    float b = r1[m->ix0[x]] + fx * (r1[m->ix1[x]] - r1[m->ix0[x]]);
-    return a + fy * (b - a);
+    return rec_mesh_at_f(&m->g, m->node + plane * (size_t)m->g.nx * (size_t)m->g.ny, x, y);
 }
 
 /* ------------------------------------------------------------ per-pixel Eq. 7 */
@@ -265,7 +220,7 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
      * the raw samples once in memory order; the background is linear in its mesh nodes, so its
      * contribution to B is one interpolation of the nodes summed over frames and bands. */
     double *sum = calloc(np, sizeof *sum);
-    float *bg_mean = malloc(sizeof *bg_mean * (size_t)bg.nbx * (size_t)bg.nby);
+    float *bg_mean = malloc(sizeof *bg_mean * (size_t)bg.g.nx * (size_t)bg.g.ny);
     if (!sum || !bg_mean) {
         free(sum);
         free(bg_mean);
@@ -276,7 +231,7 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
         return gs_fail(GS_ENOMEM, "maps: cannot allocate maps of %dx%d pixels", W, H);
     }
     {
-        size_t nodes = (size_t)bg.nbx * (size_t)bg.nby;
+        size_t nodes = (size_t)bg.g.nx * (size_t)bg.g.ny;
         for (size_t q = 0; q < nodes; q++) {
             double acc = 0.0;
             for (size_t plane = 0; plane < (size_t)K * (size_t)bands; plane++) acc += bg.node[plane * nodes + q];
@@ -339,13 +294,8 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
     for (int y = 0; y < H; y++)
         for (int x = 0; x < W; x++) {
             size_t p = (size_t)y * (size_t)W + (size_t)x;
-            /* mesh_at on the summed nodes (plane 0 of a one-plane view) */
-            const float *r0 = bg_mean + (size_t)bg.iy0[y] * (size_t)bg.nbx;
-            const float *r1 = bg_mean + (size_t)bg.iy1[y] * (size_t)bg.nbx;
-            float fx = bg.fx[x], fy = bg.fy[y];
-            float a0 = r0[bg.ix0[x]] + fx * (r0[bg.ix1[x]] - r0[bg.ix0[x]]);
-            float a1 = r1[bg.ix0[x]] + fx * (r1[bg.ix1[x]] - r1[bg.ix0[x]]);
-            pm->brightness[p] = (float)(sum[p] / K - (a0 + fy * (a1 - a0)));
+            /* the background of the summed nodes */
+            pm->brightness[p] = (float)(sum[p] / K - rec_mesh_at_f(&bg.g, bg_mean, x, y));
         }
     free(sum);
     free(bg_mean);

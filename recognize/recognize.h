@@ -251,9 +251,10 @@ gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *no
  * (recognize/maps.c; docs/recognize-cli.md shows them).
  *
  * rec_pixel_maps_compute: every pixel's per-cycle values (docs/formats.md: (raw - black_level)
- * 2^h / cycles) minus a background: per frame and band, a mesh of 64-pixel boxes (SExtractor's
- * default), each the median of (at most 256 evenly spaced of) its unsaturated values,
- * interpolated bilinearly between box centres (constant beyond the outer centres). The pixel's
+ * 2^h / cycles) minus a background: per frame and band, the background mesh of blobs (boxes
+ * of about 64 pixels, SExtractor's default; recognize/background.c), each node the median of (at
+ * most 256 evenly spaced of) its box's unsaturated values, interpolated bilinearly between box
+ * centres (constant beyond the outer centres). The pixel's
  * brightness B is the sum over bands of the mean over k of those values; its noise comes from the
  * capture's noise model (docs/formats.md), per sample. A pixel is mapped when B exceeds
  * threshold_sigma times the std of B; a pixel with a saturated sample in any frame or band is
