@@ -22,16 +22,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* Peaks per component considered for deblending (brightest first) and their spacing: local
- * maxima of M in a 5x5 window, no two within 2 pixels (Chebyshev). */
-#define MAX_PEAKS 32
-#define PEAK_RADIUS 2
-/* A peak's signal comes from its 3x3 neighbourhood (grown to 7x7 when all of it saturated);
- * it is usable for deblending when its mean over k is at least PEAK_SNR sigmas. */
-#define PEAK_WINDOW_MAX 3
-#define PEAK_SNR 5.0
-/* Components larger than this many max_area_px are dropped without deblending. */
-#define DEBLEND_AREA_FACTOR 4
 /* A mesh node needs this many usable pixels (and this fraction of its box) for the per-frame
  * background; others are filled from their neighbours. */
 #define NODE_MIN_PX 8
@@ -120,38 +110,10 @@ static void mesh_median3(double *g, int nx, int ny, double *tmp)
         }
 }
 
-/* ------------------------------------------------------------------ state */
+/* ------------------------------------------------------------------ rec_blob_state */
 
-typedef struct {
-    const gs_capture *cap;
-    const rec_blob_opts *o;
-    int W, H, K, bands;
-    size_t N;
-    int sat_level;           /* raw >= sat_level is saturated (integer form of saturation_dn) */
-    float black;
-    gs_noise nz;             /* the capture's noise model */
-    double *scale;           /* [k * (GS_MAX_HALVINGS + 1) + h] = 2^h / cycles_k */
 
-    float *M;                /* mean image, then M - background */
-    unsigned char *sat;      /* saturated in some frame and band */
-    unsigned char *hdr;      /* halved in some frame */
-    float *sumA, *sumB;      /* HDR only: sum_k scale^2, sum_k scale */
-
-    rec_mesh mesh;
-    double *fval, *fvar;     /* per-frame mesh: [((k * bands + b) * nodes + n)] mean, var of mean */
-
-    unsigned char *det;      /* detection mask */
-    int *comp;               /* component labels (0 = none) */
-    int ncomp;
-    int *stats;              /* 5 per label */
-
-    int *fp;                 /* footprint owner (light index) or -1 */
-    int *ap;                 /* aperture owner or -1 */
-    int nlights, cap_lights;
-    unsigned *lflags;        /* per light: DEBLENDED */
-} state;
-
-static void state_free(state *s)
+static void state_free(rec_blob_state *s)
 {
     free(s->scale);
     free(s->M);
@@ -170,14 +132,10 @@ static void state_free(state *s)
     free(s->lflags);
 }
 
-static inline double sample_var(const state *s, unsigned raw, double scale)
-{
-    return gs_noise_raw_var(&s->nz, (double)raw) * scale * scale;
-}
 
 /* ------------------------------------------------------- 1. mean image */
 
-static gs_status mean_image(state *s)
+static gs_status mean_image(rec_blob_state *s)
 {
     const gs_capture *c = s->cap;
     const int HS = GS_MAX_HALVINGS + 1;
@@ -219,7 +177,7 @@ static gs_status mean_image(state *s)
 
 /* ----------------------------------------- 2-4. background, noise, threshold */
 
-static gs_status detect(state *s)
+static gs_status detect(rec_blob_state *s)
 {
     const rec_mesh *m = &s->mesh;
     const int nodes = m->nx * m->ny;
@@ -278,7 +236,7 @@ static gs_status detect(state *s)
 /* For every frame and band, each node: the mean of the values of its box's pixels outside the
  * dilated detections (and unsaturated), and the variance of that mean. use_mask = 0 takes every
  * unsaturated pixel (the fallback when detections cover nearly everything). */
-static gs_status frame_mesh(state *s, const unsigned char *mask, int use_mask)
+static gs_status frame_mesh(rec_blob_state *s, const unsigned char *mask, int use_mask)
 {
     const gs_capture *c = s->cap;
     const rec_mesh *m = &s->mesh;
@@ -312,7 +270,7 @@ static gs_status frame_mesh(state *s, const unsigned char *mask, int use_mask)
                 for (int b = 0; b < B; b++) {
                     unsigned r = rk[p * (size_t)B + (size_t)b];
                     val[b * nodes + n] += ((float)r - s->black) * f;
-                    var[b * nodes + n] += sample_var(s, r, f);
+                    var[b * nodes + n] += rec_blob_sample_var(s, r, f);
                 }
             }
         }
@@ -386,612 +344,10 @@ static gs_status frame_mesh(state *s, const unsigned char *mask, int use_mask)
 }
 
 /* Background of frame k, band b at (x, y), per cycle. */
-static double frame_bg(const state *s, int k, int b, int x, int y)
+double rec_blob_frame_bg(const rec_blob_state *s, int k, int b, int x, int y)
 {
     const int nodes = s->mesh.nx * s->mesh.ny;
     return rec_mesh_at(&s->mesh, s->fval + ((size_t)k * s->bands + (size_t)b) * nodes, 1, x, y);
-}
-
-/* ------------------------------------------------------------- 5. deblend */
-
-typedef struct {
-    int p;            /* pixel index */
-    float v;          /* M - background */
-    int group;        /* -1: signal unusable */
-} peak;
-
-static int cmp_peak(const void *a, const void *b)
-{
-    const peak *x = a, *y = b;
-    if (x->v != y->v) return x->v < y->v ? 1 : -1;
-    return (x->p > y->p) - (x->p < y->p);
-}
-
-/* Temporal signal of a peak: sum over unsaturated pixels of the component in a window around
- * it of value - background, per (band, k), normalised by the mean over k of the band sum.
- * u and su hold bands * K values. 0 when unusable. */
-static int peak_signal(const state *s, int label, int p, double *u, double *su)
-{
-    const gs_capture *c = s->cap;
-    const int B = s->bands, K = s->K, HS = GS_MAX_HALVINGS + 1;
-    const int px = (int)(p % (size_t)s->W), py = (int)(p / (size_t)s->W);
-    int used = 0;
-    for (int r = 1; r <= PEAK_WINDOW_MAX && !used; r++) {
-        memset(u, 0, sizeof(double) * (size_t)(B * K));
-        memset(su, 0, sizeof(double) * (size_t)(B * K));
-        for (int y = py - r; y <= py + r; y++)
-            for (int x = px - r; x <= px + r; x++) {
-                if (x < 0 || y < 0 || x >= s->W || y >= s->H) continue;
-                size_t q = (size_t)y * s->W + (size_t)x;
-                if (s->comp[q] != label || s->sat[q]) continue;
-                used++;
-                for (int k = 0; k < K; k++) {
-                    size_t qk = s->N * (size_t)k + q;
-                    double f = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[qk] : 0)];
-                    for (int b = 0; b < B; b++) {
-                        unsigned raw = c->raw[qk * (size_t)B + (size_t)b];
-                        u[b * K + k] += ((double)raw - s->black) * f - frame_bg(s, k, b, x, y);
-                        su[b * K + k] += sample_var(s, raw, f);
-                    }
-                }
-            }
-    }
-    if (!used) return 0;
-    double mean = 0, var_mean = 0;
-    for (int i = 0; i < B * K; i++) {
-        mean += u[i];
-        var_mean += su[i];
-    }
-    mean /= K;
-    var_mean /= (double)K * K;
-    if (!(mean > PEAK_SNR * sqrt(var_mean))) return 0;
-    for (int i = 0; i < B * K; i++) {
-        u[i] /= mean;
-        su[i] = sqrt(su[i]) / mean;
-    }
-    return 1;
-}
-
-/* How many Gaussian sigmas two normalised signals differ by: chi-square over the n values,
- * converted with Wilson & Hilferty (1931): z = ((chi2/nu)^(1/3) - (1 - 2/(9 nu))) /
- * sqrt(2/(9 nu)), nu = n - 1 (the normalisation takes one degree of freedom). */
-static double signal_z(const double *u1, const double *s1, const double *u2, const double *s2,
-                       int n)
-{
-    double chi2 = 0;
-    for (int i = 0; i < n; i++) {
-        double v = s1[i] * s1[i] + s2[i] * s2[i];
-        double d = u1[i] - u2[i];
-        chi2 += v > 0 ? d * d / v : (d != 0 ? INFINITY : 0);
-    }
-    double nu = n > 1 ? n - 1 : 1;
-    if (!isfinite(chi2)) return INFINITY;
-    double a = 2.0 / (9.0 * nu);
-    return (cbrt(chi2 / nu) - (1 - a)) / sqrt(a);
-}
-
-/* A max-heap of pixels by M - background, for the watershed. */
-typedef struct {
-    float v;
-    int p;
-} heap_item;
-
-static void heap_push(heap_item *h, size_t *n, heap_item it)
-{
-    size_t i = (*n)++;
-    while (i > 0) {
-        size_t parent = (i - 1) / 2;
-        if (h[parent].v > it.v || (h[parent].v == it.v && h[parent].p < it.p)) break;
-        h[i] = h[parent];
-        i = parent;
-    }
-    h[i] = it;
-}
-
-static heap_item heap_pop(heap_item *h, size_t *n)
-{
-    heap_item top = h[0], last = h[--(*n)];
-    size_t i = 0;
-    for (;;) {
-        size_t l = 2 * i + 1, r = l + 1, best = i;
-        heap_item bv = last;
-        if (l < *n && (h[l].v > bv.v || (h[l].v == bv.v && h[l].p < bv.p))) {
-            best = l;
-            bv = h[l];
-        }
-        if (r < *n && (h[r].v > bv.v || (h[r].v == bv.v && h[r].p < bv.p))) best = r;
-        if (best == i) break;
-        h[i] = h[best];
-        i = best;
-    }
-    if (*n) h[i] = last;
-    return top;
-}
-
-static gs_status add_light(state *s, unsigned flags, int *index)
-{
-    if (s->nlights == s->cap_lights) {
-        int nc = s->cap_lights ? s->cap_lights * 2 : 64;
-        unsigned *nf = realloc(s->lflags, sizeof *nf * (size_t)nc);
-        if (!nf) return gs_fail(GS_ENOMEM, "blobs: cannot hold %d lights", nc);
-        s->lflags = nf;
-        s->cap_lights = nc;
-    }
-    s->lflags[s->nlights] = flags;
-    *index = s->nlights++;
-    return GS_OK;
-}
-
-/* Pixels of each component, grouped: pix[start[l] .. start[l + 1]) in raster order. */
-static gs_status component_lists(const state *s, int **start_out, int **pix_out)
-{
-    int *start = calloc((size_t)s->ncomp + 2, sizeof *start);
-    int *pix = malloc(sizeof(int) * (s->N ? s->N : 1));
-    if (!start || !pix) {
-        free(start);
-        free(pix);
-        return gs_fail(GS_ENOMEM, "blobs: cannot list the components' pixels");
-    }
-    for (size_t p = 0; p < s->N; p++)
-        if (s->comp[p]) start[s->comp[p] + 1]++;
-    for (int l = 1; l <= s->ncomp + 1; l++) start[l] += start[l - 1];
-    int *fill = malloc(sizeof(int) * ((size_t)s->ncomp + 1));
-    if (!fill) {
-        free(start);
-        free(pix);
-        return gs_fail(GS_ENOMEM, "blobs: cannot list the components' pixels");
-    }
-    memcpy(fill, start, sizeof(int) * ((size_t)s->ncomp + 1));
-    for (size_t p = 0; p < s->N; p++)
-        if (s->comp[p]) pix[fill[s->comp[p]]++] = (int)p;
-    free(fill);
-    *start_out = start;
-    *pix_out = pix;
-    return GS_OK;
-}
-
-/* Split the components into lights: every kept component becomes one light (footprint = its
- * pixels) or, when its peaks' signals differ, one light per group of peaks, by a watershed on
- * M from the peaks (priority flood: the brightest unassigned neighbour of an assigned pixel
- * takes that pixel's light). Writes s->fp and the lights' flags. */
-static gs_status deblend(state *s)
-{
-    const rec_blob_opts *o = s->o;
-    const int BK = s->bands * s->K;
-    int *start = NULL, *pix = NULL;
-    gs_status st = component_lists(s, &start, &pix);
-    if (st != GS_OK) return st;
-    float *dil = malloc(sizeof(float) * s->N);
-    double *u = malloc(sizeof(double) * (size_t)BK * MAX_PEAKS * 2);
-    peak *pk = NULL;
-    heap_item *heap = NULL;
-    size_t pk_cap = 0, heap_cap = 0;
-    if (!dil || !u) st = gs_fail(GS_ENOMEM, "blobs: cannot allocate the deblending buffers");
-    const int try_split = isfinite(o->deblend_sigma);
-    if (st == GS_OK && try_split) st = rec_cv_dilate_f32(s->M, dil, s->W, s->H, PEAK_RADIUS);
-    double *su = u + (size_t)BK * MAX_PEAKS;
-
-    for (int l = 1; st == GS_OK && l <= s->ncomp; l++) {
-        const int area = start[l + 1] - start[l];
-        const int *px = pix + start[l];
-        if (area < o->min_area_px || area > (long long)DEBLEND_AREA_FACTOR * o->max_area_px)
-            continue;
-        int npk = 0, ngroups = 1;
-        if (try_split && area >= 2) {
-            if ((size_t)area > pk_cap) {
-                peak *np = realloc(pk, sizeof *np * (size_t)area);
-                if (!np) {
-                    st = gs_fail(GS_ENOMEM, "blobs: cannot hold %d peaks", area);
-                    break;
-                }
-                pk = np;
-                pk_cap = (size_t)area;
-            }
-            int cand = 0;
-            for (int i = 0; i < area; i++) {
-                int p = px[i];
-                if (s->M[p] >= dil[p]) pk[cand++] = (peak){p, s->M[p], -1};
-            }
-            qsort(pk, (size_t)cand, sizeof *pk, cmp_peak);
-            for (int i = 0; i < cand && npk < MAX_PEAKS; i++) {
-                int x = pk[i].p % s->W, y = pk[i].p / s->W, near = 0;
-                for (int j = 0; j < npk && !near; j++) {
-                    int dx = abs(pk[j].p % s->W - x), dy = abs(pk[j].p / s->W - y);
-                    near = dx <= PEAK_RADIUS && dy <= PEAK_RADIUS;
-                }
-                if (!near) pk[npk++] = pk[i];
-            }
-        }
-        if (npk >= 2) {
-            int rep[MAX_PEAKS];
-            ngroups = 0;
-            for (int j = 0; j < npk; j++) {
-                double *uj = u + (size_t)j * BK, *sj = su + (size_t)j * BK;
-                if (!peak_signal(s, l, pk[j].p, uj, sj)) continue; /* group -1 */
-                int best = -1;
-                double best_z = INFINITY;
-                for (int g = 0; g < ngroups; g++) {
-                    int r = rep[g];
-                    double z = signal_z(uj, sj, u + (size_t)r * BK, su + (size_t)r * BK, BK);
-                    if (z < best_z) {
-                        best_z = z;
-                        best = g;
-                    }
-                }
-                if (best >= 0 && best_z <= o->deblend_sigma) {
-                    pk[j].group = best;
-                } else {
-                    rep[ngroups] = j;
-                    pk[j].group = ngroups++;
-                }
-            }
-        }
-        if (ngroups <= 1) {
-            int idx;
-            if ((st = add_light(s, 0, &idx)) != GS_OK) break;
-            for (int i = 0; i < area; i++) s->fp[px[i]] = idx;
-            continue;
-        }
-        int base = s->nlights, idx;
-        for (int g = 0; g < ngroups && st == GS_OK; g++) st = add_light(s, REC_BLOB_DEBLENDED, &idx);
-        if (st != GS_OK) break;
-        if ((size_t)area > heap_cap) {
-            heap_item *nh = realloc(heap, sizeof *nh * (size_t)area);
-            if (!nh) {
-                st = gs_fail(GS_ENOMEM, "blobs: cannot hold a %d-pixel watershed", area);
-                break;
-            }
-            heap = nh;
-            heap_cap = (size_t)area;
-        }
-        size_t hn = 0;
-        for (int j = 0; j < npk; j++)
-            if (pk[j].group >= 0) {
-                s->fp[pk[j].p] = base + pk[j].group;
-                heap_push(heap, &hn, (heap_item){pk[j].v, pk[j].p});
-            }
-        while (hn) {
-            heap_item it = heap_pop(heap, &hn);
-            int x = it.p % s->W, y = it.p / s->W;
-            for (int dy = -1; dy <= 1; dy++)
-                for (int dx = -1; dx <= 1; dx++) {
-                    int xx = x + dx, yy = y + dy;
-                    if ((!dx && !dy) || xx < 0 || yy < 0 || xx >= s->W || yy >= s->H) continue;
-                    int q = yy * s->W + xx;
-                    if (s->comp[q] != l || s->fp[q] >= 0) continue;
-                    s->fp[q] = s->fp[it.p];
-                    heap_push(heap, &hn, (heap_item){s->M[q], q});
-                }
-        }
-    }
-    free(start);
-    free(pix);
-    free(dil);
-    free(u);
-    free(pk);
-    free(heap);
-    return st;
-}
-
-/* ------------------------------------------------- 6. aperture, 7. photometry */
-
-/* Drop lights whose footprint area is outside the limits; grow the apertures. */
-static gs_status apertures(state *s, int *area)
-{
-    const rec_blob_opts *o = s->o;
-    for (size_t p = 0; p < s->N; p++)
-        if (s->fp[p] >= 0) area[s->fp[p]]++;
-    for (size_t p = 0; p < s->N; p++) {
-        int i = s->fp[p];
-        if (i >= 0 && (area[i] < o->min_area_px || area[i] > o->max_area_px)) s->fp[p] = -1;
-    }
-    memcpy(s->ap, s->fp, sizeof(int) * s->N);
-    if (o->grow_px == 0) return GS_OK;
-    int *cur = malloc(sizeof(int) * s->N), *next = malloc(sizeof(int) * s->N);
-    if (!cur || !next) {
-        free(cur);
-        free(next);
-        return gs_fail(GS_ENOMEM, "blobs: cannot allocate the aperture growth");
-    }
-    size_t nc = 0;
-    for (size_t p = 0; p < s->N; p++)
-        if (s->fp[p] >= 0) cur[nc++] = (int)p;
-    for (int r = 0; r < o->grow_px && nc; r++) {
-        size_t nn = 0;
-        for (size_t i = 0; i < nc; i++) {
-            int p = cur[i], x = p % s->W, y = p / s->W;
-            for (int dy = -1; dy <= 1; dy++)
-                for (int dx = -1; dx <= 1; dx++) {
-                    int xx = x + dx, yy = y + dy;
-                    if (xx < 0 || yy < 0 || xx >= s->W || yy >= s->H) continue;
-                    int q = yy * s->W + xx;
-                    if (s->ap[q] >= 0) continue;
-                    s->ap[q] = s->ap[p];
-                    next[nn++] = q;
-                }
-        }
-        int *t = cur;
-        cur = next;
-        next = t;
-        nc = nn;
-    }
-    free(cur);
-    free(next);
-    return GS_OK;
-}
-
-typedef struct {
-    int first, light;
-} order_item;
-
-static int cmp_order(const void *a, const void *b)
-{
-    const order_item *x = a, *y = b;
-    return (x->first > y->first) - (x->first < y->first);
-}
-
-static gs_status alloc_catalog(rec_catalog *cat, size_t n, int bands, int K)
-{
-    cat->count = n;
-    cat->bands = bands;
-    cat->K = K;
-    if (n == 0) return GS_OK;
-    size_t nbk = n * (size_t)bands * (size_t)K;
-    cat->x_px = malloc(sizeof(double) * n);
-    cat->y_px = malloc(sizeof(double) * n);
-    cat->area_px = malloc(sizeof(int) * n);
-    cat->peak_dn = malloc(sizeof(double) * n);
-    cat->saturated_px = malloc(sizeof(int) * n);
-    cat->flags = malloc(sizeof(unsigned) * n);
-    cat->signal = malloc(sizeof(double) * nbk);
-    cat->sigma = malloc(sizeof(double) * nbk);
-    if (!cat->x_px || !cat->y_px || !cat->area_px || !cat->peak_dn || !cat->saturated_px ||
-        !cat->flags || !cat->signal || !cat->sigma)
-        return gs_fail(GS_ENOMEM, "blobs: cannot hold a catalog of %zu lights", n);
-    return GS_OK;
-}
-
-/* Windowed centroid (SExtractor's XWIN_IMAGE, Bertin 2010; SEP's winpos): iterate
- * x <- x + 2 sum(w I (x_p - x)) / sum(w I) with a Gaussian window w of sigma_w, which converges to
- * the centre of any symmetric profile (where sum w I (x_p - x) = 0) and, for a Gaussian PSF
- * with sigma_w = its sigma, in one step with near-optimal (PSF-weighted) noise. I = M -
- * background over pixels within 4 sigma_w that no other light's aperture owns. sigma_w comes
- * from the aperture's second moment (2 sigma^2 for a Gaussian), clamped to [1, 8] pixels (a
- * window wider than the PSF costs a little noise, a narrower one much more; the moment of a dim
- * light's aperture is mostly noise).
- * Starts from (x, y); keeps it when the iteration fails or leaves 2 sigma_w. */
-static void win_centroid(const state *s, int light, double r2, double *xc, double *yc)
-{
-    double sw = sqrt(r2 / 2);
-    if (!(sw >= 1)) sw = 1;
-    if (sw > 8) sw = 8;
-    const double x0 = *xc, y0 = *yc, inv2s2 = 1 / (2 * sw * sw);
-    const int R = (int)ceil(4 * sw);
-    double x = x0, y = y0;
-    for (int it = 0; it < 16; it++) {
-        double swi = 0, sx = 0, sy = 0;
-        int cx = (int)lround(x), cy = (int)lround(y);
-        for (int yy = cy - R; yy <= cy + R; yy++) {
-            if (yy < 0 || yy >= s->H) continue;
-            for (int xx = cx - R; xx <= cx + R; xx++) {
-                if (xx < 0 || xx >= s->W) continue;
-                size_t q = (size_t)yy * s->W + (size_t)xx;
-                if (s->ap[q] >= 0 && s->ap[q] != light) continue;
-                double dx = xx - x, dy = yy - y;
-                double w = exp(-(dx * dx + dy * dy) * inv2s2) * s->M[q];
-                swi += w;
-                sx += w * dx;
-                sy += w * dy;
-            }
-        }
-        if (!(swi > 0)) return;
-        double ddx = 2 * sx / swi, ddy = 2 * sy / swi;
-        x += ddx;
-        y += ddy;
-        if (!isfinite(x) || !isfinite(y) || fabs(x - x0) > 2 * sw || fabs(y - y0) > 2 * sw) return;
-        if (ddx * ddx + ddy * ddy < 1e-10) break;
-    }
-    *xc = x;
-    *yc = y;
-}
-
-/* The catalog: lights in raster order of their first footprint pixel. */
-static gs_status photometry(state *s, const int *area, rec_catalog *cat)
-{
-    const gs_capture *c = s->cap;
-    const int B = s->bands, K = s->K, HS = GS_MAX_HALVINGS + 1, BK = B * K;
-    const int nodes = s->mesh.nx * s->mesh.ny;
-    const int W = s->W, H = s->H;
-    gs_status st = GS_OK;
-
-    /* order and new indices */
-    order_item *ord = malloc(sizeof *ord * (size_t)(s->nlights ? s->nlights : 1));
-    int *newi = malloc(sizeof(int) * (size_t)(s->nlights ? s->nlights : 1));
-    int *start = calloc((size_t)s->nlights + 2, sizeof(int));
-    int *pix = NULL, *fill = NULL, *stamp = NULL, *touched = NULL;
-    double *wn = NULL, *acc = NULL;
-    if (!ord || !newi || !start) {
-        st = gs_fail(GS_ENOMEM, "blobs: cannot order the lights");
-        goto done;
-    }
-    for (int i = 0; i < s->nlights; i++) {
-        ord[i].first = -1;
-        ord[i].light = i;
-    }
-    for (size_t p = 0; p < s->N; p++) {
-        int i = s->fp[p];
-        if (i >= 0 && ord[i].first < 0) ord[i].first = (int)p;
-    }
-    size_t n = 0;
-    for (int i = 0; i < s->nlights; i++)
-        if (ord[i].first >= 0) ord[n++] = ord[i];
-    qsort(ord, n, sizeof *ord, cmp_order);
-    for (int i = 0; i < s->nlights; i++) newi[i] = -1;
-    for (size_t j = 0; j < n; j++) newi[ord[j].light] = (int)j;
-    for (size_t p = 0; p < s->N; p++) {
-        if (s->ap[p] >= 0) s->ap[p] = newi[s->ap[p]];
-        if (s->fp[p] >= 0) s->fp[p] = newi[s->fp[p]];
-    }
-
-    if ((st = alloc_catalog(cat, n, B, K)) != GS_OK) goto done;
-    cat->width = W;
-    cat->height = H;
-    if (s->o->labels) {
-        cat->labels = malloc(sizeof(int) * s->N);
-        if (!cat->labels) {
-            st = gs_fail(GS_ENOMEM, "blobs: cannot hold the label image");
-            goto done;
-        }
-        memcpy(cat->labels, s->ap, sizeof(int) * s->N);
-    }
-    if (n == 0) goto done;
-
-    /* aperture pixel lists */
-    pix = malloc(sizeof(int) * s->N);
-    fill = malloc(sizeof(int) * (n + 1));
-    stamp = malloc(sizeof(int) * (size_t)nodes);
-    touched = malloc(sizeof(int) * (size_t)nodes);
-    wn = malloc(sizeof(double) * (size_t)nodes);
-    acc = malloc(sizeof(double) * (size_t)BK * 2);
-    if (!pix || !fill || !stamp || !touched || !wn || !acc) {
-        st = gs_fail(GS_ENOMEM, "blobs: cannot allocate the photometry buffers");
-        goto done;
-    }
-    for (size_t p = 0; p < s->N; p++)
-        if (s->ap[p] >= 0) start[s->ap[p] + 1]++;
-    for (size_t i = 1; i <= n; i++) start[i] += start[i - 1];
-    memcpy(fill, start, sizeof(int) * n);
-    for (size_t p = 0; p < s->N; p++)
-        if (s->ap[p] >= 0) pix[fill[s->ap[p]]++] = (int)p;
-    for (int t = 0; t < nodes; t++) stamp[t] = -1;
-
-    for (size_t i = 0; i < n; i++) {
-        const int *ap = pix + start[i];
-        const int na = start[i + 1] - start[i];
-        unsigned flags = s->lflags[ord[i].light];
-        double sw = 0, sx = 0, sy = 0, sxx = 0, syy = 0, peak_raw = 0;
-        int nsat = 0, nuse = 0, ntouch = 0;
-        for (int a = 0; a < na; a++) {
-            int p = ap[a], x = p % W, y = p / W;
-            if (x == 0 || y == 0 || x == W - 1 || y == H - 1) flags |= REC_BLOB_EDGE;
-            if (s->hdr[p]) flags |= REC_BLOB_HDR;
-            {
-                double w = s->M[p];
-                sw += w;
-                sx += w * x;
-                sy += w * y;
-                sxx += w * x * x;
-                syy += w * y * y;
-            }
-            if (s->fp[p] == (int)i) {
-                for (int k = 0; k < K; k++) {
-                    const unsigned short *r = c->raw + (s->N * (size_t)k + (size_t)p) * (size_t)B;
-                    for (int b = 0; b < B; b++)
-                        if (r[b] > peak_raw) peak_raw = r[b];
-                }
-            }
-            if (s->sat[p]) {
-                nsat++;
-                continue;
-            }
-            nuse++;
-            int node[4];
-            double w[4];
-            int m = rec_mesh_weights(&s->mesh, x, y, node, w);
-            for (int t = 0; t < m; t++) {
-                if (stamp[node[t]] != (int)i) {
-                    stamp[node[t]] = (int)i;
-                    wn[node[t]] = 0;
-                    touched[ntouch++] = node[t];
-                }
-                wn[node[t]] += w[t];
-            }
-        }
-        /* centroid on M - background over the footprint; its weights are above the
-         * threshold, hence > 0, except where the footprint holds saturated pixels whose
-         * clipped M is still positive: sw > 0 unless the data are degenerate */
-        if (sw > 0 && isfinite(sw)) {
-            cat->x_px[i] = sx / sw;
-            cat->y_px[i] = sy / sw;
-            double r2 = sxx / sw - cat->x_px[i] * cat->x_px[i] + syy / sw - cat->y_px[i] * cat->y_px[i];
-            win_centroid(s, (int)i, r2, &cat->x_px[i], &cat->y_px[i]);
-        } else {
-            double gx = 0, gy = 0;
-            int nf = 0;
-            for (int a = 0; a < na; a++)
-                if (s->fp[ap[a]] == (int)i) {
-                    gx += ap[a] % W;
-                    gy += ap[a] / W;
-                    nf++;
-                }
-            cat->x_px[i] = nf ? gx / nf : 0;
-            cat->y_px[i] = nf ? gy / nf : 0;
-        }
-        cat->area_px[i] = area[ord[i].light];
-        cat->peak_dn[i] = peak_raw;
-        cat->saturated_px[i] = nsat;
-        if (nsat) flags |= REC_BLOB_SATURATED;
-        if (!nuse) flags |= REC_BLOB_NO_SIGNAL;
-        cat->flags[i] = flags;
-
-        double *sig = cat->signal + i * (size_t)BK, *sgm = cat->sigma + i * (size_t)BK;
-        if (!nuse) {
-            for (int q = 0; q < BK; q++) {
-                sig[q] = 0;
-                sgm[q] = INFINITY;
-            }
-            continue;
-        }
-        double *sv = acc, *vv = acc + BK;
-        memset(acc, 0, sizeof(double) * (size_t)BK * 2);
-        /* Shot noise from each pixel's mean level over the K windows, not from each sample's
-         * own value: a sample's own value correlates its weight with its noise and biases
-         * Eq. 7 at low photon counts (docs/recognition.md). */
-        for (int a = 0; a < na; a++) {
-            int p = ap[a];
-            if (s->sat[p]) continue;
-            double mean_flux[GS_MAX_BANDS] = {0};
-            for (int k = 0; k < K; k++) {
-                double f = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[s->N * (size_t)k + (size_t)p] : 0)];
-                const unsigned short *r = c->raw + (s->N * (size_t)k + (size_t)p) * (size_t)B;
-                for (int b = 0; b < B; b++) {
-                    double v = ((double)r[b] - s->black) * f;
-                    sv[b * K + k] += v;
-                    mean_flux[b] += v / K;
-                }
-            }
-            for (int k = 0; k < K; k++) {
-                double f = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[s->N * (size_t)k + (size_t)p] : 0)];
-                for (int b = 0; b < B; b++) {
-                    double dn = mean_flux[b] / f;   /* expected raw level above black */
-                    vv[b * K + k] += (s->nz.read_var_dn2 + (dn > 0 ? dn * s->nz.inv_gain : 0)) * f * f;
-                }
-            }
-        }
-        for (int k = 0; k < K; k++)
-            for (int b = 0; b < B; b++) {
-                const size_t plane = ((size_t)k * B + (size_t)b) * (size_t)nodes;
-                double bsum = 0, bvar = 0;
-                for (int t = 0; t < ntouch; t++) {
-                    int nd = touched[t];
-                    bsum += wn[nd] * s->fval[plane + (size_t)nd];
-                    bvar += wn[nd] * wn[nd] * s->fvar[plane + (size_t)nd];
-                }
-                sig[b * K + k] = sv[b * K + k] - bsum;
-                sgm[b * K + k] = sqrt(vv[b * K + k] + bvar);
-            }
-    }
-done:
-    free(ord);
-    free(newi);
-    free(start);
-    free(pix);
-    free(fill);
-    free(stamp);
-    free(touched);
-    free(wn);
-    free(acc);
-    return st;
 }
 
 /* ------------------------------------------------------------------- entry */
@@ -1027,7 +383,7 @@ gs_status rec_blobs_extract(const gs_capture *cap, const rec_blob_opts *o, rec_c
     if ((st = gs_capture_check(cap, "rec_blobs_extract")) != GS_OK) return st;
     if (!cap->raw) return gs_fail(GS_EINVAL, "rec_blobs_extract: the capture has no pixels");
 
-    state s;
+    rec_blob_state s;
     memset(&s, 0, sizeof s);
     s.cap = cap;
     s.o = o;
@@ -1083,14 +439,14 @@ gs_status rec_blobs_extract(const gs_capture *cap, const rec_blob_opts *o, rec_c
     if ((st = rec_cv_dilate_u8(mask, s.W, s.H, o->grow_px + MASK_MARGIN)) != GS_OK) goto done;
     if ((st = frame_mesh(&s, mask, 1)) != GS_OK) goto done;
 
-    if ((st = deblend(&s)) != GS_OK) goto done;
+    if ((st = rec_blob_deblend(&s)) != GS_OK) goto done;
     area = calloc((size_t)(s.nlights ? s.nlights : 1), sizeof *area);
     if (!area) {
         st = gs_fail(GS_ENOMEM, "rec_blobs_extract: cannot hold %d lights", s.nlights);
         goto done;
     }
-    if ((st = apertures(&s, area)) != GS_OK) goto done;
-    st = photometry(&s, area, cat);
+    if ((st = rec_blob_apertures(&s, area)) != GS_OK) goto done;
+    st = rec_blob_photometry(&s, area, cat);
 done:
     free(area);
     free(mask);

@@ -26,6 +26,56 @@ int rec_mesh_weights(const rec_mesh *m, int x, int y, int *node, double *w);
 double rec_mesh_at(const rec_mesh *m, const double *g, size_t stride, int x, int y);
 float rec_mesh_at_f(const rec_mesh *m, const float *g, int x, int y);
 
+/* ====================================== blobs (blobs*.c), shared between its files */
+
+/* The extraction state of one capture (blobs.c builds it; deblending and photometry read it). */
+typedef struct {
+    const gs_capture *cap;
+    const rec_blob_opts *o;
+    int W, H, K, bands;
+    size_t N;
+    int sat_level;           /* raw >= sat_level is saturated (integer form of saturation_dn) */
+    float black;
+    gs_noise nz;             /* the capture's noise model */
+    double *scale;           /* [k * (GS_MAX_HALVINGS + 1) + h] = 2^h / cycles_k */
+
+    float *M;                /* mean image, then M - background */
+    unsigned char *sat;      /* saturated in some frame and band */
+    unsigned char *hdr;      /* halved in some frame */
+    float *sumA, *sumB;      /* HDR only: sum_k scale^2, sum_k scale */
+
+    rec_mesh mesh;
+    double *fval, *fvar;     /* per-frame mesh: [((k * bands + b) * nodes + n)] mean, var of mean */
+
+    unsigned char *det;      /* detection mask */
+    int *comp;               /* component labels (0 = none) */
+    int ncomp;
+    int *stats;              /* 5 per label */
+
+    int *fp;                 /* footprint owner (light index) or -1 */
+    int *ap;                 /* aperture owner or -1 */
+    int nlights, cap_lights;
+    unsigned *lflags;        /* per light: DEBLENDED */
+} rec_blob_state;
+/* The variance (DN^2 per cycle^2) of a raw sample that integrated 1/scale cycles. */
+static inline double rec_blob_sample_var(const rec_blob_state *s, unsigned raw, double scale)
+{
+    return gs_noise_raw_var(&s->nz, (double)raw) * scale * scale;
+}
+/* Value of the per-frame background mesh of frame k, band b at (x, y) (blobs.c). */
+double rec_blob_frame_bg(const rec_blob_state *s, int k, int b, int x, int y);
+/* Step 5, deblending (blobs_deblend.c); steps 6-7, apertures and photometry
+ * (blobs_photometry.c): area[] per light, then the catalog. */
+gs_status rec_blob_deblend(rec_blob_state *s);
+gs_status rec_blob_apertures(rec_blob_state *s, int *area);
+gs_status rec_blob_photometry(rec_blob_state *s, const int *area, rec_catalog *cat);
+/* ================================================================= end of blobs */
+
+/* The bulb colours of the bulb map (maps_draw.c) and the signal plots (plot.c), in rank order,
+ * and the degree sign in UTF-8. */
+extern const unsigned char rec_bulb_palette[20][3];
+#define REC_DEG "\xc2\xb0"
+
 /* OpenCV shim (recognize/opencv_shim.cpp), the only C++ in recognize/: plain C functions over
  * OpenCV 4 (core, imgproc, imgcodecs).
  * Every OpenCV or C++ exception is caught at this boundary and returned as a gs_status with a

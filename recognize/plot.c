@@ -1,6 +1,11 @@
-/* plot.c - BRF plots like the paper's Fig. 2 (bottom right): each bulb's BRF over one flicker
- * cycle, one panel per band, drawn with PLplot's cairo PNG driver. */
-#include "recognize/recognize.h"
+/* plot.c - plots drawn with PLplot's cairo PNG driver: BRFs like the paper's Fig. 2 (bottom
+ * right: each bulb's BRF over one flicker cycle, one panel per band) and per-light signals like
+ * its Fig. 3 (normalised measured signals with their best-matching templates, and the same
+ * signals shifted onto grid phase 0). */
+#include "recognize/internal.h"
+
+#include <math.h>
+#include <string.h>
 
 #include <plplot.h>
 #include <stdio.h>
@@ -108,4 +113,259 @@ gs_status rec_plot_brfs(const gs_bulb *const *bulbs, size_t count, const char *p
     free(x);
     free(y);
     return GS_OK;
+}
+
+/* ------------------------------------------------------------ signal plots (Fig. 3) */
+
+#define CURVE_N 200
+#define MAX_SIGNAL_LIGHTS 16
+
+/* Window-mean curve of bulb b delayed by shift cycles, for band: c(u) = the mean of the delayed,
+ * chromaticity-scaled BRF over a window of 1/K centred at u, at u = j / (CURVE_N - 1), from the
+ * BRF's Fourier series (each harmonic h times sinc(h / K)); exactly the template value (Eq. 5) at
+ * the window centres u = (k + 1/2) / K (a Nyquist component, which the built-in DELIGHT does not
+ * have, is left out). C holds n/2 + 1 values of scratch. */
+static gs_status template_curve(const gs_bulb *b, double shift, int K, int band, double *u,
+                                double *c, double complex *C)
+{
+    int n = b->brf.n;
+    gs_status st = gs_brf_spectrum(b->brf.v + (size_t)band * (size_t)n, n, C);
+    if (st != GS_OK) return st;
+    const double pi = 3.14159265358979323846;
+    for (int h = 1; h < n / 2; h++) {
+        double a = pi * h / K;
+        C[h] *= 2.0 * sin(a) / a;
+    }
+    for (int j = 0; j < CURVE_N; j++) {
+        u[j] = (double)j / (CURVE_N - 1);
+        double turns = fmod(u[j] - shift, 1.0);
+        double complex z = cexp(I * 2.0 * pi * turns), zh = 1.0;
+        double acc = creal(C[0]);
+        for (int h = 1; h < n / 2; h++) {
+            zh *= z;
+            acc += creal(C[h] * zh);
+        }
+        c[j] = b->chroma[band] * acc / n;
+    }
+    return GS_OK;
+}
+
+typedef struct {
+    size_t light;
+    double snr;
+} light_rank;
+
+static int cmp_rank(const void *a, const void *b)
+{
+    const light_rank *x = a, *y = b;
+    if (x->snr != y->snr) return x->snr < y->snr ? 1 : -1;
+    return x->light < y->light ? -1 : x->light > y->light;
+}
+
+static const char *const symbols[8] = {"\xe2\x97\x8f", "\xe2\x96\xa0", "\xe2\x96\xb2",
+                                       "\xe2\x97\x86", "\xe2\x96\xbc", "\xe2\x98\x85",
+                                       "\xe2\x9c\x9a", "\xe2\x9c\x96"};
+
+gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const rec_match *match,
+                           int max_lights, const char *png_path, const char *title)
+{
+    if (!m || !cat || (cat->count && !match) || !png_path)
+        return gs_fail(GS_EINVAL, "signal plot: expected a matcher, a catalog, its matches and a path");
+    if (max_lights < 1 || max_lights > MAX_SIGNAL_LIGHTS)
+        return gs_fail(GS_EINVAL, "signal plot: max_lights %d: expected 1 to %d", max_lights,
+                       MAX_SIGNAL_LIGHTS);
+    const gs_bulb *first = rec_matcher_bulb(m, 0);
+    int K = cat->K, bands = cat->bands;
+    if (cat->count && (!first || first->brf.bands != bands))
+        return gs_fail(GS_EINVAL, "signal plot: the catalog has %d bands, the matcher %d", bands,
+                       first ? first->brf.bands : 0);
+    if (bands < 1 || bands > GS_MAX_BANDS) bands = first ? first->brf.bands : 1;
+    if (K < 2) K = 2;
+    /* the lights to draw: recognised, highest SNR first */
+    light_rank rank[MAX_SIGNAL_LIGHTS];
+    size_t nl = 0;
+    light_rank *all = calloc(cat->count ? cat->count : 1, sizeof *all);
+    if (!all) return gs_fail(GS_ENOMEM, "signal plot: cannot rank %zu lights", cat->count);
+    size_t na = 0;
+    size_t D = (size_t)bands * (size_t)K;
+    for (size_t i = 0; i < cat->count; i++) {
+        if (match[i].bulb < 0 || !(match[i].brightness > 0.0)) continue;
+        double s = 0.0, v = 0.0;
+        for (size_t d = 0; d < D; d++) {
+            s += cat->signal[i * D + d];
+            v += cat->sigma[i * D + d] * cat->sigma[i * D + d];
+        }
+        if (!(v > 0.0) || !isfinite(v)) continue;
+        all[na].light = i;
+        all[na++].snr = s / sqrt(v);
+    }
+    qsort(all, na, sizeof *all, cmp_rank);
+    for (size_t i = 0; i < na && nl < (size_t)max_lights; i++) rank[nl++] = all[i];
+    free(all);
+
+    FILE *probe = fopen(png_path, "wb");   /* PLplot exits the process on open failures */
+    if (!probe) return gs_fail(GS_EIO, "%s: cannot write the plot", png_path);
+    fclose(probe);
+
+    double *u = malloc(sizeof *u * CURVE_N), *cv = malloc(sizeof *cv * CURVE_N);
+    int nmax = 4;
+    for (size_t i = 0; i < rec_matcher_bulb_count(m); i++)
+        if (rec_matcher_bulb(m, i)->brf.n > nmax) nmax = rec_matcher_bulb(m, i)->brf.n;
+    double complex *tmp = malloc(sizeof *tmp * (size_t)(nmax / 2 + 1));
+    double *px = malloc(sizeof *px * (size_t)(K + 1)), *py = malloc(sizeof *py * (size_t)(K + 1));
+    double *lo = malloc(sizeof *lo * (size_t)K), *hi = malloc(sizeof *hi * (size_t)K);
+    if (!u || !cv || !tmp || !px || !py || !lo || !hi) {
+        free(u); free(cv); free(tmp); free(px); free(py); free(lo); free(hi);
+        return gs_fail(GS_ENOMEM, "signal plot: cannot allocate curves");
+    }
+    /* y range over every drawn value */
+    double ymax = 0.0;
+    for (size_t l = 0; l < nl; l++) {
+        size_t i = rank[l].light;
+        double a = match[i].brightness;
+        for (size_t d = 0; d < D; d++) {
+            double y = (cat->signal[i * D + d] + cat->sigma[i * D + d]) / a;
+            if (y > ymax) ymax = y;
+        }
+    }
+    gs_status st = GS_OK;
+    for (size_t l = 0; l < nl && st == GS_OK; l++) {
+        const gs_bulb *b = rec_matcher_bulb(m, (size_t)match[rank[l].light].bulb);
+        for (int band = 0; band < bands && st == GS_OK; band++) {
+            st = template_curve(b, 0.0, K, band, u, cv, tmp);
+            for (int j = 0; j < CURVE_N && st == GS_OK; j++)
+                if (cv[j] > ymax) ymax = cv[j];
+        }
+    }
+    ymax = ymax > 0.0 ? ymax * 1.08 : 1.0;
+    if (bands == 3 && ymax < 0.6) ymax = 0.6;
+    if (bands == 1 && ymax < 1.5) ymax = 1.5;
+
+    /* colours: one per distinct bulb (as the paper's Fig. 3) */
+    int bulb_of_colour[MAX_SIGNAL_LIGHTS], ncol = 0, colour[MAX_SIGNAL_LIGHTS];
+    for (size_t l = 0; l < nl; l++) {
+        int bb = match[rank[l].light].bulb, c = -1;
+        for (int k = 0; k < ncol; k++)
+            if (bulb_of_colour[k] == bb) c = k;
+        if (c < 0) {
+            c = ncol;
+            bulb_of_colour[ncol++] = bb;
+        }
+        colour[l] = c;
+    }
+
+    if (st == GS_OK) {
+        plsdev("pngcairo");
+        plsfnam(png_path);
+        char geom[32];
+        snprintf(geom, sizeof geom, "1500x%d", bands == 1 ? 620 : 1500);
+        plsetopt("geometry", geom);
+        plscmap0n(24);
+        plscol0(0, 255, 255, 255);
+        plscol0(1, 0, 0, 0);
+        for (int c = 0; c < 20; c++)
+            plscol0(c + 2, rec_bulb_palette[c][0] * 4 / 5, rec_bulb_palette[c][1] * 4 / 5, rec_bulb_palette[c][2] * 4 / 5);
+        plinit();
+        pladv(0);
+        static const char *const band_name[3] = {"red band", "green band", "blue band"};
+        double top = 0.93, bottom = 0.05, gap = 0.09;
+        double row_h = (top - bottom - gap * (bands - 1)) / bands;
+        const char *labels[MAX_SIGNAL_LIGHTS], *syms[MAX_SIGNAL_LIGHTS];
+        char text[MAX_SIGNAL_LIGHTS][120];
+        PLINT opts[MAX_SIGNAL_LIGHTS], colors[MAX_SIGNAL_LIGHTS], styles[MAX_SIGNAL_LIGHTS];
+        PLFLT widths[MAX_SIGNAL_LIGHTS], scales[MAX_SIGNAL_LIGHTS];
+        PLINT numbers[MAX_SIGNAL_LIGHTS];
+        for (int band = 0; band < bands && st == GS_OK; band++) {
+            double y1 = top - band * (row_h + gap), y0 = y1 - row_h;
+            for (int panel = 0; panel < 2 && st == GS_OK; panel++) {
+                plvpor(panel ? 0.45 : 0.07, panel ? 0.76 : 0.38, y0, y1);
+                plwind(0.0, 1.0, 0.0, ymax);
+                plcol0(1);
+                plwidth(1.0);
+                plschr(0, 0.6);
+                plbox("bcnstg", 0.2, 2, "bcnstvg", 0, 0);
+                char lab[300];
+                const char *bn = bands == 1 ? "monochrome" : band_name[band];
+                if (panel == 0)
+                    snprintf(lab, sizeof lab, "%s: measured/brightness, best template", bn);
+                else
+                    snprintf(lab, sizeof lab, "%s: shifted to grid phase 0", bn);
+                pllab("time in the flicker cycle, t / #gD", "normalised signal", lab);
+                if (band == 0 && panel == 0 && title && *title) {
+                    plschr(0, 0.75);
+                    plmtex("t", 3.2, 0.0, 0.0, title);
+                    plschr(0, 0.6);
+                }
+                for (size_t l = 0; l < nl && st == GS_OK; l++) {
+                    size_t i = rank[l].light;
+                    const rec_match *mt = &match[i];
+                    const gs_bulb *b = rec_matcher_bulb(m, (size_t)mt->bulb);
+                    int phase_known = b->ref == GS_REF_VOLTAGE && !(mt->flags & REC_MATCH_PHASE_AMBIGUOUS);
+                    double sh = gs_phase_to_shift(mt->phase_deg);
+                    if (panel == 1 && !phase_known) continue;
+                    /* the template (panel 0: at the light's phase; panel 1: at phase 0) */
+                    st = template_curve(b, panel ? 0.0 : sh, K, band, u, cv, tmp);
+                    if (st != GS_OK) break;
+                    plcol0(colour[l] % 20 + 2);
+                    plwidth(panel ? 1.0 : 2.0);
+                    plline(CURVE_N, u, cv);
+                    /* the measured samples at the window centres (panel 1: minus the shift) */
+                    double a = mt->brightness;
+                    for (int k = 0; k < K; k++) {
+                        double t = (k + 0.5) / K - (panel ? sh : 0.0);
+                        t -= floor(t);
+                        size_t d = i * D + (size_t)band * (size_t)K + (size_t)k;
+                        px[k] = t;
+                        py[k] = cat->signal[d] / a;
+                        lo[k] = (cat->signal[d] - cat->sigma[d]) / a;
+                        hi[k] = (cat->signal[d] + cat->sigma[d]) / a;
+                    }
+                    plwidth(1.0);
+                    plerry(K, px, lo, hi);
+                    plschr(0, 0.45);
+                    plstring(K, px, py, symbols[l % 8]);
+                    plschr(0, 0.6);
+                }
+            }
+            if (st != GS_OK) break;
+            /* legend, right of the first row */
+            if (band == 0) {
+                for (size_t l = 0; l < nl; l++) {
+                    const rec_match *mt = &match[rank[l].light];
+                    const gs_bulb *b = rec_matcher_bulb(m, (size_t)mt->bulb);
+                    if (b->ref == GS_REF_VOLTAGE && !(mt->flags & REC_MATCH_PHASE_AMBIGUOUS))
+                        snprintf(text[l], sizeof text[l], "light %zu: %s, %.0f" REC_DEG, rank[l].light, b->id,
+                                 mt->phase_deg);
+                    else
+                        snprintf(text[l], sizeof text[l], "light %zu: %s, phase ?", rank[l].light, b->id);
+                    labels[l] = text[l];
+                    syms[l] = symbols[l % 8];
+                    opts[l] = PL_LEGEND_LINE | PL_LEGEND_SYMBOL;
+                    colors[l] = colour[l] % 20 + 2;
+                    styles[l] = 1;
+                    widths[l] = 2.0;
+                    scales[l] = 0.5;
+                    numbers[l] = 2;
+                }
+                plvpor(0.78, 0.998, y0, y1);
+                plwind(0.0, 1.0, 0.0, 1.0);
+                if (nl) {
+                    PLFLT lw, lh;
+                    pllegend(&lw, &lh, PL_LEGEND_BACKGROUND | PL_LEGEND_BOUNDING_BOX,
+                             PL_POSITION_LEFT | PL_POSITION_INSIDE | PL_POSITION_TOP, 0.0, 0.0,
+                             0.05, 0, 1, 1, (PLINT)nl, 1, (PLINT)nl, opts, 0.6, 0.45, 2.0, 0.0, colors,
+                             (const char *const *)labels, NULL, NULL, NULL, NULL, colors, styles,
+                             widths, colors, scales, numbers, (const char *const *)syms);
+                } else {
+                    plcol0(1);
+                    plschr(0, 0.8);
+                    plptex(0.5, 0.9, 1.0, 0.0, 0.5, "no recognised light");
+                }
+            }
+        }
+        plend();
+    }
+    free(u); free(cv); free(tmp); free(px); free(py); free(lo); free(hi);
+    if (st != GS_OK) remove(png_path);
+    return st;
 }

@@ -24,7 +24,7 @@ gs_status rec_plot_brfs(const gs_bulb *const *bulbs, size_t count, const char *p
 /* ------------------------------------------------------- blobs (per light) */
 
 /* Lights as blobs of a capture, SEP-style (Barbary 2016, after SExtractor), with per-frame
- * photometry for Eq. 7. Steps (recognize/blobs.c):
+ * photometry for Eq. 7. Steps (recognize/blobs.c, blobs_deblend.c, blobs_photometry.c):
  *  1. per-cycle values (gs_capture_value); the mean image M = mean over k of the sum over
  *     bands (saturated samples enter M clipped at the saturation level: they are bright);
  *  2. background of M: a mesh of boxes of background_px, each the median of its pixels after
@@ -248,7 +248,7 @@ gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *no
 /* ------------------------------------------------------------ maps and plots */
 
 /* Per-pixel recognition maps like the paper's Fig. 1 and per-light signal plots like its Fig. 3
- * (recognize/maps.c; docs/recognize-cli.md shows them).
+ * (recognize/maps.c, maps_draw.c, plot.c; docs/recognize-cli.md shows them).
  *
  * rec_pixel_maps_compute: every pixel's per-cycle values (docs/formats.md: (raw - black_level)
  * 2^h / cycles) minus a background: per frame and band, the background mesh of blobs (boxes
@@ -356,7 +356,7 @@ gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const r
 
 /* The optimum that Eq. 7 is judged against (tests/test_eq7_accuracy.c, `gridsurvey bench
  * accuracy`): the maximum-likelihood (template, brightness) under the exact noise of a camera,
- * written without anything from eq7.c. A sample x (any linear unit: DN, DN per cycle, a sum over
+ * written without anything from eq7_*.c. A sample x (any linear unit: DN, DN per cycle, a sum over
  * an aperture) of a light of mean mu is
  *   x = (n - bg_e) / gain + read_dn * N(0, 1),   n ~ Poisson(gain * mu + bg_e),
  * i.e. Poisson photo-electrons of the light and a known background that was subtracted, plus
