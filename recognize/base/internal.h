@@ -49,4 +49,104 @@ int gs_capture_check_fields(const gs_capture *c, gs_capture_problem *pr);
 int gs_capture_valid_name(const char *s);
 int gs_capture_valid_utc(const char *s);
 
+/* ======================== DELIGHT models (delight_model.c, delight_lamps.c), shared between them */
+
+#define PI 3.14159265358979323846
+#define SQRT2 1.41421356237309504880
+
+typedef struct {
+    double f;        /* grid frequency, Hz */
+    int M;           /* samples per flicker cycle; sample j at t = j Delta / M */
+    double dt;       /* Delta / M, s */
+    double *band[3]; /* out: raw band intensities (any common scale) */
+    double *tmp[5];  /* scratch, M each */
+} sim;
+
+static inline double dm_mean_of(const double *x, int M)
+{
+    double s = 0.0;
+    for (int j = 0; j < M; j++) s += x[j];
+    return s / M;
+}
+
+typedef double (*root_fn)(double x, void *ctx);
+
+typedef struct {
+    double va, r, gap_rad;
+} arc_model;
+
+typedef struct {
+    arc_model am;
+    double target_deg;
+    double *buf;
+    int M;
+    gs_status err;
+} lag_ctx;
+
+enum variant {
+    V_NONE,
+    V_HALO,      /* halophosphate fluorescent */
+    V_TRI,       /* triphosphor fluorescent */
+    V_MAINS,     /* mains-voltage halogen */
+    V_LOWV,      /* 12 V halogen on a magnetic transformer */
+    V_CLEAR,     /* clear mercury */
+    V_COATED,    /* phosphor-coated mercury */
+    V_KSF,       /* LED with a KSF (K2SiF6:Mn4+) red phosphor */
+    V_RGBW       /* PWM LED with separate R, G, B, W channels */
+};
+
+typedef struct {
+    const char *id;
+    const char *name;
+    gs_tech tech;
+    double watts;
+    double volts;      /* rated voltage (filament lamps); 0 = any mains */
+    int native_hz;     /* grid whose percent flicker hits the target */
+    double pf_lo, pf_hi; /* monochrome PF target range at native_hz, % (BULBS.md, see table) */
+    int variant;
+    int taps;          /* LED linear: driver taps */
+} bulb_spec;
+
+/* How the modulation depth reaches the PF target at the native grid. */
+enum knob {
+    KNOB_COUPLING,   /* filament: thermal coupling g, solved */
+    KNOB_CAPACITOR,  /* rectifier: discharge time constant tau_d (capacitor size), solved */
+    KNOB_PEDESTAL,   /* B -> 1 + s (B - 1), s <= 1: a non-flickering share 1 - s of the light */
+    KNOB_AMPLITUDE,  /* B -> 1 + s (B - 1), any s > 0: ripple amplitude of a regulated driver */
+    KNOB_NONE        /* the shape fixes the depth (linear LED driver) */
+};
+
+typedef struct {
+    const bulb_spec *spec;
+    enum knob knob;
+    double pf_target;           /* % at native_hz */
+    /* filament (incandescent, halogen) */
+    double tcolor_k, tau_th_s, coupling, planck_resp[3], planck_m[3];
+    /* discharge on a choke */
+    double lag_deg, r_choke, gap_s, gamma, afterglow_s, spike_amp, spike_s, arc_va;
+    /* phosphors */
+    double tau_blue_s, tau_green_s, tau_red_s;
+    /* rectifier drivers */
+    double rho, vf, tau_d_s, ksf_frac, ksf_tau_s;
+    /* linear LED taps */
+    double tap_v[4], tap_w[4], edge;
+    /* electronic ballast PFC input-current third harmonic */
+    double h3;
+    /* spectral weights and per-species responses (metal halide) */
+    double w[8], sp_gamma[5], sp_tau_s[5];
+    /* depth s (KNOB_PEDESTAL / KNOB_AMPLITUDE), solved at native_hz */
+    double depth;
+} lamp;
+
+/* delight_lamps.c: the lamp physics. */
+/* Band responses of a blackbody at T kelvin: resp[b] its share per band, m[b] ln-derivative. */
+void dm_planck_bands(double T, double resp[3], double m[3]);
+/* A root of f in [lo, hi] to xtol / ftol (bracketing and secant steps); 0 if none. */
+int dm_solve_root(root_fn f, void *ctx, double lo, double hi, double xtol, double ftol, double *root);
+/* The ballast lag of a choke lamp at arc voltage va, minus its target (for dm_solve_root). */
+double dm_lag_error(double va, void *vctx);
+/* The lamp's band waveforms over one cycle into s->band[] (its technology's model). */
+gs_status dm_run_model(const lamp *p, sim *s);
+/* ====================================================================== end of DELIGHT models */
+
 #endif
