@@ -32,4 +32,52 @@ int srv_error(gs_status s);
  * document (json != 0) on f. GS_EIO when f cannot be written. */
 gs_status srv_eval_print(const srv_eval_report *r, const char *truth_path, int json, FILE *f);
 
+/* ===================================== the survey database (db*.c), shared between its files */
+
+#include <sqlite3.h>
+
+/* Migration i takes the schema from version i to i + 1 (db_schema.c). */
+typedef struct {
+    const char *name;
+    const char *const *sql;   /* NULL-terminated pieces (C99 limits literals to 4095 bytes) */
+} srv_db_migration;
+#define SRV_DB_MIGRATIONS SRV_DB_SCHEMA_VERSION
+extern const srv_db_migration srv_db_migrations[SRV_DB_MIGRATIONS];
+
+/* The prepared statements of a handle (their SQL in db_schema.c). */
+enum {
+    ST_ADD_DELIGHT, ST_GET_DELIGHT, ST_ADD_SURVEY, ST_GET_SURVEY, ST_ADD_STATION, ST_GET_STATION,
+    ST_ADD_CAPTURE, ST_GET_CAPTURE, ST_ADD_FRAME, ST_ADD_LIGHT, ST_GET_LIGHT, ST_ADD_LOCATION,
+    ST_ADD_FREQ, ST_DEL_CAPTURE, ST_COUNT
+};
+extern const char *const srv_db_stmt_sql[ST_COUNT];
+
+struct srv_db {
+    sqlite3 *db;
+    char *path;
+    int readonly;
+    int wal;                    /* this handle switched the file to WAL */
+    int in_txn;
+    sqlite3_stmt *st[ST_COUNT];
+};
+
+/* Helpers of db.c for db_rows.c: failures with the connection's message, the UTC time,
+ * statements (prepared once per handle), binding (NaN and NULL text as SQL NULL), stepping,
+ * and the transaction rules (writes need a transaction; auto_begin/auto_end wrap one call). */
+gs_status srv_dbi_fail(srv_db *db, const char *what);
+void srv_dbi_utc_now(char buf[32]);
+gs_status srv_dbi_exec(srv_db *db, const char *sql, const char *what);
+gs_status srv_dbi_stmt(srv_db *db, int which, sqlite3_stmt **out);
+void srv_dbi_bind_real(sqlite3_stmt *q, int i, double v);
+void srv_dbi_bind_text(sqlite3_stmt *q, int i, const char *s);
+void srv_dbi_bind_int_or_null(sqlite3_stmt *q, int i, int64_t v, int64_t none);
+gs_status srv_dbi_step_returning(srv_db *db, sqlite3_stmt *q, int64_t *id, int *inserted, const char *what);
+gs_status srv_dbi_step_id(srv_db *db, sqlite3_stmt *q, int64_t *id, const char *what);
+gs_status srv_dbi_step_done(srv_db *db, sqlite3_stmt *q, const char *what);
+gs_status srv_dbi_writable(srv_db *db);
+gs_status srv_dbi_need_txn(srv_db *db, const char *what);
+gs_status srv_dbi_auto_begin(srv_db *db, int *began);
+gs_status srv_dbi_auto_end(srv_db *db, int began, gs_status s);
+/* ====================================================================== end of the database */
+
 #endif
