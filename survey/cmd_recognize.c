@@ -395,60 +395,35 @@ int srv_cmd_recognize(int argc, char **argv)
     if (rc >= 0) return rc;
     progress_on = isatty(2);
 
-    gs_capture cap;
-    memset(&cap, 0, sizeof cap);
-    rec_catalog cat;
-    memset(&cat, 0, sizeof cat);
-    gs_delight *d = NULL;
-    rec_matcher *m = NULL;
-    rec_match *mt = NULL;
-
+    srv_job j;
+    memset(&j, 0, sizeof j);
     gs_status st = o.maps ? maps_dir(o.maps) : GS_OK;
     if (st == GS_OK) {
         progress("reading %s ...", o.capdir);
-        st = gs_capture_read(o.capdir, &cap);
+        st = srv_job_read(&j, o.capdir);
     }
     if (st == GS_OK) {
-        progress("loading DELIGHT ...");
-        d = gs_delight_new();
-        st = !d ? gs_fail(GS_ENOMEM, "cannot allocate the DELIGHT database")
-             : o.db ? gs_delight_load(d, o.db) : gs_delight_generate(d, GS_BRF_N_DEFAULT);
-    }
-    if (st == GS_OK) {
-        progress("building Eq. 7 templates ...");
-        st = rec_matcher_new(d, cap.grid_hz, cap.bands, cap.K, &o.eq7, &m);
-        if (st == GS_ENOTFOUND) {
-            char why[512];
-            snprintf(why, sizeof why, "%s", gs_detail());
-            st = gs_fail(GS_ENOTFOUND, "DELIGHT %s: no usable %s entry for the capture's %d Hz "
-                         "grid (%s)", o.db ? o.db : "built-in",
-                         cap.bands == 3 ? "RGB" : "monochrome", cap.grid_hz, why);
-        }
+        progress("loading DELIGHT, building Eq. 7 templates ...");
+        st = srv_job_matcher(&j, NULL, o.db, j.cap.grid_hz, j.cap.bands, j.cap.K, &o.eq7);
     }
     if (st == GS_OK) {
         progress("extracting lights ...");
         rec_blob_opts bo;
         rec_blob_opts_default(&bo);
         bo.threshold_sigma = o.threshold;
-        st = rec_blobs_extract(&cap, &bo, &cat);
+        st = srv_job_extract(&j, &bo);
     }
     if (st == GS_OK) {
-        progress("matching %zu lights ...", cat.count);
-        mt = calloc(cat.count ? cat.count : 1, sizeof *mt);
-        st = mt ? rec_match_catalog(m, &cat, mt)
-                : gs_fail(GS_ENOMEM, "cannot hold %zu matches", cat.count);
+        progress("matching %zu lights ...", j.cat.count);
+        st = srv_job_match(&j);
     }
-    if (st == GS_OK && o.maps) st = write_maps(&o, &cap, m, &cat, mt);
+    if (st == GS_OK && o.maps) st = write_maps(&o, &j.cap, j.matcher, &j.cat, j.match);
     progress_done();
     if (st == GS_OK) {
-        if (o.json) st = print_json(&o, &cap, m, &cat, mt);
-        else print_table(&o, &cap, m, &cat, mt);
+        if (o.json) st = print_json(&o, &j.cap, j.matcher, &j.cat, j.match);
+        else print_table(&o, &j.cap, j.matcher, &j.cat, j.match);
         if (fflush(stdout) != 0 && st == GS_OK) st = gs_fail(GS_EIO, "stdout: write failed");
     }
-    free(mt);
-    rec_matcher_free(m);
-    gs_delight_free(d);
-    rec_catalog_release(&cat);
-    gs_capture_release(&cap);
+    srv_job_release(&j);
     return st == GS_OK ? 0 : srv_error(st);
 }

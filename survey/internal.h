@@ -80,4 +80,41 @@ gs_status srv_dbi_auto_begin(srv_db *db, int *began);
 gs_status srv_dbi_auto_end(srv_db *db, int began, gs_status s);
 /* ====================================================================== end of the database */
 
+/* ============================= `bench accuracy` (bench_accuracy*.c), shared between its files */
+
+#define NBINS 5
+extern const double srv_acc_bin_edges[NBINS + 1];
+
+typedef struct {
+    /* the setting */
+    int hard, K, C, hdr, locked, continuous;   /* hard: 0 metro, 1 metro_hard, 2 metro_clear */
+    /* results */
+    int ok;
+    char err[512];
+    long acquisitions;
+    double delta_s, readout_cycles;
+    double exposure_s, readout_s, capture_s;
+    double compute_s, sim_s;
+    srv_eval_report ev;
+    double snr_p90;
+    double bin_n[NBINS], bin_conf[NBINS], bin_right[NBINS];
+    double ece;
+    long oracle_n;                 /* lights of the oracle subset matched to the truth */
+    double ours_sub, oracle_sub;   /* right bulb and phase / matched, on that subset */
+} srv_acc_point;
+
+extern const char *const srv_acc_scene_names[3];
+
+typedef struct {
+    int x0, y0, w, h;       /* the window of the scene's image rendered */
+} srv_acc_crop;
+/* The report (bench_accuracy_report.c): the points as CSV, the accuracy-vs-time and calibration
+ * plots (PNG), and the Markdown page. */
+const char *srv_acc_ph_name(const srv_acc_point *p);
+gs_status srv_acc_write_csv(const char *path, const srv_acc_point *pts, size_t np);
+void srv_acc_plot_accuracy(const char *path, const srv_acc_point *pts, size_t np, const int *Ks, int nK);
+void srv_acc_plot_calibration(const char *path, const srv_acc_point *pts, size_t np);
+gs_status srv_acc_write_doc(const char *path, const char *out, const char *base, const srv_acc_crop *cr, int quick, const srv_acc_point *pts, size_t np, double wall, const int *Ks, int nK);
+/* ====================================================================== end of bench accuracy */
+
 #endif

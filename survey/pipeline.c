@@ -237,87 +237,41 @@ static gs_status committed_counts(srv_db *db, int64_t survey_id, srv_run_report 
     return s;
 }
 
-/* DELIGHT (the file, or the built-in database when path is NULL) and its Eq. 7 templates for
- * a capture of grid_hz, bands and K. */
-static gs_status load_matcher(const char *path, int grid_hz, int bands, int K, const rec_eq7_opts *eq7,
-                              gs_delight **d, rec_matcher **m)
-{
-    if (!(*d = gs_delight_new())) return gs_fail(GS_ENOMEM, "cannot allocate the DELIGHT database");
-    gs_status s = path ? gs_delight_load(*d, path) : gs_delight_generate(*d, GS_BRF_N_DEFAULT);
-    if (s != GS_OK) return s;
-    s = rec_matcher_new(*d, grid_hz, bands, K, eq7, m);
-    if (s == GS_ENOTFOUND) {
-        char why[512];
-        snprintf(why, sizeof why, "%s", gs_detail());
-        s = gs_fail(GS_ENOTFOUND, "DELIGHT %s: no usable %s entry for the capture's %d Hz grid (%s)",
-                    path ? path : "built-in", bands == 3 ? "RGB" : "monochrome", grid_hz, why);
-    }
-    return s;
-}
-
 /* ------------------------------------------------------------------ the run */
 
-gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
+/* store's progress report right before the capture's transaction */
+static void before_commit(void *ctx, size_t lights, int frames, size_t frequency_rows)
 {
-    if (!o || !r) return gs_fail(GS_EINVAL, "srv_run: NULL argument");
-    memset(r, 0, sizeof *r);
-    r->light_height_m = NAN;
-    gs_status s = check_opts(o);
-    if (s != GS_OK) return s;
+    const srv_run_opts *o = ctx;
+    stage(o, SRV_STAGE_STORE, "capture: %zu lights, %d frames, %zu frequency rows in one "
+          "transaction", lights, frames, frequency_rows);
+}
 
-    cap_scene sc;
-    memset(&sc, 0, sizeof sc);
-    int have_scene = 0;
-    cap_backend *be = NULL;
-    gs_capture cap;
-    memset(&cap, 0, sizeof cap);
-    rec_catalog cat;
-    memset(&cat, 0, sizeof cat);
-    gs_delight *d = NULL;
-    rec_matcher *m = NULL;
-    rec_match *mt = NULL;
-    srv_db *db = NULL;
-    srv_light_row *lights = NULL;
-    srv_location_row *locs = NULL;
-    srv_frame_row *frames = NULL;
-    srv_freq_row *freq = NULL;
-    const char *delight_path = o->delight_path;
-    char delight_buf[CAP_PATH_MAX];
-    int grid_hz = 0, bands = 0, K = 0, width = 0, height = 0;
-    double t0;
-
-    /* 1. the input, checked in full */
+/* 1. The input, checked in full: a scene (its sim backend, station, survey name and capture
+ * directory) or a capture directory (read into j). grid_hz, bands, K, width, height set. */
+static gs_status open_input(const srv_run_opts *o, srv_run_report *r, cap_scene *sc, int *have_scene,
+                            cap_backend **be, srv_job *j, int dims[5])
+{
     struct stat sb;
-    if (stat(o->input, &sb) != 0) {
-        s = gs_fail(errno == ENOENT ? GS_ENOTFOUND : GS_EIO, "%s: %s (expected a scene file or a "
-                    "capture directory)", o->input, strerror(errno));
-        goto done;
-    }
+    if (stat(o->input, &sb) != 0)
+        return gs_fail(errno == ENOENT ? GS_ENOTFOUND : GS_EIO, "%s: %s (expected a scene file or a "
+                       "capture directory)", o->input, strerror(errno));
     r->scene = !S_ISDIR(sb.st_mode);
+    gs_status s;
+    const char *station_json = NULL;
+    char src[4200];
     if (r->scene) {
-        s = cap_scene_read(o->input, &sc);
-        have_scene = 1;
-        if (s != GS_OK) goto done;
-        if (!delight_path && sc.delight[0]) {
-            snprintf(delight_buf, sizeof delight_buf, "%s", sc.delight);
-            delight_path = delight_buf;
-        }
-        if ((s = cap_backend_sim_new(&sc, &be)) != GS_OK) goto done;
+        *have_scene = 1;
+        if ((s = cap_scene_read(o->input, sc)) != GS_OK) return s;
+        if ((s = cap_backend_sim_new(sc, be)) != GS_OK) return s;
         cap_acq_info info;
-        if ((s = cap_backend_info(be, &info)) != GS_OK) goto done;
-        grid_hz = info.grid_hz;
-        bands = info.bands;
-        K = info.K;
-        width = info.width;
-        height = info.height;
-        if (info.station_json && !o->station_path) {
-            char src[4200];
-            snprintf(src, sizeof src, "%s: camera.station", o->input);
-            if ((s = gis_station_parse(info.station_json, src, &r->station)) != GS_OK) goto done;
-            r->has_station = 1;
-        }
+        if ((s = cap_backend_info(*be, &info)) != GS_OK) return s;
+        int d[5] = {info.grid_hz, info.bands, info.K, info.width, info.height};
+        memcpy(dims, d, sizeof d);
+        station_json = info.station_json;
+        snprintf(src, sizeof src, "%s: camera.station", o->input);
         if (o->survey) set_name(r->survey, o->survey);
-        else if (sc.name[0]) set_name(r->survey, sc.name);
+        else if (sc->name[0]) set_name(r->survey, sc->name);
         else {
             char stem[256];
             base_of(o->input, 1, stem, sizeof stem);
@@ -332,105 +286,118 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
             base_of(o->input, 1, stem, sizeof stem);
             len = snprintf(r->capture_dir, sizeof r->capture_dir, "%.3800s/%.200s-capture", dbdir, stem);
         }
-        if (len < 0 || (size_t)len >= sizeof r->capture_dir - 64) {
-            s = gs_fail(GS_EINVAL, "%.200s...: capture directory path too long", r->capture_dir);
-            goto done;
-        }
-        if ((s = check_dir_creatable(r->capture_dir, "capture directory")) != GS_OK) goto done;
+        if (len < 0 || (size_t)len >= sizeof r->capture_dir - 64)
+            return gs_fail(GS_EINVAL, "%.200s...: capture directory path too long", r->capture_dir);
+        if ((s = check_dir_creatable(r->capture_dir, "capture directory")) != GS_OK) return s;
     } else {
-        if (o->capture_dir) {
-            s = gs_fail(GS_EINVAL, "--capture-dir is for scene inputs: %s is already a capture "
-                        "directory", o->input);
-            goto done;
-        }
-        if (strlen(o->input) >= sizeof r->capture_dir - 64) {
-            s = gs_fail(GS_EINVAL, "%.200s...: capture directory path too long", o->input);
-            goto done;
-        }
+        if (o->capture_dir)
+            return gs_fail(GS_EINVAL, "--capture-dir is for scene inputs: %s is already a capture "
+                           "directory", o->input);
+        if (strlen(o->input) >= sizeof r->capture_dir - 64)
+            return gs_fail(GS_EINVAL, "%.200s...: capture directory path too long", o->input);
         snprintf(r->capture_dir, sizeof r->capture_dir, "%s", o->input);
         stage(o, SRV_STAGE_READ, "reading %s", o->input);
-        t0 = now_s();
-        if ((s = gs_capture_read(o->input, &cap)) != GS_OK) goto done;
+        double t0 = now_s();
+        if ((s = srv_job_read(j, o->input)) != GS_OK) return s;
         r->seconds[SRV_STAGE_READ] += now_s() - t0;
-        grid_hz = cap.grid_hz;
-        bands = cap.bands;
-        K = cap.K;
-        width = cap.width;
-        height = cap.height;
-        if (cap.station_json && !o->station_path) {
-            char src[4200];
-            snprintf(src, sizeof src, "%s/capture.json: station", o->input);
-            if ((s = gis_station_parse(cap.station_json, src, &r->station)) != GS_OK) goto done;
-            r->has_station = 1;
-        }
+        int d[5] = {j->cap.grid_hz, j->cap.bands, j->cap.K, j->cap.width, j->cap.height};
+        memcpy(dims, d, sizeof d);
+        station_json = j->cap.station_json;
+        snprintf(src, sizeof src, "%s/capture.json: station", o->input);
         char base[256];
         base_of(o->input, 0, base, sizeof base);
         set_name(r->survey, o->survey ? o->survey : base);
     }
-
-    /* 2. the station and the light height */
-    if (o->station_path) {
-        if ((s = gis_station_read(o->station_path, &r->station)) != GS_OK) goto done;
+    if (station_json && !o->station_path) {
+        if ((s = gis_station_parse(station_json, src, &r->station)) != GS_OK) return s;
         r->has_station = 1;
     }
-    if (r->has_station) {
-        const gis_camera *c = &r->station.cam;
-        if ((s = gis_camera_check(c)) != GS_OK) goto done;
-        if ((c->width_px > 0 && c->width_px != width) || (c->height_px > 0 && c->height_px != height)) {
-            s = gs_fail(GS_EINVAL, "%s: the station's image is %dx%d pixels but the capture's is "
-                        "%dx%d", o->station_path ? o->station_path : o->input, c->width_px,
-                        c->height_px, width, height);
-            goto done;
-        }
-        if (isfinite(o->light_height_m)) {
-            r->light_height_m = o->light_height_m;
-            snprintf(r->height_source, sizeof r->height_source, "--light-height-m");
-        } else if (have_scene && isfinite(r->light_height_m = scene_median_height(&sc))) {
-            snprintf(r->height_source, sizeof r->height_source, "scene median");
-        } else {
-            s = gs_fail(GS_EINVAL, "%s: the lights' height is unknown (%s): give --light-height-m "
-                        "H, metres above the WGS84 ellipsoid", o->input,
-                        have_scene ? "the scene has no geographic light" : "a capture directory");
-            goto done;
-        }
+    return GS_OK;
+}
+
+/* 2. The station (a file overrides the capture's) and the lights' height. */
+static gs_status station_and_height(const srv_run_opts *o, srv_run_report *r, const cap_scene *sc,
+                                    int have_scene, const int dims[5])
+{
+    gs_status s;
+    if (o->station_path) {
+        if ((s = gis_station_read(o->station_path, &r->station)) != GS_OK) return s;
+        r->has_station = 1;
     }
+    if (!r->has_station) return GS_OK;
+    const gis_camera *c = &r->station.cam;
+    if ((s = gis_camera_check(c)) != GS_OK) return s;
+    if ((c->width_px > 0 && c->width_px != dims[3]) || (c->height_px > 0 && c->height_px != dims[4]))
+        return gs_fail(GS_EINVAL, "%s: the station's image is %dx%d pixels but the capture's is "
+                       "%dx%d", o->station_path ? o->station_path : o->input, c->width_px,
+                       c->height_px, dims[3], dims[4]);
+    if (isfinite(o->light_height_m)) {
+        r->light_height_m = o->light_height_m;
+        snprintf(r->height_source, sizeof r->height_source, "--light-height-m");
+    } else if (have_scene && isfinite(r->light_height_m = scene_median_height(sc))) {
+        snprintf(r->height_source, sizeof r->height_source, "scene median");
+    } else {
+        return gs_fail(GS_EINVAL, "%s: the lights' height is unknown (%s): give --light-height-m "
+                       "H, metres above the WGS84 ellipsoid", o->input,
+                       have_scene ? "the scene has no geographic light" : "a capture directory");
+    }
+    return GS_OK;
+}
+
+gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
+{
+    if (!o || !r) return gs_fail(GS_EINVAL, "srv_run: NULL argument");
+    memset(r, 0, sizeof *r);
+    r->light_height_m = NAN;
+    gs_status s = check_opts(o);
+    if (s != GS_OK) return s;
+
+    cap_scene sc;
+    memset(&sc, 0, sizeof sc);
+    int have_scene = 0, dims[5] = {0};   /* grid_hz, bands, K, width, height */
+    cap_backend *be = NULL;
+    srv_job j;
+    memset(&j, 0, sizeof j);
+    srv_db *db = NULL;
+    const char *delight_path = o->delight_path;
+    char delight_buf[CAP_PATH_MAX];
+    double t0;
+
+    /* 1-2. every input, checked in full */
+    if ((s = open_input(o, r, &sc, &have_scene, &be, &j, dims)) != GS_OK) goto done;
+    if (have_scene && !delight_path && sc.delight[0]) {
+        snprintf(delight_buf, sizeof delight_buf, "%s", sc.delight);
+        delight_path = delight_buf;
+    }
+    if ((s = station_and_height(o, r, &sc, have_scene, dims)) != GS_OK) goto done;
     if (have_scene) {
         cap_scene_release(&sc);
         have_scene = 0;
     }
-
     /* 3. a DELIGHT file and the Eq. 7 templates it gives for this capture: checked now (the
      * built-in database cannot be wrong, so it is generated only when it is needed, below) */
-    if (delight_path && (s = load_matcher(delight_path, grid_hz, bands, K, &o->eq7, &d, &m)) != GS_OK)
+    if (delight_path && (s = srv_job_matcher(&j, NULL, delight_path, dims[0], dims[1], dims[2], &o->eq7)) != GS_OK)
         goto done;
 
     /* 4. the database: the last check, and the first write */
     if ((s = srv_db_open(o->db_path, SRV_DB_CREATE, &db)) != GS_OK) goto done;
 
-    /* 5. capture (scene input) */
+    /* 5. acquire (scene input) */
     if (be) {
-        stage(o, SRV_STAGE_CAPTURE, "acquiring %d frames into %s", K, r->capture_dir);
+        stage(o, SRV_STAGE_CAPTURE, "acquiring %d frames into %s", dims[2], r->capture_dir);
         t0 = now_s();
-        cap_loop_opts lo;
-        cap_loop_opts_default(&lo);
-        lo.progress = o->capture_progress ? 1 : 0;
-        cap_loop_report lr;
-        s = cap_loop_run(be, r->capture_dir, &lo, &lr);
-        if (s == GS_OK && !lr.complete)
-            s = gs_fail(GS_EIO, "%s: the acquisition stopped before the last frame", r->capture_dir);
-        if (s == GS_OK) s = cap_sim_write_truth(cap_backend_sim_handle(be), r->capture_dir);
-        r->frames_acquired = lr.frames_acquired;
-        r->frames_kept = lr.frames_kept;
+        s = srv_job_acquire(be, r->capture_dir, o->capture_progress, &r->frames_acquired, &r->frames_kept);
         cap_backend_free(be);
         be = NULL;
         r->seconds[SRV_STAGE_CAPTURE] = now_s() - t0;
         if (s != GS_OK) goto done;
         stage(o, SRV_STAGE_READ, "reading %s", r->capture_dir);
         t0 = now_s();
-        if ((s = gs_capture_read(r->capture_dir, &cap)) != GS_OK) goto done;
+        if ((s = srv_job_read(&j, r->capture_dir)) != GS_OK) goto done;
         r->seconds[SRV_STAGE_READ] += now_s() - t0;
     }
     /* (capture_dir is at most sizeof - 64 bytes long: checked above, or by gs_capture_read) */
+    struct stat sb;
     if (snprintf(r->truth_path, sizeof r->truth_path, "%.4000s/truth.json", r->capture_dir) > 0 &&
         !(stat(r->truth_path, &sb) == 0 && S_ISREG(sb.st_mode)))
         r->truth_path[0] = '\0';
@@ -438,7 +405,7 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
     /* 6. the resume key; a committed capture is skipped */
     stage(o, SRV_STAGE_READ, "hashing %s", r->capture_dir);
     t0 = now_s();
-    s = capture_key(r->capture_dir, &cap, r->key);
+    s = capture_key(r->capture_dir, &j.cap, r->key);
     r->seconds[SRV_STAGE_READ] += now_s() - t0;
     if (s != GS_OK) goto done;
     int64_t survey_id = 0;
@@ -455,152 +422,54 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
     } else if (s != GS_ENOTFOUND) {
         goto done;
     }
-    s = GS_OK;
 
-    /* 7. blobs and Eq. 7 */
+    /* 7. extract and match */
     stage(o, SRV_STAGE_BLOBS, "extracting lights");
     t0 = now_s();
     rec_blob_opts bo;
     rec_blob_opts_default(&bo);
     bo.threshold_sigma = o->threshold_sigma;
-    s = rec_blobs_extract(&cap, &bo, &cat);
+    s = srv_job_extract(&j, &bo);
     r->seconds[SRV_STAGE_BLOBS] = now_s() - t0;
     if (s != GS_OK) goto done;
-    stage(o, SRV_STAGE_MATCH, "Eq. 7 on %zu lights%s", cat.count, m ? "" : " (built-in DELIGHT)");
+    stage(o, SRV_STAGE_MATCH, "Eq. 7 on %zu lights%s", j.cat.count, j.matcher ? "" : " (built-in DELIGHT)");
     t0 = now_s();
-    if (!m && (s = load_matcher(NULL, grid_hz, bands, K, &o->eq7, &d, &m)) != GS_OK) goto done;
-    size_t n = cat.count;
-    mt = calloc(n ? n : 1, sizeof *mt);
-    lights = calloc(n ? n : 1, sizeof *lights);
-    locs = calloc(n ? n : 1, sizeof *locs);
-    frames = calloc((size_t)K, sizeof *frames);
-    freq = calloc((size_t)K, sizeof *freq);
-    if (!mt || !lights || !locs || !frames || !freq) {
-        s = gs_fail(GS_ENOMEM, "out of memory for %zu lights", n);
+    if ((s = srv_job_matcher(&j, NULL, NULL, dims[0], dims[1], dims[2], &o->eq7)) != GS_OK ||
+        (s = srv_job_match(&j)) != GS_OK)
         goto done;
-    }
-    if ((s = rec_match_catalog(m, &cat, mt)) != GS_OK) goto done;
-    for (size_t i = 0; i < n; i++) {
-        srv_light_row_init(&lights[i]);
-        srv_light_from_catalog(&lights[i], &cat, i);
-        srv_light_from_match(&lights[i], &mt[i], m);
-        r->with_bulb += lights[i].bulb_id != NULL;
-        r->with_phase += isfinite(lights[i].phase_deg);
-    }
-    r->lights = n;
-    /* the pixels are no longer needed: free them before the rest */
-    free(cap.raw);
-    cap.raw = NULL;
-    free(cap.halvings);
-    cap.halvings = NULL;
+    r->lights = j.cat.count;
+    r->with_bulb = j.with_bulb;
+    r->with_phase = j.with_phase;
+    srv_job_drop_pixels(&j);   /* not needed by the rest */
     r->seconds[SRV_STAGE_MATCH] = now_s() - t0;
 
     /* 8. locate */
     if (r->has_station) {
-        stage(o, SRV_STAGE_LOCATE, "%zu lights at %.1f m", n, r->light_height_m);
+        stage(o, SRV_STAGE_LOCATE, "%zu lights at %.1f m", j.cat.count, r->light_height_m);
         t0 = now_s();
-        for (size_t i = 0; i < n; i++) {
-            gis_fix fx;
-            s = gis_locate(&r->station.cam, lights[i].x_px, lights[i].y_px, r->station.sigma_px,
-                           r->light_height_m, NULL, &fx);
-            if (s != GS_OK) goto done;
-            srv_location_row_init(&locs[i]);
-            srv_location_from_fix(&locs[i], &fx);
-            r->located += isfinite(fx.lat_deg);
-        }
+        if ((s = srv_job_locate(&j, &r->station, r->light_height_m)) != GS_OK) goto done;
+        r->located = j.located;
         r->seconds[SRV_STAGE_LOCATE] = now_s() - t0;
     } else {
         r->light_height_m = NAN;
     }
 
-    /* 9. store: the survey, DELIGHT and station rows (get or add), then the capture at once */
+    /* 9. store */
     stage(o, SRV_STAGE_STORE, "DELIGHT, survey and station rows");
     t0 = now_s();
-    srv_delight_row dv;
-    if ((s = srv_delight_fingerprint(d, delight_path, &dv)) != GS_OK) goto done;
-    int64_t delight_id = 0, station_id = 0;
-    if ((s = srv_db_add_delight(db, &dv, &delight_id)) != GS_OK) goto done;
-    srv_survey_row sv = {.name = r->survey, .grid_hz = grid_hz, .started_utc = cap.utc[0] ? cap.utc : NULL};
-    if ((s = srv_db_add_survey(db, &sv, &survey_id)) != GS_OK) goto done;
-    r->survey_id = survey_id;
-    if (r->has_station) {
-        srv_station_row st;
-        srv_station_row_init(&st);
-        st.survey_id = survey_id;
-        st.name = r->station.id[0] ? r->station.id : "station";
-        st.cam = r->station.cam;
-        st.sigma_px = r->station.sigma_px;
-        st.time_utc = r->station.time_utc[0] ? r->station.time_utc : (cap.utc[0] ? cap.utc : NULL);
-        if ((s = srv_db_add_station(db, &st, &station_id)) != GS_OK) goto done;
-    }
-    for (int k = 0; k < K; k++) {
-        frames[k].k = cap.frames[k].k;
-        frames[k].file = cap.frames[k].file;
-        frames[k].hdr_map = cap.frames[k].hdr_map[0] ? cap.frames[k].hdr_map : NULL;
-        frames[k].cycles = cap.frames[k].cycles;
-    }
-    /* the grid frequency log: one row per frame whose exposure's frequency and start are
-     * known (capture.json), in time order; the capture's mean and std from them */
-    size_t n_freq = 0;
-    double f_sum = 0, f_sum2 = 0;
-    for (int k = 0; k < K; k++) {
-        const gs_frame_info *fi = &cap.frames[k];
-        if (!isfinite(fi->grid_hz_measured) || !isfinite(fi->start_s)) continue;
-        srv_freq_row fr = {fi->start_s, fi->cycles / (2.0 * fi->grid_hz_measured),
-                           fi->grid_hz_measured, NAN};
-        size_t j = n_freq++;
-        for (; j > 0 && freq[j - 1].t_s > fr.t_s; j--) freq[j] = freq[j - 1];
-        freq[j] = fr;
-        f_sum += fr.frequency_hz;
-    }
-    double f_mean = n_freq ? f_sum / (double)n_freq : NAN;
-    for (size_t j = 0; j < n_freq; j++)
-        f_sum2 += (freq[j].frequency_hz - f_mean) * (freq[j].frequency_hz - f_mean);
     char abs_dir[4096];
-    const char *path = realpath(r->capture_dir, abs_dir) ? abs_dir : r->capture_dir;
-    srv_capture_data cd;
-    memset(&cd, 0, sizeof cd);
-    srv_capture_row_init(&cd.capture);
-    cd.capture.survey_id = survey_id;
-    cd.capture.station_id = station_id;
-    cd.capture.delight_id = delight_id;
-    cd.capture.key = r->key;
-    cd.capture.path = path;
-    cd.capture.utc = cap.utc[0] ? cap.utc : NULL;
-    cd.capture.grid_hz = grid_hz;
-    cd.capture.K = K;
-    cd.capture.bands = bands;
-    cd.capture.width_px = width;
-    cd.capture.height_px = height;
-    cd.capture.locked = cap.locked ? 1 : 0;
-    cd.capture.mean_frequency_hz = f_mean;
-    cd.capture.sigma_frequency_hz = n_freq >= 2 ? sqrt(f_sum2 / (double)(n_freq - 1)) : NAN;
-    cd.frames = frames;
-    cd.n_frames = (size_t)K;
-    cd.frequency = n_freq ? freq : NULL;
-    cd.n_frequency = n_freq;
-    cd.lights = lights;
-    cd.locations = r->has_station ? locs : NULL;
-    cd.n_lights = n;
-    int skipped = 0;
-    stage(o, SRV_STAGE_STORE, "capture: %zu lights, %d frames, %zu frequency rows in one "
-          "transaction", n, K, n_freq);
-    s = srv_db_add_capture(db, &cd, &r->capture_id, &skipped);
+    srv_store_opts so = {.survey = r->survey,
+                         .station = r->has_station ? &r->station : NULL,
+                         .key = r->key,
+                         .path = realpath(r->capture_dir, abs_dir) ? abs_dir : r->capture_dir,
+                         .before_commit = before_commit,
+                         .ctx = (void *)o};
+    s = srv_job_store(&j, db, &so, &r->survey_id, &r->capture_id, &r->skipped);
     r->seconds[SRV_STAGE_STORE] = now_s() - t0;
-    if (s != GS_OK) goto done;
-    r->skipped = skipped;
 
 done:
-    free(freq);
-    free(frames);
-    free(locs);
-    free(lights);
-    free(mt);
-    rec_matcher_free(m);
-    gs_delight_free(d);
+    srv_job_release(&j);
     srv_db_close(db);
-    rec_catalog_release(&cat);
-    gs_capture_release(&cap);
     cap_backend_free(be);
     if (have_scene) cap_scene_release(&sc);
     return s;

@@ -393,6 +393,57 @@ int srv_bench_db(int argc, char **argv);
  * the database is opened, and srv_db_open itself leaves nothing behind on failure.
  * ===================================================================================== */
 
+/* The stages (survey/stages.c), each usable on its own: `run`, `recognize` and `bench
+ * accuracy` call them. A job holds one capture through the stages; zero it first;
+ * srv_job_release frees whatever the stages built (accepts NULL and a zeroed job). */
+typedef struct {
+    gs_capture cap;              /* srv_job_read (or the caller's) */
+    const gs_delight *delight;   /* srv_job_matcher: the DELIGHT the matcher was built from */
+    gs_delight *delight_owned;   /* ... when the job loaded or generated it */
+    const char *delight_path;    /* borrowed; NULL = built-in */
+    rec_matcher *matcher;        /* srv_job_matcher */
+    rec_catalog cat;             /* srv_job_extract */
+    rec_match *match;            /* srv_job_match: cat.count answers */
+    srv_light_row *lights;       /* srv_job_match: the rows (strings borrowed from the matcher) */
+    srv_location_row *locs;      /* srv_job_locate: cat.count locations */
+    size_t with_bulb, with_phase, located;
+} srv_job;
+void srv_job_release(srv_job *j);
+/* acquire: the acquisition loop of backend be into capdir (resumable), then truth.json when be
+ * is the sim backend; the loop's own progress line when progress. GS_EIO when the acquisition
+ * stopped early. frames_* (may be NULL) report the loop's counts. */
+struct cap_backend;
+gs_status srv_job_acquire(struct cap_backend *be, const char *capdir, int progress,
+                          int *frames_acquired, int *frames_kept);
+/* read: the capture directory into j->cap. */
+gs_status srv_job_read(srv_job *j, const char *capdir);
+/* DELIGHT (the caller's d, borrowed until srv_job_release; else the file delight_path; else the
+ * built-in database) and its Eq. 7 templates for a capture of grid_hz, bands and K; nothing when
+ * j has a matcher already. GS_ENOTFOUND naming the database when no entry fits. */
+gs_status srv_job_matcher(srv_job *j, const gs_delight *d, const char *delight_path, int grid_hz,
+                          int bands, int K, const rec_eq7_opts *eq7);
+/* extract: the lights of j->cap as blobs (rec_blobs_extract). */
+gs_status srv_job_extract(srv_job *j, const rec_blob_opts *bo);
+/* match: Eq. 7 for every light of j->cat, and its row; with_bulb / with_phase counted. */
+gs_status srv_job_match(srv_job *j);
+/* Free the capture's pixels (the later stages need only its metadata). */
+void srv_job_drop_pixels(srv_job *j);
+/* locate: every row from one station at the lights' height (gis_locate). */
+gs_status srv_job_locate(srv_job *j, const gis_station *st, double height_m);
+/* store: the DELIGHT, survey and station rows (get or add), then the capture, its frames, grid
+ * frequency log, lights and (with a station) locations in one transaction. */
+typedef struct {
+    const char *survey;          /* survey name */
+    const gis_station *station;  /* NULL: none (no locations stored) */
+    const char *key;             /* the capture's resume key */
+    const char *path;            /* the capture directory as stored */
+    /* called right before the transaction with the rows it holds; NULL = none */
+    void (*before_commit)(void *ctx, size_t lights, int frames, size_t frequency_rows);
+    void *ctx;
+} srv_store_opts;
+gs_status srv_job_store(srv_job *j, srv_db *db, const srv_store_opts *o, int64_t *survey_id,
+                        int64_t *capture_id, int *skipped);
+
 typedef enum {
     SRV_STAGE_CAPTURE,       /* acquisition loop (scene input) */
     SRV_STAGE_READ,          /* reading the capture directory, hashing its files */

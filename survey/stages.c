@@ -1,0 +1,206 @@
+/* stages.c - the pipeline's stages on one capture (survey.h, srv_job): acquire (a scene through
+ * the sim backend and the acquisition loop), read, extract (blobs), match (Eq. 7 over DELIGHT),
+ * locate (one station) and store (one transaction). `run`, `recognize` and `bench accuracy`
+ * call the same stages; srv_job_release frees whatever they built. */
+#include "survey/internal.h"
+#include "capture/capture.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+void srv_job_release(srv_job *j)
+{
+    if (!j) return;
+    free(j->locs);
+    free(j->lights);
+    free(j->match);
+    rec_matcher_free(j->matcher);
+    gs_delight_free(j->delight_owned);
+    rec_catalog_release(&j->cat);
+    gs_capture_release(&j->cap);
+    memset(j, 0, sizeof *j);
+}
+
+gs_status srv_job_acquire(cap_backend *be, const char *capdir, int progress, int *frames_acquired,
+                          int *frames_kept)
+{
+    cap_loop_opts lo;
+    cap_loop_opts_default(&lo);
+    lo.progress = progress ? 1 : 0;
+    cap_loop_report lr;
+    gs_status s = cap_loop_run(be, capdir, &lo, &lr);
+    if (s == GS_OK && !lr.complete)
+        s = gs_fail(GS_EIO, "%s: the acquisition stopped before the last frame", capdir);
+    cap_sim *sim = cap_backend_sim_handle(be);
+    if (s == GS_OK && sim) s = cap_sim_write_truth(sim, capdir);
+    if (frames_acquired) *frames_acquired = lr.frames_acquired;
+    if (frames_kept) *frames_kept = lr.frames_kept;
+    return s;
+}
+
+gs_status srv_job_read(srv_job *j, const char *capdir)
+{
+    gs_capture_release(&j->cap);
+    return gs_capture_read(capdir, &j->cap);
+}
+
+gs_status srv_job_matcher(srv_job *j, const gs_delight *d, const char *delight_path, int grid_hz,
+                          int bands, int K, const rec_eq7_opts *eq7)
+{
+    if (j->matcher) return GS_OK;
+    gs_status s = GS_OK;
+    if (!d) {
+        if (!(j->delight_owned = gs_delight_new()))
+            return gs_fail(GS_ENOMEM, "cannot allocate the DELIGHT database");
+        s = delight_path ? gs_delight_load(j->delight_owned, delight_path)
+                         : gs_delight_generate(j->delight_owned, GS_BRF_N_DEFAULT);
+        if (s != GS_OK) return s;
+        d = j->delight_owned;
+    }
+    j->delight = d;
+    j->delight_path = delight_path;
+    s = rec_matcher_new(d, grid_hz, bands, K, eq7, &j->matcher);
+    if (s == GS_ENOTFOUND)
+        s = gs_fail(GS_ENOTFOUND, "DELIGHT %s: no usable %s entry for the capture's %d Hz grid (%s)",
+                    delight_path ? delight_path : "built-in", bands == 3 ? "RGB" : "monochrome",
+                    grid_hz, gs_detail());
+    return s;
+}
+
+gs_status srv_job_extract(srv_job *j, const rec_blob_opts *bo)
+{
+    rec_catalog_release(&j->cat);
+    return rec_blobs_extract(&j->cap, bo, &j->cat);
+}
+
+gs_status srv_job_match(srv_job *j)
+{
+    if (!j->matcher) return gs_fail(GS_EINVAL, "srv_job_match: no matcher (srv_job_matcher first)");
+    size_t n = j->cat.count;
+    free(j->match);
+    free(j->lights);
+    j->match = calloc(n ? n : 1, sizeof *j->match);
+    j->lights = calloc(n ? n : 1, sizeof *j->lights);
+    if (!j->match || !j->lights) return gs_fail(GS_ENOMEM, "out of memory for %zu lights", n);
+    gs_status s = rec_match_catalog(j->matcher, &j->cat, j->match);
+    if (s != GS_OK) return s;
+    j->with_bulb = j->with_phase = 0;
+    for (size_t i = 0; i < n; i++) {
+        srv_light_row_init(&j->lights[i]);
+        srv_light_from_catalog(&j->lights[i], &j->cat, i);
+        srv_light_from_match(&j->lights[i], &j->match[i], j->matcher);
+        j->with_bulb += j->lights[i].bulb_id != NULL;
+        j->with_phase += isfinite(j->lights[i].phase_deg);
+    }
+    return GS_OK;
+}
+
+void srv_job_drop_pixels(srv_job *j)
+{
+    free(j->cap.raw);
+    j->cap.raw = NULL;
+    free(j->cap.halvings);
+    j->cap.halvings = NULL;
+}
+
+gs_status srv_job_locate(srv_job *j, const gis_station *st, double height_m)
+{
+    size_t n = j->cat.count;
+    free(j->locs);
+    j->locs = calloc(n ? n : 1, sizeof *j->locs);
+    if (!j->locs) return gs_fail(GS_ENOMEM, "out of memory for %zu locations", n);
+    j->located = 0;
+    for (size_t i = 0; i < n; i++) {
+        gis_fix fx;
+        gs_status s = gis_locate(&st->cam, j->lights[i].x_px, j->lights[i].y_px, st->sigma_px,
+                                 height_m, NULL, &fx);
+        if (s != GS_OK) return s;
+        srv_location_row_init(&j->locs[i]);
+        srv_location_from_fix(&j->locs[i], &fx);
+        j->located += isfinite(fx.lat_deg);
+    }
+    return GS_OK;
+}
+
+gs_status srv_job_store(srv_job *j, srv_db *db, const srv_store_opts *o, int64_t *survey_id,
+                        int64_t *capture_id, int *skipped)
+{
+    const gs_capture *cap = &j->cap;
+    int K = cap->K;
+    size_t n = j->cat.count;
+    srv_frame_row *frames = calloc((size_t)K, sizeof *frames);
+    srv_freq_row *freq = calloc((size_t)K, sizeof *freq);
+    gs_status s = frames && freq ? GS_OK : gs_fail(GS_ENOMEM, "out of memory for %d frames", K);
+    srv_delight_row dv;
+    int64_t delight_id = 0, station_id = 0;
+    if (s == GS_OK) s = srv_delight_fingerprint(j->delight, j->delight_path, &dv);
+    if (s == GS_OK) s = srv_db_add_delight(db, &dv, &delight_id);
+    srv_survey_row sv = {.name = o->survey, .grid_hz = cap->grid_hz,
+                         .started_utc = cap->utc[0] ? cap->utc : NULL};
+    if (s == GS_OK) s = srv_db_add_survey(db, &sv, survey_id);
+    if (s == GS_OK && o->station) {
+        srv_station_row st;
+        srv_station_row_init(&st);
+        st.survey_id = *survey_id;
+        st.name = o->station->id[0] ? o->station->id : "station";
+        st.cam = o->station->cam;
+        st.sigma_px = o->station->sigma_px;
+        st.time_utc = o->station->time_utc[0] ? o->station->time_utc : (cap->utc[0] ? cap->utc : NULL);
+        s = srv_db_add_station(db, &st, &station_id);
+    }
+    if (s != GS_OK) goto done;
+    for (int k = 0; k < K; k++) {
+        frames[k].k = cap->frames[k].k;
+        frames[k].file = cap->frames[k].file;
+        frames[k].hdr_map = cap->frames[k].hdr_map[0] ? cap->frames[k].hdr_map : NULL;
+        frames[k].cycles = cap->frames[k].cycles;
+    }
+    /* the grid frequency log: one row per frame whose exposure's frequency and start are
+     * known (capture.json), in time order; the capture's mean and std from them */
+    size_t n_freq = 0;
+    double f_sum = 0, f_sum2 = 0;
+    for (int k = 0; k < K; k++) {
+        const gs_frame_info *fi = &cap->frames[k];
+        if (!isfinite(fi->grid_hz_measured) || !isfinite(fi->start_s)) continue;
+        srv_freq_row fr = {fi->start_s, fi->cycles / (2.0 * fi->grid_hz_measured),
+                           fi->grid_hz_measured, NAN};
+        size_t q = n_freq++;
+        for (; q > 0 && freq[q - 1].t_s > fr.t_s; q--) freq[q] = freq[q - 1];
+        freq[q] = fr;
+        f_sum += fr.frequency_hz;
+    }
+    double f_mean = n_freq ? f_sum / (double)n_freq : NAN;
+    for (size_t q = 0; q < n_freq; q++)
+        f_sum2 += (freq[q].frequency_hz - f_mean) * (freq[q].frequency_hz - f_mean);
+    srv_capture_data cd;
+    memset(&cd, 0, sizeof cd);
+    srv_capture_row_init(&cd.capture);
+    cd.capture.survey_id = *survey_id;
+    cd.capture.station_id = station_id;
+    cd.capture.delight_id = delight_id;
+    cd.capture.key = o->key;
+    cd.capture.path = o->path;
+    cd.capture.utc = cap->utc[0] ? cap->utc : NULL;
+    cd.capture.grid_hz = cap->grid_hz;
+    cd.capture.K = K;
+    cd.capture.bands = cap->bands;
+    cd.capture.width_px = cap->width;
+    cd.capture.height_px = cap->height;
+    cd.capture.locked = cap->locked ? 1 : 0;
+    cd.capture.mean_frequency_hz = f_mean;
+    cd.capture.sigma_frequency_hz = n_freq >= 2 ? sqrt(f_sum2 / (double)(n_freq - 1)) : NAN;
+    cd.frames = frames;
+    cd.n_frames = (size_t)K;
+    cd.frequency = n_freq ? freq : NULL;
+    cd.n_frequency = n_freq;
+    cd.lights = j->lights;
+    cd.locations = o->station ? j->locs : NULL;
+    cd.n_lights = n;
+    if (o->before_commit) o->before_commit(o->ctx, n, K, n_freq);
+    s = srv_db_add_capture(db, &cd, capture_id, skipped);
+done:
+    free(freq);
+    free(frames);
+    return s;
+}
