@@ -1,13 +1,14 @@
 /*
  * capture.h - the public interface of gridsurvey's capture/ module (prefix cap_).
  *
- * ACam acquisition (paper Sec. 6): coded exposure over C flicker cycles, AC-locked mask
- * switching, and its backends. This header starts with the host side of the ACam controller
- * link; the capture issue (#4) adds the acquisition loop and the backends, and its `hardware`
- * backend drives the controller through this link.
+ * ACam acquisition (paper Sec. 6): the host side of the ACam controller link (the `hardware`
+ * backend drives the controller through it), the coded-exposure model (C flicker cycles, mask
+ * matrix M, HDR halving, AC-locked mask switching), the AC lock model, scene files and the
+ * effect-by-effect simulator, the backends (sim, replay, hardware) and the acquisition loop.
+ * docs/capture.md and docs/scene.md.
  *
- * Conventions: as recognize.h (gs_status, thread-local gs_detail(), destructors accept NULL,
- * ownership stated per function). A flicker cycle lasts Delta = 1/(2 f) (Eq. 1).
+ * Conventions: as recognize/base/base.h (gs_status, thread-local gs_detail(), destructors accept
+ * NULL, ownership stated per function). A flicker cycle lasts Delta = 1/(2 f) (Eq. 1).
  */
 #ifndef GRIDSURVEY_CAPTURE_H
 #define GRIDSURVEY_CAPTURE_H
@@ -98,9 +99,6 @@ gs_status cap_link_expose(cap_link *l, const cap_link_config *c, cap_exposure_lo
 void cap_exposure_log_release(cap_exposure_log *log);
 
 /* ==================================================================================== */
-/* The sections below are the capture issue (#4): coded-exposure model, AC lock, scenes, the
- * simulator, the backends and the acquisition loop. docs/capture.md and docs/scene.md. */
-
 #include "gis/gis.h"
 
 #include <stdint.h>
@@ -416,17 +414,6 @@ unsigned long long cap_sim_effect_calls(const cap_sim *s, cap_effect e);
  * geographic, distance, bulb id, technology, phase, flux) and the non-AC distractors. */
 gs_status cap_sim_write_truth(const cap_sim *s, const char *dir);
 
-/* For `gridsurvey bench`: render `frames` acquisitions (k = 0, 1, ...) of the scene with only
- * the effects in effects_mask (bits 1u << CAP_FX_*) that the scene lists, and report the wall
- * time per frame. The render time grows only with the enabled effects. */
-typedef struct {
-    int frames;
-    double seconds_per_frame;
-    unsigned effects;            /* effects actually enabled */
-    size_t lights, pixels;
-} cap_bench_result;
-gs_status cap_bench_render(const cap_scene *sc, unsigned effects_mask, int frames,
-                           cap_bench_result *out);
 
 /* ------------------------------------------------------------------ backends */
 

@@ -609,33 +609,3 @@ gs_status cap_sim_write_truth(const cap_sim *s, const char *dir)
 
 /* ------------------------------------------------------------------ bench */
 
-gs_status cap_bench_render(const cap_scene *sc, unsigned effects_mask, int frames,
-                           cap_bench_result *out)
-{
-    memset(out, 0, sizeof *out);
-    if (frames < 1) return gs_fail(GS_EINVAL, "bench: %d frames", frames);
-    cap_scene tmp = *sc;
-    tmp.fx.enabled &= effects_mask;
-    if (!((tmp.fx.enabled >> CAP_FX_READ_NOISE) & 1)) tmp.fx.read_noise.sigma_e = 0;
-    cap_sim *s = NULL;
-    gs_status st = cap_sim_new(&tmp, NULL, &s);
-    if (st != GS_OK) return st;
-    size_t npx = (size_t)s->W * (size_t)s->H * (size_t)s->B;
-    unsigned short *raw = malloc(npx * sizeof *raw);
-    if (!raw) {
-        cap_sim_free(s);
-        return gs_fail(GS_ENOMEM, "bench: out of memory");
-    }
-    double t0 = now_s();
-    for (int i = 0; i < frames && st == GS_OK; i++)
-        st = cap_sim_render(s, i % s->K, 0, i, NULL, raw, NULL);
-    double dt = now_s() - t0;
-    out->frames = frames;
-    out->seconds_per_frame = dt / frames;
-    out->effects = tmp.fx.enabled;
-    out->lights = s->n;
-    out->pixels = (size_t)s->W * (size_t)s->H;
-    free(raw);
-    cap_sim_free(s);
-    return st;
-}

@@ -664,7 +664,7 @@ static int bench_recognize(int argc, char **argv)
                 config cf = {Ks[ki], bandss[bi], bulbss[di], 0, P0, 0.1, 0, 0};
                 pixel_row(all, &cf, &failed);
             }
-    printf("\n### The issue's case: 1-megapixel RGB capture, K = 26, whole database\n\n");
+    printf("\n### 1-megapixel RGB capture, K = 26, whole database\n\n");
     pixel_header();
     static const double lits[] = {0.0, 0.1, 1.0};
     for (int e = quick ? 14 : 16; e <= (quick ? 16 : 20); e += 2)

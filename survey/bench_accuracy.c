@@ -1,5 +1,5 @@
 /* bench_accuracy.c - `gridsurvey bench accuracy [--quick] [--out DIR]`: what accuracy costs in
- * time (issue #8, docs/accuracy.md). Sweeps the ACam acquisition (cycles per frame C, windows
+ * time (docs/accuracy.md). Sweeps the ACam acquisition (cycles per frame C, windows
  * K, HDR, locked / free running, Eq. 7 phase set) on a window of the built-in metropolitan
  * scene and on a hard variant of it, and for each point runs the survey pipeline as `gridsurvey
  * run` does (srv_run: simulate the capture through the acquisition loop, blobs, Eq. 7, locate,

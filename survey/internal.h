@@ -4,6 +4,7 @@
 
 #include "recognize/recognize.h"
 #include "survey/survey.h"
+#include "capture/capture.h"
 
 #include <stdio.h>
 
@@ -24,6 +25,16 @@ int srv_cmd_evaluate(int argc, char **argv);
 int srv_bench_accuracy(int argc, char **argv);
 /* `gridsurvey bench render` (survey/bench_render.c). */
 int srv_bench_render(int argc, char **argv);
+/* Its measurement: `frames` acquisitions (k = 0, 1, ...) of the scene with only the effects in
+ * effects_mask (bits 1u << CAP_FX_*) that the scene lists, wall time per frame. */
+typedef struct {
+    int frames;
+    double seconds_per_frame;
+    unsigned effects;            /* effects actually enabled */
+    size_t lights, pixels;
+} srv_render_time_result;
+gs_status srv_render_time(const cap_scene *sc, unsigned effects_mask, int frames,
+                          srv_render_time_result *out);
 
 /* Print "gridsurvey: STATUS: DETAIL" on stderr and return 1. */
 int srv_error(gs_status s);

@@ -3,6 +3,7 @@
  * integration of the BRF's trigonometric polynomial); an effect the scene does not list is never
  * executed (pipeline list and the effects' own call counters); the HDR loop recovers saturated
  * lights; the effects' physics numbers (shared/BULBS.md); determinism. */
+#include "survey/internal.h"
 #include "tests/test.h"
 #include "capture/sim.h"
 
@@ -269,10 +270,10 @@ TEST(sim_bench_render_grows_only_with_enabled_effects)
     char *text = scene_with((1u << CAP_FX_COUNT) - 1);
     cap_scene sc;
     CHECK_OK(cap_scene_parse(text, "bench.json", ".", &sc));
-    cap_bench_result none, one, all;
-    CHECK_OK(cap_bench_render(&sc, 0, 2, &none));
-    CHECK_OK(cap_bench_render(&sc, 1u << CAP_FX_PSF, 2, &one));
-    CHECK_OK(cap_bench_render(&sc, ~0u, 2, &all));
+    srv_render_time_result none, one, all;
+    CHECK_OK(srv_render_time(&sc, 0, 2, &none));
+    CHECK_OK(srv_render_time(&sc, 1u << CAP_FX_PSF, 2, &one));
+    CHECK_OK(srv_render_time(&sc, ~0u, 2, &all));
     CHECK(none.effects == 0);
     CHECK(one.effects == 1u << CAP_FX_PSF);
     CHECK(all.effects == (1u << CAP_FX_COUNT) - 1);
