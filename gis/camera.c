@@ -8,19 +8,6 @@
 #include <stdio.h>
 #include <string.h>
 
-double gis_wrap360(double a_deg)
-{
-    double r = fmod(a_deg, 360.0);
-    if (r < 0.0) r += 360.0;
-    return r >= 360.0 ? 0.0 : r;   /* fmod of tiny negatives can round to 360 */
-}
-
-double gis_wrap180(double a_deg)
-{
-    double r = gis_wrap360(a_deg + 180.0) - 180.0;
-    return r;
-}
-
 static gs_status check_num(double v, const char *name, double lo, double hi)
 {
     if (!isfinite(v)) return gs_fail(GS_ENUMERIC, "camera: %s is %g: expected a finite number", name, v);
@@ -270,7 +257,7 @@ gs_status gis_pixel_bearing(const gis_camera *cam, double x_px, double y_px,
     double d[3];
     gs_status s = gis_pixel_ray(cam, x_px, y_px, d);
     if (s != GS_OK) return s;
-    if (azimuth_deg) *azimuth_deg = gis_wrap360(atan2(d[0], d[1]) / GIS_DEG);
+    if (azimuth_deg) *azimuth_deg = gs_wrap360(atan2(d[0], d[1]) / GIS_DEG);
     if (elevation_deg) *elevation_deg = atan2(d[2], hypot(d[0], d[1])) / GIS_DEG;
     return GS_OK;
 }

@@ -168,7 +168,7 @@ static double attr_real(const gis_light *l, size_t k)
 {
     double v = NAN;
     switch (k) {
-    case 3: v = isfinite(l->phase_deg) ? gis_wrap360(l->phase_deg) : NAN; break;
+    case 3: v = isfinite(l->phase_deg) ? gs_wrap360(l->phase_deg) : NAN; break;
     case 4: v = l->confidence; break;
     case 7: v = l->height_m; break;
     case 8: v = l->ellipse.semi_major_m; break;
@@ -201,7 +201,7 @@ gs_status gis_export_geojson(const gis_light *lights, size_t n, const char *path
         }
         if (located(l)) {
             json_t *c = json_array();
-            json_array_append_new(c, json_real(gis_wrap180(l->lon_deg)));   /* RFC 7946: lon, lat */
+            json_array_append_new(c, json_real(gs_wrap180(l->lon_deg)));   /* RFC 7946: lon, lat */
             json_array_append_new(c, json_real(l->lat_deg));
             if (isfinite(l->height_m)) json_array_append_new(c, json_real(l->height_m));
             geom = json_pack("{s:s, s:o}", "type", "Point", "coordinates", c);
@@ -304,7 +304,7 @@ gs_status gis_export_kml(const gis_light *lights, size_t n, const char *path)
         fputs(" </SchemaData></ExtendedData>\n", f);
         if (located(l))
             fprintf(f, " <Point><coordinates>%.10f,%.10f</coordinates></Point>\n",
-                    gis_wrap180(l->lon_deg), l->lat_deg);
+                    gs_wrap180(l->lon_deg), l->lat_deg);
         fputs("</Placemark>\n", f);
     }
     fputs("</Document>\n</kml>\n", f);
@@ -343,7 +343,7 @@ gs_status gis_export_csv(const gis_light *lights, size_t n, const char *path)
     for (size_t i = 0; i < n; i++) {
         const gis_light *l = &lights[i];
         csv_text(f, l->id);
-        if (located(l)) fprintf(f, ",%.10f,%.10f", l->lat_deg, gis_wrap180(l->lon_deg));
+        if (located(l)) fprintf(f, ",%.10f,%.10f", l->lat_deg, gs_wrap180(l->lon_deg));
         else fputs(",,", f);
         for (size_t k = 1; k < N_ATTRS; k++) {
             fputc(',', f);
@@ -441,7 +441,7 @@ gs_status gis_export_gpkg(const gis_light *lights, size_t n, const char *path)
         sqlite3_clear_bindings(st);
         if (located(l)) {
             unsigned char blob[29];
-            double lon = gis_wrap180(l->lon_deg);
+            double lon = gs_wrap180(l->lon_deg);
             gpkg_point(blob, lon, l->lat_deg);
             sqlite3_bind_blob(st, 1, blob, (int)sizeof blob, SQLITE_TRANSIENT);
             if (lon < minx) minx = lon;

@@ -34,10 +34,6 @@ int gis_gl_gnomonic_rev(double lat0, double lon0, double x, double y, double *la
 #ifndef __cplusplus
 #define GIS_DEG (3.14159265358979323846 / 180.0)
 
-/* Angle in [0, 360). */
-double gis_wrap360(double a_deg);
-/* Angle in [-180, 180). */
-double gis_wrap180(double a_deg);
 /* Ellipse from a 2x2 covariance (east, north), metres^2. */
 gis_ellipse gis_ellipse_from_cov(double cee, double cen, double cnn);
 /* A NaN ellipse. */

@@ -321,10 +321,10 @@ gs_status gis_locate(const gis_camera *cam, double x_px, double y_px, double sig
         return GS_OK;
     }
     out->lat_deg = lat;
-    out->lon_deg = gis_wrap180(lon);
+    out->lon_deg = gs_wrap180(lon);
     out->height_m = light_height_m;   /* the crossing is on that surface to 1e-9 m (h) */
     out->range_m = range;
     out->distance_m = dist;
-    out->bearing_deg = gis_wrap360(azi1);
+    out->bearing_deg = gs_wrap360(azi1);
     return GS_OK;
 }

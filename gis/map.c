@@ -159,7 +159,7 @@ gs_status gis_map_png(const gis_light *lights, size_t n, const gis_map_opts *o, 
     plbox("bcfnst", 0.0, 0, "bcfnstv", 0.0, 0); /* fixed-point labels: no (x10^3) over the axis titles */
     char title[300], sub[200];
     snprintf(title, sizeof title, "%s", o->title ? o->title : "gridsurvey: located lights");
-    snprintf(sub, sizeof sub, "east (m) from %.6f\u00b0, %.6f\u00b0 (WGS84)", lat0, gis_wrap180(lon0));
+    snprintf(sub, sizeof sub, "east (m) from %.6f\u00b0, %.6f\u00b0 (WGS84)", lat0, gs_wrap180(lon0));
     pllab(sub, "north (m)", title);
 
     /* ellipses, then discs (so a disc stays visible inside a small ellipse) */

@@ -140,10 +140,10 @@ gs_status gis_triangulate(const gis_bearing *a, const gis_bearing *b,
         if (gis_gl_inverse(st[i]->lat_deg, st[i]->lon_deg, lat, lon, &d[i], &azi1[i], &azi2[i]))
             return GS_ENUMERIC;
         out->distance_m[i] = d[i];
-        if (d[i] > 1e-6 && fabs(gis_wrap180(azi1[i] - st[i]->azimuth_deg)) > 90.0)
+        if (d[i] > 1e-6 && fabs(gs_wrap180(azi1[i] - st[i]->azimuth_deg)) > 90.0)
             out->flags |= GIS_FIX_BEHIND;
     }
-    double g = fabs(gis_wrap180(azi2[0] - azi2[1]));
+    double g = fabs(gs_wrap180(azi2[0] - azi2[1]));
     out->angle_deg = g > 90.0 ? 180.0 - g : g;
 
     /* Ellipse: J = d(east, north)/d(azimuth) by central differences, in the local frame at the
@@ -186,7 +186,7 @@ gs_status gis_triangulate(const gis_bearing *a, const gis_bearing *b,
         out->flags |= GIS_FIX_NEAR_PARALLEL;
     if (!(out->flags & (GIS_FIX_BEHIND | GIS_FIX_NEAR_PARALLEL | GIS_FIX_NO_CONVERGENCE))) {
         out->lat_deg = lat;
-        out->lon_deg = gis_wrap180(lon);
+        out->lon_deg = gs_wrap180(lon);
     }
     return GS_OK;
 }

@@ -79,15 +79,6 @@ static void safe_name(const char *name, char *buf, size_t size)
     if (!n) snprintf(buf, size, "survey");
 }
 
-static void dir_of(const char *path, char *buf, size_t size)
-{
-    snprintf(buf, size, "%s", path);
-    char *slash = strrchr(buf, '/');
-    if (!slash) snprintf(buf, size, ".");
-    else if (slash == buf) buf[1] = '\0';
-    else *slash = '\0';
-}
-
 /* The --out directory: exists and is writable, or its parent is a writable directory. */
 static gs_status check_out_dir(const char *path)
 {
@@ -100,7 +91,7 @@ static gs_status check_out_dir(const char *path)
     }
     if (errno != ENOENT) return gs_fail(GS_EIO, "%s: --out: %s", path, strerror(errno));
     char parent[4096];
-    dir_of(path, parent, sizeof parent);
+    gs_path_dir(path, parent, sizeof parent);
     if (stat(parent, &sb) != 0 || !S_ISDIR(sb.st_mode) || access(parent, W_OK | X_OK) != 0)
         return gs_fail(GS_EIO, "%s: cannot create the --out directory: %s is not a writable directory",
                        path, parent);
@@ -248,7 +239,7 @@ int srv_cmd_run(int argc, char **argv)
      * checked by opening the database */
     char out_dir[4096];
     if (out) snprintf(out_dir, sizeof out_dir, "%s", out);
-    else dir_of(o.db_path, out_dir, sizeof out_dir);
+    else gs_path_dir(o.db_path, out_dir, sizeof out_dir);
     gs_status s = out ? check_out_dir(out_dir) : GS_OK;
     if (s != GS_OK) return srv_error(s);
     if (isatty(2)) {

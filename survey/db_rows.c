@@ -109,21 +109,6 @@ void srv_location_from_fix(srv_location_row *r, const gis_fix *f)
     r->flags = f->flags;
 }
 
-/* [0, 360) */
-static double wrap360(double d)
-{
-    double w = fmod(d, 360.0);
-    if (w < 0.0) w += 360.0;
-    return w >= 360.0 ? 0.0 : w;
-}
-
-/* [-180, 180) */
-static double wrap180(double d)
-{
-    double w = wrap360(d + 180.0) - 180.0;
-    return w < -180.0 ? -180.0 : w;
-}
-
 /* ------------------------------------------------------------------ inserts */
 
 gs_status srv_db_add_delight(srv_db *db, const srv_delight_row *r, int64_t *id)
@@ -215,7 +200,7 @@ gs_status srv_db_add_station(srv_db *db, const srv_station_row *r, int64_t *id)
     if ((s = srv_dbi_stmt(db, ST_ADD_STATION, &q)) == GS_OK) {
         sqlite3_bind_int64(q, 1, r->survey_id);
         sqlite3_bind_text(q, 2, r->name, -1, SQLITE_STATIC);
-        const double v[] = {c->lat_deg, isfinite(c->lon_deg) ? wrap180(c->lon_deg) : NAN,
+        const double v[] = {c->lat_deg, isfinite(c->lon_deg) ? gs_wrap180(c->lon_deg) : NAN,
                             c->height_m, c->heading_deg, c->pitch_deg, c->roll_deg,
                             c->sigma_heading_deg, c->sigma_pitch_deg, c->sigma_roll_deg,
                             c->focal_px, c->cx_px, c->cy_px, c->k1, c->k2};
@@ -360,14 +345,14 @@ gs_status srv_db_insert_light(srv_db *db, int64_t capture_id, const srv_light_ro
     srv_dbi_bind_real(q, 13, r->p_value);
     srv_dbi_bind_text(q, 14, r->bulb_id);
     srv_dbi_bind_text(q, 15, r->technology);
-    srv_dbi_bind_real(q, 16, isfinite(r->phase_deg) ? wrap360(r->phase_deg) : NAN);
-    srv_dbi_bind_real(q, 17, isfinite(r->phase_fit_deg) ? wrap360(r->phase_fit_deg) : NAN);
+    srv_dbi_bind_real(q, 16, isfinite(r->phase_deg) ? gs_wrap360(r->phase_deg) : NAN);
+    srv_dbi_bind_real(q, 17, isfinite(r->phase_fit_deg) ? gs_wrap360(r->phase_fit_deg) : NAN);
     srv_dbi_bind_real(q, 18, r->phase_sigma_deg);
     sqlite3_bind_double(q, 19, conf);
     sqlite3_bind_double(q, 20, bconf);
     sqlite3_bind_double(q, 21, pconf);
     srv_dbi_bind_text(q, 22, r->runner_bulb_id);
-    srv_dbi_bind_real(q, 23, isfinite(r->runner_phase_deg) ? wrap360(r->runner_phase_deg) : NAN);
+    srv_dbi_bind_real(q, 23, isfinite(r->runner_phase_deg) ? gs_wrap360(r->runner_phase_deg) : NAN);
     srv_dbi_bind_real(q, 24, rconf);
     sqlite3_bind_int64(q, 25, r->match_flags);
     int inserted = 0;
@@ -398,7 +383,7 @@ gs_status srv_db_insert_location(srv_db *db, int64_t light_id, const srv_locatio
     sqlite3_bind_int64(q, 1, light_id);
     sqlite3_bind_text(q, 2, method[r->method], -1, SQLITE_STATIC);
     srv_dbi_bind_real(q, 3, r->lat_deg);
-    srv_dbi_bind_real(q, 4, has_lon ? wrap180(r->lon_deg) : NAN);
+    srv_dbi_bind_real(q, 4, has_lon ? gs_wrap180(r->lon_deg) : NAN);
     srv_dbi_bind_real(q, 5, r->height_m);
     srv_dbi_bind_real(q, 6, r->ellipse.semi_major_m);
     srv_dbi_bind_real(q, 7, r->ellipse.semi_minor_m);

@@ -132,15 +132,6 @@ done:
 
 /* ------------------------------------------------------------------ the capture */
 
-static void dir_of(const char *path, char *buf, size_t size)
-{
-    snprintf(buf, size, "%s", path);
-    char *slash = strrchr(buf, '/');
-    if (!slash) snprintf(buf, size, ".");
-    else if (slash == buf) buf[1] = '\0';
-    else *slash = '\0';
-}
-
 /* Which capture the truth describes (see srv_eval_opts). */
 static gs_status find_capture(srv_db *db, const char *truth_path, const srv_eval_opts *o,
                               srv_eval_report *r)
@@ -152,7 +143,7 @@ static gs_status find_capture(srv_db *db, const char *truth_path, const srv_eval
         if (s != GS_OK) return s;
     }
     char dir[4096], abs_dir[PATH_MAX];
-    dir_of(truth_path, dir, sizeof dir);
+    gs_path_dir(truth_path, dir, sizeof dir);
     const char *path = realpath(dir, abs_dir) ? abs_dir : dir;
     static const char base[] =
         "SELECT c.id, s.name, c.capture_key FROM captures c JOIN surveys s ON s.id = c.survey_id "

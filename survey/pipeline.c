@@ -52,33 +52,6 @@ static double now_s(void)
 
 /* ------------------------------------------------------------------ paths */
 
-/* The directory part of path ("." when there is none), without a trailing slash. */
-static void dir_of(const char *path, char *buf, size_t size)
-{
-    snprintf(buf, size, "%s", path);
-    size_t n = strlen(buf);
-    while (n > 1 && buf[n - 1] == '/') buf[--n] = '\0';
-    char *slash = strrchr(buf, '/');
-    if (!slash) snprintf(buf, size, ".");
-    else if (slash == buf) buf[1] = '\0';
-    else *slash = '\0';
-}
-
-/* The last component of path (trailing slashes ignored), and without its extension. */
-static void base_of(const char *path, int strip_ext, char *buf, size_t size)
-{
-    char tmp[4096];
-    snprintf(tmp, sizeof tmp, "%s", path);
-    size_t n = strlen(tmp);
-    while (n > 1 && tmp[n - 1] == '/') tmp[--n] = '\0';
-    const char *slash = strrchr(tmp, '/');
-    snprintf(buf, size, "%s", slash ? slash + 1 : tmp);
-    if (strip_ext) {
-        char *dot = strrchr(buf, '.');
-        if (dot && dot != buf) *dot = '\0';
-    }
-}
-
 /* A directory that exists and is writable, or can be created (its parent exists and is a
  * writable directory). Checked before anything is written; nothing is created here. */
 static gs_status check_dir_creatable(const char *path, const char *what)
@@ -94,7 +67,7 @@ static gs_status check_dir_creatable(const char *path, const char *what)
     if (errno != ENOENT)
         return gs_fail(GS_EIO, "%s: cannot use as the %s: %s", path, what, strerror(errno));
     char parent[4096];
-    dir_of(path, parent, sizeof parent);
+    gs_path_dir(path, parent, sizeof parent);
     if (stat(parent, &sb) != 0)
         return gs_fail(GS_EIO, "%s: cannot create the %s: %s: %s", path, what, parent, strerror(errno));
     if (!S_ISDIR(sb.st_mode))
@@ -274,7 +247,7 @@ static gs_status open_input(const srv_run_opts *o, srv_run_report *r, cap_scene 
         else if (sc->name[0]) set_name(r->survey, sc->name);
         else {
             char stem[256];
-            base_of(o->input, 1, stem, sizeof stem);
+            gs_path_base(o->input, 1, stem, sizeof stem);
             set_name(r->survey, stem);
         }
         int len;
@@ -282,8 +255,8 @@ static gs_status open_input(const srv_run_opts *o, srv_run_report *r, cap_scene 
             len = snprintf(r->capture_dir, sizeof r->capture_dir, "%s", o->capture_dir);
         } else {
             char dbdir[4096], stem[256];
-            dir_of(o->db_path, dbdir, sizeof dbdir);
-            base_of(o->input, 1, stem, sizeof stem);
+            gs_path_dir(o->db_path, dbdir, sizeof dbdir);
+            gs_path_base(o->input, 1, stem, sizeof stem);
             len = snprintf(r->capture_dir, sizeof r->capture_dir, "%.3800s/%.200s-capture", dbdir, stem);
         }
         if (len < 0 || (size_t)len >= sizeof r->capture_dir - 64)
@@ -305,7 +278,7 @@ static gs_status open_input(const srv_run_opts *o, srv_run_report *r, cap_scene 
         station_json = j->cap.station_json;
         snprintf(src, sizeof src, "%s/capture.json: station", o->input);
         char base[256];
-        base_of(o->input, 0, base, sizeof base);
+        gs_path_base(o->input, 0, base, sizeof base);
         set_name(r->survey, o->survey ? o->survey : base);
     }
     if (station_json && !o->station_path) {

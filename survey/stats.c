@@ -213,17 +213,10 @@ static int cmp_cells(const void *a, const void *b)
     return 0;
 }
 
-static double wrap180(double d)
-{
-    double w = fmod(d + 180.0, 360.0);
-    if (w < 0.0) w += 360.0;
-    return w - 180.0;
-}
-
 /* Great-circle distance on the sphere of radius GIS_EARTH_RADIUS_M (haversine). */
 static double haversine_m(double lat1, double lon1, double lat2, double lon2)
 {
-    double dlat = (lat2 - lat1) * DEG, dlon = wrap180(lon2 - lon1) * DEG;
+    double dlat = (lat2 - lat1) * DEG, dlon = gs_wrap180(lon2 - lon1) * DEG;
     double a = sin(dlat / 2) * sin(dlat / 2) +
                cos(lat1 * DEG) * cos(lat2 * DEG) * sin(dlon / 2) * sin(dlon / 2);
     if (a > 1.0) a = 1.0;
@@ -302,7 +295,7 @@ gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats
         double cmin = fmin(cmax, fmax(cos(fmin(fabs(lat_hi), 90.0) * DEG), 0.0));
         if (lat_lo > -90.0 && lat_hi < 90.0 && cmin > 0.0) {
             double dlon = dlat / cmin;
-            double c0 = wrap180(o->lon_deg);
+            double c0 = gs_wrap180(o->lon_deg);
             if (c0 - dlon >= -180.0 && c0 + dlon < 180.0) {
                 lon_lo = c0 - dlon;
                 lon_hi = c0 + dlon;
@@ -318,7 +311,7 @@ gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats
         if ((s = find_group(&gs, o->by == SRV_BY_ALL ? "all" : "radius", &g)) != GS_OK) goto done;
         if (o->by == SRV_BY_RADIUS) {
             g->g.lat_deg = o->lat_deg;
-            g->g.lon_deg = wrap180(o->lon_deg);
+            g->g.lon_deg = gs_wrap180(o->lon_deg);
         }
     }
     int rc;
@@ -370,7 +363,7 @@ gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats
         double lat0 = slat / (double)nrows, lon0 = atan2(ssin, scos) / DEG;
         double kx = GIS_EARTH_RADIUS_M * cos(lat0 * DEG) * DEG, ky = GIS_EARTH_RADIUS_M * DEG;
         for (size_t i = 0; i < nrows; i++) {
-            double x = kx * wrap180(rows[i].lon - lon0), y = ky * (rows[i].lat - lat0);
+            double x = kx * gs_wrap180(rows[i].lon - lon0), y = ky * (rows[i].lat - lat0);
             long ix = (long)floor(x / o->cell_m), iy = (long)floor(y / o->cell_m);
             char key[64];
             snprintf(key, sizeof key, "%ld,%ld", ix, iy);
@@ -379,7 +372,7 @@ gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats
                 g->ix = ix;
                 g->iy = iy;
                 g->g.lat_deg = lat0 + ((double)iy + 0.5) * o->cell_m / ky;
-                g->g.lon_deg = kx > 0.0 ? wrap180(lon0 + ((double)ix + 0.5) * o->cell_m / kx) : lon0;
+                g->g.lon_deg = kx > 0.0 ? gs_wrap180(lon0 + ((double)ix + 0.5) * o->cell_m / kx) : lon0;
             }
             add_light(&g->g, rows[i].phase, rows[i].conf, o->min_confidence);
         }

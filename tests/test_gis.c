@@ -271,7 +271,7 @@ static void locate_oracle(int n, const region *rg, unsigned long long seed, cons
         CHECK_MSG(fx.flags == 0, "%s case %d: flags %#x", label, i, fx.flags);
         double ep = err_m(fx.lat_deg, fx.lon_deg, p[6], p[7]);
         double er = fabs(fx.range_m - range), ed = fabs(fx.distance_m - p[5]), eh = fabs(fx.height_m - p[3]);
-        double eb = fabs(gis_wrap180(fx.bearing_deg - p[4])) * D2R * p[5];
+        double eb = fabs(gs_wrap180(fx.bearing_deg - p[4])) * D2R * p[5];
         double az_px, el_px;
         CHECK_OK(gis_pixel_bearing(&cam, x, y, &az_px, &el_px));
         /* The pixel's azimuth is that of the vertical plane through the elevated light: it
@@ -281,7 +281,7 @@ static void locate_oracle(int n, const region *rg, unsigned long long seed, cons
         double e2 = 0.0066943799901413165, sl = sin(p[0] * D2R);
         double Nrad = 6378137.0 / sqrt(1.0 - e2 * sl * sl);
         double skew = e2 * p[3] * cos(p[0] * D2R) * cos(p[0] * D2R) * sin(2.0 * p[4] * D2R) / (2.0 * Nrad);
-        double eb_px = fabs(gis_wrap180(az_px - p[4]));
+        double eb_px = fabs(gs_wrap180(az_px - p[4]));
         double eb_skew = fabs(fabs(eb_px * D2R) - fabs(skew));
         CHECK_MSG(ep <= 1e-3 && er <= 1e-3 && ed <= 1e-3 && eh <= 1e-6 && eb <= 1e-3,
                   "%s case %d (%.6f, %.6f, H %.1f, ht %.1f, az %.3f, s %.1f): position %.3g m, "
@@ -404,7 +404,7 @@ TEST(gis_pitch_minus_90_nadir)
     CHECK_NEAR(fx.bearing_deg, 90.0, 1e-6);
     CHECK_NEAR(fx.distance_m, 500.0 * 200.0 / 2000.0, 0.01);
     CHECK_OK(gis_locate(&cam, cam.cx_px, cam.cy_px - 200.0, 0.0, 0.0, NULL, &fx));
-    CHECK(fabs(gis_wrap180(fx.bearing_deg)) < 1e-6);
+    CHECK(fabs(gs_wrap180(fx.bearing_deg)) < 1e-6);
     cam.heading_deg = 90.0;
     CHECK_OK(gis_locate(&cam, cam.cx_px, cam.cy_px - 200.0, 0.0, 0.0, NULL, &fx));
     CHECK_NEAR(fx.bearing_deg, 90.0, 1e-6);
@@ -494,7 +494,7 @@ TEST(gis_near_horizontal_rays)
     }
     /* along the line of sight at pitch -2 deg: d(distance)/d(elevation) ~ H / sin^2(2 deg), for
      * the pitch sigma and the y pixel sigma (0.5 px / f rad); curvature adds ~2.5 % */
-    CHECK_NEAR(fabs(gis_wrap180(2.0 * fx.ellipse.azimuth_deg)) / 2.0, 0.0, 0.5);
+    CHECK_NEAR(fabs(gs_wrap180(2.0 * fx.ellipse.azimuth_deg)) / 2.0, 0.0, 0.5);
     double sig_e = hypot(0.02 * D2R, 0.5 / cam.focal_px);
     double expect = 100.0 / (sin(2.0 * D2R) * sin(2.0 * D2R)) * sig_e;
     CHECK_NEAR(fx.ellipse.semi_major_m / expect, 1.0, 0.05);
@@ -754,7 +754,7 @@ static void triangulate_oracle(int n, const region *rg, unsigned long long seed,
         CHECK_MSG(it.flags == 0, "%s case %d: flags %#x", label, i, it.flags);
         double ep = err_m(it.lat_deg, it.lon_deg, p[6], p[7]);
         double ed = fmax(fabs(it.distance_m[0] - f[0][6]), fabs(it.distance_m[1] - f[1][6]));
-        double g = fabs(gis_wrap180(f[0][5] - f[1][5]));
+        double g = fabs(gs_wrap180(f[0][5] - f[1][5]));
         double gamma = g > 90.0 ? 180.0 - g : g;
         /* first-order covariance */
         double sg = sin(gamma * D2R), ua[2] = {sin(f[0][5] * D2R), cos(f[0][5] * D2R)},
@@ -835,7 +835,7 @@ TEST(gis_triangulate_near_parallel)
     CHECK_OK(gis_triangulate(&a, &b, NULL, &it));
     CHECK(it.flags == GIS_FIX_NEAR_PARALLEL);
     CHECK(isnan(it.lat_deg) && isnan(it.lon_deg));
-    double g = fabs(gis_wrap180(f[0][5] - f[1][5]));
+    double g = fabs(gs_wrap180(f[0][5] - f[1][5]));
     CHECK_NEAR(it.angle_deg, g, 1e-6);
     CHECK_NEAR(it.angle_deg, 0.5, 0.01);
     CHECK_NEAR(it.distance_m[0], f[0][6], 1e-3);

@@ -48,6 +48,11 @@ gs_status gs_fail(gs_status s, const char *fmt, ...) __attribute__((format(print
 /* dir + "/" + name into out[0..cap); 0 if it does not fit. */
 int gs_path_join(char *out, size_t cap, const char *dir, const char *name);
 
+/* The directory part of path ("." when there is none, trailing slashes ignored); the last
+ * component, without its extension when strip_ext. Cut to size. */
+void gs_path_dir(const char *path, char *buf, size_t size);
+void gs_path_base(const char *path, int strip_ext, char *buf, size_t size);
+
 /* The whole file at path in a malloc'd buffer with a NUL appended (*data: free()), its length
  * in *size (may be NULL). GS_ENOTFOUND for a missing file, GS_EIO for one that cannot be read,
  * GS_ELIMIT beyond max_bytes (0: GS_FILE_MAX_DEFAULT); the detail names the file. */
@@ -214,6 +219,9 @@ double gs_chi2_sf(double chi2, int dof);
 double gs_chi2_isf(double p, int dof);
 /* log Phi(z), Phi the standard normal CDF, accurate for every z (asymptotic below -20). */
 double gs_log_phi(double z);
+/* An angle in degrees wrapped to [0, 360) and to [-180, 180). */
+double gs_wrap360(double a_deg);
+double gs_wrap180(double a_deg);
 /* The median of v[0..n) (n >= 1; v is reordered): quickselect, the upper median for even n. */
 float gs_median_f(float *v, size_t n);
 

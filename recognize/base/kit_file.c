@@ -19,6 +19,31 @@ int gs_path_join(char *out, size_t cap, const char *dir, const char *name)
     return n > 0 && (size_t)n < cap;
 }
 
+void gs_path_dir(const char *path, char *buf, size_t size)
+{
+    snprintf(buf, size, "%s", path);
+    size_t n = strlen(buf);
+    while (n > 1 && buf[n - 1] == '/') buf[--n] = '\0';
+    char *slash = strrchr(buf, '/');
+    if (!slash) snprintf(buf, size, ".");
+    else if (slash == buf) buf[1] = '\0';
+    else *slash = '\0';
+}
+
+void gs_path_base(const char *path, int strip_ext, char *buf, size_t size)
+{
+    char tmp[4096];
+    snprintf(tmp, sizeof tmp, "%s", path);
+    size_t n = strlen(tmp);
+    while (n > 1 && tmp[n - 1] == '/') tmp[--n] = '\0';
+    const char *slash = strrchr(tmp, '/');
+    snprintf(buf, size, "%s", slash ? slash + 1 : tmp);
+    if (strip_ext) {
+        char *dot = strrchr(buf, '.');
+        if (dot && dot != buf) *dot = '\0';
+    }
+}
+
 gs_status gs_file_read(const char *path, size_t max_bytes, char **data, size_t *size)
 {
     *data = NULL;

@@ -74,6 +74,18 @@ double gs_log_phi(double z)
     return -0.5 * z * z - log(-z) - LOG_SQRT_2PI + log1p(r * (-1.0 + r * (3.0 + r * (-15.0 + r * 105.0))));
 }
 
+double gs_wrap360(double a_deg)
+{
+    double r = fmod(a_deg, 360.0);
+    if (r < 0.0) r += 360.0;
+    return r >= 360.0 ? 0.0 : r;   /* fmod of tiny negatives can round to 360 */
+}
+
+double gs_wrap180(double a_deg)
+{
+    return gs_wrap360(a_deg + 180.0) - 180.0;
+}
+
 float gs_median_f(float *v, size_t n)
 {
     size_t k = n / 2, lo = 0, hi = n - 1;
