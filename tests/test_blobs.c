@@ -13,7 +13,6 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
 /* ------------------------------------------------------------ the renderer */
 
@@ -969,8 +968,16 @@ TEST(blobs_tiny_images)
         }
 }
 
-/* Performance: a 1-megapixel, K = 26, RGB capture (the ACam's largest K at 50 Hz, paper
- * Fig. 7) with 400 lights over a noisy background. The brief: well under a few seconds. */
+/* The ACam's largest capture at 50 Hz (paper Fig. 7): 1 megapixel, K = 26, RGB, 400 lights of
+ * 9 x 9 pixels (truncated Gaussians, each its own phase) on a 50-pixel grid over uniform noise.
+ * Every light is found at its centre, unflagged, and its sums are the light's DN over its
+ * aperture. (The extraction's time on this capture is for the bench, not for a test.) */
+static double speed_light_dn(int l, int k, int dx, int dy)
+{
+    double amp = 200 + 50 * l % 1000, mod = 1 + 0.5 * cos(2 * M_PI * (k / 26.0 - l / 7.0));
+    return (unsigned short)(amp * mod * exp(-(dx * dx + dy * dy) / 3.0));
+}
+
 TEST(blobs_speed_1mp_k26_rgb)
 {
     gs_capture cap;
@@ -998,33 +1005,53 @@ TEST(blobs_speed_1mp_k26_rgb)
         }
         for (int l = 0; l < 400; l++) {
             int cx = 20 + (l % 20) * 50, cy = 20 + (l / 20) * 50;
-            double amp = 200 + 50 * l % 1000, mod = 1 + 0.5 * cos(2 * M_PI * (k / 26.0 - l / 7.0));
             for (int dy = -4; dy <= 4; dy++)
-                for (int dx = -4; dx <= 4; dx++) {
-                    double v = amp * mod * exp(-(dx * dx + dy * dy) / 3.0);
-                    for (int b = 0; b < 3; b++) r[((size_t)(cy + dy) * 1024 + cx + dx) * 3 + b] += (unsigned short)v;
-                }
+                for (int dx = -4; dx <= 4; dx++)
+                    for (int b = 0; b < 3; b++)
+                        r[((size_t)(cy + dy) * 1024 + cx + dx) * 3 + b] +=
+                            (unsigned short)speed_light_dn(l, k, dx, dy);
         }
     }
-    rec_blob_opts o;
-    rec_blob_opts_default(&o);
+    rec_blob_opts o = opts_labels();
     rec_catalog cat;
-    /* CPU time (all threads), not wall time: other processes on the machine do not count */
-    struct timespec t0, t1, c0, c1;
-    clock_gettime(CLOCK_MONOTONIC, &t0);
-    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &c0);
     CHECK_OK(rec_blobs_extract(&cap, &o, &cat));
-    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &c1);
-    clock_gettime(CLOCK_MONOTONIC, &t1);
-    double s = (double)(c1.tv_sec - c0.tv_sec) + 1e-9 * (double)(c1.tv_nsec - c0.tv_nsec);
-    double wall = (double)(t1.tv_sec - t0.tv_sec) + 1e-9 * (double)(t1.tv_nsec - t0.tv_nsec);
-    printf("    1024x1024, K = 26, RGB: %zu lights in %.3f s CPU, %.3f s wall\n", cat.count, s, wall);
     CHECK(cat.count == 400);
-#if defined(__SANITIZE_ADDRESS__)
-    CHECK(s < 30); /* sanitizers slow everything ~5-10x */
-#else
-    CHECK(s < 2.0);
-#endif
+    /* the light of each aperture pixel (the 9 x 9 boxes are 50 pixels apart) */
+    double worst_z = 0;
+    for (int l = 0; l < 400 && cat.labels; l++) {
+        int cx = 20 + (l % 20) * 50, cy = 20 + (l / 20) * 50;
+        int j = find_light(&cat, cx, cy, 0.5);
+        CHECK_MSG(j >= 0, "light %d at (%d, %d) not found", l, cx, cy);
+        if (j < 0) continue;
+        CHECK_MSG(cat.flags[j] == 0 && cat.saturated_px[j] == 0, "light %d: flags %#x", l,
+                  cat.flags[j]);
+        for (int k = 0; k < 26; k++) {
+            double truth = 0;
+            for (int y = cy - 12; y <= cy + 12; y++)
+                for (int x = cx - 12; x <= cx + 12; x++)
+                    if (cat.labels[(size_t)y * 1024 + x] == j && abs(x - cx) <= 4 && abs(y - cy) <= 4)
+                        truth += speed_light_dn(l, k, x - cx, y - cy) / 500.0;
+            for (int b = 0; b < 3; b++) {
+                size_t q = ((size_t)j * 3 + b) * 26 + k;
+                double z = (cat.signal[q] - truth) / cat.sigma[q];
+                if (fabs(z) > worst_z) worst_z = fabs(z);
+                CHECK_MSG(fabs(z) < 5, "light %d k %d band %d: %g vs %g (sigma %g)", l, k, b,
+                          cat.signal[q], truth, cat.sigma[q]);
+            }
+        }
+    }
+    /* no aperture reaches past the 12-pixel window searched above */
+    size_t far = 0;
+    for (size_t p = 0; cat.labels && p < N; p++) {
+        int x = (int)(p % 1024), y = (int)(p / 1024);
+        int lx = (x + 5) / 50, ly = (y + 5) / 50;   /* the nearest light's column and row */
+        lx = lx > 19 ? 19 : lx;
+        ly = ly > 19 ? 19 : ly;
+        far += cat.labels[p] >= 0 && (abs(x - 20 - 50 * lx) > 12 || abs(y - 20 - 50 * ly) > 12);
+    }
+    CHECK_MSG(far == 0, "%zu aperture pixels beyond 12 px of their light", far);
+    printf("    1024x1024, K = 26, RGB: %zu lights, largest |sum - truth| %.2f sigma\n", cat.count,
+           worst_z);
     rec_catalog_release(&cat);
     gs_capture_release(&cap);
 }
