@@ -8,6 +8,7 @@
  * The truth of a per-frame sum is the light flux (all lights: crosstalk included) over the
  * light's usable aperture pixels, which the catalog's label image names. */
 #include "recognize/internal.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 #include <stdint.h>
@@ -38,31 +39,18 @@ typedef struct {
     const unsigned char *halvings;  /* optional K * W * H */
 } scene;
 
-static uint64_t rng_state;
-static uint64_t rng_next(void)
-{
-    uint64_t z = (rng_state += 0x9e3779b97f4a7c15ull);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return z ^ (z >> 31);
-}
-static double rng_uniform(void) /* (0, 1) */
-{
-    return ((double)(rng_next() >> 11) + 0.5) / 9007199254740992.0;
-}
-static double rng_gauss(void)
-{
-    return sqrt(-2 * log(rng_uniform())) * cos(2 * M_PI * rng_uniform());
-}
+static uint64_t rng_state;   /* the renderer's splitmix64 stream (tests/fixtures.h) */
+
+/* Poisson: Knuth's product of uniforms, a rounded normal above a mean of 40. */
 static double rng_poisson(double mean)
 {
     if (mean <= 0) return 0;
-    if (mean > 40) return fmax(0, floor(mean + sqrt(mean) * rng_gauss() + 0.5));
+    if (mean > 40) return fmax(0, floor(mean + sqrt(mean) * fx_rng_gauss(&rng_state) + 0.5));
     double L = exp(-mean), p = 1;
     int k = 0;
     do {
         k++;
-        p *= rng_uniform();
+        p *= fx_rng_uniform(&rng_state);
     } while (p > L);
     return k - 1;
 }
@@ -155,7 +143,7 @@ static void render(const scene *sc, gs_capture *cap)
                 if (sc->noise) {
                     double pos = dn > 0 ? dn : 0; /* a negative pedestal has no shot noise */
                     if (sc->gain > 0) dn += rng_poisson(pos * sc->gain) / sc->gain - pos;
-                    dn += sc->read * rng_gauss();
+                    dn += sc->read * fx_rng_gauss(&rng_state);
                 }
                 double raw = floor(sc->black + dn + 0.5);
                 if (raw < 0) raw = 0;
@@ -359,13 +347,14 @@ static void random_lights(light *l, int n, double flux_lo, uint64_t seed)
     rng_state = seed;
     for (int i = 0; i < n; i++) {
         memset(&l[i], 0, sizeof l[i]);
-        l[i].x = 16 + 32 * (i % 8) + rng_uniform() - 0.5;
-        l[i].y = 16 + 32 * (i / 8) + rng_uniform() - 0.5;
-        l[i].psf = 1.0 + 0.5 * rng_uniform();
-        l[i].flux = flux_lo * pow(10, 2 * rng_uniform());
-        l[i].depth = 0.5 * rng_uniform();
-        l[i].phase = rng_uniform();
-        double c0 = 0.2 + rng_uniform(), c1 = 0.2 + rng_uniform(), c2 = 0.2 + rng_uniform();
+        l[i].x = 16 + 32 * (i % 8) + fx_rng_uniform(&rng_state) - 0.5;
+        l[i].y = 16 + 32 * (i / 8) + fx_rng_uniform(&rng_state) - 0.5;
+        l[i].psf = 1.0 + 0.5 * fx_rng_uniform(&rng_state);
+        l[i].flux = flux_lo * pow(10, 2 * fx_rng_uniform(&rng_state));
+        l[i].depth = 0.5 * fx_rng_uniform(&rng_state);
+        l[i].phase = fx_rng_uniform(&rng_state);
+        double c0 = 0.2 + fx_rng_uniform(&rng_state), c1 = 0.2 + fx_rng_uniform(&rng_state),
+               c2 = 0.2 + fx_rng_uniform(&rng_state);
         l[i].chroma[0] = c0 / (c0 + c1 + c2);
         l[i].chroma[1] = c1 / (c0 + c1 + c2);
         l[i].chroma[2] = c2 / (c0 + c1 + c2);

@@ -3,6 +3,7 @@
  * integration of the BRF's trigonometric polynomial); an effect the scene does not list is never
  * executed (pipeline list and the effects' own call counters); the HDR loop recovers saturated
  * lights; the effects' physics numbers (shared/BULBS.md); determinism. */
+#include "tests/fixtures.h"
 #include "tests/test.h"
 #include "capture/sim.h"
 
@@ -305,8 +306,7 @@ TEST(sim_hdr_recovers_saturated_lights_within_2_percent)
     cap_backend *be = NULL;
     CHECK_OK(cap_backend_sim_new(&sc, &be));
     if (!be) return;
-    char dir[1024];
-    snprintf(dir, sizeof dir, "%s/hdr", test_tmpdir());
+    const char *dir = fx_tmp("hdr");
     cap_loop_opts o;
     cap_loop_opts_default(&o);
     o.progress = 0;

@@ -5,6 +5,7 @@
  * (sums of harmonics, sawtooth, a sodium-like gap, a near-flat BRF, two near-identical bulbs);
  * the generated DELIGHT is used where named. */
 #include "recognize/recognize.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 #include <float.h>
@@ -14,22 +15,6 @@
 #include <string.h>
 
 /* ------------------------------------------------------------ helpers */
-
-static uint64_t rng_next(uint64_t *s)
-{
-    uint64_t z = (*s += 0x9E3779B97F4A7C15ull);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
-}
-static double rng_unif(uint64_t *s)
-{
-    return ((double)(rng_next(s) >> 11) + 0.5) * 0x1p-53;
-}
-static double rng_gauss(uint64_t *s)
-{
-    return sqrt(-2.0 * log(rng_unif(s))) * cos(2.0 * M_PI * rng_unif(s));
-}
 
 enum { SHAPE_SINE, SHAPE_SAW, SHAPE_HARM, SHAPE_GAP, SHAPE_FLAT, SHAPE_SINE_TWIN, SHAPE_ODD };
 
@@ -238,7 +223,7 @@ static void oracle_discrete(const ttab *tb, const double *ph, const double *x, c
 static void render_t(const double *t, int D, double a, double sigma, uint64_t *rs, double *x, double *sg)
 {
     for (int k = 0; k < D; k++) {
-        x[k] = a * t[k] + (sigma > 0 ? sigma * rng_gauss(rs) : 0.0);
+        x[k] = a * t[k] + (sigma > 0 ? sigma * fx_rng_gauss(rs) : 0.0);
         sg[k] = sigma > 0 ? sigma : 1e-9 * a;
     }
 }
@@ -250,7 +235,7 @@ static void render(const gs_bulb *b, double s, int K, double a, double sigma, ui
     int D = b->brf.bands * K;
     oracle_template(b, s, K, x);
     for (int k = 0; k < D; k++) {
-        x[k] = a * x[k] + (sigma > 0 ? sigma * rng_gauss(rs) : 0.0);
+        x[k] = a * x[k] + (sigma > 0 ? sigma * fx_rng_gauss(rs) : 0.0);
         sg[k] = sigma > 0 ? sigma : 1e-9 * a;
     }
 }
@@ -701,7 +686,7 @@ TEST(eq7_analytic_templates)
         gs_bulb b;
         make_bulb(&b, ids[i], shapes[i], 50, 3, GS_REF_VOLTAGE, chroma_tab[i], 1024);
         for (int trial = 0; trial < 20; trial++) {
-            double sh = rng_unif(&rs);
+            double sh = fx_rng_uniform(&rs);
             oracle_template(&b, sh, 26, t);
             analytic_template(shapes[i], chroma_tab[i], sh, 26, ta);
             for (int k = 0; k < 78; k++) CHECK_NEAR(t[k], ta[k], 1e-12);
@@ -737,7 +722,7 @@ TEST(eq7_continuous_matches_fine_grid_oracle)
     int posterior_checked = 0, ambiguous_checked = 0;
     for (int trial = 0; trial < trials; trial++) {
         int b0 = trial % nb;
-        double s0 = rng_unif(&rs);
+        double s0 = fx_rng_uniform(&rs);
         double snr = trial % 4 == 0 ? 0.7 : trial % 4 == 1 ? 3 : trial % 4 == 2 ? 15 : 100;
         analytic_template(shapes[b0], chroma_tab[b0], s0, K, t);
         render_t(t, D, 300.0, 100.0 / snr, &rs, x, sg);
@@ -886,7 +871,7 @@ TEST(eq7_brightness_near_zero)
     CHECK_MSG(dim >= n * 9 / 10, "%d of %d dim", dim, n);
     /* pixels: the same rows give -1 and confidence 0 */
     float xf[78], sf = 1.0f;
-    for (int k = 0; k < 78; k++) xf[k] = (float)rng_gauss(&rs);
+    for (int k = 0; k < 78; k++) xf[k] = (float)fx_rng_gauss(&rs);
     int pb;
     float pp, pc;
     CHECK_OK(rec_match_pixels(m, xf, &sf, 1, &pb, &pp, &pc));
@@ -1015,7 +1000,7 @@ TEST(eq7_nan_inf_negative_input)
     CHECK(all_finite(&r) && !(r.flags & REC_MATCH_BAD_INPUT));
     CHECK(neg > 0 || r.bulb >= -1);
     /* all negative: no positive brightness fits */
-    for (int k = 0; k < 78; k++) x[k] = -5.0 - rng_unif(&rs);
+    for (int k = 0; k < 78; k++) x[k] = -5.0 - fx_rng_uniform(&rs);
     CHECK_OK(rec_match_light(m, x, sg, &r));
     CHECK(all_finite(&r) && r.bulb == -1 && (r.flags & REC_MATCH_DIM) && r.brightness == 0);
     /* extreme scales: no overflow, no NaN */
@@ -1246,7 +1231,7 @@ TEST(eq7_shape_only_bulb_never_decides_phase)
         double x[78], sg[78];
         uint64_t rs = 15;
         for (int trial = 0; trial < 10; trial++) {
-            render(&b, rng_unif(&rs), 26, 500.0, 1.0, &rs, x, sg);
+            render(&b, fx_rng_uniform(&rs), 26, 500.0, 1.0, &rs, x, sg);
             rec_match r;
             CHECK_OK(rec_match_light(m, x, sg, &r));
             CHECK(all_finite(&r));
@@ -1377,7 +1362,7 @@ TEST(eq7_pixels_prefilter_generated_delight)
     uint64_t rs = 23;
     for (size_t i = 0; i < P; i++) {
         /* |t| ~ 2.9 for a unit brightness: a in [0.5, 2] puts z around 1.5 - 6 */
-        double a = (i % 4 == 0) ? 0.0 : (i % 4 == 3) ? 50.0 * rng_unif(&rs) : 0.5 + 1.5 * rng_unif(&rs);
+        double a = (i % 4 == 0) ? 0.0 : (i % 4 == 3) ? 50.0 * fx_rng_uniform(&rs) : 0.5 + 1.5 * fx_rng_uniform(&rs);
         render_t(ttab_row(&tb, (int)(i % nb), (int)(i / nb) % 3), 78, a, 1.0, &rs, x, sg);
         for (int k = 0; k < 78; k++) xf[i * 78 + k] = (float)x[k];
         sf[i] = 1.0f;
@@ -1451,11 +1436,11 @@ static void render_fx(const gs_bulb *b, double s, double a, const double *g, dou
     int K = 26;
     oracle_template(b, s, K, x);
     double f[26];
-    for (int k = 0; k < K; k++) f[k] = scint > 0 ? exp(scint * rng_gauss(rs) - 0.5 * scint * scint) : 1.0;
+    for (int k = 0; k < K; k++) f[k] = scint > 0 ? exp(scint * fx_rng_gauss(rs) - 0.5 * scint * scint) : 1.0;
     for (int band = 0; band < 3; band++)
         for (int k = 0; k < K; k++) {
             int d = band * K + k;
-            x[d] = a * g[band] * f[k] * x[d] + sigma * rng_gauss(rs);
+            x[d] = a * g[band] * f[k] * x[d] + sigma * fx_rng_gauss(rs);
             sg[d] = sigma;
         }
 }
@@ -1565,7 +1550,7 @@ TEST(eq7_scintillation_multiplicative_noise)
     int nc = 0;
     for (int i = 0; i < 60; i++) {
         size_t b = (size_t)i % 4;
-        double ph = 360.0 * rng_unif(&rs), s = gs_phase_to_shift(ph);
+        double ph = 360.0 * fx_rng_uniform(&rs), s = gs_phase_to_shift(ph);
         render_fx(rec_matcher_bulb(m, b), s, 1000.0, g, 0.03, 1000.0 / 3 / 100, &rs, x, sg);
         rec_match r;
         CHECK_OK(rec_match_light(m, x, sg, &r));
@@ -1646,7 +1631,7 @@ TEST(eq7_band_gains_pixels_equal_lights)
     const double g[3] = {1.0, 0.8, 0.6};
     uint64_t rs = 61;
     for (size_t i = 0; i < P; i++) {
-        double a = (i % 4 == 0) ? 0.0 : (i % 4 == 3) ? 300.0 * rng_unif(&rs) : 1.0 + 4.0 * rng_unif(&rs);
+        double a = (i % 4 == 0) ? 0.0 : (i % 4 == 3) ? 300.0 * fx_rng_uniform(&rs) : 1.0 + 4.0 * fx_rng_uniform(&rs);
         render_fx(rec_matcher_bulb(m, i % nb), gs_phase_to_shift(P3[(i / nb) % 3]), a, g, 0.01, 1.0,
                   &rs, x, sg);
         for (int k = 0; k < 78; k++) xf[i * 78 + k] = (float)x[k];

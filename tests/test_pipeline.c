@@ -13,6 +13,7 @@
  * Cost: the built-in lab scene once (`pipeline_lab_end_to_end_matches_truth`, ~5 s), and a
  * half-size lab scene (320 x 240, C = 128, ~1 s per run) for everything else. */
 #include "survey/survey.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 #include <errno.h>
@@ -30,50 +31,8 @@
 #include <unistd.h>
 
 static char out[1 << 17];
-
-/* "TMPDIR/name" in a ring of 64 buffers (long-lived paths are copied by the caller). */
-static const char *tmp(const char *name)
-{
-    static char buf[64][1024];
-    static int k;
-    k = (k + 1) % 64;
-    snprintf(buf[k], sizeof buf[k], "%s/%s", test_tmpdir(), name);
-    return buf[k];
-}
-
-static void write_text(const char *path, const char *text)
-{
-    FILE *f = fopen(path, "w");
-    CHECK_MSG(f != NULL, "%s: %s", path, strerror(errno));
-    if (!f) return;
-    fputs(text, f);
-    fclose(f);
-}
-
-static int exists(const char *path)
-{
-    struct stat st;
-    return stat(path, &st) == 0;
-}
-
-static int count_lines(const char *s)
-{
-    int n = 0;
-    for (; *s; s++) n += *s == '\n';
-    return n;
-}
-
-/* test_run with a printf-style command. */
-static int sh(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
-static int sh(const char *fmt, ...)
-{
-    char cmd[8192];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(cmd, sizeof cmd, fmt, ap);
-    va_end(ap);
-    return test_run(cmd, out, sizeof out);
-}
+/* A printf-style shell command (tests/fixtures.h), its output in out. */
+#define sh(...) fx_run(out, sizeof out, __VA_ARGS__)
 
 /* The lab scene (capture/scenes/lab.json) made small: the same eight bulbs, phases, fluxes and
  * effects at `scale` times the pixel coordinates and image size (1/2: 320 x 240, 1/4: 160 x 120;
@@ -124,7 +83,7 @@ static void write_small_lab(const char *path, double scale, const char *bulb)
         "  \"effects\": {\"psf\": {\"sigma_px\": 1.5}, \"ambient\": {\"e_per_px_cycle\": 0.5},\n"
         "              \"shot_noise\": {}, \"saturation\": {}, \"read_noise\": {}, \"adc\": {}}\n"
         "}\n", (int)(640 * scale), (int)(480 * scale), 800 * scale, lights);
-    write_text(path, text);
+    fx_write_text(path, text);
 }
 
 /* ------------------------------------------------------------------ independent readers */
@@ -276,33 +235,6 @@ static char *dump_db(const char *path)
     return buf;
 }
 
-/* A file's bytes (malloc, NUL-terminated) and size; NULL when it cannot be read. */
-static char *file_bytes(const char *path, size_t *size)
-{
-    FILE *f = fopen(path, "rb");
-    *size = 0;
-    if (!f) return NULL;
-    size_t cap = 1 << 16, n = 0, got;
-    char *buf = malloc(cap + 1);
-    while (buf && (got = fread(buf + n, 1, cap - n, f)) > 0) {
-        n += got;
-        if (n == cap) {
-            char *nb = realloc(buf, 2 * cap + 1);
-            if (!nb) {
-                free(buf);
-                buf = NULL;
-                break;
-            }
-            buf = nb;
-            cap *= 2;
-        }
-    }
-    fclose(f);
-    if (buf) buf[n] = '\0';
-    *size = n;
-    return buf;
-}
-
 static long query_long(const char *path, const char *sql)
 {
     sqlite3 *h = NULL;
@@ -339,12 +271,12 @@ static void counts(const char *db, char *buf, size_t size)
 TEST(pipeline_lab_end_to_end_matches_truth)
 {
     char db[1024], cap[1024], truth[1024], scene[1024] = "capture/scenes/lab.json";
-    snprintf(db, sizeof db, "%s", tmp("lab.sqlite"));
-    snprintf(cap, sizeof cap, "%s", tmp("lab-capture"));
-    snprintf(truth, sizeof truth, "%s", tmp("lab-capture/truth.json"));
+    snprintf(db, sizeof db, "%s", fx_tmp("lab.sqlite"));
+    snprintf(cap, sizeof cap, "%s", fx_tmp("lab-capture"));
+    snprintf(truth, sizeof truth, "%s", fx_tmp("lab-capture/truth.json"));
     const char *san = getenv("GS_SAN");
     if (san && *san == '1') {
-        snprintf(scene, sizeof scene, "%s", tmp("lab.json"));
+        snprintf(scene, sizeof scene, "%s", fx_tmp("lab.json"));
         write_small_lab(scene, 0.5, NULL);
     }
     int rc = sh("%s run %s --db %s", test_bin(), scene, db);
@@ -356,11 +288,11 @@ TEST(pipeline_lab_end_to_end_matches_truth)
     CHECK(strstr(out, "| detection rate | 100.0 % | 8 / 8 ") != NULL);      /* evaluation */
     CHECK(strstr(out, "| bulb accuracy | 100.0 % | 8 / 8 ") != NULL);
     CHECK(strstr(out, "| phase accuracy | 100.0 % | 8 / 8 ") != NULL);
-    CHECK(exists(tmp("lab.geojson")) && !exists(tmp("lab-map.png")));
+    CHECK(fx_exists(fx_tmp("lab.geojson")) && !fx_exists(fx_tmp("lab-map.png")));
     CHECK(check_against_truth(db, truth, 8) == 8);
     /* the GeoJSON holds every stored light, without a geometry */
     json_error_t err;
-    json_t *g = json_load_file(tmp("lab.geojson"), 0, &err);
+    json_t *g = json_load_file(fx_tmp("lab.geojson"), 0, &err);
     json_t *features = json_object_get(g, "features");
     CHECK(json_is_array(features) &&
           (long)json_array_size(features) == query_long(db, "SELECT count(*) FROM lights"));
@@ -436,7 +368,7 @@ TEST(pipeline_lab_end_to_end_matches_truth)
  * GeoJSON coordinates and the map written, location errors small against the truth. */
 TEST(pipeline_geographic_scene_locates_lights)
 {
-    const char *scene = tmp("geo.json"), *db = tmp("geo.sqlite");
+    const char *scene = fx_tmp("geo.json"), *db = fx_tmp("geo.sqlite");
     /* a station 120 m above the ellipsoid looking north, lights 10 m up, 450-850 m away */
     static const struct {
         double north_m, east_m;
@@ -470,17 +402,17 @@ TEST(pipeline_geographic_scene_locates_lights)
              " \"lights\": [%s],\n"
              " \"effects\": {\"psf\": {\"sigma_px\": 1.2}, \"shot_noise\": {}, \"saturation\": {},\n"
              "             \"read_noise\": {}, \"adc\": {}}}\n", lights);
-    write_text(scene, text);
+    fx_write_text(scene, text);
     int rc = sh("%s run %s --db %s", test_bin(), scene, db);
     CHECK_MSG(rc == 0, "run: %d: %s", rc, out);
     if (rc != 0) return;
     CHECK(strstr(out, "at 10.00 m above the ellipsoid (scene median)") != NULL);
     CHECK(strstr(out, "| detection rate | 100.0 % | 6 / 6 ") != NULL);
-    CHECK(exists(tmp("geo-map.png")) && exists(tmp("geo.geojson")));
-    CHECK(check_against_truth(db, tmp("geo-capture/truth.json"), 6) == 6);
+    CHECK(fx_exists(fx_tmp("geo-map.png")) && fx_exists(fx_tmp("geo.geojson")));
+    CHECK(check_against_truth(db, fx_tmp("geo-capture/truth.json"), 6) == 6);
     CHECK(query_long(db, "SELECT count(*) FROM locations WHERE lat_deg IS NOT NULL AND height_m = 10") == 6);
     CHECK(query_long(db, "SELECT count(*) FROM stations WHERE name = 'geo' AND lat_deg = 32.8") == 1);
-    rc = sh("%s evaluate --db %s --truth %s --format json", test_bin(), db, tmp("geo-capture/truth.json"));
+    rc = sh("%s evaluate --db %s --truth %s --format json", test_bin(), db, fx_tmp("geo-capture/truth.json"));
     json_error_t err;
     json_t *ev = json_loads(out, 0, &err), *loc = json_object_get(ev, "location_error");
     CHECK_MSG(rc == 0 && loc, "%s", out);
@@ -491,7 +423,7 @@ TEST(pipeline_geographic_scene_locates_lights)
     CHECK_MSG(med < 0.5 && mx < 1.5, "location error median %.3f m, max %.3f m", med, mx);
     json_decref(ev);
     /* the GeoJSON's positions are the stored ones */
-    json_t *g = json_load_file(tmp("geo.geojson"), 0, &err), *features = json_object_get(g, "features");
+    json_t *g = json_load_file(fx_tmp("geo.geojson"), 0, &err), *features = json_object_get(g, "features");
     size_t i;
     json_t *f;
     int with_geometry = 0;
@@ -502,9 +434,9 @@ TEST(pipeline_geographic_scene_locates_lights)
     CHECK(with_geometry >= 6);
     json_decref(g);
     /* a capture directory with a station needs the lights' height */
-    rc = sh("%s run %s --db %s --survey other", test_bin(), tmp("geo-capture"), db);
-    CHECK_MSG(rc == 1 && count_lines(out) == 1 && strstr(out, "--light-height-m"), "%d: %s", rc, out);
-    rc = sh("%s run %s --db %s --light-height-m 10", test_bin(), tmp("geo-capture"), db);
+    rc = sh("%s run %s --db %s --survey other", test_bin(), fx_tmp("geo-capture"), db);
+    CHECK_MSG(rc == 1 && fx_count_lines(out) == 1 && strstr(out, "--light-height-m"), "%d: %s", rc, out);
+    rc = sh("%s run %s --db %s --light-height-m 10", test_bin(), fx_tmp("geo-capture"), db);
     CHECK_MSG(rc == 0, "%d: %s", rc, out);
     CHECK(query_long(db, "SELECT count(*) FROM captures") == 2);   /* survey geo-capture */
 }
@@ -546,7 +478,7 @@ static void run_child(const char *scene, const char *db, const char *capdir, chi
  * capture complete (its lights and frames as counted when it was stored), at most one. */
 static void check_after_kill(const char *db, int kill_no)
 {
-    if (!exists(db)) return;
+    if (!fx_exists(db)) return;
     sqlite3 *h = NULL;
     if (sqlite3_open_v2(db, &h, SQLITE_OPEN_READWRITE, NULL) != SQLITE_OK) {
         test_failed(__FILE__, __LINE__, "kill %d: %s: %s", kill_no, db, sqlite3_errmsg(h));
@@ -592,11 +524,11 @@ static void check_after_kill(const char *db, int kill_no)
 TEST(pipeline_sigkill_resumes_to_same_content)
 {
     char scene[1024], ref_db[1024], db[1024], ref_cap[1024], cap[1024];
-    snprintf(scene, sizeof scene, "%s", tmp("small.json"));
-    snprintf(ref_db, sizeof ref_db, "%s", tmp("ref.sqlite"));
-    snprintf(db, sizeof db, "%s", tmp("crash.sqlite"));
-    snprintf(ref_cap, sizeof ref_cap, "%s", tmp("ref-cap"));
-    snprintf(cap, sizeof cap, "%s", tmp("crash-cap"));
+    snprintf(scene, sizeof scene, "%s", fx_tmp("small.json"));
+    snprintf(ref_db, sizeof ref_db, "%s", fx_tmp("ref.sqlite"));
+    snprintf(db, sizeof db, "%s", fx_tmp("crash.sqlite"));
+    snprintf(ref_cap, sizeof ref_cap, "%s", fx_tmp("ref-cap"));
+    snprintf(cap, sizeof cap, "%s", fx_tmp("crash-cap"));
     write_small_lab(scene, 0.25, NULL);
     srv_run_opts o;
     srv_run_opts_default(&o);
@@ -605,7 +537,7 @@ TEST(pipeline_sigkill_resumes_to_same_content)
     o.capture_dir = ref_cap;
     srv_run_report ref;
     CHECK_OK(srv_run(&o, &ref));
-    CHECK(check_against_truth(ref_db, tmp("ref-cap/truth.json"), 8) == 8);
+    CHECK(check_against_truth(ref_db, fx_tmp("ref-cap/truth.json"), 8) == 8);
     static const struct {
         int stage;            /* where the child stops; -1: it does not */
         const char *detail;   /* ... at the call whose detail starts so */
@@ -694,37 +626,37 @@ TEST(pipeline_sigkill_resumes_to_same_content)
 TEST(pipeline_bad_input_changes_nothing)
 {
     const char *dir = test_tmpdir();
-    const char *scene = tmp("small.json"), *db = tmp("ok.sqlite"), *cap = tmp("ok-cap");
+    const char *scene = fx_tmp("small.json"), *db = fx_tmp("ok.sqlite"), *cap = fx_tmp("ok-cap");
     write_small_lab(scene, 0.25, NULL);
     int rc = sh("%s run %s --db %s --capture-dir %s", test_bin(), scene, db, cap);
     CHECK_MSG(rc == 0, "%d: %s", rc, out);
     if (rc != 0) return;
     /* the bad inputs */
-    write_text(tmp("syntax.json"), "{\"format\": \"gridsurvey-scene/1\", \"grid\": {\"nominal_hz\": 50,,}\n");
-    write_small_lab(tmp("bulb.json"), 0.25, "no-such-bulb-9w");
-    write_text(tmp("notes.txt"), "not a database\n");
-    write_text(tmp("afile"), "a regular file\n");
-    write_text(tmp("station-bad.json"), "{\"format\": \"gridsurvey-station/1\", \"lat_deg\": 32.8,\n \"lon\": }\n");
-    write_text(tmp("station-ok.json"),
+    fx_write_text(fx_tmp("syntax.json"), "{\"format\": \"gridsurvey-scene/1\", \"grid\": {\"nominal_hz\": 50,,}\n");
+    write_small_lab(fx_tmp("bulb.json"), 0.25, "no-such-bulb-9w");
+    fx_write_text(fx_tmp("notes.txt"), "not a database\n");
+    fx_write_text(fx_tmp("afile"), "a regular file\n");
+    fx_write_text(fx_tmp("station-bad.json"), "{\"format\": \"gridsurvey-station/1\", \"lat_deg\": 32.8,\n \"lon\": }\n");
+    fx_write_text(fx_tmp("station-ok.json"),
                "{\"lat_deg\": 32.8, \"lon_deg\": 35, \"height_m\": 100, \"heading_deg\": 0, \"pitch_deg\": -5, "
                "\"focal_px\": 200, \"cx_px\": 79.5, \"cy_px\": 59.5, \"width_px\": 160, \"height_px\": 120}\n");
-    write_text(tmp("station-size.json"),
+    fx_write_text(fx_tmp("station-size.json"),
                "{\"lat_deg\": 32.8, \"lon_deg\": 35, \"height_m\": 100, \"heading_deg\": 0, \"pitch_deg\": -5, "
                "\"focal_px\": 400, \"cx_px\": 159.5, \"cy_px\": 119.5, \"width_px\": 640, \"height_px\": 480}\n");
     sqlite3 *h = NULL;
-    CHECK(sqlite3_open(tmp("other.sqlite"), &h) == SQLITE_OK);
+    CHECK(sqlite3_open(fx_tmp("other.sqlite"), &h) == SQLITE_OK);
     CHECK(sqlite3_exec(h, "CREATE TABLE t(x); INSERT INTO t VALUES (1)", NULL, NULL, NULL) == SQLITE_OK);
     sqlite3_close(h);
     CHECK(sh("cd %s && cp -r ok-cap missing && rm missing/frame_003.png && cp -r ok-cap trunc && "
              "truncate -s 900 trunc/frame_005.png && cp -r ok-cap wrongk && "
              "sed -i 's/\"K\": 26/\"K\": 25/' wrongk/capture.json && grep -q '\"K\": 25' wrongk/capture.json",
              dir) == 0);
-    if (geteuid() != 0) CHECK(mkdir(tmp("ro"), 0555) == 0);
+    if (geteuid() != 0) CHECK(mkdir(fx_tmp("ro"), 0555) == 0);
     char listing[1 << 15];
     snprintf(out, sizeof out, "cd %s && find . -printf '%%p %%s %%T@ %%m\\n' | sort", dir);
     CHECK(test_run(out, listing, sizeof listing) == 0);
     size_t size_before, size_after;
-    char *db_bytes = file_bytes(db, &size_before);
+    char *db_bytes = fx_read_file(db, &size_before);
     char bin[4096];
     CHECK(realpath(test_bin(), bin) != NULL);
     struct {
@@ -754,20 +686,20 @@ TEST(pipeline_bad_input_changes_nothing)
     size_t n_cases = sizeof cases / sizeof *cases - (geteuid() == 0);
     for (size_t i = 0; i < n_cases; i++) {
         rc = sh("cd %s && %s run %s", dir, bin, cases[i].args);
-        CHECK_MSG(rc == 1 && count_lines(out) == 1 && strstr(out, cases[i].expect) &&
+        CHECK_MSG(rc == 1 && fx_count_lines(out) == 1 && strstr(out, cases[i].expect) &&
                   strstr(out, "gridsurvey: "),
                   "run %s: exit %d, output: %s", cases[i].args, rc, out);
     }
     /* usage errors: exit 2 */
     rc = sh("%s run %s", test_bin(), scene);
-    CHECK(rc == 2 && count_lines(out) == 1 && strstr(out, "--db"));
+    CHECK(rc == 2 && fx_count_lines(out) == 1 && strstr(out, "--db"));
     rc = sh("%s run %s --db %s --phases 4", test_bin(), scene, db);
-    CHECK(rc == 2 && count_lines(out) == 1);
+    CHECK(rc == 2 && fx_count_lines(out) == 1);
     char listing2[1 << 15];
     snprintf(out, sizeof out, "cd %s && find . -printf '%%p %%s %%T@ %%m\\n' | sort", dir);
     CHECK(test_run(out, listing2, sizeof listing2) == 0);
     CHECK_MSG(!strcmp(listing, listing2), "files changed:\nbefore:\n%s\nafter:\n%s", listing, listing2);
-    char *db_after = file_bytes(db, &size_after);
+    char *db_after = fx_read_file(db, &size_after);
     CHECK(db_bytes && db_after && size_before == size_after && !memcmp(db_bytes, db_after, size_after));
     free(db_bytes);
     free(db_after);
@@ -802,9 +734,9 @@ TEST(evaluate_hand_made_db_known_answers)
         return;
     }
     char capdir[1024], truth[1024], db[1024];
-    snprintf(capdir, sizeof capdir, "%s", tmp("cap"));
-    snprintf(truth, sizeof truth, "%s", tmp("cap/truth.json"));
-    snprintf(db, sizeof db, "%s", tmp("ev.sqlite"));
+    snprintf(capdir, sizeof capdir, "%s", fx_tmp("cap"));
+    snprintf(truth, sizeof truth, "%s", fx_tmp("cap/truth.json"));
+    snprintf(db, sizeof db, "%s", fx_tmp("ev.sqlite"));
     CHECK(mkdir(capdir, 0777) == 0);
     /* Truth: T0..T6; T5 is off the image. T6 sits 1.5 px from T0 (one-to-one, nearest first). */
     const double T[7][2] = {{100, 100}, {200, 100}, {300, 100}, {400, 100}, {500, 100}, {600, 100}, {101.5, 100}};
@@ -822,7 +754,7 @@ TEST(evaluate_hand_made_db_known_answers)
              "]}\n",
              T[0][0], T[0][1], Tlat[0], T[1][0], T[1][1], Tlat[1], T[2][0], T[2][1], Tlat[2], T[3][0], T[3][1],
              Tlat[3], T[4][0], T[4][1], T[5][0], T[5][1], T[6][0], T[6][1], Tlat[6]);
-    write_text(truth, text);
+    fx_write_text(truth, text);
     /* Stored: S0 -> T0 (0.54 px; T6 is 1.01 px away but S1 takes it at 0.4 px), right bulb, phase
      * 350 vs 0 (10 deg: right), located 3 m from T0. S1 -> T6: right bulb, phase 215 vs 240
      * (25 deg: wrong, class "other"), located 10 m away. S2 -> T1 (1.41 px): wrong bulb of the
@@ -970,23 +902,23 @@ TEST(evaluate_hand_made_db_known_answers)
                                              "none")) == 1);
     json_decref(j);
     /* CLI errors: one line, exit 1 (failures) or 2 (usage) */
-    write_text(tmp("bad-truth.json"), "{\"format\": \"gridsurvey-scene/1\", \"lights\": []}\n");
-    CHECK(sh("%s evaluate --db %s --truth %s", test_bin(), db, tmp("bad-truth.json")) == 1 &&
-          count_lines(out) == 1 && strstr(out, "gridsurvey-truth/1"));
-    write_text(tmp("bad-truth2.json"), "{\"format\": \"gridsurvey-truth/1\", \"lights\": [{\"x_px\": 1}]}\n");
-    CHECK(sh("%s evaluate --db %s --truth %s", test_bin(), db, tmp("bad-truth2.json")) == 1 &&
-          count_lines(out) == 1 && strstr(out, "lights[0].in_image"));
-    CHECK(sh("%s evaluate --db %s --truth %s", test_bin(), db, tmp("none.json")) == 1 && count_lines(out) == 1);
-    CHECK(sh("%s evaluate --db %s --truth %s", test_bin(), tmp("bad-truth.json"), truth) == 1 &&
+    fx_write_text(fx_tmp("bad-truth.json"), "{\"format\": \"gridsurvey-scene/1\", \"lights\": []}\n");
+    CHECK(sh("%s evaluate --db %s --truth %s", test_bin(), db, fx_tmp("bad-truth.json")) == 1 &&
+          fx_count_lines(out) == 1 && strstr(out, "gridsurvey-truth/1"));
+    fx_write_text(fx_tmp("bad-truth2.json"), "{\"format\": \"gridsurvey-truth/1\", \"lights\": [{\"x_px\": 1}]}\n");
+    CHECK(sh("%s evaluate --db %s --truth %s", test_bin(), db, fx_tmp("bad-truth2.json")) == 1 &&
+          fx_count_lines(out) == 1 && strstr(out, "lights[0].in_image"));
+    CHECK(sh("%s evaluate --db %s --truth %s", test_bin(), db, fx_tmp("none.json")) == 1 && fx_count_lines(out) == 1);
+    CHECK(sh("%s evaluate --db %s --truth %s", test_bin(), fx_tmp("bad-truth.json"), truth) == 1 &&
           strstr(out, "not a survey database"));
-    CHECK(sh("%s evaluate --db %s --truth %s --match-px -1", test_bin(), db, truth) == 2 && count_lines(out) == 1);
-    CHECK(sh("%s evaluate --db %s", test_bin(), db) == 2 && count_lines(out) == 1);
+    CHECK(sh("%s evaluate --db %s --truth %s --match-px -1", test_bin(), db, truth) == 2 && fx_count_lines(out) == 1);
+    CHECK(sh("%s evaluate --db %s", test_bin(), db) == 2 && fx_count_lines(out) == 1);
     /* a truth elsewhere and two captures to choose from: refused, naming them */
-    CHECK(mkdir(tmp("elsewhere"), 0777) == 0);
-    CHECK(sh("cp %s %s/", truth, tmp("elsewhere")) == 0);
-    CHECK(sh("%s evaluate --db %s --truth %s/truth.json", test_bin(), db, tmp("elsewhere")) == 1 &&
-          count_lines(out) == 1 && strstr(out, "hand/hand-1") && strstr(out, "--survey"));
-    CHECK(sh("%s evaluate --db %s --truth %s/truth.json --survey hand", test_bin(), db, tmp("elsewhere")) == 0);
+    CHECK(mkdir(fx_tmp("elsewhere"), 0777) == 0);
+    CHECK(sh("cp %s %s/", truth, fx_tmp("elsewhere")) == 0);
+    CHECK(sh("%s evaluate --db %s --truth %s/truth.json", test_bin(), db, fx_tmp("elsewhere")) == 1 &&
+          fx_count_lines(out) == 1 && strstr(out, "hand/hand-1") && strstr(out, "--survey"));
+    CHECK(sh("%s evaluate --db %s --truth %s/truth.json --survey hand", test_bin(), db, fx_tmp("elsewhere")) == 0);
 }
 
 /* Matching is one-to-one and nearest first, whatever the order of the rows: a crowded cluster
@@ -994,9 +926,9 @@ TEST(evaluate_hand_made_db_known_answers)
  * taken first is the closest. */
 TEST(evaluate_matching_one_to_one_nearest_first)
 {
-    const char *capdir = tmp("c"), *truth = tmp("c/truth.json"), *db = tmp("m.sqlite");
+    const char *capdir = fx_tmp("c"), *truth = fx_tmp("c/truth.json"), *db = fx_tmp("m.sqlite");
     CHECK(mkdir(capdir, 0777) == 0);
-    write_text(truth,
+    fx_write_text(truth,
                "{\"format\": \"gridsurvey-truth/1\", \"lights\": [\n"
                "{\"x_px\": 10.0, \"y_px\": 10.0, \"in_image\": true, \"bulb\": \"a\", \"technology\": \"cfl\", \"phase_deg\": 0},\n"
                "{\"x_px\": 10.8, \"y_px\": 10.0, \"in_image\": true, \"bulb\": \"b\", \"technology\": \"cfl\", \"phase_deg\": 120},\n"

@@ -9,6 +9,7 @@
  * Renders are cached in the runner's temporary root, so tests that share a scene render it once. */
 #include "recognize/recognize.h"
 #include "recognize/internal.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 #include <jansson.h>
@@ -146,13 +147,6 @@ static const scene scene_d = {"d", 50, 26, 3, 128, 96, 13, lights_d, 4};
 /* Scene E: sky and noise only. */
 static const scene scene_e = {"e", 50, 8, 1, 64, 48, 17, NULL, 0};
 
-static int count_lines(const char *s)
-{
-    int n = 0;
-    for (; *s; s++) n += *s == '\n';
-    return n;
-}
-
 /* The runner's temporary root (parent of this test's directory), shared by the tests of a run. */
 static const char *cache_root(void)
 {
@@ -161,19 +155,13 @@ static const char *cache_root(void)
     return dirname(root);
 }
 
-static int exists(const char *path)
-{
-    struct stat sb;
-    return stat(path, &sb) == 0;
-}
-
 /* The built-in DELIGHT as a SQLite file, generated once per run; GRIDSURVEY_DELIGHT names it for
  * the commands this test runs (generating it in every command would cost 0.25 s each). */
 static const char *cached_delight(void)
 {
     static char db[1100];
     snprintf(db, sizeof db, "%s/delight.sqlite", cache_root());
-    if (!exists(db)) {
+    if (!fx_exists(db)) {
         char cmd[4096];
         snprintf(cmd, sizeof cmd, "%s delight generate -o %s.tmp && mv %s.tmp %s", test_bin(), db, db, db);
         CHECK_MSG(test_run(cmd, out, sizeof out) == 0, "delight generate: %s", out);
@@ -190,11 +178,11 @@ static const char *render(const scene *s)
     const char *root = cache_root();
     snprintf(dir, sizeof dir, "%s/capture-%s", root, s->key);
     snprintf(path, sizeof path, "%s/capture.json", dir);
-    if (exists(path)) return dir;
+    if (fx_exists(path)) return dir;
     /* the DELIGHT export, once per run */
     char csv[1100];
     snprintf(csv, sizeof csv, "%s/delight-export.csv", root);
-    if (!exists(csv)) {
+    if (!fx_exists(csv)) {
         char tmp[1200];
         snprintf(tmp, sizeof tmp, "%s.tmp", csv);
         snprintf(cmd, sizeof cmd, "%s delight export --delight %s -o %s && mv %s %s", test_bin(),
@@ -492,8 +480,7 @@ TEST(recognize_cli_continuous_phase_within_sigma)
     CHECK(!strcmp(json_string_value(json_object_get(json_object_get(root, "recognition"), "phases")),
                   "continuous"));
     CHECK(json_array_size(json_object_get(root, "lights")) == (size_t)scene_c.count);
-    char path[1200];
-    snprintf(path, sizeof path, "%s/maps/phase_map.png", test_tmpdir());
+    const char *path = fx_tmp("maps/phase_map.png");
     int w = 0, h = 0;
     unsigned char *px = read_png(path, &w, &h);
     int s = doc_scale(scene_c.width, scene_c.height);
@@ -611,7 +598,7 @@ TEST(recognize_cli_bad_inputs_one_line_errors)
     char missing[1024], bad[1024], path[1100], file[1200];
     snprintf(missing, sizeof missing, "%s/no-such-capture", test_tmpdir());
     CHECK(run1(missing, NULL) == 1);
-    CHECK_MSG(count_lines(out) == 1 && strstr(out, "no-such-capture"), "%s", out);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "no-such-capture"), "%s", out);
 
     snprintf(bad, sizeof bad, "%s/bad", test_tmpdir());
     mkdir(bad, 0700);
@@ -623,47 +610,46 @@ TEST(recognize_cli_bad_inputs_one_line_errors)
         fclose(f);
     }
     CHECK(run1(bad, "--json") == 1);
-    CHECK_MSG(count_lines(out) == 1 && strstr(out, "capture.json"), "%s", out);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "capture.json"), "%s", out);
 
     CHECK(run1(good, "--phases 5") == 2);
-    CHECK_MSG(count_lines(out) == 1 && strstr(out, "--phases"), "%s", out);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "--phases"), "%s", out);
     CHECK(run1(good, "--phases") == 2);
-    CHECK_MSG(count_lines(out) == 1, "%s", out);
+    CHECK_MSG(fx_count_lines(out) == 1, "%s", out);
     CHECK(run1(good, "--min-confidence 1.5") == 2);
-    CHECK_MSG(count_lines(out) == 1 && strstr(out, "--min-confidence"), "%s", out);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "--min-confidence"), "%s", out);
     CHECK(run1(good, "--threshold -1") == 2);
-    CHECK_MSG(count_lines(out) == 1, "%s", out);
+    CHECK_MSG(fx_count_lines(out) == 1, "%s", out);
     CHECK(run1(good, "--transformer-deg abc") == 2);
-    CHECK_MSG(count_lines(out) == 1, "%s", out);
+    CHECK_MSG(fx_count_lines(out) == 1, "%s", out);
     CHECK(run1(good, "--frobnicate") == 2);
-    CHECK_MSG(count_lines(out) == 1 && strstr(out, "frobnicate"), "%s", out);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "frobnicate"), "%s", out);
     CHECK(run1("", NULL) == 2);
-    CHECK_MSG(count_lines(out) == 1 && strstr(out, "capture directory"), "%s", out);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "capture directory"), "%s", out);
     CHECK(run1(good, good) == 2);
-    CHECK_MSG(count_lines(out) == 1, "%s", out);
+    CHECK_MSG(fx_count_lines(out) == 1, "%s", out);
     /* a transformer shift that repeats 0/120/240 */
     CHECK(run1(good, "--phases 6 --transformer-deg 120") == 1);
-    CHECK_MSG(count_lines(out) == 1 && strstr(out, "transformer"), "%s", out);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "transformer"), "%s", out);
     /* a DELIGHT file that is missing or not a database */
     CHECK(run1(good, "--delight /nonexistent/delight.sqlite") == 1);
-    CHECK_MSG(count_lines(out) == 1 && strstr(out, "delight.sqlite"), "%s", out);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "delight.sqlite"), "%s", out);
     CHECK(run1(good, "--delight tests/test.h") == 1);
-    CHECK_MSG(count_lines(out) == 1, "%s", out);
+    CHECK_MSG(fx_count_lines(out) == 1, "%s", out);
     /* a DELIGHT without an entry for the capture's grid frequency (only 60 Hz rows) */
-    char db60[1100];
-    snprintf(db60, sizeof db60, "%s/only60.sqlite", test_tmpdir());
+    const char *db60 = fx_tmp("only60.sqlite");
     snprintf(cmd_buf, sizeof cmd_buf, "grep -E '^(bulb_id|hps-150w,[^,]*,[^,]*,[^,]*,60),' "
              "%s/delight-export.csv > %s/only60.csv && %s delight import %s/only60.csv --delight %s",
              cache_root(), test_tmpdir(), test_bin(), test_tmpdir(), db60);
     CHECK_MSG(test_run(cmd_buf, out, sizeof out) == 0, "%s", out);
     snprintf(file, sizeof file, "--delight %s", db60);
     CHECK(run1(good, file) == 1);
-    CHECK_MSG(count_lines(out) == 1 && strstr(out, "no usable monochrome entry") && strstr(out, "50 Hz"),
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "no usable monochrome entry") && strstr(out, "50 Hz"),
               "%s", out);
     /* --maps naming a regular file */
     snprintf(file, sizeof file, "--maps %s", path);
     CHECK(run1(good, file) == 1);
-    CHECK_MSG(count_lines(out) == 1 && strstr(out, "capture.json"), "%s", out);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "capture.json"), "%s", out);
     /* a frame file gone missing after capture.json was written */
     char cmd[4096];
     snprintf(cmd, sizeof cmd, "cp -r %s %s/partial && rm %s/partial/frame_003.png", good,
@@ -671,7 +657,7 @@ TEST(recognize_cli_bad_inputs_one_line_errors)
     CHECK(test_run(cmd, out, sizeof out) == 0);
     snprintf(path, sizeof path, "%s/partial", test_tmpdir());
     CHECK(run1(path, NULL) == 1);
-    CHECK_MSG(count_lines(out) == 1 && strstr(out, "frame_003.png"), "%s", out);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "frame_003.png"), "%s", out);
     /* and the maps directory of a failed run holds no partial pictures */
     char maps_arg[1300];
     snprintf(maps_arg, sizeof maps_arg, "--maps %s/failmaps", test_tmpdir());
@@ -693,7 +679,7 @@ TEST(recognize_cli_help)
     snprintf(cmd, sizeof cmd, "%s bench --help", test_bin());
     CHECK(test_run(cmd, out, sizeof out) == 0 && strstr(out, "bench recognize"));
     snprintf(cmd, sizeof cmd, "%s bench frobnicate", test_bin());
-    CHECK(test_run(cmd, out, sizeof out) == 2 && count_lines(out) == 1);
+    CHECK(test_run(cmd, out, sizeof out) == 2 && fx_count_lines(out) == 1);
 }
 
 /* The colour of a pure hue at phase 0/120/240: which channel dominates. */
@@ -759,8 +745,7 @@ TEST(maps_png_valid_and_phase_hues)
                   q[0], q[1], q[2]);
     }
     for (int m = 0; m < 3; m++) free(px[m]);
-    char path[1200];
-    snprintf(path, sizeof path, "%s/maps/signals.png", test_tmpdir());
+    const char *path = fx_tmp("maps/signals.png");
     int sw = 0, sh = 0;
     unsigned char *sp = read_png(path, &sw, &sh);
     CHECK(sw == 1500 && sh == 1500);
@@ -791,8 +776,7 @@ TEST(maps_no_lights_still_written)
         CHECK(json_integer_value(json_object_get(json_object_get(root, "summary"), "lights")) == 0);
     }
     json_decref(root);
-    char path[1200];
-    snprintf(path, sizeof path, "%s/maps/phase_map.png", test_tmpdir());
+    const char *path = fx_tmp("maps/phase_map.png");
     int w = 0, h = 0;
     unsigned char *px = read_png(path, &w, &h);
     int s = doc_scale(scene_e.width, scene_e.height);
@@ -808,7 +792,7 @@ TEST(maps_no_lights_still_written)
         CHECK_MSG(lit == 0, "%zu map pixels drawn in an empty scene", lit);
     }
     free(px);
-    snprintf(path, sizeof path, "%s/maps/signals.png", test_tmpdir());
+    path = fx_tmp("maps/signals.png");
     int sw = 0, sh = 0;
     unsigned char *sp = read_png(path, &sw, &sh);
     CHECK(sw == 1500 && sh == 620);
@@ -866,12 +850,8 @@ static gs_status mem_capture(const gs_delight *d, gs_capture *cap)
     }
     uint64_t seed = 99;
     for (size_t q = 0; q < np * 13 * 3; q++) {
-        /* Box-Muller on a splitmix64 stream */
-        seed += 0x9E3779B97F4A7C15ull;
-        uint64_t z = seed;
-        z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-        z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-        z ^= z >> 31;
+        /* Box-Muller on one splitmix64 draw: u1 from its top 53 bits, u2 from its low 11 */
+        uint64_t z = fx_rng_next(&seed);
         double u1 = ((double)(z >> 11) + 0.5) * 0x1p-53, u2 = ((double)(z & 0x7ff) + 0.5) / 2048.0;
         double n = sqrt(-2.0 * log(u1)) * cos(6.283185307179586 * u2);
         double raw = 100.0 + cycles * (0.5 + v[q]) + 2.0 * n;
@@ -947,8 +927,7 @@ TEST(maps_saturated_core_white_and_bad_arguments)
     CHECK_OK(rec_pixel_maps_compute(&cap, m, NULL, NULL, &pm));
     if (pm.state) {
         CHECK(pm.state[pc] == REC_PIX_SATURATED && pm.bulb[pc] == -1);
-        char path[1100];
-        snprintf(path, sizeof path, "%s/phase.png", test_tmpdir());
+        const char *path = fx_tmp("phase.png");
         CHECK_OK(rec_map_write_phase_png(&pm, path));
         int w = 0, h = 0;
         unsigned char *px = read_png(path, &w, &h);

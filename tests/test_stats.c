@@ -7,6 +7,7 @@
  * benchmark in --quick mode. */
 #include "gis/gis.h"
 #include "survey/survey.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 #include <jansson.h>
@@ -21,27 +22,10 @@
 
 static char out[1 << 18];
 
-static const char *tmp(const char *name)
-{
-    static char buf[8][1024];
-    static int k;
-    k = (k + 1) % 8;
-    snprintf(buf[k], sizeof buf[k], "%s/%s", test_tmpdir(), name);
-    return buf[k];
-}
-
+/* `gridsurvey ...`: fmt's first %s is the binary (tests/fixtures.h); output in out. */
 static int run(const char *fmt, const char *a, const char *b, const char *c)
 {
-    char cmd[8192];
-    snprintf(cmd, sizeof cmd, fmt, test_bin(), a ? a : "", b ? b : "", c ? c : "");
-    return test_run(cmd, out, sizeof out);
-}
-
-static int count_lines(const char *s)
-{
-    int n = 0;
-    for (; *s; s++) n += *s == '\n';
-    return n;
+    return fx_run_bin(out, sizeof out, fmt, a, b, c);
 }
 
 /* ------------------------------------------------------------------ formulas */
@@ -178,7 +162,7 @@ static srv_phase_stats *compute(srv_db *db, const char *by, double min_conf, siz
 /* phase_counts and phase_balance (SQL) equal the C computation for every group. */
 TEST(stats_sql_views_match_c)
 {
-    const char *path = tmp("v.sqlite");
+    const char *path = fx_tmp("v.sqlite");
     synth(path, "east", 10, 80, 3, 1, 1, 1, 2000);
     synth(path, "west", 6, 80, 4, 3, 2, 1, 2000);
     srv_db *db = NULL;
@@ -266,7 +250,7 @@ TEST(stats_sql_views_match_c)
 
 TEST(stats_min_confidence_unknown_other)
 {
-    const char *path = tmp("c.sqlite");
+    const char *path = fx_tmp("c.sqlite");
     srv_db *db = NULL;
     CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
     if (!db) return;
@@ -322,7 +306,7 @@ TEST(stats_min_confidence_unknown_other)
 /* Uniform populations give p-values spread over (0, 1); an imbalanced one gives a tiny p. */
 TEST(stats_pvalues_uniform_vs_imbalanced)
 {
-    const char *uni = tmp("u.sqlite"), *imb = tmp("i.sqlite");
+    const char *uni = fx_tmp("u.sqlite"), *imb = fx_tmp("i.sqlite");
     synth(uni, "uniform", 100, 150, 17, 1, 1, 1, 2000);   /* 15000 lights over 4 km x 4 km */
     srv_db *db = NULL;
     CHECK_OK(srv_db_open(uni, SRV_DB_READ, &db));
@@ -376,7 +360,7 @@ TEST(stats_pvalues_uniform_vs_imbalanced)
  * radius filter keeps those at 400 m and drops those at 600 m. */
 TEST(stats_by_cell_and_radius)
 {
-    const char *path = tmp("geo.sqlite");
+    const char *path = fx_tmp("geo.sqlite");
     srv_db *db = NULL;
     CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
     if (!db) return;
@@ -487,7 +471,7 @@ TEST(stats_by_cell_and_radius)
 /* The paper's Haifa-like answer with its uncertainty, end to end through the CLI. */
 TEST(stats_cli_haifa_example)
 {
-    const char *path = tmp("haifa.sqlite");
+    const char *path = fx_tmp("haifa.sqlite");
     srv_db *db = NULL;
     CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
     if (!db) return;
@@ -535,23 +519,23 @@ TEST(stats_cli_haifa_example)
     CHECK_NEAR(json_real_value(json_object_get(g0, "imbalance")), 3 * (1 / 3.0 - 0.303), 1e-9);
     json_decref(root);
     CHECK(run("%s stats --db %s --format csv --survey haifa", path, NULL, NULL) == 0);
-    CHECK(count_lines(out) == 2 && !strncmp(out, "group,lat_deg,lon_deg,lights,", 29));
+    CHECK(fx_count_lines(out) == 2 && !strncmp(out, "group,lat_deg,lon_deg,lights,", 29));
     CHECK(strstr(out, "\nall,,,1000,0,0,0,334,363,303,1000,0.334,") != NULL);
 }
 
 TEST(stats_cli_bad_input)
 {
-    const char *path = tmp("b.sqlite");
+    const char *path = fx_tmp("b.sqlite");
     synth(path, "b", 1, 10, 1, 1, 1, 1, 100);
     CHECK(run("%s stats --help", NULL, NULL, NULL) == 0 && strstr(out, "Wilson"));
-    CHECK(run("%s stats --db %s --by colour", path, NULL, NULL) == 2 && count_lines(out) == 1);
+    CHECK(run("%s stats --db %s --by colour", path, NULL, NULL) == 2 && fx_count_lines(out) == 1);
     CHECK(run("%s stats --db %s --by cell:0", path, NULL, NULL) == 2);
     CHECK(run("%s stats --db %s --by radius:95,1,100", path, NULL, NULL) == 2);
     CHECK(run("%s stats --db %s --min-confidence 1.5", path, NULL, NULL) == 2);
     CHECK(run("%s stats --db %s --format xml", path, NULL, NULL) == 2);
     CHECK(run("%s stats", NULL, NULL, NULL) == 2);
     CHECK(run("%s stats --db %s --survey nobody", path, NULL, NULL) == 1);
-    CHECK(count_lines(out) == 1 && strstr(out, "nobody"));
+    CHECK(fx_count_lines(out) == 1 && strstr(out, "nobody"));
     CHECK(run("%s stats --db %s --by cell:100m --format csv", path, NULL, NULL) == 0);
     CHECK(run("%s stats --db %s --by survey", path, NULL, NULL) == 0 && strstr(out, "| b |"));
 }
@@ -559,7 +543,7 @@ TEST(stats_cli_bad_input)
 /* `gridsurvey bench db --quick` (srv_bench_db) runs and prints its Markdown table. */
 TEST(stats_bench_db_quick_runs)
 {
-    const char *log = tmp("bench.md");
+    const char *log = fx_tmp("bench.md");
     fflush(stdout);
     int saved = dup(1), fd = open(log, O_WRONLY | O_CREAT | O_TRUNC, 0644);
     CHECK(saved >= 0 && fd >= 0);
@@ -573,14 +557,11 @@ TEST(stats_bench_db_quick_runs)
     dup2(saved, 1);
     close(saved);
     CHECK(rc == 0);
-    FILE *f = fopen(log, "r");
-    size_t len = f ? fread(out, 1, sizeof out - 1, f) : 0;
-    out[len] = '\0';
-    if (f) fclose(f);
-    CHECK(strstr(out, "| lights | ingest s | lights/s |") != NULL);
-    CHECK(strstr(out, "\n| 10000 | ") != NULL);
-    char p[1100];
-    snprintf(p, sizeof p, "%s/bench.sqlite", test_tmpdir());
+    char *md = fx_read_file(log, NULL);
+    CHECK(md && strstr(md, "| lights | ingest s | lights/s |") != NULL);
+    CHECK(md && strstr(md, "\n| 10000 | ") != NULL);
+    free(md);
+    const char *p = fx_tmp("bench.sqlite");
     struct stat st;
     CHECK(stat(p, &st) != 0);   /* removed without --keep */
 }

@@ -6,6 +6,7 @@
  * SQLite with their filters checked against plain SQL. */
 #include "gis/gis.h"
 #include "survey/survey.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 #include <errno.h>
@@ -23,26 +24,10 @@
 
 static char out[1 << 18];
 
-static const char *tmp(const char *name)
+/* `gridsurvey ...`: fmt's first %s is the binary (tests/fixtures.h); output in out. */
+static int run(const char *fmt, const char *a, const char *b, const char *c)
 {
-    static char buf[8][1024];
-    static int k;
-    k = (k + 1) % 8;
-    snprintf(buf[k], sizeof buf[k], "%s/%s", test_tmpdir(), name);
-    return buf[k];
-}
-
-static int count_lines(const char *s)
-{
-    int n = 0;
-    for (; *s; s++) n += *s == '\n';
-    return n;
-}
-
-static int exists(const char *path)
-{
-    struct stat st;
-    return stat(path, &st) == 0;
+    return fx_run_bin(out, sizeof out, fmt, a, b, c);
 }
 
 static int sidecars(const char *path)
@@ -52,7 +37,7 @@ static int sidecars(const char *path)
     int n = 0;
     for (int i = 0; i < 3; i++) {
         snprintf(p, sizeof p, "%s%s", path, suffix[i]);
-        n += exists(p);
+        n += fx_exists(p);
     }
     return n;
 }
@@ -115,13 +100,6 @@ static const char *query_text(sqlite3 *db, const char *sql)
     return buf;
 }
 
-static int run(const char *fmt, const char *a, const char *b, const char *c)
-{
-    char cmd[8192];
-    snprintf(cmd, sizeof cmd, fmt, test_bin(), a ? a : "", b ? b : "", c ? c : "");
-    return test_run(cmd, out, sizeof out);
-}
-
 /* A small synthetic survey. */
 static void make_synth(const char *path, const char *survey, size_t captures, size_t lights,
                        unsigned long long seed)
@@ -144,7 +122,7 @@ static void make_synth(const char *path, const char *survey, size_t captures, si
 
 TEST(survey_db_schema_created)
 {
-    const char *path = tmp("s.sqlite");
+    const char *path = fx_tmp("s.sqlite");
     srv_db *db = NULL;
     CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
     if (!db) return;
@@ -176,14 +154,14 @@ TEST(survey_db_schema_created)
     CHECK_OK(srv_db_open(path, SRV_DB_READ, &db));
     srv_db_close(db);
     /* CLI */
-    CHECK(run("%s db init --db %s", tmp("cli.sqlite"), NULL, NULL) == 0);
-    CHECK(run("%s db check --db %s", tmp("cli.sqlite"), NULL, NULL) == 0 && strstr(out, ": ok"));
+    CHECK(run("%s db init --db %s", fx_tmp("cli.sqlite"), NULL, NULL) == 0);
+    CHECK(run("%s db check --db %s", fx_tmp("cli.sqlite"), NULL, NULL) == 0 && strstr(out, ": ok"));
     CHECK(run("%s db --help", NULL, NULL, NULL) == 0 && strstr(out, "ingest-synthetic"));
 }
 
 TEST(survey_db_migrates_from_v1)
 {
-    const char *path = tmp("v1.sqlite");
+    const char *path = fx_tmp("v1.sqlite");
     CHECK_OK(srv_db_create_at_version(path, 1));
     sqlite3 *h = NULL;
     CHECK(sqlite3_open_v2(path, &h, SQLITE_OPEN_READWRITE, NULL) == SQLITE_OK);
@@ -217,7 +195,7 @@ TEST(survey_db_migrates_from_v1)
 
 TEST(survey_db_refuses_newer_schema)
 {
-    const char *path = tmp("new.sqlite");
+    const char *path = fx_tmp("new.sqlite");
     CHECK_OK(srv_db_create_at_version(path, SRV_DB_SCHEMA_VERSION));
     sqlite3 *h = NULL;
     CHECK(sqlite3_open_v2(path, &h, SQLITE_OPEN_READWRITE, NULL) == SQLITE_OK);
@@ -240,11 +218,9 @@ TEST(survey_db_refuses_newer_schema)
  * on disk changes (bytes, mtime, no -wal/-shm/-journal). */
 TEST(survey_db_refuses_foreign_files)
 {
-    const char *text = tmp("notes.txt"), *delight = tmp("delight.sqlite"), *gpkg = tmp("l.gpkg"),
-               *other = tmp("other.sqlite");
-    FILE *f = fopen(text, "w");
-    fputs("this is not a database\nsecond line\n", f);
-    fclose(f);
+    const char *text = fx_tmp("notes.txt"), *delight = fx_tmp("delight.sqlite"), *gpkg = fx_tmp("l.gpkg"),
+               *other = fx_tmp("other.sqlite");
+    fx_write_text(text, "this is not a database\nsecond line\n");
     gs_delight *d = gs_delight_new();
     CHECK_OK(gs_delight_save(d, delight));
     gs_delight_free(d);
@@ -272,15 +248,15 @@ TEST(survey_db_refuses_foreign_files)
                       "detail: %s", gs_detail());
             srv_db_close(db);
         }
-        const char *geo = tmp("x.geojson");
+        const char *geo = fx_tmp("x.geojson");
         CHECK(run("%s stats --db %s", files[i], NULL, NULL) == 1);
-        CHECK(count_lines(out) == 1 && strstr(out, files[i]) && strstr(out, "not a survey database"));
+        CHECK(fx_count_lines(out) == 1 && strstr(out, files[i]) && strstr(out, "not a survey database"));
         CHECK(run("%s export --db %s -o %s", files[i], geo, NULL) == 1);
-        CHECK(count_lines(out) == 1 && strstr(out, files[i]));
-        CHECK(!exists(geo));
+        CHECK(fx_count_lines(out) == 1 && strstr(out, files[i]));
+        CHECK(!fx_exists(geo));
         if (i % 2 == 0) {   /* the writers too (each CLI run costs a process start) */
             CHECK(run("%s db ingest-synthetic --db %s --captures 2", files[i], NULL, NULL) == 1);
-            CHECK(count_lines(out) == 1 && strstr(out, files[i]));
+            CHECK(fx_count_lines(out) == 1 && strstr(out, files[i]));
         } else {
             CHECK(run("%s db migrate --db %s", files[i], NULL, NULL) == 1);
         }
@@ -297,10 +273,8 @@ TEST(survey_db_refuses_foreign_files)
  * two are the ones CI can rely on. Nothing is created anywhere. */
 TEST(survey_db_unwritable_paths)
 {
-    const char *file = tmp("plain");
-    FILE *f = fopen(file, "w");
-    fputs("x\n", f);
-    fclose(f);
+    const char *file = fx_tmp("plain");
+    fx_write_text(file, "x\n");
     snapshot before = take(file);
     char under_file[1100], missing_dir[1100];
     snprintf(under_file, sizeof under_file, "%s/survey.sqlite", file);
@@ -311,28 +285,28 @@ TEST(survey_db_unwritable_paths)
         CHECK(srv_db_open(paths[i], SRV_DB_CREATE, &db) == GS_EIO && !db);
         CHECK(strstr(gs_detail(), paths[i]) != NULL);
         CHECK(run("%s db init --db %s", paths[i], NULL, NULL) == 1);
-        CHECK(count_lines(out) == 1 && strstr(out, paths[i]));
+        CHECK(fx_count_lines(out) == 1 && strstr(out, paths[i]));
         CHECK(run("%s db ingest-synthetic --db %s", paths[i], NULL, NULL) == 1);
-        CHECK(!exists(paths[i]));
+        CHECK(!fx_exists(paths[i]));
     }
     CHECK(unchanged(file, &before));
     free(before.bytes);
-    CHECK(!exists(tmp("no")));
+    CHECK(!fx_exists(fx_tmp("no")));
     /* a missing database is not created by readers */
-    const char *missing = tmp("missing.sqlite");
+    const char *missing = fx_tmp("missing.sqlite");
     srv_db *db = NULL;
     CHECK(srv_db_open(missing, SRV_DB_READ, &db) == GS_ENOTFOUND && !db);
     CHECK(srv_db_open(missing, SRV_DB_WRITE, &db) == GS_ENOTFOUND && !db);
-    CHECK(run("%s stats --db %s", missing, NULL, NULL) == 1 && count_lines(out) == 1 && strstr(out, missing));
-    CHECK(run("%s export --db %s -o %s", missing, tmp("m.csv"), NULL) == 1);
-    CHECK(!exists(missing) && sidecars(missing) == 0 && !exists(tmp("m.csv")));
+    CHECK(run("%s stats --db %s", missing, NULL, NULL) == 1 && fx_count_lines(out) == 1 && strstr(out, missing));
+    CHECK(run("%s export --db %s -o %s", missing, fx_tmp("m.csv"), NULL) == 1);
+    CHECK(!fx_exists(missing) && sidecars(missing) == 0 && !fx_exists(fx_tmp("m.csv")));
     if (geteuid() != 0) {
-        const char *ro = tmp("ro");
+        const char *ro = fx_tmp("ro");
         CHECK(mkdir(ro, 0555) == 0);
         char p[1100];
         snprintf(p, sizeof p, "%s/s.sqlite", ro);
         CHECK(srv_db_open(p, SRV_DB_CREATE, &db) == GS_EIO && !db);
-        CHECK(!exists(p));
+        CHECK(!fx_exists(p));
         chmod(ro, 0755);
     }
 }
@@ -341,7 +315,7 @@ TEST(survey_db_unwritable_paths)
  * file without write permission is refused for writing. The file is unchanged. */
 TEST(survey_db_readonly_refuses_writes)
 {
-    const char *path = tmp("ro.sqlite");
+    const char *path = fx_tmp("ro.sqlite");
     make_synth(path, "ro", 3, 10, 5);
     snapshot before = take(path);
     srv_db *db = NULL;
@@ -369,7 +343,7 @@ TEST(survey_db_readonly_refuses_writes)
         CHECK(chmod(path, 0444) == 0);
         CHECK(srv_db_open(path, SRV_DB_WRITE, &db) == GS_EIO && !db);
         CHECK(strstr(gs_detail(), "read-only") != NULL);
-        CHECK(run("%s db ingest-synthetic --db %s", path, NULL, NULL) == 1 && count_lines(out) == 1);
+        CHECK(run("%s db ingest-synthetic --db %s", path, NULL, NULL) == 1 && fx_count_lines(out) == 1);
         chmod(path, 0644);
         CHECK(unchanged(path, &before));
     }
@@ -380,7 +354,7 @@ TEST(survey_db_readonly_refuses_writes)
 
 TEST(survey_db_resume_never_duplicates)
 {
-    const char *path = tmp("dup.sqlite");
+    const char *path = fx_tmp("dup.sqlite");
     srv_db *db = NULL;
     CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
     if (!db) return;
@@ -460,7 +434,7 @@ static srv_light_row good_light(int i, double phase)
  * inside the caller's (SAVEPOINT), where the captures before it survive. */
 TEST(survey_db_capture_atomic_on_error)
 {
-    const char *path = tmp("atomic.sqlite");
+    const char *path = fx_tmp("atomic.sqlite");
     srv_db *db = NULL;
     CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
     if (!db) return;
@@ -546,7 +520,7 @@ TEST(survey_db_capture_atomic_on_error)
 
 TEST(survey_db_rtree_follows_locations)
 {
-    const char *path = tmp("rt.sqlite");
+    const char *path = fx_tmp("rt.sqlite");
     make_synth(path, "rt", 6, 50, 3);
     srv_db *db = NULL;
     CHECK_OK(srv_db_open(path, SRV_DB_WRITE, &db));
@@ -595,7 +569,7 @@ static int raw_inspect(const char *path, const srv_synth_opts *o, raw_state *st)
 {
     memset(st, 0, sizeof *st);
     st->integrity_ok = 1;
-    if (!exists(path)) return 1;
+    if (!fx_exists(path)) return 1;
     sqlite3 *h = NULL;
     if (sqlite3_open_v2(path, &h, SQLITE_OPEN_READWRITE, NULL) != SQLITE_OK) {
         test_failed(__FILE__, __LINE__, "%s: cannot open after a kill: %s", path, sqlite3_errmsg(h));
@@ -659,7 +633,7 @@ static void child_ingest(const char *path, const srv_synth_opts *o, int ready_fd
  * lost; a final run resumes to the exact expected counts, and another run adds nothing. */
 TEST(survey_db_sigkill_resume_no_partial_capture)
 {
-    const char *path = tmp("crash.sqlite");
+    const char *path = fx_tmp("crash.sqlite");
     srv_synth_opts o;
     srv_synth_opts_default(&o);
     o.survey = "crash";
@@ -746,7 +720,7 @@ TEST(survey_db_sigkill_resume_no_partial_capture)
         CHECK(st.frames == (long)o.captures * SRV_SYNTH_FRAMES);
     }
     /* the CLI writer is killed and resumed the same way */
-    const char *cli = tmp("cli-crash.sqlite");
+    const char *cli = fx_tmp("cli-crash.sqlite");
     char cmd[2048];
     snprintf(cmd, sizeof cmd, "%s db ingest-synthetic --db %s --captures 200 --lights 40 --batch 2 "
              "& sleep 0.3; kill -9 $! 2>/dev/null; wait; %s db ingest-synthetic --db %s "
@@ -787,7 +761,7 @@ TEST(survey_db_sha256_and_delight_fingerprint)
     CHECK_OK(srv_delight_fingerprint(d3, NULL, &r3));
     CHECK(strcmp(r1.sha256, r3.sha256) != 0 && r3.bulbs == 1);
     srv_db *db = NULL;
-    CHECK_OK(srv_db_open(tmp("fp.sqlite"), SRV_DB_CREATE, &db));
+    CHECK_OK(srv_db_open(fx_tmp("fp.sqlite"), SRV_DB_CREATE, &db));
     int64_t a = 0, b = 0, c = 0;
     CHECK_OK(srv_db_add_delight(db, &r1, &a));
     CHECK_OK(srv_db_add_delight(db, &r2, &b));
@@ -848,7 +822,7 @@ TEST(survey_db_rows_from_recognition)
     srv_location_from_fix(&loc, &f);
     CHECK(loc.method == SRV_LOC_ONE_STATION && loc.flags == GIS_FIX_GRAZING);
     srv_db *db = NULL;
-    CHECK_OK(srv_db_open(tmp("rows.sqlite"), SRV_DB_CREATE, &db));
+    CHECK_OK(srv_db_open(fx_tmp("rows.sqlite"), SRV_DB_CREATE, &db));
     srv_survey_row sr = {"rows", NULL, NULL, NULL, 50};
     int64_t sid = 0;
     CHECK_OK(srv_db_add_survey(db, &sr, &sid));
@@ -895,11 +869,11 @@ static sqlite3 *raw_open(const char *path)
 
 TEST(export_filters_match_sql)
 {
-    const char *path = tmp("ex.sqlite");
+    const char *path = fx_tmp("ex.sqlite");
     make_synth(path, "north", 8, 50, 21);
     make_synth(path, "south", 4, 50, 22);
     sqlite3 *h = raw_open(path);
-    const char *geo = tmp("all.geojson");
+    const char *geo = fx_tmp("all.geojson");
     size_t n = 0;
     CHECK(run("%s export --db %s -o %s", path, geo, NULL) == 0 && strstr(out, "exported 600 lights"));
     json_t *root = load_geojson(geo, &n);
@@ -942,34 +916,27 @@ TEST(export_filters_match_sql)
 
 TEST(export_all_formats_read_back)
 {
-    const char *path = tmp("fmt.sqlite");
+    const char *path = fx_tmp("fmt.sqlite");
     make_synth(path, "fmt", 2, 50, 4);
-    const char *gpkg = tmp("l.gpkg"), *kml = tmp("l.kml"), *csv = tmp("l.csv");
+    const char *gpkg = fx_tmp("l.gpkg"), *kml = fx_tmp("l.kml"), *csv = fx_tmp("l.csv");
     CHECK(run("%s export --db %s -o %s", path, gpkg, NULL) == 0);
     sqlite3 *h = raw_open(gpkg);
     CHECK(query_long(h, "SELECT count(*) FROM lights") == 100);
     CHECK(query_long(h, "SELECT count(*) FROM lights WHERE geom IS NULL") == 2 * (50 / SRV_SYNTH_UNLOCATED_EVERY));
     sqlite3_close(h);
     CHECK(run("%s export --db %s -o %s", path, kml, NULL) == 0);
-    FILE *f = fopen(kml, "r");
-    static char buf[1 << 20];
-    size_t len = f ? fread(buf, 1, sizeof buf - 1, f) : 0;
-    buf[len] = '\0';
-    if (f) fclose(f);
-    int placemarks = 0;
-    for (const char *p = strstr(buf, "<Placemark"); p; p = strstr(p + 1, "<Placemark")) placemarks++;
-    CHECK(placemarks == 100);
+    char *text = fx_read_file(kml, NULL);
+    CHECK(text && fx_count_of(text, "<Placemark") == 100);
+    free(text);
     CHECK(run("%s export --db %s --format csv -o %s", path, csv, NULL) == 0);
-    f = fopen(csv, "r");
-    len = f ? fread(buf, 1, sizeof buf - 1, f) : 0;
-    buf[len] = '\0';
-    if (f) fclose(f);
-    CHECK(count_lines(buf) == 101);
+    text = fx_read_file(csv, NULL);
+    CHECK(text && fx_count_lines(text) == 101);
+    free(text);
 }
 
 TEST(export_bbox_crosses_antimeridian)
 {
-    const char *path = tmp("am.sqlite");
+    const char *path = fx_tmp("am.sqlite");
     srv_db *db = NULL;
     CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
     if (!db) return;
@@ -1016,16 +983,16 @@ TEST(export_bbox_crosses_antimeridian)
 
 TEST(export_bad_input)
 {
-    const char *path = tmp("bad.sqlite");
+    const char *path = fx_tmp("bad.sqlite");
     make_synth(path, "bad", 1, 10, 1);
-    const char *geo = tmp("o.geojson");
+    const char *geo = fx_tmp("o.geojson");
     CHECK(run("%s export --db %s -o %s --bbox 1,2,3", path, geo, NULL) == 2);
     CHECK(run("%s export --db %s -o %s --phase 90", path, geo, NULL) == 2);
     CHECK(run("%s export --db %s -o %s --technology plasma", path, geo, NULL) == 2);
     CHECK(run("%s export --db %s -o %s --min-confidence 1.5", path, geo, NULL) == 2);
     CHECK(run("%s export --db %s -o %s/x.shp", path, test_tmpdir(), NULL) == 2);
     CHECK(run("%s export --db %s -o %s --survey nobody", path, geo, NULL) == 1);
-    CHECK(count_lines(out) == 1 && strstr(out, "nobody"));
-    CHECK(!exists(geo));
+    CHECK(fx_count_lines(out) == 1 && strstr(out, "nobody"));
+    CHECK(!fx_exists(geo));
     CHECK(run("%s export --help", NULL, NULL, NULL) == 0 && strstr(out, "--bbox"));
 }
