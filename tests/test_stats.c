@@ -8,6 +8,7 @@
 #include "gis/gis.h"
 #include "survey/survey.h"
 #include "tests/fixtures.h"
+#include "tests/survey_fixture.h"
 #include "tests/test.h"
 
 #include <jansson.h>
@@ -128,24 +129,16 @@ TEST(stats_phase_class_matches_gis)
 
 /* ------------------------------------------------------------------ database */
 
+/* A synthetic survey of uniform layout, phases in the ratio w0 : w1 : w2. */
 static void synth(const char *path, const char *survey, size_t captures, size_t lights,
                   unsigned long long seed, double w0, double w1, double w2, double half_width_m)
 {
-    srv_db *db = NULL;
-    CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
-    srv_synth_opts o;
-    srv_synth_opts_default(&o);
-    o.survey = survey;
-    o.captures = captures;
-    o.lights_per_capture = lights;
-    o.seed = seed;
+    srv_synth_opts o = survey_fx_synth_opts(survey, captures, lights, seed);
     o.phase_weights[0] = w0;
     o.phase_weights[1] = w1;
     o.phase_weights[2] = w2;
-    o.half_width_m = 0.0;   /* every capture sees the whole square: a uniform layout */
     o.view_half_width_m = half_width_m;
-    CHECK_OK(srv_synth_ingest(db, &o, NULL));
-    srv_db_close(db);
+    survey_fx_synth(path, &o);
 }
 
 static srv_phase_stats *compute(srv_db *db, const char *by, double min_conf, size_t *n, long *ungrouped)
@@ -174,21 +167,10 @@ TEST(stats_sql_views_match_c)
                                   720.0, 60.0, 180.0, 300.0};
     enum { NE = sizeof edge / sizeof *edge };
     srv_light_row l[NE];
-    for (int i = 0; i < NE; i++) {
-        srv_light_row_init(&l[i]);
-        l[i].index = i;
-        l[i].x_px = l[i].y_px = i;
-        l[i].phase_deg = edge[i];
-        l[i].confidence = l[i].bulb_confidence = l[i].phase_confidence = 1.0;
-    }
+    for (int i = 0; i < NE; i++) l[i] = survey_fx_light(i, i, i, edge[i], 1.0);
     int64_t sid;
     CHECK_OK(srv_db_find_survey(db, "east", &sid));
-    srv_capture_data cd = {0};
-    srv_capture_row_init(&cd.capture);
-    cd.capture.survey_id = sid;
-    cd.capture.key = "edges";
-    cd.lights = l;
-    cd.n_lights = NE;
+    srv_capture_data cd = survey_fx_capture(sid, "edges", l, NULL, NE);
     CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
     sqlite3 *h = srv_db_sqlite(db);
     /* per light: the view's class equals srv_phase_class of the stored phase */
@@ -263,20 +245,11 @@ TEST(stats_min_confidence_unknown_other)
     enum { N = sizeof spec / sizeof *spec };
     srv_light_row l[N];
     for (int i = 0; i < N; i++) {
-        srv_light_row_init(&l[i]);
-        l[i].index = i;
-        l[i].x_px = l[i].y_px = 1;
-        l[i].phase_deg = spec[i][0];
+        l[i] = survey_fx_light(i, 1, 1, spec[i][0], 0.5);
         l[i].phase_confidence = spec[i][1];
-        l[i].confidence = l[i].bulb_confidence = 0.5;
         l[i].technology = i % 2 ? "cfl" : NULL;
     }
-    srv_capture_data cd = {0};
-    srv_capture_row_init(&cd.capture);
-    cd.capture.survey_id = sid;
-    cd.capture.key = "c";
-    cd.lights = l;
-    cd.n_lights = N;
+    srv_capture_data cd = survey_fx_capture(sid, "c", l, NULL, N);
     CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
     size_t n = 0;
     srv_phase_stats *g = compute(db, "all", 0.0, &n, NULL);
@@ -377,12 +350,8 @@ TEST(stats_by_cell_and_radius)
     const double cx[4] = {-50, 50, -50, 50}, cy[4] = {-50, -50, 50, 50};
     for (int c = 0; c < 4; c++)
         for (int k = 0; k < 3 + c; k++) {
-            srv_light_row_init(&l[nl]);
+            l[nl] = survey_fx_light(nl, 0, 0, 120.0 * (c % 3), 1);
             srv_location_row_init(&loc[nl]);
-            l[nl].index = nl;
-            l[nl].x_px = l[nl].y_px = 0;
-            l[nl].phase_deg = 120.0 * (c % 3);
-            l[nl].confidence = l[nl].bulb_confidence = l[nl].phase_confidence = 1;
             loc[nl].method = SRV_LOC_TRUTH;
             double dx = cx[c] + (k - 1) * 5.0 * (c % 2 ? 1 : -1), dy = cy[c];
             loc[nl].lat_deg = lat0 + dy / R / d2r;
@@ -395,12 +364,8 @@ TEST(stats_by_cell_and_radius)
         double dist = ring ? 600.0 : 400.0;
         for (int k = 0; k < count; k++) {
             double az = 2 * M_PI * k / count;
-            srv_light_row_init(&l[nl]);
+            l[nl] = survey_fx_light(nl, 0, 0, ring ? 240.0 : 0.0, 1);
             srv_location_row_init(&loc[nl]);
-            l[nl].index = nl;
-            l[nl].x_px = l[nl].y_px = 0;
-            l[nl].phase_deg = ring ? 240.0 : 0.0;
-            l[nl].confidence = l[nl].bulb_confidence = l[nl].phase_confidence = 1;
             loc[nl].method = SRV_LOC_TRUTH;
             /* spherical destination point */
             double d = dist / R, la1 = lat0 * d2r;
@@ -412,13 +377,7 @@ TEST(stats_by_cell_and_radius)
         }
     }
     (void)base;
-    srv_capture_data cd = {0};
-    srv_capture_row_init(&cd.capture);
-    cd.capture.survey_id = sid;
-    cd.capture.key = "geo";
-    cd.lights = l;
-    cd.locations = loc;
-    cd.n_lights = (size_t)nl;
+    srv_capture_data cd = survey_fx_capture(sid, "geo", l, loc, (size_t)nl);
     CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
     size_t n = 0;
     char by[128];
@@ -481,20 +440,11 @@ TEST(stats_cli_haifa_example)
     enum { N = 1000 };
     srv_light_row *l = malloc(N * sizeof *l);
     for (int i = 0; i < N; i++) {
-        srv_light_row_init(&l[i]);
-        l[i].index = i;
-        l[i].x_px = l[i].y_px = i;
-        l[i].phase_deg = i < 334 ? 0.0 : i < 334 + 363 ? 120.0 : 240.0;
-        l[i].confidence = l[i].bulb_confidence = l[i].phase_confidence = 0.99;
+        l[i] = survey_fx_light(i, i, i, i < 334 ? 0.0 : i < 334 + 363 ? 120.0 : 240.0, 0.99);
         l[i].technology = "sodium_hp";
         l[i].bulb_id = "sodium_hp_150w";
     }
-    srv_capture_data cd = {0};
-    srv_capture_row_init(&cd.capture);
-    cd.capture.survey_id = sid;
-    cd.capture.key = "bay";
-    cd.lights = l;
-    cd.n_lights = N;
+    srv_capture_data cd = survey_fx_capture(sid, "bay", l, NULL, N);
     CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
     srv_db_close(db);
     free(l);

@@ -1,16 +1,14 @@
-/* test_survey_db.c - the survey database (survey/db.c) and `gridsurvey export`:
- * schema and migrations, refusal of files that are not survey databases (nothing changed on
- * disk), unwritable paths, read-only handles, idempotent and atomic ingest, the R*Tree kept in
- * sync, SIGKILL at random points during ingest followed by a resume (checked through a raw
- * SQLite connection, independently of the library), and exports read back by Jansson and
- * SQLite with their filters checked against plain SQL. */
+/* test_survey_db.c - the survey database (survey/db.c): schema and migrations, refusal of
+ * files that are not survey databases (nothing changed on disk), unwritable paths, read-only
+ * handles, idempotent and atomic ingest, the R*Tree kept in sync, SIGKILL at random points
+ * during ingest followed by a resume (checked through a raw SQLite connection, independently of
+ * the library). `gridsurvey export`: tests/test_survey_export.c. */
 #include "gis/gis.h"
 #include "survey/survey.h"
 #include "tests/fixtures.h"
+#include "tests/survey_fixture.h"
 #include "tests/test.h"
 
-#include <errno.h>
-#include <jansson.h>
 #include <math.h>
 #include <signal.h>
 #include <sqlite3.h>
@@ -76,48 +74,6 @@ static int unchanged(const char *path, snapshot *before)
     return same;
 }
 
-static long query_long(sqlite3 *db, const char *sql)
-{
-    sqlite3_stmt *q = NULL;
-    long v = -1;
-    if (sqlite3_prepare_v2(db, sql, -1, &q, NULL) == SQLITE_OK && sqlite3_step(q) == SQLITE_ROW)
-        v = (long)sqlite3_column_int64(q, 0);
-    else
-        test_failed(__FILE__, __LINE__, "query '%s': %s", sql, sqlite3_errmsg(db));
-    sqlite3_finalize(q);
-    return v;
-}
-
-static const char *query_text(sqlite3 *db, const char *sql)
-{
-    static char buf[256];
-    sqlite3_stmt *q = NULL;
-    buf[0] = '\0';
-    if (sqlite3_prepare_v2(db, sql, -1, &q, NULL) == SQLITE_OK && sqlite3_step(q) == SQLITE_ROW &&
-        sqlite3_column_text(q, 0))
-        snprintf(buf, sizeof buf, "%s", (const char *)sqlite3_column_text(q, 0));
-    sqlite3_finalize(q);
-    return buf;
-}
-
-/* A small synthetic survey. */
-static void make_synth(const char *path, const char *survey, size_t captures, size_t lights,
-                       unsigned long long seed)
-{
-    srv_db *db = NULL;
-    CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
-    srv_synth_opts o;
-    srv_synth_opts_default(&o);
-    o.survey = survey;
-    o.captures = captures;
-    o.lights_per_capture = lights;
-    o.seed = seed;
-    o.half_width_m = 0.0;   /* every capture sees the whole 4 km square */
-    o.view_half_width_m = 2000.0;
-    CHECK_OK(srv_synth_ingest(db, &o, NULL));
-    srv_db_close(db);
-}
-
 /* ------------------------------------------------------------------ schema */
 
 TEST(survey_db_schema_created)
@@ -127,13 +83,13 @@ TEST(survey_db_schema_created)
     CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
     if (!db) return;
     sqlite3 *h = srv_db_sqlite(db);
-    CHECK(query_long(h, "PRAGMA application_id") == SRV_DB_APPLICATION_ID);
-    CHECK(query_long(h, "PRAGMA user_version") == SRV_DB_SCHEMA_VERSION);
-    CHECK(query_long(h, "PRAGMA foreign_keys") == 1);
-    CHECK(!strcmp(query_text(h, "PRAGMA journal_mode"), "wal"));
-    CHECK(query_long(h, "PRAGMA synchronous") == 1);   /* NORMAL */
-    CHECK(!strcmp(query_text(h, "SELECT value FROM meta WHERE key = 'format'"), SRV_DB_FORMAT));
-    CHECK(query_long(h, "SELECT count(*) FROM migrations") == SRV_DB_SCHEMA_VERSION);
+    CHECK(survey_fx_query_long(h, "PRAGMA application_id") == SRV_DB_APPLICATION_ID);
+    CHECK(survey_fx_query_long(h, "PRAGMA user_version") == SRV_DB_SCHEMA_VERSION);
+    CHECK(survey_fx_query_long(h, "PRAGMA foreign_keys") == 1);
+    CHECK(!strcmp(survey_fx_query_text(h, "PRAGMA journal_mode"), "wal"));
+    CHECK(survey_fx_query_long(h, "PRAGMA synchronous") == 1);   /* NORMAL */
+    CHECK(!strcmp(survey_fx_query_text(h, "SELECT value FROM meta WHERE key = 'format'"), SRV_DB_FORMAT));
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM migrations") == SRV_DB_SCHEMA_VERSION);
     static const char *const objects[] = {
         "surveys", "stations", "captures", "frames", "lights", "locations", "locations_rtree",
         "grid_frequency", "delight_versions", "migrations", "meta", "light_phase",
@@ -142,14 +98,14 @@ TEST(survey_db_schema_created)
     for (size_t i = 0; i < sizeof objects / sizeof *objects; i++) {
         char sql[256];
         snprintf(sql, sizeof sql, "SELECT count(*) FROM sqlite_master WHERE name = '%s'", objects[i]);
-        CHECK_MSG(query_long(h, sql) == 1, "schema object %s missing", objects[i]);
+        CHECK_MSG(survey_fx_query_long(h, sql) == 1, "schema object %s missing", objects[i]);
     }
     /* the views need SQLite's math functions (Debian's build has them) */
     CHECK(sqlite3_compileoption_used("ENABLE_MATH_FUNCTIONS") == 1);
     srv_db_close(db);
     /* reopening (all modes) keeps everything; no migration runs twice */
     CHECK_OK(srv_db_open(path, SRV_DB_WRITE, &db));
-    CHECK(query_long(srv_db_sqlite(db), "SELECT count(*) FROM migrations") == SRV_DB_SCHEMA_VERSION);
+    CHECK(survey_fx_query_long(srv_db_sqlite(db), "SELECT count(*) FROM migrations") == SRV_DB_SCHEMA_VERSION);
     srv_db_close(db);
     CHECK_OK(srv_db_open(path, SRV_DB_READ, &db));
     srv_db_close(db);
@@ -165,8 +121,8 @@ TEST(survey_db_migrates_from_v1)
     CHECK_OK(srv_db_create_at_version(path, 1));
     sqlite3 *h = NULL;
     CHECK(sqlite3_open_v2(path, &h, SQLITE_OPEN_READWRITE, NULL) == SQLITE_OK);
-    CHECK(query_long(h, "PRAGMA user_version") == 1);
-    CHECK(query_long(h, "SELECT count(*) FROM sqlite_master WHERE name = 'phase_balance'") == 0);
+    CHECK(survey_fx_query_long(h, "PRAGMA user_version") == 1);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM sqlite_master WHERE name = 'phase_balance'") == 0);
     CHECK(sqlite3_exec(h, "INSERT INTO surveys(name, created_utc) VALUES ('old', 'then');"
                           "INSERT INTO captures(survey_id, capture_key, light_count, frame_count, "
                           "frequency_count, ingested_utc) VALUES (1, 'c1', 1, 0, 0, 'then');"
@@ -186,10 +142,10 @@ TEST(survey_db_migrates_from_v1)
     CHECK_OK(srv_db_open(path, SRV_DB_READ, &db));
     if (!db) return;
     h = srv_db_sqlite(db);
-    CHECK(query_long(h, "PRAGMA user_version") == 2);
-    CHECK(query_long(h, "SELECT count(*) FROM migrations") == 2);
-    CHECK(query_long(h, "SELECT group_concat(version) = '1,2' FROM (SELECT version FROM migrations ORDER BY version)") == 1);
-    CHECK(query_long(h, "SELECT n120 FROM phase_counts WHERE grouping = 'all'") == 1);
+    CHECK(survey_fx_query_long(h, "PRAGMA user_version") == 2);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM migrations") == 2);
+    CHECK(survey_fx_query_long(h, "SELECT group_concat(version) = '1,2' FROM (SELECT version FROM migrations ORDER BY version)") == 1);
+    CHECK(survey_fx_query_long(h, "SELECT n120 FROM phase_counts WHERE grouping = 'all'") == 1);
     srv_db_close(db);
 }
 
@@ -316,7 +272,7 @@ TEST(survey_db_unwritable_paths)
 TEST(survey_db_readonly_refuses_writes)
 {
     const char *path = fx_tmp("ro.sqlite");
-    make_synth(path, "ro", 3, 10, 5);
+    survey_fx_synth_square(path, "ro", 3, 10, 5);
     snapshot before = take(path);
     srv_db *db = NULL;
     CHECK_OK(srv_db_open(path, SRV_DB_READ, &db));
@@ -325,10 +281,7 @@ TEST(survey_db_readonly_refuses_writes)
     srv_survey_row sr = {"another", NULL, NULL, NULL, 50};
     int64_t id = 0;
     CHECK(srv_db_add_survey(db, &sr, &id) == GS_EIO);
-    srv_capture_data cd = {0};
-    srv_capture_row_init(&cd.capture);
-    cd.capture.survey_id = 1;
-    cd.capture.key = "new";
+    srv_capture_data cd = survey_fx_capture(1, "new", NULL, NULL, 0);
     CHECK(srv_db_add_capture(db, &cd, NULL, NULL) == GS_EIO);
     int deleted = 0;
     CHECK(srv_db_delete_capture(db, 1, "synth-000000", &deleted) == GS_EIO);
@@ -366,7 +319,7 @@ TEST(survey_db_resume_never_duplicates)
     CHECK_OK(srv_synth_ingest(db, &o, &added));
     CHECK(added == 12);
     sqlite3 *h = srv_db_sqlite(db);
-    long lights = query_long(h, "SELECT count(*) FROM lights");
+    long lights = survey_fx_query_long(h, "SELECT count(*) FROM lights");
     CHECK(lights == 360);
     CHECK_OK(srv_synth_ingest(db, &o, &added));
     CHECK(added == 0);
@@ -374,9 +327,9 @@ TEST(survey_db_resume_never_duplicates)
     o.batch = 2;
     CHECK_OK(srv_synth_ingest(db, &o, &added));
     CHECK(added == 3);
-    CHECK(query_long(h, "SELECT count(*) FROM lights") == 450);
-    CHECK(query_long(h, "SELECT count(*) FROM surveys") == 1);
-    CHECK(query_long(h, "SELECT count(*) FROM stations") == 1);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM lights") == 450);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM surveys") == 1);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM stations") == 1);
     /* get-or-add by natural key */
     int64_t a = 0, b = 0;
     srv_survey_row sr = {"synthetic", "elsewhere", NULL, NULL, 60};
@@ -399,12 +352,12 @@ TEST(survey_db_resume_never_duplicates)
     cr.survey_id = a;
     cr.key = "synth-000001";
     CHECK_OK(srv_db_insert_capture(db, &cr, 30, 8, 10, &cid));
-    CHECK(cid == query_long(h, "SELECT id FROM captures WHERE capture_key = 'synth-000001'"));
+    CHECK(cid == survey_fx_query_long(h, "SELECT id FROM captures WHERE capture_key = 'synth-000001'"));
     CHECK_OK(srv_db_insert_light(db, cid, &lr, &lid));
     CHECK_OK(srv_db_insert_light(db, cid, &lr, &lid2));
     CHECK(lid == lid2 && lid > 0);
     CHECK_OK(srv_db_commit(db));
-    CHECK(query_long(h, "SELECT count(*) FROM lights") == 450);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM lights") == 450);
     int done = 0;
     CHECK_OK(srv_db_capture_done(db, a, "synth-000014", &done));
     CHECK(done == 1);
@@ -414,20 +367,6 @@ TEST(survey_db_resume_never_duplicates)
     CHECK_OK(srv_db_check(db, &r));
     CHECK(srv_db_report_ok(&r));
     srv_db_close(db);
-}
-
-static srv_light_row good_light(int i, double phase)
-{
-    srv_light_row l;
-    srv_light_row_init(&l);
-    l.index = i;
-    l.x_px = 10.0 + i;
-    l.y_px = 20.0;
-    l.bulb_id = "sodium_hp_150w";
-    l.technology = "sodium_hp";
-    l.phase_deg = phase;
-    l.confidence = l.bulb_confidence = l.phase_confidence = 0.95;
-    return l;
 }
 
 /* A capture that fails half-way leaves nothing of itself: not in its own transaction, not
@@ -442,7 +381,7 @@ TEST(survey_db_capture_atomic_on_error)
     srv_survey_row sr = {"atomic", NULL, NULL, NULL, 50};
     int64_t sid = 0;
     CHECK_OK(srv_db_add_survey(db, &sr, &sid));
-    srv_light_row lights[4] = {good_light(0, 0), good_light(1, 120), good_light(2, 240), good_light(3, 0)};
+    srv_light_row lights[4] = {survey_fx_sodium_light(0, 0), survey_fx_sodium_light(1, 120), survey_fx_sodium_light(2, 240), survey_fx_sodium_light(3, 0)};
     lights[3].confidence = 1.5;   /* invalid: the 4th light fails after 3 were inserted */
     srv_location_row locs[4];
     for (int i = 0; i < 4; i++) {
@@ -453,15 +392,9 @@ TEST(survey_db_capture_atomic_on_error)
     }
     srv_frame_row frames[2] = {{0, "frame_000.png", NULL, 10}, {1, "frame_001.png", NULL, 10}};
     srv_freq_row freq[2] = {{0, 1, 50.01, NAN}, {1, 1, 50.02, NAN}};
-    srv_capture_data cd = {0};
-    srv_capture_row_init(&cd.capture);
-    cd.capture.survey_id = sid;
-    cd.capture.key = "bad";
+    srv_capture_data cd = survey_fx_capture(sid, "bad", lights, locs, 4);
     cd.frames = frames;
     cd.n_frames = 2;
-    cd.lights = lights;
-    cd.locations = locs;
-    cd.n_lights = 4;
     cd.frequency = freq;
     cd.n_frequency = 2;
     CHECK(srv_db_add_capture(db, &cd, NULL, NULL) == GS_EINVAL);
@@ -472,7 +405,7 @@ TEST(survey_db_capture_atomic_on_error)
     for (int t = 0; t < 6; t++) {
         char sql[128];
         snprintf(sql, sizeof sql, "SELECT count(*) FROM %s", tables[t]);
-        CHECK_MSG(query_long(h, sql) == 0, "%s not empty after a failed capture", tables[t]);
+        CHECK_MSG(survey_fx_query_long(h, sql) == 0, "%s not empty after a failed capture", tables[t]);
     }
     /* inside the caller's transaction: capture "good" commits, "bad" is rolled back alone */
     CHECK_OK(srv_db_begin(db));
@@ -487,20 +420,20 @@ TEST(survey_db_capture_atomic_on_error)
     CHECK(srv_db_add_capture(db, &cd, NULL, NULL) == GS_EINVAL);
     CHECK(srv_db_in_transaction(db));
     CHECK_OK(srv_db_commit(db));
-    CHECK(query_long(h, "SELECT count(*) FROM captures") == 1);
-    CHECK(query_long(h, "SELECT count(*) FROM lights") == 3);
-    CHECK(query_long(h, "SELECT count(*) FROM locations_rtree") == 3);
-    CHECK(query_long(h, "SELECT count(*) FROM frames") == 2);
-    CHECK(query_long(h, "SELECT count(*) FROM grid_frequency") == 2);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM captures") == 1);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM lights") == 3);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM locations_rtree") == 3);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM frames") == 2);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM grid_frequency") == 2);
     /* the same capture again is skipped, not duplicated */
     cd.capture.key = "good";
     cd.n_lights = 3;
     int64_t cid2 = 0;
     CHECK_OK(srv_db_add_capture(db, &cd, &cid2, &skipped));
     CHECK(skipped == 1 && cid2 == cid);
-    CHECK(query_long(h, "SELECT count(*) FROM lights") == 3);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM lights") == 3);
     /* invalid rows name their field */
-    srv_light_row bad = good_light(9, 0);
+    srv_light_row bad = survey_fx_sodium_light(9, 0);
     bad.technology = "plasma";
     cd.capture.key = "tech";
     cd.lights = &bad;
@@ -511,39 +444,39 @@ TEST(survey_db_capture_atomic_on_error)
     srv_location_row_init(&half);
     half.method = SRV_LOC_ONE_STATION;
     half.lat_deg = 10.0;   /* longitude missing */
-    bad = good_light(9, 0);
+    bad = survey_fx_sodium_light(9, 0);
     cd.locations = &half;
     CHECK(srv_db_add_capture(db, &cd, NULL, NULL) == GS_EINVAL && strstr(gs_detail(), "location"));
-    CHECK(query_long(h, "SELECT count(*) FROM captures") == 1);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM captures") == 1);
     srv_db_close(db);
 }
 
 TEST(survey_db_rtree_follows_locations)
 {
     const char *path = fx_tmp("rt.sqlite");
-    make_synth(path, "rt", 6, 50, 3);
+    survey_fx_synth_square(path, "rt", 6, 50, 3);
     srv_db *db = NULL;
     CHECK_OK(srv_db_open(path, SRV_DB_WRITE, &db));
     if (!db) return;
     sqlite3 *h = srv_db_sqlite(db);
     long located = 6 * (50 - 50 / SRV_SYNTH_UNLOCATED_EVERY);
-    CHECK(query_long(h, "SELECT count(*) FROM locations") == 300);
-    CHECK(query_long(h, "SELECT count(*) FROM locations WHERE lat_deg IS NOT NULL") == located);
-    CHECK(query_long(h, "SELECT count(*) FROM locations_rtree") == located);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM locations") == 300);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM locations WHERE lat_deg IS NOT NULL") == located);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM locations_rtree") == located);
     int64_t sid = 0;
     CHECK_OK(srv_db_find_survey(db, "rt", &sid));
     int deleted = 0;
     CHECK_OK(srv_db_delete_capture(db, sid, "synth-000002", &deleted));
     CHECK(deleted == 1);
-    CHECK(query_long(h, "SELECT count(*) FROM locations_rtree") == located - located / 6);
-    CHECK(query_long(h, "SELECT count(*) FROM lights") == 250);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM locations_rtree") == located - located / 6);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM lights") == 250);
     CHECK_OK(srv_db_delete_capture(db, sid, "synth-000002", &deleted));
     CHECK(deleted == 0);
     /* an update moves the R*Tree entry (trigger) */
     CHECK(sqlite3_exec(h, "UPDATE locations SET lat_deg = 10.5, lon_deg = 20.5 WHERE light_id = "
                           "(SELECT min(light_id) FROM locations WHERE lat_deg IS NOT NULL)",
                        NULL, NULL, NULL) == SQLITE_OK);
-    CHECK(query_long(h, "SELECT count(*) FROM locations_rtree WHERE min_lat <= 10.5 AND max_lat >= "
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM locations_rtree WHERE min_lat <= 10.5 AND max_lat >= "
                         "10.5 AND min_lon <= 20.5 AND max_lon >= 20.5") == 1);
     srv_db_report r;
     CHECK_OK(srv_db_check(db, &r));
@@ -576,7 +509,7 @@ static int raw_inspect(const char *path, const srv_synth_opts *o, raw_state *st)
         sqlite3_close(h);
         return 0;
     }
-    st->integrity_ok = !strcmp(query_text(h, "PRAGMA integrity_check"), "ok");
+    st->integrity_ok = !strcmp(survey_fx_query_text(h, "PRAGMA integrity_check"), "ok");
     int has_schema = 0;
     sqlite3_stmt *q = NULL;
     if (sqlite3_prepare_v2(h, "SELECT count(*) FROM sqlite_master WHERE name = 'lights'", -1, &q, NULL) == SQLITE_OK &&
@@ -584,15 +517,15 @@ static int raw_inspect(const char *path, const srv_synth_opts *o, raw_state *st)
         has_schema = sqlite3_column_int(q, 0);
     sqlite3_finalize(q);
     if (has_schema) {
-        CHECK(!strcmp(query_text(h, "SELECT rtreecheck('locations_rtree')"), "ok"));
-        st->fk = query_long(h, "SELECT count(*) FROM pragma_foreign_key_check");
-        st->captures = query_long(h, "SELECT count(*) FROM captures");
-        st->lights = query_long(h, "SELECT count(*) FROM lights");
-        st->frames = query_long(h, "SELECT count(*) FROM frames");
-        st->freq = query_long(h, "SELECT count(*) FROM grid_frequency");
-        st->locations = query_long(h, "SELECT count(*) FROM locations");
-        st->located = query_long(h, "SELECT count(*) FROM locations WHERE lat_deg IS NOT NULL");
-        st->rtree = query_long(h, "SELECT count(*) FROM locations_rtree");
+        CHECK(!strcmp(survey_fx_query_text(h, "SELECT rtreecheck('locations_rtree')"), "ok"));
+        st->fk = survey_fx_query_long(h, "SELECT count(*) FROM pragma_foreign_key_check");
+        st->captures = survey_fx_query_long(h, "SELECT count(*) FROM captures");
+        st->lights = survey_fx_query_long(h, "SELECT count(*) FROM lights");
+        st->frames = survey_fx_query_long(h, "SELECT count(*) FROM frames");
+        st->freq = survey_fx_query_long(h, "SELECT count(*) FROM grid_frequency");
+        st->locations = survey_fx_query_long(h, "SELECT count(*) FROM locations");
+        st->located = survey_fx_query_long(h, "SELECT count(*) FROM locations WHERE lat_deg IS NOT NULL");
+        st->rtree = survey_fx_query_long(h, "SELECT count(*) FROM locations_rtree");
         /* every capture complete, by the synthetic survey's known structure */
         long located_per = 0;
         for (size_t j = 0; j < o->lights_per_capture; j++)
@@ -606,9 +539,9 @@ static int raw_inspect(const char *path, const srv_synth_opts *o, raw_state *st)
                  "(SELECT count(*) FROM locations lo JOIN lights l ON l.id = lo.light_id "
                  " WHERE l.capture_id = c.id AND lo.lat_deg IS NOT NULL) != %ld",
                  o->lights_per_capture, SRV_SYNTH_FRAMES, SRV_SYNTH_FREQ, located_per);
-        st->bad_captures = query_long(h, sql);
+        st->bad_captures = survey_fx_query_long(h, sql);
         /* no orphan rows either */
-        st->bad_captures += query_long(h, "SELECT count(*) FROM lights WHERE capture_id NOT IN (SELECT id FROM captures)");
+        st->bad_captures += survey_fx_query_long(h, "SELECT count(*) FROM lights WHERE capture_id NOT IN (SELECT id FROM captures)");
     }
     sqlite3_close(h);
     return 1;
@@ -767,7 +700,7 @@ TEST(survey_db_sha256_and_delight_fingerprint)
     CHECK_OK(srv_db_add_delight(db, &r2, &b));
     CHECK_OK(srv_db_add_delight(db, &r3, &c));
     CHECK(a == b && a != c && a > 0 && c > 0);
-    CHECK(query_long(srv_db_sqlite(db), "SELECT count(*) FROM delight_versions") == 2);
+    CHECK(survey_fx_query_long(srv_db_sqlite(db), "SELECT count(*) FROM delight_versions") == 2);
     srv_db_close(db);
     gs_delight_free(d1);
     gs_delight_free(d2);
@@ -832,167 +765,12 @@ TEST(survey_db_rows_from_recognition)
     r.x_px = 3;
     r.y_px = 4;
     r.phase_deg = -120.0;   /* stored wrapped: 240 */
-    srv_capture_data cd = {0};
-    srv_capture_row_init(&cd.capture);
-    cd.capture.survey_id = sid;
-    cd.capture.key = "k";
-    cd.lights = &r;
-    cd.locations = &loc;
-    cd.n_lights = 1;
+    srv_capture_data cd = survey_fx_capture(sid, "k", &r, &loc, 1);
     CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
     sqlite3 *h = srv_db_sqlite(db);
-    CHECK(query_long(h, "SELECT phase_deg = 240 AND dof = 14 FROM lights") == 1);
-    CHECK(query_long(h, "SELECT lon_deg = -145 AND semi_major_m IS NULL AND semi_minor_m = 2 FROM locations") == 1);
+    CHECK(survey_fx_query_long(h, "SELECT phase_deg = 240 AND dof = 14 FROM lights") == 1);
+    CHECK(survey_fx_query_long(h, "SELECT lon_deg = -145 AND semi_major_m IS NULL AND semi_minor_m = 2 FROM locations") == 1);
     srv_db_close(db);
     rec_matcher_free(mt);
     gs_delight_free(d);
-}
-
-/* ------------------------------------------------------------------ export */
-
-static json_t *load_geojson(const char *path, size_t *features)
-{
-    json_error_t err;
-    json_t *root = json_load_file(path, 0, &err);
-    CHECK_MSG(root != NULL, "%s: %s", path, err.text);
-    json_t *f = root ? json_object_get(root, "features") : NULL;
-    *features = f ? json_array_size(f) : 0;
-    return root;
-}
-
-static sqlite3 *raw_open(const char *path)
-{
-    sqlite3 *h = NULL;
-    CHECK(sqlite3_open_v2(path, &h, SQLITE_OPEN_READONLY, NULL) == SQLITE_OK);
-    return h;
-}
-
-TEST(export_filters_match_sql)
-{
-    const char *path = fx_tmp("ex.sqlite");
-    make_synth(path, "north", 8, 50, 21);
-    make_synth(path, "south", 4, 50, 22);
-    sqlite3 *h = raw_open(path);
-    const char *geo = fx_tmp("all.geojson");
-    size_t n = 0;
-    CHECK(run("%s export --db %s -o %s", path, geo, NULL) == 0 && strstr(out, "exported 600 lights"));
-    json_t *root = load_geojson(geo, &n);
-    CHECK(n == 600);
-    /* one feature checked field by field against its row */
-    json_t *f0 = json_array_get(json_object_get(root, "features"), 0);
-    json_t *props = json_object_get(f0, "properties");
-    const char *id = json_string_value(json_object_get(props, "id"));
-    char sql[512];
-    snprintf(sql, sizeof sql, "SELECT technology FROM lights WHERE id = %s", id ? id : "0");
-    CHECK(!strcmp(query_text(h, sql), json_string_value(json_object_get(props, "technology"))));
-    json_decref(root);
-    struct {
-        const char *args;
-        const char *sql;
-    } cases[] = {
-        {"--survey south", "SELECT count(*) FROM light_phase WHERE survey = 'south'"},
-        {"--technology sodium_hp", "SELECT count(*) FROM lights WHERE technology = 'sodium_hp'"},
-        {"--phase 120", "SELECT count(*) FROM light_phase WHERE phase_class = '120'"},
-        {"--phase unknown", "SELECT count(*) FROM lights WHERE phase_deg IS NULL"},
-        {"--min-confidence 0.8", "SELECT count(*) FROM lights WHERE confidence >= 0.8"},
-        {"--survey north --phase 0 --min-confidence 0.7",
-         "SELECT count(*) FROM light_phase WHERE survey = 'north' AND phase_class = '0' AND confidence >= 0.7"},
-        {"--bbox 35.0,32.79,35.03,32.81",
-         "SELECT count(*) FROM locations WHERE lon_deg BETWEEN 35.0 AND 35.03 AND lat_deg BETWEEN 32.79 AND 32.81"},
-        {"--bbox 35.0,32.79,35.03,32.81 --technology led_linear",
-         "SELECT count(*) FROM locations lo JOIN lights l ON l.id = lo.light_id WHERE lon_deg BETWEEN 35.0 AND "
-         "35.03 AND lat_deg BETWEEN 32.79 AND 32.81 AND technology = 'led_linear'"},
-    };
-    for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
-        long want = query_long(h, cases[i].sql);
-        CHECK(want > 0 && want < 600);
-        CHECK(run("%s export --db %s -o %s %s", path, geo, cases[i].args) == 0);
-        root = load_geojson(geo, &n);
-        CHECK_MSG((long)n == want, "export %s: %zu features, SQL says %ld", cases[i].args, n, want);
-        json_decref(root);
-    }
-    sqlite3_close(h);
-}
-
-TEST(export_all_formats_read_back)
-{
-    const char *path = fx_tmp("fmt.sqlite");
-    make_synth(path, "fmt", 2, 50, 4);
-    const char *gpkg = fx_tmp("l.gpkg"), *kml = fx_tmp("l.kml"), *csv = fx_tmp("l.csv");
-    CHECK(run("%s export --db %s -o %s", path, gpkg, NULL) == 0);
-    sqlite3 *h = raw_open(gpkg);
-    CHECK(query_long(h, "SELECT count(*) FROM lights") == 100);
-    CHECK(query_long(h, "SELECT count(*) FROM lights WHERE geom IS NULL") == 2 * (50 / SRV_SYNTH_UNLOCATED_EVERY));
-    sqlite3_close(h);
-    CHECK(run("%s export --db %s -o %s", path, kml, NULL) == 0);
-    char *text = fx_read_file(kml, NULL);
-    CHECK(text && fx_count_of(text, "<Placemark") == 100);
-    free(text);
-    CHECK(run("%s export --db %s --format csv -o %s", path, csv, NULL) == 0);
-    text = fx_read_file(csv, NULL);
-    CHECK(text && fx_count_lines(text) == 101);
-    free(text);
-}
-
-TEST(export_bbox_crosses_antimeridian)
-{
-    const char *path = fx_tmp("am.sqlite");
-    srv_db *db = NULL;
-    CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
-    if (!db) return;
-    srv_survey_row sr = {"fiji", NULL, NULL, NULL, 50};
-    int64_t sid = 0;
-    CHECK_OK(srv_db_add_survey(db, &sr, &sid));
-    const double lon[5] = {179.95, -179.95, 179.5, -179.5, 0.0};
-    srv_light_row l[5];
-    srv_location_row loc[5];
-    for (int i = 0; i < 5; i++) {
-        l[i] = good_light(i, 0);
-        srv_location_row_init(&loc[i]);
-        loc[i].method = SRV_LOC_TRUTH;
-        loc[i].lat_deg = -16.5;
-        loc[i].lon_deg = lon[i];
-    }
-    srv_capture_data cd = {0};
-    srv_capture_row_init(&cd.capture);
-    cd.capture.survey_id = sid;
-    cd.capture.key = "am";
-    cd.lights = l;
-    cd.locations = loc;
-    cd.n_lights = 5;
-    CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
-    srv_export_opts o;
-    srv_export_opts_default(&o);
-    o.use_bbox = 1;
-    o.bbox[0] = 179.9;
-    o.bbox[1] = -17;
-    o.bbox[2] = -179.9;
-    o.bbox[3] = -16;
-    gis_light *v = NULL;
-    size_t n = 0;
-    CHECK_OK(srv_db_read_lights(db, &o, &v, &n));
-    CHECK(n == 2 && v && fabs(fabs(v[0].lon_deg) - 179.95) < 1e-9 && fabs(fabs(v[1].lon_deg) - 179.95) < 1e-9);
-    free(v);
-    o.bbox[0] = -1;
-    o.bbox[2] = 1;
-    CHECK_OK(srv_db_read_lights(db, &o, &v, &n));
-    CHECK(n == 1 && v[0].lon_deg == 0.0 && v[0].lat_deg == -16.5);
-    free(v);
-    srv_db_close(db);
-}
-
-TEST(export_bad_input)
-{
-    const char *path = fx_tmp("bad.sqlite");
-    make_synth(path, "bad", 1, 10, 1);
-    const char *geo = fx_tmp("o.geojson");
-    CHECK(run("%s export --db %s -o %s --bbox 1,2,3", path, geo, NULL) == 2);
-    CHECK(run("%s export --db %s -o %s --phase 90", path, geo, NULL) == 2);
-    CHECK(run("%s export --db %s -o %s --technology plasma", path, geo, NULL) == 2);
-    CHECK(run("%s export --db %s -o %s --min-confidence 1.5", path, geo, NULL) == 2);
-    CHECK(run("%s export --db %s -o %s/x.shp", path, test_tmpdir(), NULL) == 2);
-    CHECK(run("%s export --db %s -o %s --survey nobody", path, geo, NULL) == 1);
-    CHECK(fx_count_lines(out) == 1 && strstr(out, "nobody"));
-    CHECK(!fx_exists(geo));
-    CHECK(run("%s export --help", NULL, NULL, NULL) == 0 && strstr(out, "--bbox"));
 }
