@@ -92,6 +92,12 @@ int fx_contains(const char *hay, const char *needle)
     return strstr(hay, needle) != NULL;
 }
 
+int fx_sanitized(void)
+{
+    const char *san = getenv("GS_SAN");
+    return san && *san == '1';
+}
+
 int fx_vrun(char *out, size_t out_size, const char *fmt, va_list ap)
 {
     char cmd[8192];

@@ -35,6 +35,10 @@ int fx_contains(const char *hay, const char *needle);
 
 /* ------------------------------------------------------------------ commands */
 
+/* 1 in the sanitizer pass (GS_SAN starts with 1; `make test-asan` sets GS_SAN=1): tests that
+ * scale their work down under ASan read it. */
+int fx_sanitized(void);
+
 /* test_run of a printf-style command; its stdout+stderr in out. */
 int fx_run(char *out, size_t out_size, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
 int fx_vrun(char *out, size_t out_size, const char *fmt, va_list ap);

@@ -269,7 +269,7 @@ TEST(eq7_accuracy_vs_poisson_oracle)
     gs_delight_free(all);
     camera cam;
     camera_init(&cam, 1.0, 2.0, 4.0);   /* 1 e-/DN, 2 e- read noise, 4 e- sky per sample */
-    int san = getenv("GS_SAN") && *getenv("GS_SAN") == '1';
+    int san = fx_sanitized();
     int n = san ? 300 : 1600;
     double levels[] = {3, 10, 30, 100};
     int nl = sizeof levels / sizeof *levels;

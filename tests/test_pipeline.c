@@ -265,8 +265,7 @@ TEST(pipeline_lab_end_to_end_matches_truth)
     snprintf(db, sizeof db, "%s", fx_tmp("lab.sqlite"));
     snprintf(cap, sizeof cap, "%s", fx_tmp("lab-capture"));
     snprintf(truth, sizeof truth, "%s", fx_tmp("lab-capture/truth.json"));
-    const char *san = getenv("GS_SAN");
-    if (san && *san == '1') {
+    if (fx_sanitized()) {
         snprintf(scene, sizeof scene, "%s", fx_tmp("lab.json"));
         write_small_lab(scene, 0.5, NULL);
     }

@@ -243,9 +243,9 @@ static json_t *recognize_json(const char *args, int *rc, char *err, size_t err_s
 /* Nothing on stderr (under the sanitizers, LeakSanitizer may list its suppressions there). */
 static int quiet_stderr(const char *err)
 {
-    const char *san = getenv("GS_SAN");
-    if (san && !strcmp(san, "1")) return !strstr(err, "gridsurvey") && !strstr(err, "PLPLOT") &&
-                                         !strstr(err, "ERROR") && !strstr(err, "arning");
+    if (fx_sanitized())
+        return !strstr(err, "gridsurvey") && !strstr(err, "PLPLOT") && !strstr(err, "ERROR") &&
+               !strstr(err, "arning");
     return err[0] == '\0';
 }
 
