@@ -9,6 +9,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #define FX_RING 64
 
@@ -120,6 +121,24 @@ int fx_run_bin(char *out, size_t out_size, const char *fmt, const char *a, const
     char cmd[8192];
     snprintf(cmd, sizeof cmd, fmt, test_bin(), a ? a : "", b ? b : "", c ? c : "");
     return test_run(cmd, out, out_size);
+}
+
+int fx_fork_pipe(int *fd)
+{
+    int fds[2];
+    *fd = -1;
+    CHECK(pipe(fds) == 0);
+    fflush(stdout);
+    pid_t pid = fork();
+    CHECK(pid >= 0);
+    if (pid == 0) {
+        close(fds[0]);
+        *fd = fds[1];
+        return 0;
+    }
+    close(fds[1]);
+    *fd = fds[0];
+    return (int)pid;
 }
 
 uint64_t fx_rng_next(uint64_t *s)

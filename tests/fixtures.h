@@ -46,6 +46,13 @@ int fx_vrun(char *out, size_t out_size, const char *fmt, va_list ap);
 int fx_run_bin(char *out, size_t out_size, const char *fmt, const char *a, const char *b,
                const char *c);
 
+/* ------------------------------------------------------------------ processes */
+
+/* fork() with a pipe from the child to the parent (stdout flushed first, so the child does not
+ * print the parent's buffer again): 0 in the child, *fd the pipe's write end; the child's pid
+ * in the parent, *fd the read end. -1 (a test failure) when the pipe or fork fails. */
+int fx_fork_pipe(int *fd);
+
 /* ------------------------------------------------------------------ random numbers */
 
 /* splitmix64 (Steele, Lea and Flood 2014): advances *s and returns the next 64 bits. */

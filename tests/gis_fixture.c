@@ -12,6 +12,12 @@
 
 static unsigned long long rng_state = 88172645463325252ull;
 
+const gisfx_region gisfx_worldwide = {-80.0, 80.0, -180.0, 180.0},
+                   gisfx_north_pole = {89.9, 90.0, -180.0, 180.0},
+                   gisfx_south_pole = {-90.0, -89.9, -180.0, 180.0},
+                   gisfx_am_east = {-60.0, 60.0, 179.9, 180.0},
+                   gisfx_am_west = {-60.0, 60.0, -180.0, -179.9};
+
 void gisfx_rng_seed(unsigned long long s)
 {
     rng_state = s ? s : 1;

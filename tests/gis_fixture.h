@@ -46,4 +46,9 @@ typedef struct {
     double lat_lo, lat_hi, lon_lo, lon_hi;
 } gisfx_region;
 
+/* The oracles' regions: the world between +-80 deg, a 0.1 deg cap at each pole, and a 0.1 deg
+ * strip each side of the antimeridian (latitudes +-60). */
+extern const gisfx_region gisfx_worldwide, gisfx_north_pole, gisfx_south_pole, gisfx_am_east,
+    gisfx_am_west;
+
 #endif

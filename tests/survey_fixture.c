@@ -59,6 +59,17 @@ void survey_fx_synth_square(const char *path, const char *survey, size_t capture
     survey_fx_synth(path, &o);
 }
 
+srv_db *survey_fx_create(const char *path, const char *survey, int64_t *survey_id)
+{
+    srv_db *db = NULL;
+    *survey_id = 0;
+    CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
+    if (!db) return NULL;
+    srv_survey_row sr = {survey, NULL, NULL, NULL, 50};
+    CHECK_OK(srv_db_add_survey(db, &sr, survey_id));
+    return db;
+}
+
 srv_light_row survey_fx_light(int index, double x_px, double y_px, double phase_deg,
                               double confidence)
 {

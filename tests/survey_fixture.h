@@ -24,6 +24,10 @@ void survey_fx_synth(const char *path, const srv_synth_opts *o);
 void survey_fx_synth_square(const char *path, const char *survey, size_t captures, size_t lights,
                             unsigned long long seed);
 
+/* Opens (creating) the database at path and adds a survey of that name (50 Hz, nothing else
+ * set): its id in *survey_id. NULL (a test failure) when it cannot be opened; close it. */
+srv_db *survey_fx_create(const char *path, const char *survey, int64_t *survey_id);
+
 /* srv_light_row_init, then index, position (px), phase (deg; NaN: unknown) and confidence for
  * all three confidences (overall, bulb, phase). Borrowed strings stay NULL. */
 srv_light_row survey_fx_light(int index, double x_px, double y_px, double phase_deg,

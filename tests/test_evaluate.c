@@ -83,12 +83,9 @@ TEST(evaluate_hand_made_db_known_answers)
     CHECK(geod_direct(Tlat[0], Tlon, 90.0, 3.0, &S[0].lat, &S[0].lon));
     CHECK(geod_direct(Tlat[6], Tlon, 0.0, 10.0, &S[1].lat, &S[1].lon));
     CHECK(geod_direct(Tlat[1], Tlon, 45.0, 20.0, &S[2].lat, &S[2].lon));
-    srv_db *h = NULL;
-    CHECK_OK(srv_db_open(db, SRV_DB_CREATE, &h));
-    if (!h) return;
     int64_t sid = 0, sid2 = 0, cid = 0;
-    srv_survey_row sv = {.name = "hand", .grid_hz = 50};
-    CHECK_OK(srv_db_add_survey(h, &sv, &sid));
+    srv_db *h = survey_fx_create(db, "hand", &sid);
+    if (!h) return;
     srv_light_row L[7];
     srv_location_row loc[7];
     for (int i = 0; i < 7; i++) {

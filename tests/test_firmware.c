@@ -285,25 +285,26 @@ TEST(firmware_free_running_drifts_as_predicted_locked_does_not)
 
 /* ------------------------------------------------------------------ frequency sweeps */
 
-/* +-1 Hz around 50 Hz every 4 s (up to 1.6 Hz/s) with a 40 us detector asymmetry, at the 50 Hz
- * limit K = 26 (at 51 Hz a window is 377 us, still above the DMD's 370.4 us). */
-TEST(firmware_sweep_50hz_pm1hz)
+/* A locked exposure of 2000 cycles on a grid swept +-1 Hz around f0 every 4 s (up to 1.6 Hz/s)
+ * with a 40 us detector asymmetry. */
+static void sweep(double f0, int K, int k, const char *grid, const char *what)
 {
     long C = 2000;
     trace tr;
-    trace_synthetic(50.0, 1.0, 4.0, 0.0, 40.0, (size_t)C + 400, &tr);
+    trace_synthetic(f0, 1.0, 4.0, 0.0, 40.0, (size_t)C + 400, &tr);
     locked_result r;
-    fwsim_free(locked_exposure(&tr, 26, 13, C, 0, NULL, "sweep 50+-1 Hz K=26 k=13", &r));
+    fwsim_free(locked_exposure(&tr, K, k, C, 0, grid, what, &r));
     trace_free(&tr);
+}
+
+/* At the 50 Hz limit K = 26 (at 51 Hz a window is 377 us, still above the DMD's 370.4 us). */
+TEST(firmware_sweep_50hz_pm1hz)
+{
+    sweep(50.0, 26, 13, NULL, "sweep 50+-1 Hz K=26 k=13");
 }
 
 /* The same at 60 Hz, K = 22 (its limit, Fig. 7), last window. */
 TEST(firmware_sweep_60hz_pm1hz)
 {
-    long C = 2000;
-    trace tr;
-    trace_synthetic(60.0, 1.0, 4.0, 0.0, 40.0, (size_t)C + 400, &tr);
-    locked_result r;
-    fwsim_free(locked_exposure(&tr, 22, 21, C, 0, "grid=60", "sweep 60+-1 Hz K=22 k=21", &r));
-    trace_free(&tr);
+    sweep(60.0, 22, 21, "grid=60", "sweep 60+-1 Hz K=22 k=21");
 }

@@ -139,22 +139,19 @@ done:
 
 TEST(gis_locate_oracle_random)
 {
-    gisfx_region r = {-80.0, 80.0, -180.0, 180.0};
-    locate_oracle(300, &r, 11, "worldwide");
+    locate_oracle(300, &gisfx_worldwide, 11, "worldwide");
 }
 
 TEST(gis_locate_oracle_poles)
 {
-    gisfx_region n = {89.9, 90.0, -180.0, 180.0}, s = {-90.0, -89.9, -180.0, 180.0};
-    locate_oracle(40, &n, 12, "north pole");
-    locate_oracle(40, &s, 13, "south pole");
+    locate_oracle(40, &gisfx_north_pole, 12, "north pole");
+    locate_oracle(40, &gisfx_south_pole, 13, "south pole");
 }
 
 TEST(gis_locate_oracle_antimeridian)
 {
-    gisfx_region e = {-60.0, 60.0, 179.9, 180.0}, w = {-60.0, 60.0, -180.0, -179.9};
-    locate_oracle(40, &e, 14, "antimeridian east");
-    locate_oracle(40, &w, 15, "antimeridian west");
+    locate_oracle(40, &gisfx_am_east, 14, "antimeridian east");
+    locate_oracle(40, &gisfx_am_west, 15, "antimeridian west");
 }
 
 /* ------------------------------------------------------------- round trips */

@@ -79,18 +79,29 @@ static void check_ogr_attributes(const char *text)
     CHECK(fx_contains(text, "flags (String) = above_horizon"));
 }
 
-TEST(gis_export_geojson_ogrinfo_rfc7946)
+/* `ogrinfo -ro -al OPTS 'path'` (GDAL), its output in out. */
+static int ogrinfo(const char *opts, const char *path)
+{
+    return fx_run(out, sizeof out, "ogrinfo -ro -al %s '%s'", opts, path);
+}
+
+/* The sample lights exported by `export` to TMPDIR/name; the path. */
+static const char *export_sample(gs_status (*export)(const gis_light *, size_t, const char *),
+                                 const char *name)
 {
     gis_light l[6];
     size_t n = sample_lights(l);
-    const char *path = fx_tmp("lights.geojson");
-    CHECK_OK(gis_export_geojson(l, n, path));
-    char cmd[2048];
-    snprintf(cmd, sizeof cmd, "ogrinfo -ro -al -so '%s'", path);
-    CHECK(test_run(cmd, out, sizeof out) == 0);
+    const char *path = fx_tmp(name);
+    CHECK_OK(export(l, n, path));
+    return path;
+}
+
+TEST(gis_export_geojson_ogrinfo_rfc7946)
+{
+    const char *path = export_sample(gis_export_geojson, "lights.geojson");
+    CHECK(ogrinfo("-so", path) == 0);
     CHECK_MSG(fx_contains(out, "Feature Count: 6"), "%s", out);
-    snprintf(cmd, sizeof cmd, "ogrinfo -ro -al '%s'", path);
-    CHECK(test_run(cmd, out, sizeof out) == 0);
+    CHECK(ogrinfo("", path) == 0);
     check_ogr_points(out, 1);
     check_ogr_attributes(out);
     /* RFC 7946 structure, read independently */
@@ -113,48 +124,36 @@ TEST(gis_export_geojson_ogrinfo_rfc7946)
 
 TEST(gis_export_kml_ogrinfo)
 {
-    gis_light l[6];
-    size_t n = sample_lights(l);
-    const char *path = fx_tmp("lights.kml");
-    CHECK_OK(gis_export_kml(l, n, path));
-    char cmd[2048];
-    snprintf(cmd, sizeof cmd, "ogrinfo -ro -al '%s'", path);
-    CHECK(test_run(cmd, out, sizeof out) == 0);
+    const char *path = export_sample(gis_export_kml, "lights.kml");
+    CHECK(ogrinfo("", path) == 0);
     CHECK_MSG(fx_contains(out, "Feature Count: 6") || fx_count_of(out, "OGRFeature(") == 6, "%s", out);
     CHECK(fx_count_of(out, "OGRFeature(") == 6);
     check_ogr_points(out, 0);
     check_ogr_attributes(out);
     /* styles: a placemark of each phase class */
-    FILE *f = fopen(path, "r");
-    CHECK(f != NULL);
-    if (!f) return;
-    size_t got = fread(out, 1, sizeof out - 1, f);
-    out[got] = '\0';
-    fclose(f);
-    CHECK(fx_count_of(out, "<styleUrl>#phase0</styleUrl>") == 1);
-    CHECK(fx_count_of(out, "<styleUrl>#phase240</styleUrl>") == 2);
-    CHECK(fx_count_of(out, "<styleUrl>#phase_other</styleUrl>") == 1);
-    CHECK(fx_count_of(out, "<styleUrl>#phase_unknown</styleUrl>") == 1);
-    CHECK(fx_contains(out, "<color>ff005ed5</color>"));   /* 0 deg: vermillion (213, 94, 0), aabbggrr */
+    char *kml = fx_read_file(path, NULL);
+    CHECK(kml != NULL);
+    if (!kml) return;
+    CHECK(fx_count_of(kml, "<styleUrl>#phase0</styleUrl>") == 1);
+    CHECK(fx_count_of(kml, "<styleUrl>#phase240</styleUrl>") == 2);
+    CHECK(fx_count_of(kml, "<styleUrl>#phase_other</styleUrl>") == 1);
+    CHECK(fx_count_of(kml, "<styleUrl>#phase_unknown</styleUrl>") == 1);
+    CHECK(fx_contains(kml, "<color>ff005ed5</color>"));   /* 0 deg: vermillion (213, 94, 0), aabbggrr */
+    free(kml);
 }
 
 TEST(gis_export_gpkg_validates)
 {
-    gis_light l[6];
-    size_t n = sample_lights(l);
-    const char *path = fx_tmp("lights.gpkg");
-    CHECK_OK(gis_export_gpkg(l, n, path));
+    const char *path = export_sample(gis_export_gpkg, "lights.gpkg");
     char cmd[2048];
     snprintf(cmd, sizeof cmd, "/usr/bin/python3 /usr/lib/python3/dist-packages/osgeo_utils/samples/"
                               "validate_gpkg.py --extra '%s'", path);
     int rc = test_run(cmd, out, sizeof out);
     CHECK_MSG(rc == 0 && !fx_contains(out, "rror") && !fx_contains(out, "arning"), "validate_gpkg: %d: %s", rc, out);
-    snprintf(cmd, sizeof cmd, "ogrinfo -ro -al -so '%s'", path);
-    CHECK(test_run(cmd, out, sizeof out) == 0);
+    CHECK(ogrinfo("-so", path) == 0);
     CHECK_MSG(fx_contains(out, "Feature Count: 6") && fx_contains(out, "Geometry: Point") &&
               fx_contains(out, "WGS 84") && !fx_contains(out, "arning"), "%s", out);
-    snprintf(cmd, sizeof cmd, "ogrinfo -ro -al '%s'", path);
-    CHECK(test_run(cmd, out, sizeof out) == 0);
+    CHECK(ogrinfo("", path) == 0);
     check_ogr_points(out, 0);
     check_ogr_attributes(out);
     /* header and blobs, read with SQLite */
@@ -189,14 +188,9 @@ TEST(gis_export_gpkg_validates)
 
 TEST(gis_export_csv_ogrinfo)
 {
-    gis_light l[6];
-    size_t n = sample_lights(l);
-    const char *path = fx_tmp("lights.csv");
-    CHECK_OK(gis_export_csv(l, n, path));
-    char cmd[2048];
-    snprintf(cmd, sizeof cmd, "ogrinfo -ro -al -oo X_POSSIBLE_NAMES=lon_deg -oo Y_POSSIBLE_NAMES=lat_deg "
-                              "-oo AUTODETECT_TYPE=YES '%s'", path);
-    CHECK(test_run(cmd, out, sizeof out) == 0);
+    const char *path = export_sample(gis_export_csv, "lights.csv");
+    CHECK(ogrinfo("-oo X_POSSIBLE_NAMES=lon_deg -oo Y_POSSIBLE_NAMES=lat_deg -oo AUTODETECT_TYPE=YES",
+                  path) == 0);
     CHECK(fx_count_of(out, "OGRFeature(") == 6);
     check_ogr_points(out, 0);
     CHECK_MSG(fx_count_of(out, "Main St & <Elm>, \"north\"") == 6, "%s", out);

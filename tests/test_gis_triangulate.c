@@ -112,22 +112,19 @@ done:
 
 TEST(gis_triangulate_oracle_random)
 {
-    gisfx_region r = {-80.0, 80.0, -180.0, 180.0};
-    triangulate_oracle(300, &r, 21, "worldwide");
+    triangulate_oracle(300, &gisfx_worldwide, 21, "worldwide");
 }
 
 TEST(gis_triangulate_oracle_poles)
 {
-    gisfx_region n = {89.9, 90.0, -180.0, 180.0}, s = {-90.0, -89.9, -180.0, 180.0};
-    triangulate_oracle(40, &n, 22, "north pole");
-    triangulate_oracle(40, &s, 23, "south pole");
+    triangulate_oracle(40, &gisfx_north_pole, 22, "north pole");
+    triangulate_oracle(40, &gisfx_south_pole, 23, "south pole");
 }
 
 TEST(gis_triangulate_oracle_antimeridian)
 {
-    gisfx_region e = {-60.0, 60.0, 179.9, 180.0}, w = {-60.0, 60.0, -180.0, -179.9};
-    triangulate_oracle(40, &e, 24, "antimeridian east");
-    triangulate_oracle(40, &w, 25, "antimeridian west");
+    triangulate_oracle(40, &gisfx_am_east, 24, "antimeridian east");
+    triangulate_oracle(40, &gisfx_am_west, 25, "antimeridian west");
 }
 
 TEST(gis_triangulate_near_parallel)

@@ -551,22 +551,18 @@ TEST(pipeline_sigkill_resumes_to_same_content)
                       : plan[k].stage == SRV_STAGE_STORE ? store_tx_s : ref.seconds[plan[k].stage];
         double wait_s = (plan[k].lo + u * (plan[k].hi - plan[k].lo)) * span;
         child_ctx cc = {-1, plan[k].stage, plan[k].detail};
-        int fds[2];
-        CHECK(pipe(fds) == 0);
-        fflush(stdout);
-        pid_t pid = fork();
+        int fd;
+        pid_t pid = fx_fork_pipe(&fd);
         if (pid == 0) {
-            close(fds[0]);
-            cc.fd = fds[1];
+            cc.fd = fd;
             run_child(scene, db, cap, &cc);
         }
-        close(fds[1]);
         int status = 0, last = -1, gone = 0;
         char c;
         if (plan[k].stage >= 0) {
             /* wait until it stops itself (or ends: a stage it never reaches) */
             if (waitpid(pid, &status, WUNTRACED) == pid && !WIFSTOPPED(status)) gone = 1;
-            while (read(fds[0], &c, 1) == 1 && !gone) {
+            while (read(fd, &c, 1) == 1 && !gone) {
                 last = c - '0';
                 if (last == plan[k].stage) break;
             }
@@ -578,8 +574,8 @@ TEST(pipeline_sigkill_resumes_to_same_content)
             kill(pid, SIGKILL);
             waitpid(pid, &status, 0);
         }
-        while (read(fds[0], &c, 1) == 1) last = c - '0';   /* where it got to */
-        close(fds[0]);
+        while (read(fd, &c, 1) == 1) last = c - '0';   /* where it got to */
+        close(fd);
         int was_killed = WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL;
         CHECK_MSG(was_killed || (WIFEXITED(status) && WEXITSTATUS(status) == 0),
                   "kill %d: the child exited with %d", k, WIFEXITED(status) ? WEXITSTATUS(status) : -1);

@@ -185,16 +185,24 @@ static const char *matcher_bulb_id(const rec_matcher *m, int i)
     return b ? b->id : "none";
 }
 
+/* The generated DELIGHT (in *d), mem_capture's capture and a 50 Hz RGB K = 13 matcher. */
+static rec_matcher *mem_setup(gs_delight **d, gs_capture *cap)
+{
+    *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(*d, 512));
+    rec_matcher *m = NULL;
+    CHECK_OK(rec_matcher_new(*d, 50, 3, 13, NULL, &m));
+    CHECK_OK(mem_capture(*d, cap));
+    return m;
+}
+
 TEST(maps_fast_path_matches_general)
 {
     /* Without HDR maps and shot noise the per-pixel pass takes an integer fast path; with an
      * all-zero HDR map it takes the general one. Same capture, same maps. */
-    gs_delight *d = gs_delight_new();
-    CHECK_OK(gs_delight_generate(d, 512));
-    rec_matcher *m = NULL;
-    CHECK_OK(rec_matcher_new(d, 50, 3, 13, NULL, &m));
+    gs_delight *d = NULL;
     gs_capture cap;
-    CHECK_OK(mem_capture(d, &cap));
+    rec_matcher *m = mem_setup(&d, &cap);
     rec_pixel_maps a, b;
     CHECK_OK(rec_pixel_maps_compute(&cap, m, NULL, NULL, &a));
     CHECK_OK(gs_capture_alloc_hdr(&cap));
@@ -225,12 +233,9 @@ TEST(maps_fast_path_matches_general)
 
 TEST(maps_saturated_core_white_and_bad_arguments)
 {
-    gs_delight *d = gs_delight_new();
-    CHECK_OK(gs_delight_generate(d, 512));
-    rec_matcher *m = NULL;
-    CHECK_OK(rec_matcher_new(d, 50, 3, 13, NULL, &m));
+    gs_delight *d = NULL;
     gs_capture cap;
-    CHECK_OK(mem_capture(d, &cap));
+    rec_matcher *m = mem_setup(&d, &cap);
     /* saturate the brightest light's centre: the level just below its peak sample */
     size_t np = (size_t)cap.width * (size_t)cap.height;
     size_t pc = (size_t)mem_lights[0].y * (size_t)cap.width + (size_t)mem_lights[0].x;

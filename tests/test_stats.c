@@ -233,12 +233,9 @@ TEST(stats_sql_views_match_c)
 TEST(stats_min_confidence_unknown_other)
 {
     const char *path = fx_tmp("c.sqlite");
-    srv_db *db = NULL;
-    CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
-    if (!db) return;
-    srv_survey_row sr = {"conf", NULL, NULL, NULL, 50};
     int64_t sid;
-    CHECK_OK(srv_db_add_survey(db, &sr, &sid));
+    srv_db *db = survey_fx_create(path, "conf", &sid);
+    if (!db) return;
     /* phase, phase confidence */
     static const double spec[][2] = {{0, 0.99}, {0, 0.95}, {0, 0.5}, {120, 0.97}, {120, 0.2},
                                      {240, 0.91}, {NAN, 0.3}, {NAN, 0.95}, {60, 0.99}, {240, 0.9}};
@@ -334,12 +331,9 @@ TEST(stats_pvalues_uniform_vs_imbalanced)
 TEST(stats_by_cell_and_radius)
 {
     const char *path = fx_tmp("geo.sqlite");
-    srv_db *db = NULL;
-    CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
-    if (!db) return;
-    srv_survey_row sr = {"geo", NULL, NULL, NULL, 50};
     int64_t sid;
-    CHECK_OK(srv_db_add_survey(db, &sr, &sid));
+    srv_db *db = survey_fx_create(path, "geo", &sid);
+    if (!db) return;
     const double lat0 = 32.8, lon0 = 35.0, R = GIS_EARTH_RADIUS_M, d2r = M_PI / 180.0;
     /* 4 cells at (+-50, +-50) m, cell c holding 3 + c lights on phase c % 3; plus 8 lights at
      * 400 m and 12 at 600 m in all directions (symmetric, so the mean stays at the centre) */

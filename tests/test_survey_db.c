@@ -374,14 +374,12 @@ TEST(survey_db_resume_never_duplicates)
 TEST(survey_db_capture_atomic_on_error)
 {
     const char *path = fx_tmp("atomic.sqlite");
-    srv_db *db = NULL;
-    CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
+    int64_t sid;
+    srv_db *db = survey_fx_create(path, "atomic", &sid);
     if (!db) return;
     sqlite3 *h = srv_db_sqlite(db);
-    srv_survey_row sr = {"atomic", NULL, NULL, NULL, 50};
-    int64_t sid = 0;
-    CHECK_OK(srv_db_add_survey(db, &sr, &sid));
-    srv_light_row lights[4] = {survey_fx_sodium_light(0, 0), survey_fx_sodium_light(1, 120), survey_fx_sodium_light(2, 240), survey_fx_sodium_light(3, 0)};
+    srv_light_row lights[4] = {survey_fx_sodium_light(0, 0), survey_fx_sodium_light(1, 120),
+                               survey_fx_sodium_light(2, 240), survey_fx_sodium_light(3, 0)};
     lights[3].confidence = 1.5;   /* invalid: the 4th light fails after 3 were inserted */
     srv_location_row locs[4];
     for (int i = 0; i < 4; i++) {
@@ -586,25 +584,19 @@ TEST(survey_db_sigkill_resume_no_partial_capture)
         rng = rng * 6364136223846793005ull + 1442695040888963407ull;
         unsigned r = (unsigned)(rng >> 33);
         int early = kill_no % 4 == 0;   /* kill before or while the database is opened */
-        int fds[2];
-        CHECK(pipe(fds) == 0);
-        fflush(stdout);
-        pid_t pid = fork();
-        if (pid == 0) {
-            close(fds[0]);
-            child_ingest(path, &o, fds[1]);
-        }
-        close(fds[1]);
+        int fd;
+        pid_t pid = fx_fork_pipe(&fd);
+        if (pid == 0) child_ingest(path, &o, fd);
         if (early) {
             usleep(r % 4000);
         } else {
             char c;
-            if (read(fds[0], &c, 1) != 1) {
+            if (read(fd, &c, 1) != 1) {
                 /* the child died before it was ready: report its status below */
             }
             usleep(r % window_us);
         }
-        close(fds[0]);
+        close(fd);
         kill(pid, SIGKILL);
         int status = 0;
         waitpid(pid, &status, 0);

@@ -108,12 +108,9 @@ TEST(export_all_formats_read_back)
 TEST(export_bbox_crosses_antimeridian)
 {
     const char *path = fx_tmp("am.sqlite");
-    srv_db *db = NULL;
-    CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
+    int64_t sid;
+    srv_db *db = survey_fx_create(path, "fiji", &sid);
     if (!db) return;
-    srv_survey_row sr = {"fiji", NULL, NULL, NULL, 50};
-    int64_t sid = 0;
-    CHECK_OK(srv_db_add_survey(db, &sr, &sid));
     const double lon[5] = {179.95, -179.95, 179.5, -179.5, 0.0};
     srv_light_row l[5];
     srv_location_row loc[5];
