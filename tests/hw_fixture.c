@@ -11,8 +11,11 @@ static size_t sample(int k, int x, int y, int b, int W, int H)
     return (((size_t)k * (size_t)H + (size_t)y) * (size_t)W + (size_t)x) * 3 + (size_t)b;
 }
 
-void hw_fx_write_camera(const char *dir, int K, int W, int H, hw_fx_pixel px)
+const char *hw_fx_camera(int K, int W, int H, hw_fx_pixel px)
 {
+    static char dir[1024], pattern[1100];
+    snprintf(dir, sizeof dir, "%s/cam", test_tmpdir());
+    snprintf(pattern, sizeof pattern, "%s/cam_%%03d.png", dir);
     gs_capture c;
     memset(&c, 0, sizeof c);
     c.K = K;
@@ -20,7 +23,7 @@ void hw_fx_write_camera(const char *dir, int K, int W, int H, hw_fx_pixel px)
     c.width = W;
     c.height = H;
     CHECK_OK(gs_capture_alloc(&c));
-    if (!c.raw) return;
+    if (!c.raw) return pattern;
     for (int k = 0; k < K; k++) {
         snprintf(c.frames[k].file, GS_PATH_MAX, "cam_%03d.png", k);
         for (int y = 0; y < H; y++)
@@ -29,6 +32,7 @@ void hw_fx_write_camera(const char *dir, int K, int W, int H, hw_fx_pixel px)
     }
     for (int k = 0; k < K; k++) CHECK_OK(gs_capture_write_frame(dir, &c, k));
     gs_capture_release(&c);
+    return pattern;
 }
 
 size_t hw_fx_camera_diff(const gs_capture *cap, int K, int W, int H, hw_fx_pixel px)

@@ -12,8 +12,9 @@
 /* The camera's value of frame k at pixel (x, y), band b. */
 typedef unsigned short (*hw_fx_pixel)(int k, int x, int y, int b);
 
-/* The fake camera: K 16-bit RGB frames dir/cam_000.png, cam_001.png, ... of W x H pixels. */
-void hw_fx_write_camera(const char *dir, int K, int W, int H, hw_fx_pixel px);
+/* The fake camera: K 16-bit RGB frames TMPDIR/cam/cam_000.png, cam_001.png, ... of W x H
+ * pixels. Returns their printf pattern (a static buffer) for cap_hw_config.camera. */
+const char *hw_fx_camera(int K, int W, int H, hw_fx_pixel px);
 /* Samples of cap (K frames of H x W x 3) that differ from the camera's. */
 size_t hw_fx_camera_diff(const gs_capture *cap, int K, int W, int H, hw_fx_pixel px);
 /* cap_hw_config_default, then: the camera (images named by the printf pattern), the controller

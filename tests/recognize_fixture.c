@@ -220,6 +220,16 @@ json_t *recfx_recognize_ok(const char *args, int quiet)
     return root;
 }
 
+json_t *recfx_recognize_scene(const recfx_scene *s, const char *flags, int maps, int quiet)
+{
+    recfx_cached_delight();
+    const char *dir = recfx_render(s);
+    char args[3000];
+    snprintf(args, sizeof args, "%s %s%s%s%s", dir, flags, maps ? " --maps " : "",
+             maps ? test_tmpdir() : "", maps ? "/maps" : "");
+    return recfx_recognize_ok(args, quiet);
+}
+
 int recfx_quiet_stderr(const char *err)
 {
     if (fx_sanitized())

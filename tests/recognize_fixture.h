@@ -51,6 +51,9 @@ const char *recfx_render(const recfx_scene *s);
  * (json_decref it; NULL and a test failure when it is not JSON); the exit status must be 0,
  * and with quiet nothing may be on stderr. */
 json_t *recfx_recognize_ok(const char *args, int quiet);
+/* recfx_recognize_ok on scene s (rendered, with the cached DELIGHT) with flags, and with maps
+ * "--maps TMPDIR/maps". */
+json_t *recfx_recognize_scene(const recfx_scene *s, const char *flags, int maps, int quiet);
 /* Nothing on stderr (under the sanitizers, LeakSanitizer may list its suppressions there). */
 int recfx_quiet_stderr(const char *err);
 /* The JSON light within 1 px of (x, y), or NULL. */

@@ -30,6 +30,17 @@ const char *survey_fx_query_text(sqlite3 *h, const char *sql)
     return buf;
 }
 
+int survey_fx_has(sqlite3 *h, const char *name)
+{
+    sqlite3_stmt *q = NULL;
+    int n = 0;
+    if (sqlite3_prepare_v2(h, "SELECT count(*) FROM sqlite_master WHERE name = ?", -1, &q, NULL) == SQLITE_OK &&
+        sqlite3_bind_text(q, 1, name, -1, SQLITE_STATIC) == SQLITE_OK && sqlite3_step(q) == SQLITE_ROW)
+        n = sqlite3_column_int(q, 0);
+    sqlite3_finalize(q);
+    return n > 0;
+}
+
 srv_synth_opts survey_fx_synth_opts(const char *survey, size_t captures, size_t lights,
                                     unsigned long long seed)
 {

@@ -12,6 +12,8 @@
  * The text variant's result is in a static buffer (the next call overwrites it), "" if none. */
 long survey_fx_query_long(sqlite3 *h, const char *sql);
 const char *survey_fx_query_text(sqlite3 *h, const char *sql);
+/* 1 if the schema has an object of that name (0 also when it cannot be read: no failure). */
+int survey_fx_has(sqlite3 *h, const char *name);
 
 /* srv_synth_opts_default with these set and half_width_m = 0 (every capture sees the whole
  * square); the caller may change more before survey_fx_synth. */

@@ -134,15 +134,13 @@ static pid_t start_controller(int *fd, const char *log_path)
 TEST(capture_hardware_backend_with_fakes)
 {
     const char *tmp = test_tmpdir();
-    char events[1024], camdir[1024], pattern[1100], log_path[1024], out[1024];
+    char events[1024], log_path[1024], out[1024];
     snprintf(events, sizeof events, "%s/zc.events", tmp);
-    snprintf(camdir, sizeof camdir, "%s/cam", tmp);
-    snprintf(pattern, sizeof pattern, "%s/cam_%%03d.png", camdir);
     snprintf(log_path, sizeof log_path, "%s/controller.log", tmp);
     snprintf(out, sizeof out, "%s/capture", tmp);
     CHECK(write_events(events, HW_K * (HW_C + 1) + 10));
     CHECK(fake_gpiod_load_events(events, HW_C + 1) == HW_K * (HW_C + 1) + 10);
-    hw_fx_write_camera(camdir, HW_K, HW_W, HW_H, hw_pixel);
+    const char *pattern = hw_fx_camera(HW_K, HW_W, HW_H, hw_pixel);
     int fd = -1;
     pid_t child = start_controller(&fd, log_path);
     CHECK(child > 0);
@@ -233,12 +231,10 @@ static void expect_acquire_fails(cap_backend *be, int W, gs_status want, const c
 TEST(capture_hardware_backend_failures)
 {
     const char *tmp = test_tmpdir();
-    char events[1024], camdir[1024], pattern[1100], log_path[1024];
+    char events[1024], log_path[1024];
     snprintf(events, sizeof events, "%s/zc.events", tmp);
-    snprintf(camdir, sizeof camdir, "%s/cam", tmp);
-    snprintf(pattern, sizeof pattern, "%s/cam_%%03d.png", camdir);
     snprintf(log_path, sizeof log_path, "%s/controller.log", tmp);
-    hw_fx_write_camera(camdir, HW_K, HW_W, HW_H, hw_pixel);
+    const char *pattern = hw_fx_camera(HW_K, HW_W, HW_H, hw_pixel);
     cap_hw_config hw;
     cap_hw_config_default(&hw);
     hw.camera = pattern;

@@ -330,16 +330,14 @@ TEST(firmware_hardware_backend_loop_e2e)
     trace tr;
     if (trace_from_mains(rec, 20000, &tr) != 0) return;
     const char *tmp = test_tmpdir();
-    char events[1024], camdir[1024], pattern[1100], out[1024];
+    char events[1024], out[1024];
     snprintf(events, sizeof events, "%s/zc.events", tmp);
-    snprintf(camdir, sizeof camdir, "%s/cam", tmp);
-    snprintf(pattern, sizeof pattern, "%s/cam_%%03d.png", camdir);
     snprintf(out, sizeof out, "%s/capture", tmp);
     size_t n_events = (size_t)E2E_K * (E2E_C + 1) + 10;
     CHECK(e2e_write_events(&tr, n_events, events) == 0);
     CHECK(fake_gpiod_load_events(events, E2E_C + 1) == (int)n_events);
     size_t outputs0 = fake_gpiod_output_count(); /* the fake records across tests */
-    hw_fx_write_camera(camdir, E2E_K, E2E_W, E2E_H, e2e_pixel);
+    const char *pattern = hw_fx_camera(E2E_K, E2E_W, E2E_H, e2e_pixel);
 
     int master = -1, slave = -1, rep[2] = {-1, -1};
     CHECK(open_raw_pty(&master, &slave, NULL) == 0);

@@ -475,28 +475,16 @@ static void check_after_kill(const char *db, int kill_no)
         sqlite3_close(h);
         return;
     }
-    sqlite3_stmt *q = NULL;
-    const char *ok = NULL;
-    if (sqlite3_prepare_v2(h, "PRAGMA integrity_check", -1, &q, NULL) == SQLITE_OK && sqlite3_step(q) == SQLITE_ROW)
-        ok = (const char *)sqlite3_column_text(q, 0);
-    CHECK_MSG(ok && !strcmp(ok, "ok"), "kill %d: integrity_check: %s", kill_no, ok ? ok : "(none)");
-    sqlite3_finalize(q);
+    const char *ok = survey_fx_query_text(h, "PRAGMA integrity_check");
+    CHECK_MSG(!strcmp(ok, "ok"), "kill %d: integrity_check: %s", kill_no, *ok ? ok : "(none)");
     static const char *const zero[] = {
         "SELECT count(*) FROM pragma_foreign_key_check",
         "SELECT count(*) FROM captures c WHERE light_count != (SELECT count(*) FROM lights WHERE "
         "capture_id = c.id) OR frame_count != (SELECT count(*) FROM frames WHERE capture_id = c.id)",
         "SELECT count(*) > 1 FROM captures",
     };
-    int has_schema = 0;
-    if (sqlite3_prepare_v2(h, "SELECT count(*) FROM sqlite_master WHERE name = 'captures'", -1, &q, NULL) == SQLITE_OK &&
-        sqlite3_step(q) == SQLITE_ROW)
-        has_schema = sqlite3_column_int(q, 0);
-    sqlite3_finalize(q);
-    for (size_t k = 0; has_schema && k < sizeof zero / sizeof *zero; k++) {
-        long v = -1;
-        if (sqlite3_prepare_v2(h, zero[k], -1, &q, NULL) == SQLITE_OK && sqlite3_step(q) == SQLITE_ROW)
-            v = sqlite3_column_int64(q, 0);
-        sqlite3_finalize(q);
+    for (size_t k = 0; survey_fx_has(h, "captures") && k < sizeof zero / sizeof *zero; k++) {
+        long v = survey_fx_query_long(h, zero[k]);
         CHECK_MSG(v == 0, "kill %d: %s -> %ld", kill_no, zero[k], v);
     }
     sqlite3_close(h);

@@ -140,11 +140,7 @@ TEST(recognize_cli_mono_60hz_table)
 
 TEST(recognize_cli_continuous_phase_within_sigma)
 {
-    recfx_cached_delight();
-    const char *dir = recfx_render(&recfx_scene_c);
-    char args[2048];
-    snprintf(args, sizeof args, "%s --phases continuous --maps %s/maps", dir, test_tmpdir());
-    json_t *root = recfx_recognize_ok(args, 0);
+    json_t *root = recfx_recognize_scene(&recfx_scene_c, "--phases continuous", 1, 0);
     if (!root) return;
     CHECK(!strcmp(json_string_value(json_object_get(json_object_get(root, "recognition"), "phases")),
                   "continuous"));
@@ -180,17 +176,13 @@ TEST(recognize_cli_continuous_phase_within_sigma)
 
 TEST(recognize_cli_six_phases_transformer)
 {
-    recfx_cached_delight();
-    const char *dir = recfx_render(&recfx_scene_d);
-    char args[2048];
-    snprintf(args, sizeof args, "%s --phases 6 --transformer-deg 30", dir);
-    json_t *root = recfx_recognize_ok(args, 0);
+    json_t *root = recfx_recognize_scene(&recfx_scene_d, "--phases 6 --transformer-deg 30", 0, 0);
     if (!root) return;
     check_discrete(root, &recfx_scene_d);
     CHECK(!strcmp(json_string_value(json_object_get(json_object_get(root, "recognition"), "phases")), "6"));
     json_decref(root);
     /* the same lights with only 0/120/240 allowed: the 30/150/270 ones fit nothing (unknown) */
-    root = recfx_recognize_ok(dir, 0);
+    root = recfx_recognize_scene(&recfx_scene_d, "", 0, 0);
     if (!root) return;
     for (int i = 0; i < recfx_scene_d.count; i++) {
         json_t *l = recfx_light_near(root, recfx_lights_d[i].x, recfx_lights_d[i].y);

@@ -18,11 +18,7 @@
 
 TEST(maps_png_valid_and_phase_hues)
 {
-    recfx_cached_delight();
-    const char *dir = recfx_render(&recfx_scene_a);
-    char args[2048];
-    snprintf(args, sizeof args, "%s --maps %s/maps", dir, test_tmpdir());
-    json_t *root = recfx_recognize_ok(args, 1);
+    json_t *root = recfx_recognize_scene(&recfx_scene_a, "", 1, 1);
     json_decref(root);
     int s = recfx_doc_scale(recfx_scene_a.width, recfx_scene_a.height);
     int want_w = s * recfx_scene_a.width > 480 ? s * recfx_scene_a.width : 480;
@@ -84,11 +80,7 @@ TEST(maps_png_valid_and_phase_hues)
 
 TEST(maps_no_lights_still_written)
 {
-    recfx_cached_delight();
-    const char *dir = recfx_render(&recfx_scene_e);
-    char args[2048];
-    snprintf(args, sizeof args, "%s --maps %s/maps", dir, test_tmpdir());
-    json_t *root = recfx_recognize_ok(args, 0);
+    json_t *root = recfx_recognize_scene(&recfx_scene_e, "", 1, 0);
     if (root) {
         CHECK(json_array_size(json_object_get(root, "lights")) == 0);
         CHECK(json_integer_value(json_object_get(json_object_get(root, "summary"), "lights")) == 0);

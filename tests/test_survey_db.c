@@ -508,13 +508,7 @@ static int raw_inspect(const char *path, const srv_synth_opts *o, raw_state *st)
         return 0;
     }
     st->integrity_ok = !strcmp(survey_fx_query_text(h, "PRAGMA integrity_check"), "ok");
-    int has_schema = 0;
-    sqlite3_stmt *q = NULL;
-    if (sqlite3_prepare_v2(h, "SELECT count(*) FROM sqlite_master WHERE name = 'lights'", -1, &q, NULL) == SQLITE_OK &&
-        sqlite3_step(q) == SQLITE_ROW)
-        has_schema = sqlite3_column_int(q, 0);
-    sqlite3_finalize(q);
-    if (has_schema) {
+    if (survey_fx_has(h, "lights")) {
         CHECK(!strcmp(survey_fx_query_text(h, "SELECT rtreecheck('locations_rtree')"), "ok"));
         st->fk = survey_fx_query_long(h, "SELECT count(*) FROM pragma_foreign_key_check");
         st->captures = survey_fx_query_long(h, "SELECT count(*) FROM captures");
