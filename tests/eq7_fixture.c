@@ -273,8 +273,10 @@ int eq7fx_rows_vs_lights(const rec_matcher *m, const eq7fx_rows *r, size_t step,
         ans += l.bulb >= 0;
         int tie = ties_ok && l.bulb >= 0 && l.runner_bulb >= 0 &&
                   fabs(l.confidence - l.runner_confidence) < 1e-3;
-        if (!tie && (l.bulb != r->bulb[i] || (l.bulb >= 0 && (fabs(l.phase_deg - r->phase[i]) > 1e-3 ||
-                                                              fabs(l.confidence - r->conf[i]) > 2e-4)))) {
+        int differ = l.bulb != r->bulb[i] ||
+                     (l.bulb >= 0 && (fabs(l.phase_deg - r->phase[i]) > 1e-3 ||
+                                      fabs(l.confidence - r->conf[i]) > 2e-4));
+        if (differ && !tie) {
             if (mism < 5)
                 printf("    row %zu: light %d %g %g (flags %u), pixel %d %g %g\n", i, l.bulb,
                        l.phase_deg, l.confidence, l.flags, r->bulb[i], r->phase[i], r->conf[i]);

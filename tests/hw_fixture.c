@@ -41,7 +41,8 @@ size_t hw_fx_camera_diff(const gs_capture *cap, int K, int W, int H, hw_fx_pixel
     for (int k = 0; k < K; k++)
         for (int y = 0; y < H; y++)
             for (int x = 0; x < W; x++)
-                for (int b = 0; b < 3; b++) bad += cap->raw[sample(k, x, y, b, W, H)] != px(k, x, y, b);
+                for (int b = 0; b < 3; b++)
+                    bad += cap->raw[sample(k, x, y, b, W, H)] != px(k, x, y, b);
     return bad;
 }
 

@@ -123,8 +123,8 @@ static double default_timeout_s(void)
     char *end;
     double s = strtod(e, &end);
     if (*end || !(s > 0)) {
-        fprintf(stderr, "test runner: GS_TEST_TIMEOUT_S=%s: expected a positive number of seconds\n",
-                e);
+        fprintf(stderr, "test runner: GS_TEST_TIMEOUT_S=%s: expected a positive number of "
+                        "seconds\n", e);
         exit(2);
     }
     return s;
@@ -257,7 +257,8 @@ int main(int argc, char **argv)
     for (int i = 0; i < n_tests; i++) {
         if (!selected(tests[i].name, argc, argv)) continue;
         snprintf(tmp_dir, sizeof tmp_dir, "%s/%s", tmp_root, tests[i].name);
-        double limit_s = tests[i].timeout_s > limit_default_s ? tests[i].timeout_s : limit_default_s;
+        double limit_s = limit_default_s;
+        if (tests[i].timeout_s > limit_s) limit_s = tests[i].timeout_s;
         struct timespec t0;
         int ok = run_one(i, limit_s, &old_mask, &t0);
         printf("%s %s (%.2f s)\n", ok ? "PASS" : "FAIL", tests[i].name, seconds_since(&t0));

@@ -34,7 +34,8 @@ int survey_fx_has(sqlite3 *h, const char *name)
 {
     sqlite3_stmt *q = NULL;
     int n = 0;
-    if (sqlite3_prepare_v2(h, "SELECT count(*) FROM sqlite_master WHERE name = ?", -1, &q, NULL) == SQLITE_OK &&
+    const char *sql = "SELECT count(*) FROM sqlite_master WHERE name = ?";
+    if (sqlite3_prepare_v2(h, sql, -1, &q, NULL) == SQLITE_OK &&
         sqlite3_bind_text(q, 1, name, -1, SQLITE_STATIC) == SQLITE_OK && sqlite3_step(q) == SQLITE_ROW)
         n = sqlite3_column_int(q, 0);
     sqlite3_finalize(q);

@@ -23,7 +23,7 @@ TEST_HIDDEN(runner_case_hangs, 0)
 {
     pid_t pid = fork();
     if (pid == 0) {
-        int null = open("/dev/null", O_WRONLY);   /* holds no pipe of the caller's open */
+        int null = open("/dev/null", O_WRONLY);   /* so it holds none of the caller's pipes */
         if (null < 0 || dup2(null, 1) < 0 || dup2(null, 2) < 0) _exit(1);
         for (;;) pause();
     }
