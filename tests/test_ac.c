@@ -3,6 +3,7 @@
  * against known truth over many jittered trials, frequency wander against an analytic
  * modulation, the real ENF-WHU mains recordings, and malformed recordings. */
 #include "recognize/recognize.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 #include <sndfile.h>
@@ -14,24 +15,6 @@
 static const double pi = 3.14159265358979323846;
 
 /* ------------------------------------------------------------------ helpers */
-
-/* splitmix64 and Box-Muller: a deterministic Gaussian stream. */
-static uint64_t rng_next(uint64_t *s)
-{
-    uint64_t z = (*s += 0x9E3779B97F4A7C15ull);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
-}
-static double rng_uniform(uint64_t *s) /* (0, 1) */
-{
-    return ((double)(rng_next(s) >> 11) + 0.5) / 9007199254740992.0;
-}
-static double rng_gauss(uint64_t *s)
-{
-    double u1 = rng_uniform(s), u2 = rng_uniform(s);
-    return sqrt(-2 * log(u1)) * cos(2 * pi * u2);
-}
 
 /* A mains-like waveform: dc + a1 sin(w t + p) + a3 sin(3 (w t + p) + p3), w = 2 pi f. */
 typedef struct {
@@ -49,7 +32,7 @@ static double sample_wave(const wave *w, double rate_hz, size_t n, double noise,
 {
     double s = 0;
     for (size_t i = 0; i < n; i++) {
-        x[i] = wave_at(w, (double)i / rate_hz) + (noise > 0 ? noise * rng_gauss(rng) : 0);
+        x[i] = wave_at(w, (double)i / rate_hz) + (noise > 0 ? noise * fx_rng_gauss(rng) : 0);
         s += x[i];
     }
     return s / (double)n;
@@ -112,13 +95,8 @@ static void drift_times(double f0, double alpha, double alt_s, double sigma_t, u
     for (size_t k = 0; k < n; k++) {
         double kk = (double)k;
         t_true[k] = kk / (f0 + sqrt(f0 * f0 + alpha * kk)) + (k % 2 ? alt_s : 0);
-        t[k] = t_true[k] + (sigma_t > 0 ? sigma_t * rng_gauss(rng) : 0);
+        t[k] = t_true[k] + (sigma_t > 0 ? sigma_t * fx_rng_gauss(rng) : 0);
     }
-}
-
-static int contains(const char *hay, const char *needle)
-{
-    return strstr(hay, needle) != NULL;
 }
 
 /* ------------------------------------------------------- zero crossings */
@@ -271,7 +249,7 @@ TEST(ac_zc_nonfinite_sample)
         CHECK(gs_zero_crossings(x, 200, 400.0, 0.0, &t, &c, &rf) == GS_ENUMERIC);
         char idx[32];
         snprintf(idx, sizeof idx, "sample %zu ", where[k]);
-        CHECK_MSG(contains(gs_detail(), idx), "detail: %s", gs_detail());
+        CHECK_MSG(fx_contains(gs_detail(), idx), "detail: %s", gs_detail());
         CHECK(t == NULL && c == 0 && rf == 0);
         x[where[k]] = keep;
     }
@@ -292,7 +270,7 @@ TEST(ac_zc_constant_and_short)
         CHECK(t == NULL && c == 0 && rf == 0);
         gs_freq_stats st;
         CHECK(gs_grid_frequency(t, c, NULL, &st) == GS_EINVAL);
-        CHECK_MSG(contains(gs_detail(), "at least 3"), "detail: %s", gs_detail());
+        CHECK_MSG(fx_contains(gs_detail(), "at least 3"), "detail: %s", gs_detail());
     }
     for (int i = 0; i < 1000; i++) x[i] = 0.01 * sin(2 * pi * i / 8.0);
     double *t;
@@ -429,7 +407,7 @@ TEST(ac_grid_too_few_crossings)
     gs_freq_stats st;
     for (size_t n = 0; n < 3; n++) {
         CHECK(gs_grid_frequency(t, n, NULL, &st) == GS_EINVAL);
-        CHECK_MSG(contains(gs_detail(), "at least 3"), "detail: %s", gs_detail());
+        CHECK_MSG(fx_contains(gs_detail(), "at least 3"), "detail: %s", gs_detail());
     }
     double f[2];
     CHECK_OK(gs_grid_frequency(t, 3, f, &st));
@@ -447,11 +425,11 @@ TEST(ac_grid_bad_times)
     gs_freq_stats st;
     t[4] = NAN;
     CHECK(gs_grid_frequency(t, 10, NULL, &st) == GS_ENUMERIC);
-    CHECK_MSG(contains(gs_detail(), "t_s[4]"), "detail: %s", gs_detail());
+    CHECK_MSG(fx_contains(gs_detail(), "t_s[4]"), "detail: %s", gs_detail());
     t[4] = 0.04;
     t[5] = 0.04;
     CHECK(gs_grid_frequency(t, 10, NULL, &st) == GS_EINVAL);
-    CHECK_MSG(contains(gs_detail(), "t_s[5]"), "detail: %s", gs_detail());
+    CHECK_MSG(fx_contains(gs_detail(), "t_s[5]"), "detail: %s", gs_detail());
     t[5] = 0.05;
     CHECK(gs_grid_frequency(t, 10, NULL, NULL) == GS_EINVAL);
     CHECK(gs_grid_frequency(NULL, 10, NULL, &st) == GS_EINVAL);
@@ -537,14 +515,14 @@ TEST(ac_wander_bad_input)
     for (size_t i = 0; i < n + 100; i++) t[i] = 0.01 * (double)i;
     gs_wander w;
     CHECK(gs_frequency_wander(t, n, 1.0, &w) == GS_EINVAL);
-    CHECK_MSG(contains(gs_detail(), "120 s"), "detail: %s", gs_detail());
+    CHECK_MSG(fx_contains(gs_detail(), "120 s"), "detail: %s", gs_detail());
     CHECK_OK(gs_frequency_wander(t, n + 100, 1.0, &w));
     CHECK(w.windows == 120);
     CHECK_NEAR(w.mean_hz, 50.0, 1e-9);
     double bad[] = {0.0, -1.0, NAN, INFINITY, 10.5};
     for (int k = 0; k < 5; k++) {
         CHECK(gs_frequency_wander(t, n + 100, bad[k], &w) == GS_EINVAL);
-        CHECK_MSG(contains(gs_detail(), "window_s"), "detail: %s", gs_detail());
+        CHECK_MSG(fx_contains(gs_detail(), "window_s"), "detail: %s", gs_detail());
     }
     CHECK(gs_frequency_wander(t, 2, 1.0, &w) == GS_EINVAL);
     free(t);
@@ -612,31 +590,6 @@ TEST(ac_real_mains_whu_003)
 
 /* ------------------------------------------------------- reading recordings */
 
-static unsigned char *slurp(const char *path, long *size)
-{
-    FILE *f = fopen(path, "rb");
-    if (!f) return NULL;
-    fseek(f, 0, SEEK_END);
-    *size = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    unsigned char *b = malloc((size_t)*size);
-    if (b && fread(b, 1, (size_t)*size, f) != (size_t)*size) {
-        free(b);
-        b = NULL;
-    }
-    fclose(f);
-    return b;
-}
-
-static void write_bytes(const char *path, const void *b, size_t n)
-{
-    FILE *f = fopen(path, "wb");
-    CHECK(f != NULL);
-    if (!f) return;
-    CHECK(fwrite(b, 1, n, f) == n);
-    fclose(f);
-}
-
 /* Write frames x[0..n*channels) as a WAV of the given format with libsndfile. */
 static void write_wav(const char *path, int format, int channels, const double *x, sf_count_t n)
 {
@@ -661,8 +614,8 @@ static void expect_reject(const char *path, gs_status want, const char *field)
     gs_status s = gs_mains_read(path, &x, &n, &rate);
     CHECK_MSG(s == want, "%s: %s, expected %s (%s)", path, gs_strerror(s), gs_strerror(want),
               gs_detail());
-    CHECK_MSG(contains(gs_detail(), path), "detail does not name the file: %s", gs_detail());
-    CHECK_MSG(contains(gs_detail(), field), "detail does not name '%s': %s", field, gs_detail());
+    CHECK_MSG(fx_contains(gs_detail(), path), "detail does not name the file: %s", gs_detail());
+    CHECK_MSG(fx_contains(gs_detail(), field), "detail does not name '%s': %s", field, gs_detail());
     CHECK_MSG(!strchr(gs_detail(), '\n'), "detail is not one line: %s", gs_detail());
     CHECK(x == NULL && n == 0);
 }
@@ -671,8 +624,8 @@ static void expect_reject(const char *path, gs_status want, const char *field)
 TEST(ac_wav_real_read)
 {
     const char *path = test_shared_path("data/mains/whu_001_ref.wav");
-    long size;
-    unsigned char *b = slurp(path, &size);
+    size_t size;
+    unsigned char *b = (unsigned char *)fx_read_file(path, &size);
     CHECK(b != NULL && size > 44);
     if (!b) return;
     CHECK(memcmp(b + 36, "data", 4) == 0);
@@ -695,8 +648,7 @@ TEST(ac_wav_real_read)
 
 TEST(ac_wav_float_roundtrip)
 {
-    char path[600];
-    snprintf(path, sizeof path, "%s/sine.wav", test_tmpdir());
+    const char *path = fx_tmp("sine.wav");
     double v[1000];
     for (int i = 0; i < 1000; i++) v[i] = (float)(1.7 * sin(2 * pi * 50.0 * i / 400.0) + 0.2);
     write_wav(path, SF_FORMAT_WAV | SF_FORMAT_FLOAT, 1, v, 1000);
@@ -714,69 +666,65 @@ TEST(ac_wav_float_roundtrip)
 
 TEST(ac_wav_empty)
 {
-    char path[600];
-    snprintf(path, sizeof path, "%s/empty.wav", test_tmpdir());
-    write_bytes(path, "", 0);
+    const char *path = fx_tmp("empty.wav");
+    fx_write_text(path, "");
     expect_reject(path, GS_EFORMAT, "empty");
 }
 
 TEST(ac_wav_missing_file)
 {
-    char path[600];
-    snprintf(path, sizeof path, "%s/absent.wav", test_tmpdir());
+    const char *path = fx_tmp("absent.wav");
     expect_reject(path, GS_EIO, "open");
 }
 
 /* Cut in half, the header still declares the full length (libsndfile alone would read half). */
 TEST(ac_wav_truncated_half)
 {
-    long size;
-    unsigned char *b = slurp(test_shared_path("data/mains/whu_001_ref.wav"), &size);
+    size_t size;
+    unsigned char *b =
+        (unsigned char *)fx_read_file(test_shared_path("data/mains/whu_001_ref.wav"), &size);
     CHECK(b != NULL);
     if (!b) return;
-    char path[600];
-    snprintf(path, sizeof path, "%s/half.wav", test_tmpdir());
-    write_bytes(path, b, (size_t)size / 2);
+    const char *path = fx_tmp("half.wav");
+    fx_write_file(path, b, size / 2);
     expect_reject(path, GS_EFORMAT, "RIFF chunk size");
     /* the RIFF size patched to match: the data chunk size still gives it away */
     uint32_t riff = (uint32_t)(size / 2 - 8);
     for (int k = 0; k < 4; k++) b[4 + k] = (unsigned char)(riff >> (8 * k));
-    write_bytes(path, b, (size_t)size / 2);
+    fx_write_file(path, b, size / 2);
     expect_reject(path, GS_EFORMAT, "data chunk size");
     free(b);
 }
 
 TEST(ac_wav_truncated_header)
 {
-    long size;
-    unsigned char *b = slurp(test_shared_path("data/mains/whu_001_ref.wav"), &size);
+    size_t size;
+    unsigned char *b =
+        (unsigned char *)fx_read_file(test_shared_path("data/mains/whu_001_ref.wav"), &size);
     CHECK(b != NULL);
     if (!b) return;
-    char path[600];
-    snprintf(path, sizeof path, "%s/head.wav", test_tmpdir());
-    write_bytes(path, b, 20);
+    const char *path = fx_tmp("head.wav");
+    fx_write_file(path, b, 20);
     expect_reject(path, GS_EFORMAT, "truncated");
     /* mid-header with the sizes patched to the cut: libsndfile rejects the fmt chunk */
     uint32_t riff = 20 - 8;
     for (int k = 0; k < 4; k++) b[4 + k] = (unsigned char)(riff >> (8 * k));
-    write_bytes(path, b, 20);
+    fx_write_file(path, b, 20);
     expect_reject(path, GS_EFORMAT, "head.wav");
     free(b);
 }
 
 TEST(ac_wav_text_header)
 {
-    char path[600];
-    snprintf(path, sizeof path, "%s/notes.wav", test_tmpdir());
+    const char *path = fx_tmp("notes.wav");
     const char *text = "time,voltage\n0,0.1\n0.0025,0.7\n";
-    write_bytes(path, text, strlen(text));
+    fx_write_text(path, text);
     expect_reject(path, GS_EFORMAT, "header");
 }
 
 TEST(ac_wav_nan_sample)
 {
-    char path[600];
-    snprintf(path, sizeof path, "%s/nan.wav", test_tmpdir());
+    const char *path = fx_tmp("nan.wav");
     double v[64];
     for (int i = 0; i < 64; i++) v[i] = sin(2 * pi * i / 8.0);
     v[17] = NAN;
@@ -790,8 +738,7 @@ TEST(ac_wav_nan_sample)
 
 TEST(ac_wav_stereo)
 {
-    char path[600];
-    snprintf(path, sizeof path, "%s/stereo.wav", test_tmpdir());
+    const char *path = fx_tmp("stereo.wav");
     double v[2 * 64];
     for (int i = 0; i < 128; i++) v[i] = 0.5 * sin(2 * pi * (i / 2) / 8.0);
     write_wav(path, SF_FORMAT_WAV | SF_FORMAT_PCM_16, 2, v, 64);
@@ -800,8 +747,7 @@ TEST(ac_wav_stereo)
 
 TEST(ac_wav_no_samples)
 {
-    char path[600];
-    snprintf(path, sizeof path, "%s/silent.wav", test_tmpdir());
+    const char *path = fx_tmp("silent.wav");
     write_wav(path, SF_FORMAT_WAV | SF_FORMAT_PCM_16, 1, NULL, 0);
     expect_reject(path, GS_EFORMAT, "frames = 0");
 }

@@ -1,17 +1,13 @@
 /* test_capture_acam.c - the ACam model (capture/acam.c, aclock.c): hardware limits rejected
  * with clear errors, the mask matrix and its HDR halvings, and AC locking against a real mains
  * recording (paper Fig. 9): free running blurs the windows over 1500 cycles, locking does not. */
+#include "tests/fixtures.h"
 #include "tests/test.h"
 #include "capture/sim.h"
 
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-
-static int contains(const char *s, const char *sub)
-{
-    return strstr(s, sub) != NULL;
-}
 
 TEST(acam_limits_rejected_with_clear_errors)
 {
@@ -20,28 +16,28 @@ TEST(acam_limits_rejected_with_clear_errors)
     CHECK_OK(cap_acam_check(&c));   /* K = 26 at 50 Hz: the limit itself is fine */
     c.K = 27;
     CHECK(cap_acam_check(&c) == GS_ELIMIT);
-    CHECK_MSG(contains(gs_detail(), "K = 27") && contains(gs_detail(), "26") &&
-              contains(gs_detail(), "50 Hz"), "%s", gs_detail());
+    CHECK_MSG(fx_contains(gs_detail(), "K = 27") && fx_contains(gs_detail(), "26") &&
+              fx_contains(gs_detail(), "50 Hz"), "%s", gs_detail());
     c.grid_hz = 60;
     c.K = 22;
     CHECK_OK(cap_acam_check(&c));
     c.K = 23;
     CHECK(cap_acam_check(&c) == GS_ELIMIT);
-    CHECK_MSG(contains(gs_detail(), "K = 23") && contains(gs_detail(), "22") &&
-              contains(gs_detail(), "60 Hz"), "%s", gs_detail());
+    CHECK_MSG(fx_contains(gs_detail(), "K = 23") && fx_contains(gs_detail(), "22") &&
+              fx_contains(gs_detail(), "60 Hz"), "%s", gs_detail());
     cap_acam_config_default(&c);
     c.masks = 96;
     CHECK_OK(cap_acam_check(&c));
     c.masks = 98;
     CHECK(cap_acam_check(&c) == GS_ELIMIT);
-    CHECK_MSG(contains(gs_detail(), "M = 98") && contains(gs_detail(), "96"), "%s", gs_detail());
+    CHECK_MSG(fx_contains(gs_detail(), "M = 98") && fx_contains(gs_detail(), "96"), "%s", gs_detail());
     c.masks = 7;
     CHECK(cap_acam_check(&c) == GS_EINVAL);
     /* masks held for Delta/K: too short for the DMD */
     cap_acam_config_default(&c);
     c.dmd_min_hold_us = 400;    /* K = 26 at 50 Hz holds 384.6 us */
     CHECK(cap_acam_check(&c) == GS_ELIMIT);
-    CHECK_MSG(contains(gs_detail(), "384.6 us") && contains(gs_detail(), "400 us"), "%s", gs_detail());
+    CHECK_MSG(fx_contains(gs_detail(), "384.6 us") && fx_contains(gs_detail(), "400 us"), "%s", gs_detail());
     cap_acam_config_default(&c);
     c.max_hz = 52.5;            /* a grid this fast shortens the windows below 370 us */
     CHECK(cap_acam_check(&c) == GS_ELIMIT);
@@ -52,7 +48,7 @@ TEST(acam_limits_rejected_with_clear_errors)
     c.masks = 64;
     c.cycles = 500;
     CHECK(cap_acam_check(&c) == GS_EINVAL);   /* 500 is not a multiple of 32 */
-    CHECK_MSG(contains(gs_detail(), "C = 500"), "%s", gs_detail());
+    CHECK_MSG(fx_contains(gs_detail(), "C = 500"), "%s", gs_detail());
     c.cycles = 512;
     CHECK_OK(cap_acam_check(&c));
     c.hdr_max_rounds = 6;
@@ -78,7 +74,7 @@ TEST(acam_limits_rejected_with_clear_errors)
         gs_status st = cap_scene_parse(text, "limits.json", ".", &sc);
         char want[64];
         snprintf(want, sizeof want, "limits.json:4: field %s:", cases[i].field);
-        CHECK_MSG(st == cases[i].st && contains(gs_detail(), want), "case %zu: %s (wanted '%s')", i,
+        CHECK_MSG(st == cases[i].st && fx_contains(gs_detail(), want), "case %zu: %s (wanted '%s')", i,
                   gs_detail(), want);
         cap_scene_release(&sc);
     }

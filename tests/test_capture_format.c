@@ -5,6 +5,7 @@
  * writer's own validation, atomic writes, gs_capture_value, and a mutation fuzz of
  * capture.json (no crash, every failure explained). */
 #include "recognize/base/internal.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 #include <dirent.h>
@@ -16,48 +17,15 @@
 
 /* ------------------------------------------------------------------ helpers */
 
-static void write_text(const char *dir, const char *name, const char *text)
-{
-    char path[1024];
-    snprintf(path, sizeof path, "%s/%s", dir, name);
-    FILE *f = fopen(path, "wb");
-    CHECK(f != NULL);
-    if (!f) return;
-    fputs(text, f);
-    fclose(f);
-}
-
-static char *read_text(const char *path, size_t *n)
-{
-    FILE *f = fopen(path, "rb");
-    if (!f) return NULL;
-    fseek(f, 0, SEEK_END);
-    long sz = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    char *b = malloc((size_t)sz + 1);
-    size_t got = fread(b, 1, (size_t)sz, f);
-    b[got] = '\0';
-    fclose(f);
-    if (n) *n = got;
-    return b;
-}
-
+/* A new directory TMPDIR/name (its path lives as fx_tmp's, tests/fixtures.h). */
 static const char *subdir(const char *name)
 {
-    static char buf[1024];
-    snprintf(buf, sizeof buf, "%s/%s", test_tmpdir(), name);
-    mkdir(buf, 0700);
-    return buf;
+    const char *p = fx_tmp(name);
+    mkdir(p, 0700);
+    return p;
 }
 
 static uint64_t rng = 1;
-static uint64_t next_u64(void)
-{
-    uint64_t z = (rng += 0x9e3779b97f4a7c15ull);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return z ^ (z >> 31);
-}
 
 /* A capture with every field set and pixels spanning 0..65535. */
 static void make_capture(gs_capture *c, int K, int bands, int W, int H, int hdr)
@@ -79,13 +47,13 @@ static void make_capture(gs_capture *c, int K, int bands, int W, int H, int hdr)
     if (hdr) CHECK_OK(gs_capture_alloc_hdr(c));
     rng = 99;
     size_t n = (size_t)K * W * H * bands;
-    for (size_t i = 0; i < n; i++) c->raw[i] = (unsigned short)next_u64();
+    for (size_t i = 0; i < n; i++) c->raw[i] = (unsigned short)fx_rng_next(&rng);
     c->raw[0] = 0;
     c->raw[n - 1] = 65535;
     for (int k = 0; k < K; k++) c->frames[k].cycles = k == 1 ? 0.1 : 500 + 0.25 * k;
     if (hdr) {
         for (size_t i = 0; i < (size_t)K * W * H; i++)
-            c->halvings[i] = (unsigned char)(next_u64() % (GS_MAX_HALVINGS + 1));
+            c->halvings[i] = (unsigned char)(fx_rng_next(&rng) % (GS_MAX_HALVINGS + 1));
         /* frame 2 has no map: its halvings must be 0 */
         c->frames[2].hdr_map[0] = '\0';
         memset(c->halvings + (size_t)2 * W * H, 0, (size_t)W * H);
@@ -176,7 +144,7 @@ TEST(capture_format_round_trip_mono_defaults)
     const char *dir2 = subdir("defaults");
     make_capture(&a, 2, 1, 3, 2, 0);
     write_capture(dir2, &a);
-    write_text(dir2, "capture.json",
+    fx_write_text(fx_path(dir2, "capture.json"),
                "{\"format\": \"gridsurvey-capture/1\", \"grid_hz\": 50, \"K\": 2, \"bands\": 1,\n"
                " \"width\": 3, \"height\": 2, \"saturation\": 4095, \"frames\": [\n"
                " {\"file\": \"frame_001.png\", \"k\": 1, \"cycles\": 10},\n"
@@ -201,7 +169,7 @@ TEST(capture_format_independent_python_writer)
     const char *dir = subdir("py");
     char script[1024], cmd[3072], out[4096];
     snprintf(script, sizeof script, "%s/writer.py", test_tmpdir());
-    write_text(test_tmpdir(), "writer.py",
+    fx_write_text(script,
         "# An independent writer of gridsurvey-capture/1: numpy + OpenCV, JSON by hand.\n"
         "import os, sys\n"
         "import numpy as np\n"
@@ -310,7 +278,7 @@ static const char *small_capture(const char *name, int line, const char *text)
         strcat(text_all, i + 1 == line ? text : json_lines[i]);
         strcat(text_all, "\n");
     }
-    write_text(dir, "capture.json", text_all);
+    fx_write_text(fx_path(dir, "capture.json"), text_all);
     return dir;
 }
 
@@ -443,9 +411,8 @@ TEST(capture_format_grid_frequency_fields)
     a.frames[2].start_s = 6.1953800000000001;
     a.frames[3].start_s = 9.25;               /* a start without a frequency */
     write_capture(dir, &a);
-    char path[1100];
-    snprintf(path, sizeof path, "%s/capture.json", dir);
-    char *text = read_text(path, NULL);
+    const char *path = fx_path(dir, "capture.json");
+    char *text = fx_read_file(path, NULL);
     CHECK(text && strstr(text, "\"grid_hz_measured\": 50.0366866179697") &&
           strstr(text, "\"start_s\": 0"));
     free(text);
@@ -496,24 +463,13 @@ TEST(capture_format_grid_frequency_fields)
 
 /* ------------------------------------------------------- malformed frames */
 
-static void replace_file(const char *dir, const char *name, const void *data, size_t n)
-{
-    char path[1024];
-    snprintf(path, sizeof path, "%s/%s", dir, name);
-    FILE *f = fopen(path, "wb");
-    CHECK(f != NULL);
-    if (!f) return;
-    fwrite(data, 1, n, f);
-    fclose(f);
-}
-
 static void replace_png(const char *dir, const char *name, int w, int h, int ch, int depth16)
 {
     void *px = calloc((size_t)w * h * ch, depth16 ? 2 : 1);
     unsigned char *png;
     size_t n;
     CHECK_OK(gs_png_encode(px, w, h, ch, depth16 ? 16 : 8, &png, &n));
-    replace_file(dir, name, png, n);
+    fx_write_file(fx_path(dir, name), png, n);
     free(png);
     free(px);
 }
@@ -521,8 +477,7 @@ static void replace_png(const char *dir, const char *name, int w, int h, int ch,
 TEST(capture_format_missing_frame_file)
 {
     const char *dir = small_capture("nofile", 0, NULL);
-    char path[1024];
-    snprintf(path, sizeof path, "%s/frame_001.png", dir);
+    const char *path = fx_path(dir, "frame_001.png");
     CHECK(unlink(path) == 0);
     expect_error(dir, GS_ENOTFOUND,
                  (const char *[]){"nofile/frame_001.png: cannot open",
@@ -532,30 +487,29 @@ TEST(capture_format_missing_frame_file)
 TEST(capture_format_truncated_png)
 {
     const char *dir = small_capture("trunc", 0, NULL);
-    char path[1024];
-    snprintf(path, sizeof path, "%s/frame_002.png", dir);
+    const char *path = fx_path(dir, "frame_002.png");
     size_t n;
-    char *b = read_text(path, &n);
+    char *b = fx_read_file(path, &n);
     CHECK(b && n > 60);
     /* cut inside the image data, and exactly before IEND */
-    replace_file(dir, "frame_002.png", b, n / 2);
+    fx_write_file(fx_path(dir, "frame_002.png"), b, n / 2);
     expect_error(dir, GS_EFORMAT, (const char *[]){"trunc/frame_002.png: truncated PNG",
                                                    "(capture.json:12: frames[2].file)", NULL});
-    replace_file(dir, "frame_002.png", b, n - 12);
+    fx_write_file(fx_path(dir, "frame_002.png"), b, n - 12);
     expect_error(dir, GS_EFORMAT, (const char *[]){"frame_002.png: truncated PNG", "IEND", NULL});
-    replace_file(dir, "frame_002.png", b, 5);
+    fx_write_file(fx_path(dir, "frame_002.png"), b, 5);
     expect_error(dir, GS_EFORMAT, (const char *[]){"frame_002.png: not a PNG", NULL});
-    replace_file(dir, "frame_002.png", "", 0);
+    fx_write_file(fx_path(dir, "frame_002.png"), "", 0);
     expect_error(dir, GS_EFORMAT, (const char *[]){"frame_002.png: not a PNG", NULL});
     /* a corrupted byte inside the compressed data (libspng finds the broken deflate stream
      * before the chunk's CRC) */
     b[n / 2] ^= 0x40;
-    replace_file(dir, "frame_002.png", b, n);
+    fx_write_file(fx_path(dir, "frame_002.png"), b, n);
     expect_error(dir, GS_EFORMAT, (const char *[]){"frame_002.png: corrupt PNG", "IDAT", NULL});
     /* a corrupted byte in the last chunk (IEND's CRC): only the CRC can tell */
     b[n - 1] ^= 0x01;
     b[n / 2] ^= 0x40;
-    replace_file(dir, "frame_002.png", b, n);
+    fx_write_file(fx_path(dir, "frame_002.png"), b, n);
     expect_error(dir, GS_EFORMAT, (const char *[]){"frame_002.png: corrupt PNG", "CRC", NULL});
     free(b);
 }
@@ -592,13 +546,13 @@ TEST(capture_format_bad_hdr_map)
     unsigned char *png;
     size_t n;
     CHECK_OK(gs_png_encode(h, 5, 4, 1, 8, &png, &n));
-    replace_file(dir, "h1.png", png, n);
+    fx_write_file(fx_path(dir, "h1.png"), png, n);
     free(png);
     expect_error(dir, GS_EFORMAT, (const char *[]){"h1.png: pixel (x 3, y 2) holds 17 halvings: "
                                                    "expected 0 to 16", NULL});
     h[13] = 16;
     CHECK_OK(gs_png_encode(h, 5, 4, 1, 8, &png, &n));
-    replace_file(dir, "h1.png", png, n);
+    fx_write_file(fx_path(dir, "h1.png"), png, n);
     free(png);
     gs_capture c;
     CHECK_OK(gs_capture_read(dir, &c));
@@ -702,10 +656,9 @@ TEST(capture_format_fuzz_json)
 {
     const char *dir = small_capture("fuzz", 8, "  \"saturation\": 4095, \"utc\": \"2017-07-21T22:05:00Z\", "
                                     "\"station\": {\"a\": [1, {\"b\": \"c\\\"d\"}]}, \"black_level\": 1,");
-    char path[1024];
-    snprintf(path, sizeof path, "%s/capture.json", dir);
+    const char *path = fx_path(dir, "capture.json");
     size_t n;
-    char *orig = read_text(path, &n);
+    char *orig = fx_read_file(path, &n);
     CHECK(orig != NULL);
     if (!orig) return;
     static const char alphabet[] = "{}[]\":,0123456789.-eE \n\\tfnrux_K";
@@ -715,15 +668,15 @@ TEST(capture_format_fuzz_json)
     for (int it = 0; it < 400; it++) {
         size_t len = n;
         memcpy(buf, orig, n);
-        int edits = 1 + (int)(next_u64() % 3);
+        int edits = 1 + (int)(fx_rng_next(&rng) % 3);
         for (int e = 0; e < edits; e++) {
-            size_t pos = len ? next_u64() % len : 0;
-            switch (next_u64() % 4) {
-            case 0: buf[pos] = alphabet[next_u64() % (sizeof alphabet - 1)]; break;
+            size_t pos = len ? fx_rng_next(&rng) % len : 0;
+            switch (fx_rng_next(&rng) % 4) {
+            case 0: buf[pos] = alphabet[fx_rng_next(&rng) % (sizeof alphabet - 1)]; break;
             case 1:
                 if (len + 1 < n + 64) {
                     memmove(buf + pos + 1, buf + pos, len - pos);
-                    buf[pos] = alphabet[next_u64() % (sizeof alphabet - 1)];
+                    buf[pos] = alphabet[fx_rng_next(&rng) % (sizeof alphabet - 1)];
                     len++;
                 }
                 break;
@@ -736,7 +689,7 @@ TEST(capture_format_fuzz_json)
             case 3: len = pos; break;
             }
         }
-        replace_file(dir, "capture.json", buf, len);
+        fx_write_file(path, buf, len);
         gs_capture c;
         gs_status st = gs_capture_read(dir, &c);
         if (st == GS_OK) {

@@ -5,6 +5,7 @@
  * (CAP_IMAGES). The production code path runs unchanged. */
 #include "tests/test.h"
 #include "tests/fake_gpiod.h"
+#include "tests/hw_fixture.h"
 #include "capture/capture.h"
 
 #include <signal.h>
@@ -109,26 +110,10 @@ static int write_events(const char *path, size_t count)
     return 1;
 }
 
-/* K 16-bit RGB frames cam_000.png ... with a known pattern. */
-static void write_camera(const char *dir)
+/* The camera's known pattern (tests/hw_fixture.h). */
+static unsigned short hw_pixel(int k, int x, int y, int b)
 {
-    gs_capture c;
-    memset(&c, 0, sizeof c);
-    c.K = HW_K;
-    c.bands = 3;
-    c.width = HW_W;
-    c.height = HW_H;
-    CHECK_OK(gs_capture_alloc(&c));
-    for (int k = 0; k < HW_K; k++) {
-        snprintf(c.frames[k].file, GS_PATH_MAX, "cam_%03d.png", k);
-        for (int y = 0; y < HW_H; y++)
-            for (int x = 0; x < HW_W; x++)
-                for (int b = 0; b < 3; b++)
-                    c.raw[(((size_t)k * HW_H + (size_t)y) * HW_W + (size_t)x) * 3 + (size_t)b] =
-                        (unsigned short)(64 + 1000 * k + 31 * x + 7 * y + 300 * b);
-    }
-    for (int k = 0; k < HW_K; k++) CHECK_OK(gs_capture_write_frame(dir, &c, k));
-    gs_capture_release(&c);
+    return (unsigned short)(64 + 1000 * k + 31 * x + 7 * y + 300 * b);
 }
 
 static pid_t start_controller(int *fd, const char *log_path)
@@ -149,33 +134,19 @@ static pid_t start_controller(int *fd, const char *log_path)
 TEST(capture_hardware_backend_with_fakes)
 {
     const char *tmp = test_tmpdir();
-    char events[1024], camdir[1024], pattern[1100], log_path[1024], out[1024];
+    char events[1024], log_path[1024], out[1024];
     snprintf(events, sizeof events, "%s/zc.events", tmp);
-    snprintf(camdir, sizeof camdir, "%s/cam", tmp);
-    snprintf(pattern, sizeof pattern, "%s/cam_%%03d.png", camdir);
     snprintf(log_path, sizeof log_path, "%s/controller.log", tmp);
     snprintf(out, sizeof out, "%s/capture", tmp);
     CHECK(write_events(events, HW_K * (HW_C + 1) + 10));
     CHECK(fake_gpiod_load_events(events, HW_C + 1) == HW_K * (HW_C + 1) + 10);
-    write_camera(camdir);
+    const char *pattern = hw_fx_camera(HW_K, HW_W, HW_H, hw_pixel);
     int fd = -1;
     pid_t child = start_controller(&fd, log_path);
     CHECK(child > 0);
 
     cap_hw_config hw;
-    cap_hw_config_default(&hw);
-    hw.camera = pattern;
-    hw.camera_images = 1;
-    hw.serial_fd = fd;
-    hw.gpio_chip = "gpiochip0";
-    hw.zc_line = 17;
-    hw.shutter_line = 22;
-    hw.trigger_line = 27;
-    hw.width = HW_W;
-    hw.height = HW_H;
-    hw.bands = 3;
-    hw.K = HW_K;
-    hw.cycles = HW_C;
+    hw_fx_config(&hw, pattern, fd, HW_K, HW_C, HW_W, HW_H);
     hw.saturation_dn = 65535;
     hw.load_masks = load_masks;
     cap_backend *be = NULL;
@@ -231,40 +202,39 @@ TEST(capture_hardware_backend_with_fakes)
     if (f) fclose(f);
     CHECK(cfg == HW_K && starts == HW_K && ping == 1);
     /* the frames are the camera's */
-    gs_capture cap, cam;
+    gs_capture cap;
     CHECK_OK(gs_capture_read(out, &cap));
-    memset(&cam, 0, sizeof cam);
-    cam.K = HW_K;
-    cam.bands = 3;
-    cam.width = HW_W;
-    cam.height = HW_H;
-    CHECK_OK(gs_capture_alloc(&cam));
     if (cap.raw) {
         size_t n = (size_t)HW_K * HW_W * HW_H * 3;
-        size_t bad = 0;
-        for (int k = 0; k < HW_K; k++)
-            for (int y = 0; y < HW_H; y++)
-                for (int x = 0; x < HW_W; x++)
-                    for (int b = 0; b < 3; b++) {
-                        size_t i = (((size_t)k * HW_H + (size_t)y) * HW_W + (size_t)x) * 3 + (size_t)b;
-                        bad += cap.raw[i] != (unsigned short)(64 + 1000 * k + 31 * x + 7 * y + 300 * b);
-                    }
+        size_t bad = hw_fx_camera_diff(&cap, HW_K, HW_W, HW_H, hw_pixel);
         CHECK_MSG(bad == 0, "%zu of %zu samples differ from the camera's", bad, n);
         CHECK(cap.locked == 1 && cap.utc[0] != '\0');
     }
     gs_capture_release(&cap);
-    gs_capture_release(&cam);
+}
+
+/* Acquiring frame 0 of W x HW_H with backend be (freed; NULL: nothing) fails with want and a
+ * detail holding detail. */
+static void expect_acquire_fails(cap_backend *be, int W, gs_status want, const char *detail)
+{
+    if (!be) return;
+    unsigned char *halv = calloc((size_t)W * HW_H, 1);
+    unsigned short *raw = malloc(sizeof *raw * (size_t)W * HW_H * 3);
+    cap_acquisition a = {0, 0, 0};
+    CHECK(cap_backend_acquire(be, &a, halv, raw, NULL) == want);
+    CHECK_MSG(strstr(gs_detail(), detail), "%s", gs_detail());
+    free(raw);
+    free(halv);
+    cap_backend_free(be);
 }
 
 TEST(capture_hardware_backend_failures)
 {
     const char *tmp = test_tmpdir();
-    char events[1024], camdir[1024], pattern[1100], log_path[1024];
+    char events[1024], log_path[1024];
     snprintf(events, sizeof events, "%s/zc.events", tmp);
-    snprintf(camdir, sizeof camdir, "%s/cam", tmp);
-    snprintf(pattern, sizeof pattern, "%s/cam_%%03d.png", camdir);
     snprintf(log_path, sizeof log_path, "%s/controller.log", tmp);
-    write_camera(camdir);
+    const char *pattern = hw_fx_camera(HW_K, HW_W, HW_H, hw_pixel);
     cap_hw_config hw;
     cap_hw_config_default(&hw);
     hw.camera = pattern;
@@ -291,15 +261,7 @@ TEST(capture_hardware_backend_failures)
     hw.serial_fd = fd;
     hw.gpio_chip = "gpiochip0";
     CHECK_OK(cap_backend_hardware_new(&hw, &be));
-    if (be) {
-        unsigned char halv[HW_W * HW_H] = {0};
-        unsigned short *raw = malloc(sizeof *raw * HW_W * HW_H * 3);
-        cap_acquisition a = {0, 0, 0};
-        CHECK(cap_backend_acquire(be, &a, halv, raw, NULL) == GS_EIO);
-        CHECK_MSG(strstr(gs_detail(), "no mains zero crossing on gpio line 17"), "%s", gs_detail());
-        free(raw);
-        cap_backend_free(be);
-    }
+    expect_acquire_fails(be, HW_W, GS_EIO, "no mains zero crossing on gpio line 17");
     waitpid(child, NULL, 0);
     /* a wrong camera size */
     CHECK(write_events(events, 200));
@@ -308,15 +270,7 @@ TEST(capture_hardware_backend_failures)
     hw.serial_fd = fd;
     hw.width = HW_W + 1;
     CHECK_OK(cap_backend_hardware_new(&hw, &be));
-    if (be) {
-        unsigned char halv[(HW_W + 1) * HW_H] = {0};
-        unsigned short *raw = malloc(sizeof *raw * (HW_W + 1) * HW_H * 3);
-        cap_acquisition a = {0, 0, 0};
-        CHECK(cap_backend_acquire(be, &a, halv, raw, NULL) == GS_EFORMAT);
-        CHECK_MSG(strstr(gs_detail(), "expected 33x24"), "%s", gs_detail());
-        free(raw);
-        cap_backend_free(be);
-    }
+    expect_acquire_fails(be, HW_W + 1, GS_EFORMAT, "expected 33x24");
     waitpid(child, NULL, 0);
     CHECK(fake_gpiod_open_handles() == 0);
 }

@@ -211,11 +211,15 @@ TEST(capture_replay_roundtrip)
 
 /* ------------------------------------------------------------------ grid frequency per frame */
 
-static gs_status run_text(const char *text, const char *dir, cap_scene *sc_out)
+/* Acquires the scene `text` into dir with the sim backend and reads the capture back into cap
+ * (zeroed first); *step: the crossings from one acquisition's start to the next (C + readout). */
+static gs_status run_text(const char *text, const char *dir, long *step, gs_capture *cap)
 {
     cap_scene sc;
+    memset(cap, 0, sizeof *cap);
     gs_status s = cap_scene_parse(text, "freq.json", ".", &sc);
     if (s != GS_OK) return s;
+    *step = sc.acam.cycles + sc.readout_cycles;
     cap_backend *be = NULL;
     s = cap_backend_sim_new(&sc, &be);
     if (s == GS_OK) {
@@ -225,9 +229,8 @@ static gs_status run_text(const char *text, const char *dir, cap_scene *sc_out)
         s = cap_loop_run(be, dir, &o, NULL);
     }
     cap_backend_free(be);
-    if (sc_out && s == GS_OK) *sc_out = sc;
-    else cap_scene_release(&sc);
-    return s;
+    cap_scene_release(&sc);
+    return s == GS_OK ? gs_capture_read(dir, cap) : s;
 }
 
 static const char *freq_scene =
@@ -253,12 +256,8 @@ TEST(capture_records_grid_frequency_per_frame)
                  v == 0 ? "{\"model\": \"constant\", \"hz\": 50.02}" : "{\"model\": \"constant\"}",
                  50, v == 0 ? "\"frequency_wander\": {}" : "");
         snprintf(dir, sizeof dir, "%s/freq_const_%d", tmp, v);
-        cap_scene sc;
-        CHECK_OK(run_text(text, dir, &sc));
-        long step = sc.acam.cycles + sc.readout_cycles;
-        cap_scene_release(&sc);
-        memset(&cap, 0, sizeof cap);
-        CHECK_OK(gs_capture_read(dir, &cap));
+        long step = 0;
+        CHECK_OK(run_text(text, dir, &step, &cap));
         for (int k = 0; k < cap.K; k++) {
             CHECK_NEAR(cap.frames[k].grid_hz_measured, want_hz[v], 1e-9);
             /* acquisition k starts k (C + readout) crossings after the first */
@@ -276,12 +275,8 @@ TEST(capture_records_grid_frequency_per_frame)
     int C = 300;
     snprintf(text, sizeof text, freq_scene, freq, C, "\"frequency_wander\": {}");
     snprintf(dir, sizeof dir, "%s/freq_trace", tmp);
-    cap_scene sc;
-    CHECK_OK(run_text(text, dir, &sc));
-    long step = sc.acam.cycles + sc.readout_cycles;
-    cap_scene_release(&sc);
-    memset(&cap, 0, sizeof cap);
-    CHECK_OK(gs_capture_read(dir, &cap));
+    long step = 0;
+    CHECK_OK(run_text(text, dir, &step, &cap));
     if (!cap.frames) return;
     /* the recording's crossings as docs/scene.md defines the trace timeline: crossing 0 is the
      * first rising crossing with a neighbour on each side, each time (t[i-1] + 2 t[i] +

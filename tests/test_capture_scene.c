@@ -1,5 +1,6 @@
 /* test_capture_scene.c - scene files (capture/scene.c, docs/scene.md): every error names the
  * file, the line and the field; GeoJSON lights; the built-in scenes (lab, metro). */
+#include "tests/fixtures.h"
 #include "tests/test.h"
 #include "capture/sim.h"
 
@@ -74,8 +75,7 @@ TEST(scene_parse_errors_name_file_line_field)
     {
         char text[2048];
         snprintf(text, sizeof text, "%s \"lights\": [\n  {\"id\": \"x1\", \"bulb\": \"no-such-bulb\", \"x_px\": 1, \"y_px\": 2, \"flux_e_per_cycle\": 5}]}\n", head);
-        char path[1024];
-        snprintf(path, sizeof path, "%s/unknown.json", test_tmpdir());
+        const char *path = fx_tmp("unknown.json");
         FILE *f = fopen(path, "w");
         fputs(text, f);
         fclose(f);

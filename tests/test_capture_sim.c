@@ -3,19 +3,14 @@
  * integration of the BRF's trigonometric polynomial); an effect the scene does not list is never
  * executed (pipeline list and the effects' own call counters); the HDR loop recovers saturated
  * lights; the effects' physics numbers (shared/BULBS.md); determinism. */
-#include "survey/internal.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 #include "capture/sim.h"
+#include "survey/internal.h"
 
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-
-static int san(void)
-{
-    const char *s = getenv("GS_SAN");
-    return s && *s && strcmp(s, "0");
-}
 
 static gs_delight *delight(void)
 {
@@ -121,7 +116,7 @@ TEST(sim_no_effects_is_exact_eq5_vs_brute_force)
     }
     double worst = 0;
     int ks[3] = {0, 6, 12};
-    for (int ki = 0; ki < (san() ? 1 : 3); ki++) {
+    for (int ki = 0; ki < (fx_sanitized() ? 1 : 3); ki++) {
         int k = ks[ki];
         CHECK_OK(cap_sim_render(s, k, 0, ki, halv, raw, dn));
         double expect[30][40][3];
@@ -306,8 +301,7 @@ TEST(sim_hdr_recovers_saturated_lights_within_2_percent)
     cap_backend *be = NULL;
     CHECK_OK(cap_backend_sim_new(&sc, &be));
     if (!be) return;
-    char dir[1024];
-    snprintf(dir, sizeof dir, "%s/hdr", test_tmpdir());
+    const char *dir = fx_tmp("hdr");
     cap_loop_opts o;
     cap_loop_opts_default(&o);
     o.progress = 0;
@@ -409,7 +403,7 @@ TEST(sim_effect_physics_matches_bulbs_md)
     f.seed = 7;
     cap_ac *ac = NULL;
     CHECK_OK(cap_ac_new(&f, 50, &ac));
-    long n = san() ? 60000 : 360000;   /* 10 / 60 minutes */
+    long n = fx_sanitized() ? 60000 : 360000;   /* 10 / 60 minutes */
     double *t = malloc(sizeof *t * (size_t)n);
     for (long c = 0; c < n; c++) CHECK_OK(cap_ac_time(ac, c, &t[c]));
     gs_wander w;

@@ -2,6 +2,7 @@
  * `export`, export -> import -> export identity, `add` of a real recording, `plot` writing a
  * real PNG, --help everywhere, and bad input as one-line errors with a non-zero exit. */
 #include "recognize/recognize.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 #include <stdio.h>
@@ -10,25 +11,16 @@
 
 static char out[1 << 20];
 
+/* `gridsurvey ...`: fmt's first %s is the binary (tests/fixtures.h); output in out. */
 static int run(const char *fmt, const char *a, const char *b)
 {
-    char cmd[4096];
-    snprintf(cmd, sizeof cmd, fmt, test_bin(), a ? a : "", b ? b : "");
-    return test_run(cmd, out, sizeof out);
-}
-
-static int count_lines(const char *s)
-{
-    int n = 0;
-    for (; *s; s++) n += *s == '\n';
-    return n;
+    return fx_run_bin(out, sizeof out, fmt, a, b, NULL);
 }
 
 TEST(cli_delight_export_covers_30_bulbs_9_technologies)
 {
     /* The export is parsed here independently of the library's CSV reader. */
-    char path[1024];
-    snprintf(path, sizeof path, "%s/d.csv", test_tmpdir());
+    const char *path = fx_tmp("d.csv");
     CHECK(run("%s delight export -o %s", path, NULL) == 0);
     FILE *f = fopen(path, "r");
     CHECK(f != NULL);
@@ -61,10 +53,7 @@ TEST(cli_delight_export_covers_30_bulbs_9_technologies)
 
 TEST(cli_delight_import_export_identity)
 {
-    char csv1[1024], csv2[1024], db[1024];
-    snprintf(csv1, sizeof csv1, "%s/a.csv", test_tmpdir());
-    snprintf(csv2, sizeof csv2, "%s/b.csv", test_tmpdir());
-    snprintf(db, sizeof db, "%s/d.sqlite", test_tmpdir());
+    const char *csv1 = fx_tmp("a.csv"), *csv2 = fx_tmp("b.csv"), *db = fx_tmp("d.sqlite");
     CHECK(run("%s delight export -o %s", csv1, NULL) == 0);
     CHECK(run("%s delight import %s --delight %s", csv1, db) == 0);
     CHECK(run("%s delight export --delight %s -o %s", db, csv2) == 0);
@@ -80,8 +69,7 @@ TEST(cli_delight_import_export_identity)
 
 TEST(cli_delight_add_real_recording)
 {
-    char db[1024];
-    snprintf(db, sizeof db, "%s/m.sqlite", test_tmpdir());
+    const char *db = fx_tmp("m.sqlite");
     const char *rec = test_shared_path("data/flicker/Feit 60W.csv");
     char quoted[1100];
     snprintf(quoted, sizeof quoted, "'%s'", rec);
@@ -93,8 +81,7 @@ TEST(cli_delight_add_real_recording)
 
 TEST(cli_delight_plot_writes_png)
 {
-    char png[1024];
-    snprintf(png, sizeof png, "%s/brf.png", test_tmpdir());
+    const char *png = fx_tmp("brf.png");
     CHECK(run("%s delight plot --grid 50 -o %s", png, NULL) == 0);
     FILE *f = fopen(png, "rb");
     CHECK(f != NULL);
@@ -116,22 +103,18 @@ TEST(cli_help_everywhere)
 
 TEST(cli_bad_input_one_line_errors)
 {
-    char bad[1024];
-    snprintf(bad, sizeof bad, "%s/bad.csv", test_tmpdir());
-    FILE *f = fopen(bad, "w");
-    fputs("bulb_id,type,name\nx,y,z\n", f);
-    fclose(f);
-    char db[1024];
-    snprintf(db, sizeof db, "%s/d.sqlite", test_tmpdir());
+    const char *bad = fx_tmp("bad.csv");
+    fx_write_text(bad, "bulb_id,type,name\nx,y,z\n");
+    const char *db = fx_tmp("d.sqlite");
     CHECK(run("%s delight import %s --delight %s", bad, db) == 1);
-    CHECK(count_lines(out) == 1 && strstr(out, "bad.csv"));
+    CHECK(fx_count_lines(out) == 1 && strstr(out, "bad.csv"));
     FILE *exists = fopen(db, "r");
     CHECK(exists == NULL); /* nothing written */
     if (exists) fclose(exists);
     CHECK(run("%s delight show no-such-bulb", NULL, NULL) == 1);
-    CHECK(count_lines(out) == 1 && strstr(out, "no-such-bulb"));
+    CHECK(fx_count_lines(out) == 1 && strstr(out, "no-such-bulb"));
     CHECK(run("%s delight list --delight %s", bad, NULL) == 1);
-    CHECK(count_lines(out) == 1 && strstr(out, "bad.csv"));
+    CHECK(fx_count_lines(out) == 1 && strstr(out, "bad.csv"));
     CHECK(run("%s delight frobnicate", NULL, NULL) == 2);
     CHECK(run("%s frobnicate", NULL, NULL) == 2);
     CHECK(run("%s delight list --grid 55", NULL, NULL) == 2);

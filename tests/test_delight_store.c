@@ -2,6 +2,7 @@
  * rejection of files that are not DELIGHT databases, and malformed CSV rejected atomically
  * with a detail naming the file, line and field. */
 #include "recognize/base/internal.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 #include <sqlite3.h>
@@ -78,43 +79,6 @@ static int same_db(const gs_delight *a, const gs_delight *b)
     return 1;
 }
 
-static char *tmp_path(const char *name)
-{
-    static char buf[4][600];
-    static int k;
-    k = (k + 1) % 4;
-    snprintf(buf[k], sizeof buf[k], "%s/%s", test_tmpdir(), name);
-    return buf[k];
-}
-
-static void write_file(const char *path, const char *text)
-{
-    FILE *f = fopen(path, "wb");
-    CHECK(f != NULL);
-    if (!f) return;
-    fputs(text, f);
-    fclose(f);
-}
-
-/* Whole file in a malloc'd string (NULL on failure). */
-static char *read_all(const char *path, size_t *len)
-{
-    FILE *f = fopen(path, "rb");
-    if (!f) return NULL;
-    fseek(f, 0, SEEK_END);
-    long sz = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    char *buf = malloc((size_t)sz + 1);
-    if (buf && fread(buf, 1, (size_t)sz, f) != (size_t)sz) {
-        free(buf);
-        buf = NULL;
-    }
-    if (buf) buf[sz] = '\0';
-    fclose(f);
-    if (len) *len = (size_t)sz;
-    return buf;
-}
-
 static void export_to(const gs_delight *d, const char *path)
 {
     FILE *f = fopen(path, "w");
@@ -129,13 +93,13 @@ static void export_to(const gs_delight *d, const char *path)
 TEST(delight_csv_round_trip_exact)
 {
     gs_delight *d = make_db(1024), *e = gs_delight_new();
-    const char *a = tmp_path("a.csv"), *b = tmp_path("b.csv");
+    const char *a = fx_tmp("a.csv"), *b = fx_tmp("b.csv");
     export_to(d, a);
     CHECK_OK(gs_delight_import_csv(e, a));
     CHECK(same_db(d, e));
     export_to(e, b);
     size_t la, lb;
-    char *ta = read_all(a, &la), *tb = read_all(b, &lb);
+    char *ta = fx_read_file(a, &la), *tb = fx_read_file(b, &lb);
     CHECK(ta && tb && la == lb && memcmp(ta, tb, la) == 0);
     /* the header and the first row's leading fields, exactly */
     CHECK(ta && strncmp(ta, "bulb_id,type,name,watts,grid_hz,sensor,band,chromaticity,n,v0,v1,", 65) == 0);
@@ -167,9 +131,9 @@ TEST(delight_csv_round_trip_exact)
 TEST(delight_csv_crlf_bom_and_empty_database)
 {
     gs_delight *d = make_db(16), *e = gs_delight_new();
-    const char *a = tmp_path("a.csv"), *b = tmp_path("crlf.csv");
+    const char *a = fx_tmp("a.csv"), *b = fx_tmp("crlf.csv");
     export_to(d, a);
-    char *text = read_all(a, NULL);
+    char *text = fx_read_file(a, NULL);
     FILE *f = fopen(b, "wb");
     CHECK(text && f);
     if (text && f) {
@@ -186,7 +150,7 @@ TEST(delight_csv_crlf_bom_and_empty_database)
     /* an empty database exports a header only, which imports as nothing */
     gs_delight *empty = gs_delight_new(), *g = gs_delight_new();
     export_to(empty, a);
-    char *h = read_all(a, NULL);
+    char *h = fx_read_file(a, NULL);
     CHECK(h && strcmp(h, "bulb_id,type,name,watts,grid_hz,sensor,band,chromaticity,n\n") == 0);
     free(h);
     CHECK_OK(gs_delight_import_csv(g, a));
@@ -205,8 +169,8 @@ TEST(delight_csv_crlf_bom_and_empty_database)
 
 TEST(delight_csv_small_file_imports)
 {
-    const char *p = tmp_path("ok.csv");
-    write_file(p, HDR MONO RED GREEN BLUE);
+    const char *p = fx_tmp("ok.csv");
+    fx_write_text(p, HDR MONO RED GREEN BLUE);
     gs_delight *d = gs_delight_new();
     CHECK_OK(gs_delight_import_csv(d, p));
     CHECK(gs_delight_count(d) == 2);
@@ -248,8 +212,8 @@ TEST(delight_csv_malformed_rejected_atomically)
     for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
         char name[64];
         snprintf(name, sizeof name, "bad%zu.csv", i);
-        const char *p = tmp_path(name);
-        write_file(p, cases[i].text);
+        const char *p = fx_tmp(name);
+        fx_write_text(p, cases[i].text);
         gs_delight *d = gs_delight_new();
         gs_bulb keep;
         make_bulb(&keep, "kept", 50, "photodiode", 1, 4, GS_TECH_HALOGEN, GS_REF_VOLTAGE, 0.3);
@@ -272,8 +236,8 @@ TEST(delight_csv_malformed_rejected_atomically)
 TEST(delight_csv_inconsistent_entry_and_duplicates)
 {
     /* a BRF whose mean is not 1 fails validation; the detail names the file and the line */
-    const char *p = tmp_path("mean.csv");
-    write_file(p, HDR MONO "c,cfl,C,13,50,photodiode/voltage,mono,1,4,2,2,2,2\n");
+    const char *p = fx_tmp("mean.csv");
+    fx_write_text(p, HDR MONO "c,cfl,C,13,50,photodiode/voltage,mono,1,4,2,2,2,2\n");
     gs_delight *d = gs_delight_new();
     CHECK(gs_delight_import_csv(d, p) == GS_EINVAL);
     char where[700];
@@ -281,14 +245,14 @@ TEST(delight_csv_inconsistent_entry_and_duplicates)
     CHECK_MSG(strncmp(gs_detail(), where, strlen(where)) == 0, "detail '%s'", gs_detail());
     CHECK(gs_delight_count(d) == 0);
     /* importing a bulb already present adds nothing */
-    const char *q = tmp_path("dup.csv");
-    write_file(q, HDR RED GREEN BLUE MONO);
-    write_file(p, HDR MONO);
+    const char *q = fx_tmp("dup.csv");
+    fx_write_text(q, HDR RED GREEN BLUE MONO);
+    fx_write_text(p, HDR MONO);
     CHECK_OK(gs_delight_import_csv(d, p));
     CHECK(gs_delight_import_csv(d, q) == GS_EINVAL);
     CHECK(strstr(gs_detail(), q) && strstr(gs_detail(), "already"));
     CHECK(gs_delight_count(d) == 1);
-    CHECK(gs_delight_import_csv(d, tmp_path("missing.csv")) == GS_ENOTFOUND);
+    CHECK(gs_delight_import_csv(d, fx_tmp("missing.csv")) == GS_ENOTFOUND);
     gs_delight_free(d);
 }
 
@@ -297,7 +261,7 @@ TEST(delight_csv_inconsistent_entry_and_duplicates)
 TEST(delight_sqlite_round_trip_exact)
 {
     gs_delight *d = make_db(1024), *e = gs_delight_new();
-    const char *db = tmp_path("delight.sqlite");
+    const char *db = fx_tmp("delight.sqlite");
     CHECK_OK(gs_delight_save(d, db));
     CHECK_OK(gs_delight_load(e, db));
     CHECK(same_db(d, e));
@@ -328,7 +292,7 @@ static int query_int(sqlite3 *db, const char *sql)
 TEST(delight_sqlite_schema_versioned)
 {
     gs_delight *d = make_db(16);
-    const char *path = tmp_path("delight.sqlite");
+    const char *path = fx_tmp("delight.sqlite");
     CHECK_OK(gs_delight_save(d, path));
     sqlite3 *db = NULL;
     CHECK(sqlite3_open(path, &db) == SQLITE_OK);
@@ -366,7 +330,7 @@ TEST(delight_sqlite_rejects_other_files)
     gs_delight *d = make_db(8);
     size_t before = gs_delight_count(d);
     /* an SQLite file that is not a DELIGHT database */
-    const char *other = tmp_path("other.sqlite");
+    const char *other = fx_tmp("other.sqlite");
     sqlite3 *db = NULL;
     CHECK(sqlite3_open(other, &db) == SQLITE_OK);
     CHECK(sqlite3_exec(db, "CREATE TABLE lights(id INTEGER); PRAGMA user_version = 7", NULL, NULL,
@@ -383,20 +347,20 @@ TEST(delight_sqlite_rejects_other_files)
     CHECK(query_int(db, "SELECT count(*) FROM sqlite_master WHERE name LIKE 'delight%'") == 0);
     sqlite3_close(db);
     /* an SQLite file with user_version 1 but no DELIGHT tables */
-    const char *fake = tmp_path("fake.sqlite");
+    const char *fake = fx_tmp("fake.sqlite");
     CHECK(sqlite3_open(fake, &db) == SQLITE_OK);
     CHECK(sqlite3_exec(db, "CREATE TABLE t(x); PRAGMA user_version = 1", NULL, NULL, NULL) == SQLITE_OK);
     sqlite3_close(db);
     CHECK(gs_delight_load(d, fake) == GS_EFORMAT);
     CHECK(strstr(gs_detail(), fake) != NULL);
     /* a text file */
-    const char *text = tmp_path("delight.csv");
-    write_file(text, "bulb_id,type,name,watts,grid_hz,sensor,band,chromaticity,n\n"
+    const char *text = fx_tmp("delight.csv");
+    fx_write_text(text, "bulb_id,type,name,watts,grid_hz,sensor,band,chromaticity,n\n"
                      "this is not an SQLite database, but it is long enough to look like one\n");
     CHECK(gs_delight_load(d, text) == GS_EFORMAT);
     CHECK(strstr(gs_detail(), text) && strstr(gs_detail(), "DELIGHT"));
     /* a missing file */
-    CHECK(gs_delight_load(d, tmp_path("missing.sqlite")) == GS_EIO);
+    CHECK(gs_delight_load(d, fx_tmp("missing.sqlite")) == GS_EIO);
     CHECK(gs_delight_count(d) == before);
     gs_delight_free(d);
 }
@@ -404,7 +368,7 @@ TEST(delight_sqlite_rejects_other_files)
 TEST(delight_sqlite_bad_entry_rejected_atomically)
 {
     gs_delight *d = make_db(8);
-    const char *path = tmp_path("delight.sqlite");
+    const char *path = fx_tmp("delight.sqlite");
     CHECK_OK(gs_delight_save(d, path));
     sqlite3 *db = NULL;
     CHECK(sqlite3_open(path, &db) == SQLITE_OK);

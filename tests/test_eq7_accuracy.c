@@ -17,28 +17,13 @@
  *   build/run_tests eq7_accuracy
  * (GS_SAN=1, set by `make test-asan`, uses fewer lights). */
 #include "recognize/recognize.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-
-static uint64_t rng_next(uint64_t *s)
-{
-    uint64_t z = (*s += 0x9E3779B97F4A7C15ull);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
-}
-static double rng_unif(uint64_t *s)
-{
-    return ((double)(rng_next(s) >> 11) + 0.5) * 0x1p-53;
-}
-static double rng_gauss(uint64_t *s)
-{
-    return sqrt(-2.0 * log(rng_unif(s))) * cos(2.0 * M_PI * rng_unif(s));
-}
 
 /* log n! for n < NFACT */
 #define NFACT 200000
@@ -57,7 +42,7 @@ static long rng_poisson(uint64_t *s, double lam)
 {
     if (lam <= 0.0) return 0;
     long mode = (long)floor(lam);
-    double u = rng_unif(s);
+    double u = fx_rng_uniform(s);
     double pm = exp(-lam + mode * log(lam) - lfact[mode]);
     double up = pm, dn = pm;
     long hi = mode, lo = mode;
@@ -192,14 +177,14 @@ static void run_level(const gs_delight *d, const camera *cam, double mean_e, int
     double x[78], sg[78], sg_own[78], sum_conf = 0;
     int own_pair = 0;
     for (int i = 0; i < n; i++) {
-        int b = (int)(rng_next(&rs) % (uint64_t)nb), p = (int)(rng_next(&rs) % 3);
+        int b = (int)(fx_rng_next(&rs) % (uint64_t)nb), p = (int)(fx_rng_next(&rs) % 3);
         const double *t = tab + (size_t)(b * 3 + p) * (size_t)D;
         /* brightness: the mean sample (a / 3 in DN) holds mean_e electrons */
         double a = 3.0 * mean_e / cam->gain;
         for (int k = 0; k < D; k++) {
             double mu = a * t[k] > 0 ? a * t[k] : 0;
             long ne = rng_poisson(&rs, cam->gain * mu + cam->bg_e);
-            x[k] = ((double)ne - cam->bg_e) / cam->gain + cam->read_dn * rng_gauss(&rs);
+            x[k] = ((double)ne - cam->bg_e) / cam->gain + cam->read_dn * fx_rng_gauss(&rs);
         }
         /* the noise std given to Eq. 7: shot noise of the band's mean level (a smoothed
          * estimate, docs/recognition.md) and, for comparison, of each sample's own value */
@@ -284,7 +269,7 @@ TEST(eq7_accuracy_vs_poisson_oracle)
     gs_delight_free(all);
     camera cam;
     camera_init(&cam, 1.0, 2.0, 4.0);   /* 1 e-/DN, 2 e- read noise, 4 e- sky per sample */
-    int san = getenv("GS_SAN") && *getenv("GS_SAN") == '1';
+    int san = fx_sanitized();
     int n = san ? 300 : 1600;
     double levels[] = {3, 10, 30, 100};
     int nl = sizeof levels / sizeof *levels;

@@ -4,6 +4,7 @@
  * RFC 7946 structure, OpenCV (python3-opencv) for the map's colours; atomic replacement; and
  * `gridsurvey locate` end to end. */
 #include "gis/gis.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 #include <dirent.h>
@@ -15,15 +16,6 @@
 #include <string.h>
 
 static char out[1 << 18];
-
-static const char *tmp(const char *name)
-{
-    static char buf[4][1024];
-    static int k;
-    k = (k + 1) % 4;
-    snprintf(buf[k], sizeof buf[k], "%s/%s", test_tmpdir(), name);
-    return buf[k];
-}
 
 /* Six lights: the three phases, another phase, an unknown phase, and one not located; two
  * near the antimeridian; a survey name that needs escaping in every format. */
@@ -64,53 +56,52 @@ static size_t sample_lights(gis_light *l)
     return 6;
 }
 
-static int contains(const char *hay, const char *needle)
-{
-    return strstr(hay, needle) != NULL;
-}
-
-static int count_of(const char *hay, const char *needle)
-{
-    int n = 0;
-    for (const char *p = strstr(hay, needle); p; p = strstr(p + 1, needle)) n++;
-    return n;
-}
-
 /* Point WKT of light i as ogrinfo prints it (lon first), or "" when not located. */
 static void check_ogr_points(const char *text, int z)
 {
-    CHECK_MSG(contains(text, z ? "POINT Z (-75.2 40.1 30.5)" : "POINT (-75.2 40.1)"), "%s", text);
-    CHECK(contains(text, z ? "POINT Z (-75.2004 40.1005 31)" : "POINT (-75.2004 40.1005)"));
-    CHECK(contains(text, z ? "POINT Z (179.99995 -16.5 12)" : "POINT (179.99995 -16.5)"));
-    CHECK(contains(text, z ? "POINT Z (-179.99995 -16.5001 12.5)" : "POINT (-179.99995 -16.5001)"));
-    CHECK(count_of(text, "POINT") == 5);
+    CHECK_MSG(fx_contains(text, z ? "POINT Z (-75.2 40.1 30.5)" : "POINT (-75.2 40.1)"), "%s", text);
+    CHECK(fx_contains(text, z ? "POINT Z (-75.2004 40.1005 31)" : "POINT (-75.2004 40.1005)"));
+    CHECK(fx_contains(text, z ? "POINT Z (179.99995 -16.5 12)" : "POINT (179.99995 -16.5)"));
+    CHECK(fx_contains(text, z ? "POINT Z (-179.99995 -16.5001 12.5)" : "POINT (-179.99995 -16.5001)"));
+    CHECK(fx_count_of(text, "POINT") == 5);
 }
 
 static void check_ogr_attributes(const char *text)
 {
-    CHECK_MSG(count_of(text, "Main St & <Elm>, \"north\"") == 6, "%s", text);
-    CHECK(contains(text, "bulb (String) = sodium_hp_2"));
-    CHECK(contains(text, "technology (String) = led_linear"));
-    CHECK(contains(text, "phase (Real) = 240"));
-    CHECK(contains(text, "confidence (Real) = 0.91"));
+    CHECK_MSG(fx_count_of(text, "Main St & <Elm>, \"north\"") == 6, "%s", text);
+    CHECK(fx_contains(text, "bulb (String) = sodium_hp_2"));
+    CHECK(fx_contains(text, "technology (String) = led_linear"));
+    CHECK(fx_contains(text, "phase (Real) = 240"));
+    CHECK(fx_contains(text, "confidence (Real) = 0.91"));
     /* GDAL's GeoJSON reader recognises the ISO 8601 text as a DateTime */
-    CHECK(contains(text, "time (String) = 2024-05-01T21:30:00Z") ||
-          contains(text, "time (DateTime) = 2024/05/01 21:30:00+00"));
-    CHECK(contains(text, "flags (String) = above_horizon"));
+    CHECK(fx_contains(text, "time (String) = 2024-05-01T21:30:00Z") ||
+          fx_contains(text, "time (DateTime) = 2024/05/01 21:30:00+00"));
+    CHECK(fx_contains(text, "flags (String) = above_horizon"));
+}
+
+/* `ogrinfo -ro -al OPTS 'path'` (GDAL), its output in out. */
+static int ogrinfo(const char *opts, const char *path)
+{
+    return fx_run(out, sizeof out, "ogrinfo -ro -al %s '%s'", opts, path);
+}
+
+/* The sample lights exported by `export` to TMPDIR/name; the path. */
+static const char *export_sample(gs_status (*export)(const gis_light *, size_t, const char *),
+                                 const char *name)
+{
+    gis_light l[6];
+    size_t n = sample_lights(l);
+    const char *path = fx_tmp(name);
+    CHECK_OK(export(l, n, path));
+    return path;
 }
 
 TEST(gis_export_geojson_ogrinfo_rfc7946)
 {
-    gis_light l[6];
-    size_t n = sample_lights(l);
-    const char *path = tmp("lights.geojson");
-    CHECK_OK(gis_export_geojson(l, n, path));
-    char cmd[2048];
-    snprintf(cmd, sizeof cmd, "ogrinfo -ro -al -so '%s'", path);
-    CHECK(test_run(cmd, out, sizeof out) == 0);
-    CHECK_MSG(contains(out, "Feature Count: 6"), "%s", out);
-    snprintf(cmd, sizeof cmd, "ogrinfo -ro -al '%s'", path);
-    CHECK(test_run(cmd, out, sizeof out) == 0);
+    const char *path = export_sample(gis_export_geojson, "lights.geojson");
+    CHECK(ogrinfo("-so", path) == 0);
+    CHECK_MSG(fx_contains(out, "Feature Count: 6"), "%s", out);
+    CHECK(ogrinfo("", path) == 0);
     check_ogr_points(out, 1);
     check_ogr_attributes(out);
     /* RFC 7946 structure, read independently */
@@ -133,48 +124,36 @@ TEST(gis_export_geojson_ogrinfo_rfc7946)
 
 TEST(gis_export_kml_ogrinfo)
 {
-    gis_light l[6];
-    size_t n = sample_lights(l);
-    const char *path = tmp("lights.kml");
-    CHECK_OK(gis_export_kml(l, n, path));
-    char cmd[2048];
-    snprintf(cmd, sizeof cmd, "ogrinfo -ro -al '%s'", path);
-    CHECK(test_run(cmd, out, sizeof out) == 0);
-    CHECK_MSG(contains(out, "Feature Count: 6") || count_of(out, "OGRFeature(") == 6, "%s", out);
-    CHECK(count_of(out, "OGRFeature(") == 6);
+    const char *path = export_sample(gis_export_kml, "lights.kml");
+    CHECK(ogrinfo("", path) == 0);
+    CHECK_MSG(fx_contains(out, "Feature Count: 6") || fx_count_of(out, "OGRFeature(") == 6, "%s", out);
+    CHECK(fx_count_of(out, "OGRFeature(") == 6);
     check_ogr_points(out, 0);
     check_ogr_attributes(out);
     /* styles: a placemark of each phase class */
-    FILE *f = fopen(path, "r");
-    CHECK(f != NULL);
-    if (!f) return;
-    size_t got = fread(out, 1, sizeof out - 1, f);
-    out[got] = '\0';
-    fclose(f);
-    CHECK(count_of(out, "<styleUrl>#phase0</styleUrl>") == 1);
-    CHECK(count_of(out, "<styleUrl>#phase240</styleUrl>") == 2);
-    CHECK(count_of(out, "<styleUrl>#phase_other</styleUrl>") == 1);
-    CHECK(count_of(out, "<styleUrl>#phase_unknown</styleUrl>") == 1);
-    CHECK(contains(out, "<color>ff005ed5</color>"));   /* 0 deg: vermillion (213, 94, 0), aabbggrr */
+    char *kml = fx_read_file(path, NULL);
+    CHECK(kml != NULL);
+    if (!kml) return;
+    CHECK(fx_count_of(kml, "<styleUrl>#phase0</styleUrl>") == 1);
+    CHECK(fx_count_of(kml, "<styleUrl>#phase240</styleUrl>") == 2);
+    CHECK(fx_count_of(kml, "<styleUrl>#phase_other</styleUrl>") == 1);
+    CHECK(fx_count_of(kml, "<styleUrl>#phase_unknown</styleUrl>") == 1);
+    CHECK(fx_contains(kml, "<color>ff005ed5</color>"));   /* 0 deg: vermillion (213, 94, 0), aabbggrr */
+    free(kml);
 }
 
 TEST(gis_export_gpkg_validates)
 {
-    gis_light l[6];
-    size_t n = sample_lights(l);
-    const char *path = tmp("lights.gpkg");
-    CHECK_OK(gis_export_gpkg(l, n, path));
+    const char *path = export_sample(gis_export_gpkg, "lights.gpkg");
     char cmd[2048];
     snprintf(cmd, sizeof cmd, "/usr/bin/python3 /usr/lib/python3/dist-packages/osgeo_utils/samples/"
                               "validate_gpkg.py --extra '%s'", path);
     int rc = test_run(cmd, out, sizeof out);
-    CHECK_MSG(rc == 0 && !contains(out, "rror") && !contains(out, "arning"), "validate_gpkg: %d: %s", rc, out);
-    snprintf(cmd, sizeof cmd, "ogrinfo -ro -al -so '%s'", path);
-    CHECK(test_run(cmd, out, sizeof out) == 0);
-    CHECK_MSG(contains(out, "Feature Count: 6") && contains(out, "Geometry: Point") &&
-              contains(out, "WGS 84") && !contains(out, "arning"), "%s", out);
-    snprintf(cmd, sizeof cmd, "ogrinfo -ro -al '%s'", path);
-    CHECK(test_run(cmd, out, sizeof out) == 0);
+    CHECK_MSG(rc == 0 && !fx_contains(out, "rror") && !fx_contains(out, "arning"), "validate_gpkg: %d: %s", rc, out);
+    CHECK(ogrinfo("-so", path) == 0);
+    CHECK_MSG(fx_contains(out, "Feature Count: 6") && fx_contains(out, "Geometry: Point") &&
+              fx_contains(out, "WGS 84") && !fx_contains(out, "arning"), "%s", out);
+    CHECK(ogrinfo("", path) == 0);
     check_ogr_points(out, 0);
     check_ogr_attributes(out);
     /* header and blobs, read with SQLite */
@@ -209,19 +188,14 @@ TEST(gis_export_gpkg_validates)
 
 TEST(gis_export_csv_ogrinfo)
 {
-    gis_light l[6];
-    size_t n = sample_lights(l);
-    const char *path = tmp("lights.csv");
-    CHECK_OK(gis_export_csv(l, n, path));
-    char cmd[2048];
-    snprintf(cmd, sizeof cmd, "ogrinfo -ro -al -oo X_POSSIBLE_NAMES=lon_deg -oo Y_POSSIBLE_NAMES=lat_deg "
-                              "-oo AUTODETECT_TYPE=YES '%s'", path);
-    CHECK(test_run(cmd, out, sizeof out) == 0);
-    CHECK(count_of(out, "OGRFeature(") == 6);
+    const char *path = export_sample(gis_export_csv, "lights.csv");
+    CHECK(ogrinfo("-oo X_POSSIBLE_NAMES=lon_deg -oo Y_POSSIBLE_NAMES=lat_deg -oo AUTODETECT_TYPE=YES",
+                  path) == 0);
+    CHECK(fx_count_of(out, "OGRFeature(") == 6);
     check_ogr_points(out, 0);
-    CHECK_MSG(count_of(out, "Main St & <Elm>, \"north\"") == 6, "%s", out);
-    CHECK(contains(out, "bulb (String) = sodium_hp_2"));
-    CHECK(contains(out, "flags (String) = above_horizon"));
+    CHECK_MSG(fx_count_of(out, "Main St & <Elm>, \"north\"") == 6, "%s", out);
+    CHECK(fx_contains(out, "bulb (String) = sodium_hp_2"));
+    CHECK(fx_contains(out, "flags (String) = above_horizon"));
 }
 
 static int count_tmp_files(const char *dir)
@@ -239,7 +213,7 @@ TEST(gis_export_atomic_replace)
 {
     gis_light l[6];
     size_t n = sample_lights(l);
-    const char *path = tmp("a.geojson");
+    const char *path = fx_tmp("a.geojson");
     FILE *f = fopen(path, "w");
     fputs("old content\n", f);
     fclose(f);
@@ -259,7 +233,7 @@ TEST(gis_export_atomic_replace)
     CHECK(f && fgets(line, sizeof line, f) && !strcmp(line, "{\n"));
     if (f) fclose(f);
     /* an unwritable place fails with GS_EIO and creates nothing */
-    for (int k = 0; k < 4; k++) CHECK(gis_export(l, n, fmts[k], tmp("missing/dir/x.out")) == GS_EIO);
+    for (int k = 0; k < 4; k++) CHECK(gis_export(l, n, fmts[k], fx_tmp("missing/dir/x.out")) == GS_EIO);
     CHECK(count_tmp_files(test_tmpdir()) == 0);
     /* formats by name and by extension */
     gis_format fm;
@@ -271,9 +245,9 @@ TEST(gis_export_atomic_replace)
     CHECK(gis_format_parse("KML", &fm) == GS_OK && fm == GIS_FORMAT_KML);
     /* NaN latitude with a finite longitude is inconsistent */
     l[0].lat_deg = NAN;
-    CHECK(gis_export_csv(l, n, tmp("b.csv")) == GS_EINVAL);
+    CHECK(gis_export_csv(l, n, fx_tmp("b.csv")) == GS_EINVAL);
     l[0].lat_deg = INFINITY;
-    CHECK(gis_export_csv(l, n, tmp("b.csv")) == GS_ENUMERIC);
+    CHECK(gis_export_csv(l, n, fx_tmp("b.csv")) == GS_ENUMERIC);
 }
 
 TEST(gis_map_png_phase_colours)
@@ -297,7 +271,7 @@ TEST(gis_map_png_phase_colours)
     o.n_stations = 1;
     o.width_px = 900;
     o.height_px = 700;
-    const char *path = tmp("map.png");
+    const char *path = fx_tmp("map.png");
     CHECK_OK(gis_map_png(l, n, &o, path));
     /* count pixels of each class colour (exact RGB inside the discs) with OpenCV */
     char cmd[2048];
@@ -319,42 +293,33 @@ TEST(gis_map_png_phase_colours)
     /* each class appears: a disc (plus its legend box) */
     for (int k = 0; k < 5; k++) CHECK_MSG(c[k] > 50, "class %d: %d pixels\n%s", k, c[k], out);
     /* nothing to draw is an error, not an empty picture */
-    CHECK(gis_map_png(l + 5, 1, NULL, tmp("empty.png")) == GS_EINVAL);
+    CHECK(gis_map_png(l + 5, 1, NULL, fx_tmp("empty.png")) == GS_EINVAL);
 }
 
 /* ------------------------------------------------------------- the CLI */
 
-static void write_file(const char *path, const char *text)
-{
-    FILE *f = fopen(path, "w");
-    CHECK(f != NULL);
-    if (!f) return;
-    fputs(text, f);
-    fclose(f);
-}
-
 TEST(gis_cli_locate)
 {
     char st[1024], px[1024], res[1024];
-    snprintf(st, sizeof st, "%s", tmp("station.json"));
-    snprintf(px, sizeof px, "%s", tmp("pixels.csv"));
-    snprintf(res, sizeof res, "%s", tmp("out.geojson"));
-    write_file(st, "{\"format\": \"gridsurvey-station/1\", \"lat_deg\": 40.0, \"lon_deg\": -75.0,\n"
+    snprintf(st, sizeof st, "%s", fx_tmp("station.json"));
+    snprintf(px, sizeof px, "%s", fx_tmp("pixels.csv"));
+    snprintf(res, sizeof res, "%s", fx_tmp("out.geojson"));
+    fx_write_text(st, "{\"format\": \"gridsurvey-station/1\", \"lat_deg\": 40.0, \"lon_deg\": -75.0,\n"
                    " \"height_m\": 120.0, \"heading_deg\": 30, \"pitch_deg\": -5, \"roll_deg\": 1,\n"
                    " \"focal_px\": 2000, \"cx_px\": 959.5, \"cy_px\": 539.5, \"k1\": -0.05, \"k2\": 0.01,\n"
                    " \"sigma_px\": 0.5, \"sigma_heading_deg\": 0.05, \"sigma_pitch_deg\": 0.05,\n"
                    " \"time_utc\": \"2024-05-01T21:30:00Z\"}\n");
-    write_file(px, "id,x_px,y_px,sigma_px\nA,959.5,539.5,0.3\nB,100,800,1\nUP,959.5,100,1\n");
+    fx_write_text(px, "id,x_px,y_px,sigma_px\nA,959.5,539.5,0.3\nB,100,800,1\nUP,959.5,100,1\n");
     /* PLplot's cairo driver leaves fontconfig's caches allocated at exit: suppress those
      * (third-party) leaks only, when this runs under LeakSanitizer */
     char supp[1024], cmd[8192];
-    snprintf(supp, sizeof supp, "%s", tmp("lsan.supp"));
-    write_file(supp, "leak:libfontconfig.so\nleak:libltdl.so\n");
+    snprintf(supp, sizeof supp, "%s", fx_tmp("lsan.supp"));
+    fx_write_text(supp, "leak:libfontconfig.so\nleak:libltdl.so\n");
     snprintf(cmd, sizeof cmd, "LSAN_OPTIONS=suppressions=%s %s locate --station %s --pixels %s "
-             "--height-m 30 --survey s1 -o %s --map %s", supp, test_bin(), st, px, res, tmp("m.png"));
+             "--height-m 30 --survey s1 -o %s --map %s", supp, test_bin(), st, px, res, fx_tmp("m.png"));
     int rc = test_run(cmd, out, sizeof out);
-    CHECK_MSG(rc == 0 && contains(out, "located 2 of 3 lights"), "%d: %s", rc, out);
-    CHECK(contains(out, "light UP: not located (above_horizon)"));
+    CHECK_MSG(rc == 0 && fx_contains(out, "located 2 of 3 lights"), "%d: %s", rc, out);
+    CHECK(fx_contains(out, "light UP: not located (above_horizon)"));
     /* the file holds what the library computes for the same input */
     gis_station s;
     CHECK_OK(gis_station_read(st, &s));
@@ -378,7 +343,7 @@ TEST(gis_cli_locate)
         json_decref(root);
     }
     /* GeoPackage through the CLI validates too */
-    const char *gpkg = tmp("o.gpkg");
+    const char *gpkg = fx_tmp("o.gpkg");
     snprintf(cmd, sizeof cmd, "%s locate --station %s --pixels %s --format gpkg -o %s && "
              "/usr/bin/python3 /usr/lib/python3/dist-packages/osgeo_utils/samples/validate_gpkg.py --extra %s",
              test_bin(), st, px, gpkg, gpkg);
@@ -386,22 +351,22 @@ TEST(gis_cli_locate)
     CHECK_MSG(rc == 0, "%s", out);
     /* --help, usage errors (2) and bad input (1, one line naming file, line and field) */
     snprintf(cmd, sizeof cmd, "%s locate --help", test_bin());
-    CHECK(test_run(cmd, out, sizeof out) == 0 && contains(out, "usage: gridsurvey locate"));
+    CHECK(test_run(cmd, out, sizeof out) == 0 && fx_contains(out, "usage: gridsurvey locate"));
     snprintf(cmd, sizeof cmd, "%s locate --station %s -o %s", test_bin(), st, res);
     CHECK(test_run(cmd, out, sizeof out) == 2);
-    write_file(px, "id,x_px,y_px\nA,1,2\nB,1e,2\n");
+    fx_write_text(px, "id,x_px,y_px\nA,1,2\nB,1e,2\n");
     snprintf(cmd, sizeof cmd, "%s locate --station %s --pixels %s -o %s", test_bin(), st, px, res);
     rc = test_run(cmd, out, sizeof out);
-    CHECK_MSG(rc == 1 && contains(out, "pixels.csv:3: x_px: expected a finite number, got '1e'"), "%d: %s", rc, out);
-    write_file(px, "id,x,y\nA,1,2\n");
+    CHECK_MSG(rc == 1 && fx_contains(out, "pixels.csv:3: x_px: expected a finite number, got '1e'"), "%d: %s", rc, out);
+    fx_write_text(px, "id,x,y\nA,1,2\n");
     rc = test_run(cmd, out, sizeof out);
-    CHECK_MSG(rc == 1 && contains(out, "pixels.csv:1: header column 2 is 'x'"), "%d: %s", rc, out);
-    write_file(px, "id,x_px,y_px\nA,1,2\n");
-    write_file(st, "{\"lat_deg\": 40.0, \"lon_deg\": -75.0,\n \"height_m\": 120.0,\n \"heading_deg\": 30,\n"
+    CHECK_MSG(rc == 1 && fx_contains(out, "pixels.csv:1: header column 2 is 'x'"), "%d: %s", rc, out);
+    fx_write_text(px, "id,x_px,y_px\nA,1,2\n");
+    fx_write_text(st, "{\"lat_deg\": 40.0, \"lon_deg\": -75.0,\n \"height_m\": 120.0,\n \"heading_deg\": 30,\n"
                    " \"pitch_deg\": -95, \"focal_px\": 2000, \"cx_px\": 959.5, \"cy_px\": 539.5}\n");
     rc = test_run(cmd, out, sizeof out);
-    CHECK_MSG(rc == 1 && contains(out, "station.json:4: field pitch_deg: pitch_deg = -95"), "%d: %s", rc, out);
-    CHECK(count_of(out, "\n") == 1);
-    snprintf(cmd, sizeof cmd, "%s locate --station %s --pixels %s -o %s", test_bin(), st, px, tmp("x.shp"));
-    CHECK(test_run(cmd, out, sizeof out) == 1 && contains(out, "cannot tell the format"));
+    CHECK_MSG(rc == 1 && fx_contains(out, "station.json:4: field pitch_deg: pitch_deg = -95"), "%d: %s", rc, out);
+    CHECK(fx_count_of(out, "\n") == 1);
+    snprintf(cmd, sizeof cmd, "%s locate --station %s --pixels %s -o %s", test_bin(), st, px, fx_tmp("x.shp"));
+    CHECK(test_run(cmd, out, sizeof out) == 1 && fx_contains(out, "cannot tell the format"));
 }

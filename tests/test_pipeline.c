@@ -1,79 +1,34 @@
-/* test_pipeline.c - `gridsurvey run` (survey/pipeline.c, survey/cmd_run.c) and `gridsurvey
- * evaluate` (survey/evaluate.c).
+/* test_pipeline.c - `gridsurvey run` (survey/pipeline.c, survey/cmd_run.c); `gridsurvey
+ * evaluate` is tested in tests/test_evaluate.c.
  *
  * Oracles are independent of the code under test: stored lights are read with plain SQLite
  * queries and the simulator's truth.json with Jansson, and matched here by their own rule;
  * after each SIGKILL the database is inspected through a raw SQLite connection
  * (integrity_check, foreign_key_check, each capture complete); a resumed run is compared with
  * an uninterrupted one row by row; bad input is checked against the bytes of the database and a
- * listing of every file in the test directory; the evaluation of a hand-made database is
- * checked against answers worked out by hand, with positions placed by GeographicLib's
- * GeodSolve (a separate program) at known geodesic distances.
+ * listing of every file in the test directory.
  *
  * Cost: the built-in lab scene once (`pipeline_lab_end_to_end_matches_truth`, ~5 s), and a
  * half-size lab scene (320 x 240, C = 128, ~1 s per run) for everything else. */
 #include "survey/survey.h"
+#include "tests/fixtures.h"
+#include "tests/survey_fixture.h"
 #include "tests/test.h"
 
-#include <errno.h>
 #include <jansson.h>
 #include <math.h>
 #include <signal.h>
 #include <sqlite3.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
-#include <time.h>
 #include <unistd.h>
 
 static char out[1 << 17];
-
-/* "TMPDIR/name" in a ring of 64 buffers (long-lived paths are copied by the caller). */
-static const char *tmp(const char *name)
-{
-    static char buf[64][1024];
-    static int k;
-    k = (k + 1) % 64;
-    snprintf(buf[k], sizeof buf[k], "%s/%s", test_tmpdir(), name);
-    return buf[k];
-}
-
-static void write_text(const char *path, const char *text)
-{
-    FILE *f = fopen(path, "w");
-    CHECK_MSG(f != NULL, "%s: %s", path, strerror(errno));
-    if (!f) return;
-    fputs(text, f);
-    fclose(f);
-}
-
-static int exists(const char *path)
-{
-    struct stat st;
-    return stat(path, &st) == 0;
-}
-
-static int count_lines(const char *s)
-{
-    int n = 0;
-    for (; *s; s++) n += *s == '\n';
-    return n;
-}
-
-/* test_run with a printf-style command. */
-static int sh(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
-static int sh(const char *fmt, ...)
-{
-    char cmd[8192];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(cmd, sizeof cmd, fmt, ap);
-    va_end(ap);
-    return test_run(cmd, out, sizeof out);
-}
+/* A printf-style shell command (tests/fixtures.h), its output in out. */
+#define sh(...) fx_run(out, sizeof out, __VA_ARGS__)
 
 /* The lab scene (capture/scenes/lab.json) made small: the same eight bulbs, phases, fluxes and
  * effects at `scale` times the pixel coordinates and image size (1/2: 320 x 240, 1/4: 160 x 120;
@@ -124,7 +79,7 @@ static void write_small_lab(const char *path, double scale, const char *bulb)
         "  \"effects\": {\"psf\": {\"sigma_px\": 1.5}, \"ambient\": {\"e_per_px_cycle\": 0.5},\n"
         "              \"shot_noise\": {}, \"saturation\": {}, \"read_noise\": {}, \"adc\": {}}\n"
         "}\n", (int)(640 * scale), (int)(480 * scale), 800 * scale, lights);
-    write_text(path, text);
+    fx_write_text(path, text);
 }
 
 /* ------------------------------------------------------------------ independent readers */
@@ -276,45 +231,13 @@ static char *dump_db(const char *path)
     return buf;
 }
 
-/* A file's bytes (malloc, NUL-terminated) and size; NULL when it cannot be read. */
-static char *file_bytes(const char *path, size_t *size)
-{
-    FILE *f = fopen(path, "rb");
-    *size = 0;
-    if (!f) return NULL;
-    size_t cap = 1 << 16, n = 0, got;
-    char *buf = malloc(cap + 1);
-    while (buf && (got = fread(buf + n, 1, cap - n, f)) > 0) {
-        n += got;
-        if (n == cap) {
-            char *nb = realloc(buf, 2 * cap + 1);
-            if (!nb) {
-                free(buf);
-                buf = NULL;
-                break;
-            }
-            buf = nb;
-            cap *= 2;
-        }
-    }
-    fclose(f);
-    if (buf) buf[n] = '\0';
-    *size = n;
-    return buf;
-}
-
+/* survey_fx_query_long on a read-only connection to the database at path (-1 if none). */
 static long query_long(const char *path, const char *sql)
 {
     sqlite3 *h = NULL;
     long v = -1;
-    if (sqlite3_open_v2(path, &h, SQLITE_OPEN_READONLY, NULL) == SQLITE_OK) {
-        sqlite3_stmt *q = NULL;
-        if (sqlite3_prepare_v2(h, sql, -1, &q, NULL) == SQLITE_OK && sqlite3_step(q) == SQLITE_ROW)
-            v = (long)sqlite3_column_int64(q, 0);
-        else
-            test_failed(__FILE__, __LINE__, "%s: %s", sql, sqlite3_errmsg(h));
-        sqlite3_finalize(q);
-    }
+    if (sqlite3_open_v2(path, &h, SQLITE_OPEN_READONLY, NULL) == SQLITE_OK)
+        v = survey_fx_query_long(h, sql);
     sqlite3_close(h);
     return v;
 }
@@ -339,12 +262,11 @@ static void counts(const char *db, char *buf, size_t size)
 TEST(pipeline_lab_end_to_end_matches_truth)
 {
     char db[1024], cap[1024], truth[1024], scene[1024] = "capture/scenes/lab.json";
-    snprintf(db, sizeof db, "%s", tmp("lab.sqlite"));
-    snprintf(cap, sizeof cap, "%s", tmp("lab-capture"));
-    snprintf(truth, sizeof truth, "%s", tmp("lab-capture/truth.json"));
-    const char *san = getenv("GS_SAN");
-    if (san && *san == '1') {
-        snprintf(scene, sizeof scene, "%s", tmp("lab.json"));
+    snprintf(db, sizeof db, "%s", fx_tmp("lab.sqlite"));
+    snprintf(cap, sizeof cap, "%s", fx_tmp("lab-capture"));
+    snprintf(truth, sizeof truth, "%s", fx_tmp("lab-capture/truth.json"));
+    if (fx_sanitized()) {
+        snprintf(scene, sizeof scene, "%s", fx_tmp("lab.json"));
         write_small_lab(scene, 0.5, NULL);
     }
     int rc = sh("%s run %s --db %s", test_bin(), scene, db);
@@ -356,11 +278,11 @@ TEST(pipeline_lab_end_to_end_matches_truth)
     CHECK(strstr(out, "| detection rate | 100.0 % | 8 / 8 ") != NULL);      /* evaluation */
     CHECK(strstr(out, "| bulb accuracy | 100.0 % | 8 / 8 ") != NULL);
     CHECK(strstr(out, "| phase accuracy | 100.0 % | 8 / 8 ") != NULL);
-    CHECK(exists(tmp("lab.geojson")) && !exists(tmp("lab-map.png")));
+    CHECK(fx_exists(fx_tmp("lab.geojson")) && !fx_exists(fx_tmp("lab-map.png")));
     CHECK(check_against_truth(db, truth, 8) == 8);
     /* the GeoJSON holds every stored light, without a geometry */
     json_error_t err;
-    json_t *g = json_load_file(tmp("lab.geojson"), 0, &err);
+    json_t *g = json_load_file(fx_tmp("lab.geojson"), 0, &err);
     json_t *features = json_object_get(g, "features");
     CHECK(json_is_array(features) &&
           (long)json_array_size(features) == query_long(db, "SELECT count(*) FROM lights"));
@@ -436,7 +358,7 @@ TEST(pipeline_lab_end_to_end_matches_truth)
  * GeoJSON coordinates and the map written, location errors small against the truth. */
 TEST(pipeline_geographic_scene_locates_lights)
 {
-    const char *scene = tmp("geo.json"), *db = tmp("geo.sqlite");
+    const char *scene = fx_tmp("geo.json"), *db = fx_tmp("geo.sqlite");
     /* a station 120 m above the ellipsoid looking north, lights 10 m up, 450-850 m away */
     static const struct {
         double north_m, east_m;
@@ -470,17 +392,17 @@ TEST(pipeline_geographic_scene_locates_lights)
              " \"lights\": [%s],\n"
              " \"effects\": {\"psf\": {\"sigma_px\": 1.2}, \"shot_noise\": {}, \"saturation\": {},\n"
              "             \"read_noise\": {}, \"adc\": {}}}\n", lights);
-    write_text(scene, text);
+    fx_write_text(scene, text);
     int rc = sh("%s run %s --db %s", test_bin(), scene, db);
     CHECK_MSG(rc == 0, "run: %d: %s", rc, out);
     if (rc != 0) return;
     CHECK(strstr(out, "at 10.00 m above the ellipsoid (scene median)") != NULL);
     CHECK(strstr(out, "| detection rate | 100.0 % | 6 / 6 ") != NULL);
-    CHECK(exists(tmp("geo-map.png")) && exists(tmp("geo.geojson")));
-    CHECK(check_against_truth(db, tmp("geo-capture/truth.json"), 6) == 6);
+    CHECK(fx_exists(fx_tmp("geo-map.png")) && fx_exists(fx_tmp("geo.geojson")));
+    CHECK(check_against_truth(db, fx_tmp("geo-capture/truth.json"), 6) == 6);
     CHECK(query_long(db, "SELECT count(*) FROM locations WHERE lat_deg IS NOT NULL AND height_m = 10") == 6);
     CHECK(query_long(db, "SELECT count(*) FROM stations WHERE name = 'geo' AND lat_deg = 32.8") == 1);
-    rc = sh("%s evaluate --db %s --truth %s --format json", test_bin(), db, tmp("geo-capture/truth.json"));
+    rc = sh("%s evaluate --db %s --truth %s --format json", test_bin(), db, fx_tmp("geo-capture/truth.json"));
     json_error_t err;
     json_t *ev = json_loads(out, 0, &err), *loc = json_object_get(ev, "location_error");
     CHECK_MSG(rc == 0 && loc, "%s", out);
@@ -491,7 +413,7 @@ TEST(pipeline_geographic_scene_locates_lights)
     CHECK_MSG(med < 0.5 && mx < 1.5, "location error median %.3f m, max %.3f m", med, mx);
     json_decref(ev);
     /* the GeoJSON's positions are the stored ones */
-    json_t *g = json_load_file(tmp("geo.geojson"), 0, &err), *features = json_object_get(g, "features");
+    json_t *g = json_load_file(fx_tmp("geo.geojson"), 0, &err), *features = json_object_get(g, "features");
     size_t i;
     json_t *f;
     int with_geometry = 0;
@@ -502,9 +424,9 @@ TEST(pipeline_geographic_scene_locates_lights)
     CHECK(with_geometry >= 6);
     json_decref(g);
     /* a capture directory with a station needs the lights' height */
-    rc = sh("%s run %s --db %s --survey other", test_bin(), tmp("geo-capture"), db);
-    CHECK_MSG(rc == 1 && count_lines(out) == 1 && strstr(out, "--light-height-m"), "%d: %s", rc, out);
-    rc = sh("%s run %s --db %s --light-height-m 10", test_bin(), tmp("geo-capture"), db);
+    rc = sh("%s run %s --db %s --survey other", test_bin(), fx_tmp("geo-capture"), db);
+    CHECK_MSG(rc == 1 && fx_count_lines(out) == 1 && strstr(out, "--light-height-m"), "%d: %s", rc, out);
+    rc = sh("%s run %s --db %s --light-height-m 10", test_bin(), fx_tmp("geo-capture"), db);
     CHECK_MSG(rc == 0, "%d: %s", rc, out);
     CHECK(query_long(db, "SELECT count(*) FROM captures") == 2);   /* survey geo-capture */
 }
@@ -546,35 +468,23 @@ static void run_child(const char *scene, const char *db, const char *capdir, chi
  * capture complete (its lights and frames as counted when it was stored), at most one. */
 static void check_after_kill(const char *db, int kill_no)
 {
-    if (!exists(db)) return;
+    if (!fx_exists(db)) return;
     sqlite3 *h = NULL;
     if (sqlite3_open_v2(db, &h, SQLITE_OPEN_READWRITE, NULL) != SQLITE_OK) {
         test_failed(__FILE__, __LINE__, "kill %d: %s: %s", kill_no, db, sqlite3_errmsg(h));
         sqlite3_close(h);
         return;
     }
-    sqlite3_stmt *q = NULL;
-    const char *ok = NULL;
-    if (sqlite3_prepare_v2(h, "PRAGMA integrity_check", -1, &q, NULL) == SQLITE_OK && sqlite3_step(q) == SQLITE_ROW)
-        ok = (const char *)sqlite3_column_text(q, 0);
-    CHECK_MSG(ok && !strcmp(ok, "ok"), "kill %d: integrity_check: %s", kill_no, ok ? ok : "(none)");
-    sqlite3_finalize(q);
+    const char *ok = survey_fx_query_text(h, "PRAGMA integrity_check");
+    CHECK_MSG(!strcmp(ok, "ok"), "kill %d: integrity_check: %s", kill_no, *ok ? ok : "(none)");
     static const char *const zero[] = {
         "SELECT count(*) FROM pragma_foreign_key_check",
         "SELECT count(*) FROM captures c WHERE light_count != (SELECT count(*) FROM lights WHERE "
         "capture_id = c.id) OR frame_count != (SELECT count(*) FROM frames WHERE capture_id = c.id)",
         "SELECT count(*) > 1 FROM captures",
     };
-    int has_schema = 0;
-    if (sqlite3_prepare_v2(h, "SELECT count(*) FROM sqlite_master WHERE name = 'captures'", -1, &q, NULL) == SQLITE_OK &&
-        sqlite3_step(q) == SQLITE_ROW)
-        has_schema = sqlite3_column_int(q, 0);
-    sqlite3_finalize(q);
-    for (size_t k = 0; has_schema && k < sizeof zero / sizeof *zero; k++) {
-        long v = -1;
-        if (sqlite3_prepare_v2(h, zero[k], -1, &q, NULL) == SQLITE_OK && sqlite3_step(q) == SQLITE_ROW)
-            v = sqlite3_column_int64(q, 0);
-        sqlite3_finalize(q);
+    for (size_t k = 0; survey_fx_has(h, "captures") && k < sizeof zero / sizeof *zero; k++) {
+        long v = survey_fx_query_long(h, zero[k]);
         CHECK_MSG(v == 0, "kill %d: %s -> %ld", kill_no, zero[k], v);
     }
     sqlite3_close(h);
@@ -592,11 +502,11 @@ static void check_after_kill(const char *db, int kill_no)
 TEST(pipeline_sigkill_resumes_to_same_content)
 {
     char scene[1024], ref_db[1024], db[1024], ref_cap[1024], cap[1024];
-    snprintf(scene, sizeof scene, "%s", tmp("small.json"));
-    snprintf(ref_db, sizeof ref_db, "%s", tmp("ref.sqlite"));
-    snprintf(db, sizeof db, "%s", tmp("crash.sqlite"));
-    snprintf(ref_cap, sizeof ref_cap, "%s", tmp("ref-cap"));
-    snprintf(cap, sizeof cap, "%s", tmp("crash-cap"));
+    snprintf(scene, sizeof scene, "%s", fx_tmp("small.json"));
+    snprintf(ref_db, sizeof ref_db, "%s", fx_tmp("ref.sqlite"));
+    snprintf(db, sizeof db, "%s", fx_tmp("crash.sqlite"));
+    snprintf(ref_cap, sizeof ref_cap, "%s", fx_tmp("ref-cap"));
+    snprintf(cap, sizeof cap, "%s", fx_tmp("crash-cap"));
     write_small_lab(scene, 0.25, NULL);
     srv_run_opts o;
     srv_run_opts_default(&o);
@@ -605,7 +515,7 @@ TEST(pipeline_sigkill_resumes_to_same_content)
     o.capture_dir = ref_cap;
     srv_run_report ref;
     CHECK_OK(srv_run(&o, &ref));
-    CHECK(check_against_truth(ref_db, tmp("ref-cap/truth.json"), 8) == 8);
+    CHECK(check_against_truth(ref_db, fx_tmp("ref-cap/truth.json"), 8) == 8);
     static const struct {
         int stage;            /* where the child stops; -1: it does not */
         const char *detail;   /* ... at the call whose detail starts so */
@@ -629,22 +539,18 @@ TEST(pipeline_sigkill_resumes_to_same_content)
                       : plan[k].stage == SRV_STAGE_STORE ? store_tx_s : ref.seconds[plan[k].stage];
         double wait_s = (plan[k].lo + u * (plan[k].hi - plan[k].lo)) * span;
         child_ctx cc = {-1, plan[k].stage, plan[k].detail};
-        int fds[2];
-        CHECK(pipe(fds) == 0);
-        fflush(stdout);
-        pid_t pid = fork();
+        int fd;
+        pid_t pid = fx_fork_pipe(&fd);
         if (pid == 0) {
-            close(fds[0]);
-            cc.fd = fds[1];
+            cc.fd = fd;
             run_child(scene, db, cap, &cc);
         }
-        close(fds[1]);
         int status = 0, last = -1, gone = 0;
         char c;
         if (plan[k].stage >= 0) {
             /* wait until it stops itself (or ends: a stage it never reaches) */
             if (waitpid(pid, &status, WUNTRACED) == pid && !WIFSTOPPED(status)) gone = 1;
-            while (read(fds[0], &c, 1) == 1 && !gone) {
+            while (read(fd, &c, 1) == 1 && !gone) {
                 last = c - '0';
                 if (last == plan[k].stage) break;
             }
@@ -656,8 +562,8 @@ TEST(pipeline_sigkill_resumes_to_same_content)
             kill(pid, SIGKILL);
             waitpid(pid, &status, 0);
         }
-        while (read(fds[0], &c, 1) == 1) last = c - '0';   /* where it got to */
-        close(fds[0]);
+        while (read(fd, &c, 1) == 1) last = c - '0';   /* where it got to */
+        close(fd);
         int was_killed = WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL;
         CHECK_MSG(was_killed || (WIFEXITED(status) && WEXITSTATUS(status) == 0),
                   "kill %d: the child exited with %d", k, WIFEXITED(status) ? WEXITSTATUS(status) : -1);
@@ -694,37 +600,37 @@ TEST(pipeline_sigkill_resumes_to_same_content)
 TEST(pipeline_bad_input_changes_nothing)
 {
     const char *dir = test_tmpdir();
-    const char *scene = tmp("small.json"), *db = tmp("ok.sqlite"), *cap = tmp("ok-cap");
+    const char *scene = fx_tmp("small.json"), *db = fx_tmp("ok.sqlite"), *cap = fx_tmp("ok-cap");
     write_small_lab(scene, 0.25, NULL);
     int rc = sh("%s run %s --db %s --capture-dir %s", test_bin(), scene, db, cap);
     CHECK_MSG(rc == 0, "%d: %s", rc, out);
     if (rc != 0) return;
     /* the bad inputs */
-    write_text(tmp("syntax.json"), "{\"format\": \"gridsurvey-scene/1\", \"grid\": {\"nominal_hz\": 50,,}\n");
-    write_small_lab(tmp("bulb.json"), 0.25, "no-such-bulb-9w");
-    write_text(tmp("notes.txt"), "not a database\n");
-    write_text(tmp("afile"), "a regular file\n");
-    write_text(tmp("station-bad.json"), "{\"format\": \"gridsurvey-station/1\", \"lat_deg\": 32.8,\n \"lon\": }\n");
-    write_text(tmp("station-ok.json"),
+    fx_write_text(fx_tmp("syntax.json"), "{\"format\": \"gridsurvey-scene/1\", \"grid\": {\"nominal_hz\": 50,,}\n");
+    write_small_lab(fx_tmp("bulb.json"), 0.25, "no-such-bulb-9w");
+    fx_write_text(fx_tmp("notes.txt"), "not a database\n");
+    fx_write_text(fx_tmp("afile"), "a regular file\n");
+    fx_write_text(fx_tmp("station-bad.json"), "{\"format\": \"gridsurvey-station/1\", \"lat_deg\": 32.8,\n \"lon\": }\n");
+    fx_write_text(fx_tmp("station-ok.json"),
                "{\"lat_deg\": 32.8, \"lon_deg\": 35, \"height_m\": 100, \"heading_deg\": 0, \"pitch_deg\": -5, "
                "\"focal_px\": 200, \"cx_px\": 79.5, \"cy_px\": 59.5, \"width_px\": 160, \"height_px\": 120}\n");
-    write_text(tmp("station-size.json"),
+    fx_write_text(fx_tmp("station-size.json"),
                "{\"lat_deg\": 32.8, \"lon_deg\": 35, \"height_m\": 100, \"heading_deg\": 0, \"pitch_deg\": -5, "
                "\"focal_px\": 400, \"cx_px\": 159.5, \"cy_px\": 119.5, \"width_px\": 640, \"height_px\": 480}\n");
     sqlite3 *h = NULL;
-    CHECK(sqlite3_open(tmp("other.sqlite"), &h) == SQLITE_OK);
+    CHECK(sqlite3_open(fx_tmp("other.sqlite"), &h) == SQLITE_OK);
     CHECK(sqlite3_exec(h, "CREATE TABLE t(x); INSERT INTO t VALUES (1)", NULL, NULL, NULL) == SQLITE_OK);
     sqlite3_close(h);
     CHECK(sh("cd %s && cp -r ok-cap missing && rm missing/frame_003.png && cp -r ok-cap trunc && "
              "truncate -s 900 trunc/frame_005.png && cp -r ok-cap wrongk && "
              "sed -i 's/\"K\": 26/\"K\": 25/' wrongk/capture.json && grep -q '\"K\": 25' wrongk/capture.json",
              dir) == 0);
-    if (geteuid() != 0) CHECK(mkdir(tmp("ro"), 0555) == 0);
+    if (geteuid() != 0) CHECK(mkdir(fx_tmp("ro"), 0555) == 0);
     char listing[1 << 15];
     snprintf(out, sizeof out, "cd %s && find . -printf '%%p %%s %%T@ %%m\\n' | sort", dir);
     CHECK(test_run(out, listing, sizeof listing) == 0);
     size_t size_before, size_after;
-    char *db_bytes = file_bytes(db, &size_before);
+    char *db_bytes = fx_read_file(db, &size_before);
     char bin[4096];
     CHECK(realpath(test_bin(), bin) != NULL);
     struct {
@@ -754,287 +660,21 @@ TEST(pipeline_bad_input_changes_nothing)
     size_t n_cases = sizeof cases / sizeof *cases - (geteuid() == 0);
     for (size_t i = 0; i < n_cases; i++) {
         rc = sh("cd %s && %s run %s", dir, bin, cases[i].args);
-        CHECK_MSG(rc == 1 && count_lines(out) == 1 && strstr(out, cases[i].expect) &&
+        CHECK_MSG(rc == 1 && fx_count_lines(out) == 1 && strstr(out, cases[i].expect) &&
                   strstr(out, "gridsurvey: "),
                   "run %s: exit %d, output: %s", cases[i].args, rc, out);
     }
     /* usage errors: exit 2 */
     rc = sh("%s run %s", test_bin(), scene);
-    CHECK(rc == 2 && count_lines(out) == 1 && strstr(out, "--db"));
+    CHECK(rc == 2 && fx_count_lines(out) == 1 && strstr(out, "--db"));
     rc = sh("%s run %s --db %s --phases 4", test_bin(), scene, db);
-    CHECK(rc == 2 && count_lines(out) == 1);
+    CHECK(rc == 2 && fx_count_lines(out) == 1);
     char listing2[1 << 15];
     snprintf(out, sizeof out, "cd %s && find . -printf '%%p %%s %%T@ %%m\\n' | sort", dir);
     CHECK(test_run(out, listing2, sizeof listing2) == 0);
     CHECK_MSG(!strcmp(listing, listing2), "files changed:\nbefore:\n%s\nafter:\n%s", listing, listing2);
-    char *db_after = file_bytes(db, &size_after);
+    char *db_after = fx_read_file(db, &size_after);
     CHECK(db_bytes && db_after && size_before == size_after && !memcmp(db_bytes, db_after, size_after));
     free(db_bytes);
     free(db_after);
-}
-
-/* ------------------------------------------------------------------ evaluation */
-
-/* GeodSolve (GeographicLib's own program): the point s12_m from (lat, lon) at azimuth azi. */
-static int geod_direct(double lat, double lon, double azi, double s12, double *lat2, double *lon2)
-{
-    char cmd[256], res[256];
-    snprintf(cmd, sizeof cmd, "echo %.12f %.12f %.12f %.12f | GeodSolve -p 9", lat, lon, azi, s12);
-    if (test_run(cmd, res, sizeof res) != 0) return 0;
-    return sscanf(res, "%lf %lf", lat2, lon2) == 2;
-}
-
-typedef struct {
-    double x, y;
-    const char *bulb, *tech;
-    double phase;            /* NaN: ambiguous */
-    int loc;                 /* 0: no location row, 1: unlocated row, 2: located */
-    double lat, lon;
-} hand_light;
-
-/* A hand-made capture with known answers (worked out in the comments), evaluated by the API
- * and by the CLI (table and JSON). */
-TEST(evaluate_hand_made_db_known_answers)
-{
-    if (sh("echo 0 0 0 1 | GeodSolve") != 0) {
-        printf("    (GeodSolve not installed: geographiclib-tools)\n");
-        CHECK(0);
-        return;
-    }
-    char capdir[1024], truth[1024], db[1024];
-    snprintf(capdir, sizeof capdir, "%s", tmp("cap"));
-    snprintf(truth, sizeof truth, "%s", tmp("cap/truth.json"));
-    snprintf(db, sizeof db, "%s", tmp("ev.sqlite"));
-    CHECK(mkdir(capdir, 0777) == 0);
-    /* Truth: T0..T6; T5 is off the image. T6 sits 1.5 px from T0 (one-to-one, nearest first). */
-    const double T[7][2] = {{100, 100}, {200, 100}, {300, 100}, {400, 100}, {500, 100}, {600, 100}, {101.5, 100}};
-    const double Tlat[7] = {32.80, 32.81, 32.82, 32.83, 32.84, 32.85, 32.86}, Tlon = 35.0;
-    char text[4096];
-    snprintf(text, sizeof text,
-             "{\"format\": \"gridsurvey-truth/1\", \"scene\": \"hand\", \"lights\": [\n"
-             "{\"id\": \"T0\", \"x_px\": %g, \"y_px\": %g, \"in_image\": true, \"lat_deg\": %.2f, \"lon_deg\": 35.0, \"bulb\": \"bulbA\", \"technology\": \"incandescent\", \"phase_deg\": 0.0},\n"
-             "{\"id\": \"T1\", \"x_px\": %g, \"y_px\": %g, \"in_image\": true, \"lat_deg\": %.2f, \"lon_deg\": 35.0, \"bulb\": \"bulbB\", \"technology\": \"cfl\", \"phase_deg\": 120.0},\n"
-             "{\"id\": \"T2\", \"x_px\": %g, \"y_px\": %g, \"in_image\": true, \"lat_deg\": %.2f, \"lon_deg\": 35.0, \"bulb\": \"bulbC\", \"technology\": \"sodium_hp\", \"phase_deg\": 240.0},\n"
-             "{\"id\": \"T3\", \"x_px\": %g, \"y_px\": %g, \"in_image\": true, \"lat_deg\": %.2f, \"lon_deg\": 35.0, \"bulb\": \"bulbC\", \"technology\": \"sodium_hp\", \"phase_deg\": 30.0},\n"
-             "{\"id\": \"T4\", \"x_px\": %g, \"y_px\": %g, \"in_image\": true, \"bulb\": \"bulbA\", \"technology\": \"incandescent\", \"phase_deg\": 0.0},\n"
-             "{\"id\": \"T5\", \"x_px\": %g, \"y_px\": %g, \"in_image\": false, \"bulb\": \"bulbA\", \"technology\": \"incandescent\", \"phase_deg\": 0.0},\n"
-             "{\"id\": \"T6\", \"x_px\": %g, \"y_px\": %g, \"in_image\": true, \"lat_deg\": %.2f, \"lon_deg\": 35.0, \"bulb\": \"bulbB\", \"technology\": \"cfl\", \"phase_deg\": 240.0}\n"
-             "]}\n",
-             T[0][0], T[0][1], Tlat[0], T[1][0], T[1][1], Tlat[1], T[2][0], T[2][1], Tlat[2], T[3][0], T[3][1],
-             Tlat[3], T[4][0], T[4][1], T[5][0], T[5][1], T[6][0], T[6][1], Tlat[6]);
-    write_text(truth, text);
-    /* Stored: S0 -> T0 (0.54 px; T6 is 1.01 px away but S1 takes it at 0.4 px), right bulb, phase
-     * 350 vs 0 (10 deg: right), located 3 m from T0. S1 -> T6: right bulb, phase 215 vs 240
-     * (25 deg: wrong, class "other"), located 10 m away. S2 -> T1 (1.41 px): wrong bulb of the
-     * right technology, phase 125 (right), located 20 m away. S3: 2.5 px from T2 (matched only
-     * with R = 3: right bulb and phase, unlocated row). S4 -> T3: right bulb, ambiguous phase, no
-     * location row. S5: nothing near. S6: next to T5, which is off the image. */
-    hand_light S[7] = {
-        {100.5, 100.2, "bulbA", "incandescent", 350.0, 2, 0, 0},
-        {101.9, 100.0, "bulbB", "cfl", 215.0, 2, 0, 0},
-        {201.0, 101.0, "bulbX", "cfl", 125.0, 2, 0, 0},
-        {300.0, 102.5, "bulbC", "sodium_hp", 240.0, 1, NAN, NAN},
-        {400.3, 99.8, "bulbC", "sodium_hp", NAN, 0, NAN, NAN},
-        {700.0, 700.0, NULL, NULL, NAN, 1, NAN, NAN},
-        {599.5, 100.0, "bulbA", "incandescent", 0.0, 1, NAN, NAN},
-    };
-    CHECK(geod_direct(Tlat[0], Tlon, 90.0, 3.0, &S[0].lat, &S[0].lon));
-    CHECK(geod_direct(Tlat[6], Tlon, 0.0, 10.0, &S[1].lat, &S[1].lon));
-    CHECK(geod_direct(Tlat[1], Tlon, 45.0, 20.0, &S[2].lat, &S[2].lon));
-    srv_db *h = NULL;
-    CHECK_OK(srv_db_open(db, SRV_DB_CREATE, &h));
-    if (!h) return;
-    int64_t sid = 0, sid2 = 0, cid = 0;
-    srv_survey_row sv = {.name = "hand", .grid_hz = 50};
-    CHECK_OK(srv_db_add_survey(h, &sv, &sid));
-    srv_light_row L[7];
-    srv_location_row loc[7];
-    for (int i = 0; i < 7; i++) {
-        srv_light_row_init(&L[i]);
-        L[i].index = i;
-        L[i].x_px = S[i].x;
-        L[i].y_px = S[i].y;
-        L[i].bulb_id = S[i].bulb;
-        L[i].technology = S[i].tech;
-        L[i].phase_deg = S[i].phase;
-        L[i].confidence = L[i].bulb_confidence = L[i].phase_confidence = 0.9;
-        L[i].match_flags = i == 2 ? REC_MATCH_BULB_AMBIGUOUS : 0;
-        srv_location_row_init(&loc[i]);
-        loc[i].method = S[i].loc ? SRV_LOC_ONE_STATION : SRV_LOC_NONE;
-        if (S[i].loc == 2) {
-            loc[i].lat_deg = S[i].lat;
-            loc[i].lon_deg = S[i].lon;
-            loc[i].height_m = 10.0;
-        } else if (S[i].loc == 1) {
-            loc[i].flags = GIS_FIX_ABOVE_HORIZON;
-        }
-    }
-    char abs_dir[4096];
-    CHECK(realpath(capdir, abs_dir) != NULL);
-    srv_capture_data cd;
-    memset(&cd, 0, sizeof cd);
-    srv_capture_row_init(&cd.capture);
-    cd.capture.survey_id = sid;
-    cd.capture.key = "hand-1";
-    cd.capture.path = abs_dir;
-    cd.capture.grid_hz = 50;
-    cd.lights = L;
-    cd.locations = loc;
-    cd.n_lights = 7;
-    CHECK_OK(srv_db_add_capture(h, &cd, &cid, NULL));
-    /* a second survey with another capture elsewhere: not the one the truth describes */
-    srv_survey_row sv2 = {.name = "other", .grid_hz = 50};
-    CHECK_OK(srv_db_add_survey(h, &sv2, &sid2));
-    srv_capture_row_init(&cd.capture);
-    cd.capture.survey_id = sid2;
-    cd.capture.key = "other-1";
-    cd.capture.path = "/nowhere";
-    cd.capture.grid_hz = 50;
-    cd.locations = NULL;
-    cd.n_lights = 2;
-    CHECK_OK(srv_db_add_capture(h, &cd, NULL, NULL));
-
-    srv_eval_opts o;
-    srv_eval_opts_default(&o);
-    CHECK(o.match_px == 2.0);
-    srv_eval_report r;
-    CHECK_OK(srv_evaluate(h, truth, &o, &r));
-    CHECK(!strcmp(r.survey, "hand") && !strcmp(r.capture_key, "hand-1") && r.capture_id == cid);
-    CHECK(r.truth_lights == 7 && r.truth_in_image == 6 && r.stored == 7);
-    CHECK(r.matched == 4 && r.false_detections == 3);   /* S0, S1, S2, S4; false S3, S5, S6 */
-    CHECK_NEAR(r.detection_rate, 4.0 / 6.0, 1e-15);
-    CHECK_NEAR(r.false_rate, 3.0 / 7.0, 1e-15);
-    CHECK(r.bulb_answered == 4 && r.bulb_correct == 3 && r.bulb_ambiguous == 1);
-    CHECK(r.tech_answered == 4 && r.tech_correct == 4);
-    CHECK(r.phase_answered == 3 && r.phase_correct == 2);
-    CHECK_NEAR(r.phase_accuracy, 2.0 / 3.0, 1e-15);
-    CHECK_NEAR(r.bulb_unknown_rate, 0.0, 0.0);
-    CHECK_NEAR(r.phase_unknown_rate, 0.25, 1e-15);
-    CHECK(r.all_correct == 1);   /* S0 only */
-    CHECK_NEAR(r.all_correct_rate, 1.0 / 6.0, 1e-15);
-    CHECK(r.confusion[0][0] == 1 && r.confusion[2][3] == 1 && r.confusion[1][1] == 1 && r.confusion[3][4] == 1);
-    long total = 0;
-    for (int t = 0; t < 4; t++)
-        for (int c = 0; c < SRV_EVAL_PHASE_CLASSES; c++) total += r.confusion[t][c];
-    CHECK(total == 4);
-    /* location errors 3, 10, 20 m: median 10, 95th percentile 10 + 0.9 * 10 = 19 (position
-     * 0.95 * 2 = 1.9), max 20; S4 has no location */
-    CHECK(r.loc_pairs == 3 && r.loc_unlocated == 1);
-    CHECK_NEAR(r.loc_median_m, 10.0, 1e-6);
-    CHECK_NEAR(r.loc_p95_m, 19.0, 1e-6);
-    CHECK_NEAR(r.loc_max_m, 20.0, 1e-6);
-    /* R = 3 takes in S3 -> T2: right bulb and phase; its location row is unlocated */
-    o.match_px = 3.0;
-    CHECK_OK(srv_evaluate(h, truth, &o, &r));
-    CHECK(r.matched == 5 && r.false_detections == 2 && r.bulb_correct == 4 && r.phase_correct == 3);
-    CHECK(r.phase_answered == 4 && r.all_correct == 2 && r.loc_unlocated == 2 && r.loc_pairs == 3);
-    /* an explicit capture key or survey chooses the same capture */
-    o.match_px = 2.0;
-    o.survey = "hand";
-    CHECK_OK(srv_evaluate(h, truth, &o, &r));
-    CHECK(r.matched == 4);
-    o.survey = NULL;
-    o.capture_key = "other-1";
-    CHECK_OK(srv_evaluate(h, truth, &o, &r));
-    CHECK(r.stored == 2 && !strcmp(r.survey, "other"));
-    /* errors: a key that is not there (not a fallback to the truth's directory), a survey */
-    o.capture_key = "nope-1";
-    CHECK(srv_evaluate(h, truth, &o, &r) == GS_ENOTFOUND && strstr(gs_detail(), "nope-1"));
-    o.capture_key = NULL;
-    o.survey = "nope";
-    CHECK(srv_evaluate(h, truth, &o, &r) == GS_ENOTFOUND);
-    o.survey = NULL;
-    o.match_px = 0.0;
-    CHECK(srv_evaluate(h, truth, &o, &r) == GS_EINVAL);
-    srv_db_close(h);
-
-    /* the CLI: the same numbers as a table and as JSON */
-    int rc = sh("%s evaluate --db %s --truth %s", test_bin(), db, truth);
-    CHECK_MSG(rc == 0, "%d: %s", rc, out);
-    CHECK(strstr(out, "| detection rate | 66.7 % | 4 / 6 truth lights in the image |") != NULL);
-    CHECK(strstr(out, "| false detections | 42.9 % | 3 / 7 stored lights |") != NULL);
-    CHECK(strstr(out, "| bulb accuracy | 75.0 % | 3 / 4 ") != NULL);
-    CHECK(strstr(out, "| phase accuracy | 66.7 % | 2 / 3 ") != NULL);
-    CHECK(strstr(out, "| location error, median | 10.00 m |") != NULL);
-    CHECK(strstr(out, "| location error, 95th percentile | 19.00 m |") != NULL);
-    CHECK(strstr(out, "| 240 | 0 | 0 | 0 | 1 | 0 |") != NULL);
-    rc = sh("%s evaluate --db %s --truth %s --match-px 3 --format json", test_bin(), db, truth);
-    json_error_t err;
-    json_t *j = json_loads(out, 0, &err);
-    CHECK_MSG(rc == 0 && j, "%d: %s", rc, out);
-    CHECK(!strcmp(json_string_value(json_object_get(j, "format")), "gridsurvey-evaluation/1"));
-    CHECK(json_integer_value(json_object_get(j, "matched")) == 5);
-    CHECK_NEAR(json_number_value(json_object_get(json_object_get(j, "detection"), "rate")), 5.0 / 6.0, 1e-9);
-    CHECK_NEAR(json_number_value(json_object_get(json_object_get(j, "location_error"), "p95_m")), 19.0, 1e-6);
-    CHECK(json_integer_value(json_object_get(json_object_get(json_object_get(j, "phase_confusion"), "other"),
-                                             "none")) == 1);
-    json_decref(j);
-    /* CLI errors: one line, exit 1 (failures) or 2 (usage) */
-    write_text(tmp("bad-truth.json"), "{\"format\": \"gridsurvey-scene/1\", \"lights\": []}\n");
-    CHECK(sh("%s evaluate --db %s --truth %s", test_bin(), db, tmp("bad-truth.json")) == 1 &&
-          count_lines(out) == 1 && strstr(out, "gridsurvey-truth/1"));
-    write_text(tmp("bad-truth2.json"), "{\"format\": \"gridsurvey-truth/1\", \"lights\": [{\"x_px\": 1}]}\n");
-    CHECK(sh("%s evaluate --db %s --truth %s", test_bin(), db, tmp("bad-truth2.json")) == 1 &&
-          count_lines(out) == 1 && strstr(out, "lights[0].in_image"));
-    CHECK(sh("%s evaluate --db %s --truth %s", test_bin(), db, tmp("none.json")) == 1 && count_lines(out) == 1);
-    CHECK(sh("%s evaluate --db %s --truth %s", test_bin(), tmp("bad-truth.json"), truth) == 1 &&
-          strstr(out, "not a survey database"));
-    CHECK(sh("%s evaluate --db %s --truth %s --match-px -1", test_bin(), db, truth) == 2 && count_lines(out) == 1);
-    CHECK(sh("%s evaluate --db %s", test_bin(), db) == 2 && count_lines(out) == 1);
-    /* a truth elsewhere and two captures to choose from: refused, naming them */
-    CHECK(mkdir(tmp("elsewhere"), 0777) == 0);
-    CHECK(sh("cp %s %s/", truth, tmp("elsewhere")) == 0);
-    CHECK(sh("%s evaluate --db %s --truth %s/truth.json", test_bin(), db, tmp("elsewhere")) == 1 &&
-          count_lines(out) == 1 && strstr(out, "hand/hand-1") && strstr(out, "--survey"));
-    CHECK(sh("%s evaluate --db %s --truth %s/truth.json --survey hand", test_bin(), db, tmp("elsewhere")) == 0);
-}
-
-/* Matching is one-to-one and nearest first, whatever the order of the rows: a crowded cluster
- * (every stored light within R of every truth light) matches all of them once, and the pair
- * taken first is the closest. */
-TEST(evaluate_matching_one_to_one_nearest_first)
-{
-    const char *capdir = tmp("c"), *truth = tmp("c/truth.json"), *db = tmp("m.sqlite");
-    CHECK(mkdir(capdir, 0777) == 0);
-    write_text(truth,
-               "{\"format\": \"gridsurvey-truth/1\", \"lights\": [\n"
-               "{\"x_px\": 10.0, \"y_px\": 10.0, \"in_image\": true, \"bulb\": \"a\", \"technology\": \"cfl\", \"phase_deg\": 0},\n"
-               "{\"x_px\": 10.8, \"y_px\": 10.0, \"in_image\": true, \"bulb\": \"b\", \"technology\": \"cfl\", \"phase_deg\": 120},\n"
-               "{\"x_px\": 11.6, \"y_px\": 10.0, \"in_image\": true, \"bulb\": \"c\", \"technology\": \"cfl\", \"phase_deg\": 240}]}\n");
-    /* stored in reverse order; each 0.1 px right of its truth light */
-    const double xs[3] = {11.7, 10.9, 10.1};
-    const char *bulbs[3] = {"c", "b", "a"};
-    const double ph[3] = {240, 120, 0};
-    srv_db *h = NULL;
-    CHECK_OK(srv_db_open(db, SRV_DB_CREATE, &h));
-    if (!h) return;
-    int64_t sid;
-    srv_survey_row sv = {.name = "m"};
-    CHECK_OK(srv_db_add_survey(h, &sv, &sid));
-    srv_light_row L[3];
-    for (int i = 0; i < 3; i++) {
-        srv_light_row_init(&L[i]);
-        L[i].index = i;
-        L[i].x_px = xs[i];
-        L[i].y_px = 10.0;
-        L[i].bulb_id = bulbs[i];
-        L[i].technology = "cfl";
-        L[i].phase_deg = ph[i];
-        L[i].confidence = L[i].bulb_confidence = L[i].phase_confidence = 1.0;
-    }
-    srv_capture_data cd;
-    memset(&cd, 0, sizeof cd);
-    srv_capture_row_init(&cd.capture);
-    cd.capture.survey_id = sid;
-    cd.capture.key = "k";
-    cd.lights = L;
-    cd.n_lights = 3;
-    CHECK_OK(srv_db_add_capture(h, &cd, NULL, NULL));
-    srv_eval_opts o;
-    srv_eval_opts_default(&o);
-    o.match_px = 5.0;
-    srv_eval_report r;
-    CHECK_OK(srv_evaluate(h, truth, &o, &r));
-    CHECK(r.matched == 3 && r.bulb_correct == 3 && r.phase_correct == 3 && r.false_detections == 0);
-    srv_db_close(h);
 }

@@ -3,37 +3,12 @@
  * voltage column give the analytic BRF at the right phase; scope file variants (BOM, metadata,
  * a header running into the first sample, CRLF, a space in the name) parse identically. */
 #include "recognize/base/internal.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-
-static char *tmp_path(const char *name)
-{
-    static char buf[4][600];
-    static int k;
-    k = (k + 1) % 4;
-    snprintf(buf[k], sizeof buf[k], "%s/%s", test_tmpdir(), name);
-    return buf[k];
-}
-
-static char *read_all(const char *path)
-{
-    FILE *f = fopen(path, "rb");
-    if (!f) return NULL;
-    fseek(f, 0, SEEK_END);
-    long sz = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    char *buf = malloc((size_t)sz + 1);
-    if (buf && fread(buf, 1, (size_t)sz, f) != (size_t)sz) {
-        free(buf);
-        buf = NULL;
-    }
-    if (buf) buf[sz] = '\0';
-    fclose(f);
-    return buf;
-}
 
 static void write_file(const char *path, const char *a, const char *b)
 {
@@ -149,7 +124,7 @@ TEST(recording_synthetic_voltage_brf_and_phase)
         {59.98, 0.0007, 1.0 / 3.0, 100e3, 0.004}, /* 60 Hz grid, phase 240 deg */
     };
     for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
-        const char *p = tmp_path("synthetic.csv");
+        const char *p = fx_tmp("synthetic.csv");
         write_synthetic(p, cases[i].ac_hz, cases[i].t_zero, cases[i].shift, cases[i].rate_hz, 0.3,
                         cases[i].sigma);
         gs_bulb b;
@@ -181,7 +156,7 @@ TEST(recording_synthetic_voltage_brf_and_phase)
 
 TEST(recording_pwm_is_unlocked)
 {
-    const char *p = tmp_path("pwm.csv");
+    const char *p = fx_tmp("pwm.csv");
     FILE *f = fopen(p, "w");
     CHECK(f != NULL);
     if (!f) return;
@@ -201,7 +176,7 @@ TEST(recording_pwm_is_unlocked)
 
 TEST(recording_flat_lamp_has_no_frequency)
 {
-    const char *p = tmp_path("dc.csv");
+    const char *p = fx_tmp("dc.csv");
     FILE *f = fopen(p, "w");
     CHECK(f != NULL);
     if (!f) return;
@@ -242,15 +217,15 @@ TEST(recording_scope_variants_parse_identically)
     gs_bulb ref_b;
     gs_recording_info ref_i;
     CHECK_OK(gs_recording_to_bulb(plain, 0, 1024, &ref_b, &ref_i));
-    char *data = read_all(plain);
+    char *data = fx_read_file(plain, NULL);
     CHECK(data != NULL);
     if (!data) return;
     /* BOM + metadata + header on its own line */
-    const char *a = tmp_path("meta.csv");
+    const char *a = fx_tmp("meta.csv");
     write_file(a, SCOPE_META "\r\n", data);
     CHECK(same_result(a, &ref_b, &ref_i));
     /* ... with the header running straight into the first sample */
-    const char *b = tmp_path("runin.csv");
+    const char *b = fx_tmp("runin.csv");
     write_file(b, SCOPE_META, data);
     CHECK(same_result(b, &ref_b, &ref_i));
     /* LF instead of CRLF, and a file name with a space */
@@ -258,7 +233,7 @@ TEST(recording_scope_variants_parse_identically)
     for (const char *c = data; *c; c++)
         if (*c != '\r') *o++ = *c;
     *o = '\0';
-    const char *c = tmp_path("my CFL bulb.csv");
+    const char *c = fx_tmp("my CFL bulb.csv");
     write_file(c, lf, "\n");
     CHECK(same_result(c, &ref_b, &ref_i));
     gs_bulb named;
@@ -275,7 +250,7 @@ TEST(recording_rejects_bad_input)
     gs_bulb b;
     char expect[700];
     /* a non-numeric value in the data */
-    const char *p = tmp_path("bad.csv");
+    const char *p = fx_tmp("bad.csv");
     FILE *f = fopen(p, "w");
     CHECK(f != NULL);
     if (!f) return;
@@ -303,7 +278,7 @@ TEST(recording_rejects_bad_input)
     CHECK(gs_recording_to_bulb(p, 0, 64, &b, NULL) == GS_EFORMAT);
     CHECK(strstr(gs_detail(), p) != NULL);
     CHECK(gs_recording_to_bulb(test_shared_path("data/flicker/info.csv"), 0, 64, &b, NULL) == GS_EFORMAT);
-    CHECK(gs_recording_to_bulb(tmp_path("missing.csv"), 0, 64, &b, NULL) == GS_ENOTFOUND);
+    CHECK(gs_recording_to_bulb(fx_tmp("missing.csv"), 0, 64, &b, NULL) == GS_ENOTFOUND);
     /* a voltage that is not mains */
     f = fopen(p, "w");
     for (int i = 0; i < 30000; i++)

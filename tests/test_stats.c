@@ -7,6 +7,8 @@
  * benchmark in --quick mode. */
 #include "gis/gis.h"
 #include "survey/survey.h"
+#include "tests/fixtures.h"
+#include "tests/survey_fixture.h"
 #include "tests/test.h"
 
 #include <jansson.h>
@@ -21,27 +23,10 @@
 
 static char out[1 << 18];
 
-static const char *tmp(const char *name)
-{
-    static char buf[8][1024];
-    static int k;
-    k = (k + 1) % 8;
-    snprintf(buf[k], sizeof buf[k], "%s/%s", test_tmpdir(), name);
-    return buf[k];
-}
-
+/* `gridsurvey ...`: fmt's first %s is the binary (tests/fixtures.h); output in out. */
 static int run(const char *fmt, const char *a, const char *b, const char *c)
 {
-    char cmd[8192];
-    snprintf(cmd, sizeof cmd, fmt, test_bin(), a ? a : "", b ? b : "", c ? c : "");
-    return test_run(cmd, out, sizeof out);
-}
-
-static int count_lines(const char *s)
-{
-    int n = 0;
-    for (; *s; s++) n += *s == '\n';
-    return n;
+    return fx_run_bin(out, sizeof out, fmt, a, b, c);
 }
 
 /* ------------------------------------------------------------------ formulas */
@@ -144,24 +129,16 @@ TEST(stats_phase_class_matches_gis)
 
 /* ------------------------------------------------------------------ database */
 
+/* A synthetic survey of uniform layout, phases in the ratio w0 : w1 : w2. */
 static void synth(const char *path, const char *survey, size_t captures, size_t lights,
                   unsigned long long seed, double w0, double w1, double w2, double half_width_m)
 {
-    srv_db *db = NULL;
-    CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
-    srv_synth_opts o;
-    srv_synth_opts_default(&o);
-    o.survey = survey;
-    o.captures = captures;
-    o.lights_per_capture = lights;
-    o.seed = seed;
+    srv_synth_opts o = survey_fx_synth_opts(survey, captures, lights, seed);
     o.phase_weights[0] = w0;
     o.phase_weights[1] = w1;
     o.phase_weights[2] = w2;
-    o.half_width_m = 0.0;   /* every capture sees the whole square: a uniform layout */
     o.view_half_width_m = half_width_m;
-    CHECK_OK(srv_synth_ingest(db, &o, NULL));
-    srv_db_close(db);
+    survey_fx_synth(path, &o);
 }
 
 static srv_phase_stats *compute(srv_db *db, const char *by, double min_conf, size_t *n, long *ungrouped)
@@ -178,7 +155,7 @@ static srv_phase_stats *compute(srv_db *db, const char *by, double min_conf, siz
 /* phase_counts and phase_balance (SQL) equal the C computation for every group. */
 TEST(stats_sql_views_match_c)
 {
-    const char *path = tmp("v.sqlite");
+    const char *path = fx_tmp("v.sqlite");
     synth(path, "east", 10, 80, 3, 1, 1, 1, 2000);
     synth(path, "west", 6, 80, 4, 3, 2, 1, 2000);
     srv_db *db = NULL;
@@ -190,21 +167,10 @@ TEST(stats_sql_views_match_c)
                                   720.0, 60.0, 180.0, 300.0};
     enum { NE = sizeof edge / sizeof *edge };
     srv_light_row l[NE];
-    for (int i = 0; i < NE; i++) {
-        srv_light_row_init(&l[i]);
-        l[i].index = i;
-        l[i].x_px = l[i].y_px = i;
-        l[i].phase_deg = edge[i];
-        l[i].confidence = l[i].bulb_confidence = l[i].phase_confidence = 1.0;
-    }
+    for (int i = 0; i < NE; i++) l[i] = survey_fx_light(i, i, i, edge[i], 1.0);
     int64_t sid;
     CHECK_OK(srv_db_find_survey(db, "east", &sid));
-    srv_capture_data cd = {0};
-    srv_capture_row_init(&cd.capture);
-    cd.capture.survey_id = sid;
-    cd.capture.key = "edges";
-    cd.lights = l;
-    cd.n_lights = NE;
+    srv_capture_data cd = survey_fx_capture(sid, "edges", l, NULL, NE);
     CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
     sqlite3 *h = srv_db_sqlite(db);
     /* per light: the view's class equals gs_phase_class of the stored phase */
@@ -266,33 +232,21 @@ TEST(stats_sql_views_match_c)
 
 TEST(stats_min_confidence_unknown_other)
 {
-    const char *path = tmp("c.sqlite");
-    srv_db *db = NULL;
-    CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
-    if (!db) return;
-    srv_survey_row sr = {"conf", NULL, NULL, NULL, 50};
+    const char *path = fx_tmp("c.sqlite");
     int64_t sid;
-    CHECK_OK(srv_db_add_survey(db, &sr, &sid));
+    srv_db *db = survey_fx_create(path, "conf", &sid);
+    if (!db) return;
     /* phase, phase confidence */
     static const double spec[][2] = {{0, 0.99}, {0, 0.95}, {0, 0.5}, {120, 0.97}, {120, 0.2},
                                      {240, 0.91}, {NAN, 0.3}, {NAN, 0.95}, {60, 0.99}, {240, 0.9}};
     enum { N = sizeof spec / sizeof *spec };
     srv_light_row l[N];
     for (int i = 0; i < N; i++) {
-        srv_light_row_init(&l[i]);
-        l[i].index = i;
-        l[i].x_px = l[i].y_px = 1;
-        l[i].phase_deg = spec[i][0];
+        l[i] = survey_fx_light(i, 1, 1, spec[i][0], 0.5);
         l[i].phase_confidence = spec[i][1];
-        l[i].confidence = l[i].bulb_confidence = 0.5;
         l[i].technology = i % 2 ? "cfl" : NULL;
     }
-    srv_capture_data cd = {0};
-    srv_capture_row_init(&cd.capture);
-    cd.capture.survey_id = sid;
-    cd.capture.key = "c";
-    cd.lights = l;
-    cd.n_lights = N;
+    srv_capture_data cd = survey_fx_capture(sid, "c", l, NULL, N);
     CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
     size_t n = 0;
     srv_phase_stats *g = compute(db, "all", 0.0, &n, NULL);
@@ -322,7 +276,7 @@ TEST(stats_min_confidence_unknown_other)
 /* Uniform populations give p-values spread over (0, 1); an imbalanced one gives a tiny p. */
 TEST(stats_pvalues_uniform_vs_imbalanced)
 {
-    const char *uni = tmp("u.sqlite"), *imb = tmp("i.sqlite");
+    const char *uni = fx_tmp("u.sqlite"), *imb = fx_tmp("i.sqlite");
     synth(uni, "uniform", 100, 150, 17, 1, 1, 1, 2000);   /* 15000 lights over 4 km x 4 km */
     srv_db *db = NULL;
     CHECK_OK(srv_db_open(uni, SRV_DB_READ, &db));
@@ -376,13 +330,10 @@ TEST(stats_pvalues_uniform_vs_imbalanced)
  * radius filter keeps those at 400 m and drops those at 600 m. */
 TEST(stats_by_cell_and_radius)
 {
-    const char *path = tmp("geo.sqlite");
-    srv_db *db = NULL;
-    CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
-    if (!db) return;
-    srv_survey_row sr = {"geo", NULL, NULL, NULL, 50};
+    const char *path = fx_tmp("geo.sqlite");
     int64_t sid;
-    CHECK_OK(srv_db_add_survey(db, &sr, &sid));
+    srv_db *db = survey_fx_create(path, "geo", &sid);
+    if (!db) return;
     const double lat0 = 32.8, lon0 = 35.0, R = GIS_EARTH_RADIUS_M, d2r = M_PI / 180.0;
     /* 4 cells at (+-50, +-50) m, cell c holding 3 + c lights on phase c % 3; plus 8 lights at
      * 400 m and 12 at 600 m in all directions (symmetric, so the mean stays at the centre) */
@@ -393,12 +344,8 @@ TEST(stats_by_cell_and_radius)
     const double cx[4] = {-50, 50, -50, 50}, cy[4] = {-50, -50, 50, 50};
     for (int c = 0; c < 4; c++)
         for (int k = 0; k < 3 + c; k++) {
-            srv_light_row_init(&l[nl]);
+            l[nl] = survey_fx_light(nl, 0, 0, 120.0 * (c % 3), 1);
             srv_location_row_init(&loc[nl]);
-            l[nl].index = nl;
-            l[nl].x_px = l[nl].y_px = 0;
-            l[nl].phase_deg = 120.0 * (c % 3);
-            l[nl].confidence = l[nl].bulb_confidence = l[nl].phase_confidence = 1;
             loc[nl].method = SRV_LOC_TRUTH;
             double dx = cx[c] + (k - 1) * 5.0 * (c % 2 ? 1 : -1), dy = cy[c];
             loc[nl].lat_deg = lat0 + dy / R / d2r;
@@ -411,12 +358,8 @@ TEST(stats_by_cell_and_radius)
         double dist = ring ? 600.0 : 400.0;
         for (int k = 0; k < count; k++) {
             double az = 2 * M_PI * k / count;
-            srv_light_row_init(&l[nl]);
+            l[nl] = survey_fx_light(nl, 0, 0, ring ? 240.0 : 0.0, 1);
             srv_location_row_init(&loc[nl]);
-            l[nl].index = nl;
-            l[nl].x_px = l[nl].y_px = 0;
-            l[nl].phase_deg = ring ? 240.0 : 0.0;
-            l[nl].confidence = l[nl].bulb_confidence = l[nl].phase_confidence = 1;
             loc[nl].method = SRV_LOC_TRUTH;
             /* spherical destination point */
             double d = dist / R, la1 = lat0 * d2r;
@@ -428,13 +371,7 @@ TEST(stats_by_cell_and_radius)
         }
     }
     (void)base;
-    srv_capture_data cd = {0};
-    srv_capture_row_init(&cd.capture);
-    cd.capture.survey_id = sid;
-    cd.capture.key = "geo";
-    cd.lights = l;
-    cd.locations = loc;
-    cd.n_lights = (size_t)nl;
+    srv_capture_data cd = survey_fx_capture(sid, "geo", l, loc, (size_t)nl);
     CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
     size_t n = 0;
     char by[128];
@@ -487,7 +424,7 @@ TEST(stats_by_cell_and_radius)
 /* The paper's Haifa-like answer with its uncertainty, end to end through the CLI. */
 TEST(stats_cli_haifa_example)
 {
-    const char *path = tmp("haifa.sqlite");
+    const char *path = fx_tmp("haifa.sqlite");
     srv_db *db = NULL;
     CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
     if (!db) return;
@@ -497,20 +434,11 @@ TEST(stats_cli_haifa_example)
     enum { N = 1000 };
     srv_light_row *l = malloc(N * sizeof *l);
     for (int i = 0; i < N; i++) {
-        srv_light_row_init(&l[i]);
-        l[i].index = i;
-        l[i].x_px = l[i].y_px = i;
-        l[i].phase_deg = i < 334 ? 0.0 : i < 334 + 363 ? 120.0 : 240.0;
-        l[i].confidence = l[i].bulb_confidence = l[i].phase_confidence = 0.99;
+        l[i] = survey_fx_light(i, i, i, i < 334 ? 0.0 : i < 334 + 363 ? 120.0 : 240.0, 0.99);
         l[i].technology = "sodium_hp";
         l[i].bulb_id = "sodium_hp_150w";
     }
-    srv_capture_data cd = {0};
-    srv_capture_row_init(&cd.capture);
-    cd.capture.survey_id = sid;
-    cd.capture.key = "bay";
-    cd.lights = l;
-    cd.n_lights = N;
+    srv_capture_data cd = survey_fx_capture(sid, "bay", l, NULL, N);
     CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
     srv_db_close(db);
     free(l);
@@ -535,23 +463,23 @@ TEST(stats_cli_haifa_example)
     CHECK_NEAR(json_real_value(json_object_get(g0, "imbalance")), 3 * (1 / 3.0 - 0.303), 1e-9);
     json_decref(root);
     CHECK(run("%s stats --db %s --format csv --survey haifa", path, NULL, NULL) == 0);
-    CHECK(count_lines(out) == 2 && !strncmp(out, "group,lat_deg,lon_deg,lights,", 29));
+    CHECK(fx_count_lines(out) == 2 && !strncmp(out, "group,lat_deg,lon_deg,lights,", 29));
     CHECK(strstr(out, "\nall,,,1000,0,0,0,334,363,303,1000,0.334,") != NULL);
 }
 
 TEST(stats_cli_bad_input)
 {
-    const char *path = tmp("b.sqlite");
+    const char *path = fx_tmp("b.sqlite");
     synth(path, "b", 1, 10, 1, 1, 1, 1, 100);
     CHECK(run("%s stats --help", NULL, NULL, NULL) == 0 && strstr(out, "Wilson"));
-    CHECK(run("%s stats --db %s --by colour", path, NULL, NULL) == 2 && count_lines(out) == 1);
+    CHECK(run("%s stats --db %s --by colour", path, NULL, NULL) == 2 && fx_count_lines(out) == 1);
     CHECK(run("%s stats --db %s --by cell:0", path, NULL, NULL) == 2);
     CHECK(run("%s stats --db %s --by radius:95,1,100", path, NULL, NULL) == 2);
     CHECK(run("%s stats --db %s --min-confidence 1.5", path, NULL, NULL) == 2);
     CHECK(run("%s stats --db %s --format xml", path, NULL, NULL) == 2);
     CHECK(run("%s stats", NULL, NULL, NULL) == 2);
     CHECK(run("%s stats --db %s --survey nobody", path, NULL, NULL) == 1);
-    CHECK(count_lines(out) == 1 && strstr(out, "nobody"));
+    CHECK(fx_count_lines(out) == 1 && strstr(out, "nobody"));
     CHECK(run("%s stats --db %s --by cell:100m --format csv", path, NULL, NULL) == 0);
     CHECK(run("%s stats --db %s --by survey", path, NULL, NULL) == 0 && strstr(out, "| b |"));
 }
@@ -559,7 +487,7 @@ TEST(stats_cli_bad_input)
 /* `gridsurvey bench db --quick` (srv_bench_db) runs and prints its Markdown table. */
 TEST(stats_bench_db_quick_runs)
 {
-    const char *log = tmp("bench.md");
+    const char *log = fx_tmp("bench.md");
     fflush(stdout);
     int saved = dup(1), fd = open(log, O_WRONLY | O_CREAT | O_TRUNC, 0644);
     CHECK(saved >= 0 && fd >= 0);
@@ -573,14 +501,11 @@ TEST(stats_bench_db_quick_runs)
     dup2(saved, 1);
     close(saved);
     CHECK(rc == 0);
-    FILE *f = fopen(log, "r");
-    size_t len = f ? fread(out, 1, sizeof out - 1, f) : 0;
-    out[len] = '\0';
-    if (f) fclose(f);
-    CHECK(strstr(out, "| lights | ingest s | lights/s |") != NULL);
-    CHECK(strstr(out, "\n| 10000 | ") != NULL);
-    char p[1100];
-    snprintf(p, sizeof p, "%s/bench.sqlite", test_tmpdir());
+    char *md = fx_read_file(log, NULL);
+    CHECK(md && strstr(md, "| lights | ingest s | lights/s |") != NULL);
+    CHECK(md && strstr(md, "\n| 10000 | ") != NULL);
+    free(md);
+    const char *p = fx_tmp("bench.sqlite");
     struct stat st;
     CHECK(stat(p, &st) != 0);   /* removed without --keep */
 }

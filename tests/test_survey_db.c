@@ -1,15 +1,14 @@
-/* test_survey_db.c - the survey database (survey/db.c) and `gridsurvey export`:
- * schema and migrations, refusal of files that are not survey databases (nothing changed on
- * disk), unwritable paths, read-only handles, idempotent and atomic ingest, the R*Tree kept in
- * sync, SIGKILL at random points during ingest followed by a resume (checked through a raw
- * SQLite connection, independently of the library), and exports read back by Jansson and
- * SQLite with their filters checked against plain SQL. */
+/* test_survey_db.c - the survey database (survey/db.c): schema and migrations, refusal of
+ * files that are not survey databases (nothing changed on disk), unwritable paths, read-only
+ * handles, idempotent and atomic ingest, the R*Tree kept in sync, SIGKILL at random points
+ * during ingest followed by a resume (checked through a raw SQLite connection, independently of
+ * the library). `gridsurvey export`: tests/test_survey_export.c. */
 #include "gis/gis.h"
 #include "survey/survey.h"
+#include "tests/fixtures.h"
+#include "tests/survey_fixture.h"
 #include "tests/test.h"
 
-#include <errno.h>
-#include <jansson.h>
 #include <math.h>
 #include <signal.h>
 #include <sqlite3.h>
@@ -23,26 +22,10 @@
 
 static char out[1 << 18];
 
-static const char *tmp(const char *name)
+/* `gridsurvey ...`: fmt's first %s is the binary (tests/fixtures.h); output in out. */
+static int run(const char *fmt, const char *a, const char *b, const char *c)
 {
-    static char buf[8][1024];
-    static int k;
-    k = (k + 1) % 8;
-    snprintf(buf[k], sizeof buf[k], "%s/%s", test_tmpdir(), name);
-    return buf[k];
-}
-
-static int count_lines(const char *s)
-{
-    int n = 0;
-    for (; *s; s++) n += *s == '\n';
-    return n;
-}
-
-static int exists(const char *path)
-{
-    struct stat st;
-    return stat(path, &st) == 0;
+    return fx_run_bin(out, sizeof out, fmt, a, b, c);
 }
 
 static int sidecars(const char *path)
@@ -52,7 +35,7 @@ static int sidecars(const char *path)
     int n = 0;
     for (int i = 0; i < 3; i++) {
         snprintf(p, sizeof p, "%s%s", path, suffix[i]);
-        n += exists(p);
+        n += fx_exists(p);
     }
     return n;
 }
@@ -91,71 +74,22 @@ static int unchanged(const char *path, snapshot *before)
     return same;
 }
 
-static long query_long(sqlite3 *db, const char *sql)
-{
-    sqlite3_stmt *q = NULL;
-    long v = -1;
-    if (sqlite3_prepare_v2(db, sql, -1, &q, NULL) == SQLITE_OK && sqlite3_step(q) == SQLITE_ROW)
-        v = (long)sqlite3_column_int64(q, 0);
-    else
-        test_failed(__FILE__, __LINE__, "query '%s': %s", sql, sqlite3_errmsg(db));
-    sqlite3_finalize(q);
-    return v;
-}
-
-static const char *query_text(sqlite3 *db, const char *sql)
-{
-    static char buf[256];
-    sqlite3_stmt *q = NULL;
-    buf[0] = '\0';
-    if (sqlite3_prepare_v2(db, sql, -1, &q, NULL) == SQLITE_OK && sqlite3_step(q) == SQLITE_ROW &&
-        sqlite3_column_text(q, 0))
-        snprintf(buf, sizeof buf, "%s", (const char *)sqlite3_column_text(q, 0));
-    sqlite3_finalize(q);
-    return buf;
-}
-
-static int run(const char *fmt, const char *a, const char *b, const char *c)
-{
-    char cmd[8192];
-    snprintf(cmd, sizeof cmd, fmt, test_bin(), a ? a : "", b ? b : "", c ? c : "");
-    return test_run(cmd, out, sizeof out);
-}
-
-/* A small synthetic survey. */
-static void make_synth(const char *path, const char *survey, size_t captures, size_t lights,
-                       unsigned long long seed)
-{
-    srv_db *db = NULL;
-    CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
-    srv_synth_opts o;
-    srv_synth_opts_default(&o);
-    o.survey = survey;
-    o.captures = captures;
-    o.lights_per_capture = lights;
-    o.seed = seed;
-    o.half_width_m = 0.0;   /* every capture sees the whole 4 km square */
-    o.view_half_width_m = 2000.0;
-    CHECK_OK(srv_synth_ingest(db, &o, NULL));
-    srv_db_close(db);
-}
-
 /* ------------------------------------------------------------------ schema */
 
 TEST(survey_db_schema_created)
 {
-    const char *path = tmp("s.sqlite");
+    const char *path = fx_tmp("s.sqlite");
     srv_db *db = NULL;
     CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
     if (!db) return;
     sqlite3 *h = srv_db_sqlite(db);
-    CHECK(query_long(h, "PRAGMA application_id") == SRV_DB_APPLICATION_ID);
-    CHECK(query_long(h, "PRAGMA user_version") == SRV_DB_SCHEMA_VERSION);
-    CHECK(query_long(h, "PRAGMA foreign_keys") == 1);
-    CHECK(!strcmp(query_text(h, "PRAGMA journal_mode"), "wal"));
-    CHECK(query_long(h, "PRAGMA synchronous") == 1);   /* NORMAL */
-    CHECK(!strcmp(query_text(h, "SELECT value FROM meta WHERE key = 'format'"), SRV_DB_FORMAT));
-    CHECK(query_long(h, "SELECT count(*) FROM migrations") == SRV_DB_SCHEMA_VERSION);
+    CHECK(survey_fx_query_long(h, "PRAGMA application_id") == SRV_DB_APPLICATION_ID);
+    CHECK(survey_fx_query_long(h, "PRAGMA user_version") == SRV_DB_SCHEMA_VERSION);
+    CHECK(survey_fx_query_long(h, "PRAGMA foreign_keys") == 1);
+    CHECK(!strcmp(survey_fx_query_text(h, "PRAGMA journal_mode"), "wal"));
+    CHECK(survey_fx_query_long(h, "PRAGMA synchronous") == 1);   /* NORMAL */
+    CHECK(!strcmp(survey_fx_query_text(h, "SELECT value FROM meta WHERE key = 'format'"), SRV_DB_FORMAT));
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM migrations") == SRV_DB_SCHEMA_VERSION);
     static const char *const objects[] = {
         "surveys", "stations", "captures", "frames", "lights", "locations", "locations_rtree",
         "grid_frequency", "delight_versions", "migrations", "meta", "light_phase",
@@ -164,31 +98,31 @@ TEST(survey_db_schema_created)
     for (size_t i = 0; i < sizeof objects / sizeof *objects; i++) {
         char sql[256];
         snprintf(sql, sizeof sql, "SELECT count(*) FROM sqlite_master WHERE name = '%s'", objects[i]);
-        CHECK_MSG(query_long(h, sql) == 1, "schema object %s missing", objects[i]);
+        CHECK_MSG(survey_fx_query_long(h, sql) == 1, "schema object %s missing", objects[i]);
     }
     /* the views need SQLite's math functions (Debian's build has them) */
     CHECK(sqlite3_compileoption_used("ENABLE_MATH_FUNCTIONS") == 1);
     srv_db_close(db);
     /* reopening (all modes) keeps everything; no migration runs twice */
     CHECK_OK(srv_db_open(path, SRV_DB_WRITE, &db));
-    CHECK(query_long(srv_db_sqlite(db), "SELECT count(*) FROM migrations") == SRV_DB_SCHEMA_VERSION);
+    CHECK(survey_fx_query_long(srv_db_sqlite(db), "SELECT count(*) FROM migrations") == SRV_DB_SCHEMA_VERSION);
     srv_db_close(db);
     CHECK_OK(srv_db_open(path, SRV_DB_READ, &db));
     srv_db_close(db);
     /* CLI */
-    CHECK(run("%s db init --db %s", tmp("cli.sqlite"), NULL, NULL) == 0);
-    CHECK(run("%s db check --db %s", tmp("cli.sqlite"), NULL, NULL) == 0 && strstr(out, ": ok"));
+    CHECK(run("%s db init --db %s", fx_tmp("cli.sqlite"), NULL, NULL) == 0);
+    CHECK(run("%s db check --db %s", fx_tmp("cli.sqlite"), NULL, NULL) == 0 && strstr(out, ": ok"));
     CHECK(run("%s db --help", NULL, NULL, NULL) == 0 && strstr(out, "ingest-synthetic"));
 }
 
 TEST(survey_db_migrates_from_v1)
 {
-    const char *path = tmp("v1.sqlite");
+    const char *path = fx_tmp("v1.sqlite");
     CHECK_OK(srv_db_create_at_version(path, 1));
     sqlite3 *h = NULL;
     CHECK(sqlite3_open_v2(path, &h, SQLITE_OPEN_READWRITE, NULL) == SQLITE_OK);
-    CHECK(query_long(h, "PRAGMA user_version") == 1);
-    CHECK(query_long(h, "SELECT count(*) FROM sqlite_master WHERE name = 'phase_balance'") == 0);
+    CHECK(survey_fx_query_long(h, "PRAGMA user_version") == 1);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM sqlite_master WHERE name = 'phase_balance'") == 0);
     CHECK(sqlite3_exec(h, "INSERT INTO surveys(name, created_utc) VALUES ('old', 'then');"
                           "INSERT INTO captures(survey_id, capture_key, light_count, frame_count, "
                           "frequency_count, ingested_utc) VALUES (1, 'c1', 1, 0, 0, 'then');"
@@ -208,16 +142,16 @@ TEST(survey_db_migrates_from_v1)
     CHECK_OK(srv_db_open(path, SRV_DB_READ, &db));
     if (!db) return;
     h = srv_db_sqlite(db);
-    CHECK(query_long(h, "PRAGMA user_version") == 2);
-    CHECK(query_long(h, "SELECT count(*) FROM migrations") == 2);
-    CHECK(query_long(h, "SELECT group_concat(version) = '1,2' FROM (SELECT version FROM migrations ORDER BY version)") == 1);
-    CHECK(query_long(h, "SELECT n120 FROM phase_counts WHERE grouping = 'all'") == 1);
+    CHECK(survey_fx_query_long(h, "PRAGMA user_version") == 2);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM migrations") == 2);
+    CHECK(survey_fx_query_long(h, "SELECT group_concat(version) = '1,2' FROM (SELECT version FROM migrations ORDER BY version)") == 1);
+    CHECK(survey_fx_query_long(h, "SELECT n120 FROM phase_counts WHERE grouping = 'all'") == 1);
     srv_db_close(db);
 }
 
 TEST(survey_db_refuses_newer_schema)
 {
-    const char *path = tmp("new.sqlite");
+    const char *path = fx_tmp("new.sqlite");
     CHECK_OK(srv_db_create_at_version(path, SRV_DB_SCHEMA_VERSION));
     sqlite3 *h = NULL;
     CHECK(sqlite3_open_v2(path, &h, SQLITE_OPEN_READWRITE, NULL) == SQLITE_OK);
@@ -240,11 +174,9 @@ TEST(survey_db_refuses_newer_schema)
  * on disk changes (bytes, mtime, no -wal/-shm/-journal). */
 TEST(survey_db_refuses_foreign_files)
 {
-    const char *text = tmp("notes.txt"), *delight = tmp("delight.sqlite"), *gpkg = tmp("l.gpkg"),
-               *other = tmp("other.sqlite");
-    FILE *f = fopen(text, "w");
-    fputs("this is not a database\nsecond line\n", f);
-    fclose(f);
+    const char *text = fx_tmp("notes.txt"), *delight = fx_tmp("delight.sqlite"), *gpkg = fx_tmp("l.gpkg"),
+               *other = fx_tmp("other.sqlite");
+    fx_write_text(text, "this is not a database\nsecond line\n");
     gs_delight *d = gs_delight_new();
     CHECK_OK(gs_delight_save(d, delight));
     gs_delight_free(d);
@@ -272,15 +204,15 @@ TEST(survey_db_refuses_foreign_files)
                       "detail: %s", gs_detail());
             srv_db_close(db);
         }
-        const char *geo = tmp("x.geojson");
+        const char *geo = fx_tmp("x.geojson");
         CHECK(run("%s stats --db %s", files[i], NULL, NULL) == 1);
-        CHECK(count_lines(out) == 1 && strstr(out, files[i]) && strstr(out, "not a survey database"));
+        CHECK(fx_count_lines(out) == 1 && strstr(out, files[i]) && strstr(out, "not a survey database"));
         CHECK(run("%s export --db %s -o %s", files[i], geo, NULL) == 1);
-        CHECK(count_lines(out) == 1 && strstr(out, files[i]));
-        CHECK(!exists(geo));
+        CHECK(fx_count_lines(out) == 1 && strstr(out, files[i]));
+        CHECK(!fx_exists(geo));
         if (i % 2 == 0) {   /* the writers too (each CLI run costs a process start) */
             CHECK(run("%s db ingest-synthetic --db %s --captures 2", files[i], NULL, NULL) == 1);
-            CHECK(count_lines(out) == 1 && strstr(out, files[i]));
+            CHECK(fx_count_lines(out) == 1 && strstr(out, files[i]));
         } else {
             CHECK(run("%s db migrate --db %s", files[i], NULL, NULL) == 1);
         }
@@ -297,10 +229,8 @@ TEST(survey_db_refuses_foreign_files)
  * two are the ones CI can rely on. Nothing is created anywhere. */
 TEST(survey_db_unwritable_paths)
 {
-    const char *file = tmp("plain");
-    FILE *f = fopen(file, "w");
-    fputs("x\n", f);
-    fclose(f);
+    const char *file = fx_tmp("plain");
+    fx_write_text(file, "x\n");
     snapshot before = take(file);
     char under_file[1100], missing_dir[1100];
     snprintf(under_file, sizeof under_file, "%s/survey.sqlite", file);
@@ -311,28 +241,28 @@ TEST(survey_db_unwritable_paths)
         CHECK(srv_db_open(paths[i], SRV_DB_CREATE, &db) == GS_EIO && !db);
         CHECK(strstr(gs_detail(), paths[i]) != NULL);
         CHECK(run("%s db init --db %s", paths[i], NULL, NULL) == 1);
-        CHECK(count_lines(out) == 1 && strstr(out, paths[i]));
+        CHECK(fx_count_lines(out) == 1 && strstr(out, paths[i]));
         CHECK(run("%s db ingest-synthetic --db %s", paths[i], NULL, NULL) == 1);
-        CHECK(!exists(paths[i]));
+        CHECK(!fx_exists(paths[i]));
     }
     CHECK(unchanged(file, &before));
     free(before.bytes);
-    CHECK(!exists(tmp("no")));
+    CHECK(!fx_exists(fx_tmp("no")));
     /* a missing database is not created by readers */
-    const char *missing = tmp("missing.sqlite");
+    const char *missing = fx_tmp("missing.sqlite");
     srv_db *db = NULL;
     CHECK(srv_db_open(missing, SRV_DB_READ, &db) == GS_ENOTFOUND && !db);
     CHECK(srv_db_open(missing, SRV_DB_WRITE, &db) == GS_ENOTFOUND && !db);
-    CHECK(run("%s stats --db %s", missing, NULL, NULL) == 1 && count_lines(out) == 1 && strstr(out, missing));
-    CHECK(run("%s export --db %s -o %s", missing, tmp("m.csv"), NULL) == 1);
-    CHECK(!exists(missing) && sidecars(missing) == 0 && !exists(tmp("m.csv")));
+    CHECK(run("%s stats --db %s", missing, NULL, NULL) == 1 && fx_count_lines(out) == 1 && strstr(out, missing));
+    CHECK(run("%s export --db %s -o %s", missing, fx_tmp("m.csv"), NULL) == 1);
+    CHECK(!fx_exists(missing) && sidecars(missing) == 0 && !fx_exists(fx_tmp("m.csv")));
     if (geteuid() != 0) {
-        const char *ro = tmp("ro");
+        const char *ro = fx_tmp("ro");
         CHECK(mkdir(ro, 0555) == 0);
         char p[1100];
         snprintf(p, sizeof p, "%s/s.sqlite", ro);
         CHECK(srv_db_open(p, SRV_DB_CREATE, &db) == GS_EIO && !db);
-        CHECK(!exists(p));
+        CHECK(!fx_exists(p));
         chmod(ro, 0755);
     }
 }
@@ -341,8 +271,8 @@ TEST(survey_db_unwritable_paths)
  * file without write permission is refused for writing. The file is unchanged. */
 TEST(survey_db_readonly_refuses_writes)
 {
-    const char *path = tmp("ro.sqlite");
-    make_synth(path, "ro", 3, 10, 5);
+    const char *path = fx_tmp("ro.sqlite");
+    survey_fx_synth_square(path, "ro", 3, 10, 5);
     snapshot before = take(path);
     srv_db *db = NULL;
     CHECK_OK(srv_db_open(path, SRV_DB_READ, &db));
@@ -351,10 +281,7 @@ TEST(survey_db_readonly_refuses_writes)
     srv_survey_row sr = {"another", NULL, NULL, NULL, 50};
     int64_t id = 0;
     CHECK(srv_db_add_survey(db, &sr, &id) == GS_EIO);
-    srv_capture_data cd = {0};
-    srv_capture_row_init(&cd.capture);
-    cd.capture.survey_id = 1;
-    cd.capture.key = "new";
+    srv_capture_data cd = survey_fx_capture(1, "new", NULL, NULL, 0);
     CHECK(srv_db_add_capture(db, &cd, NULL, NULL) == GS_EIO);
     int deleted = 0;
     CHECK(srv_db_delete_capture(db, 1, "synth-000000", &deleted) == GS_EIO);
@@ -369,7 +296,7 @@ TEST(survey_db_readonly_refuses_writes)
         CHECK(chmod(path, 0444) == 0);
         CHECK(srv_db_open(path, SRV_DB_WRITE, &db) == GS_EIO && !db);
         CHECK(strstr(gs_detail(), "read-only") != NULL);
-        CHECK(run("%s db ingest-synthetic --db %s", path, NULL, NULL) == 1 && count_lines(out) == 1);
+        CHECK(run("%s db ingest-synthetic --db %s", path, NULL, NULL) == 1 && fx_count_lines(out) == 1);
         chmod(path, 0644);
         CHECK(unchanged(path, &before));
     }
@@ -380,7 +307,7 @@ TEST(survey_db_readonly_refuses_writes)
 
 TEST(survey_db_resume_never_duplicates)
 {
-    const char *path = tmp("dup.sqlite");
+    const char *path = fx_tmp("dup.sqlite");
     srv_db *db = NULL;
     CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
     if (!db) return;
@@ -392,7 +319,7 @@ TEST(survey_db_resume_never_duplicates)
     CHECK_OK(srv_synth_ingest(db, &o, &added));
     CHECK(added == 12);
     sqlite3 *h = srv_db_sqlite(db);
-    long lights = query_long(h, "SELECT count(*) FROM lights");
+    long lights = survey_fx_query_long(h, "SELECT count(*) FROM lights");
     CHECK(lights == 360);
     CHECK_OK(srv_synth_ingest(db, &o, &added));
     CHECK(added == 0);
@@ -400,9 +327,9 @@ TEST(survey_db_resume_never_duplicates)
     o.batch = 2;
     CHECK_OK(srv_synth_ingest(db, &o, &added));
     CHECK(added == 3);
-    CHECK(query_long(h, "SELECT count(*) FROM lights") == 450);
-    CHECK(query_long(h, "SELECT count(*) FROM surveys") == 1);
-    CHECK(query_long(h, "SELECT count(*) FROM stations") == 1);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM lights") == 450);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM surveys") == 1);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM stations") == 1);
     /* get-or-add by natural key */
     int64_t a = 0, b = 0;
     srv_survey_row sr = {"synthetic", "elsewhere", NULL, NULL, 60};
@@ -425,12 +352,12 @@ TEST(survey_db_resume_never_duplicates)
     cr.survey_id = a;
     cr.key = "synth-000001";
     CHECK_OK(srv_db_insert_capture(db, &cr, 30, 8, 10, &cid));
-    CHECK(cid == query_long(h, "SELECT id FROM captures WHERE capture_key = 'synth-000001'"));
+    CHECK(cid == survey_fx_query_long(h, "SELECT id FROM captures WHERE capture_key = 'synth-000001'"));
     CHECK_OK(srv_db_insert_light(db, cid, &lr, &lid));
     CHECK_OK(srv_db_insert_light(db, cid, &lr, &lid2));
     CHECK(lid == lid2 && lid > 0);
     CHECK_OK(srv_db_commit(db));
-    CHECK(query_long(h, "SELECT count(*) FROM lights") == 450);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM lights") == 450);
     int done = 0;
     CHECK_OK(srv_db_capture_done(db, a, "synth-000014", &done));
     CHECK(done == 1);
@@ -442,33 +369,17 @@ TEST(survey_db_resume_never_duplicates)
     srv_db_close(db);
 }
 
-static srv_light_row good_light(int i, double phase)
-{
-    srv_light_row l;
-    srv_light_row_init(&l);
-    l.index = i;
-    l.x_px = 10.0 + i;
-    l.y_px = 20.0;
-    l.bulb_id = "sodium_hp_150w";
-    l.technology = "sodium_hp";
-    l.phase_deg = phase;
-    l.confidence = l.bulb_confidence = l.phase_confidence = 0.95;
-    return l;
-}
-
 /* A capture that fails half-way leaves nothing of itself: not in its own transaction, not
  * inside the caller's (SAVEPOINT), where the captures before it survive. */
 TEST(survey_db_capture_atomic_on_error)
 {
-    const char *path = tmp("atomic.sqlite");
-    srv_db *db = NULL;
-    CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
+    const char *path = fx_tmp("atomic.sqlite");
+    int64_t sid;
+    srv_db *db = survey_fx_create(path, "atomic", &sid);
     if (!db) return;
     sqlite3 *h = srv_db_sqlite(db);
-    srv_survey_row sr = {"atomic", NULL, NULL, NULL, 50};
-    int64_t sid = 0;
-    CHECK_OK(srv_db_add_survey(db, &sr, &sid));
-    srv_light_row lights[4] = {good_light(0, 0), good_light(1, 120), good_light(2, 240), good_light(3, 0)};
+    srv_light_row lights[4] = {survey_fx_sodium_light(0, 0), survey_fx_sodium_light(1, 120),
+                               survey_fx_sodium_light(2, 240), survey_fx_sodium_light(3, 0)};
     lights[3].confidence = 1.5;   /* invalid: the 4th light fails after 3 were inserted */
     srv_location_row locs[4];
     for (int i = 0; i < 4; i++) {
@@ -479,15 +390,9 @@ TEST(survey_db_capture_atomic_on_error)
     }
     srv_frame_row frames[2] = {{0, "frame_000.png", NULL, 10}, {1, "frame_001.png", NULL, 10}};
     srv_freq_row freq[2] = {{0, 1, 50.01, NAN}, {1, 1, 50.02, NAN}};
-    srv_capture_data cd = {0};
-    srv_capture_row_init(&cd.capture);
-    cd.capture.survey_id = sid;
-    cd.capture.key = "bad";
+    srv_capture_data cd = survey_fx_capture(sid, "bad", lights, locs, 4);
     cd.frames = frames;
     cd.n_frames = 2;
-    cd.lights = lights;
-    cd.locations = locs;
-    cd.n_lights = 4;
     cd.frequency = freq;
     cd.n_frequency = 2;
     CHECK(srv_db_add_capture(db, &cd, NULL, NULL) == GS_EINVAL);
@@ -498,7 +403,7 @@ TEST(survey_db_capture_atomic_on_error)
     for (int t = 0; t < 6; t++) {
         char sql[128];
         snprintf(sql, sizeof sql, "SELECT count(*) FROM %s", tables[t]);
-        CHECK_MSG(query_long(h, sql) == 0, "%s not empty after a failed capture", tables[t]);
+        CHECK_MSG(survey_fx_query_long(h, sql) == 0, "%s not empty after a failed capture", tables[t]);
     }
     /* inside the caller's transaction: capture "good" commits, "bad" is rolled back alone */
     CHECK_OK(srv_db_begin(db));
@@ -513,20 +418,20 @@ TEST(survey_db_capture_atomic_on_error)
     CHECK(srv_db_add_capture(db, &cd, NULL, NULL) == GS_EINVAL);
     CHECK(srv_db_in_transaction(db));
     CHECK_OK(srv_db_commit(db));
-    CHECK(query_long(h, "SELECT count(*) FROM captures") == 1);
-    CHECK(query_long(h, "SELECT count(*) FROM lights") == 3);
-    CHECK(query_long(h, "SELECT count(*) FROM locations_rtree") == 3);
-    CHECK(query_long(h, "SELECT count(*) FROM frames") == 2);
-    CHECK(query_long(h, "SELECT count(*) FROM grid_frequency") == 2);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM captures") == 1);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM lights") == 3);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM locations_rtree") == 3);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM frames") == 2);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM grid_frequency") == 2);
     /* the same capture again is skipped, not duplicated */
     cd.capture.key = "good";
     cd.n_lights = 3;
     int64_t cid2 = 0;
     CHECK_OK(srv_db_add_capture(db, &cd, &cid2, &skipped));
     CHECK(skipped == 1 && cid2 == cid);
-    CHECK(query_long(h, "SELECT count(*) FROM lights") == 3);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM lights") == 3);
     /* invalid rows name their field */
-    srv_light_row bad = good_light(9, 0);
+    srv_light_row bad = survey_fx_sodium_light(9, 0);
     bad.technology = "plasma";
     cd.capture.key = "tech";
     cd.lights = &bad;
@@ -537,39 +442,39 @@ TEST(survey_db_capture_atomic_on_error)
     srv_location_row_init(&half);
     half.method = SRV_LOC_ONE_STATION;
     half.lat_deg = 10.0;   /* longitude missing */
-    bad = good_light(9, 0);
+    bad = survey_fx_sodium_light(9, 0);
     cd.locations = &half;
     CHECK(srv_db_add_capture(db, &cd, NULL, NULL) == GS_EINVAL && strstr(gs_detail(), "location"));
-    CHECK(query_long(h, "SELECT count(*) FROM captures") == 1);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM captures") == 1);
     srv_db_close(db);
 }
 
 TEST(survey_db_rtree_follows_locations)
 {
-    const char *path = tmp("rt.sqlite");
-    make_synth(path, "rt", 6, 50, 3);
+    const char *path = fx_tmp("rt.sqlite");
+    survey_fx_synth_square(path, "rt", 6, 50, 3);
     srv_db *db = NULL;
     CHECK_OK(srv_db_open(path, SRV_DB_WRITE, &db));
     if (!db) return;
     sqlite3 *h = srv_db_sqlite(db);
     long located = 6 * (50 - 50 / SRV_SYNTH_UNLOCATED_EVERY);
-    CHECK(query_long(h, "SELECT count(*) FROM locations") == 300);
-    CHECK(query_long(h, "SELECT count(*) FROM locations WHERE lat_deg IS NOT NULL") == located);
-    CHECK(query_long(h, "SELECT count(*) FROM locations_rtree") == located);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM locations") == 300);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM locations WHERE lat_deg IS NOT NULL") == located);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM locations_rtree") == located);
     int64_t sid = 0;
     CHECK_OK(srv_db_find_survey(db, "rt", &sid));
     int deleted = 0;
     CHECK_OK(srv_db_delete_capture(db, sid, "synth-000002", &deleted));
     CHECK(deleted == 1);
-    CHECK(query_long(h, "SELECT count(*) FROM locations_rtree") == located - located / 6);
-    CHECK(query_long(h, "SELECT count(*) FROM lights") == 250);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM locations_rtree") == located - located / 6);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM lights") == 250);
     CHECK_OK(srv_db_delete_capture(db, sid, "synth-000002", &deleted));
     CHECK(deleted == 0);
     /* an update moves the R*Tree entry (trigger) */
     CHECK(sqlite3_exec(h, "UPDATE locations SET lat_deg = 10.5, lon_deg = 20.5 WHERE light_id = "
                           "(SELECT min(light_id) FROM locations WHERE lat_deg IS NOT NULL)",
                        NULL, NULL, NULL) == SQLITE_OK);
-    CHECK(query_long(h, "SELECT count(*) FROM locations_rtree WHERE min_lat <= 10.5 AND max_lat >= "
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM locations_rtree WHERE min_lat <= 10.5 AND max_lat >= "
                         "10.5 AND min_lon <= 20.5 AND max_lon >= 20.5") == 1);
     srv_db_report r;
     CHECK_OK(srv_db_check(db, &r));
@@ -595,30 +500,24 @@ static int raw_inspect(const char *path, const srv_synth_opts *o, raw_state *st)
 {
     memset(st, 0, sizeof *st);
     st->integrity_ok = 1;
-    if (!exists(path)) return 1;
+    if (!fx_exists(path)) return 1;
     sqlite3 *h = NULL;
     if (sqlite3_open_v2(path, &h, SQLITE_OPEN_READWRITE, NULL) != SQLITE_OK) {
         test_failed(__FILE__, __LINE__, "%s: cannot open after a kill: %s", path, sqlite3_errmsg(h));
         sqlite3_close(h);
         return 0;
     }
-    st->integrity_ok = !strcmp(query_text(h, "PRAGMA integrity_check"), "ok");
-    int has_schema = 0;
-    sqlite3_stmt *q = NULL;
-    if (sqlite3_prepare_v2(h, "SELECT count(*) FROM sqlite_master WHERE name = 'lights'", -1, &q, NULL) == SQLITE_OK &&
-        sqlite3_step(q) == SQLITE_ROW)
-        has_schema = sqlite3_column_int(q, 0);
-    sqlite3_finalize(q);
-    if (has_schema) {
-        CHECK(!strcmp(query_text(h, "SELECT rtreecheck('locations_rtree')"), "ok"));
-        st->fk = query_long(h, "SELECT count(*) FROM pragma_foreign_key_check");
-        st->captures = query_long(h, "SELECT count(*) FROM captures");
-        st->lights = query_long(h, "SELECT count(*) FROM lights");
-        st->frames = query_long(h, "SELECT count(*) FROM frames");
-        st->freq = query_long(h, "SELECT count(*) FROM grid_frequency");
-        st->locations = query_long(h, "SELECT count(*) FROM locations");
-        st->located = query_long(h, "SELECT count(*) FROM locations WHERE lat_deg IS NOT NULL");
-        st->rtree = query_long(h, "SELECT count(*) FROM locations_rtree");
+    st->integrity_ok = !strcmp(survey_fx_query_text(h, "PRAGMA integrity_check"), "ok");
+    if (survey_fx_has(h, "lights")) {
+        CHECK(!strcmp(survey_fx_query_text(h, "SELECT rtreecheck('locations_rtree')"), "ok"));
+        st->fk = survey_fx_query_long(h, "SELECT count(*) FROM pragma_foreign_key_check");
+        st->captures = survey_fx_query_long(h, "SELECT count(*) FROM captures");
+        st->lights = survey_fx_query_long(h, "SELECT count(*) FROM lights");
+        st->frames = survey_fx_query_long(h, "SELECT count(*) FROM frames");
+        st->freq = survey_fx_query_long(h, "SELECT count(*) FROM grid_frequency");
+        st->locations = survey_fx_query_long(h, "SELECT count(*) FROM locations");
+        st->located = survey_fx_query_long(h, "SELECT count(*) FROM locations WHERE lat_deg IS NOT NULL");
+        st->rtree = survey_fx_query_long(h, "SELECT count(*) FROM locations_rtree");
         /* every capture complete, by the synthetic survey's known structure */
         long located_per = 0;
         for (size_t j = 0; j < o->lights_per_capture; j++)
@@ -632,9 +531,9 @@ static int raw_inspect(const char *path, const srv_synth_opts *o, raw_state *st)
                  "(SELECT count(*) FROM locations lo JOIN lights l ON l.id = lo.light_id "
                  " WHERE l.capture_id = c.id AND lo.lat_deg IS NOT NULL) != %ld",
                  o->lights_per_capture, SRV_SYNTH_FRAMES, SRV_SYNTH_FREQ, located_per);
-        st->bad_captures = query_long(h, sql);
+        st->bad_captures = survey_fx_query_long(h, sql);
         /* no orphan rows either */
-        st->bad_captures += query_long(h, "SELECT count(*) FROM lights WHERE capture_id NOT IN (SELECT id FROM captures)");
+        st->bad_captures += survey_fx_query_long(h, "SELECT count(*) FROM lights WHERE capture_id NOT IN (SELECT id FROM captures)");
     }
     sqlite3_close(h);
     return 1;
@@ -659,7 +558,7 @@ static void child_ingest(const char *path, const srv_synth_opts *o, int ready_fd
  * lost; a final run resumes to the exact expected counts, and another run adds nothing. */
 TEST(survey_db_sigkill_resume_no_partial_capture)
 {
-    const char *path = tmp("crash.sqlite");
+    const char *path = fx_tmp("crash.sqlite");
     srv_synth_opts o;
     srv_synth_opts_default(&o);
     o.survey = "crash";
@@ -679,25 +578,19 @@ TEST(survey_db_sigkill_resume_no_partial_capture)
         rng = rng * 6364136223846793005ull + 1442695040888963407ull;
         unsigned r = (unsigned)(rng >> 33);
         int early = kill_no % 4 == 0;   /* kill before or while the database is opened */
-        int fds[2];
-        CHECK(pipe(fds) == 0);
-        fflush(stdout);
-        pid_t pid = fork();
-        if (pid == 0) {
-            close(fds[0]);
-            child_ingest(path, &o, fds[1]);
-        }
-        close(fds[1]);
+        int fd;
+        pid_t pid = fx_fork_pipe(&fd);
+        if (pid == 0) child_ingest(path, &o, fd);
         if (early) {
             usleep(r % 4000);
         } else {
             char c;
-            if (read(fds[0], &c, 1) != 1) {
+            if (read(fd, &c, 1) != 1) {
                 /* the child died before it was ready: report its status below */
             }
             usleep(r % window_us);
         }
-        close(fds[0]);
+        close(fd);
         kill(pid, SIGKILL);
         int status = 0;
         waitpid(pid, &status, 0);
@@ -746,7 +639,7 @@ TEST(survey_db_sigkill_resume_no_partial_capture)
         CHECK(st.frames == (long)o.captures * SRV_SYNTH_FRAMES);
     }
     /* the CLI writer is killed and resumed the same way */
-    const char *cli = tmp("cli-crash.sqlite");
+    const char *cli = fx_tmp("cli-crash.sqlite");
     char cmd[2048];
     snprintf(cmd, sizeof cmd, "%s db ingest-synthetic --db %s --captures 200 --lights 40 --batch 2 "
              "& sleep 0.3; kill -9 $! 2>/dev/null; wait; %s db ingest-synthetic --db %s "
@@ -787,13 +680,13 @@ TEST(survey_db_sha256_and_delight_fingerprint)
     CHECK_OK(srv_delight_fingerprint(d3, NULL, &r3));
     CHECK(strcmp(r1.sha256, r3.sha256) != 0 && r3.bulbs == 1);
     srv_db *db = NULL;
-    CHECK_OK(srv_db_open(tmp("fp.sqlite"), SRV_DB_CREATE, &db));
+    CHECK_OK(srv_db_open(fx_tmp("fp.sqlite"), SRV_DB_CREATE, &db));
     int64_t a = 0, b = 0, c = 0;
     CHECK_OK(srv_db_add_delight(db, &r1, &a));
     CHECK_OK(srv_db_add_delight(db, &r2, &b));
     CHECK_OK(srv_db_add_delight(db, &r3, &c));
     CHECK(a == b && a != c && a > 0 && c > 0);
-    CHECK(query_long(srv_db_sqlite(db), "SELECT count(*) FROM delight_versions") == 2);
+    CHECK(survey_fx_query_long(srv_db_sqlite(db), "SELECT count(*) FROM delight_versions") == 2);
     srv_db_close(db);
     gs_delight_free(d1);
     gs_delight_free(d2);
@@ -848,7 +741,7 @@ TEST(survey_db_rows_from_recognition)
     srv_location_from_fix(&loc, &f);
     CHECK(loc.method == SRV_LOC_ONE_STATION && loc.flags == GIS_FIX_GRAZING);
     srv_db *db = NULL;
-    CHECK_OK(srv_db_open(tmp("rows.sqlite"), SRV_DB_CREATE, &db));
+    CHECK_OK(srv_db_open(fx_tmp("rows.sqlite"), SRV_DB_CREATE, &db));
     srv_survey_row sr = {"rows", NULL, NULL, NULL, 50};
     int64_t sid = 0;
     CHECK_OK(srv_db_add_survey(db, &sr, &sid));
@@ -858,174 +751,12 @@ TEST(survey_db_rows_from_recognition)
     r.x_px = 3;
     r.y_px = 4;
     r.phase_deg = -120.0;   /* stored wrapped: 240 */
-    srv_capture_data cd = {0};
-    srv_capture_row_init(&cd.capture);
-    cd.capture.survey_id = sid;
-    cd.capture.key = "k";
-    cd.lights = &r;
-    cd.locations = &loc;
-    cd.n_lights = 1;
+    srv_capture_data cd = survey_fx_capture(sid, "k", &r, &loc, 1);
     CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
     sqlite3 *h = srv_db_sqlite(db);
-    CHECK(query_long(h, "SELECT phase_deg = 240 AND dof = 14 FROM lights") == 1);
-    CHECK(query_long(h, "SELECT lon_deg = -145 AND semi_major_m IS NULL AND semi_minor_m = 2 FROM locations") == 1);
+    CHECK(survey_fx_query_long(h, "SELECT phase_deg = 240 AND dof = 14 FROM lights") == 1);
+    CHECK(survey_fx_query_long(h, "SELECT lon_deg = -145 AND semi_major_m IS NULL AND semi_minor_m = 2 FROM locations") == 1);
     srv_db_close(db);
     rec_matcher_free(mt);
     gs_delight_free(d);
-}
-
-/* ------------------------------------------------------------------ export */
-
-static json_t *load_geojson(const char *path, size_t *features)
-{
-    json_error_t err;
-    json_t *root = json_load_file(path, 0, &err);
-    CHECK_MSG(root != NULL, "%s: %s", path, err.text);
-    json_t *f = root ? json_object_get(root, "features") : NULL;
-    *features = f ? json_array_size(f) : 0;
-    return root;
-}
-
-static sqlite3 *raw_open(const char *path)
-{
-    sqlite3 *h = NULL;
-    CHECK(sqlite3_open_v2(path, &h, SQLITE_OPEN_READONLY, NULL) == SQLITE_OK);
-    return h;
-}
-
-TEST(export_filters_match_sql)
-{
-    const char *path = tmp("ex.sqlite");
-    make_synth(path, "north", 8, 50, 21);
-    make_synth(path, "south", 4, 50, 22);
-    sqlite3 *h = raw_open(path);
-    const char *geo = tmp("all.geojson");
-    size_t n = 0;
-    CHECK(run("%s export --db %s -o %s", path, geo, NULL) == 0 && strstr(out, "exported 600 lights"));
-    json_t *root = load_geojson(geo, &n);
-    CHECK(n == 600);
-    /* one feature checked field by field against its row */
-    json_t *f0 = json_array_get(json_object_get(root, "features"), 0);
-    json_t *props = json_object_get(f0, "properties");
-    const char *id = json_string_value(json_object_get(props, "id"));
-    char sql[512];
-    snprintf(sql, sizeof sql, "SELECT technology FROM lights WHERE id = %s", id ? id : "0");
-    CHECK(!strcmp(query_text(h, sql), json_string_value(json_object_get(props, "technology"))));
-    json_decref(root);
-    struct {
-        const char *args;
-        const char *sql;
-    } cases[] = {
-        {"--survey south", "SELECT count(*) FROM light_phase WHERE survey = 'south'"},
-        {"--technology sodium_hp", "SELECT count(*) FROM lights WHERE technology = 'sodium_hp'"},
-        {"--phase 120", "SELECT count(*) FROM light_phase WHERE phase_class = '120'"},
-        {"--phase unknown", "SELECT count(*) FROM lights WHERE phase_deg IS NULL"},
-        {"--min-confidence 0.8", "SELECT count(*) FROM lights WHERE confidence >= 0.8"},
-        {"--survey north --phase 0 --min-confidence 0.7",
-         "SELECT count(*) FROM light_phase WHERE survey = 'north' AND phase_class = '0' AND confidence >= 0.7"},
-        {"--bbox 35.0,32.79,35.03,32.81",
-         "SELECT count(*) FROM locations WHERE lon_deg BETWEEN 35.0 AND 35.03 AND lat_deg BETWEEN 32.79 AND 32.81"},
-        {"--bbox 35.0,32.79,35.03,32.81 --technology led_linear",
-         "SELECT count(*) FROM locations lo JOIN lights l ON l.id = lo.light_id WHERE lon_deg BETWEEN 35.0 AND "
-         "35.03 AND lat_deg BETWEEN 32.79 AND 32.81 AND technology = 'led_linear'"},
-    };
-    for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
-        long want = query_long(h, cases[i].sql);
-        CHECK(want > 0 && want < 600);
-        CHECK(run("%s export --db %s -o %s %s", path, geo, cases[i].args) == 0);
-        root = load_geojson(geo, &n);
-        CHECK_MSG((long)n == want, "export %s: %zu features, SQL says %ld", cases[i].args, n, want);
-        json_decref(root);
-    }
-    sqlite3_close(h);
-}
-
-TEST(export_all_formats_read_back)
-{
-    const char *path = tmp("fmt.sqlite");
-    make_synth(path, "fmt", 2, 50, 4);
-    const char *gpkg = tmp("l.gpkg"), *kml = tmp("l.kml"), *csv = tmp("l.csv");
-    CHECK(run("%s export --db %s -o %s", path, gpkg, NULL) == 0);
-    sqlite3 *h = raw_open(gpkg);
-    CHECK(query_long(h, "SELECT count(*) FROM lights") == 100);
-    CHECK(query_long(h, "SELECT count(*) FROM lights WHERE geom IS NULL") == 2 * (50 / SRV_SYNTH_UNLOCATED_EVERY));
-    sqlite3_close(h);
-    CHECK(run("%s export --db %s -o %s", path, kml, NULL) == 0);
-    FILE *f = fopen(kml, "r");
-    static char buf[1 << 20];
-    size_t len = f ? fread(buf, 1, sizeof buf - 1, f) : 0;
-    buf[len] = '\0';
-    if (f) fclose(f);
-    int placemarks = 0;
-    for (const char *p = strstr(buf, "<Placemark"); p; p = strstr(p + 1, "<Placemark")) placemarks++;
-    CHECK(placemarks == 100);
-    CHECK(run("%s export --db %s --format csv -o %s", path, csv, NULL) == 0);
-    f = fopen(csv, "r");
-    len = f ? fread(buf, 1, sizeof buf - 1, f) : 0;
-    buf[len] = '\0';
-    if (f) fclose(f);
-    CHECK(count_lines(buf) == 101);
-}
-
-TEST(export_bbox_crosses_antimeridian)
-{
-    const char *path = tmp("am.sqlite");
-    srv_db *db = NULL;
-    CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &db));
-    if (!db) return;
-    srv_survey_row sr = {"fiji", NULL, NULL, NULL, 50};
-    int64_t sid = 0;
-    CHECK_OK(srv_db_add_survey(db, &sr, &sid));
-    const double lon[5] = {179.95, -179.95, 179.5, -179.5, 0.0};
-    srv_light_row l[5];
-    srv_location_row loc[5];
-    for (int i = 0; i < 5; i++) {
-        l[i] = good_light(i, 0);
-        srv_location_row_init(&loc[i]);
-        loc[i].method = SRV_LOC_TRUTH;
-        loc[i].lat_deg = -16.5;
-        loc[i].lon_deg = lon[i];
-    }
-    srv_capture_data cd = {0};
-    srv_capture_row_init(&cd.capture);
-    cd.capture.survey_id = sid;
-    cd.capture.key = "am";
-    cd.lights = l;
-    cd.locations = loc;
-    cd.n_lights = 5;
-    CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
-    srv_export_opts o;
-    srv_export_opts_default(&o);
-    o.use_bbox = 1;
-    o.bbox[0] = 179.9;
-    o.bbox[1] = -17;
-    o.bbox[2] = -179.9;
-    o.bbox[3] = -16;
-    gis_light *v = NULL;
-    size_t n = 0;
-    CHECK_OK(srv_db_read_lights(db, &o, &v, &n));
-    CHECK(n == 2 && v && fabs(fabs(v[0].lon_deg) - 179.95) < 1e-9 && fabs(fabs(v[1].lon_deg) - 179.95) < 1e-9);
-    free(v);
-    o.bbox[0] = -1;
-    o.bbox[2] = 1;
-    CHECK_OK(srv_db_read_lights(db, &o, &v, &n));
-    CHECK(n == 1 && v[0].lon_deg == 0.0 && v[0].lat_deg == -16.5);
-    free(v);
-    srv_db_close(db);
-}
-
-TEST(export_bad_input)
-{
-    const char *path = tmp("bad.sqlite");
-    make_synth(path, "bad", 1, 10, 1);
-    const char *geo = tmp("o.geojson");
-    CHECK(run("%s export --db %s -o %s --bbox 1,2,3", path, geo, NULL) == 2);
-    CHECK(run("%s export --db %s -o %s --phase 90", path, geo, NULL) == 2);
-    CHECK(run("%s export --db %s -o %s --technology plasma", path, geo, NULL) == 2);
-    CHECK(run("%s export --db %s -o %s --min-confidence 1.5", path, geo, NULL) == 2);
-    CHECK(run("%s export --db %s -o %s/x.shp", path, test_tmpdir(), NULL) == 2);
-    CHECK(run("%s export --db %s -o %s --survey nobody", path, geo, NULL) == 1);
-    CHECK(count_lines(out) == 1 && strstr(out, "nobody"));
-    CHECK(!exists(geo));
-    CHECK(run("%s export --help", NULL, NULL, NULL) == 0 && strstr(out, "--bbox"));
 }

@@ -1,0 +1,287 @@
+/* test_recognize_maps.c - the maps of `gridsurvey recognize --maps` (Fig. 1): valid PNGs with
+ * the documented scale, phase hues, bulb colours and the confidence scale on rendered captures
+ * (tests/recognize_fixture.h), an empty scene, and in process the per-pixel pass's fast and
+ * general paths, a saturated core and bad arguments. */
+#include "recognize/recognize.h"
+#include "recognize/internal.h"
+#include "tests/fixtures.h"
+#include "tests/recognize_fixture.h"
+#include "tests/test.h"
+
+#include <jansson.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+TEST(maps_png_valid_and_phase_hues)
+{
+    json_t *root = recfx_recognize_scene(&recfx_scene_a, "", 1, 1);
+    json_decref(root);
+    int s = recfx_doc_scale(recfx_scene_a.width, recfx_scene_a.height);
+    int want_w = s * recfx_scene_a.width > 480 ? s * recfx_scene_a.width : 480;
+    static const char *const names[3] = {"phase_map.png", "bulb_map.png", "confidence_map.png"};
+    unsigned char *px[3] = {NULL, NULL, NULL};
+    int w[3] = {0, 0, 0}, h[3] = {0, 0, 0};
+    for (int m = 0; m < 3; m++) {
+        char path[1200];
+        snprintf(path, sizeof path, "%s/maps/%s", test_tmpdir(), names[m]);
+        px[m] = recfx_read_png(path, &w[m], &h[m]);
+        CHECK_MSG(w[m] == want_w && h[m] > s * recfx_scene_a.height + 40, "%s: %dx%d, expected %d wide and a legend",
+                  names[m], w[m], h[m], want_w);
+        if (!px[m] || w[m] != want_w) {
+            for (int k = 0; k <= m; k++) free(px[k]);
+            return;
+        }
+        /* far from every light: black (below the threshold) */
+        const unsigned char *bg = recfx_map_at(px[m], w[m], s, 2, 60);
+        CHECK_MSG(bg[0] == 0 && bg[1] == 0 && bg[2] == 0, "%s: background (%d, %d, %d)", names[m],
+                  bg[0], bg[1], bg[2]);
+        /* the legend band holds text (dark pixels on white) */
+        size_t dark = 0;
+        for (int y = s * recfx_scene_a.height; y < h[m]; y++)
+            for (int x = 0; x < w[m]; x++) dark += px[m][3 * ((size_t)y * (size_t)w[m] + (size_t)x)] < 100;
+        CHECK_MSG(dark > 500, "%s: legend has %zu dark pixels", names[m], dark);
+    }
+    for (int i = 0; i < recfx_scene_a.count; i++) {
+        const recfx_light *t = &recfx_lights_a[i];
+        recfx_check_phase_colour(recfx_map_at(px[0], w[0], s, t->x, t->y), t->phase_deg, t->bulb);
+        const unsigned char *c = recfx_map_at(px[1], w[1], s, t->x, t->y);
+        CHECK_MSG(!(c[0] == c[1] && c[1] == c[2]), "bulb map: %s grey", t->bulb);
+        for (int j = 0; j < i; j++) {
+            const unsigned char *d = recfx_map_at(px[1], w[1], s, recfx_lights_a[j].x, recfx_lights_a[j].y);
+            /* distinct bulbs in distinct hues (brightness may differ) */
+            double hc = recfx_hue_deg(c), hd = recfx_hue_deg(d);
+            CHECK_MSG(!(fabs(recfx_circ_diff_deg(hc, hd)) < 1.0 && abs(c[0] - d[0]) < 8),
+                      "bulb map: %s and %s share a colour", t->bulb, recfx_lights_a[j].bulb);
+        }
+        const unsigned char *q = recfx_map_at(px[2], w[2], s, t->x, t->y);   /* viridis near 1: yellow */
+        CHECK_MSG(q[0] > 150 && q[1] > 150 && q[2] < 120, "confidence map: %s (%d, %d, %d)", t->bulb,
+                  q[0], q[1], q[2]);
+    }
+    for (int m = 0; m < 3; m++) free(px[m]);
+    const char *path = fx_tmp("maps/signals.png");
+    int sw = 0, sh = 0;
+    unsigned char *sp = recfx_read_png(path, &sw, &sh);
+    CHECK(sw == 1500 && sh == 1500);
+    if (sp) {
+        /* curves and points in colour, not an empty canvas */
+        size_t coloured = 0;
+        for (size_t k = 0; k < (size_t)sw * (size_t)sh; k++) {
+            const unsigned char *p = sp + 3 * k;
+            coloured += abs(p[0] - p[1]) > 40 || abs(p[1] - p[2]) > 40;
+        }
+        CHECK_MSG(coloured > 20000, "signals.png: %zu coloured pixels", coloured);
+    }
+    free(sp);
+}
+
+TEST(maps_no_lights_still_written)
+{
+    json_t *root = recfx_recognize_scene(&recfx_scene_e, "", 1, 0);
+    if (root) {
+        CHECK(json_array_size(json_object_get(root, "lights")) == 0);
+        CHECK(json_integer_value(json_object_get(json_object_get(root, "summary"), "lights")) == 0);
+    }
+    json_decref(root);
+    const char *path = fx_tmp("maps/phase_map.png");
+    int w = 0, h = 0;
+    unsigned char *px = recfx_read_png(path, &w, &h);
+    int s = recfx_doc_scale(recfx_scene_e.width, recfx_scene_e.height);
+    CHECK(w == s * recfx_scene_e.width && h > s * recfx_scene_e.height);
+    if (px) {
+        size_t lit = 0;
+        for (int y = 0; y < s * recfx_scene_e.height; y++)
+            for (int x = 0; x < s * recfx_scene_e.width; x++) {
+                const unsigned char *p = px + 3 * ((size_t)y * (size_t)w + (size_t)x);
+                lit += p[0] || p[1] || p[2];
+            }
+        /* noise alone crosses 5 sigma in ~3e-7 of the pixels: nothing is drawn */
+        CHECK_MSG(lit == 0, "%zu map pixels drawn in an empty scene", lit);
+    }
+    free(px);
+    path = fx_tmp("maps/signals.png");
+    int sw = 0, sh = 0;
+    unsigned char *sp = recfx_read_png(path, &sw, &sh);
+    CHECK(sw == 1500 && sh == 620);
+    free(sp);
+}
+
+/* ------------------------------------------------------------ maps, in process */
+
+/* A capture built in memory: sky 0.5 DN per cycle, read noise 2 DN at 40 cycles, three lights of
+ * 3x3 pixels (weights 1, 0.5, 0.25) of known bulbs and phases. */
+typedef struct {
+    int x, y;
+    const char *bulb;
+    double phase_deg, flux;
+} mem_light;
+
+static const mem_light mem_lights[3] = {
+    {12, 14, "hps-150w", 240, 60}, {40, 20, "mh-250w", 0, 50}, {25, 45, "cfl-23w", 120, 50}};
+
+static gs_status mem_capture(const gs_delight *d, gs_capture *cap)
+{
+    memset(cap, 0, sizeof *cap);
+    cap->grid_hz = 50;
+    cap->K = 13;
+    cap->bands = 3;
+    cap->width = 64;
+    cap->height = 56;
+    cap->saturation_dn = 65536;
+    cap->black_level_dn = 100;
+    cap->read_noise_dn = 2;
+    cap->locked = 1;
+    gs_status s = gs_capture_alloc(cap);
+    if (s != GS_OK) return s;
+    const double cycles = 40.0;
+    size_t np = (size_t)cap->width * (size_t)cap->height;
+    double *v = calloc(np * 13 * 3, sizeof *v);
+    if (!v) return GS_ENOMEM;
+    for (int k = 0; k < 13; k++) cap->frames[k].cycles = cycles;
+    for (int i = 0; i < 3; i++) {
+        const gs_bulb *b = gs_delight_find(d, mem_lights[i].bulb, 50, 3);
+        double t[3 * 13];
+        if (!b || gs_brf_integrate(&b->brf, gs_phase_to_shift(mem_lights[i].phase_deg), 13, t) != GS_OK) {
+            free(v);
+            return GS_ENOTFOUND;
+        }
+        for (int dy = -1; dy <= 1; dy++)
+            for (int dx = -1; dx <= 1; dx++) {
+                double w = (dx ? 0.5 : 1.0) * (dy ? 0.5 : 1.0);
+                size_t p = (size_t)(mem_lights[i].y + dy) * (size_t)cap->width + (size_t)(mem_lights[i].x + dx);
+                for (int band = 0; band < 3; band++)
+                    for (int k = 0; k < 13; k++)
+                        v[((size_t)k * np + p) * 3 + (size_t)band] +=
+                            w * mem_lights[i].flux * b->chroma[band] * t[band * 13 + k];
+            }
+    }
+    uint64_t seed = 99;
+    for (size_t q = 0; q < np * 13 * 3; q++) {
+        /* Box-Muller on one splitmix64 draw: u1 from its top 53 bits, u2 from its low 11 */
+        uint64_t z = fx_rng_next(&seed);
+        double u1 = ((double)(z >> 11) + 0.5) * 0x1p-53, u2 = ((double)(z & 0x7ff) + 0.5) / 2048.0;
+        double n = sqrt(-2.0 * log(u1)) * cos(6.283185307179586 * u2);
+        double raw = 100.0 + cycles * (0.5 + v[q]) + 2.0 * n;
+        cap->raw[q] = (unsigned short)(raw < 0 ? 0 : raw > 65535 ? 65535 : lround(raw));
+    }
+    free(v);
+    return GS_OK;
+}
+
+static const char *matcher_bulb_id(const rec_matcher *m, int i)
+{
+    const gs_bulb *b = i >= 0 ? rec_matcher_bulb(m, (size_t)i) : NULL;
+    return b ? b->id : "none";
+}
+
+/* The generated DELIGHT (in *d), mem_capture's capture and a 50 Hz RGB K = 13 matcher. */
+static rec_matcher *mem_setup(gs_delight **d, gs_capture *cap)
+{
+    *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(*d, 512));
+    rec_matcher *m = NULL;
+    CHECK_OK(rec_matcher_new(*d, 50, 3, 13, NULL, &m));
+    CHECK_OK(mem_capture(*d, cap));
+    return m;
+}
+
+TEST(maps_fast_path_matches_general)
+{
+    /* Without HDR maps and shot noise the per-pixel pass takes an integer fast path; with an
+     * all-zero HDR map it takes the general one. Same capture, same maps. */
+    gs_delight *d = NULL;
+    gs_capture cap;
+    rec_matcher *m = mem_setup(&d, &cap);
+    rec_pixel_maps a, b;
+    CHECK_OK(rec_pixel_maps_compute(&cap, m, NULL, NULL, &a));
+    CHECK_OK(gs_capture_alloc_hdr(&cap));
+    CHECK_OK(rec_pixel_maps_compute(&cap, m, NULL, NULL, &b));
+    size_t np = (size_t)cap.width * (size_t)cap.height, differ = 0;
+    for (size_t p = 0; p < np && a.state && b.state; p++)
+        differ += a.state[p] != b.state[p] || a.bulb[p] != b.bulb[p] ||
+                  fabsf(a.brightness[p] - b.brightness[p]) > 1e-4f * (1.0f + fabsf(a.brightness[p]));
+    CHECK_MSG(differ == 0, "%zu pixels differ", differ);
+    /* the light centres: the rendered bulb and phase (Eq. 7 per pixel) */
+    for (int i = 0; i < 3 && a.state; i++) {
+        size_t p = (size_t)mem_lights[i].y * (size_t)cap.width + (size_t)mem_lights[i].x;
+        CHECK_MSG(a.state[p] == REC_PIX_MATCHED && !strcmp(matcher_bulb_id(m, a.bulb[p]), mem_lights[i].bulb) &&
+                      fabs(recfx_circ_diff_deg(a.phase_deg[p], mem_lights[i].phase_deg)) < 1e-3 && a.confidence[p] > 0.8,
+                  "light %s: state %d bulb %s phase %g conf %g", mem_lights[i].bulb, a.state[p],
+                  matcher_bulb_id(m, a.bulb[p]), a.phase_deg[p], a.confidence[p]);
+        /* brightness = the rendered flux at the centre pixel (weight 1), background removed */
+        CHECK_NEAR(a.brightness[p], mem_lights[i].flux, 0.02 * mem_lights[i].flux);
+    }
+    CHECK(a.mapped >= 9 * 3 - 6 && a.mapped <= 9 * 3 + 3);   /* the lights' pixels, no sky */
+    rec_pixel_maps_release(&a);
+    rec_pixel_maps_release(&b);
+    rec_pixel_maps_release(NULL);
+    gs_capture_release(&cap);
+    rec_matcher_free(m);
+    gs_delight_free(d);
+}
+
+TEST(maps_saturated_core_white_and_bad_arguments)
+{
+    gs_delight *d = NULL;
+    gs_capture cap;
+    rec_matcher *m = mem_setup(&d, &cap);
+    /* saturate the brightest light's centre: the level just below its peak sample */
+    size_t np = (size_t)cap.width * (size_t)cap.height;
+    size_t pc = (size_t)mem_lights[0].y * (size_t)cap.width + (size_t)mem_lights[0].x;
+    unsigned peak = 0;
+    for (int k = 0; k < 13; k++)
+        for (int band = 0; band < 3; band++) {
+            unsigned r = cap.raw[((size_t)k * np + pc) * 3 + (size_t)band];
+            peak = r > peak ? r : peak;
+        }
+    cap.saturation_dn = peak - 1;   /* only that pixel reaches it */
+    rec_pixel_maps pm;
+    CHECK_OK(rec_pixel_maps_compute(&cap, m, NULL, NULL, &pm));
+    if (pm.state) {
+        CHECK(pm.state[pc] == REC_PIX_SATURATED && pm.bulb[pc] == -1);
+        const char *path = fx_tmp("phase.png");
+        CHECK_OK(rec_map_write_phase_png(&pm, path));
+        int w = 0, h = 0;
+        unsigned char *px = recfx_read_png(path, &w, &h);
+        int s = rec_map_scale(cap.width, cap.height);
+        CHECK(s == recfx_doc_scale(cap.width, cap.height) && w == s * cap.width);
+        if (px) {
+            const unsigned char *c = recfx_map_at(px, w, s, mem_lights[0].x, mem_lights[0].y);
+            CHECK_MSG(c[0] == 255 && c[1] == 255 && c[2] == 255, "saturated pixel (%d, %d, %d)", c[0], c[1], c[2]);
+            /* a neighbour, unsaturated: blue for 240 deg */
+            recfx_check_phase_colour(recfx_map_at(px, w, s, mem_lights[0].x + 1, mem_lights[0].y), 240, "neighbour");
+        }
+        free(px);
+        /* unwritable paths fail cleanly, leaving nothing behind */
+        CHECK(rec_map_write_phase_png(&pm, "/nonexistent-dir/phase.png") == GS_EIO);
+        CHECK(rec_map_write_bulb_png(&pm, m, "/nonexistent-dir/bulb.png") == GS_EIO);
+        CHECK(rec_map_write_confidence_png(&pm, "/nonexistent-dir/c.png") == GS_EIO);
+    }
+    rec_pixel_maps_release(&pm);
+    /* bad arguments */
+    rec_map_opts o;
+    rec_map_opts_default(&o);
+    o.threshold_sigma = 0.0;
+    CHECK(rec_pixel_maps_compute(&cap, m, NULL, &o, &pm) == GS_EINVAL && pm.state == NULL);
+    o.threshold_sigma = NAN;
+    CHECK(rec_pixel_maps_compute(&cap, m, NULL, &o, &pm) == GS_EINVAL);
+    rec_matcher *mono = NULL;
+    CHECK_OK(rec_matcher_new(d, 50, 1, 13, NULL, &mono));
+    CHECK(rec_pixel_maps_compute(&cap, mono, NULL, NULL, &pm) == GS_EINVAL);
+    rec_matcher *k26 = NULL;   /* a matcher for another K: refused, not read out of bounds */
+    CHECK_OK(rec_matcher_new(d, 50, 3, 26, NULL, &k26));
+    CHECK(rec_pixel_maps_compute(&cap, k26, NULL, NULL, &pm) == GS_EINVAL && strstr(gs_detail(), "K = 13"));
+    rec_matcher_free(k26);
+    CHECK(rec_pixel_maps_compute(NULL, m, NULL, NULL, &pm) == GS_EINVAL);
+    rec_catalog cat;
+    memset(&cat, 0, sizeof cat);
+    CHECK(rec_plot_signals(m, &cat, NULL, 0, "/tmp/x.png", NULL) == GS_EINVAL);
+    CHECK(rec_plot_signals(m, &cat, NULL, 4, "/nonexistent-dir/s.png", NULL) == GS_EIO);
+    rec_matcher_free(mono);
+    gs_capture_release(&cap);
+    rec_matcher_free(m);
+    gs_delight_free(d);
+}
