@@ -31,7 +31,7 @@
  * the cos(e) factor leaves vertical lines straight). The standard value is k = 0.13.
  * Projection and location both use it, so they stay exact inverses of each other.
  *
- * Errors: functions return a gs_status (recognize/recognize.h) and set gs_detail(). NaN or
+ * Errors: functions return a gs_status (recognize/base/base.h) and set gs_detail(). NaN or
  * infinite inputs are GS_ENUMERIC, finite values out of range GS_EINVAL. Geometric failures
  * (a ray above the horizon, near-parallel bearings) are not errors: the result carries a flag
  * and NaN coordinates instead of a made-up point.

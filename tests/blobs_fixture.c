@@ -15,12 +15,12 @@ static uint64_t rng_state;   /* the renderer's splitmix64 stream */
 static double rng_poisson(double mean)
 {
     if (mean <= 0) return 0;
-    if (mean > 40) return fmax(0, floor(mean + sqrt(mean) * fx_rng_gauss(&rng_state) + 0.5));
+    if (mean > 40) return fmax(0, floor(mean + sqrt(mean) * gs_splitmix_normal(&rng_state) + 0.5));
     double L = exp(-mean), p = 1;
     int k = 0;
     do {
         k++;
-        p *= fx_rng_uniform(&rng_state);
+        p *= gs_splitmix_uniform(&rng_state);
     } while (p > L);
     return k - 1;
 }
@@ -110,7 +110,7 @@ void blobfx_render(const blobfx_scene *sc, gs_capture *cap)
                 if (sc->noise) {
                     double pos = dn > 0 ? dn : 0; /* a negative pedestal has no shot noise */
                     if (sc->gain > 0) dn += rng_poisson(pos * sc->gain) / sc->gain - pos;
-                    dn += sc->read * fx_rng_gauss(&rng_state);
+                    dn += sc->read * gs_splitmix_normal(&rng_state);
                 }
                 double raw = floor(sc->black + dn + 0.5);
                 if (raw < 0) raw = 0;

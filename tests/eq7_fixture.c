@@ -189,7 +189,7 @@ void eq7fx_oracle_discrete(const eq7fx_ttab *tb, const double *ph, const double 
 void eq7fx_render_t(const double *t, int D, double a, double sigma, uint64_t *rs, double *x, double *sg)
 {
     for (int k = 0; k < D; k++) {
-        x[k] = a * t[k] + (sigma > 0 ? sigma * fx_rng_gauss(rs) : 0.0);
+        x[k] = a * t[k] + (sigma > 0 ? sigma * gs_splitmix_normal(rs) : 0.0);
         sg[k] = sigma > 0 ? sigma : 1e-9 * a;
     }
 }
@@ -200,7 +200,7 @@ void eq7fx_render(const gs_bulb *b, double s, int K, double a, double sigma, uin
     int D = b->brf.bands * K;
     eq7fx_template(b, s, K, x);
     for (int k = 0; k < D; k++) {
-        x[k] = a * x[k] + (sigma > 0 ? sigma * fx_rng_gauss(rs) : 0.0);
+        x[k] = a * x[k] + (sigma > 0 ? sigma * gs_splitmix_normal(rs) : 0.0);
         sg[k] = sigma > 0 ? sigma : 1e-9 * a;
     }
 }

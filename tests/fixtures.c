@@ -140,22 +140,3 @@ int fx_fork_pipe(int *fd)
     *fd = fds[0];
     return (int)pid;
 }
-
-uint64_t fx_rng_next(uint64_t *s)
-{
-    uint64_t z = (*s += 0x9E3779B97F4A7C15ull);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
-}
-
-double fx_rng_uniform(uint64_t *s)
-{
-    return ((double)(fx_rng_next(s) >> 11) + 0.5) * 0x1p-53;
-}
-
-double fx_rng_gauss(uint64_t *s)
-{
-    double u1 = fx_rng_uniform(s), u2 = fx_rng_uniform(s);
-    return sqrt(-2.0 * log(u1)) * cos(2.0 * M_PI * u2);
-}

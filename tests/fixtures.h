@@ -1,6 +1,6 @@
 /* fixtures.h - helpers shared by the test files (tests/fixtures.c), prefix fx_: temporary paths,
- * whole-file reads and writes, string counts, printf-style commands, and a deterministic
- * random stream (splitmix64, uniform, Box-Muller Gaussian). A failure to write is a test
+ * whole-file reads and writes, string counts, printf-style commands (random numbers: the
+ * format kit's gs_splitmix64, gs_splitmix_uniform, gs_splitmix_normal). A failure to write is a test
  * failure (a CHECK); the other helpers report through their results. */
 #ifndef GRIDSURVEY_TESTS_FIXTURES_H
 #define GRIDSURVEY_TESTS_FIXTURES_H
@@ -52,15 +52,5 @@ int fx_run_bin(char *out, size_t out_size, const char *fmt, const char *a, const
  * print the parent's buffer again): 0 in the child, *fd the pipe's write end; the child's pid
  * in the parent, *fd the read end. -1 (a test failure) when the pipe or fork fails. */
 int fx_fork_pipe(int *fd);
-
-/* ------------------------------------------------------------------ random numbers */
-
-/* splitmix64 (Steele, Lea and Flood 2014): advances *s and returns the next 64 bits. */
-uint64_t fx_rng_next(uint64_t *s);
-/* Uniform in (0, 1): the top 53 bits of one draw, plus half a step. */
-double fx_rng_uniform(uint64_t *s);
-/* Standard normal by Box-Muller: two uniforms u1, u2 (in that order) per value,
- * sqrt(-2 ln u1) cos(2 pi u2). */
-double fx_rng_gauss(uint64_t *s);
 
 #endif

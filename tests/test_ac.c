@@ -32,7 +32,7 @@ static double sample_wave(const wave *w, double rate_hz, size_t n, double noise,
 {
     double s = 0;
     for (size_t i = 0; i < n; i++) {
-        x[i] = wave_at(w, (double)i / rate_hz) + (noise > 0 ? noise * fx_rng_gauss(rng) : 0);
+        x[i] = wave_at(w, (double)i / rate_hz) + (noise > 0 ? noise * gs_splitmix_normal(rng) : 0);
         s += x[i];
     }
     return s / (double)n;
@@ -95,7 +95,7 @@ static void drift_times(double f0, double alpha, double alt_s, double sigma_t, u
     for (size_t k = 0; k < n; k++) {
         double kk = (double)k;
         t_true[k] = kk / (f0 + sqrt(f0 * f0 + alpha * kk)) + (k % 2 ? alt_s : 0);
-        t[k] = t_true[k] + (sigma_t > 0 ? sigma_t * fx_rng_gauss(rng) : 0);
+        t[k] = t_true[k] + (sigma_t > 0 ? sigma_t * gs_splitmix_normal(rng) : 0);
     }
 }
 

@@ -90,14 +90,14 @@ static void random_lights(blobfx_light *l, int n, double flux_lo, uint64_t seed)
     uint64_t rs = seed;
     for (int i = 0; i < n; i++) {
         memset(&l[i], 0, sizeof l[i]);
-        l[i].x = 16 + 32 * (i % 8) + fx_rng_uniform(&rs) - 0.5;
-        l[i].y = 16 + 32 * (i / 8) + fx_rng_uniform(&rs) - 0.5;
-        l[i].psf = 1.0 + 0.5 * fx_rng_uniform(&rs);
-        l[i].flux = flux_lo * pow(10, 2 * fx_rng_uniform(&rs));
-        l[i].depth = 0.5 * fx_rng_uniform(&rs);
-        l[i].phase = fx_rng_uniform(&rs);
-        double c0 = 0.2 + fx_rng_uniform(&rs), c1 = 0.2 + fx_rng_uniform(&rs),
-               c2 = 0.2 + fx_rng_uniform(&rs);
+        l[i].x = 16 + 32 * (i % 8) + gs_splitmix_uniform(&rs) - 0.5;
+        l[i].y = 16 + 32 * (i / 8) + gs_splitmix_uniform(&rs) - 0.5;
+        l[i].psf = 1.0 + 0.5 * gs_splitmix_uniform(&rs);
+        l[i].flux = flux_lo * pow(10, 2 * gs_splitmix_uniform(&rs));
+        l[i].depth = 0.5 * gs_splitmix_uniform(&rs);
+        l[i].phase = gs_splitmix_uniform(&rs);
+        double c0 = 0.2 + gs_splitmix_uniform(&rs), c1 = 0.2 + gs_splitmix_uniform(&rs),
+               c2 = 0.2 + gs_splitmix_uniform(&rs);
         l[i].chroma[0] = c0 / (c0 + c1 + c2);
         l[i].chroma[1] = c1 / (c0 + c1 + c2);
         l[i].chroma[2] = c2 / (c0 + c1 + c2);

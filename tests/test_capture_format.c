@@ -47,13 +47,13 @@ static void make_capture(gs_capture *c, int K, int bands, int W, int H, int hdr)
     if (hdr) CHECK_OK(gs_capture_alloc_hdr(c));
     rng = 99;
     size_t n = (size_t)K * W * H * bands;
-    for (size_t i = 0; i < n; i++) c->raw[i] = (unsigned short)fx_rng_next(&rng);
+    for (size_t i = 0; i < n; i++) c->raw[i] = (unsigned short)gs_splitmix64(&rng);
     c->raw[0] = 0;
     c->raw[n - 1] = 65535;
     for (int k = 0; k < K; k++) c->frames[k].cycles = k == 1 ? 0.1 : 500 + 0.25 * k;
     if (hdr) {
         for (size_t i = 0; i < (size_t)K * W * H; i++)
-            c->halvings[i] = (unsigned char)(fx_rng_next(&rng) % (GS_MAX_HALVINGS + 1));
+            c->halvings[i] = (unsigned char)(gs_splitmix64(&rng) % (GS_MAX_HALVINGS + 1));
         /* frame 2 has no map: its halvings must be 0 */
         c->frames[2].hdr_map[0] = '\0';
         memset(c->halvings + (size_t)2 * W * H, 0, (size_t)W * H);
@@ -668,15 +668,15 @@ TEST(capture_format_fuzz_json)
     for (int it = 0; it < 400; it++) {
         size_t len = n;
         memcpy(buf, orig, n);
-        int edits = 1 + (int)(fx_rng_next(&rng) % 3);
+        int edits = 1 + (int)(gs_splitmix64(&rng) % 3);
         for (int e = 0; e < edits; e++) {
-            size_t pos = len ? fx_rng_next(&rng) % len : 0;
-            switch (fx_rng_next(&rng) % 4) {
-            case 0: buf[pos] = alphabet[fx_rng_next(&rng) % (sizeof alphabet - 1)]; break;
+            size_t pos = len ? gs_splitmix64(&rng) % len : 0;
+            switch (gs_splitmix64(&rng) % 4) {
+            case 0: buf[pos] = alphabet[gs_splitmix64(&rng) % (sizeof alphabet - 1)]; break;
             case 1:
                 if (len + 1 < n + 64) {
                     memmove(buf + pos + 1, buf + pos, len - pos);
-                    buf[pos] = alphabet[fx_rng_next(&rng) % (sizeof alphabet - 1)];
+                    buf[pos] = alphabet[gs_splitmix64(&rng) % (sizeof alphabet - 1)];
                     len++;
                 }
                 break;

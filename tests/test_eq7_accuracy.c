@@ -42,7 +42,7 @@ static long rng_poisson(uint64_t *s, double lam)
 {
     if (lam <= 0.0) return 0;
     long mode = (long)floor(lam);
-    double u = fx_rng_uniform(s);
+    double u = gs_splitmix_uniform(s);
     double pm = exp(-lam + mode * log(lam) - lfact[mode]);
     double up = pm, dn = pm;
     long hi = mode, lo = mode;
@@ -177,14 +177,14 @@ static void run_level(const gs_delight *d, const camera *cam, double mean_e, int
     double x[78], sg[78], sg_own[78], sum_conf = 0;
     int own_pair = 0;
     for (int i = 0; i < n; i++) {
-        int b = (int)(fx_rng_next(&rs) % (uint64_t)nb), p = (int)(fx_rng_next(&rs) % 3);
+        int b = (int)(gs_splitmix64(&rs) % (uint64_t)nb), p = (int)(gs_splitmix64(&rs) % 3);
         const double *t = tab + (size_t)(b * 3 + p) * (size_t)D;
         /* brightness: the mean sample (a / 3 in DN) holds mean_e electrons */
         double a = 3.0 * mean_e / cam->gain;
         for (int k = 0; k < D; k++) {
             double mu = a * t[k] > 0 ? a * t[k] : 0;
             long ne = rng_poisson(&rs, cam->gain * mu + cam->bg_e);
-            x[k] = ((double)ne - cam->bg_e) / cam->gain + cam->read_dn * fx_rng_gauss(&rs);
+            x[k] = ((double)ne - cam->bg_e) / cam->gain + cam->read_dn * gs_splitmix_normal(&rs);
         }
         /* the noise std given to Eq. 7: shot noise of the band's mean level (a smoothed
          * estimate, docs/recognition.md) and, for comparison, of each sample's own value */

@@ -107,7 +107,7 @@ TEST(eq7_analytic_templates)
         gs_bulb b;
         eq7fx_make_bulb(&b, ids[i], shapes[i], 50, 3, GS_REF_VOLTAGE, eq7fx_chroma[i], 1024);
         for (int trial = 0; trial < 20; trial++) {
-            double sh = fx_rng_uniform(&rs);
+            double sh = gs_splitmix_uniform(&rs);
             eq7fx_template(&b, sh, 26, t);
             analytic_template(shapes[i], eq7fx_chroma[i], sh, 26, ta);
             for (int k = 0; k < 78; k++) CHECK_NEAR(t[k], ta[k], 1e-12);
@@ -143,7 +143,7 @@ TEST(eq7_continuous_matches_fine_grid_oracle)
     int posterior_checked = 0, ambiguous_checked = 0;
     for (int trial = 0; trial < trials; trial++) {
         int b0 = trial % nb;
-        double s0 = fx_rng_uniform(&rs);
+        double s0 = gs_splitmix_uniform(&rs);
         double snr = trial % 4 == 0 ? 0.7 : trial % 4 == 1 ? 3 : trial % 4 == 2 ? 15 : 100;
         analytic_template(shapes[b0], eq7fx_chroma[b0], s0, K, t);
         eq7fx_render_t(t, D, 300.0, 100.0 / snr, &rs, x, sg);

@@ -52,7 +52,7 @@ TEST(eq7_brightness_near_zero)
     CHECK_MSG(dim >= n * 9 / 10, "%d of %d dim", dim, n);
     /* pixels: the same rows give -1 and confidence 0 */
     float xf[78], sf = 1.0f;
-    for (int k = 0; k < 78; k++) xf[k] = (float)fx_rng_gauss(&rs);
+    for (int k = 0; k < 78; k++) xf[k] = (float)gs_splitmix_normal(&rs);
     int pb;
     float pp, pc;
     CHECK_OK(rec_match_pixels(m, xf, &sf, 1, &pb, &pp, &pc));
@@ -181,7 +181,7 @@ TEST(eq7_nan_inf_negative_input)
     CHECK(eq7fx_all_finite(&r) && !(r.flags & REC_MATCH_BAD_INPUT));
     CHECK(neg > 0 || r.bulb >= -1);
     /* all negative: no positive brightness fits */
-    for (int k = 0; k < 78; k++) x[k] = -5.0 - fx_rng_uniform(&rs);
+    for (int k = 0; k < 78; k++) x[k] = -5.0 - gs_splitmix_uniform(&rs);
     CHECK_OK(rec_match_light(m, x, sg, &r));
     CHECK(eq7fx_all_finite(&r) && r.bulb == -1 && (r.flags & REC_MATCH_DIM) && r.brightness == 0);
     /* extreme scales: no overflow, no NaN */
@@ -308,7 +308,7 @@ TEST(eq7_shape_only_bulb_never_decides_phase)
         double x[78], sg[78];
         uint64_t rs = 15;
         for (int trial = 0; trial < 10; trial++) {
-            eq7fx_render(&b, fx_rng_uniform(&rs), 26, 500.0, 1.0, &rs, x, sg);
+            eq7fx_render(&b, gs_splitmix_uniform(&rs), 26, 500.0, 1.0, &rs, x, sg);
             rec_match r;
             CHECK_OK(rec_match_light(m, x, sg, &r));
             CHECK(eq7fx_all_finite(&r));

@@ -33,11 +33,11 @@ static void render_fx(const gs_bulb *b, double s, double a, const double *g, dou
     int K = 26;
     eq7fx_template(b, s, K, x);
     double f[26];
-    for (int k = 0; k < K; k++) f[k] = scint > 0 ? exp(scint * fx_rng_gauss(rs) - 0.5 * scint * scint) : 1.0;
+    for (int k = 0; k < K; k++) f[k] = scint > 0 ? exp(scint * gs_splitmix_normal(rs) - 0.5 * scint * scint) : 1.0;
     for (int band = 0; band < 3; band++)
         for (int k = 0; k < K; k++) {
             int d = band * K + k;
-            x[d] = a * g[band] * f[k] * x[d] + sigma * fx_rng_gauss(rs);
+            x[d] = a * g[band] * f[k] * x[d] + sigma * gs_splitmix_normal(rs);
             sg[d] = sigma;
         }
 }
@@ -147,7 +147,7 @@ TEST(eq7_scintillation_multiplicative_noise)
     int nc = 0;
     for (int i = 0; i < 60; i++) {
         size_t b = (size_t)i % 4;
-        double ph = 360.0 * fx_rng_uniform(&rs), s = gs_phase_to_shift(ph);
+        double ph = 360.0 * gs_splitmix_uniform(&rs), s = gs_phase_to_shift(ph);
         render_fx(rec_matcher_bulb(m, b), s, 1000.0, g, 0.03, 1000.0 / 3 / 100, &rs, x, sg);
         rec_match r;
         CHECK_OK(rec_match_light(m, x, sg, &r));
@@ -226,7 +226,7 @@ TEST(eq7_band_gains_pixels_equal_lights)
     const double g[3] = {1.0, 0.8, 0.6};
     uint64_t rs = 61;
     for (size_t i = 0; i < px.n; i++) {
-        double a = (i % 4 == 0) ? 0.0 : (i % 4 == 3) ? 300.0 * fx_rng_uniform(&rs) : 1.0 + 4.0 * fx_rng_uniform(&rs);
+        double a = (i % 4 == 0) ? 0.0 : (i % 4 == 3) ? 300.0 * gs_splitmix_uniform(&rs) : 1.0 + 4.0 * gs_splitmix_uniform(&rs);
         render_fx(rec_matcher_bulb(m, i % nb), gs_phase_to_shift(eq7fx_p3[(i / nb) % 3]), a, g, 0.01, 1.0,
                   &rs, x, sg);
         for (int k = 0; k < 78; k++) px.x[i * 78 + k] = (float)x[k];

@@ -96,7 +96,7 @@ TEST(eq7_pixels_prefilter_generated_delight)
     uint64_t rs = 23;
     for (size_t i = 0; i < px.n; i++) {
         /* |t| ~ 2.9 for a unit brightness: a in [0.5, 2] puts z around 1.5 - 6 */
-        double a = (i % 4 == 0) ? 0.0 : (i % 4 == 3) ? 50.0 * fx_rng_uniform(&rs) : 0.5 + 1.5 * fx_rng_uniform(&rs);
+        double a = (i % 4 == 0) ? 0.0 : (i % 4 == 3) ? 50.0 * gs_splitmix_uniform(&rs) : 0.5 + 1.5 * gs_splitmix_uniform(&rs);
         eq7fx_render_t(eq7fx_ttab_row(&tb, (int)(i % nb), (int)(i / nb) % 3), 78, a, 1.0, &rs, x, sg);
         for (int k = 0; k < 78; k++) px.x[i * 78 + k] = (float)x[k];
     }

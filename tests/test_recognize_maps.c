@@ -161,7 +161,7 @@ static gs_status mem_capture(const gs_delight *d, gs_capture *cap)
     uint64_t seed = 99;
     for (size_t q = 0; q < np * 13 * 3; q++) {
         /* Box-Muller on one splitmix64 draw: u1 from its top 53 bits, u2 from its low 11 */
-        uint64_t z = fx_rng_next(&seed);
+        uint64_t z = gs_splitmix64(&seed);
         double u1 = ((double)(z >> 11) + 0.5) * 0x1p-53, u2 = ((double)(z & 0x7ff) + 0.5) / 2048.0;
         double n = sqrt(-2.0 * log(u1)) * cos(6.283185307179586 * u2);
         double raw = 100.0 + cycles * (0.5 + v[q]) + 2.0 * n;
