@@ -555,6 +555,16 @@ gs_status cap_sim_write_truth(const cap_sim *s, const char *dir)
         json_object_set_new(o, "shift_cycles", jnum(gs_phase_to_shift(li->phase_deg)));
         json_object_set_new(o, "flux_e_per_cycle", jnum(li->flux_e_per_cycle));
         if (li->lumens > 0) json_object_set_new(o, "lumens", jnum(li->lumens));
+        /* what a maximum-likelihood oracle must know of the atmosphere (docs/formats.md) */
+        if (has(s, CAP_FX_EXTINCTION) && s->trans) {
+            json_t *t = json_array();
+            for (int band = 0; band < s->B; band++) json_array_append_new(t, jnum(s->trans[l * (size_t)s->B + (size_t)band]));
+            json_object_set_new(o, "transmission", t);
+        }
+        if (has(s, CAP_FX_SCINTILLATION) && s->scint_s2 && s->scint_s2[l] > 0) {
+            json_object_set_new(o, "scintillation_log_var", jnum(s->scint_s2[l]));
+            json_object_set_new(o, "scintillation_rho", jnum(s->scint_rho[l]));
+        }
         json_array_append_new(lights, o);
         in_image += li->in_image != 0;
     }

@@ -35,6 +35,12 @@ void rec_eq7_work_free(rec_eq7_work *w)
     free(w->tt);
     free(w->dt);
     free(w->d2t);
+    free(w->r2);
+    free(w->s2);
+    free(w->m2);
+    free(w->tr);
+    free(w->t12);
+    free(w->scratch);
     free(w->acc);
     memset(w, 0, sizeof *w);
 }
@@ -64,10 +70,16 @@ gs_status rec_eq7_work_alloc(const rec_matcher *m, rec_eq7_work *w)
     w->tt = malloc(sizeof *w->tt * D);
     w->dt = malloc(sizeof *w->dt * D);
     w->d2t = malloc(sizeof *w->d2t * D);
+    w->r2 = malloc(sizeof *w->r2 * D);
+    w->s2 = malloc(sizeof *w->s2 * D);
+    w->m2 = malloc(sizeof *w->m2 * D);
+    w->tr = malloc(sizeof *w->tr * D);
+    w->t12 = malloc(sizeof *w->t12 * M * (size_t)m->nfit);
+    w->scratch = malloc(sizeof *w->scratch * (size_t)(2 * 3 * GS_MAX_BANDS + 1) * D);
     w->acc = malloc(sizeof *w->acc * 3 * (size_t)m->K);
     if (!w->L || !w->mass || !w->cand || !w->mark || !w->bmass || !w->wmass || !w->has_peak ||
         !w->peak_s || !w->peak_L || !w->peak_sig || !w->peak_z || !w->peak_gain || !w->peak_cell || !w->S || !w->T || !w->w ||
-        !w->wx || !w->xs || !w->tt || !w->dt || !w->d2t || !w->acc) {
+        !w->wx || !w->xs || !w->tt || !w->dt || !w->d2t || !w->r2 || !w->s2 || !w->m2 || !w->tr || !w->t12 || !w->scratch || !w->acc) {
         rec_eq7_work_free(w);
         return gs_fail(GS_ENOMEM, "Eq. 7: cannot allocate scratch for %zu templates", M);
     }

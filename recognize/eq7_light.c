@@ -108,6 +108,97 @@ static double gain_n(int nf, const double *S, const double *T)
     return g;
 }
 
+/* The reddened band model (recognize.h) for bulb b's per-band sums S_b = sum w x t, T_b =
+ * sum w t^2 (templates of mean 1 per band): the per-band estimates a_b = S_b/T_b (variance
+ * 1/T_b) are explained by a c_b(tau), c_b = Q_b exp(-tau f_b), each band free within the
+ * tolerance t: a_b ~ N(a c_b, (t a c_b)^2) marginalised exactly,
+ *   log p = -R/2 - sum_b log(1 + s_b^2 T_b)/2 - (sum v a_b^2 - B^2/A)/2 - log(A)/2 + log Phi(B/sqrt(A)),
+ * R = Sxx - sum_b S_b^2/T_b, s_b = t a c_b, v_b = 1/(1/T_b + s_b^2), A = sum v c^2, B = sum v c a_b
+ * (a marginalised over a > 0 with a flat prior, s_b from the plug-in a), then averaged over a
+ * uniform prior on tau (RED_TAU_N points of [RED_TAU_LO, RED_TAU_HI]). With t -> 0 and tau = 0
+ * this is the paper's one brightness times Q_b. fit (may be NULL) gets the best tau's numbers. */
+#define RED_TAU_N 24
+#define RED_TAU_LO -0.3
+#define RED_TAU_HI 3.0
+typedef struct {
+    double chi2;                 /* R + sum v (a_b - a c_b)^2 at the best tau */
+    double a, tau, z;            /* the brightness, optical depth and a / sigma_a there */
+    double band[GS_MAX_BANDS];   /* each band's brightness: the posterior mean of a_b */
+} red_fit;
+
+static double loglik_red(const rec_matcher *m, int bulb, double Sxx, const double *S,
+                         const double *T, red_fit *fit)
+{
+    const double *Q = m->bulbs[bulb].chroma, tol = m->o.chroma_tolerance;
+    double R = Sxx, ah[GS_MAX_BANDS];
+    int nb = m->bands, any = 0;
+    for (int b = 0; b < nb; b++) {
+        ah[b] = T[b] > 0.0 ? S[b] / T[b] : 0.0;
+        if (T[b] > 0.0) {
+            R -= S[b] * ah[b];
+            any = 1;
+        }
+    }
+    if (!any) return -INFINITY;
+    if (R < 0.0) R = 0.0;
+    double Lt[RED_TAU_N], Lmax = -INFINITY;
+    for (int i = 0; i < RED_TAU_N; i++) {
+        double tau = RED_TAU_LO + (RED_TAU_HI - RED_TAU_LO) * i / (RED_TAU_N - 1);
+        double c[GS_MAX_BANDS], v[GS_MAX_BANDS], a = 0.0, A = 0.0, B = 0.0, C = 0.0, occ = 0.0;
+        for (int b = 0; b < nb; b++) c[b] = Q[b] * exp(-tau * m->red_f[b]);
+        for (int it = 0; it < 3; it++) {   /* s_b from the current brightness */
+            A = B = C = occ = 0.0;
+            for (int b = 0; b < nb; b++) {
+                if (!(T[b] > 0.0)) continue;
+                double sb = tol * (a > 0.0 ? a : 0.0) * c[b];
+                v[b] = 1.0 / (1.0 / T[b] + sb * sb);
+                A += v[b] * c[b] * c[b];
+                B += v[b] * c[b] * ah[b];
+                C += v[b] * ah[b] * ah[b];
+                occ += log1p(sb * sb * T[b]);
+            }
+            if (!(A > 0.0)) break;
+            a = B / A;
+        }
+        if (!(A > 0.0)) {
+            Lt[i] = -INFINITY;
+            continue;
+        }
+        double between = C - B * B / A;
+        if (between < 0.0) between = 0.0;
+        double z = B / sqrt(A);
+        Lt[i] = -0.5 * (R + between) - 0.5 * occ - 0.5 * log(A) + gs_log_phi(z);
+        if (Lt[i] > Lmax) {
+            Lmax = Lt[i];
+            if (fit) {
+                fit->chi2 = R + between;
+                fit->a = a > 0.0 ? a : 0.0;
+                fit->tau = tau;
+                fit->z = z > 0.0 ? z : 0.0;
+                for (int b = 0; b < nb; b++) {
+                    double sb = tol * fit->a * c[b];
+                    /* posterior mean of a_b: data a_b (weight T_b) and prior a c_b (1/s_b^2) */
+                    fit->band[b] = T[b] > 0.0 ? (sb > 0.0 ? (T[b] * ah[b] + fit->a * c[b] / (sb * sb)) /
+                                                              (T[b] + 1.0 / (sb * sb))
+                                                          : fit->a * c[b])
+                                              : 0.0;
+                    if (fit->band[b] < 0.0) fit->band[b] = 0.0;
+                }
+            }
+        }
+    }
+    if (!isfinite(Lmax)) return -INFINITY;
+    double sum = 0.0;
+    for (int i = 0; i < RED_TAU_N; i++) sum += exp(Lt[i] - Lmax);
+    return Lmax + log(sum / RED_TAU_N);
+}
+
+/* The log likelihood of bulb b's sums under the matcher's band model. */
+static double loglik_bulb(const rec_matcher *m, int b, double Sxx, const double *S, const double *T)
+{
+    return m->red ? loglik_red(m, b, Sxx, S, T, NULL) : loglik_n(m->nfit, Sxx, S, T);
+}
+
 /* The sums of template j from the rec_eq7_work arrays ([f * M + j]). */
 static void sums_of(const rec_matcher *m, const rec_eq7_work *w, size_t j, double *S, double *T)
 {
@@ -156,7 +247,7 @@ void rec_eq7_refine_peak(const rec_matcher *m, rec_eq7_work *w, size_t b, size_t
     chi2_at(m, w, b, sc + u, Sxx, &e);
     double sig = (e.d2 > 0.0) ? sqrt(2.0 / e.d2) : INV_SQRT12;
     if (!(sig < INV_SQRT12)) sig = INV_SQRT12;
-    double Lp = loglik_n(e.nf, Sxx, e.S, e.T);
+    double Lp = loglik_bulb(m, (int)b, Sxx, e.S, e.T);
     double gp = Sxx - e.chi2;
     /* never below the grid: if the refinement did not improve, keep the best cell */
     if (!(Lp >= w->L[j0])) {
@@ -180,19 +271,125 @@ void rec_eq7_refine_peak(const rec_matcher *m, rec_eq7_work *w, size_t b, size_t
     w->peak_cell[b] = j0;
 }
 
-static void no_answer(rec_match *out, unsigned flags)
+void rec_eq7_no_answer(rec_match *out, unsigned flags)
 {
     memset(out, 0, sizeof *out);
     out->bulb = -1;
     out->runner_bulb = -1;
+    out->shape_p_value = out->blend_p_value = 1.0;
+    out->blend_bulb[0] = out->blend_bulb[1] = -1;
     out->flags = flags | REC_MATCH_BULB_AMBIGUOUS | REC_MATCH_PHASE_AMBIGUOUS;
 }
 
+/* The excess e2 of a fit (rec_eq7_excess): residuals r^2, camera variances s2 and band levels
+ * mu2 of the n usable samples (units of c), dof. chi2(e2) = sum r^2 / (s2 + e2 mu2) falls
+ * monotonically: bisection. */
+static double excess_e2(const double *r2, const double *s2, const double *mu2, size_t n, int dof)
+{
+    double chi0 = 0.0, mmax = 0.0;
+    for (size_t d = 0; d < n; d++) {
+        chi0 += r2[d] / s2[d];
+        if (mu2[d] / s2[d] > mmax) mmax = mu2[d] / s2[d];
+    }
+    if (!(chi0 > dof) || !(mmax > 0.0)) return 0.0;
+    double lo = 0.0, hi = 1.0 / mmax;
+    for (int it = 0; it < 200; it++) {
+        double c = 0.0;
+        for (size_t d = 0; d < n; d++) c += r2[d] / (s2[d] + hi * mu2[d]);
+        if (c < dof || hi > 1e6) break;
+        hi *= 4.0;
+    }
+    for (int it = 0; it < 60; it++) {
+        double mid = 0.5 * (lo + hi), c = 0.0;
+        for (size_t d = 0; d < n; d++) c += r2[d] / (s2[d] + mid * mu2[d]);
+        if (c > dof) lo = mid;
+        else hi = mid;
+    }
+    return 0.5 * (lo + hi);
+}
+
+/* Template j (or continuous bulb b at shift s, with its derivative in s when dt is not NULL)
+ * into t, and its brightness per parameter a_f = S_f/T_f >= 0 from the light's weights. */
+static void model_of(const rec_matcher *m, rec_eq7_work *w, int b, size_t j, double s, double *t,
+                     double *dt, double *a_f)
+{
+    size_t D = (size_t)m->D, span = D / (size_t)m->nfit;
+    if (m->cont[b]) rec_eq7_template_at(m, (size_t)b, s, t, dt, w->d2t, w->acc);
+    else memcpy(t, m->t + j * D, sizeof *t * D);
+    for (int f = 0; f < m->nfit; f++) {
+        double S = 0.0, T = 0.0;
+        for (size_t d = (size_t)f * span; d < (size_t)(f + 1) * span; d++) {
+            S += w->wx[d] * t[d];
+            T += w->w[d] * t[d] * t[d];
+        }
+        a_f[f] = (T > 0.0 && S > 0.0) ? S / T : 0.0;
+    }
+}
+
+/* The excess noise is one flux factor per frame, common to the bands (scintillation is nearly
+ * achromatic): the covariance of frame k is Sigma_k = diag(s^2) + e^2 u_k u_k^T (u the fitted
+ * model), while the scores weigh the samples independently, w_d = 1/(s_d^2 + e^2 mu_b^2). For
+ * that composite likelihood (Chandler & Bate 2007) the information along a direction Delta of
+ * the model is H = Delta' W Delta but the score's variance J = Delta' W Sigma W Delta: kappa =
+ * H/J (<= 1 kept) tempers the log likelihood so that posteriors and phase sigmas are calibrated.
+ * phi = n tr((W Sigma)^2) / tr(W Sigma)^2 >= 1 inflates the variance of chi2 (Satterthwaite:
+ * chi2 ~ phi chi2(dof/phi)). u, delta in units of c, s2 the camera variances. */
+static void excess_correlation(const rec_matcher *m, const rec_eq7_work *w, const double *sigma,
+                               double c, double fe, const double *u, const double *delta,
+                               double *kappa, double *phi)
+{
+    size_t K = (size_t)m->K;
+    double e2 = fe * fe, H = 0.0, J = 0.0, trB = 0.0, trB2 = 0.0;
+    int n = 0;
+    for (size_t k = 0; k < K; k++) {
+        double wdu = 0.0, wu2[GS_MAX_BANDS] = {0};
+        for (int b = 0; b < m->bands; b++) {
+            size_t d = (size_t)b * K + k;
+            double wd = w->w[d];
+            if (!(wd > 0.0)) continue;
+            double s2 = (sigma[d] / c) * (sigma[d] / c), v = s2 + e2 * u[d] * u[d];
+            if (delta) {
+                H += wd * delta[d] * delta[d];
+                J += wd * delta[d] * wd * delta[d] * s2;
+                wdu += wd * delta[d] * u[d];
+            }
+            trB += wd * v;
+            trB2 += wd * v * wd * v;
+            wu2[b] = wd * u[d] * u[d];
+            n++;
+        }
+        J += e2 * wdu * wdu;
+        for (int b = 0; b < m->bands; b++)
+            for (int b2 = 0; b2 < m->bands; b2++)
+                if (b2 != b) trB2 += e2 * e2 * wu2[b] * wu2[b2];
+    }
+    *kappa = (delta && H > 0.0 && J > H) ? H / J : 1.0;
+    if (*kappa < 1e-3) *kappa = 1e-3;
+    *phi = trB > 0.0 ? n * trB2 / (trB * trB) : 1.0;
+    if (!(*phi >= 1.0)) *phi = 1.0;
+}
+
+/* Temper every score by kappa about Lmax (excess_correlation): L -> Lmax + kappa (L - Lmax),
+ * the continuous peaks' widths by 1/sqrt(kappa). */
+static void temper(const rec_matcher *m, rec_eq7_work *w, double Lmax, double kappa)
+{
+    for (size_t j = 0; j < m->M; j++)
+        if (isfinite(w->L[j])) w->L[j] = Lmax + kappa * (w->L[j] - Lmax);
+    for (size_t b = 0; b < m->nb; b++) {
+        if (!m->cont[b] || !isfinite(w->peak_L[b])) continue;
+        w->peak_L[b] = Lmax + kappa * (w->peak_L[b] - Lmax);
+        w->peak_sig[b] /= sqrt(kappa);
+        if (w->peak_sig[b] > INV_SQRT12) w->peak_sig[b] = INV_SQRT12;
+    }
+}
+
 gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const double *signal,
-                                const double *sigma, rec_match *out)
+                                 const double *sigma, double fe, rec_match *out,
+                                 rec_eq7_excess *excess)
 {
     size_t D = (size_t)m->D, M = m->M;
     unsigned flags = 0;
+    if (excess) excess->valid = 0;
     /* usable samples: finite signal, finite sigma > 0; sigma = +inf marks a dropped sample */
     double c = 0.0;
     int used = 0;
@@ -205,13 +402,12 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
         }
         if (s > c) c = s;
     }
-    /* model error: the variance of each sample gains (model_error mu_b)^2, mu_b the RMS signal
-     * level of the band: mu_b^2 = mean(x^2 - sigma^2) over its usable samples (>= 0), in units of
-     * c. A multiplicative error of model_error per sample then adds, on average over the band,
-     * exactly the variance assumed (E chi2 = dof), though spread evenly over the K windows. */
-    double mu[GS_MAX_BANDS] = {0.0, 0.0, 0.0};
-    const double fe = m->o.model_error;
-    if (fe > 0.0) {
+    /* the band levels: mu_b^2 = mean(x^2 - sigma^2) over the band's usable samples (>= 0), in
+     * units of c. A multiplicative excess e per sample adds (e mu_b)^2 to each sample's variance:
+     * on average over the band exactly the variance it causes (E chi2 = dof), spread evenly over
+     * the K windows. */
+    double mu2[GS_MAX_BANDS] = {0.0, 0.0, 0.0};
+    {
         size_t K = (size_t)m->K;
         for (int band = 0; band < m->bands; band++) {
             double sum = 0.0;
@@ -222,15 +418,14 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
                 sum += (x / c) * (x / c) - (s / c) * (s / c);
                 n++;
             }
-            mu[band] = (n > 0 && sum > 0.0 && isfinite(sum)) ? fe * sqrt(sum / n) : 0.0;
+            mu2[band] = (n > 0 && sum > 0.0 && isfinite(sum)) ? sum / n : 0.0;
         }
     }
     for (size_t d = 0; d < D; d++) {
         double x = signal[d], s = sigma[d];
         w->w[d] = w->wx[d] = w->xs[d] = 0.0;
         if (!isfinite(x) || !isfinite(s) || !(s > 0.0)) continue;
-        double me = mu[d / (size_t)m->K];
-        double ws = 1.0 / ((s / c) * (s / c) + me * me), xs = x / c;
+        double ws = 1.0 / ((s / c) * (s / c) + fe * fe * mu2[d / (size_t)m->K]), xs = x / c;
         if (!isfinite(ws) || !isfinite(ws * xs * xs)) {
             flags |= REC_MATCH_BAD_INPUT;
             continue;
@@ -241,13 +436,13 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
         used++;
     }
     if (used == 0) {
-        no_answer(out, flags | REC_MATCH_BAD_INPUT);
+        rec_eq7_no_answer(out, flags | REC_MATCH_BAD_INPUT);
         return GS_OK;
     }
     double Sxx = 0.0;
     for (size_t d = 0; d < D; d++) Sxx += w->wx[d] * w->xs[d];
     if (!isfinite(Sxx)) {
-        no_answer(out, flags | REC_MATCH_BAD_INPUT);
+        rec_eq7_no_answer(out, flags | REC_MATCH_BAD_INPUT);
         return GS_OK;
     }
     /* all templates: S = T_mat wx, T = T_sq w (per band with band gains) */
@@ -270,7 +465,7 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
         double Sv[GS_MAX_BANDS], Tv[GS_MAX_BANDS];
         for (size_t j = 0; j < M; j++) {
             sums_of(m, w, j, Sv, Tv);
-            w->L[j] = loglik_n(m->nfit, Sxx, Sv, Tv);
+            w->L[j] = loglik_bulb(m, m->tbulb[j], Sxx, Sv, Tv);
             if (w->L[j] > Lmax) Lmax = w->L[j];
         }
     }
@@ -298,8 +493,29 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
         rec_eq7_add_cand(m, w, j);   /* every pair counts for one light */
     rec_eq7_decision dec;
     rec_eq7_decide(m, w, Lmax, &dec);
+    double kappa = 1.0, phi = 1.0;
+    if (fe > 0.0 && dec.bulb >= 0) {
+        /* the excess's correlation along the decision's direction: the best pair's phase
+         * derivative (continuous), else the best model minus the runner-up's */
+        double a1[GS_MAX_BANDS], a2[GS_MAX_BANDS];
+        size_t span = D / (size_t)m->nfit;
+        int cont = m->cont[dec.bulb], have = cont || dec.runner_bulb >= 0;
+        model_of(m, w, dec.bulb, dec.tmpl, dec.shift, w->tt, cont ? w->dt : NULL, a1);
+        if (!cont && have) model_of(m, w, dec.runner_bulb, dec.runner_tmpl, dec.runner_shift, w->tr, NULL, a2);
+        for (size_t d = 0; d < D; d++) {
+            double u = a1[d / span] * w->tt[d];
+            w->r2[d] = cont ? a1[d / span] * w->dt[d] : u - (have ? a2[d / span] * w->tr[d] : 0.0);
+            w->tt[d] = u;
+        }
+        excess_correlation(m, w, sigma, c, fe, w->tt, have ? w->r2 : NULL, &kappa, &phi);
+        if (kappa < 1.0) {
+            temper(m, w, Lmax, kappa);
+            for (size_t j = 0; j < M; j++) rec_eq7_add_cand(m, w, j);   /* decide consumed them */
+            rec_eq7_decide(m, w, Lmax, &dec);
+        }
+    }
     if (dec.bulb < 0) {
-        no_answer(out, flags | REC_MATCH_BAD_INPUT);
+        rec_eq7_no_answer(out, flags | REC_MATCH_BAD_INPUT);
         return GS_OK;
     }
     /* the fit of the best pair: exact template at its shift */
@@ -311,10 +527,10 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
     } else {
         tb = m->t + dec.tmpl * D;
     }
-    /* one brightness (or one per band) a_f = S_f/T_f >= 0 */
+    /* the brightness per brightness parameter: a_f = S_f/T_f >= 0, or the reddened model's */
     int nf = m->nfit, nfree = 0;
     size_t span = D / (size_t)nf;
-    double a_sum = 0.0, chi2 = 0.0, Sv[GS_MAX_BANDS], Tv[GS_MAX_BANDS];
+    double a_f[GS_MAX_BANDS] = {0}, Sv[GS_MAX_BANDS] = {0}, Tv[GS_MAX_BANDS] = {0};
     for (int f = 0; f < nf; f++) {
         double S = 0.0, T = 0.0;
         for (size_t d = (size_t)f * span; d < (size_t)(f + 1) * span; d++) {
@@ -323,23 +539,61 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
         }
         Sv[f] = S;
         Tv[f] = T;
-        double a = (T > 0.0 && S > 0.0) ? S / T : 0.0;
+        a_f[f] = (T > 0.0 && S > 0.0) ? S / T : 0.0;
         nfree += T > 0.0;
-        a_sum += a;
+    }
+    double snr;
+    red_fit rf;
+    if (m->red) {
+        loglik_red(m, bb, Sxx, Sv, Tv, &rf);
+        for (int f = 0; f < nf; f++) a_f[f] = rf.band[f];
+        snr = rf.z;
+        nfree = 2;   /* brightness and optical depth */
+    } else {
+        /* a / sigma_a (one gain: a sqrt(T), sigma_a = 1/sqrt(T)) */
+        snr = nf == 1 ? (Tv[0] > 0.0 ? a_f[0] * sqrt(Tv[0]) : 0.0) : snr_n(nf, Sv, Tv);
+    }
+    double a_sum = 0.0, chi2 = 0.0;
+    for (int f = 0; f < nf; f++) {
+        a_sum += a_f[f];
         for (size_t d = (size_t)f * span; d < (size_t)(f + 1) * span; d++) {
-            double r = w->xs[d] - a * tb[d];
+            double r = w->xs[d] - a_f[f] * tb[d];
             chi2 += w->w[d] * r * r;
         }
     }
-    /* a / sigma_a (one gain: a sqrt(T), sigma_a = 1/sqrt(T)) */
-    double snr = nf == 1 ? (Tv[0] > 0.0 ? a_sum * sqrt(Tv[0]) : 0.0) : snr_n(nf, Sv, Tv);
+    if (m->red) chi2 = rf.chi2;   /* the residual with the prior's share (recognize.h) */
     int npar = nfree + 1;   /* brightness(es) and phase */
     if (nf == 1) npar = 2;
     memset(out, 0, sizeof *out);
     out->brightness = a_sum * c;
     out->chi2 = chi2;
     out->dof = used > npar ? used - npar : 0;
-    out->p_value = out->dof >= 1 ? gs_chi2_sf(chi2, out->dof) : 1.0;
+    /* chi2 ~ phi chi2(dof / phi) with a correlated excess (excess_correlation) */
+    long dof_eff = lround(out->dof / phi);
+    out->p_value = out->dof >= 1 ? gs_chi2_sf(chi2 / phi, dof_eff > 1 ? (int)dof_eff : 1) : 1.0;
+    out->model_error = fe;
+    if (excess) {
+        /* residuals against the camera noise alone (the fit is the same to first order) */
+        size_t n = 0, K = (size_t)m->K;
+        memset(excess, 0, sizeof *excess);
+        for (size_t d = 0; d < D; d++) {
+            if (!(w->w[d] > 0.0)) continue;
+            double s = sigma[d] / c, r = w->xs[d] - a_f[d / span] * tb[d];
+            w->r2[n] = r * r;
+            w->s2[n] = s * s;
+            w->m2[n] = mu2[d / K];
+            excess->n_b[d / K] += 1.0;
+            excess->s2_b[d / K] += s * s;
+            n++;
+        }
+        for (int band = 0; band < m->bands; band++) {
+            if (excess->n_b[band] > 0.0) excess->s2_b[band] /= excess->n_b[band];
+            excess->mu2_b[band] = mu2[band];
+        }
+        excess->dof = out->dof;
+        excess->valid = out->dof >= 1 && mu2[0] + mu2[1] + mu2[2] > 0.0;
+        excess->e2 = excess->valid ? excess_e2(w->r2, w->s2, w->m2, n, out->dof) : 0.0;
+    }
     out->bulb = bb;
     out->phase_deg = rec_eq7_report_phase(m, bb, dec.tmpl, dec.shift);
     out->phase_sigma_deg = 0.0;
@@ -354,12 +608,44 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
     out->runner_phase_deg =
         dec.runner_bulb >= 0 ? rec_eq7_report_phase(m, dec.runner_bulb, dec.runner_tmpl, dec.runner_shift) : 0.0;
     out->runner_confidence = dec.runner_bulb >= 0 ? dec.runner_conf : 0.0;
+    out->shape_p_value = out->blend_p_value = 1.0;
+    out->p_other = out->p_blend = 0.0;
+    out->blend_bulb[0] = out->blend_bulb[1] = -1;
+    if (snr >= m->o.min_snr && m->o.unknown_p > 0.0) {
+        /* the nested-model tests (eq7_nested.c): a second light, or a waveform not in DELIGHT */
+        rec_eq7_nested nt;
+        rec_eq7_nested_tests(m, w, tb, bb, dec.tmpl, dec.shift, phi, &nt);
+        out->shape_p_value = nt.p_shape;
+        out->blend_p_value = nt.p_blend;
+        /* the posteriors are over DELIGHT and "a bulb not in it" (eq7_nested.c) */
+        out->p_other = nt.p_other;
+        out->p_blend = nt.found ? nt.p_blend_post : 0.0;
+        double one = (1.0 - out->p_other) * (1.0 - out->p_blend);   /* in DELIGHT, one light */
+        out->confidence *= one;
+        out->bulb_confidence *= one;
+        out->phase_confidence *= one;
+        out->runner_confidence *= one;
+        int blend = nt.found && (nt.p_blend < m->o.unknown_p || out->p_blend > 0.5) &&
+                    !(nt.extra_shape > 0 && nt.chi2_blend + 2.0 * nt.extra_blend > nt.chi2_shape + 2.0 * nt.extra_shape);
+        if (blend) {
+            flags |= REC_MATCH_BLEND;
+            for (int q = 0; q < 2; q++) {
+                size_t j = nt.tmpl[q];
+                int b = j == (size_t)-1 ? bb : m->tbulb[j];
+                out->blend_bulb[q] = b;
+                out->blend_phase_deg[q] = j == (size_t)-1 ? out->phase_deg : rec_eq7_report_phase(m, b, j, m->shift[j]);
+                out->blend_share[q] = nt.share[q];
+            }
+        } else if (nt.p_shape < m->o.unknown_p) {
+            flags |= REC_MATCH_UNKNOWN;
+        }
+    }
     if (m->bulbs[bb].ref == GS_REF_NONE) flags |= REC_MATCH_PHASE_AMBIGUOUS;
     if (out->bulb_confidence < m->o.ambiguous_conf) flags |= REC_MATCH_BULB_AMBIGUOUS;
     if (out->phase_confidence < m->o.ambiguous_conf) flags |= REC_MATCH_PHASE_AMBIGUOUS;
     if (out->dof > 0 && out->p_value < m->o.unknown_p) flags |= REC_MATCH_UNKNOWN;
     if (snr < m->o.min_snr) flags |= REC_MATCH_DIM;
-    if (flags & (REC_MATCH_UNKNOWN | REC_MATCH_DIM)) {
+    if (flags & (REC_MATCH_UNKNOWN | REC_MATCH_DIM | REC_MATCH_BLEND)) {
         /* no answer; the best fit within the database moves to the runner-up fields */
         out->runner_bulb = out->bulb;
         out->runner_phase_deg = out->phase_deg;
@@ -382,32 +668,8 @@ gs_status rec_match_light(const rec_matcher *m, const double *signal, const doub
     rec_eq7_work w;
     gs_status s = rec_eq7_work_alloc(m, &w);
     if (s != GS_OK) return s;
-    s = rec_eq7_match_light_ws(m, &w, signal, sigma, out);
-    rec_eq7_work_free(&w);
-    return s;
-}
-
-gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_match *out)
-{
-    if (!m || !cat) return gs_fail(GS_EINVAL, "Eq. 7: matcher and catalog must not be NULL");
-    if (cat->count == 0) return GS_OK;
-    if (!out || !cat->signal || !cat->sigma)
-        return gs_fail(GS_EINVAL, "Eq. 7: catalog of %zu lights without signal, sigma or output",
-                       cat->count);
-    if (cat->bands != m->bands || cat->K != m->K)
-        return gs_fail(GS_EINVAL, "Eq. 7: catalog has %d bands x K=%d, the matcher %d bands x K=%d",
-                       cat->bands, cat->K, m->bands, m->K);
-    rec_eq7_work w;
-    gs_status s = rec_eq7_work_alloc(m, &w);
-    if (s != GS_OK) return s;
-    size_t D = (size_t)m->D;
-    for (size_t i = 0; i < cat->count && s == GS_OK; i++) {
-        if (cat->flags && (cat->flags[i] & REC_BLOB_NO_SIGNAL)) {
-            no_answer(&out[i], REC_MATCH_BAD_INPUT);
-            continue;
-        }
-        s = rec_eq7_match_light_ws(m, &w, cat->signal + i * D, cat->sigma + i * D, &out[i]);
-    }
+    s = rec_eq7_match_light_ws(m, &w, signal, sigma,
+                               isfinite(m->o.model_error) ? m->o.model_error : 0.0, out, NULL);
     rec_eq7_work_free(&w);
     return s;
 }

@@ -50,8 +50,11 @@ void rec_eq7_opts_default(rec_eq7_opts *o)
     o->unknown_p = 1e-3;
     o->ambiguous_conf = 0.8;
     o->min_snr = 3.0;
-    o->band_gains = 1;
-    o->model_error = 0.04;
+    o->band_gains = REC_BANDS_REDDENED;
+    o->chroma_tolerance = 0.05;
+    o->model_error = NAN;
+    o->other_prior = 0.0;
+    o->blend_prior = 0.1;
 }
 
 void rec_matcher_free(rec_matcher *m)
@@ -136,10 +139,19 @@ static gs_status check_opts(const rec_eq7_opts *o)
         return gs_fail(GS_EINVAL, "Eq. 7 options: ambiguous_conf=%g: expected [0, 1]", o->ambiguous_conf);
     if (!(o->min_snr >= 0.0 && o->min_snr < 1e6))
         return gs_fail(GS_EINVAL, "Eq. 7 options: min_snr=%g: expected [0, 1e6)", o->min_snr);
-    if (o->band_gains != 0 && o->band_gains != 1)
-        return gs_fail(GS_EINVAL, "Eq. 7 options: band_gains=%d: expected 0 or 1", o->band_gains);
-    if (!(o->model_error >= 0.0 && o->model_error < 1.0))
-        return gs_fail(GS_EINVAL, "Eq. 7 options: model_error=%g: expected [0, 1)", o->model_error);
+    if (o->band_gains < REC_BANDS_CHROMA || o->band_gains > REC_BANDS_REDDENED)
+        return gs_fail(GS_EINVAL, "Eq. 7 options: band_gains=%d: expected 0 (chromaticity), 1 "
+                       "(free) or 2 (reddened)", o->band_gains);
+    if (!(o->chroma_tolerance >= 0.001 && o->chroma_tolerance <= 1.0))
+        return gs_fail(GS_EINVAL, "Eq. 7 options: chroma_tolerance=%g: expected [0.001, 1]",
+                       o->chroma_tolerance);
+    if (!isnan(o->model_error) && !(o->model_error >= 0.0 && o->model_error < 1.0))
+        return gs_fail(GS_EINVAL, "Eq. 7 options: model_error=%g: expected [0, 1) or NaN "
+                       "(measured)", o->model_error);
+    if (!(o->other_prior >= 0.0 && o->other_prior < 1.0))
+        return gs_fail(GS_EINVAL, "Eq. 7 options: other_prior=%g: expected [0, 1)", o->other_prior);
+    if (!(o->blend_prior >= 0.0 && o->blend_prior < 1.0))
+        return gs_fail(GS_EINVAL, "Eq. 7 options: blend_prior=%g: expected [0, 1)", o->blend_prior);
     return GS_OK;
 }
 
@@ -407,9 +419,13 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
     m->D = bands * K;
     m->o = opts;
     m->G = 8 * K > 96 ? 8 * K : 96;
-    m->bg = opts.band_gains && bands > 1;
+    m->bg = opts.band_gains != REC_BANDS_CHROMA && bands > 1;
+    m->red = opts.band_gains == REC_BANDS_REDDENED && bands > 1;
     m->nfit = m->bg ? bands : 1;
-    m->bandpath = bands > 1 && (m->bg || opts.model_error > 0.0);
+    m->fe_pix = isfinite(opts.model_error) ? opts.model_error : 0.0;
+    m->bandpath = bands > 1 && (m->bg || m->fe_pix > 0.0);
+    for (int band = 0; band < bands; band++)   /* Angstrom exponent 1.3 at 650/550/450 nm */
+        m->red_f[band] = bands == 3 ? pow((650.0 - 100.0 * band) / 550.0, -1.3) - 1.0 : 0.0;
     size_t D = (size_t)m->D;
 
     /* candidate bulbs */

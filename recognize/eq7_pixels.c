@@ -301,7 +301,7 @@ static void pixel_row_band(const rec_matcher *m, pix_work *pw, const float *xr, 
     rec_eq7_work *w = &pw->w;
     double *zz = pw->zz, *gg = pw->gg, *xd = pw->xd;
     float *ub = pw->ub;
-    const double min_snr = m->o.min_snr, fe = m->o.model_error;
+    const double min_snr = m->o.min_snr, fe = m->fe_pix;
     double var[GS_MAX_BANDS], inv[GS_MAX_BANDS], Sxx = 0.0;
     for (int b = 0; b < nb; b++) {
         const float *xb = xr + (size_t)b * K;

@@ -146,7 +146,11 @@ struct rec_matcher {
     double complex *wk;                 /* [K] e^{2 pi i j / K} */
     double chi2_thr;                    /* pixels: chi2 at p = unknown_p, dof D - nfit - 1 */
     /* per-band brightness (band_gains) and model error */
-    int bg;                             /* one brightness per band (band_gains and bands > 1) */
+    int bg;                             /* per-band sums and templates of mean 1 per band
+                                         * (REC_BANDS_FREE or _REDDENED, bands > 1) */
+    int red;                            /* light path: the reddened band model */
+    double red_f[GS_MAX_BANDS];         /* its f_b - 1 (optical depth per band relative to 550 nm) */
+    double fe_pix;                      /* pixels: the relative excess noise (model_error or 0) */
     int nfit;                           /* brightness parameters: bands (bg) or 1 */
     int bandpath;                       /* pixels: per-band scores (bands > 1, bg or model error) */
     double *bnorm;                      /* [M * bands] |t_j| over band b's K values */
@@ -196,6 +200,10 @@ typedef struct {
     /* light path */
     double *S, *T, *w, *wx, *xs;           /* [nfit * M] ([f * M + j]), [nfit * M], [D] x 3 */
     double *tt, *dt, *d2t;                 /* [D] */
+    double *r2, *s2, *m2;                  /* [D] the excess noise's residuals, variances, levels */
+    double *tr;                            /* [D] the runner-up's template */
+    double *t12;                           /* [nfit * M] cross sums of a first and every template */
+    double *scratch;                       /* [(6 bands + 1) D] the nested tests' */
     double complex *acc;                   /* [3 K] */
 } rec_eq7_work;
 
@@ -223,9 +231,42 @@ void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_
 /* eq7_light.c: the log likelihood of one scale; Newton refinement of continuous bulb b's peak
  * from grid cell j0; Eq. 7 for one light with caller-owned scratch. */
 double rec_eq7_loglik(double Sxx, double S, double T);
+/* An answer without a bulb (every number 0, runner-up none, both ambiguous flags). */
+void rec_eq7_no_answer(rec_match *out, unsigned flags);
 void rec_eq7_refine_peak(const rec_matcher *m, rec_eq7_work *w, size_t b, size_t j0, double Sxx);
+/* Excess noise of one light's fit (eq7_light.c, for the population estimate of eq7_noise.c):
+ * e2 solves sum_d r_d^2 / (sigma_d^2 + e2 mu_b^2) = dof for the best fit's residuals r (0 when
+ * the camera noise explains them); per band b its usable samples n_b, their mean camera variance
+ * s2_b and the level mu2_b, from which the estimate's expected variance at any e2 follows
+ * (2 dof / I^2, I = sum_b n_b mu2_b / (s2_b + e2 mu2_b)); valid 0 when the light has no fit. */
+typedef struct {
+    double e2;
+    int dof, valid;
+    double n_b[GS_MAX_BANDS], s2_b[GS_MAX_BANDS], mu2_b[GS_MAX_BANDS];
+} rec_eq7_excess;
 gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const double *signal,
-                                 const double *sigma, rec_match *out);
+                                 const double *sigma, double fe, rec_match *out,
+                                 rec_eq7_excess *excess);
+/* eq7_nested.c: the nested-model tests of the best fit tb (bulb, template or M for an exact
+ * continuous one, shift), on the work arrays of rec_eq7_match_light_ws; phi the chi2 variance
+ * inflation of a correlated excess. */
+#define REC_NESTED_MAX_D (GS_MAX_BANDS * 64)
+typedef struct {
+    double p_shape;       /* + smooth harmonics 1..3 per band: chi2(2 H bands) test */
+    double p_blend;       /* + a second template: Bonferroni over the templates searched */
+    double chi2_null, chi2_shape, chi2_blend;
+    int extra_shape, extra_blend, found;
+    size_t tmpl[2];       /* the blend's two templates; (size_t)-1: the best fit itself */
+    double share[2];      /* their shares of the brightness */
+    double p_other;       /* posterior that the bulb is not in DELIGHT (eq7_nested.c) */
+    double p_blend_post;  /* posterior of two lights (blend_prior) */
+} rec_eq7_nested;
+/* "Not in DELIGHT": a bulb whose waveform is the best template deformed by harmonics 1..3 per
+ * band of relative amplitude ~ N(0, tau^2), tau one of REC_OTHER_TAUS (equally likely), of prior
+ * probability other_prior. */
+#define REC_OTHER_TAUS {0.01, 0.03, 0.1}
+void rec_eq7_nested_tests(const rec_matcher *m, rec_eq7_work *w, const double *tb, int best_bulb,
+                          size_t best_tmpl, double best_shift, double phi, rec_eq7_nested *out);
 /* ============================================================================ end of Eq. 7 */
 
 #endif

@@ -141,7 +141,7 @@ static gs_status check_matcher(const rec_matcher *m, int bands, int K)
                        .area_px = &area, .peak_dn = &peak, .saturated_px = &sat, .flags = &flags,
                        .signal = sig, .sigma = sig + D, .width = 1, .height = 1, .labels = NULL};
     rec_match r;
-    gs_status st = rec_match_catalog(m, &one, &r);
+    gs_status st = rec_match_catalog(m, &one, &r, NULL);
     free(sig);
     if (st == GS_OK) return GS_OK;
     char why[512];

@@ -68,19 +68,51 @@ static const rec_pg_noise *nz(const rec_pg_noise *noise, int per_sample, int k)
     return per_sample ? noise + k : noise;
 }
 
-static double loglik(const rec_pg_noise *noise, int per_sample, const double *x, const double *t,
-                     int D, double a)
+/* The log likelihood of brightness a: per sample exactly (Poisson-Gaussian) where frame k has
+ * no excess; where it has one (relative variance v, one flux factor for the frame's samples of
+ * every band), the frame's samples are Gaussian with the Poisson-Gaussian variances d_b and
+ * covariance diag(d) + v mu mu^T (mu_b = a t_b), by Sherman-Morrison and the determinant lemma. */
+static double loglik(const rec_pg_noise *noise, int per_sample, const rec_pg_excess *ex,
+                     const double *x, const double *t, int D, double a)
 {
     double l = 0.0;
-    for (int k = 0; k < D; k++) l += rec_pg_log_likelihood(nz(noise, per_sample, k), x[k], a * t[k]);
+    int K = ex ? ex->K : D;
+    for (int k = 0; k < K; k++) {
+        double v = ex ? ex->frame_var[k] : 0.0;
+        if (!(v > 0.0)) {
+            for (int d = k; d < D; d += K) l += rec_pg_log_likelihood(nz(noise, per_sample, d), x[d], a * t[d]);
+            continue;
+        }
+        double q = 0.0, uq = 0.0, uu = 0.0, ld = 0.0;
+        for (int d = k; d < D; d += K) {
+            const rec_pg_noise *c = nz(noise, per_sample, d);
+            double mu = a * t[d], r = x[d] - mu;
+            double var = c->read_dn * c->read_dn + (c->gain * (mu > 0 ? mu : 0) + c->bg_e) / (c->gain * c->gain);
+            q += r * r / var;
+            uq += mu * r / var;
+            uu += mu * mu / var;
+            ld += log(2.0 * M_PI * var);
+        }
+        l += -0.5 * (q - v * uq * uq / (1.0 + v * uu)) - 0.5 * (ld + log1p(v * uu));
+    }
     return l;
 }
 
-gs_status rec_ml_oracle(const rec_pg_noise *noise, int per_sample, const double *x,
-                        const double *templates, int M, int D, int *best_out, double *loglik_out)
+gs_status rec_ml_oracle(const rec_pg_noise *noise, int per_sample, const rec_pg_excess *ex,
+                        const double *x, const double *templates, int M, int D, int *best_out,
+                        double *loglik_out)
 {
     if (!noise || !x || !templates || !best_out || M < 1 || D < 1)
         return gs_fail(GS_EINVAL, "rec_ml_oracle: NULL argument or M = %d, D = %d", M, D);
+    if (ex) {
+        if (!ex->frame_var || ex->K < 1 || D % ex->K)
+            return gs_fail(GS_EINVAL, "rec_ml_oracle: excess of K = %d frames for %d samples: "
+                           "expected K dividing D and frame_var", ex->K, D);
+        for (int k = 0; k < ex->K; k++)
+            if (!(ex->frame_var[k] >= 0.0) || !isfinite(ex->frame_var[k]))
+                return gs_fail(GS_EINVAL, "rec_ml_oracle: frame %d: excess variance %g: expected "
+                               "finite and >= 0", k, ex->frame_var[k]);
+    }
     for (int k = 0; k < (per_sample ? D : 1); k++) {
         const rec_pg_noise *c = nz(noise, per_sample, k);
         if (!(c->gain > 0) || !(c->read_dn > 0) || !(c->bg_e >= 0) || !isfinite(c->gain) ||
@@ -104,7 +136,7 @@ gs_status rec_ml_oracle(const rec_pg_noise *noise, int per_sample, const double 
         double a = den > 0 ? num / den : 0;
         if (!(a > 1e-9)) a = 1e-9;
         alsq[j] = a;
-        lb[j] = loglik(noise, per_sample, x, t, D, a);
+        lb[j] = loglik(noise, per_sample, ex, x, t, D, a);
         if (lb[j] > best_lb) best_lb = lb[j];
     }
     int best = 0;
@@ -120,25 +152,30 @@ gs_status rec_ml_oracle(const rec_pg_noise *noise, int per_sample, const double 
             den += t[k] * t[k];
             var += t[k] * t[k] * (c->read_dn * c->read_dn + (a0 * t[k] * c->gain + c->bg_e) / (c->gain * c->gain));
         }
+        for (int f = 0; ex && f < ex->K; f++) {   /* the excess: a^2 sum_k v_k (sum_{d in k} t_d^2)^2 */
+            double tk = 0;
+            for (int d = f; d < D; d += ex->K) tk += t[d] * t[d];
+            var += ex->frame_var[f] * a0 * a0 * tk * tk;
+        }
         double sa = den > 0 ? sqrt(var) / den : 0;
         double lo = a0 - 6 * sa, hi = a0 + 6 * sa;
         if (lo < 1e-9) lo = 1e-9;
         if (hi < lo) hi = lo;
         double p = hi - gr * (hi - lo), q = lo + gr * (hi - lo);
-        double fp = loglik(noise, per_sample, x, t, D, p), fq = loglik(noise, per_sample, x, t, D, q);
+        double fp = loglik(noise, per_sample, ex, x, t, D, p), fq = loglik(noise, per_sample, ex, x, t, D, q);
         for (int it = 0; it < 18; it++) {   /* bracket / 5800: ~1e-6 nats from the top */
             if (fp > fq) {
                 hi = q;
                 q = p;
                 fq = fp;
                 p = hi - gr * (hi - lo);
-                fp = loglik(noise, per_sample, x, t, D, p);
+                fp = loglik(noise, per_sample, ex, x, t, D, p);
             } else {
                 lo = p;
                 p = q;
                 fp = fq;
                 q = lo + gr * (hi - lo);
-                fq = loglik(noise, per_sample, x, t, D, q);
+                fq = loglik(noise, per_sample, ex, x, t, D, q);
             }
         }
         double v = fp > fq ? fp : fq;

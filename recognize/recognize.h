@@ -116,12 +116,17 @@ void rec_catalog_release(rec_catalog *cat);
  * chi2 = sum w x^2 - S^2/T. The posterior over (bulb, phase) has uniform priors and the scale
  * marginalised over a > 0 (flat prior):
  *   log p(beta, phi | x) = -chi2/2 - log(T)/2 + log Phi(S/sqrt(T)) + const.
- * With band_gains (the default for 3 bands) each band b has its own brightness a_b and its
- * template is shift(phi, b_beta(b)) of mean 1 (no Q_beta), so a per-band gain such as extinction
- * reddening cancels: chi2 = sum w x^2 - sum_b S_b^2/T_b, the log posterior sums
- * -log(T_b)/2 + log Phi(S_b/sqrt(T_b)) over bands, the brightness is sum_b a_b and dof =
- * usable samples - bands - 1. model_error adds (model_error mu_b)^2 to every sample's variance
- * (docs/recognition.md, "Band gains and model error").
+ * Bands (3): with REC_BANDS_REDDENED (the default) the band b brightness is a c_b(tau),
+ * c_b = Q_beta(b) exp(-tau (f_b - 1)): the chromaticity reddened by extinction of optical depth
+ * tau at 550 nm (Angstrom exponent 1.3, f_b = (lambda_b / 550 nm)^-1.3 at 650/550/450 nm), each
+ * band free within chroma_tolerance of it (a Gaussian prior, marginalised), tau over a uniform
+ * prior on [-0.3, 3]; so chromaticity stays information at low SNR while distant, reddened lights
+ * still fit. REC_BANDS_FREE gives each band its own free brightness (chromaticity unused; the
+ * log posterior sums -log(T_b)/2 + log Phi(S_b/sqrt(T_b)) over bands); REC_BANDS_CHROMA is the
+ * paper's one brightness times Q_beta. The pixel path (rec_match_pixels) treats REDDENED as FREE.
+ * Noise: each sample's variance is sigma^2 + (e mu_b)^2, mu_b the band's RMS signal level and e
+ * the light's relative excess noise (scintillation): model_error when it is a number, else
+ * measured per capture by rec_match_catalog (docs/recognition.md, "Noise").
  * Thread safety: a matcher is read-only after rec_matcher_new; rec_match_* may run on several
  * threads with the same matcher (rec_match_pixels calls OpenBLAS, whose own threading applies;
  * rec_matcher_new plans FFTs, so do not create matchers concurrently with other FFTW planners). */
@@ -140,15 +145,31 @@ typedef struct {
                               * [0, 1), 0 disables the test */
     double ambiguous_conf;   /* bulb or phase posterior below which it is ambiguous (0.8), [0, 1] */
     double min_snr;          /* brightness / its std below which a light is too dim (3), >= 0 */
-    int band_gains;          /* 1: one brightness per band (each band of the template mean 1,
-                              * the chromaticity Q_beta not used), so a per-band gain (extinction
-                              * reddening, white balance) cancels; 0: one brightness times Q_beta
-                              * (the paper's Eq. 7). Ignored for 1 band. 0 or 1 (1) */
-    double model_error;      /* fractional model error (scintillation, template mismatch): each
-                              * sample's variance is sigma^2 + (model_error * mu_b)^2, mu_b the
-                              * band's RMS signal level, mu_b^2 = mean over the band's usable
-                              * samples of x^2 - sigma^2 (>= 0). [0, 1) (0.04) */
+    int band_gains;          /* the band model, rec_band_model (REC_BANDS_REDDENED); ignored for
+                              * 1 band */
+    double chroma_tolerance; /* REC_BANDS_REDDENED: relative std of each band's gain around the
+                              * reddened chromaticity (white balance, lamp-to-lamp spread),
+                              * [0.001, 1] (0.05) */
+    double model_error;      /* relative excess noise e of every light (scintillation): each
+                              * sample's variance is sigma^2 + (e mu_b)^2, mu_b the band's RMS
+                              * signal level, mu_b^2 = mean over the band's usable samples of
+                              * x^2 - sigma^2 (>= 0). [0, 1), or NaN (default): measured per
+                              * capture by rec_match_catalog; 0 for rec_match_light */
+    double other_prior;      /* prior probability that a light's bulb is not in DELIGHT (its
+                              * waveform a deformation of the best template's, eq7_nested.c):
+                              * every confidence is of "in DELIGHT and this"; 0 = the paper's
+                              * closed world, calibrated when DELIGHT covers the scene; 0.2 makes
+                              * bulbs not in DELIGHT rarely confident (docs/recognition.md,
+                              * "Bulbs not in DELIGHT"). [0, 1) (0) */
+    double blend_prior;      /* prior probability that a light is two lights in one aperture
+                              * (eq7_nested.c): a blend more probable than not is flagged BLEND,
+                              * and every confidence is of "one light and this". [0, 1) (0.1) */
 } rec_eq7_opts;
+typedef enum {
+    REC_BANDS_CHROMA = 0,    /* one brightness times Q_beta (the paper's Eq. 7) */
+    REC_BANDS_FREE = 1,      /* one free brightness per band */
+    REC_BANDS_REDDENED = 2   /* one brightness times the reddened Q_beta, bands within a tolerance */
+} rec_band_model;
 /* Fill *o with the defaults in parentheses above. */
 void rec_eq7_opts_default(rec_eq7_opts *o);
 
@@ -157,8 +178,11 @@ enum {
     REC_MATCH_PHASE_AMBIGUOUS = 1u << 1,  /* phase_confidence < ambiguous_conf, or no phase */
     REC_MATCH_BULB_AMBIGUOUS = 1u << 2,   /* bulb_confidence < ambiguous_conf, or no bulb */
     REC_MATCH_DIM = 1u << 3,              /* brightness below min_snr of its std (bulb -1) */
-    REC_MATCH_BAD_INPUT = 1u << 4         /* some sample non-finite / sigma <= 0 (dropped), or
+    REC_MATCH_BAD_INPUT = 1u << 4,        /* some sample non-finite / sigma <= 0 (dropped), or
                                            * no usable sample at all (bulb -1) */
+    REC_MATCH_BLEND = 1u << 5             /* two templates explain the light better than one
+                                           * (two lights in one aperture): blend_* hold them
+                                           * (bulb -1) */
 };
 
 /* The answer for one light. No field is ever NaN or infinite.
@@ -190,6 +214,15 @@ typedef struct {
     int runner_bulb;          /* second most probable pair (different bulb or phase), -1 if none */
     double runner_phase_deg;
     double runner_confidence;
+    double model_error;       /* the relative excess noise e assumed for this light */
+    double shape_p_value;     /* the smooth-deformation test of the best fit (1: not run) */
+    double p_other;           /* posterior that the bulb is not in DELIGHT (other_prior); every
+                               * confidence is of "in DELIGHT and this" (0: not run) */
+    double blend_p_value;     /* the second-template test (1: not run or nothing found) */
+    double p_blend;           /* posterior of two lights (blend_prior; 0: not run) */
+    int blend_bulb[2];        /* REC_MATCH_BLEND: the two components (-1 otherwise), */
+    double blend_phase_deg[2];   /* their phases (grid values for continuous bulbs) */
+    double blend_share[2];       /* and their shares of the brightness */
     unsigned flags;           /* REC_MATCH_* */
 } rec_match;
 
@@ -224,8 +257,28 @@ int rec_matcher_prefilter_dim(const rec_matcher *m);
 gs_status rec_match_light(const rec_matcher *m, const double *signal, const double *sigma,
                           rec_match *out);
 /* Eq. 7 for every light of a catalog (bands and K must match the matcher's: GS_EINVAL); out
- * has cat->count entries. Lights flagged REC_BLOB_NO_SIGNAL get bulb -1 and BAD_INPUT. */
-gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_match *out);
+ * has cat->count entries. Lights flagged REC_BLOB_NO_SIGNAL get bulb -1 and BAD_INPUT.
+ * The excess noise (recognize/eq7_noise.c, docs/recognition.md "Noise"): a fixed model_error,
+ * or measured: every light fitted with the camera noise, each light's excess e^2 from its
+ * residuals, and for light i the weighted median of the OTHER clean lights' e^2 (weights their
+ * precision times a kernel in image row and log brightness: a blend's or an unknown bulb's
+ * misfit never raises its own noise), then the lights fitted again with it; out[i].model_error
+ * is the e used. Fewer than 8 clean lights: the camera noise alone. noise (may be NULL) says
+ * which. */
+typedef enum {
+    REC_NOISE_CAMERA,        /* the camera's noise model only (no population to measure from) */
+    REC_NOISE_FIXED,         /* the options' model_error for every light */
+    REC_NOISE_POPULATION     /* measured from the capture's other lights */
+} rec_noise_source;
+typedef struct {
+    rec_noise_source source;
+    size_t lights_used;           /* lights the measurement used */
+    double median_model_error;    /* the capture's typical e (weighted median of all lights) */
+} rec_noise_report;
+/* "camera", "fixed", "population". */
+const char *rec_noise_source_name(rec_noise_source s);
+gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_match *out,
+                            rec_noise_report *noise);
 
 /* Eq. 7 per pixel, as matrix products (OpenBLAS SGEMMs per block of 1024 rows; a rigorous
  * prefilter first sets aside rows that are dim for every template): x holds P rows of
@@ -372,16 +425,27 @@ typedef struct {
  * largest (mu < 0 counts as 0). Any electron count (log n! by lgamma). Thread-safe. */
 double rec_pg_log_likelihood(const rec_pg_noise *c, double x, double mu);
 
+/* An excess the oracle knows (the simulator's scintillation): frame k's flux is multiplied by a
+ * factor of mean 1 and relative variance frame_var[k], the same factor for the frame's samples of
+ * every band (sample d is frame d % K). */
+typedef struct {
+    int K;
+    const double *frame_var;   /* [K], finite, >= 0 */
+} rec_pg_excess;
+
 /* The maximum-likelihood template for one light: for each of the M templates (templates[j * D
  * + d], d = band * K + k as Eq. 7's), the log-likelihood sum_d rec_pg_log_likelihood(x_d, a t_d)
  * maximised over the brightness a > 0 (golden-section search, 18 steps in a bracket of +-6
  * standard deviations around the least-squares a: ~1e-6 nats from the top; templates 30 nats
  * below the best at their least-squares a are not refined). noise: one entry for every sample
  * (per_sample 0) or D entries (per_sample 1). *best = the winning template's index, *loglik (may
- * be NULL) its log-likelihood. Cost: M x D likelihoods of a few to a few hundred terms each, plus
+ * be NULL) its log-likelihood. ex (may be NULL): frames with an excess are Gaussian with the
+ * Poisson-Gaussian variances plus the excess's rank-one covariance (exact in the limit of many
+ * electrons, where the excess matters). Cost: M x D likelihoods of a few to a few hundred terms each, plus
  * 20 D per refined template: milliseconds per light, for accuracy studies only.
  * GS_EINVAL for NULL arguments, M or D < 1, a non-finite x or bad noise; GS_ENOMEM. */
-gs_status rec_ml_oracle(const rec_pg_noise *noise, int per_sample, const double *x,
-                        const double *templates, int M, int D, int *best, double *loglik);
+gs_status rec_ml_oracle(const rec_pg_noise *noise, int per_sample, const rec_pg_excess *ex,
+                        const double *x, const double *templates, int M, int D, int *best,
+                        double *loglik);
 
 #endif

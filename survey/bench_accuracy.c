@@ -207,8 +207,7 @@ static int cmp_double(const void *a, const void *b)
     return (x > y) - (x < y);
 }
 
-/* Store rows[0..n) as a capture of the point's survey under key, and evaluate that capture. */
-static gs_status eval_subset(srv_db *db, int64_t survey_id, const char *key, const srv_light_row *rows,
+gs_status srv_acc_eval_subset(srv_db *db, int64_t survey_id, const char *key, const srv_light_row *rows,
                              size_t n, const char *truth, srv_eval_report *ev)
 {
     srv_capture_data cd;
@@ -265,9 +264,7 @@ static gs_status run_point(const char *base, const srv_acc_crop *cr, const char 
     srv_job j;
     memset(&j, 0, sizeof j);
     srv_light_row *sub = NULL;
-    double *snr = NULL, *tab = NULL, *x = NULL;
-    int *npix = NULL;
-    rec_pg_noise *nz = NULL;
+    double *snr = NULL;
     if ((s = srv_db_open(dbp, SRV_DB_WRITE, &db)) != GS_OK) goto done;
     srv_eval_opts eo;
     srv_eval_opts_default(&eo);
@@ -288,20 +285,16 @@ static gs_status run_point(const char *base, const srv_acc_crop *cr, const char 
         goto done;
     }
     size_t n = j.cat.count;
-    int K = j.cat.K, B = j.cat.bands, D = K * B;
+    int K = j.cat.K, B = j.cat.bands;
     sub = calloc(n ? n : 1, sizeof *sub);
     snr = calloc(n ? n : 1, sizeof *snr);
-    npix = calloc(n ? n : 1, sizeof *npix);
-    x = calloc((size_t)D, sizeof *x);
-    nz = calloc((size_t)D, sizeof *nz);
-    if (!sub || !snr || !npix || !x || !nz) {
+    if (!sub || !snr) {
         s = gs_fail(GS_ENOMEM, "bench accuracy: out of memory");
         goto done;
     }
     if ((s = srv_job_matcher(&j, dl, NULL, j.cap.grid_hz, B, K, &ro.eq7)) != GS_OK ||
         (s = srv_job_match(&j)) != GS_OK)
         goto done;
-    const rec_matcher *m = j.matcher;
     const rec_match *mt = j.match;
     const srv_light_row *rows = j.lights;
     for (size_t i = 0; i < n; i++) snr[i] = rows[i].snr;
@@ -333,7 +326,7 @@ static gs_status run_point(const char *base, const srv_acc_crop *cr, const char 
         char key[64];
         snprintf(key, sizeof key, "calibration-bin-%d", b);
         srv_eval_report ev;
-        if ((s = eval_subset(db, rr.survey_id, key, sub, k, rr.truth_path, &ev)) != GS_OK) goto done;
+        if ((s = srv_acc_eval_subset(db, rr.survey_id, key, sub, k, rr.truth_path, &ev)) != GS_OK) goto done;
         /* the bin's matched lights; its mean confidence over all of its lights */
         p->bin_n[b] = (double)ev.matched;
         p->bin_conf[b] = conf / (double)k * (double)ev.matched;
@@ -345,106 +338,9 @@ static gs_status run_point(const char *base, const srv_acc_crop *cr, const char 
     }
     p->ece = ece_den > 0 ? ece_num / ece_den : NAN;
 
-    /* the oracle: templates of the matcher's voltage-referenced bulbs at the grid's phases
-     * (0/120/240 and the same + the transformer's shift: the truth's phase set) */
-    if (j.cap.gain_e_per_dn > 0 && n_oracle > 0) {
-        double phases[6] = {0, 120, 240, fmod(transformer + 360.0, 360.0), fmod(transformer + 480.0, 360.0),
-                            fmod(transformer + 600.0, 360.0)};
-        size_t nb = rec_matcher_bulb_count(m);
-        int M = 0;
-        tab = malloc(sizeof *tab * nb * 6 * (size_t)D);
-        int *tb = malloc(sizeof *tb * nb * 6);
-        double *tp = malloc(sizeof *tp * nb * 6);
-        if (!tab || !tb || !tp) {
-            free(tb);
-            free(tp);
-            s = gs_fail(GS_ENOMEM, "bench accuracy: out of memory for the oracle");
-            goto done;
-        }
-        for (size_t b = 0; b < nb && s == GS_OK; b++) {
-            const gs_bulb *bu = rec_matcher_bulb(m, b);
-            if (bu->ref != GS_REF_VOLTAGE) continue;
-            for (int ph = 0; ph < 6 && s == GS_OK; ph++) {
-                double *t = tab + (size_t)M * (size_t)D;
-                s = gs_brf_integrate(&bu->brf, gs_phase_to_shift(phases[ph]), K, t);
-                for (int d = 0; d < D; d++) t[d] *= bu->chroma[d / K];
-                tb[M] = (int)b;
-                tp[M] = phases[ph];
-                M++;
-            }
-        }
-        /* aperture sizes */
-        for (size_t q = 0; q < (size_t)j.cat.width * (size_t)j.cat.height; q++)
-            if (j.cat.labels[q] >= 0 && (size_t)j.cat.labels[q] < n) npix[j.cat.labels[q]]++;
-        /* the subset: unflagged lights (no saturation, HDR, edge or deblending), evenly spaced */
-        size_t eligible = 0;
-        const unsigned bad = REC_BLOB_EDGE | REC_BLOB_SATURATED | REC_BLOB_DEBLENDED | REC_BLOB_HDR | REC_BLOB_NO_SIGNAL;
-        for (size_t i = 0; i < n; i++) eligible += !(j.cat.flags[i] & bad) && npix[i] > 0;
-        size_t want = eligible < (size_t)n_oracle ? eligible : (size_t)n_oracle, seen = 0, k = 0;
-        srv_light_row *orc = calloc(want ? want : 1, sizeof *orc);
-        if (!orc) s = gs_fail(GS_ENOMEM, "bench accuracy: out of memory");
-        double r2 = gs_capture_noise(&j.cap).read_var_dn2;
-        for (size_t i = 0; i < n && k < want && s == GS_OK; i++) {
-            if ((j.cat.flags[i] & bad) || npix[i] <= 0) continue;
-            if (seen++ != k * eligible / want) continue;
-            /* the camera's noise of an aperture sum of npix pixels, in DN per cycle: Poisson
-             * electrons (gain_e_per_dn * cycles per unit), read + quantisation noise of npix
-             * pixels, and the background's electrons: the shot part of the extractor's sigma
-             * (which is shot + read + background estimate) less the light's own, per band */
-            for (int band = 0; band < B; band++) {
-                double bg = 0;
-                for (int kk = 0; kk < K; kk++) {
-                    int d = band * K + kk;
-                    double c = j.cap.frames[kk].cycles, g = j.cap.gain_e_per_dn * c;
-                    double sig = j.cat.sigma[i * (size_t)D + (size_t)d];
-                    x[d] = j.cat.signal[i * (size_t)D + (size_t)d];
-                    double tot_e = (sig * sig * c * c - npix[i] * r2) * j.cap.gain_e_per_dn * j.cap.gain_e_per_dn;
-                    bg += (tot_e - x[d] * g) / K;
-                    nz[d].gain = g;
-                    nz[d].read_dn = sqrt(npix[i] * r2) / c;
-                }
-                for (int kk = 0; kk < K; kk++) nz[band * K + kk].bg_e = bg > 0 ? bg : 0;
-            }
-            int best = 0;
-            if ((s = rec_ml_oracle(nz, 1, x, tab, M, D, &best, NULL)) != GS_OK) break;
-            const gs_bulb *bu = rec_matcher_bulb(m, (size_t)tb[best]);
-            sub[k] = rows[i];
-            sub[k].index = (int)k;
-            orc[k] = rows[i];
-            orc[k].index = (int)k;
-            orc[k].bulb_id = bu->id;
-            orc[k].technology = gs_tech_name(bu->type);
-            orc[k].phase_deg = tp[best];
-            orc[k].phase_fit_deg = tp[best];
-            orc[k].confidence = orc[k].bulb_confidence = orc[k].phase_confidence = 1.0;
-            orc[k].runner_bulb_id = NULL;
-            orc[k].runner_phase_deg = NAN;
-            orc[k].runner_confidence = 0;
-            orc[k].match_flags = 0;
-            k++;
-        }
-        free(tb);
-        free(tp);
-        srv_eval_report eo1, eo2;
-        if (s == GS_OK && k) s = eval_subset(db, rr.survey_id, "oracle-subset-pipeline", sub, k, rr.truth_path, &eo1);
-        if (s == GS_OK && k) s = eval_subset(db, rr.survey_id, "oracle-subset-oracle", orc, k, rr.truth_path, &eo2);
-        free(orc);
-        if (s != GS_OK) goto done;
-        if (k) {
-            p->oracle_n = eo1.matched;
-            p->ours_sub = eo1.matched ? (double)eo1.all_correct / (double)eo1.matched : NAN;
-            p->oracle_sub = eo2.matched ? (double)eo2.all_correct / (double)eo2.matched : NAN;
-        } else {
-            p->ours_sub = p->oracle_sub = NAN;
-        }
-    } else {
-        p->ours_sub = p->oracle_sub = NAN;
-    }
+    /* the oracle on a subset of the same lights (bench_oracle.c) */
+    s = srv_acc_oracle(db, &rr, &j, rows, transformer, n_oracle, sub, p);
 done:
-    free(nz);
-    free(x);
-    free(tab);
-    free(npix);
     free(snr);
     free(sub);
     srv_job_release(&j);

@@ -33,11 +33,19 @@ static const char recognize_usage[] =
     "                          --phases 6 not a multiple of 60)\n"
     "  --min-confidence X      posterior below which a bulb or phase is reported ambiguous\n"
     "                          (phase null in JSON), 0..1 (default 0.8)\n"
-    "  --band-gains on|off     one brightness per band (on, default for RGB: extinction reddens\n"
-    "                          distant lights) or one brightness times the template chromaticity\n"
-    "                          (off: the paper's Eq. 7)\n"
-    "  --model-error F         fractional model error added to every sample's noise, 0..1\n"
-    "                          (default 0.04: scintillation, template mismatch; 0: none)\n"
+    "  --band-model M          RGB: reddened (default: one brightness times the chromaticity\n"
+    "                          reddened by extinction, each band within --chroma-tolerance of\n"
+    "                          it), free (one free brightness per band) or chroma (one\n"
+    "                          brightness times the chromaticity: the paper's Eq. 7)\n"
+    "  --chroma-tolerance F    reddened: relative spread of each band around it, 0.001..1\n"
+    "                          (default 0.05)\n"
+    "  --model-error F|auto    relative excess noise of every light (scintillation), 0..1, or\n"
+    "                          auto (default): measured from the capture's other lights\n"
+    "  --other-prior P         prior probability that a bulb is not in DELIGHT, 0..1 (default 0:\n"
+    "                          the paper's closed world; 0.2: bulbs not in DELIGHT are rarely\n"
+    "                          confident, in-DELIGHT ones less confident at low SNR)\n"
+    "  --blend-prior P         prior probability that a light is two lights in one aperture,\n"
+    "                          0..1 (default 0.1; 0: never a blend by the posterior)\n"
     "  --threshold S           detection threshold of lights and mapped pixels, noise sigmas > 0\n"
     "                          (default 5)\n"
     "  --delight DB            the DELIGHT SQLite file (default: $GRIDSURVEY_DELIGHT, else the\n"
@@ -101,8 +109,11 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
         {"transformer-deg", required_argument, 0, 't'},
         {"min-confidence", required_argument, 0, 'c'},
         {"threshold", required_argument, 0, 's'},
-        {"band-gains", required_argument, 0, 'g'},
+        {"band-model", required_argument, 0, 'g'},
+        {"chroma-tolerance", required_argument, 0, 'T'},
         {"model-error", required_argument, 0, 'e'},
+        {"other-prior", required_argument, 0, 'O'},
+        {"blend-prior", required_argument, 0, 'B'},
         {"delight", required_argument, 0, 'd'},
         {"maps", required_argument, 0, 'm'},
         {"help", no_argument, 0, 'h'},
@@ -139,14 +150,34 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
                 return usage_error("--min-confidence '%s': expected a number from 0 to 1", optarg);
             break;
         case 'g':
-            if (!strcmp(optarg, "on")) o->eq7.band_gains = 1;
-            else if (!strcmp(optarg, "off")) o->eq7.band_gains = 0;
-            else return usage_error("--band-gains '%s': expected on or off", optarg);
+            if (!strcmp(optarg, "reddened")) o->eq7.band_gains = REC_BANDS_REDDENED;
+            else if (!strcmp(optarg, "free")) o->eq7.band_gains = REC_BANDS_FREE;
+            else if (!strcmp(optarg, "chroma")) o->eq7.band_gains = REC_BANDS_CHROMA;
+            else return usage_error("--band-model '%s': expected reddened, free or chroma", optarg);
+            break;
+        case 'T':
+            o->eq7.chroma_tolerance = strtod(optarg, &end);
+            if (end == optarg || *end || !(o->eq7.chroma_tolerance >= 0.001 && o->eq7.chroma_tolerance <= 1.0))
+                return usage_error("--chroma-tolerance '%s': expected a fraction from 0.001 to 1", optarg);
             break;
         case 'e':
+            if (!strcmp(optarg, "auto")) {
+                o->eq7.model_error = NAN;
+                break;
+            }
             o->eq7.model_error = strtod(optarg, &end);
-            if (end == optarg || *end || !(o->eq7.model_error >= 0.0 && o->eq7.model_error <= 1.0))
-                return usage_error("--model-error '%s': expected a fraction from 0 to 1", optarg);
+            if (end == optarg || *end || !(o->eq7.model_error >= 0.0 && o->eq7.model_error < 1.0))
+                return usage_error("--model-error '%s': expected auto or a fraction from 0 to below 1", optarg);
+            break;
+        case 'O':
+            o->eq7.other_prior = strtod(optarg, &end);
+            if (end == optarg || *end || !(o->eq7.other_prior >= 0.0 && o->eq7.other_prior < 1.0))
+                return usage_error("--other-prior '%s': expected a probability from 0 to below 1", optarg);
+            break;
+        case 'B':
+            o->eq7.blend_prior = strtod(optarg, &end);
+            if (end == optarg || *end || !(o->eq7.blend_prior >= 0.0 && o->eq7.blend_prior < 1.0))
+                return usage_error("--blend-prior '%s': expected a probability from 0 to below 1", optarg);
             break;
         case 's':
             o->threshold = strtod(optarg, &end);
@@ -182,6 +213,7 @@ static const struct {
     {REC_MATCH_BULB_AMBIGUOUS, 1, "bulb_ambiguous"},
     {REC_MATCH_DIM, 1, "dim"},
     {REC_MATCH_BAD_INPUT, 1, "bad_input"},
+    {REC_MATCH_BLEND, 1, "blend"},
 };
 #define N_FLAGS (sizeof flag_names / sizeof *flag_names)
 
@@ -203,7 +235,7 @@ static int phase_known(const rec_matcher *m, const rec_match *mt)
 }
 
 static void print_table(const recognize_opts *o, const gs_capture *cap, const rec_matcher *m,
-                        const rec_catalog *cat, const rec_match *mt)
+                        const rec_catalog *cat, const rec_match *mt, const rec_noise_report *noise)
 {
     printf("capture %s: %d Hz grid, K = %d, %d band%s, %dx%d pixels%s; DELIGHT %s (%zu candidate "
            "bulbs); phases %s\n",
@@ -212,6 +244,14 @@ static void print_table(const recognize_opts *o, const gs_capture *cap, const re
            o->db ? o->db : "built-in", rec_matcher_bulb_count(m),
            o->eq7.phases == REC_PHASES_3 ? "0/120/240 deg"
            : o->eq7.phases == REC_PHASES_6 ? "0/120/240 deg and + transformer" : "continuous");
+    printf("excess noise: %s", rec_noise_source_name(noise->source));
+    if (noise->source == REC_NOISE_POPULATION)
+        printf(" (median %.4f, from %zu lights)", noise->median_model_error, noise->lights_used);
+    else if (noise->source == REC_NOISE_FIXED)
+        printf(" (%.4f)", noise->median_model_error);
+    else
+        printf(" (too few lights to measure it: the camera's noise alone)");
+    printf("\n");
     printf("%4s %8s %8s %5s  %-22s %-22s %15s %6s  %-28s %9s %9s  %s\n", "id", "x", "y", "area",
            "bulb", "technology", "phase (deg)", "conf", "runner-up (conf)", "chi2/dof", "p-value",
            "flags");
@@ -282,6 +322,26 @@ static json_t *light_json(const rec_matcher *m, const rec_catalog *cat, const re
     json_object_set_new(l, "chi2", jreal(r->chi2));
     json_object_set_new(l, "dof", json_integer(r->dof));
     json_object_set_new(l, "p_value", jreal(r->p_value));
+    json_object_set_new(l, "model_error", jreal(r->model_error));
+    json_object_set_new(l, "shape_p_value", jreal(r->shape_p_value));
+    json_object_set_new(l, "p_other", jreal(r->p_other));
+    json_object_set_new(l, "p_blend", jreal(r->p_blend));
+    if (r->flags & REC_MATCH_BLEND) {
+        json_t *bl = json_array();
+        for (int q = 0; q < 2; q++) {
+            const gs_bulb *cb = rec_matcher_bulb(m, (size_t)r->blend_bulb[q]);
+            json_t *c = json_object();
+            json_object_set_new(c, "bulb", json_string(cb->id));
+            json_object_set_new(c, "technology", json_string(gs_tech_name(cb->type)));
+            json_object_set_new(c, "phase_deg", cb->ref == GS_REF_VOLTAGE ? jreal(r->blend_phase_deg[q]) : json_null());
+            json_object_set_new(c, "share", jreal(r->blend_share[q]));
+            json_array_append_new(bl, c);
+        }
+        json_object_set_new(l, "blend", bl);
+    } else {
+        json_object_set_new(l, "blend", json_null());
+    }
+    json_object_set_new(l, "blend_p_value", jreal(r->blend_p_value));
     json_t *fl = json_array();
     for (size_t f = 0; f < N_FLAGS; f++)
         if (has_flag(f, cat->flags[i], r)) json_array_append_new(fl, json_string(flag_names[f].name));
@@ -289,8 +349,13 @@ static json_t *light_json(const rec_matcher *m, const rec_catalog *cat, const re
     return l;
 }
 
+static const char *band_model_name(int bm)
+{
+    return bm == REC_BANDS_REDDENED ? "reddened" : bm == REC_BANDS_FREE ? "free" : "chroma";
+}
+
 static gs_status print_json(const recognize_opts *o, const gs_capture *cap, const rec_matcher *m,
-                            const rec_catalog *cat, const rec_match *mt)
+                            const rec_catalog *cat, const rec_match *mt, const rec_noise_report *noise)
 {
     json_t *root = json_object();
     json_object_set_new(root, "format", json_string(LIGHTS_FORMAT));
@@ -315,8 +380,16 @@ static gs_status print_json(const recognize_opts *o, const gs_capture *cap, cons
     json_object_set_new(r, "unknown_p", jreal(o->eq7.unknown_p));
     json_object_set_new(r, "min_snr", jreal(o->eq7.min_snr));
     json_object_set_new(r, "threshold_sigma", jreal(o->threshold));
-    json_object_set_new(r, "band_gains", json_boolean(o->eq7.band_gains && cap->bands > 1));
-    json_object_set_new(r, "model_error", jreal(o->eq7.model_error));
+    json_object_set_new(r, "band_model", json_string(cap->bands > 1 ? band_model_name(o->eq7.band_gains) : "mono"));
+    json_object_set_new(r, "chroma_tolerance", jreal(o->eq7.chroma_tolerance));
+    json_object_set_new(r, "other_prior", jreal(o->eq7.other_prior));
+    json_object_set_new(r, "blend_prior", jreal(o->eq7.blend_prior));
+    json_object_set_new(r, "model_error", isnan(o->eq7.model_error) ? json_string("auto") : jreal(o->eq7.model_error));
+    json_t *nz = json_object();
+    json_object_set_new(nz, "source", json_string(rec_noise_source_name(noise->source)));
+    json_object_set_new(nz, "lights_used", json_integer((json_int_t)noise->lights_used));
+    json_object_set_new(nz, "median_model_error", jreal(noise->median_model_error));
+    json_object_set_new(r, "noise", nz);
     json_object_set_new(root, "recognition", r);
     size_t with_bulb = 0, with_phase = 0;
     json_t *lights = json_array();
@@ -420,8 +493,8 @@ int srv_cmd_recognize(int argc, char **argv)
     if (st == GS_OK && o.maps) st = write_maps(&o, &j.cap, j.matcher, &j.cat, j.match);
     progress_done();
     if (st == GS_OK) {
-        if (o.json) st = print_json(&o, &j.cap, j.matcher, &j.cat, j.match);
-        else print_table(&o, &j.cap, j.matcher, &j.cat, j.match);
+        if (o.json) st = print_json(&o, &j.cap, j.matcher, &j.cat, j.match, &j.noise);
+        else print_table(&o, &j.cap, j.matcher, &j.cat, j.match, &j.noise);
         if (fflush(stdout) != 0 && st == GS_OK) st = gs_fail(GS_EIO, "stdout: write failed");
     }
     srv_job_release(&j);

@@ -126,6 +126,15 @@ gs_status srv_acc_write_csv(const char *path, const srv_acc_point *pts, size_t n
 void srv_acc_plot_accuracy(const char *path, const srv_acc_point *pts, size_t np, const int *Ks, int nK);
 void srv_acc_plot_calibration(const char *path, const srv_acc_point *pts, size_t np);
 gs_status srv_acc_write_doc(const char *path, const char *out, const char *base, const srv_acc_crop *cr, int quick, const srv_acc_point *pts, size_t np, double wall, const int *Ks, int nK);
+/* Store rows[0..n) as a capture of the point's survey under key, and evaluate that capture
+ * (bench_accuracy.c). */
+gs_status srv_acc_eval_subset(srv_db *db, int64_t survey_id, const char *key, const srv_light_row *rows,
+                              size_t n, const char *truth, srv_eval_report *ev);
+/* The oracle's ceiling on up to n_oracle unflagged lights of job j (bench_oracle.c): fills
+ * p->oracle_n, ours_sub, oracle_sub (NaN without a subset); sub is scratch of j's light count. */
+gs_status srv_acc_oracle(srv_db *db, const srv_run_report *rr, const srv_job *j,
+                         const srv_light_row *rows, double transformer, int n_oracle,
+                         srv_light_row *sub, srv_acc_point *p);
 /* ====================================================================== end of bench accuracy */
 
 #endif

@@ -83,7 +83,7 @@ gs_status srv_job_match(srv_job *j)
     j->match = calloc(n ? n : 1, sizeof *j->match);
     j->lights = calloc(n ? n : 1, sizeof *j->lights);
     if (!j->match || !j->lights) return gs_fail(GS_ENOMEM, "out of memory for %zu lights", n);
-    gs_status s = rec_match_catalog(j->matcher, &j->cat, j->match);
+    gs_status s = rec_match_catalog(j->matcher, &j->cat, j->match, &j->noise);
     if (s != GS_OK) return s;
     j->with_bulb = j->with_phase = 0;
     for (size_t i = 0; i < n; i++) {

@@ -404,6 +404,7 @@ typedef struct {
     rec_matcher *matcher;        /* srv_job_matcher */
     rec_catalog cat;             /* srv_job_extract */
     rec_match *match;            /* srv_job_match: cat.count answers */
+    rec_noise_report noise;      /* srv_job_match: where the excess noise came from */
     srv_light_row *lights;       /* srv_job_match: the rows (strings borrowed from the matcher) */
     srv_location_row *locs;      /* srv_job_locate: cat.count locations */
     size_t with_bulb, with_phase, located;

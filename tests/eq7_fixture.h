@@ -99,7 +99,8 @@ void eq7fx_rows_free(eq7fx_rows *r);
  * rec_match_pixels first): the rows that differ in the bulb, or in the phase by more than
  * 1e-3 deg or the confidence by more than 2e-4 (with ties_ok, a near tie of the best two pairs,
  * |confidence - runner's| < 1e-3, is not counted); the first five are printed. Rows
- * rec_match_light gave a bulb in *answered (may be NULL). */
+ * rec_match_light gave a bulb in *answered (may be NULL). Rows the light path flags by a
+ * nested-model test (blend, shape; the pixel path has none) are skipped, and must be rare. */
 int eq7fx_rows_vs_lights(const rec_matcher *m, const eq7fx_rows *r, size_t step, int ties_ok,
                          int *answered);
 

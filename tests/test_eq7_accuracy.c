@@ -85,7 +85,7 @@ static double log_pg(const camera *c, double x, double mu)
 static int oracle_ml(const camera *c, const double *x, const double *tab, int M, int D)
 {
     int best = -1;
-    CHECK_OK(rec_ml_oracle(c, 0, x, tab, M, D, &best, NULL));
+    CHECK_OK(rec_ml_oracle(c, 0, NULL, x, tab, M, D, &best, NULL));
     return best;
 }
 
@@ -160,6 +160,8 @@ static void run_level(const gs_delight *d, const camera *cam, double mean_e, int
     o.unknown_p = 0;
     o.band_gains = 0;   /* the oracle's model: one brightness times Q_beta, exact templates */
     o.model_error = 0.0;
+    o.other_prior = 0.0;
+    o.blend_prior = 0.0;
     rec_matcher *m = NULL, *mdef = NULL;
     CHECK_OK(rec_matcher_new(d, 50, 3, K, &o, &m));
     CHECK_OK(rec_matcher_new(d, 50, 3, K, NULL, &mdef));

@@ -31,7 +31,7 @@ TEST(eq7_catalog_equals_lights)
     cat.flags[7] = REC_BLOB_NO_SIGNAL;
     cat.flags[8] = REC_BLOB_SATURATED;
     rec_match out[12];
-    CHECK_OK(rec_match_catalog(m, &cat, out));
+    CHECK_OK(rec_match_catalog(m, &cat, out, NULL));
     for (int i = 0; i < 12; i++) {
         rec_match r;
         CHECK_OK(rec_match_light(m, cat.signal + i * 78, cat.sigma + i * 78, &r));
@@ -42,10 +42,10 @@ TEST(eq7_catalog_equals_lights)
         CHECK(memcmp(&r, &out[i], sizeof r) == 0);
     }
     cat.K = 13;
-    CHECK(rec_match_catalog(m, &cat, out) == GS_EINVAL);
+    CHECK(rec_match_catalog(m, &cat, out, NULL) == GS_EINVAL);
     cat.K = 26;
     cat.count = 0;
-    CHECK_OK(rec_match_catalog(m, &cat, NULL));
+    CHECK_OK(rec_match_catalog(m, &cat, NULL, NULL));
     free(cat.signal);
     free(cat.sigma);
     free(cat.flags);

@@ -86,24 +86,41 @@ TEST(recognize_cli_paper_model_flags)
     recfx_cached_delight();
     const char *dir = recfx_render(&recfx_scene_a);
     char args[1200];
-    snprintf(args, sizeof args, "%s --band-gains off --model-error 0", dir);
+    snprintf(args, sizeof args, "%s --band-model chroma --model-error 0", dir);
     json_t *root = recfx_recognize_ok(args, 0);
     if (!root) return;
     check_discrete(root, &recfx_scene_a);
     json_t *rcg = json_object_get(root, "recognition");
-    CHECK(json_is_false(json_object_get(rcg, "band_gains")));
+    CHECK(!strcmp(json_string_value(json_object_get(rcg, "band_model")), "chroma"));
     CHECK(json_number_value(json_object_get(rcg, "model_error")) == 0.0);
+    json_t *nz = json_object_get(rcg, "noise");
+    CHECK(!strcmp(json_string_value(json_object_get(nz, "source")), "fixed"));
     json_decref(root);
-    snprintf(args, sizeof args, "%s --model-error 0.1", dir);
+    snprintf(args, sizeof args, "%s --model-error 0.1 --band-model free", dir);
     root = recfx_recognize_ok(args, 0);
     if (!root) return;
     rcg = json_object_get(root, "recognition");
-    CHECK(json_is_true(json_object_get(rcg, "band_gains")));
+    CHECK(!strcmp(json_string_value(json_object_get(rcg, "band_model")), "free"));
     CHECK_NEAR(json_number_value(json_object_get(rcg, "model_error")), 0.1, 1e-15);
+    json_t *l0 = json_array_get(json_object_get(root, "lights"), 0);
+    CHECK_NEAR(json_number_value(json_object_get(l0, "model_error")), 0.1, 1e-15);
+    json_decref(root);
+    /* the defaults: reddened, the excess measured (the scene's few lights: the camera noise,
+     * said so, or the population) */
+    root = recfx_recognize_ok(dir, 0);
+    if (!root) return;
+    rcg = json_object_get(root, "recognition");
+    CHECK(!strcmp(json_string_value(json_object_get(rcg, "band_model")), "reddened"));
+    CHECK(!strcmp(json_string_value(json_object_get(rcg, "model_error")), "auto"));
+    nz = json_object_get(rcg, "noise");
+    const char *src = json_string_value(json_object_get(nz, "source"));
+    size_t used = (size_t)json_integer_value(json_object_get(nz, "lights_used"));
+    CHECK_MSG(src && ((!strcmp(src, "camera") && used == 0) || (!strcmp(src, "population") && used >= 8)),
+              "noise source %s from %zu lights", src ? src : "(none)", used);
     json_decref(root);
     char cmd[2048];
-    snprintf(cmd, sizeof cmd, "%s recognize %s --band-gains maybe", test_bin(), dir);
-    CHECK(test_run(cmd, out, sizeof out) == 2 && strstr(out, "--band-gains"));
+    snprintf(cmd, sizeof cmd, "%s recognize %s --band-model maybe", test_bin(), dir);
+    CHECK(test_run(cmd, out, sizeof out) == 2 && strstr(out, "--band-model"));
     snprintf(cmd, sizeof cmd, "%s recognize %s --model-error 2", test_bin(), dir);
     CHECK(test_run(cmd, out, sizeof out) == 2 && strstr(out, "--model-error"));
 }

@@ -62,8 +62,8 @@ def main():
                 variants = [("default", []), ("mc0", ["--min-confidence", "0", "--no-oracle"]),
                             ("me0", ["--model-error", "0", "--no-oracle"])]
                 if ropt[1] == "3":
-                    variants.append(("bgoff", ["--band-gains", "off", "--no-oracle"]))
-                    variants.append(("bgoff_me0", ["--band-gains", "off", "--model-error", "0", "--no-oracle"]))
+                    variants.append(("bgoff", ["--band-model", "chroma", "--no-oracle"]))
+                    variants.append(("bgoff_me0", ["--band-model", "chroma", "--model-error", "0", "--no-oracle"]))
                 for vname, vopt in variants:
                     js = cap + f".{vname}.json"
                     run(S(cap, js, "--label", f"{label} {e} e- {vname}", *vopt), log)
@@ -151,7 +151,7 @@ def tables(r):
                   f"{p(x['ece_pair'], 0)} / {p(x['ece_bulb'], 0)} / {p(x['ece_phase'], 0)} | {p(o.get('ece_pair'), 0)} | "
                   f"{p(cw['bulb'])} / {p(cw['technology'])} / {p(cw['phase'])} | {x['median_chi2_dof']:.2f} |")
         w("")
-        w("### The same captures with `--min-confidence 0`, `--model-error 0` and (RGB) `--band-gains off`\n")
+        w("### The same captures with `--min-confidence 0`, `--model-error 0` and (RGB) `--band-model chroma`\n")
         w("| config | e-/light | mc0: answered | mc0: acc. answered | mc0: conf. wrong b / t / p | me0: pair | me0: answered | me0: acc. answered | me0: median chi2/dof | me0: ECE pair | bg off: pair | bg off: answered | bg off+me0: pair | bg off+me0: median chi2/dof |")
         w("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         for ci, (label, _) in enumerate(CONFIGS):

@@ -1,0 +1,329 @@
+/* eq7_nested.c - two nested-model tests of a light's best fit (docs/recognition.md, "Blends and
+ * bulbs not in DELIGHT"), more powerful than the chi-square test against the alternatives that
+ * happen: a smooth deformation of the template (a bulb not in DELIGHT) and a second template (two
+ * lights in one aperture). Both compare unconstrained weighted least squares fits on the light's
+ * weights (rec_eq7_work w, wx, xs, in units of c); with the matcher's brightness parameters (one,
+ * or one per band) the null model is linear, the alternatives add columns, so under the null
+ * chi2_null - chi2_alt ~ chi2(extra columns) (a correlated excess widens it: / phi). */
+#include "recognize/internal.h"
+
+#include <cblas.h>
+#include <math.h>
+#include <string.h>
+
+/* The deformation: harmonics 1..SHAPE_H of the flicker cycle per band (a smooth change of the
+ * waveform; the template's own mean keeps the columns independent). */
+#define SHAPE_H 3
+#define MAX_COLS (GS_MAX_BANDS * (1 + 2 * SHAPE_H))
+/* Second templates are searched against the best fit and the next NESTED_FIRST - 1 templates
+ * by score (every template of a small bank). */
+#define NESTED_FIRST 16
+
+/* Cholesky of the n x n symmetric A (lower triangle used) in place; log det A, or NAN when A is
+ * not positive definite. */
+static double chol(double *A, int n)
+{
+    double ld = 0.0;
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j <= i; j++) {
+            double s = A[i * n + j];
+            for (int k = 0; k < j; k++) s -= A[i * n + k] * A[j * n + k];
+            if (i == j) {
+                if (!(s > 1e-12 * A[i * n + i])) return NAN;
+                A[i * n + i] = sqrt(s);
+                ld += log(A[i * n + i]);
+            } else {
+                A[i * n + j] = s / A[j * n + j];
+            }
+        }
+    return 2.0 * ld;
+}
+
+/* Solve L L^T x = b in place (L from chol). */
+static void chol_solve(const double *L, int n, double *b)
+{
+    for (int i = 0; i < n; i++) {
+        for (int k = 0; k < i; k++) b[i] -= L[i * n + k] * b[k];
+        b[i] /= L[i * n + i];
+    }
+    for (int i = n - 1; i >= 0; i--) {
+        for (int k = i + 1; k < n; k++) b[i] -= L[k * n + i] * b[k];
+        b[i] /= L[i * n + i];
+    }
+}
+
+/* The weighted least-squares fit of y (xs when NULL) on ncol columns (cols[c * D + d]): the
+ * coefficients into coef, the residuals into res (may be NULL), chi2 from the residuals
+ * themselves (Sxx - fit would cancel at high SNR); -1 when the normal equations are singular. */
+static double ls_fit(const rec_eq7_work *w, size_t D, const double *y, const double *cols, int ncol,
+                     double *coef, double *res)
+{
+    double A[MAX_COLS * MAX_COLS] = {0};
+    if (!y) y = w->xs;
+    for (int i = 0; i < ncol; i++) {
+        const double *ci = cols + (size_t)i * D;
+        coef[i] = 0.0;
+        for (size_t d = 0; d < D; d++) coef[i] += w->w[d] * y[d] * ci[d];
+        for (int j = 0; j <= i; j++) {
+            const double *cj = cols + (size_t)j * D;
+            double s = 0.0;
+            for (size_t d = 0; d < D; d++) s += w->w[d] * ci[d] * cj[d];
+            A[i * ncol + j] = s;
+        }
+    }
+    if (isnan(chol(A, ncol))) return -1.0;
+    chol_solve(A, ncol, coef);
+    double chi2 = 0.0;
+    for (size_t d = 0; d < D; d++) {
+        double r = y[d];
+        for (int i = 0; i < ncol; i++) r -= coef[i] * cols[(size_t)i * D + d];
+        if (res) res[d] = r;
+        if (w->w[d] > 0.0) chi2 += w->w[d] * r * r;
+    }
+    return chi2;
+}
+
+static double ls_chi2(const rec_eq7_work *w, size_t D, const double *cols, int ncol)
+{
+    double coef[MAX_COLS];
+    return ls_fit(w, D, NULL, cols, ncol, coef, NULL);
+}
+
+/* log of the Bayes factor of "a bulb not in DELIGHT near this template" against the template:
+ * the nh deformation columns (after the nt template columns in cols) with coefficients
+ * ~ N(0, (tau level_b)^2), level_b the fitted model's mean in the column's band,
+ * marginalised exactly (linear Gaussian), with the brightness profiled: with P the columns made
+ * W-orthogonal to the template's, G = P'WP, b = P'Wr (r the template fit's residual), S the prior
+ * variances: log BF = b'(G + S^-1)^-1 b / 2 - log det(I + S G) / 2. phi deflates the data term
+ * for a correlated excess. scratch: (nh + 1) * D doubles. */
+static double other_log_bf(const rec_eq7_work *w, size_t D, size_t K, double *cols, int nt, int nh,
+                           double tau, double phi, double *scratch)
+{
+    double coef[MAX_COLS], level[GS_MAX_BANDS] = {0}, *r = scratch, *P = scratch + D;
+    if (ls_fit(w, D, NULL, cols, nt, coef, r) < 0.0) return -INFINITY;
+    for (size_t d = 0; d < D; d++) {   /* the fitted model's mean per band */
+        double v = 0.0;
+        for (int i = 0; i < nt; i++) v += coef[i] * cols[(size_t)i * D + d];
+        level[d / K] += v / (double)K;
+    }
+    double G[MAX_COLS * MAX_COLS], b[MAX_COLS], lds = 0.0;
+    for (int h = 0; h < nh; h++) {
+        const double *ph = cols + (size_t)(nt + h) * D;
+        double c2[MAX_COLS];
+        if (ls_fit(w, D, ph, cols, nt, c2, P + (size_t)h * D) < 0.0) return -INFINITY;
+    }
+    for (int i = 0; i < nh; i++) {
+        const double *pi = P + (size_t)i * D;
+        size_t band = 0;
+        for (size_t d = 0; d < D; d++)
+            if (cols[(size_t)(nt + i) * D + d] != 0.0) {
+                band = d / K;
+                break;
+            }
+        double sd = tau * fabs(level[band]);
+        if (!(sd > 0.0)) return -INFINITY;
+        b[i] = 0.0;
+        for (size_t d = 0; d < D; d++) b[i] += w->w[d] * pi[d] * r[d];
+        for (int j = 0; j <= i; j++) {
+            const double *pj = P + (size_t)j * D;
+            double g = 0.0;
+            for (size_t d = 0; d < D; d++) g += w->w[d] * pi[d] * pj[d];
+            G[i * nh + j] = g;
+        }
+        G[i * nh + i] += 1.0 / (sd * sd);
+        lds += 2.0 * log(sd);
+    }
+    double ld = chol(G, nh);
+    if (isnan(ld)) return -INFINITY;
+    double y[MAX_COLS], q = 0.0;
+    memcpy(y, b, sizeof *y * (size_t)nh);
+    chol_solve(G, nh, y);
+    for (int i = 0; i < nh; i++) q += b[i] * y[i];
+    return 0.5 * q / phi - 0.5 * (ld + lds);
+}
+
+/* The template columns of template t: one column (one brightness) or one per band. */
+static int template_cols(const rec_matcher *m, const double *t, double *cols)
+{
+    size_t D = (size_t)m->D, K = (size_t)m->K;
+    if (m->nfit == 1) {
+        memcpy(cols, t, sizeof *cols * D);
+        return 1;
+    }
+    memset(cols, 0, sizeof *cols * D * (size_t)m->bands);
+    for (int b = 0; b < m->bands; b++)
+        memcpy(cols + (size_t)b * D + (size_t)b * K, t + (size_t)b * K, sizeof *cols * K);
+    return m->bands;
+}
+
+/* Template j is bulb b within two cells of shift s (the same template for a discrete set). */
+static int near(const rec_matcher *m, size_t j, int b, double s)
+{
+    if (m->tbulb[j] != b) return 0;
+    double ds = fabs(m->shift[j] - s);
+    ds = ds > 0.5 ? 1.0 - ds : ds;
+    return m->cont[b] ? ds < 2.0 / m->G : ds < 1e-9;
+}
+
+static double tail(double delta, int extra, double phi)
+{
+    if (extra < 1) return 1.0;
+    long dof = lround(extra / phi);
+    return gs_chi2_sf(delta / phi, dof > 1 ? (int)dof : 1);
+}
+
+void rec_eq7_nested_tests(const rec_matcher *m, rec_eq7_work *w, const double *tb, int best_bulb,
+                          size_t best_tmpl, double best_shift, double phi, rec_eq7_nested *out)
+{
+    size_t D = (size_t)m->D, K = (size_t)m->K, M = m->M;
+    int B = m->bands, nf = m->nfit;
+    double cols[MAX_COLS * REC_NESTED_MAX_D];
+    memset(out, 0, sizeof *out);
+    out->p_shape = out->p_blend = 1.0;
+    out->tmpl[0] = out->tmpl[1] = (size_t)-1;
+    if (D > REC_NESTED_MAX_D) return;
+    int used_bands = 0, used = 0;
+    for (int b = 0; b < B; b++) {
+        int n = 0;
+        for (size_t k = 0; k < K; k++) n += w->w[(size_t)b * K + k] > 0.0;
+        used_bands += n > 0;
+        used += n;
+    }
+    /* the null: the best template, unconstrained */
+    int nc = template_cols(m, tb, cols);
+    double chi0 = ls_chi2(w, D, cols, nc);
+    if (chi0 < 0.0) return;
+    out->chi2_null = chi0;
+
+    /* a smooth deformation: + harmonics 1..H per band (H <= (K - 2) / 2: the columns stay fewer
+     * than the frames) */
+    int H = SHAPE_H < ((int)K - 2) / 2 ? SHAPE_H : ((int)K - 2) / 2, nsh = nc;
+    for (int b = 0; b < B && H >= 1; b++)
+        for (int h = 1; h <= H; h++)
+            for (int q = 0; q < 2; q++) {
+                double *c = cols + (size_t)nsh * D;
+                memset(c, 0, sizeof *c * D);
+                for (size_t k = 0; k < K; k++) {
+                    double a = 2.0 * M_PI * h * (double)k / (double)K;
+                    c[(size_t)b * K + k] = q ? sin(a) : cos(a);
+                }
+                nsh++;
+            }
+    out->p_other = 0.0;
+    if (H >= 1 && used > nsh + 1) {
+        double chi_sh = ls_chi2(w, D, cols, nsh);
+        if (chi_sh >= 0.0) {
+            out->chi2_shape = chi_sh;
+            out->extra_shape = 2 * H * used_bands;
+            out->p_shape = tail(chi0 - chi_sh, out->extra_shape, phi);
+        }
+        /* the posterior of "not in DELIGHT" (prior other_prior) */
+        static const double taus[] = REC_OTHER_TAUS;   /* a mixture over the deformation's size */
+        const int nt = (int)(sizeof taus / sizeof *taus);
+        double lb[8], lmax = -INFINITY, sum = 0.0;
+        for (int i = 0; i < nt; i++) {
+            lb[i] = other_log_bf(w, D, K, cols, nc, nsh - nc, taus[i], phi, w->scratch);
+            if (lb[i] > lmax) lmax = lb[i];
+        }
+        for (int i = 0; i < nt && isfinite(lmax); i++) sum += exp(lb[i] - lmax);
+        double lbf = isfinite(lmax) ? lmax + log(sum / nt) : -INFINITY;
+        double pr = m->o.other_prior, lo = pr > 0.0 ? log(pr / (1.0 - pr)) + lbf : -INFINITY;
+        out->p_other = lo > 0.0 ? 1.0 / (1.0 + exp(-lo)) : exp(lo) / (1.0 + exp(lo));
+    }
+
+    /* a second template: for the best fit and the next best templates j1, every template j2 (not
+     * the first one's bulb within two cells), by per-band 2 x 2 least squares with both
+     * brightnesses >= 0; the sums of j2 from the work arrays (S, T), the cross terms
+     * T12 = T_mat (w t1) */
+    if (used <= 2 * nf + 2) return;
+    size_t first[NESTED_FIRST];
+    double best_delta = 0.0, e0 = 0.0, best_occam = 0.0;
+    int nfirst = 0;
+    for (int r = 0; r < NESTED_FIRST; r++) {
+        const double *t1 = tb;
+        int b1 = best_bulb;
+        double s1 = best_shift;
+        first[r] = best_tmpl;
+        if (r > 0) {   /* the next best grid template */
+            size_t jb = M;
+            for (size_t j = 0; j < M; j++) {
+                int dup = j == best_tmpl;
+                for (int q = 1; q < r; q++) dup |= first[q] == j;
+                if (!dup && isfinite(w->L[j]) && (jb == M || w->L[j] > w->L[jb])) jb = j;
+            }
+            if (jb == M) break;
+            first[r] = jb;
+            nfirst = r;
+            t1 = m->t + jb * D;
+            b1 = m->tbulb[jb];
+            s1 = m->shift[jb];
+        }
+        double S1[GS_MAX_BANDS] = {0}, T11[GS_MAX_BANDS] = {0}, e1 = 0.0;
+        for (size_t d = 0; d < D; d++) {
+            int f = nf == 1 ? 0 : (int)(d / K);
+            S1[f] += w->wx[d] * t1[d];
+            T11[f] += w->w[d] * t1[d] * t1[d];
+            w->r2[d] = w->w[d] * t1[d];
+        }
+        for (int f = 0; f < nf; f++) e1 += T11[f] > 0.0 ? S1[f] * S1[f] / T11[f] : 0.0;
+        if (r == 0) e0 = e1;
+        for (int f = 0; f < nf; f++) {
+            size_t off = nf == 1 ? 0 : (size_t)f * K, len = nf == 1 ? D : K;
+            cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, (int)len, 1.0, m->t + off, (int)D, w->r2 + off, 1,
+                        0.0, w->t12 + (size_t)f * M, 1);
+        }
+        for (size_t j = 0; j < M; j++) {
+            if (near(m, j, b1, s1) || (r > 0 && near(m, j, best_bulb, best_shift)))
+                continue;   /* itself or next door; the best fit was paired at r = 0 */
+            /* what t2 explains beyond t1, per band: (S2 - T12 S1/T11)^2 / (T22 - T12^2/T11) */
+            double gain = 0.0, a1s = 0.0, a2s = 0.0, occam = 0.0;
+            int ok = 1;
+            for (int f = 0; f < nf && ok; f++) {
+                if (!(T11[f] > 0.0)) continue;
+                double S2 = w->S[(size_t)f * M + j], T22 = w->T[(size_t)f * M + j], T12 = w->t12[(size_t)f * M + j];
+                double r2 = S2 - T12 * S1[f] / T11[f], q = T22 - T12 * T12 / T11[f];
+                if (!(q > 1e-9 * T22)) {
+                    ok = 0;
+                    break;
+                }
+                double a2 = r2 / q, a1 = (S1[f] - T12 * a2) / T11[f];
+                if (a1 < 0.0 || a2 < 0.0) ok = 0;
+                gain += r2 * r2 / q;
+                a1s += a1;
+                a2s += a2;
+                /* the second brightness: its std 1/sqrt(q) against a flat prior on [0, the
+                 * light's brightness in the band] */
+                double atot = S1[f] / T11[f];
+                occam += atot > 0.0 ? 0.5 * log(2.0 * M_PI / q) - log(atot) : 0.0;
+            }
+            double delta = (e1 - e0) + gain;   /* chi2 of the best fit minus the pair's */
+            if (!ok || !(delta > best_delta)) continue;
+            best_delta = delta;
+            best_occam = occam < 0.0 ? occam : 0.0;
+            out->tmpl[0] = r == 0 ? (size_t)-1 : first[r];
+            out->tmpl[1] = j;
+            out->share[0] = a1s + a2s > 0.0 ? a1s / (a1s + a2s) : 0.5;
+            out->share[1] = 1.0 - out->share[0];
+        }
+    }
+    if (!(best_delta > 0.0)) return;
+    /* the winner's chi2 again from its residuals (the search's sums cancel at high SNR) */
+    const double *t1 = out->tmpl[0] == (size_t)-1 ? tb : m->t + out->tmpl[0] * D;
+    int n1 = template_cols(m, t1, cols);
+    int n2 = template_cols(m, m->t + out->tmpl[1] * D, cols + (size_t)n1 * D);
+    double chi_pair = ls_chi2(w, D, cols, n1 + n2);
+    if (!(chi_pair >= 0.0) || !(chi_pair < chi0)) return;
+    best_delta = chi0 - chi_pair;
+    out->chi2_blend = chi_pair;
+    out->extra_blend = nf + 1;
+    /* the posterior of a blend (prior blend_prior): the pair's evidence over the single's,
+     * each template a priori 1/M (the pair in either order), the second brightness's Occam
+     * factor: BF = 2 exp(delta / 2) occam / M (its best term: a lower bound) */
+    double pb = m->o.blend_prior, lbf = log(2.0 / (double)M) + 0.5 * best_delta / phi + best_occam;
+    double lo = pb > 0.0 ? log(pb / (1.0 - pb)) + lbf : -INFINITY;
+    out->p_blend_post = lo > 0.0 ? 1.0 / (1.0 + exp(-lo)) : exp(lo) / (1.0 + exp(lo));
+    /* the second template was searched over M for 1 + nfirst first ones: Bonferroni */
+    double p = tail(best_delta, nf, phi) * (double)M * (double)(1 + nfirst);
+    out->p_blend = p < 1.0 ? p : 1.0;
+    out->found = 1;
+}
