@@ -42,6 +42,7 @@ void rec_blob_opts_default(rec_blob_opts *o)
     o->deblend_sigma = 5;
     o->grow_px = 2;
     o->labels = 0;
+    o->psf_weighted = 1;
 }
 
 void rec_catalog_release(rec_catalog *cat)
@@ -368,6 +369,8 @@ static gs_status check_opts(const rec_blob_opts *o)
                        "never split)", o->deblend_sigma);
     if (o->grow_px < 0 || o->grow_px > 64)
         return gs_fail(GS_EINVAL, "blobs: grow_px = %d: expected 0 to 64", o->grow_px);
+    if (o->psf_weighted != 0 && o->psf_weighted != 1)
+        return gs_fail(GS_EINVAL, "blobs: psf_weighted = %d: expected 0 or 1", o->psf_weighted);
     if (o->labels != 0 && o->labels != 1)
         return gs_fail(GS_EINVAL, "blobs: labels = %d: expected 0 or 1", o->labels);
     return GS_OK;

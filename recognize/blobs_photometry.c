@@ -129,6 +129,49 @@ static void win_centroid(const rec_blob_state *s, int light, double r2, double *
     *yc = y;
 }
 
+/* The share of a Gaussian PSF of sigma centred at (xc, yc) that falls in pixel (x, y). */
+static double psf_share(int x, int y, double xc, double yc, double sigma)
+{
+    const double k = 1.0 / (sqrt(2.0) * sigma);
+    double fx = 0.5 * (erf((x + 0.5 - xc) * k) - erf((x - 0.5 - xc) * k));
+    double fy = 0.5 * (erf((y + 0.5 - yc) * k) - erf((y - 0.5 - yc) * k));
+    return fx * fy;
+}
+
+static int cmp_dbl(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+/* The capture's PSF sigma (7.): the median of sqrt(r2 / 2) (the aperture's second moment on
+ * M - background) over its brightest clean lights (no flag, footprint >= 9 px), at most
+ * PSF_LIGHTS of them; 1 px when there is none. Clamped to [0.3, 8] px. */
+#define PSF_LIGHTS 64
+static double capture_psf_sigma(const rec_catalog *cat, const double *r2, const double *bright, size_t n)
+{
+    double br[PSF_LIGHTS], sg[PSF_LIGHTS];
+    int idx[PSF_LIGHTS], m = 0;
+    for (size_t i = 0; i < n; i++) {
+        if (cat->flags[i] || cat->area_px[i] < 9 || !(r2[i] > 0) || !isfinite(bright[i])) continue;
+        int slot = m < PSF_LIGHTS ? m++ : -1;
+        if (slot < 0) {   /* replace the faintest kept one */
+            int lo = 0;
+            for (int q = 1; q < m; q++)
+                if (br[q] < br[lo]) lo = q;
+            if (!(bright[i] > br[lo])) continue;
+            slot = lo;
+        }
+        br[slot] = bright[i];
+        idx[slot] = (int)i;
+    }
+    if (m == 0) return 1.0;
+    for (int q = 0; q < m; q++) sg[q] = sqrt(r2[idx[q]] / 2);
+    qsort(sg, (size_t)m, sizeof *sg, cmp_dbl);
+    double med = (m & 1) ? sg[m / 2] : 0.5 * (sg[m / 2 - 1] + sg[m / 2]);
+    return med < 0.3 ? 0.3 : med > 8 ? 8 : med;
+}
+
 /* The catalog: lights in raster order of their first footprint pixel. */
 gs_status rec_blob_photometry(rec_blob_state *s, const int *area, rec_catalog *cat)
 {
@@ -143,7 +186,7 @@ gs_status rec_blob_photometry(rec_blob_state *s, const int *area, rec_catalog *c
     int *newi = malloc(sizeof(int) * (size_t)(s->nlights ? s->nlights : 1));
     int *start = calloc((size_t)s->nlights + 2, sizeof(int));
     int *pix = NULL, *fill = NULL, *stamp = NULL, *touched = NULL;
-    double *wn = NULL, *acc = NULL;
+    double *wn = NULL, *acc = NULL, *r2s = NULL, *bright = NULL;
     if (!ord || !newi || !start) {
         st = gs_fail(GS_ENOMEM, "blobs: cannot order the lights");
         goto done;
@@ -185,9 +228,11 @@ gs_status rec_blob_photometry(rec_blob_state *s, const int *area, rec_catalog *c
     fill = malloc(sizeof(int) * (n + 1));
     stamp = malloc(sizeof(int) * (size_t)nodes);
     touched = malloc(sizeof(int) * (size_t)nodes);
-    wn = malloc(sizeof(double) * (size_t)nodes);
-    acc = malloc(sizeof(double) * (size_t)BK * 2);
-    if (!pix || !fill || !stamp || !touched || !wn || !acc) {
+    wn = malloc(sizeof(double) * (size_t)nodes * (size_t)B);
+    acc = malloc(sizeof(double) * (size_t)BK * 3);
+    r2s = malloc(sizeof(double) * n);
+    bright = malloc(sizeof(double) * n);
+    if (!pix || !fill || !stamp || !touched || !wn || !acc || !r2s || !bright) {
         st = gs_fail(GS_ENOMEM, "blobs: cannot allocate the photometry buffers");
         goto done;
     }
@@ -199,24 +244,23 @@ gs_status rec_blob_photometry(rec_blob_state *s, const int *area, rec_catalog *c
         if (s->ap[p] >= 0) pix[fill[s->ap[p]]++] = (int)p;
     for (int t = 0; t < nodes; t++) stamp[t] = -1;
 
+    /* the positions first (8.), then the capture's PSF from its bright clean lights */
     for (size_t i = 0; i < n; i++) {
         const int *ap = pix + start[i];
         const int na = start[i + 1] - start[i];
         unsigned flags = s->lflags[ord[i].light];
         double sw = 0, sx = 0, sy = 0, sxx = 0, syy = 0, peak_raw = 0;
-        int nsat = 0, nuse = 0, ntouch = 0;
+        int nsat = 0, nuse = 0;
         for (int a = 0; a < na; a++) {
             int p = ap[a], x = p % W, y = p / W;
             if (x == 0 || y == 0 || x == W - 1 || y == H - 1) flags |= REC_BLOB_EDGE;
             if (s->hdr[p]) flags |= REC_BLOB_HDR;
-            {
-                double w = s->M[p];
-                sw += w;
-                sx += w * x;
-                sy += w * y;
-                sxx += w * x * x;
-                syy += w * y * y;
-            }
+            double w = s->M[p];
+            sw += w;
+            sx += w * x;
+            sy += w * y;
+            sxx += w * x * x;
+            syy += w * y * y;
             if (s->fp[p] == (int)i) {
                 for (int k = 0; k < K; k++) {
                     const unsigned short *r = c->raw + (s->N * (size_t)k + (size_t)p) * (size_t)B;
@@ -224,31 +268,20 @@ gs_status rec_blob_photometry(rec_blob_state *s, const int *area, rec_catalog *c
                         if (r[b] > peak_raw) peak_raw = r[b];
                 }
             }
-            if (s->sat[p]) {
-                nsat++;
-                continue;
-            }
-            nuse++;
-            int node[4];
-            double w[4];
-            int m = rec_mesh_weights(&s->mesh, x, y, node, w);
-            for (int t = 0; t < m; t++) {
-                if (stamp[node[t]] != (int)i) {
-                    stamp[node[t]] = (int)i;
-                    wn[node[t]] = 0;
-                    touched[ntouch++] = node[t];
-                }
-                wn[node[t]] += w[t];
-            }
+            if (s->sat[p]) nsat++;
+            else nuse++;
         }
         /* centroid on M - background over the footprint; its weights are above the
          * threshold, hence > 0, except where the footprint holds saturated pixels whose
          * clipped M is still positive: sw > 0 unless the data are degenerate */
+        r2s[i] = NAN;
+        bright[i] = sw;
         if (sw > 0 && isfinite(sw)) {
             cat->x_px[i] = sx / sw;
             cat->y_px[i] = sy / sw;
             double r2 = sxx / sw - cat->x_px[i] * cat->x_px[i] + syy / sw - cat->y_px[i] * cat->y_px[i];
             win_centroid(s, (int)i, r2, &cat->x_px[i], &cat->y_px[i]);
+            r2s[i] = r2;
         } else {
             double gx = 0, gy = 0;
             int nf = 0;
@@ -267,53 +300,90 @@ gs_status rec_blob_photometry(rec_blob_state *s, const int *area, rec_catalog *c
         if (nsat) flags |= REC_BLOB_SATURATED;
         if (!nuse) flags |= REC_BLOB_NO_SIGNAL;
         cat->flags[i] = flags;
+    }
+    double psf_sigma = s->o->psf_weighted ? capture_psf_sigma(cat, r2s, bright, n) : 0.0;
 
+    for (size_t i = 0; i < n; i++) {
+        const int *ap = pix + start[i];
+        const int na = start[i + 1] - start[i];
+        int ntouch = 0;
         double *sig = cat->signal + i * (size_t)BK, *sgm = cat->sigma + i * (size_t)BK;
-        if (!nuse) {
+        if (cat->flags[i] & REC_BLOB_NO_SIGNAL) {
             for (int q = 0; q < BK; q++) {
                 sig[q] = 0;
                 sgm[q] = INFINITY;
             }
             continue;
         }
-        double *sv = acc, *vv = acc + BK;
+        double *sv = acc, *vv = acc + BK, wsum[GS_MAX_BANDS] = {0};
         memset(acc, 0, sizeof(double) * (size_t)BK * 2);
+        /* the PSF's share inside the usable aperture: a light whose centroid left it (a
+         * degenerate one) keeps the plain sum */
+        double psf = psf_sigma, mass = 0;
+        for (int a = 0; a < na && psf > 0; a++)
+            if (!s->sat[ap[a]]) mass += psf_share(ap[a] % W, ap[a] / W, cat->x_px[i], cat->y_px[i], psf);
+        if (!(mass > 0.05)) psf = 0;
         /* Shot noise from each pixel's mean level over the K windows, not from each sample's
          * own value: a sample's own value correlates its weight with its noise and biases
-         * Eq. 7 at low photon counts (docs/recognition.md). */
+         * Eq. 7 at low photon counts (docs/recognition.md). The pixel's weight (7.): 1, or
+         * its PSF share over its variance averaged over the windows, the same in every
+         * frame. */
         for (int a = 0; a < na; a++) {
-            int p = ap[a];
+            int p = ap[a], x = p % W, y = p / W;
             if (s->sat[p]) continue;
-            double mean_flux[GS_MAX_BANDS] = {0};
+            double mean_flux[GS_MAX_BANDS] = {0}, *var_k = acc + 2 * BK, wpix[GS_MAX_BANDS];
+            for (int k = 0; k < K; k++) {
+                double f = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[s->N * (size_t)k + (size_t)p] : 0)];
+                const unsigned short *r = c->raw + (s->N * (size_t)k + (size_t)p) * (size_t)B;
+                for (int b = 0; b < B; b++) mean_flux[b] += ((double)r[b] - s->black) * f / K;
+            }
+            double prof = psf > 0 ? psf_share(x, y, cat->x_px[i], cat->y_px[i], psf) : 1.0;
+            for (int b = 0; b < B; b++) {
+                double vmean = 0;
+                for (int k = 0; k < K; k++) {
+                    double f = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[s->N * (size_t)k + (size_t)p] : 0)];
+                    double dn = mean_flux[b] / f;   /* expected raw level above black */
+                    var_k[b * K + k] = (s->nz.read_var_dn2 + (dn > 0 ? dn * s->nz.inv_gain : 0)) * f * f;
+                    vmean += var_k[b * K + k] / K;
+                }
+                wpix[b] = psf > 0 ? (vmean > 0 && isfinite(vmean) ? prof / vmean : prof) : 1.0;
+                wsum[b] += wpix[b] * prof;
+            }
             for (int k = 0; k < K; k++) {
                 double f = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[s->N * (size_t)k + (size_t)p] : 0)];
                 const unsigned short *r = c->raw + (s->N * (size_t)k + (size_t)p) * (size_t)B;
                 for (int b = 0; b < B; b++) {
-                    double v = ((double)r[b] - s->black) * f;
-                    sv[b * K + k] += v;
-                    mean_flux[b] += v / K;
+                    sv[b * K + k] += wpix[b] * ((double)r[b] - s->black) * f;
+                    vv[b * K + k] += wpix[b] * wpix[b] * var_k[b * K + k];
                 }
             }
-            for (int k = 0; k < K; k++) {
-                double f = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[s->N * (size_t)k + (size_t)p] : 0)];
-                for (int b = 0; b < B; b++) {
-                    double dn = mean_flux[b] / f;   /* expected raw level above black */
-                    vv[b * K + k] += (s->nz.read_var_dn2 + (dn > 0 ? dn * s->nz.inv_gain : 0)) * f * f;
+            int node[4];
+            double w[4];
+            int m = rec_mesh_weights(&s->mesh, x, y, node, w);
+            for (int t = 0; t < m; t++) {
+                if (stamp[node[t]] != (int)i) {
+                    stamp[node[t]] = (int)i;
+                    for (int b = 0; b < B; b++) wn[(size_t)b * (size_t)nodes + (size_t)node[t]] = 0;
+                    touched[ntouch++] = node[t];
                 }
+                for (int b = 0; b < B; b++) wn[(size_t)b * (size_t)nodes + (size_t)node[t]] += wpix[b] * w[t];
             }
         }
-        for (int k = 0; k < K; k++)
-            for (int b = 0; b < B; b++) {
+        for (int b = 0; b < B; b++) {
+            /* the weighted sum estimates sum_p w_p P_p times the flux: divide it out */
+            double norm = psf > 0 ? (wsum[b] > 0 ? 1.0 / wsum[b] : 0.0) : 1.0;
+            for (int k = 0; k < K; k++) {
                 const size_t plane = ((size_t)k * B + (size_t)b) * (size_t)nodes;
                 double bsum = 0, bvar = 0;
                 for (int t = 0; t < ntouch; t++) {
-                    int nd = touched[t];
-                    bsum += wn[nd] * s->fval[plane + (size_t)nd];
-                    bvar += wn[nd] * wn[nd] * s->fvar[plane + (size_t)nd];
+                    double wt = wn[(size_t)b * (size_t)nodes + (size_t)touched[t]];
+                    bsum += wt * s->fval[plane + (size_t)touched[t]];
+                    bvar += wt * wt * s->fvar[plane + (size_t)touched[t]];
                 }
-                sig[b * K + k] = sv[b * K + k] - bsum;
-                sgm[b * K + k] = sqrt(vv[b * K + k] + bvar);
+                sig[b * K + k] = (sv[b * K + k] - bsum) * norm;
+                sgm[b * K + k] = sqrt(vv[b * K + k] + bvar) * norm;
             }
+        }
     }
 done:
     free(ord);
@@ -325,6 +395,8 @@ done:
     free(touched);
     free(wn);
     free(acc);
+    free(r2s);
+    free(bright);
     return st;
 }
 

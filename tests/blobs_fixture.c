@@ -163,6 +163,7 @@ rec_blob_opts blobfx_opts_labels(void)
     rec_blob_opts o;
     rec_blob_opts_default(&o);
     o.labels = 1;
+    o.psf_weighted = 0;   /* the aperture sums the truth is summed over (PSF weighting: test_blobs_psf.c) */
     return o;
 }
 
