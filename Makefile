@@ -2,12 +2,13 @@
 #   make          build the gridsurvey binary
 #   make check    install missing Debian packages, build, run every test (plain and ASan+UBSan)
 #   make demo     install, build, run the main job on the built-in scene
+#   make demo-transport  the light-transport lab (unmix, render, relight, separate)
 #   make bench    performance tables (docs/bench-*.md, docs/accuracy.md)
 BUILD ?= build
 SAN ?=
 CC := gcc
 CXX := g++
-PKGS := sqlite3 fftw3 sndfile jansson plplot spng nettle lapacke
+PKGS := sqlite3 fftw3 sndfile jansson plplot spng nettle lapacke libtiff-4
 WARN := -Wall -Wextra -Wpedantic -Wshadow -Werror
 OPT := -O2 -g
 SANFLAGS :=
@@ -38,7 +39,7 @@ TEST_BIN := $(BUILD)/run_tests
 DELIGHT_DB := $(BUILD)/delight.sqlite
 SHARED ?= ../shared
 
-.PHONY: all deps check test test-asan demo bench clean
+.PHONY: all deps check test test-asan demo demo-transport bench clean
 all: $(BIN) $(DELIGHT_DB)
 
 deps:
@@ -85,6 +86,22 @@ demo: deps
 	$(MAKE) --no-print-directory $(BIN)
 	rm -rf $(BUILD)/demo && mkdir -p $(BUILD)/demo
 	$(BIN) run capture/scenes/metro.json --phases 6 --db $(BUILD)/demo/survey.sqlite --out $(BUILD)/demo
+# Light transport (paper Sec. 5, docs/light-transport.md) on the built-in lab and window scenes:
+# unmix (a sources file, then auto), the HDR denoised sequences, relighting as in Fig. 4 and with
+# a source switched off (compared with a capture rendered without it), semi-reflection separation.
+DT := $(BUILD)/demo-transport
+demo-transport: deps
+	$(MAKE) --no-print-directory $(BIN)
+	rm -rf $(DT) && mkdir -p $(DT)
+	$(BIN) simulate capture/scenes/lab_transport.json -o $(DT)/lab --no-progress
+	$(BIN) simulate capture/scenes/lab_transport.json -o $(DT)/lab-without-mh70 --drop-light mh70 --no-progress
+	$(BIN) unmix $(DT)/lab --sources capture/scenes/lab_transport_sources.json -o $(DT)/unmixed --render
+	$(BIN) unmix $(DT)/lab --sources auto -o $(DT)/unmixed-auto
+	$(BIN) relight $(DT)/unmixed --set 2=gain:3.5 --set 0=bulb:hps-70w -o $(DT)/relit-fig4
+	$(BIN) relight $(DT)/unmixed --set 4=gain:0 -o $(DT)/relit-mh70-off --compare $(DT)/lab-without-mh70
+	$(BIN) simulate capture/scenes/window.json -o $(DT)/window --no-progress
+	$(BIN) separate $(DT)/window -o $(DT)/separated
+	@echo "pictures: $(DT)/unmixed/mean.png, source_NN.png, $(DT)/relit-*/preview.png, $(DT)/separated/*.png"
 # Performance tables, printed and kept in docs/: Eq. 7 throughput on one core
 # (survey/bench.c) and the survey database's ingest and query times (survey/bench_db.c).
 bench: $(BIN)
@@ -95,7 +112,9 @@ bench: $(BIN)
 	$(BIN) bench render > docs/bench-render.md.tmp
 	mv docs/bench-render.md.tmp docs/bench-render.md
 	$(BIN) bench accuracy --out docs/accuracy
-	@cat docs/bench-recognize.md docs/bench-db.md docs/bench-render.md
+	$(BIN) bench transport > docs/bench-transport.md.tmp
+	mv docs/bench-transport.md.tmp docs/bench-transport.md
+	@cat docs/bench-recognize.md docs/bench-db.md docs/bench-render.md docs/bench-transport.md
 clean:
 	rm -rf $(BUILD)
 

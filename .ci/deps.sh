@@ -3,7 +3,7 @@
 # Called by `make deps` (and so by `make`, `make check`, `make demo`); needs root to install.
 set -eu
 PKGS="gcc g++ make pkg-config sqlite3 libsqlite3-dev libfftw3-dev libsndfile1-dev libjansson-dev
-libspng-dev nettle-dev liblapacke-dev libcsv-dev
+libspng-dev nettle-dev liblapacke-dev libcsv-dev libtiff-dev
 libplplot-dev plplot-driver-cairo libopenblas-dev libopencv-dev libgeographiclib-dev
 geographiclib-tools libgpiod-dev gcc-avr avr-libc simavr libsimavr-dev libelf-dev gdal-bin
 python3-gdal python3-numpy python3-opencv"

@@ -39,6 +39,10 @@ static gs_status sim_info(void *self, cap_acq_info *info)
     /* the scene text (and its GeoJSON files), the seed and the DELIGHT file */
     info->fingerprint = cap_fnv1a(sc->fingerprint, &sc->seed, sizeof sc->seed);
     info->fingerprint = cap_fnv1a(info->fingerprint, sc->delight, strlen(sc->delight));
+    /* the lights rendered (a caller may drop some of the scene's) */
+    info->fingerprint = cap_fnv1a(info->fingerprint, &sc->n_lights, sizeof sc->n_lights);
+    for (size_t i = 0; i < sc->n_lights; i++)
+        info->fingerprint = cap_fnv1a(info->fingerprint, sc->lights[i].id, strlen(sc->lights[i].id));
     return GS_OK;
 }
 

@@ -260,10 +260,13 @@ typedef enum {
     CAP_FX_EXTINCTION,            /* Koschmieder + Angstrom, per band, with distance */
     CAP_FX_SCINTILLATION,         /* log-normal, per light and cycle, not mains-locked */
     CAP_FX_PSF,                   /* Gaussian point spread, pixel-integrated */
+    CAP_FX_LIGHT_TRANSPORT,       /* extended surfaces lit by the lights (and daylight), Sec. 5 */
     CAP_FX_SKYGLOW,               /* a halo around each light */
     CAP_FX_BLINKING_SIGN,         /* non-AC sources blinking at their own period */
     CAP_FX_HEADLIGHTS,            /* non-AC moving sources */
     CAP_FX_AMBIENT,               /* daylight / ambient pedestal (BRF = 1) */
+    CAP_FX_SEMI_REFLECTION,       /* the view through a window: the indoor scene as a reflection
+                                   * plus a daylit outdoor scene (Sec. 5.3) */
     CAP_FX_SHOT_NOISE,            /* Poisson photo-electrons */
     CAP_FX_SATURATION,            /* full-well clipping */
     CAP_FX_READ_NOISE,            /* Gaussian read noise */
@@ -293,6 +296,13 @@ typedef struct {
 
 enum { CAP_GLOW_FLAT = 0, CAP_GLOW_SAME, CAP_GLOW_MIXED };
 
+/* An object of a light-transport room: an axis-aligned box in camera coordinates (m; x right,
+ * y down, z along the optical axis) that reflects and casts shadows. */
+typedef struct {
+    double min_m[3], max_m[3];
+    double albedo[3];
+} cap_box;
+
 /* The effects' parameters, as parsed (meaning, units and defaults: docs/scene.md, "effects";
  * sigma2 < 0: computed from cn2; aperture: aperture averaging on). */
 typedef struct {
@@ -307,6 +317,15 @@ typedef struct {
     struct { cap_car *items; size_t count; } cars;       /* owned */
     struct { double e_per_px_cycle, top, bottom, chroma[3]; } ambient;
     struct { double sigma_e; } read_noise;
+    struct {                                           /* light_transport (docs/scene.md) */
+        double width_m, height_m, depth_m, floor_m;    /* the room around the camera */
+        double albedo[3], checker_m, contrast;          /* its walls' reflectance and checker */
+        cap_box *boxes;                                  /* owned */
+        size_t n_boxes;
+        double daylight_e, daylight_chroma[3];          /* daylight on the surfaces (0: none) */
+        double shade_radius_px, shade_transmission;     /* lamp shades (radius 0: none) */
+    } transport;
+    struct { double reflectance, e_per_px_cycle, chroma[3]; } window;   /* semi_reflection */
 } cap_effects;
 
 /* One AC light of a scene (inline, from a GeoJSON file, or generated). */

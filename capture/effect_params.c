@@ -249,3 +249,118 @@ gs_status cap_fxp_read_noise(const gs_json *j, cap_scene *sc, json_t *o, const c
     return gs_json_get_num(j, o, path, "sigma_e", 0, sc->read_noise_e, 0, 1e6, NULL,
                            &sc->fx.read_noise.sigma_e);
 }
+
+/* An array member key of o holding exactly 3 numbers in [lo, hi] into v (def when absent). */
+static gs_status get3(const gs_json *j, json_t *o, const char *path, const char *key, double lo,
+                      double hi, const double *def, double *v)
+{
+    if (!json_object_get(o, key)) {
+        for (int i = 0; i < 3; i++) v[i] = def[i];
+        return GS_OK;
+    }
+    return gs_json_get_num_array(j, o, path, key, 3, 3, lo, hi, v, NULL);
+}
+
+/* An albedo: 1 number (grey) or `bands` numbers in [0, 1]. */
+static gs_status get_albedo(const gs_json *j, json_t *o, const char *path, int bands, double def,
+                            double *v)
+{
+    for (int b = 0; b < 3; b++) v[b] = def;
+    json_t *a = json_object_get(o, "albedo");
+    if (!a) return GS_OK;
+    if (json_is_number(a)) {
+        double x;
+        gs_status s = gs_json_get_num(j, o, path, "albedo", 1, 0, 0, 1, NULL, &x);
+        for (int b = 0; b < 3; b++) v[b] = x;
+        return s;
+    }
+    return gs_json_get_num_array(j, o, path, "albedo", (size_t)bands, 3, 0, 1, v, NULL);
+}
+
+gs_status cap_fxp_light_transport(const gs_json *j, cap_scene *sc, json_t *o, const char *path)
+{
+    static const char *const k[] = {"room", "boxes", "daylight", "lamp_shade", NULL};
+    static const char *const sk[] = {"radius_px", "transmission", NULL};
+    static const char *const rk[] = {"width_m", "height_m", "depth_m", "floor_m", "albedo",
+                                     "checker_m", "contrast", NULL};
+    static const char *const bk[] = {"min_m", "max_m", "albedo", NULL};
+    static const char *const dk[] = {"e_per_px_cycle", "chroma", NULL};
+    cap_effects *fx = &sc->fx;
+    char p[560];
+    json_t *room = NULL, *day = NULL;
+    gs_status s = gs_json_check_keys(j, o, path, k);
+    snprintf(p, sizeof p, "%s.room", path);
+    if (s != GS_OK || (s = gs_json_get_obj(j, o, path, "room", 1, &room)) != GS_OK ||
+        (s = gs_json_check_keys(j, room, p, rk)) != GS_OK ||
+        (s = gs_json_get_num(j, room, p, "width_m", 1, 0, 0.1, 1e5, NULL, &fx->transport.width_m)) != GS_OK ||
+        (s = gs_json_get_num(j, room, p, "height_m", 1, 0, 0.1, 1e5, NULL, &fx->transport.height_m)) != GS_OK ||
+        (s = gs_json_get_num(j, room, p, "depth_m", 1, 0, 0.1, 1e5, NULL, &fx->transport.depth_m)) != GS_OK ||
+        (s = gs_json_get_num(j, room, p, "floor_m", 0, 0.5 * fx->transport.height_m, 0,
+                             fx->transport.height_m, NULL, &fx->transport.floor_m)) != GS_OK ||
+        (s = get_albedo(j, room, p, sc->bands, 0.7, fx->transport.albedo)) != GS_OK ||
+        (s = gs_json_get_num(j, room, p, "checker_m", 0, 0, 0, 100, NULL, &fx->transport.checker_m)) != GS_OK ||
+        (s = gs_json_get_num(j, room, p, "contrast", 0, 0.5, 0, 1.9, NULL, &fx->transport.contrast)) != GS_OK)
+        return s;
+    if (sc->bands == 1)
+        for (int b = 1; b < 3; b++) fx->transport.albedo[b] = fx->transport.albedo[0];
+    if (json_object_get(o, "boxes")) {
+        if ((s = object_array(j, o, path, "boxes", "boxes", sizeof *fx->transport.boxes,
+                              (void **)&fx->transport.boxes, &fx->transport.n_boxes, p, sizeof p)) != GS_OK)
+            return s;
+        json_t *arr = json_object_get(o, "boxes");
+        for (size_t i = 0; i < fx->transport.n_boxes; i++) {
+            char ip[600];
+            snprintf(ip, sizeof ip, "%s[%zu]", p, i);
+            json_t *bo = json_array_get(arr, i);
+            cap_box *bx = &fx->transport.boxes[i];
+            static const double zero[3] = {0, 0, 0};
+            if (!json_is_object(bo)) return gs_json_fail(j, GS_EFORMAT, ip, "expected an object");
+            if ((s = gs_json_check_keys(j, bo, ip, bk)) != GS_OK ||
+                (s = gs_json_get_num_array(j, bo, ip, "min_m", 3, 3, -1e5, 1e5, bx->min_m, NULL)) != GS_OK ||
+                (s = get3(j, bo, ip, "max_m", -1e5, 1e5, zero, bx->max_m)) != GS_OK ||
+                (s = get_albedo(j, bo, ip, sc->bands, 0.5, bx->albedo)) != GS_OK)
+                return s;
+            if (!json_object_get(bo, "max_m"))
+                return gs_json_fail(j, GS_EFORMAT, ip, "field max_m: expected 3 numbers (the field is missing)");
+            for (int a = 0; a < 3; a++)
+                if (!(bx->max_m[a] > bx->min_m[a])) {
+                    char mp[640];
+                    snprintf(mp, sizeof mp, "%s.max_m", ip);
+                    return gs_json_fail(j, GS_EFORMAT, mp, "expected each coordinate above min_m's");
+                }
+            if (sc->bands == 1) bx->albedo[1] = bx->albedo[2] = bx->albedo[0];
+        }
+    }
+    json_t *shade = NULL;
+    if ((s = gs_json_get_obj(j, o, path, "lamp_shade", 0, &shade)) != GS_OK) return s;
+    if (shade) {
+        snprintf(p, sizeof p, "%s.lamp_shade", path);
+        if ((s = gs_json_check_keys(j, shade, p, sk)) != GS_OK ||
+            (s = gs_json_get_num(j, shade, p, "radius_px", 1, 0, 0.5, 64, NULL,
+                                 &fx->transport.shade_radius_px)) != GS_OK ||
+            (s = gs_json_get_num(j, shade, p, "transmission", 1, 0, 0, 1, NULL,
+                                 &fx->transport.shade_transmission)) != GS_OK)
+            return s;
+    }
+    if ((s = gs_json_get_obj(j, o, path, "daylight", 0, &day)) != GS_OK || !day) return s;
+    snprintf(p, sizeof p, "%s.daylight", path);
+    if ((s = gs_json_check_keys(j, day, p, dk)) != GS_OK ||
+        (s = gs_json_get_num(j, day, p, "e_per_px_cycle", 1, 0, 0, 1e9, NULL, &fx->transport.daylight_e)) != GS_OK ||
+        (s = parse_chroma(j, day, p, sc->bands, fx->transport.daylight_chroma)) != GS_OK)
+        return s;
+    return GS_OK;
+}
+
+gs_status cap_fxp_semi_reflection(const gs_json *j, cap_scene *sc, json_t *o, const char *path)
+{
+    static const char *const k[] = {"reflectance", "outdoor_e_per_px_cycle", "chroma", NULL};
+    cap_effects *fx = &sc->fx;
+    gs_status s;
+    if ((s = gs_json_check_keys(j, o, path, k)) != GS_OK ||
+        (s = gs_json_get_num(j, o, path, "reflectance", 1, 0, 0, 1, NULL, &fx->window.reflectance)) != GS_OK ||
+        (s = gs_json_get_num(j, o, path, "outdoor_e_per_px_cycle", 1, 0, 0, 1e9, NULL,
+                             &fx->window.e_per_px_cycle)) != GS_OK ||
+        (s = parse_chroma(j, o, path, sc->bands, fx->window.chroma)) != GS_OK)
+        return s;
+    return GS_OK;
+}

@@ -380,5 +380,6 @@ void cap_scene_release(cap_scene *sc)
     free(sc->lights);
     free(sc->fx.signs.items);
     free(sc->fx.cars.items);
+    free(sc->fx.transport.boxes);
     memset(sc, 0, sizeof *sc);
 }

@@ -23,6 +23,13 @@ static gs_status scene_copy(cap_scene *dst, const cap_scene *src)
     dst->lights = NULL;
     dst->fx.signs.items = NULL;
     dst->fx.cars.items = NULL;
+    dst->fx.transport.boxes = NULL;
+    if (src->fx.transport.n_boxes) {
+        size_t nb = src->fx.transport.n_boxes * sizeof *dst->fx.transport.boxes;
+        dst->fx.transport.boxes = malloc(nb);
+        if (!dst->fx.transport.boxes) return gs_fail(GS_ENOMEM, "simulator: out of memory");
+        memcpy(dst->fx.transport.boxes, src->fx.transport.boxes, nb);
+    }
     if (src->n_lights) {
         dst->lights = malloc(src->n_lights * sizeof *dst->lights);
         if (!dst->lights) return gs_fail(GS_ENOMEM, "simulator: out of memory");
@@ -258,6 +265,7 @@ void cap_sim_free(cap_sim *s)
     free(s->scin);
     free(s->lev);
     free(s->amb_row);
+    cap_transport_free(s);
     cap_scene_release(&s->sc);
     free(s);
 }
@@ -601,6 +609,19 @@ gs_status cap_sim_write_truth(const cap_sim *s, const char *dir)
         json_object_set_new(dis, "headlights", a);
     }
     json_object_set_new(root, "distractors", dis);
+    json_t *images = NULL;
+    gs_status tst = cap_transport_write_truth(s, dir, &images);
+    if (tst != GS_OK) {
+        json_decref(root);
+        return tst;
+    }
+    if (images) {
+        json_t *tr = json_object();
+        json_object_set_new(tr, "units", json_string("DN per flicker cycle: each source's cycle-mean "
+                                                      "image tau_s Q_s (Eq. 9), float TIFF"));
+        json_object_set_new(tr, "images", images);
+        json_object_set_new(root, "transport", tr);
+    }
     char *text = json_dumps(root, JSON_INDENT(1) | JSON_PRESERVE_ORDER | JSON_REAL_PRECISION(15));
     json_decref(root);
     if (!text) return gs_fail(GS_ENOMEM, "truth: cannot serialise");

@@ -86,6 +86,7 @@ struct cap_sim {
     double *scin;                   /* [C] */
     unsigned char *lev;             /* [C] cap_cycle_level of each cycle of an exposure */
     double *amb_row;                /* [H] ambient electrons per pixel and nominal cycle (ambient) */
+    struct cap_transport *tr;       /* light_transport / semi_reflection tables (effect_transport.c) */
 };
 
 /* Rendering primitives (render.c). */
@@ -128,6 +129,18 @@ gs_status cap_fx_prepare_extinction(cap_sim *s);
 gs_status cap_fx_prepare_scintillation(cap_sim *s);
 gs_status cap_fx_prepare_psf(cap_sim *s);
 gs_status cap_fx_prepare_skyglow(cap_sim *s);
+/* Light transport and the window (effect_transport.c): prepare ray-casts the room once (each
+ * light's transport image relative to its direct flux, the daylight and outdoor images). */
+gs_status cap_fx_light_transport(cap_sim *s, cap_render *r);
+gs_status cap_fx_semi_reflection(cap_sim *s, cap_render *r);
+gs_status cap_fx_prepare_light_transport(cap_sim *s);
+gs_status cap_fx_prepare_semi_reflection(cap_sim *s);
+gs_status cap_fxp_light_transport(const gs_json *j, cap_scene *sc, json_t *o, const char *path);
+gs_status cap_fxp_semi_reflection(const gs_json *j, cap_scene *sc, json_t *o, const char *path);
+void cap_transport_free(cap_sim *s);
+/* The truth of a transport scene: every light's tau Q (and the daylight's, the outdoor
+ * scene's) as float TIFFs truth_tau_NN.tiff in dir, listed in the array *images (json). */
+gs_status cap_transport_write_truth(const cap_sim *s, const char *dir, json_t **images);
 /* Parameters (effect_params.c); cap_fxp_none: an effect without any ({} only). */
 gs_status cap_fxp_none(const gs_json *j, cap_scene *sc, json_t *o, const char *path);
 gs_status cap_fxp_free_running_drift(const gs_json *j, cap_scene *sc, json_t *o, const char *path);

@@ -1,8 +1,9 @@
 /*
  * recognize.h - the public interface of gridsurvey's recognize/ module (prefix rec_): lights as
  * blobs with per-frame photometry, Eq. 7 recognition of bulb and grid phase over DELIGHT (paper
- * Sec. 4), per-pixel maps and the paper's Fig. 2/3 plots, and the maximum-likelihood oracle that
- * Eq. 7 is judged against. Built on recognize/base/base.h (status, BRFs, DELIGHT, captures).
+ * Sec. 4), per-pixel maps and the paper's Fig. 2/3 plots, the maximum-likelihood oracle that
+ * Eq. 7 is judged against, and AC light transport (Sec. 5: unmixing, rendering, relighting,
+ * semi-reflection separation). Built on recognize/base/base.h (status, BRFs, DELIGHT, captures).
  * Ownership: functions that return allocated memory say so; free it with the named function.
  * Every destructor accepts NULL.
  */
@@ -413,6 +414,211 @@ gs_status rec_map_write_confidence_png(const rec_pixel_maps *pm, const char *pat
  * for bad arguments or bands that differ from m's. Not thread-safe (PLplot). */
 gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const rec_match *match,
                            int max_lights, const char *png_path, const char *title);
+
+/* ------------------------------------------------- light transport (paper Sec. 5) */
+
+/* AC light transport (recognize/nnls.c, unmix.c, sources.c, relight.c, separate.c,
+ * transport_png.c; docs/light-transport.md). Per band sigma, the K-frame sequence of a scene
+ * lit by S sources is I = T Q B (Eq. 13): T (P x S) the transport, Q = diag(Q_s) the sources'
+ * chromaticities, B (S x K) their BRFs integrated to the K windows and shifted by their grid
+ * phases (Eq. 14). Images are per band; "tau_s Q_s" is the cycle-mean image of source s alone
+ * (Eq. 9), in DN per flicker cycle (docs/formats.md's per-cycle value). */
+
+/* Non-negative least squares by Lawson and Hanson's active-set method (Solving Least Squares
+ * Problems, 1974, ch. 23), on the normal equations: x = argmin_{x >= 0} x^T G x / 2 - h^T x,
+ * G (n x n, row-major, symmetric positive semi-definite) and h as given; 1 <= n <= 32. The
+ * passive set's systems are solved by Cholesky. Returns the iterations (>= 0), or -1 when a
+ * passive system is singular (x is then the last feasible point) or n is out of range. */
+int rec_nnls(const double *G, const double *h, int n, double *x);
+
+#define REC_MAX_SOURCES 16
+#define REC_SOURCES_FORMAT "gridsurvey-sources/1"
+#define REC_DAYLIGHT "daylight"   /* the reserved bulb id of a constant source (BRF all ones) */
+
+/* A source set (Eqs. 13-15): S sources of bands bands and K windows. Arrays owned (malloc),
+ * freed by rec_sources_release (which accepts a zeroed struct). */
+typedef struct {
+    int S, bands, K;
+    char (*bulb)[GS_ID_MAX];  /* [S] DELIGHT id, or REC_DAYLIGHT */
+    double *phase_deg;        /* [S] grid phase (0 for daylight) */
+    double *q;                /* [S * bands] chromaticity Q_s(band), sums to 1 over bands */
+    double *b;                /* [(s * bands + band) * K + k] BRF window means, mean 1 */
+    int *fixed;               /* [S] 1: B not refined by Eq. 18 (daylight: exactly ones) */
+    int *merged;              /* [S] how many requested sources this one stands for (Eq. 15) */
+} rec_sources;
+void rec_sources_release(rec_sources *s);
+
+/* One requested source: a DELIGHT bulb (or REC_DAYLIGHT) at a grid phase. */
+typedef struct {
+    char bulb[GS_ID_MAX];
+    double phase_deg;
+} rec_source_spec;
+
+/* The source set of n specs (1..REC_MAX_SOURCES) at grid_hz, bands and K (2..1024): Q and B
+ * from DELIGHT (gs_brf_integrate at gs_phase_to_shift(phase)), a daylight source with B = 1
+ * and Q = 1/bands. Specs with the same bulb and the same BRF shift modulo one cycle (phi and
+ * phi + 180 deg included) are inseparable (Eq. 15) and become one source; into[i] (may be NULL)
+ * gets the source spec i went into. GS_ENOTFOUND naming the spec for a bulb DELIGHT lacks at
+ * grid_hz with bands. */
+gs_status rec_sources_build(const gs_delight *d, const rec_source_spec *specs, int n,
+                            int grid_hz, int bands, int K, rec_sources *out, int *into);
+
+/* The sources file, format gridsurvey-sources/1: {"format", "sources": [{"bulb", "phase_deg"},
+ * ...]} (plus the keys rec_unmix's output adds, docs/light-transport.md), read through the
+ * format kit (errors "FILE:LINE: field PATH: expected ..."). *specs is malloc'd (free()). */
+gs_status rec_sources_read_specs(const char *path, rec_source_spec **specs, int *n);
+
+/* `--sources auto` (Sec. 5.1 (a), (b)): sources from the pixels dominated by one source (bulbs
+ * in view, nearby surfaces). Every pixel whose mean per-cycle value is at least min_snr noise
+ * sigmas goes through Eq. 7 (rec_match_light with m, built for the capture; its per-cycle values
+ * with the capture's noise model, saturated samples dropped; the brightest 20000 of them); a
+ * pixel is dominated when its best template fits to chi2/dof <= 3 with a phase posterior >=
+ * 0.99 (m should be built with unknown_p 0: the fit decides). Each (bulb, phase) dominating at
+ * least min_px pixels is a source, most pixels first; one at the BRF shift of a source already
+ * taken with the same technology, or with a flicker (mean removed) within a cosine of 0.995 of
+ * it, is that source seen through a similar model (Eq. 15); at most max_sources. *specs malloc'd (free()); *tested and *dominated
+ * (either may be NULL) get the pixels tried and dominated. GS_ENOTFOUND when no source is. */
+gs_status rec_sources_auto(const gs_capture *cap, const rec_matcher *m, double min_snr,
+                           int min_px, int max_sources, rec_source_spec **specs, int *n,
+                           size_t *tested, size_t *dominated);
+
+typedef struct rec_unmix_result rec_unmix_result;
+
+/* The capture numbers a sources file keeps for relighting (the input capture's). */
+typedef struct {
+    int grid_hz, K, bands, width, height, locked;
+    double cycles;            /* C of frame 0 */
+    double saturation_dn, black_level_dn, gain_e_per_dn, read_noise_dn;
+} rec_capture_meta;
+void rec_capture_meta_of(const gs_capture *cap, rec_capture_meta *m);
+
+/* What `unmix` writes and `relight` reads: DIR/sources.json (gridsurvey-sources/1 with, per
+ * source, "file" (its tau_s Q_s TIFF), "chromaticity", "brf" (the refined K samples per band),
+ * "brf_database", "predicted_error", "merged", and "render" when written; at the top "capture"
+ * (rec_capture_meta) and "unmix" (diagnostics)). write: atomic; files[s] and renders[s] (NULL
+ * or "" = none) name each source's files in the directory. read: the sources (q and b from the
+ * file), the meta and the file names (char[GS_PATH_MAX] each, malloc'd: free()). */
+gs_status rec_sources_write(const char *path, const rec_sources *src, const rec_unmix_result *r,
+                            const rec_capture_meta *meta, int refine, const char *const *files,
+                            const char *const *renders, const double *brf_database);
+gs_status rec_sources_read(const char *path, rec_sources *src, rec_capture_meta *meta,
+                           char (**files)[GS_PATH_MAX]);
+
+/* Eqs. 16-18. */
+typedef struct {
+    int refine;           /* rounds of Eq. 18 (B >= 0) then Eq. 16 again, 0..20 (1, the paper) */
+    double max_error;     /* predicted relative error of a source above which the problem is
+                           * ill-posed (Fig. 10), (0, inf) (0.5) */
+    double max_inflation; /* a source whose variance at a pixel, from the usable samples only,
+                           * exceeds this times its variance from all K samples is not
+                           * determined there: fitted, but NaN (Eq. 17 discarded what measured
+                           * it), > 1 (10) */
+    double brf_sigma;     /* Eq. 18's freedom: B is the maximum a posteriori under a Gaussian
+                           * prior of this std per window mean about the database's B (0.05:
+                           * BRFs of one model agree to a few %), > 0 */
+    void (*progress)(void *ctx, double fraction);   /* NULL = none */
+    void *progress_ctx;
+} rec_unmix_opts;
+void rec_unmix_opts_default(rec_unmix_opts *o);
+
+enum {
+    REC_UNMIX_OK = 0,       /* every sample used */
+    REC_UNMIX_PARTIAL,      /* some samples saturated (Eq. 17 discards them): recovered from the
+                             * others (HDR, Eq. 19); a source they do not determine is NaN */
+    REC_UNMIX_UNKNOWN       /* no source determined: NaN for all */
+};
+
+struct rec_unmix_result {
+    int width, height, bands, S, K;
+    float *tq;                /* [((s * height + y) * width + x) * bands + band]: tau_s Q_s, DN
+                               * per cycle (>= 0), NaN where REC_UNMIX_UNKNOWN */
+    double *b;                /* [(s * bands + band) * K + k]: the refined B (Eq. 18), mean 1 */
+    unsigned char *state;     /* [height * width] REC_UNMIX_* */
+    size_t partial_px, unknown_px;
+    size_t unknown_values;    /* (pixel, source) pairs without a value (NaN), all bands */
+    double cond[GS_MAX_BANDS];          /* condition number of the row-normalised QB per band */
+    double predicted_error[REC_MAX_SOURCES];   /* of each source from the noise (Eq. 16's
+                                         * covariance): sqrt(sum var) / ||tau_s Q_s||_F over
+                                         * the pixels with every sample usable */
+    double rms_residual;      /* weighted residual per usable sample of the last Eq. 16 (~1 when
+                               * the model fits to the noise) */
+    int ill_posed;            /* 1: rec_unmix returned GS_ENUMERIC for Fig. 10's reason */
+};
+void rec_unmix_release(rec_unmix_result *r);
+
+/* Unmix cap with the sources src (bands and K as cap's): Eq. 16 per pixel and band, weights of
+ * Eq. 17 (a sample with any band saturated discarded; the others by their noise, the capture's
+ * model at the pixel's level, so HDR-halved samples count with their exposure), T >= 0 by
+ * rec_nnls; then `refine` rounds of Eq. 18 and Eq. 16 again. Eq. 18: each column of B by
+ * rec_nnls over the pixels, from their linear Eq. 16 estimates with those estimates' noise
+ * removed (errors in variables), samples within 10 % of the saturation left out (censored), a
+ * Gaussian prior of std brf_sigma about the database's B, each source's change shrunk by
+ * max(0, 1 - noise / change^2), rows renormalised to mean 1; fixed sources kept
+ * (docs/light-transport.md). Ill-posed (GS_ENUMERIC, with
+ * r->ill_posed = 1, cond and predicted_error filled, no images): S > K, QB of numerical rank
+ * < S, or a source whose predicted error exceeds max_error. *r overwritten; release it also
+ * after a failure. GS_EINVAL for mismatched arguments. */
+gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unmix_opts *o,
+                    rec_unmix_result *r);
+
+/* Eq. 19: the K-frame sequence of source s, out[((k * height + y) * width + x) * bands + band]
+ * = tau_s Q_s * b_s[k] (DN per cycle; may exceed the sensor's saturation; NaN where unknown). */
+gs_status rec_render_source(const rec_unmix_result *r, int s, float *out);
+
+/* Eq. 20, generalised relighting: per source s, gain a_s (>= 0; 0 switches it off), and
+ * optionally another bulb (its DELIGHT chromaticity and BRF, or REC_DAYLIGHT) and/or another
+ * grid phase. */
+typedef struct {
+    double gain;
+    char bulb[GS_ID_MAX];     /* "" = the source's own */
+    int set_phase;            /* 1: phase_deg replaces the source's phase */
+    double phase_deg;
+} rec_relight_set;
+/* frames[((k * height + y) * width + x) * bands + band] = sum_s a_s tau_s Q'_s b'_s[k] (DN per
+ * cycle) from the sources src and their tau_s Q_s images tq ([s][p][band], as rec_unmix's),
+ * with tau_s = (tau_s Q_s) / Q_s per band. A source whose bulb and phase are kept keeps its
+ * refined BRF (src->b); one given another bulb or phase takes DELIGHT's (d, at grid_hz) shifted
+ * exactly to its phase. A NaN tau Q stays NaN in the result unless the source is off. set has
+ * src->S entries. GS_ENOTFOUND for a bulb DELIGHT lacks. */
+gs_status rec_relight(const rec_sources *src, const float *tq, int width, int height,
+                      const gs_delight *d, int grid_hz, const rec_relight_set *set, float *frames);
+/* K frames of per-cycle values (rec_relight's layout) as a capture of meta's numbers: raw =
+ * black + value * cycles / 2^h with each sample's pixel halved (HDR maps, h <= 16) just enough
+ * to stay below the saturation; a NaN (or a value beyond 16 halvings) is written saturated, so
+ * it reads back as no value. *cap is a complete capture (gs_capture_release it). */
+gs_status rec_frames_to_capture(const rec_capture_meta *meta, const float *frames, gs_capture *cap);
+
+/* Semi-reflection separation (Sec. 5.3, Eqs. 21-22): a window shows a daylit scene (constant
+ * over the capture: BRF all ones) and the reflection of an indoor scene lit by one unknown AC
+ * source. Per band, frames are ranked by their mean; I_hi and I_lo are the means of the top and
+ * bottom thirds (at least one frame each: b_ac(hi) > b_ac(lo)), so by Eqs. 21-22
+ * D = I_hi - I_lo = tau_ac (b_hi - b_lo) and I_lo - A I_hi = (1 - A) tau_out at A = b_lo / b_hi.
+ * A in [0, 1) minimises the mutual information of D and I_lo - A I_hi (a 2-D histogram estimator
+ * on at most 65536 evenly spaced pixels, 32 x 32 bins over mean +- 3 std of each, then a grid
+ * of 200 values of A refined by golden section). Then transmitted = (I_lo - A I_hi) / (1 - A)
+ * and reflection = mean_k I - transmitted: the cycle-mean images of the two (DN per cycle) when
+ * the model holds. Pixels saturated in any frame are NaN. */
+typedef struct {
+    int width, height, bands;
+    float *transmitted, *reflection;   /* width * height * bands each (owned) */
+    double A[GS_MAX_BANDS];            /* the A of each band */
+    double mi[GS_MAX_BANDS];           /* the mutual information at it, nats */
+    double mi_a0[GS_MAX_BANDS];        /* and at A = 0 (no separation), for comparison */
+} rec_separation;
+gs_status rec_separate(const gs_capture *cap, rec_separation *out);
+void rec_separation_release(rec_separation *s);
+/* The mutual information (nats) of x and y (n pairs, NaN pairs skipped) by the histogram
+ * estimator above with `bins` bins a side (2..256). */
+double rec_mutual_information(const float *x, const float *y, size_t n, int bins);
+
+/* The pictures of Figs. 4-6: img (width x height x bands, DN per cycle) as an 8-bit RGB PNG
+ * (grey for 1 band), value / white clipped to [0, 1] with a 1/2.2 gamma; pixels with a NaN band
+ * (unknown) magenta. white <= 0: rec_png_white. Atomic write. */
+gs_status rec_write_image_png(const char *path, const float *img, int width, int height,
+                              int bands, double white);
+/* The 99.5th percentile of the finite samples (of at most 65536 evenly spaced ones), 1 if not
+ * positive: the white of a picture. */
+double rec_png_white(const float *img, int width, int height, int bands);
 
 /* ---------------------------------------------- maximum-likelihood oracle (recognize/ml_oracle.c) */
 

@@ -26,6 +26,7 @@ static const char bench_usage[] =
     "       gridsurvey bench db [--quick] ...       survey database tables (bench db --help)\n"
     "       gridsurvey bench render [SCENE]         simulator time per effect (bench render --help)\n"
     "       gridsurvey bench accuracy [--quick]     accuracy against capture time (docs/accuracy.md)\n"
+    "       gridsurvey bench transport [--quick]    light-transport unmixing time (docs/bench-transport.md)\n"
     "\n"
     "bench recognize: rec_match_pixels (pixels/s) and rec_match_catalog (lights/s) against K,\n"
     "bands, DELIGHT size and pixel count, one core, next to a plain triple-loop reference of the\n"
@@ -745,6 +746,7 @@ int srv_cmd_bench(int argc, char **argv)
     if (!strcmp(argv[1], "db")) return srv_bench_db(argc - 1, argv + 1);
     if (!strcmp(argv[1], "accuracy")) return srv_bench_accuracy(argc - 1, argv + 1);
     if (!strcmp(argv[1], "render")) return srv_bench_render(argc - 1, argv + 1);
-    fprintf(stderr, "gridsurvey bench: '%s' is not a benchmark: expected recognize, db, render or accuracy\n", argv[1]);
+    if (!strcmp(argv[1], "transport")) return srv_bench_transport(argc - 1, argv + 1);
+    fprintf(stderr, "gridsurvey bench: '%s' is not a benchmark: expected recognize, db, render, accuracy or transport\n", argv[1]);
     return 2;
 }

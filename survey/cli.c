@@ -19,6 +19,9 @@ static const struct {
     {"recognize", srv_cmd_recognize, "bulb type and grid phase of every light in a capture (Eq. 7); maps, plots"},
     {"run", srv_cmd_run, "the whole job: capture (or a capture directory), recognize, locate, store; stats, maps"},
     {"evaluate", srv_cmd_evaluate, "compare a survey database with a simulator's truth.json (rates, errors)"},
+    {"unmix", srv_cmd_unmix, "light transport: unmix a capture into one image per source (Eqs. 16-19)"},
+    {"relight", srv_cmd_relight, "relight unmixed sources: gain, off, other bulb or phase (Eq. 20)"},
+    {"separate", srv_cmd_separate, "separate a window's reflection from the daylit scene behind it (Sec. 5.3)"},
     {"bench", srv_cmd_bench, "performance tables: bench recognize (Eq. 7 throughput), bench db"},
 };
 

@@ -12,6 +12,7 @@
 static const char simulate_usage[] =
     "usage: gridsurvey simulate SCENE.json -o CAPDIR [--seed N] [--delight DB] [--force]\n"
     "                           [--stop-after N] [--progress | --no-progress] [--stats]\n"
+    "                           [--drop-light ID ...]\n"
     "\n"
     "Renders the scene's K frames as the ACam would acquire them (coded exposure over C\n"
     "cycles, mask matrix, HDR halving, the effects the scene lists) into CAPDIR: capture.json,\n"
@@ -28,6 +29,8 @@ static const char simulate_usage[] =
     "  --progress      progress on stderr (default: when stderr is a terminal)\n"
     "  --no-progress   no progress\n"
     "  --stats         print the pipeline's stages with their calls and time\n"
+    "  --drop-light ID render the scene without this light (repeatable; e.g. the reference\n"
+    "                  for `gridsurvey relight` switching a source off)\n"
     "  --help          this text\n"
     "\n"
     "Built-in scenes: capture/scenes/lab.json, capture/scenes/metro.json (docs/scene.md).\n";
@@ -62,9 +65,12 @@ int srv_cmd_simulate(int argc, char **argv)
         {"delight", required_argument, 0, 'd'}, {"force", no_argument, 0, 'f'},
         {"stop-after", required_argument, 0, 'S'}, {"progress", no_argument, 0, 'p'},
         {"no-progress", no_argument, 0, 'n'},   {"stats", no_argument, 0, 't'},
+        {"drop-light", required_argument, 0, 'x'},
         {"help", no_argument, 0, 'h'},          {0, 0, 0, 0},
     };
     const char *out = NULL, *delight = NULL;
+    const char *drop[64];
+    int ndrop = 0;
     long seed = -1, stop = 0;
     int stats = 0;
     cap_loop_opts lo;
@@ -79,6 +85,13 @@ int srv_cmd_simulate(int argc, char **argv)
         case 'p': lo.progress = 1; break;
         case 'n': lo.progress = 0; break;
         case 't': stats = 1; break;
+        case 'x':
+            if (ndrop == 64) {
+                fprintf(stderr, "gridsurvey simulate: at most 64 --drop-light\n");
+                return 2;
+            }
+            drop[ndrop++] = optarg;
+            break;
         case 's':
             if (!parse_long("simulate --seed", optarg, 0, 0x7fffffffL, &seed)) return 2;
             break;
@@ -99,6 +112,17 @@ int srv_cmd_simulate(int argc, char **argv)
     if (s != GS_OK) {
         cap_scene_release(&sc);
         return srv_error(s);
+    }
+    for (int i = 0; i < ndrop; i++) {
+        size_t j = 0;
+        while (j < sc.n_lights && strcmp(sc.lights[j].id, drop[i])) j++;
+        if (j == sc.n_lights) {
+            fprintf(stderr, "gridsurvey simulate: --drop-light %s: the scene has no light with this id\n", drop[i]);
+            cap_scene_release(&sc);
+            return 2;
+        }
+        memmove(&sc.lights[j], &sc.lights[j + 1], (sc.n_lights - j - 1) * sizeof *sc.lights);
+        sc.n_lights--;
     }
     if (seed >= 0) {
         sc.seed = (unsigned long long)seed;

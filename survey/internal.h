@@ -20,6 +20,44 @@ int srv_cmd_recognize(int argc, char **argv);
 int srv_cmd_bench(int argc, char **argv);
 int srv_cmd_run(int argc, char **argv);
 int srv_cmd_evaluate(int argc, char **argv);
+int srv_cmd_unmix(int argc, char **argv);
+int srv_cmd_relight(int argc, char **argv);
+int srv_cmd_separate(int argc, char **argv);
+/* `gridsurvey bench transport` (survey/bench_transport.c). */
+int srv_bench_transport(int argc, char **argv);
+
+/* ====================== light transport commands (transport_eval.c), shared between them */
+
+/* DELIGHT: the SQLite file db (NULL: $GRIDSURVEY_DELIGHT, else the built-in database). */
+gs_status srv_tr_delight(const char *db, gs_delight **out);
+/* A simulated capture's transport truth (truth.json "transport", docs/light-transport.md): n
+ * images tau Q (DN per cycle) of W x H x B, img[i * W * H * B + ...], with each one's light,
+ * bulb and phase. GS_ENOTFOUND without one. */
+typedef struct {
+    int n, W, H, B;
+    char (*light)[48];
+    char (*bulb)[GS_ID_MAX];
+    double *phase_deg;
+    float *img;
+} srv_tr_truth;
+gs_status srv_tr_truth_load(const char *capdir, srv_tr_truth *t);
+void srv_tr_truth_release(srv_tr_truth *t);
+/* 1 when two (bulb, phase) are the same source (Eq. 15: the same bulb and BRF shift). */
+int srv_tr_same_source(const char *bulb_a, double phase_a_deg, const char *bulb_b, double phase_b_deg);
+/* The sum of the truth images of the source (bulb, phase) into out (W * H * B); *lights gets how
+ * many lights it sums (0: none). */
+gs_status srv_tr_truth_of(const srv_tr_truth *t, const char *bulb, double phase_deg, float *out,
+                          int *lights);
+/* The truth's bulb that an unmixed source (bulb, phase) stands for: the same bulb at the same
+ * BRF shift, else a bulb of the same technology (DELIGHT d) at that shift (--sources auto may
+ * recognise a similar model); NULL when none. */
+const char *srv_tr_truth_match(const srv_tr_truth *t, const gs_delight *d, int grid_hz, int bands,
+                               const char *bulb, double phase_deg);
+/* ||est - truth||_F / ||truth||_F over the pixels whose every band of est is finite. */
+double srv_tr_rel_error(const float *est, const float *truth, size_t P, int bands);
+/* The normalized cross-correlation (Pearson) of a and b over the samples finite in both. */
+double srv_tr_ncc(const float *a, const float *b, size_t n);
+/* ============================================================ end of the light transport */
 
 /* `gridsurvey bench accuracy` (survey/bench_accuracy.c); argv[0] is "accuracy". */
 int srv_bench_accuracy(int argc, char **argv);

@@ -474,6 +474,22 @@ gs_status gs_png_decode(const unsigned char *buf, size_t size, const char *name,
 gs_status gs_png_encode(const void *pixels, int width, int height, int channels, int bits,
                         unsigned char **png, size_t *size);
 
+/* ------------------------------------------------------------- float TIFF */
+
+/* 32-bit IEEE float TIFF (libtiff), the light-transport images (docs/light-transport.md):
+ * `pages` images of width x height pixels of `bands` (1 grey, 3 R G B in file order, i.e. file
+ * band 1 is R) interleaved samples, pix[((page * height + y) * width + x) * bands + band];
+ * uncompressed, one page per image (a multi-page file for pages > 1). NaN and Inf are stored as
+ * they are. The write is atomic (gs_atomic_*); GS_EINVAL for sizes outside 1..65535 or other
+ * band counts, GS_EIO when it cannot be written. */
+gs_status gs_tiff_write_float(const char *path, const float *pix, int width, int height,
+                              int bands, int pages);
+/* Read such a file (any TIFF of 32-bit float samples, 1 or 3 per pixel, contiguous, every page
+ * the same size): *pix is malloc'd (free()), laid out as above. GS_ENOTFOUND for a missing
+ * file, GS_EFORMAT (naming the file, page and what was found) for anything else. */
+gs_status gs_tiff_read_float(const char *path, int *width, int *height, int *bands, int *pages,
+                             float **pix);
+
 /* --------------------------------------------------------- capture directory */
 
 /* A capture directory, format "gridsurvey-capture/1" (docs/formats.md is the specification):

@@ -1,0 +1,163 @@
+/* test_transport_cli.c - the light-transport commands end to end: simulate, unmix (a sources
+ * file and auto), relight into a capture that recognize reads back, separate; their files read
+ * by independent readers (GDAL, Jansson) and their one-line errors. */
+#include "tests/fixtures.h"
+#include "tests/test.h"
+#include "tests/transport_fixture.h"
+
+#include <jansson.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static const trfx_lamp lamps3[] = {
+    {"inc25", "inc-a60-25w-230v", 0, 11.2, 8.9, 3.8, 6e6},
+    {"cfl23", "cfl-23w", 120, 52.9, 7.2, 4.2, 6e6},
+    {"ledfil", "led-fil-4w-lin", 240, 32.0, 4.9, 4.5, 5e6},
+};
+
+static const char *sources3 =
+    "{\"format\": \"gridsurvey-sources/1\",\n"
+    " \"sources\": [{\"bulb\": \"inc-a60-25w-230v\", \"phase_deg\": 0},\n"
+    "             {\"bulb\": \"cfl-23w\", \"phase_deg\": 120},\n"
+    "             {\"bulb\": \"led-fil-4w-lin\", \"phase_deg\": 240}]}\n";
+
+/* The three-lamp scene simulated by the command into CAPDIR (returns it). */
+static const char *simulate3(void)
+{
+    trfx_opts o = {0};
+    o.hdr_rounds = 3;
+    char *text = trfx_scene(&o, lamps3, 3);
+    const char *scene = fx_tmp("three.json");
+    fx_write_text(scene, text);
+    free(text);
+    static char cap[512];
+    snprintf(cap, sizeof cap, "%s", fx_tmp("three"));
+    char out[4096];
+    int rc = fx_run(out, sizeof out, "%s simulate '%s' -o '%s' --no-progress 2>&1", test_bin(), scene, cap);
+    CHECK_MSG(rc == 0, "simulate: %s", out);
+    return cap;
+}
+
+TEST(unmix_relight_cli_float_tiffs_gdal_and_a_capture_recognize_reads)
+{
+    const char *cap = simulate3();
+    const char *src = fx_tmp("sources.json"), *dir = fx_tmp("unmixed"), *rel = fx_tmp("relit");
+    fx_write_text(src, sources3);
+    char out[16384];
+    int rc = fx_run(out, sizeof out, "%s unmix '%s' --sources '%s' -o '%s' --render 2>&1", test_bin(), cap, src, dir);
+    CHECK_MSG(rc == 0, "unmix: %s", out);
+    CHECK(fx_contains(out, "relative error"));   /* the capture has a truth */
+    CHECK(fx_contains(out, "denoising"));
+    /* GDAL reads each source as three Float32 bands, and the rendered sequence as K pages */
+    CHECK(fx_run(out, sizeof out, "gdalinfo '%s/source_02.tiff' 2>&1", dir) == 0);
+    CHECK(fx_count_of(out, "Type=Float32") == 3 && fx_contains(out, "Size is 64, 48"));
+    CHECK(fx_run(out, sizeof out, "gdalinfo '%s/render_01.tiff' 2>&1", dir) == 0);
+    CHECK(fx_contains(out, "SUBDATASET_26_NAME") && !fx_contains(out, "SUBDATASET_27_NAME"));
+    CHECK(fx_exists(fx_path(dir, "source_00.png")) && fx_exists(fx_path(dir, "mean.png")));
+    /* sources.json: the input's format with each source's file, chromaticity and K-sample BRFs */
+    json_error_t je;
+    json_t *j = json_load_file(fx_path(dir, "sources.json"), 0, &je);
+    CHECK(j != NULL);
+    json_t *arr = json_object_get(j, "sources");
+    CHECK(!strcmp(json_string_value(json_object_get(j, "format")), "gridsurvey-sources/1"));
+    CHECK(json_array_size(arr) == 3);
+    json_t *s1 = json_array_get(arr, 1);
+    CHECK(!strcmp(json_string_value(json_object_get(s1, "file")), "source_01.tiff"));
+    CHECK(json_array_size(json_object_get(s1, "chromaticity")) == 3);
+    CHECK(json_array_size(json_array_get(json_object_get(s1, "brf"), 2)) == 26);
+    json_decref(j);
+    /* relight: one source off, another bulb and phase for the first; recognize reads it back */
+    rc = fx_run(out, sizeof out, "%s relight '%s' --set 1=gain:0 --set 0=gain:2,bulb:hps-70w,phase:240 "
+                "-o '%s' 2>&1", test_bin(), dir, rel);
+    CHECK_MSG(rc == 0, "relight: %s", out);
+    CHECK(fx_contains(out, "00 hps-70w@240 x2") && fx_contains(out, "01 cfl-23w@120 x0"));
+    CHECK(fx_exists(fx_path(rel, "preview.png")));
+    rc = fx_run(out, sizeof out, "%s recognize '%s' 2>&1", test_bin(), rel);
+    CHECK_MSG(rc == 0 && fx_contains(out, "K = 26"), "recognize: %s", out);
+    gs_capture c;
+    CHECK_OK(gs_capture_read(rel, &c));
+    CHECK(c.K == 26 && c.bands == 3 && c.halvings != NULL);
+    gs_capture_release(&c);
+}
+
+TEST(unmix_cli_sources_auto_finds_the_lamps_in_view)
+{
+    const char *cap = simulate3();
+    char out[16384];
+    int rc = fx_run(out, sizeof out, "%s unmix '%s' --sources auto -o '%s' 2>&1", test_bin(), cap, fx_tmp("auto"));
+    CHECK_MSG(rc == 0, "unmix auto: %s", out);
+    printf("    %.*s\n", (int)(strchr(out, '\n') ? strchr(out, '\n') - out : 200), out);
+    /* every lamp's technology at its phase (a similar model may stand for it), nothing else */
+    CHECK(fx_contains(out, "inc-a60") && fx_contains(out, "@0"));
+    CHECK(fx_contains(out, "cfl-") && fx_contains(out, "@120"));
+    CHECK(fx_contains(out, "led-fil-4w-lin@240"));
+    CHECK(fx_contains(out, " 3 sources"));
+}
+
+TEST(transport_cli_bad_input_one_line_errors)
+{
+    const char *cap = simulate3();
+    char out[8192];
+    const char *f = fx_tmp("bad.json");
+    /* a typo'd key: file, line and field */
+    fx_write_text(f, "{\"format\": \"gridsurvey-sources/1\",\n \"sources\": [\n  {\"bulb\": \"cfl-23w\", \"phase\": 120}]}\n");
+    int rc = fx_run(out, sizeof out, "%s unmix '%s' --sources '%s' -o '%s' 2>&1", test_bin(), cap, f, fx_tmp("o"));
+    CHECK(rc == 1 && fx_contains(out, "bad.json:3: field sources[0]") && fx_count_lines(out) == 1);
+    fx_write_text(f, "{\"format\": \"gridsurvey-sources/2\", \"sources\": []}");
+    rc = fx_run(out, sizeof out, "%s unmix '%s' --sources '%s' -o '%s' 2>&1", test_bin(), cap, f, fx_tmp("o"));
+    CHECK(rc == 1 && fx_contains(out, "field format") && fx_contains(out, "gridsurvey-sources/1"));
+    fx_write_text(f, "{\"format\": \"gridsurvey-sources/1\", \"sources\": [{\"bulb\": \"nope\", \"phase_deg\": 0}]}");
+    rc = fx_run(out, sizeof out, "%s unmix '%s' --sources '%s' -o '%s' 2>&1", test_bin(), cap, f, fx_tmp("o"));
+    CHECK(rc == 1 && fx_contains(out, "bulb 'nope'") && fx_contains(out, "DELIGHT"));
+    /* a fourth source the data cannot tell from the first (two incandescent models at one
+     * phase, Fig. 10): ill-posed, exit 1, nothing written */
+    fx_write_text(f, "{\"format\": \"gridsurvey-sources/1\", \"sources\": [{\"bulb\": \"inc-a60-25w-230v\", "
+                     "\"phase_deg\": 0}, {\"bulb\": \"inc-a60-40w-230v\", \"phase_deg\": 0}, {\"bulb\": \"cfl-23w\", "
+                     "\"phase_deg\": 120}, {\"bulb\": \"led-fil-4w-lin\", \"phase_deg\": 240}]}");
+    rc = fx_run(out, sizeof out, "%s unmix '%s' --sources '%s' -o '%s' 2>&1", test_bin(), cap, f, fx_tmp("ill"));
+    CHECK_MSG(rc == 1 && fx_contains(out, "ill-posed") && !fx_exists(fx_path(fx_tmp("ill"), "sources.json")), "%s", out);
+    /* simulate --drop-light: an id the scene lacks is a usage error; a real one renders without it */
+    CHECK(fx_run(out, sizeof out, "%s simulate capture/scenes/window.json -o '%s' --drop-light nope 2>&1",
+                 test_bin(), fx_tmp("w")) == 2 && fx_contains(out, "no light with this id"));
+    CHECK(fx_run(out, sizeof out, "%s simulate capture/scenes/window.json -o '%s' --drop-light tube --no-progress 2>&1",
+                 test_bin(), fx_tmp("w")) == 0 && fx_contains(out, "0 lights in the image"));
+    /* usage errors and help */
+    CHECK(fx_run(out, sizeof out, "%s unmix '%s' -o x 2>&1", test_bin(), cap) == 2);
+    CHECK(fx_run(out, sizeof out, "%s unmix '%s' --sources auto -o x --refine 99 2>&1", test_bin(), cap) == 2);
+    CHECK(fx_run(out, sizeof out, "%s relight '%s' --set 7=gain:1 -o x 2>&1", test_bin(), fx_tmp("nowhere")) == 1);
+    CHECK(fx_run(out, sizeof out, "%s separate 2>&1", test_bin()) == 2);
+    const char *cmds[3] = {"unmix", "relight", "separate"};
+    for (int i = 0; i < 3; i++) {
+        CHECK(fx_run(out, sizeof out, "%s %s --help", test_bin(), cmds[i]) == 0);
+        CHECK(fx_contains(out, "usage: gridsurvey"));
+    }
+    /* a bad --set on real sources */
+    const char *src = fx_tmp("s.json"), *dir = fx_tmp("u");
+    fx_write_text(src, sources3);
+    CHECK(fx_run(out, sizeof out, "%s unmix '%s' --sources '%s' -o '%s' 2>&1", test_bin(), cap, src, dir) == 0);
+    rc = fx_run(out, sizeof out, "%s relight '%s' --set 1=gain:-2 -o '%s' 2>&1", test_bin(), dir, fx_tmp("r"));
+    CHECK(rc == 2 && fx_contains(out, "--set '1=gain:-2'"));
+    rc = fx_run(out, sizeof out, "%s relight '%s' --set 5=gain:1 -o '%s' 2>&1", test_bin(), dir, fx_tmp("r"));
+    CHECK(rc == 2 && fx_contains(out, "N from 0 to 2"));
+    rc = fx_run(out, sizeof out, "%s relight '%s' --set 0=bulb:none -o '%s' 2>&1", test_bin(), dir, fx_tmp("r"));
+    CHECK(rc == 1 && fx_contains(out, "bulb 'none'"));
+}
+
+TEST(separate_cli_writes_float_tiffs_and_compares_with_the_truth)
+{
+    char out[8192];
+    const char *cap = fx_tmp("window"), *dir = fx_tmp("sep");
+    int rc = fx_run(out, sizeof out, "%s simulate capture/scenes/window.json -o '%s' --no-progress 2>&1", test_bin(), cap);
+    CHECK_MSG(rc == 0, "simulate: %s", out);
+    rc = fx_run(out, sizeof out, "%s separate '%s' -o '%s' 2>&1", test_bin(), cap, dir);
+    CHECK_MSG(rc == 0, "separate: %s", out);
+    printf("    %s", strstr(out, "truth:") ? strstr(out, "truth:") : out);
+    double nt = 0, nr = 0;
+    const char *t = strstr(out, "transmitted ");
+    CHECK(t && sscanf(t, "transmitted %lf, reflection %lf", &nt, &nr) == 2);
+    CHECK(nt >= 0.97 && nr >= 0.97);
+    CHECK(fx_run(out, sizeof out, "gdalinfo '%s/reflection.tiff' 2>&1", dir) == 0);
+    CHECK(fx_count_of(out, "Type=Float32") == 3);
+    CHECK(fx_exists(fx_path(dir, "transmitted.png")) && fx_exists(fx_path(dir, "reflection.png")));
+}
