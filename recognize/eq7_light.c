@@ -115,19 +115,19 @@ static double gain_n(int nf, const double *S, const double *T)
  *   log p = -R/2 - sum_b log(1 + s_b^2 T_b)/2 - (sum v a_b^2 - B^2/A)/2 - log(A)/2 + log Phi(B/sqrt(A)),
  * R = Sxx - sum_b S_b^2/T_b, s_b = t a c_b, v_b = 1/(1/T_b + s_b^2), A = sum v c^2, B = sum v c a_b
  * (a marginalised over a > 0 with a flat prior, s_b from the plug-in a), then averaged over a
- * uniform prior on tau (RED_TAU_N points of [RED_TAU_LO, RED_TAU_HI]). With t -> 0 and tau = 0
- * this is the paper's one brightness times Q_b. fit (may be NULL) gets the best tau's numbers. */
-#define RED_TAU_N 24
-#define RED_TAU_LO -0.3
-#define RED_TAU_HI 3.0
+ * prior on tau over REC_TAU_N points of [REC_TAU_LO, REC_TAU_HI]: uniform, or the light's
+ * population prior w->tau_logprior (eq7_reddening.c). With t -> 0 and tau = 0 this is the
+ * paper's one brightness times Q_b. fit (may be NULL) gets the most probable tau's numbers;
+ * ll_acc (may be NULL) accumulates exp(L(tau) + ll_logw), the prior left out, per tau. */
 typedef struct {
     double chi2;                 /* R + sum v (a_b - a c_b)^2 at the best tau */
     double a, tau, z;            /* the brightness, optical depth and a / sigma_a there */
     double band[GS_MAX_BANDS];   /* each band's brightness: the posterior mean of a_b */
 } red_fit;
 
-static double loglik_red(const rec_matcher *m, int bulb, double Sxx, const double *S,
-                         const double *T, red_fit *fit)
+static double loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb, double Sxx,
+                         const double *S, const double *T, red_fit *fit, double *ll_acc,
+                         double ll_logw)
 {
     const double *Q = m->bulbs[bulb].chroma, tol = m->o.chroma_tolerance;
     double R = Sxx, ah[GS_MAX_BANDS];
@@ -141,9 +141,9 @@ static double loglik_red(const rec_matcher *m, int bulb, double Sxx, const doubl
     }
     if (!any) return -INFINITY;
     if (R < 0.0) R = 0.0;
-    double Lt[RED_TAU_N], Lmax = -INFINITY;
-    for (int i = 0; i < RED_TAU_N; i++) {
-        double tau = RED_TAU_LO + (RED_TAU_HI - RED_TAU_LO) * i / (RED_TAU_N - 1);
+    double Lt[REC_TAU_N], Lmax = -INFINITY;
+    for (int i = 0; i < REC_TAU_N; i++) {
+        double tau = rec_eq7_tau(i);
         double c[GS_MAX_BANDS], v[GS_MAX_BANDS], a = 0.0, A = 0.0, B = 0.0, C = 0.0, occ = 0.0;
         for (int b = 0; b < nb; b++) c[b] = Q[b] * exp(-tau * m->red_f[b]);
         for (int it = 0; it < 3; it++) {   /* s_b from the current brightness */
@@ -168,6 +168,8 @@ static double loglik_red(const rec_matcher *m, int bulb, double Sxx, const doubl
         if (between < 0.0) between = 0.0;
         double z = B / sqrt(A);
         Lt[i] = -0.5 * (R + between) - 0.5 * occ - 0.5 * log(A) + gs_log_phi(z);
+        if (ll_acc) ll_acc[i] = rec_log_add(ll_acc[i], Lt[i] + ll_logw);
+        if (w->has_tau_prior) Lt[i] += w->tau_logprior[i] + log((double)REC_TAU_N);
         if (Lt[i] > Lmax) {
             Lmax = Lt[i];
             if (fit) {
@@ -189,14 +191,15 @@ static double loglik_red(const rec_matcher *m, int bulb, double Sxx, const doubl
     }
     if (!isfinite(Lmax)) return -INFINITY;
     double sum = 0.0;
-    for (int i = 0; i < RED_TAU_N; i++) sum += exp(Lt[i] - Lmax);
-    return Lmax + log(sum / RED_TAU_N);
+    for (int i = 0; i < REC_TAU_N; i++) sum += exp(Lt[i] - Lmax);
+    return Lmax + log(sum / REC_TAU_N);
 }
 
 /* The log likelihood of bulb b's sums under the matcher's band model. */
-static double loglik_bulb(const rec_matcher *m, int b, double Sxx, const double *S, const double *T)
+static double loglik_bulb(const rec_matcher *m, const rec_eq7_work *w, int b, double Sxx,
+                          const double *S, const double *T)
 {
-    return m->red ? loglik_red(m, b, Sxx, S, T, NULL) : loglik_n(m->nfit, Sxx, S, T);
+    return m->red ? loglik_red(m, w, b, Sxx, S, T, NULL, NULL, 0.0) : loglik_n(m->nfit, Sxx, S, T);
 }
 
 /* The sums of template j from the rec_eq7_work arrays ([f * M + j]). */
@@ -247,7 +250,7 @@ void rec_eq7_refine_peak(const rec_matcher *m, rec_eq7_work *w, size_t b, size_t
     chi2_at(m, w, b, sc + u, Sxx, &e);
     double sig = (e.d2 > 0.0) ? sqrt(2.0 / e.d2) : INV_SQRT12;
     if (!(sig < INV_SQRT12)) sig = INV_SQRT12;
-    double Lp = loglik_bulb(m, (int)b, Sxx, e.S, e.T);
+    double Lp = loglik_bulb(m, w, (int)b, Sxx, e.S, e.T);
     double gp = Sxx - e.chi2;
     /* never below the grid: if the refinement did not improve, keep the best cell */
     if (!(Lp >= w->L[j0])) {
@@ -463,9 +466,14 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
                         (int)D, w->w + (size_t)band * (size_t)K, 1, 0.0, w->T + (size_t)band * M, 1);
         }
         double Sv[GS_MAX_BANDS], Tv[GS_MAX_BANDS];
+        if (w->collect_tau)
+            for (int i = 0; i < REC_TAU_N; i++) w->tau_ll[i] = -INFINITY;
         for (size_t j = 0; j < M; j++) {
             sums_of(m, w, j, Sv, Tv);
-            w->L[j] = loglik_bulb(m, m->tbulb[j], Sxx, Sv, Tv);
+            int b = m->tbulb[j];   /* every bulb weighs the same, whatever its phase grid */
+            w->L[j] = m->red ? loglik_red(m, w, b, Sxx, Sv, Tv, NULL, w->collect_tau ? w->tau_ll : NULL,
+                                          -log((double)m->count[b]))
+                             : loglik_n(m->nfit, Sxx, Sv, Tv);
             if (w->L[j] > Lmax) Lmax = w->L[j];
         }
     }
@@ -545,7 +553,7 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
     double snr;
     red_fit rf;
     if (m->red) {
-        loglik_red(m, bb, Sxx, Sv, Tv, &rf);
+        loglik_red(m, w, bb, Sxx, Sv, Tv, &rf, NULL, 0.0);
         for (int f = 0; f < nf; f++) a_f[f] = rf.band[f];
         snr = rf.z;
         nfree = 2;   /* brightness and optical depth */

@@ -83,12 +83,44 @@ const char *rec_noise_source_name(rec_noise_source s)
     return "unknown";
 }
 
+/* Pass 3 of rec_match_catalog: the tau prior from the clean lights' tau likelihoods
+ * (eq7_reddening.c), then every light with a signal fitted again under it, with its noise fe[i]
+ * (NULL: the report's fixed or zero excess). */
+static gs_status match_with_tau_prior(const rec_matcher *m, rec_eq7_work *w, const rec_catalog *cat,
+                                      rec_match *out, const double *tll, const double *fe,
+                                      rec_noise_report *rep)
+{
+    size_t n = cat->count, D = (size_t)m->D;
+    const unsigned disturbed = REC_BLOB_EDGE | REC_BLOB_SATURATED | REC_BLOB_DEBLENDED | REC_BLOB_NO_SIGNAL;
+    const unsigned misfit = REC_MATCH_DIM | REC_MATCH_BAD_INPUT | REC_MATCH_UNKNOWN | REC_MATCH_BLEND;
+    unsigned char *is_ref = calloc(n, 1);
+    double *logprior = malloc(n * REC_TAU_N * sizeof *logprior);
+    gs_status s = GS_OK;
+    if (!is_ref || !logprior) s = gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", n);
+    for (size_t i = 0; i < n && s == GS_OK; i++)
+        is_ref[i] = !(cat->flags && (cat->flags[i] & disturbed)) && !(out[i].flags & misfit);
+    size_t used = s == GS_OK ? rec_eq7_tau_prior(tll, is_ref, cat->y_px, n, cat->height, logprior) : 0;
+    w->collect_tau = 0;
+    w->has_tau_prior = 1;
+    for (size_t i = 0; i < n && s == GS_OK && used > 0; i++) {
+        if (cat->flags && (cat->flags[i] & REC_BLOB_NO_SIGNAL)) continue;
+        memcpy(w->tau_logprior, logprior + i * REC_TAU_N, sizeof w->tau_logprior);
+        s = rec_eq7_match_light_ws(m, w, cat->signal + i * D, cat->sigma + i * D,
+                                   fe ? fe[i] : rep->median_model_error, &out[i], NULL);
+    }
+    w->has_tau_prior = 0;
+    rep->reddening_lights = used;
+    free(logprior);
+    free(is_ref);
+    return s;
+}
+
 gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_match *out,
                             rec_noise_report *noise)
 {
     if (!m || !cat) return gs_fail(GS_EINVAL, "Eq. 7: matcher and catalog must not be NULL");
     rec_noise_report rep = {isfinite(m->o.model_error) ? REC_NOISE_FIXED : REC_NOISE_CAMERA, 0,
-                            isfinite(m->o.model_error) ? m->o.model_error : 0.0};
+                            isfinite(m->o.model_error) ? m->o.model_error : 0.0, 0};
     if (noise) *noise = rep;
     if (cat->count == 0) return GS_OK;
     if (!out || !cat->signal || !cat->sigma)
@@ -105,7 +137,10 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
     rec_eq7_excess *ex = measured ? calloc(n, sizeof *ex) : NULL;
     ref_light *ref = measured ? malloc(n * sizeof *ref) : NULL;
     double *wk = measured ? malloc(n * sizeof *wk) : NULL, *fe = measured ? malloc(n * sizeof *fe) : NULL;
+    double *tll = m->red ? malloc(n * REC_TAU_N * sizeof *tll) : NULL;
     if (measured && (!ex || !ref || !wk || !fe)) s = gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", n);
+    if (m->red && !tll) s = gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", n);
+    w.collect_tau = m->red;
     /* pass 1: the camera noise (or the fixed model error) */
     for (size_t i = 0; i < n && s == GS_OK; i++) {
         if (cat->flags && (cat->flags[i] & REC_BLOB_NO_SIGNAL)) {
@@ -114,8 +149,10 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
         }
         s = rec_eq7_match_light_ws(m, &w, cat->signal + i * D, cat->sigma + i * D, rep.median_model_error,
                                    &out[i], ex ? &ex[i] : NULL);
+        if (tll) memcpy(tll + i * REC_TAU_N, w.tau_ll, sizeof w.tau_ll);
     }
-    if (s != GS_OK || !measured) goto done;
+    if (s != GS_OK) goto done;
+    if (!measured) goto reddening;
     /* the clean references: a fit, an informative estimate, an aperture nothing disturbed */
     const unsigned disturbed = REC_BLOB_EDGE | REC_BLOB_SATURATED | REC_BLOB_DEBLENDED | REC_BLOB_NO_SIGNAL;
     size_t nr = 0;
@@ -131,7 +168,7 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
         ref[nr].light = i;
         nr++;
     }
-    if (nr < NOISE_MIN_LIGHTS) goto done;   /* no population: the camera noise, said so */
+    if (nr < NOISE_MIN_LIGHTS) goto reddening;   /* no population: the camera noise, said so */
     qsort(ref, nr, sizeof *ref, cmp_e2);
     /* the typical excess: the median, then twice the weighted median at the previous value */
     double hy = (cat->height > 0 ? cat->height : 1) / KERNEL_ROWS, neff;
@@ -153,11 +190,18 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
     /* pass 2: the lights whose excess is not zero */
     for (size_t i = 0; i < n && s == GS_OK; i++) {
         if (cat->flags && (cat->flags[i] & REC_BLOB_NO_SIGNAL)) continue;
-        if (fe[i] > 0.0)
+        if (fe[i] > 0.0) {
             s = rec_eq7_match_light_ws(m, &w, cat->signal + i * D, cat->sigma + i * D, fe[i], &out[i], NULL);
+            if (tll) memcpy(tll + i * REC_TAU_N, w.tau_ll, sizeof w.tau_ll);
+        }
     }
+reddening:
+    /* pass 3 (reddened band model): every light again with its population prior on tau */
+    if (s == GS_OK && tll)
+        s = match_with_tau_prior(m, &w, cat, out, tll, rep.source == REC_NOISE_POPULATION ? fe : NULL, &rep);
     if (noise && s == GS_OK) *noise = rep;
 done:
+    free(tll);
     free(fe);
     free(wk);
     free(ref);

@@ -168,6 +168,26 @@ static inline double phi_cdf(double z)
     return 0.5 * erfc(-z * M_SQRT1_2);
 }
 
+/* log(exp(a) + exp(b)), -inf aware. */
+static inline double rec_log_add(double a, double b)
+{
+    if (a < b) {
+        double t = a;
+        a = b;
+        b = t;
+    }
+    return isinf(a) && a < 0.0 ? a : a + log1p(exp(b - a));
+}
+
+/* The reddened band model's grid of optical depths at 550 nm (eq7_light.c). */
+#define REC_TAU_N 24
+#define REC_TAU_LO -0.3
+#define REC_TAU_HI 3.0
+static inline double rec_eq7_tau(int i)
+{
+    return REC_TAU_LO + (REC_TAU_HI - REC_TAU_LO) * i / (REC_TAU_N - 1);
+}
+
 /* Circular distance of two shifts, cycles, in [0, 0.5]. */
 static inline double circ_dist(double a, double b)
 {
@@ -205,7 +225,17 @@ typedef struct {
     double *t12;                           /* [nfit * M] cross sums of a first and every template */
     double *scratch;                       /* [(6 bands + 1) D] the nested tests' */
     double complex *acc;                   /* [3 K] */
+    /* the reddened model: the light's log prior per tau (has_tau_prior; else uniform) and, when
+     * collect_tau, its log likelihood per tau with every bulb weighted alike (eq7_reddening.c) */
+    int has_tau_prior, collect_tau;
+    double tau_logprior[REC_TAU_N], tau_ll[REC_TAU_N];
 } rec_eq7_work;
+
+/* eq7_reddening.c: the population prior on tau for each of n lights (logprior, n x REC_TAU_N)
+ * from their tau log likelihoods (tau_ll, n x REC_TAU_N, as rec_eq7_work's) and which lights are
+ * clean references; returns the references used, 0 (logprior untouched) below 8. */
+size_t rec_eq7_tau_prior(const double *tau_ll, const unsigned char *is_ref, const double *y_px,
+                         size_t n, int height, double *logprior);
 
 typedef struct {
     int bulb;               /* -1: nothing finite */

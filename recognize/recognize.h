@@ -284,6 +284,8 @@ typedef struct {
     rec_noise_source source;
     size_t lights_used;           /* lights the measurement used */
     double median_model_error;    /* the capture's typical e (weighted median of all lights) */
+    size_t reddening_lights;      /* REC_BANDS_REDDENED: the clean lights the population prior on
+                                   * tau came from (eq7_reddening.c); 0: the uniform prior */
 } rec_noise_report;
 /* "camera", "fixed", "population". */
 const char *rec_noise_source_name(rec_noise_source s);

@@ -251,6 +251,9 @@ static void print_table(const recognize_opts *o, const gs_capture *cap, const re
         printf(" (%.4f)", noise->median_model_error);
     else
         printf(" (too few lights to measure it: the camera's noise alone)");
+    if (cap->bands > 1 && o->eq7.band_gains == REC_BANDS_REDDENED)
+        printf("; reddening prior: %s", noise->reddening_lights ? "population" : "uniform");
+    if (noise->reddening_lights) printf(" (from %zu lights)", noise->reddening_lights);
     printf("\n");
     printf("%4s %8s %8s %5s  %-22s %-22s %15s %6s  %-28s %9s %9s  %s\n", "id", "x", "y", "area",
            "bulb", "technology", "phase (deg)", "conf", "runner-up (conf)", "chi2/dof", "p-value",
@@ -389,6 +392,7 @@ static gs_status print_json(const recognize_opts *o, const gs_capture *cap, cons
     json_object_set_new(nz, "source", json_string(rec_noise_source_name(noise->source)));
     json_object_set_new(nz, "lights_used", json_integer((json_int_t)noise->lights_used));
     json_object_set_new(nz, "median_model_error", jreal(noise->median_model_error));
+    json_object_set_new(nz, "reddening_prior_lights", json_integer((json_int_t)noise->reddening_lights));
     json_object_set_new(r, "noise", nz);
     json_object_set_new(root, "recognition", r);
     size_t with_bulb = 0, with_phase = 0;

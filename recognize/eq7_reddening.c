@@ -1,0 +1,135 @@
+/* eq7_reddening.c - the population prior on the reddened band model's optical depth
+ * (REC_BANDS_REDDENED, docs/recognition.md "Band model").
+ *
+ * Extinction reddens a light by its line of sight, not by its lamp: lights at similar range
+ * share their optical depth tau. At low SNR one light's tau is poorly known and a uniform prior
+ * on it lets the band ratios absorb the chromaticity (Eq. 6) that tells bulbs apart; the
+ * capture's bright lights know tau well. The prior for light l is the distribution of tau over
+ * the capture's clean lights near l's image row (a range proxy for a camera looking down on a
+ * city), estimated as the nonparametric maximum likelihood mixing distribution on the tau grid
+ * (Kiefer & Wolfowitz 1956; EM, Laird 1978) from every light's likelihood of tau marginalised
+ * over the bulbs and phases, kernel-weighted in row, with light l's own share removed
+ * (leave-one-out: its misfit does not pull its prior) and a floor so a light unlike its
+ * neighbours can still say so. */
+#include "recognize/internal.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Row kernel: a third of the image height (as the excess noise's), evaluated at TAU_CENTERS
+ * rows and interpolated linearly. */
+#define TAU_KERNEL_ROWS 3.0
+#define TAU_CENTERS 8
+/* EM iterations (from the uniform distribution; fewer keep the estimate smoother). */
+#define TAU_EM_ITERATIONS 100
+/* Share of the uniform prior mixed in. */
+#define TAU_FLOOR 0.05
+/* Fewer clean lights than this: the uniform prior. A centre whose kernel weights sum to less
+ * than TAU_MIN_WEIGHT lights uses the global distribution. */
+#define TAU_MIN_LIGHTS 8
+#define TAU_MIN_WEIGHT 3.0
+
+/* EM for the mixing distribution pi over the grid from the likelihoods P (nr x N, each row
+ * scaled to max 1) with weights kw (NULL: 1). */
+static void npmle(const double *P, const double *kw, size_t nr, double *pi)
+{
+    double acc[REC_TAU_N], W = 0.0;
+    for (size_t l = 0; l < nr; l++) W += kw ? kw[l] : 1.0;
+    for (int i = 0; i < REC_TAU_N; i++) pi[i] = 1.0 / REC_TAU_N;
+    for (int it = 0; it < TAU_EM_ITERATIONS; it++) {
+        memset(acc, 0, sizeof acc);
+        for (size_t l = 0; l < nr; l++) {
+            const double *p = P + l * REC_TAU_N;
+            double den = 0.0, wl = kw ? kw[l] : 1.0;
+            if (!(wl > 1e-12)) continue;
+            for (int i = 0; i < REC_TAU_N; i++) den += pi[i] * p[i];
+            if (!(den > 0.0)) continue;
+            for (int i = 0; i < REC_TAU_N; i++) acc[i] += wl * pi[i] * p[i] / den;
+        }
+        for (int i = 0; i < REC_TAU_N; i++) pi[i] = acc[i] / W;
+    }
+}
+
+size_t rec_eq7_tau_prior(const double *tau_ll, const unsigned char *is_ref, const double *y_px,
+                         size_t n, int height, double *logprior)
+{
+    size_t nr = 0;
+    for (size_t l = 0; l < n; l++) nr += is_ref[l] != 0;
+    if (nr < TAU_MIN_LIGHTS) return 0;
+    double *P = malloc(nr * REC_TAU_N * sizeof *P), *kw = malloc(nr * sizeof *kw);
+    size_t *idx = malloc(nr * sizeof *idx);
+    double (*pi)[REC_TAU_N] = malloc((TAU_CENTERS + 1) * sizeof *pi);
+    double Wc[TAU_CENTERS + 1], yc[TAU_CENTERS];
+    if (!P || !kw || !idx || !pi) {
+        free(P), free(kw), free(idx), free(pi);
+        return 0;   /* the uniform prior: recognition still correct, less informed */
+    }
+    nr = 0;
+    for (size_t l = 0; l < n; l++) {
+        if (!is_ref[l]) continue;
+        double mx = -INFINITY;
+        for (int i = 0; i < REC_TAU_N; i++)
+            if (tau_ll[l * REC_TAU_N + i] > mx) mx = tau_ll[l * REC_TAU_N + i];
+        for (int i = 0; i < REC_TAU_N; i++)
+            P[nr * REC_TAU_N + i] = isfinite(mx) ? exp(tau_ll[l * REC_TAU_N + i] - mx) : 1.0;
+        idx[nr++] = l;
+    }
+    double hy = (height > 0 ? height : 1) / TAU_KERNEL_ROWS;
+    npmle(P, NULL, nr, pi[TAU_CENTERS]);   /* the global distribution */
+    Wc[TAU_CENTERS] = (double)nr;
+    for (int c = 0; c < TAU_CENTERS; c++) {
+        yc[c] = (c + 0.5) * (height > 0 ? height : 1) / TAU_CENTERS;
+        Wc[c] = 0.0;
+        for (size_t r = 0; r < nr; r++) {
+            double d = y_px ? (y_px[idx[r]] - yc[c]) / hy : 0.0;
+            kw[r] = exp(-0.5 * d * d);
+            Wc[c] += kw[r];
+        }
+        if (Wc[c] < TAU_MIN_WEIGHT) {
+            memcpy(pi[c], pi[TAU_CENTERS], sizeof pi[c]);
+            Wc[c] = -1.0;   /* global: no leave-one-out by kernel */
+        } else {
+            npmle(P, kw, nr, pi[c]);
+        }
+    }
+    size_t r = 0;
+    for (size_t l = 0; l < n; l++) {
+        int self = is_ref[l] != 0;
+        const double *p = self ? P + r * REC_TAU_N : NULL;
+        double y = y_px ? y_px[l] : 0.0, u = y / ((height > 0 ? height : 1) / (double)TAU_CENTERS) - 0.5;
+        int c0 = (int)floor(u);
+        double t = u - c0;
+        if (c0 < 0) c0 = 0, t = 0.0;
+        if (c0 >= TAU_CENTERS - 1) c0 = TAU_CENTERS - 1, t = 0.0;
+        double prior[REC_TAU_N] = {0}, sum = 0.0;
+        for (int q = 0; q < 2; q++) {
+            int c = c0 + q;
+            double wq = q ? t : 1.0 - t;
+            if (!(wq > 0.0)) continue;
+            const double *pc = pi[Wc[c] < 0.0 ? TAU_CENTERS : c];
+            double W = Wc[c] < 0.0 ? Wc[TAU_CENTERS] : Wc[c], ws = 1.0, den = 0.0, loo[REC_TAU_N];
+            if (self && Wc[c] >= 0.0) {
+                double d = (y - yc[c]) / hy;
+                ws = exp(-0.5 * d * d);
+            }
+            if (self)
+                for (int i = 0; i < REC_TAU_N; i++) den += pc[i] * p[i];
+            for (int i = 0; i < REC_TAU_N; i++) {
+                /* leave-one-out: W pi minus the light's own EM responsibility */
+                double own = self && den > 0.0 ? ws * pc[i] * p[i] / den : 0.0;
+                loo[i] = W - (self ? ws : 0.0) > 0.0 ? (W * pc[i] - own) / (W - (self ? ws : 0.0)) : pc[i];
+                if (!(loo[i] > 0.0)) loo[i] = 0.0;
+                prior[i] += wq * loo[i];
+            }
+        }
+        for (int i = 0; i < REC_TAU_N; i++) sum += prior[i];
+        for (int i = 0; i < REC_TAU_N; i++) {
+            double v = (sum > 0.0 ? prior[i] / sum : 1.0 / REC_TAU_N) * (1.0 - TAU_FLOOR) + TAU_FLOOR / REC_TAU_N;
+            logprior[l * REC_TAU_N + i] = log(v);
+        }
+        r += self;
+    }
+    free(P), free(kw), free(idx), free(pi);
+    return nr;
+}
