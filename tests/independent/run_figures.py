@@ -37,6 +37,10 @@ def main():
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--only", default="", help="comma list of parts: levels,blends,ood,continuous")
     ap.add_argument("--tables-only", action="store_true", help="rewrite OUT/results.md from OUT/results.json")
+    ap.add_argument("--variants", default="default,mc0,me0,bgoff,bgoff_me0,open",
+                    help="levels: comma list of recognize variants (default = with the oracle; mc0 "
+                         "--min-confidence 0; me0 --model-error 0; bgoff, bgoff_me0 --band-model chroma "
+                         "[RGB]; open --other-prior 0.2)")
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)
     if a.tables_only:
@@ -60,11 +64,14 @@ def main():
                 cap = os.path.join(a.out, f"c{ci}_{e}")
                 run(R(cap, *ropt, "--lights", str(a.lights), "--electrons", str(e), "--seed", str(10 + ci)), log)
                 variants = [("default", []), ("mc0", ["--min-confidence", "0", "--no-oracle"]),
-                            ("me0", ["--model-error", "0", "--no-oracle"])]
+                            ("me0", ["--model-error", "0", "--no-oracle"]),
+                            ("open", ["--other-prior", "0.2", "--no-oracle"])]
                 if ropt[1] == "3":
                     variants.append(("bgoff", ["--band-model", "chroma", "--no-oracle"]))
                     variants.append(("bgoff_me0", ["--band-model", "chroma", "--model-error", "0", "--no-oracle"]))
                 for vname, vopt in variants:
+                    if vname not in a.variants.split(","):
+                        continue
                     js = cap + f".{vname}.json"
                     run(S(cap, js, "--label", f"{label} {e} e- {vname}", *vopt), log)
                     results[f"{ci}/{e}/{vname}"] = json.load(open(js))
@@ -129,7 +136,7 @@ def tables(r):
     out = []
     w = out.append
     if any(k.endswith("/default") and k[0].isdigit() for k in r):
-        w("### Isolated lights, default `recognize` options (3 phases, band gains on for RGB, model error 0.04)\n")
+        w("### Isolated lights, default `recognize` options\n")
         w("Percentages of the matched lights unless noted. *pair* = best guess bulb and phase right (runner-up for "
           "unknown/dim lights, the `--min-confidence 0` phase for phase-ambiguous ones); *oracle* = the maximum-"
           "likelihood oracle on the same lights; *answered* = not unknown/dim/bulb- or phase-ambiguous; "
@@ -151,6 +158,19 @@ def tables(r):
                   f"{p(x['ece_pair'], 0)} / {p(x['ece_bulb'], 0)} / {p(x['ece_phase'], 0)} | {p(o.get('ece_pair'), 0)} | "
                   f"{p(cw['bulb'])} / {p(cw['technology'])} / {p(cw['phase'])} | {x['median_chi2_dof']:.2f} |")
         w("")
+        if any(k.endswith("/open") for k in r):
+            w("### The same captures in the open world (`--other-prior 0.2`)\n")
+            w("| config | e-/light | pair | answered | acc. answered | ECE pair | conf. wrong b / t / p |")
+            w("|---|---|---|---|---|---|---|")
+            for ci, (label, _) in enumerate(CONFIGS):
+                for e in LEVELS:
+                    x = r.get(f"{ci}/{e}/open")
+                    if not x:
+                        continue
+                    cw = x["confident_wrong"]
+                    w(f"| {label} | {e:,} | {p(x['pair_acc'])} | {p(x['answered_share'])} | {p(x['answered_acc'])} | "
+                      f"{p(x['ece_pair'], 0)} | {p(cw['bulb'])} / {p(cw['technology'])} / {p(cw['phase'])} |")
+            w("")
         w("### The same captures with `--min-confidence 0`, `--model-error 0` and (RGB) `--band-model chroma`\n")
         w("| config | e-/light | mc0: answered | mc0: acc. answered | mc0: conf. wrong b / t / p | me0: pair | me0: answered | me0: acc. answered | me0: median chi2/dof | me0: ECE pair | bg off: pair | bg off: answered | bg off+me0: pair | bg off+me0: median chi2/dof |")
         w("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")

@@ -588,6 +588,17 @@ def selftest():
     return 0 if ok else 1
 
 
+def strict_json(x):
+    """NaN and infinities as null: JSON has no such numbers (RFC 8259)."""
+    if isinstance(x, float):
+        return x if math.isfinite(x) else None
+    if isinstance(x, dict):
+        return {k: strict_json(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [strict_json(v) for v in x]
+    return x
+
+
 def main(argv=None):
     if argv is None and sys.argv[1:2] == ["--selftest"]:
         return selftest()
@@ -768,7 +779,7 @@ def main(argv=None):
                         for r in rows]
     print_table(res)
     if a.json:
-        s = json.dumps(res, indent=1)
+        s = json.dumps(strict_json(res), indent=1, allow_nan=False)
         if a.json == "-":
             print(s)
         else:
