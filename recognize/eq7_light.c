@@ -116,7 +116,7 @@ static double gain_n(int nf, const double *S, const double *T)
  * R = Sxx - sum_b S_b^2/T_b, s_b = t a c_b, v_b = 1/(1/T_b + s_b^2), A = sum v c^2, B = sum v c a_b
  * (a marginalised over a > 0 with a flat prior, s_b from the plug-in a), then averaged over a
  * prior on tau over REC_TAU_N points of [REC_TAU_LO, REC_TAU_HI]: uniform, or the light's
- * population prior w->tau_logprior (eq7_reddening.c). With t -> 0 and tau = 0 this is the
+ * population prior w->tau_logprior (eq7_population.c). With t -> 0 and tau = 0 this is the
  * paper's one brightness times Q_b. fit (may be NULL) gets the most probable tau's numbers;
  * ll_acc (may be NULL) accumulates exp(L(tau) + ll_logw), the prior left out, per tau. */
 typedef struct {
@@ -129,7 +129,8 @@ static double loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb, 
                          const double *S, const double *T, red_fit *fit, double *ll_acc,
                          double ll_logw)
 {
-    const double *Q = m->bulbs[bulb].chroma, tol = m->o.chroma_tolerance;
+    const double *Q = m->bulbs[bulb].chroma;
+    double tol = w->chroma_tol > 0.0 ? w->chroma_tol : m->o.chroma_tolerance;
     double R = Sxx, ah[GS_MAX_BANDS];
     int nb = m->bands, any = 0;
     for (int b = 0; b < nb; b++) {
@@ -193,6 +194,20 @@ static double loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb, 
     double sum = 0.0;
     for (int i = 0; i < REC_TAU_N; i++) sum += exp(Lt[i] - Lmax);
     return Lmax + log(sum / REC_TAU_N);
+}
+
+double rec_eq7_band_misfit(const rec_matcher *m, int bulb, const double *S, const double *T, double tol)
+{
+    rec_eq7_work w;
+    memset(&w, 0, sizeof w);   /* only the tau prior (none) and the tolerance are read */
+    w.chroma_tol = tol;
+    double Sxx = 0.0, R;
+    for (int b = 0; b < m->bands; b++)
+        if (T[b] > 0.0) Sxx += S[b] * S[b] / T[b];
+    R = 0.0;   /* chi2 of the fit = R + the misfit, R = Sxx - sum S^2/T = 0 here */
+    red_fit rf;
+    if (!isfinite(loglik_red(m, &w, bulb, Sxx, S, T, &rf, NULL, 0.0))) return INFINITY;
+    return rf.chi2 - R;
 }
 
 /* The log likelihood of bulb b's sums under the matcher's band model. */
@@ -393,6 +408,8 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
     size_t D = (size_t)m->D, M = m->M;
     unsigned flags = 0;
     if (excess) excess->valid = 0;
+    w->fit_bulb = -1;
+    w->other_lbf = NAN;
     /* usable samples: finite signal, finite sigma > 0; sigma = +inf marks a dropped sample */
     double c = 0.0;
     int used = 0;
@@ -552,6 +569,9 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
     }
     double snr;
     red_fit rf;
+    w->fit_bulb = bb;
+    memcpy(w->fit_S, Sv, sizeof w->fit_S);
+    memcpy(w->fit_T, Tv, sizeof w->fit_T);
     if (m->red) {
         loglik_red(m, w, bb, Sxx, Sv, Tv, &rf, NULL, 0.0);
         for (int f = 0; f < nf; f++) a_f[f] = rf.band[f];
@@ -561,6 +581,7 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
         /* a / sigma_a (one gain: a sqrt(T), sigma_a = 1/sqrt(T)) */
         snr = nf == 1 ? (Tv[0] > 0.0 ? a_f[0] * sqrt(Tv[0]) : 0.0) : snr_n(nf, Sv, Tv);
     }
+    w->fit_z = snr;
     double a_sum = 0.0, chi2 = 0.0;
     for (int f = 0; f < nf; f++) {
         a_sum += a_f[f];
@@ -627,6 +648,7 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
         out->blend_p_value = nt.p_blend;
         /* the posteriors are over DELIGHT and "a bulb not in it" (eq7_nested.c) */
         out->p_other = nt.p_other;
+        w->other_lbf = nt.lbf_other;
         out->p_blend = nt.found ? nt.p_blend_post : 0.0;
         double one = (1.0 - out->p_other) * (1.0 - out->p_blend);   /* in DELIGHT, one light */
         out->confidence *= one;

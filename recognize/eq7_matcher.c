@@ -53,7 +53,7 @@ void rec_eq7_opts_default(rec_eq7_opts *o)
     o->band_gains = REC_BANDS_REDDENED;
     o->chroma_tolerance = 0.05;
     o->model_error = NAN;
-    o->other_prior = 0.0;
+    o->other_prior = NAN;
     o->blend_prior = 0.1;
 }
 
@@ -148,8 +148,9 @@ static gs_status check_opts(const rec_eq7_opts *o)
     if (!isnan(o->model_error) && !(o->model_error >= 0.0 && o->model_error < 1.0))
         return gs_fail(GS_EINVAL, "Eq. 7 options: model_error=%g: expected [0, 1) or NaN "
                        "(measured)", o->model_error);
-    if (!(o->other_prior >= 0.0 && o->other_prior < 1.0))
-        return gs_fail(GS_EINVAL, "Eq. 7 options: other_prior=%g: expected [0, 1)", o->other_prior);
+    if (!isnan(o->other_prior) && !(o->other_prior >= 0.0 && o->other_prior < 1.0))
+        return gs_fail(GS_EINVAL, "Eq. 7 options: other_prior=%g: expected [0, 1) or NaN (measured)",
+                       o->other_prior);
     if (!(o->blend_prior >= 0.0 && o->blend_prior < 1.0))
         return gs_fail(GS_EINVAL, "Eq. 7 options: blend_prior=%g: expected [0, 1)", o->blend_prior);
     return GS_OK;

@@ -210,6 +210,7 @@ void rec_eq7_nested_tests(const rec_matcher *m, rec_eq7_work *w, const double *t
                 nsh++;
             }
     out->p_other = 0.0;
+    out->lbf_other = NAN;
     if (H >= 1 && used > nsh + 1) {
         double chi_sh = ls_chi2(w, D, cols, nsh);
         if (chi_sh >= 0.0) {
@@ -227,7 +228,11 @@ void rec_eq7_nested_tests(const rec_matcher *m, rec_eq7_work *w, const double *t
         }
         for (int i = 0; i < nt && isfinite(lmax); i++) sum += exp(lb[i] - lmax);
         double lbf = isfinite(lmax) ? lmax + log(sum / nt) : -INFINITY;
-        double pr = m->o.other_prior, lo = pr > 0.0 ? log(pr / (1.0 - pr)) + lbf : -INFINITY;
+        out->lbf_other = lbf;
+        /* the prior: the capture's measured share (rec_match_catalog), the options', or (NaN
+         * for one light alone) the closed world */
+        double pr = w->has_other_prior ? w->other_prior : isnan(m->o.other_prior) ? 0.0 : m->o.other_prior;
+        double lo = pr > 0.0 ? log(pr / (1.0 - pr)) + lbf : -INFINITY;
         out->p_other = lo > 0.0 ? 1.0 / (1.0 + exp(-lo)) : exp(lo) / (1.0 + exp(lo));
     }
 

@@ -83,33 +83,73 @@ const char *rec_noise_source_name(rec_noise_source s)
     return "unknown";
 }
 
-/* Pass 3 of rec_match_catalog: the tau prior from the clean lights' tau likelihoods
- * (eq7_reddening.c), then every light with a signal fitted again under it, with its noise fe[i]
- * (NULL: the report's fixed or zero excess). */
-static gs_status match_with_tau_prior(const rec_matcher *m, rec_eq7_work *w, const rec_catalog *cat,
-                                      rec_match *out, const double *tll, const double *fe,
-                                      rec_noise_report *rep)
+/* What the last pass needs of each light's answer (rec_eq7_work's): the reddened model's tau
+ * likelihoods and band fit (tll not NULL), the log Bayes factor of "not in DELIGHT" (lbf not
+ * NULL). */
+typedef struct {
+    double *tll;         /* [i * REC_TAU_N + t] */
+    int *bulb;
+    double *S, *T, *z;   /* [i * GS_MAX_BANDS + b], [i] */
+    double *lbf;         /* [i] */
+} light_fits;
+
+static void keep_fit(const rec_eq7_work *w, size_t i, light_fits *fit)
+{
+    if (fit->tll) {
+        memcpy(fit->tll + i * REC_TAU_N, w->tau_ll, sizeof w->tau_ll);
+        fit->bulb[i] = w->fit_bulb;
+        memcpy(fit->S + i * GS_MAX_BANDS, w->fit_S, sizeof w->fit_S);
+        memcpy(fit->T + i * GS_MAX_BANDS, w->fit_T, sizeof w->fit_T);
+        fit->z[i] = w->fit_z;
+    }
+    if (fit->lbf) fit->lbf[i] = w->other_lbf;
+}
+
+/* The last pass of rec_match_catalog (eq7_population.c): from the clean lights, the tau prior
+ * and the band tolerance (reddened model) and the share of bulbs not in DELIGHT (other_prior
+ * NaN); then every light with a signal fitted again under them, with its noise fe[i] (NULL: the
+ * report's fixed or zero excess). */
+static gs_status match_with_population(const rec_matcher *m, rec_eq7_work *w, const rec_catalog *cat,
+                                       rec_match *out, const light_fits *fit, const double *fe,
+                                       rec_noise_report *rep)
 {
     size_t n = cat->count, D = (size_t)m->D;
     const unsigned disturbed = REC_BLOB_EDGE | REC_BLOB_SATURATED | REC_BLOB_DEBLENDED | REC_BLOB_NO_SIGNAL;
     const unsigned misfit = REC_MATCH_DIM | REC_MATCH_BAD_INPUT | REC_MATCH_UNKNOWN | REC_MATCH_BLEND;
     unsigned char *is_ref = calloc(n, 1);
-    double *logprior = malloc(n * REC_TAU_N * sizeof *logprior);
+    double *logprior = fit->tll ? malloc(n * REC_TAU_N * sizeof *logprior) : NULL;
     gs_status s = GS_OK;
-    if (!is_ref || !logprior) s = gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", n);
+    if (!is_ref || (fit->tll && !logprior)) s = gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", n);
     for (size_t i = 0; i < n && s == GS_OK; i++)
         is_ref[i] = !(cat->flags && (cat->flags[i] & disturbed)) && !(out[i].flags & misfit);
-    size_t used = s == GS_OK ? rec_eq7_tau_prior(tll, is_ref, cat->y_px, n, cat->height, logprior) : 0;
+    size_t used = s == GS_OK && fit->tll ? rec_eq7_tau_prior(fit->tll, is_ref, cat->y_px, n, cat->height, logprior) : 0;
+    double tol = used > 0 ? rec_eq7_chroma_tolerance(m, n, fit->bulb, fit->S, fit->T, fit->z, is_ref) : 0.0;
+    /* bulbs not in DELIGHT are the evidence for their share: unknown lights count too */
+    double other = NAN;
+    size_t other_used = 0;
+    if (s == GS_OK && fit->lbf) {
+        for (size_t i = 0; i < n; i++)
+            is_ref[i] = !(cat->flags && (cat->flags[i] & disturbed)) &&
+                        !(out[i].flags & (REC_MATCH_DIM | REC_MATCH_BAD_INPUT | REC_MATCH_BLEND));
+        other = rec_eq7_other_share(fit->lbf, is_ref, n, &other_used);
+    }
     w->collect_tau = 0;
-    w->has_tau_prior = 1;
-    for (size_t i = 0; i < n && s == GS_OK && used > 0; i++) {
+    w->has_tau_prior = used > 0;
+    w->chroma_tol = tol;
+    w->has_other_prior = isfinite(other);
+    w->other_prior = isfinite(other) ? other : 0.0;
+    for (size_t i = 0; i < n && s == GS_OK && (used > 0 || isfinite(other)); i++) {
         if (cat->flags && (cat->flags[i] & REC_BLOB_NO_SIGNAL)) continue;
-        memcpy(w->tau_logprior, logprior + i * REC_TAU_N, sizeof w->tau_logprior);
+        if (logprior) memcpy(w->tau_logprior, logprior + i * REC_TAU_N, sizeof w->tau_logprior);
         s = rec_eq7_match_light_ws(m, w, cat->signal + i * D, cat->sigma + i * D,
                                    fe ? fe[i] : rep->median_model_error, &out[i], NULL);
     }
-    w->has_tau_prior = 0;
+    w->has_tau_prior = w->has_other_prior = 0;
+    w->chroma_tol = 0.0;
     rep->reddening_lights = used;
+    rep->chroma_tolerance = tol > 0.0 ? tol : m->o.chroma_tolerance;
+    rep->other_lights = isfinite(other) ? other_used : 0;
+    rep->other_prior = isfinite(other) ? other : isnan(m->o.other_prior) ? 0.0 : m->o.other_prior;
     free(logprior);
     free(is_ref);
     return s;
@@ -120,7 +160,8 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
 {
     if (!m || !cat) return gs_fail(GS_EINVAL, "Eq. 7: matcher and catalog must not be NULL");
     rec_noise_report rep = {isfinite(m->o.model_error) ? REC_NOISE_FIXED : REC_NOISE_CAMERA, 0,
-                            isfinite(m->o.model_error) ? m->o.model_error : 0.0, 0};
+                            isfinite(m->o.model_error) ? m->o.model_error : 0.0, 0, m->o.chroma_tolerance, 0,
+                            isnan(m->o.other_prior) ? 0.0 : m->o.other_prior};
     if (noise) *noise = rep;
     if (cat->count == 0) return GS_OK;
     if (!out || !cat->signal || !cat->sigma)
@@ -137,10 +178,19 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
     rec_eq7_excess *ex = measured ? calloc(n, sizeof *ex) : NULL;
     ref_light *ref = measured ? malloc(n * sizeof *ref) : NULL;
     double *wk = measured ? malloc(n * sizeof *wk) : NULL, *fe = measured ? malloc(n * sizeof *fe) : NULL;
-    double *tll = m->red ? malloc(n * REC_TAU_N * sizeof *tll) : NULL;
+    light_fits fit = {NULL, NULL, NULL, NULL, NULL, NULL};
+    if (m->red) {
+        fit.tll = malloc(n * REC_TAU_N * sizeof *fit.tll);
+        fit.bulb = malloc(n * sizeof *fit.bulb);
+        fit.S = malloc(n * GS_MAX_BANDS * sizeof *fit.S);
+        fit.T = malloc(n * GS_MAX_BANDS * sizeof *fit.T);
+        fit.z = malloc(n * sizeof *fit.z);
+    }
+    if (isnan(m->o.other_prior)) fit.lbf = malloc(n * sizeof *fit.lbf);
     if (measured && (!ex || !ref || !wk || !fe)) s = gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", n);
-    if (m->red && !tll) s = gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", n);
-    w.collect_tau = m->red;
+    if ((m->red && (!fit.tll || !fit.bulb || !fit.S || !fit.T || !fit.z)) || (isnan(m->o.other_prior) && !fit.lbf))
+        s = gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", n);
+    w.collect_tau = m->red;   /* for the last pass (match_with_population) */
     /* pass 1: the camera noise (or the fixed model error) */
     for (size_t i = 0; i < n && s == GS_OK; i++) {
         if (cat->flags && (cat->flags[i] & REC_BLOB_NO_SIGNAL)) {
@@ -149,10 +199,10 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
         }
         s = rec_eq7_match_light_ws(m, &w, cat->signal + i * D, cat->sigma + i * D, rep.median_model_error,
                                    &out[i], ex ? &ex[i] : NULL);
-        if (tll) memcpy(tll + i * REC_TAU_N, w.tau_ll, sizeof w.tau_ll);
+        keep_fit(&w, i, &fit);
     }
     if (s != GS_OK) goto done;
-    if (!measured) goto reddening;
+    if (!measured) goto population;
     /* the clean references: a fit, an informative estimate, an aperture nothing disturbed */
     const unsigned disturbed = REC_BLOB_EDGE | REC_BLOB_SATURATED | REC_BLOB_DEBLENDED | REC_BLOB_NO_SIGNAL;
     size_t nr = 0;
@@ -168,7 +218,7 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
         ref[nr].light = i;
         nr++;
     }
-    if (nr < NOISE_MIN_LIGHTS) goto reddening;   /* no population: the camera noise, said so */
+    if (nr < NOISE_MIN_LIGHTS) goto population;   /* no population: the camera noise, said so */
     qsort(ref, nr, sizeof *ref, cmp_e2);
     /* the typical excess: the median, then twice the weighted median at the previous value */
     double hy = (cat->height > 0 ? cat->height : 1) / KERNEL_ROWS, neff;
@@ -192,16 +242,16 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
         if (cat->flags && (cat->flags[i] & REC_BLOB_NO_SIGNAL)) continue;
         if (fe[i] > 0.0) {
             s = rec_eq7_match_light_ws(m, &w, cat->signal + i * D, cat->sigma + i * D, fe[i], &out[i], NULL);
-            if (tll) memcpy(tll + i * REC_TAU_N, w.tau_ll, sizeof w.tau_ll);
+            keep_fit(&w, i, &fit);
         }
     }
-reddening:
-    /* pass 3 (reddened band model): every light again with its population prior on tau */
-    if (s == GS_OK && tll)
-        s = match_with_tau_prior(m, &w, cat, out, tll, rep.source == REC_NOISE_POPULATION ? fe : NULL, &rep);
+population:
+    /* the last pass: every light again under what the population tells (eq7_population.c) */
+    if (s == GS_OK && (fit.tll || fit.lbf))
+        s = match_with_population(m, &w, cat, out, &fit, rep.source == REC_NOISE_POPULATION ? fe : NULL, &rep);
     if (noise && s == GS_OK) *noise = rep;
 done:
-    free(tll);
+    free(fit.tll), free(fit.bulb), free(fit.S), free(fit.T), free(fit.z), free(fit.lbf);
     free(fe);
     free(wk);
     free(ref);

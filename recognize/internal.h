@@ -226,14 +226,31 @@ typedef struct {
     double *scratch;                       /* [(6 bands + 1) D] the nested tests' */
     double complex *acc;                   /* [3 K] */
     /* the reddened model: the light's log prior per tau (has_tau_prior; else uniform) and, when
-     * collect_tau, its log likelihood per tau with every bulb weighted alike (eq7_reddening.c) */
+     * collect_tau, its log likelihood per tau with every bulb weighted alike (eq7_population.c) */
     int has_tau_prior, collect_tau;
     double tau_logprior[REC_TAU_N], tau_ll[REC_TAU_N];
+    double chroma_tol;                     /* > 0: the band tolerance instead of the options' */
+    int has_other_prior;                   /* other_prior instead of the options' */
+    double other_prior, other_lbf;         /* and the last light's log Bayes factor (NaN: none) */
+    int fit_bulb;                          /* the last light's answer: bulb (-1 none), its */
+    double fit_S[GS_MAX_BANDS], fit_T[GS_MAX_BANDS], fit_z;   /* band sums and a / sigma_a */
 } rec_eq7_work;
 
-/* eq7_reddening.c: the population prior on tau for each of n lights (logprior, n x REC_TAU_N)
+/* eq7_population.c: the population prior on tau for each of n lights (logprior, n x REC_TAU_N)
  * from their tau log likelihoods (tau_ll, n x REC_TAU_N, as rec_eq7_work's) and which lights are
  * clean references; returns the references used, 0 (logprior untouched) below 8. */
+/* eq7_light.c: the reddened model's band misfit sum_b v_b (a_b - a c_b)^2 of bulb's band sums
+ * at the best tau (uniform prior) with band tolerance tol: ~ chi2 with bands - 2 dof when tol is
+ * the lamps' true spread. */
+double rec_eq7_band_misfit(const rec_matcher *m, int bulb, const double *S, const double *T, double tol);
+/* eq7_population.c: the capture's band tolerance from n lights' answers (bulb[i] >= 0, band sums
+ * S, T [i * GS_MAX_BANDS + b], a/sigma_a z[i], is_ref): the tolerance at which the median band
+ * misfit of the bright references is chi2's median; 0 when fewer than 8 bright references. */
+double rec_eq7_chroma_tolerance(const rec_matcher *m, size_t n, const int *bulb, const double *S,
+                                const double *T, const double *z, const unsigned char *is_ref);
+/* eq7_population.c: the share of bulbs not in DELIGHT from the references' log Bayes factors
+ * (rec_eq7_nested.lbf_other; NaN entries skipped), *used the lights it came from; NaN below 8. */
+double rec_eq7_other_share(const double *lbf, const unsigned char *is_ref, size_t n, size_t *used);
 size_t rec_eq7_tau_prior(const double *tau_ll, const unsigned char *is_ref, const double *y_px,
                          size_t n, int height, double *logprior);
 
@@ -289,6 +306,7 @@ typedef struct {
     size_t tmpl[2];       /* the blend's two templates; (size_t)-1: the best fit itself */
     double share[2];      /* their shares of the brightness */
     double p_other;       /* posterior that the bulb is not in DELIGHT (eq7_nested.c) */
+    double lbf_other;     /* its log Bayes factor against the best template (NaN: not tested) */
     double p_blend_post;  /* posterior of two lights (blend_prior) */
 } rec_eq7_nested;
 /* "Not in DELIGHT": a bulb whose waveform is the best template deformed by harmonics 1..3 per

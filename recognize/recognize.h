@@ -170,7 +170,9 @@ typedef struct {
                               * every confidence is of "in DELIGHT and this"; 0 = the paper's
                               * closed world, calibrated when DELIGHT covers the scene; 0.2 makes
                               * bulbs not in DELIGHT rarely confident (docs/recognition.md,
-                              * "Bulbs not in DELIGHT"). [0, 1) (0) */
+                              * "Bulbs not in DELIGHT"). [0, 1), or NaN (default): measured per
+                              * capture by rec_match_catalog from its lights' evidence (EM of the
+                              * share); 0 for rec_match_light */
     double blend_prior;      /* prior probability that a light is two lights in one aperture
                               * (eq7_nested.c): a blend more probable than not is flagged BLEND,
                               * and every confidence is of "one light and this". [0, 1) (0.1) */
@@ -285,7 +287,12 @@ typedef struct {
     size_t lights_used;           /* lights the measurement used */
     double median_model_error;    /* the capture's typical e (weighted median of all lights) */
     size_t reddening_lights;      /* REC_BANDS_REDDENED: the clean lights the population prior on
-                                   * tau came from (eq7_reddening.c); 0: the uniform prior */
+                                   * tau came from (eq7_population.c); 0: the uniform prior */
+    double chroma_tolerance;      /* REC_BANDS_REDDENED: the band tolerance of the last pass,
+                                   * measured from the bright lights (or the options') */
+    size_t other_lights;          /* other_prior NaN: the lights its share came from (0: none) */
+    double other_prior;           /* the share of bulbs not in DELIGHT used (measured or the
+                                   * options') */
 } rec_noise_report;
 /* "camera", "fixed", "population". */
 const char *rec_noise_source_name(rec_noise_source s);

@@ -38,12 +38,13 @@ static const char recognize_usage[] =
     "                          it), free (one free brightness per band) or chroma (one\n"
     "                          brightness times the chromaticity: the paper's Eq. 7)\n"
     "  --chroma-tolerance F    reddened: relative spread of each band around it, 0.001..1\n"
-    "                          (default 0.05)\n"
+    "                          (default 0.05), for the first passes: the final pass uses the\n"
+    "                          spread measured from the capture's bright lights\n"
     "  --model-error F|auto    relative excess noise of every light (scintillation), 0..1, or\n"
     "                          auto (default): measured from the capture's other lights\n"
-    "  --other-prior P         prior probability that a bulb is not in DELIGHT, 0..1 (default 0:\n"
-    "                          the paper's closed world; 0.2: bulbs not in DELIGHT are rarely\n"
-    "                          confident, in-DELIGHT ones less confident at low SNR)\n"
+    "  --other-prior P|auto    prior probability that a bulb is not in DELIGHT, 0..1 (0: the\n"
+    "                          paper's closed world), or auto (default): the share measured\n"
+    "                          from the capture's lights\n"
     "  --blend-prior P         prior probability that a light is two lights in one aperture,\n"
     "                          0..1 (default 0.1; 0: never a blend by the posterior)\n"
     "  --threshold S           detection threshold of lights and mapped pixels, noise sigmas > 0\n"
@@ -170,9 +171,13 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
                 return usage_error("--model-error '%s': expected auto or a fraction from 0 to below 1", optarg);
             break;
         case 'O':
+            if (!strcmp(optarg, "auto")) {
+                o->eq7.other_prior = NAN;
+                break;
+            }
             o->eq7.other_prior = strtod(optarg, &end);
             if (end == optarg || *end || !(o->eq7.other_prior >= 0.0 && o->eq7.other_prior < 1.0))
-                return usage_error("--other-prior '%s': expected a probability from 0 to below 1", optarg);
+                return usage_error("--other-prior '%s': expected auto or a probability from 0 to below 1", optarg);
             break;
         case 'B':
             o->eq7.blend_prior = strtod(optarg, &end);
@@ -253,7 +258,10 @@ static void print_table(const recognize_opts *o, const gs_capture *cap, const re
         printf(" (too few lights to measure it: the camera's noise alone)");
     if (cap->bands > 1 && o->eq7.band_gains == REC_BANDS_REDDENED)
         printf("; reddening prior: %s", noise->reddening_lights ? "population" : "uniform");
-    if (noise->reddening_lights) printf(" (from %zu lights)", noise->reddening_lights);
+    if (noise->reddening_lights)
+        printf(" (from %zu lights), band tolerance %.3f", noise->reddening_lights, noise->chroma_tolerance);
+    if (noise->other_lights)
+        printf("; bulbs not in DELIGHT: %.1f %% (from %zu lights)", 100.0 * noise->other_prior, noise->other_lights);
     printf("\n");
     printf("%4s %8s %8s %5s  %-22s %-22s %15s %6s  %-28s %9s %9s  %s\n", "id", "x", "y", "area",
            "bulb", "technology", "phase (deg)", "conf", "runner-up (conf)", "chi2/dof", "p-value",
@@ -385,7 +393,7 @@ static gs_status print_json(const recognize_opts *o, const gs_capture *cap, cons
     json_object_set_new(r, "threshold_sigma", jreal(o->threshold));
     json_object_set_new(r, "band_model", json_string(cap->bands > 1 ? band_model_name(o->eq7.band_gains) : "mono"));
     json_object_set_new(r, "chroma_tolerance", jreal(o->eq7.chroma_tolerance));
-    json_object_set_new(r, "other_prior", jreal(o->eq7.other_prior));
+    json_object_set_new(r, "other_prior", isnan(o->eq7.other_prior) ? json_string("auto") : jreal(o->eq7.other_prior));
     json_object_set_new(r, "blend_prior", jreal(o->eq7.blend_prior));
     json_object_set_new(r, "model_error", isnan(o->eq7.model_error) ? json_string("auto") : jreal(o->eq7.model_error));
     json_t *nz = json_object();
@@ -393,6 +401,9 @@ static gs_status print_json(const recognize_opts *o, const gs_capture *cap, cons
     json_object_set_new(nz, "lights_used", json_integer((json_int_t)noise->lights_used));
     json_object_set_new(nz, "median_model_error", jreal(noise->median_model_error));
     json_object_set_new(nz, "reddening_prior_lights", json_integer((json_int_t)noise->reddening_lights));
+    json_object_set_new(nz, "chroma_tolerance", jreal(noise->chroma_tolerance));
+    json_object_set_new(nz, "other_prior", jreal(noise->other_prior));
+    json_object_set_new(nz, "other_lights", json_integer((json_int_t)noise->other_lights));
     json_object_set_new(r, "noise", nz);
     json_object_set_new(root, "recognition", r);
     size_t with_bulb = 0, with_phase = 0;

@@ -295,3 +295,53 @@ TEST(eq7_band_gains_pixels_equal_lights)
     rec_matcher_free(m);
     gs_delight_free(d);
 }
+
+TEST(eq7_band_tolerance_and_reddening_prior_measured)
+{
+    /* 400 lights reddened by optical depth 1 (the model's law, f_b - 1 = (lambda_b / 550 nm)^-1.3
+     * - 1 at 650/550/450 nm), each lamp's bands strayed by a Gaussian relative spread s, per-sample
+     * SNR 100: rec_match_catalog measures the spread (s = 4 %: 2.8-5.6 %; s = 0: at most the tau
+     * grid's floor, 2.5 %), builds the tau prior from the population, and recognises the lights. */
+    gs_delight *d = eq7fx_make_db(50, 3, 0, 0);
+    rec_matcher *m = new_matcher_default(d, 3, REC_PHASES_3);
+    size_t n = 400;
+    rec_catalog cat = {.count = n, .bands = 3, .K = 26, .width = 640, .height = 480};
+    cat.signal = malloc(sizeof *cat.signal * n * 78);
+    cat.sigma = malloc(sizeof *cat.sigma * n * 78);
+    cat.y_px = malloc(sizeof *cat.y_px * n);
+    rec_match *r = malloc(sizeof *r * n);
+    const double spread[2] = {0.04, 0.0};
+    for (int t = 0; t < 2; t++) {
+        uint64_t rs = 97 + (uint64_t)t;
+        for (size_t i = 0; i < n; i++) {
+            double g[3];
+            for (int b = 0; b < 3; b++)
+                g[b] = exp(-(pow((650.0 - 100.0 * b) / 550.0, -1.3) - 1.0)) * (1.0 + spread[t] * gs_splitmix_normal(&rs));
+            double a = 1000.0;
+            render_fx(rec_matcher_bulb(m, i % 4), gs_phase_to_shift(eq7fx_p3[(i / 4) % 3]), a, g, 0.0, a / 3 / 100,
+                      &rs, cat.signal + i * 78, cat.sigma + i * 78);
+            cat.y_px[i] = 480.0 * gs_splitmix_uniform(&rs);
+        }
+        rec_noise_report nr;
+        CHECK_OK(rec_match_catalog(m, &cat, r, &nr));
+        int right = 0, wrong = 0;
+        for (size_t i = 0; i < n; i++) {
+            CHECK(eq7fx_all_finite(&r[i]));
+            if (r[i].bulb < 0) continue;
+            int ok = r[i].bulb == (int)(i % 4) && fabs(r[i].phase_deg - eq7fx_p3[(i / 4) % 3]) < 1e-9;
+            right += ok;
+            wrong += !ok;
+        }
+        printf("    band spread %.3f: measured tolerance %.4f, tau prior from %zu lights; %d right, %d wrong\n",
+               spread[t], nr.chroma_tolerance, nr.reddening_lights, right, wrong);
+        CHECK(nr.reddening_lights > n / 2);
+        if (t == 0) CHECK_MSG(nr.chroma_tolerance > 0.028 && nr.chroma_tolerance < 0.056, "tolerance %g", nr.chroma_tolerance);
+        else CHECK_MSG(nr.chroma_tolerance <= 0.025, "tolerance %g", nr.chroma_tolerance);
+        CHECK(right >= (int)n * 95 / 100);
+        CHECK(wrong <= 2);
+    }
+    free(r);
+    rec_catalog_release(&cat);
+    rec_matcher_free(m);
+    gs_delight_free(d);
+}

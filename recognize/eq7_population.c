@@ -1,5 +1,6 @@
-/* eq7_reddening.c - the population prior on the reddened band model's optical depth
- * (REC_BANDS_REDDENED, docs/recognition.md "Band model").
+/* eq7_population.c - what a capture's lights tell about each other (rec_match_catalog's last
+ * pass, docs/recognition.md "Band model" and "Bulbs not in DELIGHT"): the prior on the reddened
+ * band model's optical depth, the band tolerance, and the share of bulbs not in DELIGHT.
  *
  * Extinction reddens a light by its line of sight, not by its lamp: lights at similar range
  * share their optical depth tau. At low SNR one light's tau is poorly known and a uniform prior
@@ -10,7 +11,12 @@
  * (Kiefer & Wolfowitz 1956; EM, Laird 1978) from every light's likelihood of tau marginalised
  * over the bulbs and phases, kernel-weighted in row, with light l's own share removed
  * (leave-one-out: its misfit does not pull its prior) and a floor so a light unlike its
- * neighbours can still say so. */
+ * neighbours can still say so.
+ *
+ * The band tolerance (how far a lamp's band ratios stray from its bulb's reddened chromaticity:
+ * white balance, lamp-to-lamp spread) is measured too, from the capture's bright lights: the
+ * value at which their median band misfit (1 dof: three bands less brightness and tau) is the
+ * chi-square median. A tolerance wider than the lamps' spread gives the chromaticity away. */
 #include "recognize/internal.h"
 
 #include <math.h>
@@ -132,4 +138,89 @@ size_t rec_eq7_tau_prior(const double *tau_ll, const unsigned char *is_ref, cons
     }
     free(P), free(kw), free(idx), free(pi);
     return nr;
+}
+
+/* Bright references for the band tolerance: a / sigma_a at least this; at least TAU_MIN_LIGHTS. */
+#define TOL_MIN_SNR 20.0
+#define TOL_LO 0.001
+#define TOL_HI 1.0
+#define CHI2_1_MEDIAN 0.45493642311957
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+/* The median band misfit of the n references at tolerance tol (misfit falls as tol grows). */
+static double median_misfit(const rec_matcher *m, size_t n, const size_t *idx, const int *bulb,
+                            const double *S, const double *T, double tol, double *scratch)
+{
+    for (size_t r = 0; r < n; r++) {
+        size_t i = idx[r];
+        scratch[r] = rec_eq7_band_misfit(m, bulb[i], S + i * GS_MAX_BANDS, T + i * GS_MAX_BANDS, tol);
+    }
+    qsort(scratch, n, sizeof *scratch, cmp_double);
+    return n % 2 ? scratch[n / 2] : 0.5 * (scratch[n / 2 - 1] + scratch[n / 2]);
+}
+
+double rec_eq7_chroma_tolerance(const rec_matcher *m, size_t n, const int *bulb, const double *S,
+                                const double *T, const double *z, const unsigned char *is_ref)
+{
+    size_t nr = 0;
+    for (size_t i = 0; i < n; i++) nr += is_ref[i] && bulb[i] >= 0 && z[i] >= TOL_MIN_SNR;
+    if (nr < TAU_MIN_LIGHTS) return 0.0;
+    size_t *idx = malloc(nr * sizeof *idx);
+    double *scratch = malloc(nr * sizeof *scratch);
+    if (!idx || !scratch) {
+        free(idx), free(scratch);
+        return 0.0;
+    }
+    nr = 0;
+    for (size_t i = 0; i < n; i++)
+        if (is_ref[i] && bulb[i] >= 0 && z[i] >= TOL_MIN_SNR) idx[nr++] = i;
+    double lo = log(TOL_LO), hi = log(TOL_HI), t;
+    if (median_misfit(m, nr, idx, bulb, S, T, TOL_LO, scratch) <= CHI2_1_MEDIAN) {
+        t = TOL_LO;   /* the lamps agree with their chromaticity within the noise */
+    } else if (median_misfit(m, nr, idx, bulb, S, T, TOL_HI, scratch) > CHI2_1_MEDIAN) {
+        t = TOL_HI;
+    } else {
+        for (int it = 0; it < 30; it++) {   /* bisection in log t */
+            double mid = 0.5 * (lo + hi);
+            if (median_misfit(m, nr, idx, bulb, S, T, exp(mid), scratch) > CHI2_1_MEDIAN) lo = mid;
+            else hi = mid;
+        }
+        t = exp(0.5 * (lo + hi));
+    }
+    free(idx);
+    free(scratch);
+    return t;
+}
+
+/* The share of bulbs not in DELIGHT: EM for pi over the references' log Bayes factors B_l of
+ * "a deformed template" against the best one (eq7_nested.c), pi <- mean_l pi e^B_l / (pi e^B_l
+ * + 1 - pi), from pi = 0.1, kept within [OTHER_LO, OTHER_HI]. */
+#define OTHER_LO 0.001
+#define OTHER_HI 0.9
+#define OTHER_EM_ITERATIONS 200
+
+double rec_eq7_other_share(const double *lbf, const unsigned char *is_ref, size_t n, size_t *used)
+{
+    size_t nr = 0;
+    for (size_t i = 0; i < n; i++) nr += is_ref[i] && isfinite(lbf[i]);
+    *used = nr;
+    if (nr < TAU_MIN_LIGHTS) return NAN;
+    double pi = 0.1;
+    for (int it = 0; it < OTHER_EM_ITERATIONS; it++) {
+        double acc = 0.0, lo = log(pi / (1.0 - pi));
+        for (size_t i = 0; i < n; i++) {
+            if (!is_ref[i] || !isfinite(lbf[i])) continue;
+            double x = lo + lbf[i];   /* the posterior log odds */
+            acc += x > 0.0 ? 1.0 / (1.0 + exp(-x)) : exp(x) / (1.0 + exp(x));
+        }
+        pi = acc / (double)nr;
+        if (pi < OTHER_LO) pi = OTHER_LO;
+        if (pi > OTHER_HI) pi = OTHER_HI;
+    }
+    return pi;
 }
