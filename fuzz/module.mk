@@ -14,6 +14,7 @@ FUZZ_BINS := $(foreach n,$(FUZZ_NAMES),$(BUILD)/fuzz/fuzz_$(n))
 fuzz: deps
 	$(MAKE) --no-print-directory BUILD=build/fuzz SAN=fuzz fuzz-run
 ifeq ($(SAN),fuzz)
+.SECONDARY: $(FUZZ_BINS:=.o)
 $(BUILD)/fuzz/fuzz_%: $(BUILD)/fuzz/fuzz_%.o $(LIBS)
 	$(CXX) -fsanitize=fuzzer $(LDFLAGS) $^ $(LDLIBS) -o $@
 fuzz-run: $(FUZZ_BINS)
@@ -23,7 +24,8 @@ fuzz-run: $(FUZZ_BINS)
 	  $(BUILD)/fuzz/fuzz_$$n -max_total_time=$(FUZZ_S) -rss_limit_mb=2048 -timeout=10 \
 	    -print_final_stats=1 -artifact_prefix=$(BUILD)/crash-$$n- \
 	    $$( [ -f fuzz/dict/$$n.dict ] && echo -dict=fuzz/dict/$$n.dict ) \
-	    $(BUILD)/corpus/$$n fuzz/corpus/$$n 2>&1 | \
-	    grep -E '^stat::number_of_executed_units|^stat::peak_rss_mb|ERROR|SUMMARY|^==' || exit 1; \
-	done
+	    $(BUILD)/corpus/$$n fuzz/corpus/$$n > $(BUILD)/fuzz-$$n.log 2>&1; rc=$$?; \
+	  grep -E '^stat::number_of_executed_units|^stat::peak_rss_mb|ERROR|SUMMARY' $(BUILD)/fuzz-$$n.log; \
+	  [ $$rc -eq 0 ] || { echo "fuzz $$n: FAILED (exit $$rc, $(BUILD)/fuzz-$$n.log)"; failed=1; }; \
+	done; [ -z "$$failed" ]
 endif

@@ -281,7 +281,7 @@ static int cmd_plot(const gs_delight *d, const delight_opts *o)
     snprintf(title, sizeof title, "DELIGHT BRFs, %d Hz grid", pick[0]->grid_hz);
     gs_status s = rec_plot_brfs(pick, count, o->out, title);
     if (s != GS_OK) return srv_error(s);
-    printf("wrote %s (%zu bulbs)\n", o->out, count);
+    fprintf(srv_note_stream(o->out), "wrote %s (%zu bulbs)\n", o->out, count);
     return 0;
 }
 
