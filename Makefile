@@ -16,9 +16,18 @@ ifeq ($(SAN),1)
 SANFLAGS := -fsanitize=address,undefined -fno-sanitize-recover=all
 OPT := -O1 -g -fno-omit-frame-pointer $(SANFLAGS)
 endif
+# clang's UBSan also has what gcc's lacks (float-cast-overflow, pointer-overflow: #16);
+# SAN=fuzz adds the coverage libFuzzer needs (fuzz/module.mk)
+ifneq ($(filter clang fuzz,$(SAN)),)
+CC := clang
+CXX := clang++
+SANFLAGS := -fsanitize=address,undefined,float-cast-overflow,pointer-overflow -fno-sanitize-recover=all
+OPT := -O1 -g -fno-omit-frame-pointer $(SANFLAGS) $(if $(filter fuzz,$(SAN)),-fsanitize=fuzzer-no-link)
+endif
 CPPFLAGS := -D_DEFAULT_SOURCE -I. -MMD -MP
 CFLAGS := -std=c11 $(WARN) $(OPT) $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
-CXXFLAGS := -std=c++17 $(WARN) $(OPT) $(shell pkg-config --cflags opencv4 geographiclib 2>/dev/null)
+# (-isystem: the libraries' headers are not ours to warn about; clang -Wpedantic flags OpenCV's)
+CXXFLAGS := -std=c++17 $(WARN) $(OPT) $(patsubst -I%,-isystem %,$(shell pkg-config --cflags opencv4 geographiclib 2>/dev/null))
 LDFLAGS := $(SANFLAGS)
 # OpenCV: only core and imgproc (PNGs go through libspng; videoio pulls ~245 libraries,
 # capture/ adds it).
@@ -39,7 +48,7 @@ TEST_BIN := $(BUILD)/run_tests
 DELIGHT_DB := $(BUILD)/delight.sqlite
 SHARED ?= ../shared
 
-.PHONY: all deps check test test-asan demo demo-transport bench clean
+.PHONY: all deps check test test-asan test-clang demo demo-transport bench clean
 all: $(BIN) $(DELIGHT_DB)
 
 deps:
@@ -59,6 +68,15 @@ $(call lib_name,$(1)): $(call lib_objs,$(1))
 endef
 $(foreach m,$(MODULES),$(eval $(call lib_rule,$(m))))
 
+# gridsurvey --version names the commit: $(BUILD)/version.h, rewritten only when it changes.
+GIT_COMMIT := $(shell git rev-parse --short=12 HEAD 2>/dev/null || echo unknown)$(shell git diff --quiet HEAD 2>/dev/null || echo -dirty)
+.PHONY: FORCE
+$(BUILD)/version.h: FORCE
+	@mkdir -p $(BUILD) && echo '#define GS_GIT_COMMIT "$(GIT_COMMIT)"' > $@.tmp && \
+	  (cmp -s $@.tmp $@ && rm -f $@.tmp || mv $@.tmp $@)
+$(BUILD)/survey/cli.o: $(BUILD)/version.h
+$(BUILD)/survey/cli.o: CPPFLAGS += -I$(BUILD)
+
 $(BIN): $(BUILD)/survey/main.o $(LIBS)
 	$(CXX) $(LDFLAGS) $^ $(LDLIBS) -o $@
 $(TEST_BIN): $(TEST_OBJS) $(LIBS)
@@ -75,6 +93,8 @@ test: $(TEST_BIN) $(BIN)
 	LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp:print_suppressions=0 $(TEST_BIN)
 test-asan:
 	$(MAKE) --no-print-directory BUILD=$(BUILD)/asan SAN=1 test
+test-clang:
+	$(MAKE) --no-print-directory BUILD=$(BUILD)/clang SAN=clang test
 check: deps
 	$(MAKE) --no-print-directory all
 	$(MAKE) --no-print-directory test

@@ -43,6 +43,43 @@ static gs_status push_light(light_vec *lv, const cap_light *l)
     return GS_OK;
 }
 
+/* The range of every numeric light field, whichever block gives it (an inline light, a GeoJSON
+ * feature or its block's defaults), so that no path lets through what another refuses. */
+static const struct {
+    const char *key;
+    double lo, hi;
+} light_range[] = {
+    {"phase_deg", -360, 720},
+    {"x_px", -1e6, 1e6},
+    {"y_px", -1e6, 1e6},
+    {"distance_m", 0, 1e7},
+    {"lat_deg", -90, 90},
+    {"lon_deg", -540, 540},
+    {"height_m", GIS_MIN_HEIGHT_M, GIS_MAX_HEIGHT_M},
+    {"lumens", 0, 1e9},
+    {"flux_e_per_cycle", 0, 1e15},
+};
+
+static void range_of(const char *key, double *lo, double *hi)
+{
+    for (size_t i = 0; i < sizeof light_range / sizeof *light_range; i++)
+        if (!strcmp(light_range[i].key, key)) {
+            *lo = light_range[i].lo;
+            *hi = light_range[i].hi;
+            return;
+        }
+    *lo = *hi = NAN;   /* not a light field: every comparison fails, nothing passes */
+}
+
+/* gs_json_get_num of a light field, with its range. */
+static gs_status get_light_num(const cap_pctx *c, json_t *o, const char *path, const char *key,
+                               int required, double def, double *out)
+{
+    double lo, hi;
+    range_of(key, &lo, &hi);
+    return gs_json_get_num(c->doc, o, path, key, required, def, lo, hi, NULL, out);
+}
+
 /* Place a light: projection (geographic), distance, flux from lumens. path names it. */
 static gs_status finish_light(const cap_pctx *c, const cap_scene *sc, cap_light *l, const char *path,
                               int lumens_given)
@@ -71,6 +108,13 @@ static gs_status finish_light(const cap_pctx *c, const cap_scene *sc, cap_light 
         }
         l->flux_e_per_cycle = cap_scene_flux_from_lumens(sc, l->lumens, l->distance_m);
     }
+    double lo, hi;
+    range_of("flux_e_per_cycle", &lo, &hi);
+    if (!(l->flux_e_per_cycle >= lo && l->flux_e_per_cycle <= hi)) {
+        snprintf(p, sizeof p, "%s.%s", path, lumens_given ? "lumens" : "flux_e_per_cycle");
+        return cap_scene_bad(c, GS_EFORMAT, p, "gives %g photo-electrons per cycle at the sensor: "
+                             "expected %g to %g", l->flux_e_per_cycle, lo, hi);
+    }
     return GS_OK;
 }
 
@@ -88,7 +132,7 @@ static gs_status parse_light(const cap_pctx *c, const cap_scene *sc, json_t *o, 
     snprintf(def_id, sizeof def_id, "L%d", index);
     if ((s = gs_json_get_str(c->doc, o, path, "id", 0, def_id, l->id, sizeof l->id)) != GS_OK ||
         (s = gs_json_get_str(c->doc, o, path, "bulb", 1, NULL, l->bulb, sizeof l->bulb)) != GS_OK ||
-        (s = gs_json_get_num(c->doc, o, path, "phase_deg", 0, 0, -360, 720, NULL, &l->phase_deg)) != GS_OK)
+        (s = get_light_num(c, o, path, "phase_deg", 0, 0, &l->phase_deg)) != GS_OK)
         return s;
     int has_px = json_object_get(o, "x_px") || json_object_get(o, "y_px");
     int has_geo = json_object_get(o, "lat_deg") || json_object_get(o, "lon_deg");
@@ -99,16 +143,15 @@ static gs_status parse_light(const cap_pctx *c, const cap_scene *sc, json_t *o, 
                    "lon_deg and height_m (a geographic light)");
     }
     if (has_px) {
-        if ((s = gs_json_get_num(c->doc, o, path, "x_px", 1, 0, -1e6, 1e6, NULL, &l->x_px)) != GS_OK ||
-            (s = gs_json_get_num(c->doc, o, path, "y_px", 1, 0, -1e6, 1e6, NULL, &l->y_px)) != GS_OK ||
-            (s = gs_json_get_num(c->doc, o, path, "distance_m", 0, 0, 0, 1e7, NULL, &l->distance_m)) != GS_OK)
+        if ((s = get_light_num(c, o, path, "x_px", 1, 0, &l->x_px)) != GS_OK ||
+            (s = get_light_num(c, o, path, "y_px", 1, 0, &l->y_px)) != GS_OK ||
+            (s = get_light_num(c, o, path, "distance_m", 0, 0, &l->distance_m)) != GS_OK)
             return s;
     } else {
         l->geographic = 1;
-        if ((s = gs_json_get_num(c->doc, o, path, "lat_deg", 1, 0, -90, 90, NULL, &l->lat_deg)) != GS_OK ||
-            (s = gs_json_get_num(c->doc, o, path, "lon_deg", 1, 0, -540, 540, NULL, &l->lon_deg)) != GS_OK ||
-            (s = gs_json_get_num(c->doc, o, path, "height_m", 1, 0, GIS_MIN_HEIGHT_M, GIS_MAX_HEIGHT_M, NULL,
-                         &l->height_m)) != GS_OK)
+        if ((s = get_light_num(c, o, path, "lat_deg", 1, 0, &l->lat_deg)) != GS_OK ||
+            (s = get_light_num(c, o, path, "lon_deg", 1, 0, &l->lon_deg)) != GS_OK ||
+            (s = get_light_num(c, o, path, "height_m", 1, 0, &l->height_m)) != GS_OK)
             return s;
         if (json_object_get(o, "distance_m")) {
             snprintf(p, sizeof p, "%s.distance_m", path);
@@ -121,8 +164,8 @@ static gs_status parse_light(const cap_pctx *c, const cap_scene *sc, json_t *o, 
         return cap_scene_bad(c, GS_EFORMAT, p, "expected exactly one of lumens (luminous power, lm) and "
                    "flux_e_per_cycle (photo-electrons per cycle at the sensor)");
     }
-    if (has_lm) s = gs_json_get_num(c->doc, o, path, "lumens", 1, 0, 0, 1e9, NULL, &l->lumens);
-    else s = gs_json_get_num(c->doc, o, path, "flux_e_per_cycle", 1, 0, 0, 1e15, NULL, &l->flux_e_per_cycle);
+    if (has_lm) s = get_light_num(c, o, path, "lumens", 1, 0, &l->lumens);
+    else s = get_light_num(c, o, path, "flux_e_per_cycle", 1, 0, &l->flux_e_per_cycle);
     if (s != GS_OK) return s;
     return finish_light(c, sc, l, path, has_lm);
 }
@@ -193,10 +236,15 @@ static gs_status parse_geojson(const cap_pctx *c, cap_scene *sc, json_t *blk, co
         }
         l.lon_deg = xyz[0];
         l.lat_deg = xyz[1];
-        if (fabs(l.lat_deg) > 90) {
-            snprintf(q, sizeof q, "%s.geometry.coordinates[1]", fp);
-            s = cap_scene_bad(&g, GS_EFORMAT, q, "latitude %g: expected -90 to 90", l.lat_deg);
-            goto done;
+        static const char *const coord_key[3] = {"lon_deg", "lat_deg", "height_m"};
+        for (size_t j = 0; j < json_array_size(coords); j++) {
+            double lo, hi;
+            range_of(coord_key[j], &lo, &hi);
+            if (!(xyz[j] >= lo && xyz[j] <= hi)) {
+                snprintf(q, sizeof q, "%s.geometry.coordinates[%zu]", fp, j);
+                s = cap_scene_bad(&g, GS_EFORMAT, q, "%s %g: expected %g to %g", coord_key[j], xyz[j], lo, hi);
+                goto done;
+            }
         }
         snprintf(q, sizeof q, "%s.properties", fp);
         json_t *pid = json_object_get(props, "id");
@@ -214,28 +262,36 @@ static gs_status parse_geojson(const cap_pctx *c, cap_scene *sc, json_t *blk, co
         }
         snprintf(l.bulb, sizeof l.bulb, "%s", json_string_value(bulb));
         /* numbers: the feature's property, else the scene block's default */
-        struct { const char *key, *alt; double *dst; int required; double lo, hi; } nums[] = {
-            {"phase_deg", "phase", &l.phase_deg, 0, -360, 720},
-            {"height_m", NULL, &l.height_m, 0, GIS_MIN_HEIGHT_M, GIS_MAX_HEIGHT_M},
+        struct { const char *key, *alt; double *dst; } nums[] = {
+            {"phase_deg", "phase", &l.phase_deg},
+            {"height_m", NULL, &l.height_m},
+            {"lumens", "luminous_power_lm", &l.lumens},
+            {"flux_e_per_cycle", NULL, &l.flux_e_per_cycle},
         };
+        json_t *given[4] = {NULL};
+        /* the feature's own lumens or flux overrides both defaults */
+        int own_flux = json_object_get(props, "lumens") || json_object_get(props, "luminous_power_lm") ||
+                       json_object_get(props, "flux_e_per_cycle");
         for (size_t j = 0; j < sizeof nums / sizeof *nums; j++) {
             json_t *x = json_object_get(props, nums[j].key);
             if (!x && nums[j].alt) x = json_object_get(props, nums[j].alt);
             const cap_pctx *who = &g;
             char q2[640];
             snprintf(q2, sizeof q2, "%s.%s", q, nums[j].key);
-            if (!x && defs) {
+            if (!x && defs && !(j >= 2 && own_flux)) {
                 x = json_object_get(defs, nums[j].key);
                 who = c;
                 snprintf(q2, sizeof q2, "%s.%s", dpath, nums[j].key);
             }
             if (!x) continue;
-            double d = json_is_number(x) ? json_number_value(x) : NAN;
-            if (!isfinite(d) || d < nums[j].lo || d > nums[j].hi) {
-                s = cap_scene_bad(who, GS_EFORMAT, q2, "expected a number from %g to %g", nums[j].lo, nums[j].hi);
+            double d = json_is_number(x) ? json_number_value(x) : NAN, lo, hi;
+            range_of(nums[j].key, &lo, &hi);
+            if (!(d >= lo && d <= hi)) {
+                s = cap_scene_bad(who, GS_EFORMAT, q2, "expected a number from %g to %g", lo, hi);
                 goto done;
             }
             *nums[j].dst = d;
+            given[j] = x;
         }
         if (isfinite(xyz[2])) l.height_m = xyz[2];
         else if (!json_object_get(props, "height_m") && !(defs && json_object_get(defs, "height_m"))) {
@@ -245,22 +301,15 @@ static gs_status parse_geojson(const cap_pctx *c, cap_scene *sc, json_t *blk, co
                     "properties.height_m or defaults.height_m)");
             goto done;
         }
-        json_t *lm = json_object_get(props, "lumens");
-        if (!lm) lm = json_object_get(props, "luminous_power_lm");
-        json_t *fl = json_object_get(props, "flux_e_per_cycle");
-        if (!lm && !fl && defs) {
-            lm = json_object_get(defs, "lumens");
-            fl = json_object_get(defs, "flux_e_per_cycle");
-        }
-        if (!lm == !fl || !json_is_number(lm ? lm : fl) || json_number_value(lm ? lm : fl) < 0) {
+        /* lumens or flux: the feature's, else the defaults' (read and range-checked above) */
+        json_t *lm = given[2], *fl = given[3];
+        if (!lm == !fl) {
             char q2[200];
             snprintf(q2, sizeof q2, "%s.lumens", q);
-            s = cap_scene_bad(&g, GS_EFORMAT, q2, "expected exactly one of lumens (>= 0) and "
+            s = cap_scene_bad(&g, GS_EFORMAT, q2, "expected exactly one of lumens and "
                     "flux_e_per_cycle, in the feature or in defaults");
             goto done;
         }
-        if (lm) l.lumens = json_number_value(lm);
-        else l.flux_e_per_cycle = json_number_value(fl);
         if ((s = finish_light(&g, sc, &l, fp, lm != NULL)) != GS_OK) goto done;
         if ((s = push_light(lv, &l)) != GS_OK) goto done;
     }
@@ -335,7 +384,7 @@ static gs_status parse_street_grid(const cap_pctx *c, const cap_scene *sc, json_
         if ((s = gs_json_check_keys(c->doc, t, ip, tkeys)) != GS_OK ||
             (s = gs_json_get_str(c->doc, t, ip, "bulb", 1, NULL, tbulb[i], GS_ID_MAX)) != GS_OK ||
             (s = gs_json_get_num(c->doc, t, ip, "weight", 0, 1, 0, 1e9, NULL, &tw[i])) != GS_OK ||
-            (s = gs_json_get_num(c->doc, t, ip, "lumens", 1, 0, 0, 1e9, NULL, &tlm[i])) != GS_OK)
+            (s = get_light_num(c, t, ip, "lumens", 1, 0, &tlm[i])) != GS_OK)
             return s;
         wsum += tw[i];
     }

@@ -131,7 +131,8 @@ static gs_status st_store(cap_sim *s, cap_render *r)
     if (r->raw)
         for (size_t i = 0; i < n; i++) {
             double v = floor(s->img[i] + 0.5);
-            r->raw[i] = (unsigned short)(v < 0 ? 0 : v > 65535 ? 65535 : v);
+            /* written so that NaN clamps to 0 rather than reaching the cast */
+            r->raw[i] = (unsigned short)(v > 0 ? (v < 65535 ? v : 65535) : 0);
         }
     return GS_OK;
 }

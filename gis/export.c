@@ -74,25 +74,6 @@ gs_status gis_format_from_path(const char *path, gis_format *f)
                    ".json, .kml, .gpkg or .csv (or give the format)", path ? path : "");
 }
 
-static int utf8_clean(const char *s)
-{
-    const unsigned char *p = (const unsigned char *)s;
-    while (*p) {
-        unsigned c = *p;
-        int extra;
-        if (c < 0x20 || c == 0x7f) return 0;
-        if (c < 0x80) extra = 0;
-        else if (c >= 0xc2 && c <= 0xdf) extra = 1;
-        else if (c >= 0xe0 && c <= 0xef) extra = 2;
-        else if (c >= 0xf0 && c <= 0xf4) extra = 3;
-        else return 0;
-        p++;
-        for (int i = 0; i < extra; i++, p++)
-            if ((*p & 0xc0) != 0x80) return 0;
-    }
-    return 1;
-}
-
 static int located(const gis_light *l)
 {
     return isfinite(l->lat_deg) && isfinite(l->lon_deg);
@@ -113,7 +94,7 @@ static gs_status check_lights(const gis_light *lights, size_t n)
                    {l->survey, sizeof l->survey, "survey"},
                    {l->time_utc, sizeof l->time_utc, "time"}};
         for (size_t k = 0; k < sizeof str / sizeof *str; k++)
-            if (!memchr(str[k].s, '\0', str[k].size) || !utf8_clean(str[k].s))
+            if (!memchr(str[k].s, '\0', str[k].size) || !gs_text_clean(str[k].s))
                 return gs_fail(GS_EINVAL, "export: light %zu: %s: expected NUL-terminated UTF-8 "
                                "text without control characters", i, str[k].name);
         if (isnan(l->lat_deg) != isnan(l->lon_deg))

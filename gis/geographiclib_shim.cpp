@@ -213,3 +213,8 @@ extern "C" int gis_gl_gnomonic_rev(double lat0, double lon0, double x, double y,
         return fail_unknown("Gnomonic::Reverse");
     }
 }
+
+extern "C" const char *gis_geographiclib_version(void)
+{
+    return GEOGRAPHICLIB_VERSION_STRING;
+}

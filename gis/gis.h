@@ -303,4 +303,7 @@ void gis_map_opts_default(gis_map_opts *o);
  * given. Not thread-safe (PLplot). o NULL = defaults. */
 gs_status gis_map_png(const gis_light *lights, size_t n, const gis_map_opts *o, const char *path);
 
+/* GeographicLib's version string (gridsurvey --version). */
+const char *gis_geographiclib_version(void);
+
 #endif

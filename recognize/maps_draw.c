@@ -89,8 +89,6 @@ static gs_status add_label(canvas *c, double x, double y, double size_mm, const 
 /* Draw the queued labels with PLplot's memcairo driver onto the pixels, then encode the PNG. */
 static gs_status canvas_write(canvas *c, const char *path)
 {
-    FILE *f = fopen(path, "wb");
-    if (!f) return gs_fail(GS_EIO, "%s: cannot open for writing", path);
     if (c->nlabels) {
         plsdev("memcairo");
         plsmem(c->w, c->h, c->rgb);
@@ -109,10 +107,8 @@ static gs_status canvas_write(canvas *c, const char *path)
     unsigned char *png = NULL;
     size_t size = 0;
     gs_status st = gs_png_encode(c->rgb, c->w, c->h, 3, 8, &png, &size);
-    if (st == GS_OK && fwrite(png, 1, size, f) != size) st = gs_fail(GS_EIO, "%s: write failed", path);
-    if (fclose(f) != 0 && st == GS_OK) st = gs_fail(GS_EIO, "%s: write failed", path);
+    if (st == GS_OK) st = gs_file_write_atomic(path, png, size);
     free(png);
-    if (st != GS_OK) remove(path);
     return st;
 }
 

@@ -118,3 +118,8 @@ extern "C" gs_status rec_cv_dilate_u8(unsigned char *mask, int width, int height
         return gs_fail(GS_EFORMAT, "dilate: unknown C++ exception");
     }
 }
+
+extern "C" const char *rec_opencv_version(void)
+{
+    return CV_VERSION;
+}

@@ -36,9 +36,9 @@ gs_status rec_plot_brfs(const gs_bulb *const *bulbs, size_t count, const char *p
         if (bulbs[i]->brf.bands != bands)
             return gs_fail(GS_EINVAL, "plot: bulb %s has %d bands, %s has %d: expected the same",
                            bulbs[i]->id, bulbs[i]->brf.bands, bulbs[0]->id, bands);
-    FILE *probe = fopen(png_path, "wb");   /* PLplot exits the process on open failures */
-    if (!probe) return gs_fail(GS_EIO, "%s: cannot write the plot", png_path);
-    fclose(probe);
+    gs_atomic out;   /* PLplot writes by name (and exits the process on open failures) */
+    gs_status ost = gs_atomic_open(&out, png_path, 0);
+    if (ost != GS_OK) return ost;
 
     double ymax = 0.0;
     int nmax = 0;
@@ -53,11 +53,12 @@ gs_status rec_plot_brfs(const gs_bulb *const *bulbs, size_t count, const char *p
     if (!x || !y) {
         free(x);
         free(y);
+        gs_atomic_abort(&out);
         return gs_fail(GS_ENOMEM, "plot: cannot allocate %d points", nmax);
     }
 
     plsdev("pngcairo");
-    plsfnam(png_path);
+    plsfnam(out.tmp);
     plsetopt("geometry", bands == 1 ? "1100x700" : "1100x1400");
     plscmap0n(PALETTE_N + 1);
     plscol0(0, 255, 255, 255); /* background */
@@ -112,7 +113,7 @@ gs_status rec_plot_brfs(const gs_bulb *const *bulbs, size_t count, const char *p
     free(text);
     free(x);
     free(y);
-    return GS_OK;
+    return gs_atomic_commit(&out);
 }
 
 /* ------------------------------------------------------------ signal plots (Fig. 3) */
@@ -203,9 +204,9 @@ gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const r
     for (size_t i = 0; i < na && nl < (size_t)max_lights; i++) rank[nl++] = all[i];
     free(all);
 
-    FILE *probe = fopen(png_path, "wb");   /* PLplot exits the process on open failures */
-    if (!probe) return gs_fail(GS_EIO, "%s: cannot write the plot", png_path);
-    fclose(probe);
+    gs_atomic out;   /* PLplot writes by name (and exits the process on open failures) */
+    gs_status ost = gs_atomic_open(&out, png_path, 0);
+    if (ost != GS_OK) return ost;
 
     double *u = malloc(sizeof *u * CURVE_N), *cv = malloc(sizeof *cv * CURVE_N);
     int nmax = 4;
@@ -216,6 +217,7 @@ gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const r
     double *lo = malloc(sizeof *lo * (size_t)K), *hi = malloc(sizeof *hi * (size_t)K);
     if (!u || !cv || !tmp || !px || !py || !lo || !hi) {
         free(u); free(cv); free(tmp); free(px); free(py); free(lo); free(hi);
+        gs_atomic_abort(&out);
         return gs_fail(GS_ENOMEM, "signal plot: cannot allocate curves");
     }
     /* y range over every drawn value */
@@ -256,7 +258,7 @@ gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const r
 
     if (st == GS_OK) {
         plsdev("pngcairo");
-        plsfnam(png_path);
+        plsfnam(out.tmp);
         char geom[32];
         snprintf(geom, sizeof geom, "1500x%d", bands == 1 ? 620 : 1500);
         plsetopt("geometry", geom);
@@ -366,6 +368,7 @@ gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const r
         plend();
     }
     free(u); free(cv); free(tmp); free(px); free(py); free(lo); free(hi);
-    if (st != GS_OK) remove(png_path);
+    if (st == GS_OK) return gs_atomic_commit(&out);
+    gs_atomic_abort(&out);
     return st;
 }

@@ -672,4 +672,7 @@ gs_status rec_ml_oracle(const rec_pg_noise *noise, int per_sample, const rec_pg_
                         const double *x, const double *templates, int M, int D, int *best,
                         double *loglik);
 
+/* OpenCV's version string (gridsurvey --version). */
+const char *rec_opencv_version(void);
+
 #endif

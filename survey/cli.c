@@ -1,8 +1,18 @@
 /* cli.c - gridsurvey's git-style subcommand dispatch and shared option helpers. */
 #include "survey/internal.h"
+#include "gis/gis.h"
+#include "recognize/recognize.h"
+#include "version.h"   /* GS_GIT_COMMIT, written by the Makefile into $(BUILD) */
 
+#include <fftw3.h>
+#include <jansson.h>
+#include <plplot.h>
+#include <sndfile.h>
+#include <spng.h>
+#include <sqlite3.h>
 #include <stdio.h>
 #include <string.h>
+#include <tiffio.h>
 
 static const struct {
     const char *name;
@@ -27,29 +37,100 @@ static const struct {
 
 static void usage(FILE *f)
 {
-    fprintf(f, "usage: gridsurvey COMMAND [ARGS]   (gridsurvey COMMAND --help for details)\n\n"
+    fprintf(f, "usage: gridsurvey [--max-memory SIZE] COMMAND [ARGS]   (gridsurvey help COMMAND\n"
+               "       for details; gridsurvey --version)\n\n"
                "Surveys a city's electric grid from its lights at night (bulb type and grid phase\n"
-               "of every light, from an AC-locked coded-exposure camera).\n\ncommands:\n");
+               "of every light, from an AC-locked coded-exposure camera).\n\n"
+               "  --max-memory SIZE  the memory budget for an input's pixels and working images,\n"
+               "                     e.g. 4G (default: half the RAM, or $GS_MAX_MEMORY); accepted\n"
+               "                     before or after COMMAND\n\ncommands:\n");
     for (size_t i = 0; i < sizeof commands / sizeof *commands; i++)
         fprintf(f, "  %-10s %s\n", commands[i].name, commands[i].summary);
 }
 
+/* gridsurvey --version: the tool, the commit it was built from, the libraries it runs with. */
+static int version(void)
+{
+    printf("%s (git %s)\n", SRV_GENERATOR, GS_GIT_COMMIT);
+    printf("SQLite %s, Jansson %s, %s, %s, libspng %s, OpenCV %s, GeographicLib %s\n",
+           sqlite3_libversion(), jansson_version_str(), fftw_version, sf_version_string(),
+           spng_version_string(), rec_opencv_version(), gis_geographiclib_version());
+    char pl[80];
+    plgver(pl);
+    const char *tiff = TIFFGetVersion(), *nl = strchr(tiff, '\n');
+    printf("PLplot %s, %.*s\n", pl, nl ? (int)(nl - tiff) : (int)strlen(tiff), tiff);
+    return 0;
+}
+
+static int find_command(const char *name)
+{
+    for (size_t i = 0; i < sizeof commands / sizeof *commands; i++)
+        if (!strcmp(name, commands[i].name)) return (int)i;
+    fprintf(stderr, "gridsurvey: '%s' is not a command: expected one of", name);
+    for (size_t i = 0; i < sizeof commands / sizeof *commands; i++)
+        fprintf(stderr, " %s", commands[i].name);
+    fprintf(stderr, " (see gridsurvey --help)\n");
+    return -1;
+}
+
+/* Take the global --max-memory SIZE (or --max-memory=SIZE) out of argv, wherever it is before
+ * a "--". Returns 0, or 2 after a one-line usage error. */
+static int take_max_memory(int *argc, char **argv)
+{
+    for (int i = 1; i < *argc && strcmp(argv[i], "--"); i++) {
+        const char *v = NULL;
+        int used = 0;
+        if (!strcmp(argv[i], "--max-memory")) {
+            if (i + 1 >= *argc) {
+                fprintf(stderr, "gridsurvey: --max-memory needs a SIZE, e.g. 4G (see gridsurvey --help)\n");
+                return 2;
+            }
+            v = argv[i + 1];
+            used = 2;
+        } else if (!strncmp(argv[i], "--max-memory=", 13)) {
+            v = argv[i] + 13;
+            used = 1;
+        }
+        if (!used) continue;
+        size_t bytes;
+        if (gs_mem_parse(v, &bytes) != GS_OK) {
+            fprintf(stderr, "gridsurvey: %s (see gridsurvey --help)\n", gs_detail());
+            return 2;
+        }
+        gs_mem_budget_set(bytes);
+        for (int j = i; j + used <= *argc; j++) argv[j] = argv[j + used];   /* with the NULL */
+        *argc -= used;
+        i--;
+    }
+    return 0;
+}
+
 int srv_main(int argc, char **argv)
 {
+    if (take_max_memory(&argc, argv)) return 2;
     if (argc < 2) {
         usage(stderr);
         return 2;
     }
-    if (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h") || !strcmp(argv[1], "help")) {
+    if (!strcmp(argv[1], "--version") || !strcmp(argv[1], "version")) return version();
+    if (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h") || (!strcmp(argv[1], "help") && argc < 3)) {
         usage(stdout);
         return 0;
     }
-    for (size_t i = 0; i < sizeof commands / sizeof *commands; i++)
-        if (!strcmp(argv[1], commands[i].name)) return commands[i].run(argc - 1, argv + 1);
-    fprintf(stderr, "gridsurvey: '%s' is not a command: expected one of", argv[1]);
-    for (size_t i = 0; i < sizeof commands / sizeof *commands; i++)
-        fprintf(stderr, " %s", commands[i].name);
-    fprintf(stderr, " (see gridsurvey --help)\n");
+    if (!strcmp(argv[1], "help")) {   /* gridsurvey help CMD [SUB] = gridsurvey CMD [SUB] --help */
+        int c = find_command(argv[2]);
+        if (c < 0) return 2;
+        char help[] = "--help";
+        char *args[4] = {argv[2], argc > 3 ? argv[3] : help, argc > 3 ? help : NULL, NULL};
+        return commands[c].run(argc > 3 ? 3 : 2, args);
+    }
+    int c = find_command(argv[1]);
+    return c < 0 ? 2 : commands[c].run(argc - 1, argv + 1);
+}
+
+int srv_usage_hint(const char *cmd)
+{
+    fprintf(stderr, "gridsurvey %s: see gridsurvey help %s\n", cmd, cmd);
     return 2;
 }
 
@@ -57,4 +138,9 @@ int srv_error(gs_status s)
 {
     fprintf(stderr, "gridsurvey: %s: %s\n", gs_strerror(s), gs_detail());
     return 1;
+}
+
+FILE *srv_note_stream(const char *out)
+{
+    return out && !strcmp(out, "-") ? stderr : stdout;
 }

@@ -105,7 +105,7 @@ int srv_cmd_db(int argc, char **argv)
             }
             break;
         case 'h': fputs(db_usage, stdout); return 0;
-        default: fputs(db_usage, stderr); return 2;
+        default: return srv_usage_hint("db");
         }
     }
     if (optind < argc - 1) {
@@ -117,7 +117,7 @@ int srv_cmd_db(int argc, char **argv)
         return 2;
     }
     srv_db *db;
-    gs_status s = srv_db_open(path, which == 1 ? SRV_DB_WRITE : which == 2 ? SRV_DB_READ : SRV_DB_CREATE, &db);
+    gs_status s = srv_db_open(path, which == 1 ? SRV_DB_WRITE : which == 2 ? SRV_DB_READ : which == 0 ? SRV_DB_INIT : SRV_DB_CREATE, &db);
     if (s != GS_OK) return srv_error(s);
     int rc = 0;
     if (which == 0 || which == 1) {

@@ -91,7 +91,7 @@ static int parse_opts(int argc, char **argv, delight_opts *o)
             }
             break;
         case 'h': fputs(delight_usage, stdout); return 0;
-        default: fputs(delight_usage, stderr); return 2;
+        default: return srv_usage_hint("delight");
         }
     }
     return -1;
@@ -170,10 +170,11 @@ static int cmd_show(const gs_delight *d, const delight_opts *o, const char *id)
 
 static int cmd_export(const gs_delight *d, const delight_opts *o)
 {
-    FILE *f = o->out ? fopen(o->out, "w") : stdout;
-    if (!f) return srv_error(gs_fail(GS_EIO, "%s: cannot open for writing", o->out));
-    gs_status s = gs_delight_export_csv(d, f);
-    if (o->out && fclose(f) != 0 && s == GS_OK) s = gs_fail(GS_EIO, "%s: write failed", o->out);
+    gs_atomic a;   /* no -o, or -o -: stdout */
+    gs_status s = gs_atomic_open(&a, o->out ? o->out : "-", 1);
+    if (s == GS_OK) s = gs_delight_export_csv(d, a.f);
+    if (s == GS_OK) s = gs_atomic_commit(&a);
+    else gs_atomic_abort(&a);
     return s == GS_OK ? 0 : srv_error(s);
 }
 
@@ -248,6 +249,7 @@ static int cmd_plot(const gs_delight *d, const delight_opts *o)
     size_t count = 0;
     if (o->ids) {
         char *list = strdup(o->ids), *save = NULL;
+        if (!list) return srv_error(gs_fail(GS_ENOMEM, "delight plot: out of memory"));
         for (char *tok = strtok_r(list, ",", &save); tok; tok = strtok_r(NULL, ",", &save)) {
             const gs_bulb *b = NULL;
             for (size_t i = 0; i < gs_delight_count(d) && !b; i++) {
@@ -255,9 +257,11 @@ static int cmd_plot(const gs_delight *d, const delight_opts *o)
                 if (!strcmp(c->id, tok) && matches(c, o) && (o->sensor || c->brf.bands == 1)) b = c;
             }
             if (!b || count == MAX_PLOT) {
+                /* the message formats tok, which lives in list: free it after */
+                gs_status e = b ? gs_fail(GS_ELIMIT, "delight plot: at most %d bulbs", MAX_PLOT)
+                                : gs_fail(GS_ENOTFOUND, "delight plot: --ids: bulb '%s' not in the database", tok);
                 free(list);
-                return srv_error(b ? gs_fail(GS_ELIMIT, "delight plot: at most %d bulbs", MAX_PLOT)
-                                   : gs_fail(GS_ENOTFOUND, "delight plot: --ids: bulb '%s' not in the database", tok));
+                return srv_error(e);
             }
             pick[count++] = b;
         }
@@ -277,7 +281,7 @@ static int cmd_plot(const gs_delight *d, const delight_opts *o)
     snprintf(title, sizeof title, "DELIGHT BRFs, %d Hz grid", pick[0]->grid_hz);
     gs_status s = rec_plot_brfs(pick, count, o->out, title);
     if (s != GS_OK) return srv_error(s);
-    printf("wrote %s (%zu bulbs)\n", o->out, count);
+    fprintf(srv_note_stream(o->out), "wrote %s (%zu bulbs)\n", o->out, count);
     return 0;
 }
 

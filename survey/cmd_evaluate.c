@@ -22,7 +22,7 @@ static const char evaluate_usage[] =
     "  --db DB          the survey database (read-only)\n"
     "  --truth FILE     the capture directory's truth.json\n"
     "  --survey NAME    only captures of this survey\n"
-    "  --match-px R     match radius, pixels > 0 (default 2)\n"
+    "  --match-px R     match radius, pixels, > 0 and <= 64 (default 2)\n"
     "  --format F       table (Markdown, default) or json (gridsurvey-evaluation/1)\n"
     "  --help           this text\n"
     "\n"
@@ -52,8 +52,9 @@ int srv_cmd_evaluate(int argc, char **argv)
         case 'S': o.survey = optarg; break;
         case 'm':
             o.match_px = strtod(optarg, &end);
-            if (!*optarg || *end || !(o.match_px > 0.0) || !isfinite(o.match_px)) {
-                fprintf(stderr, "gridsurvey evaluate: --match-px '%s': expected a radius > 0 pixels\n", optarg);
+            if (!*optarg || *end || !(o.match_px > 0.0 && o.match_px <= SRV_MATCH_PX_MAX)) {
+                fprintf(stderr, "gridsurvey evaluate: --match-px '%s': expected a radius > 0 and <= %g "
+                        "pixels (see gridsurvey evaluate --help)\n", optarg, SRV_MATCH_PX_MAX);
                 return 2;
             }
             break;

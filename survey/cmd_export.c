@@ -230,15 +230,15 @@ int srv_cmd_export(int argc, char **argv)
             }
             break;
         case 'h': fputs(export_usage, stdout); return 0;
-        default: fputs(export_usage, stderr); return 2;
+        default: return srv_usage_hint("export");
         }
     }
     if (optind < argc) {
-        fprintf(stderr, "gridsurvey export: unexpected argument '%s'\n%s", argv[optind], export_usage);
+        fprintf(stderr, "gridsurvey export: unexpected argument '%s' (see gridsurvey help export)\n", argv[optind]);
         return 2;
     }
     if (!path || !out) {
-        fprintf(stderr, "gridsurvey export: --db and -o are required\n%s", export_usage);
+        fprintf(stderr, "gridsurvey export: --db and -o are required (see gridsurvey help export)\n");
         return 2;
     }
     gis_format fmt;
@@ -263,6 +263,6 @@ int srv_cmd_export(int argc, char **argv)
     if (s == GS_OK) s = gis_export(lights, n, fmt, out);
     free(lights);
     if (s != GS_OK) return srv_error(s);
-    printf("exported %zu lights -> %s\n", n, out);
+    fprintf(srv_note_stream(out), "exported %zu lights -> %s\n", n, out);
     return 0;
 }

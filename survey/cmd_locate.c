@@ -170,15 +170,15 @@ int srv_cmd_locate(int argc, char **argv)
             }
             break;
         case 'h': fputs(locate_usage, stdout); return 0;
-        default: fputs(locate_usage, stderr); return 2;
+        default: return srv_usage_hint("locate");
         }
     }
     if (optind < argc) {
-        fprintf(stderr, "gridsurvey locate: unexpected argument '%s'\n%s", argv[optind], locate_usage);
+        fprintf(stderr, "gridsurvey locate: unexpected argument '%s' (see gridsurvey help locate)\n", argv[optind]);
         return 2;
     }
     if (!station_path || !pixels_path || !out) {
-        fprintf(stderr, "gridsurvey locate: --station, --pixels and -o are required\n%s", locate_usage);
+        fprintf(stderr, "gridsurvey locate: --station, --pixels and -o are required (see gridsurvey help locate)\n");
         return 2;
     }
     if (survey && strlen(survey) >= GIS_TEXT_MAX) {
@@ -237,6 +237,6 @@ int srv_cmd_locate(int argc, char **argv)
     free(rows);
     free(lights);
     if (s != GS_OK) return srv_error(s);
-    printf("located %zu of %zu lights (%zu flagged) -> %s\n", nloc, n, nflag, out);
+    fprintf(srv_note_stream(out), "located %zu of %zu lights (%zu flagged) -> %s\n", nloc, n, nflag, out);
     return 0;
 }

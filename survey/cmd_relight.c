@@ -108,11 +108,11 @@ int srv_cmd_relight(int argc, char **argv)
         case 'd': db = optarg; break;
         case 'c': cmp = optarg; break;
         case 'h': fputs(relight_usage, stdout); return 0;
-        default: fputs(relight_usage, stderr); return 2;
+        default: return srv_usage_hint("relight");
         }
     }
     if (optind + 1 != argc || !out) {
-        fprintf(stderr, "gridsurvey relight: expected one DIR and -o CAPDIR\n%s", relight_usage);
+        fprintf(stderr, "gridsurvey relight: expected one DIR and -o CAPDIR (see gridsurvey help relight)\n");
         return 2;
     }
     const char *dir = argv[optind];

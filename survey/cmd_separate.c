@@ -35,11 +35,11 @@ int srv_cmd_separate(int argc, char **argv)
         switch (c) {
         case 'o': out = optarg; break;
         case 'h': fputs(separate_usage, stdout); return 0;
-        default: fputs(separate_usage, stderr); return 2;
+        default: return srv_usage_hint("separate");
         }
     }
     if (optind + 1 != argc || !out) {
-        fprintf(stderr, "gridsurvey separate: expected one CAPDIR and -o DIR\n%s", separate_usage);
+        fprintf(stderr, "gridsurvey separate: expected one CAPDIR and -o DIR (see gridsurvey help separate)\n");
         return 2;
     }
     const char *capdir = argv[optind];

@@ -100,11 +100,11 @@ int srv_cmd_simulate(int argc, char **argv)
             lo.stop_after = (int)stop;
             break;
         case 'h': fputs(simulate_usage, stdout); return 0;
-        default: fputs(simulate_usage, stderr); return 2;
+        default: return srv_usage_hint("simulate");
         }
     }
     if (optind + 1 != argc || !out) {
-        fprintf(stderr, "gridsurvey simulate: expected one SCENE.json and -o CAPDIR\n%s", simulate_usage);
+        fprintf(stderr, "gridsurvey simulate: expected one SCENE.json and -o CAPDIR (see gridsurvey help simulate)\n");
         return 2;
     }
     cap_scene sc;

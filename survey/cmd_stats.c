@@ -208,15 +208,15 @@ int srv_cmd_stats(int argc, char **argv)
             }
             break;
         case 'h': fputs(stats_usage, stdout); return 0;
-        default: fputs(stats_usage, stderr); return 2;
+        default: return srv_usage_hint("stats");
         }
     }
     if (optind < argc) {
-        fprintf(stderr, "gridsurvey stats: unexpected argument '%s'\n%s", argv[optind], stats_usage);
+        fprintf(stderr, "gridsurvey stats: unexpected argument '%s' (see gridsurvey help stats)\n", argv[optind]);
         return 2;
     }
     if (!path) {
-        fprintf(stderr, "gridsurvey stats: --db is required\n%s", stats_usage);
+        fprintf(stderr, "gridsurvey stats: --db is required (see gridsurvey help stats)\n");
         return 2;
     }
     srv_db *db;

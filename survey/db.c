@@ -344,9 +344,11 @@ static gs_status open_at(const char *path, srv_db_mode mode, int target, srv_db 
 {
     *out = NULL;
     if (!path || !*path) return gs_fail(GS_EINVAL, "survey database: empty path");
-    if (mode != SRV_DB_READ && mode != SRV_DB_WRITE && mode != SRV_DB_CREATE)
-        return gs_fail(GS_EINVAL, "%s: open mode %d: expected SRV_DB_READ, _WRITE or _CREATE", path,
-                       (int)mode);
+    if (!strcmp(path, "-"))
+        return gs_fail(GS_EINVAL, "--db -: a survey database is a file, not standard input or output");
+    if (mode != SRV_DB_READ && mode != SRV_DB_WRITE && mode != SRV_DB_CREATE && mode != SRV_DB_INIT)
+        return gs_fail(GS_EINVAL, "%s: open mode %d: expected SRV_DB_READ, _WRITE, _CREATE or _INIT",
+                       path, (int)mode);
     struct stat st;
     int exists = stat(path, &st) == 0;
     db_kind kind = KIND_EMPTY;
@@ -356,16 +358,37 @@ static gs_status open_at(const char *path, srv_db_mode mode, int target, srv_db 
         if (errno != ENOENT)
             return gs_fail(GS_EIO, "%s: cannot %s the survey database: %s", path,
                            mode == SRV_DB_CREATE ? "create" : "open", strerror(errno));
-        if (mode != SRV_DB_CREATE)
+        if (mode != SRV_DB_CREATE && mode != SRV_DB_INIT)
             return gs_fail(GS_ENOTFOUND, "%s: no such survey database (create one with `gridsurvey "
                            "db init --db %s`)", path, path);
+        /* built complete under a temporary name, then renamed: no half-made file under path */
+        gs_atomic a;
+        if (gs_atomic_open(&a, path, 0) != GS_OK) {
+            char msg[512];
+            snprintf(msg, sizeof msg, "%s", gs_detail());
+            return gs_fail(GS_EIO, "cannot create the survey database: %s", msg);
+        }
+        srv_db *fresh = NULL;
+        s = open_at(a.tmp, SRV_DB_INIT, target, &fresh);
+        srv_db_close(fresh);
+        if (s == GS_OK) s = gs_atomic_commit(&a);
+        else gs_atomic_abort(&a);
+        if (s != GS_OK) return s;
+        if ((s = open_at(path, SRV_DB_WRITE, target, out)) != GS_OK) {
+            remove_created(path);
+            return s;
+        }
+        (*out)->created = 1;
+        return GS_OK;
     } else {
         if (!S_ISREG(st.st_mode))
             return gs_fail(GS_EIO, "%s: not a regular file: %s", path, expected_text());
         if ((s = identify(path, st.st_size, &kind, &version)) != GS_OK) return s;
-        if (kind == KIND_EMPTY && mode == SRV_DB_READ)
-            return gs_fail(GS_EFORMAT, "%s: an empty file, not yet a survey database: %s", path,
-                           expected_text());
+        /* one rule for every command: only `db init` makes an empty file a survey database */
+        if (kind == KIND_EMPTY && mode != SRV_DB_INIT)
+            return gs_fail(GS_EFORMAT, "%s: an empty file (%s), not a survey database: %s; remove "
+                           "it, or make it one with `gridsurvey db init --db %s`", path,
+                           st.st_size ? "SQLite without a schema" : "0 bytes", expected_text(), path);
         if (kind == KIND_SURVEY && version < target && mode == SRV_DB_READ)
             return gs_fail(GS_EFORMAT, "%s: survey database schema version %d is older than this "
                            "gridsurvey's %d: migrate it with `gridsurvey db migrate --db %s`", path,
@@ -377,19 +400,17 @@ static gs_status open_at(const char *path, srv_db_mode mode, int target, srv_db 
         return gs_fail(GS_ENOMEM, "%s: out of memory", path);
     }
     db->readonly = mode == SRV_DB_READ;
-    int flags = db->readonly ? SQLITE_OPEN_READONLY
-                             : SQLITE_OPEN_READWRITE | (exists ? 0 : SQLITE_OPEN_CREATE);
-    int created = 0;
+    /* (the file exists: a new one was made above, under a temporary name) */
+    int flags = db->readonly ? SQLITE_OPEN_READONLY : SQLITE_OPEN_READWRITE;
     if (sqlite3_open_v2(path, &db->db, flags | SQLITE_OPEN_NOMUTEX, NULL) != SQLITE_OK) {
         int sys = db->db ? sqlite3_system_errno(db->db) : 0;
         if (sqlite3_errcode(db->db) == SQLITE_CANTOPEN)
-            s = gs_fail(GS_EIO, "%s: cannot %s the survey database: %s", path,
-                        exists ? "open" : "create", sys ? strerror(sys) : sqlite3_errmsg(db->db));
+            s = gs_fail(GS_EIO, "%s: cannot open the survey database: %s", path,
+                        sys ? strerror(sys) : sqlite3_errmsg(db->db));
         else
             s = sql_fail(db->db, path, "open");
         goto fail;
     }
-    created = !exists;
     if (!db->readonly && sqlite3_db_readonly(db->db, "main") == 1) {
         s = gs_fail(GS_EIO, "%s: the file is read-only: cannot open the survey database for writing",
                     path);
@@ -428,7 +449,6 @@ fail:
         char msg[512];
         snprintf(msg, sizeof msg, "%s", gs_detail());
         srv_db_close(db);
-        if (created) remove_created(path);
         return gs_fail(s, "%s", msg);
     }
 }
@@ -449,6 +469,16 @@ gs_status srv_db_create_at_version(const char *path, int version)
     gs_status s = open_at(path, SRV_DB_CREATE, version, &db);
     srv_db_close(db);
     return s;
+}
+
+void srv_db_close_discard(srv_db *db)
+{
+    if (!db) return;
+    int created = db->created;
+    char *path = created ? strdup(db->path) : NULL;
+    srv_db_close(db);
+    if (path) remove_created(path);
+    free(path);
 }
 
 void srv_db_close(srv_db *db)

@@ -368,8 +368,9 @@ gs_status srv_evaluate(srv_db *db, const char *truth_path, const srv_eval_opts *
     memset(r, 0, sizeof *r);
     r->match_px = o->match_px;
     r->loc_median_m = r->loc_p95_m = r->loc_max_m = NAN;
-    if (!(o->match_px > 0.0) || !isfinite(o->match_px))
-        return gs_fail(GS_EINVAL, "--match-px %g: expected a finite radius > 0 pixels", o->match_px);
+    if (!(o->match_px > 0.0 && o->match_px <= SRV_MATCH_PX_MAX))
+        return gs_fail(GS_EINVAL, "--match-px %g: expected a radius > 0 and <= %g pixels", o->match_px,
+                       SRV_MATCH_PX_MAX);
     ev_light *tr = NULL, *st = NULL;
     size_t nt = 0, ns = 0;
     double *err = NULL;

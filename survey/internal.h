@@ -75,6 +75,10 @@ gs_status srv_render_time(const cap_scene *sc, unsigned effects_mask, int frames
                           srv_render_time_result *out);
 
 /* Print "gridsurvey: STATUS: DETAIL" on stderr and return 1. */
+/* Where a command's confirmation line goes: stderr when its output is "-" (stdout). */
+FILE *srv_note_stream(const char *out);
+/* A usage error's hint line, after the one line that says what is wrong: returns 2. */
+int srv_usage_hint(const char *cmd);
 int srv_error(gs_status s);
 
 /* An evaluation (survey/evaluate.c) as Markdown tables or a gridsurvey-evaluation/1 JSON
@@ -105,6 +109,7 @@ struct srv_db {
     sqlite3 *db;
     char *path;
     int readonly;
+    int created;                /* this handle created the file */
     int wal;                    /* this handle switched the file to WAL */
     int in_txn;
     sqlite3_stmt *st[ST_COUNT];

@@ -173,8 +173,9 @@ static gs_status check_opts(const srv_run_opts *o)
         !(o->light_height_m >= GIS_MIN_HEIGHT_M && o->light_height_m <= GIS_MAX_HEIGHT_M))
         return gs_fail(GS_EINVAL, "--light-height-m %g: expected a height above the WGS84 ellipsoid "
                        "from %g to %g m", o->light_height_m, GIS_MIN_HEIGHT_M, GIS_MAX_HEIGHT_M);
-    if (o->survey && (!*o->survey || strlen(o->survey) > 63))
-        return gs_fail(GS_EINVAL, "--survey '%s': expected a name of 1 to 63 bytes", o->survey);
+    if (o->survey && (!*o->survey || strlen(o->survey) > 63 || !gs_text_clean(o->survey)))
+        return gs_fail(GS_EINVAL, "--survey: expected a name of 1 to 63 bytes of UTF-8 without "
+                       "control characters");
     return GS_OK;
 }
 
@@ -281,6 +282,13 @@ static gs_status open_input(const srv_run_opts *o, srv_run_report *r, cap_scene 
         gs_path_base(o->input, 0, base, sizeof base);
         set_name(r->survey, o->survey ? o->survey : base);
     }
+    /* the one rule of every export, checked once here (the name is not echoed: it may hold
+     * terminal escapes) */
+    if (!gs_text_clean(r->survey))
+        return gs_fail(GS_EFORMAT, "%s: the survey name (%s) is not UTF-8 text without control "
+                       "characters: give --survey NAME", o->input,
+                       o->survey ? "--survey" : r->scene && sc->name[0] ? "the scene's name"
+                       : r->scene ? "the scene file's name" : "the capture directory's name");
     if (station_json && !o->station_path) {
         if ((s = gis_station_parse(station_json, src, &r->station)) != GS_OK) return s;
         r->has_station = 1;
@@ -442,7 +450,8 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
 
 done:
     srv_job_release(&j);
-    srv_db_close(db);
+    if (s == GS_OK) srv_db_close(db);
+    else srv_db_close_discard(db);   /* a database this failed run created goes again */
     cap_backend_free(be);
     if (have_scene) cap_scene_release(&sc);
     return s;

@@ -254,6 +254,20 @@ static double column_real(sqlite3_stmt *q, int i)
     return sqlite3_column_type(q, i) == SQLITE_NULL ? NAN : sqlite3_column_double(q, i);
 }
 
+/* A stored position is NULL (not located) or numbers in range: a tampered database with text
+ * or out-of-range coordinates is refused rather than fed to floor() and an integer cast. */
+static gs_status check_position(sqlite3_stmt *q, const char *path, double lat, double lon)
+{
+    int tl = sqlite3_column_type(q, 4), tn = sqlite3_column_type(q, 5);
+    if (tl == SQLITE_NULL && tn == SQLITE_NULL) return GS_OK;
+    int num = (tl == SQLITE_FLOAT || tl == SQLITE_INTEGER) && (tn == SQLITE_FLOAT || tn == SQLITE_INTEGER);
+    if (num && fabs(lat) <= 90.0 && fabs(lon) <= 540.0) return GS_OK;
+    const char *lt = (const char *)sqlite3_column_text(q, 4), *nt = (const char *)sqlite3_column_text(q, 5);
+    return gs_fail(GS_EFORMAT, "%s: locations.lat_deg, lon_deg = '%.40s', '%.40s': expected a latitude "
+                   "in [-90, 90] and a longitude in [-540, 540] degrees, or NULL", path,
+                   lt ? lt : "NULL", nt ? nt : "NULL");
+}
+
 gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats **groups,
                             size_t *count, long *ungrouped)
 {
@@ -318,6 +332,7 @@ gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats
     while ((rc = sqlite3_step(q)) == SQLITE_ROW) {
         double phase = column_real(q, 2), conf = sqlite3_column_double(q, 3);
         double lat = column_real(q, 4), lon = column_real(q, 5);
+        if ((s = check_position(q, path, lat, lon)) != GS_OK) goto done;
         switch (o->by) {
         case SRV_BY_ALL: break;
         case SRV_BY_RADIUS:
@@ -377,8 +392,8 @@ gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats
             add_light(&g->g, rows[i].phase, rows[i].conf, o->min_confidence);
         }
     }
-    qsort(gs.v, gs.n, sizeof *gs.v, o->by == SRV_BY_CELL ? cmp_cells : cmp_groups);
-    if (gs.n) {
+    if (gs.n) {   /* (no groups: gs.v is NULL, which qsort may not be given) */
+        qsort(gs.v, gs.n, sizeof *gs.v, o->by == SRV_BY_CELL ? cmp_cells : cmp_groups);
         *groups = malloc(gs.n * sizeof **groups);
         if (!*groups) {
             s = gs_fail(GS_ENOMEM, "stats: out of memory for %zu groups", gs.n);

@@ -57,17 +57,24 @@ struct sqlite3;
 typedef enum {
     SRV_DB_READ,     /* read-only (SQLITE_OPEN_READONLY): every write fails with GS_EIO */
     SRV_DB_WRITE,    /* read-write; the file must exist; an older schema is migrated */
-    SRV_DB_CREATE    /* read-write; a missing file is created (never its directory) */
+    SRV_DB_CREATE,   /* read-write; a missing file is created (never its directory) */
+    SRV_DB_INIT      /* as _CREATE, and an existing empty file (0 bytes, or SQLite without a
+                      * schema) is made a survey database: `db init` only */
 } srv_db_mode;
 
 /* Open (or create) a survey database. Errors, all one line naming path: GS_ENOTFOUND (missing
- * file and mode != SRV_DB_CREATE), GS_EIO (cannot open or create: missing directory, parent
+ * file and mode READ or WRITE), GS_EIO (cannot open or create: missing directory, parent
  * that is not a directory, no permission; a read-only file opened for writing), GS_EFORMAT (not
- * a survey database, or a newer / older schema as above), GS_ESQL. On any error nothing is
- * left on disk that was not there before (a file created by this call is removed). */
+ * a survey database, or a newer / older schema as above; an empty file unless SRV_DB_INIT),
+ * GS_ESQL. A new file is created complete under a temporary name and renamed into place, so a
+ * killed creation leaves no file under path. On any error nothing is left on disk that was not
+ * there before (a file created by this call is removed). */
 gs_status srv_db_open(const char *path, srv_db_mode mode, srv_db **out);
 /* Roll back an open transaction, finalize statements, close. Accepts NULL. */
 void srv_db_close(srv_db *db);
+/* srv_db_close, then remove the file if this handle created it (a failed job leaves no new
+ * database behind). Accepts NULL. */
+void srv_db_close_discard(srv_db *db);
 /* The path given to srv_db_open (borrowed). */
 const char *srv_db_path(const srv_db *db);
 /* The SQLite connection, borrowed, for read queries (views, tests). Write through the API. */
@@ -516,11 +523,14 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r);
  * Evaluation against a simulator's truth (survey/evaluate.c; definitions in docs/pipeline.md)
  * ===================================================================================== */
 
+/* The largest match radius: a light is a few pixels wide, and the matching's cost grows with
+ * the radius squared (a huge radius made every pair a candidate). */
+#define SRV_MATCH_PX_MAX 64.0
 typedef struct {
     const char *survey;          /* NULL: any survey */
     const char *capture_key;     /* NULL: the capture whose stored path is the truth file's
                                   * directory, else the only capture of the selection */
-    double match_px;             /* match radius, pixels, finite and > 0 (2) */
+    double match_px;             /* match radius, pixels, in (0, SRV_MATCH_PX_MAX] (2) */
 } srv_eval_opts;
 void srv_eval_opts_default(srv_eval_opts *o);
 

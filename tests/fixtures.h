@@ -35,7 +35,8 @@ int fx_contains(const char *hay, const char *needle);
 
 /* ------------------------------------------------------------------ commands */
 
-/* 1 in the sanitizer pass (GS_SAN starts with 1; `make test-asan` sets GS_SAN=1): tests that
+/* 1 in a sanitizer pass (GS_SAN set and not "0": `make test-asan` sets 1, `make test-clang`
+ * clang): tests that
  * scale their work down under ASan read it. */
 int fx_sanitized(void);
 

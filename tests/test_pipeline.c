@@ -479,8 +479,8 @@ static void check_after_kill(const char *db, int kill_no)
     CHECK_MSG(!strcmp(ok, "ok"), "kill %d: integrity_check: %s", kill_no, *ok ? ok : "(none)");
     static const char *const zero[] = {
         "SELECT count(*) FROM pragma_foreign_key_check",
-        "SELECT count(*) FROM captures c WHERE light_count != (SELECT count(*) FROM lights WHERE "
-        "capture_id = c.id) OR frame_count != (SELECT count(*) FROM frames WHERE capture_id = c.id)",
+        ("SELECT count(*) FROM captures c WHERE light_count != (SELECT count(*) FROM lights WHERE "
+         "capture_id = c.id) OR frame_count != (SELECT count(*) FROM frames WHERE capture_id = c.id)"),
         "SELECT count(*) > 1 FROM captures",
     };
     for (size_t k = 0; survey_fx_has(h, "captures") && k < sizeof zero / sizeof *zero; k++) {

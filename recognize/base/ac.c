@@ -383,10 +383,12 @@ gs_status gs_mains_read(const char *path, double **x, size_t *n, double *rate_hz
     *x = NULL;
     *n = 0;
     *rate_hz = 0;
+    gs_status st = gs_input_check(path);   /* libsndfile reads by name: a regular file */
+    if (st != GS_OK) return st;
     FILE *f = fopen(path, "rb");
     if (!f) return gs_fail(GS_EIO, "%s: cannot open: %s", path, strerror(errno));
     long size = fseek(f, 0, SEEK_END) == 0 ? ftell(f) : -1;
-    gs_status st = size < 0 ? gs_fail(GS_EIO, "%s: cannot determine the file size", path)
+    st = size < 0 ? gs_fail(GS_EIO, "%s: cannot determine the file size", path)
                    : size == 0 ? gs_fail(GS_EFORMAT, "%s: empty file (0 bytes): expected an audio file", path)
                    : riff_check(path, f, size);
     fclose(f);

@@ -58,6 +58,14 @@ void gs_path_base(const char *path, int strip_ext, char *buf, size_t size);
  * GS_ELIMIT beyond max_bytes (0: GS_FILE_MAX_DEFAULT); the detail names the file. */
 #define GS_FILE_MAX_DEFAULT ((size_t)1 << 30)
 gs_status gs_file_read(const char *path, size_t max_bytes, char **data, size_t *size);
+/* Inputs: "-" is stdin; anything else must be a regular file (a symlink to one is fine): a
+ * FIFO, device or directory is refused before anything is read (a FIFO without waiting for a
+ * writer). gs_input_open sets *size to the file's size (-1 for stdin) unless NULL;
+ * gs_input_close leaves stdin open. gs_input_check is for readers that open by name (SQLite,
+ * libtiff, libsndfile), which cannot read stdin. */
+gs_status gs_input_open(const char *path, FILE **f, long long *size);
+void gs_input_close(FILE *f);
+gs_status gs_input_check(const char *path);
 /* SHA-256 (FIPS 180-4, nettle) of data[0..n), or of the file at path (streamed), as 64
  * lower-case hex digits + NUL. */
 void gs_sha256_hex(const void *data, size_t n, char hex[65]);
@@ -65,14 +73,29 @@ gs_status gs_sha256_file(const char *path, char hex[65]);
 /* Create dir if it does not exist (one level). */
 gs_status gs_dir_ensure(const char *dir);
 
+/* The memory budget (recognize/base/kit_mem.c): gs_mem_check fails with GS_ELIMIT, "WHAT need
+ * N MiB: more than the memory budget of B MiB ...", when bytes exceed it; call it before an
+ * allocation an input's declared size decides. Default half the physical RAM (and at most half
+ * of RLIMIT_AS), else GS_MAX_MEMORY, else what gs_mem_budget_set gave (0: the default).
+ * gs_mem_parse reads "4G", "512M", "1.5G", "1048576" (K, M, G, T: powers of 1024; >= 1M). */
+gs_status gs_mem_parse(const char *text, size_t *bytes);
+void gs_mem_budget_set(size_t bytes);
+size_t gs_mem_budget(void);
+gs_status gs_mem_check(double bytes, const char *what);
+
 /* Atomic replacement of a file: gs_atomic_open creates ".NAME.tmp.PID.SEQ" beside path (with a
  * stdio stream in f when want_stream, else for writing by name through tmp), gs_atomic_commit
  * flushes, fsyncs and renames it over path, gs_atomic_abort (accepts NULL) removes it. Readers
- * see the old file or the new one, never a partial one. */
+ * see the old file or the new one, never a partial one. Unix filter rules: path "-" is stdout; a
+ * symlink to a regular file has its target replaced (the link stays); an existing device, FIFO
+ * or dangling symlink is written through (opened, never replaced; no atomicity); for by-name
+ * writers those get a scratch file in $TMPDIR that commit copies to the target. */
 typedef struct {
     char path[4096];
     char tmp[4200];
     FILE *f;
+    int direct;   /* write-through target (internal) */
+    int out_fd;   /* its descriptor while tmp is a scratch file (internal) */
 } gs_atomic;
 gs_status gs_atomic_open(gs_atomic *a, const char *path, int want_stream);
 gs_status gs_atomic_commit(gs_atomic *a);
@@ -137,6 +160,9 @@ typedef struct {
     size_t n, cap;
     int oom;
 } gs_text;
+/* 1 if s is UTF-8 without control characters (C0, DEL): the one rule for names that reach a
+ * terminal, a database and every export (survey names, light ids). */
+int gs_text_clean(const char *s);
 void gs_text_printf(gs_text *t, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 /* A JSON string literal of s. */
 void gs_text_json_string(gs_text *t, const char *s);
@@ -551,6 +577,12 @@ typedef struct {
  * frame PNG that is truncated, not 16-bit, of the wrong colour type or size (the detail names
  * the file and the capture.json line that names it). */
 gs_status gs_capture_read(const char *dir, gs_capture *cap);
+/* Before allocating, gs_capture_read also checks that every named file is a regular file no
+ * larger than a PNG of the declared size, and that the samples plus the working images of
+ * recognition (these bytes per pixel and per sample, upper bounds of the peak resident memory
+ * measured in docs/reliability.md) fit gs_mem_check's budget (GS_ELIMIT). */
+#define GS_WORK_BYTES_PER_PIXEL 27
+#define GS_WORK_BYTES_PER_SAMPLE 1
 /* For a zeroed capture whose K, bands, width and height are set (GS_EINVAL otherwise, or if
  * frames, raw or halvings are already set): allocate frames (file "frame_NNN.png", k, cycles 0:
  * set them, hdr_map "", grid_hz_measured and start_s NaN) and zeroed raw pixels. */

@@ -188,6 +188,53 @@ static gs_status parse_capture(reader *r, gs_capture *cap)
     return bad_field(r, field, pr.expect);
 }
 
+/* The largest PNG file of that image we accept: twice its samples plus 1 MiB (deflate's
+ * stored blocks, row filters and chunk headers add far less), so that a frame file cannot be
+ * larger than any PNG of its declared size. */
+static size_t png_max_bytes(int width, int height, int channels, int bits)
+{
+    return 2 * (size_t)width * (size_t)height * (size_t)channels * (size_t)(bits / 8) + ((size_t)1 << 20);
+}
+
+static void file_ref(const reader *r, char *ref, size_t cap, const char *fmt, int i);
+
+/* Before anything is allocated: every file the capture names is a regular file no larger than
+ * a PNG of the declared size, and the pixels plus recognition's working images fit the memory
+ * budget (gs_mem_check). */
+static gs_status check_before_reading(const char *dir, const reader *r, const gs_capture *cap,
+                                      const char *json_path)
+{
+    char path[PATH_BUF], ref[160];
+    int maps = 0;
+    for (int k = 0; k < cap->K; k++)
+        for (int m = 0; m < 2; m++) {
+            const char *file = m ? cap->frames[k].hdr_map : cap->frames[k].file;
+            if (!file[0]) continue;
+            maps += m;
+            file_ref(r, ref, sizeof ref, m ? "frames[%d].hdr_map" : "frames[%d].file", r->pos[k]);
+            if (!gs_path_join(path, sizeof path, dir, file))
+                return gs_fail(GS_EINVAL, "%s/%s: path too long", dir, file);
+            gs_status st = gs_input_check(path);
+            if (st != GS_OK) return gs_fail(st, "%s%s", gs_detail(), ref);
+            struct stat sb;
+            size_t max = m ? png_max_bytes(cap->width, cap->height, 1, 8)
+                           : png_max_bytes(cap->width, cap->height, cap->bands, 16);
+            if (stat(path, &sb) == 0 && (size_t)sb.st_size > max)
+                return gs_fail(GS_EFORMAT, "%s: %lld bytes: larger than any PNG of %dx%d pixels "
+                               "(at most %zu bytes)%s", path, (long long)sb.st_size, cap->width,
+                               cap->height, max, ref);
+        }
+    double plane = (double)cap->width * (double)cap->height;
+    double samples = plane * cap->K * cap->bands;
+    double bytes = samples * ((double)sizeof *cap->raw + GS_WORK_BYTES_PER_SAMPLE) +
+                   plane * cap->K * (maps ? 1.0 : 0.0) + plane * GS_WORK_BYTES_PER_PIXEL;
+    char what[PATH_BUF + 200];
+    snprintf(what, sizeof what, "%s: %d frames of %dx%dx%d samples and the working images of "
+             "their processing (%d B per pixel, %d per sample)", json_path, cap->K, cap->width,
+             cap->height, cap->bands, GS_WORK_BYTES_PER_PIXEL, GS_WORK_BYTES_PER_SAMPLE);
+    return gs_mem_check(bytes, what);
+}
+
 /* Read dir/file, which must be a width x height PNG of `channels` channels (grey or RGB) with
  * `bits` bits per sample, into out (R, G, B order). */
 static gs_status read_png(const char *dir, const char *file, const char *ref, int width,
@@ -198,7 +245,7 @@ static gs_status read_png(const char *dir, const char *file, const char *ref, in
         return gs_fail(GS_EINVAL, "%s/%s: path too long", dir, file);
     char *buf;
     size_t n;
-    gs_status st = gs_file_read(path, 0, &buf, &n);
+    gs_status st = gs_file_read(path, png_max_bytes(width, height, channels, bits), &buf, &n);
     if (st != GS_OK) return gs_fail(st, "%s%s", gs_detail(), ref);
     st = gs_png_decode((const unsigned char *)buf, n, path, ref, width, height, channels, bits, out);
     free(buf);
@@ -227,6 +274,7 @@ gs_status gs_capture_read(const char *dir, gs_capture *cap)
     if (st != GS_OK) return st;
     r.doc = doc;
     st = parse_capture(&r, cap);
+    if (st == GS_OK) st = check_before_reading(dir, &r, cap, json_path);
 
     /* the pixels: frames in k order, then the HDR maps */
     size_t plane = (size_t)cap->width * (size_t)cap->height;

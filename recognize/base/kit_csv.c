@@ -59,44 +59,34 @@ static void on_row(int term, void *data)
 
 gs_status gs_csv_read(const char *path, size_t max_bytes, gs_csv_row_fn fn, void *ctx)
 {
-    if (!max_bytes) max_bytes = GS_FILE_MAX_DEFAULT;
-    FILE *in = fopen(path, "rb");
-    if (!in) {
-        int e = errno;
-        return gs_fail(e == ENOENT ? GS_ENOTFOUND : GS_EIO, "%s: cannot open: %s", path, strerror(e));
-    }
+    /* the whole file first (gs_file_read: "-" is stdin, the size cap holds before a line is
+     * parsed, so a file without newlines cannot grow a line without bound) */
+    char *text;
+    size_t size;
+    gs_status st = gs_file_read(path, max_bytes, &text, &size);
+    if (st != GS_OK) return st;
     struct csv_parser p;
     if (csv_init(&p, CSV_APPEND_NULL) != 0) {
-        fclose(in);
+        free(text);
         return gs_fail(GS_ENOMEM, "%s: cannot start a CSV parser", path);
     }
     csv_reader r = {.path = path, .fn = fn, .ctx = ctx};
-    char *line = NULL;
-    size_t line_cap = 0, total = 0;
-    ssize_t len;
-    while (r.st == GS_OK && (len = getline(&line, &line_cap, in)) >= 0) {
+    const char *s = text, *end = text + size;
+    if (size >= 3 && !memcmp(s, "\xEF\xBB\xBF", 3)) s += 3;
+    while (r.st == GS_OK && s < end) {
+        const char *nl = memchr(s, '\n', (size_t)(end - s));
+        size_t len = nl ? (size_t)(nl - s) + 1 : (size_t)(end - s);
         r.line++;
-        total += (size_t)len;
-        if (total > max_bytes) {
-            r.st = gs_fail(GS_ELIMIT, "%s: larger than %zu bytes", path, max_bytes);
-            break;
-        }
-        const char *s = line;
-        if (r.line == 1 && len >= 3 && !memcmp(s, "\xEF\xBB\xBF", 3)) {
-            s += 3;
-            len -= 3;
-        }
-        if (csv_parse(&p, s, (size_t)len, on_field, on_row, &r) != (size_t)len && r.st == GS_OK)
+        if (csv_parse(&p, s, len, on_field, on_row, &r) != len && r.st == GS_OK)
             r.st = gs_fail(GS_EFORMAT, "%s:%zu: CSV syntax: %s", path, r.line,
                            csv_strerror(csv_error(&p)));
+        s += len;
     }
-    if (r.st == GS_OK && ferror(in)) r.st = gs_fail(GS_EIO, "%s: read error", path);
     if (r.st == GS_OK) csv_fini(&p, on_field, on_row, &r);   /* a last row without a newline */
     clear_row(&r);
     free(r.f);
-    free(line);
+    free(text);
     csv_free(&p);
-    fclose(in);
     return r.st;
 }
 

@@ -533,3 +533,22 @@ void gs_text_json(gs_text *t, json_t *v)
 {
     text_json(t, v, 0);
 }
+
+int gs_text_clean(const char *s)
+{
+    const unsigned char *p = (const unsigned char *)s;
+    while (*p) {
+        unsigned c = *p;
+        int extra;
+        if (c < 0x20 || c == 0x7f) return 0;
+        if (c < 0x80) extra = 0;
+        else if (c >= 0xc2 && c <= 0xdf) extra = 1;
+        else if (c >= 0xe0 && c <= 0xef) extra = 2;
+        else if (c >= 0xf0 && c <= 0xf4) extra = 3;
+        else return 0;
+        p++;
+        for (int i = 0; i < extra; i++, p++)
+            if ((*p & 0xc0) != 0x80) return 0;
+    }
+    return 1;
+}

@@ -74,6 +74,7 @@ static size_t header_run_in(char **f, size_t count)
 {
     if (count < 3 || count % 2 == 0) return 0;
     char *mid = f[count / 2];
+    if (!*mid) return 0;   /* (an empty field: mid + 1 would be past its end; found by fuzz_recording) */
     for (char *s = mid + 1; *s; s++) {   /* longest numeric suffix, non-empty prefix */
         double v;
         if (strchr("+-.0123456789", *s) && number(s, &v)) {

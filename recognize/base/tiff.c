@@ -79,9 +79,8 @@ gs_status gs_tiff_read_float(const char *path, int *width, int *height, int *ban
     *pix = NULL;
     *width = *height = *bands = *pages = 0;
     tiff_quiet();
-    FILE *probe = fopen(path, "rb");
-    if (!probe) return gs_fail(GS_ENOTFOUND, "%s: no such TIFF file", path);
-    fclose(probe);
+    gs_status in = gs_input_check(path);   /* libtiff reads by name: a regular file */
+    if (in != GS_OK) return in;
     TIFF *t = TIFFOpen(path, "r");
     if (!t) return gs_fail(GS_EFORMAT, "%s: not a TIFF file: %s", path, tiff_msg);
     int np = 0;
