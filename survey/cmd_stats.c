@@ -12,6 +12,7 @@
 static const char stats_usage[] =
     "usage: gridsurvey stats --db DB [--by technology|survey|all|cell:SIZE_m|radius:LAT,LON,R_m]\n"
     "                        [--survey NAME] [--min-confidence X] [--format table|json|csv]\n"
+    "                        [--detections]\n"
     "\n"
     "Phase balance of the surveyed lights: per group, the lights on each grid phase (0, 120,\n"
     "240 deg, within 20 deg), their shares with 95 % Wilson intervals, a chi-square test of the\n"
@@ -28,6 +29,9 @@ static const char stats_usage[] =
     "  --min-confidence X  leave out lights whose phase confidence (posterior of the phase)\n"
     "                      is below X, in [0, 1] (default 0)\n"
     "  --format F          table (Markdown, default), json or csv\n"
+    "  --detections        count every stored detection; by default a light seen on several\n"
+    "                      nights or captures (one light site) counts once, its detections'\n"
+    "                      posteriors combined (docs/survey-db.md, \"Light sites\")\n"
     "  --help              this text\n";
 
 typedef enum { FMT_TABLE, FMT_JSON, FMT_CSV } out_format;
@@ -172,7 +176,7 @@ int srv_cmd_stats(int argc, char **argv)
         {"db", required_argument, 0, 'd'},     {"by", required_argument, 0, 'b'},
         {"survey", required_argument, 0, 'S'}, {"min-confidence", required_argument, 0, 'c'},
         {"format", required_argument, 0, 'f'}, {"help", no_argument, 0, 'h'},
-        {0, 0, 0, 0},
+        {"detections", no_argument, 0, 'D'},   {0, 0, 0, 0},
     };
     const char *path = NULL;
     srv_stats_opts o;
@@ -207,6 +211,7 @@ int srv_cmd_stats(int argc, char **argv)
                 return 2;
             }
             break;
+        case 'D': o.detections = 1; break;
         case 'h': fputs(stats_usage, stdout); return 0;
         default: fputs(stats_usage, stderr); return 2;
         }

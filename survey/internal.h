@@ -127,6 +127,11 @@ gs_status srv_dbi_writable(srv_db *db);
 gs_status srv_dbi_need_txn(srv_db *db, const char *what);
 gs_status srv_dbi_auto_begin(srv_db *db, int *began);
 gs_status srv_dbi_auto_end(srv_db *db, int began, gs_status s);
+/* Associate one capture's new detections (sites.c; called inside its transaction). */
+gs_status srv_dbi_associate_capture(srv_db *db, int64_t capture_id, long *created, long *joined);
+/* Fill o from the 8 columns bulb_id, technology, phase_deg, phase_sigma_deg, confidence,
+ * bulb_confidence, phase_confidence, DELIGHT bulbs starting at column first. */
+void srv_site_obs_from_row(sqlite3_stmt *q, int first, srv_site_obs *o);
 /* ====================================================================== end of the database */
 
 /* ============================= `bench accuracy` (bench_accuracy*.c), shared between its files */

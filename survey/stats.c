@@ -227,32 +227,35 @@ typedef struct {
     double lat, lon, phase, conf;
 } cell_row;
 
-/* SELECT survey, technology, phase_deg, phase_confidence, lat_deg, lon_deg: only the joins a
- * grouping needs (a 1e6-light scan of lights alone is 3x faster than with every join). */
-static const char scan_full_sql[] =
-    "SELECT s.name, l.technology, l.phase_deg, l.phase_confidence, loc.lat_deg, loc.lon_deg "
+/* One row per detection, grouped by light site (docs/survey-db.md, "Light sites"): a detection
+ * not associated (a database written before migration 3 and not yet migrated by `db migrate`)
+ * is a site of its own, and so is every detection with opts.detections. The site's position; its recognition combined in C (srv_site_combine)
+ * over the selected detections only (those of --survey, or per survey with --by survey). */
+static const char scan_sql[] =
+    "SELECT CASE WHEN ?2 THEN -l.id ELSE coalesce(sd.site_id, -l.id) END, s.name, l.bulb_id, "
+    "l.technology, l.phase_deg, l.phase_sigma_deg, l.confidence, l.bulb_confidence, "
+    "l.phase_confidence, dv.bulbs, CASE WHEN ?2 THEN loc.lat_deg ELSE coalesce(ls.lat_deg, "
+    "loc.lat_deg) END, CASE WHEN ?2 THEN loc.lon_deg ELSE coalesce(ls.lon_deg, loc.lon_deg) END "
     "FROM lights l JOIN captures c ON c.id = l.capture_id JOIN surveys s ON s.id = c.survey_id "
-    "LEFT JOIN locations loc ON loc.light_id = l.id WHERE (?1 IS NULL OR s.name = ?1)";
-static const char scan_survey_sql[] =
-    "SELECT s.name, l.technology, l.phase_deg, l.phase_confidence, NULL, NULL "
-    "FROM lights l JOIN captures c ON c.id = l.capture_id JOIN surveys s ON s.id = c.survey_id "
-    "WHERE (?1 IS NULL OR s.name = ?1)";
-static const char scan_lights_sql[] =
-    "SELECT NULL, l.technology, l.phase_deg, l.phase_confidence, NULL, NULL FROM lights l "
-    "WHERE ?1 IS NULL";
-/* The R*Tree first (CROSS JOIN fixes the join order), then the exact distance in C. */
-static const char radius_sql[] =
-    "SELECT s.name, l.technology, l.phase_deg, l.phase_confidence, loc.lat_deg, loc.lon_deg "
-    "FROM locations_rtree r CROSS JOIN locations loc ON loc.light_id = r.id "
-    "CROSS JOIN lights l ON l.id = r.id CROSS JOIN captures c ON c.id = l.capture_id "
-    "CROSS JOIN surveys s ON s.id = c.survey_id "
-    "WHERE r.max_lat >= ?2 AND r.min_lat <= ?3 AND r.max_lon >= ?4 AND r.min_lon <= ?5 "
-    "AND (?1 IS NULL OR s.name = ?1)";
+    "LEFT JOIN delight_versions dv ON dv.id = c.delight_id "
+    "LEFT JOIN site_detections sd ON sd.light_id = l.id LEFT JOIN light_sites ls ON ls.id = sd.site_id "
+    "LEFT JOIN locations loc ON loc.light_id = l.id WHERE (?1 IS NULL OR s.name = ?1) ";
+static const char order_site_sql[] = "ORDER BY 1";
+static const char order_survey_sql[] = "ORDER BY 2, 1";
 
 static double column_real(sqlite3_stmt *q, int i)
 {
     return sqlite3_column_type(q, i) == SQLITE_NULL ? NAN : sqlite3_column_double(q, i);
 }
+
+/* A site being accumulated from its detections' rows. */
+typedef struct {
+    int64_t id;
+    char survey[64];
+    double lat, lon;
+    srv_site_obs obs[SRV_SITE_MAX_OBS];
+    size_t n;
+} site_acc;
 
 gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats **groups,
                             size_t *count, long *ungrouped)
@@ -277,35 +280,19 @@ gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats
     size_t nrows = 0, caprows = 0;
     long no_position = 0;
     gs_status s = GS_OK;
-    const char *sql = o->by == SRV_BY_RADIUS ? radius_sql
-                    : o->by == SRV_BY_CELL ? scan_full_sql
-                    : o->by == SRV_BY_SURVEY || o->survey ? scan_survey_sql
-                    : scan_lights_sql;
+    site_acc *acc = calloc(1, sizeof *acc);
+    char sql[sizeof scan_sql + 32];
+    snprintf(sql, sizeof sql, "%s%s", scan_sql, o->by == SRV_BY_SURVEY ? order_survey_sql : order_site_sql);
+    if (!acc) {
+        s = gs_fail(GS_ENOMEM, "stats: out of memory");
+        goto done;
+    }
     if (sqlite3_prepare_v2(h, sql, -1, &q, NULL) != SQLITE_OK) {
         s = gs_fail(GS_ESQL, "%s: statistics query: %s", path, sqlite3_errmsg(h));
         goto done;
     }
     if (o->survey) sqlite3_bind_text(q, 1, o->survey, -1, SQLITE_STATIC);
-    if (o->by == SRV_BY_RADIUS) {
-        /* the circle's latitude/longitude box, 1 % larger than the spherical bound */
-        double dlat = o->radius_m / GIS_EARTH_RADIUS_M / DEG * 1.01;
-        double lat_lo = o->lat_deg - dlat, lat_hi = o->lat_deg + dlat;
-        double lon_lo = -180.0, lon_hi = 180.0;
-        double cmax = fmax(cos(fmin(fabs(lat_lo), 90.0) * DEG), 0.0);
-        double cmin = fmin(cmax, fmax(cos(fmin(fabs(lat_hi), 90.0) * DEG), 0.0));
-        if (lat_lo > -90.0 && lat_hi < 90.0 && cmin > 0.0) {
-            double dlon = dlat / cmin;
-            double c0 = gs_wrap180(o->lon_deg);
-            if (c0 - dlon >= -180.0 && c0 + dlon < 180.0) {
-                lon_lo = c0 - dlon;
-                lon_hi = c0 + dlon;
-            }
-        }
-        sqlite3_bind_double(q, 2, lat_lo);
-        sqlite3_bind_double(q, 3, lat_hi);
-        sqlite3_bind_double(q, 4, lon_lo);
-        sqlite3_bind_double(q, 5, lon_hi);
-    }
+    sqlite3_bind_int(q, 2, o->detections != 0);
     group *g = NULL;
     if (o->by == SRV_BY_ALL || o->by == SRV_BY_RADIUS) {
         if ((s = find_group(&gs, o->by == SRV_BY_ALL ? "all" : "radius", &g)) != GS_OK) goto done;
@@ -315,39 +302,58 @@ gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats
         }
     }
     int rc;
-    while ((rc = sqlite3_step(q)) == SQLITE_ROW) {
-        double phase = column_real(q, 2), conf = sqlite3_column_double(q, 3);
-        double lat = column_real(q, 4), lon = column_real(q, 5);
-        switch (o->by) {
-        case SRV_BY_ALL: break;
-        case SRV_BY_RADIUS:
-            if (!(haversine_m(o->lat_deg, o->lon_deg, lat, lon) <= o->radius_m)) continue;
-            break;
-        case SRV_BY_TECHNOLOGY:
-        case SRV_BY_SURVEY: {
-            const char *key = (const char *)sqlite3_column_text(q, o->by == SRV_BY_SURVEY ? 0 : 1);
-            if ((s = find_group(&gs, key ? key : "none", &g)) != GS_OK) goto done;
-            break;
-        }
-        case SRV_BY_CELL:
-            if (isnan(lat)) {
-                no_position++;
-                continue;
+    for (;;) {
+        rc = sqlite3_step(q);
+        int64_t id = rc == SQLITE_ROW ? sqlite3_column_int64(q, 0) : 0;
+        const char *sv = rc == SQLITE_ROW ? (const char *)sqlite3_column_text(q, 1) : NULL;
+        if (acc->n && (rc != SQLITE_ROW || id != acc->id ||
+                       (o->by == SRV_BY_SURVEY && strcmp(sv ? sv : "", acc->survey)))) {
+            /* the site is complete */
+            srv_site_value v;
+            srv_site_combine(acc->obs, acc->n, &v);
+            double lat = acc->lat, lon = acc->lon;
+            acc->n = 0;
+            switch (o->by) {
+            case SRV_BY_ALL: break;
+            case SRV_BY_RADIUS:
+                if (!(haversine_m(o->lat_deg, o->lon_deg, lat, lon) <= o->radius_m)) g = NULL;
+                else if ((s = find_group(&gs, "radius", &g)) != GS_OK) goto done;
+                break;
+            case SRV_BY_TECHNOLOGY:
+            case SRV_BY_SURVEY: {
+                const char *key = o->by == SRV_BY_SURVEY ? acc->survey : v.technology;
+                if ((s = find_group(&gs, *key ? key : "none", &g)) != GS_OK) goto done;
+                break;
             }
-            if (nrows == caprows) {
-                size_t nc = caprows ? 2 * caprows : 4096;
-                cell_row *nr = realloc(rows, nc * sizeof *nr);
-                if (!nr) {
-                    s = gs_fail(GS_ENOMEM, "stats: out of memory for %zu lights", nc);
-                    goto done;
+            case SRV_BY_CELL:
+                g = NULL;
+                if (isnan(lat)) {
+                    no_position++;
+                    break;
                 }
-                rows = nr;
-                caprows = nc;
+                if (nrows == caprows) {
+                    size_t nc = caprows ? 2 * caprows : 4096;
+                    cell_row *nr = realloc(rows, nc * sizeof *nr);
+                    if (!nr) {
+                        s = gs_fail(GS_ENOMEM, "stats: out of memory for %zu lights", nc);
+                        goto done;
+                    }
+                    rows = nr;
+                    caprows = nc;
+                }
+                rows[nrows++] = (cell_row){lat, lon, v.phase_deg, v.phase_confidence};
+                break;
             }
-            rows[nrows++] = (cell_row){lat, lon, phase, conf};
-            continue;
+            if (g) add_light(&g->g, v.phase_deg, v.phase_confidence, o->min_confidence);
         }
-        add_light(&g->g, phase, conf, o->min_confidence);
+        if (rc != SQLITE_ROW) break;
+        if (!acc->n) {
+            acc->id = id;
+            snprintf(acc->survey, sizeof acc->survey, "%s", sv ? sv : "");
+            acc->lat = column_real(q, 10);
+            acc->lon = column_real(q, 11);
+        }
+        if (acc->n < SRV_SITE_MAX_OBS) srv_site_obs_from_row(q, 2, &acc->obs[acc->n++]);
     }
     if (rc != SQLITE_DONE) {
         s = gs_fail(GS_ESQL, "%s: statistics query: %s", path, sqlite3_errmsg(h));
@@ -396,5 +402,6 @@ done:
     free(gs.v);
     free(gs.slot);
     free(rows);
+    free(acc);
     return s;
 }

@@ -45,7 +45,7 @@ int srv_main(int argc, char **argv);
  * SQL NULL. Non-finite doubles (NaN, +-Inf) store NULL.
  * ===================================================================================== */
 
-#define SRV_DB_SCHEMA_VERSION 2
+#define SRV_DB_SCHEMA_VERSION 3
 #define SRV_DB_APPLICATION_ID 0x47534442   /* 'GSDB' (GeoPackage uses 'GPKG' = 0x47504B47) */
 #define SRV_DB_FORMAT "gridsurvey-survey"
 /* Written to migrations.generator and delight_versions.generator. */
@@ -242,10 +242,50 @@ typedef struct {
     long incomplete_captures;  /* captures whose lights, frames or frequency rows differ from
                                 * the counts recorded with them */
     long surveys, captures, lights, locations, frequency_rows;
+    long sites;                /* light_sites rows */
+    long unassociated;         /* lights without a site (srv_db_associate fixes them) */
+    long stale_sites;          /* sites marked stale or whose detection count is off */
+    long site_rtree_mismatch;  /* located sites minus light_sites_rtree entries */
 } srv_db_report;
 gs_status srv_db_check(srv_db *db, srv_db_report *r);
 /* 1 when every check passed. */
 int srv_db_report_ok(const srv_db_report *r);
+
+/* --- light identity (survey/sites.c; docs/survey-db.md, "Light sites"). Each stored light
+ * (a detection) belongs to one light site (a physical light): srv_db_add_capture associates a
+ * new capture's lights in its transaction, by position within the combined error ellipse
+ * (Mahalanobis d2 < SRV_SITE_GATE_D2) or, without a bounded location, by pixel within
+ * SRV_SITE_GATE_PX of a site seen from the same camera pose; otherwise a new site. */
+#define SRV_SITE_GATE_D2 13.815510557964274   /* chi2 quantile 0.999 at 2 dof: -2 ln(0.001) */
+#define SRV_SITE_GATE_PX 3.0
+#define SRV_SITE_MAX_OBS 64                   /* detections combined per site (the first ones) */
+/* Associate every detection not yet associated (captures in id order) and refresh the sites
+ * left stale by deletions; its own transaction when the caller has none. Counts optional. */
+gs_status srv_db_associate(srv_db *db, long *created, long *joined);
+
+/* One detection's recognition, as srv_site_combine reads it. */
+typedef struct {
+    char bulb_id[GS_ID_MAX];   /* "" = no bulb */
+    char technology[24];
+    double phase_deg, phase_sigma_deg;   /* NaN = unknown */
+    double confidence, bulb_confidence, phase_confidence;
+    long bulbs;                /* DELIGHT entries of its capture (0 = unknown) */
+} srv_site_obs;
+/* A site's combined recognition. */
+typedef struct {
+    char bulb_id[GS_ID_MAX], technology[24];
+    double phase_deg, phase_sigma_deg;
+    double confidence, bulb_confidence, phase_confidence;
+    long detections;
+} srv_site_value;
+/* The product of the detections' posteriors (uniform prior): each detection puts its
+ * confidence on its label and spreads the rest evenly over the M - 1 other labels (M = the
+ * DELIGHT entries for bulbs; 3 phases when every phase is within 20 deg of 0/120/240, else the
+ * twelve multiples of 30 deg); the winner's normalised product. The phase is the
+ * inverse-variance circular mean of the winning label's phases, its sigma
+ * 1 / sqrt(sum sigma_i^-2). One detection is returned unchanged; unknown phases and bulbs
+ * carry no evidence (without any, the highest single confidence). */
+void srv_site_combine(const srv_site_obs *o, size_t n, srv_site_value *v);
 
 /* =====================================================================================
  * Phase-balance statistics (survey/stats.c; definitions in docs/survey-db.md)
@@ -274,6 +314,7 @@ typedef struct {
     double radius_m;           /* SRV_BY_RADIUS: > 0, spherical distance (see stats.c) */
     double min_confidence;     /* lights with phase_confidence below it are excluded (0) */
     const char *survey;        /* only this survey (NULL = all) */
+    int detections;            /* 1: count detections (stored lights), not light sites (0) */
 } srv_stats_opts;
 void srv_stats_opts_default(srv_stats_opts *o);
 /* "technology" | "survey" | "all" | "cell:SIZE_m" | "radius:LAT,LON,R_m" into o (GS_EINVAL

@@ -147,6 +147,7 @@ static srv_phase_stats *compute(srv_db *db, const char *by, double min_conf, siz
     srv_stats_opts_default(&o);
     CHECK_OK(srv_stats_parse_by(by, &o));
     o.min_confidence = min_conf;
+    o.detections = 1;   /* the synthetic lights are all distinct: counted as stored */
     srv_phase_stats *g = NULL;
     CHECK_OK(srv_stats_compute(db, &o, &g, n, ungrouped));
     return g;
