@@ -20,6 +20,7 @@ int srv_cmd_recognize(int argc, char **argv);
 int srv_cmd_bench(int argc, char **argv);
 int srv_cmd_run(int argc, char **argv);
 int srv_cmd_evaluate(int argc, char **argv);
+int srv_cmd_compare(int argc, char **argv);
 int srv_cmd_unmix(int argc, char **argv);
 int srv_cmd_relight(int argc, char **argv);
 int srv_cmd_separate(int argc, char **argv);

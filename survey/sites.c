@@ -624,3 +624,129 @@ gs_status srv_db_associate(srv_db *db, long *created, long *joined)
     free(ids);
     return srv_dbi_auto_end(db, began, s);
 }
+
+/* ------------------------------------------------------------------ change detection */
+
+/* P(two categorical posteriors name the same label): winners wa, wb with probabilities ca, cb,
+ * the rest spread evenly over the M - 1 others (as in srv_site_combine). */
+static double p_same(int same_winner, double ca, double cb, double M)
+{
+    double ra = (1.0 - ca) / (M - 1.0), rb = (1.0 - cb) / (M - 1.0);
+    if (same_winner) return ca * cb + (M - 1.0) * ra * rb;
+    return ca * rb + cb * ra + (M - 2.0) * ra * rb;
+}
+
+static const char compare_sql[] =
+    "SELECT sd.site_id, s.name = ?2, l.bulb_id, l.technology, l.phase_deg, l.phase_sigma_deg, "
+    "l.confidence, l.bulb_confidence, l.phase_confidence, dv.bulbs, ls.lat_deg, ls.lon_deg, "
+    "ls.x_px, ls.y_px FROM site_detections sd JOIN lights l ON l.id = sd.light_id "
+    "JOIN captures c ON c.id = l.capture_id JOIN surveys s ON s.id = c.survey_id "
+    "JOIN light_sites ls ON ls.id = sd.site_id LEFT JOIN delight_versions dv ON dv.id = c.delight_id "
+    "WHERE s.name IN (?1, ?2) ORDER BY sd.site_id, l.id";
+
+/* The labels' count M of a side (DELIGHT entries; 3 or 12 phases, see srv_site_combine). */
+static double bulb_labels(const srv_site_obs *o, size_t n)
+{
+    double M = 2.0;
+    for (size_t i = 0; i < n; i++) M = fmax(M, (double)o[i].bulbs);
+    return M;
+}
+
+static void judge(srv_change *c, const srv_site_obs *oa, size_t na, const srv_site_obs *ob, size_t nb,
+                  double min_p)
+{
+    srv_site_combine(oa, na, &c->a);
+    srv_site_combine(ob, nb, &c->b);
+    c->p_phase_change = c->p_bulb_change = NAN;
+    if (!na) {
+        c->kinds = SRV_CHANGE_APPEARED;
+        return;
+    }
+    if (!nb) {
+        c->kinds = SRV_CHANGE_VANISHED;
+        return;
+    }
+    if (!isnan(c->a.phase_deg) && !isnan(c->b.phase_deg)) {
+        int ka = gs_phase_class(c->a.phase_deg), kb = gs_phase_class(c->b.phase_deg);
+        int three = ka >= 0 && ka < 3 && kb >= 0 && kb < 3;
+        int same = three ? ka == kb
+                         : (int)lround(c->a.phase_deg / 30.0) % 12 == (int)lround(c->b.phase_deg / 30.0) % 12;
+        c->p_phase_change = 1.0 - p_same(same, c->a.phase_confidence, c->b.phase_confidence, three ? 3.0 : 12.0);
+        if (!same && c->p_phase_change >= min_p) c->kinds |= SRV_CHANGE_PHASE;
+    }
+    if (c->a.bulb_id[0] && c->b.bulb_id[0]) {
+        int same = !strcmp(c->a.bulb_id, c->b.bulb_id);
+        double M = fmax(bulb_labels(oa, na), bulb_labels(ob, nb));
+        c->p_bulb_change = 1.0 - p_same(same, c->a.bulb_confidence, c->b.bulb_confidence, M);
+        if (!same && c->p_bulb_change >= min_p) c->kinds |= SRV_CHANGE_BULB;
+    }
+}
+
+gs_status srv_compare(srv_db *db, const char *survey_a, const char *survey_b, double min_p,
+                      srv_change **out, size_t *count, srv_compare_totals *t)
+{
+    if (!db || !survey_a || !survey_b || !out || !count || !t)
+        return gs_fail(GS_EINVAL, "srv_compare: NULL argument");
+    *out = NULL;
+    *count = 0;
+    memset(t, 0, sizeof *t);
+    if (!(min_p >= 0.0 && min_p <= 1.0))
+        return gs_fail(GS_EINVAL, "--min-p %g: expected a probability in [0, 1]", min_p);
+    if (!strcmp(survey_a, survey_b)) return gs_fail(GS_EINVAL, "compare: the two surveys are the same ('%s')", survey_a);
+    int64_t id;
+    gs_status s;
+    if ((s = srv_db_find_survey(db, survey_a, &id)) != GS_OK || (s = srv_db_find_survey(db, survey_b, &id)) != GS_OK)
+        return s;
+    sqlite3_stmt *q = NULL;
+    if ((s = prep(db, compare_sql, &q)) != GS_OK) return s;
+    sqlite3_bind_text(q, 1, survey_a, -1, SQLITE_STATIC);
+    sqlite3_bind_text(q, 2, survey_b, -1, SQLITE_STATIC);
+    srv_site_obs *oa = malloc(SRV_SITE_MAX_OBS * sizeof *oa), *ob = malloc(SRV_SITE_MAX_OBS * sizeof *ob);
+    srv_change *v = NULL, cur;
+    size_t n = 0, cap = 0, na = 0, nb = 0;
+    int rc;
+    if (!oa || !ob) s = gs_fail(GS_ENOMEM, "compare: out of memory");
+    memset(&cur, 0, sizeof cur);
+    while (s == GS_OK) {
+        rc = sqlite3_step(q);
+        int64_t site = rc == SQLITE_ROW ? sqlite3_column_int64(q, 0) : 0;
+        if ((na || nb) && (rc != SQLITE_ROW || site != cur.site_id)) {
+            judge(&cur, oa, na, ob, nb, min_p);
+            t->sites_a += na > 0;
+            t->sites_b += nb > 0;
+            t->both += na && nb;
+            if (cur.kinds) {
+                if ((s = grow(&v, &cap, n + 1, sizeof *v)) != GS_OK) break;
+                v[n++] = cur;
+            } else if (na && nb) {
+                t->unchanged++;
+            }
+            na = nb = 0;
+        }
+        if (rc != SQLITE_ROW) {
+            if (rc != SQLITE_DONE) s = srv_dbi_fail(db, "comparing surveys");
+            break;
+        }
+        if (!na && !nb) {
+            memset(&cur, 0, sizeof cur);
+            cur.site_id = site;
+            cur.lat_deg = col(q, 10);
+            cur.lon_deg = col(q, 11);
+            cur.x_px = col(q, 12);
+            cur.y_px = col(q, 13);
+        }
+        int in_b = sqlite3_column_int(q, 1);
+        if (in_b && nb < SRV_SITE_MAX_OBS) srv_site_obs_from_row(q, 2, &ob[nb++]);
+        else if (!in_b && na < SRV_SITE_MAX_OBS) srv_site_obs_from_row(q, 2, &oa[na++]);
+    }
+    sqlite3_finalize(q);
+    free(oa);
+    free(ob);
+    if (s != GS_OK) {
+        free(v);
+        return s;
+    }
+    *out = v;
+    *count = n;
+    return GS_OK;
+}

@@ -75,24 +75,42 @@ void srv_stats_opts_default(srv_stats_opts *o)
     memset(o, 0, sizeof *o);
     o->by = SRV_BY_ALL;
     o->cell_m = o->lat_deg = o->lon_deg = o->radius_m = NAN;
+    for (int i = 0; i < 4; i++) o->bbox[i] = NAN;
     o->min_confidence = 0.0;
+}
+
+#define BY_EXPECTED "technology, survey, all, cell:SIZE_m, feature:FIELD, radius:LAT,LON,R_m, or up to " \
+                    "three of technology, survey, cell:SIZE_m, feature:FIELD joined by commas"
+
+/* One grouping of a --by list. */
+static gs_status parse_part(const char *text, const char *part, srv_stats_opts *o, srv_group_by *by)
+{
+    char *end;
+    if (!strcmp(part, "technology")) *by = SRV_BY_TECHNOLOGY;
+    else if (!strcmp(part, "survey")) *by = SRV_BY_SURVEY;
+    else if (!strcmp(part, "all")) *by = SRV_BY_ALL;
+    else if (!strncmp(part, "cell:", 5)) {
+        double v = strtod(part + 5, &end);
+        if (end == part + 5 || (*end && strcmp(end, "m")) || !isfinite(v) || !(v >= 1.0) || v > 1e7)
+            return gs_fail(GS_EINVAL, "--by '%s': expected cell:SIZE_m with a cell side of 1 to 1e7 "
+                           "metres", text);
+        *by = SRV_BY_CELL;
+        o->cell_m = v;
+    } else if (!strncmp(part, "feature:", 8) && part[8]) {
+        *by = SRV_BY_FEATURE;
+        snprintf(o->feature_field, sizeof o->feature_field, "%s", part + 8);
+    } else {
+        return gs_fail(GS_EINVAL, "--by '%s': expected " BY_EXPECTED, text);
+    }
+    return GS_OK;
 }
 
 gs_status srv_stats_parse_by(const char *text, srv_stats_opts *o)
 {
     char *end;
-    if (!text) return gs_fail(GS_EINVAL, "--by: expected technology, survey, all, cell:SIZE_m or radius:LAT,LON,R_m");
-    if (!strcmp(text, "technology")) o->by = SRV_BY_TECHNOLOGY;
-    else if (!strcmp(text, "survey")) o->by = SRV_BY_SURVEY;
-    else if (!strcmp(text, "all")) o->by = SRV_BY_ALL;
-    else if (!strncmp(text, "cell:", 5)) {
-        double v = strtod(text + 5, &end);
-        if (end == text + 5 || (*end && strcmp(end, "m")) || !isfinite(v) || !(v >= 1.0) || v > 1e7)
-            return gs_fail(GS_EINVAL, "--by '%s': expected cell:SIZE_m with a cell side of 1 to 1e7 "
-                           "metres", text);
-        o->by = SRV_BY_CELL;
-        o->cell_m = v;
-    } else if (!strncmp(text, "radius:", 7)) {
+    if (!text) return gs_fail(GS_EINVAL, "--by: expected " BY_EXPECTED);
+    o->n_then = 0;
+    if (!strncmp(text, "radius:", 7)) {
         double v[3];
         const char *p = text + 7;
         for (int i = 0; i < 3; i++) {
@@ -110,10 +128,28 @@ gs_status srv_stats_parse_by(const char *text, srv_stats_opts *o)
         o->lat_deg = v[0];
         o->lon_deg = v[1];
         o->radius_m = v[2];
-    } else {
-        return gs_fail(GS_EINVAL, "--by '%s': expected technology, survey, all, cell:SIZE_m or "
-                       "radius:LAT,LON,R_m", text);
+        return GS_OK;
     }
+    char buf[256];
+    if (strlen(text) >= sizeof buf) return gs_fail(GS_EINVAL, "--by '%.40s...': too long", text);
+    snprintf(buf, sizeof buf, "%s", text);
+    srv_group_by parts[SRV_BY_MAX];
+    int n = 0;
+    for (char *save = NULL, *t = strtok_r(buf, ",", &save); t; t = strtok_r(NULL, ",", &save)) {
+        if (n == SRV_BY_MAX) return gs_fail(GS_EINVAL, "--by '%s': expected " BY_EXPECTED, text);
+        gs_status st = parse_part(text, t, o, &parts[n]);
+        if (st != GS_OK) return st;
+        for (int j = 0; j < n; j++)
+            if (parts[j] == parts[n])
+                return gs_fail(GS_EINVAL, "--by '%s': a grouping given twice", text);
+        if (n && (parts[n] == SRV_BY_ALL || parts[0] == SRV_BY_ALL))
+            return gs_fail(GS_EINVAL, "--by '%s': 'all' combines with nothing", text);
+        n++;
+    }
+    if (!n) return gs_fail(GS_EINVAL, "--by '%s': expected " BY_EXPECTED, text);
+    o->by = parts[0];
+    for (int j = 1; j < n; j++) o->then[j - 1] = parts[j];
+    o->n_then = n - 1;
     return GS_OK;
 }
 
@@ -195,8 +231,15 @@ static void add_light(srv_phase_stats *g, double phase_deg, double phase_conf, d
     }
     int c = gs_phase_class(phase_deg);
     if (c < 0) g->unknown++;
-    else if (c == 3) g->other++;
-    else g->n[c]++;
+    else if (c < 3) g->n[c]++;
+    else {
+        /* the six-phase candidates: 30, 150, 270 deg (+30 behind delta-wye), within 15 deg */
+        int k6 = -1;
+        for (int k = 0; k < 3; k++)
+            if (fabs(gs_wrap180(phase_deg - 30.0 - 120.0 * k)) <= SRV_PHASE6_TOL_DEG) k6 = k;
+        if (k6 >= 0) g->n30[k6]++;
+        else g->other++;
+    }
 }
 
 static int cmp_groups(const void *a, const void *b)
@@ -223,9 +266,12 @@ static double haversine_m(double lat1, double lon1, double lat2, double lon2)
     return 2.0 * GIS_EARTH_RADIUS_M * asin(sqrt(a));
 }
 
+/* A light site that passed the filters: its position, combined phase and the indices of its
+ * technology and survey names (interned) and of its area. */
 typedef struct {
     double lat, lon, phase, conf;
-} cell_row;
+    int tech, survey, feature;
+} site_row;
 
 /* One row per detection, grouped by light site (docs/survey-db.md, "Light sites"): a detection
  * not associated (a database written before migration 3 and not yet migrated by `db migrate`)
@@ -240,8 +286,8 @@ static const char scan_sql[] =
     "LEFT JOIN delight_versions dv ON dv.id = c.delight_id "
     "LEFT JOIN site_detections sd ON sd.light_id = l.id LEFT JOIN light_sites ls ON ls.id = sd.site_id "
     "LEFT JOIN locations loc ON loc.light_id = l.id WHERE (?1 IS NULL OR s.name = ?1) ";
-static const char order_site_sql[] = "ORDER BY 1";
-static const char order_survey_sql[] = "ORDER BY 2, 1";
+static const char order_site_sql[] = "ORDER BY 1, l.id";
+static const char order_survey_sql[] = "ORDER BY 2, 1, l.id";
 
 static double column_real(sqlite3_stmt *q, int i)
 {
@@ -257,6 +303,31 @@ typedef struct {
     size_t n;
 } site_acc;
 
+/* The index of name in the interning set (added when new). */
+static gs_status intern(group_set *names, const char *name, int *index)
+{
+    group *g;
+    gs_status s = find_group(names, name, &g);
+    if (s == GS_OK) *index = (int)(g - names->v);
+    return s;
+}
+
+static int in_bbox(const double b[4], double lat, double lon)
+{
+    if (!(lat >= b[1] && lat <= b[3])) return 0;
+    double x = gs_wrap180(lon), lo = gs_wrap180(b[0]), hi = gs_wrap180(b[2]);
+    if (b[2] - b[0] >= 360.0) return 1;
+    return lo <= hi ? (x >= lo && x <= hi) : (x >= lo || x <= hi);   /* across the antimeridian */
+}
+
+static int uses(const srv_stats_opts *o, srv_group_by by)
+{
+    if (o->by == by) return 1;
+    for (int i = 0; i < o->n_then; i++)
+        if (o->then[i] == by) return 1;
+    return 0;
+}
+
 gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats **groups,
                             size_t *count, long *ungrouped)
 {
@@ -266,23 +337,33 @@ gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats
     if (ungrouped) *ungrouped = 0;
     if (!(o->min_confidence >= 0.0 && o->min_confidence <= 1.0))
         return gs_fail(GS_EINVAL, "--min-confidence %g: expected a probability in [0, 1]", o->min_confidence);
-    if (o->by == SRV_BY_CELL && !(o->cell_m >= 1.0 && isfinite(o->cell_m)))
+    if (uses(o, SRV_BY_CELL) && !(o->cell_m >= 1.0 && isfinite(o->cell_m)))
         return gs_fail(GS_EINVAL, "cell size %g m: expected >= 1 m", o->cell_m);
     if (o->by == SRV_BY_RADIUS && !(o->radius_m > 0.0 && isfinite(o->radius_m) &&
                                     fabs(o->lat_deg) <= 90.0 && isfinite(o->lon_deg)))
         return gs_fail(GS_EINVAL, "radius (%g, %g, %g m): expected a latitude in [-90, 90], a "
                        "finite longitude and a radius > 0", o->lat_deg, o->lon_deg, o->radius_m);
+    if (uses(o, SRV_BY_FEATURE) && !o->areas)
+        return gs_fail(GS_EINVAL, "--by feature:%s: needs the areas (--clip AREAS.geojson)", o->feature_field);
+    int has_bbox = !isnan(o->bbox[0]);
+    if (has_bbox && !(fabs(o->bbox[1]) <= 90.0 && fabs(o->bbox[3]) <= 90.0 && o->bbox[1] <= o->bbox[3] &&
+                      isfinite(o->bbox[0]) && isfinite(o->bbox[2])))
+        return gs_fail(GS_EINVAL, "--bbox %g,%g,%g,%g: expected MINLON,MINLAT,MAXLON,MAXLAT with "
+                       "MINLAT <= MAXLAT in [-90, 90]", o->bbox[0], o->bbox[1], o->bbox[2], o->bbox[3]);
+    /* the groupings that need a position */
+    int spatial = uses(o, SRV_BY_CELL) || uses(o, SRV_BY_FEATURE) || o->by == SRV_BY_RADIUS ||
+                  has_bbox || o->areas;
     sqlite3 *h = srv_db_sqlite(db);
     const char *path = srv_db_path(db);
     sqlite3_stmt *q = NULL;
-    group_set gs = {0};
-    cell_row *rows = NULL;
+    group_set gs = {0}, names = {0};
+    site_row *rows = NULL;
     size_t nrows = 0, caprows = 0;
     long no_position = 0;
     gs_status s = GS_OK;
     site_acc *acc = calloc(1, sizeof *acc);
     char sql[sizeof scan_sql + 32];
-    snprintf(sql, sizeof sql, "%s%s", scan_sql, o->by == SRV_BY_SURVEY ? order_survey_sql : order_site_sql);
+    snprintf(sql, sizeof sql, "%s%s", scan_sql, uses(o, SRV_BY_SURVEY) ? order_survey_sql : order_site_sql);
     if (!acc) {
         s = gs_fail(GS_ENOMEM, "stats: out of memory");
         goto done;
@@ -293,47 +374,42 @@ gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats
     }
     if (o->survey) sqlite3_bind_text(q, 1, o->survey, -1, SQLITE_STATIC);
     sqlite3_bind_int(q, 2, o->detections != 0);
-    group *g = NULL;
     if (o->by == SRV_BY_ALL || o->by == SRV_BY_RADIUS) {
+        group *g;   /* the one group exists even when empty */
         if ((s = find_group(&gs, o->by == SRV_BY_ALL ? "all" : "radius", &g)) != GS_OK) goto done;
         if (o->by == SRV_BY_RADIUS) {
             g->g.lat_deg = o->lat_deg;
             g->g.lon_deg = gs_wrap180(o->lon_deg);
         }
     }
+    /* pass 1: the sites, combined and filtered */
     int rc;
     for (;;) {
         rc = sqlite3_step(q);
         int64_t id = rc == SQLITE_ROW ? sqlite3_column_int64(q, 0) : 0;
         const char *sv = rc == SQLITE_ROW ? (const char *)sqlite3_column_text(q, 1) : NULL;
         if (acc->n && (rc != SQLITE_ROW || id != acc->id ||
-                       (o->by == SRV_BY_SURVEY && strcmp(sv ? sv : "", acc->survey)))) {
-            /* the site is complete */
+                       (uses(o, SRV_BY_SURVEY) && strcmp(sv ? sv : "", acc->survey)))) {
             srv_site_value v;
             srv_site_combine(acc->obs, acc->n, &v);
-            double lat = acc->lat, lon = acc->lon;
+            site_row r = {acc->lat, acc->lon, v.phase_deg, v.phase_confidence, 0, 0, -1};
             acc->n = 0;
-            switch (o->by) {
-            case SRV_BY_ALL: break;
-            case SRV_BY_RADIUS:
-                if (!(haversine_m(o->lat_deg, o->lon_deg, lat, lon) <= o->radius_m)) g = NULL;
-                else if ((s = find_group(&gs, "radius", &g)) != GS_OK) goto done;
-                break;
-            case SRV_BY_TECHNOLOGY:
-            case SRV_BY_SURVEY: {
-                const char *key = o->by == SRV_BY_SURVEY ? acc->survey : v.technology;
-                if ((s = find_group(&gs, *key ? key : "none", &g)) != GS_OK) goto done;
-                break;
+            int keep = 1;
+            if (spatial && isnan(r.lat)) {
+                no_position++;
+                keep = 0;
             }
-            case SRV_BY_CELL:
-                g = NULL;
-                if (isnan(lat)) {
-                    no_position++;
-                    break;
-                }
+            if (keep && o->by == SRV_BY_RADIUS)
+                keep = haversine_m(o->lat_deg, o->lon_deg, r.lat, r.lon) <= o->radius_m;
+            if (keep && has_bbox) keep = in_bbox(o->bbox, r.lat, r.lon);
+            if (keep && o->areas) keep = (r.feature = srv_areas_find(o->areas, r.lat, r.lon)) >= 0;
+            if (keep) {
+                if ((s = intern(&names, *v.technology ? v.technology : "none", &r.tech)) != GS_OK ||
+                    (s = intern(&names, acc->survey, &r.survey)) != GS_OK)
+                    goto done;
                 if (nrows == caprows) {
                     size_t nc = caprows ? 2 * caprows : 4096;
-                    cell_row *nr = realloc(rows, nc * sizeof *nr);
+                    site_row *nr = realloc(rows, nc * sizeof *nr);
                     if (!nr) {
                         s = gs_fail(GS_ENOMEM, "stats: out of memory for %zu lights", nc);
                         goto done;
@@ -341,10 +417,8 @@ gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats
                     rows = nr;
                     caprows = nc;
                 }
-                rows[nrows++] = (cell_row){lat, lon, v.phase_deg, v.phase_confidence};
-                break;
+                rows[nrows++] = r;
             }
-            if (g) add_light(&g->g, v.phase_deg, v.phase_confidence, o->min_confidence);
         }
         if (rc != SQLITE_ROW) break;
         if (!acc->n) {
@@ -359,31 +433,55 @@ gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats
         s = gs_fail(GS_ESQL, "%s: statistics query: %s", path, sqlite3_errmsg(h));
         goto done;
     }
-    if (o->by == SRV_BY_CELL && nrows) {
+    /* pass 2: the groups (cells need the selection's centre first) */
+    double lat0 = 0.0, lon0 = 0.0, kx = 0.0, ky = GIS_EARTH_RADIUS_M * DEG;
+    if (uses(o, SRV_BY_CELL) && nrows) {
         double slat = 0.0, ssin = 0.0, scos = 0.0;
         for (size_t i = 0; i < nrows; i++) {
             slat += rows[i].lat;
             ssin += sin(rows[i].lon * DEG);
             scos += cos(rows[i].lon * DEG);
         }
-        double lat0 = slat / (double)nrows, lon0 = atan2(ssin, scos) / DEG;
-        double kx = GIS_EARTH_RADIUS_M * cos(lat0 * DEG) * DEG, ky = GIS_EARTH_RADIUS_M * DEG;
-        for (size_t i = 0; i < nrows; i++) {
-            double x = kx * gs_wrap180(rows[i].lon - lon0), y = ky * (rows[i].lat - lat0);
-            long ix = (long)floor(x / o->cell_m), iy = (long)floor(y / o->cell_m);
-            char key[64];
-            snprintf(key, sizeof key, "%ld,%ld", ix, iy);
-            if ((s = find_group(&gs, key, &g)) != GS_OK) goto done;
-            if (!g->g.lights) {
-                g->ix = ix;
-                g->iy = iy;
-                g->g.lat_deg = lat0 + ((double)iy + 0.5) * o->cell_m / ky;
-                g->g.lon_deg = kx > 0.0 ? gs_wrap180(lon0 + ((double)ix + 0.5) * o->cell_m / kx) : lon0;
-            }
-            add_light(&g->g, rows[i].phase, rows[i].conf, o->min_confidence);
-        }
+        lat0 = slat / (double)nrows;
+        lon0 = atan2(ssin, scos) / DEG;
+        kx = GIS_EARTH_RADIUS_M * cos(lat0 * DEG) * DEG;
     }
-    qsort(gs.v, gs.n, sizeof *gs.v, o->by == SRV_BY_CELL ? cmp_cells : cmp_groups);
+    for (size_t i = 0; i < nrows; i++) {
+        const site_row *r = &rows[i];
+        char key[3 * 96 + 8] = "";   /* fits srv_phase_stats.group */
+        long ix = 0, iy = 0;
+        int nparts = 1 + o->n_then;
+        for (int k = 0; k < nparts; k++) {
+            srv_group_by by = k ? o->then[k - 1] : o->by;
+            char part[96];
+            switch (by) {
+            case SRV_BY_ALL: snprintf(part, sizeof part, "all"); break;
+            case SRV_BY_RADIUS: snprintf(part, sizeof part, "radius"); break;
+            case SRV_BY_TECHNOLOGY: snprintf(part, sizeof part, "%.95s", names.v[r->tech].g.group); break;
+            case SRV_BY_SURVEY: snprintf(part, sizeof part, "%.95s", names.v[r->survey].g.group); break;
+            case SRV_BY_FEATURE:
+                snprintf(part, sizeof part, "%.95s", srv_areas_label(o->areas, (size_t)r->feature));
+                break;
+            case SRV_BY_CELL:
+                ix = (long)floor(kx * gs_wrap180(r->lon - lon0) / o->cell_m);
+                iy = (long)floor(ky * (r->lat - lat0) / o->cell_m);
+                snprintf(part, sizeof part, "%ld,%ld", ix, iy);
+                break;
+            }
+            size_t used = strlen(key);
+            snprintf(key + used, sizeof key - used, "%s%s", k ? " / " : "", part);
+        }
+        group *g;
+        if ((s = find_group(&gs, key, &g)) != GS_OK) goto done;
+        if (!g->g.lights && uses(o, SRV_BY_CELL)) {
+            g->ix = ix;
+            g->iy = iy;
+            g->g.lat_deg = lat0 + ((double)iy + 0.5) * o->cell_m / ky;
+            g->g.lon_deg = kx > 0.0 ? gs_wrap180(lon0 + ((double)ix + 0.5) * o->cell_m / kx) : lon0;
+        }
+        add_light(&g->g, r->phase, r->conf, o->min_confidence);
+    }
+    qsort(gs.v, gs.n, sizeof *gs.v, o->by == SRV_BY_CELL && !o->n_then ? cmp_cells : cmp_groups);
     if (gs.n) {
         *groups = malloc(gs.n * sizeof **groups);
         if (!*groups) {
@@ -401,6 +499,8 @@ done:
     sqlite3_finalize(q);
     free(gs.v);
     free(gs.slot);
+    free(names.v);
+    free(names.slot);
     free(rows);
     free(acc);
     return s;

@@ -287,6 +287,32 @@ typedef struct {
  * carry no evidence (without any, the highest single confidence). */
 void srv_site_combine(const srv_site_obs *o, size_t n, srv_site_value *v);
 
+/* --- change detection between two surveys of the same area (survey/sites.c; `gridsurvey
+ * compare`, docs/survey-db.md "Changes"). Per site, each survey's detections combined
+ * (srv_site_combine); a phase or bulb change is reported when the two winners differ and the
+ * probability that they differ, 1 - sum_l P_A(l) P_B(l) (the posteriors as in
+ * srv_site_combine), is at least min_p. */
+enum {
+    SRV_CHANGE_PHASE = 1u << 0,
+    SRV_CHANGE_BULB = 1u << 1,
+    SRV_CHANGE_APPEARED = 1u << 2,   /* detections in B only */
+    SRV_CHANGE_VANISHED = 1u << 3    /* detections in A only */
+};
+typedef struct {
+    int64_t site_id;
+    double lat_deg, lon_deg;   /* the site's position (NaN for a pixel site) */
+    double x_px, y_px;         /* its mean pixel */
+    unsigned kinds;            /* SRV_CHANGE_* */
+    srv_site_value a, b;       /* each survey's combined answer (detections 0: not seen) */
+    double p_phase_change, p_bulb_change;   /* NaN when a side has no phase / bulb */
+} srv_change;
+typedef struct {
+    long sites_a, sites_b, both, unchanged;   /* unchanged: in both, no change reported */
+} srv_compare_totals;
+/* The changed sites (by site id) in *out (free()); GS_ENOTFOUND for an unknown survey. */
+gs_status srv_compare(srv_db *db, const char *survey_a, const char *survey_b, double min_p,
+                      srv_change **out, size_t *count, srv_compare_totals *t);
+
 /* =====================================================================================
  * Phase-balance statistics (survey/stats.c; definitions in docs/survey-db.md)
  * ===================================================================================== */
@@ -304,21 +330,44 @@ typedef enum {
     SRV_BY_TECHNOLOGY,   /* per technology ("none" for lights without a bulb) */
     SRV_BY_SURVEY,       /* per survey name */
     SRV_BY_CELL,         /* per cell of a local metric grid (located lights only) */
-    SRV_BY_RADIUS        /* one group: located lights within radius_m of (lat, lon) */
+    SRV_BY_RADIUS,       /* one group: located lights within radius_m of (lat, lon) */
+    SRV_BY_FEATURE       /* per area of opts.areas (its feature_field value) */
 } srv_group_by;
+#define SRV_BY_MAX 3             /* groupings combined in one --by */
+#define SRV_PHASE6_TOL_DEG 15.0  /* the six-phase classes 30/150/270: within half their spacing */
+
+/* Areas (survey/areas.c): the Polygon / MultiPolygon features of a GeoJSON FeatureCollection
+ * (WGS84 lon/lat), through GEOS. GS_EFORMAT (one line naming the file, the feature and what is
+ * expected) for anything else, an invalid polygon, or (field given) a feature without that
+ * property (a string, number or boolean). */
+typedef struct srv_areas srv_areas;
+gs_status srv_areas_load(const char *path, const char *field, srv_areas **out);
+void srv_areas_free(srv_areas *a);
+size_t srv_areas_count(const srv_areas *a);
+/* Feature i's label: its field value, else "feature I". */
+const char *srv_areas_label(const srv_areas *a, size_t i);
+/* The first feature (file order) covering the point (boundary included), -1 for none. */
+int srv_areas_find(const srv_areas *a, double lat_deg, double lon_deg);
 
 typedef struct {
-    srv_group_by by;
+    srv_group_by by;           /* the grouping, or the first of a combination */
+    srv_group_by then[SRV_BY_MAX - 1];   /* the others of a combination (n_then of them) */
+    int n_then;
     double cell_m;             /* SRV_BY_CELL: cell side, metres (> 0) */
     double lat_deg, lon_deg;   /* SRV_BY_RADIUS: centre */
     double radius_m;           /* SRV_BY_RADIUS: > 0, spherical distance (see stats.c) */
     double min_confidence;     /* lights with phase_confidence below it are excluded (0) */
     const char *survey;        /* only this survey (NULL = all) */
     int detections;            /* 1: count detections (stored lights), not light sites (0) */
+    double bbox[4];            /* MINLON, MINLAT, MAXLON, MAXLAT (NaN: none); MINLON > MAXLON
+                                * crosses the antimeridian */
+    const srv_areas *areas;    /* only sites inside one of these areas (NULL: none) */
+    char feature_field[64];    /* SRV_BY_FEATURE: the areas' property naming each one */
 } srv_stats_opts;
 void srv_stats_opts_default(srv_stats_opts *o);
-/* "technology" | "survey" | "all" | "cell:SIZE_m" | "radius:LAT,LON,R_m" into o (GS_EINVAL
- * naming the text and what is expected). */
+/* "technology" | "survey" | "all" | "cell:SIZE_m" | "feature:FIELD" | "radius:LAT,LON,R_m", or
+ * up to SRV_BY_MAX of technology, survey, cell:SIZE_m, feature:FIELD joined by commas (groups
+ * named "A / B"), into o (GS_EINVAL naming the text and what is expected). */
 gs_status srv_stats_parse_by(const char *text, srv_stats_opts *o);
 
 enum {
@@ -328,12 +377,16 @@ enum {
 };
 
 typedef struct {
-    char group[96];            /* "all", a technology, a survey, "E,N" cell indices, "radius" */
+    char group[296];           /* "all", a technology, a survey, "E,N" cell indices, "radius", an
+                                * area, or "A / B" for a combination */
     double lat_deg, lon_deg;   /* cell centre (SRV_BY_CELL), centre (SRV_BY_RADIUS), else NaN */
     long lights;               /* lights in the group */
     long below;                /* ... with phase_confidence < min_confidence (excluded) */
     long unknown;              /* ... kept, phase NULL (ambiguous / unknown) */
-    long other;                /* ... kept, phase not within GS_PHASE_TOL_DEG of 0/120/240 */
+    long other;                /* ... kept, another phase (not 0/120/240 within GS_PHASE_TOL_DEG
+                                * nor 30/150/270 within SRV_PHASE6_TOL_DEG) */
+    long n30[3];               /* ... kept, phase 30, 150, 270 (six-phase surveys); not in the
+                                * shares, which are of the three primary phases */
     long n[3];                 /* ... kept, phase 0, 120, 240 */
     long total;                /* n[0] + n[1] + n[2]: the denominator of the shares */
     double share[3];           /* n[i] / total */

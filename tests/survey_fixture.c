@@ -135,6 +135,16 @@ static const struct lab_light {
     {"mh70", "mh-70w", 240, 545.5, 360.2, 10.0, 5500},
 };
 
+double survey_fx_lab_x_px(int i, double scale)
+{
+    return (lab_lights[i].x + 0.5) * scale - 0.5;
+}
+
+double survey_fx_lab_y_px(int i, double scale)
+{
+    return (lab_lights[i].y + 0.5) * scale - 0.5;
+}
+
 survey_lab_spec survey_fx_lab_spec(void)
 {
     survey_lab_spec s;
@@ -159,8 +169,8 @@ void survey_fx_small_lab(const char *path, double scale, const survey_lab_spec *
         snprintf(lights + used, sizeof lights - used,
                  "%s    {\"id\": \"%s\", \"bulb\": \"%s\", \"phase_deg\": %d, \"x_px\": %.4f, \"y_px\": %.4f, "
                  "\"distance_m\": %g, \"lumens\": %g}", i ? ",\n" : "", L[i].id,
-                 spec->bulb[i], spec->phase_deg[i], (L[i].x + 0.5) * scale - 0.5,
-                 (L[i].y + 0.5) * scale - 0.5, L[i].d, L[i].lm);
+                 spec->bulb[i], spec->phase_deg[i], survey_fx_lab_x_px(i, scale),
+                 survey_fx_lab_y_px(i, scale), L[i].d, L[i].lm);
     }
     char text[4096];
     snprintf(text, sizeof text,

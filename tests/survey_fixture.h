@@ -49,6 +49,9 @@ typedef struct {
     int seed;
 } survey_lab_spec;
 survey_lab_spec survey_fx_lab_spec(void);   /* the lab's, seed 4 */
+/* Light i's pixel in the small lab scene at that scale. */
+double survey_fx_lab_x_px(int i, double scale);
+double survey_fx_lab_y_px(int i, double scale);
 /* The lab scene (capture/scenes/lab.json) made small, written to path as a scene file (see
  * survey_fixture.c). */
 void survey_fx_small_lab(const char *path, double scale, const survey_lab_spec *spec);

@@ -259,3 +259,65 @@ TEST(sites_lab_two_nights_cli)
     rc = fx_run(out, sizeof out, "%s db check --db %s", test_bin(), db);
     CHECK_MSG(rc == 0 && strstr(out, "8 light sites, 0 lights without a site"), "%d: %s", rc, out);
 }
+
+/* The lab scene surveyed twice (survey A; survey B another night, three lights rephased and one
+ * lamp replaced): `compare` reports exactly those four sites, with the right kinds and values,
+ * and nothing appeared or vanished. */
+TEST(sites_compare_rephased_and_replaced)
+{
+    char out[16384], db[1024];
+    snprintf(db, sizeof db, "%s", fx_tmp("cmp.sqlite"));
+    survey_lab_spec a = survey_fx_lab_spec(), b = a;
+    b.seed = 5;
+    static const int rephased[3] = {0, 4, 6}, new_phase[3] = {240, 0, 240};
+    for (int i = 0; i < 3; i++) b.phase_deg[rephased[i]] = new_phase[i];
+    const int replaced = 3;
+    b.bulb[replaced] = "led-a60-9w-cap";
+    const survey_lab_spec *sp[2] = {&a, &b};
+    static const char *const names[2] = {"before", "after"};
+    for (int k = 0; k < 2; k++) {
+        char scene[1024], cap[1024];
+        snprintf(scene, sizeof scene, "%s/%s.json", fx_tmp(""), names[k]);
+        snprintf(cap, sizeof cap, "%s/%s-cap", fx_tmp(""), names[k]);
+        survey_fx_small_lab(scene, 0.5, sp[k]);
+        int rc = fx_run(out, sizeof out, "%s run %s --db %s --survey %s --capture-dir %s", test_bin(), scene, db,
+                        names[k], cap);
+        CHECK_MSG(rc == 0 && strstr(out, "| detection rate | 100.0 % | 8 / 8 "), "%s: %d: %s", names[k], rc, out);
+    }
+    int rc = fx_run(out, sizeof out, "%s compare --db %s --survey before --survey after --format csv", test_bin(), db);
+    CHECK_MSG(rc == 0, "%d: %s", rc, out);
+    /* the truth: which site is which lab light, by the site's pixel (the lab's x at scale 1/2) */
+    int lines = 0, phase = 0, bulb = 0;
+    for (char *line = strchr(out, '\n'); line && line[1]; line = strchr(line + 1, '\n')) {
+        long long site;
+        double x, y;
+        char kind[32];
+        if (sscanf(line + 1, "%lld,,,%lf,%lf,%31[^,]", &site, &x, &y, kind) != 4) {
+            test_failed(__FILE__, __LINE__, "unparsed row: %.120s", line + 1);
+            continue;
+        }
+        lines++;
+        int which = -1;
+        for (int i = 0; i < 8; i++) {
+            double lx = survey_fx_lab_x_px(i, 0.5), ly = survey_fx_lab_y_px(i, 0.5);
+            if (fabs(x - lx) < 1.5 && fabs(y - ly) < 1.5) which = i;
+        }
+        int is_rephased = which == rephased[0] || which == rephased[1] || which == rephased[2];
+        if (!strcmp(kind, "phase")) {
+            phase++;
+            CHECK_MSG(is_rephased, "phase change at light %d", which);
+        } else if (!strcmp(kind, "bulb")) {
+            bulb++;
+            CHECK_MSG(which == replaced && strstr(line, ",led-a60-9w-cap,"), "bulb change at light %d: %.200s",
+                      which, line + 1);
+        } else {
+            test_failed(__FILE__, __LINE__, "unexpected change %s at light %d", kind, which);
+        }
+    }
+    CHECK_MSG(lines == 4 && phase == 3 && bulb == 1, "%d rows, %d phase, %d bulb: %s", lines, phase, bulb, out);
+    rc = fx_run(out, sizeof out, "%s compare --db %s --survey before --survey after", test_bin(), db);
+    CHECK_MSG(rc == 0 && strstr(out, "in both: 8 (4 unchanged); changes: 3 phase, 1 bulb, 0 appeared, 0 vanished"),
+              "%d: %s", rc, out);
+    rc = fx_run(out, sizeof out, "%s compare --db %s --survey before --survey nope 2>&1", test_bin(), db);
+    CHECK_MSG(rc == 1 && strstr(out, "nope"), "%d: %s", rc, out);
+}
