@@ -237,6 +237,13 @@ static double maha2(double dx, double dy, const double C[3])
     return (C[2] * dx * dx - 2.0 * C[1] * dx * dy + C[0] * dy * dy) / det;
 }
 
+double srv_ellipse_maha2(double a_m, double b_m, double az_deg, double east_m, double north_m)
+{
+    double C[3];
+    ellipse_cov(a_m, b_m, az_deg, C);
+    return maha2(east_m, north_m, C);
+}
+
 /* ------------------------------------------------------------------ association */
 
 typedef struct {
@@ -244,6 +251,7 @@ typedef struct {
     double x_px, y_px, lat, lon, height, a, C[3];
     int located;
     char pose[200];
+    srv_site_obs obs;      /* its recognition (a new site's combined answer) */
     int64_t site;          /* assigned site, 0 = none yet */
     double d2;
 } detection;
@@ -278,19 +286,19 @@ static const char dets_sql[] =
     "SELECT l.id, l.x_px, l.y_px, loc.lat_deg, loc.lon_deg, loc.height_m, loc.semi_major_m, "
     "loc.semi_minor_m, loc.azimuth_deg, CASE WHEN st.id IS NULL THEN 'none' ELSE "
     "printf('%.7f,%.7f,%.2f,%.3f,%.3f,%.3f,%.2f', st.lat_deg, st.lon_deg, st.height_m, "
-    "st.heading_deg, st.pitch_deg, st.roll_deg, st.focal_px) END "
+    "st.heading_deg, st.pitch_deg, st.roll_deg, st.focal_px) END, "
+    "l.bulb_id, l.technology, l.phase_deg, l.phase_sigma_deg, l.confidence, l.bulb_confidence, "
+    "l.phase_confidence, dv.bulbs "
     "FROM lights l JOIN captures c ON c.id = l.capture_id LEFT JOIN stations st ON st.id = c.station_id "
-    "LEFT JOIN locations loc ON loc.light_id = l.id "
+    "LEFT JOIN locations loc ON loc.light_id = l.id LEFT JOIN delight_versions dv ON dv.id = c.delight_id "
     "WHERE l.capture_id = ?1 AND NOT EXISTS (SELECT 1 FROM site_detections sd WHERE sd.light_id = l.id) "
     "ORDER BY l.light_index";
 static const char geo_cand_sql[] =
     "SELECT s.id, s.lat_deg, s.lon_deg, s.semi_major_m, s.semi_minor_m, s.azimuth_deg "
     "FROM light_sites_rtree r CROSS JOIN light_sites s ON s.id = r.id "
-    "WHERE r.max_lat >= ?1 AND r.min_lat <= ?2 AND r.max_lon >= ?3 AND r.min_lon <= ?4 "
-    "AND NOT EXISTS (SELECT 1 FROM site_detections sd WHERE sd.site_id = s.id AND sd.capture_id = ?5)";
+    "WHERE r.max_lat >= ?1 AND r.min_lat <= ?2 AND r.max_lon >= ?3 AND r.min_lon <= ?4";
 static const char px_cand_sql[] =
-    "SELECT s.id, s.x_px, s.y_px FROM light_sites s WHERE s.pose_key = ?1 AND s.x_px BETWEEN ?2 AND ?3 "
-    "AND NOT EXISTS (SELECT 1 FROM site_detections sd WHERE sd.site_id = s.id AND sd.capture_id = ?4)";
+    "SELECT s.id, s.x_px, s.y_px FROM light_sites s WHERE s.pose_key = ?1 AND s.x_px BETWEEN ?2 AND ?3";
 static const char site_obs_sql[] =
     "SELECT l.bulb_id, l.technology, l.phase_deg, l.phase_sigma_deg, l.confidence, l.bulb_confidence, "
     "l.phase_confidence, dv.bulbs, loc.lat_deg, loc.lon_deg, loc.height_m, loc.semi_major_m, "
@@ -299,6 +307,11 @@ static const char site_obs_sql[] =
     "LEFT JOIN delight_versions dv ON dv.id = c.delight_id LEFT JOIN locations loc ON loc.light_id = l.id "
     "WHERE sd.site_id = ?1 ORDER BY sd.light_id";
 
+static const char new_site_sql[] =
+    "INSERT INTO light_sites(lat_deg, lon_deg, height_m, semi_major_m, semi_minor_m, azimuth_deg, "
+    "pose_key, x_px, y_px, detections, captures, bulb_id, technology, phase_deg, phase_sigma_deg, "
+    "confidence, bulb_confidence, phase_confidence) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, 1, "
+    "1, ?10, ?11, ?12, ?13, ?14, ?15, ?16)";
 static const char site_update_sql[] =
     "UPDATE light_sites SET lat_deg = ?1, lon_deg = ?2, height_m = ?3, semi_major_m = ?4, "
     "semi_minor_m = ?5, azimuth_deg = ?6, x_px = ?7, y_px = ?8, detections = ?9, captures = ?9, "
@@ -437,15 +450,14 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
     detection *d = NULL;
     pair *p = NULL;
     size_t nd = 0, capd = 0, np = 0, capp = 0;
-    int64_t *touched = NULL, *taken = NULL;
-    size_t ntaken = 0;
+    int64_t *touched = NULL, *taken = NULL, *held = NULL;
+    size_t ntaken = 0, nheld = 0, capheld = 0;
     char *flag = NULL;
     gs_status s = GS_OK;
     int rc;
     if ((s = prep(db, dets_sql, &qd)) != GS_OK || (s = prep(db, geo_cand_sql, &qg)) != GS_OK ||
         (s = prep(db, px_cand_sql, &qp)) != GS_OK ||
-        (s = prep(db, "INSERT INTO light_sites(lat_deg, lon_deg, pose_key, x_px, y_px) VALUES "
-                      "(?1, ?2, ?3, ?4, ?5)", &qi)) != GS_OK ||
+        (s = prep(db, new_site_sql, &qi)) != GS_OK ||
         (s = prep(db, "INSERT INTO site_detections(light_id, site_id, capture_id, d2) VALUES "
                       "(?1, ?2, ?3, ?4)", &qa)) != GS_OK ||
         (s = prep(db, site_obs_sql, &qo)) != GS_OK ||
@@ -469,12 +481,19 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
         x->a = a;
         const char *pk = (const char *)sqlite3_column_text(qd, 9);
         snprintf(x->pose, sizeof x->pose, "%s", pk ? pk : "none");
+        srv_site_obs_from_row(qd, 10, &x->obs);
     }
     if (rc != SQLITE_DONE) {
         s = srv_dbi_fail(db, "reading detections");
         goto done;
     }
     if (!nd) goto done;
+    /* the sites that already hold a detection of this capture (none unless a capture was
+     * associated in part) */
+    char held_sql[96];
+    snprintf(held_sql, sizeof held_sql, "SELECT site_id FROM site_detections WHERE capture_id = %lld "
+             "ORDER BY site_id", (long long)cid);
+    if ((s = collect_ids(db, held_sql, &held, &capheld, &nheld)) != GS_OK) goto done;
     double amax = 0.0;
     if (sqlite3_step(qm) == SQLITE_ROW) amax = fmax(col(qm, 0), 0.0);
     if (isnan(amax)) amax = 0.0;
@@ -492,14 +511,12 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
             sqlite3_bind_double(q, 2, x->lat + dlat);
             sqlite3_bind_double(q, 3, x->lon - dlon);
             sqlite3_bind_double(q, 4, x->lon + dlon);
-            sqlite3_bind_int64(q, 5, cid);
         } else {
             q = qp;
             sqlite3_reset(q);
             sqlite3_bind_text(q, 1, x->pose, -1, SQLITE_STATIC);
             sqlite3_bind_double(q, 2, x->x_px - SRV_SITE_GATE_PX);
             sqlite3_bind_double(q, 3, x->x_px + SRV_SITE_GATE_PX);
-            sqlite3_bind_int64(q, 4, cid);
         }
         while ((rc = sqlite3_step(q)) == SQLITE_ROW) {
             double d2;
@@ -516,8 +533,10 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
                 d2 = dx * dx + dy * dy;
                 if (!(d2 <= SRV_SITE_GATE_PX * SRV_SITE_GATE_PX)) continue;
             }
+            int64_t sid = sqlite3_column_int64(q, 0);
+            if (nheld && bsearch(&sid, held, nheld, sizeof *held, cmp_ids)) continue;   /* has one */
             if ((s = grow(&p, &capp, np + 1, sizeof *p)) != GS_OK) goto done;
-            p[np++] = (pair){d2, i, sqlite3_column_int64(q, 0)};
+            p[np++] = (pair){d2, i, sid};
         }
         if (rc != SQLITE_DONE) {
             s = srv_dbi_fail(db, "looking up light sites");
@@ -550,17 +569,33 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
     }
     for (size_t i = 0; i < nd; i++) {
         detection *x = &d[i];
-        if (!x->site) {
+        touched[i] = x->site;   /* an existing site is refreshed below */
+        if (!x->site) {   /* a new site: the detection's own answer (srv_site_combine of one) */
             sqlite3_reset(qi);
             sqlite3_clear_bindings(qi);
             if (x->located) {
+                double a, b, az;
+                cov_ellipse(x->C, &a, &b, &az);
                 sqlite3_bind_double(qi, 1, x->lat);
                 sqlite3_bind_double(qi, 2, gs_wrap180(x->lon));
+                srv_dbi_bind_real(qi, 4, a);
+                srv_dbi_bind_real(qi, 5, b);
+                srv_dbi_bind_real(qi, 6, az);
             } else {
-                sqlite3_bind_text(qi, 3, x->pose, -1, SQLITE_STATIC);
+                sqlite3_bind_text(qi, 7, x->pose, -1, SQLITE_STATIC);
             }
-            sqlite3_bind_double(qi, 4, x->x_px);
-            sqlite3_bind_double(qi, 5, x->y_px);
+            srv_dbi_bind_real(qi, 3, x->height);
+            sqlite3_bind_double(qi, 8, x->x_px);
+            sqlite3_bind_double(qi, 9, x->y_px);
+            srv_site_value v;
+            srv_site_combine(&x->obs, 1, &v);
+            srv_dbi_bind_text(qi, 10, v.bulb_id);
+            srv_dbi_bind_text(qi, 11, v.technology);
+            srv_dbi_bind_real(qi, 12, v.phase_deg);
+            srv_dbi_bind_real(qi, 13, v.phase_sigma_deg);
+            sqlite3_bind_double(qi, 14, fmin(fmax(v.confidence, 0.0), 1.0));
+            sqlite3_bind_double(qi, 15, fmin(fmax(v.bulb_confidence, 0.0), 1.0));
+            sqlite3_bind_double(qi, 16, fmin(fmax(v.phase_confidence, 0.0), 1.0));
             if ((s = srv_dbi_step_done(db, qi, "adding a light site")) != GS_OK) goto done;
             x->site = sqlite3_last_insert_rowid(h);
             x->d2 = NAN;
@@ -572,9 +607,9 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
         sqlite3_bind_int64(qa, 3, cid);
         srv_dbi_bind_real(qa, 4, x->d2);
         if ((s = srv_dbi_step_done(db, qa, "associating a detection")) != GS_OK) goto done;
-        touched[i] = x->site;
     }
-    for (size_t i = 0; i < nd && s == GS_OK; i++) s = refresh_site(db, qo, qu, touched[i]);
+    for (size_t i = 0; i < nd && s == GS_OK; i++)
+        if (touched[i]) s = refresh_site(db, qo, qu, touched[i]);
 done:
     sqlite3_finalize(qd);
     sqlite3_finalize(qg);
@@ -589,6 +624,7 @@ done:
     free(touched);
     free(taken);
     free(flag);
+    free(held);
     return s;
 }
 

@@ -258,6 +258,10 @@ int srv_db_report_ok(const srv_db_report *r);
  * SRV_SITE_GATE_PX of a site seen from the same camera pose; otherwise a new site. */
 #define SRV_SITE_GATE_D2 13.815510557964274   /* chi2 quantile 0.999 at 2 dof: -2 ln(0.001) */
 #define SRV_SITE_GATE_PX 3.0
+#define SRV_CHI2_2DOF_95 5.991464547107979    /* -2 ln(0.05): the 95 % ellipse of a 2-D normal */
+/* x^T C^-1 x for the offset (east_m, north_m) and the covariance C of the 1-sigma ellipse
+ * (a, b, azimuth of a clockwise from north); +inf for a degenerate ellipse. */
+double srv_ellipse_maha2(double a_m, double b_m, double az_deg, double east_m, double north_m);
 #define SRV_SITE_MAX_OBS 64                   /* detections combined per site (the first ones) */
 /* Associate every detection not yet associated (captures in id order) and refresh the sites
  * left stale by deletions; its own transaction when the caller has none. Counts optional. */
@@ -644,6 +648,9 @@ typedef struct {
                                   * lights: classes 0, 120, 240, other (, none) */
     long loc_pairs;              /* matched lights with a stored and a truth position */
     long loc_unlocated;          /* matched lights without a stored position */
+    long ellipse_pairs;          /* loc_pairs whose stored ellipse is bounded */
+    long ellipse_in95;           /* ... whose truth is inside the stored 95 % ellipse */
+    double ellipse_coverage95;   /* ellipse_in95 / ellipse_pairs (a calibrated ellipse: 0.95) */
     double loc_median_m, loc_p95_m, loc_max_m;  /* geodesic distance stored -> truth over the
                                   * loc_pairs (percentiles interpolated linearly between order
                                   * statistics, position (n - 1) q); NaN when loc_pairs = 0 */
