@@ -544,10 +544,12 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
         }
     }
     /* greedy assignment by increasing d2; a site takes one detection of the capture */
-    qsort(p, np, sizeof *p, cmp_pairs);
-    if ((s = grow(&taken, &ntaken, np, sizeof *taken)) != GS_OK) goto done;
-    for (size_t k = 0; k < np; k++) taken[k] = p[k].site;
-    qsort(taken, np, sizeof *taken, cmp_ids);
+    if (np) {   /* (qsort of a NULL array, even empty, is undefined) */
+        qsort(p, np, sizeof *p, cmp_pairs);
+        if ((s = grow(&taken, &ntaken, np, sizeof *taken)) != GS_OK) goto done;
+        for (size_t k = 0; k < np; k++) taken[k] = p[k].site;
+        qsort(taken, np, sizeof *taken, cmp_ids);
+    }
     flag = calloc(np ? np : 1, 1);
     if (!flag) {
         s = gs_fail(GS_ENOMEM, "light sites: out of memory");

@@ -481,7 +481,7 @@ gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats
         }
         add_light(&g->g, r->phase, r->conf, o->min_confidence);
     }
-    qsort(gs.v, gs.n, sizeof *gs.v, o->by == SRV_BY_CELL && !o->n_then ? cmp_cells : cmp_groups);
+    if (gs.n) qsort(gs.v, gs.n, sizeof *gs.v, o->by == SRV_BY_CELL && !o->n_then ? cmp_cells : cmp_groups);
     if (gs.n) {
         *groups = malloc(gs.n * sizeof **groups);
         if (!*groups) {
