@@ -79,7 +79,7 @@ static void pct(char *buf, size_t size, const srv_phase_stats *g, int i)
                  100.0 * g->hi[i], g->n[i]);
 }
 
-static void print_table(const srv_phase_stats *g, size_t n, const srv_stats_opts *o, long ungrouped)
+void srv_stats_print_table(const srv_phase_stats *g, size_t n, const srv_stats_opts *o, long ungrouped)
 {
     int cells = o->by == SRV_BY_RADIUS;
     for (size_t i = 0; i < n; i++) cells |= !isnan(g[i].lat_deg);
@@ -299,7 +299,7 @@ int srv_cmd_stats(int argc, char **argv)
     srv_areas_free(areas);
     if (s != GS_OK) return srv_error(s);
     int rc = 0;
-    if (fmt == FMT_TABLE) print_table(g, n, &o, ungrouped);
+    if (fmt == FMT_TABLE) srv_stats_print_table(g, n, &o, ungrouped);
     else if (fmt == FMT_CSV) print_csv(g, n);
     else rc = print_json(g, n, &o, path, ungrouped);
     free(g);

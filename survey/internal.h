@@ -75,6 +75,11 @@ typedef struct {
 gs_status srv_render_time(const cap_scene *sc, unsigned effects_mask, int frames,
                           srv_render_time_result *out);
 
+/* The Markdown phase-balance table of `gridsurvey stats` (cmd_stats.c) on stdout: groups,
+ * counts, shares with Wilson intervals, six-phase columns when any group has such lights, and
+ * the legend (o: the threshold and grouping; ungrouped: lights without a position). */
+void srv_stats_print_table(const srv_phase_stats *g, size_t n, const srv_stats_opts *o, long ungrouped);
+
 /* Print "gridsurvey: STATUS: DETAIL" on stderr and return 1. */
 int srv_error(gs_status s);
 
