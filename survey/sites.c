@@ -345,6 +345,18 @@ static gs_status grow(void *v, size_t *cap, size_t n, size_t size)
     return GS_OK;
 }
 
+/* A site's combined answer as parameters 10..16 of new_site_sql / site_update_sql. */
+static void bind_value(sqlite3_stmt *q, const srv_site_value *v)
+{
+    srv_dbi_bind_text(q, 10, v->bulb_id);
+    srv_dbi_bind_text(q, 11, v->technology);
+    srv_dbi_bind_real(q, 12, v->phase_deg);
+    srv_dbi_bind_real(q, 13, v->phase_sigma_deg);
+    sqlite3_bind_double(q, 14, fmin(fmax(v->confidence, 0.0), 1.0));
+    sqlite3_bind_double(q, 15, fmin(fmax(v->bulb_confidence, 0.0), 1.0));
+    sqlite3_bind_double(q, 16, fmin(fmax(v->phase_confidence, 0.0), 1.0));
+}
+
 /* Recompute a site's columns from its detections. */
 static gs_status refresh_site(srv_db *db, sqlite3_stmt *qo, sqlite3_stmt *qu, int64_t site)
 {
@@ -406,13 +418,7 @@ static gs_status refresh_site(srv_db *db, sqlite3_stmt *qo, sqlite3_stmt *qu, in
         srv_dbi_bind_real(qu, 7, sx / (double)n);
         srv_dbi_bind_real(qu, 8, sy / (double)n);
         sqlite3_bind_int64(qu, 9, (sqlite3_int64)n);
-        srv_dbi_bind_text(qu, 10, v.bulb_id);
-        srv_dbi_bind_text(qu, 11, v.technology);
-        srv_dbi_bind_real(qu, 12, v.phase_deg);
-        srv_dbi_bind_real(qu, 13, v.phase_sigma_deg);
-        sqlite3_bind_double(qu, 14, fmin(fmax(v.confidence, 0.0), 1.0));
-        sqlite3_bind_double(qu, 15, fmin(fmax(v.bulb_confidence, 0.0), 1.0));
-        sqlite3_bind_double(qu, 16, fmin(fmax(v.phase_confidence, 0.0), 1.0));
+        bind_value(qu, &v);
         sqlite3_bind_int64(qu, 17, site);
         s = srv_dbi_step_done(db, qu, "updating a light site");
     }
@@ -591,13 +597,7 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
             sqlite3_bind_double(qi, 9, x->y_px);
             srv_site_value v;
             srv_site_combine(&x->obs, 1, &v);
-            srv_dbi_bind_text(qi, 10, v.bulb_id);
-            srv_dbi_bind_text(qi, 11, v.technology);
-            srv_dbi_bind_real(qi, 12, v.phase_deg);
-            srv_dbi_bind_real(qi, 13, v.phase_sigma_deg);
-            sqlite3_bind_double(qi, 14, fmin(fmax(v.confidence, 0.0), 1.0));
-            sqlite3_bind_double(qi, 15, fmin(fmax(v.bulb_confidence, 0.0), 1.0));
-            sqlite3_bind_double(qi, 16, fmin(fmax(v.phase_confidence, 0.0), 1.0));
+            bind_value(qi, &v);
             if ((s = srv_dbi_step_done(db, qi, "adding a light site")) != GS_OK) goto done;
             x->site = sqlite3_last_insert_rowid(h);
             x->d2 = NAN;
