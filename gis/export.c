@@ -162,8 +162,23 @@ static double attr_real(const gis_light *l, size_t k)
 
 /* ---------------------------------------------------------------- GeoJSON */
 
+/* v rounded to `decimals` decimal places (printed with 15 significant digits, it then shows
+ * no more than those: 7 decimals of a longitude need at most 10 digits). */
+static double round_to(double v, int decimals)
+{
+    double k = pow(10.0, decimals);
+    return round(v * k) / k;
+}
+
 gs_status gis_export_geojson(const gis_light *lights, size_t n, const char *path)
 {
+    return gis_export_geojson_decimals(lights, n, path, GIS_GEOJSON_DECIMALS);
+}
+
+gs_status gis_export_geojson_decimals(const gis_light *lights, size_t n, const char *path, int decimals)
+{
+    if (decimals < 0 || decimals > 15)
+        return gs_fail(GS_EINVAL, "%s: %d coordinate decimals: expected 0 to 15", path, decimals);
     gs_status s = check_lights(lights, n);
     if (s != GS_OK) return s;
     json_t *root = json_object(), *features = json_array();
@@ -182,9 +197,10 @@ gs_status gis_export_geojson(const gis_light *lights, size_t n, const char *path
         }
         if (located(l)) {
             json_t *c = json_array();
-            json_array_append_new(c, json_real(gs_wrap180(l->lon_deg)));   /* RFC 7946: lon, lat */
-            json_array_append_new(c, json_real(l->lat_deg));
-            if (isfinite(l->height_m)) json_array_append_new(c, json_real(l->height_m));
+            /* RFC 7946: lon, lat; heights to the millimetre */
+            json_array_append_new(c, json_real(round_to(gs_wrap180(l->lon_deg), decimals)));
+            json_array_append_new(c, json_real(round_to(l->lat_deg, decimals)));
+            if (isfinite(l->height_m)) json_array_append_new(c, json_real(round_to(l->height_m, 3)));
             geom = json_pack("{s:s, s:o}", "type", "Point", "coordinates", c);
         }
         char buf[128];
@@ -319,7 +335,7 @@ gs_status gis_export_csv(const gis_light *lights, size_t n, const char *path)
     FILE *f = a.f;
     fputs("id,lat_deg,lon_deg", f);
     for (size_t k = 1; k < N_ATTRS; k++) fprintf(f, ",%s", attrs[k].name);
-    fputs("\r\n", f);
+    fputs(",WKT\r\n", f);   /* GDAL's CSV driver reads a column named WKT as the geometry */
     char buf[128];
     for (size_t i = 0; i < n; i++) {
         const gis_light *l = &lights[i];
@@ -335,6 +351,8 @@ gs_status gis_export_csv(const gis_light *lights, size_t n, const char *path)
                 if (!isnan(d)) fprintf(f, "%.10g", d);
             }
         }
+        if (located(l)) fprintf(f, ",POINT (%.10f %.10f)", gs_wrap180(l->lon_deg), l->lat_deg);
+        else fputc(',', f);
         fputs("\r\n", f);
     }
     return gs_atomic_commit(&a);
@@ -391,9 +409,100 @@ static const char gpkg_schema[] =
     "(table_name) REFERENCES gpkg_contents(table_name), CONSTRAINT fk_gc_srs FOREIGN KEY "
     "(srs_id) REFERENCES gpkg_spatial_ref_sys (srs_id));\n"
     "CREATE TABLE lights (fid INTEGER PRIMARY KEY AUTOINCREMENT NOT NULL, geom POINT, "
-    "id TEXT, bulb TEXT, technology TEXT, phase REAL, confidence REAL, survey TEXT, time TEXT, "
+    "id TEXT, bulb TEXT, technology TEXT, phase REAL, confidence REAL, survey TEXT, time DATETIME, "
     "height_m REAL, err_major_m REAL, err_minor_m REAL, err_azimuth_deg REAL, flags TEXT);\n"
-    "INSERT INTO gpkg_geometry_columns VALUES ('lights', 'geom', 'POINT', 4326, 0, 0);\n";
+    "INSERT INTO gpkg_geometry_columns VALUES ('lights', 'geom', 'POINT', 4326, 0, 0);\n"
+    /* the R*Tree spatial index extension (GeoPackage 1.3 Annex F.3), filled directly below */
+    "CREATE TABLE gpkg_extensions (table_name TEXT, column_name TEXT, extension_name TEXT NOT NULL, "
+    "definition TEXT NOT NULL, scope TEXT NOT NULL, CONSTRAINT ge_tce UNIQUE (table_name, "
+    "column_name, extension_name));\n"
+    "INSERT INTO gpkg_extensions VALUES ('lights', 'geom', 'gpkg_rtree_index', "
+    "'http://www.geopackage.org/spec120/#extension_rtree', 'write-only');\n"
+    "CREATE VIRTUAL TABLE rtree_lights_geom USING rtree(id, minx, maxx, miny, maxy);\n"
+    /* QGIS's style table: the default style of the layer */
+    "CREATE TABLE layer_styles (id INTEGER PRIMARY KEY AUTOINCREMENT, f_table_catalog TEXT(256), "
+    "f_table_schema TEXT(256), f_table_name TEXT(256), f_geometry_column TEXT(256), "
+    "styleName TEXT(30), styleQML TEXT, styleSLD TEXT, useAsDefault BOOLEAN, description TEXT, "
+    "owner TEXT(30), ui TEXT(30), update_time DATETIME DEFAULT "
+    "(strftime('%Y-%m-%dT%H:%M:%fZ','now')));\n"
+    "INSERT INTO gpkg_contents (table_name, data_type, identifier, description) VALUES "
+    "('layer_styles', 'attributes', 'layer_styles', 'QGIS layer styles');\n";
+
+/* The index's triggers (Annex F.3, GeoPackage 1.3), created after the rows are in: they call the
+ * ST_* SQL functions that GeoPackage readers (GDAL, QGIS) register on their connections, which
+ * this writer's connection does not have (docs/gis.md). */
+static const char gpkg_rtree_triggers[] =
+    "CREATE TRIGGER rtree_lights_geom_insert AFTER INSERT ON lights WHEN (new.geom NOT NULL AND "
+    "NOT ST_IsEmpty(NEW.geom)) BEGIN INSERT OR REPLACE INTO rtree_lights_geom VALUES (NEW.fid, "
+    "ST_MinX(NEW.geom), ST_MaxX(NEW.geom), ST_MinY(NEW.geom), ST_MaxY(NEW.geom)); END;\n"
+    "CREATE TRIGGER rtree_lights_geom_update1 AFTER UPDATE OF geom ON lights WHEN OLD.fid = "
+    "NEW.fid AND (NEW.geom NOTNULL AND NOT ST_IsEmpty(NEW.geom)) BEGIN INSERT OR REPLACE INTO "
+    "rtree_lights_geom VALUES (NEW.fid, ST_MinX(NEW.geom), ST_MaxX(NEW.geom), ST_MinY(NEW.geom), "
+    "ST_MaxY(NEW.geom)); END;\n"
+    "CREATE TRIGGER rtree_lights_geom_update2 AFTER UPDATE OF geom ON lights WHEN OLD.fid = "
+    "NEW.fid AND (NEW.geom ISNULL OR ST_IsEmpty(NEW.geom)) BEGIN DELETE FROM rtree_lights_geom "
+    "WHERE id = OLD.fid; END;\n"
+    "CREATE TRIGGER rtree_lights_geom_update3 AFTER UPDATE ON lights WHEN OLD.fid != NEW.fid AND "
+    "(NEW.geom NOTNULL AND NOT ST_IsEmpty(NEW.geom)) BEGIN DELETE FROM rtree_lights_geom WHERE "
+    "id = OLD.fid; INSERT OR REPLACE INTO rtree_lights_geom VALUES (NEW.fid, ST_MinX(NEW.geom), "
+    "ST_MaxX(NEW.geom), ST_MinY(NEW.geom), ST_MaxY(NEW.geom)); END;\n"
+    "CREATE TRIGGER rtree_lights_geom_update4 AFTER UPDATE ON lights WHEN OLD.fid != NEW.fid AND "
+    "(NEW.geom ISNULL OR ST_IsEmpty(NEW.geom)) BEGIN DELETE FROM rtree_lights_geom WHERE id IN "
+    "(OLD.fid, NEW.fid); END;\n"
+    "CREATE TRIGGER rtree_lights_geom_delete AFTER DELETE ON lights WHEN old.geom NOT NULL BEGIN "
+    "DELETE FROM rtree_lights_geom WHERE id = OLD.fid; END;\n";
+
+/* The QGIS style (QML) of the lights layer: categories by phase class with the KML's colours
+ * (gis_phase_rgb), the class computed from the phase like gs_phase_class. */
+static char *gpkg_qml(void)
+{
+    static const char *const value[5] = {"0", "120", "240", "other", "unknown"};
+    static const char *const label[5] = {"0 deg", "120 deg", "240 deg", "other phase", "unknown phase"};
+    size_t size = 8192, used = 0;
+    char *q = malloc(size);
+    if (!q) return NULL;
+    used += (size_t)snprintf(q + used, size - used,
+        "<!DOCTYPE qgis PUBLIC 'http://mrcc.com/qgis.dtd' 'SYSTEM'>\n"
+        "<qgis version=\"3.22.0\" styleCategories=\"Symbology\">\n"
+        " <renderer-v2 type=\"categorizedSymbol\" attr=\"CASE WHEN &quot;phase&quot; IS NULL THEN "
+        "'unknown' WHEN &quot;phase&quot; &lt;= 20 OR &quot;phase&quot; &gt;= 340 THEN '0' WHEN "
+        "&quot;phase&quot; BETWEEN 100 AND 140 THEN '120' WHEN &quot;phase&quot; BETWEEN 220 AND "
+        "260 THEN '240' ELSE 'other' END\" symbollevels=\"0\" enableorderby=\"0\" forceraster=\"0\">\n"
+        "  <categories>\n");
+    for (int c = 0; c < 5; c++)
+        used += (size_t)snprintf(q + used, size - used, "   <category render=\"true\" value=\"%s\" "
+                                 "symbol=\"%d\" label=\"%s\"/>\n", value[c], c, label[c]);
+    used += (size_t)snprintf(q + used, size - used, "  </categories>\n  <symbols>\n");
+    for (int c = 0; c < 5; c++) {
+        unsigned char rgb[3];
+        gis_phase_rgb((gis_phase_class)c, rgb);
+        used += (size_t)snprintf(q + used, size - used,
+            "   <symbol type=\"marker\" name=\"%d\" alpha=\"1\" clip_to_extent=\"1\" force_rhr=\"0\">\n"
+            "    <layer class=\"SimpleMarker\" pass=\"0\" locked=\"0\" enabled=\"1\">\n"
+            "     <Option type=\"Map\">\n"
+            "      <Option type=\"QString\" name=\"color\" value=\"%d,%d,%d,255\"/>\n"
+            "      <Option type=\"QString\" name=\"name\" value=\"circle\"/>\n"
+            "      <Option type=\"QString\" name=\"outline_style\" value=\"no\"/>\n"
+            "      <Option type=\"QString\" name=\"size\" value=\"2.4\"/>\n"
+            "     </Option>\n    </layer>\n   </symbol>\n", c, rgb[0], rgb[1], rgb[2]);
+    }
+    snprintf(q + used, size - used, "  </symbols>\n </renderer-v2>\n</qgis>\n");
+    return q;
+}
+
+/* An ISO 8601 UTC time ("YYYY-MM-DDTHH:MM:SS[.fff]Z") as GeoPackage's DATETIME text,
+ * "YYYY-MM-DDTHH:MM:SS.SSSZ" (out: 64 bytes); 0 when t is not one. */
+static int gpkg_datetime(const char *t, char out[64])
+{
+    int y, mo, d, h, mi, n = 0;
+    double sec;
+    if (!t || sscanf(t, "%4d-%2d-%2dT%2d:%2d:%lf%n", &y, &mo, &d, &h, &mi, &sec, &n) != 6 ||
+        strcmp(t + n, "Z") || mo < 1 || mo > 12 || d < 1 || d > 31 || h > 23 || mi > 59 ||
+        !(sec >= 0.0 && sec < 61.0))
+        return 0;
+    snprintf(out, 64, "%04d-%02d-%02dT%02d:%02d:%06.3fZ", y, mo, d, h, mi, floor(sec * 1000.0) / 1000.0);
+    return 1;
+}
 
 gs_status gis_export_gpkg(const gis_light *lights, size_t n, const char *path)
 {
@@ -434,8 +543,10 @@ gs_status gis_export_gpkg(const gis_light *lights, size_t n, const char *path)
         }
         for (size_t k = 0; k < N_ATTRS; k++) {
             int col = (int)k + 2;
+            char when[64];
             if (attrs[k].kind == A_TEXT) {
                 const char *t = attr_text(l, k, buf, sizeof buf);
+                if (k == 6) t = gpkg_datetime(t, when) ? when : NULL;   /* time: DATETIME */
                 if (t) sqlite3_bind_text(st, col, t, -1, SQLITE_TRANSIENT);
                 else sqlite3_bind_null(st, col);
             } else {
@@ -462,6 +573,44 @@ gs_status gis_export_gpkg(const gis_light *lights, size_t n, const char *path)
         sqlite3_bind_double(st, 4, maxy);
     }
     if (sqlite3_step(st) != SQLITE_DONE) goto sql_error;
+    sqlite3_finalize(st);
+    st = NULL;
+    /* the spatial index, its triggers, the style */
+    if (sqlite3_prepare_v2(db, "INSERT INTO rtree_lights_geom VALUES (?, ?, ?, ?, ?)", -1, &st, NULL) != SQLITE_OK)
+        goto sql_error;
+    for (size_t i = 0, fid = 1; i < n; i++, fid++) {
+        const gis_light *l = &lights[i];
+        if (!located(l)) continue;
+        double lon = gs_wrap180(l->lon_deg);
+        sqlite3_reset(st);
+        sqlite3_bind_int64(st, 1, (sqlite3_int64)fid);
+        sqlite3_bind_double(st, 2, lon);
+        sqlite3_bind_double(st, 3, lon);
+        sqlite3_bind_double(st, 4, l->lat_deg);
+        sqlite3_bind_double(st, 5, l->lat_deg);
+        if (sqlite3_step(st) != SQLITE_DONE) goto sql_error;
+    }
+    sqlite3_finalize(st);
+    st = NULL;
+    if (sqlite3_exec(db, gpkg_rtree_triggers, NULL, NULL, &err) != SQLITE_OK) goto sql_error;
+    char *qml = gpkg_qml();
+    if (!qml) {
+        s = gs_fail(GS_ENOMEM, "%s: out of memory for the layer style", path);
+        sqlite3_close(db);
+        gs_atomic_abort(&a);
+        return s;
+    }
+    int qrc = sqlite3_prepare_v2(db, "INSERT INTO layer_styles (f_table_catalog, f_table_schema, "
+                                     "f_table_name, f_geometry_column, styleName, styleQML, styleSLD, "
+                                     "useAsDefault, description, owner, ui) VALUES ('', '', 'lights', "
+                                     "'geom', 'phase', ?, '', 1, 'lights coloured by grid phase class "
+                                     "(as the KML)', 'gridsurvey', NULL)", -1, &st, NULL);
+    if (qrc == SQLITE_OK) {
+        sqlite3_bind_text(st, 1, qml, -1, SQLITE_TRANSIENT);
+        qrc = sqlite3_step(st) == SQLITE_DONE ? SQLITE_OK : SQLITE_ERROR;
+    }
+    free(qml);
+    if (qrc != SQLITE_OK) goto sql_error;
     sqlite3_finalize(st);
     st = NULL;
     if (sqlite3_exec(db, "COMMIT", NULL, NULL, &err) != SQLITE_OK) goto sql_error;

@@ -28,6 +28,7 @@ static const struct {
     {"db", srv_cmd_db, "survey database tools: init, migrate, check, ingest-synthetic"},
     {"recognize", srv_cmd_recognize, "bulb type and grid phase of every light in a capture (Eq. 7); maps, plots"},
     {"run", srv_cmd_run, "the whole job: capture (or a capture directory), recognize, locate, store; stats, maps"},
+    {"compare", srv_cmd_compare, "changes between two surveys: rephased or replaced lights, appeared, vanished"},
     {"evaluate", srv_cmd_evaluate, "compare a survey database with a simulator's truth.json (rates, errors)"},
     {"unmix", srv_cmd_unmix, "light transport: unmix a capture into one image per source (Eqs. 16-19)"},
     {"relight", srv_cmd_relight, "relight unmixed sources: gain, off, other bulb or phase (Eq. 20)"},

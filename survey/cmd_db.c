@@ -12,9 +12,11 @@ static const char db_usage[] =
     "usage: gridsurvey db SUBCOMMAND --db DB [OPTIONS]\n"
     "\n"
     "  init      --db DB      create an empty survey database (an existing one is kept)\n"
-    "  migrate   --db DB      bring an existing database to this gridsurvey's schema version\n"
+    "  migrate   --db DB      bring an existing database to this gridsurvey's schema version and\n"
+    "                         associate its lights with light sites (resumable)\n"
     "  check     --db DB      integrity_check, foreign_key_check, R*Tree vs locations, complete\n"
-    "                         captures; exit status 1 if anything is wrong\n"
+    "                         captures, every light in a light site; exit status 1 if anything\n"
+    "                         is wrong\n"
     "  ingest-synthetic --db DB [--survey NAME] [--captures N] [--lights N] [--batch B]\n"
     "            [--seed S] [--weights W0,W120,W240] [--ambiguous F]\n"
     "                         developer tool: a deterministic synthetic survey (N captures of\n"
@@ -121,13 +123,20 @@ int srv_cmd_db(int argc, char **argv)
     if (s != GS_OK) return srv_error(s);
     int rc = 0;
     if (which == 0 || which == 1) {
+        long created = 0, joined = 0;
+        if (which == 1) s = srv_db_associate(db, &created, &joined);
         printf("%s: survey database, schema version %d\n", path, SRV_DB_SCHEMA_VERSION);
+        if (which == 1 && s == GS_OK)
+            printf("%s: %ld lights associated: %ld new light sites, %ld joined existing ones\n", path,
+                   created + joined, created, joined);
     } else if (which == 2) {
         srv_db_report r;
         if ((s = srv_db_check(db, &r)) == GS_OK) {
             printf("%s: %ld surveys, %ld captures, %ld lights, %ld locations (%ld located, %ld in the "
                    "R*Tree), %ld frequency rows\n", path, r.surveys, r.captures, r.lights,
                    r.locations, r.located, r.rtree_rows, r.frequency_rows);
+            printf("%ld light sites, %ld lights without a site, %ld stale sites, %ld site R*Tree "
+                   "mismatches\n", r.sites, r.unassociated, r.stale_sites, r.site_rtree_mismatch);
             printf("integrity %s, %ld foreign-key violations, %ld R*Tree mismatches, %ld incomplete "
                    "captures: %s\n", r.integrity_ok ? "ok" : "FAILED", r.fk_violations,
                    r.rtree_mismatch, r.incomplete_captures, srv_db_report_ok(&r) ? "ok" : "FAILED");

@@ -15,6 +15,7 @@ static const char export_usage[] =
     "usage: gridsurvey export --db DB -o FILE [--format geojson|kml|gpkg|csv] [--survey NAME]\n"
     "                         [--technology TECH] [--phase 0|120|240|other|unknown]\n"
     "                         [--bbox MINLON,MINLAT,MAXLON,MAXLAT] [--min-confidence X]\n"
+    "                         [--precision D]\n"
     "\n"
     "Writes the lights of a survey database with their bulb, technology, phase, confidence,\n"
     "position and error ellipse (docs/gis.md has each format). Lights without a position are\n"
@@ -30,6 +31,8 @@ static const char export_usage[] =
     "  --bbox A,B,C,D      only located lights with MINLON <= lon <= MAXLON and MINLAT <= lat\n"
     "                      <= MAXLAT, degrees (MINLON > MAXLON crosses the antimeridian)\n"
     "  --min-confidence X  only lights whose confidence (posterior of bulb and phase) is >= X\n"
+    "  --precision D       GeoJSON: longitudes and latitudes to D decimals, 0 to 15 (default 7,\n"
+    "                      1.1 cm; heights to the millimetre)\n"
     "  --help              this text\n";
 
 void srv_export_opts_default(srv_export_opts *o)
@@ -177,9 +180,11 @@ int srv_cmd_export(int argc, char **argv)
         {"format", required_argument, 0, 'f'},     {"survey", required_argument, 0, 'S'},
         {"technology", required_argument, 0, 't'}, {"phase", required_argument, 0, 'p'},
         {"bbox", required_argument, 0, 'b'},       {"min-confidence", required_argument, 0, 'c'},
-        {"help", no_argument, 0, 'h'},             {0, 0, 0, 0},
+        {"precision", required_argument, 0, 'P'},  {"help", no_argument, 0, 'h'},
+        {0, 0, 0, 0},
     };
     const char *path = NULL, *out = NULL, *format = NULL;
+    int decimals = GIS_GEOJSON_DECIMALS;
     srv_export_opts o;
     srv_export_opts_default(&o);
     optind = 1;
@@ -190,6 +195,15 @@ int srv_cmd_export(int argc, char **argv)
         case 'd': path = optarg; break;
         case 'o': out = optarg; break;
         case 'f': format = optarg; break;
+        case 'P': {
+            long v = strtol(optarg, &end, 10);
+            if (!*optarg || *end || v < 0 || v > 15) {
+                fprintf(stderr, "gridsurvey export: --precision '%s': expected 0 to 15 decimals\n", optarg);
+                return 2;
+            }
+            decimals = (int)v;
+            break;
+        }
         case 'S': o.survey = optarg; break;
         case 't':
             if (strcmp(optarg, "none")) {
@@ -260,7 +274,9 @@ int srv_cmd_export(int argc, char **argv)
     size_t n = 0;
     s = srv_db_read_lights(db, &o, &lights, &n);
     srv_db_close(db);
-    if (s == GS_OK) s = gis_export(lights, n, fmt, out);
+    if (s == GS_OK)
+        s = fmt == GIS_FORMAT_GEOJSON ? gis_export_geojson_decimals(lights, n, out, decimals)
+                                      : gis_export(lights, n, fmt, out);
     free(lights);
     if (s != GS_OK) return srv_error(s);
     fprintf(srv_note_stream(out), "exported %zu lights -> %s\n", n, out);

@@ -98,14 +98,6 @@ static gs_status check_out_dir(const char *path)
     return GS_OK;
 }
 
-static void pct(char *buf, size_t size, const srv_phase_stats *g, int i)
-{
-    if (g->total <= 0) snprintf(buf, size, "- (0)");
-    else
-        snprintf(buf, size, "%.1f %% [%.1f, %.1f] (%ld)", 100.0 * g->share[i], 100.0 * g->lo[i],
-                 100.0 * g->hi[i], g->n[i]);
-}
-
 /* The phase-balance table of the survey: all its lights, then per technology. */
 static gs_status print_balance(srv_db *db, const char *survey)
 {
@@ -117,30 +109,18 @@ static gs_status print_balance(srv_db *db, const char *survey)
     gs_status s = srv_stats_compute(db, &o, &all, &n_all, NULL);
     if (s == GS_OK && (s = srv_stats_parse_by("technology", &o)) == GS_OK)
         s = srv_stats_compute(db, &o, &tech, &n_tech, NULL);
+    srv_phase_stats *g = s == GS_OK ? malloc((n_all + n_tech + 1) * sizeof *g) : NULL;
+    if (s == GS_OK && !g) s = gs_fail(GS_ENOMEM, "run: out of memory for the phase-balance table");
     if (s == GS_OK) {
         printf("\nPhase balance of survey %s (srv_stats_compute; gridsurvey stats --db DB --survey %s "
                "--by technology):\n\n", survey, survey);
-        printf("| group | lights | unknown | other | n | 0 deg | 120 deg | 240 deg | chi2 | p | imbalance |\n");
-        printf("|---|---:|---:|---:|---:|---|---|---|---:|---:|---:|\n");
-        int few = 0;
         for (size_t i = 0; i < n_all + n_tech; i++) {
-            const srv_phase_stats *g = i < n_all ? &all[i] : &tech[i - n_all];
-            char c[3][64];
-            for (int k = 0; k < 3; k++) pct(c[k], sizeof c[k], g, k);
-            printf("| %s%s | %ld | %ld | %ld | %ld | %s | %s | %s |", i < n_all ? "" : "technology ",
-                   g->group, g->lights, g->unknown, g->other, g->total, c[0], c[1], c[2]);
-            if (g->total > 0)
-                printf(" %.2f | %.3g%s | %.3f |\n", g->chi2, g->p_value,
-                       g->flags & SRV_STATS_FEW ? " (few)" : "", g->imbalance);
-            else
-                printf(" - | - | - |\n");
-            few |= (g->flags & SRV_STATS_FEW) != 0;
+            g[i] = i < n_all ? all[i] : tech[i - n_all];
+            if (i >= n_all) snprintf(g[i].group, sizeof g[i].group, "technology %.200s", tech[i - n_all].group);
         }
-        printf("\nShares of the lights on a known 0/120/240 deg phase (n), 95 %% Wilson intervals; chi2: "
-               "uniformity test (2 dof); imbalance = max |share - 1/3| / (1/3); unknown: ambiguous or "
-               "unrecognized phase; other: not within 20 deg of 0/120/240.%s\n",
-               few ? " (few): fewer than 5 expected per phase, p approximate." : "");
+        srv_stats_print_table(g, n_all + n_tech, &o, 0);
     }
+    free(g);
     free(all);
     free(tech);
     return s;

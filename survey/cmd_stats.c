@@ -10,40 +10,65 @@
 #include <string.h>
 
 static const char stats_usage[] =
-    "usage: gridsurvey stats --db DB [--by technology|survey|all|cell:SIZE_m|radius:LAT,LON,R_m]\n"
-    "                        [--survey NAME] [--min-confidence X] [--format table|json|csv]\n"
+    "usage: gridsurvey stats --db DB [--by G[,G2[,G3]]] [--clip AREAS.geojson]\n"
+    "                        [--bbox MINLON,MINLAT,MAXLON,MAXLAT] [--survey NAME]\n"
+    "                        [--min-confidence X] [--format table|json|csv] [--detections]\n"
     "\n"
     "Phase balance of the surveyed lights: per group, the lights on each grid phase (0, 120,\n"
     "240 deg, within 20 deg), their shares with 95 % Wilson intervals, a chi-square test of the\n"
     "uniform split (2 dof) and the imbalance index max |share - 1/3| / (1/3) (0 = balanced,\n"
     "2 = all on one phase). Lights whose phase is ambiguous or unknown, or another phase, are\n"
-    "counted apart and not in the shares.\n"
+    "counted apart and not in the shares; lights on 30/150/270 deg (six-phase surveys, within\n"
+    "15 deg) get their own columns.\n"
     "\n"
     "  --db DB             the survey database (read-only)\n"
     "  --by G              all (default), technology, survey, cell:SIZE_m (a local metric grid\n"
     "                      of SIZE_m cells around the lights' mean latitude; located lights\n"
-    "                      only) or radius:LAT,LON,R_m (located lights within R_m metres,\n"
-    "                      spherical distance)\n"
+    "                      only), feature:FIELD (per area of --clip, named by its property\n"
+    "                      FIELD) or radius:LAT,LON,R_m (located lights within R_m metres,\n"
+    "                      spherical distance); or up to three of technology, survey,\n"
+    "                      cell:SIZE_m, feature:FIELD joined by commas (e.g.\n"
+    "                      technology,cell:500): one group per combination, \"A / B\"\n"
+    "  --clip FILE         only located lights inside the Polygon / MultiPolygon features of\n"
+    "                      this GeoJSON FeatureCollection (WGS84; boundary included)\n"
+    "  --bbox B            only located lights in MINLON,MINLAT,MAXLON,MAXLAT (degrees;\n"
+    "                      MINLON > MAXLON crosses the antimeridian)\n"
     "  --survey NAME       only this survey\n"
     "  --min-confidence X  leave out lights whose phase confidence (posterior of the phase)\n"
     "                      is below X, in [0, 1] (default 0)\n"
     "  --format F          table (Markdown, default), json or csv\n"
+    "  --detections        count every stored detection; by default a light seen on several\n"
+    "                      nights or captures (one light site) counts once, its detections'\n"
+    "                      posteriors combined (docs/survey-db.md, \"Light sites\")\n"
     "  --help              this text\n";
 
 typedef enum { FMT_TABLE, FMT_JSON, FMT_CSV } out_format;
 
-static const char *by_name(const srv_stats_opts *o, char *buf, size_t size)
+static const char *part_name(const srv_stats_opts *o, srv_group_by by, char *buf, size_t size)
 {
-    switch (o->by) {
+    switch (by) {
     case SRV_BY_ALL: return "all";
     case SRV_BY_TECHNOLOGY: return "technology";
     case SRV_BY_SURVEY: return "survey";
     case SRV_BY_CELL: snprintf(buf, size, "cell:%g", o->cell_m); return buf;
+    case SRV_BY_FEATURE: snprintf(buf, size, "feature:%s", o->feature_field); return buf;
     case SRV_BY_RADIUS:
         snprintf(buf, size, "radius:%.7f,%.7f,%g", o->lat_deg, o->lon_deg, o->radius_m);
         return buf;
     }
     return "?";
+}
+
+/* The --by text, combinations joined by commas. */
+static const char *by_name(const srv_stats_opts *o, char *buf, size_t size)
+{
+    char part[128];
+    snprintf(buf, size, "%s", part_name(o, o->by, part, sizeof part));
+    for (int i = 0; i < o->n_then; i++) {
+        size_t used = strlen(buf);
+        snprintf(buf + used, size - used, ",%s", part_name(o, o->then[i], part, sizeof part));
+    }
+    return buf;
 }
 
 static void pct(char *buf, size_t size, const srv_phase_stats *g, int i)
@@ -54,18 +79,23 @@ static void pct(char *buf, size_t size, const srv_phase_stats *g, int i)
                  100.0 * g->hi[i], g->n[i]);
 }
 
-static void print_table(const srv_phase_stats *g, size_t n, const srv_stats_opts *o, long ungrouped)
+void srv_stats_print_table(const srv_phase_stats *g, size_t n, const srv_stats_opts *o, long ungrouped)
 {
-    int cells = o->by == SRV_BY_CELL || o->by == SRV_BY_RADIUS;
-    printf("| group |%s lights | below | unknown | other | n | 0 deg | 120 deg | 240 deg | chi2 | p | imbalance |\n",
-           cells ? " lat, lon |" : "");
-    printf("|---|%s---:|---:|---:|---:|---:|---|---|---|---:|---:|---:|\n", cells ? "---|" : "");
+    int cells = o->by == SRV_BY_RADIUS;
+    for (size_t i = 0; i < n; i++) cells |= !isnan(g[i].lat_deg);
+    int six = 0;   /* six-phase columns when any light is on 30/150/270 deg */
+    for (size_t i = 0; i < n; i++) six |= g[i].n30[0] || g[i].n30[1] || g[i].n30[2];
+    printf("| group |%s lights | below | unknown | other | n | 0 deg | 120 deg | 240 deg |%s chi2 | p | imbalance |\n",
+           cells ? " lat, lon |" : "", six ? " 30 deg | 150 deg | 270 deg |" : "");
+    printf("|---|%s---:|---:|---:|---:|---:|---|---|---|%s---:|---:|---:|\n", cells ? "---|" : "",
+           six ? "---:|---:|---:|" : "");
     for (size_t i = 0; i < n; i++) {
-        char c[3][64], ll[64] = "";
+        char c[3][64], ll[64] = "", c6[64] = "";
         for (int k = 0; k < 3; k++) pct(c[k], sizeof c[k], &g[i], k);
         if (cells) snprintf(ll, sizeof ll, " %.6f, %.6f |", g[i].lat_deg, g[i].lon_deg);
-        printf("| %s |%s %ld | %ld | %ld | %ld | %ld | %s | %s | %s |", g[i].group, ll, g[i].lights,
-               g[i].below, g[i].unknown, g[i].other, g[i].total, c[0], c[1], c[2]);
+        if (six) snprintf(c6, sizeof c6, " %ld | %ld | %ld |", g[i].n30[0], g[i].n30[1], g[i].n30[2]);
+        printf("| %s |%s %ld | %ld | %ld | %ld | %ld | %s | %s | %s |%s", g[i].group, ll, g[i].lights,
+               g[i].below, g[i].unknown, g[i].other, g[i].total, c[0], c[1], c[2], c6);
         if (g[i].total > 0)
             printf(" %.2f | %.3g%s | %.3f |\n", g[i].chi2, g[i].p_value,
                    g[i].flags & SRV_STATS_FEW ? " (few)" : "", g[i].imbalance);
@@ -75,7 +105,8 @@ static void print_table(const srv_phase_stats *g, size_t n, const srv_stats_opts
     printf("\nShares of the lights on a known 0/120/240 deg phase (n), 95 %% Wilson intervals; "
            "chi2: uniformity test (2 dof), p = exp(-chi2/2); imbalance = max |share - 1/3| / (1/3).\n");
     printf("below: phase confidence < %g (left out); unknown: ambiguous or unrecognized phase; "
-           "other: a phase not within 20 deg of 0/120/240.", o->min_confidence);
+           "other: a phase not within 20 deg of 0/120/240%s.", o->min_confidence,
+           six ? " nor 15 deg of 30/150/270 (the six-phase columns, counts outside the shares)" : "");
     if (ungrouped > 0) printf(" %ld lights without a position are in no cell.", ungrouped);
     int few = 0;
     for (size_t i = 0; i < n; i++) few |= (g[i].flags & SRV_STATS_FEW) != 0;
@@ -85,7 +116,8 @@ static void print_table(const srv_phase_stats *g, size_t n, const srv_stats_opts
 static void print_csv(const srv_phase_stats *g, size_t n)
 {
     printf("group,lat_deg,lon_deg,lights,below_confidence,unknown,other,n0,n120,n240,n,"
-           "share0,lo0,hi0,share120,lo120,hi120,share240,lo240,hi240,chi2,p_value,imbalance,flags\n");
+           "share0,lo0,hi0,share120,lo120,hi120,share240,lo240,hi240,chi2,p_value,imbalance,flags,"
+           "n30,n150,n270\n");
     for (size_t i = 0; i < n; i++) {
         const srv_phase_stats *x = &g[i];
         int quote = strpbrk(x->group, ",\"\n") != NULL;
@@ -106,7 +138,7 @@ static void print_csv(const srv_phase_stats *g, size_t n)
         double r[] = {x->share[0], x->lo[0], x->hi[0], x->share[1], x->lo[1], x->hi[1], x->share[2],
                       x->lo[2], x->hi[2], x->chi2, x->p_value, x->imbalance};
         for (int k = 0; k < 12; k++) isnan(r[k]) ? printf(",") : printf(",%.10g", r[k]);
-        printf(",%u\n", x->flags);
+        printf(",%u,%ld,%ld,%ld\n", x->flags, x->n30[0], x->n30[1], x->n30[2]);
     }
 }
 
@@ -148,6 +180,8 @@ static int print_json(const srv_phase_stats *g, size_t n, const srv_stats_opts *
             json_array_append_new(pair, real_or_null(x->hi[k]));
             json_object_set_new(ci, ph[k], pair);
         }
+        static const char *const ph6[3] = {"30", "150", "270"};
+        for (int k = 0; k < 3; k++) json_object_set_new(counts, ph6[k], json_integer(x->n30[k]));
         json_object_set_new(e, "counts", counts);
         json_object_set_new(e, "n", json_integer(x->total));
         json_object_set_new(e, "shares", shares);
@@ -172,9 +206,10 @@ int srv_cmd_stats(int argc, char **argv)
         {"db", required_argument, 0, 'd'},     {"by", required_argument, 0, 'b'},
         {"survey", required_argument, 0, 'S'}, {"min-confidence", required_argument, 0, 'c'},
         {"format", required_argument, 0, 'f'}, {"help", no_argument, 0, 'h'},
-        {0, 0, 0, 0},
+        {"detections", no_argument, 0, 'D'},   {"clip", required_argument, 0, 'C'},
+        {"bbox", required_argument, 0, 'B'},   {0, 0, 0, 0},
     };
-    const char *path = NULL;
+    const char *path = NULL, *clip = NULL;
     srv_stats_opts o;
     srv_stats_opts_default(&o);
     out_format fmt = FMT_TABLE;
@@ -207,6 +242,18 @@ int srv_cmd_stats(int argc, char **argv)
                 return 2;
             }
             break;
+        case 'D': o.detections = 1; break;
+        case 'C': clip = optarg; break;
+        case 'B':
+            if (sscanf(optarg, "%lf,%lf,%lf,%lf%c", &o.bbox[0], &o.bbox[1], &o.bbox[2], &o.bbox[3],
+                       &(char){0}) != 4 || !(fabs(o.bbox[1]) <= 90.0 && fabs(o.bbox[3]) <= 90.0 &&
+                                             o.bbox[1] <= o.bbox[3] && isfinite(o.bbox[0]) &&
+                                             isfinite(o.bbox[2]))) {
+                fprintf(stderr, "gridsurvey stats: --bbox '%s': expected MINLON,MINLAT,MAXLON,MAXLAT "
+                        "(degrees, MINLAT <= MAXLAT)\n", optarg);
+                return 2;
+            }
+            break;
         case 'h': fputs(stats_usage, stdout); return 0;
         default: return srv_usage_hint("stats");
         }
@@ -219,13 +266,28 @@ int srv_cmd_stats(int argc, char **argv)
         fprintf(stderr, "gridsurvey stats: --db is required (see gridsurvey help stats)\n");
         return 2;
     }
+    int by_feature = o.by == SRV_BY_FEATURE;
+    for (int i = 0; i < o.n_then; i++) by_feature |= o.then[i] == SRV_BY_FEATURE;
+    if (by_feature && !clip) {
+        fprintf(stderr, "gridsurvey stats: --by feature:%s needs --clip AREAS.geojson\n", o.feature_field);
+        return 2;
+    }
+    srv_areas *areas = NULL;
+    gs_status s;
+    if (clip && (s = srv_areas_load(clip, by_feature ? o.feature_field : NULL, &areas)) != GS_OK)
+        return srv_error(s);
+    o.areas = areas;
     srv_db *db;
-    gs_status s = srv_db_open(path, SRV_DB_READ, &db);
-    if (s != GS_OK) return srv_error(s);
+    s = srv_db_open(path, SRV_DB_READ, &db);
+    if (s != GS_OK) {
+        srv_areas_free(areas);
+        return srv_error(s);
+    }
     if (o.survey) {
         int64_t id;
         if ((s = srv_db_find_survey(db, o.survey, &id)) != GS_OK) {
             srv_db_close(db);
+            srv_areas_free(areas);
             return srv_error(s);
         }
     }
@@ -234,9 +296,10 @@ int srv_cmd_stats(int argc, char **argv)
     long ungrouped = 0;
     s = srv_stats_compute(db, &o, &g, &n, &ungrouped);
     srv_db_close(db);
+    srv_areas_free(areas);
     if (s != GS_OK) return srv_error(s);
     int rc = 0;
-    if (fmt == FMT_TABLE) print_table(g, n, &o, ungrouped);
+    if (fmt == FMT_TABLE) srv_stats_print_table(g, n, &o, ungrouped);
     else if (fmt == FMT_CSV) print_csv(g, n);
     else rc = print_json(g, n, &o, path, ungrouped);
     free(g);

@@ -226,9 +226,9 @@ static int query_int(sqlite3 *db, const char *sql, int *v)
 static const char *expected_text(void)
 {
     return "expected a gridsurvey survey database (SQLite, application_id 0x47534442 'GSDB', "
-           "schema version 1.." "2" ")";
+           "schema version 1.." "3" ")";
 }
-_Static_assert(SRV_DB_SCHEMA_VERSION == 2, "update expected_text()");
+_Static_assert(SRV_DB_SCHEMA_VERSION == 3, "update expected_text()");
 
 /* Identify an existing file through a read-only connection (nothing is written). */
 static gs_status identify(const char *path, off_t size, db_kind *kind, int *version)
@@ -552,12 +552,16 @@ gs_status srv_db_check(srv_db *db, srv_db_report *r)
     const char *res = rc == SQLITE_ROW ? (const char *)sqlite3_column_text(q, 0) : NULL;
     r->integrity_ok = res && !strcmp(res, "ok");
     sqlite3_finalize(q);
-    if (sqlite3_prepare_v2(db->db, "SELECT rtreecheck('locations_rtree')", -1, &q, NULL) != SQLITE_OK)
-        return srv_dbi_fail(db, "rtreecheck");
-    rc = sqlite3_step(q);
-    res = rc == SQLITE_ROW ? (const char *)sqlite3_column_text(q, 0) : NULL;
-    if (!res || strcmp(res, "ok")) r->integrity_ok = 0;
-    sqlite3_finalize(q);
+    static const char *const rtrees[] = {"SELECT rtreecheck('locations_rtree')",
+                                         "SELECT rtreecheck('light_sites_rtree')"};
+    for (int i = 0; i < 2; i++) {
+        if (sqlite3_prepare_v2(db->db, rtrees[i], -1, &q, NULL) != SQLITE_OK)
+            return srv_dbi_fail(db, "rtreecheck");
+        rc = sqlite3_step(q);
+        res = rc == SQLITE_ROW ? (const char *)sqlite3_column_text(q, 0) : NULL;
+        if (!res || strcmp(res, "ok")) r->integrity_ok = 0;
+        sqlite3_finalize(q);
+    }
     long a = 0, b = 0;
     gs_status s;
     if ((s = count(db, "SELECT count(*) FROM pragma_foreign_key_check", &r->fk_violations)) != GS_OK ||
@@ -577,7 +581,15 @@ gs_status srv_db_check(srv_db *db, srv_db_report *r)
         (s = count(db, "SELECT count(*) FROM captures", &r->captures)) != GS_OK ||
         (s = count(db, "SELECT count(*) FROM lights", &r->lights)) != GS_OK ||
         (s = count(db, "SELECT count(*) FROM locations", &r->locations)) != GS_OK ||
-        (s = count(db, "SELECT count(*) FROM grid_frequency", &r->frequency_rows)) != GS_OK)
+        (s = count(db, "SELECT count(*) FROM grid_frequency", &r->frequency_rows)) != GS_OK ||
+        (s = count(db, "SELECT count(*) FROM light_sites", &r->sites)) != GS_OK ||
+        (s = count(db, "SELECT count(*) FROM lights l WHERE NOT EXISTS (SELECT 1 FROM "
+                       "site_detections sd WHERE sd.light_id = l.id)", &r->unassociated)) != GS_OK ||
+        (s = count(db, "SELECT count(*) FROM light_sites s WHERE stale = 1 OR detections != "
+                       "(SELECT count(*) FROM site_detections sd WHERE sd.site_id = s.id)",
+                   &r->stale_sites)) != GS_OK ||
+        (s = count(db, "SELECT (SELECT count(*) FROM light_sites WHERE lat_deg IS NOT NULL AND "
+                       "pose_key IS NULL) - (SELECT count(*) FROM light_sites_rtree)", &r->site_rtree_mismatch)) != GS_OK)
         return s;
     r->rtree_mismatch = a + b;
     return GS_OK;
@@ -586,5 +598,6 @@ gs_status srv_db_check(srv_db *db, srv_db_report *r)
 int srv_db_report_ok(const srv_db_report *r)
 {
     return r && r->integrity_ok && r->fk_violations == 0 && r->rtree_rows == r->located &&
-           r->rtree_mismatch == 0 && r->incomplete_captures == 0;
+           r->rtree_mismatch == 0 && r->incomplete_captures == 0 && r->unassociated == 0 &&
+           r->stale_sites == 0 && r->site_rtree_mismatch == 0;
 }

@@ -164,9 +164,71 @@ static const char *const migration_2[] = {
     "      FROM phase_shares);\n",
     NULL};
 
+/* Version 3: light identity (docs/survey-db.md, "Light sites"). A site is one physical light;
+ * each stored light (a detection) belongs to one site (site_detections), at most one per
+ * capture. survey/sites.c associates and keeps the combined columns; the R*Tree holds the
+ * located sites' positions. Deleting detections marks their site stale (refreshed by the next
+ * association) and removes a site left without any. */
+static const char *const migration_3[] = {
+    "CREATE TABLE light_sites(\n"
+    "  id INTEGER PRIMARY KEY,\n"
+    "  lat_deg REAL CHECK (lat_deg BETWEEN -90 AND 90),\n"
+    "  lon_deg REAL CHECK (lon_deg >= -180 AND lon_deg < 180),\n"
+    "  height_m REAL, semi_major_m REAL, semi_minor_m REAL, azimuth_deg REAL,\n"
+    "  pose_key TEXT, x_px REAL, y_px REAL,\n"
+    "  detections INTEGER NOT NULL DEFAULT 0, captures INTEGER NOT NULL DEFAULT 0,\n"
+    "  bulb_id TEXT, technology TEXT,\n"
+    "  phase_deg REAL CHECK (phase_deg >= 0 AND phase_deg < 360), phase_sigma_deg REAL,\n"
+    "  confidence REAL CHECK (confidence BETWEEN 0 AND 1),\n"
+    "  bulb_confidence REAL CHECK (bulb_confidence BETWEEN 0 AND 1),\n"
+    "  phase_confidence REAL CHECK (phase_confidence BETWEEN 0 AND 1),\n"
+    "  stale INTEGER NOT NULL DEFAULT 0 CHECK (stale IN (0, 1)),\n"
+    "  CHECK ((lat_deg IS NULL) = (lon_deg IS NULL)));\n"
+    "CREATE INDEX light_sites_pose ON light_sites(pose_key, x_px) WHERE pose_key IS NOT NULL;\n"
+    "CREATE INDEX light_sites_major ON light_sites(semi_major_m) WHERE pose_key IS NULL;\n"
+    "CREATE TABLE site_detections(\n"
+    "  light_id INTEGER PRIMARY KEY REFERENCES lights(id) ON DELETE CASCADE,\n"
+    "  site_id INTEGER NOT NULL REFERENCES light_sites(id) ON DELETE CASCADE,\n"
+    "  capture_id INTEGER NOT NULL REFERENCES captures(id) ON DELETE CASCADE,\n"
+    "  d2 REAL,\n"
+    "  UNIQUE (site_id, capture_id));\n"
+    "CREATE INDEX site_detections_capture ON site_detections(capture_id);\n"
+    "CREATE VIRTUAL TABLE light_sites_rtree USING rtree(id, min_lon, max_lon, min_lat, max_lat);\n"
+    "CREATE TRIGGER light_sites_rtree_insert AFTER INSERT ON light_sites\n"
+    "  WHEN new.lat_deg IS NOT NULL AND new.pose_key IS NULL BEGIN\n"
+    "  INSERT INTO light_sites_rtree VALUES (new.id, new.lon_deg, new.lon_deg, new.lat_deg,\n"
+    "                                       new.lat_deg);\n"
+    "END;\n"
+    "CREATE TRIGGER light_sites_rtree_delete AFTER DELETE ON light_sites BEGIN\n"
+    "  DELETE FROM light_sites_rtree WHERE id = old.id;\n"
+    "END;\n"
+    "CREATE TRIGGER light_sites_rtree_update AFTER UPDATE OF id, lat_deg, lon_deg, pose_key\n"
+    "  ON light_sites BEGIN\n"
+    "  DELETE FROM light_sites_rtree WHERE id = old.id;\n"
+    "  INSERT INTO light_sites_rtree SELECT new.id, new.lon_deg, new.lon_deg, new.lat_deg,\n"
+    "    new.lat_deg WHERE new.lat_deg IS NOT NULL AND new.pose_key IS NULL;\n"
+    "END;\n"
+    "CREATE TRIGGER site_detections_delete AFTER DELETE ON site_detections BEGIN\n"
+    "  UPDATE light_sites SET stale = 1 WHERE id = old.site_id;\n"
+    "  DELETE FROM light_sites WHERE id = old.site_id\n"
+    "    AND NOT EXISTS (SELECT 1 FROM site_detections WHERE site_id = old.site_id);\n"
+    "END;\n"
+    "CREATE VIEW site_phase AS\n"
+    "SELECT id AS site_id, coalesce(technology, 'none') AS technology, bulb_id, phase_deg,\n"
+    "       CASE WHEN phase_deg IS NULL THEN 'unknown'\n"
+    "            WHEN phase_deg <= 20 OR phase_deg >= 340 THEN '0'\n"
+    "            WHEN phase_deg BETWEEN 100 AND 140 THEN '120'\n"
+    "            WHEN phase_deg BETWEEN 220 AND 260 THEN '240'\n"
+    "            ELSE 'other' END AS phase_class,\n"
+    "       phase_sigma_deg, confidence, bulb_confidence, phase_confidence, detections, captures,\n"
+    "       lat_deg, lon_deg, semi_major_m, semi_minor_m, azimuth_deg\n"
+    "FROM light_sites;\n",
+    NULL};
+
 const srv_db_migration srv_db_migrations[SRV_DB_MIGRATIONS] = {
     {"tables, R*Tree and triggers", migration_1},
     {"phase-balance views", migration_2},
+    {"light sites", migration_3},
 };
 
 /* ------------------------------------------------------------------ statements */

@@ -28,6 +28,7 @@ typedef struct {
     char tech[32];              /* "" = none */
     double phase_deg;           /* NaN = none */
     double lat, lon;            /* NaN = none */
+    double a_m, b_m, az_deg;    /* stored: the 1-sigma ellipse (NaN = none or unbounded) */
     unsigned flags;             /* stored: match_flags */
     int partner;                /* index of the matched light on the other side, -1 */
 } ev_light;
@@ -193,7 +194,8 @@ static gs_status read_stored(srv_db *db, int64_t capture_id, ev_light **out, siz
 {
     static const char sql[] =
         "SELECT l.x_px, l.y_px, l.bulb_id, l.technology, l.phase_deg, l.match_flags, loc.lat_deg, "
-        "loc.lon_deg FROM lights l LEFT JOIN locations loc ON loc.light_id = l.id "
+        "loc.lon_deg, loc.semi_major_m, loc.semi_minor_m, loc.azimuth_deg FROM lights l "
+        "LEFT JOIN locations loc ON loc.light_id = l.id "
         "WHERE l.capture_id = ?1 ORDER BY l.light_index";
     sqlite3 *h = srv_db_sqlite(db);
     sqlite3_stmt *q = NULL;
@@ -230,6 +232,9 @@ static gs_status read_stored(srv_db *db, int64_t capture_id, ev_light **out, siz
         l->flags = (unsigned)sqlite3_column_int64(q, 5);
         l->lat = sqlite3_column_type(q, 6) == SQLITE_NULL ? NAN : sqlite3_column_double(q, 6);
         l->lon = sqlite3_column_type(q, 7) == SQLITE_NULL ? NAN : sqlite3_column_double(q, 7);
+        double *e[3] = {&l->a_m, &l->b_m, &l->az_deg};
+        for (int k = 0; k < 3; k++)
+            *e[k] = sqlite3_column_type(q, 8 + k) == SQLITE_NULL ? NAN : sqlite3_column_double(q, 8 + k);
     }
     if (s == GS_OK && rc != SQLITE_DONE) s = gs_fail(GS_ESQL, "%s: %s", srv_db_path(db), sqlite3_errmsg(h));
     sqlite3_finalize(q);
@@ -408,9 +413,16 @@ gs_status srv_evaluate(srv_db *db, const char *truth_path, const srv_eval_opts *
         int tc = phase_col(t->phase_deg);
         if (tc < 4) r->confusion[tc][phase_col(a->phase_deg)]++;
         if (isfinite(a->lat) && isfinite(t->lat)) {
-            double d;
-            if ((s = gis_geodesic_inverse(t->lat, t->lon, a->lat, a->lon, &d, NULL, NULL)) != GS_OK) goto done;
+            double d, azi;
+            if ((s = gis_geodesic_inverse(a->lat, a->lon, t->lat, t->lon, &d, &azi, NULL)) != GS_OK) goto done;
             err[r->loc_pairs++] = d;
+            /* the truth inside the stored 95 % ellipse: d2 = x^T C^-1 x <= -2 ln 0.05 */
+            if (a->a_m > 0.0 && isfinite(a->a_m) && a->b_m > 0.0 && isfinite(a->b_m)) {
+                double d2 = srv_ellipse_maha2(a->a_m, a->b_m, isfinite(a->az_deg) ? a->az_deg : 0.0,
+                                              d * sin(azi * M_PI / 180.0), d * cos(azi * M_PI / 180.0));
+                r->ellipse_pairs++;
+                r->ellipse_in95 += d2 <= SRV_CHI2_2DOF_95;
+            }
         } else if (!isfinite(a->lat)) {
             r->loc_unlocated++;
         }
@@ -421,6 +433,7 @@ gs_status srv_evaluate(srv_db *db, const char *truth_path, const srv_eval_opts *
         r->loc_p95_m = quantile(err, (size_t)r->loc_pairs, 0.95);
         r->loc_max_m = err[r->loc_pairs - 1];
     }
+    r->ellipse_coverage95 = rate(r->ellipse_in95, r->ellipse_pairs);
     r->detection_rate = rate(r->matched, r->truth_in_image);
     r->false_rate = rate(r->false_detections, r->stored);
     r->bulb_accuracy = rate(r->bulb_correct, r->bulb_answered);
@@ -498,6 +511,8 @@ gs_status srv_eval_print(const srv_eval_report *r, const char *truth_path, int j
         json_object_set_new(loc, "median_m", jnum(r->loc_median_m));
         json_object_set_new(loc, "p95_m", jnum(r->loc_p95_m));
         json_object_set_new(loc, "max_m", jnum(r->loc_max_m));
+        json_object_set_new(loc, "ellipse_pairs", json_integer(r->ellipse_pairs));
+        json_object_set_new(loc, "ellipse95_coverage", jnum(r->ellipse_coverage95));
         json_object_set_new(root, "location_error", loc);
         int rc = json_dumpf(root, f, JSON_INDENT(2) | JSON_PRESERVE_ORDER | JSON_REAL_PRECISION(10));
         json_decref(root);
@@ -524,6 +539,10 @@ gs_status srv_eval_print(const srv_eval_report *r, const char *truth_path, int j
         fprintf(f, "| location error, median | %.2f m | %ld located matched lights (%ld not located) |\n",
                 r->loc_median_m, r->loc_pairs, r->loc_unlocated);
         fprintf(f, "| location error, 95th percentile | %.2f m | max %.2f m |\n", r->loc_p95_m, r->loc_max_m);
+        if (r->ellipse_pairs > 0)
+            fprintf(f, "| 95 %% ellipse coverage | %.1f %% | %ld of %ld truth lights inside their stored "
+                    "95 %% error ellipse (calibrated: 95 %%) |\n", 100.0 * r->ellipse_coverage95,
+                    r->ellipse_in95, r->ellipse_pairs);
     } else {
         fprintf(f, "| location error | - | no located matched light with a true position (%ld not located) |\n",
                 r->loc_unlocated);

@@ -20,6 +20,7 @@ int srv_cmd_recognize(int argc, char **argv);
 int srv_cmd_bench(int argc, char **argv);
 int srv_cmd_run(int argc, char **argv);
 int srv_cmd_evaluate(int argc, char **argv);
+int srv_cmd_compare(int argc, char **argv);
 int srv_cmd_unmix(int argc, char **argv);
 int srv_cmd_relight(int argc, char **argv);
 int srv_cmd_separate(int argc, char **argv);
@@ -73,6 +74,11 @@ typedef struct {
 } srv_render_time_result;
 gs_status srv_render_time(const cap_scene *sc, unsigned effects_mask, int frames,
                           srv_render_time_result *out);
+
+/* The Markdown phase-balance table of `gridsurvey stats` (cmd_stats.c) on stdout: groups,
+ * counts, shares with Wilson intervals, six-phase columns when any group has such lights, and
+ * the legend (o: the threshold and grouping; ungrouped: lights without a position). */
+void srv_stats_print_table(const srv_phase_stats *g, size_t n, const srv_stats_opts *o, long ungrouped);
 
 /* Print "gridsurvey: STATUS: DETAIL" on stderr and return 1. */
 /* Where a command's confirmation line goes: stderr when its output is "-" (stdout). */
@@ -132,6 +138,11 @@ gs_status srv_dbi_writable(srv_db *db);
 gs_status srv_dbi_need_txn(srv_db *db, const char *what);
 gs_status srv_dbi_auto_begin(srv_db *db, int *began);
 gs_status srv_dbi_auto_end(srv_db *db, int began, gs_status s);
+/* Associate one capture's new detections (sites.c; called inside its transaction). */
+gs_status srv_dbi_associate_capture(srv_db *db, int64_t capture_id, long *created, long *joined);
+/* Fill o from the 8 columns bulb_id, technology, phase_deg, phase_sigma_deg, confidence,
+ * bulb_confidence, phase_confidence, DELIGHT bulbs starting at column first. */
+void srv_site_obs_from_row(sqlite3_stmt *q, int first, srv_site_obs *o);
 /* ====================================================================== end of the database */
 
 /* ============================= `bench accuracy` (bench_accuracy*.c), shared between its files */

@@ -75,24 +75,42 @@ void srv_stats_opts_default(srv_stats_opts *o)
     memset(o, 0, sizeof *o);
     o->by = SRV_BY_ALL;
     o->cell_m = o->lat_deg = o->lon_deg = o->radius_m = NAN;
+    for (int i = 0; i < 4; i++) o->bbox[i] = NAN;
     o->min_confidence = 0.0;
+}
+
+#define BY_EXPECTED "technology, survey, all, cell:SIZE_m, feature:FIELD, radius:LAT,LON,R_m, or up to " \
+                    "three of technology, survey, cell:SIZE_m, feature:FIELD joined by commas"
+
+/* One grouping of a --by list. */
+static gs_status parse_part(const char *text, const char *part, srv_stats_opts *o, srv_group_by *by)
+{
+    char *end;
+    if (!strcmp(part, "technology")) *by = SRV_BY_TECHNOLOGY;
+    else if (!strcmp(part, "survey")) *by = SRV_BY_SURVEY;
+    else if (!strcmp(part, "all")) *by = SRV_BY_ALL;
+    else if (!strncmp(part, "cell:", 5)) {
+        double v = strtod(part + 5, &end);
+        if (end == part + 5 || (*end && strcmp(end, "m")) || !isfinite(v) || !(v >= 1.0) || v > 1e7)
+            return gs_fail(GS_EINVAL, "--by '%s': expected cell:SIZE_m with a cell side of 1 to 1e7 "
+                           "metres", text);
+        *by = SRV_BY_CELL;
+        o->cell_m = v;
+    } else if (!strncmp(part, "feature:", 8) && part[8]) {
+        *by = SRV_BY_FEATURE;
+        snprintf(o->feature_field, sizeof o->feature_field, "%s", part + 8);
+    } else {
+        return gs_fail(GS_EINVAL, "--by '%s': expected " BY_EXPECTED, text);
+    }
+    return GS_OK;
 }
 
 gs_status srv_stats_parse_by(const char *text, srv_stats_opts *o)
 {
     char *end;
-    if (!text) return gs_fail(GS_EINVAL, "--by: expected technology, survey, all, cell:SIZE_m or radius:LAT,LON,R_m");
-    if (!strcmp(text, "technology")) o->by = SRV_BY_TECHNOLOGY;
-    else if (!strcmp(text, "survey")) o->by = SRV_BY_SURVEY;
-    else if (!strcmp(text, "all")) o->by = SRV_BY_ALL;
-    else if (!strncmp(text, "cell:", 5)) {
-        double v = strtod(text + 5, &end);
-        if (end == text + 5 || (*end && strcmp(end, "m")) || !isfinite(v) || !(v >= 1.0) || v > 1e7)
-            return gs_fail(GS_EINVAL, "--by '%s': expected cell:SIZE_m with a cell side of 1 to 1e7 "
-                           "metres", text);
-        o->by = SRV_BY_CELL;
-        o->cell_m = v;
-    } else if (!strncmp(text, "radius:", 7)) {
+    if (!text) return gs_fail(GS_EINVAL, "--by: expected " BY_EXPECTED);
+    o->n_then = 0;
+    if (!strncmp(text, "radius:", 7)) {
         double v[3];
         const char *p = text + 7;
         for (int i = 0; i < 3; i++) {
@@ -110,10 +128,28 @@ gs_status srv_stats_parse_by(const char *text, srv_stats_opts *o)
         o->lat_deg = v[0];
         o->lon_deg = v[1];
         o->radius_m = v[2];
-    } else {
-        return gs_fail(GS_EINVAL, "--by '%s': expected technology, survey, all, cell:SIZE_m or "
-                       "radius:LAT,LON,R_m", text);
+        return GS_OK;
     }
+    char buf[256];
+    if (strlen(text) >= sizeof buf) return gs_fail(GS_EINVAL, "--by '%.40s...': too long", text);
+    snprintf(buf, sizeof buf, "%s", text);
+    srv_group_by parts[SRV_BY_MAX];
+    int n = 0;
+    for (char *save = NULL, *t = strtok_r(buf, ",", &save); t; t = strtok_r(NULL, ",", &save)) {
+        if (n == SRV_BY_MAX) return gs_fail(GS_EINVAL, "--by '%s': expected " BY_EXPECTED, text);
+        gs_status st = parse_part(text, t, o, &parts[n]);
+        if (st != GS_OK) return st;
+        for (int j = 0; j < n; j++)
+            if (parts[j] == parts[n])
+                return gs_fail(GS_EINVAL, "--by '%s': a grouping given twice", text);
+        if (n && (parts[n] == SRV_BY_ALL || parts[0] == SRV_BY_ALL))
+            return gs_fail(GS_EINVAL, "--by '%s': 'all' combines with nothing", text);
+        n++;
+    }
+    if (!n) return gs_fail(GS_EINVAL, "--by '%s': expected " BY_EXPECTED, text);
+    o->by = parts[0];
+    for (int j = 1; j < n; j++) o->then[j - 1] = parts[j];
+    o->n_then = n - 1;
     return GS_OK;
 }
 
@@ -195,8 +231,15 @@ static void add_light(srv_phase_stats *g, double phase_deg, double phase_conf, d
     }
     int c = gs_phase_class(phase_deg);
     if (c < 0) g->unknown++;
-    else if (c == 3) g->other++;
-    else g->n[c]++;
+    else if (c < 3) g->n[c]++;
+    else {
+        /* the six-phase candidates: 30, 150, 270 deg (+30 behind delta-wye), within 15 deg */
+        int k6 = -1;
+        for (int k = 0; k < 3; k++)
+            if (fabs(gs_wrap180(phase_deg - 30.0 - 120.0 * k)) <= SRV_PHASE6_TOL_DEG) k6 = k;
+        if (k6 >= 0) g->n30[k6]++;
+        else g->other++;
+    }
 }
 
 static int cmp_groups(const void *a, const void *b)
@@ -223,49 +266,81 @@ static double haversine_m(double lat1, double lon1, double lat2, double lon2)
     return 2.0 * GIS_EARTH_RADIUS_M * asin(sqrt(a));
 }
 
+/* A light site that passed the filters: its position, combined phase and the indices of its
+ * technology and survey names (interned) and of its area. */
 typedef struct {
     double lat, lon, phase, conf;
-} cell_row;
+    int tech, survey, feature;
+} site_row;
 
-/* SELECT survey, technology, phase_deg, phase_confidence, lat_deg, lon_deg: only the joins a
- * grouping needs (a 1e6-light scan of lights alone is 3x faster than with every join). */
-static const char scan_full_sql[] =
-    "SELECT s.name, l.technology, l.phase_deg, l.phase_confidence, loc.lat_deg, loc.lon_deg "
+/* One row per detection, grouped by light site (docs/survey-db.md, "Light sites"): a detection
+ * not associated (a database written before migration 3 and not yet migrated by `db migrate`)
+ * is a site of its own, and so is every detection with opts.detections. The site's position; its recognition combined in C (srv_site_combine)
+ * over the selected detections only (those of --survey, or per survey with --by survey). */
+static const char scan_sql[] =
+    "SELECT CASE WHEN ?2 THEN -l.id ELSE coalesce(sd.site_id, -l.id) END, s.name, l.bulb_id, "
+    "l.technology, l.phase_deg, l.phase_sigma_deg, l.confidence, l.bulb_confidence, "
+    "l.phase_confidence, dv.bulbs, CASE WHEN ?2 THEN loc.lat_deg ELSE coalesce(ls.lat_deg, "
+    "loc.lat_deg) END, CASE WHEN ?2 THEN loc.lon_deg ELSE coalesce(ls.lon_deg, loc.lon_deg) END "
     "FROM lights l JOIN captures c ON c.id = l.capture_id JOIN surveys s ON s.id = c.survey_id "
-    "LEFT JOIN locations loc ON loc.light_id = l.id WHERE (?1 IS NULL OR s.name = ?1)";
-static const char scan_survey_sql[] =
-    "SELECT s.name, l.technology, l.phase_deg, l.phase_confidence, NULL, NULL "
-    "FROM lights l JOIN captures c ON c.id = l.capture_id JOIN surveys s ON s.id = c.survey_id "
-    "WHERE (?1 IS NULL OR s.name = ?1)";
-static const char scan_lights_sql[] =
-    "SELECT NULL, l.technology, l.phase_deg, l.phase_confidence, NULL, NULL FROM lights l "
-    "WHERE ?1 IS NULL";
-/* The R*Tree first (CROSS JOIN fixes the join order), then the exact distance in C. */
-static const char radius_sql[] =
-    "SELECT s.name, l.technology, l.phase_deg, l.phase_confidence, loc.lat_deg, loc.lon_deg "
-    "FROM locations_rtree r CROSS JOIN locations loc ON loc.light_id = r.id "
-    "CROSS JOIN lights l ON l.id = r.id CROSS JOIN captures c ON c.id = l.capture_id "
-    "CROSS JOIN surveys s ON s.id = c.survey_id "
-    "WHERE r.max_lat >= ?2 AND r.min_lat <= ?3 AND r.max_lon >= ?4 AND r.min_lon <= ?5 "
-    "AND (?1 IS NULL OR s.name = ?1)";
+    "LEFT JOIN delight_versions dv ON dv.id = c.delight_id "
+    "LEFT JOIN site_detections sd ON sd.light_id = l.id LEFT JOIN light_sites ls ON ls.id = sd.site_id "
+    "LEFT JOIN locations loc ON loc.light_id = l.id WHERE (?1 IS NULL OR s.name = ?1) ";
+static const char order_site_sql[] = "ORDER BY 1, l.id";
+static const char order_survey_sql[] = "ORDER BY 2, 1, l.id";
 
 static double column_real(sqlite3_stmt *q, int i)
 {
     return sqlite3_column_type(q, i) == SQLITE_NULL ? NAN : sqlite3_column_double(q, i);
 }
 
-/* A stored position is NULL (not located) or numbers in range: a tampered database with text
- * or out-of-range coordinates is refused rather than fed to floor() and an integer cast. */
-static gs_status check_position(sqlite3_stmt *q, const char *path, double lat, double lon)
+/* A stored position (columns col, col + 1) is NULL (not located) or numbers in range: a
+ * tampered database with text or out-of-range coordinates is refused rather than fed to floor()
+ * and an integer cast. */
+static gs_status check_position(sqlite3_stmt *q, int col, const char *path, double lat, double lon)
 {
-    int tl = sqlite3_column_type(q, 4), tn = sqlite3_column_type(q, 5);
+    int tl = sqlite3_column_type(q, col), tn = sqlite3_column_type(q, col + 1);
     if (tl == SQLITE_NULL && tn == SQLITE_NULL) return GS_OK;
     int num = (tl == SQLITE_FLOAT || tl == SQLITE_INTEGER) && (tn == SQLITE_FLOAT || tn == SQLITE_INTEGER);
     if (num && fabs(lat) <= 90.0 && fabs(lon) <= 540.0) return GS_OK;
-    const char *lt = (const char *)sqlite3_column_text(q, 4), *nt = (const char *)sqlite3_column_text(q, 5);
-    return gs_fail(GS_EFORMAT, "%s: locations.lat_deg, lon_deg = '%.40s', '%.40s': expected a latitude "
+    const char *lt = (const char *)sqlite3_column_text(q, col), *nt = (const char *)sqlite3_column_text(q, col + 1);
+    return gs_fail(GS_EFORMAT, "%s: lat_deg, lon_deg of a light (locations, light_sites) = '%.40s', '%.40s': expected a latitude "
                    "in [-90, 90] and a longitude in [-540, 540] degrees, or NULL", path,
                    lt ? lt : "NULL", nt ? nt : "NULL");
+}
+
+/* A site being accumulated from its detections' rows. */
+typedef struct {
+    int64_t id;
+    char survey[64];
+    double lat, lon;
+    srv_site_obs obs[SRV_SITE_MAX_OBS];
+    size_t n;
+} site_acc;
+
+/* The index of name in the interning set (added when new). */
+static gs_status intern(group_set *names, const char *name, int *index)
+{
+    group *g;
+    gs_status s = find_group(names, name, &g);
+    if (s == GS_OK) *index = (int)(g - names->v);
+    return s;
+}
+
+static int in_bbox(const double b[4], double lat, double lon)
+{
+    if (!(lat >= b[1] && lat <= b[3])) return 0;
+    double x = gs_wrap180(lon), lo = gs_wrap180(b[0]), hi = gs_wrap180(b[2]);
+    if (b[2] - b[0] >= 360.0) return 1;
+    return lo <= hi ? (x >= lo && x <= hi) : (x >= lo || x <= hi);   /* across the antimeridian */
+}
+
+static int uses(const srv_stats_opts *o, srv_group_by by)
+{
+    if (o->by == by) return 1;
+    for (int i = 0; i < o->n_then; i++)
+        if (o->then[i] == by) return 1;
+    return 0;
 }
 
 gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats **groups,
@@ -277,123 +352,153 @@ gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats
     if (ungrouped) *ungrouped = 0;
     if (!(o->min_confidence >= 0.0 && o->min_confidence <= 1.0))
         return gs_fail(GS_EINVAL, "--min-confidence %g: expected a probability in [0, 1]", o->min_confidence);
-    if (o->by == SRV_BY_CELL && !(o->cell_m >= 1.0 && isfinite(o->cell_m)))
+    if (uses(o, SRV_BY_CELL) && !(o->cell_m >= 1.0 && isfinite(o->cell_m)))
         return gs_fail(GS_EINVAL, "cell size %g m: expected >= 1 m", o->cell_m);
     if (o->by == SRV_BY_RADIUS && !(o->radius_m > 0.0 && isfinite(o->radius_m) &&
                                     fabs(o->lat_deg) <= 90.0 && isfinite(o->lon_deg)))
         return gs_fail(GS_EINVAL, "radius (%g, %g, %g m): expected a latitude in [-90, 90], a "
                        "finite longitude and a radius > 0", o->lat_deg, o->lon_deg, o->radius_m);
+    if (uses(o, SRV_BY_FEATURE) && !o->areas)
+        return gs_fail(GS_EINVAL, "--by feature:%s: needs the areas (--clip AREAS.geojson)", o->feature_field);
+    int has_bbox = !isnan(o->bbox[0]);
+    if (has_bbox && !(fabs(o->bbox[1]) <= 90.0 && fabs(o->bbox[3]) <= 90.0 && o->bbox[1] <= o->bbox[3] &&
+                      isfinite(o->bbox[0]) && isfinite(o->bbox[2])))
+        return gs_fail(GS_EINVAL, "--bbox %g,%g,%g,%g: expected MINLON,MINLAT,MAXLON,MAXLAT with "
+                       "MINLAT <= MAXLAT in [-90, 90]", o->bbox[0], o->bbox[1], o->bbox[2], o->bbox[3]);
+    /* the groupings that need a position */
+    int spatial = uses(o, SRV_BY_CELL) || uses(o, SRV_BY_FEATURE) || o->by == SRV_BY_RADIUS ||
+                  has_bbox || o->areas;
     sqlite3 *h = srv_db_sqlite(db);
     const char *path = srv_db_path(db);
     sqlite3_stmt *q = NULL;
-    group_set gs = {0};
-    cell_row *rows = NULL;
+    group_set gs = {0}, names = {0};
+    site_row *rows = NULL;
     size_t nrows = 0, caprows = 0;
     long no_position = 0;
     gs_status s = GS_OK;
-    const char *sql = o->by == SRV_BY_RADIUS ? radius_sql
-                    : o->by == SRV_BY_CELL ? scan_full_sql
-                    : o->by == SRV_BY_SURVEY || o->survey ? scan_survey_sql
-                    : scan_lights_sql;
+    site_acc *acc = calloc(1, sizeof *acc);
+    char sql[sizeof scan_sql + 32];
+    snprintf(sql, sizeof sql, "%s%s", scan_sql, uses(o, SRV_BY_SURVEY) ? order_survey_sql : order_site_sql);
+    if (!acc) {
+        s = gs_fail(GS_ENOMEM, "stats: out of memory");
+        goto done;
+    }
     if (sqlite3_prepare_v2(h, sql, -1, &q, NULL) != SQLITE_OK) {
         s = gs_fail(GS_ESQL, "%s: statistics query: %s", path, sqlite3_errmsg(h));
         goto done;
     }
     if (o->survey) sqlite3_bind_text(q, 1, o->survey, -1, SQLITE_STATIC);
-    if (o->by == SRV_BY_RADIUS) {
-        /* the circle's latitude/longitude box, 1 % larger than the spherical bound */
-        double dlat = o->radius_m / GIS_EARTH_RADIUS_M / DEG * 1.01;
-        double lat_lo = o->lat_deg - dlat, lat_hi = o->lat_deg + dlat;
-        double lon_lo = -180.0, lon_hi = 180.0;
-        double cmax = fmax(cos(fmin(fabs(lat_lo), 90.0) * DEG), 0.0);
-        double cmin = fmin(cmax, fmax(cos(fmin(fabs(lat_hi), 90.0) * DEG), 0.0));
-        if (lat_lo > -90.0 && lat_hi < 90.0 && cmin > 0.0) {
-            double dlon = dlat / cmin;
-            double c0 = gs_wrap180(o->lon_deg);
-            if (c0 - dlon >= -180.0 && c0 + dlon < 180.0) {
-                lon_lo = c0 - dlon;
-                lon_hi = c0 + dlon;
-            }
-        }
-        sqlite3_bind_double(q, 2, lat_lo);
-        sqlite3_bind_double(q, 3, lat_hi);
-        sqlite3_bind_double(q, 4, lon_lo);
-        sqlite3_bind_double(q, 5, lon_hi);
-    }
-    group *g = NULL;
+    sqlite3_bind_int(q, 2, o->detections != 0);
     if (o->by == SRV_BY_ALL || o->by == SRV_BY_RADIUS) {
+        group *g;   /* the one group exists even when empty */
         if ((s = find_group(&gs, o->by == SRV_BY_ALL ? "all" : "radius", &g)) != GS_OK) goto done;
         if (o->by == SRV_BY_RADIUS) {
             g->g.lat_deg = o->lat_deg;
             g->g.lon_deg = gs_wrap180(o->lon_deg);
         }
     }
+    /* pass 1: the sites, combined and filtered */
     int rc;
-    while ((rc = sqlite3_step(q)) == SQLITE_ROW) {
-        double phase = column_real(q, 2), conf = sqlite3_column_double(q, 3);
-        double lat = column_real(q, 4), lon = column_real(q, 5);
-        if ((s = check_position(q, path, lat, lon)) != GS_OK) goto done;
-        switch (o->by) {
-        case SRV_BY_ALL: break;
-        case SRV_BY_RADIUS:
-            if (!(haversine_m(o->lat_deg, o->lon_deg, lat, lon) <= o->radius_m)) continue;
-            break;
-        case SRV_BY_TECHNOLOGY:
-        case SRV_BY_SURVEY: {
-            const char *key = (const char *)sqlite3_column_text(q, o->by == SRV_BY_SURVEY ? 0 : 1);
-            if ((s = find_group(&gs, key ? key : "none", &g)) != GS_OK) goto done;
-            break;
-        }
-        case SRV_BY_CELL:
-            if (isnan(lat)) {
+    for (;;) {
+        rc = sqlite3_step(q);
+        int64_t id = rc == SQLITE_ROW ? sqlite3_column_int64(q, 0) : 0;
+        const char *sv = rc == SQLITE_ROW ? (const char *)sqlite3_column_text(q, 1) : NULL;
+        if (acc->n && (rc != SQLITE_ROW || id != acc->id ||
+                       (uses(o, SRV_BY_SURVEY) && strcmp(sv ? sv : "", acc->survey)))) {
+            srv_site_value v;
+            srv_site_combine(acc->obs, acc->n, &v);
+            site_row r = {acc->lat, acc->lon, v.phase_deg, v.phase_confidence, 0, 0, -1};
+            acc->n = 0;
+            int keep = 1;
+            if (spatial && isnan(r.lat)) {
                 no_position++;
-                continue;
+                keep = 0;
             }
-            if (nrows == caprows) {
-                size_t nc = caprows ? 2 * caprows : 4096;
-                cell_row *nr = realloc(rows, nc * sizeof *nr);
-                if (!nr) {
-                    s = gs_fail(GS_ENOMEM, "stats: out of memory for %zu lights", nc);
+            if (keep && o->by == SRV_BY_RADIUS)
+                keep = haversine_m(o->lat_deg, o->lon_deg, r.lat, r.lon) <= o->radius_m;
+            if (keep && has_bbox) keep = in_bbox(o->bbox, r.lat, r.lon);
+            if (keep && o->areas) keep = (r.feature = srv_areas_find(o->areas, r.lat, r.lon)) >= 0;
+            if (keep) {
+                if ((s = intern(&names, *v.technology ? v.technology : "none", &r.tech)) != GS_OK ||
+                    (s = intern(&names, acc->survey, &r.survey)) != GS_OK)
                     goto done;
+                if (nrows == caprows) {
+                    size_t nc = caprows ? 2 * caprows : 4096;
+                    site_row *nr = realloc(rows, nc * sizeof *nr);
+                    if (!nr) {
+                        s = gs_fail(GS_ENOMEM, "stats: out of memory for %zu lights", nc);
+                        goto done;
+                    }
+                    rows = nr;
+                    caprows = nc;
                 }
-                rows = nr;
-                caprows = nc;
+                rows[nrows++] = r;
             }
-            rows[nrows++] = (cell_row){lat, lon, phase, conf};
-            continue;
         }
-        add_light(&g->g, phase, conf, o->min_confidence);
+        if (rc != SQLITE_ROW) break;
+        if (!acc->n) {
+            acc->id = id;
+            snprintf(acc->survey, sizeof acc->survey, "%s", sv ? sv : "");
+            acc->lat = column_real(q, 10);
+            acc->lon = column_real(q, 11);
+            if ((s = check_position(q, 10, path, acc->lat, acc->lon)) != GS_OK) goto done;
+        }
+        if (acc->n < SRV_SITE_MAX_OBS) srv_site_obs_from_row(q, 2, &acc->obs[acc->n++]);
     }
     if (rc != SQLITE_DONE) {
         s = gs_fail(GS_ESQL, "%s: statistics query: %s", path, sqlite3_errmsg(h));
         goto done;
     }
-    if (o->by == SRV_BY_CELL && nrows) {
+    /* pass 2: the groups (cells need the selection's centre first) */
+    double lat0 = 0.0, lon0 = 0.0, kx = 0.0, ky = GIS_EARTH_RADIUS_M * DEG;
+    if (uses(o, SRV_BY_CELL) && nrows) {
         double slat = 0.0, ssin = 0.0, scos = 0.0;
         for (size_t i = 0; i < nrows; i++) {
             slat += rows[i].lat;
             ssin += sin(rows[i].lon * DEG);
             scos += cos(rows[i].lon * DEG);
         }
-        double lat0 = slat / (double)nrows, lon0 = atan2(ssin, scos) / DEG;
-        double kx = GIS_EARTH_RADIUS_M * cos(lat0 * DEG) * DEG, ky = GIS_EARTH_RADIUS_M * DEG;
-        for (size_t i = 0; i < nrows; i++) {
-            double x = kx * gs_wrap180(rows[i].lon - lon0), y = ky * (rows[i].lat - lat0);
-            long ix = (long)floor(x / o->cell_m), iy = (long)floor(y / o->cell_m);
-            char key[64];
-            snprintf(key, sizeof key, "%ld,%ld", ix, iy);
-            if ((s = find_group(&gs, key, &g)) != GS_OK) goto done;
-            if (!g->g.lights) {
-                g->ix = ix;
-                g->iy = iy;
-                g->g.lat_deg = lat0 + ((double)iy + 0.5) * o->cell_m / ky;
-                g->g.lon_deg = kx > 0.0 ? gs_wrap180(lon0 + ((double)ix + 0.5) * o->cell_m / kx) : lon0;
-            }
-            add_light(&g->g, rows[i].phase, rows[i].conf, o->min_confidence);
-        }
+        lat0 = slat / (double)nrows;
+        lon0 = atan2(ssin, scos) / DEG;
+        kx = GIS_EARTH_RADIUS_M * cos(lat0 * DEG) * DEG;
     }
-    if (gs.n) {   /* (no groups: gs.v is NULL, which qsort may not be given) */
-        qsort(gs.v, gs.n, sizeof *gs.v, o->by == SRV_BY_CELL ? cmp_cells : cmp_groups);
+    for (size_t i = 0; i < nrows; i++) {
+        const site_row *r = &rows[i];
+        char key[3 * 96 + 8] = "";   /* fits srv_phase_stats.group */
+        long ix = 0, iy = 0;
+        int nparts = 1 + o->n_then;
+        for (int k = 0; k < nparts; k++) {
+            srv_group_by by = k ? o->then[k - 1] : o->by;
+            char part[96];
+            switch (by) {
+            case SRV_BY_ALL: snprintf(part, sizeof part, "all"); break;
+            case SRV_BY_RADIUS: snprintf(part, sizeof part, "radius"); break;
+            case SRV_BY_TECHNOLOGY: snprintf(part, sizeof part, "%.95s", names.v[r->tech].g.group); break;
+            case SRV_BY_SURVEY: snprintf(part, sizeof part, "%.95s", names.v[r->survey].g.group); break;
+            case SRV_BY_FEATURE:
+                snprintf(part, sizeof part, "%.95s", srv_areas_label(o->areas, (size_t)r->feature));
+                break;
+            case SRV_BY_CELL:
+                ix = (long)floor(kx * gs_wrap180(r->lon - lon0) / o->cell_m);
+                iy = (long)floor(ky * (r->lat - lat0) / o->cell_m);
+                snprintf(part, sizeof part, "%ld,%ld", ix, iy);
+                break;
+            }
+            size_t used = strlen(key);
+            snprintf(key + used, sizeof key - used, "%s%s", k ? " / " : "", part);
+        }
+        group *g;
+        if ((s = find_group(&gs, key, &g)) != GS_OK) goto done;
+        if (!g->g.lights && uses(o, SRV_BY_CELL)) {
+            g->ix = ix;
+            g->iy = iy;
+            g->g.lat_deg = lat0 + ((double)iy + 0.5) * o->cell_m / ky;
+            g->g.lon_deg = kx > 0.0 ? gs_wrap180(lon0 + ((double)ix + 0.5) * o->cell_m / kx) : lon0;
+        }
+        add_light(&g->g, r->phase, r->conf, o->min_confidence);
+    }
+    if (gs.n) qsort(gs.v, gs.n, sizeof *gs.v, o->by == SRV_BY_CELL && !o->n_then ? cmp_cells : cmp_groups);
+    if (gs.n) {
         *groups = malloc(gs.n * sizeof **groups);
         if (!*groups) {
             s = gs_fail(GS_ENOMEM, "stats: out of memory for %zu groups", gs.n);
@@ -410,6 +515,9 @@ done:
     sqlite3_finalize(q);
     free(gs.v);
     free(gs.slot);
+    free(names.v);
+    free(names.slot);
     free(rows);
+    free(acc);
     return s;
 }

@@ -45,7 +45,7 @@ int srv_main(int argc, char **argv);
  * SQL NULL. Non-finite doubles (NaN, +-Inf) store NULL.
  * ===================================================================================== */
 
-#define SRV_DB_SCHEMA_VERSION 2
+#define SRV_DB_SCHEMA_VERSION 3
 #define SRV_DB_APPLICATION_ID 0x47534442   /* 'GSDB' (GeoPackage uses 'GPKG' = 0x47504B47) */
 #define SRV_DB_FORMAT "gridsurvey-survey"
 /* Written to migrations.generator and delight_versions.generator. */
@@ -249,10 +249,80 @@ typedef struct {
     long incomplete_captures;  /* captures whose lights, frames or frequency rows differ from
                                 * the counts recorded with them */
     long surveys, captures, lights, locations, frequency_rows;
+    long sites;                /* light_sites rows */
+    long unassociated;         /* lights without a site (srv_db_associate fixes them) */
+    long stale_sites;          /* sites marked stale or whose detection count is off */
+    long site_rtree_mismatch;  /* located sites minus light_sites_rtree entries */
 } srv_db_report;
 gs_status srv_db_check(srv_db *db, srv_db_report *r);
 /* 1 when every check passed. */
 int srv_db_report_ok(const srv_db_report *r);
+
+/* --- light identity (survey/sites.c; docs/survey-db.md, "Light sites"). Each stored light
+ * (a detection) belongs to one light site (a physical light): srv_db_add_capture associates a
+ * new capture's lights in its transaction, by position within the combined error ellipse
+ * (Mahalanobis d2 < SRV_SITE_GATE_D2) or, without a bounded location, by pixel within
+ * SRV_SITE_GATE_PX of a site seen from the same camera pose; otherwise a new site. */
+#define SRV_SITE_GATE_D2 13.815510557964274   /* chi2 quantile 0.999 at 2 dof: -2 ln(0.001) */
+#define SRV_SITE_GATE_PX 3.0
+#define SRV_CHI2_2DOF_95 5.991464547107979    /* -2 ln(0.05): the 95 % ellipse of a 2-D normal */
+/* x^T C^-1 x for the offset (east_m, north_m) and the covariance C of the 1-sigma ellipse
+ * (a, b, azimuth of a clockwise from north); +inf for a degenerate ellipse. */
+double srv_ellipse_maha2(double a_m, double b_m, double az_deg, double east_m, double north_m);
+#define SRV_SITE_MAX_OBS 64                   /* detections combined per site (the first ones) */
+/* Associate every detection not yet associated (captures in id order) and refresh the sites
+ * left stale by deletions; its own transaction when the caller has none. Counts optional. */
+gs_status srv_db_associate(srv_db *db, long *created, long *joined);
+
+/* One detection's recognition, as srv_site_combine reads it. */
+typedef struct {
+    char bulb_id[GS_ID_MAX];   /* "" = no bulb */
+    char technology[24];
+    double phase_deg, phase_sigma_deg;   /* NaN = unknown */
+    double confidence, bulb_confidence, phase_confidence;
+    long bulbs;                /* DELIGHT entries of its capture (0 = unknown) */
+} srv_site_obs;
+/* A site's combined recognition. */
+typedef struct {
+    char bulb_id[GS_ID_MAX], technology[24];
+    double phase_deg, phase_sigma_deg;
+    double confidence, bulb_confidence, phase_confidence;
+    long detections;
+} srv_site_value;
+/* The product of the detections' posteriors (uniform prior): each detection puts its
+ * confidence on its label and spreads the rest evenly over the M - 1 other labels (M = the
+ * DELIGHT entries for bulbs; 3 phases when every phase is within 20 deg of 0/120/240, else the
+ * twelve multiples of 30 deg); the winner's normalised product. The phase is the
+ * inverse-variance circular mean of the winning label's phases, its sigma
+ * 1 / sqrt(sum sigma_i^-2). One detection is returned unchanged; unknown phases and bulbs
+ * carry no evidence (without any, the highest single confidence). */
+void srv_site_combine(const srv_site_obs *o, size_t n, srv_site_value *v);
+
+/* --- change detection between two surveys of the same area (survey/sites.c; `gridsurvey
+ * compare`, docs/survey-db.md "Changes"). Per site, each survey's detections combined
+ * (srv_site_combine); a phase or bulb change is reported when the two winners differ and the
+ * probability that they differ, 1 - sum_l P_A(l) P_B(l) (the posteriors as in
+ * srv_site_combine), is at least min_p. */
+enum {
+    SRV_CHANGE_PHASE = 1u << 0,
+    SRV_CHANGE_BULB = 1u << 1,
+    SRV_CHANGE_APPEARED = 1u << 2,   /* detections in B only */
+    SRV_CHANGE_VANISHED = 1u << 3    /* detections in A only */
+};
+typedef struct {
+    int64_t site_id;
+    double lat_deg, lon_deg;   /* the site's position (NaN for a pixel site) */
+    double x_px, y_px;         /* its mean pixel */
+    unsigned kinds;            /* SRV_CHANGE_* */
+    srv_site_value a, b;       /* each survey's combined answer (detections 0: not seen) */
+    double p_phase_change, p_bulb_change;   /* NaN when a side has no phase / bulb */
+} srv_change;
+typedef struct {
+    long sites_a, sites_b, both, unchanged;   /* unchanged: in both, no change reported */
+} srv_compare_totals;
+/* The changed sites (by site id) in *out (free()); GS_ENOTFOUND for an unknown survey. */
+gs_status srv_compare(srv_db *db, const char *survey_a, const char *survey_b, double min_p,
+                      srv_change **out, size_t *count, srv_compare_totals *t);
 
 /* =====================================================================================
  * Phase-balance statistics (survey/stats.c; definitions in docs/survey-db.md)
@@ -271,20 +341,44 @@ typedef enum {
     SRV_BY_TECHNOLOGY,   /* per technology ("none" for lights without a bulb) */
     SRV_BY_SURVEY,       /* per survey name */
     SRV_BY_CELL,         /* per cell of a local metric grid (located lights only) */
-    SRV_BY_RADIUS        /* one group: located lights within radius_m of (lat, lon) */
+    SRV_BY_RADIUS,       /* one group: located lights within radius_m of (lat, lon) */
+    SRV_BY_FEATURE       /* per area of opts.areas (its feature_field value) */
 } srv_group_by;
+#define SRV_BY_MAX 3             /* groupings combined in one --by */
+#define SRV_PHASE6_TOL_DEG 15.0  /* the six-phase classes 30/150/270: within half their spacing */
+
+/* Areas (survey/areas.c): the Polygon / MultiPolygon features of a GeoJSON FeatureCollection
+ * (WGS84 lon/lat), through GEOS. GS_EFORMAT (one line naming the file, the feature and what is
+ * expected) for anything else, an invalid polygon, or (field given) a feature without that
+ * property (a string, number or boolean). */
+typedef struct srv_areas srv_areas;
+gs_status srv_areas_load(const char *path, const char *field, srv_areas **out);
+void srv_areas_free(srv_areas *a);
+size_t srv_areas_count(const srv_areas *a);
+/* Feature i's label: its field value, else "feature I". */
+const char *srv_areas_label(const srv_areas *a, size_t i);
+/* The first feature (file order) covering the point (boundary included), -1 for none. */
+int srv_areas_find(const srv_areas *a, double lat_deg, double lon_deg);
 
 typedef struct {
-    srv_group_by by;
+    srv_group_by by;           /* the grouping, or the first of a combination */
+    srv_group_by then[SRV_BY_MAX - 1];   /* the others of a combination (n_then of them) */
+    int n_then;
     double cell_m;             /* SRV_BY_CELL: cell side, metres (> 0) */
     double lat_deg, lon_deg;   /* SRV_BY_RADIUS: centre */
     double radius_m;           /* SRV_BY_RADIUS: > 0, spherical distance (see stats.c) */
     double min_confidence;     /* lights with phase_confidence below it are excluded (0) */
     const char *survey;        /* only this survey (NULL = all) */
+    int detections;            /* 1: count detections (stored lights), not light sites (0) */
+    double bbox[4];            /* MINLON, MINLAT, MAXLON, MAXLAT (NaN: none); MINLON > MAXLON
+                                * crosses the antimeridian */
+    const srv_areas *areas;    /* only sites inside one of these areas (NULL: none) */
+    char feature_field[64];    /* SRV_BY_FEATURE: the areas' property naming each one */
 } srv_stats_opts;
 void srv_stats_opts_default(srv_stats_opts *o);
-/* "technology" | "survey" | "all" | "cell:SIZE_m" | "radius:LAT,LON,R_m" into o (GS_EINVAL
- * naming the text and what is expected). */
+/* "technology" | "survey" | "all" | "cell:SIZE_m" | "feature:FIELD" | "radius:LAT,LON,R_m", or
+ * up to SRV_BY_MAX of technology, survey, cell:SIZE_m, feature:FIELD joined by commas (groups
+ * named "A / B"), into o (GS_EINVAL naming the text and what is expected). */
 gs_status srv_stats_parse_by(const char *text, srv_stats_opts *o);
 
 enum {
@@ -294,12 +388,16 @@ enum {
 };
 
 typedef struct {
-    char group[96];            /* "all", a technology, a survey, "E,N" cell indices, "radius" */
+    char group[296];           /* "all", a technology, a survey, "E,N" cell indices, "radius", an
+                                * area, or "A / B" for a combination */
     double lat_deg, lon_deg;   /* cell centre (SRV_BY_CELL), centre (SRV_BY_RADIUS), else NaN */
     long lights;               /* lights in the group */
     long below;                /* ... with phase_confidence < min_confidence (excluded) */
     long unknown;              /* ... kept, phase NULL (ambiguous / unknown) */
-    long other;                /* ... kept, phase not within GS_PHASE_TOL_DEG of 0/120/240 */
+    long other;                /* ... kept, another phase (not 0/120/240 within GS_PHASE_TOL_DEG
+                                * nor 30/150/270 within SRV_PHASE6_TOL_DEG) */
+    long n30[3];               /* ... kept, phase 30, 150, 270 (six-phase surveys); not in the
+                                * shares, which are of the three primary phases */
     long n[3];                 /* ... kept, phase 0, 120, 240 */
     long total;                /* n[0] + n[1] + n[2]: the denominator of the shares */
     double share[3];           /* n[i] / total */
@@ -560,6 +658,9 @@ typedef struct {
                                   * lights: classes 0, 120, 240, other (, none) */
     long loc_pairs;              /* matched lights with a stored and a truth position */
     long loc_unlocated;          /* matched lights without a stored position */
+    long ellipse_pairs;          /* loc_pairs whose stored ellipse is bounded */
+    long ellipse_in95;           /* ... whose truth is inside the stored 95 % ellipse */
+    double ellipse_coverage95;   /* ellipse_in95 / ellipse_pairs (a calibrated ellipse: 0.95) */
     double loc_median_m, loc_p95_m, loc_max_m;  /* geodesic distance stored -> truth over the
                                   * loc_pairs (percentiles interpolated linearly between order
                                   * statistics, position (n - 1) q); NaN when loc_pairs = 0 */

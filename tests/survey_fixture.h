@@ -41,4 +41,19 @@ srv_light_row survey_fx_sodium_light(int i, double phase_deg);
 srv_capture_data survey_fx_capture(int64_t survey_id, const char *key, srv_light_row *lights,
                                    srv_location_row *locations, size_t n);
 
+/* The lab scene's eight lights (capture/scenes/lab.json): bulbs, phases and the noise seed,
+ * which a test may change (another night: another seed; a rephased or replaced light). */
+typedef struct {
+    const char *bulb[8];
+    int phase_deg[8];
+    int seed;
+} survey_lab_spec;
+survey_lab_spec survey_fx_lab_spec(void);   /* the lab's, seed 4 */
+/* Light i's pixel in the small lab scene at that scale. */
+double survey_fx_lab_x_px(int i, double scale);
+double survey_fx_lab_y_px(int i, double scale);
+/* The lab scene (capture/scenes/lab.json) made small, written to path as a scene file (see
+ * survey_fixture.c). */
+void survey_fx_small_lab(const char *path, double scale, const survey_lab_spec *spec);
+
 #endif

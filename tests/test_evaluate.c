@@ -99,6 +99,12 @@ TEST(evaluate_hand_made_db_known_answers)
             loc[i].lat_deg = S[i].lat;
             loc[i].lon_deg = S[i].lon;
             loc[i].height_m = 10.0;
+            /* S0: 3 m along a 2 m major axis (east): d2 = 2.25, inside the 95 % ellipse; S1:
+             * 10 m north across a 3 m minor axis (major east): d2 = 11.1, outside (with east
+             * and north swapped it would be 4, inside); S2: 20 m at 45 deg along a 12 m major
+             * axis at 45 deg: d2 = 2.78, inside */
+            static const gis_ellipse E[3] = {{2.0, 1.0, 90.0}, {5.0, 3.0, 90.0}, {12.0, 2.0, 45.0}};
+            loc[i].ellipse = E[i];
         } else if (S[i].loc == 1) {
             loc[i].flags = GIS_FIX_ABOVE_HORIZON;
         }
@@ -150,6 +156,8 @@ TEST(evaluate_hand_made_db_known_answers)
     CHECK_NEAR(r.loc_median_m, 10.0, 1e-6);
     CHECK_NEAR(r.loc_p95_m, 19.0, 1e-6);
     CHECK_NEAR(r.loc_max_m, 20.0, 1e-6);
+    CHECK(r.ellipse_pairs == 3 && r.ellipse_in95 == 2);
+    CHECK_NEAR(r.ellipse_coverage95, 2.0 / 3.0, 1e-15);
     /* R = 3 takes in S3 -> T2: right bulb and phase; its location row is unlocated */
     o.match_px = 3.0;
     CHECK_OK(srv_evaluate(h, truth, &o, &r));
@@ -184,6 +192,7 @@ TEST(evaluate_hand_made_db_known_answers)
     CHECK(strstr(out, "| phase accuracy | 66.7 % | 2 / 3 ") != NULL);
     CHECK(strstr(out, "| location error, median | 10.00 m |") != NULL);
     CHECK(strstr(out, "| location error, 95th percentile | 19.00 m |") != NULL);
+    CHECK(strstr(out, "| 95 % ellipse coverage | 66.7 % | 2 of 3 truth lights") != NULL);
     CHECK(strstr(out, "| 240 | 0 | 0 | 0 | 1 | 0 |") != NULL);
     rc = sh("%s evaluate --db %s --truth %s --match-px 3 --format json", test_bin(), db, truth);
     json_error_t err;

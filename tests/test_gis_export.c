@@ -183,16 +183,75 @@ TEST(gis_export_gpkg_validates)
         CHECK_NEAR(y, 40.1, 0);
     }
     sqlite3_finalize(st);
+    /* the R*Tree index: one box per located light, each containing its point (the R*Tree
+     * rounds to float32 outward), its six triggers and its extension row */
+    const char *q2[5] = {"SELECT count(*) FROM rtree_lights_geom",
+                         "SELECT count(*) FROM rtree_lights_geom r JOIN lights l ON l.fid = r.id WHERE "
+                         "r.minx <= -75.2 + 1e-5 AND r.maxx >= -75.2 - 1e-5 AND l.id = 'L1'",
+                         "SELECT count(*) FROM sqlite_master WHERE type = 'trigger' AND name LIKE 'rtree_lights_geom_%'",
+                         "SELECT count(*) FROM gpkg_extensions WHERE table_name = 'lights' AND column_name = 'geom' "
+                         "AND extension_name = 'gpkg_rtree_index'",
+                         "SELECT count(*) FROM layer_styles WHERE f_table_name = 'lights' AND useAsDefault = 1"};
+    const long long want2[5] = {5, 1, 6, 1, 1};
+    for (int i = 0; i < 5; i++) {
+        CHECK(sqlite3_prepare_v2(db, q2[i], -1, &st, NULL) == SQLITE_OK);
+        CHECK(sqlite3_step(st) == SQLITE_ROW);
+        CHECK_MSG(sqlite3_column_int64(st, 0) == want2[i], "%s = %lld, expected %lld", q2[i],
+                  sqlite3_column_int64(st, 0), want2[i]);
+        sqlite3_finalize(st);
+    }
     sqlite3_close(db);
+    /* GDAL sees the index and uses it for a spatial filter; the time is a DateTime */
+    CHECK(fx_run(out, sizeof out, "ogrinfo -ro '%s' -sql \"SELECT HasSpatialIndex('lights', 'geom')\"", path) == 0);
+    CHECK_MSG(fx_contains(out, "= 1"), "%s", out);
+    CHECK(ogrinfo("-spat -75.3 40.0 -75.1 40.2", path) == 0);
+    CHECK_MSG(fx_count_of(out, "OGRFeature(") == 3, "%s", out);
+    CHECK(ogrinfo("", path) == 0);
+    CHECK_MSG(fx_contains(out, "time (DateTime) = 2024/05/01 21:30:00"), "%s", out);
+    /* the QGIS style: XML with one category per phase class, in the KML's colours */
+    snprintf(cmd, sizeof cmd, "/usr/bin/python3 -c \"import sqlite3, xml.etree.ElementTree as E; "
+             "q = sqlite3.connect('%s').execute('SELECT styleQML FROM layer_styles').fetchone()[0]; "
+             "r = E.fromstring(q.split('\\n', 1)[1]).find('renderer-v2'); "
+             "print(r.get('type'), len(r.find('categories')), "
+             "' '.join(o.get('value') for o in r.iter('Option') if o.get('name') == 'color'))\"", path);
+    rc = test_run(cmd, out, sizeof out);
+    CHECK_MSG(rc == 0 && fx_contains(out, "categorizedSymbol 5 213,94,0,255 0,158,115,255 0,114,178,255 "
+                                          "204,121,167,255 128,128,128,255"), "%d: %s", rc, out);
+}
+
+/* GeoJSON coordinates carry 7 decimals by default (1.1 cm), --precision otherwise. */
+TEST(gis_export_geojson_seven_decimals)
+{
+    gis_light l[6];
+    size_t n = sample_lights(l);
+    l[0].lon_deg = -75.200000049;   /* 4.9e-8: gone at 7 decimals */
+    l[1].lat_deg = 40.10050000051;
+    l[0].height_m = 30.50049;
+    const char *path = fx_tmp("d.geojson");
+    CHECK_OK(gis_export_geojson(l, n, path));
+    char *text = fx_read_file(path, NULL);
+    CHECK_MSG(text && fx_contains(text, "-75.2,") && fx_contains(text, "40.1005,") && fx_contains(text, "30.5\n"),
+              "%s", text ? text : "");
+    free(text);
+    CHECK_OK(gis_export_geojson_decimals(l, n, path, 3));
+    text = fx_read_file(path, NULL);
+    CHECK_MSG(text && fx_contains(text, "40.101,") && fx_contains(text, "-75.2,"), "%s", text ? text : "");
+    free(text);
+    CHECK(gis_export_geojson_decimals(l, n, path, 16) == GS_EINVAL);
 }
 
 TEST(gis_export_csv_ogrinfo)
 {
     const char *path = export_sample(gis_export_csv, "lights.csv");
-    CHECK(ogrinfo("-oo X_POSSIBLE_NAMES=lon_deg -oo Y_POSSIBLE_NAMES=lat_deg -oo AUTODETECT_TYPE=YES",
-                  path) == 0);
+    /* GDAL finds the geometry by itself in the WKT column (KEEP_GEOM_COLUMNS=NO only hides the
+     * column's text, which would print every POINT twice) */
+    CHECK(ogrinfo("-oo KEEP_GEOM_COLUMNS=NO -oo AUTODETECT_TYPE=YES", path) == 0);
     CHECK(fx_count_of(out, "OGRFeature(") == 6);
     check_ogr_points(out, 0);
+    /* and the lon/lat columns when told their names */
+    CHECK(ogrinfo("-oo X_POSSIBLE_NAMES=lon_deg -oo Y_POSSIBLE_NAMES=lat_deg -oo GEOM_POSSIBLE_NAMES=none "
+                  "-oo KEEP_GEOM_COLUMNS=NO", path) == 0);
+    CHECK_MSG(fx_contains(out, "  POINT (-75.2 40.1)") && fx_contains(out, "  POINT (-179.99995 -16.5001)"), "%s", out);
     CHECK_MSG(fx_count_of(out, "Main St & <Elm>, \"north\"") == 6, "%s", out);
     CHECK(fx_contains(out, "bulb (String) = sodium_hp_2"));
     CHECK(fx_contains(out, "flags (String) = above_horizon"));
@@ -336,8 +395,9 @@ TEST(gis_cli_locate)
         CHECK(!strcmp(json_string_value(json_object_get(pr, "id")), "B"));
         CHECK(!strcmp(json_string_value(json_object_get(pr, "survey")), "s1"));
         CHECK(!strcmp(json_string_value(json_object_get(pr, "time")), "2024-05-01T21:30:00Z"));
-        CHECK_NEAR(json_real_value(json_array_get(c, 0)), fx.lon_deg, 1e-11);
-        CHECK_NEAR(json_real_value(json_array_get(c, 1)), fx.lat_deg, 1e-11);
+        /* GeoJSON keeps 7 decimals: within 5e-8 deg (half the last digit) */
+        CHECK_NEAR(json_real_value(json_array_get(c, 0)), fx.lon_deg, 5.000001e-8);
+        CHECK_NEAR(json_real_value(json_array_get(c, 1)), fx.lat_deg, 5.000001e-8);
         CHECK_NEAR(json_real_value(json_object_get(pr, "err_major_m")), fx.ellipse.semi_major_m, 1e-9);
         CHECK(json_is_null(json_object_get(json_array_get(fs, 2), "geometry")));
         json_decref(root);

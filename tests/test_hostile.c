@@ -190,13 +190,19 @@ TEST(stats_by_cell_without_located_lights_and_tampered_latitude)
     CHECK_MSG(run("%s stats --db %s --by cell:250", db, NULL, NULL) == 0, "%s", out);
     CHECK(run("%s db ingest-synthetic --db %s --captures 1 --lights 20", db, NULL, NULL) == 0);
     CHECK_MSG(run("%s stats --db %s --by cell:250", db, NULL, NULL) == 0, "%s", out);
-    /* a text latitude reached (long)floor(NaN) */
+    /* a text latitude reached (long)floor(NaN): in a detection's location (stats --detections)
+     * and in a site's position (stats) */
     char cmd[4096];
     snprintf(cmd, sizeof cmd, "sqlite3 %s \"PRAGMA ignore_check_constraints = 1; UPDATE locations SET "
              "lat_deg = 'north' WHERE rowid = (SELECT min(rowid) FROM locations WHERE lat_deg IS NOT NULL)\"", db);
     CHECK(test_run(cmd, out, sizeof out) == 0);
-    CHECK(run("%s stats --db %s --by cell:250", db, NULL, NULL) == 1);
+    CHECK(run("%s stats --db %s --by cell:250 --detections", db, NULL, NULL) == 1);
     CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "lat_deg") && strstr(out, "north"), "%s", out);
+    snprintf(cmd, sizeof cmd, "sqlite3 %s \"PRAGMA ignore_check_constraints = 1; UPDATE light_sites SET "
+             "lat_deg = 'south' WHERE rowid = (SELECT min(rowid) FROM light_sites WHERE lat_deg IS NOT NULL)\"", db);
+    CHECK(test_run(cmd, out, sizeof out) == 0);
+    CHECK(run("%s stats --db %s --by cell:250", db, NULL, NULL) == 1);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "lat_deg") && strstr(out, "south"), "%s", out);
 }
 
 TEST(db_empty_file_one_rule_for_every_command)

@@ -30,56 +30,11 @@ static char out[1 << 17];
 /* A printf-style shell command (tests/fixtures.h), its output in out. */
 #define sh(...) fx_run(out, sizeof out, __VA_ARGS__)
 
-/* The lab scene (capture/scenes/lab.json) made small: the same eight bulbs, phases, fluxes and
- * effects at `scale` times the pixel coordinates and image size (1/2: 320 x 240, 1/4: 160 x 120;
- * the focal length scales too, so the lights' angles are the lab's), C = 128 cycles instead of
- * 256. BULB replaces the first light's bulb (for the unknown-bulb case; NULL: the lab's). */
 static void write_small_lab(const char *path, double scale, const char *bulb)
 {
-    static const struct {
-        const char *id, *bulb;
-        int phase;
-        double x, y, d, lm;
-    } L[8] = {
-        {"inc60", "inc-a60-60w-230v", 0, 110.3, 140.6, 3.0, 710},
-        {"cfl20", "cfl-20w", 120, 250.7, 120.2, 3.5, 1200},
-        {"led9", "led-a60-9w-cap", 240, 390.1, 135.9, 3.0, 806},
-        {"fl36", "fl-t8-36w-tri", 0, 530.4, 150.3, 4.0, 3350},
-        {"hps70", "hps-70w", 120, 140.8, 330.5, 8.0, 6000},
-        {"ledfil", "led-fil-4w-lin", 240, 280.2, 345.1, 2.0, 470},
-        {"hal42", "hal-a60-42w-230v", 120, 420.6, 320.8, 2.5, 630},
-        {"mh70", "mh-70w", 240, 545.5, 360.2, 10.0, 5500},
-    };
-    char lights[2048] = "";
-    for (int i = 0; i < 8; i++) {
-        size_t used = strlen(lights);
-        snprintf(lights + used, sizeof lights - used,
-                 "%s    {\"id\": \"%s\", \"bulb\": \"%s\", \"phase_deg\": %d, \"x_px\": %.4f, \"y_px\": %.4f, "
-                 "\"distance_m\": %g, \"lumens\": %g}", i ? ",\n" : "", L[i].id,
-                 i == 0 && bulb ? bulb : L[i].bulb, L[i].phase, (L[i].x + 0.5) * scale - 0.5,
-                 (L[i].y + 0.5) * scale - 0.5, L[i].d, L[i].lm);
-    }
-    char text[4096];
-    snprintf(text, sizeof text,
-        "{\n"
-        "  \"format\": \"gridsurvey-scene/1\",\n"
-        "  \"name\": \"lab\",\n"
-        "  \"seed\": 4,\n"
-        "  \"grid\": {\"nominal_hz\": 50},\n"
-        "  \"camera\": {\n"
-        "    \"width_px\": %d, \"height_px\": %d,\n"
-        "    \"intrinsics\": {\"focal_px\": %g},\n"
-        "    \"optics\": {\"aperture_mm\": 1.0, \"transmission\": 3e-4},\n"
-        "    \"sensor\": {\"bands\": 3, \"bit_depth\": 12, \"full_well_e\": 20000, \"read_noise_e\": 4,\n"
-        "               \"qe\": 0.6, \"gain_e_per_dn\": 5, \"black_level_dn\": 64}\n"
-        "  },\n"
-        "  \"acam\": {\"K\": 26, \"cycles\": 128, \"locked\": true, \"masks\": 64,\n"
-        "           \"hdr\": {\"enabled\": true, \"max_saturated_px\": 0}},\n"
-        "  \"lights\": [\n%s\n  ],\n"
-        "  \"effects\": {\"psf\": {\"sigma_px\": 1.5}, \"ambient\": {\"e_per_px_cycle\": 0.5},\n"
-        "              \"shot_noise\": {}, \"saturation\": {}, \"read_noise\": {}, \"adc\": {}}\n"
-        "}\n", (int)(640 * scale), (int)(480 * scale), 800 * scale, lights);
-    fx_write_text(path, text);
+    survey_lab_spec spec = survey_fx_lab_spec();
+    if (bulb) spec.bulb[0] = bulb;
+    survey_fx_small_lab(path, scale, &spec);
 }
 
 /* ------------------------------------------------------------------ independent readers */
