@@ -115,11 +115,9 @@ static double gain_n(int nf, const double *S, const double *T)
  *   log p = -R/2 - sum_b log(1 + s_b^2 T_b)/2 - (sum v a_b^2 - B^2/A)/2 - log(A)/2 + log Phi(B/sqrt(A)),
  * R = Sxx - sum_b S_b^2/T_b, s_b = t a c_b, v_b = 1/(1/T_b + s_b^2), A = sum v c^2, B = sum v c a_b
  * (a marginalised over a > 0 with a flat prior, s_b from the plug-in a), then averaged over a
- * uniform prior on tau (RED_TAU_N points of [RED_TAU_LO, RED_TAU_HI]). With t -> 0 and tau = 0
- * this is the paper's one brightness times Q_b. fit (may be NULL) gets the best tau's numbers. */
-#define RED_TAU_N 24
-#define RED_TAU_LO -0.3
-#define RED_TAU_HI 3.0
+ * uniform prior on tau (RED_TAU_N points of [RED_TAU_LO, RED_TAU_HI], c_b tabulated per bulb in
+ * m->red_c). With t -> 0 and tau = 0 this is the paper's one brightness times Q_b. fit (may be
+ * NULL) gets the best tau's numbers. */
 typedef struct {
     double chi2;                 /* R + sum v (a_b - a c_b)^2 at the best tau */
     double a, tau, z;            /* the brightness, optical depth and a / sigma_a there */
@@ -129,7 +127,7 @@ typedef struct {
 static double loglik_red(const rec_matcher *m, int bulb, double Sxx, const double *S,
                          const double *T, red_fit *fit)
 {
-    const double *Q = m->bulbs[bulb].chroma, tol = m->o.chroma_tolerance;
+    const double tol = m->o.chroma_tolerance;
     double R = Sxx, ah[GS_MAX_BANDS];
     int nb = m->bands, any = 0;
     for (int b = 0; b < nb; b++) {
@@ -144,8 +142,8 @@ static double loglik_red(const rec_matcher *m, int bulb, double Sxx, const doubl
     double Lt[RED_TAU_N], Lmax = -INFINITY;
     for (int i = 0; i < RED_TAU_N; i++) {
         double tau = RED_TAU_LO + (RED_TAU_HI - RED_TAU_LO) * i / (RED_TAU_N - 1);
-        double c[GS_MAX_BANDS], v[GS_MAX_BANDS], a = 0.0, A = 0.0, B = 0.0, C = 0.0, occ = 0.0;
-        for (int b = 0; b < nb; b++) c[b] = Q[b] * exp(-tau * m->red_f[b]);
+        const double *c = m->red_c + ((size_t)bulb * RED_TAU_N + (size_t)i) * (size_t)nb;
+        double v[GS_MAX_BANDS], a = 0.0, A = 0.0, B = 0.0, C = 0.0, occ = 0.0;
         for (int it = 0; it < 3; it++) {   /* s_b from the current brightness */
             A = B = C = occ = 0.0;
             for (int b = 0; b < nb; b++) {
@@ -155,7 +153,7 @@ static double loglik_red(const rec_matcher *m, int bulb, double Sxx, const doubl
                 A += v[b] * c[b] * c[b];
                 B += v[b] * c[b] * ah[b];
                 C += v[b] * ah[b] * ah[b];
-                occ += log1p(sb * sb * T[b]);
+                if (it == 2) occ += log1p(sb * sb * T[b]);   /* only the last round's is used */
             }
             if (!(A > 0.0)) break;
             a = B / A;

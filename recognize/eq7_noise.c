@@ -83,6 +83,66 @@ const char *rec_noise_source_name(rec_noise_source s)
     return "unknown";
 }
 
+/* One pass of rec_match_catalog over a range of lights, each part with its own scratch. */
+typedef struct {
+    const rec_matcher *m;
+    const rec_catalog *cat;
+    rec_match *out;
+    rec_eq7_excess *ex;       /* pass 1 (may be NULL) */
+    const double *fe;         /* pass 2: each light's excess; NULL: pass 1 with fe1 */
+    double fe1;
+} catalog_pass;
+
+static gs_status catalog_part(void *ctx, int part, size_t i0, size_t i1)
+{
+    (void)part;
+    const catalog_pass *p = ctx;
+    const rec_catalog *cat = p->cat;
+    size_t D = (size_t)p->m->D;
+    rec_eq7_work w;
+    gs_status s = rec_eq7_work_alloc(p->m, &w);
+    for (size_t i = i0; i < i1 && s == GS_OK; i++) {
+        int no_signal = cat->flags && (cat->flags[i] & REC_BLOB_NO_SIGNAL);
+        if (!p->fe) {
+            if (no_signal) rec_eq7_no_answer(&p->out[i], REC_MATCH_BAD_INPUT);
+            else s = rec_eq7_match_light_ws(p->m, &w, cat->signal + i * D, cat->sigma + i * D, p->fe1,
+                                            &p->out[i], p->ex ? &p->ex[i] : NULL);
+        } else if (!no_signal && p->fe[i] > 0.0) {
+            s = rec_eq7_match_light_ws(p->m, &w, cat->signal + i * D, cat->sigma + i * D, p->fe[i],
+                                       &p->out[i], NULL);
+        }
+    }
+    rec_eq7_work_free(&w);
+    return s;
+}
+
+/* Each light's excess from the others (the kernel-weighted median), over a range of lights. */
+typedef struct {
+    const ref_light *ref;
+    size_t nr;
+    const rec_catalog *cat;
+    const rec_match *out;
+    double hy;
+    double *fe;
+} excess_pass;
+
+static gs_status excess_part(void *ctx, int part, size_t i0, size_t i1)
+{
+    (void)part;
+    const excess_pass *p = ctx;
+    double *wk = malloc((p->nr ? p->nr : 1) * sizeof *wk), neff;
+    if (!wk) return gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", p->nr);
+    for (size_t i = i0; i < i1; i++) {
+        double lb = log10(p->out[i].brightness > 0.0 ? p->out[i].brightness : 1e-300);
+        double e2 = weighted_median(p->ref, p->nr, i, p->cat->y_px ? p->cat->y_px[i] : 0.0, lb, p->hy,
+                                    KERNEL_DECADES, 1, wk, &neff);
+        if (neff < NOISE_MIN_EFFECTIVE) e2 = weighted_median(p->ref, p->nr, i, 0, 0, 1, 1, 0, wk, &neff);
+        p->fe[i] = sqrt(e2);
+    }
+    free(wk);
+    return GS_OK;
+}
+
 gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_match *out,
                             rec_noise_report *noise)
 {
@@ -97,24 +157,16 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
     if (cat->bands != m->bands || cat->K != m->K)
         return gs_fail(GS_EINVAL, "Eq. 7: catalog has %d bands x K=%d, the matcher %d bands x K=%d",
                        cat->bands, cat->K, m->bands, m->K);
-    size_t n = cat->count, D = (size_t)m->D;
+    size_t n = cat->count;
     int measured = !isfinite(m->o.model_error);
-    rec_eq7_work w;
-    gs_status s = rec_eq7_work_alloc(m, &w);
-    if (s != GS_OK) return s;
+    gs_status s = GS_OK;
     rec_eq7_excess *ex = measured ? calloc(n, sizeof *ex) : NULL;
     ref_light *ref = measured ? malloc(n * sizeof *ref) : NULL;
     double *wk = measured ? malloc(n * sizeof *wk) : NULL, *fe = measured ? malloc(n * sizeof *fe) : NULL;
     if (measured && (!ex || !ref || !wk || !fe)) s = gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", n);
-    /* pass 1: the camera noise (or the fixed model error) */
-    for (size_t i = 0; i < n && s == GS_OK; i++) {
-        if (cat->flags && (cat->flags[i] & REC_BLOB_NO_SIGNAL)) {
-            rec_eq7_no_answer(&out[i], REC_MATCH_BAD_INPUT);
-            continue;
-        }
-        s = rec_eq7_match_light_ws(m, &w, cat->signal + i * D, cat->sigma + i * D, rep.median_model_error,
-                                   &out[i], ex ? &ex[i] : NULL);
-    }
+    /* pass 1: the camera noise (or the fixed model error); the lights on the matcher's threads */
+    catalog_pass pass = {m, cat, out, ex, NULL, rep.median_model_error};
+    if (s == GS_OK) s = gs_parallel_for(m->o.threads, n, catalog_part, &pass);
     if (s != GS_OK || !measured) goto done;
     /* the clean references: a fit, an informative estimate, an aperture nothing disturbed */
     const unsigned disturbed = REC_BLOB_EDGE | REC_BLOB_SATURATED | REC_BLOB_DEBLENDED | REC_BLOB_NO_SIGNAL;
@@ -140,28 +192,20 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
         for (size_t j = 0; j < nr; j++) ref[j].wt = excess_weight(ref[j].ex, m->bands, global);
         global = weighted_median(ref, nr, (size_t)-1, 0, 0, 1, 1, 0, wk, &neff);
     }
-    for (size_t i = 0; i < n; i++) {
-        double lb = log10(out[i].brightness > 0.0 ? out[i].brightness : 1e-300);
-        double e2 = weighted_median(ref, nr, i, cat->y_px ? cat->y_px[i] : 0.0, lb, hy, KERNEL_DECADES,
-                                    1, wk, &neff);
-        if (neff < NOISE_MIN_EFFECTIVE) e2 = weighted_median(ref, nr, i, 0, 0, 1, 1, 0, wk, &neff);
-        fe[i] = sqrt(e2);
-    }
+    excess_pass ep = {ref, nr, cat, out, hy, fe};
+    if ((s = gs_parallel_for(m->o.threads, n, excess_part, &ep)) != GS_OK) goto done;
     rep.source = REC_NOISE_POPULATION;
     rep.lights_used = nr;
     rep.median_model_error = sqrt(global);
     /* pass 2: the lights whose excess is not zero */
-    for (size_t i = 0; i < n && s == GS_OK; i++) {
-        if (cat->flags && (cat->flags[i] & REC_BLOB_NO_SIGNAL)) continue;
-        if (fe[i] > 0.0)
-            s = rec_eq7_match_light_ws(m, &w, cat->signal + i * D, cat->sigma + i * D, fe[i], &out[i], NULL);
-    }
+    pass.ex = NULL;
+    pass.fe = fe;
+    s = gs_parallel_for(m->o.threads, n, catalog_part, &pass);
     if (noise && s == GS_OK) *noise = rep;
 done:
     free(fe);
     free(wk);
     free(ref);
     free(ex);
-    rec_eq7_work_free(&w);
     return s;
 }

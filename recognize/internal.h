@@ -109,6 +109,11 @@ gs_status rec_cv_dilate_u8(unsigned char *mask, int width, int height, int radiu
 #define LANES 16          /* row loops in blocks of 16 floats (vectorised by the compiler) */
 #define LOGPHI_ZMAX 12.0
 #define LOGPHI_STEPS 32   /* table points per unit of z */
+/* The reddened band model's uniform prior on the optical depth tau at 550 nm: RED_TAU_N points
+ * of [RED_TAU_LO, RED_TAU_HI] (eq7_light.c). */
+#define RED_TAU_N 24
+#define RED_TAU_LO -0.3
+#define RED_TAU_HI 3.0
 
 struct rec_matcher {
     int grid_hz, bands, K, D;           /* D = bands * K values per light */
@@ -150,6 +155,8 @@ struct rec_matcher {
                                          * (REC_BANDS_FREE or _REDDENED, bands > 1) */
     int red;                            /* light path: the reddened band model */
     double red_f[GS_MAX_BANDS];         /* its f_b - 1 (optical depth per band relative to 550 nm) */
+    double *red_c;                      /* [nb * RED_TAU_N * bands] Q_b exp(-tau_i f_b) on the
+                                         * tau grid (red only) */
     double fe_pix;                      /* pixels: the relative excess noise (model_error or 0) */
     int nfit;                           /* brightness parameters: bands (bg) or 1 */
     int bandpath;                       /* pixels: per-band scores (bands > 1, bg or model error) */
