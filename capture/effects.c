@@ -433,10 +433,13 @@ gs_status cap_fx_ambient(cap_sim *s, cap_render *r)
  * deciding most zeros without an exponential), above by Hormann's PTRS. */
 enum { CAP_POISSON_CDF = 160 };   /* reaches 1 - 1e-16 for means below 40 */
 
+enum { CAP_POISSON_GUIDE = 16 };
+
 typedef struct {
     double lam;
     int n;
     double cdf[CAP_POISSON_CDF];
+    int guide[CAP_POISSON_GUIDE];   /* the first k with cdf[k] >= g / CAP_POISSON_GUIDE (or n - 1) */
 } poisson_cache;
 
 static double poisson_cached(poisson_cache *pc, gs_rng *rng, double lam)
@@ -452,9 +455,14 @@ static double poisson_cached(poisson_cache *pc, gs_rng *rng, double lam)
         }
         pc->n = k < CAP_POISSON_CDF ? k + 1 : CAP_POISSON_CDF;
         pc->lam = lam;
+        for (int g = 0, j = 0; g < CAP_POISSON_GUIDE; g++) {
+            while (j < pc->n - 1 && pc->cdf[j] < (double)g / CAP_POISSON_GUIDE) j++;
+            pc->guide[g] = j;
+        }
     }
+    /* the first k with u <= cdf[k]: every k below the guide's has cdf[k] < g / 16 <= u */
     double u = gs_rng_uniform(rng);
-    int k = 0;
+    int k = pc->guide[(int)(u * CAP_POISSON_GUIDE)];
     while (k < pc->n - 1 && u > pc->cdf[k]) k++;
     return k;
 }

@@ -268,9 +268,9 @@ TEST(sim_bench_render_grows_only_with_enabled_effects)
     cap_scene sc;
     CHECK_OK(cap_scene_parse(text, "bench.json", ".", &sc));
     srv_render_time_result none, one, all;
-    CHECK_OK(srv_render_time(&sc, 0, 2, &none));
-    CHECK_OK(srv_render_time(&sc, 1u << CAP_FX_PSF, 2, &one));
-    CHECK_OK(srv_render_time(&sc, ~0u, 2, &all));
+    CHECK_OK(srv_render_time(&sc, 0, 2, 1, &none));
+    CHECK_OK(srv_render_time(&sc, 1u << CAP_FX_PSF, 2, 1, &one));
+    CHECK_OK(srv_render_time(&sc, ~0u, 2, 1, &all));
     CHECK(none.effects == 0);
     CHECK(one.effects == 1u << CAP_FX_PSF);
     CHECK(all.effects == (1u << CAP_FX_COUNT) - 1);
