@@ -1,6 +1,7 @@
 /* render.c - the rendering primitives that the simulator's base stages (sim.c) and its effects
- * (effects.c) share: depositing each light through its footprint, pixel-integrated Gaussian
- * weights, and the timing of an exposed cycle. */
+ * (effects.c) share: a stage's parts on the sim's threads, depositing each light through its
+ * footprint (split by rows), pixel-integrated Gaussian weights, and the timing of an exposed
+ * cycle. */
 #include "capture/sim.h"
 
 #include <math.h>

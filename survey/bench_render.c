@@ -49,13 +49,15 @@ gs_status srv_render_time(const cap_scene *sc, unsigned effects_mask, int frames
     return st;
 }
 
-/* One row: the 1-thread time (and its ratio to no effects), the n-thread wall and CPU times. */
+/* One row: the 1-thread wall and CPU time (and the wall's ratio to no effects), the n-thread
+ * wall and CPU times. */
 static void print_row(const char *name, const srv_render_time_result *none,
                       const srv_render_time_result *one, const srv_render_time_result *n)
 {
-    printf("| %s | %.4f | %.1f | %.4f | %.4f | %.2f |\n", name, one->seconds_per_frame,
-           one->seconds_per_frame / none->seconds_per_frame, n->seconds_per_frame,
-           n->cpu_seconds_per_frame, one->seconds_per_frame / n->seconds_per_frame);
+    printf("| %s | %.4f | %.4f | %.1f | %.4f | %.4f | %.2f |\n", name, one->seconds_per_frame,
+           one->cpu_seconds_per_frame, one->seconds_per_frame / none->seconds_per_frame,
+           n->seconds_per_frame, n->cpu_seconds_per_frame,
+           one->seconds_per_frame / n->seconds_per_frame);
 }
 
 static const char render_usage[] =
@@ -98,8 +100,8 @@ int srv_bench_render(int argc, char **argv)
            "per frame on 1 thread and on %d (the online CPUs; the frames are the same bits, "
            "tests/test_capture_sim.c), wall and CPU (all threads). Only the effects in a row run "
            "(docs/capture.md). The machine's other load shows as wall > CPU / threads.\n\n"
-           "| effects | 1 thread, s | x no-effect time | %d threads, wall s | %d threads, CPU s | "
-           "wall speed-up |\n|---|---:|---:|---:|---:|---:|\n",
+           "| effects | 1 thread, wall s | 1 thread, CPU s | x no-effect time | %d threads, wall s | "
+           "%d threads, CPU s | wall speed-up |\n|---|---:|---:|---:|---:|---:|---:|\n",
            path, sc.n_lights, sc.cam.width_px, sc.cam.height_px, sc.bands, frames, nt, nt, nt);
     srv_render_time_result none, none_n;
     s = srv_render_time(&sc, 0, frames, 1, &none);
