@@ -399,6 +399,10 @@ typedef struct cap_sim cap_sim;
 gs_status cap_sim_new(const cap_scene *sc, const gs_delight *d, cap_sim **out);
 void cap_sim_free(cap_sim *s);
 const cap_scene *cap_sim_scene(const cap_sim *s);   /* borrowed copy held by the sim */
+/* Threads to render on (default 0: the online CPUs; 1: the caller's only). A frame is the same
+ * bits on any number: every stage splits rows or lights whose outputs are disjoint, random
+ * streams are per row or per light, and each pixel sums its lights in scene order. */
+void cap_sim_set_threads(cap_sim *s, int threads);
 
 /* Render one acquisition of frame k: pass (HDR round, 0 first), index (acquisitions before it
  * in this capture: places it on the grid's timeline), halvings (per pixel, NULL = none).

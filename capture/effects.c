@@ -117,13 +117,17 @@ gs_status cap_fx_prepare_scintillation(cap_sim *s)
     return GS_OK;
 }
 
-gs_status cap_fx_scintillation(cap_sim *s, cap_render *r)
+/* Lights [l0, l1), each with its own stream and its own rows of E. */
+static gs_status scint_lights(void *ctx, int part, size_t l0, size_t l1)
 {
-    s->fx_calls[CAP_FX_SCINTILLATION]++;
+    cap_par *par = ctx;
+    cap_sim *s = par->s;
+    const cap_render *r = par->r;
     int B = s->B, L = s->L;
     long C = s->C;
+    double *scin = s->scin + (size_t)part * (size_t)C;
     unsigned long long items = 0;
-    for (size_t l = 0; l < s->n; l++) {
+    for (size_t l = l0; l < l1; l++) {
         double s2 = s->scint_s2[l];
         if (!(s2 > 0) || !s->fp[l].w) continue;
         gs_rng rng;
@@ -132,14 +136,14 @@ gs_status cap_fx_scintillation(cap_sim *s, cap_render *r)
         double x = sd * gs_rng_normal(&rng);
         for (long c = 0; c < C; c++) {
             if (c) x = rho * x + innov * gs_rng_normal(&rng);
-            s->scin[c] = exp(x - 0.5 * s2);
+            scin[c] = exp(x - 0.5 * s2);
         }
         items += (unsigned long long)C;
         double *E = s->E + l * (size_t)L * (size_t)B;
         if (!s->wcyc) {
             /* exact windows: every cycle of a level weighs the same */
             double S[CAP_MAX_LEVELS] = {0};
-            for (long c = 0; c < C; c++) S[r->lev[c]] += s->scin[c];
+            for (long c = 0; c < C; c++) S[r->lev[c]] += scin[c];
             for (int h = L - 2; h >= 0; h--) S[h] += S[h + 1];
             for (int h = 0; h < L; h++) {
                 double f = r->n_exposed[h] ? S[h] / (double)r->n_exposed[h] : 0.0;
@@ -150,7 +154,7 @@ gs_status cap_fx_scintillation(cap_sim *s, cap_render *r)
             for (int b = 0; b < B; b++) {
                 const double *w = s->wcyc + (sp * (size_t)B + (size_t)b) * (size_t)C;
                 double S[CAP_MAX_LEVELS] = {0};
-                for (long c = 0; c < C; c++) S[r->lev[c]] += s->scin[c] * w[c];
+                for (long c = 0; c < C; c++) S[r->lev[c]] += scin[c] * w[c];
                 for (int h = L - 2; h >= 0; h--) S[h] += S[h + 1];
                 for (int h = 0; h < L; h++) {
                     double Wt = s->Wsp[(sp * (size_t)L + (size_t)h) * (size_t)B + (size_t)b];
@@ -159,8 +163,14 @@ gs_status cap_fx_scintillation(cap_sim *s, cap_render *r)
             }
         }
     }
-    r->items = items;
+    par->items[part] = items;
     return GS_OK;
+}
+
+gs_status cap_fx_scintillation(cap_sim *s, cap_render *r)
+{
+    s->fx_calls[CAP_FX_SCINTILLATION]++;
+    return cap_par_run(s, r, s->n, scint_lights);
 }
 
 /* ------------------------------------------------------------------ PSF */
@@ -208,8 +218,7 @@ gs_status cap_fx_prepare_psf(cap_sim *s)
 gs_status cap_fx_psf(cap_sim *s, cap_render *r)
 {
     s->fx_calls[CAP_FX_PSF]++;
-    r->items = cap_splat(s, r);
-    return GS_OK;
+    return cap_splat(s, r);
 }
 
 /* ------------------------------------------------------------------ skyglow */
@@ -238,9 +247,12 @@ gs_status cap_fx_prepare_skyglow(cap_sim *s)
     return GS_OK;
 }
 
-gs_status cap_fx_skyglow(cap_sim *s, cap_render *r)
+/* Rows [ya, yb) of every light's halo, the lights in scene order. */
+static gs_status skyglow_rows(void *ctx, int part, size_t ya, size_t yb)
 {
-    s->fx_calls[CAP_FX_SKYGLOW]++;
+    cap_par *par = ctx;
+    cap_sim *s = par->s;
+    const cap_render *r = par->r;
     int B = s->B, L = s->L, R = s->glow_r, n = 2 * R + 1;
     double frac = s->sc.fx.skyglow.fraction;
     int mode = s->sc.fx.skyglow.flicker;
@@ -251,6 +263,9 @@ gs_status cap_fx_skyglow(cap_sim *s, cap_render *r)
         double cx = floor(li->x_px + 0.5), cy = floor(li->y_px + 0.5);
         if (!isfinite(cx) || !isfinite(cy) || cx < -R || cy < -R || cx >= s->W + R || cy >= s->H + R)
             continue;
+        int x0 = (int)cx - R, y0 = (int)cy - R;
+        int y_lo = y0 < (int)ya ? (int)ya : y0, y_hi = y0 + n < (int)yb ? y0 + n : (int)yb;
+        if (y_lo >= y_hi) continue;
         for (int h = 0; h < L; h++)
             for (int b = 0; b < B; b++) {
                 double t = s->trans ? s->trans[l * (size_t)B + (size_t)b] : 1.0;
@@ -265,8 +280,7 @@ gs_status cap_fx_skyglow(cap_sim *s, cap_render *r)
                 } else v = f * t * r->ex[h];
                 g[h * B + b] = frac * v;
             }
-        int x0 = (int)cx - R, y0 = (int)cy - R;
-        for (int y = y0 < 0 ? 0 : y0; y < y0 + n && y < s->H; y++)
+        for (int y = y_lo; y < y_hi; y++)
             for (int x = x0 < 0 ? 0 : x0; x < x0 + n && x < s->W; x++) {
                 size_t p = (size_t)y * (size_t)s->W + (size_t)x;
                 double k = s->glow_k[(y - y0) * n + (x - x0)];
@@ -275,8 +289,14 @@ gs_status cap_fx_skyglow(cap_sim *s, cap_render *r)
                 items++;
             }
     }
-    r->items = items;
+    par->items[part] = items;
     return GS_OK;
+}
+
+gs_status cap_fx_skyglow(cap_sim *s, cap_render *r)
+{
+    s->fx_calls[CAP_FX_SKYGLOW]++;
+    return cap_par_run(s, r, (size_t)s->H, skyglow_rows);
 }
 
 /* ------------------------------------------------------------------ distractors */
@@ -375,12 +395,14 @@ gs_status cap_fx_headlights(cap_sim *s, cap_render *r)
 
 /* Daylight or room light: a pedestal with BRF = 1 (paper Sec. 5.3), e_per_px_cycle per pixel
  * and flicker cycle, scaled linearly from `top` (row 0) to `bottom` (last row). */
-gs_status cap_fx_ambient(cap_sim *s, cap_render *r)
+static gs_status ambient_rows(void *ctx, int part, size_t y0, size_t y1)
 {
-    s->fx_calls[CAP_FX_AMBIENT]++;
+    cap_par *par = ctx;
+    cap_sim *s = par->s;
+    const cap_render *r = par->r;
     const cap_effects *fx = &s->sc.fx;
     int B = s->B;
-    for (int y = 0; y < s->H; y++) {
+    for (int y = (int)y0; y < (int)y1; y++) {
         double g = s->H > 1 ? fx->ambient.top + (fx->ambient.bottom - fx->ambient.top) * y / (s->H - 1.0)
                             : fx->ambient.top;
         double lvl = fx->ambient.e_per_px_cycle * g;
@@ -391,8 +413,14 @@ gs_status cap_fx_ambient(cap_sim *s, cap_render *r)
             for (int b = 0; b < B; b++) s->img[p * (size_t)B + (size_t)b] += e * fx->ambient.chroma[b];
         }
     }
-    r->items = (unsigned long long)s->W * (unsigned long long)s->H;
+    par->items[part] = (unsigned long long)s->W * (unsigned long long)(y1 - y0);
     return GS_OK;
+}
+
+gs_status cap_fx_ambient(cap_sim *s, cap_render *r)
+{
+    s->fx_calls[CAP_FX_AMBIENT]++;
+    return cap_par_run(s, r, (size_t)s->H, ambient_rows);
 }
 
 /* ------------------------------------------------------------------ sensor */
@@ -405,10 +433,13 @@ gs_status cap_fx_ambient(cap_sim *s, cap_render *r)
  * deciding most zeros without an exponential), above by Hormann's PTRS. */
 enum { CAP_POISSON_CDF = 160 };   /* reaches 1 - 1e-16 for means below 40 */
 
+enum { CAP_POISSON_GUIDE = 16 };
+
 typedef struct {
     double lam;
     int n;
     double cdf[CAP_POISSON_CDF];
+    int guide[CAP_POISSON_GUIDE];   /* the first k with cdf[k] >= g / CAP_POISSON_GUIDE (or n - 1) */
 } poisson_cache;
 
 static double poisson_cached(poisson_cache *pc, gs_rng *rng, double lam)
@@ -424,9 +455,14 @@ static double poisson_cached(poisson_cache *pc, gs_rng *rng, double lam)
         }
         pc->n = k < CAP_POISSON_CDF ? k + 1 : CAP_POISSON_CDF;
         pc->lam = lam;
+        for (int g = 0, j = 0; g < CAP_POISSON_GUIDE; g++) {
+            while (j < pc->n - 1 && pc->cdf[j] < (double)g / CAP_POISSON_GUIDE) j++;
+            pc->guide[g] = j;
+        }
     }
+    /* the first k with u <= cdf[k]: every k below the guide's has cdf[k] < g / 16 <= u */
     double u = gs_rng_uniform(rng);
-    int k = 0;
+    int k = pc->guide[(int)(u * CAP_POISSON_GUIDE)];
     while (k < pc->n - 1 && u > pc->cdf[k]) k++;
     return k;
 }
@@ -447,16 +483,19 @@ static double poisson_rest(gs_rng *rng, double lam)
     return k;
 }
 
-gs_status cap_fx_shot_noise(cap_sim *s, cap_render *r)
+/* Rows [y0, y1); the CDF cache is the part's own (a pure memo of lam: any split draws the same). */
+static gs_status shot_rows(void *ctx, int part, size_t y0, size_t y1)
 {
-    s->fx_calls[CAP_FX_SHOT_NOISE]++;
+    cap_par *par = ctx;
+    cap_sim *s = par->s;
+    const cap_render *r = par->r;
     int B = s->B, L = s->L;
     size_t row = (size_t)s->W * (size_t)B;
     poisson_cache *pc = malloc(sizeof *pc * (size_t)B * (size_t)L);
     if (!pc) return gs_fail(GS_ENOMEM, "shot noise: out of memory");
     for (int i = 0; i < B * L; i++) pc[i].lam = -1;
     int amb = (s->fx >> CAP_FX_AMBIENT) & 1u;
-    for (int y = 0; y < s->H; y++) {
+    for (int y = (int)y0; y < (int)y1; y++) {
         gs_rng rng;
         gs_rng_init(&rng, s->sc.seed, CAP_TAG_SHOT, ((uint64_t)r->k << 32) | (uint64_t)r->pass, (uint64_t)y);
         double *v = s->img + (size_t)y * row;
@@ -475,50 +514,78 @@ gs_status cap_fx_shot_noise(cap_sim *s, cap_render *r)
         }
     }
     free(pc);
-    r->items = (unsigned long long)s->H * row;
+    par->items[part] = (unsigned long long)(y1 - y0) * row;
     return GS_OK;
+}
+
+gs_status cap_fx_shot_noise(cap_sim *s, cap_render *r)
+{
+    s->fx_calls[CAP_FX_SHOT_NOISE]++;
+    return cap_par_run(s, r, (size_t)s->H, shot_rows);
 }
 
 /* The pixel's well holds full_well_e electrons at most. */
+static gs_status saturation_rows(void *ctx, int part, size_t y0, size_t y1)
+{
+    cap_par *par = ctx;
+    cap_sim *s = par->s;
+    size_t row = (size_t)s->W * (size_t)s->B;
+    double fw = s->sc.full_well_e;
+    for (size_t i = y0 * row; i < y1 * row; i++)
+        if (s->img[i] > fw) s->img[i] = fw;
+    par->items[part] = (unsigned long long)((y1 - y0) * row);
+    return GS_OK;
+}
+
 gs_status cap_fx_saturation(cap_sim *s, cap_render *r)
 {
     s->fx_calls[CAP_FX_SATURATION]++;
-    size_t n = (size_t)s->W * (size_t)s->H * (size_t)s->B;
-    double fw = s->sc.full_well_e;
-    for (size_t i = 0; i < n; i++)
-        if (s->img[i] > fw) s->img[i] = fw;
-    r->items = n;
-    return GS_OK;
+    return cap_par_run(s, r, (size_t)s->H, saturation_rows);
 }
 
 /* Gaussian read noise, sigma_e / gain DN per sample (one stream per row). */
-gs_status cap_fx_read_noise(cap_sim *s, cap_render *r)
+static gs_status read_rows(void *ctx, int part, size_t y0, size_t y1)
 {
-    s->fx_calls[CAP_FX_READ_NOISE]++;
+    cap_par *par = ctx;
+    cap_sim *s = par->s;
+    const cap_render *r = par->r;
     size_t row = (size_t)s->W * (size_t)s->B;
     double sd = s->read_dn;
-    for (int y = 0; y < s->H; y++) {
+    for (size_t y = y0; y < y1; y++) {
         gs_rng rng;
         gs_rng_init(&rng, s->sc.seed, CAP_TAG_READ, ((uint64_t)r->k << 32) | (uint64_t)r->pass, (uint64_t)y);
-        double *v = s->img + (size_t)y * row;
+        double *v = s->img + y * row;
         for (size_t i = 0; i < row; i++) v[i] += sd * gs_rng_normal(&rng);
     }
-    r->items = (unsigned long long)s->H * row;
+    par->items[part] = (unsigned long long)((y1 - y0) * row);
     return GS_OK;
 }
 
-/* The ADC: integer DN (round half up), clipped to 0 .. 2^bit_depth - 1. */
-gs_status cap_fx_adc(cap_sim *s, cap_render *r)
+gs_status cap_fx_read_noise(cap_sim *s, cap_render *r)
 {
-    s->fx_calls[CAP_FX_ADC]++;
-    size_t n = (size_t)s->W * (size_t)s->H * (size_t)s->B;
+    s->fx_calls[CAP_FX_READ_NOISE]++;
+    return cap_par_run(s, r, (size_t)s->H, read_rows);
+}
+
+/* The ADC: integer DN (round half up), clipped to 0 .. 2^bit_depth - 1. */
+static gs_status adc_rows(void *ctx, int part, size_t y0, size_t y1)
+{
+    cap_par *par = ctx;
+    cap_sim *s = par->s;
+    size_t row = (size_t)s->W * (size_t)s->B;
     double mx = s->adc_max;
-    for (size_t i = 0; i < n; i++) {
+    for (size_t i = y0 * row; i < y1 * row; i++) {
         double v = floor(s->img[i] + 0.5);
         s->img[i] = v < 0 ? 0 : v > mx ? mx : v;
     }
-    r->items = n;
+    par->items[part] = (unsigned long long)((y1 - y0) * row);
     return GS_OK;
+}
+
+gs_status cap_fx_adc(cap_sim *s, cap_render *r)
+{
+    s->fx_calls[CAP_FX_ADC]++;
+    return cap_par_run(s, r, (size_t)s->H, adc_rows);
 }
 
 /* ------------------------------------------------------------------ the table */

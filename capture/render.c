@@ -1,32 +1,58 @@
 /* render.c - the rendering primitives that the simulator's base stages (sim.c) and its effects
- * (effects.c) share: depositing each light through its footprint, pixel-integrated Gaussian
- * weights, and the timing of an exposed cycle. */
+ * (effects.c) share: a stage's parts on the sim's threads, depositing each light through its
+ * footprint (split by rows), pixel-integrated Gaussian weights, and the timing of an exposed
+ * cycle. */
 #include "capture/sim.h"
 
 #include <math.h>
+#include <string.h>
 
-/* Deposit every light's E through its footprint (point or PSF). */
-unsigned long long cap_splat(cap_sim *s, cap_render *r)
+gs_status cap_par_run(cap_sim *s, cap_render *r, size_t n, gs_range_fn fn)
 {
+    cap_par par;
+    memset(&par, 0, sizeof par);
+    par.s = s;
+    par.r = r;
+    gs_status st = gs_parallel_for(s->threads, n, fn, &par);
+    r->items = 0;
+    for (int p = 0; p < GS_MAX_THREADS; p++) r->items += par.items[p];
+    return st;
+}
+
+/* Rows [y0, y1) of every light's footprint, the lights in scene order (so every pixel sums its
+ * lights in the same order whatever the split). */
+static gs_status splat_rows(void *ctx, int part, size_t y0, size_t y1)
+{
+    cap_par *par = ctx;
+    cap_sim *s = par->s;
+    const cap_render *r = par->r;
     int B = s->B, L = s->L;
     unsigned long long items = 0;
     for (size_t l = 0; l < s->n; l++) {
         const cap_footprint *f = &s->fp[l];
         if (!f->w) continue;
+        int ya = f->y0 > (int)y0 ? f->y0 : (int)y0, yb = f->y0 + f->h < (int)y1 ? f->y0 + f->h : (int)y1;
+        if (ya >= yb) continue;
         const double *w = s->fp_w + f->off;
         const double *E = s->E + l * (size_t)L * (size_t)B;
-        for (int y = 0; y < f->h; y++) {
-            size_t row = (size_t)(f->y0 + y) * (size_t)s->W + (size_t)f->x0;
+        for (int y = ya; y < yb; y++) {
+            size_t row = (size_t)y * (size_t)s->W + (size_t)f->x0;
+            const double *wr = w + (size_t)(y - f->y0) * (size_t)f->w;
             for (int x = 0; x < f->w; x++) {
                 size_t p = row + (size_t)x;
                 int h = r->halv ? r->halv[p] : 0;
-                double wt = w[y * f->w + x];
-                for (int b = 0; b < B; b++) s->img[p * (size_t)B + (size_t)b] += wt * E[h * B + b];
+                for (int b = 0; b < B; b++) s->img[p * (size_t)B + (size_t)b] += wr[x] * E[h * B + b];
             }
         }
-        items += (unsigned long long)f->w * (unsigned long long)f->h;
+        items += (unsigned long long)f->w * (unsigned long long)(yb - ya);
     }
-    return items;
+    par->items[part] = items;
+    return GS_OK;
+}
+
+gs_status cap_splat(cap_sim *s, cap_render *r)
+{
+    return cap_par_run(s, r, (size_t)s->H, splat_rows);
 }
 
 void cap_gauss_box(double x, double y, double sigma, int R, double *w, int *bx, int *by)

@@ -111,30 +111,45 @@ static gs_status st_lights(cap_sim *s, cap_render *r)
 
 static gs_status st_splat(cap_sim *s, cap_render *r)
 {
-    r->items = cap_splat(s, r);
+    return cap_splat(s, r);
+}
+
+static gs_status to_dn_rows(void *ctx, int part, size_t y0, size_t y1)
+{
+    cap_par *par = ctx;
+    cap_sim *s = par->s;
+    size_t row = (size_t)s->W * (size_t)s->B;
+    double g = 1.0 / s->sc.gain_e_per_dn, black = s->sc.black_level_dn;
+    for (size_t i = y0 * row; i < y1 * row; i++) s->img[i] = s->img[i] * g + black;
+    par->items[part] = 0;
     return GS_OK;
 }
 
 static gs_status st_to_dn(cap_sim *s, cap_render *r)
 {
-    (void)r;
-    size_t n = (size_t)s->W * (size_t)s->H * (size_t)s->B;
-    double g = 1.0 / s->sc.gain_e_per_dn, black = s->sc.black_level_dn;
-    for (size_t i = 0; i < n; i++) s->img[i] = s->img[i] * g + black;
+    return cap_par_run(s, r, (size_t)s->H, to_dn_rows);
+}
+
+static gs_status store_rows(void *ctx, int part, size_t y0, size_t y1)
+{
+    cap_par *par = ctx;
+    cap_sim *s = par->s;
+    const cap_render *r = par->r;
+    size_t row = (size_t)s->W * (size_t)s->B, a = y0 * row, b = y1 * row;
+    if (r->dn) memcpy(r->dn + a, s->img + a, (b - a) * sizeof *r->dn);
+    if (r->raw)
+        for (size_t i = a; i < b; i++) {
+            double v = floor(s->img[i] + 0.5);
+            /* written so that NaN clamps to 0 rather than reaching the cast */
+            r->raw[i] = (unsigned short)(v > 0 ? (v < 65535 ? v : 65535) : 0);
+        }
+    par->items[part] = 0;
     return GS_OK;
 }
 
 static gs_status st_store(cap_sim *s, cap_render *r)
 {
-    size_t n = (size_t)s->W * (size_t)s->H * (size_t)s->B;
-    if (r->dn) memcpy(r->dn, s->img, n * sizeof *r->dn);
-    if (r->raw)
-        for (size_t i = 0; i < n; i++) {
-            double v = floor(s->img[i] + 0.5);
-            /* written so that NaN clamps to 0 rather than reaching the cast */
-            r->raw[i] = (unsigned short)(v > 0 ? (v < 65535 ? v : 65535) : 0);
-        }
-    return GS_OK;
+    return cap_par_run(s, r, (size_t)s->H, store_rows);
 }
 
 /* ------------------------------------------------------------------ construction */
@@ -395,7 +410,7 @@ gs_status cap_sim_new(const cap_scene *sc, const gs_delight *d_in, cap_sim **out
     s->img = malloc(sizeof *s->img * npx);
     s->E = malloc(sizeof *s->E * (s->n ? s->n : 1) * (size_t)s->L * (size_t)s->B);
     s->Wsp = malloc(sizeof *s->Wsp * (s->n_sp ? s->n_sp : 1) * (size_t)s->L * (size_t)s->B);
-    s->scin = malloc(sizeof *s->scin * (size_t)s->C);
+    s->scin = malloc(sizeof *s->scin * GS_MAX_THREADS * (size_t)s->C);
     s->amb_row = calloc((size_t)s->H, sizeof *s->amb_row);
     if (!s->img || !s->E || !s->Wsp || !s->scin || !s->amb_row) {
         st = gs_fail(GS_ENOMEM, "simulator: cannot hold a %d x %d x %d frame", s->W, s->H, s->B);
@@ -415,6 +430,11 @@ fail:
     gs_delight_free(own);
     cap_sim_free(s);
     return st;
+}
+
+void cap_sim_set_threads(cap_sim *s, int threads)
+{
+    s->threads = threads;
 }
 
 const cap_scene *cap_sim_scene(const cap_sim *s)

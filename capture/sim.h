@@ -55,6 +55,7 @@ struct cap_sim {
     double half_s;                  /* nominal Delta */
     unsigned fx;                    /* enabled effects */
     int timing;                     /* any timing effect */
+    int threads;                    /* cap_sim_set_threads (0: the online CPUs) */
     gs_bulb *bulbs;                /* copies of the DELIGHT entries used */
     size_t n_bulbs;
     cap_brf_table *tables;          /* per bulb, only with timing effects */
@@ -83,16 +84,26 @@ struct cap_sim {
     double *E;                      /* [n * L * B] */
     double *Wsp;                    /* [n_sp * L * B] species sums (flux-per-cycle units) */
     double *wcyc;                   /* [n_sp * B * C] per-cycle window integrals (scintillation) */
-    double *scin;                   /* [C] */
+    double *scin;                   /* [GS_MAX_THREADS * C], C per part */
     unsigned char *lev;             /* [C] cap_cycle_level of each cycle of an exposure */
     double *amb_row;                /* [H] ambient electrons per pixel and nominal cycle (ambient) */
     struct cap_transport *tr;       /* light_transport / semi_reflection tables (effect_transport.c) */
 };
 
 /* Rendering primitives (render.c). */
-/* Deposit every light's E through its footprint (point or PSF) into the image; returns the
+/* A stage's parallel parts (cap_par_run): the sim, the acquisition, each part's items. */
+typedef struct {
+    cap_sim *s;
+    cap_render *r;
+    unsigned long long items[GS_MAX_THREADS];
+} cap_par;
+/* fn over [0, n) (rows, lights) on the sim's threads (gs_parallel_for with a cap_par as ctx);
+ * r->items = the parts' items summed. The parts write disjoint outputs, so the frame is the same
+ * bits on any number of threads (tests/test_capture_sim.c). */
+gs_status cap_par_run(cap_sim *s, cap_render *r, size_t n, gs_range_fn fn);
+/* Deposit every light's E through its footprint (point or PSF) into the image; r->items = the
  * pixels touched. */
-unsigned long long cap_splat(cap_sim *s, cap_render *r);
+gs_status cap_splat(cap_sim *s, cap_render *r);
 /* Timing of exposed cycle c in [0, C) of this acquisition: window [t0, t1) s. */
 void cap_cycle_time(const cap_sim *s, const cap_render *r, long c, double *t0, double *t1);
 /* Gaussian pixel-integrated weights of a point at (x, y) with sigma over a (2R+1)^2 box

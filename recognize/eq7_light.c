@@ -115,10 +115,11 @@ static double gain_n(int nf, const double *S, const double *T)
  *   log p = -R/2 - sum_b log(1 + s_b^2 T_b)/2 - (sum v a_b^2 - B^2/A)/2 - log(A)/2 + log Phi(B/sqrt(A)),
  * R = Sxx - sum_b S_b^2/T_b, s_b = t a c_b, v_b = 1/(1/T_b + s_b^2), A = sum v c^2, B = sum v c a_b
  * (a marginalised over a > 0 with a flat prior, s_b from the plug-in a), then averaged over a
- * prior on tau over REC_TAU_N points of [REC_TAU_LO, REC_TAU_HI]: uniform, or the light's
- * population prior w->tau_logprior (eq7_population.c). With t -> 0 and tau = 0 this is the
- * paper's one brightness times Q_b. fit (may be NULL) gets the most probable tau's numbers;
- * ll_acc (may be NULL) accumulates exp(L(tau) + ll_logw), the prior left out, per tau. */
+ * prior on tau over REC_TAU_N points of [REC_TAU_LO, REC_TAU_HI] (c_b tabulated per bulb in
+ * m->red_c): uniform, or the light's population prior w->tau_logprior (eq7_population.c). With
+ * t -> 0 and tau = 0 this is the paper's one brightness times Q_b. fit (may be NULL) gets the
+ * most probable tau's numbers; ll_acc (may be NULL) accumulates exp(L(tau) + ll_logw), the prior
+ * left out, per tau. */
 typedef struct {
     double chi2;                 /* R + sum v (a_b - a c_b)^2 at the best tau */
     double a, tau, z;            /* the brightness, optical depth and a / sigma_a there */
@@ -129,7 +130,6 @@ static double loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb, 
                          const double *S, const double *T, red_fit *fit, double *ll_acc,
                          double ll_logw)
 {
-    const double *Q = m->bulbs[bulb].chroma;
     double tol = w->chroma_tol > 0.0 ? w->chroma_tol : m->o.chroma_tolerance;
     double R = Sxx, ah[GS_MAX_BANDS];
     int nb = m->bands, any = 0;
@@ -145,8 +145,8 @@ static double loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb, 
     double Lt[REC_TAU_N], Lmax = -INFINITY;
     for (int i = 0; i < REC_TAU_N; i++) {
         double tau = rec_eq7_tau(i);
-        double c[GS_MAX_BANDS], v[GS_MAX_BANDS], a = 0.0, A = 0.0, B = 0.0, C = 0.0, occ = 0.0;
-        for (int b = 0; b < nb; b++) c[b] = Q[b] * exp(-tau * m->red_f[b]);
+        const double *c = m->red_c + ((size_t)bulb * REC_TAU_N + (size_t)i) * (size_t)nb;
+        double v[GS_MAX_BANDS], a = 0.0, A = 0.0, B = 0.0, C = 0.0, occ = 0.0;
         for (int it = 0; it < 3; it++) {   /* s_b from the current brightness */
             A = B = C = occ = 0.0;
             for (int b = 0; b < nb; b++) {
@@ -156,7 +156,7 @@ static double loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb, 
                 A += v[b] * c[b] * c[b];
                 B += v[b] * c[b] * ah[b];
                 C += v[b] * ah[b] * ah[b];
-                occ += log1p(sb * sb * T[b]);
+                if (it == 2) occ += log1p(sb * sb * T[b]);   /* only the last round's is used */
             }
             if (!(A > 0.0)) break;
             a = B / A;

@@ -55,6 +55,7 @@ void rec_eq7_opts_default(rec_eq7_opts *o)
     o->model_error = NAN;
     o->other_prior = NAN;
     o->blend_prior = 0.1;
+    o->threads = 0;
 }
 
 void rec_matcher_free(rec_matcher *m)
@@ -94,6 +95,7 @@ void rec_matcher_free(rec_matcher *m)
     free(m->blnf);
     free(m->bib);
     free(m->bib2);
+    free(m->red_c);
     free(m);
 }
 
@@ -153,6 +155,9 @@ static gs_status check_opts(const rec_eq7_opts *o)
                        o->other_prior);
     if (!(o->blend_prior >= 0.0 && o->blend_prior < 1.0))
         return gs_fail(GS_EINVAL, "Eq. 7 options: blend_prior=%g: expected [0, 1)", o->blend_prior);
+    if (o->threads < 0)
+        return gs_fail(GS_EINVAL, "Eq. 7 options: threads=%d: expected >= 0 (0: the online CPUs)",
+                       o->threads);
     return GS_OK;
 }
 
@@ -468,6 +473,21 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
             return s;
         }
         m->nb++;
+    }
+    if (m->red) {
+        /* the reddened chromaticities on the tau grid of eq7_light.c's loglik_red */
+        m->red_c = malloc(sizeof *m->red_c * m->nb * REC_TAU_N * (size_t)bands);
+        if (!m->red_c) {
+            rec_matcher_free(m);
+            return gs_fail(GS_ENOMEM, "Eq. 7 matcher: out of memory");
+        }
+        for (size_t b = 0; b < m->nb; b++)
+            for (int i = 0; i < REC_TAU_N; i++) {
+                double tau = rec_eq7_tau(i);
+                for (int band = 0; band < bands; band++)
+                    m->red_c[(b * REC_TAU_N + (size_t)i) * (size_t)bands + (size_t)band] =
+                        m->bulbs[b].chroma[band] * exp(-tau * m->red_f[band]);
+            }
     }
 
     /* phase set */

@@ -10,7 +10,9 @@
  * and in log brightness: the excess is a smooth property of the atmosphere along the lines of
  * sight, not of one lamp. var(e^2_j) is the expected one at the capture's typical excess (not
  * the light's own estimate, which would favour the lights whose noise happened to be low).
- * Pass 2 fits again the lights whose excess is not zero. */
+ * Pass 2 fits again the lights whose excess is not zero; the last pass (eq7_population.c) every
+ * light under what the population tells of tau, the band tolerance and bulbs not in DELIGHT.
+ * The lights of each pass run on the matcher's threads (bit-identical to one thread). */
 #include "recognize/internal.h"
 
 #include <math.h>
@@ -93,7 +95,7 @@ typedef struct {
     double *lbf;         /* [i] */
 } light_fits;
 
-static void keep_fit(const rec_eq7_work *w, size_t i, light_fits *fit)
+static void keep_fit(const rec_eq7_work *w, size_t i, const light_fits *fit)
 {
     if (fit->tll) {
         memcpy(fit->tll + i * REC_TAU_N, w->tau_ll, sizeof w->tau_ll);
@@ -105,15 +107,90 @@ static void keep_fit(const rec_eq7_work *w, size_t i, light_fits *fit)
     if (fit->lbf) fit->lbf[i] = w->other_lbf;
 }
 
+/* One pass of rec_match_catalog over a range of lights, each part with its own scratch:
+ * pass 1 (fe NULL: every light with fe1), pass 2 (the lights with fe[i] > 0), the last pass
+ * (last: every light with fe[i], or fe1 when fe is NULL, under the population's priors). */
+typedef struct {
+    const rec_matcher *m;
+    const rec_catalog *cat;
+    rec_match *out;
+    rec_eq7_excess *ex;       /* pass 1 (may be NULL) */
+    const double *fe;         /* each light's excess; NULL: fe1 */
+    double fe1;
+    const light_fits *keep;   /* passes 1 and 2: what the last pass needs */
+    int last;
+    const double *logprior;   /* the last pass: each light's tau prior (NULL: uniform) */
+    double tol, other;        /* and the band tolerance (0: the options'), other share (NaN: */
+} catalog_pass;               /* the options') */
+
+static gs_status catalog_part(void *ctx, int part, size_t i0, size_t i1)
+{
+    (void)part;
+    const catalog_pass *p = ctx;
+    const rec_catalog *cat = p->cat;
+    size_t D = (size_t)p->m->D;
+    rec_eq7_work w;
+    gs_status s = rec_eq7_work_alloc(p->m, &w);
+    w.collect_tau = p->keep && p->keep->tll;
+    w.has_tau_prior = p->last && p->logprior;
+    w.chroma_tol = p->last ? p->tol : 0.0;
+    w.has_other_prior = p->last && isfinite(p->other);
+    w.other_prior = w.has_other_prior ? p->other : 0.0;
+    for (size_t i = i0; i < i1 && s == GS_OK; i++) {
+        int no_signal = cat->flags && (cat->flags[i] & REC_BLOB_NO_SIGNAL);
+        double fe = p->fe ? p->fe[i] : p->fe1;
+        if (!p->fe && !p->last) {
+            if (no_signal) rec_eq7_no_answer(&p->out[i], REC_MATCH_BAD_INPUT);
+            else s = rec_eq7_match_light_ws(p->m, &w, cat->signal + i * D, cat->sigma + i * D, fe,
+                                            &p->out[i], p->ex ? &p->ex[i] : NULL);
+        } else if (!no_signal && (p->last || fe > 0.0)) {
+            if (w.has_tau_prior) memcpy(w.tau_logprior, p->logprior + i * REC_TAU_N, sizeof w.tau_logprior);
+            s = rec_eq7_match_light_ws(p->m, &w, cat->signal + i * D, cat->sigma + i * D, fe, &p->out[i], NULL);
+        } else {
+            continue;
+        }
+        if (p->keep && !no_signal) keep_fit(&w, i, p->keep);
+    }
+    rec_eq7_work_free(&w);
+    return s;
+}
+
+/* Each light's excess from the others (the kernel-weighted median), over a range of lights. */
+typedef struct {
+    const ref_light *ref;
+    size_t nr;
+    const rec_catalog *cat;
+    const rec_match *out;
+    double hy;
+    double *fe;
+} excess_pass;
+
+static gs_status excess_part(void *ctx, int part, size_t i0, size_t i1)
+{
+    (void)part;
+    const excess_pass *p = ctx;
+    double *wk = malloc((p->nr ? p->nr : 1) * sizeof *wk), neff;
+    if (!wk) return gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", p->nr);
+    for (size_t i = i0; i < i1; i++) {
+        double lb = log10(p->out[i].brightness > 0.0 ? p->out[i].brightness : 1e-300);
+        double e2 = weighted_median(p->ref, p->nr, i, p->cat->y_px ? p->cat->y_px[i] : 0.0, lb, p->hy,
+                                    KERNEL_DECADES, 1, wk, &neff);
+        if (neff < NOISE_MIN_EFFECTIVE) e2 = weighted_median(p->ref, p->nr, i, 0, 0, 1, 1, 0, wk, &neff);
+        p->fe[i] = sqrt(e2);
+    }
+    free(wk);
+    return GS_OK;
+}
+
 /* The last pass of rec_match_catalog (eq7_population.c): from the clean lights, the tau prior
  * and the band tolerance (reddened model) and the share of bulbs not in DELIGHT (other_prior
- * NaN); then every light with a signal fitted again under them, with its noise fe[i] (NULL: the
- * report's fixed or zero excess). */
-static gs_status match_with_population(const rec_matcher *m, rec_eq7_work *w, const rec_catalog *cat,
-                                       rec_match *out, const light_fits *fit, const double *fe,
+ * NaN); then every light with a signal fitted again under them (pass: the noise of pass 2). */
+static gs_status match_with_population(const rec_matcher *m, catalog_pass *pass, const light_fits *fit,
                                        rec_noise_report *rep)
 {
-    size_t n = cat->count, D = (size_t)m->D;
+    const rec_catalog *cat = pass->cat;
+    const rec_match *out = pass->out;
+    size_t n = cat->count;
     const unsigned disturbed = REC_BLOB_EDGE | REC_BLOB_SATURATED | REC_BLOB_DEBLENDED | REC_BLOB_NO_SIGNAL;
     const unsigned misfit = REC_MATCH_DIM | REC_MATCH_BAD_INPUT | REC_MATCH_UNKNOWN | REC_MATCH_BLEND;
     unsigned char *is_ref = calloc(n, 1);
@@ -133,19 +210,15 @@ static gs_status match_with_population(const rec_matcher *m, rec_eq7_work *w, co
                         !(out[i].flags & (REC_MATCH_DIM | REC_MATCH_BAD_INPUT | REC_MATCH_BLEND));
         other = rec_eq7_other_share(fit->lbf, is_ref, n, &other_used);
     }
-    w->collect_tau = 0;
-    w->has_tau_prior = used > 0;
-    w->chroma_tol = tol;
-    w->has_other_prior = isfinite(other);
-    w->other_prior = isfinite(other) ? other : 0.0;
-    for (size_t i = 0; i < n && s == GS_OK && (used > 0 || isfinite(other)); i++) {
-        if (cat->flags && (cat->flags[i] & REC_BLOB_NO_SIGNAL)) continue;
-        if (logprior) memcpy(w->tau_logprior, logprior + i * REC_TAU_N, sizeof w->tau_logprior);
-        s = rec_eq7_match_light_ws(m, w, cat->signal + i * D, cat->sigma + i * D,
-                                   fe ? fe[i] : rep->median_model_error, &out[i], NULL);
+    if (s == GS_OK && (used > 0 || isfinite(other))) {
+        pass->ex = NULL;
+        pass->keep = NULL;
+        pass->last = 1;
+        pass->logprior = used > 0 ? logprior : NULL;
+        pass->tol = tol;
+        pass->other = other;
+        s = gs_parallel_for(m->o.threads, n, catalog_part, pass);
     }
-    w->has_tau_prior = w->has_other_prior = 0;
-    w->chroma_tol = 0.0;
     rep->reddening_lights = used;
     rep->chroma_tolerance = tol > 0.0 ? tol : m->o.chroma_tolerance;
     rep->other_lights = isfinite(other) ? other_used : 0;
@@ -170,11 +243,9 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
     if (cat->bands != m->bands || cat->K != m->K)
         return gs_fail(GS_EINVAL, "Eq. 7: catalog has %d bands x K=%d, the matcher %d bands x K=%d",
                        cat->bands, cat->K, m->bands, m->K);
-    size_t n = cat->count, D = (size_t)m->D;
+    size_t n = cat->count;
     int measured = !isfinite(m->o.model_error);
-    rec_eq7_work w;
-    gs_status s = rec_eq7_work_alloc(m, &w);
-    if (s != GS_OK) return s;
+    gs_status s = GS_OK;
     rec_eq7_excess *ex = measured ? calloc(n, sizeof *ex) : NULL;
     ref_light *ref = measured ? malloc(n * sizeof *ref) : NULL;
     double *wk = measured ? malloc(n * sizeof *wk) : NULL, *fe = measured ? malloc(n * sizeof *fe) : NULL;
@@ -190,17 +261,10 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
     if (measured && (!ex || !ref || !wk || !fe)) s = gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", n);
     if ((m->red && (!fit.tll || !fit.bulb || !fit.S || !fit.T || !fit.z)) || (isnan(m->o.other_prior) && !fit.lbf))
         s = gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", n);
-    w.collect_tau = m->red;   /* for the last pass (match_with_population) */
-    /* pass 1: the camera noise (or the fixed model error) */
-    for (size_t i = 0; i < n && s == GS_OK; i++) {
-        if (cat->flags && (cat->flags[i] & REC_BLOB_NO_SIGNAL)) {
-            rec_eq7_no_answer(&out[i], REC_MATCH_BAD_INPUT);
-            continue;
-        }
-        s = rec_eq7_match_light_ws(m, &w, cat->signal + i * D, cat->sigma + i * D, rep.median_model_error,
-                                   &out[i], ex ? &ex[i] : NULL);
-        keep_fit(&w, i, &fit);
-    }
+    int population = fit.tll || fit.lbf;
+    /* pass 1: the camera noise (or the fixed model error); the lights on the matcher's threads */
+    catalog_pass pass = {m, cat, out, ex, NULL, rep.median_model_error, population ? &fit : NULL, 0, NULL, 0.0, NAN};
+    if (s == GS_OK) s = gs_parallel_for(m->o.threads, n, catalog_part, &pass);
     if (s != GS_OK) goto done;
     if (!measured) goto population;
     /* the clean references: a fit, an informative estimate, an aperture nothing disturbed */
@@ -227,28 +291,22 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
         for (size_t j = 0; j < nr; j++) ref[j].wt = excess_weight(ref[j].ex, m->bands, global);
         global = weighted_median(ref, nr, (size_t)-1, 0, 0, 1, 1, 0, wk, &neff);
     }
-    for (size_t i = 0; i < n; i++) {
-        double lb = log10(out[i].brightness > 0.0 ? out[i].brightness : 1e-300);
-        double e2 = weighted_median(ref, nr, i, cat->y_px ? cat->y_px[i] : 0.0, lb, hy, KERNEL_DECADES,
-                                    1, wk, &neff);
-        if (neff < NOISE_MIN_EFFECTIVE) e2 = weighted_median(ref, nr, i, 0, 0, 1, 1, 0, wk, &neff);
-        fe[i] = sqrt(e2);
-    }
+    excess_pass ep = {ref, nr, cat, out, hy, fe};
+    if ((s = gs_parallel_for(m->o.threads, n, excess_part, &ep)) != GS_OK) goto done;
     rep.source = REC_NOISE_POPULATION;
     rep.lights_used = nr;
     rep.median_model_error = sqrt(global);
     /* pass 2: the lights whose excess is not zero */
-    for (size_t i = 0; i < n && s == GS_OK; i++) {
-        if (cat->flags && (cat->flags[i] & REC_BLOB_NO_SIGNAL)) continue;
-        if (fe[i] > 0.0) {
-            s = rec_eq7_match_light_ws(m, &w, cat->signal + i * D, cat->sigma + i * D, fe[i], &out[i], NULL);
-            keep_fit(&w, i, &fit);
-        }
-    }
+    pass.ex = NULL;
+    pass.fe = fe;
+    if ((s = gs_parallel_for(m->o.threads, n, catalog_part, &pass)) != GS_OK) goto done;
 population:
     /* the last pass: every light again under what the population tells (eq7_population.c) */
-    if (s == GS_OK && (fit.tll || fit.lbf))
-        s = match_with_population(m, &w, cat, out, &fit, rep.source == REC_NOISE_POPULATION ? fe : NULL, &rep);
+    if (population) {
+        pass.fe = rep.source == REC_NOISE_POPULATION ? fe : NULL;
+        pass.fe1 = rep.median_model_error;
+        s = match_with_population(m, &pass, &fit, &rep);
+    }
     if (noise && s == GS_OK) *noise = rep;
 done:
     free(fit.tll), free(fit.bulb), free(fit.S), free(fit.T), free(fit.z), free(fit.lbf);
@@ -256,6 +314,5 @@ done:
     free(wk);
     free(ref);
     free(ex);
-    rec_eq7_work_free(&w);
     return s;
 }

@@ -150,6 +150,8 @@ struct rec_matcher {
                                          * (REC_BANDS_FREE or _REDDENED, bands > 1) */
     int red;                            /* light path: the reddened band model */
     double red_f[GS_MAX_BANDS];         /* its f_b - 1 (optical depth per band relative to 550 nm) */
+    double *red_c;                      /* [nb * REC_TAU_N * bands] Q_b exp(-tau_i f_b) on the
+                                         * tau grid (red only) */
     double fe_pix;                      /* pixels: the relative excess noise (model_error or 0) */
     int nfit;                           /* brightness parameters: bands (bg) or 1 */
     int bandpath;                       /* pixels: per-band scores (bands > 1, bg or model error) */

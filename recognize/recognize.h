@@ -176,6 +176,9 @@ typedef struct {
     double blend_prior;      /* prior probability that a light is two lights in one aperture
                               * (eq7_nested.c): a blend more probable than not is flagged BLEND,
                               * and every confidence is of "one light and this". [0, 1) (0.1) */
+    int threads;             /* threads of rec_match_catalog, >= 0; 0 = the online CPUs (0). The
+                              * lights are independent: the answers are the same bits on any
+                              * number */
 } rec_eq7_opts;
 typedef enum {
     REC_BANDS_CHROMA = 0,    /* one brightness times Q_beta (the paper's Eq. 7) */

@@ -43,6 +43,7 @@ static void bench_eq7_opts(rec_eq7_opts *eo)
     eo->band_gains = REC_BANDS_CHROMA;
     eo->model_error = 0.0;
     eo->blend_prior = 0.0;
+    eo->threads = 1;
 }
 
 static double now_s(void)
@@ -160,6 +161,8 @@ typedef struct {
     double lit;
     size_t lights;          /* lights row: lights matched; capture row: lights rendered */
     int side;               /* capture row: a side x side capture through rec_pixel_maps_compute */
+    int defaults;           /* lights row: rec_eq7_opts_default (the survey's options) */
+    int threads;            /* lights row: rec_match_catalog's threads (0: one) */
 } config;
 
 typedef struct {
@@ -498,6 +501,8 @@ static void run_config(const gs_delight *all, const config *c, result *res)
         gs_status st = subset(all, c->bands, c->bulbs, &d, &got);
         rec_eq7_opts eo;
         bench_eq7_opts(&eo);
+        if (c->defaults) rec_eq7_opts_default(&eo);
+        eo.threads = c->threads > 0 ? c->threads : 1;
         if (c->continuous) eo.phases = REC_PHASES_CONTINUOUS;
         if (st == GS_OK) st = rec_matcher_new(d, 50, c->bands, c->K, &eo, &m);
         if (st == GS_OK)
@@ -677,7 +682,7 @@ static int bench_recognize(int argc, char **argv)
         for (size_t bi = 0; bi < 2; bi++)
             for (size_t di = 0; di < 3; di++) {
                 if (quick && !(ki == 2 || (bi == 1 && di == 2))) continue;
-                config cf = {Ks[ki], bandss[bi], bulbss[di], 0, P0, 0.1, 0, 0};
+                config cf = {Ks[ki], bandss[bi], bulbss[di], 0, P0, 0.1, 0, 0, 0, 0};
                 pixel_row(all, &cf, &failed);
             }
     printf("\n### 1-megapixel RGB capture, K = 26, whole database\n\n");
@@ -686,11 +691,11 @@ static int bench_recognize(int argc, char **argv)
     for (int e = quick ? 14 : 16; e <= (quick ? 16 : 20); e += 2)
         for (size_t li = 0; li < 3; li++) {
             if (quick && li != 1) continue;
-            config cf = {26, 3, 0, 0, (size_t)1 << e, lits[li], 0, 0};
+            config cf = {26, 3, 0, 0, (size_t)1 << e, lits[li], 0, 0, 0, 0};
             pixel_row(all, &cf, &failed);
         }
     {
-        config cf = {26, 3, 0, 1, (size_t)1 << (quick ? 10 : 14), 0.1, 0, 0};
+        config cf = {26, 3, 0, 1, (size_t)1 << (quick ? 10 : 14), 0.1, 0, 0, 0, 0};
         pixel_row(all, &cf, &failed);
     }
 
@@ -706,7 +711,7 @@ static int bench_recognize(int argc, char **argv)
     static const size_t nlights[] = {200, 2000, 20000};
     for (size_t li = 0; li < 3; li++) {
         if (quick && li == 2) continue;
-        config cf = {26, 3, 0, 0, 0, 0.0, quick ? nlights[li] / 16 : nlights[li], quick ? 256 : 1024};
+        config cf = {26, 3, 0, 0, 0, 0.0, quick ? nlights[li] / 16 : nlights[li], quick ? 256 : 1024, 0, 0};
         capture_row(all, &cf, &failed);
     }
 
@@ -722,16 +727,35 @@ static int bench_recognize(int argc, char **argv)
         for (size_t bi = 0; bi < 2; bi++)
             for (size_t di = 0; di < 3; di++) {
                 if (quick && !(ki == 2 && (di == 2 || bi == 1))) continue;
-                config cf = {Ks[ki], bandss[bi], bulbss[di], 0, 0, 0.0, L0, 0};
+                config cf = {Ks[ki], bandss[bi], bulbss[di], 0, 0, 0.0, L0, 0, 0, 0};
                 light_row(all, &cf, &failed);
             }
     {
-        config cf = {26, 3, 0, 1, 0, 0.0, quick ? 50 : 300, 0};
+        config cf = {26, 3, 0, 1, 0, 0.0, quick ? 50 : 300, 0, 0, 0};
         light_row(all, &cf, &failed);
     }
     printf("\n*continuous* rows search every phase (a grid of max(8K, 96) shifts per cycle, refined); "
-           "their templates column counts those grid shifts and there is no triple-loop reference. Total %.0f s.\n",
-           now_s() - t_start);
+           "their templates column counts those grid shifts and there is no triple-loop reference.\n");
+    int nt = gs_threads_resolve(0);
+    printf("\n## Per light with the survey's options, 1 and %d threads\n\n"
+           "The rows above use the paper's model (one brightness times the chromaticity, no excess "
+           "noise) on one thread. These use rec_eq7_opts_default, as `gridsurvey run` and `recognize` "
+           "do: the reddened band model, the excess noise measured from the population (two passes), "
+           "the blend and shape tests; then on the online CPUs (rec_eq7_opts.threads: the answers "
+           "are the same bits, tests/test_eq7_model.c). *agree* compares with the triple loop of the "
+           "paper's model, so it measures the models' difference too.\n\n", nt);
+    printf("| K | bands | bulbs | templates | lights | seconds | lights/s | reference lights/s | "
+           "speed-up | agree | correct | peak RSS MiB |\n");
+    printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    for (int ti = 0; ti < 2; ti++) {
+        if (ti == 1 && nt == 1) break;
+        printf("| %s |||||||||||\n", ti ? "**threads: the online CPUs**" : "**threads: 1**");
+        config cf = {26, 3, 0, 0, 0, 0.0, quick ? 300 : 4000, 0, 1, ti ? nt : 1};
+        light_row(all, &cf, &failed);
+        config cc = {26, 3, 0, 1, 0, 0.0, quick ? 30 : 200, 0, 1, ti ? nt : 1};
+        light_row(all, &cc, &failed);
+    }
+    printf("\nTotal %.0f s.\n", now_s() - t_start);
     gs_delight_free(all);
     return failed ? 1 : 0;
 }

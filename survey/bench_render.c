@@ -9,14 +9,14 @@
 #include <string.h>
 #include <time.h>
 
-static double now_s(void)
+static double clock_s(clockid_t id)
 {
     struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
+    clock_gettime(id, &ts);
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
-gs_status srv_render_time(const cap_scene *sc, unsigned effects_mask, int frames,
+gs_status srv_render_time(const cap_scene *sc, unsigned effects_mask, int frames, int threads,
                           srv_render_time_result *out)
 {
     memset(out, 0, sizeof *out);
@@ -27,6 +27,7 @@ gs_status srv_render_time(const cap_scene *sc, unsigned effects_mask, int frames
     cap_sim *s = NULL;
     gs_status st = cap_sim_new(&tmp, NULL, &s);
     if (st != GS_OK) return st;
+    cap_sim_set_threads(s, threads);
     int K = sc->acam.K;
     size_t npx = (size_t)sc->cam.width_px * (size_t)sc->cam.height_px;
     unsigned short *raw = malloc(npx * (size_t)sc->bands * sizeof *raw);
@@ -34,11 +35,12 @@ gs_status srv_render_time(const cap_scene *sc, unsigned effects_mask, int frames
         cap_sim_free(s);
         return gs_fail(GS_ENOMEM, "bench: out of memory");
     }
-    double t0 = now_s();
+    double t0 = clock_s(CLOCK_MONOTONIC), c0 = clock_s(CLOCK_PROCESS_CPUTIME_ID);
     for (int i = 0; i < frames && st == GS_OK; i++) st = cap_sim_render(s, i % K, 0, i, NULL, raw, NULL);
-    double dt = now_s() - t0;
+    double dt = clock_s(CLOCK_MONOTONIC) - t0, dc = clock_s(CLOCK_PROCESS_CPUTIME_ID) - c0;
     out->frames = frames;
     out->seconds_per_frame = dt / frames;
+    out->cpu_seconds_per_frame = dc / frames;
     out->effects = tmp.fx.enabled;
     out->lights = sc->n_lights;
     out->pixels = npx;
@@ -47,12 +49,23 @@ gs_status srv_render_time(const cap_scene *sc, unsigned effects_mask, int frames
     return st;
 }
 
+/* One row: the 1-thread wall and CPU time (and the wall's ratio to no effects), the n-thread
+ * wall and CPU times. */
+static void print_row(const char *name, const srv_render_time_result *none,
+                      const srv_render_time_result *one, const srv_render_time_result *n)
+{
+    printf("| %s | %.4f | %.4f | %.1f | %.4f | %.4f | %.2f |\n", name, one->seconds_per_frame,
+           one->cpu_seconds_per_frame, one->seconds_per_frame / none->seconds_per_frame,
+           n->seconds_per_frame, n->cpu_seconds_per_frame,
+           one->seconds_per_frame / n->seconds_per_frame);
+}
+
 static const char render_usage[] =
     "usage: gridsurvey bench render [SCENE.json] [--frames N]\n"
     "\n"
     "Renders N acquisitions (default 3) of SCENE (default capture/scenes/metro.json) with no\n"
-    "effect, with each effect the scene lists alone, and with all of them, and prints the wall\n"
-    "time per frame as a Markdown table.\n";
+    "effect, with each effect the scene lists alone, and with all of them, on one thread and on\n"
+    "the online CPUs, and prints the wall and CPU time per frame as a Markdown table.\n";
 
 int srv_bench_render(int argc, char **argv)
 {
@@ -81,27 +94,30 @@ int srv_bench_render(int argc, char **argv)
         cap_scene_release(&sc);
         return srv_error(s);
     }
+    int nt = gs_threads_resolve(0);
     printf("# Simulator render time (`gridsurvey bench render`)\n\n"
-           "Scene `%s`: %zu lights, %d x %d pixels, %d bands; %d acquisitions per row, wall "
-           "seconds per frame. Only the effects in a row run (docs/capture.md).\n\n"
-           "| effects | seconds per frame | x no-effect time |\n|---|---:|---:|\n",
-           path, sc.n_lights, sc.cam.width_px, sc.cam.height_px, sc.bands, frames);
-    srv_render_time_result none;
-    s = srv_render_time(&sc, 0, frames, &none);
-    if (s == GS_OK) printf("| none | %.4f | 1.0 |\n", none.seconds_per_frame);
+           "Scene `%s`: %zu lights, %d x %d pixels, %d bands; %d acquisitions per row, seconds "
+           "per frame on 1 thread and on %d (the online CPUs; the frames are the same bits, "
+           "tests/test_capture_sim.c), wall and CPU (all threads). Only the effects in a row run "
+           "(docs/capture.md). The machine's other load shows as wall > CPU / threads.\n\n"
+           "| effects | 1 thread, wall s | 1 thread, CPU s | x no-effect time | %d threads, wall s | "
+           "%d threads, CPU s | wall speed-up |\n|---|---:|---:|---:|---:|---:|---:|\n",
+           path, sc.n_lights, sc.cam.width_px, sc.cam.height_px, sc.bands, frames, nt, nt, nt);
+    srv_render_time_result none, none_n;
+    s = srv_render_time(&sc, 0, frames, 1, &none);
+    if (s == GS_OK) s = srv_render_time(&sc, 0, frames, nt, &none_n);
+    if (s == GS_OK) print_row("none", &none, &none, &none_n);
     for (int e = 0; e < CAP_FX_COUNT && s == GS_OK; e++) {
         if (!(sc.fx.enabled & (1u << e))) continue;
-        srv_render_time_result one;
-        s = srv_render_time(&sc, 1u << e, frames, &one);
-        if (s == GS_OK)
-            printf("| %s | %.4f | %.1f |\n", cap_effect_name((cap_effect)e), one.seconds_per_frame,
-                   one.seconds_per_frame / none.seconds_per_frame);
+        srv_render_time_result one, one_n;
+        s = srv_render_time(&sc, 1u << e, frames, 1, &one);
+        if (s == GS_OK) s = srv_render_time(&sc, 1u << e, frames, nt, &one_n);
+        if (s == GS_OK) print_row(cap_effect_name((cap_effect)e), &none, &one, &one_n);
     }
-    srv_render_time_result all;
-    if (s == GS_OK) s = srv_render_time(&sc, ~0u, frames, &all);
-    if (s == GS_OK)
-        printf("| all listed | %.4f | %.1f |\n", all.seconds_per_frame,
-               all.seconds_per_frame / none.seconds_per_frame);
+    srv_render_time_result all, all_n;
+    if (s == GS_OK) s = srv_render_time(&sc, ~0u, frames, 1, &all);
+    if (s == GS_OK) s = srv_render_time(&sc, ~0u, frames, nt, &all_n);
+    if (s == GS_OK) print_row("all listed", &none, &all, &all_n);
     cap_scene_release(&sc);
     return s == GS_OK ? 0 : srv_error(s);
 }

@@ -65,14 +65,16 @@ int srv_bench_accuracy(int argc, char **argv);
 /* `gridsurvey bench render` (survey/bench_render.c). */
 int srv_bench_render(int argc, char **argv);
 /* Its measurement: `frames` acquisitions (k = 0, 1, ...) of the scene with only the effects in
- * effects_mask (bits 1u << CAP_FX_*) that the scene lists, wall time per frame. */
+ * effects_mask (bits 1u << CAP_FX_*) that the scene lists, on `threads` threads
+ * (cap_sim_set_threads), wall and CPU (the process's, all threads) time per frame. */
 typedef struct {
     int frames;
     double seconds_per_frame;
+    double cpu_seconds_per_frame;
     unsigned effects;            /* effects actually enabled */
     size_t lights, pixels;
 } srv_render_time_result;
-gs_status srv_render_time(const cap_scene *sc, unsigned effects_mask, int frames,
+gs_status srv_render_time(const cap_scene *sc, unsigned effects_mask, int frames, int threads,
                           srv_render_time_result *out);
 
 /* The Markdown phase-balance table of `gridsurvey stats` (cmd_stats.c) on stdout: groups,

@@ -268,9 +268,9 @@ TEST(sim_bench_render_grows_only_with_enabled_effects)
     cap_scene sc;
     CHECK_OK(cap_scene_parse(text, "bench.json", ".", &sc));
     srv_render_time_result none, one, all;
-    CHECK_OK(srv_render_time(&sc, 0, 2, &none));
-    CHECK_OK(srv_render_time(&sc, 1u << CAP_FX_PSF, 2, &one));
-    CHECK_OK(srv_render_time(&sc, ~0u, 2, &all));
+    CHECK_OK(srv_render_time(&sc, 0, 2, 1, &none));
+    CHECK_OK(srv_render_time(&sc, 1u << CAP_FX_PSF, 2, 1, &one));
+    CHECK_OK(srv_render_time(&sc, ~0u, 2, 1, &all));
     CHECK(none.effects == 0);
     CHECK(one.effects == 1u << CAP_FX_PSF);
     CHECK(all.effects == (1u << CAP_FX_COUNT) - 1);
@@ -279,6 +279,107 @@ TEST(sim_bench_render_grows_only_with_enabled_effects)
            none.seconds_per_frame, one.seconds_per_frame, all.seconds_per_frame);
     cap_scene_release(&sc);
     free(text);
+    gs_delight_free(d);
+}
+
+/* ------------------------------------------------------------ threads */
+
+/* One acquisition of `text` on `threads` threads, with some pixels halved: dn, raw and the
+ * stages' item counts. */
+static void render_on(const gs_delight *d, const char *text, int threads, double *dn,
+                      unsigned short *raw, unsigned long long *items, size_t *n_stages)
+{
+    cap_scene sc;
+    CHECK_OK(cap_scene_parse(text, "threads.json", ".", &sc));
+    cap_sim *s = NULL;
+    CHECK_OK(cap_sim_new(&sc, d, &s));
+    if (!s) {
+        cap_scene_release(&sc);
+        return;
+    }
+    cap_sim_set_threads(s, threads);
+    unsigned char halv[40 * 30] = {0};
+    for (int y = 10; y < 16; y++)
+        for (int x = 6; x < 14; x++) halv[y * 40 + x] = (unsigned char)(1 + (x + y) % 2);
+    CHECK_OK(cap_sim_render(s, 3, 1, 4, halv, raw, dn));
+    *n_stages = cap_sim_stage_count(s);
+    for (size_t i = 0; i < *n_stages && i < CAP_MAX_STAGES; i++) {
+        cap_stage_info si;
+        CHECK_OK(cap_sim_stage(s, i, &si));
+        items[i] = si.items;
+    }
+    cap_sim_free(s);
+    cap_scene_release(&sc);
+}
+
+/* Every stage splits rows or lights into disjoint parts (per-row and per-light random streams,
+ * each pixel summing its lights in scene order): 2, 3 and 7 threads give the one-thread frame
+ * bit for bit, and each stage touches the same number of items (the footprints and halos cut at
+ * the parts' row boundaries add up to the whole ones). */
+TEST(sim_threads_bit_identical_to_one_thread)
+{
+    gs_delight *d = delight();
+    CHECK(d != NULL);
+    unsigned all = (1u << CAP_FX_COUNT) - 1;
+    /* the last without shot noise and ADC: dn keeps every last bit of the deposits (a Poisson
+     * draw would hide a one-ulp difference in its mean) */
+    unsigned masks[4] = {all, all & ~(1u << CAP_FX_FREE_RUNNING_DRIFT),
+                         (1u << CAP_FX_PSF) | (1u << CAP_FX_SKYGLOW) | (1u << CAP_FX_SCINTILLATION) |
+                             (1u << CAP_FX_SHOT_NOISE) | (1u << CAP_FX_READ_NOISE),
+                         (1u << CAP_FX_PSF) | (1u << CAP_FX_SKYGLOW) | (1u << CAP_FX_SCINTILLATION) |
+                             (1u << CAP_FX_AMBIENT) | (1u << CAP_FX_READ_NOISE)};
+    size_t n = 40 * 30 * 3;
+    double *dn1 = malloc(n * sizeof *dn1), *dn = malloc(n * sizeof *dn);
+    unsigned short *raw1 = malloc(n * sizeof *raw1), *raw = malloc(n * sizeof *raw);
+    for (int mi = 0; mi < 4; mi++) {
+        /* with HDR masks, so pixels can be halved, and two more lights whose footprints and
+         * halos overlap the first one's across the parts' row boundaries (each pixel then sums
+         * several lights: their order decides the bits) */
+        const char *more = "{\"bulb\": \"lps-90w\", \"phase_deg\": 240, \"x_px\": 11.2, \"y_px\": 11.4, "
+                           "\"distance_m\": 4000, \"flux_e_per_cycle\": 1300},\n"
+                           "            {\"bulb\": \"hps-250w\", \"x_px\": 9.6, \"y_px\": 13.3, "
+                           "\"distance_m\": 2500, \"flux_e_per_cycle\": 1700},\n"
+                           "            {\"bulb\": \"mh-250w\", \"phase_deg\": 120, \"x_px\": 10.9, \"y_px\": 12.2, "
+                           "\"distance_m\": 3500, \"flux_e_per_cycle\": 1100.7},\n            ";
+        char *plain = scene_with(masks[mi]);
+        size_t cap = strlen(plain) + strlen(more) + 64;
+        char *text = malloc(cap);
+        const char *at = strstr(plain, "\"locked\""), *li = strstr(plain, "\"lights\": [");
+        CHECK(at != NULL && li != NULL && at < li);
+        if (!at || !li || at > li) at = li = plain;
+        li += strlen("\"lights\": [");
+        snprintf(text, cap, "%.*s\"masks\": 16, \"hdr\": true, %.*s%s%s", (int)(at - plain), plain,
+                 (int)(li - at), at, more, li);
+        free(plain);
+        unsigned long long items1[CAP_MAX_STAGES] = {0}, items[CAP_MAX_STAGES] = {0};
+        size_t ns1 = 0, ns = 0;
+        render_on(d, text, 1, dn1, raw1, items1, &ns1);
+        int threads[3] = {2, 3, 7};
+        for (int ti = 0; ti < 3; ti++) {
+            memset(dn, 0, n * sizeof *dn);
+            render_on(d, text, threads[ti], dn, raw, items, &ns);
+            CHECK_MSG(!memcmp(dn, dn1, n * sizeof *dn), "mask %#x, %d threads: dn differs", masks[mi],
+                      threads[ti]);
+            CHECK_MSG(!memcmp(raw, raw1, n * sizeof *raw), "mask %#x, %d threads: raw differs",
+                      masks[mi], threads[ti]);
+            CHECK(ns == ns1);
+            for (size_t i = 0; i < ns && i < CAP_MAX_STAGES; i++)
+                CHECK_MSG(items[i] == items1[i], "mask %#x, %d threads, stage %zu: %llu items, one "
+                          "thread %llu", masks[mi], threads[ti], i, items[i], items1[i]);
+        }
+        /* the frame is not trivially the same: the lights and the noise are in it */
+        double mn = dn1[0], mx = dn1[0];
+        for (size_t i = 0; i < n; i++) {
+            if (dn1[i] < mn) mn = dn1[i];
+            if (dn1[i] > mx) mx = dn1[i];
+        }
+        CHECK_MSG(mx > mn + 10, "mask %#x: flat frame %g .. %g", masks[mi], mn, mx);
+        free(text);
+    }
+    free(dn1);
+    free(dn);
+    free(raw1);
+    free(raw);
     gs_delight_free(d);
 }
 

@@ -345,3 +345,75 @@ TEST(eq7_band_tolerance_and_reddening_prior_measured)
     rec_matcher_free(m);
     gs_delight_free(d);
 }
+
+/* rec_match_catalog splits its lights over threads (both passes and the excess medians): 2 and
+ * 3 threads give the one-thread answers bit for bit, with the excess measured (pass 2 runs) and
+ * some lights without signal. */
+TEST(eq7_catalog_threads_bit_identical_to_one_thread)
+{
+    gs_delight *d = eq7fx_make_db(50, 3, 0, 0);
+    const double g[3] = {1.0, 0.85, 0.7};
+    size_t n = 40;
+    rec_catalog cat = {.count = n, .bands = 3, .K = 26, .width = 640, .height = 480};
+    cat.signal = malloc(sizeof *cat.signal * n * 78);
+    cat.sigma = malloc(sizeof *cat.sigma * n * 78);
+    cat.y_px = malloc(sizeof *cat.y_px * n);
+    unsigned *flags = calloc(n, sizeof *flags);
+    rec_match *r[3];
+    rec_noise_report nr[3];
+    rec_phase_set sets[2] = {REC_PHASES_6, REC_PHASES_CONTINUOUS};
+    for (int si = 0; si < 2; si++) {
+        uint64_t rs = 77;
+        rec_matcher *m[3] = {NULL, NULL, NULL};
+        for (int t = 0; t < 3; t++) {
+            rec_eq7_opts o;
+            rec_eq7_opts_default(&o);
+            o.phases = sets[si];
+            o.threads = t + 1;
+            CHECK_OK(rec_matcher_new(d, 50, 3, 26, &o, &m[t]));
+            r[t] = calloc(n, sizeof *r[t]);
+        }
+        if (!m[0] || !m[1] || !m[2]) break;
+        for (size_t i = 0; i < n; i++) {
+            double a = 300.0 * (1.0 + (double)(i % 7)), sigma = 1000.0 / 3 / 100;
+            render_fx(rec_matcher_bulb(m[0], i % 4), gs_phase_to_shift(eq7fx_p3[(i / 4) % 3]), a, g, 0.03,
+                      sigma, &rs, cat.signal + i * 78, cat.sigma + i * 78);
+            cat.y_px[i] = 480.0 * gs_splitmix_uniform(&rs);
+            flags[i] = i % 23 == 5 ? REC_BLOB_NO_SIGNAL : 0;
+        }
+        cat.flags = flags;
+        for (int t = 0; t < 3; t++) CHECK_OK(rec_match_catalog(m[t], &cat, r[t], &nr[t]));
+        CHECK(nr[0].source == REC_NOISE_POPULATION);
+        int answered = 0;
+        for (size_t i = 0; i < n; i++) answered += r[0][i].bulb >= 0;
+        CHECK_MSG(answered > (int)n / 2, "%d of %zu answered", answered, n);
+        for (int t = 1; t < 3; t++) {
+            CHECK(nr[t].source == nr[0].source && nr[t].lights_used == nr[0].lights_used &&
+                  nr[t].median_model_error == nr[0].median_model_error);
+            for (size_t i = 0; i < n; i++) {
+                const rec_match *a = &r[0][i], *b = &r[t][i];
+                int same = a->bulb == b->bulb && a->phase_deg == b->phase_deg &&
+                           a->phase_sigma_deg == b->phase_sigma_deg && a->brightness == b->brightness &&
+                           a->chi2 == b->chi2 && a->dof == b->dof && a->p_value == b->p_value &&
+                           a->confidence == b->confidence && a->bulb_confidence == b->bulb_confidence &&
+                           a->phase_confidence == b->phase_confidence && a->runner_bulb == b->runner_bulb &&
+                           a->runner_phase_deg == b->runner_phase_deg &&
+                           a->runner_confidence == b->runner_confidence && a->model_error == b->model_error &&
+                           a->shape_p_value == b->shape_p_value && a->p_other == b->p_other &&
+                           a->blend_p_value == b->blend_p_value && a->p_blend == b->p_blend &&
+                           a->flags == b->flags;
+                CHECK_MSG(same, "phases %d, %d threads, light %zu differs from one thread", (int)sets[si],
+                          t + 1, i);
+            }
+        }
+        for (int t = 0; t < 3; t++) {
+            rec_matcher_free(m[t]);
+            free(r[t]);
+        }
+    }
+    free(flags);
+    free(cat.signal);
+    free(cat.sigma);
+    free(cat.y_px);
+    gs_delight_free(d);
+}

@@ -251,6 +251,21 @@ double gs_wrap180(double a_deg);
 /* The median of v[0..n) (n >= 1; v is reordered): quickselect, the upper median for even n. */
 float gs_median_f(float *v, size_t n);
 
+/* ------------------------------------------------------------------ threads */
+
+#define GS_MAX_THREADS 64
+/* threads > 0 as given, <= 0: the online CPUs; at most GS_MAX_THREADS. */
+int gs_threads_resolve(int threads);
+/* Part `part` of an index range: [begin, end). */
+typedef gs_status (*gs_range_fn)(void *ctx, int part, size_t begin, size_t end);
+/* fn over [0, n) split into P = min(gs_threads_resolve(threads), n) contiguous parts, part p
+ * getting [n p / P, n (p + 1) / P), each on its own thread (part 0 on the caller's). The parts
+ * must write disjoint outputs; the split depends only on n and P, and a caller whose result
+ * does not depend on the split (per-row random streams, per-pixel sums in a fixed order) gets
+ * the same bits on any number of threads. Returns the status of the lowest failing part with
+ * its gs_detail() copied to the caller's thread. */
+gs_status gs_parallel_for(int threads, size_t n, gs_range_fn fn, void *ctx);
+
 /* ------------------------------------------------------------- AC (Eq. 1) */
 
 /* Zero crossings of a uniformly sampled waveform x[0..n) at rate_hz, both directions, with
