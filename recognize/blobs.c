@@ -31,6 +31,11 @@
 #define CLIP_SIGMA 3.0
 /* The per-frame background ignores pixels within grow_px + this of a detection. */
 #define MASK_MARGIN 2
+/* Halo cut (step 4): a pixel is detected only when it holds at least HALO_FRACTION of the
+ * brightest M - background within HALO_RADIUS pixels (Chebyshev), so that the faint wide halos
+ * around lights (scattering, skyglow) never join neighbours however long the exposure. */
+#define HALO_FRACTION 0.01f
+#define HALO_RADIUS 8
 
 void rec_blob_opts_default(rec_blob_opts *o)
 {
@@ -226,10 +231,15 @@ static gs_status detect(rec_blob_state *s)
         s->M[p] = r;
         s->det[p] = (unsigned char)(s->sat[p] || r > thr * sqrt(var));
     }
+    /* the halo cut, on the local maximum of M - background (bg reused for it) */
+    gs_status st = rec_cv_dilate_f32(s->M, bg, s->W, s->H, HALO_RADIUS);
+    if (st == GS_OK)
+        for (size_t p = 0; p < s->N; p++)
+            if (!s->sat[p] && s->M[p] < HALO_FRACTION * bg[p]) s->det[p] = 0;
     free(buf);
     free(level);
     free(bg);
-    return GS_OK;
+    return st;
 }
 
 /* ------------------------------------------------ per-frame background mesh */

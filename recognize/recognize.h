@@ -34,7 +34,11 @@ gs_status rec_plot_brfs(const gs_bulb *const *bulbs, size_t count, const char *p
  *  3. noise of M per pixel from the capture's noise model: per sample
  *     var(DN) = read_noise_dn^2 + 1/12 (quantisation) + max(DN - black, 0) / gain_e_per_dn,
  *     var(value) = var(DN) / c_eff^2 with c_eff = cycles / 2^h, at the background level;
- *  4. detection: M - background > threshold_sigma noise sigmas, or saturated in any frame;
+ *  4. detection: M - background > threshold_sigma noise sigmas, or saturated in any frame,
+ *     and (the halo cut) at least 1 % of the largest M - background within 8 pixels
+ *     (Chebyshev): the threshold falls as sqrt(C) while a light's faint wide halo (scattering,
+ *     skyglow) grows as C, so without the cut longer exposures join neighbours through their
+ *     halos; with it a light's footprint is its core at any exposure;
  *     8-connected components; components smaller than min_area_px are dropped, and so are
  *     components larger than 4 max_area_px (not deblended);
  *  5. deblending: local maxima of M (5x5) in a component, at most 32; each peak's temporal
