@@ -48,6 +48,7 @@ void rec_blob_opts_default(rec_blob_opts *o)
     o->grow_px = 2;
     o->labels = 0;
     o->psf_weighted = 1;
+    o->psf_fit = 1;
 }
 
 void rec_catalog_release(rec_catalog *cat)
@@ -381,6 +382,8 @@ static gs_status check_opts(const rec_blob_opts *o)
         return gs_fail(GS_EINVAL, "blobs: grow_px = %d: expected 0 to 64", o->grow_px);
     if (o->psf_weighted != 0 && o->psf_weighted != 1)
         return gs_fail(GS_EINVAL, "blobs: psf_weighted = %d: expected 0 or 1", o->psf_weighted);
+    if (o->psf_fit != 0 && o->psf_fit != 1)
+        return gs_fail(GS_EINVAL, "blobs: psf_fit = %d: expected 0 or 1", o->psf_fit);
     if (o->labels != 0 && o->labels != 1)
         return gs_fail(GS_EINVAL, "blobs: labels = %d: expected 0 or 1", o->labels);
     return GS_OK;
@@ -459,7 +462,8 @@ gs_status rec_blobs_extract(const gs_capture *cap, const rec_blob_opts *o, rec_c
         goto done;
     }
     if ((st = rec_blob_apertures(&s, area)) != GS_OK) goto done;
-    st = rec_blob_photometry(&s, area, cat);
+    if ((st = rec_blob_photometry(&s, area, cat)) != GS_OK) goto done;
+    st = rec_blob_psf_fit(&s, cat);
 done:
     free(area);
     free(mask);

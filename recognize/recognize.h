@@ -74,7 +74,9 @@ enum {
     REC_BLOB_SATURATED = 1u << 1,   /* some pixel saturated in some frame (excluded from sums) */
     REC_BLOB_DEBLENDED = 1u << 2,   /* split from touching lights with different signals */
     REC_BLOB_HDR = 1u << 3,         /* some aperture pixel was HDR-halved in some frame */
-    REC_BLOB_NO_SIGNAL = 1u << 4    /* every aperture pixel saturated: signal 0, sigma +Inf */
+    REC_BLOB_NO_SIGNAL = 1u << 4,   /* every aperture pixel saturated: signal 0, sigma +Inf */
+    REC_BLOB_PSF_FIT = 1u << 5      /* one of several sources of the multi-source PSF fit (9.):
+                                     * signal and sigma are its fitted per-frame fluxes */
 };
 
 typedef struct {
@@ -87,6 +89,7 @@ typedef struct {
     int grow_px;              /* photometry aperture = footprint grown by this, 0..64 (2) */
     int labels;               /* 1: also return the aperture label image (0) */
     int psf_weighted;         /* 1: PSF-weighted (optimal) photometry, 0: the aperture sum (1) */
+    int psf_fit;              /* 1: the multi-source PSF fit over the K frames (9.), 0: off (1) */
 } rec_blob_opts;
 void rec_blob_opts_default(rec_blob_opts *o);
 
