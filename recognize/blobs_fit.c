@@ -28,7 +28,7 @@
 #define FIT_NM_EVALS 30          /* Nelder-Mead evaluations per position coordinate */
 #define FIT_STEP_PX 0.4          /* Nelder-Mead's first simplex step (sigma: 0.2 sigma) */
 #define FIT_TOL_PX 0.01          /* Nelder-Mead stops when its simplex is this small */
-#define RANK1_ITER 6              /* alternating least-squares rounds of the gate */
+#define RANK1_ITER 3              /* alternating least-squares rounds of the gate */
 #define FIT_SIGMA_RANGE 2.0      /* each component's PSF sigma within this factor of the capture's */
 /* The PSF model's relative error (DAOPHOT's "profile error"): each pixel's variance in the fit
  * gains (FIT_PROFILE_ERR x its mean level)^2, and so does each flux in span_z. */
@@ -426,12 +426,18 @@ static gs_status fit_component(fit_data *f, int comp, const int *ap, int nap, co
         int x = p % W, y = p / W;
         double *V = f->V + (size_t)n * BK, *D = f->D + (size_t)n * BK;
         rec_blob_pixel_var(s, (size_t)p, V);
+        int node[4];
+        double nw[4];
+        const int nn = rec_mesh_weights(&s->mesh, x, y, node, nw), nodes = s->mesh.nx * s->mesh.ny;
         for (int k = 0; k < K; k++) {
             size_t pk = s->N * (size_t)k + (size_t)p;
             double sc = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[pk] : 0)];
-            for (int b = 0; b < B; b++)
-                D[b * K + k] = ((double)c->raw[pk * (size_t)B + (size_t)b] - s->black) * sc -
-                               rec_blob_frame_bg(s, k, b, x, y);
+            for (int b = 0; b < B; b++) {
+                const double *g = s->fval + ((size_t)k * B + (size_t)b) * (size_t)nodes;
+                double bg = 0;
+                for (int t = 0; t < nn; t++) bg += nw[t] * g[node[t]];
+                D[b * K + k] = ((double)c->raw[pk * (size_t)B + (size_t)b] - s->black) * sc - bg;
+            }
         }
         for (int b = 0; b < B; b++) {
             double vm = 0, dm = 0;

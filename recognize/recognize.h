@@ -67,6 +67,14 @@ gs_status rec_plot_brfs(const gs_bulb *const *bulbs, size_t count, const char *p
  *     centroid; unbiased for any symmetric PSF (at most 0.013 px of pixel-sampling error for
  *     1-1.5 px Gaussian PSFs without noise, tests/test_blobs.c).
  *     The position comes before the sums (step 8 is computed first).
+ *  9. with psf_fit (the default), the multi-source PSF fit over the K frames (blobs_fit.c,
+ *     docs/recognition.md "Detection at kilometre range"): a component that is not one
+ *     spatial profile times one signal (a rank-1 test, PSF-free) is fitted as sources of a
+ *     Gaussian PSF (positions and one sigma free, each source's per-frame fluxes free, by least
+ *     squares), sources added at the residual's matched-filter peak while the chi-square drop
+ *     is significant and the new source's signal is not a combination of the others'; with
+ *     two or more sources its lights become the fit's (REC_BLOB_PSF_FIT: signal and sigma are
+ *     the fitted fluxes and their noise; the catalog stays in raster order).
  * Works in O(K * bands * pixels), with OpenCV for components and morphology: 0.35 s for a
  * 1024 x 1024, K = 26, RGB capture (one core). */
 enum {
