@@ -7,6 +7,7 @@
  * to the next, nor the false detections rise by more than one. */
 #include "capture/sim.h"
 #include "recognize/recognize.h"
+#include "tests/blobs_fixture.h"
 #include "tests/fixtures.h"
 #include "tests/test.h"
 
@@ -55,24 +56,16 @@ static exposure_score score_at(long C)
     char *text = clear_window(700, 380, 240, 135, 8, C);
     CHECK(text != NULL);
     if (!text) return r;
+    char name[64];
+    snprintf(name, sizeof name, "exposure-%ld", C);
     cap_scene sc;
-    CHECK_OK(cap_scene_parse(text, "clear.json", ".", &sc));
+    const char *path;
+    cap_backend *be = blobfx_acquire(text, name, &sc, &path);
     free(text);
-    cap_backend *be = NULL;
-    CHECK_OK(cap_backend_sim_new(&sc, &be));
     if (!be) {
         cap_scene_release(&sc);
         return r;
     }
-    char dir[64];
-    snprintf(dir, sizeof dir, "exposure-%ld", C);
-    const char *path = fx_tmp(dir);
-    cap_loop_opts o;
-    cap_loop_opts_default(&o);
-    o.progress = 0;
-    cap_loop_report rep;
-    CHECK_OK(cap_loop_run(be, path, &o, &rep));
-    CHECK(rep.complete);
     const cap_sim *s = cap_backend_sim_handle(be);
     size_t n = s->n;
     unsigned char *res = malloc(n ? n : 1), *used = calloc(n ? n : 1, 1);

@@ -7,6 +7,7 @@
  * whose phase is the light's. Target: >= 95 % of the pairs (57 of 60). */
 #include "capture/capture.h"
 #include "recognize/recognize.h"
+#include "tests/blobs_fixture.h"
 #include "tests/fixtures.h"
 #include "tests/test.h"
 
@@ -70,19 +71,12 @@ static int resolved_pairs(int bands, gs_delight *d)
     char *text = pair_scene(bands, x, y, ph);
     CHECK(text != NULL);
     if (!text) return 0;
+    char name[32];
+    snprintf(name, sizeof name, "pairs-%d", bands);
     cap_scene sc;
-    CHECK_OK(cap_scene_parse(text, "pairs.json", ".", &sc));
+    const char *path;
+    cap_backend *be = blobfx_acquire(text, name, &sc, &path);
     free(text);
-    cap_backend *be = NULL;
-    CHECK_OK(cap_backend_sim_new(&sc, &be));
-    char dir[32];
-    snprintf(dir, sizeof dir, "pairs-%d", bands);
-    const char *path = fx_tmp(dir);
-    cap_loop_opts lo;
-    cap_loop_opts_default(&lo);
-    lo.progress = 0;
-    cap_loop_report rep;
-    if (be) CHECK_OK(cap_loop_run(be, path, &lo, &rep));
     cap_backend_free(be);
     cap_scene_release(&sc);
     gs_capture cap;
