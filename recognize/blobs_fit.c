@@ -13,8 +13,9 @@
  * the footprint pixel where a PSF explains the most residual (the matched filter on the
  * residual), while the chi-square drop is significant (Wilson-Hilferty z over BK + 2 degrees
  * of freedom above deblend_sigma), every source's flux is above FIT_SNR sigmas, and the new
- * source's fluxes are not a combination of the others' (span_z above deblend_sigma). A component whose one-source chi-square is within
- * deblend_sigma of its degrees of freedom is one light, untouched. */
+ * source's fluxes are not a combination of the others' (span_z above deblend_sigma). A
+ * component that is one spatial profile times one signal (rank1_z, PSF-free) is left as step 5
+ * made it; so is one whose fit keeps a single source. */
 #include "recognize/internal.h"
 
 #include <math.h>
