@@ -5,6 +5,7 @@
 #include "capture/sim.h"
 
 #include <jansson.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -563,6 +564,23 @@ gs_status cap_sim_write_truth(const cap_sim *s, const char *dir)
     json_object_set_new(root, "bands", json_integer(s->B));
     json_object_set_new(root, "width", json_integer(s->W));
     json_object_set_new(root, "height", json_integer(s->H));
+    unsigned char *res = malloc(s->n ? s->n : 1);
+    int *grp = malloc((s->n ? s->n : 1) * sizeof *grp), n_groups = 0;
+    gs_status rst = res && grp ? cap_resolve(s, res, grp, &n_groups)
+                               : gs_fail(GS_ENOMEM, "truth: out of memory");
+    if (rst != GS_OK) {
+        free(res);
+        free(grp);
+        json_decref(root);
+        json_decref(lights);
+        return rst;
+    }
+    json_t *rs = json_object();
+    json_object_set_new(rs, "sigma_px", jnum(cap_resolve_sigma_px(s)));
+    json_object_set_new(rs, "separation_sigma", jnum(CAP_RESOLVE_SEPARATION));
+    json_object_set_new(rs, "flux_ratio", jnum(CAP_RESOLVE_FLUX_RATIO));
+    json_object_set_new(rs, "blend_groups", json_integer(n_groups));
+    json_object_set_new(root, "resolvability", rs);
     size_t in_image = 0;
     for (size_t l = 0; l < s->n; l++) {
         const cap_light *li = &sc->lights[l];
@@ -583,6 +601,10 @@ gs_status cap_sim_write_truth(const cap_sim *s, const char *dir)
         json_object_set_new(o, "phase_deg", jnum(li->phase_deg));
         json_object_set_new(o, "shift_cycles", jnum(gs_phase_to_shift(li->phase_deg)));
         json_object_set_new(o, "flux_e_per_cycle", jnum(li->flux_e_per_cycle));
+        if (li->in_image) {
+            json_object_set_new(o, "resolvable", json_boolean(res[l]));
+            json_object_set_new(o, "blend_group", grp[l] >= 0 ? json_integer(grp[l]) : json_null());
+        }
         if (li->lumens > 0) json_object_set_new(o, "lumens", jnum(li->lumens));
         /* what a maximum-likelihood oracle must know of the atmosphere (docs/formats.md) */
         if (has(s, CAP_FX_EXTINCTION) && s->trans) {
@@ -597,6 +619,8 @@ gs_status cap_sim_write_truth(const cap_sim *s, const char *dir)
         json_array_append_new(lights, o);
         in_image += li->in_image != 0;
     }
+    free(res);
+    free(grp);
     json_object_set_new(root, "lights_in_image", json_integer((json_int_t)in_image));
     json_object_set_new(root, "lights", lights);
     json_t *dis = json_object();

@@ -90,6 +90,16 @@ struct cap_sim {
     struct cap_transport *tr;       /* light_transport / semi_reflection tables (effect_transport.c) */
 };
 
+/* Resolvability of the lights (truth_resolve.c, docs/formats.md): sigma_e = sqrt(psf sigma^2
+ * + 1/12) px; lights closer than CAP_RESOLVE_SEPARATION sigma_e are close; a light is resolvable
+ * when no close light has at least 1/CAP_RESOLVE_FLUX_RATIO of its received flux; close pairs
+ * of comparable flux (that ratio either way) join blend groups of two or more lights.
+ * resolvable[n] (0 for lights not in the image), group[n] (-1: none), *n_groups. */
+#define CAP_RESOLVE_SEPARATION 2.0
+#define CAP_RESOLVE_FLUX_RATIO 10.0
+double cap_resolve_sigma_px(const cap_sim *s);
+gs_status cap_resolve(const cap_sim *s, unsigned char *resolvable, int *group, int *n_groups);
+
 /* Rendering primitives (render.c). */
 /* A stage's parallel parts (cap_par_run): the sim, the acquisition, each part's items. */
 typedef struct {

@@ -31,6 +31,11 @@
 #define CLIP_SIGMA 3.0
 /* The per-frame background ignores pixels within grow_px + this of a detection. */
 #define MASK_MARGIN 2
+/* Halo cut (step 4): a pixel is detected only when it holds at least HALO_FRACTION of the
+ * brightest M - background within HALO_RADIUS pixels (Chebyshev), so that the faint wide halos
+ * around lights (scattering, skyglow) never join neighbours however long the exposure. */
+#define HALO_FRACTION 0.01f
+#define HALO_RADIUS 8
 
 void rec_blob_opts_default(rec_blob_opts *o)
 {
@@ -43,6 +48,7 @@ void rec_blob_opts_default(rec_blob_opts *o)
     o->grow_px = 2;
     o->labels = 0;
     o->psf_weighted = 1;
+    o->psf_fit = 1;
 }
 
 void rec_catalog_release(rec_catalog *cat)
@@ -226,10 +232,15 @@ static gs_status detect(rec_blob_state *s)
         s->M[p] = r;
         s->det[p] = (unsigned char)(s->sat[p] || r > thr * sqrt(var));
     }
+    /* the halo cut, on the local maximum of M - background (bg reused for it) */
+    gs_status st = rec_cv_dilate_f32(s->M, bg, s->W, s->H, HALO_RADIUS);
+    if (st == GS_OK)
+        for (size_t p = 0; p < s->N; p++)
+            if (!s->sat[p] && s->M[p] < HALO_FRACTION * bg[p]) s->det[p] = 0;
     free(buf);
     free(level);
     free(bg);
-    return GS_OK;
+    return st;
 }
 
 /* ------------------------------------------------ per-frame background mesh */
@@ -371,6 +382,8 @@ static gs_status check_opts(const rec_blob_opts *o)
         return gs_fail(GS_EINVAL, "blobs: grow_px = %d: expected 0 to 64", o->grow_px);
     if (o->psf_weighted != 0 && o->psf_weighted != 1)
         return gs_fail(GS_EINVAL, "blobs: psf_weighted = %d: expected 0 or 1", o->psf_weighted);
+    if (o->psf_fit != 0 && o->psf_fit != 1)
+        return gs_fail(GS_EINVAL, "blobs: psf_fit = %d: expected 0 or 1", o->psf_fit);
     if (o->labels != 0 && o->labels != 1)
         return gs_fail(GS_EINVAL, "blobs: labels = %d: expected 0 or 1", o->labels);
     return GS_OK;
@@ -449,7 +462,8 @@ gs_status rec_blobs_extract(const gs_capture *cap, const rec_blob_opts *o, rec_c
         goto done;
     }
     if ((st = rec_blob_apertures(&s, area)) != GS_OK) goto done;
-    st = rec_blob_photometry(&s, area, cat);
+    if ((st = rec_blob_photometry(&s, area, cat)) != GS_OK) goto done;
+    st = rec_blob_psf_fit(&s, cat);
 done:
     free(area);
     free(mask);

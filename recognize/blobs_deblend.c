@@ -79,7 +79,7 @@ static int peak_signal(const rec_blob_state *s, int label, int p, double *u, dou
 /* How many Gaussian sigmas two normalised signals differ by: chi-square over the n values,
  * converted with Wilson & Hilferty (1931): z = ((chi2/nu)^(1/3) - (1 - 2/(9 nu))) /
  * sqrt(2/(9 nu)), nu = n - 1 (the normalisation takes one degree of freedom). */
-static double signal_z(const double *u1, const double *s1, const double *u2, const double *s2,
+double rec_signal_z(const double *u1, const double *s1, const double *u2, const double *s2,
                        int n)
 {
     double chi2 = 0;
@@ -236,7 +236,7 @@ gs_status rec_blob_deblend(rec_blob_state *s)
                 double best_z = INFINITY;
                 for (int g = 0; g < ngroups; g++) {
                     int r = rep[g];
-                    double z = signal_z(uj, sj, u + (size_t)r * BK, su + (size_t)r * BK, BK);
+                    double z = rec_signal_z(uj, sj, u + (size_t)r * BK, su + (size_t)r * BK, BK);
                     if (z < best_z) {
                         best_z = z;
                         best = g;

@@ -129,8 +129,28 @@ static void win_centroid(const rec_blob_state *s, int light, double r2, double *
     *yc = y;
 }
 
+/* Noise of pixel p's samples from the pixel's mean level over the K windows (shot + read),
+ * var_k[b * K + k] in (DN per cycle)^2. */
+void rec_blob_pixel_var(const rec_blob_state *s, size_t p, double *var_k)
+{
+    const gs_capture *c = s->cap;
+    const int B = s->bands, K = s->K, HS = GS_MAX_HALVINGS + 1;
+    double mean_flux[GS_MAX_BANDS] = {0};
+    for (int k = 0; k < K; k++) {
+        double f = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[s->N * (size_t)k + p] : 0)];
+        const unsigned short *r = c->raw + (s->N * (size_t)k + p) * (size_t)B;
+        for (int b = 0; b < B; b++) mean_flux[b] += ((double)r[b] - s->black) * f / K;
+    }
+    for (int b = 0; b < B; b++)
+        for (int k = 0; k < K; k++) {
+            double f = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[s->N * (size_t)k + p] : 0)];
+            double dn = mean_flux[b] / f;   /* expected raw level above black */
+            var_k[b * K + k] = (s->nz.read_var_dn2 + (dn > 0 ? dn * s->nz.inv_gain : 0)) * f * f;
+        }
+}
+
 /* The share of a Gaussian PSF of sigma centred at (xc, yc) that falls in pixel (x, y). */
-static double psf_share(int x, int y, double xc, double yc, double sigma)
+double rec_psf_share(int x, int y, double xc, double yc, double sigma)
 {
     const double k = 1.0 / (sqrt(2.0) * sigma);
     double fx = 0.5 * (erf((x + 0.5 - xc) * k) - erf((x - 0.5 - xc) * k));
@@ -301,7 +321,8 @@ gs_status rec_blob_photometry(rec_blob_state *s, const int *area, rec_catalog *c
         if (!nuse) flags |= REC_BLOB_NO_SIGNAL;
         cat->flags[i] = flags;
     }
-    double psf_sigma = s->o->psf_weighted ? capture_psf_sigma(cat, r2s, bright, n) : 0.0;
+    s->psf_sigma = capture_psf_sigma(cat, r2s, bright, n);
+    double psf_sigma = s->o->psf_weighted ? s->psf_sigma : 0.0;
 
     for (size_t i = 0; i < n; i++) {
         const int *ap = pix + start[i];
@@ -321,7 +342,7 @@ gs_status rec_blob_photometry(rec_blob_state *s, const int *area, rec_catalog *c
          * degenerate one) keeps the plain sum */
         double psf = psf_sigma, mass = 0;
         for (int a = 0; a < na && psf > 0; a++)
-            if (!s->sat[ap[a]]) mass += psf_share(ap[a] % W, ap[a] / W, cat->x_px[i], cat->y_px[i], psf);
+            if (!s->sat[ap[a]]) mass += rec_psf_share(ap[a] % W, ap[a] / W, cat->x_px[i], cat->y_px[i], psf);
         if (!(mass > 0.05)) psf = 0;
         /* Shot noise from each pixel's mean level over the K windows, not from each sample's
          * own value: a sample's own value correlates its weight with its noise and biases
@@ -331,21 +352,12 @@ gs_status rec_blob_photometry(rec_blob_state *s, const int *area, rec_catalog *c
         for (int a = 0; a < na; a++) {
             int p = ap[a], x = p % W, y = p / W;
             if (s->sat[p]) continue;
-            double mean_flux[GS_MAX_BANDS] = {0}, *var_k = acc + 2 * BK, wpix[GS_MAX_BANDS];
-            for (int k = 0; k < K; k++) {
-                double f = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[s->N * (size_t)k + (size_t)p] : 0)];
-                const unsigned short *r = c->raw + (s->N * (size_t)k + (size_t)p) * (size_t)B;
-                for (int b = 0; b < B; b++) mean_flux[b] += ((double)r[b] - s->black) * f / K;
-            }
-            double prof = psf > 0 ? psf_share(x, y, cat->x_px[i], cat->y_px[i], psf) : 1.0;
+            double *var_k = acc + 2 * BK, wpix[GS_MAX_BANDS];
+            rec_blob_pixel_var(s, (size_t)p, var_k);
+            double prof = psf > 0 ? rec_psf_share(x, y, cat->x_px[i], cat->y_px[i], psf) : 1.0;
             for (int b = 0; b < B; b++) {
                 double vmean = 0;
-                for (int k = 0; k < K; k++) {
-                    double f = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[s->N * (size_t)k + (size_t)p] : 0)];
-                    double dn = mean_flux[b] / f;   /* expected raw level above black */
-                    var_k[b * K + k] = (s->nz.read_var_dn2 + (dn > 0 ? dn * s->nz.inv_gain : 0)) * f * f;
-                    vmean += var_k[b * K + k] / K;
-                }
+                for (int k = 0; k < K; k++) vmean += var_k[b * K + k] / K;
                 wpix[b] = psf > 0 ? (vmean > 0 && isfinite(vmean) ? prof / vmean : prof) : 1.0;
                 wsum[b] += wpix[b] * prof;
             }

@@ -56,12 +56,22 @@ typedef struct {
     int *ap;                 /* aperture owner or -1 */
     int nlights, cap_lights;
     unsigned *lflags;        /* per light: DEBLENDED */
+    double psf_sigma;        /* the capture's PSF sigma (photometry, step 7), px */
 } rec_blob_state;
 /* The variance (DN^2 per cycle^2) of a raw sample that integrated 1/scale cycles. */
 static inline double rec_blob_sample_var(const rec_blob_state *s, unsigned raw, double scale)
 {
     return gs_noise_raw_var(&s->nz, (double)raw) * scale * scale;
 }
+/* Noise of pixel p's samples from its mean level over the K windows, var_k[b * K + k]
+ * (blobs_photometry.c). */
+void rec_blob_pixel_var(const rec_blob_state *s, size_t p, double *var_k);
+/* The share of a Gaussian PSF of sigma centred at (xc, yc) that falls in pixel (x, y). */
+double rec_psf_share(int x, int y, double xc, double yc, double sigma);
+/* How many Gaussian sigmas two normalised signals of n values differ by (blobs_deblend.c). */
+double rec_signal_z(const double *u1, const double *s1, const double *u2, const double *s2, int n);
+/* Step 9, the multi-source PSF fit over the K frames (blobs_fit.c): rewrites cat. */
+gs_status rec_blob_psf_fit(rec_blob_state *s, rec_catalog *cat);
 /* Value of the per-frame background mesh of frame k, band b at (x, y) (blobs.c). */
 double rec_blob_frame_bg(const rec_blob_state *s, int k, int b, int x, int y);
 /* Step 5, deblending (blobs_deblend.c); steps 6-7, apertures and photometry

@@ -34,7 +34,11 @@ gs_status rec_plot_brfs(const gs_bulb *const *bulbs, size_t count, const char *p
  *  3. noise of M per pixel from the capture's noise model: per sample
  *     var(DN) = read_noise_dn^2 + 1/12 (quantisation) + max(DN - black, 0) / gain_e_per_dn,
  *     var(value) = var(DN) / c_eff^2 with c_eff = cycles / 2^h, at the background level;
- *  4. detection: M - background > threshold_sigma noise sigmas, or saturated in any frame;
+ *  4. detection: M - background > threshold_sigma noise sigmas, or saturated in any frame,
+ *     and (the halo cut) at least 1 % of the largest M - background within 8 pixels
+ *     (Chebyshev): the threshold falls as sqrt(C) while a light's faint wide halo (scattering,
+ *     skyglow) grows as C, so without the cut longer exposures join neighbours through their
+ *     halos; with it a light's footprint is its core at any exposure;
  *     8-connected components; components smaller than min_area_px are dropped, and so are
  *     components larger than 4 max_area_px (not deblended);
  *  5. deblending: local maxima of M (5x5) in a component, at most 32; each peak's temporal
@@ -63,6 +67,14 @@ gs_status rec_plot_brfs(const gs_bulb *const *bulbs, size_t count, const char *p
  *     centroid; unbiased for any symmetric PSF (at most 0.013 px of pixel-sampling error for
  *     1-1.5 px Gaussian PSFs without noise, tests/test_blobs.c).
  *     The position comes before the sums (step 8 is computed first).
+ *  9. with psf_fit (the default), the multi-source PSF fit over the K frames (blobs_fit.c,
+ *     docs/recognition.md "Detection at kilometre range"): a component that is not one
+ *     spatial profile times one signal (a rank-1 test, PSF-free) is fitted as sources of a
+ *     Gaussian PSF (positions and one sigma free, each source's per-frame fluxes free, by least
+ *     squares), sources added at the residual's matched-filter peak while the chi-square drop
+ *     is significant and the new source's signal is not a combination of the others'; with
+ *     two or more sources its lights become the fit's (REC_BLOB_PSF_FIT: signal and sigma are
+ *     the fitted fluxes and their noise; the catalog stays in raster order).
  * Works in O(K * bands * pixels), with OpenCV for components and morphology: 0.35 s for a
  * 1024 x 1024, K = 26, RGB capture (one core). */
 enum {
@@ -70,7 +82,9 @@ enum {
     REC_BLOB_SATURATED = 1u << 1,   /* some pixel saturated in some frame (excluded from sums) */
     REC_BLOB_DEBLENDED = 1u << 2,   /* split from touching lights with different signals */
     REC_BLOB_HDR = 1u << 3,         /* some aperture pixel was HDR-halved in some frame */
-    REC_BLOB_NO_SIGNAL = 1u << 4    /* every aperture pixel saturated: signal 0, sigma +Inf */
+    REC_BLOB_NO_SIGNAL = 1u << 4,   /* every aperture pixel saturated: signal 0, sigma +Inf */
+    REC_BLOB_PSF_FIT = 1u << 5      /* one of several sources of the multi-source PSF fit (9.):
+                                     * signal and sigma are its fitted per-frame fluxes */
 };
 
 typedef struct {
@@ -83,6 +97,7 @@ typedef struct {
     int grow_px;              /* photometry aperture = footprint grown by this, 0..64 (2) */
     int labels;               /* 1: also return the aperture label image (0) */
     int psf_weighted;         /* 1: PSF-weighted (optimal) photometry, 0: the aperture sum (1) */
+    int psf_fit;              /* 1: the multi-source PSF fit over the K frames (9.), 0: off (1) */
 } rec_blob_opts;
 void rec_blob_opts_default(rec_blob_opts *o);
 

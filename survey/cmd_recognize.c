@@ -213,6 +213,7 @@ static const struct {
     {REC_BLOB_DEBLENDED, 0, "deblended"},
     {REC_BLOB_HDR, 0, "hdr"},
     {REC_BLOB_NO_SIGNAL, 0, "no_signal"},
+    {REC_BLOB_PSF_FIT, 0, "psf_fit"},
     {REC_MATCH_UNKNOWN, 1, "unknown"},
     {REC_MATCH_PHASE_AMBIGUOUS, 1, "phase_ambiguous"},
     {REC_MATCH_BULB_AMBIGUOUS, 1, "bulb_ambiguous"},

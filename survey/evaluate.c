@@ -30,6 +30,8 @@ typedef struct {
     double lat, lon;            /* NaN = none */
     double a_m, b_m, az_deg;    /* stored: the 1-sigma ellipse (NaN = none or unbounded) */
     unsigned flags;             /* stored: match_flags */
+    int resolvable;             /* truth: resolvable (1 when the truth does not say) */
+    long group;                 /* truth: blend group, -1 none */
     int partner;                /* index of the matched light on the other side, -1 */
 } ev_light;
 
@@ -99,6 +101,7 @@ static gs_status read_truth(const char *path, ev_light **out, size_t *count, lon
         memset(l, 0, sizeof *l);
         l->partner = -1;
         int in_image;
+        double group;
         if ((s = gs_json_get_bool(doc, o, lp, "in_image", 1, 0, &in_image)) != GS_OK ||
             (s = truth_number(doc, o, "x_px", i, &l->x)) != GS_OK ||
             (s = truth_number(doc, o, "y_px", i, &l->y)) != GS_OK ||
@@ -106,8 +109,16 @@ static gs_status read_truth(const char *path, ev_light **out, size_t *count, lon
             (s = truth_number(doc, o, "lat_deg", i, &l->lat)) != GS_OK ||
             (s = truth_number(doc, o, "lon_deg", i, &l->lon)) != GS_OK ||
             (s = truth_text(doc, o, "bulb", i, 1, l->bulb, sizeof l->bulb)) != GS_OK ||
-            (s = truth_text(doc, o, "technology", i, 0, l->tech, sizeof l->tech)) != GS_OK)
+            (s = truth_text(doc, o, "technology", i, 0, l->tech, sizeof l->tech)) != GS_OK ||
+            (s = gs_json_get_bool(doc, o, lp, "resolvable", 0, 1, &l->resolvable)) != GS_OK ||
+            (s = truth_number(doc, o, "blend_group", i, &group)) != GS_OK)
             goto done;
+        if (!isnan(group) && !(group >= 0 && group == floor(group) && group < (double)total_n)) {
+            s = gs_json_fail(doc, GS_EFORMAT, lp, "blend_group %g: expected an integer 0 to %zu or "
+                             "null", group, total_n - 1);
+            goto done;
+        }
+        l->group = isnan(group) ? -1 : (long)group;
         if (!in_image) continue;
         if (!isfinite(l->x) || !isfinite(l->y)) {
             s = gs_json_fail(doc, GS_EFORMAT, lp, "in_image but x_px/y_px not numbers");
@@ -348,6 +359,51 @@ static double rate(long k, long n)
     return n > 0 ? (double)k / (double)n : NAN;
 }
 
+/* Resolvable and hidden lights found, and the outcome of each blend group (survey.h). */
+static gs_status score_groups(const ev_light *st, const ev_light *tr, size_t nt, srv_eval_report *r)
+{
+    long ng = 0;
+    for (size_t j = 0; j < nt; j++) {
+        const ev_light *t = &tr[j];
+        if (t->resolvable) {
+            r->resolvable++;
+            r->resolvable_matched += t->partner >= 0;
+        } else if (t->group < 0) {
+            r->hidden++;
+            r->hidden_matched += t->partner >= 0;
+        }
+        if (t->group >= ng) ng = t->group + 1;
+    }
+    if (ng == 0) return GS_OK;
+    /* per group: members, members matched, matched lights flagged blend, confident */
+    long *c = calloc((size_t)ng * 4, sizeof *c);
+    if (!c) return gs_fail(GS_ENOMEM, "evaluate: out of memory for %ld blend groups", ng);
+    for (size_t j = 0; j < nt; j++) {
+        const ev_light *t = &tr[j];
+        if (t->group < 0) continue;
+        long *g = c + 4 * t->group;
+        g[0]++;
+        if (t->partner < 0) continue;
+        const ev_light *a = &st[t->partner];
+        g[1]++;
+        g[2] += (a->flags & REC_MATCH_BLEND) != 0;
+        g[3] += a->bulb[0] && !(a->flags & (REC_MATCH_BLEND | REC_MATCH_BULB_AMBIGUOUS));
+    }
+    for (long k = 0; k < ng; k++) {
+        const long *g = c + 4 * k;
+        if (g[0] < 2) continue; /* ids the truth skipped */
+        r->groups++;
+        r->group_lights += g[0];
+        if (g[1] == g[0]) r->groups_resolved++;
+        else if (g[2] > 0) r->groups_flagged++;
+        else if (g[3] > 0) r->groups_confident++;
+        else if (g[1] > 0) r->groups_unsure++;
+        else r->groups_missed++;
+    }
+    free(c);
+    return GS_OK;
+}
+
 /* Class 0..3 of a phase (0, 120, 240, other), 4 for NaN. */
 static int phase_col(double phase_deg)
 {
@@ -434,7 +490,9 @@ gs_status srv_evaluate(srv_db *db, const char *truth_path, const srv_eval_opts *
         r->loc_max_m = err[r->loc_pairs - 1];
     }
     r->ellipse_coverage95 = rate(r->ellipse_in95, r->ellipse_pairs);
+    if ((s = score_groups(st, tr, nt, r)) != GS_OK) goto done;
     r->detection_rate = rate(r->matched, r->truth_in_image);
+    r->resolvable_rate = rate(r->resolvable_matched, r->resolvable);
     r->false_rate = rate(r->false_detections, r->stored);
     r->bulb_accuracy = rate(r->bulb_correct, r->bulb_answered);
     r->tech_accuracy = rate(r->tech_correct, r->tech_answered);
@@ -488,6 +546,19 @@ gs_status srv_eval_print(const srv_eval_report *r, const char *truth_path, int j
         json_object_set_new(root, "matched", json_integer(r->matched));
         json_object_set_new(root, "detection", jrate(r->detection_rate, r->matched, r->truth_in_image));
         json_object_set_new(root, "false_detections", jrate(r->false_rate, r->false_detections, r->stored));
+        json_object_set_new(root, "resolvable_detection",
+                            jrate(r->resolvable_rate, r->resolvable_matched, r->resolvable));
+        json_object_set_new(root, "hidden_detection",
+                            jrate(rate(r->hidden_matched, r->hidden), r->hidden_matched, r->hidden));
+        json_t *bg = json_object();
+        json_object_set_new(bg, "groups", json_integer(r->groups));
+        json_object_set_new(bg, "lights", json_integer(r->group_lights));
+        json_object_set_new(bg, "resolved", json_integer(r->groups_resolved));
+        json_object_set_new(bg, "flagged_blend", json_integer(r->groups_flagged));
+        json_object_set_new(bg, "confident_single", json_integer(r->groups_confident));
+        json_object_set_new(bg, "unsure", json_integer(r->groups_unsure));
+        json_object_set_new(bg, "missed", json_integer(r->groups_missed));
+        json_object_set_new(root, "blend_groups", bg);
         json_object_set_new(root, "bulb", jrate(r->bulb_accuracy, r->bulb_correct, r->bulb_answered));
         json_object_set_new(root, "bulb_ambiguous", json_integer(r->bulb_ambiguous));
         json_object_set_new(root, "technology", jrate(r->tech_accuracy, r->tech_correct, r->tech_answered));
@@ -525,6 +596,10 @@ gs_status srv_eval_print(const srv_eval_report *r, const char *truth_path, int j
     fprintf(f, "| metric | value | counts |\n|---|---:|---|\n");
     pct_row(f, "detection rate", r->detection_rate, r->matched, r->truth_in_image, "truth lights in the image");
     pct_row(f, "false detections", r->false_rate, r->false_detections, r->stored, "stored lights");
+    pct_row(f, "detection of resolvable lights", r->resolvable_rate, r->resolvable_matched, r->resolvable,
+            "resolvable truth lights");
+    pct_row(f, "detection of hidden lights", rate(r->hidden_matched, r->hidden), r->hidden_matched, r->hidden,
+            "lights next to a 10x brighter one");
     pct_row(f, "bulb accuracy", r->bulb_accuracy, r->bulb_correct, r->bulb_answered, "matched lights with a bulb");
     pct_row(f, "technology accuracy", r->tech_accuracy, r->tech_correct, r->tech_answered,
             "matched lights with a technology");
@@ -547,6 +622,12 @@ gs_status srv_eval_print(const srv_eval_report *r, const char *truth_path, int j
         fprintf(f, "| location error | - | no located matched light with a true position (%ld not located) |\n",
                 r->loc_unlocated);
     }
+    if (r->groups > 0)
+        fprintf(f, "\nUnresolvable groups (lights closer than 2 PSF sigma, fluxes within 10x; truth.json "
+                   "resolvability): %ld groups of %ld lights: %ld resolved (every light matched), %ld "
+                   "flagged blend, %ld a confident single bulb, %ld unsure (bulb unknown or ambiguous), "
+                   "%ld missed.\n", r->groups, r->group_lights, r->groups_resolved, r->groups_flagged,
+                r->groups_confident, r->groups_unsure, r->groups_missed);
     fprintf(f, "\nbulb accuracy counts %ld bulbs flagged ambiguous (posterior < the ambiguity threshold) "
                "as answers. Phase of matched lights, truth (rows) against stored (columns; none = "
                "ambiguous or unknown):\n\n", r->bulb_ambiguous);

@@ -656,6 +656,19 @@ typedef struct {
     long all_correct;            /* matched lights with the right bulb and the right phase */
     long confusion[4][SRV_EVAL_PHASE_CLASSES];  /* [truth class][stored class] of matched
                                   * lights: classes 0, 120, 240, other (, none) */
+    /* Resolvability (truth.json, docs/formats.md; a truth without it: every light resolvable) */
+    long resolvable;             /* resolvable truth lights in the image */
+    long resolvable_matched;     /* ... matched */
+    long hidden;                 /* unresolvable lights in no blend group (a >= 10x brighter
+                                  * light within 2 sigma) */
+    long hidden_matched;         /* ... matched */
+    long groups, group_lights;   /* blend groups (2+ close lights of comparable flux), lights */
+    long groups_resolved;        /* groups whose every light is matched */
+    long groups_flagged;         /* else: a matched stored light flagged REC_MATCH_BLEND */
+    long groups_confident;       /* else: a matched stored light with a bulb, not ambiguous:
+                                  * a blend reported as one confident bulb (the failure) */
+    long groups_unsure;          /* else: matched, but bulb unknown or ambiguous */
+    long groups_missed;          /* else: no light of the group matched */
     long loc_pairs;              /* matched lights with a stored and a truth position */
     long loc_unlocated;          /* matched lights without a stored position */
     long ellipse_pairs;          /* loc_pairs whose stored ellipse is bounded */
@@ -667,6 +680,7 @@ typedef struct {
     /* Rates (NaN when the denominator is 0) */
     double detection_rate;       /* matched / truth_in_image */
     double false_rate;           /* false_detections / stored */
+    double resolvable_rate;      /* resolvable_matched / resolvable */
     double bulb_accuracy;        /* bulb_correct / bulb_answered */
     double tech_accuracy;        /* tech_correct / tech_answered */
     double phase_accuracy;       /* phase_correct / phase_answered */

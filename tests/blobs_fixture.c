@@ -216,3 +216,20 @@ double blobfx_mean_image_var(const blobfx_scene *sc, int x, int y)
         }
     return v / ((double)sc->K * sc->K);
 }
+
+cap_backend *blobfx_acquire(const char *text, const char *name, cap_scene *sc, const char **path)
+{
+    memset(sc, 0, sizeof *sc);
+    *path = fx_tmp(name);
+    CHECK_OK(cap_scene_parse(text, name, ".", sc));
+    cap_backend *be = NULL;
+    CHECK_OK(cap_backend_sim_new(sc, &be));
+    if (!be) return NULL;
+    cap_loop_opts o;
+    cap_loop_opts_default(&o);
+    o.progress = 0;
+    cap_loop_report rep;
+    CHECK_OK(cap_loop_run(be, *path, &o, &rep));
+    CHECK(rep.complete);
+    return be;
+}

@@ -11,6 +11,7 @@
 #ifndef GRIDSURVEY_TESTS_BLOBS_FIXTURE_H
 #define GRIDSURVEY_TESTS_BLOBS_FIXTURE_H
 
+#include "capture/capture.h"
 #include "recognize/recognize.h"
 
 #include <stddef.h>
@@ -67,5 +68,11 @@ int blobfx_find_light(const rec_catalog *cat, double x, double y, double r);
 rec_blob_opts blobfx_opts_labels(void);
 /* Every value of a catalog is finite (sigma may be +Inf only for NO_SIGNAL lights). */
 int blobfx_catalog_finite(const rec_catalog *cat);
+
+/* A scene (text) acquired through the simulator backend and the acquisition loop (HDR as the
+ * scene says, no progress) into fx_tmp(name), which *path names. Returns the backend (its
+ * simulator: cap_backend_sim_handle; free it with cap_backend_free), NULL on failure (CHECKs
+ * fail); *sc is the parsed scene (cap_scene_release it). */
+cap_backend *blobfx_acquire(const char *text, const char *name, cap_scene *sc, const char **path);
 
 #endif

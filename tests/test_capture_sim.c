@@ -8,9 +8,13 @@
 #include "capture/sim.h"
 #include "survey/internal.h"
 
+#include <errno.h>
+#include <jansson.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 static gs_delight *delight(void)
 {
@@ -546,4 +550,59 @@ TEST(sim_same_seed_identical_files)
              test_bin(), scene, tmp, tmp, tmp);
     rc = test_run(cmd, out, sizeof out);
     CHECK_MSG(strstr(out, "DIFFERENT"), "another seed gave the same frame: %s", out);
+}
+
+/* truth.json's resolvability (docs/formats.md): PSF sigma 1 px, so sigma_e = sqrt(1 + 1/12) and
+ * lights closer than 2 sigma_e = 2.082 px are close. a-b (1.5 px, fluxes 2x) and b-c (1.80 px)
+ * chain into one group of three although a-c are 2.92 px apart; e is 1.9 px from d and 20x
+ * fainter: hidden (no group), d stays resolvable; f-g at 2.2 px are both resolvable. */
+TEST(sim_truth_resolvability_groups_and_hidden)
+{
+    const char *text =
+        "{\"format\": \"gridsurvey-scene/1\", \"seed\": 3,\n"
+        " \"grid\": {\"nominal_hz\": 50},\n"
+        " \"camera\": {\"width_px\": 64, \"height_px\": 24,\n"
+        "   \"sensor\": {\"bands\": 1, \"bit_depth\": 12, \"full_well_e\": 20000, \"read_noise_e\": 3, \"gain_e_per_dn\": 5, \"black_level_dn\": 64}},\n"
+        " \"acam\": {\"K\": 4, \"cycles\": 16, \"masks\": 64},\n"
+        " \"lights\": [\n"
+        "  {\"id\": \"a\", \"bulb\": \"hps-150w\", \"phase_deg\": 0, \"x_px\": 10, \"y_px\": 10, \"flux_e_per_cycle\": 1000},\n"
+        "  {\"id\": \"b\", \"bulb\": \"hps-150w\", \"phase_deg\": 120, \"x_px\": 11.5, \"y_px\": 10, \"flux_e_per_cycle\": 500},\n"
+        "  {\"id\": \"c\", \"bulb\": \"mh-250w\", \"phase_deg\": 0, \"x_px\": 12.5, \"y_px\": 11.5, \"flux_e_per_cycle\": 300},\n"
+        "  {\"id\": \"d\", \"bulb\": \"hps-150w\", \"phase_deg\": 0, \"x_px\": 30, \"y_px\": 10, \"flux_e_per_cycle\": 1000},\n"
+        "  {\"id\": \"e\", \"bulb\": \"hps-150w\", \"phase_deg\": 240, \"x_px\": 31.9, \"y_px\": 10, \"flux_e_per_cycle\": 50},\n"
+        "  {\"id\": \"f\", \"bulb\": \"hps-150w\", \"phase_deg\": 0, \"x_px\": 50, \"y_px\": 10, \"flux_e_per_cycle\": 1000},\n"
+        "  {\"id\": \"g\", \"bulb\": \"hps-150w\", \"phase_deg\": 240, \"x_px\": 52.2, \"y_px\": 10, \"flux_e_per_cycle\": 900},\n"
+        "  {\"id\": \"out\", \"bulb\": \"hps-150w\", \"phase_deg\": 0, \"x_px\": -40, \"y_px\": 10, \"flux_e_per_cycle\": 900}\n"
+        " ],\n"
+        " \"effects\": {\"psf\": {\"sigma_px\": 1.0}}}\n";
+    gs_delight *d = delight();
+    cap_scene sc;
+    CHECK_OK(cap_scene_parse(text, "resolve.json", ".", &sc));
+    cap_sim *s = NULL;
+    CHECK_OK(cap_sim_new(&sc, d, &s));
+    const char *dir = fx_tmp("resolve");
+    CHECK(mkdir(dir, 0755) == 0 || errno == EEXIST);
+    if (s) CHECK_OK(cap_sim_write_truth(s, dir));
+    json_error_t err;
+    json_t *root = json_load_file(fx_path(dir, "truth.json"), 0, &err);
+    CHECK(root != NULL);
+    if (root) {
+        json_t *rs = json_object_get(root, "resolvability");
+        CHECK_NEAR(json_real_value(json_object_get(rs, "sigma_px")), sqrt(1 + 1 / 12.0), 1e-12);
+        CHECK(json_integer_value(json_object_get(rs, "blend_groups")) == 1);
+        /* resolvable, group (-1: null) of a..g; "out" has neither field */
+        const int want_res[7] = {0, 0, 0, 1, 0, 1, 1}, want_grp[7] = {0, 0, 0, -1, -1, -1, -1};
+        json_t *arr = json_object_get(root, "lights");
+        for (size_t i = 0; i < 7; i++) {
+            json_t *o = json_array_get(arr, i), *g = json_object_get(o, "blend_group");
+            CHECK_MSG(json_is_true(json_object_get(o, "resolvable")) == want_res[i], "light %zu", i);
+            CHECK_MSG(want_grp[i] < 0 ? json_is_null(g) : json_integer_value(g) == want_grp[i], "light %zu", i);
+        }
+        json_t *out = json_array_get(arr, 7);
+        CHECK(!json_object_get(out, "resolvable") && !json_object_get(out, "blend_group"));
+    }
+    json_decref(root);
+    cap_sim_free(s);
+    cap_scene_release(&sc);
+    gs_delight_free(d);
 }

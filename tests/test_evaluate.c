@@ -263,3 +263,57 @@ TEST(evaluate_matching_one_to_one_nearest_first)
     CHECK(r.matched == 3 && r.bulb_correct == 3 && r.phase_correct == 3 && r.false_detections == 0);
     srv_db_close(h);
 }
+
+/* Resolvability (docs/formats.md): the outcome of each blend group by the rules of survey.h,
+ * five groups, one per outcome, hand-counted; a hidden light and two resolvable ones. */
+TEST(evaluate_blend_groups_outcomes)
+{
+    const char *capdir = fx_tmp("g"), *truth = fx_tmp("g/truth.json"), *db = fx_tmp("g.sqlite");
+    CHECK(mkdir(capdir, 0777) == 0);
+    /* groups 0 resolved, 1 flagged, 2 confident single, 3 unsure, 4 missed; at x = 10, 30, ... */
+    char text[8192];
+    size_t n = (size_t)snprintf(text, sizeof text, "{\"format\": \"gridsurvey-truth/1\", \"lights\": [\n");
+    for (int g = 0; g < 5; g++)
+        for (int m = 0; m < 2; m++)
+            n += (size_t)snprintf(text + n, sizeof text - n,
+                                  "{\"x_px\": %d.%d, \"y_px\": 10, \"in_image\": true, \"bulb\": \"a\", "
+                                  "\"phase_deg\": 0, \"resolvable\": false, \"blend_group\": %d},\n",
+                                  10 + 20 * g, 8 * m, g);
+    n += (size_t)snprintf(text + n, sizeof text - n,
+                          "{\"x_px\": 10, \"y_px\": 40, \"in_image\": true, \"bulb\": \"a\", \"phase_deg\": 0},\n"
+                          "{\"x_px\": 30, \"y_px\": 40, \"in_image\": true, \"bulb\": \"a\", \"phase_deg\": 0, "
+                          "\"resolvable\": true, \"blend_group\": null},\n"
+                          "{\"x_px\": 31, \"y_px\": 40, \"in_image\": true, \"bulb\": \"a\", \"phase_deg\": 0, "
+                          "\"resolvable\": false, \"blend_group\": null}]}\n");
+    fx_write_text(truth, text);
+    srv_db *h = NULL;
+    CHECK_OK(srv_db_open(db, SRV_DB_CREATE, &h));
+    if (!h) return;
+    int64_t sid;
+    srv_survey_row sv = {.name = "g"};
+    CHECK_OK(srv_db_add_survey(h, &sv, &sid));
+    /* group 0: both; 1: one, blend; 2: one, a bulb; 3: one, no bulb; the first resolvable one */
+    const double xs[6] = {10.0, 10.8, 30.0, 50.0, 70.0, 10.0}, ys[6] = {10, 10, 10, 10, 10, 40};
+    const unsigned fl[6] = {0, 0, REC_MATCH_BLEND, 0, 0, 0};
+    const char *bulb[6] = {"a", "a", "a", "a", NULL, "a"};
+    srv_light_row L[6];
+    for (int i = 0; i < 6; i++) {
+        L[i] = survey_fx_light(i, xs[i], ys[i], 0, 1.0);
+        L[i].bulb_id = bulb[i];
+        L[i].match_flags = fl[i];
+    }
+    srv_capture_data cd = survey_fx_capture(sid, "k", L, NULL, 6);
+    CHECK_OK(srv_db_add_capture(h, &cd, NULL, NULL));
+    srv_eval_report r;
+    CHECK_OK(srv_evaluate(h, truth, NULL, &r));
+    CHECK(r.groups == 5 && r.group_lights == 10);
+    CHECK(r.groups_resolved == 1 && r.groups_flagged == 1 && r.groups_confident == 1 &&
+          r.groups_unsure == 1 && r.groups_missed == 1);
+    CHECK(r.resolvable == 2 && r.resolvable_matched == 1 && r.hidden == 1 && r.hidden_matched == 0);
+    CHECK_NEAR(r.resolvable_rate, 0.5, 1e-12);
+    /* a blend group that is not an integer: one line naming the light */
+    fx_write_text(truth, "{\"format\": \"gridsurvey-truth/1\", \"lights\": [{\"x_px\": 1, \"y_px\": 1, "
+                         "\"in_image\": true, \"bulb\": \"a\", \"blend_group\": 0.5}]}\n");
+    CHECK(srv_evaluate(h, truth, NULL, &r) == GS_EFORMAT && strstr(gs_detail(), "lights[0]"));
+    srv_db_close(h);
+}

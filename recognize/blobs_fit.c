@@ -1,0 +1,770 @@
+/* blobs_fit.c - step 9 of the blob extraction (recognize.h, rec_blobs_extract): the
+ * multi-source PSF fit over the K frames, crowded-field photometry (DAOPHOT's PSF fitting,
+ * Stetson 1987) with time as the extra dimension. docs/recognition.md, "Detection at
+ * kilometre range", has the equations; in short, for one component with fit pixels p and
+ * samples d = (band b, frame k):
+ *   D_pd = sum_s P(p; x_s) F_sd + noise,  w_pb = 1 / (the pixel's variance averaged over k),
+ * P a Gaussian PSF integrated over the pixel (its sigma free, shared by the component's sources,
+ * from the capture's, within a factor FIT_SIGMA_RANGE), positions x_s free and
+ * each source's per-frame fluxes F_sd free (its own template, scale and chromaticity). For
+ * fixed positions F is linear least squares, per band A_b = sum_p w_pb P P^T,
+ * F_.d = A_b^-1 sum_p w_pb P D_pd, and chi2 = sum w D^2 - sum_d F_.d . (sum_p w P D_pd); the
+ * positions are found by Nelder-Mead (Nelder & Mead 1965). Sources are added one at a time at
+ * the footprint pixel where a PSF explains the most residual (the matched filter on the
+ * residual), while the chi-square drop is significant (Wilson-Hilferty z over BK + 2 degrees
+ * of freedom above deblend_sigma), every source's flux is above FIT_SNR sigmas, and the new
+ * source's fluxes are not a combination of the others' (span_z above deblend_sigma). A
+ * component that is one spatial profile times one signal (rank1_z, PSF-free) is left as step 5
+ * made it; so is one whose fit keeps a single source. */
+#include "recognize/internal.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define FIT_MAX_SOURCES 6
+#define FIT_MAX_PX 400           /* components with more fit pixels are left as they are */
+#define FIT_SNR 5.0              /* every source's flux over its noise */
+#define FIT_MIN_SEP_SIGMA 0.5    /* sources closer than this many PSF sigmas are one */
+#define FIT_NM_EVALS 30          /* Nelder-Mead evaluations per position coordinate */
+#define FIT_STEP_PX 0.4          /* Nelder-Mead's first simplex step (sigma: 0.2 sigma) */
+#define FIT_TOL_PX 0.01          /* Nelder-Mead stops when its simplex is this small */
+#define RANK1_ITER 3              /* alternating least-squares rounds of the gate */
+#define FIT_SIGMA_RANGE 2.0      /* each component's PSF sigma within this factor of the capture's */
+/* The PSF model's relative error (DAOPHOT's "profile error"): each pixel's variance in the fit
+ * gains (FIT_PROFILE_ERR x its mean level)^2, and so does each flux in span_z. */
+#define FIT_PROFILE_ERR 0.03
+
+typedef struct {
+    const rec_blob_state *s;
+    int n, B, K, BK;
+    int *x, *y;           /* [n] fit pixels */
+    double *D, *V;        /* [n * BK] value - background, its variance */
+    double *w;            /* [n * B] */
+    double wdd;           /* sum w D^2 */
+    double lo_x, lo_y, hi_x, hi_y;   /* positions allowed (the footprint's box, +1 px) */
+    double *P;            /* [FIT_MAX_SOURCES * n] */
+    double *F;            /* [FIT_MAX_SOURCES * BK] fluxes of the last evaluation */
+    double *Ainv;         /* [B * S * S] of the last evaluation */
+    double *num;          /* [K] scratch */
+    double *Dt, *wP;      /* [BK * n] D by sample, [FIT_MAX_SOURCES * n] w_pb P */
+    int bx0, by0, bw, bh; /* the fit pixels' bounding box */
+    double *gx, *gy;      /* [bw + 1], [bh + 1] scratch: the PSF's 1-D shares */
+} fit_data;
+
+/* The shares of a pixel-integrated 1-D Gaussian (centre c, sigma) in pixels lo .. lo + n - 1:
+ * 0.5 (erf((x + 0.5 - c) / (sqrt 2 sigma)) - erf((x - 0.5 - c) / (sqrt 2 sigma))), each edge
+ * once. The 2-D share is the product (rec_psf_share). */
+static void psf_1d(int lo, int n, double c, double sigma, double *g)
+{
+    const double k = 1.0 / (sqrt(2.0) * sigma);
+    double prev = erf((lo - 0.5 - c) * k);
+    for (int i = 0; i < n; i++) {
+        double e = erf((lo + i + 0.5 - c) * k);
+        g[i] = 0.5 * (e - prev);
+        prev = e;
+    }
+}
+
+/* In-place inverse of the n x n symmetric positive matrix a (Gauss-Jordan, pivoting on the
+ * diagonal); 0 when singular. */
+static int small_inverse(double *a, int n)
+{
+    double inv[FIT_MAX_SOURCES * FIT_MAX_SOURCES];
+    for (int i = 0; i < n * n; i++) inv[i] = 0;
+    for (int i = 0; i < n; i++) inv[i * n + i] = 1;
+    for (int c = 0; c < n; c++) {
+        double piv = a[c * n + c];
+        if (!(piv > 1e-300)) return 0;
+        for (int j = 0; j < n; j++) {
+            a[c * n + j] /= piv;
+            inv[c * n + j] /= piv;
+        }
+        for (int r = 0; r < n; r++) {
+            if (r == c) continue;
+            double f = a[r * n + c];
+            if (f == 0) continue;
+            for (int j = 0; j < n; j++) {
+                a[r * n + j] -= f * a[c * n + j];
+                inv[r * n + j] -= f * inv[c * n + j];
+            }
+        }
+    }
+    memcpy(a, inv, sizeof(double) * (size_t)(n * n));
+    return 1;
+}
+
+/* chi2 of N sources at pos[2 N] with the PSF sigma pos[2 N]; leaves P, F and Ainv. HUGE_VAL
+ * outside the allowed box (positions; sigma within FIT_SIGMA_RANGE of the capture's) or when the
+ * normal matrix is singular. */
+static double fit_eval(fit_data *f, int N, const double *pos)
+{
+    const int n = f->n, B = f->B, K = f->K, BK = f->BK;
+    const double sigma = pos[2 * N], s0 = f->s->psf_sigma;
+    if (!(sigma >= s0 / FIT_SIGMA_RANGE && sigma <= s0 * FIT_SIGMA_RANGE)) return HUGE_VAL;
+    for (int q = 0; q < N; q++)
+        if (!(pos[2 * q] >= f->lo_x && pos[2 * q] <= f->hi_x && pos[2 * q + 1] >= f->lo_y &&
+              pos[2 * q + 1] <= f->hi_y))
+            return HUGE_VAL;
+    for (int q = 0; q < N; q++) {
+        psf_1d(f->bx0, f->bw, pos[2 * q], sigma, f->gx);
+        psf_1d(f->by0, f->bh, pos[2 * q + 1], sigma, f->gy);
+        for (int p = 0; p < n; p++) f->P[q * n + p] = f->gx[f->x[p] - f->bx0] * f->gy[f->y[p] - f->by0];
+    }
+    double chi2 = f->wdd;
+    for (int b = 0; b < B; b++) {
+        double *A = f->Ainv + (size_t)b * N * N;
+        for (int q = 0; q < N; q++)
+            for (int t = q; t < N; t++) {
+                double a = 0;
+                for (int p = 0; p < n; p++) a += f->w[p * B + b] * f->P[q * n + p] * f->P[t * n + p];   /* N^2 n: small */
+                A[q * N + t] = A[t * N + q] = a;
+            }
+        if (!small_inverse(A, N)) return HUGE_VAL;
+        /* w P per source, then each sample's right-hand side as dot products with WD's rows */
+        for (int q = 0; q < N; q++)
+            for (int p = 0; p < n; p++) f->wP[q * n + p] = f->w[p * B + b] * f->P[q * n + p];
+        for (int k = 0; k < K; k++) {
+            const int d = b * K + k;
+            const double *Dd = f->Dt + (size_t)d * n;
+            double r[FIT_MAX_SOURCES];
+            for (int q = 0; q < N; q++) {
+                const double *wp = f->wP + q * n;
+                double a0 = 0, a1 = 0, a2 = 0, a3 = 0;
+                int p = 0;
+                for (; p + 4 <= n; p += 4) {
+                    a0 += wp[p] * Dd[p];
+                    a1 += wp[p + 1] * Dd[p + 1];
+                    a2 += wp[p + 2] * Dd[p + 2];
+                    a3 += wp[p + 3] * Dd[p + 3];
+                }
+                for (; p < n; p++) a0 += wp[p] * Dd[p];
+                r[q] = (a0 + a1) + (a2 + a3);
+            }
+            for (int q = 0; q < N; q++) {
+                double v = 0;
+                for (int t = 0; t < N; t++) v += A[q * N + t] * r[t];
+                f->F[q * BK + d] = v;
+                chi2 -= v * r[q];
+            }
+        }
+    }
+    return chi2;
+}
+
+/* Nelder-Mead over the 2 N coordinates and sigma from pos (overwritten with the best); its
+ * chi2. */
+static double nelder_mead(fit_data *f, int N, double *pos)
+{
+    enum { MAXD = 2 * FIT_MAX_SOURCES + 1 };
+    const int m = 2 * N + 1, max_evals = FIT_NM_EVALS * m;
+    double X[(MAXD + 1) * MAXD], Y[MAXD + 1], c[MAXD], xr[MAXD], xe[MAXD];
+    for (int i = 0; i <= m; i++) {
+        memcpy(X + i * m, pos, sizeof(double) * (size_t)m);
+        if (i > 0) X[i * m + i - 1] += i == m ? FIT_STEP_PX * 0.5 * pos[2 * N] : FIT_STEP_PX;
+        Y[i] = fit_eval(f, N, X + i * m);
+    }
+    int evals = m + 1;
+    while (evals < max_evals) {
+        int lo = 0, hi = 0, nh = 0;
+        for (int i = 1; i <= m; i++) {
+            if (Y[i] < Y[lo]) lo = i;
+            if (Y[i] > Y[hi]) hi = i;
+        }
+        nh = lo;
+        for (int i = 0; i <= m; i++)
+            if (i != hi && Y[i] > Y[nh]) nh = i;
+        double spread = 0;
+        for (int i = 0; i <= m; i++)
+            for (int j = 0; j < m; j++) spread = fmax(spread, fabs(X[i * m + j] - X[lo * m + j]));
+        if (isfinite(Y[hi]) && (Y[hi] - Y[lo] < 1e-3 || spread < FIT_TOL_PX)) break;
+        for (int j = 0; j < m; j++) {
+            c[j] = 0;
+            for (int i = 0; i <= m; i++)
+                if (i != hi) c[j] += X[i * m + j] / m;
+        }
+        for (int j = 0; j < m; j++) xr[j] = 2 * c[j] - X[hi * m + j];
+        double yr = fit_eval(f, N, xr);
+        evals++;
+        if (yr < Y[lo]) {
+            for (int j = 0; j < m; j++) xe[j] = 3 * c[j] - 2 * X[hi * m + j];
+            double ye = fit_eval(f, N, xe);
+            evals++;
+            memcpy(X + hi * m, ye < yr ? xe : xr, sizeof(double) * (size_t)m);
+            Y[hi] = ye < yr ? ye : yr;
+        } else if (yr < Y[nh]) {
+            memcpy(X + hi * m, xr, sizeof(double) * (size_t)m);
+            Y[hi] = yr;
+        } else {
+            for (int j = 0; j < m; j++) xe[j] = 0.5 * (c[j] + X[hi * m + j]);
+            double yc = fit_eval(f, N, xe);
+            evals++;
+            if (yc < Y[hi]) {
+                memcpy(X + hi * m, xe, sizeof(double) * (size_t)m);
+                Y[hi] = yc;
+            } else {   /* shrink towards the best */
+                for (int i = 0; i <= m; i++) {
+                    if (i == lo) continue;
+                    for (int j = 0; j < m; j++) X[i * m + j] = 0.5 * (X[i * m + j] + X[lo * m + j]);
+                    Y[i] = fit_eval(f, N, X + i * m);
+                    evals++;
+                }
+            }
+        }
+    }
+    int lo = 0;
+    for (int i = 1; i <= m; i++)
+        if (Y[i] < Y[lo]) lo = i;
+    memcpy(pos, X + lo * m, sizeof(double) * (size_t)m);
+    return fit_eval(f, N, pos);   /* chi2, P, F and Ainv of the best */
+}
+
+/* Wilson-Hilferty: chi2 with nu degrees of freedom as a Gaussian z. */
+static double wh_z(double chi2, double nu)
+{
+    if (!(chi2 > 0)) return -INFINITY;
+    double a = 2.0 / (9.0 * nu);
+    return (cbrt(chi2 / nu) - (1 - a)) / sqrt(a);
+}
+
+/* Source q's flux over its noise (sums over the BK samples; noise from A_b^-1). */
+static double source_snr(const fit_data *f, int N, int q)
+{
+    double sum = 0, var = 0;
+    for (int b = 0; b < f->B; b++)
+        for (int k = 0; k < f->K; k++) {
+            sum += f->F[q * f->BK + b * f->K + k];
+            var += f->Ainv[(size_t)b * N * N + (size_t)q * N + q];
+        }
+    return var > 0 ? sum / sqrt(var) : 0;
+}
+
+/* How far, in Gaussian sigmas, the newest source's fluxes (q = N - 1) are from the span of the
+ * others': per band, the least-squares combination sum_t c_bt F_t,b. of the other sources over
+ * the K frames, then chi2 = sum_bk (F_q,bk - sum_t c_bt F_t,bk)^2 / (var F_q,bk + (FIT_PROFILE_ERR
+ * F_q,bk)^2) over B (K - N + 1) degrees of freedom (Wilson-Hilferty). A PSF that is not quite
+ * the model leaves residuals that are such a combination (sum_t (P_true - P_model)_t F_t), so a
+ * source that only absorbs them is no light. */
+static double span_z(const fit_data *f, int N)
+{
+    const int B = f->B, K = f->K, BK = f->BK, q = N - 1, m = N - 1;
+    double chi2 = 0;
+    for (int b = 0; b < B; b++) {
+        double G[FIT_MAX_SOURCES * FIT_MAX_SOURCES], h[FIT_MAX_SOURCES], c[FIT_MAX_SOURCES];
+        for (int i = 0; i < m; i++) {
+            h[i] = 0;
+            for (int j = 0; j < m; j++) {
+                double g = 0;
+                for (int k = 0; k < K; k++) g += f->F[i * BK + b * K + k] * f->F[j * BK + b * K + k];
+                G[i * m + j] = g;
+            }
+            for (int k = 0; k < K; k++) h[i] += f->F[i * BK + b * K + k] * f->F[q * BK + b * K + k];
+        }
+        if (!small_inverse(G, m)) return INFINITY;
+        for (int i = 0; i < m; i++) {
+            c[i] = 0;
+            for (int j = 0; j < m; j++) c[i] += G[i * m + j] * h[j];
+        }
+        const double vq = f->Ainv[(size_t)b * N * N + (size_t)q * N + q];
+        for (int k = 0; k < K; k++) {
+            double fq = f->F[q * BK + b * K + k], r = fq, v = vq + FIT_PROFILE_ERR * FIT_PROFILE_ERR * fq * fq;
+            for (int i = 0; i < m; i++) {
+                r -= c[i] * f->F[i * BK + b * K + k];
+                v += c[i] * c[i] * f->Ainv[(size_t)b * N * N + (size_t)i * N + i];
+            }
+            chi2 += v > 0 ? r * r / v : 0;
+        }
+    }
+    return wh_z(chi2, (double)B * (K - m));
+}
+
+/* The N-source fit is acceptable: every source bright enough, none too close, and the newest
+ * one's signal outside the span of the others' (span_z). */
+static int fit_ok(const fit_data *f, int N, const double *pos, double deblend_sigma)
+{
+    const double sigma = pos[2 * N];
+    for (int q = 0; q < N; q++)
+        if (!(source_snr(f, N, q) > FIT_SNR)) return 0;
+    for (int q = 0; q < N; q++)
+        for (int t = q + 1; t < N; t++)
+            if (hypot(pos[2 * q] - pos[2 * t], pos[2 * q + 1] - pos[2 * t + 1]) < FIT_MIN_SEP_SIGMA * sigma) return 0;
+    return span_z(f, N) > deblend_sigma;
+}
+
+/* The footprint pixel (of fp[0..nfp)) where one more PSF explains the most of the residual of
+ * the N-source fit at pos (F from that fit): max over c of
+ * sum_d (sum_p w P_c R_pd)^2 / sum_p w P_c^2. -1 when none is far enough from the sources. */
+static int best_new_source(fit_data *f, int N, const double *pos, const int *fp, int nfp, double *R)
+{
+    const int n = f->n, B = f->B, K = f->K, BK = f->BK;
+    const double sigma = pos[2 * N], reach = ceil(3 * sigma) + 0.5;
+    const int W = f->s->W;
+    for (int p = 0; p < n; p++)
+        for (int d = 0; d < BK; d++) {
+            double m = 0;
+            for (int q = 0; q < N; q++) m += f->P[q * n + p] * f->F[q * BK + d];
+            R[(size_t)p * BK + d] = f->D[(size_t)p * BK + d] - m;
+        }
+    /* a PSF centred on a pixel: the same 1-D shares at every candidate */
+    const int rr = (int)reach, span = 2 * rr + 1;
+    psf_1d(-rr, span, 0.0, sigma, f->gx);
+    int best = -1;
+    double best_v = 0;
+    for (int i = 0; i < nfp; i++) {
+        int cx = fp[i] % W, cy = fp[i] / W, near = 0;
+        for (int q = 0; q < N && !near; q++)
+            near = hypot(cx - pos[2 * q], cy - pos[2 * q + 1]) < FIT_MIN_SEP_SIGMA * sigma;
+        if (near) continue;
+        double v = 0;
+        for (int b = 0; b < B; b++) {
+            double *num = f->num, den = 0;
+            const int kk = K;
+            for (int k = 0; k < kk; k++) num[k] = 0;
+            for (int p = 0; p < n; p++) {
+                int dx = f->x[p] - cx, dy = f->y[p] - cy;
+                if (abs(dx) > rr || abs(dy) > rr) continue;
+                double P = f->gx[dx + rr] * f->gx[dy + rr], wp = f->w[p * B + b] * P;
+                den += wp * P;
+                for (int k = 0; k < kk; k++) num[k] += wp * R[(size_t)p * BK + b * K + k];
+            }
+            if (den > 0)
+                for (int k = 0; k < kk; k++) v += num[k] * num[k] / den;
+        }
+        if (v > best_v) {
+            best_v = v;
+            best = i;
+        }
+    }
+    return best;
+}
+
+/* The gate: how far (Wilson-Hilferty z) the component is from one signal times one spatial
+ * profile, D_p,bk = u_pb v_bk per band with u and v free (any PSF: a single light passes), by
+ * alternating least squares; weights 1 / (V_pd + (FIT_PROFILE_ERR mean_k D_pb)^2). */
+static double rank1_z(const fit_data *f, double *u, double *v)
+{
+    const int n = f->n, B = f->B, K = f->K, BK = f->BK;
+    double chi2 = 0, dof = 0;
+    for (int b = 0; b < B; b++) {
+        for (int k = 0; k < K; k++) {
+            v[k] = 0;
+            for (int p = 0; p < n; p++) v[k] += f->D[(size_t)p * BK + b * K + k];
+        }
+        for (int it = 0; it < RANK1_ITER; it++) {
+            for (int p = 0; p < n; p++) {
+                double num = 0, den = 0, wp = f->w[p * B + b];
+                for (int k = 0; k < K; k++) {
+                    num += wp * f->D[(size_t)p * BK + b * K + k] * v[k];
+                    den += wp * v[k] * v[k];
+                }
+                u[p] = den > 0 ? num / den : 0;
+            }
+            for (int k = 0; k < K; k++) {
+                double num = 0, den = 0;
+                for (int p = 0; p < n; p++) {
+                    double wp = f->w[p * B + b];
+                    num += wp * f->D[(size_t)p * BK + b * K + k] * u[p];
+                    den += wp * u[p] * u[p];
+                }
+                v[k] = den > 0 ? num / den : 0;
+            }
+        }
+        for (int p = 0; p < n; p++)
+            for (int k = 0; k < K; k++) {
+                double r = f->D[(size_t)p * BK + b * K + k] - u[p] * v[k];
+                chi2 += f->w[p * B + b] * r * r;
+            }
+        dof += (double)n * K - n - K + 1;
+    }
+    return dof > 0 ? wh_z(chi2, dof) : -INFINITY;
+}
+
+/* One light of the fit. */
+typedef struct {
+    int comp;             /* component label */
+    double x, y, psf;     /* position, the component's fitted PSF sigma */
+    double *sig, *sgm;    /* BK each (one allocation) */
+} fit_light;
+
+/* The fitted lights of every component, and per component whether it was replaced. */
+typedef struct {
+    fit_light *v;
+    size_t n, cap;
+} fit_list;
+
+static gs_status push_light(fit_list *L, int comp, double x, double y, double psf, int BK, double **sig)
+{
+    if (L->n == L->cap) {
+        size_t nc = L->cap ? 2 * L->cap : 64;
+        fit_light *nv = realloc(L->v, nc * sizeof *nv);
+        if (!nv) return gs_fail(GS_ENOMEM, "blobs: cannot hold %zu fitted lights", nc);
+        L->v = nv;
+        L->cap = nc;
+    }
+    double *m = malloc(sizeof(double) * (size_t)BK * 2);
+    if (!m) return gs_fail(GS_ENOMEM, "blobs: cannot hold a fitted light");
+    L->v[L->n++] = (fit_light){comp, x, y, psf, m, m + BK};
+    *sig = m;
+    return GS_OK;
+}
+
+/* Fit one component: its aperture pixels ap[0..nap), footprint pixels fp[0..nfp), the
+ * positions start[2 N0] of its lights (brightest first). Appends its lights to L when the fit
+ * holds two or more. */
+static gs_status fit_component(fit_data *f, int comp, const int *ap, int nap, const int *fp, int nfp,
+                               const double *start, int N0, double *R, fit_list *L, int *replaced)
+{
+    const rec_blob_state *s = f->s;
+    const int B = f->B, K = f->K, BK = f->BK, W = s->W;
+    const gs_capture *c = s->cap;
+    const int HS = GS_MAX_HALVINGS + 1;
+    *replaced = 0;
+    int n = 0;
+    f->wdd = 0;
+    for (int a = 0; a < nap; a++) {
+        int p = ap[a];
+        if (s->sat[p]) continue;
+        int x = p % W, y = p / W;
+        double *V = f->V + (size_t)n * BK, *D = f->D + (size_t)n * BK;
+        rec_blob_pixel_var(s, (size_t)p, V);
+        int node[4];
+        double nw[4];
+        const int nn = rec_mesh_weights(&s->mesh, x, y, node, nw), nodes = s->mesh.nx * s->mesh.ny;
+        for (int k = 0; k < K; k++) {
+            size_t pk = s->N * (size_t)k + (size_t)p;
+            double sc = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[pk] : 0)];
+            for (int b = 0; b < B; b++) {
+                const double *g = s->fval + ((size_t)k * B + (size_t)b) * (size_t)nodes;
+                double bg = 0;
+                for (int t = 0; t < nn; t++) bg += nw[t] * g[node[t]];
+                D[b * K + k] = ((double)c->raw[pk * (size_t)B + (size_t)b] - s->black) * sc - bg;
+            }
+        }
+        for (int b = 0; b < B; b++) {
+            double vm = 0, dm = 0;
+            for (int k = 0; k < K; k++) {
+                vm += V[b * K + k] / K;
+                dm += D[b * K + k] / K;
+            }
+            if (dm > 0) vm += FIT_PROFILE_ERR * FIT_PROFILE_ERR * dm * dm;
+            f->w[n * B + b] = vm > 0 && isfinite(vm) ? 1 / vm : 0;
+            for (int k = 0; k < K; k++) f->wdd += f->w[n * B + b] * D[b * K + k] * D[b * K + k];
+        }
+        f->x[n] = x;
+        f->y[n] = y;
+        n++;
+    }
+    f->n = n;
+    if (n < 4) return GS_OK;
+    int x1 = f->x[0], y1 = f->y[0];
+    f->bx0 = f->x[0];
+    f->by0 = f->y[0];
+    for (int p = 1; p < n; p++) {
+        if (f->x[p] < f->bx0) f->bx0 = f->x[p];
+        if (f->y[p] < f->by0) f->by0 = f->y[p];
+        if (f->x[p] > x1) x1 = f->x[p];
+        if (f->y[p] > y1) y1 = f->y[p];
+    }
+    f->bw = x1 - f->bx0 + 1;
+    f->bh = y1 - f->by0 + 1;
+    for (int p = 0; p < n; p++)
+        for (int d = 0; d < BK; d++) f->Dt[(size_t)d * n + p] = f->D[(size_t)p * BK + d];
+    f->lo_x = f->lo_y = HUGE_VAL;
+    f->hi_x = f->hi_y = -HUGE_VAL;
+    for (int i = 0; i < nfp; i++) {
+        double x = fp[i] % W, y = fp[i] / W;
+        if (x - 1 < f->lo_x) f->lo_x = x - 1;
+        if (y - 1 < f->lo_y) f->lo_y = y - 1;
+        if (x + 1 > f->hi_x) f->hi_x = x + 1;
+        if (y + 1 > f->hi_y) f->hi_y = y + 1;
+    }
+    if (!(rank1_z(f, R, R + n) > s->o->deblend_sigma)) return GS_OK;   /* one signal */
+    double pos[2 * FIT_MAX_SOURCES + 1], trial[2 * FIT_MAX_SOURCES + 1];
+    int N = N0;
+    memcpy(pos, start, sizeof(double) * (size_t)(2 * N));
+    pos[2 * N] = s->psf_sigma;
+    double chi2 = nelder_mead(f, N, pos);
+    if (N >= 2 && !fit_ok(f, N, pos, -INFINITY)) return GS_OK;   /* keep step 5's lights */
+    while (N < FIT_MAX_SOURCES) {
+        int i = best_new_source(f, N, pos, fp, nfp, R);
+        if (i < 0) break;
+        memcpy(trial, pos, sizeof(double) * (size_t)(2 * N));
+        trial[2 * N] = fp[i] % W;
+        trial[2 * N + 1] = fp[i] / W;
+        trial[2 * N + 2] = pos[2 * N];
+        /* the drop and the new signal at the candidate pixel first (one evaluation): only a
+         * candidate that passes both there is worth the search (the search only lowers chi2) */
+        double c2 = fit_eval(f, N + 1, trial);
+        if (!(wh_z(chi2 - c2, BK + 2) > s->o->deblend_sigma) || !(span_z(f, N + 1) > s->o->deblend_sigma))
+            break;
+        c2 = nelder_mead(f, N + 1, trial);
+        if (!(wh_z(chi2 - c2, BK + 2) > s->o->deblend_sigma) || !fit_ok(f, N + 1, trial, s->o->deblend_sigma))
+            break;
+        N++;
+        memcpy(pos, trial, sizeof(double) * (size_t)(2 * N + 1));
+        chi2 = c2;
+    }
+    if (N < 2) return GS_OK;
+    fit_eval(f, N, pos);
+    /* each source's fluxes and their noise: var F_qd = sum_p (sum_t Ainv_qt w_pb P_tp)^2 V_pd */
+    for (int q = 0; q < N; q++) {
+        double *sig = NULL;
+        gs_status st = push_light(L, comp, pos[2 * q], pos[2 * q + 1], pos[2 * N], BK, &sig);
+        if (st != GS_OK) return st;
+        double *sgm = sig + BK;
+        for (int b = 0; b < B; b++) {
+            const double *A = f->Ainv + (size_t)b * N * N;
+            for (int k = 0; k < K; k++) {
+                const int d = b * K + k;
+                double v = 0;
+                for (int p = 0; p < n; p++) {
+                    double g = 0;
+                    for (int t = 0; t < N; t++) g += A[q * N + t] * f->P[t * n + p];
+                    g *= f->w[p * B + b];
+                    v += g * g * f->V[(size_t)p * BK + d];
+                }
+                sig[d] = f->F[q * BK + d];
+                sgm[d] = sqrt(v);
+            }
+        }
+    }
+    *replaced = 1;
+    return GS_OK;
+}
+
+/* The owner among lights first..first+N-1 of L of pixel (x, y): the largest mean model flux. */
+static int dominant(const fit_list *L, size_t first, size_t N, int x, int y, int BK)
+{
+    size_t best = first;
+    double best_v = -HUGE_VAL;
+    for (size_t q = first; q < first + N; q++) {
+        double m = 0;
+        for (int d = 0; d < BK; d++) m += L->v[q].sig[d];
+        double v = rec_psf_share(x, y, L->v[q].x, L->v[q].y, L->v[q].psf) * m;
+        if (v > best_v) {
+            best_v = v;
+            best = q;
+        }
+    }
+    return (int)best;
+}
+
+typedef struct {
+    int first, id;
+} fit_order;
+
+static int cmp_fit_order(const void *a, const void *b)
+{
+    const fit_order *x = a, *y = b;
+    return (x->first > y->first) - (x->first < y->first);
+}
+
+gs_status rec_blob_psf_fit(rec_blob_state *s, rec_catalog *cat)
+{
+    const int B = s->bands, K = s->K, BK = B * K, W = s->W;
+    const size_t n = cat->count;
+    if (!s->o->psf_fit || n == 0 || !(s->psf_sigma > 0) || !isfinite(s->o->deblend_sigma)) return GS_OK;
+    gs_status st = GS_OK;
+    const size_t nc = (size_t)s->ncomp + 1;
+    int *comp_of = calloc(n, sizeof *comp_of);
+    int *ap_start = calloc(nc + 1, sizeof(int)), *fp_start = calloc(nc + 1, sizeof(int));
+    int *ap_pix = malloc(sizeof(int) * s->N), *fp_pix = malloc(sizeof(int) * s->N);
+    int *fill = malloc(sizeof(int) * (nc + 1));
+    int *lt_start = calloc(nc + 1, sizeof(int)), *lt_list = malloc(sizeof(int) * n);
+    int *replaced = calloc(nc, sizeof(int));
+    size_t *first_new = malloc(sizeof(size_t) * nc);
+    fit_data f;
+    memset(&f, 0, sizeof f);
+    f.s = s;
+    f.B = B;
+    f.K = K;
+    f.BK = BK;
+    f.x = malloc(sizeof(int) * FIT_MAX_PX);
+    f.y = malloc(sizeof(int) * FIT_MAX_PX);
+    f.D = malloc(sizeof(double) * FIT_MAX_PX * (size_t)BK);
+    f.V = malloc(sizeof(double) * FIT_MAX_PX * (size_t)BK);
+    f.w = malloc(sizeof(double) * FIT_MAX_PX * (size_t)B);
+    f.P = malloc(sizeof(double) * FIT_MAX_PX * FIT_MAX_SOURCES);
+    f.F = malloc(sizeof(double) * FIT_MAX_SOURCES * (size_t)BK);
+    f.Ainv = malloc(sizeof(double) * FIT_MAX_SOURCES * FIT_MAX_SOURCES * (size_t)B);
+    f.num = malloc(sizeof(double) * (size_t)K);
+    f.Dt = malloc(sizeof(double) * FIT_MAX_PX * (size_t)BK);
+    f.wP = malloc(sizeof(double) * FIT_MAX_PX * FIT_MAX_SOURCES);
+    f.gx = malloc(sizeof(double) * (FIT_MAX_PX + 1));
+    f.gy = malloc(sizeof(double) * (FIT_MAX_PX + 1));
+    double *R = malloc(sizeof(double) * FIT_MAX_PX * (size_t)BK);
+    fit_list L = {NULL, 0, 0};
+    rec_catalog out;
+    memset(&out, 0, sizeof out);
+    fit_order *ord = NULL;
+    int *newid = NULL;
+    if (!comp_of || !ap_start || !fp_start || !ap_pix || !fp_pix || !fill || !lt_start || !lt_list || !replaced ||
+        !first_new || !f.x || !f.y || !f.D || !f.V || !f.w || !f.P || !f.F || !f.Ainv || !f.num || !f.Dt || !f.wP || !f.gx || !f.gy || !R) {
+        st = gs_fail(GS_ENOMEM, "blobs: cannot allocate the PSF fit");
+        goto done;
+    }
+    /* each light's component, each component's aperture and footprint pixels */
+    for (size_t p = 0; p < s->N; p++)
+        if (s->fp[p] >= 0 && !comp_of[s->fp[p]]) comp_of[s->fp[p]] = s->comp[p];
+    for (size_t p = 0; p < s->N; p++) {
+        if (s->ap[p] >= 0) ap_start[comp_of[s->ap[p]] + 1]++;
+        if (s->fp[p] >= 0) fp_start[comp_of[s->fp[p]] + 1]++;
+    }
+    for (size_t l = 1; l <= nc; l++) {
+        ap_start[l] += ap_start[l - 1];
+        fp_start[l] += fp_start[l - 1];
+    }
+    memcpy(fill, ap_start, sizeof(int) * nc);
+    for (size_t p = 0; p < s->N; p++)
+        if (s->ap[p] >= 0) ap_pix[fill[comp_of[s->ap[p]]]++] = (int)p;
+    memcpy(fill, fp_start, sizeof(int) * nc);
+    for (size_t p = 0; p < s->N; p++)
+        if (s->fp[p] >= 0) fp_pix[fill[comp_of[s->fp[p]]]++] = (int)p;
+    /* the lights of each component start the fit */
+    for (size_t i = 0; i < n; i++) lt_start[comp_of[i] + 1]++;
+    for (size_t l = 1; l <= nc; l++) lt_start[l] += lt_start[l - 1];
+    memcpy(fill, lt_start, sizeof(int) * nc);
+    for (size_t i = 0; i < n; i++) lt_list[fill[comp_of[i]]++] = (int)i;
+    for (size_t l = 1; l < nc && st == GS_OK; l++) {
+        int nap = ap_start[l + 1] - ap_start[l], nl = lt_start[l + 1] - lt_start[l];
+        first_new[l] = L.n;
+        if (nl == 0 || nl > FIT_MAX_SOURCES || nap > FIT_MAX_PX) continue;
+        double start[2 * FIT_MAX_SOURCES];
+        int skip = 0;
+        for (int j = 0; j < nl; j++) {
+            int i = lt_list[lt_start[l] + j];
+            skip |= (cat->flags[i] & REC_BLOB_NO_SIGNAL) != 0;
+            start[2 * j] = cat->x_px[i];
+            start[2 * j + 1] = cat->y_px[i];
+        }
+        if (skip) continue;
+        st = fit_component(&f, (int)l, ap_pix + ap_start[l], nap, fp_pix + fp_start[l],
+                           fp_start[l + 1] - fp_start[l], start, nl, R, &L, &replaced[l]);
+    }
+    if (st != GS_OK || L.n == 0) goto done;
+
+    /* the new catalog: ids 0..n-1 the old lights, n + j the fitted ones; replaced components'
+     * pixels go to their dominant fitted light; then raster order of the first footprint pixel */
+    const size_t total = n + L.n;
+    for (size_t p = 0; p < s->N; p++) {
+        int i = s->ap[p] >= 0 ? s->ap[p] : -1;
+        if (i < 0) continue;
+        int l = comp_of[i];
+        if (!replaced[l]) continue;
+        size_t cnt = (l + 1 < (int)nc ? first_new[l + 1] : L.n) - first_new[l];
+        int j = dominant(&L, first_new[l], cnt, (int)(p % (size_t)W), (int)(p / (size_t)W), BK);
+        int was_fp = s->fp[p] >= 0;
+        s->ap[p] = (int)n + j;
+        if (was_fp) s->fp[p] = (int)n + j;
+    }
+    ord = malloc(sizeof *ord * total);
+    newid = malloc(sizeof(int) * total);
+    if (!ord || !newid) {
+        st = gs_fail(GS_ENOMEM, "blobs: cannot order the fitted lights");
+        goto done;
+    }
+    for (size_t i = 0; i < total; i++) ord[i] = (fit_order){-1, (int)i};
+    for (size_t p = 0; p < s->N; p++)
+        if (s->fp[p] >= 0 && ord[s->fp[p]].first < 0) ord[s->fp[p]].first = (int)p;
+    size_t m = 0;
+    for (size_t i = 0; i < total; i++)
+        if (ord[i].first >= 0) ord[m++] = ord[i];
+    qsort(ord, m, sizeof *ord, cmp_fit_order);
+    for (size_t i = 0; i < total; i++) newid[i] = -1;
+    for (size_t j = 0; j < m; j++) newid[ord[j].id] = (int)j;
+    out.count = m;
+    out.bands = B;
+    out.K = K;
+    out.width = cat->width;
+    out.height = cat->height;
+    out.x_px = malloc(sizeof(double) * m);
+    out.y_px = malloc(sizeof(double) * m);
+    out.area_px = calloc(m, sizeof(int));
+    out.peak_dn = calloc(m, sizeof(double));
+    out.saturated_px = calloc(m, sizeof(int));
+    out.flags = calloc(m, sizeof(unsigned));
+    out.signal = malloc(sizeof(double) * m * (size_t)BK);
+    out.sigma = malloc(sizeof(double) * m * (size_t)BK);
+    if (cat->labels) out.labels = malloc(sizeof(int) * s->N);
+    if (!out.x_px || !out.y_px || !out.area_px || !out.peak_dn || !out.saturated_px || !out.flags ||
+        !out.signal || !out.sigma || (cat->labels && !out.labels)) {
+        st = gs_fail(GS_ENOMEM, "blobs: cannot hold a catalog of %zu lights", m);
+        goto done;
+    }
+    for (size_t j = 0; j < m; j++) {
+        int id = ord[j].id;
+        if (id < (int)n) {
+            out.x_px[j] = cat->x_px[id];
+            out.y_px[j] = cat->y_px[id];
+            out.area_px[j] = cat->area_px[id];
+            out.peak_dn[j] = cat->peak_dn[id];
+            out.saturated_px[j] = cat->saturated_px[id];
+            out.flags[j] = cat->flags[id];
+            memcpy(out.signal + j * BK, cat->signal + (size_t)id * BK, sizeof(double) * (size_t)BK);
+            memcpy(out.sigma + j * BK, cat->sigma + (size_t)id * BK, sizeof(double) * (size_t)BK);
+        } else {
+            const fit_light *fl = &L.v[id - (int)n];
+            out.x_px[j] = fl->x;
+            out.y_px[j] = fl->y;
+            out.flags[j] = REC_BLOB_DEBLENDED | REC_BLOB_PSF_FIT;
+            memcpy(out.signal + j * BK, fl->sig, sizeof(double) * (size_t)BK);
+            memcpy(out.sigma + j * BK, fl->sgm, sizeof(double) * (size_t)BK);
+        }
+    }
+    /* the fitted lights' footprint area, peak, saturation and flags from their pixels */
+    for (size_t p = 0; p < s->N; p++) {
+        if (s->ap[p] >= 0) s->ap[p] = newid[s->ap[p]];
+        if (s->fp[p] >= 0) s->fp[p] = newid[s->fp[p]];
+        int j = s->ap[p];
+        if (j < 0 || !(out.flags[j] & REC_BLOB_PSF_FIT)) continue;
+        int x = (int)(p % (size_t)W), y = (int)(p / (size_t)W);
+        if (x == 0 || y == 0 || x == W - 1 || y == s->H - 1) out.flags[j] |= REC_BLOB_EDGE;
+        if (s->hdr[p]) out.flags[j] |= REC_BLOB_HDR;
+        if (s->sat[p]) {
+            out.flags[j] |= REC_BLOB_SATURATED;
+            out.saturated_px[j]++;
+        }
+        if (s->fp[p] != j) continue;
+        out.area_px[j]++;
+        for (int k = 0; k < K; k++) {
+            const unsigned short *r = s->cap->raw + (s->N * (size_t)k + p) * (size_t)B;
+            for (int b = 0; b < B; b++)
+                if (r[b] > out.peak_dn[j]) out.peak_dn[j] = r[b];
+        }
+    }
+    if (out.labels) memcpy(out.labels, s->ap, sizeof(int) * s->N);
+    rec_catalog_release(cat);
+    *cat = out;
+    memset(&out, 0, sizeof out);
+done:
+    rec_catalog_release(&out);
+    for (size_t i = 0; i < L.n; i++) free(L.v[i].sig);
+    free(L.v);
+    free(comp_of);
+    free(ap_start);
+    free(fp_start);
+    free(ap_pix);
+    free(fp_pix);
+    free(fill);
+    free(lt_start);
+    free(lt_list);
+    free(replaced);
+    free(first_new);
+    free(f.x);
+    free(f.y);
+    free(f.D);
+    free(f.V);
+    free(f.w);
+    free(f.P);
+    free(f.F);
+    free(f.Ainv);
+    free(f.num);
+    free(f.Dt);
+    free(f.wP);
+    free(f.gx);
+    free(f.gy);
+    free(R);
+    free(ord);
+    free(newid);
+    return st;
+}
