@@ -17,7 +17,7 @@ SANFLAGS := -fsanitize=address,undefined -fno-sanitize-recover=all
 OPT := -O1 -g -fno-omit-frame-pointer $(SANFLAGS)
 endif
 # clang's UBSan also has what gcc's lacks (float-cast-overflow, pointer-overflow: #16);
-# SAN=fuzz adds the coverage libFuzzer needs (fuzz/module.mk)
+# SAN=fuzz adds the coverage libFuzzer needs (tests/fuzz/module.mk)
 ifneq ($(filter clang fuzz,$(SAN)),)
 CC := clang
 CXX := clang++
@@ -139,6 +139,6 @@ clean:
 	rm -rf $(BUILD)
 
 # Module fragments (e.g. firmware/module.mk) add their own targets.
-include $(wildcard */module.mk)
+include $(wildcard */module.mk tests/fuzz/module.mk)
 
 -include $(patsubst %.o,%.d,$(foreach m,$(MODULES),$(call lib_objs,$(m))) $(TEST_OBJS) $(BUILD)/survey/main.o)

@@ -201,13 +201,12 @@ double rec_eq7_band_misfit(const rec_matcher *m, int bulb, const double *S, cons
     rec_eq7_work w;
     memset(&w, 0, sizeof w);   /* only the tau prior (none) and the tolerance are read */
     w.chroma_tol = tol;
-    double Sxx = 0.0, R;
+    double Sxx = 0.0;   /* = sum S^2/T: no residual within the bands, the fit's chi2 is the misfit */
     for (int b = 0; b < m->bands; b++)
         if (T[b] > 0.0) Sxx += S[b] * S[b] / T[b];
-    R = 0.0;   /* chi2 of the fit = R + the misfit, R = Sxx - sum S^2/T = 0 here */
     red_fit rf;
     if (!isfinite(loglik_red(m, &w, bulb, Sxx, S, T, &rf, NULL, 0.0))) return INFINITY;
-    return rf.chi2 - R;
+    return rf.chi2;
 }
 
 /* The log likelihood of bulb b's sums under the matcher's band model. */

@@ -70,19 +70,6 @@ bad:
     return 0;
 }
 
-/* The mean over frames of the per-cycle values of cap (NaN where any frame saturated). */
-static void mean_image(const gs_capture *cap, float *out)
-{
-    size_t P = (size_t)cap->width * cap->height;
-    for (size_t p = 0; p < P; p++)
-        for (int b = 0; b < cap->bands; b++) {
-            double s = 0;
-            for (int k = 0; k < cap->K; k++)
-                s += gs_capture_value(cap, k, (int)(p / (size_t)cap->width), (int)(p % (size_t)cap->width), b);
-            out[p * cap->bands + b] = (float)(s / cap->K);
-        }
-}
-
 int srv_cmd_relight(int argc, char **argv)
 {
     static const struct option longs[] = {
@@ -184,8 +171,8 @@ int srv_cmd_relight(int argc, char **argv)
             float *om = malloc(sizeof *om * n), *rm = malloc(sizeof *rm * n);
             if (!om || !rm) st = gs_fail(GS_ENOMEM, "out of memory");
             else {
-                mean_image(&other, om);
-                mean_image(&rc, rm);
+                gs_capture_mean_image(&other, 0, om);
+                gs_capture_mean_image(&rc, 0, rm);
                 for (size_t i = 0; i < n; i++)
                     if (!isfinite(om[i])) rm[i] = NAN;
                 double e = srv_tr_rel_error(rm, om, P, meta.bands);

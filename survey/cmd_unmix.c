@@ -263,15 +263,7 @@ int srv_cmd_unmix(int argc, char **argv)
     }
     if (st == GS_OK) {
         /* the input's mean image over the frames, saturated samples at the saturation level */
-        for (size_t p = 0; p < P; p++)
-            for (int b = 0; b < cap.bands; b++) {
-                double sum = 0;
-                for (int k = 0; k < cap.K; k++) {
-                    double v = gs_capture_value(&cap, k, (int)(p / (size_t)cap.width), (int)(p % (size_t)cap.width), b);
-                    sum += isfinite(v) ? v : (cap.saturation_dn - cap.black_level_dn) / cap.frames[k].cycles;
-                }
-                buf[p * cap.bands + b] = (float)(sum / cap.K);
-            }
+        gs_capture_mean_image(&cap, 1, buf);
         char path[4096];
         gs_path_join(path, sizeof path, out, "mean.png");
         st = rec_write_image_png(path, buf, cap.width, cap.height, cap.bands, 0);

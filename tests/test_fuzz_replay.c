@@ -1,17 +1,17 @@
-/* test_fuzz_replay.c - every libFuzzer target (fuzz/fuzz_*.c, built here as plain functions
- * with FUZZ_REPLAY) over its seed corpus fuzz/corpus/NAME/ and every past crash input
- * fuzz/crashes/NAME/: each input must return normally (under `make test-asan` and
+/* test_fuzz_replay.c - every libFuzzer target (tests/fuzz/fuzz_*.c, built here as plain functions
+ * with FUZZ_REPLAY) over its seed corpus tests/fuzz/corpus/NAME/ and every past crash input
+ * tests/fuzz/crashes/NAME/: each input must return normally (under `make test-asan` and
  * `make test-clang` also without a sanitizer report). docs/reliability.md. */
 #define FUZZ_REPLAY 1
-#include "fuzz/fuzz_capture.c"
-#include "fuzz/fuzz_csv.c"
-#include "fuzz/fuzz_delight_csv.c"
-#include "fuzz/fuzz_firmware.c"
-#include "fuzz/fuzz_geojson.c"
-#include "fuzz/fuzz_png.c"
-#include "fuzz/fuzz_recording.c"
-#include "fuzz/fuzz_scene.c"
-#include "fuzz/fuzz_station.c"
+#include "tests/fuzz/fuzz_capture.c"
+#include "tests/fuzz/fuzz_csv.c"
+#include "tests/fuzz/fuzz_delight_csv.c"
+#include "tests/fuzz/fuzz_firmware.c"
+#include "tests/fuzz/fuzz_geojson.c"
+#include "tests/fuzz/fuzz_png.c"
+#include "tests/fuzz/fuzz_recording.c"
+#include "tests/fuzz/fuzz_scene.c"
+#include "tests/fuzz/fuzz_station.c"
 #include "tests/fixtures.h"
 #include "tests/test.h"
 
@@ -52,8 +52,8 @@ TEST(fuzz_corpora_and_crash_inputs_replay)
     setenv("TMPDIR", test_tmpdir(), 1);   /* the targets' scratch files */
     for (size_t i = 0; i < sizeof targets / sizeof *targets; i++) {
         char corpus[256], crashes[256];
-        snprintf(corpus, sizeof corpus, "fuzz/corpus/%s", targets[i].name);
-        snprintf(crashes, sizeof crashes, "fuzz/crashes/%s", targets[i].name);
+        snprintf(corpus, sizeof corpus, "tests/fuzz/corpus/%s", targets[i].name);
+        snprintf(crashes, sizeof crashes, "tests/fuzz/crashes/%s", targets[i].name);
         int n = replay_dir(corpus, targets[i].fn);
         CHECK_MSG(n >= 1, "%s: no seed inputs", corpus);
         replay_dir(crashes, targets[i].fn);

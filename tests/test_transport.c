@@ -711,17 +711,6 @@ TEST(k2_two_sources_unmixed_three_ill_posed)
 
 /* ------------------------------------------------------------------ relighting */
 
-static void mean_of(const gs_capture *cap, float *m)
-{
-    size_t P = (size_t)cap->width * cap->height;
-    for (size_t p = 0; p < P; p++)
-        for (int b = 0; b < cap->bands; b++) {
-            double s = 0;
-            for (int k = 0; k < cap->K; k++)
-                s += gs_capture_value(cap, k, (int)(p / (size_t)cap->width), (int)(p % (size_t)cap->width), b);
-            m[p * cap->bands + b] = (float)(s / cap->K);
-        }
-}
 
 TEST_TIMEOUT(eq20_relight_source_off_matches_a_capture_without_it_within_5_percent, 600)
 {
@@ -750,8 +739,8 @@ TEST_TIMEOUT(eq20_relight_source_off_matches_a_capture_without_it_within_5_perce
         rec_capture_meta meta;
         rec_capture_meta_of(&cap, &meta);
         CHECK_OK(rec_frames_to_capture(&meta, fr, &rc));
-        mean_of(&rc, mr);
-        mean_of(&off, mo);
+        gs_capture_mean_image(&rc, 0, mr);
+        gs_capture_mean_image(&off, 0, mo);
         for (size_t i = 0; i < n; i++)
             if (!isfinite(mo[i])) mr[i] = NAN;
         double e = srv_tr_rel_error(mr, mo, n / 3, 3);
@@ -762,8 +751,8 @@ TEST_TIMEOUT(eq20_relight_source_off_matches_a_capture_without_it_within_5_perce
         CHECK_OK(rec_relight(&src, r.tq, cap.width, cap.height, d, 50, set, fr));
         gs_capture_release(&rc);
         CHECK_OK(rec_frames_to_capture(&meta, fr, &rc));
-        mean_of(&rc, mr);
-        mean_of(&cap, mo);
+        gs_capture_mean_image(&rc, 0, mr);
+        gs_capture_mean_image(&cap, 0, mo);
         for (size_t i = 0; i < n; i++)
             if (!isfinite(mo[i])) mr[i] = NAN;
         double e1 = srv_tr_rel_error(mr, mo, n / 3, 3);

@@ -639,6 +639,10 @@ void gs_capture_release(gs_capture *cap);
  * sample is saturated (raw >= saturation_dn), when an index is out of range or the capture has
  * no pixels. May be negative (noise below the black level). */
 double gs_capture_value(const gs_capture *cap, int k, int y, int x, int band);
+/* The mean over the K frames of every pixel's per-cycle value (gs_capture_value), bands
+ * interleaved (out: width * height * bands). A saturated sample counts at the saturation level
+ * when saturated_at_level, else makes its pixel's band NaN. */
+void gs_capture_mean_image(const gs_capture *cap, int saturated_at_level, float *out);
 
 
 #endif

@@ -526,6 +526,22 @@ void gs_capture_release(gs_capture *cap)
     memset(cap, 0, sizeof *cap);
 }
 
+void gs_capture_mean_image(const gs_capture *cap, int saturated_at_level, float *out)
+{
+    size_t P = (size_t)cap->width * (size_t)cap->height;
+    for (size_t p = 0; p < P; p++)
+        for (int b = 0; b < cap->bands; b++) {
+            double sum = 0.0;
+            for (int k = 0; k < cap->K; k++) {
+                double v = gs_capture_value(cap, k, (int)(p / (size_t)cap->width), (int)(p % (size_t)cap->width), b);
+                if (!isfinite(v) && saturated_at_level)
+                    v = (cap->saturation_dn - cap->black_level_dn) / cap->frames[k].cycles;
+                sum += v;
+            }
+            out[p * (size_t)cap->bands + (size_t)b] = (float)(sum / cap->K);
+        }
+}
+
 double gs_capture_value(const gs_capture *cap, int k, int y, int x, int band)
 {
     if (!cap || !cap->raw || !cap->frames || k < 0 || k >= cap->K || y < 0 ||

@@ -1,5 +1,5 @@
 /* fuzz_delight_csv.c - `delight import` (gs_delight_import_csv) into an empty database. */
-#include "fuzz/fuzz.h"
+#include "tests/fuzz/fuzz.h"
 
 FUZZ_TARGET(delight_csv)
 {

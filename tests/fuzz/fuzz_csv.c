@@ -1,6 +1,6 @@
 /* fuzz_csv.c - the format kit's CSV reader (gs_csv_read: DELIGHT CSV, recordings, pixel
  * lists), every field touched by the row function. */
-#include "fuzz/fuzz.h"
+#include "tests/fuzz/fuzz.h"
 
 static gs_status fuzz_csv_row(void *ctx, char **fields, size_t count, size_t line)
 {

@@ -1,6 +1,6 @@
 /* fuzz_geojson.c - a scene's GeoJSON light file (the scene fixed, the file fuzzed). */
 #include "capture/capture.h"
-#include "fuzz/fuzz.h"
+#include "tests/fuzz/fuzz.h"
 
 FUZZ_TARGET(geojson)
 {

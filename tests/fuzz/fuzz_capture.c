@@ -1,7 +1,7 @@
 /* fuzz_capture.c - capture.json through gs_capture_read, beside two valid 4x4 16-bit grey
  * frames f0.png, f1.png and an HDR map h0.png (so that JSON naming them reaches the pixels).
  * The memory budget is 256 MiB (gs_mem_check), under libFuzzer's -rss_limit_mb. */
-#include "fuzz/fuzz.h"
+#include "tests/fuzz/fuzz.h"
 
 FUZZ_TARGET(capture)
 {

@@ -1,6 +1,6 @@
 /* fuzz_recording.c - photodiode recordings (`delight add --from-recording`, oscilloscope CSV)
  * through gs_recording_to_bulb, with and without a voltage column. */
-#include "fuzz/fuzz.h"
+#include "tests/fuzz/fuzz.h"
 
 FUZZ_TARGET(recording)
 {

@@ -1,6 +1,6 @@
 /* fuzz_firmware.c - the ACam firmware's serial protocol parser (firmware/proto.c, compiled
  * natively): bytes through the line assembler, each line through fw_parse. */
-#include "fuzz/fuzz.h"
+#include "tests/fuzz/fuzz.h"
 #ifdef FUZZ_REPLAY
 #include "firmware/proto.h"   /* proto.c is in the test binary already (test_firmware_logic.c) */
 #else

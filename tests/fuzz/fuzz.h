@@ -1,4 +1,4 @@
-/* fuzz.h - the shared part of the libFuzzer targets (fuzz/fuzz_*.c, docs/reliability.md).
+/* fuzz.h - the shared part of the libFuzzer targets (tests/fuzz/fuzz_*.c, docs/reliability.md).
  * FUZZ_TARGET(name) is LLVMFuzzerTestOneInput in a libFuzzer build (`make fuzz`), and a static
  * function fuzz_name when tests/test_fuzz_replay.c includes the targets (FUZZ_REPLAY) to replay
  * the corpora and past crash inputs in `make check`. Inputs that the parsers read by path go

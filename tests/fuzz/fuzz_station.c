@@ -1,5 +1,5 @@
 /* fuzz_station.c - station files and capture.json "station" objects (gis_station_parse). */
-#include "fuzz/fuzz.h"
+#include "tests/fuzz/fuzz.h"
 #include "gis/gis.h"
 
 FUZZ_TARGET(station)

@@ -1,7 +1,7 @@
 /* fuzz_scene.c - scene JSON (gridsurvey-scene/1: inline lights, GeoJSON light files, street
  * grids, effects) through cap_scene_parse; a GeoJSON file "lights.geojson" beside it. */
 #include "capture/capture.h"
-#include "fuzz/fuzz.h"
+#include "tests/fuzz/fuzz.h"
 
 FUZZ_TARGET(scene)
 {

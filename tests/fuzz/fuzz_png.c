@@ -1,6 +1,6 @@
 /* fuzz_png.c - frame PNGs and HDR maps through gs_png_decode: the first byte picks the
  * expected channels and depth, the next two the expected width and height (1..64). */
-#include "fuzz/fuzz.h"
+#include "tests/fuzz/fuzz.h"
 
 FUZZ_TARGET(png)
 {
