@@ -15,7 +15,9 @@
  * of freedom above deblend_sigma), every source's flux is above FIT_SNR sigmas, and the new
  * source's fluxes are not a combination of the others' (span_z above deblend_sigma). A
  * component that is one spatial profile times one signal (rank1_z, PSF-free) is left as step 5
- * made it; so is one whose fit keeps a single source. */
+ * made it; so is one whose fit keeps a single source. A crowded component is fitted as groups
+ * (DAOPHOT's): its lights within FIT_GROUP_SIGMA PSF sigmas of each other, each group over its
+ * own lights' apertures. */
 #include "recognize/internal.h"
 
 #include <math.h>
@@ -26,6 +28,10 @@
 #define FIT_MAX_PX 400           /* components with more fit pixels are left as they are */
 #define FIT_SNR 5.0              /* every source's flux over its noise */
 #define FIT_MIN_SEP_SIGMA 0.5    /* sources closer than this many PSF sigmas are one */
+/* Lights of one component closer than this many PSF sigmas (directly or through a chain) are
+ * fitted together; farther groups apart (DAOPHOT's groups: a crowded component of many lights is
+ * many small fits, each over its own lights' apertures). */
+#define FIT_GROUP_SIGMA 6.0
 #define FIT_NM_EVALS 30          /* Nelder-Mead evaluations per position coordinate */
 #define FIT_STEP_PX 0.4          /* Nelder-Mead's first simplex step (sigma: 0.2 sigma) */
 #define FIT_TOL_PX 0.01          /* Nelder-Mead stops when its simplex is this small */
@@ -506,7 +512,9 @@ static gs_status fit_component(fit_data *f, int comp, const int *ap, int nap, co
     }
     if (N < 2) return GS_OK;
     fit_eval(f, N, pos);
-    /* each source's fluxes and their noise: var F_qd = sum_p (sum_t Ainv_qt w_pb P_tp)^2 V_pd */
+    /* each source's fluxes and their noise under the fit's own noise model (its weights): var
+     * F_qd = sum_p (sum_t Ainv_qt w_pb P_tp)^2 (V_pd + (FIT_PROFILE_ERR sum_t P_tp F_td)^2), the
+     * camera noise and the PSF model's error at the pixel's modelled level */
     for (int q = 0; q < N; q++) {
         double *sig = NULL;
         gs_status st = push_light(L, comp, pos[2 * q], pos[2 * q + 1], pos[2 * N], BK, &sig);
@@ -518,10 +526,14 @@ static gs_status fit_component(fit_data *f, int comp, const int *ap, int nap, co
                 const int d = b * K + k;
                 double v = 0;
                 for (int p = 0; p < n; p++) {
-                    double g = 0;
-                    for (int t = 0; t < N; t++) g += A[q * N + t] * f->P[t * n + p];
+                    double g = 0, mod = 0;
+                    for (int t = 0; t < N; t++) {
+                        g += A[q * N + t] * f->P[t * n + p];
+                        mod += f->P[t * n + p] * f->F[t * BK + d];
+                    }
                     g *= f->w[p * B + b];
-                    v += g * g * f->V[(size_t)p * BK + d];
+                    double pe = FIT_PROFILE_ERR * mod;
+                    v += g * g * (f->V[(size_t)p * BK + d] + pe * pe);
                 }
                 sig[d] = f->F[q * BK + d];
                 sgm[d] = sqrt(v);
@@ -559,14 +571,66 @@ static int cmp_fit_order(const void *a, const void *b)
     return (x->first > y->first) - (x->first < y->first);
 }
 
+static int uf_root(int *parent, int i)
+{
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+}
+
+/* The fit groups: unit_of[i] (1-based) for every light, from the lights' components comp_of
+ * and positions; lights of a component within FIT_GROUP_SIGMA PSF sigmas of each other are one
+ * group (union-find over each component's pairs). Returns the number of groups; -1 out of
+ * memory. */
+static int fit_groups(const rec_blob_state *s, const rec_catalog *cat, const int *comp_of, int *unit_of)
+{
+    const size_t n = cat->count;
+    const double reach = FIT_GROUP_SIGMA * s->psf_sigma;
+    int *parent = malloc(sizeof(int) * n), *order = malloc(sizeof(int) * n);
+    int *cstart = calloc((size_t)s->ncomp + 2, sizeof(int));
+    if (!parent || !order || !cstart) {
+        free(parent);
+        free(order);
+        free(cstart);
+        return -1;
+    }
+    for (size_t i = 0; i < n; i++) {
+        parent[i] = (int)i;
+        cstart[comp_of[i] + 1]++;
+    }
+    for (int l = 1; l <= s->ncomp + 1; l++) cstart[l] += cstart[l - 1];
+    for (size_t i = 0; i < n; i++) order[cstart[comp_of[i]]++] = (int)i;   /* cstart[l]: end of l */
+    for (int l = 0, a = 0; l <= s->ncomp; l++) {
+        int b = cstart[l];
+        for (int u = a; u < b; u++)
+            for (int v = u + 1; v < b; v++) {
+                int i = order[u], j = order[v];
+                if (hypot(cat->x_px[i] - cat->x_px[j], cat->y_px[i] - cat->y_px[j]) <= reach)
+                    parent[uf_root(parent, i)] = uf_root(parent, j);
+            }
+        a = b;
+    }
+    int units = 0;
+    for (size_t i = 0; i < n; i++) unit_of[i] = 0;
+    for (size_t i = 0; i < n; i++) {
+        int r = uf_root(parent, (int)i);
+        if (!unit_of[r]) unit_of[r] = ++units;
+        unit_of[i] = unit_of[r];
+    }
+    free(parent);
+    free(order);
+    free(cstart);
+    return units;
+}
+
 gs_status rec_blob_psf_fit(rec_blob_state *s, rec_catalog *cat)
 {
     const int B = s->bands, K = s->K, BK = B * K, W = s->W;
     const size_t n = cat->count;
     if (!s->o->psf_fit || n == 0 || !(s->psf_sigma > 0) || !isfinite(s->o->deblend_sigma)) return GS_OK;
     gs_status st = GS_OK;
-    const size_t nc = (size_t)s->ncomp + 1;
-    int *comp_of = calloc(n, sizeof *comp_of);
+    /* arrays by fit group, at most one per light; nc: the groups + 1 once they are known */
+    size_t nc = ((size_t)s->ncomp > n ? (size_t)s->ncomp : n) + 1;
+    int *comp_of = calloc(n, sizeof *comp_of), *unit_of = calloc(n, sizeof *unit_of);
     int *ap_start = calloc(nc + 1, sizeof(int)), *fp_start = calloc(nc + 1, sizeof(int));
     int *ap_pix = malloc(sizeof(int) * s->N), *fp_pix = malloc(sizeof(int) * s->N);
     int *fill = malloc(sizeof(int) * (nc + 1));
@@ -598,17 +662,23 @@ gs_status rec_blob_psf_fit(rec_blob_state *s, rec_catalog *cat)
     memset(&out, 0, sizeof out);
     fit_order *ord = NULL;
     int *newid = NULL;
-    if (!comp_of || !ap_start || !fp_start || !ap_pix || !fp_pix || !fill || !lt_start || !lt_list || !replaced ||
+    if (!comp_of || !unit_of || !ap_start || !fp_start || !ap_pix || !fp_pix || !fill || !lt_start || !lt_list || !replaced ||
         !first_new || !f.x || !f.y || !f.D || !f.V || !f.w || !f.P || !f.F || !f.Ainv || !f.num || !f.Dt || !f.wP || !f.gx || !f.gy || !R) {
         st = gs_fail(GS_ENOMEM, "blobs: cannot allocate the PSF fit");
         goto done;
     }
-    /* each light's component, each component's aperture and footprint pixels */
+    /* each light's component, its fit group, each group's aperture and footprint pixels */
     for (size_t p = 0; p < s->N; p++)
         if (s->fp[p] >= 0 && !comp_of[s->fp[p]]) comp_of[s->fp[p]] = s->comp[p];
+    int units = fit_groups(s, cat, comp_of, unit_of);
+    if (units < 0) {
+        st = gs_fail(GS_ENOMEM, "blobs: cannot group %zu lights for the PSF fit", n);
+        goto done;
+    }
+    nc = (size_t)units + 1;
     for (size_t p = 0; p < s->N; p++) {
-        if (s->ap[p] >= 0) ap_start[comp_of[s->ap[p]] + 1]++;
-        if (s->fp[p] >= 0) fp_start[comp_of[s->fp[p]] + 1]++;
+        if (s->ap[p] >= 0) ap_start[unit_of[s->ap[p]] + 1]++;
+        if (s->fp[p] >= 0) fp_start[unit_of[s->fp[p]] + 1]++;
     }
     for (size_t l = 1; l <= nc; l++) {
         ap_start[l] += ap_start[l - 1];
@@ -616,15 +686,15 @@ gs_status rec_blob_psf_fit(rec_blob_state *s, rec_catalog *cat)
     }
     memcpy(fill, ap_start, sizeof(int) * nc);
     for (size_t p = 0; p < s->N; p++)
-        if (s->ap[p] >= 0) ap_pix[fill[comp_of[s->ap[p]]]++] = (int)p;
+        if (s->ap[p] >= 0) ap_pix[fill[unit_of[s->ap[p]]]++] = (int)p;
     memcpy(fill, fp_start, sizeof(int) * nc);
     for (size_t p = 0; p < s->N; p++)
-        if (s->fp[p] >= 0) fp_pix[fill[comp_of[s->fp[p]]]++] = (int)p;
-    /* the lights of each component start the fit */
-    for (size_t i = 0; i < n; i++) lt_start[comp_of[i] + 1]++;
+        if (s->fp[p] >= 0) fp_pix[fill[unit_of[s->fp[p]]]++] = (int)p;
+    /* the lights of each group start the fit */
+    for (size_t i = 0; i < n; i++) lt_start[unit_of[i] + 1]++;
     for (size_t l = 1; l <= nc; l++) lt_start[l] += lt_start[l - 1];
     memcpy(fill, lt_start, sizeof(int) * nc);
-    for (size_t i = 0; i < n; i++) lt_list[fill[comp_of[i]]++] = (int)i;
+    for (size_t i = 0; i < n; i++) lt_list[fill[unit_of[i]]++] = (int)i;
     for (size_t l = 1; l < nc && st == GS_OK; l++) {
         int nap = ap_start[l + 1] - ap_start[l], nl = lt_start[l + 1] - lt_start[l];
         first_new[l] = L.n;
@@ -649,7 +719,7 @@ gs_status rec_blob_psf_fit(rec_blob_state *s, rec_catalog *cat)
     for (size_t p = 0; p < s->N; p++) {
         int i = s->ap[p] >= 0 ? s->ap[p] : -1;
         if (i < 0) continue;
-        int l = comp_of[i];
+        int l = unit_of[i];
         if (!replaced[l]) continue;
         size_t cnt = (l + 1 < (int)nc ? first_new[l + 1] : L.n) - first_new[l];
         int j = dominant(&L, first_new[l], cnt, (int)(p % (size_t)W), (int)(p / (size_t)W), BK);
@@ -741,6 +811,7 @@ done:
     for (size_t i = 0; i < L.n; i++) free(L.v[i].sig);
     free(L.v);
     free(comp_of);
+    free(unit_of);
     free(ap_start);
     free(fp_start);
     free(ap_pix);
