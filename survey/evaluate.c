@@ -359,6 +359,12 @@ static double rate(long k, long n)
     return n > 0 ? (double)k / (double)n : NAN;
 }
 
+static double phase_diff_deg(double a, double b)
+{
+    double d = fmod(fabs(a - b), 360.0);
+    return d > 180.0 ? 360.0 - d : d;
+}
+
 /* Resolvable and hidden lights found, and the outcome of each blend group (survey.h). */
 static gs_status score_groups(const ev_light *st, const ev_light *tr, size_t nt, srv_eval_report *r)
 {
@@ -375,29 +381,40 @@ static gs_status score_groups(const ev_light *st, const ev_light *tr, size_t nt,
         if (t->group >= ng) ng = t->group + 1;
     }
     if (ng == 0) return GS_OK;
-    /* per group: members, members matched, matched lights flagged blend, confident */
-    long *c = calloc((size_t)ng * 4, sizeof *c);
+    /* per group: members, members matched, matched lights flagged blend, confident, members
+     * whose signal differs from the first one's, confident answers other than that signal, and
+     * the first member + 1 */
+    enum { NG = 7 };
+    long *c = calloc((size_t)ng * NG, sizeof *c);
     if (!c) return gs_fail(GS_ENOMEM, "evaluate: out of memory for %ld blend groups", ng);
     for (size_t j = 0; j < nt; j++) {
         const ev_light *t = &tr[j];
         if (t->group < 0) continue;
-        long *g = c + 4 * t->group;
+        long *g = c + NG * t->group;
+        if (!g[6]) g[6] = (long)j + 1;
+        const ev_light *t0 = &tr[g[6] - 1];
         g[0]++;
+        g[4] += strcmp(t->bulb, t0->bulb) != 0 || !(phase_diff_deg(t->phase_deg, t0->phase_deg) <= GS_PHASE_TOL_DEG);
         if (t->partner < 0) continue;
         const ev_light *a = &st[t->partner];
         g[1]++;
         g[2] += (a->flags & REC_MATCH_BLEND) != 0;
-        g[3] += a->bulb[0] && !(a->flags & (REC_MATCH_BLEND | REC_MATCH_BULB_AMBIGUOUS));
+        int confident = a->bulb[0] && !(a->flags & (REC_MATCH_BLEND | REC_MATCH_BULB_AMBIGUOUS));
+        g[3] += confident;
+        g[5] += confident && (strcmp(a->bulb, t0->bulb) != 0 ||
+                              !(phase_diff_deg(a->phase_deg, t0->phase_deg) <= GS_PHASE_TOL_DEG));
     }
     for (long k = 0; k < ng; k++) {
-        const long *g = c + 4 * k;
+        const long *g = c + NG * k;
         if (g[0] < 2) continue; /* ids the truth skipped */
         r->groups++;
         r->group_lights += g[0];
         if (g[1] == g[0]) r->groups_resolved++;
         else if (g[2] > 0) r->groups_flagged++;
-        else if (g[3] > 0) r->groups_confident++;
-        else if (g[1] > 0) r->groups_unsure++;
+        else if (g[3] > 0) {
+            r->groups_confident++;
+            r->groups_one_signal += g[4] == 0 && g[5] == 0;
+        } else if (g[1] > 0) r->groups_unsure++;
         else r->groups_missed++;
     }
     free(c);
@@ -409,12 +426,6 @@ static int phase_col(double phase_deg)
 {
     int c = gs_phase_class(phase_deg);
     return c < 0 ? 4 : c;
-}
-
-static double phase_diff_deg(double a, double b)
-{
-    double d = fmod(fabs(a - b), 360.0);
-    return d > 180.0 ? 360.0 - d : d;
 }
 
 gs_status srv_evaluate(srv_db *db, const char *truth_path, const srv_eval_opts *o,
@@ -556,6 +567,7 @@ gs_status srv_eval_print(const srv_eval_report *r, const char *truth_path, int j
         json_object_set_new(bg, "resolved", json_integer(r->groups_resolved));
         json_object_set_new(bg, "flagged_blend", json_integer(r->groups_flagged));
         json_object_set_new(bg, "confident_single", json_integer(r->groups_confident));
+        json_object_set_new(bg, "confident_single_one_signal", json_integer(r->groups_one_signal));
         json_object_set_new(bg, "unsure", json_integer(r->groups_unsure));
         json_object_set_new(bg, "missed", json_integer(r->groups_missed));
         json_object_set_new(root, "blend_groups", bg);
@@ -625,9 +637,10 @@ gs_status srv_eval_print(const srv_eval_report *r, const char *truth_path, int j
     if (r->groups > 0)
         fprintf(f, "\nUnresolvable groups (lights closer than 2 PSF sigma, fluxes within 10x; truth.json "
                    "resolvability): %ld groups of %ld lights: %ld resolved (every light matched), %ld "
-                   "flagged blend, %ld a confident single bulb, %ld unsure (bulb unknown or ambiguous), "
-                   "%ld missed.\n", r->groups, r->group_lights, r->groups_resolved, r->groups_flagged,
-                r->groups_confident, r->groups_unsure, r->groups_missed);
+                   "flagged blend, %ld a confident single bulb (%ld of them one bulb and phase, answered "
+                   "right: their sum is one template), %ld unsure (bulb unknown or ambiguous), %ld missed.\n",
+                r->groups, r->group_lights, r->groups_resolved, r->groups_flagged, r->groups_confident,
+                r->groups_one_signal, r->groups_unsure, r->groups_missed);
     fprintf(f, "\nbulb accuracy counts %ld bulbs flagged ambiguous (posterior < the ambiguity threshold) "
                "as answers. Phase of matched lights, truth (rows) against stored (columns; none = "
                "ambiguous or unknown):\n\n", r->bulb_ambiguous);

@@ -667,6 +667,8 @@ typedef struct {
     long groups_flagged;         /* else: a matched stored light flagged REC_MATCH_BLEND */
     long groups_confident;       /* else: a matched stored light with a bulb, not ambiguous:
                                   * a blend reported as one confident bulb (the failure) */
+    long groups_one_signal;      /* ... of which every light has one bulb and phase and every
+                                  * answer is that one: their sum is one template, the answer right */
     long groups_unsure;          /* else: matched, but bulb unknown or ambiguous */
     long groups_missed;          /* else: no light of the group matched */
     long loc_pairs;              /* matched lights with a stored and a truth position */

@@ -270,15 +270,16 @@ TEST(evaluate_blend_groups_outcomes)
 {
     const char *capdir = fx_tmp("g"), *truth = fx_tmp("g/truth.json"), *db = fx_tmp("g.sqlite");
     CHECK(mkdir(capdir, 0777) == 0);
-    /* groups 0 resolved, 1 flagged, 2 confident single, 3 unsure, 4 missed; at x = 10, 30, ... */
+    /* groups 0 resolved, 1 flagged, 2 confident single (one signal), 3 unsure, 4 missed, 5
+     * confident single of two phases; at x = 10, 30, ... */
     char text[8192];
     size_t n = (size_t)snprintf(text, sizeof text, "{\"format\": \"gridsurvey-truth/1\", \"lights\": [\n");
-    for (int g = 0; g < 5; g++)
+    for (int g = 0; g < 6; g++)
         for (int m = 0; m < 2; m++)
             n += (size_t)snprintf(text + n, sizeof text - n,
                                   "{\"x_px\": %d.%d, \"y_px\": 10, \"in_image\": true, \"bulb\": \"a\", "
-                                  "\"phase_deg\": 0, \"resolvable\": false, \"blend_group\": %d},\n",
-                                  10 + 20 * g, 8 * m, g);
+                                  "\"phase_deg\": %d, \"resolvable\": false, \"blend_group\": %d},\n",
+                                  10 + 20 * g, 8 * m, g == 5 && m ? 120 : 0, g);
     n += (size_t)snprintf(text + n, sizeof text - n,
                           "{\"x_px\": 10, \"y_px\": 40, \"in_image\": true, \"bulb\": \"a\", \"phase_deg\": 0},\n"
                           "{\"x_px\": 30, \"y_px\": 40, \"in_image\": true, \"bulb\": \"a\", \"phase_deg\": 0, "
@@ -292,23 +293,24 @@ TEST(evaluate_blend_groups_outcomes)
     int64_t sid;
     srv_survey_row sv = {.name = "g"};
     CHECK_OK(srv_db_add_survey(h, &sv, &sid));
-    /* group 0: both; 1: one, blend; 2: one, a bulb; 3: one, no bulb; the first resolvable one */
-    const double xs[6] = {10.0, 10.8, 30.0, 50.0, 70.0, 10.0}, ys[6] = {10, 10, 10, 10, 10, 40};
-    const unsigned fl[6] = {0, 0, REC_MATCH_BLEND, 0, 0, 0};
-    const char *bulb[6] = {"a", "a", "a", "a", NULL, "a"};
-    srv_light_row L[6];
-    for (int i = 0; i < 6; i++) {
+    /* group 0: both; 1: one, blend; 2: one, a bulb; 3: one, no bulb; the first resolvable one;
+     * group 5: one, a bulb */
+    const double xs[7] = {10.0, 10.8, 30.0, 50.0, 70.0, 10.0, 110.0}, ys[7] = {10, 10, 10, 10, 10, 40, 10};
+    const unsigned fl[7] = {0, 0, REC_MATCH_BLEND, 0, 0, 0, 0};
+    const char *bulb[7] = {"a", "a", "a", "a", NULL, "a", "a"};
+    srv_light_row L[7];
+    for (int i = 0; i < 7; i++) {
         L[i] = survey_fx_light(i, xs[i], ys[i], 0, 1.0);
         L[i].bulb_id = bulb[i];
         L[i].match_flags = fl[i];
     }
-    srv_capture_data cd = survey_fx_capture(sid, "k", L, NULL, 6);
+    srv_capture_data cd = survey_fx_capture(sid, "k", L, NULL, 7);
     CHECK_OK(srv_db_add_capture(h, &cd, NULL, NULL));
     srv_eval_report r;
     CHECK_OK(srv_evaluate(h, truth, NULL, &r));
-    CHECK(r.groups == 5 && r.group_lights == 10);
-    CHECK(r.groups_resolved == 1 && r.groups_flagged == 1 && r.groups_confident == 1 &&
-          r.groups_unsure == 1 && r.groups_missed == 1);
+    CHECK(r.groups == 6 && r.group_lights == 12);
+    CHECK(r.groups_resolved == 1 && r.groups_flagged == 1 && r.groups_confident == 2 &&
+          r.groups_one_signal == 1 && r.groups_unsure == 1 && r.groups_missed == 1);
     CHECK(r.resolvable == 2 && r.resolvable_matched == 1 && r.hidden == 1 && r.hidden_matched == 0);
     CHECK_NEAR(r.resolvable_rate, 0.5, 1e-12);
     /* a blend group that is not an integer: one line naming the light */
