@@ -32,6 +32,10 @@
  * fitted together; farther groups apart (DAOPHOT's groups: a crowded component of many lights is
  * many small fits, each over its own lights' apertures). */
 #define FIT_GROUP_SIGMA 6.0
+/* One signal split in space (spatial_split): the fainter source's least flux share, the least
+ * separation in PSF sigmas. */
+#define SPLIT_MIN_SHARE 0.1
+#define SPLIT_MIN_SEP_SIGMA 1.5
 #define FIT_NM_EVALS 30          /* Nelder-Mead evaluations per position coordinate */
 #define FIT_STEP_PX 0.4          /* Nelder-Mead's first simplex step (sigma: 0.2 sigma) */
 #define FIT_TOL_PX 0.01          /* Nelder-Mead stops when its simplex is this small */
@@ -56,6 +60,7 @@ typedef struct {
     double *Dt, *wP;      /* [BK * n] D by sample, [FIT_MAX_SOURCES * n] w_pb P */
     int bx0, by0, bw, bh; /* the fit pixels' bounding box */
     double *gx, *gy;      /* [bw + 1], [bh + 1] scratch: the PSF's 1-D shares */
+    double *mean;         /* [3 n B] scratch of spatial_split */
 } fit_data;
 
 /* The shares of a pixel-integrated 1-D Gaussian (centre c, sigma) in pixels lo .. lo + n - 1:
@@ -284,8 +289,28 @@ static double span_z(const fit_data *f, int N)
     return wh_z(chi2, (double)B * (K - m));
 }
 
+/* The newest source (q = N - 1) of the fit at pos is a light of its own in space: at least
+ * SPLIT_MIN_SEP_SIGMA PSF sigmas from every other source, and its flux (summed over the samples)
+ * at least SPLIT_MIN_SHARE of each one's and each one's at least SPLIT_MIN_SHARE of its own
+ * (a halo or a PSF that is not quite the model leaves far less). */
+static int spatially_distinct(const fit_data *f, int N, const double *pos)
+{
+    const int q = N - 1;
+    double fq = 0;
+    for (int d = 0; d < f->BK; d++) fq += f->F[q * f->BK + d];
+    for (int t = 0; t < q; t++) {
+        double ft = 0;
+        for (int d = 0; d < f->BK; d++) ft += f->F[t * f->BK + d];
+        if (!(hypot(pos[2 * q] - pos[2 * t], pos[2 * q + 1] - pos[2 * t + 1]) >= SPLIT_MIN_SEP_SIGMA * pos[2 * N]) ||
+            !(fmin(fq, ft) >= SPLIT_MIN_SHARE * fmax(fq, ft)))
+            return 0;
+    }
+    return 1;
+}
+
 /* The N-source fit is acceptable: every source bright enough, none too close, and the newest
- * one's signal outside the span of the others' (span_z). */
+ * one's signal outside the span of the others' (span_z) or the newest a light of its own in
+ * space. */
 static int fit_ok(const fit_data *f, int N, const double *pos, double deblend_sigma)
 {
     const double sigma = pos[2 * N];
@@ -294,7 +319,7 @@ static int fit_ok(const fit_data *f, int N, const double *pos, double deblend_si
     for (int q = 0; q < N; q++)
         for (int t = q + 1; t < N; t++)
             if (hypot(pos[2 * q] - pos[2 * t], pos[2 * q + 1] - pos[2 * t + 1]) < FIT_MIN_SEP_SIGMA * sigma) return 0;
-    return span_z(f, N) > deblend_sigma;
+    return span_z(f, N) > deblend_sigma || spatially_distinct(f, N, pos);
 }
 
 /* The footprint pixel (of fp[0..nfp)) where one more PSF explains the most of the residual of
@@ -414,6 +439,93 @@ static gs_status push_light(fit_list *L, int comp, double x, double y, double ps
     return GS_OK;
 }
 
+/* The N sources of the fit at pos as lights of L: each source's fluxes and their noise under
+ * the fit's own noise model (its weights): var F_qd = sum_p (sum_t Ainv_qt w_pb P_tp)^2 (V_pd +
+ * (FIT_PROFILE_ERR sum_t P_tp F_td)^2), the camera noise and the PSF model's error at the
+ * pixel's modelled level. */
+static gs_status emit_fit(fit_data *f, int comp, int N, const double *pos, fit_list *L)
+{
+    const int n = f->n, B = f->B, K = f->K, BK = f->BK;
+    fit_eval(f, N, pos);
+    for (int q = 0; q < N; q++) {
+        double *sig = NULL;
+        gs_status st = push_light(L, comp, pos[2 * q], pos[2 * q + 1], pos[2 * N], BK, &sig);
+        if (st != GS_OK) return st;
+        double *sgm = sig + BK;
+        for (int b = 0; b < B; b++) {
+            const double *A = f->Ainv + (size_t)b * N * N;
+            for (int k = 0; k < K; k++) {
+                const int d = b * K + k;
+                double v = 0;
+                for (int p = 0; p < n; p++) {
+                    double g = 0, mod = 0;
+                    for (int t = 0; t < N; t++) {
+                        g += A[q * N + t] * f->P[t * n + p];
+                        mod += f->P[t * n + p] * f->F[t * BK + d];
+                    }
+                    g *= f->w[p * B + b];
+                    double pe = FIT_PROFILE_ERR * mod;
+                    v += g * g * (f->V[(size_t)p * BK + d] + pe * pe);
+                }
+                sig[d] = f->F[q * BK + d];
+                sgm[d] = sqrt(v);
+            }
+        }
+    }
+    return GS_OK;
+}
+
+/* One signal (the rank-1 gate passed) but maybe two lights: neighbours of the same bulb and
+ * phase that step 5 took for one peak can only be told apart in space. The fit on the mean over
+ * the frames (enough for the positions when every pixel carries the same signal): one source
+ * against two, two when the chi2 drop is significant (Wilson-Hilferty z over B + 2 degrees of
+ * freedom above deblend_sigma), both sources are above FIT_SNR, the fainter carries at least
+ * SPLIT_MIN_SHARE of the brighter's flux (a halo or a PSF that is not quite the model leaves far
+ * less) and they are SPLIT_MIN_SEP_SIGMA PSF sigmas apart; then the two sources' per-frame
+ * fluxes from the full fit at those positions. Components with saturated pixels are not split
+ * (their fit pixels are a ring). */
+static gs_status spatial_split(fit_data *f, int comp, const int *fp, int nfp, const double *start, double *R,
+                               fit_list *L, int *replaced)
+{
+    double *mean = f->mean;
+    const int n = f->n, B = f->B, K = f->K, BK = f->BK, W = f->s->W;
+    fit_data g = *f;
+    g.K = 1;
+    g.BK = B;
+    g.D = mean;
+    g.w = mean + (size_t)n * B;
+    g.Dt = mean + 2 * (size_t)n * B;
+    g.wdd = 0;
+    for (int p = 0; p < n; p++)
+        for (int b = 0; b < B; b++) {
+            double dm = 0, vm = 0;
+            for (int k = 0; k < K; k++) {
+                dm += f->D[(size_t)p * BK + b * K + k] / K;
+                vm += f->V[(size_t)p * BK + b * K + k] / K;
+            }
+            double v = vm / K + (dm > 0 ? FIT_PROFILE_ERR * FIT_PROFILE_ERR * dm * dm : 0.0);
+            g.D[p * B + b] = g.Dt[(size_t)b * n + p] = dm;
+            g.w[p * B + b] = v > 0 && isfinite(v) ? 1 / v : 0;
+            g.wdd += g.w[p * B + b] * dm * dm;
+        }
+    double one[3] = {start[0], start[1], f->s->psf_sigma}, two[5];
+    double c1 = nelder_mead(&g, 1, one);
+    int i = best_new_source(&g, 1, one, fp, nfp, R);
+    if (i < 0) return GS_OK;
+    two[0] = one[0];
+    two[1] = one[1];
+    two[2] = fp[i] % W;
+    two[3] = fp[i] / W;
+    two[4] = one[2];
+    double c2 = nelder_mead(&g, 2, two);
+    if (!(wh_z(c1 - c2, B + 2) > f->s->o->deblend_sigma)) return GS_OK;
+    for (int q = 0; q < 2; q++)
+        if (!(source_snr(&g, 2, q) > FIT_SNR)) return GS_OK;
+    if (!spatially_distinct(&g, 2, two)) return GS_OK;
+    *replaced = 1;
+    return emit_fit(f, comp, 2, two, L);
+}
+
 /* Fit one component: its aperture pixels ap[0..nap), footprint pixels fp[0..nfp), the
  * positions start[2 N0] of its lights (brightest first). Appends its lights to L when the fit
  * holds two or more. */
@@ -425,11 +537,14 @@ static gs_status fit_component(fit_data *f, int comp, const int *ap, int nap, co
     const gs_capture *c = s->cap;
     const int HS = GS_MAX_HALVINGS + 1;
     *replaced = 0;
-    int n = 0;
+    int n = 0, nsat = 0;
     f->wdd = 0;
     for (int a = 0; a < nap; a++) {
         int p = ap[a];
-        if (s->sat[p]) continue;
+        if (s->sat[p]) {
+            nsat++;
+            continue;
+        }
         int x = p % W, y = p / W;
         double *V = f->V + (size_t)n * BK, *D = f->D + (size_t)n * BK;
         rec_blob_pixel_var(s, (size_t)p, V);
@@ -484,7 +599,8 @@ static gs_status fit_component(fit_data *f, int comp, const int *ap, int nap, co
         if (x + 1 > f->hi_x) f->hi_x = x + 1;
         if (y + 1 > f->hi_y) f->hi_y = y + 1;
     }
-    if (!(rank1_z(f, R, R + n) > s->o->deblend_sigma)) return GS_OK;   /* one signal */
+    if (!(rank1_z(f, R, R + n) > s->o->deblend_sigma))   /* one signal: split only in space */
+        return N0 == 1 && !nsat ? spatial_split(f, comp, fp, nfp, start, R, L, replaced) : GS_OK;
     double pos[2 * FIT_MAX_SOURCES + 1], trial[2 * FIT_MAX_SOURCES + 1];
     int N = N0;
     memcpy(pos, start, sizeof(double) * (size_t)(2 * N));
@@ -501,7 +617,8 @@ static gs_status fit_component(fit_data *f, int comp, const int *ap, int nap, co
         /* the drop and the new signal at the candidate pixel first (one evaluation): only a
          * candidate that passes both there is worth the search (the search only lowers chi2) */
         double c2 = fit_eval(f, N + 1, trial);
-        if (!(wh_z(chi2 - c2, BK + 2) > s->o->deblend_sigma) || !(span_z(f, N + 1) > s->o->deblend_sigma))
+        if (!(wh_z(chi2 - c2, BK + 2) > s->o->deblend_sigma) ||
+            !(span_z(f, N + 1) > s->o->deblend_sigma || spatially_distinct(f, N + 1, trial)))
             break;
         c2 = nelder_mead(f, N + 1, trial);
         if (!(wh_z(chi2 - c2, BK + 2) > s->o->deblend_sigma) || !fit_ok(f, N + 1, trial, s->o->deblend_sigma))
@@ -511,37 +628,8 @@ static gs_status fit_component(fit_data *f, int comp, const int *ap, int nap, co
         chi2 = c2;
     }
     if (N < 2) return GS_OK;
-    fit_eval(f, N, pos);
-    /* each source's fluxes and their noise under the fit's own noise model (its weights): var
-     * F_qd = sum_p (sum_t Ainv_qt w_pb P_tp)^2 (V_pd + (FIT_PROFILE_ERR sum_t P_tp F_td)^2), the
-     * camera noise and the PSF model's error at the pixel's modelled level */
-    for (int q = 0; q < N; q++) {
-        double *sig = NULL;
-        gs_status st = push_light(L, comp, pos[2 * q], pos[2 * q + 1], pos[2 * N], BK, &sig);
-        if (st != GS_OK) return st;
-        double *sgm = sig + BK;
-        for (int b = 0; b < B; b++) {
-            const double *A = f->Ainv + (size_t)b * N * N;
-            for (int k = 0; k < K; k++) {
-                const int d = b * K + k;
-                double v = 0;
-                for (int p = 0; p < n; p++) {
-                    double g = 0, mod = 0;
-                    for (int t = 0; t < N; t++) {
-                        g += A[q * N + t] * f->P[t * n + p];
-                        mod += f->P[t * n + p] * f->F[t * BK + d];
-                    }
-                    g *= f->w[p * B + b];
-                    double pe = FIT_PROFILE_ERR * mod;
-                    v += g * g * (f->V[(size_t)p * BK + d] + pe * pe);
-                }
-                sig[d] = f->F[q * BK + d];
-                sgm[d] = sqrt(v);
-            }
-        }
-    }
     *replaced = 1;
-    return GS_OK;
+    return emit_fit(f, comp, N, pos, L);
 }
 
 /* The owner among lights first..first+N-1 of L of pixel (x, y): the largest mean model flux. */
@@ -656,6 +744,7 @@ gs_status rec_blob_psf_fit(rec_blob_state *s, rec_catalog *cat)
     f.wP = malloc(sizeof(double) * FIT_MAX_PX * FIT_MAX_SOURCES);
     f.gx = malloc(sizeof(double) * (FIT_MAX_PX + 1));
     f.gy = malloc(sizeof(double) * (FIT_MAX_PX + 1));
+    f.mean = malloc(sizeof(double) * 3 * FIT_MAX_PX * (size_t)B);
     double *R = malloc(sizeof(double) * FIT_MAX_PX * (size_t)BK);
     fit_list L = {NULL, 0, 0};
     rec_catalog out;
@@ -663,7 +752,7 @@ gs_status rec_blob_psf_fit(rec_blob_state *s, rec_catalog *cat)
     fit_order *ord = NULL;
     int *newid = NULL;
     if (!comp_of || !unit_of || !ap_start || !fp_start || !ap_pix || !fp_pix || !fill || !lt_start || !lt_list || !replaced ||
-        !first_new || !f.x || !f.y || !f.D || !f.V || !f.w || !f.P || !f.F || !f.Ainv || !f.num || !f.Dt || !f.wP || !f.gx || !f.gy || !R) {
+        !first_new || !f.x || !f.y || !f.D || !f.V || !f.w || !f.P || !f.F || !f.Ainv || !f.num || !f.Dt || !f.wP || !f.gx || !f.gy || !f.mean || !R) {
         st = gs_fail(GS_ENOMEM, "blobs: cannot allocate the PSF fit");
         goto done;
     }
@@ -834,6 +923,7 @@ done:
     free(f.wP);
     free(f.gx);
     free(f.gy);
+    free(f.mean);
     free(R);
     free(ord);
     free(newid);
