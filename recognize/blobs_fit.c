@@ -36,6 +36,8 @@
  * separation in PSF sigmas. */
 #define SPLIT_MIN_SHARE 0.1
 #define SPLIT_MIN_SEP_SIGMA 1.5
+/* ... tried only where one source leaves a misfit above this z (a chance of 2 % for one light) */
+#define SPLIT_SCREEN_Z 2.0
 #define FIT_NM_EVALS 30          /* Nelder-Mead evaluations per position coordinate */
 #define FIT_STEP_PX 0.4          /* Nelder-Mead's first simplex step (sigma: 0.2 sigma) */
 #define FIT_TOL_PX 0.01          /* Nelder-Mead stops when its simplex is this small */
@@ -477,13 +479,12 @@ static gs_status emit_fit(fit_data *f, int comp, int N, const double *pos, fit_l
 
 /* One signal (the rank-1 gate passed) but maybe two lights: neighbours of the same bulb and
  * phase that step 5 took for one peak can only be told apart in space. The fit on the mean over
- * the frames (enough for the positions when every pixel carries the same signal): one source
- * against two, two when the chi2 drop is significant (Wilson-Hilferty z over B + 2 degrees of
- * freedom above deblend_sigma), both sources are above FIT_SNR, the fainter carries at least
- * SPLIT_MIN_SHARE of the brighter's flux (a halo or a PSF that is not quite the model leaves far
- * less) and they are SPLIT_MIN_SEP_SIGMA PSF sigmas apart; then the two sources' per-frame
- * fluxes from the full fit at those positions. Components with saturated pixels are not split
- * (their fit pixels are a ring). */
+ * the frames (enough for the positions when every pixel carries the same signal): one source,
+ * and where it leaves a misfit (z above SPLIT_SCREEN_Z) two. Two are kept when the chi2 drop is
+ * significant (Wilson-Hilferty z over B + 2 degrees of freedom above deblend_sigma), both
+ * sources are above FIT_SNR and the second is spatially_distinct; then the two sources'
+ * per-frame fluxes from the full fit at those positions. Components with saturated pixels are
+ * not split (their fit pixels are a ring). */
 static gs_status spatial_split(fit_data *f, int comp, const int *fp, int nfp, const double *start, double *R,
                                fit_list *L, int *replaced)
 {
@@ -510,6 +511,7 @@ static gs_status spatial_split(fit_data *f, int comp, const int *fp, int nfp, co
         }
     double one[3] = {start[0], start[1], f->s->psf_sigma}, two[5];
     double c1 = nelder_mead(&g, 1, one);
+    if (!(wh_z(c1, (double)n * B - B - 3) > SPLIT_SCREEN_Z)) return GS_OK;   /* one source fits */
     int i = best_new_source(&g, 1, one, fp, nfp, R);
     if (i < 0) return GS_OK;
     two[0] = one[0];
