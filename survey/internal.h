@@ -61,6 +61,14 @@ double srv_tr_rel_error(const float *est, const float *truth, size_t P, int band
 double srv_tr_ncc(const float *a, const float *b, size_t n);
 /* ============================================================ end of the light transport */
 
+/* `gridsurvey bench pg` (survey/bench_pg.c), and the timing helpers of bench_db.c it shares:
+ * monotonic seconds, `stats --by BY` on the SQLite db (or, db NULL, on conninfo's PostGIS
+ * database), and reading every row of an SQL query on db. */
+int srv_bench_pg(int argc, char **argv);
+double srv_bench_now_s(void);
+gs_status srv_bench_time_stats(srv_db *db, const char *conninfo, const char *by, double *sec);
+gs_status srv_bench_time_view(srv_db *db, const char *sql, double *sec);
+
 /* `gridsurvey bench accuracy` (survey/bench_accuracy.c); argv[0] is "accuracy". */
 int srv_bench_accuracy(int argc, char **argv);
 /* `gridsurvey bench render` (survey/bench_render.c). */

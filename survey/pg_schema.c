@@ -226,6 +226,12 @@ static const char *const pg_migration_2[] = {
     "         count(*) FILTER (WHERE phase_class IN ('0', '120', '240')) AS n\n"
     "  FROM area_sites GROUP BY layer, label) c\n"
     "CROSS JOIN LATERAL balance(c.n0, c.n120, c.n240) b;\n"
+    /* the same with each area's outline, for a map (QGIS: style by imbalance or p_value) */
+    "CREATE VIEW area_balance_map AS\n"
+    "SELECT b.layer || ':' || b.label AS area_id, b.*, g.geom\n"
+    "FROM area_balance b JOIN (SELECT layer, label,\n"
+    "  ST_Multi(ST_Union(geom))::geometry(MultiPolygon, 4326) AS geom FROM areas\n"
+    "  GROUP BY layer, label) g USING (layer, label);\n"
     ,
     /* cells of size_m metres on the local grid of stats.c (around the located sites' mean
      * latitude and circular-mean longitude) */

@@ -5,6 +5,7 @@
 #                                       free port, print the port; the cluster stops and DIR is
 #                                       removed when process WATCH_PID (the test runner) ends
 #   pg_cluster.sh stop DIR              stop it now and remove DIR
+# PG_FSYNC=on (default off: a test cluster need not survive a crash) for benchmarks.
 # Exit status 77 (and one line saying what is missing) when the Debian packages postgresql and
 # postgresql-15-postgis-3 are not installed.
 set -eu
@@ -38,7 +39,7 @@ $as "$bin/initdb" -D "$dir/data" -U gs -A trust -E UTF8 --locale=C --no-sync >"$
 port=$(/usr/bin/python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
 # its own session: the runner's kill of a test's process group does not reach the server
 setsid -w $as "$bin/pg_ctl" -D "$dir/data" -l "$dir/server.log" -w -t 60 \
-    -o "-c listen_addresses=127.0.0.1 -p $port -c unix_socket_directories=$dir -c fsync=off -c shared_buffers=64MB -c max_connections=40" \
+    -o "-c listen_addresses=127.0.0.1 -p $port -c unix_socket_directories=$dir -c fsync=${PG_FSYNC:-off} -c shared_buffers=64MB -c max_connections=40" \
     start >/dev/null || { echo "the server did not start:"; cat "$dir/server.log"; exit 1; }
 echo "$port" >"$dir/port"
 # the watchdog: stop the cluster and remove it once the runner has gone

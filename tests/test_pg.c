@@ -84,14 +84,14 @@ static void write_feeders(const char *path)
     fclose(f);
 }
 
-/* Two surveys (12 + 8 captures of 250 lights around one point, so sites gather detections from
+/* Two surveys (10 + 6 captures of 200 lights around one point, so sites gather detections from
  * several captures and both surveys) in one file. */
 static void two_surveys(const char *db)
 {
-    srv_synth_opts o = survey_fx_synth_opts("alpha", 12, 250, 3);
+    srv_synth_opts o = survey_fx_synth_opts("alpha", 10, 200, 3);
     o.half_width_m = 300.0;
     survey_fx_synth(db, &o);
-    o = survey_fx_synth_opts("beta", 8, 250, 4);
+    o = survey_fx_synth_opts("beta", 6, 200, 4);
     o.half_width_m = 300.0;
     survey_fx_synth(db, &o);
 }
