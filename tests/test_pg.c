@@ -228,6 +228,10 @@ TEST_TIMEOUT(pg_push_then_stats_equal_sqlite, 600)
     snprintf(feeders, sizeof feeders, "%s/feeders.geojson", test_tmpdir());
     two_surveys(db);
     write_feeders(feeders);
+    /* nothing pushed yet: a reader refuses (and creates nothing) */
+    char cmd[1024];
+    snprintf(cmd, sizeof cmd, "%s stats --pg '%s'", test_bin(), pg);
+    CHECK(test_run(cmd, out_b, sizeof out_b) == 1 && strstr(out_b, "no schema gridsurvey"));
     snprintf(extra, sizeof extra, "--areas %s --field feeder", feeders);
     CHECK_MSG(push(db, pg, extra, out_a, sizeof out_a) == 0, "push: %s", out_a);
     PGconn *c = pg_fx_connect(pg);
@@ -251,7 +255,6 @@ TEST_TIMEOUT(pg_push_then_stats_equal_sqlite, 600)
     check_stats_equal(db, pg, extra);
     check_views(db, feeders, c);
     /* a survey that is not there: the same refusal as --db */
-    char cmd[1024];
     snprintf(cmd, sizeof cmd, "%s stats --pg '%s' --survey nosuch", test_bin(), pg);
     CHECK(test_run(cmd, out_b, sizeof out_b) != 0 && strstr(out_b, "no survey named 'nosuch'"));
     PQfinish(c);
