@@ -8,7 +8,7 @@ BUILD ?= build
 SAN ?=
 CC := gcc
 CXX := g++
-PKGS := sqlite3 fftw3 sndfile jansson plplot spng nettle lapacke libtiff-4 geos
+PKGS := sqlite3 fftw3 sndfile jansson plplot spng nettle lapacke libtiff-4 geos libpq
 WARN := -Wall -Wextra -Wpedantic -Wshadow -Werror
 OPT := -O2 -g
 SANFLAGS :=
@@ -123,18 +123,23 @@ demo-transport: deps
 	$(BIN) separate $(DT)/window -o $(DT)/separated
 	@echo "pictures: $(DT)/unmixed/mean.png, source_NN.png, $(DT)/relit-*/preview.png, $(DT)/separated/*.png"
 # Performance tables, printed and kept in docs/: Eq. 7 throughput on one core
-# (survey/bench.c) and the survey database's ingest and query times (survey/bench_db.c).
+# (survey/bench.c), the survey database's ingest and query times (survey/bench_db.c), and
+# SQLite vs PostGIS on a throw-away cluster (survey/bench_pg.c, tests/pg_cluster.sh).
 bench: $(BIN)
 	$(BIN) bench recognize > docs/bench-recognize.md.tmp
 	mv docs/bench-recognize.md.tmp docs/bench-recognize.md
 	$(BIN) bench db > docs/bench-db.md.tmp
 	mv docs/bench-db.md.tmp docs/bench-db.md
+	port=$$(PG_FSYNC=on sh tests/pg_cluster.sh start /tmp/gridsurvey-bench-pg.$$$$ $$$$) && \
+	  $(BIN) bench pg --pg "host=127.0.0.1 port=$$port user=gs dbname=postgres" > docs/bench-pg.md.tmp; \
+	  rc=$$?; sh tests/pg_cluster.sh stop /tmp/gridsurvey-bench-pg.$$$$; [ $$rc -eq 0 ]
+	mv docs/bench-pg.md.tmp docs/bench-pg.md
 	$(BIN) bench render > docs/bench-render.md.tmp
 	mv docs/bench-render.md.tmp docs/bench-render.md
 	$(BIN) bench accuracy --out docs/accuracy
 	$(BIN) bench transport > docs/bench-transport.md.tmp
 	mv docs/bench-transport.md.tmp docs/bench-transport.md
-	@cat docs/bench-recognize.md docs/bench-db.md docs/bench-render.md docs/bench-transport.md
+	@cat docs/bench-recognize.md docs/bench-db.md docs/bench-pg.md docs/bench-render.md docs/bench-transport.md
 clean:
 	rm -rf $(BUILD)
 

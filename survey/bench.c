@@ -5,6 +5,7 @@
  *                              search written here (independent of recognize/eq7.c), with the
  *                              agreement of the two and each configuration's peak memory.
  *   bench db ...               the survey database (survey/bench_db.c).
+ *   bench pg ...               SQLite vs the shared PostGIS database (survey/bench_pg.c).
  * One core: OpenBLAS runs single-threaded (openblas_set_num_threads(1)). Each configuration runs
  * in a child process so that its getrusage ru_maxrss is its own peak. */
 #include "survey/internal.h"
@@ -24,6 +25,7 @@
 static const char bench_usage[] =
     "usage: gridsurvey bench recognize [--quick]   Eq. 7 throughput tables (Markdown on stdout)\n"
     "       gridsurvey bench db [--quick] ...       survey database tables (bench db --help)\n"
+    "       gridsurvey bench pg --pg CONNINFO ...   SQLite vs PostGIS: push and stats (bench pg --help)\n"
     "       gridsurvey bench render [SCENE]         simulator time per effect (bench render --help)\n"
     "       gridsurvey bench accuracy [--quick]     accuracy against capture time (docs/accuracy.md)\n"
     "       gridsurvey bench transport [--quick]    light-transport unmixing time (docs/bench-transport.md)\n"
@@ -768,9 +770,10 @@ int srv_cmd_bench(int argc, char **argv)
     }
     if (!strcmp(argv[1], "recognize")) return bench_recognize(argc - 1, argv + 1);
     if (!strcmp(argv[1], "db")) return srv_bench_db(argc - 1, argv + 1);
+    if (!strcmp(argv[1], "pg")) return srv_bench_pg(argc - 1, argv + 1);
     if (!strcmp(argv[1], "accuracy")) return srv_bench_accuracy(argc - 1, argv + 1);
     if (!strcmp(argv[1], "render")) return srv_bench_render(argc - 1, argv + 1);
     if (!strcmp(argv[1], "transport")) return srv_bench_transport(argc - 1, argv + 1);
-    fprintf(stderr, "gridsurvey bench: '%s' is not a benchmark: expected recognize, db, render, accuracy or transport\n", argv[1]);
+    fprintf(stderr, "gridsurvey bench: '%s' is not a benchmark: expected recognize, db, pg, render, accuracy or transport\n", argv[1]);
     return 2;
 }

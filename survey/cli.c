@@ -25,6 +25,7 @@ static const struct {
     {"capture", srv_cmd_capture, "run the ACam acquisition loop: --backend sim, replay or hardware"},
     {"stats", srv_cmd_stats, "phase-balance statistics of a survey database (shares, Wilson CIs, chi-square)"},
     {"export", srv_cmd_export, "export a survey database's lights as GeoJSON, KML, GeoPackage or CSV"},
+    {"push", srv_cmd_push, "copy a survey database into a shared PostgreSQL + PostGIS database"},
     {"db", srv_cmd_db, "survey database tools: init, migrate, check, ingest-synthetic"},
     {"recognize", srv_cmd_recognize, "bulb type and grid phase of every light in a capture (Eq. 7); maps, plots"},
     {"run", srv_cmd_run, "the whole job: capture (or a capture directory), recognize, locate, store; stats, maps"},

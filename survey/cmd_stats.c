@@ -10,7 +10,7 @@
 #include <string.h>
 
 static const char stats_usage[] =
-    "usage: gridsurvey stats --db DB [--by G[,G2[,G3]]] [--clip AREAS.geojson]\n"
+    "usage: gridsurvey stats (--db DB | --pg CONNINFO) [--by G[,G2[,G3]]] [--clip AREAS.geojson]\n"
     "                        [--bbox MINLON,MINLAT,MAXLON,MAXLAT] [--survey NAME]\n"
     "                        [--min-confidence X] [--format table|json|csv] [--detections]\n"
     "\n"
@@ -22,6 +22,8 @@ static const char stats_usage[] =
     "15 deg) get their own columns.\n"
     "\n"
     "  --db DB             the survey database (read-only)\n"
+    "  --pg CONNINFO       or the shared PostGIS database `gridsurvey push` fills (a libpq\n"
+    "                      connection string; the same numbers on the same data)\n"
     "  --by G              all (default), technology, survey, cell:SIZE_m (a local metric grid\n"
     "                      of SIZE_m cells around the lights' mean latitude; located lights\n"
     "                      only), feature:FIELD (per area of --clip, named by its property\n"
@@ -207,9 +209,10 @@ int srv_cmd_stats(int argc, char **argv)
         {"survey", required_argument, 0, 'S'}, {"min-confidence", required_argument, 0, 'c'},
         {"format", required_argument, 0, 'f'}, {"help", no_argument, 0, 'h'},
         {"detections", no_argument, 0, 'D'},   {"clip", required_argument, 0, 'C'},
-        {"bbox", required_argument, 0, 'B'},   {0, 0, 0, 0},
+        {"bbox", required_argument, 0, 'B'},   {"pg", required_argument, 0, 'p'},
+        {0, 0, 0, 0},
     };
-    const char *path = NULL, *clip = NULL;
+    const char *path = NULL, *clip = NULL, *conninfo = NULL;
     srv_stats_opts o;
     srv_stats_opts_default(&o);
     out_format fmt = FMT_TABLE;
@@ -219,6 +222,7 @@ int srv_cmd_stats(int argc, char **argv)
     while ((c = getopt_long(argc, argv, "h", longs, NULL)) != -1) {
         switch (c) {
         case 'd': path = optarg; break;
+        case 'p': conninfo = optarg; break;
         case 'S': o.survey = optarg; break;
         case 'b':
             if (srv_stats_parse_by(optarg, &o) != GS_OK) {
@@ -262,8 +266,8 @@ int srv_cmd_stats(int argc, char **argv)
         fprintf(stderr, "gridsurvey stats: unexpected argument '%s' (see gridsurvey help stats)\n", argv[optind]);
         return 2;
     }
-    if (!path) {
-        fprintf(stderr, "gridsurvey stats: --db is required (see gridsurvey help stats)\n");
+    if (!path == !conninfo) {
+        fprintf(stderr, "gridsurvey stats: expected one of --db and --pg (see gridsurvey help stats)\n");
         return 2;
     }
     int by_feature = o.by == SRV_BY_FEATURE;
@@ -277,31 +281,25 @@ int srv_cmd_stats(int argc, char **argv)
     if (clip && (s = srv_areas_load(clip, by_feature ? o.feature_field : NULL, &areas)) != GS_OK)
         return srv_error(s);
     o.areas = areas;
-    srv_db *db;
-    s = srv_db_open(path, SRV_DB_READ, &db);
-    if (s != GS_OK) {
-        srv_areas_free(areas);
-        return srv_error(s);
-    }
-    if (o.survey) {
-        int64_t id;
-        if ((s = srv_db_find_survey(db, o.survey, &id)) != GS_OK) {
-            srv_db_close(db);
-            srv_areas_free(areas);
-            return srv_error(s);
-        }
-    }
     srv_phase_stats *g = NULL;
     size_t n = 0;
     long ungrouped = 0;
-    s = srv_stats_compute(db, &o, &g, &n, &ungrouped);
-    srv_db_close(db);
+    if (conninfo) {
+        s = srv_stats_compute_pg(conninfo, &o, &g, &n, &ungrouped);
+    } else {
+        srv_db *db = NULL;
+        s = srv_db_open(path, SRV_DB_READ, &db);
+        int64_t id;
+        if (s == GS_OK && o.survey) s = srv_db_find_survey(db, o.survey, &id);
+        if (s == GS_OK) s = srv_stats_compute(db, &o, &g, &n, &ungrouped);
+        if (db) srv_db_close(db);
+    }
     srv_areas_free(areas);
     if (s != GS_OK) return srv_error(s);
     int rc = 0;
     if (fmt == FMT_TABLE) srv_stats_print_table(g, n, &o, ungrouped);
     else if (fmt == FMT_CSV) print_csv(g, n);
-    else rc = print_json(g, n, &o, path, ungrouped);
+    else rc = print_json(g, n, &o, path ? path : "postgresql", ungrouped);
     free(g);
     if (rc != 0 || fflush(stdout) != 0 || ferror(stdout)) {
         fprintf(stderr, "gridsurvey stats: cannot write the output\n");

@@ -14,6 +14,7 @@ int srv_cmd_locate(int argc, char **argv);
 int srv_cmd_simulate(int argc, char **argv);
 int srv_cmd_capture(int argc, char **argv);
 int srv_cmd_stats(int argc, char **argv);
+int srv_cmd_push(int argc, char **argv);
 int srv_cmd_export(int argc, char **argv);
 int srv_cmd_db(int argc, char **argv);
 int srv_cmd_recognize(int argc, char **argv);
@@ -60,6 +61,14 @@ double srv_tr_rel_error(const float *est, const float *truth, size_t P, int band
 double srv_tr_ncc(const float *a, const float *b, size_t n);
 /* ============================================================ end of the light transport */
 
+/* `gridsurvey bench pg` (survey/bench_pg.c), and the timing helpers of bench_db.c it shares:
+ * monotonic seconds, `stats --by BY` on the SQLite db (or, db NULL, on conninfo's PostGIS
+ * database), and reading every row of an SQL query on db. */
+int srv_bench_pg(int argc, char **argv);
+double srv_bench_now_s(void);
+gs_status srv_bench_time_stats(srv_db *db, const char *conninfo, const char *by, double *sec);
+gs_status srv_bench_time_view(srv_db *db, const char *sql, double *sec);
+
 /* `gridsurvey bench accuracy` (survey/bench_accuracy.c); argv[0] is "accuracy". */
 int srv_bench_accuracy(int argc, char **argv);
 /* `gridsurvey bench render` (survey/bench_render.c). */
@@ -81,6 +90,21 @@ gs_status srv_render_time(const cap_scene *sc, unsigned effects_mask, int frames
  * counts, shares with Wilson intervals, six-phase columns when any group has such lights, and
  * the legend (o: the threshold and grouping; ungrouped: lights without a position). */
 void srv_stats_print_table(const srv_phase_stats *g, size_t n, const srv_stats_opts *o, long ungrouped);
+
+/* The statistics of stats.c over any source of detection rows (the SQLite database, or the
+ * PostGIS one: pg_stats.c): the rows of one site consecutive (by survey first when
+ * srv_stats_by_survey), each with its site (or -light id), survey, recognition and its site's
+ * position (NaN when none). next sets *got = 0 at the end. */
+typedef struct {
+    int64_t id;
+    const char *survey;
+    srv_site_obs obs;
+    double lat, lon;
+} srv_stats_row;
+typedef gs_status (*srv_stats_next)(void *ctx, srv_stats_row *row, int *got);
+gs_status srv_stats_run(const srv_stats_opts *o, srv_stats_next next, void *ctx,
+                        srv_phase_stats **groups, size_t *count, long *ungrouped);
+int srv_stats_by_survey(const srv_stats_opts *o);
 
 /* Print "gridsurvey: STATUS: DETAIL" on stderr and return 1. */
 /* Where a command's confirmation line goes: stderr when its output is "-" (stdout). */
@@ -146,6 +170,23 @@ gs_status srv_dbi_associate_capture(srv_db *db, int64_t capture_id, long *create
  * bulb_confidence, phase_confidence, DELIGHT bulbs starting at column first. */
 void srv_site_obs_from_row(sqlite3_stmt *q, int first, srv_site_obs *o);
 /* ====================================================================== end of the database */
+
+/* ============================ the shared PostGIS database (pg*.c), shared between its files */
+
+#include <libpq-fe.h>
+
+#define SRV_PG_LOCK_KEY "4747534442"   /* pg_advisory_xact_lock key of the migrations */
+/* Connect and set search_path = gridsurvey, public; a writer applies the missing migrations
+ * (pg_schema.c), a reader needs the schema at this version. The one-line failures name
+ * PostgreSQL and what was being done. */
+gs_status srv_pgi_connect(const char *conninfo, int writer, PGconn **out);
+gs_status srv_pgi_fail(PGconn *c, const PGresult *r, const char *what);
+gs_status srv_pgi_exec(PGconn *c, const char *sql, const char *what);
+/* PQexecParams with n text parameters (NULL = SQL NULL), text results. */
+PGresult *srv_pgi_query(PGconn *c, const char *sql, int n, const char *const *params);
+/* 1 when a failed transaction may simply be retried (deadlock, serialization failure). */
+int srv_pgi_retryable(const PGresult *r);
+/* ====================================================================== end of PostGIS */
 
 /* ============================= `bench accuracy` (bench_accuracy*.c), shared between its files */
 

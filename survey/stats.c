@@ -343,13 +343,9 @@ static int uses(const srv_stats_opts *o, srv_group_by by)
     return 0;
 }
 
-gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats **groups,
-                            size_t *count, long *ungrouped)
+/* The options' consistency (both backends). */
+static gs_status check_opts(const srv_stats_opts *o)
 {
-    if (!db || !o || !groups || !count) return gs_fail(GS_EINVAL, "srv_stats_compute: NULL argument");
-    *groups = NULL;
-    *count = 0;
-    if (ungrouped) *ungrouped = 0;
     if (!(o->min_confidence >= 0.0 && o->min_confidence <= 1.0))
         return gs_fail(GS_EINVAL, "--min-confidence %g: expected a probability in [0, 1]", o->min_confidence);
     if (uses(o, SRV_BY_CELL) && !(o->cell_m >= 1.0 && isfinite(o->cell_m)))
@@ -360,35 +356,83 @@ gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats
                        "finite longitude and a radius > 0", o->lat_deg, o->lon_deg, o->radius_m);
     if (uses(o, SRV_BY_FEATURE) && !o->areas)
         return gs_fail(GS_EINVAL, "--by feature:%s: needs the areas (--clip AREAS.geojson)", o->feature_field);
-    int has_bbox = !isnan(o->bbox[0]);
-    if (has_bbox && !(fabs(o->bbox[1]) <= 90.0 && fabs(o->bbox[3]) <= 90.0 && o->bbox[1] <= o->bbox[3] &&
-                      isfinite(o->bbox[0]) && isfinite(o->bbox[2])))
+    if (!isnan(o->bbox[0]) && !(fabs(o->bbox[1]) <= 90.0 && fabs(o->bbox[3]) <= 90.0 && o->bbox[1] <= o->bbox[3] &&
+                                isfinite(o->bbox[0]) && isfinite(o->bbox[2])))
         return gs_fail(GS_EINVAL, "--bbox %g,%g,%g,%g: expected MINLON,MINLAT,MAXLON,MAXLAT with "
                        "MINLAT <= MAXLAT in [-90, 90]", o->bbox[0], o->bbox[1], o->bbox[2], o->bbox[3]);
+    return GS_OK;
+}
+
+int srv_stats_by_survey(const srv_stats_opts *o)
+{
+    return uses(o, SRV_BY_SURVEY);
+}
+
+/* The SQLite row source of srv_stats_run. */
+typedef struct {
+    sqlite3_stmt *q;
+    const char *path;
+} lite_rows;
+
+static gs_status lite_next(void *ctx, srv_stats_row *row, int *got)
+{
+    lite_rows *x = ctx;
+    int rc = sqlite3_step(x->q);
+    *got = rc == SQLITE_ROW;
+    if (!*got)
+        return rc == SQLITE_DONE ? GS_OK
+                                 : gs_fail(GS_ESQL, "%s: statistics query: %s", x->path,
+                                           sqlite3_errmsg(sqlite3_db_handle(x->q)));
+    row->id = sqlite3_column_int64(x->q, 0);
+    row->survey = (const char *)sqlite3_column_text(x->q, 1);
+    row->lat = column_real(x->q, 10);
+    row->lon = column_real(x->q, 11);
+    srv_site_obs_from_row(x->q, 2, &row->obs);
+    return check_position(x->q, 10, x->path, row->lat, row->lon);
+}
+
+gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats **groups,
+                            size_t *count, long *ungrouped)
+{
+    if (!db || !o || !groups || !count) return gs_fail(GS_EINVAL, "srv_stats_compute: NULL argument");
+    *groups = NULL;
+    *count = 0;
+    if (ungrouped) *ungrouped = 0;
+    gs_status s;
+    sqlite3 *h = srv_db_sqlite(db);
+    lite_rows x = {NULL, srv_db_path(db)};
+    char sql[sizeof scan_sql + 32];
+    snprintf(sql, sizeof sql, "%s%s", scan_sql, uses(o, SRV_BY_SURVEY) ? order_survey_sql : order_site_sql);
+    if (sqlite3_prepare_v2(h, sql, -1, &x.q, NULL) != SQLITE_OK)
+        return gs_fail(GS_ESQL, "%s: statistics query: %s", x.path, sqlite3_errmsg(h));
+    if (o->survey) sqlite3_bind_text(x.q, 1, o->survey, -1, SQLITE_STATIC);
+    sqlite3_bind_int(x.q, 2, o->detections != 0);
+    s = srv_stats_run(o, lite_next, &x, groups, count, ungrouped);
+    sqlite3_finalize(x.q);
+    return s;
+}
+
+gs_status srv_stats_run(const srv_stats_opts *o, srv_stats_next next, void *ctx,
+                        srv_phase_stats **groups, size_t *count, long *ungrouped)
+{
+    *groups = NULL;
+    *count = 0;
+    if (ungrouped) *ungrouped = 0;
+    gs_status s = check_opts(o);
+    if (s != GS_OK) return s;
+    int has_bbox = !isnan(o->bbox[0]);
     /* the groupings that need a position */
     int spatial = uses(o, SRV_BY_CELL) || uses(o, SRV_BY_FEATURE) || o->by == SRV_BY_RADIUS ||
                   has_bbox || o->areas;
-    sqlite3 *h = srv_db_sqlite(db);
-    const char *path = srv_db_path(db);
-    sqlite3_stmt *q = NULL;
     group_set gs = {0}, names = {0};
     site_row *rows = NULL;
     size_t nrows = 0, caprows = 0;
     long no_position = 0;
-    gs_status s = GS_OK;
     site_acc *acc = calloc(1, sizeof *acc);
-    char sql[sizeof scan_sql + 32];
-    snprintf(sql, sizeof sql, "%s%s", scan_sql, uses(o, SRV_BY_SURVEY) ? order_survey_sql : order_site_sql);
     if (!acc) {
         s = gs_fail(GS_ENOMEM, "stats: out of memory");
         goto done;
     }
-    if (sqlite3_prepare_v2(h, sql, -1, &q, NULL) != SQLITE_OK) {
-        s = gs_fail(GS_ESQL, "%s: statistics query: %s", path, sqlite3_errmsg(h));
-        goto done;
-    }
-    if (o->survey) sqlite3_bind_text(q, 1, o->survey, -1, SQLITE_STATIC);
-    sqlite3_bind_int(q, 2, o->detections != 0);
     if (o->by == SRV_BY_ALL || o->by == SRV_BY_RADIUS) {
         group *g;   /* the one group exists even when empty */
         if ((s = find_group(&gs, o->by == SRV_BY_ALL ? "all" : "radius", &g)) != GS_OK) goto done;
@@ -398,12 +442,13 @@ gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats
         }
     }
     /* pass 1: the sites, combined and filtered */
-    int rc;
     for (;;) {
-        rc = sqlite3_step(q);
-        int64_t id = rc == SQLITE_ROW ? sqlite3_column_int64(q, 0) : 0;
-        const char *sv = rc == SQLITE_ROW ? (const char *)sqlite3_column_text(q, 1) : NULL;
-        if (acc->n && (rc != SQLITE_ROW || id != acc->id ||
+        srv_stats_row row;
+        int got;
+        if ((s = next(ctx, &row, &got)) != GS_OK) goto done;
+        int64_t id = got ? row.id : 0;
+        const char *sv = got ? row.survey : NULL;
+        if (acc->n && (!got || id != acc->id ||
                        (uses(o, SRV_BY_SURVEY) && strcmp(sv ? sv : "", acc->survey)))) {
             srv_site_value v;
             srv_site_combine(acc->obs, acc->n, &v);
@@ -435,19 +480,14 @@ gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats
                 rows[nrows++] = r;
             }
         }
-        if (rc != SQLITE_ROW) break;
+        if (!got) break;
         if (!acc->n) {
             acc->id = id;
             snprintf(acc->survey, sizeof acc->survey, "%s", sv ? sv : "");
-            acc->lat = column_real(q, 10);
-            acc->lon = column_real(q, 11);
-            if ((s = check_position(q, 10, path, acc->lat, acc->lon)) != GS_OK) goto done;
+            acc->lat = row.lat;
+            acc->lon = row.lon;
         }
-        if (acc->n < SRV_SITE_MAX_OBS) srv_site_obs_from_row(q, 2, &acc->obs[acc->n++]);
-    }
-    if (rc != SQLITE_DONE) {
-        s = gs_fail(GS_ESQL, "%s: statistics query: %s", path, sqlite3_errmsg(h));
-        goto done;
+        if (acc->n < SRV_SITE_MAX_OBS) acc->obs[acc->n++] = row.obs;
     }
     /* pass 2: the groups (cells need the selection's centre first) */
     double lat0 = 0.0, lon0 = 0.0, kx = 0.0, ky = GIS_EARTH_RADIUS_M * DEG;
@@ -512,7 +552,6 @@ gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats
     }
     if (ungrouped) *ungrouped = no_position;
 done:
-    sqlite3_finalize(q);
     free(gs.v);
     free(gs.slot);
     free(names.v);

@@ -419,6 +419,43 @@ void srv_phase_stats_finish(srv_phase_stats *g);
 gs_status srv_stats_compute(srv_db *db, const srv_stats_opts *o, srv_phase_stats **groups,
                             size_t *count, long *ungrouped);
 
+/* The same statistics from the shared PostGIS database (conninfo: a libpq connection string;
+ * survey/pg_stats.c): the same rows, read from PostgreSQL in the same order, through the same
+ * computation, so the numbers equal those of srv_stats_compute on the data pushed. */
+gs_status srv_stats_compute_pg(const char *conninfo, const srv_stats_opts *o, srv_phase_stats **groups,
+                               size_t *count, long *ungrouped);
+
+/* =====================================================================================
+ * The shared PostGIS database (survey/pg*.c, docs/postgis.md): `gridsurvey push`
+ *
+ * Copies a survey database's surveys, stations, DELIGHT versions, captures (frames, frequency
+ * log), lights, locations and light sites into the schema "gridsurvey" of a PostgreSQL +
+ * PostGIS database (created and migrated on connection). Idempotent and resumable: a capture
+ * is one transaction with its rows (keyed by survey name and capture_key), so a capture already
+ * there is skipped and an interrupted push resumes where it stopped; sites are upserted by
+ * their founding detection and only rewritten when they differ. Several stations may push at
+ * once (unique keys, ON CONFLICT, retried deadlocks).
+ * ===================================================================================== */
+
+#define SRV_PG_SCHEMA_VERSION 2
+#define SRV_PG_FORMAT "gridsurvey-survey-pg"
+typedef struct {
+    size_t batch_lights;       /* lights per transaction, whole captures (20000) */
+    const char *areas;         /* a GeoJSON of areas to load too (NULL: none) */
+    const char *areas_field;   /* their label property; the layer's name */
+    int progress;              /* a line per 10 % on stderr */
+} srv_push_opts;
+void srv_push_opts_default(srv_push_opts *o);
+typedef struct {
+    size_t captures, captures_pushed;   /* in the file; newly pushed */
+    size_t lights_pushed;
+    size_t sites, sites_written;        /* in the file; inserted or changed */
+    size_t areas;
+    int retries;                        /* transactions retried after a deadlock */
+} srv_push_report;
+gs_status srv_pg_push(const char *db_path, const char *conninfo, const srv_push_opts *o,
+                      srv_push_report *r);
+
 /* =====================================================================================
  * Export (survey/cmd_export.c): database rows -> gis_light -> gis_export
  * ===================================================================================== */
