@@ -15,8 +15,8 @@
 
 static const char run_usage[] =
     "usage: gridsurvey run SCENE.json|CAPDIR --db survey.sqlite [--station FILE] [--survey NAME]\n"
-    "                      [--capture-dir DIR] [--light-height-m H] [--phases 3|6|continuous]\n"
-    "                      [--unknown-p P] [--delight DB] [--out DIR]\n"
+    "                      [--capture-dir DIR] [--light-height-m H] [--light-height-sigma-m S]\n"
+    "                      [--phases 3|6|continuous] [--unknown-p P] [--delight DB] [--out DIR]\n"
     "\n"
     "The whole job on one capture: a scene (gridsurvey-scene/1) is acquired by the simulator\n"
     "through the ACam acquisition loop into a capture directory (resumable), a capture directory\n"
@@ -37,6 +37,8 @@ static const char run_usage[] =
     "  --light-height-m H   the lights' height above the WGS84 ellipsoid, m (default for a scene:\n"
     "                       the median height of its geographic lights; required for a capture\n"
     "                       directory with a station)\n"
+    "  --light-height-sigma-m S  its 1-sigma for the error ellipses, m (default: with the\n"
+    "                       scene's median, the spread of its lights' heights, else 0)\n"
     "  --phases P           candidate grid phases: 3 = 0/120/240 deg (default), 6 = those and\n"
     "                       + 30 deg (delta-wye transformers), continuous\n"
     "  --unknown-p P        Eq. 7's goodness-of-fit gate: a light whose best fit has a chi-square\n"
@@ -169,7 +171,7 @@ int srv_cmd_run(int argc, char **argv)
         {"survey", required_argument, 0, 'S'},      {"capture-dir", required_argument, 0, 'c'},
         {"light-height-m", required_argument, 0, 'H'}, {"phases", required_argument, 0, 'p'},
         {"delight", required_argument, 0, 'D'},     {"out", required_argument, 0, 'o'},
-        {"unknown-p", required_argument, 0, 'u'},
+        {"unknown-p", required_argument, 0, 'u'},   {"light-height-sigma-m", required_argument, 0, 'G'},
         {"help", no_argument, 0, 'h'},              {0, 0, 0, 0},
     };
     srv_run_opts o;
@@ -193,6 +195,11 @@ int srv_cmd_run(int argc, char **argv)
             o.light_height_m = strtod(optarg, &end);
             if (!*optarg || *end || !isfinite(o.light_height_m))
                 return usage_error("--light-height-m '%s': expected a height in metres", optarg);
+            break;
+        case 'G':
+            o.light_height_sigma_m = strtod(optarg, &end);
+            if (!*optarg || *end || !(o.light_height_sigma_m >= 0.0))
+                return usage_error("--light-height-sigma-m '%s': expected metres >= 0", optarg);
             break;
         case 'u':
             o.eq7.unknown_p = strtod(optarg, &end);
@@ -236,7 +243,8 @@ int srv_cmd_run(int argc, char **argv)
     printf("run: %zu lights, %zu with a bulb, %zu with a phase, %zu located", r.lights, r.with_bulb,
            r.with_phase, r.located);
     if (isfinite(r.light_height_m))
-        printf(" at %.2f m above the ellipsoid (%s)", r.light_height_m, r.height_source);
+        printf(" at %.2f m above the ellipsoid (%s), height sigma %.2f m", r.light_height_m,
+               r.height_source, r.light_height_sigma_m);
     else if (!r.has_station)
         printf(" (no station: stored without a location)");
     printf("\n");

@@ -534,8 +534,24 @@ gs_status srv_job_extract(srv_job *j, const rec_blob_opts *bo);
 gs_status srv_job_match(srv_job *j);
 /* Free the capture's pixels (the later stages need only its metadata). */
 void srv_job_drop_pixels(srv_job *j);
-/* locate: every row from one station at the lights' height (gis_locate). */
-gs_status srv_job_locate(srv_job *j, const gis_station *st, double height_m);
+/* A light's 1-sigma centroid error per image axis, px (docs/gis.md, "Calibrated ellipses"):
+ * sqrt((sqrt(2) s / snr)^2 + (0.003 s)^2 + c^2), s = sqrt(psf_sigma_px^2 + 1/12) the
+ * pixel-integrated PSF sigma, snr the light's (srv_light_row.snr), c the crowding term: 0.012 s
+ * for a light of the multi-source PSF fit (REC_BLOB_PSF_FIT), else 0.5 s when it was
+ * deblended (REC_BLOB_DEBLENDED) or its footprint is crowded (srv_crowded_footprints), else 0.
+ * NaN when snr is not finite and > 0 or psf_sigma_px is NaN. */
+double srv_centroid_sigma_px(double snr, unsigned blob_flags, int crowded, double psf_sigma_px);
+/* Marks crowded[i] = 1 for the lights whose footprint is too large for one light of their SNR:
+ * area_px more than 4 robust sigmas above the capture's line area = a + b ln(snr), fitted by
+ * least squares to its plain lights (no REC_BLOB_* flag) with those beyond 3 robust sigmas
+ * (1.4826 MAD) dropped, three rounds: a neighbour merged into the footprint undetected. All 0
+ * with fewer than 10 plain lights. GS_ENOMEM (all 0) when out of memory. */
+gs_status srv_crowded_footprints(const srv_light_row *lights, size_t n, unsigned char *crowded);
+/* locate: every row from one station at the lights' height (gis_locate) with its 1-sigma
+ * (sigma_height_m >= 0). Each light's pixel sigma: with the station's psf_sigma_px, its
+ * centroid sigma (srv_centroid_sigma_px) and the station's sigma_px in quadrature; else (or
+ * without an SNR) the station's sigma_px. */
+gs_status srv_job_locate(srv_job *j, const gis_station *st, double height_m, double sigma_height_m);
 /* store: the DELIGHT, survey and station rows (get or add), then the capture, its frames, grid
  * frequency log, lights and (with a station) locations in one transaction. */
 typedef struct {
@@ -576,6 +592,10 @@ typedef struct {
                                  * [GIS_MIN_HEIGHT_M, GIS_MAX_HEIGHT_M]; NaN (default): a scene's
                                  * median height of its geographic lights. Required (GS_EINVAL)
                                  * when there is a station and no default. */
+    double light_height_sigma_m;   /* the height's 1-sigma (the height prior of the error
+                                    * ellipses), >= 0; NaN (default): with the scene's median,
+                                    * the standard deviation of its geographic lights' heights,
+                                    * else 0 */
     const char *delight_path;   /* DELIGHT SQLite file (NULL: a scene's "delight", else the
                                  * built-in database, gs_delight_generate) */
     rec_eq7_opts eq7;           /* Eq. 7 options (rec_eq7_opts_default) */
@@ -606,6 +626,7 @@ typedef struct {
     gis_station station;             /* that station (when has_station) */
     double light_height_m;           /* used (NaN when nothing was located) */
     char height_source[32];          /* "--light-height-m", "scene median", or "" */
+    double light_height_sigma_m;     /* its 1-sigma used for the ellipses */
     double seconds[SRV_STAGE_COUNT]; /* wall time per stage (0 for stages skipped) */
 } srv_run_report;
 
