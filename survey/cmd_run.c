@@ -14,7 +14,8 @@
 #include <unistd.h>
 
 static const char run_usage[] =
-    "usage: gridsurvey run SCENE.json|CAPDIR --db survey.sqlite [--station FILE] [--survey NAME]\n"
+    "usage: gridsurvey run SCENE.json|CAPDIR [MORE ...] --db survey.sqlite [--station FILE]\n"
+    "                      [--survey NAME]\n"
     "                      [--capture-dir DIR] [--light-height-m H] [--light-height-sigma-m S]\n"
     "                      [--phases 3|6|continuous] [--unknown-p P] [--delight DB] [--out DIR]\n"
     "\n"
@@ -26,6 +27,13 @@ static const char run_usage[] =
     "database is skipped (never stored twice); an interrupted run resumes. Then prints the\n"
     "survey's phase balance, writes OUT/SURVEY.geojson and OUT/SURVEY-map.png, and when the\n"
     "capture directory holds the simulator's truth.json, prints the evaluation against it.\n"
+    "Several inputs (e.g. two stations of one area) are run in turn, each its own capture and\n"
+    "station; then the light sites seen from two stations are triangulated (gis_triangulate)\n"
+    "and listed with their 1-sigma ellipses.\n"
+    "\n"
+    "Examples:\n"
+    "  gridsurvey run capture/scenes/metro.json --phases 6 --db build/demo/survey.sqlite\n"
+    "  gridsurvey run east.json west.json --survey town --db town.sqlite\n"
     "\n"
     "  --db FILE            the survey database (created if missing)\n"
     "  --station FILE       the station (gridsurvey-station/1, docs/gis.md) instead of the\n"
@@ -164,6 +172,81 @@ static gs_status write_outputs(srv_db *db, const srv_run_report *r, const char *
     return s;
 }
 
+/* One input: srv_run, its lines, the survey's balance, GeoJSON, map and evaluation. */
+static gs_status run_one(const srv_run_opts *op, const char *out_dir, int64_t *capture_id)
+{
+    const srv_run_opts o = *op;
+    srv_run_report r;
+    gs_status s = srv_run(&o, &r);
+    if (s != GS_OK) return s;
+    *capture_id = r.capture_id;
+    printf("run: survey %s, capture %s (key %.19s...)", r.survey, r.capture_dir, r.key);
+    if (r.scene) printf(": %d frames acquired, %d kept from an earlier run", r.frames_acquired, r.frames_kept);
+    printf("\n");
+    printf("run: %zu lights, %zu with a bulb, %zu with a phase, %zu located", r.lights, r.with_bulb,
+           r.with_phase, r.located);
+    if (isfinite(r.light_height_m))
+        printf(" at %.2f m above the ellipsoid (%s), height sigma %.2f m", r.light_height_m,
+               r.height_source, r.light_height_sigma_m);
+    else if (!r.has_station)
+        printf(" (no station: stored without a location)");
+    printf("\n");
+    if (r.skipped) {
+        printf("run: already in %s (capture id %lld): nothing stored\n", o.db_path, (long long)r.capture_id);
+    } else {
+        printf("run: stored as capture %lld in %s; seconds:", (long long)r.capture_id, o.db_path);
+        for (int k = 0; k < SRV_STAGE_COUNT; k++)
+            if (r.seconds[k] > 0.0) printf(" %s %.2f", srv_stage_name((srv_stage)k), r.seconds[k]);
+        printf("\n");
+    }
+
+    srv_db *db = NULL;
+    s = srv_db_open(o.db_path, SRV_DB_READ, &db);
+    if (s == GS_OK) s = print_balance(db, r.survey);
+    if (s == GS_OK) s = write_outputs(db, &r, out_dir);
+    if (s == GS_OK && r.truth_path[0]) {
+        srv_eval_opts eo;
+        srv_eval_opts_default(&eo);
+        eo.survey = r.survey;
+        eo.capture_key = r.key;
+        srv_eval_report er;
+        s = srv_evaluate(db, r.truth_path, &eo, &er);
+        if (s == GS_OK) {
+            printf("\n");
+            s = srv_eval_print(&er, r.truth_path, 0, stdout);
+        }
+    }
+    srv_db_close(db);
+    return s;
+}
+
+/* Two stations: the sites seen from two stations of these captures, triangulated. */
+static gs_status print_triangulated(const char *db_path, const int64_t *captures, size_t n)
+{
+    srv_db *db = NULL;
+    srv_tri_site *t = NULL;
+    size_t nt = 0, ok = 0;
+    gs_status s = srv_db_open(db_path, SRV_DB_READ, &db);
+    if (s == GS_OK) s = srv_triangulate_sites(db, captures, n, &t, &nt);
+    srv_db_close(db);
+    if (s != GS_OK) return s;
+    for (size_t i = 0; i < nt; i++) ok += isfinite(t[i].fix.lat_deg);
+    printf("\nTwo stations (srv_triangulate_sites, gis_triangulate): %zu light sites seen from two "
+           "stations, %zu triangulated, %zu flagged (behind a station or near-parallel)\n\n", nt, ok, nt - ok);
+    if (nt) printf("| site | stations | lat_deg | lon_deg | semi-major m | semi-minor m | azimuth deg | angle deg | flags |\n"
+                   "|---:|---|---:|---:|---:|---:|---:|---:|---|\n");
+    for (size_t i = 0; i < nt; i++) {
+        const gis_intersection *x = &t[i].fix;
+        char fl[96];
+        printf("| %lld | %s, %s | %.7f | %.7f | %.3f | %.3f | %.1f | %.1f | %s |\n", (long long)t[i].site_id,
+               t[i].station[0], t[i].station[1], x->lat_deg, x->lon_deg, x->ellipse.semi_major_m,
+               x->ellipse.semi_minor_m, x->ellipse.azimuth_deg, x->angle_deg,
+               gis_flags_str(x->flags, fl, sizeof fl));
+    }
+    free(t);
+    return GS_OK;
+}
+
 int srv_cmd_run(int argc, char **argv)
 {
     static const struct option longs[] = {
@@ -217,10 +300,11 @@ int srv_cmd_run(int argc, char **argv)
         default: return usage_error("unknown option '%s'", argv[optind - 1]);
         }
     }
-    if (argc - optind != 1)
-        return usage_error("%s", argc - optind < 1 ? "expected a scene file or a capture directory"
-                                                   : "expected exactly one scene or capture directory");
-    o.input = argv[optind];
+    if (argc - optind < 1) return usage_error("%s", "expected a scene file or a capture directory");
+    int n_inputs = argc - optind;
+    if (n_inputs > 1 && (o.capture_dir || o.station_path))
+        return usage_error("%s", "--capture-dir and --station take one input (each input has its own "
+                           "capture directory and station)");
     if (!o.db_path) return usage_error("%s", "--db is required");
     /* --out is checked before anything is written; the default, the database's directory, is
      * checked by opening the database */
@@ -233,47 +317,14 @@ int srv_cmd_run(int argc, char **argv)
         o.progress = tty_progress;
         o.capture_progress = 1;
     }
-
-    srv_run_report r;
-    s = srv_run(&o, &r);
-    if (s != GS_OK) return srv_error(s);
-    printf("run: survey %s, capture %s (key %.19s...)", r.survey, r.capture_dir, r.key);
-    if (r.scene) printf(": %d frames acquired, %d kept from an earlier run", r.frames_acquired, r.frames_kept);
-    printf("\n");
-    printf("run: %zu lights, %zu with a bulb, %zu with a phase, %zu located", r.lights, r.with_bulb,
-           r.with_phase, r.located);
-    if (isfinite(r.light_height_m))
-        printf(" at %.2f m above the ellipsoid (%s), height sigma %.2f m", r.light_height_m,
-               r.height_source, r.light_height_sigma_m);
-    else if (!r.has_station)
-        printf(" (no station: stored without a location)");
-    printf("\n");
-    if (r.skipped) {
-        printf("run: already in %s (capture id %lld): nothing stored\n", o.db_path, (long long)r.capture_id);
-    } else {
-        printf("run: stored as capture %lld in %s; seconds:", (long long)r.capture_id, o.db_path);
-        for (int k = 0; k < SRV_STAGE_COUNT; k++)
-            if (r.seconds[k] > 0.0) printf(" %s %.2f", srv_stage_name((srv_stage)k), r.seconds[k]);
-        printf("\n");
+    int64_t *captures = calloc((size_t)n_inputs, sizeof *captures);
+    if (!captures) return srv_error(gs_fail(GS_ENOMEM, "run: out of memory"));
+    for (int i = 0; i < n_inputs && s == GS_OK; i++) {
+        o.input = argv[optind + i];
+        s = run_one(&o, out_dir, &captures[i]);
     }
-
-    srv_db *db = NULL;
-    s = srv_db_open(o.db_path, SRV_DB_READ, &db);
-    if (s == GS_OK) s = print_balance(db, r.survey);
-    if (s == GS_OK) s = write_outputs(db, &r, out_dir);
-    if (s == GS_OK && r.truth_path[0]) {
-        srv_eval_opts eo;
-        srv_eval_opts_default(&eo);
-        eo.survey = r.survey;
-        eo.capture_key = r.key;
-        srv_eval_report er;
-        s = srv_evaluate(db, r.truth_path, &eo, &er);
-        if (s == GS_OK) {
-            printf("\n");
-            s = srv_eval_print(&er, r.truth_path, 0, stdout);
-        }
-    }
-    srv_db_close(db);
+    if (s == GS_OK && n_inputs > 1) s = print_triangulated(o.db_path, captures, (size_t)n_inputs);
+    free(captures);
     if (s == GS_OK && fflush(stdout) != 0) s = gs_fail(GS_EIO, "stdout: write failed");
     return s == GS_OK ? 0 : srv_error(s);
 }

@@ -498,6 +498,22 @@ int srv_bench_db(int argc, char **argv);
  * the database is opened, and srv_db_open itself leaves nothing behind on failure.
  * ===================================================================================== */
 
+/* Two stations (survey/sites_triangulate.c, docs/gis.md "Two stations in a survey"): every
+ * light site with located detections in the given captures from two different stations (the
+ * first two, in capture order) intersected by gis_triangulate from the detections' pixel
+ * bearings (the stations' stored cameras). A bearing's 1-sigma is the cross-range part of its
+ * one-station ellipse over its distance. *out is malloc'd (free it); flagged intersections
+ * (GIS_FIX_BEHIND, NEAR_PARALLEL) are kept with NaN positions. */
+typedef struct {
+    int64_t site_id;
+    int64_t light_id[2];             /* the two detections */
+    char station[2][64];             /* their stations' names */
+    double sigma_bearing_deg[2];
+    gis_intersection fix;            /* position, 1-sigma ellipse, angle, flags */
+} srv_tri_site;
+gs_status srv_triangulate_sites(srv_db *db, const int64_t *capture_ids, size_t n_captures,
+                                srv_tri_site **out, size_t *n_out);
+
 /* The stages (survey/stages.c), each usable on its own: `run`, `recognize` and `bench
  * accuracy` call them. A job holds one capture through the stages; zero it first;
  * srv_job_release frees whatever the stages built (accepts NULL and a zeroed job). */
