@@ -245,12 +245,8 @@ int srv_cmd_stats(int argc, char **argv)
         case 'D': o.detections = 1; break;
         case 'C': clip = optarg; break;
         case 'B':
-            if (sscanf(optarg, "%lf,%lf,%lf,%lf%c", &o.bbox[0], &o.bbox[1], &o.bbox[2], &o.bbox[3],
-                       &(char){0}) != 4 || !(fabs(o.bbox[1]) <= 90.0 && fabs(o.bbox[3]) <= 90.0 &&
-                                             o.bbox[1] <= o.bbox[3] && isfinite(o.bbox[0]) &&
-                                             isfinite(o.bbox[2]))) {
-                fprintf(stderr, "gridsurvey stats: --bbox '%s': expected MINLON,MINLAT,MAXLON,MAXLAT "
-                        "(degrees, MINLAT <= MAXLAT)\n", optarg);
+            if (srv_parse_bbox(optarg, o.bbox) != GS_OK) {
+                fprintf(stderr, "gridsurvey stats: %s\n", gs_detail());
                 return 2;
             }
             break;

@@ -514,6 +514,30 @@ typedef struct {
 gs_status srv_triangulate_sites(srv_db *db, const int64_t *capture_ids, size_t n_captures,
                                 srv_tri_site **out, size_t *n_out);
 
+/* Per-area share changes (survey/compare_shares.c): the phase counts of each group of o's
+ * grouping and filters (o->survey ignored) in survey A and in survey B (srv_stats_compute of
+ * each, light sites, their detections in that survey), joined by group name (A's groups first,
+ * then B's others). For each phase i the two-proportion z test of share_b - share_a with the
+ * pooled share p = (a_i + b_i) / (n_a + n_b): z = (s_b - s_a) / sqrt(p (1 - p) (1/n_a + 1/n_b)),
+ * two-sided P = erfc(|z| / sqrt 2) (NaN when a total is 0 or p is 0 or 1); and Pearson's
+ * chi-square of homogeneity of the 2 x 3 table (surveys x phases, phases with a count in either),
+ * dof = phases - 1, P = gs_chi2_sf (NaN when dof < 1). The tests take the two surveys as
+ * independent samples of the area's lights. GS_ENOTFOUND naming a survey that does not exist. */
+typedef struct {
+    char group[296];
+    long n_a[3], total_a, n_b[3], total_b;   /* 0/120/240 counts and their sums */
+    double share_a[3], share_b[3];
+    double z[3], p[3];
+    double chi2, p_value;
+    int dof;
+} srv_share_change;
+gs_status srv_compare_shares(srv_db *db, const srv_stats_opts *o, const char *survey_a,
+                             const char *survey_b, srv_share_change **out, size_t *count);
+/* The tests of c from its counts (n_a, total_a, n_b, total_b). */
+void srv_share_change_finish(srv_share_change *c);
+/* "MINLON,MINLAT,MAXLON,MAXLAT" into bbox (GS_EINVAL naming the text otherwise). */
+gs_status srv_parse_bbox(const char *text, double bbox[4]);
+
 /* The stages (survey/stages.c), each usable on its own: `run`, `recognize` and `bench
  * accuracy` call them. A job holds one capture through the stages; zero it first;
  * srv_job_release frees whatever the stages built (accepts NULL and a zeroed job). */
