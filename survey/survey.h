@@ -359,6 +359,9 @@ size_t srv_areas_count(const srv_areas *a);
 const char *srv_areas_label(const srv_areas *a, size_t i);
 /* The first feature (file order) covering the point (boundary included), -1 for none. */
 int srv_areas_find(const srv_areas *a, double lat_deg, double lon_deg);
+/* The union of the features labelled label as WKT (9 decimals, trimmed; malloc'd, free it):
+ * the geometry of a stats group --by feature:FIELD. GS_ENOTFOUND when no feature has it. */
+gs_status srv_areas_wkt(const srv_areas *a, const char *label, char **wkt);
 
 typedef struct {
     srv_group_by by;           /* the grouping, or the first of a combination */
