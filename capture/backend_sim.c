@@ -83,9 +83,11 @@ static void sim_free(void *self)
 static const cap_backend_ops sim_ops = {"sim", sim_info, sim_acquire, sim_free,
                                          sim_timing};
 
-/* The camera as a gridsurvey-station/1 object (docs/gis.md), for capture.json. */
-static char *station_text(const cap_scene *sc)
+/* The camera as a gridsurvey-station/1 object (docs/gis.md), for capture.json: its pose is
+ * exact (no pose sigmas) and its PSF the psf effect's (0 without it: a point in one pixel). */
+static char *station_text(const cap_sim *sim)
 {
+    const cap_scene *sc = &sim->sc;
     if (!sc->has_station) return NULL;
     const gis_camera *c = &sc->cam;
     json_t *o = json_object();
@@ -106,6 +108,7 @@ static char *station_text(const cap_scene *sc)
     json_object_set_new(o, "width_px", json_integer(c->width_px));
     json_object_set_new(o, "height_px", json_integer(c->height_px));
     json_object_set_new(o, "refraction_k", json_real(c->refraction_k));
+    json_object_set_new(o, "psf_sigma_px", json_real((sim->fx >> CAP_FX_PSF) & 1u ? sc->fx.psf.sigma_px : 0.0));
     if (sc->utc[0]) json_object_set_new(o, "time_utc", json_string(sc->utc));
     char *t = json_dumps(o, JSON_COMPACT | JSON_PRESERVE_ORDER | JSON_REAL_PRECISION(17));
     json_decref(o);
@@ -122,7 +125,7 @@ gs_status cap_backend_sim_new(const cap_scene *sc, cap_backend **out)
         sim_free(b);
         return s;
     }
-    if (sc->has_station && !(b->station_json = station_text(sc))) {
+    if (sc->has_station && !(b->station_json = station_text(b->sim))) {
         sim_free(b);
         return gs_fail(GS_ENOMEM, "sim backend: out of memory");
     }

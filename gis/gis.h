@@ -137,6 +137,7 @@ const char *gis_flags_str(unsigned flags, char *buf, size_t size);
 
 typedef struct {
     double max_error_ratio;  /* GIS_FIX_GRAZING when semi_major > ratio * range (0.25) */
+    double sigma_height_m;   /* 1-sigma of the light's height (the height prior), >= 0 (0) */
 } gis_locate_opts;
 void gis_locate_opts_default(gis_locate_opts *o);
 
@@ -148,7 +149,8 @@ typedef struct {
     double bearing_deg;     /* azimuth at the station, [0, 360): the geodesic's when located,
                                the sight line's when flagged */
     double elevation_deg;   /* elevation of the sight line at the station (apparent) */
-    gis_ellipse ellipse;    /* from sigma_px and the camera's pose sigmas; semi-axes INFINITY
+    gis_ellipse ellipse;    /* from sigma_px, the camera's pose sigmas and the height prior's
+                               sigma (gis_locate_opts.sigma_height_m); semi-axes INFINITY
                                when unbounded, NaN when not computed (no intersection) */
     unsigned flags;         /* GIS_FIX_* */
 } gis_fix;
@@ -160,9 +162,9 @@ typedef struct {
  * ABOVE_HORIZON). Exact in Earth curvature: Newton on the geodetic height along the line
  * (Geocentric::Reverse), which converges monotonically because that height is a convex
  * function of the path length, to 1e-9 m in height. sigma_px (>= 0) is the 1-sigma error of
- * each pixel coordinate; the ellipse propagates it and the pose sigmas (small rotations about
+ * each pixel coordinate; the ellipse propagates it, the pose sigmas (small rotations about
  * the vertical, the camera's horizontal right axis and its optical axis, so pitch +-90 is
- * fine) through a central-difference Jacobian. Flags: ABOVE_HORIZON (no crossing within
+ * fine) and o->sigma_height_m (the light's height) through a central-difference Jacobian. Flags: ABOVE_HORIZON (no crossing within
  * GIS_MAX_PATH_M), GRAZING (a +-1-sigma change of one parameter loses the crossing, or the
  * semi-major axis exceeds o->max_error_ratio * range), BAD_PIXEL (beyond the distortion
  * model's field); flagged fixes have NaN position and range. o NULL = defaults. Returns an
@@ -226,7 +228,10 @@ double gis_chord_m(double lat1_deg, double lon1_deg, double h1_m, double lat2_de
 /* A station file (JSON object, docs/gis.md): the camera plus the default pixel sigma. */
 typedef struct {
     gis_camera cam;
-    double sigma_px;                 /* default 1-sigma of pixel positions (1) */
+    double sigma_px;                 /* without psf_sigma_px: every light's pixel 1-sigma (1);
+                                        with it: the calibration residual added in quadrature
+                                        to each light's centroid sigma (0) */
+    double psf_sigma_px;             /* the optics' Gaussian PSF sigma, px; NaN = unknown */
     char id[GIS_TEXT_MAX];           /* "" when absent */
     char time_utc[40];               /* ISO 8601, "" when absent */
 } gis_station;

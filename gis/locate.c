@@ -17,6 +17,7 @@
 void gis_locate_opts_default(gis_locate_opts *o)
 {
     o->max_error_ratio = 0.25;
+    o->sigma_height_m = 0.0;
 }
 
 const char *gis_flags_str(unsigned flags, char *buf, size_t size)
@@ -236,6 +237,8 @@ gs_status gis_locate(const gis_camera *cam, double x_px, double y_px, double sig
                        GIS_MIN_HEIGHT_M, GIS_MAX_HEIGHT_M);
     if (!isfinite(o->max_error_ratio) || o->max_error_ratio <= 0.0)
         return gs_fail(GS_EINVAL, "locate: max_error_ratio = %g: expected > 0", o->max_error_ratio);
+    if (!(o->sigma_height_m >= 0.0) || !isfinite(o->sigma_height_m))
+        return gs_fail(GS_EINVAL, "locate: sigma_height_m = %g: expected a finite value >= 0", o->sigma_height_m);
 
     if (gis_pixel_bearing(cam, x_px, y_px, &out->bearing_deg, &out->elevation_deg) != GS_OK) {
         out->flags |= GIS_FIX_BAD_PIXEL;   /* beyond the distortion model's field */
@@ -262,25 +265,27 @@ gs_status gis_locate(const gis_camera *cam, double x_px, double y_px, double sig
      * heading about the vertical (clockwise), pitch about the horizontal right axis
      * (cos H, -sin H, 0), roll about the optical axis; these are the partial derivatives of
      * the heading/pitch/roll parametrisation, and stay defined at pitch +-90 deg, where the
-     * angles themselves lock. Each parameter is also moved by +-1 sigma: when that sight line
-     * misses the surface the ellipse is unbounded. */
-    const double sig[5] = {sigma_px, sigma_px, cam->sigma_heading_deg, cam->sigma_pitch_deg,
-                           cam->sigma_roll_deg};
-    const double step[5] = {1e-3, 1e-3, 1e-5, 1e-5, 1e-5};
+     * angles themselves lock. The light's height (the prior's sigma) moves the surface the
+     * sight line meets. Each parameter is also moved by +-1 sigma: when that sight line misses
+     * the surface the ellipse is unbounded. */
+    const double sig[6] = {sigma_px, sigma_px, cam->sigma_heading_deg, cam->sigma_pitch_deg,
+                           cam->sigma_roll_deg, o->sigma_height_m};
+    const double step[6] = {1e-3, 1e-3, 1e-5, 1e-5, 1e-5, 1e-3};
     const double up[3] = {0.0, 0.0, 1.0};
     const double pitch_axis[3] = {cos(cam->heading_deg * GIS_DEG), -sin(cam->heading_deg * GIS_DEG), 0.0};
     double cee = 0.0, cen = 0.0, cnn = 0.0;
     int unbounded = 0;
-    for (int j = 0; j < 5 && !unbounded; j++) {
+    for (int j = 0; j < 6 && !unbounded; j++) {
         if (sig[j] == 0.0) continue;
         double en[2][2];
         for (int pass = 0; pass < 2 && !unbounded; pass++) {
             for (int sgn = 0; sgn < 2; sgn++) {
                 double delta = (sgn ? -1.0 : 1.0) * (pass == 0 ? step[j] : sig[j]);
-                double x = x_px, y = y_px, ax[9];
+                double x = x_px, y = y_px, ht = light_height_m, ax[9];
                 memcpy(ax, axes, sizeof ax);
                 if (j == 0) x += delta;
                 else if (j == 1) y += delta;
+                else if (j == 5) ht += delta;
                 else {
                     const double *about = j == 2 ? up : j == 3 ? pitch_axis : axes + 6;
                     double ang = (j == 2 ? -delta : delta) * GIS_DEG;
@@ -288,7 +293,7 @@ gs_status gis_locate(const gis_camera *cam, double x_px, double y_px, double sig
                 }
                 double la, lo, hh, rr;
                 gs_status e2;
-                int r2 = locate_point(cam, ax, x, y, light_height_m, &la, &lo, &hh, &rr, &e2);
+                int r2 = locate_point(cam, ax, x, y, ht, &la, &lo, &hh, &rr, &e2);
                 if (r2 != HIT) {
                     unbounded = 1;
                     break;

@@ -39,6 +39,7 @@ static const field fields[] = {
     {"sigma_roll_deg", "sigma_roll", F_NUM, 0, CAM(sigma_roll_deg), 0},
     {"refraction_k", NULL, F_NUM, 0, CAM(refraction_k), 0},
     {"sigma_px", NULL, F_NUM, 0, offsetof(gis_station, sigma_px), 0},
+    {"psf_sigma_px", NULL, F_NUM, 0, offsetof(gis_station, psf_sigma_px), 0},
     {"id", NULL, F_STR, 0, offsetof(gis_station, id), GIS_TEXT_MAX},
     {"time_utc", NULL, F_STR, 0, offsetof(gis_station, time_utc), 40},
 };
@@ -78,7 +79,8 @@ static const char *const *allowed_keys(void)
 gs_status gis_station_parse(const char *json_text, const char *source, gis_station *st)
 {
     memset(st, 0, sizeof *st);
-    st->sigma_px = 1.0;
+    st->sigma_px = NAN;
+    st->psf_sigma_px = NAN;
     if (!source) source = "station";
     gs_json *doc;
     gs_status s = gs_json_parse(json_text, strlen(json_text), source, &doc);
@@ -133,8 +135,15 @@ gs_status gis_station_parse(const char *json_text, const char *source, gis_stati
                              "missing; see docs/gis.md for the station fields)");
             goto done;
         }
-    if (!(st->sigma_px >= 0.0)) {
+    /* NaN = not given (JSON has no NaN): without a PSF, sigma_px is every light's pixel sigma
+     * (1 px); with one, the calibration residual added to each light's centroid sigma (0) */
+    if (isnan(st->sigma_px)) st->sigma_px = isnan(st->psf_sigma_px) ? 1.0 : 0.0;
+    if (!(st->sigma_px >= 0.0) || !isfinite(st->sigma_px)) {
         s = gs_json_fail(doc, GS_EFORMAT, "sigma_px", "expected a value >= 0");
+        goto done;
+    }
+    if (!isnan(st->psf_sigma_px) && !(st->psf_sigma_px >= 0.0 && st->psf_sigma_px <= 50.0)) {
+        s = gs_json_fail(doc, GS_EFORMAT, "psf_sigma_px", "expected a value from 0 to 50");
         goto done;
     }
     s = gis_camera_check(&st->cam);

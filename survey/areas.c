@@ -160,3 +160,41 @@ int srv_areas_find(const srv_areas *a, double lat_deg, double lon_deg)
     if (p) GEOSGeom_destroy_r(a->ctx, p);
     return found;
 }
+
+gs_status srv_areas_wkt(const srv_areas *a, const char *label, char **wkt)
+{
+    *wkt = NULL;
+    if (!a || !label) return gs_fail(GS_EINVAL, "srv_areas_wkt: NULL argument");
+    GEOSGeometry **parts = calloc(a->n ? a->n : 1, sizeof *parts);
+    if (!parts) return gs_fail(GS_ENOMEM, "areas: out of memory");
+    unsigned k = 0;
+    gs_status s = GS_OK;
+    for (size_t i = 0; i < a->n && s == GS_OK; i++) {
+        if (strcmp(a->label[i], label)) continue;
+        if (!(parts[k] = GEOSGeom_clone_r(a->ctx, a->geom[i]))) s = gs_fail(GS_ENOMEM, "areas: out of memory");
+        else k++;
+    }
+    if (s == GS_OK && !k) s = gs_fail(GS_ENOTFOUND, "areas: no feature named '%s'", label);
+    /* the features of one label as one geometry: a collection (which owns the parts), then
+     * its union (overlapping features merged) */
+    GEOSGeometry *coll = NULL, *u = NULL;
+    if (s == GS_OK && !(coll = GEOSGeom_createCollection_r(a->ctx, GEOS_GEOMETRYCOLLECTION, parts, k)))
+        s = gs_fail(GS_ENOMEM, "areas: out of memory");
+    if (!coll)
+        for (unsigned i = 0; i < k; i++) GEOSGeom_destroy_r(a->ctx, parts[i]);
+    free(parts);
+    if (s == GS_OK && !(u = GEOSUnaryUnion_r(a->ctx, coll))) s = gs_fail(GS_ENUMERIC, "areas: '%s': union failed", label);
+    GEOSWKTWriter *w = s == GS_OK ? GEOSWKTWriter_create_r(a->ctx) : NULL;
+    char *t = NULL;
+    if (w) {
+        GEOSWKTWriter_setTrim_r(a->ctx, w, 1);
+        GEOSWKTWriter_setRoundingPrecision_r(a->ctx, w, 9);
+        t = GEOSWKTWriter_write_r(a->ctx, w, u);
+        GEOSWKTWriter_destroy_r(a->ctx, w);
+    }
+    if (s == GS_OK && !(t && (*wkt = strdup(t)))) s = gs_fail(GS_ENOMEM, "areas: out of memory");
+    if (t) GEOSFree_r(a->ctx, t);
+    if (u) GEOSGeom_destroy_r(a->ctx, u);
+    if (coll) GEOSGeom_destroy_r(a->ctx, coll);
+    return s;
+}

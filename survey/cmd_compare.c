@@ -10,16 +10,32 @@
 
 static const char compare_usage[] =
     "usage: gridsurvey compare --db DB --survey A --survey B [--min-p P] [--format table|csv]\n"
+    "       gridsurvey compare --db DB --survey A --survey B --by G [--clip AREAS.geojson]\n"
+    "                          [--bbox MINLON,MINLAT,MAXLON,MAXLAT] [--min-confidence X]\n"
+    "                          [--format table|csv]\n"
     "\n"
     "The light sites (physical lights) whose grid phase or bulb changed from survey A to survey\n"
     "B, with the evidence for each (both surveys' answers, their confidences and detections,\n"
     "and the probability that they differ), and the sites seen in only one of them (appeared\n"
     "in B, vanished from A: a light off, removed, or outside the other survey's view).\n"
+    "With --by, the phase shares of each group (e.g. each feeder area of --clip) in A and in B\n"
+    "instead, with the two-proportion z test of each share's change and the chi-square test of\n"
+    "homogeneity of the 0/120/240 split (P: two-sided; the surveys taken as independent samples).\n"
+    "\n"
+    "Examples:\n"
+    "  gridsurvey compare --db city.sqlite --survey june --survey july\n"
+    "  gridsurvey compare --db city.sqlite --survey june --survey july --clip feeders.geojson \\\n"
+    "                     --by feature:feeder\n"
     "\n"
     "  --db DB          the survey database (read-only)\n"
     "  --survey NAME    survey A, then survey B (twice)\n"
     "  --min-p P        report a phase or bulb change when the probability that the answers\n"
     "                   differ is at least P, in [0, 1] (default 0.9)\n"
+    "  --by G           per-group share changes; G as in gridsurvey stats (technology,\n"
+    "                   cell:SIZE_m, feature:FIELD, combinations; survey is not allowed)\n"
+    "  --clip FILE      with --by: only sites inside these areas (GeoJSON polygons)\n"
+    "  --bbox B         with --by: only sites in MINLON,MINLAT,MAXLON,MAXLAT\n"
+    "  --min-confidence X  with --by: leave out sites whose phase confidence is below X\n"
     "  --format F       table (Markdown, default) or csv\n"
     "  --help           this text\n"
     "\n"
@@ -56,14 +72,104 @@ static void fmt_p(char *buf, size_t size, double p)
     else snprintf(buf, size, "%.4f", p);
 }
 
+/* A share's cell: "33.3 % -> 40.0 % (+6.7, z 1.02, P 0.3077)". */
+static void share_cell(const srv_share_change *c, int i, char *buf, size_t size)
+{
+    if (isnan(c->share_a[i]) || isnan(c->share_b[i])) {
+        char a[16] = "-", b[16] = "-";
+        if (!isnan(c->share_a[i])) snprintf(a, sizeof a, "%.1f %%", 100.0 * c->share_a[i]);
+        if (!isnan(c->share_b[i])) snprintf(b, sizeof b, "%.1f %%", 100.0 * c->share_b[i]);
+        snprintf(buf, size, "%s -> %s", a, b);
+        return;
+    }
+    char zp[48] = "";
+    if (!isnan(c->z[i])) snprintf(zp, sizeof zp, ", z %.2f, P %.4f", c->z[i], c->p[i]);
+    snprintf(buf, size, "%.1f %% -> %.1f %% (%+.1f%s)", 100.0 * c->share_a[i], 100.0 * c->share_b[i],
+             100.0 * (c->share_b[i] - c->share_a[i]), zp);
+}
+
+/* compare --by: the per-group share changes. */
+static int compare_shares(const char *path, const char *const sv[2], srv_stats_opts *so, int by,
+                          const char *clip, int csv)
+{
+    if (!by) {
+        fprintf(stderr, "gridsurvey compare: --clip, --bbox and --min-confidence need --by\n");
+        return 2;
+    }
+    int by_feature = so->by == SRV_BY_FEATURE, by_survey = so->by == SRV_BY_SURVEY;
+    for (int i = 0; i < so->n_then; i++) {
+        by_feature |= so->then[i] == SRV_BY_FEATURE;
+        by_survey |= so->then[i] == SRV_BY_SURVEY;
+    }
+    if (by_survey) {
+        fprintf(stderr, "gridsurvey compare: --by survey: the two surveys are the comparison\n");
+        return 2;
+    }
+    if (by_feature && !clip) {
+        fprintf(stderr, "gridsurvey compare: --by feature:%s needs --clip AREAS.geojson\n", so->feature_field);
+        return 2;
+    }
+    srv_areas *areas = NULL;
+    gs_status s = clip ? srv_areas_load(clip, by_feature ? so->feature_field : NULL, &areas) : GS_OK;
+    srv_db *db = NULL;
+    if (s == GS_OK) s = srv_db_open(path, SRV_DB_READ, &db);
+    so->areas = areas;
+    srv_share_change *v = NULL;
+    size_t n = 0;
+    if (s == GS_OK) s = srv_compare_shares(db, so, sv[0], sv[1], &v, &n);
+    srv_db_close(db);
+    srv_areas_free(areas);
+    if (s != GS_OK) return srv_error(s);
+    static const char *const ph[3] = {"0", "120", "240"};
+    if (csv) {
+        printf("group,n_a,n_b");
+        for (int i = 0; i < 3; i++)
+            printf(",n%s_a,n%s_b,share%s_a,share%s_b,z%s,p%s", ph[i], ph[i], ph[i], ph[i], ph[i], ph[i]);
+        printf(",chi2,dof,p_value\n");
+        for (size_t k = 0; k < n; k++) {
+            const srv_share_change *c = &v[k];
+            printf("\"%s\",%ld,%ld", c->group, c->total_a, c->total_b);
+            for (int i = 0; i < 3; i++) {
+                printf(",%ld,%ld", c->n_a[i], c->n_b[i]);
+                double x[4] = {c->share_a[i], c->share_b[i], c->z[i], c->p[i]};
+                for (int j = 0; j < 4; j++) isnan(x[j]) ? printf(",") : printf(",%.10g", x[j]);
+            }
+            isnan(c->chi2) ? printf(",,%d,", c->dof) : printf(",%.10g,%d,%.10g", c->chi2, c->dof, c->p_value);
+            printf("\n");
+        }
+    } else {
+        printf("Phase shares of %s -> %s (two-proportion z test of each change; chi-square test of "
+               "homogeneity of the split):\n\n| group | n %s | n %s | 0 deg | 120 deg | 240 deg | chi2 | P |\n"
+               "|---|---:|---:|---|---|---|---:|---:|\n", sv[0], sv[1], sv[0], sv[1]);
+        for (size_t k = 0; k < n; k++) {
+            const srv_share_change *c = &v[k];
+            char cell[3][128];
+            for (int i = 0; i < 3; i++) share_cell(c, i, cell[i], sizeof cell[i]);
+            printf("| %s | %ld | %ld | %s | %s | %s | ", c->group, c->total_a, c->total_b, cell[0], cell[1], cell[2]);
+            isnan(c->chi2) ? printf("- | - |\n") : printf("%.2f | %.4f |\n", c->chi2, c->p_value);
+        }
+    }
+    free(v);
+    if (fflush(stdout) != 0 || ferror(stdout)) {
+        fprintf(stderr, "gridsurvey compare: cannot write the output\n");
+        return 1;
+    }
+    return 0;
+}
+
 int srv_cmd_compare(int argc, char **argv)
 {
     static const struct option longs[] = {
         {"db", required_argument, 0, 'd'},     {"survey", required_argument, 0, 'S'},
         {"min-p", required_argument, 0, 'p'},  {"format", required_argument, 0, 'f'},
-        {"help", no_argument, 0, 'h'},         {0, 0, 0, 0},
+        {"help", no_argument, 0, 'h'},         {"by", required_argument, 0, 'b'},
+        {"clip", required_argument, 0, 'C'},   {"bbox", required_argument, 0, 'B'},
+        {"min-confidence", required_argument, 0, 'c'}, {0, 0, 0, 0},
     };
-    const char *path = NULL, *sv[2] = {NULL, NULL};
+    const char *path = NULL, *sv[2] = {NULL, NULL}, *clip = NULL;
+    srv_stats_opts so;
+    srv_stats_opts_default(&so);
+    int by = 0;
     int nsv = 0, csv = 0;
     double min_p = 0.9;
     optind = 1;
@@ -94,6 +200,27 @@ int srv_cmd_compare(int argc, char **argv)
                 return 2;
             }
             break;
+        case 'b':
+            if (srv_stats_parse_by(optarg, &so) != GS_OK) {
+                fprintf(stderr, "gridsurvey compare: %s\n", gs_detail());
+                return 2;
+            }
+            by = 1;
+            break;
+        case 'C': clip = optarg; break;
+        case 'B':
+            if (srv_parse_bbox(optarg, so.bbox) != GS_OK) {
+                fprintf(stderr, "gridsurvey compare: %s\n", gs_detail());
+                return 2;
+            }
+            break;
+        case 'c':
+            so.min_confidence = strtod(optarg, &end);
+            if (!*optarg || *end || !(so.min_confidence >= 0.0 && so.min_confidence <= 1.0)) {
+                fprintf(stderr, "gridsurvey compare: --min-confidence '%s': expected a number in [0, 1]\n", optarg);
+                return 2;
+            }
+            break;
         case 'h': fputs(compare_usage, stdout); return 0;
         default: fputs(compare_usage, stderr); return 2;
         }
@@ -102,6 +229,7 @@ int srv_cmd_compare(int argc, char **argv)
         fprintf(stderr, "gridsurvey compare: expected --db DB --survey A --survey B\n%s", compare_usage);
         return 2;
     }
+    if (by || clip || !isnan(so.bbox[0]) || so.min_confidence > 0.0) return compare_shares(path, sv, &so, by, clip, csv);
     srv_db *db;
     gs_status s = srv_db_open(path, SRV_DB_READ, &db);
     if (s != GS_OK) return srv_error(s);

@@ -14,9 +14,10 @@
 #include <unistd.h>
 
 static const char run_usage[] =
-    "usage: gridsurvey run SCENE.json|CAPDIR --db survey.sqlite [--station FILE] [--survey NAME]\n"
-    "                      [--capture-dir DIR] [--light-height-m H] [--phases 3|6|continuous]\n"
-    "                      [--unknown-p P] [--delight DB] [--out DIR]\n"
+    "usage: gridsurvey run SCENE.json|CAPDIR [MORE ...] --db survey.sqlite [--station FILE]\n"
+    "                      [--survey NAME]\n"
+    "                      [--capture-dir DIR] [--light-height-m H] [--light-height-sigma-m S]\n"
+    "                      [--phases 3|6|continuous] [--unknown-p P] [--delight DB] [--out DIR]\n"
     "\n"
     "The whole job on one capture: a scene (gridsurvey-scene/1) is acquired by the simulator\n"
     "through the ACam acquisition loop into a capture directory (resumable), a capture directory\n"
@@ -26,6 +27,13 @@ static const char run_usage[] =
     "database is skipped (never stored twice); an interrupted run resumes. Then prints the\n"
     "survey's phase balance, writes OUT/SURVEY.geojson and OUT/SURVEY-map.png, and when the\n"
     "capture directory holds the simulator's truth.json, prints the evaluation against it.\n"
+    "Several inputs (e.g. two stations of one area) are run in turn, each its own capture and\n"
+    "station; then the light sites seen from two stations are triangulated (gis_triangulate)\n"
+    "and listed with their 1-sigma ellipses.\n"
+    "\n"
+    "Examples:\n"
+    "  gridsurvey run capture/scenes/metro.json --phases 6 --db build/demo/survey.sqlite\n"
+    "  gridsurvey run east.json west.json --survey town --db town.sqlite\n"
     "\n"
     "  --db FILE            the survey database (created if missing)\n"
     "  --station FILE       the station (gridsurvey-station/1, docs/gis.md) instead of the\n"
@@ -37,6 +45,8 @@ static const char run_usage[] =
     "  --light-height-m H   the lights' height above the WGS84 ellipsoid, m (default for a scene:\n"
     "                       the median height of its geographic lights; required for a capture\n"
     "                       directory with a station)\n"
+    "  --light-height-sigma-m S  its 1-sigma for the error ellipses, m (default: with the\n"
+    "                       scene's median, the spread of its lights' heights, else 0)\n"
     "  --phases P           candidate grid phases: 3 = 0/120/240 deg (default), 6 = those and\n"
     "                       + 30 deg (delta-wye transformers), continuous\n"
     "  --unknown-p P        Eq. 7's goodness-of-fit gate: a light whose best fit has a chi-square\n"
@@ -162,81 +172,22 @@ static gs_status write_outputs(srv_db *db, const srv_run_report *r, const char *
     return s;
 }
 
-int srv_cmd_run(int argc, char **argv)
+/* One input: srv_run, its lines, the survey's balance, GeoJSON, map and evaluation. */
+static gs_status run_one(const srv_run_opts *op, const char *out_dir, int64_t *capture_id)
 {
-    static const struct option longs[] = {
-        {"db", required_argument, 0, 'd'},          {"station", required_argument, 0, 's'},
-        {"survey", required_argument, 0, 'S'},      {"capture-dir", required_argument, 0, 'c'},
-        {"light-height-m", required_argument, 0, 'H'}, {"phases", required_argument, 0, 'p'},
-        {"delight", required_argument, 0, 'D'},     {"out", required_argument, 0, 'o'},
-        {"unknown-p", required_argument, 0, 'u'},
-        {"help", no_argument, 0, 'h'},              {0, 0, 0, 0},
-    };
-    srv_run_opts o;
-    srv_run_opts_default(&o);
-    const char *out = NULL;
-    o.delight_path = getenv("GRIDSURVEY_DELIGHT");
-    if (o.delight_path && !*o.delight_path) o.delight_path = NULL;
-    optind = 1;
-    opterr = 0;
-    int c;
-    char *end;
-    while ((c = getopt_long(argc, argv, ":h", longs, NULL)) != -1) {
-        switch (c) {
-        case 'd': o.db_path = optarg; break;
-        case 's': o.station_path = optarg; break;
-        case 'S': o.survey = optarg; break;
-        case 'c': o.capture_dir = optarg; break;
-        case 'D': o.delight_path = optarg; break;
-        case 'o': out = optarg; break;
-        case 'H':
-            o.light_height_m = strtod(optarg, &end);
-            if (!*optarg || *end || !isfinite(o.light_height_m))
-                return usage_error("--light-height-m '%s': expected a height in metres", optarg);
-            break;
-        case 'u':
-            o.eq7.unknown_p = strtod(optarg, &end);
-            if (!*optarg || *end || !(o.eq7.unknown_p >= 0.0 && o.eq7.unknown_p < 1.0))
-                return usage_error("--unknown-p '%s': expected a p-value in [0, 1)", optarg);
-            break;
-        case 'p':
-            if (!strcmp(optarg, "3")) o.eq7.phases = REC_PHASES_3;
-            else if (!strcmp(optarg, "6")) o.eq7.phases = REC_PHASES_6;
-            else if (!strcmp(optarg, "continuous")) o.eq7.phases = REC_PHASES_CONTINUOUS;
-            else return usage_error("--phases '%s': expected 3, 6 or continuous", optarg);
-            break;
-        case 'h': fputs(run_usage, stdout); return 0;
-        case ':': return usage_error("option '%s' needs a value", argv[optind - 1]);
-        default: return usage_error("unknown option '%s'", argv[optind - 1]);
-        }
-    }
-    if (argc - optind != 1)
-        return usage_error("%s", argc - optind < 1 ? "expected a scene file or a capture directory"
-                                                   : "expected exactly one scene or capture directory");
-    o.input = argv[optind];
-    if (!o.db_path) return usage_error("%s", "--db is required");
-    /* --out is checked before anything is written; the default, the database's directory, is
-     * checked by opening the database */
-    char out_dir[4096];
-    if (out) snprintf(out_dir, sizeof out_dir, "%s", out);
-    else gs_path_dir(o.db_path, out_dir, sizeof out_dir);
-    gs_status s = out ? check_out_dir(out_dir) : GS_OK;
-    if (s != GS_OK) return srv_error(s);
-    if (isatty(2)) {
-        o.progress = tty_progress;
-        o.capture_progress = 1;
-    }
-
+    const srv_run_opts o = *op;
     srv_run_report r;
-    s = srv_run(&o, &r);
-    if (s != GS_OK) return srv_error(s);
+    gs_status s = srv_run(&o, &r);
+    if (s != GS_OK) return s;
+    *capture_id = r.capture_id;
     printf("run: survey %s, capture %s (key %.19s...)", r.survey, r.capture_dir, r.key);
     if (r.scene) printf(": %d frames acquired, %d kept from an earlier run", r.frames_acquired, r.frames_kept);
     printf("\n");
     printf("run: %zu lights, %zu with a bulb, %zu with a phase, %zu located", r.lights, r.with_bulb,
            r.with_phase, r.located);
     if (isfinite(r.light_height_m))
-        printf(" at %.2f m above the ellipsoid (%s)", r.light_height_m, r.height_source);
+        printf(" at %.2f m above the ellipsoid (%s), height sigma %.2f m", r.light_height_m,
+               r.height_source, r.light_height_sigma_m);
     else if (!r.has_station)
         printf(" (no station: stored without a location)");
     printf("\n");
@@ -266,6 +217,114 @@ int srv_cmd_run(int argc, char **argv)
         }
     }
     srv_db_close(db);
+    return s;
+}
+
+/* Two stations: the sites seen from two stations of these captures, triangulated. */
+static gs_status print_triangulated(const char *db_path, const int64_t *captures, size_t n)
+{
+    srv_db *db = NULL;
+    srv_tri_site *t = NULL;
+    size_t nt = 0, ok = 0;
+    gs_status s = srv_db_open(db_path, SRV_DB_READ, &db);
+    if (s == GS_OK) s = srv_triangulate_sites(db, captures, n, &t, &nt);
+    srv_db_close(db);
+    if (s != GS_OK) return s;
+    for (size_t i = 0; i < nt; i++) ok += isfinite(t[i].fix.lat_deg);
+    printf("\nTwo stations (srv_triangulate_sites, gis_triangulate): %zu light sites seen from two "
+           "stations, %zu triangulated, %zu flagged (behind a station or near-parallel)\n\n", nt, ok, nt - ok);
+    if (nt) printf("| site | stations | lat_deg | lon_deg | semi-major m | semi-minor m | azimuth deg | angle deg | flags |\n"
+                   "|---:|---|---:|---:|---:|---:|---:|---:|---|\n");
+    for (size_t i = 0; i < nt; i++) {
+        const gis_intersection *x = &t[i].fix;
+        char fl[96];
+        printf("| %lld | %s, %s | %.7f | %.7f | %.3f | %.3f | %.1f | %.1f | %s |\n", (long long)t[i].site_id,
+               t[i].station[0], t[i].station[1], x->lat_deg, x->lon_deg, x->ellipse.semi_major_m,
+               x->ellipse.semi_minor_m, x->ellipse.azimuth_deg, x->angle_deg,
+               gis_flags_str(x->flags, fl, sizeof fl));
+    }
+    free(t);
+    return GS_OK;
+}
+
+int srv_cmd_run(int argc, char **argv)
+{
+    static const struct option longs[] = {
+        {"db", required_argument, 0, 'd'},          {"station", required_argument, 0, 's'},
+        {"survey", required_argument, 0, 'S'},      {"capture-dir", required_argument, 0, 'c'},
+        {"light-height-m", required_argument, 0, 'H'}, {"phases", required_argument, 0, 'p'},
+        {"delight", required_argument, 0, 'D'},     {"out", required_argument, 0, 'o'},
+        {"unknown-p", required_argument, 0, 'u'},   {"light-height-sigma-m", required_argument, 0, 'G'},
+        {"help", no_argument, 0, 'h'},              {0, 0, 0, 0},
+    };
+    srv_run_opts o;
+    srv_run_opts_default(&o);
+    const char *out = NULL;
+    o.delight_path = getenv("GRIDSURVEY_DELIGHT");
+    if (o.delight_path && !*o.delight_path) o.delight_path = NULL;
+    optind = 1;
+    opterr = 0;
+    int c;
+    char *end;
+    while ((c = getopt_long(argc, argv, ":h", longs, NULL)) != -1) {
+        switch (c) {
+        case 'd': o.db_path = optarg; break;
+        case 's': o.station_path = optarg; break;
+        case 'S': o.survey = optarg; break;
+        case 'c': o.capture_dir = optarg; break;
+        case 'D': o.delight_path = optarg; break;
+        case 'o': out = optarg; break;
+        case 'H':
+            o.light_height_m = strtod(optarg, &end);
+            if (!*optarg || *end || !isfinite(o.light_height_m))
+                return usage_error("--light-height-m '%s': expected a height in metres", optarg);
+            break;
+        case 'G':
+            o.light_height_sigma_m = strtod(optarg, &end);
+            if (!*optarg || *end || !(o.light_height_sigma_m >= 0.0))
+                return usage_error("--light-height-sigma-m '%s': expected metres >= 0", optarg);
+            break;
+        case 'u':
+            o.eq7.unknown_p = strtod(optarg, &end);
+            if (!*optarg || *end || !(o.eq7.unknown_p >= 0.0 && o.eq7.unknown_p < 1.0))
+                return usage_error("--unknown-p '%s': expected a p-value in [0, 1)", optarg);
+            break;
+        case 'p':
+            if (!strcmp(optarg, "3")) o.eq7.phases = REC_PHASES_3;
+            else if (!strcmp(optarg, "6")) o.eq7.phases = REC_PHASES_6;
+            else if (!strcmp(optarg, "continuous")) o.eq7.phases = REC_PHASES_CONTINUOUS;
+            else return usage_error("--phases '%s': expected 3, 6 or continuous", optarg);
+            break;
+        case 'h': fputs(run_usage, stdout); return 0;
+        case ':': return usage_error("option '%s' needs a value", argv[optind - 1]);
+        default: return usage_error("unknown option '%s'", argv[optind - 1]);
+        }
+    }
+    if (argc - optind < 1) return usage_error("%s", "expected a scene file or a capture directory");
+    int n_inputs = argc - optind;
+    if (n_inputs > 1 && (o.capture_dir || o.station_path))
+        return usage_error("%s", "--capture-dir and --station take one input (each input has its own "
+                           "capture directory and station)");
+    if (!o.db_path) return usage_error("%s", "--db is required");
+    /* --out is checked before anything is written; the default, the database's directory, is
+     * checked by opening the database */
+    char out_dir[4096];
+    if (out) snprintf(out_dir, sizeof out_dir, "%s", out);
+    else gs_path_dir(o.db_path, out_dir, sizeof out_dir);
+    gs_status s = out ? check_out_dir(out_dir) : GS_OK;
+    if (s != GS_OK) return srv_error(s);
+    if (isatty(2)) {
+        o.progress = tty_progress;
+        o.capture_progress = 1;
+    }
+    int64_t *captures = calloc((size_t)n_inputs, sizeof *captures);
+    if (!captures) return srv_error(gs_fail(GS_ENOMEM, "run: out of memory"));
+    for (int i = 0; i < n_inputs && s == GS_OK; i++) {
+        o.input = argv[optind + i];
+        s = run_one(&o, out_dir, &captures[i]);
+    }
+    if (s == GS_OK && n_inputs > 1) s = print_triangulated(o.db_path, captures, (size_t)n_inputs);
+    free(captures);
     if (s == GS_OK && fflush(stdout) != 0) s = gs_fail(GS_EIO, "stdout: write failed");
     return s == GS_OK ? 0 : srv_error(s);
 }

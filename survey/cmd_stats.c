@@ -38,11 +38,20 @@ static const char stats_usage[] =
     "  --survey NAME       only this survey\n"
     "  --min-confidence X  leave out lights whose phase confidence (posterior of the phase)\n"
     "                      is below X, in [0, 1] (default 0)\n"
-    "  --format F          table (Markdown, default), json or csv\n"
+    "  --format F          table (Markdown, default), json or csv; with --by feature:FIELD the\n"
+    "                      CSV's last column, WKT, is each area's polygon (GDAL reads the\n"
+    "                      file as a polygon layer: QGIS, ogr2ogr)\n"
+    "  -o, --output F.csv  write the CSV to F.csv (replaced atomically) instead of stdout, with\n"
+    "                      GDAL's F.csvt (column types) and, with the WKT column, F.prj (WGS84)\n"
     "  --detections        count every stored detection; by default a light seen on several\n"
     "                      nights or captures (one light site) counts once, its detections'\n"
     "                      posteriors combined (docs/survey-db.md, \"Light sites\")\n"
-    "  --help              this text\n";
+    "  --help              this text\n"
+    "\n"
+    "Examples:\n"
+    "  gridsurvey stats --db city.sqlite --by technology\n"
+    "  gridsurvey stats --db city.sqlite --clip feeders.geojson --by feature:feeder --format csv \\\n"
+    "                   -o feeders-balance.csv\n";
 
 typedef enum { FMT_TABLE, FMT_JSON, FMT_CSV } out_format;
 
@@ -115,33 +124,68 @@ void srv_stats_print_table(const srv_phase_stats *g, size_t n, const srv_stats_o
     printf("%s\n", few ? " (few): fewer than 5 expected per phase, p approximate." : "");
 }
 
-static void print_csv(const srv_phase_stats *g, size_t n)
+/* The CSV (RFC 4180) to f; with areas (--by feature:FIELD alone), a last column WKT holding
+ * each group's area (srv_areas_wkt), which GDAL's CSV driver reads as the geometry. */
+static gs_status print_csv(FILE *f, const srv_phase_stats *g, size_t n, const srv_areas *areas)
 {
-    printf("group,lat_deg,lon_deg,lights,below_confidence,unknown,other,n0,n120,n240,n,"
-           "share0,lo0,hi0,share120,lo120,hi120,share240,lo240,hi240,chi2,p_value,imbalance,flags,"
-           "n30,n150,n270\n");
+    fprintf(f, "group,lat_deg,lon_deg,lights,below_confidence,unknown,other,n0,n120,n240,n,"
+            "share0,lo0,hi0,share120,lo120,hi120,share240,lo240,hi240,chi2,p_value,imbalance,flags,"
+            "n30,n150,n270%s\n", areas ? ",WKT" : "");
     for (size_t i = 0; i < n; i++) {
         const srv_phase_stats *x = &g[i];
         int quote = strpbrk(x->group, ",\"\n") != NULL;
         if (quote) {
-            putchar('"');
+            fputc('"', f);
             for (const char *p = x->group; *p; p++) {
-                if (*p == '"') putchar('"');
-                putchar(*p);
+                if (*p == '"') fputc('"', f);
+                fputc(*p, f);
             }
-            putchar('"');
+            fputc('"', f);
         } else {
-            fputs(x->group, stdout);
+            fputs(x->group, f);
         }
         double v[] = {x->lat_deg, x->lon_deg};
-        for (int k = 0; k < 2; k++) isnan(v[k]) ? printf(",") : printf(",%.7f", v[k]);
-        printf(",%ld,%ld,%ld,%ld,%ld,%ld,%ld,%ld", x->lights, x->below, x->unknown, x->other, x->n[0],
-               x->n[1], x->n[2], x->total);
+        for (int k = 0; k < 2; k++) isnan(v[k]) ? fprintf(f, ",") : fprintf(f, ",%.7f", v[k]);
+        fprintf(f, ",%ld,%ld,%ld,%ld,%ld,%ld,%ld,%ld", x->lights, x->below, x->unknown, x->other, x->n[0],
+                x->n[1], x->n[2], x->total);
         double r[] = {x->share[0], x->lo[0], x->hi[0], x->share[1], x->lo[1], x->hi[1], x->share[2],
                       x->lo[2], x->hi[2], x->chi2, x->p_value, x->imbalance};
-        for (int k = 0; k < 12; k++) isnan(r[k]) ? printf(",") : printf(",%.10g", r[k]);
-        printf(",%u,%ld,%ld,%ld\n", x->flags, x->n30[0], x->n30[1], x->n30[2]);
+        for (int k = 0; k < 12; k++) isnan(r[k]) ? fprintf(f, ",") : fprintf(f, ",%.10g", r[k]);
+        fprintf(f, ",%u,%ld,%ld,%ld", x->flags, x->n30[0], x->n30[1], x->n30[2]);
+        if (areas) {
+            char *wkt = NULL;
+            gs_status s = srv_areas_wkt(areas, x->group, &wkt);
+            if (s != GS_OK) return s;
+            fprintf(f, ",\"%s\"", wkt);   /* WKT has no quote to double */
+            free(wkt);
+        }
+        fputc('\n', f);
     }
+    return GS_OK;
+}
+
+/* GDAL's sidecars of a CSV NAME.csv: NAME.csvt, the column types (so counts import as
+ * integers and WKT as the geometry), and NAME.prj, WGS84 (EPSG:4326 axes lon, lat). */
+static gs_status write_sidecars(const char *csv_path, int wkt)
+{
+    char path[4200];
+    size_t stem = strlen(csv_path) - 4;
+    static const char prj[] = "GEOGCS[\"WGS 84\",DATUM[\"WGS_1984\",SPHEROID[\"WGS 84\",6378137,"
+                              "298.257223563]],PRIMEM[\"Greenwich\",0],UNIT[\"degree\",0.0174532925199433]]";
+    gs_atomic a;
+    snprintf(path, sizeof path, "%.*s.csvt", (int)stem, csv_path);
+    gs_status s = gs_atomic_open(&a, path, 1);
+    if (s != GS_OK) return s;
+    fputs("\"String\",\"Real\",\"Real\"", a.f);
+    for (int k = 0; k < 8; k++) fputs(",\"Integer\"", a.f);
+    for (int k = 0; k < 12; k++) fputs(",\"Real\"", a.f);
+    for (int k = 0; k < 4; k++) fputs(",\"Integer\"", a.f);
+    fputs(wkt ? ",\"WKT\"\n" : "\n", a.f);
+    if ((s = gs_atomic_commit(&a)) != GS_OK || !wkt) return s;
+    snprintf(path, sizeof path, "%.*s.prj", (int)stem, csv_path);
+    if ((s = gs_atomic_open(&a, path, 1)) != GS_OK) return s;
+    fputs(prj, a.f);
+    return gs_atomic_commit(&a);
 }
 
 static json_t *real_or_null(double v)
@@ -210,19 +254,20 @@ int srv_cmd_stats(int argc, char **argv)
         {"format", required_argument, 0, 'f'}, {"help", no_argument, 0, 'h'},
         {"detections", no_argument, 0, 'D'},   {"clip", required_argument, 0, 'C'},
         {"bbox", required_argument, 0, 'B'},   {"pg", required_argument, 0, 'p'},
-        {0, 0, 0, 0},
+        {"output", required_argument, 0, 'o'}, {0, 0, 0, 0},
     };
-    const char *path = NULL, *clip = NULL, *conninfo = NULL;
+    const char *path = NULL, *clip = NULL, *conninfo = NULL, *output = NULL;
     srv_stats_opts o;
     srv_stats_opts_default(&o);
     out_format fmt = FMT_TABLE;
     optind = 1;
     int c;
     char *end;
-    while ((c = getopt_long(argc, argv, "h", longs, NULL)) != -1) {
+    while ((c = getopt_long(argc, argv, "ho:", longs, NULL)) != -1) {
         switch (c) {
         case 'd': path = optarg; break;
         case 'p': conninfo = optarg; break;
+        case 'o': output = optarg; break;
         case 'S': o.survey = optarg; break;
         case 'b':
             if (srv_stats_parse_by(optarg, &o) != GS_OK) {
@@ -249,12 +294,8 @@ int srv_cmd_stats(int argc, char **argv)
         case 'D': o.detections = 1; break;
         case 'C': clip = optarg; break;
         case 'B':
-            if (sscanf(optarg, "%lf,%lf,%lf,%lf%c", &o.bbox[0], &o.bbox[1], &o.bbox[2], &o.bbox[3],
-                       &(char){0}) != 4 || !(fabs(o.bbox[1]) <= 90.0 && fabs(o.bbox[3]) <= 90.0 &&
-                                             o.bbox[1] <= o.bbox[3] && isfinite(o.bbox[0]) &&
-                                             isfinite(o.bbox[2]))) {
-                fprintf(stderr, "gridsurvey stats: --bbox '%s': expected MINLON,MINLAT,MAXLON,MAXLAT "
-                        "(degrees, MINLAT <= MAXLAT)\n", optarg);
+            if (srv_parse_bbox(optarg, o.bbox) != GS_OK) {
+                fprintf(stderr, "gridsurvey stats: %s\n", gs_detail());
                 return 2;
             }
             break;
@@ -268,6 +309,10 @@ int srv_cmd_stats(int argc, char **argv)
     }
     if (!path == !conninfo) {
         fprintf(stderr, "gridsurvey stats: expected one of --db and --pg (see gridsurvey help stats)\n");
+        return 2;
+    }
+    if (output && (fmt != FMT_CSV || strlen(output) < 5 || strcmp(output + strlen(output) - 4, ".csv"))) {
+        fprintf(stderr, "gridsurvey stats: -o '%s': expected a NAME.csv file and --format csv\n", output);
         return 2;
     }
     int by_feature = o.by == SRV_BY_FEATURE;
@@ -294,12 +339,26 @@ int srv_cmd_stats(int argc, char **argv)
         if (s == GS_OK) s = srv_stats_compute(db, &o, &g, &n, &ungrouped);
         if (db) srv_db_close(db);
     }
+    if (s == GS_OK && fmt == FMT_CSV) {
+        /* the file replaced atomically ("-" or no -o: stdout); the areas' geometry when the
+         * groups are the areas */
+        gs_atomic a;
+        const srv_areas *wkt = o.by == SRV_BY_FEATURE && !o.n_then ? areas : NULL;
+        s = gs_atomic_open(&a, output ? output : "-", 1);
+        if (s == GS_OK) s = print_csv(a.f, g, n, wkt);
+        if (s == GS_OK) s = gs_atomic_commit(&a);
+        else gs_atomic_abort(&a);
+        if (s == GS_OK && output) s = write_sidecars(output, wkt != NULL);
+        if (s == GS_OK && output) fprintf(stderr, "wrote %s (%zu groups)\n", output, n);
+    }
     srv_areas_free(areas);
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) {
+        free(g);
+        return srv_error(s);
+    }
     int rc = 0;
     if (fmt == FMT_TABLE) srv_stats_print_table(g, n, &o, ungrouped);
-    else if (fmt == FMT_CSV) print_csv(g, n);
-    else rc = print_json(g, n, &o, path ? path : "postgresql", ungrouped);
+    else if (fmt == FMT_JSON) rc = print_json(g, n, &o, path ? path : "postgresql", ungrouped);
     free(g);
     if (rc != 0 || fflush(stdout) != 0 || ferror(stdout)) {
         fprintf(stderr, "gridsurvey stats: cannot write the output\n");

@@ -226,9 +226,9 @@ static int query_int(sqlite3 *db, const char *sql, int *v)
 static const char *expected_text(void)
 {
     return "expected a gridsurvey survey database (SQLite, application_id 0x47534442 'GSDB', "
-           "schema version 1.." "3" ")";
+           "schema version 1.." "4" ")";
 }
-_Static_assert(SRV_DB_SCHEMA_VERSION == 3, "update expected_text()");
+_Static_assert(SRV_DB_SCHEMA_VERSION == 4, "update expected_text()");
 
 /* Identify an existing file through a read-only connection (nothing is written). */
 static gs_status identify(const char *path, off_t size, db_kind *kind, int *version)

@@ -114,6 +114,29 @@ static const char *const migration_1[] = {
  * built with SQLITE_ENABLE_MATH_FUNCTIONS). The phase classes match gs_phase_class exactly
  * (phases are stored wrapped to [0, 360)); the Wilson interval uses z = SRV_Z95. */
 #define Z95_SQL "1.959963984540054"
+/* The shares view over a counts view (grouping, grp, lights, unknown, other, n0, n120, n240,
+ * n) and the balance view over it: Wilson bounds, chi2, p-value and imbalance. */
+#define SHARES_BALANCE_SQL(counts, shares, balance) \
+    "CREATE VIEW " shares " AS\n" \
+    "SELECT *, 1.0 * n0 / n AS share0, 1.0 * n120 / n AS share120, 1.0 * n240 / n AS share240\n" \
+    "FROM " counts ";\n" \
+    "CREATE VIEW " balance " AS\n" \
+    "SELECT grouping, grp, lights, unknown, other, n0, n120, n240, n,\n" \
+    "  share0,\n" \
+    "  (share0 + z2 / (2 * n) - z * sqrt(share0 * (1 - share0) / n + z2 / (4.0 * n * n))) / (1 + z2 / n) AS lo0,\n" \
+    "  (share0 + z2 / (2 * n) + z * sqrt(share0 * (1 - share0) / n + z2 / (4.0 * n * n))) / (1 + z2 / n) AS hi0,\n" \
+    "  share120,\n" \
+    "  (share120 + z2 / (2 * n) - z * sqrt(share120 * (1 - share120) / n + z2 / (4.0 * n * n))) / (1 + z2 / n) AS lo120,\n" \
+    "  (share120 + z2 / (2 * n) + z * sqrt(share120 * (1 - share120) / n + z2 / (4.0 * n * n))) / (1 + z2 / n) AS hi120,\n" \
+    "  share240,\n" \
+    "  (share240 + z2 / (2 * n) - z * sqrt(share240 * (1 - share240) / n + z2 / (4.0 * n * n))) / (1 + z2 / n) AS lo240,\n" \
+    "  (share240 + z2 / (2 * n) + z * sqrt(share240 * (1 - share240) / n + z2 / (4.0 * n * n))) / (1 + z2 / n) AS hi240,\n" \
+    "  chi2, exp(-chi2 / 2) AS p_value,\n" \
+    "  3 * max(abs(share0 - 1.0 / 3), abs(share120 - 1.0 / 3), abs(share240 - 1.0 / 3)) AS imbalance\n" \
+    "FROM (SELECT *, " Z95_SQL " AS z, " Z95_SQL " * " Z95_SQL " AS z2,\n" \
+    "        CASE WHEN n > 0 THEN ((n0 - n / 3.0) * (n0 - n / 3.0) + (n120 - n / 3.0) * (n120 - n / 3.0)\n" \
+    "                             + (n240 - n / 3.0) * (n240 - n / 3.0)) / (n / 3.0) END AS chi2\n" \
+    "      FROM " shares ");\n"
 static const char *const migration_2[] = {
     "CREATE VIEW light_phase AS\n"
     "SELECT l.id AS light_id, s.id AS survey_id, s.name AS survey, c.capture_key,\n"
@@ -142,26 +165,7 @@ static const char *const migration_2[] = {
     "       sum(n0) AS n0, sum(n120) AS n120, sum(n240) AS n240, sum(n0 + n120 + n240) AS n\n"
     "FROM g GROUP BY grouping, grp;\n"
     ,
-    "CREATE VIEW phase_shares AS\n"
-    "SELECT *, 1.0 * n0 / n AS share0, 1.0 * n120 / n AS share120, 1.0 * n240 / n AS share240\n"
-    "FROM phase_counts;\n"
-    "CREATE VIEW phase_balance AS\n"
-    "SELECT grouping, grp, lights, unknown, other, n0, n120, n240, n,\n"
-    "  share0,\n"
-    "  (share0 + z2 / (2 * n) - z * sqrt(share0 * (1 - share0) / n + z2 / (4.0 * n * n))) / (1 + z2 / n) AS lo0,\n"
-    "  (share0 + z2 / (2 * n) + z * sqrt(share0 * (1 - share0) / n + z2 / (4.0 * n * n))) / (1 + z2 / n) AS hi0,\n"
-    "  share120,\n"
-    "  (share120 + z2 / (2 * n) - z * sqrt(share120 * (1 - share120) / n + z2 / (4.0 * n * n))) / (1 + z2 / n) AS lo120,\n"
-    "  (share120 + z2 / (2 * n) + z * sqrt(share120 * (1 - share120) / n + z2 / (4.0 * n * n))) / (1 + z2 / n) AS hi120,\n"
-    "  share240,\n"
-    "  (share240 + z2 / (2 * n) - z * sqrt(share240 * (1 - share240) / n + z2 / (4.0 * n * n))) / (1 + z2 / n) AS lo240,\n"
-    "  (share240 + z2 / (2 * n) + z * sqrt(share240 * (1 - share240) / n + z2 / (4.0 * n * n))) / (1 + z2 / n) AS hi240,\n"
-    "  chi2, exp(-chi2 / 2) AS p_value,\n"
-    "  3 * max(abs(share0 - 1.0 / 3), abs(share120 - 1.0 / 3), abs(share240 - 1.0 / 3)) AS imbalance\n"
-    "FROM (SELECT *, " Z95_SQL " AS z, " Z95_SQL " * " Z95_SQL " AS z2,\n"
-    "        CASE WHEN n > 0 THEN ((n0 - n / 3.0) * (n0 - n / 3.0) + (n120 - n / 3.0) * (n120 - n / 3.0)\n"
-    "                             + (n240 - n / 3.0) * (n240 - n / 3.0)) / (n / 3.0) END AS chi2\n"
-    "      FROM phase_shares);\n",
+    SHARES_BALANCE_SQL("phase_counts", "phase_shares", "phase_balance"),
     NULL};
 
 /* Version 3: light identity (docs/survey-db.md, "Light sites"). A site is one physical light;
@@ -225,10 +229,32 @@ static const char *const migration_3[] = {
     "FROM light_sites;\n",
     NULL};
 
+
+/* Version 4: the phase-balance views over light sites (docs/survey-db.md "Views"): one row per
+ * physical light, its detections combined over every survey (light_sites' columns), grouped
+ * as 'all' and 'technology'; gridsurvey stats (no --survey) gives the same counts. */
+static const char *const migration_4[] = {
+    "CREATE VIEW site_phase_counts AS\n"
+    "WITH base AS MATERIALIZED (\n"
+    "  SELECT technology, count(*) AS lights,\n"
+    "         sum(phase_class = 'unknown') AS unknown, sum(phase_class = 'other') AS other,\n"
+    "         sum(phase_class = '0') AS n0, sum(phase_class = '120') AS n120,\n"
+    "         sum(phase_class = '240') AS n240\n"
+    "  FROM site_phase GROUP BY technology),\n"
+    "g(grouping, grp, lights, unknown, other, n0, n120, n240) AS (\n"
+    "  SELECT 'all', 'all', lights, unknown, other, n0, n120, n240 FROM base\n"
+    "  UNION ALL SELECT 'technology', technology, lights, unknown, other, n0, n120, n240 FROM base)\n"
+    "SELECT grouping, grp, sum(lights) AS lights, sum(unknown) AS unknown, sum(other) AS other,\n"
+    "       sum(n0) AS n0, sum(n120) AS n120, sum(n240) AS n240, sum(n0 + n120 + n240) AS n\n"
+    "FROM g GROUP BY grouping, grp;\n",
+    SHARES_BALANCE_SQL("site_phase_counts", "site_phase_shares", "site_phase_balance"),
+    NULL};
+
 const srv_db_migration srv_db_migrations[SRV_DB_MIGRATIONS] = {
     {"tables, R*Tree and triggers", migration_1},
     {"phase-balance views", migration_2},
     {"light sites", migration_3},
+    {"site phase-balance views", migration_4},
 };
 
 /* ------------------------------------------------------------------ statements */

@@ -10,7 +10,7 @@
  * Crash safety comes from the parts: the acquisition loop keeps intact frames and resumes,
  * srv_db_add_capture commits a capture completely or not at all, and the resume key (a content
  * hash of the capture directory) makes a re-run skip what is committed. */
-#include "survey/survey.h"
+#include "survey/internal.h"
 #include "capture/capture.h"
 
 #include <errno.h>
@@ -39,6 +39,7 @@ void srv_run_opts_default(srv_run_opts *o)
 {
     memset(o, 0, sizeof *o);
     o->light_height_m = NAN;
+    o->light_height_sigma_m = NAN;
     rec_eq7_opts_default(&o->eq7);
     o->threshold_sigma = 5.0;
 }
@@ -126,23 +127,21 @@ static gs_status capture_key(const char *dir, const gs_capture *cap, char key[72
 
 /* ------------------------------------------------------------------ helpers */
 
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-/* The median height of the scene's geographic lights; NaN when it has none. */
-static double scene_median_height(const cap_scene *sc)
+/* The median height of the scene's geographic lights (NaN when it has none) and their
+ * standard deviation. */
+static double scene_median_height(const cap_scene *sc, double *sd_m)
 {
     double *h = malloc((sc->n_lights ? sc->n_lights : 1) * sizeof *h);
     size_t n = 0;
     if (!h) return NAN;
     for (size_t i = 0; i < sc->n_lights; i++)
         if (sc->lights[i].geographic && isfinite(sc->lights[i].height_m)) h[n++] = sc->lights[i].height_m;
-    double med = NAN;
+    double med = NAN, sum = 0, sum2 = 0;
+    for (size_t i = 0; i < n; i++) sum += h[i];
+    for (size_t i = 0; i < n; i++) sum2 += (h[i] - sum / (double)n) * (h[i] - sum / (double)n);
+    *sd_m = n > 1 ? sqrt(sum2 / (double)(n - 1)) : 0.0;
     if (n) {
-        qsort(h, n, sizeof *h, cmp_double);
+        qsort(h, n, sizeof *h, srv_cmp_double);
         med = n % 2 ? h[n / 2] : 0.5 * (h[n / 2 - 1] + h[n / 2]);
     }
     free(h);
@@ -173,6 +172,9 @@ static gs_status check_opts(const srv_run_opts *o)
         !(o->light_height_m >= GIS_MIN_HEIGHT_M && o->light_height_m <= GIS_MAX_HEIGHT_M))
         return gs_fail(GS_EINVAL, "--light-height-m %g: expected a height above the WGS84 ellipsoid "
                        "from %g to %g m", o->light_height_m, GIS_MIN_HEIGHT_M, GIS_MAX_HEIGHT_M);
+    if (!isnan(o->light_height_sigma_m) && !(o->light_height_sigma_m >= 0.0 && o->light_height_sigma_m <= 1000.0))
+        return gs_fail(GS_EINVAL, "--light-height-sigma-m %g: expected metres from 0 to 1000",
+                       o->light_height_sigma_m);
     if (o->survey && (!*o->survey || strlen(o->survey) > 63 || !gs_text_clean(o->survey)))
         return gs_fail(GS_EINVAL, "--survey: expected a name of 1 to 63 bytes of UTF-8 without "
                        "control characters");
@@ -301,6 +303,7 @@ static gs_status station_and_height(const srv_run_opts *o, srv_run_report *r, co
                                     int have_scene, const int dims[5])
 {
     gs_status s;
+    double sd = 0.0;
     if (o->station_path) {
         if ((s = gis_station_read(o->station_path, &r->station)) != GS_OK) return s;
         r->has_station = 1;
@@ -315,13 +318,15 @@ static gs_status station_and_height(const srv_run_opts *o, srv_run_report *r, co
     if (isfinite(o->light_height_m)) {
         r->light_height_m = o->light_height_m;
         snprintf(r->height_source, sizeof r->height_source, "--light-height-m");
-    } else if (have_scene && isfinite(r->light_height_m = scene_median_height(sc))) {
+    } else if (have_scene && isfinite(r->light_height_m = scene_median_height(sc, &sd))) {
         snprintf(r->height_source, sizeof r->height_source, "scene median");
+        r->light_height_sigma_m = sd;
     } else {
         return gs_fail(GS_EINVAL, "%s: the lights' height is unknown (%s): give --light-height-m "
                        "H, metres above the WGS84 ellipsoid", o->input,
                        have_scene ? "the scene has no geographic light" : "a capture directory");
     }
+    if (!isnan(o->light_height_sigma_m)) r->light_height_sigma_m = o->light_height_sigma_m;
     return GS_OK;
 }
 
@@ -428,7 +433,7 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
     if (r->has_station) {
         stage(o, SRV_STAGE_LOCATE, "%zu lights at %.1f m", j.cat.count, r->light_height_m);
         t0 = now_s();
-        if ((s = srv_job_locate(&j, &r->station, r->light_height_m)) != GS_OK) goto done;
+        if ((s = srv_job_locate(&j, &r->station, r->light_height_m, r->light_height_sigma_m)) != GS_OK) goto done;
         r->located = j.located;
         r->seconds[SRV_STAGE_LOCATE] = now_s() - t0;
     } else {

@@ -45,7 +45,7 @@ int srv_main(int argc, char **argv);
  * SQL NULL. Non-finite doubles (NaN, +-Inf) store NULL.
  * ===================================================================================== */
 
-#define SRV_DB_SCHEMA_VERSION 3
+#define SRV_DB_SCHEMA_VERSION 4
 #define SRV_DB_APPLICATION_ID 0x47534442   /* 'GSDB' (GeoPackage uses 'GPKG' = 0x47504B47) */
 #define SRV_DB_FORMAT "gridsurvey-survey"
 /* Written to migrations.generator and delight_versions.generator. */
@@ -359,6 +359,9 @@ size_t srv_areas_count(const srv_areas *a);
 const char *srv_areas_label(const srv_areas *a, size_t i);
 /* The first feature (file order) covering the point (boundary included), -1 for none. */
 int srv_areas_find(const srv_areas *a, double lat_deg, double lon_deg);
+/* The union of the features labelled label as WKT (9 decimals, trimmed; malloc'd, free it):
+ * the geometry of a stats group --by feature:FIELD. GS_ENOTFOUND when no feature has it. */
+gs_status srv_areas_wkt(const srv_areas *a, const char *label, char **wkt);
 
 typedef struct {
     srv_group_by by;           /* the grouping, or the first of a combination */
@@ -535,6 +538,46 @@ int srv_bench_db(int argc, char **argv);
  * the database is opened, and srv_db_open itself leaves nothing behind on failure.
  * ===================================================================================== */
 
+/* Two stations (survey/sites_triangulate.c, docs/gis.md "Two stations in a survey"): every
+ * light site with located detections in the given captures from two different stations (the
+ * first two, in capture order) intersected by gis_triangulate from the detections' pixel
+ * bearings (the stations' stored cameras). A bearing's 1-sigma is the cross-range part of its
+ * one-station ellipse over its distance. *out is malloc'd (free it); flagged intersections
+ * (GIS_FIX_BEHIND, NEAR_PARALLEL) are kept with NaN positions. */
+typedef struct {
+    int64_t site_id;
+    int64_t light_id[2];             /* the two detections */
+    char station[2][64];             /* their stations' names */
+    double sigma_bearing_deg[2];
+    gis_intersection fix;            /* position, 1-sigma ellipse, angle, flags */
+} srv_tri_site;
+gs_status srv_triangulate_sites(srv_db *db, const int64_t *capture_ids, size_t n_captures,
+                                srv_tri_site **out, size_t *n_out);
+
+/* Per-area share changes (survey/compare_shares.c): the phase counts of each group of o's
+ * grouping and filters (o->survey ignored) in survey A and in survey B (srv_stats_compute of
+ * each, light sites, their detections in that survey), joined by group name (A's groups first,
+ * then B's others). For each phase i the two-proportion z test of share_b - share_a with the
+ * pooled share p = (a_i + b_i) / (n_a + n_b): z = (s_b - s_a) / sqrt(p (1 - p) (1/n_a + 1/n_b)),
+ * two-sided P = erfc(|z| / sqrt 2) (NaN when a total is 0 or p is 0 or 1); and Pearson's
+ * chi-square of homogeneity of the 2 x 3 table (surveys x phases, phases with a count in either),
+ * dof = phases - 1, P = gs_chi2_sf (NaN when dof < 1). The tests take the two surveys as
+ * independent samples of the area's lights. GS_ENOTFOUND naming a survey that does not exist. */
+typedef struct {
+    char group[296];
+    long n_a[3], total_a, n_b[3], total_b;   /* 0/120/240 counts and their sums */
+    double share_a[3], share_b[3];
+    double z[3], p[3];
+    double chi2, p_value;
+    int dof;
+} srv_share_change;
+gs_status srv_compare_shares(srv_db *db, const srv_stats_opts *o, const char *survey_a,
+                             const char *survey_b, srv_share_change **out, size_t *count);
+/* The tests of c from its counts (n_a, total_a, n_b, total_b). */
+void srv_share_change_finish(srv_share_change *c);
+/* "MINLON,MINLAT,MAXLON,MAXLAT" into bbox (GS_EINVAL naming the text otherwise). */
+gs_status srv_parse_bbox(const char *text, double bbox[4]);
+
 /* The stages (survey/stages.c), each usable on its own: `run`, `recognize` and `bench
  * accuracy` call them. A job holds one capture through the stages; zero it first;
  * srv_job_release frees whatever the stages built (accepts NULL and a zeroed job). */
@@ -571,8 +614,24 @@ gs_status srv_job_extract(srv_job *j, const rec_blob_opts *bo);
 gs_status srv_job_match(srv_job *j);
 /* Free the capture's pixels (the later stages need only its metadata). */
 void srv_job_drop_pixels(srv_job *j);
-/* locate: every row from one station at the lights' height (gis_locate). */
-gs_status srv_job_locate(srv_job *j, const gis_station *st, double height_m);
+/* A light's 1-sigma centroid error per image axis, px (docs/gis.md, "Calibrated ellipses"):
+ * sqrt((sqrt(2) s / snr)^2 + (0.003 s)^2 + c^2), s = sqrt(psf_sigma_px^2 + 1/12) the
+ * pixel-integrated PSF sigma, snr the light's (srv_light_row.snr), c the crowding term: 0.012 s
+ * for a light of the multi-source PSF fit (REC_BLOB_PSF_FIT), else 0.5 s when it was
+ * deblended (REC_BLOB_DEBLENDED) or its footprint is crowded (srv_crowded_footprints), else 0.
+ * NaN when snr is not finite and > 0 or psf_sigma_px is NaN. */
+double srv_centroid_sigma_px(double snr, unsigned blob_flags, int crowded, double psf_sigma_px);
+/* Marks crowded[i] = 1 for the lights whose footprint is too large for one light of their SNR:
+ * area_px more than 4 robust sigmas above the capture's line area = a + b ln(snr), fitted by
+ * least squares to its plain lights (no REC_BLOB_* flag) with those beyond 3 robust sigmas
+ * (1.4826 MAD) dropped, three rounds: a neighbour merged into the footprint undetected. All 0
+ * with fewer than 10 plain lights. GS_ENOMEM (all 0) when out of memory. */
+gs_status srv_crowded_footprints(const srv_light_row *lights, size_t n, unsigned char *crowded);
+/* locate: every row from one station at the lights' height (gis_locate) with its 1-sigma
+ * (sigma_height_m >= 0). Each light's pixel sigma: with the station's psf_sigma_px, its
+ * centroid sigma (srv_centroid_sigma_px) and the station's sigma_px in quadrature; else (or
+ * without an SNR) the station's sigma_px. */
+gs_status srv_job_locate(srv_job *j, const gis_station *st, double height_m, double sigma_height_m);
 /* store: the DELIGHT, survey and station rows (get or add), then the capture, its frames, grid
  * frequency log, lights and (with a station) locations in one transaction. */
 typedef struct {
@@ -613,6 +672,10 @@ typedef struct {
                                  * [GIS_MIN_HEIGHT_M, GIS_MAX_HEIGHT_M]; NaN (default): a scene's
                                  * median height of its geographic lights. Required (GS_EINVAL)
                                  * when there is a station and no default. */
+    double light_height_sigma_m;   /* the height's 1-sigma (the height prior of the error
+                                    * ellipses), >= 0; NaN (default): with the scene's median,
+                                    * the standard deviation of its geographic lights' heights,
+                                    * else 0 */
     const char *delight_path;   /* DELIGHT SQLite file (NULL: a scene's "delight", else the
                                  * built-in database, gs_delight_generate) */
     rec_eq7_opts eq7;           /* Eq. 7 options (rec_eq7_opts_default) */
@@ -643,6 +706,7 @@ typedef struct {
     gis_station station;             /* that station (when has_station) */
     double light_height_m;           /* used (NaN when nothing was located) */
     char height_source[32];          /* "--light-height-m", "scene median", or "" */
+    double light_height_sigma_m;     /* its 1-sigma used for the ellipses */
     double seconds[SRV_STAGE_COUNT]; /* wall time per stage (0 for stages skipped) */
 } srv_run_report;
 

@@ -518,6 +518,33 @@ TEST(gis_locate_ellipse_nadir_analytic)
     CHECK_NEAR(fx.ellipse.semi_major_m, 1.0, 2e-3);
 }
 
+TEST(gis_locate_ellipse_height_prior_analytic)
+{
+    /* 100 m above flat ground (the Earth's curvature drops it 0.08 m at 1 km), the centre
+     * pixel at a depression of atan(0.1): the light is 1000 m away, and a height error dh
+     * moves it along the sight line's azimuth by dh / tan(e) = 10 dh (to 1 %); across it,
+     * nothing. */
+    gis_camera cam = gisfx_base_camera();
+    cam.height_m = 100.0;
+    cam.focal_px = 1000.0;
+    cam.heading_deg = 70.0;
+    cam.pitch_deg = -atan(0.1) / D2R;
+    gis_locate_opts o;
+    gis_locate_opts_default(&o);
+    o.sigma_height_m = 0.5;
+    gis_fix fx;
+    CHECK_OK(gis_locate(&cam, cam.cx_px, cam.cy_px, 0.0, 0.0, &o, &fx));
+    CHECK_NEAR(fx.distance_m, 1000.0, 2.0);
+    CHECK_NEAR(fx.ellipse.semi_major_m, 0.5 * 10.0, 0.05);
+    CHECK_NEAR(fx.ellipse.semi_minor_m, 0.0, 1e-6);
+    CHECK_NEAR(fx.ellipse.azimuth_deg, 70.0, 0.01);
+    gis_fix f0;
+    CHECK_OK(gis_locate(&cam, cam.cx_px, cam.cy_px, 0.0, 0.0, NULL, &f0));
+    CHECK_NEAR(f0.ellipse.semi_major_m, 0.0, 1e-6);   /* no height prior, no sigma: a point */
+    o.sigma_height_m = -1.0;
+    CHECK(gis_locate(&cam, cam.cx_px, cam.cy_px, 0.0, 0.0, &o, &fx) == GS_EINVAL);
+}
+
 /* -------------------------------------------------------------- station files */
 
 TEST(gis_station_parse_errors_name_line_and_field)
@@ -533,6 +560,17 @@ TEST(gis_station_parse_errors_name_line_and_field)
     CHECK_NEAR(st.sigma_px, 0.7, 0);
     CHECK_NEAR(st.cam.sigma_heading_deg, 0.05, 0);
     CHECK(!strcmp(st.time_utc, "2024-05-01T21:00:00Z"));
+    CHECK(isnan(st.psf_sigma_px));
+    /* sigma_px defaults to 1 px without a PSF, to 0 (a perfect calibration) with one */
+    const char *psf = "{\"lat\": 45, \"lon\": 7, \"height\": 100, \"heading\": 10, \"pitch\": -5,\n"
+                      " \"focal_px\": 2000, \"cx\": 959.5, \"cy\": 539.5, \"psf_sigma_px\": 0.8}";
+    CHECK_OK(gis_station_parse(psf, "st.json", &st));
+    CHECK_NEAR(st.psf_sigma_px, 0.8, 0);
+    CHECK_NEAR(st.sigma_px, 0.0, 0);
+    char nopsf[400];
+    snprintf(nopsf, sizeof nopsf, "%.*s}", (int)(strstr(psf, ", \"psf") - psf), psf);
+    CHECK_OK(gis_station_parse(nopsf, "st.json", &st));
+    CHECK(isnan(st.psf_sigma_px) && st.sigma_px == 1.0);
     const struct {
         const char *text, *expect;
         gs_status s;
@@ -546,6 +584,8 @@ TEST(gis_station_parse_errors_name_line_and_field)
         {"{\n \"lat_deg\": 45,\n \"lon_deg\": 7,,}", "s.json:3:", GS_EFORMAT},
         {"{\"format\": \"gridsurvey-station/2\"}", "s.json:1: field format", GS_EFORMAT},
         {"[1, 2]", "s.json:1: expected a JSON object", GS_EFORMAT},
+        {"{\"lat\": 45, \"lon\": 7, \"height\": 100, \"heading\": 10, \"pitch\": -5,\n \"focal_px\": 2000, "
+         "\"cx\": 1, \"cy\": 1,\n \"psf_sigma_px\": -1}", "s.json:3: field psf_sigma_px: expected a value from 0 to 50", GS_EFORMAT},
     };
     for (size_t i = 0; i < sizeof bad / sizeof *bad; i++) {
         gs_status s = gis_station_parse(bad[i].text, "s.json", &st);

@@ -153,6 +153,53 @@ static srv_phase_stats *compute(srv_db *db, const char *by, double min_conf, siz
     return g;
 }
 
+/* Every group of srv_stats_compute (sites, or detections) by each grouping equals its row of
+ * the SQL view (a phase_balance-shaped view); returns the rows checked. */
+static int check_balance_view(srv_db *db, const char *view, int detections, const char *const *groupings,
+                              int n_groupings)
+{
+    sqlite3 *h = srv_db_sqlite(db);
+    sqlite3_stmt *q = NULL;
+    int checked = 0;
+    for (int gi = 0; gi < n_groupings; gi++) {
+        size_t n = 0;
+        srv_stats_opts o;
+        srv_stats_opts_default(&o);
+        CHECK_OK(srv_stats_parse_by(groupings[gi], &o));
+        o.detections = detections;
+        srv_phase_stats *g = NULL;
+        CHECK_OK(srv_stats_compute(db, &o, &g, &n, NULL));
+        CHECK(n >= 1);
+        for (size_t i = 0; i < n; i++) {
+            char sql[512];
+            snprintf(sql, sizeof sql, "SELECT lights, unknown, other, n0, n120, n240, n, share0, lo0, "
+                     "hi0, share120, lo120, hi120, share240, lo240, hi240, chi2, p_value, imbalance "
+                     "FROM %s WHERE grouping = '%s' AND grp = '%s'", view, groupings[gi], g[i].group);
+            CHECK(sqlite3_prepare_v2(h, sql, -1, &q, NULL) == SQLITE_OK);
+            if (sqlite3_step(q) != SQLITE_ROW) {
+                test_failed(__FILE__, __LINE__, "no %s row for %s %s", view, groupings[gi], g[i].group);
+                sqlite3_finalize(q);
+                continue;
+            }
+            /* the views' "other" includes the six-phase classes 30/150/270 */
+            long other = g[i].other + g[i].n30[0] + g[i].n30[1] + g[i].n30[2];
+            long want[7] = {g[i].lights, g[i].unknown, other, g[i].n[0], g[i].n[1], g[i].n[2], g[i].total};
+            for (int k = 0; k < 7; k++)
+                CHECK_MSG(sqlite3_column_int64(q, k) == want[k], "%s %s %s column %d: %lld vs %ld", view,
+                          groupings[gi], g[i].group, k, (long long)sqlite3_column_int64(q, k), want[k]);
+            double wantr[12] = {g[i].share[0], g[i].lo[0], g[i].hi[0], g[i].share[1], g[i].lo[1],
+                                g[i].hi[1], g[i].share[2], g[i].lo[2], g[i].hi[2], g[i].chi2,
+                                g[i].p_value, g[i].imbalance};
+            for (int k = 0; k < 12; k++)
+                CHECK_NEAR(sqlite3_column_double(q, 7 + k), wantr[k], 1e-12 * fmax(1.0, fabs(wantr[k])));
+            sqlite3_finalize(q);
+            checked++;
+        }
+        free(g);
+    }
+    return checked;
+}
+
 /* phase_counts and phase_balance (SQL) equal the C computation for every group. */
 TEST(stats_sql_views_match_c)
 {
@@ -189,39 +236,7 @@ TEST(stats_sql_views_match_c)
     sqlite3_finalize(q);
     CHECK(rows == 16 * 80 + NE);
     static const char *const groupings[] = {"all", "survey", "technology"};
-    int checked = 0;
-    for (int gi = 0; gi < 3; gi++) {
-        size_t n = 0;
-        srv_phase_stats *g = compute(db, groupings[gi], 0.0, &n, NULL);
-        CHECK(n >= 1);
-        for (size_t i = 0; i < n; i++) {
-            char sql[512];
-            snprintf(sql, sizeof sql, "SELECT lights, unknown, other, n0, n120, n240, n, share0, lo0, "
-                     "hi0, share120, lo120, hi120, share240, lo240, hi240, chi2, p_value, imbalance "
-                     "FROM phase_balance WHERE grouping = '%s' AND grp = '%s'", groupings[gi],
-                     g[i].group);
-            CHECK(sqlite3_prepare_v2(h, sql, -1, &q, NULL) == SQLITE_OK);
-            if (sqlite3_step(q) != SQLITE_ROW) {
-                test_failed(__FILE__, __LINE__, "no view row for %s %s", groupings[gi], g[i].group);
-                sqlite3_finalize(q);
-                continue;
-            }
-            /* the views' "other" includes the six-phase classes 30/150/270 */
-            long other = g[i].other + g[i].n30[0] + g[i].n30[1] + g[i].n30[2];
-            long want[7] = {g[i].lights, g[i].unknown, other, g[i].n[0], g[i].n[1], g[i].n[2], g[i].total};
-            for (int k = 0; k < 7; k++)
-                CHECK_MSG(sqlite3_column_int64(q, k) == want[k], "%s %s column %d: %lld vs %ld",
-                          groupings[gi], g[i].group, k, (long long)sqlite3_column_int64(q, k), want[k]);
-            double wantr[12] = {g[i].share[0], g[i].lo[0], g[i].hi[0], g[i].share[1], g[i].lo[1],
-                                g[i].hi[1], g[i].share[2], g[i].lo[2], g[i].hi[2], g[i].chi2,
-                                g[i].p_value, g[i].imbalance};
-            for (int k = 0; k < 12; k++)
-                CHECK_NEAR(sqlite3_column_double(q, 7 + k), wantr[k], 1e-12 * fmax(1.0, fabs(wantr[k])));
-            sqlite3_finalize(q);
-            checked++;
-        }
-        free(g);
-    }
+    int checked = check_balance_view(db, "phase_balance", 1, groupings, 3);
     CHECK(checked >= 1 + 2 + 7);
     /* the edge capture: 20, 340, 100, 140, 220, 260, 359.9999999, -1e-7 (-> 359.9999999), 720
      * (-> 0) are on a phase; 20.0000001, 339.9999999, 99.9999999, 260.0000001, 60, 180, 300
@@ -230,6 +245,37 @@ TEST(stats_sql_views_match_c)
                                 "FROM light_phase WHERE capture_key = 'edges'", -1, &q, NULL) == SQLITE_OK);
     CHECK(sqlite3_step(q) == SQLITE_ROW && sqlite3_column_int(q, 0) == 7 && sqlite3_column_int(q, 1) == 9);
     sqlite3_finalize(q);
+    srv_db_close(db);
+}
+
+/* site_phase_balance (SQL, migration 4) equals stats over light sites: two surveys of the same
+ * synthetic lights (same seed, so each site joins one detection of each, their posteriors
+ * combined), a third survey elsewhere, and pixel sites without a location. */
+TEST(stats_site_sql_views_match_c)
+{
+    const char *path = fx_tmp("sv.sqlite");
+    synth(path, "night1", 4, 60, 7, 1, 1, 1, 2000);
+    synth(path, "night2", 4, 60, 7, 1, 1, 1, 2000);
+    synth(path, "other", 3, 60, 8, 3, 2, 1, 2000);
+    srv_db *db = NULL;
+    CHECK_OK(srv_db_open(path, SRV_DB_WRITE, &db));
+    if (!db) return;
+    static const double edge[] = {20.0, 340.0, 100.0, 140.0, 220.0, 260.0, 20.0000001, 60.0, 30.0, 150.0};
+    enum { NE = sizeof edge / sizeof *edge };
+    srv_light_row l[NE];
+    for (int i = 0; i < NE; i++) l[i] = survey_fx_light(i, 10.0 * i, 10.0, edge[i], 0.9);
+    int64_t sid;
+    CHECK_OK(srv_db_find_survey(db, "other", &sid));
+    srv_capture_data cd = survey_fx_capture(sid, "edges", l, NULL, NE);
+    CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
+    sqlite3 *h = srv_db_sqlite(db);
+    long sites = survey_fx_query_long(h, "SELECT count(*) FROM light_sites");
+    long two = survey_fx_query_long(h, "SELECT count(*) FROM light_sites WHERE detections = 2");
+    CHECK_MSG(two >= 200 && sites < 11 * 60 + NE, "%ld sites, %ld with two detections", sites, two);
+    CHECK(survey_fx_query_long(h, "SELECT lights FROM site_phase_balance WHERE grouping = 'all'") == sites);
+    static const char *const groupings[] = {"all", "technology"};
+    int checked = check_balance_view(db, "site_phase_balance", 0, groupings, 2);
+    CHECK(checked >= 1 + 5);
     srv_db_close(db);
 }
 

@@ -177,6 +177,43 @@ TEST(stats_clip_equals_brute_force_point_in_polygon)
         CHECK_MSG(csv_row(out, F[f].name, &got), "no row %s in %s", F[f].name, out);
         check_tally(F[f].name, &got, &want[f]);
     }
+    /* -o: a polygon layer GDAL reads (ogrinfo): the CSV, its .csvt types and .prj */
+    const char *csv = fx_tmp("feeders.csv");
+    rc = fx_run(out, sizeof out, "%s stats --db %s --clip %s --by feature:feeder --format csv -o %s", test_bin(),
+                db, areas, csv);
+    CHECK_MSG(rc == 0 && fx_exists(fx_tmp("feeders.csvt")) && fx_exists(fx_tmp("feeders.prj")), "%d: %s", rc, out);
+    rc = fx_run(out, sizeof out, "ogrinfo -ro -al -so '%s'", csv);
+    CHECK_MSG(rc == 0 && strstr(out, "Feature Count: 3") && strstr(out, "WGS 84") &&
+              strstr(out, "n0: Integer") && strstr(out, "share0: Real") && strstr(out, "Geometry Column = geom_WKT"),
+              "%d: %s", rc, out);
+    /* the extent: the areas' vertices span CLON -+ 4 D, CLAT - 4 D .. CLAT + 4.5 D */
+    char ext[160];
+    snprintf(ext, sizeof ext, "Extent: (%.6f, %.6f) - (%.6f, %.6f)", CLON - 4 * D, CLAT - 4 * D, CLON + 4 * D,
+             CLAT + 4.5 * D);
+    CHECK_MSG(strstr(out, ext) != NULL, "expected %s in %s", ext, out);
+    rc = fx_run(out, sizeof out, "ogrinfo -ro -al '%s'", csv);
+    CHECK_MSG(rc == 0, "%d: %s", rc, out);
+    for (int f = 0; f < 3; f++) {
+        char key[64];
+        snprintf(key, sizeof key, "group (String) = %s\n", F[f].name);
+        const char *p = strstr(out, key), *next = p ? strstr(p, "OGRFeature(") : NULL;
+        CHECK_MSG(p != NULL, "no feature %s in %s", F[f].name, out);
+        if (!p) continue;
+        long v[4] = {-1, -1, -1, -1};
+        static const char *const fld[4] = {"lights (Integer) = ", "n0 (Integer) = ", "n120 (Integer) = ",
+                                           "n240 (Integer) = "};
+        for (int k = 0; k < 4; k++) {
+            const char *at = strstr(p, fld[k]);
+            if (at && (!next || at < next)) v[k] = atol(at + strlen(fld[k]));
+        }
+        CHECK_MSG(v[0] == want[f].lights && v[1] == want[f].n[0] && v[2] == want[f].n[1] && v[3] == want[f].n[2],
+                  "%s: ogrinfo %ld %ld %ld %ld", F[f].name, v[0], v[1], v[2], v[3]);
+        const char *g = strstr(p, F[f].polys > 1 ? "\n  MULTIPOLYGON ((" : "\n  POLYGON ((");
+        CHECK_MSG(g && (!next || g < next), "%s: geometry type", F[f].name);
+    }
+    /* -o needs --format csv and a .csv name */
+    rc = fx_run(out, sizeof out, "%s stats --db %s -o %s", test_bin(), db, csv);
+    CHECK_MSG(rc == 2 && strstr(out, "NAME.csv"), "%d: %s", rc, out);
     /* --clip alone: one group, the union */
     rc = fx_run(out, sizeof out, "%s stats --db %s --clip %s --format csv", test_bin(), db, areas);
     tally got, uni = want[0];

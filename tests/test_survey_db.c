@@ -142,10 +142,11 @@ TEST(survey_db_migrates_from_v1)
     CHECK_OK(srv_db_open(path, SRV_DB_READ, &db));
     if (!db) return;
     h = srv_db_sqlite(db);
-    CHECK(survey_fx_query_long(h, "PRAGMA user_version") == 3);
-    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM migrations") == 3);
-    CHECK(survey_fx_query_long(h, "SELECT group_concat(version) = '1,2,3' FROM (SELECT version FROM migrations ORDER BY version)") == 1);
+    CHECK(survey_fx_query_long(h, "PRAGMA user_version") == 4);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM migrations") == 4);
+    CHECK(survey_fx_query_long(h, "SELECT group_concat(version) = '1,2,3,4' FROM (SELECT version FROM migrations ORDER BY version)") == 1);
     CHECK(survey_fx_query_long(h, "SELECT n120 FROM phase_counts WHERE grouping = 'all'") == 1);
+    CHECK(survey_fx_query_long(h, "SELECT n120 FROM site_phase_counts WHERE grouping = 'all'") == 1);
     /* migrate associated the old light with a new site of its own */
     CHECK(survey_fx_query_long(h, "SELECT count(*) FROM light_sites WHERE phase_deg = 120 AND detections = 1") == 1);
     CHECK(survey_fx_query_long(h, "SELECT count(*) FROM site_detections") == 1);

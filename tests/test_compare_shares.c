@@ -1,0 +1,128 @@
+/* test_compare_shares.c - per-area phase-share changes between two surveys (survey/
+ * compare_shares.c, `gridsurvey compare --by`): a hand-made database of two surveys over three
+ * feeder areas with counts chosen here, against the z statistics, P-values and chi-square
+ * worked out by hand (and with Python's math.erfc):
+ *   w: A 30/30/40 of 100, B 20/30/50 of 100.
+ *      0 deg: pooled 50/200, se = sqrt(0.25 x 0.75 x 0.02) = 0.0612372, z = -0.1 / se = -1.6329932,
+ *             P = erfc(1.6329932 / sqrt 2) = 0.1024704;
+ *      120 deg: z = 0, P = 1;
+ *      240 deg: pooled 0.45, se = sqrt(0.45 x 0.55 x 0.02) = 0.0703562, z = 1.4213381, P = 0.1552185;
+ *      homogeneity: expected 25/30/45 in each survey, chi2 = 1 + 1 + 0 + 0 + 25/45 + 25/45
+ *      = 3.1111111 (2 dof), P = exp(-chi2 / 2) = 0.2110721.
+ *   e: 10/10/10 in both: z = 0, P = 1, chi2 = 0, P = 1.
+ *   n: A 5/0/0, B none: no test (NaN), A's shares 1/0/0.
+ * Each survey's lights are their own sites (20 m apart, 1 m ellipses). */
+#include "survey/survey.h"
+#include "tests/fixtures.h"
+#include "tests/survey_fixture.h"
+#include "tests/test.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static char out[1 << 16];
+
+/* areas: w = lon [35.000, 35.010], e = lon [35.020, 35.030], both lat [32.800, 32.810];
+ * n = lat [32.820, 32.830], lon [35.000, 35.010] */
+static const char areas_json[] =
+    "{\"type\": \"FeatureCollection\", \"features\": [\n"
+    " {\"type\": \"Feature\", \"properties\": {\"feeder\": \"w\"}, \"geometry\": {\"type\": \"Polygon\",\n"
+    "  \"coordinates\": [[[35.0, 32.8], [35.01, 32.8], [35.01, 32.81], [35.0, 32.81], [35.0, 32.8]]]}},\n"
+    " {\"type\": \"Feature\", \"properties\": {\"feeder\": \"e\"}, \"geometry\": {\"type\": \"Polygon\",\n"
+    "  \"coordinates\": [[[35.02, 32.8], [35.03, 32.8], [35.03, 32.81], [35.02, 32.81], [35.02, 32.8]]]}},\n"
+    " {\"type\": \"Feature\", \"properties\": {\"feeder\": \"n\"}, \"geometry\": {\"type\": \"Polygon\",\n"
+    "  \"coordinates\": [[[35.0, 32.82], [35.01, 32.82], [35.01, 32.83], [35.0, 32.83], [35.0, 32.82]]]}}]}\n";
+
+/* counts[area][phase] lights of one survey, on a 20 m grid inside each area (offset by the
+ * survey so no light of B joins a site of A). */
+static void add_survey(srv_db *db, int64_t sid, const char *key, const int counts[3][3], double offset_m)
+{
+    static const double lon0[3] = {35.0005, 35.0205, 35.0005}, lat0[3] = {32.8005, 32.8005, 32.8205};
+    srv_light_row l[160];
+    srv_location_row loc[160];
+    int k = 0;
+    double ky = 1.0 / 111000.0, kx = ky / cos(32.8 * M_PI / 180.0);
+    for (int a = 0; a < 3; a++)
+        for (int p = 0; p < 3; p++)
+            for (int j = 0; j < counts[a][p]; j++, k++) {
+                int q = p * 40 + j;   /* cell in the area: 8 per row */
+                l[k] = survey_fx_light(k, 10.0 + k, 20.0, 120.0 * p, 0.99);
+                l[k].bulb_id = "hps-70w";
+                l[k].technology = "sodium_hp";
+                srv_location_row_init(&loc[k]);
+                loc[k].method = SRV_LOC_ONE_STATION;
+                loc[k].lat_deg = lat0[a] + (20.0 * (q / 8) + offset_m) * ky;
+                loc[k].lon_deg = lon0[a] + (20.0 * (q % 8) + offset_m) * kx;
+                loc[k].ellipse = (gis_ellipse){1.0, 1.0, 0.0};
+            }
+    srv_capture_data cd = survey_fx_capture(sid, key, l, loc, (size_t)k);
+    CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
+}
+
+TEST(compare_shares_two_proportion_oracle)
+{
+    const char *path = fx_tmp("shares.sqlite"), *geo = fx_tmp("feeders.geojson");
+    fx_write_text(geo, areas_json);
+    int64_t a_id, b_id;
+    srv_db *db = survey_fx_create(path, "A", &a_id);
+    if (!db) return;
+    srv_survey_row sb = {.name = "B", .grid_hz = 50};
+    CHECK_OK(srv_db_add_survey(db, &sb, &b_id));
+    static const int ca[3][3] = {{30, 30, 40}, {10, 10, 10}, {5, 0, 0}};
+    static const int cb[3][3] = {{20, 30, 50}, {10, 10, 10}, {0, 0, 0}};
+    add_survey(db, a_id, "cap-a", ca, 0.0);
+    add_survey(db, b_id, "cap-b", cb, 10.0);
+
+    srv_areas *areas = NULL;
+    CHECK_OK(srv_areas_load(geo, "feeder", &areas));
+    srv_stats_opts o;
+    srv_stats_opts_default(&o);
+    CHECK_OK(srv_stats_parse_by("feature:feeder", &o));
+    o.areas = areas;
+    srv_share_change *v = NULL;
+    size_t n = 0;
+    CHECK_OK(srv_compare_shares(db, &o, "A", "B", &v, &n));
+    CHECK(n == 3);
+    const srv_share_change *w = NULL, *e = NULL, *nn = NULL;
+    for (size_t i = 0; i < n; i++) {
+        if (!strcmp(v[i].group, "w")) w = &v[i];
+        if (!strcmp(v[i].group, "e")) e = &v[i];
+        if (!strcmp(v[i].group, "n")) nn = &v[i];
+    }
+    CHECK(w && e && nn);
+    if (w && e && nn) {
+        CHECK(w->total_a == 100 && w->total_b == 100 && w->n_a[2] == 40 && w->n_b[0] == 20);
+        CHECK_NEAR(w->z[0], -1.6329931618554518, 1e-12);
+        CHECK_NEAR(w->p[0], 0.1024704348597495, 1e-12);
+        CHECK_NEAR(w->z[1], 0.0, 1e-12);
+        CHECK_NEAR(w->p[1], 1.0, 1e-12);
+        CHECK_NEAR(w->z[2], 1.4213381090374024, 1e-12);
+        CHECK_NEAR(w->p[2], 0.1552184896846842, 1e-12);
+        CHECK_NEAR(w->chi2, 28.0 / 9.0, 1e-12);
+        CHECK(w->dof == 2);
+        CHECK_NEAR(w->p_value, 0.2110720877910902, 1e-12);
+        CHECK(e->total_a == 30 && e->total_b == 30);
+        CHECK_NEAR(e->chi2, 0.0, 1e-12);
+        CHECK_NEAR(e->p_value, 1.0, 1e-12);
+        CHECK(nn->total_a == 5 && nn->total_b == 0 && isnan(nn->z[0]) && isnan(nn->chi2));
+        CHECK_NEAR(nn->share_a[0], 1.0, 0);
+    }
+    free(v);
+    /* a survey that does not exist */
+    CHECK(srv_compare_shares(db, &o, "A", "C", &v, &n) == GS_ENOTFOUND);
+    srv_areas_free(areas);
+    srv_db_close(db);
+
+    int rc = fx_run(out, sizeof out, "%s compare --db %s --survey A --survey B --by feature:feeder --clip %s",
+                    test_bin(), path, geo);
+    CHECK_MSG(rc == 0 && strstr(out, "| w | 100 | 100 | 30.0 % -> 20.0 % (-10.0, z -1.63, P 0.1025) | "
+                                      "30.0 % -> 30.0 % (+0.0, z 0.00, P 1.0000) | 40.0 % -> 50.0 % "
+                                      "(+10.0, z 1.42, P 0.1552) | 3.11 | 0.2111 |"), "%d: %s", rc, out);
+    CHECK_MSG(strstr(out, "| n | 5 | 0 | 100.0 % -> - | 0.0 % -> - | 0.0 % -> - | - | - |"), "%s", out);
+    rc = fx_run(out, sizeof out, "%s compare --db %s --survey A --survey B --by feature:feeder", test_bin(), path);
+    CHECK_MSG(rc == 2 && strstr(out, "needs --clip"), "%d: %s", rc, out);
+    rc = fx_run(out, sizeof out, "%s compare --db %s --survey A --survey B --by survey", test_bin(), path);
+    CHECK_MSG(rc == 2, "%d: %s", rc, out);
+}
