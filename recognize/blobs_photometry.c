@@ -85,6 +85,14 @@ static gs_status alloc_catalog(rec_catalog *cat, size_t n, int bands, int K)
     return GS_OK;
 }
 
+/* The window of step 8 for a footprint's second moment r2 (px^2, both axes): sigma. */
+static double window_sigma(double r2)
+{
+    double sw = sqrt(r2 / 2);
+    if (!(sw >= 1)) sw = 1;
+    return sw > 8 ? 8 : sw;
+}
+
 /* Windowed centroid (SExtractor's XWIN_IMAGE, Bertin 2010; SEP's winpos): iterate
  * x <- x + 2 sum(w I (x_p - x)) / sum(w I) with a Gaussian window w of sigma_w, which converges to
  * the centre of any symmetric profile (where sum w I (x_p - x) = 0) and, for a Gaussian PSF
@@ -96,9 +104,7 @@ static gs_status alloc_catalog(rec_catalog *cat, size_t n, int bands, int K)
  * Starts from (x, y); keeps it when the iteration fails or leaves 2 sigma_w. */
 static void win_centroid(const rec_blob_state *s, int light, double r2, double *xc, double *yc)
 {
-    double sw = sqrt(r2 / 2);
-    if (!(sw >= 1)) sw = 1;
-    if (sw > 8) sw = 8;
+    const double sw = window_sigma(r2);
     const double x0 = *xc, y0 = *yc, inv2s2 = 1 / (2 * sw * sw);
     const int R = (int)ceil(4 * sw);
     double x = x0, y = y0;
@@ -127,6 +133,34 @@ static void win_centroid(const rec_blob_state *s, int light, double r2, double *
     }
     *xc = x;
     *yc = y;
+}
+
+double rec_centroid_bias_px(double psf_sigma_px)
+{
+    if (!(psf_sigma_px > 0 && psf_sigma_px <= 64)) return NAN;
+    enum { PHASES = 40, ITER = 100 };
+    const double sp = sqrt(psf_sigma_px * psf_sigma_px + 1.0 / 12.0), sw = window_sigma(2 * sp * sp);
+    const int R = (int)ceil(4 * sw) + 1;
+    const double k = 1.0 / (sqrt(2.0) * psf_sigma_px);
+    double sum2 = 0;
+    for (int ph = 0; ph < PHASES; ph++) {
+        /* one axis (the PSF and the window are separable): pixel shares of a Gaussian at c */
+        double c = (double)ph / PHASES, x = 0;
+        for (int it = 0; it < ITER; it++) {
+            double sw_sum = 0, sx = 0;
+            for (int i = -R; i <= R; i++) {
+                double g = 0.5 * (erf((i + 0.5 - c) * k) - erf((i - 0.5 - c) * k));
+                double w = exp(-(i - x) * (i - x) / (2 * sw * sw)) * g;
+                sw_sum += w;
+                sx += w * (i - x);
+            }
+            double d = 2 * sx / sw_sum;
+            x += d;
+            if (fabs(d) < 1e-12) break;
+        }
+        sum2 += (x - c) * (x - c);
+    }
+    return sqrt(sum2 / PHASES);
 }
 
 /* Noise of pixel p's samples from the pixel's mean level over the K windows (shot + read),

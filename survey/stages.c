@@ -107,19 +107,19 @@ void srv_job_drop_pixels(srv_job *j)
 /* The windowed centroid's noise (recognize/blobs_photometry.c: a Gaussian window of the PSF's
  * sigma s): for a Gaussian PSF, x = x0 + 2 sum(w I dx) / sum(w I) has variance 16 s^2 / (9 N)
  * for N photons and 8 pi b s^4 / N^2 on a background b per pixel, i.e. (4/3) s / SNR and
- * sqrt(2) s / SNR with the PSF-weighted SNR; sqrt(2) s / snr is the bound taken. On the metro
- * scene (make demo) the plain lights' errors against the truth follow it (95.0 % inside
- * their 95 % circle) down to a floor of 0.003 s (the window's pixelisation bias, ~0.0025 px).
- * A deblended or crowded footprint may hold an undetected neighbour (errors up to 1-2 px: 0.5 s
- * covers 95 % of the deblended ones); the multi-source PSF fit's lights share a neighbour's
- * residual (0.012 s). */
-double srv_centroid_sigma_px(double snr, unsigned blob_flags, int crowded, double psf_sigma_px)
+ * sqrt(2) s / SNR with the PSF-weighted SNR; sqrt(2) s / snr is the bound taken. Its floor is
+ * the window's pixel-sampling bias (rec_centroid_bias_px, floor_px here): on the metro scene
+ * (make demo, PSF 0.8 px) the plain lights' errors against the truth follow both (95 % inside
+ * their 95 % circle); at a 1.1 px PSF the floor is 50x smaller. A deblended or crowded
+ * footprint may hold an undetected neighbour (errors up to 1-2 px: 0.5 s covers 95 % of the
+ * deblended ones); the multi-source PSF fit's lights share a neighbour's residual (0.012 s). */
+double srv_centroid_sigma_px(double snr, unsigned blob_flags, int crowded, double psf_sigma_px, double floor_px)
 {
-    if (!(snr > 0.0) || !isfinite(snr) || !(psf_sigma_px >= 0.0)) return NAN;
+    if (!(snr > 0.0) || !isfinite(snr) || !(psf_sigma_px >= 0.0) || !(floor_px >= 0.0)) return NAN;
     double s = sqrt(psf_sigma_px * psf_sigma_px + 1.0 / 12.0);
     double crowd = (blob_flags & REC_BLOB_PSF_FIT) ? 0.012 * s
                    : (crowded || (blob_flags & REC_BLOB_DEBLENDED)) ? 0.5 * s : 0.0;
-    double noise = M_SQRT2 * s / snr, floor_px = 0.003 * s;
+    double noise = M_SQRT2 * s / snr;
     return sqrt(noise * noise + floor_px * floor_px + crowd * crowd);
 }
 
@@ -187,10 +187,11 @@ gs_status srv_job_locate(srv_job *j, const gis_station *st, double height_m, dou
         free(crowded);
         return gs_fail(GS_ENOMEM, "out of memory for %zu locations", n);
     }
+    const double floor_px = st->psf_sigma_px > 0.0 ? rec_centroid_bias_px(st->psf_sigma_px) : 0.0;
     for (size_t i = 0; i < n; i++) {
         gis_fix fx;
         double c = srv_centroid_sigma_px(j->lights[i].snr, j->lights[i].blob_flags, crowded[i],
-                                         st->psf_sigma_px);
+                                         st->psf_sigma_px, floor_px);
         double sig = isfinite(c) ? hypot(c, st->sigma_px) : st->sigma_px;
         gs_status s = gis_locate(&st->cam, j->lights[i].x_px, j->lights[i].y_px, sig, height_m, &lo, &fx);
         if (s != GS_OK) {

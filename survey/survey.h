@@ -615,12 +615,14 @@ gs_status srv_job_match(srv_job *j);
 /* Free the capture's pixels (the later stages need only its metadata). */
 void srv_job_drop_pixels(srv_job *j);
 /* A light's 1-sigma centroid error per image axis, px (docs/gis.md, "Calibrated ellipses"):
- * sqrt((sqrt(2) s / snr)^2 + (0.003 s)^2 + c^2), s = sqrt(psf_sigma_px^2 + 1/12) the
+ * sqrt((sqrt(2) s / snr)^2 + floor_px^2 + c^2), floor_px the centroid's pixel-sampling bias
+ * (rec_centroid_bias_px), s = sqrt(psf_sigma_px^2 + 1/12) the
  * pixel-integrated PSF sigma, snr the light's (srv_light_row.snr), c the crowding term: 0.012 s
  * for a light of the multi-source PSF fit (REC_BLOB_PSF_FIT), else 0.5 s when it was
  * deblended (REC_BLOB_DEBLENDED) or its footprint is crowded (srv_crowded_footprints), else 0.
- * NaN when snr is not finite and > 0 or psf_sigma_px is NaN. */
-double srv_centroid_sigma_px(double snr, unsigned blob_flags, int crowded, double psf_sigma_px);
+ * NaN when snr is not finite and > 0, psf_sigma_px is NaN or floor_px not >= 0. */
+double srv_centroid_sigma_px(double snr, unsigned blob_flags, int crowded, double psf_sigma_px,
+                             double floor_px);
 /* Marks crowded[i] = 1 for the lights whose footprint is too large for one light of their SNR:
  * area_px more than 4 robust sigmas above the capture's line area = a + b ln(snr), fitted by
  * least squares to its plain lights (no REC_BLOB_* flag) with those beyond 3 robust sigmas

@@ -346,3 +346,71 @@ TEST(blobs_speed_1mp_k26_rgb)
     rec_catalog_release(&cat);
     gs_capture_release(&cap);
 }
+
+/* The windowed centroid's fixed point on a noise-free pixel-integrated 1-D Gaussian, found by
+ * bisection on its condition sum_i w(i - x) g_i (i - x) = 0 (not step 8's iteration), window
+ * sigma max(1, s): the oracle of rec_centroid_bias_px. */
+static double bisect_centroid(double c, double psf)
+{
+    const double s = sqrt(psf * psf + 1.0 / 12.0), sw = s > 1 ? s : 1, k = 1 / (sqrt(2.0) * psf);
+    double lo = c - 0.5, hi = c + 0.5;
+    for (int it = 0; it < 80; it++) {
+        double x = 0.5 * (lo + hi), f = 0;
+        for (int i = -40; i <= 40; i++) {
+            double g = 0.5 * (erf((i + 0.5 - c) * k) - erf((i - 0.5 - c) * k));
+            f += exp(-(i - x) * (i - x) / (2 * sw * sw)) * g * (i - x);
+        }
+        if (f > 0) lo = x;
+        else hi = x;
+    }
+    return 0.5 * (lo + hi);
+}
+
+/* rec_centroid_bias_px: the RMS over 40 sub-pixel phases of the bisection oracle's bias (to
+ * 1e-4 relative), 0 at the symmetric phases, falling with the PSF's width; and it is a floor of
+ * the extractor's own error: one noise-free bright light (black background, only the rounding
+ * of the raw samples) at 20 sub-pixel positions has at least that RMS x error. */
+TEST(blobs_centroid_bias_floor)
+{
+    const double psf[2] = {0.8, 1.1};
+    for (int t = 0; t < 2; t++) {
+        double sum2 = 0;
+        for (int ph = 0; ph < 40; ph++) {
+            double d = bisect_centroid(ph / 40.0, psf[t]) - ph / 40.0;
+            sum2 += d * d;
+            if (ph == 0 || ph == 20) CHECK_MSG(fabs(d) < 1e-9, "phase %d: bias %g", ph, d);
+        }
+        double oracle = sqrt(sum2 / 40), b = rec_centroid_bias_px(psf[t]);
+        CHECK_MSG(fabs(b - oracle) <= 1e-4 * oracle, "PSF %g: %g against the oracle's %g", psf[t], b, oracle);
+        double ext2 = 0;
+        int n = 0;
+        for (int ph = 0; ph < 20; ph++) {
+            blobfx_light l[1];
+            memset(l, 0, sizeof l);
+            l[0] = (blobfx_light){20.0 + ph / 20.0, 16.0, psf[t], 4000, 0.3, 0.1, {0}};
+            blobfx_scene sc = blobfx_base_scene(40, 32, l, 1, 3);
+            sc.noise = 0;
+            sc.read = 0;
+            sc.gain = 0;
+            sc.bg0 = sc.bgx = sc.bgy = 0;
+            gs_capture cap;
+            blobfx_render(&sc, &cap);
+            rec_blob_opts o = blobfx_opts_labels();
+            rec_catalog cat;
+            CHECK_OK(rec_blobs_extract(&cap, &o, &cat));
+            CHECK(cat.count == 1);
+            if (cat.count == 1) {
+                ext2 += (cat.x_px[0] - l[0].x) * (cat.x_px[0] - l[0].x);
+                n++;
+            }
+            rec_catalog_release(&cat);
+            gs_capture_release(&cap);
+        }
+        double ext = n ? sqrt(ext2 / n) : NAN;
+        printf("    PSF %.1f px: rec_centroid_bias_px %.5f px, the extractor's noise-free RMS x error %.5f px\n",
+               psf[t], b, ext);
+        CHECK_MSG(ext >= b, "PSF %g: extractor %g below the floor %g", psf[t], ext, b);
+    }
+    CHECK(rec_centroid_bias_px(1.1) < rec_centroid_bias_px(0.8) / 20);
+    CHECK(isnan(rec_centroid_bias_px(0)) && isnan(rec_centroid_bias_px(NAN)) && isnan(rec_centroid_bias_px(100)));
+}
