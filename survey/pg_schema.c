@@ -133,6 +133,14 @@ static const char *const pg_migration_1[] = {
 /* Version 2: the statistics views. The phase classes, the Wilson interval (z = SRV_Z95, with
  * the clamps of srv_wilson), chi2 and p = exp(-chi2 / 2) and the imbalance are those of
  * stats.c, in the same operation order. */
+/* The per-phase counts of a view over rows with a phase_class (phase_class()), one line each. */
+#define PG_PHASE_COUNTS \
+    "       count(*) FILTER (WHERE phase_class = 'unknown') AS unknown,\n" \
+    "       count(*) FILTER (WHERE phase_class = 'other') AS other,\n" \
+    "       count(*) FILTER (WHERE phase_class = '0') AS n0,\n" \
+    "       count(*) FILTER (WHERE phase_class = '120') AS n120,\n" \
+    "       count(*) FILTER (WHERE phase_class = '240') AS n240,\n" \
+    "       count(*) FILTER (WHERE phase_class IN ('0', '120', '240')) AS n\n"
 #define PG_Z95 "1.959963984540054"
 static const char *const pg_migration_2[] = {
     "CREATE FUNCTION phase_class(p float8) RETURNS text LANGUAGE sql IMMUTABLE AS $$\n"
@@ -180,12 +188,7 @@ static const char *const pg_migration_2[] = {
     "SELECT CASE WHEN GROUPING(survey) = 0 THEN 'survey' WHEN GROUPING(technology) = 0\n"
     "            THEN 'technology' ELSE 'all' END AS grouping,\n"
     "       coalesce(survey, technology, 'all') AS grp, count(*) AS lights,\n"
-    "       count(*) FILTER (WHERE phase_class = 'unknown') AS unknown,\n"
-    "       count(*) FILTER (WHERE phase_class = 'other') AS other,\n"
-    "       count(*) FILTER (WHERE phase_class = '0') AS n0,\n"
-    "       count(*) FILTER (WHERE phase_class = '120') AS n120,\n"
-    "       count(*) FILTER (WHERE phase_class = '240') AS n240,\n"
-    "       count(*) FILTER (WHERE phase_class IN ('0', '120', '240')) AS n\n"
+    PG_PHASE_COUNTS
     "FROM light_phase GROUP BY GROUPING SETS ((), (survey), (technology));\n"
     "CREATE VIEW phase_balance AS\n"
     "SELECT c.*, b.* FROM phase_counts c CROSS JOIN LATERAL balance(c.n0, c.n120, c.n240) b;\n"
@@ -200,12 +203,7 @@ static const char *const pg_migration_2[] = {
     "CREATE VIEW site_counts AS\n"
     "SELECT CASE WHEN GROUPING(technology) = 0 THEN 'technology' ELSE 'all' END AS grouping,\n"
     "       coalesce(technology, 'all') AS grp, count(*) AS lights,\n"
-    "       count(*) FILTER (WHERE phase_class = 'unknown') AS unknown,\n"
-    "       count(*) FILTER (WHERE phase_class = 'other') AS other,\n"
-    "       count(*) FILTER (WHERE phase_class = '0') AS n0,\n"
-    "       count(*) FILTER (WHERE phase_class = '120') AS n120,\n"
-    "       count(*) FILTER (WHERE phase_class = '240') AS n240,\n"
-    "       count(*) FILTER (WHERE phase_class IN ('0', '120', '240')) AS n\n"
+    PG_PHASE_COUNTS
     "FROM site_phase GROUP BY GROUPING SETS ((), (technology));\n"
     "CREATE VIEW site_balance AS\n"
     "SELECT c.*, b.* FROM site_counts c CROSS JOIN LATERAL balance(c.n0, c.n120, c.n240) b;\n"
@@ -218,12 +216,7 @@ static const char *const pg_migration_2[] = {
     "CREATE VIEW area_balance AS\n"
     "SELECT c.*, b.* FROM (\n"
     "  SELECT layer, label, count(*) AS lights,\n"
-    "         count(*) FILTER (WHERE phase_class = 'unknown') AS unknown,\n"
-    "         count(*) FILTER (WHERE phase_class = 'other') AS other,\n"
-    "         count(*) FILTER (WHERE phase_class = '0') AS n0,\n"
-    "         count(*) FILTER (WHERE phase_class = '120') AS n120,\n"
-    "         count(*) FILTER (WHERE phase_class = '240') AS n240,\n"
-    "         count(*) FILTER (WHERE phase_class IN ('0', '120', '240')) AS n\n"
+    PG_PHASE_COUNTS
     "  FROM area_sites GROUP BY layer, label) c\n"
     "CROSS JOIN LATERAL balance(c.n0, c.n120, c.n240) b;\n"
     /* the same with each area's outline, for a map (QGIS: style by imbalance or p_value) */
@@ -250,12 +243,7 @@ static const char *const pg_migration_2[] = {
     "                 floor(k.ky * (s.lat_deg - k.lat0) / size_m)::bigint AS iy, s.phase_class\n"
     "          FROM located s CROSS JOIN k),\n"
     "c AS (SELECT ix, iy, count(*) AS lights,\n"
-    "         count(*) FILTER (WHERE phase_class = 'unknown') AS unknown,\n"
-    "         count(*) FILTER (WHERE phase_class = 'other') AS other,\n"
-    "         count(*) FILTER (WHERE phase_class = '0') AS n0,\n"
-    "         count(*) FILTER (WHERE phase_class = '120') AS n120,\n"
-    "         count(*) FILTER (WHERE phase_class = '240') AS n240,\n"
-    "         count(*) FILTER (WHERE phase_class IN ('0', '120', '240')) AS n\n"
+    PG_PHASE_COUNTS
     "       FROM cells GROUP BY ix, iy)\n"
     "SELECT c.ix, c.iy, k.lat0 + (c.iy + 0.5::float8) * size_m / k.ky,\n"
     "       gridsurvey.wrap180(k.lon0 + (c.ix + 0.5::float8) * size_m / k.kx),\n"
