@@ -8,6 +8,7 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#include <fftw3.h>
 
 /* ------------------------------------------------------------ one light */
 
@@ -223,6 +224,52 @@ static void sums_of(const rec_matcher *m, const rec_eq7_work *w, size_t j, doubl
         S[f] = w->S[(size_t)f * m->M + j];
         T[f] = w->T[(size_t)f * m->M + j];
     }
+}
+
+/* The light's K-point DFTs of wx and w per band into w->spec + nh (X, then W; [band * K + r]),
+ * conjugated: conj(sum_k v_k e^{2 pi i r k / K}). */
+void rec_eq7_light_dfts(const rec_matcher *m, rec_eq7_work *w)
+{
+    size_t K = (size_t)m->K, nh = (size_t)m->G / 2 + 1, D = (size_t)m->D;
+    double complex *X = w->spec + nh, *W = X + D;
+    for (int band = 0; band < m->bands; band++)
+        for (size_t r = 0; r < K; r++) {
+            double complex x = 0.0, v = 0.0;
+            size_t rk = 0;   /* r k mod K */
+            for (size_t k = 0; k < K; k++) {
+                size_t d = (size_t)band * K + k;
+                x += w->wx[d] * m->wk[rk];
+                v += w->w[d] * m->wk[rk];
+                rk += r;
+                if (rk >= K) rk -= K;
+            }
+            X[(size_t)band * K + r] = conj(x);
+            W[(size_t)band * K + r] = conj(v);
+        }
+}
+
+void rec_eq7_grid_sums(const rec_matcher *m, rec_eq7_work *w, size_t b)
+{
+    size_t K = (size_t)m->K, nh = (size_t)m->G / 2 + 1, D = (size_t)m->D, M = m->M;
+    const double complex *X = w->spec + nh, *W = X + D;
+    int nf = m->nfit;
+    for (int f = 0; f < nf; f++)
+        for (int sq = 0; sq < 2; sq++) {
+            /* the cross-spectrum of the parameter's bands (all of them with one gain) */
+            int b0 = nf == 1 ? 0 : f, b1 = nf == 1 ? m->bands : f + 1;
+            for (size_t r = 0, rk = 0; r < nh; r++) {
+                double complex z = 0.0;
+                for (int band = b0; band < b1; band++) {
+                    size_t o = (b * (size_t)m->bands + (size_t)band) * nh + r;
+                    z += sq ? m->bhat[o] * W[(size_t)band * K + rk] : m->ahat[o] * X[(size_t)band * K + rk];
+                }
+                w->spec[r] = z;
+                if (++rk == K) rk = 0;
+            }
+            fftw_execute_dft_c2r((fftw_plan)m->c2r, (fftw_complex *)w->spec, w->grid);
+            double *dst = (sq ? w->T : w->S) + (size_t)f * M + m->first[b];
+            memcpy(dst, w->grid, sizeof *dst * (size_t)m->G);
+        }
 }
 
 /* Refine continuous bulb b around its best grid cell j0: safeguarded Newton on the exact chi2(s)
@@ -466,21 +513,30 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
     }
     /* all templates: S = T_mat wx, T = T_sq w (per band with band gains) */
     double Lmax = -INFINITY;
+    /* the sums of every template (blocks of rows: continuous bulbs from the Fourier form, the
+     * rest as matrix-vector products); one block of all M rows without the Fourier form */
+    if (m->fourier) rec_eq7_light_dfts(m, w);
+    for (size_t b = 0; b < (m->fourier ? m->nb : 1); b++) {
+        if (m->fourier && m->cont[b]) {
+            rec_eq7_grid_sums(m, w, b);
+            continue;
+        }
+        size_t j0 = m->fourier ? m->first[b] : 0, n = m->fourier ? m->count[b] : M;
+        size_t span = m->bg ? (size_t)m->K : D;
+        for (int f = 0; f < m->nfit; f++) {
+            size_t o = (size_t)f * span;
+            cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)n, (int)span, 1.0, m->t + j0 * D + o, (int)D,
+                        w->wx + o, 1, 0.0, w->S + (size_t)f * M + j0, 1);
+            cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)n, (int)span, 1.0, m->tsq + j0 * D + o, (int)D,
+                        w->w + o, 1, 0.0, w->T + (size_t)f * M + j0, 1);
+        }
+    }
     if (!m->bg) {
-        cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, (int)D, 1.0, m->t, (int)D, w->wx, 1, 0.0, w->S, 1);
-        cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, (int)D, 1.0, m->tsq, (int)D, w->w, 1, 0.0, w->T, 1);
         for (size_t j = 0; j < M; j++) {
             w->L[j] = rec_eq7_loglik(Sxx, w->S[j], w->T[j]);
             if (w->L[j] > Lmax) Lmax = w->L[j];
         }
     } else {
-        int K = m->K;
-        for (int band = 0; band < m->bands; band++) {
-            cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, K, 1.0, m->t + (size_t)band * (size_t)K,
-                        (int)D, w->wx + (size_t)band * (size_t)K, 1, 0.0, w->S + (size_t)band * M, 1);
-            cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, K, 1.0, m->tsq + (size_t)band * (size_t)K,
-                        (int)D, w->w + (size_t)band * (size_t)K, 1, 0.0, w->T + (size_t)band * M, 1);
-        }
         double Sv[GS_MAX_BANDS], Tv[GS_MAX_BANDS];
         if (w->collect_tau)
             for (int i = 0; i < REC_TAU_N; i++) w->tau_ll[i] = -INFINITY;
