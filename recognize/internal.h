@@ -157,6 +157,10 @@ struct rec_matcher {
      * the G cells of t_0(c) and of t_0(c)^2, divided by G, bins 0..G/2 (eq7_matcher.c) */
     int fourier;
     double complex *ahat, *bhat;        /* [nb * bands * (G/2 + 1)] */
+    int exhaustive;                     /* 1: neither the Fourier form nor the reddened model's
+                                         * screen (eq7_light.c): every template's sums as
+                                         * matrix-vector products and its exact L (the tests'
+                                         * slow path); 0 from rec_matcher_new */
     void *c2r;                          /* fftw_plan: G-point complex-to-real, unaligned */
     int *nfine;                         /* [nb] BRF samples per cycle */
     double complex *wk;                 /* [K] e^{2 pi i j / K} */
