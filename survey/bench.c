@@ -676,9 +676,11 @@ static void capture_row(const gs_delight *all, const config *c, int *failed)
         return;
     }
     double np = (double)c->side * c->side;
-    printf("| %dx%d | %zu | %zu (%.1f %%) | %zu | %.3f | **%.2f** | %.3f | %zu | %.0f |\n", c->side,
+    double stack_mib = np * c->K * c->bands * 2.0 / (1024.0 * 1024.0);   /* 16-bit raw frames */
+    printf("| %dx%d | %zu | %zu (%.1f %%) | %zu | %.3f | **%.2f** | %.3f | %zu | %.0f | %.0f | %.2f |\n", c->side,
            c->side, c->lights, r.mapped, 100.0 * (double)r.mapped / np, r.matched, r.seconds,
-           r.rate / 1e6, r.blob_seconds, r.blobs, r.maxrss_kib / 1024.0);
+           r.rate / 1e6, r.blob_seconds, r.blobs, r.maxrss_kib / 1024.0, stack_mib,
+           r.maxrss_kib / 1024.0 / stack_mib);
     fflush(stdout);
 }
 
@@ -781,9 +783,12 @@ static int bench_recognize(int argc, char **argv)
            "the maps compute a background mesh, threshold every pixel at 5 sigma and run "
            "rec_match_pixels on the pixels above it only. Mpixel/s counts every pixel of the "
            "capture. *blobs*: the same capture through rec_blobs_extract (default options), the "
-           "first stage of the per-light path, and the lights it found.\n\n");
+           "first stage of the per-light path, and the lights it found. *frame stack*: the capture's "
+           "16-bit raw frames (side^2 x K x bands x 2 bytes); peak RSS includes them, the rendering "
+           "and both passes.\n\n");
     printf("| capture | lights | pixels above threshold | with a bulb | seconds | capture Mpixel/s | "
-           "blobs seconds | blobs found | peak RSS MiB |\n|---|---|---|---|---|---|---|---|---|\n");
+           "blobs seconds | blobs found | peak RSS MiB | frame stack MiB | peak / stack |\n"
+           "|---|---|---|---|---|---|---|---|---|---|---|\n");
     static const size_t nlights[] = {200, 2000, 20000};
     for (size_t li = 0; li < 3; li++) {
         if (quick && li == 2) continue;
@@ -808,6 +813,15 @@ static int bench_recognize(int argc, char **argv)
             }
     {
         config cf = {26, 3, 0, 1, 0, 0.0, quick ? 50 : 300, 0, 0, 0, 0};
+        light_row(all, &cf, &failed);
+    }
+    printf("\n### Time against the number of lights\n\nK = 26, RGB, whole database, the paper's model, "
+           "one thread: the same lights as above, 10^3 to 10^%d of them.\n\n", quick ? 4 : 5);
+    printf("| K | bands | bulbs | templates | lights | seconds | lights/s | reference lights/s | "
+           "speed-up | agree | correct | peak RSS MiB |\n");
+    printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    for (size_t n = 1000; n <= (quick ? 10000u : 100000u); n *= 10) {
+        config cf = {26, 3, 0, 0, 0, 0.0, n, 0, 0, 0, 0};
         light_row(all, &cf, &failed);
     }
     printf("\n*continuous* rows search every phase (a grid of max(8K, 96) shifts per cycle, refined); "
