@@ -16,6 +16,8 @@
  *     log p_m = -chi2_m/2 - log(T_m)/2 + log Phi(S_m / sqrt(T_m)) + log prior.
  * - Continuous phase: a grid of G = max(8K, 96) shifts per cycle, then Newton's method on the exact
  *   chi2(s) (templates evaluated from their Fourier series), sigma_s from chi2'' (Delta chi2 = 1).
+ *   One light's sums over every grid shift of a bulb are one G-point inverse FFT of the
+ *   cross-spectrum of the template with the light's weights when K divides G (fourier_grid_setup).
  *   The posterior integrates over s: grid cells (periodic trapezoid rule, spectrally accurate for
  *   peaks wider than a cell) with the cells around each bulb's peak replaced by the Gaussian
  *   (Laplace) integral when the peak is narrower than a cell.
