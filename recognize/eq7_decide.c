@@ -42,6 +42,8 @@ void rec_eq7_work_free(rec_eq7_work *w)
     free(w->t12);
     free(w->scratch);
     free(w->acc);
+    free(w->spec);
+    free(w->grid);
     memset(w, 0, sizeof *w);
 }
 
@@ -74,12 +76,15 @@ gs_status rec_eq7_work_alloc(const rec_matcher *m, rec_eq7_work *w)
     w->s2 = malloc(sizeof *w->s2 * D);
     w->m2 = malloc(sizeof *w->m2 * D);
     w->tr = malloc(sizeof *w->tr * D);
-    w->t12 = malloc(sizeof *w->t12 * M * (size_t)m->nfit);
+    w->t12 = malloc(sizeof *w->t12 * M * (size_t)m->nfit * REC_NESTED_FIRST);
     w->scratch = malloc(sizeof *w->scratch * (size_t)(2 * 3 * GS_MAX_BANDS + 1) * D);
     w->acc = malloc(sizeof *w->acc * 3 * (size_t)m->K);
+    w->spec = malloc(sizeof *w->spec * ((size_t)m->G / 2 + 1 + 2 * D));
+    w->grid = malloc(sizeof *w->grid * (size_t)m->G);
     if (!w->L || !w->mass || !w->cand || !w->mark || !w->bmass || !w->wmass || !w->has_peak ||
         !w->peak_s || !w->peak_L || !w->peak_sig || !w->peak_z || !w->peak_gain || !w->peak_cell || !w->S || !w->T || !w->w ||
-        !w->wx || !w->xs || !w->tt || !w->dt || !w->d2t || !w->r2 || !w->s2 || !w->m2 || !w->tr || !w->t12 || !w->scratch || !w->acc) {
+        !w->wx || !w->xs || !w->tt || !w->dt || !w->d2t || !w->r2 || !w->s2 || !w->m2 || !w->tr || !w->t12 || !w->scratch || !w->acc ||
+        !w->spec || !w->grid) {
         rec_eq7_work_free(w);
         return gs_fail(GS_ENOMEM, "Eq. 7: cannot allocate scratch for %zu templates", M);
     }

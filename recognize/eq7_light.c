@@ -8,6 +8,7 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#include <fftw3.h>
 
 /* ------------------------------------------------------------ one light */
 
@@ -223,6 +224,150 @@ static void sums_of(const rec_matcher *m, const rec_eq7_work *w, size_t j, doubl
         S[f] = w->S[(size_t)f * m->M + j];
         T[f] = w->T[(size_t)f * m->M + j];
     }
+}
+
+/* An upper bound of loglik_red for bulb b's sums: with v_b = T_b / (1 + s_b^2 T_b) <= T_b the
+ * occupation term is sum_b log(v_b / T_b) / 2 <= 0 and A = sum v c^2 >= v_k c_k^2 for any used
+ * band k, so -log(A)/2 - occ/2 <= -log(c_k^2 T_k)/2; between >= 0 and log Phi <= 0; c_k(tau) is
+ * at least the bulb's smallest tabulated c_k (cmin); the tau prior adds at most its largest
+ * log weight (lp_max). Every tau's L(tau) obeys it, so their prior-weighted mean does. */
+static double red_bound(const rec_matcher *m, double Sxx, const double *S, const double *T,
+                        const double *cmin, double lp_max)
+{
+    double R = Sxx, best = -INFINITY;
+    for (int b = 0; b < m->bands; b++) {
+        if (!(T[b] > 0.0)) continue;
+        R -= S[b] * (S[b] / T[b]);
+        double l = log(cmin[b] * cmin[b] * T[b]);
+        if (l > best) best = l;
+    }
+    if (!isfinite(best)) return -INFINITY;
+    if (R < 0.0) R = 0.0;
+    double u = -0.5 * R - 0.5 * best + lp_max;
+    return u + 1e-9 * (1.0 + fabs(u));   /* rounding slack: a bound in floating point too */
+}
+
+/* The reddened model's log likelihood of template j into w->L[j] (its tau terms into tau_ll
+ * when collecting); returns it. */
+static double red_exact(const rec_matcher *m, rec_eq7_work *w, size_t j, double Sxx)
+{
+    double Sv[GS_MAX_BANDS], Tv[GS_MAX_BANDS];
+    sums_of(m, w, j, Sv, Tv);
+    int b = m->tbulb[j];   /* every bulb weighs the same, whatever its phase grid */
+    w->L[j] = loglik_red(m, w, b, Sxx, Sv, Tv, NULL, w->collect_tau ? w->tau_ll : NULL,
+                         -log((double)m->count[b]));
+    return w->L[j];
+}
+
+/* w->L of every template under the reddened model, exactly wherever it can matter and -inf
+ * elsewhere (a bound-based screen; returns the largest L). Exact: every template whose bound
+ * reaches within CUT_PIXEL of a computed L (the rest carry < e^-30 of the best's mass each: the
+ * posterior to ~M e^-30, runner-ups below that may differ), each bulb's best template (the
+ * runner-up's ranking), and every template that can be among the REC_NESTED_FIRST + 1 largest
+ * L (the blend search's first templates). The bounds go in w->mass (rec_eq7_decide rewrites
+ * it). */
+static double red_screen(const rec_matcher *m, rec_eq7_work *w, double Sxx)
+{
+    size_t M = m->M;
+    double *U = w->mass, lp_max = 0.0, Sv[GS_MAX_BANDS], Tv[GS_MAX_BANDS];
+    if (w->has_tau_prior) {
+        lp_max = -INFINITY;
+        for (int i = 0; i < REC_TAU_N; i++) lp_max = fmax(lp_max, w->tau_logprior[i]);
+        lp_max += log((double)REC_TAU_N);
+    }
+    size_t jbest = 0;
+    for (size_t b = 0; b < m->nb; b++) {
+        double cmin[GS_MAX_BANDS];
+        for (int band = 0; band < m->bands; band++) {
+            cmin[band] = INFINITY;
+            for (int i = 0; i < REC_TAU_N; i++)
+                cmin[band] = fmin(cmin[band], m->red_c[(b * REC_TAU_N + (size_t)i) * (size_t)m->bands + (size_t)band]);
+        }
+        for (size_t j = m->first[b]; j < m->first[b] + m->count[b]; j++) {
+            sums_of(m, w, j, Sv, Tv);
+            U[j] = red_bound(m, Sxx, Sv, Tv, cmin, lp_max);
+            w->L[j] = NAN;   /* not computed */
+            if (U[j] > U[jbest]) jbest = j;
+        }
+    }
+    double lo = red_exact(m, w, jbest, Sxx);   /* Lmax >= lo */
+    for (size_t b = 0; b < m->nb; b++) {
+        size_t j0 = m->first[b], n = m->count[b], jb = j0;
+        for (size_t j = j0; j < j0 + n; j++)
+            if (U[j] > U[jb]) jb = j;
+        double lb = isnan(w->L[jb]) ? red_exact(m, w, jb, Sxx) : w->L[jb];
+        for (size_t j = j0; j < j0 + n; j++)
+            if (isnan(w->L[j]) && (U[j] >= lo - CUT_PIXEL || U[j] >= lb)) red_exact(m, w, j, Sxx);
+        for (size_t j = j0; j < j0 + n; j++)
+            if (w->L[j] > lo) lo = w->L[j];
+    }
+    /* the REC_NESTED_FIRST + 1 largest computed L: a template whose bound is below the least of
+     * them cannot be among them */
+    double top[REC_NESTED_FIRST + 1];
+    int nt = 0;
+    for (size_t j = 0; j < M; j++) {
+        double l = w->L[j];
+        if (!isfinite(l) || (nt == REC_NESTED_FIRST + 1 && !(l > top[nt - 1]))) continue;
+        int q = nt < REC_NESTED_FIRST + 1 ? nt++ : nt - 1;
+        while (q > 0 && l > top[q - 1]) {
+            top[q] = top[q - 1];
+            q--;
+        }
+        top[q] = l;
+    }
+    double th = nt == REC_NESTED_FIRST + 1 ? top[nt - 1] : -INFINITY;
+    double Lmax = -INFINITY;
+    for (size_t j = 0; j < M; j++) {
+        if (isnan(w->L[j])) w->L[j] = U[j] >= th ? red_exact(m, w, j, Sxx) : -INFINITY;
+        if (w->L[j] > Lmax) Lmax = w->L[j];
+    }
+    return Lmax;
+}
+
+/* The light's K-point DFTs of wx and w per band into w->spec + nh (X, then W; [band * K + r]),
+ * conjugated: conj(sum_k v_k e^{2 pi i r k / K}). */
+void rec_eq7_light_dfts(const rec_matcher *m, rec_eq7_work *w)
+{
+    size_t K = (size_t)m->K, nh = (size_t)m->G / 2 + 1, D = (size_t)m->D;
+    double complex *X = w->spec + nh, *W = X + D;
+    for (int band = 0; band < m->bands; band++)
+        for (size_t r = 0; r < K; r++) {
+            double complex x = 0.0, v = 0.0;
+            size_t rk = 0;   /* r k mod K */
+            for (size_t k = 0; k < K; k++) {
+                size_t d = (size_t)band * K + k;
+                x += w->wx[d] * m->wk[rk];
+                v += w->w[d] * m->wk[rk];
+                rk += r;
+                if (rk >= K) rk -= K;
+            }
+            X[(size_t)band * K + r] = conj(x);
+            W[(size_t)band * K + r] = conj(v);
+        }
+}
+
+void rec_eq7_grid_sums(const rec_matcher *m, rec_eq7_work *w, size_t b)
+{
+    size_t K = (size_t)m->K, nh = (size_t)m->G / 2 + 1, D = (size_t)m->D, M = m->M;
+    const double complex *X = w->spec + nh, *W = X + D;
+    int nf = m->nfit;
+    for (int f = 0; f < nf; f++)
+        for (int sq = 0; sq < 2; sq++) {
+            /* the cross-spectrum of the parameter's bands (all of them with one gain) */
+            int b0 = nf == 1 ? 0 : f, b1 = nf == 1 ? m->bands : f + 1;
+            for (size_t r = 0, rk = 0; r < nh; r++) {
+                double complex z = 0.0;
+                for (int band = b0; band < b1; band++) {
+                    size_t o = (b * (size_t)m->bands + (size_t)band) * nh + r;
+                    z += sq ? m->bhat[o] * W[(size_t)band * K + rk] : m->ahat[o] * X[(size_t)band * K + rk];
+                }
+                w->spec[r] = z;
+                if (++rk == K) rk = 0;
+            }
+            fftw_execute_dft_c2r((fftw_plan)m->c2r, (fftw_complex *)w->spec, w->grid);
+            double *dst = (sq ? w->T : w->S) + (size_t)f * M + m->first[b];
+            memcpy(dst, w->grid, sizeof *dst * (size_t)m->G);
+        }
 }
 
 /* Refine continuous bulb b around its best grid cell j0: safeguarded Newton on the exact chi2(s)
@@ -466,31 +611,42 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
     }
     /* all templates: S = T_mat wx, T = T_sq w (per band with band gains) */
     double Lmax = -INFINITY;
+    /* the sums of every template (blocks of rows: continuous bulbs from the Fourier form, the
+     * rest as matrix-vector products); one block of all M rows without the Fourier form */
+    int fourier = m->fourier && !m->exhaustive;
+    if (fourier) rec_eq7_light_dfts(m, w);
+    for (size_t b = 0; b < (fourier ? m->nb : 1); b++) {
+        if (fourier && m->cont[b]) {
+            rec_eq7_grid_sums(m, w, b);
+            continue;
+        }
+        size_t j0 = fourier ? m->first[b] : 0, n = fourier ? m->count[b] : M;
+        size_t span = m->bg ? (size_t)m->K : D;
+        for (int f = 0; f < m->nfit; f++) {
+            size_t o = (size_t)f * span;
+            cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)n, (int)span, 1.0, m->t + j0 * D + o, (int)D,
+                        w->wx + o, 1, 0.0, w->S + (size_t)f * M + j0, 1);
+            cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)n, (int)span, 1.0, m->tsq + j0 * D + o, (int)D,
+                        w->w + o, 1, 0.0, w->T + (size_t)f * M + j0, 1);
+        }
+    }
     if (!m->bg) {
-        cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, (int)D, 1.0, m->t, (int)D, w->wx, 1, 0.0, w->S, 1);
-        cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, (int)D, 1.0, m->tsq, (int)D, w->w, 1, 0.0, w->T, 1);
         for (size_t j = 0; j < M; j++) {
             w->L[j] = rec_eq7_loglik(Sxx, w->S[j], w->T[j]);
             if (w->L[j] > Lmax) Lmax = w->L[j];
         }
     } else {
-        int K = m->K;
-        for (int band = 0; band < m->bands; band++) {
-            cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, K, 1.0, m->t + (size_t)band * (size_t)K,
-                        (int)D, w->wx + (size_t)band * (size_t)K, 1, 0.0, w->S + (size_t)band * M, 1);
-            cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, K, 1.0, m->tsq + (size_t)band * (size_t)K,
-                        (int)D, w->w + (size_t)band * (size_t)K, 1, 0.0, w->T + (size_t)band * M, 1);
-        }
         double Sv[GS_MAX_BANDS], Tv[GS_MAX_BANDS];
         if (w->collect_tau)
             for (int i = 0; i < REC_TAU_N; i++) w->tau_ll[i] = -INFINITY;
-        for (size_t j = 0; j < M; j++) {
-            sums_of(m, w, j, Sv, Tv);
-            int b = m->tbulb[j];   /* every bulb weighs the same, whatever its phase grid */
-            w->L[j] = m->red ? loglik_red(m, w, b, Sxx, Sv, Tv, NULL, w->collect_tau ? w->tau_ll : NULL,
-                                          -log((double)m->count[b]))
-                             : loglik_n(m->nfit, Sxx, Sv, Tv);
-            if (w->L[j] > Lmax) Lmax = w->L[j];
+        if (m->red && !m->exhaustive) {
+            Lmax = red_screen(m, w, Sxx);
+        } else {
+            for (size_t j = 0; j < M; j++) {
+                sums_of(m, w, j, Sv, Tv);
+                w->L[j] = m->red ? red_exact(m, w, j, Sxx) : loglik_n(m->nfit, Sxx, Sv, Tv);
+                if (w->L[j] > Lmax) Lmax = w->L[j];
+            }
         }
     }
     /* continuous bulbs near the top: refine their peaks exactly */

@@ -16,6 +16,8 @@
  *     log p_m = -chi2_m/2 - log(T_m)/2 + log Phi(S_m / sqrt(T_m)) + log prior.
  * - Continuous phase: a grid of G = max(8K, 96) shifts per cycle, then Newton's method on the exact
  *   chi2(s) (templates evaluated from their Fourier series), sigma_s from chi2'' (Delta chi2 = 1).
+ *   One light's sums over every grid shift of a bulb are one G-point inverse FFT of the
+ *   cross-spectrum of the template with the light's weights when K divides G (fourier_grid_setup).
  *   The posterior integrates over s: grid cells (periodic trapezoid rule, spectrally accurate for
  *   peaks wider than a cell) with the cells around each bulb's peak replaced by the Gaussian
  *   (Laplace) integral when the peak is narrower than a cell.
@@ -38,6 +40,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <lapacke.h>
+#include <fftw3.h>
 
 /* ------------------------------------------------------------ matcher */
 
@@ -96,6 +99,9 @@ void rec_matcher_free(rec_matcher *m)
     free(m->bib);
     free(m->bib2);
     free(m->red_c);
+    free(m->ahat);
+    free(m->bhat);
+    if (m->c2r) fftw_destroy_plan((fftw_plan)m->c2r);
     free(m);
 }
 
@@ -399,6 +405,54 @@ done:
     return st;
 }
 
+/* The Fourier form of the continuous grids (internal.h): when K divides G, window k's mean is
+ * window 0's delayed by G/K cells, so for one light S_c = sum_k wx_k t_k(c) is the circular
+ * correlation of t_0 with the weights placed every G/K cells: its DFT is the template's times
+ * the conjugate K-point DFT of the weights (and T_c the same with t_0^2 and w). Here: the
+ * template spectra and the G-point inverse plan (rec_eq7_grid_sums). */
+static gs_status fourier_grid_setup(rec_matcher *m)
+{
+    int G = m->G, K = m->K, bands = m->bands;
+    size_t nh = (size_t)G / 2 + 1, D = (size_t)m->D;
+    m->fourier = 0;
+    if (m->ncont == 0 || G % K != 0) return GS_OK;
+    m->ahat = calloc(m->nb * (size_t)bands * nh, sizeof *m->ahat);
+    m->bhat = calloc(m->nb * (size_t)bands * nh, sizeof *m->bhat);
+    double *in = fftw_malloc(sizeof *in * (size_t)G);
+    fftw_complex *out = fftw_malloc(sizeof *out * nh);
+    gs_status st = GS_OK;
+    if (!m->ahat || !m->bhat || !in || !out) {
+        st = gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate the template spectra");
+        goto done;
+    }
+    fftw_plan fwd = fftw_plan_dft_r2c_1d(G, in, out, FFTW_ESTIMATE);
+    m->c2r = fftw_plan_dft_c2r_1d(G, (fftw_complex *)out, in, FFTW_ESTIMATE | FFTW_UNALIGNED);
+    if (!fwd || !m->c2r) {
+        if (fwd) fftw_destroy_plan(fwd);
+        st = gs_fail(GS_ENUMERIC, "Eq. 7 matcher: no %d-point FFT plan", G);
+        goto done;
+    }
+    for (size_t b = 0; b < m->nb; b++) {
+        if (!m->cont[b]) continue;
+        for (int band = 0; band < bands; band++)
+            for (int sq = 0; sq < 2; sq++) {
+                for (int c = 0; c < G; c++) {
+                    double v = m->t[(m->first[b] + (size_t)c) * D + (size_t)band * (size_t)K];
+                    in[c] = sq ? v * v : v;
+                }
+                fftw_execute(fwd);
+                double complex *dst = (sq ? m->bhat : m->ahat) + (b * (size_t)bands + (size_t)band) * nh;
+                for (size_t r = 0; r < nh; r++) dst[r] = out[r] / G;
+            }
+    }
+    fftw_destroy_plan(fwd);
+    m->fourier = 1;
+done:
+    fftw_free(in);
+    fftw_free(out);
+    return st;
+}
+
 gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
                           const rec_eq7_opts *o, rec_matcher **out)
 {
@@ -668,6 +722,11 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
         }
     }
     for (size_t b = 0; b < m->nb; b++) m->ncont += m->cont[b];
+    s = fourier_grid_setup(m);
+    if (s != GS_OK) {
+        rec_matcher_free(m);
+        return s;
+    }
     /* the prefilter bounds x . tnd_j; that bounds the dim statistic of the one-gain model with
      * one sigma per row, and of the band-gain model with any per-band sigma >= the row's (its
      * unit vector is tnd_j), but not of one gain with per-band sigmas: no prefilter then */

@@ -15,9 +15,6 @@
  * waveform; the template's own mean keeps the columns independent). */
 #define SHAPE_H 3
 #define MAX_COLS (GS_MAX_BANDS * (1 + 2 * SHAPE_H))
-/* Second templates are searched against the best fit and the next NESTED_FIRST - 1 templates
- * by score (every template of a small bank). */
-#define NESTED_FIRST 16
 
 /* Cholesky of the n x n symmetric A (lower triangle used) in place; log det A, or NAN when A is
  * not positive definite. */
@@ -241,51 +238,66 @@ void rec_eq7_nested_tests(const rec_matcher *m, rec_eq7_work *w, const double *t
      * brightnesses >= 0; the sums of j2 from the work arrays (S, T), the cross terms
      * T12 = T_mat (w t1) */
     if (used <= 2 * nf + 2) return;
-    size_t first[NESTED_FIRST];
-    double best_delta = 0.0, e0 = 0.0, best_occam = 0.0;
-    int nfirst = 0;
-    for (int r = 0; r < NESTED_FIRST; r++) {
-        const double *t1 = tb;
-        int b1 = best_bulb;
-        double s1 = best_shift;
-        first[r] = best_tmpl;
-        if (r > 0) {   /* the next best grid template */
-            size_t jb = M;
-            for (size_t j = 0; j < M; j++) {
-                int dup = j == best_tmpl;
-                for (int q = 1; q < r; q++) dup |= first[q] == j;
-                if (!dup && isfinite(w->L[j]) && (jb == M || w->L[j] > w->L[jb])) jb = j;
-            }
-            if (jb == M) break;
-            first[r] = jb;
-            nfirst = r;
-            t1 = m->t + jb * D;
-            b1 = m->tbulb[jb];
-            s1 = m->shift[jb];
+    /* the first templates: the best fit, then the next best grid templates by L (ties to the
+     * lower index), in one pass */
+    size_t first[REC_NESTED_FIRST];
+    int nr = 1;
+    first[0] = best_tmpl;
+    for (size_t j = 0; j < M; j++) {
+        if (j == best_tmpl || !isfinite(w->L[j])) continue;
+        if (nr == REC_NESTED_FIRST && !(w->L[j] > w->L[first[nr - 1]])) continue;
+        int q = nr < REC_NESTED_FIRST ? nr++ : nr - 1;
+        while (q > 1 && w->L[j] > w->L[first[q - 1]]) {
+            first[q] = first[q - 1];
+            q--;
         }
-        double S1[GS_MAX_BANDS] = {0}, T11[GS_MAX_BANDS] = {0}, e1 = 0.0;
+        first[q] = j;
+    }
+    int nfirst = nr - 1;
+    /* their weighted templates u_r = w t_r (D x nr) and the cross sums of every template with
+     * each, T12 = T_mat U (per band with band gains): one matrix product */
+    double S1v[REC_NESTED_FIRST][GS_MAX_BANDS], T11v[REC_NESTED_FIRST][GS_MAX_BANDS], e1v[REC_NESTED_FIRST];
+    double *U = w->scratch;   /* D * REC_NESTED_FIRST doubles (rec_eq7_work_alloc) */
+    _Static_assert(REC_NESTED_FIRST <= 2 * 3 * GS_MAX_BANDS + 1, "the scratch holds U");
+    for (int r = 0; r < nr; r++) {
+        const double *t1 = r == 0 ? tb : m->t + first[r] * D;
+        double e1 = 0.0;
+        for (int f = 0; f < nf; f++) S1v[r][f] = T11v[r][f] = 0.0;
         for (size_t d = 0; d < D; d++) {
             int f = nf == 1 ? 0 : (int)(d / K);
-            S1[f] += w->wx[d] * t1[d];
-            T11[f] += w->w[d] * t1[d] * t1[d];
-            w->r2[d] = w->w[d] * t1[d];
+            S1v[r][f] += w->wx[d] * t1[d];
+            T11v[r][f] += w->w[d] * t1[d] * t1[d];
+            U[d * REC_NESTED_FIRST + (size_t)r] = w->w[d] * t1[d];
         }
-        for (int f = 0; f < nf; f++) e1 += T11[f] > 0.0 ? S1[f] * S1[f] / T11[f] : 0.0;
-        if (r == 0) e0 = e1;
-        for (int f = 0; f < nf; f++) {
-            size_t off = nf == 1 ? 0 : (size_t)f * K, len = nf == 1 ? D : K;
-            cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, (int)len, 1.0, m->t + off, (int)D, w->r2 + off, 1,
-                        0.0, w->t12 + (size_t)f * M, 1);
-        }
+        for (int f = 0; f < nf; f++) e1 += T11v[r][f] > 0.0 ? S1v[r][f] * S1v[r][f] / T11v[r][f] : 0.0;
+        e1v[r] = e1;
+    }
+    for (int f = 0; f < nf; f++) {
+        size_t off = nf == 1 ? 0 : (size_t)f * K, len = nf == 1 ? D : K;
+        cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, (int)M, nr, (int)len, 1.0, m->t + off, (int)D,
+                    U + off * REC_NESTED_FIRST, REC_NESTED_FIRST, 0.0, w->t12 + (size_t)f * M * REC_NESTED_FIRST,
+                    REC_NESTED_FIRST);
+    }
+    /* a second template: for each first template j1, every template j2 (not the first one's
+     * bulb within two cells), by per-band 2 x 2 least squares with both brightnesses >= 0; the
+     * sums of j2 from the work arrays (S, T) */
+    double best_delta = 0.0, e0 = e1v[0], best_occam = 0.0;
+    size_t best_j = M;
+    int best_r = 0;
+    for (int r = 0; r < nr; r++) {
+        int b1 = r == 0 ? best_bulb : m->tbulb[first[r]];
+        double s1 = r == 0 ? best_shift : m->shift[first[r]];
+        const double *S1 = S1v[r], *T11 = T11v[r];
         for (size_t j = 0; j < M; j++) {
             if (near(m, j, b1, s1) || (r > 0 && near(m, j, best_bulb, best_shift)))
                 continue;   /* itself or next door; the best fit was paired at r = 0 */
             /* what t2 explains beyond t1, per band: (S2 - T12 S1/T11)^2 / (T22 - T12^2/T11) */
-            double gain = 0.0, a1s = 0.0, a2s = 0.0, occam = 0.0;
+            double gain = 0.0;
             int ok = 1;
             for (int f = 0; f < nf && ok; f++) {
                 if (!(T11[f] > 0.0)) continue;
-                double S2 = w->S[(size_t)f * M + j], T22 = w->T[(size_t)f * M + j], T12 = w->t12[(size_t)f * M + j];
+                double S2 = w->S[(size_t)f * M + j], T22 = w->T[(size_t)f * M + j];
+                double T12 = w->t12[((size_t)f * M + j) * REC_NESTED_FIRST + (size_t)r];
                 double r2 = S2 - T12 * S1[f] / T11[f], q = T22 - T12 * T12 / T11[f];
                 if (!(q > 1e-9 * T22)) {
                     ok = 0;
@@ -294,22 +306,35 @@ void rec_eq7_nested_tests(const rec_matcher *m, rec_eq7_work *w, const double *t
                 double a2 = r2 / q, a1 = (S1[f] - T12 * a2) / T11[f];
                 if (a1 < 0.0 || a2 < 0.0) ok = 0;
                 gain += r2 * r2 / q;
-                a1s += a1;
-                a2s += a2;
-                /* the second brightness: its std 1/sqrt(q) against a flat prior on [0, the
-                 * light's brightness in the band] */
-                double atot = S1[f] / T11[f];
-                occam += atot > 0.0 ? 0.5 * log(2.0 * M_PI / q) - log(atot) : 0.0;
             }
-            double delta = (e1 - e0) + gain;   /* chi2 of the best fit minus the pair's */
+            double delta = (e1v[r] - e0) + gain;   /* chi2 of the best fit minus the pair's */
             if (!ok || !(delta > best_delta)) continue;
             best_delta = delta;
-            best_occam = occam < 0.0 ? occam : 0.0;
-            out->tmpl[0] = r == 0 ? (size_t)-1 : first[r];
-            out->tmpl[1] = j;
-            out->share[0] = a1s + a2s > 0.0 ? a1s / (a1s + a2s) : 0.5;
-            out->share[1] = 1.0 - out->share[0];
+            best_j = j;
+            best_r = r;
         }
+    }
+    if (best_j < M) {
+        /* the winner's shares and the second brightness's Occam factor: its std 1/sqrt(q)
+         * against a flat prior on [0, the light's brightness in the band] */
+        const double *S1 = S1v[best_r], *T11 = T11v[best_r];
+        double a1s = 0.0, a2s = 0.0, occam = 0.0;
+        for (int f = 0; f < nf; f++) {
+            if (!(T11[f] > 0.0)) continue;
+            double S2 = w->S[(size_t)f * M + best_j], T22 = w->T[(size_t)f * M + best_j];
+            double T12 = w->t12[((size_t)f * M + best_j) * REC_NESTED_FIRST + (size_t)best_r];
+            double r2 = S2 - T12 * S1[f] / T11[f], q = T22 - T12 * T12 / T11[f];
+            double a2 = r2 / q, a1 = (S1[f] - T12 * a2) / T11[f];
+            a1s += a1;
+            a2s += a2;
+            double atot = S1[f] / T11[f];
+            occam += atot > 0.0 ? 0.5 * log(2.0 * M_PI / q) - log(atot) : 0.0;
+        }
+        out->tmpl[0] = best_r == 0 ? (size_t)-1 : first[best_r];
+        out->tmpl[1] = best_j;
+        out->share[0] = a1s + a2s > 0.0 ? a1s / (a1s + a2s) : 0.5;
+        out->share[1] = 1.0 - out->share[0];
+        best_occam = occam < 0.0 ? occam : 0.0;
     }
     if (!(best_delta > 0.0)) return;
     /* the winner's chi2 again from its residuals (the search's sums cancel at high SNR) */

@@ -152,6 +152,16 @@ struct rec_matcher {
     int *H;                             /* [nb] harmonics kept */
     double complex **F;                 /* [nb] -> [bands * (H + 1)], F[band * (H+1) + h] */
     double *nyq;                        /* [nb * bands] Nyquist coefficient */
+    /* The Fourier form of the continuous grids (fourier: K divides G, so window k is window 0
+     * delayed by G/K cells, t_k(c) = t_0(c - k G/K)): per continuous bulb and band the DFT over
+     * the G cells of t_0(c) and of t_0(c)^2, divided by G, bins 0..G/2 (eq7_matcher.c) */
+    int fourier;
+    double complex *ahat, *bhat;        /* [nb * bands * (G/2 + 1)] */
+    int exhaustive;                     /* 1: neither the Fourier form nor the reddened model's
+                                         * screen (eq7_light.c): every template's sums as
+                                         * matrix-vector products and its exact L (the tests'
+                                         * slow path); 0 from rec_matcher_new */
+    void *c2r;                          /* fftw_plan: G-point complex-to-real, unaligned */
     int *nfine;                         /* [nb] BRF samples per cycle */
     double complex *wk;                 /* [K] e^{2 pi i j / K} */
     double chi2_thr;                    /* pixels: chi2 at p = unknown_p, dof D - nfit - 1 */
@@ -234,9 +244,13 @@ typedef struct {
     double *tt, *dt, *d2t;                 /* [D] */
     double *r2, *s2, *m2;                  /* [D] the excess noise's residuals, variances, levels */
     double *tr;                            /* [D] the runner-up's template */
-    double *t12;                           /* [nfit * M] cross sums of a first and every template */
+    double *t12;                           /* [nfit * M * REC_NESTED_FIRST] cross sums of the first
+                                            * templates and every template (eq7_nested.c) */
     double *scratch;                       /* [(6 bands + 1) D] the nested tests' */
     double complex *acc;                   /* [3 K] */
+    double complex *spec;                  /* [G/2 + 1 + 2 D] a cross-spectrum and the light's
+                                            * band DFTs (rec_eq7_grid_sums) */
+    double *grid;                          /* [G] its inverse */
     /* the reddened model: the light's log prior per tau (has_tau_prior; else uniform) and, when
      * collect_tau, its log likelihood per tau with every bulb weighted alike (eq7_population.c) */
     int has_tau_prior, collect_tau;
@@ -281,6 +295,11 @@ typedef struct {
 void rec_eq7_template_at(const rec_matcher *m, size_t b, double s, double *t, double *dt,
                          double *d2t, double complex *acc);
 double rec_eq7_log_phi_fast(const rec_matcher *m, double z);
+/* eq7_light.c: the sums S, T (rec_eq7_work [f * M + j]) of continuous bulb b's grid from the
+ * Fourier form (m->fourier): one G-point inverse FFT per sum, after rec_eq7_light_dfts has
+ * taken the DFTs of the light's w->wx and w->w. */
+void rec_eq7_light_dfts(const rec_matcher *m, rec_eq7_work *w);
+void rec_eq7_grid_sums(const rec_matcher *m, rec_eq7_work *w, size_t b);
 /* eq7_decide.c: scratch, and the posterior over (bulb, phase) from the candidates' scores. */
 gs_status rec_eq7_work_alloc(const rec_matcher *m, rec_eq7_work *w);
 void rec_eq7_work_free(rec_eq7_work *w);
@@ -310,6 +329,9 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
  * continuous one, shift), on the work arrays of rec_eq7_match_light_ws; phi the chi2 variance
  * inflation of a correlated excess. */
 #define REC_NESTED_MAX_D (GS_MAX_BANDS * 64)
+/* Second templates are searched against the best fit and the next REC_NESTED_FIRST - 1
+ * templates by score (every template of a small bank). */
+#define REC_NESTED_FIRST 16
 typedef struct {
     double p_shape;       /* + smooth harmonics 1..3 per band: chi2(2 H bands) test */
     double p_blend;       /* + a second template: Bonferroni over the templates searched */

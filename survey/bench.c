@@ -23,7 +23,7 @@
 #include <unistd.h>
 
 static const char bench_usage[] =
-    "usage: gridsurvey bench recognize [--quick]   Eq. 7 throughput tables (Markdown on stdout)\n"
+    "usage: gridsurvey bench recognize [--quick] [--numpy SCRIPT]   Eq. 7 throughput tables (Markdown)\n"
     "       gridsurvey bench db [--quick] ...       survey database tables (bench db --help)\n"
     "       gridsurvey bench pg --pg CONNINFO ...   SQLite vs PostGIS: push and stats (bench pg --help)\n"
     "       gridsurvey bench render [SCENE]         simulator time per effect (bench render --help)\n"
@@ -32,7 +32,9 @@ static const char bench_usage[] =
     "\n"
     "bench recognize: rec_match_pixels (pixels/s) and rec_match_catalog (lights/s) against K,\n"
     "bands, DELIGHT size and pixel count, one core, next to a plain triple-loop reference of the\n"
-    "same search; --quick runs a small subset (seconds).\n";
+    "same search; --quick runs a small subset (seconds); --numpy SCRIPT also times the NumPy\n"
+    "implementation of that search on the 1-megapixel rows (survey/bench_eq7_numpy.py).\n"
+    "example: gridsurvey bench recognize --quick --numpy survey/bench_eq7_numpy.py\n";
 
 /* ------------------------------------------------------------------ helpers */
 
@@ -165,6 +167,7 @@ typedef struct {
     int side;               /* capture row: a side x side capture through rec_pixel_maps_compute */
     int defaults;           /* lights row: rec_eq7_opts_default (the survey's options) */
     int threads;            /* lights row: rec_match_catalog's threads (0: one) */
+    int numpy;              /* pixels row: also time survey/bench_eq7_numpy.py (--numpy) */
 } config;
 
 typedef struct {
@@ -180,6 +183,7 @@ typedef struct {
     double blob_seconds;           /* capture row: rec_blobs_extract */
     size_t blobs;                  /* capture row: lights it found */
     double lit_correct;            /* lit rows with the true bulb and phase (fast path) */
+    double numpy_rate, numpy_agree;   /* the NumPy search: pixels/s, rows answered as here */
     long maxrss_kib;
 } result;
 
@@ -218,6 +222,61 @@ static gs_status subset(const gs_delight *d, int bands, int count, gs_delight **
 #define REPS 3              /* timings are the best of REPS runs (the machine may be shared) */
 #define SNR 10.0            /* lit rows and lights: mean sample = SNR noise sigmas */
 #define POOL (1u << 20)
+
+/* The --numpy script (survey/bench_eq7_numpy.py), NULL without. */
+static const char *numpy_script;
+
+/* The same rows through the NumPy implementation of the reference's search, one core
+ * (OPENBLAS_NUM_THREADS=1): its rate and the fraction of rows with the same answer as
+ * rec_match_pixels (bulb, phase). Inputs and answers pass through files in a temporary
+ * directory. */
+static gs_status run_numpy(const ref_templates *r, const float *x, size_t P, double min_snr,
+                           double chi2_thr, const int *bulb, const float *ph, result *res)
+{
+    char dir[] = "/tmp/gs-bench-numpy-XXXXXX", path[512], cmd[1400];
+    if (!mkdtemp(dir)) return gs_fail(GS_EIO, "bench: cannot create a temporary directory");
+    size_t D = (size_t)r->D;
+    gs_status st = GS_OK;
+    FILE *f;
+    snprintf(path, sizeof path, "%s/t.f64", dir);
+    if (!(f = fopen(path, "wb")) || fwrite(r->t, sizeof *r->t, r->M * D, f) != r->M * D) st = gs_fail(GS_EIO, "bench: %s: cannot write", path);
+    if (f) fclose(f);
+    snprintf(path, sizeof path, "%s/x.f32", dir);
+    if (st == GS_OK && (!(f = fopen(path, "wb")) || fwrite(x, sizeof *x, P * D, f) != P * D)) st = gs_fail(GS_EIO, "bench: %s: cannot write", path);
+    if (st == GS_OK && f) fclose(f);
+    snprintf(path, sizeof path, "%s/params.txt", dir);
+    if (st == GS_OK && (f = fopen(path, "w"))) {
+        fprintf(f, "%zu %zu %zu %.17g %.17g %d\n", r->M, D, P, min_snr, chi2_thr, REPS);
+        fclose(f);
+    }
+    snprintf(cmd, sizeof cmd, "OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 /usr/bin/python3 '%s' '%s'", numpy_script, dir);
+    if (st == GS_OK && system(cmd) != 0) st = gs_fail(GS_EIO, "bench: %s failed", numpy_script);
+    double sec = NAN;
+    snprintf(path, sizeof path, "%s/seconds.txt", dir);
+    if (st == GS_OK && (!(f = fopen(path, "r")) || fscanf(f, "%lf", &sec) != 1)) st = gs_fail(GS_EIO, "bench: %s: no time", path);
+    if (st == GS_OK && f) fclose(f);
+    int *ans = st == GS_OK ? malloc(sizeof *ans * P) : NULL;
+    snprintf(path, sizeof path, "%s/answers.i32", dir);
+    if (st == GS_OK && (!ans || !(f = fopen(path, "rb")) || fread(ans, sizeof *ans, P, f) != P)) st = gs_fail(GS_EIO, "bench: %s: no answers", path);
+    if (st == GS_OK && f) fclose(f);
+    if (st == GS_OK) {
+        size_t same = 0;
+        for (size_t p = 0; p < P; p++) {
+            int b = ans[p] >= 0 ? r->bulb[ans[p]] : -1;
+            same += b == bulb[p] && (b < 0 || fabs(r->phase[ans[p]] - ph[p]) < 1e-3);
+        }
+        res->numpy_rate = (double)P / sec;
+        res->numpy_agree = (double)same / (double)P;
+    }
+    free(ans);
+    static const char *files[] = {"t.f64", "x.f32", "params.txt", "seconds.txt", "answers.i32"};
+    for (size_t i = 0; i < sizeof files / sizeof *files; i++) {
+        snprintf(path, sizeof path, "%s/%s", dir, files[i]);
+        remove(path);
+    }
+    rmdir(dir);
+    return st;
+}
 
 static gs_status run_pixels(const config *c, rec_matcher *m, result *res)
 {
@@ -295,6 +354,7 @@ static gs_status run_pixels(const config *c, rec_matcher *m, result *res)
         res->ref_rate = (double)nref / res->ref_seconds;
         res->agree = (double)same / (double)nref;
         free(w);
+        if (st == GS_OK && c->numpy && numpy_script) st = run_numpy(&r, x, P, eo.min_snr, thr, bulb, ph, res);
     }
     if (st == GS_OK) {
         size_t lit = 0, right = 0;
@@ -571,11 +631,16 @@ static void pixel_row(const gs_delight *all, const config *c, int *failed)
     char lit[32] = "-", sgemm[32] = "-";
     if (isfinite(r.lit_correct)) snprintf(lit, sizeof lit, "%.3f", r.lit_correct);
     if (r.sgemm_rate > 0) snprintf(sgemm, sizeof sgemm, "%.2f", r.sgemm_rate / 1e6);
-    printf("| %d | %d | %s%s | %zu | 2^%d | %.2f | %.3f | **%.3f** | %s | %s | %s | %s | %s | %.0f |\n",
+    char np[96] = "";
+    if (c->numpy && r.numpy_rate > 0)
+        snprintf(np, sizeof np, " %.3f | %.1fx | %.4f |", r.numpy_rate / 1e6, r.rate / r.numpy_rate, r.numpy_agree);
+    else if (c->numpy)
+        snprintf(np, sizeof np, " - | - | - |");
+    printf("| %d | %d | %s%s | %zu | 2^%d | %.2f | %.3f | **%.3f** | %s | %s | %s | %s | %s | %.0f |%s\n",
            c->K, c->bands, bulbs_label(c->bulbs, bl, sizeof bl),
            c->continuous ? " (continuous)" : "", r.templates,
            (int)lround(log2((double)c->pixels)), c->lit, r.seconds, r.rate / 1e6, sgemm, ref, speed,
-           agree, lit, r.maxrss_kib / 1024.0);
+           agree, lit, r.maxrss_kib / 1024.0, np);
     fflush(stdout);
 }
 
@@ -613,28 +678,35 @@ static void capture_row(const gs_delight *all, const config *c, int *failed)
         return;
     }
     double np = (double)c->side * c->side;
-    printf("| %dx%d | %zu | %zu (%.1f %%) | %zu | %.3f | **%.2f** | %.3f | %zu | %.0f |\n", c->side,
+    double stack_mib = np * c->K * c->bands * 2.0 / (1024.0 * 1024.0);   /* 16-bit raw frames */
+    printf("| %dx%d | %zu | %zu (%.1f %%) | %zu | %.3f | **%.2f** | %.3f | %zu | %.0f | %.0f | %.2f |\n", c->side,
            c->side, c->lights, r.mapped, 100.0 * (double)r.mapped / np, r.matched, r.seconds,
-           r.rate / 1e6, r.blob_seconds, r.blobs, r.maxrss_kib / 1024.0);
+           r.rate / 1e6, r.blob_seconds, r.blobs, r.maxrss_kib / 1024.0, stack_mib,
+           r.maxrss_kib / 1024.0 / stack_mib);
     fflush(stdout);
 }
 
-static void pixel_header(void)
+static void pixel_header(int numpy)
 {
     printf("| K | bands | bulbs | templates | pixels | lit | seconds | Mpixel/s | SGEMM only Mpixel/s "
-           "| reference Mpixel/s | speed-up | agree | lit correct | peak RSS MiB |\n");
-    printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+           "| reference Mpixel/s | speed-up | agree | lit correct | peak RSS MiB |%s\n",
+           numpy ? " NumPy Mpixel/s | vs NumPy | NumPy agree |" : "");
+    printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|%s\n", numpy ? "---|---|---|" : "");
 }
 
 static int bench_recognize(int argc, char **argv)
 {
-    static const struct option longs[] = {
-        {"quick", no_argument, 0, 'q'}, {"help", no_argument, 0, 'h'}, {0, 0, 0, 0}};
+    static const struct option longs[] = {{"quick", no_argument, 0, 'q'},
+                                          {"numpy", required_argument, 0, 'n'},
+                                          {"help", no_argument, 0, 'h'},
+                                          {0, 0, 0, 0}};
     int quick = 0, c;
     optind = 1;
     opterr = 0;
+    numpy_script = NULL;
     while ((c = getopt_long(argc, argv, "h", longs, NULL)) != -1) {
         if (c == 'q') quick = 1;
+        else if (c == 'n') numpy_script = optarg;
         else if (c == 'h') {
             fputs(bench_usage, stdout);
             return 0;
@@ -678,26 +750,32 @@ static int bench_recognize(int argc, char **argv)
            "bulb and phase.\n\n", SNR, REF_ROWS_MAX, REPS);
 
     printf("## Per pixel: rec_match_pixels\n\n");
-    pixel_header();
+    pixel_header(0);
     size_t P0 = quick ? (size_t)1 << 14 : (size_t)1 << 18;
     for (size_t ki = 0; ki < 3; ki++)
         for (size_t bi = 0; bi < 2; bi++)
             for (size_t di = 0; di < 3; di++) {
                 if (quick && !(ki == 2 || (bi == 1 && di == 2))) continue;
-                config cf = {Ks[ki], bandss[bi], bulbss[di], 0, P0, 0.1, 0, 0, 0, 0};
+                config cf = {Ks[ki], bandss[bi], bulbss[di], 0, P0, 0.1, 0, 0, 0, 0, 0};
                 pixel_row(all, &cf, &failed);
             }
     printf("\n### 1-megapixel RGB capture, K = 26, whole database\n\n");
-    pixel_header();
+    if (numpy_script)
+        printf("*NumPy*: the same rows through %s, the reference's search in its best NumPy form "
+               "(float32 scores of blocks of rows against every unit template as one matrix "
+               "product, the rest vectorised; /usr/bin/python3, one core: OPENBLAS_NUM_THREADS=1), "
+               "best of %d runs in this process's run; *vs NumPy* is rec_match_pixels' rate over "
+               "its, *NumPy agree* the fraction of rows both answer alike.\n\n", numpy_script, REPS);
+    pixel_header(numpy_script != NULL);
     static const double lits[] = {0.0, 0.1, 1.0};
     for (int e = quick ? 14 : 16; e <= (quick ? 16 : 20); e += 2)
         for (size_t li = 0; li < 3; li++) {
             if (quick && li != 1) continue;
-            config cf = {26, 3, 0, 0, (size_t)1 << e, lits[li], 0, 0, 0, 0};
+            config cf = {26, 3, 0, 0, (size_t)1 << e, lits[li], 0, 0, 0, 0, numpy_script != NULL};
             pixel_row(all, &cf, &failed);
         }
     {
-        config cf = {26, 3, 0, 1, (size_t)1 << (quick ? 10 : 14), 0.1, 0, 0, 0, 0};
+        config cf = {26, 3, 0, 1, (size_t)1 << (quick ? 10 : 14), 0.1, 0, 0, 0, 0, numpy_script != NULL};
         pixel_row(all, &cf, &failed);
     }
 
@@ -707,13 +785,16 @@ static int bench_recognize(int argc, char **argv)
            "the maps compute a background mesh, threshold every pixel at 5 sigma and run "
            "rec_match_pixels on the pixels above it only. Mpixel/s counts every pixel of the "
            "capture. *blobs*: the same capture through rec_blobs_extract (default options), the "
-           "first stage of the per-light path, and the lights it found.\n\n");
+           "first stage of the per-light path, and the lights it found. *frame stack*: the capture's "
+           "16-bit raw frames (side^2 x K x bands x 2 bytes); peak RSS includes them, the rendering "
+           "and both passes.\n\n");
     printf("| capture | lights | pixels above threshold | with a bulb | seconds | capture Mpixel/s | "
-           "blobs seconds | blobs found | peak RSS MiB |\n|---|---|---|---|---|---|---|---|---|\n");
+           "blobs seconds | blobs found | peak RSS MiB | frame stack MiB | peak / stack |\n"
+           "|---|---|---|---|---|---|---|---|---|---|---|\n");
     static const size_t nlights[] = {200, 2000, 20000};
     for (size_t li = 0; li < 3; li++) {
         if (quick && li == 2) continue;
-        config cf = {26, 3, 0, 0, 0, 0.0, quick ? nlights[li] / 16 : nlights[li], quick ? 256 : 1024, 0, 0};
+        config cf = {26, 3, 0, 0, 0, 0.0, quick ? nlights[li] / 16 : nlights[li], quick ? 256 : 1024, 0, 0, 0};
         capture_row(all, &cf, &failed);
     }
 
@@ -729,11 +810,20 @@ static int bench_recognize(int argc, char **argv)
         for (size_t bi = 0; bi < 2; bi++)
             for (size_t di = 0; di < 3; di++) {
                 if (quick && !(ki == 2 && (di == 2 || bi == 1))) continue;
-                config cf = {Ks[ki], bandss[bi], bulbss[di], 0, 0, 0.0, L0, 0, 0, 0};
+                config cf = {Ks[ki], bandss[bi], bulbss[di], 0, 0, 0.0, L0, 0, 0, 0, 0};
                 light_row(all, &cf, &failed);
             }
     {
-        config cf = {26, 3, 0, 1, 0, 0.0, quick ? 50 : 300, 0, 0, 0};
+        config cf = {26, 3, 0, 1, 0, 0.0, quick ? 50 : 300, 0, 0, 0, 0};
+        light_row(all, &cf, &failed);
+    }
+    printf("\n### Time against the number of lights\n\nK = 26, RGB, whole database, the paper's model, "
+           "one thread: the same lights as above, 10^3 to 10^%d of them.\n\n", quick ? 4 : 5);
+    printf("| K | bands | bulbs | templates | lights | seconds | lights/s | reference lights/s | "
+           "speed-up | agree | correct | peak RSS MiB |\n");
+    printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    for (size_t n = 1000; n <= (quick ? 10000u : 100000u); n *= 10) {
+        config cf = {26, 3, 0, 0, 0, 0.0, n, 0, 0, 0, 0};
         light_row(all, &cf, &failed);
     }
     printf("\n*continuous* rows search every phase (a grid of max(8K, 96) shifts per cycle, refined); "
@@ -752,9 +842,9 @@ static int bench_recognize(int argc, char **argv)
     for (int ti = 0; ti < 2; ti++) {
         if (ti == 1 && nt == 1) break;
         printf("| %s |||||||||||\n", ti ? "**threads: the online CPUs**" : "**threads: 1**");
-        config cf = {26, 3, 0, 0, 0, 0.0, quick ? 300 : 4000, 0, 1, ti ? nt : 1};
+        config cf = {26, 3, 0, 0, 0, 0.0, quick ? 300 : 4000, 0, 1, ti ? nt : 1, 0};
         light_row(all, &cf, &failed);
-        config cc = {26, 3, 0, 1, 0, 0.0, quick ? 30 : 200, 0, 1, ti ? nt : 1};
+        config cc = {26, 3, 0, 1, 0, 0.0, quick ? 30 : 200, 0, 1, ti ? nt : 1, 0};
         light_row(all, &cc, &failed);
     }
     printf("\nTotal %.0f s.\n", now_s() - t_start);

@@ -1,0 +1,166 @@
+/* test_eq7_fourier.c - the fast paths of one light (recognize/eq7_light.c): the Fourier form
+ * of the continuous-phase grids (every shift's sums S = sum w x t and T = sum w t^2 from one
+ * inverse FFT of a cross-spectrum) and the reddened model's bound-based screen, against the
+ * brute force they replace: the sums as plain double loops over the matcher's grid templates,
+ * and every field of rec_match_light against the same matcher with both off (m->exhaustive:
+ * the matrix-vector path and every template's exact likelihood; probabilities within 1e-9 for
+ * 90 % of the lights, 1e-4 for all), for K = 13, 22, 26, K not divisible by 3 and a K whose
+ * grid it does not divide (no Fourier form then), continuous and discrete phases.
+ */
+#include "recognize/internal.h"
+#include "tests/eq7_fixture.h"
+#include "tests/fixtures.h"
+#include "tests/test.h"
+
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static rec_matcher *phase_matcher(const gs_delight *d, int bands, int K, rec_band_model bg,
+                                  rec_phase_set ps)
+{
+    rec_eq7_opts o;
+    rec_eq7_opts_default(&o);
+    o.phases = ps;
+    o.band_gains = bg;
+    o.model_error = 0.0;
+    o.threads = 1;
+    rec_matcher *m = NULL;
+    CHECK_OK(rec_matcher_new(d, 50, bands, K, &o, &m));
+    return m;
+}
+
+/* The sums of every grid template from the FFT against sum_d over the templates themselves,
+ * for random positive weights: within 1e-12 of sum |w x t| (the rounding of either). */
+TEST(eq7_fourier_sums_match_brute_force)
+{
+    static const int Ks[] = {4, 8, 13, 16, 22, 26};
+    uint64_t rs = 17;
+    for (int bands = 1; bands <= 3; bands += 2) {
+        gs_delight *d = eq7fx_make_db(50, bands, 0, 0);
+        for (int bg = 0; bg < (bands == 3 ? 2 : 1); bg++)
+            for (size_t ki = 0; ki < sizeof Ks / sizeof *Ks; ki++) {
+                int K = Ks[ki];
+                rec_matcher *m = phase_matcher(d, bands, K, bg ? REC_BANDS_FREE : REC_BANDS_CHROMA, REC_PHASES_CONTINUOUS);
+                if (!m) continue;
+                CHECK_MSG(m->fourier, "K = %d, G = %d: expected the Fourier form", K, m->G);
+                rec_eq7_work w;
+                CHECK_OK(rec_eq7_work_alloc(m, &w));
+                size_t D = (size_t)m->D, M = m->M, span = m->bg ? (size_t)K : D;
+                for (size_t d0 = 0; d0 < D; d0++) {
+                    w.w[d0] = 0.2 + gs_splitmix_uniform(&rs);
+                    w.wx[d0] = w.w[d0] * (1.0 + 3.0 * gs_splitmix_normal(&rs));
+                }
+                rec_eq7_light_dfts(m, &w);
+                double worst = 0.0;
+                for (size_t b = 0; b < m->nb; b++) {
+                    rec_eq7_grid_sums(m, &w, b);
+                    for (size_t j = m->first[b]; j < m->first[b] + m->count[b]; j++) {
+                        const double *t = rec_matcher_template(m, j, NULL, NULL);
+                        for (int f = 0; f < m->nfit; f++) {
+                            double S = 0, T = 0, Sa = 0, Ta = 0;
+                            for (size_t q = (size_t)f * span; q < (size_t)(f + 1) * span; q++) {
+                                S += w.wx[q] * t[q];
+                                Sa += fabs(w.wx[q] * t[q]);
+                                T += w.w[q] * t[q] * t[q];
+                                Ta += w.w[q] * t[q] * t[q];
+                            }
+                            double eS = fabs(w.S[(size_t)f * M + j] - S) / Sa;
+                            double eT = fabs(w.T[(size_t)f * M + j] - T) / Ta;
+                            worst = fmax(worst, fmax(eS, eT));
+                        }
+                    }
+                }
+                CHECK_MSG(worst < 1e-12, "bands %d gains %d K %d: worst relative error %g", bands, bg, K, worst);
+                rec_eq7_work_free(&w);
+                rec_matcher_free(m);
+            }
+        gs_delight_free(d);
+    }
+    /* K = 10: the grid of 96 cells is not a multiple of K, no Fourier form */
+    gs_delight *d = eq7fx_make_db(50, 3, 0, 0);
+    rec_matcher *m = phase_matcher(d, 3, 10, REC_BANDS_CHROMA, REC_PHASES_CONTINUOUS);
+    CHECK(m && !m->fourier);
+    rec_matcher_free(m);
+    gs_delight_free(d);
+}
+
+static int close_to(double a, double b, double abs_tol, double rel_tol)
+{
+    return fabs(a - b) <= abs_tol + rel_tol * fmax(fabs(a), fabs(b));
+}
+
+/* Every answer of rec_match_light with the fast paths equals the exhaustive path's within the
+ * stated tolerance: the same bulb, blend bulbs and flags, the same runner-up unless both give it
+ * a posterior below 1e-9; phases within 1e-6 deg,
+ * brightness and chi2 within 1e-9 relative; probabilities and the phase sigma within 1e-9 for
+ * at least 90 % of the lights and 1e-4 for every light. */
+TEST(eq7_fourier_answers_match_slow_path)
+{
+    static const int Ks[] = {8, 13, 16, 22, 26};
+    static const rec_band_model models[] = {REC_BANDS_CHROMA, REC_BANDS_FREE, REC_BANDS_REDDENED};
+    uint64_t rs = 99;
+    gs_delight *d = eq7fx_make_db(50, 3, 1, 0);
+    int lights = 0, ntight = 0;
+    /* models 0-2 continuous, 3-4 the reddened model with 3 and 6 discrete phases */
+    for (size_t mi = 0; mi < 5; mi++)
+        for (size_t ki = 0; ki < sizeof Ks / sizeof *Ks; ki++) {
+            int K = Ks[ki];
+            rec_phase_set ps = mi < 3 ? REC_PHASES_CONTINUOUS : mi == 3 ? REC_PHASES_3 : REC_PHASES_6;
+            rec_matcher *m = phase_matcher(d, 3, K, models[mi < 3 ? mi : 2], ps);
+            if (!m) continue;
+            CHECK(m->fourier == (mi < 3));
+            size_t D = (size_t)m->D;
+            double *x = malloc(sizeof *x * D), *sg = malloc(sizeof *sg * D);
+            for (int i = 0; i < 12; i++) {
+                size_t b = gs_splitmix64(&rs) % m->nb;
+                double a = i < 4 ? 3.0 : i < 8 ? 30.0 : 400.0;   /* dim, medium, bright */
+                eq7fx_render(rec_matcher_bulb(m, b), gs_splitmix_uniform(&rs), K, a, 1.0, &rs, x, sg);
+                for (size_t q = 0; q < D; q++) sg[q] *= 0.5 + gs_splitmix_uniform(&rs);
+                rec_match f, s;
+                CHECK_OK(rec_match_light(m, x, sg, &f));
+                m->exhaustive = 1;
+                CHECK_OK(rec_match_light(m, x, sg, &s));
+                m->exhaustive = 0;
+                /* the screen may rank runner-ups of posterior < 1e-9 differently */
+                int runner = f.runner_bulb == s.runner_bulb || (f.runner_confidence < 1e-9 && s.runner_confidence < 1e-9);
+                int same = f.bulb == s.bulb && runner && f.flags == s.flags &&
+                           f.blend_bulb[0] == s.blend_bulb[0] && f.blend_bulb[1] == s.blend_bulb[1];
+                double dph = fabs(fmod(f.phase_deg - s.phase_deg + 540.0, 360.0) - 180.0);
+                double drp = f.runner_bulb != s.runner_bulb ? 0.0 :
+                             fabs(fmod(f.runner_phase_deg - s.runner_phase_deg + 540.0, 360.0) - 180.0);
+                /* tight: 1e-9; loose: 1e-4 for the probabilities, when the best grid cell flips
+                 * between two cells of equal likelihood (rounding decides; the posterior's cell
+                 * integration differs by its own error) */
+                int tight = 1, loose = 1;
+                for (int tier = 0; tier < 2; tier++) {
+                    double pt = tier ? 1e-4 : 1e-9;
+                    int ok = dph < 1e-6 && drp < 1e-6 && close_to(f.phase_sigma_deg, s.phase_sigma_deg, 1e-12, pt) &&
+                             close_to(f.confidence, s.confidence, pt, 0) &&
+                             close_to(f.bulb_confidence, s.bulb_confidence, pt, 0) &&
+                             close_to(f.phase_confidence, s.phase_confidence, pt, 0) &&
+                             close_to(f.runner_confidence, s.runner_confidence, pt, 0) &&
+                             close_to(f.p_value, s.p_value, 1e-9, 0) &&
+                             close_to(f.shape_p_value, s.shape_p_value, 1e-9, 0) &&
+                             close_to(f.blend_p_value, s.blend_p_value, pt, 0) &&
+                             close_to(f.p_other, s.p_other, 1e-9, 0) && close_to(f.p_blend, s.p_blend, pt, 0) &&
+                             close_to(f.brightness, s.brightness, 1e-12, 1e-9) && close_to(f.chi2, s.chi2, 1e-9, 1e-9);
+                    if (tier) loose = ok;
+                    else tight = ok;
+                }
+                CHECK_MSG(same && loose, "model %zu K %d light %d: bulb %d/%d phase %.9f/%.9f sigma %g/%g "
+                          "conf %.12f/%.12f flags %u/%u", mi, K, i, f.bulb, s.bulb, f.phase_deg, s.phase_deg,
+                          f.phase_sigma_deg, s.phase_sigma_deg, f.confidence, s.confidence, f.flags, s.flags);
+                ntight += same && tight;
+                lights++;
+            }
+            free(x);
+            free(sg);
+            rec_matcher_free(m);
+        }
+    CHECK(lights == 5 * 5 * 12);
+    CHECK_MSG(ntight >= lights * 9 / 10, "%d of %d lights within 1e-9", ntight, lights);
+    gs_delight_free(d);
+}
