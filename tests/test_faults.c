@@ -10,8 +10,9 @@
  * listing, compared with the state before the run and after an uninjected run.
  *
  * Which points: a count-only run of each class gives the number of calls N; `make check` tries
- * FAULT_POINTS of them, evenly spread (the cheap scenarios all of them), `make faults`
- * (GS_FAULT_SWEEP=full) every one, and appends the counts to $GS_FAULT_REPORT. */
+ * a few of them (the scenario's `points`), evenly spread, `make faults`
+ * (GS_FAULT_SWEEP=full) every one (every GS_FAULT_MALLOC_STEP-th allocation when that is set),
+ * and appends the counts to $GS_FAULT_REPORT. */
 #include "tests/fixtures.h"
 #include "tests/survey_fixture.h"
 #include "tests/test.h"
@@ -24,8 +25,6 @@
 #include <string.h>
 #include <sys/stat.h>
 #include <unistd.h>
-
-enum { FAULT_POINTS = 8 };
 
 static char out[1 << 16];
 
@@ -213,7 +212,9 @@ static const char *first_difference(const char *a, const char *b)
 
 typedef struct {
     const char *name;
-    const char *cmd;   /* a format with %s: the binary, then the work directory (the shell's cwd) */
+    int points;        /* of each kind in `make check` (the sweep: all) */
+    const char *cmd;   /* a format of up to two %s: the binary, the assets' directory (it runs in
+                        * the work directory) */
     const char *db;    /* the database's name in the work directory */
     /* makes the work directory's state before the command (it is emptied first) */
     void (*setup)(const char *work, const char *assets);
@@ -251,9 +252,11 @@ static void setup_delight_existing(const char *work, const char *assets)
  * DELIGHT database holding part of it. */
 static const char *assets(void)
 {
+    /* beside the tests' own directories, so the tests of one runner share them */
     static char dir[1024];
-    if (dir[0]) return dir;
-    snprintf(dir, sizeof dir, "%s", fx_tmp("fault-assets"));
+    const char *t = test_tmpdir(), *slash = strrchr(t, '/');
+    snprintf(dir, sizeof dir, "%.*s/fault-assets", slash ? (int)(slash - t) : 1, slash ? t : ".");
+    if (fx_exists(fx_path(dir, "ready"))) return dir;
     mkdir(dir, 0777);
     char scene[1100], cmd[8192];
     snprintf(scene, sizeof scene, "%s/small.json", dir);
@@ -271,18 +274,19 @@ static const char *assets(void)
              dir, b, b, b, b);
     free(b);
     CHECK_MSG(test_run(cmd, out, sizeof out) == 0, "%s", out);
+    fx_write_text(fx_path(dir, "ready"), "");
     return dir;
 }
 
 static const scenario scenarios[] = {
-    {"run-new-db", "%s run ../../fault-assets/cap --db survey.sqlite --survey night --out .", "survey.sqlite", setup_empty},
-    {"run-existing-db", "%s run ../../fault-assets/cap --db survey.sqlite --survey night --out .", "survey.sqlite",
+    {"run-new-db", 1, "%s run %s/cap --db survey.sqlite --survey night --out .", "survey.sqlite", setup_empty},
+    {"run-existing-db", 2, "%s run %s/cap --db survey.sqlite --survey night --out .", "survey.sqlite",
      setup_existing_survey},
-    {"export-geojson", "%s export --db survey.sqlite -o lights.geojson", "survey.sqlite", setup_export},
-    {"export-gpkg", "%s export --db survey.sqlite -o lights.gpkg", "survey.sqlite", setup_export},
-    {"delight-import-new", "%s delight import ../../fault-assets/some.csv --delight delight.sqlite", "delight.sqlite",
+    {"export-geojson", 2, "%s export --db survey.sqlite -o lights.geojson", "survey.sqlite", setup_export},
+    {"export-gpkg", 2, "%s export --db survey.sqlite -o lights.gpkg", "survey.sqlite", setup_export},
+    {"delight-import-new", 2, "%s delight import %s/some.csv --delight delight.sqlite", "delight.sqlite",
      setup_empty},
-    {"delight-import-existing", "%s delight import ../../fault-assets/more.csv --delight delight.sqlite",
+    {"delight-import-existing", 2, "%s delight import %s/more.csv --delight delight.sqlite",
      "delight.sqlite", setup_delight_existing},
 };
 
@@ -304,8 +308,12 @@ static const char *shim_path(void)
     return path;
 }
 
+enum { N_CLASSES = 4 };
+static const char *const class_names[N_CLASSES] = {"malloc", "write", "fsync", "rename"};
+
 /* Empties work, sets it up, runs the scenario with the n-th call of kind failing (n = 0: none);
- * its exit status, stderr in out, the count of calls and whether it fired in *calls, *fired. */
+ * its exit status, stderr in out, the calls of each class (class_names) in calls[] and
+ * whether the fault fired in *fired. */
 static int run_injected(const scenario *sc, const char *work, const fault_kind *k, long n, long *calls,
                         int *fired)
 {
@@ -325,7 +333,7 @@ static int run_injected(const scenario *sc, const char *work, const fault_kind *
         return -1;
     }
     char run[2048];
-    snprintf(run, sizeof run, sc->cmd, bin);
+    snprintf(run, sizeof run, sc->cmd, bin, assets());
     snprintf(cmd, sizeof cmd,
              "cd %s && timeout 300 env GS_FAULT_CLASS=%s GS_FAULT_N=%ld GS_FAULT_ERRNO=%s GS_FAULT_OUT=%s "
              "LD_PRELOAD=%s ASAN_OPTIONS=${ASAN_OPTIONS:+$ASAN_OPTIONS:}verify_asan_link_order=0 "
@@ -334,17 +342,17 @@ static int run_injected(const scenario *sc, const char *work, const fault_kind *
     free(bin);
     free(shim);
     int rc = test_run(cmd, out, sizeof out);
-    *calls = -1;
+    for (int c = 0; c < N_CLASSES; c++) calls[c] = -1;
     *fired = 0;
     FILE *f = fopen(report, "r");
     if (f) {
-        if (fscanf(f, "%ld %d", calls, fired) != 2) *calls = -1;
+        if (fscanf(f, "%ld %ld %ld %ld %d", &calls[0], &calls[1], &calls[2], &calls[3], fired) != 5) calls[0] = -1;
         fclose(f);
     }
     return rc;
 }
 
-/* One scenario through every kind of fault: `make check` at FAULT_POINTS points of each,
+/* One scenario through every kind of fault: `make check` at sc->points points of each,
  * GS_FAULT_SWEEP=full at every point. */
 static void sweep(const scenario *sc)
 {
@@ -353,37 +361,36 @@ static void sweep(const scenario *sc)
     snprintf(work, sizeof work, "%s/%s", fx_tmp("fault-work"), sc->name);
     snprintf(dbp, sizeof dbp, "%s/%s", work, sc->db);
     /* before and after an uninjected run */
-    long calls;
     int fired;
     char cmd[4096];
     snprintf(cmd, sizeof cmd, "rm -rf %s && mkdir -p %s", work, work);
     CHECK(test_run(cmd, NULL, 0) == 0);
     sc->setup(work, assets());
     char *db_before = db_state(dbp), *files_before = files_state(work, sc->db);
-    long total[sizeof kinds / sizeof *kinds];
+    long total[N_CLASSES], again[N_CLASSES], calls[N_CLASSES];
     char *db_ref = NULL, *files_ref = NULL;
-    for (size_t k = 0; k < sizeof kinds / sizeof *kinds; k++) {
-        int rc = run_injected(sc, work, &kinds[k], 0, &total[k], &fired);
-        CHECK_MSG(rc == 0 && total[k] >= 0, "%s: the uninjected run: %d: %s", sc->name, rc, out);
-        char *dbr = db_state(dbp), *fr = files_state(work, sc->db);
-        if (!db_ref) {
-            db_ref = dbr;
-            files_ref = fr;
-            continue;
-        }
-        /* the oracle needs the command to be deterministic */
-        CHECK_MSG(!strcmp(dbr, db_ref), "%s: two uninjected runs differ: %s", sc->name, first_difference(db_ref, dbr));
-        CHECK_MSG(!strcmp(fr, files_ref), "%s: two uninjected runs differ: %s", sc->name, first_difference(files_ref, fr));
-        free(dbr);
-        free(fr);
-    }
+    /* two uninjected runs: the counts of calls, and the complete state (the same twice: the
+     * oracle needs the command to be deterministic) */
+    int rc = run_injected(sc, work, &kinds[0], 0, total, &fired);
+    CHECK_MSG(rc == 0 && total[0] >= 0, "%s: the uninjected run: %d: %s", sc->name, rc, out);
+    db_ref = db_state(dbp);
+    files_ref = files_state(work, sc->db);
+    rc = run_injected(sc, work, &kinds[0], 0, again, &fired);
+    CHECK_MSG(rc == 0 && again[0] >= 0, "%s: the uninjected run: %d: %s", sc->name, rc, out);
+    char *dbr = db_state(dbp), *fr = files_state(work, sc->db);
+    CHECK_MSG(!strcmp(dbr, db_ref), "%s: two uninjected runs differ: %s", sc->name, first_difference(db_ref, dbr));
+    CHECK_MSG(!strcmp(fr, files_ref), "%s: two uninjected runs differ: %s", sc->name, first_difference(files_ref, fr));
+    free(dbr);
+    free(fr);
     long tried = 0, failed_ok = 0, succeeded = 0, bad = 0;
     for (size_t k = 0; k < sizeof kinds / sizeof *kinds; k++) {
-        if (k > 0 && !strcmp(kinds[k].cls, kinds[k - 1].cls) && total[k] != total[k - 1])
-            CHECK_MSG(0, "%s: %s calls differ between two uninjected runs", sc->name, kinds[k].cls);
-        long step = full || total[k] <= FAULT_POINTS ? 1 : (total[k] + FAULT_POINTS - 1) / FAULT_POINTS;
-        for (long n = 1 + (full ? 0 : (step - 1) / 2); n <= total[k]; n += step) {
-            int rc = run_injected(sc, work, &kinds[k], n, &calls, &fired);
+        int c = 0;
+        while (strcmp(class_names[c], kinds[k].cls)) c++;
+        long step = full || total[c] <= sc->points ? 1 : (total[c] + sc->points - 1) / sc->points;
+        if (full && c == 0 && getenv("GS_FAULT_MALLOC_STEP")) step = atol(getenv("GS_FAULT_MALLOC_STEP"));
+        if (step < 1) step = 1;
+        for (long n = 1 + (full ? 0 : (step - 1) / 2); n <= total[c]; n += step) {
+            rc = run_injected(sc, work, &kinds[k], n, calls, &fired);
             tried++;
             char *dba = db_state(dbp), *fa = files_state(work, sc->db);
             char why[1200] = "";
@@ -406,7 +413,7 @@ static void sweep(const scenario *sc)
             }
             bad += !ok;
             CHECK_MSG(ok, "%s: %s %s at call %ld of %ld (fired %d): %s: %.2000s", sc->name, kinds[k].cls,
-                      kinds[k].err, n, total[k], fired, why, out);
+                      kinds[k].err, n, total[c], fired, why, out);
             free(dba);
             free(fa);
         }
@@ -414,13 +421,13 @@ static void sweep(const scenario *sc)
     const char *rep = getenv("GS_FAULT_REPORT");
     FILE *r = rep && *rep ? fopen(rep, "a") : NULL;
     if (r) {
-        fprintf(r, "| `%s` | %ld | %ld | %ld | %ld | %ld | %ld | %ld | %ld | %ld |\n", sc->name, total[0],
-                total[1], total[4], total[5], tried, failed_ok, succeeded, bad, tried - failed_ok - succeeded - bad);
+        fprintf(r, "| `%s` | %ld | %ld | %ld | %ld | %ld | %ld | %ld | %ld |\n", sc->name, total[0], total[1],
+                total[2], total[3], tried, failed_ok, succeeded, bad);
         fclose(r);
     }
     if (getenv("GS_TEST_VERBOSE"))
         printf("    %s: calls malloc %ld, write %ld, fsync %ld, rename %ld; %ld tried: %ld failed cleanly, "
-               "%ld succeeded, %ld bad\n", sc->name, total[0], total[1], total[4], total[5], tried, failed_ok,
+               "%ld succeeded, %ld bad\n", sc->name, total[0], total[1], total[2], total[3], tried, failed_ok,
                succeeded, bad);
     free(db_before);
     free(files_before);
@@ -428,9 +435,94 @@ static void sweep(const scenario *sc)
     free(files_ref);
 }
 
-TEST(fault_injection_run_new_database) { sweep(&scenarios[0]); }
+/* (only in `make faults`: `make check` has run_failed_leaves_no_new_database) */
+TEST_HIDDEN(fault_injection_run_new_database, 0) { sweep(&scenarios[0]); }
 TEST(fault_injection_run_existing_database) { sweep(&scenarios[1]); }
 TEST(fault_injection_export_geojson) { sweep(&scenarios[2]); }
 TEST(fault_injection_export_gpkg) { sweep(&scenarios[3]); }
 TEST(fault_injection_delight_import_new) { sweep(&scenarios[4]); }
 TEST(fault_injection_delight_import_existing) { sweep(&scenarios[5]); }
+
+/* ------------------------------------------------------------------ the defects it found */
+
+/* `run` stored the DELIGHT version, the survey and the station each in a transaction of its
+ * own before the capture's: a capture that failed to go in (a full disk at its commit) left a
+ * survey without it. Now all are one transaction. The failure here is a trigger that refuses
+ * the capture's row. */
+TEST(run_failed_capture_insert_leaves_database_as_it_was)
+{
+    const char *dir = fx_tmp("trigger"), *a = assets();
+    char *bin = realpath(test_bin(), NULL), cmd[8192];
+    CHECK(bin != NULL);
+    snprintf(cmd, sizeof cmd, "mkdir -p %s && cd %s && %s db init --db s.sqlite >/dev/null && sqlite3 s.sqlite "
+             "\"CREATE TRIGGER refuse BEFORE INSERT ON captures BEGIN SELECT RAISE(ABORT, 'refused'); END\"",
+             dir, dir, bin ? bin : "");
+    CHECK(test_run(cmd, out, sizeof out) == 0);
+    char db[1200];
+    snprintf(db, sizeof db, "%s/s.sqlite", dir);
+    char *before = db_state(db);
+    snprintf(cmd, sizeof cmd, "cd %s && %s run %s/cap --db s.sqlite --survey night --out . 2>&1 >/dev/null", dir,
+             bin ? bin : "", a);
+    CHECK(test_run(cmd, out, sizeof out) == 1);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "refused"), "%s", out);
+    char *after = db_state(db);
+    CHECK_MSG(!strcmp(before, after), "the database changed: %s", first_difference(before, after));
+    free(before);
+    free(after);
+    free(bin);
+}
+
+/* `delight import` into a new file: a failed commit (here the first fsync) left a database file
+ * behind that was neither absent nor complete. A new file is now built under a temporary name. */
+TEST(delight_import_failed_commit_leaves_no_new_file)
+{
+    const scenario sc = {"delight-new", 0, "%s delight import %s/some.csv --delight delight.sqlite",
+                         "delight.sqlite", setup_empty};
+    char work[1100];
+    snprintf(work, sizeof work, "%s/one", fx_tmp("fault-work"));
+    const fault_kind k = {"fsync", "EIO"};
+    long calls[N_CLASSES];
+    int fired;
+    CHECK(run_injected(&sc, work, &k, 1, calls, &fired) == 1 && fired);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "delight.sqlite"), "%s", out);
+    char *files = files_state(work, "none");
+    CHECK_MSG(!files[0], "left behind: %s", files);
+    free(files);
+}
+
+/* A new survey database (`db init`, and `run` into a new file) is built under a temporary name
+ * in WAL mode: a write that failed while closing it (folding the log into the file) left the
+ * temporary -wal and -shm files behind and renamed an incomplete file into place. Every write
+ * of `db init` fails in turn here (`make check`: the last 8, where the file is closed, and 6
+ * more spread over the others): each either fails in one line leaving nothing, or succeeds
+ * with a database `db check` accepts. */
+TEST(db_init_write_failure_leaves_no_file)
+{
+    const scenario sc = {"db-init", 0, "%s db init --db survey.sqlite", "survey.sqlite", setup_empty};
+    char work[1100], db[1200];
+    snprintf(work, sizeof work, "%s/init", fx_tmp("fault-work"));
+    snprintf(db, sizeof db, "%s/survey.sqlite", work);
+    const fault_kind k = {"write", "ENOSPC"};
+    long counts[N_CLASSES], calls[N_CLASSES];
+    int fired;
+    CHECK(run_injected(&sc, work, &k, 0, counts, &fired) == 0 && counts[1] > 0);
+    long total = counts[1];
+    char *bin = realpath(test_bin(), NULL);
+    int full = getenv("GS_FAULT_SWEEP") && !strcmp(getenv("GS_FAULT_SWEEP"), "full");
+    long step = full ? 1 : total / 6 + 1;
+    for (long n = 1; n <= total; n++) {
+        if (!full && n <= total - 8 && (n - 1) % step) continue;
+        int rc = run_injected(&sc, work, &k, n, calls, &fired);
+        char *files = files_state(work, "none");
+        if (rc == 0) {
+            char cmd[4096];
+            snprintf(cmd, sizeof cmd, "%s db check --db %s", bin ? bin : "", db);
+            CHECK_MSG(test_run(cmd, out, sizeof out) == 0, "write %ld of %ld: succeeded, but: %s", n, total, out);
+        } else {
+            CHECK_MSG(rc == 1 && fx_count_lines(out) == 1, "write %ld of %ld: %d: %s", n, total, rc, out);
+            CHECK_MSG(!files[0], "write %ld of %ld: failed and left: %s", n, total, files);
+        }
+        free(files);
+    }
+    free(bin);
+}

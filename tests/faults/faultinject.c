@@ -13,8 +13,8 @@
  *   GS_FAULT_N      the call (1-based) that fails; 0 or unset: none (count only)
  *   GS_FAULT_ERRNO  ENOSPC (default), EIO or SHORT (write class: half the bytes are written and
  *                   the call reports that short count; stdio calls then fail with ENOSPC)
- *   GS_FAULT_OUT    a file to which the count of the class's calls is appended at exit, with
- *                   "1" if the fault was injected ("COUNT FIRED\n")
+ *   GS_FAULT_OUT    a file to which the calls of each class are appended at exit, with "1" if
+ *                   the fault was injected ("MALLOC WRITE FSYNC RENAME FIRED\n")
  *
  * A gcc ASan binary runs with it given ASAN_OPTIONS=verify_asan_link_order=0: the shim then
  * comes before libasan and forwards to ASan's allocator (dlsym RTLD_NEXT), so a leak after an
@@ -40,7 +40,7 @@ static int fault_class = C_NONE;
 static long fault_n;
 static int fault_errno = ENOSPC, fault_short;
 static int armed;                 /* counting: from main() on */
-static long calls;                /* of fault_class, atomically */
+static long calls[C_RENAME + 1];  /* of each class, atomically */
 static int fired;
 
 /* The next definitions, resolved once; an allocation dlsym makes before they are known comes
@@ -113,20 +113,21 @@ static void report(void)
 {
     const char *path = getenv("GS_FAULT_OUT");
     if (!path || !real_write) return;
-    char line[64];
-    int n = snprintf(line, sizeof line, "%ld %d\n", __atomic_load_n(&calls, __ATOMIC_SEQ_CST), fired);
+    char line[128];
+    int n = snprintf(line, sizeof line, "%ld %ld %ld %ld %d\n", calls[C_MALLOC], calls[C_WRITE],
+                     calls[C_FSYNC], calls[C_RENAME], fired);
     int fd = open(path, O_WRONLY | O_CREAT | O_APPEND, 0600);
     if (fd < 0) return;
     if (real_write(fd, line, (size_t)n) != n) { /* nothing to do about it */ }
     close(fd);
 }
 
-/* 1 if this call of class c is the one to fail. */
+/* Counts this call of class c; 1 if it is the one to fail. */
 static int hit(int c)
 {
-    if (!armed || c != fault_class) return 0;
-    long k = __atomic_add_fetch(&calls, 1, __ATOMIC_SEQ_CST);
-    if (k != fault_n) return 0;
+    if (!armed) return 0;
+    long k = __atomic_add_fetch(&calls[c], 1, __ATOMIC_SEQ_CST);
+    if (c != fault_class || k != fault_n) return 0;
     fired = 1;
     return 1;
 }
@@ -135,7 +136,7 @@ static int hit(int c)
  * failure (by design: it has no error path). */
 static int alloc_hit(const void *caller)
 {
-    if (!armed || fault_class != C_MALLOC) return 0;
+    if (!armed) return 0;
     Dl_info info;
     if (dladdr(caller, &info) && info.dli_fname && strstr(info.dli_fname, "libfftw3")) return 0;
     return hit(C_MALLOC);
