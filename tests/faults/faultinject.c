@@ -1,8 +1,9 @@
 /* faultinject.c - an LD_PRELOAD shim that makes the n-th call of one class fail, as SQLite's
  * test harness does for its own allocator and VFS (docs/reliability.md, "Fault injection").
  * Built as $(BUILD)/tests/faults/faultinject.so (tests/faults/module.mk), driven by
- * tests/test_faults.c. Calls are counted from main() on (the loader's and the libraries'
- * constructors are not counted: a failure there is not the tool's to handle).
+ * tests/test_faults.c. Calls are counted from main() until exit begins (the loader's and the
+ * libraries' constructors and teardown are not counted: a failure there is not the tool's to
+ * handle; OpenCV's teardown throws std::bad_alloc).
  *
  *   GS_FAULT_CLASS  malloc  malloc, calloc, realloc, posix_memalign, aligned_alloc, memalign
  *                   write   write, pwrite, pwrite64, writev, fwrite, fputs, fflush, fclose
@@ -159,9 +160,14 @@ __attribute__((constructor)) static void setup(void)
 /* main() is wrapped so that counting starts there. */
 typedef int (*main_fn)(int, char **, char **);
 static main_fn real_main;
+static void disarm(void)
+{
+    armed = 0;
+}
 static int counted_main(int argc, char **argv, char **envp)
 {
     armed = 1;
+    atexit(disarm);   /* runs first at exit: the libraries' teardown is not counted */
     return real_main(argc, argv, envp);
 }
 int __libc_start_main(main_fn main, int argc, char **argv, void (*init)(void), void (*fini)(void),

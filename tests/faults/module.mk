@@ -21,3 +21,11 @@ faults-run: $(TEST_BIN) $(BIN) $(FAULT_SHIM)
 	GS_TEST_TIMEOUT_S=172800 LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp:print_suppressions=0 \
 	  $(TEST_BIN) fault_injection_ _fault_injection_run_new_database
 	@cat $(BUILD)/faults.md
+
+# make kills KILLS=N: N random SIGKILLs of `gridsurvey run` over its whole duration, each
+# resumed and compared (tests/test_pipeline.c, pipeline_sigkill_campaign; docs/reliability.md)
+KILLS ?= 100
+.PHONY: kills
+kills: $(TEST_BIN) $(BIN)
+	GS_SHARED=$(SHARED) GS_BIN=$(BIN) GS_SAN=$(SAN) GS_KILLS=$(KILLS) GS_TEST_TIMEOUT_S=86400 \
+	LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp:print_suppressions=0 $(TEST_BIN) _pipeline_sigkill_campaign
