@@ -572,11 +572,14 @@ gs_status gis_export_gpkg(const gis_light *lights, size_t n, const char *path)
         const gis_light *l = &lights[i];
         sqlite3_reset(st);
         sqlite3_clear_bindings(st);
+        /* every bind checked: a text or blob copy that could not be allocated left the column
+         * NULL and the row went in without it (#16, fault injection) */
+        int brc = SQLITE_OK;
         if (located(l)) {
             unsigned char blob[29];
             double lon = gs_wrap180(l->lon_deg);
             gpkg_point(blob, lon, l->lat_deg);
-            sqlite3_bind_blob(st, 1, blob, (int)sizeof blob, SQLITE_TRANSIENT);
+            brc |= sqlite3_bind_blob(st, 1, blob, (int)sizeof blob, SQLITE_TRANSIENT);
             if (lon < minx) minx = lon;
             if (lon > maxx) maxx = lon;
             if (l->lat_deg < miny) miny = l->lat_deg;
@@ -590,15 +593,15 @@ gs_status gis_export_gpkg(const gis_light *lights, size_t n, const char *path)
             if (attrs[k].kind == A_TEXT) {
                 const char *t = attr_text(l, k, buf, sizeof buf);
                 if (k == 6) t = gpkg_datetime(t, when) ? when : NULL;   /* time: DATETIME */
-                if (t) sqlite3_bind_text(st, col, t, -1, SQLITE_TRANSIENT);
+                if (t) brc |= sqlite3_bind_text(st, col, t, -1, SQLITE_TRANSIENT);
                 else sqlite3_bind_null(st, col);
             } else {
                 double d = attr_real(l, k);
                 if (isnan(d)) sqlite3_bind_null(st, col);
-                else sqlite3_bind_double(st, col, d);
+                else brc |= sqlite3_bind_double(st, col, d);
             }
         }
-        if (sqlite3_step(st) != SQLITE_DONE) goto sql_error;
+        if (brc != SQLITE_OK || sqlite3_step(st) != SQLITE_DONE) goto sql_error;
     }
     sqlite3_finalize(st);
     st = NULL;
@@ -649,8 +652,8 @@ gs_status gis_export_gpkg(const gis_light *lights, size_t n, const char *path)
                                      "'geom', 'phase', ?, '', 1, 'lights coloured by grid phase class "
                                      "(as the KML)', 'gridsurvey', NULL)", -1, &st, NULL);
     if (qrc == SQLITE_OK) {
-        sqlite3_bind_text(st, 1, qml, -1, SQLITE_TRANSIENT);
-        qrc = sqlite3_step(st) == SQLITE_DONE ? SQLITE_OK : SQLITE_ERROR;
+        qrc = sqlite3_bind_text(st, 1, qml, -1, SQLITE_TRANSIENT) == SQLITE_OK && sqlite3_step(st) == SQLITE_DONE
+                  ? SQLITE_OK : SQLITE_ERROR;
     }
     free(qml);
     if (qrc != SQLITE_OK) goto sql_error;

@@ -7,7 +7,7 @@
 FAULT_SHIM := $(BUILD)/tests/faults/faultinject.so
 $(FAULT_SHIM): tests/faults/faultinject.c
 	@mkdir -p $(dir $@)
-	gcc -std=gnu11 -Wall -Wextra -Werror -O1 -g -shared -fPIC $< -ldl -o $@
+	gcc -std=gnu11 -Wall -Wextra -Werror -O1 -g -fno-omit-frame-pointer -shared -fPIC $< -ldl -o $@
 test: $(FAULT_SHIM)
 
 FAULT_MALLOC_STEP ?= 1
