@@ -144,6 +144,6 @@ clean:
 	rm -rf $(BUILD)
 
 # Module fragments (e.g. firmware/module.mk) add their own targets.
-include $(wildcard */module.mk tests/fuzz/module.mk)
+include $(wildcard */module.mk tests/fuzz/module.mk tests/faults/module.mk)
 
 -include $(patsubst %.o,%.d,$(foreach m,$(MODULES),$(call lib_objs,$(m))) $(TEST_OBJS) $(BUILD)/survey/main.o)

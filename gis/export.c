@@ -175,6 +175,34 @@ gs_status gis_export_geojson(const gis_light *lights, size_t n, const char *path
     return gis_export_geojson_decimals(lights, n, path, GIS_GEOJSON_DECIMALS);
 }
 
+/* json_dump_callback's output, growing; failed once an append could not be made. */
+typedef struct {
+    char *p;
+    size_t n, cap;
+    int failed;
+} dump_buf;
+
+static int dump_append(const char *bytes, size_t size, void *data)
+{
+    dump_buf *d = data;
+    if (d->failed) return -1;
+    if (d->n + size + 1 > d->cap) {
+        size_t cap = d->cap ? d->cap : 4096;
+        while (cap < d->n + size + 1) cap *= 2;
+        char *q = realloc(d->p, cap);
+        if (!q) {
+            d->failed = 1;
+            return -1;
+        }
+        d->p = q;
+        d->cap = cap;
+    }
+    memcpy(d->p + d->n, bytes, size);
+    d->n += size;
+    d->p[d->n] = '\0';
+    return 0;
+}
+
 gs_status gis_export_geojson_decimals(const gis_light *lights, size_t n, const char *path, int decimals)
 {
     if (decimals < 0 || decimals > 15)
@@ -195,13 +223,17 @@ gs_status gis_export_geojson_decimals(const gis_light *lights, size_t n, const c
             json_decref(props);
             goto nomem;
         }
+        /* every step checked: an allocation that failed used to drop the property silently
+         * (#16, fault injection); each set steals its value, even when it fails */
+        int bad = 0;
         if (located(l)) {
             json_t *c = json_array();
             /* RFC 7946: lon, lat; heights to the millimetre */
-            json_array_append_new(c, json_real(round_to(gs_wrap180(l->lon_deg), decimals)));
-            json_array_append_new(c, json_real(round_to(l->lat_deg, decimals)));
-            if (isfinite(l->height_m)) json_array_append_new(c, json_real(round_to(l->height_m, 3)));
-            geom = json_pack("{s:s, s:o}", "type", "Point", "coordinates", c);
+            bad |= !c || json_array_append_new(c, json_real(round_to(gs_wrap180(l->lon_deg), decimals))) ||
+                   json_array_append_new(c, json_real(round_to(l->lat_deg, decimals)));
+            if (isfinite(l->height_m)) bad |= !c || json_array_append_new(c, json_real(round_to(l->height_m, 3)));
+            geom = c ? json_pack("{s:s, s:o}", "type", "Point", "coordinates", c) : NULL;
+            bad |= !geom;
         }
         char buf[128];
         for (size_t k = 0; k < N_ATTRS; k++) {
@@ -213,15 +245,26 @@ gs_status gis_export_geojson_decimals(const gis_light *lights, size_t n, const c
                 double d = attr_real(l, k);
                 v = isnan(d) ? json_null() : json_real(d);
             }
-            json_object_set_new(props, attrs[k].name, v);
+            bad |= json_object_set_new(props, attrs[k].name, v) != 0;
         }
-        json_object_set_new(f, "type", json_string("Feature"));
-        json_object_set_new(f, "geometry", geom ? geom : json_null());
-        json_object_set_new(f, "properties", props);
+        bad |= json_object_set_new(f, "type", json_string("Feature")) != 0;
+        bad |= json_object_set_new(f, "geometry", geom ? geom : json_null()) != 0;
+        bad |= json_object_set_new(f, "properties", props) != 0;
+        if (bad) {
+            json_decref(f);
+            goto nomem;
+        }
         if (json_array_append_new(features, f)) goto nomem;
     }
-    text = json_dumps(root, JSON_INDENT(1) | JSON_PRESERVE_ORDER | JSON_REAL_PRECISION(15));
-    if (!text) goto nomem;
+    /* not json_dumps: jansson ignores a failed append of an object's key to its own buffer and
+     * returned a document without it (#16, fault injection); ours records the failure */
+    dump_buf out = {NULL, 0, 0, 0};
+    if (json_dump_callback(root, dump_append, &out, JSON_INDENT(1) | JSON_PRESERVE_ORDER |
+                           JSON_REAL_PRECISION(15)) || out.failed || !out.p) {
+        free(out.p);
+        goto nomem;
+    }
+    text = out.p;
     json_decref(features);
     json_decref(root);
     gs_atomic a;
@@ -529,11 +572,14 @@ gs_status gis_export_gpkg(const gis_light *lights, size_t n, const char *path)
         const gis_light *l = &lights[i];
         sqlite3_reset(st);
         sqlite3_clear_bindings(st);
+        /* every bind checked: a text or blob copy that could not be allocated left the column
+         * NULL and the row went in without it (#16, fault injection) */
+        int brc = SQLITE_OK;
         if (located(l)) {
             unsigned char blob[29];
             double lon = gs_wrap180(l->lon_deg);
             gpkg_point(blob, lon, l->lat_deg);
-            sqlite3_bind_blob(st, 1, blob, (int)sizeof blob, SQLITE_TRANSIENT);
+            brc |= sqlite3_bind_blob(st, 1, blob, (int)sizeof blob, SQLITE_TRANSIENT);
             if (lon < minx) minx = lon;
             if (lon > maxx) maxx = lon;
             if (l->lat_deg < miny) miny = l->lat_deg;
@@ -547,15 +593,15 @@ gs_status gis_export_gpkg(const gis_light *lights, size_t n, const char *path)
             if (attrs[k].kind == A_TEXT) {
                 const char *t = attr_text(l, k, buf, sizeof buf);
                 if (k == 6) t = gpkg_datetime(t, when) ? when : NULL;   /* time: DATETIME */
-                if (t) sqlite3_bind_text(st, col, t, -1, SQLITE_TRANSIENT);
+                if (t) brc |= sqlite3_bind_text(st, col, t, -1, SQLITE_TRANSIENT);
                 else sqlite3_bind_null(st, col);
             } else {
                 double d = attr_real(l, k);
                 if (isnan(d)) sqlite3_bind_null(st, col);
-                else sqlite3_bind_double(st, col, d);
+                else brc |= sqlite3_bind_double(st, col, d);
             }
         }
-        if (sqlite3_step(st) != SQLITE_DONE) goto sql_error;
+        if (brc != SQLITE_OK || sqlite3_step(st) != SQLITE_DONE) goto sql_error;
     }
     sqlite3_finalize(st);
     st = NULL;
@@ -606,8 +652,8 @@ gs_status gis_export_gpkg(const gis_light *lights, size_t n, const char *path)
                                      "'geom', 'phase', ?, '', 1, 'lights coloured by grid phase class "
                                      "(as the KML)', 'gridsurvey', NULL)", -1, &st, NULL);
     if (qrc == SQLITE_OK) {
-        sqlite3_bind_text(st, 1, qml, -1, SQLITE_TRANSIENT);
-        qrc = sqlite3_step(st) == SQLITE_DONE ? SQLITE_OK : SQLITE_ERROR;
+        qrc = sqlite3_bind_text(st, 1, qml, -1, SQLITE_TRANSIENT) == SQLITE_OK && sqlite3_step(st) == SQLITE_DONE
+                  ? SQLITE_OK : SQLITE_ERROR;
     }
     free(qml);
     if (qrc != SQLITE_OK) goto sql_error;

@@ -371,6 +371,14 @@ static gs_status open_at(const char *path, srv_db_mode mode, int target, srv_db 
         srv_db *fresh = NULL;
         s = open_at(a.tmp, SRV_DB_INIT, target, &fresh);
         srv_db_close(fresh);
+        /* closing folds the write-ahead log into the file; if that failed (a full disk, an I/O
+         * error), the file alone is not the database: nothing is renamed into place */
+        char wal[sizeof a.tmp + 8];
+        snprintf(wal, sizeof wal, "%s-wal", a.tmp);
+        struct stat ws;
+        if (s == GS_OK && lstat(wal, &ws) == 0)
+            s = gs_fail(GS_EIO, "%s: cannot create the survey database: writing it failed (a full "
+                        "disk or an I/O error)", path);
         if (s == GS_OK) s = gs_atomic_commit(&a);
         else gs_atomic_abort(&a);
         if (s != GS_OK) return s;

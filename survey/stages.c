@@ -217,6 +217,11 @@ gs_status srv_job_store(srv_job *j, srv_db *db, const srv_store_opts *o, int64_t
     gs_status s = frames && freq ? GS_OK : gs_fail(GS_ENOMEM, "out of memory for %d frames", K);
     srv_delight_row dv;
     int64_t delight_id = 0, station_id = 0;
+    /* one transaction for the DELIGHT version, survey, station and capture rows: a failure
+     * (a full disk, an I/O error at commit) leaves the database as it was, not a survey without
+     * its capture (#16, fault injection) */
+    int own = 0;
+    if (s == GS_OK) s = srv_dbi_auto_begin(db, &own);
     if (s == GS_OK) s = srv_delight_fingerprint(j->delight, j->delight_path, &dv);
     if (s == GS_OK) s = srv_db_add_delight(db, &dv, &delight_id);
     srv_survey_row sv = {.name = o->survey, .grid_hz = cap->grid_hz,
@@ -283,6 +288,7 @@ gs_status srv_job_store(srv_job *j, srv_db *db, const srv_store_opts *o, int64_t
     if (o->before_commit) o->before_commit(o->ctx, n, K, n_freq);
     s = srv_db_add_capture(db, &cd, capture_id, skipped);
 done:
+    s = srv_dbi_auto_end(db, own, s);
     free(freq);
     free(frames);
     return s;

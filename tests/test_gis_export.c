@@ -430,3 +430,48 @@ TEST(gis_cli_locate)
     snprintf(cmd, sizeof cmd, "%s locate --station %s --pixels %s -o %s", test_bin(), st, px, fx_tmp("x.shp"));
     CHECK(test_run(cmd, out, sizeof out) == 1 && fx_contains(out, "cannot tell the format"));
 }
+
+/* Jansson's allocator failing at its n-th call (json_set_alloc_funcs). */
+static long jansson_calls, jansson_fail_at;
+static void *jansson_failing_malloc(size_t n)
+{
+    return ++jansson_calls == jansson_fail_at ? NULL : malloc(n);
+}
+
+/* The GeoJSON writer with Jansson's n-th allocation failing, for every n: it fails with
+ * GS_ENOMEM leaving the older file, or writes the same bytes as without the failure. Through
+ * json_dumps, a failed append of an object's key to Jansson's buffer was ignored and the
+ * document written without it, exit 0 (found by the fault-injection sweep, #16). */
+TEST(geojson_export_allocation_failure_never_drops_a_property)
+{
+    gis_light l[6];
+    size_t n = sample_lights(l);
+    char ref[1100], path[1100];
+    snprintf(ref, sizeof ref, "%s", fx_tmp("ref.geojson"));
+    snprintf(path, sizeof path, "%s", fx_tmp("out.geojson"));
+    CHECK_OK(gis_export_geojson(l, n, ref));
+    size_t ref_size = 0;
+    char *want = fx_read_file(ref, &ref_size);
+    long failed = 0, points = 0;
+    for (jansson_fail_at = 1;; jansson_fail_at++) {
+        fx_write_text(path, "old\n");
+        jansson_calls = 0;
+        json_set_alloc_funcs(jansson_failing_malloc, free);
+        gs_status s = gis_export_geojson(l, n, path);
+        json_set_alloc_funcs(malloc, free);
+        if (jansson_calls < jansson_fail_at) break;   /* no failure any more: all tried */
+        points++;
+        size_t size = 0;
+        char *got = fx_read_file(path, &size);
+        if (s == GS_OK)
+            CHECK_MSG(got && want && size == ref_size && !memcmp(got, want, size),
+                      "allocation %ld failed, the export succeeded, and its file differs", jansson_fail_at);
+        else
+            CHECK_MSG(s == GS_ENOMEM && got && !strcmp(got, "old\n"), "allocation %ld: status %d, file %s",
+                      jansson_fail_at, (int)s, got ? "changed" : "gone");
+        failed += s != GS_OK;
+        free(got);
+    }
+    CHECK(points > 100 && failed == points);
+    free(want);
+}

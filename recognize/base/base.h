@@ -457,8 +457,9 @@ const gs_bulb *gs_delight_find(const gs_delight *d, const char *id, int grid_hz,
 gs_status gs_delight_generate(gs_delight *d, int n);
 
 /* SQLite storage (versioned schema, docs/delight.md; tables delight_meta, delight_bulbs,
- * delight_brf_bands). save replaces the file's DELIGHT tables in one transaction and refuses a
- * file whose user_version belongs to another schema; load appends the file's bulbs to d, and on
+ * delight_brf_bands). save replaces the file's DELIGHT tables in one transaction (a new file is
+ * built under a temporary name and renamed into place) and refuses a file whose user_version
+ * belongs to another schema; load appends the file's bulbs to d, and on
  * any error (GS_EFORMAT for a file that is not a DELIGHT database) adds nothing. */
 #define GS_DELIGHT_SCHEMA_VERSION 1
 gs_status gs_delight_save(const gs_delight *d, const char *path);

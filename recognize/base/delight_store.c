@@ -13,11 +13,13 @@
  * and append it to d only when the whole file is good. */
 #include "recognize/base/internal.h"
 
+#include <errno.h>
 #include <math.h>
 #include <sqlite3.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 #define FORMAT_NAME "gridsurvey-delight"
 
@@ -142,14 +144,15 @@ static double get_le(const unsigned char *p)
     return v;
 }
 
-gs_status gs_delight_save(const gs_delight *d, const char *path)
+/* gs_delight_save into the SQLite file `file` (path: the name in messages). */
+static gs_status save_at(const gs_delight *d, const char *file, const char *path)
 {
     sqlite3 *db = NULL;
     sqlite3_stmt *ins_bulb = NULL, *ins_band = NULL;
     unsigned char *blob = NULL;
     int in_txn = 0, version = 0;
     gs_status s = GS_OK;
-    if (sqlite3_open_v2(path, &db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, NULL) != SQLITE_OK) {
+    if (sqlite3_open_v2(file, &db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, NULL) != SQLITE_OK) {
         s = sql_fail(db, path, "open");
         goto done;
     }
@@ -230,6 +233,21 @@ done:
     if (in_txn) sqlite3_exec(db, "ROLLBACK", NULL, NULL, NULL);
     sqlite3_close(db);
     free(blob);
+    return s;
+}
+
+/* An existing database gets the new rows in one transaction; a new one is built complete under
+ * a temporary name and renamed into place (gs_atomic_*), so a failure (a full disk, an I/O error)
+ * leaves no half-made file under path (#16, fault injection). */
+gs_status gs_delight_save(const gs_delight *d, const char *path)
+{
+    struct stat st;
+    if (lstat(path, &st) == 0 || errno != ENOENT) return save_at(d, path, path);
+    gs_atomic a;
+    gs_status s = gs_atomic_open(&a, path, 0);
+    if (s != GS_OK) return s;
+    if ((s = save_at(d, a.tmp, path)) == GS_OK) return gs_atomic_commit(&a);
+    gs_atomic_abort(&a);
     return s;
 }
 

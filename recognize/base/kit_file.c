@@ -312,7 +312,16 @@ void gs_atomic_abort(gs_atomic *a)
     a->f = NULL;
     if (a->out_fd > STDERR_FILENO) close(a->out_fd);
     a->out_fd = -1;
-    if (a->tmp[0]) unlink(a->tmp);
+    if (a->tmp[0]) {
+        unlink(a->tmp);
+        /* what an SQLite writer by name may leave beside it */
+        static const char *const side[] = {"-journal", "-wal", "-shm"};
+        for (int i = 0; i < 3; i++) {
+            char p[sizeof a->tmp + 16];
+            snprintf(p, sizeof p, "%s%s", a->tmp, side[i]);
+            unlink(p);
+        }
+    }
     a->tmp[0] = '\0';
 }
 

@@ -1,0 +1,334 @@
+/* faultinject.c - an LD_PRELOAD shim that makes the n-th call of one class fail, as SQLite's
+ * test harness does for its own allocator and VFS (docs/reliability.md, "Fault injection").
+ * Built as $(BUILD)/tests/faults/faultinject.so (tests/faults/module.mk), driven by
+ * tests/test_faults.c. Calls are counted from main() until exit begins (the loader's and the
+ * libraries' constructors and teardown are not counted: a failure there is not the tool's to
+ * handle; OpenCV's teardown throws std::bad_alloc).
+ *
+ *   GS_FAULT_CLASS  malloc  malloc, calloc, realloc, posix_memalign, aligned_alloc, memalign
+ *                   write   write, pwrite, pwrite64, writev, fwrite, fputs, fflush, fclose
+ *                           (of a stream open for writing: where stdio's buffered writes reach
+ *                           the file)
+ *                   fsync   fsync, fdatasync
+ *                   rename  rename, renameat
+ *   GS_FAULT_N      the call (1-based) that fails; 0 or unset: none (count only)
+ *   GS_FAULT_ERRNO  ENOSPC (default), EIO or SHORT (write class: half the bytes are written and
+ *                   the call reports that short count; stdio calls then fail with ENOSPC)
+ *   GS_FAULT_OUT    a file to which the calls of each class are appended at exit, with "1" if
+ *                   the fault was injected ("MALLOC WRITE FSYNC RENAME FIRED\n")
+ *
+ * A gcc ASan binary runs with it given ASAN_OPTIONS=verify_asan_link_order=0: the shim then
+ * comes before libasan and forwards to ASan's allocator (dlsym RTLD_NEXT), so a leak after an
+ * injected failure is still reported. (clang links its ASan runtime into the executable, whose
+ * malloc then wins over any preload: use gcc builds.) Not counted: C++ operator new under ASan
+ * (ASan replaces it; without ASan libstdc++'s operator new calls malloc and is counted), and
+ * FFTW's allocations, which FFTW by design does not survive (fftw_malloc asserts). */
+#define _GNU_SOURCE
+#include <dlfcn.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <stdarg.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/uio.h>
+#include <unistd.h>
+
+enum { C_NONE, C_MALLOC, C_WRITE, C_FSYNC, C_RENAME };
+
+static int fault_class = C_NONE;
+static long fault_n;
+static int fault_errno = ENOSPC, fault_short;
+static int armed;                 /* counting: from main() on */
+static long calls[C_RENAME + 1];  /* of each class, atomically */
+static int fired;
+
+/* The next definitions, resolved once; an allocation dlsym makes before they are known comes
+ * from a small static arena (never freed). */
+static void *(*real_malloc)(size_t);
+static void *(*real_calloc)(size_t, size_t);
+static void *(*real_realloc)(void *, size_t);
+static void (*real_free)(void *);
+static int (*real_posix_memalign)(void **, size_t, size_t);
+static void *(*real_aligned_alloc)(size_t, size_t);
+static void *(*real_memalign)(size_t, size_t);
+static ssize_t (*real_write)(int, const void *, size_t);
+static ssize_t (*real_pwrite)(int, const void *, size_t, off_t);
+static ssize_t (*real_pwrite64)(int, const void *, size_t, off_t);
+static ssize_t (*real_writev)(int, const struct iovec *, int);
+static size_t (*real_fwrite)(const void *, size_t, size_t, FILE *);
+static int (*real_fputs)(const char *, FILE *);
+static int (*real_fflush)(FILE *);
+static int (*real_fclose)(FILE *);
+static int (*real_fsync)(int);
+static int (*real_fdatasync)(int);
+static int (*real_rename)(const char *, const char *);
+static int (*real_renameat)(int, const char *, int, const char *);
+
+static _Alignas(16) char arena[1 << 16];
+static size_t arena_used;
+static int resolving;
+
+static void *arena_alloc(size_t n)
+{
+    n = (n + 15) & ~(size_t)15;
+    if (arena_used + n > sizeof arena) return NULL;
+    void *p = arena + arena_used;
+    arena_used += n;
+    return p;
+}
+static int in_arena(const void *p)
+{
+    return (const char *)p >= arena && (const char *)p < arena + sizeof arena;
+}
+
+#define RESOLVE(name) real_##name = (__typeof__(real_##name))dlsym(RTLD_NEXT, #name)
+static void resolve(void)
+{
+    if (real_malloc || resolving) return;
+    resolving = 1;
+    RESOLVE(calloc);
+    RESOLVE(realloc);
+    RESOLVE(free);
+    RESOLVE(posix_memalign);
+    RESOLVE(aligned_alloc);
+    RESOLVE(memalign);
+    RESOLVE(write);
+    RESOLVE(pwrite);
+    RESOLVE(pwrite64);
+    RESOLVE(writev);
+    RESOLVE(fwrite);
+    RESOLVE(fputs);
+    RESOLVE(fflush);
+    RESOLVE(fclose);
+    RESOLVE(fsync);
+    RESOLVE(fdatasync);
+    RESOLVE(rename);
+    RESOLVE(renameat);
+    RESOLVE(malloc);   /* last: its being set means all are */
+    resolving = 0;
+}
+
+static void report(void)
+{
+    const char *path = getenv("GS_FAULT_OUT");
+    if (!path || !real_write) return;
+    char line[128];
+    int n = snprintf(line, sizeof line, "%ld %ld %ld %ld %d\n", calls[C_MALLOC], calls[C_WRITE],
+                     calls[C_FSYNC], calls[C_RENAME], fired);
+    int fd = open(path, O_WRONLY | O_CREAT | O_APPEND, 0600);
+    if (fd < 0) return;
+    if (real_write(fd, line, (size_t)n) != n) { /* nothing to do about it */ }
+    close(fd);
+}
+
+/* Counts this call of class c; 1 if it is the one to fail. */
+static int hit(int c)
+{
+    if (!armed) return 0;
+    long k = __atomic_add_fetch(&calls[c], 1, __ATOMIC_SEQ_CST);
+    if (c != fault_class || k != fault_n) return 0;
+    fired = 1;
+    return 1;
+}
+
+/* hit(C_MALLOC) for an allocation called from caller: never FFTW's, whose allocator asserts on
+ * failure (by design: it has no error path). */
+static int alloc_hit(const void *caller)
+{
+    if (!armed) return 0;
+    Dl_info info;
+    if (dladdr(caller, &info) && info.dli_fname && strstr(info.dli_fname, "libfftw3")) return 0;
+    return hit(C_MALLOC);
+}
+
+__attribute__((constructor)) static void setup(void)
+{
+    resolve();
+    const char *c = getenv("GS_FAULT_CLASS"), *n = getenv("GS_FAULT_N"), *e = getenv("GS_FAULT_ERRNO");
+    if (c) {
+        fault_class = !strcmp(c, "malloc") ? C_MALLOC : !strcmp(c, "write") ? C_WRITE
+                      : !strcmp(c, "fsync") ? C_FSYNC : !strcmp(c, "rename") ? C_RENAME : C_NONE;
+    }
+    fault_n = n ? atol(n) : 0;
+    if (e && !strcmp(e, "EIO")) fault_errno = EIO;
+    if (e && !strcmp(e, "SHORT")) fault_short = 1;
+    atexit(report);
+}
+
+/* main() is wrapped so that counting starts there. */
+typedef int (*main_fn)(int, char **, char **);
+static main_fn real_main;
+static void disarm(void)
+{
+    armed = 0;
+}
+static int counted_main(int argc, char **argv, char **envp)
+{
+    armed = 1;
+    atexit(disarm);   /* runs first at exit: the libraries' teardown is not counted */
+    return real_main(argc, argv, envp);
+}
+int __libc_start_main(main_fn main, int argc, char **argv, void (*init)(void), void (*fini)(void),
+                      void (*rtld_fini)(void), void *stack_end)
+{
+    int (*next)(main_fn, int, char **, void (*)(void), void (*)(void), void (*)(void), void *) =
+        (__typeof__(next))dlsym(RTLD_NEXT, "__libc_start_main");
+    real_main = main;
+    return next(counted_main, argc, argv, init, fini, rtld_fini, stack_end);
+}
+
+/* ------------------------------------------------------------------ allocation */
+
+void *malloc(size_t n)
+{
+    if (!real_malloc) {
+        resolve();
+        if (!real_malloc) return arena_alloc(n);
+    }
+    if (alloc_hit(__builtin_return_address(0))) { errno = ENOMEM; return NULL; }
+    return real_malloc(n);
+}
+void *calloc(size_t m, size_t n)
+{
+    if (!real_calloc) return arena_alloc(m * n);   /* zeroed: static */
+    if (alloc_hit(__builtin_return_address(0))) { errno = ENOMEM; return NULL; }
+    return real_calloc(m, n);
+}
+void *realloc(void *p, size_t n)
+{
+    if (in_arena(p)) {   /* moved out of the arena */
+        void *q = malloc(n);
+        if (q) memcpy(q, p, n < (size_t)(arena + sizeof arena - (char *)p) ? n : (size_t)(arena + sizeof arena - (char *)p));
+        return q;
+    }
+    if (alloc_hit(__builtin_return_address(0))) { errno = ENOMEM; return NULL; }
+    return real_realloc(p, n);
+}
+void free(void *p)
+{
+    if (!p || in_arena(p)) return;
+    real_free(p);
+}
+int posix_memalign(void **p, size_t align, size_t n)
+{
+    if (alloc_hit(__builtin_return_address(0))) return ENOMEM;
+    return real_posix_memalign(p, align, n);
+}
+void *aligned_alloc(size_t align, size_t n)
+{
+    if (alloc_hit(__builtin_return_address(0))) { errno = ENOMEM; return NULL; }
+    return real_aligned_alloc(align, n);
+}
+void *memalign(size_t align, size_t n)
+{
+    if (alloc_hit(__builtin_return_address(0))) { errno = ENOMEM; return NULL; }
+    return real_memalign(align, n);
+}
+
+/* ------------------------------------------------------------------ writes */
+
+/* A failed write: SHORT writes half (at least one byte when there are two) and returns that. */
+ssize_t write(int fd, const void *b, size_t n)
+{
+    if (fd != 2 && hit(C_WRITE)) {
+        if (fault_short && n > 1) return real_write(fd, b, n / 2);
+        errno = fault_errno;
+        return -1;
+    }
+    return real_write(fd, b, n);
+}
+ssize_t pwrite(int fd, const void *b, size_t n, off_t off)
+{
+    if (hit(C_WRITE)) {
+        if (fault_short && n > 1) return real_pwrite(fd, b, n / 2, off);
+        errno = fault_errno;
+        return -1;
+    }
+    return real_pwrite(fd, b, n, off);
+}
+ssize_t pwrite64(int fd, const void *b, size_t n, off_t off)
+{
+    if (hit(C_WRITE)) {
+        if (fault_short && n > 1) return real_pwrite64(fd, b, n / 2, off);
+        errno = fault_errno;
+        return -1;
+    }
+    return real_pwrite64(fd, b, n, off);
+}
+ssize_t writev(int fd, const struct iovec *v, int cnt)
+{
+    if (fd != 2 && hit(C_WRITE)) {
+        if (fault_short && cnt > 0 && v[0].iov_len > 1) return real_write(fd, v[0].iov_base, v[0].iov_len / 2);
+        errno = fault_errno;
+        return -1;
+    }
+    return real_writev(fd, v, cnt);
+}
+
+/* stdio: the stream's error flag is set, as a failed buffered write sets it (glibc's
+ * _IO_ERR_SEEN). */
+static int stdio_fail(FILE *f)
+{
+    f->_flags |= 0x0020;
+    errno = fault_short ? ENOSPC : fault_errno;
+    return EOF;
+}
+static int writing(FILE *f)
+{
+    if (f == stderr) return 0;
+    int fl = fcntl(fileno(f), F_GETFL);
+    return fl >= 0 && (fl & O_ACCMODE) != O_RDONLY;
+}
+size_t fwrite(const void *b, size_t size, size_t n, FILE *f)
+{
+    if (writing(f) && hit(C_WRITE)) {
+        size_t done = fault_short && n > 1 ? real_fwrite(b, size, n / 2, f) : 0;
+        stdio_fail(f);
+        return done;
+    }
+    return real_fwrite(b, size, n, f);
+}
+int fputs(const char *s, FILE *f)
+{
+    if (writing(f) && hit(C_WRITE)) return stdio_fail(f);
+    return real_fputs(s, f);
+}
+int fflush(FILE *f)
+{
+    if (f && writing(f) && hit(C_WRITE)) return stdio_fail(f);
+    return real_fflush(f);
+}
+int fclose(FILE *f)
+{
+    if (f && writing(f) && hit(C_WRITE)) {
+        real_fclose(f);   /* closed all the same, as a failed fclose leaves it */
+        errno = fault_short ? ENOSPC : fault_errno;
+        return EOF;
+    }
+    return real_fclose(f);
+}
+
+/* ------------------------------------------------------------------ fsync, rename */
+
+int fsync(int fd)
+{
+    if (hit(C_FSYNC)) { errno = fault_errno == ENOSPC ? EIO : fault_errno; return -1; }
+    return real_fsync(fd);
+}
+int fdatasync(int fd)
+{
+    if (hit(C_FSYNC)) { errno = fault_errno == ENOSPC ? EIO : fault_errno; return -1; }
+    return real_fdatasync(fd);
+}
+int rename(const char *a, const char *b)
+{
+    if (hit(C_RENAME)) { errno = fault_errno; return -1; }
+    return real_rename(a, b);
+}
+int renameat(int da, const char *a, int db, const char *b)
+{
+    if (hit(C_RENAME)) { errno = fault_errno; return -1; }
+    return real_renameat(da, a, db, b);
+}

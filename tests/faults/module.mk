@@ -1,0 +1,31 @@
+# tests/faults/module.mk - the fault-injection shim (tests/faults/faultinject.c, preloaded by
+# tests/test_faults.c; docs/reliability.md). Built without sanitizers (it forwards to ASan's
+# allocator in an ASan build) next to the test binary, which finds it beside $(BIN).
+#   make faults   the sweep of every failure point of run, export and delight import (every
+#                 FAULT_MALLOC_STEP-th allocation; 1, the default, is every one: hours for run)
+#                 with the gcc ASan+UBSan build; the counts in build/asan/faults.md
+FAULT_SHIM := $(BUILD)/tests/faults/faultinject.so
+$(FAULT_SHIM): tests/faults/faultinject.c
+	@mkdir -p $(dir $@)
+	gcc -std=gnu11 -Wall -Wextra -Werror -O1 -g -fno-omit-frame-pointer -shared -fPIC $< -ldl -o $@
+test: $(FAULT_SHIM)
+
+FAULT_MALLOC_STEP ?= 1
+.PHONY: faults faults-run
+faults: deps
+	$(MAKE) --no-print-directory BUILD=build/asan SAN=1 faults-run
+faults-run: $(TEST_BIN) $(BIN) $(FAULT_SHIM)
+	@echo '| scenario | malloc calls | write calls | fsync calls | rename calls | injected runs | failed cleanly | succeeded complete | bad |' > $(BUILD)/faults.md
+	@echo '| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |' >> $(BUILD)/faults.md
+	GS_SHARED=$(SHARED) GS_BIN=$(BIN) GS_SAN=$(SAN) GS_FAULT_SWEEP=full GS_FAULT_MALLOC_STEP=$(FAULT_MALLOC_STEP) GS_FAULT_REPORT=$(CURDIR)/$(BUILD)/faults.md \
+	GS_TEST_TIMEOUT_S=172800 LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp:print_suppressions=0 \
+	  $(TEST_BIN) fault_injection_ _fault_injection_run_new_database
+	@cat $(BUILD)/faults.md
+
+# make kills KILLS=N: N random SIGKILLs of `gridsurvey run` over its whole duration, each
+# resumed and compared (tests/test_pipeline.c, pipeline_sigkill_campaign; docs/reliability.md)
+KILLS ?= 100
+.PHONY: kills
+kills: $(TEST_BIN) $(BIN)
+	GS_SHARED=$(SHARED) GS_BIN=$(BIN) GS_SAN=$(SAN) GS_KILLS=$(KILLS) GS_TEST_TIMEOUT_S=86400 \
+	LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp:print_suppressions=0 $(TEST_BIN) _pipeline_sigkill_campaign

@@ -1,0 +1,528 @@
+/* test_faults.c - fault injection as SQLite's harness does it (docs/reliability.md): the n-th
+ * allocation, write, fsync or rename of `gridsurvey run`, `export` and `delight import` fails
+ * (tests/faults/faultinject.c, preloaded), and each such run must either fail with one line on
+ * stderr or succeed, and leave the database and every file in its directory either as they were
+ * before or as an uninjected run leaves them. Under ASan (`make test-asan`) a leak or any other
+ * report is a failure too (it makes stderr longer than one line).
+ *
+ * Oracles: the database as every table's rows read through a raw SQLite connection (after
+ * PRAGMA integrity_check), and every other file's SHA-256 (sha256sum) with the directory's
+ * listing, compared with the state before the run and after an uninjected run.
+ *
+ * Which points: a count-only run of each class gives the number of calls N; `make check` tries
+ * a few of them (the scenario's `points`), evenly spread, `make faults`
+ * (GS_FAULT_SWEEP=full) every one (every GS_FAULT_MALLOC_STEP-th allocation when that is set),
+ * and appends the counts to $GS_FAULT_REPORT. */
+#include "tests/fixtures.h"
+#include "tests/survey_fixture.h"
+#include "tests/test.h"
+
+#include <nettle/sha2.h>
+#include <sqlite3.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+static char out[1 << 16];
+
+/* ------------------------------------------------------------------ the state of a directory */
+
+/* Every table's rows (all columns but the times of writing: the survey database's
+ * applied_utc, added_utc, created_utc, ingested_utc, a GeoPackage's last_change and
+ * update_time, and the value of a meta row with such a key), in a fixed order, after an
+ * integrity check; "absent" if there is no such file, "unreadable: ..." if it cannot be read.
+ * The caller frees. */
+static char *db_state(const char *path)
+{
+    static const char times[] = " applied_utc added_utc created_utc ingested_utc last_change update_time ";
+    if (!fx_exists(path)) return strdup("absent");
+    sqlite3 *h = NULL;
+    char *buf = NULL;
+    size_t len = 0;
+    FILE *f = open_memstream(&buf, &len);
+    if (sqlite3_open_v2(path, &h, SQLITE_OPEN_READONLY, NULL) != SQLITE_OK) {
+        fprintf(f, "unreadable: %s", sqlite3_errmsg(h));
+        goto done;
+    }
+    sqlite3_stmt *t = NULL;
+    /* (no survey_fx_query_*: a file that is not a database is a state, not a test failure) */
+    static const char *const head[] = {"PRAGMA integrity_check", "PRAGMA user_version"};
+    for (int i = 0; i < 2; i++) {
+        if (sqlite3_prepare_v2(h, head[i], -1, &t, NULL) != SQLITE_OK || sqlite3_step(t) != SQLITE_ROW) {
+            fprintf(f, "unreadable: %s", sqlite3_errmsg(h));
+            sqlite3_finalize(t);
+            goto done;
+        }
+        fprintf(f, "%s: %s\n", head[i], (const char *)sqlite3_column_text(t, 0));
+        sqlite3_finalize(t);
+    }
+    if (sqlite3_prepare_v2(h, "SELECT name, sql FROM sqlite_master WHERE type = 'table' AND name NOT "
+                              "LIKE 'sqlite_%' ORDER BY name", -1, &t, NULL) != SQLITE_OK) {
+        fprintf(f, "unreadable: %s", sqlite3_errmsg(h));
+        goto done;
+    }
+    while (sqlite3_step(t) == SQLITE_ROW) {
+        const char *name = (const char *)sqlite3_column_text(t, 0);
+        fprintf(f, "## %s\n%s\n", name, (const char *)sqlite3_column_text(t, 1));
+        char cols[2048] = "", order[2048] = "", sql[4500];
+        snprintf(sql, sizeof sql, "SELECT name FROM pragma_table_info('%s') ORDER BY cid", name);
+        sqlite3_stmt *c = NULL;
+        int n = 0;
+        if (sqlite3_prepare_v2(h, sql, -1, &c, NULL) == SQLITE_OK) {
+            while (sqlite3_step(c) == SQLITE_ROW) {
+                const char *col = (const char *)sqlite3_column_text(c, 0);
+                char spaced[300];
+                snprintf(spaced, sizeof spaced, " %s ", col);
+                if (strstr(times, spaced))
+                    continue;
+                size_t u = strlen(cols), v = strlen(order);
+                snprintf(cols + u, sizeof cols - u, "%s\"%s\"", n ? ", " : "", col);
+                snprintf(order + v, sizeof order - v, "%s%d", n ? ", " : "", n + 1);
+                n++;
+            }
+        }
+        sqlite3_finalize(c);
+        if (!n) continue;
+        snprintf(sql, sizeof sql, "SELECT %s FROM \"%s\" ORDER BY %s", cols, name, order);
+        sqlite3_stmt *q = NULL;
+        if (sqlite3_prepare_v2(h, sql, -1, &q, NULL) != SQLITE_OK) {
+            fprintf(f, "unreadable: %s\n", sqlite3_errmsg(h));
+            continue;
+        }
+        while (sqlite3_step(q) == SQLITE_ROW) {
+            /* a key-value row (the meta table) whose key is such a time: its value is masked */
+            char key[300];
+            const unsigned char *k0 = sqlite3_column_text(q, 0);
+            snprintf(key, sizeof key, " %s ", k0 ? (const char *)k0 : "");
+            int mask = strstr(times, key) != NULL;
+            for (int i = 0; i < sqlite3_column_count(q); i++) {
+                const unsigned char *v = sqlite3_column_text(q, i);
+                fprintf(f, "%s%s", i ? "|" : "", mask && i ? "*" : v ? (const char *)v : "NULL");
+            }
+            fputc('\n', f);
+        }
+        sqlite3_finalize(q);
+    }
+    sqlite3_finalize(t);
+done:
+    sqlite3_close(h);
+    fclose(f);
+    return buf;
+}
+
+/* "SHA256  ./name" for every file under dir but the database (db, relative to dir, with its
+ * -journal and -wal), sorted by name; for a GeoPackage the SHA-256 of its db_state (its bytes
+ * differ from run to run). The caller frees. */
+static char *files_state(const char *dir, const char *db)
+{
+    char cmd[4096];
+    snprintf(cmd, sizeof cmd, "cd %s && find . -type f ! -name '%s' ! -name '%s-journal' ! -name '%s-wal' "
+             "! -name '%s-shm' -print0 | LC_ALL=C sort -z | xargs -0 -r sha256sum", dir, db, db, db, db);
+    static char listing[1 << 16];
+    if (test_run(cmd, listing, sizeof listing) != 0) return strdup("unlistable");
+    for (char *l = listing; *l;) {
+        char *e = strchr(l, '\n');
+        size_t n = e ? (size_t)(e - l) : strlen(l);
+        if (n > 66 + 5 && !strncmp(l + n - 5, ".gpkg", 5)) {
+            char path[2048];
+            snprintf(path, sizeof path, "%s/%.*s", dir, (int)(n - 66), l + 66);
+            char *st = db_state(path);
+            struct sha256_ctx c;
+            uint8_t d[SHA256_DIGEST_SIZE];
+            sha256_init(&c);
+            sha256_update(&c, strlen(st), (const uint8_t *)st);
+            sha256_digest(&c, sizeof d, d);
+            for (int i = 0; i < SHA256_DIGEST_SIZE; i++) {
+                static const char hex[] = "0123456789abcdef";
+                l[2 * i] = hex[d[i] >> 4];
+                l[2 * i + 1] = hex[d[i] & 15];
+            }
+            free(st);
+        }
+        if (!e) break;
+        l = e + 1;
+    }
+    return strdup(listing);
+}
+
+/* The hash of ./name in a files_state listing, or "" if it is not there. */
+static const char *hash_of(const char *state, const char *name, char *hash, size_t size)
+{
+    hash[0] = '\0';
+    for (const char *l = state; *l;) {
+        const char *e = strchr(l, '\n');
+        size_t n = e ? (size_t)(e - l) : strlen(l);
+        if (n > 66 && strlen(name) == n - 66 && !strncmp(l + 66, name, n - 66)) {
+            snprintf(hash, size, "%.64s", l);
+            break;
+        }
+        if (!e) break;
+        l = e + 1;
+    }
+    return hash;
+}
+
+/* Each file of after either as in before or as in ref (absent counting as a state); the first
+ * that is neither in why. */
+static int files_each_before_or_ref(const char *before, const char *ref, const char *after, char *why,
+                                    size_t size)
+{
+    const char *lists[3] = {before, ref, after};
+    for (int k = 0; k < 3; k++) {
+        for (const char *l = lists[k]; *l;) {
+            const char *e = strchr(l, '\n');
+            size_t n = e ? (size_t)(e - l) : strlen(l);
+            if (n > 66) {
+                char name[1024], hb[80], hr[80], ha[80];
+                snprintf(name, sizeof name, "%.*s", (int)(n - 66), l + 66);
+                hash_of(before, name, hb, sizeof hb);
+                hash_of(ref, name, hr, sizeof hr);
+                hash_of(after, name, ha, sizeof ha);
+                if (strcmp(ha, hb) && strcmp(ha, hr)) {
+                    snprintf(why, size, "%s is %s", name, ha[0] ? "neither as before nor complete"
+                                                                 : "gone (it was there before and after a run)");
+                    return 0;
+                }
+            }
+            if (!e) break;
+            l = e + 1;
+        }
+    }
+    return 1;
+}
+
+/* The first line where a and b differ, as "a-line | b-line", in a static buffer. */
+static const char *first_difference(const char *a, const char *b)
+{
+    static char buf[600];
+    while (*a && *a == *b) {
+        const char *ea = strchr(a, '\n'), *eb = strchr(b, '\n');
+        if (!ea || !eb || ea - a != eb - b || strncmp(a, b, (size_t)(ea - a))) break;
+        a = ea + 1;
+        b = eb + 1;
+    }
+    snprintf(buf, sizeof buf, "%.*s | %.*s", (int)strcspn(a, "\n") % 280, a, (int)strcspn(b, "\n") % 280, b);
+    return buf;
+}
+
+/* ------------------------------------------------------------------ scenarios */
+
+typedef struct {
+    const char *name;
+    int points;        /* of each kind in `make check` (the sweep: all) */
+    const char *cmd;   /* a format of up to two %s: the binary, the assets' directory (it runs in
+                        * the work directory) */
+    const char *db;    /* the database's name in the work directory */
+    /* makes the work directory's state before the command (it is emptied first) */
+    void (*setup)(const char *work, const char *assets);
+} scenario;
+
+static void setup_empty(const char *work, const char *assets)
+{
+    (void)work;
+    (void)assets;
+}
+/* an existing survey database with a survey in it (the run adds a capture to it) */
+static void setup_existing_survey(const char *work, const char *assets)
+{
+    char cmd[4096];
+    snprintf(cmd, sizeof cmd, "cp %s/base.sqlite %s/survey.sqlite", assets, work);
+    CHECK(test_run(cmd, out, sizeof out) == 0);
+}
+/* the export's source database, and an older output file to be replaced */
+static void setup_export(const char *work, const char *assets)
+{
+    char cmd[4096];
+    snprintf(cmd, sizeof cmd, "cp %s/exported.sqlite %s/survey.sqlite && echo old > %s/lights.geojson && "
+             "echo old > %s/lights.gpkg", assets, work, work, work);
+    CHECK(test_run(cmd, out, sizeof out) == 0);
+}
+static void setup_delight_existing(const char *work, const char *assets)
+{
+    char cmd[4096];
+    snprintf(cmd, sizeof cmd, "cp %s/small-delight.sqlite %s/delight.sqlite", assets, work);
+    CHECK(test_run(cmd, out, sizeof out) == 0);
+}
+
+/* The assets every scenario reads, made once: a capture directory of the small lab scene, a
+ * survey database with it (to export) and one with only another survey, a DELIGHT CSV and a
+ * DELIGHT database holding part of it. */
+static const char *assets(void)
+{
+    /* beside the tests' own directories, so the tests of one runner share them */
+    static char dir[1024];
+    const char *t = test_tmpdir(), *slash = strrchr(t, '/');
+    snprintf(dir, sizeof dir, "%.*s/fault-assets", slash ? (int)(slash - t) : 1, slash ? t : ".");
+    if (fx_exists(fx_path(dir, "ready"))) return dir;
+    mkdir(dir, 0777);
+    char scene[1100], cmd[8192];
+    snprintf(scene, sizeof scene, "%s/small.json", dir);
+    survey_lab_spec spec = survey_fx_lab_spec();
+    survey_fx_small_lab(scene, 0.25, &spec);
+    char *b = realpath(test_bin(), NULL);
+    CHECK_MSG(b != NULL, "%s: not found", test_bin());
+    if (!b) return dir;
+    snprintf(cmd, sizeof cmd,
+             "cd %s && %s run small.json --db exported.sqlite --capture-dir cap --out cap-out >/dev/null && "
+             "%s db init --db base.sqlite >/dev/null && "
+             "%s delight export -o all.csv && head -n 9 all.csv > some.csv && "
+             "(head -n 1 all.csv; tail -n +10 all.csv | head -n 16) > more.csv && "
+             "%s delight import some.csv --delight small-delight.sqlite >/dev/null",
+             dir, b, b, b, b);
+    free(b);
+    CHECK_MSG(test_run(cmd, out, sizeof out) == 0, "%s", out);
+    fx_write_text(fx_path(dir, "ready"), "");
+    return dir;
+}
+
+static const scenario scenarios[] = {
+    {"run-new-db", 1, "%s run %s/cap --db survey.sqlite --survey night --out .", "survey.sqlite", setup_empty},
+    {"run-existing-db", 2, "%s run %s/cap --db survey.sqlite --survey night --out .", "survey.sqlite",
+     setup_existing_survey},
+    {"export-geojson", 2, "%s export --db survey.sqlite -o lights.geojson", "survey.sqlite", setup_export},
+    {"export-gpkg", 2, "%s export --db survey.sqlite -o lights.gpkg", "survey.sqlite", setup_export},
+    {"delight-import-new", 2, "%s delight import %s/some.csv --delight delight.sqlite", "delight.sqlite",
+     setup_empty},
+    {"delight-import-existing", 2, "%s delight import %s/more.csv --delight delight.sqlite",
+     "delight.sqlite", setup_delight_existing},
+};
+
+typedef struct {
+    const char *cls, *err;
+} fault_kind;
+static const fault_kind kinds[] = {
+    {"malloc", "ENOSPC"}, {"write", "ENOSPC"}, {"write", "EIO"}, {"write", "SHORT"},
+    {"fsync", "EIO"},     {"rename", "EIO"},
+};
+
+/* The shim beside the binary's build: BUILD/tests/faults/faultinject.so for BUILD/gridsurvey. */
+static const char *shim_path(void)
+{
+    static char path[1100];
+    const char *bin = test_bin(), *slash = strrchr(bin, '/');
+    snprintf(path, sizeof path, "%.*s/tests/faults/faultinject.so", slash ? (int)(slash - bin) : 1,
+             slash ? bin : ".");
+    return path;
+}
+
+enum { N_CLASSES = 4 };
+static const char *const class_names[N_CLASSES] = {"malloc", "write", "fsync", "rename"};
+
+/* Empties work, sets it up, runs the scenario with the n-th call of kind failing (n = 0: none);
+ * its exit status, stderr in out, the calls of each class (class_names) in calls[] and
+ * whether the fault fired in *fired. */
+static int run_injected(const scenario *sc, const char *work, const fault_kind *k, long n, long *calls,
+                        int *fired)
+{
+    char cmd[8192], report[1100];
+    snprintf(cmd, sizeof cmd, "rm -rf %s && mkdir -p %s", work, work);
+    CHECK(test_run(cmd, NULL, 0) == 0);
+    sc->setup(work, assets());
+    snprintf(report, sizeof report, "%s.count", work);
+    unlink(report);
+    /* absolute paths: the command runs in work */
+    char *bin = realpath(test_bin(), NULL), *shim = realpath(shim_path(), NULL);
+    CHECK_MSG(bin && shim, "%s or %s: not found (make builds the shim with the test binary)", test_bin(),
+              shim_path());
+    if (!bin || !shim) {
+        free(bin);
+        free(shim);
+        return -1;
+    }
+    char run[2048];
+    snprintf(run, sizeof run, sc->cmd, bin, assets());
+    snprintf(cmd, sizeof cmd,
+             "cd %s && timeout 300 env GS_FAULT_CLASS=%s GS_FAULT_N=%ld GS_FAULT_ERRNO=%s GS_FAULT_OUT=%s "
+             "LD_PRELOAD=%s ASAN_OPTIONS=${ASAN_OPTIONS:+$ASAN_OPTIONS:}verify_asan_link_order=0 "
+             "%s 2>&1 >/dev/null",
+             work, k->cls, n, k->err, report, shim, run);
+    free(bin);
+    free(shim);
+    int rc = test_run(cmd, out, sizeof out);
+    for (int c = 0; c < N_CLASSES; c++) calls[c] = -1;
+    *fired = 0;
+    FILE *f = fopen(report, "r");
+    if (f) {
+        if (fscanf(f, "%ld %ld %ld %ld %d", &calls[0], &calls[1], &calls[2], &calls[3], fired) != 5) calls[0] = -1;
+        fclose(f);
+    }
+    return rc;
+}
+
+/* One scenario through every kind of fault: `make check` at sc->points points of each,
+ * GS_FAULT_SWEEP=full at every point. */
+static void sweep(const scenario *sc)
+{
+    int full = getenv("GS_FAULT_SWEEP") && !strcmp(getenv("GS_FAULT_SWEEP"), "full");
+    char work[1100], dbp[1200];
+    snprintf(work, sizeof work, "%s/%s", fx_tmp("fault-work"), sc->name);
+    snprintf(dbp, sizeof dbp, "%s/%s", work, sc->db);
+    /* before and after an uninjected run */
+    int fired;
+    char cmd[4096];
+    snprintf(cmd, sizeof cmd, "rm -rf %s && mkdir -p %s", work, work);
+    CHECK(test_run(cmd, NULL, 0) == 0);
+    sc->setup(work, assets());
+    char *db_before = db_state(dbp), *files_before = files_state(work, sc->db);
+    long total[N_CLASSES], again[N_CLASSES], calls[N_CLASSES];
+    char *db_ref = NULL, *files_ref = NULL;
+    /* two uninjected runs: the counts of calls, and the complete state (the same twice: the
+     * oracle needs the command to be deterministic) */
+    int rc = run_injected(sc, work, &kinds[0], 0, total, &fired);
+    CHECK_MSG(rc == 0 && total[0] >= 0, "%s: the uninjected run: %d: %s", sc->name, rc, out);
+    db_ref = db_state(dbp);
+    files_ref = files_state(work, sc->db);
+    rc = run_injected(sc, work, &kinds[0], 0, again, &fired);
+    CHECK_MSG(rc == 0 && again[0] >= 0, "%s: the uninjected run: %d: %s", sc->name, rc, out);
+    char *dbr = db_state(dbp), *fr = files_state(work, sc->db);
+    CHECK_MSG(!strcmp(dbr, db_ref), "%s: two uninjected runs differ: %s", sc->name, first_difference(db_ref, dbr));
+    CHECK_MSG(!strcmp(fr, files_ref), "%s: two uninjected runs differ: %s", sc->name, first_difference(files_ref, fr));
+    free(dbr);
+    free(fr);
+    long tried = 0, failed_ok = 0, succeeded = 0, bad = 0;
+    for (size_t k = 0; k < sizeof kinds / sizeof *kinds; k++) {
+        int c = 0;
+        while (strcmp(class_names[c], kinds[k].cls)) c++;
+        long step = full || total[c] <= sc->points ? 1 : (total[c] + sc->points - 1) / sc->points;
+        if (full && c == 0 && getenv("GS_FAULT_MALLOC_STEP")) step = atol(getenv("GS_FAULT_MALLOC_STEP"));
+        if (step < 1) step = 1;
+        for (long n = 1 + (full ? 0 : (step - 1) / 2); n <= total[c]; n += step) {
+            rc = run_injected(sc, work, &kinds[k], n, calls, &fired);
+            tried++;
+            char *dba = db_state(dbp), *fa = files_state(work, sc->db);
+            char why[1200] = "";
+            int ok;
+            if (rc == 0) {
+                ok = !strcmp(dba, db_ref) && !strcmp(fa, files_ref);
+                if (!ok)
+                    snprintf(why, sizeof why, "succeeded but its output is not complete: %s",
+                             strcmp(dba, db_ref) ? first_difference(db_ref, dba) : first_difference(files_ref, fa));
+                succeeded += ok;
+            } else {
+                int one_line = rc == 1 && fx_count_lines(out) == 1 && !strncmp(out, "gridsurvey: ", 12);
+                int db_ok = !strcmp(dba, db_before) || !strcmp(dba, db_ref);
+                ok = one_line && db_ok && files_each_before_or_ref(files_before, files_ref, fa, why, sizeof why);
+                if (!one_line) snprintf(why, sizeof why, "exit %d, not one line on stderr", rc);
+                else if (!db_ok)
+                    snprintf(why, sizeof why, "the database is neither as before nor complete: %s",
+                             first_difference(db_ref, dba));
+                failed_ok += ok;
+            }
+            bad += !ok;
+            CHECK_MSG(ok, "%s: %s %s at call %ld of %ld (fired %d): %s: %.2000s", sc->name, kinds[k].cls,
+                      kinds[k].err, n, total[c], fired, why, out);
+            free(dba);
+            free(fa);
+        }
+    }
+    const char *rep = getenv("GS_FAULT_REPORT");
+    FILE *r = rep && *rep ? fopen(rep, "a") : NULL;
+    if (r) {
+        fprintf(r, "| `%s` | %ld | %ld | %ld | %ld | %ld | %ld | %ld | %ld |\n", sc->name, total[0], total[1],
+                total[2], total[3], tried, failed_ok, succeeded, bad);
+        fclose(r);
+    }
+    if (getenv("GS_TEST_VERBOSE"))
+        printf("    %s: calls malloc %ld, write %ld, fsync %ld, rename %ld; %ld tried: %ld failed cleanly, "
+               "%ld succeeded, %ld bad\n", sc->name, total[0], total[1], total[2], total[3], tried, failed_ok,
+               succeeded, bad);
+    free(db_before);
+    free(files_before);
+    free(db_ref);
+    free(files_ref);
+}
+
+/* (only in `make faults`: `make check` has run_failed_leaves_no_new_database) */
+TEST_HIDDEN(fault_injection_run_new_database, 0) { sweep(&scenarios[0]); }
+TEST(fault_injection_run_existing_database) { sweep(&scenarios[1]); }
+TEST(fault_injection_export_geojson) { sweep(&scenarios[2]); }
+TEST(fault_injection_export_gpkg) { sweep(&scenarios[3]); }
+TEST(fault_injection_delight_import_new) { sweep(&scenarios[4]); }
+TEST(fault_injection_delight_import_existing) { sweep(&scenarios[5]); }
+
+/* ------------------------------------------------------------------ the defects it found */
+
+/* `run` stored the DELIGHT version, the survey and the station each in a transaction of its
+ * own before the capture's: a capture that failed to go in (a full disk at its commit) left a
+ * survey without it. Now all are one transaction. The failure here is a trigger that refuses
+ * the capture's row. */
+TEST(run_failed_capture_insert_leaves_database_as_it_was)
+{
+    const char *dir = fx_tmp("trigger"), *a = assets();
+    char *bin = realpath(test_bin(), NULL), cmd[8192];
+    CHECK(bin != NULL);
+    snprintf(cmd, sizeof cmd, "mkdir -p %s && cd %s && %s db init --db s.sqlite >/dev/null && sqlite3 s.sqlite "
+             "\"CREATE TRIGGER refuse BEFORE INSERT ON captures BEGIN SELECT RAISE(ABORT, 'refused'); END\"",
+             dir, dir, bin ? bin : "");
+    CHECK(test_run(cmd, out, sizeof out) == 0);
+    char db[1200];
+    snprintf(db, sizeof db, "%s/s.sqlite", dir);
+    char *before = db_state(db);
+    snprintf(cmd, sizeof cmd, "cd %s && %s run %s/cap --db s.sqlite --survey night --out . 2>&1 >/dev/null", dir,
+             bin ? bin : "", a);
+    CHECK(test_run(cmd, out, sizeof out) == 1);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "refused"), "%s", out);
+    char *after = db_state(db);
+    CHECK_MSG(!strcmp(before, after), "the database changed: %s", first_difference(before, after));
+    free(before);
+    free(after);
+    free(bin);
+}
+
+/* `delight import` into a new file: a failed commit (here the first fsync) left a database file
+ * behind that was neither absent nor complete. A new file is now built under a temporary name. */
+TEST(delight_import_failed_commit_leaves_no_new_file)
+{
+    const scenario sc = {"delight-new", 0, "%s delight import %s/some.csv --delight delight.sqlite",
+                         "delight.sqlite", setup_empty};
+    char work[1100];
+    snprintf(work, sizeof work, "%s/one", fx_tmp("fault-work"));
+    const fault_kind k = {"fsync", "EIO"};
+    long calls[N_CLASSES];
+    int fired;
+    CHECK(run_injected(&sc, work, &k, 1, calls, &fired) == 1 && fired);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "delight.sqlite"), "%s", out);
+    char *files = files_state(work, "none");
+    CHECK_MSG(!files[0], "left behind: %s", files);
+    free(files);
+}
+
+/* A new survey database (`db init`, and `run` into a new file) is built under a temporary name
+ * in WAL mode: a write that failed while closing it (folding the log into the file) left the
+ * temporary -wal and -shm files behind and renamed an incomplete file into place. Every write
+ * of `db init` fails in turn here (`make check`: the last 8, where the file is closed, and 6
+ * more spread over the others): each either fails in one line leaving nothing, or succeeds
+ * with a database `db check` accepts. */
+TEST(db_init_write_failure_leaves_no_file)
+{
+    const scenario sc = {"db-init", 0, "%s db init --db survey.sqlite", "survey.sqlite", setup_empty};
+    char work[1100], db[1200];
+    snprintf(work, sizeof work, "%s/init", fx_tmp("fault-work"));
+    snprintf(db, sizeof db, "%s/survey.sqlite", work);
+    const fault_kind k = {"write", "ENOSPC"};
+    long counts[N_CLASSES], calls[N_CLASSES];
+    int fired;
+    CHECK(run_injected(&sc, work, &k, 0, counts, &fired) == 0 && counts[1] > 0);
+    long total = counts[1];
+    char *bin = realpath(test_bin(), NULL);
+    int full = getenv("GS_FAULT_SWEEP") && !strcmp(getenv("GS_FAULT_SWEEP"), "full");
+    long step = full ? 1 : total / 6 + 1;
+    for (long n = 1; n <= total; n++) {
+        if (!full && n <= total - 8 && (n - 1) % step) continue;
+        int rc = run_injected(&sc, work, &k, n, calls, &fired);
+        char *files = files_state(work, "none");
+        if (rc == 0) {
+            char cmd[4096];
+            snprintf(cmd, sizeof cmd, "%s db check --db %s", bin ? bin : "", db);
+            CHECK_MSG(test_run(cmd, out, sizeof out) == 0, "write %ld of %ld: succeeded, but: %s", n, total, out);
+        } else {
+            CHECK_MSG(rc == 1 && fx_count_lines(out) == 1, "write %ld of %ld: %d: %s", n, total, rc, out);
+            CHECK_MSG(!files[0], "write %ld of %ld: failed and left: %s", n, total, files);
+        }
+        free(files);
+    }
+    free(bin);
+}
