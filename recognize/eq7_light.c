@@ -545,6 +545,43 @@ static void temper(const rec_matcher *m, rec_eq7_work *w, double Lmax, double ka
     }
 }
 
+/* The light's own flat share with template t (the answer's): per brightness parameter the
+ * weighted least squares of x = a t + beta m (m the template's band means), phi = beta / a with
+ * its delta-method variance, combined over the parameters by inverse variance; w->fit_flat_var
+ * inf when the template cannot tell the two apart (a near-flat BRF) or a is not positive. */
+static void flat_share_of(const rec_matcher *m, rec_eq7_work *w, const double *t)
+{
+    size_t K = (size_t)m->K, D = (size_t)m->D, span = D / (size_t)m->nfit;
+    double mb[GS_MAX_BANDS], num = 0.0, info = 0.0;
+    for (int band = 0; band < m->bands; band++) {
+        double sum = 0.0;
+        for (size_t k = 0; k < K; k++) sum += t[(size_t)band * K + k];
+        mb[band] = sum / (double)K;
+    }
+    for (int f = 0; f < m->nfit; f++) {
+        double A11 = 0, A12 = 0, A22 = 0, b1 = 0, b2 = 0;
+        for (size_t d = (size_t)f * span; d < (size_t)(f + 1) * span; d++) {
+            double u = mb[d / K];
+            A11 += w->w[d] * t[d] * t[d];
+            A12 += w->w[d] * t[d] * u;
+            A22 += w->w[d] * u * u;
+            b1 += w->wx[d] * t[d];
+            b2 += w->wx[d] * u;
+        }
+        double det = A11 * A22 - A12 * A12;
+        if (!(det > 1e-12 * A11 * A22)) continue;
+        double a = (A22 * b1 - A12 * b2) / det, beta = (A11 * b2 - A12 * b1) / det;
+        if (!(a > 0.0)) continue;
+        double phi = beta / a;
+        double var = (A11 + 2.0 * phi * A12 + phi * phi * A22) / det / (a * a);
+        if (!(var > 0.0) || !isfinite(var)) continue;
+        num += phi / var;
+        info += 1.0 / var;
+    }
+    w->fit_flat = info > 0.0 ? num / info : 0.0;
+    w->fit_flat_var = info > 0.0 ? 1.0 / info : INFINITY;
+}
+
 gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const double *signal,
                                  const double *sigma, double fe, rec_match *out,
                                  rec_eq7_excess *excess)
@@ -554,6 +591,7 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
     if (excess) excess->valid = 0;
     w->fit_bulb = -1;
     w->other_lbf = NAN;
+    w->fit_flat_var = INFINITY;
     /* usable samples: finite signal, finite sigma > 0; sigma = +inf marks a dropped sample */
     double c = 0.0;
     int used = 0;
@@ -585,11 +623,25 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
             mu2[band] = (n > 0 && sum > 0.0 && isfinite(sum)) ? sum / n : 0.0;
         }
     }
+    /* the flat share (rec_eq7_opts.flat_share): x = a (t + phi m) has band means a m_b (1 + phi),
+     * so the flat part is phi / (1 + phi) of each band's mean, whatever the template */
+    double flat_b[GS_MAX_BANDS] = {0.0, 0.0, 0.0};
+    if (w->flat > 0.0) {
+        size_t K = (size_t)m->K;
+        for (int band = 0; band < m->bands; band++) {
+            double sum = 0.0;
+            int n = 0;
+            for (size_t d = (size_t)band * K; d < (size_t)(band + 1) * K; d++)
+                if (isfinite(signal[d]) && isfinite(sigma[d]) && sigma[d] > 0.0) sum += signal[d] / c, n++;
+            flat_b[band] = n > 0 ? w->flat / (1.0 + w->flat) * sum / n : 0.0;
+        }
+    }
     for (size_t d = 0; d < D; d++) {
         double x = signal[d], s = sigma[d];
         w->w[d] = w->wx[d] = w->xs[d] = 0.0;
         if (!isfinite(x) || !isfinite(s) || !(s > 0.0)) continue;
-        double ws = 1.0 / ((s / c) * (s / c) + fe * fe * mu2[d / (size_t)m->K]), xs = x / c;
+        double ws = 1.0 / ((s / c) * (s / c) + fe * fe * mu2[d / (size_t)m->K]),
+               xs = x / c - flat_b[d / (size_t)m->K];
         if (!isfinite(ws) || !isfinite(ws * xs * xs)) {
             flags |= REC_MATCH_BAD_INPUT;
             continue;
@@ -737,6 +789,7 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
         snr = nf == 1 ? (Tv[0] > 0.0 ? a_f[0] * sqrt(Tv[0]) : 0.0) : snr_n(nf, Sv, Tv);
     }
     w->fit_z = snr;
+    flat_share_of(m, w, tb);
     double a_sum = 0.0, chi2 = 0.0;
     for (int f = 0; f < nf; f++) {
         a_sum += a_f[f];
@@ -853,6 +906,7 @@ gs_status rec_match_light(const rec_matcher *m, const double *signal, const doub
     rec_eq7_work w;
     gs_status s = rec_eq7_work_alloc(m, &w);
     if (s != GS_OK) return s;
+    w.flat = isfinite(m->o.flat_share) ? m->o.flat_share : 0.0;
     s = rec_eq7_match_light_ws(m, &w, signal, sigma,
                                isfinite(m->o.model_error) ? m->o.model_error : 0.0, out, NULL);
     rec_eq7_work_free(&w);

@@ -57,6 +57,7 @@ void rec_eq7_opts_default(rec_eq7_opts *o)
     o->chroma_tolerance = 0.05;
     o->model_error = NAN;
     o->other_prior = NAN;
+    o->flat_share = NAN;
     o->blend_prior = 0.1;
     o->threads = 0;
 }
@@ -159,6 +160,9 @@ static gs_status check_opts(const rec_eq7_opts *o)
     if (!isnan(o->other_prior) && !(o->other_prior >= 0.0 && o->other_prior < 1.0))
         return gs_fail(GS_EINVAL, "Eq. 7 options: other_prior=%g: expected [0, 1) or NaN (measured)",
                        o->other_prior);
+    if (!isnan(o->flat_share) && !(o->flat_share >= 0.0 && o->flat_share < 0.5))
+        return gs_fail(GS_EINVAL, "Eq. 7 options: flat_share=%g: expected [0, 0.5) or NaN (measured)",
+                       o->flat_share);
     if (!(o->blend_prior >= 0.0 && o->blend_prior < 1.0))
         return gs_fail(GS_EINVAL, "Eq. 7 options: blend_prior=%g: expected [0, 1)", o->blend_prior);
     if (o->threads < 0)

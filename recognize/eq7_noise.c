@@ -93,6 +93,7 @@ typedef struct {
     int *bulb;
     double *S, *T, *z;   /* [i * GS_MAX_BANDS + b], [i] */
     double *lbf;         /* [i] */
+    double *flat, *flat_var;   /* [i]: the light's own flat share (flat_share measured) */
 } light_fits;
 
 static void keep_fit(const rec_eq7_work *w, size_t i, const light_fits *fit)
@@ -105,6 +106,10 @@ static void keep_fit(const rec_eq7_work *w, size_t i, const light_fits *fit)
         fit->z[i] = w->fit_z;
     }
     if (fit->lbf) fit->lbf[i] = w->other_lbf;
+    if (fit->flat) {
+        fit->flat[i] = w->fit_flat;
+        fit->flat_var[i] = w->fit_flat_var;
+    }
 }
 
 /* One pass of rec_match_catalog over a range of lights, each part with its own scratch:
@@ -121,7 +126,10 @@ typedef struct {
     int last;
     const double *logprior;   /* the last pass: each light's tau prior (NULL: uniform) */
     double tol, other;        /* and the band tolerance (0: the options'), other share (NaN: */
-} catalog_pass;               /* the options') */
+                              /* the options') */
+    double flat;              /* every pass: the flat share subtracted, or */
+    const double *flat_i;     /* each light's (not NULL) */
+} catalog_pass;
 
 static gs_status catalog_part(void *ctx, int part, size_t i0, size_t i1)
 {
@@ -136,9 +144,11 @@ static gs_status catalog_part(void *ctx, int part, size_t i0, size_t i1)
     w.chroma_tol = p->last ? p->tol : 0.0;
     w.has_other_prior = p->last && isfinite(p->other);
     w.other_prior = w.has_other_prior ? p->other : 0.0;
+    w.flat = p->flat;
     for (size_t i = i0; i < i1 && s == GS_OK; i++) {
         int no_signal = cat->flags && (cat->flags[i] & REC_BLOB_NO_SIGNAL);
         double fe = p->fe ? p->fe[i] : p->fe1;
+        if (p->flat_i) w.flat = p->flat_i[i];
         if (!p->fe && !p->last) {
             if (no_signal) rec_eq7_no_answer(&p->out[i], REC_MATCH_BAD_INPUT);
             else s = rec_eq7_match_light_ws(p->m, &w, cat->signal + i * D, cat->sigma + i * D, fe,
@@ -228,13 +238,51 @@ static gs_status match_with_population(const rec_matcher *m, catalog_pass *pass,
     return s;
 }
 
+/* The flat share from pass 1's answers: the capture's (rep) and each light's flat_i. Unknown
+ * lights and blends count (a flat share is what makes a bright light unknown, or better fitted by
+ * two phases of its bulb, whose sum flickers less), so do the PSF fit's sources; the weighted
+ * median is robust to the minority of true blends. Not lights cut by the border or saturated.
+ * The lights' shares differ (how much of a halo the photometry takes depends on the light): each
+ * light's is its own estimate shrunk to the capture's under the prior N(phi0, spread^2) (the
+ * posterior mean), kept within FLAT_PRIOR_Z spreads of phi0 so that a blend's or an unknown
+ * bulb's misfit cannot hide in it; phi0 for a light without an estimate. */
+#define FLAT_PRIOR_Z 3.0
+static gs_status measure_flat(const rec_catalog *cat, const rec_match *out, const light_fits *fit,
+                              double *flat_i, rec_noise_report *rep)
+{
+    size_t n = cat->count;
+    const unsigned disturbed = REC_BLOB_EDGE | REC_BLOB_SATURATED | REC_BLOB_NO_SIGNAL;
+    unsigned char *is_ref = malloc(n);
+    if (!is_ref) return gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", n);
+    for (size_t i = 0; i < n; i++)
+        is_ref[i] = !(cat->flags && (cat->flags[i] & disturbed)) && !(out[i].flags & (REC_MATCH_DIM | REC_MATCH_BAD_INPUT));
+    double share, spread;
+    gs_status s = rec_eq7_flat_share(fit->flat, fit->flat_var, is_ref, n, &share, &spread, &rep->flat_lights);
+    free(is_ref);
+    rep->flat_share = isfinite(share) ? share : 0.0;
+    rep->flat_spread = isfinite(share) ? spread : 0.0;
+    if (!isfinite(share)) rep->flat_lights = 0;
+    for (size_t i = 0; i < n && s == GS_OK; i++) {
+        double phi0 = rep->flat_share, t2 = rep->flat_spread * rep->flat_spread, v = fit->flat_var[i];
+        double f = phi0;
+        if (phi0 > 0.0 && t2 > 0.0 && v > 0.0 && isfinite(v) && isfinite(fit->flat[i])) {
+            f = (fit->flat[i] / v + phi0 / t2) / (1.0 / v + 1.0 / t2);
+            double lo = phi0 - FLAT_PRIOR_Z * rep->flat_spread, hi = phi0 + FLAT_PRIOR_Z * rep->flat_spread;
+            f = f < lo ? lo : f > hi ? hi : f;
+        }
+        flat_i[i] = f < 0.0 ? 0.0 : f > REC_FLAT_MAX ? REC_FLAT_MAX : f;
+    }
+    return s;
+}
+
 gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_match *out,
                             rec_noise_report *noise)
 {
     if (!m || !cat) return gs_fail(GS_EINVAL, "Eq. 7: matcher and catalog must not be NULL");
     rec_noise_report rep = {isfinite(m->o.model_error) ? REC_NOISE_FIXED : REC_NOISE_CAMERA, 0,
                             isfinite(m->o.model_error) ? m->o.model_error : 0.0, 0, m->o.chroma_tolerance, 0,
-                            isnan(m->o.other_prior) ? 0.0 : m->o.other_prior};
+                            isnan(m->o.other_prior) ? 0.0 : m->o.other_prior, 0,
+                            isnan(m->o.flat_share) ? 0.0 : m->o.flat_share, 0.0};
     if (noise) *noise = rep;
     if (cat->count == 0) return GS_OK;
     if (!out || !cat->signal || !cat->sigma)
@@ -249,7 +297,14 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
     rec_eq7_excess *ex = measured ? calloc(n, sizeof *ex) : NULL;
     ref_light *ref = measured ? malloc(n * sizeof *ref) : NULL;
     double *wk = measured ? malloc(n * sizeof *wk) : NULL, *fe = measured ? malloc(n * sizeof *fe) : NULL;
-    light_fits fit = {NULL, NULL, NULL, NULL, NULL, NULL};
+    light_fits fit = {NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL};
+    int flat_measured = isnan(m->o.flat_share);
+    double *flat_i = NULL;
+    if (flat_measured) {
+        fit.flat = calloc(n, sizeof *fit.flat);
+        fit.flat_var = calloc(n, sizeof *fit.flat_var);
+        flat_i = malloc(n * sizeof *flat_i);
+    }
     if (m->red) {
         fit.tll = malloc(n * REC_TAU_N * sizeof *fit.tll);
         fit.bulb = malloc(n * sizeof *fit.bulb);
@@ -261,11 +316,20 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
     if (measured && (!ex || !ref || !wk || !fe)) s = gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", n);
     if ((m->red && (!fit.tll || !fit.bulb || !fit.S || !fit.T || !fit.z)) || (isnan(m->o.other_prior) && !fit.lbf))
         s = gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", n);
+    if (flat_measured && (!fit.flat || !fit.flat_var || !flat_i)) s = gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", n);
     int population = fit.tll || fit.lbf;
     /* pass 1: the camera noise (or the fixed model error); the lights on the matcher's threads */
-    catalog_pass pass = {m, cat, out, ex, NULL, rep.median_model_error, population ? &fit : NULL, 0, NULL, 0.0, NAN};
+    catalog_pass pass = {m, cat, out, ex, NULL, rep.median_model_error, population || flat_measured ? &fit : NULL,
+                         0, NULL, 0.0, NAN, rep.flat_share, NULL};
     if (s == GS_OK) s = gs_parallel_for(m->o.threads, n, catalog_part, &pass);
     if (s != GS_OK) goto done;
+    /* the flat share measured on pass 1's answers; when there is one, pass 1 again without it,
+     * so that neither the excess noise nor the last pass's priors absorb its misfit */
+    if (flat_measured && (s = measure_flat(cat, out, &fit, flat_i, &rep)) != GS_OK) goto done;
+    if (rep.flat_share > 0.0 && flat_measured) {
+        pass.flat_i = flat_i;
+        if ((s = gs_parallel_for(m->o.threads, n, catalog_part, &pass)) != GS_OK) goto done;
+    }
     if (!measured) goto population;
     /* the clean references: a fit, an informative estimate, an aperture nothing disturbed */
     const unsigned disturbed = REC_BLOB_EDGE | REC_BLOB_SATURATED | REC_BLOB_DEBLENDED | REC_BLOB_NO_SIGNAL;
@@ -310,6 +374,7 @@ population:
     if (noise && s == GS_OK) *noise = rep;
 done:
     free(fit.tll), free(fit.bulb), free(fit.S), free(fit.T), free(fit.z), free(fit.lbf);
+    free(fit.flat), free(fit.flat_var), free(flat_i);
     free(fe);
     free(wk);
     free(ref);

@@ -224,3 +224,72 @@ double rec_eq7_other_share(const double *lbf, const unsigned char *is_ref, size_
     }
     return pi;
 }
+
+/* The capture's flat share (rec_eq7_opts.flat_share): the weighted median (weights 1/var) of the
+ * references' own estimates phi_l (rec_eq7_work.fit_flat, with the answer's template); kept only
+ * when positive and above FLAT_Z standard errors, else 0; at most REC_FLAT_MAX.
+ * The error is robust (the lights' shares differ by more than their noise, and blends are
+ * outliers): 1.2533 (the median's efficiency) x 1.4826 x the weighted median absolute deviation
+ * over the square root of the effective count (sum w)^2 / sum w^2; never below the estimates'
+ * own noise 1.2533 / sqrt(sum w) (a few bright lights: the deviation can be 0). */
+#define FLAT_Z 3.0
+
+typedef struct {
+    double phi, w;
+} flat_ref;
+
+static int cmp_flat(const void *a, const void *b)
+{
+    double x = ((const flat_ref *)a)->phi, y = ((const flat_ref *)b)->phi;
+    return (x > y) - (x < y);
+}
+
+/* The weighted median of r[0..n) sorted by phi, total weight sw. */
+static double flat_median(const flat_ref *r, size_t n, double sw)
+{
+    double acc = 0.0;
+    for (size_t j = 0; j < n; j++)
+        if ((acc += r[j].w) >= 0.5 * sw) return r[j].phi;
+    return r[n - 1].phi;
+}
+
+gs_status rec_eq7_flat_share(const double *phi, const double *var, const unsigned char *is_ref,
+                             size_t n, double *share, double *spread, size_t *used)
+{
+    *share = NAN;
+    *spread = 0.0;
+    *used = 0;
+    flat_ref *r = malloc((n ? 2 * n : 1) * sizeof *r);
+    if (!r) return gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights' flat shares", n);
+    size_t nr = 0;
+    double sw = 0.0, sw2 = 0.0;
+    for (size_t i = 0; i < n; i++)
+        if (is_ref[i] && isfinite(phi[i]) && var[i] > 0.0 && isfinite(var[i])) {
+            r[nr].phi = phi[i];
+            r[nr].w = 1.0 / var[i];
+            sw += r[nr].w;
+            sw2 += r[nr].w * r[nr].w;
+            nr++;
+        }
+    *used = nr;
+    if (nr < TAU_MIN_LIGHTS) {
+        free(r);
+        return GS_OK;
+    }
+    qsort(r, nr, sizeof *r, cmp_flat);
+    double med = flat_median(r, nr, sw);
+    /* the robust std of the estimates, and the spread of the shares: its square less the
+     * estimates' typical (weighted median) variance */
+    flat_ref *dev = r + nr;
+    for (size_t j = 0; j < nr; j++) dev[j] = (flat_ref){fabs(r[j].phi - med), r[j].w};
+    qsort(dev, nr, sizeof *dev, cmp_flat);
+    double sd = 1.4826 * flat_median(dev, nr, sw), se = 1.2533 * sd * sqrt(sw2) / sw;
+    if (1.2533 / sqrt(sw) > se) se = 1.2533 / sqrt(sw);   /* never below the estimates' own noise */
+    for (size_t j = 0; j < nr; j++) dev[j] = (flat_ref){1.0 / r[j].w, r[j].w};
+    qsort(dev, nr, sizeof *dev, cmp_flat);
+    double excess = sd * sd - flat_median(dev, nr, sw);
+    free(r);
+    *share = !(med > FLAT_Z * se) ? 0.0 : med < REC_FLAT_MAX ? med : REC_FLAT_MAX;
+    *spread = *share > 0.0 && excess > 0.0 ? sqrt(excess) : 0.0;
+    return GS_OK;
+}

@@ -260,6 +260,10 @@ typedef struct {
     double other_prior, other_lbf;         /* and the last light's log Bayes factor (NaN: none) */
     int fit_bulb;                          /* the last light's answer: bulb (-1 none), its */
     double fit_S[GS_MAX_BANDS], fit_T[GS_MAX_BANDS], fit_z;   /* band sums and a / sigma_a */
+    double flat;                           /* the flat share phi subtracted (rec_eq7_opts) */
+    double fit_flat, fit_flat_var;         /* the last light's own estimate of the flat share
+                                            * left after that, with the answer's template, and
+                                            * its variance (inf: none) */
 } rec_eq7_work;
 
 /* eq7_population.c: the population prior on tau for each of n lights (logprior, n x REC_TAU_N)
@@ -277,6 +281,14 @@ double rec_eq7_chroma_tolerance(const rec_matcher *m, size_t n, const int *bulb,
 /* eq7_population.c: the share of bulbs not in DELIGHT from the references' log Bayes factors
  * (rec_eq7_nested.lbf_other; NaN entries skipped), *used the lights it came from; NaN below 8. */
 double rec_eq7_other_share(const double *lbf, const unsigned char *is_ref, size_t n, size_t *used);
+/* eq7_population.c: the capture's flat share *share from n lights' own estimates phi[i]
+ * (variance var[i], inf: none) over the references is_ref: their weighted median when
+ * significant, else 0; NaN with fewer than 8 references with an estimate. *spread the std of the
+ * lights' true shares about it (beyond their estimates' noise; 0 when *share is 0), *used the
+ * references with an estimate. */
+#define REC_FLAT_MAX 0.45   /* the largest flat share (rec_eq7_opts.flat_share below 0.5) */
+gs_status rec_eq7_flat_share(const double *phi, const double *var, const unsigned char *is_ref,
+                             size_t n, double *share, double *spread, size_t *used);
 size_t rec_eq7_tau_prior(const double *tau_ll, const unsigned char *is_ref, const double *y_px,
                          size_t n, int height, double *logprior);
 

@@ -194,6 +194,14 @@ typedef struct {
                               * "Bulbs not in DELIGHT"). [0, 1), or NaN (default): measured per
                               * capture by rec_match_catalog from its lights' evidence (EM of the
                               * share); 0 for rec_match_light */
+    double flat_share;       /* the share of each light's flux that does not flicker (a halo of
+                              * scattered light from many lamps, an unmodulated neighbour) and
+                              * that the photometry takes for the light's, relative to its
+                              * flickering flux phi: x = a (t + phi m), m the template's band
+                              * means; each light's x minus phi/(1 + phi) of its band means
+                              * before Eq. 7. [0, 0.5), or NaN (default): measured per capture
+                              * by rec_match_catalog (the references' weighted median, 0 unless
+                              * significant); 0 for rec_match_light */
     double blend_prior;      /* prior probability that a light is two lights in one aperture
                               * (eq7_nested.c): a blend more probable than not is flagged BLEND,
                               * and every confidence is of "one light and this". [0, 1) (0.1) */
@@ -317,6 +325,10 @@ typedef struct {
     size_t other_lights;          /* other_prior NaN: the lights its share came from (0: none) */
     double other_prior;           /* the share of bulbs not in DELIGHT used (measured or the
                                    * options') */
+    size_t flat_lights;           /* flat_share NaN: the references it was measured on (0: none) */
+    double flat_share;            /* the flat share subtracted (measured: the capture's phi0, each
+                                   * light's shrunk to it; or the options') */
+    double flat_spread;           /* measured: the spread of the lights' shares about phi0 */
 } rec_noise_report;
 /* "camera", "fixed", "population". */
 const char *rec_noise_source_name(rec_noise_source s);

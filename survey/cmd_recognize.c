@@ -45,6 +45,10 @@ static const char recognize_usage[] =
     "  --other-prior P|auto    prior probability that a bulb is not in DELIGHT, 0..1 (0: the\n"
     "                          paper's closed world), or auto (default): the share measured\n"
     "                          from the capture's lights\n"
+    "  --flat-share F|auto     share of each light's flux that does not flicker (a halo of\n"
+    "                          many lamps' light), 0..0.5 of its flickering flux, subtracted\n"
+    "                          before Eq. 7; or auto (default): measured from the capture's\n"
+    "                          lights (0 unless significant)\n"
     "  --blend-prior P         prior probability that a light is two lights in one aperture,\n"
     "                          0..1 (default 0.1; 0: never a blend by the posterior)\n"
     "  --threshold S           detection threshold of lights and mapped pixels, noise sigmas > 0\n"
@@ -114,6 +118,7 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
         {"chroma-tolerance", required_argument, 0, 'T'},
         {"model-error", required_argument, 0, 'e'},
         {"other-prior", required_argument, 0, 'O'},
+        {"flat-share", required_argument, 0, 'F'},
         {"blend-prior", required_argument, 0, 'B'},
         {"delight", required_argument, 0, 'd'},
         {"maps", required_argument, 0, 'm'},
@@ -178,6 +183,15 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
             o->eq7.other_prior = strtod(optarg, &end);
             if (end == optarg || *end || !(o->eq7.other_prior >= 0.0 && o->eq7.other_prior < 1.0))
                 return usage_error("--other-prior '%s': expected auto or a probability from 0 to below 1", optarg);
+            break;
+        case 'F':
+            if (!strcmp(optarg, "auto")) {
+                o->eq7.flat_share = NAN;
+                break;
+            }
+            o->eq7.flat_share = strtod(optarg, &end);
+            if (end == optarg || *end || !(o->eq7.flat_share >= 0.0 && o->eq7.flat_share < 0.5))
+                return usage_error("--flat-share '%s': expected auto or a share from 0 to below 0.5", optarg);
             break;
         case 'B':
             o->eq7.blend_prior = strtod(optarg, &end);
@@ -263,6 +277,8 @@ static void print_table(const recognize_opts *o, const gs_capture *cap, const re
         printf(" (from %zu lights), band tolerance %.3f", noise->reddening_lights, noise->chroma_tolerance);
     if (noise->other_lights)
         printf("; bulbs not in DELIGHT: %.1f %% (from %zu lights)", 100.0 * noise->other_prior, noise->other_lights);
+    if (noise->flat_share > 0.0)
+        printf("; flat share %.4f%s", noise->flat_share, noise->flat_lights ? " (measured, each light's within its spread)" : "");
     printf("\n");
     printf("%4s %8s %8s %5s  %-22s %-22s %15s %6s  %-28s %9s %9s  %s\n", "id", "x", "y", "area",
            "bulb", "technology", "phase (deg)", "conf", "runner-up (conf)", "chi2/dof", "p-value",
@@ -395,6 +411,7 @@ static gs_status print_json(const recognize_opts *o, const gs_capture *cap, cons
     json_object_set_new(r, "band_model", json_string(cap->bands > 1 ? band_model_name(o->eq7.band_gains) : "mono"));
     json_object_set_new(r, "chroma_tolerance", jreal(o->eq7.chroma_tolerance));
     json_object_set_new(r, "other_prior", isnan(o->eq7.other_prior) ? json_string("auto") : jreal(o->eq7.other_prior));
+    json_object_set_new(r, "flat_share", isnan(o->eq7.flat_share) ? json_string("auto") : jreal(o->eq7.flat_share));
     json_object_set_new(r, "blend_prior", jreal(o->eq7.blend_prior));
     json_object_set_new(r, "model_error", isnan(o->eq7.model_error) ? json_string("auto") : jreal(o->eq7.model_error));
     json_t *nz = json_object();
@@ -404,6 +421,9 @@ static gs_status print_json(const recognize_opts *o, const gs_capture *cap, cons
     json_object_set_new(nz, "reddening_prior_lights", json_integer((json_int_t)noise->reddening_lights));
     json_object_set_new(nz, "chroma_tolerance", jreal(noise->chroma_tolerance));
     json_object_set_new(nz, "other_prior", jreal(noise->other_prior));
+    json_object_set_new(nz, "flat_share", jreal(noise->flat_share));
+    json_object_set_new(nz, "flat_spread", jreal(noise->flat_spread));
+    json_object_set_new(nz, "flat_lights", json_integer((json_int_t)noise->flat_lights));
     json_object_set_new(nz, "other_lights", json_integer((json_int_t)noise->other_lights));
     json_object_set_new(r, "noise", nz);
     json_object_set_new(root, "recognition", r);

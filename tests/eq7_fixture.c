@@ -227,6 +227,7 @@ rec_matcher *eq7fx_new_matcher(const gs_delight *d, int grid_hz, int bands, int 
     o.model_error = 0.0;
     o.other_prior = 0.0;
     o.blend_prior = 0.0;
+    o.flat_share = 0.0;
     rec_matcher *m = NULL;
     CHECK_OK(rec_matcher_new(d, grid_hz, bands, K, &o, &m));
     return m;

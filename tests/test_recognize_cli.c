@@ -105,6 +105,16 @@ TEST(recognize_cli_paper_model_flags)
     json_t *l0 = json_array_get(json_object_get(root, "lights"), 0);
     CHECK_NEAR(json_number_value(json_object_get(l0, "model_error")), 0.1, 1e-15);
     json_decref(root);
+    /* a fixed flat share is what the last pass used, and said so */
+    snprintf(args, sizeof args, "%s --flat-share 0.01", dir);
+    root = recfx_recognize_ok(args, 0);
+    if (!root) return;
+    rcg = json_object_get(root, "recognition");
+    CHECK_NEAR(json_number_value(json_object_get(rcg, "flat_share")), 0.01, 1e-15);
+    nz = json_object_get(rcg, "noise");
+    CHECK_NEAR(json_number_value(json_object_get(nz, "flat_share")), 0.01, 1e-15);
+    CHECK(json_integer_value(json_object_get(nz, "flat_lights")) == 0);
+    json_decref(root);
     /* the defaults: reddened, the excess measured (the scene's few lights: the camera noise,
      * said so, or the population) */
     root = recfx_recognize_ok(dir, 0);
@@ -123,6 +133,8 @@ TEST(recognize_cli_paper_model_flags)
     CHECK(test_run(cmd, out, sizeof out) == 2 && strstr(out, "--band-model"));
     snprintf(cmd, sizeof cmd, "%s recognize %s --model-error 2", test_bin(), dir);
     CHECK(test_run(cmd, out, sizeof out) == 2 && strstr(out, "--model-error"));
+    snprintf(cmd, sizeof cmd, "%s recognize %s --flat-share 0.5", test_bin(), dir);
+    CHECK(test_run(cmd, out, sizeof out) == 2 && strstr(out, "--flat-share"));
 }
 
 TEST(recognize_cli_mono_60hz_table)
