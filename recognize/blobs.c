@@ -49,6 +49,7 @@ void rec_blob_opts_default(rec_blob_opts *o)
     o->labels = 0;
     o->psf_weighted = 1;
     o->psf_fit = 1;
+    o->threads = 0;
 }
 
 void rec_catalog_release(rec_catalog *cat)
@@ -384,6 +385,7 @@ static gs_status check_opts(const rec_blob_opts *o)
         return gs_fail(GS_EINVAL, "blobs: psf_weighted = %d: expected 0 or 1", o->psf_weighted);
     if (o->psf_fit != 0 && o->psf_fit != 1)
         return gs_fail(GS_EINVAL, "blobs: psf_fit = %d: expected 0 or 1", o->psf_fit);
+    if (o->threads < 0) return gs_fail(GS_EINVAL, "blobs: threads = %d: expected >= 0 (0: the online CPUs)", o->threads);
     if (o->labels != 0 && o->labels != 1)
         return gs_fail(GS_EINVAL, "blobs: labels = %d: expected 0 or 1", o->labels);
     return GS_OK;

@@ -712,6 +712,91 @@ static int fit_groups(const rec_blob_state *s, const rec_catalog *cat, const int
     return units;
 }
 
+/* One thread's scratch of the fit: fit_data's arrays and the residual R. */
+static int fit_data_alloc(fit_data *f, const rec_blob_state *s, double **R)
+{
+    const int B = s->bands, K = s->K, BK = B * K;
+    memset(f, 0, sizeof *f);
+    f->s = s;
+    f->B = B;
+    f->K = K;
+    f->BK = BK;
+    f->x = malloc(sizeof(int) * FIT_MAX_PX);
+    f->y = malloc(sizeof(int) * FIT_MAX_PX);
+    f->D = malloc(sizeof(double) * FIT_MAX_PX * (size_t)BK);
+    f->V = malloc(sizeof(double) * FIT_MAX_PX * (size_t)BK);
+    f->w = malloc(sizeof(double) * FIT_MAX_PX * (size_t)B);
+    f->P = malloc(sizeof(double) * FIT_MAX_PX * FIT_MAX_SOURCES);
+    f->F = malloc(sizeof(double) * FIT_MAX_SOURCES * (size_t)BK);
+    f->Ainv = malloc(sizeof(double) * FIT_MAX_SOURCES * FIT_MAX_SOURCES * (size_t)B);
+    f->num = malloc(sizeof(double) * (size_t)K);
+    f->Dt = malloc(sizeof(double) * FIT_MAX_PX * (size_t)BK);
+    f->wP = malloc(sizeof(double) * FIT_MAX_PX * FIT_MAX_SOURCES);
+    f->gx = malloc(sizeof(double) * (FIT_MAX_PX + 1));
+    f->gy = malloc(sizeof(double) * (FIT_MAX_PX + 1));
+    f->mean = malloc(sizeof(double) * 3 * FIT_MAX_PX * (size_t)B);
+    *R = malloc(sizeof(double) * FIT_MAX_PX * (size_t)BK);
+    return f->x && f->y && f->D && f->V && f->w && f->P && f->F && f->Ainv && f->num && f->Dt && f->wP &&
+           f->gx && f->gy && f->mean && *R;
+}
+
+static void fit_data_free(fit_data *f, double *R)
+{
+    free(f->x), free(f->y), free(f->D), free(f->V), free(f->w), free(f->P), free(f->F);
+    free(f->Ainv), free(f->num), free(f->Dt), free(f->wP), free(f->gx), free(f->gy), free(f->mean);
+    free(R);
+}
+
+static void fit_list_free(fit_list *L)
+{
+    for (size_t i = 0; i < L->n; i++) free(L->v[i].sig);
+    free(L->v);
+    memset(L, 0, sizeof *L);
+}
+
+/* The fit groups 1..ngroups, split over threads: each part fits its groups in order into its own
+ * list, first_new[l] the index of group l's first light in its part's list. Concatenated in part
+ * order the lists are what one thread makes. */
+typedef struct {
+    const rec_blob_state *s;
+    const rec_catalog *cat;
+    const int *ap_start, *ap_pix, *fp_start, *fp_pix, *lt_start, *lt_list;
+    int *replaced;
+    size_t *first_new;
+    fit_list lists[GS_MAX_THREADS];
+    size_t begin[GS_MAX_THREADS];
+} fit_groups_job;
+
+static gs_status fit_groups_part(void *ctx, int part, size_t i0, size_t i1)
+{
+    fit_groups_job *j = ctx;
+    const rec_catalog *cat = j->cat;
+    fit_list *L = &j->lists[part];
+    j->begin[part] = i0 + 1;
+    fit_data f;
+    double *R;
+    gs_status st = GS_OK;
+    if (!fit_data_alloc(&f, j->s, &R)) st = gs_fail(GS_ENOMEM, "blobs: cannot allocate the PSF fit");
+    for (size_t l = i0 + 1; l < i1 + 1 && st == GS_OK; l++) {
+        int nap = j->ap_start[l + 1] - j->ap_start[l], nl = j->lt_start[l + 1] - j->lt_start[l];
+        j->first_new[l] = L->n;
+        if (nl == 0 || nl > FIT_MAX_SOURCES || nap > FIT_MAX_PX) continue;
+        double start[2 * FIT_MAX_SOURCES];
+        int skip = 0;
+        for (int q = 0; q < nl; q++) {
+            int i = j->lt_list[j->lt_start[l] + q];
+            skip |= (cat->flags[i] & REC_BLOB_NO_SIGNAL) != 0;
+            start[2 * q] = cat->x_px[i];
+            start[2 * q + 1] = cat->y_px[i];
+        }
+        if (skip) continue;
+        st = fit_component(&f, (int)l, j->ap_pix + j->ap_start[l], nap, j->fp_pix + j->fp_start[l],
+                           j->fp_start[l + 1] - j->fp_start[l], start, nl, R, L, &j->replaced[l]);
+    }
+    fit_data_free(&f, R);
+    return st;
+}
+
 gs_status rec_blob_psf_fit(rec_blob_state *s, rec_catalog *cat)
 {
     const int B = s->bands, K = s->K, BK = B * K, W = s->W;
@@ -727,34 +812,14 @@ gs_status rec_blob_psf_fit(rec_blob_state *s, rec_catalog *cat)
     int *lt_start = calloc(nc + 1, sizeof(int)), *lt_list = malloc(sizeof(int) * n);
     int *replaced = calloc(nc, sizeof(int));
     size_t *first_new = malloc(sizeof(size_t) * nc);
-    fit_data f;
-    memset(&f, 0, sizeof f);
-    f.s = s;
-    f.B = B;
-    f.K = K;
-    f.BK = BK;
-    f.x = malloc(sizeof(int) * FIT_MAX_PX);
-    f.y = malloc(sizeof(int) * FIT_MAX_PX);
-    f.D = malloc(sizeof(double) * FIT_MAX_PX * (size_t)BK);
-    f.V = malloc(sizeof(double) * FIT_MAX_PX * (size_t)BK);
-    f.w = malloc(sizeof(double) * FIT_MAX_PX * (size_t)B);
-    f.P = malloc(sizeof(double) * FIT_MAX_PX * FIT_MAX_SOURCES);
-    f.F = malloc(sizeof(double) * FIT_MAX_SOURCES * (size_t)BK);
-    f.Ainv = malloc(sizeof(double) * FIT_MAX_SOURCES * FIT_MAX_SOURCES * (size_t)B);
-    f.num = malloc(sizeof(double) * (size_t)K);
-    f.Dt = malloc(sizeof(double) * FIT_MAX_PX * (size_t)BK);
-    f.wP = malloc(sizeof(double) * FIT_MAX_PX * FIT_MAX_SOURCES);
-    f.gx = malloc(sizeof(double) * (FIT_MAX_PX + 1));
-    f.gy = malloc(sizeof(double) * (FIT_MAX_PX + 1));
-    f.mean = malloc(sizeof(double) * 3 * FIT_MAX_PX * (size_t)B);
-    double *R = malloc(sizeof(double) * FIT_MAX_PX * (size_t)BK);
     fit_list L = {NULL, 0, 0};
     rec_catalog out;
     memset(&out, 0, sizeof out);
     fit_order *ord = NULL;
     int *newid = NULL;
+    fit_groups_job *job = NULL;
     if (!comp_of || !unit_of || !ap_start || !fp_start || !ap_pix || !fp_pix || !fill || !lt_start || !lt_list || !replaced ||
-        !first_new || !f.x || !f.y || !f.D || !f.V || !f.w || !f.P || !f.F || !f.Ainv || !f.num || !f.Dt || !f.wP || !f.gx || !f.gy || !f.mean || !R) {
+        !first_new) {
         st = gs_fail(GS_ENOMEM, "blobs: cannot allocate the PSF fit");
         goto done;
     }
@@ -786,21 +851,35 @@ gs_status rec_blob_psf_fit(rec_blob_state *s, rec_catalog *cat)
     for (size_t l = 1; l <= nc; l++) lt_start[l] += lt_start[l - 1];
     memcpy(fill, lt_start, sizeof(int) * nc);
     for (size_t i = 0; i < n; i++) lt_list[fill[unit_of[i]]++] = (int)i;
-    for (size_t l = 1; l < nc && st == GS_OK; l++) {
-        int nap = ap_start[l + 1] - ap_start[l], nl = lt_start[l + 1] - lt_start[l];
-        first_new[l] = L.n;
-        if (nl == 0 || nl > FIT_MAX_SOURCES || nap > FIT_MAX_PX) continue;
-        double start[2 * FIT_MAX_SOURCES];
-        int skip = 0;
-        for (int j = 0; j < nl; j++) {
-            int i = lt_list[lt_start[l] + j];
-            skip |= (cat->flags[i] & REC_BLOB_NO_SIGNAL) != 0;
-            start[2 * j] = cat->x_px[i];
-            start[2 * j + 1] = cat->y_px[i];
+    /* the groups on the blob options' threads, their lists joined in group order */
+    job = calloc(1, sizeof *job);
+    if (!job) {
+        st = gs_fail(GS_ENOMEM, "blobs: cannot allocate the PSF fit");
+        goto done;
+    }
+    *job = (fit_groups_job){.s = s, .cat = cat, .ap_start = ap_start, .ap_pix = ap_pix, .fp_start = fp_start,
+                            .fp_pix = fp_pix, .lt_start = lt_start, .lt_list = lt_list, .replaced = replaced,
+                            .first_new = first_new};
+    st = gs_parallel_for(s->o->threads, nc - 1, fit_groups_part, job);
+    for (int p = 0; p < GS_MAX_THREADS && st == GS_OK; p++) {
+        fit_list *Lp = &job->lists[p];
+        if (!job->begin[p]) break;   /* parts 0..P-1 ran */
+        size_t end = p + 1 < GS_MAX_THREADS && job->begin[p + 1] ? job->begin[p + 1] : nc;
+        for (size_t l = job->begin[p]; l < end; l++) first_new[l] += L.n;
+        if (!Lp->n) continue;
+        if (L.n + Lp->n > L.cap) {
+            fit_light *nv = realloc(L.v, (L.n + Lp->n) * sizeof *nv);
+            if (!nv) {
+                st = gs_fail(GS_ENOMEM, "blobs: cannot hold %zu fitted lights", L.n + Lp->n);
+                break;
+            }
+            L.v = nv;
+            L.cap = L.n + Lp->n;
         }
-        if (skip) continue;
-        st = fit_component(&f, (int)l, ap_pix + ap_start[l], nap, fp_pix + fp_start[l],
-                           fp_start[l + 1] - fp_start[l], start, nl, R, &L, &replaced[l]);
+        memcpy(L.v + L.n, Lp->v, Lp->n * sizeof *Lp->v);
+        L.n += Lp->n;
+        free(Lp->v);
+        memset(Lp, 0, sizeof *Lp);
     }
     if (st != GS_OK || L.n == 0) goto done;
 
@@ -899,8 +978,7 @@ gs_status rec_blob_psf_fit(rec_blob_state *s, rec_catalog *cat)
     memset(&out, 0, sizeof out);
 done:
     rec_catalog_release(&out);
-    for (size_t i = 0; i < L.n; i++) free(L.v[i].sig);
-    free(L.v);
+    fit_list_free(&L);
     free(comp_of);
     free(unit_of);
     free(ap_start);
@@ -912,21 +990,9 @@ done:
     free(lt_list);
     free(replaced);
     free(first_new);
-    free(f.x);
-    free(f.y);
-    free(f.D);
-    free(f.V);
-    free(f.w);
-    free(f.P);
-    free(f.F);
-    free(f.Ainv);
-    free(f.num);
-    free(f.Dt);
-    free(f.wP);
-    free(f.gx);
-    free(f.gy);
-    free(f.mean);
-    free(R);
+    if (job)
+        for (int p = 0; p < GS_MAX_THREADS; p++) fit_list_free(&job->lists[p]);
+    free(job);
     free(ord);
     free(newid);
     return st;

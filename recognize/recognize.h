@@ -98,6 +98,8 @@ typedef struct {
     int labels;               /* 1: also return the aperture label image (0) */
     int psf_weighted;         /* 1: PSF-weighted (optimal) photometry, 0: the aperture sum (1) */
     int psf_fit;              /* 1: the multi-source PSF fit over the K frames (9.), 0: off (1) */
+    int threads;              /* threads of the PSF fit's groups, >= 0; 0 = the online CPUs (0);
+                               * the catalog is the same bits on any number */
 } rec_blob_opts;
 void rec_blob_opts_default(rec_blob_opts *o);
 

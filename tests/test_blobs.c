@@ -109,7 +109,7 @@ TEST(blobs_opts_default)
     rec_blob_opts o;
     rec_blob_opts_default(&o);
     CHECK(o.threshold_sigma == 5 && o.min_area_px == 1 && o.max_area_px == 5000);
-    CHECK(o.background_px == 31 && o.deblend_sigma == 5 && o.grow_px == 2 && o.labels == 0);
+    CHECK(o.background_px == 31 && o.deblend_sigma == 5 && o.grow_px == 2 && o.labels == 0 && o.threads == 0);
     rec_blob_opts_default(NULL); /* harmless */
     rec_catalog_release(NULL);
     rec_catalog cat;
