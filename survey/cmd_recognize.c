@@ -106,6 +106,20 @@ static int usage_error(const char *fmt, const char *arg)
 }
 
 /* Returns -1 to go on, else the exit status. */
+/* "auto" (NaN: measured from the capture) or a number in [0, hi) into *v; 0 when neither. */
+static int auto_or_share(const char *arg, double hi, double *v)
+{
+    if (!strcmp(arg, "auto")) {
+        *v = NAN;
+        return 1;
+    }
+    char *end;
+    double x = strtod(arg, &end);
+    if (end == arg || *end || !(x >= 0.0 && x < hi)) return 0;
+    *v = x;
+    return 1;
+}
+
 static int parse_opts(int argc, char **argv, recognize_opts *o)
 {
     static const struct option longs[] = {
@@ -167,30 +181,15 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
                 return usage_error("--chroma-tolerance '%s': expected a fraction from 0.001 to 1", optarg);
             break;
         case 'e':
-            if (!strcmp(optarg, "auto")) {
-                o->eq7.model_error = NAN;
-                break;
-            }
-            o->eq7.model_error = strtod(optarg, &end);
-            if (end == optarg || *end || !(o->eq7.model_error >= 0.0 && o->eq7.model_error < 1.0))
+            if (!auto_or_share(optarg, 1.0, &o->eq7.model_error))
                 return usage_error("--model-error '%s': expected auto or a fraction from 0 to below 1", optarg);
             break;
         case 'O':
-            if (!strcmp(optarg, "auto")) {
-                o->eq7.other_prior = NAN;
-                break;
-            }
-            o->eq7.other_prior = strtod(optarg, &end);
-            if (end == optarg || *end || !(o->eq7.other_prior >= 0.0 && o->eq7.other_prior < 1.0))
+            if (!auto_or_share(optarg, 1.0, &o->eq7.other_prior))
                 return usage_error("--other-prior '%s': expected auto or a probability from 0 to below 1", optarg);
             break;
         case 'F':
-            if (!strcmp(optarg, "auto")) {
-                o->eq7.flat_share = NAN;
-                break;
-            }
-            o->eq7.flat_share = strtod(optarg, &end);
-            if (end == optarg || *end || !(o->eq7.flat_share >= 0.0 && o->eq7.flat_share < 0.5))
+            if (!auto_or_share(optarg, 0.5, &o->eq7.flat_share))
                 return usage_error("--flat-share '%s': expected auto or a share from 0 to below 0.5", optarg);
             break;
         case 'B':
