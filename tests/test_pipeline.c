@@ -557,9 +557,10 @@ TEST(pipeline_sigkill_resumes_to_same_content)
 /* `gridsurvey run` (the CLI, a process of its own) SIGKILLed at a moment uniform over its whole
  * duration (1.05 x an uninterrupted run's, measured here), each time from scratch; then the
  * database is checked (check_after_kill), the run resumed to its end, and its rows and capture
- * files compared with the uninterrupted run's. Counts corrupt databases, failed resumes and
- * resumed databases whose rows differ from the reference (duplicates among them) in *bad[3];
- * each is a test failure too. */
+ * files compared with the uninterrupted run's. Tries until `kills` kills have landed while the
+ * run was going (at most 4 x kills tries; *before_end the tries whose run had ended first, checked
+ * the same way). Counts corrupt databases, failed resumes and resumed databases whose rows differ
+ * from the reference (duplicates among them) in *bad[3]; each is a test failure too. */
 static void random_kills(int kills, uint64_t seed, int bad[3], int *before_end)
 {
     char scene[1024], ref_db[1024], ref_cap[1024], db[1024], cap[1024];
@@ -578,7 +579,8 @@ static void random_kills(int kills, uint64_t seed, int bad[3], int *before_end)
     char *ref = dump_db(ref_db);
     bad[0] = bad[1] = bad[2] = 0;
     *before_end = 0;
-    for (int k = 0; k < kills; k++) {
+    int landed = 0, k = 0;
+    for (; landed < kills && k < 4 * kills; k++) {
         sh("rm -rf %s %s %s-wal %s-shm %s-journal", cap, db, db, db, db);
         double wait_s = gs_splitmix_uniform(&seed) * 1.05 * run_s;
         fflush(stdout);
@@ -594,7 +596,9 @@ static void random_kills(int kills, uint64_t seed, int bad[3], int *before_end)
         kill(pid, SIGKILL);
         int status = 0;
         waitpid(pid, &status, 0);
-        *before_end += !(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL);
+        int hit = WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL;
+        landed += hit;
+        *before_end += !hit;
         bad[0] += check_after_kill(db, k) != 0;
         rc = sh("%s run %s --db %s --capture-dir %s", test_bin(), scene, db, cap);
         CHECK_MSG(rc == 0, "kill %d after %.3f s: resume: %d: %s", k, wait_s, rc, out);
@@ -609,10 +613,11 @@ static void random_kills(int kills, uint64_t seed, int bad[3], int *before_end)
         free(got);
     }
     free(ref);
+    CHECK_MSG(landed == kills, "%d of %d kills landed during the run in %d tries", landed, kills, k);
     if (getenv("GS_TEST_VERBOSE") || kills > 10)
-        printf("    %d random SIGKILLs over a %.2f s run (%d after it had ended): %d corrupt databases, "
-               "%d failed resumes, %d resumed databases unlike the reference\n", kills, run_s, *before_end,
-               bad[0], bad[1], bad[2]);
+        printf("    %d random SIGKILLs landed during a %.2f s run, %d tries (%d after it had ended): %d corrupt "
+               "databases, %d failed resumes, %d resumed databases unlike the reference\n", landed, run_s, k,
+               *before_end, bad[0], bad[1], bad[2]);
 }
 
 /* A few of the campaign's random kills (`make kills`: 100 of them, docs/reliability.md). */
