@@ -168,6 +168,19 @@ def ece(conf, right, bins=10):
     return float(e), table
 
 
+def ece_null(conf, observed, bins=10, draws=2000, seed=1):
+    """The calibration test: the ECE of a perfectly calibrated predictor with the same confidences
+    (outcomes drawn as Bernoulli(conf)), its 99th percentile and the share of draws at least as
+    large as the observed ECE (the p-value: small when the confidences are miscalibrated beyond
+    the sampling noise of that many lights)."""
+    conf = np.asarray(conf, float)
+    if conf.size == 0 or not np.isfinite(observed):
+        return float("nan"), float("nan")
+    rng = np.random.default_rng(seed)
+    null = np.array([ece(conf, rng.random(conf.size) < conf, bins)[0] for _ in range(draws)])
+    return float(np.quantile(null, 0.99)), float((null >= observed).mean())
+
+
 # --------------------------------------------------------------------------------------------
 # The oracle
 # --------------------------------------------------------------------------------------------
@@ -676,6 +689,7 @@ def main(argv=None):
         res["phase_amb_but_right"] = float((flag("phase_ambiguous") & R("phase_ok") & hb).mean())
         res["bulb_amb_share"] = float(flag("bulb_ambiguous").mean())
         res["ece_pair"], res["ece_pair_table"] = ece(conf[hb], pair[hb])
+        res["ece_pair_null_p99"], res["ece_pair_p"] = ece_null(conf[hb], res["ece_pair"])
         res["ece_bulb"], _ = ece(R("bconf")[hb], R("bulb_ok")[hb])
         res["ece_phase"], _ = ece(R("pconf")[hb], R("phase_ok")[hb])
         res["mean_conf"] = float(conf[hb].mean()) if hb.any() else float("nan")
