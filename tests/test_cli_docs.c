@@ -6,8 +6,10 @@
  * every command and every flag of each. Then: groff renders the page without a warning, both
  * files are what docs/gen-cli-docs.sh makes of this binary (`make cli-docs` after a change to a
  * --help text), and `make install` puts the binary, the page and the completion under
- * DESTDIR/PREFIX. */
+ * DESTDIR/PREFIX. Last, the progress flags: the same three in every command that has them, with
+ * the same effect. */
 #include "tests/fixtures.h"
+#include "tests/survey_fixture.h"
 #include "tests/test.h"
 
 #include <ctype.h>
@@ -181,4 +183,62 @@ TEST(make_install_puts_binary_page_and_completion_under_destdir)
              "env -u MAKEFLAGS -u MFLAGS -u MAKELEVEL make -s --no-print-directory uninstall "
              "DESTDIR=%s PREFIX=/opt/gs && test -z \"$(find %s -type f)\"", dest, dest);
     CHECK_MSG(test_run(cmd, out, sizeof out) == 0, "%s: %s", cmd, out);
+}
+
+/* stderr of `BIN ARGS`, stdout dropped; the exit status must be 0. */
+static void run_stderr(const char *args, char *err, size_t size)
+{
+    char cmd[4096];
+    snprintf(cmd, sizeof cmd, "%s %s 2>&1 >/dev/null", test_bin(), args);
+    CHECK_MSG(test_run(cmd, err, size) == 0, "%s: %s", cmd, err);
+}
+
+/* One meaning of the progress flags: every command that prints progress takes --progress,
+ * --no-progress and -q; on a stderr that is not a terminal (the default there: none),
+ * --progress adds progress lines and a later -q takes them away again. */
+TEST(progress_flags_mean_the_same_in_every_command)
+{
+    static char help[65536], sub[65536];
+    CHECK(fx_run_bin(help, sizeof help, "%s --help%s%s%s", NULL, NULL, NULL) == 0);
+    words cmds, fl;
+    help_commands(help, &cmds);
+    int with_progress = 0;
+    for (int c = 0; c < cmds.n; c++) {
+        CHECK(fx_run_bin(sub, sizeof sub, "%s help %s%s%s", cmds.w[c], NULL, NULL) == 0);
+        help_flags(sub, &fl);
+        int has[3] = {0, 0, 0};
+        for (int f = 0; f < fl.n; f++) {
+            has[0] |= !strcmp(fl.w[f], "--progress");
+            has[1] |= !strcmp(fl.w[f], "--no-progress");
+            has[2] |= !strcmp(fl.w[f], "-q");
+        }
+        if (!has[0]) continue;
+        with_progress++;
+        CHECK_MSG(has[1] && has[2], "%s: --progress without --no-progress and -q", cmds.w[c]);
+    }
+    CHECK_MSG(with_progress >= 5, "%d commands with --progress", with_progress);
+
+    survey_lab_spec spec = survey_fx_lab_spec();
+    char scene[600], args[2048];
+    snprintf(scene, sizeof scene, "%s", fx_tmp("lab.json"));
+    survey_fx_small_lab(scene, 0.25, &spec);
+    static const char *const modes[3] = {"", "--progress", "--progress -q"};
+    static char err[3][65536];
+    for (int m = 0; m < 3; m++) {
+        snprintf(args, sizeof args, "simulate %s -o %s/cap%d %s", scene, test_tmpdir(), m, modes[m]);
+        run_stderr(args, err[m], sizeof err[m]);
+    }
+    char cap0[600];
+    snprintf(cap0, sizeof cap0, "%s/cap0", test_tmpdir());
+    for (int step = 0; step < 2; step++) {   /* the capture loop's progress, then recognize's */
+        const char *what = step == 0 ? "simulate" : "recognize";
+        if (step > 0)
+            for (int m = 0; m < 3; m++) {
+                snprintf(args, sizeof args, "recognize %s %s", cap0, modes[m]);
+                run_stderr(args, err[m], sizeof err[m]);
+            }
+        CHECK_MSG(strlen(err[1]) > strlen(err[0]), "%s --progress printed no progress", what);
+        CHECK_MSG(!strcmp(err[2], err[0]), "%s --progress -q: stderr '%s', without the flags '%s'",
+                  what, err[2], err[0]);
+    }
 }
