@@ -5,7 +5,7 @@ set -eu
 PKGS="gcc g++ make pkg-config sqlite3 libsqlite3-dev libfftw3-dev libsndfile1-dev libjansson-dev
 libspng-dev nettle-dev liblapacke-dev libcsv-dev libtiff-dev
 libplplot-dev plplot-driver-cairo libopenblas-dev libopencv-dev libgeographiclib-dev
-geographiclib-tools libgpiod-dev gcc-avr avr-libc simavr libsimavr-dev libelf-dev gdal-bin
+geographiclib-tools groff-base libgpiod-dev gcc-avr avr-libc simavr libsimavr-dev libelf-dev gdal-bin
 python3-gdal python3-numpy python3-opencv clang libclang-rt-14-dev libgeos-dev
 libpq-dev postgresql postgresql-15-postgis-3"
 missing=""

@@ -24,7 +24,7 @@ static const char capture_usage[] =
     "             [--grid 50|60] [--K K] [--cycles C] [--masks M] [--free-running]\n"
     "             [--saturation DN] [--black-level DN] [--gain E] [--read-noise DN]\n"
     "  common:    [--hdr | --no-hdr] [--max-rounds N] [--max-saturated N]\n"
-    "             [--stop-after N] [--force] [--progress | --no-progress]\n"
+    "             [--stop-after N] [--force] [--progress | --no-progress | -q]\n"
     "\n"
     "Frames go to CAPDIR as they are acquired; running the same command again resumes an\n"
     "interrupted capture (acquisition.json) and re-acquires only missing or damaged frames.\n"
@@ -71,7 +71,7 @@ int srv_cmd_capture(int argc, char **argv)
     cap_loop_opts_default(&lo);
     optind = 1;
     int c;
-    while ((c = getopt_long(argc, argv, "o:h", longs, NULL)) != -1) {
+    while ((c = getopt_long(argc, argv, "o:hq", longs, NULL)) != -1) {
         switch (c) {
         case 'b': backend = optarg; break;
         case 'o': out = optarg; break;
@@ -86,7 +86,8 @@ int srv_cmd_capture(int argc, char **argv)
         case 'X': lo.hdr = 0; break;
         case 'E': lo.force = 1; break;
         case 'p': lo.progress = 1; break;
-        case 'P': lo.progress = 0; break;
+        case 'P':
+        case 'q': lo.progress = 0; break;
         case 'S': if (!num_arg("--seed", optarg, 0, 2147483647.0, &seed)) return 2; break;
         case 'z': if (!num_arg("--zc-line", optarg, 0, 1023, &v)) return 2; hw.zc_line = (int)v; break;
         case 'u': if (!num_arg("--shutter-line", optarg, 0, 1023, &v)) return 2; hw.shutter_line = (int)v; break;

@@ -6,10 +6,11 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 static const char push_usage[] =
     "usage: gridsurvey push --db DB --pg CONNINFO [--areas AREAS.geojson --field FIELD]\n"
-    "                       [--batch N] [--progress]\n"
+    "                       [--batch N] [--progress | --no-progress | -q]\n"
     "\n"
     "Copy a survey database (surveys, stations, DELIGHT versions, captures with their frames\n"
     "and frequency log, lights, locations, light sites) into the schema gridsurvey of a\n"
@@ -23,7 +24,9 @@ static const char push_usage[] =
     "  --field FIELD   FIELD of table gridsurvey.areas, labelled by their property FIELD\n"
     "                  (for the view area_balance); a layer is replaced as a whole\n"
     "  --batch N       lights (whole captures) or sites per transaction (default 20000)\n"
-    "  --progress      a line per 10 % of the captures on stderr\n"
+    "  --progress      a line per 10 % of the captures on stderr (default: when stderr is a\n"
+    "                  terminal)\n"
+    "  -q, --no-progress  no progress\n"
     "  --help          this text\n"
     "\n"
     "example:\n"
@@ -36,15 +39,17 @@ int srv_cmd_push(int argc, char **argv)
         {"db", required_argument, 0, 'd'},    {"pg", required_argument, 0, 'p'},
         {"areas", required_argument, 0, 'a'}, {"field", required_argument, 0, 'f'},
         {"batch", required_argument, 0, 'b'}, {"progress", no_argument, 0, 'P'},
-        {"help", no_argument, 0, 'h'},        {0, 0, 0, 0},
+        {"no-progress", no_argument, 0, 'q'}, {"help", no_argument, 0, 'h'},
+        {0, 0, 0, 0},
     };
     const char *path = NULL, *conninfo = NULL;
     srv_push_opts o;
     srv_push_opts_default(&o);
+    o.progress = isatty(2);
     optind = 1;
     int c;
     char *end;
-    while ((c = getopt_long(argc, argv, "h", longs, NULL)) != -1) {
+    while ((c = getopt_long(argc, argv, "hq", longs, NULL)) != -1) {
         switch (c) {
         case 'd': path = optarg; break;
         case 'p': conninfo = optarg; break;
@@ -60,6 +65,7 @@ int srv_cmd_push(int argc, char **argv)
             break;
         }
         case 'P': o.progress = 1; break;
+        case 'q': o.progress = 0; break;
         case 'h': fputs(push_usage, stdout); return 0;
         default: return srv_usage_hint("push");
         }

@@ -57,6 +57,8 @@ static const char recognize_usage[] =
     "                          built-in database generated from the lamp models)\n"
     "  --maps DIR              also write DIR/phase_map.png, bulb_map.png, confidence_map.png\n"
     "                          (per-pixel Eq. 7, paper Fig. 1) and signals.png (Fig. 3)\n"
+    "  --progress              progress on stderr (default: when stderr is a terminal)\n"
+    "  -q, --no-progress       no progress\n"
     "  --help                  this text\n"
     "\n"
     "Exit status: 0 done, 1 failure (one line on stderr), 2 usage error.\n";
@@ -64,11 +66,12 @@ static const char recognize_usage[] =
 typedef struct {
     const char *capdir, *db, *maps;
     int json;
+    int progress;   /* progress on stderr (default: when it is a terminal) */
     rec_eq7_opts eq7;
     double threshold;
 } recognize_opts;
 
-/* Progress on stderr when it is a terminal; each call overwrites the line. */
+/* Progress on stderr when on (--progress, or stderr a terminal); each call overwrites the line. */
 static int progress_on;
 
 static void progress(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
@@ -136,21 +139,26 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
         {"blend-prior", required_argument, 0, 'B'},
         {"delight", required_argument, 0, 'd'},
         {"maps", required_argument, 0, 'm'},
+        {"progress", no_argument, 0, 'P'},
+        {"no-progress", no_argument, 0, 'q'},
         {"help", no_argument, 0, 'h'},
         {0, 0, 0, 0},
     };
     memset(o, 0, sizeof *o);
     rec_eq7_opts_default(&o->eq7);
     o->threshold = 5.0;
+    o->progress = isatty(2);
     o->db = getenv("GRIDSURVEY_DELIGHT");
     if (o->db && !*o->db) o->db = NULL;
     optind = 1;
     opterr = 0;
     int c;
     char *end;
-    while ((c = getopt_long(argc, argv, ":h", longs, NULL)) != -1) {
+    while ((c = getopt_long(argc, argv, ":hq", longs, NULL)) != -1) {
         switch (c) {
         case 'j': o->json = 1; break;
+        case 'P': o->progress = 1; break;
+        case 'q': o->progress = 0; break;
         case 'd': o->db = optarg; break;
         case 'm': o->maps = optarg; break;
         case 'p':
@@ -501,7 +509,7 @@ int srv_cmd_recognize(int argc, char **argv)
     recognize_opts o;
     int rc = parse_opts(argc, argv, &o);
     if (rc >= 0) return rc;
-    progress_on = isatty(2);
+    progress_on = o.progress;
 
     srv_job j;
     memset(&j, 0, sizeof j);

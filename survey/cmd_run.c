@@ -18,6 +18,7 @@ static const char run_usage[] =
     "                      [--survey NAME]\n"
     "                      [--capture-dir DIR] [--light-height-m H] [--light-height-sigma-m S]\n"
     "                      [--phases 3|6|continuous] [--unknown-p P] [--delight DB] [--out DIR]\n"
+    "                      [--progress | --no-progress | -q]\n"
     "\n"
     "The whole job on one capture: a scene (gridsurvey-scene/1) is acquired by the simulator\n"
     "through the ACam acquisition loop into a capture directory (resumable), a capture directory\n"
@@ -55,9 +56,11 @@ static const char run_usage[] =
     "  --delight DB         DELIGHT SQLite file (default: $GRIDSURVEY_DELIGHT, else the scene's,\n"
     "                       else the built-in database)\n"
     "  --out DIR            where the GeoJSON and the map go (default: the database's directory)\n"
+    "  --progress           progress on stderr (default: when stderr is a terminal)\n"
+    "  -q, --no-progress    no progress\n"
     "  --help               this text\n"
     "\n"
-    "Progress goes to stderr when it is a terminal. Exit status: 0 done, 1 failure (one line on\n"
+    "Exit status: 0 done, 1 failure (one line on\n"
     "stderr; bad input changes nothing on disk), 2 usage error.\n";
 
 static int usage_error(const char *fmt, const char *arg)
@@ -255,18 +258,20 @@ int srv_cmd_run(int argc, char **argv)
         {"light-height-m", required_argument, 0, 'H'}, {"phases", required_argument, 0, 'p'},
         {"delight", required_argument, 0, 'D'},     {"out", required_argument, 0, 'o'},
         {"unknown-p", required_argument, 0, 'u'},   {"light-height-sigma-m", required_argument, 0, 'G'},
+        {"progress", no_argument, 0, 'P'},          {"no-progress", no_argument, 0, 'q'},
         {"help", no_argument, 0, 'h'},              {0, 0, 0, 0},
     };
     srv_run_opts o;
     srv_run_opts_default(&o);
     const char *out = NULL;
+    int progress = isatty(2);
     o.delight_path = getenv("GRIDSURVEY_DELIGHT");
     if (o.delight_path && !*o.delight_path) o.delight_path = NULL;
     optind = 1;
     opterr = 0;
     int c;
     char *end;
-    while ((c = getopt_long(argc, argv, ":h", longs, NULL)) != -1) {
+    while ((c = getopt_long(argc, argv, ":hq", longs, NULL)) != -1) {
         switch (c) {
         case 'd': o.db_path = optarg; break;
         case 's': o.station_path = optarg; break;
@@ -274,6 +279,8 @@ int srv_cmd_run(int argc, char **argv)
         case 'c': o.capture_dir = optarg; break;
         case 'D': o.delight_path = optarg; break;
         case 'o': out = optarg; break;
+        case 'P': progress = 1; break;
+        case 'q': progress = 0; break;
         case 'H':
             o.light_height_m = strtod(optarg, &end);
             if (!*optarg || *end || !isfinite(o.light_height_m))
@@ -313,7 +320,7 @@ int srv_cmd_run(int argc, char **argv)
     else gs_path_dir(o.db_path, out_dir, sizeof out_dir);
     gs_status s = out ? check_out_dir(out_dir) : GS_OK;
     if (s != GS_OK) return srv_error(s);
-    if (isatty(2)) {
+    if (progress) {
         o.progress = tty_progress;
         o.capture_progress = 1;
     }

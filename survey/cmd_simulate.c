@@ -11,7 +11,7 @@
 
 static const char simulate_usage[] =
     "usage: gridsurvey simulate SCENE.json -o CAPDIR [--seed N] [--delight DB] [--force]\n"
-    "                           [--stop-after N] [--progress | --no-progress] [--stats]\n"
+    "                           [--stop-after N] [--progress | --no-progress | -q] [--stats]\n"
     "                           [--drop-light ID ...]\n"
     "\n"
     "Renders the scene's K frames as the ACam would acquire them (coded exposure over C\n"
@@ -27,7 +27,7 @@ static const char simulate_usage[] =
     "  --force         start again even if CAPDIR holds progress of this scene\n"
     "  --stop-after N  stop after rendering N frames (resume later)\n"
     "  --progress      progress on stderr (default: when stderr is a terminal)\n"
-    "  --no-progress   no progress\n"
+    "  -q, --no-progress  no progress\n"
     "  --stats         print the pipeline's stages with their calls and time\n"
     "  --drop-light ID render the scene without this light (repeatable; e.g. the reference\n"
     "                  for `gridsurvey relight` switching a source off)\n"
@@ -77,13 +77,14 @@ int srv_cmd_simulate(int argc, char **argv)
     cap_loop_opts_default(&lo);
     optind = 1;
     int c;
-    while ((c = getopt_long(argc, argv, "o:h", longs, NULL)) != -1) {
+    while ((c = getopt_long(argc, argv, "o:hq", longs, NULL)) != -1) {
         switch (c) {
         case 'o': out = optarg; break;
         case 'd': delight = optarg; break;
         case 'f': lo.force = 1; break;
         case 'p': lo.progress = 1; break;
-        case 'n': lo.progress = 0; break;
+        case 'n':
+        case 'q': lo.progress = 0; break;
         case 't': stats = 1; break;
         case 'x':
             if (ndrop == 64) {

@@ -285,8 +285,8 @@ static const char *const part_lite[4] = {
     "loc.semi_minor_m, loc.azimuth_deg, loc.range_m, loc.flags FROM locations loc "
     "JOIN lights l ON l.id = loc.light_id WHERE l.capture_id = ?1 ORDER BY l.light_index",
     "SELECT k, file, cycles, hdr_map FROM frames WHERE capture_id = ?1 ORDER BY k",
-    "SELECT seq, t_s, window_s, frequency_hz, sigma_hz FROM grid_frequency WHERE capture_id = ?1 "
-    "ORDER BY seq",
+    ("SELECT seq, t_s, window_s, frequency_hz, sigma_hz FROM grid_frequency WHERE capture_id = ?1 "
+     "ORDER BY seq"),   /* (parenthesised: clang's -Wstring-concatenation) */
 };
 static const char *const part_copy[4] = {
     "COPY lights(capture_id, " LIGHT_COLS ") FROM STDIN",

@@ -5,13 +5,17 @@
 #define FUZZ_REPLAY 1
 #include "tests/fuzz/fuzz_capture.c"
 #include "tests/fuzz/fuzz_csv.c"
+#include "tests/fuzz/fuzz_db.c"
 #include "tests/fuzz/fuzz_delight_csv.c"
 #include "tests/fuzz/fuzz_firmware.c"
 #include "tests/fuzz/fuzz_geojson.c"
+#include "tests/fuzz/fuzz_pixels.c"
 #include "tests/fuzz/fuzz_png.c"
 #include "tests/fuzz/fuzz_recording.c"
 #include "tests/fuzz/fuzz_scene.c"
 #include "tests/fuzz/fuzz_station.c"
+#include "tests/fuzz/fuzz_truth.c"
+#include "tests/fuzz/fuzz_wav.c"
 #include "tests/fixtures.h"
 #include "tests/test.h"
 
@@ -21,9 +25,11 @@ static const struct {
     const char *name;
     int (*fn)(const uint8_t *, size_t);
 } targets[] = {
-    {"capture", fuzz_capture},   {"csv", fuzz_csv},         {"delight_csv", fuzz_delight_csv},
-    {"firmware", fuzz_firmware}, {"geojson", fuzz_geojson}, {"png", fuzz_png},
-    {"recording", fuzz_recording}, {"scene", fuzz_scene},   {"station", fuzz_station},
+    {"capture", fuzz_capture},     {"csv", fuzz_csv},         {"db", fuzz_db},
+    {"delight_csv", fuzz_delight_csv}, {"firmware", fuzz_firmware}, {"geojson", fuzz_geojson},
+    {"pixels", fuzz_pixels},       {"png", fuzz_png},         {"recording", fuzz_recording},
+    {"scene", fuzz_scene},         {"station", fuzz_station}, {"truth", fuzz_truth},
+    {"wav", fuzz_wav},
 };
 
 /* Every file of dir through fn; returns how many. */
