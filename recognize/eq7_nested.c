@@ -296,11 +296,16 @@ void rec_eq7_nested_tests(const rec_matcher *m, rec_eq7_work *w, const double *t
         const double *t1 = r == 0 ? tb : m->t + first[r] * D;
         double e1 = 0.0;
         for (int f = 0; f < nf; f++) S1v[r][f] = T11v[r][f] = 0.0;
-        for (size_t d = 0; d < D; d++) {
-            int f = nf == 1 ? 0 : (int)(d / K);
-            S1v[r][f] += w->wx[d] * t1[d];
-            T11v[r][f] += w->w[d] * t1[d] * t1[d];
-            U[d * REC_NESTED_FIRST + (size_t)r] = w->w[d] * t1[d];
+        size_t span_f = nf == 1 ? D : K;   /* the samples of one brightness parameter */
+        for (int f = 0; f < nf; f++) {
+            double S1 = 0.0, T11 = 0.0;
+            for (size_t d = (size_t)f * span_f; d < (size_t)(f + 1) * span_f; d++) {
+                S1 += w->wx[d] * t1[d];
+                T11 += w->w[d] * t1[d] * t1[d];
+                U[d * REC_NESTED_FIRST + (size_t)r] = w->w[d] * t1[d];
+            }
+            S1v[r][f] = S1;
+            T11v[r][f] = T11;
         }
         for (int f = 0; f < nf; f++) e1 += T11v[r][f] > 0.0 ? S1v[r][f] * S1v[r][f] / T11v[r][f] : 0.0;
         e1v[r] = e1;
