@@ -659,7 +659,7 @@ static void light_row(const gs_delight *all, const config *c, int *failed)
     char ref[64] = "-", speed[32] = "-", agree[32] = "-";
     if (r.ref_rows) {
         snprintf(ref, sizeof ref, "%.0f", r.ref_rate);
-        snprintf(speed, sizeof speed, "%.1fx", r.rate / r.ref_rate);
+        snprintf(speed, sizeof speed, r.rate < r.ref_rate ? "%.2fx" : "%.1fx", r.rate / r.ref_rate);
         snprintf(agree, sizeof agree, "%.4f", r.agree);
     }
     printf("| %d | %d | %s%s | %zu | %zu | %.3f | **%.0f** | %s | %s | %s | %.3f | %.0f |\n", c->K,
