@@ -92,6 +92,7 @@ void rec_matcher_free(rec_matcher *m)
     free(m->nyq);
     free(m->nfine);
     free(m->wk);
+    free(m->harm);
     free(m->bnorm);
     free(m->blog);
     free(m->tbn);
@@ -513,12 +514,19 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
     m->nyq = calloc(nb * (size_t)bands, sizeof *m->nyq);
     m->nfine = calloc(nb, sizeof *m->nfine);
     m->wk = malloc(sizeof *m->wk * (size_t)K);
+    m->harm = malloc(sizeof *m->harm * 2 * REC_SHAPE_H * (size_t)K);
     if (!m->bulbs || !m->cont || !m->first || !m->count || !m->H || !m->F || !m->nyq ||
-        !m->nfine || !m->wk) {
+        !m->nfine || !m->wk || !m->harm) {
         rec_matcher_free(m);
         return gs_fail(GS_ENOMEM, "Eq. 7 matcher: out of memory");
     }
     for (int j = 0; j < K; j++) m->wk[j] = cexp(I * EQ7_TWO_PI * (double)j / K);
+    for (int h = 1; h <= REC_SHAPE_H; h++)
+        for (int k = 0; k < K; k++) {
+            double a = 2.0 * M_PI * h * (double)k / (double)K;
+            m->harm[(size_t)(2 * (h - 1)) * (size_t)K + (size_t)k] = cos(a);
+            m->harm[(size_t)(2 * (h - 1) + 1) * (size_t)K + (size_t)k] = sin(a);
+        }
     for (size_t i = 0; i < nd; i++) {
         const gs_bulb *b = gs_delight_get(d, i);
         if (!(b->grid_hz == grid_hz && b->brf.bands == bands && b->ref != GS_REF_UNLOCKED)) continue;

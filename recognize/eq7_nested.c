@@ -11,10 +11,7 @@
 #include <math.h>
 #include <string.h>
 
-/* The deformation: harmonics 1..SHAPE_H of the flicker cycle per band (a smooth change of the
- * waveform; the template's own mean keeps the columns independent). */
-#define SHAPE_H 3
-#define MAX_COLS (GS_MAX_BANDS * (1 + 2 * SHAPE_H))
+#define MAX_COLS (GS_MAX_BANDS * (1 + 2 * REC_SHAPE_H))
 
 /* Cholesky of the n x n symmetric A (lower triangle used) in place; log det A, or NAN when A is
  * not positive definite. */
@@ -49,34 +46,73 @@ static void chol_solve(const double *L, int n, double *b)
     }
 }
 
+/* The samples [lo, hi) outside which column c is zero (the columns of one band: a third of D).
+ * Sums skip the zero terms: adding a zero product leaves a sum that starts at +0 unchanged, so
+ * they are the same numbers as over all D samples. */
+typedef struct {
+    size_t lo, hi;
+} span;
+
+static span span_of(const double *c, size_t D)
+{
+    span r = {0, D};
+    while (r.lo < D && c[r.lo] == 0.0) r.lo++;
+    while (r.hi > r.lo && c[r.hi - 1] == 0.0) r.hi--;
+    return r;
+}
+
+/* out[j] = sum over d of w_d a_d c_j,d for the n columns c_j = cols + j D (spans sc[j]), over
+ * a's span and four columns at a time (independent sums in one pass; each sum's terms in the
+ * order of d, those outside its column's span zero). */
+static void wdots(const double *w, const double *a, span sa, const double *cols, size_t D,
+                  const span *sc, int n, double *out)
+{
+    for (int j0 = 0; j0 < n; j0 += 4) {
+        int nj = n - j0 < 4 ? n - j0 : 4;
+        size_t lo = D, hi = 0;
+        for (int j = j0; j < j0 + nj; j++) {
+            if (sc[j].lo < lo) lo = sc[j].lo;
+            if (sc[j].hi > hi) hi = sc[j].hi;
+        }
+        if (sa.lo > lo) lo = sa.lo;
+        if (sa.hi < hi) hi = sa.hi;
+        const double *c0 = cols + (size_t)j0 * D, *c1 = c0 + (nj > 1 ? D : 0),
+                     *c2 = c0 + (nj > 2 ? 2 * D : 0), *c3 = c0 + (nj > 3 ? 3 * D : 0);
+        double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+        for (size_t d = lo; d < hi; d++) {
+            double u = w[d] * a[d];
+            s0 += u * c0[d];
+            s1 += u * c1[d];
+            s2 += u * c2[d];
+            s3 += u * c3[d];
+        }
+        double v[4] = {s0, s1, s2, s3};
+        for (int j = 0; j < nj; j++) out[j0 + j] = v[j];
+    }
+}
+
 /* The weighted least-squares fit of y (xs when NULL) on ncol columns (cols[c * D + d]): the
  * coefficients into coef, the residuals into res (may be NULL), chi2 from the residuals
  * themselves (Sxx - fit would cancel at high SNR); -1 when the normal equations are singular. */
 static double ls_fit(const rec_eq7_work *w, size_t D, const double *y, const double *cols, int ncol,
                      double *coef, double *res)
 {
-    double A[MAX_COLS * MAX_COLS] = {0};
+    double A[MAX_COLS * MAX_COLS] = {0}, own[REC_NESTED_MAX_D];
+    span sp[MAX_COLS] = {{0, 0}};
     if (!y) y = w->xs;
-    for (int i = 0; i < ncol; i++) {
-        const double *ci = cols + (size_t)i * D;
-        coef[i] = 0.0;
-        for (size_t d = 0; d < D; d++) coef[i] += w->w[d] * y[d] * ci[d];
-        for (int j = 0; j <= i; j++) {
-            const double *cj = cols + (size_t)j * D;
-            double s = 0.0;
-            for (size_t d = 0; d < D; d++) s += w->w[d] * ci[d] * cj[d];
-            A[i * ncol + j] = s;
-        }
-    }
+    if (!res) res = own;
+    span sy = span_of(y, D);
+    for (int i = 0; i < ncol; i++) sp[i] = span_of(cols + (size_t)i * D, D);
+    wdots(w->w, y, sy, cols, D, sp, ncol, coef);
+    for (int i = 0; i < ncol; i++) wdots(w->w, cols + (size_t)i * D, sp[i], cols, D, sp, i + 1, A + i * ncol);
     if (isnan(chol(A, ncol))) return -1.0;
     chol_solve(A, ncol, coef);
+    memcpy(res, y, sizeof *res * D);
+    for (int i = 0; i < ncol; i++)
+        for (size_t d = sp[i].lo; d < sp[i].hi; d++) res[d] -= coef[i] * cols[(size_t)i * D + d];
     double chi2 = 0.0;
-    for (size_t d = 0; d < D; d++) {
-        double r = y[d];
-        for (int i = 0; i < ncol; i++) r -= coef[i] * cols[(size_t)i * D + d];
-        if (res) res[d] = r;
-        if (w->w[d] > 0.0) chi2 += w->w[d] * r * r;
-    }
+    for (size_t d = 0; d < D; d++)
+        if (w->w[d] > 0.0) chi2 += w->w[d] * res[d] * res[d];
     return chi2;
 }
 
@@ -86,57 +122,58 @@ static double ls_chi2(const rec_eq7_work *w, size_t D, const double *cols, int n
     return ls_fit(w, D, NULL, cols, ncol, coef, NULL);
 }
 
-/* log of the Bayes factor of "a bulb not in DELIGHT near this template" against the template:
- * the nh deformation columns (after the nt template columns in cols) with coefficients
- * ~ N(0, (tau level_b)^2), level_b the fitted model's mean in the column's band,
- * marginalised exactly (linear Gaussian), with the brightness profiled: with P the columns made
- * W-orthogonal to the template's, G = P'WP, b = P'Wr (r the template fit's residual), S the prior
- * variances: log BF = b'(G + S^-1)^-1 b / 2 - log det(I + S G) / 2. phi deflates the data term
- * for a correlated excess. scratch: (nh + 1) * D doubles. */
-static double other_log_bf(const rec_eq7_work *w, size_t D, size_t K, double *cols, int nt, int nh,
-                           double tau, double phi, double *scratch)
+/* log of the Bayes factor of "a bulb not in DELIGHT near this template" against the template,
+ * for each of the ntau deformation sizes taus (into lb): the nh deformation columns (after the
+ * nt template columns in cols) with coefficients ~ N(0, (tau level_b)^2), level_b the fitted
+ * model's mean in the column's band, marginalised exactly (linear Gaussian), with the
+ * brightness profiled: with P the columns made W-orthogonal to the template's, G = P'WP,
+ * b = P'Wr (r the template fit's residual), S the prior variances: log BF = b'(G + S^-1)^-1 b / 2
+ * - log det(I + S G) / 2 (P, G and b do not depend on tau). phi deflates the data term for a
+ * correlated excess. scratch: (nh + 1) * D doubles. */
+static void other_log_bf(const rec_eq7_work *w, size_t D, size_t K, double *cols, int nt, int nh,
+                         const double *taus, int ntau, double phi, double *scratch, double *lb)
 {
     double coef[MAX_COLS], level[GS_MAX_BANDS] = {0}, *r = scratch, *P = scratch + D;
-    if (ls_fit(w, D, NULL, cols, nt, coef, r) < 0.0) return -INFINITY;
+    for (int t = 0; t < ntau; t++) lb[t] = -INFINITY;
+    if (ls_fit(w, D, NULL, cols, nt, coef, r) < 0.0) return;
     for (size_t d = 0; d < D; d++) {   /* the fitted model's mean per band */
         double v = 0.0;
         for (int i = 0; i < nt; i++) v += coef[i] * cols[(size_t)i * D + d];
         level[d / K] += v / (double)K;
     }
-    double G[MAX_COLS * MAX_COLS], b[MAX_COLS], lds = 0.0;
+    double G0[MAX_COLS * MAX_COLS], b[MAX_COLS];
+    span sp[MAX_COLS] = {{0, 0}}, sr = span_of(r, D);
+    size_t band[MAX_COLS];
     for (int h = 0; h < nh; h++) {
         const double *ph = cols + (size_t)(nt + h) * D;
         double c2[MAX_COLS];
-        if (ls_fit(w, D, ph, cols, nt, c2, P + (size_t)h * D) < 0.0) return -INFINITY;
+        if (ls_fit(w, D, ph, cols, nt, c2, P + (size_t)h * D) < 0.0) return;
+        sp[h] = span_of(P + (size_t)h * D, D);
+        span sh = span_of(ph, D);
+        band[h] = sh.lo < D ? sh.lo / K : 0;   /* the column's band: its first nonzero sample's */
     }
     for (int i = 0; i < nh; i++) {
-        const double *pi = P + (size_t)i * D;
-        size_t band = 0;
-        for (size_t d = 0; d < D; d++)
-            if (cols[(size_t)(nt + i) * D + d] != 0.0) {
-                band = d / K;
-                break;
-            }
-        double sd = tau * fabs(level[band]);
-        if (!(sd > 0.0)) return -INFINITY;
-        b[i] = 0.0;
-        for (size_t d = 0; d < D; d++) b[i] += w->w[d] * pi[d] * r[d];
-        for (int j = 0; j <= i; j++) {
-            const double *pj = P + (size_t)j * D;
-            double g = 0.0;
-            for (size_t d = 0; d < D; d++) g += w->w[d] * pi[d] * pj[d];
-            G[i * nh + j] = g;
-        }
-        G[i * nh + i] += 1.0 / (sd * sd);
-        lds += 2.0 * log(sd);
+        wdots(w->w, P + (size_t)i * D, sp[i], r, D, &sr, 1, b + i);   /* w p_i r, in that order */
+        wdots(w->w, P + (size_t)i * D, sp[i], P, D, sp, i + 1, G0 + i * nh);
     }
-    double ld = chol(G, nh);
-    if (isnan(ld)) return -INFINITY;
-    double y[MAX_COLS], q = 0.0;
-    memcpy(y, b, sizeof *y * (size_t)nh);
-    chol_solve(G, nh, y);
-    for (int i = 0; i < nh; i++) q += b[i] * y[i];
-    return 0.5 * q / phi - 0.5 * (ld + lds);
+    for (int t = 0; t < ntau; t++) {
+        double G[MAX_COLS * MAX_COLS], lds = 0.0;
+        int ok = 1;
+        memcpy(G, G0, sizeof *G * (size_t)(nh * nh));
+        for (int i = 0; i < nh && ok; i++) {
+            double sd = taus[t] * fabs(level[band[i]]);
+            ok = sd > 0.0;
+            G[i * nh + i] += 1.0 / (sd * sd);
+            lds += 2.0 * log(sd);
+        }
+        double ld = ok ? chol(G, nh) : NAN;
+        if (isnan(ld)) continue;
+        double y[MAX_COLS], q = 0.0;
+        memcpy(y, b, sizeof *y * (size_t)nh);
+        chol_solve(G, nh, y);
+        for (int i = 0; i < nh; i++) q += b[i] * y[i];
+        lb[t] = 0.5 * q / phi - 0.5 * (ld + lds);
+    }
 }
 
 /* The template columns of template t: one column (one brightness) or one per band. */
@@ -194,16 +231,13 @@ void rec_eq7_nested_tests(const rec_matcher *m, rec_eq7_work *w, const double *t
 
     /* a smooth deformation: + harmonics 1..H per band (H <= (K - 2) / 2: the columns stay fewer
      * than the frames) */
-    int H = SHAPE_H < ((int)K - 2) / 2 ? SHAPE_H : ((int)K - 2) / 2, nsh = nc;
+    int H = REC_SHAPE_H < ((int)K - 2) / 2 ? REC_SHAPE_H : ((int)K - 2) / 2, nsh = nc;
     for (int b = 0; b < B && H >= 1; b++)
         for (int h = 1; h <= H; h++)
             for (int q = 0; q < 2; q++) {
                 double *c = cols + (size_t)nsh * D;
                 memset(c, 0, sizeof *c * D);
-                for (size_t k = 0; k < K; k++) {
-                    double a = 2.0 * M_PI * h * (double)k / (double)K;
-                    c[(size_t)b * K + k] = q ? sin(a) : cos(a);
-                }
+                memcpy(c + (size_t)b * K, m->harm + (size_t)(2 * (h - 1) + q) * K, sizeof *c * K);
                 nsh++;
             }
     out->p_other = 0.0;
@@ -219,10 +253,9 @@ void rec_eq7_nested_tests(const rec_matcher *m, rec_eq7_work *w, const double *t
         static const double taus[] = REC_OTHER_TAUS;   /* a mixture over the deformation's size */
         const int nt = (int)(sizeof taus / sizeof *taus);
         double lb[8], lmax = -INFINITY, sum = 0.0;
-        for (int i = 0; i < nt; i++) {
-            lb[i] = other_log_bf(w, D, K, cols, nc, nsh - nc, taus[i], phi, w->scratch);
+        other_log_bf(w, D, K, cols, nc, nsh - nc, taus, nt, phi, w->scratch, lb);
+        for (int i = 0; i < nt; i++)
             if (lb[i] > lmax) lmax = lb[i];
-        }
         for (int i = 0; i < nt && isfinite(lmax); i++) sum += exp(lb[i] - lmax);
         double lbf = isfinite(lmax) ? lmax + log(sum / nt) : -INFINITY;
         out->lbf_other = lbf;
@@ -263,11 +296,16 @@ void rec_eq7_nested_tests(const rec_matcher *m, rec_eq7_work *w, const double *t
         const double *t1 = r == 0 ? tb : m->t + first[r] * D;
         double e1 = 0.0;
         for (int f = 0; f < nf; f++) S1v[r][f] = T11v[r][f] = 0.0;
-        for (size_t d = 0; d < D; d++) {
-            int f = nf == 1 ? 0 : (int)(d / K);
-            S1v[r][f] += w->wx[d] * t1[d];
-            T11v[r][f] += w->w[d] * t1[d] * t1[d];
-            U[d * REC_NESTED_FIRST + (size_t)r] = w->w[d] * t1[d];
+        size_t span_f = nf == 1 ? D : K;   /* the samples of one brightness parameter */
+        for (int f = 0; f < nf; f++) {
+            double S1 = 0.0, T11 = 0.0;
+            for (size_t d = (size_t)f * span_f; d < (size_t)(f + 1) * span_f; d++) {
+                S1 += w->wx[d] * t1[d];
+                T11 += w->w[d] * t1[d] * t1[d];
+                U[d * REC_NESTED_FIRST + (size_t)r] = w->w[d] * t1[d];
+            }
+            S1v[r][f] = S1;
+            T11v[r][f] = T11;
         }
         for (int f = 0; f < nf; f++) e1 += T11v[r][f] > 0.0 ? S1v[r][f] * S1v[r][f] / T11v[r][f] : 0.0;
         e1v[r] = e1;
@@ -298,13 +336,18 @@ void rec_eq7_nested_tests(const rec_matcher *m, rec_eq7_work *w, const double *t
                 if (!(T11[f] > 0.0)) continue;
                 double S2 = w->S[(size_t)f * M + j], T22 = w->T[(size_t)f * M + j];
                 double T12 = w->t12[((size_t)f * M + j) * REC_NESTED_FIRST + (size_t)r];
-                double r2 = S2 - T12 * S1[f] / T11[f], q = T22 - T12 * T12 / T11[f];
-                if (!(q > 1e-9 * T22)) {
+                /* a2 = r2 / q and a1 = (S1 - T12 a2) / T11 (q, T11 > 0) have their numerators'
+                 * signs: test those before dividing */
+                double r2 = S2 - T12 * S1[f] / T11[f];
+                if (r2 < 0.0) {
                     ok = 0;
                     break;
                 }
-                double a2 = r2 / q, a1 = (S1[f] - T12 * a2) / T11[f];
-                if (a1 < 0.0 || a2 < 0.0) ok = 0;
+                double q = T22 - T12 * T12 / T11[f];
+                if (!(q > 1e-9 * T22) || S1[f] - T12 * (r2 / q) < 0.0) {
+                    ok = 0;
+                    break;
+                }
                 gain += r2 * r2 / q;
             }
             double delta = (e1v[r] - e0) + gain;   /* chi2 of the best fit minus the pair's */

@@ -164,6 +164,9 @@ struct rec_matcher {
     void *c2r;                          /* fftw_plan: G-point complex-to-real, unaligned */
     int *nfine;                         /* [nb] BRF samples per cycle */
     double complex *wk;                 /* [K] e^{2 pi i j / K} */
+    double *harm;                       /* [2 REC_SHAPE_H K] the shape test's columns within a
+                                         * band: cos, sin of 2 pi h k / K, h = 1..REC_SHAPE_H
+                                         * ([(2 (h - 1) + q) K + k], q = 1 sin; eq7_nested.c) */
     double chi2_thr;                    /* pixels: chi2 at p = unknown_p, dof D - nfit - 1 */
     /* per-band brightness (band_gains) and model error */
     int bg;                             /* per-band sums and templates of mean 1 per band
@@ -359,6 +362,9 @@ typedef struct {
  * band of relative amplitude ~ N(0, tau^2), tau one of REC_OTHER_TAUS (equally likely), of prior
  * probability other_prior. */
 #define REC_OTHER_TAUS {0.01, 0.03, 0.1}
+/* The deformation: harmonics 1..REC_SHAPE_H of the flicker cycle per band (a smooth change of
+ * the waveform; the template's own mean keeps the columns independent). */
+#define REC_SHAPE_H 3
 void rec_eq7_nested_tests(const rec_matcher *m, rec_eq7_work *w, const double *tb, int best_bulb,
                           size_t best_tmpl, double best_shift, double phi, rec_eq7_nested *out);
 /* ============================================================================ end of Eq. 7 */

@@ -23,7 +23,7 @@
 #include <unistd.h>
 
 static const char bench_usage[] =
-    "usage: gridsurvey bench recognize [--quick] [--numpy SCRIPT]   Eq. 7 throughput tables (Markdown)\n"
+    "usage: gridsurvey bench recognize [--quick] [--lights] [--numpy SCRIPT]   Eq. 7 throughput tables (Markdown)\n"
     "       gridsurvey bench db [--quick] ...       survey database tables (bench db --help)\n"
     "       gridsurvey bench pg --pg CONNINFO ...   SQLite vs PostGIS: push and stats (bench pg --help)\n"
     "       gridsurvey bench render [SCENE]         simulator time per effect (bench render --help)\n"
@@ -32,7 +32,8 @@ static const char bench_usage[] =
     "\n"
     "bench recognize: rec_match_pixels (pixels/s) and rec_match_catalog (lights/s) against K,\n"
     "bands, DELIGHT size and pixel count, one core, next to a plain triple-loop reference of the\n"
-    "same search; --quick runs a small subset (seconds); --numpy SCRIPT also times the NumPy\n"
+    "same search; --quick runs a small subset (seconds); --lights only the per-light tables\n"
+    "(rec_match_catalog); --numpy SCRIPT also times the NumPy\n"
     "implementation of that search on the 1-megapixel rows (survey/bench_eq7_numpy.py).\n"
     "example: gridsurvey bench recognize --quick --numpy survey/bench_eq7_numpy.py\n";
 
@@ -658,7 +659,7 @@ static void light_row(const gs_delight *all, const config *c, int *failed)
     char ref[64] = "-", speed[32] = "-", agree[32] = "-";
     if (r.ref_rows) {
         snprintf(ref, sizeof ref, "%.0f", r.ref_rate);
-        snprintf(speed, sizeof speed, "%.1fx", r.rate / r.ref_rate);
+        snprintf(speed, sizeof speed, r.rate < r.ref_rate ? "%.2fx" : "%.1fx", r.rate / r.ref_rate);
         snprintf(agree, sizeof agree, "%.4f", r.agree);
     }
     printf("| %d | %d | %s%s | %zu | %zu | %.3f | **%.0f** | %s | %s | %s | %.3f | %.0f |\n", c->K,
@@ -697,15 +698,17 @@ static void pixel_header(int numpy)
 static int bench_recognize(int argc, char **argv)
 {
     static const struct option longs[] = {{"quick", no_argument, 0, 'q'},
+                                          {"lights", no_argument, 0, 'l'},
                                           {"numpy", required_argument, 0, 'n'},
                                           {"help", no_argument, 0, 'h'},
                                           {0, 0, 0, 0}};
-    int quick = 0, c;
+    int quick = 0, lights_only = 0, c;
     optind = 1;
     opterr = 0;
     numpy_script = NULL;
     while ((c = getopt_long(argc, argv, "h", longs, NULL)) != -1) {
         if (c == 'q') quick = 1;
+        else if (c == 'l') lights_only = 1;
         else if (c == 'n') numpy_script = optarg;
         else if (c == 'h') {
             fputs(bench_usage, stdout);
@@ -749,6 +752,7 @@ static int bench_recognize(int argc, char **argv)
            "implementation on this machine. *lit correct*: lit rows answered with their true "
            "bulb and phase.\n\n", SNR, REF_ROWS_MAX, REPS);
 
+    if (lights_only) goto lights;
     printf("## Per pixel: rec_match_pixels\n\n");
     pixel_header(0);
     size_t P0 = quick ? (size_t)1 << 14 : (size_t)1 << 18;
@@ -798,6 +802,7 @@ static int bench_recognize(int argc, char **argv)
         capture_row(all, &cf, &failed);
     }
 
+lights:
     printf("\n## Per light: rec_match_catalog\n\n");
     printf("Each light: a random template at a mean sample of 1000, per-sample noise std uniform in "
            "50..150 (so the weights differ by up to 9x within a light), %d lights per row; "

@@ -2,11 +2,12 @@
  * aperture are a BLEND with both components, never a confident third bulb; real measured
  * waveforms that are not in DELIGHT (shared/data/flicker) are their technology or unknown, never
  * confidently another technology; neither test fires on the database's own bulbs. */
-#include "recognize/recognize.h"
+#include "recognize/internal.h"
 #include "tests/eq7_fixture.h"
 #include "tests/fixtures.h"
 #include "tests/test.h"
 
+#include <lapacke.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -176,6 +177,109 @@ TEST(eq7_real_recordings_out_of_database)
      * "Limits"): guarded at 5 %, the measured 4 % */
     CHECK_MSG(conf_wrong * 20 <= answers, "%d of %d answers confidently of another family", conf_wrong, answers);
     CHECK(answers > 0 && unknown > total / 2);
+    rec_matcher_free(m);
+    gs_delight_free(d);
+}
+
+/* log N(r; 0, C) for the D x D covariance C (destroyed): by Cholesky, -1 when not positive. */
+static double log_normal(double *C, const double *r, int D)
+{
+    double z[78], ld = 0.0;
+    if (LAPACKE_dpotrf(LAPACK_ROW_MAJOR, 'L', D, C, D) != 0) return 1.0;
+    for (int i = 0; i < D; i++) {   /* z = L^-1 r */
+        double s = r[i];
+        for (int k = 0; k < i; k++) s -= C[i * D + k] * z[k];
+        z[i] = s / C[i * D + i];
+        ld += 2.0 * log(C[i * D + i]);
+    }
+    double q = 0.0;
+    for (int i = 0; i < D; i++) q += z[i] * z[i];
+    return -0.5 * q - 0.5 * ld - 0.5 * D * log(2.0 * M_PI);
+}
+
+TEST(eq7_other_bayes_factor_against_dense_marginal)
+{
+    /* The "not in DELIGHT" Bayes factor (eq7_nested.c: Woodbury form, one Gram matrix for every
+     * deformation size) against the dense marginal likelihood of the fit's residual r: with P
+     * the harmonics 1..3 per band made W-orthogonal to the answer's template t, S their prior
+     * variances (tau level_b)^2, BF_tau = N(r; 0, W^-1 + P S P') / N(r; 0, W^-1), averaged over
+     * REC_OTHER_TAUS; read back from p_other with a small prior. Lights of the database and
+     * deformed ones, the paper's one brightness (chroma gains), RGB K = 26. */
+    gs_delight *d = eq7fx_make_db(50, 3, 0, 0);
+    rec_eq7_opts o;
+    rec_eq7_opts_default(&o);
+    o.band_gains = REC_BANDS_CHROMA;
+    o.model_error = 0.0;
+    o.flat_share = 0.0;
+    o.other_prior = 1e-9;
+    rec_matcher *m = NULL;
+    CHECK_OK(rec_matcher_new(d, 50, 3, 26, &o, &m));
+    static const double taus[] = REC_OTHER_TAUS;
+    const int ntau = (int)(sizeof taus / sizeof *taus), K = 26, D = 78;
+    uint64_t rs = 5;
+    int tested = 0, positive = 0;
+    for (int i = 0; i < 24; i++) {
+        double x[78], sg[78], t[78], wt[78], r[78], P[18][78], C[78 * 78];
+        int b0 = i % 4;
+        eq7fx_template(rec_matcher_bulb(m, (size_t)b0), gs_phase_to_shift(eq7fx_p3[i % 3]), K, t);
+        double dev = (i / 4) % 3 == 0 ? 0.0 : 0.008 * ((i / 4) % 3);   /* a relative deformation */
+        for (int k = 0; k < D; k++) {
+            sg[k] = 10.0 * (0.5 + gs_splitmix_uniform(&rs));
+            x[k] = 1000.0 * t[k] * (1.0 + dev * cos(2.0 * M_PI * 2.0 * (k % K) / K + k / K)) +
+                   sg[k] * gs_splitmix_normal(&rs);
+        }
+        rec_match out;
+        CHECK_OK(rec_match_light(m, x, sg, &out));
+        int b = out.bulb >= 0 ? out.bulb : out.runner_bulb;
+        double ph = out.bulb >= 0 ? out.phase_deg : out.runner_phase_deg;
+        if (b < 0 || !(out.p_other > 0.0) || !(out.p_other < 0.5)) continue;
+        double lbf = log(out.p_other) - log1p(-out.p_other) - log(o.other_prior / (1.0 - o.other_prior));
+        /* the oracle, in the light's own units */
+        eq7fx_template(rec_matcher_bulb(m, (size_t)b), gs_phase_to_shift(ph), K, t);
+        double Stt = 0.0, Sty = 0.0, level[3] = {0, 0, 0};
+        for (int k = 0; k < D; k++) {
+            wt[k] = 1.0 / (sg[k] * sg[k]);
+            Stt += wt[k] * t[k] * t[k];
+            Sty += wt[k] * t[k] * x[k];
+        }
+        for (int k = 0; k < D; k++) {
+            r[k] = x[k] - Sty / Stt * t[k];
+            level[k / K] += Sty / Stt * t[k] / K;
+        }
+        for (int c = 0; c < 18; c++) {
+            int band = c / 6, h = (c % 6) / 2 + 1, q = c % 2;
+            double Sht = 0.0;
+            for (int k = 0; k < D; k++) {
+                double a = 2.0 * M_PI * h * (double)(k % K) / (double)K;
+                P[c][k] = k / K == band ? (q ? sin(a) : cos(a)) : 0.0;
+                Sht += wt[k] * P[c][k] * t[k];
+            }
+            for (int k = 0; k < D; k++) P[c][k] -= Sht / Stt * t[k];
+        }
+        double l0 = 0.0, lmax = -INFINITY, lt[8];
+        for (int k = 0; k < D; k++) l0 += -0.5 * r[k] * r[k] * wt[k] + 0.5 * log(wt[k]) - 0.5 * log(2.0 * M_PI);
+        for (int j = 0; j < ntau; j++) {
+            for (int k = 0; k < D; k++)
+                for (int l = 0; l < D; l++) {
+                    double s = k == l ? 1.0 / wt[k] : 0.0;
+                    for (int c = 0; c < 18; c++) {
+                        double sd = taus[j] * level[c / 6];
+                        s += sd * sd * P[c][k] * P[c][l];
+                    }
+                    C[k * D + l] = s;
+                }
+            lt[j] = log_normal(C, r, D) - l0;
+            if (lt[j] > lmax) lmax = lt[j];
+        }
+        double sum = 0.0;
+        for (int j = 0; j < ntau; j++) sum += exp(lt[j] - lmax);
+        double want = lmax + log(sum / ntau);
+        CHECK(fabs(lbf - want) < 1e-6 * (1.0 + fabs(want)));
+        tested++;
+        positive += want > 0.0;
+    }
+    CHECK(tested >= 16);   /* most lights are tested (p_other readable) */
+    CHECK(positive >= 3);  /* and the deformed ones include evidence for "not in DELIGHT" */
     rec_matcher_free(m);
     gs_delight_free(d);
 }
