@@ -105,7 +105,7 @@ check: deps
 demo: deps
 	$(MAKE) --no-print-directory $(BIN)
 	rm -rf $(BUILD)/demo && mkdir -p $(BUILD)/demo
-	$(BIN) run capture/scenes/metro.json --phases 6 --db $(BUILD)/demo/survey.sqlite --out $(BUILD)/demo
+	$(BIN) run capture/scenes/metro.json --phases 6 --db $(BUILD)/demo/survey.sqlite --out-dir $(BUILD)/demo
 # Light transport (paper Sec. 5, docs/light-transport.md) on the built-in lab and window scenes:
 # unmix (a sources file, then auto), the HDR denoised sequences, relighting as in Fig. 4 and with
 # a source switched off (compared with a capture rendered without it), semi-reflection separation.
@@ -113,14 +113,14 @@ DT := $(BUILD)/demo-transport
 demo-transport: deps
 	$(MAKE) --no-print-directory $(BIN)
 	rm -rf $(DT) && mkdir -p $(DT)
-	$(BIN) simulate capture/scenes/lab_transport.json -o $(DT)/lab --no-progress
-	$(BIN) simulate capture/scenes/lab_transport.json -o $(DT)/lab-without-mh70 --drop-light mh70 --no-progress
-	$(BIN) unmix $(DT)/lab --sources capture/scenes/lab_transport_sources.json -o $(DT)/unmixed --render
-	$(BIN) unmix $(DT)/lab --sources auto -o $(DT)/unmixed-auto
-	$(BIN) relight $(DT)/unmixed --set 2=gain:3.5 --set 0=bulb:hps-70w -o $(DT)/relit-fig4
-	$(BIN) relight $(DT)/unmixed --set 4=gain:0 -o $(DT)/relit-mh70-off --compare $(DT)/lab-without-mh70
-	$(BIN) simulate capture/scenes/window.json -o $(DT)/window --no-progress
-	$(BIN) separate $(DT)/window -o $(DT)/separated
+	$(BIN) simulate capture/scenes/lab_transport.json --out-dir $(DT)/lab --no-progress
+	$(BIN) simulate capture/scenes/lab_transport.json --out-dir $(DT)/lab-without-mh70 --drop-light mh70 --no-progress
+	$(BIN) unmix $(DT)/lab --sources capture/scenes/lab_transport_sources.json --out-dir $(DT)/unmixed --render
+	$(BIN) unmix $(DT)/lab --sources auto --out-dir $(DT)/unmixed-auto
+	$(BIN) relight $(DT)/unmixed --set 2=gain:3.5 --set 0=bulb:hps-70w --out-dir $(DT)/relit-fig4
+	$(BIN) relight $(DT)/unmixed --set 4=gain:0 --out-dir $(DT)/relit-mh70-off --compare $(DT)/lab-without-mh70
+	$(BIN) simulate capture/scenes/window.json --out-dir $(DT)/window --no-progress
+	$(BIN) separate $(DT)/window --out-dir $(DT)/separated
 	@echo "pictures: $(DT)/unmixed/mean.png, source_NN.png, $(DT)/relit-*/preview.png, $(DT)/separated/*.png"
 # Performance tables, printed and kept in docs/: Eq. 7 throughput on one core
 # (survey/bench.c), the survey database's ingest and query times (survey/bench_db.c), and
@@ -136,7 +136,7 @@ bench: $(BIN)
 	mv docs/bench-pg.md.tmp docs/bench-pg.md
 	$(BIN) bench render > docs/bench-render.md.tmp
 	mv docs/bench-render.md.tmp docs/bench-render.md
-	$(BIN) bench accuracy --out docs/accuracy
+	$(BIN) bench accuracy --out-dir docs/accuracy
 	$(BIN) bench transport > docs/bench-transport.md.tmp
 	mv docs/bench-transport.md.tmp docs/bench-transport.md
 	@cat docs/bench-recognize.md docs/bench-db.md docs/bench-pg.md docs/bench-render.md docs/bench-transport.md

@@ -35,12 +35,12 @@ flags() {
 }
 
 # the subcommands of a command whose usage says SUBCOMMAND (the two-space-indented words of its
-# list) or that lists `gridsurvey CMD NAME` lines (bench)
+# list, before its examples) or that lists `gridsurvey CMD NAME` lines (bench, the examples)
 subcommands() {
     cmd=$1
     {
         if head -1 "$help/$cmd" | grep -q SUBCOMMAND; then
-            awk '/^  [a-z][a-z-]* / { print $1 }' "$help/$cmd"
+            awk '/^Examples?/ { exit } /^  [a-z][a-z-]* / { print $1 }' "$help/$cmd"
         fi
         grep -oE "^(usage:)? *gridsurvey $cmd [a-z][a-z-]*( |\$)" "$help/$cmd" |
             awk '{ print $NF }'

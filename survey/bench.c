@@ -35,7 +35,14 @@ static const char bench_usage[] =
     "same search; --quick runs a small subset (seconds); --lights only the per-light tables\n"
     "(rec_match_catalog); --numpy SCRIPT also times the NumPy\n"
     "implementation of that search on the 1-megapixel rows (survey/bench_eq7_numpy.py).\n"
-    "example: gridsurvey bench recognize --quick --numpy survey/bench_eq7_numpy.py\n";
+    "\n"
+    "Examples:\n"
+    "  gridsurvey bench recognize --quick --numpy survey/bench_eq7_numpy.py\n"
+    "  gridsurvey bench db --quick\n"
+    "  gridsurvey bench render capture/scenes/lab.json --frames 1\n"
+    "  gridsurvey bench accuracy --quick --out-dir build/accuracy-quick\n"
+    "  gridsurvey bench transport --quick\n"
+    "  gridsurvey bench pg --pg \"host=127.0.0.1 port=5432 dbname=bench\" --max 100000\n";
 
 /* ------------------------------------------------------------------ helpers */
 

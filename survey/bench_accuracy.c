@@ -1,4 +1,4 @@
-/* bench_accuracy.c - `gridsurvey bench accuracy [--quick] [--out DIR]`: what accuracy costs in
+/* bench_accuracy.c - `gridsurvey bench accuracy [--quick] [--out-dir DIR]`: what accuracy costs in
  * time (docs/accuracy.md). Sweeps the ACam acquisition (cycles per frame C, windows
  * K, HDR, locked / free running, Eq. 7 phase set) on a window of the built-in metropolitan
  * scene and on a hard variant of it, and for each point runs the survey pipeline as `gridsurvey
@@ -16,7 +16,7 @@
  *                  capture and scored by srv_evaluate, next to the pipeline's answers for the
  *                  same lights.
  * Writes DIR/accuracy.csv, DIR/accuracy_vs_time.png, DIR/calibration.png and the Markdown
- * report DIR.md (docs/accuracy.md for --out docs/accuracy). Deterministic for the scene's seed
+ * report DIR.md (docs/accuracy.md for --out-dir docs/accuracy). Deterministic for the scene's seed
  * except the compute times. */
 #define _XOPEN_SOURCE 700   /* nftw */
 #include "survey/internal.h"
@@ -351,18 +351,22 @@ done:
 /* ------------------------------------------------------------------ main */
 
 static const char acc_usage[] =
-    "usage: gridsurvey bench accuracy [--quick] [--out DIR] [--scene FILE] [--keep]\n"
+    "usage: gridsurvey bench accuracy [--quick] [--out-dir DIR] [--scene FILE] [--keep]\n"
     "\n"
     "Sweeps the ACam acquisition (cycles per frame C, windows K, HDR, locked / free running, Eq. 7\n"
     "phase set) on a window of the metro scene and a hard variant, runs the survey pipeline on each\n"
     "point and scores it against the simulator's truth, next to the maximum-likelihood oracle.\n"
     "Writes DIR/accuracy.csv, DIR/accuracy_vs_time.png, DIR/calibration.png and DIR.md\n"
     "(default DIR: build/accuracy). --quick: a few points on a small window (seconds).\n"
-    "--scene: the base scene (capture/scenes/metro.json). --keep: keep the work directory.\n";
+    "--scene: the base scene (capture/scenes/metro.json). --keep: keep the work directory.\n"
+    "\n"
+    "Examples:\n"
+    "  gridsurvey bench accuracy --quick --out-dir build/accuracy-quick\n"
+    "  gridsurvey bench accuracy --out-dir docs/accuracy   # docs/accuracy.md (make bench)\n";
 
 int srv_bench_accuracy(int argc, char **argv)
 {
-    static const struct option longs[] = {{"quick", no_argument, 0, 'q'}, {"out", required_argument, 0, 'o'},
+    static const struct option longs[] = {{"quick", no_argument, 0, 'q'}, {"out-dir", required_argument, 0, 'O'},
                                           {"scene", required_argument, 0, 's'}, {"keep", no_argument, 0, 'k'},
                                           {"help", no_argument, 0, 'h'}, {0, 0, 0, 0}};
     int quick = 0, keep = 0, c;
@@ -371,7 +375,8 @@ int srv_bench_accuracy(int argc, char **argv)
     opterr = 0;
     while ((c = getopt_long(argc, argv, "ho:", longs, NULL)) != -1) {
         if (c == 'q') quick = 1;
-        else if (c == 'o') out = optarg;
+        else if (c == 'O') out = optarg;
+        else if (c == 'o') return srv_out_dir_hint("bench accuracy");
         else if (c == 's') base = optarg;
         else if (c == 'k') keep = 1;
         else if (c == 'h') {

@@ -238,7 +238,10 @@ static const char bench_usage[] =
     "  --quick    1e4 lights only (a smoke test)\n"
     "  --max N    largest size (default 1000000; sizes are powers of ten from 1e4)\n"
     "  --dir DIR  where to write bench.sqlite (default: a new temporary directory, removed)\n"
-    "  --keep     keep the database\n";
+    "  --keep     keep the database\n"
+    "\n"
+    "Example:\n"
+    "  gridsurvey bench db --quick\n";
 
 double srv_bench_now_s(void)
 {

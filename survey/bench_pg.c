@@ -22,7 +22,7 @@ static const char bench_pg_usage[] =
     "site_balance_cells(250) (PostGIS). Prints a Markdown table. make bench runs it on a\n"
     "throw-away cluster (tests/pg_cluster.sh, fsync on).\n"
     "\n"
-    "example:\n"
+    "Example:\n"
     "  gridsurvey bench pg --pg \"host=127.0.0.1 port=5432 dbname=bench\" --max 100000\n";
 
 /* Read every row of sql on the PostGIS database. */

@@ -65,7 +65,10 @@ static const char render_usage[] =
     "\n"
     "Renders N acquisitions (default 3) of SCENE (default capture/scenes/metro.json) with no\n"
     "effect, with each effect the scene lists alone, and with all of them, on one thread and on\n"
-    "the online CPUs, and prints the wall and CPU time per frame as a Markdown table.\n";
+    "the online CPUs, and prints the wall and CPU time per frame as a Markdown table.\n"
+    "\n"
+    "Example:\n"
+    "  gridsurvey bench render capture/scenes/lab.json --frames 1\n";
 
 int srv_bench_render(int argc, char **argv)
 {

@@ -81,12 +81,23 @@ static gs_status synth(const rec_sources *src, int W, int H, gs_capture *cap, fl
     return GS_OK;
 }
 
+static const char transport_usage[] =
+    "usage: gridsurvey bench transport [--quick]\n"
+    "\n"
+    "Times rec_unmix (Eqs. 16-18) on synthetic RGB captures of five sources, 256 x 256 to\n"
+    "1024 x 1024 pixels (--quick: 256 x 256 only), and prints a Markdown table\n"
+    "(docs/bench-transport.md).\n"
+    "\n"
+    "Example:\n"
+    "  gridsurvey bench transport --quick\n";
+
 int srv_bench_transport(int argc, char **argv)
 {
     int quick = argc > 1 && !strcmp(argv[1], "--quick");
     if (argc > 1 && !quick) {
-        fprintf(stderr, "usage: gridsurvey bench transport [--quick]\n");
-        return !strcmp(argv[1], "--help") ? 0 : 2;
+        int help = !strcmp(argv[1], "--help");
+        fputs(transport_usage, help ? stdout : stderr);
+        return help ? 0 : 2;
     }
     gs_delight *d = NULL;
     gs_status st = srv_tr_delight(NULL, &d);

@@ -136,6 +136,13 @@ int srv_usage_hint(const char *cmd)
     return 2;
 }
 
+int srv_out_dir_hint(const char *cmd)
+{
+    fprintf(stderr, "gridsurvey %s: -o names an output file; this command writes a directory: "
+                    "--out-dir DIR (see gridsurvey help %s)\n", cmd, cmd);
+    return 2;
+}
+
 int srv_error(gs_status s)
 {
     fprintf(stderr, "gridsurvey: %s: %s\n", gs_strerror(s), gs_detail());

@@ -11,7 +11,7 @@
 #include <string.h>
 
 static const char capture_usage[] =
-    "usage: gridsurvey capture --backend sim|replay|hardware -o CAPDIR [OPTIONS]\n"
+    "usage: gridsurvey capture --backend sim|replay|hardware --out-dir CAPDIR [OPTIONS]\n"
     "\n"
     "  sim:       --scene SCENE.json [--seed N]          render a scene (also writes truth.json)\n"
     "  replay:    --from CAPDIR                           serve an existing capture's frames\n"
@@ -28,7 +28,13 @@ static const char capture_usage[] =
     "\n"
     "Frames go to CAPDIR as they are acquired; running the same command again resumes an\n"
     "interrupted capture (acquisition.json) and re-acquires only missing or damaged frames.\n"
-    "The hardware backend needs a DMD mask loader for HDR (not available from this command).\n";
+    "The hardware backend needs a DMD mask loader for HDR (not available from this command).\n"
+    "\n"
+    "Examples:\n"
+    "  gridsurvey capture --backend sim --scene capture/scenes/lab.json --out-dir build/lab\n"
+    "  gridsurvey capture --backend replay --from build/lab --out-dir build/lab-copy\n"
+    "  gridsurvey capture --backend hardware --camera 0 --serial /dev/ttyACM0 --width 1920 \\\n"
+    "                     --height 1080 --bands 3 --grid 50 --out-dir night-01\n";
 
 static int num_arg(const char *opt, const char *arg, double lo, double hi, double *out)
 {
@@ -45,7 +51,7 @@ static int num_arg(const char *opt, const char *arg, double lo, double hi, doubl
 int srv_cmd_capture(int argc, char **argv)
 {
     static const struct option longs[] = {
-        {"backend", required_argument, 0, 'b'}, {"output", required_argument, 0, 'o'},
+        {"backend", required_argument, 0, 'b'}, {"out-dir", required_argument, 0, 'O'},
         {"scene", required_argument, 0, 's'},   {"seed", required_argument, 0, 'S'},
         {"from", required_argument, 0, 'F'},    {"camera", required_argument, 0, 'c'},
         {"camera-images", no_argument, 0, 'I'}, {"serial", required_argument, 0, 'T'},
@@ -74,7 +80,8 @@ int srv_cmd_capture(int argc, char **argv)
     while ((c = getopt_long(argc, argv, "o:hq", longs, NULL)) != -1) {
         switch (c) {
         case 'b': backend = optarg; break;
-        case 'o': out = optarg; break;
+        case 'O': out = optarg; break;
+        case 'o': return srv_out_dir_hint("capture");
         case 's': scene = optarg; break;
         case 'F': from = optarg; break;
         case 'c': hw.camera = optarg; break;
@@ -111,7 +118,7 @@ int srv_cmd_capture(int argc, char **argv)
         }
     }
     if (optind < argc || !backend || !out) {
-        fprintf(stderr, "gridsurvey capture: --backend and -o are required%s%s\n%s",
+        fprintf(stderr, "gridsurvey capture: --backend and --out-dir are required%s%s\n%s",
                 optind < argc ? "; unexpected argument " : "", optind < argc ? argv[optind] : "",
                 capture_usage);
         return 2;

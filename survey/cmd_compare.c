@@ -11,7 +11,7 @@
 static const char compare_usage[] =
     "usage: gridsurvey compare --db DB --survey A --survey B [--min-p P] [--format table|csv]\n"
     "       gridsurvey compare --db DB --survey A --survey B --by G [--clip AREAS.geojson]\n"
-    "                          [--bbox MINLON,MINLAT,MAXLON,MAXLAT] [--min-confidence X]\n"
+    "                          [--bbox MINLON,MINLAT,MAXLON,MAXLAT] [--min-phase-confidence X]\n"
     "                          [--format table|csv]\n"
     "\n"
     "The light sites (physical lights) whose grid phase or bulb changed from survey A to survey\n"
@@ -28,14 +28,14 @@ static const char compare_usage[] =
     "                     --by feature:feeder\n"
     "\n"
     "  --db DB          the survey database (read-only)\n"
-    "  --survey NAME    survey A, then survey B (twice)\n"
+    "  --survey NAME    survey A, then survey B (given twice: the two surveys read)\n"
     "  --min-p P        report a phase or bulb change when the probability that the answers\n"
     "                   differ is at least P, in [0, 1] (default 0.9)\n"
     "  --by G           per-group share changes; G as in gridsurvey stats (technology,\n"
     "                   cell:SIZE_m, feature:FIELD, combinations; survey is not allowed)\n"
     "  --clip FILE      with --by: only sites inside these areas (GeoJSON polygons)\n"
     "  --bbox B         with --by: only sites in MINLON,MINLAT,MAXLON,MAXLAT\n"
-    "  --min-confidence X  with --by: leave out sites whose phase confidence is below X\n"
+    "  --min-phase-confidence X  with --by: leave out sites whose phase confidence is below X\n"
     "  --format F       table (Markdown, default) or csv\n"
     "  --help           this text\n"
     "\n"
@@ -93,7 +93,7 @@ static int compare_shares(const char *path, const char *const sv[2], srv_stats_o
                           const char *clip, int csv)
 {
     if (!by) {
-        fprintf(stderr, "gridsurvey compare: --clip, --bbox and --min-confidence need --by\n");
+        fprintf(stderr, "gridsurvey compare: --clip, --bbox and --min-phase-confidence need --by\n");
         return 2;
     }
     int by_feature = so->by == SRV_BY_FEATURE, by_survey = so->by == SRV_BY_SURVEY;
@@ -164,7 +164,7 @@ int srv_cmd_compare(int argc, char **argv)
         {"min-p", required_argument, 0, 'p'},  {"format", required_argument, 0, 'f'},
         {"help", no_argument, 0, 'h'},         {"by", required_argument, 0, 'b'},
         {"clip", required_argument, 0, 'C'},   {"bbox", required_argument, 0, 'B'},
-        {"min-confidence", required_argument, 0, 'c'}, {0, 0, 0, 0},
+        {"min-phase-confidence", required_argument, 0, 'c'}, {0, 0, 0, 0},
     };
     const char *path = NULL, *sv[2] = {NULL, NULL}, *clip = NULL;
     srv_stats_opts so;
@@ -215,9 +215,9 @@ int srv_cmd_compare(int argc, char **argv)
             }
             break;
         case 'c':
-            so.min_confidence = strtod(optarg, &end);
-            if (!*optarg || *end || !(so.min_confidence >= 0.0 && so.min_confidence <= 1.0)) {
-                fprintf(stderr, "gridsurvey compare: --min-confidence '%s': expected a number in [0, 1]\n", optarg);
+            so.min_phase_confidence = strtod(optarg, &end);
+            if (!*optarg || *end || !(so.min_phase_confidence >= 0.0 && so.min_phase_confidence <= 1.0)) {
+                fprintf(stderr, "gridsurvey compare: --min-phase-confidence '%s': expected a number in [0, 1]\n", optarg);
                 return 2;
             }
             break;
@@ -229,7 +229,7 @@ int srv_cmd_compare(int argc, char **argv)
         fprintf(stderr, "gridsurvey compare: expected --db DB --survey A --survey B\n%s", compare_usage);
         return 2;
     }
-    if (by || clip || !isnan(so.bbox[0]) || so.min_confidence > 0.0) return compare_shares(path, sv, &so, by, clip, csv);
+    if (by || clip || !isnan(so.bbox[0]) || so.min_phase_confidence > 0.0) return compare_shares(path, sv, &so, by, clip, csv);
     srv_db *db;
     gs_status s = srv_db_open(path, SRV_DB_READ, &db);
     if (s != GS_OK) return srv_error(s);

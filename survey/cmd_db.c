@@ -22,7 +22,13 @@ static const char db_usage[] =
     "                         developer tool: a deterministic synthetic survey (N captures of\n"
     "                         N lights, B captures per transaction); a re-run resumes\n"
     "\n"
-    "The schema, migrations and crash safety are described in docs/survey-db.md.\n";
+    "The schema, migrations and crash safety are described in docs/survey-db.md.\n"
+    "\n"
+    "Examples:\n"
+    "  gridsurvey db init --db city.sqlite\n"
+    "  gridsurvey db migrate --db city.sqlite\n"
+    "  gridsurvey db check --db city.sqlite\n"
+    "  gridsurvey db ingest-synthetic --db synthetic.sqlite --captures 10 --lights 1000\n";
 
 static int parse_size(const char *opt, const char *text, size_t lo, size_t hi, size_t *v)
 {

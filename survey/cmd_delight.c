@@ -25,7 +25,17 @@ static const char delight_usage[] =
     "Common options:\n"
     "  --delight DB   the DELIGHT SQLite file (default: $GRIDSURVEY_DELIGHT, else the built-in\n"
     "                 database generated in memory from the lamp models)\n"
-    "  --help         this text\n";
+    "  --help         this text\n"
+    "\n"
+    "Examples:\n"
+    "  gridsurvey delight list --grid 50\n"
+    "  gridsurvey delight show hps-70w --grid 50\n"
+    "  gridsurvey delight export -o delight.csv\n"
+    "  gridsurvey delight import delight.csv --delight my-delight.sqlite\n"
+    "  gridsurvey delight add --from-recording lamp.csv --id my-lamp --type led_linear --watts 9 \\\n"
+    "                         --grid 50 --delight my-delight.sqlite\n"
+    "  gridsurvey delight plot --ids inc-a19-60w-120v,hps-150w --grid 60 -o brfs.png\n"
+    "  gridsurvey delight generate -o delight.sqlite\n";
 
 typedef struct {
     const char *db, *out, *ids, *recording, *id, *name, *type, *sensor;
@@ -37,7 +47,7 @@ typedef struct {
 static int parse_opts(int argc, char **argv, delight_opts *o)
 {
     static const struct option longs[] = {
-        {"delight", required_argument, 0, 'd'}, {"output", required_argument, 0, 'o'},
+        {"delight", required_argument, 0, 'd'},
         {"ids", required_argument, 0, 'i'},     {"from-recording", required_argument, 0, 'r'},
         {"id", required_argument, 0, 'I'},      {"name", required_argument, 0, 'N'},
         {"type", required_argument, 0, 't'},    {"grid", required_argument, 0, 'g'},

@@ -27,6 +27,10 @@ static const char evaluate_usage[] =
     "  --help           this text\n"
     "\n"
     "The capture is the one whose directory holds the truth file (or the only one).\n"
+    "\n"
+    "Example (a database of `gridsurvey run build/lab --db build/lab.sqlite`):\n"
+    "  gridsurvey evaluate --db build/lab.sqlite --truth build/lab/truth.json --format json\n"
+    "\n"
     "Exit status: 0 done, 1 failure (one line on stderr), 2 usage error.\n";
 
 int srv_cmd_evaluate(int argc, char **argv)

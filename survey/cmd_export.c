@@ -33,7 +33,12 @@ static const char export_usage[] =
     "  --min-confidence X  only lights whose confidence (posterior of bulb and phase) is >= X\n"
     "  --precision D       GeoJSON: longitudes and latitudes to D decimals, 0 to 15 (default 7,\n"
     "                      1.1 cm; heights to the millimetre)\n"
-    "  --help              this text\n";
+    "  --help              this text\n"
+    "\n"
+    "Examples:\n"
+    "  gridsurvey export --db city.sqlite -o lights.geojson\n"
+    "  gridsurvey export --db city.sqlite -o phase120.gpkg --phase 120 --min-confidence 0.9 \\\n"
+    "                    --bbox 34.98,32.78,35.05,32.82\n";
 
 void srv_export_opts_default(srv_export_opts *o)
 {
@@ -176,7 +181,7 @@ static int parse_bbox(const char *text, double b[4])
 int srv_cmd_export(int argc, char **argv)
 {
     static const struct option longs[] = {
-        {"db", required_argument, 0, 'd'},         {"output", required_argument, 0, 'o'},
+        {"db", required_argument, 0, 'd'},
         {"format", required_argument, 0, 'f'},     {"survey", required_argument, 0, 'S'},
         {"technology", required_argument, 0, 't'}, {"phase", required_argument, 0, 'p'},
         {"bbox", required_argument, 0, 'b'},       {"min-confidence", required_argument, 0, 'c'},

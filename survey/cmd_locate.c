@@ -13,8 +13,9 @@
 
 static const char locate_usage[] =
     "usage: gridsurvey locate --station STATION.json --pixels PIXELS.csv -o FILE\n"
-    "                         [--height-m H] [--format geojson|kml|gpkg|csv] [--map MAP.png]\n"
-    "                         [--survey NAME] [--refraction] [--max-error-ratio R]\n"
+    "                         [--light-height-m H] [--format geojson|kml|gpkg|csv]\n"
+    "                         [--map MAP.png] [--survey NAME] [--refraction]\n"
+    "                         [--max-error-ratio R]\n"
     "\n"
     "Locates each light seen by one camera station: its sight line is intersected with the\n"
     "surface H metres above the WGS84 ellipsoid (Earth curvature exact), with a 1-sigma error\n"
@@ -27,17 +28,21 @@ static const char locate_usage[] =
     "                   sigma_roll_deg, refraction_k, id, time_utc]  (docs/gis.md)\n"
     "  --pixels FILE    CSV with header id,x_px,y_px[,sigma_px]; image x right, y down, pixel\n"
     "                   centres at integers; sigma_px defaults to the station's (else 1)\n"
-    "  --height-m H     the lights' height above the ellipsoid, metres (default 0; note that\n"
-    "                   ellipsoidal heights differ from heights above sea level by the geoid\n"
-    "                   undulation, up to +-100 m)\n"
+    "  --light-height-m H  the lights' height above the WGS84 ellipsoid, metres (default 0;\n"
+    "                   note that ellipsoidal heights differ from heights above sea level by\n"
+    "                   the geoid undulation, up to +-100 m)\n"
     "  --format F       geojson, kml, gpkg or csv (default: from the -o extension)\n"
     "  -o FILE          output file (replaced atomically)\n"
     "  --map FILE.png   also draw a map of the located lights\n"
-    "  --survey NAME    survey name stored with every light\n"
+    "  --survey NAME    the survey the lights belong to (stored with every light)\n"
     "  --refraction     standard atmospheric refraction (k = 0.13) unless the station sets\n"
     "                   refraction_k\n"
     "  --max-error-ratio R  flag a light whose error ellipse exceeds R x range (0.25)\n"
-    "  --help           this text\n";
+    "  --help           this text\n"
+    "\n"
+    "Example:\n"
+    "  gridsurvey locate --station station.json --pixels pixels.csv --light-height-m 30 \\\n"
+    "                    -o lights.geojson --map lights.png\n";
 
 typedef struct {
     char id[GIS_TEXT_MAX];
@@ -130,9 +135,9 @@ int srv_cmd_locate(int argc, char **argv)
 {
     static const struct option longs[] = {
         {"station", required_argument, 0, 's'}, {"pixels", required_argument, 0, 'p'},
-        {"height-m", required_argument, 0, 'H'}, {"format", required_argument, 0, 'f'},
-        {"output", required_argument, 0, 'o'},  {"map", required_argument, 0, 'm'},
-        {"survey", required_argument, 0, 'S'},  {"refraction", no_argument, 0, 'r'},
+        {"light-height-m", required_argument, 0, 'H'}, {"format", required_argument, 0, 'f'},
+        {"map", required_argument, 0, 'm'},     {"survey", required_argument, 0, 'S'},
+        {"refraction", no_argument, 0, 'r'},
         {"max-error-ratio", required_argument, 0, 'R'}, {"help", no_argument, 0, 'h'},
         {0, 0, 0, 0},
     };
@@ -157,7 +162,7 @@ int srv_cmd_locate(int argc, char **argv)
         case 'H':
             height_m = strtod(optarg, &end);
             if (!*optarg || *end || !isfinite(height_m) || height_m < GIS_MIN_HEIGHT_M || height_m > GIS_MAX_HEIGHT_M) {
-                fprintf(stderr, "gridsurvey locate: --height-m '%s': expected metres in [%g, %g]\n",
+                fprintf(stderr, "gridsurvey locate: --light-height-m '%s': expected metres in [%g, %g]\n",
                         optarg, GIS_MIN_HEIGHT_M, GIS_MAX_HEIGHT_M);
                 return 2;
             }

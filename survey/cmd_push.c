@@ -29,7 +29,7 @@ static const char push_usage[] =
     "  -q, --no-progress  no progress\n"
     "  --help          this text\n"
     "\n"
-    "example:\n"
+    "Example:\n"
     "  gridsurvey push --db haifa.sqlite --pg \"host=127.0.0.1 dbname=grid\" \\\n"
     "      --areas feeders.geojson --field feeder\n";
 

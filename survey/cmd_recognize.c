@@ -25,13 +25,13 @@ static const char recognize_usage[] =
     "(docs/formats.md, gridsurvey-capture/1): lights as blobs with per-frame photometry, then\n"
     "the paper's Eq. 7 against DELIGHT. Prints a table, or JSON (docs/recognize-cli.md).\n"
     "\n"
-    "  --json                  print a gridsurvey-lights/1 JSON document instead of the table\n"
+    "  --format F              table (default) or json (a gridsurvey-lights/1 document)\n"
     "  --phases 3|6|continuous candidate grid phases: 3 = 0/120/240 deg (default); 6 = those\n"
     "                          and the same + --transformer-deg (delta-wye transformers);\n"
     "                          continuous = any phase, with its 1-sigma uncertainty\n"
     "  --transformer-deg D     AC phase shift of a delta-wye transformer, deg (default 30; with\n"
     "                          --phases 6 not a multiple of 60)\n"
-    "  --min-confidence X      posterior below which a bulb or phase is reported ambiguous\n"
+    "  --ambiguous-below X     posterior below which a bulb or phase is reported ambiguous\n"
     "                          (phase null in JSON), 0..1 (default 0.8)\n"
     "  --band-model M          RGB: reddened (default: one brightness times the chromaticity\n"
     "                          reddened by extinction, each band within --chroma-tolerance of\n"
@@ -60,6 +60,10 @@ static const char recognize_usage[] =
     "  --progress              progress on stderr (default: when stderr is a terminal)\n"
     "  -q, --no-progress       no progress\n"
     "  --help                  this text\n"
+    "\n"
+    "Examples (build/lab: see gridsurvey help simulate):\n"
+    "  gridsurvey recognize build/lab --maps build/lab-maps\n"
+    "  gridsurvey recognize build/lab --format json --ambiguous-below 0.9 > build/lab-lights.json\n"
     "\n"
     "Exit status: 0 done, 1 failure (one line on stderr), 2 usage error.\n";
 
@@ -126,10 +130,10 @@ static int auto_or_share(const char *arg, double hi, double *v)
 static int parse_opts(int argc, char **argv, recognize_opts *o)
 {
     static const struct option longs[] = {
-        {"json", no_argument, 0, 'j'},
+        {"format", required_argument, 0, 'f'},
         {"phases", required_argument, 0, 'p'},
         {"transformer-deg", required_argument, 0, 't'},
-        {"min-confidence", required_argument, 0, 'c'},
+        {"ambiguous-below", required_argument, 0, 'c'},
         {"threshold", required_argument, 0, 's'},
         {"band-model", required_argument, 0, 'g'},
         {"chroma-tolerance", required_argument, 0, 'T'},
@@ -156,7 +160,10 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
     char *end;
     while ((c = getopt_long(argc, argv, ":hq", longs, NULL)) != -1) {
         switch (c) {
-        case 'j': o->json = 1; break;
+        case 'f':
+            if (!strcmp(optarg, "json") || !strcmp(optarg, "table")) o->json = !strcmp(optarg, "json");
+            else return usage_error("--format '%s': expected table or json", optarg);
+            break;
         case 'P': o->progress = 1; break;
         case 'q': o->progress = 0; break;
         case 'd': o->db = optarg; break;
@@ -175,7 +182,7 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
         case 'c':
             o->eq7.ambiguous_conf = strtod(optarg, &end);
             if (end == optarg || *end || !(o->eq7.ambiguous_conf >= 0.0 && o->eq7.ambiguous_conf <= 1.0))
-                return usage_error("--min-confidence '%s': expected a number from 0 to 1", optarg);
+                return usage_error("--ambiguous-below '%s': expected a number from 0 to 1", optarg);
             break;
         case 'g':
             if (!strcmp(optarg, "reddened")) o->eq7.band_gains = REC_BANDS_REDDENED;

@@ -1,4 +1,4 @@
-/* cmd_relight.c - `gridsurvey relight DIR --set N=gain:A[,bulb:ID][,phase:DEG] ... -o CAPDIR`:
+/* cmd_relight.c - `gridsurvey relight DIR --set N=gain:A[,bulb:ID][,phase:DEG] ... --out-dir CAPDIR`:
  * generalised relighting (paper Sec. 5.2, Eq. 20) of what `unmix` wrote, as a capture directory
  * (gridsurvey-capture/1, so `recognize` reads it back) with a PNG preview. */
 #include "survey/internal.h"
@@ -10,8 +10,8 @@
 #include <string.h>
 
 static const char relight_usage[] =
-    "usage: gridsurvey relight DIR --set N=gain:A[,bulb:ID][,phase:DEG] ... -o CAPDIR\n"
-    "                          [--delight DB] [--compare CAPDIR2]\n"
+    "usage: gridsurvey relight DIR --set N=gain:A[,bulb:ID][,phase:DEG] ...\n"
+    "                          --out-dir CAPDIR [--delight DB] [--compare CAPDIR2]\n"
     "\n"
     "Relights the sources that `gridsurvey unmix` wrote to DIR (sources.json, source_NN.tiff):\n"
     "I = T [A Q B]^relight (paper Eq. 20). Each --set changes source N (00, 01, ...): gain:A\n"
@@ -22,11 +22,17 @@ static const char relight_usage[] =
     "saturated) of the input capture's numbers, and CAPDIR/preview.png (the mean image).\n"
     "\n"
     "  --set N=...        a source's change (repeatable)\n"
-    "  -o CAPDIR          the capture directory to write\n"
+    "  --out-dir CAPDIR   the capture directory to write\n"
     "  --delight DB       DELIGHT SQLite file (default: $GRIDSURVEY_DELIGHT, else built-in)\n"
     "  --compare CAPDIR2  print the relative difference of the result's mean image from\n"
     "                     CAPDIR2's (e.g. a capture rendered without the switched-off source)\n"
     "  --help             this text\n"
+    "\n"
+    "\n"
+    "Examples (DIR from the examples of gridsurvey help unmix):\n"
+    "  gridsurvey relight build/unmixed --set 2=gain:3.5 --set 0=bulb:hps-70w \\\n"
+    "                     --out-dir build/relit\n"
+    "  gridsurvey relight build/unmixed --set 4=gain:0 --out-dir build/relit-mh70-off\n"
     "\n"
     "Exit status: 0 done, 1 failure (one line on stderr), 2 usage error.\n";
 
@@ -73,7 +79,7 @@ bad:
 int srv_cmd_relight(int argc, char **argv)
 {
     static const struct option longs[] = {
-        {"set", required_argument, 0, 's'},     {"output", required_argument, 0, 'o'},
+        {"set", required_argument, 0, 's'},     {"out-dir", required_argument, 0, 'O'},
         {"delight", required_argument, 0, 'd'}, {"compare", required_argument, 0, 'c'},
         {"help", no_argument, 0, 'h'},          {0, 0, 0, 0},
     };
@@ -91,7 +97,8 @@ int srv_cmd_relight(int argc, char **argv)
             }
             sets[nsets++] = optarg;
             break;
-        case 'o': out = optarg; break;
+        case 'O': out = optarg; break;
+        case 'o': return srv_out_dir_hint("relight");
         case 'd': db = optarg; break;
         case 'c': cmp = optarg; break;
         case 'h': fputs(relight_usage, stdout); return 0;
@@ -99,7 +106,7 @@ int srv_cmd_relight(int argc, char **argv)
         }
     }
     if (optind + 1 != argc || !out) {
-        fprintf(stderr, "gridsurvey relight: expected one DIR and -o CAPDIR (see gridsurvey help relight)\n");
+        fprintf(stderr, "gridsurvey relight: expected one DIR and --out-dir CAPDIR (see gridsurvey help relight)\n");
         return 2;
     }
     const char *dir = argv[optind];

@@ -17,8 +17,8 @@ static const char run_usage[] =
     "usage: gridsurvey run SCENE.json|CAPDIR [MORE ...] --db survey.sqlite [--station FILE]\n"
     "                      [--survey NAME]\n"
     "                      [--capture-dir DIR] [--light-height-m H] [--light-height-sigma-m S]\n"
-    "                      [--phases 3|6|continuous] [--unknown-p P] [--delight DB] [--out DIR]\n"
-    "                      [--progress | --no-progress | -q]\n"
+    "                      [--phases 3|6|continuous] [--unknown-p P] [--delight DB]\n"
+    "                      [--out-dir DIR] [--progress | --no-progress | -q]\n"
     "\n"
     "The whole job on one capture: a scene (gridsurvey-scene/1) is acquired by the simulator\n"
     "through the ACam acquisition loop into a capture directory (resumable), a capture directory\n"
@@ -26,13 +26,14 @@ static const char run_usage[] =
     "paper's Eq. 7 against DELIGHT, each light located from the station at the lights' height,\n"
     "and everything stored in the survey database in one transaction. A capture already in the\n"
     "database is skipped (never stored twice); an interrupted run resumes. Then prints the\n"
-    "survey's phase balance, writes OUT/SURVEY.geojson and OUT/SURVEY-map.png, and when the\n"
+    "survey's phase balance, writes DIR/SURVEY.geojson and DIR/SURVEY-map.png, and when the\n"
     "capture directory holds the simulator's truth.json, prints the evaluation against it.\n"
     "Several inputs (e.g. two stations of one area) are run in turn, each its own capture and\n"
     "station; then the light sites seen from two stations are triangulated (gis_triangulate)\n"
     "and listed with their 1-sigma ellipses.\n"
     "\n"
     "Examples:\n"
+    "  gridsurvey run build/lab --db build/lab.sqlite   # build/lab: gridsurvey help simulate\n"
     "  gridsurvey run capture/scenes/metro.json --phases 6 --db build/demo/survey.sqlite\n"
     "  gridsurvey run east.json west.json --survey town --db town.sqlite\n"
     "\n"
@@ -40,7 +41,8 @@ static const char run_usage[] =
     "  --station FILE       the station (gridsurvey-station/1, docs/gis.md) instead of the\n"
     "                       capture's \"station\" object; without any, lights are stored\n"
     "                       without a location\n"
-    "  --survey NAME        survey name (default: the scene's name, or the capture directory's)\n"
+    "  --survey NAME        the survey the lights are stored under (default: the scene's name,\n"
+    "                       or the capture directory's)\n"
     "  --capture-dir DIR    scene input: the capture directory (default: next to the database,\n"
     "                       SCENE-capture)\n"
     "  --light-height-m H   the lights' height above the WGS84 ellipsoid, m (default for a scene:\n"
@@ -55,7 +57,7 @@ static const char run_usage[] =
     "                       off (default 0.001)\n"
     "  --delight DB         DELIGHT SQLite file (default: $GRIDSURVEY_DELIGHT, else the scene's,\n"
     "                       else the built-in database)\n"
-    "  --out DIR            where the GeoJSON and the map go (default: the database's directory)\n"
+    "  --out-dir DIR        where the GeoJSON and the map go (default: the database's directory)\n"
     "  --progress           progress on stderr (default: when stderr is a terminal)\n"
     "  -q, --no-progress    no progress\n"
     "  --help               this text\n"
@@ -92,21 +94,21 @@ static void safe_name(const char *name, char *buf, size_t size)
     if (!n) snprintf(buf, size, "survey");
 }
 
-/* The --out directory: exists and is writable, or its parent is a writable directory. */
+/* The --out-dir directory: exists and is writable, or its parent is a writable directory. */
 static gs_status check_out_dir(const char *path)
 {
     struct stat sb;
     if (stat(path, &sb) == 0) {
-        if (!S_ISDIR(sb.st_mode)) return gs_fail(GS_EIO, "%s: --out exists and is not a directory", path);
+        if (!S_ISDIR(sb.st_mode)) return gs_fail(GS_EIO, "%s: --out-dir exists and is not a directory", path);
         if (access(path, W_OK | X_OK) != 0)
-            return gs_fail(GS_EIO, "%s: --out is not writable: %s", path, strerror(errno));
+            return gs_fail(GS_EIO, "%s: --out-dir is not writable: %s", path, strerror(errno));
         return GS_OK;
     }
-    if (errno != ENOENT) return gs_fail(GS_EIO, "%s: --out: %s", path, strerror(errno));
+    if (errno != ENOENT) return gs_fail(GS_EIO, "%s: --out-dir: %s", path, strerror(errno));
     char parent[4096];
     gs_path_dir(path, parent, sizeof parent);
     if (stat(parent, &sb) != 0 || !S_ISDIR(sb.st_mode) || access(parent, W_OK | X_OK) != 0)
-        return gs_fail(GS_EIO, "%s: cannot create the --out directory: %s is not a writable directory",
+        return gs_fail(GS_EIO, "%s: cannot create the --out-dir directory: %s is not a writable directory",
                        path, parent);
     return GS_OK;
 }
@@ -143,7 +145,7 @@ static gs_status print_balance(srv_db *db, const char *survey)
 static gs_status write_outputs(srv_db *db, const srv_run_report *r, const char *out_dir)
 {
     if (mkdir(out_dir, 0777) != 0 && errno != EEXIST)
-        return gs_fail(GS_EIO, "%s: cannot create the --out directory: %s", out_dir, strerror(errno));
+        return gs_fail(GS_EIO, "%s: cannot create the --out-dir directory: %s", out_dir, strerror(errno));
     srv_export_opts eo;
     srv_export_opts_default(&eo);
     eo.survey = r->survey;
@@ -256,7 +258,7 @@ int srv_cmd_run(int argc, char **argv)
         {"db", required_argument, 0, 'd'},          {"station", required_argument, 0, 's'},
         {"survey", required_argument, 0, 'S'},      {"capture-dir", required_argument, 0, 'c'},
         {"light-height-m", required_argument, 0, 'H'}, {"phases", required_argument, 0, 'p'},
-        {"delight", required_argument, 0, 'D'},     {"out", required_argument, 0, 'o'},
+        {"delight", required_argument, 0, 'D'},     {"out-dir", required_argument, 0, 'O'},
         {"unknown-p", required_argument, 0, 'u'},   {"light-height-sigma-m", required_argument, 0, 'G'},
         {"progress", no_argument, 0, 'P'},          {"no-progress", no_argument, 0, 'q'},
         {"help", no_argument, 0, 'h'},              {0, 0, 0, 0},
@@ -271,14 +273,15 @@ int srv_cmd_run(int argc, char **argv)
     opterr = 0;
     int c;
     char *end;
-    while ((c = getopt_long(argc, argv, ":hq", longs, NULL)) != -1) {
+    while ((c = getopt_long(argc, argv, ":hqo:", longs, NULL)) != -1) {
         switch (c) {
         case 'd': o.db_path = optarg; break;
         case 's': o.station_path = optarg; break;
         case 'S': o.survey = optarg; break;
         case 'c': o.capture_dir = optarg; break;
         case 'D': o.delight_path = optarg; break;
-        case 'o': out = optarg; break;
+        case 'O': out = optarg; break;
+        case 'o': return srv_out_dir_hint("run");
         case 'P': progress = 1; break;
         case 'q': progress = 0; break;
         case 'H':
@@ -313,7 +316,7 @@ int srv_cmd_run(int argc, char **argv)
         return usage_error("%s", "--capture-dir and --station take one input (each input has its own "
                            "capture directory and station)");
     if (!o.db_path) return usage_error("%s", "--db is required");
-    /* --out is checked before anything is written; the default, the database's directory, is
+    /* --out-dir is checked before anything is written; the default, the database's directory, is
      * checked by opening the database */
     char out_dir[4096];
     if (out) snprintf(out_dir, sizeof out_dir, "%s", out);

@@ -1,4 +1,4 @@
-/* cmd_separate.c - `gridsurvey separate CAPDIR -o DIR`: a window's semi-reflection separated
+/* cmd_separate.c - `gridsurvey separate CAPDIR --out-dir DIR`: a window's semi-reflection separated
  * from the daylit scene behind it (paper Sec. 5.3, Eqs. 21-22, Fig. 6). */
 #include "survey/internal.h"
 
@@ -9,7 +9,7 @@
 #include <string.h>
 
 static const char separate_usage[] =
-    "usage: gridsurvey separate CAPDIR -o DIR\n"
+    "usage: gridsurvey separate CAPDIR --out-dir DIR\n"
     "\n"
     "Separates a capture of a window (paper Sec. 5.3): daylight through it (constant: BRF all\n"
     "ones) and the reflection of an indoor scene lit by one AC source of unknown bulb and phase.\n"
@@ -18,28 +18,34 @@ static const char separate_usage[] =
     "DIR/reflection.tiff (32-bit float, DN per cycle: the cycle-mean images when the model\n"
     "holds, else up to scale; NaN where saturated) and their PNGs, and DIR/mean.png.\n"
     "\n"
-    "  -o DIR     output directory (created)\n"
-    "  --help     this text\n"
+    "  --out-dir DIR  output directory (created)\n"
+    "  --help         this text\n"
+    "\n"
+    "\n"
+    "Examples:\n"
+    "  gridsurvey simulate capture/scenes/window.json --out-dir build/window\n"
+    "  gridsurvey separate build/window --out-dir build/separated\n"
     "\n"
     "Exit status: 0 done, 1 failure (one line on stderr), 2 usage error.\n";
 
 int srv_cmd_separate(int argc, char **argv)
 {
     static const struct option longs[] = {
-        {"output", required_argument, 0, 'o'}, {"help", no_argument, 0, 'h'}, {0, 0, 0, 0},
+        {"out-dir", required_argument, 0, 'O'}, {"help", no_argument, 0, 'h'}, {0, 0, 0, 0},
     };
     const char *out = NULL;
     optind = 1;
     int c;
     while ((c = getopt_long(argc, argv, "o:h", longs, NULL)) != -1) {
         switch (c) {
-        case 'o': out = optarg; break;
+        case 'O': out = optarg; break;
+        case 'o': return srv_out_dir_hint("separate");
         case 'h': fputs(separate_usage, stdout); return 0;
         default: return srv_usage_hint("separate");
         }
     }
     if (optind + 1 != argc || !out) {
-        fprintf(stderr, "gridsurvey separate: expected one CAPDIR and -o DIR (see gridsurvey help separate)\n");
+        fprintf(stderr, "gridsurvey separate: expected one CAPDIR and --out-dir DIR (see gridsurvey help separate)\n");
         return 2;
     }
     const char *capdir = argv[optind];

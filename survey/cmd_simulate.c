@@ -10,9 +10,9 @@
 #include <string.h>
 
 static const char simulate_usage[] =
-    "usage: gridsurvey simulate SCENE.json -o CAPDIR [--seed N] [--delight DB] [--force]\n"
-    "                           [--stop-after N] [--progress | --no-progress | -q] [--stats]\n"
-    "                           [--drop-light ID ...]\n"
+    "usage: gridsurvey simulate SCENE.json --out-dir CAPDIR [--seed N] [--delight DB]\n"
+    "                           [--force] [--stop-after N] [--progress | --no-progress | -q]\n"
+    "                           [--stats] [--drop-light ID ...]\n"
     "\n"
     "Renders the scene's K frames as the ACam would acquire them (coded exposure over C\n"
     "cycles, mask matrix, HDR halving, the effects the scene lists) into CAPDIR: capture.json,\n"
@@ -21,19 +21,23 @@ static const char simulate_usage[] =
     "interrupted CAPDIR keeps the intact frames and renders the rest; the result is the same\n"
     "as an uninterrupted run.\n"
     "\n"
-    "  -o CAPDIR       the capture directory (created)\n"
-    "  --seed N        override the scene's seed\n"
-    "  --delight DB    DELIGHT SQLite file (default: the scene's, else the built-in database)\n"
-    "  --force         start again even if CAPDIR holds progress of this scene\n"
-    "  --stop-after N  stop after rendering N frames (resume later)\n"
-    "  --progress      progress on stderr (default: when stderr is a terminal)\n"
+    "  --out-dir CAPDIR   the capture directory (created)\n"
+    "  --seed N           override the scene's seed\n"
+    "  --delight DB       DELIGHT SQLite file (default: the scene's, else the built-in database)\n"
+    "  --force            start again even if CAPDIR holds progress of this scene\n"
+    "  --stop-after N     stop after rendering N frames (resume later)\n"
+    "  --progress         progress on stderr (default: when stderr is a terminal)\n"
     "  -q, --no-progress  no progress\n"
-    "  --stats         print the pipeline's stages with their calls and time\n"
-    "  --drop-light ID render the scene without this light (repeatable; e.g. the reference\n"
-    "                  for `gridsurvey relight` switching a source off)\n"
-    "  --help          this text\n"
+    "  --stats            print the pipeline's stages with their calls and time\n"
+    "  --drop-light ID    render the scene without this light (repeatable; e.g. the reference\n"
+    "                     for `gridsurvey relight` switching a source off)\n"
+    "  --help             this text\n"
     "\n"
-    "Built-in scenes: capture/scenes/lab.json, capture/scenes/metro.json (docs/scene.md).\n";
+    "Built-in scenes: capture/scenes/lab.json, capture/scenes/metro.json (docs/scene.md).\n"
+    "\n"
+    "Examples:\n"
+    "  gridsurvey simulate capture/scenes/lab.json --out-dir build/lab\n"
+    "  gridsurvey simulate capture/scenes/lab.json --out-dir build/lab-no-mh70 --drop-light mh70\n";
 
 static int parse_long(const char *what, const char *arg, long lo, long hi, long *out)
 {
@@ -61,7 +65,7 @@ static void print_stats(cap_sim *sim)
 int srv_cmd_simulate(int argc, char **argv)
 {
     static const struct option longs[] = {
-        {"output", required_argument, 0, 'o'},  {"seed", required_argument, 0, 's'},
+        {"out-dir", required_argument, 0, 'O'}, {"seed", required_argument, 0, 's'},
         {"delight", required_argument, 0, 'd'}, {"force", no_argument, 0, 'f'},
         {"stop-after", required_argument, 0, 'S'}, {"progress", no_argument, 0, 'p'},
         {"no-progress", no_argument, 0, 'n'},   {"stats", no_argument, 0, 't'},
@@ -79,7 +83,8 @@ int srv_cmd_simulate(int argc, char **argv)
     int c;
     while ((c = getopt_long(argc, argv, "o:hq", longs, NULL)) != -1) {
         switch (c) {
-        case 'o': out = optarg; break;
+        case 'O': out = optarg; break;
+        case 'o': return srv_out_dir_hint("simulate");
         case 'd': delight = optarg; break;
         case 'f': lo.force = 1; break;
         case 'p': lo.progress = 1; break;
@@ -105,7 +110,7 @@ int srv_cmd_simulate(int argc, char **argv)
         }
     }
     if (optind + 1 != argc || !out) {
-        fprintf(stderr, "gridsurvey simulate: expected one SCENE.json and -o CAPDIR (see gridsurvey help simulate)\n");
+        fprintf(stderr, "gridsurvey simulate: expected one SCENE.json and --out-dir CAPDIR (see gridsurvey help simulate)\n");
         return 2;
     }
     cap_scene sc;

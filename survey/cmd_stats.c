@@ -12,7 +12,8 @@
 static const char stats_usage[] =
     "usage: gridsurvey stats (--db DB | --pg CONNINFO) [--by G[,G2[,G3]]] [--clip AREAS.geojson]\n"
     "                        [--bbox MINLON,MINLAT,MAXLON,MAXLAT] [--survey NAME]\n"
-    "                        [--min-confidence X] [--format table|json|csv] [--detections]\n"
+    "                        [--min-phase-confidence X] [--format table|json|csv] [-o F.csv]\n"
+    "                        [--detections]\n"
     "\n"
     "Phase balance of the surveyed lights: per group, the lights on each grid phase (0, 120,\n"
     "240 deg, within 20 deg), their shares with 95 % Wilson intervals, a chi-square test of the\n"
@@ -36,12 +37,12 @@ static const char stats_usage[] =
     "  --bbox B            only located lights in MINLON,MINLAT,MAXLON,MAXLAT (degrees;\n"
     "                      MINLON > MAXLON crosses the antimeridian)\n"
     "  --survey NAME       only this survey\n"
-    "  --min-confidence X  leave out lights whose phase confidence (posterior of the phase)\n"
-    "                      is below X, in [0, 1] (default 0)\n"
+    "  --min-phase-confidence X  leave out lights whose phase confidence (posterior of the\n"
+    "                      phase) is below X, in [0, 1] (default 0)\n"
     "  --format F          table (Markdown, default), json or csv; with --by feature:FIELD the\n"
     "                      CSV's last column, WKT, is each area's polygon (GDAL reads the\n"
     "                      file as a polygon layer: QGIS, ogr2ogr)\n"
-    "  -o, --output F.csv  write the CSV to F.csv (replaced atomically) instead of stdout, with\n"
+    "  -o F.csv            write the CSV to F.csv (replaced atomically) instead of stdout, with\n"
     "                      GDAL's F.csvt (column types) and, with the WKT column, F.prj (WGS84)\n"
     "  --detections        count every stored detection; by default a light seen on several\n"
     "                      nights or captures (one light site) counts once, its detections'\n"
@@ -49,7 +50,7 @@ static const char stats_usage[] =
     "  --help              this text\n"
     "\n"
     "Examples:\n"
-    "  gridsurvey stats --db city.sqlite --by technology\n"
+    "  gridsurvey stats --db city.sqlite --by technology --min-phase-confidence 0.9\n"
     "  gridsurvey stats --db city.sqlite --clip feeders.geojson --by feature:feeder --format csv \\\n"
     "                   -o feeders-balance.csv\n";
 
@@ -116,7 +117,7 @@ void srv_stats_print_table(const srv_phase_stats *g, size_t n, const srv_stats_o
     printf("\nShares of the lights on a known 0/120/240 deg phase (n), 95 %% Wilson intervals; "
            "chi2: uniformity test (2 dof), p = exp(-chi2/2); imbalance = max |share - 1/3| / (1/3).\n");
     printf("below: phase confidence < %g (left out); unknown: ambiguous or unrecognized phase; "
-           "other: a phase not within 20 deg of 0/120/240%s.", o->min_confidence,
+           "other: a phase not within 20 deg of 0/120/240%s.", o->min_phase_confidence,
            six ? " nor 15 deg of 30/150/270 (the six-phase columns, counts outside the shares)" : "");
     if (ungrouped > 0) printf(" %ld lights without a position are in no cell.", ungrouped);
     int few = 0;
@@ -201,7 +202,7 @@ static int print_json(const srv_phase_stats *g, size_t n, const srv_stats_opts *
     json_object_set_new(root, "db", json_string(db));
     json_object_set_new(root, "by", json_string(by_name(o, buf, sizeof buf)));
     json_object_set_new(root, "survey", o->survey ? json_string(o->survey) : json_null());
-    json_object_set_new(root, "min_phase_confidence", json_real(o->min_confidence));
+    json_object_set_new(root, "min_phase_confidence", json_real(o->min_phase_confidence));
     json_object_set_new(root, "confidence_level", json_real(0.95));
     json_object_set_new(root, "lights_without_position", json_integer(ungrouped));
     static const char *const ph[3] = {"0", "120", "240"};
@@ -250,11 +251,11 @@ int srv_cmd_stats(int argc, char **argv)
 {
     static const struct option longs[] = {
         {"db", required_argument, 0, 'd'},     {"by", required_argument, 0, 'b'},
-        {"survey", required_argument, 0, 'S'}, {"min-confidence", required_argument, 0, 'c'},
+        {"survey", required_argument, 0, 'S'}, {"min-phase-confidence", required_argument, 0, 'c'},
         {"format", required_argument, 0, 'f'}, {"help", no_argument, 0, 'h'},
         {"detections", no_argument, 0, 'D'},   {"clip", required_argument, 0, 'C'},
         {"bbox", required_argument, 0, 'B'},   {"pg", required_argument, 0, 'p'},
-        {"output", required_argument, 0, 'o'}, {0, 0, 0, 0},
+        {0, 0, 0, 0},
     };
     const char *path = NULL, *clip = NULL, *conninfo = NULL, *output = NULL;
     srv_stats_opts o;
@@ -276,9 +277,9 @@ int srv_cmd_stats(int argc, char **argv)
             }
             break;
         case 'c':
-            o.min_confidence = strtod(optarg, &end);
-            if (!*optarg || *end || !(o.min_confidence >= 0.0 && o.min_confidence <= 1.0)) {
-                fprintf(stderr, "gridsurvey stats: --min-confidence '%s': expected a number in [0, 1]\n", optarg);
+            o.min_phase_confidence = strtod(optarg, &end);
+            if (!*optarg || *end || !(o.min_phase_confidence >= 0.0 && o.min_phase_confidence <= 1.0)) {
+                fprintf(stderr, "gridsurvey stats: --min-phase-confidence '%s': expected a number in [0, 1]\n", optarg);
                 return 2;
             }
             break;

@@ -1,4 +1,4 @@
-/* cmd_unmix.c - `gridsurvey unmix CAPDIR --sources FILE|auto -o DIR`: AC light-transport
+/* cmd_unmix.c - `gridsurvey unmix CAPDIR --sources FILE|auto --out-dir DIR`: AC light-transport
  * unmixing (paper Sec. 5.1, Eqs. 16-18) into one float TIFF per source, with --render each
  * source's HDR denoised K-frame sequence (Eq. 19), and the pictures of Fig. 4. With a simulated
  * capture's truth it prints each source's error (docs/light-transport.md). */
@@ -12,7 +12,7 @@
 #include <unistd.h>
 
 static const char unmix_usage[] =
-    "usage: gridsurvey unmix CAPDIR --sources FILE|auto -o DIR [OPTIONS]\n"
+    "usage: gridsurvey unmix CAPDIR --sources FILE|auto --out-dir DIR [OPTIONS]\n"
     "\n"
     "Unmixes a capture directory (gridsurvey-capture/1) of a scene lit by S AC sources into the\n"
     "image of each source alone (paper Sec. 5.1): I = T Q B per band (Eq. 13), T >= 0 per pixel\n"
@@ -26,7 +26,7 @@ static const char unmix_usage[] =
     "                     \"phase_deg\": P}, ...]} (bulb \"daylight\": a constant source)\n"
     "  --sources auto     the sources dominating pixels (bulbs in view, nearby surfaces),\n"
     "                     recognised per pixel with Eq. 7 (Sec. 5.1 (a), (b))\n"
-    "  -o DIR             output directory (created)\n"
+    "  --out-dir DIR      output directory (created)\n"
     "  --render           also DIR/render_NN.tiff: each source's K frames (Eq. 19; HDR,\n"
     "                     denoised), one page per frame\n"
     "  --refine N         rounds of Eq. 18 + Eq. 16, 0..20 (default 1, as the paper)\n"
@@ -36,6 +36,13 @@ static const char unmix_usage[] =
     "  --min-pixels N     with auto: a source must dominate at least N pixels (default 3)\n"
     "  --delight DB       DELIGHT SQLite file (default: $GRIDSURVEY_DELIGHT, else built-in)\n"
     "  --help             this text\n"
+    "\n"
+    "\n"
+    "Examples:\n"
+    "  gridsurvey simulate capture/scenes/lab_transport.json --out-dir build/lab-transport\n"
+    "  gridsurvey unmix build/lab-transport --sources capture/scenes/lab_transport_sources.json \\\n"
+    "                   --out-dir build/unmixed --render\n"
+    "  gridsurvey unmix build/lab-transport --sources auto --out-dir build/unmixed-auto\n"
     "\n"
     "Exit status: 0 done, 1 failure or ill-posed (one line on stderr), 2 usage error.\n";
 
@@ -132,7 +139,7 @@ static void print_truth(const char *capdir, const gs_capture *cap, const rec_sou
 int srv_cmd_unmix(int argc, char **argv)
 {
     static const struct option longs[] = {
-        {"sources", required_argument, 0, 's'}, {"output", required_argument, 0, 'o'},
+        {"sources", required_argument, 0, 's'}, {"out-dir", required_argument, 0, 'O'},
         {"render", no_argument, 0, 'r'},        {"refine", required_argument, 0, 'f'},
         {"max-error", required_argument, 0, 'e'}, {"max-sources", required_argument, 0, 'm'},
         {"delight", required_argument, 0, 'd'}, {"min-pixels", required_argument, 0, 'p'},
@@ -149,7 +156,8 @@ int srv_cmd_unmix(int argc, char **argv)
     while ((c = getopt_long(argc, argv, "o:h", longs, NULL)) != -1) {
         switch (c) {
         case 's': sources = optarg; break;
-        case 'o': out = optarg; break;
+        case 'O': out = optarg; break;
+        case 'o': return srv_out_dir_hint("unmix");
         case 'r': render = 1; break;
         case 'd': db = optarg; break;
         case 'f':
@@ -171,7 +179,7 @@ int srv_cmd_unmix(int argc, char **argv)
         }
     }
     if (optind + 1 != argc || !sources || !out) {
-        fprintf(stderr, "gridsurvey unmix: expected one CAPDIR, --sources FILE|auto and -o DIR\n%s",
+        fprintf(stderr, "gridsurvey unmix: expected one CAPDIR, --sources FILE|auto and --out-dir DIR\n%s",
                 unmix_usage);
         return 2;
     }

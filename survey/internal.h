@@ -106,11 +106,14 @@ gs_status srv_stats_run(const srv_stats_opts *o, srv_stats_next next, void *ctx,
                         srv_phase_stats **groups, size_t *count, long *ungrouped);
 int srv_stats_by_survey(const srv_stats_opts *o);
 
-/* Print "gridsurvey: STATUS: DETAIL" on stderr and return 1. */
 /* Where a command's confirmation line goes: stderr when its output is "-" (stdout). */
 FILE *srv_note_stream(const char *out);
 /* A usage error's hint line, after the one line that says what is wrong: returns 2. */
 int srv_usage_hint(const char *cmd);
+/* The one-line usage error of -o given to a command that writes a directory (-o is always a
+ * file; directories are --out-dir DIR, docs/reliability.md "Command-line habits"): returns 2. */
+int srv_out_dir_hint(const char *cmd);
+/* Print "gridsurvey: STATUS: DETAIL" on stderr and return 1. */
 int srv_error(gs_status s);
 
 /* An evaluation (survey/evaluate.c) as Markdown tables or a gridsurvey-evaluation/1 JSON

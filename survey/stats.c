@@ -76,7 +76,7 @@ void srv_stats_opts_default(srv_stats_opts *o)
     o->by = SRV_BY_ALL;
     o->cell_m = o->lat_deg = o->lon_deg = o->radius_m = NAN;
     for (int i = 0; i < 4; i++) o->bbox[i] = NAN;
-    o->min_confidence = 0.0;
+    o->min_phase_confidence = 0.0;
 }
 
 #define BY_EXPECTED "technology, survey, all, cell:SIZE_m, feature:FIELD, radius:LAT,LON,R_m, or up to " \
@@ -346,8 +346,8 @@ static int uses(const srv_stats_opts *o, srv_group_by by)
 /* The options' consistency (both backends). */
 static gs_status check_opts(const srv_stats_opts *o)
 {
-    if (!(o->min_confidence >= 0.0 && o->min_confidence <= 1.0))
-        return gs_fail(GS_EINVAL, "--min-confidence %g: expected a probability in [0, 1]", o->min_confidence);
+    if (!(o->min_phase_confidence >= 0.0 && o->min_phase_confidence <= 1.0))
+        return gs_fail(GS_EINVAL, "--min-phase-confidence %g: expected a probability in [0, 1]", o->min_phase_confidence);
     if (uses(o, SRV_BY_CELL) && !(o->cell_m >= 1.0 && isfinite(o->cell_m)))
         return gs_fail(GS_EINVAL, "cell size %g m: expected >= 1 m", o->cell_m);
     if (o->by == SRV_BY_RADIUS && !(o->radius_m > 0.0 && isfinite(o->radius_m) &&
@@ -535,7 +535,7 @@ gs_status srv_stats_run(const srv_stats_opts *o, srv_stats_next next, void *ctx,
             g->g.lat_deg = lat0 + ((double)iy + 0.5) * o->cell_m / ky;
             g->g.lon_deg = kx > 0.0 ? gs_wrap180(lon0 + ((double)ix + 0.5) * o->cell_m / kx) : lon0;
         }
-        add_light(&g->g, r->phase, r->conf, o->min_confidence);
+        add_light(&g->g, r->phase, r->conf, o->min_phase_confidence);
     }
     if (gs.n) qsort(gs.v, gs.n, sizeof *gs.v, o->by == SRV_BY_CELL && !o->n_then ? cmp_cells : cmp_groups);
     if (gs.n) {

@@ -370,7 +370,7 @@ typedef struct {
     double cell_m;             /* SRV_BY_CELL: cell side, metres (> 0) */
     double lat_deg, lon_deg;   /* SRV_BY_RADIUS: centre */
     double radius_m;           /* SRV_BY_RADIUS: > 0, spherical distance (see stats.c) */
-    double min_confidence;     /* lights with phase_confidence below it are excluded (0) */
+    double min_phase_confidence;    /* lights with phase_confidence below it are excluded (0) */
     const char *survey;        /* only this survey (NULL = all) */
     int detections;            /* 1: count detections (stored lights), not light sites (0) */
     double bbox[4];            /* MINLON, MINLAT, MAXLON, MAXLAT (NaN: none); MINLON > MAXLON

@@ -193,7 +193,7 @@ static json_t *recognize_json(const char *args, int *rc, char *err, size_t err_s
 {
     char errf[1100], cmd[4096];
     snprintf(errf, sizeof errf, "%s/stderr.txt", test_tmpdir());
-    snprintf(cmd, sizeof cmd, "%s recognize %s --json 2>%s", test_bin(), args, errf);
+    snprintf(cmd, sizeof cmd, "%s recognize %s --format json 2>%s", test_bin(), args, errf);
     *rc = test_run(cmd, out, sizeof out);
     if (err) {
         err[0] = '\0';

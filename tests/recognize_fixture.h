@@ -47,7 +47,7 @@ const char *recfx_cached_delight(void);
  * directory (a static buffer). */
 const char *recfx_render(const recfx_scene *s);
 
-/* Runs `gridsurvey recognize ARGS --json` (stderr to a file) and parses stdout as JSON
+/* Runs `gridsurvey recognize ARGS --format json` (stderr to a file) and parses stdout as JSON
  * (json_decref it; NULL and a test failure when it is not JSON); the exit status must be 0,
  * and with quiet nothing may be on stderr. */
 json_t *recfx_recognize_ok(const char *args, int quiet);

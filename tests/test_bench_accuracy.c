@@ -35,7 +35,7 @@ TEST(bench_accuracy_quick_consistent)
 {
     char out[2048], cmd[4096], log[8192];
     snprintf(out, sizeof out, "%s/acc", test_tmpdir());
-    snprintf(cmd, sizeof cmd, "%s bench accuracy --quick --out %s", test_bin(), out);
+    snprintf(cmd, sizeof cmd, "%s bench accuracy --quick --out-dir %s", test_bin(), out);
     int rc = test_run(cmd, log, sizeof log);
     CHECK_MSG(rc == 0, "%s -> %d:\n%s", cmd, rc, log);
     char path[2200];

@@ -152,13 +152,13 @@ TEST(capture_resume_after_kill_cli)
     write_small(scene, 5);
     /* kill -9 as soon as the first frame is recorded, then resume */
     snprintf(cmd, sizeof cmd,
-             "cd %s && %s simulate small.json -o full --no-progress >/dev/null && "
-             "(%s simulate small.json -o killed --no-progress >/dev/null & pid=$!; "
+             "cd %s && %s simulate small.json --out-dir full --no-progress >/dev/null && "
+             "(%s simulate small.json --out-dir killed --no-progress >/dev/null & pid=$!; "
              " while ! grep -q '\"k\": 0' killed/acquisition.json 2>/dev/null; do sleep 0.005; done; "
              " kill -9 $pid; wait $pid; echo \"exit $?\"; "
              " if [ -f killed/capture.json ]; then echo finished-before-kill; else echo interrupted; fi; "
              " grep -c '\"k\":' killed/acquisition.json) && "
-             "%s simulate small.json -o killed --no-progress && diff -r full killed && echo SAME",
+             "%s simulate small.json --out-dir killed --no-progress && diff -r full killed && echo SAME",
              tmp, bin, bin, bin);
     int rc = test_run(cmd, out, sizeof out);
     printf("    %s", out);
@@ -196,11 +196,11 @@ TEST(capture_replay_roundtrip)
     cap_backend_free(be);
     /* the CLI route */
     char cmd[4096], out[2048];
-    snprintf(cmd, sizeof cmd, "%s capture --backend replay --from %s -o %s/d --no-progress && diff %s/frame_005.png %s/d/frame_005.png && echo SAME",
+    snprintf(cmd, sizeof cmd, "%s capture --backend replay --from %s --out-dir %s/d --no-progress && diff %s/frame_005.png %s/d/frame_005.png && echo SAME",
              test_bin(), a, tmp, a, tmp);
     int rc = test_run(cmd, out, sizeof out);
     CHECK_MSG(rc == 0 && strstr(out, "SAME"), "%s", out);
-    snprintf(cmd, sizeof cmd, "%s capture --backend sim --scene %s -o %s/e --no-progress",
+    snprintf(cmd, sizeof cmd, "%s capture --backend sim --scene %s --out-dir %s/e --no-progress",
              test_bin(), scene, tmp);
     rc = test_run(cmd, out, sizeof out);
     CHECK_MSG(rc == 0, "%s", out);

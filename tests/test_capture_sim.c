@@ -539,13 +539,13 @@ TEST(sim_same_seed_identical_files)
     fclose(f);
     free(text);
     snprintf(cmd, sizeof cmd,
-             "%s simulate %s -o %s/a --no-progress && %s simulate %s -o %s/b --no-progress && "
+             "%s simulate %s --out-dir %s/a --no-progress && %s simulate %s --out-dir %s/b --no-progress && "
              "diff -r %s/a %s/b && echo SAME",
              test_bin(), scene, tmp, test_bin(), scene, tmp, tmp, tmp);
     int rc = test_run(cmd, out, sizeof out);
     CHECK_MSG(rc == 0 && strstr(out, "SAME"), "rc %d: %s", rc, out);
     snprintf(cmd, sizeof cmd,
-             "%s simulate %s -o %s/c --seed 99 --no-progress >/dev/null && "
+             "%s simulate %s --out-dir %s/c --seed 99 --no-progress >/dev/null && "
              "cmp -s %s/a/frame_003.png %s/c/frame_003.png || echo DIFFERENT",
              test_bin(), scene, tmp, tmp, tmp);
     rc = test_run(cmd, out, sizeof out);

@@ -6,8 +6,10 @@
  * every command and every flag of each. Then: groff renders the page without a warning, both
  * files are what docs/gen-cli-docs.sh makes of this binary (`make cli-docs` after a change to a
  * --help text), and `make install` puts the binary, the page and the completion under
- * DESTDIR/PREFIX. Last, the progress flags: the same three in every command that has them, with
- * the same effect. */
+ * DESTDIR/PREFIX. Then the progress flags: the same three in every command that has them, with
+ * the same effect. Last, every command's and subcommand's --help has an example of its own that
+ * uses only flags its command names, and the flags that once meant different things in
+ * different commands (-o, --out, --json, --min-confidence, --height-m) have one meaning each. */
 #include "tests/fixtures.h"
 #include "tests/survey_fixture.h"
 #include "tests/test.h"
@@ -225,7 +227,7 @@ TEST(progress_flags_mean_the_same_in_every_command)
     static const char *const modes[3] = {"", "--progress", "--progress -q"};
     static char err[3][65536];
     for (int m = 0; m < 3; m++) {
-        snprintf(args, sizeof args, "simulate %s -o %s/cap%d %s", scene, test_tmpdir(), m, modes[m]);
+        snprintf(args, sizeof args, "simulate %s --out-dir %s/cap%d %s", scene, test_tmpdir(), m, modes[m]);
         run_stderr(args, err[m], sizeof err[m]);
     }
     char cap0[600];
@@ -241,4 +243,291 @@ TEST(progress_flags_mean_the_same_in_every_command)
         CHECK_MSG(!strcmp(err[2], err[0]), "%s --progress -q: stderr '%s', without the flags '%s'",
                   what, err[2], err[0]);
     }
+}
+
+/* ------------------------------------------------------------------ examples and flag meanings */
+
+#define MAX_EXAMPLES 16
+#define EXAMPLE_LEN 512
+
+typedef struct {
+    char line[MAX_EXAMPLES][EXAMPLE_LEN];   /* "gridsurvey ...", continuations joined, no comment */
+    int n;
+} examples;
+
+/* stdout of `gridsurvey CMD [SUB] --help`, which must exit 0. */
+static void help_of(const char *cmd, const char *sub, char *out, size_t size)
+{
+    int rc = fx_run(out, size, "%s %s %s --help 2>/dev/null", test_bin(), cmd, sub ? sub : "");
+    CHECK_MSG(rc == 0, "gridsurvey %s %s --help: exit status %d", cmd, sub ? sub : "", rc);
+}
+
+/* The --help texts a test has read (each command's and subcommand's once: each run of the
+ * binary costs a fraction of a second). */
+#define MAX_HELPS 64
+static struct {
+    char key[2 * WORD_LEN];
+    char *text;
+} helps[MAX_HELPS];
+static int n_helps;
+
+static const char *cached_help(const char *cmd, const char *sub)
+{
+    static char buf[65536];
+    char key[2 * WORD_LEN];
+    snprintf(key, sizeof key, "%s %s", cmd, sub ? sub : "");
+    for (int i = 0; i < n_helps; i++)
+        if (!strcmp(helps[i].key, key)) return helps[i].text;
+    help_of(cmd, sub, buf, sizeof buf);
+    if (n_helps == MAX_HELPS) return buf;
+    snprintf(helps[n_helps].key, sizeof helps[n_helps].key, "%s", key);
+    helps[n_helps].text = strdup(buf);
+    return helps[n_helps].text ? helps[n_helps++].text : buf;
+}
+
+static void cached_helps_free(void)
+{
+    for (int i = 0; i < n_helps; i++) free(helps[i].text);
+    n_helps = 0;
+}
+
+/* The text before a help's examples (its usage and options): the examples start at a line
+ * beginning with "Example". Returns its length. */
+static size_t before_examples(const char *help)
+{
+    for (const char *p = help; *p;) {
+        if (!strncmp(p, "Example", 7)) return (size_t)(p - help);
+        const char *nl = strchr(p, '\n');
+        if (!nl) break;
+        p = nl + 1;
+    }
+    return strlen(help);
+}
+
+/* The command lines of a help's examples: after the "Example..." heading, each line that
+ * starts with "  gridsurvey ", with the lines it continues with a trailing backslash, up to a
+ * blank line; a "# ..." comment is cut off. */
+static void help_examples(const char *help, examples *ex)
+{
+    ex->n = 0;
+    const char *p = help + before_examples(help);
+    if (!*p) return;
+    p = strchr(p, '\n');
+    while (p && p[1] && p[1] != '\n') {
+        p++;
+        const char *nl = strchr(p, '\n');
+        const char *s = p;
+        while (*s == ' ') s++;
+        if (!strncmp(s, "gridsurvey ", 11) && ex->n < MAX_EXAMPLES) {
+            char *d = ex->line[ex->n++];
+            size_t used = 0;
+            for (;;) {
+                size_t l = nl ? (size_t)(nl - s) : strlen(s);
+                int more = l > 0 && s[l - 1] == '\\';
+                if (more) l--;
+                if (used + l >= EXAMPLE_LEN) l = EXAMPLE_LEN - 1 - used;
+                memcpy(d + used, s, l);
+                used += l;
+                d[used] = '\0';
+                if (!more || !nl) break;
+                p = nl + 1;
+                nl = strchr(p, '\n');
+                for (s = p; *s == ' '; s++) {}
+            }
+            char *hash = strstr(d, " #");
+            if (hash) *hash = '\0';
+            for (size_t e = strlen(d); e > 0 && d[e - 1] == ' '; e--) d[e - 1] = '\0';
+        }
+        p = nl;
+    }
+}
+
+/* A command's subcommands, found as docs/gen-cli-docs.sh finds them: with SUBCOMMAND in its
+ * usage line, the first word of each two-space-indented line before the examples; and NAME in
+ * every line "[usage:] gridsurvey CMD NAME ..." (bench's usage, the examples). */
+static void help_subcommands(const char *cmd, const char *help, words *ws)
+{
+    ws->n = 0;
+    size_t head = before_examples(help);
+    char first[256];
+    snprintf(first, sizeof first, "%.*s", (int)strcspn(help, "\n"), help);
+    int listed = strstr(first, "SUBCOMMAND") != NULL;
+    char prefix[64];
+    snprintf(prefix, sizeof prefix, "gridsurvey %s ", cmd);
+    for (const char *p = help; *p;) {
+        const char *nl = strchr(p, '\n');
+        if (listed && (size_t)(p - help) < head && !strncmp(p, "  ", 2) && islower((unsigned char)p[2]) &&
+            strcspn(p + 2, " \n") < strcspn(p + 2, "\n"))
+            words_add(ws, p + 2, strcspn(p + 2, " \n"));
+        const char *s = p;
+        if (!strncmp(s, "usage:", 6)) s += 6;
+        while (*s == ' ') s++;
+        if (!strncmp(s, prefix, strlen(prefix))) {
+            const char *w = s + strlen(prefix);
+            size_t len = 0;
+            while (islower((unsigned char)w[len]) || (len && w[len] == '-')) len++;
+            if (len && (w[len] == ' ' || w[len] == '\n' || !w[len])) words_add(ws, w, len);
+        }
+        if (!nl) break;
+        p = nl + 1;
+    }
+}
+
+static int has_word(const words *ws, const char *w)
+{
+    for (int i = 0; i < ws->n; i++)
+        if (!strcmp(ws->w[i], w)) return 1;
+    return 0;
+}
+
+/* An example line's command and subcommand ("gridsurvey CMD [SUB] ..."), and whether it has
+ * one the help of CMD lists. */
+static void example_command(const char *line, char *cmd, size_t cmd_size, char *sub, size_t sub_size)
+{
+    const char *c = line + 11;   /* after "gridsurvey " */
+    size_t len = strcspn(c, " ");
+    snprintf(cmd, cmd_size, "%.*s", (int)len, c);
+    const char *s = c + len;
+    while (*s == ' ') s++;
+    len = strcspn(s, " ");
+    snprintf(sub, sub_size, "%.*s", (int)len, s);
+}
+
+/* Every command and subcommand has an "Example" section in its --help with a command line of
+ * its own, and every flag an example uses is one the help of that example's command names
+ * (outside the examples): an example still written with a renamed flag fails here. */
+TEST(every_help_has_an_example_of_its_command_with_its_own_flags)
+{
+    static char top[65536], other[65536];
+    CHECK(fx_run_bin(top, sizeof top, "%s --help%s%s%s", NULL, NULL, NULL) == 0);
+    words cmds, subs, fl, other_subs, named;
+    help_commands(top, &cmds);
+    CHECK_MSG(cmds.n >= 16, "%d commands in gridsurvey --help", cmds.n);
+    int checked_subs = 0, checked_examples = 0;
+    for (int c = 0; c < cmds.n; c++) {
+        const char *name = cmds.w[c];
+        help_subcommands(name, cached_help(name, NULL), &subs);
+        for (int s = -1; s < subs.n; s++) {
+            const char *sub = s < 0 ? NULL : subs.w[s];
+            checked_subs += sub != NULL;
+            examples ex;
+            help_examples(cached_help(name, sub), &ex);
+            char want[128];
+            snprintf(want, sizeof want, "gridsurvey %s%s%s", name, sub ? " " : "", sub ? sub : "");
+            size_t wl = strlen(want);
+            int own = 0;
+            for (int e = 0; e < ex.n; e++)
+                own |= !strncmp(ex.line[e], want, wl) && (ex.line[e][wl] == ' ' || !ex.line[e][wl]);
+            CHECK_MSG(own, "%s --help: no example line '%s ...' in an Example section", want, want);
+            if (sub) continue;
+            /* the flags of each example line against its command's help */
+            for (int e = 0; e < ex.n; e++) {
+                char ecmd[64], esub[64];
+                example_command(ex.line[e], ecmd, sizeof ecmd, esub, sizeof esub);
+                CHECK_MSG(has_word(&cmds, ecmd), "%s --help: example '%s': no command %s", name,
+                          ex.line[e], ecmd);
+                if (!has_word(&cmds, ecmd)) continue;
+                help_subcommands(ecmd, cached_help(ecmd, NULL), &other_subs);
+                int with_sub = has_word(&other_subs, esub);
+                snprintf(other, sizeof other, "%s", cached_help(ecmd, with_sub ? esub : NULL));
+                other[before_examples(other)] = '\0';
+                help_flags(other, &named);
+                help_flags(ex.line[e], &fl);
+                for (int f = 0; f < fl.n; f++)
+                    CHECK_MSG(has_word(&named, fl.w[f]), "%s --help: example '%s' uses %s, which "
+                              "gridsurvey %s %s --help does not name", name, ex.line[e], fl.w[f], ecmd,
+                              with_sub ? esub : "");
+                checked_examples++;
+            }
+        }
+    }
+    CHECK_MSG(checked_subs >= 17, "%d subcommands checked (db 4, delight 7, bench 6)", checked_subs);
+    CHECK_MSG(checked_examples >= 40, "%d example lines checked", checked_examples);
+    cached_helps_free();
+}
+
+/* The words that follow FLAG (e.g. "-o") in a help's usage and options, each checked for containing "DIR" as
+ * want_dir says: -o is always a file, --out-dir always a directory. Returns the count. */
+static int placeholders_after(const char *text, const char *flag, int want_dir, const char *where)
+{
+    int n = 0;
+    size_t fl = strlen(flag);
+    for (const char *p = strstr(text, flag); p; p = strstr(p + 1, flag)) {
+        if ((p > text && (isalnum((unsigned char)p[-1]) || p[-1] == '-')) || (p[fl] != ' ' && p[fl] != ','))
+            continue;
+        const char *w = p + fl + (p[fl] == ',');
+        if (*w == ',') continue;
+        while (*w == ' ') w++;
+        size_t len = strcspn(w, " \n]|)");
+        char word[64];
+        snprintf(word, sizeof word, "%.*s", (int)(len < 63 ? len : 63), w);
+        if (p[fl] == ',' || !strncmp(word, "--", 2)) continue;   /* "-o, --output" style */
+        n++;
+        CHECK_MSG(!!strstr(word, "DIR") == want_dir, "%s: '%s %s': %s names %s", where, flag, word,
+                  flag, want_dir ? "a directory" : "a file");
+    }
+    return n;
+}
+
+/* One meaning per flag across commands (docs/reliability.md, "Command-line habits"), read from
+ * every command's and subcommand's --help: -o FILE is always a file and the directory a
+ * command writes is always --out-dir DIR; JSON output is --format json (no --json); the
+ * lights' height is --light-height-m (no --height-m); a phase-confidence filter is
+ * --min-phase-confidence, and --min-confidence is only export's overall-confidence filter;
+ * no --output or --out. Then the directory commands refuse -o with a one-line error that
+ * names --out-dir, writing nothing. */
+TEST(flags_mean_the_same_in_every_command)
+{
+    static char top[65536], out[65536];
+    CHECK(fx_run_bin(top, sizeof top, "%s --help%s%s%s", NULL, NULL, NULL) == 0);
+    words cmds, subs, fl;
+    help_commands(top, &cmds);
+    static const char *const gone[] = {"--json", "--output", "--out", "--height-m"};
+    int with_out_dir = 0, with_o = 0;
+    for (int c = 0; c < cmds.n; c++) {
+        const char *name = cmds.w[c];
+        help_subcommands(name, cached_help(name, NULL), &subs);
+        for (int s = -1; s < subs.n; s++) {
+            const char *sub = s < 0 ? NULL : subs.w[s];
+            const char *text = cached_help(name, sub);
+            char where[128];
+            snprintf(where, sizeof where, "gridsurvey %s%s%s --help", name, sub ? " " : "", sub ? sub : "");
+            help_flags(text, &fl);
+            for (size_t g = 0; g < sizeof gone / sizeof *gone; g++)
+                CHECK_MSG(!has_word(&fl, gone[g]), "%s names %s", where, gone[g]);
+            CHECK_MSG(!has_word(&fl, "--min-confidence") || !strcmp(name, "export"),
+                      "%s: --min-confidence outside export", where);
+            static char head[65536];   /* the usage and the options: placeholders, not paths */
+            snprintf(head, sizeof head, "%.*s", (int)before_examples(text), text);
+            with_o += placeholders_after(head, "-o", 0, where) > 0;
+            with_out_dir += placeholders_after(head, "--out-dir", 1, where) > 0;
+        }
+    }
+    CHECK_MSG(with_o >= 5 && with_out_dir >= 7, "-o FILE in %d help texts, --out-dir DIR in %d", with_o,
+              with_out_dir);
+    static const char *const has[][2] = {
+        {"stats", "--min-phase-confidence"}, {"compare", "--min-phase-confidence"},
+        {"export", "--min-confidence"},      {"recognize", "--ambiguous-below"},
+        {"run", "--light-height-m"},         {"locate", "--light-height-m"},
+        {"stats", "--format"},               {"evaluate", "--format"},
+        {"recognize", "--format"},           {"run", "--out-dir"},
+    };
+    for (size_t i = 0; i < sizeof has / sizeof *has; i++) {
+        help_flags(cached_help(has[i][0], NULL), &fl);
+        CHECK_MSG(has_word(&fl, has[i][1]), "gridsurvey %s --help does not name %s", has[i][0], has[i][1]);
+    }
+    /* -o on a command that writes a directory: one line naming --out-dir, exit 2, nothing made */
+    static const char *const dir_cmds[][2] = {
+        {"simulate", "capture/scenes/lab.json"}, {"capture", "--backend replay --from ."},
+        {"unmix", ". --sources auto"},            {"relight", ". --set 0=gain:1"},
+        {"separate", "."},                        {"run", ". --db x.sqlite"},
+    };
+    const char *made = fx_tmp("by-o");
+    for (size_t i = 0; i < sizeof dir_cmds / sizeof *dir_cmds; i++) {
+        int rc = fx_run(out, sizeof out, "%s %s %s -o %s", test_bin(), dir_cmds[i][0], dir_cmds[i][1], made);
+        CHECK_MSG(rc == 2 && fx_count_lines(out) == 1 && strstr(out, "--out-dir"), "%s -o: exit %d: %s",
+                  dir_cmds[i][0], rc, out);
+        CHECK_MSG(!fx_exists(made), "%s -o: %s was made", dir_cmds[i][0], made);
+    }
+    cached_helps_free();
 }

@@ -266,7 +266,7 @@ static const char *assets(void)
     CHECK_MSG(b != NULL, "%s: not found", test_bin());
     if (!b) return dir;
     snprintf(cmd, sizeof cmd,
-             "cd %s && %s run small.json --db exported.sqlite --capture-dir cap --out cap-out >/dev/null && "
+             "cd %s && %s run small.json --db exported.sqlite --capture-dir cap --out-dir cap-out >/dev/null && "
              "%s db init --db base.sqlite >/dev/null && "
              "%s delight export -o all.csv && head -n 9 all.csv > some.csv && "
              "(head -n 1 all.csv; tail -n +10 all.csv | head -n 16) > more.csv && "
@@ -279,8 +279,8 @@ static const char *assets(void)
 }
 
 static const scenario scenarios[] = {
-    {"run-new-db", 1, "%s run %s/cap --db survey.sqlite --survey night --out .", "survey.sqlite", setup_empty},
-    {"run-existing-db", 2, "%s run %s/cap --db survey.sqlite --survey night --out .", "survey.sqlite",
+    {"run-new-db", 1, "%s run %s/cap --db survey.sqlite --survey night --out-dir .", "survey.sqlite", setup_empty},
+    {"run-existing-db", 2, "%s run %s/cap --db survey.sqlite --survey night --out-dir .", "survey.sqlite",
      setup_existing_survey},
     {"export-geojson", 2, "%s export --db survey.sqlite -o lights.geojson", "survey.sqlite", setup_export},
     {"export-gpkg", 2, "%s export --db survey.sqlite -o lights.gpkg", "survey.sqlite", setup_export},
@@ -461,7 +461,7 @@ TEST(run_failed_capture_insert_leaves_database_as_it_was)
     char db[1200];
     snprintf(db, sizeof db, "%s/s.sqlite", dir);
     char *before = db_state(db);
-    snprintf(cmd, sizeof cmd, "cd %s && %s run %s/cap --db s.sqlite --survey night --out . 2>&1 >/dev/null", dir,
+    snprintf(cmd, sizeof cmd, "cd %s && %s run %s/cap --db s.sqlite --survey night --out-dir . 2>&1 >/dev/null", dir,
              bin ? bin : "", a);
     CHECK(test_run(cmd, out, sizeof out) == 1);
     CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "refused"), "%s", out);

@@ -375,7 +375,7 @@ TEST(gis_cli_locate)
     snprintf(supp, sizeof supp, "%s", fx_tmp("lsan.supp"));
     fx_write_text(supp, "leak:libfontconfig.so\nleak:libltdl.so\n");
     snprintf(cmd, sizeof cmd, "LSAN_OPTIONS=suppressions=%s %s locate --station %s --pixels %s "
-             "--height-m 30 --survey s1 -o %s --map %s", supp, test_bin(), st, px, res, fx_tmp("m.png"));
+             "--light-height-m 30 --survey s1 -o %s --map %s", supp, test_bin(), st, px, res, fx_tmp("m.png"));
     int rc = test_run(cmd, out, sizeof out);
     CHECK_MSG(rc == 0 && fx_contains(out, "located 2 of 3 lights"), "%d: %s", rc, out);
     CHECK(fx_contains(out, "light UP: not located (above_horizon)"));

@@ -246,7 +246,7 @@ TEST_TIMEOUT(pg_push_then_stats_equal_sqlite, 600)
     static const char *const args[] = {
         "--format csv", "--by technology --format csv", "--by survey --format csv",
         "--by cell:250 --format csv", "--by technology,cell:500", "--by survey,technology --format csv",
-        "--detections --by technology --format csv", "--min-confidence 0.9 --by cell:300 --format csv",
+        "--detections --by technology --format csv", "--min-phase-confidence 0.9 --by cell:300 --format csv",
         "--survey beta --by technology --format csv", "--by radius:32.80,35.02,400 --format csv",
         "--bbox 35.012,32.795,35.024,32.805 --by technology --format csv",
     };

@@ -692,7 +692,7 @@ TEST(pipeline_bad_input_changes_nothing)
         {"ok-cap --db afile/survey.sqlite", "afile/survey.sqlite"},
         {"ok-cap --db missing-dir/survey.sqlite", "missing-dir/survey.sqlite"},
         {"small.json --db ok.sqlite --capture-dir afile/cap", "afile/cap"},
-        {"ok-cap --db ok.sqlite --out afile/out", "afile/out"},
+        {"ok-cap --db ok.sqlite --out-dir afile/out", "afile/out"},
         {"ok-cap --db new.sqlite --station station-bad.json", "station-bad.json:2"},
         {"ok-cap --db new.sqlite --station station-size.json --light-height-m 5", "640x480"},
         {"ok-cap --db new.sqlite --station station-ok.json", "--light-height-m"},

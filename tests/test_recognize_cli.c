@@ -288,15 +288,17 @@ TEST(recognize_cli_bad_inputs_one_line_errors)
     mkdir(bad, 0700);
     snprintf(path, sizeof path, "%s/capture.json", bad);
     fx_write_text(path, "{\"format\": \"gridsurvey-capture/1\", \"grid_hz\": 50,\n \"K\": 26,\n");
-    CHECK(run1(bad, "--json") == 1);
+    CHECK(run1(bad, "--format json") == 1);
     CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "capture.json"), "%s", out);
 
     CHECK(run1(good, "--phases 5") == 2);
     CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "--phases"), "%s", out);
     CHECK(run1(good, "--phases") == 2);
     CHECK_MSG(fx_count_lines(out) == 1, "%s", out);
-    CHECK(run1(good, "--min-confidence 1.5") == 2);
-    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "--min-confidence"), "%s", out);
+    CHECK(run1(good, "--format xml") == 2);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "--format 'xml'"), "%s", out);
+    CHECK(run1(good, "--ambiguous-below 1.5") == 2);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "--ambiguous-below"), "%s", out);
     CHECK(run1(good, "--threshold -1") == 2);
     CHECK_MSG(fx_count_lines(out) == 1, "%s", out);
     CHECK(run1(good, "--transformer-deg abc") == 2);
@@ -350,7 +352,7 @@ TEST(recognize_cli_help)
 {
     CHECK(run1("--help", NULL) == 0);
     CHECK(strstr(out, "usage: gridsurvey recognize CAPDIR") && strstr(out, "--phases 3|6|continuous") &&
-          strstr(out, "--maps DIR") && strstr(out, "--json") && strstr(out, "--min-confidence") &&
+          strstr(out, "--maps DIR") && strstr(out, "--format F") && strstr(out, "--ambiguous-below") &&
           strstr(out, "--transformer-deg") && strstr(out, "--delight"));
     char cmd[2048];
     snprintf(cmd, sizeof cmd, "%s --help", test_bin());

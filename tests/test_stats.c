@@ -146,7 +146,7 @@ static srv_phase_stats *compute(srv_db *db, const char *by, double min_conf, siz
     srv_stats_opts o;
     srv_stats_opts_default(&o);
     CHECK_OK(srv_stats_parse_by(by, &o));
-    o.min_confidence = min_conf;
+    o.min_phase_confidence = min_conf;
     o.detections = 1;   /* the synthetic lights are all distinct: counted as stored */
     srv_phase_stats *g = NULL;
     CHECK_OK(srv_stats_compute(db, &o, &g, n, ungrouped));
@@ -524,7 +524,7 @@ TEST(stats_cli_bad_input)
     CHECK(run("%s stats --db %s --by colour", path, NULL, NULL) == 2 && fx_count_lines(out) == 1);
     CHECK(run("%s stats --db %s --by cell:0", path, NULL, NULL) == 2);
     CHECK(run("%s stats --db %s --by radius:95,1,100", path, NULL, NULL) == 2);
-    CHECK(run("%s stats --db %s --min-confidence 1.5", path, NULL, NULL) == 2);
+    CHECK(run("%s stats --db %s --min-phase-confidence 1.5", path, NULL, NULL) == 2);
     CHECK(run("%s stats --db %s --format xml", path, NULL, NULL) == 2);
     CHECK(run("%s stats", NULL, NULL, NULL) == 2);
     CHECK(run("%s stats --db %s --survey nobody", path, NULL, NULL) == 1);

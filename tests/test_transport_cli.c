@@ -34,7 +34,7 @@ static const char *simulate3(void)
     static char cap[512];
     snprintf(cap, sizeof cap, "%s", fx_tmp("three"));
     char out[4096];
-    int rc = fx_run(out, sizeof out, "%s simulate '%s' -o '%s' --no-progress 2>&1", test_bin(), scene, cap);
+    int rc = fx_run(out, sizeof out, "%s simulate '%s' --out-dir '%s' --no-progress 2>&1", test_bin(), scene, cap);
     CHECK_MSG(rc == 0, "simulate: %s", out);
     return cap;
 }
@@ -45,7 +45,7 @@ TEST(unmix_relight_cli_float_tiffs_gdal_and_a_capture_recognize_reads)
     const char *src = fx_tmp("sources.json"), *dir = fx_tmp("unmixed"), *rel = fx_tmp("relit");
     fx_write_text(src, sources3);
     char out[16384];
-    int rc = fx_run(out, sizeof out, "%s unmix '%s' --sources '%s' -o '%s' --render 2>&1", test_bin(), cap, src, dir);
+    int rc = fx_run(out, sizeof out, "%s unmix '%s' --sources '%s' --out-dir '%s' --render 2>&1", test_bin(), cap, src, dir);
     CHECK_MSG(rc == 0, "unmix: %s", out);
     CHECK(fx_contains(out, "relative error"));   /* the capture has a truth */
     CHECK(fx_contains(out, "denoising"));
@@ -69,7 +69,7 @@ TEST(unmix_relight_cli_float_tiffs_gdal_and_a_capture_recognize_reads)
     json_decref(j);
     /* relight: one source off, another bulb and phase for the first; recognize reads it back */
     rc = fx_run(out, sizeof out, "%s relight '%s' --set 1=gain:0 --set 0=gain:2,bulb:hps-70w,phase:240 "
-                "-o '%s' 2>&1", test_bin(), dir, rel);
+                "--out-dir '%s' 2>&1", test_bin(), dir, rel);
     CHECK_MSG(rc == 0, "relight: %s", out);
     CHECK(fx_contains(out, "00 hps-70w@240 x2") && fx_contains(out, "01 cfl-23w@120 x0"));
     CHECK(fx_exists(fx_path(rel, "preview.png")));
@@ -85,7 +85,7 @@ TEST(unmix_cli_sources_auto_finds_the_lamps_in_view)
 {
     const char *cap = simulate3();
     char out[16384];
-    int rc = fx_run(out, sizeof out, "%s unmix '%s' --sources auto -o '%s' 2>&1", test_bin(), cap, fx_tmp("auto"));
+    int rc = fx_run(out, sizeof out, "%s unmix '%s' --sources auto --out-dir '%s' 2>&1", test_bin(), cap, fx_tmp("auto"));
     CHECK_MSG(rc == 0, "unmix auto: %s", out);
     printf("    %.*s\n", (int)(strchr(out, '\n') ? strchr(out, '\n') - out : 200), out);
     /* every lamp's technology at its phase (a similar model may stand for it), nothing else */
@@ -102,30 +102,30 @@ TEST(transport_cli_bad_input_one_line_errors)
     const char *f = fx_tmp("bad.json");
     /* a typo'd key: file, line and field */
     fx_write_text(f, "{\"format\": \"gridsurvey-sources/1\",\n \"sources\": [\n  {\"bulb\": \"cfl-23w\", \"phase\": 120}]}\n");
-    int rc = fx_run(out, sizeof out, "%s unmix '%s' --sources '%s' -o '%s' 2>&1", test_bin(), cap, f, fx_tmp("o"));
+    int rc = fx_run(out, sizeof out, "%s unmix '%s' --sources '%s' --out-dir '%s' 2>&1", test_bin(), cap, f, fx_tmp("o"));
     CHECK(rc == 1 && fx_contains(out, "bad.json:3: field sources[0]") && fx_count_lines(out) == 1);
     fx_write_text(f, "{\"format\": \"gridsurvey-sources/2\", \"sources\": []}");
-    rc = fx_run(out, sizeof out, "%s unmix '%s' --sources '%s' -o '%s' 2>&1", test_bin(), cap, f, fx_tmp("o"));
+    rc = fx_run(out, sizeof out, "%s unmix '%s' --sources '%s' --out-dir '%s' 2>&1", test_bin(), cap, f, fx_tmp("o"));
     CHECK(rc == 1 && fx_contains(out, "field format") && fx_contains(out, "gridsurvey-sources/1"));
     fx_write_text(f, "{\"format\": \"gridsurvey-sources/1\", \"sources\": [{\"bulb\": \"nope\", \"phase_deg\": 0}]}");
-    rc = fx_run(out, sizeof out, "%s unmix '%s' --sources '%s' -o '%s' 2>&1", test_bin(), cap, f, fx_tmp("o"));
+    rc = fx_run(out, sizeof out, "%s unmix '%s' --sources '%s' --out-dir '%s' 2>&1", test_bin(), cap, f, fx_tmp("o"));
     CHECK(rc == 1 && fx_contains(out, "bulb 'nope'") && fx_contains(out, "DELIGHT"));
     /* a fourth source the data cannot tell from the first (two incandescent models at one
      * phase, Fig. 10): ill-posed, exit 1, nothing written */
     fx_write_text(f, "{\"format\": \"gridsurvey-sources/1\", \"sources\": [{\"bulb\": \"inc-a60-25w-230v\", "
                      "\"phase_deg\": 0}, {\"bulb\": \"inc-a60-40w-230v\", \"phase_deg\": 0}, {\"bulb\": \"cfl-23w\", "
                      "\"phase_deg\": 120}, {\"bulb\": \"led-fil-4w-lin\", \"phase_deg\": 240}]}");
-    rc = fx_run(out, sizeof out, "%s unmix '%s' --sources '%s' -o '%s' 2>&1", test_bin(), cap, f, fx_tmp("ill"));
+    rc = fx_run(out, sizeof out, "%s unmix '%s' --sources '%s' --out-dir '%s' 2>&1", test_bin(), cap, f, fx_tmp("ill"));
     CHECK_MSG(rc == 1 && fx_contains(out, "ill-posed") && !fx_exists(fx_path(fx_tmp("ill"), "sources.json")), "%s", out);
     /* simulate --drop-light: an id the scene lacks is a usage error; a real one renders without it */
-    CHECK(fx_run(out, sizeof out, "%s simulate capture/scenes/window.json -o '%s' --drop-light nope 2>&1",
+    CHECK(fx_run(out, sizeof out, "%s simulate capture/scenes/window.json --out-dir '%s' --drop-light nope 2>&1",
                  test_bin(), fx_tmp("w")) == 2 && fx_contains(out, "no light with this id"));
-    CHECK(fx_run(out, sizeof out, "%s simulate capture/scenes/window.json -o '%s' --drop-light tube --no-progress 2>&1",
+    CHECK(fx_run(out, sizeof out, "%s simulate capture/scenes/window.json --out-dir '%s' --drop-light tube --no-progress 2>&1",
                  test_bin(), fx_tmp("w")) == 0 && fx_contains(out, "0 lights in the image"));
     /* usage errors and help */
-    CHECK(fx_run(out, sizeof out, "%s unmix '%s' -o x 2>&1", test_bin(), cap) == 2);
-    CHECK(fx_run(out, sizeof out, "%s unmix '%s' --sources auto -o x --refine 99 2>&1", test_bin(), cap) == 2);
-    CHECK(fx_run(out, sizeof out, "%s relight '%s' --set 7=gain:1 -o x 2>&1", test_bin(), fx_tmp("nowhere")) == 1);
+    CHECK(fx_run(out, sizeof out, "%s unmix '%s' --out-dir x 2>&1", test_bin(), cap) == 2);
+    CHECK(fx_run(out, sizeof out, "%s unmix '%s' --sources auto --out-dir x --refine 99 2>&1", test_bin(), cap) == 2);
+    CHECK(fx_run(out, sizeof out, "%s relight '%s' --set 7=gain:1 --out-dir x 2>&1", test_bin(), fx_tmp("nowhere")) == 1);
     CHECK(fx_run(out, sizeof out, "%s separate 2>&1", test_bin()) == 2);
     const char *cmds[3] = {"unmix", "relight", "separate"};
     for (int i = 0; i < 3; i++) {
@@ -135,12 +135,12 @@ TEST(transport_cli_bad_input_one_line_errors)
     /* a bad --set on real sources */
     const char *src = fx_tmp("s.json"), *dir = fx_tmp("u");
     fx_write_text(src, sources3);
-    CHECK(fx_run(out, sizeof out, "%s unmix '%s' --sources '%s' -o '%s' 2>&1", test_bin(), cap, src, dir) == 0);
-    rc = fx_run(out, sizeof out, "%s relight '%s' --set 1=gain:-2 -o '%s' 2>&1", test_bin(), dir, fx_tmp("r"));
+    CHECK(fx_run(out, sizeof out, "%s unmix '%s' --sources '%s' --out-dir '%s' 2>&1", test_bin(), cap, src, dir) == 0);
+    rc = fx_run(out, sizeof out, "%s relight '%s' --set 1=gain:-2 --out-dir '%s' 2>&1", test_bin(), dir, fx_tmp("r"));
     CHECK(rc == 2 && fx_contains(out, "--set '1=gain:-2'"));
-    rc = fx_run(out, sizeof out, "%s relight '%s' --set 5=gain:1 -o '%s' 2>&1", test_bin(), dir, fx_tmp("r"));
+    rc = fx_run(out, sizeof out, "%s relight '%s' --set 5=gain:1 --out-dir '%s' 2>&1", test_bin(), dir, fx_tmp("r"));
     CHECK(rc == 2 && fx_contains(out, "N from 0 to 2"));
-    rc = fx_run(out, sizeof out, "%s relight '%s' --set 0=bulb:none -o '%s' 2>&1", test_bin(), dir, fx_tmp("r"));
+    rc = fx_run(out, sizeof out, "%s relight '%s' --set 0=bulb:none --out-dir '%s' 2>&1", test_bin(), dir, fx_tmp("r"));
     CHECK(rc == 1 && fx_contains(out, "bulb 'none'"));
 }
 
@@ -148,9 +148,9 @@ TEST(separate_cli_writes_float_tiffs_and_compares_with_the_truth)
 {
     char out[8192];
     const char *cap = fx_tmp("window"), *dir = fx_tmp("sep");
-    int rc = fx_run(out, sizeof out, "%s simulate capture/scenes/window.json -o '%s' --no-progress 2>&1", test_bin(), cap);
+    int rc = fx_run(out, sizeof out, "%s simulate capture/scenes/window.json --out-dir '%s' --no-progress 2>&1", test_bin(), cap);
     CHECK_MSG(rc == 0, "simulate: %s", out);
-    rc = fx_run(out, sizeof out, "%s separate '%s' -o '%s' 2>&1", test_bin(), cap, dir);
+    rc = fx_run(out, sizeof out, "%s separate '%s' --out-dir '%s' 2>&1", test_bin(), cap, dir);
     CHECK_MSG(rc == 0, "separate: %s", out);
     printf("    %s", strstr(out, "truth:") ? strstr(out, "truth:") : out);
     double nt = 0, nr = 0;

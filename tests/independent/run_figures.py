@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """Reproduce the recognition figures with the independent renderer (render.py) and harness
 (score.py): every capture is rendered, `gridsurvey recognize` scored with its default options,
-with --min-confidence 0 and with diagnostic variants, and the tables are written as Markdown
+with --ambiguous-below 0 and with diagnostic variants, and the tables are written as Markdown
 (OUT/results.md) and JSON (OUT/results.json).  Every command run is printed and listed in
 results.md.  Deterministic: fixed seeds."""
 
@@ -39,7 +39,7 @@ def main():
     ap.add_argument("--tables-only", action="store_true", help="rewrite OUT/results.md from OUT/results.json")
     ap.add_argument("--variants", default="default,mc0,me0,bgoff,bgoff_me0,open",
                     help="levels: comma list of recognize variants (default = with the oracle; mc0 "
-                         "--min-confidence 0; me0 --model-error 0; bgoff, bgoff_me0 --band-model chroma "
+                         "--ambiguous-below 0; me0 --model-error 0; bgoff, bgoff_me0 --band-model chroma "
                          "[RGB]; open --other-prior 0.2)")
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)
@@ -63,7 +63,7 @@ def main():
             for e in LEVELS:
                 cap = os.path.join(a.out, f"c{ci}_{e}")
                 run(R(cap, *ropt, "--lights", str(a.lights), "--electrons", str(e), "--seed", str(10 + ci)), log)
-                variants = [("default", []), ("mc0", ["--min-confidence", "0", "--no-oracle"]),
+                variants = [("default", []), ("mc0", ["--ambiguous-below", "0", "--no-oracle"]),
                             ("me0", ["--model-error", "0", "--no-oracle"]),
                             ("open", ["--other-prior", "0.2", "--no-oracle"])]
                 if ropt[1] == "3":
@@ -138,7 +138,7 @@ def tables(r):
     if any(k.endswith("/default") and k[0].isdigit() for k in r):
         w("### Isolated lights, default `recognize` options\n")
         w("Percentages of the matched lights unless noted. *pair* = best guess bulb and phase right (runner-up for "
-          "unknown/dim lights, the `--min-confidence 0` phase for phase-ambiguous ones); *oracle* = the maximum-"
+          "unknown/dim lights, the `--ambiguous-below 0` phase for phase-ambiguous ones); *oracle* = the maximum-"
           "likelihood oracle on the same lights; *answered* = not unknown/dim/bulb- or phase-ambiguous; "
           "*amb. but right* = flagged phase_ambiguous while the best phase is right; *conf. wrong* = confidence "
           "> 0.9 and wrong bulb / technology / phase, per answered light.\n")
@@ -171,7 +171,7 @@ def tables(r):
                     w(f"| {label} | {e:,} | {p(x['pair_acc'])} | {p(x['answered_share'])} | {p(x['answered_acc'])} | "
                       f"{p(x['ece_pair'], 0)} | {p(cw['bulb'])} / {p(cw['technology'])} / {p(cw['phase'])} |")
             w("")
-        w("### The same captures with `--min-confidence 0`, `--model-error 0` and (RGB) `--band-model chroma`\n")
+        w("### The same captures with `--ambiguous-below 0`, `--model-error 0` and (RGB) `--band-model chroma`\n")
         w("| config | e-/light | mc0: answered | mc0: acc. answered | mc0: conf. wrong b / t / p | me0: pair | me0: answered | me0: acc. answered | me0: median chi2/dof | me0: ECE pair | bg off: pair | bg off: answered | bg off+me0: pair | bg off+me0: median chi2/dof |")
         w("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         for ci, (label, _) in enumerate(CONFIGS):

@@ -2,12 +2,12 @@
 """Score `gridsurvey recognize` on a capture written by render.py, against its truth.json and
 against a maximum-likelihood oracle that knows render.py's whole forward model.
 
-1. Runs `BIN recognize CAPDIR --json [extra options]` and, to recover the best-guess phase of
+1. Runs `BIN recognize CAPDIR --format json [extra options]` and, to recover the best-guess phase of
    lights whose phase is withheld (`phase_deg` is null when phase_ambiguous,
-   docs/recognize-cli.md), the same command with `--min-confidence 0` (the option only sets the
+   docs/recognize-cli.md), the same command with `--ambiguous-below 0` (the option only sets the
    flags; the second run must report the same lights, bulbs and confidences, which is checked).
 2. Matches reported lights to truth lights one-to-one, nearest pair first, within --radius px.
-3. Best guess of a matched light: `bulb` and the phase (the --min-confidence 0 run's phase_deg
+3. Best guess of a matched light: `bulb` and the phase (the --ambiguous-below 0 run's phase_deg
    when the first run's is null); for a light without an answer (`unknown`, `dim`: bulb null)
    the best fit within the database, `runner_up` (docs/recognition.md, "Flags"), with
    `runner_up.confidence` as its pair confidence.  A phase is right when it equals the truth
@@ -517,7 +517,7 @@ def run_oracle(capdir, truth_lights, which, csv, radius, jobs):
 # --------------------------------------------------------------------------------------------
 
 def run_recognize(binary, capdir, extra):
-    cmd = [binary, "recognize", capdir, "--json"] + extra
+    cmd = [binary, "recognize", capdir, "--format", "json"] + extra
     p = subprocess.run(cmd, capture_output=True, text=True)
     if p.returncode != 0:
         raise SystemExit(f"{' '.join(cmd)}: exit {p.returncode}: {p.stderr.strip()}")
@@ -525,19 +525,19 @@ def run_recognize(binary, capdir, extra):
 
 
 def with_min_conf_zero(extra):
-    """The recogniser options with any --min-confidence replaced by 0."""
+    """The recogniser options with any --ambiguous-below replaced by 0."""
     out, it = [], iter(extra)
     for a in it:
-        if a == "--min-confidence":
+        if a == "--ambiguous-below":
             next(it, None)
-        elif not a.startswith("--min-confidence="):
+        elif not a.startswith("--ambiguous-below="):
             out.append(a)
-    return out + ["--min-confidence", "0"]
+    return out + ["--ambiguous-below", "0"]
 
 
 def best_guess(l, l0):
     """(bulb, technology, phase, pair confidence, answered) of a reported light l; l0 is the
-    same light from the --min-confidence 0 run (its phase for phase-ambiguous lights)."""
+    same light from the --ambiguous-below 0 run (its phase for phase-ambiguous lights)."""
     if l["bulb"] is None:                                # unknown / dim: best fit within DELIGHT
         ru = l.get("runner_up") or {}
         return ru.get("bulb"), ru.get("technology"), ru.get("phase_deg"), float(ru.get("confidence", 0.0)), False
@@ -641,7 +641,7 @@ def main(argv=None):
     L, L0 = rep["lights"], rep0["lights"]
     assert len(L) == len(L0) and all(
         (x["id"], x["x"], x["y"], x["bulb"], x["confidence"]) == (y["id"], y["x"], y["y"], y["bulb"], y["confidence"])
-        for x, y in zip(L, L0)), "--min-confidence 0 changed more than the flags"
+        for x, y in zip(L, L0)), "--ambiguous-below 0 changed more than the flags"
 
     m = match_lights(tl, L, a.radius)
     cls = lambda t: "blend" if "blend" in t["flags"] else ("out_of_db" if t.get("out_of_db") else "isolated")
