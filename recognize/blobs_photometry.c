@@ -173,8 +173,9 @@ void rec_blob_pixel_var(const rec_blob_state *s, size_t p, double *var_k)
     for (int k = 0; k < K; k++) {
         double f = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[s->N * (size_t)k + p] : 0)];
         const unsigned short *r = c->raw + (s->N * (size_t)k + p) * (size_t)B;
-        for (int b = 0; b < B; b++) mean_flux[b] += ((double)r[b] - s->black) * f / K;
+        for (int b = 0; b < B; b++) mean_flux[b] += ((double)r[b] - s->black) * f;
     }
+    for (int b = 0; b < B; b++) mean_flux[b] /= K;
     for (int b = 0; b < B; b++)
         for (int k = 0; k < K; k++) {
             double f = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[s->N * (size_t)k + p] : 0)];
