@@ -201,7 +201,8 @@ static inline double rec_log_add(double a, double b)
         a = b;
         b = t;
     }
-    return isinf(a) && a < 0.0 ? a : a + log1p(exp(b - a));
+    if (isinf(a) && a < 0.0) return a;
+    return b - a < -746.0 ? a : a + log1p(exp(b - a));   /* exp underflows to 0 there */
 }
 
 /* The reddened band model's grid of optical depths at 550 nm (eq7_light.c). */
