@@ -662,8 +662,6 @@ static gs_status fit_component(fit_data *f, int comp, const int *ap, int nap, co
 {
     const rec_blob_state *s = f->s;
     const int B = f->B, K = f->K, BK = f->BK, W = s->W;
-    const gs_capture *c = s->cap;
-    const int HS = GS_MAX_HALVINGS + 1;
     *replaced = 0;
     int n = 0, nsat = 0;
     f->wdd = 0;
@@ -675,20 +673,17 @@ static gs_status fit_component(fit_data *f, int comp, const int *ap, int nap, co
         }
         int x = p % W, y = p / W;
         double *V = f->V + (size_t)n * BK, *D = f->D + (size_t)n * BK;
-        rec_blob_pixel_var(s, (size_t)p, V);
+        rec_blob_pixel_var(s, (size_t)p, V, D);   /* D: the levels, then minus the background */
         int node[4];
         double nw[4];
         const int nn = rec_mesh_weights(&s->mesh, x, y, node, nw), nodes = s->mesh.nx * s->mesh.ny;
-        for (int k = 0; k < K; k++) {
-            size_t pk = s->N * (size_t)k + (size_t)p;
-            double sc = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[pk] : 0)];
+        for (int k = 0; k < K; k++)
             for (int b = 0; b < B; b++) {
                 const double *g = s->fval + ((size_t)k * B + (size_t)b) * (size_t)nodes;
                 double bg = 0;
                 for (int t = 0; t < nn; t++) bg += nw[t] * g[node[t]];
-                D[b * K + k] = ((double)c->raw[pk * (size_t)B + (size_t)b] - s->black) * sc - bg;
+                D[b * K + k] -= bg;
             }
-        }
         for (int b = 0; b < B; b++) {
             double vm = 0, dm = 0;
             for (int k = 0; k < K; k++) {
