@@ -9,7 +9,8 @@
  * each source's per-frame fluxes F_sd free (its own template, scale and chromaticity). For
  * fixed positions F is linear least squares, per band A_b = sum_p w_pb P P^T,
  * F_.d = A_b^-1 sum_p w_pb P D_pd, and chi2 = sum w D^2 - sum_d F_.d . (sum_p w P D_pd); the
- * positions are found by Nelder-Mead (Nelder & Mead 1965). Sources are added one at a time at
+ * positions and sigma are found by Levenberg-Marquardt on the variable projection (Golub &
+ * Pereyra 1973: the gradient and Gauss-Newton matrix of chi2 with F at its optimum). Sources are added one at a time at
  * the footprint pixel where a PSF explains the most residual (the matched filter on the
  * residual), while the chi-square drop is significant (Wilson-Hilferty z over BK + 2 degrees
  * of freedom above deblend_sigma), every source's flux is above FIT_SNR sigmas, and the new
@@ -38,9 +39,10 @@
 #define SPLIT_MIN_SEP_SIGMA 1.5
 /* ... tried only where one source leaves a misfit above this z (a chance of 2 % for one light) */
 #define SPLIT_SCREEN_Z 2.0
-#define FIT_NM_EVALS 30          /* Nelder-Mead evaluations per position coordinate */
-#define FIT_STEP_PX 0.4          /* Nelder-Mead's first simplex step (sigma: 0.2 sigma) */
-#define FIT_TOL_PX 0.01          /* Nelder-Mead stops when its simplex is this small */
+#define FIT_LM_ITER 40           /* Levenberg-Marquardt steps at most */
+#define FIT_LM_LAMBDA_MAX 1e8    /* ... and its damping at most */
+#define FIT_TOL_PX 0.01          /* it stops when a step moves no coordinate more than this */
+#define FIT_CHI2_TOL 1e-3        /* ... or lowers chi2 by less than this */
 #define RANK1_ITER 3              /* alternating least-squares rounds of the gate */
 #define FIT_SIGMA_RANGE 2.0      /* each component's PSF sigma within this factor of the capture's */
 /* The PSF model's relative error (DAOPHOT's "profile error"): each pixel's variance in the fit
@@ -61,8 +63,9 @@ typedef struct {
     double *num;          /* [K] scratch */
     double *Dt, *wP;      /* [BK * n] D by sample, [FIT_MAX_SOURCES * n] w_pb P */
     int bx0, by0, bw, bh; /* the fit pixels' bounding box */
-    double *gx, *gy;      /* [bw + 1], [bh + 1] scratch: the PSF's 1-D shares */
+    double *gx, *gy;      /* [3 (bw + 1)], [3 (bh + 1)] scratch: the PSF's 1-D shares, derivatives */
     double *mean;         /* [3 n B] scratch of spatial_split */
+    double *dP, *perp;    /* [3 FIT_MAX_SOURCES n] scratch of fit_gradient */
 } fit_data;
 
 /* The shares of a pixel-integrated 1-D Gaussian (centre c, sigma) in pixels lo .. lo + n - 1:
@@ -165,71 +168,192 @@ static double fit_eval(fit_data *f, int N, const double *pos)
     return chi2;
 }
 
-/* Nelder-Mead over the 2 N coordinates and sigma from pos (overwritten with the best); its
- * chi2. */
-static double nelder_mead(fit_data *f, int N, double *pos)
+/* psf_1d and its derivatives by the centre c (dc) and by sigma (ds): with u the pixel edge's
+ * offset from c and kappa = 1 / (sqrt 2 sigma), d erf(u kappa) / dc = -2 kappa exp(-u^2 kappa^2)
+ * / sqrt(pi) and d erf(u kappa) / dsigma = -2 u kappa exp(-u^2 kappa^2) / (sqrt(pi) sigma). */
+static void psf_1d_d(int lo, int n, double c, double sigma, double *g, double *dc, double *ds)
 {
-    enum { MAXD = 2 * FIT_MAX_SOURCES + 1 };
-    const int m = 2 * N + 1, max_evals = FIT_NM_EVALS * m;
-    double X[(MAXD + 1) * MAXD], Y[MAXD + 1], c[MAXD], xr[MAXD], xe[MAXD];
-    for (int i = 0; i <= m; i++) {
-        memcpy(X + i * m, pos, sizeof(double) * (size_t)m);
-        if (i > 0) X[i * m + i - 1] += i == m ? FIT_STEP_PX * 0.5 * pos[2 * N] : FIT_STEP_PX;
-        Y[i] = fit_eval(f, N, X + i * m);
+    const double k = 1.0 / (sqrt(2.0) * sigma), a = 2.0 / sqrt(M_PI);
+    double u = lo - 0.5 - c, e0 = erf(u * k), x0 = exp(-u * u * k * k);
+    double c0 = -a * k * x0, s0 = -a * u * k * x0 / sigma;
+    for (int i = 0; i < n; i++) {
+        u = lo + i + 0.5 - c;
+        const double e = erf(u * k), x = exp(-u * u * k * k), ce = -a * k * x, se = -a * u * k * x / sigma;
+        g[i] = 0.5 * (e - e0);
+        dc[i] = 0.5 * (ce - c0);
+        ds[i] = 0.5 * (se - s0);
+        e0 = e, c0 = ce, s0 = se;
     }
-    int evals = m + 1;
-    while (evals < max_evals) {
-        int lo = 0, hi = 0, nh = 0;
-        for (int i = 1; i <= m; i++) {
-            if (Y[i] < Y[lo]) lo = i;
-            if (Y[i] > Y[hi]) hi = i;
+}
+
+/* Solves the m x m symmetric positive system H x = g in place of g (Cholesky); 0 when H is not
+ * positive definite. H is overwritten. */
+static int cholesky_solve(double *H, double *g, int m)
+{
+    for (int j = 0; j < m; j++) {
+        double d = H[j * m + j];
+        for (int t = 0; t < j; t++) d -= H[j * m + t] * H[j * m + t];
+        if (!(d > 0)) return 0;
+        H[j * m + j] = sqrt(d);
+        for (int i = j + 1; i < m; i++) {
+            double v = H[i * m + j];
+            for (int t = 0; t < j; t++) v -= H[i * m + t] * H[j * m + t];
+            H[i * m + j] = v / H[j * m + j];
         }
-        nh = lo;
-        for (int i = 0; i <= m; i++)
-            if (i != hi && Y[i] > Y[nh]) nh = i;
-        double spread = 0;
-        for (int i = 0; i <= m; i++)
-            for (int j = 0; j < m; j++) spread = fmax(spread, fabs(X[i * m + j] - X[lo * m + j]));
-        if (isfinite(Y[hi]) && (Y[hi] - Y[lo] < 1e-3 || spread < FIT_TOL_PX)) break;
-        for (int j = 0; j < m; j++) {
-            c[j] = 0;
-            for (int i = 0; i <= m; i++)
-                if (i != hi) c[j] += X[i * m + j] / m;
+    }
+    for (int i = 0; i < m; i++) {
+        for (int t = 0; t < i; t++) g[i] -= H[i * m + t] * g[t];
+        g[i] /= H[i * m + i];
+    }
+    for (int i = m - 1; i >= 0; i--) {
+        for (int t = i + 1; t < m; t++) g[i] -= H[t * m + i] * g[t];
+        g[i] /= H[i * m + i];
+    }
+    return 1;
+}
+
+/* The gradient g and the Gauss-Newton matrix H of chi2 over the m = 2 N + 1 parameters (x_q,
+ * y_q, then sigma) at the point fit_eval last evaluated (its P, F and Ainv): the variable
+ * projection of Golub & Pereyra (1973), Kaufman's (1975) form. With M_pd = sum_q P_q(p) F_qd
+ * and F at its optimum, d chi2 / d theta_i = -2 sum_pd w_pb r_pd dM_pd / d theta_i (r = D - M);
+ * H_ij = 2 sum_pd w_pb (dM / d theta_i)_perp (dM / d theta_j)_perp, where _perp removes the part
+ * that the fluxes absorb (per band, the weighted projection on the span of the P_q). Each
+ * dM / d theta_i is a sum over sources of dP_q(p) F_qd, so its projection is that of the dP_q:
+ * the sums over the K frames separate. */
+static void fit_gradient(fit_data *f, int N, const double *pos, double *g, double *H)
+{
+    const int n = f->n, B = f->B, K = f->K, BK = f->BK, m = 2 * N + 1, S = 3 * N;
+    const double sigma = pos[2 * N];
+    double *dP = f->dP, *perp = f->perp;   /* [3 N n]: d/dx_q, d/dy_q, d/dsigma of P_q */
+    double *wh = f->wP;                     /* [N n] scratch (fit_eval's, set again there) */
+    double *gx = f->gx, *gy = f->gy, *dx = f->gx + f->bw + 1, *dy = f->gy + f->bh + 1;
+    double *sx = dx + f->bw + 1, *sy = dy + f->bh + 1;
+    for (int q = 0; q < N; q++) {
+        psf_1d_d(f->bx0, f->bw, pos[2 * q], sigma, gx, dx, sx);
+        psf_1d_d(f->by0, f->bh, pos[2 * q + 1], sigma, gy, dy, sy);
+        for (int p = 0; p < n; p++) {
+            const int ix = f->x[p] - f->bx0, iy = f->y[p] - f->by0;
+            dP[(3 * q) * n + p] = dx[ix] * gy[iy];
+            dP[(3 * q + 1) * n + p] = gx[ix] * dy[iy];
+            dP[(3 * q + 2) * n + p] = sx[ix] * gy[iy] + gx[ix] * sy[iy];
         }
-        for (int j = 0; j < m; j++) xr[j] = 2 * c[j] - X[hi * m + j];
-        double yr = fit_eval(f, N, xr);
-        evals++;
-        if (yr < Y[lo]) {
-            for (int j = 0; j < m; j++) xe[j] = 3 * c[j] - 2 * X[hi * m + j];
-            double ye = fit_eval(f, N, xe);
-            evals++;
-            memcpy(X + hi * m, ye < yr ? xe : xr, sizeof(double) * (size_t)m);
-            Y[hi] = ye < yr ? ye : yr;
-        } else if (yr < Y[nh]) {
-            memcpy(X + hi * m, xr, sizeof(double) * (size_t)m);
-            Y[hi] = yr;
-        } else {
-            for (int j = 0; j < m; j++) xe[j] = 0.5 * (c[j] + X[hi * m + j]);
-            double yc = fit_eval(f, N, xe);
-            evals++;
-            if (yc < Y[hi]) {
-                memcpy(X + hi * m, xe, sizeof(double) * (size_t)m);
-                Y[hi] = yc;
-            } else {   /* shrink towards the best */
-                for (int i = 0; i <= m; i++) {
-                    if (i == lo) continue;
-                    for (int j = 0; j < m; j++) X[i * m + j] = 0.5 * (X[i * m + j] + X[lo * m + j]);
-                    Y[i] = fit_eval(f, N, X + i * m);
-                    evals++;
-                }
+    }
+    for (int i = 0; i < m; i++) {
+        g[i] = 0;
+        for (int j = 0; j < m; j++) H[i * m + j] = 0;
+    }
+    /* the parameter of derivative column c = 3 q + j: x_q, y_q or sigma */
+#define PARAM_OF(c) ((c) % 3 == 2 ? 2 * N : 2 * ((c) / 3) + (c) % 3)
+    for (int b = 0; b < B; b++) {
+        const double *A = f->Ainv + (size_t)b * N * N;
+        /* perp_c = dP_c - P^T A^-1 (P W dP_c) */
+        for (int c = 0; c < S; c++) {
+            double pr[FIT_MAX_SOURCES], v[FIT_MAX_SOURCES];
+            for (int q = 0; q < N; q++) {
+                double a = 0;
+                for (int p = 0; p < n; p++) a += f->P[q * n + p] * f->w[p * B + b] * dP[c * n + p];
+                pr[q] = a;
+            }
+            for (int q = 0; q < N; q++) {
+                v[q] = 0;
+                for (int t = 0; t < N; t++) v[q] += A[q * N + t] * pr[t];
+            }
+            for (int p = 0; p < n; p++) {
+                double a = dP[c * n + p];
+                for (int q = 0; q < N; q++) a -= f->P[q * n + p] * v[q];
+                perp[c * n + p] = a;
             }
         }
+        /* FF_qt = sum_k F_q,bk F_t,bk */
+        double FF[FIT_MAX_SOURCES * FIT_MAX_SOURCES];
+        for (int q = 0; q < N; q++)
+            for (int t = q; t < N; t++) {
+                double a = 0;
+                for (int k = 0; k < K; k++) a += f->F[q * BK + b * K + k] * f->F[t * BK + b * K + k];
+                FF[q * N + t] = FF[t * N + q] = a;
+            }
+        for (int p = 0; p < n; p++) {
+            /* w_pb h_q(p), h_q = sum_k (D_pk - sum_t P_t(p) F_tk) F_qk
+             *                 = sum_k D_pk F_qk - sum_t P_t(p) FF_tq */
+            const double *Dp = f->D + (size_t)p * BK + b * K;
+            for (int q = 0; q < N; q++) {
+                const double *Fq = f->F + q * BK + b * K;
+                double a0 = 0, a1 = 0;
+                int k = 0;
+                for (; k + 2 <= K; k += 2) {
+                    a0 += Dp[k] * Fq[k];
+                    a1 += Dp[k + 1] * Fq[k + 1];
+                }
+                if (k < K) a0 += Dp[k] * Fq[k];
+                double h = a0 + a1;
+                for (int t = 0; t < N; t++) h -= f->P[t * n + p] * FF[t * N + q];
+                wh[q * n + p] = f->w[p * B + b] * h;
+            }
+        }
+        for (int c = 0; c < S; c++) {
+            const double *d = dP + c * n, *h = wh + (c / 3) * n;
+            double a = 0;
+            for (int p = 0; p < n; p++) a += d[p] * h[p];
+            g[PARAM_OF(c)] -= 2 * a;
+        }
+        for (int c = 0; c < S; c++)
+            for (int e = c; e < S; e++) {
+                double a = 0;
+                for (int p = 0; p < n; p++) a += f->w[p * B + b] * perp[c * n + p] * perp[e * n + p];
+                a *= 2 * FF[(c / 3) * N + e / 3];
+                const int i = PARAM_OF(c), j = PARAM_OF(e);
+                H[i * m + j] += a;
+                if (c != e) H[j * m + i] += a;
+            }
     }
-    int lo = 0;
-    for (int i = 1; i <= m; i++)
-        if (Y[i] < Y[lo]) lo = i;
-    memcpy(pos, X + lo * m, sizeof(double) * (size_t)m);
-    return fit_eval(f, N, pos);   /* chi2, P, F and Ainv of the best */
+#undef PARAM_OF
+}
+
+/* The positions and sigma from pos (overwritten with the best) that minimise chi2:
+ * Levenberg-Marquardt (Marquardt 1963) on fit_gradient's g and H, each step
+ * (H + lambda diag H) delta = -g kept only when chi2 falls (outside fit_eval's box it is
+ * HUGE_VAL: the step is refused and lambda grows). Stops when a step lowers chi2 by less than
+ * FIT_CHI2_TOL or moves no coordinate by more than FIT_TOL_PX, or after FIT_LM_ITER steps. Its
+ * chi2; P, F and Ainv are those of the best. */
+static double fit_positions(fit_data *f, int N, double *pos)
+{
+    enum { MAXD = 2 * FIT_MAX_SOURCES + 1 };
+    const int m = 2 * N + 1;
+    double chi2 = fit_eval(f, N, pos), lambda = 1e-3;
+    if (!isfinite(chi2)) return chi2;
+    double g[MAXD], H[MAXD * MAXD], Hl[MAXD * MAXD], step[MAXD], trial[MAXD];
+    int fresh = 0;   /* 1: P, F and Ainv are those of pos */
+    fit_gradient(f, N, pos, g, H);
+    for (int it = 0; it < FIT_LM_ITER; it++) {
+        memcpy(Hl, H, sizeof(double) * (size_t)(m * m));
+        for (int i = 0; i < m; i++) {
+            Hl[i * m + i] *= 1 + lambda;
+            step[i] = -g[i];
+        }
+        if (!cholesky_solve(Hl, step, m)) {
+            if ((lambda *= 10) > FIT_LM_LAMBDA_MAX) break;
+            continue;
+        }
+        double move = 0;
+        for (int i = 0; i < m; i++) {
+            trial[i] = pos[i] + step[i];
+            move = fmax(move, fabs(step[i]));
+        }
+        const double c = fit_eval(f, N, trial);
+        fresh = 0;
+        if (!(c < chi2)) {
+            if ((lambda *= 10) > FIT_LM_LAMBDA_MAX || move < FIT_TOL_PX) break;
+            continue;
+        }
+        memcpy(pos, trial, sizeof(double) * (size_t)m);
+        const double drop = chi2 - c;
+        chi2 = c;
+        fresh = 1;
+        lambda = fmax(lambda / 10, 1e-9);
+        if (drop < FIT_CHI2_TOL || move < FIT_TOL_PX) break;
+        fit_gradient(f, N, pos, g, H);
+    }
+    return fresh ? chi2 : fit_eval(f, N, pos);
 }
 
 /* Wilson-Hilferty: chi2 with nu degrees of freedom as a Gaussian z. */
@@ -501,16 +625,18 @@ static gs_status spatial_split(fit_data *f, int comp, const int *fp, int nfp, co
         for (int b = 0; b < B; b++) {
             double dm = 0, vm = 0;
             for (int k = 0; k < K; k++) {
-                dm += f->D[(size_t)p * BK + b * K + k] / K;
-                vm += f->V[(size_t)p * BK + b * K + k] / K;
+                dm += f->D[(size_t)p * BK + b * K + k];
+                vm += f->V[(size_t)p * BK + b * K + k];
             }
+            dm /= K;
+            vm /= K;
             double v = vm / K + (dm > 0 ? FIT_PROFILE_ERR * FIT_PROFILE_ERR * dm * dm : 0.0);
             g.D[p * B + b] = g.Dt[(size_t)b * n + p] = dm;
             g.w[p * B + b] = v > 0 && isfinite(v) ? 1 / v : 0;
             g.wdd += g.w[p * B + b] * dm * dm;
         }
     double one[3] = {start[0], start[1], f->s->psf_sigma}, two[5];
-    double c1 = nelder_mead(&g, 1, one);
+    double c1 = fit_positions(&g, 1, one);
     if (!(wh_z(c1, (double)n * B - B - 3) > SPLIT_SCREEN_Z)) return GS_OK;   /* one source fits */
     int i = best_new_source(&g, 1, one, fp, nfp, R);
     if (i < 0) return GS_OK;
@@ -519,7 +645,7 @@ static gs_status spatial_split(fit_data *f, int comp, const int *fp, int nfp, co
     two[2] = fp[i] % W;
     two[3] = fp[i] / W;
     two[4] = one[2];
-    double c2 = nelder_mead(&g, 2, two);
+    double c2 = fit_positions(&g, 2, two);
     if (!(wh_z(c1 - c2, B + 2) > f->s->o->deblend_sigma)) return GS_OK;
     for (int q = 0; q < 2; q++)
         if (!(source_snr(&g, 2, q) > FIT_SNR)) return GS_OK;
@@ -536,8 +662,6 @@ static gs_status fit_component(fit_data *f, int comp, const int *ap, int nap, co
 {
     const rec_blob_state *s = f->s;
     const int B = f->B, K = f->K, BK = f->BK, W = s->W;
-    const gs_capture *c = s->cap;
-    const int HS = GS_MAX_HALVINGS + 1;
     *replaced = 0;
     int n = 0, nsat = 0;
     f->wdd = 0;
@@ -549,26 +673,25 @@ static gs_status fit_component(fit_data *f, int comp, const int *ap, int nap, co
         }
         int x = p % W, y = p / W;
         double *V = f->V + (size_t)n * BK, *D = f->D + (size_t)n * BK;
-        rec_blob_pixel_var(s, (size_t)p, V);
+        rec_blob_pixel_var(s, (size_t)p, V, D);   /* D: the levels, then minus the background */
         int node[4];
         double nw[4];
         const int nn = rec_mesh_weights(&s->mesh, x, y, node, nw), nodes = s->mesh.nx * s->mesh.ny;
-        for (int k = 0; k < K; k++) {
-            size_t pk = s->N * (size_t)k + (size_t)p;
-            double sc = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[pk] : 0)];
+        for (int k = 0; k < K; k++)
             for (int b = 0; b < B; b++) {
                 const double *g = s->fval + ((size_t)k * B + (size_t)b) * (size_t)nodes;
                 double bg = 0;
                 for (int t = 0; t < nn; t++) bg += nw[t] * g[node[t]];
-                D[b * K + k] = ((double)c->raw[pk * (size_t)B + (size_t)b] - s->black) * sc - bg;
+                D[b * K + k] -= bg;
             }
-        }
         for (int b = 0; b < B; b++) {
             double vm = 0, dm = 0;
             for (int k = 0; k < K; k++) {
-                vm += V[b * K + k] / K;
-                dm += D[b * K + k] / K;
+                vm += V[b * K + k];
+                dm += D[b * K + k];
             }
+            vm /= K;
+            dm /= K;
             if (dm > 0) vm += FIT_PROFILE_ERR * FIT_PROFILE_ERR * dm * dm;
             f->w[n * B + b] = vm > 0 && isfinite(vm) ? 1 / vm : 0;
             for (int k = 0; k < K; k++) f->wdd += f->w[n * B + b] * D[b * K + k] * D[b * K + k];
@@ -607,7 +730,7 @@ static gs_status fit_component(fit_data *f, int comp, const int *ap, int nap, co
     int N = N0;
     memcpy(pos, start, sizeof(double) * (size_t)(2 * N));
     pos[2 * N] = s->psf_sigma;
-    double chi2 = nelder_mead(f, N, pos);
+    double chi2 = fit_positions(f, N, pos);
     if (N >= 2 && !fit_ok(f, N, pos, -INFINITY)) return GS_OK;   /* keep step 5's lights */
     while (N < FIT_MAX_SOURCES) {
         int i = best_new_source(f, N, pos, fp, nfp, R);
@@ -622,7 +745,7 @@ static gs_status fit_component(fit_data *f, int comp, const int *ap, int nap, co
         if (!(wh_z(chi2 - c2, BK + 2) > s->o->deblend_sigma) ||
             !(span_z(f, N + 1) > s->o->deblend_sigma || spatially_distinct(f, N + 1, trial)))
             break;
-        c2 = nelder_mead(f, N + 1, trial);
+        c2 = fit_positions(f, N + 1, trial);
         if (!(wh_z(chi2 - c2, BK + 2) > s->o->deblend_sigma) || !fit_ok(f, N + 1, trial, s->o->deblend_sigma))
             break;
         N++;
@@ -732,18 +855,21 @@ static int fit_data_alloc(fit_data *f, const rec_blob_state *s, double **R)
     f->num = malloc(sizeof(double) * (size_t)K);
     f->Dt = malloc(sizeof(double) * FIT_MAX_PX * (size_t)BK);
     f->wP = malloc(sizeof(double) * FIT_MAX_PX * FIT_MAX_SOURCES);
-    f->gx = malloc(sizeof(double) * (FIT_MAX_PX + 1));
-    f->gy = malloc(sizeof(double) * (FIT_MAX_PX + 1));
+    f->gx = malloc(sizeof(double) * 3 * (FIT_MAX_PX + 1));   /* the shares and two derivatives */
+    f->gy = malloc(sizeof(double) * 3 * (FIT_MAX_PX + 1));
+    f->dP = malloc(sizeof(double) * 3 * FIT_MAX_SOURCES * FIT_MAX_PX);
+    f->perp = malloc(sizeof(double) * 3 * FIT_MAX_SOURCES * FIT_MAX_PX);
     f->mean = malloc(sizeof(double) * 3 * FIT_MAX_PX * (size_t)B);
     *R = malloc(sizeof(double) * FIT_MAX_PX * (size_t)BK);
     return f->x && f->y && f->D && f->V && f->w && f->P && f->F && f->Ainv && f->num && f->Dt && f->wP &&
-           f->gx && f->gy && f->mean && *R;
+           f->gx && f->gy && f->mean && f->dP && f->perp && *R;
 }
 
 static void fit_data_free(fit_data *f, double *R)
 {
     free(f->x), free(f->y), free(f->D), free(f->V), free(f->w), free(f->P), free(f->F);
     free(f->Ainv), free(f->num), free(f->Dt), free(f->wP), free(f->gx), free(f->gy), free(f->mean);
+    free(f->dP), free(f->perp);
     free(R);
 }
 

@@ -164,8 +164,9 @@ double rec_centroid_bias_px(double psf_sigma_px)
 }
 
 /* Noise of pixel p's samples from the pixel's mean level over the K windows (shot + read),
- * var_k[b * K + k] in (DN per cycle)^2. */
-void rec_blob_pixel_var(const rec_blob_state *s, size_t p, double *var_k)
+ * var_k[b * K + k] in (DN per cycle)^2; level_k (NULL: not wanted) the samples' levels
+ * (raw - black) x scale. The raw frames are read once. */
+void rec_blob_pixel_var(const rec_blob_state *s, size_t p, double *var_k, double *level_k)
 {
     const gs_capture *c = s->cap;
     const int B = s->bands, K = s->K, HS = GS_MAX_HALVINGS + 1;
@@ -173,11 +174,17 @@ void rec_blob_pixel_var(const rec_blob_state *s, size_t p, double *var_k)
     for (int k = 0; k < K; k++) {
         double f = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[s->N * (size_t)k + p] : 0)];
         const unsigned short *r = c->raw + (s->N * (size_t)k + p) * (size_t)B;
-        for (int b = 0; b < B; b++) mean_flux[b] += ((double)r[b] - s->black) * f / K;
+        for (int b = 0; b < B; b++) {
+            double l = ((double)r[b] - s->black) * f;
+            mean_flux[b] += l;
+            if (level_k) level_k[b * K + k] = l;
+        }
+        var_k[k] = f;   /* the scale, until band 0's variance replaces it (bands in reverse) */
     }
-    for (int b = 0; b < B; b++)
+    for (int b = 0; b < B; b++) mean_flux[b] /= K;
+    for (int b = B - 1; b >= 0; b--)
         for (int k = 0; k < K; k++) {
-            double f = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[s->N * (size_t)k + p] : 0)];
+            double f = var_k[k];
             double dn = mean_flux[b] / f;   /* expected raw level above black */
             var_k[b * K + k] = (s->nz.read_var_dn2 + (dn > 0 ? dn * s->nz.inv_gain : 0)) * f * f;
         }
@@ -387,7 +394,7 @@ gs_status rec_blob_photometry(rec_blob_state *s, const int *area, rec_catalog *c
             int p = ap[a], x = p % W, y = p / W;
             if (s->sat[p]) continue;
             double *var_k = acc + 2 * BK, wpix[GS_MAX_BANDS];
-            rec_blob_pixel_var(s, (size_t)p, var_k);
+            rec_blob_pixel_var(s, (size_t)p, var_k, NULL);
             double prof = psf > 0 ? rec_psf_share(x, y, cat->x_px[i], cat->y_px[i], psf) : 1.0;
             for (int b = 0; b < B; b++) {
                 double vmean = 0;

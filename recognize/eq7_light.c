@@ -147,17 +147,19 @@ static double loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb, 
     for (int i = 0; i < REC_TAU_N; i++) {
         double tau = rec_eq7_tau(i);
         const double *c = m->red_c + ((size_t)bulb * REC_TAU_N + (size_t)i) * (size_t)nb;
-        double v[GS_MAX_BANDS], a = 0.0, A = 0.0, B = 0.0, C = 0.0, occ = 0.0;
+        /* occ1 = prod_b (1 + s_b^2 T_b) - 1: the occupation term sum_b log(1 + s_b^2 T_b) is
+         * log1p(occ1), one logarithm for the bands (and with log A, one for both) */
+        double v[GS_MAX_BANDS], a = 0.0, A = 0.0, B = 0.0, C = 0.0, occ1 = 0.0;
         for (int it = 0; it < 3; it++) {   /* s_b from the current brightness */
-            A = B = C = occ = 0.0;
+            A = B = C = occ1 = 0.0;
             for (int b = 0; b < nb; b++) {
                 if (!(T[b] > 0.0)) continue;
-                double sb = tol * (a > 0.0 ? a : 0.0) * c[b];
+                double sb = tol * (a > 0.0 ? a : 0.0) * c[b], x = sb * sb * T[b];
                 v[b] = 1.0 / (1.0 / T[b] + sb * sb);
                 A += v[b] * c[b] * c[b];
                 B += v[b] * c[b] * ah[b];
                 C += v[b] * ah[b] * ah[b];
-                if (it == 2) occ += log1p(sb * sb * T[b]);   /* only the last round's is used */
+                occ1 += x + occ1 * x;   /* only the last round's is used */
             }
             if (!(A > 0.0)) break;
             a = B / A;
@@ -169,7 +171,7 @@ static double loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb, 
         double between = C - B * B / A;
         if (between < 0.0) between = 0.0;
         double z = B / sqrt(A);
-        Lt[i] = -0.5 * (R + between) - 0.5 * occ - 0.5 * log(A) + gs_log_phi(z);
+        Lt[i] = -0.5 * (R + between) - 0.5 * log(A + A * occ1) + gs_log_phi(z);
         if (ll_acc) ll_acc[i] = rec_log_add(ll_acc[i], Lt[i] + ll_logw);
         if (w->has_tau_prior) Lt[i] += w->tau_logprior[i] + log((double)REC_TAU_N);
         if (Lt[i] > Lmax) {
@@ -193,7 +195,8 @@ static double loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb, 
     }
     if (!isfinite(Lmax)) return -INFINITY;
     double sum = 0.0;
-    for (int i = 0; i < REC_TAU_N; i++) sum += exp(Lt[i] - Lmax);
+    for (int i = 0; i < REC_TAU_N; i++)
+        if (Lt[i] - Lmax > -746.0) sum += exp(Lt[i] - Lmax);   /* exp underflows to 0 below */
     return Lmax + log(sum / REC_TAU_N);
 }
 

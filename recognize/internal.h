@@ -63,9 +63,9 @@ static inline double rec_blob_sample_var(const rec_blob_state *s, unsigned raw, 
 {
     return gs_noise_raw_var(&s->nz, (double)raw) * scale * scale;
 }
-/* Noise of pixel p's samples from its mean level over the K windows, var_k[b * K + k]
- * (blobs_photometry.c). */
-void rec_blob_pixel_var(const rec_blob_state *s, size_t p, double *var_k);
+/* Noise of pixel p's samples from its mean level over the K windows, var_k[b * K + k], and
+ * (level_k not NULL) the samples' levels above black per cycle (blobs_photometry.c). */
+void rec_blob_pixel_var(const rec_blob_state *s, size_t p, double *var_k, double *level_k);
 /* The share of a Gaussian PSF of sigma centred at (xc, yc) that falls in pixel (x, y). */
 double rec_psf_share(int x, int y, double xc, double yc, double sigma);
 /* How many Gaussian sigmas two normalised signals of n values differ by (blobs_deblend.c). */
@@ -201,7 +201,8 @@ static inline double rec_log_add(double a, double b)
         a = b;
         b = t;
     }
-    return isinf(a) && a < 0.0 ? a : a + log1p(exp(b - a));
+    if (isinf(a) && a < 0.0) return a;
+    return b - a < -746.0 ? a : a + log1p(exp(b - a));   /* exp underflows to 0 there */
 }
 
 /* The reddened band model's grid of optical depths at 550 nm (eq7_light.c). */

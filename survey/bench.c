@@ -23,7 +23,7 @@
 #include <unistd.h>
 
 static const char bench_usage[] =
-    "usage: gridsurvey bench recognize [--quick] [--lights] [--numpy SCRIPT]   Eq. 7 throughput tables (Markdown)\n"
+    "usage: gridsurvey bench recognize [--quick] [--lights | --captures] [--numpy SCRIPT]   Eq. 7 throughput tables (Markdown)\n"
     "       gridsurvey bench db [--quick] ...       survey database tables (bench db --help)\n"
     "       gridsurvey bench pg --pg CONNINFO ...   SQLite vs PostGIS: push and stats (bench pg --help)\n"
     "       gridsurvey bench render [SCENE]         simulator time per effect (bench render --help)\n"
@@ -33,7 +33,8 @@ static const char bench_usage[] =
     "bench recognize: rec_match_pixels (pixels/s) and rec_match_catalog (lights/s) against K,\n"
     "bands, DELIGHT size and pixel count, one core, next to a plain triple-loop reference of the\n"
     "same search; --quick runs a small subset (seconds); --lights only the per-light tables\n"
-    "(rec_match_catalog); --numpy SCRIPT also times the NumPy\n"
+    "(rec_match_catalog); --captures only the whole-capture table (rec_pixel_maps_compute and\n"
+    "rec_blobs_extract); --numpy SCRIPT also times the NumPy\n"
     "implementation of that search on the 1-megapixel rows (survey/bench_eq7_numpy.py).\n"
     "\n"
     "Examples:\n"
@@ -706,16 +707,18 @@ static int bench_recognize(int argc, char **argv)
 {
     static const struct option longs[] = {{"quick", no_argument, 0, 'q'},
                                           {"lights", no_argument, 0, 'l'},
+                                          {"captures", no_argument, 0, 'c'},
                                           {"numpy", required_argument, 0, 'n'},
                                           {"help", no_argument, 0, 'h'},
                                           {0, 0, 0, 0}};
-    int quick = 0, lights_only = 0, c;
+    int quick = 0, lights_only = 0, captures_only = 0, c;
     optind = 1;
     opterr = 0;
     numpy_script = NULL;
     while ((c = getopt_long(argc, argv, "h", longs, NULL)) != -1) {
         if (c == 'q') quick = 1;
         else if (c == 'l') lights_only = 1;
+        else if (c == 'c') captures_only = 1;
         else if (c == 'n') numpy_script = optarg;
         else if (c == 'h') {
             fputs(bench_usage, stdout);
@@ -727,6 +730,10 @@ static int bench_recognize(int argc, char **argv)
     }
     if (optind != argc) {
         fprintf(stderr, "gridsurvey bench recognize: unexpected argument '%s' (see --help)\n", argv[optind]);
+        return 2;
+    }
+    if (lights_only && captures_only) {
+        fprintf(stderr, "gridsurvey bench recognize: --lights and --captures: expected one of them (see --help)\n");
         return 2;
     }
     gs_delight *all = gs_delight_new();
@@ -760,6 +767,7 @@ static int bench_recognize(int argc, char **argv)
            "bulb and phase.\n\n", SNR, REF_ROWS_MAX, REPS);
 
     if (lights_only) goto lights;
+    if (captures_only) goto captures;
     printf("## Per pixel: rec_match_pixels\n\n");
     pixel_header(0);
     size_t P0 = quick ? (size_t)1 << 14 : (size_t)1 << 18;
@@ -790,6 +798,7 @@ static int bench_recognize(int argc, char **argv)
         pixel_row(all, &cf, &failed);
     }
 
+captures:
     printf("\n### A whole capture through the per-pixel maps: rec_pixel_maps_compute\n\n");
     printf("K = 26, RGB, whole database, phases 0/120/240. The capture is rendered in memory: "
            "Gaussian lights (PSF sigma 1.3 px) of random templates over a sky with read noise; "
@@ -808,6 +817,7 @@ static int bench_recognize(int argc, char **argv)
         config cf = {26, 3, 0, 0, 0, 0.0, quick ? nlights[li] / 16 : nlights[li], quick ? 256 : 1024, 0, 0, 0};
         capture_row(all, &cf, &failed);
     }
+    if (captures_only) goto done;
 
 lights:
     printf("\n## Per light: rec_match_catalog\n\n");
@@ -859,6 +869,7 @@ lights:
         config cc = {26, 3, 0, 1, 0, 0.0, quick ? 30 : 200, 0, 1, ti ? nt : 1, 0};
         light_row(all, &cc, &failed);
     }
+done:
     printf("\nTotal %.0f s.\n", now_s() - t_start);
     gs_delight_free(all);
     return failed ? 1 : 0;

@@ -67,6 +67,7 @@ double gs_chi2_isf(double p, int dof)
 
 double gs_log_phi(double z)
 {
+    if (z > 40.0) return -0.0;   /* erfc(z / sqrt 2) underflows to 0 from z = 38.6 */
     if (z > 0.0) return log1p(-0.5 * erfc(z * M_SQRT1_2));
     if (z > -20.0) return log(0.5 * erfc(-z * M_SQRT1_2));
     /* Mills ratio, asymptotic series */
