@@ -21,6 +21,7 @@
  * own lights' apertures. */
 #include "recognize/internal.h"
 
+#include <lapacke.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -186,32 +187,6 @@ static void psf_1d_d(int lo, int n, double c, double sigma, double *g, double *d
     }
 }
 
-/* Solves the m x m symmetric positive system H x = g in place of g (Cholesky); 0 when H is not
- * positive definite. H is overwritten. */
-static int cholesky_solve(double *H, double *g, int m)
-{
-    for (int j = 0; j < m; j++) {
-        double d = H[j * m + j];
-        for (int t = 0; t < j; t++) d -= H[j * m + t] * H[j * m + t];
-        if (!(d > 0)) return 0;
-        H[j * m + j] = sqrt(d);
-        for (int i = j + 1; i < m; i++) {
-            double v = H[i * m + j];
-            for (int t = 0; t < j; t++) v -= H[i * m + t] * H[j * m + t];
-            H[i * m + j] = v / H[j * m + j];
-        }
-    }
-    for (int i = 0; i < m; i++) {
-        for (int t = 0; t < i; t++) g[i] -= H[i * m + t] * g[t];
-        g[i] /= H[i * m + i];
-    }
-    for (int i = m - 1; i >= 0; i--) {
-        for (int t = i + 1; t < m; t++) g[i] -= H[t * m + i] * g[t];
-        g[i] /= H[i * m + i];
-    }
-    return 1;
-}
-
 /* The gradient g and the Gauss-Newton matrix H of chi2 over the m = 2 N + 1 parameters (x_q,
  * y_q, then sigma) at the point fit_eval last evaluated (its P, F and Ainv): the variable
  * projection of Golub & Pereyra (1973), Kaufman's (1975) form. With M_pd = sum_q P_q(p) F_qd
@@ -330,7 +305,8 @@ static double fit_positions(fit_data *f, int N, double *pos)
             Hl[i * m + i] *= 1 + lambda;
             step[i] = -g[i];
         }
-        if (!cholesky_solve(Hl, step, m)) {
+        /* H is symmetric: its row-major storage is its column-major one (no copy by LAPACKE) */
+        if (LAPACKE_dposv(LAPACK_COL_MAJOR, 'L', m, 1, Hl, m, step, m) != 0) {
             if ((lambda *= 10) > FIT_LM_LAMBDA_MAX) break;
             continue;
         }
