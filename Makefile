@@ -136,10 +136,13 @@ bench: $(BIN)
 	mv docs/bench-pg.md.tmp docs/bench-pg.md
 	$(BIN) bench render > docs/bench-render.md.tmp
 	mv docs/bench-render.md.tmp docs/bench-render.md
+	rm -rf $(BUILD)/bench-metro && $(BIN) simulate capture/scenes/metro.json --out-dir $(BUILD)/bench-metro --no-progress
+	$(BIN) bench blobs $(BUILD)/bench-metro > docs/bench-blobs.md.tmp
+	mv docs/bench-blobs.md.tmp docs/bench-blobs.md
 	$(BIN) bench accuracy --out-dir docs/accuracy
 	$(BIN) bench transport > docs/bench-transport.md.tmp
 	mv docs/bench-transport.md.tmp docs/bench-transport.md
-	@cat docs/bench-recognize.md docs/bench-db.md docs/bench-pg.md docs/bench-render.md docs/bench-transport.md
+	@cat docs/bench-recognize.md docs/bench-db.md docs/bench-pg.md docs/bench-render.md docs/bench-blobs.md docs/bench-transport.md
 clean:
 	rm -rf $(BUILD)
 

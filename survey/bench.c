@@ -27,6 +27,7 @@ static const char bench_usage[] =
     "       gridsurvey bench db [--quick] ...       survey database tables (bench db --help)\n"
     "       gridsurvey bench pg --pg CONNINFO ...   SQLite vs PostGIS: push and stats (bench pg --help)\n"
     "       gridsurvey bench render [SCENE]         simulator time per effect (bench render --help)\n"
+    "       gridsurvey bench blobs CAPDIR           blob extraction time, without and with the PSF fit\n"
     "       gridsurvey bench accuracy [--quick]     accuracy against capture time (docs/accuracy.md)\n"
     "       gridsurvey bench transport [--quick]    light-transport unmixing time (docs/bench-transport.md)\n"
     "\n"
@@ -41,6 +42,7 @@ static const char bench_usage[] =
     "  gridsurvey bench recognize --quick --numpy survey/bench_eq7_numpy.py\n"
     "  gridsurvey bench db --quick\n"
     "  gridsurvey bench render capture/scenes/lab.json --frames 1\n"
+    "  gridsurvey bench blobs build/demo/metro-capture --reps 5\n"
     "  gridsurvey bench accuracy --quick --out-dir build/accuracy-quick\n"
     "  gridsurvey bench transport --quick\n"
     "  gridsurvey bench pg --pg \"host=127.0.0.1 port=5432 dbname=bench\" --max 100000\n";
@@ -886,7 +888,8 @@ int srv_cmd_bench(int argc, char **argv)
     if (!strcmp(argv[1], "pg")) return srv_bench_pg(argc - 1, argv + 1);
     if (!strcmp(argv[1], "accuracy")) return srv_bench_accuracy(argc - 1, argv + 1);
     if (!strcmp(argv[1], "render")) return srv_bench_render(argc - 1, argv + 1);
+    if (!strcmp(argv[1], "blobs")) return srv_bench_blobs(argc - 1, argv + 1);
     if (!strcmp(argv[1], "transport")) return srv_bench_transport(argc - 1, argv + 1);
-    fprintf(stderr, "gridsurvey bench: '%s' is not a benchmark: expected recognize, db, pg, render, accuracy or transport\n", argv[1]);
+    fprintf(stderr, "gridsurvey bench: '%s' is not a benchmark: expected recognize, db, pg, render, blobs, accuracy or transport\n", argv[1]);
     return 2;
 }

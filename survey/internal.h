@@ -73,6 +73,8 @@ gs_status srv_bench_time_view(srv_db *db, const char *sql, double *sec);
 int srv_bench_accuracy(int argc, char **argv);
 /* `gridsurvey bench render` (survey/bench_render.c). */
 int srv_bench_render(int argc, char **argv);
+/* `gridsurvey bench blobs` (survey/bench_blobs.c). */
+int srv_bench_blobs(int argc, char **argv);
 /* Its measurement: `frames` acquisitions (k = 0, 1, ...) of the scene with only the effects in
  * effects_mask (bits 1u << CAP_FX_*) that the scene lists, on `threads` threads
  * (cap_sim_set_threads), wall and CPU (the process's, all threads) time per frame. */
