@@ -67,6 +67,7 @@ typedef struct {
     double *gx, *gy;      /* [3 (bw + 1)], [3 (bh + 1)] scratch: the PSF's 1-D shares, derivatives */
     double *mean;         /* [3 n B] scratch of spatial_split */
     double *dP, *perp;    /* [3 FIT_MAX_SOURCES n] scratch of fit_gradient */
+    double *wb, *wPb, *wperp;   /* [n], [FIT_MAX_SOURCES n], [3 FIT_MAX_SOURCES n] its too */
 } fit_data;
 
 /* The shares of a pixel-integrated 1-D Gaussian (centre c, sigma) in pixels lo .. lo + n - 1:
@@ -111,6 +112,21 @@ static int small_inverse(double *a, int n)
     return 1;
 }
 
+/* sum_i a_i b_i, four partial sums. */
+static double dot(const double *a, const double *b, int n)
+{
+    double s0 = 0, s1 = 0, s2 = 0, s3 = 0;
+    int i = 0;
+    for (; i + 4 <= n; i += 4) {
+        s0 += a[i] * b[i];
+        s1 += a[i + 1] * b[i + 1];
+        s2 += a[i + 2] * b[i + 2];
+        s3 += a[i + 3] * b[i + 3];
+    }
+    for (; i < n; i++) s0 += a[i] * b[i];
+    return (s0 + s1) + (s2 + s3);
+}
+
 /* chi2 of N sources at pos[2 N] with the PSF sigma pos[2 N]; leaves P, F and Ainv. HUGE_VAL
  * outside the allowed box (positions; sigma within FIT_SIGMA_RANGE of the capture's) or when the
  * normal matrix is singular. */
@@ -131,33 +147,18 @@ static double fit_eval(fit_data *f, int N, const double *pos)
     double chi2 = f->wdd;
     for (int b = 0; b < B; b++) {
         double *A = f->Ainv + (size_t)b * N * N;
-        for (int q = 0; q < N; q++)
-            for (int t = q; t < N; t++) {
-                double a = 0;
-                for (int p = 0; p < n; p++) a += f->w[p * B + b] * f->P[q * n + p] * f->P[t * n + p];   /* N^2 n: small */
-                A[q * N + t] = A[t * N + q] = a;
-            }
-        if (!small_inverse(A, N)) return HUGE_VAL;
-        /* w P per source, then each sample's right-hand side as dot products with WD's rows */
+        /* w P per source; A = (w P) P^T; each sample's right-hand side as dot products with
+         * WD's rows */
         for (int q = 0; q < N; q++)
             for (int p = 0; p < n; p++) f->wP[q * n + p] = f->w[p * B + b] * f->P[q * n + p];
+        for (int q = 0; q < N; q++)
+            for (int t = q; t < N; t++) A[q * N + t] = A[t * N + q] = dot(f->wP + q * n, f->P + t * n, n);
+        if (!small_inverse(A, N)) return HUGE_VAL;
         for (int k = 0; k < K; k++) {
             const int d = b * K + k;
             const double *Dd = f->Dt + (size_t)d * n;
             double r[FIT_MAX_SOURCES];
-            for (int q = 0; q < N; q++) {
-                const double *wp = f->wP + q * n;
-                double a0 = 0, a1 = 0, a2 = 0, a3 = 0;
-                int p = 0;
-                for (; p + 4 <= n; p += 4) {
-                    a0 += wp[p] * Dd[p];
-                    a1 += wp[p + 1] * Dd[p + 1];
-                    a2 += wp[p + 2] * Dd[p + 2];
-                    a3 += wp[p + 3] * Dd[p + 3];
-                }
-                for (; p < n; p++) a0 += wp[p] * Dd[p];
-                r[q] = (a0 + a1) + (a2 + a3);
-            }
+            for (int q = 0; q < N; q++) r[q] = dot(f->wP + q * n, Dd, n);
             for (int q = 0; q < N; q++) {
                 double v = 0;
                 for (int t = 0; t < N; t++) v += A[q * N + t] * r[t];
@@ -219,63 +220,43 @@ static void fit_gradient(fit_data *f, int N, const double *pos, double *g, doubl
     }
     /* the parameter of derivative column c = 3 q + j: x_q, y_q or sigma */
 #define PARAM_OF(c) ((c) % 3 == 2 ? 2 * N : 2 * ((c) / 3) + (c) % 3)
+    double *wb = f->wb, *wPb = f->wPb, *wperp = f->wperp;   /* [n], [N n], [3 N n] */
     for (int b = 0; b < B; b++) {
         const double *A = f->Ainv + (size_t)b * N * N;
+        for (int p = 0; p < n; p++) wb[p] = f->w[p * B + b];
+        for (int q = 0; q < N; q++)
+            for (int p = 0; p < n; p++) wPb[q * n + p] = wb[p] * f->P[q * n + p];
         /* perp_c = dP_c - P^T A^-1 (P W dP_c) */
         for (int c = 0; c < S; c++) {
-            double pr[FIT_MAX_SOURCES], v[FIT_MAX_SOURCES];
+            double pr[FIT_MAX_SOURCES];
+            for (int q = 0; q < N; q++) pr[q] = dot(wPb + q * n, dP + c * n, n);
+            double *pc = perp + c * n;
+            memcpy(pc, dP + c * n, sizeof(double) * (size_t)n);
             for (int q = 0; q < N; q++) {
-                double a = 0;
-                for (int p = 0; p < n; p++) a += f->P[q * n + p] * f->w[p * B + b] * dP[c * n + p];
-                pr[q] = a;
+                double v = 0;
+                for (int t = 0; t < N; t++) v += A[q * N + t] * pr[t];
+                for (int p = 0; p < n; p++) pc[p] -= v * f->P[q * n + p];
             }
-            for (int q = 0; q < N; q++) {
-                v[q] = 0;
-                for (int t = 0; t < N; t++) v[q] += A[q * N + t] * pr[t];
-            }
-            for (int p = 0; p < n; p++) {
-                double a = dP[c * n + p];
-                for (int q = 0; q < N; q++) a -= f->P[q * n + p] * v[q];
-                perp[c * n + p] = a;
-            }
+            for (int p = 0; p < n; p++) wperp[c * n + p] = wb[p] * pc[p];
         }
         /* FF_qt = sum_k F_q,bk F_t,bk */
         double FF[FIT_MAX_SOURCES * FIT_MAX_SOURCES];
         for (int q = 0; q < N; q++)
-            for (int t = q; t < N; t++) {
-                double a = 0;
-                for (int k = 0; k < K; k++) a += f->F[q * BK + b * K + k] * f->F[t * BK + b * K + k];
-                FF[q * N + t] = FF[t * N + q] = a;
-            }
-        for (int p = 0; p < n; p++) {
-            /* w_pb h_q(p), h_q = sum_k (D_pk - sum_t P_t(p) F_tk) F_qk
-             *                 = sum_k D_pk F_qk - sum_t P_t(p) FF_tq */
-            const double *Dp = f->D + (size_t)p * BK + b * K;
-            for (int q = 0; q < N; q++) {
-                const double *Fq = f->F + q * BK + b * K;
-                double a0 = 0, a1 = 0;
-                int k = 0;
-                for (; k + 2 <= K; k += 2) {
-                    a0 += Dp[k] * Fq[k];
-                    a1 += Dp[k + 1] * Fq[k + 1];
-                }
-                if (k < K) a0 += Dp[k] * Fq[k];
-                double h = a0 + a1;
-                for (int t = 0; t < N; t++) h -= f->P[t * n + p] * FF[t * N + q];
-                wh[q * n + p] = f->w[p * B + b] * h;
-            }
+            for (int t = q; t < N; t++)
+                FF[q * N + t] = FF[t * N + q] = dot(f->F + q * BK + b * K, f->F + t * BK + b * K, K);
+        /* w_pb h_q(p), h_q = sum_k (D_pk - sum_t P_t(p) F_tk) F_qk
+         *                 = sum_k D_pk F_qk - sum_t P_t(p) FF_tq */
+        for (int q = 0; q < N; q++) {
+            double *h = wh + q * n;
+            for (int p = 0; p < n; p++) h[p] = dot(f->D + (size_t)p * BK + b * K, f->F + q * BK + b * K, K);
+            for (int t = 0; t < N; t++)
+                for (int p = 0; p < n; p++) h[p] -= FF[t * N + q] * f->P[t * n + p];
+            for (int p = 0; p < n; p++) h[p] *= wb[p];
         }
-        for (int c = 0; c < S; c++) {
-            const double *d = dP + c * n, *h = wh + (c / 3) * n;
-            double a = 0;
-            for (int p = 0; p < n; p++) a += d[p] * h[p];
-            g[PARAM_OF(c)] -= 2 * a;
-        }
+        for (int c = 0; c < S; c++) g[PARAM_OF(c)] -= 2 * dot(dP + c * n, wh + (c / 3) * n, n);
         for (int c = 0; c < S; c++)
             for (int e = c; e < S; e++) {
-                double a = 0;
-                for (int p = 0; p < n; p++) a += f->w[p * B + b] * perp[c * n + p] * perp[e * n + p];
-                a *= 2 * FF[(c / 3) * N + e / 3];
+                const double a = 2 * FF[(c / 3) * N + e / 3] * dot(wperp + c * n, perp + e * n, n);
                 const int i = PARAM_OF(c), j = PARAM_OF(e);
                 H[i * m + j] += a;
                 if (c != e) H[j * m + i] += a;
@@ -424,50 +405,98 @@ static int fit_ok(const fit_data *f, int N, const double *pos, double deblend_si
     return span_z(f, N) > deblend_sigma || spatially_distinct(f, N, pos);
 }
 
+/* The matched filter of a PSF centred on pixel (cx, cy) (its 1-D shares in f->gx, rr pixels each
+ * side) on the residual R: sum_bk (sum_p w_pb P_p R_p,bk)^2 / sum_p w_pb P_p^2. */
+static double candidate_value(const fit_data *f, const double *R, int cx, int cy, int rr)
+{
+    const int n = f->n, B = f->B, K = f->K, BK = f->BK;
+    double v = 0;
+    for (int b = 0; b < B; b++) {
+        double *num = f->num, den = 0;
+        for (int k = 0; k < K; k++) num[k] = 0;
+        for (int p = 0; p < n; p++) {
+            int dx = f->x[p] - cx, dy = f->y[p] - cy;
+            if (abs(dx) > rr || abs(dy) > rr) continue;
+            double P = f->gx[dx + rr] * f->gx[dy + rr], wp = f->w[p * B + b] * P;
+            den += wp * P;
+            for (int k = 0; k < K; k++) num[k] += wp * R[(size_t)p * BK + b * K + k];
+        }
+        if (den > 0)
+            for (int k = 0; k < K; k++) v += num[k] * num[k] / den;
+    }
+    return v;
+}
+
+typedef struct {
+    double bound;
+    int i;
+} candidate;
+
+static int cmp_candidate(const void *a, const void *b)
+{
+    const candidate *x = a, *y = b;
+    if (x->bound != y->bound) return x->bound < y->bound ? 1 : -1;   /* largest bound first */
+    return (x->i > y->i) - (x->i < y->i);
+}
+
 /* The footprint pixel (of fp[0..nfp)) where one more PSF explains the most of the residual of
  * the N-source fit at pos (F from that fit): max over c of
- * sum_d (sum_p w P_c R_pd)^2 / sum_p w P_c^2. -1 when none is far enough from the sources. */
+ * sum_d (sum_p w P_c R_pd)^2 / sum_p w P_c^2, the first in fp's order among equals. -1 when none
+ * is far enough from the sources. By Cauchy-Schwarz a candidate's value is at most the
+ * residual's energy sum_bk w_pb R_p,bk^2 summed over its window: candidates are tried in the
+ * order of that bound and the search stops where the bound falls below the best value (the
+ * same pixel as trying them all; all are tried when the list cannot be allocated). */
 static int best_new_source(fit_data *f, int N, const double *pos, const int *fp, int nfp, double *R)
 {
     const int n = f->n, B = f->B, K = f->K, BK = f->BK;
     const double sigma = pos[2 * N], reach = ceil(3 * sigma) + 0.5;
     const int W = f->s->W;
-    for (int p = 0; p < n; p++)
+    double *e = f->wb;   /* [n] each pixel's residual energy (fit_gradient's scratch) */
+    for (int p = 0; p < n; p++) {
+        e[p] = 0;
         for (int d = 0; d < BK; d++) {
             double m = 0;
             for (int q = 0; q < N; q++) m += f->P[q * n + p] * f->F[q * BK + d];
-            R[(size_t)p * BK + d] = f->D[(size_t)p * BK + d] - m;
+            const double r = f->D[(size_t)p * BK + d] - m;
+            R[(size_t)p * BK + d] = r;
+            e[p] += f->w[p * B + d / K] * r * r;
         }
+    }
     /* a PSF centred on a pixel: the same 1-D shares at every candidate */
     const int rr = (int)reach, span = 2 * rr + 1;
     psf_1d(-rr, span, 0.0, sigma, f->gx);
-    int best = -1;
+    candidate *c = malloc(sizeof *c * (size_t)(nfp > 0 ? nfp : 1));   /* NULL: all tried in order */
+    int nc = 0, best = -1;
     double best_v = 0;
     for (int i = 0; i < nfp; i++) {
         int cx = fp[i] % W, cy = fp[i] / W, near = 0;
         for (int q = 0; q < N && !near; q++)
             near = hypot(cx - pos[2 * q], cy - pos[2 * q + 1]) < FIT_MIN_SEP_SIGMA * sigma;
         if (near) continue;
-        double v = 0;
-        for (int b = 0; b < B; b++) {
-            double *num = f->num, den = 0;
-            const int kk = K;
-            for (int k = 0; k < kk; k++) num[k] = 0;
-            for (int p = 0; p < n; p++) {
-                int dx = f->x[p] - cx, dy = f->y[p] - cy;
-                if (abs(dx) > rr || abs(dy) > rr) continue;
-                double P = f->gx[dx + rr] * f->gx[dy + rr], wp = f->w[p * B + b] * P;
-                den += wp * P;
-                for (int k = 0; k < kk; k++) num[k] += wp * R[(size_t)p * BK + b * K + k];
+        if (!c) {
+            const double v = candidate_value(f, R, cx, cy, rr);
+            if (v > best_v) {
+                best_v = v;
+                best = i;
             }
-            if (den > 0)
-                for (int k = 0; k < kk; k++) v += num[k] * num[k] / den;
+            continue;
         }
-        if (v > best_v) {
+        double E = 0;
+        for (int p = 0; p < n; p++)
+            if (abs(f->x[p] - cx) <= rr && abs(f->y[p] - cy) <= rr) E += e[p];
+        c[nc++] = (candidate){E * (1 + 1e-9) + 1e-300, i};   /* rounding slack: a bound in floating point */
+    }
+    if (!c) return best;
+    qsort(c, (size_t)nc, sizeof *c, cmp_candidate);
+    for (int t = 0; t < nc && !(c[t].bound < best_v); t++) {
+        const int i = c[t].i;
+        const double v = candidate_value(f, R, fp[i] % W, fp[i] / W, rr);
+        if (v > best_v || (v == best_v && best >= 0 && i < best)) {
             best_v = v;
             best = i;
         }
     }
+    free(c);
     return best;
 }
 
@@ -492,15 +521,14 @@ static double rank1_z(const fit_data *f, double *u, double *v)
                 }
                 u[p] = den > 0 ? num / den : 0;
             }
-            for (int k = 0; k < K; k++) {
-                double num = 0, den = 0;
-                for (int p = 0; p < n; p++) {
-                    double wp = f->w[p * B + b];
-                    num += wp * f->D[(size_t)p * BK + b * K + k] * u[p];
-                    den += wp * u[p] * u[p];
-                }
-                v[k] = den > 0 ? num / den : 0;
+            double den = 0;
+            for (int k = 0; k < K; k++) v[k] = 0;
+            for (int p = 0; p < n; p++) {   /* pixel by pixel: D's rows in memory order */
+                const double wu = f->w[p * B + b] * u[p], *Dp = f->D + (size_t)p * BK + b * K;
+                den += wu * u[p];
+                for (int k = 0; k < K; k++) v[k] += wu * Dp[k];
             }
+            for (int k = 0; k < K; k++) v[k] = den > 0 ? v[k] / den : 0;
         }
         for (int p = 0; p < n; p++)
             for (int k = 0; k < K; k++) {
@@ -835,17 +863,20 @@ static int fit_data_alloc(fit_data *f, const rec_blob_state *s, double **R)
     f->gy = malloc(sizeof(double) * 3 * (FIT_MAX_PX + 1));
     f->dP = malloc(sizeof(double) * 3 * FIT_MAX_SOURCES * FIT_MAX_PX);
     f->perp = malloc(sizeof(double) * 3 * FIT_MAX_SOURCES * FIT_MAX_PX);
+    f->wb = malloc(sizeof(double) * FIT_MAX_PX);
+    f->wPb = malloc(sizeof(double) * FIT_MAX_SOURCES * FIT_MAX_PX);
+    f->wperp = malloc(sizeof(double) * 3 * FIT_MAX_SOURCES * FIT_MAX_PX);
     f->mean = malloc(sizeof(double) * 3 * FIT_MAX_PX * (size_t)B);
     *R = malloc(sizeof(double) * FIT_MAX_PX * (size_t)BK);
     return f->x && f->y && f->D && f->V && f->w && f->P && f->F && f->Ainv && f->num && f->Dt && f->wP &&
-           f->gx && f->gy && f->mean && f->dP && f->perp && *R;
+           f->gx && f->gy && f->mean && f->dP && f->perp && f->wb && f->wPb && f->wperp && *R;
 }
 
 static void fit_data_free(fit_data *f, double *R)
 {
     free(f->x), free(f->y), free(f->D), free(f->V), free(f->w), free(f->P), free(f->F);
     free(f->Ainv), free(f->num), free(f->Dt), free(f->wP), free(f->gx), free(f->gy), free(f->mean);
-    free(f->dP), free(f->perp);
+    free(f->dP), free(f->perp), free(f->wb), free(f->wPb), free(f->wperp);
     free(R);
 }
 
