@@ -170,15 +170,31 @@ static void field_text(const char *line, const char *key, char *out, size_t size
     out[n] = '\0';
 }
 
-/* "key=<integer>" of a reply; GS_EFORMAT if absent or not a number. */
-static gs_status field_long(const char *line, const char *key, long *v)
+#define LINK_U32_MAX 4294967295L /* the firmware's numbers are uint32_t (fw_out_u32) */
+#define LINK_U8_MAX 255L         /* and its STATUS lock, grid, K and k bytes */
+
+/* text[0..len) as a number the way the firmware writes one (decimal digits only), at most max;
+ * -1 if it is not one. */
+static long decimal(const char *text, size_t len, long max)
 {
-    char text[24], *end;
+    if (!len || len > 10) return -1;
+    long x = 0;
+    for (size_t i = 0; i < len; i++) {
+        if (text[i] < '0' || text[i] > '9') return -1;
+        x = 10 * x + (text[i] - '0');
+    }
+    return x <= max ? x : -1;
+}
+
+/* "key=<number>" of a reply, at most max; GS_EFORMAT if absent or not such a number. */
+static gs_status field_long(const char *line, const char *key, long max, long *v)
+{
+    char text[24];
     field_text(line, key, text, sizeof text);
-    errno = 0;
-    long x = strtol(text, &end, 10);
-    if (!text[0] || *end || errno)
-        return gs_fail(GS_EFORMAT, "acam link: '%s': field %s: expected an integer", line, key);
+    long x = decimal(text, strlen(text), max);
+    if (x < 0)
+        return gs_fail(GS_EFORMAT, "acam link: '%s': field %s: expected an integer 0..%ld", line,
+                       key, max);
     *v = x;
     return GS_OK;
 }
@@ -275,7 +291,7 @@ gs_status cap_link_stop(cap_link *l, long *cycles_done)
     char reply[LINK_LINE_MAX];
     gs_status s = command(l, "STOP", "STOP", reply, NULL, 0);
     long n = 0;
-    if (s == GS_OK) s = field_long(reply, "cycles", &n);
+    if (s == GS_OK) s = field_long(reply, "cycles", LINK_U32_MAX, &n);
     if (s == GS_OK && cycles_done) *cycles_done = n;
     return s;
 }
@@ -287,12 +303,13 @@ gs_status cap_link_get_status(cap_link *l, cap_link_status *st)
     gs_status s = command(l, "STATUS", "STATUS", reply, NULL, 0);
     if (s != GS_OK) return s;
     long lock, grid, done, C, K, k, half_ns;
-    if ((s = field_long(reply, "lock", &lock)) != GS_OK ||
-        (s = field_long(reply, "grid", &grid)) != GS_OK ||
-        (s = field_long(reply, "cycles", &done)) != GS_OK ||
-        (s = field_long(reply, "C", &C)) != GS_OK || (s = field_long(reply, "K", &K)) != GS_OK ||
-        (s = field_long(reply, "k", &k)) != GS_OK ||
-        (s = field_long(reply, "half_ns", &half_ns)) != GS_OK)
+    if ((s = field_long(reply, "lock", LINK_U8_MAX, &lock)) != GS_OK ||
+        (s = field_long(reply, "grid", LINK_U8_MAX, &grid)) != GS_OK ||
+        (s = field_long(reply, "cycles", LINK_U32_MAX, &done)) != GS_OK ||
+        (s = field_long(reply, "C", LINK_U32_MAX, &C)) != GS_OK ||
+        (s = field_long(reply, "K", LINK_U8_MAX, &K)) != GS_OK ||
+        (s = field_long(reply, "k", LINK_U8_MAX, &k)) != GS_OK ||
+        (s = field_long(reply, "half_ns", LINK_U32_MAX, &half_ns)) != GS_OK)
         return s;
     field_text(reply, "state", st->state, sizeof st->state);
     field_text(reply, "fault", st->fault, sizeof st->fault);
@@ -313,12 +330,11 @@ gs_status cap_link_get_status(cap_link *l, cap_link_status *st)
 
 gs_status cap_link_cycle_count(cap_link *l, long *cycles_done)
 {
-    char reply[LINK_LINE_MAX], *end;
+    char reply[LINK_LINE_MAX];
     gs_status s = command(l, "COUNT", "COUNT", reply, NULL, 0);
     if (s != GS_OK) return s;
-    errno = 0;
-    long n = strtol(reply + 9, &end, 10);
-    if (reply[9] == '\0' || *end || errno || n < 0)
+    long n = reply[8] ? decimal(reply + 9, strlen(reply + 9), LINK_U32_MAX) : -1;
+    if (n < 0)
         return gs_fail(GS_EFORMAT, "acam link: COUNT -> '%s'", reply);
     *cycles_done = n;
     return GS_OK;
@@ -362,17 +378,18 @@ gs_status cap_link_expose(cap_link *l, const cap_link_config *c, cap_exposure_lo
         if (s != GS_OK) return s;
         if (!strncmp(line, "EV START", 8)) {
             long grid, half_ns;
-            if ((s = field_long(line, "grid", &grid)) != GS_OK ||
-                (s = field_long(line, "half_ns", &half_ns)) != GS_OK)
+            if ((s = field_long(line, "grid", LINK_U8_MAX, &grid)) != GS_OK ||
+                (s = field_long(line, "half_ns", LINK_U32_MAX, &half_ns)) != GS_OK)
                 return s;
             log->grid_hz = (int)grid;
             log->start_half_period_s = (double)half_ns * 1e-9;
             started = 1;
         } else if (line[0] == 'D' && line[1] == ' ') {
-            long n;
-            unsigned long ns;
-            char extra;
-            if (sscanf(line, "D %ld %lu %c", &n, &ns, &extra) != 2)
+            /* "D <n> <half period, ns>" */
+            const char *sp = strchr(line + 2, ' ');
+            long n = sp ? decimal(line + 2, (size_t)(sp - line - 2), LINK_U32_MAX) : -1;
+            long ns = sp ? decimal(sp + 1, strlen(sp + 1), LINK_U32_MAX) : -1;
+            if (n < 0 || ns < 0)
                 return gs_fail(GS_EFORMAT, "acam link: exposure: bad data line '%s'", line);
             if (!started || n != (long)log->cycles || n >= c->cycles)
                 return gs_fail(GS_EFORMAT,

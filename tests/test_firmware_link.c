@@ -172,6 +172,77 @@ TEST(firmware_link_client_scripted)
     CHECK(cap_link_open("/nonexistent/tty", &l) == GS_EIO && l == NULL);
 }
 
+/* Found by tests/fuzz/fuzz_link.c (tests/fuzz/crashes/link/): a data line's half period of
+ * 2^64 - 1 ns (strtoul's saturation) was logged as 1.8e10 s, and "-5" wrapped to the same. The
+ * firmware writes every number as a uint32_t in plain digits (firmware/main.c, fw_out_u32), the
+ * STATUS bytes at most 255: anything else is refused (GS_EFORMAT), whatever the field. */
+TEST(firmware_link_half_period_beyond_u32)
+{
+    static const char *const bad_d[] = {"D 0 4294967296", "D 0 -5", "D 0 18446744073709551615",
+                                        "D 0 +10000500", "D 0  10000500", "D -0 10000500"};
+    cap_link_config c = {4, 1, 2, CAP_LOCKED};
+    for (size_t i = 0; i <= sizeof bad_d / sizeof *bad_d; i++) {
+        int sv[2];
+        CHECK(socketpair(AF_UNIX, SOCK_STREAM, 0, sv) == 0);
+        cap_link *l = NULL;
+        CHECK_OK(cap_link_open_fd(sv[0], &l));
+        if (!l) return;
+        script(sv[1], "OK CFG K=4 k=1 C=2 mode=L", 0);
+        script(sv[1], "OK START", 0);
+        script(sv[1], "EV START grid=50 mode=L half_ns=9999000", 0);
+        script(sv[1], i < sizeof bad_d / sizeof *bad_d ? bad_d[i] : "D 0 4294967295", 0);
+        script(sv[1], "D 1 10000500", 0);
+        script(sv[1], "EV DONE cycles=2", 0);
+        cap_exposure_log log;
+        gs_status s = cap_link_expose(l, &c, &log);
+        if (i < sizeof bad_d / sizeof *bad_d) {
+            CHECK_MSG(s == GS_EFORMAT && log.cycles == 0, "'%s' -> %s, %zu cycles", bad_d[i],
+                      gs_strerror(s), log.cycles);
+        } else { /* the largest the firmware can write: 4.294967295 s */
+            CHECK_OK(s);
+            CHECK(log.cycles == 2);
+            if (log.cycles == 2) CHECK_NEAR(log.half_period_s[0], 4.294967295, 1e-12);
+        }
+        cap_exposure_log_release(&log);
+        cap_link_close(l);
+        close(sv[1]);
+    }
+    /* the same rule for the replies' fields */
+    static const struct {
+        const char *reply;
+        int what; /* 0 STATUS, 1 COUNT, 2 STOP */
+    } bad[] = {
+        {"OK STATUS state=IDLE lock=1 grid=50 cycles=0 C=5 K=4294967298 k=1 mode=L half_ns=0 "
+         "fault=OK last=OK", 0},
+        {"OK STATUS state=IDLE lock=1 grid=306 cycles=0 C=5 K=4 k=1 mode=L half_ns=0 "
+         "fault=OK last=OK", 0},
+        {"OK STATUS state=IDLE lock=1 grid=50 cycles=0 C=5 K=4 k=1 mode=L half_ns=-1 "
+         "fault=OK last=OK", 0},
+        {"OK COUNT -1", 1}, {"OK COUNT 4294967296", 1}, {"OK COUNT", 1}, {"OK COUNT  7", 1},
+        {"OK STOP cycles=+3", 2}, {"OK STOP cycles=99999999999", 2},
+    };
+    int sv[2];
+    CHECK(socketpair(AF_UNIX, SOCK_STREAM, 0, sv) == 0);
+    cap_link *l = NULL;
+    CHECK_OK(cap_link_open_fd(sv[0], &l));
+    if (!l) return;
+    for (size_t i = 0; i < sizeof bad / sizeof *bad; i++) {
+        script(sv[1], bad[i].reply, 0);
+        cap_link_status st;
+        long n;
+        gs_status s = bad[i].what == 0   ? cap_link_get_status(l, &st)
+                      : bad[i].what == 1 ? cap_link_cycle_count(l, &n)
+                                         : cap_link_stop(l, &n);
+        CHECK_MSG(s == GS_EFORMAT, "'%s' -> %s", bad[i].reply, gs_strerror(s));
+    }
+    script(sv[1], "OK COUNT 4294967295", 0);
+    long n = 0;
+    CHECK_OK(cap_link_cycle_count(l, &n));
+    CHECK(n == 4294967295L);
+    cap_link_close(l);
+    close(sv[1]);
+}
+
 /* Does log match the half periods of the trace somewhere (within one 0.5 us tick and the
  * injection's few cycles)? Returns the crossing index of cycle 0, or -1. */
 static long find_in_trace(const trace *tr, const cap_exposure_log *log)

@@ -9,6 +9,7 @@
 #include "tests/fuzz/fuzz_delight_csv.c"
 #include "tests/fuzz/fuzz_firmware.c"
 #include "tests/fuzz/fuzz_geojson.c"
+#include "tests/fuzz/fuzz_link.c"
 #include "tests/fuzz/fuzz_pixels.c"
 #include "tests/fuzz/fuzz_png.c"
 #include "tests/fuzz/fuzz_recording.c"
@@ -25,11 +26,11 @@ static const struct {
     const char *name;
     int (*fn)(const uint8_t *, size_t);
 } targets[] = {
-    {"capture", fuzz_capture},     {"csv", fuzz_csv},         {"db", fuzz_db},
+    {"capture", fuzz_capture},         {"csv", fuzz_csv},           {"db", fuzz_db},
     {"delight_csv", fuzz_delight_csv}, {"firmware", fuzz_firmware}, {"geojson", fuzz_geojson},
-    {"pixels", fuzz_pixels},       {"png", fuzz_png},         {"recording", fuzz_recording},
-    {"scene", fuzz_scene},         {"station", fuzz_station}, {"truth", fuzz_truth},
-    {"wav", fuzz_wav},
+    {"link", fuzz_link},               {"pixels", fuzz_pixels},     {"png", fuzz_png},
+    {"recording", fuzz_recording},     {"scene", fuzz_scene},       {"station", fuzz_station},
+    {"truth", fuzz_truth},             {"wav", fuzz_wav},
 };
 
 /* Every file of dir through fn; returns how many. */
