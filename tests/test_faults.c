@@ -358,7 +358,7 @@ static int run_injected(const scenario *sc, const char *work, const fault_kind *
 /* The outcome of one injected run: 0 bad, 1 failed cleanly, 2 succeeded complete; why (bad). */
 typedef struct {
     int outcome;
-    char why[2600];
+    char why[4200];
 } point_result;
 
 /* The references one scenario's injected runs are judged against. */
@@ -506,7 +506,7 @@ static void sweep(const scenario *sc)
         }
         FILE *f = fopen(res[w], "r");
         CHECK_MSG(f != NULL, "%s: no outcomes from worker %d", res[w], w);
-        char line[3000];
+        char line[4400];
         while (f && fgets(line, sizeof line, f)) {
             int outcome = line[0] - '0';
             tried++;
