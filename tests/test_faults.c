@@ -405,13 +405,14 @@ static point_result try_point(const sweep_refs *rf, const char *work, size_t k, 
 }
 
 /* The step between the tried calls of class c: `make check` sc->points evenly spread, the
- * sweep every call, or every GS_FAULT_MALLOC_STEP-th allocation (GS_FAULT_RUN_MALLOC_STEP for
- * the run scenarios, when set). */
+ * sweep every call, or every GS_FAULT_MALLOC_STEP-th allocation; in the run scenarios every
+ * GS_FAULT_RUN_MALLOC_STEP-th allocation and GS_FAULT_RUN_WRITE_STEP-th write, when set. */
 static long point_step(const scenario *sc, int c, long total, int full)
 {
     long step = full || total <= sc->points ? 1 : (total + sc->points - 1) / sc->points;
-    if (full && c == 0) {
-        const char *e = getenv("GS_FAULT_MALLOC_STEP"), *r = getenv("GS_FAULT_RUN_MALLOC_STEP");
+    if (full && c <= 1) {
+        const char *e = c == 0 ? getenv("GS_FAULT_MALLOC_STEP") : NULL,
+                   *r = getenv(c == 0 ? "GS_FAULT_RUN_MALLOC_STEP" : "GS_FAULT_RUN_WRITE_STEP");
         if (r && *r && !strncmp(sc->name, "run-", 4)) e = r;
         if (e && *e) step = atol(e);
     }
@@ -454,7 +455,7 @@ static void sweep(const scenario *sc)
     rf.files_before = files_before;
     rf.db_ref = db_ref;
     rf.files_ref = files_ref;
-    long tried = 0, failed_ok = 0, succeeded = 0, bad = 0, malloc_step = 1;
+    long tried = 0, failed_ok = 0, succeeded = 0, bad = 0, malloc_step = 1, write_step = 1;
     /* the points, in order: point i goes to worker i % jobs */
     size_t n_points = 0, cap_points = 0;
     struct point {
@@ -466,6 +467,7 @@ static void sweep(const scenario *sc)
         while (strcmp(class_names[c], kinds[k].cls)) c++;
         long step = point_step(sc, c, rf.total[c], full);
         if (c == 0) malloc_step = step;
+        if (c == 1) write_step = step;
         for (long n = 1 + (full ? 0 : (step - 1) / 2); n <= rf.total[c]; n += step) {
             if (n_points == cap_points) {
                 cap_points = cap_points ? 2 * cap_points : 256;
@@ -523,8 +525,8 @@ static void sweep(const scenario *sc)
     const char *rep = getenv("GS_FAULT_REPORT");
     FILE *r = rep && *rep ? fopen(rep, "a") : NULL;
     if (r) {
-        fprintf(r, "| `%s` | %ld | %ld | %ld | %ld | %ld | %ld | %ld | %ld | %ld |\n", sc->name, rf.total[0],
-                malloc_step, rf.total[1], rf.total[2], rf.total[3], tried, failed_ok, succeeded, bad);
+        fprintf(r, "| `%s` | %ld | %ld | %ld | %ld | %ld | %ld | %ld | %ld | %ld | %ld |\n", sc->name, rf.total[0],
+                malloc_step, rf.total[1], write_step, rf.total[2], rf.total[3], tried, failed_ok, succeeded, bad);
         fclose(r);
     }
     if (getenv("GS_TEST_VERBOSE"))

@@ -140,10 +140,11 @@ static int hit(int c)
  * stderr), abort (GLib by design; fontconfig's assertions) or crash (fontconfig passes a failed
  * strdup on: SIGSEGV in FcValueSave under FcConfigSubstituteWithPat and pango_layout_get_size,
  * found by the sweep), in the drawing thread and in the one pango loads fonts in
- * (docs/reliability.md). */
+ * (docs/reliability.md). And the sanitizer runtime's own: ASan's setup of a new thread calls
+ * pthread_getattr_np, which allocates, and aborts when that fails. */
 static const char *const unsurvivable[] = {"libfftw3", "libplplot", "plplot5", "libfontconfig", "libpango",
                                            "libglib-2", "libgobject-2", "libcairo", "libharfbuzz",
-                                           "libfreetype", "libexpat", NULL};
+                                           "libfreetype", "libexpat", "libasan", "libubsan", NULL};
 
 /* 1 if a frame of one of them is on the stack of the allocation being made. Allocations made by
  * backtrace() itself (only its first call, in setup) count as such. */
