@@ -346,9 +346,9 @@ static gs_status render_budget(const cap_scene *sc)
 {
     char what[CAP_PATH_MAX + 400];
     snprintf(what, sizeof what, "%s: camera.width_px x height_px x sensor.bands = %dx%dx%d samples and %zu "
-             "lights, rendered (16 MiB, %d B per sample, %d per pixel, %d per light, the light transport's "
+             "lights, rendered (%.0f MiB, %d B per sample, %d per pixel, %d per light, the light transport's "
              "images and %ld acam.cycles)", sc->path[0] ? sc->path : "scene", sc->cam.width_px, sc->cam.height_px,
-             sc->bands, sc->n_lights, CAP_RENDER_BYTES_PER_SAMPLE, CAP_RENDER_BYTES_PER_PIXEL,
+             sc->bands, sc->n_lights, CAP_RENDER_BASE_BYTES / 1048576, CAP_RENDER_BYTES_PER_SAMPLE, CAP_RENDER_BYTES_PER_PIXEL,
              CAP_RENDER_BYTES_PER_LIGHT, sc->acam.cycles);
     return gs_mem_check(cap_sim_bytes(sc), what);
 }

@@ -505,7 +505,8 @@ static gs_status transport_budget(const char *file, const char *cmd, int W, int 
                    P * REC_TRANSPORT_BYTES_PER_PIXEL;
     char what[4400];
     snprintf(what, sizeof what, "%s: %s of %d frames of %dx%dx%d samples into %d source images and %d frames "
-             "(16 MiB and %d B per pixel besides)", file, cmd, K, W, H, B, S, F, REC_TRANSPORT_BYTES_PER_PIXEL);
+             "(%.0f MiB and %d B per pixel besides)", file, cmd, K, W, H, B, S, F, REC_TRANSPORT_BASE_BYTES / 1048576,
+             REC_TRANSPORT_BYTES_PER_PIXEL);
     return gs_mem_check(bytes, what);
 }
 
