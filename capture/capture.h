@@ -397,6 +397,18 @@ typedef struct cap_sim cap_sim;
 /* d: the DELIGHT database to draw bulbs from (borrowed during the call only); NULL = the scene's
  * "delight" file or the built-in database. GS_ENOTFOUND naming the light for an unknown bulb. */
 gs_status cap_sim_new(const cap_scene *sc, const gs_delight *d, cap_sim **out);
+/* Before it allocates anything, cap_sim_new checks that the render fits the memory budget
+ * (gs_mem_check, GS_ELIMIT naming the scene, the frame and the lights): the bytes
+ * cap_sim_bytes gives, the DELIGHT database and the tables built once (base), the frame and
+ * the capture loop's buffers (these bytes per sample and per pixel, with the HDR maps), every
+ * light's tables and footprint (per light), the light transport's images and the per-cycle
+ * tables, upper bounds of the peak resident memory above the binary's baseline measured in
+ * docs/reliability.md. */
+#define CAP_RENDER_BASE_BYTES (16.0 * 1048576)
+#define CAP_RENDER_BYTES_PER_SAMPLE 14
+#define CAP_RENDER_BYTES_PER_PIXEL 4
+#define CAP_RENDER_BYTES_PER_LIGHT 3072
+double cap_sim_bytes(const cap_scene *sc);
 void cap_sim_free(cap_sim *s);
 const cap_scene *cap_sim_scene(const cap_sim *s);   /* borrowed copy held by the sim */
 /* Threads to render on (default 0: the online CPUs; 1: the caller's only). A frame is the same

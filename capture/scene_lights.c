@@ -30,10 +30,18 @@ typedef struct {
     size_t n, cap;
 } light_vec;
 
-static gs_status push_light(light_vec *lv, const cap_light *l)
+/* Appends l (of the block at path); the lights must fit the memory budget as the simulator
+ * will hold them (CAP_RENDER_BYTES_PER_LIGHT each), checked before the vector grows: a street
+ * grid of a few lines can declare 10^8 lights. */
+static gs_status push_light(const cap_pctx *c, const char *path, light_vec *lv, const cap_light *l)
 {
     if (lv->n == lv->cap) {
         size_t nc = lv->cap ? lv->cap * 2 : 64;
+        char what[160];
+        snprintf(what, sizeof what, "%zu lights (%d B each when rendered)", nc,
+                 CAP_RENDER_BYTES_PER_LIGHT + (int)sizeof(cap_light));
+        if (lv->cap && gs_mem_check((double)nc * (CAP_RENDER_BYTES_PER_LIGHT + sizeof(cap_light)), what) != GS_OK)
+            return cap_scene_bad(c, GS_ELIMIT, path, "%s", gs_detail());
         cap_light *nv = realloc(lv->v, nc * sizeof *nv);
         if (!nv) return gs_fail(GS_ENOMEM, "scene: out of memory for lights");
         lv->v = nv;
@@ -311,7 +319,7 @@ static gs_status parse_geojson(const cap_pctx *c, cap_scene *sc, json_t *blk, co
             goto done;
         }
         if ((s = finish_light(&g, sc, &l, fp, lm != NULL)) != GS_OK) goto done;
-        if ((s = push_light(lv, &l)) != GS_OK) goto done;
+        if ((s = push_light(c, path, lv, &l)) != GS_OK) goto done;
     }
     s = GS_OK;
 done:
@@ -446,7 +454,7 @@ static gs_status parse_street_grid(const cap_pctx *c, const cap_scene *sc, json_
                 if (only && !l.in_image) continue;
                 l.flux_e_per_cycle = cap_scene_flux_from_lumens(sc, l.lumens, l.distance_m);
                 snprintf(l.id, sizeof l.id, "S%d-%zu", index, lv->n - before);
-                if ((s = push_light(lv, &l)) != GS_OK) return s;
+                if ((s = push_light(c, path, lv, &l)) != GS_OK) return s;
             }
         }
     }
@@ -481,7 +489,7 @@ gs_status cap_scene_parse_lights(const cap_pctx *c, cap_scene *sc, json_t *light
             cap_light l;
             s = parse_light(c, sc, o, p, (int)lv.n, &l);
             l.line = gs_json_line(c->doc, p);
-            if (s == GS_OK) s = push_light(&lv, &l);
+            if (s == GS_OK) s = push_light(c, p, &lv, &l);
         }
         for (size_t j = 0; j < lv.n; j++)
             if (!lv.v[j].line) lv.v[j].line = gs_json_line(c->doc, p);

@@ -313,9 +313,51 @@ static const struct {
     {"store", st_store, CAP_FX_COUNT, NULL},
 };
 
+double cap_sim_bytes(const cap_scene *sc)
+{
+    unsigned fx = sc->fx.enabled;
+    double P = (double)sc->cam.width_px * (double)sc->cam.height_px, N = P * sc->bands;
+    double n = (double)sc->n_lights, C = (double)sc->acam.cycles, B = sc->bands;
+    double bytes = CAP_RENDER_BASE_BYTES + N * CAP_RENDER_BYTES_PER_SAMPLE + P * CAP_RENDER_BYTES_PER_PIXEL +
+                   n * (CAP_RENDER_BYTES_PER_LIGHT + sizeof(cap_light) + 8.0 * CAP_MAX_LEVELS * B);
+    if ((fx >> CAP_FX_PSF) & 1u) {
+        /* each light's footprint: a (2R + 1)^2 box of weights (cap_fx_prepare_psf) */
+        double R = fmin(64.0, ceil(sc->fx.psf.radius_sigma * sc->fx.psf.sigma_px));
+        bytes += n * 8.0 * (2 * R + 1) * (2 * R + 1);
+    }
+    if ((fx >> CAP_FX_SKYGLOW) & 1u) bytes += 8.0 * 513 * 513;   /* the kernel, R <= 256 */
+    if ((fx >> CAP_FX_LIGHT_TRANSPORT) & 1u) {
+        /* a float image per light (tau), the daylight's, the truth's; lamp shades' disks */
+        double r = ceil(sc->fx.transport.shade_radius_px);
+        bytes += (n + 2) * N * 4.0 + n * 8.0 * (2 * r + 2) * (2 * r + 2);
+    }
+    if ((fx >> CAP_FX_SEMI_REFLECTION) & 1u) bytes += 2 * N * 4.0;   /* the outdoor image, the truth's */
+    /* per cycle: the mask levels, each thread's scintillation row, and with a timing effect
+     * the species' per-cycle windows (at most one species per light) */
+    bytes += C * (1.0 + 8.0 * GS_MAX_THREADS);
+    int timing = (fx >> CAP_FX_FREQUENCY_WANDER) & 1u || (fx >> CAP_FX_FREE_RUNNING_DRIFT) & 1u ||
+                 (fx >> CAP_FX_DMD_JITTER) & 1u;
+    if (timing && (fx >> CAP_FX_SCINTILLATION) & 1u) bytes += n * B * C * 8.0;
+    return bytes;
+}
+
+/* cap_sim_bytes against the memory budget, in one line naming the scene's sizes. */
+static gs_status render_budget(const cap_scene *sc)
+{
+    char what[CAP_PATH_MAX + 400];
+    snprintf(what, sizeof what, "%s: camera.width_px x height_px x sensor.bands = %dx%dx%d samples and %zu "
+             "lights, rendered (%.0f MiB, %d B per sample, %d per pixel, %d per light, the light transport's "
+             "images and %ld acam.cycles)", sc->path[0] ? sc->path : "scene", sc->cam.width_px, sc->cam.height_px,
+             sc->bands, sc->n_lights, CAP_RENDER_BASE_BYTES / 1048576, CAP_RENDER_BYTES_PER_SAMPLE, CAP_RENDER_BYTES_PER_PIXEL,
+             CAP_RENDER_BYTES_PER_LIGHT, sc->acam.cycles);
+    return gs_mem_check(cap_sim_bytes(sc), what);
+}
+
 gs_status cap_sim_new(const cap_scene *sc, const gs_delight *d_in, cap_sim **out)
 {
     *out = NULL;
+    gs_status budget = render_budget(sc);
+    if (budget != GS_OK) return budget;
     cap_sim *s = calloc(1, sizeof *s);
     if (!s) return gs_fail(GS_ENOMEM, "simulator: out of memory");
     gs_delight *own = NULL;

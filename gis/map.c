@@ -1,7 +1,9 @@
 /* map.c - a PNG map of located lights (gis.h): local east/north metres around the lights'
  * centre (GeographicLib LocalCartesian; grid north is true north at the centre), discs coloured
  * by phase class, 1-sigma error ellipses, stations, a legend, a scale bar and a north arrow.
- * Drawn with PLplot's cairo PNG driver like recognize/plot.c. */
+ * Drawn with PLplot's memcairo driver into memory and encoded by the format kit (PLplot's
+ * pngcairo driver crashed in plend, free() of an invalid pointer, when a write of its file
+ * failed; docs/reliability.md). */
 #include "gis/internal.h"
 
 #include <math.h>
@@ -117,8 +119,9 @@ gs_status gis_map_png(const gis_light *lights, size_t n, const gis_map_opts *o, 
         double mid[3] = {0.5 * (xmin + xmax), 0.5 * (ymin + ymax), 0.0}, h;
         if (gis_gl_local_rev(lat0, lon0, 0.0, mid, &lat0, &lon0, &h)) s = GS_ENUMERIC;
     }
-    gs_atomic a;
-    if (s == GS_OK) s = gs_atomic_open(&a, path, 0);
+    size_t npx = (size_t)o->width_px * (size_t)o->height_px;
+    unsigned char *rgb = s == GS_OK ? malloc(3 * npx) : NULL;
+    if (s == GS_OK && !rgb) s = gs_fail(GS_ENOMEM, "map: cannot hold a %dx%d image", o->width_px, o->height_px);
     if (s != GS_OK) {
         free(x);
         free(y);
@@ -137,18 +140,16 @@ gs_status gis_map_png(const gis_light *lights, size_t n, const gis_map_opts *o, 
     half *= 1.35;
     double hx = half, hy = half, span = 2.0 * half;
 
-    char geometry[64];
-    snprintf(geometry, sizeof geometry, "%dx%d", o->width_px, o->height_px);
-    plsdev("pngcairo");
-    plsfnam(a.tmp);
-    plsetopt("geometry", geometry);
+    memset(rgb, 255, 3 * npx);   /* the background: memcairo draws onto the buffer */
+    plsdev("memcairo");
+    plsmem(o->width_px, o->height_px, rgb);
     plscmap0n(16);
     plscol0(0, 255, 255, 255);   /* background */
     plscol0(1, 0, 0, 0);
     for (int c = 0; c < 5; c++) {
-        unsigned char rgb[3];
-        gis_phase_rgb((gis_phase_class)c, rgb);
-        plscol0(2 + c, rgb[0], rgb[1], rgb[2]);
+        unsigned char col[3];
+        gis_phase_rgb((gis_phase_class)c, col);
+        plscol0(2 + c, col[0], col[1], col[2]);
     }
     plscol0(7, 90, 90, 90);
     plinit();
@@ -251,5 +252,11 @@ gs_status gis_map_png(const gis_light *lights, size_t n, const gis_map_opts *o, 
     free(y);
     free(cls);
     free(ref);
-    return gs_atomic_commit(&a);
+    unsigned char *png = NULL;
+    size_t size = 0;
+    s = gs_png_encode(rgb, o->width_px, o->height_px, 3, 8, &png, &size);
+    free(rgb);
+    if (s == GS_OK) s = gs_file_write_atomic(path, png, size);
+    free(png);
+    return s;
 }

@@ -608,6 +608,21 @@ void rec_unmix_release(rec_unmix_result *r);
 gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unmix_opts *o,
                     rec_unmix_result *r);
 
+/* The memory budget of the light-transport commands (gs_mem_check, GS_ELIMIT in one line
+ * naming file, the declared sizes and the budget), checked before they allocate from their
+ * inputs' declared sizes: unmix (after reading the capture; S sources, each source's K-frame
+ * rendering when render), separate (after reading the capture) and relight (from a sources
+ * file's declared capture, S sources). The bytes are the capture's samples and HDR maps, the
+ * source images (8 B per source sample in unmix, 4 in relight), the rendered or relit frames
+ * (4 B per sample), REC_TRANSPORT_BYTES_PER_PIXEL for the rest (per-pixel state, image
+ * writing) and REC_TRANSPORT_BASE_BYTES (the DELIGHT database and its tables): upper bounds of
+ * the peak resident memory above the binary's baseline measured in docs/reliability.md. */
+#define REC_TRANSPORT_BYTES_PER_PIXEL 96
+#define REC_TRANSPORT_BASE_BYTES (16.0 * 1048576)
+gs_status rec_unmix_budget(const char *capdir, const gs_capture *cap, int S, int render);
+gs_status rec_separate_budget(const char *capdir, const gs_capture *cap);
+gs_status rec_relight_budget(const char *sources_json, const rec_capture_meta *m, int S);
+
 /* Eq. 19: the K-frame sequence of source s, out[((k * height + y) * width + x) * bands + band]
  * = tau_s Q_s * b_s[k] (DN per cycle; may exceed the sensor's saturation; NaN where unknown). */
 gs_status rec_render_source(const rec_unmix_result *r, int s, float *out);

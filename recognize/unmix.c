@@ -494,6 +494,47 @@ static gs_status eq18(ux *u)
     return GS_OK;
 }
 
+/* The bytes of a capture of P pixels x K frames x B bands (2 B per sample, 1 per HDR map
+ * pixel), of S source images of 8 B (unmix) or 4 B (relight) per sample, of F frames of floats,
+ * and the per-pixel rest, against the budget; what names them. */
+static gs_status transport_budget(const char *file, const char *cmd, int W, int H, int B, int K, int S,
+                                  double source_bytes, int F)
+{
+    double P = (double)W * H, N = P * B;
+    double bytes = REC_TRANSPORT_BASE_BYTES + N * K * 2.0 + P * K + S * N * source_bytes + F * N * 4.0 +
+                   P * REC_TRANSPORT_BYTES_PER_PIXEL;
+    char what[4400];
+    snprintf(what, sizeof what, "%s: %s of %d frames of %dx%dx%d samples into %d source images and %d frames "
+             "(%.0f MiB and %d B per pixel besides)", file, cmd, K, W, H, B, S, F, REC_TRANSPORT_BASE_BYTES / 1048576,
+             REC_TRANSPORT_BYTES_PER_PIXEL);
+    return gs_mem_check(bytes, what);
+}
+
+gs_status rec_unmix_budget(const char *capdir, const gs_capture *cap, int S, int render)
+{
+    char file[4200];
+    snprintf(file, sizeof file, "%s/capture.json", capdir);
+    /* the command's image buffer: one source's K frames (--render) or one image */
+    return transport_budget(file, "unmix", cap->width, cap->height, cap->bands, cap->K, S, 8.0,
+                            render ? cap->K : 1);
+}
+
+gs_status rec_separate_budget(const char *capdir, const gs_capture *cap)
+{
+    char file[4200];
+    snprintf(file, sizeof file, "%s/capture.json", capdir);
+    /* the frames' grey values (one float per pixel and frame: K / B frames of B bands), the
+     * transmitted and reflected images (two floats per sample), the mean image */
+    return transport_budget(file, "separate", cap->width, cap->height, cap->bands, cap->K, 0, 0.0,
+                            (cap->K + cap->bands - 1) / cap->bands + 3);
+}
+
+gs_status rec_relight_budget(const char *sources_json, const rec_capture_meta *m, int S)
+{
+    /* the source images (floats), the relit frames, their mean and the capture made of them */
+    return transport_budget(sources_json, "relight", m->width, m->height, m->bands, m->K, S, 4.0, m->K + 1);
+}
+
 gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unmix_opts *o_in,
                     rec_unmix_result *r)
 {

@@ -119,6 +119,10 @@ int srv_cmd_relight(int argc, char **argv)
         return 2;
     }
     gs_status st = rec_sources_read(path, &src, &meta, &files);
+    if (st == GS_OK && (st = rec_relight_budget(path, &meta, src.S)) != GS_OK) {
+        rec_sources_release(&src);
+        free(files);
+    }
     if (st != GS_OK) return srv_error(st);
     rec_relight_set set[REC_MAX_SOURCES];
     memset(set, 0, sizeof set);

@@ -52,6 +52,7 @@ int srv_cmd_separate(int argc, char **argv)
     gs_capture cap;
     rec_separation sep = {0};
     gs_status st = gs_capture_read(capdir, &cap);
+    if (st == GS_OK) st = rec_separate_budget(capdir, &cap);
     if (st == GS_OK) st = rec_separate(&cap, &sep);
     if (st == GS_OK) st = gs_dir_ensure(out);
     size_t n = (size_t)cap.width * cap.height * (size_t)cap.bands;

@@ -217,6 +217,7 @@ int srv_cmd_unmix(int argc, char **argv)
     } else if (st == GS_OK) {
         st = rec_sources_read_specs(sources, &specs, &n);
     }
+    if (st == GS_OK) st = rec_unmix_budget(capdir, &cap, n, render);
     if (st == GS_OK) st = rec_sources_build(d, specs, n, cap.grid_hz, cap.bands, cap.K, &src, into);
     if (st == GS_OK)
         for (int i = 0; i < n; i++)

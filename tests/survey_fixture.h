@@ -55,5 +55,7 @@ double survey_fx_lab_y_px(int i, double scale);
 /* The lab scene (capture/scenes/lab.json) made small, written to path as a scene file (see
  * survey_fixture.c). */
 void survey_fx_small_lab(const char *path, double scale, const survey_lab_spec *spec);
+/* A scene of geographic lights seen from a station, located by `run` (see survey_fixture.c). */
+void survey_fx_geo_scene(const char *path, double scale, int n_lights, int cycles);
 
 #endif

@@ -24,6 +24,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 static char out[1 << 16];
@@ -247,9 +248,11 @@ static void setup_delight_existing(const char *work, const char *assets)
     CHECK(test_run(cmd, out, sizeof out) == 0);
 }
 
-/* The assets every scenario reads, made once: a capture directory of the small lab scene, a
- * survey database with it (to export) and one with only another survey, a DELIGHT CSV and a
- * DELIGHT database holding part of it. */
+/* The assets every scenario reads, made once: a capture directory of a small geographic scene
+ * (160 x 120 pixels, three lights seen from a station, C = 64 cycles: every stage of `run`,
+ * recognition, location, the store, the GeoJSON and the map, in about a second), a survey
+ * database with it (to export) and one with only another survey, a DELIGHT CSV and a DELIGHT
+ * database holding part of it. */
 static const char *assets(void)
 {
     /* beside the tests' own directories, so the tests of one runner share them */
@@ -260,8 +263,7 @@ static const char *assets(void)
     mkdir(dir, 0777);
     char scene[1100], cmd[8192];
     snprintf(scene, sizeof scene, "%s/small.json", dir);
-    survey_lab_spec spec = survey_fx_lab_spec();
-    survey_fx_small_lab(scene, 0.25, &spec);
+    survey_fx_geo_scene(scene, 0.5, 3, 64);
     char *b = realpath(test_bin(), NULL);
     CHECK_MSG(b != NULL, "%s: not found", test_bin());
     if (!b) return dir;
@@ -279,9 +281,10 @@ static const char *assets(void)
 }
 
 static const scenario scenarios[] = {
-    {"run-new-db", 1, "%s run %s/cap --db survey.sqlite --survey night --out-dir .", "survey.sqlite", setup_empty},
-    {"run-existing-db", 2, "%s run %s/cap --db survey.sqlite --survey night --out-dir .", "survey.sqlite",
-     setup_existing_survey},
+    {"run-new-db", 1, "%s run %s/cap --db survey.sqlite --survey night --light-height-m 10 --out-dir .",
+     "survey.sqlite", setup_empty},
+    {"run-existing-db", 2, "%s run %s/cap --db survey.sqlite --survey night --light-height-m 10 --out-dir .",
+     "survey.sqlite", setup_existing_survey},
     {"export-geojson", 2, "%s export --db survey.sqlite -o lights.geojson", "survey.sqlite", setup_export},
     {"export-gpkg", 2, "%s export --db survey.sqlite -o lights.gpkg", "survey.sqlite", setup_export},
     {"delight-import-new", 2, "%s delight import %s/some.csv --delight delight.sqlite", "delight.sqlite",
@@ -352,11 +355,78 @@ static int run_injected(const scenario *sc, const char *work, const fault_kind *
     return rc;
 }
 
+/* The outcome of one injected run: 0 bad, 1 failed cleanly, 2 succeeded complete; why (bad). */
+typedef struct {
+    int outcome;
+    char why[4200];
+} point_result;
+
+/* The references one scenario's injected runs are judged against. */
+typedef struct {
+    const scenario *sc;
+    const char *db_before, *files_before, *db_ref, *files_ref;
+    long total[N_CLASSES];
+} sweep_refs;
+
+/* The n-th call of kind k failing in the work directory work, judged against the references. */
+static point_result try_point(const sweep_refs *rf, const char *work, size_t k, long n)
+{
+    point_result pr = {0, ""};
+    const scenario *sc = rf->sc;
+    char dbp[1400];
+    snprintf(dbp, sizeof dbp, "%s/%s", work, sc->db);
+    long calls[N_CLASSES];
+    int fired, c = 0;
+    while (strcmp(class_names[c], kinds[k].cls)) c++;
+    int rc = run_injected(sc, work, &kinds[k], n, calls, &fired);
+    char *dba = db_state(dbp), *fa = files_state(work, sc->db);
+    char why[1200] = "";
+    if (rc == 0) {
+        pr.outcome = !strcmp(dba, rf->db_ref) && !strcmp(fa, rf->files_ref) ? 2 : 0;
+        if (!pr.outcome)
+            snprintf(why, sizeof why, "succeeded but its output is not complete: %s",
+                     strcmp(dba, rf->db_ref) ? first_difference(rf->db_ref, dba) : first_difference(rf->files_ref, fa));
+    } else {
+        int one_line = rc == 1 && fx_count_lines(out) == 1 && !strncmp(out, "gridsurvey: ", 12);
+        int db_ok = !strcmp(dba, rf->db_before) || !strcmp(dba, rf->db_ref);
+        int ok = one_line && db_ok && files_each_before_or_ref(rf->files_before, rf->files_ref, fa, why, sizeof why);
+        if (!one_line) snprintf(why, sizeof why, "exit %d, not one line on stderr", rc);
+        else if (!db_ok)
+            snprintf(why, sizeof why, "the database is neither as before nor complete: %s",
+                     first_difference(rf->db_ref, dba));
+        pr.outcome = ok;
+    }
+    if (!pr.outcome)
+        snprintf(pr.why, sizeof pr.why, "%s: %s %s at call %ld of %ld (fired %d): %s: %.2000s", sc->name,
+                 kinds[k].cls, kinds[k].err, n, rf->total[c], fired, why, out);
+    free(dba);
+    free(fa);
+    return pr;
+}
+
+/* The step between the tried calls of class c: `make check` sc->points evenly spread, the
+ * sweep every call, or every GS_FAULT_MALLOC_STEP-th allocation; in the run scenarios every
+ * GS_FAULT_RUN_MALLOC_STEP-th allocation and GS_FAULT_RUN_WRITE_STEP-th write, when set. */
+static long point_step(const scenario *sc, int c, long total, int full)
+{
+    long step = full || total <= sc->points ? 1 : (total + sc->points - 1) / sc->points;
+    if (full && c <= 1) {
+        const char *e = c == 0 ? getenv("GS_FAULT_MALLOC_STEP") : NULL,
+                   *r = getenv(c == 0 ? "GS_FAULT_RUN_MALLOC_STEP" : "GS_FAULT_RUN_WRITE_STEP");
+        if (r && *r && !strncmp(sc->name, "run-", 4)) e = r;
+        if (e && *e) step = atol(e);
+    }
+    return step < 1 ? 1 : step;
+}
+
 /* One scenario through every kind of fault: `make check` at sc->points points of each,
- * GS_FAULT_SWEEP=full at every point. */
+ * GS_FAULT_SWEEP=full at every point, on GS_FAULT_JOBS workers (each its own process and work
+ * directory; their outcomes come back through a file each). */
 static void sweep(const scenario *sc)
 {
     int full = getenv("GS_FAULT_SWEEP") && !strcmp(getenv("GS_FAULT_SWEEP"), "full");
+    int jobs = getenv("GS_FAULT_JOBS") ? atoi(getenv("GS_FAULT_JOBS")) : 1;
+    if (jobs < 1 || jobs > 64) jobs = 1;
     char work[1100], dbp[1200];
     snprintf(work, sizeof work, "%s/%s", fx_tmp("fault-work"), sc->name);
     snprintf(dbp, sizeof dbp, "%s/%s", work, sc->db);
@@ -366,15 +436,14 @@ static void sweep(const scenario *sc)
     snprintf(cmd, sizeof cmd, "rm -rf %s && mkdir -p %s", work, work);
     CHECK(test_run(cmd, NULL, 0) == 0);
     sc->setup(work, assets());
+    sweep_refs rf = {sc, NULL, NULL, NULL, NULL, {0}};
     char *db_before = db_state(dbp), *files_before = files_state(work, sc->db);
-    long total[N_CLASSES], again[N_CLASSES], calls[N_CLASSES];
-    char *db_ref = NULL, *files_ref = NULL;
+    long again[N_CLASSES];
     /* two uninjected runs: the counts of calls, and the complete state (the same twice: the
      * oracle needs the command to be deterministic) */
-    int rc = run_injected(sc, work, &kinds[0], 0, total, &fired);
-    CHECK_MSG(rc == 0 && total[0] >= 0, "%s: the uninjected run: %d: %s", sc->name, rc, out);
-    db_ref = db_state(dbp);
-    files_ref = files_state(work, sc->db);
+    int rc = run_injected(sc, work, &kinds[0], 0, rf.total, &fired);
+    CHECK_MSG(rc == 0 && rf.total[0] >= 0, "%s: the uninjected run: %d: %s", sc->name, rc, out);
+    char *db_ref = db_state(dbp), *files_ref = files_state(work, sc->db);
     rc = run_injected(sc, work, &kinds[0], 0, again, &fired);
     CHECK_MSG(rc == 0 && again[0] >= 0, "%s: the uninjected run: %d: %s", sc->name, rc, out);
     char *dbr = db_state(dbp), *fr = files_state(work, sc->db);
@@ -382,53 +451,88 @@ static void sweep(const scenario *sc)
     CHECK_MSG(!strcmp(fr, files_ref), "%s: two uninjected runs differ: %s", sc->name, first_difference(files_ref, fr));
     free(dbr);
     free(fr);
-    long tried = 0, failed_ok = 0, succeeded = 0, bad = 0;
+    rf.db_before = db_before;
+    rf.files_before = files_before;
+    rf.db_ref = db_ref;
+    rf.files_ref = files_ref;
+    long tried = 0, failed_ok = 0, succeeded = 0, bad = 0, malloc_step = 1, write_step = 1;
+    /* the points, in order: point i goes to worker i % jobs */
+    size_t n_points = 0, cap_points = 0;
+    struct point {
+        size_t k;
+        long n;
+    } *points = NULL;
     for (size_t k = 0; k < sizeof kinds / sizeof *kinds; k++) {
         int c = 0;
         while (strcmp(class_names[c], kinds[k].cls)) c++;
-        long step = full || total[c] <= sc->points ? 1 : (total[c] + sc->points - 1) / sc->points;
-        if (full && c == 0 && getenv("GS_FAULT_MALLOC_STEP")) step = atol(getenv("GS_FAULT_MALLOC_STEP"));
-        if (step < 1) step = 1;
-        for (long n = 1 + (full ? 0 : (step - 1) / 2); n <= total[c]; n += step) {
-            rc = run_injected(sc, work, &kinds[k], n, calls, &fired);
-            tried++;
-            char *dba = db_state(dbp), *fa = files_state(work, sc->db);
-            char why[1200] = "";
-            int ok;
-            if (rc == 0) {
-                ok = !strcmp(dba, db_ref) && !strcmp(fa, files_ref);
-                if (!ok)
-                    snprintf(why, sizeof why, "succeeded but its output is not complete: %s",
-                             strcmp(dba, db_ref) ? first_difference(db_ref, dba) : first_difference(files_ref, fa));
-                succeeded += ok;
-            } else {
-                int one_line = rc == 1 && fx_count_lines(out) == 1 && !strncmp(out, "gridsurvey: ", 12);
-                int db_ok = !strcmp(dba, db_before) || !strcmp(dba, db_ref);
-                ok = one_line && db_ok && files_each_before_or_ref(files_before, files_ref, fa, why, sizeof why);
-                if (!one_line) snprintf(why, sizeof why, "exit %d, not one line on stderr", rc);
-                else if (!db_ok)
-                    snprintf(why, sizeof why, "the database is neither as before nor complete: %s",
-                             first_difference(db_ref, dba));
-                failed_ok += ok;
+        long step = point_step(sc, c, rf.total[c], full);
+        if (c == 0) malloc_step = step;
+        if (c == 1) write_step = step;
+        for (long n = 1 + (full ? 0 : (step - 1) / 2); n <= rf.total[c]; n += step) {
+            if (n_points == cap_points) {
+                cap_points = cap_points ? 2 * cap_points : 256;
+                struct point *np = realloc(points, cap_points * sizeof *np);
+                CHECK(np != NULL);
+                if (!np) break;
+                points = np;
             }
-            bad += !ok;
-            CHECK_MSG(ok, "%s: %s %s at call %ld of %ld (fired %d): %s: %.2000s", sc->name, kinds[k].cls,
-                      kinds[k].err, n, total[c], fired, why, out);
-            free(dba);
-            free(fa);
+            points[n_points++] = (struct point){k, n};
         }
     }
+    pid_t pids[64];
+    char res[64][1200];
+    for (int w = 0; w < jobs; w++) {
+        snprintf(res[w], sizeof res[w], "%s.worker%d", work, w);
+        fflush(NULL);
+        pids[w] = jobs > 1 ? fork() : 0;
+        CHECK(pids[w] >= 0);
+        if (pids[w] != 0) continue;
+        /* a worker: its points, each outcome a line "OUTCOME WHY" (why without newlines) */
+        char wwork[1200];
+        snprintf(wwork, sizeof wwork, "%s-w%d", work, w);
+        FILE *f = fopen(res[w], "w");
+        for (size_t i = (size_t)w; f && i < n_points; i += (size_t)jobs) {
+            point_result pr = try_point(&rf, jobs > 1 ? wwork : work, points[i].k, points[i].n);
+            for (char *p = pr.why; *p; p++)
+                if (*p == '\n') *p = ' ';
+            fprintf(f, "%d %s\n", pr.outcome, pr.why);
+            fflush(f);
+        }
+        if (f) fclose(f);
+        if (jobs > 1) _exit(f ? 0 : 1);
+    }
+    for (int w = 0; w < jobs; w++) {
+        if (jobs > 1) {
+            int st = 0;
+            CHECK(waitpid(pids[w], &st, 0) == pids[w] && WIFEXITED(st) && WEXITSTATUS(st) == 0);
+        }
+        FILE *f = fopen(res[w], "r");
+        CHECK_MSG(f != NULL, "%s: no outcomes from worker %d", res[w], w);
+        char line[4400];
+        while (f && fgets(line, sizeof line, f)) {
+            int outcome = line[0] - '0';
+            tried++;
+            failed_ok += outcome == 1;
+            succeeded += outcome == 2;
+            bad += outcome == 0;
+            line[strcspn(line, "\n")] = '\0';
+            CHECK_MSG(outcome != 0, "%s", line + 2);
+        }
+        if (f) fclose(f);
+    }
+    CHECK_MSG(tried == (long)n_points, "%s: %ld of %zu points have an outcome", sc->name, tried, n_points);
+    free(points);
     const char *rep = getenv("GS_FAULT_REPORT");
     FILE *r = rep && *rep ? fopen(rep, "a") : NULL;
     if (r) {
-        fprintf(r, "| `%s` | %ld | %ld | %ld | %ld | %ld | %ld | %ld | %ld |\n", sc->name, total[0], total[1],
-                total[2], total[3], tried, failed_ok, succeeded, bad);
+        fprintf(r, "| `%s` | %ld | %ld | %ld | %ld | %ld | %ld | %ld | %ld | %ld | %ld |\n", sc->name, rf.total[0],
+                malloc_step, rf.total[1], write_step, rf.total[2], rf.total[3], tried, failed_ok, succeeded, bad);
         fclose(r);
     }
     if (getenv("GS_TEST_VERBOSE"))
-        printf("    %s: calls malloc %ld, write %ld, fsync %ld, rename %ld; %ld tried: %ld failed cleanly, "
-               "%ld succeeded, %ld bad\n", sc->name, total[0], total[1], total[2], total[3], tried, failed_ok,
-               succeeded, bad);
+        printf("    %s: calls malloc %ld (every %ld tried), write %ld, fsync %ld, rename %ld; %ld tried: %ld "
+               "failed cleanly, %ld succeeded, %ld bad\n", sc->name, rf.total[0], malloc_step, rf.total[1],
+               rf.total[2], rf.total[3], tried, failed_ok, succeeded, bad);
     free(db_before);
     free(files_before);
     free(db_ref);
@@ -461,7 +565,8 @@ TEST(run_failed_capture_insert_leaves_database_as_it_was)
     char db[1200];
     snprintf(db, sizeof db, "%s/s.sqlite", dir);
     char *before = db_state(db);
-    snprintf(cmd, sizeof cmd, "cd %s && %s run %s/cap --db s.sqlite --survey night --out-dir . 2>&1 >/dev/null", dir,
+    snprintf(cmd, sizeof cmd, "cd %s && %s run %s/cap --db s.sqlite --survey night --light-height-m 10 --out-dir . "
+             "2>&1 >/dev/null", dir,
              bin ? bin : "", a);
     CHECK(test_run(cmd, out, sizeof out) == 1);
     CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "refused"), "%s", out);
@@ -527,4 +632,50 @@ TEST(db_init_write_failure_leaves_no_file)
         free(files);
     }
     free(bin);
+}
+
+/* The map (`run`'s and `locate --map`'s) was written by PLplot's pngcairo driver, which ignores
+ * a failed write of its file: the command exited 0 leaving a truncated map (0 to 52 KB of 60).
+ * The map is now drawn by the memcairo driver into memory and written by the format kit. Every
+ * write of `locate --map` fails in turn: each run exits 0 with the complete map and GeoJSON, or
+ * 1 in one line with each of them absent or complete. */
+static void setup_locate(const char *work, const char *assets_dir)
+{
+    (void)assets_dir;
+    char path[1200];
+    snprintf(path, sizeof path, "%s/st.json", work);
+    fx_write_text(path, "{\"format\": \"gridsurvey-station/1\", \"lat_deg\": 40.0, \"lon_deg\": -75.0,\n"
+                        " \"height_m\": 120.0, \"heading_deg\": 30, \"pitch_deg\": -5, \"roll_deg\": 1,\n"
+                        " \"focal_px\": 2000, \"cx_px\": 959.5, \"cy_px\": 539.5}\n");
+    snprintf(path, sizeof path, "%s/px.csv", work);
+    fx_write_text(path, "id,x_px,y_px\nA,959.5,539.5\nB,100,800\n");
+}
+
+TEST(map_write_failure_never_leaves_a_partial_map)
+{
+    const scenario sc = {"locate-map", 0, "%s locate --station st.json --pixels px.csv --light-height-m 30 -o l.geojson "
+                         "--map m.png", "none", setup_locate};
+    char work[1100];
+    snprintf(work, sizeof work, "%s/locate", fx_tmp("fault-work"));
+    const fault_kind k = {"write", "EIO"};
+    long counts[N_CLASSES] = {0}, calls[N_CLASSES];
+    int fired;
+    int ok = run_injected(&sc, work, &k, 0, counts, &fired) == 0 && counts[1] > 0;
+    CHECK_MSG(ok, "%s", out);
+    if (!ok) return;
+    char *before = strdup(""), *ref = files_state(work, "none");
+    CHECK(strstr(ref, "./m.png") != NULL);
+    for (long n = 1; n <= counts[1]; n++) {
+        int rc = run_injected(&sc, work, &k, n, calls, &fired);
+        CHECK_MSG(rc == 0 || (rc == 1 && fx_count_lines(out) == 1), "write %ld of %ld: exit %d: %s", n,
+                  counts[1], rc, out);
+        char *after = files_state(work, "none"), why[1200] = "";
+        /* the inputs are there before and after; the outputs each absent or complete */
+        CHECK_MSG(files_each_before_or_ref(before, ref, after, why, sizeof why), "write %ld of %ld: %s", n,
+                  counts[1], why);
+        if (rc == 0) CHECK_MSG(!strcmp(after, ref), "write %ld: succeeded: %s", n, first_difference(ref, after));
+        free(after);
+    }
+    free(before);
+    free(ref);
 }

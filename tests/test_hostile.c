@@ -8,11 +8,16 @@
 #include "recognize/base/base.h"
 #include "tests/fixtures.h"
 #include "tests/test.h"
+#include "tests/transport_fixture.h"
 
+#include <fcntl.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 static char out[1 << 20];
@@ -296,6 +301,216 @@ TEST(capture_frame_larger_than_any_png_refused)
     gs_capture c;
     CHECK(gs_capture_read(dir, &c) == GS_EFORMAT);
     CHECK_MSG(strstr(gs_detail(), "larger than any PNG of 8x8 pixels"), "%s", gs_detail());
+}
+
+/* ------------------------------------------------------------------ the render's and unmix's budget */
+
+/* A scene of one light in the middle of a side x side x bands frame, K frames of `cycles`. */
+static const char *budget_scene(const char *name, int side, int bands, int K, int cycles)
+{
+    const char *path = fx_tmp(name);
+    char text[2048];
+    snprintf(text, sizeof text,
+             "{\"format\": \"gridsurvey-scene/1\", \"seed\": 1, \"grid\": {\"nominal_hz\": 50},\n"
+             " \"camera\": {\"width_px\": %d, \"height_px\": %d, \"intrinsics\": {\"focal_px\": %d},\n"
+             "   \"optics\": {\"aperture_mm\": 1.0, \"transmission\": 3e-4},\n"
+             "   \"sensor\": {\"bands\": %d, \"bit_depth\": 12, \"full_well_e\": 20000, \"read_noise_e\": 4,\n"
+             "              \"qe\": 0.6, \"gain_e_per_dn\": 5, \"black_level_dn\": 64}},\n"
+             " \"acam\": {\"K\": %d, \"cycles\": %d, \"locked\": true, \"masks\": 64},\n"
+             " \"lights\": [{\"id\": \"a\", \"bulb\": \"cfl-20w\", \"phase_deg\": 0, \"x_px\": %d, \"y_px\": %d,\n"
+             "              \"distance_m\": 3, \"lumens\": 800}],\n"
+             " \"effects\": {\"psf\": {\"sigma_px\": 1.5}, \"shot_noise\": {}, \"read_noise\": {}, \"adc\": {}}}\n",
+             side, side, side, bands, K, cycles, side / 2, side / 2);
+    fx_write_text(path, text);
+    return path;
+}
+
+/* The peak resident memory of the command argv (the binary first), KiB: a child's own
+ * ru_maxrss (wait4); -1 if it did not run or did not exit 0. */
+static long peak_kib(const char *const argv[])
+{
+    fflush(NULL);
+    pid_t pid = fork();
+    if (pid == 0) {
+        int null = open("/dev/null", O_WRONLY);
+        dup2(null, 1);
+        dup2(null, 2);
+        execv(argv[0], (char *const *)argv);
+        _exit(127);
+    }
+    int st;
+    struct rusage ru;
+    if (pid < 0 || wait4(pid, &st, 0, &ru) != pid || !WIFEXITED(st) || WEXITSTATUS(st)) return -1;
+    return ru.ru_maxrss;
+}
+
+/* simulate, capture --backend sim and run allocated the render's frames and per-light tables
+ * from the scene's declared sizes without a budget: a few hundred bytes of JSON declared
+ * 32768 x 32768 x 3 samples (about 46 GiB to render), and a street grid of a few lines 10^8
+ * lights. Now each is refused in one line before anything is allocated or written; a scene
+ * just under the budget renders; and the constants bound the measured peak. */
+TEST(scene_memory_budget_checked_before_rendering)
+{
+    const char *huge = budget_scene("huge.json", 32768, 3, 26, 64), *o = fx_tmp("huge-out"),
+               *db = fx_tmp("huge.sqlite");
+    CHECK(run("%s --max-memory 4G simulate %s --out-dir %s --no-progress", huge, o, NULL) == 1);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "huge.json: camera.width_px x height_px x sensor.bands = "
+              "32768x32768x3") && strstr(out, "memory budget of 4096.0 MiB"), "%s", out);
+    CHECK(run("%s --max-memory 4G capture --backend sim --scene %s --out-dir %s", huge, o, NULL) == 1);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "32768x32768x3"), "%s", out);
+    CHECK(run("%s --max-memory 4G run %s --db %s --capture-dir %s", huge, db, o) == 1);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "32768x32768x3"), "%s", out);
+    CHECK(!fx_exists(o) && !fx_exists(db));
+    /* a 100 km square street grid, a light every 5 m: 4 x 10^8 lights, refused as they are made */
+    const char *grid = fx_tmp("grid.json");
+    fx_write_text(grid, "{\"format\": \"gridsurvey-scene/1\", \"grid\": {\"nominal_hz\": 50},\n"
+                        " \"camera\": {\"width_px\": 64, \"height_px\": 64, \"intrinsics\": {\"focal_px\": 64},\n"
+                        "   \"station\": {\"lat_deg\": 32.8, \"lon_deg\": 35.0, \"height_m\": 100},\n"
+                        "   \"pose\": {\"heading_deg\": 0, \"pitch_deg\": -5}},\n"
+                        " \"acam\": {\"K\": 26, \"cycles\": 64},\n"
+                        " \"lights\": [{\"type\": \"street_grid\", \"center\": {\"lat_deg\": 33.3, \"lon_deg\": 35.0},\n"
+                        "   \"size_m\": [100000, 100000], \"street_spacing_m\": 10, \"light_spacing_m\": 5,\n"
+                        "   \"max_range_m\": 1e7, \"technologies\": [{\"bulb\": \"hps-150w\", \"lumens\": 15000}]}]}\n");
+    CHECK(run("%s --max-memory 64M simulate %s --out-dir %s --no-progress", grid, o, NULL) == 1);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "grid.json") && strstr(out, "lights[0]") &&
+              strstr(out, "memory budget of 64.0 MiB"), "%s", out);
+    CHECK(!fx_exists(o));
+    /* just under the budget it renders, one byte less it does not (the budget in bytes) */
+    const char *small = budget_scene("small.json", 256, 3, 2, 16), *o2 = fx_tmp("small-out");
+    cap_scene sc;
+    CHECK_OK(cap_scene_read(small, &sc));
+    double b = cap_sim_bytes(&sc);
+    cap_scene_release(&sc);
+    char lim[64];
+    snprintf(lim, sizeof lim, "%.0f", floor(b) - 1);
+    CHECK(run("%s --max-memory %s simulate %s --out-dir %s --no-progress", lim, small, o2) == 1);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "256x256x3") && !fx_exists(o2), "%s", out);
+    snprintf(lim, sizeof lim, "%.0f", ceil(b));
+    CHECK_MSG(run("%s --max-memory %s simulate %s --out-dir %s --no-progress", lim, small, o2) == 0, "%s", out);
+    CHECK(fx_exists(fx_path(o2, "capture.json")));
+    /* the bound against the measured peak above the binary's baseline (not under ASan: its
+     * shadow memory and quarantine are not the tool's); at least the frame's doubles and
+     * samples (10 B per sample) must show, or the measurement measured nothing */
+    if (fx_sanitized()) return;
+    const char *big = budget_scene("big.json", 1024, 3, 2, 16), *o3 = fx_tmp("big-out");
+    CHECK_OK(cap_scene_read(big, &sc));
+    b = cap_sim_bytes(&sc);
+    cap_scene_release(&sc);
+    char bin[4096];
+    CHECK(realpath(test_bin(), bin) != NULL);
+    const char *const version[] = {bin, "--version", NULL};
+    const char *const sim[] = {bin, "simulate", big, "--out-dir", o3, "--no-progress", NULL};
+    long base = peak_kib(version), peak = peak_kib(sim);
+    CHECK(base > 0 && peak > 0);
+    double above = 1024.0 * (double)(peak - base), samples = 1024.0 * 1024 * 3;
+    CHECK_MSG(above <= b && above >= 10 * samples, "peak %.1f MiB above the baseline, bound %.1f MiB",
+              above / 1048576, b / 1048576);
+}
+
+/* The smallest budget, in bytes, that check passes (a bisection over gs_mem_budget_set). */
+static double budget_threshold(gs_status (*check)(const void *), const void *arg)
+{
+    double lo = 1048576, hi = 0x1p40;
+    while (hi - lo > 1) {
+        double mid = floor(0.5 * (lo + hi));
+        gs_mem_budget_set((size_t)mid);
+        if (check(arg) == GS_OK) hi = mid;
+        else lo = mid;
+    }
+    gs_mem_budget_set(0);
+    return hi;
+}
+typedef struct {
+    const char *dir;
+    const gs_capture *cap;
+    const char *sources;
+    const rec_capture_meta *meta;
+    int S;
+} budget_args;
+static gs_status unmix_check(const void *a)
+{
+    const budget_args *b = a;
+    return rec_unmix_budget(b->dir, b->cap, b->S, 1);
+}
+static gs_status separate_check(const void *a)
+{
+    const budget_args *b = a;
+    return rec_separate_budget(b->dir, b->cap);
+}
+static gs_status relight_check(const void *a)
+{
+    const budget_args *b = a;
+    return rec_relight_budget(b->sources, b->meta, b->S);
+}
+
+/* unmix allocated its source images (8 B per source sample) and, with --render, each source's
+ * K frames from the capture's declared sizes, beyond what reading the capture is allowed;
+ * relight allocated the source images, the relit frames and a capture from a sources file's
+ * declared capture; separate its images. Each is now refused in one line, with nothing
+ * written, one byte under its budget, and runs at it; unmix's constants bound its peak. */
+TEST(unmix_memory_budget_checked_before_allocating)
+{
+    static const trfx_lamp lamps[] = {
+        {"inc25", "inc-a60-25w-230v", 0, 11.2, 8.9, 3.8, 6e6},
+        {"cfl23", "cfl-23w", 120, 52.9, 7.2, 4.2, 6e6},
+        {"ledfil", "led-fil-4w-lin", 240, 32.0, 4.9, 4.5, 5e6},
+    };
+    trfx_opts o = {0};
+    o.W = 160;
+    o.H = 120;
+    char *text = trfx_scene(&o, lamps, 3);
+    const char *dir = fx_tmp("ucap"), *src = fx_tmp("usources.json"), *u = fx_tmp("unmixed"),
+               *r = fx_tmp("relit"), *sep = fx_tmp("separated");
+    gs_capture cap;
+    int ok = trfx_render(text, dir, &cap);
+    free(text);
+    if (!ok) return;
+    fx_write_text(src, "{\"format\": \"gridsurvey-sources/1\", \"sources\": [{\"bulb\": \"inc-a60-25w-230v\", "
+                       "\"phase_deg\": 0}, {\"bulb\": \"cfl-23w\", \"phase_deg\": 120}, {\"bulb\": "
+                       "\"led-fil-4w-lin\", \"phase_deg\": 240}]}\n");
+    budget_args a = {dir, &cap, NULL, NULL, 3};
+    double t = budget_threshold(unmix_check, &a), ts = budget_threshold(separate_check, &a);
+    char lim[64];
+    snprintf(lim, sizeof lim, "%.0f", t - 1);
+    char args[4096];
+    snprintf(args, sizeof args, "%s --sources %s --out-dir %s --render", dir, src, u);
+    CHECK(run("%s --max-memory %s unmix %s", lim, args, NULL) == 1);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "ucap/capture.json: unmix of 26 frames of 160x120x3 samples "
+              "into 3 source images and 26 frames") && strstr(out, "memory budget"), "%s", out);
+    CHECK(!fx_exists(u));
+    snprintf(lim, sizeof lim, "%.0f", ts - 1);
+    CHECK(run("%s --max-memory %s separate %s --out-dir %s", lim, dir, sep) == 1);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "separate of 26 frames") && !fx_exists(sep), "%s", out);
+    /* at the budget unmix runs (the one run measured, outside ASan) */
+    snprintf(lim, sizeof lim, "%.0f", t);
+    char bin[4096], maxmem[80];
+    CHECK(realpath(test_bin(), bin) != NULL);
+    snprintf(maxmem, sizeof maxmem, "--max-memory=%s", lim);
+    const char *const version[] = {bin, "--version", NULL};
+    const char *const unmix[] = {bin, maxmem, "unmix", dir, "--sources", src, "--out-dir", u, "--render", NULL};
+    long base = peak_kib(version), peak = peak_kib(unmix);
+    CHECK_MSG(base > 0 && peak > 0 && fx_exists(fx_path(u, "sources.json")), "unmix at its budget failed");
+    double above = 1024.0 * (double)(peak - base), samples = 160.0 * 120 * 3 * 26;
+    if (!fx_sanitized())
+        CHECK_MSG(above <= t && above >= 6 * samples, "unmix: peak %.1f MiB above the baseline, bound %.1f MiB",
+                  above / 1048576, t / 1048576);
+    /* relight from the sources file unmix wrote */
+    char path[4200];
+    snprintf(path, sizeof path, "%s/sources.json", u);
+    rec_sources s;
+    rec_capture_meta meta;
+    char(*files)[GS_PATH_MAX] = NULL;
+    CHECK_OK(rec_sources_read(path, &s, &meta, &files));
+    budget_args ra = {NULL, NULL, path, &meta, s.S};
+    double tr = budget_threshold(relight_check, &ra);
+    rec_sources_release(&s);
+    free(files);
+    snprintf(lim, sizeof lim, "%.0f", tr - 1);
+    CHECK(run("%s --max-memory %s relight %s --out-dir %s", lim, u, r) == 1);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "sources.json: relight of 26 frames") && !fx_exists(r), "%s", out);
+    snprintf(lim, sizeof lim, "%.0f", tr);
+    CHECK_MSG(run("%s --max-memory %s relight %s --out-dir %s", lim, u, r) == 0, "%s", out);
+    gs_capture_release(&cap);
 }
 
 TEST(memory_size_parse)

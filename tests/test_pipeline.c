@@ -316,40 +316,7 @@ TEST(pipeline_lab_end_to_end_matches_truth)
 TEST(pipeline_geographic_scene_locates_lights)
 {
     const char *scene = fx_tmp("geo.json"), *db = fx_tmp("geo.sqlite");
-    /* a station 120 m above the ellipsoid looking north, lights 10 m up, 450-850 m away */
-    static const struct {
-        double north_m, east_m;
-        const char *bulb;
-        int phase;
-    } L[] = {
-        {450, -40, "inc-a60-60w-230v", 0}, {500, 30, "cfl-20w", 120}, {600, -60, "led-a60-9w-cap", 240},
-        {650, 50, "fl-t8-36w-tri", 0},    {750, 0, "hps-70w", 120},  {850, -80, "mh-70w", 240},
-    };
-    char lights[4096] = "";
-    for (size_t i = 0; i < 6; i++) {
-        size_t used = strlen(lights);
-        snprintf(lights + used, sizeof lights - used,
-                 "%s{\"id\": \"g%zu\", \"bulb\": \"%s\", \"phase_deg\": %d, \"lat_deg\": %.9f, "
-                 "\"lon_deg\": %.9f, \"height_m\": 10, \"flux_e_per_cycle\": 40000}",
-                 i ? ",\n" : "", i, L[i].bulb, L[i].phase, 32.8 + L[i].north_m / 110900.0,
-                 35.0 + L[i].east_m / 93400.0);
-    }
-    char text[8192];
-    snprintf(text, sizeof text,
-             "{\"format\": \"gridsurvey-scene/1\", \"name\": \"geo\", \"seed\": 3,\n"
-             " \"grid\": {\"nominal_hz\": 50},\n"
-             " \"camera\": {\"width_px\": 320, \"height_px\": 240,\n"
-             "   \"station\": {\"lat_deg\": 32.8, \"lon_deg\": 35.0, \"height_m\": 120},\n"
-             "   \"pose\": {\"heading_deg\": 0, \"pitch_deg\": -9, \"roll_deg\": 0},\n"
-             "   \"intrinsics\": {\"focal_px\": 800},\n"
-             "   \"sensor\": {\"bands\": 3, \"bit_depth\": 12, \"full_well_e\": 60000, \"read_noise_e\": 4,\n"
-             "              \"qe\": 0.6, \"gain_e_per_dn\": 15, \"black_level_dn\": 64}},\n"
-             " \"acam\": {\"K\": 26, \"cycles\": 128, \"locked\": true, \"masks\": 64,\n"
-             "          \"hdr\": {\"enabled\": true, \"max_saturated_px\": 0}},\n"
-             " \"lights\": [%s],\n"
-             " \"effects\": {\"psf\": {\"sigma_px\": 1.2}, \"shot_noise\": {}, \"saturation\": {},\n"
-             "             \"read_noise\": {}, \"adc\": {}}}\n", lights);
-    fx_write_text(scene, text);
+    survey_fx_geo_scene(scene, 1.0, 6, 128);
     int rc = sh("%s run %s --db %s", test_bin(), scene, db);
     CHECK_MSG(rc == 0, "run: %d: %s", rc, out);
     if (rc != 0) return;

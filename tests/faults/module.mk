@@ -2,8 +2,10 @@
 # tests/test_faults.c; docs/reliability.md). Built without sanitizers (it forwards to ASan's
 # allocator in an ASan build) next to the test binary, which finds it beside $(BIN).
 #   make faults   the sweep of every failure point of run, export and delight import (every
-#                 FAULT_MALLOC_STEP-th allocation; 1, the default, is every one: hours for run)
-#                 with the gcc ASan+UBSan build; the counts in build/asan/faults.md
+#                 FAULT_MALLOC_STEP-th allocation; in the run scenarios every
+#                 FAULT_RUN_MALLOC_STEP-th allocation and FAULT_RUN_WRITE_STEP-th write if set;
+#                 1, the default, is every one: days for run) on FAULT_JOBS workers with the gcc
+#                 ASan+UBSan build; the counts in build/asan/faults.md
 FAULT_SHIM := $(BUILD)/tests/faults/faultinject.so
 $(FAULT_SHIM): tests/faults/faultinject.c
 	@mkdir -p $(dir $@)
@@ -11,13 +13,17 @@ $(FAULT_SHIM): tests/faults/faultinject.c
 test: $(FAULT_SHIM)
 
 FAULT_MALLOC_STEP ?= 1
+FAULT_RUN_MALLOC_STEP ?=
+FAULT_RUN_WRITE_STEP ?=
+FAULT_JOBS ?= 1
 .PHONY: faults faults-run
 faults: deps
 	$(MAKE) --no-print-directory BUILD=build/asan SAN=1 faults-run
 faults-run: $(TEST_BIN) $(BIN) $(FAULT_SHIM)
-	@echo '| scenario | malloc calls | write calls | fsync calls | rename calls | injected runs | failed cleanly | succeeded complete | bad |' > $(BUILD)/faults.md
-	@echo '| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |' >> $(BUILD)/faults.md
-	GS_SHARED=$(SHARED) GS_BIN=$(BIN) GS_SAN=$(SAN) GS_FAULT_SWEEP=full GS_FAULT_MALLOC_STEP=$(FAULT_MALLOC_STEP) GS_FAULT_REPORT=$(CURDIR)/$(BUILD)/faults.md \
+	@echo '| scenario | malloc calls | every n-th tried | write calls | every n-th tried | fsync calls | rename calls | injected runs | failed cleanly | succeeded complete | bad |' > $(BUILD)/faults.md
+	@echo '| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |' >> $(BUILD)/faults.md
+	GS_SHARED=$(SHARED) GS_BIN=$(BIN) GS_SAN=$(SAN) GS_FAULT_SWEEP=full GS_FAULT_MALLOC_STEP=$(FAULT_MALLOC_STEP) \
+	GS_FAULT_RUN_MALLOC_STEP=$(FAULT_RUN_MALLOC_STEP) GS_FAULT_RUN_WRITE_STEP=$(FAULT_RUN_WRITE_STEP) GS_FAULT_JOBS=$(FAULT_JOBS) GS_FAULT_REPORT=$(CURDIR)/$(BUILD)/faults.md \
 	GS_TEST_TIMEOUT_S=172800 LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp:print_suppressions=0 \
 	  $(TEST_BIN) fault_injection_ _fault_injection_run_new_database
 	@cat $(BUILD)/faults.md
