@@ -112,21 +112,6 @@ static int small_inverse(double *a, int n)
     return 1;
 }
 
-/* sum_i a_i b_i, four partial sums. */
-static double dot(const double *a, const double *b, int n)
-{
-    double s0 = 0, s1 = 0, s2 = 0, s3 = 0;
-    int i = 0;
-    for (; i + 4 <= n; i += 4) {
-        s0 += a[i] * b[i];
-        s1 += a[i + 1] * b[i + 1];
-        s2 += a[i + 2] * b[i + 2];
-        s3 += a[i + 3] * b[i + 3];
-    }
-    for (; i < n; i++) s0 += a[i] * b[i];
-    return (s0 + s1) + (s2 + s3);
-}
-
 /* chi2 of N sources at pos[2 N] with the PSF sigma pos[2 N]; leaves P, F and Ainv. HUGE_VAL
  * outside the allowed box (positions; sigma within FIT_SIGMA_RANGE of the capture's) or when the
  * normal matrix is singular. */
@@ -152,13 +137,13 @@ static double fit_eval(fit_data *f, int N, const double *pos)
         for (int q = 0; q < N; q++)
             for (int p = 0; p < n; p++) f->wP[q * n + p] = f->w[p * B + b] * f->P[q * n + p];
         for (int q = 0; q < N; q++)
-            for (int t = q; t < N; t++) A[q * N + t] = A[t * N + q] = dot(f->wP + q * n, f->P + t * n, n);
+            for (int t = q; t < N; t++) A[q * N + t] = A[t * N + q] = rec_dot(f->wP + q * n, f->P + t * n, n);
         if (!small_inverse(A, N)) return HUGE_VAL;
         for (int k = 0; k < K; k++) {
             const int d = b * K + k;
             const double *Dd = f->Dt + (size_t)d * n;
             double r[FIT_MAX_SOURCES];
-            for (int q = 0; q < N; q++) r[q] = dot(f->wP + q * n, Dd, n);
+            for (int q = 0; q < N; q++) r[q] = rec_dot(f->wP + q * n, Dd, n);
             for (int q = 0; q < N; q++) {
                 double v = 0;
                 for (int t = 0; t < N; t++) v += A[q * N + t] * r[t];
@@ -229,7 +214,7 @@ static void fit_gradient(fit_data *f, int N, const double *pos, double *g, doubl
         /* perp_c = dP_c - P^T A^-1 (P W dP_c) */
         for (int c = 0; c < S; c++) {
             double pr[FIT_MAX_SOURCES];
-            for (int q = 0; q < N; q++) pr[q] = dot(wPb + q * n, dP + c * n, n);
+            for (int q = 0; q < N; q++) pr[q] = rec_dot(wPb + q * n, dP + c * n, n);
             double *pc = perp + c * n;
             memcpy(pc, dP + c * n, sizeof(double) * (size_t)n);
             for (int q = 0; q < N; q++) {
@@ -243,20 +228,20 @@ static void fit_gradient(fit_data *f, int N, const double *pos, double *g, doubl
         double FF[FIT_MAX_SOURCES * FIT_MAX_SOURCES];
         for (int q = 0; q < N; q++)
             for (int t = q; t < N; t++)
-                FF[q * N + t] = FF[t * N + q] = dot(f->F + q * BK + b * K, f->F + t * BK + b * K, K);
+                FF[q * N + t] = FF[t * N + q] = rec_dot(f->F + q * BK + b * K, f->F + t * BK + b * K, K);
         /* w_pb h_q(p), h_q = sum_k (D_pk - sum_t P_t(p) F_tk) F_qk
          *                 = sum_k D_pk F_qk - sum_t P_t(p) FF_tq */
         for (int q = 0; q < N; q++) {
             double *h = wh + q * n;
-            for (int p = 0; p < n; p++) h[p] = dot(f->D + (size_t)p * BK + b * K, f->F + q * BK + b * K, K);
+            for (int p = 0; p < n; p++) h[p] = rec_dot(f->D + (size_t)p * BK + b * K, f->F + q * BK + b * K, K);
             for (int t = 0; t < N; t++)
                 for (int p = 0; p < n; p++) h[p] -= FF[t * N + q] * f->P[t * n + p];
             for (int p = 0; p < n; p++) h[p] *= wb[p];
         }
-        for (int c = 0; c < S; c++) g[PARAM_OF(c)] -= 2 * dot(dP + c * n, wh + (c / 3) * n, n);
+        for (int c = 0; c < S; c++) g[PARAM_OF(c)] -= 2 * rec_dot(dP + c * n, wh + (c / 3) * n, n);
         for (int c = 0; c < S; c++)
             for (int e = c; e < S; e++) {
-                const double a = 2 * FF[(c / 3) * N + e / 3] * dot(wperp + c * n, perp + e * n, n);
+                const double a = 2 * FF[(c / 3) * N + e / 3] * rec_dot(wperp + c * n, perp + e * n, n);
                 const int i = PARAM_OF(c), j = PARAM_OF(e);
                 H[i * m + j] += a;
                 if (c != e) H[j * m + i] += a;
@@ -278,7 +263,7 @@ static double fit_positions(fit_data *f, int N, double *pos)
     double chi2 = fit_eval(f, N, pos), lambda = 1e-3;
     if (!isfinite(chi2)) return chi2;
     double g[MAXD], H[MAXD * MAXD], Hl[MAXD * MAXD], step[MAXD], trial[MAXD];
-    int fresh = 0;   /* 1: P, F and Ainv are those of pos */
+    int fresh = 1;   /* 1: P, F and Ainv are those of pos */
     fit_gradient(f, N, pos, g, H);
     for (int it = 0; it < FIT_LM_ITER; it++) {
         memcpy(Hl, H, sizeof(double) * (size_t)(m * m));

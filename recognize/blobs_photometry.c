@@ -179,12 +179,11 @@ void rec_blob_pixel_var(const rec_blob_state *s, size_t p, double *var_k, double
             mean_flux[b] += l;
             if (level_k) level_k[b * K + k] = l;
         }
-        var_k[k] = f;   /* the scale, until band 0's variance replaces it (bands in reverse) */
     }
     for (int b = 0; b < B; b++) mean_flux[b] /= K;
-    for (int b = B - 1; b >= 0; b--)
+    for (int b = 0; b < B; b++)
         for (int k = 0; k < K; k++) {
-            double f = var_k[k];
+            double f = s->scale[(size_t)k * HS + (c->halvings ? c->halvings[s->N * (size_t)k + p] : 0)];
             double dn = mean_flux[b] / f;   /* expected raw level above black */
             var_k[b * K + k] = (s->nz.read_var_dn2 + (dn > 0 ? dn * s->nz.inv_gain : 0)) * f * f;
         }

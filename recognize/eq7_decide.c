@@ -150,7 +150,7 @@ void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_
     if (!isfinite(Lmax)) goto done;
     for (size_t i = 0; i < w->ncand; i++) {
         size_t j = w->cand[i];
-        w->mass[j] = isfinite(w->L[j]) && w->L[j] - Lmax > -746.0 ? exp(w->L[j] - Lmax) * m->cellw[j] : 0.0;
+        w->mass[j] = isfinite(w->L[j]) ? rec_exp_neg(w->L[j] - Lmax) * m->cellw[j] : 0.0;
     }
     /* Laplace correction of the cells around narrow peaks (narrower than a cell) */
     for (size_t b = 0; m->ncont && b < nb; b++) {

@@ -195,8 +195,7 @@ static double loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb, 
     }
     if (!isfinite(Lmax)) return -INFINITY;
     double sum = 0.0;
-    for (int i = 0; i < REC_TAU_N; i++)
-        if (Lt[i] - Lmax > -746.0) sum += exp(Lt[i] - Lmax);   /* exp underflows to 0 below */
+    for (int i = 0; i < REC_TAU_N; i++) sum += rec_exp_neg(Lt[i] - Lmax);
     return Lmax + log(sum / REC_TAU_N);
 }
 

@@ -32,16 +32,6 @@ static double dot_fd(const float *x, const double *t, size_t n)
     return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
 }
 
-static double dot_dd(const double *x, const double *t, size_t n)
-{
-    double a[8] = {0, 0, 0, 0, 0, 0, 0, 0};
-    size_t i = 0;
-    for (; i + 8 <= n; i += 8)
-        for (int k = 0; k < 8; k++) a[k] += x[i + k] * t[i + k];
-    for (; i < n; i++) a[0] += x[i] * t[i];
-    return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
-}
-
 /* max_j (sh_j + rho_j xp) over n (a multiple of LANES) prefilter scores. */
 static float row_bound_perp(const float *sh, const float *rho, float xp, size_t n)
 {
@@ -171,7 +161,7 @@ static void pixel_row(const rec_matcher *m, pix_work *pw, const float *xr, const
     int exact = err > 1e-3;
     if (exact)
         for (size_t d = 0; d < D; d++) xd[d] = xr[d];
-    double zu = exact ? dot_dd(xd, m->tnd + ju * D, D) * inv : srow[ju] * inv;
+    double zu = exact ? rec_dot(xd, m->tnd + ju * D, D) * inv : srow[ju] * inv;
     /* candidates: the templates whose bound reaches within CUT_PIXEL of a template's L */
     double thr = pix_L(m, ju, zu, Sxx) + 0.5 * Sxx - CUT_PIXEL - 2.0 * err;
     w->ncand = 0;
@@ -182,7 +172,7 @@ static void pixel_row(const rec_matcher *m, pix_work *pw, const float *xr, const
     } else {
         for (size_t ci = 0; ci < w->ncand; ci++) {
             size_t j = w->cand[ci];
-            zz[j] = exact ? dot_dd(xd, m->tnd + j * D, D) * inv : srow[j] * inv;
+            zz[j] = exact ? rec_dot(xd, m->tnd + j * D, D) * inv : srow[j] * inv;
         }
     }
     double Lmax = -INFINITY;
@@ -374,7 +364,7 @@ static void pixel_row_band(const rec_matcher *m, pix_work *pw, const float *xr, 
     if (exact)
         for (size_t d = 0; d < D; d++) xd[d] = xr[d];
     if (exact)
-        for (int b = 0; b < nb; b++) p[b] = dot_dd(xd + (size_t)b * K, m->tbn + ju * D + (size_t)b * K, K);
+        for (int b = 0; b < nb; b++) p[b] = rec_dot(xd + (size_t)b * K, m->tbn + ju * D + (size_t)b * K, K);
     else
         for (int b = 0; b < nb; b++) p[b] = srow[(size_t)b * Mp + ju];
     double g0, s0;
@@ -386,7 +376,7 @@ static void pixel_row_band(const rec_matcher *m, pix_work *pw, const float *xr, 
     for (size_t ci = 0; ci < w->ncand; ci++) {
         size_t j = w->cand[ci];
         if (exact)
-            for (int b = 0; b < nb; b++) p[b] = dot_dd(xd + (size_t)b * K, m->tbn + j * D + (size_t)b * K, K);
+            for (int b = 0; b < nb; b++) p[b] = rec_dot(xd + (size_t)b * K, m->tbn + j * D + (size_t)b * K, K);
         else
             for (int b = 0; b < nb; b++) p[b] = srow[(size_t)b * Mp + j];
         w->L[j] = band_terms(m, j, p, var, Sxx, &gg[j], &zz[j]);
@@ -453,7 +443,7 @@ static void pixel_row_band(const rec_matcher *m, pix_work *pw, const float *xr, 
                 size_t jj = q ? jp : jm;
                 if (exact)
                     for (int band = 0; band < nb; band++)
-                        p[band] = dot_dd(xd + (size_t)band * K, m->tbn + jj * D + (size_t)band * K, K);
+                        p[band] = rec_dot(xd + (size_t)band * K, m->tbn + jj * D + (size_t)band * K, K);
                 else
                     for (int band = 0; band < nb; band++) p[band] = srow[(size_t)band * Mp + jj];
                 band_terms(m, jj, p, var, Sxx, q ? &gp : &gm, q ? &sp : &sm);

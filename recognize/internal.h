@@ -193,6 +193,23 @@ static inline double phi_cdf(double z)
     return 0.5 * erfc(-z * M_SQRT1_2);
 }
 
+/* sum_i x_i t_i, eight partial sums. */
+static inline double rec_dot(const double *x, const double *t, size_t n)
+{
+    double a[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+    size_t i = 0;
+    for (; i + 8 <= n; i += 8)
+        for (int k = 0; k < 8; k++) a[k] += x[i + k] * t[i + k];
+    for (; i < n; i++) a[0] += x[i] * t[i];
+    return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
+}
+
+/* exp(d) for d <= 0, without calling exp where it underflows to 0 (below -745.2). */
+static inline double rec_exp_neg(double d)
+{
+    return d > -746.0 ? exp(d) : 0.0;
+}
+
 /* log(exp(a) + exp(b)), -inf aware. */
 static inline double rec_log_add(double a, double b)
 {
@@ -201,8 +218,7 @@ static inline double rec_log_add(double a, double b)
         a = b;
         b = t;
     }
-    if (isinf(a) && a < 0.0) return a;
-    return b - a < -746.0 ? a : a + log1p(exp(b - a));   /* exp underflows to 0 there */
+    return isinf(a) && a < 0.0 ? a : a + log1p(rec_exp_neg(b - a));
 }
 
 /* The reddened band model's grid of optical depths at 550 nm (eq7_light.c). */

@@ -9,7 +9,7 @@
 #include <string.h>
 #include <time.h>
 
-static double clock_s(clockid_t id)
+double srv_clock_s(clockid_t id)
 {
     struct timespec ts;
     clock_gettime(id, &ts);
@@ -35,9 +35,9 @@ gs_status srv_render_time(const cap_scene *sc, unsigned effects_mask, int frames
         cap_sim_free(s);
         return gs_fail(GS_ENOMEM, "bench: out of memory");
     }
-    double t0 = clock_s(CLOCK_MONOTONIC), c0 = clock_s(CLOCK_PROCESS_CPUTIME_ID);
+    double t0 = srv_clock_s(CLOCK_MONOTONIC), c0 = srv_clock_s(CLOCK_PROCESS_CPUTIME_ID);
     for (int i = 0; i < frames && st == GS_OK; i++) st = cap_sim_render(s, i % K, 0, i, NULL, raw, NULL);
-    double dt = clock_s(CLOCK_MONOTONIC) - t0, dc = clock_s(CLOCK_PROCESS_CPUTIME_ID) - c0;
+    double dt = srv_clock_s(CLOCK_MONOTONIC) - t0, dc = srv_clock_s(CLOCK_PROCESS_CPUTIME_ID) - c0;
     out->frames = frames;
     out->seconds_per_frame = dt / frames;
     out->cpu_seconds_per_frame = dc / frames;

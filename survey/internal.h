@@ -7,6 +7,7 @@
 #include "capture/capture.h"
 
 #include <stdio.h>
+#include <time.h>
 
 /* Subcommands: argv[0] is the command name; return the exit status. */
 int srv_cmd_delight(int argc, char **argv);
@@ -75,6 +76,9 @@ int srv_bench_accuracy(int argc, char **argv);
 int srv_bench_render(int argc, char **argv);
 /* `gridsurvey bench blobs` (survey/bench_blobs.c). */
 int srv_bench_blobs(int argc, char **argv);
+/* Seconds on clock id (CLOCK_MONOTONIC: wall; CLOCK_PROCESS_CPUTIME_ID: the process's CPU, all
+ * threads), for the benchmarks (survey/bench_render.c). */
+double srv_clock_s(clockid_t id);
 /* Its measurement: `frames` acquisitions (k = 0, 1, ...) of the scene with only the effects in
  * effects_mask (bits 1u << CAP_FX_*) that the scene lists, on `threads` threads
  * (cap_sim_set_threads), wall and CPU (the process's, all threads) time per frame. */
