@@ -230,14 +230,9 @@ static const char *expected_text(void)
 }
 _Static_assert(SRV_DB_SCHEMA_VERSION == 4, "update expected_text()");
 
-/* Identify an existing file through a read-only connection (nothing is written). */
-static gs_status identify(const char *path, off_t size, db_kind *kind, int *version)
+/* The 16-byte header of an existing file: SQLite's, or a one-line error. */
+static gs_status check_header(const char *path)
 {
-    *version = 0;
-    if (size == 0) {
-        *kind = KIND_EMPTY;
-        return GS_OK;
-    }
     unsigned char head[16] = {0};
     FILE *f = fopen(path, "rb");
     if (!f) return gs_fail(GS_EIO, "%s: cannot read: %s", path, strerror(errno));
@@ -246,13 +241,15 @@ static gs_status identify(const char *path, off_t size, db_kind *kind, int *vers
     if (got < sizeof head || memcmp(head, "SQLite format 3", 16) != 0)
         return gs_fail(GS_EFORMAT, "%s: not a survey database: %s; found a file that is not "
                        "SQLite", path, expected_text());
-    sqlite3 *db = NULL;
+    return GS_OK;
+}
+
+/* What an existing SQLite file is, read through the connection open on it (nothing is written;
+ * the schema is read once, for this and for what the connection does next). */
+static gs_status identify(sqlite3 *db, const char *path, db_kind *kind, int *version)
+{
+    *version = 0;
     gs_status s = GS_OK;
-    if (sqlite3_open_v2(path, &db, SQLITE_OPEN_READONLY, NULL) != SQLITE_OK) {
-        s = sql_fail(db, path, "open");
-        sqlite3_close(db);
-        return s;
-    }
     int app = 0, user = 0, objects = 0, delight = 0;
     if (!query_int(db, "PRAGMA application_id", &app) || !query_int(db, "PRAGMA user_version", &user) ||
         !query_int(db, "SELECT count(*) FROM sqlite_master", &objects)) {
@@ -260,11 +257,9 @@ static gs_status identify(const char *path, off_t size, db_kind *kind, int *vers
         if (s == GS_EFORMAT)
             s = gs_fail(GS_EFORMAT, "%s: not a survey database: %s; SQLite says: %s", path,
                         expected_text(), sqlite3_errmsg(db));
-        sqlite3_close(db);
         return s;
     }
     query_int(db, "SELECT count(*) FROM sqlite_master WHERE name = 'delight_meta'", &delight);
-    sqlite3_close(db);
     if ((unsigned)app == SRV_DB_APPLICATION_ID) {
         if (user > SRV_DB_SCHEMA_VERSION)
             return gs_fail(GS_EFORMAT, "%s: survey database schema version %d is newer than this "
@@ -391,16 +386,7 @@ static gs_status open_at(const char *path, srv_db_mode mode, int target, srv_db 
     } else {
         if (!S_ISREG(st.st_mode))
             return gs_fail(GS_EIO, "%s: not a regular file: %s", path, expected_text());
-        if ((s = identify(path, st.st_size, &kind, &version)) != GS_OK) return s;
-        /* one rule for every command: only `db init` makes an empty file a survey database */
-        if (kind == KIND_EMPTY && mode != SRV_DB_INIT)
-            return gs_fail(GS_EFORMAT, "%s: an empty file (%s), not a survey database: %s; remove "
-                           "it, or make it one with `gridsurvey db init --db %s`", path,
-                           st.st_size ? "SQLite without a schema" : "0 bytes", expected_text(), path);
-        if (kind == KIND_SURVEY && version < target && mode == SRV_DB_READ)
-            return gs_fail(GS_EFORMAT, "%s: survey database schema version %d is older than this "
-                           "gridsurvey's %d: migrate it with `gridsurvey db migrate --db %s`", path,
-                           version, target, path);
+        if (st.st_size > 0 && (s = check_header(path)) != GS_OK) return s;
     }
     srv_db *db = calloc(1, sizeof *db);
     if (!db || !(db->path = strdup(path))) {
@@ -417,6 +403,20 @@ static gs_status open_at(const char *path, srv_db_mode mode, int target, srv_db 
                         sys ? strerror(sys) : sqlite3_errmsg(db->db));
         else
             s = sql_fail(db->db, path, "open");
+        goto fail;
+    }
+    if (st.st_size > 0 && (s = identify(db->db, path, &kind, &version)) != GS_OK) goto fail;
+    /* one rule for every command: only `db init` makes an empty file a survey database */
+    if (kind == KIND_EMPTY && mode != SRV_DB_INIT) {
+        s = gs_fail(GS_EFORMAT, "%s: an empty file (%s), not a survey database: %s; remove it, or "
+                    "make it one with `gridsurvey db init --db %s`", path,
+                    st.st_size ? "SQLite without a schema" : "0 bytes", expected_text(), path);
+        goto fail;
+    }
+    if (kind == KIND_SURVEY && version < target && mode == SRV_DB_READ) {
+        s = gs_fail(GS_EFORMAT, "%s: survey database schema version %d is older than this "
+                    "gridsurvey's %d: migrate it with `gridsurvey db migrate --db %s`", path,
+                    version, target, path);
         goto fail;
     }
     if (!db->readonly && sqlite3_db_readonly(db->db, "main") == 1) {

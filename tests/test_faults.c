@@ -314,11 +314,13 @@ static const char *shim_path(void)
 enum { N_CLASSES = 4 };
 static const char *const class_names[N_CLASSES] = {"malloc", "write", "fsync", "rename"};
 
-/* Empties work, sets it up, runs the scenario with the n-th call of kind failing (n = 0: none);
- * its exit status, stderr in out, the calls of each class (class_names) in calls[] and
- * whether the fault fired in *fired. */
-static int run_injected(const scenario *sc, const char *work, const fault_kind *k, long n, long *calls,
-                        int *fired)
+/* Empties work, sets it up, runs the scenario with the n-th call of kind failing (n = 0: none),
+ * or (site != 0, allocations) the first allocation from that stack; sites_out (or NULL): where
+ * the shim writes the distinct stacks of the allocations (GS_FAULT_SITES). Its exit status,
+ * stderr in out, the calls of each class (class_names) in calls[] and whether the fault fired
+ * in *fired. */
+static int run_injected_at(const scenario *sc, const char *work, const fault_kind *k, long n,
+                           unsigned long long site, const char *sites_out, long *calls, int *fired)
 {
     char cmd[8192], report[1100];
     snprintf(cmd, sizeof cmd, "rm -rf %s && mkdir -p %s", work, work);
@@ -337,11 +339,14 @@ static int run_injected(const scenario *sc, const char *work, const fault_kind *
     }
     char run[2048];
     snprintf(run, sizeof run, sc->cmd, bin, assets());
+    char site_env[1300] = "";
+    if (site) snprintf(site_env, sizeof site_env, "GS_FAULT_SITE=%llx ", site);
+    else if (sites_out) snprintf(site_env, sizeof site_env, "GS_FAULT_SITES=%s ", sites_out);
     snprintf(cmd, sizeof cmd,
-             "cd %s && timeout 300 env GS_FAULT_CLASS=%s GS_FAULT_N=%ld GS_FAULT_ERRNO=%s GS_FAULT_OUT=%s "
+             "cd %s && timeout 300 env GS_FAULT_CLASS=%s GS_FAULT_N=%ld %sGS_FAULT_ERRNO=%s GS_FAULT_OUT=%s "
              "LD_PRELOAD=%s ASAN_OPTIONS=${ASAN_OPTIONS:+$ASAN_OPTIONS:}verify_asan_link_order=0 "
              "%s 2>&1 >/dev/null",
-             work, k->cls, n, k->err, report, shim, run);
+             work, k->cls, n, site_env, k->err, report, shim, run);
     free(bin);
     free(shim);
     int rc = test_run(cmd, out, sizeof out);
@@ -353,6 +358,59 @@ static int run_injected(const scenario *sc, const char *work, const fault_kind *
         fclose(f);
     }
     return rc;
+}
+
+static int run_injected(const scenario *sc, const char *work, const fault_kind *k, long n, long *calls,
+                        int *fired)
+{
+    return run_injected_at(sc, work, k, n, 0, NULL, calls, fired);
+}
+
+/* The distinct allocation stacks a run wrote (GS_FAULT_SITES: "SITE N" lines in the order first
+ * seen), into a new array (*n of them; NULL and 0 if none, *overflow if the shim ran out of room). */
+typedef struct {
+    unsigned long long site;
+    long first;
+} alloc_site;
+static alloc_site *read_sites(const char *path, size_t *n, int *overflow)
+{
+    *n = 0;
+    *overflow = 0;
+    alloc_site *v = NULL;
+    size_t cap = 0;
+    FILE *f = fopen(path, "r");
+    char line[128];
+    while (f && fgets(line, sizeof line, f)) {
+        alloc_site a;
+        if (!strncmp(line, "overflow", 8)) *overflow = 1;
+        if (sscanf(line, "%llx %ld", &a.site, &a.first) != 2) continue;
+        if (*n == cap) {
+            cap = cap ? 2 * cap : 1024;
+            alloc_site *nv = realloc(v, cap * sizeof *nv);
+            if (!nv) break;
+            v = nv;
+        }
+        v[(*n)++] = a;
+    }
+    if (f) fclose(f);
+    return v;
+}
+
+static int by_site(const void *a, const void *b)
+{
+    unsigned long long x = ((const alloc_site *)a)->site, y = ((const alloc_site *)b)->site;
+    return (x > y) - (x < y);
+}
+
+/* How many of a's sites are not among b's (both sorted by site). */
+static size_t sites_missing(const alloc_site *a, size_t na, const alloc_site *b, size_t nb)
+{
+    size_t missing = 0;
+    for (size_t i = 0, j = 0; i < na; i++) {
+        while (j < nb && b[j].site < a[i].site) j++;
+        missing += j == nb || b[j].site != a[i].site;
+    }
+    return missing;
 }
 
 /* The outcome of one injected run: 0 bad, 1 failed cleanly, 2 succeeded complete; why (bad). */
@@ -368,8 +426,9 @@ typedef struct {
     long total[N_CLASSES];
 } sweep_refs;
 
-/* The n-th call of kind k failing in the work directory work, judged against the references. */
-static point_result try_point(const sweep_refs *rf, const char *work, size_t k, long n)
+/* The n-th call of kind k failing (or the first allocation from site) in the work directory
+ * work, judged against the references. */
+static point_result try_point(const sweep_refs *rf, const char *work, size_t k, long n, unsigned long long site)
 {
     point_result pr = {0, ""};
     const scenario *sc = rf->sc;
@@ -378,7 +437,7 @@ static point_result try_point(const sweep_refs *rf, const char *work, size_t k, 
     long calls[N_CLASSES];
     int fired, c = 0;
     while (strcmp(class_names[c], kinds[k].cls)) c++;
-    int rc = run_injected(sc, work, &kinds[k], n, calls, &fired);
+    int rc = run_injected_at(sc, work, &kinds[k], n, site, NULL, calls, &fired);
     char *dba = db_state(dbp), *fa = files_state(work, sc->db);
     char why[1200] = "";
     if (rc == 0) {
@@ -397,8 +456,8 @@ static point_result try_point(const sweep_refs *rf, const char *work, size_t k, 
         pr.outcome = ok;
     }
     if (!pr.outcome)
-        snprintf(pr.why, sizeof pr.why, "%s: %s %s at call %ld of %ld (fired %d): %s: %.2000s", sc->name,
-                 kinds[k].cls, kinds[k].err, n, rf->total[c], fired, why, out);
+        snprintf(pr.why, sizeof pr.why, "%s: %s %s at call %ld of %ld (site %llx, fired %d): %s: %.2000s",
+                 sc->name, kinds[k].cls, kinds[k].err, n, rf->total[c], site, fired, why, out);
     free(dba);
     free(fa);
     return pr;
@@ -420,11 +479,14 @@ static long point_step(const scenario *sc, int c, long total, int full)
 }
 
 /* One scenario through every kind of fault: `make check` at sc->points points of each,
- * GS_FAULT_SWEEP=full at every point, on GS_FAULT_JOBS workers (each its own process and work
- * directory; their outcomes come back through a file each). */
+ * GS_FAULT_SWEEP=full at every point, GS_FAULT_SWEEP=sites at every point but the allocations,
+ * which fail once for each distinct stack they are made from (its first call); on
+ * GS_FAULT_JOBS workers (each its own process and work directory; their outcomes come back
+ * through a file each). */
 static void sweep(const scenario *sc)
 {
-    int full = getenv("GS_FAULT_SWEEP") && !strcmp(getenv("GS_FAULT_SWEEP"), "full");
+    const char *mode = getenv("GS_FAULT_SWEEP");
+    int by_sites = mode && !strcmp(mode, "sites"), full = by_sites || (mode && !strcmp(mode, "full"));
     int jobs = getenv("GS_FAULT_JOBS") ? atoi(getenv("GS_FAULT_JOBS")) : 1;
     if (jobs < 1 || jobs > 64) jobs = 1;
     char work[1100], dbp[1200];
@@ -441,16 +503,37 @@ static void sweep(const scenario *sc)
     long again[N_CLASSES];
     /* two uninjected runs: the counts of calls, and the complete state (the same twice: the
      * oracle needs the command to be deterministic) */
-    int rc = run_injected(sc, work, &kinds[0], 0, rf.total, &fired);
+    char sites_path[2][1200];
+    for (int i = 0; i < 2; i++) snprintf(sites_path[i], sizeof sites_path[i], "%s.sites%d", work, i);
+    int rc = run_injected_at(sc, work, &kinds[0], 0, 0, by_sites ? sites_path[0] : NULL, rf.total, &fired);
     CHECK_MSG(rc == 0 && rf.total[0] >= 0, "%s: the uninjected run: %d: %s", sc->name, rc, out);
     char *db_ref = db_state(dbp), *files_ref = files_state(work, sc->db);
-    rc = run_injected(sc, work, &kinds[0], 0, again, &fired);
+    rc = run_injected_at(sc, work, &kinds[0], 0, 0, by_sites ? sites_path[1] : NULL, again, &fired);
     CHECK_MSG(rc == 0 && again[0] >= 0, "%s: the uninjected run: %d: %s", sc->name, rc, out);
     char *dbr = db_state(dbp), *fr = files_state(work, sc->db);
     CHECK_MSG(!strcmp(dbr, db_ref), "%s: two uninjected runs differ: %s", sc->name, first_difference(db_ref, dbr));
     CHECK_MSG(!strcmp(fr, files_ref), "%s: two uninjected runs differ: %s", sc->name, first_difference(files_ref, fr));
     free(dbr);
     free(fr);
+    /* the allocation sites (by_sites): the same in both runs, each tried at its first call */
+    size_t n_sites = 0, n_again = 0, unstable = 0;
+    int overflow = 0, overflow_again = 0;
+    alloc_site *sites = by_sites ? read_sites(sites_path[0], &n_sites, &overflow) : NULL;
+    if (by_sites) {
+        alloc_site *sites_again = read_sites(sites_path[1], &n_again, &overflow_again);
+        CHECK_MSG(n_sites > 0 && !overflow && !overflow_again, "%s: %zu allocation sites (overflow %d %d)",
+                  sc->name, n_sites, overflow, overflow_again);
+        alloc_site *a = malloc((n_sites + 1) * sizeof *a);
+        CHECK(a != NULL);
+        if (a && sites_again) {
+            memcpy(a, sites, n_sites * sizeof *a);
+            qsort(a, n_sites, sizeof *a, by_site);
+            qsort(sites_again, n_again, sizeof *sites_again, by_site);
+            unstable = sites_missing(a, n_sites, sites_again, n_again) + sites_missing(sites_again, n_again, a, n_sites);
+        }
+        free(a);
+        free(sites_again);
+    }
     rf.db_before = db_before;
     rf.files_before = files_before;
     rf.db_ref = db_ref;
@@ -461,6 +544,7 @@ static void sweep(const scenario *sc)
     struct point {
         size_t k;
         long n;
+        unsigned long long site;
     } *points = NULL;
     for (size_t k = 0; k < sizeof kinds / sizeof *kinds; k++) {
         int c = 0;
@@ -468,7 +552,9 @@ static void sweep(const scenario *sc)
         long step = point_step(sc, c, rf.total[c], full);
         if (c == 0) malloc_step = step;
         if (c == 1) write_step = step;
-        for (long n = 1 + (full ? 0 : (step - 1) / 2); n <= rf.total[c]; n += step) {
+        int each_site = by_sites && c == 0;
+        long end = each_site ? (long)n_sites : rf.total[c];
+        for (long n = each_site ? 1 : 1 + (full ? 0 : (step - 1) / 2); n <= end; n += each_site ? 1 : step) {
             if (n_points == cap_points) {
                 cap_points = cap_points ? 2 * cap_points : 256;
                 struct point *np = realloc(points, cap_points * sizeof *np);
@@ -476,9 +562,10 @@ static void sweep(const scenario *sc)
                 if (!np) break;
                 points = np;
             }
-            points[n_points++] = (struct point){k, n};
+            points[n_points++] = each_site ? (struct point){k, 0, sites[n - 1].site} : (struct point){k, n, 0};
         }
     }
+    free(sites);
     pid_t pids[64];
     char res[64][1200];
     for (int w = 0; w < jobs; w++) {
@@ -492,7 +579,7 @@ static void sweep(const scenario *sc)
         snprintf(wwork, sizeof wwork, "%s-w%d", work, w);
         FILE *f = fopen(res[w], "w");
         for (size_t i = (size_t)w; f && i < n_points; i += (size_t)jobs) {
-            point_result pr = try_point(&rf, jobs > 1 ? wwork : work, points[i].k, points[i].n);
+            point_result pr = try_point(&rf, jobs > 1 ? wwork : work, points[i].k, points[i].n, points[i].site);
             for (char *p = pr.why; *p; p++)
                 if (*p == '\n') *p = ' ';
             fprintf(f, "%d %s\n", pr.outcome, pr.why);
@@ -524,19 +611,61 @@ static void sweep(const scenario *sc)
     free(points);
     const char *rep = getenv("GS_FAULT_REPORT");
     FILE *r = rep && *rep ? fopen(rep, "a") : NULL;
+    char malloc_tried[80];
+    if (by_sites) snprintf(malloc_tried, sizeof malloc_tried, "each of %zu stacks (%zu unstable)", n_sites, unstable);
+    else snprintf(malloc_tried, sizeof malloc_tried, "every %ld", malloc_step);
     if (r) {
-        fprintf(r, "| `%s` | %ld | %ld | %ld | %ld | %ld | %ld | %ld | %ld | %ld | %ld |\n", sc->name, rf.total[0],
-                malloc_step, rf.total[1], write_step, rf.total[2], rf.total[3], tried, failed_ok, succeeded, bad);
+        fprintf(r, "| `%s` | %ld | %s | %ld | every %ld | %ld | %ld | %ld | %ld | %ld | %ld |\n", sc->name, rf.total[0],
+                malloc_tried, rf.total[1], write_step, rf.total[2], rf.total[3], tried, failed_ok, succeeded, bad);
         fclose(r);
     }
     if (getenv("GS_TEST_VERBOSE"))
-        printf("    %s: calls malloc %ld (every %ld tried), write %ld, fsync %ld, rename %ld; %ld tried: %ld "
-               "failed cleanly, %ld succeeded, %ld bad\n", sc->name, rf.total[0], malloc_step, rf.total[1],
+        printf("    %s: calls malloc %ld (%s tried), write %ld, fsync %ld, rename %ld; %ld tried: %ld "
+               "failed cleanly, %ld succeeded, %ld bad\n", sc->name, rf.total[0], malloc_tried, rf.total[1],
                rf.total[2], rf.total[3], tried, failed_ok, succeeded, bad);
     free(db_before);
     free(files_before);
     free(db_ref);
     free(files_ref);
+}
+
+/* The shim's site mode (GS_FAULT_SWEEP=sites): a count-only run lists the distinct stacks the
+ * allocations come from, each with its first call; failing the first allocation from a site must
+ * be failing that call. Oracle: the n-th-call mode of the same shim, on a single-threaded command
+ * (export): the same exit, the same stderr and the same number of allocations made. */
+TEST(fault_site_is_the_allocation_of_its_first_call)
+{
+    const scenario *sc = &scenarios[2];
+    char work[1100], sites_file[1200];
+    snprintf(work, sizeof work, "%s/sites", fx_tmp("fault-work"));
+    snprintf(sites_file, sizeof sites_file, "%s.sites", work);
+    long total[N_CLASSES], calls[N_CLASSES];
+    int fired;
+    CHECK(run_injected_at(sc, work, &kinds[0], 0, 0, sites_file, total, &fired) == 0 && !fired);
+    size_t n = 0;
+    int overflow;
+    alloc_site *sites = read_sites(sites_file, &n, &overflow);
+    CHECK_MSG(n > 10 && (long)n < total[0] && !overflow, "%zu sites of %ld allocations", n, total[0]);
+    if (n <= 10) {
+        free(sites);
+        return;
+    }
+    CHECK(sites[0].first == 1);   /* the first allocation is a new site, and so on in order */
+    for (size_t i = 1; i < n; i++) CHECK(sites[i].first > sites[i - 1].first && sites[i].first <= total[0]);
+    const size_t pick[] = {1, n / 2, n - 1};
+    for (int j = 0; j < 3; j++) {
+        const alloc_site *a = &sites[pick[j]];
+        int rc_site = run_injected_at(sc, work, &kinds[0], 0, a->site, NULL, calls, &fired), fired_site = fired;
+        long made_site = calls[0];
+        char out_site[4096];
+        snprintf(out_site, sizeof out_site, "%.4000s", out);
+        int rc_n = run_injected(sc, work, &kinds[0], a->first, calls, &fired);
+        CHECK_MSG(fired_site && fired, "site %llx (call %ld): fired %d and %d", a->site, a->first, fired_site, fired);
+        CHECK_MSG(rc_site == rc_n && made_site == calls[0] && !strcmp(out_site, out),
+                  "site %llx, its first call %ld: exit %d after %ld allocations (%s), and %d after %ld (%s)",
+                  a->site, a->first, rc_site, made_site, out_site, rc_n, calls[0], out);
+    }
+    free(sites);
 }
 
 /* (only in `make faults`: `make check` has run_failed_leaves_no_new_database) */

@@ -17,6 +17,13 @@
  *                   the call reports that short count; stdio calls then fail with ENOSPC)
  *   GS_FAULT_OUT    a file to which the calls of each class are appended at exit, with "1" if
  *                   the fault was injected ("MALLOC WRITE FSYNC RENAME FIRED\n")
+ *   GS_FAULT_SITES  (GS_FAULT_CLASS=malloc) a file to which every distinct stack an allocation
+ *                   was made from is written at exit, in the order first seen, as "SITE N\n":
+ *                   SITE the hash of the stack (each frame's module and offset in it, so the same
+ *                   in every run), N the allocation (1-based) that first had it
+ *   GS_FAULT_SITE   (GS_FAULT_CLASS=malloc, instead of GS_FAULT_N) the first allocation whose
+ *                   stack hashes to this SITE (hexadecimal) fails: the same call whatever the
+ *                   order the threads allocate in
  *
  * A gcc ASan binary runs with it given ASAN_OPTIONS=verify_asan_link_order=0: the shim then
  * comes before libasan and forwards to ASan's allocator (dlsym RTLD_NEXT), so a leak after an
@@ -45,6 +52,15 @@ static int fault_errno = ENOSPC, fault_short;
 static int armed;                 /* counting: from main() on */
 static long calls[C_RENAME + 1];  /* of each class, atomically */
 static int fired;
+static uint64_t fault_site;       /* GS_FAULT_SITE, 0 if none */
+
+/* The distinct stacks seen (GS_FAULT_SITES): a hash set, and the list in the order first seen. */
+enum { SITE_CAP = 1 << 16 };
+static int record_sites, site_lock, sites_overflow;
+static uint64_t site_set[2 * SITE_CAP];
+static uint64_t site_list[SITE_CAP];
+static long site_first[SITE_CAP];
+static long n_sites;
 
 /* The next definitions, resolved once; an allocation dlsym makes before they are known comes
  * from a small static arena (never freed). */
@@ -112,27 +128,64 @@ static void resolve(void)
     resolving = 0;
 }
 
+static void write_all(int fd, const char *b, size_t n)
+{
+    if (real_write(fd, b, n) != (ssize_t)n) { /* nothing to do about it */ }
+}
+
 static void report(void)
 {
-    const char *path = getenv("GS_FAULT_OUT");
-    if (!path || !real_write) return;
+    const char *path = getenv("GS_FAULT_OUT"), *sites = getenv("GS_FAULT_SITES");
+    if (!real_write) return;
     char line[128];
-    int n = snprintf(line, sizeof line, "%ld %ld %ld %ld %d\n", calls[C_MALLOC], calls[C_WRITE],
-                     calls[C_FSYNC], calls[C_RENAME], fired);
-    int fd = open(path, O_WRONLY | O_CREAT | O_APPEND, 0600);
+    int fd = path ? open(path, O_WRONLY | O_CREAT | O_APPEND, 0600) : -1;
+    if (fd >= 0) {
+        int n = snprintf(line, sizeof line, "%ld %ld %ld %ld %d\n", calls[C_MALLOC], calls[C_WRITE],
+                         calls[C_FSYNC], calls[C_RENAME], fired);
+        write_all(fd, line, (size_t)n);
+        close(fd);
+    }
+    fd = record_sites && sites ? open(sites, O_WRONLY | O_CREAT | O_TRUNC, 0600) : -1;
     if (fd < 0) return;
-    if (real_write(fd, line, (size_t)n) != n) { /* nothing to do about it */ }
+    for (long i = 0; i < n_sites; i++) {
+        int n = snprintf(line, sizeof line, "%016llx %ld\n", (unsigned long long)site_list[i], site_first[i]);
+        write_all(fd, line, (size_t)n);
+    }
+    if (sites_overflow) write_all(fd, "overflow\n", 9);   /* more stacks than SITE_CAP */
     close(fd);
+}
+
+/* 1 if call k of class c is the one to fail (and it is marked as fired). */
+static int fails(int c, long k)
+{
+    if (c != fault_class || k != fault_n || fault_site) return 0;
+    fired = 1;
+    return 1;
 }
 
 /* Counts this call of class c; 1 if it is the one to fail. */
 static int hit(int c)
 {
     if (!armed) return 0;
-    long k = __atomic_add_fetch(&calls[c], 1, __ATOMIC_SEQ_CST);
-    if (c != fault_class || k != fault_n) return 0;
-    fired = 1;
-    return 1;
+    return fails(c, __atomic_add_fetch(&calls[c], 1, __ATOMIC_SEQ_CST));
+}
+
+/* Notes the stack site of allocation k if it is new. */
+static void record_site(uint64_t site, long k)
+{
+    while (__atomic_exchange_n(&site_lock, 1, __ATOMIC_ACQUIRE)) { /* spin: a few instructions */ }
+    size_t i = (size_t)(site * 0x9E3779B97F4A7C15ull >> 47) & (2 * SITE_CAP - 1);
+    while (site_set[i] && site_set[i] != site) i = (i + 1) & (2 * SITE_CAP - 1);
+    if (!site_set[i]) {
+        if (n_sites < SITE_CAP) {
+            site_set[i] = site;
+            site_list[n_sites] = site;
+            site_first[n_sites++] = k;
+        } else {
+            sites_overflow = 1;
+        }
+    }
+    __atomic_store_n(&site_lock, 0, __ATOMIC_RELEASE);
 }
 
 /* Libraries that do not survive a failed allocation. FFTW's allocator asserts (by design: it
@@ -146,31 +199,45 @@ static const char *const unsurvivable[] = {"libfftw3", "libplplot", "plplot5", "
                                            "libglib-2", "libgobject-2", "libcairo", "libharfbuzz",
                                            "libfreetype", "libexpat", "libasan", "libubsan", NULL};
 
-/* 1 if a frame of one of them is on the stack of the allocation being made. Allocations made by
- * backtrace() itself (only its first call, in setup) count as such. */
+/* 1 if a frame of one of them is on the stack of the allocation being made; *site the hash
+ * (FNV-1a) of that stack's frames, each as its module's name and its offset in the module.
+ * Allocations made by backtrace() itself (only its first call, in setup) count as such. */
 static __thread int unwinding;
-static int for_unsurvivable(void)
+static int for_unsurvivable(uint64_t *site)
 {
     if (unwinding) return 1;
     unwinding = 1;
     void *pc[64];
     int n = backtrace(pc, 64), found = 0;
+    uint64_t h = 0xcbf29ce484222325ull;
     for (int i = 1; i < n && !found; i++) {
         Dl_info d;
-        if (dladdr(pc[i], &d) && d.dli_fname)
+        uintptr_t off = (uintptr_t)pc[i];
+        if (dladdr(pc[i], &d) && d.dli_fname) {
             for (int j = 0; unsurvivable[j] && !found; j++) found = strstr(d.dli_fname, unsurvivable[j]) != NULL;
+            for (const char *c = d.dli_fname; *c; c++) h = (h ^ (unsigned char)*c) * 0x100000001b3ull;
+            off -= (uintptr_t)d.dli_fbase;
+        }
+        for (int b = 0; b < 8; b++) h = (h ^ ((off >> (8 * b)) & 0xff)) * 0x100000001b3ull;
     }
     unwinding = 0;
+    *site = h ? h : 1;
     return found;
 }
 
 /* hit(C_MALLOC) for an allocation, unless for one of those libraries (only looked for when
- * allocations are the class counted: the stack is unwound for each). */
+ * allocations are the class counted: the stack is unwound for each); with GS_FAULT_SITE, the
+ * first allocation from that site fails instead of the n-th. */
 static int alloc_hit(void)
 {
     if (!armed) return 0;
-    if (fault_class == C_MALLOC && for_unsurvivable()) return 0;
-    return hit(C_MALLOC);
+    if (fault_class != C_MALLOC) return hit(C_MALLOC);
+    uint64_t site;
+    if (for_unsurvivable(&site)) return 0;
+    long k = __atomic_add_fetch(&calls[C_MALLOC], 1, __ATOMIC_SEQ_CST);
+    if (record_sites) record_site(site, k);
+    if (fault_site) return site == fault_site && !__atomic_exchange_n(&fired, 1, __ATOMIC_SEQ_CST);
+    return fails(C_MALLOC, k);
 }
 
 __attribute__((constructor)) static void setup(void)
@@ -186,6 +253,9 @@ __attribute__((constructor)) static void setup(void)
                       : !strcmp(c, "fsync") ? C_FSYNC : !strcmp(c, "rename") ? C_RENAME : C_NONE;
     }
     fault_n = n ? atol(n) : 0;
+    const char *site = getenv("GS_FAULT_SITE");
+    if (fault_class == C_MALLOC && site && *site) fault_site = strtoull(site, NULL, 16);
+    record_sites = fault_class == C_MALLOC && getenv("GS_FAULT_SITES") != NULL;
     if (e && !strcmp(e, "EIO")) fault_errno = EIO;
     if (e && !strcmp(e, "SHORT")) fault_short = 1;
     atexit(report);

@@ -6,12 +6,15 @@
 #                 FAULT_RUN_MALLOC_STEP-th allocation and FAULT_RUN_WRITE_STEP-th write if set;
 #                 1, the default, is every one: days for run) on FAULT_JOBS workers with the gcc
 #                 ASan+UBSan build; the counts in build/asan/faults.md
+#   make faults FAULT_SWEEP=sites   the same, but the allocations fail once for each distinct
+#                 stack they are made from (at its first call) instead of at every n
 FAULT_SHIM := $(BUILD)/tests/faults/faultinject.so
 $(FAULT_SHIM): tests/faults/faultinject.c
 	@mkdir -p $(dir $@)
 	gcc -std=gnu11 -Wall -Wextra -Werror -O1 -g -fno-omit-frame-pointer -shared -fPIC $< -ldl -o $@
 test: $(FAULT_SHIM)
 
+FAULT_SWEEP ?= full
 FAULT_MALLOC_STEP ?= 1
 FAULT_RUN_MALLOC_STEP ?=
 FAULT_RUN_WRITE_STEP ?=
@@ -20,9 +23,9 @@ FAULT_JOBS ?= 1
 faults: deps
 	$(MAKE) --no-print-directory BUILD=build/asan SAN=1 faults-run
 faults-run: $(TEST_BIN) $(BIN) $(FAULT_SHIM)
-	@echo '| scenario | malloc calls | every n-th tried | write calls | every n-th tried | fsync calls | rename calls | injected runs | failed cleanly | succeeded complete | bad |' > $(BUILD)/faults.md
+	@echo '| scenario | malloc calls | tried | write calls | tried | fsync calls | rename calls | injected runs | failed cleanly | succeeded complete | bad |' > $(BUILD)/faults.md
 	@echo '| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |' >> $(BUILD)/faults.md
-	GS_SHARED=$(SHARED) GS_BIN=$(BIN) GS_SAN=$(SAN) GS_FAULT_SWEEP=full GS_FAULT_MALLOC_STEP=$(FAULT_MALLOC_STEP) \
+	GS_SHARED=$(SHARED) GS_BIN=$(BIN) GS_SAN=$(SAN) GS_FAULT_SWEEP=$(FAULT_SWEEP) GS_FAULT_MALLOC_STEP=$(FAULT_MALLOC_STEP) \
 	GS_FAULT_RUN_MALLOC_STEP=$(FAULT_RUN_MALLOC_STEP) GS_FAULT_RUN_WRITE_STEP=$(FAULT_RUN_WRITE_STEP) GS_FAULT_JOBS=$(FAULT_JOBS) GS_FAULT_REPORT=$(CURDIR)/$(BUILD)/faults.md \
 	GS_TEST_TIMEOUT_S=172800 LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp:print_suppressions=0 \
 	  $(TEST_BIN) fault_injection_ _fault_injection_run_new_database
