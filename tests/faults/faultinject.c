@@ -36,6 +36,7 @@
 #include <errno.h>
 #include <execinfo.h>
 #include <fcntl.h>
+#include <link.h>
 #include <stdarg.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -199,9 +200,80 @@ static const char *const unsurvivable[] = {"libfftw3", "libplplot", "plplot5", "
                                            "libglib-2", "libgobject-2", "libcairo", "libharfbuzz",
                                            "libfreetype", "libexpat", "libasan", "libubsan", NULL};
 
+/* The loaded modules' address ranges (their PT_LOAD segments), each with its name's hash and
+ * whether it is one of those: appended when a frame is in none of them (a module loaded since),
+ * never changed once counted in n_modules, searched newest first. dladdr() would do, but it
+ * searches each module's symbols too: most of the time of an allocation sweep. */
+enum { MODULE_CAP = 4096 };   /* a power of two (page_cache keeps an index in 12 bits) */
+static struct module {
+    uintptr_t lo, hi, base;
+    uint64_t name_hash;
+    int unsurvivable;
+} modules[MODULE_CAP];
+static int n_modules, module_lock;
+
+static uint64_t fnv(uint64_t h, const void *p, size_t n)
+{
+    for (size_t i = 0; i < n; i++) h = (h ^ ((const unsigned char *)p)[i]) * 0x100000001b3ull;
+    return h;
+}
+
+static int add_modules(struct dl_phdr_info *info, size_t size, void *ctx)
+{
+    (void)size;
+    (void)ctx;
+    const char *name = info->dlpi_name ? info->dlpi_name : "";
+    for (int i = 0; i < info->dlpi_phnum; i++) {
+        const ElfW(Phdr) *ph = &info->dlpi_phdr[i];
+        if (ph->p_type != PT_LOAD) continue;
+        uintptr_t lo = info->dlpi_addr + ph->p_vaddr, hi = lo + ph->p_memsz;
+        int known = 0;
+        for (int m = 0; m < n_modules && !known; m++)
+            known = modules[m].lo == lo && modules[m].hi == hi && modules[m].base == info->dlpi_addr;
+        if (known || n_modules == MODULE_CAP) continue;
+        struct module *mo = &modules[n_modules];
+        mo->lo = lo;
+        mo->hi = hi;
+        mo->base = info->dlpi_addr;
+        mo->name_hash = fnv(0xcbf29ce484222325ull, name, strlen(name));
+        mo->unsurvivable = 0;
+        for (int j = 0; unsurvivable[j]; j++) mo->unsurvivable |= strstr(name, unsurvivable[j]) != NULL;
+        __atomic_store_n(&n_modules, n_modules + 1, __ATOMIC_RELEASE);
+    }
+    return 0;
+}
+
+/* The module a code page was last found in, as (page << 12 | index): a hint, checked. */
+enum { PAGE_CACHE = 1 << 14 };
+static uint64_t page_cache[PAGE_CACHE];
+
+/* The module pc is in (NULL if none, as for a JIT's code). */
+static const struct module *module_of(uintptr_t pc)
+{
+    uint64_t page = pc >> 12, *slot = &page_cache[(page * 0x9E3779B97F4A7C15ull) >> 50];
+    uint64_t e = __atomic_load_n(slot, __ATOMIC_RELAXED);
+    const struct module *hint = &modules[e & (MODULE_CAP - 1)];
+    if (e >> 12 == page && (int)(e & (MODULE_CAP - 1)) < __atomic_load_n(&n_modules, __ATOMIC_ACQUIRE) &&
+        pc >= hint->lo && pc < hint->hi)
+        return hint;
+    for (int pass = 0; pass < 2; pass++) {
+        for (int m = __atomic_load_n(&n_modules, __ATOMIC_ACQUIRE) - 1; m >= 0; m--)
+            if (pc >= modules[m].lo && pc < modules[m].hi) {
+                __atomic_store_n(slot, page << 12 | (uint64_t)m, __ATOMIC_RELAXED);
+                return &modules[m];
+            }
+        if (pass) break;
+        while (__atomic_exchange_n(&module_lock, 1, __ATOMIC_ACQUIRE)) { /* spin */ }
+        dl_iterate_phdr(add_modules, NULL);
+        __atomic_store_n(&module_lock, 0, __ATOMIC_RELEASE);
+    }
+    return NULL;
+}
+
 /* 1 if a frame of one of them is on the stack of the allocation being made; *site the hash
- * (FNV-1a) of that stack's frames, each as its module's name and its offset in the module.
- * Allocations made by backtrace() itself (only its first call, in setup) count as such. */
+ * (FNV-1a) of that stack's frames, each as its module's name and its offset in the module (the
+ * same in every run). Allocations made by backtrace() itself (only its first call, in setup)
+ * count as such. */
 static __thread int unwinding;
 static int for_unsurvivable(uint64_t *site)
 {
@@ -211,14 +283,14 @@ static int for_unsurvivable(uint64_t *site)
     int n = backtrace(pc, 64), found = 0;
     uint64_t h = 0xcbf29ce484222325ull;
     for (int i = 1; i < n && !found; i++) {
-        Dl_info d;
         uintptr_t off = (uintptr_t)pc[i];
-        if (dladdr(pc[i], &d) && d.dli_fname) {
-            for (int j = 0; unsurvivable[j] && !found; j++) found = strstr(d.dli_fname, unsurvivable[j]) != NULL;
-            for (const char *c = d.dli_fname; *c; c++) h = (h ^ (unsigned char)*c) * 0x100000001b3ull;
-            off -= (uintptr_t)d.dli_fbase;
+        const struct module *m = module_of(off);
+        if (m) {
+            found = m->unsurvivable;
+            h = fnv(h, &m->name_hash, sizeof m->name_hash);
+            off -= m->base;
         }
-        for (int b = 0; b < 8; b++) h = (h ^ ((off >> (8 * b)) & 0xff)) * 0x100000001b3ull;
+        h = fnv(h, &off, sizeof off);
     }
     unwinding = 0;
     *site = h ? h : 1;
