@@ -244,6 +244,10 @@ static gs_status open_input(const srv_run_opts *o, srv_run_report *r, cap_scene 
         if ((s = cap_backend_info(*be, &info)) != GS_OK) return s;
         int d[5] = {info.grid_hz, info.bands, info.K, info.width, info.height};
         memcpy(dims, d, sizeof d);
+        /* recognition's memory, checked before the capture is rendered (the render's own is
+         * checked by cap_backend_sim_new) */
+        if ((s = gs_capture_budget(o->input, info.width, info.height, info.bands, info.K, info.hdr)) != GS_OK)
+            return s;
         station_json = info.station_json;
         snprintf(src, sizeof src, "%s: camera.station", o->input);
         if (o->survey) set_name(r->survey, o->survey);

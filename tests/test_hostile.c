@@ -407,6 +407,28 @@ TEST(scene_memory_budget_checked_before_rendering)
               above / 1048576, b / 1048576);
 }
 
+/* `run` on a scene checked recognition's budget only when it read the capture back, after
+ * rendering all of it. Here the render fits the budget and the capture's recognition does not:
+ * the run is refused at once, in one line naming the scene and recognition's sizes, with
+ * nothing rendered and no database. */
+TEST(run_on_a_scene_checks_recognition_budget_before_rendering)
+{
+    const char *scene = budget_scene("deep.json", 1024, 3, 26, 64), *o = fx_tmp("deep-out"),
+               *db = fx_tmp("deep.sqlite");
+    cap_scene sc;
+    CHECK_OK(cap_scene_read(scene, &sc));
+    double render = cap_sim_bytes(&sc), budget = 128.0 * 1048576;
+    cap_scene_release(&sc);
+    /* K = 26 frames of 3 bands: 3 B per sample and 27 + 0 per pixel, about 240 MiB */
+    double recognize = 1024.0 * 1024 * (26 * 3 * 3 + 27);
+    CHECK_MSG(render < budget && recognize > budget, "render %.1f MiB, recognition %.1f MiB", render / 1048576,
+              recognize / 1048576);
+    CHECK(run("%s --max-memory 128M run %s --db %s --capture-dir %s", scene, db, o) == 1);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "deep.json: 26 frames of 1024x1024x3 samples and the "
+              "working images") && strstr(out, "memory budget of 128.0 MiB"), "%s", out);
+    CHECK(!fx_exists(o) && !fx_exists(db));
+}
+
 /* The smallest budget, in bytes, that check passes (a bisection over gs_mem_budget_set). */
 static double budget_threshold(gs_status (*check)(const void *), const void *arg)
 {

@@ -599,6 +599,9 @@ gs_status gs_capture_read(const char *dir, gs_capture *cap);
  * measured in docs/reliability.md) fit gs_mem_check's budget (GS_ELIMIT). */
 #define GS_WORK_BYTES_PER_PIXEL 27
 #define GS_WORK_BYTES_PER_SAMPLE 1
+/* That check alone, for a capture of these sizes (hdr_maps: it has HDR maps): GS_ELIMIT in one
+ * line naming source and the sizes. `run` asks it of a scene before rendering the capture. */
+gs_status gs_capture_budget(const char *source, int width, int height, int bands, int K, int hdr_maps);
 /* For a zeroed capture whose K, bands, width and height are set (GS_EINVAL otherwise, or if
  * frames, raw or halvings are already set): allocate frames (file "frame_NNN.png", k, cycles 0:
  * set them, hdr_map "", grid_hz_measured and start_s NaN) and zeroed raw pixels. */

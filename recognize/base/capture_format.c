@@ -224,14 +224,19 @@ static gs_status check_before_reading(const char *dir, const reader *r, const gs
                                "(at most %zu bytes)%s", path, (long long)sb.st_size, cap->width,
                                cap->height, max, ref);
         }
-    double plane = (double)cap->width * (double)cap->height;
-    double samples = plane * cap->K * cap->bands;
-    double bytes = samples * ((double)sizeof *cap->raw + GS_WORK_BYTES_PER_SAMPLE) +
-                   plane * cap->K * (maps ? 1.0 : 0.0) + plane * GS_WORK_BYTES_PER_PIXEL;
+    return gs_capture_budget(json_path, cap->width, cap->height, cap->bands, cap->K, maps > 0);
+}
+
+gs_status gs_capture_budget(const char *source, int width, int height, int bands, int K, int hdr_maps)
+{
+    double plane = (double)width * (double)height;
+    double samples = plane * K * bands;
+    double bytes = samples * ((double)sizeof(unsigned short) + GS_WORK_BYTES_PER_SAMPLE) +
+                   plane * K * (hdr_maps ? 1.0 : 0.0) + plane * GS_WORK_BYTES_PER_PIXEL;
     char what[PATH_BUF + 200];
-    snprintf(what, sizeof what, "%s: %d frames of %dx%dx%d samples and the working images of "
-             "their processing (%d B per pixel, %d per sample)", json_path, cap->K, cap->width,
-             cap->height, cap->bands, GS_WORK_BYTES_PER_PIXEL, GS_WORK_BYTES_PER_SAMPLE);
+    snprintf(what, sizeof what, "%.*s: %d frames of %dx%dx%d samples and the working images of "
+             "their processing (%d B per pixel, %d per sample)", PATH_BUF, source, K, width, height,
+             bands, GS_WORK_BYTES_PER_PIXEL, GS_WORK_BYTES_PER_SAMPLE);
     return gs_mem_check(bytes, what);
 }
 
