@@ -403,6 +403,16 @@ static gs_status parse_street_grid(const cap_pctx *c, const cap_scene *sc, json_
     double la = lat0 * M_PI / 180, sl = sin(la);
     double Nr = a / sqrt(1 - e2 * sl * sl), Mr = a * (1 - e2) / pow(1 - e2 * sl * sl, 1.5);
     long streets_u = (long)floor(size[0] / street), streets_v = (long)floor(size[1] / street);
+    /* every position is computed (and, in range, projected) before it is kept or dropped: the
+     * positions, each a light if all are in range, must fit the budget as the lights would,
+     * which bounds the time too (not only the lights kept) */
+    double positions = (streets_v + 1.0) * floor(size[0] / spacing) + (streets_u + 1.0) * floor(size[1] / spacing);
+    char what[200];
+    snprintf(what, sizeof what, "a street grid of %.0f positions (size_m over street_spacing_m and "
+             "light_spacing_m, both directions; %d B each when rendered)", positions,
+             CAP_RENDER_BYTES_PER_LIGHT + (int)sizeof(cap_light));
+    if (gs_mem_check(positions * (CAP_RENDER_BYTES_PER_LIGHT + sizeof(cap_light)), what) != GS_OK)
+        return cap_scene_bad(c, GS_ELIMIT, path, "%s", gs_detail());
     size_t before = lv->n;
     /* two families: direction 0 streets run along u (constant v), direction 1 along v */
     for (int dir = 0; dir < 2; dir++) {

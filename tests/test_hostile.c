@@ -407,6 +407,38 @@ TEST(scene_memory_budget_checked_before_rendering)
               above / 1048576, b / 1048576);
 }
 
+/* A street grid is generated position by position, and positions out of range are dropped: a
+ * grid of 4 x 10^8 positions with only a handful in range kept the memory small and ran for
+ * minutes. Its positions are now counted first, against the budget as lights: refused at once,
+ * in one line naming the block and the count; a grid whose positions fit generates. */
+TEST(street_grid_positions_bounded_before_generating)
+{
+    const char *grid = fx_tmp("far.json"), *o = fx_tmp("far-out");
+    static const char fmt[] =
+        "{\"format\": \"gridsurvey-scene/1\", \"grid\": {\"nominal_hz\": 50},\n"
+        " \"camera\": {\"width_px\": 64, \"height_px\": 64, \"intrinsics\": {\"focal_px\": 64},\n"
+        "   \"station\": {\"lat_deg\": 32.8, \"lon_deg\": 35.0, \"height_m\": 100},\n"
+        "   \"pose\": {\"heading_deg\": 0, \"pitch_deg\": -5}},\n"
+        " \"acam\": {\"K\": 26, \"cycles\": 64},\n"
+        " \"lights\": [{\"type\": \"street_grid\", \"center\": {\"lat_deg\": 32.81, \"lon_deg\": 35.0},\n"
+        "   \"size_m\": [%d, %d], \"street_spacing_m\": 10, \"light_spacing_m\": 5,\n"
+        "   \"max_range_m\": 1200, \"technologies\": [{\"bulb\": \"hps-150w\", \"lumens\": 15000}]}]}\n";
+    char text[2048];
+    snprintf(text, sizeof text, fmt, 100000, 100000);
+    fx_write_text(grid, text);
+    CHECK(run("%s --max-memory 1G simulate %s --out-dir %s --no-progress", grid, o, NULL) == 1);
+    /* (100000 / 10 + 1) streets of 100000 / 5 positions, in each direction */
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "far.json") && strstr(out, "lights[0]") &&
+              strstr(out, "a street grid of 400040000 positions") && strstr(out, "memory budget of 1024.0 MiB"),
+              "%s", out);
+    CHECK(!fx_exists(o));
+    /* 2 km square: 2 x 201 x 400 = 160,800 positions, 0.5 GiB as lights: it fits and generates */
+    snprintf(text, sizeof text, fmt, 2000, 2000);
+    fx_write_text(grid, text);
+    CHECK_MSG(run("%s --max-memory 1G simulate %s --out-dir %s --no-progress", grid, o, NULL) == 0, "%s", out);
+    CHECK(fx_exists(fx_path(o, "truth.json")));
+}
+
 /* `run` on a scene checked recognition's budget only when it read the capture back, after
  * rendering all of it. Here the render fits the budget and the capture's recognition does not:
  * the run is refused at once, in one line naming the scene and recognition's sizes, with
