@@ -32,9 +32,7 @@ struct cap_link {
 
 static double now_ms(void)
 {
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return 1e3 * (double)ts.tv_sec + 1e-6 * (double)ts.tv_nsec;
+    return 1e3 * gs_clock_s(CLOCK_MONOTONIC);
 }
 
 static unsigned checksum(const char *s, size_t n)

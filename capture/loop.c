@@ -99,13 +99,6 @@ typedef struct {
     uint64_t fnv, hdr_fnv;
 } frame_state;
 
-static double now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
 /* Size and checksum of dir/name; -1 bytes when it cannot be read. */
 static void file_sum(const char *dir, const char *name, long *bytes, uint64_t *fnv)
 {
@@ -276,7 +269,7 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
     cap_loop_report dummy;
     if (!rep) rep = &dummy;
     memset(rep, 0, sizeof *rep);
-    double t_start = now_s();
+    double t_start = gs_clock_s(CLOCK_MONOTONIC);
     cap_acq_info info;
     gs_status s = cap_backend_info(b, &info);
     if (s != GS_OK) return s;
@@ -463,7 +456,7 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
         rep->frames_acquired++;
         if (progress)
             fprintf(stderr, "\rcapture: frame %d/%d acquired (%d pass%s, %zu saturated px)  %.1f s   ",
-                    k + 1, K, pass + 1, pass ? "es" : "", n_sat, now_s() - t_start);
+                    k + 1, K, pass + 1, pass ? "es" : "", n_sat, gs_clock_s(CLOCK_MONOTONIC) - t_start);
     }
     if (progress) fputc('\n', stderr);
     rep->acquisitions = acquisitions;
@@ -477,7 +470,7 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
     if (s != GS_OK) goto done;
     rep->complete = 1;
 done:
-    rep->seconds = now_s() - t_start;
+    rep->seconds = gs_clock_s(CLOCK_MONOTONIC) - t_start;
     free(raw);
     free(halv);
     free(fs);

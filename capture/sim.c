@@ -11,13 +11,6 @@
 #include <string.h>
 #include <time.h>
 
-static double now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
 static gs_status scene_copy(cap_scene *dst, const cap_scene *src)
 {
     *dst = *src;
@@ -571,10 +564,10 @@ gs_status cap_sim_render(cap_sim *s, int k, int pass, long index, const unsigned
     gs_status st = GS_OK;
     for (size_t i = 0; i < s->n_stages && st == GS_OK; i++) {
         cap_stage *sg = &s->stages[i];
-        double t0 = now_s();
+        double t0 = gs_clock_s(CLOCK_MONOTONIC);
         r.items = 0;
         st = sg->run(s, &r);
-        sg->seconds += now_s() - t0;
+        sg->seconds += gs_clock_s(CLOCK_MONOTONIC) - t0;
         sg->calls++;
         sg->items += r.items;
     }

@@ -61,13 +61,6 @@ static void bench_eq7_opts(rec_eq7_opts *eo)
     eo->threads = 1;
 }
 
-static double now_s(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
-}
-
 
 /* ------------------------------------------------------------------ the reference */
 
@@ -318,9 +311,9 @@ static gs_status run_pixels(const config *c, rec_matcher *m, result *res)
         }
         res->seconds = INFINITY;
         for (int rep = 0; rep < REPS && st == GS_OK; rep++) {
-            double t0 = now_s();
+            double t0 = gs_clock_s(CLOCK_MONOTONIC);
             st = rec_match_pixels(m, x, sg, P, bulb, ph, cf);
-            res->seconds = fmin(res->seconds, now_s() - t0);
+            res->seconds = fmin(res->seconds, gs_clock_s(CLOCK_MONOTONIC) - t0);
         }
         res->rate = (double)P / res->seconds;
         res->templates = r.M;
@@ -334,13 +327,13 @@ static gs_status run_pixels(const config *c, rec_matcher *m, result *res)
             for (size_t i = 0; i < M * D; i++) tf[i] = (float)r.t[i];
             double best = INFINITY;
             for (int rep = 0; rep < REPS; rep++) {
-                double t0 = now_s();
+                double t0 = gs_clock_s(CLOCK_MONOTONIC);
                 for (size_t r0 = 0; r0 < P; r0 += B) {
                     size_t nr = P - r0 < B ? P - r0 : B;
                     cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)nr, (int)M, (int)D,
                                 1.0f, x + r0 * D, (int)D, tf, (int)D, 0.0f, sc, (int)M);
                 }
-                best = fmin(best, now_s() - t0);
+                best = fmin(best, gs_clock_s(CLOCK_MONOTONIC) - t0);
             }
             res->sgemm_rate = (double)P / best;
         }
@@ -353,14 +346,14 @@ static gs_status run_pixels(const config *c, rec_matcher *m, result *res)
         if (!w) st = gs_fail(GS_ENOMEM, "bench: cannot allocate weights");
         for (size_t d = 0; w && d < D; d++) w[d] = 1.0;
         double thr = gs_chi2_isf(eo.unknown_p, (int)D - 2);
-        double t0 = now_s();
+        double t0 = gs_clock_s(CLOCK_MONOTONIC);
         for (size_t p = 0; w && p < nref; p++) {
             int b;
             double phase;
             ref_search(&r, x + p * D, w, eo.min_snr, thr, &b, &phase);
             same += b == bulb[p] && (b < 0 || fabs(phase - ph[p]) < 1e-3);
         }
-        res->ref_seconds = now_s() - t0;
+        res->ref_seconds = gs_clock_s(CLOCK_MONOTONIC) - t0;
         res->ref_rows = nref;
         res->ref_rate = (double)nref / res->ref_seconds;
         res->agree = (double)same / (double)nref;
@@ -427,9 +420,9 @@ static gs_status run_lights(const config *c, rec_matcher *m, result *res)
         }
         res->seconds = INFINITY;
         for (int rep = 0; rep < REPS && st == GS_OK; rep++) {
-            double t0 = now_s();
+            double t0 = gs_clock_s(CLOCK_MONOTONIC);
             st = rec_match_catalog(m, &cat, mt, NULL);
-            res->seconds = fmin(res->seconds, now_s() - t0);
+            res->seconds = fmin(res->seconds, gs_clock_s(CLOCK_MONOTONIC) - t0);
         }
         res->rate = (double)N / res->seconds;
         res->templates = r.M;
@@ -437,7 +430,7 @@ static gs_status run_lights(const config *c, rec_matcher *m, result *res)
     if (st == GS_OK && !c->continuous) {
         size_t nref = N < REF_ROWS_MAX ? N : REF_ROWS_MAX, same = 0;
         double thr = gs_chi2_isf(eo.unknown_p, (int)D - 2);
-        double t0 = now_s();
+        double t0 = gs_clock_s(CLOCK_MONOTONIC);
         for (size_t i = 0; i < nref; i++) {
             for (size_t d = 0; d < D; d++) {
                 xf[d] = (float)cat.signal[i * D + d];
@@ -449,7 +442,7 @@ static gs_status run_lights(const config *c, rec_matcher *m, result *res)
             int fast_b = mt[i].bulb >= 0 ? mt[i].bulb : -1;
             same += b == fast_b && (b < 0 || fabs(phase - mt[i].phase_deg) < 1e-3);
         }
-        res->ref_seconds = now_s() - t0;
+        res->ref_seconds = gs_clock_s(CLOCK_MONOTONIC) - t0;
         res->ref_rows = nref;
         res->ref_rate = (double)nref / res->ref_seconds;
         res->agree = (double)same / (double)nref;
@@ -524,9 +517,9 @@ static gs_status run_capture(const config *c, rec_matcher *m, result *res)
         res->seconds = INFINITY;
         for (int rep = 0; rep < REPS && st == GS_OK; rep++) {
             rec_pixel_maps pm;
-            double t0 = now_s();
+            double t0 = gs_clock_s(CLOCK_MONOTONIC);
             st = rec_pixel_maps_compute(&cap, m, &eo, NULL, &pm);
-            res->seconds = fmin(res->seconds, now_s() - t0);
+            res->seconds = fmin(res->seconds, gs_clock_s(CLOCK_MONOTONIC) - t0);
             res->mapped = pm.mapped;
             res->matched = pm.matched;
             rec_pixel_maps_release(&pm);
@@ -539,9 +532,9 @@ static gs_status run_capture(const config *c, rec_matcher *m, result *res)
             rec_blob_opts bo;
             rec_blob_opts_default(&bo);
             rec_catalog cat;
-            double t0 = now_s();
+            double t0 = gs_clock_s(CLOCK_MONOTONIC);
             st = rec_blobs_extract(&cap, &bo, &cat);
-            res->blob_seconds = fmin(res->blob_seconds, now_s() - t0);
+            res->blob_seconds = fmin(res->blob_seconds, gs_clock_s(CLOCK_MONOTONIC) - t0);
             res->blobs = cat.count;
             rec_catalog_release(&cat);
         }
@@ -746,7 +739,7 @@ static int bench_recognize(int argc, char **argv)
     }
     int failed = 0;
     static const int Ks[] = {8, 13, 26}, bandss[] = {1, 3}, bulbss[] = {10, 25, 0};
-    double t_start = now_s();
+    double t_start = gs_clock_s(CLOCK_MONOTONIC);
 
     printf("# Eq. 7 throughput (`gridsurvey bench recognize%s`)\n\n", quick ? " --quick" : "");
     printf("The matcher runs the paper's Eq. 7 (one brightness per light, chromaticity templates; "
@@ -872,7 +865,7 @@ lights:
         light_row(all, &cc, &failed);
     }
 done:
-    printf("\nTotal %.0f s.\n", now_s() - t_start);
+    printf("\nTotal %.0f s.\n", gs_clock_s(CLOCK_MONOTONIC) - t_start);
     gs_delight_free(all);
     return failed ? 1 : 0;
 }

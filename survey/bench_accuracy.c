@@ -40,13 +40,6 @@
 const double srv_acc_bin_edges[NBINS + 1] = {0.0, 0.5, 0.8, 0.95, 0.99, 1.0000001};
 const char *const srv_acc_scene_names[3] = {"metro", "metro_hard", "metro_clear"};
 
-static double now_s(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
-}
-
 static int rm_one(const char *p, const struct stat *sb, int flag, struct FTW *f)
 {
     (void)sb;
@@ -392,7 +385,7 @@ int srv_bench_accuracy(int argc, char **argv)
         return 2;
     }
     openblas_set_num_threads(1);
-    double t_start = now_s();
+    double t_start = gs_clock_s(CLOCK_MONOTONIC);
     gs_status s = mkdir_p(out);
     if (s != GS_OK) return srv_error(s);
     char work[4096];
@@ -434,7 +427,7 @@ int srv_bench_accuracy(int argc, char **argv)
     int failed = 0;
     for (size_t i = 0; i < np; i++) {
         srv_acc_point *p = &pts[i];
-        double t0 = now_s();
+        double t0 = gs_clock_s(CLOCK_MONOTONIC);
         s = run_point(base, &cr, work, quick ? 8 : 40, dl, p);
         p->ok = s == GS_OK;
         if (!p->ok) {
@@ -443,7 +436,7 @@ int srv_bench_accuracy(int argc, char **argv)
         }
         fprintf(stderr, "bench accuracy: %s K=%d C=%d hdr=%d locked=%d phases=%s: %s (%.1f s)\n",
                 srv_acc_scene_names[p->hard], p->K, p->C, p->hdr, p->locked, srv_acc_ph_name(p),
-                p->ok ? "ok" : p->err, now_s() - t0);
+                p->ok ? "ok" : p->err, gs_clock_s(CLOCK_MONOTONIC) - t0);
         if (!keep) rm_rf(work), mkdir(work, 0700);
     }
     gs_delight_free(dl);
@@ -459,12 +452,12 @@ int srv_bench_accuracy(int argc, char **argv)
         size_t len = strlen(out);
         while (len > 1 && out[len - 1] == '/') len--;
         snprintf(doc, sizeof doc, "%.*s.md", (int)len, out);
-        s = srv_acc_write_doc(doc, out, base, &cr, quick, pts, np, now_s() - t_start, Ks, nK);
+        s = srv_acc_write_doc(doc, out, base, &cr, quick, pts, np, gs_clock_s(CLOCK_MONOTONIC) - t_start, Ks, nK);
     }
     if (!keep) rm_rf(work);
     else fprintf(stderr, "bench accuracy: work directory kept: %s\n", work);
     free(pts);
     if (s != GS_OK) return srv_error(s);
-    fprintf(stderr, "bench accuracy: %zu points (%d failed) in %.0f s\n", np, failed, now_s() - t_start);
+    fprintf(stderr, "bench accuracy: %zu points (%d failed) in %.0f s\n", np, failed, gs_clock_s(CLOCK_MONOTONIC) - t_start);
     return failed ? 1 : 0;
 }

@@ -32,9 +32,9 @@ static gs_status blobs_row(const gs_capture *cap, int psf_fit, int threads, int 
         o.psf_fit = psf_fit;
         o.threads = threads;
         rec_catalog cat;
-        double t0 = srv_clock_s(CLOCK_MONOTONIC), c0 = srv_clock_s(CLOCK_PROCESS_CPUTIME_ID);
+        double t0 = gs_clock_s(CLOCK_MONOTONIC), c0 = gs_clock_s(CLOCK_PROCESS_CPUTIME_ID);
         gs_status st = rec_blobs_extract(cap, &o, &cat);
-        double dt = srv_clock_s(CLOCK_MONOTONIC) - t0, dc = srv_clock_s(CLOCK_PROCESS_CPUTIME_ID) - c0;
+        double dt = gs_clock_s(CLOCK_MONOTONIC) - t0, dc = gs_clock_s(CLOCK_PROCESS_CPUTIME_ID) - c0;
         if (st != GS_OK) return st;
         lights = cat.count;
         rec_catalog_release(&cat);

@@ -243,13 +243,6 @@ static const char bench_usage[] =
     "Example:\n"
     "  gridsurvey bench db --quick\n";
 
-double srv_bench_now_s(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
-}
-
 gs_status srv_bench_time_stats(srv_db *db, const char *conninfo, const char *by, double *sec)
 {
     srv_stats_opts o;
@@ -258,9 +251,9 @@ gs_status srv_bench_time_stats(srv_db *db, const char *conninfo, const char *by,
     if (s != GS_OK) return s;
     srv_phase_stats *g = NULL;
     size_t n = 0;
-    double t0 = srv_bench_now_s();
+    double t0 = gs_clock_s(CLOCK_MONOTONIC);
     s = db ? srv_stats_compute(db, &o, &g, &n, NULL) : srv_stats_compute_pg(conninfo, &o, &g, &n, NULL);
-    *sec = srv_bench_now_s() - t0;
+    *sec = gs_clock_s(CLOCK_MONOTONIC) - t0;
     free(g);
     return s;
 }
@@ -269,13 +262,13 @@ gs_status srv_bench_time_view(srv_db *db, const char *sql, double *sec)
 {
     sqlite3 *h = srv_db_sqlite(db);
     sqlite3_stmt *q = NULL;
-    double t0 = srv_bench_now_s();
+    double t0 = gs_clock_s(CLOCK_MONOTONIC);
     if (sqlite3_prepare_v2(h, sql, -1, &q, NULL) != SQLITE_OK)
         return gs_fail(GS_ESQL, "%s: %s", sql, sqlite3_errmsg(h));
     int rc;
     while ((rc = sqlite3_step(q)) == SQLITE_ROW) {}
     sqlite3_finalize(q);
-    *sec = srv_bench_now_s() - t0;
+    *sec = gs_clock_s(CLOCK_MONOTONIC) - t0;
     return rc == SQLITE_DONE ? GS_OK : gs_fail(GS_ESQL, "%s: %s", sql, sqlite3_errmsg(h));
 }
 
@@ -341,9 +334,9 @@ int srv_bench_db(int argc, char **argv)
     snprintf(radius, sizeof radius, "radius:%.6f,%.6f,500", o.lat_deg, o.lon_deg);
     for (long size = 10000; size <= max && s == GS_OK; size *= 10) {
         o.captures = (size_t)(size / 1000);
-        double t0 = srv_bench_now_s();
+        double t0 = gs_clock_s(CLOCK_MONOTONIC);
         s = srv_synth_ingest(db, &o, NULL);
-        double ingest = srv_bench_now_s() - t0;
+        double ingest = gs_clock_s(CLOCK_MONOTONIC) - t0;
         if (s != GS_OK) break;
         double t_tech = 0, t_cell = 0, t_rad = 0, t_view = 0, t_box = 0, t_check = 0;
         if ((s = srv_bench_time_stats(db, NULL, "technology", &t_tech)) != GS_OK ||
@@ -360,15 +353,15 @@ int srv_bench_db(int argc, char **argv)
         eo.bbox[3] = o.lat_deg + lat_half;
         gis_light *l = NULL;
         size_t nl = 0;
-        t0 = srv_bench_now_s();
+        t0 = gs_clock_s(CLOCK_MONOTONIC);
         s = srv_db_read_lights(db, &eo, &l, &nl);
-        t_box = srv_bench_now_s() - t0;
+        t_box = gs_clock_s(CLOCK_MONOTONIC) - t0;
         free(l);
         if (s != GS_OK) break;
         srv_db_report rep;
-        t0 = srv_bench_now_s();
+        t0 = gs_clock_s(CLOCK_MONOTONIC);
         s = srv_db_check(db, &rep);
-        t_check = srv_bench_now_s() - t0;
+        t_check = gs_clock_s(CLOCK_MONOTONIC) - t0;
         if (s == GS_OK && !srv_db_report_ok(&rep))
             s = gs_fail(GS_EFORMAT, "%s: db check failed at %ld lights", path, size);
         if (s != GS_OK) break;

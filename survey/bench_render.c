@@ -9,13 +9,6 @@
 #include <string.h>
 #include <time.h>
 
-double srv_clock_s(clockid_t id)
-{
-    struct timespec ts;
-    clock_gettime(id, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
 gs_status srv_render_time(const cap_scene *sc, unsigned effects_mask, int frames, int threads,
                           srv_render_time_result *out)
 {
@@ -35,9 +28,9 @@ gs_status srv_render_time(const cap_scene *sc, unsigned effects_mask, int frames
         cap_sim_free(s);
         return gs_fail(GS_ENOMEM, "bench: out of memory");
     }
-    double t0 = srv_clock_s(CLOCK_MONOTONIC), c0 = srv_clock_s(CLOCK_PROCESS_CPUTIME_ID);
+    double t0 = gs_clock_s(CLOCK_MONOTONIC), c0 = gs_clock_s(CLOCK_PROCESS_CPUTIME_ID);
     for (int i = 0; i < frames && st == GS_OK; i++) st = cap_sim_render(s, i % K, 0, i, NULL, raw, NULL);
-    double dt = srv_clock_s(CLOCK_MONOTONIC) - t0, dc = srv_clock_s(CLOCK_PROCESS_CPUTIME_ID) - c0;
+    double dt = gs_clock_s(CLOCK_MONOTONIC) - t0, dc = gs_clock_s(CLOCK_PROCESS_CPUTIME_ID) - c0;
     out->frames = frames;
     out->seconds_per_frame = dt / frames;
     out->cpu_seconds_per_frame = dc / frames;

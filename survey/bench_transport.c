@@ -14,13 +14,6 @@
 #include <string.h>
 #include <time.h>
 
-static double now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
 static const rec_source_spec bench_sources[5] = {
     {"inc-a60-25w-230v", 0}, {"cfl-23w", 120}, {"led-fil-4w-lin", 240}, {"fl-t8-36w-tri", 0},
     {"mh-70w", 240}};
@@ -130,9 +123,9 @@ int srv_bench_transport(int argc, char **argv)
             double best = INFINITY, err = 0;
             rec_unmix_result r;
             for (int rep = 0; rep < 2 && st == GS_OK; rep++) {
-                double t0 = now_s();
+                double t0 = gs_clock_s(CLOCK_MONOTONIC);
                 st = rec_unmix(&cap, &src, &uo, &r);
-                double dt = now_s() - t0;
+                double dt = gs_clock_s(CLOCK_MONOTONIC) - t0;
                 if (dt < best) best = dt;
                 if (st == GS_OK && rep == 1) {
                     err = 0;

@@ -63,10 +63,9 @@ double srv_tr_ncc(const float *a, const float *b, size_t n);
 /* ============================================================ end of the light transport */
 
 /* `gridsurvey bench pg` (survey/bench_pg.c), and the timing helpers of bench_db.c it shares:
- * monotonic seconds, `stats --by BY` on the SQLite db (or, db NULL, on conninfo's PostGIS
- * database), and reading every row of an SQL query on db. */
+ * `stats --by BY` on the SQLite db (or, db NULL, on conninfo's PostGIS database), and reading
+ * every row of an SQL query on db. */
 int srv_bench_pg(int argc, char **argv);
-double srv_bench_now_s(void);
 gs_status srv_bench_time_stats(srv_db *db, const char *conninfo, const char *by, double *sec);
 gs_status srv_bench_time_view(srv_db *db, const char *sql, double *sec);
 
@@ -76,9 +75,6 @@ int srv_bench_accuracy(int argc, char **argv);
 int srv_bench_render(int argc, char **argv);
 /* `gridsurvey bench blobs` (survey/bench_blobs.c). */
 int srv_bench_blobs(int argc, char **argv);
-/* Seconds on clock id (CLOCK_MONOTONIC: wall; CLOCK_PROCESS_CPUTIME_ID: the process's CPU, all
- * threads), for the benchmarks (survey/bench_render.c). */
-double srv_clock_s(clockid_t id);
 /* Its measurement: `frames` acquisitions (k = 0, 1, ...) of the scene with only the effects in
  * effects_mask (bits 1u << CAP_FX_*) that the scene lists, on `threads` threads
  * (cap_sim_set_threads), wall and CPU (the process's, all threads) time per frame. */

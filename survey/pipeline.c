@@ -44,13 +44,6 @@ void srv_run_opts_default(srv_run_opts *o)
     o->threshold_sigma = 5.0;
 }
 
-static double now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
 /* ------------------------------------------------------------------ paths */
 
 /* A directory that exists and is writable, or can be created (its parent exists and is a
@@ -277,9 +270,9 @@ static gs_status open_input(const srv_run_opts *o, srv_run_report *r, cap_scene 
             return gs_fail(GS_EINVAL, "%.200s...: capture directory path too long", o->input);
         snprintf(r->capture_dir, sizeof r->capture_dir, "%s", o->input);
         stage(o, SRV_STAGE_READ, "reading %s", o->input);
-        double t0 = now_s();
+        double t0 = gs_clock_s(CLOCK_MONOTONIC);
         if ((s = srv_job_read(j, o->input)) != GS_OK) return s;
-        r->seconds[SRV_STAGE_READ] += now_s() - t0;
+        r->seconds[SRV_STAGE_READ] += gs_clock_s(CLOCK_MONOTONIC) - t0;
         int d[5] = {j->cap.grid_hz, j->cap.bands, j->cap.K, j->cap.width, j->cap.height};
         memcpy(dims, d, sizeof d);
         station_json = j->cap.station_json;
@@ -375,16 +368,16 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
     /* 5. acquire (scene input) */
     if (be) {
         stage(o, SRV_STAGE_CAPTURE, "acquiring %d frames into %s", dims[2], r->capture_dir);
-        t0 = now_s();
+        t0 = gs_clock_s(CLOCK_MONOTONIC);
         s = srv_job_acquire(be, r->capture_dir, o->capture_progress, &r->frames_acquired, &r->frames_kept);
         cap_backend_free(be);
         be = NULL;
-        r->seconds[SRV_STAGE_CAPTURE] = now_s() - t0;
+        r->seconds[SRV_STAGE_CAPTURE] = gs_clock_s(CLOCK_MONOTONIC) - t0;
         if (s != GS_OK) goto done;
         stage(o, SRV_STAGE_READ, "reading %s", r->capture_dir);
-        t0 = now_s();
+        t0 = gs_clock_s(CLOCK_MONOTONIC);
         if ((s = srv_job_read(&j, r->capture_dir)) != GS_OK) goto done;
-        r->seconds[SRV_STAGE_READ] += now_s() - t0;
+        r->seconds[SRV_STAGE_READ] += gs_clock_s(CLOCK_MONOTONIC) - t0;
     }
     /* (capture_dir is at most sizeof - 64 bytes long: checked above, or by gs_capture_read) */
     struct stat sb;
@@ -394,9 +387,9 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
 
     /* 6. the resume key; a committed capture is skipped */
     stage(o, SRV_STAGE_READ, "hashing %s", r->capture_dir);
-    t0 = now_s();
+    t0 = gs_clock_s(CLOCK_MONOTONIC);
     s = capture_key(r->capture_dir, &j.cap, r->key);
-    r->seconds[SRV_STAGE_READ] += now_s() - t0;
+    r->seconds[SRV_STAGE_READ] += gs_clock_s(CLOCK_MONOTONIC) - t0;
     if (s != GS_OK) goto done;
     int64_t survey_id = 0;
     s = srv_db_find_survey(db, r->survey, &survey_id);
@@ -415,15 +408,15 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
 
     /* 7. extract and match */
     stage(o, SRV_STAGE_BLOBS, "extracting lights");
-    t0 = now_s();
+    t0 = gs_clock_s(CLOCK_MONOTONIC);
     rec_blob_opts bo;
     rec_blob_opts_default(&bo);
     bo.threshold_sigma = o->threshold_sigma;
     s = srv_job_extract(&j, &bo);
-    r->seconds[SRV_STAGE_BLOBS] = now_s() - t0;
+    r->seconds[SRV_STAGE_BLOBS] = gs_clock_s(CLOCK_MONOTONIC) - t0;
     if (s != GS_OK) goto done;
     stage(o, SRV_STAGE_MATCH, "Eq. 7 on %zu lights%s", j.cat.count, j.matcher ? "" : " (built-in DELIGHT)");
-    t0 = now_s();
+    t0 = gs_clock_s(CLOCK_MONOTONIC);
     if ((s = srv_job_matcher(&j, NULL, NULL, dims[0], dims[1], dims[2], &o->eq7)) != GS_OK ||
         (s = srv_job_match(&j)) != GS_OK)
         goto done;
@@ -431,22 +424,22 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
     r->with_bulb = j.with_bulb;
     r->with_phase = j.with_phase;
     srv_job_drop_pixels(&j);   /* not needed by the rest */
-    r->seconds[SRV_STAGE_MATCH] = now_s() - t0;
+    r->seconds[SRV_STAGE_MATCH] = gs_clock_s(CLOCK_MONOTONIC) - t0;
 
     /* 8. locate */
     if (r->has_station) {
         stage(o, SRV_STAGE_LOCATE, "%zu lights at %.1f m", j.cat.count, r->light_height_m);
-        t0 = now_s();
+        t0 = gs_clock_s(CLOCK_MONOTONIC);
         if ((s = srv_job_locate(&j, &r->station, r->light_height_m, r->light_height_sigma_m)) != GS_OK) goto done;
         r->located = j.located;
-        r->seconds[SRV_STAGE_LOCATE] = now_s() - t0;
+        r->seconds[SRV_STAGE_LOCATE] = gs_clock_s(CLOCK_MONOTONIC) - t0;
     } else {
         r->light_height_m = NAN;
     }
 
     /* 9. store */
     stage(o, SRV_STAGE_STORE, "DELIGHT, survey and station rows");
-    t0 = now_s();
+    t0 = gs_clock_s(CLOCK_MONOTONIC);
     char abs_dir[4096];
     srv_store_opts so = {.survey = r->survey,
                          .station = r->has_station ? &r->station : NULL,
@@ -455,7 +448,7 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
                          .before_commit = before_commit,
                          .ctx = (void *)o};
     s = srv_job_store(&j, db, &so, &r->survey_id, &r->capture_id, &r->skipped);
-    r->seconds[SRV_STAGE_STORE] = now_s() - t0;
+    r->seconds[SRV_STAGE_STORE] = gs_clock_s(CLOCK_MONOTONIC) - t0;
 
 done:
     srv_job_release(&j);

@@ -18,6 +18,7 @@
 
 #include <jansson.h>
 #include <stddef.h>
+#include <time.h>
 #include <stdint.h>
 #include <stdio.h>
 
@@ -265,6 +266,9 @@ typedef gs_status (*gs_range_fn)(void *ctx, int part, size_t begin, size_t end);
  * the same bits on any number of threads. Returns the status of the lowest failing part with
  * its gs_detail() copied to the caller's thread. */
 gs_status gs_parallel_for(int threads, size_t n, gs_range_fn fn, void *ctx);
+/* The clock id's time in seconds (CLOCK_MONOTONIC for intervals, CLOCK_PROCESS_CPUTIME_ID for
+ * CPU time). */
+double gs_clock_s(clockid_t id);
 
 /* ------------------------------------------------------------- AC (Eq. 1) */
 
