@@ -50,6 +50,7 @@ void rec_blob_opts_default(rec_blob_opts *o)
     o->psf_weighted = 1;
     o->psf_fit = 1;
     o->threads = 0;
+    o->psf_fit_exhaustive = 0;
 }
 
 void rec_catalog_release(rec_catalog *cat)

@@ -430,7 +430,8 @@ static int cmp_candidate(const void *a, const void *b)
  * is far enough from the sources. By Cauchy-Schwarz a candidate's value is at most the
  * residual's energy sum_bk w_pb R_p,bk^2 summed over its window: candidates are tried in the
  * order of that bound and the search stops where the bound falls below the best value (the
- * same pixel as trying them all; all are tried when the list cannot be allocated). */
+ * same pixel as trying them all, which psf_fit_exhaustive does, and so does a search whose list
+ * cannot be allocated). */
 static int best_new_source(fit_data *f, int N, const double *pos, const int *fp, int nfp, double *R)
 {
     const int n = f->n, B = f->B, K = f->K, BK = f->BK;
@@ -450,7 +451,8 @@ static int best_new_source(fit_data *f, int N, const double *pos, const int *fp,
     /* a PSF centred on a pixel: the same 1-D shares at every candidate */
     const int rr = (int)reach, span = 2 * rr + 1;
     psf_1d(-rr, span, 0.0, sigma, f->gx);
-    candidate *c = malloc(sizeof *c * (size_t)(nfp > 0 ? nfp : 1));   /* NULL: all tried in order */
+    /* NULL (exhaustive, or no memory for the list): all tried in order */
+    candidate *c = f->s->o->psf_fit_exhaustive ? NULL : malloc(sizeof *c * (size_t)(nfp > 0 ? nfp : 1));
     int nc = 0, best = -1;
     double best_v = 0;
     for (int i = 0; i < nfp; i++) {

@@ -100,6 +100,9 @@ typedef struct {
     int psf_fit;              /* 1: the multi-source PSF fit over the K frames (9.), 0: off (1) */
     int threads;              /* threads of the PSF fit's groups, >= 0; 0 = the online CPUs (0);
                                * the catalog is the same bits on any number */
+    int psf_fit_exhaustive;   /* 1: the fit's new-source search tries every candidate pixel
+                               * instead of stopping at its Cauchy-Schwarz bound (the tests'
+                               * slow path: the same catalog, bit for bit) (0) */
 } rec_blob_opts;
 void rec_blob_opts_default(rec_blob_opts *o);
 

@@ -5,7 +5,8 @@
  * Blobs, then Eq. 7 (rec_match_catalog, the default options, 0/120/240 deg): a pair is resolved
  * when each of its lights has its own catalog light within 1 px (one-to-one, nearest first)
  * whose phase is the light's. Target: >= 95 % of the pairs (57 of 60). The fit's groups on 1, 3
- * and the online CPUs' threads give the same catalog, bit for bit. */
+ * and the online CPUs' threads give the same catalog, bit for bit, and so does the fit whose
+ * new-source search tries every candidate (psf_fit_exhaustive) instead of stopping at its bound. */
 #include "capture/capture.h"
 #include "recognize/recognize.h"
 #include "tests/blobs_fixture.h"
@@ -86,10 +87,12 @@ static int resolved_pairs(int bands, gs_delight *d)
     rec_blob_opts_default(&bo);
     rec_catalog cat;
     CHECK_OK(rec_blobs_extract(&cap, &bo, &cat));
-    /* the fit's groups on 1 and 3 threads: the same catalog, bit for bit */
-    for (int th = 1; th <= 3; th += 2) {
+    /* the fit's groups on 1 and 3 threads, and (th = 0) the exhaustive new-source search: the
+     * same catalog, bit for bit */
+    for (int th = 0; th <= 3; th += th ? 2 : 1) {
         rec_blob_opts bt = bo;
-        bt.threads = th;
+        bt.threads = th ? th : bo.threads;
+        bt.psf_fit_exhaustive = th == 0;
         rec_catalog ct;
         CHECK_OK(rec_blobs_extract(&cap, &bt, &ct));
         size_t nv = ct.count * (size_t)bands * (size_t)cap.K;
@@ -99,7 +102,8 @@ static int resolved_pairs(int bands, gs_delight *d)
                       !memcmp(ct.area_px, cat.area_px, ct.count * sizeof *ct.area_px) &&
                       !memcmp(ct.signal, cat.signal, nv * sizeof *ct.signal) &&
                       !memcmp(ct.sigma, cat.sigma, nv * sizeof *ct.sigma),
-                  "%d threads: %zu lights, the default's %zu (or other bits)", th, ct.count, cat.count);
+                  "%s: %zu lights, the default's %zu (or other bits)", th ? "1 or 3 threads" : "exhaustive search",
+                  ct.count, cat.count);
         rec_catalog_release(&ct);
     }
     rec_matcher *m = NULL;
