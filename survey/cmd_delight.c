@@ -2,11 +2,13 @@
  * DELIGHT bulb database (paper Sec. 3; our substitute is described in docs/delight.md). */
 #include "survey/internal.h"
 
+#include <errno.h>
 #include <getopt.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 static const char delight_usage[] =
     "usage: gridsurvey delight SUBCOMMAND [OPTIONS]\n"
@@ -188,17 +190,18 @@ static int cmd_export(const gs_delight *d, const delight_opts *o)
     return s == GS_OK ? 0 : srv_error(s);
 }
 
-/* Load DB if it exists (else start empty), let add() change it, save it back. */
+/* Load DB if it exists (else start empty), let add() change it, save it back. Only a path that
+ * does not exist starts empty: a database that cannot be opened (out of memory, out of file
+ * descriptors, no permission) is an error, never replaced by the new bulbs alone. */
 static int modify_db(const char *db, gs_status (*add)(gs_delight *, const void *), const void *arg)
 {
     gs_delight *d = gs_delight_new();
     if (!d) return srv_error(gs_fail(GS_ENOMEM, "cannot allocate the DELIGHT database"));
-    FILE *exists = fopen(db, "rb");
+    struct stat st;
     gs_status s = GS_OK;
-    if (exists) {
-        fclose(exists);
-        s = gs_delight_load(d, db);
-    }
+    if (stat(db, &st) == 0) s = gs_delight_load(d, db);
+    else if (errno != ENOENT)
+        s = gs_fail(GS_EIO, "%s: cannot open the DELIGHT database: %s", db, strerror(errno));
     if (s == GS_OK) s = add(d, arg);
     if (s == GS_OK) s = gs_delight_save(d, db);
     gs_delight_free(d);

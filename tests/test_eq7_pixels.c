@@ -91,7 +91,7 @@ TEST(eq7_pixels_prefilter_generated_delight)
     eq7fx_ttab_init(&tb, d, 50, 3, 26, eq7fx_p3, 3);
     size_t nb = rec_matcher_bulb_count(m);
     eq7fx_rows px;
-    eq7fx_rows_alloc(&px, fx_sanitized() ? 3000 : 12000);
+    eq7fx_rows_alloc(&px, 4000);   /* each of the 150 x 3 templates about 9 times */
     double x[78], sg[78];
     uint64_t rs = 23;
     for (size_t i = 0; i < px.n; i++) {

@@ -629,6 +629,36 @@ static void sweep(const scenario *sc)
     free(files_ref);
 }
 
+/* `delight import` took a DELIGHT database it could not open (fopen failing: out of memory here,
+ * out of file descriptors or permissions elsewhere) for an absent one, started empty and saved
+ * only the imported bulbs over it, exit 0 (found by the allocation-site sweep, at the 2nd
+ * allocation). The first 12 allocations of an import into a database holding other bulbs fail
+ * in turn: each run fails in one line leaving the database as it was, or succeeds complete. */
+TEST(delight_import_failed_open_never_replaces_the_database)
+{
+    const scenario *sc = &scenarios[5];
+    char work[1100], dbp[1200], cmd[4096];
+    snprintf(work, sizeof work, "%s/open", fx_tmp("fault-work"));
+    snprintf(dbp, sizeof dbp, "%s/%s", work, sc->db);
+    snprintf(cmd, sizeof cmd, "rm -rf %s && mkdir -p %s", work, work);
+    CHECK(test_run(cmd, NULL, 0) == 0);
+    sc->setup(work, assets());
+    sweep_refs rf = {sc, db_state(dbp), files_state(work, sc->db), NULL, NULL, {0}};
+    int fired;
+    CHECK_MSG(run_injected(sc, work, &kinds[0], 0, rf.total, &fired) == 0 && rf.total[0] > 12, "%s", out);
+    char *db_ref = db_state(dbp), *files_ref = files_state(work, sc->db);
+    rf.db_ref = db_ref;
+    rf.files_ref = files_ref;
+    for (long n = 1; n <= 12; n++) {
+        point_result pr = try_point(&rf, work, 0, n, 0);
+        CHECK_MSG(pr.outcome != 0, "%s", pr.why);
+    }
+    free((char *)rf.db_before);
+    free((char *)rf.files_before);
+    free(db_ref);
+    free(files_ref);
+}
+
 /* The shim's site mode (GS_FAULT_SWEEP=sites): a count-only run lists the distinct stacks the
  * allocations come from, each with its first call; failing the first allocation from a site must
  * be failing that call. Oracle: the n-th-call mode of the same shim, on a single-threaded command
