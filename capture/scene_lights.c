@@ -402,11 +402,13 @@ static gs_status parse_street_grid(const cap_pctx *c, const cap_scene *sc, json_
     const double a = 6378137.0, f = 1.0 / 298.257223563, e2 = f * (2 - f);
     double la = lat0 * M_PI / 180, sl = sin(la);
     double Nr = a / sqrt(1 - e2 * sl * sl), Mr = a * (1 - e2) / pow(1 - e2 * sl * sl, 1.5);
-    long streets_u = (long)floor(size[0] / street), streets_v = (long)floor(size[1] / street);
+    /* two families: direction 0 streets run along u (constant v), direction 1 along v */
+    const long n_streets[2] = {(long)floor(size[1] / street) + 1, (long)floor(size[0] / street) + 1};
+    const long n_lights[2] = {(long)floor(size[0] / spacing), (long)floor(size[1] / spacing)};
     /* every position is computed (and, in range, projected) before it is kept or dropped: the
      * positions, each a light if all are in range, must fit the budget as the lights would,
      * which bounds the time too (not only the lights kept) */
-    double positions = (streets_v + 1.0) * floor(size[0] / spacing) + (streets_u + 1.0) * floor(size[1] / spacing);
+    double positions = (double)n_streets[0] * n_lights[0] + (double)n_streets[1] * n_lights[1];
     char what[200];
     snprintf(what, sizeof what, "a street grid of %.0f positions (size_m over street_spacing_m and "
              "light_spacing_m, both directions; %d B each when rendered)", positions,
@@ -414,14 +416,11 @@ static gs_status parse_street_grid(const cap_pctx *c, const cap_scene *sc, json_
     if (gs_mem_check(positions * (CAP_RENDER_BYTES_PER_LIGHT + sizeof(cap_light)), what) != GS_OK)
         return cap_scene_bad(c, GS_ELIMIT, path, "%s", gs_detail());
     size_t before = lv->n;
-    /* two families: direction 0 streets run along u (constant v), direction 1 along v */
     for (int dir = 0; dir < 2; dir++) {
-        long n_streets = (dir == 0 ? streets_v : streets_u) + 1;
         double len = dir == 0 ? size[0] : size[1];
-        long n_lights = (long)floor(len / spacing);
-        for (long i = 0; i < n_streets; i++) {
+        for (long i = 0; i < n_streets[dir]; i++) {
             double across = -0.5 * (dir == 0 ? size[1] : size[0]) + (double)i * street;
-            for (long j = 0; j < n_lights; j++) {
+            for (long j = 0; j < n_lights[dir]; j++) {
                 double along = -0.5 * len + ((double)j + 0.5) * spacing;
                 double u = dir == 0 ? along : across, v = dir == 0 ? across : along;
                 gs_rng r;

@@ -366,6 +366,19 @@ static int run_injected(const scenario *sc, const char *work, const fault_kind *
     return run_injected_at(sc, work, k, n, 0, NULL, calls, fired);
 }
 
+/* Empties work and sets the scenario up in it; the state before the command in *db and *files
+ * (db_state, files_state; the caller frees). */
+static void set_up(const scenario *sc, const char *work, char **db, char **files)
+{
+    char cmd[4096], dbp[1200];
+    snprintf(cmd, sizeof cmd, "rm -rf %s && mkdir -p %s", work, work);
+    CHECK(test_run(cmd, NULL, 0) == 0);
+    sc->setup(work, assets());
+    snprintf(dbp, sizeof dbp, "%s/%s", work, sc->db);
+    *db = db_state(dbp);
+    *files = files_state(work, sc->db);
+}
+
 /* The distinct allocation stacks a run wrote (GS_FAULT_SITES: "SITE N" lines in the order first
  * seen), into a new array (*n of them; NULL and 0 if none, *overflow if the shim ran out of room). */
 typedef struct {
@@ -494,12 +507,9 @@ static void sweep(const scenario *sc)
     snprintf(dbp, sizeof dbp, "%s/%s", work, sc->db);
     /* before and after an uninjected run */
     int fired;
-    char cmd[4096];
-    snprintf(cmd, sizeof cmd, "rm -rf %s && mkdir -p %s", work, work);
-    CHECK(test_run(cmd, NULL, 0) == 0);
-    sc->setup(work, assets());
     sweep_refs rf = {sc, NULL, NULL, NULL, NULL, {0}};
-    char *db_before = db_state(dbp), *files_before = files_state(work, sc->db);
+    char *db_before, *files_before;
+    set_up(sc, work, &db_before, &files_before);
     long again[N_CLASSES];
     /* two uninjected runs: the counts of calls, and the complete state (the same twice: the
      * oracle needs the command to be deterministic) */
@@ -637,13 +647,11 @@ static void sweep(const scenario *sc)
 TEST(delight_import_failed_open_never_replaces_the_database)
 {
     const scenario *sc = &scenarios[5];
-    char work[1100], dbp[1200], cmd[4096];
+    char work[1100], dbp[1200], *db_before, *files_before;
     snprintf(work, sizeof work, "%s/open", fx_tmp("fault-work"));
     snprintf(dbp, sizeof dbp, "%s/%s", work, sc->db);
-    snprintf(cmd, sizeof cmd, "rm -rf %s && mkdir -p %s", work, work);
-    CHECK(test_run(cmd, NULL, 0) == 0);
-    sc->setup(work, assets());
-    sweep_refs rf = {sc, db_state(dbp), files_state(work, sc->db), NULL, NULL, {0}};
+    set_up(sc, work, &db_before, &files_before);
+    sweep_refs rf = {sc, db_before, files_before, NULL, NULL, {0}};
     int fired;
     CHECK_MSG(run_injected(sc, work, &kinds[0], 0, rf.total, &fired) == 0 && rf.total[0] > 12, "%s", out);
     char *db_ref = db_state(dbp), *files_ref = files_state(work, sc->db);
@@ -653,8 +661,8 @@ TEST(delight_import_failed_open_never_replaces_the_database)
         point_result pr = try_point(&rf, work, 0, n, 0);
         CHECK_MSG(pr.outcome != 0, "%s", pr.why);
     }
-    free((char *)rf.db_before);
-    free((char *)rf.files_before);
+    free(db_before);
+    free(files_before);
     free(db_ref);
     free(files_ref);
 }

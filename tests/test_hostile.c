@@ -451,7 +451,7 @@ TEST(run_on_a_scene_checks_recognition_budget_before_rendering)
     CHECK_OK(cap_scene_read(scene, &sc));
     double render = cap_sim_bytes(&sc), budget = 128.0 * 1048576;
     cap_scene_release(&sc);
-    /* K = 26 frames of 3 bands: 3 B per sample and 27 + 0 per pixel, about 240 MiB */
+    /* K = 26 frames of 3 bands: 3 B per sample and 27 + 0 per pixel, 261 MiB */
     double recognize = 1024.0 * 1024 * (26 * 3 * 3 + 27);
     CHECK_MSG(render < budget && recognize > budget, "render %.1f MiB, recognition %.1f MiB", render / 1048576,
               recognize / 1048576);
