@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <exception>
+#include <new>
 
 extern "C" {
 #include "capture/internal.h"
@@ -20,6 +21,9 @@ struct cap_vio {
 
 static gs_status fail_exception(const char *what, const std::exception &e)
 {
+    const auto *cve = dynamic_cast<const cv::Exception *>(&e);
+    if (dynamic_cast<const std::bad_alloc *>(&e) || (cve && cve->code == cv::Error::StsNoMem))
+        return gs_fail(GS_ENOMEM, "OpenCV %s: out of memory", what);
     return gs_fail(GS_EIO, "OpenCV %s: %s", what, e.what());
 }
 

@@ -39,6 +39,9 @@ namespace {
 gs_status fail_exception(const char *what, const std::exception &e)
 {
     if (dynamic_cast<const std::bad_alloc *>(&e)) return gs_fail(GS_ENOMEM, "%s: out of memory", what);
+    /* OpenCV's own allocator reports a failed allocation as cv::Exception StsNoMem */
+    const auto *cve = dynamic_cast<const cv::Exception *>(&e);
+    if (cve && cve->code == cv::Error::StsNoMem) return gs_fail(GS_ENOMEM, "%s: out of memory", what);
     return gs_fail(GS_EFORMAT, "%s: OpenCV: %s", what, e.what());
 }
 

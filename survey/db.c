@@ -25,9 +25,6 @@
 
 /* ------------------------------------------------------------------ handle */
 
-
-
-
 /* GS_ESQL with the connection's message, "PATH: WHAT: MESSAGE". */
 static gs_status sql_fail(sqlite3 *db, const char *path, const char *what)
 {
@@ -43,9 +40,29 @@ static gs_status sql_fail(sqlite3 *db, const char *path, const char *what)
     return gs_fail(GS_ESQL, "%s: %s: %s", path, what, msg);
 }
 
+gs_status srv_dbi_lost(srv_db *db, const char *what)
+{
+    if (!db->in_txn || !sqlite3_get_autocommit(db->db)) return GS_OK;
+    return gs_fail(GS_ESQL, "%s: %s: the transaction was lost (SQLite rolled it back after an "
+                   "earlier failure): nothing of it was stored", db->path, what);
+}
+
 gs_status srv_dbi_fail(srv_db *db, const char *what)
 {
+    gs_status s;
+    if (sqlite3_errcode(db->db) == SQLITE_CONSTRAINT && (s = srv_dbi_lost(db, what)) != GS_OK) return s;
     return sql_fail(db->db, db->path, what);
+}
+
+/* SQLite's commit hook: while the handle holds a transaction, only srv_db_commit commits.
+ * SQLite rolls a whole transaction back by itself on some errors (out of memory even in a read,
+ * a full disk); a caller that missed one would go on writing each statement in a transaction of
+ * its own, half of a capture. Such a commit is refused (the statement fails, SQLITE_CONSTRAINT
+ * from the hook; srv_dbi_fail names it, srv_dbi_lost). */
+static int refuse_stray_commit(void *arg)
+{
+    const srv_db *db = arg;
+    return db->in_txn && !db->committing;
 }
 
 void srv_dbi_utc_now(char buf[32])
@@ -154,7 +171,9 @@ gs_status srv_db_commit(srv_db *db)
 {
     if (!db) return gs_fail(GS_EINVAL, "srv_db_commit: NULL database");
     if (!db->in_txn) return gs_fail(GS_EINVAL, "%s: commit without a transaction", db->path);
+    db->committing = 1;
     gs_status s = srv_dbi_exec(db, "COMMIT", "commit");
+    db->committing = 0;
     if (s != GS_OK) {
         char msg[512];
         snprintf(msg, sizeof msg, "%s", gs_detail());
@@ -425,6 +444,7 @@ static gs_status open_at(const char *path, srv_db_mode mode, int target, srv_db 
         goto fail;
     }
     sqlite3_extended_result_codes(db->db, 0);
+    sqlite3_commit_hook(db->db, refuse_stray_commit, db);
     sqlite3_busy_timeout(db->db, 10000);
     /* 64 MiB of page cache: the R*Tree and index inserts of a 1e6-light survey touch pages all
      * over the file (docs/survey-db.md, "Scale") */

@@ -446,7 +446,8 @@ gs_status srv_db_add_capture(srv_db *db, const srv_capture_data *c, int64_t *cap
     if (s != GS_OK) return s;
     int own = !db->in_txn;
     if (own) s = srv_db_begin(db);
-    else s = srv_dbi_exec(db, "SAVEPOINT srv_capture", "savepoint");
+    else if ((s = srv_dbi_lost(db, "storing a capture")) == GS_OK)   /* (a savepoint would begin anew) */
+        s = srv_dbi_exec(db, "SAVEPOINT srv_capture", "savepoint");
     if (s != GS_OK) return s;
     db->in_txn = 1;
     int done = 0;

@@ -149,6 +149,7 @@ struct srv_db {
     int created;                /* this handle created the file */
     int wal;                    /* this handle switched the file to WAL */
     int in_txn;
+    int committing;             /* srv_db_commit's COMMIT is running (refuse_stray_commit) */
     sqlite3_stmt *st[ST_COUNT];
 };
 
@@ -156,6 +157,9 @@ struct srv_db {
  * statements (prepared once per handle), binding (NaN and NULL text as SQL NULL), stepping,
  * and the transaction rules (writes need a transaction; auto_begin/auto_end wrap one call). */
 gs_status srv_dbi_fail(srv_db *db, const char *what);
+/* GS_ESQL "the transaction was lost" when the handle holds a transaction that SQLite has rolled
+ * back by itself (out of memory, disk full), else GS_OK. */
+gs_status srv_dbi_lost(srv_db *db, const char *what);
 void srv_dbi_utc_now(char buf[32]);
 gs_status srv_dbi_exec(srv_db *db, const char *sql, const char *what);
 gs_status srv_dbi_stmt(srv_db *db, int which, sqlite3_stmt **out);

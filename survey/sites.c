@@ -501,7 +501,11 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
              "ORDER BY site_id", (long long)cid);
     if ((s = collect_ids(db, held_sql, &held, &capheld, &nheld)) != GS_OK) goto done;
     double amax = 0.0;
-    if (sqlite3_step(qm) == SQLITE_ROW) amax = fmax(col(qm, 0), 0.0);
+    if ((rc = sqlite3_step(qm)) == SQLITE_ROW) amax = fmax(col(qm, 0), 0.0);
+    else if (rc != SQLITE_DONE) {   /* (SQLite may have rolled the transaction back) */
+        s = srv_dbi_fail(db, "reading the widest site ellipse");
+        goto done;
+    }
     if (isnan(amax)) amax = 0.0;
     /* candidate pairs */
     for (size_t i = 0; i < nd; i++) {

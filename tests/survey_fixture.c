@@ -5,6 +5,7 @@
 #include "tests/test.h"
 
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 long survey_fx_query_long(sqlite3 *h, const char *sql)
@@ -237,4 +238,89 @@ void survey_fx_geo_scene(const char *path, double scale, int n_lights, int cycle
              "             \"read_noise\": {}, \"adc\": {}}}\n", (int)(320 * scale), (int)(240 * scale),
              800 * scale, cycles, lights);
     fx_write_text(path, text);
+}
+
+/* ------------------------------------------------------------------ the state of a database */
+
+/* Every table's rows (all columns but the times of writing: the survey database's
+ * applied_utc, added_utc, created_utc, ingested_utc, a GeoPackage's last_change and
+ * update_time, and the value of a meta row with such a key), in a fixed order, after an
+ * integrity check; "absent" if there is no such file, "unreadable: ..." if it cannot be read.
+ * The caller frees. */
+char *survey_fx_db_state(const char *path)
+{
+    static const char times[] = " applied_utc added_utc created_utc ingested_utc last_change update_time ";
+    if (!fx_exists(path)) return strdup("absent");
+    sqlite3 *h = NULL;
+    char *buf = NULL;
+    size_t len = 0;
+    FILE *f = open_memstream(&buf, &len);
+    if (sqlite3_open_v2(path, &h, SQLITE_OPEN_READONLY, NULL) != SQLITE_OK) {
+        fprintf(f, "unreadable: %s", sqlite3_errmsg(h));
+        goto done;
+    }
+    sqlite3_stmt *t = NULL;
+    /* (no survey_fx_query_*: a file that is not a database is a state, not a test failure) */
+    static const char *const head[] = {"PRAGMA integrity_check", "PRAGMA user_version"};
+    for (int i = 0; i < 2; i++) {
+        if (sqlite3_prepare_v2(h, head[i], -1, &t, NULL) != SQLITE_OK || sqlite3_step(t) != SQLITE_ROW) {
+            fprintf(f, "unreadable: %s", sqlite3_errmsg(h));
+            sqlite3_finalize(t);
+            goto done;
+        }
+        fprintf(f, "%s: %s\n", head[i], (const char *)sqlite3_column_text(t, 0));
+        sqlite3_finalize(t);
+    }
+    if (sqlite3_prepare_v2(h, "SELECT name, sql FROM sqlite_master WHERE type = 'table' AND name NOT "
+                              "LIKE 'sqlite_%' ORDER BY name", -1, &t, NULL) != SQLITE_OK) {
+        fprintf(f, "unreadable: %s", sqlite3_errmsg(h));
+        goto done;
+    }
+    while (sqlite3_step(t) == SQLITE_ROW) {
+        const char *name = (const char *)sqlite3_column_text(t, 0);
+        fprintf(f, "## %s\n%s\n", name, (const char *)sqlite3_column_text(t, 1));
+        char cols[2048] = "", order[2048] = "", sql[4500];
+        snprintf(sql, sizeof sql, "SELECT name FROM pragma_table_info('%s') ORDER BY cid", name);
+        sqlite3_stmt *c = NULL;
+        int n = 0;
+        if (sqlite3_prepare_v2(h, sql, -1, &c, NULL) == SQLITE_OK) {
+            while (sqlite3_step(c) == SQLITE_ROW) {
+                const char *col = (const char *)sqlite3_column_text(c, 0);
+                char spaced[300];
+                snprintf(spaced, sizeof spaced, " %s ", col);
+                if (strstr(times, spaced))
+                    continue;
+                size_t u = strlen(cols), v = strlen(order);
+                snprintf(cols + u, sizeof cols - u, "%s\"%s\"", n ? ", " : "", col);
+                snprintf(order + v, sizeof order - v, "%s%d", n ? ", " : "", n + 1);
+                n++;
+            }
+        }
+        sqlite3_finalize(c);
+        if (!n) continue;
+        snprintf(sql, sizeof sql, "SELECT %s FROM \"%s\" ORDER BY %s", cols, name, order);
+        sqlite3_stmt *q = NULL;
+        if (sqlite3_prepare_v2(h, sql, -1, &q, NULL) != SQLITE_OK) {
+            fprintf(f, "unreadable: %s\n", sqlite3_errmsg(h));
+            continue;
+        }
+        while (sqlite3_step(q) == SQLITE_ROW) {
+            /* a key-value row (the meta table) whose key is such a time: its value is masked */
+            char key[300];
+            const unsigned char *k0 = sqlite3_column_text(q, 0);
+            snprintf(key, sizeof key, " %s ", k0 ? (const char *)k0 : "");
+            int mask = strstr(times, key) != NULL;
+            for (int i = 0; i < sqlite3_column_count(q); i++) {
+                const unsigned char *v = sqlite3_column_text(q, i);
+                fprintf(f, "%s%s", i ? "|" : "", mask && i ? "*" : v ? (const char *)v : "NULL");
+            }
+            fputc('\n', f);
+        }
+        sqlite3_finalize(q);
+    }
+    sqlite3_finalize(t);
+done:
+    sqlite3_close(h);
+    fclose(f);
+    return buf;
 }

@@ -58,4 +58,8 @@ void survey_fx_small_lab(const char *path, double scale, const survey_lab_spec *
 /* A scene of geographic lights seen from a station, located by `run` (see survey_fixture.c). */
 void survey_fx_geo_scene(const char *path, double scale, int n_lights, int cycles);
 
+/* Every table's rows of the database at path (all columns but the times of writing), in a fixed
+ * order, after an integrity check; "absent" or "unreadable: ..." if so. The caller frees. */
+char *survey_fx_db_state(const char *path);
+
 #endif

@@ -31,89 +31,6 @@ static char out[1 << 16];
 
 /* ------------------------------------------------------------------ the state of a directory */
 
-/* Every table's rows (all columns but the times of writing: the survey database's
- * applied_utc, added_utc, created_utc, ingested_utc, a GeoPackage's last_change and
- * update_time, and the value of a meta row with such a key), in a fixed order, after an
- * integrity check; "absent" if there is no such file, "unreadable: ..." if it cannot be read.
- * The caller frees. */
-static char *db_state(const char *path)
-{
-    static const char times[] = " applied_utc added_utc created_utc ingested_utc last_change update_time ";
-    if (!fx_exists(path)) return strdup("absent");
-    sqlite3 *h = NULL;
-    char *buf = NULL;
-    size_t len = 0;
-    FILE *f = open_memstream(&buf, &len);
-    if (sqlite3_open_v2(path, &h, SQLITE_OPEN_READONLY, NULL) != SQLITE_OK) {
-        fprintf(f, "unreadable: %s", sqlite3_errmsg(h));
-        goto done;
-    }
-    sqlite3_stmt *t = NULL;
-    /* (no survey_fx_query_*: a file that is not a database is a state, not a test failure) */
-    static const char *const head[] = {"PRAGMA integrity_check", "PRAGMA user_version"};
-    for (int i = 0; i < 2; i++) {
-        if (sqlite3_prepare_v2(h, head[i], -1, &t, NULL) != SQLITE_OK || sqlite3_step(t) != SQLITE_ROW) {
-            fprintf(f, "unreadable: %s", sqlite3_errmsg(h));
-            sqlite3_finalize(t);
-            goto done;
-        }
-        fprintf(f, "%s: %s\n", head[i], (const char *)sqlite3_column_text(t, 0));
-        sqlite3_finalize(t);
-    }
-    if (sqlite3_prepare_v2(h, "SELECT name, sql FROM sqlite_master WHERE type = 'table' AND name NOT "
-                              "LIKE 'sqlite_%' ORDER BY name", -1, &t, NULL) != SQLITE_OK) {
-        fprintf(f, "unreadable: %s", sqlite3_errmsg(h));
-        goto done;
-    }
-    while (sqlite3_step(t) == SQLITE_ROW) {
-        const char *name = (const char *)sqlite3_column_text(t, 0);
-        fprintf(f, "## %s\n%s\n", name, (const char *)sqlite3_column_text(t, 1));
-        char cols[2048] = "", order[2048] = "", sql[4500];
-        snprintf(sql, sizeof sql, "SELECT name FROM pragma_table_info('%s') ORDER BY cid", name);
-        sqlite3_stmt *c = NULL;
-        int n = 0;
-        if (sqlite3_prepare_v2(h, sql, -1, &c, NULL) == SQLITE_OK) {
-            while (sqlite3_step(c) == SQLITE_ROW) {
-                const char *col = (const char *)sqlite3_column_text(c, 0);
-                char spaced[300];
-                snprintf(spaced, sizeof spaced, " %s ", col);
-                if (strstr(times, spaced))
-                    continue;
-                size_t u = strlen(cols), v = strlen(order);
-                snprintf(cols + u, sizeof cols - u, "%s\"%s\"", n ? ", " : "", col);
-                snprintf(order + v, sizeof order - v, "%s%d", n ? ", " : "", n + 1);
-                n++;
-            }
-        }
-        sqlite3_finalize(c);
-        if (!n) continue;
-        snprintf(sql, sizeof sql, "SELECT %s FROM \"%s\" ORDER BY %s", cols, name, order);
-        sqlite3_stmt *q = NULL;
-        if (sqlite3_prepare_v2(h, sql, -1, &q, NULL) != SQLITE_OK) {
-            fprintf(f, "unreadable: %s\n", sqlite3_errmsg(h));
-            continue;
-        }
-        while (sqlite3_step(q) == SQLITE_ROW) {
-            /* a key-value row (the meta table) whose key is such a time: its value is masked */
-            char key[300];
-            const unsigned char *k0 = sqlite3_column_text(q, 0);
-            snprintf(key, sizeof key, " %s ", k0 ? (const char *)k0 : "");
-            int mask = strstr(times, key) != NULL;
-            for (int i = 0; i < sqlite3_column_count(q); i++) {
-                const unsigned char *v = sqlite3_column_text(q, i);
-                fprintf(f, "%s%s", i ? "|" : "", mask && i ? "*" : v ? (const char *)v : "NULL");
-            }
-            fputc('\n', f);
-        }
-        sqlite3_finalize(q);
-    }
-    sqlite3_finalize(t);
-done:
-    sqlite3_close(h);
-    fclose(f);
-    return buf;
-}
-
 /* "SHA256  ./name" for every file under dir but the database (db, relative to dir, with its
  * -journal and -wal), sorted by name; for a GeoPackage the SHA-256 of its db_state (its bytes
  * differ from run to run). The caller frees. */
@@ -130,7 +47,7 @@ static char *files_state(const char *dir, const char *db)
         if (n > 66 + 5 && !strncmp(l + n - 5, ".gpkg", 5)) {
             char path[2048];
             snprintf(path, sizeof path, "%s/%.*s", dir, (int)(n - 66), l + 66);
-            char *st = db_state(path);
+            char *st = survey_fx_db_state(path);
             struct sha256_ctx c;
             uint8_t d[SHA256_DIGEST_SIZE];
             sha256_init(&c);
@@ -214,11 +131,14 @@ static const char *first_difference(const char *a, const char *b)
 typedef struct {
     const char *name;
     int points;        /* of each kind in `make check` (the sweep: all) */
-    const char *cmd;   /* a format of up to two %s: the binary, the assets' directory (it runs in
-                        * the work directory) */
+    const char *cmd;   /* a format of up to three %s: the binary, the assets' directory, and it
+                        * again (it runs in the work directory) */
     const char *db;    /* the database's name in the work directory */
     /* makes the work directory's state before the command (it is emptied first) */
     void (*setup)(const char *work, const char *assets);
+    /* when set, only allocations fail, by site, always, and only those of the sites whose module
+     * (the shim's GS_FAULT_SITES) starts with it: `make check` spreads sc->points over them */
+    const char *site_module;
 } scenario;
 
 static void setup_empty(const char *work, const char *assets)
@@ -282,15 +202,18 @@ static const char *assets(void)
 
 static const scenario scenarios[] = {
     {"run-new-db", 1, "%s run %s/cap --db survey.sqlite --survey night --light-height-m 10 --out-dir .",
-     "survey.sqlite", setup_empty},
+     "survey.sqlite", setup_empty, NULL},
     {"run-existing-db", 2, "%s run %s/cap --db survey.sqlite --survey night --light-height-m 10 --out-dir .",
-     "survey.sqlite", setup_existing_survey},
-    {"export-geojson", 2, "%s export --db survey.sqlite -o lights.geojson", "survey.sqlite", setup_export},
-    {"export-gpkg", 2, "%s export --db survey.sqlite -o lights.gpkg", "survey.sqlite", setup_export},
+     "survey.sqlite", setup_existing_survey, NULL},
+    {"export-geojson", 2, "%s export --db survey.sqlite -o lights.geojson", "survey.sqlite", setup_export, NULL},
+    {"export-gpkg", 2, "%s export --db survey.sqlite -o lights.gpkg", "survey.sqlite", setup_export, NULL},
     {"delight-import-new", 2, "%s delight import %s/some.csv --delight delight.sqlite", "delight.sqlite",
-     setup_empty},
+     setup_empty, NULL},
     {"delight-import-existing", 2, "%s delight import %s/more.csv --delight delight.sqlite",
-     "delight.sqlite", setup_delight_existing},
+     "delight.sqlite", setup_delight_existing, NULL},
+    /* OpenCV's allocations (it throws cv::Exception StsNoMem, not std::bad_alloc) */
+    {"recognize-opencv", 12, "%s recognize %s/cap --format json --delight %s/small-delight.sqlite",
+     "none.sqlite", setup_empty, "libopencv"},
 };
 
 typedef struct {
@@ -338,7 +261,7 @@ static int run_injected_at(const scenario *sc, const char *work, const fault_kin
         return -1;
     }
     char run[2048];
-    snprintf(run, sizeof run, sc->cmd, bin, assets());
+    snprintf(run, sizeof run, sc->cmd, bin, assets(), assets());
     char site_env[1300] = "";
     if (site) snprintf(site_env, sizeof site_env, "GS_FAULT_SITE=%llx ", site);
     else if (sites_out) snprintf(site_env, sizeof site_env, "GS_FAULT_SITES=%s ", sites_out);
@@ -375,28 +298,31 @@ static void set_up(const scenario *sc, const char *work, char **db, char **files
     CHECK(test_run(cmd, NULL, 0) == 0);
     sc->setup(work, assets());
     snprintf(dbp, sizeof dbp, "%s/%s", work, sc->db);
-    *db = db_state(dbp);
+    *db = survey_fx_db_state(dbp);
     *files = files_state(work, sc->db);
 }
 
-/* The distinct allocation stacks a run wrote (GS_FAULT_SITES: "SITE N" lines in the order first
- * seen), into a new array (*n of them; NULL and 0 if none, *overflow if the shim ran out of room). */
+/* The distinct allocation stacks a run wrote (GS_FAULT_SITES: "SITE N MODULE" lines in the order
+ * first seen), those of module (a prefix of MODULE; NULL: all) into a new array (*n of them; NULL
+ * and 0 if none, *overflow if the shim ran out of room). */
 typedef struct {
     unsigned long long site;
     long first;
+    char module[64];
 } alloc_site;
-static alloc_site *read_sites(const char *path, size_t *n, int *overflow)
+static alloc_site *read_sites(const char *path, const char *module, size_t *n, int *overflow)
 {
     *n = 0;
     *overflow = 0;
     alloc_site *v = NULL;
     size_t cap = 0;
     FILE *f = fopen(path, "r");
-    char line[128];
+    char line[256];
     while (f && fgets(line, sizeof line, f)) {
         alloc_site a;
         if (!strncmp(line, "overflow", 8)) *overflow = 1;
-        if (sscanf(line, "%llx %ld", &a.site, &a.first) != 2) continue;
+        if (sscanf(line, "%llx %ld %63s", &a.site, &a.first, a.module) != 3) continue;
+        if (module && strncmp(a.module, module, strlen(module))) continue;
         if (*n == cap) {
             cap = cap ? 2 * cap : 1024;
             alloc_site *nv = realloc(v, cap * sizeof *nv);
@@ -451,7 +377,7 @@ static point_result try_point(const sweep_refs *rf, const char *work, size_t k, 
     int fired, c = 0;
     while (strcmp(class_names[c], kinds[k].cls)) c++;
     int rc = run_injected_at(sc, work, &kinds[k], n, site, NULL, calls, &fired);
-    char *dba = db_state(dbp), *fa = files_state(work, sc->db);
+    char *dba = survey_fx_db_state(dbp), *fa = files_state(work, sc->db);
     char why[1200] = "";
     if (rc == 0) {
         pr.outcome = !strcmp(dba, rf->db_ref) && !strcmp(fa, rf->files_ref) ? 2 : 0;
@@ -499,7 +425,8 @@ static long point_step(const scenario *sc, int c, long total, int full)
 static void sweep(const scenario *sc)
 {
     const char *mode = getenv("GS_FAULT_SWEEP");
-    int by_sites = mode && !strcmp(mode, "sites"), full = by_sites || (mode && !strcmp(mode, "full"));
+    int sites_mode = mode && !strcmp(mode, "sites"), full = sites_mode || (mode && !strcmp(mode, "full"));
+    int by_sites = sites_mode || sc->site_module;
     int jobs = getenv("GS_FAULT_JOBS") ? atoi(getenv("GS_FAULT_JOBS")) : 1;
     if (jobs < 1 || jobs > 64) jobs = 1;
     char work[1100], dbp[1200];
@@ -517,10 +444,10 @@ static void sweep(const scenario *sc)
     for (int i = 0; i < 2; i++) snprintf(sites_path[i], sizeof sites_path[i], "%s.sites%d", work, i);
     int rc = run_injected_at(sc, work, &kinds[0], 0, 0, by_sites ? sites_path[0] : NULL, rf.total, &fired);
     CHECK_MSG(rc == 0 && rf.total[0] >= 0, "%s: the uninjected run: %d: %s", sc->name, rc, out);
-    char *db_ref = db_state(dbp), *files_ref = files_state(work, sc->db);
+    char *db_ref = survey_fx_db_state(dbp), *files_ref = files_state(work, sc->db);
     rc = run_injected_at(sc, work, &kinds[0], 0, 0, by_sites ? sites_path[1] : NULL, again, &fired);
     CHECK_MSG(rc == 0 && again[0] >= 0, "%s: the uninjected run: %d: %s", sc->name, rc, out);
-    char *dbr = db_state(dbp), *fr = files_state(work, sc->db);
+    char *dbr = survey_fx_db_state(dbp), *fr = files_state(work, sc->db);
     CHECK_MSG(!strcmp(dbr, db_ref), "%s: two uninjected runs differ: %s", sc->name, first_difference(db_ref, dbr));
     CHECK_MSG(!strcmp(fr, files_ref), "%s: two uninjected runs differ: %s", sc->name, first_difference(files_ref, fr));
     free(dbr);
@@ -528,9 +455,9 @@ static void sweep(const scenario *sc)
     /* the allocation sites (by_sites): the same in both runs, each tried at its first call */
     size_t n_sites = 0, n_again = 0, unstable = 0;
     int overflow = 0, overflow_again = 0;
-    alloc_site *sites = by_sites ? read_sites(sites_path[0], &n_sites, &overflow) : NULL;
+    alloc_site *sites = by_sites ? read_sites(sites_path[0], sc->site_module, &n_sites, &overflow) : NULL;
     if (by_sites) {
-        alloc_site *sites_again = read_sites(sites_path[1], &n_again, &overflow_again);
+        alloc_site *sites_again = read_sites(sites_path[1], sc->site_module, &n_again, &overflow_again);
         CHECK_MSG(n_sites > 0 && !overflow && !overflow_again, "%s: %zu allocation sites (overflow %d %d)",
                   sc->name, n_sites, overflow, overflow_again);
         alloc_site *a = malloc((n_sites + 1) * sizeof *a);
@@ -556,15 +483,16 @@ static void sweep(const scenario *sc)
         long n;
         unsigned long long site;
     } *points = NULL;
-    for (size_t k = 0; k < sizeof kinds / sizeof *kinds; k++) {
+    /* (a scenario of one module's allocations tries only them) */
+    for (size_t k = 0; k < (sc->site_module ? 1 : sizeof kinds / sizeof *kinds); k++) {
         int c = 0;
         while (strcmp(class_names[c], kinds[k].cls)) c++;
-        long step = point_step(sc, c, rf.total[c], full);
-        if (c == 0) malloc_step = step;
-        if (c == 1) write_step = step;
         int each_site = by_sites && c == 0;
         long end = each_site ? (long)n_sites : rf.total[c];
-        for (long n = each_site ? 1 : 1 + (full ? 0 : (step - 1) / 2); n <= end; n += each_site ? 1 : step) {
+        long step = each_site && full ? 1 : point_step(sc, c, end, full);
+        if (c == 0) malloc_step = step;
+        if (c == 1) write_step = step;
+        for (long n = 1 + (full ? 0 : (step - 1) / 2); n <= end; n += step) {
             if (n_points == cap_points) {
                 cap_points = cap_points ? 2 * cap_points : 256;
                 struct point *np = realloc(points, cap_points * sizeof *np);
@@ -622,7 +550,9 @@ static void sweep(const scenario *sc)
     const char *rep = getenv("GS_FAULT_REPORT");
     FILE *r = rep && *rep ? fopen(rep, "a") : NULL;
     char malloc_tried[80];
-    if (by_sites) snprintf(malloc_tried, sizeof malloc_tried, "each of %zu stacks (%zu unstable)", n_sites, unstable);
+    if (by_sites)
+        snprintf(malloc_tried, sizeof malloc_tried, "%s %zu %s stacks (%zu unstable)", malloc_step > 1 ? "spread over" : "each of",
+                 n_sites, sc->site_module ? sc->site_module : "", unstable);
     else snprintf(malloc_tried, sizeof malloc_tried, "every %ld", malloc_step);
     if (r) {
         fprintf(r, "| `%s` | %ld | %s | %ld | every %ld | %ld | %ld | %ld | %ld | %ld | %ld |\n", sc->name, rf.total[0],
@@ -654,7 +584,7 @@ TEST(delight_import_failed_open_never_replaces_the_database)
     sweep_refs rf = {sc, db_before, files_before, NULL, NULL, {0}};
     int fired;
     CHECK_MSG(run_injected(sc, work, &kinds[0], 0, rf.total, &fired) == 0 && rf.total[0] > 12, "%s", out);
-    char *db_ref = db_state(dbp), *files_ref = files_state(work, sc->db);
+    char *db_ref = survey_fx_db_state(dbp), *files_ref = files_state(work, sc->db);
     rf.db_ref = db_ref;
     rf.files_ref = files_ref;
     for (long n = 1; n <= 12; n++) {
@@ -682,7 +612,7 @@ TEST(fault_site_is_the_allocation_of_its_first_call)
     CHECK(run_injected_at(sc, work, &kinds[0], 0, 0, sites_file, total, &fired) == 0 && !fired);
     size_t n = 0;
     int overflow;
-    alloc_site *sites = read_sites(sites_file, &n, &overflow);
+    alloc_site *sites = read_sites(sites_file, NULL, &n, &overflow);
     CHECK_MSG(n > 10 && (long)n < total[0] && !overflow, "%zu sites of %ld allocations", n, total[0]);
     if (n <= 10) {
         free(sites);
@@ -711,6 +641,7 @@ TEST(fault_injection_export_gpkg) { sweep(&scenarios[3]); }
 TEST(fault_injection_delight_import_new) { sweep(&scenarios[4]); }
 TEST(fault_injection_delight_import_existing) { sweep(&scenarios[5]); }
 TEST(fault_injection_run_existing_database) { sweep(&scenarios[1]); }
+TEST(fault_injection_recognize_opencv_out_of_memory_is_one_line) { sweep(&scenarios[6]); }
 /* (only in `make faults`, last: `make check` has run_failed_leaves_no_new_database) */
 TEST_HIDDEN(fault_injection_run_new_database, 0) { sweep(&scenarios[0]); }
 
@@ -731,13 +662,13 @@ TEST(run_failed_capture_insert_leaves_database_as_it_was)
     CHECK(test_run(cmd, out, sizeof out) == 0);
     char db[1200];
     snprintf(db, sizeof db, "%s/s.sqlite", dir);
-    char *before = db_state(db);
+    char *before = survey_fx_db_state(db);
     snprintf(cmd, sizeof cmd, "cd %s && %s run %s/cap --db s.sqlite --survey night --light-height-m 10 --out-dir . "
              "2>&1 >/dev/null", dir,
              bin ? bin : "", a);
     CHECK(test_run(cmd, out, sizeof out) == 1);
     CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "refused"), "%s", out);
-    char *after = db_state(db);
+    char *after = survey_fx_db_state(db);
     CHECK_MSG(!strcmp(before, after), "the database changed: %s", first_difference(before, after));
     free(before);
     free(after);
@@ -749,7 +680,7 @@ TEST(run_failed_capture_insert_leaves_database_as_it_was)
 TEST(delight_import_failed_commit_leaves_no_new_file)
 {
     const scenario sc = {"delight-new", 0, "%s delight import %s/some.csv --delight delight.sqlite",
-                         "delight.sqlite", setup_empty};
+                         "delight.sqlite", setup_empty, NULL};
     char work[1100];
     snprintf(work, sizeof work, "%s/one", fx_tmp("fault-work"));
     const fault_kind k = {"fsync", "EIO"};
@@ -770,7 +701,7 @@ TEST(delight_import_failed_commit_leaves_no_new_file)
  * with a database `db check` accepts. */
 TEST(db_init_write_failure_leaves_no_file)
 {
-    const scenario sc = {"db-init", 0, "%s db init --db survey.sqlite", "survey.sqlite", setup_empty};
+    const scenario sc = {"db-init", 0, "%s db init --db survey.sqlite", "survey.sqlite", setup_empty, NULL};
     char work[1100], db[1200];
     snprintf(work, sizeof work, "%s/init", fx_tmp("fault-work"));
     snprintf(db, sizeof db, "%s/survey.sqlite", work);
@@ -821,7 +752,7 @@ static void setup_locate(const char *work, const char *assets_dir)
 TEST(map_write_failure_never_leaves_a_partial_map)
 {
     const scenario sc = {"locate-map", 0, "%s locate --station st.json --pixels px.csv --light-height-m 30 -o l.geojson "
-                         "--map m.png", "none", setup_locate};
+                         "--map m.png", "none", setup_locate, NULL};
     char work[1100];
     snprintf(work, sizeof work, "%s/locate", fx_tmp("fault-work"));
     const fault_kind k = {"write", "EIO"};

@@ -296,3 +296,18 @@ TEST(kit_numeric_median_and_wraps)
     CHECK(gs_wrap360(-1e-17) == 0.0 && gs_wrap360(725) == 5 && gs_wrap360(-90) == 270);
     CHECK(gs_wrap180(180) == -180 && gs_wrap180(-181) == 179 && gs_wrap180(359) == -1);
 }
+
+/* A failure's detail is one line whatever its parts hold: a library's message ending in a
+ * newline (OpenCV's), a file name with a newline or ESC in it. */
+TEST(kit_status_detail_is_one_line)
+{
+    CHECK(gs_fail(GS_EFORMAT, "dilate: OpenCV: %s", "OpenCV(4.6.0) alloc.cpp:73: error\n\n") == GS_EFORMAT);
+    CHECK_MSG(!strcmp(gs_detail(), "dilate: OpenCV: OpenCV(4.6.0) alloc.cpp:73: error"), "%s", gs_detail());
+    gs_fail(GS_EIO, "%s: cannot open it", "a\nb\x1b[31m\tc\x7f");
+    CHECK_MSG(!strcmp(gs_detail(), "a b [31m c : cannot open it"), "%s", gs_detail());
+    /* context added to the last detail keeps it */
+    gs_fail(GS_EIO, "run: %s", gs_detail());
+    CHECK_MSG(!strcmp(gs_detail(), "run: a b [31m c : cannot open it"), "%s", gs_detail());
+    gs_fail(GS_EIO, "%s", "");
+    CHECK(!strcmp(gs_detail(), ""));
+}

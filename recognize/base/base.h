@@ -41,7 +41,8 @@ const char *gs_strerror(gs_status s);
 /* The detail of the last failure on this thread ("file:line: field: expected ..."); never NULL. */
 const char *gs_detail(void);
 /* Record a printf-style detail for this thread and return s (for `return gs_fail(...)`); an
- * argument may be gs_detail() itself, to add context to the last failure. */
+ * argument may be gs_detail() itself, to add context to the last failure. The detail is kept to
+ * one line: trailing white space is dropped and other control bytes become spaces. */
 gs_status gs_fail(gs_status s, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 
 /* ------------------------------------------------------- format kit: files */

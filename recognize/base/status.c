@@ -36,6 +36,12 @@ gs_status gs_fail(gs_status s, const char *fmt, ...)
     va_start(ap, fmt);
     vsnprintf(buf, sizeof buf, fmt, ap);
     va_end(ap);
+    /* one line, whatever a library or a file name put in it: trailing white space (OpenCV ends
+     * its messages with a newline) dropped, other control bytes shown as spaces */
+    size_t n = strlen(buf);
+    while (n > 0 && (unsigned char)buf[n - 1] <= ' ') buf[--n] = '\0';
+    for (size_t i = 0; i < n; i++)
+        if ((unsigned char)buf[i] < ' ' || buf[i] == 0x7f) buf[i] = ' ';
     memcpy(detail, buf, sizeof detail);
     return s;
 }

@@ -18,9 +18,11 @@
  *   GS_FAULT_OUT    a file to which the calls of each class are appended at exit, with "1" if
  *                   the fault was injected ("MALLOC WRITE FSYNC RENAME FIRED\n")
  *   GS_FAULT_SITES  (GS_FAULT_CLASS=malloc) a file to which every distinct stack an allocation
- *                   was made from is written at exit, in the order first seen, as "SITE N\n":
- *                   SITE the hash of the stack (each frame's module and offset in it, so the same
- *                   in every run), N the allocation (1-based) that first had it
+ *                   was made from is written at exit, in the order first seen, as
+ *                   "SITE N MODULE\n": SITE the hash of the stack (each frame's module and offset
+ *                   in it, so the same in every run), N the allocation (1-based) that first had
+ *                   it, MODULE the file name of the module that asked for it (the innermost frame
+ *                   outside this shim and libstdc++'s operator new; "exe" for the executable)
  *   GS_FAULT_SITE   (GS_FAULT_CLASS=malloc, instead of GS_FAULT_N) the first allocation whose
  *                   stack hashes to this SITE (hexadecimal) fails: the same call whatever the
  *                   order the threads allocate in
@@ -61,6 +63,7 @@ static int record_sites, site_lock, sites_overflow;
 static uint64_t site_set[2 * SITE_CAP];
 static uint64_t site_list[SITE_CAP];
 static long site_first[SITE_CAP];
+static const char *site_module[SITE_CAP];
 static long n_sites;
 
 /* The next definitions, resolved once; an allocation dlsym makes before they are known comes
@@ -138,7 +141,7 @@ static void report(void)
 {
     const char *path = getenv("GS_FAULT_OUT"), *sites = getenv("GS_FAULT_SITES");
     if (!real_write) return;
-    char line[128];
+    char line[512];
     int fd = path ? open(path, O_WRONLY | O_CREAT | O_APPEND, 0600) : -1;
     if (fd >= 0) {
         int n = snprintf(line, sizeof line, "%ld %ld %ld %ld %d\n", calls[C_MALLOC], calls[C_WRITE],
@@ -149,7 +152,9 @@ static void report(void)
     fd = record_sites && sites ? open(sites, O_WRONLY | O_CREAT | O_TRUNC, 0600) : -1;
     if (fd < 0) return;
     for (long i = 0; i < n_sites; i++) {
-        int n = snprintf(line, sizeof line, "%016llx %ld\n", (unsigned long long)site_list[i], site_first[i]);
+        const char *m = site_module[i] ? site_module[i] : "", *slash = strrchr(m, '/');
+        int n = snprintf(line, sizeof line, "%016llx %ld %s\n", (unsigned long long)site_list[i], site_first[i],
+                         slash ? slash + 1 : *m ? m : "exe");
         write_all(fd, line, (size_t)n);
     }
     if (sites_overflow) write_all(fd, "overflow\n", 9);   /* more stacks than SITE_CAP */
@@ -171,8 +176,8 @@ static int hit(int c)
     return fails(c, __atomic_add_fetch(&calls[c], 1, __ATOMIC_SEQ_CST));
 }
 
-/* Notes the stack site of allocation k if it is new. */
-static void record_site(uint64_t site, long k)
+/* Notes the stack site of allocation k, asked for by module (its name), if it is new. */
+static void record_site(uint64_t site, long k, const char *module)
 {
     while (__atomic_exchange_n(&site_lock, 1, __ATOMIC_ACQUIRE)) { /* spin: a few instructions */ }
     size_t i = (size_t)(site * 0x9E3779B97F4A7C15ull >> 47) & (2 * SITE_CAP - 1);
@@ -181,6 +186,7 @@ static void record_site(uint64_t site, long k)
         if (n_sites < SITE_CAP) {
             site_set[i] = site;
             site_list[n_sites] = site;
+            site_module[n_sites] = module;
             site_first[n_sites++] = k;
         } else {
             sites_overflow = 1;
@@ -207,8 +213,9 @@ static const char *const unsurvivable[] = {"libfftw3", "libplplot", "plplot5", "
 enum { MODULE_CAP = 4096 };   /* a power of two (page_cache keeps an index in 12 bits) */
 static struct module {
     uintptr_t lo, hi, base;
+    const char *name;   /* the loader's (valid while the module is loaded) */
     uint64_t name_hash;
-    int unsurvivable;
+    int unsurvivable, allocator;   /* allocator: this shim or libstdc++ (operator new) */
 } modules[MODULE_CAP];
 static int n_modules, module_lock;
 
@@ -235,8 +242,11 @@ static int add_modules(struct dl_phdr_info *info, size_t size, void *ctx)
         mo->lo = lo;
         mo->hi = hi;
         mo->base = info->dlpi_addr;
+        mo->name = name;
         mo->name_hash = fnv(0xcbf29ce484222325ull, name, strlen(name));
         mo->unsurvivable = 0;
+        mo->allocator = strstr(name, "libstdc++") != NULL ||
+                        ((uintptr_t)&add_modules >= lo && (uintptr_t)&add_modules < hi);
         for (int j = 0; unsurvivable[j]; j++) mo->unsurvivable |= strstr(name, unsurvivable[j]) != NULL;
         __atomic_store_n(&n_modules, n_modules + 1, __ATOMIC_RELEASE);
     }
@@ -272,11 +282,12 @@ static const struct module *module_of(uintptr_t pc)
 
 /* 1 if a frame of one of them is on the stack of the allocation being made; *site the hash
  * (FNV-1a) of that stack's frames, each as its module's name and its offset in the module (the
- * same in every run). Allocations made by backtrace() itself (only its first call, in setup)
- * count as such. */
+ * same in every run), *module the name of the module that asked for it. Allocations made by
+ * backtrace() itself (only its first call, in setup) count as such. */
 static __thread int unwinding;
-static int for_unsurvivable(uint64_t *site)
+static int for_unsurvivable(uint64_t *site, const char **module)
 {
+    *module = NULL;
     if (unwinding) return 1;
     unwinding = 1;
     void *pc[64];
@@ -287,6 +298,7 @@ static int for_unsurvivable(uint64_t *site)
         const struct module *m = module_of(off);
         if (m) {
             found = m->unsurvivable;
+            if (!*module && !m->allocator) *module = m->name;
             h = fnv(h, &m->name_hash, sizeof m->name_hash);
             off -= m->base;
         }
@@ -305,9 +317,10 @@ static int alloc_hit(void)
     if (!armed) return 0;
     if (fault_class != C_MALLOC) return hit(C_MALLOC);
     uint64_t site;
-    if (for_unsurvivable(&site)) return 0;
+    const char *module;
+    if (for_unsurvivable(&site, &module)) return 0;
     long k = __atomic_add_fetch(&calls[C_MALLOC], 1, __ATOMIC_SEQ_CST);
-    if (record_sites) record_site(site, k);
+    if (record_sites) record_site(site, k, module);
     if (fault_site) return site == fault_site && !__atomic_exchange_n(&fired, 1, __ATOMIC_SEQ_CST);
     return fails(C_MALLOC, k);
 }
