@@ -1,5 +1,5 @@
 /* backend_hardware.c - the `hardware` backend (paper Sec. 6, Figs. 7-8): an off-the-shelf
- * camera through OpenCV VideoCapture (videoio_shim.cpp), the mains zero crossings and the
+ * camera through OpenCV VideoCapture (videoio.c, its plugin), the mains zero crossings and the
  * camera's shutter and trigger lines through libgpiod v1.6 (written against <gpiod.h>; the
  * tests link a fake libgpiod that replays an event file and records the outputs, so this code
  * path is tested unchanged), and the ACam controller over its serial link (cap_link_*, which

@@ -88,11 +88,15 @@ uint64_t cap_fnv1a(uint64_t h, const void *data, size_t n);
 /* Write data to dir/name atomically (gs_file_write_atomic), creating dir (one level). */
 gs_status cap_write_in(const char *dir, const char *name, const void *data, size_t size);
 
-/* -------------------------------------------------- the videoio shim (videoio_shim.cpp) */
+/* ------------------------------------------------------- the camera (videoio.c, plugin) */
 
 /* A camera through OpenCV VideoCapture (opencv_videoio). Every C++ exception is caught at the
  * boundary. source: a device index ("0"), a device path or URL, or, with images = 1, an image
- * sequence pattern ("dir/img_%03d.png", CAP_IMAGES; 16-bit PNGs are read as they are). */
+ * sequence pattern ("dir/img_%03d.png", CAP_IMAGES; 16-bit PNGs are read as they are).
+ * opencv_videoio brings some 180 libraries that cost every process about 50 MB of memory and
+ * 0.14 s at start, so it is in a plugin (capture/videoio/videoio_plugin.cpp, built as
+ * gridsurvey-videoio.so beside the binary, installed as PREFIX/lib/gridsurvey/) that the first
+ * cap_vio_open loads: GS_EIO in one line when it cannot (where it looked, dlerror). */
 typedef struct cap_vio cap_vio;
 #ifdef __cplusplus
 extern "C" {
@@ -106,6 +110,11 @@ gs_status cap_vio_set_exposure(cap_vio *v, double exposure, double *actual);
  * 8-bit camera is scaled by 257). GS_EIO when no frame comes, GS_EFORMAT for another size or
  * channel count. */
 gs_status cap_vio_read(cap_vio *v, int width, int height, int bands, unsigned short *out);
+/* The plugin's entry points, one for each of the above. */
+gs_status cap_vio_plugin_open(const char *source, int images, cap_vio **out);
+void cap_vio_plugin_close(cap_vio *v);
+gs_status cap_vio_plugin_set_exposure(cap_vio *v, double exposure, double *actual);
+gs_status cap_vio_plugin_read(cap_vio *v, int width, int height, int bands, unsigned short *out);
 #ifdef __cplusplus
 }
 #endif

@@ -457,6 +457,8 @@ gs_status rec_blobs_extract(const gs_capture *cap, const rec_blob_opts *o, rec_c
     memcpy(mask, s.det, s.N);
     if ((st = rec_cv_dilate_u8(mask, s.W, s.H, o->grow_px + MASK_MARGIN)) != GS_OK) goto done;
     if ((st = frame_mesh(&s, mask, 1)) != GS_OK) goto done;
+    free(mask);
+    mask = NULL;
 
     if ((st = rec_blob_deblend(&s)) != GS_OK) goto done;
     area = calloc((size_t)(s.nlights ? s.nlights : 1), sizeof *area);

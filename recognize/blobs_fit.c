@@ -927,7 +927,7 @@ gs_status rec_blob_psf_fit(rec_blob_state *s, rec_catalog *cat)
     size_t nc = ((size_t)s->ncomp > n ? (size_t)s->ncomp : n) + 1;
     int *comp_of = calloc(n, sizeof *comp_of), *unit_of = calloc(n, sizeof *unit_of);
     int *ap_start = calloc(nc + 1, sizeof(int)), *fp_start = calloc(nc + 1, sizeof(int));
-    int *ap_pix = malloc(sizeof(int) * s->N), *fp_pix = malloc(sizeof(int) * s->N);
+    int *ap_pix = NULL, *fp_pix = NULL;   /* (sized once the groups' pixels are counted) */
     int *fill = malloc(sizeof(int) * (nc + 1));
     int *lt_start = calloc(nc + 1, sizeof(int)), *lt_list = malloc(sizeof(int) * n);
     int *replaced = calloc(nc, sizeof(int));
@@ -938,8 +938,7 @@ gs_status rec_blob_psf_fit(rec_blob_state *s, rec_catalog *cat)
     fit_order *ord = NULL;
     int *newid = NULL;
     fit_groups_job *job = NULL;
-    if (!comp_of || !unit_of || !ap_start || !fp_start || !ap_pix || !fp_pix || !fill || !lt_start || !lt_list || !replaced ||
-        !first_new) {
+    if (!comp_of || !unit_of || !ap_start || !fp_start || !fill || !lt_start || !lt_list || !replaced || !first_new) {
         st = gs_fail(GS_ENOMEM, "blobs: cannot allocate the PSF fit");
         goto done;
     }
@@ -959,6 +958,12 @@ gs_status rec_blob_psf_fit(rec_blob_state *s, rec_catalog *cat)
     for (size_t l = 1; l <= nc; l++) {
         ap_start[l] += ap_start[l - 1];
         fp_start[l] += fp_start[l - 1];
+    }
+    ap_pix = malloc(sizeof(int) * (size_t)(ap_start[nc] > 0 ? ap_start[nc] : 1));
+    fp_pix = malloc(sizeof(int) * (size_t)(fp_start[nc] > 0 ? fp_start[nc] : 1));
+    if (!ap_pix || !fp_pix) {
+        st = gs_fail(GS_ENOMEM, "blobs: cannot allocate the PSF fit");
+        goto done;
     }
     memcpy(fill, ap_start, sizeof(int) * nc);
     for (size_t p = 0; p < s->N; p++)
@@ -1002,6 +1007,11 @@ gs_status rec_blob_psf_fit(rec_blob_state *s, rec_catalog *cat)
         memset(Lp, 0, sizeof *Lp);
     }
     if (st != GS_OK || L.n == 0) goto done;
+    /* (the groups' pixel lists are done with: not beside the new catalog) */
+    free(ap_pix);
+    free(fp_pix);
+    free(lt_list);
+    ap_pix = fp_pix = lt_list = NULL;
 
     /* the new catalog: ids 0..n-1 the old lights, n + j the fitted ones; replaced components'
      * pixels go to their dominant fitted light; then raster order of the first footprint pixel */

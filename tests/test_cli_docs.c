@@ -5,8 +5,8 @@
  * every flag in it (as roff writes a minus, \-), and bash, sourcing the completion, must offer
  * every command and every flag of each. Then: groff renders the page without a warning, both
  * files are what docs/gen-cli-docs.sh makes of this binary (`make cli-docs` after a change to a
- * --help text), and `make install` puts the binary, the page and the completion under
- * DESTDIR/PREFIX. Then the progress flags: the same three in every command that has them, with
+ * --help text), and `make install` puts the binary, its camera plugin, the page and the
+ * completion under DESTDIR/PREFIX. Then the progress flags: the same three in every command that has them, with
  * the same effect. Last, every command's and subcommand's --help has an example of its own that
  * uses only flags its command names, and the flags that once meant different things in
  * different commands (-o, --out, --json, --min-confidence, --height-m) have one meaning each. */
@@ -164,17 +164,23 @@ TEST(make_install_puts_binary_page_and_completion_under_destdir)
     static char out[65536];
     const char *dest = fx_tmp("destdir");
     char cmd[2048];
-    /* the binary under test as it is (-o: never rebuilt), outside the calling make */
+    /* the binary under test and its camera plugin beside it as they are (-o: never rebuilt),
+     * outside the calling make */
+    char plugin[1100];
+    const char *slash = strrchr(test_bin(), '/');
+    snprintf(plugin, sizeof plugin, "%.*sgridsurvey-videoio.so", slash ? (int)(slash - test_bin() + 1) : 0,
+             test_bin());
     snprintf(cmd, sizeof cmd,
-             "env -u MAKEFLAGS -u MFLAGS -u MAKELEVEL make -s --no-print-directory -o %s install "
-             "BIN=%s DESTDIR=%s PREFIX=/opt/gs", test_bin(), test_bin(), dest);
+             "env -u MAKEFLAGS -u MFLAGS -u MAKELEVEL make -s --no-print-directory -o %s -o %s install "
+             "BIN=%s DESTDIR=%s PREFIX=/opt/gs", test_bin(), plugin, test_bin(), dest);
     CHECK_MSG(test_run(cmd, out, sizeof out) == 0, "%s: %s", cmd, out);
-    static const char *const pairs[][2] = {
+    const char *const pairs[][2] = {
         {"bin/gridsurvey", NULL},
+        {"lib/gridsurvey/gridsurvey-videoio.so", plugin},
         {"share/man/man1/gridsurvey.1", "docs/gridsurvey.1"},
         {"share/bash-completion/completions/gridsurvey", "docs/bash-completion/gridsurvey"},
     };
-    for (int i = 0; i < 3; i++) {
+    for (int i = 0; i < 4; i++) {
         snprintf(cmd, sizeof cmd, "cmp %s %s/opt/gs/%s", pairs[i][1] ? pairs[i][1] : test_bin(), dest,
                  pairs[i][0]);
         CHECK_MSG(test_run(cmd, out, sizeof out) == 0, "%s: %s", cmd, out);

@@ -355,6 +355,9 @@ static void disarm(void)
 }
 static int counted_main(int argc, char **argv, char **envp)
 {
+    /* not into the children: a sanitizer's symbolizer (clang's runs llvm-symbolizer to match
+     * LSan's suppressions) would fail its own allocations and garble the report */
+    unsetenv("LD_PRELOAD");
     armed = 1;
     atexit(disarm);   /* runs first at exit: the libraries' teardown is not counted */
     return real_main(argc, argv, envp);

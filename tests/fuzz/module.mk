@@ -21,9 +21,9 @@ fuzz: deps
 	$(MAKE) --no-print-directory BUILD=build/fuzz SAN=fuzz fuzz-run
 ifeq ($(SAN),fuzz)
 .SECONDARY: $(FUZZ_BINS:=.o)
-# (the targets that reach survey/ link capture/ and with it the binary's libgpiod and videoio)
+# (the targets that reach survey/ link capture/ and with it the binary's libgpiod)
 $(BUILD)/tests/fuzz/fuzz_%: $(BUILD)/tests/fuzz/fuzz_%.o $(LIBS)
-	$(CXX) -fsanitize=fuzzer $(LDFLAGS) $^ $(LDLIBS) -lgpiod -lopencv_videoio -o $@
+	$(CXX) -fsanitize=fuzzer $(LDFLAGS) $^ $(LDLIBS) -lgpiod -o $@
 fuzz-run: $(FUZZ_BINS)
 	@scratch=$$(mktemp -d "$$( [ -d /dev/shm ] && echo /dev/shm || echo "$${TMPDIR:-/tmp}" )/gridsurvey-fuzz.XXXXXX"); \
 	for n in $(FUZZ_NAMES); do \

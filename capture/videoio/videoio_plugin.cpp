@@ -1,6 +1,7 @@
-/* videoio_shim.cpp - the only C++ in capture/: a camera through OpenCV 4 VideoCapture
- * (opencv_videoio, linked only into the programs that use capture/'s hardware backend). Plain C
- * functions (capture/internal.h); every exception is caught here and returned as a gs_status. */
+/* videoio_plugin.cpp - the only C++ of capture/: a camera through OpenCV 4 VideoCapture, built
+ * as the plugin BUILD/gridsurvey-videoio.so (linked with opencv_videoio) that capture/videoio.c
+ * loads on the first camera opened. Plain C functions (cap_vio_plugin_*, capture/internal.h);
+ * every exception is caught here and returned as a gs_status (gs_fail is the program's). */
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
@@ -27,7 +28,7 @@ static gs_status fail_exception(const char *what, const std::exception &e)
     return gs_fail(GS_EIO, "OpenCV %s: %s", what, e.what());
 }
 
-extern "C" gs_status cap_vio_open(const char *source, int images, cap_vio **out)
+extern "C" gs_status cap_vio_plugin_open(const char *source, int images, cap_vio **out)
 {
     *out = nullptr;
     if (!source || !*source) return gs_fail(GS_EINVAL, "camera: no source");
@@ -55,7 +56,7 @@ extern "C" gs_status cap_vio_open(const char *source, int images, cap_vio **out)
     }
 }
 
-extern "C" void cap_vio_close(cap_vio *v)
+extern "C" void cap_vio_plugin_close(cap_vio *v)
 {
     try {
         delete v;
@@ -63,7 +64,7 @@ extern "C" void cap_vio_close(cap_vio *v)
     }
 }
 
-extern "C" gs_status cap_vio_set_exposure(cap_vio *v, double exposure, double *actual)
+extern "C" gs_status cap_vio_plugin_set_exposure(cap_vio *v, double exposure, double *actual)
 {
     try {
         bool ok = v->cap.set(cv::CAP_PROP_EXPOSURE, exposure);
@@ -76,7 +77,7 @@ extern "C" gs_status cap_vio_set_exposure(cap_vio *v, double exposure, double *a
     }
 }
 
-extern "C" gs_status cap_vio_read(cap_vio *v, int width, int height, int bands,
+extern "C" gs_status cap_vio_plugin_read(cap_vio *v, int width, int height, int bands,
                                   unsigned short *out)
 {
     try {
