@@ -29,8 +29,9 @@
  *
  * A gcc ASan binary runs with it given ASAN_OPTIONS=verify_asan_link_order=0: the shim then
  * comes before libasan and forwards to ASan's allocator (dlsym RTLD_NEXT), so a leak after an
- * injected failure is still reported. (clang links its ASan runtime into the executable, whose
- * malloc then wins over any preload: use gcc builds.) Not counted: C++ operator new under ASan
+ * injected failure is still reported; so does a clang one linked with the shared runtime
+ * (-shared-libsan, the Makefile's SAN=clang; a static one's malloc would win over any preload).
+ * Not counted: C++ operator new under ASan
  * (ASan replaces it; without ASan libstdc++'s operator new calls malloc and is counted), and
  * FFTW's allocations, which FFTW by design does not survive (fftw_malloc asserts). */
 #define _GNU_SOURCE
@@ -200,11 +201,12 @@ static void record_site(uint64_t site, long k, const char *module)
  * stderr), abort (GLib by design; fontconfig's assertions) or crash (fontconfig passes a failed
  * strdup on: SIGSEGV in FcValueSave under FcConfigSubstituteWithPat and pango_layout_get_size,
  * found by the sweep), in the drawing thread and in the one pango loads fonts in
- * (docs/reliability.md). And the sanitizer runtime's own: ASan's setup of a new thread calls
- * pthread_getattr_np, which allocates, and aborts when that fails. */
+ * (docs/reliability.md). And the sanitizer runtime's own (gcc's libasan, clang's shared
+ * libclang_rt.asan): ASan's setup of a new thread calls pthread_getattr_np, which allocates, and
+ * aborts when that fails; those allocations, made as threads start, are not counted either. */
 static const char *const unsurvivable[] = {"libfftw3", "libplplot", "plplot5", "libfontconfig", "libpango",
                                            "libglib-2", "libgobject-2", "libcairo", "libharfbuzz",
-                                           "libfreetype", "libexpat", "libasan", "libubsan", NULL};
+                                           "libfreetype", "libexpat", "libasan", "libubsan", "libclang_rt", NULL};
 
 /* The loaded modules' address ranges (their PT_LOAD segments), each with its name's hash and
  * whether it is one of those: appended when a frame is in none of them (a module loaded since),
