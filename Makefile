@@ -91,7 +91,7 @@ $(TEST_BIN): $(TEST_OBJS) $(LIBS)
 # every process 50 MB and 0.14 s at start); gs_fail, which the plugin calls, is exported to it.
 $(BIN): LDLIBS += -lgpiod
 $(BIN) $(TEST_BIN): LDFLAGS += -Wl,--export-dynamic-symbol=gs_fail
-$(VIDEOIO): capture/videoio/videoio_plugin.cpp capture/internal.h recognize/base/base.h
+$(VIDEOIO): capture/videoio/videoio_plugin.cpp capture/internal.h recognize/base/base.h recognize/base/cv_nomem.hpp
 	@mkdir -p $(dir $@)
 	$(CXX) $(CPPFLAGS) $(CXXFLAGS) -fPIC -shared $< $(LDFLAGS) -lopencv_videoio -lopencv_imgproc -lopencv_core -o $@
 $(DELIGHT_DB): $(BIN)

@@ -110,6 +110,19 @@ gs_status cap_vio_set_exposure(cap_vio *v, double exposure, double *actual);
  * 8-bit camera is scaled by 257). GS_EIO when no frame comes, GS_EFORMAT for another size or
  * channel count. */
 gs_status cap_vio_read(cap_vio *v, int width, int height, int bands, unsigned short *out);
+/* The plugin's entry points (cap_vio_plugin_*, named as the functions above) and its dlopen
+ * handle. cap_vio_plugin_load looks in bin_dir, then in bin_dir/../lib/gridsurvey/ (the
+ * installed layout); the first cap_vio_open calls it with the running binary's directory and
+ * keeps the plugin loaded until exit. GS_EIO in one line naming both places and dlerror's
+ * reasons, or the missing entry points. */
+typedef struct {
+    void *handle;
+    gs_status (*open)(const char *, int, cap_vio **);
+    void (*close)(cap_vio *);
+    gs_status (*set_exposure)(cap_vio *, double, double *);
+    gs_status (*read)(cap_vio *, int, int, int, unsigned short *);
+} cap_vio_api;
+gs_status cap_vio_plugin_load(const char *bin_dir, cap_vio_api *api);
 /* The plugin's entry points, one for each of the above. */
 gs_status cap_vio_plugin_open(const char *source, int images, cap_vio **out);
 void cap_vio_plugin_close(cap_vio *v);

@@ -1,6 +1,6 @@
 /* videoio.c - the camera functions of capture/internal.h: each forwards to the videoio plugin
  * (capture/videoio/videoio_plugin.cpp), loaded by the first cap_vio_open from beside the
- * running binary or from the installed layout (PREFIX/bin/.. /lib/gridsurvey/). */
+ * running binary or from the installed layout (PREFIX/bin/../lib/gridsurvey/). */
 #include "capture/internal.h"
 
 #include <dlfcn.h>
@@ -11,27 +11,14 @@
 
 static const char PLUGIN[] = "gridsurvey-videoio.so";
 
-static struct {
-    gs_status (*open)(const char *, int, cap_vio **);
-    void (*close)(cap_vio *);
-    gs_status (*set_exposure)(cap_vio *, double, double *);
-    gs_status (*read)(cap_vio *, int, int, int, unsigned short *);
-} api;
+static cap_vio_api api;
 
-/* dlopen of the plugin in the binary's directory, else in ../lib/gridsurvey/ from it. */
-static gs_status load(void)
+gs_status cap_vio_plugin_load(const char *bin_dir, cap_vio_api *out)
 {
-    if (api.open) return GS_OK;
-    char exe[PATH_MAX];
-    ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
-    if (n <= 0) return gs_fail(GS_EIO, "camera: cannot find the running binary (/proc/self/exe) "
-                               "to load %s beside it", PLUGIN);
-    exe[n] = '\0';
-    char *slash = strrchr(exe, '/');
-    if (slash) *slash = '\0';
+    memset(out, 0, sizeof *out);
     char paths[2][PATH_MAX + 64], why[2][256];
-    snprintf(paths[0], sizeof paths[0], "%s/%s", exe, PLUGIN);
-    snprintf(paths[1], sizeof paths[1], "%s/../lib/gridsurvey/%s", exe, PLUGIN);
+    snprintf(paths[0], sizeof paths[0], "%s/%s", bin_dir, PLUGIN);
+    snprintf(paths[1], sizeof paths[1], "%s/../lib/gridsurvey/%s", bin_dir, PLUGIN);
     void *h = NULL;
     for (int i = 0; i < 2 && !h; i++) {
         h = dlopen(paths[i], RTLD_NOW | RTLD_LOCAL);
@@ -42,7 +29,7 @@ static gs_status load(void)
         return gs_fail(GS_EIO, "camera: cannot load the OpenCV camera plugin (%s; %s): make builds "
                        "it beside the binary, make install puts it in PREFIX/lib/gridsurvey",
                        why[0], why[1]);
-    __typeof__(api) a;
+    cap_vio_api a = {.handle = h};
     *(void **)&a.open = dlsym(h, "cap_vio_plugin_open");
     *(void **)&a.close = dlsym(h, "cap_vio_plugin_close");
     *(void **)&a.set_exposure = dlsym(h, "cap_vio_plugin_set_exposure");
@@ -52,8 +39,22 @@ static gs_status load(void)
         return gs_fail(GS_EIO, "camera: the OpenCV camera plugin lacks its entry points "
                        "(cap_vio_plugin_*): rebuild it with the binary");
     }
-    api = a;   /* kept loaded until exit */
+    *out = a;
     return GS_OK;
+}
+
+/* Once per process, from the running binary's directory. */
+static gs_status load(void)
+{
+    if (api.open) return GS_OK;
+    char exe[PATH_MAX];
+    ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
+    if (n <= 0) return gs_fail(GS_EIO, "camera: cannot find the running binary (/proc/self/exe) "
+                               "to load %s beside it", PLUGIN);
+    exe[n] = '\0';
+    char *slash = strrchr(exe, '/');
+    if (slash) *slash = '\0';
+    return cap_vio_plugin_load(exe, &api);
 }
 
 gs_status cap_vio_open(const char *source, int images, cap_vio **out)

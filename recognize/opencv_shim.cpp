@@ -27,6 +27,8 @@ extern "C" {
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "recognize/base/cv_nomem.hpp"
+
 extern "C" {
 gs_status rec_cv_components(const unsigned char *mask, int width, int height, int *labels,
                             int *count, int **stats);
@@ -38,10 +40,7 @@ namespace {
 
 gs_status fail_exception(const char *what, const std::exception &e)
 {
-    if (dynamic_cast<const std::bad_alloc *>(&e)) return gs_fail(GS_ENOMEM, "%s: out of memory", what);
-    /* OpenCV's own allocator reports a failed allocation as cv::Exception StsNoMem */
-    const auto *cve = dynamic_cast<const cv::Exception *>(&e);
-    if (cve && cve->code == cv::Error::StsNoMem) return gs_fail(GS_ENOMEM, "%s: out of memory", what);
+    if (gs_cv_out_of_memory(e)) return gs_fail(GS_ENOMEM, "%s: out of memory", what);
     return gs_fail(GS_EFORMAT, "%s: OpenCV: %s", what, e.what());
 }
 

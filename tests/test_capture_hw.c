@@ -3,11 +3,14 @@
  * records the shutter and trigger outputs; a forked fake ACam controller speaks the firmware's
  * serial protocol on a socketpair; the camera is OpenCV VideoCapture on a 16-bit PNG sequence
  * (CAP_IMAGES). The production code path runs unchanged. */
+#define _GNU_SOURCE /* dladdr */
 #include "tests/test.h"
 #include "tests/fake_gpiod.h"
 #include "tests/hw_fixture.h"
 #include "capture/capture.h"
+#include "capture/internal.h"
 
+#include <dlfcn.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -273,4 +276,73 @@ TEST(capture_hardware_backend_failures)
     expect_acquire_fails(be, HW_W + 1, GS_EFORMAT, "expected 33x24");
     waitpid(child, NULL, 0);
     CHECK(fake_gpiod_open_handles() == 0);
+}
+
+/* The camera plugin (capture/videoio.c): found in the installed layout BIN/../lib/gridsurvey/
+ * when it is not beside the binary, and working from there; one line naming both places when it
+ * is in neither, and the missing entry points when the file there is another library. */
+TEST(capture_camera_plugin_installed_layout_and_load_errors)
+{
+    const char *tmp = test_tmpdir();
+    const char *gsbin = test_bin(), *slash = strrchr(gsbin, '/');
+    int dir_len = slash ? (int)(slash - gsbin) : 1;
+    char built[1200], bin[1200], lib[1200], installed[1300], cmd[5000];
+    snprintf(built, sizeof built, "%.*s/gridsurvey-videoio.so", dir_len, slash ? gsbin : ".");
+    snprintf(bin, sizeof bin, "%s/prefix/bin", tmp);
+    snprintf(lib, sizeof lib, "%s/prefix/lib/gridsurvey", tmp);
+    snprintf(installed, sizeof installed, "%s/gridsurvey-videoio.so", lib);
+    /* a link, not a copy: the same file as the built plugin, so not a second copy in the process */
+    snprintf(cmd, sizeof cmd, "mkdir -p '%s' '%s' && ln -s \"$(realpath '%s')\" '%s'", bin, lib, built,
+             installed);
+    CHECK(system(cmd) == 0);
+
+    cap_vio_api api;
+    CHECK_OK(cap_vio_plugin_load(bin, &api));
+    if (api.handle) {
+        const char *pattern = hw_fx_camera(HW_K, HW_W, HW_H, hw_pixel);
+        cap_vio *v = NULL;
+        CHECK_OK(api.open(pattern, 1, &v));
+        unsigned short *raw = malloc(sizeof *raw * HW_W * HW_H * 3);
+        if (v && raw) {
+            CHECK_OK(api.read(v, HW_W, HW_H, 3, raw));
+            size_t bad = 0;
+            for (int y = 0; y < HW_H; y++)
+                for (int x = 0; x < HW_W; x++)
+                    for (int b = 0; b < 3; b++)
+                        bad += raw[((size_t)y * HW_W + (size_t)x) * 3 + (size_t)b] != hw_pixel(0, x, y, b);
+            CHECK_MSG(bad == 0, "%zu samples of frame 0 differ from the camera's", bad);
+            CHECK(api.read(v, HW_W + 1, HW_H, 3, raw) == GS_EFORMAT);
+        }
+        free(raw);
+        if (v) api.close(v);
+        dlclose(api.handle);
+    }
+
+    /* in neither place: both named, each with its reason. Another prefix: a plugin loaded once
+     * may stay loaded (dlclose need not unload it), and dlopen matches loaded objects by path. */
+    snprintf(bin, sizeof bin, "%s/prefix2/bin", tmp);
+    snprintf(lib, sizeof lib, "%s/prefix2/lib/gridsurvey", tmp);
+    snprintf(installed, sizeof installed, "%s/gridsurvey-videoio.so", lib);
+    snprintf(cmd, sizeof cmd, "mkdir -p '%s' '%s'", bin, lib);
+    CHECK(system(cmd) == 0);
+    CHECK(cap_vio_plugin_load(bin, &api) == GS_EIO && !api.open);
+    const char *d = gs_detail();
+    CHECK_MSG(strstr(d, "cannot load the OpenCV camera plugin") && strstr(d, bin) &&
+              strstr(d, "/../lib/gridsurvey/gridsurvey-videoio.so") && !strchr(d, '\n'), "%s", d);
+    /* not a library */
+    FILE *f = fopen(installed, "w");
+    if (f) {
+        fputs("not an ELF file\n", f);
+        fclose(f);
+    }
+    CHECK(cap_vio_plugin_load(bin, &api) == GS_EIO);
+    CHECK_MSG(strstr(gs_detail(), "invalid ELF header") || strstr(gs_detail(), "too short"), "%s", gs_detail());
+    /* a library without the entry points: SQLite's */
+    Dl_info info;
+    void *sym = dlsym(RTLD_DEFAULT, "sqlite3_libversion");
+    CHECK(sym && dladdr(sym, &info) && info.dli_fname);
+    snprintf(cmd, sizeof cmd, "cp '%s' '%s'", info.dli_fname, installed);
+    CHECK(system(cmd) == 0);
+    CHECK(cap_vio_plugin_load(bin, &api) == GS_EIO && !api.handle);
+    CHECK_MSG(strstr(gs_detail(), "lacks its entry points"), "%s", gs_detail());
 }

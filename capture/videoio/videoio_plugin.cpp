@@ -6,6 +6,8 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
+#include "recognize/base/cv_nomem.hpp"
+
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -22,9 +24,7 @@ struct cap_vio {
 
 static gs_status fail_exception(const char *what, const std::exception &e)
 {
-    const auto *cve = dynamic_cast<const cv::Exception *>(&e);
-    if (dynamic_cast<const std::bad_alloc *>(&e) || (cve && cve->code == cv::Error::StsNoMem))
-        return gs_fail(GS_ENOMEM, "OpenCV %s: out of memory", what);
+    if (gs_cv_out_of_memory(e)) return gs_fail(GS_ENOMEM, "OpenCV %s: out of memory", what);
     return gs_fail(GS_EIO, "OpenCV %s: %s", what, e.what());
 }
 
