@@ -39,97 +39,26 @@ static void disc(double x, double y, double r, int n)
     plfill(n, px, py);
 }
 
-gs_status gis_map_png(const gis_light *lights, size_t n, const gis_map_opts *o, const char *path)
+/* What the map's drawing needs: the lights' and stations' local coordinates (x, y, metres east
+ * and north of lat0, lon0), the lights' phase classes and rows (ref; NULL for a station). */
+typedef struct {
+    const gis_map_opts *o;
+    const double *x, *y;
+    const gis_phase_class *cls;
+    const gis_light *const *ref;
+    size_t nl, np;
+    double lat0, lon0;
+} map_drawing;
+
+/* The whole map, with PLplot's memcairo driver onto rgb (in a child process: gs_isolated). */
+static gs_status draw_map(void *ctx, unsigned char *rgb)
 {
-    gis_map_opts def;
-    if (!o) {
-        gis_map_opts_default(&def);
-        o = &def;
-    }
-    if (n && !lights) return gs_fail(GS_EINVAL, "map: NULL lights");
-    if (o->width_px < 200 || o->height_px < 200 || o->width_px > 10000 || o->height_px > 10000)
-        return gs_fail(GS_EINVAL, "map: size %d x %d px: expected 200..10000", o->width_px, o->height_px);
-    if (o->n_stations && !o->stations) return gs_fail(GS_EINVAL, "map: NULL stations");
-    for (size_t i = 0; i < o->n_stations; i++) {
-        gs_status s = gis_camera_check(&o->stations[i]);
-        if (s != GS_OK) return s;
-    }
-
-    /* Reference: the first located light (else station), then the centre of the extent. */
-    double lat0 = NAN, lon0 = NAN;
-    size_t nl = 0;
-    for (size_t i = 0; i < n; i++)
-        if (isfinite(lights[i].lat_deg) && isfinite(lights[i].lon_deg)) {
-            if (fabs(lights[i].lat_deg) > 90.0)
-                return gs_fail(GS_EINVAL, "map: light %zu latitude %g", i, lights[i].lat_deg);
-            if (!nl) {
-                lat0 = lights[i].lat_deg;
-                lon0 = lights[i].lon_deg;
-            }
-            nl++;
-        }
-    if (!nl && o->n_stations) {
-        lat0 = o->stations[0].lat_deg;
-        lon0 = o->stations[0].lon_deg;
-    }
-    if (!nl && !o->n_stations) return gs_fail(GS_EINVAL, "map: no located light and no station to draw");
-    size_t np = nl + o->n_stations;
-    double *x = malloc(sizeof *x * (np + 1)), *y = malloc(sizeof *y * (np + 1));
-    gis_phase_class *cls = malloc(sizeof *cls * (np + 1));
-    const gis_light **ref = malloc(sizeof *ref * (np + 1));
-    if (!x || !y || !cls || !ref) {
-        free(x);
-        free(y);
-        free(cls);
-        free(ref);
-        return gs_fail(GS_ENOMEM, "map: out of memory");
-    }
-    gs_status s = GS_OK;
-    for (int pass = 0; pass < 2 && s == GS_OK; pass++) {
-        double xmin = INFINITY, xmax = -INFINITY, ymin = INFINITY, ymax = -INFINITY;
-        size_t k = 0;
-        for (size_t i = 0; i < n + o->n_stations; i++) {
-            double la, lo;
-            if (i < n) {
-                if (!(isfinite(lights[i].lat_deg) && isfinite(lights[i].lon_deg))) continue;
-                la = lights[i].lat_deg;
-                lo = lights[i].lon_deg;
-                cls[k] = gis_phase_classify(lights[i].phase_deg);
-                ref[k] = &lights[i];
-            } else {
-                la = o->stations[i - n].lat_deg;
-                lo = o->stations[i - n].lon_deg;
-                ref[k] = NULL;
-            }
-            double enu[3];
-            if (gis_gl_local_fwd(lat0, lon0, 0.0, la, lo, 0.0, enu)) {
-                s = GS_ENUMERIC;
-                break;
-            }
-            x[k] = enu[0];
-            y[k] = enu[1];
-            if (x[k] < xmin) xmin = x[k];
-            if (x[k] > xmax) xmax = x[k];
-            if (y[k] < ymin) ymin = y[k];
-            if (y[k] > ymax) ymax = y[k];
-            k++;
-        }
-        if (s != GS_OK || pass == 1) break;
-        /* re-centre on the middle of the extent */
-        double mid[3] = {0.5 * (xmin + xmax), 0.5 * (ymin + ymax), 0.0}, h;
-        if (gis_gl_local_rev(lat0, lon0, 0.0, mid, &lat0, &lon0, &h)) s = GS_ENUMERIC;
-    }
-    size_t npx = (size_t)o->width_px * (size_t)o->height_px;
-    unsigned char *rgb = s == GS_OK ? malloc(3 * npx) : NULL;
-    if (s == GS_OK && !rgb) s = gs_fail(GS_ENOMEM, "map: cannot hold a %dx%d image", o->width_px, o->height_px);
-    if (s != GS_OK) {
-        free(x);
-        free(y);
-        free(cls);
-        free(ref);
-        return s;
-    }
-
+    const map_drawing *md = ctx;
+    const gis_map_opts *o = md->o;
+    const double *x = md->x, *y = md->y, lat0 = md->lat0, lon0 = md->lon0;
+    const gis_phase_class *cls = md->cls;
+    const gis_light *const *ref = md->ref;
+    size_t nl = md->nl, np = md->np;
     double half = 50.0;
     for (size_t k = 0; k < np; k++) {
         if (fabs(x[k]) > half) half = fabs(x[k]);
@@ -140,7 +69,6 @@ gs_status gis_map_png(const gis_light *lights, size_t n, const gis_map_opts *o, 
     half *= 1.35;
     double hx = half, hy = half, span = 2.0 * half;
 
-    memset(rgb, 255, 3 * npx);   /* the background: memcairo draws onto the buffer */
     plsdev("memcairo");
     plsmem(o->width_px, o->height_px, rgb);
     plscmap0n(16);
@@ -248,13 +176,110 @@ gs_status gis_map_png(const gis_light *lights, size_t n, const gis_map_opts *o, 
              text_col, (const char *const *)labels, box_col, box_pat, box_scale, box_width, NULL,
              NULL, NULL, NULL, NULL, NULL, NULL);
     plend();
+    return GS_OK;
+}
+
+gs_status gis_map_png(const gis_light *lights, size_t n, const gis_map_opts *o, const char *path)
+{
+    gis_map_opts def;
+    if (!o) {
+        gis_map_opts_default(&def);
+        o = &def;
+    }
+    if (n && !lights) return gs_fail(GS_EINVAL, "map: NULL lights");
+    if (o->width_px < 200 || o->height_px < 200 || o->width_px > 10000 || o->height_px > 10000)
+        return gs_fail(GS_EINVAL, "map: size %d x %d px: expected 200..10000", o->width_px, o->height_px);
+    if (o->n_stations && !o->stations) return gs_fail(GS_EINVAL, "map: NULL stations");
+    for (size_t i = 0; i < o->n_stations; i++) {
+        gs_status s = gis_camera_check(&o->stations[i]);
+        if (s != GS_OK) return s;
+    }
+
+    /* Reference: the first located light (else station), then the centre of the extent. */
+    double lat0 = NAN, lon0 = NAN;
+    size_t nl = 0;
+    for (size_t i = 0; i < n; i++)
+        if (isfinite(lights[i].lat_deg) && isfinite(lights[i].lon_deg)) {
+            if (fabs(lights[i].lat_deg) > 90.0)
+                return gs_fail(GS_EINVAL, "map: light %zu latitude %g", i, lights[i].lat_deg);
+            if (!nl) {
+                lat0 = lights[i].lat_deg;
+                lon0 = lights[i].lon_deg;
+            }
+            nl++;
+        }
+    if (!nl && o->n_stations) {
+        lat0 = o->stations[0].lat_deg;
+        lon0 = o->stations[0].lon_deg;
+    }
+    if (!nl && !o->n_stations) return gs_fail(GS_EINVAL, "map: no located light and no station to draw");
+    size_t np = nl + o->n_stations;
+    double *x = malloc(sizeof *x * (np + 1)), *y = malloc(sizeof *y * (np + 1));
+    gis_phase_class *cls = malloc(sizeof *cls * (np + 1));
+    const gis_light **ref = malloc(sizeof *ref * (np + 1));
+    if (!x || !y || !cls || !ref) {
+        free(x);
+        free(y);
+        free(cls);
+        free(ref);
+        return gs_fail(GS_ENOMEM, "map: out of memory");
+    }
+    gs_status s = GS_OK;
+    for (int pass = 0; pass < 2 && s == GS_OK; pass++) {
+        double xmin = INFINITY, xmax = -INFINITY, ymin = INFINITY, ymax = -INFINITY;
+        size_t k = 0;
+        for (size_t i = 0; i < n + o->n_stations; i++) {
+            double la, lo;
+            if (i < n) {
+                if (!(isfinite(lights[i].lat_deg) && isfinite(lights[i].lon_deg))) continue;
+                la = lights[i].lat_deg;
+                lo = lights[i].lon_deg;
+                cls[k] = gis_phase_classify(lights[i].phase_deg);
+                ref[k] = &lights[i];
+            } else {
+                la = o->stations[i - n].lat_deg;
+                lo = o->stations[i - n].lon_deg;
+                ref[k] = NULL;
+            }
+            double enu[3];
+            if (gis_gl_local_fwd(lat0, lon0, 0.0, la, lo, 0.0, enu)) {
+                s = GS_ENUMERIC;
+                break;
+            }
+            x[k] = enu[0];
+            y[k] = enu[1];
+            if (x[k] < xmin) xmin = x[k];
+            if (x[k] > xmax) xmax = x[k];
+            if (y[k] < ymin) ymin = y[k];
+            if (y[k] > ymax) ymax = y[k];
+            k++;
+        }
+        if (s != GS_OK || pass == 1) break;
+        /* re-centre on the middle of the extent */
+        double mid[3] = {0.5 * (xmin + xmax), 0.5 * (ymin + ymax), 0.0}, h;
+        if (gis_gl_local_rev(lat0, lon0, 0.0, mid, &lat0, &lon0, &h)) s = GS_ENUMERIC;
+    }
+    size_t npx = (size_t)o->width_px * (size_t)o->height_px;
+    unsigned char *rgb = s == GS_OK ? malloc(3 * npx) : NULL;
+    if (s == GS_OK && !rgb) s = gs_fail(GS_ENOMEM, "map: cannot hold a %dx%d image", o->width_px, o->height_px);
+    if (s != GS_OK) {
+        free(x);
+        free(y);
+        free(cls);
+        free(ref);
+        return s;
+    }
+
+    map_drawing md = {o, x, y, cls, ref, nl, np, lat0, lon0};
+    memset(rgb, 255, 3 * npx);   /* the background: memcairo draws onto the buffer */
+    s = gs_isolated(path, rgb, 3 * npx, draw_map, &md);
     free(x);
     free(y);
     free(cls);
     free(ref);
     unsigned char *png = NULL;
     size_t size = 0;
-    s = gs_png_encode(rgb, o->width_px, o->height_px, 3, 8, &png, &size);
+    if (s == GS_OK) s = gs_png_encode(rgb, o->width_px, o->height_px, 3, 8, &png, &size);
     free(rgb);
     if (s == GS_OK) s = gs_file_write_atomic(path, png, size);
     free(png);

@@ -86,23 +86,32 @@ static gs_status add_label(canvas *c, double x, double y, double size_mm, const 
     return GS_OK;
 }
 
-/* Draw the queued labels with PLplot's memcairo driver onto the pixels, then encode the PNG. */
+/* The queued labels, with PLplot's memcairo driver onto rgb (in a child process: gs_isolated). */
+static gs_status draw_labels(void *ctx, unsigned char *rgb)
+{
+    const canvas *c = ctx;
+    plsdev("memcairo");
+    plsmem(c->w, c->h, rgb);
+    plinit();
+    pladv(0);
+    plvpor(0.0, 1.0, 0.0, 1.0);
+    plwind(0.0, c->w, c->h, 0.0);   /* pixel coordinates, y down */
+    plscol0(1, 0, 0, 0);
+    plcol0(1);
+    for (size_t i = 0; i < c->nlabels; i++) {
+        plschr(c->labels[i].size_mm, 1.0);
+        plptex(c->labels[i].x, c->labels[i].y, 1.0, 0.0, c->labels[i].just, c->labels[i].text);
+    }
+    plend();
+    return GS_OK;
+}
+
+/* Draw the queued labels onto the pixels, then encode the PNG. */
 static gs_status canvas_write(canvas *c, const char *path)
 {
     if (c->nlabels) {
-        plsdev("memcairo");
-        plsmem(c->w, c->h, c->rgb);
-        plinit();
-        pladv(0);
-        plvpor(0.0, 1.0, 0.0, 1.0);
-        plwind(0.0, c->w, c->h, 0.0);   /* pixel coordinates, y down */
-        plscol0(1, 0, 0, 0);
-        plcol0(1);
-        for (size_t i = 0; i < c->nlabels; i++) {
-            plschr(c->labels[i].size_mm, 1.0);
-            plptex(c->labels[i].x, c->labels[i].y, 1.0, 0.0, c->labels[i].just, c->labels[i].text);
-        }
-        plend();
+        gs_status s = gs_isolated(path, c->rgb, (size_t)c->w * (size_t)c->h * 3, draw_labels, c);
+        if (s != GS_OK) return s;
     }
     unsigned char *png = NULL;
     size_t size = 0;

@@ -25,40 +25,29 @@ static const char *band_label(int bands, int band)
     return bands == 1 ? "monochrome" : rgb[band];
 }
 
-gs_status rec_plot_brfs(const gs_bulb *const *bulbs, size_t count, const char *png_path,
-                        const char *title)
+/* What the BRF plot's drawing needs; x, y: scratch of the longest BRF + 1 points. */
+typedef struct {
+    const gs_bulb *const *bulbs;
+    size_t count;
+    const char *file;   /* PLplot writes it by name */
+    const char *title;
+    int bands;
+    double ymax;
+    double *x, *y;
+} brf_plot;
+
+/* The BRF plot (in a child process: gs_isolated). */
+static gs_status draw_brfs(void *ctx, unsigned char *unused)
 {
-    if (count == 0) return gs_fail(GS_EINVAL, "plot: no bulbs to plot");
-    if (count > (size_t)PALETTE_N - 1)
-        return gs_fail(GS_ELIMIT, "plot: %zu bulbs: at most %d fit one legible plot", count, PALETTE_N - 1);
-    int bands = bulbs[0]->brf.bands;
-    for (size_t i = 1; i < count; i++)
-        if (bulbs[i]->brf.bands != bands)
-            return gs_fail(GS_EINVAL, "plot: bulb %s has %d bands, %s has %d: expected the same",
-                           bulbs[i]->id, bulbs[i]->brf.bands, bulbs[0]->id, bands);
-    gs_atomic out;   /* PLplot writes by name (and exits the process on open failures) */
-    gs_status ost = gs_atomic_open(&out, png_path, 0);
-    if (ost != GS_OK) return ost;
-
-    double ymax = 0.0;
-    int nmax = 0;
-    for (size_t i = 0; i < count; i++) {
-        const gs_brf *b = &bulbs[i]->brf;
-        for (int j = 0; j < b->n * b->bands; j++)
-            if (b->v[j] > ymax) ymax = b->v[j];
-        if (b->n > nmax) nmax = b->n;
-    }
-    ymax = ymax < 1.5 ? 1.5 : ymax * 1.08;
-    double *x = malloc(sizeof *x * (size_t)(nmax + 1)), *y = malloc(sizeof *y * (size_t)(nmax + 1));
-    if (!x || !y) {
-        free(x);
-        free(y);
-        gs_atomic_abort(&out);
-        return gs_fail(GS_ENOMEM, "plot: cannot allocate %d points", nmax);
-    }
-
+    (void)unused;
+    const brf_plot *bp = ctx;
+    const gs_bulb *const *bulbs = bp->bulbs;
+    size_t count = bp->count;
+    int bands = bp->bands;
+    double ymax = bp->ymax, *x = bp->x, *y = bp->y;
+    const char *title = bp->title;
     plsdev("pngcairo");
-    plsfnam(out.tmp);
+    plsfnam(bp->file);
     plsetopt("geometry", bands == 1 ? "1100x700" : "1100x1400");
     plscmap0n(PALETTE_N + 1);
     plscol0(0, 255, 255, 255); /* background */
@@ -111,9 +100,48 @@ gs_status rec_plot_brfs(const gs_bulb *const *bulbs, size_t count, const char *p
     free(styles);
     free(widths);
     free(text);
+    return GS_OK;
+}
+
+gs_status rec_plot_brfs(const gs_bulb *const *bulbs, size_t count, const char *png_path,
+                        const char *title)
+{
+    if (count == 0) return gs_fail(GS_EINVAL, "plot: no bulbs to plot");
+    if (count > (size_t)PALETTE_N - 1)
+        return gs_fail(GS_ELIMIT, "plot: %zu bulbs: at most %d fit one legible plot", count, PALETTE_N - 1);
+    int bands = bulbs[0]->brf.bands;
+    for (size_t i = 1; i < count; i++)
+        if (bulbs[i]->brf.bands != bands)
+            return gs_fail(GS_EINVAL, "plot: bulb %s has %d bands, %s has %d: expected the same",
+                           bulbs[i]->id, bulbs[i]->brf.bands, bulbs[0]->id, bands);
+    gs_atomic out;   /* PLplot writes by name (and exits the process on open failures) */
+    gs_status ost = gs_atomic_open(&out, png_path, 0);
+    if (ost != GS_OK) return ost;
+
+    double ymax = 0.0;
+    int nmax = 0;
+    for (size_t i = 0; i < count; i++) {
+        const gs_brf *b = &bulbs[i]->brf;
+        for (int j = 0; j < b->n * b->bands; j++)
+            if (b->v[j] > ymax) ymax = b->v[j];
+        if (b->n > nmax) nmax = b->n;
+    }
+    ymax = ymax < 1.5 ? 1.5 : ymax * 1.08;
+    double *x = malloc(sizeof *x * (size_t)(nmax + 1)), *y = malloc(sizeof *y * (size_t)(nmax + 1));
+    if (!x || !y) {
+        free(x);
+        free(y);
+        gs_atomic_abort(&out);
+        return gs_fail(GS_ENOMEM, "plot: cannot allocate %d points", nmax);
+    }
+
+    brf_plot bp = {bulbs, count, out.tmp, title, bands, ymax, x, y};
+    gs_status st = gs_isolated(png_path, NULL, 0, draw_brfs, &bp);
     free(x);
     free(y);
-    return gs_atomic_commit(&out);
+    if (st == GS_OK) return gs_atomic_commit(&out);
+    gs_atomic_abort(&out);
+    return st;
 }
 
 /* ------------------------------------------------------------ signal plots (Fig. 3) */
@@ -166,6 +194,153 @@ static int cmp_rank(const void *a, const void *b)
 static const char *const symbols[8] = {"\xe2\x97\x8f", "\xe2\x96\xa0", "\xe2\x96\xb2",
                                        "\xe2\x97\x86", "\xe2\x96\xbc", "\xe2\x98\x85",
                                        "\xe2\x9c\x9a", "\xe2\x9c\x96"};
+
+/* What the signal plot's drawing needs: the lights (rank[0..nl)), their colours, the y range,
+ * and scratch curves (u, cv, tmp: template_curve's; px, py, lo, hi: K points). */
+typedef struct {
+    const rec_matcher *m;
+    const rec_catalog *cat;
+    const rec_match *match;
+    const light_rank *rank;
+    size_t nl;
+    int K, bands;
+    size_t D;
+    const char *title, *file;   /* PLplot writes file by name */
+    double ymax;
+    const int *colour;
+    double *u, *cv;
+    double complex *tmp;
+    double *px, *py, *lo, *hi;
+} signal_plot;
+
+/* The signal plot (in a child process: gs_isolated). */
+static gs_status draw_signals(void *ctx, unsigned char *unused)
+{
+    (void)unused;
+    const signal_plot *sp = ctx;
+    const rec_matcher *m = sp->m;
+    const rec_catalog *cat = sp->cat;
+    const rec_match *match = sp->match;
+    const light_rank *rank = sp->rank;
+    size_t nl = sp->nl, D = sp->D;
+    int K = sp->K, bands = sp->bands;
+    const char *title = sp->title;
+    double ymax = sp->ymax, *u = sp->u, *cv = sp->cv, *px = sp->px, *py = sp->py, *lo = sp->lo,
+           *hi = sp->hi;
+    double complex *tmp = sp->tmp;
+    const int *colour = sp->colour;
+    gs_status st = GS_OK;
+    plsdev("pngcairo");
+    plsfnam(sp->file);
+    char geom[32];
+    snprintf(geom, sizeof geom, "1500x%d", bands == 1 ? 620 : 1500);
+    plsetopt("geometry", geom);
+    plscmap0n(24);
+    plscol0(0, 255, 255, 255);
+    plscol0(1, 0, 0, 0);
+    for (int c = 0; c < 20; c++)
+        plscol0(c + 2, rec_bulb_palette[c][0] * 4 / 5, rec_bulb_palette[c][1] * 4 / 5, rec_bulb_palette[c][2] * 4 / 5);
+    plinit();
+    pladv(0);
+    static const char *const band_name[3] = {"red band", "green band", "blue band"};
+    double top = 0.93, bottom = 0.05, gap = 0.09;
+    double row_h = (top - bottom - gap * (bands - 1)) / bands;
+    const char *labels[MAX_SIGNAL_LIGHTS], *syms[MAX_SIGNAL_LIGHTS];
+    char text[MAX_SIGNAL_LIGHTS][120];
+    PLINT opts[MAX_SIGNAL_LIGHTS], colors[MAX_SIGNAL_LIGHTS], styles[MAX_SIGNAL_LIGHTS];
+    PLFLT widths[MAX_SIGNAL_LIGHTS], scales[MAX_SIGNAL_LIGHTS];
+    PLINT numbers[MAX_SIGNAL_LIGHTS];
+    for (int band = 0; band < bands && st == GS_OK; band++) {
+        double y1 = top - band * (row_h + gap), y0 = y1 - row_h;
+        for (int panel = 0; panel < 2 && st == GS_OK; panel++) {
+            plvpor(panel ? 0.45 : 0.07, panel ? 0.76 : 0.38, y0, y1);
+            plwind(0.0, 1.0, 0.0, ymax);
+            plcol0(1);
+            plwidth(1.0);
+            plschr(0, 0.6);
+            plbox("bcnstg", 0.2, 2, "bcnstvg", 0, 0);
+            char lab[300];
+            const char *bn = bands == 1 ? "monochrome" : band_name[band];
+            if (panel == 0)
+                snprintf(lab, sizeof lab, "%s: measured/brightness, best template", bn);
+            else
+                snprintf(lab, sizeof lab, "%s: shifted to grid phase 0", bn);
+            pllab("time in the flicker cycle, t / #gD", "normalised signal", lab);
+            if (band == 0 && panel == 0 && title && *title) {
+                plschr(0, 0.75);
+                plmtex("t", 3.2, 0.0, 0.0, title);
+                plschr(0, 0.6);
+            }
+            for (size_t l = 0; l < nl && st == GS_OK; l++) {
+                size_t i = rank[l].light;
+                const rec_match *mt = &match[i];
+                const gs_bulb *b = rec_matcher_bulb(m, (size_t)mt->bulb);
+                int phase_known = b->ref == GS_REF_VOLTAGE && !(mt->flags & REC_MATCH_PHASE_AMBIGUOUS);
+                double sh = gs_phase_to_shift(mt->phase_deg);
+                if (panel == 1 && !phase_known) continue;
+                /* the template (panel 0: at the light's phase; panel 1: at phase 0) */
+                st = template_curve(b, panel ? 0.0 : sh, K, band, u, cv, tmp);
+                if (st != GS_OK) break;
+                plcol0(colour[l] % 20 + 2);
+                plwidth(panel ? 1.0 : 2.0);
+                plline(CURVE_N, u, cv);
+                /* the measured samples at the window centres (panel 1: minus the shift) */
+                double a = mt->brightness;
+                for (int k = 0; k < K; k++) {
+                    double t = (k + 0.5) / K - (panel ? sh : 0.0);
+                    t -= floor(t);
+                    size_t d = i * D + (size_t)band * (size_t)K + (size_t)k;
+                    px[k] = t;
+                    py[k] = cat->signal[d] / a;
+                    lo[k] = (cat->signal[d] - cat->sigma[d]) / a;
+                    hi[k] = (cat->signal[d] + cat->sigma[d]) / a;
+                }
+                plwidth(1.0);
+                plerry(K, px, lo, hi);
+                plschr(0, 0.45);
+                plstring(K, px, py, symbols[l % 8]);
+                plschr(0, 0.6);
+            }
+        }
+        if (st != GS_OK) break;
+        /* legend, right of the first row */
+        if (band == 0) {
+            for (size_t l = 0; l < nl; l++) {
+                const rec_match *mt = &match[rank[l].light];
+                const gs_bulb *b = rec_matcher_bulb(m, (size_t)mt->bulb);
+                if (b->ref == GS_REF_VOLTAGE && !(mt->flags & REC_MATCH_PHASE_AMBIGUOUS))
+                    snprintf(text[l], sizeof text[l], "light %zu: %s, %.0f" REC_DEG, rank[l].light, b->id,
+                             mt->phase_deg);
+                else
+                    snprintf(text[l], sizeof text[l], "light %zu: %s, phase ?", rank[l].light, b->id);
+                labels[l] = text[l];
+                syms[l] = symbols[l % 8];
+                opts[l] = PL_LEGEND_LINE | PL_LEGEND_SYMBOL;
+                colors[l] = colour[l] % 20 + 2;
+                styles[l] = 1;
+                widths[l] = 2.0;
+                scales[l] = 0.5;
+                numbers[l] = 2;
+            }
+            plvpor(0.78, 0.998, y0, y1);
+            plwind(0.0, 1.0, 0.0, 1.0);
+            if (nl) {
+                PLFLT lw, lh;
+                pllegend(&lw, &lh, PL_LEGEND_BACKGROUND | PL_LEGEND_BOUNDING_BOX,
+                         PL_POSITION_LEFT | PL_POSITION_INSIDE | PL_POSITION_TOP, 0.0, 0.0,
+                         0.05, 0, 1, 1, (PLINT)nl, 1, (PLINT)nl, opts, 0.6, 0.45, 2.0, 0.0, colors,
+                         (const char *const *)labels, NULL, NULL, NULL, NULL, colors, styles,
+                         widths, colors, scales, numbers, (const char *const *)syms);
+            } else {
+                plcol0(1);
+                plschr(0, 0.8);
+                plptex(0.5, 0.9, 1.0, 0.0, 0.5, "no recognised light");
+            }
+        }
+    }
+    plend();
+    return st;
+}
 
 gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const rec_match *match,
                            int max_lights, const char *png_path, const char *title)
@@ -256,117 +431,9 @@ gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const r
         colour[l] = c;
     }
 
-    if (st == GS_OK) {
-        plsdev("pngcairo");
-        plsfnam(out.tmp);
-        char geom[32];
-        snprintf(geom, sizeof geom, "1500x%d", bands == 1 ? 620 : 1500);
-        plsetopt("geometry", geom);
-        plscmap0n(24);
-        plscol0(0, 255, 255, 255);
-        plscol0(1, 0, 0, 0);
-        for (int c = 0; c < 20; c++)
-            plscol0(c + 2, rec_bulb_palette[c][0] * 4 / 5, rec_bulb_palette[c][1] * 4 / 5, rec_bulb_palette[c][2] * 4 / 5);
-        plinit();
-        pladv(0);
-        static const char *const band_name[3] = {"red band", "green band", "blue band"};
-        double top = 0.93, bottom = 0.05, gap = 0.09;
-        double row_h = (top - bottom - gap * (bands - 1)) / bands;
-        const char *labels[MAX_SIGNAL_LIGHTS], *syms[MAX_SIGNAL_LIGHTS];
-        char text[MAX_SIGNAL_LIGHTS][120];
-        PLINT opts[MAX_SIGNAL_LIGHTS], colors[MAX_SIGNAL_LIGHTS], styles[MAX_SIGNAL_LIGHTS];
-        PLFLT widths[MAX_SIGNAL_LIGHTS], scales[MAX_SIGNAL_LIGHTS];
-        PLINT numbers[MAX_SIGNAL_LIGHTS];
-        for (int band = 0; band < bands && st == GS_OK; band++) {
-            double y1 = top - band * (row_h + gap), y0 = y1 - row_h;
-            for (int panel = 0; panel < 2 && st == GS_OK; panel++) {
-                plvpor(panel ? 0.45 : 0.07, panel ? 0.76 : 0.38, y0, y1);
-                plwind(0.0, 1.0, 0.0, ymax);
-                plcol0(1);
-                plwidth(1.0);
-                plschr(0, 0.6);
-                plbox("bcnstg", 0.2, 2, "bcnstvg", 0, 0);
-                char lab[300];
-                const char *bn = bands == 1 ? "monochrome" : band_name[band];
-                if (panel == 0)
-                    snprintf(lab, sizeof lab, "%s: measured/brightness, best template", bn);
-                else
-                    snprintf(lab, sizeof lab, "%s: shifted to grid phase 0", bn);
-                pllab("time in the flicker cycle, t / #gD", "normalised signal", lab);
-                if (band == 0 && panel == 0 && title && *title) {
-                    plschr(0, 0.75);
-                    plmtex("t", 3.2, 0.0, 0.0, title);
-                    plschr(0, 0.6);
-                }
-                for (size_t l = 0; l < nl && st == GS_OK; l++) {
-                    size_t i = rank[l].light;
-                    const rec_match *mt = &match[i];
-                    const gs_bulb *b = rec_matcher_bulb(m, (size_t)mt->bulb);
-                    int phase_known = b->ref == GS_REF_VOLTAGE && !(mt->flags & REC_MATCH_PHASE_AMBIGUOUS);
-                    double sh = gs_phase_to_shift(mt->phase_deg);
-                    if (panel == 1 && !phase_known) continue;
-                    /* the template (panel 0: at the light's phase; panel 1: at phase 0) */
-                    st = template_curve(b, panel ? 0.0 : sh, K, band, u, cv, tmp);
-                    if (st != GS_OK) break;
-                    plcol0(colour[l] % 20 + 2);
-                    plwidth(panel ? 1.0 : 2.0);
-                    plline(CURVE_N, u, cv);
-                    /* the measured samples at the window centres (panel 1: minus the shift) */
-                    double a = mt->brightness;
-                    for (int k = 0; k < K; k++) {
-                        double t = (k + 0.5) / K - (panel ? sh : 0.0);
-                        t -= floor(t);
-                        size_t d = i * D + (size_t)band * (size_t)K + (size_t)k;
-                        px[k] = t;
-                        py[k] = cat->signal[d] / a;
-                        lo[k] = (cat->signal[d] - cat->sigma[d]) / a;
-                        hi[k] = (cat->signal[d] + cat->sigma[d]) / a;
-                    }
-                    plwidth(1.0);
-                    plerry(K, px, lo, hi);
-                    plschr(0, 0.45);
-                    plstring(K, px, py, symbols[l % 8]);
-                    plschr(0, 0.6);
-                }
-            }
-            if (st != GS_OK) break;
-            /* legend, right of the first row */
-            if (band == 0) {
-                for (size_t l = 0; l < nl; l++) {
-                    const rec_match *mt = &match[rank[l].light];
-                    const gs_bulb *b = rec_matcher_bulb(m, (size_t)mt->bulb);
-                    if (b->ref == GS_REF_VOLTAGE && !(mt->flags & REC_MATCH_PHASE_AMBIGUOUS))
-                        snprintf(text[l], sizeof text[l], "light %zu: %s, %.0f" REC_DEG, rank[l].light, b->id,
-                                 mt->phase_deg);
-                    else
-                        snprintf(text[l], sizeof text[l], "light %zu: %s, phase ?", rank[l].light, b->id);
-                    labels[l] = text[l];
-                    syms[l] = symbols[l % 8];
-                    opts[l] = PL_LEGEND_LINE | PL_LEGEND_SYMBOL;
-                    colors[l] = colour[l] % 20 + 2;
-                    styles[l] = 1;
-                    widths[l] = 2.0;
-                    scales[l] = 0.5;
-                    numbers[l] = 2;
-                }
-                plvpor(0.78, 0.998, y0, y1);
-                plwind(0.0, 1.0, 0.0, 1.0);
-                if (nl) {
-                    PLFLT lw, lh;
-                    pllegend(&lw, &lh, PL_LEGEND_BACKGROUND | PL_LEGEND_BOUNDING_BOX,
-                             PL_POSITION_LEFT | PL_POSITION_INSIDE | PL_POSITION_TOP, 0.0, 0.0,
-                             0.05, 0, 1, 1, (PLINT)nl, 1, (PLINT)nl, opts, 0.6, 0.45, 2.0, 0.0, colors,
-                             (const char *const *)labels, NULL, NULL, NULL, NULL, colors, styles,
-                             widths, colors, scales, numbers, (const char *const *)syms);
-                } else {
-                    plcol0(1);
-                    plschr(0, 0.8);
-                    plptex(0.5, 0.9, 1.0, 0.0, 0.5, "no recognised light");
-                }
-            }
-        }
-        plend();
-    }
+    signal_plot sp = {m, cat, match, rank, nl, K, bands, D, title, out.tmp, ymax, colour,
+                      u, cv, tmp, px, py, lo, hi};
+    if (st == GS_OK) st = gs_isolated(png_path, NULL, 0, draw_signals, &sp);
     free(u); free(cv); free(tmp); free(px); free(py); free(lo); free(hi);
     if (st == GS_OK) return gs_atomic_commit(&out);
     gs_atomic_abort(&out);

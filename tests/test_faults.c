@@ -777,3 +777,67 @@ TEST(map_write_failure_never_leaves_a_partial_map)
     free(before);
     free(ref);
 }
+
+/* Runs CMD (printf: the binary, assets twice) in an empty work with GS_PLCRASH=how and
+ * tests/faults/plcrash.so preloaded; its exit status, stderr in out. */
+static int run_plcrash(const char *work, const char *how, const char *cmd_fmt, void (*setup)(const char *, const char *))
+{
+    char crash[1100], cmd[8192], run[4096];
+    snprintf(crash, sizeof crash, "%s", shim_path());
+    char *slash = strrchr(crash, '/');
+    if (slash) snprintf(slash, sizeof crash - (size_t)(slash - crash), "/plcrash.so");
+    char *bin = realpath(test_bin(), NULL), *shim = realpath(crash, NULL);
+    CHECK_MSG(bin && shim, "%s or %s: not found", test_bin(), crash);
+    int rc = -1;
+    if (bin && shim) {
+        snprintf(cmd, sizeof cmd, "rm -rf %s && mkdir -p %s", work, work);
+        CHECK(test_run(cmd, NULL, 0) == 0);
+        if (setup) setup(work, assets());
+        snprintf(run, sizeof run, cmd_fmt, bin, assets(), assets());
+        snprintf(cmd, sizeof cmd,
+                 "cd %s && env GS_PLCRASH=%s LD_PRELOAD=%s "
+                 "ASAN_OPTIONS=${ASAN_OPTIONS:+$ASAN_OPTIONS:}verify_asan_link_order=0 %s 2>&1 >/dev/null",
+                 work, how, shim, run);
+        rc = test_run(cmd, out, sizeof out);
+    }
+    free(bin);
+    free(shim);
+    return rc;
+}
+
+/* PLplot and its text stack exit or crash when they fail (docs/reliability.md): every drawing
+ * with PLplot runs in a child process (gs_isolated), so a crash there fails the command in one
+ * line naming the file, every other output complete and the drawing's absent or complete
+ * (`locate --map`, `recognize --maps`: three maps and a signal plot, `delight plot`);
+ * tests/faults/plcrash.c makes plinit crash each way PLplot's stack does. */
+TEST(map_drawing_crash_fails_in_one_line)
+{
+    static const struct {
+        const char *name, *cmd, *drawing;
+        void (*setup)(const char *, const char *);
+    } cmds[] = {
+        {"locate", "%s locate --station st.json --pixels px.csv --light-height-m 30 -o l.geojson --map m.png",
+         "m.png", setup_locate},
+        {"recognize", "%s recognize %s/cap --format json --delight %s/small-delight.sqlite --maps mp",
+         "_map.png", NULL},
+        {"delight plot", "%s delight plot --ids inc-a19-25w-120v,hps-150w -o brf.png", "brf.png", NULL},
+    };
+    static const char *const hows[] = {"segv", "abort", "exit"};
+    for (size_t c = 0; c < sizeof cmds / sizeof *cmds; c++) {
+        char work[1100];
+        snprintf(work, sizeof work, "%s/plcrash", fx_tmp("fault-work"));
+        int rc = run_plcrash(work, "none", cmds[c].cmd, cmds[c].setup);   /* PLplot's own plinit */
+        char *ref = files_state(work, "none");
+        CHECK_MSG(rc == 0 && strstr(ref, cmds[c].drawing), "%s: exit %d: %s", cmds[c].name, rc, out);
+        for (size_t i = 0; i < sizeof hows / sizeof *hows; i++) {
+            rc = run_plcrash(work, hows[i], cmds[c].cmd, cmds[c].setup);
+            CHECK_MSG(rc == 1 && fx_count_lines(out) == 1 && strstr(out, "the drawing process"),
+                      "%s, %s: exit %d: %s", cmds[c].name, hows[i], rc, out);
+            char *after = files_state(work, "none"), why[1200] = "";
+            CHECK_MSG(files_each_before_or_ref("", ref, after, why, sizeof why), "%s, %s: %s", cmds[c].name,
+                      hows[i], why);
+            free(after);
+        }
+        free(ref);
+    }
+}

@@ -105,6 +105,15 @@ void gs_atomic_abort(gs_atomic *a);
 /* data[0..size) as path, atomically. */
 gs_status gs_file_write_atomic(const char *path, const void *data, size_t size);
 
+/* draw(ctx, copy) in a child process on a shared copy of buf[0..bytes) (none when bytes is 0),
+ * copied back when it succeeds (recognize/base/kit_isolate.c): for libraries that exit or crash
+ * on a failure (PLplot). Nothing else draw changes reaches this process but the files it
+ * writes. The child's standard error is passed on; draw's own failure is returned with its
+ * detail; a crash or an exit is GS_EIO "WHAT: the drawing process was killed by signal N
+ * (NAME): ITS LAST LINE" (or "failed (exit status N)"), in one line, buf unchanged. */
+gs_status gs_isolated(const char *what, unsigned char *buf, size_t bytes,
+                      gs_status (*draw)(void *ctx, unsigned char *buf), void *ctx);
+
 /* -------------------------------------------------------- format kit: JSON */
 
 /* Every JSON format of the tool (scenes, capture.json, stations, truth files, progress files)

@@ -1,6 +1,7 @@
 # tests/faults/module.mk - the fault-injection shim (tests/faults/faultinject.c, preloaded by
-# tests/test_faults.c; docs/reliability.md). Built without sanitizers (it forwards to ASan's
-# allocator in an ASan build) next to the test binary, which finds it beside $(BIN).
+# tests/test_faults.c; docs/reliability.md) and plcrash.c (PLplot's plinit crashing). Built
+# without sanitizers (the shim forwards to ASan's allocator in an ASan build) next to the test
+# binary, which finds them beside $(BIN).
 #   make faults   the sweep of every failure point of run, export and delight import (every
 #                 FAULT_MALLOC_STEP-th allocation; in the run scenarios every
 #                 FAULT_RUN_MALLOC_STEP-th allocation and FAULT_RUN_WRITE_STEP-th write if set;
@@ -12,7 +13,11 @@ FAULT_SHIM := $(BUILD)/tests/faults/faultinject.so
 $(FAULT_SHIM): tests/faults/faultinject.c
 	@mkdir -p $(dir $@)
 	gcc -std=gnu11 -Wall -Wextra -Werror -O1 -g -fno-omit-frame-pointer -shared -fPIC $< -ldl -o $@
-test: $(FAULT_SHIM)
+PLCRASH_SHIM := $(BUILD)/tests/faults/plcrash.so
+$(PLCRASH_SHIM): tests/faults/plcrash.c
+	@mkdir -p $(dir $@)
+	gcc -std=gnu11 -Wall -Wextra -Werror -O1 -g -shared -fPIC $< -ldl -o $@
+test: $(FAULT_SHIM) $(PLCRASH_SHIM)
 
 FAULT_SWEEP ?= full
 FAULT_MALLOC_STEP ?= 1
