@@ -16,7 +16,7 @@ static cap_vio_api api;
 gs_status cap_vio_plugin_load(const char *bin_dir, cap_vio_api *out)
 {
     memset(out, 0, sizeof *out);
-    char paths[2][PATH_MAX + 64], why[2][256];
+    char paths[2][PATH_MAX + 64], why[2][PATH_MAX + 256];
     snprintf(paths[0], sizeof paths[0], "%s/%s", bin_dir, PLUGIN);
     snprintf(paths[1], sizeof paths[1], "%s/../lib/gridsurvey/%s", bin_dir, PLUGIN);
     void *h = NULL;

@@ -80,6 +80,7 @@ static gs_status draw_map(void *ctx, unsigned char *rgb)
         plscol0(2 + c, col[0], col[1], col[2]);
     }
     plscol0(7, 90, 90, 90);
+    plsexit(gs_isolated_exit);   /* plexit: its reason the last line, the child ended */
     plinit();
     plcol0(1);
     pladv(0);

@@ -92,6 +92,7 @@ static gs_status draw_labels(void *ctx, unsigned char *rgb)
     const canvas *c = ctx;
     plsdev("memcairo");
     plsmem(c->w, c->h, rgb);
+    plsexit(gs_isolated_exit);   /* plexit: its reason the last line, the child ended */
     plinit();
     pladv(0);
     plvpor(0.0, 1.0, 0.0, 1.0);

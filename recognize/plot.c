@@ -52,12 +52,12 @@ static gs_status draw_brfs(void *ctx, unsigned char *unused)
     plscmap0n(PALETTE_N + 1);
     plscol0(0, 255, 255, 255); /* background */
     for (int c = 0; c < PALETTE_N; c++) plscol0(c + 1, palette[c][0], palette[c][1], palette[c][2]);
+    plsexit(gs_isolated_exit);   /* plexit: its reason the last line, the child ended */
     plstar(1, bands);
-    const char **labels = calloc(count, sizeof *labels);
-    PLINT *opts = calloc(count, sizeof *opts), *colors = calloc(count, sizeof *colors),
-          *styles = calloc(count, sizeof *styles);
-    PLFLT *widths = calloc(count, sizeof *widths);
-    char(*text)[160] = calloc(count, sizeof *text);
+    const char *labels[PALETTE_N];   /* count < PALETTE_N (rec_plot_brfs) */
+    PLINT opts[PALETTE_N], colors[PALETTE_N], styles[PALETTE_N];
+    PLFLT widths[PALETTE_N];
+    char text[PALETTE_N][160];
     for (int band = 0; band < bands; band++) {
         pladv(0);
         plvpor(0.11, 0.60, 0.12, 0.88);
@@ -94,12 +94,6 @@ static gs_status draw_brfs(void *ctx, unsigned char *unused)
                  NULL, NULL, NULL);
     }
     plend();
-    free(labels);
-    free(opts);
-    free(colors);
-    free(styles);
-    free(widths);
-    free(text);
     return GS_OK;
 }
 
@@ -240,6 +234,7 @@ static gs_status draw_signals(void *ctx, unsigned char *unused)
     plscol0(1, 0, 0, 0);
     for (int c = 0; c < 20; c++)
         plscol0(c + 2, rec_bulb_palette[c][0] * 4 / 5, rec_bulb_palette[c][1] * 4 / 5, rec_bulb_palette[c][2] * 4 / 5);
+    plsexit(gs_isolated_exit);   /* plexit: its reason the last line, the child ended */
     plinit();
     pladv(0);
     static const char *const band_name[3] = {"red band", "green band", "blue band"};

@@ -778,9 +778,11 @@ TEST(map_write_failure_never_leaves_a_partial_map)
     free(ref);
 }
 
-/* Runs CMD (printf: the binary, assets twice) in an empty work with GS_PLCRASH=how and
- * tests/faults/plcrash.so preloaded; its exit status, stderr in out. */
-static int run_plcrash(const char *work, const char *how, const char *cmd_fmt, void (*setup)(const char *, const char *))
+/* Runs CMD (printf: the binary, assets twice) in an empty work set up by setup (or none), with
+ * tests/faults/plcrash.so preloaded failing the at-th plinit the way how says (at 0: every one);
+ * plinit calls are counted in work.plinit. Its exit status, stderr in out. */
+static int run_plcrash(const char *work, const char *how, int at, const char *cmd_fmt,
+                       void (*setup)(const char *, const char *))
 {
     char crash[1100], cmd[8192], run[4096];
     snprintf(crash, sizeof crash, "%s", shim_path());
@@ -790,14 +792,16 @@ static int run_plcrash(const char *work, const char *how, const char *cmd_fmt, v
     CHECK_MSG(bin && shim, "%s or %s: not found", test_bin(), crash);
     int rc = -1;
     if (bin && shim) {
-        snprintf(cmd, sizeof cmd, "rm -rf %s && mkdir -p %s", work, work);
+        snprintf(cmd, sizeof cmd, "rm -rf %s %s.plinit && mkdir -p %s", work, work, work);
         CHECK(test_run(cmd, NULL, 0) == 0);
         if (setup) setup(work, assets());
         snprintf(run, sizeof run, cmd_fmt, bin, assets(), assets());
+        char at_env[64] = "";
+        if (at > 0) snprintf(at_env, sizeof at_env, "GS_PLCRASH_AT=%d ", at);
         snprintf(cmd, sizeof cmd,
-                 "cd %s && env GS_PLCRASH=%s LD_PRELOAD=%s "
+                 "cd %s && env GS_PLCRASH=%s %sGS_PLCRASH_COUNT=%s.plinit LD_PRELOAD=%s "
                  "ASAN_OPTIONS=${ASAN_OPTIONS:+$ASAN_OPTIONS:}verify_asan_link_order=0 %s 2>&1 >/dev/null",
-                 work, how, shim, run);
+                 work, how, at_env, work, shim, run);
         rc = test_run(cmd, out, sizeof out);
     }
     free(bin);
@@ -805,37 +809,70 @@ static int run_plcrash(const char *work, const char *how, const char *cmd_fmt, v
     return rc;
 }
 
+/* plinit calls counted by run_plcrash. */
+static int plinit_calls(const char *work)
+{
+    char path[1200];
+    snprintf(path, sizeof path, "%s.plinit", work);
+    FILE *f = fopen(path, "r");
+    int n = 0;
+    if (f) {
+        if (fscanf(f, "%d", &n) != 1) n = 0;
+        fclose(f);
+    }
+    return n;
+}
+
 /* PLplot and its text stack exit or crash when they fail (docs/reliability.md): every drawing
  * with PLplot runs in a child process (gs_isolated), so a crash there fails the command in one
- * line naming the file, every other output complete and the drawing's absent or complete
- * (`locate --map`, `recognize --maps`: three maps and a signal plot, `delight plot`);
- * tests/faults/plcrash.c makes plinit crash each way PLplot's stack does. */
+ * line naming the drawing's file, every output absent or complete. Each drawing of `locate
+ * --map`, `recognize --maps` (three maps and a signal plot), `delight plot` and `run` (its map)
+ * is failed in turn by tests/faults/plcrash.c, which makes plinit crash (SIGSEGV, abort) or
+ * exit through PLplot's plexit; the exit's reason must be the line's end. */
 TEST(map_drawing_crash_fails_in_one_line)
 {
     static const struct {
-        const char *name, *cmd, *drawing;
+        const char *name, *cmd;
         void (*setup)(const char *, const char *);
+        int drawings;   /* plinit calls of an uninjected run */
     } cmds[] = {
         {"locate", "%s locate --station st.json --pixels px.csv --light-height-m 30 -o l.geojson --map m.png",
-         "m.png", setup_locate},
-        {"recognize", "%s recognize %s/cap --format json --delight %s/small-delight.sqlite --maps mp",
-         "_map.png", NULL},
-        {"delight plot", "%s delight plot --ids inc-a19-25w-120v,hps-150w -o brf.png", "brf.png", NULL},
+         setup_locate, 1},
+        {"recognize", "%s recognize %s/cap --format json --delight %s/small-delight.sqlite --maps mp", NULL, 4},
+        {"delight plot", "%s delight plot --ids inc-a19-25w-120v,hps-150w -o brf.png", NULL, 1},
+        {"run", "%s run %s/cap --db survey.sqlite --survey night --light-height-m 10 --out-dir .", setup_empty, 1},
     };
     static const char *const hows[] = {"segv", "abort", "exit"};
+    char work[1100];
+    snprintf(work, sizeof work, "%s/plcrash", fx_tmp("fault-work"));
     for (size_t c = 0; c < sizeof cmds / sizeof *cmds; c++) {
-        char work[1100];
-        snprintf(work, sizeof work, "%s/plcrash", fx_tmp("fault-work"));
-        int rc = run_plcrash(work, "none", cmds[c].cmd, cmds[c].setup);   /* PLplot's own plinit */
-        char *ref = files_state(work, "none");
-        CHECK_MSG(rc == 0 && strstr(ref, cmds[c].drawing), "%s: exit %d: %s", cmds[c].name, rc, out);
-        for (size_t i = 0; i < sizeof hows / sizeof *hows; i++) {
-            rc = run_plcrash(work, hows[i], cmds[c].cmd, cmds[c].setup);
-            CHECK_MSG(rc == 1 && fx_count_lines(out) == 1 && strstr(out, "the drawing process"),
-                      "%s, %s: exit %d: %s", cmds[c].name, hows[i], rc, out);
-            char *after = files_state(work, "none"), why[1200] = "";
-            CHECK_MSG(files_each_before_or_ref("", ref, after, why, sizeof why), "%s, %s: %s", cmds[c].name,
-                      hows[i], why);
+        int rc = run_plcrash(work, "none", 0, cmds[c].cmd, cmds[c].setup);   /* PLplot's own plinit */
+        char *ref = files_state(work, "survey.sqlite");
+        CHECK_MSG(rc == 0 && plinit_calls(work) == cmds[c].drawings, "%s: exit %d, %d drawings: %s", cmds[c].name,
+                  rc, plinit_calls(work), out);
+        char named[4][256] = {{0}};
+        /* the first command: every way at its drawing; the others: a way per drawing */
+        int tries = c == 0 ? 3 : cmds[c].drawings;
+        for (int t = 0; t < tries; t++) {
+            int at = c == 0 ? 1 : t + 1;
+            const char *how = hows[c == 0 ? (size_t)t : ((size_t)t + c) % 3];
+            rc = run_plcrash(work, how, at, cmds[c].cmd, cmds[c].setup);
+            const char *what = strstr(out, ": the drawing process ");
+            CHECK_MSG(rc == 1 && fx_count_lines(out) == 1 && what && strstr(out, ".png: the drawing process "),
+                      "%s, %s at drawing %d: exit %d: %s", cmds[c].name, how, at, rc, out);
+            if (!strcmp(how, "exit"))
+                CHECK_MSG(strstr(out, "(exit status 1): plinit: out of memory\n"), "%s: %s", cmds[c].name, out);
+            if (what && c > 0 && t < 4) {   /* the file it names: "gridsurvey: STATUS: FILE: the drawing ..." */
+                const char *p = what;
+                while (p > out && p[-1] != ' ') p--;
+                snprintf(named[t], sizeof named[t], "%.*s", (int)(what - p), p);
+                for (int u = 0; u < t; u++)
+                    CHECK_MSG(strcmp(named[u], named[t]), "%s: drawing %d and %d both name %s", cmds[c].name,
+                              u + 1, t + 1, named[t]);
+            }
+            char *after = files_state(work, "survey.sqlite"), why[1200] = "";
+            CHECK_MSG(files_each_before_or_ref("", ref, after, why, sizeof why), "%s, %s at drawing %d: %s",
+                      cmds[c].name, how, at, why);
             free(after);
         }
         free(ref);

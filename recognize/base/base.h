@@ -108,11 +108,16 @@ gs_status gs_file_write_atomic(const char *path, const void *data, size_t size);
 /* draw(ctx, copy) in a child process on a shared copy of buf[0..bytes) (none when bytes is 0),
  * copied back when it succeeds (recognize/base/kit_isolate.c): for libraries that exit or crash
  * on a failure (PLplot). Nothing else draw changes reaches this process but the files it
- * writes. The child's standard error is passed on; draw's own failure is returned with its
- * detail; a crash or an exit is GS_EIO "WHAT: the drawing process was killed by signal N
- * (NAME): ITS LAST LINE" (or "failed (exit status N)"), in one line, buf unchanged. */
+ * writes. draw's own failure is returned with its detail; a crash or an exit is GS_EIO "WHAT:
+ * the drawing process was killed by signal N (NAME): LAST LINE" (or "failed (exit status N)"),
+ * LAST LINE the last of the child's standard error, in one line, buf unchanged. The child's
+ * standard error is passed on after it ends when it succeeded, or when it holds a sanitizer's
+ * report. A library's exit() in the child ends only the child. */
 gs_status gs_isolated(const char *what, unsigned char *buf, size_t bytes,
                       gs_status (*draw)(void *ctx, unsigned char *buf), void *ctx);
+/* For a library's error handler in draw (PLplot's plsexit): writes reason as the last line of
+ * the child's standard error and ends the child with status 1. */
+int gs_isolated_exit(const char *reason);
 
 /* -------------------------------------------------------- format kit: JSON */
 

@@ -36,6 +36,7 @@
  * FFTW's allocations, which FFTW by design does not survive (fftw_malloc asserts). */
 #define _GNU_SOURCE
 #include <dlfcn.h>
+#include <pthread.h>
 #include <errno.h>
 #include <execinfo.h>
 #include <fcntl.h>
@@ -362,6 +363,9 @@ static int counted_main(int argc, char **argv, char **envp)
     unsetenv("LD_PRELOAD");
     armed = 1;
     atexit(disarm);   /* runs first at exit: the libraries' teardown is not counted */
+    /* nor a forked child's (gs_isolated's drawing processes): its calls would reach neither the
+     * report nor the site list, and fail the n-th call a second time */
+    pthread_atfork(NULL, NULL, disarm);
     return real_main(argc, argv, envp);
 }
 int __libc_start_main(main_fn main, int argc, char **argv, void (*init)(void), void (*fini)(void),

@@ -1,8 +1,14 @@
 /* plcrash.c - an LD_PRELOAD shim for tests/test_faults.c (map_drawing_crash_fails_in_one_line):
- * PLplot's plinit (c_plinit) fails the ways PLplot and its text stack do when memory runs out
- * (docs/reliability.md): GS_PLCRASH=segv raises SIGSEGV (fontconfig passing a failed strdup
- * on), abort calls abort() (GLib, fontconfig's assertions), exit prints PLplot's message and
- * exits 1 (plexit). Any other value, or none: PLplot's own plinit. */
+ * PLplot's plinit (c_plinit; plstar calls it too) fails the ways PLplot and its text stack do
+ * when memory runs out (docs/reliability.md):
+ *   GS_PLCRASH=segv   SIGSEGV with its default action (fontconfig passing a failed strdup on;
+ *                     a sanitizer's handler, which would report it, is bypassed)
+ *   GS_PLCRASH=abort  abort() (GLib, fontconfig's assertions)
+ *   GS_PLCRASH=exit   PLplot's own plexit("plinit: out of memory") (its banner, the reason,
+ *                     "Program aborted", exit(1); or the program's plsexit handler)
+ *   other, or unset   PLplot's own plinit
+ * GS_PLCRASH_COUNT=FILE, GS_PLCRASH_AT=N: only the N-th plinit of the command fails, counted in
+ * FILE across its processes (each drawing is a process of its own). */
 #define _GNU_SOURCE
 #include <dlfcn.h>
 #include <signal.h>
@@ -10,13 +16,39 @@
 #include <stdlib.h>
 #include <string.h>
 
-void c_plinit(void) /* plplot.h: #define plinit c_plinit */
+/* This call's number (1-based) in the count file, which it updates; 0 without one. */
+static long call_number(void)
 {
-    const char *how = getenv("GS_PLCRASH");
-    if (how && !strcmp(how, "segv")) raise(SIGSEGV);
-    if (how && !strcmp(how, "abort")) abort();
-    if (how && !strcmp(how, "exit")) {
-        fprintf(stderr, "\n*** PLPLOT ERROR, ABORTING OPERATION ***\nplinit: out of memory, aborting operation\n");
+    const char *path = getenv("GS_PLCRASH_COUNT");
+    if (!path) return 0;
+    long n = 0;
+    FILE *f = fopen(path, "r");
+    if (f) {
+        if (fscanf(f, "%ld", &n) != 1) n = 0;
+        fclose(f);
+    }
+    f = fopen(path, "w");
+    if (f) {
+        fprintf(f, "%ld\n", n + 1);
+        fclose(f);
+    }
+    return n + 1;
+}
+
+void c_plinit(void)   /* plplot.h: #define plinit c_plinit */
+{
+    const char *how = getenv("GS_PLCRASH"), *at = getenv("GS_PLCRASH_AT");
+    long n = call_number();
+    int fail = how && (!at || n == atol(at));
+    if (fail && !strcmp(how, "segv")) {
+        signal(SIGSEGV, SIG_DFL);
+        raise(SIGSEGV);
+    }
+    if (fail && !strcmp(how, "abort")) abort();
+    if (fail && !strcmp(how, "exit")) {
+        void (*plexit)(const char *) = NULL;
+        *(void **)&plexit = dlsym(RTLD_DEFAULT, "plexit");
+        if (plexit) plexit("plinit: out of memory");
         exit(1);
     }
     void (*real)(void) = NULL;
