@@ -224,14 +224,20 @@ static const fault_kind kinds[] = {
     {"fsync", "EIO"},     {"rename", "EIO"},
 };
 
-/* The shim beside the binary's build: BUILD/tests/faults/faultinject.so for BUILD/gridsurvey. */
-static const char *shim_path(void)
+/* A shim beside the binary's build: BUILD/tests/faults/NAME for BUILD/gridsurvey (a static
+ * buffer). */
+static const char *shim_path_of(const char *name)
 {
     static char path[1100];
     const char *bin = test_bin(), *slash = strrchr(bin, '/');
-    snprintf(path, sizeof path, "%.*s/tests/faults/faultinject.so", slash ? (int)(slash - bin) : 1,
-             slash ? bin : ".");
+    snprintf(path, sizeof path, "%.*s/tests/faults/%s", slash ? (int)(slash - bin) : 1,
+             slash ? bin : ".", name);
     return path;
+}
+
+static const char *shim_path(void)
+{
+    return shim_path_of("faultinject.so");
 }
 
 enum { N_CLASSES = 4 };
@@ -784,10 +790,8 @@ TEST(map_write_failure_never_leaves_a_partial_map)
 static int run_plcrash(const char *work, const char *how, int at, const char *cmd_fmt,
                        void (*setup)(const char *, const char *))
 {
-    char crash[1100], cmd[8192], run[4096];
-    snprintf(crash, sizeof crash, "%s", shim_path());
-    char *slash = strrchr(crash, '/');
-    if (slash) snprintf(slash, sizeof crash - (size_t)(slash - crash), "/plcrash.so");
+    char cmd[8192], run[4096];
+    const char *crash = shim_path_of("plcrash.so");
     char *bin = realpath(test_bin(), NULL), *shim = realpath(crash, NULL);
     CHECK_MSG(bin && shim, "%s or %s: not found", test_bin(), crash);
     int rc = -1;
