@@ -1,7 +1,8 @@
 /* loop.c - the acquisition loop behind one backend interface (sim, replay, hardware): frames
  * 0..K-1, each with the ACam's HDR loop (paper Sec. 6: repeat with the rows of saturated pixels
  * halved until few pixels saturate or rows cannot be halved), written to the capture directory
- * as soon as it is acquired (gs_capture_write_frame: atomic), then capture.json. Progress on a
+ * as soon as it is acquired (gs_capture_write_frame: atomic; on a thread while the next frame
+ * is acquired), then capture.json. Progress on a
  * TTY. acquisition.json makes an interrupted capture resumable: it holds the configuration's
  * fingerprint and each finished frame's files with sizes and FNV-1a checksums and the index of
  * its first acquisition on the capture's timeline, so a frame that is re-acquired comes out the
@@ -12,6 +13,7 @@
 #include <errno.h>
 #include <jansson.h>
 #include <math.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -57,6 +59,7 @@ const char *cap_backend_name(const cap_backend *b)
 {
     return b ? b->ops->name : "(none)";
 }
+
 
 gs_status cap_backend_info(cap_backend *b, cap_acq_info *info)
 {
@@ -258,6 +261,87 @@ static void remove_stale_temporaries(const char *dir)
     closedir(d);
 }
 
+/* ------------------------------------------------------------------ the frame writer */
+
+/* One frame's files written on a thread of their own while the next frame is acquired (the PNG
+ * encoding is a third of a simulated capture's time): the frame's pixels in its own buffers
+ * (two slots, used in turn), what its acquisition.json entry records kept with it. Only the
+ * loop's thread writes acquisition.json, after the frame's files are complete, so the files a
+ * killed run leaves are those of one frame after the other. */
+typedef struct {
+    unsigned short *raw;
+    unsigned char *halv;
+    gs_frame_info frames[2];      /* a 2-frame view: the frame, and an unused second one */
+    gs_capture view;
+    const char *dir;
+    int k, passes, maps;
+    int pending, threaded;        /* written or being written, not yet recorded; on a thread */
+    long index, acquisitions;     /* its first acquisition; the timeline's length after it */
+    size_t n_sat;
+    pthread_t tid;
+    gs_status st;                 /* the thread's outcome, its detail (thread-local there) */
+    char detail[512];
+    long bytes, hdr_bytes;
+    uint64_t fnv, hdr_fnv;
+} frame_write;
+
+static void *write_frame_main(void *arg)
+{
+    frame_write *w = arg;
+    w->st = gs_capture_write_frame(w->dir, &w->view, 0);
+    if (w->st != GS_OK) {
+        snprintf(w->detail, sizeof w->detail, "%s", gs_detail());
+        return NULL;
+    }
+    file_sum(w->dir, w->frames[0].file, &w->bytes, &w->fnv);
+    if (w->maps) file_sum(w->dir, w->frames[0].hdr_map, &w->hdr_bytes, &w->hdr_fnv);
+    return NULL;
+}
+
+/* Start writing slot w (inline when no thread can start). */
+static void write_frame_start(frame_write *w)
+{
+    w->pending = 1;
+    w->threaded = pthread_create(&w->tid, NULL, write_frame_main, w) == 0;
+    if (!w->threaded) write_frame_main(w);
+}
+
+/* Wait for slot w's files; their failure as this thread's. */
+static gs_status write_frame_wait(frame_write *w)
+{
+    if (w->threaded) pthread_join(w->tid, NULL);
+    w->threaded = 0;
+    return w->st == GS_OK ? GS_OK : gs_fail(w->st, "%s", w->detail);
+}
+
+/* Slot w's frame, once its files are complete, into acquisition.json (the timeline as it was
+ * after the frame) and the report. */
+static gs_status record_frame(frame_write *w, uint64_t fp, int K, const gs_capture *cap, frame_state *fs,
+                              cap_loop_report *rep, int progress, double t_start)
+{
+    w->pending = 0;
+    gs_status s = write_frame_wait(w);
+    if (s != GS_OK) return s;
+    int k = w->k;
+    fs[k].done = 1;
+    fs[k].index = w->index;
+    fs[k].passes = w->passes;
+    fs[k].cycles = cap->frames[k].cycles;
+    fs[k].grid_hz_measured = cap->frames[k].grid_hz_measured;
+    fs[k].start_s = cap->frames[k].start_s;
+    fs[k].bytes = w->bytes;
+    fs[k].fnv = w->fnv;
+    fs[k].hdr_bytes = w->hdr_bytes;
+    fs[k].hdr_fnv = w->hdr_fnv;
+    s = write_progress(w->dir, fp, w->acquisitions, K, cap, fs, 0);
+    if (s != GS_OK) return s;
+    rep->frames_acquired++;
+    if (progress)
+        fprintf(stderr, "\rcapture: frame %d/%d acquired (%d pass%s, %zu saturated px)  %.1f s   ", k + 1, K,
+                w->passes, w->passes > 1 ? "es" : "", w->n_sat, gs_clock_s(CLOCK_MONOTONIC) - t_start);
+    return GS_OK;
+}
+
 /* ------------------------------------------------------------------ the loop */
 
 gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_in,
@@ -292,6 +376,9 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
 
     gs_capture cap;
     memset(&cap, 0, sizeof cap);
+    frame_write wr[2];   /* the frame being acquired and the one being written, in turn */
+    memset(wr, 0, sizeof wr);
+    int cur = 0;   /* the slot of the frame being acquired */
     cap.grid_hz = info.grid_hz;
     cap.K = K;
     cap.bands = info.bands;
@@ -303,12 +390,15 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
     cap.read_noise_dn = info.read_noise_dn;
     cap.locked = info.locked;
     snprintf(cap.utc, sizeof cap.utc, "%s", info.utc);
-    unsigned short *raw = malloc(nraw * sizeof *raw);
-    unsigned char *halv = calloc(plane ? plane : 1, 1);
+    for (int i = 0; i < 2; i++) {
+        wr[i].raw = malloc(nraw * sizeof *wr[i].raw);
+        wr[i].halv = calloc(plane ? plane : 1, 1);
+    }
     cap.frames = calloc((size_t)K, sizeof *cap.frames);
     frame_state *fs = calloc((size_t)K, sizeof *fs);
     if (info.station_json) cap.station_json = strdup(info.station_json);
-    if (!raw || !halv || !cap.frames || !fs || (info.station_json && !cap.station_json)) {
+    if (!wr[0].raw || !wr[0].halv || !wr[1].raw || !wr[1].halv || !cap.frames || !fs ||
+        (info.station_json && !cap.station_json)) {
         s = gs_fail(GS_ENOMEM, "capture loop: cannot hold a %d x %d x %d frame", info.width,
                     info.height, info.bands);
         goto done;
@@ -360,18 +450,23 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
             goto done;
         }
     }
-    /* a 2-frame view of the capture writes one frame from the single frame buffer */
-    gs_frame_info view_frames[2];
-    gs_capture view = cap;
-    view.K = 2;
-    view.frames = view_frames;
-    view.raw = raw;
-    view.halvings = maps ? halv : NULL;
-    view.station_json = NULL;
+    /* each slot's 2-frame view of the capture writes one frame from the slot's buffers */
+    for (int i = 0; i < 2; i++) {
+        wr[i].view = cap;
+        wr[i].view.K = 2;
+        wr[i].view.frames = wr[i].frames;
+        wr[i].view.raw = wr[i].raw;
+        wr[i].view.halvings = maps ? wr[i].halv : NULL;
+        wr[i].view.station_json = NULL;
+        wr[i].dir = dir;
+        wr[i].maps = maps;
+    }
+    unsigned short *raw = wr[0].raw;
+    unsigned char *halv = wr[0].halv;
     int stopped = 0;
     for (int k = 0; k < K; k++) {
         if (fs[k].done) continue;
-        if (o.stop_after > 0 && rep->frames_acquired >= o.stop_after) {
+        if (o.stop_after > 0 && rep->frames_acquired + wr[cur ^ 1].pending >= o.stop_after) {
             stopped = 1;
             break;
         }
@@ -437,27 +532,28 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
             isfinite(tm.grid_hz_measured) && tm.grid_hz_measured >= 45 && tm.grid_hz_measured <= 65
                 ? tm.grid_hz_measured : NAN;
         cap.frames[k].start_s = isfinite(tm.start_s) && tm.start_s >= 0 ? tm.start_s : NAN;
-        view_frames[0] = cap.frames[k];
-        view_frames[1] = cap.frames[k];
-        snprintf(view_frames[1].file, GS_PATH_MAX, "unused_%03d.png", k);
-        view_frames[1].hdr_map[0] = '\0';
-        s = gs_capture_write_frame(dir, &view, 0);
-        if (s != GS_OK) goto done;
-        fs[k].done = 1;
-        fs[k].index = index;
-        fs[k].passes = pass + 1;
-        fs[k].cycles = cycles;
-        fs[k].grid_hz_measured = cap.frames[k].grid_hz_measured;
-        fs[k].start_s = cap.frames[k].start_s;
-        file_sum(dir, cap.frames[k].file, &fs[k].bytes, &fs[k].fnv);
-        if (maps) file_sum(dir, cap.frames[k].hdr_map, &fs[k].hdr_bytes, &fs[k].hdr_fnv);
-        s = write_progress(dir, fp, acquisitions, K, &cap, fs, 0);
-        if (s != GS_OK) goto done;
-        rep->frames_acquired++;
-        if (progress)
-            fprintf(stderr, "\rcapture: frame %d/%d acquired (%d pass%s, %zu saturated px)  %.1f s   ",
-                    k + 1, K, pass + 1, pass ? "es" : "", n_sat, gs_clock_s(CLOCK_MONOTONIC) - t_start);
+        frame_write *w = &wr[cur];
+        w->frames[0] = cap.frames[k];
+        w->frames[1] = cap.frames[k];
+        snprintf(w->frames[1].file, GS_PATH_MAX, "unused_%03d.png", k);
+        w->frames[1].hdr_map[0] = '\0';
+        w->k = k;
+        w->index = index;
+        w->passes = pass + 1;
+        w->acquisitions = acquisitions;
+        w->n_sat = n_sat;
+        w->st = GS_OK;
+        /* the previous frame recorded once its files are complete, then this one written while
+         * the next is acquired */
+        if (wr[cur ^ 1].pending && (s = record_frame(&wr[cur ^ 1], fp, K, &cap, fs, rep, progress, t_start)) != GS_OK)
+            goto done;
+        write_frame_start(w);
+        cur ^= 1;
+        raw = wr[cur].raw;
+        halv = wr[cur].halv;
     }
+    if (wr[cur ^ 1].pending && (s = record_frame(&wr[cur ^ 1], fp, K, &cap, fs, rep, progress, t_start)) != GS_OK)
+        goto done;
     if (progress) fputc('\n', stderr);
     rep->acquisitions = acquisitions;
     if (stopped) {
@@ -470,9 +566,18 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
     if (s != GS_OK) goto done;
     rep->complete = 1;
 done:
+    if (wr[cur ^ 1].pending) {
+        /* a frame written before the failure is recorded, as one after the other would have */
+        char why[512];
+        snprintf(why, sizeof why, "%s", gs_detail());
+        gs_status s1 = record_frame(&wr[cur ^ 1], fp, K, &cap, fs, rep, progress, t_start);
+        s = s1 != GS_OK ? s1 : gs_fail(s, "%s", why);
+    }
     rep->seconds = gs_clock_s(CLOCK_MONOTONIC) - t_start;
-    free(raw);
-    free(halv);
+    for (int i = 0; i < 2; i++) {
+        free(wr[i].raw);
+        free(wr[i].halv);
+    }
     free(fs);
     gs_capture_release(&cap);
     return s;

@@ -143,28 +143,43 @@ static double loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb, 
     }
     if (!any) return -INFINITY;
     if (R < 0.0) R = 0.0;
+    /* the three rounds of s_b from the current brightness, for every tau at once: the taus are
+     * independent, so the divisions of one overlap the others' (each tau's numbers are the same
+     * operations in the same order as one tau alone). occ1 = prod_b (1 + s_b^2 T_b) - 1: the
+     * occupation term sum_b log(1 + s_b^2 T_b) is log1p(occ1), one logarithm for the bands (and
+     * with log A, one for both); only the last round's is used. A tau whose A is not > 0 in some
+     * round has no likelihood. */
+    const double *cb = m->red_c + (size_t)bulb * REC_TAU_N * (size_t)nb;
+    double av[REC_TAU_N] = {0}, Av[REC_TAU_N], Bv[REC_TAU_N], Cv[REC_TAU_N], occv[REC_TAU_N];
+    unsigned char dead[REC_TAU_N] = {0};
+    for (int it = 0; it < 3; it++) {
+        int first = 1;   /* the sums start at 0 (+0 + x, as a zeroed sum would) */
+        for (int b = 0; b < nb; b++) {
+            if (!(T[b] > 0.0)) continue;
+            double Tb = T[b], iT = 1.0 / Tb, ab = ah[b];
+            for (int i = 0; i < REC_TAU_N; i++) {
+                double c = cb[(size_t)i * (size_t)nb + (size_t)b], a = av[i] > 0.0 ? av[i] : 0.0;
+                double sb = tol * a * c, x = sb * sb * Tb, v = 1.0 / (iT + sb * sb);
+                double A0 = first ? 0.0 : Av[i], B0 = first ? 0.0 : Bv[i], C0 = first ? 0.0 : Cv[i],
+                       o0 = first ? 0.0 : occv[i];
+                Av[i] = A0 + v * c * c;
+                Bv[i] = B0 + v * c * ab;
+                Cv[i] = C0 + v * ab * ab;
+                occv[i] = o0 + (x + o0 * x);
+            }
+            first = 0;
+        }
+        for (int i = 0; i < REC_TAU_N; i++) {
+            dead[i] |= !(Av[i] > 0.0);
+            if (!dead[i]) av[i] = Bv[i] / Av[i];
+        }
+    }
     double Lt[REC_TAU_N], Lmax = -INFINITY;
     for (int i = 0; i < REC_TAU_N; i++) {
         double tau = rec_eq7_tau(i);
-        const double *c = m->red_c + ((size_t)bulb * REC_TAU_N + (size_t)i) * (size_t)nb;
-        /* occ1 = prod_b (1 + s_b^2 T_b) - 1: the occupation term sum_b log(1 + s_b^2 T_b) is
-         * log1p(occ1), one logarithm for the bands (and with log A, one for both) */
-        double v[GS_MAX_BANDS], a = 0.0, A = 0.0, B = 0.0, C = 0.0, occ1 = 0.0;
-        for (int it = 0; it < 3; it++) {   /* s_b from the current brightness */
-            A = B = C = occ1 = 0.0;
-            for (int b = 0; b < nb; b++) {
-                if (!(T[b] > 0.0)) continue;
-                double sb = tol * (a > 0.0 ? a : 0.0) * c[b], x = sb * sb * T[b];
-                v[b] = 1.0 / (1.0 / T[b] + sb * sb);
-                A += v[b] * c[b] * c[b];
-                B += v[b] * c[b] * ah[b];
-                C += v[b] * ah[b] * ah[b];
-                occ1 += x + occ1 * x;   /* only the last round's is used */
-            }
-            if (!(A > 0.0)) break;
-            a = B / A;
-        }
-        if (!(A > 0.0)) {
+        const double *c = cb + (size_t)i * (size_t)nb;
+        double a = av[i], A = Av[i], B = Bv[i], C = Cv[i], occ1 = occv[i];
+        if (dead[i]) {
             Lt[i] = -INFINITY;
             continue;
         }

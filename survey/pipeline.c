@@ -91,29 +91,49 @@ static gs_status file_sha256(const char *dir, const char *name, char hex[65])
     return gs_sha256_file(path, hex);
 }
 
+/* The SHA-256 of frames [k0, k1) and their HDR maps (hex[2k], hex[2k + 1]). */
+typedef struct {
+    const char *dir;
+    const gs_capture *cap;
+    char (*hex)[65];
+} frame_hashes;
+
+static gs_status hash_frames(void *ctx, int part, size_t k0, size_t k1)
+{
+    (void)part;
+    const frame_hashes *h = ctx;
+    gs_status s = GS_OK;
+    for (size_t k = k0; s == GS_OK && k < k1; k++) {
+        const gs_frame_info *fr = &h->cap->frames[k];
+        s = file_sha256(h->dir, fr->file, h->hex[2 * k]);
+        if (s == GS_OK && fr->hdr_map[0]) s = file_sha256(h->dir, fr->hdr_map, h->hex[2 * k + 1]);
+    }
+    return s;
+}
+
 /* "sha256:" + SHA-256 of a manifest listing capture.json and every file it names (frames in
  * k order, then their HDR maps) with each file's SHA-256: the capture's identity, whatever the
- * directory is called or where it lies. */
+ * directory is called or where it lies. The files are hashed on every CPU (an error is the
+ * first file's in that order, as one after the other). */
 static gs_status capture_key(const char *dir, const gs_capture *cap, char key[72])
 {
     size_t size = 128 + (size_t)cap->K * 2 * (GS_PATH_MAX + 70), used = 0;
     char *man = malloc(size), hex[65];
-    if (!man) return gs_fail(GS_ENOMEM, "capture key: out of memory");
-    gs_status s = file_sha256(dir, "capture.json", hex);
-    if (s == GS_OK) used += (size_t)snprintf(man + used, size - used, KEY_FORMAT "\ncapture.json %s\n", hex);
-    for (int k = 0; s == GS_OK && k < cap->K; k++) {
-        const gs_frame_info *fr = &cap->frames[k];
-        if ((s = file_sha256(dir, fr->file, hex)) != GS_OK) break;
-        used += (size_t)snprintf(man + used, size - used, "%s %s\n", fr->file, hex);
-        if (fr->hdr_map[0]) {
-            if ((s = file_sha256(dir, fr->hdr_map, hex)) != GS_OK) break;
-            used += (size_t)snprintf(man + used, size - used, "%s %s\n", fr->hdr_map, hex);
-        }
-    }
+    frame_hashes fh = {dir, cap, malloc(sizeof *fh.hex * 2 * (size_t)(cap->K > 0 ? cap->K : 1))};
+    gs_status s = man && fh.hex ? file_sha256(dir, "capture.json", hex) : gs_fail(GS_ENOMEM, "capture key: out of memory");
+    if (s == GS_OK) s = gs_parallel_for(0, (size_t)cap->K, hash_frames, &fh);
     if (s == GS_OK) {
+        used += (size_t)snprintf(man + used, size - used, KEY_FORMAT "\ncapture.json %s\n", hex);
+        for (int k = 0; k < cap->K; k++) {
+            const gs_frame_info *fr = &cap->frames[k];
+            used += (size_t)snprintf(man + used, size - used, "%s %s\n", fr->file, fh.hex[2 * k]);
+            if (fr->hdr_map[0])
+                used += (size_t)snprintf(man + used, size - used, "%s %s\n", fr->hdr_map, fh.hex[2 * k + 1]);
+        }
         gs_sha256_hex(man, used, hex);
         snprintf(key, 72, "sha256:%s", hex);
     }
+    free(fh.hex);
     free(man);
     return s;
 }

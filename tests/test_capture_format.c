@@ -514,6 +514,39 @@ TEST(capture_format_truncated_png)
     free(b);
 }
 
+/* The frames are read on every CPU (gs_capture_read): the error is still the first bad frame's
+ * in k order, whichever part of the split reads it, and a read after the failure is whole. */
+TEST(capture_format_frames_read_in_parallel_fail_at_the_first_bad_frame)
+{
+    char dir[1024];
+    snprintf(dir, sizeof dir, "%s", subdir("parallel"));
+    gs_capture a, b;
+    make_capture(&a, 9, 3, 17, 11, 1);
+    write_capture(dir, &a);
+    CHECK_OK(gs_capture_read(dir, &b));
+    check_same(&a, &b);
+    gs_capture_release(&b);
+    size_t n0, n1;
+    char *f1 = fx_read_file(fx_path(dir, "frame_001.png"), &n0), *h7 = fx_read_file(fx_path(dir, "hdr_007.png"), &n1);
+    CHECK(f1 && h7 && n0 > 60 && n1 > 60);
+    /* a frame of the last part alone, then one of the first part too: the first in k order */
+    fx_write_file(fx_path(dir, "hdr_007.png"), h7, n1 / 2);
+    expect_error(dir, GS_EFORMAT, (const char *[]){"parallel/hdr_007.png: truncated PNG",
+                                                   "frames[7].hdr_map)", NULL});
+    fx_write_file(fx_path(dir, "frame_001.png"), f1, n0 / 2);
+    for (int rep = 0; rep < 5; rep++)
+        expect_error(dir, GS_EFORMAT, (const char *[]){"parallel/frame_001.png: truncated PNG",
+                                                       "frames[1].file)", NULL});
+    fx_write_file(fx_path(dir, "frame_001.png"), f1, n0);
+    fx_write_file(fx_path(dir, "hdr_007.png"), h7, n1);
+    CHECK_OK(gs_capture_read(dir, &b));
+    check_same(&a, &b);
+    free(f1);
+    free(h7);
+    gs_capture_release(&a);
+    gs_capture_release(&b);
+}
+
 TEST(capture_format_8bit_png)
 {
     const char *dir = small_capture("eight", 0, NULL);

@@ -265,6 +265,37 @@ static void file_ref(const reader *r, char *ref, size_t cap, const char *fmt, in
     snprintf(ref, cap, " (%s:%d: %s)", CAPTURE_JSON, gs_json_line(r->doc, field), field);
 }
 
+/* Frames [k0, k1) of a capture whose sizes are checked and buffers allocated: each PNG and its
+ * HDR map, the references of their fields made beforehand. */
+typedef struct {
+    const char *dir;
+    gs_capture *cap;
+    char (*ref)[2][160];   /* [K]: frames[k].file, frames[k].hdr_map */
+} frame_refs;
+
+static gs_status read_frames(void *ctx, int part, size_t k0, size_t k1)
+{
+    (void)part;
+    const frame_refs *fr = ctx;
+    const gs_capture *cap = fr->cap;
+    size_t plane = (size_t)cap->width * (size_t)cap->height;
+    gs_status st = GS_OK;
+    for (size_t k = k0; st == GS_OK && k < k1; k++) {
+        const gs_frame_info *f = &cap->frames[k];
+        st = read_png(fr->dir, f->file, fr->ref[k][0], cap->width, cap->height, cap->bands, 16,
+                      cap->raw + plane * (size_t)cap->bands * k);
+        if (st != GS_OK || !f->hdr_map[0]) continue;
+        unsigned char *h = cap->halvings + plane * k;
+        st = read_png(fr->dir, f->hdr_map, fr->ref[k][1], cap->width, cap->height, 1, 8, h);
+        for (size_t p = 0; st == GS_OK && p < plane; p++)
+            if (h[p] > GS_MAX_HALVINGS)
+                st = gs_fail(GS_EFORMAT, "%s/%s: pixel (x %zu, y %zu) holds %d halvings: expected 0 to "
+                             "%d%s", fr->dir, f->hdr_map, p % (size_t)cap->width, p / (size_t)cap->width,
+                             h[p], GS_MAX_HALVINGS, fr->ref[k][1]);
+    }
+    return st;
+}
+
 gs_status gs_capture_read(const char *dir, gs_capture *cap)
 {
     if (!dir || !cap) return gs_fail(GS_EINVAL, "gs_capture_read: NULL argument");
@@ -281,40 +312,27 @@ gs_status gs_capture_read(const char *dir, gs_capture *cap)
     st = parse_capture(&r, cap);
     if (st == GS_OK) st = check_before_reading(dir, &r, cap, json_path);
 
-    /* the pixels: frames in k order, then the HDR maps */
+    /* the pixels: every frame and its HDR map, the frames split over the CPUs (each into its
+     * own slice; the error is the first frame's in k order, as one after the other) */
     size_t plane = (size_t)cap->width * (size_t)cap->height;
-    for (int k = 0; st == GS_OK && k < cap->K; k++) {
-        char ref[160];
-        file_ref(&r, ref, sizeof ref, "frames[%d].file", r.pos[k]);
-        if (!cap->raw) {
-            cap->raw = calloc(plane * (size_t)cap->K * (size_t)cap->bands, sizeof *cap->raw);
-            if (!cap->raw) {
-                st = gs_fail(GS_ENOMEM, "%s: cannot hold %d frames of %dx%dx%d samples",
-                             json_path, cap->K, cap->width, cap->height, cap->bands);
-                break;
-            }
+    frame_refs fr = {dir, cap, NULL};
+    int hdr_maps = 0;
+    for (int k = 0; st == GS_OK && k < cap->K; k++) hdr_maps |= cap->frames[k].hdr_map[0] != '\0';
+    if (st == GS_OK && cap->K > 0) {
+        fr.ref = malloc(sizeof *fr.ref * (size_t)cap->K);
+        cap->raw = calloc(plane * (size_t)cap->K * (size_t)cap->bands, sizeof *cap->raw);
+        if (!fr.ref || !cap->raw)
+            st = gs_fail(GS_ENOMEM, "%s: cannot hold %d frames of %dx%dx%d samples", json_path, cap->K,
+                         cap->width, cap->height, cap->bands);
+        if (st == GS_OK && hdr_maps && !(cap->halvings = calloc(plane * (size_t)cap->K, 1)))
+            st = gs_fail(GS_ENOMEM, "%s: cannot hold the HDR maps", json_path);
+        for (int k = 0; st == GS_OK && k < cap->K; k++) {   /* the JSON is not shared by threads */
+            file_ref(&r, fr.ref[k][0], sizeof fr.ref[k][0], "frames[%d].file", r.pos[k]);
+            file_ref(&r, fr.ref[k][1], sizeof fr.ref[k][1], "frames[%d].hdr_map", r.pos[k]);
         }
-        st = read_png(dir, cap->frames[k].file, ref, cap->width, cap->height, cap->bands, 16,
-                      cap->raw + plane * (size_t)cap->bands * (size_t)k);
-        if (st == GS_OK && cap->frames[k].hdr_map[0]) {
-            if (!cap->halvings) {
-                cap->halvings = calloc(plane * (size_t)cap->K, 1);
-                if (!cap->halvings) {
-                    st = gs_fail(GS_ENOMEM, "%s: cannot hold the HDR maps", json_path);
-                    break;
-                }
-            }
-            unsigned char *h = cap->halvings + plane * (size_t)k;
-            file_ref(&r, ref, sizeof ref, "frames[%d].hdr_map", r.pos[k]);
-            st = read_png(dir, cap->frames[k].hdr_map, ref, cap->width, cap->height, 1, 8, h);
-            for (size_t p = 0; st == GS_OK && p < plane; p++)
-                if (h[p] > GS_MAX_HALVINGS)
-                    st = gs_fail(GS_EFORMAT, "%s/%s: pixel (x %zu, y %zu) holds %d halvings: "
-                                 "expected 0 to %d%s", dir, cap->frames[k].hdr_map,
-                                 p % (size_t)cap->width, p / (size_t)cap->width, h[p],
-                                 GS_MAX_HALVINGS, ref);
-        }
+        if (st == GS_OK) st = gs_parallel_for(0, (size_t)cap->K, read_frames, &fr);
     }
+    free(fr.ref);
     free(r.pos);
     gs_json_free(doc);
     if (st != GS_OK) gs_capture_release(cap);
