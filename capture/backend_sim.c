@@ -51,8 +51,10 @@ static gs_status sim_acquire(void *self, const cap_acquisition *a, unsigned char
 {
     sim_backend *b = self;
     b->timing.grid_hz_measured = b->timing.start_s = NAN;
+    b->timing.probed = 0;
     if (cycles) *cycles = (double)b->sim->C;
-    gs_status st = cap_sim_render(b->sim, a->k, a->pass, a->index, halvings, raw, NULL);
+    gs_status st = cap_sim_render_hdr(b->sim, a->k, a->pass, a->index, halvings, raw, a->probe,
+                                      a->max_saturated_px, &b->timing.probed);
     if (st != GS_OK) return st;
     /* the exposure's crossings on the sim's timeline: f = C / (2 (t_end - t_start)) (Eq. 1),
      * its start from the capture's first exposure (index 0) */

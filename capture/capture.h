@@ -423,6 +423,17 @@ void cap_sim_set_threads(cap_sim *s, int threads);
  * halvings). */
 gs_status cap_sim_render(cap_sim *s, int k, int pass, long index, const unsigned char *halvings,
                          unsigned short *raw, double *dn);
+/* cap_sim_render into raw for the HDR loop (cap_acquisition). probe 1 (its decision only):
+ * when more than max_saturated_px pixels could saturate, the noise stages run only on the rows
+ * that hold one and every other sample is 0 (*probed 1); a sample cannot saturate when its mean
+ * is at most half the electrons the saturation level needs (less 40 read-noise sigmas):
+ * Poisson's Chernoff bound, P < e^-80. So the saturated pixels are those of the whole frame,
+ * unless an event of that probability happens; else the whole frame (*probed 0). probe 0 right
+ * after a probe of the same k, pass, index and halvings, with raw as the probe left it: the
+ * probe's other rows rendered from the means it kept, so raw is the whole frame, the same bits
+ * as cap_sim_render's; else cap_sim_render. */
+gs_status cap_sim_render_hdr(cap_sim *s, int k, int pass, long index, const unsigned char *halvings,
+                             unsigned short *raw, int probe, long max_saturated_px, int *probed);
 /* Times (s, on the sim's grid timeline: the cap_ac crossings with timing effects, else
  * nominal half periods) of the crossings that start and end the C cycles of acquisition index:
  * crossings first_cycle and first_cycle + C. Index 0 starts the capture. */
@@ -473,6 +484,11 @@ typedef struct {
     int k;                        /* window */
     int pass;                     /* HDR round, 0 first */
     long index;                   /* acquisitions before this one in the capture */
+    int probe;                    /* 1: only the HDR loop's decision needs this one (more rounds
+                                   * may follow): the backend may return a probe, every sample that
+                                   * cannot reach the saturation level 0, when more than
+                                   * max_saturated_px pixels could (cap_acq_timing.probed) */
+    long max_saturated_px;
 } cap_acquisition;
 
 typedef struct cap_backend cap_backend;
@@ -489,6 +505,7 @@ gs_status cap_backend_acquire(cap_backend *b, const cap_acquisition *a, unsigned
 typedef struct {
     double grid_hz_measured;      /* mean grid frequency during the exposure, Hz */
     double start_s;               /* its start, s from the capture's first exposure (index 0) */
+    int probed;                   /* it was a probe (cap_acquisition.probe) */
 } cap_acq_timing;
 /* After cap_backend_acquire: sim from its timeline (C / (2 (t_end - t_start)) between the
  * exposure's first and last crossings, Eq. 1), hardware from the controller's per-cycle log
@@ -556,6 +573,7 @@ typedef struct {
     int hdr;                      /* -1: the backend's default; 0 off; 1 on */
     int hdr_max_rounds;           /* -1: the backend's default */
     int hdr_max_saturated_px;     /* -1: the backend's default */
+    int hdr_whole_passes;         /* 1: no probes, every HDR pass acquired whole (the same frames) */
 } cap_loop_opts;
 void cap_loop_opts_default(cap_loop_opts *o);
 
@@ -565,6 +583,8 @@ typedef struct {
     long acquisitions;            /* in the whole capture (HDR passes included) */
     int max_passes;
     size_t saturated_px;          /* saturated pixels left over all frames */
+    long probes, probes_kept;     /* HDR passes acquired as probes; of them the frame's last,
+                                   * acquired again whole */
     int complete;                 /* capture.json written */
     double seconds;
 } cap_loop_report;

@@ -483,6 +483,14 @@ static double poisson_rest(gs_rng *rng, double lam)
     return k;
 }
 
+/* The samples of rows [y0, y1) a stage renders: every row, or a probe's (cap_render.rows). */
+static unsigned long long rendered(const cap_sim *s, const cap_render *r, size_t y0, size_t y1)
+{
+    size_t n = 0;
+    for (size_t y = y0; y < y1; y++) n += !r->rows || r->rows[y];
+    return (unsigned long long)n * (unsigned long long)s->W * (unsigned long long)s->B;
+}
+
 /* Rows [y0, y1); the CDF cache is the part's own (a pure memo of lam: any split draws the same). */
 static gs_status shot_rows(void *ctx, int part, size_t y0, size_t y1)
 {
@@ -496,6 +504,7 @@ static gs_status shot_rows(void *ctx, int part, size_t y0, size_t y1)
     for (int i = 0; i < B * L; i++) pc[i].lam = -1;
     int amb = (s->fx >> CAP_FX_AMBIENT) & 1u;
     for (int y = (int)y0; y < (int)y1; y++) {
+        if (r->rows && !r->rows[y]) continue;   /* a probe's row that cannot saturate */
         gs_rng rng;
         gs_rng_init(&rng, s->sc.seed, CAP_TAG_SHOT, ((uint64_t)r->k << 32) | (uint64_t)r->pass, (uint64_t)y);
         double *v = s->img + (size_t)y * row;
@@ -514,7 +523,7 @@ static gs_status shot_rows(void *ctx, int part, size_t y0, size_t y1)
         }
     }
     free(pc);
-    par->items[part] = (unsigned long long)(y1 - y0) * row;
+    par->items[part] = rendered(s, r, y0, y1);
     return GS_OK;
 }
 
@@ -529,11 +538,13 @@ static gs_status saturation_rows(void *ctx, int part, size_t y0, size_t y1)
 {
     cap_par *par = ctx;
     cap_sim *s = par->s;
+    const cap_render *r = par->r;
     size_t row = (size_t)s->W * (size_t)s->B;
     double fw = s->sc.full_well_e;
-    for (size_t i = y0 * row; i < y1 * row; i++)
-        if (s->img[i] > fw) s->img[i] = fw;
-    par->items[part] = (unsigned long long)((y1 - y0) * row);
+    for (size_t y = y0; y < y1; y++)
+        for (size_t i = y * row; (!r->rows || r->rows[y]) && i < (y + 1) * row; i++)
+            if (s->img[i] > fw) s->img[i] = fw;
+    par->items[part] = rendered(s, r, y0, y1);
     return GS_OK;
 }
 
@@ -552,12 +563,13 @@ static gs_status read_rows(void *ctx, int part, size_t y0, size_t y1)
     size_t row = (size_t)s->W * (size_t)s->B;
     double sd = s->read_dn;
     for (size_t y = y0; y < y1; y++) {
+        if (r->rows && !r->rows[y]) continue;
         gs_rng rng;
         gs_rng_init(&rng, s->sc.seed, CAP_TAG_READ, ((uint64_t)r->k << 32) | (uint64_t)r->pass, (uint64_t)y);
         double *v = s->img + y * row;
         for (size_t i = 0; i < row; i++) v[i] += sd * gs_rng_normal(&rng);
     }
-    par->items[part] = (unsigned long long)((y1 - y0) * row);
+    par->items[part] = rendered(s, r, y0, y1);
     return GS_OK;
 }
 
@@ -572,13 +584,15 @@ static gs_status adc_rows(void *ctx, int part, size_t y0, size_t y1)
 {
     cap_par *par = ctx;
     cap_sim *s = par->s;
+    const cap_render *r = par->r;
     size_t row = (size_t)s->W * (size_t)s->B;
     double mx = s->adc_max;
-    for (size_t i = y0 * row; i < y1 * row; i++) {
-        double v = floor(s->img[i] + 0.5);
-        s->img[i] = v < 0 ? 0 : v > mx ? mx : v;
-    }
-    par->items[part] = (unsigned long long)((y1 - y0) * row);
+    for (size_t y = y0; y < y1; y++)
+        for (size_t i = y * row; (!r->rows || r->rows[y]) && i < (y + 1) * row; i++) {
+            double v = floor(s->img[i] + 0.5);
+            s->img[i] = v < 0 ? 0 : v > mx ? mx : v;
+        }
+    par->items[part] = rendered(s, r, y0, y1);
     return GS_OK;
 }
 

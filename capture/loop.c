@@ -76,6 +76,7 @@ gs_status cap_backend_timing(cap_backend *b, cap_acq_timing *t)
 {
     t->grid_hz_measured = NAN;
     t->start_s = NAN;
+    t->probed = 0;
     return b->ops->timing ? b->ops->timing(b->self, t) : GS_OK;
 }
 
@@ -87,6 +88,7 @@ void cap_loop_opts_default(cap_loop_opts *o)
     o->hdr = -1;
     o->hdr_max_rounds = -1;
     o->hdr_max_saturated_px = -1;
+    o->hdr_whole_passes = 0;
 }
 
 /* ------------------------------------------------------------------ progress file */
@@ -478,11 +480,13 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
         double cycles = (double)info.cycles;
         cap_acq_timing tm;
         for (;;) {
-            cap_acquisition a = {k, pass, index + pass};
+            /* a pass that more rounds may follow: a probe will do (its saturated pixels) */
+            cap_acquisition a = {k, pass, index + pass, hdr && pass < rounds && !o.hdr_whole_passes, max_sat};
             s = cap_backend_acquire(b, &a, halv, raw, &cycles);
             if (s != GS_OK) goto done;
             /* the timing of the exposure that is kept: the last one */
             if ((s = cap_backend_timing(b, &tm)) != GS_OK) goto done;
+            rep->probes += tm.probed;
             if (!hdr) {
                 if (progress) {
                     n_sat = 0;
@@ -514,6 +518,13 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
             if (s != GS_OK || n_sat <= (size_t)max_sat || halved == 0) {
                 free(trial);
                 if (s != GS_OK) goto done;
+                if (tm.probed) {   /* the probe is the frame's last pass: acquired again whole */
+                    a.probe = 0;
+                    rep->probes_kept++;
+                    if ((s = cap_backend_acquire(b, &a, halv, raw, &cycles)) != GS_OK ||
+                        (s = cap_backend_timing(b, &tm)) != GS_OK)
+                        goto done;
+                }
                 break;
             }
             memcpy(halv, trial, plane);

@@ -113,8 +113,11 @@ static gs_status to_dn_rows(void *ctx, int part, size_t y0, size_t y1)
     cap_par *par = ctx;
     cap_sim *s = par->s;
     size_t row = (size_t)s->W * (size_t)s->B;
+    const cap_render *r = par->r;
     double g = 1.0 / s->sc.gain_e_per_dn, black = s->sc.black_level_dn;
-    for (size_t i = y0 * row; i < y1 * row; i++) s->img[i] = s->img[i] * g + black;
+    for (size_t y = y0; y < y1; y++)
+        if (!r->rows || r->rows[y])
+            for (size_t i = y * row; i < (y + 1) * row; i++) s->img[i] = s->img[i] * g + black;
     par->items[part] = 0;
     return GS_OK;
 }
@@ -131,12 +134,17 @@ static gs_status store_rows(void *ctx, int part, size_t y0, size_t y1)
     const cap_render *r = par->r;
     size_t row = (size_t)s->W * (size_t)s->B, a = y0 * row, b = y1 * row;
     if (r->dn) memcpy(r->dn + a, s->img + a, (b - a) * sizeof *r->dn);
-    if (r->raw)
-        for (size_t i = a; i < b; i++) {
+    for (size_t y = y0; r->raw && y < y1; y++) {
+        if (r->rows && !r->rows[y]) {   /* a probe's row without noise, or a completed one */
+            if (!r->rows_keep) memset(r->raw + y * row, 0, row * sizeof *r->raw);
+            continue;
+        }
+        for (size_t i = y * row; i < (y + 1) * row; i++) {
             double v = floor(s->img[i] + 0.5);
             /* written so that NaN clamps to 0 rather than reaching the cast */
             r->raw[i] = (unsigned short)(v > 0 ? (v < 65535 ? v : 65535) : 0);
         }
+    }
     par->items[part] = 0;
     return GS_OK;
 }
@@ -155,6 +163,7 @@ static void add_stage(cap_sim *s, const char *name, int effect,
     memset(st, 0, sizeof *st);
     st->name = name;
     st->effect = effect;
+    st->noise = effect >= CAP_FX_SHOT_NOISE || run == st_to_dn || run == st_store;
     st->run = run;
 }
 
@@ -275,6 +284,9 @@ void cap_sim_free(cap_sim *s)
     free(s->scin);
     free(s->lev);
     free(s->amb_row);
+    free(s->probe_rows);
+    free(s->probe_r);
+    free(s->probe_halv);
     cap_transport_free(s);
     cap_scene_release(&s->sc);
     free(s);
@@ -448,7 +460,11 @@ gs_status cap_sim_new(const cap_scene *sc, const gs_delight *d_in, cap_sim **out
     s->Wsp = malloc(sizeof *s->Wsp * (s->n_sp ? s->n_sp : 1) * (size_t)s->L * (size_t)s->B);
     s->scin = malloc(sizeof *s->scin * GS_MAX_THREADS * (size_t)s->C);
     s->amb_row = calloc((size_t)s->H, sizeof *s->amb_row);
-    if (!s->img || !s->E || !s->Wsp || !s->scin || !s->amb_row) {
+    s->probe_rows = malloc((size_t)s->H);
+    s->probe_r = malloc(sizeof *s->probe_r);
+    s->probe_halv = malloc((size_t)s->W * (size_t)s->H);
+    if (!s->img || !s->E || !s->Wsp || !s->scin || !s->amb_row || !s->probe_rows || !s->probe_r ||
+        !s->probe_halv) {
         st = gs_fail(GS_ENOMEM, "simulator: cannot hold a %d x %d x %d frame", s->W, s->H, s->B);
         goto fail;
     }
@@ -532,8 +548,42 @@ gs_status cap_sim_exposure_span(cap_sim *s, long index, double *t_start_s, doubl
     return st;
 }
 
-gs_status cap_sim_render(cap_sim *s, int k, int pass, long index, const unsigned char *halvings,
-                         unsigned short *raw, double *dn)
+/* The electrons a sample's mean may have and still certainly not read the saturation level
+ * (cap_sim_render_probe), or NaN when no bound is tight enough: it needs n = (sat_dn - 0.5 -
+ * black - 40 read sigmas) x gain electrons; with shot noise, a mean lam <= n/2 reaches n with
+ * P <= e^-lam (e lam / n)^n <= e^(-n (ln 2 - 1/2)) (Chernoff), which must be below e^-80. */
+static double probe_safe_e(const cap_sim *s)
+{
+    double n = (s->sat_dn - 0.5 - s->sc.black_level_dn - 40.0 * s->read_dn) * s->sc.gain_e_per_dn;
+    if (!(n > 0.0) || !isfinite(n)) return NAN;
+    if (!has(s, CAP_FX_SHOT_NOISE)) return n * (1.0 - 1e-9);
+    return n * (M_LN2 - 0.5) >= 80.0 ? 0.5 * n : NAN;
+}
+
+/* A probe's rows: those with a sample whose mean (s->img before the noise stages) could
+ * saturate; NULL (a whole frame) when no more than max_px pixels could. */
+static const unsigned char *probe_rows_of(cap_sim *s, long max_px)
+{
+    double safe = probe_safe_e(s);
+    if (isnan(safe)) return NULL;
+    size_t row = (size_t)s->W * (size_t)s->B;
+    long px = 0;
+    for (size_t y = 0; y < (size_t)s->H; y++) {
+        const double *v = s->img + y * row;
+        int any = 0;
+        for (size_t x = 0; x < (size_t)s->W; x++) {
+            int hot = 0;
+            for (int b = 0; b < s->B; b++) hot |= !(v[x * (size_t)s->B + (size_t)b] <= safe);
+            px += hot;
+            any |= hot;
+        }
+        s->probe_rows[y] = (unsigned char)any;
+    }
+    return px > max_px ? s->probe_rows : NULL;
+}
+
+static gs_status render(cap_sim *s, int k, int pass, long index, const unsigned char *halvings,
+                        unsigned short *raw, double *dn, long probe_max_px, int *probed)
 {
     if (k < 0 || k >= s->K || pass < 0 || index < 0)
         return gs_fail(GS_EINVAL, "render: k %d of K %d, pass %d, index %ld", k, s->K, pass, index);
@@ -560,10 +610,16 @@ gs_status cap_sim_render(cap_sim *s, int k, int pass, long index, const unsigned
     r.wcfg.mode = s->sc.locked ? CAP_LOCKED : CAP_FREE_RUNNING;
     r.wcfg.free_period_measured = s->sc.free_period_measured;
     r.wcfg.jitter_seed = s->sc.seed ^ (0x5851f42d4c957f2dull * (unsigned long long)(pass + 1));
+    s->probe_pending = 0;
     memset(s->img, 0, sizeof *s->img * plane * (size_t)s->B);
     gs_status st = GS_OK;
+    int decided = probe_max_px < 0;
     for (size_t i = 0; i < s->n_stages && st == GS_OK; i++) {
         cap_stage *sg = &s->stages[i];
+        if (!decided && sg->noise) {   /* the means are complete: which rows can saturate */
+            decided = 1;
+            r.rows = probe_rows_of(s, probe_max_px);
+        }
         double t0 = gs_clock_s(CLOCK_MONOTONIC);
         r.items = 0;
         st = sg->run(s, &r);
@@ -572,7 +628,59 @@ gs_status cap_sim_render(cap_sim *s, int k, int pass, long index, const unsigned
         sg->items += r.items;
     }
     cap_windows_release(&r.win);
+    if (probed) *probed = st == GS_OK && r.rows;
+    if (st == GS_OK && r.rows) {   /* what completing it needs */
+        s->probe_pending = 1;
+        *s->probe_r = r;
+        memset(&s->probe_r->win, 0, sizeof s->probe_r->win);   /* released: the noise stages do not use it */
+        if (halvings) memcpy(s->probe_halv, halvings, plane);
+        s->probe_r->halv = halvings ? s->probe_halv : NULL;
+    }
     return st;
+}
+
+/* The rows the last probe left without noise, into raw (its other rows already there). */
+static gs_status complete_probe(cap_sim *s, unsigned short *raw)
+{
+    s->probe_pending = 0;
+    for (int y = 0; y < s->H; y++) s->probe_rows[y] = !s->probe_rows[y];
+    cap_render r = *s->probe_r;
+    r.raw = raw;
+    r.rows = s->probe_rows;
+    r.rows_keep = 1;
+    gs_status st = GS_OK;
+    size_t i = 0;
+    while (i < s->n_stages && !s->stages[i].noise) i++;
+    for (; i < s->n_stages && st == GS_OK; i++) {
+        cap_stage *sg = &s->stages[i];
+        double t0 = gs_clock_s(CLOCK_MONOTONIC);
+        r.items = 0;
+        st = sg->run(s, &r);
+        sg->seconds += gs_clock_s(CLOCK_MONOTONIC) - t0;
+        sg->calls++;
+        sg->items += r.items;
+    }
+    return st;
+}
+
+gs_status cap_sim_render(cap_sim *s, int k, int pass, long index, const unsigned char *halvings,
+                         unsigned short *raw, double *dn)
+{
+    return render(s, k, pass, index, halvings, raw, dn, -1, NULL);
+}
+
+gs_status cap_sim_render_hdr(cap_sim *s, int k, int pass, long index, const unsigned char *halvings,
+                             unsigned short *raw, int probe, long max_saturated_px, int *probed)
+{
+    *probed = 0;
+    if (!raw) return render(s, k, pass, index, halvings, NULL, NULL, -1, NULL);
+    const cap_render *p = s->probe_r;
+    size_t plane = (size_t)s->W * (size_t)s->H;
+    if (!probe && s->probe_pending && p->k == k && p->pass == pass && p->index == index &&
+        (halvings ? p->halv && !memcmp(halvings, p->halv, plane) : !p->halv))
+        return complete_probe(s, raw);
+    return render(s, k, pass, index, halvings, raw, NULL, probe ? (max_saturated_px < 0 ? 0 : max_saturated_px) : -1,
+                  probed);
 }
 
 /* ------------------------------------------------------------------ truth */

@@ -24,6 +24,7 @@ typedef struct cap_stage cap_stage;
 struct cap_stage {
     const char *name;
     int effect;        /* cap_effect or -1 */
+    int noise;         /* shot noise and every stage after it: a probe runs them on its rows */
     gs_status (*run)(cap_sim *s, cap_render *r);
     unsigned long long calls, items;
     double seconds;
@@ -46,6 +47,8 @@ struct cap_render {
     unsigned long long items;       /* set by the running stage: elements it processed */
     unsigned short *raw;            /* outputs (may be NULL) */
     double *dn;
+    const unsigned char *rows;      /* a probe: the rows the noise stages render (NULL: all) */
+    int rows_keep;                  /* 1: the other rows' raw samples are left as they are (0: 0) */
 };
 
 struct cap_sim {
@@ -87,6 +90,10 @@ struct cap_sim {
     double *scin;                   /* [GS_MAX_THREADS * C], C per part */
     unsigned char *lev;             /* [C] cap_cycle_level of each cycle of an exposure */
     double *amb_row;                /* [H] ambient electrons per pixel and nominal cycle (ambient) */
+    unsigned char *probe_rows;      /* [H] a probe's rows (cap_sim_render_hdr) */
+    int probe_pending;              /* the last render was a probe, img holds its other rows' means */
+    cap_render *probe_r;            /* its state (k, pass, halvings' copy in probe_halv) */
+    unsigned char *probe_halv;      /* [W H] */
     struct cap_transport *tr;       /* light_transport / semi_reflection tables (effect_transport.c) */
 };
 

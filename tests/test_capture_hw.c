@@ -223,7 +223,7 @@ static void expect_acquire_fails(cap_backend *be, int W, gs_status want, const c
     if (!be) return;
     unsigned char *halv = calloc((size_t)W * HW_H, 1);
     unsigned short *raw = malloc(sizeof *raw * (size_t)W * HW_H * 3);
-    cap_acquisition a = {0, 0, 0};
+    cap_acquisition a = {0, 0, 0, 0, 0};
     CHECK(cap_backend_acquire(be, &a, halv, raw, NULL) == want);
     CHECK_MSG(strstr(gs_detail(), detail), "%s", gs_detail());
     free(raw);

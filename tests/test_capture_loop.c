@@ -65,6 +65,8 @@ static int same_capture(const char *a, const char *b, int with_progress)
     return ok;
 }
 
+static int whole_passes;   /* cap_loop_opts.hdr_whole_passes of run() */
+
 static gs_status run(const char *scene_path, const char *dir, int stop_after, int force,
                      cap_loop_report *rep)
 {
@@ -79,6 +81,7 @@ static gs_status run(const char *scene_path, const char *dir, int stop_after, in
     o.progress = 0;
     o.stop_after = stop_after;
     o.force = force;
+    o.hdr_whole_passes = whole_passes;
     s = cap_loop_run(be, dir, &o, rep);
     cap_backend_free(be);
     return s;
@@ -140,6 +143,31 @@ TEST(capture_resume_after_stop_and_damage_identical)
     CHECK_OK(gs_capture_read(b, &cap));
     CHECK(cap.K == SMALL_K && cap.bands == 3 && cap.halvings != NULL);
     gs_capture_release(&cap);
+}
+
+/* The HDR loop's probes (cap_sim_render_hdr: a pass that more rounds may follow renders its
+ * noise only on the rows that can saturate; a probe that is the frame's last pass gets its other
+ * rows afterwards): the same files, byte for byte, as every pass acquired whole. Both kinds of
+ * probe happen here (followed by another round, and completed as the last pass). */
+TEST(capture_hdr_probes_give_the_same_files_as_whole_passes)
+{
+    char scene[1024], a[1024], b[1024];
+    const char *tmp = test_tmpdir();
+    snprintf(scene, sizeof scene, "%s/probe.json", tmp);
+    snprintf(a, sizeof a, "%s/probed", tmp);
+    snprintf(b, sizeof b, "%s/whole", tmp);
+    write_small(scene, 23);
+    cap_loop_report ra, rb;
+    CHECK_OK(run(scene, a, 0, 0, &ra));
+    whole_passes = 1;
+    gs_status s = run(scene, b, 0, 0, &rb);
+    whole_passes = 0;
+    CHECK_OK(s);
+    CHECK(ra.complete && rb.complete && ra.max_passes >= 2 && ra.acquisitions == rb.acquisitions);
+    CHECK_MSG(ra.probes > ra.probes_kept && ra.probes_kept > 0, "probes %ld, completed %ld", ra.probes,
+              ra.probes_kept);
+    CHECK(rb.probes == 0 && rb.probes_kept == 0);
+    CHECK_MSG(same_capture(a, b, 1), "a capture with probes differs from one with whole passes");
 }
 
 TEST(capture_resume_after_kill_cli)
