@@ -1,6 +1,7 @@
 # gridsurvey - GNU make, one out-of-tree build folder ($(BUILD)).
 #   make          build the gridsurvey binary
-#   make check    install missing Debian packages, build, run every test (plain and ASan+UBSan)
+#   make check    install missing Debian packages, build, run every test (plain, gcc and clang
+#                 ASan+UBSan)
 #   make demo     install, build, run the main job on the built-in scene
 #   make demo-transport  the light-transport lab (unmix, render, relight, separate)
 #   make bench    performance tables (docs/bench-*.md, docs/accuracy.md)
@@ -52,7 +53,7 @@ TEST_BIN := $(BUILD)/run_tests
 DELIGHT_DB := $(BUILD)/delight.sqlite
 SHARED ?= ../shared
 
-.PHONY: all deps check test test-asan test-clang demo demo-transport bench clean
+.PHONY: all deps check test test-build test-asan test-clang demo demo-transport bench clean
 all: $(BIN) $(VIDEOIO) $(DELIGHT_DB)
 
 deps:
@@ -97,17 +98,24 @@ $(VIDEOIO): capture/videoio/videoio_plugin.cpp capture/internal.h recognize/base
 $(DELIGHT_DB): $(BIN)
 	$(BIN) delight generate -o $@
 
-test: $(TEST_BIN) $(BIN) $(VIDEOIO)
+JOBS := $(shell nproc 2>/dev/null || echo 2)
+test-build: $(TEST_BIN) $(BIN) $(VIDEOIO)
+test: test-build
 	GS_SHARED=$(SHARED) GS_BIN=$(BIN) GS_SAN=$(SAN) \
 	LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp:print_suppressions=0 $(TEST_BIN)
 test-asan:
+	$(MAKE) --no-print-directory -j$(JOBS) BUILD=$(BUILD)/asan SAN=1 test-build
 	$(MAKE) --no-print-directory BUILD=$(BUILD)/asan SAN=1 test
 test-clang:
+	$(MAKE) --no-print-directory -j$(JOBS) BUILD=$(BUILD)/clang SAN=clang test-build
 	$(MAKE) --no-print-directory BUILD=$(BUILD)/clang SAN=clang test
+# The three passes in turn, each built on every CPU and running GS_TEST_JOBS tests at once
+# (default: the online CPUs, tests/main.c): as built, gcc ASan+UBSan, clang ASan+UBSan.
 check: deps
-	$(MAKE) --no-print-directory all
+	$(MAKE) --no-print-directory -j$(JOBS) all test-build
 	$(MAKE) --no-print-directory test
 	$(MAKE) --no-print-directory test-asan
+	$(MAKE) --no-print-directory test-clang
 # The whole job on the built-in metropolitan scene (docs/pipeline.md), from scratch each time:
 # simulate, recognize, locate, store; phase balance, GeoJSON, PNG map, evaluation vs truth.
 # --phases 6: the scene puts 10 % of its districts behind delta-wye transformers (+30 deg).

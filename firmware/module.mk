@@ -38,7 +38,7 @@ $(BUILD)/tests/test_firmware.o: CPPFLAGS += -isystem /usr/include/simavr \
 $(TEST_BIN): LDLIBS += -lsimavr -lelf
 # the tests load the ELF at run time (order-only: it is not linked in)
 $(TEST_BIN): | $(FW_ELF)
-test: $(FW_ELF)
+test-build: $(FW_ELF)
 test: export GS_FIRMWARE_ELF = $(FW_ELF)
 
 -include $(FW_OBJS:.o=.d)

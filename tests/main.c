@@ -6,11 +6,14 @@
  * process dies of a signal ("killed by signal N"), exits before the test function returns, or
  * runs past its time limit ("timed out after N s": the whole process group is SIGKILLed).
  * The limit is GS_TEST_TIMEOUT_S (default 300 s), or a test's own TEST_TIMEOUT if longer.
- * Hidden tests (TEST_HIDDEN, names starting with '_') run only when named exactly. */
+ * Hidden tests (TEST_HIDDEN, names starting with '_') run only when named exactly.
+ * GS_TEST_JOBS tests (default: the online CPUs) run at once; each one's stdout and stderr go to
+ * a file of its own, printed with its PASS/FAIL line when it ends (in the order they end). */
 #include "tests/test.h"
 
 #include <errno.h>
 #include <fcntl.h>
+#include <math.h>
 #include <signal.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -34,7 +37,6 @@ static int failures;            /* in the current (child) process */
 static unsigned long checks;    /* likewise */
 static char tmp_root[256];
 static char tmp_dir[512];
-static volatile sig_atomic_t running_pgid;   /* the test's process group, 0 between tests */
 
 void test_register(const char *name, test_fn fn, double timeout_s)
 {
@@ -130,15 +132,6 @@ static double default_timeout_s(void)
     return s;
 }
 
-/* SIGINT/SIGTERM/SIGHUP to the runner also end the running test's group (it is not in the
- * terminal's foreground group), then the runner dies of the same signal. */
-static void on_signal(int sig)
-{
-    if (running_pgid > 0) kill(-(pid_t)running_pgid, SIGKILL);
-    signal(sig, SIG_DFL);
-    raise(sig);
-}
-
 static double seconds_since(const struct timespec *t0)
 {
     struct timespec t1;
@@ -152,16 +145,62 @@ typedef struct {
     unsigned long checks;
 } report;
 
-/* Runs test i in a child; prints its reason lines and returns 1 if it passed. */
-static int run_one(int i, double limit_s, const sigset_t *old_mask, struct timespec *t0)
+/* A test the runner has started: its process (group), report pipe, output file, clock. */
+typedef struct {
+    int test;            /* index into tests[] */
+    pid_t pid;           /* 0: the slot is free */
+    int report_fd, out_fd;
+    double limit_s;
+    struct timespec t0;
+} running;
+
+enum { MAX_JOBS = 64 };
+static running slots[MAX_JOBS];
+
+/* SIGINT/SIGTERM/SIGHUP to the runner also end the running tests' groups (they are not in the
+ * terminal's foreground group), then the runner dies of the same signal. */
+static void on_signal(int sig)
 {
-    int fds[2];
-    if (pipe(fds) != 0) {
-        perror("test runner: pipe");
+    for (int i = 0; i < MAX_JOBS; i++)
+        if (slots[i].pid > 0) kill(-slots[i].pid, SIGKILL);
+    signal(sig, SIG_DFL);
+    raise(sig);
+}
+
+/* GS_TEST_JOBS, or the online CPUs: how many tests run at once; exits 2 on a bad value. */
+static int jobs_wanted(void)
+{
+    const char *e = getenv("GS_TEST_JOBS");
+    if (!e || !*e) {
+        long n = sysconf(_SC_NPROCESSORS_ONLN);
+        return n < 1 ? 1 : n > MAX_JOBS ? MAX_JOBS : (int)n;
+    }
+    char *end;
+    long n = strtol(e, &end, 10);
+    if (*end || n < 1 || n > MAX_JOBS) {
+        fprintf(stderr, "test runner: GS_TEST_JOBS=%s: expected a whole number from 1 to %d\n", e,
+                MAX_JOBS);
         exit(2);
     }
-    clock_gettime(CLOCK_MONOTONIC, t0);
+    return (int)n;
+}
+
+/* Starts test i in slot r: a child in its own process group, its stdout and stderr into a file
+ * of its own (printed when it ends, so that tests running at once do not interleave). */
+static void start(running *r, int i, double limit_s, const sigset_t *old_mask)
+{
+    char out_path[600];
+    snprintf(out_path, sizeof out_path, "%s/%s.out", tmp_root, tests[i].name);
+    int fds[2], out = open(out_path, O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+    if (out < 0 || pipe(fds) != 0) {
+        perror("test runner: output file or pipe");
+        exit(2);
+    }
+    unlink(out_path);   /* the runner reads it through out; nothing else needs its name */
+    snprintf(tmp_dir, sizeof tmp_dir, "%s/%s", tmp_root, tests[i].name);
     fflush(stdout);
+    fflush(stderr);
+    clock_gettime(CLOCK_MONOTONIC, &r->t0);
     pid_t pid = fork();
     if (pid < 0) {
         perror("test runner: fork");
@@ -175,66 +214,106 @@ static int run_one(int i, double limit_s, const sigset_t *old_mask, struct times
         sigprocmask(SIG_SETMASK, old_mask, NULL);
         close(fds[0]);
         fcntl(fds[1], F_SETFD, FD_CLOEXEC);
+        if (dup2(out, 1) < 0 || dup2(out, 2) < 0) _exit(3);
         if (mkdir(tmp_dir, 0700) != 0) _exit(3);
         tests[i].fn();
         fflush(stdout);
-        report r = {failures, checks};
-        if (write(fds[1], &r, sizeof r) != (ssize_t)sizeof r) _exit(3);
+        report rep = {failures, checks};
+        if (write(fds[1], &rep, sizeof rep) != (ssize_t)sizeof rep) _exit(3);
         _exit(failures ? 1 : 0);
     }
     close(fds[1]);
     setpgid(pid, pid);   /* also here: no race with the child's own call */
-    running_pgid = pid;
+    r->test = i;
+    r->pid = pid;
+    r->report_fd = fds[0];
+    r->out_fd = out;
+    r->limit_s = limit_s;
+}
 
-    int st = 0, timed_out = 0;
+/* The verdict on a test that has ended (status st) or timed out: its reason line into why
+ * (empty when the failed checks said why, or it passed); 1 if it passed. */
+static int verdict(running *r, int st, int timed_out, char *why, size_t why_size)
+{
+    /* the report is in the pipe by now, or never will be (grandchildren may hold it open) */
+    report rep = {0, 0};
+    int have_report = 0;
+    if (!timed_out) {
+        fcntl(r->report_fd, F_SETFL, O_NONBLOCK);
+        have_report = read(r->report_fd, &rep, sizeof rep) == (ssize_t)sizeof rep;
+    }
+    close(r->report_fd);
+    why[0] = '\0';
+    if (timed_out) {
+        snprintf(why, why_size, "    timed out after %g s\n", r->limit_s);
+        return 0;
+    }
+    if (WIFSIGNALED(st)) {
+        snprintf(why, why_size, "    killed by signal %d\n", WTERMSIG(st));
+        return 0;
+    }
+    if (!have_report) {
+        snprintf(why, why_size, "    exited with status %d before the end of the test\n", WEXITSTATUS(st));
+        return 0;
+    }
+    if (WEXITSTATUS(st) != 0) return 0;   /* the failed checks said why */
+    if (rep.checks == 0) {
+        snprintf(why, why_size, "    made no check\n");
+        return 0;
+    }
+    return rep.failures == 0;
+}
+
+/* The output of a test that has ended, its reason line and its PASS/FAIL line, to stdout. */
+static void print_result(running *r, int ok, const char *why)
+{
+    char buf[1 << 14];
+    ssize_t got;
+    fflush(stdout);
+    lseek(r->out_fd, 0, SEEK_SET);
+    while ((got = read(r->out_fd, buf, sizeof buf)) > 0) fwrite(buf, 1, (size_t)got, stdout);
+    close(r->out_fd);
+    fputs(why, stdout);
+    printf("%s %s (%.2f s)\n", ok ? "PASS" : "FAIL", tests[r->test].name, seconds_since(&r->t0));
+    fflush(stdout);
+    r->pid = 0;
+}
+
+/* Waits until a running test ends or the first one's limit passes; finishes that test. */
+static int wait_one(int njobs, int *passed, int *failed)
+{
     sigset_t chld;
     sigemptyset(&chld);
     sigaddset(&chld, SIGCHLD);
     for (;;) {
-        pid_t w = waitpid(pid, &st, WNOHANG);
-        if (w == pid) break;
-        double left = limit_s - seconds_since(t0);
-        if (left <= 0) {
-            kill(-pid, SIGKILL);
-            waitpid(pid, &st, 0);
-            timed_out = 1;
-            break;
+        double left = INFINITY;
+        for (int s = 0; s < njobs; s++) {
+            running *r = &slots[s];
+            if (!r->pid) continue;
+            int st = 0;
+            pid_t w = waitpid(r->pid, &st, WNOHANG);
+            double l = r->limit_s - seconds_since(&r->t0);
+            int timed_out = w != r->pid && l <= 0;
+            if (timed_out) {
+                kill(-r->pid, SIGKILL);
+                waitpid(r->pid, &st, 0);
+            }
+            if (w == r->pid || timed_out) {
+                char why[128];
+                int ok = verdict(r, st, timed_out, why, sizeof why);
+                print_result(r, ok, why);
+                ++*(ok ? passed : failed);
+                return s;
+            }
+            if (l < left) left = l;
         }
+        if (!isfinite(left)) return -1;
         struct timespec ts = {(time_t)left, (long)((left - (double)(time_t)left) * 1e9)};
         if (sigtimedwait(&chld, NULL, &ts) < 0 && errno != EAGAIN && errno != EINTR) {
             perror("test runner: sigtimedwait");
             exit(2);
         }
     }
-    running_pgid = 0;
-
-    /* the report is in the pipe by now, or never will be (grandchildren may hold it open) */
-    report r = {0, 0};
-    int have_report = 0;
-    if (!timed_out) {
-        fcntl(fds[0], F_SETFL, O_NONBLOCK);
-        have_report = read(fds[0], &r, sizeof r) == (ssize_t)sizeof r;
-    }
-    close(fds[0]);
-
-    if (timed_out) {
-        printf("    timed out after %g s\n", limit_s);
-        return 0;
-    }
-    if (WIFSIGNALED(st)) {
-        printf("    killed by signal %d\n", WTERMSIG(st));
-        return 0;
-    }
-    if (!have_report) {
-        printf("    exited with status %d before the end of the test\n", WEXITSTATUS(st));
-        return 0;
-    }
-    if (WEXITSTATUS(st) != 0) return 0;   /* the failed checks said why */
-    if (r.checks == 0) {
-        printf("    made no check\n");
-        return 0;
-    }
-    return r.failures == 0;
 }
 
 int main(int argc, char **argv)
@@ -253,17 +332,22 @@ int main(int argc, char **argv)
     signal(SIGINT, on_signal);
     signal(SIGTERM, on_signal);
     signal(SIGHUP, on_signal);
-    int passed = 0, failed = 0;
-    for (int i = 0; i < n_tests; i++) {
-        if (!selected(tests[i].name, argc, argv)) continue;
-        snprintf(tmp_dir, sizeof tmp_dir, "%s/%s", tmp_root, tests[i].name);
-        double limit_s = limit_default_s;
-        if (tests[i].timeout_s > limit_s) limit_s = tests[i].timeout_s;
-        struct timespec t0;
-        int ok = run_one(i, limit_s, &old_mask, &t0);
-        printf("%s %s (%.2f s)\n", ok ? "PASS" : "FAIL", tests[i].name, seconds_since(&t0));
-        if (ok) passed++;
-        else failed++;
+    int passed = 0, failed = 0, njobs = jobs_wanted(), busy = 0;
+    for (int i = 0; i < n_tests || busy > 0;) {
+        if (i < n_tests && !selected(tests[i].name, argc, argv)) {
+            i++;
+            continue;
+        }
+        if (i < n_tests && busy < njobs) {
+            int s = 0;
+            while (slots[s].pid) s++;
+            double limit_s = limit_default_s;
+            if (tests[i].timeout_s > limit_s) limit_s = tests[i].timeout_s;
+            start(&slots[s], i++, limit_s, &old_mask);
+            busy++;
+            continue;
+        }
+        if (wait_one(njobs, &passed, &failed) >= 0) busy--;
     }
     sigprocmask(SIG_SETMASK, &old_mask, NULL);
     char rm[512];

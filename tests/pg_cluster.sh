@@ -17,7 +17,7 @@ as=""
 case $cmd in
 stop)
     [ -f "$dir/data/postmaster.pid" ] && $as "$bin/pg_ctl" -D "$dir/data" -m fast -w stop >/dev/null 2>&1 || true
-    rm -rf "$dir"
+    rm -rf "$dir" "$dir.lock"
     exit 0 ;;
 start) ;;
 *) echo "usage: pg_cluster.sh start DIR WATCH_PID | stop DIR" >&2; exit 2 ;;

@@ -5,14 +5,20 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/file.h>
 #include <unistd.h>
 
 const char *pg_fx_database(const char *name)
 {
     static char conninfo[256];
     char dir[128], path[192], out[4096] = "";
-    /* the runner is the test's parent: one cluster per run */
+    /* the runner is the test's parent: one cluster per run, started by the first test that
+     * needs it while the others (tests run at once, tests/main.c) wait on the lock */
     snprintf(dir, sizeof dir, "/tmp/gridsurvey-pg.%ld", (long)getppid());
+    snprintf(path, sizeof path, "%s.lock", dir);
+    FILE *lock = fopen(path, "ae");   /* close-on-exec: the cluster's watchdog must not hold it */
+    CHECK_MSG(lock && flock(fileno(lock), LOCK_EX) == 0, "%s: cannot lock", path);
+    if (!lock) return NULL;
     snprintf(path, sizeof path, "%s/port", dir);
     int port = 0;
     FILE *f = fopen(path, "r");
@@ -28,11 +34,16 @@ const char *pg_fx_database(const char *name)
         if (rc == 77 && getuid() != 0) {
             printf("    SKIP: %s", out);
             CHECK(1);
+            fclose(lock);
             return NULL;
         }
         CHECK_MSG(rc == 0 && sscanf(out, "%d", &port) == 1, "pg_cluster.sh start: status %d: %s", rc, out);
-        if (rc != 0) return NULL;
+        if (rc != 0) {
+            fclose(lock);
+            return NULL;
+        }
     }
+    fclose(lock);
     snprintf(conninfo, sizeof conninfo, "host=127.0.0.1 port=%d user=gs dbname=postgres", port);
     PGconn *c = pg_fx_connect(conninfo);
     if (!c) return NULL;

@@ -22,7 +22,9 @@
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <fcntl.h>
 #include <string.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -175,18 +177,29 @@ static void setup_delight_existing(const char *work, const char *assets)
  * database holding part of it. */
 static const char *assets(void)
 {
-    /* beside the tests' own directories, so the tests of one runner share them */
+    /* beside the tests' own directories, so the tests of one runner share them; made by the
+     * first test that needs them while the others (tests run at once) wait on the lock */
     static char dir[1024];
     const char *t = test_tmpdir(), *slash = strrchr(t, '/');
     snprintf(dir, sizeof dir, "%.*s/fault-assets", slash ? (int)(slash - t) : 1, slash ? t : ".");
-    if (fx_exists(fx_path(dir, "ready"))) return dir;
+    char lock_path[1100];
+    snprintf(lock_path, sizeof lock_path, "%s.lock", dir);
+    int lock = open(lock_path, O_WRONLY | O_CREAT | O_CLOEXEC, 0600);
+    CHECK_MSG(lock >= 0 && flock(lock, LOCK_EX) == 0, "%s: cannot lock", lock_path);
+    if (fx_exists(fx_path(dir, "ready"))) {
+        if (lock >= 0) close(lock);
+        return dir;
+    }
     mkdir(dir, 0777);
     char scene[1100], cmd[8192];
     snprintf(scene, sizeof scene, "%s/small.json", dir);
     survey_fx_geo_scene(scene, 0.5, 3, 64);
     char *b = realpath(test_bin(), NULL);
     CHECK_MSG(b != NULL, "%s: not found", test_bin());
-    if (!b) return dir;
+    if (!b) {
+        if (lock >= 0) close(lock);
+        return dir;
+    }
     snprintf(cmd, sizeof cmd,
              "cd %s && %s run small.json --db exported.sqlite --capture-dir cap --out-dir cap-out >/dev/null && "
              "%s db init --db base.sqlite >/dev/null && "
@@ -195,8 +208,9 @@ static const char *assets(void)
              "%s delight import some.csv --delight small-delight.sqlite >/dev/null",
              dir, b, b, b, b);
     free(b);
-    CHECK_MSG(test_run(cmd, out, sizeof out) == 0, "%s", out);
-    fx_write_text(fx_path(dir, "ready"), "");
+    if (test_run(cmd, out, sizeof out) == 0) fx_write_text(fx_path(dir, "ready"), "");
+    else CHECK_MSG(0, "%s", out);
+    if (lock >= 0) close(lock);
     return dir;
 }
 

@@ -17,7 +17,7 @@ PLCRASH_SHIM := $(BUILD)/tests/faults/plcrash.so
 $(PLCRASH_SHIM): tests/faults/plcrash.c
 	@mkdir -p $(dir $@)
 	gcc -std=gnu11 -Wall -Wextra -Werror -O1 -g -shared -fPIC $< -ldl -o $@
-test: $(FAULT_SHIM) $(PLCRASH_SHIM)
+test-build: $(FAULT_SHIM) $(PLCRASH_SHIM)
 
 FAULT_SWEEP ?= full
 FAULT_MALLOC_STEP ?= 1
