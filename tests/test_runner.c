@@ -46,6 +46,28 @@ TEST_HIDDEN(runner_case_own_longer_limit, 60)
     CHECK(1);
 }
 
+/* Two tests that print while the other does (run at once with GS_TEST_JOBS=2). */
+static void chatty(const char *who)
+{
+    for (int i = 0; i < 3; i++) {
+        printf("    %s line %d\n", who, i);
+        fflush(stdout);
+        fprintf(stderr, "    %s err %d\n", who, i);
+        usleep(100000);
+    }
+    CHECK(1);
+}
+
+TEST_HIDDEN(runner_case_chatty_a, 0)
+{
+    chatty("a");
+}
+
+TEST_HIDDEN(runner_case_chatty_b, 0)
+{
+    chatty("b");
+}
+
 /* ------------------------------------------------------------------ the test */
 
 /* 1 once /proc/PID is gone or a zombie (waits up to 5 s for the kernel to finish the kill). */
@@ -104,4 +126,28 @@ TEST(runner_fails_test_without_checks_and_hanging_test)
             }
         }
     }
+}
+
+/* Tests run at once keep their output whole: each one's lines (stdout and stderr) come
+ * together, right before its PASS line; a bad GS_TEST_JOBS is refused. */
+TEST(runner_runs_tests_at_once_without_mixing_their_output)
+{
+    char self[4096];
+    ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
+    CHECK(n > 0);
+    if (n <= 0) return;
+    self[n] = '\0';
+    static char out[1 << 14];
+    char cmd[8192];
+    snprintf(cmd, sizeof cmd, "GS_TEST_JOBS=2 '%s' _runner_case_chatty_a _runner_case_chatty_b", self);
+    int rc = test_run(cmd, out, sizeof out);
+    CHECK_MSG(rc == 0 && strstr(out, "2 passed, 0 failed\n"), "exit %d\n%s", rc, out);
+    static const char *const whole[] = {
+        "    a line 0\n    a err 0\n    a line 1\n    a err 1\n    a line 2\n    a err 2\nPASS _runner_case_chatty_a (",
+        "    b line 0\n    b err 0\n    b line 1\n    b err 1\n    b line 2\n    b err 2\nPASS _runner_case_chatty_b (",
+    };
+    for (int i = 0; i < 2; i++) CHECK_MSG(strstr(out, whole[i]), "not whole: %s in\n%s", whole[i], out);
+    snprintf(cmd, sizeof cmd, "GS_TEST_JOBS=0 '%s' _runner_case_chatty_a", self);
+    rc = test_run(cmd, out, sizeof out);
+    CHECK_MSG(rc == 2 && strstr(out, "GS_TEST_JOBS=0: expected a whole number from 1 to 64"), "exit %d\n%s", rc, out);
 }
