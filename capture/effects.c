@@ -163,7 +163,7 @@ static gs_status scint_lights(void *ctx, int part, size_t l0, size_t l1)
             }
         }
     }
-    par->items[part] = items;
+    par->items[part] += items;
     return GS_OK;
 }
 
@@ -289,7 +289,7 @@ static gs_status skyglow_rows(void *ctx, int part, size_t ya, size_t yb)
                 items++;
             }
     }
-    par->items[part] = items;
+    par->items[part] += items;
     return GS_OK;
 }
 
@@ -413,7 +413,7 @@ static gs_status ambient_rows(void *ctx, int part, size_t y0, size_t y1)
             for (int b = 0; b < B; b++) s->img[p * (size_t)B + (size_t)b] += e * fx->ambient.chroma[b];
         }
     }
-    par->items[part] = (unsigned long long)s->W * (unsigned long long)(y1 - y0);
+    par->items[part] += (unsigned long long)s->W * (unsigned long long)(y1 - y0);
     return GS_OK;
 }
 
@@ -523,7 +523,7 @@ static gs_status shot_rows(void *ctx, int part, size_t y0, size_t y1)
         }
     }
     free(pc);
-    par->items[part] = rendered(s, r, y0, y1);
+    par->items[part] += rendered(s, r, y0, y1);
     return GS_OK;
 }
 
@@ -544,7 +544,7 @@ static gs_status saturation_rows(void *ctx, int part, size_t y0, size_t y1)
     for (size_t y = y0; y < y1; y++)
         for (size_t i = y * row; (!r->rows || r->rows[y]) && i < (y + 1) * row; i++)
             if (s->img[i] > fw) s->img[i] = fw;
-    par->items[part] = rendered(s, r, y0, y1);
+    par->items[part] += rendered(s, r, y0, y1);
     return GS_OK;
 }
 
@@ -569,7 +569,7 @@ static gs_status read_rows(void *ctx, int part, size_t y0, size_t y1)
         double *v = s->img + y * row;
         for (size_t i = 0; i < row; i++) v[i] += sd * gs_rng_normal(&rng);
     }
-    par->items[part] = rendered(s, r, y0, y1);
+    par->items[part] += rendered(s, r, y0, y1);
     return GS_OK;
 }
 
@@ -592,7 +592,7 @@ static gs_status adc_rows(void *ctx, int part, size_t y0, size_t y1)
             double v = floor(s->img[i] + 0.5);
             s->img[i] = v < 0 ? 0 : v > mx ? mx : v;
         }
-    par->items[part] = rendered(s, r, y0, y1);
+    par->items[part] += rendered(s, r, y0, y1);
     return GS_OK;
 }
 

@@ -13,7 +13,9 @@ gs_status cap_par_run(cap_sim *s, cap_render *r, size_t n, gs_range_fn fn)
     memset(&par, 0, sizeof par);
     par.s = s;
     par.r = r;
-    gs_status st = gs_parallel_for(s->threads, n, fn, &par);
+    /* about 64 chunks taken in turn: a frame's rows (or lights) are uneven work (the city below
+     * the sky), and every stage's result is the same for any split */
+    gs_status st = gs_parallel_chunks(s->threads, n, n / 64 + 1, fn, &par);
     r->items = 0;
     for (int p = 0; p < GS_MAX_THREADS; p++) r->items += par.items[p];
     return st;
@@ -46,7 +48,7 @@ static gs_status splat_rows(void *ctx, int part, size_t y0, size_t y1)
         }
         items += (unsigned long long)f->w * (unsigned long long)(yb - ya);
     }
-    par->items[part] = items;
+    par->items[part] += items;
     return GS_OK;
 }
 

@@ -110,6 +110,7 @@ static gs_status st_splat(cap_sim *s, cap_render *r)
 
 static gs_status to_dn_rows(void *ctx, int part, size_t y0, size_t y1)
 {
+    (void)part;   /* no items */
     cap_par *par = ctx;
     cap_sim *s = par->s;
     size_t row = (size_t)s->W * (size_t)s->B;
@@ -118,7 +119,6 @@ static gs_status to_dn_rows(void *ctx, int part, size_t y0, size_t y1)
     for (size_t y = y0; y < y1; y++)
         if (!r->rows || r->rows[y])
             for (size_t i = y * row; i < (y + 1) * row; i++) s->img[i] = s->img[i] * g + black;
-    par->items[part] = 0;
     return GS_OK;
 }
 
@@ -129,6 +129,7 @@ static gs_status st_to_dn(cap_sim *s, cap_render *r)
 
 static gs_status store_rows(void *ctx, int part, size_t y0, size_t y1)
 {
+    (void)part;   /* no items */
     cap_par *par = ctx;
     cap_sim *s = par->s;
     const cap_render *r = par->r;
@@ -145,7 +146,6 @@ static gs_status store_rows(void *ctx, int part, size_t y0, size_t y1)
             r->raw[i] = (unsigned short)(v > 0 ? (v < 65535 ? v : 65535) : 0);
         }
     }
-    par->items[part] = 0;
     return GS_OK;
 }
 

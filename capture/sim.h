@@ -114,9 +114,10 @@ typedef struct {
     cap_render *r;
     unsigned long long items[GS_MAX_THREADS];
 } cap_par;
-/* fn over [0, n) (rows, lights) on the sim's threads (gs_parallel_for with a cap_par as ctx);
- * r->items = the parts' items summed. The parts write disjoint outputs, so the frame is the same
- * bits on any number of threads (tests/test_capture_sim.c). */
+/* fn over [0, n) (rows, lights) on the sim's threads (gs_parallel_chunks with a cap_par as ctx:
+ * fn adds to its part's items, once per chunk); r->items = the parts' items summed. The chunks
+ * write disjoint outputs, so the frame is the same bits on any number of threads and any split
+ * (tests/test_capture_sim.c). */
 gs_status cap_par_run(cap_sim *s, cap_render *r, size_t n, gs_range_fn fn);
 /* Deposit every light's E through its footprint (point or PSF) into the image; r->items = the
  * pixels touched. */

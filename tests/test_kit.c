@@ -311,3 +311,70 @@ TEST(kit_status_detail_is_one_line)
     gs_fail(GS_EIO, "%s", "");
     CHECK(!strcmp(gs_detail(), ""));
 }
+
+/* ------------------------------------------------------------------ gs_parallel_chunks */
+
+/* Each index's visitor (part + 1) and each part's calls, so the test sees how the range was cut. */
+typedef struct {
+    int *owner;                           /* [n] the part that visited index i, + 1 */
+    int *count;                           /* [n] visits of index i */
+    size_t last_end[GS_MAX_THREADS];      /* a part's previous chunk's end */
+    int calls[GS_MAX_THREADS], out_of_order, bad_part;
+    size_t fail_at;                       /* a chunk holding this index fails (n: none) */
+} chunk_probe;
+
+static gs_status probe_range(void *ctx, int part, size_t b, size_t e)
+{
+    chunk_probe *p = ctx;
+    if (part < 0 || part >= GS_MAX_THREADS) {
+        p->bad_part = 1;
+        return GS_OK;
+    }
+    if (p->calls[part]++ && b < p->last_end[part]) p->out_of_order = 1;
+    p->last_end[part] = e;
+    for (size_t i = b; i < e; i++) {
+        p->owner[i] = part + 1;
+        p->count[i]++;   /* each index is one part's: no two threads write one slot */
+    }
+    if (p->fail_at >= b && p->fail_at < e) return gs_fail(GS_EINVAL, "chunk [%zu, %zu) failed", b, e);
+    return GS_OK;
+}
+
+/* Every index once, in chunks of the size asked (the last shorter), a part's chunks in rising
+ * order, parts numbered below the threads; one thread gets the whole range in one call; a
+ * failing chunk's status and message come back. */
+TEST(kit_parallel_chunks_every_index_once_and_failures_reported)
+{
+    enum { N = 1000 };
+    static int owner[N], count[N];
+    static const size_t chunks[] = {1, 7, 64, 1000, 5000};
+    for (int threads = 1; threads <= 4; threads++)
+        for (size_t c = 0; c < sizeof chunks / sizeof *chunks; c++) {
+            chunk_probe p;
+            memset(&p, 0, sizeof p);
+            memset(owner, 0, sizeof owner);
+            memset(count, 0, sizeof count);
+            p.owner = owner;
+            p.count = count;
+            p.fail_at = N;
+            CHECK_OK(gs_parallel_chunks(threads, N, chunks[c], probe_range, &p));
+            int once = 1, parts = 0, calls = 0;
+            for (size_t i = 0; i < N; i++) once &= count[i] == 1 && owner[i] >= 1 && owner[i] <= threads;
+            for (int q = 0; q < GS_MAX_THREADS; q++) {
+                parts += p.calls[q] > 0;
+                calls += p.calls[q];
+            }
+            size_t want = threads == 1 ? 1 : (N + chunks[c] - 1) / chunks[c];
+            CHECK_MSG(once && !p.out_of_order && !p.bad_part && (size_t)calls == want && parts <= threads,
+                      "threads %d chunk %zu: once %d order %d calls %d (want %zu) parts %d", threads, chunks[c],
+                      once, !p.out_of_order, calls, want, parts);
+        }
+    chunk_probe p;
+    memset(&p, 0, sizeof p);
+    p.owner = owner;
+    p.count = count;
+    p.fail_at = 500;
+    gs_status st = gs_parallel_chunks(2, N, 10, probe_range, &p);
+    CHECK(st == GS_EINVAL && strstr(gs_detail(), "chunk [500, 510) failed"));
+    CHECK_OK(gs_parallel_chunks(2, 0, 10, probe_range, &p));   /* an empty range: no call */
+}

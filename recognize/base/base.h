@@ -281,6 +281,13 @@ typedef gs_status (*gs_range_fn)(void *ctx, int part, size_t begin, size_t end);
  * the same bits on any number of threads. Returns the status of the lowest failing part with
  * its gs_detail() copied to the caller's thread. */
 gs_status gs_parallel_for(int threads, size_t n, gs_range_fn fn, void *ctx);
+/* fn over [0, n) in chunks of `chunk` indices (the last shorter) that P threads take in turn,
+ * part = the thread's slot (0 on the caller's): a part gets any number of chunks, in rising
+ * order, and on one thread (P = 1) the whole range in one call. For work that is uneven over
+ * the range; a caller whose result does not depend on the split gets the same bits as with
+ * gs_parallel_for. Returns the status of the lowest failing part (the others stop taking
+ * chunks). */
+gs_status gs_parallel_chunks(int threads, size_t n, size_t chunk, gs_range_fn fn, void *ctx);
 /* The clock id's time in seconds (CLOCK_MONOTONIC for intervals, CLOCK_PROCESS_CPUTIME_ID for
  * CPU time). */
 double gs_clock_s(clockid_t id);
