@@ -144,8 +144,12 @@ static void state_free(rec_blob_state *s)
 
 /* ------------------------------------------------------- 1. mean image */
 
-static gs_status mean_image(rec_blob_state *s)
+/* Pixels [p0, p1) of the mean image: each pixel's frames summed in frame order (the same
+ * floats on any split). */
+static gs_status mean_pixels(void *ctx, int part, size_t p0, size_t p1)
 {
+    (void)part;
+    rec_blob_state *s = ctx;
     const gs_capture *c = s->cap;
     const int HS = GS_MAX_HALVINGS + 1;
     const int B = s->bands;
@@ -154,7 +158,7 @@ static gs_status mean_image(rec_blob_state *s)
         const unsigned char *hk = c->halvings ? c->halvings + s->N * (size_t)k : NULL;
         const double *sc = s->scale + (size_t)k * HS;
         const float sc0 = (float)sc[0];
-        for (size_t p = 0; p < s->N; p++) {
+        for (size_t p = p0; p < p1; p++) {
             float acc = 0;
             int satp = 0;
             for (int b = 0; b < B; b++) {
@@ -164,11 +168,7 @@ static gs_status mean_image(rec_blob_state *s)
             }
             s->sat[p] |= (unsigned char)satp;
             if (hk) {
-                unsigned h = hk[p];
-                if (h > GS_MAX_HALVINGS)
-                    return gs_fail(GS_EINVAL, "blobs: frame %d pixel (x %zu, y %zu): %u halvings: "
-                                   "expected 0 to %d", k, p % (size_t)s->W, p / (size_t)s->W, h,
-                                   GS_MAX_HALVINGS);
+                unsigned h = hk[p];   /* <= GS_MAX_HALVINGS: mean_image checked */
                 float f = (float)sc[h];
                 s->M[p] += acc * f;
                 s->sumA[p] += f * f;
@@ -180,8 +180,22 @@ static gs_status mean_image(rec_blob_state *s)
         }
     }
     const float invK = 1.0f / (float)s->K;
-    for (size_t p = 0; p < s->N; p++) s->M[p] *= invK;
+    for (size_t p = p0; p < p1; p++) s->M[p] *= invK;
     return GS_OK;
+}
+
+static gs_status mean_image(rec_blob_state *s)
+{
+    const gs_capture *c = s->cap;
+    for (int k = 0; c->halvings && k < s->K; k++)
+        for (size_t p = 0; p < s->N; p++) {
+            unsigned h = c->halvings[s->N * (size_t)k + p];
+            if (h > GS_MAX_HALVINGS)
+                return gs_fail(GS_EINVAL, "blobs: frame %d pixel (x %zu, y %zu): %u halvings: "
+                               "expected 0 to %d", k, p % (size_t)s->W, p / (size_t)s->W, h,
+                               GS_MAX_HALVINGS);
+        }
+    return gs_parallel_for(s->o->threads, s->N, mean_pixels, s);
 }
 
 /* ----------------------------------------- 2-4. background, noise, threshold */
@@ -247,14 +261,52 @@ static gs_status detect(rec_blob_state *s)
 
 /* ------------------------------------------------ per-frame background mesh */
 
+/* Frames [k0, k1) of frame_mesh: each node's sums of its pixels' values and variances, each
+ * frame into its own planes (the same sums on any split). */
+typedef struct {
+    rec_blob_state *s;
+    const unsigned char *mask;   /* NULL: every unsaturated pixel */
+} frame_sums;
+
+static gs_status frame_sums_part(void *ctx, int part, size_t k0, size_t k1)
+{
+    (void)part;
+    const frame_sums *fs = ctx;
+    rec_blob_state *s = fs->s;
+    const gs_capture *c = s->cap;
+    const rec_mesh *m = &s->mesh;
+    const int nodes = m->nx * m->ny, B = s->bands, HS = GS_MAX_HALVINGS + 1;
+    for (size_t k = k0; k < k1; k++) {
+        const unsigned short *rk = c->raw + s->N * (size_t)B * k;
+        const unsigned char *hk = c->halvings ? c->halvings + s->N * k : NULL;
+        const double *sc = s->scale + k * HS;
+        double *val = s->fval + k * B * nodes, *var = s->fvar + k * B * nodes;
+        for (int y = 0; y < s->H; y++) {
+            const size_t row = (size_t)y * s->W;
+            const int nrow = m->iy[y] * m->nx;
+            for (int x = 0; x < s->W; x++) {
+                size_t p = row + (size_t)x;
+                if (s->sat[p] || (fs->mask && fs->mask[p])) continue;
+                double f = sc[hk ? hk[p] : 0];
+                int n = nrow + m->ix[x];
+                for (int b = 0; b < B; b++) {
+                    unsigned r = rk[p * (size_t)B + (size_t)b];
+                    val[b * nodes + n] += ((float)r - s->black) * f;
+                    var[b * nodes + n] += rec_blob_sample_var(s, r, f);
+                }
+            }
+        }
+    }
+    return GS_OK;
+}
+
 /* For every frame and band, each node: the mean of the values of its box's pixels outside the
  * dilated detections (and unsaturated), and the variance of that mean. use_mask = 0 takes every
  * unsaturated pixel (the fallback when detections cover nearly everything). */
 static gs_status frame_mesh(rec_blob_state *s, const unsigned char *mask, int use_mask)
 {
-    const gs_capture *c = s->cap;
     const rec_mesh *m = &s->mesh;
-    const int nodes = m->nx * m->ny, B = s->bands, HS = GS_MAX_HALVINGS + 1;
+    const int nodes = m->nx * m->ny, B = s->bands;
     const size_t planes = (size_t)s->K * (size_t)B;
     int *cnt = calloc((size_t)nodes, sizeof *cnt);
     unsigned char *good = malloc((size_t)nodes);
@@ -268,26 +320,12 @@ static gs_status frame_mesh(rec_blob_state *s, const unsigned char *mask, int us
     for (size_t p = 0; p < s->N; p++)
         if (!s->sat[p] && !(use_mask && mask[p]))
             cnt[m->iy[p / (size_t)s->W] * m->nx + m->ix[p % (size_t)s->W]]++;
-    for (int k = 0; k < s->K; k++) {
-        const unsigned short *rk = c->raw + s->N * (size_t)B * (size_t)k;
-        const unsigned char *hk = c->halvings ? c->halvings + s->N * (size_t)k : NULL;
-        const double *sc = s->scale + (size_t)k * HS;
-        double *val = s->fval + (size_t)k * B * nodes, *var = s->fvar + (size_t)k * B * nodes;
-        for (int y = 0; y < s->H; y++) {
-            const size_t row = (size_t)y * s->W;
-            const int nrow = m->iy[y] * m->nx;
-            for (int x = 0; x < s->W; x++) {
-                size_t p = row + (size_t)x;
-                if (s->sat[p] || (use_mask && mask[p])) continue;
-                double f = sc[hk ? hk[p] : 0];
-                int n = nrow + m->ix[x];
-                for (int b = 0; b < B; b++) {
-                    unsigned r = rk[p * (size_t)B + (size_t)b];
-                    val[b * nodes + n] += ((float)r - s->black) * f;
-                    var[b * nodes + n] += rec_blob_sample_var(s, r, f);
-                }
-            }
-        }
+    frame_sums fs = {s, use_mask ? mask : NULL};
+    gs_status st = gs_parallel_for(s->o->threads, (size_t)s->K, frame_sums_part, &fs);
+    if (st != GS_OK) {
+        free(cnt);
+        free(good);
+        return st;
     }
     int any = 0;
     for (int n = 0; n < nodes; n++) {

@@ -387,7 +387,9 @@ TEST(blobs_nan_inf_negative_input)
     /* HDR counts beyond the format's 16 */
     CHECK_OK(gs_capture_alloc_hdr(&cap));
     cap.halvings[5] = 17;
-    CHECK(rec_blobs_extract(&cap, &o, &cat) == GS_EINVAL);
+    cap.halvings[(size_t)cap.width * (size_t)cap.height + 3] = 18;   /* frame 1: the first bad one is named */
+    CHECK(rec_blobs_extract(&cap, &o, &cat) == GS_EINVAL && strstr(gs_detail(), "frame 0 pixel (x 5, y 0): 17 halvings: expected 0 to 16"));
+    cap.halvings[(size_t)cap.width * (size_t)cap.height + 3] = 0;
     cap.halvings[5] = 0;
     gs_capture_release(&cap);
 
