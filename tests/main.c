@@ -8,7 +8,8 @@
  * The limit is GS_TEST_TIMEOUT_S (default 300 s), or a test's own TEST_TIMEOUT if longer.
  * Hidden tests (TEST_HIDDEN, names starting with '_') run only when named exactly.
  * GS_TEST_JOBS tests (default: the online CPUs) run at once; each one's stdout and stderr go to
- * a file of its own, printed with its PASS/FAIL line when it ends (in the order they end). */
+ * a file of its own, printed with its PASS/FAIL line when it ends (in the order they end); one
+ * test at a time (one job or one test selected) writes straight to the runner's output. */
 #include "tests/test.h"
 
 #include <errno.h>
@@ -185,18 +186,19 @@ static int jobs_wanted(void)
     return (int)n;
 }
 
-/* Starts test i in slot r: a child in its own process group, its stdout and stderr into a file
- * of its own (printed when it ends, so that tests running at once do not interleave). */
-static void start(running *r, int i, double limit_s, const sigset_t *old_mask)
+/* Starts test i in slot r: a child in its own process group; when tests run at once (kept),
+ * its stdout and stderr into a file of its own, printed when it ends so that they do not
+ * interleave; else straight to the runner's (a long test shows its progress). */
+static void start(running *r, int i, double limit_s, int kept, const sigset_t *old_mask)
 {
     char out_path[600];
     snprintf(out_path, sizeof out_path, "%s/%s.out", tmp_root, tests[i].name);
-    int fds[2], out = open(out_path, O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
-    if (out < 0 || pipe(fds) != 0) {
+    int fds[2], out = kept ? open(out_path, O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0600) : -1;
+    if ((kept && out < 0) || pipe(fds) != 0) {
         perror("test runner: output file or pipe");
         exit(2);
     }
-    unlink(out_path);   /* the runner reads it through out; nothing else needs its name */
+    if (kept) unlink(out_path);   /* the runner reads it through out; nothing else needs its name */
     snprintf(tmp_dir, sizeof tmp_dir, "%s/%s", tmp_root, tests[i].name);
     fflush(stdout);
     fflush(stderr);
@@ -214,7 +216,7 @@ static void start(running *r, int i, double limit_s, const sigset_t *old_mask)
         sigprocmask(SIG_SETMASK, old_mask, NULL);
         close(fds[0]);
         fcntl(fds[1], F_SETFD, FD_CLOEXEC);
-        if (dup2(out, 1) < 0 || dup2(out, 2) < 0) _exit(3);
+        if (kept && (dup2(out, 1) < 0 || dup2(out, 2) < 0)) _exit(3);
         if (mkdir(tmp_dir, 0700) != 0) _exit(3);
         tests[i].fn();
         fflush(stdout);
@@ -270,9 +272,11 @@ static void print_result(running *r, int ok, const char *why)
     char buf[1 << 14];
     ssize_t got;
     fflush(stdout);
-    lseek(r->out_fd, 0, SEEK_SET);
-    while ((got = read(r->out_fd, buf, sizeof buf)) > 0) fwrite(buf, 1, (size_t)got, stdout);
-    close(r->out_fd);
+    if (r->out_fd >= 0) {
+        lseek(r->out_fd, 0, SEEK_SET);
+        while ((got = read(r->out_fd, buf, sizeof buf)) > 0) fwrite(buf, 1, (size_t)got, stdout);
+        close(r->out_fd);
+    }
     fputs(why, stdout);
     printf("%s %s (%.2f s)\n", ok ? "PASS" : "FAIL", tests[r->test].name, seconds_since(&r->t0));
     fflush(stdout);
@@ -319,6 +323,7 @@ static int wait_one(int njobs, int *passed, int *failed)
 int main(int argc, char **argv)
 {
     double limit_default_s = default_timeout_s();
+    int njobs = jobs_wanted();
     snprintf(tmp_root, sizeof tmp_root, "/tmp/gridsurvey-tests.XXXXXX");
     if (!mkdtemp(tmp_root)) {
         perror("test runner: mkdtemp");
@@ -332,7 +337,9 @@ int main(int argc, char **argv)
     signal(SIGINT, on_signal);
     signal(SIGTERM, on_signal);
     signal(SIGHUP, on_signal);
-    int passed = 0, failed = 0, njobs = jobs_wanted(), busy = 0;
+    int passed = 0, failed = 0, busy = 0, nsel = 0;
+    for (int i = 0; i < n_tests; i++) nsel += selected(tests[i].name, argc, argv);
+    int kept = njobs > 1 && nsel > 1;   /* tests run at once: their output kept apart */
     for (int i = 0; i < n_tests || busy > 0;) {
         if (i < n_tests && !selected(tests[i].name, argc, argv)) {
             i++;
@@ -343,7 +350,7 @@ int main(int argc, char **argv)
             while (slots[s].pid) s++;
             double limit_s = limit_default_s;
             if (tests[i].timeout_s > limit_s) limit_s = tests[i].timeout_s;
-            start(&slots[s], i++, limit_s, &old_mask);
+            start(&slots[s], i++, limit_s, kept, &old_mask);
             busy++;
             continue;
         }

@@ -32,7 +32,7 @@ faults-run: $(TEST_BIN) $(BIN) $(FAULT_SHIM)
 	@echo '| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |' >> $(BUILD)/faults.md
 	GS_SHARED=$(SHARED) GS_BIN=$(BIN) GS_SAN=$(SAN) GS_FAULT_SWEEP=$(FAULT_SWEEP) GS_FAULT_MALLOC_STEP=$(FAULT_MALLOC_STEP) \
 	GS_FAULT_RUN_MALLOC_STEP=$(FAULT_RUN_MALLOC_STEP) GS_FAULT_RUN_WRITE_STEP=$(FAULT_RUN_WRITE_STEP) GS_FAULT_JOBS=$(FAULT_JOBS) GS_FAULT_REPORT=$(CURDIR)/$(BUILD)/faults.md \
-	GS_TEST_TIMEOUT_S=172800 LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp:print_suppressions=0 \
+	GS_TEST_TIMEOUT_S=172800 GS_TEST_JOBS=1 LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp:print_suppressions=0 \
 	  $(TEST_BIN) fault_injection_ _fault_injection_run_new_database
 	@cat $(BUILD)/faults.md
 
