@@ -15,7 +15,7 @@ gs_status cap_par_run(cap_sim *s, cap_render *r, size_t n, gs_range_fn fn)
     par.r = r;
     /* about 64 chunks taken in turn: a frame's rows (or lights) are uneven work (the city below
      * the sky), and every stage's result is the same for any split */
-    gs_status st = gs_parallel_chunks(s->threads, n, n / 64 + 1, fn, &par);
+    gs_status st = gs_parallel_chunks(s->threads, n, 0, fn, &par);
     r->items = 0;
     for (int p = 0; p < GS_MAX_THREADS; p++) r->items += par.items[p];
     return st;

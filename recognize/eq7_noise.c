@@ -228,7 +228,7 @@ static gs_status match_with_population(const rec_matcher *m, catalog_pass *pass,
         pass->logprior = used > 0 ? logprior : NULL;
         pass->tol = tol;
         pass->other = other;
-        s = gs_parallel_chunks(m->o.threads, n, n / 64 + 1, catalog_part, pass);
+        s = gs_parallel_chunks(m->o.threads, n, 0, catalog_part, pass);
     }
     rep->reddening_lights = used;
     rep->chroma_tolerance = tol > 0.0 ? tol : m->o.chroma_tolerance;
@@ -322,14 +322,14 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
     /* pass 1: the camera noise (or the fixed model error); the lights on the matcher's threads */
     catalog_pass pass = {m, cat, out, ex, NULL, rep.median_model_error, population || flat_measured ? &fit : NULL,
                          0, NULL, 0.0, NAN, rep.flat_share, NULL};
-    if (s == GS_OK) s = gs_parallel_chunks(m->o.threads, n, n / 64 + 1, catalog_part, &pass);
+    if (s == GS_OK) s = gs_parallel_chunks(m->o.threads, n, 0, catalog_part, &pass);
     if (s != GS_OK) goto done;
     /* the flat share measured on pass 1's answers; when there is one, pass 1 again without it,
      * so that neither the excess noise nor the last pass's priors absorb its misfit */
     if (flat_measured && (s = measure_flat(cat, out, &fit, flat_i, &rep)) != GS_OK) goto done;
     if (rep.flat_share > 0.0 && flat_measured) {
         pass.flat_i = flat_i;
-        if ((s = gs_parallel_chunks(m->o.threads, n, n / 64 + 1, catalog_part, &pass)) != GS_OK) goto done;
+        if ((s = gs_parallel_chunks(m->o.threads, n, 0, catalog_part, &pass)) != GS_OK) goto done;
     }
     if (!measured) goto population;
     /* the clean references: a fit, an informative estimate, an aperture nothing disturbed */
@@ -357,14 +357,14 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
         global = weighted_median(ref, nr, (size_t)-1, 0, 0, 1, 1, 0, wk, &neff);
     }
     excess_pass ep = {ref, nr, cat, out, hy, fe};
-    if ((s = gs_parallel_chunks(m->o.threads, n, n / 64 + 1, excess_part, &ep)) != GS_OK) goto done;
+    if ((s = gs_parallel_chunks(m->o.threads, n, 0, excess_part, &ep)) != GS_OK) goto done;
     rep.source = REC_NOISE_POPULATION;
     rep.lights_used = nr;
     rep.median_model_error = sqrt(global);
     /* pass 2: the lights whose excess is not zero */
     pass.ex = NULL;
     pass.fe = fe;
-    if ((s = gs_parallel_chunks(m->o.threads, n, n / 64 + 1, catalog_part, &pass)) != GS_OK) goto done;
+    if ((s = gs_parallel_chunks(m->o.threads, n, 0, catalog_part, &pass)) != GS_OK) goto done;
 population:
     /* the last pass: every light again under what the population tells (eq7_population.c) */
     if (population) {

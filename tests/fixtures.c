@@ -4,10 +4,12 @@
 #include "tests/test.h"
 
 #include <errno.h>
+#include <fcntl.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -139,4 +141,13 @@ int fx_fork_pipe(int *fd)
     close(fds[1]);
     *fd = fds[0];
     return (int)pid;
+}
+
+int fx_lock(const char *path)
+{
+    int fd = open(path, O_WRONLY | O_CREAT | O_CLOEXEC, 0600);
+    int ok = fd >= 0 && flock(fd, LOCK_EX) == 0;
+    CHECK_MSG(ok, "%s: cannot lock", path);
+    if (!ok && fd >= 0) close(fd);
+    return ok ? fd : -1;
 }

@@ -17,6 +17,10 @@ const char *fx_path(const char *dir, const char *name);
 const char *fx_tmp(const char *name);
 /* 1 if path exists (stat succeeds). */
 int fx_exists(const char *path);
+/* An exclusive lock on the file `path` (created), close-on-exec so that no child keeps it: the
+ * descriptor to close() to release it, or -1 (a failed check). For what the tests of one
+ * runner, running at once, make once and share. */
+int fx_lock(const char *path);
 /* Writes n bytes (or the text without its NUL) to path, replacing it. */
 void fx_write_file(const char *path, const void *data, size_t n);
 void fx_write_text(const char *path, const char *text);

@@ -1,11 +1,11 @@
 /* pg_fixture.c - the tests' PostgreSQL + PostGIS cluster (pg_fixture.h). */
 #include "tests/pg_fixture.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/file.h>
 #include <unistd.h>
 
 const char *pg_fx_database(const char *name)
@@ -16,9 +16,8 @@ const char *pg_fx_database(const char *name)
      * needs it while the others (tests run at once, tests/main.c) wait on the lock */
     snprintf(dir, sizeof dir, "/tmp/gridsurvey-pg.%ld", (long)getppid());
     snprintf(path, sizeof path, "%s.lock", dir);
-    FILE *lock = fopen(path, "ae");   /* close-on-exec: the cluster's watchdog must not hold it */
-    CHECK_MSG(lock && flock(fileno(lock), LOCK_EX) == 0, "%s: cannot lock", path);
-    if (!lock) return NULL;
+    int lock = fx_lock(path);   /* close-on-exec: the cluster's watchdog does not hold it */
+    if (lock < 0) return NULL;
     snprintf(path, sizeof path, "%s/port", dir);
     int port = 0;
     FILE *f = fopen(path, "r");
@@ -34,16 +33,16 @@ const char *pg_fx_database(const char *name)
         if (rc == 77 && getuid() != 0) {
             printf("    SKIP: %s", out);
             CHECK(1);
-            fclose(lock);
+            close(lock);
             return NULL;
         }
         CHECK_MSG(rc == 0 && sscanf(out, "%d", &port) == 1, "pg_cluster.sh start: status %d: %s", rc, out);
         if (rc != 0) {
-            fclose(lock);
+            close(lock);
             return NULL;
         }
     }
-    fclose(lock);
+    close(lock);
     snprintf(conninfo, sizeof conninfo, "host=127.0.0.1 port=%d user=gs dbname=postgres", port);
     PGconn *c = pg_fx_connect(conninfo);
     if (!c) return NULL;

@@ -22,9 +22,7 @@
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
-#include <fcntl.h>
 #include <string.h>
-#include <sys/file.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -184,8 +182,7 @@ static const char *assets(void)
     snprintf(dir, sizeof dir, "%.*s/fault-assets", slash ? (int)(slash - t) : 1, slash ? t : ".");
     char lock_path[1100];
     snprintf(lock_path, sizeof lock_path, "%s.lock", dir);
-    int lock = open(lock_path, O_WRONLY | O_CREAT | O_CLOEXEC, 0600);
-    CHECK_MSG(lock >= 0 && flock(lock, LOCK_EX) == 0, "%s: cannot lock", lock_path);
+    int lock = fx_lock(lock_path);
     if (fx_exists(fx_path(dir, "ready"))) {
         if (lock >= 0) close(lock);
         return dir;

@@ -340,14 +340,14 @@ static gs_status probe_range(void *ctx, int part, size_t b, size_t e)
     return GS_OK;
 }
 
-/* Every index once, in chunks of the size asked (the last shorter), a part's chunks in rising
+/* Every index once, in chunks of the size asked (the last shorter; 0: about 64), a part's chunks in rising
  * order, parts numbered below the threads; one thread gets the whole range in one call; a
  * failing chunk's status and message come back. */
 TEST(kit_parallel_chunks_every_index_once_and_failures_reported)
 {
     enum { N = 1000 };
     static int owner[N], count[N];
-    static const size_t chunks[] = {1, 7, 64, 1000, 5000};
+    static const size_t chunks[] = {0, 1, 7, 64, 1000, 5000};   /* 0: the default, N / 64 + 1 */
     for (int threads = 1; threads <= 4; threads++)
         for (size_t c = 0; c < sizeof chunks / sizeof *chunks; c++) {
             chunk_probe p;
@@ -364,7 +364,7 @@ TEST(kit_parallel_chunks_every_index_once_and_failures_reported)
                 parts += p.calls[q] > 0;
                 calls += p.calls[q];
             }
-            size_t want = threads == 1 ? 1 : (N + chunks[c] - 1) / chunks[c];
+            size_t size = chunks[c] ? chunks[c] : N / 64 + 1, want = threads == 1 ? 1 : (N + size - 1) / size;
             CHECK_MSG(once && !p.out_of_order && !p.bad_part && (size_t)calls == want && parts <= threads,
                       "threads %d chunk %zu: once %d order %d calls %d (want %zu) parts %d", threads, chunks[c],
                       once, !p.out_of_order, calls, want, parts);

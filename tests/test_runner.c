@@ -70,6 +70,16 @@ TEST_HIDDEN(runner_case_chatty_b, 0)
 
 /* ------------------------------------------------------------------ the test */
 
+/* The test binary's own path into self (size bytes); 0 when it cannot be read (a failed check). */
+static int self_exe(char *self, size_t size)
+{
+    ssize_t n = readlink("/proc/self/exe", self, size - 1);
+    CHECK(n > 0);
+    if (n <= 0) return 0;
+    self[n] = '\0';
+    return 1;
+}
+
 /* 1 once /proc/PID is gone or a zombie (waits up to 5 s for the kernel to finish the kill). */
 static int process_gone(long pid)
 {
@@ -90,10 +100,7 @@ static int process_gone(long pid)
 TEST(runner_fails_test_without_checks_and_hanging_test)
 {
     char self[4096];
-    ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
-    CHECK(n > 0);
-    if (n <= 0) return;
-    self[n] = '\0';
+    if (!self_exe(self, sizeof self)) return;
     static const struct {
         const char *name, *reason;
         int status;
@@ -133,10 +140,7 @@ TEST(runner_fails_test_without_checks_and_hanging_test)
 TEST(runner_runs_tests_at_once_without_mixing_their_output)
 {
     char self[4096];
-    ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
-    CHECK(n > 0);
-    if (n <= 0) return;
-    self[n] = '\0';
+    if (!self_exe(self, sizeof self)) return;
     static char out[1 << 14];
     char cmd[8192];
     snprintf(cmd, sizeof cmd, "GS_TEST_JOBS=2 '%s' _runner_case_chatty_a _runner_case_chatty_b", self);

@@ -281,7 +281,8 @@ typedef gs_status (*gs_range_fn)(void *ctx, int part, size_t begin, size_t end);
  * the same bits on any number of threads. Returns the status of the lowest failing part with
  * its gs_detail() copied to the caller's thread. */
 gs_status gs_parallel_for(int threads, size_t n, gs_range_fn fn, void *ctx);
-/* fn over [0, n) in chunks of `chunk` indices (the last shorter) that P threads take in turn,
+/* fn over [0, n) in chunks of `chunk` indices (the last shorter; 0: n / 64 + 1, about 64
+ * chunks) that P threads take in turn,
  * part = the thread's slot (0 on the caller's): a part gets any number of chunks, in rising
  * order, and on one thread (P = 1) the whole range in one call. For work that is uneven over
  * the range; a caller whose result does not depend on the split gets the same bits as with

@@ -103,7 +103,7 @@ gs_status gs_parallel_for(int threads, size_t n, gs_range_fn fn, void *ctx)
 gs_status gs_parallel_chunks(int threads, size_t n, size_t chunk, gs_range_fn fn, void *ctx)
 {
     if (n == 0) return GS_OK;
-    if (chunk < 1) chunk = 1;
+    if (chunk == 0) chunk = n / 64 + 1;
     size_t nchunks = (n + chunk - 1) / chunk;
     int P = gs_threads_resolve(threads);
     if ((size_t)P > nchunks) P = (int)nchunks;
