@@ -27,11 +27,14 @@ void rec_eq7_work_free(rec_eq7_work *w)
     free(w->peak_z);
     free(w->peak_gain);
     free(w->peak_cell);
-    free(w->S);
-    free(w->T);
-    free(w->w);
-    free(w->wx);
-    free(w->xs);
+    free(w->S_all);
+    free(w->T_all);
+    free(w->w_all);
+    free(w->wx_all);
+    free(w->xs_all);
+    free(w->prep);
+    free(w->U);
+    free(w->done);
     free(w->tt);
     free(w->dt);
     free(w->d2t);
@@ -47,10 +50,22 @@ void rec_eq7_work_free(rec_eq7_work *w)
     memset(w, 0, sizeof *w);
 }
 
-gs_status rec_eq7_work_alloc(const rec_matcher *m, rec_eq7_work *w)
+void rec_eq7_work_row(const rec_matcher *m, rec_eq7_work *w, size_t q)
+{
+    size_t D = (size_t)m->D, SM = (size_t)m->nfit * m->M;
+    w->w = w->w_all + q * D;
+    w->wx = w->wx_all + q * D;
+    w->xs = w->xs_all + q * D;
+    w->S = w->S_all + q * SM;
+    w->T = w->T_all + q * SM;
+}
+
+gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t rows)
 {
     memset(w, 0, sizeof *w);
     size_t M = m->M, nb = m->nb, D = (size_t)m->D;
+    size_t nr = (rows + SUMS_ROWS - 1) / SUMS_ROWS * SUMS_ROWS;   /* the sums' tiles */
+    w->rows = rows;
     w->L = malloc(sizeof *w->L * M);
     w->mass = malloc(sizeof *w->mass * M);
     w->cand = malloc(sizeof *w->cand * (M + 3 * nb));
@@ -64,11 +79,14 @@ gs_status rec_eq7_work_alloc(const rec_matcher *m, rec_eq7_work *w)
     w->peak_z = malloc(sizeof *w->peak_z * nb);
     w->peak_gain = malloc(sizeof *w->peak_gain * nb);
     w->peak_cell = malloc(sizeof *w->peak_cell * nb);
-    w->S = malloc(sizeof *w->S * M * (size_t)m->nfit);
-    w->T = malloc(sizeof *w->T * M * (size_t)m->nfit);
-    w->w = malloc(sizeof *w->w * D);
-    w->wx = malloc(sizeof *w->wx * D);
-    w->xs = malloc(sizeof *w->xs * D);
+    w->S_all = calloc(nr * M * (size_t)m->nfit, sizeof *w->S_all);
+    w->T_all = calloc(nr * M * (size_t)m->nfit, sizeof *w->T_all);
+    w->w_all = calloc(nr * D, sizeof *w->w_all);
+    w->wx_all = calloc(nr * D, sizeof *w->wx_all);
+    w->xs_all = calloc(nr * D, sizeof *w->xs_all);
+    w->prep = calloc(nr, sizeof *w->prep);
+    w->U = malloc(sizeof *w->U * M);
+    w->done = calloc(M, 1);
     w->tt = malloc(sizeof *w->tt * D);
     w->dt = malloc(sizeof *w->dt * D);
     w->d2t = malloc(sizeof *w->d2t * D);
@@ -82,13 +100,19 @@ gs_status rec_eq7_work_alloc(const rec_matcher *m, rec_eq7_work *w)
     w->spec = malloc(sizeof *w->spec * ((size_t)m->G / 2 + 1 + 2 * D));
     w->grid = malloc(sizeof *w->grid * (size_t)m->G);
     if (!w->L || !w->mass || !w->cand || !w->mark || !w->bmass || !w->wmass || !w->has_peak ||
-        !w->peak_s || !w->peak_L || !w->peak_sig || !w->peak_z || !w->peak_gain || !w->peak_cell || !w->S || !w->T || !w->w ||
-        !w->wx || !w->xs || !w->tt || !w->dt || !w->d2t || !w->r2 || !w->s2 || !w->m2 || !w->tr || !w->t12 || !w->scratch || !w->acc ||
-        !w->spec || !w->grid) {
+        !w->peak_s || !w->peak_L || !w->peak_sig || !w->peak_z || !w->peak_gain || !w->peak_cell || !w->S_all ||
+        !w->T_all || !w->w_all || !w->wx_all || !w->xs_all || !w->prep || !w->U || !w->done || !w->tt || !w->dt ||
+        !w->d2t || !w->r2 || !w->s2 || !w->m2 || !w->tr || !w->t12 || !w->scratch || !w->acc || !w->spec || !w->grid) {
         rec_eq7_work_free(w);
         return gs_fail(GS_ENOMEM, "Eq. 7: cannot allocate scratch for %zu templates", M);
     }
+    rec_eq7_work_row(m, w, 0);
     return GS_OK;
+}
+
+gs_status rec_eq7_work_alloc(const rec_matcher *m, rec_eq7_work *w)
+{
+    return rec_eq7_work_alloc_rows(m, w, 1);
 }
 
 
@@ -191,7 +215,7 @@ void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_
         size_t j = w->cand[i];
         int b = m->tbulb[j];
         if (m->cont[b]) continue;
-        consider(&best, &second, w->L[j] - Lmax + log(m->cellw[j]), b, j, m->shift[j]);
+        consider(&best, &second, w->L[j] - Lmax + m->logcellw[j], b, j, m->shift[j]);
     }
     for (size_t b = 0; m->ncont && b < nb; b++) {
         if (!m->cont[b] || !w->has_peak[b]) continue;

@@ -2,13 +2,11 @@
  * template in double, the continuous-phase refinement, the flags and the answer. */
 #include "recognize/internal.h"
 
-#include <cblas.h>
 #include <float.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
-#include <fftw3.h>
 
 /* ------------------------------------------------------------ one light */
 
@@ -55,36 +53,6 @@ static void chi2_at(const rec_matcher *m, rec_eq7_work *w, size_t b, double s, d
     if (e->chi2 < 0.0) e->chi2 = 0.0;
 }
 
-/* Log likelihood (no prior) for sums S, T: -chi2/2 - log(T)/2 + log Phi(S/sqrt(T)). */
-double rec_eq7_loglik(double Sxx, double S, double T)
-{
-    if (!(T > 0.0)) return -INFINITY;
-    double z = S / sqrt(T);
-    double chi2 = Sxx - S * z / sqrt(T);
-    if (chi2 < 0.0) chi2 = 0.0;
-    return -0.5 * chi2 - 0.5 * log(T) + gs_log_phi(z);
-}
-
-/* The same with nf brightness parameters (one per band, each marginalised over a_b > 0 with a
- * flat prior): -chi2/2 + sum_b (-log(T_b)/2 + log Phi(S_b/sqrt(T_b))); a band without usable
- * samples (T_b = 0 for every template) has no parameter. */
-static double loglik_n(int nf, double Sxx, const double *S, const double *T)
-{
-    if (nf == 1) return rec_eq7_loglik(Sxx, S[0], T[0]);
-    double chi2 = Sxx, l = 0.0;
-    int any = 0;
-    for (int f = 0; f < nf; f++) {
-        if (!(T[f] > 0.0)) continue;
-        double z = S[f] / sqrt(T[f]);
-        chi2 -= z * z;
-        l += -0.5 * log(T[f]) + gs_log_phi(z);
-        any = 1;
-    }
-    if (!any) return -INFINITY;
-    if (chi2 < 0.0) chi2 = 0.0;
-    return -0.5 * chi2 + l;
-}
-
 /* Brightness / its std: S/sqrt(T) for one gain; with band gains sum_b a_b / sqrt(sum_b 1/T_b),
  * a_b = S_b/T_b (unconstrained: a linear statistic, as the one-gain z); 0 when not positive. */
 static double snr_n(int nf, const double *S, const double *T)
@@ -109,282 +77,11 @@ static double gain_n(int nf, const double *S, const double *T)
     return g;
 }
 
-/* The reddened band model (recognize.h) for bulb b's per-band sums S_b = sum w x t, T_b =
- * sum w t^2 (templates of mean 1 per band): the per-band estimates a_b = S_b/T_b (variance
- * 1/T_b) are explained by a c_b(tau), c_b = Q_b exp(-tau f_b), each band free within the
- * tolerance t: a_b ~ N(a c_b, (t a c_b)^2) marginalised exactly,
- *   log p = -R/2 - sum_b log(1 + s_b^2 T_b)/2 - (sum v a_b^2 - B^2/A)/2 - log(A)/2 + log Phi(B/sqrt(A)),
- * R = Sxx - sum_b S_b^2/T_b, s_b = t a c_b, v_b = 1/(1/T_b + s_b^2), A = sum v c^2, B = sum v c a_b
- * (a marginalised over a > 0 with a flat prior, s_b from the plug-in a), then averaged over a
- * prior on tau over REC_TAU_N points of [REC_TAU_LO, REC_TAU_HI] (c_b tabulated per bulb in
- * m->red_c): uniform, or the light's population prior w->tau_logprior (eq7_population.c). With
- * t -> 0 and tau = 0 this is the paper's one brightness times Q_b. fit (may be NULL) gets the
- * most probable tau's numbers; ll_acc (may be NULL) accumulates exp(L(tau) + ll_logw), the prior
- * left out, per tau. */
-typedef struct {
-    double chi2;                 /* R + sum v (a_b - a c_b)^2 at the best tau */
-    double a, tau, z;            /* the brightness, optical depth and a / sigma_a there */
-    double band[GS_MAX_BANDS];   /* each band's brightness: the posterior mean of a_b */
-} red_fit;
-
-static double loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb, double Sxx,
-                         const double *S, const double *T, red_fit *fit, double *ll_acc,
-                         double ll_logw)
-{
-    double tol = w->chroma_tol > 0.0 ? w->chroma_tol : m->o.chroma_tolerance;
-    double R = Sxx, ah[GS_MAX_BANDS];
-    int nb = m->bands, any = 0;
-    for (int b = 0; b < nb; b++) {
-        ah[b] = T[b] > 0.0 ? S[b] / T[b] : 0.0;
-        if (T[b] > 0.0) {
-            R -= S[b] * ah[b];
-            any = 1;
-        }
-    }
-    if (!any) return -INFINITY;
-    if (R < 0.0) R = 0.0;
-    /* the three rounds of s_b from the current brightness, for every tau at once: the taus are
-     * independent, so the divisions of one overlap the others' (each tau's numbers are the same
-     * operations in the same order as one tau alone). occ1 = prod_b (1 + s_b^2 T_b) - 1: the
-     * occupation term sum_b log(1 + s_b^2 T_b) is log1p(occ1), one logarithm for the bands (and
-     * with log A, one for both); only the last round's is used. A tau whose A is not > 0 in some
-     * round has no likelihood. */
-    const double *cb = m->red_c + (size_t)bulb * REC_TAU_N * (size_t)nb;
-    double av[REC_TAU_N] = {0}, Av[REC_TAU_N], Bv[REC_TAU_N], Cv[REC_TAU_N], occv[REC_TAU_N];
-    unsigned char dead[REC_TAU_N] = {0};
-    for (int it = 0; it < 3; it++) {
-        int first = 1;   /* the sums start at 0 (+0 + x, as a zeroed sum would) */
-        for (int b = 0; b < nb; b++) {
-            if (!(T[b] > 0.0)) continue;
-            double Tb = T[b], iT = 1.0 / Tb, ab = ah[b];
-            for (int i = 0; i < REC_TAU_N; i++) {
-                double c = cb[(size_t)i * (size_t)nb + (size_t)b], a = av[i] > 0.0 ? av[i] : 0.0;
-                double sb = tol * a * c, x = sb * sb * Tb, v = 1.0 / (iT + sb * sb);
-                double A0 = first ? 0.0 : Av[i], B0 = first ? 0.0 : Bv[i], C0 = first ? 0.0 : Cv[i],
-                       o0 = first ? 0.0 : occv[i];
-                Av[i] = A0 + v * c * c;
-                Bv[i] = B0 + v * c * ab;
-                Cv[i] = C0 + v * ab * ab;
-                occv[i] = o0 + (x + o0 * x);
-            }
-            first = 0;
-        }
-        for (int i = 0; i < REC_TAU_N; i++) {
-            dead[i] |= !(Av[i] > 0.0);
-            if (!dead[i]) av[i] = Bv[i] / Av[i];
-        }
-    }
-    double Lt[REC_TAU_N], Lmax = -INFINITY;
-    for (int i = 0; i < REC_TAU_N; i++) {
-        double tau = rec_eq7_tau(i);
-        const double *c = cb + (size_t)i * (size_t)nb;
-        double a = av[i], A = Av[i], B = Bv[i], C = Cv[i], occ1 = occv[i];
-        if (dead[i]) {
-            Lt[i] = -INFINITY;
-            continue;
-        }
-        double between = C - B * B / A;
-        if (between < 0.0) between = 0.0;
-        double z = B / sqrt(A);
-        Lt[i] = -0.5 * (R + between) - 0.5 * log(A + A * occ1) + gs_log_phi(z);
-        if (ll_acc) ll_acc[i] = rec_log_add(ll_acc[i], Lt[i] + ll_logw);
-        if (w->has_tau_prior) Lt[i] += w->tau_logprior[i] + log((double)REC_TAU_N);
-        if (Lt[i] > Lmax) {
-            Lmax = Lt[i];
-            if (fit) {
-                fit->chi2 = R + between;
-                fit->a = a > 0.0 ? a : 0.0;
-                fit->tau = tau;
-                fit->z = z > 0.0 ? z : 0.0;
-                for (int b = 0; b < nb; b++) {
-                    double sb = tol * fit->a * c[b];
-                    /* posterior mean of a_b: data a_b (weight T_b) and prior a c_b (1/s_b^2) */
-                    fit->band[b] = T[b] > 0.0 ? (sb > 0.0 ? (T[b] * ah[b] + fit->a * c[b] / (sb * sb)) /
-                                                              (T[b] + 1.0 / (sb * sb))
-                                                          : fit->a * c[b])
-                                              : 0.0;
-                    if (fit->band[b] < 0.0) fit->band[b] = 0.0;
-                }
-            }
-        }
-    }
-    if (!isfinite(Lmax)) return -INFINITY;
-    double sum = 0.0;
-    for (int i = 0; i < REC_TAU_N; i++) sum += rec_exp_neg(Lt[i] - Lmax);
-    return Lmax + log(sum / REC_TAU_N);
-}
-
-double rec_eq7_band_misfit(const rec_matcher *m, int bulb, const double *S, const double *T, double tol)
-{
-    rec_eq7_work w;
-    memset(&w, 0, sizeof w);   /* only the tau prior (none) and the tolerance are read */
-    w.chroma_tol = tol;
-    double Sxx = 0.0;   /* = sum S^2/T: no residual within the bands, the fit's chi2 is the misfit */
-    for (int b = 0; b < m->bands; b++)
-        if (T[b] > 0.0) Sxx += S[b] * S[b] / T[b];
-    red_fit rf;
-    if (!isfinite(loglik_red(m, &w, bulb, Sxx, S, T, &rf, NULL, 0.0))) return INFINITY;
-    return rf.chi2;
-}
-
 /* The log likelihood of bulb b's sums under the matcher's band model. */
 static double loglik_bulb(const rec_matcher *m, const rec_eq7_work *w, int b, double Sxx,
                           const double *S, const double *T)
 {
-    return m->red ? loglik_red(m, w, b, Sxx, S, T, NULL, NULL, 0.0) : loglik_n(m->nfit, Sxx, S, T);
-}
-
-/* The sums of template j from the rec_eq7_work arrays ([f * M + j]). */
-static void sums_of(const rec_matcher *m, const rec_eq7_work *w, size_t j, double *S, double *T)
-{
-    for (int f = 0; f < m->nfit; f++) {
-        S[f] = w->S[(size_t)f * m->M + j];
-        T[f] = w->T[(size_t)f * m->M + j];
-    }
-}
-
-/* An upper bound of loglik_red for bulb b's sums: with v_b = T_b / (1 + s_b^2 T_b) <= T_b the
- * occupation term is sum_b log(v_b / T_b) / 2 <= 0 and A = sum v c^2 >= v_k c_k^2 for any used
- * band k, so -log(A)/2 - occ/2 <= -log(c_k^2 T_k)/2; between >= 0 and log Phi <= 0; c_k(tau) is
- * at least the bulb's smallest tabulated c_k (cmin); the tau prior adds at most its largest
- * log weight (lp_max). Every tau's L(tau) obeys it, so their prior-weighted mean does. */
-static double red_bound(const rec_matcher *m, double Sxx, const double *S, const double *T,
-                        const double *cmin, double lp_max)
-{
-    double R = Sxx, best = -INFINITY;
-    for (int b = 0; b < m->bands; b++) {
-        if (!(T[b] > 0.0)) continue;
-        R -= S[b] * (S[b] / T[b]);
-        double l = log(cmin[b] * cmin[b] * T[b]);
-        if (l > best) best = l;
-    }
-    if (!isfinite(best)) return -INFINITY;
-    if (R < 0.0) R = 0.0;
-    double u = -0.5 * R - 0.5 * best + lp_max;
-    return u + 1e-9 * (1.0 + fabs(u));   /* rounding slack: a bound in floating point too */
-}
-
-/* The reddened model's log likelihood of template j into w->L[j] (its tau terms into tau_ll
- * when collecting); returns it. */
-static double red_exact(const rec_matcher *m, rec_eq7_work *w, size_t j, double Sxx)
-{
-    double Sv[GS_MAX_BANDS], Tv[GS_MAX_BANDS];
-    sums_of(m, w, j, Sv, Tv);
-    int b = m->tbulb[j];   /* every bulb weighs the same, whatever its phase grid */
-    w->L[j] = loglik_red(m, w, b, Sxx, Sv, Tv, NULL, w->collect_tau ? w->tau_ll : NULL,
-                         -log((double)m->count[b]));
-    return w->L[j];
-}
-
-/* w->L of every template under the reddened model, exactly wherever it can matter and -inf
- * elsewhere (a bound-based screen; returns the largest L). Exact: every template whose bound
- * reaches within CUT_PIXEL of a computed L (the rest carry < e^-30 of the best's mass each: the
- * posterior to ~M e^-30, runner-ups below that may differ), each bulb's best template (the
- * runner-up's ranking), and every template that can be among the REC_NESTED_FIRST + 1 largest
- * L (the blend search's first templates). The bounds go in w->mass (rec_eq7_decide rewrites
- * it). */
-static double red_screen(const rec_matcher *m, rec_eq7_work *w, double Sxx)
-{
-    size_t M = m->M;
-    double *U = w->mass, lp_max = 0.0, Sv[GS_MAX_BANDS], Tv[GS_MAX_BANDS];
-    if (w->has_tau_prior) {
-        lp_max = -INFINITY;
-        for (int i = 0; i < REC_TAU_N; i++) lp_max = fmax(lp_max, w->tau_logprior[i]);
-        lp_max += log((double)REC_TAU_N);
-    }
-    size_t jbest = 0;
-    for (size_t b = 0; b < m->nb; b++) {
-        double cmin[GS_MAX_BANDS];
-        for (int band = 0; band < m->bands; band++) {
-            cmin[band] = INFINITY;
-            for (int i = 0; i < REC_TAU_N; i++)
-                cmin[band] = fmin(cmin[band], m->red_c[(b * REC_TAU_N + (size_t)i) * (size_t)m->bands + (size_t)band]);
-        }
-        for (size_t j = m->first[b]; j < m->first[b] + m->count[b]; j++) {
-            sums_of(m, w, j, Sv, Tv);
-            U[j] = red_bound(m, Sxx, Sv, Tv, cmin, lp_max);
-            w->L[j] = NAN;   /* not computed */
-            if (U[j] > U[jbest]) jbest = j;
-        }
-    }
-    double lo = red_exact(m, w, jbest, Sxx);   /* Lmax >= lo */
-    for (size_t b = 0; b < m->nb; b++) {
-        size_t j0 = m->first[b], n = m->count[b], jb = j0;
-        for (size_t j = j0; j < j0 + n; j++)
-            if (U[j] > U[jb]) jb = j;
-        double lb = isnan(w->L[jb]) ? red_exact(m, w, jb, Sxx) : w->L[jb];
-        for (size_t j = j0; j < j0 + n; j++)
-            if (isnan(w->L[j]) && (U[j] >= lo - CUT_PIXEL || U[j] >= lb)) red_exact(m, w, j, Sxx);
-        for (size_t j = j0; j < j0 + n; j++)
-            if (w->L[j] > lo) lo = w->L[j];
-    }
-    /* the REC_NESTED_FIRST + 1 largest computed L: a template whose bound is below the least of
-     * them cannot be among them */
-    double top[REC_NESTED_FIRST + 1];
-    int nt = 0;
-    for (size_t j = 0; j < M; j++) {
-        double l = w->L[j];
-        if (!isfinite(l) || (nt == REC_NESTED_FIRST + 1 && !(l > top[nt - 1]))) continue;
-        int q = nt < REC_NESTED_FIRST + 1 ? nt++ : nt - 1;
-        while (q > 0 && l > top[q - 1]) {
-            top[q] = top[q - 1];
-            q--;
-        }
-        top[q] = l;
-    }
-    double th = nt == REC_NESTED_FIRST + 1 ? top[nt - 1] : -INFINITY;
-    double Lmax = -INFINITY;
-    for (size_t j = 0; j < M; j++) {
-        if (isnan(w->L[j])) w->L[j] = U[j] >= th ? red_exact(m, w, j, Sxx) : -INFINITY;
-        if (w->L[j] > Lmax) Lmax = w->L[j];
-    }
-    return Lmax;
-}
-
-/* The light's K-point DFTs of wx and w per band into w->spec + nh (X, then W; [band * K + r]),
- * conjugated: conj(sum_k v_k e^{2 pi i r k / K}). */
-void rec_eq7_light_dfts(const rec_matcher *m, rec_eq7_work *w)
-{
-    size_t K = (size_t)m->K, nh = (size_t)m->G / 2 + 1, D = (size_t)m->D;
-    double complex *X = w->spec + nh, *W = X + D;
-    for (int band = 0; band < m->bands; band++)
-        for (size_t r = 0; r < K; r++) {
-            double complex x = 0.0, v = 0.0;
-            size_t rk = 0;   /* r k mod K */
-            for (size_t k = 0; k < K; k++) {
-                size_t d = (size_t)band * K + k;
-                x += w->wx[d] * m->wk[rk];
-                v += w->w[d] * m->wk[rk];
-                rk += r;
-                if (rk >= K) rk -= K;
-            }
-            X[(size_t)band * K + r] = conj(x);
-            W[(size_t)band * K + r] = conj(v);
-        }
-}
-
-void rec_eq7_grid_sums(const rec_matcher *m, rec_eq7_work *w, size_t b)
-{
-    size_t K = (size_t)m->K, nh = (size_t)m->G / 2 + 1, D = (size_t)m->D, M = m->M;
-    const double complex *X = w->spec + nh, *W = X + D;
-    int nf = m->nfit;
-    for (int f = 0; f < nf; f++)
-        for (int sq = 0; sq < 2; sq++) {
-            /* the cross-spectrum of the parameter's bands (all of them with one gain) */
-            int b0 = nf == 1 ? 0 : f, b1 = nf == 1 ? m->bands : f + 1;
-            for (size_t r = 0, rk = 0; r < nh; r++) {
-                double complex z = 0.0;
-                for (int band = b0; band < b1; band++) {
-                    size_t o = (b * (size_t)m->bands + (size_t)band) * nh + r;
-                    z += sq ? m->bhat[o] * W[(size_t)band * K + rk] : m->ahat[o] * X[(size_t)band * K + rk];
-                }
-                w->spec[r] = z;
-                if (++rk == K) rk = 0;
-            }
-            fftw_execute_dft_c2r((fftw_plan)m->c2r, (fftw_complex *)w->spec, w->grid);
-            double *dst = (sq ? w->T : w->S) + (size_t)f * M + m->first[b];
-            memcpy(dst, w->grid, sizeof *dst * (size_t)m->G);
-        }
+    return m->red ? rec_eq7_loglik_red(m, w, b, Sxx, S, T, NULL, NULL, 0.0) : rec_eq7_loglik_n(m->nfit, Sxx, S, T);
 }
 
 /* Refine continuous bulb b around its best grid cell j0: safeguarded Newton on the exact chi2(s)
@@ -399,7 +96,7 @@ void rec_eq7_refine_peak(const rec_matcher *m, rec_eq7_work *w, size_t b, size_t
     double q[3], Sv[GS_MAX_BANDS], Tv[GS_MAX_BANDS];
     size_t js[3] = {jm, j0, jp};
     for (int i = 0; i < 3; i++) {
-        sums_of(m, w, js[i], Sv, Tv);
+        rec_eq7_sums_of(m, w, js[i], Sv, Tv);
         q[i] = Sxx - gain_n(m->nfit, Sv, Tv);
     }
     double den = q[0] - 2.0 * q[1] + q[2];
@@ -440,7 +137,7 @@ void rec_eq7_refine_peak(const rec_matcher *m, rec_eq7_work *w, size_t b, size_t
     w->has_peak[b] = 1;
     w->peak_z[b] = snr_n(e.nf, e.S, e.T);
     if (u == 0.0) {
-        sums_of(m, w, j0, Sv, Tv);
+        rec_eq7_sums_of(m, w, j0, Sv, Tv);
         w->peak_z[b] = snr_n(m->nfit, Sv, Tv);
     }
     w->peak_gain[b] = gp;
@@ -599,19 +296,16 @@ static void flat_share_of(const rec_matcher *m, rec_eq7_work *w, const double *t
     w->fit_flat_var = info > 0.0 ? 1.0 / info : INFINITY;
 }
 
-gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const double *signal,
-                                 const double *sigma, double fe, rec_match *out,
-                                 rec_eq7_excess *excess)
+int rec_eq7_light_prepare(const rec_matcher *m, rec_eq7_work *w, size_t q, const double *signal,
+                          const double *sigma, double fe, rec_match *out)
 {
-    size_t D = (size_t)m->D, M = m->M;
+    size_t D = (size_t)m->D, K = (size_t)m->K;
+    rec_eq7_work_row(m, w, q);
+    rec_eq7_prep *p = &w->prep[q];
+    memset(p, 0, sizeof *p);
     unsigned flags = 0;
-    if (excess) excess->valid = 0;
-    w->fit_bulb = -1;
-    w->other_lbf = NAN;
-    w->fit_flat_var = INFINITY;
     /* usable samples: finite signal, finite sigma > 0; sigma = +inf marks a dropped sample */
     double c = 0.0;
-    int used = 0;
     for (size_t d = 0; d < D; d++) {
         double x = signal[d], s = sigma[d];
         if (isinf(s) && s > 0.0) continue;
@@ -624,41 +318,30 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
     /* the band levels: mu_b^2 = mean(x^2 - sigma^2) over the band's usable samples (>= 0), in
      * units of c. A multiplicative excess e per sample adds (e mu_b)^2 to each sample's variance:
      * on average over the band exactly the variance it causes (E chi2 = dof), spread evenly over
-     * the K windows. */
-    double mu2[GS_MAX_BANDS] = {0.0, 0.0, 0.0};
-    {
-        size_t K = (size_t)m->K;
-        for (int band = 0; band < m->bands; band++) {
-            double sum = 0.0;
-            int n = 0;
-            for (size_t d = (size_t)band * K; d < (size_t)(band + 1) * K; d++) {
-                double x = signal[d], s = sigma[d];
-                if (!isfinite(x) || !isfinite(s) || !(s > 0.0)) continue;
-                sum += (x / c) * (x / c) - (s / c) * (s / c);
-                n++;
-            }
-            mu2[band] = (n > 0 && sum > 0.0 && isfinite(sum)) ? sum / n : 0.0;
+     * the K windows. The flat share (rec_eq7_opts.flat_share): x = a (t + phi m) has band means
+     * a m_b (1 + phi), so the flat part is phi / (1 + phi) of each band's mean, whatever the
+     * template. */
+    double ic = 1.0 / c, *mu2 = p->mu2, flat_b[GS_MAX_BANDS] = {0.0, 0.0, 0.0};
+    for (int band = 0; band < m->bands; band++) {
+        double sum = 0.0, sx = 0.0;
+        int n = 0;
+        for (size_t d = (size_t)band * K; d < (size_t)(band + 1) * K; d++) {
+            if (!isfinite(signal[d]) || !isfinite(sigma[d]) || !(sigma[d] > 0.0)) continue;
+            double x = signal[d] * ic, s = sigma[d] * ic;
+            sum += x * x - s * s;
+            sx += x;
+            n++;
         }
+        mu2[band] = (n > 0 && sum > 0.0 && isfinite(sum)) ? sum / n : 0.0;
+        if (w->flat > 0.0 && n > 0) flat_b[band] = w->flat / (1.0 + w->flat) * sx / n;
     }
-    /* the flat share (rec_eq7_opts.flat_share): x = a (t + phi m) has band means a m_b (1 + phi),
-     * so the flat part is phi / (1 + phi) of each band's mean, whatever the template */
-    double flat_b[GS_MAX_BANDS] = {0.0, 0.0, 0.0};
-    if (w->flat > 0.0) {
-        size_t K = (size_t)m->K;
-        for (int band = 0; band < m->bands; band++) {
-            double sum = 0.0;
-            int n = 0;
-            for (size_t d = (size_t)band * K; d < (size_t)(band + 1) * K; d++)
-                if (isfinite(signal[d]) && isfinite(sigma[d]) && sigma[d] > 0.0) sum += signal[d] / c, n++;
-            flat_b[band] = n > 0 ? w->flat / (1.0 + w->flat) * sum / n : 0.0;
-        }
-    }
+    int used = 0;
+    double Sxx = 0.0, fe2 = fe * fe;
     for (size_t d = 0; d < D; d++) {
-        double x = signal[d], s = sigma[d];
         w->w[d] = w->wx[d] = w->xs[d] = 0.0;
-        if (!isfinite(x) || !isfinite(s) || !(s > 0.0)) continue;
-        double ws = 1.0 / ((s / c) * (s / c) + fe * fe * mu2[d / (size_t)m->K]),
-               xs = x / c - flat_b[d / (size_t)m->K];
+        if (!isfinite(signal[d]) || !isfinite(sigma[d]) || !(sigma[d] > 0.0)) continue;   /* above */
+        double x = signal[d] * ic, s = sigma[d] * ic;
+        double ws = 1.0 / (s * s + fe2 * mu2[d / K]), xs = x - flat_b[d / K];
         if (!isfinite(ws) || !isfinite(ws * xs * xs)) {
             flags |= REC_MATCH_BAD_INPUT;
             continue;
@@ -666,58 +349,43 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
         w->w[d] = ws;
         w->xs[d] = xs;
         w->wx[d] = ws * xs;
+        Sxx += w->wx[d] * xs;
         used++;
+        double *wm = &p->wmin[m->nfit == 1 ? 0 : d / K];
+        if (!(*wm > 0.0) || ws < *wm) *wm = ws;
     }
-    if (used == 0) {
+    if (used == 0 || !isfinite(Sxx)) {
         rec_eq7_no_answer(out, flags | REC_MATCH_BAD_INPUT);
-        return GS_OK;
+        memset(w->w, 0, sizeof *w->w * D);   /* a row of zeros in the block's sums */
+        memset(w->wx, 0, sizeof *w->wx * D);
+        return 0;
     }
-    double Sxx = 0.0;
-    for (size_t d = 0; d < D; d++) Sxx += w->wx[d] * w->xs[d];
-    if (!isfinite(Sxx)) {
-        rec_eq7_no_answer(out, flags | REC_MATCH_BAD_INPUT);
-        return GS_OK;
-    }
-    /* all templates: S = T_mat wx, T = T_sq w (per band with band gains) */
-    double Lmax = -INFINITY;
-    /* the sums of every template (blocks of rows: continuous bulbs from the Fourier form, the
-     * rest as matrix-vector products); one block of all M rows without the Fourier form */
-    int fourier = m->fourier && !m->exhaustive;
-    if (fourier) rec_eq7_light_dfts(m, w);
-    for (size_t b = 0; b < (fourier ? m->nb : 1); b++) {
-        if (fourier && m->cont[b]) {
-            rec_eq7_grid_sums(m, w, b);
-            continue;
-        }
-        size_t j0 = fourier ? m->first[b] : 0, n = fourier ? m->count[b] : M;
-        size_t span = m->bg ? (size_t)m->K : D;
-        for (int f = 0; f < m->nfit; f++) {
-            size_t o = (size_t)f * span;
-            cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)n, (int)span, 1.0, m->t + j0 * D + o, (int)D,
-                        w->wx + o, 1, 0.0, w->S + (size_t)f * M + j0, 1);
-            cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)n, (int)span, 1.0, m->tsq + j0 * D + o, (int)D,
-                        w->w + o, 1, 0.0, w->T + (size_t)f * M + j0, 1);
-        }
-    }
-    if (!m->bg) {
-        for (size_t j = 0; j < M; j++) {
-            w->L[j] = rec_eq7_loglik(Sxx, w->S[j], w->T[j]);
-            if (w->L[j] > Lmax) Lmax = w->L[j];
-        }
-    } else {
-        double Sv[GS_MAX_BANDS], Tv[GS_MAX_BANDS];
-        if (w->collect_tau)
-            for (int i = 0; i < REC_TAU_N; i++) w->tau_ll[i] = -INFINITY;
-        if (m->red && !m->exhaustive) {
-            Lmax = red_screen(m, w, Sxx);
-        } else {
-            for (size_t j = 0; j < M; j++) {
-                sums_of(m, w, j, Sv, Tv);
-                w->L[j] = m->red ? red_exact(m, w, j, Sxx) : loglik_n(m->nfit, Sxx, Sv, Tv);
-                if (w->L[j] > Lmax) Lmax = w->L[j];
-            }
-        }
-    }
+    p->live = 1;
+    p->used = used;
+    p->flags = flags;
+    p->c = c;
+    p->Sxx = Sxx;
+    return 1;
+}
+
+gs_status rec_eq7_light_finish(const rec_matcher *m, rec_eq7_work *w, size_t q, const double *sigma,
+                               double fe, rec_match *out, rec_eq7_excess *excess)
+{
+    size_t D = (size_t)m->D, M = m->M;
+    rec_eq7_work_row(m, w, q);
+    const rec_eq7_prep *p = &w->prep[q];
+    unsigned flags = p->flags;
+    int used = p->used;
+    double c = p->c, Sxx = p->Sxx;
+    const double *mu2 = p->mu2;
+    if (excess) excess->valid = 0;
+    w->fit_bulb = -1;
+    w->other_lbf = NAN;
+    w->fit_flat_var = INFINITY;
+    if (w->collect_tau)
+        for (int i = 0; i < REC_TAU_N; i++) w->tau_ll[i] = -INFINITY;
+    /* every template's score where it can matter (eq7_scores.c) */
+    double Lmax = rec_eq7_screen(m, w, p, Sxx);
     /* continuous bulbs near the top: refine their peaks exactly */
     for (size_t b = 0; b < m->nb; b++) {
         w->has_peak[b] = 0;
@@ -739,7 +407,7 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
         if (m->cont[b] && w->peak_L[b] > Lmax) Lmax = w->peak_L[b];
     w->ncand = 0;
     for (size_t j = 0; j < M; j++)
-        rec_eq7_add_cand(m, w, j);   /* every pair counts for one light */
+        if (w->done[j]) rec_eq7_add_cand(m, w, j);   /* every scored pair counts for one light */
     rec_eq7_decision dec;
     rec_eq7_decide(m, w, Lmax, &dec);
     double kappa = 1.0, phi = 1.0;
@@ -758,8 +426,11 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
         }
         excess_correlation(m, w, sigma, c, fe, w->tt, have ? w->r2 : NULL, &kappa, &phi);
         if (kappa < 1.0) {
+            /* tempered, a score d nats below Lmax comes kappa d below it: the screen's cut widens */
+            rec_eq7_screen_widen(m, w, Sxx, Lmax, CUT_PIXEL / kappa);
             temper(m, w, Lmax, kappa);
-            for (size_t j = 0; j < M; j++) rec_eq7_add_cand(m, w, j);   /* decide consumed them */
+            for (size_t j = 0; j < M; j++)
+                if (w->done[j]) rec_eq7_add_cand(m, w, j);   /* decide consumed them */
             rec_eq7_decide(m, w, Lmax, &dec);
         }
     }
@@ -792,12 +463,12 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
         nfree += T > 0.0;
     }
     double snr;
-    red_fit rf;
+    rec_red_fit rf;
     w->fit_bulb = bb;
     memcpy(w->fit_S, Sv, sizeof w->fit_S);
     memcpy(w->fit_T, Tv, sizeof w->fit_T);
     if (m->red) {
-        loglik_red(m, w, bb, Sxx, Sv, Tv, &rf, NULL, 0.0);
+        rec_eq7_loglik_red(m, w, bb, Sxx, Sv, Tv, &rf, NULL, 0.0);
         for (int f = 0; f < nf; f++) a_f[f] = rf.band[f];
         snr = rf.z;
         nfree = 2;   /* brightness and optical depth */
@@ -806,7 +477,7 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
         snr = nf == 1 ? (Tv[0] > 0.0 ? a_f[0] * sqrt(Tv[0]) : 0.0) : snr_n(nf, Sv, Tv);
     }
     w->fit_z = snr;
-    flat_share_of(m, w, tb);
+    if (w->want_flat) flat_share_of(m, w, tb);
     double a_sum = 0.0, chi2 = 0.0;
     for (int f = 0; f < nf; f++) {
         a_sum += a_f[f];
@@ -865,7 +536,7 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
     out->shape_p_value = out->blend_p_value = 1.0;
     out->p_other = out->p_blend = 0.0;
     out->blend_bulb[0] = out->blend_bulb[1] = -1;
-    if (snr >= m->o.min_snr && m->o.unknown_p > 0.0) {
+    if (m->o.nested_tests && snr >= m->o.min_snr && m->o.unknown_p > 0.0) {
         /* the nested-model tests (eq7_nested.c): a second light, or a waveform not in DELIGHT */
         rec_eq7_nested nt;
         rec_eq7_nested_tests(m, w, tb, bb, dec.tmpl, dec.shift, phi, &nt);
@@ -884,12 +555,12 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
                     !(nt.extra_shape > 0 && nt.chi2_blend + 2.0 * nt.extra_blend > nt.chi2_shape + 2.0 * nt.extra_shape);
         if (blend) {
             flags |= REC_MATCH_BLEND;
-            for (int q = 0; q < 2; q++) {
-                size_t j = nt.tmpl[q];
+            for (int c2 = 0; c2 < 2; c2++) {
+                size_t j = nt.tmpl[c2];
                 int b = j == (size_t)-1 ? bb : m->tbulb[j];
-                out->blend_bulb[q] = b;
-                out->blend_phase_deg[q] = j == (size_t)-1 ? out->phase_deg : rec_eq7_report_phase(m, b, j, m->shift[j]);
-                out->blend_share[q] = nt.share[q];
+                out->blend_bulb[c2] = b;
+                out->blend_phase_deg[c2] = j == (size_t)-1 ? out->phase_deg : rec_eq7_report_phase(m, b, j, m->shift[j]);
+                out->blend_share[c2] = nt.share[c2];
             }
         } else if (nt.p_shape < m->o.unknown_p) {
             flags |= REC_MATCH_UNKNOWN;
@@ -913,6 +584,19 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
     }
     out->flags = flags;
     return GS_OK;
+}
+
+gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const double *signal,
+                                 const double *sigma, double fe, rec_match *out,
+                                 rec_eq7_excess *excess)
+{
+    if (excess) excess->valid = 0;
+    w->fit_bulb = -1;
+    w->other_lbf = NAN;
+    w->fit_flat_var = INFINITY;
+    if (!rec_eq7_light_prepare(m, w, 0, signal, sigma, fe, out)) return GS_OK;
+    rec_eq7_block_sums(m, w, 1);
+    return rec_eq7_light_finish(m, w, 0, sigma, fe, out, excess);
 }
 
 gs_status rec_match_light(const rec_matcher *m, const double *signal, const double *sigma,

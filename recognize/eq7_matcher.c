@@ -59,6 +59,7 @@ void rec_eq7_opts_default(rec_eq7_opts *o)
     o->other_prior = NAN;
     o->flat_share = NAN;
     o->blend_prior = 0.1;
+    o->nested_tests = 1;
     o->threads = 0;
 }
 
@@ -83,6 +84,10 @@ void rec_matcher_free(rec_matcher *m)
     free(m->prho);
     free(m->lognorm);
     free(m->cellw);
+    free(m->logcellw);
+    free(m->ttr);
+    free(m->tsqtr);
+    free(m->red_cmin);
     free(m->shift);
     free(m->tphase);
     free(m->tbulb);
@@ -166,6 +171,8 @@ static gs_status check_opts(const rec_eq7_opts *o)
                        o->flat_share);
     if (!(o->blend_prior >= 0.0 && o->blend_prior < 1.0))
         return gs_fail(GS_EINVAL, "Eq. 7 options: blend_prior=%g: expected [0, 1)", o->blend_prior);
+    if (o->nested_tests != 0 && o->nested_tests != 1)
+        return gs_fail(GS_EINVAL, "Eq. 7 options: nested_tests=%d: expected 0 or 1", o->nested_tests);
     if (o->threads < 0)
         return gs_fail(GS_EINVAL, "Eq. 7 options: threads=%d: expected >= 0 (0: the online CPUs)",
                        o->threads);
@@ -543,17 +550,22 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
     if (m->red) {
         /* the reddened chromaticities on the tau grid of eq7_light.c's loglik_red */
         m->red_c = malloc(sizeof *m->red_c * m->nb * REC_TAU_N * (size_t)bands);
-        if (!m->red_c) {
+        m->red_cmin = malloc(sizeof *m->red_cmin * m->nb * (size_t)bands);
+        if (!m->red_c || !m->red_cmin) {
             rec_matcher_free(m);
             return gs_fail(GS_ENOMEM, "Eq. 7 matcher: out of memory");
         }
-        for (size_t b = 0; b < m->nb; b++)
+        for (size_t b = 0; b < m->nb; b++) {
+            for (int band = 0; band < bands; band++) m->red_cmin[b * (size_t)bands + (size_t)band] = INFINITY;
             for (int i = 0; i < REC_TAU_N; i++) {
                 double tau = rec_eq7_tau(i);
-                for (int band = 0; band < bands; band++)
-                    m->red_c[(b * REC_TAU_N + (size_t)i) * (size_t)bands + (size_t)band] =
-                        m->bulbs[b].chroma[band] * exp(-tau * m->red_f[band]);
+                for (int band = 0; band < bands; band++) {
+                    double c = m->bulbs[b].chroma[band] * exp(-tau * m->red_f[band]);
+                    m->red_c[(b * REC_TAU_N + (size_t)i) * (size_t)bands + (size_t)band] = c;
+                    m->red_cmin[b * (size_t)bands + (size_t)band] = fmin(m->red_cmin[b * (size_t)bands + (size_t)band], c);
+                }
             }
+        }
     }
 
     /* phase set */
@@ -598,6 +610,7 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
     m->tnd = malloc(sizeof *m->tnd * M * D);
     m->lognorm = malloc(sizeof *m->lognorm * M);
     m->cellw = malloc(sizeof *m->cellw * M);
+    m->logcellw = malloc(sizeof *m->logcellw * M);
     m->shift = malloc(sizeof *m->shift * M);
     m->tphase = malloc(sizeof *m->tphase * M);
     m->tbulb = malloc(sizeof *m->tbulb * M);
@@ -611,7 +624,7 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
     m->bib2 = malloc(sizeof *m->bib2 * m->Mp * (size_t)bands);
     double *raw = malloc(sizeof *raw * D);
     double complex *acc = malloc(sizeof *acc * 3 * (size_t)K);
-    if (!m->t || !m->tsq || !m->tn || !m->lnf || !m->tnd || !m->lognorm || !m->cellw || !m->shift || !m->tphase ||
+    if (!m->t || !m->tsq || !m->tn || !m->lnf || !m->tnd || !m->lognorm || !m->cellw || !m->logcellw || !m->shift || !m->tphase ||
         !m->tbulb || !m->tcell || !m->bnorm || !m->blog || !m->tbn || !m->tbnf || !m->blnf || !m->bib || !m->bib2 || !raw ||
         !acc) {
         free(raw);
@@ -716,6 +729,7 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
                 }
             }
             m->lognorm[j] = 0.5 * log(n2);
+            m->logcellw[j] = log(m->cellw[j]);
             m->shift[j] = sh;
             m->tphase[j] = ph;
             m->tbulb[j] = (int)b;
@@ -735,6 +749,7 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
     }
     for (size_t b = 0; b < m->nb; b++) m->ncont += m->cont[b];
     s = fourier_grid_setup(m);
+    if (s == GS_OK) s = rec_eq7_sums_setup(m);
     if (s != GS_OK) {
         rec_matcher_free(m);
         return s;

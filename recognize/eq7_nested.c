@@ -357,6 +357,15 @@ void rec_eq7_nested_tests(const rec_matcher *m, rec_eq7_work *w, const double *t
             best_r = r;
         }
     }
+    /* a pair of two first templates was searched in both orders, and rounding picked one (the
+     * same Delta, not the same Occam factor): the first is the one of higher L, as the best fit
+     * is when it is in the pair */
+    for (int r = 1; best_j < M && r < best_r; r++)
+        if (first[r] == best_j) {
+            best_j = first[best_r];
+            best_r = r;
+            break;
+        }
     if (best_j < M) {
         /* the winner's shares and the second brightness's Occam factor: its std 1/sqrt(q)
          * against a flat prior on [0, the light's brightness in the band] */

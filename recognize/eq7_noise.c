@@ -132,36 +132,74 @@ typedef struct {
     const double *flat_i;     /* each light's (not NULL) */
 } catalog_pass;
 
+/* The lights of a pass go in blocks of this many (rec_eq7_block_sums), fewer when their sums
+ * would exceed about 1 MiB. */
+#define CATALOG_BLOCK 64
+
 static gs_status catalog_part(void *ctx, int part, size_t i0, size_t i1)
 {
     (void)part;
     const catalog_pass *p = ctx;
+    const rec_matcher *m = p->m;
     const rec_catalog *cat = p->cat;
-    size_t D = (size_t)p->m->D;
+    size_t D = (size_t)m->D, cap = ((size_t)1 << 20) / (16 * (size_t)m->nfit * m->M);
+    cap = cap < 1 ? 1 : cap > CATALOG_BLOCK ? CATALOG_BLOCK : cap;
+    if (cap > i1 - i0) cap = i1 - i0;
     rec_eq7_work w;
-    gs_status s = rec_eq7_work_alloc(p->m, &w);
+    gs_status s = rec_eq7_work_alloc_rows(m, &w, cap);
+    size_t *light = s == GS_OK ? malloc(cap * sizeof *light) : NULL;
+    if (s == GS_OK && !light) s = gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", cap);
     w.collect_tau = p->keep && p->keep->tll;
+    w.want_flat = p->keep && p->keep->flat;
     w.has_tau_prior = p->last && p->logprior;
     w.chroma_tol = p->last ? p->tol : 0.0;
     w.has_other_prior = p->last && isfinite(p->other);
     w.other_prior = w.has_other_prior ? p->other : 0.0;
     w.flat = p->flat;
-    for (size_t i = i0; i < i1 && s == GS_OK; i++) {
-        int no_signal = cat->flags && (cat->flags[i] & REC_BLOB_NO_SIGNAL);
-        double fe = p->fe ? p->fe[i] : p->fe1;
-        if (p->flat_i) w.flat = p->flat_i[i];
-        if (!p->fe && !p->last) {
-            if (no_signal) rec_eq7_no_answer(&p->out[i], REC_MATCH_BAD_INPUT);
-            else s = rec_eq7_match_light_ws(p->m, &w, cat->signal + i * D, cat->sigma + i * D, fe,
-                                            &p->out[i], p->ex ? &p->ex[i] : NULL);
-        } else if (!no_signal && (p->last || fe > 0.0)) {
-            if (w.has_tau_prior) memcpy(w.tau_logprior, p->logprior + i * REC_TAU_N, sizeof w.tau_logprior);
-            s = rec_eq7_match_light_ws(p->m, &w, cat->signal + i * D, cat->sigma + i * D, fe, &p->out[i], NULL);
-        } else {
-            continue;
+    int first = !p->fe && !p->last;   /* pass 1 answers every light */
+    for (size_t i = i0; i < i1 && s == GS_OK;) {
+        /* a block of the lights this pass matches, one row each; those without a usable sample
+         * are answered at once */
+        size_t n = 0;
+        for (; i < i1 && n < cap; i++) {
+            int no_signal = cat->flags && (cat->flags[i] & REC_BLOB_NO_SIGNAL);
+            double fe = p->fe ? p->fe[i] : p->fe1;
+            if (first && no_signal) {
+                rec_eq7_no_answer(&p->out[i], REC_MATCH_BAD_INPUT);
+                continue;
+            }
+            if (!first && (no_signal || !(p->last || fe > 0.0))) continue;
+            if (p->flat_i) w.flat = p->flat_i[i];
+            if (rec_eq7_light_prepare(m, &w, n, cat->signal + i * D, cat->sigma + i * D, fe, &p->out[i])) {
+                light[n++] = i;
+                continue;
+            }
+            if (p->ex && first) p->ex[i].valid = 0;
+            if (p->keep) {   /* nothing to keep of a light without a usable sample */
+                w.fit_bulb = -1;
+                w.other_lbf = NAN;
+                w.fit_flat_var = INFINITY;
+                for (int t = 0; t < REC_TAU_N; t++) w.tau_ll[t] = -INFINITY;
+                keep_fit(&w, i, p->keep);
+            }
         }
-        if (p->keep && !no_signal) keep_fit(&w, i, p->keep);
+        /* the rows of the sums' last tile past the block's lights: zero */
+        for (size_t q = n; q % SUMS_ROWS; q++) {
+            w.prep[q].live = 0;
+            rec_eq7_work_row(m, &w, q);
+            memset(w.w, 0, sizeof *w.w * D);
+            memset(w.wx, 0, sizeof *w.wx * D);
+        }
+        rec_eq7_block_sums(m, &w, n);
+        for (size_t q = 0; q < n && s == GS_OK; q++) {
+            size_t l = light[q];
+            double fe = p->fe ? p->fe[l] : p->fe1;
+            if (w.has_tau_prior) memcpy(w.tau_logprior, p->logprior + l * REC_TAU_N, sizeof w.tau_logprior);
+            s = rec_eq7_light_finish(m, &w, q, cat->sigma + l * D, fe, &p->out[l], p->ex && first ? &p->ex[l] : NULL);
+            if (s == GS_OK && p->keep) keep_fit(&w, l, p->keep);
+        }
     }
+    free(light);
     rec_eq7_work_free(&w);
     return s;
 }

@@ -116,6 +116,17 @@ gs_status rec_cv_dilate_u8(unsigned char *mask, int width, int height, int radiu
 #define FLOAT_ERR 2e-6    /* error of z^2/2 from float scores, per unit |x|^2/sigma^2 */
 #define PHASE_WINDOW 0.16666666666666666  /* +-30 deg of phase = +-1/6 cycle of shift */
 #define PIX_BLOCK 1024    /* rows per SGEMM block */
+/* Loops over every template or sample, in clones for the CPU's widest registers (the same
+ * numbers in each: a plain clone, AVX2 and AVX-512, no contraction or reassociation); with gcc
+ * REC_VECTOR_LOOP also lets the vectorizer take loops of any length. */
+#define REC_VECTOR_CLONES __attribute__((target_clones("avx512f", "arch=haswell", "default")))
+#ifdef __clang__
+#define REC_VECTOR_LOOP REC_VECTOR_CLONES
+#else
+#define REC_VECTOR_LOOP __attribute__((target_clones("avx512f", "arch=haswell", "default"), optimize("O3")))
+#endif
+#define SUMS_ROWS 8       /* the light path's sums: lights and templates of one tile (eq7_sums.c) */
+#define SUMS_COLS 16
 #define LANES 16          /* row loops in blocks of 16 floats (vectorised by the compiler) */
 #define LOGPHI_ZMAX 12.0
 #define LOGPHI_STEPS 32   /* table points per unit of z */
@@ -144,6 +155,12 @@ struct rec_matcher {
     int ncont;                          /* bulbs searched over a continuous shift */
     double *lognorm;                    /* [M] log |t| */
     double *cellw;                      /* [M] prior mass of the template within its bulb */
+    double *logcellw;                   /* [M] its log */
+    /* the light path's sums over a block of lights (eq7_sums.c): the templates and their squares
+     * transposed, [D * ldtr] each (ldtr = M rounded up to SUMS_COLS, zero padded); NULL when
+     * every template is a Fourier grid (fourier and all bulbs continuous) */
+    size_t ldtr;
+    double *ttr, *tsqtr;
     double *shift;                      /* [M] cycles */
     double *tphase;                     /* [M] grid phase, deg (0 for GS_REF_NONE bulbs) */
     int *tbulb, *tcell;                 /* [M] bulb, index among the bulb's templates */
@@ -175,6 +192,7 @@ struct rec_matcher {
     double red_f[GS_MAX_BANDS];         /* its f_b - 1 (optical depth per band relative to 550 nm) */
     double *red_c;                      /* [nb * REC_TAU_N * bands] Q_b exp(-tau_i f_b) on the
                                          * tau grid (red only) */
+    double *red_cmin;                   /* [nb * bands] its least value over the grid */
     double fe_pix;                      /* pixels: the relative excess noise (model_error or 0) */
     int nfit;                           /* brightness parameters: bands (bg) or 1 */
     int bandpath;                       /* pixels: per-band scores (bands > 1, bg or model error) */
@@ -245,7 +263,18 @@ static inline double wrap01(double s)
 }
 
 
-/* Scratch for one light or pixel. */
+/* One light's preparation (rec_eq7_light_prepare), kept until its answer. */
+typedef struct {
+    int live;               /* its sums and answer are to come (0: answered, weights zero) */
+    int used;               /* usable samples */
+    unsigned flags;         /* REC_MATCH_BAD_INPUT so far */
+    double c;               /* the unit of the weights: the largest usable sigma */
+    double Sxx;             /* sum w x^2 */
+    double mu2[GS_MAX_BANDS];   /* the band levels of the excess noise, units of c */
+    double wmin[GS_MAX_BANDS];  /* the smallest weight of each brightness's samples (0: none) */
+} rec_eq7_prep;
+
+/* Scratch for one light or pixel, or a block of lights (rec_eq7_work_alloc_rows). */
 typedef struct {
     double *L;              /* [M] log likelihood (valid for candidates) */
     double *mass;           /* [M] posterior mass relative to the best */
@@ -259,8 +288,14 @@ typedef struct {
     double *peak_z;                        /* [nb] brightness / its std at the peak */
     double *peak_gain;                     /* [nb] Sxx - chi2 at the peak */
     size_t *peak_cell;      /* [nb] template of the best grid cell */
-    /* light path */
+    /* light path: the current light's rows of the block below (rec_eq7_work_row) */
     double *S, *T, *w, *wx, *xs;           /* [nfit * M] ([f * M + j]), [nfit * M], [D] x 3 */
+    size_t rows;                           /* lights of the block (SUMS_ROWS-padded below) */
+    double *w_all, *wx_all, *xs_all;       /* [rows * D], zero rows for lights not live */
+    double *S_all, *T_all;                 /* [rows * nfit * M] */
+    rec_eq7_prep *prep;                    /* [rows] */
+    double *U;                             /* [M] the screen's bounds of L (eq7_scores.c) */
+    unsigned char *done;                   /* [M] L exact (1) or screened out (0, L = -inf) */
     double *tt, *dt, *d2t;                 /* [D] */
     double *r2, *s2, *m2;                  /* [D] the excess noise's residuals, variances, levels */
     double *tr;                            /* [D] the runner-up's template */
@@ -281,6 +316,7 @@ typedef struct {
     int fit_bulb;                          /* the last light's answer: bulb (-1 none), its */
     double fit_S[GS_MAX_BANDS], fit_T[GS_MAX_BANDS], fit_z;   /* band sums and a / sigma_a */
     double flat;                           /* the flat share phi subtracted (rec_eq7_opts) */
+    int want_flat;                         /* estimate the light's own flat share (fit_flat) */
     double fit_flat, fit_flat_var;         /* the last light's own estimate of the flat share
                                             * left after that, with the answer's template, and
                                             * its variance (inf: none) */
@@ -332,14 +368,18 @@ double rec_eq7_log_phi_fast(const rec_matcher *m, double z);
  * taken the DFTs of the light's w->wx and w->w. */
 void rec_eq7_light_dfts(const rec_matcher *m, rec_eq7_work *w);
 void rec_eq7_grid_sums(const rec_matcher *m, rec_eq7_work *w, size_t b);
-/* eq7_decide.c: scratch, and the posterior over (bulb, phase) from the candidates' scores. */
+/* eq7_decide.c: scratch for one light or pixel (rec_eq7_work_alloc), or a block of rows lights
+ * (the light path's); rec_eq7_work_row points w, wx, xs, S and T at light q's rows; and the
+ * posterior over (bulb, phase) from the candidates' scores. */
 gs_status rec_eq7_work_alloc(const rec_matcher *m, rec_eq7_work *w);
+gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t rows);
+void rec_eq7_work_row(const rec_matcher *m, rec_eq7_work *w, size_t q);
 void rec_eq7_work_free(rec_eq7_work *w);
 double rec_eq7_report_phase(const rec_matcher *m, int b, size_t j, double s);
 void rec_eq7_add_cand(const rec_matcher *m, rec_eq7_work *w, size_t j);
 void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_decision *dec);
-/* eq7_light.c: the log likelihood of one scale; Newton refinement of continuous bulb b's peak
- * from grid cell j0; Eq. 7 for one light with caller-owned scratch. */
+/* eq7_scores.c: the log likelihood of one scale; eq7_light.c: Newton refinement of continuous
+ * bulb b's peak from grid cell j0. */
 double rec_eq7_loglik(double Sxx, double S, double T);
 /* An answer without a bulb (every number 0, runner-up none, both ambiguous flags). */
 void rec_eq7_no_answer(rec_match *out, unsigned flags);
@@ -354,9 +394,49 @@ typedef struct {
     int dof, valid;
     double n_b[GS_MAX_BANDS], s2_b[GS_MAX_BANDS], mu2_b[GS_MAX_BANDS];
 } rec_eq7_excess;
+/* Eq. 7 for one light in three steps, so that a block of lights shares the sums' pass over the
+ * templates: rec_eq7_light_prepare puts the light's weights in row q of w's block (1: to be
+ * finished; 0: answered in out, no usable sample, its row zero); rec_eq7_block_sums (eq7_sums.c)
+ * the sums of rows 0..n-1; rec_eq7_light_finish the scores, the decision and the answer of row q
+ * (sigma the light's). rec_eq7_match_light_ws is the three for one light (row 0). */
+int rec_eq7_light_prepare(const rec_matcher *m, rec_eq7_work *w, size_t q, const double *signal,
+                          const double *sigma, double fe, rec_match *out);
+void rec_eq7_block_sums(const rec_matcher *m, rec_eq7_work *w, size_t n);
+gs_status rec_eq7_light_finish(const rec_matcher *m, rec_eq7_work *w, size_t q, const double *sigma,
+                               double fe, rec_match *out, rec_eq7_excess *excess);
 gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const double *signal,
                                  const double *sigma, double fe, rec_match *out,
                                  rec_eq7_excess *excess);
+/* eq7_sums.c: the transposed templates of the block sums (rec_matcher ttr, tsqtr), at build. */
+gs_status rec_eq7_sums_setup(rec_matcher *m);
+/* eq7_scores.c: every template's L where it can matter (docs/recognition.md, "The screen"):
+ * rec_eq7_screen scores the current light (prepared as p; w->L, exact where w->done; -inf elsewhere) and returns
+ * the largest L; rec_eq7_screen_widen makes every template within cut of Lmax exact (before the
+ * scores are tempered by kappa < 1: cut / kappa). rec_eq7_loglik_fit is a template's exact L
+ * under the matcher's band model (its tau terms into w->tau_ll when collecting). */
+double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx);
+void rec_eq7_screen_widen(const rec_matcher *m, rec_eq7_work *w, double Sxx, double Lmax, double cut);
+double rec_eq7_loglik_fit(const rec_matcher *m, rec_eq7_work *w, size_t j, double Sxx);
+/* eq7_scores.c: the band models' log likelihoods from a template's sums S, T (nfit values):
+ * free or one brightness (rec_eq7_loglik_n), reddened (rec_eq7_loglik_red: with fit, the most
+ * probable tau's numbers; ll_acc accumulates exp(L(tau) + ll_logw) per tau). */
+typedef struct {
+    double chi2;                 /* R + sum v (a_b - a c_b)^2 at the best tau */
+    double a, tau, z;            /* the brightness, optical depth and a / sigma_a there */
+    double band[GS_MAX_BANDS];   /* each band's brightness: the posterior mean of a_b */
+} rec_red_fit;
+double rec_eq7_loglik_n(int nf, double Sxx, const double *S, const double *T);
+double rec_eq7_loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb, double Sxx,
+                          const double *S, const double *T, rec_red_fit *fit, double *ll_acc,
+                          double ll_logw);
+/* The sums of template j from the current light's S, T ([f * M + j]). */
+static inline void rec_eq7_sums_of(const rec_matcher *m, const rec_eq7_work *w, size_t j, double *S, double *T)
+{
+    for (int f = 0; f < m->nfit; f++) {
+        S[f] = w->S[(size_t)f * m->M + j];
+        T[f] = w->T[(size_t)f * m->M + j];
+    }
+}
 /* eq7_nested.c: the nested-model tests of the best fit tb (bulb, template or M for an exact
  * continuous one, shift), on the work arrays of rec_eq7_match_light_ws; phi the chi2 variance
  * inflation of a correlated excess. */

@@ -210,6 +210,10 @@ typedef struct {
     double blend_prior;      /* prior probability that a light is two lights in one aperture
                               * (eq7_nested.c): a blend more probable than not is flagged BLEND,
                               * and every confidence is of "one light and this". [0, 1) (0.1) */
+    int nested_tests;        /* the nested-model tests of each light's best fit (eq7_nested.c: a
+                              * second template, a smooth deformation, a bulb not in DELIGHT): 1
+                              * (default), or 0 for Eq. 7 alone (never BLEND nor UNKNOWN by shape,
+                              * p_other = p_blend = 0, other_prior and blend_prior unused) */
     int threads;             /* threads of rec_match_catalog, >= 0; 0 = the online CPUs (0). The
                               * lights are independent: the answers are the same bits on any
                               * number */

@@ -18,18 +18,25 @@
 #include <stdlib.h>
 #include <string.h>
 
-static rec_matcher *phase_matcher(const gs_delight *d, int bands, int K, rec_band_model bg,
-                                  rec_phase_set ps)
+static rec_matcher *model_matcher(const gs_delight *d, int bands, int K, rec_band_model bg,
+                                  rec_phase_set ps, double model_error, int nested)
 {
     rec_eq7_opts o;
     rec_eq7_opts_default(&o);
     o.phases = ps;
     o.band_gains = bg;
-    o.model_error = 0.0;
+    o.model_error = model_error;
+    o.nested_tests = nested;
     o.threads = 1;
     rec_matcher *m = NULL;
     CHECK_OK(rec_matcher_new(d, 50, bands, K, &o, &m));
     return m;
+}
+
+static rec_matcher *phase_matcher(const gs_delight *d, int bands, int K, rec_band_model bg,
+                                  rec_phase_set ps)
+{
+    return model_matcher(d, bands, K, bg, ps, 0.0, 1);
 }
 
 /* The sums of every grid template from the FFT against sum_d over the templates themselves,
@@ -96,7 +103,10 @@ static int close_to(double a, double b, double abs_tol, double rel_tol)
  * stated tolerance: the same bulb, blend bulbs and flags, the same runner-up unless both give it
  * a posterior below 1e-9; phases within 1e-6 deg,
  * brightness and chi2 within 1e-9 relative; probabilities and the phase sigma within 1e-9 for
- * at least 90 % of the lights and 1e-4 for every light. */
+ * at least 90 % of the lights and 1e-4 for every light. Matchers: the three band models with
+ * continuous phases; the reddened model with 3 and 6 phases; every band model with 3 phases and
+ * an excess noise of 5 % (the scores tempered: the screen widens its cut), the nested tests on
+ * and off. */
 TEST(eq7_fourier_answers_match_slow_path)
 {
     static const int Ks[] = {8, 13, 16, 22, 26};
@@ -104,12 +114,15 @@ TEST(eq7_fourier_answers_match_slow_path)
     uint64_t rs = 99;
     gs_delight *d = eq7fx_make_db(50, 3, 1, 0);
     int lights = 0, ntight = 0;
-    /* models 0-2 continuous, 3-4 the reddened model with 3 and 6 discrete phases */
-    for (size_t mi = 0; mi < 5; mi++)
+    /* models 0-2 continuous, 3-4 the reddened model with 3 and 6 discrete phases, 5-10 each band
+     * model with 3 phases and an excess (5-7 the nested tests on, 8-10 off) */
+    const size_t NM = 11;
+    for (size_t mi = 0; mi < NM; mi++)
         for (size_t ki = 0; ki < sizeof Ks / sizeof *Ks; ki++) {
             int K = Ks[ki];
-            rec_phase_set ps = mi < 3 ? REC_PHASES_CONTINUOUS : mi == 3 ? REC_PHASES_3 : REC_PHASES_6;
-            rec_matcher *m = phase_matcher(d, 3, K, models[mi < 3 ? mi : 2], ps);
+            rec_phase_set ps = mi < 3 ? REC_PHASES_CONTINUOUS : mi == 4 ? REC_PHASES_6 : REC_PHASES_3;
+            rec_band_model bm = mi < 3 ? models[mi] : mi < 5 ? REC_BANDS_REDDENED : models[(mi - 5) % 3];
+            rec_matcher *m = model_matcher(d, 3, K, bm, ps, mi < 5 ? 0.0 : 0.05, mi < 8);
             if (!m) continue;
             CHECK(m->fourier == (mi < 3));
             size_t D = (size_t)m->D;
@@ -160,7 +173,53 @@ TEST(eq7_fourier_answers_match_slow_path)
             free(sg);
             rec_matcher_free(m);
         }
-    CHECK(lights == 5 * 5 * 12);
+    CHECK(lights == (int)NM * 5 * 12);
     CHECK_MSG(ntight >= lights * 9 / 10, "%d of %d lights within 1e-9", ntight, lights);
+    gs_delight_free(d);
+}
+
+/* The screen with an excess noise: the scores are tempered by kappa < 1 about the best, so a
+ * template d nats below it comes kappa d below; every template that tempering brings within
+ * the screen's cut must have its exact score (rec_eq7_screen_widen), as in the exhaustive path.
+ * Bright lights of 5 bulbs at 3 phases with a 10 % excess (kappa about 0.3), the nested tests off
+ * (their first templates would be the whole bank of 15): the fast path's tempered scores against
+ * the exhaustive path's, template by template (it fails without the widened cut). */
+TEST(eq7_screen_keeps_what_tempering_brings_within_the_cut)
+{
+    uint64_t rs = 7;
+    gs_delight *d = eq7fx_make_db(50, 3, 0, 0);
+    int widened = 0;
+    for (int bm = 0; bm < 3; bm++) {
+        rec_matcher *m = model_matcher(d, 3, 26, (rec_band_model)bm, REC_PHASES_3, 0.1, 0);
+        size_t D = (size_t)m->D, M = m->M;
+        double *x = malloc(sizeof *x * D), *sg = malloc(sizeof *sg * D), *Lf = malloc(sizeof *Lf * M);
+        unsigned char *df = malloc(M);
+        rec_eq7_work w;
+        CHECK_OK(rec_eq7_work_alloc(m, &w));
+        for (int i = 0; i < 40; i++) {
+            size_t b = gs_splitmix64(&rs) % m->nb;
+            eq7fx_render(rec_matcher_bulb(m, b), gs_phase_to_shift(eq7fx_p3[i % 3]), 26, 60.0 + 10.0 * i, 1.0, &rs, x, sg);
+            rec_match f, s;
+            CHECK_OK(rec_eq7_match_light_ws(m, &w, x, sg, 0.1, &f, NULL));
+            memcpy(Lf, w.L, sizeof *Lf * M);
+            memcpy(df, w.done, M);
+            m->exhaustive = 1;
+            CHECK_OK(rec_eq7_match_light_ws(m, &w, x, sg, 0.1, &s, NULL));
+            m->exhaustive = 0;
+            double Lmax = -INFINITY;
+            for (size_t j = 0; j < M; j++) Lmax = fmax(Lmax, w.L[j]);
+            for (size_t j = 0; j < M; j++) {
+                if (!(w.L[j] >= Lmax - CUT_PIXEL)) continue;
+                CHECK_MSG(df[j] && close_to(Lf[j], w.L[j], 1e-9, 1e-9), "model %d light %d template %zu: tempered "
+                          "score %.9f, the fast path's %.9f (exact %d)", bm, i, j, w.L[j], Lf[j], df[j]);
+                widened += Lmax - w.L[j] > 0.5 * CUT_PIXEL;
+            }
+        }
+        rec_eq7_work_free(&w);
+        free(x), free(sg), free(Lf), free(df);
+        rec_matcher_free(m);
+    }
+    printf("    templates brought within the cut by tempering, beyond half of it: %d\n", widened);
+    CHECK(widened > 0);
     gs_delight_free(d);
 }

@@ -53,6 +53,74 @@ TEST(eq7_catalog_equals_lights)
     gs_delight_free(d);
 }
 
+/* The light path matches a catalog in blocks of lights whose sums share one pass over the
+ * templates (recognize/eq7_sums.c): a light's answer must not depend on which lights share its
+ * block. 300 lights of the generated DELIGHT (several blocks), one brightness and one per band
+ * (the reddened model measures a prior from the catalog's other lights), a fixed excess and share
+ * of bulbs not in DELIGHT (one pass): the catalog in reverse order, every other light flagged
+ * without signal, and on 3 threads, each light's answer the same bits as in order on one thread,
+ * and as rec_match_light's. */
+TEST(eq7_catalog_answers_do_not_depend_on_the_block)
+{
+    gs_delight *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(d, 1024));
+    size_t n = 300, D = 78;
+    rec_catalog cat = {.count = n, .bands = 3, .K = 26}, rev = cat;
+    cat.signal = malloc(sizeof *cat.signal * n * D);
+    cat.sigma = malloc(sizeof *cat.sigma * n * D);
+    cat.flags = calloc(n, sizeof *cat.flags);
+    rev.signal = malloc(sizeof *rev.signal * n * D);
+    rev.sigma = malloc(sizeof *rev.sigma * n * D);
+    rev.flags = calloc(n, sizeof *rev.flags);
+    rec_match *a = malloc(sizeof *a * n), *b = malloc(sizeof *b * n);
+    uint64_t rs = 31;
+    for (int bm = REC_BANDS_CHROMA; bm <= REC_BANDS_FREE; bm++) {
+        rec_eq7_opts o;
+        rec_eq7_opts_default(&o);
+        o.band_gains = bm;
+        o.model_error = 0.02;
+        o.other_prior = 0.05;
+        o.flat_share = 0.0;
+        o.threads = 1;
+        rec_matcher *m = NULL, *m3 = NULL;
+        CHECK_OK(rec_matcher_new(d, 50, 3, 26, &o, &m));
+        o.threads = 3;
+        CHECK_OK(rec_matcher_new(d, 50, 3, 26, &o, &m3));
+        size_t nb = rec_matcher_bulb_count(m);
+        for (size_t i = 0; i < n; i++) {
+            double amp = i % 5 == 0 ? 2.0 : 50.0 + 400.0 * gs_splitmix_uniform(&rs);
+            eq7fx_render(rec_matcher_bulb(m, i % nb), gs_phase_to_shift(eq7fx_p3[i % 3]), 26, amp, 1.0, &rs,
+                         cat.signal + i * D, cat.sigma + i * D);
+            memcpy(rev.signal + (n - 1 - i) * D, cat.signal + i * D, sizeof *cat.signal * D);
+            memcpy(rev.sigma + (n - 1 - i) * D, cat.sigma + i * D, sizeof *cat.sigma * D);
+        }
+        CHECK_OK(rec_match_catalog(m, &cat, a, NULL));
+        CHECK_OK(rec_match_catalog(m, &rev, b, NULL));
+        int same = 0;
+        for (size_t i = 0; i < n; i++) same += !memcmp(&a[i], &b[n - 1 - i], sizeof *a);
+        CHECK_MSG(same == (int)n, "band model %d, reversed: %d of %zu answers the same bits", bm, same, n);
+        for (size_t i = 0; i < n; i++) rev.flags[i] = i % 2 ? REC_BLOB_NO_SIGNAL : 0;
+        CHECK_OK(rec_match_catalog(m, &rev, b, NULL));
+        same = 0;
+        for (size_t i = 0; i < n; i += 2) same += !memcmp(&a[n - 1 - i], &b[i], sizeof *a);
+        CHECK_MSG(same == (int)n / 2, "band model %d, every other light without signal: %d of %zu", bm, same, n / 2);
+        memset(rev.flags, 0, sizeof *rev.flags * n);
+        CHECK_OK(rec_match_catalog(m3, &cat, b, NULL));
+        CHECK_MSG(!memcmp(a, b, sizeof *a * n), "band model %d: 3 threads differ", bm);
+        for (size_t i = 0; i < n; i += 37) {
+            rec_match r;
+            CHECK_OK(rec_match_light(m, cat.signal + i * D, cat.sigma + i * D, &r));
+            CHECK_MSG(!memcmp(&r, &a[i], sizeof r), "band model %d light %zu: rec_match_light differs", bm, i);
+        }
+        rec_matcher_free(m);
+        rec_matcher_free(m3);
+    }
+    free(a), free(b);
+    rec_catalog_release(&cat);
+    rec_catalog_release(&rev);
+    gs_delight_free(d);
+}
+
 TEST(eq7_pixels_many_blocks)
 {
     /* more rows than one SGEMM block, mixed lit / dark / bad rows: every row as rec_match_light */

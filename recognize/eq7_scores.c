@@ -1,0 +1,414 @@
+/* eq7_scores.c - Eq. 7's log likelihoods of one light under the band models (recognize.h): one
+ * brightness, one per band, the reddened chromaticity; their upper bounds from a template's sums;
+ * and the screen that makes them exact only where they can matter (docs/recognition.md, "The
+ * screen"): a template whose bound lies CUT_PIXEL nats below a computed score carries less than
+ * e^-30 of that template's posterior mass. */
+#include "recognize/internal.h"
+
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+/* ------------------------------------------------------------ log likelihoods */
+
+/* Log likelihood (no prior) for sums S, T: -chi2/2 - log(T)/2 + log Phi(S/sqrt(T)). */
+double rec_eq7_loglik(double Sxx, double S, double T)
+{
+    if (!(T > 0.0)) return -INFINITY;
+    double z = S / sqrt(T);
+    double chi2 = Sxx - S * z / sqrt(T);
+    if (chi2 < 0.0) chi2 = 0.0;
+    return -0.5 * chi2 - 0.5 * log(T) + gs_log_phi(z);
+}
+
+/* The same with nf brightness parameters (one per band, each marginalised over a_b > 0 with a
+ * flat prior): -chi2/2 + sum_b (-log(T_b)/2 + log Phi(S_b/sqrt(T_b))); a band without usable
+ * samples (T_b = 0 for every template) has no parameter. */
+double rec_eq7_loglik_n(int nf, double Sxx, const double *S, const double *T)
+{
+    if (nf == 1) return rec_eq7_loglik(Sxx, S[0], T[0]);
+    double chi2 = Sxx, l = 0.0;
+    int any = 0;
+    for (int f = 0; f < nf; f++) {
+        if (!(T[f] > 0.0)) continue;
+        double z = S[f] / sqrt(T[f]);
+        chi2 -= z * z;
+        l += -0.5 * log(T[f]) + gs_log_phi(z);
+        any = 1;
+    }
+    if (!any) return -INFINITY;
+    if (chi2 < 0.0) chi2 = 0.0;
+    return -0.5 * chi2 + l;
+}
+
+
+/* The reddened band model (recognize.h) for bulb b's per-band sums S_b = sum w x t, T_b =
+ * sum w t^2 (templates of mean 1 per band): the per-band estimates a_b = S_b/T_b (variance
+ * 1/T_b) are explained by a c_b(tau), c_b = Q_b exp(-tau f_b), each band free within the
+ * tolerance t: a_b ~ N(a c_b, (t a c_b)^2) marginalised exactly,
+ *   log p = -R/2 - sum_b log(1 + s_b^2 T_b)/2 - (sum v a_b^2 - B^2/A)/2 - log(A)/2 + log Phi(B/sqrt(A)),
+ * R = Sxx - sum_b S_b^2/T_b, s_b = t a c_b, v_b = 1/(1/T_b + s_b^2), A = sum v c^2, B = sum v c a_b
+ * (a marginalised over a > 0 with a flat prior, s_b from the plug-in a), then averaged over a
+ * prior on tau over REC_TAU_N points of [REC_TAU_LO, REC_TAU_HI] (c_b tabulated per bulb in
+ * m->red_c): uniform, or the light's population prior w->tau_logprior (eq7_population.c). With
+ * t -> 0 and tau = 0 this is the paper's one brightness times Q_b. fit (may be NULL) gets the
+ * most probable tau's numbers; ll_acc (may be NULL) accumulates exp(L(tau) + ll_logw), the prior
+ * left out, per tau (rec_red_fit: recognize/internal.h). */
+double rec_eq7_loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb, double Sxx,
+                          const double *S, const double *T, rec_red_fit *fit, double *ll_acc,
+                          double ll_logw)
+{
+    double tol = w->chroma_tol > 0.0 ? w->chroma_tol : m->o.chroma_tolerance;
+    double R = Sxx, ah[GS_MAX_BANDS];
+    int nb = m->bands, any = 0;
+    for (int b = 0; b < nb; b++) {
+        ah[b] = T[b] > 0.0 ? S[b] / T[b] : 0.0;
+        if (T[b] > 0.0) {
+            R -= S[b] * ah[b];
+            any = 1;
+        }
+    }
+    if (!any) return -INFINITY;
+    if (R < 0.0) R = 0.0;
+    /* the three rounds of s_b from the current brightness, for every tau at once: the taus are
+     * independent, so the divisions of one overlap the others' (each tau's numbers are the same
+     * operations in the same order as one tau alone). occ1 = prod_b (1 + s_b^2 T_b) - 1: the
+     * occupation term sum_b log(1 + s_b^2 T_b) is log1p(occ1), one logarithm for the bands (and
+     * with log A, one for both); only the last round's is used. A tau whose A is not > 0 in some
+     * round has no likelihood. */
+    const double *cb = m->red_c + (size_t)bulb * REC_TAU_N * (size_t)nb;
+    double av[REC_TAU_N] = {0}, Av[REC_TAU_N], Bv[REC_TAU_N], Cv[REC_TAU_N], occv[REC_TAU_N];
+    unsigned char dead[REC_TAU_N] = {0};
+    for (int it = 0; it < 3; it++) {
+        int first = 1;   /* the sums start at 0 (+0 + x, as a zeroed sum would) */
+        for (int b = 0; b < nb; b++) {
+            if (!(T[b] > 0.0)) continue;
+            double Tb = T[b], iT = 1.0 / Tb, ab = ah[b];
+            for (int i = 0; i < REC_TAU_N; i++) {
+                double c = cb[(size_t)i * (size_t)nb + (size_t)b], a = av[i] > 0.0 ? av[i] : 0.0;
+                double sb = tol * a * c, x = sb * sb * Tb, v = 1.0 / (iT + sb * sb);
+                double A0 = first ? 0.0 : Av[i], B0 = first ? 0.0 : Bv[i], C0 = first ? 0.0 : Cv[i],
+                       o0 = first ? 0.0 : occv[i];
+                Av[i] = A0 + v * c * c;
+                Bv[i] = B0 + v * c * ab;
+                Cv[i] = C0 + v * ab * ab;
+                occv[i] = o0 + (x + o0 * x);
+            }
+            first = 0;
+        }
+        for (int i = 0; i < REC_TAU_N; i++) {
+            dead[i] |= !(Av[i] > 0.0);
+            if (!dead[i]) av[i] = Bv[i] / Av[i];
+        }
+    }
+    double Lt[REC_TAU_N], Lmax = -INFINITY;
+    for (int i = 0; i < REC_TAU_N; i++) {
+        double tau = rec_eq7_tau(i);
+        const double *c = cb + (size_t)i * (size_t)nb;
+        double a = av[i], A = Av[i], B = Bv[i], C = Cv[i], occ1 = occv[i];
+        if (dead[i]) {
+            Lt[i] = -INFINITY;
+            continue;
+        }
+        double between = C - B * B / A;
+        if (between < 0.0) between = 0.0;
+        double z = B / sqrt(A);
+        Lt[i] = -0.5 * (R + between) - 0.5 * log(A + A * occ1) + gs_log_phi(z);
+        if (ll_acc) ll_acc[i] = rec_log_add(ll_acc[i], Lt[i] + ll_logw);
+        if (w->has_tau_prior) Lt[i] += w->tau_logprior[i] + log((double)REC_TAU_N);
+        if (Lt[i] > Lmax) {
+            Lmax = Lt[i];
+            if (fit) {
+                fit->chi2 = R + between;
+                fit->a = a > 0.0 ? a : 0.0;
+                fit->tau = tau;
+                fit->z = z > 0.0 ? z : 0.0;
+                for (int b = 0; b < nb; b++) {
+                    double sb = tol * fit->a * c[b];
+                    /* posterior mean of a_b: data a_b (weight T_b) and prior a c_b (1/s_b^2) */
+                    fit->band[b] = T[b] > 0.0 ? (sb > 0.0 ? (T[b] * ah[b] + fit->a * c[b] / (sb * sb)) /
+                                                              (T[b] + 1.0 / (sb * sb))
+                                                          : fit->a * c[b])
+                                              : 0.0;
+                    if (fit->band[b] < 0.0) fit->band[b] = 0.0;
+                }
+            }
+        }
+    }
+    if (!isfinite(Lmax)) return -INFINITY;
+    double sum = 0.0;
+    for (int i = 0; i < REC_TAU_N; i++) sum += rec_exp_neg(Lt[i] - Lmax);
+    return Lmax + log(sum / REC_TAU_N);
+}
+
+double rec_eq7_band_misfit(const rec_matcher *m, int bulb, const double *S, const double *T, double tol)
+{
+    rec_eq7_work w;
+    memset(&w, 0, sizeof w);   /* only the tau prior (none) and the tolerance are read */
+    w.chroma_tol = tol;
+    double Sxx = 0.0;   /* = sum S^2/T: no residual within the bands, the fit's chi2 is the misfit */
+    for (int b = 0; b < m->bands; b++)
+        if (T[b] > 0.0) Sxx += S[b] * S[b] / T[b];
+    rec_red_fit rf;
+    if (!isfinite(rec_eq7_loglik_red(m, &w, bulb, Sxx, S, T, &rf, NULL, 0.0))) return INFINITY;
+    return rf.chi2;
+}
+
+
+/* ------------------------------------------------------------ bounds */
+
+/* An upper bound of rec_eq7_loglik_red for bulb b's sums: with v_b = T_b / (1 + s_b^2 T_b) <= T_b
+ * the occupation term is sum_b log(v_b / T_b) / 2 <= 0 and A = sum v c^2 >= v_k c_k^2 for any used
+ * band k, so -log(A)/2 - occ/2 <= -log(c_k^2 T_k)/2; between >= 0 and log Phi <= 0; c_k(tau) is
+ * at least the bulb's smallest tabulated c_k (m->red_cmin); the tau prior adds at most its
+ * largest log weight (lp_max). Every tau's L(tau) obeys it, so their prior-weighted mean does. */
+static double red_bound(const rec_matcher *m, double Sxx, const double *S, const double *T,
+                        const double *cmin, double lp_max)
+{
+    double R = Sxx, best = -INFINITY;
+    for (int b = 0; b < m->bands; b++) {
+        if (!(T[b] > 0.0)) continue;
+        R -= S[b] * (S[b] / T[b]);
+        double l = log(cmin[b] * cmin[b] * T[b]);
+        if (l > best) best = l;
+    }
+    if (!isfinite(best)) return -INFINITY;
+    if (R < 0.0) R = 0.0;
+    double u = -0.5 * R - 0.5 * best + lp_max;
+    return u + 1e-9 * (1.0 + fabs(u));   /* rounding slack: a bound in floating point too */
+}
+
+static void red_bounds(const rec_matcher *m, rec_eq7_work *w, double Sxx, size_t *jbest)
+{
+    double lp_max = 0.0, Sv[GS_MAX_BANDS], Tv[GS_MAX_BANDS];
+    if (w->has_tau_prior) {
+        lp_max = -INFINITY;
+        for (int i = 0; i < REC_TAU_N; i++) lp_max = fmax(lp_max, w->tau_logprior[i]);
+        lp_max += log((double)REC_TAU_N);
+    }
+    size_t jb = 0;
+    for (size_t j = 0; j < m->M; j++) {
+        rec_eq7_sums_of(m, w, j, Sv, Tv);
+        w->U[j] = red_bound(m, Sxx, Sv, Tv, m->red_cmin + (size_t)m->tbulb[j] * (size_t)m->bands, lp_max);
+        jb = w->U[j] > w->U[jb] ? j : jb;
+    }
+    *jbest = jb;
+}
+
+/* The screen's passes over every template: the largest bound, with its first index, 8 lanes at
+ * a time (each lane keeps the first of its largest); and the bounds themselves, written plainly
+ * for the compiler to vectorize (REC_VECTOR_LOOP). */
+typedef double scr_vd __attribute__((vector_size(8 * sizeof(double))));
+typedef long long scr_vl __attribute__((vector_size(8 * sizeof(long long))));
+
+/* The first index of the largest of U[0..M) (0 when every one is -inf). */
+REC_VECTOR_CLONES static size_t scr_argmax(const double *U, size_t M)
+{
+    size_t j = 0, jb = 0;
+    double mx = -INFINITY;
+    if (M >= 8) {
+        scr_vd vm;
+        scr_vl vi = {0, 1, 2, 3, 4, 5, 6, 7}, vj = vi, step = {8, 8, 8, 8, 8, 8, 8, 8};
+        memcpy(&vm, U, sizeof vm);
+        for (j = 8; j + 8 <= M; j += 8) {
+            scr_vd u;
+            memcpy(&u, U + j, sizeof u);
+            vj += step;
+            scr_vl gt = u > vm;
+            vm = (scr_vd)((gt & (scr_vl)u) | (~gt & (scr_vl)vm));
+            vi = (gt & vj) | (~gt & vi);
+        }
+        for (int q = 0; q < 8; q++)
+            if (vm[q] > mx || (vm[q] == mx && (size_t)vi[q] < jb)) mx = vm[q], jb = (size_t)vi[q];
+    }
+    for (; j < M; j++)
+        if (U[j] > mx) mx = U[j], jb = j;
+    return jb;
+}
+
+/* The one-brightness bound below (free_bounds) of every template: U = c0 - lognorm +
+ * min(g - Sxx, 0)/2 plus the slack, g = S^2/T where S > 0 (T > 0), -inf where T <= 0. */
+REC_VECTOR_LOOP static void scr_bounds_1(const double *S, const double *T, const double *lognorm, size_t M,
+                                         double c0, double Sxx, double slack, double *U)
+{
+    for (size_t j = 0; j < M; j++) {
+        double s = S[j], t = T[j];
+        double g = s > 0.0 && t > 0.0 ? s * (s / t) : 0.0, d = g - Sxx;
+        double u = c0 - lognorm[j] + 0.5 * (d < 0.0 ? d : 0.0);
+        U[j] = t > 0.0 ? u + (1e-9 * (1.0 + fabs(u)) + slack) : -INFINITY;
+    }
+}
+
+/* The bounds of rec_eq7_loglik_n: log Phi(z) <= 0, and a brightness whose S_f <= 0 adds at most
+ * z_f^2/2 + log Phi(z_f) <= log(1/2) < 0 to L, so with g = sum over S_f > 0 of S_f^2/T_f
+ *   L <= -max(Sxx - g, 0)/2 - sum_f log(T_f)/2,
+ * and T_f = sum w t^2 >= w_min |t_f|^2 (w_min the light's smallest weight of the brightness's
+ * samples, |t_f| the template's norm there, tabulated): no logarithm per template. A brightness
+ * whose samples a template misses (T_f = 0) adds no term to its L: the bound's term is kept from
+ * going below 0 then. Rounding slack: L's own chi2 cancels as Sxx - g does, to some 1e-16 Sxx. */
+static void free_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx,
+                        size_t *jbest)
+{
+    size_t M = m->M, jb = 0;
+    int nf = m->nfit;
+    double slack = 1e-12 * Sxx, *U = w->U;
+    if (nf == 1) {
+        scr_bounds_1(w->S, w->T, m->lognorm, M, -0.5 * log(p->wmin[0]), Sxx, slack, U);
+        *jbest = scr_argmax(U, M);
+        return;
+    }
+    double cf[GS_MAX_BANDS];
+    for (int f = 0; f < nf; f++) cf[f] = p->wmin[f] > 0.0 ? -0.5 * log(p->wmin[f]) : 0.0;
+    for (size_t j = 0; j < M; j++) {
+        double g = 0.0, u = 0.0;
+        int any = 0;
+        for (int f = 0; f < nf; f++) {
+            double S = w->S[(size_t)f * M + j], T = w->T[(size_t)f * M + j];
+            if (!(p->wmin[f] > 0.0)) continue;   /* no usable sample: no brightness */
+            double c = cf[f] - log(m->bnorm[j * (size_t)m->bands + (size_t)f]);
+            if (!(T > 0.0)) {
+                u += c > 0.0 ? c : 0.0;
+                continue;
+            }
+            any = 1;
+            u += c;
+            if (S > 0.0) g += S * (S / T);
+        }
+        double d = g - Sxx;
+        u += 0.5 * (d < 0.0 ? d : 0.0);
+        U[j] = any ? u + 1e-9 * (1.0 + fabs(u)) + slack : -INFINITY;
+        jb = U[j] > U[jb] ? j : jb;
+    }
+    *jbest = jb;
+}
+
+/* ------------------------------------------------------------ the screen */
+
+double rec_eq7_loglik_fit(const rec_matcher *m, rec_eq7_work *w, size_t j, double Sxx)
+{
+    double Sv[GS_MAX_BANDS], Tv[GS_MAX_BANDS];
+    rec_eq7_sums_of(m, w, j, Sv, Tv);
+    if (!m->red) return rec_eq7_loglik_n(m->nfit, Sxx, Sv, Tv);
+    int b = m->tbulb[j];   /* every bulb weighs the same, whatever its phase grid */
+    return rec_eq7_loglik_red(m, w, b, Sxx, Sv, Tv, NULL, w->collect_tau ? w->tau_ll : NULL,
+                              -log((double)m->count[b]));
+}
+
+/* The screen of one light: its sums, the largest exact L so far, and the two largest ranks (L +
+ * log cellw, as eq7_decide.c ranks discrete pairs) of its exact discrete templates. */
+typedef struct {
+    const rec_matcher *m;
+    rec_eq7_work *w;
+    double Sxx, Lmax, r1, r2;
+} screen;
+
+/* Template j's exact L; its bound is spent (-inf: the passes below look for the largest bound
+ * of the templates not yet exact). */
+static double exact(screen *sc, size_t j)
+{
+    const rec_matcher *m = sc->m;
+    rec_eq7_work *w = sc->w;
+    w->done[j] = 1;
+    w->U[j] = -INFINITY;
+    double L = w->L[j] = rec_eq7_loglik_fit(m, w, j, sc->Sxx);
+    if (L > sc->Lmax) sc->Lmax = L;
+    if (!m->ncont || !m->cont[m->tbulb[j]]) {
+        double r = L + m->logcellw[j];
+        if (r > sc->r1) sc->r2 = sc->r1, sc->r1 = r;
+        else if (r > sc->r2) sc->r2 = r;
+    }
+    return L;
+}
+
+/* The discrete template of the largest bound not yet exact (M: none), its bound + log cellw in *u. */
+static size_t best_discrete_bound(const rec_matcher *m, const rec_eq7_work *w, double *u)
+{
+    size_t jn = m->M;
+    if (!m->ncont) {   /* every cellw the same */
+        jn = scr_argmax(w->U, m->M);
+        *u = w->U[jn] + m->logcellw[jn];
+        return w->U[jn] > -INFINITY ? jn : m->M;
+    }
+    *u = -INFINITY;
+    for (size_t j = 0; j < m->M; j++)
+        if (!m->cont[m->tbulb[j]] && w->U[j] + m->logcellw[j] > *u) {
+            *u = w->U[j] + m->logcellw[j];
+            jn = j;
+        }
+    return jn;
+}
+
+/* The nested tests' first templates (eq7_nested.c): every template that can be among the
+ * REC_NESTED_FIRST + 1 largest L, i.e. whose bound is not below the least of the largest
+ * computed ones. */
+static void nested_first(screen *sc)
+{
+    const rec_matcher *m = sc->m;
+    rec_eq7_work *w = sc->w;
+    double top[REC_NESTED_FIRST + 1];
+    int nt = 0;
+    for (size_t j = 0; j < m->M; j++) {
+        double l = w->L[j];
+        if (!w->done[j] || !isfinite(l) || (nt == REC_NESTED_FIRST + 1 && !(l > top[nt - 1]))) continue;
+        int q = nt < REC_NESTED_FIRST + 1 ? nt++ : nt - 1;
+        while (q > 0 && l > top[q - 1]) {
+            top[q] = top[q - 1];
+            q--;
+        }
+        top[q] = l;
+    }
+    double th = nt == REC_NESTED_FIRST + 1 ? top[nt - 1] : -INFINITY;
+    for (size_t j = 0; j < m->M; j++)
+        if (!w->done[j] && w->U[j] >= th && w->U[j] > -INFINITY) exact(sc, j);
+}
+
+/* Exact: the best bound's template; for each continuous bulb its best (from its best bound, then
+ * every one of its templates whose bound reaches the bulb's best so far: its peak is refined or
+ * ranked from there); every template whose bound is within CUT_PIXEL of the best computed L (the
+ * posterior's mass; in one pass, its threshold only rises); the runner-up (the two best discrete
+ * templates: the best bound of the rest while it beats the second rank); with the nested tests
+ * their first templates. */
+double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx)
+{
+    size_t M = m->M;
+    double *U = w->U;
+    screen sc = {m, w, Sxx, -INFINITY, -INFINITY, -INFINITY};
+    memset(w->done, 0, M);
+    for (size_t j = 0; j < M; j++) w->L[j] = -INFINITY;
+    if (m->exhaustive) {
+        for (size_t j = 0; j < M; j++) exact(&sc, j);
+        return sc.Lmax;
+    }
+    size_t jb = 0;
+    if (m->red) red_bounds(m, w, Sxx, &jb);
+    else free_bounds(m, w, p, Sxx, &jb);
+    if (!(U[jb] > -INFINITY)) return -INFINITY;
+    exact(&sc, jb);
+    for (size_t b = 0; m->ncont && b < m->nb; b++) {
+        if (!m->cont[b]) continue;
+        size_t j0 = m->first[b], n = m->count[b], jm = j0;
+        for (size_t j = j0; j < j0 + n; j++)
+            if (U[j] > U[jm]) jm = j;
+        double lb = w->done[jm] ? w->L[jm] : U[jm] > -INFINITY ? exact(&sc, jm) : -INFINITY;
+        for (size_t j = j0; lb > -INFINITY && j < j0 + n; j++)
+            if (U[j] >= lb) lb = fmax(lb, exact(&sc, j));
+    }
+    for (size_t j = 0; j < M; j++)
+        if (U[j] >= sc.Lmax - CUT_PIXEL) exact(&sc, j);
+    if ((size_t)m->ncont < m->nb)
+        for (;;) {
+            double u;
+            size_t jn = best_discrete_bound(m, w, &u);
+            if (jn == M || !(u > sc.r2)) break;
+            exact(&sc, jn);
+        }
+    if (m->o.nested_tests) nested_first(&sc);
+    return sc.Lmax;
+}
+
+void rec_eq7_screen_widen(const rec_matcher *m, rec_eq7_work *w, double Sxx, double Lmax, double cut)
+{
+    screen sc = {m, w, Sxx, Lmax, -INFINITY, -INFINITY};
+    for (size_t j = 0; j < m->M; j++)
+        if (!w->done[j] && w->U[j] >= Lmax - cut) exact(&sc, j);
+}

@@ -1,0 +1,187 @@
+/* eq7_sums.c - the sums of Eq. 7's scores, S = sum w x t and T = sum w t^2 of every template
+ * (per band with band gains), for a block of lights (rec_eq7_block_sums):
+ * - the templates that are not Fourier grids: a matrix product of the block's weighted samples
+ *   with the transposed templates, by a kernel whose every sum runs in the order of the samples
+ *   (one multiply-add per term, fused where the CPU can), so that a light's sums are the same bits
+ *   whatever lights share its block: rec_match_light and rec_match_catalog agree to the bit;
+ * - continuous bulbs with the Fourier form: one G-point inverse FFT per sum and light;
+ * - the slow path (m->exhaustive, the tests' oracle) and matchers too large for the transposed
+ *   copies: one matrix-vector product per light and sum (OpenBLAS). */
+#include "recognize/internal.h"
+
+#include <cblas.h>
+#include <fftw3.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* The transposed copies are built up to this many values each (64 MiB). */
+#define SUMS_MAX_VALUES (8u << 20)
+
+gs_status rec_eq7_sums_setup(rec_matcher *m)
+{
+    size_t D = (size_t)m->D, M = m->M;
+    m->ldtr = (M + SUMS_COLS - 1) / SUMS_COLS * SUMS_COLS + SUMS_COLS;   /* a tile past any range */
+    if ((m->fourier && (size_t)m->ncont == m->nb) || D * m->ldtr > SUMS_MAX_VALUES) return GS_OK;
+    m->ttr = calloc(D * m->ldtr, sizeof *m->ttr);
+    m->tsqtr = calloc(D * m->ldtr, sizeof *m->tsqtr);
+    if (!m->ttr || !m->tsqtr) return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate %zu templates", M);
+    for (size_t j = 0; j < M; j++)
+        for (size_t d = 0; d < D; d++) {
+            m->ttr[d * m->ldtr + j] = m->t[j * D + d];
+            m->tsqtr[d * m->ldtr + j] = m->tsq[j * D + d];
+        }
+    return GS_OK;
+}
+
+/* out[q * ldo + j] = sum over d < n of a[q * lda + d] tt[d * ldt + j], for q < nq (a multiple of
+ * SUMS_ROWS) and j < nj; tt holds SUMS_COLS columns past nj (ldt >= nj + SUMS_COLS). A tile of
+ * SUMS_ROWS lights by two vectors of templates, each sum its own chain of multiply-adds over d,
+ * fused where the CPU can: the same bits whichever kernel runs (the 512-bit one, the 256-bit one
+ * with FMA), and whatever lights share the tile. */
+#ifdef __clang__
+#pragma clang fp contract(fast)
+#define SUMS_CONTRACT
+#else
+#define SUMS_CONTRACT optimize("fp-contract=fast"),
+#endif
+#define SUMS_ROW(r)                                                                                 \
+    do {                                                                                            \
+        double x = ar[(r) * lda + d];                                                               \
+        s[r] += x * t0;                                                                             \
+        s[SUMS_ROWS + (r)] += x * t1;                                                               \
+    } while (0)
+#define SUMS_KERNEL(NAME, VW, TARGET)                                                               \
+    typedef double NAME##_vec __attribute__((vector_size((VW) * sizeof(double))));                  \
+    __attribute__((SUMS_CONTRACT TARGET)) static void NAME(const double *a, size_t lda, size_t nq,  \
+                                                           const double *tt, size_t ldt, size_t n,  \
+                                                           double *out, size_t ldo, size_t nj)      \
+    {                                                                                               \
+        _Static_assert(SUMS_ROWS == 8 && 2 * (VW) <= SUMS_COLS, "the tile");                        \
+        for (size_t q = 0; q < nq; q += SUMS_ROWS) {                                                \
+            const double *ar = a + q * lda;                                                         \
+            for (size_t j = 0; j < nj; j += 2 * (VW)) {                                             \
+                NAME##_vec s[2 * SUMS_ROWS] = {{0}};                                                \
+                for (size_t d = 0; d < n; d++) {                                                    \
+                    NAME##_vec t0, t1;                                                              \
+                    memcpy(&t0, tt + d * ldt + j, sizeof t0);                                       \
+                    memcpy(&t1, tt + d * ldt + j + (VW), sizeof t1);                                \
+                    SUMS_ROW(0); SUMS_ROW(1); SUMS_ROW(2); SUMS_ROW(3);                             \
+                    SUMS_ROW(4); SUMS_ROW(5); SUMS_ROW(6); SUMS_ROW(7);                             \
+                }                                                                                   \
+                size_t n0 = nj - j < (VW) ? nj - j : (VW), n1 = nj - j > (VW) ? nj - j - (VW) : 0;  \
+                n1 = n1 < (VW) ? n1 : (VW);                                                         \
+                for (int r = 0; r < SUMS_ROWS; r++) {                                               \
+                    memcpy(out + (q + (size_t)r) * ldo + j, &s[r], n0 * sizeof(double));            \
+                    memcpy(out + (q + (size_t)r) * ldo + j + (VW), &s[SUMS_ROWS + r], n1 * sizeof(double)); \
+                }                                                                                   \
+            }                                                                                       \
+        }                                                                                           \
+    }
+SUMS_KERNEL(sums_kernel_512, 8, target("avx512f"))
+SUMS_KERNEL(sums_kernel_256, 4, target_clones("arch=haswell", "default"))
+#ifdef __clang__
+#pragma clang fp contract(on)
+#endif
+
+static void sums_kernel(const double *a, size_t lda, size_t nq, const double *tt, size_t ldt, size_t n,
+                        double *out, size_t ldo, size_t nj)
+{
+    if (__builtin_cpu_supports("avx512f")) sums_kernel_512(a, lda, nq, tt, ldt, n, out, ldo, nj);
+    else sums_kernel_256(a, lda, nq, tt, ldt, n, out, ldo, nj);
+}
+
+/* The light's K-point DFTs of wx and w per band into w->spec + nh (X, then W; [band * K + r]),
+ * conjugated: conj(sum_k v_k e^{2 pi i r k / K}). */
+void rec_eq7_light_dfts(const rec_matcher *m, rec_eq7_work *w)
+{
+    size_t K = (size_t)m->K, nh = (size_t)m->G / 2 + 1, D = (size_t)m->D;
+    double complex *X = w->spec + nh, *W = X + D;
+    for (int band = 0; band < m->bands; band++)
+        for (size_t r = 0; r < K; r++) {
+            double complex x = 0.0, v = 0.0;
+            size_t rk = 0;   /* r k mod K */
+            for (size_t k = 0; k < K; k++) {
+                size_t d = (size_t)band * K + k;
+                x += w->wx[d] * m->wk[rk];
+                v += w->w[d] * m->wk[rk];
+                rk += r;
+                if (rk >= K) rk -= K;
+            }
+            X[(size_t)band * K + r] = conj(x);
+            W[(size_t)band * K + r] = conj(v);
+        }
+}
+
+void rec_eq7_grid_sums(const rec_matcher *m, rec_eq7_work *w, size_t b)
+{
+    size_t K = (size_t)m->K, nh = (size_t)m->G / 2 + 1, D = (size_t)m->D, M = m->M;
+    const double complex *X = w->spec + nh, *W = X + D;
+    int nf = m->nfit;
+    for (int f = 0; f < nf; f++)
+        for (int sq = 0; sq < 2; sq++) {
+            /* the cross-spectrum of the parameter's bands (all of them with one gain) */
+            int b0 = nf == 1 ? 0 : f, b1 = nf == 1 ? m->bands : f + 1;
+            for (size_t r = 0, rk = 0; r < nh; r++) {
+                double complex z = 0.0;
+                for (int band = b0; band < b1; band++) {
+                    size_t o = (b * (size_t)m->bands + (size_t)band) * nh + r;
+                    z += sq ? m->bhat[o] * W[(size_t)band * K + rk] : m->ahat[o] * X[(size_t)band * K + rk];
+                }
+                w->spec[r] = z;
+                if (++rk == K) rk = 0;
+            }
+            fftw_execute_dft_c2r((fftw_plan)m->c2r, (fftw_complex *)w->spec, w->grid);
+            double *dst = (sq ? w->T : w->S) + (size_t)f * M + m->first[b];
+            memcpy(dst, w->grid, sizeof *dst * (size_t)m->G);
+        }
+}
+
+/* Templates j0..j0+n-1 of row q by matrix-vector products (the slow path). */
+static void gemv_sums(const rec_matcher *m, rec_eq7_work *w, size_t j0, size_t n)
+{
+    size_t D = (size_t)m->D, M = m->M, span = m->bg ? (size_t)m->K : D;
+    for (int f = 0; f < m->nfit; f++) {
+        size_t o = (size_t)f * span;
+        cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)n, (int)span, 1.0, m->t + j0 * D + o, (int)D,
+                    w->wx + o, 1, 0.0, w->S + (size_t)f * M + j0, 1);
+        cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)n, (int)span, 1.0, m->tsq + j0 * D + o, (int)D,
+                    w->w + o, 1, 0.0, w->T + (size_t)f * M + j0, 1);
+    }
+}
+
+void rec_eq7_block_sums(const rec_matcher *m, rec_eq7_work *w, size_t n)
+{
+    size_t D = (size_t)m->D, M = m->M, span = m->bg ? (size_t)m->K : D;
+    int fourier = m->fourier && !m->exhaustive, kernel = m->ttr && !m->exhaustive;
+    size_t nq = (n + SUMS_ROWS - 1) / SUMS_ROWS * SUMS_ROWS;   /* the block's rows are padded */
+    /* the templates that are not Fourier grids, in runs of consecutive ones */
+    for (size_t b = 0; b < m->nb;) {
+        if (fourier && m->cont[b]) {
+            b++;
+            continue;
+        }
+        size_t b1 = b + 1;
+        while (b1 < m->nb && !(fourier && m->cont[b1])) b1++;
+        size_t j0 = m->first[b], nj = m->first[b1 - 1] + m->count[b1 - 1] - j0;
+        for (size_t q = 0; !kernel && q < n; q++) {
+            if (!w->prep[q].live) continue;
+            rec_eq7_work_row(m, w, q);
+            gemv_sums(m, w, j0, nj);
+        }
+        for (int f = 0; kernel && f < m->nfit; f++) {
+            size_t o = (size_t)f * span, ldo = (size_t)m->nfit * M;
+            sums_kernel(w->wx_all + o, D, nq, m->ttr + o * m->ldtr + j0, m->ldtr, span,
+                        w->S_all + (size_t)f * M + j0, ldo, nj);
+            sums_kernel(w->w_all + o, D, nq, m->tsqtr + o * m->ldtr + j0, m->ldtr, span,
+                        w->T_all + (size_t)f * M + j0, ldo, nj);
+        }
+        b = b1;
+    }
+    for (size_t q = 0; fourier && q < n; q++) {
+        if (!w->prep[q].live) continue;
+        rec_eq7_work_row(m, w, q);
+        rec_eq7_light_dfts(m, w);
+        for (size_t b = 0; b < m->nb; b++)
+            if (m->cont[b]) rec_eq7_grid_sums(m, w, b);
+    }
+}
