@@ -296,6 +296,98 @@ static void flat_share_of(const rec_matcher *m, rec_eq7_work *w, const double *t
     w->fit_flat_var = info > 0.0 ? 1.0 / info : INFINITY;
 }
 
+/* The passes of rec_eq7_light_prepare over a light's samples, written for the vectorizer
+ * (REC_VECTOR_LOOP): sums in 8 interleaved partial sums, taken in a fixed order. */
+#define PREP_LANES 8
+
+/* ok[d] = 1 where sample d is usable (finite signal, finite sigma > 0), else 0; the largest
+ * usable sigma into *cmax; returns how many are bad (neither usable nor dropped: sigma = +inf). */
+REC_VECTOR_LOOP static int prep_scan(const double *x, const double *s, size_t D, double *ok, double *cmax)
+{
+    int bad = 0;
+    for (size_t d = 0; d < D; d++) {
+        int u = (fabs(x[d]) <= DBL_MAX) & (fabs(s[d]) <= DBL_MAX) & (s[d] > 0.0);
+        ok[d] = u ? 1.0 : 0.0;
+        bad += !u & !(s[d] > DBL_MAX);
+    }
+    double mx[PREP_LANES] = {0};
+    size_t d = 0;
+    for (; d + PREP_LANES <= D; d += PREP_LANES)
+        for (int k = 0; k < PREP_LANES; k++) mx[k] = (ok[d + k] != 0.0) & (s[d + k] > mx[k]) ? s[d + k] : mx[k];
+    for (; d < D; d++) mx[0] = (ok[d] != 0.0) & (s[d] > mx[0]) ? s[d] : mx[0];
+    double c = 0.0;
+    for (int k = 0; k < PREP_LANES; k++) c = mx[k] > c ? mx[k] : c;
+    *cmax = c;
+    return bad;
+}
+
+/* Over one band's usable samples, in units of 1/ic: sum x^2 - sigma^2 and sum x; returns their
+ * count. */
+REC_VECTOR_LOOP static int prep_band(const double *x, const double *s, const double *ok, size_t K, double ic,
+                                     double *sum2, double *sum1)
+{
+    double a[PREP_LANES] = {0}, b[PREP_LANES] = {0}, n[PREP_LANES] = {0};
+    size_t d = 0;
+    for (; d + PREP_LANES <= K; d += PREP_LANES)
+        for (int k = 0; k < PREP_LANES; k++) {
+            double xv = x[d + k] * ic, sv = s[d + k] * ic, u = ok[d + k];
+            a[k] += u != 0.0 ? xv * xv - sv * sv : 0.0;
+            b[k] += u != 0.0 ? xv : 0.0;
+            n[k] += u;
+        }
+    for (; d < K; d++) {
+        double xv = x[d] * ic, sv = s[d] * ic;
+        a[0] += ok[d] != 0.0 ? xv * xv - sv * sv : 0.0;
+        b[0] += ok[d] != 0.0 ? xv : 0.0;
+        n[0] += ok[d];
+    }
+    double A = 0.0, B = 0.0, N = 0.0;
+    for (int k = 0; k < PREP_LANES; k++) A += a[k], B += b[k], N += n[k];
+    *sum1 = B;
+    *sum2 = A;
+    return (int)N;
+}
+
+/* One band's weights ws = 1/(sigma^2 + fe2mu2) and samples xs = x - flat (units of 1/ic) where
+ * usable and finite (w, wx, xs 0 elsewhere); adds sum ws xs^2 to *Sxx and lowers *wmin to their
+ * least weight; returns the samples used, and the usable ones whose weight overflowed in *bad. */
+REC_VECTOR_LOOP static int prep_weights(const double *x, const double *s, const double *ok, size_t K, double ic,
+                                        double fe2mu2, double flat, double *w, double *wx, double *xs,
+                                        double *Sxx, double *wmin, int *bad)
+{
+    double sxx[PREP_LANES] = {0}, mn[PREP_LANES];
+    int used = 0, over = 0;
+    for (int k = 0; k < PREP_LANES; k++) mn[k] = INFINITY;
+    for (size_t d = 0; d < K; d++) {
+        double sv = s[d] * ic, ws = 1.0 / (sv * sv + fe2mu2), xv = x[d] * ic - flat;
+        int good = (ok[d] != 0.0) & (fabs(ws) <= DBL_MAX) & (fabs(ws * xv * xv) <= DBL_MAX);
+        w[d] = good ? ws : 0.0;
+        xs[d] = good ? xv : 0.0;
+        wx[d] = good ? ws * xv : 0.0;
+        used += good;
+        over += (ok[d] != 0.0) & !good;
+    }
+    size_t d = 0;
+    for (; d + PREP_LANES <= K; d += PREP_LANES)
+        for (int k = 0; k < PREP_LANES; k++) {
+            sxx[k] += wx[d + k] * xs[d + k];
+            mn[k] = (w[d + k] > 0.0) & (w[d + k] < mn[k]) ? w[d + k] : mn[k];
+        }
+    for (; d < K; d++) {
+        sxx[0] += wx[d] * xs[d];
+        mn[0] = (w[d] > 0.0) & (w[d] < mn[0]) ? w[d] : mn[0];
+    }
+    double S = 0.0, m = *wmin > 0.0 ? *wmin : INFINITY;
+    for (int k = 0; k < PREP_LANES; k++) {
+        S += sxx[k];
+        m = mn[k] < m ? mn[k] : m;
+    }
+    *Sxx += S;
+    *wmin = m < INFINITY ? m : *wmin;
+    *bad += over;
+    return used;
+}
+
 int rec_eq7_light_prepare(const rec_matcher *m, rec_eq7_work *w, size_t q, const double *signal,
                           const double *sigma, double fe, rec_match *out)
 {
@@ -303,57 +395,27 @@ int rec_eq7_light_prepare(const rec_matcher *m, rec_eq7_work *w, size_t q, const
     rec_eq7_work_row(m, w, q);
     rec_eq7_prep *p = &w->prep[q];
     memset(p, 0, sizeof *p);
-    unsigned flags = 0;
     /* usable samples: finite signal, finite sigma > 0; sigma = +inf marks a dropped sample */
-    double c = 0.0;
-    for (size_t d = 0; d < D; d++) {
-        double x = signal[d], s = sigma[d];
-        if (isinf(s) && s > 0.0) continue;
-        if (!isfinite(x) || !isfinite(s) || !(s > 0.0)) {
-            flags |= REC_MATCH_BAD_INPUT;
-            continue;
-        }
-        if (s > c) c = s;
-    }
+    double c, *ok = w->r2;
+    int bad = prep_scan(signal, sigma, D, ok, &c);
     /* the band levels: mu_b^2 = mean(x^2 - sigma^2) over the band's usable samples (>= 0), in
      * units of c. A multiplicative excess e per sample adds (e mu_b)^2 to each sample's variance:
      * on average over the band exactly the variance it causes (E chi2 = dof), spread evenly over
      * the K windows. The flat share (rec_eq7_opts.flat_share): x = a (t + phi m) has band means
      * a m_b (1 + phi), so the flat part is phi / (1 + phi) of each band's mean, whatever the
      * template. */
-    double ic = 1.0 / c, *mu2 = p->mu2, flat_b[GS_MAX_BANDS] = {0.0, 0.0, 0.0};
-    for (int band = 0; band < m->bands; band++) {
-        double sum = 0.0, sx = 0.0;
-        int n = 0;
-        for (size_t d = (size_t)band * K; d < (size_t)(band + 1) * K; d++) {
-            if (!isfinite(signal[d]) || !isfinite(sigma[d]) || !(sigma[d] > 0.0)) continue;
-            double x = signal[d] * ic, s = sigma[d] * ic;
-            sum += x * x - s * s;
-            sx += x;
-            n++;
-        }
-        mu2[band] = (n > 0 && sum > 0.0 && isfinite(sum)) ? sum / n : 0.0;
-        if (w->flat > 0.0 && n > 0) flat_b[band] = w->flat / (1.0 + w->flat) * sx / n;
-    }
+    double ic = 1.0 / c, *mu2 = p->mu2, Sxx = 0.0;
     int used = 0;
-    double Sxx = 0.0, fe2 = fe * fe;
-    for (size_t d = 0; d < D; d++) {
-        w->w[d] = w->wx[d] = w->xs[d] = 0.0;
-        if (!isfinite(signal[d]) || !isfinite(sigma[d]) || !(sigma[d] > 0.0)) continue;   /* above */
-        double x = signal[d] * ic, s = sigma[d] * ic;
-        double ws = 1.0 / (s * s + fe2 * mu2[d / K]), xs = x - flat_b[d / K];
-        if (!isfinite(ws) || !isfinite(ws * xs * xs)) {
-            flags |= REC_MATCH_BAD_INPUT;
-            continue;
-        }
-        w->w[d] = ws;
-        w->xs[d] = xs;
-        w->wx[d] = ws * xs;
-        Sxx += w->wx[d] * xs;
-        used++;
-        double *wm = &p->wmin[m->nfit == 1 ? 0 : d / K];
-        if (!(*wm > 0.0) || ws < *wm) *wm = ws;
+    for (int band = 0; band < m->bands; band++) {
+        size_t o = (size_t)band * K;
+        double sum2, sum1;
+        int n = prep_band(signal + o, sigma + o, ok + o, K, ic, &sum2, &sum1);
+        mu2[band] = (n > 0 && sum2 > 0.0 && isfinite(sum2)) ? sum2 / n : 0.0;
+        double flat = w->flat > 0.0 && n > 0 ? w->flat / (1.0 + w->flat) * sum1 / n : 0.0;
+        used += prep_weights(signal + o, sigma + o, ok + o, K, ic, fe * fe * mu2[band], flat, w->w + o,
+                             w->wx + o, w->xs + o, &Sxx, &p->wmin[m->nfit == 1 ? 0 : band], &bad);
     }
+    unsigned flags = bad ? REC_MATCH_BAD_INPUT : 0u;
     if (used == 0 || !isfinite(Sxx)) {
         rec_eq7_no_answer(out, flags | REC_MATCH_BAD_INPUT);
         memset(w->w, 0, sizeof *w->w * D);   /* a row of zeros in the block's sums */

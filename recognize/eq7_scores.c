@@ -339,12 +339,19 @@ static size_t best_discrete_bound(const rec_matcher *m, const rec_eq7_work *w, d
 }
 
 /* The nested tests' first templates (eq7_nested.c): every template that can be among the
- * REC_NESTED_FIRST + 1 largest L, i.e. whose bound is not below the least of the largest
- * computed ones. */
+ * REC_NESTED_FIRST + 1 largest L: the largest bounds exact until there are as many exact scores,
+ * then every template whose bound is not below the least of the largest. */
 static void nested_first(screen *sc)
 {
     const rec_matcher *m = sc->m;
     rec_eq7_work *w = sc->w;
+    size_t ndone = 0;
+    for (size_t j = 0; j < m->M; j++) ndone += w->done[j] && isfinite(w->L[j]);
+    while (ndone < REC_NESTED_FIRST + 1) {
+        size_t jn = scr_argmax(w->U, m->M);
+        if (!(w->U[jn] > -INFINITY)) break;
+        ndone += isfinite(exact(sc, jn));
+    }
     double top[REC_NESTED_FIRST + 1];
     int nt = 0;
     for (size_t j = 0; j < m->M; j++) {
