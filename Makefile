@@ -36,7 +36,7 @@ LDFLAGS := $(SANFLAGS) $(CLANG_SHARED_SAN)
 # OpenCV: only core and imgproc (PNGs go through libspng; videoio, with its ~180 libraries, is
 # in the camera plugin below).
 LDLIBS := $(shell pkg-config --libs $(PKGS) 2>/dev/null) -lopencv_imgproc \
-	-lopencv_core -lGeographicLib -lopenblas -lcsv -lm
+	-lopencv_core -lGeographicLib -lopenblas -lcsv -lmvec -lm
 
 # Static libraries in link order (each depends only on those after it): the lowest layer,
 # recognize/base (status, format kit, AC/BRF, DELIGHT, capture format), is libbase.a.
@@ -81,6 +81,9 @@ $(BUILD)/version.h: FORCE
 	  (cmp -s $@.tmp $@ && rm -f $@.tmp || mv $@.tmp $@)
 $(BUILD)/survey/cli.o: $(BUILD)/version.h
 $(BUILD)/survey/cli.o: CPPFLAGS += -I$(BUILD)
+# Eq. 7's scores and decision: loops over templates that call log, erfc and exp, which gcc
+# vectorizes with glibc's libmvec only without errno (nothing there reads it)
+$(BUILD)/recognize/eq7_scores.o $(BUILD)/recognize/eq7_decide.o: CFLAGS += -fno-math-errno
 
 $(BIN): $(BUILD)/survey/main.o $(LIBS)
 	$(CXX) $(LDFLAGS) $^ $(LDLIBS) -o $@

@@ -9,8 +9,31 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* ------------------------------------------------------------ the rec_eq7_decision */
+#if defined(__GNUC__) && !defined(__clang__)
+/* glibc's vector math (libmvec): the candidates' masses below, 8 (or 4) at a time */
+__attribute__((simd("notinbranch"))) double exp(double);
+#endif
 
+/* e[i] = exp(d[i]) where d[i] > -746, else 0 (rec_exp_neg), for n values. */
+REC_VECTOR_LOOP static void exp_neg(const double *restrict d, size_t n, double *restrict e)
+{
+    for (size_t i = 0; i < n; i++) {
+        double x = exp(d[i] > -746.0 ? d[i] : 0.0);
+        e[i] = d[i] > -746.0 ? x : 0.0;
+    }
+}
+
+/* mass[j] = exp(L[j] - Lmax) cellw[j] of the candidates j (0 where L is not finite). */
+static void masses(const rec_matcher *m, rec_eq7_work *w, double Lmax)
+{
+    double *d = w->tmp, *e = w->tmp + m->M;
+    for (size_t i = 0; i < w->ncand; i++) {
+        double L = w->L[w->cand[i]];
+        d[i] = isfinite(L) ? L - Lmax : -INFINITY;
+    }
+    exp_neg(d, w->ncand, e);
+    for (size_t i = 0; i < w->ncand; i++) w->mass[w->cand[i]] = e[i] * m->cellw[w->cand[i]];
+}
 
 void rec_eq7_work_free(rec_eq7_work *w)
 {
@@ -35,6 +58,7 @@ void rec_eq7_work_free(rec_eq7_work *w)
     free(w->prep);
     free(w->U);
     free(w->done);
+    free(w->tmp);
     free(w->tt);
     free(w->dt);
     free(w->d2t);
@@ -87,6 +111,7 @@ gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t 
     w->prep = calloc(nr, sizeof *w->prep);
     w->U = malloc(sizeof *w->U * M);
     w->done = calloc(M, 1);
+    w->tmp = malloc(sizeof *w->tmp * 2 * (M + 3 * nb));
     w->tt = malloc(sizeof *w->tt * D);
     w->dt = malloc(sizeof *w->dt * D);
     w->d2t = malloc(sizeof *w->d2t * D);
@@ -101,7 +126,7 @@ gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t 
     w->grid = malloc(sizeof *w->grid * (size_t)m->G);
     if (!w->L || !w->mass || !w->cand || !w->mark || !w->bmass || !w->wmass || !w->has_peak ||
         !w->peak_s || !w->peak_L || !w->peak_sig || !w->peak_z || !w->peak_gain || !w->peak_cell || !w->S_all ||
-        !w->T_all || !w->w_all || !w->wx_all || !w->xs_all || !w->prep || !w->U || !w->done || !w->tt || !w->dt ||
+        !w->T_all || !w->w_all || !w->wx_all || !w->xs_all || !w->prep || !w->U || !w->done || !w->tmp || !w->tt || !w->dt ||
         !w->d2t || !w->r2 || !w->s2 || !w->m2 || !w->tr || !w->t12 || !w->scratch || !w->acc || !w->spec || !w->grid) {
         rec_eq7_work_free(w);
         return gs_fail(GS_ENOMEM, "Eq. 7: cannot allocate scratch for %zu templates", M);
@@ -172,10 +197,7 @@ void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_
     dec->tmpl = dec->runner_tmpl = 0;
     dec->shift = dec->runner_shift = 0.0;
     if (!isfinite(Lmax)) goto done;
-    for (size_t i = 0; i < w->ncand; i++) {
-        size_t j = w->cand[i];
-        w->mass[j] = isfinite(w->L[j]) ? rec_exp_neg(w->L[j] - Lmax) * m->cellw[j] : 0.0;
-    }
+    masses(m, w, Lmax);
     /* Laplace correction of the cells around narrow peaks (narrower than a cell) */
     for (size_t b = 0; m->ncont && b < nb; b++) {
         if (!m->cont[b] || !w->has_peak[b] || !(w->peak_sig[b] < cell)) continue;

@@ -302,7 +302,8 @@ static void flat_share_of(const rec_matcher *m, rec_eq7_work *w, const double *t
 
 /* ok[d] = 1 where sample d is usable (finite signal, finite sigma > 0), else 0; the largest
  * usable sigma into *cmax; returns how many are bad (neither usable nor dropped: sigma = +inf). */
-REC_VECTOR_LOOP static int prep_scan(const double *x, const double *s, size_t D, double *ok, double *cmax)
+REC_VECTOR_LOOP static int prep_scan(const double *restrict x, const double *restrict s, size_t D, double *restrict ok,
+                                     double *cmax)
 {
     int bad = 0;
     for (size_t d = 0; d < D; d++) {
@@ -323,8 +324,8 @@ REC_VECTOR_LOOP static int prep_scan(const double *x, const double *s, size_t D,
 
 /* Over one band's usable samples, in units of 1/ic: sum x^2 - sigma^2 and sum x; returns their
  * count. */
-REC_VECTOR_LOOP static int prep_band(const double *x, const double *s, const double *ok, size_t K, double ic,
-                                     double *sum2, double *sum1)
+REC_VECTOR_LOOP static int prep_band(const double *restrict x, const double *restrict s, const double *restrict ok,
+                                     size_t K, double ic, double *sum2, double *sum1)
 {
     double a[PREP_LANES] = {0}, b[PREP_LANES] = {0}, n[PREP_LANES] = {0};
     size_t d = 0;
@@ -351,9 +352,10 @@ REC_VECTOR_LOOP static int prep_band(const double *x, const double *s, const dou
 /* One band's weights ws = 1/(sigma^2 + fe2mu2) and samples xs = x - flat (units of 1/ic) where
  * usable and finite (w, wx, xs 0 elsewhere); adds sum ws xs^2 to *Sxx and lowers *wmin to their
  * least weight; returns the samples used, and the usable ones whose weight overflowed in *bad. */
-REC_VECTOR_LOOP static int prep_weights(const double *x, const double *s, const double *ok, size_t K, double ic,
-                                        double fe2mu2, double flat, double *w, double *wx, double *xs,
-                                        double *Sxx, double *wmin, int *bad)
+REC_VECTOR_LOOP static int prep_weights(const double *restrict x, const double *restrict s, const double *restrict ok,
+                                        size_t K, double ic, double fe2mu2, double flat, double *restrict w,
+                                        double *restrict wx, double *restrict xs, double *Sxx, double *wmin,
+                                        int *bad)
 {
     double sxx[PREP_LANES] = {0}, mn[PREP_LANES];
     int used = 0, over = 0;

@@ -5,9 +5,17 @@
  * e^-30 of that template's posterior mass. */
 #include "recognize/internal.h"
 
+#include <float.h>
 #include <math.h>
 #include <stdint.h>
 #include <string.h>
+
+#if defined(__GNUC__) && !defined(__clang__)
+/* glibc's vector math (libmvec): the score loops below call these 8 (or 4) at a time */
+__attribute__((simd("notinbranch"))) double erfc(double);
+__attribute__((simd("notinbranch"))) double log(double);
+__attribute__((simd("notinbranch"))) double log1p(double);
+#endif
 
 /* ------------------------------------------------------------ log likelihoods */
 
@@ -282,6 +290,73 @@ static void free_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pre
     *jbest = jb;
 }
 
+/* ------------------------------------------------------------ many scores at once */
+
+/* rec_eq7_loglik_n of the templates idx[0..n) into w->L[idx[i]], vectorized (the same terms;
+ * glibc's vector logarithm and erfc): log Phi(z) is log1p(-e) or log(e), e = erfc(|z| / sqrt 2)
+ * / 2; where z <= -20, rec_eq7_loglik_n again (scores_free_fix: its asymptotic series, as
+ * gs_log_phi). */
+REC_VECTOR_LOOP static void scores_1(const double *restrict S, const double *restrict T, const size_t *restrict idx,
+                                     size_t n, double Sxx, double *restrict L)
+{
+    for (size_t i = 0; i < n; i++) {
+        double sv = S[idx[i]], tv = T[idx[i]];
+        int use = tv > 0.0;
+        double sq = sqrt(use ? tv : 1.0), z = sv / sq, chi2 = Sxx - sv * z / sq;
+        double e = 0.5 * erfc(fabs(z) * M_SQRT1_2), a = log1p(-e), b = log(e), lt = log(use ? tv : 1.0);
+        double c = -0.5 * (chi2 > 0.0 ? chi2 : 0.0) - 0.5 * lt + (z > 0.0 ? a : b);
+        L[idx[i]] = use ? c : -INFINITY;
+    }
+}
+
+/* One brightness parameter f's terms (T_f > 0): z_f^2 into chi2[i] (subtracted), -log(T_f)/2 +
+ * log Phi(z_f) into l[i], use[i] set. */
+REC_VECTOR_LOOP static void scores_band(const double *restrict S, const double *restrict T, const size_t *restrict idx,
+                                        size_t n, double *restrict chi2, double *restrict l, int *restrict use)
+{
+    for (size_t i = 0; i < n; i++) {
+        double sv = S[idx[i]], tv = T[idx[i]];
+        int u = tv > 0.0;
+        double sq = sqrt(u ? tv : 1.0), z = sv / sq;
+        double e = 0.5 * erfc(fabs(z) * M_SQRT1_2), a = log1p(-e), b = log(e), lt = log(u ? tv : 1.0);
+        chi2[i] -= u ? z * z : 0.0;
+        l[i] += u ? -0.5 * lt + (z > 0.0 ? a : b) : 0.0;
+        use[i] |= u;
+    }
+}
+
+static void scores_free(const rec_matcher *m, rec_eq7_work *w, const size_t *idx, size_t n, double Sxx)
+{
+    if (m->nfit == 1) {
+        scores_1(w->S, w->T, idx, n, Sxx, w->L);
+        return;
+    }
+    /* per brightness into the scratch (D >= 3 n is not assured: in pieces of D / 3) */
+    size_t piece = (size_t)m->D / 3;
+    double *chi2 = w->tt, *l = w->dt;
+    int use[REC_NESTED_MAX_D];
+    for (size_t i0 = 0; i0 < n; i0 += piece) {
+        size_t k = n - i0 < piece ? n - i0 : piece;
+        for (size_t i = 0; i < k; i++) chi2[i] = Sxx, l[i] = 0.0, use[i] = 0;
+        for (int f = 0; f < m->nfit; f++)
+            scores_band(w->S + (size_t)f * m->M, w->T + (size_t)f * m->M, idx + i0, k, chi2, l, use);
+        for (size_t i = 0; i < k; i++)
+            w->L[idx[i0 + i]] = use[i] ? -0.5 * (chi2[i] > 0.0 ? chi2[i] : 0.0) + l[i] : -INFINITY;
+    }
+}
+
+static void scores_free_fix(const rec_matcher *m, const rec_eq7_work *w, const size_t *idx, size_t n, double Sxx)
+{
+    for (size_t i = 0; i < n; i++)
+        for (int f = 0; f < m->nfit; f++) {
+            double sv = w->S[(size_t)f * m->M + idx[i]], tv = w->T[(size_t)f * m->M + idx[i]];
+            if (tv > 0.0 && !(sv / sqrt(tv) > -20.0)) {
+                w->L[idx[i]] = rec_eq7_loglik_fit(m, (rec_eq7_work *)w, idx[i], Sxx);
+                break;
+            }
+        }
+}
+
 /* ------------------------------------------------------------ the screen */
 
 double rec_eq7_loglik_fit(const rec_matcher *m, rec_eq7_work *w, size_t j, double Sxx)
@@ -318,6 +393,41 @@ static double exact(screen *sc, size_t j)
         else if (r > sc->r2) sc->r2 = r;
     }
     return L;
+}
+
+/* exact() of the templates idx[0..n): the free models' scores at once. */
+static void exact_set(screen *sc, const size_t *idx, size_t n)
+{
+    const rec_matcher *m = sc->m;
+    rec_eq7_work *w = sc->w;
+    if (m->red) {
+        for (size_t i = 0; i < n; i++) exact(sc, idx[i]);
+        return;
+    }
+    scores_free(m, w, idx, n, sc->Sxx);
+    scores_free_fix(m, w, idx, n, sc->Sxx);
+    for (size_t i = 0; i < n; i++) {
+        size_t j = idx[i];
+        double L = w->L[j];
+        w->done[j] = 1;
+        w->U[j] = -INFINITY;
+        if (L > sc->Lmax) sc->Lmax = L;
+        if (!m->ncont || !m->cont[m->tbulb[j]]) {
+            double r = L + m->logcellw[j];
+            if (r > sc->r1) sc->r2 = sc->r1, sc->r1 = r;
+            else if (r > sc->r2) sc->r2 = r;
+        }
+    }
+}
+
+/* The templates not yet exact whose bound is at least th, into idx (w->cand: free while the
+ * screen runs); returns how many. */
+static size_t bounds_at_least(const rec_matcher *m, rec_eq7_work *w, double th)
+{
+    size_t n = 0;
+    for (size_t j = 0; j < m->M; j++)
+        if (w->U[j] >= th && w->U[j] > -INFINITY) w->cand[n++] = j;
+    return n;
 }
 
 /* The discrete template of the largest bound not yet exact (M: none), its bound + log cellw in *u. */
@@ -365,8 +475,7 @@ static void nested_first(screen *sc)
         top[q] = l;
     }
     double th = nt == REC_NESTED_FIRST + 1 ? top[nt - 1] : -INFINITY;
-    for (size_t j = 0; j < m->M; j++)
-        if (!w->done[j] && w->U[j] >= th && w->U[j] > -INFINITY) exact(sc, j);
+    exact_set(sc, w->cand, bounds_at_least(m, w, th));
 }
 
 /* Exact: the best bound's template; for each continuous bulb its best (from its best bound, then
@@ -383,7 +492,8 @@ double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep 
     memset(w->done, 0, M);
     for (size_t j = 0; j < M; j++) w->L[j] = -INFINITY;
     if (m->exhaustive) {
-        for (size_t j = 0; j < M; j++) exact(&sc, j);
+        for (size_t j = 0; j < M; j++) w->cand[j] = j;
+        exact_set(&sc, w->cand, M);
         return sc.Lmax;
     }
     size_t jb = 0;
@@ -400,8 +510,7 @@ double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep 
         for (size_t j = j0; lb > -INFINITY && j < j0 + n; j++)
             if (U[j] >= lb) lb = fmax(lb, exact(&sc, j));
     }
-    for (size_t j = 0; j < M; j++)
-        if (U[j] >= sc.Lmax - CUT_PIXEL) exact(&sc, j);
+    exact_set(&sc, w->cand, bounds_at_least(m, w, sc.Lmax - CUT_PIXEL));
     if ((size_t)m->ncont < m->nb)
         for (;;) {
             double u;
@@ -416,6 +525,5 @@ double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep 
 void rec_eq7_screen_widen(const rec_matcher *m, rec_eq7_work *w, double Sxx, double Lmax, double cut)
 {
     screen sc = {m, w, Sxx, Lmax, -INFINITY, -INFINITY};
-    for (size_t j = 0; j < m->M; j++)
-        if (!w->done[j] && w->U[j] >= Lmax - cut) exact(&sc, j);
+    exact_set(&sc, w->cand, bounds_at_least(m, w, Lmax - cut));
 }

@@ -135,12 +135,16 @@ const char *recfx_cache_root(void)
 const char *recfx_cached_delight(void)
 {
     static char db[1100];
+    char lock_path[1200];
     snprintf(db, sizeof db, "%s/delight.sqlite", recfx_cache_root());
+    snprintf(lock_path, sizeof lock_path, "%s.lock", db);
+    int lock = fx_lock(lock_path);   /* tests that run at once make it once */
     if (!fx_exists(db)) {
         char cmd[4096];
         snprintf(cmd, sizeof cmd, "%s delight generate -o %s.tmp && mv %s.tmp %s", test_bin(), db, db, db);
         CHECK_MSG(test_run(cmd, out, sizeof out) == 0, "delight generate: %s", out);
     }
+    if (lock >= 0) close(lock);
     setenv("GRIDSURVEY_DELIGHT", db, 1);
     return db;
 }
@@ -152,7 +156,14 @@ const char *recfx_render(const recfx_scene *s)
     const char *root = recfx_cache_root();
     snprintf(dir, sizeof dir, "%s/capture-%s", root, s->key);
     snprintf(path, sizeof path, "%s/capture.json", dir);
-    if (fx_exists(path)) return dir;
+    /* tests that run at once render each capture once, and none reads one being rendered (a
+     * frame being rewritten was read short) */
+    snprintf(cmd, sizeof cmd, "%s/render.lock", root);
+    int lock = fx_lock(cmd);
+    if (fx_exists(path)) {
+        if (lock >= 0) close(lock);
+        return dir;
+    }
     /* the DELIGHT export, once per run */
     char csv[1100];
     snprintf(csv, sizeof csv, "%s/delight-export.csv", root);
@@ -170,7 +181,10 @@ const char *recfx_render(const recfx_scene *s)
     snprintf(spec, sizeof spec, "%s/spec-%s.json", root, s->key);
     FILE *f = fopen(spec, "w");
     CHECK(f != NULL);
-    if (!f) return dir;
+    if (!f) {
+        if (lock >= 0) close(lock);
+        return dir;
+    }
     fprintf(f, "{\"grid_hz\": %d, \"K\": %d, \"bands\": %d, \"width\": %d, \"height\": %d, "
                "\"black_level\": 64, \"read_noise_dn\": 3, \"cycles\": 50, "
                "\"sky\": [0.5, 0.6, 0.8], \"seed\": %u, \"lights\": [",
@@ -185,6 +199,7 @@ const char *recfx_render(const recfx_scene *s)
     int rc = test_run(cmd, out, sizeof out);
     CHECK_MSG(rc == 0, "render.py (needs /usr/bin/python3 with python3-numpy, .ci/deps.sh) "
                        "failed: %s", out);
+    if (lock >= 0) close(lock);
     return dir;
 }
 
