@@ -314,8 +314,8 @@ REC_VECTOR_LOOP static int prep_scan(const double *restrict x, const double *res
     double mx[PREP_LANES] = {0};
     size_t d = 0;
     for (; d + PREP_LANES <= D; d += PREP_LANES)
-        for (int k = 0; k < PREP_LANES; k++) mx[k] = (ok[d + k] != 0.0) & (s[d + k] > mx[k]) ? s[d + k] : mx[k];
-    for (; d < D; d++) mx[0] = (ok[d] != 0.0) & (s[d] > mx[0]) ? s[d] : mx[0];
+        for (int k = 0; k < PREP_LANES; k++) mx[k] = ((ok[d + k] != 0.0) & (s[d + k] > mx[k])) ? s[d + k] : mx[k];
+    for (; d < D; d++) mx[0] = ((ok[d] != 0.0) & (s[d] > mx[0])) ? s[d] : mx[0];
     double c = 0.0;
     for (int k = 0; k < PREP_LANES; k++) c = mx[k] > c ? mx[k] : c;
     *cmax = c;
@@ -373,11 +373,11 @@ REC_VECTOR_LOOP static int prep_weights(const double *restrict x, const double *
     for (; d + PREP_LANES <= K; d += PREP_LANES)
         for (int k = 0; k < PREP_LANES; k++) {
             sxx[k] += wx[d + k] * xs[d + k];
-            mn[k] = (w[d + k] > 0.0) & (w[d + k] < mn[k]) ? w[d + k] : mn[k];
+            mn[k] = ((w[d + k] > 0.0) & (w[d + k] < mn[k])) ? w[d + k] : mn[k];
         }
     for (; d < K; d++) {
         sxx[0] += wx[d] * xs[d];
-        mn[0] = (w[d] > 0.0) & (w[d] < mn[0]) ? w[d] : mn[0];
+        mn[0] = ((w[d] > 0.0) & (w[d] < mn[0])) ? w[d] : mn[0];
     }
     double S = 0.0, m = *wmin > 0.0 ? *wmin : INFINITY;
     for (int k = 0; k < PREP_LANES; k++) {

@@ -11,6 +11,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 static const char render_py[] =
     "# render.py - writes a gridsurvey-capture/1 directory (docs/formats.md) of Gaussian lights whose\n"
