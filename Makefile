@@ -84,6 +84,9 @@ $(BUILD)/survey/cli.o: CPPFLAGS += -I$(BUILD)
 # Eq. 7's scores and decision: loops over templates that call log, erfc and exp, which gcc
 # vectorizes with glibc's libmvec only without errno (nothing there reads it)
 $(BUILD)/recognize/eq7_scores.o $(BUILD)/recognize/eq7_decide.o: CFLAGS += -fno-math-errno
+# the continuous templates' and grids' complex products: finite numbers, without C99's recovery
+# of a NaN product (the same results for finite operands, no library call per product)
+$(BUILD)/recognize/eq7_matcher.o $(BUILD)/recognize/eq7_sums.o: CFLAGS += -fcx-limited-range
 
 $(BIN): $(BUILD)/survey/main.o $(LIBS)
 	$(CXX) $(LDFLAGS) $^ $(LDLIBS) -o $@

@@ -121,8 +121,8 @@ gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t 
     w->tr = malloc(sizeof *w->tr * D);
     w->t12 = malloc(sizeof *w->t12 * M * (size_t)m->nfit * REC_NESTED_FIRST);
     w->scratch = malloc(sizeof *w->scratch * (size_t)(2 * 3 * GS_MAX_BANDS + 1) * D);
-    w->acc = malloc(sizeof *w->acc * 3 * (size_t)m->K);
-    w->spec = malloc(sizeof *w->spec * ((size_t)m->G / 2 + 1 + 2 * D));
+    w->acc = malloc(sizeof *w->acc * REC_TEMPLATE_ACC * (size_t)m->K);
+    w->spec = malloc(sizeof *w->spec * ((size_t)m->G / 2 + 1) * (size_t)(1 + 2 * m->bands));
     w->grid = malloc(sizeof *w->grid * (size_t)m->G);
     if (!w->L || !w->mass || !w->cand || !w->mark || !w->bmass || !w->wmass || !w->has_peak ||
         !w->peak_s || !w->peak_L || !w->peak_sig || !w->peak_z || !w->peak_gain || !w->peak_cell || !w->S_all ||

@@ -96,6 +96,10 @@ void rec_matcher_free(rec_matcher *m)
     free(m->F);
     free(m->nyq);
     free(m->nfine);
+    free(m->dftc);
+    free(m->dfts);
+    free(m->nyqs);
+    free(m->nyqc);
     free(m->wk);
     free(m->harm);
     free(m->bnorm);
@@ -229,68 +233,105 @@ static gs_status fourier_setup(rec_matcher *m, size_t b)
     m->F[b] = F;
     m->H[b] = H;
     m->nfine[b] = n;
+    for (int k = 0; k <= K; k++) {
+        /* pi n k / K modulo 2 pi: n k mod 2K, exactly, then the angle */
+        double a = M_PI * (double)((long)n * k % (2L * K)) / K;
+        m->nyqs[b * (size_t)(K + 1) + (size_t)k] = sin(a);
+        m->nyqc[b * (size_t)(K + 1) + (size_t)k] = cos(a);
+    }
     return GS_OK;
 }
 
-/* Exact template of continuous bulb b at shift s and its first two derivatives in s (any of
- * dt, d2t may be NULL). acc is scratch of 3 * K complex values. */
-void rec_eq7_template_at(const rec_matcher *m, size_t b, double s, double *t, double *dt,
-                        double *d2t, double complex *acc)
+/* The K-point inverse DFT of the folded harmonics, t_k = sum_q Re(A_q e^{2 pi i q k / K}), as
+ * products with the tabulated cos and sin (m->dftc, m->dfts: [k K + q]), for up to three series
+ * (the value and two derivatives); v[k] starts at base. */
+REC_VECTOR_LOOP static void inverse_dft(const double *restrict c, const double *restrict sn, int K,
+                                        const double *restrict re, const double *restrict im, double base,
+                                        double *restrict v)
 {
-    int K = m->K, H = m->H[b], n = m->nfine[b];
+    for (int k = 0; k < K; k++) v[k] = base;
+    for (int q = 0; q < K; q++)   /* the tables are symmetric: [q K + k] = [k K + q] */
+        for (int k = 0; k < K; k++) v[k] += re[q] * c[q * K + k] - im[q] * sn[q * K + k];
+}
+
+/* Exact template of continuous bulb b at shift s and its first two derivatives in s (any of
+ * dt, d2t may be NULL). acc is scratch of 3 * K complex values. The harmonics are folded into K
+ * bins (harmonic h into h mod K, times e^{-2 pi i h s}), then one inverse DFT per series; the
+ * Nyquist term sin(pi n (k/K - s)) from the tabulated sin and cos of pi n k / K (m->nyqs, nyqc). */
+void rec_eq7_template_at(const rec_matcher *m, size_t b, double s, double *t, double *dt,
+                         double *d2t, double complex *acc)
+{
+    int K = m->K, H = m->H[b], n = m->nfine[b], deriv = dt || d2t;
     s = wrap01(s);
     double complex *A0 = acc, *A1 = acc + K, *A2 = acc + 2 * K;
-    double complex base = cexp(-I * EQ7_TWO_PI * s);
+    double complex base = cexp(-I * EQ7_TWO_PI * s), pw[32];
+    pw[0] = 1.0;
+    for (int i = 1; i < 32; i++) pw[i] = pw[i - 1] * base;
+    double pn = M_PI * n, sB = sin(pn * s), cB = cos(pn * s);
+    const double *ns = m->nyqs + b * (size_t)(K + 1), *nc = m->nyqc + b * (size_t)(K + 1);
+    /* split real and imaginary parts of the bins, for the DFT's products (after the bins) */
+    double *re = (double *)(acc + 3 * K), *im = re + 3 * K;
     for (int band = 0; band < m->bands; band++) {
         const double complex *F = m->F[b] + (size_t)band * (size_t)(H + 1);
         for (int r = 0; r < K; r++) A0[r] = A1[r] = A2[r] = 0.0;
-        double complex e = 1.0;
+        /* harmonic h's term F_h e^{-2 pi i h s}: e from cexp every 32 harmonics, times powers of
+         * base within (independent products, then added to the bins in the order of h) */
         int r = 0;
-        if (dt || d2t) {
-            for (int h = 1; h <= H; h++) {
-                if ((h & 31) == 0) e = cexp(-I * EQ7_TWO_PI * fmod((double)h * s, 1.0));
-                else e *= base;
+        for (int h0 = 0; h0 <= H; h0 += 32) {
+            double complex e0 = h0 ? cexp(-I * EQ7_TWO_PI * fmod((double)h0 * s, 1.0)) : 1.0, g[32];
+            int hn = H + 1 - h0 < 32 ? H + 1 - h0 : 32;
+            for (int i = 0; i < hn; i++) g[i] = F[h0 + i] * (e0 * pw[i]);
+            for (int i = h0 ? 0 : 1; i < hn; i++) {
                 if (++r == K) r = 0;
-                double complex g = F[h] * e;
-                double w = EQ7_TWO_PI * h;
-                A0[r] += g;
-                A1[r] += g * (-I * w);
-                A2[r] += g * (-w * w);
-            }
-        } else {
-            for (int h = 1; h <= H; h++) {
-                if ((h & 31) == 0) e = cexp(-I * EQ7_TWO_PI * fmod((double)h * s, 1.0));
-                else e *= base;
-                if (++r == K) r = 0;
-                A0[r] += F[h] * e;
+                A0[r] += g[i];
+                if (deriv) {
+                    double w = EQ7_TWO_PI * (h0 + i);
+                    A1[r] += g[i] * (-I * w);
+                    A2[r] += g[i] * (-w * w);
+                }
             }
         }
+        for (int q = 0; q < K; q++) {
+            re[q] = creal(A0[q]), im[q] = cimag(A0[q]);
+            re[K + q] = creal(A1[q]), im[K + q] = cimag(A1[q]);
+            re[2 * K + q] = creal(A2[q]), im[2 * K + q] = cimag(A2[q]);
+        }
+        size_t d0 = (size_t)band * (size_t)K;
+        inverse_dft(m->dftc, m->dfts, K, re, im, creal(F[0]), t + d0);
+        if (dt) inverse_dft(m->dftc, m->dfts, K, re + K, im + K, 0.0, dt + d0);
+        if (d2t) inverse_dft(m->dftc, m->dfts, K, re + 2 * K, im + 2 * K, 0.0, d2t + d0);
         double nq = m->nyq[b * (size_t)m->bands + (size_t)band];
+        if (nq == 0.0) continue;
         for (int k = 0; k < K; k++) {
-            double v0 = creal(F[0]), v1 = 0.0, v2 = 0.0;
-            int rk = 0;   /* r k mod K */
-            for (int q = 0; q < K; q++) {
-                double complex wv = m->wk[rk];
-                v0 += creal(A0[q]) * creal(wv) - cimag(A0[q]) * cimag(wv);
-                if (dt || d2t) {
-                    v1 += creal(A1[q]) * creal(wv) - cimag(A1[q]) * cimag(wv);
-                    v2 += creal(A2[q]) * creal(wv) - cimag(A2[q]) * cimag(wv);
-                }
-                rk += k;
-                if (rk >= K) rk -= K;
-            }
-            if (nq != 0.0) {
-                double a = (double)k / K - s, bb = (double)(k + 1) / K - s, pn = M_PI * n;
-                v0 += nq * (sin(pn * bb) - sin(pn * a)) * K / pn;
-                v1 += nq * -(cos(pn * bb) - cos(pn * a)) * K;
-                v2 += nq * -(sin(pn * bb) - sin(pn * a)) * K * pn;
-            }
-            size_t d = (size_t)band * (size_t)K + (size_t)k;
-            t[d] = v0;
-            if (dt) dt[d] = v1;
-            if (d2t) d2t[d] = v2;
+            /* sin and cos of pi n (k/K - s) and of pi n ((k + 1)/K - s) */
+            double sa = ns[k] * cB - nc[k] * sB, ca = nc[k] * cB + ns[k] * sB;
+            double sb = ns[k + 1] * cB - nc[k + 1] * sB, cb = nc[k + 1] * cB + ns[k + 1] * sB;
+            t[d0 + (size_t)k] += nq * (sb - sa) * K / pn;
+            if (dt) dt[d0 + (size_t)k] += nq * -(cb - ca) * K;
+            if (d2t) d2t[d0 + (size_t)k] += nq * -(sb - sa) * K * pn;
         }
     }
+}
+
+/* The tables of rec_eq7_template_at (with continuous bulbs): the K-point DFT's cos and sin (K^2
+ * values, fewer than a grid's templates); per continuous bulb the sin and cos of pi n k / K,
+ * k = 0..K, filled by fourier_setup. */
+static gs_status template_tables(rec_matcher *m)
+{
+    int K = m->K;
+    m->dftc = malloc(sizeof *m->dftc * (size_t)K * (size_t)K);
+    m->dfts = malloc(sizeof *m->dfts * (size_t)K * (size_t)K);
+    m->nyqs = calloc(m->nb * (size_t)(K + 1), sizeof *m->nyqs);
+    m->nyqc = calloc(m->nb * (size_t)(K + 1), sizeof *m->nyqc);
+    if (!m->dftc || !m->dfts || !m->nyqs || !m->nyqc)
+        return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate the continuous templates' tables");
+    for (int k = 0; k < K; k++)
+        for (int q = 0; q < K; q++) {
+            double complex wv = m->wk[(size_t)k * (size_t)q % (size_t)K];
+            m->dftc[k * K + q] = creal(wv);
+            m->dfts[k * K + q] = cimag(wv);
+        }
+    return GS_OK;
 }
 
 /* The pixel prefilter: the top-R principal directions E of the unit templates, each template's
@@ -595,6 +636,7 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
         m->first[b] = M;
         m->count[b] = m->cont[b] ? (size_t)m->G : (size_t)m->np;
         M += m->count[b];
+        m->ncont += m->cont[b];
     }
     if ((double)M * (double)D > 64.0 * 1024 * 1024) {
         rec_matcher_free(m);
@@ -623,7 +665,7 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
     m->bib = malloc(sizeof *m->bib * m->Mp * (size_t)bands);
     m->bib2 = malloc(sizeof *m->bib2 * m->Mp * (size_t)bands);
     double *raw = malloc(sizeof *raw * D);
-    double complex *acc = malloc(sizeof *acc * 3 * (size_t)K);
+    double complex *acc = malloc(sizeof *acc * REC_TEMPLATE_ACC * (size_t)K);
     if (!m->t || !m->tsq || !m->tn || !m->lnf || !m->tnd || !m->lognorm || !m->cellw || !m->logcellw || !m->shift || !m->tphase ||
         !m->tbulb || !m->tcell || !m->bnorm || !m->blog || !m->tbn || !m->tbnf || !m->blnf || !m->bib || !m->bib2 || !raw ||
         !acc) {
@@ -631,6 +673,13 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
         free(acc);
         rec_matcher_free(m);
         return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate %zu templates", M);
+    }
+    s = m->ncont ? template_tables(m) : GS_OK;
+    if (s != GS_OK) {
+        free(raw);
+        free(acc);
+        rec_matcher_free(m);
+        return s;
     }
     for (size_t b = 0; b < m->nb; b++) {
         const gs_bulb *bu = &m->bulbs[b];
@@ -747,7 +796,6 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
             m->bib2[(size_t)band * m->Mp + j] = j < M ? (float)(1.0 / (bn * bn)) : 1.0f;
         }
     }
-    for (size_t b = 0; b < m->nb; b++) m->ncont += m->cont[b];
     s = fourier_grid_setup(m);
     if (s == GS_OK) s = rec_eq7_sums_setup(m);
     if (s != GS_OK) {

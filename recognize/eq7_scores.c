@@ -503,10 +503,9 @@ double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep 
     exact(&sc, jb);
     for (size_t b = 0; m->ncont && b < m->nb; b++) {
         if (!m->cont[b]) continue;
-        size_t j0 = m->first[b], n = m->count[b], jm = j0;
-        for (size_t j = j0; j < j0 + n; j++)
-            if (U[j] > U[jm]) jm = j;
-        double lb = w->done[jm] ? w->L[jm] : U[jm] > -INFINITY ? exact(&sc, jm) : -INFINITY;
+        size_t j0 = m->first[b], n = m->count[b], jm = j0 + scr_argmax(U + j0, n);
+        double lb = jb >= j0 && jb < j0 + n ? w->L[jb] : -INFINITY;   /* its exact ones so far */
+        if (U[jm] > lb) lb = fmax(lb, exact(&sc, jm));
         for (size_t j = j0; lb > -INFINITY && j < j0 + n; j++)
             if (U[j] >= lb) lb = fmax(lb, exact(&sc, j));
     }

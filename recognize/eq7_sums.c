@@ -90,14 +90,16 @@ static void sums_kernel(const double *a, size_t lda, size_t nq, const double *tt
     else sums_kernel_256(a, lda, nq, tt, ldt, n, out, ldo, nj);
 }
 
-/* The light's K-point DFTs of wx and w per band into w->spec + nh (X, then W; [band * K + r]),
- * conjugated: conj(sum_k v_k e^{2 pi i r k / K}). */
+/* The light's K-point DFTs of wx and w per band, conjugated, conj(sum_k v_k e^{2 pi i r k / K}),
+ * repeated over the G/2 + 1 bins of the grid (bin r is the DFT's r mod K), into w->spec + nh
+ * (X, then W: [band * nh + r]). */
 void rec_eq7_light_dfts(const rec_matcher *m, rec_eq7_work *w)
 {
-    size_t K = (size_t)m->K, nh = (size_t)m->G / 2 + 1, D = (size_t)m->D;
-    double complex *X = w->spec + nh, *W = X + D;
-    for (int band = 0; band < m->bands; band++)
-        for (size_t r = 0; r < K; r++) {
+    size_t K = (size_t)m->K, nh = (size_t)m->G / 2 + 1, bn = (size_t)m->bands * nh;
+    double complex *X = w->spec + nh, *W = X + bn;
+    for (int band = 0; band < m->bands; band++) {
+        double complex *Xb = X + (size_t)band * nh, *Wb = W + (size_t)band * nh;
+        for (size_t r = 0; r < K && r < nh; r++) {
             double complex x = 0.0, v = 0.0;
             size_t rk = 0;   /* r k mod K */
             for (size_t k = 0; k < K; k++) {
@@ -107,28 +109,40 @@ void rec_eq7_light_dfts(const rec_matcher *m, rec_eq7_work *w)
                 rk += r;
                 if (rk >= K) rk -= K;
             }
-            X[(size_t)band * K + r] = conj(x);
-            W[(size_t)band * K + r] = conj(v);
+            Xb[r] = conj(x);
+            Wb[r] = conj(v);
         }
+        for (size_t r = K; r < nh; r++) {
+            Xb[r] = Xb[r - K];
+            Wb[r] = Wb[r - K];
+        }
+    }
+}
+
+/* z[r] += a[r] x[r], complex (re, im pairs), r < n. */
+REC_VECTOR_LOOP static void cross_add(const double *restrict a, const double *restrict x, size_t n, double *restrict z)
+{
+    for (size_t r = 0; r < n; r++) {
+        double ar = a[2 * r], ai = a[2 * r + 1], xr = x[2 * r], xi = x[2 * r + 1];
+        z[2 * r] += ar * xr - ai * xi;
+        z[2 * r + 1] += ar * xi + ai * xr;
+    }
 }
 
 void rec_eq7_grid_sums(const rec_matcher *m, rec_eq7_work *w, size_t b)
 {
-    size_t K = (size_t)m->K, nh = (size_t)m->G / 2 + 1, D = (size_t)m->D, M = m->M;
-    const double complex *X = w->spec + nh, *W = X + D;
+    size_t nh = (size_t)m->G / 2 + 1, M = m->M, bn = (size_t)m->bands * nh;
+    const double complex *X = w->spec + nh, *W = X + bn;
     int nf = m->nfit;
     for (int f = 0; f < nf; f++)
         for (int sq = 0; sq < 2; sq++) {
             /* the cross-spectrum of the parameter's bands (all of them with one gain) */
             int b0 = nf == 1 ? 0 : f, b1 = nf == 1 ? m->bands : f + 1;
-            for (size_t r = 0, rk = 0; r < nh; r++) {
-                double complex z = 0.0;
-                for (int band = b0; band < b1; band++) {
-                    size_t o = (b * (size_t)m->bands + (size_t)band) * nh + r;
-                    z += sq ? m->bhat[o] * W[(size_t)band * K + rk] : m->ahat[o] * X[(size_t)band * K + rk];
-                }
-                w->spec[r] = z;
-                if (++rk == K) rk = 0;
+            memset(w->spec, 0, sizeof *w->spec * nh);
+            for (int band = b0; band < b1; band++) {
+                size_t o = (b * (size_t)m->bands + (size_t)band) * nh;
+                cross_add((const double *)((sq ? m->bhat : m->ahat) + o), (const double *)((sq ? W : X) + (size_t)band * nh),
+                          nh, (double *)w->spec);
             }
             fftw_execute_dft_c2r((fftw_plan)m->c2r, (fftw_complex *)w->spec, w->grid);
             double *dst = (sq ? w->T : w->S) + (size_t)f * M + m->first[b];

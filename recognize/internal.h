@@ -180,6 +180,8 @@ struct rec_matcher {
                                          * slow path); 0 from rec_matcher_new */
     void *c2r;                          /* fftw_plan: G-point complex-to-real, unaligned */
     int *nfine;                         /* [nb] BRF samples per cycle */
+    double *dftc, *dfts;                /* [K * K] cos, sin of 2 pi q k / K ([k K + q]) */
+    double *nyqs, *nyqc;                /* [nb * (K + 1)] sin, cos of pi nfine k / K (continuous) */
     double complex *wk;                 /* [K] e^{2 pi i j / K} */
     double *harm;                       /* [2 REC_SHAPE_H K] the shape test's columns within a
                                          * band: cos, sin of 2 pi h k / K, h = 1..REC_SHAPE_H
@@ -303,9 +305,10 @@ typedef struct {
     double *t12;                           /* [nfit * M * REC_NESTED_FIRST] cross sums of the first
                                             * templates and every template (eq7_nested.c) */
     double *scratch;                       /* [(6 bands + 1) D] the nested tests' */
-    double complex *acc;                   /* [3 K] */
-    double complex *spec;                  /* [G/2 + 1 + 2 D] a cross-spectrum and the light's
-                                            * band DFTs (rec_eq7_grid_sums) */
+    double complex *acc;                   /* [REC_TEMPLATE_ACC K] */
+    double complex *spec;                  /* [(G/2 + 1) (1 + 2 bands)] a cross-spectrum and the
+                                            * light's band DFTs over the grid's bins
+                                            * (rec_eq7_grid_sums) */
     double *grid;                          /* [G] its inverse */
     /* the reddened model: the light's log prior per tau (has_tau_prior; else uniform) and, when
      * collect_tau, its log likelihood per tau with every bulb weighted alike (eq7_population.c) */
@@ -360,7 +363,9 @@ typedef struct {
 } rec_eq7_decision;
 
 /* eq7_matcher.c: the window means of continuous bulb b at shift s (and their first two
- * derivatives when dt, d2t are not NULL; acc is scratch of 3 K); log Phi from the table. */
+ * derivatives when dt, d2t are not NULL; acc is scratch of REC_TEMPLATE_ACC K); log Phi from the
+ * table. */
+#define REC_TEMPLATE_ACC 6
 void rec_eq7_template_at(const rec_matcher *m, size_t b, double s, double *t, double *dt,
                          double *d2t, double complex *acc);
 double rec_eq7_log_phi_fast(const rec_matcher *m, double z);
