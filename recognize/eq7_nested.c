@@ -206,6 +206,23 @@ static double tail(double delta, int extra, double phi)
     return gs_chi2_sf(delta / phi, dof > 1 ? (int)dof : 1);
 }
 
+/* The blend search's pairs of first template r (its sums S1, T11 > 0 in one brightness) with
+ * every template j (S2, T22, and T12 their cross sums): what t_j explains beyond t_r in that
+ * brightness, (S2 - T12 S1/T11)^2 / (T22 - T12^2/T11), added to gain[j]; ok[j] = 0 where either
+ * brightness of the 2 x 2 least squares would be negative (a2 = r2 / q, a1 = (S1 - T12 a2) / T11:
+ * their numerators' signs) or q is not positive. */
+REC_VECTOR_LOOP static void pair_gains(const double *restrict S2, const double *restrict T22, const double *restrict T12,
+                                       size_t M, double S1, double T11, double *restrict gain, double *restrict ok)
+{
+    double a1 = S1 / T11, i11 = 1.0 / T11;
+    for (size_t j = 0; j < M; j++) {
+        double r2 = S2[j] - T12[j] * a1, q = T22[j] - T12[j] * T12[j] * i11, a2 = r2 / q;
+        int good = (r2 >= 0.0) & (q > 1e-9 * T22[j]) & (S1 - T12[j] * a2 >= 0.0);
+        gain[j] += good ? r2 * a2 : 0.0;
+        ok[j] = good ? ok[j] : 0.0;
+    }
+}
+
 void rec_eq7_nested_tests(const rec_matcher *m, rec_eq7_work *w, const double *tb, int best_bulb,
                           size_t best_tmpl, double best_shift, double phi, rec_eq7_nested *out)
 {
@@ -310,48 +327,30 @@ void rec_eq7_nested_tests(const rec_matcher *m, rec_eq7_work *w, const double *t
         for (int f = 0; f < nf; f++) e1 += T11v[r][f] > 0.0 ? S1v[r][f] * S1v[r][f] / T11v[r][f] : 0.0;
         e1v[r] = e1;
     }
-    for (int f = 0; f < nf; f++) {
+    for (int f = 0; f < nf; f++) {   /* T12 = U' T_mat': [f][r][j] */
         size_t off = nf == 1 ? 0 : (size_t)f * K, len = nf == 1 ? D : K;
-        cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, (int)M, nr, (int)len, 1.0, m->t + off, (int)D,
-                    U + off * REC_NESTED_FIRST, REC_NESTED_FIRST, 0.0, w->t12 + (size_t)f * M * REC_NESTED_FIRST,
-                    REC_NESTED_FIRST);
+        cblas_dgemm(CblasRowMajor, CblasTrans, CblasTrans, nr, (int)M, (int)len, 1.0, U + off * REC_NESTED_FIRST,
+                    REC_NESTED_FIRST, m->t + off, (int)D, 0.0, w->t12 + (size_t)f * REC_NESTED_FIRST * M, (int)M);
     }
     /* a second template: for each first template j1, every template j2 (not the first one's
      * bulb within two cells), by per-band 2 x 2 least squares with both brightnesses >= 0; the
      * sums of j2 from the work arrays (S, T) */
-    double best_delta = 0.0, e0 = e1v[0], best_occam = 0.0;
+    double best_delta = 0.0, e0 = e1v[0], best_occam = 0.0, *gain = w->tmp, *ok = w->tmp + M;
     size_t best_j = M;
     int best_r = 0;
     for (int r = 0; r < nr; r++) {
         int b1 = r == 0 ? best_bulb : m->tbulb[first[r]];
         double s1 = r == 0 ? best_shift : m->shift[first[r]];
-        const double *S1 = S1v[r], *T11 = T11v[r];
+        for (size_t j = 0; j < M; j++) gain[j] = 0.0, ok[j] = 1.0;
+        for (int f = 0; f < nf; f++)
+            if (T11v[r][f] > 0.0)
+                pair_gains(w->S + (size_t)f * M, w->T + (size_t)f * M, w->t12 + ((size_t)f * REC_NESTED_FIRST + (size_t)r) * M,
+                           M, S1v[r][f], T11v[r][f], gain, ok);
         for (size_t j = 0; j < M; j++) {
+            double delta = (e1v[r] - e0) + gain[j];   /* chi2 of the best fit minus the pair's */
+            if (ok[j] == 0.0 || !(delta > best_delta)) continue;
             if (near(m, j, b1, s1) || (r > 0 && near(m, j, best_bulb, best_shift)))
                 continue;   /* itself or next door; the best fit was paired at r = 0 */
-            /* what t2 explains beyond t1, per band: (S2 - T12 S1/T11)^2 / (T22 - T12^2/T11) */
-            double gain = 0.0;
-            int ok = 1;
-            for (int f = 0; f < nf && ok; f++) {
-                if (!(T11[f] > 0.0)) continue;
-                double S2 = w->S[(size_t)f * M + j], T22 = w->T[(size_t)f * M + j];
-                double T12 = w->t12[((size_t)f * M + j) * REC_NESTED_FIRST + (size_t)r];
-                /* a2 = r2 / q and a1 = (S1 - T12 a2) / T11 (q, T11 > 0) have their numerators'
-                 * signs: test those before dividing */
-                double r2 = S2 - T12 * S1[f] / T11[f];
-                if (r2 < 0.0) {
-                    ok = 0;
-                    break;
-                }
-                double q = T22 - T12 * T12 / T11[f];
-                if (!(q > 1e-9 * T22) || S1[f] - T12 * (r2 / q) < 0.0) {
-                    ok = 0;
-                    break;
-                }
-                gain += r2 * r2 / q;
-            }
-            double delta = (e1v[r] - e0) + gain;   /* chi2 of the best fit minus the pair's */
-            if (!ok || !(delta > best_delta)) continue;
             best_delta = delta;
             best_j = j;
             best_r = r;
@@ -374,7 +373,7 @@ void rec_eq7_nested_tests(const rec_matcher *m, rec_eq7_work *w, const double *t
         for (int f = 0; f < nf; f++) {
             if (!(T11[f] > 0.0)) continue;
             double S2 = w->S[(size_t)f * M + best_j], T22 = w->T[(size_t)f * M + best_j];
-            double T12 = w->t12[((size_t)f * M + best_j) * REC_NESTED_FIRST + (size_t)best_r];
+            double T12 = w->t12[((size_t)f * REC_NESTED_FIRST + (size_t)best_r) * M + best_j];
             double r2 = S2 - T12 * S1[f] / T11[f], q = T22 - T12 * T12 / T11[f];
             double a2 = r2 / q, a1 = (S1[f] - T12 * a2) / T11[f];
             a1s += a1;

@@ -15,6 +15,7 @@
 __attribute__((simd("notinbranch"))) double erfc(double);
 __attribute__((simd("notinbranch"))) double log(double);
 __attribute__((simd("notinbranch"))) double log1p(double);
+__attribute__((simd("notinbranch"))) double exp(double);
 #endif
 
 /* ------------------------------------------------------------ log likelihoods */
@@ -62,6 +63,33 @@ double rec_eq7_loglik_n(int nf, double Sxx, const double *S, const double *T)
  * t -> 0 and tau = 0 this is the paper's one brightness times Q_b. fit (may be NULL) gets the
  * most probable tau's numbers; ll_acc (may be NULL) accumulates exp(L(tau) + ll_logw), the prior
  * left out, per tau (rec_red_fit: recognize/internal.h). */
+/* The reddened model's terms of each tau from its sums A, B, C and occupation occ (dead: none):
+ * L(tau) without the prior into Lt (-inf where dead; log Phi from erfc, for z > -20), z = B /
+ * sqrt(A) into zt, the between-band misfit into bt. */
+REC_VECTOR_LOOP static void red_taus(const double *restrict A, const double *restrict B, const double *restrict C,
+                                     const double *restrict occ, const unsigned char *restrict dead, double R,
+                                     double *restrict Lt, double *restrict zt, double *restrict bt)
+{
+    for (int i = 0; i < REC_TAU_N; i++) {
+        double a = dead[i] ? 1.0 : A[i], between = C[i] - B[i] * B[i] / a, z = B[i] / sqrt(a);
+        between = between < 0.0 ? 0.0 : between;
+        double e = 0.5 * erfc(fabs(z) * M_SQRT1_2), p = log1p(-e), q = log(e);
+        double l = -0.5 * (R + between) - 0.5 * log(a + a * occ[i]) + (z > 0.0 ? p : q);
+        Lt[i] = dead[i] ? -INFINITY : l;
+        zt[i] = z;
+        bt[i] = between;
+    }
+}
+
+/* ex[i] = exp(L[i] - Lmax) where that is above -746, else 0 (rec_exp_neg). */
+REC_VECTOR_LOOP static void exps_below(const double *restrict L, int n, double Lmax, double *restrict ex)
+{
+    for (int i = 0; i < n; i++) {
+        double d = L[i] - Lmax, e = exp(d > -746.0 ? d : 0.0);
+        ex[i] = d > -746.0 ? e : 0.0;
+    }
+}
+
 double rec_eq7_loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb, double Sxx,
                           const double *S, const double *T, rec_red_fit *fit, double *ll_acc,
                           double ll_logw)
@@ -109,19 +137,14 @@ double rec_eq7_loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb,
             if (!dead[i]) av[i] = Bv[i] / Av[i];
         }
     }
-    double Lt[REC_TAU_N], Lmax = -INFINITY;
+    double Lt[REC_TAU_N], zt[REC_TAU_N], bt[REC_TAU_N], Lmax = -INFINITY;
+    red_taus(Av, Bv, Cv, occv, dead, R, Lt, zt, bt);
     for (int i = 0; i < REC_TAU_N; i++) {
         double tau = rec_eq7_tau(i);
         const double *c = cb + (size_t)i * (size_t)nb;
-        double a = av[i], A = Av[i], B = Bv[i], C = Cv[i], occ1 = occv[i];
-        if (dead[i]) {
-            Lt[i] = -INFINITY;
-            continue;
-        }
-        double between = C - B * B / A;
-        if (between < 0.0) between = 0.0;
-        double z = B / sqrt(A);
-        Lt[i] = -0.5 * (R + between) - 0.5 * log(A + A * occ1) + gs_log_phi(z);
+        double a = av[i], z = zt[i], between = bt[i];
+        if (dead[i]) continue;
+        if (!(z > -20.0)) Lt[i] += gs_log_phi(z) - log(0.5 * erfc(-z * M_SQRT1_2));   /* its asymptotic form */
         if (ll_acc) ll_acc[i] = rec_log_add(ll_acc[i], Lt[i] + ll_logw);
         if (w->has_tau_prior) Lt[i] += w->tau_logprior[i] + log((double)REC_TAU_N);
         if (Lt[i] > Lmax) {
@@ -144,8 +167,9 @@ double rec_eq7_loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb,
         }
     }
     if (!isfinite(Lmax)) return -INFINITY;
-    double sum = 0.0;
-    for (int i = 0; i < REC_TAU_N; i++) sum += rec_exp_neg(Lt[i] - Lmax);
+    double ex[REC_TAU_N], sum = 0.0;
+    exps_below(Lt, REC_TAU_N, Lmax, ex);
+    for (int i = 0; i < REC_TAU_N; i++) sum += ex[i];
     return Lmax + log(sum / REC_TAU_N);
 }
 

@@ -298,12 +298,12 @@ typedef struct {
     rec_eq7_prep *prep;                    /* [rows] */
     double *U;                             /* [M] the screen's bounds of L (eq7_scores.c) */
     unsigned char *done;                   /* [M] L exact (1) or screened out (0, L = -inf) */
-    double *tmp;                           /* [2 (M + 3 nb)] the decision's scratch */
+    double *tmp;                           /* [2 (M + 3 nb)] the decision's and blend search's scratch */
     double *tt, *dt, *d2t;                 /* [D] */
     double *r2, *s2, *m2;                  /* [D] the excess noise's residuals, variances, levels */
     double *tr;                            /* [D] the runner-up's template */
-    double *t12;                           /* [nfit * M * REC_NESTED_FIRST] cross sums of the first
-                                            * templates and every template (eq7_nested.c) */
+    double *t12;                           /* [nfit * REC_NESTED_FIRST * M] cross sums of the first
+                                            * templates and every template ([f][r][j], eq7_nested.c) */
     double *scratch;                       /* [(6 bands + 1) D] the nested tests' */
     double complex *acc;                   /* [REC_TEMPLATE_ACC K] */
     double complex *spec;                  /* [(G/2 + 1) (1 + 2 bands)] a cross-spectrum and the
