@@ -51,6 +51,10 @@ static const char recognize_usage[] =
     "                          lights (0 unless significant)\n"
     "  --blend-prior P         prior probability that a light is two lights in one aperture,\n"
     "                          0..1 (default 0.1; 0: never a blend by the posterior)\n"
+    "  --nested-tests on|off   the tests of each light's best fit against a second light and\n"
+    "                          a bulb not in DELIGHT (default on); off: Eq. 7 alone (with\n"
+    "                          --band-model chroma --model-error 0 --other-prior 0\n"
+    "                          --flat-share 0, exactly the paper's)\n"
     "  --threshold S           detection threshold of lights and mapped pixels, noise sigmas > 0\n"
     "                          (default 5)\n"
     "  --delight DB            the DELIGHT SQLite file (default: $GRIDSURVEY_DELIGHT, else the\n"
@@ -64,6 +68,7 @@ static const char recognize_usage[] =
     "Examples (build/lab: see gridsurvey help simulate):\n"
     "  gridsurvey recognize build/lab --maps build/lab-maps\n"
     "  gridsurvey recognize build/lab --format json --ambiguous-below 0.9 > build/lab-lights.json\n"
+    "  gridsurvey recognize build/lab --band-model chroma --model-error 0 --other-prior 0 --flat-share 0 --nested-tests off\n"
     "\n"
     "Exit status: 0 done, 1 failure (one line on stderr), 2 usage error.\n";
 
@@ -141,6 +146,7 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
         {"other-prior", required_argument, 0, 'O'},
         {"flat-share", required_argument, 0, 'F'},
         {"blend-prior", required_argument, 0, 'B'},
+        {"nested-tests", required_argument, 0, 'N'},
         {"delight", required_argument, 0, 'd'},
         {"maps", required_argument, 0, 'm'},
         {"progress", no_argument, 0, 'P'},
@@ -211,6 +217,10 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
             o->eq7.blend_prior = strtod(optarg, &end);
             if (end == optarg || *end || !(o->eq7.blend_prior >= 0.0 && o->eq7.blend_prior < 1.0))
                 return usage_error("--blend-prior '%s': expected a probability from 0 to below 1", optarg);
+            break;
+        case 'N':
+            if (!strcmp(optarg, "on") || !strcmp(optarg, "off")) o->eq7.nested_tests = !strcmp(optarg, "on");
+            else return usage_error("--nested-tests '%s': expected on or off", optarg);
             break;
         case 's':
             o->threshold = strtod(optarg, &end);
@@ -427,6 +437,7 @@ static gs_status print_json(const recognize_opts *o, const gs_capture *cap, cons
     json_object_set_new(r, "other_prior", isnan(o->eq7.other_prior) ? json_string("auto") : jreal(o->eq7.other_prior));
     json_object_set_new(r, "flat_share", isnan(o->eq7.flat_share) ? json_string("auto") : jreal(o->eq7.flat_share));
     json_object_set_new(r, "blend_prior", jreal(o->eq7.blend_prior));
+    json_object_set_new(r, "nested_tests", json_boolean(o->eq7.nested_tests));
     json_object_set_new(r, "model_error", isnan(o->eq7.model_error) ? json_string("auto") : jreal(o->eq7.model_error));
     json_t *nz = json_object();
     json_object_set_new(nz, "source", json_string(rec_noise_source_name(noise->source)));

@@ -80,7 +80,7 @@ TEST(recognize_cli_json_bulbs_and_phases)
 }
 
 /* --band-gains off --model-error 0 is the paper's Eq. 7: these unreddened lights are recognized
- * just the same, and the JSON says which model ran. */
+ * just the same, and the JSON says which model ran; --nested-tests off runs Eq. 7 alone. */
 TEST(recognize_cli_paper_model_flags)
 {
     recfx_cached_delight();
@@ -105,6 +105,30 @@ TEST(recognize_cli_paper_model_flags)
     json_t *l0 = json_array_get(json_object_get(root, "lights"), 0);
     CHECK_NEAR(json_number_value(json_object_get(l0, "model_error")), 0.1, 1e-15);
     json_decref(root);
+    /* --nested-tests off: Eq. 7 alone, exactly the paper's with the flags above: the same answers
+     * as with the tests on for these single database lights, no test run (shape p-value 1,
+     * p_other and p_blend 0; with the tests on, each light's shape test gives a p-value below 1) */
+    const char *paper = "--band-model chroma --model-error 0 --other-prior 0 --flat-share 0";
+    json_t *with = NULL, *without = NULL;
+    snprintf(args, sizeof args, "%s %s --nested-tests on", dir, paper);
+    with = recfx_recognize_ok(args, 0);
+    snprintf(args, sizeof args, "%s %s --nested-tests off", dir, paper);
+    without = recfx_recognize_ok(args, 0);
+    if (!with || !without) return;
+    CHECK(json_is_true(json_object_get(json_object_get(with, "recognition"), "nested_tests")));
+    CHECK(json_is_false(json_object_get(json_object_get(without, "recognition"), "nested_tests")));
+    json_t *lw = json_object_get(with, "lights"), *lo = json_object_get(without, "lights");
+    CHECK(json_array_size(lw) == 6 && json_array_size(lo) == 6);
+    for (size_t i = 0; i < json_array_size(lo); i++) {
+        json_t *a = json_array_get(lw, i), *b = json_array_get(lo, i);
+        CHECK(!strcmp(json_string_value(json_object_get(a, "bulb")), json_string_value(json_object_get(b, "bulb"))));
+        CHECK(json_number_value(json_object_get(a, "phase_deg")) == json_number_value(json_object_get(b, "phase_deg")));
+        CHECK(json_number_value(json_object_get(a, "shape_p_value")) < 1.0);
+        CHECK(json_number_value(json_object_get(b, "shape_p_value")) == 1.0);
+        CHECK(json_number_value(json_object_get(b, "p_other")) == 0.0 && json_number_value(json_object_get(b, "p_blend")) == 0.0);
+    }
+    json_decref(with);
+    json_decref(without);
     /* a fixed flat share is what the last pass used, and said so */
     snprintf(args, sizeof args, "%s --flat-share 0.01", dir);
     root = recfx_recognize_ok(args, 0);
@@ -135,6 +159,8 @@ TEST(recognize_cli_paper_model_flags)
     CHECK(test_run(cmd, out, sizeof out) == 2 && strstr(out, "--model-error"));
     snprintf(cmd, sizeof cmd, "%s recognize %s --flat-share 0.5", test_bin(), dir);
     CHECK(test_run(cmd, out, sizeof out) == 2 && strstr(out, "--flat-share"));
+    snprintf(cmd, sizeof cmd, "%s recognize %s --nested-tests maybe", test_bin(), dir);
+    CHECK(test_run(cmd, out, sizeof out) == 2 && strstr(out, "--nested-tests"));
 }
 
 TEST(recognize_cli_mono_60hz_table)
