@@ -137,13 +137,13 @@ static double fit_eval(fit_data *f, int N, const double *pos)
         for (int q = 0; q < N; q++)
             for (int p = 0; p < n; p++) f->wP[q * n + p] = f->w[p * B + b] * f->P[q * n + p];
         for (int q = 0; q < N; q++)
-            for (int t = q; t < N; t++) A[q * N + t] = A[t * N + q] = rec_dot(f->wP + q * n, f->P + t * n, n);
+            for (int t = q; t < N; t++) A[q * N + t] = A[t * N + q] = gs_dot(f->wP + q * n, f->P + t * n, n);
         if (!small_inverse(A, N)) return HUGE_VAL;
         for (int k = 0; k < K; k++) {
             const int d = b * K + k;
             const double *Dd = f->Dt + (size_t)d * n;
             double r[FIT_MAX_SOURCES];
-            for (int q = 0; q < N; q++) r[q] = rec_dot(f->wP + q * n, Dd, n);
+            for (int q = 0; q < N; q++) r[q] = gs_dot(f->wP + q * n, Dd, n);
             for (int q = 0; q < N; q++) {
                 double v = 0;
                 for (int t = 0; t < N; t++) v += A[q * N + t] * r[t];
@@ -214,7 +214,7 @@ static void fit_gradient(fit_data *f, int N, const double *pos, double *g, doubl
         /* perp_c = dP_c - P^T A^-1 (P W dP_c) */
         for (int c = 0; c < S; c++) {
             double pr[FIT_MAX_SOURCES];
-            for (int q = 0; q < N; q++) pr[q] = rec_dot(wPb + q * n, dP + c * n, n);
+            for (int q = 0; q < N; q++) pr[q] = gs_dot(wPb + q * n, dP + c * n, n);
             double *pc = perp + c * n;
             memcpy(pc, dP + c * n, sizeof(double) * (size_t)n);
             for (int q = 0; q < N; q++) {
@@ -228,20 +228,20 @@ static void fit_gradient(fit_data *f, int N, const double *pos, double *g, doubl
         double FF[FIT_MAX_SOURCES * FIT_MAX_SOURCES];
         for (int q = 0; q < N; q++)
             for (int t = q; t < N; t++)
-                FF[q * N + t] = FF[t * N + q] = rec_dot(f->F + q * BK + b * K, f->F + t * BK + b * K, K);
+                FF[q * N + t] = FF[t * N + q] = gs_dot(f->F + q * BK + b * K, f->F + t * BK + b * K, K);
         /* w_pb h_q(p), h_q = sum_k (D_pk - sum_t P_t(p) F_tk) F_qk
          *                 = sum_k D_pk F_qk - sum_t P_t(p) FF_tq */
         for (int q = 0; q < N; q++) {
             double *h = wh + q * n;
-            for (int p = 0; p < n; p++) h[p] = rec_dot(f->D + (size_t)p * BK + b * K, f->F + q * BK + b * K, K);
+            for (int p = 0; p < n; p++) h[p] = gs_dot(f->D + (size_t)p * BK + b * K, f->F + q * BK + b * K, K);
             for (int t = 0; t < N; t++)
                 for (int p = 0; p < n; p++) h[p] -= FF[t * N + q] * f->P[t * n + p];
             for (int p = 0; p < n; p++) h[p] *= wb[p];
         }
-        for (int c = 0; c < S; c++) g[PARAM_OF(c)] -= 2 * rec_dot(dP + c * n, wh + (c / 3) * n, n);
+        for (int c = 0; c < S; c++) g[PARAM_OF(c)] -= 2 * gs_dot(dP + c * n, wh + (c / 3) * n, n);
         for (int c = 0; c < S; c++)
             for (int e = c; e < S; e++) {
-                const double a = 2 * FF[(c / 3) * N + e / 3] * rec_dot(wperp + c * n, perp + e * n, n);
+                const double a = 2 * FF[(c / 3) * N + e / 3] * gs_dot(wperp + c * n, perp + e * n, n);
                 const int i = PARAM_OF(c), j = PARAM_OF(e);
                 H[i * m + j] += a;
                 if (c != e) H[j * m + i] += a;

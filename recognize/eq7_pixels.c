@@ -12,7 +12,7 @@
 /* ------------------------------------------------------------ pixels */
 
 /* Sum of squares of n floats in double, 8 partial sums (the chain would be latency bound). */
-static double sumsq_f(const float *x, size_t n)
+REC_VECTOR_LOOP static double sumsq_f(const float *x, size_t n)
 {
     double a[8] = {0, 0, 0, 0, 0, 0, 0, 0};
     size_t i = 0;
@@ -22,7 +22,7 @@ static double sumsq_f(const float *x, size_t n)
     return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
 }
 
-static double dot_fd(const float *x, const double *t, size_t n)
+REC_VECTOR_LOOP static double dot_fd(const float *x, const double *t, size_t n)
 {
     double a[8] = {0, 0, 0, 0, 0, 0, 0, 0};
     size_t i = 0;
@@ -33,7 +33,7 @@ static double dot_fd(const float *x, const double *t, size_t n)
 }
 
 /* max_j (sh_j + rho_j xp) over n (a multiple of LANES) prefilter scores. */
-static float row_bound_perp(const float *sh, const float *rho, float xp, size_t n)
+REC_VECTOR_LOOP static float row_bound_perp(const float *sh, const float *rho, float xp, size_t n)
 {
     float mx[LANES];
     for (int q = 0; q < LANES; q++) mx[q] = -FLT_MAX;
@@ -72,7 +72,7 @@ static double pix_L(const rec_matcher *m, size_t j, double z, double Sxx)
 
 /* The largest of n floats (n a multiple of LANES), in LANES partial maxima; NaN-safe in the
  * sense that a row of NaN scores gives NaN. */
-static float row_max(const float *s, size_t n)
+REC_VECTOR_LOOP static float row_max(const float *s, size_t n)
 {
     float mx[LANES];
     for (int q = 0; q < LANES; q++) mx[q] = s[q];
@@ -84,7 +84,7 @@ static float row_max(const float *s, size_t n)
 }
 
 /* u[j] = max(s_j, 0)^2 hf - lnf[j] (the bound U_j in float) for n scores; returns max u. */
-static float row_bounds(const float *s, const float *lnf, float hf, float *u, size_t n)
+REC_VECTOR_LOOP static float row_bounds(const float *s, const float *lnf, float hf, float *u, size_t n)
 {
     float mx[LANES];
     for (int q = 0; q < LANES; q++) mx[q] = -FLT_MAX;
@@ -98,6 +98,34 @@ static float row_bounds(const float *s, const float *lnf, float hf, float *u, si
     float r = mx[0];
     for (int q = 1; q < LANES; q++) r = mx[q] > r ? mx[q] : r;
     return r;
+}
+
+/* The first index where u is v (n - 1 if none). */
+REC_VECTOR_LOOP static size_t first_equal(const float *u, size_t n, float v)
+{
+    size_t j = 0;
+    for (; j + LANES <= n; j += LANES) {
+        int any = 0;
+        for (int q = 0; q < LANES; q++) any |= u[j + q] == v;
+        if (any) break;
+    }
+    while (j + 1 < n && u[j] != v) j++;
+    return j;
+}
+
+/* The indices j < n with (double)u[j] + err >= thr into out, in order; returns their number.
+ * (u[j] >= lo, lo a float just below thr - err, is the vectorized pre-test.) */
+REC_VECTOR_LOOP static size_t at_least(const float *u, size_t n, float lo, double err, double thr, size_t *out)
+{
+    size_t k = 0;
+    for (size_t j = 0; j < n; j += LANES) {
+        int any = 0;
+        for (int q = 0; q < LANES && j + (size_t)q < n; q++) any |= u[j + q] >= lo;
+        if (!any) continue;
+        for (size_t q = j; q < j + LANES && q < n; q++)
+            if ((double)u[q] + err >= thr) out[k++] = q;
+    }
+    return k;
 }
 
 /* A float phase in [0, 360) (a double just below 360 rounds up to 360.0f). */
@@ -151,8 +179,7 @@ static void pixel_row(const rec_matcher *m, pix_work *pw, const float *xr, const
     double inv = 1.0 / sg, Sxx = ss * inv * inv;
     /* bounds U_j >= L_j + Sxx/2 (log Phi <= 0) from the float scores */
     float umax = row_bounds(srow, m->lnf, (float)(0.5 * inv * inv), ub, Mp);
-    size_t ju = 0;
-    while (ju + 1 < M && ub[ju] != umax) ju++;
+    size_t ju = first_equal(ub, M, umax);
     /* error of z^2/2 from the float scores (float dot products, templates rounded to float,
      * the float bound itself): at most 8.9e-7 Sxx measured over 3e7 scores of the generated
      * DELIGHT (K = 26, RGB); FLOAT_ERR allows twice that. Above 1e-3 nats the candidates are
@@ -161,18 +188,17 @@ static void pixel_row(const rec_matcher *m, pix_work *pw, const float *xr, const
     int exact = err > 1e-3;
     if (exact)
         for (size_t d = 0; d < D; d++) xd[d] = xr[d];
-    double zu = exact ? rec_dot(xd, m->tnd + ju * D, D) * inv : srow[ju] * inv;
+    double zu = exact ? gs_dot(xd, m->tnd + ju * D, D) * inv : srow[ju] * inv;
     /* candidates: the templates whose bound reaches within CUT_PIXEL of a template's L */
     double thr = pix_L(m, ju, zu, Sxx) + 0.5 * Sxx - CUT_PIXEL - 2.0 * err;
-    w->ncand = 0;
-    for (size_t j = 0; j < M; j++)
-        if ((double)ub[j] + err >= thr) rec_eq7_add_cand(m, w, j);
+    w->ncand = at_least(ub, M, nextafterf((float)(thr - err), -INFINITY), err, thr, w->cand);
+    for (size_t ci = 0; ci < w->ncand; ci++) w->mark[w->cand[ci]] = 1;
     if (exact && w->ncand > M / 4) {   /* many: one matrix-vector product for all templates */
         cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, (int)D, inv, m->tnd, (int)D, xd, 1, 0.0, zz, 1);
     } else {
         for (size_t ci = 0; ci < w->ncand; ci++) {
             size_t j = w->cand[ci];
-            zz[j] = exact ? rec_dot(xd, m->tnd + j * D, D) * inv : srow[j] * inv;
+            zz[j] = exact ? gs_dot(xd, m->tnd + j * D, D) * inv : srow[j] * inv;
         }
     }
     double Lmax = -INFINITY;
@@ -364,19 +390,18 @@ static void pixel_row_band(const rec_matcher *m, pix_work *pw, const float *xr, 
     if (exact)
         for (size_t d = 0; d < D; d++) xd[d] = xr[d];
     if (exact)
-        for (int b = 0; b < nb; b++) p[b] = rec_dot(xd + (size_t)b * K, m->tbn + ju * D + (size_t)b * K, K);
+        for (int b = 0; b < nb; b++) p[b] = gs_dot(xd + (size_t)b * K, m->tbn + ju * D + (size_t)b * K, K);
     else
         for (int b = 0; b < nb; b++) p[b] = srow[(size_t)b * Mp + ju];
     double g0, s0;
     double thr = band_terms(m, ju, p, var, Sxx, &g0, &s0) + 0.5 * Sxx - CUT_PIXEL - 2.0 * err;
-    w->ncand = 0;
-    for (size_t j = 0; j < M; j++)
-        if ((double)ub[j] + err >= thr) rec_eq7_add_cand(m, w, j);
+    w->ncand = at_least(ub, M, nextafterf((float)(thr - err), -INFINITY), err, thr, w->cand);
+    for (size_t ci = 0; ci < w->ncand; ci++) w->mark[w->cand[ci]] = 1;
     double Lmax = -INFINITY;
     for (size_t ci = 0; ci < w->ncand; ci++) {
         size_t j = w->cand[ci];
         if (exact)
-            for (int b = 0; b < nb; b++) p[b] = rec_dot(xd + (size_t)b * K, m->tbn + j * D + (size_t)b * K, K);
+            for (int b = 0; b < nb; b++) p[b] = gs_dot(xd + (size_t)b * K, m->tbn + j * D + (size_t)b * K, K);
         else
             for (int b = 0; b < nb; b++) p[b] = srow[(size_t)b * Mp + j];
         w->L[j] = band_terms(m, j, p, var, Sxx, &gg[j], &zz[j]);
@@ -443,7 +468,7 @@ static void pixel_row_band(const rec_matcher *m, pix_work *pw, const float *xr, 
                 size_t jj = q ? jp : jm;
                 if (exact)
                     for (int band = 0; band < nb; band++)
-                        p[band] = rec_dot(xd + (size_t)band * K, m->tbn + jj * D + (size_t)band * K, K);
+                        p[band] = gs_dot(xd + (size_t)band * K, m->tbn + jj * D + (size_t)band * K, K);
                 else
                     for (int band = 0; band < nb; band++) p[band] = srow[(size_t)band * Mp + jj];
                 band_terms(m, jj, p, var, Sxx, q ? &gp : &gm, q ? &sp : &sm);

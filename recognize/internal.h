@@ -103,6 +103,16 @@ gs_status rec_cv_dilate_f32(const float *src, float *dst, int width, int height,
 /* In-place dilation of a 0/1 byte mask with a (2 radius + 1)^2 square. */
 gs_status rec_cv_dilate_u8(unsigned char *mask, int width, int height, int radius);
 
+/* Loops over every template or sample, in clones for the CPU's widest registers (the same
+ * numbers in each: a plain clone, AVX2 and AVX-512, no contraction or reassociation); with gcc
+ * REC_VECTOR_LOOP also lets the vectorizer take loops of any length. */
+#define REC_VECTOR_CLONES __attribute__((target_clones("avx512f", "arch=haswell", "default")))
+#ifdef __clang__
+#define REC_VECTOR_LOOP REC_VECTOR_CLONES
+#else
+#define REC_VECTOR_LOOP __attribute__((target_clones("avx512f", "arch=haswell", "default"), optimize("O3")))
+#endif
+
 /* ================================================= Eq. 7 (eq7_*.c), shared between its files */
 
 /* complex.h before the matcher: its Fourier series are C99 double complex */
@@ -116,15 +126,6 @@ gs_status rec_cv_dilate_u8(unsigned char *mask, int width, int height, int radiu
 #define FLOAT_ERR 2e-6    /* error of z^2/2 from float scores, per unit |x|^2/sigma^2 */
 #define PHASE_WINDOW 0.16666666666666666  /* +-30 deg of phase = +-1/6 cycle of shift */
 #define PIX_BLOCK 1024    /* rows per SGEMM block */
-/* Loops over every template or sample, in clones for the CPU's widest registers (the same
- * numbers in each: a plain clone, AVX2 and AVX-512, no contraction or reassociation); with gcc
- * REC_VECTOR_LOOP also lets the vectorizer take loops of any length. */
-#define REC_VECTOR_CLONES __attribute__((target_clones("avx512f", "arch=haswell", "default")))
-#ifdef __clang__
-#define REC_VECTOR_LOOP REC_VECTOR_CLONES
-#else
-#define REC_VECTOR_LOOP __attribute__((target_clones("avx512f", "arch=haswell", "default"), optimize("O3")))
-#endif
 #define SUMS_ROWS 8       /* the light path's sums: lights and templates of one tile (eq7_sums.c) */
 #define SUMS_COLS 16
 #define LANES 16          /* row loops in blocks of 16 floats (vectorised by the compiler) */
@@ -213,16 +214,6 @@ static inline double phi_cdf(double z)
     return 0.5 * erfc(-z * M_SQRT1_2);
 }
 
-/* sum_i x_i t_i, eight partial sums. */
-static inline double rec_dot(const double *x, const double *t, size_t n)
-{
-    double a[8] = {0, 0, 0, 0, 0, 0, 0, 0};
-    size_t i = 0;
-    for (; i + 8 <= n; i += 8)
-        for (int k = 0; k < 8; k++) a[k] += x[i + k] * t[i + k];
-    for (; i < n; i++) a[0] += x[i] * t[i];
-    return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
-}
 
 /* exp(d) for d <= 0, without calling exp where it underflows to 0 (below -745.2). */
 static inline double rec_exp_neg(double d)

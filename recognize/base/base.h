@@ -261,6 +261,9 @@ double gs_chi2_sf(double chi2, int dof);
 double gs_chi2_isf(double p, int dof);
 /* log Phi(z), Phi the standard normal CDF, accurate for every z (asymptotic below -20). */
 double gs_log_phi(double z);
+/* sum_i x_i t_i in eight interleaved partial sums (clones for the CPU's widest registers compute
+ * the same sums: no fused multiply-add). */
+double gs_dot(const double *x, const double *t, size_t n);
 /* An angle in degrees wrapped to [0, 360) and to [-180, 180). */
 double gs_wrap360(double a_deg);
 double gs_wrap180(double a_deg);

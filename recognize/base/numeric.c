@@ -111,3 +111,18 @@ float gs_median_f(float *v, size_t n)
     }
     return v[k];
 }
+
+#if defined(__GNUC__) && !defined(__clang__)
+__attribute__((target_clones("avx512f", "arch=haswell", "default"), optimize("O3")))
+#else
+__attribute__((target_clones("avx512f", "arch=haswell", "default")))
+#endif
+double gs_dot(const double *x, const double *t, size_t n)
+{
+    double a[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+    size_t i = 0;
+    for (; i + 8 <= n; i += 8)
+        for (int k = 0; k < 8; k++) a[k] += x[i + k] * t[i + k];
+    for (; i < n; i++) a[0] += x[i] * t[i];
+    return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
+}
