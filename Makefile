@@ -23,7 +23,8 @@ ifneq ($(filter clang fuzz,$(SAN)),)
 CC := clang
 CXX := clang++
 SANFLAGS := -fsanitize=address,undefined,float-cast-overflow,pointer-overflow -fno-sanitize-recover=all
-OPT := -O1 -g -fno-omit-frame-pointer $(SANFLAGS) $(if $(filter fuzz,$(SAN)),-fsanitize=fuzzer-no-link)
+# (no contraction into fused multiply-adds, as gcc's -std=c11: the same sums in every clone)
+OPT := -O1 -g -fno-omit-frame-pointer -ffp-contract=off $(SANFLAGS) $(if $(filter fuzz,$(SAN)),-fsanitize=fuzzer-no-link)
 endif
 # (the test pass links ASan's runtime as a shared library, as gcc does, so that the fault-injection
 # shim, tests/faults/faultinject.c, preloaded, comes before its malloc: docs/reliability.md)
@@ -81,12 +82,13 @@ $(BUILD)/version.h: FORCE
 	  (cmp -s $@.tmp $@ && rm -f $@.tmp || mv $@.tmp $@)
 $(BUILD)/survey/cli.o: $(BUILD)/version.h
 $(BUILD)/survey/cli.o: CPPFLAGS += -I$(BUILD)
-# Eq. 7's scores and decision: loops over templates that call log, erfc and exp, which gcc
-# vectorizes with glibc's libmvec only without errno (nothing there reads it)
-$(BUILD)/recognize/eq7_scores.o $(BUILD)/recognize/eq7_decide.o: CFLAGS += -fno-math-errno
+# Eq. 7's scores: loops over templates that call log, erfc and exp, which gcc vectorizes with
+# glibc's libmvec only without errno (nothing there reads it)
+$(BUILD)/recognize/eq7_scores.o: CFLAGS += -fno-math-errno
 # the continuous templates' and grids' complex products: finite numbers, without C99's recovery
-# of a NaN product (the same results for finite operands, no library call per product)
-$(BUILD)/recognize/eq7_matcher.o $(BUILD)/recognize/eq7_sums.o: CFLAGS += -fcx-limited-range
+# of a NaN product (the same results for finite operands, no library call per product; gcc's
+# flag, which clang 14 does not know)
+$(BUILD)/recognize/eq7_matcher.o $(BUILD)/recognize/eq7_sums.o: CFLAGS += $(if $(filter gcc,$(CC)),-fcx-limited-range)
 
 $(BIN): $(BUILD)/survey/main.o $(LIBS)
 	$(CXX) $(LDFLAGS) $^ $(LDLIBS) -o $@

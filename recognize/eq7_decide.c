@@ -9,29 +9,12 @@
 #include <stdlib.h>
 #include <string.h>
 
-#if defined(__GNUC__) && !defined(__clang__)
-/* glibc's vector math (libmvec): the candidates' masses below, 8 (or 4) at a time */
-__attribute__((simd("notinbranch"))) double exp(double);
-#endif
-
-/* e[i] = exp(d[i]) where d[i] > -746, else 0 (rec_exp_neg), for n values. */
-REC_VECTOR_LOOP static void exp_neg(const double *restrict d, size_t n, double *restrict e)
-{
-    for (size_t i = 0; i < n; i++) {
-        double x = exp(d[i] > -746.0 ? d[i] : 0.0);
-        e[i] = d[i] > -746.0 ? x : 0.0;
-    }
-}
-
 /* mass[j] = exp(L[j] - Lmax) cellw[j] of the candidates j (0 where L is not finite). */
 static void masses(const rec_matcher *m, rec_eq7_work *w, double Lmax)
 {
-    double *d = w->tmp, *e = w->tmp + m->M;
-    for (size_t i = 0; i < w->ncand; i++) {
-        double L = w->L[w->cand[i]];
-        d[i] = isfinite(L) ? L - Lmax : -INFINITY;
-    }
-    exp_neg(d, w->ncand, e);
+    double *L = w->tmp, *e = w->tmp + m->M + 3 * m->nb;   /* ncand <= M + 3 nb */
+    for (size_t i = 0; i < w->ncand; i++) L[i] = w->L[w->cand[i]];
+    rec_eq7_exp_below(L, w->ncand, Lmax, e);
     for (size_t i = 0; i < w->ncand; i++) w->mass[w->cand[i]] = e[i] * m->cellw[w->cand[i]];
 }
 
@@ -88,7 +71,7 @@ gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t 
 {
     memset(w, 0, sizeof *w);
     size_t M = m->M, nb = m->nb, D = (size_t)m->D;
-    size_t nr = (rows + SUMS_ROWS - 1) / SUMS_ROWS * SUMS_ROWS;   /* the sums' tiles */
+    size_t nr = rows;
     w->rows = rows;
     w->L = malloc(sizeof *w->L * M);
     w->mass = malloc(sizeof *w->mass * M);

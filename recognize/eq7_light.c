@@ -184,22 +184,34 @@ static double excess_e2(const double *r2, const double *s2, const double *mu2, s
     return 0.5 * (lo + hi);
 }
 
+/* The sums S_f = sum w x t and T_f = sum w t^2 of template t per brightness parameter, and the
+ * brightness a_f = S_f/T_f >= 0. */
+static void fit_sums(const rec_matcher *m, const rec_eq7_work *w, const double *t, double *S, double *T,
+                     double *a_f)
+{
+    size_t span = (size_t)m->D / (size_t)m->nfit;
+    for (int f = 0; f < m->nfit; f++) {
+        double s = 0.0, q = 0.0;
+        for (size_t d = (size_t)f * span; d < (size_t)(f + 1) * span; d++) {
+            s += w->wx[d] * t[d];
+            q += w->w[d] * t[d] * t[d];
+        }
+        S[f] = s;
+        T[f] = q;
+        a_f[f] = (q > 0.0 && s > 0.0) ? s / q : 0.0;
+    }
+}
+
 /* Template j (or continuous bulb b at shift s, with its derivative in s when dt is not NULL)
- * into t, and its brightness per parameter a_f = S_f/T_f >= 0 from the light's weights. */
+ * into t, and its brightness per parameter a_f from the light's weights. */
 static void model_of(const rec_matcher *m, rec_eq7_work *w, int b, size_t j, double s, double *t,
                      double *dt, double *a_f)
 {
-    size_t D = (size_t)m->D, span = D / (size_t)m->nfit;
+    size_t D = (size_t)m->D;
+    double S[GS_MAX_BANDS], T[GS_MAX_BANDS];
     if (m->cont[b]) rec_eq7_template_at(m, (size_t)b, s, t, dt, w->d2t, w->acc);
     else memcpy(t, m->t + j * D, sizeof *t * D);
-    for (int f = 0; f < m->nfit; f++) {
-        double S = 0.0, T = 0.0;
-        for (size_t d = (size_t)f * span; d < (size_t)(f + 1) * span; d++) {
-            S += w->wx[d] * t[d];
-            T += w->w[d] * t[d] * t[d];
-        }
-        a_f[f] = (T > 0.0 && S > 0.0) ? S / T : 0.0;
-    }
+    fit_sums(m, w, t, S, T, a_f);
 }
 
 /* The excess noise is one flux factor per frame, common to the bands (scintillation is nearly
@@ -322,22 +334,22 @@ REC_VECTOR_LOOP static int prep_scan(const double *restrict x, const double *res
     return bad;
 }
 
-/* Over one band's usable samples, in units of 1/ic: sum x^2 - sigma^2 and sum x; returns their
- * count. */
+/* Over one band's usable samples, in units of c = 1/(ic1 ic2): sum x^2 - sigma^2 and sum x;
+ * returns their count. */
 REC_VECTOR_LOOP static int prep_band(const double *restrict x, const double *restrict s, const double *restrict ok,
-                                     size_t K, double ic, double *sum2, double *sum1)
+                                     size_t K, double ic1, double ic2, double *sum2, double *sum1)
 {
     double a[PREP_LANES] = {0}, b[PREP_LANES] = {0}, n[PREP_LANES] = {0};
     size_t d = 0;
     for (; d + PREP_LANES <= K; d += PREP_LANES)
         for (int k = 0; k < PREP_LANES; k++) {
-            double xv = x[d + k] * ic, sv = s[d + k] * ic, u = ok[d + k];
+            double xv = x[d + k] * ic1 * ic2, sv = s[d + k] * ic1 * ic2, u = ok[d + k];
             a[k] += u != 0.0 ? xv * xv - sv * sv : 0.0;
             b[k] += u != 0.0 ? xv : 0.0;
             n[k] += u;
         }
     for (; d < K; d++) {
-        double xv = x[d] * ic, sv = s[d] * ic;
+        double xv = x[d] * ic1 * ic2, sv = s[d] * ic1 * ic2;
         a[0] += ok[d] != 0.0 ? xv * xv - sv * sv : 0.0;
         b[0] += ok[d] != 0.0 ? xv : 0.0;
         n[0] += ok[d];
@@ -349,11 +361,11 @@ REC_VECTOR_LOOP static int prep_band(const double *restrict x, const double *res
     return (int)N;
 }
 
-/* One band's weights ws = 1/(sigma^2 + fe2mu2) and samples xs = x - flat (units of 1/ic) where
+/* One band's weights ws = 1/(sigma^2 + fe2mu2) and samples xs = x - flat (units of c) where
  * usable and finite (w, wx, xs 0 elsewhere); adds sum ws xs^2 to *Sxx and lowers *wmin to their
  * least weight; returns the samples used, and the usable ones whose weight overflowed in *bad. */
 REC_VECTOR_LOOP static int prep_weights(const double *restrict x, const double *restrict s, const double *restrict ok,
-                                        size_t K, double ic, double fe2mu2, double flat, double *restrict w,
+                                        size_t K, double ic1, double ic2, double fe2mu2, double flat, double *restrict w,
                                         double *restrict wx, double *restrict xs, double *Sxx, double *wmin,
                                         int *bad)
 {
@@ -361,7 +373,7 @@ REC_VECTOR_LOOP static int prep_weights(const double *restrict x, const double *
     int used = 0, over = 0;
     for (int k = 0; k < PREP_LANES; k++) mn[k] = INFINITY;
     for (size_t d = 0; d < K; d++) {
-        double sv = s[d] * ic, ws = 1.0 / (sv * sv + fe2mu2), xv = x[d] * ic - flat;
+        double sv = s[d] * ic1 * ic2, ws = 1.0 / (sv * sv + fe2mu2), xv = x[d] * ic1 * ic2 - flat;
         int good = (ok[d] != 0.0) & (fabs(ws) <= DBL_MAX) & (fabs(ws * xv * xv) <= DBL_MAX);
         w[d] = good ? ws : 0.0;
         xs[d] = good ? xv : 0.0;
@@ -390,6 +402,15 @@ REC_VECTOR_LOOP static int prep_weights(const double *restrict x, const double *
     return used;
 }
 
+/* What the catalog keeps of a light's fit (eq7_noise.c), for a light without one. */
+static void fit_none(rec_eq7_work *w)
+{
+    w->fit_bulb = -1;
+    w->other_lbf = NAN;
+    w->fit_flat_var = INFINITY;
+    for (int i = 0; i < REC_TAU_N; i++) w->tau_ll[i] = -INFINITY;
+}
+
 int rec_eq7_light_prepare(const rec_matcher *m, rec_eq7_work *w, size_t q, const double *signal,
                           const double *sigma, double fe, rec_match *out)
 {
@@ -406,25 +427,28 @@ int rec_eq7_light_prepare(const rec_matcher *m, rec_eq7_work *w, size_t q, const
      * the K windows. The flat share (rec_eq7_opts.flat_share): x = a (t + phi m) has band means
      * a m_b (1 + phi), so the flat part is phi / (1 + phi) of each band's mean, whatever the
      * template. */
-    double ic = 1.0 / c, *mu2 = p->mu2, Sxx = 0.0;
+    /* 1/c in two factors: 1 and 1/c, or, for a c so small (subnormal) that 1/c overflows, 2^600
+     * and 1/(2^600 c) */
+    double ic1 = 1.0 / c <= DBL_MAX ? 1.0 : 0x1p600, ic2 = 1.0 / (ic1 * c), *mu2 = p->mu2, Sxx = 0.0;
     int used = 0;
     for (int band = 0; band < m->bands; band++) {
         size_t o = (size_t)band * K;
         double sum2, sum1;
-        int n = prep_band(signal + o, sigma + o, ok + o, K, ic, &sum2, &sum1);
+        int n = prep_band(signal + o, sigma + o, ok + o, K, ic1, ic2, &sum2, &sum1);
         mu2[band] = (n > 0 && sum2 > 0.0 && isfinite(sum2)) ? sum2 / n : 0.0;
         double flat = w->flat > 0.0 && n > 0 ? w->flat / (1.0 + w->flat) * sum1 / n : 0.0;
-        used += prep_weights(signal + o, sigma + o, ok + o, K, ic, fe * fe * mu2[band], flat, w->w + o,
-                             w->wx + o, w->xs + o, &Sxx, &p->wmin[m->nfit == 1 ? 0 : band], &bad);
+        int nb = prep_weights(signal + o, sigma + o, ok + o, K, ic1, ic2, fe * fe * mu2[band], flat, w->w + o,
+                              w->wx + o, w->xs + o, &Sxx, &p->wmin[m->nfit == 1 ? 0 : band], &bad);
+        used += nb;
+        if (m->nfit > 1) p->full[band] = nb == (int)K;
     }
+    if (m->nfit == 1) p->full[0] = used == (int)D;
     unsigned flags = bad ? REC_MATCH_BAD_INPUT : 0u;
     if (used == 0 || !isfinite(Sxx)) {
         rec_eq7_no_answer(out, flags | REC_MATCH_BAD_INPUT);
-        memset(w->w, 0, sizeof *w->w * D);   /* a row of zeros in the block's sums */
-        memset(w->wx, 0, sizeof *w->wx * D);
+        fit_none(w);
         return 0;
     }
-    p->live = 1;
     p->used = used;
     p->flags = flags;
     p->c = c;
@@ -443,11 +467,7 @@ gs_status rec_eq7_light_finish(const rec_matcher *m, rec_eq7_work *w, size_t q, 
     double c = p->c, Sxx = p->Sxx;
     const double *mu2 = p->mu2;
     if (excess) excess->valid = 0;
-    w->fit_bulb = -1;
-    w->other_lbf = NAN;
-    w->fit_flat_var = INFINITY;
-    if (w->collect_tau)
-        for (int i = 0; i < REC_TAU_N; i++) w->tau_ll[i] = -INFINITY;
+    fit_none(w);
     /* every template's score where it can matter (eq7_scores.c) */
     double Lmax = rec_eq7_screen(m, w, p, Sxx);
     /* continuous bulbs near the top: refine their peaks exactly */
@@ -515,17 +535,8 @@ gs_status rec_eq7_light_finish(const rec_matcher *m, rec_eq7_work *w, size_t q, 
     int nf = m->nfit, nfree = 0;
     size_t span = D / (size_t)nf;
     double a_f[GS_MAX_BANDS] = {0}, Sv[GS_MAX_BANDS] = {0}, Tv[GS_MAX_BANDS] = {0};
-    for (int f = 0; f < nf; f++) {
-        double S = 0.0, T = 0.0;
-        for (size_t d = (size_t)f * span; d < (size_t)(f + 1) * span; d++) {
-            S += w->wx[d] * tb[d];
-            T += w->w[d] * tb[d] * tb[d];
-        }
-        Sv[f] = S;
-        Tv[f] = T;
-        a_f[f] = (T > 0.0 && S > 0.0) ? S / T : 0.0;
-        nfree += T > 0.0;
-    }
+    fit_sums(m, w, tb, Sv, Tv, a_f);
+    for (int f = 0; f < nf; f++) nfree += Tv[f] > 0.0;
     double snr;
     rec_red_fit rf;
     w->fit_bulb = bb;
@@ -655,9 +666,6 @@ gs_status rec_eq7_match_light_ws(const rec_matcher *m, rec_eq7_work *w, const do
                                  rec_eq7_excess *excess)
 {
     if (excess) excess->valid = 0;
-    w->fit_bulb = -1;
-    w->other_lbf = NAN;
-    w->fit_flat_var = INFINITY;
     if (!rec_eq7_light_prepare(m, w, 0, signal, sigma, fe, out)) return GS_OK;
     rec_eq7_block_sums(m, w, 1);
     return rec_eq7_light_finish(m, w, 0, sigma, fe, out, excess);

@@ -103,6 +103,7 @@ void rec_matcher_free(rec_matcher *m)
     free(m->wk);
     free(m->harm);
     free(m->bnorm);
+    free(m->lbnorm);
     free(m->blog);
     free(m->tbn);
     free(m->tbnf);
@@ -255,8 +256,9 @@ REC_VECTOR_LOOP static void inverse_dft(const double *restrict c, const double *
 }
 
 /* Exact template of continuous bulb b at shift s and its first two derivatives in s (any of
- * dt, d2t may be NULL). acc is scratch of 3 * K complex values. The harmonics are folded into K
- * bins (harmonic h into h mod K, times e^{-2 pi i h s}), then one inverse DFT per series; the
+ * dt, d2t may be NULL). acc is scratch of REC_TEMPLATE_ACC * K complex values. The harmonics are
+ * folded into K bins (harmonic h into h mod K, times e^{-2 pi i h s}), then one inverse DFT per
+ * series; the
  * Nyquist term sin(pi n (k/K - s)) from the tabulated sin and cos of pi n k / K (m->nyqs, nyqc). */
 void rec_eq7_template_at(const rec_matcher *m, size_t b, double s, double *t, double *dt,
                          double *d2t, double complex *acc)
@@ -589,7 +591,7 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
         m->nb++;
     }
     if (m->red) {
-        /* the reddened chromaticities on the tau grid of eq7_light.c's loglik_red */
+        /* the reddened chromaticities on the tau grid of eq7_scores.c's rec_eq7_loglik_red */
         m->red_c = malloc(sizeof *m->red_c * m->nb * REC_TAU_N * (size_t)bands);
         m->red_cmin = malloc(sizeof *m->red_cmin * m->nb * (size_t)bands);
         if (!m->red_c || !m->red_cmin) {
@@ -658,6 +660,7 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
     m->tbulb = malloc(sizeof *m->tbulb * M);
     m->tcell = malloc(sizeof *m->tcell * M);
     m->bnorm = malloc(sizeof *m->bnorm * M * (size_t)bands);
+    m->lbnorm = malloc(sizeof *m->lbnorm * M * (size_t)bands);
     m->blog = malloc(sizeof *m->blog * M);
     m->tbn = malloc(sizeof *m->tbn * M * D);
     m->tbnf = calloc(m->Mp * D, sizeof *m->tbnf);
@@ -667,7 +670,7 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
     double *raw = malloc(sizeof *raw * D);
     double complex *acc = malloc(sizeof *acc * REC_TEMPLATE_ACC * (size_t)K);
     if (!m->t || !m->tsq || !m->tn || !m->lnf || !m->tnd || !m->lognorm || !m->cellw || !m->logcellw || !m->shift || !m->tphase ||
-        !m->tbulb || !m->tcell || !m->bnorm || !m->blog || !m->tbn || !m->tbnf || !m->blnf || !m->bib || !m->bib2 || !raw ||
+        !m->tbulb || !m->tcell || !m->bnorm || !m->lbnorm || !m->blog || !m->tbn || !m->tbnf || !m->blnf || !m->bib || !m->bib2 || !raw ||
         !acc) {
         free(raw);
         free(acc);
@@ -758,6 +761,7 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
                     return s;
                 }
                 m->bnorm[j * (size_t)bands + (size_t)band] = bn;
+                m->lbnorm[j * (size_t)bands + (size_t)band] = log(bn);
                 m->blog[j] += log(bn);
                 for (int k = 0; k < K; k++) {
                     size_t dd = (size_t)band * (size_t)K + (size_t)k;

@@ -356,11 +356,11 @@ void rec_eq7_nested_tests(const rec_matcher *m, rec_eq7_work *w, const double *t
             best_r = r;
         }
     }
-    /* a pair of two first templates was searched in both orders, and rounding picked one (the
-     * same Delta, not the same Occam factor): the first is the one of higher L, as the best fit
-     * is when it is in the pair */
+    /* a pair of two first templates was searched in both orders (the second's not next to the
+     * best fit), and rounding picked one (the same Delta, not the same Occam factor): the first
+     * is the one of higher L, as the best fit is when it is in the pair */
     for (int r = 1; best_j < M && r < best_r; r++)
-        if (first[r] == best_j) {
+        if (first[r] == best_j && !near(m, first[best_r], best_bulb, best_shift)) {
             best_j = first[best_r];
             best_r = r;
             break;

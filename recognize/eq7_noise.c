@@ -175,20 +175,7 @@ static gs_status catalog_part(void *ctx, int part, size_t i0, size_t i1)
                 continue;
             }
             if (p->ex && first) p->ex[i].valid = 0;
-            if (p->keep) {   /* nothing to keep of a light without a usable sample */
-                w.fit_bulb = -1;
-                w.other_lbf = NAN;
-                w.fit_flat_var = INFINITY;
-                for (int t = 0; t < REC_TAU_N; t++) w.tau_ll[t] = -INFINITY;
-                keep_fit(&w, i, p->keep);
-            }
-        }
-        /* the rows of the sums' last tile past the block's lights: zero */
-        for (size_t q = n; q % SUMS_ROWS; q++) {
-            w.prep[q].live = 0;
-            rec_eq7_work_row(m, &w, q);
-            memset(w.w, 0, sizeof *w.w * D);
-            memset(w.wx, 0, sizeof *w.wx * D);
+            if (p->keep) keep_fit(&w, i, p->keep);   /* (none: prepare said so) */
         }
         rec_eq7_block_sums(m, &w, n);
         for (size_t q = 0; q < n && s == GS_OK; q++) {

@@ -11,7 +11,7 @@
 #include <string.h>
 
 #if defined(__GNUC__) && !defined(__clang__)
-/* glibc's vector math (libmvec): the score loops below call these 8 (or 4) at a time */
+/* glibc's vector math (libmvec): the score loops below call these (the AVX-512 clone: 8 at a time) */
 __attribute__((simd("notinbranch"))) double erfc(double);
 __attribute__((simd("notinbranch"))) double log(double);
 __attribute__((simd("notinbranch"))) double log1p(double);
@@ -64,27 +64,28 @@ double rec_eq7_loglik_n(int nf, double Sxx, const double *S, const double *T)
  * most probable tau's numbers; ll_acc (may be NULL) accumulates exp(L(tau) + ll_logw), the prior
  * left out, per tau (rec_red_fit: recognize/internal.h). */
 /* The reddened model's terms of each tau from its sums A, B, C and occupation occ (dead: none):
- * L(tau) without the prior into Lt (-inf where dead; log Phi from erfc, for z > -20), z = B /
- * sqrt(A) into zt, the between-band misfit into bt. */
+ * L(tau) without the prior and log Phi(z) into Lt (-inf where dead), log Phi(z) from erfc into
+ * lphi (for z > -20: below, gs_log_phi's series), z = B / sqrt(A) into zt, the between-band
+ * misfit into bt. */
 REC_VECTOR_LOOP static void red_taus(const double *restrict A, const double *restrict B, const double *restrict C,
                                      const double *restrict occ, const unsigned char *restrict dead, double R,
-                                     double *restrict Lt, double *restrict zt, double *restrict bt)
+                                     double *restrict Lt, double *restrict lphi, double *restrict zt,
+                                     double *restrict bt)
 {
     for (int i = 0; i < REC_TAU_N; i++) {
         double a = dead[i] ? 1.0 : A[i], between = C[i] - B[i] * B[i] / a, z = B[i] / sqrt(a);
         between = between < 0.0 ? 0.0 : between;
         double e = 0.5 * erfc(fabs(z) * M_SQRT1_2), p = log1p(-e), q = log(e);
-        double l = -0.5 * (R + between) - 0.5 * log(a + a * occ[i]) + (z > 0.0 ? p : q);
-        Lt[i] = dead[i] ? -INFINITY : l;
+        Lt[i] = dead[i] ? -INFINITY : -0.5 * (R + between) - 0.5 * log(a + a * occ[i]);
+        lphi[i] = z > 0.0 ? p : q;
         zt[i] = z;
         bt[i] = between;
     }
 }
 
-/* ex[i] = exp(L[i] - Lmax) where that is above -746, else 0 (rec_exp_neg). */
-REC_VECTOR_LOOP static void exps_below(const double *restrict L, int n, double Lmax, double *restrict ex)
+REC_VECTOR_LOOP void rec_eq7_exp_below(const double *restrict L, size_t n, double Lmax, double *restrict ex)
 {
-    for (int i = 0; i < n; i++) {
+    for (size_t i = 0; i < n; i++) {
         double d = L[i] - Lmax, e = exp(d > -746.0 ? d : 0.0);
         ex[i] = d > -746.0 ? e : 0.0;
     }
@@ -137,14 +138,14 @@ double rec_eq7_loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb,
             if (!dead[i]) av[i] = Bv[i] / Av[i];
         }
     }
-    double Lt[REC_TAU_N], zt[REC_TAU_N], bt[REC_TAU_N], Lmax = -INFINITY;
-    red_taus(Av, Bv, Cv, occv, dead, R, Lt, zt, bt);
+    double Lt[REC_TAU_N], lphi[REC_TAU_N], zt[REC_TAU_N], bt[REC_TAU_N], Lmax = -INFINITY;
+    red_taus(Av, Bv, Cv, occv, dead, R, Lt, lphi, zt, bt);
     for (int i = 0; i < REC_TAU_N; i++) {
         double tau = rec_eq7_tau(i);
         const double *c = cb + (size_t)i * (size_t)nb;
         double a = av[i], z = zt[i], between = bt[i];
         if (dead[i]) continue;
-        if (!(z > -20.0)) Lt[i] += gs_log_phi(z) - log(0.5 * erfc(-z * M_SQRT1_2));   /* its asymptotic form */
+        Lt[i] += z > -20.0 ? lphi[i] : gs_log_phi(z);
         if (ll_acc) ll_acc[i] = rec_log_add(ll_acc[i], Lt[i] + ll_logw);
         if (w->has_tau_prior) Lt[i] += w->tau_logprior[i] + log((double)REC_TAU_N);
         if (Lt[i] > Lmax) {
@@ -168,7 +169,7 @@ double rec_eq7_loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb,
     }
     if (!isfinite(Lmax)) return -INFINITY;
     double ex[REC_TAU_N], sum = 0.0;
-    exps_below(Lt, REC_TAU_N, Lmax, ex);
+    rec_eq7_exp_below(Lt, REC_TAU_N, Lmax, ex);
     for (int i = 0; i < REC_TAU_N; i++) sum += ex[i];
     return Lmax + log(sum / REC_TAU_N);
 }
@@ -259,25 +260,28 @@ REC_VECTOR_CLONES static size_t scr_argmax(const double *U, size_t M)
 }
 
 /* The one-brightness bound below (free_bounds) of every template: U = c0 - lognorm +
- * min(g - Sxx, 0)/2 plus the slack, g = S^2/T where S > 0 (T > 0), -inf where T <= 0. */
+ * min(g - Sxx, 0)/2 plus the slack, g = S^2/T where S > 0 (T > 0), -inf where T <= 0; without
+ * lognorm (a light with dropped samples), -log(T)/2 in place of c0 - lognorm. */
 REC_VECTOR_LOOP static void scr_bounds_1(const double *S, const double *T, const double *lognorm, size_t M,
                                          double c0, double Sxx, double slack, double *U)
 {
     for (size_t j = 0; j < M; j++) {
         double s = S[j], t = T[j];
         double g = s > 0.0 && t > 0.0 ? s * (s / t) : 0.0, d = g - Sxx;
-        double u = c0 - lognorm[j] + 0.5 * (d < 0.0 ? d : 0.0);
+        double u = (lognorm ? c0 - lognorm[j] : -0.5 * log(t > 0.0 ? t : 1.0)) + 0.5 * (d < 0.0 ? d : 0.0);
         U[j] = t > 0.0 ? u + (1e-9 * (1.0 + fabs(u)) + slack) : -INFINITY;
     }
 }
 
 /* The bounds of rec_eq7_loglik_n: log Phi(z) <= 0, and a brightness whose S_f <= 0 adds at most
  * z_f^2/2 + log Phi(z_f) <= log(1/2) < 0 to L, so with g = sum over S_f > 0 of S_f^2/T_f
- *   L <= -max(Sxx - g, 0)/2 - sum_f log(T_f)/2,
- * and T_f = sum w t^2 >= w_min |t_f|^2 (w_min the light's smallest weight of the brightness's
- * samples, |t_f| the template's norm there, tabulated): no logarithm per template. A brightness
- * whose samples a template misses (T_f = 0) adds no term to its L: the bound's term is kept from
- * going below 0 then. Rounding slack: L's own chi2 cancels as Sxx - g does, to some 1e-16 Sxx. */
+ *   L <= -max(Sxx - g, 0)/2 - sum_f log(T_f)/2.
+ * When every sample of brightness f has a weight, T_f = sum w t^2 >= w_min |t_f|^2 (w_min the
+ * light's least weight there, |t_f| the template's norm over the brightness's samples,
+ * tabulated): no logarithm per template. Otherwise (a dropped sample: saturated, masked, bad)
+ * that need not hold and log T_f itself is taken. A brightness whose samples a template misses
+ * (T_f = 0) adds no term to its L: the bound's term is kept from going below 0 then. Rounding
+ * slack: L's own chi2 cancels as Sxx - g does, to some 1e-16 Sxx. */
 static void free_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx,
                         size_t *jbest)
 {
@@ -285,7 +289,7 @@ static void free_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pre
     int nf = m->nfit;
     double slack = 1e-12 * Sxx, *U = w->U;
     if (nf == 1) {
-        scr_bounds_1(w->S, w->T, m->lognorm, M, -0.5 * log(p->wmin[0]), Sxx, slack, U);
+        scr_bounds_1(w->S, w->T, p->full[0] ? m->lognorm : NULL, M, -0.5 * log(p->wmin[0]), Sxx, slack, U);
         *jbest = scr_argmax(U, M);
         return;
     }
@@ -297,7 +301,7 @@ static void free_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pre
         for (int f = 0; f < nf; f++) {
             double S = w->S[(size_t)f * M + j], T = w->T[(size_t)f * M + j];
             if (!(p->wmin[f] > 0.0)) continue;   /* no usable sample: no brightness */
-            double c = cf[f] - log(m->bnorm[j * (size_t)m->bands + (size_t)f]);
+            double c = p->full[f] ? cf[f] - m->lbnorm[j * (size_t)m->bands + (size_t)f] : T > 0.0 ? -0.5 * log(T) : 0.0;
             if (!(T > 0.0)) {
                 u += c > 0.0 ? c : 0.0;
                 continue;
@@ -355,10 +359,10 @@ static void scores_free(const rec_matcher *m, rec_eq7_work *w, const size_t *idx
         scores_1(w->S, w->T, idx, n, Sxx, w->L);
         return;
     }
-    /* per brightness into the scratch (D >= 3 n is not assured: in pieces of D / 3) */
-    size_t piece = (size_t)m->D / 3;
-    double *chi2 = w->tt, *l = w->dt;
+    /* per brightness into the scratch (w->tt, w->dt: D values; use: on the stack), in pieces */
     int use[REC_NESTED_MAX_D];
+    size_t piece = (size_t)m->D < sizeof use / sizeof *use ? (size_t)m->D : sizeof use / sizeof *use;
+    double *chi2 = w->tt, *l = w->dt;
     for (size_t i0 = 0; i0 < n; i0 += piece) {
         size_t k = n - i0 < piece ? n - i0 : piece;
         for (size_t i = 0; i < k; i++) chi2[i] = Sxx, l[i] = 0.0, use[i] = 0;
@@ -401,15 +405,15 @@ typedef struct {
     double Sxx, Lmax, r1, r2;
 } screen;
 
-/* Template j's exact L; its bound is spent (-inf: the passes below look for the largest bound
- * of the templates not yet exact). */
-static double exact(screen *sc, size_t j)
+/* Template j's exact L (scored: already in w->L); its bound is spent (-inf: the passes below look
+ * for the largest bound of the templates not yet exact). */
+static double scored(screen *sc, size_t j)
 {
     const rec_matcher *m = sc->m;
     rec_eq7_work *w = sc->w;
+    double L = w->L[j];
     w->done[j] = 1;
     w->U[j] = -INFINITY;
-    double L = w->L[j] = rec_eq7_loglik_fit(m, w, j, sc->Sxx);
     if (L > sc->Lmax) sc->Lmax = L;
     if (!m->ncont || !m->cont[m->tbulb[j]]) {
         double r = L + m->logcellw[j];
@@ -417,6 +421,12 @@ static double exact(screen *sc, size_t j)
         else if (r > sc->r2) sc->r2 = r;
     }
     return L;
+}
+
+static double exact(screen *sc, size_t j)
+{
+    sc->w->L[j] = rec_eq7_loglik_fit(sc->m, sc->w, j, sc->Sxx);
+    return scored(sc, j);
 }
 
 /* exact() of the templates idx[0..n): the free models' scores at once. */
@@ -430,18 +440,7 @@ static void exact_set(screen *sc, const size_t *idx, size_t n)
     }
     scores_free(m, w, idx, n, sc->Sxx);
     scores_free_fix(m, w, idx, n, sc->Sxx);
-    for (size_t i = 0; i < n; i++) {
-        size_t j = idx[i];
-        double L = w->L[j];
-        w->done[j] = 1;
-        w->U[j] = -INFINITY;
-        if (L > sc->Lmax) sc->Lmax = L;
-        if (!m->ncont || !m->cont[m->tbulb[j]]) {
-            double r = L + m->logcellw[j];
-            if (r > sc->r1) sc->r2 = sc->r1, sc->r1 = r;
-            else if (r > sc->r2) sc->r2 = r;
-        }
-    }
+    for (size_t i = 0; i < n; i++) scored(sc, idx[i]);
 }
 
 /* The templates not yet exact whose bound is at least th, into idx (w->cand: free while the

@@ -33,11 +33,11 @@ gs_status rec_eq7_sums_setup(rec_matcher *m)
     return GS_OK;
 }
 
-/* out[q * ldo + j] = sum over d < n of a[q * lda + d] tt[d * ldt + j], for q < nq (a multiple of
- * SUMS_ROWS) and j < nj; tt holds SUMS_COLS columns past nj (ldt >= nj + SUMS_COLS). A tile of
- * SUMS_ROWS lights by two vectors of templates, each sum its own chain of multiply-adds over d,
- * fused where the CPU can: the same bits whichever kernel runs (the 512-bit one, the 256-bit one
- * with FMA), and whatever lights share the tile. */
+/* out[q * ldo + j] = sum over d < n of a[q * lda + d] tt[d * ldt + j], for q < nq and j < nj; tt
+ * holds SUMS_COLS columns past nj (ldt >= nj + SUMS_COLS). Tiles of SUMS_ROWS lights by two
+ * vectors of templates, then the last rows one by one; each sum its own chain of multiply-adds
+ * over d, fused where the CPU can: the same bits whichever kernel runs (the 512-bit one, the
+ * 256-bit one with FMA), and whatever lights share the tile. */
 #ifdef __clang__
 #pragma clang fp contract(fast)
 #define SUMS_CONTRACT
@@ -50,6 +50,12 @@ gs_status rec_eq7_sums_setup(rec_matcher *m)
         s[r] += x * t0;                                                                             \
         s[SUMS_ROWS + (r)] += x * t1;                                                               \
     } while (0)
+#define SUMS_STORE(r, s0, s1, VW)                                                                   \
+    do {                                                                                            \
+        size_t n0 = nj - j < (VW) ? nj - j : (VW), n1 = nj - j > (VW) ? nj - j - (VW) : 0;          \
+        memcpy(out + (r) * ldo + j, &(s0), n0 * sizeof(double));                                    \
+        memcpy(out + (r) * ldo + j + (VW), &(s1), (n1 < (VW) ? n1 : (VW)) * sizeof(double));       \
+    } while (0)
 #define SUMS_KERNEL(NAME, VW, TARGET)                                                               \
     typedef double NAME##_vec __attribute__((vector_size((VW) * sizeof(double))));                  \
     __attribute__((SUMS_CONTRACT TARGET)) static void NAME(const double *a, size_t lda, size_t nq,  \
@@ -57,7 +63,8 @@ gs_status rec_eq7_sums_setup(rec_matcher *m)
                                                            double *out, size_t ldo, size_t nj)      \
     {                                                                                               \
         _Static_assert(SUMS_ROWS == 8 && 2 * (VW) <= SUMS_COLS, "the tile");                        \
-        for (size_t q = 0; q < nq; q += SUMS_ROWS) {                                                \
+        size_t q = 0;                                                                               \
+        for (; q + SUMS_ROWS <= nq; q += SUMS_ROWS) {                                               \
             const double *ar = a + q * lda;                                                         \
             for (size_t j = 0; j < nj; j += 2 * (VW)) {                                             \
                 NAME##_vec s[2 * SUMS_ROWS] = {{0}};                                                \
@@ -68,14 +75,22 @@ gs_status rec_eq7_sums_setup(rec_matcher *m)
                     SUMS_ROW(0); SUMS_ROW(1); SUMS_ROW(2); SUMS_ROW(3);                             \
                     SUMS_ROW(4); SUMS_ROW(5); SUMS_ROW(6); SUMS_ROW(7);                             \
                 }                                                                                   \
-                size_t n0 = nj - j < (VW) ? nj - j : (VW), n1 = nj - j > (VW) ? nj - j - (VW) : 0;  \
-                n1 = n1 < (VW) ? n1 : (VW);                                                         \
-                for (int r = 0; r < SUMS_ROWS; r++) {                                               \
-                    memcpy(out + (q + (size_t)r) * ldo + j, &s[r], n0 * sizeof(double));            \
-                    memcpy(out + (q + (size_t)r) * ldo + j + (VW), &s[SUMS_ROWS + r], n1 * sizeof(double)); \
-                }                                                                                   \
+                for (size_t r = 0; r < SUMS_ROWS; r++) SUMS_STORE(q + r, s[r], s[SUMS_ROWS + r], VW); \
             }                                                                                       \
         }                                                                                           \
+        for (; q < nq; q++)   /* the last rows one by one: the same chain for each sum */          \
+            for (size_t j = 0; j < nj; j += 2 * (VW)) {                                             \
+                NAME##_vec s0 = {0}, s1 = {0};                                                      \
+                for (size_t d = 0; d < n; d++) {                                                    \
+                    NAME##_vec t0, t1;                                                              \
+                    memcpy(&t0, tt + d * ldt + j, sizeof t0);                                       \
+                    memcpy(&t1, tt + d * ldt + j + (VW), sizeof t1);                                \
+                    double x = a[q * lda + d];                                                      \
+                    s0 += x * t0;                                                                   \
+                    s1 += x * t1;                                                                   \
+                }                                                                                   \
+                SUMS_STORE(q, s0, s1, VW);                                                          \
+            }                                                                                       \
     }
 SUMS_KERNEL(sums_kernel_512, 8, target("avx512f"))
 SUMS_KERNEL(sums_kernel_256, 4, target_clones("arch=haswell", "default"))
@@ -167,7 +182,6 @@ void rec_eq7_block_sums(const rec_matcher *m, rec_eq7_work *w, size_t n)
 {
     size_t D = (size_t)m->D, M = m->M, span = m->bg ? (size_t)m->K : D;
     int fourier = m->fourier && !m->exhaustive, kernel = m->ttr && !m->exhaustive;
-    size_t nq = (n + SUMS_ROWS - 1) / SUMS_ROWS * SUMS_ROWS;   /* the block's rows are padded */
     /* the templates that are not Fourier grids, in runs of consecutive ones */
     for (size_t b = 0; b < m->nb;) {
         if (fourier && m->cont[b]) {
@@ -178,21 +192,19 @@ void rec_eq7_block_sums(const rec_matcher *m, rec_eq7_work *w, size_t n)
         while (b1 < m->nb && !(fourier && m->cont[b1])) b1++;
         size_t j0 = m->first[b], nj = m->first[b1 - 1] + m->count[b1 - 1] - j0;
         for (size_t q = 0; !kernel && q < n; q++) {
-            if (!w->prep[q].live) continue;
             rec_eq7_work_row(m, w, q);
             gemv_sums(m, w, j0, nj);
         }
         for (int f = 0; kernel && f < m->nfit; f++) {
             size_t o = (size_t)f * span, ldo = (size_t)m->nfit * M;
-            sums_kernel(w->wx_all + o, D, nq, m->ttr + o * m->ldtr + j0, m->ldtr, span,
+            sums_kernel(w->wx_all + o, D, n, m->ttr + o * m->ldtr + j0, m->ldtr, span,
                         w->S_all + (size_t)f * M + j0, ldo, nj);
-            sums_kernel(w->w_all + o, D, nq, m->tsqtr + o * m->ldtr + j0, m->ldtr, span,
+            sums_kernel(w->w_all + o, D, n, m->tsqtr + o * m->ldtr + j0, m->ldtr, span,
                         w->T_all + (size_t)f * M + j0, ldo, nj);
         }
         b = b1;
     }
     for (size_t q = 0; fourier && q < n; q++) {
-        if (!w->prep[q].live) continue;
         rec_eq7_work_row(m, w, q);
         rec_eq7_light_dfts(m, w);
         for (size_t b = 0; b < m->nb; b++)

@@ -103,14 +103,19 @@ gs_status rec_cv_dilate_f32(const float *src, float *dst, int width, int height,
 /* In-place dilation of a 0/1 byte mask with a (2 radius + 1)^2 square. */
 gs_status rec_cv_dilate_u8(unsigned char *mask, int width, int height, int radius);
 
-/* Loops over every template or sample, in clones for the CPU's widest registers (the same
- * numbers in each: a plain clone, AVX2 and AVX-512, no contraction or reassociation); with gcc
- * REC_VECTOR_LOOP also lets the vectorizer take loops of any length. */
+/* Loops over every template or sample, in clones for the CPU's widest registers (a plain clone,
+ * AVX2 and AVX-512; the same arithmetic in each, no contraction into fused multiply-adds; where a
+ * loop calls log, erfc or exp, gcc's AVX-512 clone calls glibc's vector versions, which round
+ * otherwise than the scalar ones: results may differ in the last bits from one CPU to another,
+ * never from one block of lights to another on one CPU); REC_VECTOR_LOOP also lets the
+ * vectorizer take loops of any length. gcc's only: clang (14) cannot export such a function and
+ * names each resolver globally, so its build (the sanitizers') runs the plain code. */
+#if defined(__GNUC__) && !defined(__clang__)
 #define REC_VECTOR_CLONES __attribute__((target_clones("avx512f", "arch=haswell", "default")))
-#ifdef __clang__
-#define REC_VECTOR_LOOP REC_VECTOR_CLONES
-#else
 #define REC_VECTOR_LOOP __attribute__((target_clones("avx512f", "arch=haswell", "default"), optimize("O3")))
+#else   /* clang (the sanitizers' build): the plain code */
+#define REC_VECTOR_CLONES
+#define REC_VECTOR_LOOP
 #endif
 
 /* ================================================= Eq. 7 (eq7_*.c), shared between its files */
@@ -175,10 +180,10 @@ struct rec_matcher {
      * the G cells of t_0(c) and of t_0(c)^2, divided by G, bins 0..G/2 (eq7_matcher.c) */
     int fourier;
     double complex *ahat, *bhat;        /* [nb * bands * (G/2 + 1)] */
-    int exhaustive;                     /* 1: neither the Fourier form nor the reddened model's
-                                         * screen (eq7_light.c): every template's sums as
-                                         * matrix-vector products and its exact L (the tests'
-                                         * slow path); 0 from rec_matcher_new */
+    int exhaustive;                     /* 1: neither the Fourier form, the block sums' kernel
+                                         * nor the screen (eq7_sums.c, eq7_scores.c): every
+                                         * template's sums as matrix-vector products and its
+                                         * exact L (the tests' slow path); 0 from rec_matcher_new */
     void *c2r;                          /* fftw_plan: G-point complex-to-real, unaligned */
     int *nfine;                         /* [nb] BRF samples per cycle */
     double *dftc, *dfts;                /* [K * K] cos, sin of 2 pi q k / K ([k K + q]) */
@@ -200,6 +205,7 @@ struct rec_matcher {
     int nfit;                           /* brightness parameters: bands (bg) or 1 */
     int bandpath;                       /* pixels: per-band scores (bands > 1, bg or model error) */
     double *bnorm;                      /* [M * bands] |t_j| over band b's K values */
+    double *lbnorm;                     /* [M * bands] its log */
     double *blog;                       /* [M] sum over bands of log |t_jb| */
     double *tbn;                        /* [M * D] templates, each band of unit norm */
     float *tbnf;                        /* [Mp * D] the same in float, zero padded */
@@ -232,7 +238,7 @@ static inline double rec_log_add(double a, double b)
     return isinf(a) && a < 0.0 ? a : a + log1p(rec_exp_neg(b - a));
 }
 
-/* The reddened band model's grid of optical depths at 550 nm (eq7_light.c). */
+/* The reddened band model's grid of optical depths at 550 nm (eq7_scores.c). */
 #define REC_TAU_N 24
 #define REC_TAU_LO -0.3
 #define REC_TAU_HI 3.0
@@ -258,13 +264,13 @@ static inline double wrap01(double s)
 
 /* One light's preparation (rec_eq7_light_prepare), kept until its answer. */
 typedef struct {
-    int live;               /* its sums and answer are to come (0: answered, weights zero) */
     int used;               /* usable samples */
     unsigned flags;         /* REC_MATCH_BAD_INPUT so far */
     double c;               /* the unit of the weights: the largest usable sigma */
     double Sxx;             /* sum w x^2 */
     double mu2[GS_MAX_BANDS];   /* the band levels of the excess noise, units of c */
     double wmin[GS_MAX_BANDS];  /* the smallest weight of each brightness's samples (0: none) */
+    int full[GS_MAX_BANDS];     /* every sample of the brightness has a weight (none dropped) */
 } rec_eq7_prep;
 
 /* Scratch for one light or pixel, or a block of lights (rec_eq7_work_alloc_rows). */
@@ -283,8 +289,8 @@ typedef struct {
     size_t *peak_cell;      /* [nb] template of the best grid cell */
     /* light path: the current light's rows of the block below (rec_eq7_work_row) */
     double *S, *T, *w, *wx, *xs;           /* [nfit * M] ([f * M + j]), [nfit * M], [D] x 3 */
-    size_t rows;                           /* lights of the block (SUMS_ROWS-padded below) */
-    double *w_all, *wx_all, *xs_all;       /* [rows * D], zero rows for lights not live */
+    size_t rows;                           /* lights of the block */
+    double *w_all, *wx_all, *xs_all;       /* [rows * D] */
     double *S_all, *T_all;                 /* [rows * nfit * M] */
     rec_eq7_prep *prep;                    /* [rows] */
     double *U;                             /* [M] the screen's bounds of L (eq7_scores.c) */
@@ -320,7 +326,7 @@ typedef struct {
 /* eq7_population.c: the population prior on tau for each of n lights (logprior, n x REC_TAU_N)
  * from their tau log likelihoods (tau_ll, n x REC_TAU_N, as rec_eq7_work's) and which lights are
  * clean references; returns the references used, 0 (logprior untouched) below 8. */
-/* eq7_light.c: the reddened model's band misfit sum_b v_b (a_b - a c_b)^2 of bulb's band sums
+/* eq7_scores.c: the reddened model's band misfit sum_b v_b (a_b - a c_b)^2 of bulb's band sums
  * at the best tau (uniform prior) with band tolerance tol: ~ chi2 with bands - 2 dof when tol is
  * the lamps' true spread. */
 double rec_eq7_band_misfit(const rec_matcher *m, int bulb, const double *S, const double *T, double tol);
@@ -360,7 +366,7 @@ typedef struct {
 void rec_eq7_template_at(const rec_matcher *m, size_t b, double s, double *t, double *dt,
                          double *d2t, double complex *acc);
 double rec_eq7_log_phi_fast(const rec_matcher *m, double z);
-/* eq7_light.c: the sums S, T (rec_eq7_work [f * M + j]) of continuous bulb b's grid from the
+/* eq7_sums.c: the sums S, T (rec_eq7_work [f * M + j]) of continuous bulb b's grid from the
  * Fourier form (m->fourier): one G-point inverse FFT per sum, after rec_eq7_light_dfts has
  * taken the DFTs of the light's w->wx and w->w. */
 void rec_eq7_light_dfts(const rec_matcher *m, rec_eq7_work *w);
@@ -393,8 +399,8 @@ typedef struct {
 } rec_eq7_excess;
 /* Eq. 7 for one light in three steps, so that a block of lights shares the sums' pass over the
  * templates: rec_eq7_light_prepare puts the light's weights in row q of w's block (1: to be
- * finished; 0: answered in out, no usable sample, its row zero); rec_eq7_block_sums (eq7_sums.c)
- * the sums of rows 0..n-1; rec_eq7_light_finish the scores, the decision and the answer of row q
+ * finished; 0: answered in out, no usable sample, w's fit outputs none);
+ * rec_eq7_block_sums (eq7_sums.c) the sums of rows 0..n-1; rec_eq7_light_finish the scores, the decision and the answer of row q
  * (sigma the light's). rec_eq7_match_light_ws is the three for one light (row 0). */
 int rec_eq7_light_prepare(const rec_matcher *m, rec_eq7_work *w, size_t q, const double *signal,
                           const double *sigma, double fe, rec_match *out);
@@ -423,6 +429,9 @@ typedef struct {
     double band[GS_MAX_BANDS];   /* each band's brightness: the posterior mean of a_b */
 } rec_red_fit;
 double rec_eq7_loglik_n(int nf, double Sxx, const double *S, const double *T);
+/* ex[i] = exp(L[i] - Lmax) where that is above -746, else 0 (rec_exp_neg), for n values, through
+ * the vector math. */
+void rec_eq7_exp_below(const double *L, size_t n, double Lmax, double *ex);
 double rec_eq7_loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb, double Sxx,
                           const double *S, const double *T, rec_red_fit *fit, double *ll_acc,
                           double ll_logw);

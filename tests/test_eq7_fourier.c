@@ -223,3 +223,97 @@ TEST(eq7_screen_keeps_what_tempering_brings_within_the_cut)
     CHECK(widened > 0);
     gs_delight_free(d);
 }
+
+/* The screen's bounds are upper bounds of the exact scores: for every template the fast path
+ * did not score, its bound is at least its exact score from the same sums (rec_eq7_loglik_fit),
+ * and the answers are the exhaustive path's (bulb and flags; the confidence within 1e-9, or
+ * 1e-4 for a continuous bank, whose Fourier sums round otherwise). Lights with samples
+ * dropped (sigma = +inf: saturated frames, 2 to 13 of the 26 per band, or a whole band), whose
+ * sums cover fewer samples than the templates' norms (the bound from the norms is not valid
+ * there: it missed templates within the cut), every band model, 3 and continuous phases. */
+TEST(eq7_screen_bounds_hold_with_dropped_samples)
+{
+    uint64_t rs = 41;
+    gs_delight *d = eq7fx_make_db(50, 3, 1, 0);
+    gs_delight *g = gs_delight_new();
+    CHECK_OK(gs_delight_generate(g, 1024));
+    int checked = 0, dropped_lights = 0;
+    for (int db = 0; db < 2; db++)
+        for (int bm = 0; bm < 3; bm++)
+            for (int cont = 0; cont < 2; cont++) {
+                rec_matcher *m = model_matcher(db ? g : d, 3, 26, (rec_band_model)bm,
+                                               cont ? REC_PHASES_CONTINUOUS : REC_PHASES_3, 0.0, 0);
+                size_t D = (size_t)m->D, M = m->M;
+                double *x = malloc(sizeof *x * D), *sg = malloc(sizeof *sg * D), *Uf = malloc(sizeof *Uf * M);
+                unsigned char *df = malloc(M);
+                rec_eq7_work w;
+                CHECK_OK(rec_eq7_work_alloc(m, &w));
+                for (int i = 0; i < 12; i++) {
+                    size_t b = gs_splitmix64(&rs) % m->nb;
+                    eq7fx_render(rec_matcher_bulb(m, b), gs_splitmix_uniform(&rs), 26, i < 6 ? 20.0 : 300.0, 1.0, &rs, x, sg);
+                    for (size_t q = 0; q < D; q++) sg[q] *= 0.5 + gs_splitmix_uniform(&rs);
+                    /* a run of dropped frames in every band, or a whole band */
+                    int run = 2 + (int)(gs_splitmix64(&rs) % 12), k0 = (int)(gs_splitmix64(&rs) % 26);
+                    for (int band = 0; band < 3; band++)
+                        for (int k = 0; k < (i == 11 && band == 2 ? 26 : run); k++) sg[band * 26 + (k0 + k) % 26] = INFINITY;
+                    dropped_lights++;
+                    rec_match f, s;
+                    CHECK_OK(rec_eq7_match_light_ws(m, &w, x, sg, 0.0, &f, NULL));
+                    memcpy(Uf, w.U, sizeof *Uf * M);
+                    memcpy(df, w.done, M);
+                    for (size_t j = 0; j < M; j++) {
+                        if (df[j]) continue;
+                        double L = rec_eq7_loglik_fit(m, &w, j, w.prep[0].Sxx);
+                        if (!isfinite(L)) continue;
+                        checked++;
+                        CHECK_MSG(Uf[j] >= L, "db %d model %d cont %d light %d template %zu: bound %.9f below "
+                                  "the exact score %.9f", db, bm, cont, i, j, Uf[j], L);
+                    }
+                    m->exhaustive = 1;
+                    CHECK_OK(rec_eq7_match_light_ws(m, &w, x, sg, 0.0, &s, NULL));
+                    m->exhaustive = 0;
+                    CHECK_MSG(f.bulb == s.bulb && f.flags == s.flags && close_to(f.confidence, s.confidence, cont ? 1e-4 : 1e-9, 0),
+                              "db %d model %d cont %d light %d: bulb %d/%d flags %u/%u confidence %.12f/%.12f", db,
+                              bm, cont, i, f.bulb, s.bulb, f.flags, s.flags, f.confidence, s.confidence);
+                }
+                rec_eq7_work_free(&w);
+                free(x), free(sg), free(Uf), free(df);
+                rec_matcher_free(m);
+            }
+    printf("    %d lights with dropped samples, %d templates left unscored checked against their bounds\n",
+           dropped_lights, checked);
+    CHECK(checked > 1000);
+    gs_delight_free(g);
+    gs_delight_free(d);
+}
+
+/* Many exact scores at once (the screen's vectorized scores of the free model, in pieces of the
+ * stack's scratch): K = 256, RGB, one brightness per band, 6 phases (300 templates), a light of
+ * noise alone (every template within the cut) and a bright one: answers as the exhaustive
+ * path's (the ASan passes check the scratch). */
+TEST(eq7_free_model_many_scores_large_k)
+{
+    uint64_t rs = 5;
+    gs_delight *g = gs_delight_new();
+    CHECK_OK(gs_delight_generate(g, 1024));
+    rec_matcher *m = model_matcher(g, 3, 256, REC_BANDS_FREE, REC_PHASES_6, 0.0, 1);
+    size_t D = (size_t)m->D;
+    double *x = malloc(sizeof *x * D), *sg = malloc(sizeof *sg * D);
+    for (int i = 0; i < 2; i++) {
+        eq7fx_render(rec_matcher_bulb(m, 3), 0.25, 256, i ? 300.0 : 0.0, 1.0, &rs, x, sg);
+        rec_match f, s;
+        CHECK_OK(rec_match_light(m, x, sg, &f));
+        m->exhaustive = 1;
+        CHECK_OK(rec_match_light(m, x, sg, &s));
+        m->exhaustive = 0;
+        CHECK(eq7fx_all_finite(&f));
+        CHECK_MSG(f.bulb == s.bulb && f.flags == s.flags && close_to(f.confidence, s.confidence, 1e-9, 0) &&
+                  close_to(f.runner_confidence, s.runner_confidence, 1e-9, 0),
+                  "light %d: bulb %d/%d flags %u/%u confidence %.12f/%.12f", i, f.bulb, s.bulb, f.flags, s.flags,
+                  f.confidence, s.confidence);
+    }
+    CHECK(rec_matcher_template_count(m) == 300);
+    free(x), free(sg);
+    rec_matcher_free(m);
+    gs_delight_free(g);
+}

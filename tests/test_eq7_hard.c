@@ -197,6 +197,34 @@ TEST(eq7_nan_inf_negative_input)
         CHECK(r.bulb == 3 && r.phase_deg == 0);
         CHECK_NEAR(r.brightness / scales[i], 1.0, 1e-9);
     }
+    /* subnormal sigmas, whose inverse overflows: the same answer */
+    double tiny[] = {1e-310, 1e-305};
+    for (size_t i = 0; i < 2; i++) {
+        eq7fx_render(rec_matcher_bulb(m, 3), gs_phase_to_shift(0), 26, 1.0, 0.0, &rs, x, sg);
+        for (int k = 0; k < 78; k++) {
+            x[k] *= tiny[i];
+            sg[k] = 1e-3 * tiny[i];
+        }
+        CHECK_OK(rec_match_light(m, x, sg, &r));
+        CHECK_MSG(eq7fx_all_finite(&r) && r.bulb == 3 && r.phase_deg == 0 && !(r.flags & REC_MATCH_BAD_INPUT),
+                  "scale %g: bulb %d flags %u", tiny[i], r.bulb, r.flags);
+        CHECK_NEAR(r.brightness / tiny[i], 1.0, 1e-6);
+    }
+    /* a strongly negative light (z < -38, where erfc underflows) under the reddened model: dim,
+     * its scores finite (gs_log_phi's series), not bad input */
+    {
+        rec_eq7_opts o;
+        rec_eq7_opts_default(&o);
+        o.model_error = 0.0;
+        rec_matcher *mr = NULL;
+        CHECK_OK(rec_matcher_new(d, 50, 3, 26, &o, &mr));
+        eq7fx_render(rec_matcher_bulb(mr, 2), gs_phase_to_shift(240), 26, 400.0, 1.0, &rs, x, sg);
+        for (int k = 0; k < 78; k++) x[k] = -x[k];
+        CHECK_OK(rec_match_light(mr, x, sg, &r));
+        CHECK_MSG(eq7fx_all_finite(&r) && r.bulb == -1 && (r.flags & REC_MATCH_DIM) && !(r.flags & REC_MATCH_BAD_INPUT),
+                  "negative light: bulb %d flags %u", r.bulb, r.flags);
+        rec_matcher_free(mr);
+    }
     /* a sigma spread too wide for doubles: flagged, still finite */
     eq7fx_render(rec_matcher_bulb(m, 3), 0.0, 26, 1.0, 0.0, &rs, x, sg);
     for (int k = 0; k < 78; k++) sg[k] = k == 0 ? 1e300 : 1e-300;

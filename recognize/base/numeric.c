@@ -112,10 +112,8 @@ float gs_median_f(float *v, size_t n)
     return v[k];
 }
 
-#if defined(__GNUC__) && !defined(__clang__)
+#if defined(__GNUC__) && !defined(__clang__)   /* (clang 14 cannot export target clones) */
 __attribute__((target_clones("avx512f", "arch=haswell", "default"), optimize("O3")))
-#else
-__attribute__((target_clones("avx512f", "arch=haswell", "default")))
 #endif
 double gs_dot(const double *x, const double *t, size_t n)
 {
