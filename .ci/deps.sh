@@ -8,9 +8,12 @@ libplplot-dev plplot-driver-cairo libopenblas-dev libopencv-dev libgeographiclib
 geographiclib-tools groff-base libgpiod-dev gcc-avr avr-libc simavr libsimavr-dev libelf-dev gdal-bin
 python3-gdal python3-numpy python3-opencv clang libclang-rt-14-dev libgeos-dev
 libpq-dev postgresql postgresql-15-postgis-3"
+# one dpkg-query for all of them (it runs before every build and demo)
+# shellcheck disable=SC2086
+installed=" $(dpkg-query -W -f='${Package} ${Status}\n' $PKGS 2>/dev/null | awk '$4 == "installed" { printf "%s ", $1 }')"
 missing=""
 for p in $PKGS; do
-  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
+  case "$installed" in *" $p "*) ;; *) missing="$missing $p" ;; esac
 done
 [ -z "$missing" ] && exit 0
 echo "deps: installing missing Debian packages:$missing"

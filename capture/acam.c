@@ -3,6 +3,7 @@
  * h times, one HDR round, and the exact expected value of a light (Eq. 5 through the masks). */
 #include "capture/internal.h"
 
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -113,6 +114,14 @@ int cap_cycle_level(int masks, int max_h, long c)
     return h;
 }
 
+/* 1 when a sample of v[0 .. n) is at least thr (one vectorized pass: most rows have none). */
+GS_VECTOR_LOOP static int any_at_least(const unsigned short *v, size_t n, unsigned thr)
+{
+    int any = 0;
+    for (size_t i = 0; i < n; i++) any |= v[i] >= thr;
+    return any;
+}
+
 gs_status cap_hdr_update(const unsigned short *raw, int width, int height, int bands,
                          double saturation_dn, int max_halvings, unsigned char *halvings,
                          size_t *saturated, size_t *halved)
@@ -120,15 +129,21 @@ gs_status cap_hdr_update(const unsigned short *raw, int width, int height, int b
     if (!raw || !halvings || width < 1 || height < 1 || bands < 1 || max_halvings < 0 ||
         max_halvings > GS_MAX_HALVINGS)
         return gs_fail(GS_EINVAL, "HDR update: bad arguments");
-    size_t n_sat = 0, n_half = 0, plane = (size_t)width * (size_t)height;
-    for (size_t p = 0; p < plane; p++) {
-        int sat = 0;
-        for (int b = 0; b < bands; b++) sat |= raw[p * (size_t)bands + (size_t)b] >= saturation_dn;
-        if (!sat) continue;
-        n_sat++;
-        if (halvings[p] < max_halvings) {
-            halvings[p]++;
-            n_half++;
+    size_t n_sat = 0, n_half = 0, row = (size_t)width * (size_t)bands;
+    /* raw >= saturation_dn for an integer raw: raw >= the threshold rounded up (none above
+     * 65535 or NaN) */
+    unsigned thr = saturation_dn <= 0.0 ? 0u : saturation_dn <= 65535.0 ? (unsigned)ceil(saturation_dn) : 65536u;
+    for (size_t y = 0; y < (size_t)height; y++) {
+        const unsigned short *v = raw + y * row;
+        if (!any_at_least(v, row, thr)) continue;
+        for (size_t x = 0; x < (size_t)width; x++) {
+            if (!any_at_least(v + x * (size_t)bands, (size_t)bands, thr)) continue;
+            size_t p = y * (size_t)width + x;
+            n_sat++;
+            if (halvings[p] < max_halvings) {
+                halvings[p]++;
+                n_half++;
+            }
         }
     }
     if (saturated) *saturated = n_sat;

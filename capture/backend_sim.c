@@ -117,12 +117,12 @@ static char *station_text(const cap_sim *sim)
     return t;
 }
 
-gs_status cap_backend_sim_new(const cap_scene *sc, cap_backend **out)
+gs_status cap_backend_sim_new(const cap_scene *sc, const gs_delight *d, cap_backend **out)
 {
     *out = NULL;
     sim_backend *b = calloc(1, sizeof *b);
     if (!b) return gs_fail(GS_ENOMEM, "sim backend: out of memory");
-    gs_status s = cap_sim_new(sc, NULL, &b->sim);
+    gs_status s = cap_sim_new(sc, d, &b->sim);
     if (s != GS_OK) {
         sim_free(b);
         return s;

@@ -452,8 +452,8 @@ typedef struct {
 } cap_stage_info;
 size_t cap_sim_stage_count(const cap_sim *s);
 gs_status cap_sim_stage(const cap_sim *s, size_t i, cap_stage_info *info);
-/* Calls of each effect's implementation, counted inside the implementation itself (so a stage
- * that is not in the pipeline but still ran would show up). */
+/* Calls of each effect's stage, counted where the pipeline runs it (a probe's completion runs
+ * the noise stages again): 0 for an effect the scene does not list. */
 unsigned long long cap_sim_effect_calls(const cap_sim *s, cap_effect e);
 
 /* truth.json (CAP_TRUTH_FORMAT): every light (id, pixel, in_image, lat/lon/height when
@@ -513,8 +513,9 @@ typedef struct {
  * else NaN), replay what the source capture.json holds. Always GS_OK for a valid backend. */
 gs_status cap_backend_timing(cap_backend *b, cap_acq_timing *t);
 
-/* sim: renders sc (copied). cap_backend_sim_handle gives its simulator (borrowed). */
-gs_status cap_backend_sim_new(const cap_scene *sc, cap_backend **out);
+/* sim: renders sc (copied) with the bulbs of d (NULL: the scene's DELIGHT file, else the
+ * built-in database; as cap_sim_new). cap_backend_sim_handle gives its simulator (borrowed). */
+gs_status cap_backend_sim_new(const cap_scene *sc, const gs_delight *d, cap_backend **out);
 cap_sim *cap_backend_sim_handle(cap_backend *b);
 /* replay: serves the frames (and HDR maps) of a capture directory. */
 gs_status cap_backend_replay_new(const char *dir, cap_backend **out);

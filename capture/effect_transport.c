@@ -248,7 +248,6 @@ gs_status cap_fx_prepare_light_transport(cap_sim *s)
 
 gs_status cap_fx_light_transport(cap_sim *s, cap_render *r)
 {
-    s->fx_calls[CAP_FX_LIGHT_TRANSPORT]++;
     const struct cap_transport *t = s->tr;
     int B = s->B, L = s->L;
     size_t P = (size_t)s->W * (size_t)s->H;
@@ -325,7 +324,6 @@ gs_status cap_fx_prepare_semi_reflection(cap_sim *s)
 
 gs_status cap_fx_semi_reflection(cap_sim *s, cap_render *r)
 {
-    s->fx_calls[CAP_FX_SEMI_REFLECTION]++;
     size_t P = (size_t)s->W * (size_t)s->H;
     int B = s->B;
     double R = s->sc.fx.window.reflectance;

@@ -1,7 +1,8 @@
 /* effects.c - the simulator's effects, one stage each (docs/capture.md has the physics and the
  * sources of every constant). A stage exists in a simulator's pipeline only when its scene lists
- * the effect; each implementation counts its own calls (cap_sim_effect_calls) so tests can prove
- * that a disabled effect never ran. */
+ * the effect; the pipeline counts its calls (cap_sim_effect_calls) so tests can prove that a
+ * disabled effect never ran. The row stages (the image's rows from the same rows) run together
+ * over cached blocks of rows (cap_rows_run). */
 #include "capture/sim.h"
 
 #include <stdlib.h>
@@ -13,7 +14,6 @@
  * the simulator was; windows re-anchor (locked) or drift (free running) against it. */
 gs_status cap_fx_frequency_wander(cap_sim *s, cap_render *r)
 {
-    s->fx_calls[CAP_FX_FREQUENCY_WANDER]++;
     r->timing = 1;
     r->items = (unsigned long long)s->C;
     return GS_OK;
@@ -22,7 +22,6 @@ gs_status cap_fx_frequency_wander(cap_sim *s, cap_render *r)
 /* The free-running controller's clock error: its period is off by clock_ppm. */
 gs_status cap_fx_free_running_drift(cap_sim *s, cap_render *r)
 {
-    s->fx_calls[CAP_FX_FREE_RUNNING_DRIFT]++;
     r->timing = 1;
     r->wcfg.clock_ppm = s->sc.fx.drift.clock_ppm;
     r->items = (unsigned long long)s->C;
@@ -33,7 +32,6 @@ gs_status cap_fx_free_running_drift(cap_sim *s, cap_render *r)
  * controller's interrupt latency. */
 gs_status cap_fx_dmd_jitter(cap_sim *s, cap_render *r)
 {
-    s->fx_calls[CAP_FX_DMD_JITTER]++;
     r->timing = 1;
     r->wcfg.jitter_us = s->sc.fx.jitter.sigma_us;
     r->items = (unsigned long long)s->C;
@@ -62,7 +60,6 @@ gs_status cap_fx_prepare_extinction(cap_sim *s)
 
 gs_status cap_fx_extinction(cap_sim *s, cap_render *r)
 {
-    s->fx_calls[CAP_FX_EXTINCTION]++;
     int B = s->B, L = s->L;
     for (size_t l = 0; l < s->n; l++)
         for (int h = 0; h < L; h++)
@@ -169,7 +166,6 @@ static gs_status scint_lights(void *ctx, int part, size_t l0, size_t l1)
 
 gs_status cap_fx_scintillation(cap_sim *s, cap_render *r)
 {
-    s->fx_calls[CAP_FX_SCINTILLATION]++;
     return cap_par_run(s, r, s->n, scint_lights);
 }
 
@@ -213,12 +209,6 @@ gs_status cap_fx_prepare_psf(cap_sim *s)
     free(box);
     s->fp_n = off;
     return GS_OK;
-}
-
-gs_status cap_fx_psf(cap_sim *s, cap_render *r)
-{
-    s->fx_calls[CAP_FX_PSF]++;
-    return cap_splat(s, r);
 }
 
 /* ------------------------------------------------------------------ skyglow */
@@ -293,19 +283,12 @@ static gs_status skyglow_rows(void *ctx, int part, size_t ya, size_t yb)
     return GS_OK;
 }
 
-gs_status cap_fx_skyglow(cap_sim *s, cap_render *r)
-{
-    s->fx_calls[CAP_FX_SKYGLOW]++;
-    return cap_par_run(s, r, (size_t)s->H, skyglow_rows);
-}
-
 /* ------------------------------------------------------------------ distractors */
 
 /* Signs blinking at their own period (not mains-locked): on during [phase, phase + duty P)
  * modulo P, sampled at the middle of each exposed window. */
 gs_status cap_fx_blinking_sign(cap_sim *s, cap_render *r)
 {
-    s->fx_calls[CAP_FX_BLINKING_SIGN]++;
     int B = s->B, L = s->L;
     unsigned long long items = 0;
     for (size_t i = 0; i < s->sc.fx.signs.count; i++) {
@@ -340,7 +323,6 @@ gs_status cap_fx_blinking_sign(cap_sim *s, cap_render *r)
  * window a car is a point at its position then (through the PSF when the scene has one). */
 gs_status cap_fx_headlights(cap_sim *s, cap_render *r)
 {
-    s->fx_calls[CAP_FX_HEADLIGHTS]++;
     int B = s->B;
     int psf = (s->fx >> CAP_FX_PSF) & 1u;
     double sigma = psf ? s->sc.fx.psf.sigma_px : 0;
@@ -417,23 +399,18 @@ static gs_status ambient_rows(void *ctx, int part, size_t y0, size_t y1)
     return GS_OK;
 }
 
-gs_status cap_fx_ambient(cap_sim *s, cap_render *r)
-{
-    s->fx_calls[CAP_FX_AMBIENT]++;
-    return cap_par_run(s, r, (size_t)s->H, ambient_rows);
-}
-
 /* ------------------------------------------------------------------ sensor */
 
 /* Photo-electrons are Poisson (one stream per row, so a frame renders the same in any order).
  * A Poisson count of mean a + b is the sum of independent counts of means a and b, which this
  * uses for speed without leaving the law: the ambient pedestal (the same mean along a row, per
  * band and halving level) is drawn by inversion from a cached CDF, the rest (lights, halos,
- * distractors) separately; a rest below 40 by inversion (with the bound e^-x >= 1 - x
- * deciding most zeros without an exponential), above by Hormann's PTRS. */
-enum { CAP_POISSON_CDF = 160 };   /* reaches 1 - 1e-16 for means below 40 */
+ * distractors) separately; either below CAP_POISSON_INVERT by inversion (the rest with the bound
+ * e^-x >= 1 - x deciding most zeros without an exponential), above by Hormann's PTRS. */
+#define CAP_POISSON_INVERT 40.0
+enum { CAP_POISSON_CDF = 160 };   /* reaches 1 - 1e-16 for means below CAP_POISSON_INVERT */
 
-enum { CAP_POISSON_GUIDE = 16 };
+enum { CAP_POISSON_GUIDE = 128 };   /* about one CDF step per draw after the guide */
 
 typedef struct {
     double lam;
@@ -444,6 +421,7 @@ typedef struct {
 
 static double poisson_cached(poisson_cache *pc, gs_rng *rng, double lam)
 {
+    if (lam >= CAP_POISSON_INVERT) return gs_rng_poisson(rng, lam);   /* beyond the table */
     if (lam != pc->lam) {
         double p = exp(-lam), F = p;
         int k = 0;
@@ -460,7 +438,7 @@ static double poisson_cached(poisson_cache *pc, gs_rng *rng, double lam)
             pc->guide[g] = j;
         }
     }
-    /* the first k with u <= cdf[k]: every k below the guide's has cdf[k] < g / 16 <= u */
+    /* the first k with u <= cdf[k]: every k below the guide's has cdf[k] < g / GUIDE <= u */
     double u = gs_rng_uniform(rng);
     int k = pc->guide[(int)(u * CAP_POISSON_GUIDE)];
     while (k < pc->n - 1 && u > pc->cdf[k]) k++;
@@ -470,7 +448,7 @@ static double poisson_cached(poisson_cache *pc, gs_rng *rng, double lam)
 static double poisson_rest(gs_rng *rng, double lam)
 {
     if (!(lam > 0)) return 0;
-    if (lam >= 40.0) return gs_rng_poisson(rng, lam);
+    if (lam >= CAP_POISSON_INVERT) return gs_rng_poisson(rng, lam);
     double u = gs_rng_uniform(rng);
     if (u <= 1.0 - lam) return 0;   /* u <= 1 - lam <= e^-lam */
     double p = exp(-lam), F = p;
@@ -527,13 +505,8 @@ static gs_status shot_rows(void *ctx, int part, size_t y0, size_t y1)
     return GS_OK;
 }
 
-gs_status cap_fx_shot_noise(cap_sim *s, cap_render *r)
-{
-    s->fx_calls[CAP_FX_SHOT_NOISE]++;
-    return cap_par_run(s, r, (size_t)s->H, shot_rows);
-}
-
 /* The pixel's well holds full_well_e electrons at most. */
+GS_VECTOR_LOOP
 static gs_status saturation_rows(void *ctx, int part, size_t y0, size_t y1)
 {
     cap_par *par = ctx;
@@ -541,17 +514,13 @@ static gs_status saturation_rows(void *ctx, int part, size_t y0, size_t y1)
     const cap_render *r = par->r;
     size_t row = (size_t)s->W * (size_t)s->B;
     double fw = s->sc.full_well_e;
-    for (size_t y = y0; y < y1; y++)
-        for (size_t i = y * row; (!r->rows || r->rows[y]) && i < (y + 1) * row; i++)
-            if (s->img[i] > fw) s->img[i] = fw;
+    for (size_t y = y0; y < y1; y++) {
+        if (r->rows && !r->rows[y]) continue;
+        double *v = s->img + y * row;
+        for (size_t i = 0; i < row; i++) v[i] = v[i] > fw ? fw : v[i];
+    }
     par->items[part] += rendered(s, r, y0, y1);
     return GS_OK;
-}
-
-gs_status cap_fx_saturation(cap_sim *s, cap_render *r)
-{
-    s->fx_calls[CAP_FX_SATURATION]++;
-    return cap_par_run(s, r, (size_t)s->H, saturation_rows);
 }
 
 /* Gaussian read noise, sigma_e / gain DN per sample (one stream per row). */
@@ -573,13 +542,8 @@ static gs_status read_rows(void *ctx, int part, size_t y0, size_t y1)
     return GS_OK;
 }
 
-gs_status cap_fx_read_noise(cap_sim *s, cap_render *r)
-{
-    s->fx_calls[CAP_FX_READ_NOISE]++;
-    return cap_par_run(s, r, (size_t)s->H, read_rows);
-}
-
 /* The ADC: integer DN (round half up), clipped to 0 .. 2^bit_depth - 1. */
+GS_VECTOR_LOOP
 static gs_status adc_rows(void *ctx, int part, size_t y0, size_t y1)
 {
     cap_par *par = ctx;
@@ -587,47 +551,44 @@ static gs_status adc_rows(void *ctx, int part, size_t y0, size_t y1)
     const cap_render *r = par->r;
     size_t row = (size_t)s->W * (size_t)s->B;
     double mx = s->adc_max;
-    for (size_t y = y0; y < y1; y++)
-        for (size_t i = y * row; (!r->rows || r->rows[y]) && i < (y + 1) * row; i++) {
-            double v = floor(s->img[i] + 0.5);
-            s->img[i] = v < 0 ? 0 : v > mx ? mx : v;
+    for (size_t y = y0; y < y1; y++) {
+        if (r->rows && !r->rows[y]) continue;
+        double *img = s->img + y * row;
+        for (size_t i = 0; i < row; i++) {
+            double v = floor(img[i] + 0.5);
+            img[i] = v < 0 ? 0 : v > mx ? mx : v;
         }
+    }
     par->items[part] += rendered(s, r, y0, y1);
     return GS_OK;
-}
-
-gs_status cap_fx_adc(cap_sim *s, cap_render *r)
-{
-    s->fx_calls[CAP_FX_ADC]++;
-    return cap_par_run(s, r, (size_t)s->H, adc_rows);
 }
 
 /* ------------------------------------------------------------------ the table */
 
 /* The one list of effects, in pipeline order: name in scene files, parameters, once-per-sim
- * preparation, per-acquisition stage. */
+ * preparation, per-acquisition stage (the whole frame, or a row stage). */
 const cap_effect_def cap_effect_defs[CAP_FX_COUNT] = {
-    [CAP_FX_FREQUENCY_WANDER] = {"frequency_wander", cap_fxp_none, NULL, cap_fx_frequency_wander},
+    [CAP_FX_FREQUENCY_WANDER] = {"frequency_wander", cap_fxp_none, NULL, cap_fx_frequency_wander, NULL},
     [CAP_FX_FREE_RUNNING_DRIFT] = {"free_running_drift", cap_fxp_free_running_drift, NULL,
-                                   cap_fx_free_running_drift},
-    [CAP_FX_DMD_JITTER] = {"dmd_jitter", cap_fxp_dmd_jitter, NULL, cap_fx_dmd_jitter},
+                                   cap_fx_free_running_drift, NULL},
+    [CAP_FX_DMD_JITTER] = {"dmd_jitter", cap_fxp_dmd_jitter, NULL, cap_fx_dmd_jitter, NULL},
     [CAP_FX_EXTINCTION] = {"extinction", cap_fxp_extinction, cap_fx_prepare_extinction,
-                           cap_fx_extinction},
+                           cap_fx_extinction, NULL},
     [CAP_FX_SCINTILLATION] = {"scintillation", cap_fxp_scintillation,
-                              cap_fx_prepare_scintillation, cap_fx_scintillation},
-    [CAP_FX_PSF] = {"psf", cap_fxp_psf, cap_fx_prepare_psf, cap_fx_psf},
+                              cap_fx_prepare_scintillation, cap_fx_scintillation, NULL},
+    [CAP_FX_PSF] = {"psf", cap_fxp_psf, cap_fx_prepare_psf, NULL, cap_splat_rows},
     [CAP_FX_LIGHT_TRANSPORT] = {"light_transport", cap_fxp_light_transport,
-                                cap_fx_prepare_light_transport, cap_fx_light_transport},
-    [CAP_FX_SKYGLOW] = {"skyglow", cap_fxp_skyglow, cap_fx_prepare_skyglow, cap_fx_skyglow},
-    [CAP_FX_BLINKING_SIGN] = {"blinking_sign", cap_fxp_blinking_sign, NULL, cap_fx_blinking_sign},
-    [CAP_FX_HEADLIGHTS] = {"headlights", cap_fxp_headlights, NULL, cap_fx_headlights},
-    [CAP_FX_AMBIENT] = {"ambient", cap_fxp_ambient, NULL, cap_fx_ambient},
+                                cap_fx_prepare_light_transport, cap_fx_light_transport, NULL},
+    [CAP_FX_SKYGLOW] = {"skyglow", cap_fxp_skyglow, cap_fx_prepare_skyglow, NULL, skyglow_rows},
+    [CAP_FX_BLINKING_SIGN] = {"blinking_sign", cap_fxp_blinking_sign, NULL, cap_fx_blinking_sign, NULL},
+    [CAP_FX_HEADLIGHTS] = {"headlights", cap_fxp_headlights, NULL, cap_fx_headlights, NULL},
+    [CAP_FX_AMBIENT] = {"ambient", cap_fxp_ambient, NULL, NULL, ambient_rows},
     [CAP_FX_SEMI_REFLECTION] = {"semi_reflection", cap_fxp_semi_reflection,
-                                cap_fx_prepare_semi_reflection, cap_fx_semi_reflection},
-    [CAP_FX_SHOT_NOISE] = {"shot_noise", cap_fxp_none, NULL, cap_fx_shot_noise},
-    [CAP_FX_SATURATION] = {"saturation", cap_fxp_none, NULL, cap_fx_saturation},
-    [CAP_FX_READ_NOISE] = {"read_noise", cap_fxp_read_noise, NULL, cap_fx_read_noise},
-    [CAP_FX_ADC] = {"adc", cap_fxp_none, NULL, cap_fx_adc},
+                                cap_fx_prepare_semi_reflection, cap_fx_semi_reflection, NULL},
+    [CAP_FX_SHOT_NOISE] = {"shot_noise", cap_fxp_none, NULL, NULL, shot_rows},
+    [CAP_FX_SATURATION] = {"saturation", cap_fxp_none, NULL, NULL, saturation_rows},
+    [CAP_FX_READ_NOISE] = {"read_noise", cap_fxp_read_noise, NULL, NULL, read_rows},
+    [CAP_FX_ADC] = {"adc", cap_fxp_none, NULL, NULL, adc_rows},
 };
 
 const char *cap_effect_name(cap_effect e)

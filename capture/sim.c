@@ -103,11 +103,19 @@ static gs_status st_lights(cap_sim *s, cap_render *r)
     return GS_OK;
 }
 
-static gs_status st_splat(cap_sim *s, cap_render *r)
+/* The image's rows at 0 before the first stage that deposits into them (with the next row
+ * stages, while the rows are in the cache). */
+static gs_status clear_rows(void *ctx, int part, size_t y0, size_t y1)
 {
-    return cap_splat(s, r);
+    (void)part;   /* no items */
+    cap_par *par = ctx;
+    cap_sim *s = par->s;
+    size_t row = (size_t)s->W * (size_t)s->B;
+    memset(s->img + y0 * row, 0, (y1 - y0) * row * sizeof *s->img);
+    return GS_OK;
 }
 
+GS_VECTOR_LOOP
 static gs_status to_dn_rows(void *ctx, int part, size_t y0, size_t y1)
 {
     (void)part;   /* no items */
@@ -116,17 +124,15 @@ static gs_status to_dn_rows(void *ctx, int part, size_t y0, size_t y1)
     size_t row = (size_t)s->W * (size_t)s->B;
     const cap_render *r = par->r;
     double g = 1.0 / s->sc.gain_e_per_dn, black = s->sc.black_level_dn;
-    for (size_t y = y0; y < y1; y++)
-        if (!r->rows || r->rows[y])
-            for (size_t i = y * row; i < (y + 1) * row; i++) s->img[i] = s->img[i] * g + black;
+    for (size_t y = y0; y < y1; y++) {
+        if (r->rows && !r->rows[y]) continue;
+        double *v = s->img + y * row;
+        for (size_t i = 0; i < row; i++) v[i] = v[i] * g + black;
+    }
     return GS_OK;
 }
 
-static gs_status st_to_dn(cap_sim *s, cap_render *r)
-{
-    return cap_par_run(s, r, (size_t)s->H, to_dn_rows);
-}
-
+GS_VECTOR_LOOP
 static gs_status store_rows(void *ctx, int part, size_t y0, size_t y1)
 {
     (void)part;   /* no items */
@@ -140,31 +146,29 @@ static gs_status store_rows(void *ctx, int part, size_t y0, size_t y1)
             if (!r->rows_keep) memset(r->raw + y * row, 0, row * sizeof *r->raw);
             continue;
         }
-        for (size_t i = y * row; i < (y + 1) * row; i++) {
-            double v = floor(s->img[i] + 0.5);
+        const double *img = s->img + y * row;
+        unsigned short *raw = r->raw + y * row;
+        for (size_t i = 0; i < row; i++) {
+            double v = floor(img[i] + 0.5);
             /* written so that NaN clamps to 0 rather than reaching the cast */
-            r->raw[i] = (unsigned short)(v > 0 ? (v < 65535 ? v : 65535) : 0);
+            raw[i] = (unsigned short)(v > 0 ? (v < 65535 ? v : 65535) : 0);
         }
     }
     return GS_OK;
 }
 
-static gs_status st_store(cap_sim *s, cap_render *r)
-{
-    return cap_par_run(s, r, (size_t)s->H, store_rows);
-}
-
 /* ------------------------------------------------------------------ construction */
 
 static void add_stage(cap_sim *s, const char *name, int effect,
-                      gs_status (*run)(cap_sim *, cap_render *))
+                      gs_status (*run)(cap_sim *, cap_render *), gs_range_fn rows)
 {
     cap_stage *st = &s->stages[s->n_stages++];
     memset(st, 0, sizeof *st);
     st->name = name;
     st->effect = effect;
-    st->noise = effect >= CAP_FX_SHOT_NOISE || run == st_to_dn || run == st_store;
+    st->noise = effect >= CAP_FX_SHOT_NOISE || rows == to_dn_rows || rows == store_rows;
     st->run = run;
+    st->rows = rows;
 }
 
 static int has(const cap_sim *s, cap_effect e)
@@ -307,15 +311,17 @@ static int no_psf(const cap_sim *s)
 static const struct {
     const char *name;
     gs_status (*run)(cap_sim *, cap_render *);
+    gs_range_fn rows;
     cap_effect before;
     int (*wanted)(const cap_sim *);
 } base_stages[] = {
-    {"windows", st_windows, CAP_FX_EXTINCTION, timing_wanted},
-    {"eq5", st_eq5, CAP_FX_EXTINCTION, NULL},
-    {"lights", st_lights, CAP_FX_EXTINCTION, NULL},
-    {"splat", st_splat, CAP_FX_SKYGLOW, no_psf},
-    {"to_dn", st_to_dn, CAP_FX_READ_NOISE, NULL},
-    {"store", st_store, CAP_FX_COUNT, NULL},
+    {"windows", st_windows, NULL, CAP_FX_EXTINCTION, timing_wanted},
+    {"eq5", st_eq5, NULL, CAP_FX_EXTINCTION, NULL},
+    {"lights", st_lights, NULL, CAP_FX_EXTINCTION, NULL},
+    {"clear", NULL, clear_rows, CAP_FX_PSF, NULL},
+    {"splat", NULL, cap_splat_rows, CAP_FX_SKYGLOW, no_psf},
+    {"to_dn", NULL, to_dn_rows, CAP_FX_READ_NOISE, NULL},
+    {"store", NULL, store_rows, CAP_FX_COUNT, NULL},
 };
 
 double cap_sim_bytes(const cap_scene *sc)
@@ -472,9 +478,9 @@ gs_status cap_sim_new(const cap_scene *sc, const gs_delight *d_in, cap_sim **out
     for (int e = 0; e <= CAP_FX_COUNT; e++) {
         for (size_t b = 0; b < sizeof base_stages / sizeof *base_stages; b++)
             if ((int)base_stages[b].before == e && (!base_stages[b].wanted || base_stages[b].wanted(s)))
-                add_stage(s, base_stages[b].name, -1, base_stages[b].run);
+                add_stage(s, base_stages[b].name, -1, base_stages[b].run, base_stages[b].rows);
         if (e < CAP_FX_COUNT && has(s, (cap_effect)e))
-            add_stage(s, cap_effect_defs[e].name, e, cap_effect_defs[e].run);
+            add_stage(s, cap_effect_defs[e].name, e, cap_effect_defs[e].run, cap_effect_defs[e].rows);
     }
     *out = s;
     return GS_OK;
@@ -560,26 +566,66 @@ static double probe_safe_e(const cap_sim *s)
     return n * (M_LN2 - 0.5) >= 80.0 ? 0.5 * n : NAN;
 }
 
+/* 1 when a sample of v[0 .. n) is above safe or NaN (one vectorized pass: most rows have none). */
+GS_VECTOR_LOOP static int any_above(const double *v, size_t n, double safe)
+{
+    int any = 0;
+    for (size_t i = 0; i < n; i++) any |= !(v[i] <= safe);
+    return any;
+}
+
+/* Rows [y0, y1) of a probe: s->probe_rows[y] = 1 for a row with a sample above the safe mean
+ * (par->r->probe_safe_e), the part's items the pixels with one. */
+static gs_status probe_rows_part(void *ctx, int part, size_t y0, size_t y1)
+{
+    cap_par *par = ctx;
+    cap_sim *s = par->s;
+    double safe = par->r->probe_safe_e;
+    size_t row = (size_t)s->W * (size_t)s->B;
+    for (size_t y = y0; y < y1; y++) {
+        const double *v = s->img + y * row;
+        s->probe_rows[y] = (unsigned char)any_above(v, row, safe);
+        if (!s->probe_rows[y]) continue;
+        for (size_t x = 0; x < (size_t)s->W; x++)
+            par->items[part] += (unsigned long long)any_above(v + x * (size_t)s->B, (size_t)s->B, safe);
+    }
+    return GS_OK;
+}
+
 /* A probe's rows: those with a sample whose mean (s->img before the noise stages) could
  * saturate; NULL (a whole frame) when no more than max_px pixels could. */
-static const unsigned char *probe_rows_of(cap_sim *s, long max_px)
+static const unsigned char *probe_rows_of(cap_sim *s, cap_render *r, long max_px, gs_status *st)
 {
-    double safe = probe_safe_e(s);
-    if (isnan(safe)) return NULL;
-    size_t row = (size_t)s->W * (size_t)s->B;
-    long px = 0;
-    for (size_t y = 0; y < (size_t)s->H; y++) {
-        const double *v = s->img + y * row;
-        int any = 0;
-        for (size_t x = 0; x < (size_t)s->W; x++) {
-            int hot = 0;
-            for (int b = 0; b < s->B; b++) hot |= !(v[x * (size_t)s->B + (size_t)b] <= safe);
-            px += hot;
-            any |= hot;
+    r->probe_safe_e = probe_safe_e(s);
+    if (isnan(r->probe_safe_e)) return NULL;
+    *st = cap_par_run(s, r, (size_t)s->H, probe_rows_part);
+    return *st == GS_OK && r->items > (unsigned long long)max_px ? s->probe_rows : NULL;
+}
+
+/* Stages [i0, i1) of the pipeline on one acquisition, consecutive row stages together
+ * (cap_rows_run); each effect's calls counted. */
+static gs_status run_stages(cap_sim *s, cap_render *r, size_t i0, size_t i1)
+{
+    gs_status st = GS_OK;
+    for (size_t i = i0, j; i < i1 && st == GS_OK; i = j) {
+        j = i + 1;
+        if (s->stages[i].rows)
+            while (j < i1 && s->stages[j].rows) j++;
+        for (size_t e = i; e < j; e++)
+            if (s->stages[e].effect >= 0) s->fx_calls[s->stages[e].effect]++;
+        if (s->stages[i].rows) {
+            st = cap_rows_run(s, r, &s->stages[i], j - i);
+            continue;
         }
-        s->probe_rows[y] = (unsigned char)any;
+        cap_stage *sg = &s->stages[i];
+        double t0 = gs_clock_s(CLOCK_MONOTONIC);
+        r->items = 0;
+        st = sg->run(s, r);
+        sg->seconds += gs_clock_s(CLOCK_MONOTONIC) - t0;
+        sg->calls++;
+        sg->items += r->items;
     }
-    return px > max_px ? s->probe_rows : NULL;
+    return st;
 }
 
 static gs_status render(cap_sim *s, int k, int pass, long index, const unsigned char *halvings,
@@ -611,21 +657,12 @@ static gs_status render(cap_sim *s, int k, int pass, long index, const unsigned 
     r.wcfg.free_period_measured = s->sc.free_period_measured;
     r.wcfg.jitter_seed = s->sc.seed ^ (0x5851f42d4c957f2dull * (unsigned long long)(pass + 1));
     s->probe_pending = 0;
-    memset(s->img, 0, sizeof *s->img * plane * (size_t)s->B);
-    gs_status st = GS_OK;
-    int decided = probe_max_px < 0;
-    for (size_t i = 0; i < s->n_stages && st == GS_OK; i++) {
-        cap_stage *sg = &s->stages[i];
-        if (!decided && sg->noise) {   /* the means are complete: which rows can saturate */
-            decided = 1;
-            r.rows = probe_rows_of(s, probe_max_px);
-        }
-        double t0 = gs_clock_s(CLOCK_MONOTONIC);
-        r.items = 0;
-        st = sg->run(s, &r);
-        sg->seconds += gs_clock_s(CLOCK_MONOTONIC) - t0;
-        sg->calls++;
-        sg->items += r.items;
+    size_t noise = 0;   /* a probe decides its rows when the means are complete */
+    while (probe_max_px >= 0 && noise < s->n_stages && !s->stages[noise].noise) noise++;
+    gs_status st = run_stages(s, &r, 0, probe_max_px >= 0 ? noise : s->n_stages);
+    if (st == GS_OK && probe_max_px >= 0) {   /* which rows can saturate */
+        r.rows = probe_rows_of(s, &r, probe_max_px, &st);
+        if (st == GS_OK) st = run_stages(s, &r, noise, s->n_stages);
     }
     cap_windows_release(&r.win);
     if (probed) *probed = st == GS_OK && r.rows;
@@ -648,19 +685,9 @@ static gs_status complete_probe(cap_sim *s, unsigned short *raw)
     r.raw = raw;
     r.rows = s->probe_rows;
     r.rows_keep = 1;
-    gs_status st = GS_OK;
     size_t i = 0;
     while (i < s->n_stages && !s->stages[i].noise) i++;
-    for (; i < s->n_stages && st == GS_OK; i++) {
-        cap_stage *sg = &s->stages[i];
-        double t0 = gs_clock_s(CLOCK_MONOTONIC);
-        r.items = 0;
-        st = sg->run(s, &r);
-        sg->seconds += gs_clock_s(CLOCK_MONOTONIC) - t0;
-        sg->calls++;
-        sg->items += r.items;
-    }
-    return st;
+    return run_stages(s, &r, i, s->n_stages);
 }
 
 gs_status cap_sim_render(cap_sim *s, int k, int pass, long index, const unsigned char *halvings,

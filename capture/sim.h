@@ -25,7 +25,8 @@ struct cap_stage {
     const char *name;
     int effect;        /* cap_effect or -1 */
     int noise;         /* shot noise and every stage after it: a probe runs them on its rows */
-    gs_status (*run)(cap_sim *s, cap_render *r);
+    gs_status (*run)(cap_sim *s, cap_render *r);   /* a whole-frame stage, or NULL and: */
+    gs_range_fn rows;  /* a row stage (rows [y0, y1) of the image from the same rows; cap_par ctx) */
     unsigned long long calls, items;
     double seconds;
 };
@@ -48,6 +49,7 @@ struct cap_render {
     unsigned short *raw;            /* outputs (may be NULL) */
     double *dn;
     const unsigned char *rows;      /* a probe: the rows the noise stages render (NULL: all) */
+    double probe_safe_e;            /* a probe: the largest mean that cannot saturate */
     int rows_keep;                  /* 1: the other rows' raw samples are left as they are (0: 0) */
 };
 
@@ -119,9 +121,15 @@ typedef struct {
  * write disjoint outputs, so the frame is the same bits on any number of threads and any split
  * (tests/test_capture_sim.c). */
 gs_status cap_par_run(cap_sim *s, cap_render *r, size_t n, gs_range_fn fn);
-/* Deposit every light's E through its footprint (point or PSF) into the image; r->items = the
- * pixels touched. */
-gs_status cap_splat(cap_sim *s, cap_render *r);
+/* The n row stages stage[0 .. n) (consecutive in the pipeline) over the image's rows on the sim's
+ * threads, together: every stage over a block of rows while it is in the cache, then the next
+ * block. A row stage's rows depend only on the same rows, so the bits are those of the stages
+ * run one after the other over the whole frame. Adds to each stage's calls, items and seconds
+ * (the wall time, shared out in proportion to each stage's time on the threads). */
+gs_status cap_rows_run(cap_sim *s, cap_render *r, cap_stage *stage, size_t n);
+/* A row stage: rows [y0, y1) of every light's E through its footprint (point or PSF) into the
+ * image; items: the pixels touched. */
+gs_status cap_splat_rows(void *ctx, int part, size_t y0, size_t y1);
 /* Timing of exposed cycle c in [0, C) of this acquisition: window [t0, t1) s. */
 void cap_cycle_time(const cap_sim *s, const cap_render *r, long c, double *t0, double *t1);
 /* Gaussian pixel-integrated weights of a point at (x, y) with sigma over a (2R+1)^2 box
@@ -130,13 +138,15 @@ void cap_gauss_box(double x, double y, double sigma, int R, double *w, int *bx, 
 
 /* The effects (effects.c, effect_params.c): the one table the scene parser and the pipeline
  * read. parse reads the effect's object at path of the scene document into sc->fx; prepare
- * (NULL: none) runs once when a simulator is built; run is the per-acquisition stage and
- * increments s->fx_calls[its effect] first (so a test can prove a disabled effect never ran). */
+ * (NULL: none) runs once when a simulator is built; the per-acquisition stage is run (the whole
+ * frame) or rows (a row stage: cap_stage). The pipeline counts each effect's stage calls in
+ * s->fx_calls (so a test can prove a disabled effect never ran). */
 typedef struct {
     const char *name;   /* in scene files: "shot_noise", ... */
     gs_status (*parse)(const gs_json *j, cap_scene *sc, json_t *o, const char *path);
     gs_status (*prepare)(cap_sim *s);
     gs_status (*run)(cap_sim *s, cap_render *r);
+    gs_range_fn rows;
 } cap_effect_def;
 extern const cap_effect_def cap_effect_defs[CAP_FX_COUNT];
 
@@ -145,15 +155,8 @@ gs_status cap_fx_free_running_drift(cap_sim *s, cap_render *r);
 gs_status cap_fx_dmd_jitter(cap_sim *s, cap_render *r);
 gs_status cap_fx_extinction(cap_sim *s, cap_render *r);
 gs_status cap_fx_scintillation(cap_sim *s, cap_render *r);
-gs_status cap_fx_psf(cap_sim *s, cap_render *r);
-gs_status cap_fx_skyglow(cap_sim *s, cap_render *r);
 gs_status cap_fx_blinking_sign(cap_sim *s, cap_render *r);
 gs_status cap_fx_headlights(cap_sim *s, cap_render *r);
-gs_status cap_fx_ambient(cap_sim *s, cap_render *r);
-gs_status cap_fx_shot_noise(cap_sim *s, cap_render *r);
-gs_status cap_fx_saturation(cap_sim *s, cap_render *r);
-gs_status cap_fx_read_noise(cap_sim *s, cap_render *r);
-gs_status cap_fx_adc(cap_sim *s, cap_render *r);
 gs_status cap_fx_prepare_extinction(cap_sim *s);
 gs_status cap_fx_prepare_scintillation(cap_sim *s);
 gs_status cap_fx_prepare_psf(cap_sim *s);

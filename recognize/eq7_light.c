@@ -309,12 +309,12 @@ static void flat_share_of(const rec_matcher *m, rec_eq7_work *w, const double *t
 }
 
 /* The passes of rec_eq7_light_prepare over a light's samples, written for the vectorizer
- * (REC_VECTOR_LOOP): sums in 8 interleaved partial sums, taken in a fixed order. */
+ * (GS_VECTOR_LOOP): sums in 8 interleaved partial sums, taken in a fixed order. */
 #define PREP_LANES 8
 
 /* ok[d] = 1 where sample d is usable (finite signal, finite sigma > 0), else 0; the largest
  * usable sigma into *cmax; returns how many are bad (neither usable nor dropped: sigma = +inf). */
-REC_VECTOR_LOOP static int prep_scan(const double *restrict x, const double *restrict s, size_t D, double *restrict ok,
+GS_VECTOR_LOOP static int prep_scan(const double *restrict x, const double *restrict s, size_t D, double *restrict ok,
                                      double *cmax)
 {
     int bad = 0;
@@ -336,7 +336,7 @@ REC_VECTOR_LOOP static int prep_scan(const double *restrict x, const double *res
 
 /* Over one band's usable samples, in units of c = 1/(ic1 ic2): sum x^2 - sigma^2 and sum x;
  * returns their count. */
-REC_VECTOR_LOOP static int prep_band(const double *restrict x, const double *restrict s, const double *restrict ok,
+GS_VECTOR_LOOP static int prep_band(const double *restrict x, const double *restrict s, const double *restrict ok,
                                      size_t K, double ic1, double ic2, double *sum2, double *sum1)
 {
     double a[PREP_LANES] = {0}, b[PREP_LANES] = {0}, n[PREP_LANES] = {0};
@@ -364,7 +364,7 @@ REC_VECTOR_LOOP static int prep_band(const double *restrict x, const double *res
 /* One band's weights ws = 1/(sigma^2 + fe2mu2) and samples xs = x - flat (units of c) where
  * usable and finite (w, wx, xs 0 elsewhere); adds sum ws xs^2 to *Sxx and lowers *wmin to their
  * least weight; returns the samples used, and the usable ones whose weight overflowed in *bad. */
-REC_VECTOR_LOOP static int prep_weights(const double *restrict x, const double *restrict s, const double *restrict ok,
+GS_VECTOR_LOOP static int prep_weights(const double *restrict x, const double *restrict s, const double *restrict ok,
                                         size_t K, double ic1, double ic2, double fe2mu2, double flat, double *restrict w,
                                         double *restrict wx, double *restrict xs, double *Sxx, double *wmin,
                                         int *bad)

@@ -246,7 +246,7 @@ static gs_status fourier_setup(rec_matcher *m, size_t b)
 /* The K-point inverse DFT of the folded harmonics, t_k = sum_q Re(A_q e^{2 pi i q k / K}), as
  * products with the tabulated cos and sin (m->dftc, m->dfts: [k K + q]), for up to three series
  * (the value and two derivatives); v[k] starts at base. */
-REC_VECTOR_LOOP static void inverse_dft(const double *restrict c, const double *restrict sn, int K,
+GS_VECTOR_LOOP static void inverse_dft(const double *restrict c, const double *restrict sn, int K,
                                         const double *restrict re, const double *restrict im, double base,
                                         double *restrict v)
 {

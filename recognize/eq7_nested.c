@@ -211,7 +211,7 @@ static double tail(double delta, int extra, double phi)
  * brightness, (S2 - T12 S1/T11)^2 / (T22 - T12^2/T11), added to gain[j]; ok[j] = 0 where either
  * brightness of the 2 x 2 least squares would be negative (a2 = r2 / q, a1 = (S1 - T12 a2) / T11:
  * their numerators' signs) or q is not positive. */
-REC_VECTOR_LOOP static void pair_gains(const double *restrict S2, const double *restrict T22, const double *restrict T12,
+GS_VECTOR_LOOP static void pair_gains(const double *restrict S2, const double *restrict T22, const double *restrict T12,
                                        size_t M, double S1, double T11, double *restrict gain, double *restrict ok)
 {
     double a1 = S1 / T11, i11 = 1.0 / T11;

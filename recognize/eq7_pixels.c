@@ -12,7 +12,7 @@
 /* ------------------------------------------------------------ pixels */
 
 /* Sum of squares of n floats in double, 8 partial sums (the chain would be latency bound). */
-REC_VECTOR_LOOP static double sumsq_f(const float *x, size_t n)
+GS_VECTOR_LOOP static double sumsq_f(const float *x, size_t n)
 {
     double a[8] = {0, 0, 0, 0, 0, 0, 0, 0};
     size_t i = 0;
@@ -22,7 +22,7 @@ REC_VECTOR_LOOP static double sumsq_f(const float *x, size_t n)
     return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
 }
 
-REC_VECTOR_LOOP static double dot_fd(const float *x, const double *t, size_t n)
+GS_VECTOR_LOOP static double dot_fd(const float *x, const double *t, size_t n)
 {
     double a[8] = {0, 0, 0, 0, 0, 0, 0, 0};
     size_t i = 0;
@@ -33,7 +33,7 @@ REC_VECTOR_LOOP static double dot_fd(const float *x, const double *t, size_t n)
 }
 
 /* max_j (sh_j + rho_j xp) over n (a multiple of LANES) prefilter scores. */
-REC_VECTOR_LOOP static float row_bound_perp(const float *sh, const float *rho, float xp, size_t n)
+GS_VECTOR_LOOP static float row_bound_perp(const float *sh, const float *rho, float xp, size_t n)
 {
     float mx[LANES];
     for (int q = 0; q < LANES; q++) mx[q] = -FLT_MAX;
@@ -72,7 +72,7 @@ static double pix_L(const rec_matcher *m, size_t j, double z, double Sxx)
 
 /* The largest of n floats (n a multiple of LANES), in LANES partial maxima; NaN-safe in the
  * sense that a row of NaN scores gives NaN. */
-REC_VECTOR_LOOP static float row_max(const float *s, size_t n)
+GS_VECTOR_LOOP static float row_max(const float *s, size_t n)
 {
     float mx[LANES];
     for (int q = 0; q < LANES; q++) mx[q] = s[q];
@@ -84,7 +84,7 @@ REC_VECTOR_LOOP static float row_max(const float *s, size_t n)
 }
 
 /* u[j] = max(s_j, 0)^2 hf - lnf[j] (the bound U_j in float) for n scores; returns max u. */
-REC_VECTOR_LOOP static float row_bounds(const float *s, const float *lnf, float hf, float *u, size_t n)
+GS_VECTOR_LOOP static float row_bounds(const float *s, const float *lnf, float hf, float *u, size_t n)
 {
     float mx[LANES];
     for (int q = 0; q < LANES; q++) mx[q] = -FLT_MAX;
@@ -101,7 +101,7 @@ REC_VECTOR_LOOP static float row_bounds(const float *s, const float *lnf, float 
 }
 
 /* The first index where u is v (n - 1 if none). */
-REC_VECTOR_LOOP static size_t first_equal(const float *u, size_t n, float v)
+GS_VECTOR_LOOP static size_t first_equal(const float *u, size_t n, float v)
 {
     size_t j = 0;
     for (; j + LANES <= n; j += LANES) {
@@ -115,7 +115,7 @@ REC_VECTOR_LOOP static size_t first_equal(const float *u, size_t n, float v)
 
 /* The indices j < n with (double)u[j] + err >= thr into out, in order; returns their number.
  * (u[j] >= lo, lo a float just below thr - err, is the vectorized pre-test.) */
-REC_VECTOR_LOOP static size_t at_least(const float *u, size_t n, float lo, double err, double thr, size_t *out)
+GS_VECTOR_LOOP static size_t at_least(const float *u, size_t n, float lo, double err, double thr, size_t *out)
 {
     size_t k = 0;
     for (size_t j = 0; j < n; j += LANES) {

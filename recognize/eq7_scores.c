@@ -67,8 +67,8 @@ double rec_eq7_loglik_n(int nf, double Sxx, const double *S, const double *T)
  * L(tau) without the prior and log Phi(z) into Lt (-inf where dead), log Phi(z) from erfc into
  * lphi (for z > -20: below, gs_log_phi's series), z = B / sqrt(A) into zt, the between-band
  * misfit into bt. */
-REC_VECTOR_LOOP static void red_taus(const double *restrict A, const double *restrict B, const double *restrict C,
-                                     const double *restrict occ, const unsigned char *restrict dead, double R,
+GS_VECTOR_LOOP static void red_taus(const double *restrict A, const double *restrict B, const double *restrict C,
+                                     const double *restrict occ, const long long *restrict dead, double R,
                                      double *restrict Lt, double *restrict lphi, double *restrict zt,
                                      double *restrict bt)
 {
@@ -83,7 +83,36 @@ REC_VECTOR_LOOP static void red_taus(const double *restrict A, const double *res
     }
 }
 
-REC_VECTOR_LOOP void rec_eq7_exp_below(const double *restrict L, size_t n, double Lmax, double *restrict ex)
+/* One band's terms of a round of the reddened model for every tau: s_b = t a c_b from the
+ * current brightness av (clamped at 0), then A += v c^2, B += v c a_b, C += v a_b^2 and the
+ * occupation occ += x + occ x, x = s_b^2 T_b, v = 1 / (1/T_b + s_b^2). */
+GS_VECTOR_LOOP static void red_round(const double *restrict c, const double *restrict av, double tol,
+                                      double Tb, double ab, double *restrict A, double *restrict B,
+                                      double *restrict C, double *restrict occ)
+{
+    double iT = 1.0 / Tb;
+    for (int i = 0; i < REC_TAU_N; i++) {
+        double a = av[i] > 0.0 ? av[i] : 0.0;
+        double sb = tol * a * c[i], x = sb * sb * Tb, v = 1.0 / (iT + sb * sb);
+        A[i] = A[i] + v * c[i] * c[i];
+        B[i] = B[i] + v * c[i] * ab;
+        C[i] = C[i] + v * ab * ab;
+        occ[i] = occ[i] + (x + occ[i] * x);
+    }
+}
+
+/* After a round: a tau whose A is not > 0 is dead from now on, the others' brightness B / A. */
+GS_VECTOR_LOOP static void red_brightness(const double *restrict A, const double *restrict B,
+                                           long long *restrict dead, double *restrict av)
+{
+    for (int i = 0; i < REC_TAU_N; i++) {
+        dead[i] |= !(A[i] > 0.0);
+        double a = B[i] / A[i];   /* (only kept where alive) */
+        av[i] = dead[i] ? av[i] : a;
+    }
+}
+
+GS_VECTOR_LOOP void rec_eq7_exp_below(const double *restrict L, size_t n, double Lmax, double *restrict ex)
 {
     for (size_t i = 0; i < n; i++) {
         double d = L[i] - Lmax, e = exp(d > -746.0 ? d : 0.0);
@@ -115,28 +144,15 @@ double rec_eq7_loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb,
      * round has no likelihood. */
     const double *cb = m->red_c + (size_t)bulb * REC_TAU_N * (size_t)nb;
     double av[REC_TAU_N] = {0}, Av[REC_TAU_N], Bv[REC_TAU_N], Cv[REC_TAU_N], occv[REC_TAU_N];
-    unsigned char dead[REC_TAU_N] = {0};
+    double ccol[GS_MAX_BANDS][REC_TAU_N];   /* each band's c_b(tau), contiguous */
+    for (int b = 0; b < nb; b++)
+        for (int i = 0; i < REC_TAU_N; i++) ccol[b][i] = cb[(size_t)i * (size_t)nb + (size_t)b];
+    long long dead[REC_TAU_N] = {0};   /* (as wide as a double: red_taus vectorizes) */
     for (int it = 0; it < 3; it++) {
-        int first = 1;   /* the sums start at 0 (+0 + x, as a zeroed sum would) */
-        for (int b = 0; b < nb; b++) {
-            if (!(T[b] > 0.0)) continue;
-            double Tb = T[b], iT = 1.0 / Tb, ab = ah[b];
-            for (int i = 0; i < REC_TAU_N; i++) {
-                double c = cb[(size_t)i * (size_t)nb + (size_t)b], a = av[i] > 0.0 ? av[i] : 0.0;
-                double sb = tol * a * c, x = sb * sb * Tb, v = 1.0 / (iT + sb * sb);
-                double A0 = first ? 0.0 : Av[i], B0 = first ? 0.0 : Bv[i], C0 = first ? 0.0 : Cv[i],
-                       o0 = first ? 0.0 : occv[i];
-                Av[i] = A0 + v * c * c;
-                Bv[i] = B0 + v * c * ab;
-                Cv[i] = C0 + v * ab * ab;
-                occv[i] = o0 + (x + o0 * x);
-            }
-            first = 0;
-        }
-        for (int i = 0; i < REC_TAU_N; i++) {
-            dead[i] |= !(Av[i] > 0.0);
-            if (!dead[i]) av[i] = Bv[i] / Av[i];
-        }
+        for (int i = 0; i < REC_TAU_N; i++) Av[i] = Bv[i] = Cv[i] = occv[i] = 0.0;
+        for (int b = 0; b < nb; b++)
+            if (T[b] > 0.0) red_round(ccol[b], av, tol, T[b], ah[b], Av, Bv, Cv, occv);
+        red_brightness(Av, Bv, dead, av);
     }
     double Lt[REC_TAU_N], lphi[REC_TAU_N], zt[REC_TAU_N], bt[REC_TAU_N], Lmax = -INFINITY;
     red_taus(Av, Bv, Cv, occv, dead, R, Lt, lphi, zt, bt);
@@ -230,12 +246,12 @@ static void red_bounds(const rec_matcher *m, rec_eq7_work *w, double Sxx, size_t
 
 /* The screen's passes over every template: the largest bound, with its first index, 8 lanes at
  * a time (each lane keeps the first of its largest); and the bounds themselves, written plainly
- * for the compiler to vectorize (REC_VECTOR_LOOP). */
+ * for the compiler to vectorize (GS_VECTOR_LOOP). */
 typedef double scr_vd __attribute__((vector_size(8 * sizeof(double))));
 typedef long long scr_vl __attribute__((vector_size(8 * sizeof(long long))));
 
 /* The first index of the largest of U[0..M) (0 when every one is -inf). */
-REC_VECTOR_CLONES static size_t scr_argmax(const double *U, size_t M)
+GS_VECTOR_CLONES static size_t scr_argmax(const double *U, size_t M)
 {
     size_t j = 0, jb = 0;
     double mx = -INFINITY;
@@ -262,7 +278,7 @@ REC_VECTOR_CLONES static size_t scr_argmax(const double *U, size_t M)
 /* The one-brightness bound below (free_bounds) of every template: U = c0 - lognorm +
  * min(g - Sxx, 0)/2 plus the slack, g = S^2/T where S > 0 (T > 0), -inf where T <= 0; without
  * lognorm (a light with dropped samples), -log(T)/2 in place of c0 - lognorm. */
-REC_VECTOR_LOOP static void scr_bounds_1(const double *S, const double *T, const double *lognorm, size_t M,
+GS_VECTOR_LOOP static void scr_bounds_1(const double *S, const double *T, const double *lognorm, size_t M,
                                          double c0, double Sxx, double slack, double *U)
 {
     for (size_t j = 0; j < M; j++) {
@@ -324,7 +340,7 @@ static void free_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pre
  * glibc's vector logarithm and erfc): log Phi(z) is log1p(-e) or log(e), e = erfc(|z| / sqrt 2)
  * / 2; where z <= -20, rec_eq7_loglik_n again (scores_free_fix: its asymptotic series, as
  * gs_log_phi). */
-REC_VECTOR_LOOP static void scores_1(const double *restrict S, const double *restrict T, const size_t *restrict idx,
+GS_VECTOR_LOOP static void scores_1(const double *restrict S, const double *restrict T, const size_t *restrict idx,
                                      size_t n, double Sxx, double *restrict L)
 {
     for (size_t i = 0; i < n; i++) {
@@ -339,7 +355,7 @@ REC_VECTOR_LOOP static void scores_1(const double *restrict S, const double *res
 
 /* One brightness parameter f's terms (T_f > 0): z_f^2 into chi2[i] (subtracted), -log(T_f)/2 +
  * log Phi(z_f) into l[i], use[i] set. */
-REC_VECTOR_LOOP static void scores_band(const double *restrict S, const double *restrict T, const size_t *restrict idx,
+GS_VECTOR_LOOP static void scores_band(const double *restrict S, const double *restrict T, const size_t *restrict idx,
                                         size_t n, double *restrict chi2, double *restrict l, int *restrict use)
 {
     for (size_t i = 0; i < n; i++) {

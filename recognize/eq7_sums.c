@@ -135,7 +135,7 @@ void rec_eq7_light_dfts(const rec_matcher *m, rec_eq7_work *w)
 }
 
 /* z[r] += a[r] x[r], complex (re, im pairs), r < n. */
-REC_VECTOR_LOOP static void cross_add(const double *restrict a, const double *restrict x, size_t n, double *restrict z)
+GS_VECTOR_LOOP static void cross_add(const double *restrict a, const double *restrict x, size_t n, double *restrict z)
 {
     for (size_t r = 0; r < n; r++) {
         double ar = a[2 * r], ai = a[2 * r + 1], xr = x[2 * r], xi = x[2 * r + 1];

@@ -103,21 +103,6 @@ gs_status rec_cv_dilate_f32(const float *src, float *dst, int width, int height,
 /* In-place dilation of a 0/1 byte mask with a (2 radius + 1)^2 square. */
 gs_status rec_cv_dilate_u8(unsigned char *mask, int width, int height, int radius);
 
-/* Loops over every template or sample, in clones for the CPU's widest registers (a plain clone,
- * AVX2 and AVX-512; the same arithmetic in each, no contraction into fused multiply-adds; where a
- * loop calls log, erfc or exp, gcc's AVX-512 clone calls glibc's vector versions, which round
- * otherwise than the scalar ones: results may differ in the last bits from one CPU to another,
- * never from one block of lights to another on one CPU); REC_VECTOR_LOOP also lets the
- * vectorizer take loops of any length. gcc's only: clang (14) cannot export such a function and
- * names each resolver globally, so its build (the sanitizers') runs the plain code. */
-#if defined(__GNUC__) && !defined(__clang__)
-#define REC_VECTOR_CLONES __attribute__((target_clones("avx512f", "arch=haswell", "default")))
-#define REC_VECTOR_LOOP __attribute__((target_clones("avx512f", "arch=haswell", "default"), optimize("O3")))
-#else   /* clang (the sanitizers' build): the plain code */
-#define REC_VECTOR_CLONES
-#define REC_VECTOR_LOOP
-#endif
-
 /* ================================================= Eq. 7 (eq7_*.c), shared between its files */
 
 /* complex.h before the matcher: its Fourier series are C99 double complex */

@@ -137,7 +137,7 @@ int srv_cmd_capture(int argc, char **argv)
             sc.seed = (unsigned long long)seed;
             sc.freq.seed = sc.seed;
         }
-        if (s == GS_OK) s = cap_backend_sim_new(&sc, &be);
+        if (s == GS_OK) s = cap_backend_sim_new(&sc, NULL, &be);
         cap_scene_release(&sc);
         is_sim = 1;
     } else if (!strcmp(backend, "replay")) {

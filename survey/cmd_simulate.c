@@ -143,7 +143,7 @@ int srv_cmd_simulate(int argc, char **argv)
         snprintf(sc.delight, sizeof sc.delight, "%s", delight);
     }
     cap_backend *be = NULL;
-    s = cap_backend_sim_new(&sc, &be);
+    s = cap_backend_sim_new(&sc, NULL, &be);
     size_t in_image = 0;
     for (size_t i = 0; i < sc.n_lights; i++) in_image += sc.lights[i].in_image != 0;
     cap_scene_release(&sc);

@@ -252,7 +252,15 @@ static gs_status open_input(const srv_run_opts *o, srv_run_report *r, cap_scene 
     if (r->scene) {
         *have_scene = 1;
         if ((s = cap_scene_read(o->input, sc)) != GS_OK) return s;
-        if ((s = cap_backend_sim_new(sc, be)) != GS_OK) return s;
+        /* without --delight the render's DELIGHT is also Eq. 7's: read or generated once */
+        if (!o->delight_path) {
+            if (!(j->delight_owned = gs_delight_new()))
+                return gs_fail(GS_ENOMEM, "cannot allocate the DELIGHT database");
+            s = sc->delight[0] ? gs_delight_load(j->delight_owned, sc->delight)
+                               : gs_delight_generate(j->delight_owned, GS_BRF_N_DEFAULT);
+            if (s != GS_OK) return s;
+        }
+        if ((s = cap_backend_sim_new(sc, j->delight_owned, be)) != GS_OK) return s;
         cap_acq_info info;
         if ((s = cap_backend_info(*be, &info)) != GS_OK) return s;
         int d[5] = {info.grid_hz, info.bands, info.K, info.width, info.height};
@@ -379,7 +387,7 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
     }
     /* 3. a DELIGHT file and the Eq. 7 templates it gives for this capture: checked now (the
      * built-in database cannot be wrong, so it is generated only when it is needed, below) */
-    if (delight_path && (s = srv_job_matcher(&j, NULL, delight_path, dims[0], dims[1], dims[2], &o->eq7)) != GS_OK)
+    if (delight_path && (s = srv_job_matcher(&j, j.delight_owned, delight_path, dims[0], dims[1], dims[2], &o->eq7)) != GS_OK)
         goto done;
 
     /* 4. the database: the last check, and the first write */
@@ -437,7 +445,7 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
     if (s != GS_OK) goto done;
     stage(o, SRV_STAGE_MATCH, "Eq. 7 on %zu lights%s", j.cat.count, j.matcher ? "" : " (built-in DELIGHT)");
     t0 = gs_clock_s(CLOCK_MONOTONIC);
-    if ((s = srv_job_matcher(&j, NULL, NULL, dims[0], dims[1], dims[2], &o->eq7)) != GS_OK ||
+    if ((s = srv_job_matcher(&j, j.delight_owned, NULL, dims[0], dims[1], dims[2], &o->eq7)) != GS_OK ||
         (s = srv_job_match(&j)) != GS_OK)
         goto done;
     r->lights = j.cat.count;

@@ -223,7 +223,7 @@ cap_backend *blobfx_acquire(const char *text, const char *name, cap_scene *sc, c
     *path = fx_tmp(name);
     CHECK_OK(cap_scene_parse(text, name, ".", sc));
     cap_backend *be = NULL;
-    CHECK_OK(cap_backend_sim_new(sc, &be));
+    CHECK_OK(cap_backend_sim_new(sc, NULL, &be));
     if (!be) return NULL;
     cap_loop_opts o;
     cap_loop_opts_default(&o);

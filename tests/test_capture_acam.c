@@ -119,6 +119,39 @@ TEST(acam_mask_matrix_and_halvings)
     CHECK_OK(cap_hdr_update(raw, 3, 1, 2, 4095, 5, h, &sat, &halved));
     /* all three saturate in some band; the one already at the limit stays */
     CHECK(sat == 3 && halved == 2 && h[0] == 1 && h[1] == 5 && h[2] == 3);
+    /* against the definition (a pixel saturates when a band's raw >= saturation_dn), pixel by
+     * pixel: odd sizes, 1 to 4 bands, thresholds between integers, 0, above 65535, NaN */
+    const double thr[] = {4094.5, 4095, 1, 0, -3, 65535, 65535.5, 70000, NAN};
+    uint64_t x = 12345;
+    for (int t = 0; t < 9; t++)
+        for (int bands = 1; bands <= 4; bands++) {
+            int W = 37 + bands, H = 5;
+            size_t n = (size_t)W * H * (size_t)bands;
+            unsigned short *r = malloc(n * sizeof *r);
+            unsigned char *hv = malloc((size_t)W * H), *ref = malloc((size_t)W * H);
+            for (size_t i = 0; i < n; i++) {
+                uint64_t u = gs_splitmix64(&x);
+                r[i] = u % 50 == 0 ? (unsigned short)(4094 + u % 3) : u % 97 == 0 ? 65535 : (unsigned short)(u % 4000);
+            }
+            size_t want_sat = 0, want_halved = 0;
+            for (int p = 0; p < W * H; p++) {
+                hv[p] = ref[p] = (unsigned char)(p % 3);
+                int any = 0;
+                for (int b = 0; b < bands; b++) any |= r[(size_t)p * (size_t)bands + (size_t)b] >= thr[t];
+                want_sat += (size_t)any;
+                if (any && ref[p] < 2) {
+                    ref[p]++;
+                    want_halved++;
+                }
+            }
+            CHECK_OK(cap_hdr_update(r, W, H, bands, thr[t], 2, hv, &sat, &halved));
+            CHECK_MSG(sat == want_sat && halved == want_halved && !memcmp(hv, ref, (size_t)W * H),
+                      "threshold %g, %d bands: %zu/%zu saturated, %zu/%zu halved", thr[t], bands, sat,
+                      want_sat, halved, want_halved);
+            free(r);
+            free(hv);
+            free(ref);
+        }
 }
 
 /* ------------------------------------------------------------ Fig. 9: lock vs free running */

@@ -73,7 +73,7 @@ static gs_status run(const char *scene_path, const char *dir, int stop_after, in
     cap_scene sc;
     gs_status s = cap_scene_read(scene_path, &sc);
     cap_backend *be = NULL;
-    if (s == GS_OK) s = cap_backend_sim_new(&sc, &be);
+    if (s == GS_OK) s = cap_backend_sim_new(&sc, NULL, &be);
     cap_scene_release(&sc);
     if (s != GS_OK) return s;
     cap_loop_opts o;
@@ -249,7 +249,7 @@ static gs_status run_text(const char *text, const char *dir, long *step, gs_capt
     if (s != GS_OK) return s;
     *step = sc.acam.cycles + sc.readout_cycles;
     cap_backend *be = NULL;
-    s = cap_backend_sim_new(&sc, &be);
+    s = cap_backend_sim_new(&sc, NULL, &be);
     if (s == GS_OK) {
         cap_loop_opts o;
         cap_loop_opts_default(&o);

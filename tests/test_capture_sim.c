@@ -319,7 +319,10 @@ static void render_on(const gs_delight *d, const char *text, int threads, double
 /* Every stage splits rows or lights into disjoint parts (per-row and per-light random streams,
  * each pixel summing its lights in scene order): 2, 3 and 7 threads give the one-thread frame
  * bit for bit, and each stage touches the same number of items (the footprints and halos cut at
- * the parts' row boundaries add up to the whole ones). */
+ * the parts' row boundaries add up to the whole ones). The row stages run together over blocks
+ * of rows (cap_rows_run): one block of the whole 40 x 30 frame on one thread (each stage over the
+ * frame, then the next), chunks of a row or two on more, so a row stage that read rows beyond
+ * its own would fail here too. */
 TEST(sim_threads_bit_identical_to_one_thread)
 {
     gs_delight *d = delight();
@@ -406,7 +409,7 @@ TEST(sim_hdr_recovers_saturated_lights_within_2_percent)
     cap_scene sc;
     CHECK_OK(cap_scene_parse(text, "hdr.json", ".", &sc));
     cap_backend *be = NULL;
-    CHECK_OK(cap_backend_sim_new(&sc, &be));
+    CHECK_OK(cap_backend_sim_new(&sc, NULL, &be));
     if (!be) return;
     const char *dir = fx_tmp("hdr");
     cap_loop_opts o;
@@ -522,6 +525,62 @@ TEST(sim_effect_physics_matches_bulbs_md)
     CHECK(w.corr_10s > 0.7);
     free(t);
     cap_ac_free(ac);
+    gs_delight_free(d);
+}
+
+/* Shot noise is Poisson at every mean: an ambient pedestal of 2 to 5000 electrons per pixel
+ * (the cached-CDF inversion below 40, Hormann's PTRS above) has the mean of the same scene
+ * rendered without noise and the Poisson variance (the inversion's table once stopped at 159
+ * electrons: every brighter pixel read 159, with no variance). */
+TEST(sim_shot_noise_is_poisson_at_every_level)
+{
+    gs_delight *d = delight();
+    const double level_e[] = {2, 30, 300, 5000};
+    enum { W = 200, H = 100 };
+    double *dn = malloc(sizeof *dn * W * H);
+    unsigned short *raw = malloc(sizeof *raw * W * H);
+    for (size_t i = 0; i < sizeof level_e / sizeof *level_e; i++) {
+        double mean_e[2] = {0, 0}, var_e = 0;
+        for (int noisy = 0; noisy < 2; noisy++) {
+            char text[2048];
+            /* 40 cycles, K = 10: a frame exposes 4 nominal cycles */
+            snprintf(text, sizeof text,
+                     "{\"format\": \"gridsurvey-scene/1\", \"seed\": 3, \"grid\": {\"nominal_hz\": 50},\n"
+                     " \"camera\": {\"width_px\": %d, \"height_px\": %d, \"sensor\": {\"bands\": 1, "
+                     "\"full_well_e\": 100000, \"gain_e_per_dn\": 1, \"black_level_dn\": 10}},\n"
+                     " \"acam\": {\"K\": 10, \"cycles\": 40},\n"
+                     " \"lights\": [{\"bulb\": \"hps-150w\", \"x_px\": -500, \"y_px\": -500, \"distance_m\": 3000, "
+                     "\"flux_e_per_cycle\": 1}],\n"
+                     " \"effects\": {\"ambient\": {\"e_per_px_cycle\": %.17g}%s}}\n",
+                     W, H, level_e[i] / 4.0, noisy ? ", \"shot_noise\": {}" : "");
+            cap_scene sc;
+            CHECK_OK(cap_scene_parse(text, "shot.json", ".", &sc));
+            cap_sim *s = NULL;
+            CHECK_OK(cap_sim_new(&sc, d, &s));
+            if (s) {
+                CHECK_OK(cap_sim_render(s, 0, 0, 0, NULL, raw, dn));
+                double sum = 0, sum2 = 0;
+                for (int p = 0; p < W * H; p++) {
+                    double e = dn[p] - 10.0;
+                    sum += e;
+                    sum2 += e * e;
+                }
+                mean_e[noisy] = sum / (W * H);
+                if (noisy) var_e = sum2 / (W * H) - mean_e[1] * mean_e[1];
+            }
+            cap_sim_free(s);
+            cap_scene_release(&sc);
+        }
+        double mu = mean_e[0], n = W * H;
+        printf("    ambient %.0f e: mean %.3f e (noiseless %.3f), variance %.3f\n", level_e[i], mean_e[1],
+               mu, var_e);
+        CHECK_NEAR(mu, level_e[i], 1e-9 * level_e[i]);
+        CHECK_MSG(fabs(mean_e[1] - mu) < 5.0 * sqrt(mu / n), "ambient %.0f e: mean %.3f", mu, mean_e[1]);
+        CHECK_MSG(fabs(var_e - mu) < 6.0 * sqrt((mu + 2.0 * mu * mu) / n), "ambient %.0f e: variance %.3f",
+                  mu, var_e);
+    }
+    free(dn);
+    free(raw);
     gs_delight_free(d);
 }
 

@@ -58,7 +58,7 @@ int trfx_render(const char *text, const char *dir, gs_capture *cap)
     CHECK_MSG(st == GS_OK, "scene: %s", gs_detail());
     cap_backend *be = NULL;
     if (st == GS_OK) {
-        st = cap_backend_sim_new(&sc, &be);
+        st = cap_backend_sim_new(&sc, NULL, &be);
         CHECK_MSG(st == GS_OK, "sim: %s", gs_detail());
     }
     cap_scene_release(&sc);

@@ -261,8 +261,21 @@ double gs_chi2_sf(double chi2, int dof);
 double gs_chi2_isf(double p, int dof);
 /* log Phi(z), Phi the standard normal CDF, accurate for every z (asymptotic below -20). */
 double gs_log_phi(double z);
-/* sum_i x_i t_i in eight interleaved partial sums (clones for the CPU's widest registers compute
- * the same sums: no fused multiply-add). */
+/* Loops over every template, sample or pixel, in clones for the CPU's widest registers (a plain
+ * clone, AVX2 and AVX-512; the same arithmetic in each, no contraction into fused multiply-adds;
+ * where a loop calls log, erfc or exp, gcc's AVX-512 clone calls glibc's vector versions, which
+ * round otherwise than the scalar ones: results may differ in the last bits from one CPU to
+ * another, never from one split of the work to another on one CPU); GS_VECTOR_LOOP also lets
+ * the vectorizer take loops of any length. gcc's only: clang (14) cannot export such a function
+ * and names each resolver globally, so its build (the sanitizers') runs the plain code. */
+#if defined(__GNUC__) && !defined(__clang__)
+#define GS_VECTOR_CLONES __attribute__((target_clones("avx512f", "arch=haswell", "default")))
+#define GS_VECTOR_LOOP __attribute__((target_clones("avx512f", "arch=haswell", "default"), optimize("O3")))
+#else   /* clang (the sanitizers' build): the plain code */
+#define GS_VECTOR_CLONES
+#define GS_VECTOR_LOOP
+#endif
+/* sum_i x_i t_i in eight interleaved partial sums (in clones, GS_VECTOR_LOOP: the same sums). */
 double gs_dot(const double *x, const double *t, size_t n);
 /* An angle in degrees wrapped to [0, 360) and to [-180, 180). */
 double gs_wrap360(double a_deg);

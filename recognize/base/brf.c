@@ -141,12 +141,19 @@ gs_status gs_brf_integrate(const gs_brf *b, double shift_cycles, int K, double *
         return gs_fail(GS_EINVAL, "Eq. 5: shift %g cycles: expected a finite number", shift_cycles);
     if (!finite_samples(b)) return gs_fail(GS_ENUMERIC, "Eq. 5: BRF has non-finite samples");
     int n = b->n;
-    double complex *C = malloc(sizeof *C * (size_t)(n / 2 + 1));
-    if (!C) return gs_fail(GS_ENOMEM, "Eq. 5: cannot allocate a %d-point DFT", n);
+    double complex *C = malloc(sizeof *C * (size_t)(n / 2 + 1)), *root = malloc(sizeof *root * (size_t)K);
+    if (!C || !root) {
+        free(C);
+        free(root);
+        return gs_fail(GS_ENOMEM, "Eq. 5: cannot allocate a %d-point DFT", n);
+    }
+    /* e^{2 pi i h k/K} takes K values: e^{2 pi i j/K}, j = h k mod K */
+    for (int j = 0; j < K; j++) root[j] = cexp(I * two_pi * ((double)j / K));
     for (int band = 0; band < b->bands; band++) {
         gs_status s = gs_brf_spectrum(b->v + (size_t)band * (size_t)n, n, C);
         if (s != GS_OK) {
             free(C);
+            free(root);
             return s;
         }
         /* Window mean of e^{2 pi i h (t - s)} over [k/K, (k+1)/K):
@@ -160,10 +167,7 @@ gs_status gs_brf_integrate(const gs_brf *b, double shift_cycles, int K, double *
         double s_mod = fmod(shift_cycles, 2.0);
         for (int k = 0; k < K; k++) {
             double acc = 0.0;
-            for (int h = 1; h < n / 2; h++) {
-                double turns = (double)(((long long)h * k) % K) / K;
-                acc += creal(C[h] * cexp(I * two_pi * turns));
-            }
+            for (int h = 1; h < n / 2; h++) acc += creal(C[h] * root[((long long)h * k) % K]);
             /* Nyquist: mean of cos(pi n (t - s)) over the window. */
             double a = (double)k / K - s_mod, bb = (double)(k + 1) / K - s_mod;
             double nyq_mean = (sin(M_PI * n * bb) - sin(M_PI * n * a)) * K / (M_PI * n);
@@ -171,6 +175,7 @@ gs_status gs_brf_integrate(const gs_brf *b, double shift_cycles, int K, double *
         }
     }
     free(C);
+    free(root);
     return GS_OK;
 }
 

@@ -112,9 +112,7 @@ float gs_median_f(float *v, size_t n)
     return v[k];
 }
 
-#if defined(__GNUC__) && !defined(__clang__)   /* (clang 14 cannot export target clones) */
-__attribute__((target_clones("avx512f", "arch=haswell", "default"), optimize("O3")))
-#endif
+GS_VECTOR_LOOP
 double gs_dot(const double *x, const double *t, size_t n)
 {
     double a[8] = {0, 0, 0, 0, 0, 0, 0, 0};
