@@ -3,7 +3,6 @@
  * h times, one HDR round, and the exact expected value of a light (Eq. 5 through the masks). */
 #include "capture/internal.h"
 
-#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 

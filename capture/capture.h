@@ -513,8 +513,9 @@ typedef struct {
  * else NaN), replay what the source capture.json holds. Always GS_OK for a valid backend. */
 gs_status cap_backend_timing(cap_backend *b, cap_acq_timing *t);
 
-/* sim: renders sc (copied) with the bulbs of d (NULL: the scene's DELIGHT file, else the
- * built-in database; as cap_sim_new). cap_backend_sim_handle gives its simulator (borrowed). */
+/* sim: renders sc (copied) with the bulbs of d (read during the call only; NULL: the scene's
+ * DELIGHT file, else the built-in database; as cap_sim_new). cap_backend_sim_handle gives its
+ * simulator (borrowed). */
 gs_status cap_backend_sim_new(const cap_scene *sc, const gs_delight *d, cap_backend **out);
 cap_sim *cap_backend_sim_handle(cap_backend *b);
 /* replay: serves the frames (and HDR maps) of a capture directory. */

@@ -1,8 +1,7 @@
 /* effects.c - the simulator's effects, one stage each (docs/capture.md has the physics and the
  * sources of every constant). A stage exists in a simulator's pipeline only when its scene lists
- * the effect; the pipeline counts its calls (cap_sim_effect_calls) so tests can prove that a
- * disabled effect never ran. The row stages (the image's rows from the same rows) run together
- * over cached blocks of rows (cap_rows_run). */
+ * the effect (the pipeline counts its calls: cap_sim_effect_calls). The row stages (the image's
+ * rows from the same rows) run together over cached blocks of rows (cap_rows_run). */
 #include "capture/sim.h"
 
 #include <stdlib.h>
@@ -172,7 +171,7 @@ gs_status cap_fx_scintillation(cap_sim *s, cap_render *r)
 /* ------------------------------------------------------------------ PSF */
 
 /* A Gaussian integrated over each pixel, truncated at radius_sigma sigmas and renormalised so
- * the light's flux is kept (cap_fx_psf deposits through it). */
+ * the light's flux is kept (the psf stage, cap_splat_rows, deposits through it). */
 gs_status cap_fx_prepare_psf(cap_sim *s)
 {
     double sigma = s->sc.fx.psf.sigma_px;

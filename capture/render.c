@@ -66,8 +66,11 @@ gs_status cap_rows_run(cap_sim *s, cap_render *r, cap_stage *stage, size_t n)
         par[i].s = s;
         par[i].r = r;
     }
+    /* chunks of at most a block (about 64 of them), so that a chunk is one block */
+    size_t chunk = (size_t)s->H / 64 + 1;
     double t0 = gs_clock_s(CLOCK_MONOTONIC);
-    gs_status st = gs_parallel_chunks(s->threads, (size_t)s->H, 0, group_rows, &g);
+    gs_status st = gs_parallel_chunks(s->threads, (size_t)s->H, chunk < g.block_rows ? chunk : g.block_rows,
+                                      group_rows, &g);
     double wall_s = gs_clock_s(CLOCK_MONOTONIC) - t0, busy_all = 0;
     for (size_t i = 0; i < n; i++)
         for (int p = 0; p < GS_MAX_THREADS; p++) busy_all += busy_s[i][p];

@@ -159,14 +159,16 @@ static gs_status store_rows(void *ctx, int part, size_t y0, size_t y1)
 
 /* ------------------------------------------------------------------ construction */
 
-static void add_stage(cap_sim *s, const char *name, int effect,
+/* A stage at pipeline position `at` (the effect it is, or runs before): from shot noise on, a
+ * noise stage. */
+static void add_stage(cap_sim *s, const char *name, int effect, int at,
                       gs_status (*run)(cap_sim *, cap_render *), gs_range_fn rows)
 {
     cap_stage *st = &s->stages[s->n_stages++];
     memset(st, 0, sizeof *st);
     st->name = name;
     st->effect = effect;
-    st->noise = effect >= CAP_FX_SHOT_NOISE || rows == to_dn_rows || rows == store_rows;
+    st->noise = at >= CAP_FX_SHOT_NOISE;
     st->run = run;
     st->rows = rows;
 }
@@ -393,14 +395,7 @@ gs_status cap_sim_new(const cap_scene *sc, const gs_delight *d_in, cap_sim **out
     /* DELIGHT */
     const gs_delight *d = d_in;
     if (!d) {
-        own = gs_delight_new();
-        if (!own) {
-            st = gs_fail(GS_ENOMEM, "simulator: out of memory");
-            goto fail;
-        }
-        st = sc->delight[0] ? gs_delight_load(own, sc->delight)
-                            : gs_delight_generate(own, GS_BRF_N_DEFAULT);
-        if (st != GS_OK) goto fail;
+        if ((st = gs_delight_open(sc->delight[0] ? sc->delight : NULL, &own)) != GS_OK) goto fail;
         d = own;
     }
     if ((st = load_bulbs(s, d)) != GS_OK) goto fail;
@@ -478,9 +473,9 @@ gs_status cap_sim_new(const cap_scene *sc, const gs_delight *d_in, cap_sim **out
     for (int e = 0; e <= CAP_FX_COUNT; e++) {
         for (size_t b = 0; b < sizeof base_stages / sizeof *base_stages; b++)
             if ((int)base_stages[b].before == e && (!base_stages[b].wanted || base_stages[b].wanted(s)))
-                add_stage(s, base_stages[b].name, -1, base_stages[b].run, base_stages[b].rows);
+                add_stage(s, base_stages[b].name, -1, e, base_stages[b].run, base_stages[b].rows);
         if (e < CAP_FX_COUNT && has(s, (cap_effect)e))
-            add_stage(s, cap_effect_defs[e].name, e, cap_effect_defs[e].run, cap_effect_defs[e].rows);
+            add_stage(s, cap_effect_defs[e].name, e, e, cap_effect_defs[e].run, cap_effect_defs[e].rows);
     }
     *out = s;
     return GS_OK;

@@ -140,7 +140,7 @@ void cap_gauss_box(double x, double y, double sigma, int R, double *w, int *bx, 
  * read. parse reads the effect's object at path of the scene document into sc->fx; prepare
  * (NULL: none) runs once when a simulator is built; the per-acquisition stage is run (the whole
  * frame) or rows (a row stage: cap_stage). The pipeline counts each effect's stage calls in
- * s->fx_calls (so a test can prove a disabled effect never ran). */
+ * s->fx_calls (once per acquisition it runs the stage in, a probe's completion included). */
 typedef struct {
     const char *name;   /* in scene files: "shot_noise", ... */
     gs_status (*parse)(const gs_json *j, cap_scene *sc, json_t *o, const char *path);

@@ -253,13 +253,9 @@ static gs_status open_input(const srv_run_opts *o, srv_run_report *r, cap_scene 
         *have_scene = 1;
         if ((s = cap_scene_read(o->input, sc)) != GS_OK) return s;
         /* without --delight the render's DELIGHT is also Eq. 7's: read or generated once */
-        if (!o->delight_path) {
-            if (!(j->delight_owned = gs_delight_new()))
-                return gs_fail(GS_ENOMEM, "cannot allocate the DELIGHT database");
-            s = sc->delight[0] ? gs_delight_load(j->delight_owned, sc->delight)
-                               : gs_delight_generate(j->delight_owned, GS_BRF_N_DEFAULT);
-            if (s != GS_OK) return s;
-        }
+        if (!o->delight_path &&
+            (s = gs_delight_open(sc->delight[0] ? sc->delight : NULL, &j->delight_owned)) != GS_OK)
+            return s;
         if ((s = cap_backend_sim_new(sc, j->delight_owned, be)) != GS_OK) return s;
         cap_acq_info info;
         if ((s = cap_backend_info(*be, &info)) != GS_OK) return s;
@@ -386,7 +382,8 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
         have_scene = 0;
     }
     /* 3. a DELIGHT file and the Eq. 7 templates it gives for this capture: checked now (the
-     * built-in database cannot be wrong, so it is generated only when it is needed, below) */
+     * built-in database cannot be wrong: for a capture directory it is generated only when it
+     * is needed, below; a scene's render has it already) */
     if (delight_path && (s = srv_job_matcher(&j, j.delight_owned, delight_path, dims[0], dims[1], dims[2], &o->eq7)) != GS_OK)
         goto done;
 

@@ -51,11 +51,7 @@ gs_status srv_job_matcher(srv_job *j, const gs_delight *d, const char *delight_p
     if (j->matcher) return GS_OK;
     gs_status s = GS_OK;
     if (!d) {
-        if (!(j->delight_owned = gs_delight_new()))
-            return gs_fail(GS_ENOMEM, "cannot allocate the DELIGHT database");
-        s = delight_path ? gs_delight_load(j->delight_owned, delight_path)
-                         : gs_delight_generate(j->delight_owned, GS_BRF_N_DEFAULT);
-        if (s != GS_OK) return s;
+        if ((s = gs_delight_open(delight_path, &j->delight_owned)) != GS_OK) return s;
         d = j->delight_owned;
     }
     j->delight = d;

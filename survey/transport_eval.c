@@ -9,15 +9,8 @@
 
 gs_status srv_tr_delight(const char *db, gs_delight **out)
 {
-    *out = gs_delight_new();
-    if (!*out) return gs_fail(GS_ENOMEM, "out of memory");
-    if (!db) db = getenv("GRIDSURVEY_DELIGHT");
-    gs_status st = db && *db ? gs_delight_load(*out, db) : gs_delight_generate(*out, GS_BRF_N_DEFAULT);
-    if (st != GS_OK) {
-        gs_delight_free(*out);
-        *out = NULL;
-    }
-    return st;
+    const char *env = getenv("GRIDSURVEY_DELIGHT");
+    return gs_delight_open(db ? db : env && *env ? env : NULL, out);
 }
 
 void srv_tr_truth_release(srv_tr_truth *t)

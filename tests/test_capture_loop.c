@@ -33,6 +33,19 @@ static void write_small(const char *path, int seed)
     fclose(f);
 }
 
+/* The small scene without shot noise and saturation: its first noise stage is to_dn. */
+static void write_small_without_shot_noise(const char *path, int seed)
+{
+    char text[4096];
+    snprintf(text, sizeof text, small_scene, seed);
+    char *at = strstr(text, "\"shot_noise\": {}, \"saturation\": {}, ");
+    if (at) memmove(at, at + strlen("\"shot_noise\": {}, \"saturation\": {}, "),
+                    strlen(at + strlen("\"shot_noise\": {}, \"saturation\": {}, ")) + 1);
+    FILE *f = fopen(path, "w");
+    fputs(text, f);
+    fclose(f);
+}
+
 /* 1 if dir_a/name and dir_b/name have the same bytes. */
 static int same_file(const char *a, const char *b, const char *name)
 {
@@ -149,25 +162,31 @@ TEST(capture_resume_after_stop_and_damage_identical)
  * noise only on the rows that can saturate; a probe that is the frame's last pass gets its other
  * rows afterwards): the same files, byte for byte, as every pass acquired whole. Both kinds of
  * probe happen here (followed by another round, and completed as the last pass). */
+/* Also without shot noise (the probe then decides before to_dn: its bound is in electrons). */
 TEST(capture_hdr_probes_give_the_same_files_as_whole_passes)
 {
-    char scene[1024], a[1024], b[1024];
-    const char *tmp = test_tmpdir();
-    snprintf(scene, sizeof scene, "%s/probe.json", tmp);
-    snprintf(a, sizeof a, "%s/probed", tmp);
-    snprintf(b, sizeof b, "%s/whole", tmp);
-    write_small(scene, 23);
-    cap_loop_report ra, rb;
-    CHECK_OK(run(scene, a, 0, 0, &ra));
-    whole_passes = 1;
-    gs_status s = run(scene, b, 0, 0, &rb);
-    whole_passes = 0;
-    CHECK_OK(s);
-    CHECK(ra.complete && rb.complete && ra.max_passes >= 2 && ra.acquisitions == rb.acquisitions);
-    CHECK_MSG(ra.probes > ra.probes_kept && ra.probes_kept > 0, "probes %ld, completed %ld", ra.probes,
-              ra.probes_kept);
-    CHECK(rb.probes == 0 && rb.probes_kept == 0);
-    CHECK_MSG(same_capture(a, b, 1), "a capture with probes differs from one with whole passes");
+    for (int shot = 1; shot >= 0; shot--) {
+        char scene[1024], a[1024], b[1024];
+        const char *tmp = test_tmpdir();
+        snprintf(scene, sizeof scene, "%s/probe%d.json", tmp, shot);
+        snprintf(a, sizeof a, "%s/probed%d", tmp, shot);
+        snprintf(b, sizeof b, "%s/whole%d", tmp, shot);
+        if (shot) write_small(scene, 23);
+        else write_small_without_shot_noise(scene, 23);
+        cap_loop_report ra, rb;
+        CHECK_OK(run(scene, a, 0, 0, &ra));
+        whole_passes = 1;
+        gs_status s = run(scene, b, 0, 0, &rb);
+        whole_passes = 0;
+        CHECK_OK(s);
+        CHECK(ra.complete && rb.complete && ra.max_passes >= 2 && ra.acquisitions == rb.acquisitions);
+        /* (with shot noise both kinds of probe happen: one followed by more rounds, one completed) */
+        CHECK_MSG(ra.probes > ra.probes_kept && (ra.probes_kept > 0 || !shot), "shot noise %d: probes %ld, "
+                  "completed %ld", shot, ra.probes, ra.probes_kept);
+        CHECK(rb.probes == 0 && rb.probes_kept == 0);
+        CHECK_MSG(same_capture(a, b, 1), "shot noise %d: a capture with probes differs from one with "
+                  "whole passes", shot);
+    }
 }
 
 TEST(capture_resume_after_kill_cli)

@@ -321,7 +321,7 @@ static void render_on(const gs_delight *d, const char *text, int threads, double
  * bit for bit, and each stage touches the same number of items (the footprints and halos cut at
  * the parts' row boundaries add up to the whole ones). The row stages run together over blocks
  * of rows (cap_rows_run): one block of the whole 40 x 30 frame on one thread (each stage over the
- * frame, then the next), chunks of a row or two on more, so a row stage that read rows beyond
+ * frame, then the next), chunks of one row on more, so a row stage that read rows beyond
  * its own would fail here too. */
 TEST(sim_threads_bit_identical_to_one_thread)
 {

@@ -507,6 +507,9 @@ gs_status gs_delight_generate(gs_delight *d, int n);
 #define GS_DELIGHT_SCHEMA_VERSION 1
 gs_status gs_delight_save(const gs_delight *d, const char *path);
 gs_status gs_delight_load(gs_delight *d, const char *path);
+/* A new DELIGHT into *out (gs_delight_free; NULL on error): the file at path, or the built-in
+ * database (gs_delight_generate, GS_BRF_N_DEFAULT samples) when path is NULL. */
+gs_status gs_delight_open(const char *path, gs_delight **out);
 
 /* CSV: header `bulb_id,type,name,watts,grid_hz,sensor,band,chromaticity,n,v0,...,v{n-1}`, one
  * row per bulb and band (band: mono, R, G, B); sensor is written "SENSOR/REF" (REF as in

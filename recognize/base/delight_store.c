@@ -301,6 +301,17 @@ static gs_status load_bulb(sqlite3_stmt *q, const char *path, gs_bulb *b)
     return gs_brf_init(&b->brf, sqlite3_column_int(q, 8), sqlite3_column_int(q, 7));
 }
 
+gs_status gs_delight_open(const char *path, gs_delight **out)
+{
+    if (!(*out = gs_delight_new())) return gs_fail(GS_ENOMEM, "cannot allocate the DELIGHT database");
+    gs_status st = path ? gs_delight_load(*out, path) : gs_delight_generate(*out, GS_BRF_N_DEFAULT);
+    if (st != GS_OK) {
+        gs_delight_free(*out);
+        *out = NULL;
+    }
+    return st;
+}
+
 gs_status gs_delight_load(gs_delight *d, const char *path)
 {
     sqlite3 *db = NULL;
