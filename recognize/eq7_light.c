@@ -309,29 +309,41 @@ static void flat_share_of(const rec_matcher *m, rec_eq7_work *w, const double *t
 }
 
 /* The passes of rec_eq7_light_prepare over a light's samples, written for the vectorizer
- * (GS_VECTOR_LOOP): sums in 8 interleaved partial sums, taken in a fixed order. */
+ * (GS_VECTOR_LOOP): sums in 8 interleaved partial sums, taken in a fixed order (the lanes of one
+ * vector: lane k sums the samples d = k mod 8 in order; a select by mask adds +0 where the scalar
+ * form added 0.0, so the sums are those of the plain loop). */
 #define PREP_LANES 8
+typedef double prep_vd __attribute__((vector_size(PREP_LANES * sizeof(double))));
+typedef long long prep_vl __attribute__((vector_size(PREP_LANES * sizeof(long long))));
+
+/* (macros: a function returning a vector would take the ABI of the widest one) */
+#define PREP_LOAD(v, p) memcpy(&(v), (p), sizeof(v))
+#define PREP_SELECT(m, a, b) ((prep_vd)(((prep_vl)(a) & (m)) | ((prep_vl)(b) & ~(m))))   /* m ? a : b */
 
 /* ok[d] = 1 where sample d is usable (finite signal, finite sigma > 0), else 0; the largest
  * usable sigma into *cmax; returns how many are bad (neither usable nor dropped: sigma = +inf). */
 GS_VECTOR_LOOP static int prep_scan(const double *restrict x, const double *restrict s, size_t D, double *restrict ok,
                                      double *cmax)
 {
-    int bad = 0;
+    long long bad = 0;   /* (counts as wide as the samples: the loop vectorizes without packing) */
     for (size_t d = 0; d < D; d++) {
-        int u = (fabs(x[d]) <= DBL_MAX) & (fabs(s[d]) <= DBL_MAX) & (s[d] > 0.0);
+        long long u = (fabs(x[d]) <= DBL_MAX) & (fabs(s[d]) <= DBL_MAX) & (s[d] > 0.0);
         ok[d] = u ? 1.0 : 0.0;
         bad += !u & !(s[d] > DBL_MAX);
     }
-    double mx[PREP_LANES] = {0};
+    prep_vd mx = {0};
     size_t d = 0;
-    for (; d + PREP_LANES <= D; d += PREP_LANES)
-        for (int k = 0; k < PREP_LANES; k++) mx[k] = ((ok[d + k] != 0.0) & (s[d + k] > mx[k])) ? s[d + k] : mx[k];
+    for (; d + PREP_LANES <= D; d += PREP_LANES) {
+        prep_vd sv, u;
+        PREP_LOAD(sv, s + d);
+        PREP_LOAD(u, ok + d);
+        mx = PREP_SELECT((u != 0.0) & (sv > mx), sv, mx);
+    }
     for (; d < D; d++) mx[0] = ((ok[d] != 0.0) & (s[d] > mx[0])) ? s[d] : mx[0];
     double c = 0.0;
     for (int k = 0; k < PREP_LANES; k++) c = mx[k] > c ? mx[k] : c;
     *cmax = c;
-    return bad;
+    return (int)bad;
 }
 
 /* Over one band's usable samples, in units of c = 1/(ic1 ic2): sum x^2 - sigma^2 and sum x;
@@ -339,15 +351,20 @@ GS_VECTOR_LOOP static int prep_scan(const double *restrict x, const double *rest
 GS_VECTOR_LOOP static int prep_band(const double *restrict x, const double *restrict s, const double *restrict ok,
                                      size_t K, double ic1, double ic2, double *sum2, double *sum1)
 {
-    double a[PREP_LANES] = {0}, b[PREP_LANES] = {0}, n[PREP_LANES] = {0};
+    prep_vd a = {0}, b = {0}, n = {0}, zero = {0};
     size_t d = 0;
-    for (; d + PREP_LANES <= K; d += PREP_LANES)
-        for (int k = 0; k < PREP_LANES; k++) {
-            double xv = x[d + k] * ic1 * ic2, sv = s[d + k] * ic1 * ic2, u = ok[d + k];
-            a[k] += u != 0.0 ? xv * xv - sv * sv : 0.0;
-            b[k] += u != 0.0 ? xv : 0.0;
-            n[k] += u;
-        }
+    for (; d + PREP_LANES <= K; d += PREP_LANES) {
+        prep_vd xv, sv, u;
+        PREP_LOAD(xv, x + d);
+        PREP_LOAD(sv, s + d);
+        PREP_LOAD(u, ok + d);
+        xv = xv * ic1 * ic2;
+        sv = sv * ic1 * ic2;
+        prep_vl use = u != 0.0;
+        a += PREP_SELECT(use, xv * xv - sv * sv, zero);
+        b += PREP_SELECT(use, xv, zero);
+        n += u;
+    }
     for (; d < K; d++) {
         double xv = x[d] * ic1 * ic2, sv = s[d] * ic1 * ic2;
         a[0] += ok[d] != 0.0 ? xv * xv - sv * sv : 0.0;
@@ -369,12 +386,12 @@ GS_VECTOR_LOOP static int prep_weights(const double *restrict x, const double *r
                                         double *restrict wx, double *restrict xs, double *Sxx, double *wmin,
                                         int *bad)
 {
-    double sxx[PREP_LANES] = {0}, mn[PREP_LANES];
-    int used = 0, over = 0;
+    prep_vd sxx = {0}, mn;
+    long long used = 0, over = 0;
     for (int k = 0; k < PREP_LANES; k++) mn[k] = INFINITY;
     for (size_t d = 0; d < K; d++) {
         double sv = s[d] * ic1 * ic2, ws = 1.0 / (sv * sv + fe2mu2), xv = x[d] * ic1 * ic2 - flat;
-        int good = (ok[d] != 0.0) & (fabs(ws) <= DBL_MAX) & (fabs(ws * xv * xv) <= DBL_MAX);
+        long long good = (ok[d] != 0.0) & (fabs(ws) <= DBL_MAX) & (fabs(ws * xv * xv) <= DBL_MAX);
         w[d] = good ? ws : 0.0;
         xs[d] = good ? xv : 0.0;
         wx[d] = good ? ws * xv : 0.0;
@@ -382,11 +399,14 @@ GS_VECTOR_LOOP static int prep_weights(const double *restrict x, const double *r
         over += (ok[d] != 0.0) & !good;
     }
     size_t d = 0;
-    for (; d + PREP_LANES <= K; d += PREP_LANES)
-        for (int k = 0; k < PREP_LANES; k++) {
-            sxx[k] += wx[d + k] * xs[d + k];
-            mn[k] = ((w[d + k] > 0.0) & (w[d + k] < mn[k])) ? w[d + k] : mn[k];
-        }
+    for (; d + PREP_LANES <= K; d += PREP_LANES) {
+        prep_vd wv, wxv, xsv;
+        PREP_LOAD(wv, w + d);
+        PREP_LOAD(wxv, wx + d);
+        PREP_LOAD(xsv, xs + d);
+        sxx += wxv * xsv;
+        mn = PREP_SELECT((wv > 0.0) & (wv < mn), wv, mn);
+    }
     for (; d < K; d++) {
         sxx[0] += wx[d] * xs[d];
         mn[0] = ((w[d] > 0.0) & (w[d] < mn[0])) ? w[d] : mn[0];
@@ -398,8 +418,8 @@ GS_VECTOR_LOOP static int prep_weights(const double *restrict x, const double *r
     }
     *Sxx += S;
     *wmin = m < INFINITY ? m : *wmin;
-    *bad += over;
-    return used;
+    *bad += (int)over;
+    return (int)used;
 }
 
 /* What the catalog keeps of a light's fit (eq7_noise.c), for a light without one. */
