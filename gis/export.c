@@ -500,7 +500,7 @@ static const char gpkg_rtree_triggers[] =
 static char *gpkg_qml(void)
 {
     static const char *const value[5] = {"0", "120", "240", "other", "unknown"};
-    static const char *const label[5] = {"0 deg", "120 deg", "240 deg", "other phase", "unknown phase"};
+    static const char *const label[5] = {"0 deg", "120 deg", "240 deg", "not 0/120/240 deg", "unknown phase"};
     size_t size = 8192, used = 0;
     char *q = malloc(size);
     if (!q) return NULL;

@@ -156,7 +156,7 @@ static gs_status draw_map(void *ctx, unsigned char *rgb)
 
     /* legend */
     static const char *const names[5] = {"phase 0\u00b0", "phase 120\u00b0", "phase 240\u00b0",
-                                         "other phase", "unknown phase"};
+                                         "not 0/120/240\u00b0", "unknown phase"};
     char text[5][64];
     const char *labels[5];
     PLINT opts[5], box_col[5], box_pat[5], text_col[5];

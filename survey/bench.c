@@ -715,7 +715,6 @@ static int bench_recognize(int argc, char **argv)
                                           {0, 0, 0, 0}};
     int quick = 0, lights_only = 0, captures_only = 0, c;
     optind = 1;
-    opterr = 0;
     numpy_script = NULL;
     while ((c = getopt_long(argc, argv, "h", longs, NULL)) != -1) {
         if (c == 'q') quick = 1;

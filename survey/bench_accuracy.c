@@ -365,7 +365,6 @@ int srv_bench_accuracy(int argc, char **argv)
     int quick = 0, keep = 0, c;
     const char *out = "build/accuracy", *base = "capture/scenes/metro.json";
     optind = 1;
-    opterr = 0;
     while ((c = getopt_long(argc, argv, "ho:", longs, NULL)) != -1) {
         if (c == 'q') quick = 1;
         else if (c == 'O') out = optarg;

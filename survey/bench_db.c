@@ -298,7 +298,7 @@ int srv_bench_db(int argc, char **argv)
         case 'd': dir = optarg; break;
         case 'k': keep = 1; break;
         case 'h': fputs(bench_usage, stdout); return 0;
-        default: return srv_usage_hint("bench");
+        default: return srv_usage_hint("bench", argv);
         }
     }
     char tmp[256] = "", path[4096];

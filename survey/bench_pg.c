@@ -65,7 +65,7 @@ int srv_bench_pg(int argc, char **argv)
         case 'm': if (!parse_size("--max", optarg, &max)) return 2; break;
         case 'd': dir = optarg; break;
         case 'h': fputs(bench_pg_usage, stdout); return 0;
-        default: return srv_usage_hint("bench");
+        default: return srv_usage_hint("bench", argv);
         }
     }
     if (!conninfo) {

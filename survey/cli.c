@@ -5,6 +5,7 @@
 #include "version.h"   /* GS_GIT_COMMIT, written by the Makefile into $(BUILD) */
 
 #include <fftw3.h>
+#include <getopt.h>
 #include <jansson.h>
 #include <plplot.h>
 #include <sndfile.h>
@@ -109,6 +110,7 @@ static int take_max_memory(int *argc, char **argv)
 
 int srv_main(int argc, char **argv)
 {
+    opterr = 0;   /* the commands say what is wrong in one line of their own */
     if (take_max_memory(&argc, argv)) return 2;
     if (argc < 2) {
         usage(stderr);
@@ -130,9 +132,10 @@ int srv_main(int argc, char **argv)
     return c < 0 ? 2 : commands[c].run(argc - 1, argv + 1);
 }
 
-int srv_usage_hint(const char *cmd)
+int srv_usage_hint(const char *cmd, char **argv)
 {
-    fprintf(stderr, "gridsurvey %s: see gridsurvey help %s\n", cmd, cmd);
+    fprintf(stderr, "gridsurvey %s: unknown option or missing value: '%s' (see gridsurvey help %s)\n", cmd,
+            optind > 1 ? argv[optind - 1] : "", cmd);
     return 2;
 }
 

@@ -114,7 +114,7 @@ int srv_cmd_capture(int argc, char **argv)
         case 'm': if (!num_arg("--max-saturated", optarg, 0, 1e9, &v)) return 2; lo.hdr_max_saturated_px = (int)v; break;
         case 'A': if (!num_arg("--stop-after", optarg, 1, 1 << 20, &v)) return 2; lo.stop_after = (int)v; break;
         case 'h': fputs(capture_usage, stdout); return 0;
-        default: return srv_usage_hint("capture");
+        default: return srv_usage_hint("capture", argv);
         }
     }
     if (optind < argc || !backend || !out) {

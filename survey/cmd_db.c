@@ -113,7 +113,7 @@ int srv_cmd_db(int argc, char **argv)
             }
             break;
         case 'h': fputs(db_usage, stdout); return 0;
-        default: return srv_usage_hint("db");
+        default: return srv_usage_hint("db", argv);
         }
     }
     if (optind < argc - 1) {

@@ -103,7 +103,7 @@ static int parse_opts(int argc, char **argv, delight_opts *o)
             }
             break;
         case 'h': fputs(delight_usage, stdout); return 0;
-        default: return srv_usage_hint("delight");
+        default: return srv_usage_hint("delight", argv);
         }
     }
     return -1;

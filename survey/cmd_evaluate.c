@@ -46,7 +46,6 @@ int srv_cmd_evaluate(int argc, char **argv)
     srv_eval_opts o;
     srv_eval_opts_default(&o);
     optind = 1;
-    opterr = 0;
     int c;
     char *end;
     while ((c = getopt_long(argc, argv, ":h", longs, NULL)) != -1) {

@@ -249,7 +249,7 @@ int srv_cmd_export(int argc, char **argv)
             }
             break;
         case 'h': fputs(export_usage, stdout); return 0;
-        default: return srv_usage_hint("export");
+        default: return srv_usage_hint("export", argv);
         }
     }
     if (optind < argc) {

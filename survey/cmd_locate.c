@@ -175,7 +175,7 @@ int srv_cmd_locate(int argc, char **argv)
             }
             break;
         case 'h': fputs(locate_usage, stdout); return 0;
-        default: return srv_usage_hint("locate");
+        default: return srv_usage_hint("locate", argv);
         }
     }
     if (optind < argc) {

@@ -67,7 +67,7 @@ int srv_cmd_push(int argc, char **argv)
         case 'P': o.progress = 1; break;
         case 'q': o.progress = 0; break;
         case 'h': fputs(push_usage, stdout); return 0;
-        default: return srv_usage_hint("push");
+        default: return srv_usage_hint("push", argv);
         }
     }
     if (optind < argc) {

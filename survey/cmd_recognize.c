@@ -161,7 +161,6 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
     o->db = getenv("GRIDSURVEY_DELIGHT");
     if (o->db && !*o->db) o->db = NULL;
     optind = 1;
-    opterr = 0;
     int c;
     char *end;
     while ((c = getopt_long(argc, argv, ":hq", longs, NULL)) != -1) {

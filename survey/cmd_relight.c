@@ -102,7 +102,7 @@ int srv_cmd_relight(int argc, char **argv)
         case 'd': db = optarg; break;
         case 'c': cmp = optarg; break;
         case 'h': fputs(relight_usage, stdout); return 0;
-        default: return srv_usage_hint("relight");
+        default: return srv_usage_hint("relight", argv);
         }
     }
     if (optind + 1 != argc || !out) {

@@ -270,7 +270,6 @@ int srv_cmd_run(int argc, char **argv)
     o.delight_path = getenv("GRIDSURVEY_DELIGHT");
     if (o.delight_path && !*o.delight_path) o.delight_path = NULL;
     optind = 1;
-    opterr = 0;
     int c;
     char *end;
     while ((c = getopt_long(argc, argv, ":hqo:", longs, NULL)) != -1) {

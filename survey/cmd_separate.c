@@ -41,7 +41,7 @@ int srv_cmd_separate(int argc, char **argv)
         case 'O': out = optarg; break;
         case 'o': return srv_out_dir_hint("separate");
         case 'h': fputs(separate_usage, stdout); return 0;
-        default: return srv_usage_hint("separate");
+        default: return srv_usage_hint("separate", argv);
         }
     }
     if (optind + 1 != argc || !out) {

@@ -106,7 +106,7 @@ int srv_cmd_simulate(int argc, char **argv)
             lo.stop_after = (int)stop;
             break;
         case 'h': fputs(simulate_usage, stdout); return 0;
-        default: return srv_usage_hint("simulate");
+        default: return srv_usage_hint("simulate", argv);
         }
     }
     if (optind + 1 != argc || !out) {

@@ -301,7 +301,7 @@ int srv_cmd_stats(int argc, char **argv)
             }
             break;
         case 'h': fputs(stats_usage, stdout); return 0;
-        default: return srv_usage_hint("stats");
+        default: return srv_usage_hint("stats", argv);
         }
     }
     if (optind < argc) {

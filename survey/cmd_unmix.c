@@ -175,7 +175,7 @@ int srv_cmd_unmix(int argc, char **argv)
             if (!parse_num("--min-pixels", optarg, 1, 1e9, &min_px) || min_px != floor(min_px)) return 2;
             break;
         case 'h': fputs(unmix_usage, stdout); return 0;
-        default: return srv_usage_hint("unmix");
+        default: return srv_usage_hint("unmix", argv);
         }
     }
     if (optind + 1 != argc || !sources || !out) {

@@ -520,10 +520,23 @@ done:
 
 /* ------------------------------------------------------------------ printing */
 
+/* 100 v with one decimal, or as many more (up to 4) as keep a share that is not all from
+ * reading 100.0 and one that is not none from reading 0.0 */
+static const char *pct_text(double v, char *buf, size_t size)
+{
+    for (int d = 1; d <= 4; d++) {
+        snprintf(buf, size, "%.*f", d, 100.0 * v);
+        double shown = atof(buf);
+        if (!((v < 1.0 && shown >= 100.0) || (v > 0.0 && shown <= 0.0))) break;
+    }
+    return buf;
+}
+
 static void pct_row(FILE *f, const char *metric, double v, long k, long n, const char *of)
 {
+    char b[32];
     if (isnan(v)) fprintf(f, "| %s | - | %ld / %ld %s |\n", metric, k, n, of);
-    else fprintf(f, "| %s | %.1f %% | %ld / %ld %s |\n", metric, 100.0 * v, k, n, of);
+    else fprintf(f, "| %s | %s %% | %ld / %ld %s |\n", metric, pct_text(v, b, sizeof b), k, n, of);
 }
 
 static json_t *jnum(double v)
@@ -626,9 +639,10 @@ gs_status srv_eval_print(const srv_eval_report *r, const char *truth_path, int j
         fprintf(f, "| location error, median | %.2f m | %ld located matched lights (%ld not located) |\n",
                 r->loc_median_m, r->loc_pairs, r->loc_unlocated);
         fprintf(f, "| location error, 95th percentile | %.2f m | max %.2f m |\n", r->loc_p95_m, r->loc_max_m);
+        char b[32];
         if (r->ellipse_pairs > 0)
-            fprintf(f, "| 95 %% ellipse coverage | %.1f %% | %ld of %ld truth lights inside their stored "
-                    "95 %% error ellipse (calibrated: 95 %%) |\n", 100.0 * r->ellipse_coverage95,
+            fprintf(f, "| 95 %% ellipse coverage | %s %% | %ld of %ld truth lights inside their stored "
+                    "95 %% error ellipse (calibrated: 95 %%) |\n", pct_text(r->ellipse_coverage95, b, sizeof b),
                     r->ellipse_in95, r->ellipse_pairs);
     } else {
         fprintf(f, "| location error | - | no located matched light with a true position (%ld not located) |\n",

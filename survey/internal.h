@@ -110,8 +110,9 @@ int srv_stats_by_survey(const srv_stats_opts *o);
 
 /* Where a command's confirmation line goes: stderr when its output is "-" (stdout). */
 FILE *srv_note_stream(const char *out);
-/* A usage error's hint line, after the one line that says what is wrong: returns 2. */
-int srv_usage_hint(const char *cmd);
+/* getopt's '?' in command cmd (getopt itself prints nothing: srv_main sets opterr = 0): the one
+ * line naming the option (argv[optind - 1]) and the hint; returns 2. */
+int srv_usage_hint(const char *cmd, char **argv);
 /* The one-line usage error of -o given to a command that writes a directory (-o is always a
  * file; directories are --out-dir DIR, docs/reliability.md "Command-line habits"): returns 2. */
 int srv_out_dir_hint(const char *cmd);

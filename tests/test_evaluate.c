@@ -2,6 +2,7 @@
  * against answers worked out by hand, with positions placed by GeographicLib's GeodSolve (a
  * separate program) at known geodesic distances, and one-to-one nearest-first matching. */
 #include "survey/survey.h"
+#include "survey/internal.h"
 #include "tests/fixtures.h"
 #include "tests/survey_fixture.h"
 #include "tests/test.h"
@@ -318,4 +319,37 @@ TEST(evaluate_blend_groups_outcomes)
                          "\"in_image\": true, \"bulb\": \"a\", \"blend_group\": 0.5}]}\n");
     CHECK(srv_evaluate(h, truth, NULL, &r) == GS_EFORMAT && strstr(gs_detail(), "lights[0]"));
     srv_db_close(h);
+}
+
+/* A share that is not all never reads 100.0 %, one that is not none never 0.0 %: one decimal,
+ * or as many more as it takes (the demo's 5211 of 5213 technologies once read 100.0 %). */
+TEST(evaluate_shares_near_all_or_none_not_rounded_to_it)
+{
+    srv_eval_report r;
+    memset(&r, 0, sizeof r);
+    r.truth_in_image = r.matched = r.stored = 100000;
+    r.false_detections = 1;
+    r.tech_answered = 5213, r.tech_correct = 5211;
+    r.phase_answered = 5212, r.phase_correct = 5211;
+    r.bulb_answered = 5213, r.bulb_correct = 5206;
+    r.detection_rate = 1.0;
+    r.false_rate = 1.0 / 100000;
+    r.tech_accuracy = 5211.0 / 5213;
+    r.phase_accuracy = 5211.0 / 5212;
+    r.bulb_accuracy = 5206.0 / 5213;
+    r.resolvable_rate = r.bulb_unknown_rate = r.phase_unknown_rate = r.all_correct_rate = 0.0;
+    r.ellipse_pairs = 0;
+    r.loc_median_m = r.loc_p95_m = r.loc_max_m = NAN;
+    char *text = NULL;
+    size_t size = 0;
+    FILE *f = open_memstream(&text, &size);
+    CHECK(f != NULL);
+    if (!f) return;
+    CHECK_OK(srv_eval_print(&r, "truth.json", 0, f));
+    fclose(f);
+    CHECK_MSG(strstr(text, "| technology accuracy | 99.96 % |") && strstr(text, "| phase accuracy | 99.98 % |") &&
+                  strstr(text, "| bulb accuracy | 99.9 % |") && strstr(text, "| detection rate | 100.0 % |") &&
+                  strstr(text, "| false detections | 0.001 % |") && strstr(text, "| bulb unknown | 0.0 % |"),
+              "%s", text);
+    free(text);
 }

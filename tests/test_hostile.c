@@ -611,9 +611,16 @@ TEST(cli_version_and_help_command)
     CHECK(run("%s help stats", NULL, NULL, NULL) == 0);
     CHECK(!strcmp(help, out));
     CHECK(run("%s help nosuchcommand", NULL, NULL, NULL) == 2);
-    /* a usage error: what is wrong, then a hint; not the whole usage */
+    /* a usage error: one line with what is wrong and a hint; not the whole usage, nor getopt's
+     * own line */
     CHECK(run("%s stats --frobnicate", NULL, NULL, NULL) == 2);
-    CHECK_MSG(fx_count_lines(out) == 2 && strstr(out, "see gridsurvey help stats"), "%s", out);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "'--frobnicate'") && strstr(out, "see gridsurvey help stats"),
+              "%s", out);
+    CHECK(run("%s export --db", NULL, NULL, NULL) == 2);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "missing value: '--db'"), "%s", out);
+    /* a scene where a capture directory is expected: said so */
+    CHECK(run("%s recognize capture/scenes/lab.json", NULL, NULL, NULL) == 1);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "expected a capture directory"), "%s", out);
     CHECK(run("%s export --db x.sqlite", NULL, NULL, NULL) == 2);
     CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "see gridsurvey help export"), "%s", out);
 }

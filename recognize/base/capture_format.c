@@ -300,6 +300,10 @@ gs_status gs_capture_read(const char *dir, gs_capture *cap)
 {
     if (!dir || !cap) return gs_fail(GS_EINVAL, "gs_capture_read: NULL argument");
     memset(cap, 0, sizeof *cap);
+    struct stat sb;
+    if (stat(dir, &sb) == 0 && !S_ISDIR(sb.st_mode))
+        return gs_fail(GS_EINVAL, "%s: not a directory: expected a capture directory (a scene file? "
+                       "gridsurvey simulate SCENE --out-dir DIR renders one; docs/formats.md)", dir);
     reader r;
     memset(&r, 0, sizeof r);
     char json_path[PATH_BUF];
