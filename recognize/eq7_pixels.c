@@ -32,16 +32,34 @@ GS_VECTOR_LOOP static double dot_fd(const float *x, const double *t, size_t n)
     return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
 }
 
+/* LANES floats as one vector (gcc's vector types: the compiler did not vectorize the row loops
+ * written lane by lane, nor a lane loop with an early exit), a select by mask (the same values as
+ * the scalar a > b ? a : b), and the test whether any lane of a comparison holds. The row loops
+ * read LANES floats at a time: their rows are padded to a multiple of LANES. */
+typedef float pix_vf __attribute__((vector_size(LANES * sizeof(float))));
+typedef int pix_vi __attribute__((vector_size(LANES * sizeof(int))));
+#define PIX_LOAD(v, p) memcpy(&(v), (p), sizeof(v))
+#define PIX_SELECT(m, a, b) ((pix_vf)(((pix_vi)(a) & (m)) | ((pix_vi)(b) & ~(m))))   /* m ? a : b */
+#define PIX_ANY(m, any)                                                                            \
+    do {                                                                                           \
+        uint64_t w_[LANES / 2], a_ = 0;                                                            \
+        memcpy(w_, &(m), sizeof w_);                                                               \
+        for (int q_ = 0; q_ < LANES / 2; q_++) a_ |= w_[q_];                                       \
+        (any) = a_ != 0;                                                                           \
+    } while (0)
+
 /* max_j (sh_j + rho_j xp) over n (a multiple of LANES) prefilter scores. */
 GS_VECTOR_LOOP static float row_bound_perp(const float *sh, const float *rho, float xp, size_t n)
 {
-    float mx[LANES];
+    pix_vf mx;
     for (int q = 0; q < LANES; q++) mx[q] = -FLT_MAX;
-    for (size_t j = 0; j < n; j += LANES)
-        for (int q = 0; q < LANES; q++) {
-            float v = sh[j + q] + rho[j + q] * xp;
-            mx[q] = v > mx[q] ? v : mx[q];
-        }
+    for (size_t j = 0; j < n; j += LANES) {
+        pix_vf a, r;
+        PIX_LOAD(a, sh + j);
+        PIX_LOAD(r, rho + j);
+        pix_vf v = a + r * xp;
+        mx = PIX_SELECT(v > mx, v, mx);
+    }
     float r = mx[0];
     for (int q = 1; q < LANES; q++) r = mx[q] > r ? mx[q] : r;
     return r;
@@ -74,10 +92,13 @@ static double pix_L(const rec_matcher *m, size_t j, double z, double Sxx)
  * sense that a row of NaN scores gives NaN. */
 GS_VECTOR_LOOP static float row_max(const float *s, size_t n)
 {
-    float mx[LANES];
-    for (int q = 0; q < LANES; q++) mx[q] = s[q];
-    for (size_t j = LANES; j < n; j += LANES)
-        for (int q = 0; q < LANES; q++) mx[q] = s[j + q] > mx[q] ? s[j + q] : mx[q];
+    pix_vf mx;
+    PIX_LOAD(mx, s);
+    for (size_t j = LANES; j < n; j += LANES) {
+        pix_vf x;
+        PIX_LOAD(x, s + j);
+        mx = PIX_SELECT(x > mx, x, mx);
+    }
     float r = mx[0];
     for (int q = 1; q < LANES; q++) r = mx[q] > r ? mx[q] : r;
     return r;
@@ -86,27 +107,32 @@ GS_VECTOR_LOOP static float row_max(const float *s, size_t n)
 /* u[j] = max(s_j, 0)^2 hf - lnf[j] (the bound U_j in float) for n scores; returns max u. */
 GS_VECTOR_LOOP static float row_bounds(const float *s, const float *lnf, float hf, float *u, size_t n)
 {
-    float mx[LANES];
+    pix_vf mx, zero = {0};
     for (int q = 0; q < LANES; q++) mx[q] = -FLT_MAX;
-    for (size_t j = 0; j < n; j += LANES)
-        for (int q = 0; q < LANES; q++) {
-            float v = s[j + q] > 0.0f ? s[j + q] : 0.0f;
-            float uu = v * v * hf - lnf[j + q];
-            u[j + q] = uu;
-            mx[q] = uu > mx[q] ? uu : mx[q];
-        }
+    for (size_t j = 0; j < n; j += LANES) {
+        pix_vf x, l;
+        PIX_LOAD(x, s + j);
+        PIX_LOAD(l, lnf + j);
+        pix_vf v = PIX_SELECT(x > 0.0f, x, zero);
+        pix_vf uu = v * v * hf - l;
+        memcpy(u + j, &uu, sizeof uu);
+        mx = PIX_SELECT(uu > mx, uu, mx);
+    }
     float r = mx[0];
     for (int q = 1; q < LANES; q++) r = mx[q] > r ? mx[q] : r;
     return r;
 }
 
-/* The first index where u is v (n - 1 if none). */
+/* The first index where u is v (n - 1 if none); u holds a multiple of LANES floats. */
 GS_VECTOR_LOOP static size_t first_equal(const float *u, size_t n, float v)
 {
     size_t j = 0;
     for (; j + LANES <= n; j += LANES) {
-        int any = 0;
-        for (int q = 0; q < LANES; q++) any |= u[j + q] == v;
+        pix_vf x;
+        memcpy(&x, u + j, sizeof x);
+        pix_vi m = x == v;
+        int any;
+        PIX_ANY(m, any);
         if (any) break;
     }
     while (j + 1 < n && u[j] != v) j++;
@@ -114,13 +140,17 @@ GS_VECTOR_LOOP static size_t first_equal(const float *u, size_t n, float v)
 }
 
 /* The indices j < n with (double)u[j] + err >= thr into out, in order; returns their number.
- * (u[j] >= lo, lo a float just below thr - err, is the vectorized pre-test.) */
+ * (u[j] >= lo, lo a float just below thr - err, is the vectorized pre-test; u holds n rounded
+ * up to a multiple of LANES floats.) */
 GS_VECTOR_LOOP static size_t at_least(const float *u, size_t n, float lo, double err, double thr, size_t *out)
 {
     size_t k = 0;
     for (size_t j = 0; j < n; j += LANES) {
-        int any = 0;
-        for (int q = 0; q < LANES && j + (size_t)q < n; q++) any |= u[j + q] >= lo;
+        pix_vf x;
+        memcpy(&x, u + j, sizeof x);
+        pix_vi m = x >= lo;
+        int any;
+        PIX_ANY(m, any);
         if (!any) continue;
         for (size_t q = j; q < j + LANES && q < n; q++)
             if ((double)u[q] + err >= thr) out[k++] = q;
@@ -306,6 +336,38 @@ static double band_terms(const rec_matcher *m, size_t j, const double *p, const 
     return -0.5 * (Sxx - z * z) - 0.5 * log(T) + rec_eq7_log_phi_fast(m, z);
 }
 
+/* The band path's float bounds of n templates (a multiple of LANES; bands blocks of n scores in
+ * s, ib, ib2), a vector of LANES templates at a time: u_j = sum_b max(s_jb fi_b, 0)^2 / 2 -
+ * blnf_j, and the largest snr^2 kept with its sign, num |num| / den (num = sum_b s_jb ib_jb,
+ * den = sum_b fv_b ib2_jb), returned. */
+GS_VECTOR_LOOP static float band_bounds(const float *s, size_t n, int nb, const float *fi, const float *fv,
+                                         const float *blnf, const float *ib, const float *ib2, float *u)
+{
+    pix_vf mxs, zero = {0};
+    for (int q = 0; q < LANES; q++) mxs[q] = -FLT_MAX;
+    for (size_t j0 = 0; j0 < n; j0 += LANES) {
+        pix_vf num = zero, den = zero, uu;
+        PIX_LOAD(uu, blnf + j0);
+        uu = -uu;
+        for (int b = 0; b < nb; b++) {
+            pix_vf sb, ibb, ib2b;
+            PIX_LOAD(sb, s + (size_t)b * n + j0);
+            PIX_LOAD(ibb, ib + (size_t)b * n + j0);
+            PIX_LOAD(ib2b, ib2 + (size_t)b * n + j0);
+            pix_vf z = sb * fi[b], zp = PIX_SELECT(z > 0.0f, z, zero);
+            uu += 0.5f * zp * zp;
+            num += sb * ibb;
+            den += fv[b] * ib2b;
+        }
+        memcpy(u + j0, &uu, sizeof uu);
+        pix_vf s2 = num * PIX_SELECT(num > 0.0f, num, -num) / den;
+        mxs = PIX_SELECT(s2 > mxs, s2, mxs);
+    }
+    float r = mxs[0];
+    for (int q = 1; q < LANES; q++) r = mxs[q] > r ? mxs[q] : r;
+    return r;
+}
+
 /* rec_match_pixels for matchers with per-band brightness or model error (m->bandpath): srow
  * holds the row's float scores per band (bands blocks of Mp). The same rec_eq7_decision as pixel_row,
  * with the band model of rec_eq7_match_light_ws (per-band sigma^2 = sg^2 + (model_error mu_b)^2). */
@@ -340,36 +402,10 @@ static void pixel_row_band(const rec_matcher *m, pix_work *pw, const float *xr, 
             fi[b] = (float)inv[b];
             fv[b] = (float)var[b];
         }
-        float mxs[LANES];
-        for (int q = 0; q < LANES; q++) mxs[q] = -FLT_MAX;
-        for (size_t j0 = 0; j0 < Mp; j0 += LANES) {
-            float num[LANES], den[LANES], uu[LANES];
-            for (int q = 0; q < LANES; q++) {
-                num[q] = 0.0f;
-                den[q] = 0.0f;
-                uu[q] = -m->blnf[j0 + (size_t)q];
-            }
-            for (int b = 0; b < nb; b++) {
-                const float *sb = srow + (size_t)b * Mp + j0, *ib = m->bib + (size_t)b * Mp + j0,
-                            *ib2 = m->bib2 + (size_t)b * Mp + j0;
-                for (int q = 0; q < LANES; q++) {
-                    float z = sb[q] * fi[b], zp = z > 0.0f ? z : 0.0f;
-                    uu[q] += 0.5f * zp * zp;
-                    num[q] += sb[q] * ib[q];
-                    den[q] += fv[b] * ib2[q];
-                }
-            }
-            for (int q = 0; q < LANES; q++) {
-                ub[j0 + (size_t)q] = uu[q];
-                float s2 = num[q] * (num[q] > 0.0f ? num[q] : -num[q]) / den[q];
-                mxs[q] = s2 > mxs[q] ? s2 : mxs[q];
-            }
-        }
-        float s2max = mxs[0];
-        for (int q = 1; q < LANES; q++) s2max = mxs[q] > s2max ? mxs[q] : s2max;
+        float s2max = band_bounds(srow, Mp, nb, fi, fv, m->blnf, m->bib, m->bib2, ub);
         smax = s2max > 0.0f ? sqrt((double)s2max) * (1.0 + 1e-5) : 0.0;   /* float slack */
         umax = row_max(ub, Mp);
-        while (ju + 1 < M && ub[ju] != umax) ju++;
+        ju = first_equal(ub, M, umax);
     } else {
         /* one gain with per-band sigmas: exact terms for every template (no bound needed) */
         for (size_t j = 0; j < M; j++) {
@@ -519,7 +555,7 @@ gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *no
     pw.rows = malloc(sizeof *pw.rows * B);
     pw.y = malloc(sizeof *pw.y * B * (R ? R : 1));
     pw.sh = malloc(sizeof *pw.sh * B * Mp);
-    pw.ub = malloc(sizeof *pw.ub * Mp);
+    pw.ub = calloc(Mp, sizeof *pw.ub);   /* (read whole by the LANES-wide tests) */
     pw.zz = malloc(sizeof *pw.zz * m->M);
     pw.gg = malloc(sizeof *pw.gg * m->M);
     pw.xd = malloc(sizeof *pw.xd * D);
