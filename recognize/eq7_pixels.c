@@ -16,6 +16,12 @@
 typedef float pix_v8f __attribute__((vector_size(8 * sizeof(float))));
 typedef double pix_v8d __attribute__((vector_size(8 * sizeof(double))));
 
+/* xd = the n floats of x as doubles. */
+GS_VECTOR_LOOP static void to_double(const float *restrict x, size_t n, double *restrict xd)
+{
+    for (size_t i = 0; i < n; i++) xd[i] = x[i];
+}
+
 /* Sum of squares of n floats in double, 8 partial sums (the chain would be latency bound). */
 GS_VECTOR_LOOP static double sumsq_f(const float *x, size_t n)
 {
@@ -54,12 +60,19 @@ typedef float pix_vf __attribute__((vector_size(LANES * sizeof(float))));
 typedef int pix_vi __attribute__((vector_size(LANES * sizeof(int))));
 #define PIX_LOAD(v, p) memcpy(&(v), (p), sizeof(v))
 #define PIX_SELECT(m, a, b) ((pix_vf)(((pix_vi)(a) & (m)) | ((pix_vi)(b) & ~(m))))   /* m ? a : b */
+typedef int pix_vi8 __attribute__((vector_size(LANES / 2 * sizeof(int))));
+typedef int pix_vi4 __attribute__((vector_size(LANES / 4 * sizeof(int))));
 #define PIX_ANY(m, any)                                                                            \
     do {                                                                                           \
-        uint64_t w_[LANES / 2], a_ = 0;                                                            \
-        memcpy(w_, &(m), sizeof w_);                                                               \
-        for (int q_ = 0; q_ < LANES / 2; q_++) a_ |= w_[q_];                                       \
-        (any) = a_ != 0;                                                                           \
+        pix_vi8 h_[2];                                                                             \
+        pix_vi4 q_[2];                                                                             \
+        uint64_t w_[2];                                                                            \
+        memcpy(h_, &(m), sizeof h_);                                                               \
+        h_[0] |= h_[1];                                                                            \
+        memcpy(q_, h_, sizeof q_);                                                                 \
+        q_[0] |= q_[1];                                                                            \
+        memcpy(w_, q_, sizeof w_);                                                                 \
+        (any) = (w_[0] | w_[1]) != 0;                                                              \
     } while (0)
 
 /* max_j (sh_j + rho_j xp) over n (a multiple of LANES) prefilter scores. */
@@ -230,8 +243,7 @@ static void pixel_row(const rec_matcher *m, pix_work *pw, const float *xr, const
      * rescored in double, so the posterior does not depend on float rounding. */
     double err = FLOAT_ERR * Sxx + 1e-6;
     int exact = err > 1e-3;
-    if (exact)
-        for (size_t d = 0; d < D; d++) xd[d] = xr[d];
+    if (exact) to_double(xr, D, xd);
     double zu = exact ? gs_dot(xd, m->tnd + ju * D, D) * inv : srow[ju] * inv;
     /* candidates: the templates whose bound reaches within CUT_PIXEL of a template's L */
     double thr = pix_L(m, ju, zu, Sxx) + 0.5 * Sxx - CUT_PIXEL - 2.0 * err;
@@ -437,8 +449,7 @@ static void pixel_row_band(const rec_matcher *m, pix_work *pw, const float *xr, 
     if (!(smax >= min_snr) || !(smax > 0.0)) return;   /* every template too dim (or NaN) */
     double err = FLOAT_ERR * Sxx + 1e-6;
     int exact = err > 1e-3;
-    if (exact)
-        for (size_t d = 0; d < D; d++) xd[d] = xr[d];
+    if (exact) to_double(xr, D, xd);
     if (exact)
         for (int b = 0; b < nb; b++) p[b] = gs_dot(xd + (size_t)b * K, m->tbn + ju * D + (size_t)b * K, K);
     else
