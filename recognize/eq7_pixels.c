@@ -589,6 +589,10 @@ gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *no
         return gs_fail(GS_ENOMEM, "Eq. 7 pixels: cannot allocate a %zu x %zu score block", B, Mp);
     }
     const double min_snr = m->o.min_snr;
+    /* The prefilter pays only where it rejects rows: after a block where it passed more than
+     * 3/4 of them (an all-lit region) the next PIX_PREFILTER_REST blocks go without it (the
+     * same answers: a row it rejects is dim for every template) */
+    int rest = 0;
     for (size_t r0 = 0; r0 < P; r0 += B) {
         size_t nr = P - r0 < B ? P - r0 : B;
         const float *xb = x + r0 * D;
@@ -603,7 +607,9 @@ gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *no
          * so a row whose bound stays below min_snr sigma is dim for every template (exactly as
          * the full test would find) and needs no full scores. */
         size_t ns = 0;
-        if (R) {
+        int prefilter = R && rest == 0;
+        rest -= rest > 0;
+        if (prefilter) {
             cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)nr, (int)R, (int)D, 1.0f, xb,
                         (int)D, m->pe, (int)D, 0.0f, pw.y, (int)R);
             cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)nr, (int)Mp, (int)R, 1.0f, pw.y,
@@ -612,7 +618,7 @@ gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *no
         for (size_t i = 0; i < nr; i++) {
             double sg = noise_sigma[r0 + i];
             if (!(sg > 0.0) || !isfinite(sg)) continue;
-            if (R) {
+            if (prefilter) {
                 const float *xr = xb + i * D;
                 double ss = sumsq_f(xr, D), yy = 0.0;
                 for (size_t q = 0; q < R; q++) yy += (double)pw.y[i * R + q] * pw.y[i * R + q];
@@ -624,6 +630,7 @@ gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *no
             }
             pw.rows[ns++] = r0 + i;
         }
+        if (prefilter && 4 * ns > 3 * nr) rest = PIX_PREFILTER_REST;
         if (ns == 0) continue;
         const float *xs = xb;
         if (ns < nr) {

@@ -115,7 +115,8 @@ gs_status rec_cv_dilate_u8(unsigned char *mask, int width, int height, int radiu
 #define CUT_REFINE 30.0   /* nats: continuous bulbs this far below the best keep their grid peak */
 #define FLOAT_ERR 2e-6    /* error of z^2/2 from float scores, per unit |x|^2/sigma^2 */
 #define PHASE_WINDOW 0.16666666666666666  /* +-30 deg of phase = +-1/6 cycle of shift */
-#define PIX_BLOCK 1024    /* rows per SGEMM block */
+#define PIX_BLOCK 512    /* rows per SGEMM block (its band scores stay in L2) */
+#define PIX_PREFILTER_REST 7   /* blocks without the prefilter after one it hardly filtered */
 #define SUMS_ROWS 8       /* the light path's sums: lights and templates of one tile (eq7_sums.c) */
 #define SUMS_COLS 16
 #define LANES 16          /* row loops in blocks of 16 floats (vectorised by the compiler) */

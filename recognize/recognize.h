@@ -344,8 +344,8 @@ const char *rec_noise_source_name(rec_noise_source s);
 gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_match *out,
                             rec_noise_report *noise);
 
-/* Eq. 7 per pixel, as matrix products (OpenBLAS SGEMMs per block of 1024 rows; a rigorous
- * prefilter first sets aside rows that are dim for every template): x holds P rows of
+/* Eq. 7 per pixel, as matrix products (OpenBLAS SGEMMs per block of 512 rows; a rigorous
+ * prefilter first sets aside rows that are dim for every template, where it finds some): x holds P rows of
  * bands * K values, noise_sigma one std per row (uniform over the row; the model error adds per
  * band, as for one light). With band gains or a model error (3 bands) the scores are per band:
  * one SGEMM of K columns per band. Writes the best bulb,
