@@ -52,7 +52,7 @@ static const char bench_usage[] =
 /* The paper's Eq. 7 (one brightness per light with chromaticity templates, no excess noise, the
  * closed world, one light per aperture: no flat share and no nested-model tests): the model the
  * triple-loop reference below implements, so both compute the same thing (with the posterior,
- * which the reference does not). The survey's options have their own table. */
+ * which the reference does not). The survey's options have their own rows. */
 static void bench_eq7_opts(rec_eq7_opts *eo)
 {
     rec_eq7_opts_default(eo);
@@ -326,7 +326,7 @@ static gs_status run_pixels(const config *c, rec_matcher *m, result *res)
     }
     if (st == GS_OK && !c->continuous) {
         /* the floor of any matrix-product implementation: the scores alone, one SGEMM per block
-         * of 4096 rows as recognize.h describes, no decision */
+         * of 4096 rows, no decision */
         size_t B = 4096, M = r.M;
         float *tf = malloc(sizeof *tf * M * D), *sc = malloc(sizeof *sc * B * M);
         if (tf && sc) {
@@ -628,8 +628,9 @@ static void pixel_row(const gs_delight *all, const config *c, int *failed)
     run_config(all, c, &r);
     char bl[16];
     if (!r.ok) {
-        printf("| %d | %d | %s | | %zu | %.2f | failed: %s | | | | | | | |\n", c->K, c->bands,
-               bulbs_label(c->bulbs, bl, sizeof bl), c->pixels, c->lit, r.detail);
+        printf("| %d | %d | %s%s%s | | %zu | %.2f | failed: %s | | | | | | | |\n", c->K, c->bands,
+               bulbs_label(c->bulbs, bl, sizeof bl), c->continuous ? " (continuous)" : "",
+               c->defaults == 1 ? " (survey's defaults)" : "", c->pixels, c->lit, r.detail);
         (*failed)++;
         return;
     }
@@ -755,8 +756,8 @@ static int bench_recognize(int argc, char **argv)
            "--other-prior 0 --flat-share 0 --nested-tests off`): what the reference computes, and "
            "besides the posterior, the runner-up and the chi-square p-value, which the reference "
            "does not. The survey's defaults (docs/recognition.md: the reddened band model, the "
-           "excess measured per capture, the nested-model tests) are timed per light in the last "
-           "tables.\n\n");
+           "excess measured per capture, the nested-model tests) are timed per pixel in the rows "
+           "marked so and per light in the last tables.\n\n");
     printf("One core (OpenBLAS single-threaded), built-in DELIGHT at 50 Hz (all = every voltage-"
            "referenced entry of the sensor), phases 0/120/240 unless marked continuous. Synthetic "
            "data: a lit row/light is a random template at a mean sample of %.0f noise sigmas "
@@ -790,10 +791,11 @@ static int bench_recognize(int argc, char **argv)
                "best of %d runs in this process's run; *vs NumPy* is rec_match_pixels' rate over "
                "its, *NumPy agree* the fraction of rows both answer alike.\n\n", numpy_script, REPS);
     printf("Rows marked *survey's defaults* run rec_match_pixels with rec_eq7_opts_default, as "
-           "`gridsurvey recognize --maps` does (the reddened band model: a brightness and an optical "
-           "depth per pixel; the model error): more work per pixel than the paper's model the "
-           "reference and NumPy compute, so their *agree* columns measure the models' difference "
-           "too.\n\n");
+           "`gridsurvey recognize --maps` does: the pixel path runs the reddened band model as free "
+           "band gains (a brightness per band; no model error, which the defaults measure per "
+           "capture for lights only): scores per band, more work per pixel than the paper's model "
+           "the reference and NumPy compute, so their *agree* columns measure the models' "
+           "difference too.\n\n");
     pixel_header(numpy_script != NULL);
     static const double lits[] = {0.0, 0.1, 1.0};
     for (int e = quick ? 14 : 16; e <= (quick ? 16 : 20); e += 2)
