@@ -236,12 +236,14 @@ static gs_status subset(const gs_delight *d, int bands, int count, gs_delight **
 /* The --numpy script (survey/bench_eq7_numpy.py), NULL without. */
 static const char *numpy_script;
 
-/* The same rows through the NumPy implementation of the reference's search, one core
+/* The same rows through the NumPy implementation of rec_match_pixels' search (the paper's model
+ * as the reference; with free_gains the survey's defaults per pixel, free band gains), one core
  * (OPENBLAS_NUM_THREADS=1): its rate and the fraction of rows with the same answer as
  * rec_match_pixels (bulb, phase). Inputs and answers pass through files in a temporary
  * directory. */
 static gs_status run_numpy(const ref_templates *r, const float *x, size_t P, double min_snr,
-                           double chi2_thr, const int *bulb, const float *ph, result *res)
+                           double chi2_thr, int free_gains, int bands, const int *bulb,
+                           const float *ph, result *res)
 {
     char dir[] = "/tmp/gs-bench-numpy-XXXXXX", path[512], cmd[1400];
     if (!mkdtemp(dir)) return gs_fail(GS_EIO, "bench: cannot create a temporary directory");
@@ -256,7 +258,8 @@ static gs_status run_numpy(const ref_templates *r, const float *x, size_t P, dou
     if (st == GS_OK && f) fclose(f);
     snprintf(path, sizeof path, "%s/params.txt", dir);
     if (st == GS_OK && (f = fopen(path, "w"))) {
-        fprintf(f, "%zu %zu %zu %.17g %.17g %d\n", r->M, D, P, min_snr, chi2_thr, REPS);
+        fprintf(f, "%zu %zu %zu %.17g %.17g %d %s %d\n", r->M, D, P, min_snr, chi2_thr, REPS,
+                free_gains ? "free" : "chroma", bands);
         fclose(f);
     }
     snprintf(cmd, sizeof cmd, "OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 /usr/bin/python3 '%s' '%s'", numpy_script, dir);
@@ -364,7 +367,12 @@ static gs_status run_pixels(const config *c, rec_matcher *m, result *res)
         res->ref_rate = (double)nref / res->ref_seconds;
         res->agree = (double)same / (double)nref;
         free(w);
-        if (st == GS_OK && c->numpy && numpy_script) st = run_numpy(&r, x, P, eo.min_snr, thr, bulb, ph, res);
+        /* NumPy runs the same search as rec_match_pixels: with the survey's defaults the free
+         * band gains (unknown at dof D - bands - 1, as the matcher's) */
+        int free_gains = c->defaults == 1 && c->bands > 1;
+        double np_thr = free_gains ? gs_chi2_isf(eo.unknown_p, (int)D - c->bands - 1) : thr;
+        if (st == GS_OK && c->numpy && numpy_script)
+            st = run_numpy(&r, x, P, eo.min_snr, np_thr, free_gains, c->bands, bulb, ph, res);
     }
     if (st == GS_OK) {
         size_t lit = 0, right = 0;
@@ -793,9 +801,10 @@ static int bench_recognize(int argc, char **argv)
     printf("Rows marked *survey's defaults* run rec_match_pixels with rec_eq7_opts_default, as "
            "`gridsurvey recognize --maps` does: the pixel path runs the reddened band model as free "
            "band gains (a brightness per band; no model error, which the defaults measure per "
-           "capture for lights only): scores per band, more work per pixel than the paper's model "
-           "the reference and NumPy compute, so their *agree* columns measure the models' "
-           "difference too.\n\n");
+           "capture for lights only). %sThe triple-loop reference stays the paper's model, so its "
+           "*agree* measures the models' difference too.\n\n",
+           numpy_script ? "Their NumPy column runs that same search (the script's free model: "
+                          "scores and log Phi per band). " : "");
     pixel_header(numpy_script != NULL);
     static const double lits[] = {0.0, 0.1, 1.0};
     for (int e = quick ? 14 : 16; e <= (quick ? 16 : 20); e += 2)

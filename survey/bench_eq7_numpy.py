@@ -1,13 +1,21 @@
 #!/usr/bin/python3
-"""bench_eq7_numpy.py - the paper's Eq. 7 per pixel in NumPy, for `gridsurvey bench recognize
---numpy` (survey/bench.c): the same search as its triple-loop reference (one brightness per
-pixel, chromaticity templates, unit noise; L = -chi2/2 - log|t| + log Phi(z), z = x.t/|t|; no
-answer when z < min_snr or chi2 > the unknown threshold), in its best NumPy form: float32 scores
-of a block of rows against every unit template as one matrix product, the rest vectorised.
+"""bench_eq7_numpy.py - Eq. 7 per pixel in NumPy, for `gridsurvey bench recognize --numpy`
+(survey/bench.c), in its best NumPy form: float32 scores of a block of rows against every unit
+template as matrix products, the rest vectorised. Unit noise. Two searches:
+
+  chroma  the paper's model, the search of bench.c's triple-loop reference: one brightness per
+          pixel times the chromaticity; L = -chi2/2 - log|t| + log Phi(z), z = x.t/|t|; no answer
+          when z < min_snr or chi2 = |x|^2 - z^2 > the unknown threshold
+  free    the survey's defaults per pixel (free band gains, docs/recognition.md): a brightness
+          per band, each band of a template at mean 1;
+          L = sum_b [log Phi(z_b) - log|t_b|] - (|x|^2 - sum_b z_b^2)/2,
+          z_b = x_b.t_b/|t_b|; no answer when the summed brightness's SNR
+          (sum_b z_b/|t_b|) / sqrt(sum_b 1/|t_b|^2) < min_snr or chi2 = |x|^2 - sum_b max(z_b, 0)^2
+          > the unknown threshold
 
 usage: bench_eq7_numpy.py DIR   (DIR holds t.f64 [M x D], x.f32 [P x D], params.txt
-"M D P min_snr chi2_thr reps"; writes answers.i32 [P] (template index or -1) and seconds.txt,
-the best of reps runs)
+"M D P min_snr chi2_thr reps [chroma|free bands]"; writes answers.i32 [P] (template index or
+-1) and seconds.txt, the best of reps runs)
 example: OPENBLAS_NUM_THREADS=1 bench_eq7_numpy.py /tmp/bench-numpy
 """
 import os
@@ -45,13 +53,49 @@ def search(x, tn32, lognorm, min_snr, chi2_thr):
     return out
 
 
+def search_free(x, t, bands, min_snr, chi2_thr):
+    M, D = t.shape
+    K = D // bands
+    tb = t.reshape(M, bands, K)
+    tb = tb / tb.mean(axis=2, keepdims=True)     # each band at mean 1 (its gain is free)
+    bn = np.linalg.norm(tb, axis=2)                                  # [M x bands]
+    ub32 = [(tb[:, b, :] / bn[:, b:b + 1]).astype(np.float32) for b in range(bands)]
+    blog = np.log(bn).sum(axis=1)
+    ibn = 1.0 / bn
+    snr_den = np.sqrt((ibn * ibn).sum(axis=1))
+    out = np.empty(x.shape[0], dtype=np.int32)
+    for r0 in range(0, x.shape[0], BLOCK):
+        xb = x[r0:r0 + BLOCK]
+        sxx = np.einsum("ij,ij->i", xb, xb, dtype=np.float64)
+        n = xb.shape[0]
+        L = np.empty((n, M))
+        L[:] = -blog
+        num = np.zeros((n, M))
+        gain = np.zeros((n, M))
+        for b in range(bands):
+            z = (xb[:, b * K:(b + 1) * K] @ ub32[b].T).astype(np.float64)   # [rows x M]
+            L += 0.5 * z * z
+            L += log_phi(z)
+            num += z * ibn[:, b]
+            zp = np.maximum(z, 0.0)
+            gain += zp * zp
+        best = np.argmax(L, axis=1)
+        rows = np.arange(len(best))
+        snr = num[rows, best] / snr_den[best]
+        ok = (snr >= min_snr) & (sxx - gain[rows, best] <= chi2_thr)
+        out[r0:r0 + BLOCK] = np.where(ok, best, -1)
+    return out
+
+
 def main():
     if len(sys.argv) != 2 or sys.argv[1] in ("-h", "--help"):
         print(__doc__)
         return 0 if len(sys.argv) == 2 else 2
     d = sys.argv[1]
     with open(os.path.join(d, "params.txt")) as f:
-        M, D, P, min_snr, chi2_thr, reps = f.read().split()
+        fields = f.read().split()
+    M, D, P, min_snr, chi2_thr, reps = fields[:6]
+    model, bands = (fields[6], int(fields[7])) if len(fields) > 6 else ("chroma", 1)
     M, D, P, reps = int(M), int(D), int(P), int(reps)
     min_snr, chi2_thr = float(min_snr), float(chi2_thr)
     t = np.fromfile(os.path.join(d, "t.f64"), dtype=np.float64).reshape(M, D)
@@ -62,7 +106,10 @@ def main():
     best_s = float("inf")
     for _ in range(reps):
         t0 = time.perf_counter()
-        ans = search(x, tn32, lognorm, min_snr, chi2_thr)
+        if model == "free":
+            ans = search_free(x, t, bands, min_snr, chi2_thr)
+        else:
+            ans = search(x, tn32, lognorm, min_snr, chi2_thr)
         best_s = min(best_s, time.perf_counter() - t0)
     ans.tofile(os.path.join(d, "answers.i32"))
     with open(os.path.join(d, "seconds.txt"), "w") as f:

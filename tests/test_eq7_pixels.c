@@ -12,6 +12,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 TEST(eq7_catalog_equals_lights)
 {
@@ -251,3 +252,102 @@ TEST(eq7_pixels_prefilter_generated_delight)
     gs_delight_free(d);
 }
 
+
+/* One file of n items of size sz in dir (CHECKed). */
+static void write_file(const char *dir, const char *name, const void *p, size_t sz, size_t n)
+{
+    char path[1200];
+    snprintf(path, sizeof path, "%s/%s", dir, name);
+    FILE *f = fopen(path, "wb");
+    CHECK(f && fwrite(p, sz, n, f) == n);
+    if (f) fclose(f);
+}
+
+/* rec_match_pixels against an independent implementation of the same search: the NumPy one of
+ * `bench recognize --numpy` (survey/bench_eq7_numpy.py, written from the models' description,
+ * sharing no code with recognize/), on the same rows, with the paper's model and with the
+ * survey's defaults per pixel (free band gains). Rows: a random template of the generated
+ * DELIGHT's voltage-referenced 50 Hz RGB bulbs at 0/120/240 deg, 2 to 40 noise sigmas per
+ * sample, and dark rows. Oracle: the same answer (bulb and phase, or none) for >= 99.5 % of the
+ * rows (float scores leave near-ties to either side), and most lit rows answered. */
+TEST(eq7_pixels_agree_with_numpy_search)
+{
+    gs_delight *all = gs_delight_new(), *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(all, 1024));
+    for (size_t i = 0; i < gs_delight_count(all); i++) {
+        const gs_bulb *b = gs_delight_get(all, i);
+        if (b->grid_hz == 50 && b->brf.bands == 3 && b->ref == GS_REF_VOLTAGE) CHECK_OK(gs_delight_add(d, b));
+    }
+    size_t nb = gs_delight_count(d), M = 3 * nb, D = 78, P = 3000;
+    double *t = malloc(sizeof *t * M * D);
+    float *x = malloc(sizeof *x * P * D), *sg = malloc(sizeof *sg * P), *ph = malloc(sizeof *ph * P);
+    int *bulb = malloc(sizeof *bulb * P), *ans = malloc(sizeof *ans * P);
+    CHECK(nb > 10 && t && x && sg && ph && bulb && ans);
+    for (size_t j = 0; j < M; j++) eq7fx_template(gs_delight_get(d, j / 3), gs_phase_to_shift(120.0 * (double)(j % 3)), 26, t + j * D);
+    uint64_t rs = 77;
+    size_t lit = 0;
+    for (size_t p = 0; p < P; p++) {
+        int on = p % 3 != 0;
+        size_t j = (size_t)gs_splitmix64(&rs) % M;
+        double a = on ? 2.0 + 38.0 * gs_splitmix_uniform(&rs) : 0.0;   /* templates' mean ~1/3 per band */
+        for (size_t k = 0; k < D; k++) x[p * D + k] = (float)(3.0 * a * t[j * D + k] + gs_splitmix_normal(&rs));
+        sg[p] = 1.0f;
+        lit += on;
+    }
+    char dir[1100];
+    snprintf(dir, sizeof dir, "%s", fx_tmp("numpy-search"));
+    CHECK(mkdir(dir, 0700) == 0);
+    write_file(dir, "t.f64", t, sizeof *t, M * D);
+    write_file(dir, "x.f32", x, sizeof *x, P * D);
+    for (int model = 0; model < 2; model++) {
+        rec_eq7_opts o;
+        rec_eq7_opts_default(&o);
+        o.phases = REC_PHASES_3;
+        o.threads = 1;
+        rec_matcher *m = NULL;
+        if (model == 0) m = eq7fx_new_matcher(d, 50, 3, 26, REC_PHASES_3);
+        else CHECK_OK(rec_matcher_new(d, 50, 3, 26, &o, &m));
+        CHECK(m != NULL);
+        if (!m) continue;
+        CHECK_OK(rec_match_pixels(m, x, sg, P, bulb, ph, NULL));
+        /* the unknown test at the matcher's dof: D - 2 (one brightness), D - 4 (three gains) */
+        double thr = gs_chi2_isf(o.unknown_p, model == 0 ? (int)D - 2 : (int)D - 4);
+        char params[256], path[1200], cmd[2600], out[4096];
+        int n = snprintf(params, sizeof params, "%zu %zu %zu %.17g %.17g 1 %s 3\n", M, D, P, o.min_snr, thr,
+                         model == 0 ? "chroma" : "free");
+        write_file(dir, "params.txt", params, 1, (size_t)n);
+        snprintf(cmd, sizeof cmd, "OPENBLAS_NUM_THREADS=1 /usr/bin/python3 survey/bench_eq7_numpy.py %s", dir);
+        CHECK_MSG(fx_run(out, sizeof out, "%s", cmd) == 0, "%s", out);
+        snprintf(path, sizeof path, "%s/answers.i32", dir);
+        FILE *f = fopen(path, "rb");
+        int got = f && fread(ans, sizeof *ans, P, f) == P;
+        if (f) fclose(f);
+        CHECK(got);
+        if (!got) {
+            rec_matcher_free(m);
+            continue;
+        }
+        size_t same = 0, answered = 0;
+        for (size_t p = 0; p < P; p++) {
+            answered += p % 3 != 0 && bulb[p] >= 0;
+            if (ans[p] < 0 || bulb[p] < 0) {
+                same += ans[p] < 0 && bulb[p] < 0;
+                continue;
+            }
+            const gs_bulb *mine = rec_matcher_bulb(m, (size_t)bulb[p]);
+            const gs_bulb *theirs = gs_delight_get(d, (size_t)ans[p] / 3);
+            same += !strcmp(mine->id, theirs->id) && fabs(ph[p] - 120.0 * (ans[p] % 3)) < 1e-3;
+        }
+        CHECK_MSG(same >= P - P / 200, "model %d: %zu of %zu rows answered alike", model, same, P);
+        CHECK_MSG(answered > lit / 2, "model %d: %zu of %zu lit rows answered", model, answered, lit);
+        rec_matcher_free(m);
+    }
+    free(t);
+    free(x);
+    free(sg);
+    free(ph);
+    free(bulb);
+    free(ans);
+    gs_delight_free(d);
+    gs_delight_free(all);
+}
