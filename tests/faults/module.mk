@@ -9,6 +9,8 @@
 #                 ASan+UBSan build; the counts in build/asan/faults.md
 #   make faults FAULT_SWEEP=sites   the same, but the allocations fail once for each distinct
 #                 stack they are made from (at its first call) instead of at every n
+#   make faults FAULT_POINTS=A-B   only the points A..B of each scenario's list (a sweep too long
+#                 for one sitting in parts, with the same binaries; the report says which)
 FAULT_SHIM := $(BUILD)/tests/faults/faultinject.so
 $(FAULT_SHIM): tests/faults/faultinject.c
 	@mkdir -p $(dir $@)
@@ -24,6 +26,7 @@ FAULT_MALLOC_STEP ?= 1
 FAULT_RUN_MALLOC_STEP ?=
 FAULT_RUN_WRITE_STEP ?=
 FAULT_JOBS ?= 1
+FAULT_POINTS ?=
 .PHONY: faults faults-run
 faults: deps
 	$(MAKE) --no-print-directory BUILD=build/asan SAN=1 faults-run
@@ -31,7 +34,7 @@ faults-run: $(TEST_BIN) $(BIN) $(FAULT_SHIM)
 	@echo '| scenario | malloc calls | tried | write calls | tried | fsync calls | rename calls | injected runs | failed cleanly | succeeded complete | bad |' > $(BUILD)/faults.md
 	@echo '| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |' >> $(BUILD)/faults.md
 	GS_SHARED=$(SHARED) GS_BIN=$(BIN) GS_SAN=$(SAN) GS_FAULT_SWEEP=$(FAULT_SWEEP) GS_FAULT_MALLOC_STEP=$(FAULT_MALLOC_STEP) \
-	GS_FAULT_RUN_MALLOC_STEP=$(FAULT_RUN_MALLOC_STEP) GS_FAULT_RUN_WRITE_STEP=$(FAULT_RUN_WRITE_STEP) GS_FAULT_JOBS=$(FAULT_JOBS) GS_FAULT_REPORT=$(CURDIR)/$(BUILD)/faults.md \
+	GS_FAULT_RUN_MALLOC_STEP=$(FAULT_RUN_MALLOC_STEP) GS_FAULT_RUN_WRITE_STEP=$(FAULT_RUN_WRITE_STEP) GS_FAULT_JOBS=$(FAULT_JOBS) GS_FAULT_POINTS=$(FAULT_POINTS) GS_FAULT_REPORT=$(CURDIR)/$(BUILD)/faults.md \
 	GS_TEST_TIMEOUT_S=172800 GS_TEST_JOBS=1 LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp:print_suppressions=0 \
 	  $(TEST_BIN) fault_injection_ _fault_injection_run_new_database
 	@cat $(BUILD)/faults.md
