@@ -316,9 +316,7 @@ static void flat_share_of(const rec_matcher *m, rec_eq7_work *w, const double *t
 typedef double prep_vd __attribute__((vector_size(PREP_LANES * sizeof(double))));
 typedef long long prep_vl __attribute__((vector_size(PREP_LANES * sizeof(long long))));
 
-/* (macros: a function returning a vector would take the ABI of the widest one) */
-#define PREP_LOAD(v, p) memcpy(&(v), (p), sizeof(v))
-#define PREP_SELECT(m, a, b) ((prep_vd)(((prep_vl)(a) & (m)) | ((prep_vl)(b) & ~(m))))   /* m ? a : b */
+#define PREP_SELECT(m, a, b) REC_VSELECT(prep_vd, prep_vl, m, a, b)   /* m ? a : b */
 
 /* ok[d] = 1 where sample d is usable (finite signal, finite sigma > 0), else 0; the largest
  * usable sigma into *cmax; returns how many are bad (neither usable nor dropped: sigma = +inf). */
@@ -335,8 +333,8 @@ GS_VECTOR_LOOP static int prep_scan(const double *restrict x, const double *rest
     size_t d = 0;
     for (; d + PREP_LANES <= D; d += PREP_LANES) {
         prep_vd sv, u;
-        PREP_LOAD(sv, s + d);
-        PREP_LOAD(u, ok + d);
+        REC_VLOAD(sv, s + d);
+        REC_VLOAD(u, ok + d);
         mx = PREP_SELECT((u != 0.0) & (sv > mx), sv, mx);
     }
     for (; d < D; d++) mx[0] = ((ok[d] != 0.0) & (s[d] > mx[0])) ? s[d] : mx[0];
@@ -355,9 +353,9 @@ GS_VECTOR_LOOP static int prep_band(const double *restrict x, const double *rest
     size_t d = 0;
     for (; d + PREP_LANES <= K; d += PREP_LANES) {
         prep_vd xv, sv, u;
-        PREP_LOAD(xv, x + d);
-        PREP_LOAD(sv, s + d);
-        PREP_LOAD(u, ok + d);
+        REC_VLOAD(xv, x + d);
+        REC_VLOAD(sv, s + d);
+        REC_VLOAD(u, ok + d);
         xv = xv * ic1 * ic2;
         sv = sv * ic1 * ic2;
         prep_vl use = u != 0.0;
@@ -401,9 +399,9 @@ GS_VECTOR_LOOP static int prep_weights(const double *restrict x, const double *r
     size_t d = 0;
     for (; d + PREP_LANES <= K; d += PREP_LANES) {
         prep_vd wv, wxv, xsv;
-        PREP_LOAD(wv, w + d);
-        PREP_LOAD(wxv, wx + d);
-        PREP_LOAD(xsv, xs + d);
+        REC_VLOAD(wv, w + d);
+        REC_VLOAD(wxv, wx + d);
+        REC_VLOAD(xsv, xs + d);
         sxx += wxv * xsv;
         mn = PREP_SELECT((wv > 0.0) & (wv < mn), wv, mn);
     }

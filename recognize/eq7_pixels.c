@@ -29,7 +29,7 @@ GS_VECTOR_LOOP static double sumsq_f(const float *x, size_t n)
     size_t i = 0;
     for (; i + 8 <= n; i += 8) {
         pix_v8f xf;
-        memcpy(&xf, x + i, sizeof xf);
+        REC_VLOAD(xf, x + i);
         pix_v8d xd = __builtin_convertvector(xf, pix_v8d);
         a += xd * xd;
     }
@@ -44,8 +44,8 @@ GS_VECTOR_LOOP static double dot_fd(const float *x, const double *t, size_t n)
     for (; i + 8 <= n; i += 8) {
         pix_v8f xf;
         pix_v8d tv;
-        memcpy(&xf, x + i, sizeof xf);
-        memcpy(&tv, t + i, sizeof tv);
+        REC_VLOAD(xf, x + i);
+        REC_VLOAD(tv, t + i);
         a += __builtin_convertvector(xf, pix_v8d) * tv;
     }
     for (; i < n; i++) a[0] += (double)x[i] * t[i];
@@ -58,8 +58,7 @@ GS_VECTOR_LOOP static double dot_fd(const float *x, const double *t, size_t n)
  * read LANES floats at a time: their rows are padded to a multiple of LANES. */
 typedef float pix_vf __attribute__((vector_size(LANES * sizeof(float))));
 typedef int pix_vi __attribute__((vector_size(LANES * sizeof(int))));
-#define PIX_LOAD(v, p) memcpy(&(v), (p), sizeof(v))
-#define PIX_SELECT(m, a, b) ((pix_vf)(((pix_vi)(a) & (m)) | ((pix_vi)(b) & ~(m))))   /* m ? a : b */
+#define PIX_SELECT(m, a, b) REC_VSELECT(pix_vf, pix_vi, m, a, b)   /* m ? a : b */
 typedef int pix_vi8 __attribute__((vector_size(LANES / 2 * sizeof(int))));
 typedef int pix_vi4 __attribute__((vector_size(LANES / 4 * sizeof(int))));
 #define PIX_ANY(m, any)                                                                            \
@@ -82,8 +81,8 @@ GS_VECTOR_LOOP static float row_bound_perp(const float *sh, const float *rho, fl
     for (int q = 0; q < LANES; q++) mx[q] = -FLT_MAX;
     for (size_t j = 0; j < n; j += LANES) {
         pix_vf a, r;
-        PIX_LOAD(a, sh + j);
-        PIX_LOAD(r, rho + j);
+        REC_VLOAD(a, sh + j);
+        REC_VLOAD(r, rho + j);
         pix_vf v = a + r * xp;
         mx = PIX_SELECT(v > mx, v, mx);
     }
@@ -120,10 +119,10 @@ static double pix_L(const rec_matcher *m, size_t j, double z, double Sxx)
 GS_VECTOR_LOOP static float row_max(const float *s, size_t n)
 {
     pix_vf mx;
-    PIX_LOAD(mx, s);
+    REC_VLOAD(mx, s);
     for (size_t j = LANES; j < n; j += LANES) {
         pix_vf x;
-        PIX_LOAD(x, s + j);
+        REC_VLOAD(x, s + j);
         mx = PIX_SELECT(x > mx, x, mx);
     }
     float r = mx[0];
@@ -138,8 +137,8 @@ GS_VECTOR_LOOP static float row_bounds(const float *s, const float *lnf, float h
     for (int q = 0; q < LANES; q++) mx[q] = -FLT_MAX;
     for (size_t j = 0; j < n; j += LANES) {
         pix_vf x, l;
-        PIX_LOAD(x, s + j);
-        PIX_LOAD(l, lnf + j);
+        REC_VLOAD(x, s + j);
+        REC_VLOAD(l, lnf + j);
         pix_vf v = PIX_SELECT(x > 0.0f, x, zero);
         pix_vf uu = v * v * hf - l;
         memcpy(u + j, &uu, sizeof uu);
@@ -156,7 +155,7 @@ GS_VECTOR_LOOP static size_t first_equal(const float *u, size_t n, float v)
     size_t j = 0;
     for (; j + LANES <= n; j += LANES) {
         pix_vf x;
-        memcpy(&x, u + j, sizeof x);
+        REC_VLOAD(x, u + j);
         pix_vi m = x == v;
         int any;
         PIX_ANY(m, any);
@@ -174,7 +173,7 @@ GS_VECTOR_LOOP static size_t at_least(const float *u, size_t n, float lo, double
     size_t k = 0;
     for (size_t j = 0; j < n; j += LANES) {
         pix_vf x;
-        memcpy(&x, u + j, sizeof x);
+        REC_VLOAD(x, u + j);
         pix_vi m = x >= lo;
         int any;
         PIX_ANY(m, any);
@@ -373,13 +372,13 @@ GS_VECTOR_LOOP static float band_bounds(const float *s, size_t n, int nb, const 
     for (int q = 0; q < LANES; q++) mxs[q] = -FLT_MAX;
     for (size_t j0 = 0; j0 < n; j0 += LANES) {
         pix_vf num = zero, den = zero, uu;
-        PIX_LOAD(uu, blnf + j0);
+        REC_VLOAD(uu, blnf + j0);
         uu = -uu;
         for (int b = 0; b < nb; b++) {
             pix_vf sb, ibb, ib2b;
-            PIX_LOAD(sb, s + (size_t)b * n + j0);
-            PIX_LOAD(ibb, ib + (size_t)b * n + j0);
-            PIX_LOAD(ib2b, ib2 + (size_t)b * n + j0);
+            REC_VLOAD(sb, s + (size_t)b * n + j0);
+            REC_VLOAD(ibb, ib + (size_t)b * n + j0);
+            REC_VLOAD(ib2b, ib2 + (size_t)b * n + j0);
             pix_vf z = sb * fi[b], zp = PIX_SELECT(z > 0.0f, z, zero);
             uu += 0.5f * zp * zp;
             num += sb * ibb;
@@ -449,11 +448,12 @@ static void pixel_row_band(const rec_matcher *m, pix_work *pw, const float *xr, 
     if (!(smax >= min_snr) || !(smax > 0.0)) return;   /* every template too dim (or NaN) */
     double err = FLOAT_ERR * Sxx + 1e-6;
     int exact = err > 1e-3;
-    if (exact) to_double(xr, D, xd);
-    if (exact)
+    if (exact) {
+        to_double(xr, D, xd);
         for (int b = 0; b < nb; b++) p[b] = gs_dot(xd + (size_t)b * K, m->tbn + ju * D + (size_t)b * K, K);
-    else
+    } else {
         for (int b = 0; b < nb; b++) p[b] = srow[(size_t)b * Mp + ju];
+    }
     double g0, s0;
     double thr = band_terms(m, ju, p, var, Sxx, &g0, &s0) + 0.5 * Sxx - CUT_PIXEL - 2.0 * err;
     w->ncand = at_least(ub, M, nextafterf((float)(thr - err), -INFINITY), err, thr, w->cand);

@@ -120,6 +120,11 @@ gs_status rec_cv_dilate_u8(unsigned char *mask, int width, int height, int radiu
 #define SUMS_ROWS 8       /* the light path's sums: lights and templates of one tile (eq7_sums.c) */
 #define SUMS_COLS 16
 #define LANES 16          /* row loops in blocks of 16 floats (vectorised by the compiler) */
+/* gcc vector types (eq7_light.c, eq7_pixels.c): a load from memory of any alignment, and a select
+ * by a comparison's mask m of integer vector type IT (the same values as the scalar m ? a : b;
+ * macros: a function returning a vector would take the ABI of the widest one) */
+#define REC_VLOAD(v, p) memcpy(&(v), (p), sizeof(v))
+#define REC_VSELECT(T, IT, m, a, b) ((T)(((IT)(a) & (m)) | ((IT)(b) & ~(m))))
 #define LOGPHI_ZMAX 12.0
 #define LOGPHI_STEPS 32   /* table points per unit of z */
 

@@ -634,11 +634,12 @@ static void pixel_row(const gs_delight *all, const config *c, int *failed)
 {
     result r;
     run_config(all, c, &r);
-    char bl[16];
+    char bl[16], label[64];
+    snprintf(label, sizeof label, "%s%s%s", bulbs_label(c->bulbs, bl, sizeof bl),
+             c->continuous ? " (continuous)" : "", c->defaults == 1 ? " (survey's defaults)" : "");
     if (!r.ok) {
-        printf("| %d | %d | %s%s%s | | %zu | %.2f | failed: %s | | | | | | | |\n", c->K, c->bands,
-               bulbs_label(c->bulbs, bl, sizeof bl), c->continuous ? " (continuous)" : "",
-               c->defaults == 1 ? " (survey's defaults)" : "", c->pixels, c->lit, r.detail);
+        printf("| %d | %d | %s | | %zu | %.2f | failed: %s | | | | | | | |\n", c->K, c->bands, label,
+               c->pixels, c->lit, r.detail);
         (*failed)++;
         return;
     }
@@ -656,9 +657,8 @@ static void pixel_row(const gs_delight *all, const config *c, int *failed)
         snprintf(np, sizeof np, " %.3f | %.1fx | %.4f |", r.numpy_rate / 1e6, r.rate / r.numpy_rate, r.numpy_agree);
     else if (c->numpy)
         snprintf(np, sizeof np, " - | - | - |");
-    printf("| %d | %d | %s%s%s | %zu | 2^%d | %.2f | %.3f | **%.3f** | %s | %s | %s | %s | %s | %.0f |%s\n",
-           c->K, c->bands, bulbs_label(c->bulbs, bl, sizeof bl),
-           c->continuous ? " (continuous)" : "", c->defaults == 1 ? " (survey's defaults)" : "", r.templates,
+    printf("| %d | %d | %s | %zu | 2^%d | %.2f | %.3f | **%.3f** | %s | %s | %s | %s | %s | %.0f |%s\n",
+           c->K, c->bands, label, r.templates,
            (int)lround(log2((double)c->pixels)), c->lit, r.seconds, r.rate / 1e6, sgemm, ref, speed,
            agree, lit, r.maxrss_kib / 1024.0, np);
     fflush(stdout);
@@ -746,12 +746,9 @@ static int bench_recognize(int argc, char **argv)
         fprintf(stderr, "gridsurvey bench recognize: --lights and --captures: expected one of them (see --help)\n");
         return 2;
     }
-    gs_delight *all = gs_delight_new();
-    gs_status st = all ? gs_delight_generate(all, GS_BRF_N_DEFAULT) : gs_fail(GS_ENOMEM, "out of memory");
-    if (st != GS_OK) {
-        gs_delight_free(all);
-        return srv_error(st);
-    }
+    gs_delight *all = NULL;
+    gs_status st = gs_delight_open(NULL, &all);
+    if (st != GS_OK) return srv_error(st);
     int failed = 0;
     static const int Ks[] = {8, 13, 26}, bandss[] = {1, 3}, bulbss[] = {10, 25, 0};
     double t_start = gs_clock_s(CLOCK_MONOTONIC);

@@ -416,10 +416,8 @@ int srv_bench_accuracy(int argc, char **argv)
         pts[np++] = (srv_acc_point){.hard = 2, .K = 8, .C = 64, .hdr = 1, .locked = 1};
         pts[np++] = (srv_acc_point){.K = 8, .C = 64, .hdr = 0, .locked = 1};
     }
-    gs_delight *dl = gs_delight_new();
-    s = dl ? gs_delight_generate(dl, GS_BRF_N_DEFAULT) : gs_fail(GS_ENOMEM, "out of memory");
-    if (s != GS_OK) {
-        gs_delight_free(dl);
+    gs_delight *dl = NULL;
+    if ((s = gs_delight_open(NULL, &dl)) != GS_OK) {
         free(pts);
         return srv_error(s);
     }

@@ -38,9 +38,10 @@ static void write_small_without_shot_noise(const char *path, int seed)
 {
     char text[4096];
     snprintf(text, sizeof text, small_scene, seed);
-    char *at = strstr(text, "\"shot_noise\": {}, \"saturation\": {}, ");
-    if (at) memmove(at, at + strlen("\"shot_noise\": {}, \"saturation\": {}, "),
-                    strlen(at + strlen("\"shot_noise\": {}, \"saturation\": {}, ")) + 1);
+    const char *cut = "\"shot_noise\": {}, \"saturation\": {}, ";
+    char *at = strstr(text, cut);
+    CHECK_MSG(at != NULL, "the small scene has no %s", cut);
+    if (at) memmove(at, at + strlen(cut), strlen(at + strlen(cut)) + 1);
     FILE *f = fopen(path, "w");
     fputs(text, f);
     fclose(f);
