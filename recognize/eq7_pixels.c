@@ -202,6 +202,8 @@ typedef struct {
     double *zz;      /* [M] normalised scores of one row (band path: brightness / its std) */
     double *gg;      /* [M] band path: Sxx - chi2 of the constrained fit */
     double *xd;      /* [D] one row in double */
+    rec_pixscreen_work fs;   /* the Fourier screen's (m->fs_on) */
+    unsigned char *keep;     /* [B] rows it keeps */
 } pix_work;
 
 static void pix_free(pix_work *p)
@@ -216,6 +218,8 @@ static void pix_free(pix_work *p)
     free(p->zz);
     free(p->gg);
     free(p->xd);
+    rec_eq7_pixscreen_free(&p->fs);
+    free(p->keep);
 }
 
 /* The answer for one surviving row: x row xr, its full float scores srow, noise sigma sg. */
@@ -584,7 +588,13 @@ gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *no
     pw.zz = malloc(sizeof *pw.zz * m->M);
     pw.gg = malloc(sizeof *pw.gg * m->M);
     pw.xd = malloc(sizeof *pw.xd * D);
-    if (!pw.sc || !pw.xs || !pw.rows || !pw.y || !pw.sh || !pw.ub || !pw.zz || !pw.gg || !pw.xd) {
+    pw.keep = malloc(B);
+    st = rec_eq7_pixscreen_alloc(m, B, &pw.fs);
+    if (st != GS_OK) {
+        pix_free(&pw);
+        return st;
+    }
+    if (!pw.keep || !pw.sc || !pw.xs || !pw.rows || !pw.y || !pw.sh || !pw.ub || !pw.zz || !pw.gg || !pw.xd) {
         pix_free(&pw);
         return gs_fail(GS_ENOMEM, "Eq. 7 pixels: cannot allocate a %zu x %zu score block", B, Mp);
     }
@@ -607,7 +617,7 @@ gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *no
          * so a row whose bound stays below min_snr sigma is dim for every template (exactly as
          * the full test would find) and needs no full scores. */
         size_t ns = 0;
-        int prefilter = R && rest == 0;
+        int prefilter = R && rest == 0 && !m->fs_on;
         rest -= rest > 0;
         if (prefilter) {
             cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)nr, (int)R, (int)D, 1.0f, xb,
@@ -653,10 +663,16 @@ gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *no
             }
             continue;
         }
-        cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)ns, (int)Mp, (int)D, 1.0f, xs,
-                    (int)D, m->tn, (int)D, 0.0f, pw.sc, (int)Mp);
+        if (m->fs_on) {
+            rec_eq7_pixscreen(m, &pw.fs, xs, ns, noise_sigma, pw.rows, pw.sc, pw.keep);
+        } else {
+            cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)ns, (int)Mp, (int)D, 1.0f, xs,
+                        (int)D, m->tn, (int)D, 0.0f, pw.sc, (int)Mp);
+            memset(pw.keep, 1, ns);
+        }
         for (size_t k = 0; k < ns; k++) {
             size_t r = pw.rows[k];
+            if (!pw.keep[k]) continue;
             pixel_row(m, &pw, xs + k * D, pw.sc + k * Mp, noise_sigma[r], &bulb[r],
                       phase_deg ? &phase_deg[r] : NULL, confidence ? &confidence[r] : NULL);
         }

@@ -179,6 +179,20 @@ struct rec_matcher {
     int *nfine;                         /* [nb] BRF samples per cycle */
     double *dftc, *dfts;                /* [K * K] cos, sin of 2 pi q k / K ([k K + q]) */
     double *nyqs, *nyqc;                /* [nb * (K + 1)] sin, cos of pi nfine k / K (continuous) */
+    /* the pixel path's Fourier screen (eq7_pixscreen.c: fourier and the one-score path) */
+    int fs_on;                          /* REC_FS_ON: rec_match_pixels uses it; _OFF: the matcher
+                                         * has none (one SGEMM of every template); _ALL (tests):
+                                         * the screen's kernel on every bulb of every row */
+    int fs_n;                           /* harmonics 0..fs_n kept */
+    size_t fs_np;                       /* fs_n + 1 rounded up to 8 */
+    double *fs_dft;                     /* [K * 2K] cos, -sin of 2 pi q k / K ([k 2K + q], then sin) */
+    double *fs_a;                       /* [nb * bands * 2 * fs_np] f_n ahat_n / min |t| (re, im) */
+    double *fs_tail;                    /* [nb * bands * K] sum of |f_n ahat_n| / min |t| over the
+                                         * harmonics n > fs_n with n mod K = q ([b][band][q]) */
+    double *fs_asum;                    /* [nb] sum over every harmonic of |f_n ahat_n| / min |t| */
+    double *fs_lnfmin;                  /* [nb] least log |t| of the bulb's templates */
+    size_t fs_ldt;                      /* Mp + LANES */
+    float *fs_tt;                       /* [D * fs_ldt] the unit templates tn transposed */
     double complex *wk;                 /* [K] e^{2 pi i j / K} */
     double *harm;                       /* [2 REC_SHAPE_H K] the shape test's columns within a
                                          * band: cos, sin of 2 pi h k / K, h = 1..REC_SHAPE_H
@@ -239,14 +253,18 @@ static inline double rec_eq7_tau(int i)
 }
 
 /* Circular distance of two shifts, cycles, in [0, 0.5]. */
+/* (fmod only outside [0, 1), where it is not the identity: the same values, without its cost
+ * in the decision's loops over candidates) */
 static inline double circ_dist(double a, double b)
 {
-    double d = fmod(fabs(a - b), 1.0);
+    double d = fabs(a - b);
+    if (!(d < 1.0)) d = fmod(d, 1.0);
     return d > 0.5 ? 1.0 - d : d;
 }
 
 static inline double wrap01(double s)
 {
+    if (s >= 0.0 && s < 1.0) return s;
     s = fmod(s, 1.0);
     if (s < 0.0) s += 1.0;
     return s >= 1.0 ? 0.0 : s;
@@ -349,6 +367,36 @@ typedef struct {
     double runner_shift, runner_conf;
     size_t runner_tmpl;
 } rec_eq7_decision;
+
+/* eq7_pixscreen.c: the pixel path's Fourier screen for continuous bulbs (rec_matcher.fs_on). */
+enum { REC_FS_OFF = 0, REC_FS_ON = 1, REC_FS_ALL = 2 };
+/* Per row of a block: */
+typedef struct {
+    double umax;            /* the largest float bound U of the scores so far (-inf: none) */
+    double nmax;            /* the largest U of a score <= eps so far */
+    double err;             /* pixel_row's error of z^2/2 from float scores */
+    float smax, hf;         /* the largest score so far; 1 / (2 sigma^2) */
+    float eps;              /* a bound on a float score's rounding error */
+} rec_pixscreen_row;
+typedef struct {
+    double *bound;          /* [B * nb] bounds of the bulbs' normalised scores */
+    unsigned char *state;   /* [B * nb] none, wanted, scored */
+    rec_pixscreen_row *row; /* [B] */
+    double *y;              /* [bands * 2K] one row's DFT */
+    double *yx;             /* [bands * 2 fs_np] one row's, at the kept harmonics */
+    double *xa;             /* [bands * K] its magnitudes */
+    float *xg, *og;         /* [(B + 3) * D] gathered rows, [(B + 3) * max count] their scores */
+    size_t *idx;            /* [B] their rows */
+} rec_pixscreen_work;
+/* Tables (rec_matcher_new; fs_on when m->fourier, every bulb continuous, not m->bandpath). */
+gs_status rec_eq7_pixscreen_setup(rec_matcher *m);
+gs_status rec_eq7_pixscreen_alloc(const rec_matcher *m, size_t B, rec_pixscreen_work *sw);
+void rec_eq7_pixscreen_free(rec_pixscreen_work *sw);
+/* The float scores sc[k * Mp + j] of the ns rows xs (rows[k]: their index into noise_sigma)
+ * for every template that can matter, 0 for the others; keep[k] = 0 for a row pixel_row would
+ * answer nothing (dim, or not finite). */
+void rec_eq7_pixscreen(const rec_matcher *m, rec_pixscreen_work *sw, const float *xs, size_t ns,
+                       const float *noise_sigma, const size_t *rows, float *sc, unsigned char *keep);
 
 /* eq7_matcher.c: the window means of continuous bulb b at shift s (and their first two
  * derivatives when dt, d2t are not NULL; acc is scratch of REC_TEMPLATE_ACC K); log Phi from the

@@ -253,6 +253,182 @@ TEST(eq7_pixels_prefilter_generated_delight)
 }
 
 
+/* The screen on the first PIX_BLOCK finite rows of x with a valid sigma (row i of kind i % 6:
+ * dark, dim, lit, bright): every bulb's bound against the float scores of its templates (the
+ * screen's kernel on every bulb, REC_FS_ALL) and against double dot products; what it leaves
+ * out. */
+static void screen_block_checks(rec_matcher *m, const float *x, const float *sg, size_t n)
+{
+    size_t D = (size_t)m->D, nb = m->nb, Mp = m->Mp, rows[PIX_BLOCK], ns = 0;
+    float *xs = malloc(sizeof *xs * PIX_BLOCK * D), *sc = malloc(sizeof *sc * PIX_BLOCK * Mp);
+    double *bound = malloc(sizeof *bound * PIX_BLOCK * nb);
+    unsigned char keep[PIX_BLOCK], *state = malloc(PIX_BLOCK * nb);
+    rec_pixscreen_work sw;
+    CHECK_OK(rec_eq7_pixscreen_alloc(m, PIX_BLOCK, &sw));
+    for (size_t i = 0; i < n && ns < PIX_BLOCK; i++) {
+        int ok = sg[i] > 0.0f && i % 6 < 4;
+        for (size_t d = 0; d < D; d++) ok = ok && isfinite(x[i * D + d]);
+        if (!ok) continue;
+        memcpy(xs + ns * D, x + i * D, sizeof *xs * D);
+        rows[ns++] = i;
+    }
+    rec_eq7_pixscreen(m, &sw, xs, ns, sg, rows, sc, keep);
+    memcpy(bound, sw.bound, sizeof *bound * ns * nb);
+    memcpy(state, sw.state, ns * nb);
+    int dark = 0, dark_out = 0;
+    size_t lit_pairs = 0, lit_scored = 0;
+    for (size_t k = 0; k < ns; k++) {
+        int kind = (int)(rows[k] % 6);
+        dark += kind == 0;
+        dark_out += kind == 0 && !keep[k];
+        for (size_t b = 0; b < nb && kind >= 2 && keep[k]; b++) {
+            lit_pairs++;
+            lit_scored += state[k * nb + b] != 0;
+        }
+    }
+    m->fs_on = REC_FS_ALL;   /* every score, for the bounds */
+    rec_eq7_pixscreen(m, &sw, xs, ns, sg, rows, sc, keep);
+    m->fs_on = REC_FS_ON;
+    int below = 0;
+    for (size_t k = 0; k < ns; k++)
+        for (size_t b = 0; b < nb; b++) {
+            double best = -INFINITY, bestf = -INFINITY;
+            for (size_t c = 0; c < m->count[b]; c++) {
+                size_t j = m->first[b] + c;
+                double v = 0.0;
+                for (size_t d = 0; d < D; d++) v += (double)xs[k * D + d] * m->tnd[j * D + d];
+                best = v > best ? v : best;
+                bestf = sc[k * Mp + j] > bestf ? sc[k * Mp + j] : bestf;
+            }
+            if (!(bound[k * nb + b] >= best && bound[k * nb + b] >= bestf) && below++ < 5)
+                printf("    row %zu bulb %zu: bound %.9g below the best score %.9g (float %.9g)\n", rows[k], b,
+                       bound[k * nb + b], best, bestf);
+        }
+    printf("    screen: %d of %d dark rows left out; %zu of %zu (lit row, bulb) pairs scored\n", dark_out, dark,
+           lit_scored, lit_pairs);
+    CHECK_MSG(below == 0, "%d bounds below their bulb's best score", below);
+    CHECK_MSG(2 * dark_out > dark, "%d of %d dark rows left out", dark_out, dark);
+    CHECK_MSG(lit_pairs > 0 && 2 * lit_scored < lit_pairs, "%zu of %zu lit pairs scored", lit_scored, lit_pairs);
+    rec_eq7_pixscreen_free(&sw);
+    free(xs);
+    free(sc);
+    free(bound);
+    free(state);
+}
+
+/* The Fourier screen of continuous grids (recognize/eq7_pixscreen.c) gives full scores only to
+ * the bulbs that can matter: every row gets the bits it gets with the screen's kernel on every
+ * bulb (REC_FS_ALL; SGEMM's float scores differ from that kernel's in the last bits, its kernels
+ * depending on the shapes, which moves dim rows' parabolic phases by up to 0.35 deg): dark rows,
+ * dim ones around the threshold, lit and bright ones (the exact rescoring and the Newton
+ * refinement), rows near float overflow (|x| / sigma ~ 1e21 and entries ~ 1e37), rows of zero
+ * mean (scores around 0), zero and broken rows (NaN, Inf, sigma 0 or NaN), several blocks; RGB
+ * at K = 26 (G = 208), a photodiode at K = 8 and RGB at K = 12 (G = 96), and RGB at K = 13
+ * (G = 104, not a multiple of the 16-score vectors) with min_snr 0 and no unknown test (every
+ * row answered, extreme ones too). And the screen itself on one block of the K = 26 rows: every
+ * bulb's bound is at least its largest float and double score, and it leaves out most dark
+ * rows and most (lit row, bulb) pairs (else the first part could pass with a screen that scores
+ * everything). A discrete matcher with a shape-only bulb (searched over every shift) keeps its
+ * dark-row prefilter and has no screen. */
+TEST(eq7_pixels_fourier_screen_same_answers_as_every_score)
+{
+    gs_delight *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(d, 1024));
+    static const struct { int bands, K; double min_snr, unknown_p; } cases[] = {
+        {3, 26, 3.0, -1}, {1, 8, 3.0, -1}, {3, 12, 3.0, -1}, {3, 13, 0.0, 0.0}};
+    for (size_t ci = 0; ci < sizeof cases / sizeof *cases; ci++) {
+        int bands = cases[ci].bands, K = cases[ci].K, D = bands * K;
+        rec_eq7_opts o;
+        rec_eq7_opts_default(&o);
+        o.phases = REC_PHASES_CONTINUOUS;
+        o.band_gains = 0;
+        o.model_error = 0.0;
+        o.other_prior = o.blend_prior = o.flat_share = 0.0;
+        o.min_snr = cases[ci].min_snr;
+        if (cases[ci].unknown_p >= 0.0) o.unknown_p = cases[ci].unknown_p;
+        rec_matcher *m = NULL;
+        CHECK_OK(rec_matcher_new(d, 50, bands, K, &o, &m));
+        CHECK_MSG(m && m->fs_on == REC_FS_ON, "K = %d, %d bands: the screen is on", K, bands);
+        if (!m || m->fs_on != REC_FS_ON) {
+            rec_matcher_free(m);
+            continue;
+        }
+        size_t n = 1500, M = rec_matcher_template_count(m);
+        float *x = malloc(sizeof *x * n * (size_t)D), *sg = malloc(sizeof *sg * n);
+        float *ph[2] = {malloc(sizeof(float) * n), malloc(sizeof(float) * n)};
+        float *cf[2] = {malloc(sizeof(float) * n), malloc(sizeof(float) * n)};
+        int *bu[2] = {malloc(sizeof(int) * n), malloc(sizeof(int) * n)};
+        uint64_t rs = 97 + ci;
+        for (size_t i = 0; i < n; i++) {
+            size_t j = (size_t)(gs_splitmix_uniform(&rs) * (double)M) % M;
+            const double *t = rec_matcher_template(m, j, NULL, NULL);
+            double tt = 0.0, mean = 0.0;
+            for (int k = 0; k < D; k++) tt += t[k] * t[k], mean += t[k] / D;
+            /* a |t| = z: dark, dim (0.5 - 6), lit (6 - 60), bright (100 - 3000), extreme, zero mean */
+            int kind = (int)(i % 6);
+            double u = gs_splitmix_uniform(&rs);
+            double z = kind == 0 ? 0.0 : kind == 1 ? 0.5 + 5.5 * u : kind == 2 ? 6.0 + 54.0 * u
+                     : kind == 3 ? 100.0 + 2900.0 * u : kind == 4 ? (i % 12 < 6 ? 1e21 : 1.5e37 * sqrt(tt) / t[0])
+                     : 3.0 * u;
+            double a = z / sqrt(tt);
+            for (int k = 0; k < D; k++)
+                x[i * (size_t)D + (size_t)k] = (float)(a * (kind == 5 ? t[k] - mean : t[k]) + gs_splitmix_normal(&rs));
+            sg[i] = 1.0f;
+            if (i % 61 == 5) x[i * (size_t)D + i % (size_t)D] = NAN;
+            if (i % 61 == 6) x[i * (size_t)D + i % (size_t)D] = INFINITY;
+            if (i % 67 == 7) sg[i] = (i % 2) ? 0.0f : NAN;
+            if (i % 71 == 8) memset(x + i * (size_t)D, 0, sizeof *x * (size_t)D);
+        }
+        for (int on = 0; on < 2; on++) {
+            m->fs_on = on ? REC_FS_ON : REC_FS_ALL;
+            CHECK_OK(rec_match_pixels(m, x, sg, n, bu[on], ph[on], cf[on]));
+        }
+        m->fs_on = REC_FS_ON;
+        int differ = 0, answered = 0, extreme = 0;
+        for (size_t i = 0; i < n; i++) {
+            answered += bu[1][i] >= 0;
+            extreme += i % 6 == 4 && bu[1][i] >= 0;
+            if (bu[0][i] != bu[1][i] || memcmp(&ph[0][i], &ph[1][i], sizeof(float)) ||
+                memcmp(&cf[0][i], &cf[1][i], sizeof(float))) {
+                if (differ++ < 5)
+                    printf("    K = %d, %d bands, row %zu: screened %d %g %g, every score %d %g %g\n", K, bands, i,
+                           bu[1][i], ph[1][i], cf[1][i], bu[0][i], ph[0][i], cf[0][i]);
+            }
+        }
+        CHECK_MSG(differ == 0, "K = %d, %d bands: %d of %zu rows differ", K, bands, differ, n);
+        CHECK_MSG(answered > (int)n / 3, "K = %d: %d rows answered", K, answered);
+        if (cases[ci].unknown_p == 0.0) CHECK_MSG(extreme > (int)n / 12, "K = %d: %d extreme rows answered", K, extreme);
+        if (ci == 0) screen_block_checks(m, x, sg, n);
+        rec_matcher_free(m);
+        free(x);
+        free(sg);
+        for (int on = 0; on < 2; on++) {
+            free(ph[on]);
+            free(cf[on]);
+            free(bu[on]);
+        }
+    }
+    /* discrete phases with a shape-only bulb: no screen, the prefilter kept */
+    gs_delight *d2 = gs_delight_new();
+    size_t nv = 0;
+    for (size_t i = 0; i < gs_delight_count(d); i++) {
+        gs_bulb b = *gs_delight_get(d, i);
+        if (b.grid_hz != 50 || strcmp(b.sensor, "rgb") || b.ref != GS_REF_VOLTAGE) continue;
+        if (nv++ == 0) {
+            CHECK_OK(gs_delight_add(d2, &b));
+            snprintf(b.id, sizeof b.id, "shape-only-copy");
+            b.ref = GS_REF_NONE;
+        }
+        CHECK_OK(gs_delight_add(d2, &b));
+    }
+    rec_matcher *m3 = eq7fx_new_matcher(d2, 50, 3, 26, REC_PHASES_3);
+    CHECK(m3 && m3->ncont == 1 && m3->fs_on == REC_FS_OFF && rec_matcher_prefilter_dim(m3) > 0);
+    rec_matcher_free(m3);
+    gs_delight_free(d2);
+    gs_delight_free(d);
+}
+
+
 /* One file of n items of size sz in dir (CHECKed). */
 static void write_file(const char *dir, const char *name, const void *p, size_t sz, size_t n)
 {

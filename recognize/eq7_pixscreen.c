@@ -1,0 +1,374 @@
+/* eq7_pixscreen.c - the pixel path's Fourier screen for continuous phases (rec_match_pixels with
+ * the paper's one-brightness model, every bulb continuous; docs/recognition.md "Continuous
+ * phases: the Fourier screen").
+ *
+ * When K divides the grid G, window k of a continuous bulb is window 0 delayed by G/K cells
+ * (internal.h), so a row's score at grid cell c is a trigonometric sum,
+ *   x . t_bc = sum_{n < G} C_bn e^{2 pi i n c / G},  C_bn = sum_band ahat_{b,band,n} X_{band, n mod K},
+ * X the K-point DFT of the row's band. Hence every grid score of bulb b obeys
+ *   x . t_bc / |t_bc| <= sum_n f_n |C_bn| / min_c |t_bc|   (f_n = 1 for n = 0, G/2, else 2),
+ * from 3 (K/2 + 1) complex products per bulb instead of 3 K G multiply-adds (the harmonics above
+ * K/2 grouped by n mod K: sum_band |X_band,q| times the sum of their |f_n ahat_n|), plus the
+ * float scores' rounding. The screen gives float scores only to the bulbs that can matter, by
+ * pixel_row's own rules (eq7_pixels.c):
+ *  1. the bulb of the largest bound; a row whose bounds all stay below min_snr sigma is dim for
+ *     every template (pixel_row's early out);
+ *  2. if the scores so far are below min_snr sigma (or not positive): every bulb whose bound
+ *     reaches it (else the row is dim);
+ *  3. every bulb whose bound on U_j = max(s_j, 0)^2 / (2 sigma^2) - log |t_j| reaches within
+ *     CUT_PIXEL (and the rounding slack) of the largest U so far: pixel_row's threshold is at
+ *     least that much (log Phi(z) >= -log 2 for the best bound's z >= 0), so every candidate is
+ *     among them, and so is the best bound; every bulb if a score within the rounding of 0 may
+ *     hold that bound (log Phi has no floor below 0), or if U overflows.
+ * A bulb left out gets scores 0: its U = -log |t_j| stays below its true U, so it is neither a
+ * candidate nor the best bound, and 0 is not above any score that decides. The scores come from
+ * bulb_scores, whose every score is one chain of multiply-adds in sample order; the answers are
+ * those of that kernel on every bulb (REC_FS_ALL), bit for bit (tests/test_eq7_pixels.c).
+ * (SGEMM's scores differ from it in the last bits: its kernels depend on the shapes.) */
+#include "recognize/internal.h"
+
+#include <float.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define SCREEN_LANES 8   /* harmonics padded to a multiple of 8 doubles */
+
+gs_status rec_eq7_pixscreen_setup(rec_matcher *m)
+{
+    int K = m->K, G = m->G, bands = m->bands;
+    size_t nh = (size_t)G / 2 + 1, nb = m->nb;
+    /* (a discrete matcher with shape-only bulbs keeps its prefilter) */
+    if (!m->fourier || m->bandpath || (size_t)m->ncont != nb) return GS_OK;
+    m->fs_lnfmin = malloc(sizeof *m->fs_lnfmin * nb);
+    m->fs_asum = malloc(sizeof *m->fs_asum * nb);
+    m->fs_dft = malloc(sizeof *m->fs_dft * 2 * (size_t)K * (size_t)K);
+    if (!m->fs_lnfmin || !m->fs_asum || !m->fs_dft)
+        return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate the pixel Fourier screen");
+    for (int k = 0; k < K; k++)
+        for (int q = 0; q < K; q++) {
+            double a = EQ7_TWO_PI * (double)((q * k) % K) / K;
+            m->fs_dft[(size_t)k * 2 * (size_t)K + (size_t)q] = cos(a);
+            m->fs_dft[(size_t)k * 2 * (size_t)K + (size_t)(K + q)] = -sin(a);
+        }
+    for (size_t b = 0; b < nb; b++) {
+        double lmin = INFINITY;
+        for (size_t c = 0; c < m->count[b]; c++) {
+            double l = m->lognorm[m->first[b] + c];
+            lmin = l < lmin ? l : lmin;
+        }
+        m->fs_lnfmin[b] = lmin;
+    }
+    /* harmonics 0..K/2 exactly; the others grouped by n mod K: for q = n mod K,
+     * sum_n f_n |C_bn| <= sum_band fs_tail[b, band, q] |X_band,q| */
+    size_t keep = (size_t)K / 2;   /* < G/2: G >= 8K */
+    m->fs_n = (int)keep;
+    m->fs_np = (keep + 1 + SCREEN_LANES - 1) / SCREEN_LANES * SCREEN_LANES;
+    size_t np = m->fs_np;
+    m->fs_a = calloc(nb * (size_t)bands * 2 * np, sizeof *m->fs_a);
+    m->fs_tail = calloc(nb * (size_t)bands * (size_t)K, sizeof *m->fs_tail);
+    if (!m->fs_a || !m->fs_tail) return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate the pixel Fourier screen");
+    for (size_t b = 0; b < nb; b++) {
+        m->fs_asum[b] = 0.0;
+        double inv = exp(-m->fs_lnfmin[b]);
+        for (int band = 0; band < bands; band++) {
+            for (size_t n = 0; n < nh; n++) {
+                double f = (n == 0 || 2 * n == (size_t)G) ? 1.0 : 2.0;
+                double complex a = m->ahat[(b * (size_t)bands + (size_t)band) * nh + n] * (f * inv);
+                m->fs_asum[b] += cabs(a);
+                if (n > keep) {
+                    m->fs_tail[(b * (size_t)bands + (size_t)band) * (size_t)K + n % (size_t)K] += cabs(a);
+                    continue;
+                }
+                double *dst = m->fs_a + ((b * (size_t)bands + (size_t)band) * 2) * np;
+                dst[n] = creal(a);
+                dst[np + n] = cimag(a);
+            }
+        }
+    }
+    m->fs_ldt = m->Mp + LANES;
+    m->fs_tt = calloc((size_t)m->D * m->fs_ldt, sizeof *m->fs_tt);
+    if (!m->fs_tt) return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate the pixel Fourier screen");
+    for (size_t j = 0; j < m->M; j++)
+        for (size_t d = 0; d < (size_t)m->D; d++) m->fs_tt[d * m->fs_ldt + j] = m->tn[j * (size_t)m->D + d];
+    m->fs_on = REC_FS_ON;
+    return GS_OK;
+}
+
+gs_status rec_eq7_pixscreen_alloc(const rec_matcher *m, size_t B, rec_pixscreen_work *sw)
+{
+    memset(sw, 0, sizeof *sw);
+    if (!m->fs_on) return GS_OK;
+    size_t nb = m->nb, gmax = 0;
+    for (size_t b = 0; b < nb; b++) gmax = m->count[b] > gmax ? m->count[b] : gmax;
+    sw->bound = malloc(sizeof *sw->bound * B * nb);
+    sw->state = malloc(sizeof *sw->state * B * nb);
+    sw->row = malloc(sizeof *sw->row * B);
+    sw->y = malloc(sizeof *sw->y * (size_t)m->bands * 2 * (size_t)m->K);
+    sw->yx = malloc(sizeof *sw->yx * (size_t)m->bands * 2 * m->fs_np);
+    sw->xa = malloc(sizeof *sw->xa * (size_t)m->bands * (size_t)m->K);
+    gmax = (gmax + LANES - 1) / LANES * LANES;
+    sw->xg = malloc(sizeof *sw->xg * (B + 3) * (size_t)m->D);
+    sw->og = malloc(sizeof *sw->og * (B + 3) * gmax);
+    sw->idx = malloc(sizeof *sw->idx * B);
+    if (!sw->bound || !sw->state || !sw->row || !sw->y || !sw->yx || !sw->xa || !sw->xg || !sw->og || !sw->idx) {
+        rec_eq7_pixscreen_free(sw);
+        return gs_fail(GS_ENOMEM, "Eq. 7 pixels: cannot allocate the Fourier screen for %zu rows", B);
+    }
+    return GS_OK;
+}
+
+void rec_eq7_pixscreen_free(rec_pixscreen_work *sw)
+{
+    free(sw->bound);
+    free(sw->state);
+    free(sw->row);
+    free(sw->y);
+    free(sw->yx);
+    free(sw->xa);
+    free(sw->xg);
+    free(sw->og);
+    free(sw->idx);
+    memset(sw, 0, sizeof *sw);
+}
+
+/* sum over n < np of |sum_band a_band,n y_band,n| (complex; re and im blocks of np each), 8
+ * harmonics at a time (gcc's vector types: the loop over n was compiled as scalar code). */
+typedef double scr_v8d __attribute__((vector_size(SCREEN_LANES * sizeof(double))));
+GS_VECTOR_LOOP static double harmonic_sum(const double *a, const double *y, int bands, size_t np)
+{
+    scr_v8d acc = {0};
+    for (size_t n = 0; n < np; n += SCREEN_LANES) {
+        scr_v8d re = {0}, im = {0};
+        for (int band = 0; band < bands; band++) {
+            const double *ab = a + (size_t)band * 2 * np + n, *yb = y + (size_t)band * 2 * np + n;
+            scr_v8d ar, ai, yr, yi;
+            REC_VLOAD(ar, ab);
+            REC_VLOAD(ai, ab + np);
+            REC_VLOAD(yr, yb);
+            REC_VLOAD(yi, yb + np);
+            re += ar * yr - ai * yi;
+            im += ar * yi + ai * yr;
+        }
+        scr_v8d q = re * re + im * im;
+        double t[SCREEN_LANES];
+        memcpy(t, &q, sizeof t);
+        for (int i = 0; i < SCREEN_LANES; i++) t[i] = sqrt(t[i]);
+        memcpy(&q, t, sizeof q);
+        acc += q;
+    }
+    return ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
+}
+
+/* out[r * ldo + c] = x_r . t_(f0 + c) for the n rows of x (a multiple of 4; ld D) and the cnt
+ * templates from f0, from the transposed unit templates tt (ld ldt, LANES columns past any
+ * range): vectors of LANES templates times 4 rows, each score one chain of multiply-adds over d
+ * in order, so a row's scores do not depend on the rows that share its call (the screen's
+ * answers are those of every bulb scored by this kernel, bit for bit). */
+typedef float scr_vf __attribute__((vector_size(LANES * sizeof(float))));
+typedef int scr_vi __attribute__((vector_size(LANES * sizeof(int))));
+GS_VECTOR_LOOP static void bulb_scores(const float *tt, size_t ldt, size_t D, const float *x, size_t n, size_t f0,
+                                       size_t cnt, float *out, size_t ldo)
+{
+    for (size_t c = 0; c < cnt; c += LANES)
+        for (size_t r = 0; r < n; r += 4) {
+            const float *x0 = x + r * D, *x1 = x0 + D, *x2 = x1 + D, *x3 = x2 + D;
+            scr_vf a0 = {0}, a1 = {0}, a2 = {0}, a3 = {0};
+            for (size_t d = 0; d < D; d++) {
+                scr_vf t;
+                REC_VLOAD(t, tt + d * ldt + f0 + c);
+                a0 += x0[d] * t;
+                a1 += x1[d] * t;
+                a2 += x2[d] * t;
+                a3 += x3[d] * t;
+            }
+            memcpy(out + r * ldo + c, &a0, sizeof a0);
+            memcpy(out + (r + 1) * ldo + c, &a1, sizeof a1);
+            memcpy(out + (r + 2) * ldo + c, &a2, sizeof a2);
+            memcpy(out + (r + 3) * ldo + c, &a3, sizeof a3);
+        }
+}
+
+/* Over the n scores o: the largest score, the largest float bound U = max(o, 0)^2 hf - lnf (as
+ * pixel_row's row_bounds, up to rounding), and the largest U of a score <= eps (which may be <= 0
+ * in double); LANES at a time, then the last ones. */
+GS_VECTOR_LOOP static void scan_scores(const float *o, const float *lnf, size_t n, float hf, float eps, float *out)
+{
+    scr_vf ms, mu, mn, zero = {0}, ninf;
+    for (int q = 0; q < LANES; q++) ms[q] = mu[q] = mn[q] = ninf[q] = -INFINITY;
+    size_t c = 0;
+    for (; c + LANES <= n; c += LANES) {
+        scr_vf s, l;
+        REC_VLOAD(s, o + c);
+        REC_VLOAD(l, lnf + c);
+        scr_vi pos = s > zero;
+        scr_vf v = REC_VSELECT(scr_vf, scr_vi, pos, s, zero), u = v * v * hf - l;
+        scr_vf nl = REC_VSELECT(scr_vf, scr_vi, s > eps, ninf, u);
+        ms = REC_VSELECT(scr_vf, scr_vi, s > ms, s, ms);
+        mu = REC_VSELECT(scr_vf, scr_vi, u > mu, u, mu);
+        mn = REC_VSELECT(scr_vf, scr_vi, nl > mn, nl, mn);
+    }
+    float a = -INFINITY, b = -INFINITY, d = -INFINITY;
+    for (int q = 0; q < LANES; q++) {
+        a = ms[q] > a ? ms[q] : a;
+        b = mu[q] > b ? mu[q] : b;
+        d = mn[q] > d ? mn[q] : d;
+    }
+    for (; c < n; c++) {
+        float v = o[c] > 0.0f ? o[c] : 0.0f, u = v * v * hf - lnf[c];
+        a = o[c] > a ? o[c] : a;
+        b = u > b ? u : b;
+        if (!(o[c] > eps) && u > d) d = u;
+    }
+    out[0] = a;
+    out[1] = b;
+    out[2] = d;
+}
+
+/* y[r] = sum_k tab[k 2K + r] x[k], r < 2K: the K-point DFT of x (re, then im), in double. */
+GS_VECTOR_LOOP static void row_dft(const double *tab, const float *x, size_t K, double *y)
+{
+    for (size_t r = 0; r < 2 * K; r++) y[r] = 0.0;
+    for (size_t k = 0; k < K; k++) {
+        double xk = x[k];
+        for (size_t r = 0; r < 2 * K; r++) y[r] += tab[k * 2 * K + r] * xk;
+    }
+}
+
+enum { ST_NONE = 0, ST_WANT = 1, ST_DONE = 2 };
+
+/* The float scores of the wanted (row, bulb) pairs: per bulb its rows (gathered, padded to a
+ * multiple of 4 with zeros) against its templates by bulb_scores, scattered into sc; each row's
+ * largest score, largest U and largest U of a score <= eps (scan_scores). */
+static void score_wanted(const rec_matcher *m, rec_pixscreen_work *sw, const float *xs, size_t ns, float *sc)
+{
+    size_t D = (size_t)m->D, nb = m->nb, Mp = m->Mp;
+    for (size_t b = 0; b < nb; b++) {
+        size_t n = 0, cnt = m->count[b], f0 = m->first[b];
+        for (size_t k = 0; k < ns; k++)
+            if (sw->state[k * nb + b] == ST_WANT) {
+                sw->state[k * nb + b] = ST_DONE;
+                memcpy(sw->xg + n * D, xs + k * D, sizeof *xs * D);
+                sw->idx[n++] = k;
+            }
+        if (n == 0) continue;
+        size_t n4 = (n + 3) / 4 * 4, ldo = (cnt + LANES - 1) / LANES * LANES;
+        memset(sw->xg + n * D, 0, sizeof *sw->xg * (n4 - n) * D);
+        bulb_scores(m->fs_tt, m->fs_ldt, D, sw->xg, n4, f0, cnt, sw->og, ldo);
+        for (size_t i = 0; i < n; i++) {
+            size_t k = sw->idx[i];
+            rec_pixscreen_row *r = &sw->row[k];
+            const float *o = sw->og + i * ldo;
+            memcpy(sc + k * Mp + f0, o, sizeof *o * cnt);
+            float v[3];
+            scan_scores(o, m->lnf + f0, cnt, r->hf, r->eps, v);
+            r->smax = v[0] > r->smax ? v[0] : r->smax;
+            r->umax = v[1] > r->umax ? v[1] : r->umax;
+            r->nmax = v[2] > r->nmax ? v[2] : r->nmax;
+        }
+    }
+}
+
+void rec_eq7_pixscreen(const rec_matcher *m, rec_pixscreen_work *sw, const float *xs, size_t ns,
+                       const float *noise_sigma, const size_t *rows, float *sc, unsigned char *keep)
+{
+    size_t D = (size_t)m->D, K = (size_t)m->K, nb = m->nb, Mp = m->Mp, np = m->fs_np;
+    int bands = m->bands;
+    const double min_snr = m->o.min_snr;
+    for (size_t k = 0; k < ns; k++) {
+        rec_pixscreen_row *r = &sw->row[k];
+        unsigned char *st = sw->state + k * nb;
+        double sg = noise_sigma[rows[k]];
+        double ss = 0.0;
+        for (size_t d = 0; d < D; d++) ss += (double)xs[k * D + d] * xs[k * D + d];
+        keep[k] = isfinite(ss) != 0;   /* pixel_row answers no row with a NaN or Inf */
+        memset(st, ST_NONE, nb);
+        if (!keep[k]) continue;
+        double inv = 1.0 / sg, Sxx = ss * inv * inv, xn = sqrt(ss);
+        /* a float score's error: the templates rounded to float and D multiply-adds, twice */
+        double serr = 2.0 * (double)(D + 2) * FLT_EPSILON * 0.5 * xn;
+        r->eps = (float)serr;
+        r->hf = (float)(0.5 * inv * inv);
+        r->err = FLOAT_ERR * Sxx + 1e-6;
+        r->smax = -INFINITY;
+        r->umax = -INFINITY;
+        r->nmax = -INFINITY;
+        /* the row's DFT, X_q = sum_k x_k e^{-2 pi i q k / K}, and at harmonics 0..n_kept (X_{n mod K}) */
+        double *y = sw->y;
+        for (int band = 0; band < bands; band++) row_dft(m->fs_dft, xs + k * D + (size_t)band * K, K, y + (size_t)band * 2 * K);
+        for (int band = 0; band < bands; band++) {
+            double *yb = sw->yx + (size_t)band * 2 * np;
+            for (size_t n = 0; n < np; n++) {
+                int in = n <= (size_t)m->fs_n;
+                yb[n] = in ? y[(size_t)band * 2 * K + n % K] : 0.0;
+                yb[np + n] = in ? y[(size_t)band * 2 * K + K + n % K] : 0.0;
+            }
+        }
+        double *xa = sw->xa;   /* |X_band,q| */
+        for (int band = 0; band < bands; band++)
+            for (size_t q = 0; q < K; q++) {
+                double re = y[(size_t)band * 2 * K + q], im = y[(size_t)band * 2 * K + K + q];
+                xa[(size_t)band * K + q] = sqrt(re * re + im * im);
+            }
+        /* slack: the double DFT's rounding, the float score's */
+        double bmax = -INFINITY;
+        for (size_t b = 0; b < nb; b++) {
+            double bd = (harmonic_sum(m->fs_a + b * (size_t)bands * 2 * np, sw->yx, bands, np) +
+                         gs_dot(m->fs_tail + b * (size_t)bands * K, xa, (size_t)bands * K)) * (1.0 + 1e-9) +
+                        1e-12 * m->fs_asum[b] * xn + serr;
+            if (!(bd <= DBL_MAX)) bd = INFINITY;   /* an overflowed DFT: scored */
+            sw->bound[k * nb + b] = bd;
+            bmax = bd > bmax ? bd : bmax;
+        }
+        if (!(bmax >= min_snr * sg) && m->fs_on != REC_FS_ALL) {   /* 1: dim for every template */
+            keep[k] = 0;
+            continue;
+        }
+        for (size_t b = 0; b < nb; b++)
+            if (m->fs_on == REC_FS_ALL || sw->bound[k * nb + b] >= bmax) st[b] = ST_WANT;
+    }
+    score_wanted(m, sw, xs, ns, sc);
+    for (size_t k = 0; k < ns; k++) {   /* 2 */
+        double lim = min_snr * noise_sigma[rows[k]];
+        if (!keep[k] || ((double)sw->row[k].smax >= lim && sw->row[k].smax > 0.0f)) continue;
+        for (size_t b = 0; b < nb; b++)
+            if (sw->state[k * nb + b] == ST_NONE && sw->bound[k * nb + b] >= lim) sw->state[k * nb + b] = ST_WANT;
+    }
+    score_wanted(m, sw, xs, ns, sc);
+    for (int pass = 0; pass < 2; pass++) {   /* 3, then every bulb where the best U's score <= 0 */
+        for (size_t k = 0; k < ns; k++) {
+            rec_pixscreen_row *r = &sw->row[k];
+            if (!keep[k]) continue;
+            if (pass == 0 && m->fs_on != REC_FS_ALL &&
+                (!((double)r->smax >= min_snr * noise_sigma[rows[k]]) || !(r->smax > 0.0f))) {
+                keep[k] = 0;   /* 2: dim */
+                continue;
+            }
+            unsigned char *st = sw->state + k * nb;
+            /* U here and in row_bounds may round differently (fused or not): the slack */
+            double umax = r->umax - 1e-5 * (fabs(r->umax) + 1.0);
+            double thr = umax - CUT_PIXEL - 3.0 * r->err - M_LN2 - 1e-3;
+            if (r->nmax >= umax || !(thr > -INFINITY && thr < INFINITY)) {
+                /* the best bound may have a score <= 0, or U overflows: every bulb */
+                for (size_t b = 0; b < nb; b++)
+                    if (st[b] == ST_NONE) st[b] = ST_WANT;
+                continue;
+            }
+            if (pass == 1) continue;
+            for (size_t b = 0; b < nb; b++) {
+                if (st[b] != ST_NONE) continue;
+                double v = sw->bound[k * nb + b] > 0.0 ? sw->bound[k * nb + b] : 0.0;
+                double ub = v * v * r->hf - m->fs_lnfmin[b];
+                if (ub + 1e-5 * (fabs(ub) + 1.0) + r->err >= thr) st[b] = ST_WANT;
+            }
+        }
+        score_wanted(m, sw, xs, ns, sc);
+    }
+    for (size_t k = 0; k < ns; k++) {   /* the bulbs left out (and the padding): scores 0 */
+        if (!keep[k]) continue;
+        memset(sc + k * Mp + m->M, 0, sizeof *sc * (Mp - m->M));
+        for (size_t b = 0; b < nb; b++)
+            if (sw->state[k * nb + b] != ST_DONE)
+                memset(sc + k * Mp + m->first[b], 0, sizeof *sc * m->count[b]);
+    }
+}
