@@ -816,8 +816,9 @@ static int bench_recognize(int argc, char **argv)
             config cf = {26, 3, 0, 0, (size_t)1 << e, lits[li], 0, 0, 1, 0, numpy_script != NULL};
             pixel_row(all, &cf, &failed);
         }
-    {
-        config cf = {26, 3, 0, 1, (size_t)1 << (quick ? 10 : 14), 0.1, 0, 0, 0, 0, numpy_script != NULL};
+    for (size_t li = 0; li < 3; li++) {   /* continuous phases: dark, 10 % lit, all lit */
+        if (quick && li != 1) continue;
+        config cf = {26, 3, 0, 1, (size_t)1 << (quick ? 10 : 14), lits[li], 0, 0, 0, 0, numpy_script != NULL};
         pixel_row(all, &cf, &failed);
     }
 
@@ -873,7 +874,9 @@ lights:
         light_row(all, &cf, &failed);
     }
     printf("\n*continuous* rows search every phase (a grid of max(8K, 96) shifts per cycle, refined); "
-           "their templates column counts those grid shifts and there is no triple-loop reference.\n");
+           "their templates column counts those grid shifts and there is no triple-loop reference. "
+           "Per pixel they go through the Fourier screen (docs/recognition.md, \"Continuous phases: "
+           "the Fourier screen\"): only the grids of the bulbs it cannot rule out are scored.\n");
     int nt = gs_threads_resolve(0);
     printf("\n## What the nested-model tests cost\n\n"
            "The paper's model as above, with the nested-model tests of each light's best fit on "
