@@ -318,18 +318,19 @@ static void screen_block_checks(rec_matcher *m, const float *x, const float *sg,
 
 /* The Fourier screen of continuous grids (recognize/eq7_pixscreen.c) gives full scores only to
  * the bulbs that can matter: every row gets the bits it gets with the screen's kernel on every
- * bulb (REC_FS_ALL; SGEMM's float scores differ from that kernel's in the last bits, its kernels
- * depending on the shapes, which moves dim rows' parabolic phases by up to 0.35 deg): dark rows,
- * dim ones around the threshold, lit and bright ones (the exact rescoring and the Newton
- * refinement), rows near float overflow (|x| / sigma ~ 1e21 and entries ~ 1e37), rows of zero
- * mean (scores around 0), zero and broken rows (NaN, Inf, sigma 0 or NaN), several blocks; RGB
- * at K = 26 (G = 208), a photodiode at K = 8 and RGB at K = 12 (G = 96), and RGB at K = 13
- * (G = 104, not a multiple of the 16-score vectors) with min_snr 0 and no unknown test (every
- * row answered, extreme ones too). And the screen itself on one block of the K = 26 rows: every
- * bulb's bound is at least its largest float and double score, and it leaves out most dark
- * rows and most (lit row, bulb) pairs (else the first part could pass with a screen that scores
- * everything). A discrete matcher with a shape-only bulb (searched over every shift) keeps its
- * dark-row prefilter and has no screen. */
+ * bulb (REC_FS_ALL): dark rows, dim ones around the threshold, lit and bright ones (the exact
+ * rescoring and the Newton refinement), rows near float overflow (|x| / sigma ~ 1e21 and
+ * entries ~ 1e37), rows of zero mean (scores around 0), zero and broken rows (NaN, Inf, sigma 0
+ * or NaN), several blocks; RGB at K = 26 (G = 208), a photodiode at K = 8 and RGB at K = 12
+ * (G = 96), and RGB at K = 13 (G = 104, not a multiple of the 16-score vectors) with min_snr 0
+ * and no unknown test (every row answered, extreme ones too). SGEMM's float scores differ from
+ * that kernel's in the last bits (its kernels depend on the shapes): against one SGEMM of every
+ * template (REC_FS_OFF), at K = 26, the same bulb wherever a pair has confidence >= 0.1, phases
+ * within 1 deg (dim rows' parabolas), confidences within 5e-3. And the screen itself on one
+ * block of the K = 26 rows: every bulb's bound is at least its largest float and double score,
+ * and it leaves out most dark rows and most (lit row, bulb) pairs (else the first part could
+ * pass with a screen that scores everything). A discrete matcher with a shape-only bulb
+ * (searched over every shift) keeps its dark-row prefilter and has no screen. */
 TEST(eq7_pixels_fourier_screen_same_answers_as_every_score)
 {
     gs_delight *d = gs_delight_new();
@@ -398,7 +399,31 @@ TEST(eq7_pixels_fourier_screen_same_answers_as_every_score)
         CHECK_MSG(differ == 0, "K = %d, %d bands: %d of %zu rows differ", K, bands, differ, n);
         CHECK_MSG(answered > (int)n / 3, "K = %d: %d rows answered", K, answered);
         if (cases[ci].unknown_p == 0.0) CHECK_MSG(extreme > (int)n / 12, "K = %d: %d extreme rows answered", K, extreme);
-        if (ci == 0) screen_block_checks(m, x, sg, n);
+        if (ci == 0) {
+            /* against one SGEMM of every template (REC_FS_OFF): the same bulbs where a pair has
+             * confidence >= 0.1; phases and confidences within the float scores' rounding (dim
+             * rows' parabolas) */
+            m->fs_on = REC_FS_OFF;
+            CHECK_OK(rec_match_pixels(m, x, sg, n, bu[0], ph[0], cf[0]));
+            m->fs_on = REC_FS_ON;
+            int other = 0;
+            double dph = 0.0, dcf = 0.0;
+            for (size_t i = 0; i < n; i++) {
+                /* a bulb may flip only between near-tied pairs of a row no pair dominates */
+                if (bu[0][i] != bu[1][i] && (cf[0][i] >= 0.1f || cf[1][i] >= 0.1f) && other++ < 3)
+                    printf("    row %zu (kind %zu): SGEMM %d %g %g, screened %d %g %g\n", i, i % 6, bu[0][i], ph[0][i],
+                           cf[0][i], bu[1][i], ph[1][i], cf[1][i]);
+                if (bu[0][i] < 0 || bu[0][i] != bu[1][i]) continue;
+                double e = fabs((double)ph[0][i] - ph[1][i]);
+                e = e > 180.0 ? 360.0 - e : e;
+                dph = e > dph ? e : dph;
+                dcf = fabs((double)cf[0][i] - cf[1][i]) > dcf ? fabs((double)cf[0][i] - cf[1][i]) : dcf;
+            }
+            printf("    against SGEMM: %d confident bulbs differ, phases within %.3g deg, confidences within %.2g\n", other,
+                   dph, dcf);
+            CHECK_MSG(other == 0 && dph < 1.0 && dcf < 5e-3, "against SGEMM: %d bulbs, %g deg, %g", other, dph, dcf);
+            screen_block_checks(m, x, sg, n);
+        }
         rec_matcher_free(m);
         free(x);
         free(sg);
