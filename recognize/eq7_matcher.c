@@ -113,10 +113,8 @@ void rec_matcher_free(rec_matcher *m)
     free(m->red_c);
     free(m->ahat);
     free(m->bhat);
-    free(m->fs_dft);
     free(m->fs_a);
     free(m->fs_tail);
-    free(m->fs_asum);
     free(m->fs_lnfmin);
     free(m->fs_tt);
     if (m->c2r) fftw_destroy_plan((fftw_plan)m->c2r);
@@ -812,9 +810,10 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
         rec_matcher_free(m);
         return s;
     }
-    /* the Fourier screen (continuous grids) replaces the prefilter; the prefilter bounds x . tnd_j; that bounds the dim statistic of the one-gain model with
-     * one sigma per row, and of the band-gain model with any per-band sigma >= the row's (its
-     * unit vector is tnd_j), but not of one gain with per-band sigmas: no prefilter then */
+    /* the Fourier screen (continuous grids) replaces the prefilter. The prefilter bounds
+     * x . tnd_j; that bounds the dim statistic of the one-gain model with one sigma per row, and
+     * of the band-gain model with any per-band sigma >= the row's (its unit vector is tnd_j),
+     * but not of one gain with per-band sigmas: no prefilter then */
     s = rec_eq7_pixscreen_setup(m);
     if (s == GS_OK && !m->fs_on && !(m->bandpath && !m->bg)) s = prefilter_setup(m);
     if (s != GS_OK) {

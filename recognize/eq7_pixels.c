@@ -244,7 +244,7 @@ static void pixel_row(const rec_matcher *m, pix_work *pw, const float *xr, const
      * the float bound itself): at most 8.9e-7 Sxx measured over 3e7 scores of the generated
      * DELIGHT (K = 26, RGB); FLOAT_ERR allows twice that. Above 1e-3 nats the candidates are
      * rescored in double, so the posterior does not depend on float rounding. */
-    double err = FLOAT_ERR * Sxx + 1e-6;
+    double err = rec_pix_float_err(Sxx);
     int exact = err > 1e-3;
     if (exact) to_double(xr, D, xd);
     double zu = exact ? gs_dot(xd, m->tnd + ju * D, D) * inv : srow[ju] * inv;
@@ -450,7 +450,7 @@ static void pixel_row_band(const rec_matcher *m, pix_work *pw, const float *xr, 
         }
     }
     if (!(smax >= min_snr) || !(smax > 0.0)) return;   /* every template too dim (or NaN) */
-    double err = FLOAT_ERR * Sxx + 1e-6;
+    double err = rec_pix_float_err(Sxx);
     int exact = err > 1e-3;
     if (exact) {
         to_double(xr, D, xd);

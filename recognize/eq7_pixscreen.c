@@ -41,16 +41,7 @@ gs_status rec_eq7_pixscreen_setup(rec_matcher *m)
     /* (a discrete matcher with shape-only bulbs keeps its prefilter) */
     if (!m->fourier || m->bandpath || (size_t)m->ncont != nb) return GS_OK;
     m->fs_lnfmin = malloc(sizeof *m->fs_lnfmin * nb);
-    m->fs_asum = malloc(sizeof *m->fs_asum * nb);
-    m->fs_dft = malloc(sizeof *m->fs_dft * 2 * (size_t)K * (size_t)K);
-    if (!m->fs_lnfmin || !m->fs_asum || !m->fs_dft)
-        return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate the pixel Fourier screen");
-    for (int k = 0; k < K; k++)
-        for (int q = 0; q < K; q++) {
-            double a = EQ7_TWO_PI * (double)((q * k) % K) / K;
-            m->fs_dft[(size_t)k * 2 * (size_t)K + (size_t)q] = cos(a);
-            m->fs_dft[(size_t)k * 2 * (size_t)K + (size_t)(K + q)] = -sin(a);
-        }
+    if (!m->fs_lnfmin) return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate the pixel Fourier screen");
     for (size_t b = 0; b < nb; b++) {
         double lmin = INFINITY;
         for (size_t c = 0; c < m->count[b]; c++) {
@@ -69,13 +60,11 @@ gs_status rec_eq7_pixscreen_setup(rec_matcher *m)
     m->fs_tail = calloc(nb * (size_t)bands * (size_t)K, sizeof *m->fs_tail);
     if (!m->fs_a || !m->fs_tail) return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate the pixel Fourier screen");
     for (size_t b = 0; b < nb; b++) {
-        m->fs_asum[b] = 0.0;
         double inv = exp(-m->fs_lnfmin[b]);
         for (int band = 0; band < bands; band++) {
             for (size_t n = 0; n < nh; n++) {
                 double f = (n == 0 || 2 * n == (size_t)G) ? 1.0 : 2.0;
                 double complex a = m->ahat[(b * (size_t)bands + (size_t)band) * nh + n] * (f * inv);
-                m->fs_asum[b] += cabs(a);
                 if (n > keep) {
                     m->fs_tail[(b * (size_t)bands + (size_t)band) * (size_t)K + n % (size_t)K] += cabs(a);
                     continue;
@@ -225,13 +214,18 @@ GS_VECTOR_LOOP static void scan_scores(const float *o, const float *lnf, size_t 
     out[2] = d;
 }
 
-/* y[r] = sum_k tab[k 2K + r] x[k], r < 2K: the K-point DFT of x (re, then im), in double. */
-GS_VECTOR_LOOP static void row_dft(const double *tab, const float *x, size_t K, double *y)
+/* The K-point DFT of x in double, X_q = sum_k x_k e^{-2 pi i q k / K}: re[q], im[q], from the
+ * matcher's cos and sin tables (m->dftc, m->dfts: [k K + q]). */
+GS_VECTOR_LOOP static void row_dft(const double *restrict c, const double *restrict sn, const float *restrict x,
+                                    size_t K, double *restrict re, double *restrict im)
 {
-    for (size_t r = 0; r < 2 * K; r++) y[r] = 0.0;
+    for (size_t q = 0; q < K; q++) re[q] = im[q] = 0.0;
     for (size_t k = 0; k < K; k++) {
         double xk = x[k];
-        for (size_t r = 0; r < 2 * K; r++) y[r] += tab[k * 2 * K + r] * xk;
+        for (size_t q = 0; q < K; q++) {
+            re[q] += c[k * K + q] * xk;
+            im[q] -= sn[k * K + q] * xk;
+        }
     }
 }
 
@@ -285,17 +279,20 @@ void rec_eq7_pixscreen(const rec_matcher *m, rec_pixscreen_work *sw, const float
         memset(st, ST_NONE, nb);
         if (!keep[k]) continue;
         double inv = 1.0 / sg, Sxx = ss * inv * inv, xn = sqrt(ss);
-        /* a float score's error: the templates rounded to float and D multiply-adds, twice */
+        /* a float score's error: the templates rounded to float and D multiply-adds, twice (the
+         * double DFT's, ~K 1e-16 |x|, is far inside the factor 2) */
         double serr = 2.0 * (double)(D + 2) * FLT_EPSILON * 0.5 * xn;
         r->eps = (float)serr;
         r->hf = (float)(0.5 * inv * inv);
-        r->err = FLOAT_ERR * Sxx + 1e-6;
+        r->err = rec_pix_float_err(Sxx);
         r->smax = -INFINITY;
         r->umax = -INFINITY;
         r->nmax = -INFINITY;
         /* the row's DFT, X_q = sum_k x_k e^{-2 pi i q k / K}, and at harmonics 0..n_kept (X_{n mod K}) */
         double *y = sw->y;
-        for (int band = 0; band < bands; band++) row_dft(m->fs_dft, xs + k * D + (size_t)band * K, K, y + (size_t)band * 2 * K);
+        for (int band = 0; band < bands; band++)
+            row_dft(m->dftc, m->dfts, xs + k * D + (size_t)band * K, K, y + (size_t)band * 2 * K,
+                    y + (size_t)band * 2 * K + K);
         for (int band = 0; band < bands; band++) {
             double *yb = sw->yx + (size_t)band * 2 * np;
             for (size_t n = 0; n < np; n++) {
@@ -310,12 +307,12 @@ void rec_eq7_pixscreen(const rec_matcher *m, rec_pixscreen_work *sw, const float
                 double re = y[(size_t)band * 2 * K + q], im = y[(size_t)band * 2 * K + K + q];
                 xa[(size_t)band * K + q] = sqrt(re * re + im * im);
             }
-        /* slack: the double DFT's rounding, the float score's */
+        /* slack: the float score's rounding */
         double bmax = -INFINITY;
         for (size_t b = 0; b < nb; b++) {
             double bd = (harmonic_sum(m->fs_a + b * (size_t)bands * 2 * np, sw->yx, bands, np) +
                          gs_dot(m->fs_tail + b * (size_t)bands * K, xa, (size_t)bands * K)) * (1.0 + 1e-9) +
-                        1e-12 * m->fs_asum[b] * xn + serr;
+                        serr;
             if (!(bd <= DBL_MAX)) bd = INFINITY;   /* an overflowed DFT: scored */
             sw->bound[k * nb + b] = bd;
             bmax = bd > bmax ? bd : bmax;

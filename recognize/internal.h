@@ -114,6 +114,11 @@ gs_status rec_cv_dilate_u8(unsigned char *mask, int width, int height, int radiu
 #define CUT_PIXEL 30.0    /* nats: pairs this far below the best are < 1e-13 of it */
 #define CUT_REFINE 30.0   /* nats: continuous bulbs this far below the best keep their grid peak */
 #define FLOAT_ERR 2e-6    /* error of z^2/2 from float scores, per unit |x|^2/sigma^2 */
+/* the pixel path's bound on that error for a row of Sxx = |x|^2/sigma^2 (eq7_pixels.c, eq7_pixscreen.c) */
+static inline double rec_pix_float_err(double Sxx)
+{
+    return FLOAT_ERR * Sxx + 1e-6;
+}
 #define PHASE_WINDOW 0.16666666666666666  /* +-30 deg of phase = +-1/6 cycle of shift */
 #define PIX_BLOCK 512    /* rows per SGEMM block (its band scores stay in L2) */
 #define PIX_PREFILTER_REST 7   /* blocks without the prefilter after one it hardly filtered */
@@ -185,11 +190,9 @@ struct rec_matcher {
                                          * the screen's kernel on every bulb of every row */
     int fs_n;                           /* harmonics 0..fs_n kept */
     size_t fs_np;                       /* fs_n + 1 rounded up to 8 */
-    double *fs_dft;                     /* [K * 2K] cos, -sin of 2 pi q k / K ([k 2K + q], then sin) */
     double *fs_a;                       /* [nb * bands * 2 * fs_np] f_n ahat_n / min |t| (re, im) */
     double *fs_tail;                    /* [nb * bands * K] sum of |f_n ahat_n| / min |t| over the
                                          * harmonics n > fs_n with n mod K = q ([b][band][q]) */
-    double *fs_asum;                    /* [nb] sum over every harmonic of |f_n ahat_n| / min |t| */
     double *fs_lnfmin;                  /* [nb] least log |t| of the bulb's templates */
     size_t fs_ldt;                      /* Mp + LANES */
     float *fs_tt;                       /* [D * fs_ldt] the unit templates tn transposed */

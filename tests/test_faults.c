@@ -529,9 +529,10 @@ static void sweep(const scenario *sc)
     const char *range = getenv("GS_FAULT_POINTS");
     if (range && *range) {
         unsigned long a = 0, b = 0;
-        CHECK_MSG(sscanf(range, "%lu-%lu", &a, &b) == 2 && a >= 1 && a <= b, "GS_FAULT_POINTS=%s: expected A-B, 1 <= A <= B", range);
-        lo = a >= 1 && a <= b && a - 1 < n_points ? a - 1 : n_points;   /* (none when malformed) */
-        hi = a >= 1 && a <= b && b < n_points ? b : n_points;
+        int ok = sscanf(range, "%lu-%lu", &a, &b) == 2 && a >= 1 && a <= b;
+        CHECK_MSG(ok, "GS_FAULT_POINTS=%s: expected A-B, 1 <= A <= B", range);
+        lo = ok && a - 1 < n_points ? a - 1 : n_points;   /* (none when malformed) */
+        hi = ok && b < n_points ? b : n_points;
     }
     pid_t pids[64];
     char res[64][1200];
