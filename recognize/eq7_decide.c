@@ -52,6 +52,7 @@ void rec_eq7_work_free(rec_eq7_work *w)
     free(w->t12);
     free(w->scratch);
     free(w->acc);
+    free(w->rs);
     free(w->spec);
     free(w->grid);
     memset(w, 0, sizeof *w);
@@ -105,12 +106,14 @@ gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t 
     w->t12 = malloc(sizeof *w->t12 * M * (size_t)m->nfit * REC_NESTED_FIRST);
     w->scratch = malloc(sizeof *w->scratch * (size_t)(2 * 3 * GS_MAX_BANDS + 1) * D);
     w->acc = malloc(sizeof *w->acc * REC_TEMPLATE_ACC * (size_t)m->K);
+    size_t nrs = rec_eq7_series_work_size(m);
+    w->rs = nrs ? malloc(sizeof *w->rs * nrs) : NULL;
     w->spec = malloc(sizeof *w->spec * ((size_t)m->G / 2 + 1) * (size_t)(1 + 2 * m->bands));
     w->grid = malloc(sizeof *w->grid * (size_t)m->G);
     if (!w->L || !w->mass || !w->cand || !w->mark || !w->bmass || !w->wmass || !w->has_peak ||
         !w->peak_s || !w->peak_L || !w->peak_sig || !w->peak_z || !w->peak_gain || !w->peak_cell || !w->S_all ||
         !w->T_all || !w->w_all || !w->wx_all || !w->xs_all || !w->prep || !w->U || !w->done || !w->tmp || !w->tt || !w->dt ||
-        !w->d2t || !w->r2 || !w->s2 || !w->m2 || !w->tr || !w->t12 || !w->scratch || !w->acc || !w->spec || !w->grid) {
+        !w->d2t || !w->r2 || !w->s2 || !w->m2 || !w->tr || !w->t12 || !w->scratch || !w->acc || (nrs && !w->rs) || !w->spec || !w->grid) {
         rec_eq7_work_free(w);
         return gs_fail(GS_ENOMEM, "Eq. 7: cannot allocate scratch for %zu templates", M);
     }

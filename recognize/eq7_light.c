@@ -19,33 +19,21 @@ typedef struct {
 
 static void chi2_at(const rec_matcher *m, rec_eq7_work *w, size_t b, double s, double Sxx, chi2_eval *e)
 {
-    size_t K = (size_t)m->K;
     int nf = m->nfit;
-    size_t span = m->bg ? K : (size_t)m->D;   /* samples of one brightness parameter */
-    rec_eq7_template_at(m, b, s, w->tt, w->dt, w->d2t, w->acc);
+    double S1[GS_MAX_BANDS], S2[GS_MAX_BANDS], T1[GS_MAX_BANDS], T2[GS_MAX_BANDS];
+    rec_eq7_series_at(m, w, b, s, e->S, S1, S2, e->T, T1, T2);
     e->nf = nf;
     e->chi2 = Sxx;
     e->d1 = e->d2 = 0.0;
     for (int f = 0; f < nf; f++) {
-        double S = 0, S1 = 0, S2 = 0, T = 0, T1 = 0, T2 = 0;
-        for (size_t d = (size_t)f * span; d < (size_t)(f + 1) * span; d++) {
-            double t = w->tt[d], t1 = w->dt[d], t2 = w->d2t[d];
-            S += w->wx[d] * t;
-            S1 += w->wx[d] * t1;
-            S2 += w->wx[d] * t2;
-            T += w->w[d] * t * t;
-            T1 += 2.0 * w->w[d] * t * t1;
-            T2 += 2.0 * w->w[d] * (t1 * t1 + t * t2);
-        }
-        e->S[f] = S;
-        e->T[f] = T;
+        double S = e->S[f], T = e->T[f];
         /* a* <= 0 (or no samples): the constrained fit is a = 0, this part of chi2 flat */
         if (!(T > 0.0) || S <= 0.0) continue;
         /* f = S^2/T, chi2 = Sxx - sum f */
         double f0 = S * S / T;
-        double f1 = 2.0 * S * S1 / T - S * S * T1 / (T * T);
-        double f2 = (2.0 * S1 * S1 + 2.0 * S * S2) / T - 4.0 * S * S1 * T1 / (T * T) -
-                    S * S * T2 / (T * T) + 2.0 * S * S * T1 * T1 / (T * T * T);
+        double f1 = 2.0 * S * S1[f] / T - S * S * T1[f] / (T * T);
+        double f2 = (2.0 * S1[f] * S1[f] + 2.0 * S * S2[f]) / T - 4.0 * S * S1[f] * T1[f] / (T * T) -
+                    S * S * T2[f] / (T * T) + 2.0 * S * S * T1[f] * T1[f] / (T * T * T);
         e->chi2 -= f0;
         e->d1 -= f1;
         e->d2 -= f2;
@@ -85,7 +73,8 @@ static double loglik_bulb(const rec_matcher *m, const rec_eq7_work *w, int b, do
 }
 
 /* Refine continuous bulb b around its best grid cell j0: safeguarded Newton on the exact chi2(s)
- * within +-1 cell, then the peak's log likelihood and std. */
+ * within +-1 cell (its sums from eq7_series.c: rec_eq7_series_row taken for the row), then the
+ * peak's log likelihood and std. */
 void rec_eq7_refine_peak(const rec_matcher *m, rec_eq7_work *w, size_t b, size_t j0, double Sxx)
 {
     double cell = 1.0 / m->G;
@@ -105,6 +94,7 @@ void rec_eq7_refine_peak(const rec_matcher *m, rec_eq7_work *w, size_t b, size_t
     if (u > cell) u = cell;
     double lo = -cell, hi = cell;
     chi2_eval e;
+    rec_eq7_series_bulb(m, w, b);
     for (int it = 0; it < 60; it++) {
         chi2_at(m, w, b, sc + u, Sxx, &e);
         if (e.d1 > 0.0) hi = u;
@@ -489,6 +479,7 @@ gs_status rec_eq7_light_finish(const rec_matcher *m, rec_eq7_work *w, size_t q, 
     /* every template's score where it can matter (eq7_scores.c) */
     double Lmax = rec_eq7_screen(m, w, p, Sxx);
     /* continuous bulbs near the top: refine their peaks exactly */
+    int series_row = 0;
     for (size_t b = 0; b < m->nb; b++) {
         w->has_peak[b] = 0;
         if (!m->cont[b]) continue;
@@ -503,6 +494,8 @@ gs_status rec_eq7_light_finish(const rec_matcher *m, rec_eq7_work *w, size_t q, 
             w->peak_cell[b] = jb;
             continue;
         }
+        if (!series_row) rec_eq7_series_row(m, w);
+        series_row = 1;
         rec_eq7_refine_peak(m, w, b, jb, Sxx);
     }
     for (size_t b = 0; b < m->nb; b++)

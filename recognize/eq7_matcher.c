@@ -118,6 +118,7 @@ void rec_matcher_free(rec_matcher *m)
     free(m->fs_lnfmin);
     free(m->fs_tt);
     if (m->c2r) fftw_destroy_plan((fftw_plan)m->c2r);
+    rec_eq7_series_free(m);
     free(m);
 }
 
@@ -805,6 +806,7 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
         }
     }
     s = fourier_grid_setup(m);
+    if (s == GS_OK) s = rec_eq7_series_setup(m);
     if (s == GS_OK) s = rec_eq7_sums_setup(m);
     if (s != GS_OK) {
         rec_matcher_free(m);

@@ -184,6 +184,13 @@ struct rec_matcher {
     int *nfine;                         /* [nb] BRF samples per cycle */
     double *dftc, *dfts;                /* [K * K] cos, sin of 2 pi q k / K ([k K + q]) */
     double *nyqs, *nyqc;                /* [nb * (K + 1)] sin, cos of pi nfine k / K (continuous) */
+    /* the refinement's series (eq7_series.c), continuous bulbs: f(x) = Re sum A_h e^{2 pi i h x},
+     * h <= rs_h (the Nyquist term as harmonic nfine / 2), and f^2, (f^2)', (f^2)'' = Re sum B_g
+     * e^{2 pi i g x}, g <= 2 rs_h; per band the real parts, then the imaginary parts, each zero
+     * padded to 8 */
+    int *rs_h;                          /* [nb] */
+    int rs_hmax;                        /* their largest */
+    double **rs_a, **rs_b;              /* [nb] -> A ([band][re, im]), B ([band][3][re, im]) */
     /* the pixel path's Fourier screen (eq7_pixscreen.c: fourier and the one-score path) */
     int fs_on;                          /* REC_FS_ON: rec_match_pixels uses it; _OFF: the matcher
                                          * has none (one SGEMM of every template); _ALL (tests):
@@ -315,6 +322,7 @@ typedef struct {
                                             * templates and every template ([f][r][j], eq7_nested.c) */
     double *scratch;                       /* [(6 bands + 1) D] the nested tests' */
     double complex *acc;                   /* [REC_TEMPLATE_ACC K] */
+    double *rs;                            /* [rec_eq7_series_work_size] the series' (eq7_series.c) */
     double complex *spec;                  /* [(G/2 + 1) (1 + 2 bands)] a cross-spectrum and the
                                             * light's band DFTs over the grid's bins
                                             * (rec_eq7_grid_sums) */
@@ -408,6 +416,18 @@ void rec_eq7_pixscreen(const rec_matcher *m, rec_pixscreen_work *sw, const float
 void rec_eq7_template_at(const rec_matcher *m, size_t b, double s, double *t, double *dt,
                          double *d2t, double complex *acc);
 double rec_eq7_log_phi_fast(const rec_matcher *m, double z);
+/* eq7_series.c: continuous bulb b's sums S_f, T_f per brightness f and their first two
+ * derivatives at any shift s from Fourier series (the tables of rec_eq7_series_setup; freed by
+ * rec_eq7_series_free): rec_eq7_series_row takes the K-point DFTs of the row's w->wx and w->w
+ * (once per row), rec_eq7_series_bulb bulb b's products with them, into w->rs; then
+ * rec_eq7_series_at evaluates any s. */
+gs_status rec_eq7_series_setup(rec_matcher *m);
+void rec_eq7_series_free(rec_matcher *m);
+size_t rec_eq7_series_work_size(const rec_matcher *m);
+void rec_eq7_series_row(const rec_matcher *m, rec_eq7_work *w);
+void rec_eq7_series_bulb(const rec_matcher *m, rec_eq7_work *w, size_t b);
+void rec_eq7_series_at(const rec_matcher *m, rec_eq7_work *w, size_t b, double s, double *S, double *S1,
+                       double *S2, double *T, double *T1, double *T2);
 /* eq7_sums.c: the sums S, T (rec_eq7_work [f * M + j]) of continuous bulb b's grid from the
  * Fourier form (m->fourier): one G-point inverse FFT per sum, after rec_eq7_light_dfts has
  * taken the DFTs of the light's w->wx and w->w. */
@@ -424,7 +444,7 @@ double rec_eq7_report_phase(const rec_matcher *m, int b, size_t j, double s);
 void rec_eq7_add_cand(const rec_matcher *m, rec_eq7_work *w, size_t j);
 void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_decision *dec);
 /* eq7_scores.c: the log likelihood of one scale; eq7_light.c: Newton refinement of continuous
- * bulb b's peak from grid cell j0. */
+ * bulb b's peak from grid cell j0 (after rec_eq7_series_row of the row's weights). */
 double rec_eq7_loglik(double Sxx, double S, double T);
 /* An answer without a bulb (every number 0, runner-up none, both ambiguous flags). */
 void rec_eq7_no_answer(rec_match *out, unsigned flags);

@@ -153,6 +153,11 @@ TEST(grid_phase_shifts_0_120_240)
     CHECK_NEAR(gs_shift_to_phase(0), 0.0, 1e-12);
     CHECK_NEAR(gs_shift_to_phase(2.0 / 3), 120.0, 1e-12);
     CHECK_NEAR(gs_shift_to_phase(1.0 / 3), 240.0, 1e-12);
+    /* a shift just below a whole cycle is phase 0, inside [0, 360): 180 s + 180 rounds to 360 */
+    for (double s = nextafter(1.0, 0.0), i = 0; i < 64; i++, s = nextafter(s, 0.0)) {
+        double q = gs_shift_to_phase(s);
+        CHECK_MSG(q >= 0.0 && q < 360.0 && (q < 1e-9 || q > 360.0 - 1e-9), "shift %.17g: phase %.17g", s, q);
+    }
     /* round trip for any phase, modulo the 180 deg a flicker cannot tell apart */
     for (double p = 0; p < 360; p += 7.5) {
         double q = gs_shift_to_phase(gs_phase_to_shift(p));

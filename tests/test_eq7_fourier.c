@@ -94,6 +94,92 @@ TEST(eq7_fourier_sums_match_brute_force)
     gs_delight_free(d);
 }
 
+/* The refinement's series (eq7_series.c: S, T and their first two derivatives at any shift from
+ * the row's K-point DFTs and the tabulated harmonics of t and t^2) against the same sums over
+ * rec_eq7_template_at's window means and derivatives (the harmonic fold and inverse DFTs, the
+ * Nyquist term in closed form), for random weights and shifts: the built-in DELIGHT (sharp
+ * waveforms: 500 harmonics and a Nyquist term) and the smooth test bulbs, K = 8, 13 (odd), 10
+ * (no Fourier grid), 26, one band and RGB, one brightness and one per band. Each sum within
+ * 1e-11 of its scale: the weights' absolute sum times the largest value the summed function
+ * can take, from its harmonics' magnitudes (either method's rounding is relative to that). */
+TEST(eq7_series_sums_match_templates)
+{
+    static const int Ks[] = {8, 10, 13, 26};
+    uint64_t rs = 23;
+    gs_delight *gen = gs_delight_new();
+    CHECK_OK(gs_delight_generate(gen, GS_BRF_N_DEFAULT));
+    double worst = 0.0;
+    int sharp = 0;
+    for (int db = 0; db < 2; db++)
+        for (int bands = 1; bands <= 3; bands += 2) {
+            gs_delight *d = db ? eq7fx_make_db(50, bands, 0, 0) : gen;
+            for (int bg = 0; bg < (bands == 3 ? 2 : 1); bg++)
+                for (size_t ki = 0; ki < sizeof Ks / sizeof *Ks; ki++) {
+                    int K = Ks[ki];
+                    rec_matcher *m = phase_matcher(d, bands, K, bg ? REC_BANDS_FREE : REC_BANDS_CHROMA,
+                                                   REC_PHASES_CONTINUOUS);
+                    if (!m) continue;
+                    rec_eq7_work w;
+                    CHECK_OK(rec_eq7_work_alloc(m, &w));
+                    size_t D = (size_t)m->D, span = m->bg ? (size_t)K : D;
+                    double *t = malloc(sizeof *t * 3 * D), *t1 = t + D, *t2 = t1 + D;
+                    for (size_t b = 0; b < m->nb; b += db ? 1 : 7) {
+                        sharp += m->rs_h[b] == m->nfine[b] / 2;
+                        for (size_t q = 0; q < D; q++) {
+                            w.w[q] = 0.2 + gs_splitmix_uniform(&rs);
+                            w.wx[q] = w.w[q] * (1.0 + 3.0 * gs_splitmix_normal(&rs));
+                        }
+                        rec_eq7_series_row(m, &w);
+                        rec_eq7_series_bulb(m, &w, b);
+                        for (int trial = 0; trial < 4; trial++) {
+                            double sh = trial == 0 ? 0.0 : trial == 1 ? nextafter(1.0, 0.0) : gs_splitmix_uniform(&rs);
+                            double v[6][GS_MAX_BANDS];
+                            rec_eq7_series_at(m, &w, b, sh, v[0], v[1], v[2], v[3], v[4], v[5]);
+                            rec_eq7_template_at(m, b, sh, t, t1, t2, w.acc);
+                            for (int f = 0; f < m->nfit; f++) {
+                                /* the scale of each sum: its weights' absolute sum times the largest
+                                 * value of the function summed (t, its derivatives, t^2 and
+                                 * its), from the harmonics' magnitudes M_i = sum (2 pi h)^i |A_h| */
+                                double ref[6] = {0}, sw = 0.0, sx = 0.0, Mi[3] = {0};
+                                for (size_t q = (size_t)f * span; q < (size_t)(f + 1) * span; q++) {
+                                    double terms[6] = {w.wx[q] * t[q], w.wx[q] * t1[q], w.wx[q] * t2[q], w.w[q] * t[q] * t[q],
+                                                       2.0 * w.w[q] * t[q] * t1[q], 2.0 * w.w[q] * (t1[q] * t1[q] + t[q] * t2[q])};
+                                    for (int i = 0; i < 6; i++) ref[i] += terms[i];
+                                    sw += w.w[q];
+                                    sx += fabs(w.wx[q]);
+                                }
+                                int b0 = m->nfit == 1 ? 0 : f, b1 = m->nfit == 1 ? bands : f + 1;
+                                for (int band = b0; band < b1; band++) {
+                                    const double complex *F = m->F[b] + (size_t)band * (size_t)(m->H[b] + 1);
+                                    double nyq = fabs(m->nyq[b * (size_t)bands + (size_t)band]) * 2.0 * K / (M_PI * m->nfine[b]);
+                                    for (int h = 0; h <= m->H[b] + 1; h++) {
+                                        double a = h <= m->H[b] ? cabs(F[h]) : nyq, wh = 2.0 * M_PI * (h <= m->H[b] ? h : m->nfine[b] / 2);
+                                        Mi[0] += a, Mi[1] += wh * a, Mi[2] += wh * wh * a;
+                                    }
+                                }
+                                double scale[6] = {sx * Mi[0], sx * Mi[1], sx * Mi[2], sw * Mi[0] * Mi[0], 2.0 * sw * Mi[0] * Mi[1],
+                                                   2.0 * sw * (Mi[1] * Mi[1] + Mi[0] * Mi[2])};
+                                for (int i = 0; i < 6; i++) {
+                                    double e = fabs(v[i][f] - ref[i]) / scale[i];
+                                    CHECK_MSG(e < 1e-11, "db %d bands %d gains %d K %d bulb %zu s %.17g sum %d: %.17g, "
+                                              "templates %.17g (scale %g)", db, bands, bg, K, b, sh, i, v[i][f], ref[i], scale[i]);
+                                    worst = fmax(worst, e);
+                                }
+                            }
+                        }
+                    }
+                    free(t);
+                    rec_eq7_work_free(&w);
+                    rec_matcher_free(m);
+                }
+            if (db) gs_delight_free(d);
+        }
+    gs_delight_free(gen);
+    CHECK_MSG(sharp > 0, "no bulb with a Nyquist harmonic");
+    printf("    series against the templates' sums: worst relative error %.2g (%d bulbs with a Nyquist term)\n",
+           worst, sharp);
+}
+
 static int close_to(double a, double b, double abs_tol, double rel_tol)
 {
     return fabs(a - b) <= abs_tol + rel_tol * fmax(fabs(a), fabs(b));

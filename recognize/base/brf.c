@@ -212,6 +212,7 @@ double gs_shift_to_phase(double shift_cycles)
     double s = fmod(shift_cycles, 1.0);
     if (s < 0) s += 1.0;
     double a = fmod(180.0 * s, 180.0), b = a + 180.0;
+    if (b >= 360.0) b = 0.0;   /* a just below 180 rounds a + 180 up to 360: the same phase as 0 */
     return off_grid_deg(a) <= off_grid_deg(b) ? a : b;
 }
 

@@ -1,0 +1,272 @@
+/* eq7_series.c - a continuous bulb's sums S(s) = sum_k w_k x_k t_k(s) and T(s) = sum_k w_k
+ * t_k(s)^2 at any shift s, with their first two derivatives in s, from Fourier series: the
+ * Newton steps of the peak refinement (rec_eq7_refine_peak, eq7_light.c).
+ *
+ * A window mean is one periodic function of k/K - s, t_k(s) = f(k/K - s), with
+ *   f(x) = Re sum_{h=0}^{H} A_h e^{2 pi i h x}
+ * (rec_eq7_template_at's series, its Nyquist term as harmonic n/2), and f^2 = Re sum_{g=0}^{2H}
+ * B_g e^{2 pi i g x}. With the row's K-point DFTs X_r = sum_k w_k x_k e^{2 pi i r k / K} and
+ * W_r = sum_k w_k e^{2 pi i r k / K} (per band),
+ *   S(s) = Re sum_h A_h X_{h mod K} e^{-2 pi i h s},   T(s) = Re sum_g B_g W_{g mod K} e^{-2 pi i g s}:
+ * per shift one pass over 7H + 4 terms (the bands of one brightness summed into one series), not
+ * the template's harmonic fold and three K x K inverse DFTs per band. S's derivatives come from
+ * the same terms times (2 pi h)^i; T's from the harmonics B' and B'' of (f^2)' = 2 f f' and
+ * (f^2)'' = 2 (f'^2 + f f''), each tabulated per bulb by an FFT of the function sampled at
+ * N > 4H points (2H harmonics: no aliasing), so that its rounding is relative to that function's
+ * size, not to f^2's times g^2. */
+#include "recognize/internal.h"
+
+#include <fftw3.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define SER_LANES 8
+#define SER_PAD(n) (((n) + SER_LANES - 1) / SER_LANES * SER_LANES)
+#define SER_PAD32(n) (((n) + 31) / 32 * 32)
+typedef double ser_vd __attribute__((vector_size(SER_LANES * sizeof(double))));
+
+void rec_eq7_series_free(rec_matcher *m)
+{
+    for (size_t b = 0; m->rs_a && b < m->nb; b++) free(m->rs_a[b]);
+    for (size_t b = 0; m->rs_b && b < m->nb; b++) free(m->rs_b[b]);
+    free(m->rs_a);
+    free(m->rs_b);
+    free(m->rs_h);
+}
+
+/* The Nyquist term of rec_eq7_template_at, nyq K / (pi n) (sin(pi n (x + 1/K)) - sin(pi n x)),
+ * is Re(nyq c e^{i pi n x}): harmonic n/2 of f, c = -i K / (pi n) (e^{i pi n / K} - 1) (pi n / K
+ * modulo 2 pi exactly). */
+static double complex nyquist_factor(int n, int K)
+{
+    double an = M_PI * (double)((long)n % (2L * K)) / K;
+    return -I * K / (M_PI * n) * (cexp(I * an) - 1.0);
+}
+
+/* Bulb b's A and B, B', B'', band by band, each real parts then imaginary parts, zero padded to
+ * SER_PAD. */
+static gs_status series_bulb(rec_matcher *m, size_t b, int hs)
+{
+    int K = m->K, n = m->nfine[b], H = m->H[b], bands = m->bands;
+    size_t la = SER_PAD((size_t)hs + 1), lb = SER_PAD(2 * (size_t)hs + 1), N = 8, nh;
+    while (N <= 4 * (size_t)hs + 1) N *= 2;
+    nh = N / 2 + 1;
+    m->rs_a[b] = calloc((size_t)bands * 2 * la, sizeof **m->rs_a);
+    m->rs_b[b] = calloc((size_t)bands * 6 * lb, sizeof **m->rs_b);
+    double *y = fftw_malloc(sizeof *y * 3 * N);
+    fftw_complex *Y = fftw_malloc(sizeof *Y * 3 * nh);
+    gs_status st = GS_OK;
+    fftw_plan inv = NULL, fwd = NULL;
+    if (!m->rs_a[b] || !m->rs_b[b] || !y || !Y) {
+        st = gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate the refinement's %d harmonics", hs);
+        goto done;
+    }
+    /* three transforms at once: f, f', f'' to samples; f^2 and its derivatives back */
+    int Ni = (int)N;
+    inv = fftw_plan_many_dft_c2r(1, &Ni, 3, Y, NULL, 1, (int)nh, y, NULL, 1, Ni, FFTW_ESTIMATE);
+    fwd = fftw_plan_many_dft_r2c(1, &Ni, 3, y, NULL, 1, Ni, Y, NULL, 1, (int)nh, FFTW_ESTIMATE);
+    if (!inv || !fwd) {
+        st = gs_fail(GS_ENUMERIC, "Eq. 7 matcher: no %zu-point FFT plan", N);
+        goto done;
+    }
+    double complex nyw = nyquist_factor(n, K);
+    for (int band = 0; band < bands; band++) {
+        const double complex *F = m->F[b] + (size_t)band * (size_t)(H + 1);
+        double *ar = m->rs_a[b] + (size_t)band * 2 * la, *ai = ar + la;
+        ar[0] = creal(F[0]);
+        for (int h = 1; h <= H; h++) ar[h] = creal(F[h]), ai[h] = cimag(F[h]);
+        double nq = m->nyq[b * (size_t)bands + (size_t)band];
+        if (hs > H) ar[hs] = creal(nq * nyw), ai[hs] = cimag(nq * nyw);
+        /* f, f', f'' on N points (Y_0 = A_0, Y_h = (2 pi i h)^i A_h / 2) */
+        memset(Y, 0, sizeof *Y * 3 * nh);
+        Y[0] = ar[0];
+        for (int h = 1; h <= hs; h++) {
+            double complex a = 0.5 * (ar[h] + I * ai[h]), d = I * EQ7_TWO_PI * h;
+            Y[h] = a, Y[nh + (size_t)h] = d * a, Y[2 * nh + (size_t)h] = d * d * a;
+        }
+        fftw_execute(inv);
+        for (size_t j = 0; j < N; j++) {
+            double f = y[j], f1 = y[N + j], f2 = y[2 * N + j];
+            y[j] = f * f, y[N + j] = 2.0 * f * f1, y[2 * N + j] = 2.0 * (f1 * f1 + f * f2);
+        }
+        fftw_execute(fwd);
+        for (int i = 0; i < 3; i++) {
+            double *br = m->rs_b[b] + ((size_t)band * 3 + (size_t)i) * 2 * lb, *bi = br + lb;
+            const fftw_complex *Z = Y + (size_t)i * nh;
+            br[0] = creal(Z[0]) / (double)N;
+            for (int g = 1; g <= 2 * hs; g++) br[g] = 2.0 * creal(Z[g]) / (double)N, bi[g] = 2.0 * cimag(Z[g]) / (double)N;
+        }
+    }
+done:
+    if (inv) fftw_destroy_plan(inv);
+    if (fwd) fftw_destroy_plan(fwd);
+    fftw_free(y);
+    fftw_free(Y);
+    return st;
+}
+
+gs_status rec_eq7_series_setup(rec_matcher *m)
+{
+    if (!m->ncont) return GS_OK;
+    m->rs_h = calloc(m->nb, sizeof *m->rs_h);
+    m->rs_a = calloc(m->nb, sizeof *m->rs_a);
+    m->rs_b = calloc(m->nb, sizeof *m->rs_b);
+    if (!m->rs_h || !m->rs_a || !m->rs_b) return gs_fail(GS_ENOMEM, "Eq. 7 matcher: out of memory");
+    m->rs_hmax = 0;
+    for (size_t b = 0; b < m->nb; b++) {
+        if (!m->cont[b]) continue;
+        /* the Nyquist harmonic where it is kept as fourier_setup keeps the others (> 1e-15) */
+        int hs = m->H[b];
+        double complex c = nyquist_factor(m->nfine[b], m->K);
+        for (int band = 0; band < m->bands; band++)
+            if (cabs(m->nyq[b * (size_t)m->bands + (size_t)band] * c) > 1e-15) hs = m->nfine[b] / 2;
+        m->rs_h[b] = hs;
+        if (hs > m->rs_hmax) m->rs_hmax = hs;
+        gs_status st = series_bulb(m, b, hs);
+        if (st != GS_OK) return st;
+    }
+    return GS_OK;
+}
+
+size_t rec_eq7_series_work_size(const rec_matcher *m)
+{
+    if (!m->ncont) return 0;
+    size_t la = SER_PAD((size_t)m->rs_hmax + 1), lb = SER_PAD(2 * (size_t)m->rs_hmax + 1);
+    /* the row's DFTs (4 bands K), the products (nfit (2 la + 6 lb)), the powers (2 le) */
+    return 4 * (size_t)m->D + (size_t)m->nfit * (2 * la + 6 * lb) + 2 * SER_PAD32(2 * (size_t)m->rs_hmax + 1);
+}
+
+/* c += a X_{h mod K} over h < n (complex, split parts): one band's terms of a series, in rows
+ * of K harmonics (h = h0 + r, X_r). */
+GS_VECTOR_LOOP static void series_products(const double *restrict ar, const double *restrict ai,
+                                           const double *restrict xr, const double *restrict xi, int K, size_t n,
+                                           double *restrict cr, double *restrict ci)
+{
+    for (size_t h0 = 0; h0 < n; h0 += (size_t)K) {
+        size_t nr = n - h0 < (size_t)K ? n - h0 : (size_t)K;
+        for (size_t r = 0; r < nr; r++) {
+            cr[h0 + r] += ar[h0 + r] * xr[r] - ai[h0 + r] * xi[r];
+            ci[h0 + r] += ar[h0 + r] * xi[r] + ai[h0 + r] * xr[r];
+        }
+    }
+}
+
+void rec_eq7_series_row(const rec_matcher *m, rec_eq7_work *w)
+{
+    int K = m->K;
+    double *xr = w->rs, *xi = xr + m->D, *vr = xi + m->D, *vi = vr + m->D;
+    /* X and W per band (m->dftc, dfts: cos, sin of 2 pi r k / K) */
+    for (int band = 0; band < m->bands; band++)
+        for (int r = 0; r < K; r++) {
+            size_t o = (size_t)band * (size_t)K;
+            const double *c = m->dftc + (size_t)r * (size_t)K, *sn = m->dfts + (size_t)r * (size_t)K;
+            double a = 0.0, bq = 0.0, e = 0.0, f = 0.0;
+            for (int k = 0; k < K; k++) {
+                a += w->wx[o + (size_t)k] * c[k];
+                bq += w->wx[o + (size_t)k] * sn[k];
+                e += w->w[o + (size_t)k] * c[k];
+                f += w->w[o + (size_t)k] * sn[k];
+            }
+            xr[o + (size_t)r] = a, xi[o + (size_t)r] = bq, vr[o + (size_t)r] = e, vi[o + (size_t)r] = f;
+        }
+}
+
+void rec_eq7_series_bulb(const rec_matcher *m, rec_eq7_work *w, size_t b)
+{
+    int K = m->K, bands = m->bands, hs = m->rs_h[b], nf = m->nfit;
+    size_t la = SER_PAD((size_t)m->rs_hmax + 1), lb = SER_PAD(2 * (size_t)m->rs_hmax + 1);
+    size_t lab = SER_PAD((size_t)hs + 1), lbb = SER_PAD(2 * (size_t)hs + 1);
+    const double *xr = w->rs, *xi = xr + m->D, *vr = xi + m->D, *vi = vr + m->D;
+    double *cs = w->rs + 4 * (size_t)m->D, *ct = cs + 2 * (size_t)nf * la;
+    memset(cs, 0, sizeof *cs * (size_t)nf * (2 * la + 6 * lb));
+    for (int band = 0; band < bands; band++) {
+        int f = nf == 1 ? 0 : band;
+        size_t o = (size_t)band * (size_t)K;
+        const double *ar = m->rs_a[b] + (size_t)band * 2 * lab;
+        double *sr = cs + (size_t)f * 2 * la;
+        series_products(ar, ar + lab, xr + o, xi + o, K, (size_t)hs + 1, sr, sr + la);
+        for (int i = 0; i < 3; i++) {
+            const double *br = m->rs_b[b] + ((size_t)band * 3 + (size_t)i) * 2 * lbb;
+            double *tr = ct + ((size_t)f * 3 + (size_t)i) * 2 * lb;
+            series_products(br, br + lbb, vr + o, vi + o, K, 2 * (size_t)hs + 1, tr, tr + lb);
+        }
+    }
+}
+
+/* e^{-2 pi i g s}, g < n (n a multiple of 32): blocks of 32 powers of e^{-2 pi i s} times the
+ * blocks' own, each from cexp every 8 blocks (relative error some 100 eps). */
+GS_VECTOR_LOOP static void series_powers(double s, size_t n, double *er, double *ei)
+{
+    double pr[32], pi[32];
+    double complex e1 = cexp(-I * EQ7_TWO_PI * s), p = 1.0;
+    for (int i = 0; i < 32; i++) {
+        pr[i] = creal(p), pi[i] = cimag(p);
+        p *= e1;
+    }
+    double complex e32 = cexp(-I * EQ7_TWO_PI * fmod(32.0 * s, 1.0)), q = 1.0;
+    for (size_t j = 0; j * 32 < n; j++) {
+        if (j % 8 == 0 && j) q = cexp(-I * EQ7_TWO_PI * fmod((double)(32 * j) * s, 1.0));
+        double qr = creal(q), qi = cimag(q);
+        for (int i = 0; i < 32; i++) {
+            er[32 * j + (size_t)i] = qr * pr[i] - qi * pi[i];
+            ei[32 * j + (size_t)i] = qr * pi[i] + qi * pr[i];
+        }
+        q *= e32;
+    }
+}
+
+/* Over g < n (a multiple of SER_LANES), in SER_LANES interleaved partial sums taken in a fixed
+ * order: out = sum Re(c_g e_g), sum g Im(c_g e_g), sum g^2 Re(c_g e_g) (the S series and its
+ * derivatives); or, with c1 and c2 (the T series of f^2, (f^2)', (f^2)''), sum Re(c_g e_g),
+ * Re(c1_g e_g), Re(c2_g e_g). */
+GS_VECTOR_CLONES static void series_sums(const double *cr, const double *ci, const double *c1, const double *c2,
+                                         size_t ld, const double *er, const double *ei, size_t n, double out[3])
+{
+    ser_vd s0 = {0}, s1 = {0}, s2 = {0}, g = {0, 1, 2, 3, 4, 5, 6, 7}, step;
+    for (int i = 0; i < SER_LANES; i++) step[i] = SER_LANES;
+    for (size_t h = 0; h < n; h += SER_LANES) {
+        ser_vd a, b, c, d;
+        memcpy(&a, cr + h, sizeof a);
+        memcpy(&b, ci + h, sizeof b);
+        memcpy(&c, er + h, sizeof c);
+        memcpy(&d, ei + h, sizeof d);
+        ser_vd re = a * c - b * d;
+        s0 += re;
+        if (c1) {
+            ser_vd a1, b1, a2, b2;
+            memcpy(&a1, c1 + h, sizeof a1);
+            memcpy(&b1, c1 + ld + h, sizeof b1);
+            memcpy(&a2, c2 + h, sizeof a2);
+            memcpy(&b2, c2 + ld + h, sizeof b2);
+            s1 += a1 * c - b1 * d;
+            s2 += a2 * c - b2 * d;
+        } else {
+            s1 += g * (a * d + b * c);
+            s2 += g * g * re;
+            g += step;
+        }
+    }
+    out[0] = out[1] = out[2] = 0.0;
+    for (int i = 0; i < SER_LANES; i++) out[0] += s0[i], out[1] += s1[i], out[2] += s2[i];
+}
+
+void rec_eq7_series_at(const rec_matcher *m, rec_eq7_work *w, size_t b, double s, double *S, double *S1,
+                       double *S2, double *T, double *T1, double *T2)
+{
+    int hs = m->rs_h[b];
+    size_t la = SER_PAD((size_t)m->rs_hmax + 1), lb = SER_PAD(2 * (size_t)m->rs_hmax + 1);
+    size_t na = SER_PAD((size_t)hs + 1), nbb = SER_PAD(2 * (size_t)hs + 1);
+    double *cs = w->rs + 4 * (size_t)m->D, *ct = cs + 2 * (size_t)m->nfit * la, *er = ct + 6 * (size_t)m->nfit * lb;
+    double *ei = er + SER_PAD32(2 * (size_t)m->rs_hmax + 1);
+    series_powers(wrap01(s), SER_PAD32(2 * (size_t)hs + 1), er, ei);
+    double tp = EQ7_TWO_PI, o[3];
+    for (int f = 0; f < m->nfit; f++) {
+        const double *sr = cs + (size_t)f * 2 * la, *tr = ct + (size_t)f * 6 * lb;
+        series_sums(sr, sr + la, NULL, NULL, 0, er, ei, na, o);
+        S[f] = o[0], S1[f] = tp * o[1], S2[f] = -tp * tp * o[2];
+        /* d/ds of u(k/K - s) is -u'(k/K - s) */
+        series_sums(tr, tr + lb, tr + 2 * lb, tr + 4 * lb, lb, er, ei, nbb, o);
+        T[f] = o[0], T1[f] = -o[1], T2[f] = o[2];
+    }
+}
