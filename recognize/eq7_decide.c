@@ -144,6 +144,20 @@ void rec_eq7_add_cand(const rec_matcher *m, rec_eq7_work *w, size_t j)
     }
 }
 
+/* Every template the screen made exact (w->done), in order; eight flags at a time where none is set. */
+void rec_eq7_add_done(const rec_matcher *m, rec_eq7_work *w)
+{
+    size_t j = 0;
+    for (; j + 8 <= m->M; j += 8) {
+        uint64_t any;
+        memcpy(&any, w->done + j, sizeof any);
+        for (size_t i = j; any && i < j + 8; i++)
+            if (w->done[i]) rec_eq7_add_cand(m, w, i);
+    }
+    for (; j < m->M; j++)
+        if (w->done[j]) rec_eq7_add_cand(m, w, j);
+}
+
 /* A pair candidate for the best / runner-up: log of its mass relative to exp(Lmax). */
 typedef struct {
     double lm;

@@ -467,7 +467,7 @@ int rec_eq7_light_prepare(const rec_matcher *m, rec_eq7_work *w, size_t q, const
 gs_status rec_eq7_light_finish(const rec_matcher *m, rec_eq7_work *w, size_t q, const double *sigma,
                                double fe, rec_match *out, rec_eq7_excess *excess)
 {
-    size_t D = (size_t)m->D, M = m->M;
+    size_t D = (size_t)m->D;
     rec_eq7_work_row(m, w, q);
     const rec_eq7_prep *p = &w->prep[q];
     unsigned flags = p->flags;
@@ -483,9 +483,7 @@ gs_status rec_eq7_light_finish(const rec_matcher *m, rec_eq7_work *w, size_t q, 
     for (size_t b = 0; b < m->nb; b++) {
         w->has_peak[b] = 0;
         if (!m->cont[b]) continue;
-        size_t jb = m->first[b];
-        for (size_t c2 = 1; c2 < m->count[b]; c2++)
-            if (w->L[m->first[b] + c2] > w->L[jb]) jb = m->first[b] + c2;
+        size_t jb = m->first[b] + rec_eq7_argmax(w->L + m->first[b], m->count[b]);
         if (!(w->L[jb] >= Lmax - CUT_REFINE)) {
             w->has_peak[b] = 1;   /* negligible: grid values only */
             w->peak_s[b] = m->shift[jb];
@@ -501,8 +499,7 @@ gs_status rec_eq7_light_finish(const rec_matcher *m, rec_eq7_work *w, size_t q, 
     for (size_t b = 0; b < m->nb; b++)
         if (m->cont[b] && w->peak_L[b] > Lmax) Lmax = w->peak_L[b];
     w->ncand = 0;
-    for (size_t j = 0; j < M; j++)
-        if (w->done[j]) rec_eq7_add_cand(m, w, j);   /* every scored pair counts for one light */
+    rec_eq7_add_done(m, w);   /* every scored pair counts for one light */
     rec_eq7_decision dec;
     rec_eq7_decide(m, w, Lmax, &dec);
     double kappa = 1.0, phi = 1.0;
@@ -524,8 +521,7 @@ gs_status rec_eq7_light_finish(const rec_matcher *m, rec_eq7_work *w, size_t q, 
             /* tempered, a score d nats below Lmax comes kappa d below it: the screen's cut widens */
             rec_eq7_screen_widen(m, w, Sxx, Lmax, CUT_PIXEL / kappa);
             temper(m, w, Lmax, kappa);
-            for (size_t j = 0; j < M; j++)
-                if (w->done[j]) rec_eq7_add_cand(m, w, j);   /* decide consumed them */
+            rec_eq7_add_done(m, w);   /* decide consumed them */
             rec_eq7_decide(m, w, Lmax, &dec);
         }
     }

@@ -250,8 +250,14 @@ static void red_bounds(const rec_matcher *m, rec_eq7_work *w, double Sxx, size_t
 typedef double scr_vd __attribute__((vector_size(8 * sizeof(double))));
 typedef long long scr_vl __attribute__((vector_size(8 * sizeof(long long))));
 
+/* v[0..n) = x. */
+GS_VECTOR_LOOP static void scr_fill(double *v, size_t n, double x)
+{
+    for (size_t j = 0; j < n; j++) v[j] = x;
+}
+
 /* The first index of the largest of U[0..M) (0 when every one is -inf). */
-GS_VECTOR_CLONES static size_t scr_argmax(const double *U, size_t M)
+GS_VECTOR_CLONES size_t rec_eq7_argmax(const double *U, size_t M)
 {
     size_t j = 0, jb = 0;
     double mx = -INFINITY;
@@ -306,7 +312,7 @@ static void free_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pre
     double slack = 1e-12 * Sxx, *U = w->U;
     if (nf == 1) {
         scr_bounds_1(w->S, w->T, p->full[0] ? m->lognorm : NULL, M, -0.5 * log(p->wmin[0]), Sxx, slack, U);
-        *jbest = scr_argmax(U, M);
+        *jbest = rec_eq7_argmax(U, M);
         return;
     }
     double cf[GS_MAX_BANDS];
@@ -459,14 +465,51 @@ static void exact_set(screen *sc, const size_t *idx, size_t n)
     for (size_t i = 0; i < n; i++) scored(sc, idx[i]);
 }
 
+/* The indices j in [j0, j1) with U[j] >= th and U[j] > -inf into out, in order; returns how
+ * many. Blocks of 8 none of which reaches th are skipped by one vector compare. */
+GS_VECTOR_CLONES static size_t scr_at_least(const double *U, size_t j0, size_t j1, double th, size_t *out)
+{
+    size_t n = 0, j = j0;
+    scr_vd t;
+    for (int q = 0; q < 8; q++) t[q] = th;
+    for (; j + 8 <= j1; j += 8) {
+        scr_vd u;
+        memcpy(&u, U + j, sizeof u);
+        scr_vl ge = u >= t;
+        long long any = 0;
+        for (int q = 0; q < 8; q++) any |= ge[q];
+        if (!any) continue;
+        for (size_t i = j; i < j + 8; i++)
+            if (U[i] >= th && U[i] > -INFINITY) out[n++] = i;
+    }
+    for (; j < j1; j++)
+        if (U[j] >= th && U[j] > -INFINITY) out[n++] = j;
+    return n;
+}
+
+/* The first i < n with U[i] >= th (n if none). */
+GS_VECTOR_CLONES static size_t scr_first_at_least(const double *U, size_t n, double th)
+{
+    size_t i = 0;
+    scr_vd t;
+    for (int q = 0; q < 8; q++) t[q] = th;
+    for (; i + 8 <= n; i += 8) {
+        scr_vd u;
+        memcpy(&u, U + i, sizeof u);
+        scr_vl ge = u >= t;
+        long long any = 0;
+        for (int q = 0; q < 8; q++) any |= ge[q];
+        if (any) break;
+    }
+    while (i < n && !(U[i] >= th)) i++;
+    return i;
+}
+
 /* The templates not yet exact whose bound is at least th, into idx (w->cand: free while the
  * screen runs); returns how many. */
 static size_t bounds_at_least(const rec_matcher *m, rec_eq7_work *w, double th)
 {
-    size_t n = 0;
-    for (size_t j = 0; j < m->M; j++)
-        if (w->U[j] >= th && w->U[j] > -INFINITY) w->cand[n++] = j;
-    return n;
+    return scr_at_least(w->U, 0, m->M, th, w->cand);
 }
 
 /* The discrete template of the largest bound not yet exact (M: none), its bound + log cellw in *u. */
@@ -474,7 +517,7 @@ static size_t best_discrete_bound(const rec_matcher *m, const rec_eq7_work *w, d
 {
     size_t jn = m->M;
     if (!m->ncont) {   /* every cellw the same */
-        jn = scr_argmax(w->U, m->M);
+        jn = rec_eq7_argmax(w->U, m->M);
         *u = w->U[jn] + m->logcellw[jn];
         return w->U[jn] > -INFINITY ? jn : m->M;
     }
@@ -497,7 +540,7 @@ static void nested_first(screen *sc)
     size_t ndone = 0;
     for (size_t j = 0; j < m->M; j++) ndone += w->done[j] && isfinite(w->L[j]);
     while (ndone < REC_NESTED_FIRST + 1) {
-        size_t jn = scr_argmax(w->U, m->M);
+        size_t jn = rec_eq7_argmax(w->U, m->M);
         if (!(w->U[jn] > -INFINITY)) break;
         ndone += isfinite(exact(sc, jn));
     }
@@ -529,7 +572,7 @@ double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep 
     double *U = w->U;
     screen sc = {m, w, Sxx, -INFINITY, -INFINITY, -INFINITY};
     memset(w->done, 0, M);
-    for (size_t j = 0; j < M; j++) w->L[j] = -INFINITY;
+    scr_fill(w->L, M, -INFINITY);
     if (m->exhaustive) {
         for (size_t j = 0; j < M; j++) w->cand[j] = j;
         exact_set(&sc, w->cand, M);
@@ -542,11 +585,13 @@ double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep 
     exact(&sc, jb);
     for (size_t b = 0; m->ncont && b < m->nb; b++) {
         if (!m->cont[b]) continue;
-        size_t j0 = m->first[b], n = m->count[b], jm = j0 + scr_argmax(U + j0, n);
+        size_t j0 = m->first[b], n = m->count[b], jm = j0 + rec_eq7_argmax(U + j0, n);
         double lb = jb >= j0 && jb < j0 + n ? w->L[jb] : -INFINITY;   /* its exact ones so far */
         if (U[jm] > lb) lb = fmax(lb, exact(&sc, jm));
-        for (size_t j = j0; lb > -INFINITY && j < j0 + n; j++)
-            if (U[j] >= lb) lb = fmax(lb, exact(&sc, j));
+        for (size_t j = j0; lb > -INFINITY && j < j0 + n; j++) {
+            j += scr_first_at_least(U + j, j0 + n - j, lb);
+            if (j < j0 + n) lb = fmax(lb, exact(&sc, j));
+        }
     }
     exact_set(&sc, w->cand, bounds_at_least(m, w, sc.Lmax - CUT_PIXEL));
     if ((size_t)m->ncont < m->nb)

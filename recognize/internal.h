@@ -442,10 +442,13 @@ void rec_eq7_work_row(const rec_matcher *m, rec_eq7_work *w, size_t q);
 void rec_eq7_work_free(rec_eq7_work *w);
 double rec_eq7_report_phase(const rec_matcher *m, int b, size_t j, double s);
 void rec_eq7_add_cand(const rec_matcher *m, rec_eq7_work *w, size_t j);
+void rec_eq7_add_done(const rec_matcher *m, rec_eq7_work *w);
 void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_decision *dec);
 /* eq7_scores.c: the log likelihood of one scale; eq7_light.c: Newton refinement of continuous
  * bulb b's peak from grid cell j0 (after rec_eq7_series_row of the row's weights). */
 double rec_eq7_loglik(double Sxx, double S, double T);
+/* eq7_scores.c: the first index of the largest of U[0..n) (0 when every one is -inf). */
+size_t rec_eq7_argmax(const double *U, size_t n);
 /* An answer without a bulb (every number 0, runner-up none, both ambiguous flags). */
 void rec_eq7_no_answer(rec_match *out, unsigned flags);
 void rec_eq7_refine_peak(const rec_matcher *m, rec_eq7_work *w, size_t b, size_t j0, double Sxx);
