@@ -41,6 +41,7 @@ void rec_eq7_work_free(rec_eq7_work *w)
     free(w->prep);
     free(w->U);
     free(w->done);
+    free(w->tight);
     free(w->tmp);
     free(w->tt);
     free(w->dt);
@@ -95,6 +96,7 @@ gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t 
     w->prep = calloc(nr, sizeof *w->prep);
     w->U = malloc(sizeof *w->U * M);
     w->done = calloc(M, 1);
+    w->tight = calloc(M, 1);
     w->tmp = malloc(sizeof *w->tmp * 2 * (M + 3 * nb));
     w->tt = malloc(sizeof *w->tt * D);
     w->dt = malloc(sizeof *w->dt * D);
@@ -112,7 +114,7 @@ gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t 
     w->grid = malloc(sizeof *w->grid * (size_t)m->G);
     if (!w->L || !w->mass || !w->cand || !w->mark || !w->bmass || !w->wmass || !w->has_peak ||
         !w->peak_s || !w->peak_L || !w->peak_sig || !w->peak_z || !w->peak_gain || !w->peak_cell || !w->S_all ||
-        !w->T_all || !w->w_all || !w->wx_all || !w->xs_all || !w->prep || !w->U || !w->done || !w->tmp || !w->tt || !w->dt ||
+        !w->T_all || !w->w_all || !w->wx_all || !w->xs_all || !w->prep || !w->U || !w->done || !w->tight || !w->tmp || !w->tt || !w->dt ||
         !w->d2t || !w->r2 || !w->s2 || !w->m2 || !w->tr || !w->t12 || !w->scratch || !w->acc || (nrs && !w->rs) || !w->spec || !w->grid) {
         rec_eq7_work_free(w);
         return gs_fail(GS_ENOMEM, "Eq. 7: cannot allocate scratch for %zu templates", M);
@@ -216,10 +218,7 @@ void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_
             w->mass[j] = amp * (phi_cdf(hi / w->peak_sig[b]) - phi_cdf(lo / w->peak_sig[b]));
         }
     }
-    for (size_t i = 0; i < w->ncand; i++) {
-        int b = m->tbulb[w->cand[i]];
-        w->bmass[b] = w->wmass[b] = 0.0;
-    }
+    for (size_t b = 0; b < nb; b++) w->bmass[b] = w->wmass[b] = 0.0;   /* (a bulb may have no candidate) */
     double Z = 0.0;
     for (size_t i = 0; i < w->ncand; i++) {
         size_t j = w->cand[i];

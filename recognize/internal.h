@@ -314,6 +314,7 @@ typedef struct {
     rec_eq7_prep *prep;                    /* [rows] */
     double *U;                             /* [M] the screen's bounds of L (eq7_scores.c) */
     unsigned char *done;                   /* [M] L exact (1) or screened out (0, L = -inf) */
+    unsigned char *tight;                  /* [M] its bound made tight (the reddened model) */
     double *tmp;                           /* [2 (M + 3 nb)] the decision's and blend search's scratch */
     double *tt, *dt, *d2t;                 /* [D] */
     double *r2, *s2, *m2;                  /* [D] the excess noise's residuals, variances, levels */

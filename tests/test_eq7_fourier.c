@@ -373,6 +373,67 @@ TEST(eq7_screen_bounds_hold_with_dropped_samples)
     gs_delight_free(d);
 }
 
+/* The reddened model's tight bounds (eq7_scores.c, red_tight_bound: the model's rounds without
+ * its logarithms): every template the screen tightened but left unscored has a bound at least
+ * its exact score, with a tau prior and a capture's chromaticity tolerance too; the bounds are
+ * close (the median gap below 1 nat, where the chromaticity-blind bound is tens of nats off),
+ * and the answers are the exhaustive path's. The built-in DELIGHT, RGB, K = 26, 3
+ * phases and continuous, dim and bright lights. */
+TEST(eq7_reddened_tight_bounds_hold)
+{
+    uint64_t rs = 43;
+    gs_delight *g = gs_delight_new();
+    CHECK_OK(gs_delight_generate(g, 1024));
+    size_t checked = 0, exact_n = 0, total = 0;
+    float *gaps = NULL;
+    size_t ngap = 0;
+    for (int cont = 0; cont < 2; cont++) {
+        rec_matcher *m = model_matcher(g, 3, 26, REC_BANDS_REDDENED, cont ? REC_PHASES_CONTINUOUS : REC_PHASES_3, 0.0, 0);
+        size_t D = (size_t)m->D, M = m->M;
+        double *x = malloc(sizeof *x * D), *sg = malloc(sizeof *sg * D);
+        gaps = realloc(gaps, sizeof *gaps * (ngap + 8 * M));
+        rec_eq7_work w;
+        CHECK_OK(rec_eq7_work_alloc(m, &w));
+        for (int i = 0; i < 8; i++) {
+            size_t b = gs_splitmix64(&rs) % m->nb;
+            eq7fx_render(rec_matcher_bulb(m, b), gs_splitmix_uniform(&rs), 26, i < 4 ? 30.0 : 500.0, 1.0, &rs, x, sg);
+            for (size_t q = 0; q < D; q++) sg[q] *= 0.5 + gs_splitmix_uniform(&rs);
+            w.has_tau_prior = i % 2;
+            for (int t = 0; t < REC_TAU_N; t++) w.tau_logprior[t] = -3.0 * gs_splitmix_uniform(&rs);
+            w.chroma_tol = i % 4 < 2 ? 0.0 : 0.08;
+            rec_match f, s;
+            CHECK_OK(rec_eq7_match_light_ws(m, &w, x, sg, 0.0, &f, NULL));
+            for (size_t j = 0; j < M; j++) {
+                total++;
+                exact_n += w.done[j];
+                if (w.done[j] || !w.tight[j]) continue;
+                double L = rec_eq7_loglik_fit(m, &w, j, w.prep[0].Sxx);
+                if (!isfinite(L)) continue;
+                checked++;
+                CHECK_MSG(w.U[j] >= L, "cont %d light %d template %zu: tight bound %.9f below the exact score %.9f",
+                          cont, i, j, w.U[j], L);
+                gaps[ngap++] = (float)(w.U[j] - L);
+            }
+            m->exhaustive = 1;
+            CHECK_OK(rec_eq7_match_light_ws(m, &w, x, sg, 0.0, &s, NULL));
+            m->exhaustive = 0;
+            CHECK_MSG(f.bulb == s.bulb && f.flags == s.flags && close_to(f.confidence, s.confidence, cont ? 1e-4 : 1e-9, 0),
+                      "cont %d light %d: bulb %d/%d flags %u/%u confidence %.12f/%.12f", cont, i, f.bulb, s.bulb,
+                      f.flags, s.flags, f.confidence, s.confidence);
+        }
+        rec_eq7_work_free(&w);
+        free(x), free(sg);
+        rec_matcher_free(m);
+    }
+    CHECK(checked > 1000);
+    double med = ngap ? gs_median_f(gaps, ngap) : INFINITY;
+    CHECK_MSG(med < 1.0, "median gap of the tight bounds %.2f nats", med);
+    printf("    %zu tight bounds left unscored checked (median gap %.2f nats); %zu of %zu templates scored exactly\n",
+           checked, med, exact_n, total);
+    free(gaps);
+    gs_delight_free(g);
+}
+
 /* Many exact scores at once (the screen's vectorized scores of the free model, in pieces of the
  * stack's scratch): K = 256, RGB, one brightness per band, 6 phases (300 templates), a light of
  * noise alone (every template within the cut) and a bright one: answers as the exhaustive
