@@ -56,6 +56,7 @@ void rec_eq7_work_free(rec_eq7_work *w)
     free(w->rs);
     free(w->spec);
     free(w->grid);
+    free(w->spec_v);
     memset(w, 0, sizeof *w);
 }
 
@@ -112,10 +113,11 @@ gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t 
     w->rs = nrs ? malloc(sizeof *w->rs * nrs) : NULL;
     w->spec = malloc(sizeof *w->spec * ((size_t)m->G / 2 + 1) * (size_t)(1 + 2 * m->bands));
     w->grid = malloc(sizeof *w->grid * (size_t)m->G);
+    w->spec_v = malloc(sizeof *w->spec_v * ((size_t)m->G / 2 + 1) * (size_t)m->bands);
     if (!w->L || !w->mass || !w->cand || !w->mark || !w->bmass || !w->wmass || !w->has_peak ||
         !w->peak_s || !w->peak_L || !w->peak_sig || !w->peak_z || !w->peak_gain || !w->peak_cell || !w->S_all ||
         !w->T_all || !w->w_all || !w->wx_all || !w->xs_all || !w->prep || !w->U || !w->done || !w->tight || !w->tmp || !w->tt || !w->dt ||
-        !w->d2t || !w->r2 || !w->s2 || !w->m2 || !w->tr || !w->t12 || !w->scratch || !w->acc || (nrs && !w->rs) || !w->spec || !w->grid) {
+        !w->d2t || !w->r2 || !w->s2 || !w->m2 || !w->tr || !w->t12 || !w->scratch || !w->acc || (nrs && !w->rs) || !w->spec || !w->grid || !w->spec_v) {
         rec_eq7_work_free(w);
         return gs_fail(GS_ENOMEM, "Eq. 7: cannot allocate scratch for %zu templates", M);
     }

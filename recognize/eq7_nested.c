@@ -223,6 +223,20 @@ GS_VECTOR_LOOP static void pair_gains(const double *restrict S2, const double *r
     }
 }
 
+GS_VECTOR_LOOP static void pair_init(double *restrict gain, double *restrict ok, size_t M)
+{
+    for (size_t j = 0; j < M; j++) gain[j] = 0.0, ok[j] = 1.0;
+}
+
+/* ok[j] = base + gain[j] where ok[j] != 0 (a number), else -inf: the pairs' chi2 drops. */
+GS_VECTOR_LOOP static void pair_deltas(const double *restrict gain, double *restrict ok, size_t M, double base)
+{
+    for (size_t j = 0; j < M; j++) {
+        double d = base + gain[j];
+        ok[j] = ok[j] != 0.0 && d > -INFINITY ? d : -INFINITY;
+    }
+}
+
 void rec_eq7_nested_tests(const rec_matcher *m, rec_eq7_work *w, const double *tb, int best_bulb,
                           size_t best_tmpl, double best_shift, double phi, rec_eq7_nested *out)
 {
@@ -327,10 +341,25 @@ void rec_eq7_nested_tests(const rec_matcher *m, rec_eq7_work *w, const double *t
         for (int f = 0; f < nf; f++) e1 += T11v[r][f] > 0.0 ? S1v[r][f] * S1v[r][f] / T11v[r][f] : 0.0;
         e1v[r] = e1;
     }
-    for (int f = 0; f < nf; f++) {   /* T12 = U' T_mat': [f][r][j] */
-        size_t off = nf == 1 ? 0 : (size_t)f * K, len = nf == 1 ? D : K;
-        cblas_dgemm(CblasRowMajor, CblasTrans, CblasTrans, nr, (int)M, (int)len, 1.0, U + off * REC_NESTED_FIRST,
-                    REC_NESTED_FIRST, m->t + off, (int)D, 0.0, w->t12 + (size_t)f * REC_NESTED_FIRST * M, (int)M);
+    if (m->fourier && !m->exhaustive && (size_t)m->ncont == m->nb) {
+        /* every template a continuous grid: each first template's cross sums with a bulb's grid
+         * from their Fourier form, as the light's own sums (eq7_sums.c), not one product with
+         * all 8G templates */
+        double *u = w->dt;   /* (D: free here) */
+        for (int r = 0; r < nr; r++) {
+            for (size_t d = 0; d < D; d++) u[d] = U[d * REC_NESTED_FIRST + (size_t)r];
+            rec_eq7_band_dfts(m, u, w->spec_v);
+            for (int f = 0; f < nf; f++)
+                for (size_t b = 0; b < m->nb; b++)
+                    rec_eq7_grid_dots(m, w, b, f, w->spec_v,
+                                      w->t12 + ((size_t)f * REC_NESTED_FIRST + (size_t)r) * M + m->first[b]);
+        }
+    } else {
+        for (int f = 0; f < nf; f++) {   /* T12 = U' T_mat': [f][r][j] */
+            size_t off = nf == 1 ? 0 : (size_t)f * K, len = nf == 1 ? D : K;
+            cblas_dgemm(CblasRowMajor, CblasTrans, CblasTrans, nr, (int)M, (int)len, 1.0, U + off * REC_NESTED_FIRST,
+                        REC_NESTED_FIRST, m->t + off, (int)D, 0.0, w->t12 + (size_t)f * REC_NESTED_FIRST * M, (int)M);
+        }
     }
     /* a second template: for each first template j1, every template j2 (not the first one's
      * bulb within two cells), by per-band 2 x 2 least squares with both brightnesses >= 0; the
@@ -341,16 +370,23 @@ void rec_eq7_nested_tests(const rec_matcher *m, rec_eq7_work *w, const double *t
     for (int r = 0; r < nr; r++) {
         int b1 = r == 0 ? best_bulb : m->tbulb[first[r]];
         double s1 = r == 0 ? best_shift : m->shift[first[r]];
-        for (size_t j = 0; j < M; j++) gain[j] = 0.0, ok[j] = 1.0;
+        pair_init(gain, ok, M);
         for (int f = 0; f < nf; f++)
             if (T11v[r][f] > 0.0)
                 pair_gains(w->S + (size_t)f * M, w->T + (size_t)f * M, w->t12 + ((size_t)f * REC_NESTED_FIRST + (size_t)r) * M,
                            M, S1v[r][f], T11v[r][f], gain, ok);
-        for (size_t j = 0; j < M; j++) {
-            double delta = (e1v[r] - e0) + gain[j];   /* chi2 of the best fit minus the pair's */
-            if (ok[j] == 0.0 || !(delta > best_delta)) continue;
-            if (near(m, j, b1, s1) || (r > 0 && near(m, j, best_bulb, best_shift)))
-                continue;   /* itself or next door; the best fit was paired at r = 0 */
+        /* the first template of the largest drop, itself and its neighbours (and the best
+         * fit's, r > 0: paired at r = 0) left out */
+        for (size_t b = 0; b < m->nb; b++) {
+            if ((int)b != b1 && (r == 0 || (int)b != best_bulb)) continue;
+            for (size_t j = m->first[b]; j < m->first[b] + m->count[b]; j++)
+                if (near(m, j, b1, s1) || (r > 0 && near(m, j, best_bulb, best_shift))) ok[j] = 0.0;
+        }
+        pair_deltas(gain, ok, M, e1v[r] - e0);
+        {
+            size_t j = rec_eq7_argmax(ok, M);
+            double delta = ok[j];   /* chi2 of the best fit minus the pair's */
+            if (!(delta > best_delta)) continue;
             best_delta = delta;
             best_j = j;
             best_r = r;

@@ -105,33 +105,33 @@ static void sums_kernel(const double *a, size_t lda, size_t nq, const double *tt
     else sums_kernel_256(a, lda, nq, tt, ldt, n, out, ldo, nj);
 }
 
-/* The light's K-point DFTs of wx and w per band, conjugated, conj(sum_k v_k e^{2 pi i r k / K}),
- * repeated over the G/2 + 1 bins of the grid (bin r is the DFT's r mod K), into w->spec + nh
- * (X, then W: [band * nh + r]). */
-void rec_eq7_light_dfts(const rec_matcher *m, rec_eq7_work *w)
+/* The conjugate K-point DFTs of D values v per band, conj(sum_k v_k e^{2 pi i r k / K}), repeated
+ * over the G/2 + 1 bins of the grid (bin r is the DFT's r mod K), into X ([band * nh + r]). */
+void rec_eq7_band_dfts(const rec_matcher *m, const double *v, double complex *X)
 {
-    size_t K = (size_t)m->K, nh = (size_t)m->G / 2 + 1, bn = (size_t)m->bands * nh;
-    double complex *X = w->spec + nh, *W = X + bn;
+    size_t K = (size_t)m->K, nh = (size_t)m->G / 2 + 1;
     for (int band = 0; band < m->bands; band++) {
-        double complex *Xb = X + (size_t)band * nh, *Wb = W + (size_t)band * nh;
+        double complex *Xb = X + (size_t)band * nh;
         for (size_t r = 0; r < K && r < nh; r++) {
-            double complex x = 0.0, v = 0.0;
+            double complex x = 0.0;
             size_t rk = 0;   /* r k mod K */
             for (size_t k = 0; k < K; k++) {
-                size_t d = (size_t)band * K + k;
-                x += w->wx[d] * m->wk[rk];
-                v += w->w[d] * m->wk[rk];
+                x += v[(size_t)band * K + k] * m->wk[rk];
                 rk += r;
                 if (rk >= K) rk -= K;
             }
             Xb[r] = conj(x);
-            Wb[r] = conj(v);
         }
-        for (size_t r = K; r < nh; r++) {
-            Xb[r] = Xb[r - K];
-            Wb[r] = Wb[r - K];
-        }
+        for (size_t r = K; r < nh; r++) Xb[r] = Xb[r - K];
     }
+}
+
+/* The light's DFTs of wx and w (rec_eq7_band_dfts) into w->spec + nh (X, then W). */
+void rec_eq7_light_dfts(const rec_matcher *m, rec_eq7_work *w)
+{
+    size_t nh = (size_t)m->G / 2 + 1, bn = (size_t)m->bands * nh;
+    rec_eq7_band_dfts(m, w->wx, w->spec + nh);
+    rec_eq7_band_dfts(m, w->w, w->spec + nh + bn);
 }
 
 /* z[r] += a[r] x[r], complex (re, im pairs), r < n. */
@@ -144,25 +144,35 @@ GS_VECTOR_LOOP static void cross_add(const double *restrict a, const double *res
     }
 }
 
+/* One grid of sums of continuous bulb b for brightness f into dst (G values): the inverse FFT of
+ * the cross-spectrum of the template spectra hat (m->ahat: sum v t; m->bhat: sum v t^2) with
+ * the band DFTs X of the weighted values v (all bands with one gain). */
+static void grid_corr(const rec_matcher *m, rec_eq7_work *w, size_t b, int f, const double complex *hat,
+                      const double complex *X, double *dst)
+{
+    size_t nh = (size_t)m->G / 2 + 1;
+    int nf = m->nfit, b0 = nf == 1 ? 0 : f, b1 = nf == 1 ? m->bands : f + 1;
+    memset(w->spec, 0, sizeof *w->spec * nh);
+    for (int band = b0; band < b1; band++)
+        cross_add((const double *)(hat + (b * (size_t)m->bands + (size_t)band) * nh),
+                  (const double *)(X + (size_t)band * nh), nh, (double *)w->spec);
+    fftw_execute_dft_c2r((fftw_plan)m->c2r, (fftw_complex *)w->spec, w->grid);
+    memcpy(dst, w->grid, sizeof *dst * (size_t)m->G);
+}
+
 void rec_eq7_grid_sums(const rec_matcher *m, rec_eq7_work *w, size_t b)
 {
     size_t nh = (size_t)m->G / 2 + 1, M = m->M, bn = (size_t)m->bands * nh;
     const double complex *X = w->spec + nh, *W = X + bn;
-    int nf = m->nfit;
-    for (int f = 0; f < nf; f++)
-        for (int sq = 0; sq < 2; sq++) {
-            /* the cross-spectrum of the parameter's bands (all of them with one gain) */
-            int b0 = nf == 1 ? 0 : f, b1 = nf == 1 ? m->bands : f + 1;
-            memset(w->spec, 0, sizeof *w->spec * nh);
-            for (int band = b0; band < b1; band++) {
-                size_t o = (b * (size_t)m->bands + (size_t)band) * nh;
-                cross_add((const double *)((sq ? m->bhat : m->ahat) + o), (const double *)((sq ? W : X) + (size_t)band * nh),
-                          nh, (double *)w->spec);
-            }
-            fftw_execute_dft_c2r((fftw_plan)m->c2r, (fftw_complex *)w->spec, w->grid);
-            double *dst = (sq ? w->T : w->S) + (size_t)f * M + m->first[b];
-            memcpy(dst, w->grid, sizeof *dst * (size_t)m->G);
-        }
+    for (int f = 0; f < m->nfit; f++) {
+        grid_corr(m, w, b, f, m->ahat, X, w->S + (size_t)f * M + m->first[b]);
+        grid_corr(m, w, b, f, m->bhat, W, w->T + (size_t)f * M + m->first[b]);
+    }
+}
+
+void rec_eq7_grid_dots(const rec_matcher *m, rec_eq7_work *w, size_t b, int f, const double complex *X, double *dst)
+{
+    grid_corr(m, w, b, f, m->ahat, X, dst);
 }
 
 /* Templates j0..j0+n-1 of row q by matrix-vector products (the slow path). */

@@ -328,6 +328,8 @@ typedef struct {
                                             * light's band DFTs over the grid's bins
                                             * (rec_eq7_grid_sums) */
     double *grid;                          /* [G] its inverse */
+    double complex *spec_v;                /* [(G/2 + 1) bands] the band DFTs of other values
+                                            * (the nested tests' cross sums, rec_eq7_grid_dots) */
     /* the reddened model: the light's log prior per tau (has_tau_prior; else uniform) and, when
      * collect_tau, its log likelihood per tau with every bulb weighted alike (eq7_population.c) */
     int has_tau_prior, collect_tau;
@@ -434,6 +436,10 @@ void rec_eq7_series_at(const rec_matcher *m, rec_eq7_work *w, size_t b, double s
  * taken the DFTs of the light's w->wx and w->w. */
 void rec_eq7_light_dfts(const rec_matcher *m, rec_eq7_work *w);
 void rec_eq7_grid_sums(const rec_matcher *m, rec_eq7_work *w, size_t b);
+/* The same for any D values v: their band DFTs (X: bands * (G/2 + 1), e.g. w->spec_v), then
+ * sum_d v_d t_j[d] of brightness f over bulb b's grid into dst (G values). */
+void rec_eq7_band_dfts(const rec_matcher *m, const double *v, double complex *X);
+void rec_eq7_grid_dots(const rec_matcher *m, rec_eq7_work *w, size_t b, int f, const double complex *X, double *dst);
 /* eq7_decide.c: scratch for one light or pixel (rec_eq7_work_alloc), or a block of rows lights
  * (the light path's); rec_eq7_work_row points w, wx, xs, S and T at light q's rows; and the
  * posterior over (bulb, phase) from the candidates' scores. */

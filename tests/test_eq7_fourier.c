@@ -40,7 +40,8 @@ static rec_matcher *phase_matcher(const gs_delight *d, int bands, int K, rec_ban
 }
 
 /* The sums of every grid template from the FFT against sum_d over the templates themselves,
- * for random positive weights: within 1e-12 of sum |w x t| (the rounding of either). */
+ * for random positive weights, and any values' sums with the grids (rec_eq7_grid_dots, the
+ * nested tests' cross sums): within 1e-12 of sum |w x t| (the rounding of either). */
 TEST(eq7_fourier_sums_match_brute_force)
 {
     static const int Ks[] = {4, 8, 13, 16, 22, 26};
@@ -81,6 +82,26 @@ TEST(eq7_fourier_sums_match_brute_force)
                     }
                 }
                 CHECK_MSG(worst < 1e-12, "bands %d gains %d K %d: worst relative error %g", bands, bg, K, worst);
+                /* any values' sums with the grids (the nested tests' cross sums): rec_eq7_grid_dots */
+                double *v = malloc(sizeof *v * D), *g = malloc(sizeof *g * (size_t)m->G), wd = 0.0;
+                for (size_t d0 = 0; d0 < D; d0++) v[d0] = gs_splitmix_normal(&rs);
+                rec_eq7_band_dfts(m, v, w.spec_v);
+                for (size_t b = 0; b < m->nb; b++)
+                    for (int f = 0; f < m->nfit; f++) {
+                        rec_eq7_grid_dots(m, &w, b, f, w.spec_v, g);
+                        for (size_t c = 0; c < m->count[b]; c++) {
+                            const double *t = rec_matcher_template(m, m->first[b] + c, NULL, NULL);
+                            double S = 0, Sa = 0;
+                            for (size_t q = (size_t)f * span; q < (size_t)(f + 1) * span; q++) {
+                                S += v[q] * t[q];
+                                Sa += fabs(v[q] * t[q]);
+                            }
+                            wd = fmax(wd, fabs(g[c] - S) / Sa);
+                        }
+                    }
+                CHECK_MSG(wd < 1e-12, "bands %d gains %d K %d: grid dots' worst relative error %g", bands, bg, K, wd);
+                free(v);
+                free(g);
                 rec_eq7_work_free(&w);
                 rec_matcher_free(m);
             }
