@@ -45,7 +45,6 @@ void rec_eq7_work_free(rec_eq7_work *w)
     free(w->tmp);
     free(w->tt);
     free(w->dt);
-    free(w->d2t);
     free(w->r2);
     free(w->s2);
     free(w->m2);
@@ -101,7 +100,6 @@ gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t 
     w->tmp = malloc(sizeof *w->tmp * 2 * (M + 3 * nb));
     w->tt = malloc(sizeof *w->tt * D);
     w->dt = malloc(sizeof *w->dt * D);
-    w->d2t = malloc(sizeof *w->d2t * D);
     w->r2 = malloc(sizeof *w->r2 * D);
     w->s2 = malloc(sizeof *w->s2 * D);
     w->m2 = malloc(sizeof *w->m2 * D);
@@ -117,7 +115,7 @@ gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t 
     if (!w->L || !w->mass || !w->cand || !w->mark || !w->bmass || !w->wmass || !w->has_peak ||
         !w->peak_s || !w->peak_L || !w->peak_sig || !w->peak_z || !w->peak_gain || !w->peak_cell || !w->S_all ||
         !w->T_all || !w->w_all || !w->wx_all || !w->xs_all || !w->prep || !w->U || !w->done || !w->tight || !w->tmp || !w->tt || !w->dt ||
-        !w->d2t || !w->r2 || !w->s2 || !w->m2 || !w->tr || !w->t12 || !w->scratch || !w->acc || (nrs && !w->rs) || !w->spec || !w->grid || !w->spec_v) {
+        !w->r2 || !w->s2 || !w->m2 || !w->tr || !w->t12 || !w->scratch || !w->acc || (nrs && !w->rs) || !w->spec || !w->grid || !w->spec_v) {
         rec_eq7_work_free(w);
         return gs_fail(GS_ENOMEM, "Eq. 7: cannot allocate scratch for %zu templates", M);
     }

@@ -199,7 +199,7 @@ static void model_of(const rec_matcher *m, rec_eq7_work *w, int b, size_t j, dou
 {
     size_t D = (size_t)m->D;
     double S[GS_MAX_BANDS], T[GS_MAX_BANDS];
-    if (m->cont[b]) rec_eq7_template_at(m, (size_t)b, s, t, dt, w->d2t, w->acc);
+    if (m->cont[b]) rec_eq7_template_at(m, (size_t)b, s, t, dt, NULL, w->acc);
     else memcpy(t, m->t + j * D, sizeof *t * D);
     fit_sums(m, w, t, S, T, a_f);
 }

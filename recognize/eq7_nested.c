@@ -344,7 +344,7 @@ void rec_eq7_nested_tests(const rec_matcher *m, rec_eq7_work *w, const double *t
     if (m->fourier && !m->exhaustive && (size_t)m->ncont == m->nb) {
         /* every template a continuous grid: each first template's cross sums with a bulb's grid
          * from their Fourier form, as the light's own sums (eq7_sums.c), not one product with
-         * all 8G templates */
+         * all nb G templates */
         double *u = w->dt;   /* (D: free here) */
         for (int r = 0; r < nr; r++) {
             for (size_t d = 0; d < D; d++) u[d] = U[d * REC_NESTED_FIRST + (size_t)r];

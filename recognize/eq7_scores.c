@@ -112,6 +112,23 @@ GS_VECTOR_LOOP static void red_brightness(const double *restrict A, const double
     }
 }
 
+/* The per-band estimates ah_b = S_b / T_b (0 where T_b <= 0) and the residual within the bands
+ * R = max(Sxx - sum_b S_b ah_b, 0) of the reddened model; 0 when no band has T_b > 0. */
+static int red_residual(const rec_matcher *m, double Sxx, const double *S, const double *T, double *ah, double *R)
+{
+    int any = 0;
+    *R = Sxx;
+    for (int b = 0; b < m->bands; b++) {
+        ah[b] = T[b] > 0.0 ? S[b] / T[b] : 0.0;
+        if (T[b] > 0.0) {
+            *R -= S[b] * ah[b];
+            any = 1;
+        }
+    }
+    if (*R < 0.0) *R = 0.0;
+    return any;
+}
+
 /* The three rounds of the reddened model of bulb b's per-band estimates ah (the bands with
  * T_b > 0) for every tau (rec_eq7_loglik_red): the last round's A, B, C and occupation, the
  * brightness av and the dead taus. */
@@ -132,8 +149,10 @@ static void red_rounds(const rec_matcher *m, int bulb, const double *T, const do
 }
 
 /* Each live tau's -(R + between)/2 - log_lo(A (1 + occ))/2 (+ the tau prior prior[i], NULL:
- * none) into u (-inf where dead), log_lo(x) = e log 2 <= log x for a normal x in [2^e, 2^(e+1))
- * (-inf otherwise): L(tau) without its log Phi(z) <= 0 and with a logarithm from below. */
+ * none) into u (-inf where dead), log_lo(x) = e log 2 for a normal x in [2^e, 2^(e+1)), at most
+ * log x (to within e 2e-17 in floating point, far inside the bound's slack), and -inf for any
+ * other x (u = +inf or NaN then: no bound, as tighten keeps the old one): L(tau) without its
+ * log Phi(z) <= 0 and with a logarithm from below. */
 GS_VECTOR_LOOP static void red_tau_bounds(const double *restrict A, const double *restrict B,
                                           const double *restrict C, const double *restrict occ,
                                           const long long *restrict dead, double R, const double *restrict prior,
@@ -162,17 +181,9 @@ double rec_eq7_loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb,
                           double ll_logw)
 {
     double tol = w->chroma_tol > 0.0 ? w->chroma_tol : m->o.chroma_tolerance;
-    double R = Sxx, ah[GS_MAX_BANDS];
-    int nb = m->bands, any = 0;
-    for (int b = 0; b < nb; b++) {
-        ah[b] = T[b] > 0.0 ? S[b] / T[b] : 0.0;
-        if (T[b] > 0.0) {
-            R -= S[b] * ah[b];
-            any = 1;
-        }
-    }
-    if (!any) return -INFINITY;
-    if (R < 0.0) R = 0.0;
+    double R, ah[GS_MAX_BANDS];
+    int nb = m->bands;
+    if (!red_residual(m, Sxx, S, T, ah, &R)) return -INFINITY;
     /* the three rounds of s_b from the current brightness, for every tau at once: the taus are
      * independent, so the divisions of one overlap the others' (each tau's numbers are the same
      * operations in the same order as one tau alone). occ1 = prod_b (1 + s_b^2 T_b) - 1: the
@@ -279,27 +290,17 @@ static void red_bounds(const rec_matcher *m, rec_eq7_work *w, double Sxx, size_t
  * bounds. Several times cheaper than the exact L and within a nat or so of it (log Phi(z) ~ 0
  * for a fit of any brightness), where red_bound's chromaticity-blind bound can be 100 nats
  * above. */
-static double red_tight_bound(const rec_matcher *m, const rec_eq7_work *w, size_t j, double Sxx)
+static double red_tight_bound(const rec_matcher *m, const rec_eq7_work *w, size_t j, double Sxx, const double *prior)
 {
-    double S[GS_MAX_BANDS], T[GS_MAX_BANDS], R = Sxx, ah[GS_MAX_BANDS], prior[REC_TAU_N];
+    double S[GS_MAX_BANDS], T[GS_MAX_BANDS], R, ah[GS_MAX_BANDS];
     rec_eq7_sums_of(m, w, j, S, T);
-    int any = 0;
-    for (int b = 0; b < m->bands; b++) {
-        ah[b] = T[b] > 0.0 ? S[b] / T[b] : 0.0;
-        if (T[b] > 0.0) {
-            R -= S[b] * ah[b];
-            any = 1;
-        }
-    }
-    if (!any) return -INFINITY;
-    if (R < 0.0) R = 0.0;
+    if (!red_residual(m, Sxx, S, T, ah, &R)) return -INFINITY;
     double tol = w->chroma_tol > 0.0 ? w->chroma_tol : m->o.chroma_tolerance;
     double av[REC_TAU_N] = {0}, A[REC_TAU_N], B[REC_TAU_N], C[REC_TAU_N], occ[REC_TAU_N];
     long long dead[REC_TAU_N] = {0};
     red_rounds(m, m->tbulb[j], T, ah, tol, av, A, B, C, occ, dead);
-    for (int i = 0; w->has_tau_prior && i < REC_TAU_N; i++) prior[i] = w->tau_logprior[i] + log((double)REC_TAU_N);
     double ut[REC_TAU_N], ex[REC_TAU_N], mx = -INFINITY, sum = 0.0;
-    red_tau_bounds(A, B, C, occ, dead, R, w->has_tau_prior ? prior : NULL, ut);
+    red_tau_bounds(A, B, C, occ, dead, R, prior, ut);
     for (int i = 0; i < REC_TAU_N; i++) mx = ut[i] > mx ? ut[i] : mx;
     if (!(mx > -INFINITY)) return mx;
     rec_eq7_exp_below(ut, REC_TAU_N, mx, ex);
@@ -489,7 +490,23 @@ typedef struct {
     const rec_matcher *m;
     rec_eq7_work *w;
     double Sxx, Lmax, r1, r2;
+    const double *prior;            /* the tau prior's log weights + log REC_TAU_N (NULL: none) */
+    double prior_v[REC_TAU_N];
 } screen;
+
+/* A screen of one light (its sums in w, Lmax the best score so far). */
+static void screen_init(screen *sc, const rec_matcher *m, rec_eq7_work *w, double Sxx, double Lmax)
+{
+    sc->m = m;
+    sc->w = w;
+    sc->Sxx = Sxx;
+    sc->Lmax = Lmax;
+    sc->r1 = sc->r2 = -INFINITY;
+    sc->prior = NULL;
+    if (!m->red || !w->has_tau_prior) return;
+    for (int i = 0; i < REC_TAU_N; i++) sc->prior_v[i] = w->tau_logprior[i] + log((double)REC_TAU_N);
+    sc->prior = sc->prior_v;
+}
 
 /* Template j's exact L (scored: already in w->L); its bound is spent (-inf: the passes below look
  * for the largest bound of the templates not yet exact). */
@@ -521,7 +538,7 @@ static double tighten(screen *sc, size_t j)
     rec_eq7_work *w = sc->w;
     if (sc->m->red && !w->tight[j] && !w->done[j]) {
         w->tight[j] = 1;
-        double t = red_tight_bound(sc->m, w, j, sc->Sxx);
+        double t = red_tight_bound(sc->m, w, j, sc->Sxx, sc->prior);
         if (t < w->U[j]) w->U[j] = t;
     }
     return w->U[j];
@@ -647,7 +664,8 @@ static void nested_first(screen *sc)
 
 /* Exact: the best bound's template; for each continuous bulb its best (from its best bound, then
  * every one of its templates whose bound reaches the bulb's best so far: its peak is refined or
- * ranked from there); every template whose bound is within CUT_PIXEL of the best computed L (the
+ * ranked from there; the reddened model: tight bounds, best first, and no bulb whose every bound
+ * is below the cut); every template whose bound is within CUT_PIXEL of the best computed L (the
  * posterior's mass; in one pass, its threshold only rises); the runner-up (the two best discrete
  * templates: the best bound of the rest while it beats the second rank); with the nested tests
  * their first templates. */
@@ -655,7 +673,8 @@ double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep 
 {
     size_t M = m->M;
     double *U = w->U;
-    screen sc = {m, w, Sxx, -INFINITY, -INFINITY, -INFINITY};
+    screen sc;
+    screen_init(&sc, m, w, Sxx, -INFINITY);
     memset(w->done, 0, M);
     if (m->red) memset(w->tight, 0, M);
     scr_fill(w->L, M, -INFINITY);
@@ -669,9 +688,13 @@ double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep 
     else free_bounds(m, w, p, Sxx, &jb);
     if (!(U[jb] > -INFINITY)) return -INFINITY;
     while (m->red && !w->tight[jb]) {   /* the best tight bound's template */
-        tighten(&sc, jb);
+        /* every bound at least this one's tight bound, tight, in one pass */
+        double th = tighten(&sc, jb);
+        size_t n = scr_at_least(U, 0, M, th, w->cand);
+        for (size_t i = 0; i < n; i++) tighten(&sc, w->cand[i]);
         jb = rec_eq7_argmax(U, M);
     }
+    if (!(U[jb] > -INFINITY)) return -INFINITY;
     exact(&sc, jb);
     for (size_t b = 0; m->ncont && b < m->nb; b++) {
         if (!m->cont[b]) continue;
@@ -711,6 +734,7 @@ double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep 
 
 void rec_eq7_screen_widen(const rec_matcher *m, rec_eq7_work *w, double Sxx, double Lmax, double cut)
 {
-    screen sc = {m, w, Sxx, Lmax, -INFINITY, -INFINITY};
+    screen sc;
+    screen_init(&sc, m, w, Sxx, Lmax);
     exact_at_least(&sc, Lmax - cut);
 }

@@ -154,22 +154,18 @@ GS_VECTOR_LOOP static void series_products(const double *restrict ar, const doub
 
 void rec_eq7_series_row(const rec_matcher *m, rec_eq7_work *w)
 {
-    int K = m->K;
+    size_t K = (size_t)m->K, nh = (size_t)m->G / 2 + 1;
     double *xr = w->rs, *xi = xr + m->D, *vr = xi + m->D, *vi = vr + m->D;
-    /* X and W per band (m->dftc, dfts: cos, sin of 2 pi r k / K) */
-    for (int band = 0; band < m->bands; band++)
-        for (int r = 0; r < K; r++) {
-            size_t o = (size_t)band * (size_t)K;
-            const double *c = m->dftc + (size_t)r * (size_t)K, *sn = m->dfts + (size_t)r * (size_t)K;
-            double a = 0.0, bq = 0.0, e = 0.0, f = 0.0;
-            for (int k = 0; k < K; k++) {
-                a += w->wx[o + (size_t)k] * c[k];
-                bq += w->wx[o + (size_t)k] * sn[k];
-                e += w->w[o + (size_t)k] * c[k];
-                f += w->w[o + (size_t)k] * sn[k];
+    /* X and W per band: the conjugates of rec_eq7_band_dfts' bins 0..K-1 */
+    for (int q = 0; q < 2; q++) {
+        rec_eq7_band_dfts(m, q ? w->w : w->wx, w->spec_v);
+        for (int band = 0; band < m->bands; band++)
+            for (size_t r = 0; r < K; r++) {
+                double complex x = w->spec_v[(size_t)band * nh + r];
+                (q ? vr : xr)[(size_t)band * K + r] = creal(x);
+                (q ? vi : xi)[(size_t)band * K + r] = -cimag(x);
             }
-            xr[o + (size_t)r] = a, xi[o + (size_t)r] = bq, vr[o + (size_t)r] = e, vi[o + (size_t)r] = f;
-        }
+    }
 }
 
 void rec_eq7_series_bulb(const rec_matcher *m, rec_eq7_work *w, size_t b)
@@ -179,7 +175,8 @@ void rec_eq7_series_bulb(const rec_matcher *m, rec_eq7_work *w, size_t b)
     size_t lab = SER_PAD((size_t)hs + 1), lbb = SER_PAD(2 * (size_t)hs + 1);
     const double *xr = w->rs, *xi = xr + m->D, *vr = xi + m->D, *vi = vr + m->D;
     double *cs = w->rs + 4 * (size_t)m->D, *ct = cs + 2 * (size_t)nf * la;
-    memset(cs, 0, sizeof *cs * (size_t)nf * (2 * la + 6 * lb));
+    for (size_t i = 0; i < 2 * (size_t)nf; i++) memset(cs + i * la, 0, sizeof *cs * lab);   /* what b's sums read */
+    for (size_t i = 0; i < 6 * (size_t)nf; i++) memset(ct + i * lb, 0, sizeof *ct * lbb);
     for (int band = 0; band < bands; band++) {
         int f = nf == 1 ? 0 : band;
         size_t o = (size_t)band * (size_t)K;

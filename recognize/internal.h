@@ -316,7 +316,7 @@ typedef struct {
     unsigned char *done;                   /* [M] L exact (1) or screened out (0, L = -inf) */
     unsigned char *tight;                  /* [M] its bound made tight (the reddened model) */
     double *tmp;                           /* [2 (M + 3 nb)] the decision's and blend search's scratch */
-    double *tt, *dt, *d2t;                 /* [D] */
+    double *tt, *dt;                       /* [D] */
     double *r2, *s2, *m2;                  /* [D] the excess noise's residuals, variances, levels */
     double *tr;                            /* [D] the runner-up's template */
     double *t12;                           /* [nfit * REC_NESTED_FIRST * M] cross sums of the first
@@ -454,7 +454,8 @@ void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_
 /* eq7_scores.c: the log likelihood of one scale; eq7_light.c: Newton refinement of continuous
  * bulb b's peak from grid cell j0 (after rec_eq7_series_row of the row's weights). */
 double rec_eq7_loglik(double Sxx, double S, double T);
-/* eq7_scores.c: the first index of the largest of U[0..n) (0 when every one is -inf). */
+/* eq7_scores.c: the first index of the largest of U[0..n) (0 when every one is -inf; NaN
+ * entries are passed over). */
 size_t rec_eq7_argmax(const double *U, size_t n);
 /* An answer without a bulb (every number 0, runner-up none, both ambiguous flags). */
 void rec_eq7_no_answer(rec_match *out, unsigned flags);
