@@ -558,6 +558,17 @@ static void exact_set(screen *sc, const size_t *idx, size_t n)
     for (size_t i = 0; i < n; i++) scored(sc, idx[i]);
 }
 
+/* any = whether one of the 8 values at p is at least its lane of t (a macro: a vector argument
+ * would take the ABI of the widest clone). */
+#define SCR_ANY_AT_LEAST(any, p, t)                                                                  \
+    do {                                                                                            \
+        scr_vd u_;                                                                                  \
+        memcpy(&u_, (p), sizeof u_);                                                                \
+        scr_vl ge_ = u_ >= (t);                                                                     \
+        (any) = 0;                                                                                  \
+        for (int q_ = 0; q_ < 8; q_++) (any) |= ge_[q_];                                            \
+    } while (0)
+
 /* The indices j in [j0, j1) with U[j] >= th and U[j] > -inf into out, in order; returns how
  * many. Blocks of 8 none of which reaches th are skipped by one vector compare. */
 GS_VECTOR_CLONES static size_t scr_at_least(const double *U, size_t j0, size_t j1, double th, size_t *out)
@@ -566,11 +577,8 @@ GS_VECTOR_CLONES static size_t scr_at_least(const double *U, size_t j0, size_t j
     scr_vd t;
     for (int q = 0; q < 8; q++) t[q] = th;
     for (; j + 8 <= j1; j += 8) {
-        scr_vd u;
-        memcpy(&u, U + j, sizeof u);
-        scr_vl ge = u >= t;
-        long long any = 0;
-        for (int q = 0; q < 8; q++) any |= ge[q];
+        long long any;
+        SCR_ANY_AT_LEAST(any, U + j, t);
         if (!any) continue;
         for (size_t i = j; i < j + 8; i++)
             if (U[i] >= th && U[i] > -INFINITY) out[n++] = i;
@@ -587,11 +595,8 @@ GS_VECTOR_CLONES static size_t scr_first_at_least(const double *U, size_t n, dou
     scr_vd t;
     for (int q = 0; q < 8; q++) t[q] = th;
     for (; i + 8 <= n; i += 8) {
-        scr_vd u;
-        memcpy(&u, U + i, sizeof u);
-        scr_vl ge = u >= t;
-        long long any = 0;
-        for (int q = 0; q < 8; q++) any |= ge[q];
+        long long any;
+        SCR_ANY_AT_LEAST(any, U + i, t);
         if (any) break;
     }
     while (i < n && !(U[i] >= th)) i++;
