@@ -105,6 +105,22 @@ static void sums_kernel(const double *a, size_t lda, size_t nq, const double *tt
     else sums_kernel_256(a, lda, nq, tt, ldt, n, out, ldo, nj);
 }
 
+/* x[r] = conj(sum_k v_k e^{2 pi i r k / K}), r < K, as (re, im) pairs: the sums over k in order,
+ * every r at once (c, s: cos and sin of 2 pi r k / K, [k K + r]). */
+GS_VECTOR_LOOP static void band_dft(const double *restrict v, const double *restrict c, const double *restrict s,
+                                    size_t K, double *restrict x)
+{
+    for (size_t r = 0; r < 2 * K; r++) x[r] = 0.0;
+    for (size_t k = 0; k < K; k++) {
+        double vk = v[k];
+        const double *ck = c + k * K, *sk = s + k * K;
+        for (size_t r = 0; r < K; r++) {
+            x[2 * r] += vk * ck[r];
+            x[2 * r + 1] -= vk * sk[r];
+        }
+    }
+}
+
 /* The conjugate K-point DFTs of D values v per band, conj(sum_k v_k e^{2 pi i r k / K}), repeated
  * over the G/2 + 1 bins of the grid (bin r is the DFT's r mod K), into X ([band * nh + r]). */
 void rec_eq7_band_dfts(const rec_matcher *m, const double *v, double complex *X)
@@ -112,16 +128,7 @@ void rec_eq7_band_dfts(const rec_matcher *m, const double *v, double complex *X)
     size_t K = (size_t)m->K, nh = (size_t)m->G / 2 + 1;
     for (int band = 0; band < m->bands; band++) {
         double complex *Xb = X + (size_t)band * nh;
-        for (size_t r = 0; r < K && r < nh; r++) {
-            double complex x = 0.0;
-            size_t rk = 0;   /* r k mod K */
-            for (size_t k = 0; k < K; k++) {
-                x += v[(size_t)band * K + k] * m->wk[rk];
-                rk += r;
-                if (rk >= K) rk -= K;
-            }
-            Xb[r] = conj(x);
-        }
+        band_dft(v + (size_t)band * K, m->dftc, m->dfts, K, (double *)Xb);
         for (size_t r = K; r < nh; r++) Xb[r] = Xb[r - K];
     }
 }
