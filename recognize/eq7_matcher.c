@@ -100,7 +100,6 @@ void rec_matcher_free(rec_matcher *m)
     free(m->dfts);
     free(m->nyqs);
     free(m->nyqc);
-    free(m->wk);
     free(m->harm);
     free(m->bnorm);
     free(m->lbnorm);
@@ -334,7 +333,7 @@ static gs_status template_tables(rec_matcher *m)
         return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate the continuous templates' tables");
     for (int k = 0; k < K; k++)
         for (int q = 0; q < K; q++) {
-            double complex wv = m->wk[(size_t)k * (size_t)q % (size_t)K];
+            double complex wv = cexp(I * EQ7_TWO_PI * (double)((size_t)k * (size_t)q % (size_t)K) / K);
             m->dftc[k * K + q] = creal(wv);
             m->dfts[k * K + q] = cimag(wv);
         }
@@ -568,14 +567,12 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
     m->F = calloc(nb, sizeof *m->F);
     m->nyq = calloc(nb * (size_t)bands, sizeof *m->nyq);
     m->nfine = calloc(nb, sizeof *m->nfine);
-    m->wk = malloc(sizeof *m->wk * (size_t)K);
     m->harm = malloc(sizeof *m->harm * 2 * REC_SHAPE_H * (size_t)K);
     if (!m->bulbs || !m->cont || !m->first || !m->count || !m->H || !m->F || !m->nyq ||
-        !m->nfine || !m->wk || !m->harm) {
+        !m->nfine || !m->harm) {
         rec_matcher_free(m);
         return gs_fail(GS_ENOMEM, "Eq. 7 matcher: out of memory");
     }
-    for (int j = 0; j < K; j++) m->wk[j] = cexp(I * EQ7_TWO_PI * (double)j / K);
     for (int h = 1; h <= REC_SHAPE_H; h++)
         for (int k = 0; k < K; k++) {
             double a = 2.0 * M_PI * h * (double)k / (double)K;

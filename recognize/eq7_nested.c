@@ -199,6 +199,13 @@ static int near(const rec_matcher *m, size_t j, int b, double s)
     return m->cont[b] ? ds < 2.0 / m->G : ds < 1e-9;
 }
 
+/* ok[j] = 0 for bulb b's templates near shift s. */
+static void mask_near(const rec_matcher *m, int b, double s, double *ok)
+{
+    for (size_t j = m->first[b]; j < m->first[b] + m->count[b]; j++)
+        if (near(m, j, b, s)) ok[j] = 0.0;
+}
+
 static double tail(double delta, int extra, double phi)
 {
     if (extra < 1) return 1.0;
@@ -377,20 +384,15 @@ void rec_eq7_nested_tests(const rec_matcher *m, rec_eq7_work *w, const double *t
                            M, S1v[r][f], T11v[r][f], gain, ok);
         /* the first template of the largest drop, itself and its neighbours (and the best
          * fit's, r > 0: paired at r = 0) left out */
-        for (size_t b = 0; b < m->nb; b++) {
-            if ((int)b != b1 && (r == 0 || (int)b != best_bulb)) continue;
-            for (size_t j = m->first[b]; j < m->first[b] + m->count[b]; j++)
-                if (near(m, j, b1, s1) || (r > 0 && near(m, j, best_bulb, best_shift))) ok[j] = 0.0;
-        }
+        mask_near(m, b1, s1, ok);
+        if (r > 0) mask_near(m, best_bulb, best_shift, ok);
         pair_deltas(gain, ok, M, e1v[r] - e0);
-        {
-            size_t j = rec_eq7_argmax(ok, M);
-            double delta = ok[j];   /* chi2 of the best fit minus the pair's */
-            if (!(delta > best_delta)) continue;
-            best_delta = delta;
-            best_j = j;
-            best_r = r;
-        }
+        size_t j = rec_eq7_argmax(ok, M);
+        double delta = ok[j];   /* chi2 of the best fit minus the pair's */
+        if (!(delta > best_delta)) continue;
+        best_delta = delta;
+        best_j = j;
+        best_r = r;
     }
     /* a pair of two first templates was searched in both orders (the second's not next to the
      * best fit), and rounding picked one (the same Delta, not the same Occam factor): the first

@@ -23,7 +23,7 @@ GS_VECTOR_LOOP static void to_double(const float *restrict x, size_t n, double *
 }
 
 /* Sum of squares of n floats in double, 8 partial sums (the chain would be latency bound). */
-GS_VECTOR_LOOP static double sumsq_f(const float *x, size_t n)
+GS_VECTOR_LOOP double rec_pix_sumsq(const float *x, size_t n)
 {
     pix_v8d a = {0};
     size_t i = 0;
@@ -234,7 +234,7 @@ static void pixel_row(const rec_matcher *m, pix_work *pw, const float *xr, const
     /* early out: every template too dim; a row with a NaN has NaN scores and stops here too */
     float smax = row_max(srow, Mp);
     if (!((double)smax >= min_snr * sg) || !(smax > 0.0f)) return;
-    double ss = sumsq_f(xr, D);
+    double ss = rec_pix_sumsq(xr, D);
     if (!isfinite(ss)) return;
     double inv = 1.0 / sg, Sxx = ss * inv * inv;
     /* bounds U_j >= L_j + Sxx/2 (log Phi <= 0) from the float scores */
@@ -413,7 +413,7 @@ static void pixel_row_band(const rec_matcher *m, pix_work *pw, const float *xr, 
     double var[GS_MAX_BANDS], inv[GS_MAX_BANDS], Sxx = 0.0;
     for (int b = 0; b < nb; b++) {
         const float *xb = xr + (size_t)b * K;
-        double ssb = sumsq_f(xb, K), ms = ssb / (double)K - sg * sg;   /* RMS signal level^2 */
+        double ssb = rec_pix_sumsq(xb, K), ms = ssb / (double)K - sg * sg;   /* RMS signal level^2 */
         double mu2 = ms > 0.0 ? fe * fe * ms : 0.0;
         var[b] = sg * sg + mu2;
         inv[b] = 1.0 / sqrt(var[b]);
@@ -632,7 +632,7 @@ gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *no
             if (!(sg > 0.0) || !isfinite(sg)) continue;
             if (prefilter) {
                 const float *xr = xb + i * D;
-                double ss = sumsq_f(xr, D), yy = 0.0;
+                double ss = rec_pix_sumsq(xr, D), yy = 0.0;
                 for (size_t q = 0; q < R; q++) yy += (double)pw.y[i * R + q] * pw.y[i * R + q];
                 /* |x_perp| from |x|^2 - |y|^2, plus the rounding of both (an upper bound) */
                 float xp = (float)sqrt((ss > yy ? ss - yy : 0.0) + 1e-6 * ss);

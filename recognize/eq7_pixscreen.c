@@ -96,11 +96,12 @@ gs_status rec_eq7_pixscreen_alloc(const rec_matcher *m, size_t B, rec_pixscreen_
     sw->y = malloc(sizeof *sw->y * (size_t)m->bands * 2 * (size_t)m->K);
     sw->yx = malloc(sizeof *sw->yx * (size_t)m->bands * 2 * m->fs_np);
     sw->xa = malloc(sizeof *sw->xa * (size_t)m->bands * (size_t)m->K);
+    sw->xd = malloc(sizeof *sw->xd * (size_t)m->D);
     gmax = (gmax + LANES - 1) / LANES * LANES;
     sw->xg = malloc(sizeof *sw->xg * (B + 3) * (size_t)m->D);
     sw->og = malloc(sizeof *sw->og * (B + 3) * gmax);
     sw->idx = malloc(sizeof *sw->idx * B);
-    if (!sw->bound || !sw->state || !sw->row || !sw->y || !sw->yx || !sw->xa || !sw->xg || !sw->og || !sw->idx) {
+    if (!sw->bound || !sw->state || !sw->row || !sw->y || !sw->yx || !sw->xa || !sw->xd || !sw->xg || !sw->og || !sw->idx) {
         rec_eq7_pixscreen_free(sw);
         return gs_fail(GS_ENOMEM, "Eq. 7 pixels: cannot allocate the Fourier screen for %zu rows", B);
     }
@@ -115,6 +116,7 @@ void rec_eq7_pixscreen_free(rec_pixscreen_work *sw)
     free(sw->y);
     free(sw->yx);
     free(sw->xa);
+    free(sw->xd);
     free(sw->xg);
     free(sw->og);
     free(sw->idx);
@@ -214,21 +216,6 @@ GS_VECTOR_LOOP static void scan_scores(const float *o, const float *lnf, size_t 
     out[2] = d;
 }
 
-/* The K-point DFT of x in double, X_q = sum_k x_k e^{-2 pi i q k / K}: re[q], im[q], from the
- * matcher's cos and sin tables (m->dftc, m->dfts: [k K + q]). */
-GS_VECTOR_LOOP static void row_dft(const double *restrict c, const double *restrict sn, const float *restrict x,
-                                    size_t K, double *restrict re, double *restrict im)
-{
-    for (size_t q = 0; q < K; q++) re[q] = im[q] = 0.0;
-    for (size_t k = 0; k < K; k++) {
-        double xk = x[k];
-        for (size_t q = 0; q < K; q++) {
-            re[q] += c[k * K + q] * xk;
-            im[q] -= sn[k * K + q] * xk;
-        }
-    }
-}
-
 enum { ST_NONE = 0, ST_WANT = 1, ST_DONE = 2 };
 
 /* The float scores of the wanted (row, bulb) pairs: per bulb its rows (gathered, padded to a
@@ -273,8 +260,7 @@ void rec_eq7_pixscreen(const rec_matcher *m, rec_pixscreen_work *sw, const float
         rec_pixscreen_row *r = &sw->row[k];
         unsigned char *st = sw->state + k * nb;
         double sg = noise_sigma[rows[k]];
-        double ss = 0.0;
-        for (size_t d = 0; d < D; d++) ss += (double)xs[k * D + d] * xs[k * D + d];
+        double ss = rec_pix_sumsq(xs + k * D, D);
         keep[k] = isfinite(ss) != 0;   /* pixel_row answers no row with a NaN or Inf */
         memset(st, ST_NONE, nb);
         if (!keep[k]) continue;
@@ -288,25 +274,23 @@ void rec_eq7_pixscreen(const rec_matcher *m, rec_pixscreen_work *sw, const float
         r->smax = -INFINITY;
         r->umax = -INFINITY;
         r->nmax = -INFINITY;
-        /* the row's DFT, X_q = sum_k x_k e^{-2 pi i q k / K}, and at harmonics 0..n_kept (X_{n mod K}) */
+        /* the row's DFT, X_q = sum_k x_k e^{-2 pi i q k / K} ((re, im) pairs), and at harmonics
+         * 0..n_kept (X_{n mod K}) */
         double *y = sw->y;
+        for (size_t d = 0; d < D; d++) sw->xd[d] = xs[k * D + d];
         for (int band = 0; band < bands; band++)
-            row_dft(m->dftc, m->dfts, xs + k * D + (size_t)band * K, K, y + (size_t)band * 2 * K,
-                    y + (size_t)band * 2 * K + K);
+            rec_eq7_dft(sw->xd + (size_t)band * K, m->dftc, m->dfts, K, y + (size_t)band * 2 * K);
         for (int band = 0; band < bands; band++) {
             double *yb = sw->yx + (size_t)band * 2 * np;
+            const double *xb = y + (size_t)band * 2 * K;
             for (size_t n = 0; n < np; n++) {
                 int in = n <= (size_t)m->fs_n;
-                yb[n] = in ? y[(size_t)band * 2 * K + n % K] : 0.0;
-                yb[np + n] = in ? y[(size_t)band * 2 * K + K + n % K] : 0.0;
+                yb[n] = in ? xb[2 * (n % K)] : 0.0;
+                yb[np + n] = in ? xb[2 * (n % K) + 1] : 0.0;
             }
         }
         double *xa = sw->xa;   /* |X_band,q| */
-        for (int band = 0; band < bands; band++)
-            for (size_t q = 0; q < K; q++) {
-                double re = y[(size_t)band * 2 * K + q], im = y[(size_t)band * 2 * K + K + q];
-                xa[(size_t)band * K + q] = sqrt(re * re + im * im);
-            }
+        for (size_t q = 0; q < (size_t)bands * K; q++) xa[q] = sqrt(y[2 * q] * y[2 * q] + y[2 * q + 1] * y[2 * q + 1]);
         /* slack: the float score's rounding */
         double bmax = -INFINITY;
         for (size_t b = 0; b < nb; b++) {

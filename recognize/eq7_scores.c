@@ -288,8 +288,8 @@ static void red_bounds(const rec_matcher *m, rec_eq7_work *w, double Sxx, size_t
  * rec_eq7_loglik_red without its erfc and with its logarithms from below; red_tau_bounds): its
  * L is the log of the prior-weighted mean of exp L(tau), below the same mean of the taus'
  * bounds. Several times cheaper than the exact L and within a nat or so of it (log Phi(z) ~ 0
- * for a fit of any brightness), where red_bound's chromaticity-blind bound can be 100 nats
- * above. */
+ * for a fit of any brightness), where red_bound's chromaticity-blind bound is far
+ * above (see the screen's test, eq7_reddened_tight_bounds_hold). */
 static double red_tight_bound(const rec_matcher *m, const rec_eq7_work *w, size_t j, double Sxx, const double *prior)
 {
     double S[GS_MAX_BANDS], T[GS_MAX_BANDS], R, ah[GS_MAX_BANDS];
@@ -544,6 +544,15 @@ static double tighten(screen *sc, size_t j)
     return w->U[j];
 }
 
+/* Whether template j's bound is final (tight, or a model without tight bounds); if not, it is
+ * made tight now and may no longer be the largest. */
+static int bound_final(screen *sc, size_t j)
+{
+    if (!sc->m->red || sc->w->tight[j]) return 1;
+    tighten(sc, j);
+    return 0;
+}
+
 /* exact() of the templates idx[0..n): the free models' scores at once. */
 static void exact_set(screen *sc, const size_t *idx, size_t n)
 {
@@ -645,11 +654,7 @@ static void nested_first(screen *sc)
     while (ndone < REC_NESTED_FIRST + 1) {
         size_t jn = rec_eq7_argmax(w->U, m->M);
         if (!(w->U[jn] > -INFINITY)) break;
-        if (m->red && !w->tight[jn]) {
-            tighten(sc, jn);
-            continue;
-        }
-        ndone += isfinite(exact(sc, jn));
+        if (bound_final(sc, jn)) ndone += isfinite(exact(sc, jn));
     }
     double top[REC_NESTED_FIRST + 1];
     int nt = 0;
@@ -692,10 +697,9 @@ double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep 
     if (m->red) red_bounds(m, w, Sxx, &jb);
     else free_bounds(m, w, p, Sxx, &jb);
     if (!(U[jb] > -INFINITY)) return -INFINITY;
-    while (m->red && !w->tight[jb]) {   /* the best tight bound's template */
+    while (!bound_final(&sc, jb)) {   /* the best final bound's template */
         /* every bound at least this one's tight bound, tight, in one pass */
-        double th = tighten(&sc, jb);
-        size_t n = scr_at_least(U, 0, M, th, w->cand);
+        size_t n = scr_at_least(U, 0, M, U[jb], w->cand);
         for (size_t i = 0; i < n; i++) tighten(&sc, w->cand[i]);
         jb = rec_eq7_argmax(U, M);
     }
@@ -713,8 +717,7 @@ double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep 
             for (;;) {
                 jm = j0 + rec_eq7_argmax(U + j0, n);
                 if (!(U[jm] > -INFINITY) || !(U[jm] >= lb)) break;
-                if (!w->tight[jm]) tighten(&sc, jm);
-                else lb = fmax(lb, exact(&sc, jm));
+                if (bound_final(&sc, jm)) lb = fmax(lb, exact(&sc, jm));
             }
             continue;
         }
@@ -730,8 +733,7 @@ double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep 
             double u;
             size_t jn = best_discrete_bound(m, w, &u);
             if (jn == M || !(u > sc.r2)) break;
-            if (m->red && !w->tight[jn]) tighten(&sc, jn);
-            else exact(&sc, jn);
+            if (bound_final(&sc, jn)) exact(&sc, jn);
         }
     if (m->o.nested_tests) nested_first(&sc);
     return sc.Lmax;

@@ -105,10 +105,8 @@ static void sums_kernel(const double *a, size_t lda, size_t nq, const double *tt
     else sums_kernel_256(a, lda, nq, tt, ldt, n, out, ldo, nj);
 }
 
-/* x[r] = conj(sum_k v_k e^{2 pi i r k / K}), r < K, as (re, im) pairs: the sums over k in order,
- * every r at once (c, s: cos and sin of 2 pi r k / K, [k K + r]). */
-GS_VECTOR_LOOP static void band_dft(const double *restrict v, const double *restrict c, const double *restrict s,
-                                    size_t K, double *restrict x)
+GS_VECTOR_LOOP void rec_eq7_dft(const double *restrict v, const double *restrict c, const double *restrict s,
+                                size_t K, double *restrict x)
 {
     for (size_t r = 0; r < 2 * K; r++) x[r] = 0.0;
     for (size_t k = 0; k < K; k++) {
@@ -128,7 +126,7 @@ void rec_eq7_band_dfts(const rec_matcher *m, const double *v, double complex *X)
     size_t K = (size_t)m->K, nh = (size_t)m->G / 2 + 1;
     for (int band = 0; band < m->bands; band++) {
         double complex *Xb = X + (size_t)band * nh;
-        band_dft(v + (size_t)band * K, m->dftc, m->dfts, K, (double *)Xb);
+        rec_eq7_dft(v + (size_t)band * K, m->dftc, m->dfts, K, (double *)Xb);
         for (size_t r = K; r < nh; r++) Xb[r] = Xb[r - K];
     }
 }

@@ -114,7 +114,9 @@ gs_status rec_cv_dilate_u8(unsigned char *mask, int width, int height, int radiu
 #define CUT_PIXEL 30.0    /* nats: pairs this far below the best are < 1e-13 of it */
 #define CUT_REFINE 30.0   /* nats: continuous bulbs this far below the best keep their grid peak */
 #define FLOAT_ERR 2e-6    /* error of z^2/2 from float scores, per unit |x|^2/sigma^2 */
-/* the pixel path's bound on that error for a row of Sxx = |x|^2/sigma^2 (eq7_pixels.c, eq7_pixscreen.c) */
+/* a row's |x|^2 in double (eq7_pixels.c), and the pixel path's bound on that error for a row of
+ * Sxx = |x|^2/sigma^2 (eq7_pixels.c, eq7_pixscreen.c) */
+double rec_pix_sumsq(const float *x, size_t n);
 static inline double rec_pix_float_err(double Sxx)
 {
     return FLOAT_ERR * Sxx + 1e-6;
@@ -203,7 +205,6 @@ struct rec_matcher {
     double *fs_lnfmin;                  /* [nb] least log |t| of the bulb's templates */
     size_t fs_ldt;                      /* Mp + LANES */
     float *fs_tt;                       /* [D * fs_ldt] the unit templates tn transposed */
-    double complex *wk;                 /* [K] e^{2 pi i j / K} */
     double *harm;                       /* [2 REC_SHAPE_H K] the shape test's columns within a
                                          * band: cos, sin of 2 pi h k / K, h = 1..REC_SHAPE_H
                                          * ([(2 (h - 1) + q) K + k], q = 1 sin; eq7_nested.c) */
@@ -396,7 +397,8 @@ typedef struct {
     double *bound;          /* [B * nb] bounds of the bulbs' normalised scores */
     unsigned char *state;   /* [B * nb] none, wanted, scored */
     rec_pixscreen_row *row; /* [B] */
-    double *y;              /* [bands * 2K] one row's DFT */
+    double *xd;             /* [D] one row in double */
+    double *y;              /* [bands * 2K] its DFT ((re, im) pairs) */
     double *yx;             /* [bands * 2 fs_np] one row's, at the kept harmonics */
     double *xa;             /* [bands * K] its magnitudes */
     float *xg, *og;         /* [(B + 3) * D] gathered rows, [(B + 3) * max count] their scores */
@@ -439,6 +441,9 @@ void rec_eq7_grid_sums(const rec_matcher *m, rec_eq7_work *w, size_t b);
 /* The same for any D values v: their band DFTs (X: bands * (G/2 + 1), e.g. w->spec_v), then
  * sum_d v_d t_j[d] of brightness f over bulb b's grid into dst (G values). */
 void rec_eq7_band_dfts(const rec_matcher *m, const double *v, double complex *X);
+/* The K-point DFT of v, x[q] = sum_k v_k e^{-2 pi i q k / K} as (re, im) pairs, q < K, from the
+ * tables c, s (m->dftc, dfts: [k K + q]); the sums over k in order, every q at once. */
+void rec_eq7_dft(const double *v, const double *c, const double *s, size_t K, double *x);
 void rec_eq7_grid_dots(const rec_matcher *m, rec_eq7_work *w, size_t b, int f, const double complex *X, double *dst);
 /* eq7_decide.c: scratch for one light or pixel (rec_eq7_work_alloc), or a block of rows lights
  * (the light path's); rec_eq7_work_row points w, wx, xs, S and T at light q's rows; and the
