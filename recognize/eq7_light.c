@@ -299,64 +299,60 @@ static void flat_share_of(const rec_matcher *m, rec_eq7_work *w, const double *t
 }
 
 /* The passes of rec_eq7_light_prepare over a light's samples, written for the vectorizer
- * (GS_VECTOR_LOOP): sums in 8 interleaved partial sums, taken in a fixed order (the lanes of one
- * vector: lane k sums the samples d = k mod 8 in order; a select by mask adds +0 where the scalar
- * form added 0.0, so the sums are those of the plain loop). */
+ * (GS_VECTOR_LOOP). Comparisons stay in plain loops, which the vectorizer takes after cloning:
+ * gcc (12) lowers a comparison of generic vectors for the baseline target in every clone, to
+ * scalar code. Sums in 8 interleaved partial sums, taken in a fixed order (lane k sums the samples
+ * d = k mod 8 in order, the last ones in lane 0); an unusable sample adds +0, as a select would.
+ * The largest and least of positive values by their bits: for doubles >= 0 the bit patterns
+ * order as the values. */
 #define PREP_LANES 8
 typedef double prep_vd __attribute__((vector_size(PREP_LANES * sizeof(double))));
-typedef long long prep_vl __attribute__((vector_size(PREP_LANES * sizeof(long long))));
 
-#define PREP_SELECT(m, a, b) REC_VSELECT(prep_vd, prep_vl, m, a, b)   /* m ? a : b */
-
-/* ok[d] = 1 where sample d is usable (finite signal, finite sigma > 0), else 0; the largest
- * usable sigma into *cmax; returns how many are bad (neither usable nor dropped: sigma = +inf). */
+/* ok[d] = 1 where sample d is usable (finite signal, finite sigma > 0), else 0, and its signal
+ * and sigma in xc, sc (0 where unusable); the largest usable sigma into *cmax; returns how many
+ * are bad (neither usable nor dropped: sigma = +inf). */
 GS_VECTOR_LOOP static int prep_scan(const double *restrict x, const double *restrict s, size_t D, double *restrict ok,
-                                     double *cmax)
+                                     double *restrict xc, double *restrict sc, double *cmax)
 {
-    long long bad = 0;   /* (counts as wide as the samples: the loop vectorizes without packing) */
     for (size_t d = 0; d < D; d++) {
-        long long u = (fabs(x[d]) <= DBL_MAX) & (fabs(s[d]) <= DBL_MAX) & (s[d] > 0.0);
+        int u = (fabs(x[d]) <= DBL_MAX) & (fabs(s[d]) <= DBL_MAX) & (s[d] > 0.0);
         ok[d] = u ? 1.0 : 0.0;
-        bad += !u & !(s[d] > DBL_MAX);
+        xc[d] = u ? x[d] : 0.0;
+        sc[d] = u ? s[d] : 0.0;
     }
-    prep_vd mx = {0};
-    size_t d = 0;
-    for (; d + PREP_LANES <= D; d += PREP_LANES) {
-        prep_vd sv, u;
-        REC_VLOAD(sv, s + d);
-        REC_VLOAD(u, ok + d);
-        mx = PREP_SELECT((u != 0.0) & (sv > mx), sv, mx);
+    long long top = 0, left = 0;   /* the largest sigma's bits; samples neither usable nor dropped */
+    for (size_t d = 0; d < D; d++) {
+        long long bits;
+        memcpy(&bits, &sc[d], sizeof bits);
+        top = bits > top ? bits : top;
+        left += (ok[d] == 0.0) & !(s[d] > DBL_MAX);
     }
-    for (; d < D; d++) mx[0] = ((ok[d] != 0.0) & (s[d] > mx[0])) ? s[d] : mx[0];
-    double c = 0.0;
-    for (int k = 0; k < PREP_LANES; k++) c = mx[k] > c ? mx[k] : c;
-    *cmax = c;
-    return (int)bad;
+    memcpy(cmax, &top, sizeof *cmax);
+    return (int)left;
 }
 
-/* Over one band's usable samples, in units of c = 1/(ic1 ic2): sum x^2 - sigma^2 and sum x;
- * returns their count. */
-GS_VECTOR_LOOP static int prep_band(const double *restrict x, const double *restrict s, const double *restrict ok,
+/* Over one band's usable samples (xc, sc from prep_scan), in units of c = 1/(ic1 ic2):
+ * sum x^2 - sigma^2 and sum x; returns their count. */
+GS_VECTOR_LOOP static int prep_band(const double *restrict xc, const double *restrict sc, const double *restrict ok,
                                      size_t K, double ic1, double ic2, double *sum2, double *sum1)
 {
-    prep_vd a = {0}, b = {0}, n = {0}, zero = {0};
+    prep_vd a = {0}, b = {0}, n = {0};
     size_t d = 0;
     for (; d + PREP_LANES <= K; d += PREP_LANES) {
         prep_vd xv, sv, u;
-        REC_VLOAD(xv, x + d);
-        REC_VLOAD(sv, s + d);
+        REC_VLOAD(xv, xc + d);
+        REC_VLOAD(sv, sc + d);
         REC_VLOAD(u, ok + d);
         xv = xv * ic1 * ic2;
         sv = sv * ic1 * ic2;
-        prep_vl use = u != 0.0;
-        a += PREP_SELECT(use, xv * xv - sv * sv, zero);
-        b += PREP_SELECT(use, xv, zero);
+        a += xv * xv - sv * sv;
+        b += xv;
         n += u;
     }
     for (; d < K; d++) {
-        double xv = x[d] * ic1 * ic2, sv = s[d] * ic1 * ic2;
-        a[0] += ok[d] != 0.0 ? xv * xv - sv * sv : 0.0;
-        b[0] += ok[d] != 0.0 ? xv : 0.0;
+        double xv = xc[d] * ic1 * ic2, sv = sc[d] * ic1 * ic2;
+        a[0] += xv * xv - sv * sv;
+        b[0] += xv;
         n[0] += ok[d];
     }
     double A = 0.0, B = 0.0, N = 0.0;
@@ -369,45 +365,44 @@ GS_VECTOR_LOOP static int prep_band(const double *restrict x, const double *rest
 /* One band's weights ws = 1/(sigma^2 + fe2mu2) and samples xs = x - flat (units of c) where
  * usable and finite (w, wx, xs 0 elsewhere); adds sum ws xs^2 to *Sxx and lowers *wmin to their
  * least weight; returns the samples used, and the usable ones whose weight overflowed in *bad. */
-GS_VECTOR_LOOP static int prep_weights(const double *restrict x, const double *restrict s, const double *restrict ok,
+GS_VECTOR_LOOP static int prep_weights(const double *restrict xc, const double *restrict sc, const double *restrict ok,
                                         size_t K, double ic1, double ic2, double fe2mu2, double flat, double *restrict w,
                                         double *restrict wx, double *restrict xs, double *Sxx, double *wmin,
                                         int *bad)
 {
-    prep_vd sxx = {0}, mn;
-    long long used = 0, over = 0;
-    for (int k = 0; k < PREP_LANES; k++) mn[k] = INFINITY;
+    int used = 0, over = 0;
     for (size_t d = 0; d < K; d++) {
-        double sv = s[d] * ic1 * ic2, ws = 1.0 / (sv * sv + fe2mu2), xv = x[d] * ic1 * ic2 - flat;
-        long long good = (ok[d] != 0.0) & (fabs(ws) <= DBL_MAX) & (fabs(ws * xv * xv) <= DBL_MAX);
+        double sv = sc[d] * ic1 * ic2, ws = 1.0 / (sv * sv + fe2mu2), xv = xc[d] * ic1 * ic2 - flat;
+        int u = ok[d] != 0.0, good = u & (fabs(ws) <= DBL_MAX) & (fabs(ws * xv * xv) <= DBL_MAX);
         w[d] = good ? ws : 0.0;
         xs[d] = good ? xv : 0.0;
         wx[d] = good ? ws * xv : 0.0;
         used += good;
-        over += (ok[d] != 0.0) & !good;
+        over += u & !good;
     }
+    long long least = 0x7ff0000000000000LL;   /* the least positive weight's bits (+inf: none) */
+    for (size_t d = 0; d < K; d++) {
+        long long bits;
+        memcpy(&bits, &w[d], sizeof bits);
+        least = bits > 0 && bits < least ? bits : least;
+    }
+    prep_vd sxx = {0};
     size_t d = 0;
     for (; d + PREP_LANES <= K; d += PREP_LANES) {
-        prep_vd wv, wxv, xsv;
-        REC_VLOAD(wv, w + d);
+        prep_vd wxv, xsv;
         REC_VLOAD(wxv, wx + d);
         REC_VLOAD(xsv, xs + d);
         sxx += wxv * xsv;
-        mn = PREP_SELECT((wv > 0.0) & (wv < mn), wv, mn);
     }
-    for (; d < K; d++) {
-        sxx[0] += wx[d] * xs[d];
-        mn[0] = ((w[d] > 0.0) & (w[d] < mn[0])) ? w[d] : mn[0];
-    }
-    double S = 0.0, m = *wmin > 0.0 ? *wmin : INFINITY;
-    for (int k = 0; k < PREP_LANES; k++) {
-        S += sxx[k];
-        m = mn[k] < m ? mn[k] : m;
-    }
+    for (; d < K; d++) sxx[0] += wx[d] * xs[d];
+    double S = 0.0, m;
+    memcpy(&m, &least, sizeof m);
+    for (int k = 0; k < PREP_LANES; k++) S += sxx[k];
+    if (*wmin > 0.0 && *wmin < m) m = *wmin;
     *Sxx += S;
     *wmin = m < INFINITY ? m : *wmin;
-    *bad += (int)over;
-    return (int)used;
+    *bad += over;
+    return used;
 }
 
 /* What the catalog keeps of a light's fit (eq7_noise.c), for a light without one. */
@@ -427,8 +422,8 @@ int rec_eq7_light_prepare(const rec_matcher *m, rec_eq7_work *w, size_t q, const
     rec_eq7_prep *p = &w->prep[q];
     memset(p, 0, sizeof *p);
     /* usable samples: finite signal, finite sigma > 0; sigma = +inf marks a dropped sample */
-    double c, *ok = w->r2;
-    int bad = prep_scan(signal, sigma, D, ok, &c);
+    double c, *ok = w->r2, *xc = w->s2, *sc = w->m2;   /* (scratch until the answer) */
+    int bad = prep_scan(signal, sigma, D, ok, xc, sc, &c);
     /* the band levels: mu_b^2 = mean(x^2 - sigma^2) over the band's usable samples (>= 0), in
      * units of c. A multiplicative excess e per sample adds (e mu_b)^2 to each sample's variance:
      * on average over the band exactly the variance it causes (E chi2 = dof), spread evenly over
@@ -442,10 +437,10 @@ int rec_eq7_light_prepare(const rec_matcher *m, rec_eq7_work *w, size_t q, const
     for (int band = 0; band < m->bands; band++) {
         size_t o = (size_t)band * K;
         double sum2, sum1;
-        int n = prep_band(signal + o, sigma + o, ok + o, K, ic1, ic2, &sum2, &sum1);
+        int n = prep_band(xc + o, sc + o, ok + o, K, ic1, ic2, &sum2, &sum1);
         mu2[band] = (n > 0 && sum2 > 0.0 && isfinite(sum2)) ? sum2 / n : 0.0;
         double flat = w->flat > 0.0 && n > 0 ? w->flat / (1.0 + w->flat) * sum1 / n : 0.0;
-        int nb = prep_weights(signal + o, sigma + o, ok + o, K, ic1, ic2, fe * fe * mu2[band], flat, w->w + o,
+        int nb = prep_weights(xc + o, sc + o, ok + o, K, ic1, ic2, fe * fe * mu2[band], flat, w->w + o,
                               w->wx + o, w->xs + o, &Sxx, &p->wmin[m->nfit == 1 ? 0 : band], &bad);
         used += nb;
         if (m->nfit > 1) p->full[band] = nb == (int)K;

@@ -37,7 +37,8 @@ gs_status rec_eq7_sums_setup(rec_matcher *m)
  * holds SUMS_COLS columns past nj (ldt >= nj + SUMS_COLS). Tiles of SUMS_ROWS lights by two
  * vectors of templates, then the last rows one by one; each sum its own chain of multiply-adds
  * over d, fused where the CPU can: the same bits whichever kernel runs (the 512-bit one, the
- * 256-bit one with FMA), and whatever lights share the tile. */
+ * 256-bit one with FMA; the plain one, for a CPU without FMA, rounds each product), and whatever
+ * lights share the tile. */
 #ifdef __clang__
 #pragma clang fp contract(fast)
 #define SUMS_CONTRACT
@@ -93,7 +94,8 @@ gs_status rec_eq7_sums_setup(rec_matcher *m)
             }                                                                                       \
     }
 SUMS_KERNEL(sums_kernel_512, 8, target("avx512f"))
-SUMS_KERNEL(sums_kernel_256, 4, target_clones("arch=haswell", "default"))
+SUMS_KERNEL(sums_kernel_256, 4, target("avx2,fma"))
+SUMS_KERNEL(sums_kernel_plain, 4, )
 #ifdef __clang__
 #pragma clang fp contract(on)
 #endif
@@ -102,7 +104,10 @@ static void sums_kernel(const double *a, size_t lda, size_t nq, const double *tt
                         double *out, size_t ldo, size_t nj)
 {
     if (__builtin_cpu_supports("avx512f")) sums_kernel_512(a, lda, nq, tt, ldt, n, out, ldo, nj);
-    else sums_kernel_256(a, lda, nq, tt, ldt, n, out, ldo, nj);
+    else if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"))
+        sums_kernel_256(a, lda, nq, tt, ldt, n, out, ldo, nj);
+    else
+        sums_kernel_plain(a, lda, nq, tt, ldt, n, out, ldo, nj);
 }
 
 GS_VECTOR_LOOP void rec_eq7_dft(const double *restrict v, const double *restrict c, const double *restrict s,

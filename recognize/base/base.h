@@ -266,11 +266,15 @@ double gs_log_phi(double z);
  * where a loop calls log, erfc or exp, gcc's AVX-512 clone calls glibc's vector versions, which
  * round otherwise than the scalar ones: results may differ in the last bits from one CPU to
  * another, never from one split of the work to another on one CPU); GS_VECTOR_LOOP also lets
- * the vectorizer take loops of any length. gcc's only: clang (14) cannot export such a function
- * and names each resolver globally, so its build (the sanitizers') runs the plain code. */
+ * the vectorizer take loops of any length. The AVX2 clone by the CPU's features ("avx2"; gcc's
+ * "arch=haswell" clone runs on Haswell models only). gcc lowers a comparison of generic vectors
+ * (vector_size types) in these clones for the plain target, to scalar code: loops that compare
+ * are written plainly for the vectorizer, which runs per clone. gcc's only: clang (14) cannot
+ * export such a function and names each resolver globally, so its build (the sanitizers') runs
+ * the plain code. */
 #if defined(__GNUC__) && !defined(__clang__)
-#define GS_VECTOR_CLONES __attribute__((target_clones("avx512f", "arch=haswell", "default")))
-#define GS_VECTOR_LOOP __attribute__((target_clones("avx512f", "arch=haswell", "default"), optimize("O3")))
+#define GS_VECTOR_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
+#define GS_VECTOR_LOOP __attribute__((target_clones("avx512f", "avx2", "default"), optimize("O3")))
 #else   /* clang (the sanitizers' build): the plain code */
 #define GS_VECTOR_CLONES
 #define GS_VECTOR_LOOP
