@@ -35,6 +35,13 @@ void rec_eq7_work_free(rec_eq7_work *w)
     free(w->peak_cell);
     free(w->S_all);
     free(w->T_all);
+    free(w->wf_all);
+    free(w->wxf_all);
+    free(w->Sf_all);
+    free(w->Tf_all);
+    free(w->wxn_all);
+    free(w->fok_all);
+    free(w->have);
     free(w->w_all);
     free(w->wx_all);
     free(w->xs_all);
@@ -67,6 +74,12 @@ void rec_eq7_work_row(const rec_matcher *m, rec_eq7_work *w, size_t q)
     w->xs = w->xs_all + q * D;
     w->S = w->S_all + q * SM;
     w->T = w->T_all + q * SM;
+    if (m->fsums) {
+        w->Sf = w->Sf_all + q * m->M;
+        w->Tf = w->Tf_all + q * m->M;
+        w->wxn = w->wxn_all[q];
+        w->fok = w->fok_all[q];
+    }
 }
 
 gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t rows)
@@ -94,6 +107,15 @@ gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t 
     w->wx_all = calloc(nr * D, sizeof *w->wx_all);
     w->xs_all = calloc(nr * D, sizeof *w->xs_all);
     w->prep = calloc(nr, sizeof *w->prep);
+    int fs = m->fsums;   /* (NULL and free() alike without the float sums) */
+    w->wf_all = fs ? calloc(nr * D, sizeof *w->wf_all) : NULL;
+    w->wxf_all = fs ? calloc(nr * D, sizeof *w->wxf_all) : NULL;
+    w->Sf_all = fs ? calloc(nr * M, sizeof *w->Sf_all) : NULL;
+    w->Tf_all = fs ? calloc(nr * M, sizeof *w->Tf_all) : NULL;
+    w->wxn_all = fs ? calloc(nr, sizeof *w->wxn_all) : NULL;
+    w->fok_all = fs ? calloc(nr, 1) : NULL;
+    w->have = fs ? calloc(M, 1) : NULL;
+    int fs_bad = fs && (!w->wf_all || !w->wxf_all || !w->Sf_all || !w->Tf_all || !w->wxn_all || !w->fok_all || !w->have);
     w->U = malloc(sizeof *w->U * M);
     w->done = calloc(M, 1);
     w->tight = calloc(M, 1);
@@ -115,7 +137,8 @@ gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t 
     if (!w->L || !w->mass || !w->cand || !w->mark || !w->bmass || !w->wmass || !w->has_peak ||
         !w->peak_s || !w->peak_L || !w->peak_sig || !w->peak_z || !w->peak_gain || !w->peak_cell || !w->S_all ||
         !w->T_all || !w->w_all || !w->wx_all || !w->xs_all || !w->prep || !w->U || !w->done || !w->tight || !w->tmp || !w->tt || !w->dt ||
-        !w->r2 || !w->s2 || !w->m2 || !w->tr || !w->t12 || !w->scratch || !w->acc || (nrs && !w->rs) || !w->spec || !w->grid || !w->spec_v) {
+        !w->r2 || !w->s2 || !w->m2 || !w->tr || !w->t12 || !w->scratch || !w->acc || (nrs && !w->rs) || !w->spec || !w->grid || !w->spec_v ||
+        fs_bad) {
         rec_eq7_work_free(w);
         return gs_fail(GS_ENOMEM, "Eq. 7: cannot allocate scratch for %zu templates", M);
     }

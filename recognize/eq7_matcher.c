@@ -87,6 +87,9 @@ void rec_matcher_free(rec_matcher *m)
     free(m->logcellw);
     free(m->ttr);
     free(m->tsqtr);
+    free(m->ttrf);
+    free(m->tsqtrf);
+    free(m->tnorm);
     free(m->red_cmin);
     free(m->shift);
     free(m->tphase);

@@ -360,6 +360,26 @@ GS_VECTOR_LOOP static void scr_bounds_1(const double *S, const double *T, const 
     }
 }
 
+/* scr_bounds_1 from the float sums (rec_eq7_float_sums): S and T within es_j = es |t_j| + eabs
+ * and et_j = et T_f + eabs of their float values Sf, Tf (float's rounding over D terms, gamma_(D+3),
+ * with |sum w x t| <= |w x| |t|; eabs for subnormal terms), the bound taken at the box's worst
+ * corner: S + es_j over T - et_j; +inf (score exactly) where T - et_j <= 0 without lognorm. */
+GS_VECTOR_LOOP static void scr_bounds_1f(const float *Sf, const float *Tf, const double *tnorm, const double *lognorm,
+                                          size_t M, double c0, double Sxx, double slack, double es, double et,
+                                          double eabs, double *U)
+{
+    for (size_t j = 0; j < M; j++) {   /* (the term of T first: lognorm's or log T's) */
+        double t = Tf[j], lo = t - (et * t + eabs);
+        U[j] = lognorm ? c0 - lognorm[j] : lo > 0.0 ? -0.5 * log(lo) : INFINITY;
+    }
+    for (size_t j = 0; j < M; j++) {
+        double s = (double)Sf[j] + (es * tnorm[j] + eabs), t = Tf[j], lo = t - (et * t + eabs);
+        double g = s > 0.0 && lo > 0.0 ? s * (s / lo) : 0.0, d = g - Sxx;
+        double u = U[j] + 0.5 * (d < 0.0 ? d : 0.0);
+        U[j] = t + (et * t + eabs) > 0.0 ? u + (1e-9 * (1.0 + fabs(u)) + slack) : -INFINITY;
+    }
+}
+
 /* The bounds of rec_eq7_loglik_n: log Phi(z) <= 0, and a brightness whose S_f <= 0 adds at most
  * z_f^2/2 + log Phi(z_f) <= log(1/2) < 0 to L, so with g = sum over S_f > 0 of S_f^2/T_f
  *   L <= -max(Sxx - g, 0)/2 - sum_f log(T_f)/2.
@@ -375,6 +395,13 @@ static void free_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pre
     size_t M = m->M, jb = 0;
     int nf = m->nfit;
     double slack = 1e-12 * Sxx, *U = w->U;
+    if (nf == 1 && rec_eq7_float_sums(m) && w->fok) {
+        double u = 0x1p-24 * (double)(m->D + 3), gam = u / (1.0 - u);
+        scr_bounds_1f(w->Sf, w->Tf, m->tnorm, p->full[0] ? m->lognorm : NULL, M, -0.5 * log(p->wmin[0]), Sxx,
+                      slack, gam * w->wxn, gam / (1.0 - gam), 4.0 * m->D * 0x1p-90, U);
+        *jbest = rec_eq7_argmax(U, M);
+        return;
+    }
     if (nf == 1) {
         scr_bounds_1(w->S, w->T, p->full[0] ? m->lognorm : NULL, M, -0.5 * log(p->wmin[0]), Sxx, slack, U);
         *jbest = rec_eq7_argmax(U, M);
@@ -477,6 +504,7 @@ static void scores_free_fix(const rec_matcher *m, const rec_eq7_work *w, const s
 double rec_eq7_loglik_fit(const rec_matcher *m, rec_eq7_work *w, size_t j, double Sxx)
 {
     double Sv[GS_MAX_BANDS], Tv[GS_MAX_BANDS];
+    rec_eq7_exact_sums(m, w, &j, 1);
     rec_eq7_sums_of(m, w, j, Sv, Tv);
     if (!m->red) return rec_eq7_loglik_n(m->nfit, Sxx, Sv, Tv);
     int b = m->tbulb[j];   /* every bulb weighs the same, whatever its phase grid */
@@ -562,6 +590,7 @@ static void exact_set(screen *sc, const size_t *idx, size_t n)
         for (size_t i = 0; i < n; i++) exact(sc, idx[i]);
         return;
     }
+    rec_eq7_exact_sums(m, w, idx, n);
     scores_free(m, w, idx, n, sc->Sxx);
     scores_free_fix(m, w, idx, n, sc->Sxx);
     for (size_t i = 0; i < n; i++) scored(sc, idx[i]);
@@ -687,6 +716,7 @@ double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep 
     screen_init(&sc, m, w, Sxx, -INFINITY);
     memset(w->done, 0, M);
     if (m->red) memset(w->tight, 0, M);
+    if (rec_eq7_float_sums(m)) memset(w->have, !w->fok, M);   /* (all taken for a row not in float) */
     scr_fill(w->L, M, -INFINITY);
     if (m->exhaustive) {
         for (size_t j = 0; j < M; j++) w->cand[j] = j;

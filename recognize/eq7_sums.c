@@ -17,6 +17,11 @@
 /* The transposed copies are built up to this many values each (64 MiB). */
 #define SUMS_MAX_VALUES (8u << 20)
 
+/* The float sums from this many values per light: below, the double sums cost little and a
+ * light of few samples scores many templates exactly, each from its double sums (K = 8, one
+ * band: 9 % slower in float; K = 26, RGB: 8 % faster; docs/bench-recognize.md). */
+#define FSUMS_MIN_D 64
+
 gs_status rec_eq7_sums_setup(rec_matcher *m)
 {
     size_t D = (size_t)m->D, M = m->M;
@@ -30,15 +35,100 @@ gs_status rec_eq7_sums_setup(rec_matcher *m)
             m->ttr[d * m->ldtr + j] = m->t[j * D + d];
             m->tsqtr[d * m->ldtr + j] = m->tsq[j * D + d];
         }
+    /* the float sums: templates within 2^30 (their squares' sums with weights within 2^50 then
+     * stay far inside float's range, FSUMS_ROW_MAX), and D >= FSUMS_MIN_D */
+    m->fsums = m->nfit == 1 && !m->red && !m->o.nested_tests && m->ncont == 0 && D >= FSUMS_MIN_D;
+    for (size_t i = 0; m->fsums && i < M * D; i++) m->fsums = fabs(m->t[i]) <= 0x1p30;
+    if (!m->fsums) return GS_OK;
+    m->ldtrf = (M + SUMS_COLS_F - 1) / SUMS_COLS_F * SUMS_COLS_F + SUMS_COLS_F;
+    m->ttrf = calloc(D * m->ldtrf, sizeof *m->ttrf);
+    m->tsqtrf = calloc(D * m->ldtrf, sizeof *m->tsqtrf);
+    m->tnorm = malloc(M * sizeof *m->tnorm);
+    if (!m->ttrf || !m->tsqtrf || !m->tnorm)
+        return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate %zu templates", M);
+    for (size_t j = 0; j < M; j++) {
+        double q = 0.0;
+        for (size_t d = 0; d < D; d++) {
+            m->ttrf[d * m->ldtrf + j] = (float)m->t[j * D + d];
+            m->tsqtrf[d * m->ldtrf + j] = (float)m->tsq[j * D + d];
+            q += m->tsq[j * D + d];
+        }
+        m->tnorm[j] = sqrt(q);
+    }
     return GS_OK;
 }
 
+/* A row's weights and weighted samples go in float when every one is within 2^50 (in units of
+ * the light's largest sigma: a sample this much sharper than the bluntest is rare); the double
+ * sums of the other rows are all taken. */
+#define FSUMS_ROW_MAX 0x1p50
+
+/* One row's w and wx in float; whether they fit (FSUMS_ROW_MAX). */
+GS_VECTOR_LOOP static int float_row(const double *restrict wv, const double *restrict wx, size_t D,
+                                    float *restrict wf, float *restrict wxf)
+{
+    long long over = 0;
+    for (size_t d = 0; d < D; d++) {
+        over += !(wv[d] <= FSUMS_ROW_MAX) | !(fabs(wx[d]) <= FSUMS_ROW_MAX);
+        wf[d] = (float)(wv[d] <= FSUMS_ROW_MAX ? wv[d] : 0.0);
+        wxf[d] = (float)(fabs(wx[d]) <= FSUMS_ROW_MAX ? wx[d] : 0.0);
+    }
+    return over == 0;
+}
+
+/* The block's rows in float, their |wx| and whether they fit (FSUMS_ROW_MAX). */
+static void float_rows(const rec_matcher *m, rec_eq7_work *w, size_t n)
+{
+    size_t D = (size_t)m->D;
+    for (size_t q = 0; q < n; q++) {
+        const double *wv = w->w_all + q * D, *wx = w->wx_all + q * D;
+        w->wxn_all[q] = sqrt(gs_dot(wx, wx, D));
+        w->fok_all[q] = float_row(wv, wx, D, w->wf_all + q * D, w->wxf_all + q * D);
+    }
+}
+
+/* *s = sum x t and *q = sum v u, each in eight interleaved partial sums (as gs_dot). */
+typedef double exact_v8 __attribute__((vector_size(8 * sizeof(double))));
+GS_VECTOR_CLONES static void exact_pair(const double *x, const double *t, const double *v, const double *u, size_t n,
+                                        double *s, double *q)
+{
+    exact_v8 a = {0}, b = {0};
+    size_t i = 0;
+    for (; i + 8 <= n; i += 8) {
+        exact_v8 xv, tv, vv, uv;
+        memcpy(&xv, x + i, sizeof xv);
+        memcpy(&tv, t + i, sizeof tv);
+        memcpy(&vv, v + i, sizeof vv);
+        memcpy(&uv, u + i, sizeof uv);
+        a += xv * tv;
+        b += vv * uv;
+    }
+    for (; i < n; i++) {
+        a[0] += x[i] * t[i];
+        b[0] += v[i] * u[i];
+    }
+    *s = ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
+    *q = ((b[0] + b[1]) + (b[2] + b[3])) + ((b[4] + b[5]) + (b[6] + b[7]));
+}
+
+void rec_eq7_exact_sums(const rec_matcher *m, rec_eq7_work *w, const size_t *idx, size_t n)
+{
+    if (!rec_eq7_float_sums(m)) return;
+    size_t D = (size_t)m->D;
+    for (size_t i = 0; i < n; i++) {
+        size_t j = idx[i];
+        if (w->have[j]) continue;
+        w->have[j] = 1;
+        exact_pair(w->wx, m->t + j * D, w->w, m->tsq + j * D, D, &w->S[j], &w->T[j]);
+    }
+}
+
 /* out[q * ldo + j] = sum over d < n of a[q * lda + d] tt[d * ldt + j], for q < nq and j < nj; tt
- * holds SUMS_COLS columns past nj (ldt >= nj + SUMS_COLS). Tiles of SUMS_ROWS lights by two
- * vectors of templates, then the last rows one by one; each sum its own chain of multiply-adds
- * over d, fused where the CPU can: the same bits whichever kernel runs (the 512-bit one, the
- * 256-bit one with FMA; the plain one, for a CPU without FMA, rounds each product), and whatever
- * lights share the tile. */
+ * holds COLS columns past nj (ldt >= nj + COLS). Tiles of SUMS_ROWS lights by two vectors of
+ * templates, then the last rows one by one; each sum its own chain of multiply-adds over d,
+ * fused where the CPU can: the same bits whichever kernel runs (the 512-bit one, the 256-bit one
+ * with FMA; the plain one, for a CPU without FMA, rounds each product), and whatever lights
+ * share the tile. In double (sums_kernel) and in float (sums_kernel_f: the float sums' path). */
 #ifdef __clang__
 #pragma clang fp contract(fast)
 #define SUMS_CONTRACT
@@ -47,27 +137,27 @@ gs_status rec_eq7_sums_setup(rec_matcher *m)
 #endif
 #define SUMS_ROW(r)                                                                                 \
     do {                                                                                            \
-        double x = ar[(r) * lda + d];                                                               \
+        __typeof__(*ar) x = ar[(r) * lda + d];                                                      \
         s[r] += x * t0;                                                                             \
         s[SUMS_ROWS + (r)] += x * t1;                                                               \
     } while (0)
 #define SUMS_STORE(r, s0, s1, VW)                                                                   \
     do {                                                                                            \
         size_t n0 = nj - j < (VW) ? nj - j : (VW), n1 = nj - j > (VW) ? nj - j - (VW) : 0;          \
-        memcpy(out + (r) * ldo + j, &(s0), n0 * sizeof(double));                                    \
-        memcpy(out + (r) * ldo + j + (VW), &(s1), (n1 < (VW) ? n1 : (VW)) * sizeof(double));       \
+        memcpy(out + (r) * ldo + j, &(s0), n0 * sizeof *out);                                       \
+        memcpy(out + (r) * ldo + j + (VW), &(s1), (n1 < (VW) ? n1 : (VW)) * sizeof *out);          \
     } while (0)
-#define SUMS_KERNEL(NAME, VW, TARGET)                                                               \
-    typedef double NAME##_vec __attribute__((vector_size((VW) * sizeof(double))));                  \
-    __attribute__((SUMS_CONTRACT TARGET)) static void NAME(const double *a, size_t lda, size_t nq,  \
-                                                           const double *tt, size_t ldt, size_t n,  \
-                                                           double *out, size_t ldo, size_t nj)      \
+#define SUMS_KERNEL(NAME, TY, VW, COLS, TARGET)                                                     \
+    typedef TY NAME##_vec __attribute__((vector_size((VW) * sizeof(TY))));                          \
+    __attribute__((SUMS_CONTRACT TARGET)) static void NAME(const TY *a, size_t lda, size_t nq,      \
+                                                           const TY *tt, size_t ldt, size_t n,      \
+                                                           TY *out, size_t ldo, size_t nj)          \
     {                                                                                               \
-        _Static_assert(SUMS_ROWS == 8 && 2 * (VW) <= SUMS_COLS, "the tile");                        \
-        size_t q = 0;                                                                               \
-        for (; q + SUMS_ROWS <= nq; q += SUMS_ROWS) {                                               \
-            const double *ar = a + q * lda;                                                         \
-            for (size_t j = 0; j < nj; j += 2 * (VW)) {                                             \
+        _Static_assert(SUMS_ROWS == 8 && 2 * (VW) <= (COLS), "the tile");                           \
+        size_t q8 = nq / SUMS_ROWS * SUMS_ROWS;                                                     \
+        for (size_t j = 0; j < nj; j += 2 * (VW))   /* a tile of templates stays in L1 */           \
+            for (size_t q = 0; q < q8; q += SUMS_ROWS) {                                            \
+                const TY *ar = a + q * lda;                                                         \
                 NAME##_vec s[2 * SUMS_ROWS] = {{0}};                                                \
                 for (size_t d = 0; d < n; d++) {                                                    \
                     NAME##_vec t0, t1;                                                              \
@@ -78,36 +168,49 @@ gs_status rec_eq7_sums_setup(rec_matcher *m)
                 }                                                                                   \
                 for (size_t r = 0; r < SUMS_ROWS; r++) SUMS_STORE(q + r, s[r], s[SUMS_ROWS + r], VW); \
             }                                                                                       \
-        }                                                                                           \
-        for (; q < nq; q++)   /* the last rows one by one: the same chain for each sum */          \
+        for (size_t q = q8; q < nq; q++)   /* the last rows one by one: the same chain for each sum */ \
             for (size_t j = 0; j < nj; j += 2 * (VW)) {                                             \
                 NAME##_vec s0 = {0}, s1 = {0};                                                      \
                 for (size_t d = 0; d < n; d++) {                                                    \
                     NAME##_vec t0, t1;                                                              \
                     memcpy(&t0, tt + d * ldt + j, sizeof t0);                                       \
                     memcpy(&t1, tt + d * ldt + j + (VW), sizeof t1);                                \
-                    double x = a[q * lda + d];                                                      \
+                    TY x = a[q * lda + d];                                                          \
                     s0 += x * t0;                                                                   \
                     s1 += x * t1;                                                                   \
                 }                                                                                   \
                 SUMS_STORE(q, s0, s1, VW);                                                          \
             }                                                                                       \
     }
-SUMS_KERNEL(sums_kernel_512, 8, target("avx512f"))
-SUMS_KERNEL(sums_kernel_256, 4, target("avx2,fma"))
-SUMS_KERNEL(sums_kernel_plain, 4, )
+SUMS_KERNEL(sums_kernel_512, double, 8, SUMS_COLS, target("avx512f"))
+SUMS_KERNEL(sums_kernel_256, double, 4, SUMS_COLS, target("avx2,fma"))
+SUMS_KERNEL(sums_kernel_plain, double, 4, SUMS_COLS, )
+SUMS_KERNEL(sums_kernel_f512, float, 16, SUMS_COLS_F, target("avx512f"))
+SUMS_KERNEL(sums_kernel_f256, float, 8, SUMS_COLS_F, target("avx2,fma"))
+SUMS_KERNEL(sums_kernel_fplain, float, 8, SUMS_COLS_F, )
 #ifdef __clang__
 #pragma clang fp contract(on)
 #endif
 
+#define SUMS_PICK(k, ...)                                                                           \
+    do {                                                                                            \
+        if (__builtin_cpu_supports("avx512f")) k##512(__VA_ARGS__);                                 \
+        else if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"))                   \
+            k##256(__VA_ARGS__);                                                                    \
+        else                                                                                        \
+            k##plain(__VA_ARGS__);                                                                  \
+    } while (0)
+
 static void sums_kernel(const double *a, size_t lda, size_t nq, const double *tt, size_t ldt, size_t n,
                         double *out, size_t ldo, size_t nj)
 {
-    if (__builtin_cpu_supports("avx512f")) sums_kernel_512(a, lda, nq, tt, ldt, n, out, ldo, nj);
-    else if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"))
-        sums_kernel_256(a, lda, nq, tt, ldt, n, out, ldo, nj);
-    else
-        sums_kernel_plain(a, lda, nq, tt, ldt, n, out, ldo, nj);
+    SUMS_PICK(sums_kernel_, a, lda, nq, tt, ldt, n, out, ldo, nj);
+}
+
+static void sums_kernel_f(const float *a, size_t lda, size_t nq, const float *tt, size_t ldt, size_t n,
+                          float *out, size_t ldo, size_t nj)
+{
+    SUMS_PICK(sums_kernel_f, a, lda, nq, tt, ldt, n, out, ldo, nj);
 }
 
 GS_VECTOR_LOOP void rec_eq7_dft(const double *restrict v, const double *restrict c, const double *restrict s,
@@ -201,6 +304,17 @@ static void gemv_sums(const rec_matcher *m, rec_eq7_work *w, size_t j0, size_t n
 void rec_eq7_block_sums(const rec_matcher *m, rec_eq7_work *w, size_t n)
 {
     size_t D = (size_t)m->D, M = m->M, span = m->bg ? (size_t)m->K : D;
+    if (rec_eq7_float_sums(m)) {   /* every template discrete, one brightness */
+        float_rows(m, w, n);
+        sums_kernel_f(w->wxf_all, D, n, m->ttrf, m->ldtrf, D, w->Sf_all, M, M);
+        sums_kernel_f(w->wf_all, D, n, m->tsqtrf, m->ldtrf, D, w->Tf_all, M, M);
+        for (size_t q = 0; q < n; q++)
+            if (!w->fok_all[q]) {
+                sums_kernel(w->wx_all + q * D, D, 1, m->ttr, m->ldtr, D, w->S_all + q * M, M, M);
+                sums_kernel(w->w_all + q * D, D, 1, m->tsqtr, m->ldtr, D, w->T_all + q * M, M, M);
+            }
+        return;
+    }
     int fourier = m->fourier && !m->exhaustive, kernel = m->ttr && !m->exhaustive;
     /* the templates that are not Fourier grids, in runs of consecutive ones */
     for (size_t b = 0; b < m->nb;) {

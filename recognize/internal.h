@@ -126,6 +126,7 @@ static inline double rec_pix_float_err(double Sxx)
 #define PIX_PREFILTER_REST 7   /* blocks without the prefilter after one it hardly filtered */
 #define SUMS_ROWS 8       /* the light path's sums: lights and templates of one tile (eq7_sums.c) */
 #define SUMS_COLS 16
+#define SUMS_COLS_F 32    /* (in float) */
 #define LANES 16          /* row loops in blocks of 16 floats (vectorised by the compiler) */
 /* gcc vector types (eq7_light.c, eq7_pixels.c): a load from memory of any alignment, and a select
  * by a comparison's mask m of integer vector type IT (the same values as the scalar m ? a : b;
@@ -165,6 +166,14 @@ struct rec_matcher {
      * every template is a Fourier grid (fourier and all bulbs continuous) */
     size_t ldtr;
     double *ttr, *tsqtr;
+    /* and in float, when the block's sums go in float first (fsums: one brightness, no reddening,
+     * no nested tests, discrete phases only): every template's score bounded from them with
+     * their error bound, the double sums taken only for the templates scored exactly
+     * (rec_eq7_exact_sums); ldtrf = M rounded up to SUMS_COLS_F, plus SUMS_COLS_F; tnorm [M] |t| */
+    int fsums;
+    size_t ldtrf;
+    float *ttrf, *tsqtrf;
+    double *tnorm;
     double *shift;                      /* [M] cycles */
     double *tphase;                     /* [M] grid phase, deg (0 for GS_REF_NONE bulbs) */
     int *tbulb, *tcell;                 /* [M] bulb, index among the bulb's templates */
@@ -312,6 +321,17 @@ typedef struct {
     size_t rows;                           /* lights of the block */
     double *w_all, *wx_all, *xs_all;       /* [rows * D] */
     double *S_all, *T_all;                 /* [rows * nfit * M] */
+    /* the float sums (m->fsums): the block's weights and weighted samples, their sums, |wx| per
+     * row and whether a row's values fit float's range (else its double sums are all taken);
+     * the current light's rows and which of its double sums are taken (have [M]) */
+    float *wf_all, *wxf_all;               /* [rows * D] */
+    float *Sf_all, *Tf_all;                /* [rows * M] */
+    double *wxn_all;                       /* [rows] */
+    unsigned char *fok_all;                /* [rows] */
+    const float *Sf, *Tf;
+    double wxn;
+    int fok;
+    unsigned char *have;                   /* [M] */
     rec_eq7_prep *prep;                    /* [rows] */
     double *U;                             /* [M] the screen's bounds of L (eq7_scores.c) */
     unsigned char *done;                   /* [M] L exact (1) or screened out (0, L = -inf) */
@@ -513,6 +533,14 @@ void rec_eq7_exp_below(const double *L, size_t n, double Lmax, double *ex);
 double rec_eq7_loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb, double Sxx,
                           const double *S, const double *T, rec_red_fit *fit, double *ll_acc,
                           double ll_logw);
+/* The double sums S, T of the current light's templates idx[0..n) where not yet taken (the
+ * float sums' path, m->fsums; no-op otherwise). */
+void rec_eq7_exact_sums(const rec_matcher *m, rec_eq7_work *w, const size_t *idx, size_t n);
+/* Whether the block's sums go in float first (m->fsums and not the tests' slow path). */
+static inline int rec_eq7_float_sums(const rec_matcher *m)
+{
+    return m->fsums && !m->exhaustive;
+}
 /* The sums of template j from the current light's S, T ([f * M + j]). */
 static inline void rec_eq7_sums_of(const rec_matcher *m, const rec_eq7_work *w, size_t j, double *S, double *T)
 {

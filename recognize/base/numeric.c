@@ -7,38 +7,45 @@
 
 #define LOG_SQRT_2PI 0.91893853320467274178032973640562
 
-/* Regularised upper incomplete gamma Q(a, x), a > 0, x > 0: the series for P when x < a + 1,
- * else the continued fraction for Q (modified Lentz), as in Numerical Recipes 6.2, with libm's
- * lgamma. */
+/* Regularised upper incomplete gamma Q(a, x), a > 0, x > 0, with libm's lgamma (Numerical
+ * Recipes 6.2): the series for P when x < a + 1, else the continued fraction for Q. Both in steps
+ * of 8 terms without a division on the chain of terms: the series' 8 ratios x / (a + n) are
+ * independent divisions, the fraction's convergents Q_n / P_n come from the three-term recurrences
+ * of their numerators and denominators, rescaled (and tested) once per step. */
 static double gamma_q(double a, double x)
 {
     double lpre = a * log(x) - x - lgamma(a);
     if (x < a + 1.0) {
         double ap = a, del = 1.0 / a, sum = del;
-        for (int n = 0; n < 100000; n++) {
-            ap += 1.0;
-            del *= x / ap;
-            sum += del;
+        for (int n = 0; n < 100000; n += 8) {
+            double r[8];
+            for (int i = 0; i < 8; i++) r[i] = x / (ap + (i + 1));
+            for (int i = 0; i < 8; i++) {
+                del *= r[i];
+                sum += del;
+            }
+            ap += 8.0;
             if (fabs(del) < fabs(sum) * 1e-17) break;
         }
         double p = sum * exp(lpre);
         return p >= 1.0 ? 0.0 : 1.0 - p;
     }
-    double tiny = 1e-300;
-    double b = x + 1.0 - a, c = 1.0 / tiny, d = 1.0 / b, h = d;
-    for (int i = 1; i < 100000; i++) {
-        double an = -i * (i - a);
-        b += 2.0;
-        d = an * d + b;
-        if (fabs(d) < tiny) d = tiny;
-        c = b + an / c;
-        if (fabs(c) < tiny) c = tiny;
-        d = 1.0 / d;
-        double del = d * c;
-        h *= del;
-        if (fabs(del - 1.0) < 1e-16) break;
+    /* h = 1 / (b0 + a1 / (b1 + a2 / (b2 + ...))), a_i = -i (i - a), b_i = x + 1 - a + 2 i: its
+     * convergents are q_n / p_n, p_n = b_n p_(n-1) + a_n p_(n-2) (p_(-1) = 1, p_0 = b0) and
+     * q_n likewise (q_(-1) = 0, q_0 = 1); all p_n > 0 here (x >= a + 1) */
+    double b = x + 1.0 - a, p0 = 1.0, p1 = b, q0 = 0.0, q1 = 1.0;
+    for (int i = 1; i < 100000;) {
+        for (int k = 0; k < 8; k++, i++) {
+            double an = -i * (i - a);
+            b += 2.0;
+            double p2 = b * p1 + an * p0, q2 = b * q1 + an * q0;
+            p0 = p1, p1 = p2, q0 = q1, q1 = q2;
+        }
+        double r = 1.0 / p1;
+        p0 *= r, q0 *= r, q1 *= r, p1 = 1.0;   /* now q1 = h_n, and h_(n-1) = q0 / p0 */
+        if (fabs(q0 - q1 * p0) <= 1e-16 * fabs(q1 * p0)) break;
     }
-    return exp(lpre) * h;
+    return exp(lpre) * q1;
 }
 
 double gs_chi2_sf(double chi2, int dof)
