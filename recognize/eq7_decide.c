@@ -241,7 +241,8 @@ void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_
             w->mass[j] = amp * (phi_cdf(hi / w->peak_sig[b]) - phi_cdf(lo / w->peak_sig[b]));
         }
     }
-    for (size_t b = 0; b < nb; b++) w->bmass[b] = w->wmass[b] = 0.0;   /* (a bulb may have no candidate) */
+    memset(w->bmass, 0, sizeof *w->bmass * nb);   /* (a bulb may have no candidate) */
+    memset(w->wmass, 0, sizeof *w->wmass * nb);
     double Z = 0.0;
     for (size_t i = 0; i < w->ncand; i++) {
         size_t j = w->cand[i];

@@ -475,8 +475,8 @@ gs_status rec_eq7_light_finish(const rec_matcher *m, rec_eq7_work *w, size_t q, 
     double Lmax = rec_eq7_screen(m, w, p, Sxx);
     /* continuous bulbs near the top: refine their peaks exactly */
     int series_row = 0;
-    for (size_t b = 0; b < m->nb; b++) {
-        w->has_peak[b] = 0;
+    memset(w->has_peak, 0, m->nb);
+    for (size_t b = 0; m->ncont && b < m->nb; b++) {
         if (!m->cont[b]) continue;
         size_t jb = m->first[b] + rec_eq7_argmax(w->L + m->first[b], m->count[b]);
         if (!(w->L[jb] >= Lmax - CUT_REFINE)) {
@@ -491,7 +491,7 @@ gs_status rec_eq7_light_finish(const rec_matcher *m, rec_eq7_work *w, size_t q, 
         series_row = 1;
         rec_eq7_refine_peak(m, w, b, jb, Sxx);
     }
-    for (size_t b = 0; b < m->nb; b++)
+    for (size_t b = 0; m->ncont && b < m->nb; b++)
         if (m->cont[b] && w->peak_L[b] > Lmax) Lmax = w->peak_L[b];
     w->ncand = 0;
     rec_eq7_add_done(m, w);   /* every scored pair counts for one light */

@@ -67,13 +67,20 @@ gs_status rec_eq7_sums_setup(rec_matcher *m)
 GS_VECTOR_LOOP static int float_row(const double *restrict wv, const double *restrict wx, size_t D,
                                     float *restrict wf, float *restrict wxf)
 {
-    long long over = 0;
+    long long top = 0, lim;   /* the largest |value|'s bits (doubles >= 0 order as their bits) */
+    double mx = FSUMS_ROW_MAX;
+    memcpy(&lim, &mx, sizeof lim);
     for (size_t d = 0; d < D; d++) {
-        over += !(wv[d] <= FSUMS_ROW_MAX) | !(fabs(wx[d]) <= FSUMS_ROW_MAX);
-        wf[d] = (float)(wv[d] <= FSUMS_ROW_MAX ? wv[d] : 0.0);
-        wxf[d] = (float)(fabs(wx[d]) <= FSUMS_ROW_MAX ? wx[d] : 0.0);
+        double a = wv[d], b = fabs(wx[d]);
+        long long ba, bb;
+        memcpy(&ba, &a, sizeof ba);
+        memcpy(&bb, &b, sizeof bb);
+        top = ba > top ? ba : top;
+        top = bb > top ? bb : top;
+        wf[d] = (float)(a <= FSUMS_ROW_MAX ? a : 0.0);
+        wxf[d] = (float)(b <= FSUMS_ROW_MAX ? wx[d] : 0.0);
     }
-    return over == 0;
+    return top <= lim;
 }
 
 /* The block's rows in float, their |wx| and whether they fit (FSUMS_ROW_MAX). */
@@ -87,25 +94,25 @@ static void float_rows(const rec_matcher *m, rec_eq7_work *w, size_t n)
     }
 }
 
-/* *s = sum x t and *q = sum v u, each in eight interleaved partial sums (as gs_dot). */
+/* *s = sum x t and *q = sum v t^2 (t^2 rounded first, as m->tsq: one template row read), each in
+ * eight interleaved partial sums (as gs_dot). */
 typedef double exact_v8 __attribute__((vector_size(8 * sizeof(double))));
-GS_VECTOR_CLONES static void exact_pair(const double *x, const double *t, const double *v, const double *u, size_t n,
-                                        double *s, double *q)
+GS_VECTOR_CLONES static void exact_pair(const double *x, const double *t, const double *v, size_t n, double *s,
+                                        double *q)
 {
     exact_v8 a = {0}, b = {0};
     size_t i = 0;
     for (; i + 8 <= n; i += 8) {
-        exact_v8 xv, tv, vv, uv;
+        exact_v8 xv, tv, vv;
         memcpy(&xv, x + i, sizeof xv);
         memcpy(&tv, t + i, sizeof tv);
         memcpy(&vv, v + i, sizeof vv);
-        memcpy(&uv, u + i, sizeof uv);
         a += xv * tv;
-        b += vv * uv;
+        b += vv * (tv * tv);
     }
     for (; i < n; i++) {
         a[0] += x[i] * t[i];
-        b[0] += v[i] * u[i];
+        b[0] += v[i] * (t[i] * t[i]);
     }
     *s = ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
     *q = ((b[0] + b[1]) + (b[2] + b[3])) + ((b[4] + b[5]) + (b[6] + b[7]));
@@ -119,7 +126,7 @@ void rec_eq7_exact_sums(const rec_matcher *m, rec_eq7_work *w, const size_t *idx
         size_t j = idx[i];
         if (w->have[j]) continue;
         w->have[j] = 1;
-        exact_pair(w->wx, m->t + j * D, w->w, m->tsq + j * D, D, &w->S[j], &w->T[j]);
+        exact_pair(w->wx, m->t + j * D, w->w, D, &w->S[j], &w->T[j]);
     }
 }
 
