@@ -3,6 +3,7 @@
 #include "recognize/internal.h"
 
 #include <cblas.h>
+#include <fftw3.h>
 #include <float.h>
 #include <math.h>
 #include <stdint.h>
@@ -60,8 +61,8 @@ void rec_eq7_work_free(rec_eq7_work *w)
     free(w->scratch);
     free(w->acc);
     free(w->rs);
-    free(w->spec);
-    free(w->grid);
+    fftw_free(w->spec);
+    fftw_free(w->grid);
     free(w->spec_v);
     memset(w, 0, sizeof *w);
 }
@@ -131,8 +132,9 @@ gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t 
     w->acc = malloc(sizeof *w->acc * REC_TEMPLATE_ACC * (size_t)m->K);
     size_t nrs = rec_eq7_series_work_size(m);
     w->rs = nrs ? malloc(sizeof *w->rs * nrs) : NULL;
-    w->spec = malloc(sizeof *w->spec * ((size_t)m->G / 2 + 1) * (size_t)(1 + 2 * m->bands));
-    w->grid = malloc(sizeof *w->grid * (size_t)m->G);
+    /* (FFTW's alignment, as the arrays m->c2r was planned on: its SIMD codelets) */
+    w->spec = fftw_malloc(sizeof *w->spec * ((size_t)m->G / 2 + 1) * (size_t)(1 + 2 * m->bands));
+    w->grid = fftw_malloc(sizeof *w->grid * (size_t)m->G);
     w->spec_v = malloc(sizeof *w->spec_v * ((size_t)m->G / 2 + 1) * (size_t)m->bands);
     if (!w->L || !w->mass || !w->cand || !w->mark || !w->bmass || !w->wmass || !w->has_peak ||
         !w->peak_s || !w->peak_L || !w->peak_sig || !w->peak_z || !w->peak_gain || !w->peak_cell || !w->S_all ||

@@ -488,7 +488,7 @@ static gs_status fourier_grid_setup(rec_matcher *m)
         goto done;
     }
     fftw_plan fwd = fftw_plan_dft_r2c_1d(G, in, out, FFTW_ESTIMATE);
-    m->c2r = fftw_plan_dft_c2r_1d(G, (fftw_complex *)out, in, FFTW_ESTIMATE | FFTW_UNALIGNED);
+    m->c2r = fftw_plan_dft_c2r_1d(G, (fftw_complex *)out, in, FFTW_ESTIMATE);
     if (!fwd || !m->c2r) {
         if (fwd) fftw_destroy_plan(fwd);
         st = gs_fail(GS_ENUMERIC, "Eq. 7 matcher: no %d-point FFT plan", G);

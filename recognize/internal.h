@@ -191,7 +191,8 @@ struct rec_matcher {
                                          * nor the screen (eq7_sums.c, eq7_scores.c): every
                                          * template's sums as matrix-vector products and its
                                          * exact L (the tests' slow path); 0 from rec_matcher_new */
-    void *c2r;                          /* fftw_plan: G-point complex-to-real, unaligned */
+    void *c2r;                          /* fftw_plan: G-point complex-to-real, on FFTW-aligned arrays
+                                         * (w->spec, w->grid: fftw_malloc, its SIMD codelets) */
     int *nfine;                         /* [nb] BRF samples per cycle */
     double *dftc, *dfts;                /* [K * K] cos, sin of 2 pi q k / K ([k K + q]) */
     double *nyqs, *nyqc;                /* [nb * (K + 1)] sin, cos of pi nfine k / K (continuous) */
