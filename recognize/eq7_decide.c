@@ -40,8 +40,9 @@ void rec_eq7_work_free(rec_eq7_work *w)
     free(w->wxf_all);
     free(w->Sf_all);
     free(w->Tf_all);
+    free(w->fsw_all);
+    free(w->fsx_all);
     free(w->wxn_all);
-    free(w->fok_all);
     free(w->have);
     free(w->w_all);
     free(w->wx_all);
@@ -78,8 +79,9 @@ void rec_eq7_work_row(const rec_matcher *m, rec_eq7_work *w, size_t q)
     if (m->fsums) {
         w->Sf = w->Sf_all + q * m->M;
         w->Tf = w->Tf_all + q * m->M;
+        w->fsw = w->fsw_all[q];
+        w->fsx = w->fsx_all[q];
         w->wxn = w->wxn_all[q];
-        w->fok = w->fok_all[q];
     }
 }
 
@@ -113,10 +115,11 @@ gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t 
     w->wxf_all = fs ? calloc(nr * D, sizeof *w->wxf_all) : NULL;
     w->Sf_all = fs ? calloc(nr * M, sizeof *w->Sf_all) : NULL;
     w->Tf_all = fs ? calloc(nr * M, sizeof *w->Tf_all) : NULL;
+    w->fsw_all = fs ? calloc(nr, sizeof *w->fsw_all) : NULL;
+    w->fsx_all = fs ? calloc(nr, sizeof *w->fsx_all) : NULL;
     w->wxn_all = fs ? calloc(nr, sizeof *w->wxn_all) : NULL;
-    w->fok_all = fs ? calloc(nr, 1) : NULL;
     w->have = fs ? calloc(M, 1) : NULL;
-    int fs_bad = fs && (!w->wf_all || !w->wxf_all || !w->Sf_all || !w->Tf_all || !w->wxn_all || !w->fok_all || !w->have);
+    int fs_bad = fs && (!w->wf_all || !w->wxf_all || !w->Sf_all || !w->Tf_all || !w->fsw_all || !w->fsx_all || !w->wxn_all || !w->have);
     w->U = malloc(sizeof *w->U * M);
     w->done = calloc(M, 1);
     w->tight = calloc(M, 1);

@@ -360,23 +360,24 @@ GS_VECTOR_LOOP static void scr_bounds_1(const double *S, const double *T, const 
     }
 }
 
-/* scr_bounds_1 from the float sums (rec_eq7_float_sums): S and T within es_j = es |t_j| + eabs
- * and et_j = et T_f + eabs of their float values Sf, Tf (float's rounding over D terms, gamma_(D+3),
- * with |sum w x t| <= |w x| |t|; eabs for subnormal terms), the bound taken at the box's worst
- * corner: S + es_j over T - et_j; +inf (score exactly) where T - et_j <= 0 without lognorm. */
+/* scr_bounds_1 from the float sums (rec_eq7_float_sums), their rows scaled by powers of two (the
+ * sums by 1/isx and 1/isw): the scaled S and T within es_j = es |t_j| + eabs and et_j = et T_f +
+ * eabs of their float values Sf, Tf (float's rounding over D terms, es = gamma_(D+3) |wx|, et =
+ * gamma / (1 - gamma); |sum w x t| <= |w x| |t|; eabs for subnormal terms), the bound taken at
+ * the box's worst corner, S + es_j over T - et_j: +inf where T - et_j <= 0 (scored exactly). */
 GS_VECTOR_LOOP static void scr_bounds_1f(const float *Sf, const float *Tf, const double *tnorm, const double *lognorm,
                                           size_t M, double c0, double Sxx, double slack, double es, double et,
-                                          double eabs, double *U)
+                                          double eabs, double isx, double isw, double *U)
 {
     for (size_t j = 0; j < M; j++) {   /* (the term of T first: lognorm's or log T's) */
-        double t = Tf[j], lo = t - (et * t + eabs);
+        double t = Tf[j], lo = (t - (et * t + eabs)) * isw;
         U[j] = lognorm ? c0 - lognorm[j] : lo > 0.0 ? -0.5 * log(lo) : INFINITY;
     }
     for (size_t j = 0; j < M; j++) {
-        double s = (double)Sf[j] + (es * tnorm[j] + eabs), t = Tf[j], lo = t - (et * t + eabs);
-        double g = s > 0.0 && lo > 0.0 ? s * (s / lo) : 0.0, d = g - Sxx;
+        double s = ((double)Sf[j] + (es * tnorm[j] + eabs)) * isx, t = Tf[j], lo = (t - (et * t + eabs)) * isw;
+        double q = s * (s / (lo > 0.0 ? lo : 1.0)), g = s > 0.0 ? (lo > 0.0 ? q : INFINITY) : 0.0, d = g - Sxx;
         double u = U[j] + 0.5 * (d < 0.0 ? d : 0.0);
-        U[j] = t + (et * t + eabs) > 0.0 ? u + (1e-9 * (1.0 + fabs(u)) + slack) : -INFINITY;
+        U[j] = u + (1e-9 * (1.0 + fabs(u)) + slack);
     }
 }
 
@@ -395,10 +396,10 @@ static void free_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pre
     size_t M = m->M, jb = 0;
     int nf = m->nfit;
     double slack = 1e-12 * Sxx, *U = w->U;
-    if (nf == 1 && rec_eq7_float_sums(m) && w->fok) {
+    if (rec_eq7_float_sums(m)) {   /* (one brightness) */
         double u = 0x1p-24 * (double)(m->D + 3), gam = u / (1.0 - u);
         scr_bounds_1f(w->Sf, w->Tf, m->tnorm, p->full[0] ? m->lognorm : NULL, M, -0.5 * log(p->wmin[0]), Sxx,
-                      slack, gam * w->wxn, gam / (1.0 - gam), 4.0 * m->D * 0x1p-90, U);
+                      slack, gam * w->wxn, gam / (1.0 - gam), 4.0 * m->D * 0x1p-90, 1.0 / w->fsx, 1.0 / w->fsw, U);
         *jbest = rec_eq7_argmax(U, M);
         return;
     }
@@ -716,7 +717,7 @@ double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep 
     screen_init(&sc, m, w, Sxx, -INFINITY);
     memset(w->done, 0, M);
     if (m->red) memset(w->tight, 0, M);
-    if (rec_eq7_float_sums(m)) memset(w->have, !w->fok, M);   /* (all taken for a row not in float) */
+    if (rec_eq7_float_sums(m)) memset(w->have, 0, M);
     scr_fill(w->L, M, -INFINITY);
     if (m->exhaustive) {
         for (size_t j = 0; j < M; j++) w->cand[j] = j;

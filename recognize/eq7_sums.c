@@ -18,8 +18,8 @@
 #define SUMS_MAX_VALUES (8u << 20)
 
 /* The float sums from this many values per light: below, the double sums cost little and a
- * light of few samples scores many templates exactly, each from its double sums (K = 8, one
- * band: 9 % slower in float; K = 26, RGB: 8 % faster; docs/bench-recognize.md). */
+ * light of few samples scores many templates exactly, each from its double sums (measured with
+ * the bench's lights: K = 8, one band, 9 % slower in float; K = 26, RGB, 8 % faster). */
 #define FSUMS_MIN_D 64
 
 gs_status rec_eq7_sums_setup(rec_matcher *m)
@@ -35,8 +35,8 @@ gs_status rec_eq7_sums_setup(rec_matcher *m)
             m->ttr[d * m->ldtr + j] = m->t[j * D + d];
             m->tsqtr[d * m->ldtr + j] = m->tsq[j * D + d];
         }
-    /* the float sums: templates within 2^30 (their squares' sums with weights within 2^50 then
-     * stay far inside float's range, FSUMS_ROW_MAX), and D >= FSUMS_MIN_D */
+    /* the float sums: templates within 2^30 (their squares' sums with the rows scaled below 1
+     * then stay far inside float's range: float_rows), and D >= FSUMS_MIN_D */
     m->fsums = m->nfit == 1 && !m->red && !m->o.nested_tests && m->ncont == 0 && D >= FSUMS_MIN_D;
     for (size_t i = 0; m->fsums && i < M * D; i++) m->fsums = fabs(m->t[i]) <= 0x1p30;
     if (!m->fsums) return GS_OK;
@@ -58,64 +58,50 @@ gs_status rec_eq7_sums_setup(rec_matcher *m)
     return GS_OK;
 }
 
-/* A row's weights and weighted samples go in float when every one is within 2^50 (in units of
- * the light's largest sigma: a sample this much sharper than the bluntest is rare); the double
- * sums of the other rows are all taken. */
-#define FSUMS_ROW_MAX 0x1p50
-
-/* One row's w and wx in float; whether they fit (FSUMS_ROW_MAX). */
-GS_VECTOR_LOOP static int float_row(const double *restrict wv, const double *restrict wx, size_t D,
-                                    float *restrict wf, float *restrict wxf)
+/* The largest |v_d| of a row, by its bits (doubles >= 0 order as their bits). */
+GS_VECTOR_LOOP static double row_top(const double *restrict v, size_t D)
 {
-    long long top = 0, lim;   /* the largest |value|'s bits (doubles >= 0 order as their bits) */
-    double mx = FSUMS_ROW_MAX;
-    memcpy(&lim, &mx, sizeof lim);
+    long long top = 0;
     for (size_t d = 0; d < D; d++) {
-        double a = wv[d], b = fabs(wx[d]);
-        long long ba, bb;
-        memcpy(&ba, &a, sizeof ba);
-        memcpy(&bb, &b, sizeof bb);
-        top = ba > top ? ba : top;
-        top = bb > top ? bb : top;
-        wf[d] = (float)(a <= FSUMS_ROW_MAX ? a : 0.0);
-        wxf[d] = (float)(b <= FSUMS_ROW_MAX ? wx[d] : 0.0);
+        double a = fabs(v[d]);
+        long long b;
+        memcpy(&b, &a, sizeof b);
+        top = b > top ? b : top;
     }
-    return top <= lim;
+    double r;
+    memcpy(&r, &top, sizeof r);
+    return r;
 }
 
-/* The block's rows in float, their |wx| and whether they fit (FSUMS_ROW_MAX). */
+/* The power of two that takes a row's largest |value| top into [1/2, 1) (at most 2^1000: a row of
+ * zeros or subnormals keeps float's absolute error, eabs of scr_bounds_1f): scaled so, the row
+ * fits float's range and its rounding is relative to its largest value. */
+static double row_scale(double top)
+{
+    int e;
+    frexp(top, &e);
+    return top > 0.0 ? ldexp(1.0, e < -1000 ? 1000 : -e) : 1.0;
+}
+
+/* f = (float)(v s), s a power of two. */
+GS_VECTOR_LOOP static void to_float(const double *restrict v, size_t D, double s, float *restrict f)
+{
+    for (size_t d = 0; d < D; d++) f[d] = (float)(v[d] * s);
+}
+
+/* The block's rows in float, each of w and wx scaled by its power of two, and |wx| scaled. */
 static void float_rows(const rec_matcher *m, rec_eq7_work *w, size_t n)
 {
     size_t D = (size_t)m->D;
     for (size_t q = 0; q < n; q++) {
         const double *wv = w->w_all + q * D, *wx = w->wx_all + q * D;
-        w->wxn_all[q] = sqrt(gs_dot(wx, wx, D));
-        w->fok_all[q] = float_row(wv, wx, D, w->wf_all + q * D, w->wxf_all + q * D);
+        double sw = row_scale(row_top(wv, D)), sx = row_scale(row_top(wx, D));
+        to_float(wv, D, sw, w->wf_all + q * D);
+        to_float(wx, D, sx, w->wxf_all + q * D);
+        w->fsw_all[q] = sw;
+        w->fsx_all[q] = sx;
+        w->wxn_all[q] = sqrt(gs_dot(wx, wx, D)) * sx;
     }
-}
-
-/* *s = sum x t and *q = sum v t^2 (t^2 rounded first, as m->tsq: one template row read), each in
- * eight interleaved partial sums (as gs_dot). */
-typedef double exact_v8 __attribute__((vector_size(8 * sizeof(double))));
-GS_VECTOR_CLONES static void exact_pair(const double *x, const double *t, const double *v, size_t n, double *s,
-                                        double *q)
-{
-    exact_v8 a = {0}, b = {0};
-    size_t i = 0;
-    for (; i + 8 <= n; i += 8) {
-        exact_v8 xv, tv, vv;
-        memcpy(&xv, x + i, sizeof xv);
-        memcpy(&tv, t + i, sizeof tv);
-        memcpy(&vv, v + i, sizeof vv);
-        a += xv * tv;
-        b += vv * (tv * tv);
-    }
-    for (; i < n; i++) {
-        a[0] += x[i] * t[i];
-        b[0] += v[i] * (t[i] * t[i]);
-    }
-    *s = ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
-    *q = ((b[0] + b[1]) + (b[2] + b[3])) + ((b[4] + b[5]) + (b[6] + b[7]));
 }
 
 void rec_eq7_exact_sums(const rec_matcher *m, rec_eq7_work *w, const size_t *idx, size_t n)
@@ -126,7 +112,8 @@ void rec_eq7_exact_sums(const rec_matcher *m, rec_eq7_work *w, const size_t *idx
         size_t j = idx[i];
         if (w->have[j]) continue;
         w->have[j] = 1;
-        exact_pair(w->wx, m->t + j * D, w->w, D, &w->S[j], &w->T[j]);
+        w->S[j] = gs_dot(w->wx, m->t + j * D, D);
+        w->T[j] = gs_dot(w->w, m->tsq + j * D, D);
     }
 }
 
@@ -315,11 +302,6 @@ void rec_eq7_block_sums(const rec_matcher *m, rec_eq7_work *w, size_t n)
         float_rows(m, w, n);
         sums_kernel_f(w->wxf_all, D, n, m->ttrf, m->ldtrf, D, w->Sf_all, M, M);
         sums_kernel_f(w->wf_all, D, n, m->tsqtrf, m->ldtrf, D, w->Tf_all, M, M);
-        for (size_t q = 0; q < n; q++)
-            if (!w->fok_all[q]) {
-                sums_kernel(w->wx_all + q * D, D, 1, m->ttr, m->ldtr, D, w->S_all + q * M, M, M);
-                sums_kernel(w->w_all + q * D, D, 1, m->tsqtr, m->ldtr, D, w->T_all + q * M, M, M);
-            }
         return;
     }
     int fourier = m->fourier && !m->exhaustive, kernel = m->ttr && !m->exhaustive;

@@ -322,16 +322,14 @@ typedef struct {
     size_t rows;                           /* lights of the block */
     double *w_all, *wx_all, *xs_all;       /* [rows * D] */
     double *S_all, *T_all;                 /* [rows * nfit * M] */
-    /* the float sums (m->fsums): the block's weights and weighted samples, their sums, |wx| per
-     * row and whether a row's values fit float's range (else its double sums are all taken);
-     * the current light's rows and which of its double sums are taken (have [M]) */
+    /* the float sums (m->fsums): the block's weights and weighted samples, each row scaled by a
+     * power of two (fsw, fsx: its largest in [1/2, 1)), their sums and the scaled |wx| per row;
+     * the current light's and which of its double sums are taken (have [M]) */
     float *wf_all, *wxf_all;               /* [rows * D] */
     float *Sf_all, *Tf_all;                /* [rows * M] */
-    double *wxn_all;                       /* [rows] */
-    unsigned char *fok_all;                /* [rows] */
+    double *fsw_all, *fsx_all, *wxn_all;   /* [rows] */
     const float *Sf, *Tf;
-    double wxn;
-    int fok;
+    double fsw, fsx, wxn;
     unsigned char *have;                   /* [M] */
     rec_eq7_prep *prep;                    /* [rows] */
     double *U;                             /* [M] the screen's bounds of L (eq7_scores.c) */

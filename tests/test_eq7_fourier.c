@@ -397,17 +397,19 @@ TEST(eq7_screen_bounds_hold_with_dropped_samples)
 /* The float sums' screen (eq7_sums.c, m->fsums: the paper's model, D >= 64): every template it
  * left unscored has a float bound at least its exact score from plain double sums of the
  * light's weights, and the answers are the exhaustive path's. Hard cases: noise alone (sums of
- * either sign), dim and very bright lights (Sxx up to 1e12), sample sigmas over 6 decades,
- * dropped samples (sigma = +inf, NaN signal) and one sigma 1e9 times below the others (the row
- * then takes its double sums: beyond float's range); RGB K = 22 and 26, one band K = 64, an
- * excess noise. */
+ * either sign), dim to very bright lights (Sxx to 1e33; with an excess noise their weights are
+ * ~1e-30, whose absolute float error alone would make T's bound <= 0), sample sigmas over 6
+ * decades, dropped samples (sigma = +inf, NaN signal), one sigma 1e9 and one 1e25 times below
+ * the others (weights 1e50 apart: subnormal in float); RGB K = 22 and 26, one band K = 64,
+ * without and with an excess. */
 TEST(eq7_float_sums_bounds_hold)
 {
     uint64_t rs = 47;
     gs_delight *g = gs_delight_new();
     CHECK_OK(gs_delight_generate(g, 1024));
     static const int shapes[][2] = {{3, 22}, {3, 26}, {1, 64}};
-    size_t checked = 0, exact_n = 0, total = 0, wide_rows = 0;
+    static const double amp[] = {0.0, 3.0, 30.0, 1e3, 1e6, 1e16};
+    size_t checked = 0, exact_n = 0, total = 0;
     for (int si = 0; si < 3; si++)
         for (int ex = 0; ex < 2; ex++) {
             int bands = shapes[si][0], K = shapes[si][1];
@@ -417,10 +419,9 @@ TEST(eq7_float_sums_bounds_hold)
             double *x = malloc(sizeof *x * D), *sg = malloc(sizeof *sg * D);
             rec_eq7_work w;
             CHECK_OK(rec_eq7_work_alloc(m, &w));
-            for (int i = 0; i < 16; i++) {
+            for (int i = 0; i < 18; i++) {
                 size_t b = gs_splitmix64(&rs) % m->nb;
-                static const double amp[] = {0.0, 3.0, 30.0, 1e3, 1e6};
-                eq7fx_render(rec_matcher_bulb(m, b), gs_splitmix_uniform(&rs), K, amp[i % 5], 0.0, &rs, x, sg);
+                eq7fx_render(rec_matcher_bulb(m, b), gs_splitmix_uniform(&rs), K, amp[i % 6], 0.0, &rs, x, sg);
                 double spread = i % 3 == 0 ? 1e6 : 3.0;   /* sigmas over 6 decades, or a factor 3 */
                 for (size_t q = 0; q < D; q++) {
                     sg[q] = exp(log(spread) * gs_splitmix_uniform(&rs));
@@ -428,11 +429,11 @@ TEST(eq7_float_sums_bounds_hold)
                 }
                 if (i % 4 == 1) sg[gs_splitmix64(&rs) % D] = INFINITY;   /* dropped samples */
                 if (i % 4 == 2) x[gs_splitmix64(&rs) % D] = NAN;
-                if (i == 15) sg[0] *= 1e-9;   /* beyond float's range: double sums for the row */
+                if (i == 16) sg[0] *= 1e-9;
+                if (i == 17) sg[1] *= 1e-25;
                 rec_match f, s;
                 double fe = ex ? 0.05 : 0.0;
                 CHECK_OK(rec_eq7_match_light_ws(m, &w, x, sg, fe, &f, NULL));
-                wide_rows += !w.fok;
                 double Sxx = w.prep[0].Sxx;
                 for (size_t j = 0; j < M; j++) {
                     total++;
@@ -452,21 +453,26 @@ TEST(eq7_float_sums_bounds_hold)
                 m->exhaustive = 1;
                 CHECK_OK(rec_eq7_match_light_ws(m, &w, x, sg, fe, &s, NULL));
                 m->exhaustive = 0;
-                CHECK_MSG(f.bulb == s.bulb && f.flags == s.flags && close_to(f.confidence, s.confidence, 1e-9, 0) &&
-                              close_to(f.phase_confidence, s.phase_confidence, 1e-9, 0) &&
-                              close_to(f.runner_confidence, s.runner_confidence, 1e-9, 0) &&
+                /* the probabilities where the rounding of Sxx - g (1e-16 Sxx) is below 0.1 nats: above,
+                 * any two sums' last bits reorder templates (both paths' answers are rounding) */
+                int sharp = Sxx < 1e15;
+                CHECK_MSG(f.bulb == s.bulb && f.flags == s.flags &&
+                              (!sharp || (close_to(f.confidence, s.confidence, 1e-9, 0) &&
+                                          close_to(f.phase_confidence, s.phase_confidence, 1e-9, 0) &&
+                                          close_to(f.runner_confidence, s.runner_confidence, 1e-9, 0))) &&
                               close_to(f.p_value, s.p_value, 1e-9, 0),
-                          "D %zu excess %d light %d: bulb %d/%d flags %u/%u confidence %.12f/%.12f", D, ex, i, f.bulb,
-                          s.bulb, f.flags, s.flags, f.confidence, s.confidence);
+                          "D %zu excess %d light %d: bulb %d/%d flags %u/%u confidence %.12f/%.12f phase %.12f/%.12f "
+                          "runner %.12f/%.12f p %.12g/%.12g", D, ex, i, f.bulb, s.bulb, f.flags, s.flags, f.confidence,
+                          s.confidence, f.phase_confidence, s.phase_confidence, f.runner_confidence,
+                          s.runner_confidence, f.p_value, s.p_value);
             }
             rec_eq7_work_free(&w);
             free(x), free(sg);
             rec_matcher_free(m);
         }
     CHECK(checked > 5000);
-    CHECK(wide_rows >= 3);   /* (an excess caps the weights: those rows may fit) */
-    printf("    %zu unscored templates checked against their float bounds; %zu of %zu scored exactly; %zu rows "
-           "beyond float's range\n", checked, exact_n, total, wide_rows);
+    printf("    %zu unscored templates checked against their float bounds; %zu of %zu scored exactly\n", checked,
+           exact_n, total);
     gs_delight_free(g);
 }
 

@@ -267,9 +267,11 @@ double gs_log_phi(double z);
  * round otherwise than the scalar ones: results may differ in the last bits from one CPU to
  * another, never from one split of the work to another on one CPU); GS_VECTOR_LOOP also lets
  * the vectorizer take loops of any length. The AVX2 clone by the CPU's features ("avx2"; gcc's
- * "arch=haswell" clone runs on Haswell models only). gcc lowers a comparison of generic vectors
- * (vector_size types) in these clones for the plain target, to scalar code: loops that compare
- * are written plainly for the vectorizer, which runs per clone. gcc's only: clang (14) cannot
+ * "arch=haswell" clone runs on Haswell models only). gcc (12) lowers a comparison of generic
+ * vectors (vector_size types) in these clones for the plain target, to scalar code; the
+ * vectorizer runs per clone. The light's preparation (eq7_light.c) compares in plain loops for
+ * that; the screen's scans and the pixel rows' still compare generic vectors (by hand in
+ * target("avx512f") copies they measured no faster). gcc's only: clang (14) cannot
  * export such a function and names each resolver globally, so its build (the sanitizers') runs
  * the plain code. */
 #if defined(__GNUC__) && !defined(__clang__)

@@ -4,6 +4,7 @@
 #include "recognize/base/base.h"
 
 #include <math.h>
+#include <string.h>
 
 #define LOG_SQRT_2PI 0.91893853320467274178032973640562
 
@@ -30,6 +31,7 @@ static double gamma_q(double a, double x)
         double p = sum * exp(lpre);
         return p >= 1.0 ? 0.0 : 1.0 - p;
     }
+    if (!(exp(lpre) > 0.0)) return 0.0;   /* (and x^8 from one rescaling to the next could overflow) */
     /* h = 1 / (b0 + a1 / (b1 + a2 / (b2 + ...))), a_i = -i (i - a), b_i = x + 1 - a + 2 i: its
      * convergents are q_n / p_n, p_n = b_n p_(n-1) + a_n p_(n-2) (p_(-1) = 1, p_0 = b0) and
      * q_n likewise (q_(-1) = 0, q_0 = 1); all p_n > 0 here (x >= a + 1) */
@@ -119,13 +121,19 @@ float gs_median_f(float *v, size_t n)
     return v[k];
 }
 
-GS_VECTOR_LOOP
+/* (the eight partial sums as one vector: gcc's vectorizer made a poor loop of the array form) */
+typedef double dot_v8 __attribute__((vector_size(8 * sizeof(double))));
+GS_VECTOR_CLONES
 double gs_dot(const double *x, const double *t, size_t n)
 {
-    double a[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+    dot_v8 a = {0};
     size_t i = 0;
-    for (; i + 8 <= n; i += 8)
-        for (int k = 0; k < 8; k++) a[k] += x[i + k] * t[i + k];
+    for (; i + 8 <= n; i += 8) {
+        dot_v8 xv, tv;
+        memcpy(&xv, x + i, sizeof xv);
+        memcpy(&tv, t + i, sizeof tv);
+        a += xv * tv;
+    }
     for (; i < n; i++) a[0] += x[i] * t[i];
     return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
 }
