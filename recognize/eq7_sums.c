@@ -73,14 +73,16 @@ GS_VECTOR_LOOP static double row_top(const double *restrict v, size_t D)
     return r;
 }
 
-/* The power of two that takes a row's largest |value| top into [1/2, 1) (at most 2^1000: a row of
- * zeros or subnormals keeps float's absolute error, eabs of scr_bounds_1f): scaled so, the row
- * fits float's range and its rounding is relative to its largest value. */
+/* The power of two that takes a row's largest |value| top into [1/2, 1): scaled so, the row fits
+ * float's range and its rounding is relative to its largest value. Within 2^-1000..2^1000, so
+ * that its inverse is finite too (a row of subnormals keeps float's absolute error, eabs of
+ * scr_bounds_1f; one near DBL_MAX comes to at most 2^24). */
 static double row_scale(double top)
 {
     int e;
     frexp(top, &e);
-    return top > 0.0 ? ldexp(1.0, e < -1000 ? 1000 : -e) : 1.0;
+    e = e < -1000 ? -1000 : e > 1000 ? 1000 : e;
+    return top > 0.0 ? ldexp(1.0, -e) : 1.0;
 }
 
 /* f = (float)(v s), s a power of two. */

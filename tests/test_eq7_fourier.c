@@ -400,7 +400,8 @@ TEST(eq7_screen_bounds_hold_with_dropped_samples)
  * either sign), dim to very bright lights (Sxx to 1e33; with an excess noise their weights are
  * ~1e-30, whose absolute float error alone would make T's bound <= 0), sample sigmas over 6
  * decades, dropped samples (sigma = +inf, NaN signal), one sigma 1e9 and one 1e25 times below
- * the others (weights 1e50 apart: subnormal in float); RGB K = 22 and 26, one band K = 64,
+ * the others (weights 1e50 apart: subnormal in float), a weight near DBL_MAX (the row's scale
+ * clamped to 2^-1000); RGB K = 22 and 26, one band K = 64,
  * without and with an excess. */
 TEST(eq7_float_sums_bounds_hold)
 {
@@ -431,6 +432,13 @@ TEST(eq7_float_sums_bounds_hold)
                 if (i % 4 == 2) x[gs_splitmix64(&rs) % D] = NAN;
                 if (i == 16) sg[0] *= 1e-9;
                 if (i == 17) sg[1] *= 1e-25;
+                if (i == 12) {   /* a weight near DBL_MAX (its sample 0: the weighted sample finite) */
+                    double top = 0.0;
+                    for (size_t q = 0; q < D; q++) top = fmax(top, sg[q]);
+                    sg[2] = top * 8.2e-155;
+                    x[2] = 0.0;
+                    sg[3] = INFINITY;   /* and a dropped sample: the bound takes log T itself */
+                }
                 rec_match f, s;
                 double fe = ex ? 0.05 : 0.0;
                 CHECK_OK(rec_eq7_match_light_ws(m, &w, x, sg, fe, &f, NULL));
