@@ -102,7 +102,8 @@ static void float_rows(const rec_matcher *m, rec_eq7_work *w, size_t n)
         to_float(wx, D, sx, w->wxf_all + q * D);
         w->fsw_all[q] = sw;
         w->fsx_all[q] = sx;
-        w->wxn_all[q] = sqrt(gs_dot(wx, wx, D)) * sx;
+        /* |wx| scaled, from the float row (no overflow): above |fl(v)| / (1 - 2^-24) by a margin */
+        w->wxn_all[q] = sqrt(rec_pix_sumsq(w->wxf_all + q * D, D)) * (1.0 + 0x1p-20) + (double)D * 0x1p-149;
     }
 }
 
