@@ -369,7 +369,7 @@ GS_VECTOR_LOOP static void scr_bounds_1f(const float *Sf, const float *Tf, const
                                           size_t M, double c0, double Sxx, double slack, double es, double et,
                                           double eabs, double isx, double isw, double *U)
 {
-    for (size_t j = 0; j < M; j++) {   /* (the term of T first: lognorm's or log T's) */
+    for (size_t j = 0; j < M; j++) {   /* the term of T: in its own loop, no logarithm with lognorm */
         double t = Tf[j], lo = (t - (et * t + eabs)) * isw;
         U[j] = lognorm ? c0 - lognorm[j] : lo > 0.0 ? -0.5 * log(lo) : INFINITY;
     }

@@ -18,15 +18,40 @@
 #define SUMS_MAX_VALUES (8u << 20)
 
 /* The float sums from this many values per light: below, the double sums cost little and a
- * light of few samples scores many templates exactly, each from its double sums (measured with
- * the bench's lights: K = 8, one band, 9 % slower in float; K = 26, RGB, 8 % faster). */
+ * light of few samples scores many templates exactly, each from its double sums. */
 #define FSUMS_MIN_D 64
+
+/* The float sums' transposed templates and their norms (m->fsums). */
+static gs_status float_setup(rec_matcher *m)
+{
+    size_t D = (size_t)m->D, M = m->M;
+    m->ldtrf = (M + SUMS_COLS_F - 1) / SUMS_COLS_F * SUMS_COLS_F + SUMS_COLS_F;
+    m->ttrf = calloc(D * m->ldtrf, sizeof *m->ttrf);
+    m->tsqtrf = calloc(D * m->ldtrf, sizeof *m->tsqtrf);
+    m->tnorm = malloc(M * sizeof *m->tnorm);
+    if (!m->ttrf || !m->tsqtrf || !m->tnorm)
+        return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate %zu templates", M);
+    for (size_t j = 0; j < M; j++) {
+        for (size_t d = 0; d < D; d++) {
+            m->ttrf[d * m->ldtrf + j] = (float)m->t[j * D + d];
+            m->tsqtrf[d * m->ldtrf + j] = (float)m->tsq[j * D + d];
+        }
+        m->tnorm[j] = exp(m->lognorm[j]);
+    }
+    return GS_OK;
+}
 
 gs_status rec_eq7_sums_setup(rec_matcher *m)
 {
     size_t D = (size_t)m->D, M = m->M;
     m->ldtr = (M + SUMS_COLS - 1) / SUMS_COLS * SUMS_COLS + SUMS_COLS;   /* a tile past any range */
     if ((m->fourier && (size_t)m->ncont == m->nb) || D * m->ldtr > SUMS_MAX_VALUES) return GS_OK;
+    /* the float sums: templates within 2^30 (their squares' sums with the rows scaled below 1
+     * then stay far inside float's range: float_rows), and D >= FSUMS_MIN_D; then the double
+     * kernel is not used (the exhaustive path takes matrix-vector products) */
+    m->fsums = m->nfit == 1 && !m->red && !m->o.nested_tests && m->ncont == 0 && D >= FSUMS_MIN_D;
+    for (size_t i = 0; m->fsums && i < M * D; i++) m->fsums = fabs(m->t[i]) <= 0x1p30;
+    if (m->fsums) return float_setup(m);
     m->ttr = calloc(D * m->ldtr, sizeof *m->ttr);
     m->tsqtr = calloc(D * m->ldtr, sizeof *m->tsqtr);
     if (!m->ttr || !m->tsqtr) return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate %zu templates", M);
@@ -35,26 +60,6 @@ gs_status rec_eq7_sums_setup(rec_matcher *m)
             m->ttr[d * m->ldtr + j] = m->t[j * D + d];
             m->tsqtr[d * m->ldtr + j] = m->tsq[j * D + d];
         }
-    /* the float sums: templates within 2^30 (their squares' sums with the rows scaled below 1
-     * then stay far inside float's range: float_rows), and D >= FSUMS_MIN_D */
-    m->fsums = m->nfit == 1 && !m->red && !m->o.nested_tests && m->ncont == 0 && D >= FSUMS_MIN_D;
-    for (size_t i = 0; m->fsums && i < M * D; i++) m->fsums = fabs(m->t[i]) <= 0x1p30;
-    if (!m->fsums) return GS_OK;
-    m->ldtrf = (M + SUMS_COLS_F - 1) / SUMS_COLS_F * SUMS_COLS_F + SUMS_COLS_F;
-    m->ttrf = calloc(D * m->ldtrf, sizeof *m->ttrf);
-    m->tsqtrf = calloc(D * m->ldtrf, sizeof *m->tsqtrf);
-    m->tnorm = malloc(M * sizeof *m->tnorm);
-    if (!m->ttrf || !m->tsqtrf || !m->tnorm)
-        return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate %zu templates", M);
-    for (size_t j = 0; j < M; j++) {
-        double q = 0.0;
-        for (size_t d = 0; d < D; d++) {
-            m->ttrf[d * m->ldtrf + j] = (float)m->t[j * D + d];
-            m->tsqtrf[d * m->ldtrf + j] = (float)m->tsq[j * D + d];
-            q += m->tsq[j * D + d];
-        }
-        m->tnorm[j] = sqrt(q);
-    }
     return GS_OK;
 }
 

@@ -163,13 +163,15 @@ struct rec_matcher {
     double *logcellw;                   /* [M] its log */
     /* the light path's sums over a block of lights (eq7_sums.c): the templates and their squares
      * transposed, [D * ldtr] each (ldtr = M rounded up to SUMS_COLS, zero padded); NULL when
-     * every template is a Fourier grid (fourier and all bulbs continuous) */
+     * every template is a Fourier grid (fourier and all bulbs continuous) or the sums go in
+     * float (fsums) */
     size_t ldtr;
     double *ttr, *tsqtr;
     /* and in float, when the block's sums go in float first (fsums: one brightness, no reddening,
      * no nested tests, discrete phases only): every template's score bounded from them with
      * their error bound, the double sums taken only for the templates scored exactly
-     * (rec_eq7_exact_sums); ldtrf = M rounded up to SUMS_COLS_F, plus SUMS_COLS_F; tnorm [M] |t| */
+     * (rec_eq7_exact_sums); ldtrf = M rounded up to SUMS_COLS_F, plus SUMS_COLS_F; tnorm [M] |t|
+     * (exp lognorm: the bound's factor per template, without an exp per light) */
     int fsums;
     size_t ldtrf;
     float *ttrf, *tsqtrf;

@@ -270,10 +270,9 @@ double gs_log_phi(double z);
  * "arch=haswell" clone runs on Haswell models only). gcc (12) lowers a comparison of generic
  * vectors (vector_size types) in these clones for the plain target, to scalar code; the
  * vectorizer runs per clone. The light's preparation (eq7_light.c) compares in plain loops for
- * that; the screen's scans and the pixel rows' still compare generic vectors (by hand in
- * target("avx512f") copies they measured no faster). gcc's only: clang (14) cannot
- * export such a function and names each resolver globally, so its build (the sanitizers') runs
- * the plain code. */
+ * that; the screen's scans and the pixel rows' still compare generic vectors. gcc's only:
+ * clang (14) cannot export such a function and names each resolver globally, so its build (the
+ * sanitizers') runs the plain code. */
 #if defined(__GNUC__) && !defined(__clang__)
 #define GS_VECTOR_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
 #define GS_VECTOR_LOOP __attribute__((target_clones("avx512f", "avx2", "default"), optimize("O3")))
