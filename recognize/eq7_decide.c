@@ -65,6 +65,10 @@ void rec_eq7_work_free(rec_eq7_work *w)
     fftw_free(w->spec);
     fftw_free(w->grid);
     free(w->spec_v);
+    free(w->bub);
+    free(w->open);
+    free(w->border);
+    free(w->bs_y);
     memset(w, 0, sizeof *w);
 }
 
@@ -119,7 +123,7 @@ gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t 
     w->fsx_all = fs ? calloc(nr, sizeof *w->fsx_all) : NULL;
     w->wxn_all = fs ? calloc(nr, sizeof *w->wxn_all) : NULL;
     w->have = fs ? calloc(M, 1) : NULL;
-    int fs_bad = fs && (!w->wf_all || !w->wxf_all || !w->Sf_all || !w->Tf_all || !w->fsw_all || !w->fsx_all || !w->wxn_all || !w->have);
+    int part_bad = fs && (!w->wf_all || !w->wxf_all || !w->Sf_all || !w->Tf_all || !w->fsw_all || !w->fsx_all || !w->wxn_all || !w->have);
     w->U = malloc(sizeof *w->U * M);
     w->done = calloc(M, 1);
     w->tight = calloc(M, 1);
@@ -139,11 +143,17 @@ gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t 
     w->spec = fftw_malloc(sizeof *w->spec * ((size_t)m->G / 2 + 1) * (size_t)(1 + 2 * m->bands));
     w->grid = fftw_malloc(sizeof *w->grid * (size_t)m->G);
     w->spec_v = malloc(sizeof *w->spec_v * ((size_t)m->G / 2 + 1) * (size_t)m->bands);
+    int bs = m->bs_on;   /* (NULL and free() alike without the screen of bulbs) */
+    w->bub = bs ? malloc(sizeof *w->bub * nb) : NULL;
+    w->open = bs ? calloc(nb, 1) : NULL;
+    w->border = bs ? malloc(sizeof *w->border * nb) : NULL;
+    w->bs_y = bs ? malloc(sizeof *w->bs_y * (4 * (size_t)m->bands * rec_eq7_harmonics_np(m) + 2 * D)) : NULL;
+    part_bad = part_bad || (bs && (!w->bub || !w->open || !w->border || !w->bs_y));
     if (!w->L || !w->mass || !w->cand || !w->mark || !w->bmass || !w->wmass || !w->has_peak ||
         !w->peak_s || !w->peak_L || !w->peak_sig || !w->peak_z || !w->peak_gain || !w->peak_cell || !w->S_all ||
         !w->T_all || !w->w_all || !w->wx_all || !w->xs_all || !w->prep || !w->U || !w->done || !w->tight || !w->tmp || !w->tt || !w->dt ||
         !w->r2 || !w->s2 || !w->m2 || !w->tr || !w->t12 || !w->scratch || !w->acc || (nrs && !w->rs) || !w->spec || !w->grid || !w->spec_v ||
-        fs_bad) {
+        part_bad) {
         rec_eq7_work_free(w);
         return gs_fail(GS_ENOMEM, "Eq. 7: cannot allocate scratch for %zu templates", M);
     }

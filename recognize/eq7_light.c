@@ -251,10 +251,11 @@ static void excess_correlation(const rec_matcher *m, const rec_eq7_work *w, cons
  * the continuous peaks' widths by 1/sqrt(kappa). */
 static void temper(const rec_matcher *m, rec_eq7_work *w, double Lmax, double kappa)
 {
-    for (size_t j = 0; j < m->M; j++)
-        if (isfinite(w->L[j])) w->L[j] = Lmax + kappa * (w->L[j] - Lmax);
+    for (size_t b = 0; b < m->nb; b++)
+        for (size_t j = m->first[b]; rec_eq7_bulb_active(m, w, b) && j < m->first[b] + m->count[b]; j++)
+            if (isfinite(w->L[j])) w->L[j] = Lmax + kappa * (w->L[j] - Lmax);
     for (size_t b = 0; b < m->nb; b++) {
-        if (!m->cont[b] || !isfinite(w->peak_L[b])) continue;
+        if (!w->has_peak[b] || !isfinite(w->peak_L[b])) continue;
         w->peak_L[b] = Lmax + kappa * (w->peak_L[b] - Lmax);
         w->peak_sig[b] /= sqrt(kappa);
         if (w->peak_sig[b] > INV_SQRT12) w->peak_sig[b] = INV_SQRT12;
@@ -405,6 +406,16 @@ GS_VECTOR_LOOP static int prep_weights(const double *restrict xc, const double *
     return used;
 }
 
+void rec_eq7_grid_peak(const rec_matcher *m, rec_eq7_work *w, size_t b)
+{
+    size_t jb = m->first[b] + rec_eq7_argmax(w->L + m->first[b], m->count[b]);
+    w->has_peak[b] = 1;
+    w->peak_s[b] = m->shift[jb];
+    w->peak_L[b] = w->L[jb];
+    w->peak_sig[b] = INV_SQRT12;
+    w->peak_cell[b] = jb;
+}
+
 /* What the catalog keeps of a light's fit (eq7_noise.c), for a light without one. */
 static void fit_none(rec_eq7_work *w)
 {
@@ -477,14 +488,10 @@ gs_status rec_eq7_light_finish(const rec_matcher *m, rec_eq7_work *w, size_t q, 
     int series_row = 0;
     memset(w->has_peak, 0, m->nb);
     for (size_t b = 0; m->ncont && b < m->nb; b++) {
-        if (!m->cont[b]) continue;
+        if (!m->cont[b] || !rec_eq7_bulb_active(m, w, b)) continue;   /* (no peak: screened out) */
         size_t jb = m->first[b] + rec_eq7_argmax(w->L + m->first[b], m->count[b]);
         if (!(w->L[jb] >= Lmax - CUT_REFINE)) {
-            w->has_peak[b] = 1;   /* negligible: grid values only */
-            w->peak_s[b] = m->shift[jb];
-            w->peak_L[b] = w->L[jb];
-            w->peak_sig[b] = INV_SQRT12;
-            w->peak_cell[b] = jb;
+            rec_eq7_grid_peak(m, w, b);   /* negligible: grid values only */
             continue;
         }
         if (!series_row) rec_eq7_series_row(m, w);
@@ -492,7 +499,7 @@ gs_status rec_eq7_light_finish(const rec_matcher *m, rec_eq7_work *w, size_t q, 
         rec_eq7_refine_peak(m, w, b, jb, Sxx);
     }
     for (size_t b = 0; m->ncont && b < m->nb; b++)
-        if (m->cont[b] && w->peak_L[b] > Lmax) Lmax = w->peak_L[b];
+        if (w->has_peak[b] && w->peak_L[b] > Lmax) Lmax = w->peak_L[b];
     w->ncand = 0;
     rec_eq7_add_done(m, w);   /* every scored pair counts for one light */
     rec_eq7_decision dec;
@@ -514,7 +521,7 @@ gs_status rec_eq7_light_finish(const rec_matcher *m, rec_eq7_work *w, size_t q, 
         excess_correlation(m, w, sigma, c, fe, w->tt, have ? w->r2 : NULL, &kappa, &phi);
         if (kappa < 1.0) {
             /* tempered, a score d nats below Lmax comes kappa d below it: the screen's cut widens */
-            rec_eq7_screen_widen(m, w, Sxx, Lmax, CUT_PIXEL / kappa);
+            rec_eq7_screen_widen(m, w, p, Sxx, Lmax, CUT_PIXEL / kappa);
             temper(m, w, Lmax, kappa);
             rec_eq7_add_done(m, w);   /* decide consumed them */
             rec_eq7_decide(m, w, Lmax, &dec);

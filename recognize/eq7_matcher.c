@@ -119,6 +119,11 @@ void rec_matcher_free(rec_matcher *m)
     free(m->fs_tail);
     free(m->fs_lnfmin);
     free(m->fs_tt);
+    free(m->bs_a);
+    free(m->bs_b);
+    free(m->bs_at);
+    free(m->bs_bt);
+    free(m->bs_t2);
     if (m->c2r) fftw_destroy_plan((fftw_plan)m->c2r);
     rec_eq7_series_free(m);
     free(m);
@@ -808,6 +813,7 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
     s = fourier_grid_setup(m);
     if (s == GS_OK) s = rec_eq7_series_setup(m);
     if (s == GS_OK) s = rec_eq7_sums_setup(m);
+    if (s == GS_OK) s = rec_eq7_bulbscreen_setup(m);
     if (s != GS_OK) {
         rec_matcher_free(m);
         return s;

@@ -7,9 +7,8 @@
  *   x . t_bc = sum_{n < G} C_bn e^{2 pi i n c / G},  C_bn = sum_band ahat_{b,band,n} X_{band, n mod K},
  * X the K-point DFT of the row's band. Hence every grid score of bulb b obeys
  *   x . t_bc / |t_bc| <= sum_n f_n |C_bn| / min_c |t_bc|   (f_n = 1 for n = 0, G/2, else 2),
- * from 3 (K/2 + 1) complex products per bulb instead of 3 K G multiply-adds (the harmonics above
- * K/2 grouped by n mod K: sum_band |X_band,q| times the sum of their |f_n ahat_n|), plus the
- * float scores' rounding. The screen gives float scores only to the bulbs that can matter, by
+ * from 3 (K/2 + 1) complex products per bulb instead of 3 K G multiply-adds (eq7_bulbscreen.c),
+ * plus the float scores' rounding. The screen gives float scores only to the bulbs that can matter, by
  * pixel_row's own rules (eq7_pixels.c):
  *  1. the bulb of the largest bound; a row whose bounds all stay below min_snr sigma is dim for
  *     every template (pixel_row's early out);
@@ -32,12 +31,10 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define SCREEN_LANES 8   /* harmonics padded to a multiple of 8 doubles */
-
 gs_status rec_eq7_pixscreen_setup(rec_matcher *m)
 {
-    int K = m->K, G = m->G, bands = m->bands;
-    size_t nh = (size_t)G / 2 + 1, nb = m->nb;
+    int K = m->K, bands = m->bands;
+    size_t nb = m->nb;
     /* (a discrete matcher with shape-only bulbs keeps its prefilter) */
     if (!m->fourier || m->bandpath || (size_t)m->ncont != nb) return GS_OK;
     m->fs_lnfmin = malloc(sizeof *m->fs_lnfmin * nb);
@@ -50,31 +47,17 @@ gs_status rec_eq7_pixscreen_setup(rec_matcher *m)
         }
         m->fs_lnfmin[b] = lmin;
     }
-    /* harmonics 0..K/2 exactly; the others grouped by n mod K: for q = n mod K,
-     * sum_n f_n |C_bn| <= sum_band fs_tail[b, band, q] |X_band,q| */
-    size_t keep = (size_t)K / 2;   /* < G/2: G >= 8K */
-    m->fs_n = (int)keep;
-    m->fs_np = (keep + 1 + SCREEN_LANES - 1) / SCREEN_LANES * SCREEN_LANES;
+    /* harmonics 0..K/2 exactly; the others grouped by n mod K (eq7_bulbscreen.c), scaled by
+     * 1 / min |t| */
+    m->fs_n = K / 2;   /* < G/2: G >= 8K */
+    m->fs_np = rec_eq7_harmonics_np(m);
     size_t np = m->fs_np;
     m->fs_a = calloc(nb * (size_t)bands * 2 * np, sizeof *m->fs_a);
     m->fs_tail = calloc(nb * (size_t)bands * (size_t)K, sizeof *m->fs_tail);
     if (!m->fs_a || !m->fs_tail) return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate the pixel Fourier screen");
-    for (size_t b = 0; b < nb; b++) {
-        double inv = exp(-m->fs_lnfmin[b]);
-        for (int band = 0; band < bands; band++) {
-            for (size_t n = 0; n < nh; n++) {
-                double f = (n == 0 || 2 * n == (size_t)G) ? 1.0 : 2.0;
-                double complex a = m->ahat[(b * (size_t)bands + (size_t)band) * nh + n] * (f * inv);
-                if (n > keep) {
-                    m->fs_tail[(b * (size_t)bands + (size_t)band) * (size_t)K + n % (size_t)K] += cabs(a);
-                    continue;
-                }
-                double *dst = m->fs_a + ((b * (size_t)bands + (size_t)band) * 2) * np;
-                dst[n] = creal(a);
-                dst[np + n] = cimag(a);
-            }
-        }
-    }
+    for (size_t b = 0; b < nb; b++)
+        rec_eq7_harmonic_table(m, m->ahat, b, exp(-m->fs_lnfmin[b]), m->fs_a + b * (size_t)bands * 2 * np,
+                               m->fs_tail + b * (size_t)bands * (size_t)K);
     m->fs_ldt = m->Mp + LANES;
     m->fs_tt = calloc((size_t)m->D * m->fs_ldt, sizeof *m->fs_tt);
     if (!m->fs_tt) return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate the pixel Fourier screen");
@@ -121,34 +104,6 @@ void rec_eq7_pixscreen_free(rec_pixscreen_work *sw)
     free(sw->og);
     free(sw->idx);
     memset(sw, 0, sizeof *sw);
-}
-
-/* sum over n < np of |sum_band a_band,n y_band,n| (complex; re and im blocks of np each), 8
- * harmonics at a time (gcc's vector types: the loop over n was compiled as scalar code). */
-typedef double scr_v8d __attribute__((vector_size(SCREEN_LANES * sizeof(double))));
-GS_VECTOR_LOOP static double harmonic_sum(const double *a, const double *y, int bands, size_t np)
-{
-    scr_v8d acc = {0};
-    for (size_t n = 0; n < np; n += SCREEN_LANES) {
-        scr_v8d re = {0}, im = {0};
-        for (int band = 0; band < bands; band++) {
-            const double *ab = a + (size_t)band * 2 * np + n, *yb = y + (size_t)band * 2 * np + n;
-            scr_v8d ar, ai, yr, yi;
-            REC_VLOAD(ar, ab);
-            REC_VLOAD(ai, ab + np);
-            REC_VLOAD(yr, yb);
-            REC_VLOAD(yi, yb + np);
-            re += ar * yr - ai * yi;
-            im += ar * yi + ai * yr;
-        }
-        scr_v8d q = re * re + im * im;
-        double t[SCREEN_LANES];
-        memcpy(t, &q, sizeof t);
-        for (int i = 0; i < SCREEN_LANES; i++) t[i] = sqrt(t[i]);
-        memcpy(&q, t, sizeof q);
-        acc += q;
-    }
-    return ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
 }
 
 /* out[r * ldo + c] = x_r . t_(f0 + c) for the n rows of x (a multiple of 4; ld D) and the cnt
@@ -280,22 +235,12 @@ void rec_eq7_pixscreen(const rec_matcher *m, rec_pixscreen_work *sw, const float
         for (size_t d = 0; d < D; d++) sw->xd[d] = xs[k * D + d];
         for (int band = 0; band < bands; band++)
             rec_eq7_dft(sw->xd + (size_t)band * K, m->dftc, m->dfts, K, y + (size_t)band * 2 * K);
-        for (int band = 0; band < bands; band++) {
-            double *yb = sw->yx + (size_t)band * 2 * np;
-            const double *xb = y + (size_t)band * 2 * K;
-            for (size_t n = 0; n < np; n++) {
-                int in = n <= (size_t)m->fs_n;
-                yb[n] = in ? xb[2 * (n % K)] : 0.0;
-                yb[np + n] = in ? xb[2 * (n % K) + 1] : 0.0;
-            }
-        }
-        double *xa = sw->xa;   /* |X_band,q| */
-        for (size_t q = 0; q < (size_t)bands * K; q++) xa[q] = sqrt(y[2 * q] * y[2 * q] + y[2 * q + 1] * y[2 * q + 1]);
+        rec_eq7_harmonic_row(m, (const double complex *)y, K, sw->yx, sw->xa);
         /* slack: the float score's rounding */
         double bmax = -INFINITY;
         for (size_t b = 0; b < nb; b++) {
-            double bd = (harmonic_sum(m->fs_a + b * (size_t)bands * 2 * np, sw->yx, bands, np) +
-                         gs_dot(m->fs_tail + b * (size_t)bands * K, xa, (size_t)bands * K)) * (1.0 + 1e-9) +
+            double bd = (rec_eq7_harmonic_sum(m->fs_a + b * (size_t)bands * 2 * np, sw->yx, bands, np) +
+                         gs_dot(m->fs_tail + b * (size_t)bands * K, sw->xa, (size_t)bands * K)) * (1.0 + 1e-9) +
                         serr;
             if (!(bd <= DBL_MAX)) bd = INFINITY;   /* an overflowed DFT: scored */
             sw->bound[k * nb + b] = bd;

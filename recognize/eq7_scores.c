@@ -389,28 +389,28 @@ GS_VECTOR_LOOP static void scr_bounds_1f(const float *Sf, const float *Tf, const
  * tabulated): no logarithm per template. Otherwise (a dropped sample: saturated, masked, bad)
  * that need not hold and log T_f itself is taken. A brightness whose samples a template misses
  * (T_f = 0) adds no term to its L: the bound's term is kept from going below 0 then. Rounding
- * slack: L's own chi2 cancels as Sxx - g does, to some 1e-16 Sxx. */
-static void free_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx,
-                        size_t *jbest)
+ * slack: L's own chi2 cancels as Sxx - g does, to some 1e-16 Sxx. Into U[j0..j0 + n). */
+static void free_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx, size_t j0,
+                        size_t n)
 {
-    size_t M = m->M, jb = 0;
+    size_t M = m->M;
     int nf = m->nfit;
     double slack = 1e-12 * Sxx, *U = w->U;
-    if (rec_eq7_float_sums(m)) {   /* (one brightness) */
+    if (rec_eq7_float_sums(m)) {   /* (one brightness; every template discrete) */
         double u = 0x1p-24 * (double)(m->D + 3), gam = u / (1.0 - u);
-        scr_bounds_1f(w->Sf, w->Tf, m->tnorm, p->full[0] ? m->lognorm : NULL, M, -0.5 * log(p->wmin[0]), Sxx,
-                      slack, gam * w->wxn, gam / (1.0 - gam), 4.0 * m->D * 0x1p-90, 1.0 / w->fsx, 1.0 / w->fsw, U);
-        *jbest = rec_eq7_argmax(U, M);
+        scr_bounds_1f(w->Sf + j0, w->Tf + j0, m->tnorm + j0, p->full[0] ? m->lognorm + j0 : NULL, n,
+                      -0.5 * log(p->wmin[0]), Sxx, slack, gam * w->wxn, gam / (1.0 - gam), 4.0 * m->D * 0x1p-90,
+                      1.0 / w->fsx, 1.0 / w->fsw, U + j0);
         return;
     }
     if (nf == 1) {
-        scr_bounds_1(w->S, w->T, p->full[0] ? m->lognorm : NULL, M, -0.5 * log(p->wmin[0]), Sxx, slack, U);
-        *jbest = rec_eq7_argmax(U, M);
+        scr_bounds_1(w->S + j0, w->T + j0, p->full[0] ? m->lognorm + j0 : NULL, n, -0.5 * log(p->wmin[0]), Sxx,
+                     slack, U + j0);
         return;
     }
     double cf[GS_MAX_BANDS];
     for (int f = 0; f < nf; f++) cf[f] = p->wmin[f] > 0.0 ? -0.5 * log(p->wmin[f]) : 0.0;
-    for (size_t j = 0; j < M; j++) {
+    for (size_t j = j0; j < j0 + n; j++) {
         double g = 0.0, u = 0.0;
         int any = 0;
         for (int f = 0; f < nf; f++) {
@@ -428,9 +428,7 @@ static void free_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pre
         double d = g - Sxx;
         u += 0.5 * (d < 0.0 ? d : 0.0);
         U[j] = any ? u + 1e-9 * (1.0 + fabs(u)) + slack : -INFINITY;
-        jb = U[j] > U[jb] ? j : jb;
     }
-    *jbest = jb;
 }
 
 /* ------------------------------------------------------------ many scores at once */
@@ -518,16 +516,19 @@ double rec_eq7_loglik_fit(const rec_matcher *m, rec_eq7_work *w, size_t j, doubl
 typedef struct {
     const rec_matcher *m;
     rec_eq7_work *w;
+    const rec_eq7_prep *p;
     double Sxx, Lmax, r1, r2;
     const double *prior;            /* the tau prior's log weights + log REC_TAU_N (NULL: none) */
     double prior_v[REC_TAU_N];
 } screen;
 
 /* A screen of one light (its sums in w, Lmax the best score so far). */
-static void screen_init(screen *sc, const rec_matcher *m, rec_eq7_work *w, double Sxx, double Lmax)
+static void screen_init(screen *sc, const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx,
+                        double Lmax)
 {
     sc->m = m;
     sc->w = w;
+    sc->p = p;
     sc->Sxx = Sxx;
     sc->Lmax = Lmax;
     sc->r1 = sc->r2 = -INFINITY;
@@ -648,7 +649,12 @@ static void exact_at_least(screen *sc, double th)
 {
     const rec_matcher *m = sc->m;
     rec_eq7_work *w = sc->w;
-    size_t n = scr_at_least(w->U, 0, m->M, th, w->cand), k = 0;   /* (w->cand: free while the screen runs) */
+    size_t n = 0, k = 0;   /* (w->cand: free while the screen runs) */
+    if (rec_eq7_bulb_screen(m))   /* the bulbs with bounds: discrete, or open */
+        for (size_t b = 0; b < m->nb; b++)
+            n += rec_eq7_bulb_active(m, w, b) ? scr_at_least(w->U, m->first[b], m->first[b] + m->count[b], th, w->cand + n) : 0;
+    else
+        n = scr_at_least(w->U, 0, m->M, th, w->cand);
     for (size_t i = 0; i < n; i++)
         if (tighten(sc, w->cand[i]) >= th) w->cand[k++] = w->cand[i];
     exact_set(sc, w->cand, k);
@@ -702,61 +708,119 @@ static void nested_first(screen *sc)
     exact_at_least(sc, th);
 }
 
-/* Exact: the best bound's template; for each continuous bulb its best (from its best bound, then
- * every one of its templates whose bound reaches the bulb's best so far: its peak is refined or
- * ranked from there; the reddened model: tight bounds, best first, and no bulb whose every bound
- * is below the cut); every template whose bound is within CUT_PIXEL of the best computed L (the
- * posterior's mass; in one pass, its threshold only rises); the runner-up (the two best discrete
- * templates: the best bound of the rest while it beats the second rank); with the nested tests
- * their first templates. */
+/* Continuous bulb b's best grid cell exact, and every one of its cells whose bound reaches the
+ * best so far (jb: a cell already exact, or M): its peak is refined or ranked from there. The
+ * reddened model: tight bounds, best first, and no bulb whose every bound is below the cut. */
+static void bulb_best(screen *sc, size_t b, size_t jb)
+{
+    const rec_matcher *m = sc->m;
+    rec_eq7_work *w = sc->w;
+    double *U = w->U;
+    size_t j0 = m->first[b], n = m->count[b], jm = j0 + rec_eq7_argmax(U + j0, n);
+    double lb = jb >= j0 && jb < j0 + n ? w->L[jb] : -INFINITY;   /* its exact ones so far */
+    if (m->red) {
+        /* a bulb whose every bound is below the cut has no pair within it (it can only be a
+         * runner-up with a posterior below e^-30); the others best first, each bound tight
+         * before it counts */
+        if (lb == -INFINITY && !(U[jm] >= sc->Lmax - CUT_PIXEL)) return;
+        for (;;) {
+            jm = j0 + rec_eq7_argmax(U + j0, n);
+            if (!(U[jm] > -INFINITY) || !(U[jm] >= lb)) break;
+            if (bound_final(sc, jm)) lb = fmax(lb, exact(sc, jm));
+        }
+        return;
+    }
+    if (U[jm] > lb) lb = fmax(lb, exact(sc, jm));
+    for (size_t j = j0; lb > -INFINITY && j < j0 + n; j++) {
+        j += scr_first_at_least(U + j, j0 + n - j, lb);
+        if (j < j0 + n) lb = fmax(lb, exact(sc, j));
+    }
+}
+
+/* The screen of bulbs (m->bs_on): continuous bulb b's grids, its cells' bounds, its best. */
+static void open_bulb(screen *sc, size_t b)
+{
+    rec_eq7_work *w = sc->w;
+    scr_fill(w->L + sc->m->first[b], sc->m->count[b], -INFINITY);
+    rec_eq7_grid_sums(sc->m, w, b);
+    free_bounds(sc->m, w, sc->p, sc->Sxx, sc->m->first[b], sc->m->count[b]);
+    w->open[b] = 1;
+    bulb_best(sc, b, sc->m->M);
+}
+
+/* The screen of bulbs: the discrete templates' bounds (the best's index in *jb; M if none), every
+ * continuous bulb's (eq7_bulbscreen.c), sorted in w->border (largest first; returns how many);
+ * no grid open yet. */
+static size_t bulb_bounds(screen *sc, size_t *jb)
+{
+    const rec_matcher *m = sc->m;
+    rec_eq7_work *w = sc->w;
+    *jb = m->M;
+    for (size_t b = 0; b < m->nb; b++) {
+        if (m->cont[b]) continue;
+        size_t j0 = m->first[b], n = m->count[b];
+        scr_fill(w->L + j0, n, -INFINITY);
+        free_bounds(m, w, sc->p, sc->Sxx, j0, n);
+        size_t j = j0 + rec_eq7_argmax(w->U + j0, n);
+        if (w->U[j] > -INFINITY && (*jb == m->M || w->U[j] > w->U[*jb])) *jb = j;
+    }
+    rec_eq7_light_dfts(m, w);
+    rec_eq7_bulb_bounds(m, w, sc->p, sc->Sxx, w->bub);
+    memset(w->open, 0, m->nb);
+    size_t n = 0;
+    for (size_t b = 0; b < m->nb; b++) {
+        if (!m->cont[b]) continue;
+        size_t i = n++;
+        for (; i > 0 && w->bub[w->border[i - 1]] < w->bub[b]; i--) w->border[i] = w->border[i - 1];
+        w->border[i] = b;
+    }
+    return n;
+}
+
+/* Exact: the best bound's template; for each continuous bulb its best (bulb_best; with the
+ * screen of bulbs, only the bulbs whose bound reaches within CUT_PIXEL of the best L so far, by
+ * their bounds, largest first: the others' cells are all below the cut, and stay -inf); every
+ * template whose bound is within CUT_PIXEL of the best computed L (the posterior's mass; in one
+ * pass, its threshold only rises); the runner-up (the two best discrete templates: the best
+ * bound of the rest while it beats the second rank); with the nested tests their first
+ * templates. */
 double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx)
 {
     size_t M = m->M;
     double *U = w->U;
     screen sc;
-    screen_init(&sc, m, w, Sxx, -INFINITY);
+    screen_init(&sc, m, w, p, Sxx, -INFINITY);
     memset(w->done, 0, M);
     if (m->red) memset(w->tight, 0, M);
     if (rec_eq7_float_sums(m)) memset(w->have, 0, M);
-    scr_fill(w->L, M, -INFINITY);
+    if (!rec_eq7_bulb_screen(m)) scr_fill(w->L, M, -INFINITY);   /* (else per bulb: bulb_bounds, open_bulb) */
     if (m->exhaustive) {
         for (size_t j = 0; j < M; j++) w->cand[j] = j;
         exact_set(&sc, w->cand, M);
         return sc.Lmax;
     }
-    size_t jb = 0;
-    if (m->red) red_bounds(m, w, Sxx, &jb);
-    else free_bounds(m, w, p, Sxx, &jb);
-    if (!(U[jb] > -INFINITY)) return -INFINITY;
-    while (!bound_final(&sc, jb)) {   /* the best final bound's template */
-        /* every bound at least this one's tight bound, tight, in one pass */
-        size_t n = scr_at_least(U, 0, M, U[jb], w->cand);
-        for (size_t i = 0; i < n; i++) tighten(&sc, w->cand[i]);
-        jb = rec_eq7_argmax(U, M);
-    }
-    if (!(U[jb] > -INFINITY)) return -INFINITY;
-    exact(&sc, jb);
-    for (size_t b = 0; m->ncont && b < m->nb; b++) {
-        if (!m->cont[b]) continue;
-        size_t j0 = m->first[b], n = m->count[b], jm = j0 + rec_eq7_argmax(U + j0, n);
-        double lb = jb >= j0 && jb < j0 + n ? w->L[jb] : -INFINITY;   /* its exact ones so far */
-        if (m->red) {
-            /* the reddened model: a bulb whose every bound is below the cut has no pair within it
-             * (it can only be a runner-up with a posterior below e^-30); the others best first,
-             * each bound tight before it counts */
-            if (lb == -INFINITY && !(U[jm] >= sc.Lmax - CUT_PIXEL)) continue;
-            for (;;) {
-                jm = j0 + rec_eq7_argmax(U + j0, n);
-                if (!(U[jm] > -INFINITY) || !(U[jm] >= lb)) break;
-                if (bound_final(&sc, jm)) lb = fmax(lb, exact(&sc, jm));
-            }
-            continue;
+    if (rec_eq7_bulb_screen(m)) {
+        size_t jb, nc = bulb_bounds(&sc, &jb);
+        if (jb < M) exact(&sc, jb);
+        for (size_t i = 0; i < nc && w->bub[w->border[i]] >= sc.Lmax - CUT_PIXEL; i++) open_bulb(&sc, w->border[i]);
+    } else {
+        size_t jb = 0;
+        if (m->red) red_bounds(m, w, Sxx, &jb);
+        else {
+            free_bounds(m, w, p, Sxx, 0, M);
+            jb = rec_eq7_argmax(U, M);
         }
-        if (U[jm] > lb) lb = fmax(lb, exact(&sc, jm));
-        for (size_t j = j0; lb > -INFINITY && j < j0 + n; j++) {
-            j += scr_first_at_least(U + j, j0 + n - j, lb);
-            if (j < j0 + n) lb = fmax(lb, exact(&sc, j));
+        if (!(U[jb] > -INFINITY)) return -INFINITY;
+        while (!bound_final(&sc, jb)) {   /* the best final bound's template */
+            /* every bound at least this one's tight bound, tight, in one pass */
+            size_t n = scr_at_least(U, 0, M, U[jb], w->cand);
+            for (size_t i = 0; i < n; i++) tighten(&sc, w->cand[i]);
+            jb = rec_eq7_argmax(U, M);
         }
+        if (!(U[jb] > -INFINITY)) return -INFINITY;
+        exact(&sc, jb);
+        for (size_t b = 0; m->ncont && b < m->nb; b++)
+            if (m->cont[b]) bulb_best(&sc, b, jb);
     }
     exact_at_least(&sc, sc.Lmax - CUT_PIXEL);
     if ((size_t)m->ncont < m->nb)
@@ -770,9 +834,15 @@ double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep 
     return sc.Lmax;
 }
 
-void rec_eq7_screen_widen(const rec_matcher *m, rec_eq7_work *w, double Sxx, double Lmax, double cut)
+void rec_eq7_screen_widen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx, double Lmax,
+                          double cut)
 {
     screen sc;
-    screen_init(&sc, m, w, Sxx, Lmax);
+    screen_init(&sc, m, w, p, Sxx, Lmax);
+    for (size_t b = 0; rec_eq7_bulb_screen(m) && b < m->nb; b++)
+        if (m->cont[b] && !w->open[b] && w->bub[b] >= Lmax - cut) {
+            open_bulb(&sc, b);   /* its grid peak, as the bulbs too far below to refine */
+            rec_eq7_grid_peak(m, w, b);
+        }
     exact_at_least(&sc, Lmax - cut);
 }

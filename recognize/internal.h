@@ -215,6 +215,12 @@ struct rec_matcher {
     double *fs_tail;                    /* [nb * bands * K] sum of |f_n ahat_n| / min |t| over the
                                          * harmonics n > fs_n with n mod K = q ([b][band][q]) */
     double *fs_lnfmin;                  /* [nb] least log |t| of the bulb's templates */
+    /* the light path's screen of continuous bulbs (eq7_bulbscreen.c; bs_on: fourier, not
+     * reddened, no nested tests): per bulb [bands][re, im rec_eq7_harmonics_np] f_n ahat_n and
+     * f_n bhat_n, n <= K/2; [bands][K] the tails (sum of |f_n hat_n| over n > K/2, n mod K = q);
+     * [nfit] the least |t|^2 of its cells over each brightness's samples */
+    int bs_on;
+    double *bs_a, *bs_b, *bs_at, *bs_bt, *bs_t2;
     size_t fs_ldt;                      /* Mp + LANES */
     float *fs_tt;                       /* [D * fs_ldt] the unit templates tn transposed */
     double *harm;                       /* [2 REC_SHAPE_H K] the shape test's columns within a
@@ -350,6 +356,12 @@ typedef struct {
                                             * light's band DFTs over the grid's bins
                                             * (rec_eq7_grid_sums) */
     double *grid;                          /* [G] its inverse */
+    /* the light path's screen of continuous bulbs (m->bs_on): each bulb's bound, whether its
+     * grids are computed (open), the bulbs by bound; the light's harmonics (eq7_bulbscreen.c) */
+    double *bub;                           /* [nb] */
+    unsigned char *open;                   /* [nb] */
+    size_t *border;                        /* [nb] */
+    double *bs_y;                          /* [4 bands rec_eq7_harmonics_np + 2 D] */
     double complex *spec_v;                /* [(G/2 + 1) bands] the band DFTs of other values
                                             * (the nested tests' cross sums, rec_eq7_grid_dots) */
     /* the reddened model: the light's log prior per tau (has_tau_prior; else uniform) and, when
@@ -425,6 +437,20 @@ typedef struct {
     float *xg, *og;         /* [(B + 3) * D] gathered rows, [(B + 3) * max count] their scores */
     size_t *idx;            /* [B] their rows */
 } rec_pixscreen_work;
+/* eq7_bulbscreen.c: bounds of a continuous bulb's grid sums from its cross-spectrum's magnitudes.
+ * rec_eq7_harmonic_table: bulb b's f_n hat_n * scale, n <= K/2, into a ([bands][re, im np]), the
+ * rest's magnitudes added into tail ([bands][K], by n mod K); rec_eq7_harmonic_row: a row's band
+ * DFTs V (ld ldv) at those harmonics into y, their magnitudes |V_band,q| into ya; harmonic_sum:
+ * sum_n |sum_band a_n y_n| over np harmonics. rec_eq7_bulbscreen_setup (rec_matcher_new) and
+ * rec_eq7_bulb_bounds: every continuous bulb's bound on the L of its cells into U ([nb]), after
+ * rec_eq7_light_dfts. */
+size_t rec_eq7_harmonics_np(const rec_matcher *m);
+void rec_eq7_harmonic_table(const rec_matcher *m, const double complex *hat, size_t b, double scale, double *a,
+                            double *tail);
+void rec_eq7_harmonic_row(const rec_matcher *m, const double complex *V, size_t ldv, double *y, double *ya);
+double rec_eq7_harmonic_sum(const double *a, const double *y, int bands, size_t np);
+gs_status rec_eq7_bulbscreen_setup(rec_matcher *m);
+void rec_eq7_bulb_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx, double *U);
 /* Tables (rec_matcher_new; fs_on when m->fourier, every bulb continuous, not m->bandpath). */
 gs_status rec_eq7_pixscreen_setup(rec_matcher *m);
 gs_status rec_eq7_pixscreen_alloc(const rec_matcher *m, size_t B, rec_pixscreen_work *sw);
@@ -517,7 +543,22 @@ gs_status rec_eq7_sums_setup(rec_matcher *m);
  * scores are tempered by kappa < 1: cut / kappa). rec_eq7_loglik_fit is a template's exact L
  * under the matcher's band model (its tau terms into w->tau_ll when collecting). */
 double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx);
-void rec_eq7_screen_widen(const rec_matcher *m, rec_eq7_work *w, double Sxx, double Lmax, double cut);
+/* The light path's screen of bulbs is on (m->bs_on, not the exhaustive path): a continuous bulb's
+ * grid sums, bounds U and scores L exist only once the screen opened it (w->open); a bulb is
+ * active when they exist. */
+static inline int rec_eq7_bulb_screen(const rec_matcher *m)
+{
+    return m->bs_on && !m->exhaustive;
+}
+static inline int rec_eq7_bulb_active(const rec_matcher *m, const rec_eq7_work *w, size_t b)
+{
+    return !rec_eq7_bulb_screen(m) || !m->cont[b] || w->open[b];
+}
+/* eq7_light.c: continuous bulb b's peak at its best grid cell, unrefined (a bulb too far below the
+ * best to refine). */
+void rec_eq7_grid_peak(const rec_matcher *m, rec_eq7_work *w, size_t b);
+void rec_eq7_screen_widen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx, double Lmax,
+                          double cut);
 double rec_eq7_loglik_fit(const rec_matcher *m, rec_eq7_work *w, size_t j, double Sxx);
 /* eq7_scores.c: the band models' log likelihoods from a template's sums S, T (nfit values):
  * free or one brightness (rec_eq7_loglik_n), reddened (rec_eq7_loglik_red: with fit, the most

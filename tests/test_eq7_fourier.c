@@ -222,16 +222,17 @@ TEST(eq7_fourier_answers_match_slow_path)
     gs_delight *d = eq7fx_make_db(50, 3, 1, 0);
     int lights = 0, ntight = 0;
     /* models 0-2 continuous, 3-4 the reddened model with 3 and 6 discrete phases, 5-10 each band
-     * model with 3 phases and an excess (5-7 the nested tests on, 8-10 off) */
-    const size_t NM = 11;
+     * model with 3 phases and an excess (5-7 the nested tests on, 8-10 off), 11-12 one brightness
+     * and free band gains, continuous, with an excess (the screen of bulbs widens its cut) */
+    const size_t NM = 13;
     for (size_t mi = 0; mi < NM; mi++)
         for (size_t ki = 0; ki < sizeof Ks / sizeof *Ks; ki++) {
             int K = Ks[ki];
-            rec_phase_set ps = mi < 3 ? REC_PHASES_CONTINUOUS : mi == 4 ? REC_PHASES_6 : REC_PHASES_3;
+            rec_phase_set ps = mi < 3 || mi > 10 ? REC_PHASES_CONTINUOUS : mi == 4 ? REC_PHASES_6 : REC_PHASES_3;
             rec_band_model bm = mi < 3 ? models[mi] : mi < 5 ? REC_BANDS_REDDENED : models[(mi - 5) % 3];
             rec_matcher *m = model_matcher(d, 3, K, bm, ps, mi < 5 ? 0.0 : 0.05, mi < 8);
             if (!m) continue;
-            CHECK(m->fourier == (mi < 3));
+            CHECK(m->fourier == (mi < 3 || mi > 10));
             size_t D = (size_t)m->D;
             double *x = malloc(sizeof *x * D), *sg = malloc(sizeof *sg * D);
             for (int i = 0; i < 12; i++) {
@@ -344,7 +345,7 @@ TEST(eq7_screen_bounds_hold_with_dropped_samples)
     gs_delight *d = eq7fx_make_db(50, 3, 1, 0);
     gs_delight *g = gs_delight_new();
     CHECK_OK(gs_delight_generate(g, 1024));
-    int checked = 0, dropped_lights = 0;
+    int checked = 0, dropped_lights = 0, closed_bulbs = 0;
     for (int db = 0; db < 2; db++)
         for (int bm = 0; bm < 3; bm++)
             for (int cont = 0; cont < 2; cont++) {
@@ -368,6 +369,17 @@ TEST(eq7_screen_bounds_hold_with_dropped_samples)
                     CHECK_OK(rec_eq7_match_light_ws(m, &w, x, sg, 0.0, &f, NULL));
                     memcpy(Uf, w.U, sizeof *Uf * M);
                     memcpy(df, w.done, M);
+                    /* a bulb the screen of bulbs left closed: its grids now, its cells against its
+                     * bulb's bound */
+                    int closed = 0;
+                    if (m->bs_on) rec_eq7_light_dfts(m, &w);
+                    for (size_t c = 0; m->bs_on && c < m->nb; c++) {
+                        if (!m->cont[c] || w.open[c]) continue;
+                        rec_eq7_grid_sums(m, &w, c);
+                        for (size_t j = m->first[c]; j < m->first[c] + m->count[c]; j++) Uf[j] = w.bub[c];
+                        closed++;
+                    }
+                    closed_bulbs += closed;
                     for (size_t j = 0; j < M; j++) {
                         if (df[j]) continue;
                         double L = rec_eq7_loglik_fit(m, &w, j, w.prep[0].Sxx);
@@ -387,9 +399,10 @@ TEST(eq7_screen_bounds_hold_with_dropped_samples)
                 free(x), free(sg), free(Uf), free(df);
                 rec_matcher_free(m);
             }
-    printf("    %d lights with dropped samples, %d templates left unscored checked against their bounds\n",
-           dropped_lights, checked);
+    printf("    %d lights with dropped samples, %d templates left unscored checked against their bounds (%d "
+           "continuous bulbs' grids left closed)\n", dropped_lights, checked, closed_bulbs);
     CHECK(checked > 1000);
+    CHECK(closed_bulbs > 0);
     gs_delight_free(g);
     gs_delight_free(d);
 }
