@@ -83,8 +83,8 @@ $(BUILD)/version.h: FORCE
 $(BUILD)/survey/cli.o: $(BUILD)/version.h
 $(BUILD)/survey/cli.o: CPPFLAGS += -I$(BUILD)
 # Eq. 7's scores: loops over templates that call log, erfc and exp, which gcc vectorizes with
-# glibc's libmvec only without errno (nothing there reads it); the pixel screen's sqrt likewise
-$(BUILD)/recognize/eq7_scores.o $(BUILD)/recognize/eq7_pixscreen.o: CFLAGS += -fno-math-errno
+# glibc's libmvec only without errno (nothing there reads it); the Fourier screens' sqrt likewise
+$(BUILD)/recognize/eq7_scores.o $(BUILD)/recognize/eq7_pixscreen.o $(BUILD)/recognize/eq7_bulbscreen.o: CFLAGS += -fno-math-errno
 # the continuous templates' and grids' complex products: finite numbers, without C99's recovery
 # of a NaN product (the same results for finite operands, no library call per product; gcc's
 # flag, which clang 14 does not know)

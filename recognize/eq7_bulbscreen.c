@@ -7,14 +7,16 @@
  *   sum_k v_k t_k(c) = sum_{n <= G/2} f_n Re(C_bn e^{2 pi i n c / G}),
  *   C_bn = sum_band hat_{b,band,n} V_{band, n mod K}
  * (f_n = 1 for n = 0, G/2, else 2; hat the bulb's spectrum over the grid, ahat for t and bhat
- * for t^2; V the K-point DFT of the row's band), so every cell's |sum| <= sum_n f_n |C_bn|: from
+ * for t^2; V the K-point DFT of the row's band), so every cell's sum <= C_b0 + sum_{n>0} f_n |C_bn|: from
  * 3 (K/2 + 1) complex products per bulb, the harmonics n <= K/2 exactly and the others grouped
- * by q = n mod K (sum_band tail_{b,band,q} |V_band,q|, tail the sum of |f_n hat_n| over those n).
+ * by q = n mod K (sum_band tail_{b,band,q} |V_band,q|, tail the sum of |f_n hat_n| over those n);
+ * the constant term C_0 (real) with its sign.
  *
  * The light path (weights w, weighted values wx): S_c = sum w x t_c and T_c = sum w t_c^2 are
  * such sums, so per brightness f (its bands)
- *   S_fc <= Sb_f = sum_n f_n |C_n|,   T_fc >= Tb_f = 2 C'_0 - sum_n f_n |C'_n|
- * (C' of bhat and the DFT of w; C'_0 = sum_band bhat_0 W_0 > 0), and T_fc >= w_min |t_fc|^2 when
+ *   S_fc <= Sb_f = C_0 + sum_{n>0} f_n |C_n|,   T_fc >= Tb_f = C'_0 - sum_{n>0} f_n |C'_n|
+ * (C_0 = sum_band ahat_0 X_0 is real and keeps its sign: the bound of a row whose mean is below
+ * zero drops by 2 |C_0|; C' of bhat and the DFT of w), and T_fc >= w_min |t_fc|^2 when
  * no sample of f is dropped. With them free_bounds' bound (eq7_scores.c) holds for every cell:
  *   L_c <= -max(Sxx - sum_f Sb_f^2 / Tb_f, 0)/2 - sum_f log(Tb_f)/2,
  * and a bulb whose bound is below the screen's cut never has its grids computed. */
@@ -76,6 +78,15 @@ GS_VECTOR_LOOP double rec_eq7_harmonic_sum(const double *a, const double *y, int
         acc += q;
     }
     return ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
+}
+
+double rec_eq7_harmonic_extent(const double *a, const double *tail, const double *y, const double *ya, int bands,
+                               size_t np, size_t K, double *c0)
+{
+    double c = 0.0;
+    for (int band = 0; band < bands; band++) c += a[(size_t)band * 2 * np] * y[(size_t)band * 2 * np];
+    *c0 = c;
+    return rec_eq7_harmonic_sum(a, y, bands, np) + gs_dot(tail, ya, (size_t)bands * K);
 }
 
 void rec_eq7_harmonic_row(const rec_matcher *m, const double complex *V, size_t ldv, double *y, double *ya)
@@ -141,14 +152,14 @@ void rec_eq7_bulb_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pr
         for (int f = 0; f < nf && !open; f++) {
             if (!(p->wmin[f] > 0.0)) continue;   /* no usable sample: no brightness */
             size_t b0 = nf == 1 ? 0 : (size_t)f, nbf = nf == 1 ? bands : 1, ka = b0 * 2 * np, kt = b0 * K;
-            const double *a = m->bs_a + b * la + ka, *bb = m->bs_b + b * la + ka;
-            double sb = rec_eq7_harmonic_sum(a, yx + ka, (int)nbf, np) + gs_dot(m->bs_at + b * lt + kt, xa + kt, nbf * K);
-            double c0 = 0.0, hs = rec_eq7_harmonic_sum(bb, yw + ka, (int)nbf, np) +
-                                  gs_dot(m->bs_bt + b * lt + kt, wa + kt, nbf * K);
-            for (size_t band = b0; band < b0 + nbf; band++) c0 += bb[(band - b0) * 2 * np] * yw[band * 2 * np];
-            /* rounding: the FFT's and these sums', far inside 1e-9 of the magnitudes' sum */
-            sb *= 1.0 + 1e-9;
-            double tb = 2.0 * c0 - hs - 1e-9 * (2.0 * fabs(c0) + hs);
+            double cs, ct;
+            double es = rec_eq7_harmonic_extent(m->bs_a + b * la + ka, m->bs_at + b * lt + kt, yx + ka, xa + kt,
+                                                (int)nbf, np, K, &cs);
+            double et = rec_eq7_harmonic_extent(m->bs_b + b * la + ka, m->bs_bt + b * lt + kt, yw + ka, wa + kt,
+                                                (int)nbf, np, K, &ct);
+            /* the sums' constant terms with their signs; rounding: the FFT's and these sums', far
+             * inside 1e-9 of the magnitudes' sum */
+            double sb = es - fabs(cs) + cs + 1e-9 * es, tb = ct - (et - fabs(ct)) - 1e-9 * et;
             if (p->full[f]) {
                 double tw = p->wmin[f] * m->bs_t2[b * (size_t)nf + (size_t)f] * (1.0 - 1e-12);
                 tb = tw > tb ? tw : tb;
@@ -158,7 +169,7 @@ void rec_eq7_bulb_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pr
                 break;
             }
             u -= 0.5 * log(tb);
-            g += sb * (sb / tb);
+            g += sb > 0.0 ? sb * (sb / tb) : 0.0;   /* (S <= 0 adds nothing: free_bounds) */
         }
         double d = g - Sxx, v = u + 0.5 * (d < 0.0 ? d : 0.0);
         v += 1e-9 * (1.0 + fabs(v)) + 1e-12 * Sxx;

@@ -239,9 +239,9 @@ void rec_eq7_pixscreen(const rec_matcher *m, rec_pixscreen_work *sw, const float
         /* slack: the float score's rounding */
         double bmax = -INFINITY;
         for (size_t b = 0; b < nb; b++) {
-            double bd = (rec_eq7_harmonic_sum(m->fs_a + b * (size_t)bands * 2 * np, sw->yx, bands, np) +
-                         gs_dot(m->fs_tail + b * (size_t)bands * K, sw->xa, (size_t)bands * K)) * (1.0 + 1e-9) +
-                        serr;
+            double c0, e = rec_eq7_harmonic_extent(m->fs_a + b * (size_t)bands * 2 * np, m->fs_tail + b * (size_t)bands * K,
+                                                   sw->yx, sw->xa, bands, np, K, &c0);
+            double bd = e - fabs(c0) + c0 + 1e-9 * e + serr;   /* (the constant term with its sign) */
             if (!(bd <= DBL_MAX)) bd = INFINITY;   /* an overflowed DFT: scored */
             sw->bound[k * nb + b] = bd;
             bmax = bd > bmax ? bd : bmax;

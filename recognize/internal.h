@@ -449,6 +449,10 @@ void rec_eq7_harmonic_table(const rec_matcher *m, const double complex *hat, siz
                             double *tail);
 void rec_eq7_harmonic_row(const rec_matcher *m, const double complex *V, size_t ldv, double *y, double *ya);
 double rec_eq7_harmonic_sum(const double *a, const double *y, int bands, size_t np);
+/* sum_n |sum_band a_n y_n| over np harmonics plus the tail's sum_band tail_q |y_q| (ya, [bands][K]):
+ * the sum of a trigonometric sum's magnitudes; its constant term (real) into *c0 */
+double rec_eq7_harmonic_extent(const double *a, const double *tail, const double *y, const double *ya, int bands,
+                               size_t np, size_t K, double *c0);
 gs_status rec_eq7_bulbscreen_setup(rec_matcher *m);
 void rec_eq7_bulb_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx, double *U);
 /* Tables (rec_matcher_new; fs_on when m->fourier, every bulb continuous, not m->bandpath). */
