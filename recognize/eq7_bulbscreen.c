@@ -1,7 +1,8 @@
 /* eq7_bulbscreen.c - bounds of every grid sum of a continuous bulb from the magnitudes of its
  * cross-spectrum (the Fourier form, internal.h: K divides G), without the grid's inverse FFT:
  * for the pixel path's Fourier screen (eq7_pixscreen.c) and the light path's screen of bulbs
- * (rec_eq7_screen, eq7_scores.c; docs/recognition.md "Continuous phases: the Fourier screen").
+ * (rec_eq7_screen, eq7_scores.c; docs/recognition.md, "Continuous phases": "Per light: the
+ * screen of bulbs", and "Pixels": "the Fourier screen").
  *
  * A row v's sum with bulb b's templates at grid cell c is a trigonometric sum,
  *   sum_k v_k t_k(c) = sum_{n <= G/2} f_n Re(C_bn e^{2 pi i n c / G}),
@@ -108,7 +109,9 @@ void rec_eq7_harmonic_row(const rec_matcher *m, const double complex *V, size_t 
 
 gs_status rec_eq7_bulbscreen_setup(rec_matcher *m)
 {
-    if (!m->fourier || m->red || m->o.nested_tests) return GS_OK;
+    /* (every bulb continuous: with discrete bulbs, a closed one could be the runner-up that sets an
+     * excess's direction, eq7_light.c) */
+    if (!m->fourier || m->red || m->o.nested_tests || (size_t)m->ncont != m->nb) return GS_OK;
     size_t nb = m->nb, bands = (size_t)m->bands, K = (size_t)m->K, np = rec_eq7_harmonics_np(m);
     size_t la = bands * 2 * np, lt = bands * K, nf = (size_t)m->nfit;
     m->bs_a = calloc(nb * la, sizeof *m->bs_a);

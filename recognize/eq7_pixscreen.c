@@ -49,7 +49,6 @@ gs_status rec_eq7_pixscreen_setup(rec_matcher *m)
     }
     /* harmonics 0..K/2 exactly; the others grouped by n mod K (eq7_bulbscreen.c), scaled by
      * 1 / min |t| */
-    m->fs_n = K / 2;   /* < G/2: G >= 8K */
     m->fs_np = rec_eq7_harmonics_np(m);
     size_t np = m->fs_np;
     m->fs_a = calloc(nb * (size_t)bands * 2 * np, sizeof *m->fs_a);
@@ -241,7 +240,9 @@ void rec_eq7_pixscreen(const rec_matcher *m, rec_pixscreen_work *sw, const float
         for (size_t b = 0; b < nb; b++) {
             double c0, e = rec_eq7_harmonic_extent(m->fs_a + b * (size_t)bands * 2 * np, m->fs_tail + b * (size_t)bands * K,
                                                    sw->yx, sw->xa, bands, np, K, &c0);
-            double bd = e - fabs(c0) + c0 + 1e-9 * e + serr;   /* (the constant term with its sign) */
+            /* the constant term with its sign; at least 0 (the bound of a value <= 0 scaled by
+             * 1/min |t| would not be one) */
+            double bd = fmax(e - fabs(c0) + c0 + 1e-9 * e, 0.0) + serr;
             if (!(bd <= DBL_MAX)) bd = INFINITY;   /* an overflowed DFT: scored */
             sw->bound[k * nb + b] = bd;
             bmax = bd > bmax ? bd : bmax;

@@ -778,8 +778,9 @@ static size_t bulb_bounds(screen *sc, size_t *jb)
 }
 
 /* Exact: the best bound's template; for each continuous bulb its best (bulb_best; with the
- * screen of bulbs, only the bulbs whose bound reaches within CUT_PIXEL of the best L so far, by
- * their bounds, largest first: the others' cells are all below the cut, and stay -inf); every
+ * screen of bulbs, only the two bulbs of the largest bounds and those whose bound reaches within
+ * CUT_PIXEL of the best L so far, largest first: the others' cells are all below the cut, and
+ * stay -inf); every
  * template whose bound is within CUT_PIXEL of the best computed L (the posterior's mass; in one
  * pass, its threshold only rises); the runner-up (the two best discrete templates: the best
  * bound of the rest while it beats the second rank); with the nested tests their first
@@ -802,7 +803,9 @@ double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep 
     if (rec_eq7_bulb_screen(m)) {
         size_t jb, nc = bulb_bounds(&sc, &jb);
         if (jb < M) exact(&sc, jb);
-        for (size_t i = 0; i < nc && w->bub[w->border[i]] >= sc.Lmax - CUT_PIXEL; i++) open_bulb(&sc, w->border[i]);
+        /* (two at least: a runner-up bulb exists whenever the database has one) */
+        for (size_t i = 0; i < nc && (i < 2 || w->bub[w->border[i]] >= sc.Lmax - CUT_PIXEL); i++)
+            open_bulb(&sc, w->border[i]);
     } else {
         size_t jb = 0;
         if (m->red) red_bounds(m, w, Sxx, &jb);

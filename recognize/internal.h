@@ -112,7 +112,9 @@ gs_status rec_cv_dilate_u8(unsigned char *mask, int width, int height, int radiu
 #define EQ7_TWO_PI 6.283185307179586476925286766559
 #define INV_SQRT12 0.28867513459481288225457439025098  /* std of a uniform shift, cycles */
 #define CUT_PIXEL 30.0    /* nats: pairs this far below the best are < 1e-13 of it */
-#define CUT_REFINE 30.0   /* nats: continuous bulbs this far below the best keep their grid peak */
+/* nats: continuous bulbs this far below the best keep their grid peak (not above CUT_PIXEL: the
+ * screen of bulbs leaves closed, unrefined, bulbs whose every cell is below CUT_PIXEL) */
+#define CUT_REFINE CUT_PIXEL
 #define FLOAT_ERR 2e-6    /* error of z^2/2 from float scores, per unit |x|^2/sigma^2 */
 /* a row's |x|^2 in double (eq7_pixels.c), and the pixel path's bound on that error for a row of
  * Sxx = |x|^2/sigma^2 (eq7_pixels.c, eq7_pixscreen.c) */
@@ -209,11 +211,10 @@ struct rec_matcher {
     int fs_on;                          /* REC_FS_ON: rec_match_pixels uses it; _OFF: the matcher
                                          * has none (one SGEMM of every template); _ALL (tests):
                                          * the screen's kernel on every bulb of every row */
-    int fs_n;                           /* harmonics 0..fs_n kept */
-    size_t fs_np;                       /* fs_n + 1 rounded up to 8 */
+    size_t fs_np;                       /* K/2 + 1 rounded up to 8 (rec_eq7_harmonics_np) */
     double *fs_a;                       /* [nb * bands * 2 * fs_np] f_n ahat_n / min |t| (re, im) */
     double *fs_tail;                    /* [nb * bands * K] sum of |f_n ahat_n| / min |t| over the
-                                         * harmonics n > fs_n with n mod K = q ([b][band][q]) */
+                                         * harmonics n > K/2 with n mod K = q ([b][band][q]) */
     double *fs_lnfmin;                  /* [nb] least log |t| of the bulb's templates */
     /* the light path's screen of continuous bulbs (eq7_bulbscreen.c; bs_on: fourier, not
      * reddened, no nested tests): per bulb [bands][re, im rec_eq7_harmonics_np] f_n ahat_n and

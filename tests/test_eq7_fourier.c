@@ -411,6 +411,73 @@ TEST(eq7_screen_bounds_hold_with_dropped_samples)
     gs_delight_free(d);
 }
 
+/* The screen of bulbs (eq7_bulbscreen.c): every continuous bulb's bound, open or closed, is at
+ * least the exact L of each of its grid cells (from its grids, computed here for every bulb).
+ * Lights: noise alone, its negative (a mean below zero: the signed constant term), dim, bright,
+ * 1e6 sigma, a run of dropped samples, a whole band dropped, sigmas over 3 decades, a positive
+ * and a negative offset; equal sigmas otherwise (where w_min |t|^2 is T's bound); K = 4 to 26,
+ * both databases, one brightness and free band gains. (Noise and lights below zero close no
+ * bulb, every one within the cut, but their bounds are checked all the same.) */
+TEST(eq7_bulb_bounds_hold)
+{
+    static const int Ks[] = {4, 8, 13, 26};
+    enum { KINDS = 10 };
+    uint64_t rs = 12345;
+    gs_delight *d = eq7fx_make_db(50, 3, 1, 0), *g = gs_delight_new();
+    CHECK_OK(gs_delight_generate(g, 300));
+    long checked = 0, closed[KINDS] = {0};
+    for (int db = 0; db < 2; db++)
+        for (int bm = 0; bm < 2; bm++)
+            for (size_t ki = 0; ki < sizeof Ks / sizeof *Ks; ki++) {
+                int K = Ks[ki];
+                rec_matcher *m = model_matcher(db ? g : d, 3, K, bm ? REC_BANDS_FREE : REC_BANDS_CHROMA,
+                                               REC_PHASES_CONTINUOUS, 0.0, 0);
+                CHECK_MSG(m->bs_on, "K = %d: expected the screen of bulbs", K);
+                size_t D = (size_t)m->D;
+                double *x = malloc(sizeof *x * D), *sg = malloc(sizeof *sg * D);
+                rec_eq7_work w;
+                CHECK_OK(rec_eq7_work_alloc(m, &w));
+                for (int i = 0; i < 40; i++) {
+                    int kind = i % KINDS;
+                    double a = kind <= 1 ? 0.0 : kind == 3 ? 3000.0 : kind == 9 ? 1e6 : 30.0;
+                    eq7fx_render(rec_matcher_bulb(m, gs_splitmix64(&rs) % m->nb), gs_splitmix_uniform(&rs), K, a, 1.0,
+                                 &rs, x, sg);
+                    for (size_t q = 0; q < D; q++) {
+                        x[q] = kind == 1 ? -x[q] - 0.5 : kind == 7 ? x[q] + 50.0 : kind == 8 ? x[q] - 50.0 - 0.2 * a : x[q];
+                        if (kind == 6) sg[q] *= pow(10.0, 3.0 * gs_splitmix_uniform(&rs));
+                    }
+                    int run = kind == 4 ? 1 + (int)(gs_splitmix64(&rs) % (uint64_t)(K - 1)) : 0, k0 = (int)(gs_splitmix64(&rs) % (uint64_t)K);
+                    for (int band = 0; band < 3; band++)
+                        for (int k = 0; k < (kind == 5 && band == 2 ? K : run); k++) sg[band * K + (k0 + k) % K] = INFINITY;
+                    rec_match f;
+                    CHECK_OK(rec_eq7_match_light_ws(m, &w, x, sg, 0.0, &f, NULL));
+                    if (!w.prep[0].used) continue;
+                    rec_eq7_light_dfts(m, &w);
+                    for (size_t b = 0; b < m->nb; b++) {
+                        closed[kind] += !w.open[b];
+                        rec_eq7_grid_sums(m, &w, b);
+                        for (size_t j = m->first[b]; j < m->first[b] + m->count[b]; j++) {
+                            double L = rec_eq7_loglik_fit(m, &w, j, w.prep[0].Sxx);
+                            if (!isfinite(L)) continue;
+                            checked++;
+                            CHECK_MSG(w.bub[b] >= L, "db %d model %d K %d light %d (kind %d) bulb %zu cell %zu: bound %.12g "
+                                      "below the exact score %.12g", db, bm, K, i, kind, b, j - m->first[b], w.bub[b], L);
+                        }
+                    }
+                }
+                rec_eq7_work_free(&w);
+                free(x), free(sg);
+                rec_matcher_free(m);
+            }
+    long nclosed = 0;
+    printf("    %ld cells checked against their bulbs' bounds; bulbs left closed per kind of light:", checked);
+    for (int k = 0; k < KINDS; k++) printf(" %ld", closed[k]), nclosed += closed[k];
+    printf("\n");
+    CHECK(nclosed > 1000);
+    gs_delight_free(g);
+    gs_delight_free(d);
+}
+
 /* The float sums' screen (eq7_sums.c, m->fsums: the paper's model, D >= 64): every template it
  * left unscored has a float bound at least its exact score from plain double sums of the
  * light's weights, and the answers are the exhaustive path's. Hard cases: noise alone (sums of

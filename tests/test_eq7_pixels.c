@@ -365,15 +365,18 @@ TEST(eq7_pixels_fourier_screen_same_answers_as_every_score)
             const double *t = rec_matcher_template(m, j, NULL, NULL);
             double tt = 0.0, mean = 0.0;
             for (int k = 0; k < D; k++) tt += t[k] * t[k], mean += t[k] / D;
-            /* a |t| = z: dark, dim (0.5 - 6), lit (6 - 60), bright (100 - 3000), extreme, zero mean */
+            /* a |t| = z: dark (or below zero), dim (0.5 - 6), lit (6 - 60), bright (100 - 3000), extreme,
+             * zero mean */
             int kind = (int)(i % 6);
             double u = gs_splitmix_uniform(&rs);
             double z = kind == 0 ? 0.0 : kind == 1 ? 0.5 + 5.5 * u : kind == 2 ? 6.0 + 54.0 * u
                      : kind == 3 ? 100.0 + 2900.0 * u : kind == 4 ? (i % 12 < 6 ? 1e21 : 1.5e37 * sqrt(tt) / t[0])
                      : 3.0 * u;
             double a = z / sqrt(tt);
+            /* (every other dark row 10 sigma below zero: every score negative) */
+            double off = kind == 0 && i % 12 == 6 ? -10.0 : 0.0;
             for (int k = 0; k < D; k++)
-                x[i * (size_t)D + (size_t)k] = (float)(a * (kind == 5 ? t[k] - mean : t[k]) + gs_splitmix_normal(&rs));
+                x[i * (size_t)D + (size_t)k] = (float)(a * (kind == 5 ? t[k] - mean : t[k]) + off + gs_splitmix_normal(&rs));
             sg[i] = 1.0f;
             if (i % 61 == 5) x[i * (size_t)D + i % (size_t)D] = NAN;
             if (i % 61 == 6) x[i * (size_t)D + i % (size_t)D] = INFINITY;
