@@ -56,7 +56,7 @@ void rec_eq7_harmonic_table(const rec_matcher *m, const double complex *hat, siz
 /* sum over n < np of |sum_band a_band,n y_band,n| (complex; re and im blocks of np each), 8
  * harmonics at a time (gcc's vector types: the loop over n was compiled as scalar code). */
 typedef double bs_vd __attribute__((vector_size(BS_LANES * sizeof(double))));
-GS_VECTOR_LOOP double rec_eq7_harmonic_sum(const double *a, const double *y, int bands, size_t np)
+GS_VECTOR_LOOP static double harmonic_sum(const double *a, const double *y, int bands, size_t np)
 {
     bs_vd acc = {0};
     for (size_t n = 0; n < np; n += BS_LANES) {
@@ -87,7 +87,7 @@ double rec_eq7_harmonic_extent(const double *a, const double *tail, const double
     double c = 0.0;
     for (int band = 0; band < bands; band++) c += a[(size_t)band * 2 * np] * y[(size_t)band * 2 * np];
     *c0 = c;
-    return rec_eq7_harmonic_sum(a, y, bands, np) + gs_dot(tail, ya, (size_t)bands * K);
+    return harmonic_sum(a, y, bands, np) + gs_dot(tail, ya, (size_t)bands * K);
 }
 
 void rec_eq7_harmonic_row(const rec_matcher *m, const double complex *V, size_t ldv, double *y, double *ya)
@@ -122,7 +122,6 @@ gs_status rec_eq7_bulbscreen_setup(rec_matcher *m)
     if (!m->bs_a || !m->bs_b || !m->bs_at || !m->bs_bt || !m->bs_t2)
         return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate the light path's screen of bulbs");
     for (size_t b = 0; b < nb; b++) {
-        if (!m->cont[b]) continue;
         rec_eq7_harmonic_table(m, m->ahat, b, 1.0, m->bs_a + b * la, m->bs_at + b * lt);
         rec_eq7_harmonic_table(m, m->bhat, b, 1.0, m->bs_b + b * la, m->bs_bt + b * lt);
         /* the least |t_fc|^2 over the bulb's cells, per brightness */
@@ -149,10 +148,9 @@ void rec_eq7_bulb_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pr
     rec_eq7_harmonic_row(m, X, nh, yx, xa);
     rec_eq7_harmonic_row(m, W, nh, yw, wa);
     for (size_t b = 0; b < nb; b++) {
-        if (!m->cont[b]) continue;
         double u = 0.0, g = 0.0;
-        int open = 0;
-        for (int f = 0; f < nf && !open; f++) {
+        int none = 0;   /* no bound: the bulb is opened */
+        for (int f = 0; f < nf && !none; f++) {
             if (!(p->wmin[f] > 0.0)) continue;   /* no usable sample: no brightness */
             size_t b0 = nf == 1 ? 0 : (size_t)f, nbf = nf == 1 ? bands : 1, ka = b0 * 2 * np, kt = b0 * K;
             double cs, ct;
@@ -168,7 +166,7 @@ void rec_eq7_bulb_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pr
                 tb = tw > tb ? tw : tb;
             }
             if (!(tb > 0.0) || !(sb <= 1e300)) {
-                open = 1;   /* no bound */
+                none = 1;
                 break;
             }
             u -= 0.5 * log(tb);
@@ -176,6 +174,6 @@ void rec_eq7_bulb_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pr
         }
         double d = g - Sxx, v = u + 0.5 * (d < 0.0 ? d : 0.0);
         v += 1e-9 * (1.0 + fabs(v)) + 1e-12 * Sxx;
-        U[b] = open || !(v > -INFINITY) ? INFINITY : v;
+        U[b] = none || !(v > -INFINITY) ? INFINITY : v;
     }
 }

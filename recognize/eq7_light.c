@@ -251,9 +251,11 @@ static void excess_correlation(const rec_matcher *m, const rec_eq7_work *w, cons
  * the continuous peaks' widths by 1/sqrt(kappa). */
 static void temper(const rec_matcher *m, rec_eq7_work *w, double Lmax, double kappa)
 {
-    for (size_t b = 0; b < m->nb; b++)
-        for (size_t j = m->first[b]; rec_eq7_bulb_active(m, w, b) && j < m->first[b] + m->count[b]; j++)
+    for (size_t b = 0; b < m->nb; b++) {
+        if (!rec_eq7_bulb_active(m, w, b)) continue;
+        for (size_t j = m->first[b]; j < m->first[b] + m->count[b]; j++)
             if (isfinite(w->L[j])) w->L[j] = Lmax + kappa * (w->L[j] - Lmax);
+    }
     for (size_t b = 0; b < m->nb; b++) {
         if (!w->has_peak[b] || !isfinite(w->peak_L[b])) continue;
         w->peak_L[b] = Lmax + kappa * (w->peak_L[b] - Lmax);
@@ -406,9 +408,8 @@ GS_VECTOR_LOOP static int prep_weights(const double *restrict xc, const double *
     return used;
 }
 
-void rec_eq7_grid_peak(const rec_matcher *m, rec_eq7_work *w, size_t b)
+void rec_eq7_grid_peak(const rec_matcher *m, rec_eq7_work *w, size_t b, size_t jb)
 {
-    size_t jb = m->first[b] + rec_eq7_argmax(w->L + m->first[b], m->count[b]);
     w->has_peak[b] = 1;
     w->peak_s[b] = m->shift[jb];
     w->peak_L[b] = w->L[jb];
@@ -491,7 +492,7 @@ gs_status rec_eq7_light_finish(const rec_matcher *m, rec_eq7_work *w, size_t q, 
         if (!m->cont[b] || !rec_eq7_bulb_active(m, w, b)) continue;   /* (no peak: screened out) */
         size_t jb = m->first[b] + rec_eq7_argmax(w->L + m->first[b], m->count[b]);
         if (!(w->L[jb] >= Lmax - CUT_REFINE)) {
-            rec_eq7_grid_peak(m, w, b);   /* negligible: grid values only */
+            rec_eq7_grid_peak(m, w, b, jb);   /* negligible: grid values only */
             continue;
         }
         if (!series_row) rec_eq7_series_row(m, w);

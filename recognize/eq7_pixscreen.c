@@ -6,7 +6,8 @@
  * (internal.h), so a row's score at grid cell c is a trigonometric sum,
  *   x . t_bc = sum_{n < G} C_bn e^{2 pi i n c / G},  C_bn = sum_band ahat_{b,band,n} X_{band, n mod K},
  * X the K-point DFT of the row's band. Hence every grid score of bulb b obeys
- *   x . t_bc / |t_bc| <= sum_n f_n |C_bn| / min_c |t_bc|   (f_n = 1 for n = 0, G/2, else 2),
+ *   x . t_bc / |t_bc| <= max(C_b0 + sum_{n>0} f_n |C_bn|, 0) / min_c |t_bc|   (f_n = 1 for n = 0,
+ *   G/2, else 2; the constant term C_b0 is real),
  * from 3 (K/2 + 1) complex products per bulb instead of 3 K G multiply-adds (eq7_bulbscreen.c),
  * plus the float scores' rounding. The screen gives float scores only to the bulbs that can matter, by
  * pixel_row's own rules (eq7_pixels.c):
@@ -49,8 +50,7 @@ gs_status rec_eq7_pixscreen_setup(rec_matcher *m)
     }
     /* harmonics 0..K/2 exactly; the others grouped by n mod K (eq7_bulbscreen.c), scaled by
      * 1 / min |t| */
-    m->fs_np = rec_eq7_harmonics_np(m);
-    size_t np = m->fs_np;
+    size_t np = rec_eq7_harmonics_np(m);
     m->fs_a = calloc(nb * (size_t)bands * 2 * np, sizeof *m->fs_a);
     m->fs_tail = calloc(nb * (size_t)bands * (size_t)K, sizeof *m->fs_tail);
     if (!m->fs_a || !m->fs_tail) return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate the pixel Fourier screen");
@@ -76,7 +76,7 @@ gs_status rec_eq7_pixscreen_alloc(const rec_matcher *m, size_t B, rec_pixscreen_
     sw->state = malloc(sizeof *sw->state * B * nb);
     sw->row = malloc(sizeof *sw->row * B);
     sw->y = malloc(sizeof *sw->y * (size_t)m->bands * 2 * (size_t)m->K);
-    sw->yx = malloc(sizeof *sw->yx * (size_t)m->bands * 2 * m->fs_np);
+    sw->yx = malloc(sizeof *sw->yx * (size_t)m->bands * 2 * rec_eq7_harmonics_np(m));
     sw->xa = malloc(sizeof *sw->xa * (size_t)m->bands * (size_t)m->K);
     sw->xd = malloc(sizeof *sw->xd * (size_t)m->D);
     gmax = (gmax + LANES - 1) / LANES * LANES;
@@ -207,7 +207,7 @@ static void score_wanted(const rec_matcher *m, rec_pixscreen_work *sw, const flo
 void rec_eq7_pixscreen(const rec_matcher *m, rec_pixscreen_work *sw, const float *xs, size_t ns,
                        const float *noise_sigma, const size_t *rows, float *sc, unsigned char *keep)
 {
-    size_t D = (size_t)m->D, K = (size_t)m->K, nb = m->nb, Mp = m->Mp, np = m->fs_np;
+    size_t D = (size_t)m->D, K = (size_t)m->K, nb = m->nb, Mp = m->Mp, np = rec_eq7_harmonics_np(m);
     int bands = m->bands;
     const double min_snr = m->o.min_snr;
     for (size_t k = 0; k < ns; k++) {

@@ -650,7 +650,7 @@ static void exact_at_least(screen *sc, double th)
     const rec_matcher *m = sc->m;
     rec_eq7_work *w = sc->w;
     size_t n = 0, k = 0;   /* (w->cand: free while the screen runs) */
-    if (rec_eq7_bulb_screen(m))   /* the bulbs with bounds: discrete, or open */
+    if (rec_eq7_bulb_screen(m))   /* the bulbs with bounds: the open ones */
         for (size_t b = 0; b < m->nb; b++)
             n += rec_eq7_bulb_active(m, w, b) ? scr_at_least(w->U, m->first[b], m->first[b] + m->count[b], th, w->cand + n) : 0;
     else
@@ -748,43 +748,29 @@ static void open_bulb(screen *sc, size_t b)
     bulb_best(sc, b, sc->m->M);
 }
 
-/* The screen of bulbs: the discrete templates' bounds (the best's index in *jb; M if none), every
- * continuous bulb's (eq7_bulbscreen.c), sorted in w->border (largest first; returns how many);
- * no grid open yet. */
-static size_t bulb_bounds(screen *sc, size_t *jb)
+/* The screen of bulbs (every bulb continuous): each bulb's bound (eq7_bulbscreen.c), the bulbs
+ * sorted by it in w->border (largest first); no grid open yet. */
+static void bulb_bounds(screen *sc)
 {
     const rec_matcher *m = sc->m;
     rec_eq7_work *w = sc->w;
-    *jb = m->M;
-    for (size_t b = 0; b < m->nb; b++) {
-        if (m->cont[b]) continue;
-        size_t j0 = m->first[b], n = m->count[b];
-        scr_fill(w->L + j0, n, -INFINITY);
-        free_bounds(m, w, sc->p, sc->Sxx, j0, n);
-        size_t j = j0 + rec_eq7_argmax(w->U + j0, n);
-        if (w->U[j] > -INFINITY && (*jb == m->M || w->U[j] > w->U[*jb])) *jb = j;
-    }
     rec_eq7_light_dfts(m, w);
     rec_eq7_bulb_bounds(m, w, sc->p, sc->Sxx, w->bub);
     memset(w->open, 0, m->nb);
-    size_t n = 0;
     for (size_t b = 0; b < m->nb; b++) {
-        if (!m->cont[b]) continue;
-        size_t i = n++;
+        size_t i = b;
         for (; i > 0 && w->bub[w->border[i - 1]] < w->bub[b]; i--) w->border[i] = w->border[i - 1];
         w->border[i] = b;
     }
-    return n;
 }
 
 /* Exact: the best bound's template; for each continuous bulb its best (bulb_best; with the
  * screen of bulbs, only the two bulbs of the largest bounds and those whose bound reaches within
  * CUT_PIXEL of the best L so far, largest first: the others' cells are all below the cut, and
- * stay -inf); every
- * template whose bound is within CUT_PIXEL of the best computed L (the posterior's mass; in one
- * pass, its threshold only rises); the runner-up (the two best discrete templates: the best
- * bound of the rest while it beats the second rank); with the nested tests their first
- * templates. */
+ * stay -inf); every template whose bound is within CUT_PIXEL of the best computed L (the
+ * posterior's mass; in one pass, its threshold only rises); the runner-up (the two best
+ * discrete templates: the best bound of the rest while it beats the second rank); with the
+ * nested tests their first templates. */
 double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx)
 {
     size_t M = m->M;
@@ -801,10 +787,9 @@ double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep 
         return sc.Lmax;
     }
     if (rec_eq7_bulb_screen(m)) {
-        size_t jb, nc = bulb_bounds(&sc, &jb);
-        if (jb < M) exact(&sc, jb);
+        bulb_bounds(&sc);
         /* (two at least: a runner-up bulb exists whenever the database has one) */
-        for (size_t i = 0; i < nc && (i < 2 || w->bub[w->border[i]] >= sc.Lmax - CUT_PIXEL); i++)
+        for (size_t i = 0; i < m->nb && (i < 2 || w->bub[w->border[i]] >= sc.Lmax - CUT_PIXEL); i++)
             open_bulb(&sc, w->border[i]);
     } else {
         size_t jb = 0;
@@ -843,9 +828,9 @@ void rec_eq7_screen_widen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_p
     screen sc;
     screen_init(&sc, m, w, p, Sxx, Lmax);
     for (size_t b = 0; rec_eq7_bulb_screen(m) && b < m->nb; b++)
-        if (m->cont[b] && !w->open[b] && w->bub[b] >= Lmax - cut) {
+        if (!w->open[b] && w->bub[b] >= Lmax - cut) {
             open_bulb(&sc, b);   /* its grid peak, as the bulbs too far below to refine */
-            rec_eq7_grid_peak(m, w, b);
+            rec_eq7_grid_peak(m, w, b, m->first[b] + rec_eq7_argmax(w->L + m->first[b], m->count[b]));
         }
     exact_at_least(&sc, Lmax - cut);
 }

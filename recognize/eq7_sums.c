@@ -336,7 +336,7 @@ void rec_eq7_block_sums(const rec_matcher *m, rec_eq7_work *w, size_t n)
         b = b1;
     }
     /* (with the screen of bulbs, each light's grids only where it opens them: rec_eq7_screen) */
-    for (size_t q = 0; fourier && !m->bs_on && q < n; q++) {
+    for (size_t q = 0; fourier && !rec_eq7_bulb_screen(m) && q < n; q++) {
         rec_eq7_work_row(m, w, q);
         rec_eq7_light_dfts(m, w);
         for (size_t b = 0; b < m->nb; b++)

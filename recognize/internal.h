@@ -211,13 +211,13 @@ struct rec_matcher {
     int fs_on;                          /* REC_FS_ON: rec_match_pixels uses it; _OFF: the matcher
                                          * has none (one SGEMM of every template); _ALL (tests):
                                          * the screen's kernel on every bulb of every row */
-    size_t fs_np;                       /* K/2 + 1 rounded up to 8 (rec_eq7_harmonics_np) */
-    double *fs_a;                       /* [nb * bands * 2 * fs_np] f_n ahat_n / min |t| (re, im) */
+    double *fs_a;                       /* [nb * bands * 2 * np] f_n ahat_n / min |t| (re, im; np =
+                                         * rec_eq7_harmonics_np) */
     double *fs_tail;                    /* [nb * bands * K] sum of |f_n ahat_n| / min |t| over the
                                          * harmonics n > K/2 with n mod K = q ([b][band][q]) */
     double *fs_lnfmin;                  /* [nb] least log |t| of the bulb's templates */
-    /* the light path's screen of continuous bulbs (eq7_bulbscreen.c; bs_on: fourier, not
-     * reddened, no nested tests): per bulb [bands][re, im rec_eq7_harmonics_np] f_n ahat_n and
+    /* the light path's screen of continuous bulbs (eq7_bulbscreen.c; bs_on: fourier, every bulb
+     * continuous, not reddened, no nested tests): per bulb [bands][re, im rec_eq7_harmonics_np] f_n ahat_n and
      * f_n bhat_n, n <= K/2; [bands][K] the tails (sum of |f_n hat_n| over n > K/2, n mod K = q);
      * [nfit] the least |t|^2 of its cells over each brightness's samples */
     int bs_on;
@@ -433,7 +433,7 @@ typedef struct {
     rec_pixscreen_row *row; /* [B] */
     double *xd;             /* [D] one row in double */
     double *y;              /* [bands * 2K] its DFT ((re, im) pairs) */
-    double *yx;             /* [bands * 2 fs_np] one row's, at the kept harmonics */
+    double *yx;             /* [bands * 2 np] one row's, at the kept harmonics */
     double *xa;             /* [bands * K] its magnitudes */
     float *xg, *og;         /* [(B + 3) * D] gathered rows, [(B + 3) * max count] their scores */
     size_t *idx;            /* [B] their rows */
@@ -441,15 +441,14 @@ typedef struct {
 /* eq7_bulbscreen.c: bounds of a continuous bulb's grid sums from its cross-spectrum's magnitudes.
  * rec_eq7_harmonic_table: bulb b's f_n hat_n * scale, n <= K/2, into a ([bands][re, im np]), the
  * rest's magnitudes added into tail ([bands][K], by n mod K); rec_eq7_harmonic_row: a row's band
- * DFTs V (ld ldv) at those harmonics into y, their magnitudes |V_band,q| into ya; harmonic_sum:
- * sum_n |sum_band a_n y_n| over np harmonics. rec_eq7_bulbscreen_setup (rec_matcher_new) and
+ * DFTs V (ld ldv) at those harmonics into y, their magnitudes |V_band,q| into ya.
+ * rec_eq7_bulbscreen_setup (rec_matcher_new) and
  * rec_eq7_bulb_bounds: every continuous bulb's bound on the L of its cells into U ([nb]), after
  * rec_eq7_light_dfts. */
 size_t rec_eq7_harmonics_np(const rec_matcher *m);
 void rec_eq7_harmonic_table(const rec_matcher *m, const double complex *hat, size_t b, double scale, double *a,
                             double *tail);
 void rec_eq7_harmonic_row(const rec_matcher *m, const double complex *V, size_t ldv, double *y, double *ya);
-double rec_eq7_harmonic_sum(const double *a, const double *y, int bands, size_t np);
 /* sum_n |sum_band a_n y_n| over np harmonics plus the tail's sum_band tail_q |y_q| (ya, [bands][K]):
  * the sum of a trigonometric sum's magnitudes; its constant term (real) into *c0 */
 double rec_eq7_harmonic_extent(const double *a, const double *tail, const double *y, const double *ya, int bands,
@@ -548,20 +547,20 @@ gs_status rec_eq7_sums_setup(rec_matcher *m);
  * scores are tempered by kappa < 1: cut / kappa). rec_eq7_loglik_fit is a template's exact L
  * under the matcher's band model (its tau terms into w->tau_ll when collecting). */
 double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx);
-/* The light path's screen of bulbs is on (m->bs_on, not the exhaustive path): a continuous bulb's
- * grid sums, bounds U and scores L exist only once the screen opened it (w->open); a bulb is
- * active when they exist. */
+/* The light path's screen of bulbs is on (m->bs_on, not the exhaustive path): a bulb's grid sums,
+ * bounds U and scores L exist only once the screen opened it (w->open); a bulb is active when
+ * they exist. */
 static inline int rec_eq7_bulb_screen(const rec_matcher *m)
 {
     return m->bs_on && !m->exhaustive;
 }
 static inline int rec_eq7_bulb_active(const rec_matcher *m, const rec_eq7_work *w, size_t b)
 {
-    return !rec_eq7_bulb_screen(m) || !m->cont[b] || w->open[b];
+    return !rec_eq7_bulb_screen(m) || w->open[b];
 }
-/* eq7_light.c: continuous bulb b's peak at its best grid cell, unrefined (a bulb too far below the
- * best to refine). */
-void rec_eq7_grid_peak(const rec_matcher *m, rec_eq7_work *w, size_t b);
+/* eq7_light.c: continuous bulb b's peak at its best grid cell jb, unrefined (a bulb too far below
+ * the best to refine). */
+void rec_eq7_grid_peak(const rec_matcher *m, rec_eq7_work *w, size_t b, size_t jb);
 void rec_eq7_screen_widen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx, double Lmax,
                           double cut);
 double rec_eq7_loglik_fit(const rec_matcher *m, rec_eq7_work *w, size_t j, double Sxx);
