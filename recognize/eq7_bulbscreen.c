@@ -20,7 +20,9 @@
  * zero drops by 2 |C_0|; C' of bhat and the DFT of w), and T_fc >= w_min |t_fc|^2 when
  * no sample of f is dropped. With them free_bounds' bound (eq7_scores.c) holds for every cell:
  *   L_c <= -max(Sxx - sum_f Sb_f^2 / Tb_f, 0)/2 - sum_f log(Tb_f)/2,
- * and a bulb whose bound is below the screen's cut never has its grids computed. */
+ * and a bulb whose bound is below the screen's cut never has its grids computed. Those bounds
+ * take S's largest and T's least value at once; rec_eq7_bulb_tighten's coupled bound (below)
+ * joins them where unequal weights make the two peak at different cells. */
 #include "recognize/internal.h"
 
 #include <math.h>
@@ -138,11 +140,45 @@ gs_status rec_eq7_bulbscreen_setup(rec_matcher *m)
     return GS_OK;
 }
 
+/* Brightness f of bulb b against the light's rows (rec_eq7_bulb_bounds' harmonic rows in
+ * w->bs_y): the constant terms of S and T (signed), their tails' magnitudes, the sums of their
+ * magnitudes (constant, harmonics, tails), and S <= sb, T >= tb at every cell (tb <= 0: no
+ * bound). Rounding: the FFT's and these sums', far inside 1e-9 of the magnitudes' sums. */
+static void bulb_terms(const rec_matcher *m, const rec_eq7_work *w, const rec_eq7_prep *p, size_t b, int f,
+                       rec_eq7_bulb_terms *t)
+{
+    size_t bands = (size_t)m->bands, K = (size_t)m->K, np = rec_eq7_harmonics_np(m), la = bands * 2 * np;
+    size_t lt = bands * K, nf = (size_t)m->nfit, b0 = nf == 1 ? 0 : (size_t)f, nbf = nf == 1 ? bands : 1;
+    size_t ka = b0 * 2 * np, kt = b0 * K;
+    const double *yx = w->bs_y, *yw = yx + la, *xa = yw + la, *wa = xa + lt;
+    const double *as = m->bs_a + b * la + ka, *at = m->bs_b + b * la + ka;
+    t->cs = t->ct = 0.0;
+    for (size_t q = 0; q < nbf; q++) t->cs += as[q * 2 * np] * yx[ka + q * 2 * np], t->ct += at[q * 2 * np] * yw[ka + q * 2 * np];
+    t->tail_s = gs_dot(m->bs_at + b * lt + kt, xa + kt, nbf * K);
+    t->tail_t = gs_dot(m->bs_bt + b * lt + kt, wa + kt, nbf * K);
+    t->es = harmonic_sum(as, yx + ka, (int)nbf, np) + t->tail_s;
+    t->et = harmonic_sum(at, yw + ka, (int)nbf, np) + t->tail_t;
+    t->sb = t->es - fabs(t->cs) + t->cs + 1e-9 * t->es;
+    t->tb = t->ct - (t->et - fabs(t->ct)) - 1e-9 * t->et;
+    if (p->full[f]) {
+        double tw = p->wmin[f] * m->bs_t2[b * nf + (size_t)f] * (1.0 - 1e-12);
+        t->tb = tw > t->tb ? tw : t->tb;
+    }
+}
+
+/* The bound on L from each brightness's bounds u = -sum_f log(tb_f)/2 and g >= sum_f S_f^2/T_f
+ * (free_bounds' bound, eq7_scores.c), with the rounding's margin. */
+static double bound_of(double u, double g, double Sxx)
+{
+    double d = g - Sxx, v = u + 0.5 * (d < 0.0 ? d : 0.0);
+    v += 1e-9 * (1.0 + fabs(v)) + 1e-12 * Sxx;
+    return v > -INFINITY ? v : INFINITY;
+}
+
 void rec_eq7_bulb_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx, double *U)
 {
-    size_t nb = m->nb, bands = (size_t)m->bands, K = (size_t)m->K, np = rec_eq7_harmonics_np(m);
-    size_t nh = (size_t)m->G / 2 + 1, la = bands * 2 * np, lt = bands * K;
-    int nf = m->nfit;
+    size_t nb = m->nb, bands = (size_t)m->bands, np = rec_eq7_harmonics_np(m), la = bands * 2 * np;
+    size_t nh = (size_t)m->G / 2 + 1, lt = bands * (size_t)m->K;
     const double complex *X = w->spec + nh, *W = X + bands * nh;   /* rec_eq7_light_dfts */
     double *yx = w->bs_y, *yw = yx + la, *xa = yw + la, *wa = xa + lt;
     rec_eq7_harmonic_row(m, X, nh, yx, xa);
@@ -150,30 +186,137 @@ void rec_eq7_bulb_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pr
     for (size_t b = 0; b < nb; b++) {
         double u = 0.0, g = 0.0;
         int none = 0;   /* no bound: the bulb is opened */
-        for (int f = 0; f < nf && !none; f++) {
+        for (int f = 0; f < m->nfit && !none; f++) {
             if (!(p->wmin[f] > 0.0)) continue;   /* no usable sample: no brightness */
-            size_t b0 = nf == 1 ? 0 : (size_t)f, nbf = nf == 1 ? bands : 1, ka = b0 * 2 * np, kt = b0 * K;
-            double cs, ct;
-            double es = rec_eq7_harmonic_extent(m->bs_a + b * la + ka, m->bs_at + b * lt + kt, yx + ka, xa + kt,
-                                                (int)nbf, np, K, &cs);
-            double et = rec_eq7_harmonic_extent(m->bs_b + b * la + ka, m->bs_bt + b * lt + kt, yw + ka, wa + kt,
-                                                (int)nbf, np, K, &ct);
-            /* the sums' constant terms with their signs; rounding: the FFT's and these sums', far
-             * inside 1e-9 of the magnitudes' sum */
-            double sb = es - fabs(cs) + cs + 1e-9 * es, tb = ct - (et - fabs(ct)) - 1e-9 * et;
-            if (p->full[f]) {
-                double tw = p->wmin[f] * m->bs_t2[b * (size_t)nf + (size_t)f] * (1.0 - 1e-12);
-                tb = tw > tb ? tw : tb;
-            }
-            if (!(tb > 0.0) || !(sb <= 1e300)) {
-                none = 1;
-                break;
-            }
-            u -= 0.5 * log(tb);
-            g += sb > 0.0 ? sb * (sb / tb) : 0.0;   /* (S <= 0 adds nothing: free_bounds) */
+            rec_eq7_bulb_terms *t = w->bs_t + b * (size_t)m->nfit + (size_t)f;
+            bulb_terms(m, w, p, b, f, t);
+            none = !(t->tb > 0.0) || !(t->sb <= 1e300);
+            u -= 0.5 * log(t->tb);
+            g += t->sb > 0.0 ? t->sb * (t->sb / t->tb) : 0.0;   /* (S <= 0 adds nothing: free_bounds) */
         }
-        double d = g - Sxx, v = u + 0.5 * (d < 0.0 ? d : 0.0);
-        v += 1e-9 * (1.0 + fabs(v)) + 1e-12 * Sxx;
-        U[b] = none || !(v > -INFINITY) ? INFINITY : v;
+        U[b] = none ? INFINITY : bound_of(u, g, Sxx);
     }
+}
+
+/* The coupled bound. At every cell, S^2/T (S > 0; else 0) = max_{mu >= 0} 4 mu (S - mu T), and
+ * S - mu T is itself a trigonometric sum, of the cross-spectra C - mu C', so
+ *   S^2/T <= max_{mu >= 0} A(mu),   A(mu) = 4 mu h(mu),
+ *   h(mu) = C_0 + tail_S - mu (C'_0 - tail_T) + phi(mu),   phi(mu) = sum_{0 < n <= K/2} f_n |C_n - mu C'_n|
+ * (the tails' harmonics by the triangle inequality), and with every sample, A(mu) <= 4 mu (sb - mu
+ * w_min |t|^2) too. phi, a sum of norms of affine functions, is convex, so on [mu_a, mu_c] h is
+ * at most its chord and A at most a quadratic whose maximum is exact: a branch and bound over mu
+ * in [0, sb/(2 tb)] (each cell's best mu, S/(2T), lies there) until the bound is below stop, or
+ * cannot get there (a value of the bound function itself reaches it), or is within 1e-6 of those
+ * values. S
+ * and T peak at different cells with unequal weights; this bound couples them there, where sb and
+ * tb alone cannot. */
+typedef struct {
+    double *zr, *zi, *tr, *ti;  /* C_n and C'_n, n < np */
+    double c0, slope, e0, e1;   /* h(mu) = c0 - mu slope + phi(mu) + 1e-9 (e0 + mu e1) */
+    size_t np;
+    double sb, tw;              /* the bound 4 mu (sb - mu tw) (tw 0: none) */
+} bs_coupled;
+
+static double coupled_h(const bs_coupled *c, double mu)
+{
+    double phi = 0.0;
+    for (size_t n = 1; n < c->np; n++) phi += sqrt((c->zr[n] - mu * c->tr[n]) * (c->zr[n] - mu * c->tr[n]) +
+                                                    (c->zi[n] - mu * c->ti[n]) * (c->zi[n] - mu * c->ti[n]));
+    return c->c0 - mu * c->slope + phi + 1e-9 * (c->e0 + mu * c->e1);
+}
+
+/* max over [a, b] of 4 mu (p + q mu) */
+static double quad_max(double p, double q, double a, double b)
+{
+    double v = 4.0 * a * (p + q * a), vb = 4.0 * b * (p + q * b);
+    v = vb > v ? vb : v;
+    if (q < 0.0) {
+        double x = -p / (2.0 * q);
+        if (x > a && x < b) v = 4.0 * x * (p + q * x) > v ? 4.0 * x * (p + q * x) : v;
+    }
+    return v;
+}
+
+static double coupled_at(const bs_coupled *c, double mu, double h)
+{
+    double a = 4.0 * mu * h, b = c->tw > 0.0 ? 4.0 * mu * (c->sb - mu * c->tw) : INFINITY;
+    return a < b ? a : b;
+}
+
+static double coupled_interval(const bs_coupled *c, double a, double b, double ha, double hb)
+{
+    double q = (hb - ha) / (b - a), v = quad_max(ha - q * a, q, a, b);
+    if (c->tw > 0.0) {
+        double vw = quad_max(c->sb, -c->tw, a, b);
+        v = vw < v ? vw : v;
+    }
+    return v > 0.0 ? v : 0.0;
+}
+
+#define BS_INTERVALS 48
+static double coupled_gain(const bs_coupled *c, double mu_n, double stop)
+{
+    double ia[BS_INTERVALS], ib[BS_INTERVALS], ha[BS_INTERVALS], hb[BS_INTERVALS], up[BS_INTERVALS];
+    int n = 1;
+    ia[0] = 0.0, ib[0] = mu_n, ha[0] = coupled_h(c, 0.0), hb[0] = coupled_h(c, mu_n);
+    up[0] = coupled_interval(c, ia[0], ib[0], ha[0], hb[0]);
+    double lo = coupled_at(c, mu_n, hb[0]) > 0.0 ? coupled_at(c, mu_n, hb[0]) : 0.0;
+    for (;;) {
+        int i = 0;
+        for (int k = 1; k < n; k++) i = up[k] > up[i] ? k : i;
+        if (up[i] < stop || lo >= stop || up[i] - lo <= 1e-6 * up[i] || n == BS_INTERVALS) return up[i];
+        double mid = 0.5 * (ia[i] + ib[i]), hm = coupled_h(c, mid), v = coupled_at(c, mid, hm);
+        lo = v > lo ? v : lo;
+        ia[n] = mid, ib[n] = ib[i], ha[n] = hm, hb[n] = hb[i];
+        ib[i] = mid, hb[i] = hm;
+        up[i] = coupled_interval(c, ia[i], ib[i], ha[i], hb[i]);
+        up[n] = coupled_interval(c, ia[n], ib[n], ha[n], hb[n]);
+        n++;
+    }
+}
+
+double rec_eq7_bulb_tighten(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx, size_t b,
+                            double th)
+{
+    size_t bands = (size_t)m->bands, np = rec_eq7_harmonics_np(m), la = bands * 2 * np;
+    size_t lt = bands * (size_t)m->K;
+    int nf = m->nfit;
+    const rec_eq7_bulb_terms *t = w->bs_t + b * (size_t)nf;
+    double u = 0.0, g[GS_MAX_BANDS], gs = 0.0;
+    if (!(w->bub[b] < INFINITY)) return w->bub[b];
+    for (int f = 0; f < nf; f++) {
+        g[f] = 0.0;
+        if (!(p->wmin[f] > 0.0)) continue;
+        u -= 0.5 * log(t[f].tb);
+        g[f] = t[f].sb > 0.0 ? t[f].sb * (t[f].sb / t[f].tb) : 0.0;
+        gs += g[f];
+    }
+    /* sum_f g_f below this gives a bound below th (the margin: bound_of's rounding's) */
+    double gth = Sxx + 2.0 * (th - u) - 1e-6 * (1.0 + fabs(th) + fabs(u) + Sxx);
+    for (int f = 0; f < nf; f++) {
+        if (!(p->wmin[f] > 0.0) || !(t[f].sb > 0.0)) continue;
+        size_t b0 = nf == 1 ? 0 : (size_t)f, nbf = nf == 1 ? bands : 1, ka = b0 * 2 * np;
+        const double *as = m->bs_a + b * la + ka, *at = m->bs_b + b * la + ka, *yx = w->bs_y + ka, *yw = w->bs_y + la + ka;
+        bs_coupled c;
+        c.np = np;
+        c.zr = w->bs_y + 2 * la + 2 * lt, c.zi = c.zr + np, c.tr = c.zi + np, c.ti = c.tr + np;
+        for (size_t k = 0; k < np; k++) {
+            double zr = 0.0, zi = 0.0, tr = 0.0, ti = 0.0;
+            for (size_t q = 0; q < nbf; q++) {
+                const double *a = as + q * 2 * np, *a2 = at + q * 2 * np, *x = yx + q * 2 * np, *v = yw + q * 2 * np;
+                zr += a[k] * x[k] - a[np + k] * x[np + k], zi += a[k] * x[np + k] + a[np + k] * x[k];
+                tr += a2[k] * v[k] - a2[np + k] * v[np + k], ti += a2[k] * v[np + k] + a2[np + k] * v[k];
+            }
+            c.zr[k] = zr, c.zi[k] = zi, c.tr[k] = tr, c.ti[k] = ti;
+        }
+        c.c0 = t[f].cs + t[f].tail_s;
+        c.slope = t[f].ct - t[f].tail_t;
+        c.e0 = t[f].es, c.e1 = t[f].et;
+        c.sb = t[f].sb;
+        c.tw = p->full[f] ? p->wmin[f] * m->bs_t2[b * (size_t)nf + (size_t)f] * (1.0 - 1e-12) : 0.0;
+        double gc = coupled_gain(&c, 0.5 * t[f].sb / t[f].tb, gth - (gs - g[f]));
+        if (gc < g[f]) gs -= g[f] - gc, g[f] = gc;
+    }
+    double v = bound_of(u, gs, Sxx);
+    return v < w->bub[b] ? v : w->bub[b];
 }

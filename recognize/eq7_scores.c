@@ -765,9 +765,9 @@ static void bulb_bounds(screen *sc)
 }
 
 /* Exact: the best bound's template; for each continuous bulb its best (bulb_best; with the
- * screen of bulbs, only the two bulbs of the largest bounds and those whose bound reaches within
- * CUT_PIXEL of the best L so far, largest first: the others' cells are all below the cut, and
- * stay -inf); every template whose bound is within CUT_PIXEL of the best computed L (the
+ * screen of bulbs, only the bulb of the largest bound, the next by coupled bound, and those whose
+ * coupled bound reaches within CUT_PIXEL of the best L so far, largest first: the others' cells
+ * are all below the cut, and stay -inf); every template whose bound is within CUT_PIXEL of the best computed L (the
  * posterior's mass; in one pass, its threshold only rises); the runner-up (the two best
  * discrete templates: the best bound of the rest while it beats the second rank); with the
  * nested tests their first templates. */
@@ -789,8 +789,27 @@ double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep 
     if (rec_eq7_bulb_screen(m)) {
         bulb_bounds(&sc);
         /* (two at least: a runner-up bulb exists whenever the database has one) */
-        for (size_t i = 0; i < m->nb && (i < 2 || w->bub[w->border[i]] >= sc.Lmax - CUT_PIXEL); i++)
-            open_bulb(&sc, w->border[i]);
+        open_bulb(&sc, w->border[0]);
+        /* the others within the cut by their first bounds: their coupled bounds, largest first */
+        double th0 = sc.Lmax - CUT_PIXEL;
+        size_t n = 1;
+        for (; n < m->nb && w->bub[w->border[n]] >= th0; n++)
+            w->bub[w->border[n]] = rec_eq7_bulb_tighten(m, w, p, Sxx, w->border[n], th0);
+        for (size_t i = 2; i < n; i++)
+            for (size_t k = i; k > 1 && w->bub[w->border[k - 1]] < w->bub[w->border[k]]; k--) {
+                size_t t = w->border[k];
+                w->border[k] = w->border[k - 1], w->border[k - 1] = t;
+            }
+        for (size_t i = 1; i < m->nb; i++) {
+            size_t b = w->border[i];
+            double th = sc.Lmax - CUT_PIXEL;
+            if (i >= 2) {
+                if (i >= n || !(w->bub[b] >= th)) break;
+                if (th > th0) w->bub[b] = rec_eq7_bulb_tighten(m, w, p, Sxx, b, th);
+                if (!(w->bub[b] >= th)) continue;
+            }
+            open_bulb(&sc, b);
+        }
     } else {
         size_t jb = 0;
         if (m->red) red_bounds(m, w, Sxx, &jb);

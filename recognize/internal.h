@@ -312,6 +312,13 @@ typedef struct {
     int full[GS_MAX_BANDS];     /* every sample of the brightness has a weight (none dropped) */
 } rec_eq7_prep;
 
+/* A continuous bulb's brightness f against a light (eq7_bulbscreen.c): the constant terms of its
+ * sums S and T (signed), their tails' magnitudes, the sums of their magnitudes, and S <= sb,
+ * T >= tb at every cell */
+typedef struct {
+    double cs, ct, tail_s, tail_t, es, et, sb, tb;
+} rec_eq7_bulb_terms;
+
 /* Scratch for one light or pixel, or a block of lights (rec_eq7_work_alloc_rows). */
 typedef struct {
     double *L;              /* [M] log likelihood (valid for candidates) */
@@ -362,7 +369,8 @@ typedef struct {
     double *bub;                           /* [nb] */
     unsigned char *open;                   /* [nb] */
     size_t *border;                        /* [nb] */
-    double *bs_y;                          /* [4 bands rec_eq7_harmonics_np + 2 D] */
+    double *bs_y;                          /* [(4 bands + 4) rec_eq7_harmonics_np + 2 D] */
+    rec_eq7_bulb_terms *bs_t;              /* [nb nfit] */
     double complex *spec_v;                /* [(G/2 + 1) bands] the band DFTs of other values
                                             * (the nested tests' cross sums, rec_eq7_grid_dots) */
     /* the reddened model: the light's log prior per tau (has_tau_prior; else uniform) and, when
@@ -455,6 +463,10 @@ double rec_eq7_harmonic_extent(const double *a, const double *tail, const double
                                size_t np, size_t K, double *c0);
 gs_status rec_eq7_bulbscreen_setup(rec_matcher *m);
 void rec_eq7_bulb_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx, double *U);
+/* Bulb b's coupled bound (after rec_eq7_bulb_bounds, at most its bound w->bub[b]): refined until
+ * it is below th or cannot get there (th = -inf: as tight as it gets) */
+double rec_eq7_bulb_tighten(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx, size_t b,
+                            double th);
 /* Tables (rec_matcher_new; fs_on when m->fourier, every bulb continuous, not m->bandpath). */
 gs_status rec_eq7_pixscreen_setup(rec_matcher *m);
 gs_status rec_eq7_pixscreen_alloc(const rec_matcher *m, size_t B, rec_pixscreen_work *sw);

@@ -421,11 +421,11 @@ TEST(eq7_screen_bounds_hold_with_dropped_samples)
 TEST(eq7_bulb_bounds_hold)
 {
     static const int Ks[] = {4, 8, 13, 26};
-    enum { KINDS = 10 };
+    enum { KINDS = 11 };
     uint64_t rs = 12345;
     gs_delight *d = eq7fx_make_db(50, 3, 1, 0), *g = gs_delight_new();
     CHECK_OK(gs_delight_generate(g, 300));
-    long checked = 0, closed[KINDS] = {0};
+    long checked = 0, closed[KINDS] = {0}, tighter[KINDS] = {0}, bulbs[KINDS] = {0};
     for (int db = 0; db < 2; db++)
         for (int bm = 0; bm < 2; bm++)
             for (size_t ki = 0; ki < sizeof Ks / sizeof *Ks; ki++) {
@@ -435,16 +435,18 @@ TEST(eq7_bulb_bounds_hold)
                 CHECK_MSG(m->bs_on, "K = %d: expected the screen of bulbs", K);
                 size_t D = (size_t)m->D;
                 double *x = malloc(sizeof *x * D), *sg = malloc(sizeof *sg * D);
+                double *first = malloc(sizeof *first * m->nb), *tight = malloc(sizeof *tight * m->nb);
                 rec_eq7_work w;
                 CHECK_OK(rec_eq7_work_alloc(m, &w));
-                for (int i = 0; i < 40; i++) {
+                for (int i = 0; i < 44; i++) {
                     int kind = i % KINDS;
-                    double a = kind <= 1 ? 0.0 : kind == 3 ? 3000.0 : kind == 9 ? 1e6 : 30.0;
+                    double a = kind <= 1 ? 0.0 : kind == 3 || kind == 10 ? 3000.0 : kind == 9 ? 1e6 : 30.0;
                     eq7fx_render(rec_matcher_bulb(m, gs_splitmix64(&rs) % m->nb), gs_splitmix_uniform(&rs), K, a, 1.0,
                                  &rs, x, sg);
                     for (size_t q = 0; q < D; q++) {
                         x[q] = kind == 1 ? -x[q] - 0.5 : kind == 7 ? x[q] + 50.0 : kind == 8 ? x[q] - 50.0 - 0.2 * a : x[q];
                         if (kind == 6) sg[q] *= pow(10.0, 3.0 * gs_splitmix_uniform(&rs));
+                        if (kind == 10) sg[q] *= 0.5 + gs_splitmix_uniform(&rs);   /* (the noise as drawn: 1) */
                     }
                     int run = kind == 4 ? 1 + (int)(gs_splitmix64(&rs) % (uint64_t)(K - 1)) : 0, k0 = (int)(gs_splitmix64(&rs) % (uint64_t)K);
                     for (int band = 0; band < 3; band++)
@@ -452,28 +454,44 @@ TEST(eq7_bulb_bounds_hold)
                     rec_match f;
                     CHECK_OK(rec_eq7_match_light_ws(m, &w, x, sg, 0.0, &f, NULL));
                     if (!w.prep[0].used) continue;
+                    /* each bulb's first bound, and its coupled bound as tight as it gets */
+                    double Sxx = w.prep[0].Sxx;
                     rec_eq7_light_dfts(m, &w);
+                    rec_eq7_bulb_bounds(m, &w, &w.prep[0], Sxx, first);
                     for (size_t b = 0; b < m->nb; b++) {
                         closed[kind] += !w.open[b];
+                        double screened = w.bub[b];
+                        w.bub[b] = first[b];
+                        tight[b] = rec_eq7_bulb_tighten(m, &w, &w.prep[0], Sxx, b, -INFINITY);
+                        w.bub[b] = screened;
+                        CHECK(tight[b] <= first[b]);
+                        tighter[kind] += tight[b] < first[b] - 1.0;
+                        bulbs[kind]++;
+                    }
+                    for (size_t b = 0; b < m->nb; b++) {
                         rec_eq7_grid_sums(m, &w, b);
                         for (size_t j = m->first[b]; j < m->first[b] + m->count[b]; j++) {
-                            double L = rec_eq7_loglik_fit(m, &w, j, w.prep[0].Sxx);
+                            double L = rec_eq7_loglik_fit(m, &w, j, Sxx);
                             if (!isfinite(L)) continue;
                             checked++;
-                            CHECK_MSG(w.bub[b] >= L, "db %d model %d K %d light %d (kind %d) bulb %zu cell %zu: bound %.12g "
-                                      "below the exact score %.12g", db, bm, K, i, kind, b, j - m->first[b], w.bub[b], L);
+                            CHECK_MSG(w.bub[b] >= L && tight[b] >= L, "db %d model %d K %d light %d (kind %d) bulb %zu "
+                                      "cell %zu: bound %.12g (coupled %.12g) below the exact score %.12g", db, bm, K, i,
+                                      kind, b, j - m->first[b], w.bub[b], tight[b], L);
                         }
                     }
                 }
                 rec_eq7_work_free(&w);
-                free(x), free(sg);
+                free(x), free(sg), free(first), free(tight);
                 rec_matcher_free(m);
             }
     long nclosed = 0;
     printf("    %ld cells checked against their bulbs' bounds; bulbs left closed per kind of light:", checked);
     for (int k = 0; k < KINDS; k++) printf(" %ld", closed[k]), nclosed += closed[k];
+    printf("\n    coupled bounds more than 1 nat below the first, per kind:");
+    for (int k = 0; k < KINDS; k++) printf(" %ld/%ld", tighter[k], bulbs[k]);
     printf("\n");
     CHECK(nclosed > 1000);
+    CHECK(tighter[10] > bulbs[10] / 4);   /* weights unequal: the coupled bound is the tighter */
     gs_delight_free(g);
     gs_delight_free(d);
 }
