@@ -56,9 +56,10 @@ void rec_eq7_harmonic_table(const rec_matcher *m, const double complex *hat, siz
 }
 
 /* sum over n < np of |sum_band a_band,n y_band,n| (complex; re and im blocks of np each), 8
- * harmonics at a time (gcc's vector types: the loop over n was compiled as scalar code). */
+ * harmonics at a time (gcc's vector types: the loop over n was compiled as scalar code); the
+ * complex sums themselves into z (re and im blocks of np) unless NULL. */
 typedef double bs_vd __attribute__((vector_size(BS_LANES * sizeof(double))));
-GS_VECTOR_LOOP static double harmonic_sum(const double *a, const double *y, int bands, size_t np)
+GS_VECTOR_LOOP static double harmonic_sum(const double *a, const double *y, int bands, size_t np, double *z)
 {
     bs_vd acc = {0};
     for (size_t n = 0; n < np; n += BS_LANES) {
@@ -72,6 +73,10 @@ GS_VECTOR_LOOP static double harmonic_sum(const double *a, const double *y, int 
             REC_VLOAD(yi, yb + np);
             re += ar * yr - ai * yi;
             im += ar * yi + ai * yr;
+        }
+        if (z) {
+            memcpy(z + n, &re, sizeof re);
+            memcpy(z + np + n, &im, sizeof im);
         }
         bs_vd q = re * re + im * im;
         double t[BS_LANES];
@@ -89,7 +94,7 @@ double rec_eq7_harmonic_extent(const double *a, const double *tail, const double
     double c = 0.0;
     for (int band = 0; band < bands; band++) c += a[(size_t)band * 2 * np] * y[(size_t)band * 2 * np];
     *c0 = c;
-    return harmonic_sum(a, y, bands, np) + gs_dot(tail, ya, (size_t)bands * K);
+    return harmonic_sum(a, y, bands, np, NULL) + gs_dot(tail, ya, (size_t)bands * K);
 }
 
 void rec_eq7_harmonic_row(const rec_matcher *m, const double complex *V, size_t ldv, double *y, double *ya)
@@ -144,7 +149,7 @@ gs_status rec_eq7_bulbscreen_setup(rec_matcher *m)
  * w->bs_y): the constant terms of S and T (signed), their tails' magnitudes, the sums of their
  * magnitudes (constant, harmonics, tails), and S <= sb, T >= tb at every cell (tb <= 0: no
  * bound). Rounding: the FFT's and these sums', far inside 1e-9 of the magnitudes' sums. */
-static void bulb_terms(const rec_matcher *m, const rec_eq7_work *w, const rec_eq7_prep *p, size_t b, int f,
+static void bulb_terms(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, size_t b, int f,
                        rec_eq7_bulb_terms *t)
 {
     size_t bands = (size_t)m->bands, K = (size_t)m->K, np = rec_eq7_harmonics_np(m), la = bands * 2 * np;
@@ -152,12 +157,12 @@ static void bulb_terms(const rec_matcher *m, const rec_eq7_work *w, const rec_eq
     size_t ka = b0 * 2 * np, kt = b0 * K;
     const double *yx = w->bs_y, *yw = yx + la, *xa = yw + la, *wa = xa + lt;
     const double *as = m->bs_a + b * la + ka, *at = m->bs_b + b * la + ka;
-    t->cs = t->ct = 0.0;
-    for (size_t q = 0; q < nbf; q++) t->cs += as[q * 2 * np] * yx[ka + q * 2 * np], t->ct += at[q * 2 * np] * yw[ka + q * 2 * np];
     t->tail_s = gs_dot(m->bs_at + b * lt + kt, xa + kt, nbf * K);
     t->tail_t = gs_dot(m->bs_bt + b * lt + kt, wa + kt, nbf * K);
-    t->es = harmonic_sum(as, yx + ka, (int)nbf, np) + t->tail_s;
-    t->et = harmonic_sum(at, yw + ka, (int)nbf, np) + t->tail_t;
+    double *z = w->bs_z + (b * nf + (size_t)f) * 4 * np;   /* (C and C': rec_eq7_bulb_tighten) */
+    t->es = harmonic_sum(as, yx + ka, (int)nbf, np, z) + t->tail_s;
+    t->et = harmonic_sum(at, yw + ka, (int)nbf, np, z + 2 * np) + t->tail_t;
+    t->cs = z[0], t->ct = z[2 * np];   /* (the constant terms: real) */
     t->sb = t->es - fabs(t->cs) + t->cs + 1e-9 * t->es;
     t->tb = t->ct - (t->et - fabs(t->ct)) - 1e-9 * t->et;
     if (p->full[f]) {
@@ -211,13 +216,13 @@ void rec_eq7_bulb_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pr
  * and T peak at different cells with unequal weights; this bound couples them there, where sb and
  * tb alone cannot. */
 typedef struct {
-    double *zr, *zi, *tr, *ti;  /* C_n and C'_n, n < np */
+    const double *zr, *zi, *tr, *ti;   /* C_n and C'_n, n < np */
     double c0, slope, e0, e1;   /* h(mu) = c0 - mu slope + phi(mu) + 1e-9 (e0 + mu e1) */
     size_t np;
     double sb, tw;              /* the bound 4 mu (sb - mu tw) (tw 0: none) */
 } bs_coupled;
 
-static double coupled_h(const bs_coupled *c, double mu)
+GS_VECTOR_LOOP static double coupled_h(const bs_coupled *c, double mu)
 {
     double phi = 0.0;
     for (size_t n = 1; n < c->np; n++) phi += sqrt((c->zr[n] - mu * c->tr[n]) * (c->zr[n] - mu * c->tr[n]) +
@@ -278,8 +283,7 @@ static double coupled_gain(const bs_coupled *c, double mu_n, double stop)
 double rec_eq7_bulb_tighten(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx, size_t b,
                             double th)
 {
-    size_t bands = (size_t)m->bands, np = rec_eq7_harmonics_np(m), la = bands * 2 * np;
-    size_t lt = bands * (size_t)m->K;
+    size_t np = rec_eq7_harmonics_np(m);
     int nf = m->nfit;
     const rec_eq7_bulb_terms *t = w->bs_t + b * (size_t)nf;
     double u = 0.0, g[GS_MAX_BANDS], gs = 0.0;
@@ -295,20 +299,8 @@ double rec_eq7_bulb_tighten(const rec_matcher *m, rec_eq7_work *w, const rec_eq7
     double gth = Sxx + 2.0 * (th - u) - 1e-6 * (1.0 + fabs(th) + fabs(u) + Sxx);
     for (int f = 0; f < nf; f++) {
         if (!(p->wmin[f] > 0.0) || !(t[f].sb > 0.0)) continue;
-        size_t b0 = nf == 1 ? 0 : (size_t)f, nbf = nf == 1 ? bands : 1, ka = b0 * 2 * np;
-        const double *as = m->bs_a + b * la + ka, *at = m->bs_b + b * la + ka, *yx = w->bs_y + ka, *yw = w->bs_y + la + ka;
-        bs_coupled c;
-        c.np = np;
-        c.zr = w->bs_y + 2 * la + 2 * lt, c.zi = c.zr + np, c.tr = c.zi + np, c.ti = c.tr + np;
-        for (size_t k = 0; k < np; k++) {
-            double zr = 0.0, zi = 0.0, tr = 0.0, ti = 0.0;
-            for (size_t q = 0; q < nbf; q++) {
-                const double *a = as + q * 2 * np, *a2 = at + q * 2 * np, *x = yx + q * 2 * np, *v = yw + q * 2 * np;
-                zr += a[k] * x[k] - a[np + k] * x[np + k], zi += a[k] * x[np + k] + a[np + k] * x[k];
-                tr += a2[k] * v[k] - a2[np + k] * v[np + k], ti += a2[k] * v[np + k] + a2[np + k] * v[k];
-            }
-            c.zr[k] = zr, c.zi[k] = zi, c.tr[k] = tr, c.ti[k] = ti;
-        }
+        const double *z = w->bs_z + (b * (size_t)nf + (size_t)f) * 4 * np;
+        bs_coupled c = {.zr = z, .zi = z + np, .tr = z + 2 * np, .ti = z + 3 * np, .np = np};
         c.c0 = t[f].cs + t[f].tail_s;
         c.slope = t[f].ct - t[f].tail_t;
         c.e0 = t[f].es, c.e1 = t[f].et;

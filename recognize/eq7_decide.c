@@ -70,6 +70,7 @@ void rec_eq7_work_free(rec_eq7_work *w)
     free(w->border);
     free(w->bs_y);
     free(w->bs_t);
+    free(w->bs_z);
     memset(w, 0, sizeof *w);
 }
 
@@ -148,9 +149,10 @@ gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t 
     w->bub = bs ? malloc(sizeof *w->bub * nb) : NULL;
     w->open = bs ? calloc(nb, 1) : NULL;
     w->border = bs ? malloc(sizeof *w->border * nb) : NULL;
-    w->bs_y = bs ? malloc(sizeof *w->bs_y * ((4 * (size_t)m->bands + 4) * rec_eq7_harmonics_np(m) + 2 * D)) : NULL;
+    w->bs_y = bs ? malloc(sizeof *w->bs_y * (4 * (size_t)m->bands * rec_eq7_harmonics_np(m) + 2 * D)) : NULL;
+    w->bs_z = bs ? malloc(sizeof *w->bs_z * nb * (size_t)m->nfit * 4 * rec_eq7_harmonics_np(m)) : NULL;
     w->bs_t = bs ? malloc(sizeof *w->bs_t * nb * (size_t)m->nfit) : NULL;
-    part_bad = part_bad || (bs && (!w->bub || !w->open || !w->border || !w->bs_y || !w->bs_t));
+    part_bad = part_bad || (bs && (!w->bub || !w->open || !w->border || !w->bs_y || !w->bs_t || !w->bs_z));
     if (!w->L || !w->mass || !w->cand || !w->mark || !w->bmass || !w->wmass || !w->has_peak ||
         !w->peak_s || !w->peak_L || !w->peak_sig || !w->peak_z || !w->peak_gain || !w->peak_cell || !w->S_all ||
         !w->T_all || !w->w_all || !w->wx_all || !w->xs_all || !w->prep || !w->U || !w->done || !w->tight || !w->tmp || !w->tt || !w->dt ||

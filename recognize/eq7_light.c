@@ -95,7 +95,7 @@ void rec_eq7_refine_peak(const rec_matcher *m, rec_eq7_work *w, size_t b, size_t
     double lo = -cell, hi = cell;
     chi2_eval e;
     rec_eq7_series_bulb(m, w, b);
-    for (int it = 0; it < 60; it++) {
+    for (int it = 0;; it++) {   /* (the peak: the last u evaluated, e) */
         chi2_at(m, w, b, sc + u, Sxx, &e);
         if (e.d1 > 0.0) hi = u;
         else lo = u;
@@ -104,13 +104,11 @@ void rec_eq7_refine_peak(const rec_matcher *m, rec_eq7_work *w, size_t b, size_t
         else step = e.d1 > 0.0 ? -0.25 * (u - lo) : 0.25 * (hi - u);
         double un = u + step;
         if (!(un > lo && un < hi)) un = 0.5 * (lo + hi);
-        if (fabs(un - u) < 1e-11 || hi - lo < 1e-11) {   /* 2e-9 deg of phase */
-            u = un;
-            break;
-        }
+        /* 2e-9 deg of phase, and 1e-4 of the peak's std (chi2 within 1e-8 of its least) */
+        double tol = e.d2 > 0.0 && 1e-4 * sqrt(2.0 / e.d2) < 1e-11 ? 1e-4 * sqrt(2.0 / e.d2) : 1e-11;
+        if (fabs(un - u) < tol || hi - lo < 1e-11 || it == 59) break;
         u = un;
     }
-    chi2_at(m, w, b, sc + u, Sxx, &e);
     double sig = (e.d2 > 0.0) ? sqrt(2.0 / e.d2) : INV_SQRT12;
     if (!(sig < INV_SQRT12)) sig = INV_SQRT12;
     double Lp = loglik_bulb(m, w, (int)b, Sxx, e.S, e.T);
@@ -495,7 +493,7 @@ gs_status rec_eq7_light_finish(const rec_matcher *m, rec_eq7_work *w, size_t q, 
             rec_eq7_grid_peak(m, w, b, jb);   /* negligible: grid values only */
             continue;
         }
-        if (!series_row) rec_eq7_series_row(m, w);
+        if (!series_row) rec_eq7_series_row(m, w, rec_eq7_bulb_screen(m));   /* (its DFTs: the screen's) */
         series_row = 1;
         rec_eq7_refine_peak(m, w, b, jb, Sxx);
     }

@@ -287,7 +287,7 @@ static void pixel_row(const rec_matcher *m, pix_work *pw, const float *xr, const
                         w->xs[d] = w->wx[d] = xr[d] * inv;
                         w->w[d] = 1.0;
                     }
-                    rec_eq7_series_row(m, w);
+                    rec_eq7_series_row(m, w, 0);
                     wset = 1;
                 }
                 size_t js[3] = {jm, j0, jp};
@@ -500,7 +500,7 @@ static void pixel_row_band(const rec_matcher *m, pix_work *pw, const float *xr, 
                             w->wx[d] = w->w[d] * xr[d];
                         }
                     }
-                    rec_eq7_series_row(m, w);
+                    rec_eq7_series_row(m, w, 0);
                     wset = 1;
                 }
                 size_t js[3] = {jm, j0, jp};

@@ -152,16 +152,17 @@ GS_VECTOR_LOOP static void series_products(const double *restrict ar, const doub
     }
 }
 
-void rec_eq7_series_row(const rec_matcher *m, rec_eq7_work *w)
+void rec_eq7_series_row(const rec_matcher *m, rec_eq7_work *w, int have_dfts)
 {
-    size_t K = (size_t)m->K, nh = (size_t)m->G / 2 + 1;
+    size_t K = (size_t)m->K, nh = (size_t)m->G / 2 + 1, bn = (size_t)m->bands * nh;
     double *xr = w->rs, *xi = xr + m->D, *vr = xi + m->D, *vi = vr + m->D;
     /* X and W per band: the conjugates of rec_eq7_band_dfts' bins 0..K-1 */
     for (int q = 0; q < 2; q++) {
-        rec_eq7_band_dfts(m, q ? w->w : w->wx, w->spec_v);
+        const double complex *src = have_dfts ? w->spec + nh + (size_t)q * bn : w->spec_v;
+        if (!have_dfts) rec_eq7_band_dfts(m, q ? w->w : w->wx, w->spec_v);
         for (int band = 0; band < m->bands; band++)
             for (size_t r = 0; r < K; r++) {
-                double complex x = w->spec_v[(size_t)band * nh + r];
+                double complex x = src[(size_t)band * nh + r];
                 (q ? vr : xr)[(size_t)band * K + r] = creal(x);
                 (q ? vi : xi)[(size_t)band * K + r] = -cimag(x);
             }

@@ -369,8 +369,9 @@ typedef struct {
     double *bub;                           /* [nb] */
     unsigned char *open;                   /* [nb] */
     size_t *border;                        /* [nb] */
-    double *bs_y;                          /* [(4 bands + 4) rec_eq7_harmonics_np + 2 D] */
-    rec_eq7_bulb_terms *bs_t;              /* [nb nfit] */
+    double *bs_y;                          /* [4 bands rec_eq7_harmonics_np + 2 D] */
+    rec_eq7_bulb_terms *bs_t;              /* [nb nfit] each bulb's terms */
+    double *bs_z;                          /* [nb nfit 4 rec_eq7_harmonics_np] its C_n, C'_n */
     double complex *spec_v;                /* [(G/2 + 1) bands] the band DFTs of other values
                                             * (the nested tests' cross sums, rec_eq7_grid_dots) */
     /* the reddened model: the light's log prior per tau (has_tau_prior; else uniform) and, when
@@ -492,7 +493,7 @@ double rec_eq7_log_phi_fast(const rec_matcher *m, double z);
 gs_status rec_eq7_series_setup(rec_matcher *m);
 void rec_eq7_series_free(rec_matcher *m);
 size_t rec_eq7_series_work_size(const rec_matcher *m);
-void rec_eq7_series_row(const rec_matcher *m, rec_eq7_work *w);
+void rec_eq7_series_row(const rec_matcher *m, rec_eq7_work *w, int have_dfts);
 void rec_eq7_series_bulb(const rec_matcher *m, rec_eq7_work *w, size_t b);
 void rec_eq7_series_at(const rec_matcher *m, rec_eq7_work *w, size_t b, double s, double *S, double *S1,
                        double *S2, double *T, double *T1, double *T2);

@@ -150,7 +150,9 @@ TEST(eq7_series_sums_match_templates)
                             w.w[q] = 0.2 + gs_splitmix_uniform(&rs);
                             w.wx[q] = w.w[q] * (1.0 + 3.0 * gs_splitmix_normal(&rs));
                         }
-                        rec_eq7_series_row(m, &w);
+                        /* (the row's DFTs taken here, or from rec_eq7_light_dfts' as the light path) */
+                        if (b % 2) rec_eq7_light_dfts(m, &w);
+                        rec_eq7_series_row(m, &w, (int)(b % 2));
                         rec_eq7_series_bulb(m, &w, b);
                         for (int trial = 0; trial < 4; trial++) {
                             double sh = trial == 0 ? 0.0 : trial == 1 ? nextafter(1.0, 0.0) : gs_splitmix_uniform(&rs);
