@@ -8,12 +8,12 @@
  * B_g e^{2 pi i g x}. With the row's K-point DFTs X_r = sum_k w_k x_k e^{2 pi i r k / K} and
  * W_r = sum_k w_k e^{2 pi i r k / K} (per band),
  *   S(s) = Re sum_h A_h X_{h mod K} e^{-2 pi i h s},   T(s) = Re sum_g B_g W_{g mod K} e^{-2 pi i g s}:
- * per shift one pass over 7H + 4 terms (the bands of one brightness summed into one series), not
- * the template's harmonic fold and three K x K inverse DFTs per band. S's derivatives come from
- * the same terms times (2 pi h)^i; T's from the harmonics B' and B'' of (f^2)' = 2 f f' and
- * (f^2)'' = 2 (f'^2 + f f''), each tabulated per bulb by an FFT of the function sampled at
- * N > 4H points (2H harmonics: no aliasing), so that its rounding is relative to that function's
- * size, not to f^2's times g^2. */
+ * per shift one pass over 3H + 2 terms (the bands of one brightness summed into one series), not
+ * the template's harmonic fold and three K x K inverse DFTs per band. The derivatives come from
+ * the same terms times (2 pi h)^i. B is tabulated per bulb by an FFT of f^2 sampled at N > 4H
+ * points (2H harmonics: no aliasing) in long double: its rounding, some 1e-19 of f^2's largest
+ * value per harmonic, stays far below the sums' 1e-11 when T'' multiplies it by g^2 (up to 10^6;
+ * in double it did not). */
 #include "recognize/internal.h"
 
 #include <fftw3.h>
@@ -44,8 +44,7 @@ static double complex nyquist_factor(int n, int K)
     return -I * K / (M_PI * n) * (cexp(I * an) - 1.0);
 }
 
-/* Bulb b's A and B, B', B'', band by band, each real parts then imaginary parts, zero padded to
- * SER_PAD. */
+/* Bulb b's A and B, band by band, each real parts then imaginary parts, zero padded to SER_PAD. */
 static gs_status series_bulb(rec_matcher *m, size_t b, int hs)
 {
     int K = m->K, n = m->nfine[b], H = m->H[b], bands = m->bands;
@@ -53,19 +52,18 @@ static gs_status series_bulb(rec_matcher *m, size_t b, int hs)
     while (N <= 4 * (size_t)hs + 1) N *= 2;
     nh = N / 2 + 1;
     m->rs_a[b] = calloc((size_t)bands * 2 * la, sizeof **m->rs_a);
-    m->rs_b[b] = calloc((size_t)bands * 6 * lb, sizeof **m->rs_b);
-    double *y = fftw_malloc(sizeof *y * 3 * N);
-    fftw_complex *Y = fftw_malloc(sizeof *Y * 3 * nh);
+    m->rs_b[b] = calloc((size_t)bands * 2 * lb, sizeof **m->rs_b);
+    long double *y = fftwl_malloc(sizeof *y * N);
+    fftwl_complex *Y = fftwl_malloc(sizeof *Y * nh);
     gs_status st = GS_OK;
-    fftw_plan inv = NULL, fwd = NULL;
+    fftwl_plan inv = NULL, fwd = NULL;
     if (!m->rs_a[b] || !m->rs_b[b] || !y || !Y) {
         st = gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate the refinement's %d harmonics", hs);
         goto done;
     }
-    /* three transforms at once: f, f', f'' to samples; f^2 and its derivatives back */
-    int Ni = (int)N;
-    inv = fftw_plan_many_dft_c2r(1, &Ni, 3, Y, NULL, 1, (int)nh, y, NULL, 1, Ni, FFTW_ESTIMATE);
-    fwd = fftw_plan_many_dft_r2c(1, &Ni, 3, y, NULL, 1, Ni, Y, NULL, 1, (int)nh, FFTW_ESTIMATE);
+    /* f to samples, f^2 back */
+    inv = fftwl_plan_dft_c2r_1d((int)N, Y, y, FFTW_ESTIMATE);
+    fwd = fftwl_plan_dft_r2c_1d((int)N, y, Y, FFTW_ESTIMATE);
     if (!inv || !fwd) {
         st = gs_fail(GS_ENUMERIC, "Eq. 7 matcher: no %zu-point FFT plan", N);
         goto done;
@@ -78,31 +76,23 @@ static gs_status series_bulb(rec_matcher *m, size_t b, int hs)
         for (int h = 1; h <= H; h++) ar[h] = creal(F[h]), ai[h] = cimag(F[h]);
         double nq = m->nyq[b * (size_t)bands + (size_t)band];
         if (hs > H) ar[hs] = creal(nq * nyw), ai[hs] = cimag(nq * nyw);
-        /* f, f', f'' on N points (Y_0 = A_0, Y_h = (2 pi i h)^i A_h / 2) */
-        memset(Y, 0, sizeof *Y * 3 * nh);
+        /* f on N points (Y_0 = A_0, Y_h = A_h / 2) */
+        memset(Y, 0, sizeof *Y * nh);
         Y[0] = ar[0];
-        for (int h = 1; h <= hs; h++) {
-            double complex a = 0.5 * (ar[h] + I * ai[h]), d = I * EQ7_TWO_PI * h;
-            Y[h] = a, Y[nh + (size_t)h] = d * a, Y[2 * nh + (size_t)h] = d * d * a;
-        }
-        fftw_execute(inv);
-        for (size_t j = 0; j < N; j++) {
-            double f = y[j], f1 = y[N + j], f2 = y[2 * N + j];
-            y[j] = f * f, y[N + j] = 2.0 * f * f1, y[2 * N + j] = 2.0 * (f1 * f1 + f * f2);
-        }
-        fftw_execute(fwd);
-        for (int i = 0; i < 3; i++) {
-            double *br = m->rs_b[b] + ((size_t)band * 3 + (size_t)i) * 2 * lb, *bi = br + lb;
-            const fftw_complex *Z = Y + (size_t)i * nh;
-            br[0] = creal(Z[0]) / (double)N;
-            for (int g = 1; g <= 2 * hs; g++) br[g] = 2.0 * creal(Z[g]) / (double)N, bi[g] = 2.0 * cimag(Z[g]) / (double)N;
-        }
+        for (int h = 1; h <= hs; h++) Y[h] = 0.5L * ((long double)ar[h] + I * (long double)ai[h]);
+        fftwl_execute(inv);
+        for (size_t j = 0; j < N; j++) y[j] *= y[j];
+        fftwl_execute(fwd);
+        double *br = m->rs_b[b] + (size_t)band * 2 * lb, *bi = br + lb;
+        br[0] = (double)(creall(Y[0]) / (long double)N);
+        for (int g = 1; g <= 2 * hs; g++)
+            br[g] = (double)(2.0L * creall(Y[g]) / (long double)N), bi[g] = (double)(2.0L * cimagl(Y[g]) / (long double)N);
     }
 done:
-    if (inv) fftw_destroy_plan(inv);
-    if (fwd) fftw_destroy_plan(fwd);
-    fftw_free(y);
-    fftw_free(Y);
+    if (inv) fftwl_destroy_plan(inv);
+    if (fwd) fftwl_destroy_plan(fwd);
+    fftwl_free(y);
+    fftwl_free(Y);
     return st;
 }
 
@@ -133,8 +123,8 @@ size_t rec_eq7_series_work_size(const rec_matcher *m)
 {
     if (!m->ncont) return 0;
     size_t la = SER_PAD((size_t)m->rs_hmax + 1), lb = SER_PAD(2 * (size_t)m->rs_hmax + 1);
-    /* the row's DFTs (4 bands K), the products (nfit (2 la + 6 lb)), the powers (2 le) */
-    return 4 * (size_t)m->D + (size_t)m->nfit * (2 * la + 6 * lb) + 2 * SER_PAD32(2 * (size_t)m->rs_hmax + 1);
+    /* the row's DFTs (4 bands K), the products (nfit (2 la + 2 lb)), the powers (2 le) */
+    return 4 * (size_t)m->D + (size_t)m->nfit * (2 * la + 2 * lb) + 2 * SER_PAD32(2 * (size_t)m->rs_hmax + 1);
 }
 
 /* c += a X_{h mod K} over h < n (complex, split parts): one band's terms of a series, in rows
@@ -177,18 +167,14 @@ void rec_eq7_series_bulb(const rec_matcher *m, rec_eq7_work *w, size_t b)
     const double *xr = w->rs, *xi = xr + m->D, *vr = xi + m->D, *vi = vr + m->D;
     double *cs = w->rs + 4 * (size_t)m->D, *ct = cs + 2 * (size_t)nf * la;
     for (size_t i = 0; i < 2 * (size_t)nf; i++) memset(cs + i * la, 0, sizeof *cs * lab);   /* what b's sums read */
-    for (size_t i = 0; i < 6 * (size_t)nf; i++) memset(ct + i * lb, 0, sizeof *ct * lbb);
+    for (size_t i = 0; i < 2 * (size_t)nf; i++) memset(ct + i * lb, 0, sizeof *ct * lbb);
     for (int band = 0; band < bands; band++) {
         int f = nf == 1 ? 0 : band;
         size_t o = (size_t)band * (size_t)K;
-        const double *ar = m->rs_a[b] + (size_t)band * 2 * lab;
-        double *sr = cs + (size_t)f * 2 * la;
+        const double *ar = m->rs_a[b] + (size_t)band * 2 * lab, *br = m->rs_b[b] + (size_t)band * 2 * lbb;
+        double *sr = cs + (size_t)f * 2 * la, *tr = ct + (size_t)f * 2 * lb;
         series_products(ar, ar + lab, xr + o, xi + o, K, (size_t)hs + 1, sr, sr + la);
-        for (int i = 0; i < 3; i++) {
-            const double *br = m->rs_b[b] + ((size_t)band * 3 + (size_t)i) * 2 * lbb;
-            double *tr = ct + ((size_t)f * 3 + (size_t)i) * 2 * lb;
-            series_products(br, br + lbb, vr + o, vi + o, K, 2 * (size_t)hs + 1, tr, tr + lb);
-        }
+        series_products(br, br + lbb, vr + o, vi + o, K, 2 * (size_t)hs + 1, tr, tr + lb);
     }
 }
 
@@ -215,11 +201,10 @@ GS_VECTOR_LOOP static void series_powers(double s, size_t n, double *er, double 
 }
 
 /* Over g < n (a multiple of SER_LANES), in SER_LANES interleaved partial sums taken in a fixed
- * order: out = sum Re(c_g e_g), sum g Im(c_g e_g), sum g^2 Re(c_g e_g) (the S series and its
- * derivatives); or, with c1 and c2 (the T series of f^2, (f^2)', (f^2)''), sum Re(c_g e_g),
- * Re(c1_g e_g), Re(c2_g e_g). */
-GS_VECTOR_CLONES static void series_sums(const double *cr, const double *ci, const double *c1, const double *c2,
-                                         size_t ld, const double *er, const double *ei, size_t n, double out[3])
+ * order: out = sum Re(c_g e_g), sum g Im(c_g e_g), sum g^2 Re(c_g e_g) (a series and its
+ * derivatives). */
+GS_VECTOR_CLONES static void series_sums(const double *cr, const double *ci, const double *er, const double *ei,
+                                         size_t n, double out[3])
 {
     ser_vd s0 = {0}, s1 = {0}, s2 = {0}, g = {0, 1, 2, 3, 4, 5, 6, 7}, step;
     for (int i = 0; i < SER_LANES; i++) step[i] = SER_LANES;
@@ -231,19 +216,9 @@ GS_VECTOR_CLONES static void series_sums(const double *cr, const double *ci, con
         memcpy(&d, ei + h, sizeof d);
         ser_vd re = a * c - b * d;
         s0 += re;
-        if (c1) {
-            ser_vd a1, b1, a2, b2;
-            memcpy(&a1, c1 + h, sizeof a1);
-            memcpy(&b1, c1 + ld + h, sizeof b1);
-            memcpy(&a2, c2 + h, sizeof a2);
-            memcpy(&b2, c2 + ld + h, sizeof b2);
-            s1 += a1 * c - b1 * d;
-            s2 += a2 * c - b2 * d;
-        } else {
-            s1 += g * (a * d + b * c);
-            s2 += g * g * re;
-            g += step;
-        }
+        s1 += g * (a * d + b * c);
+        s2 += g * g * re;
+        g += step;
     }
     out[0] = out[1] = out[2] = 0.0;
     for (int i = 0; i < SER_LANES; i++) out[0] += s0[i], out[1] += s1[i], out[2] += s2[i];
@@ -255,16 +230,15 @@ void rec_eq7_series_at(const rec_matcher *m, rec_eq7_work *w, size_t b, double s
     int hs = m->rs_h[b];
     size_t la = SER_PAD((size_t)m->rs_hmax + 1), lb = SER_PAD(2 * (size_t)m->rs_hmax + 1);
     size_t na = SER_PAD((size_t)hs + 1), nbb = SER_PAD(2 * (size_t)hs + 1);
-    double *cs = w->rs + 4 * (size_t)m->D, *ct = cs + 2 * (size_t)m->nfit * la, *er = ct + 6 * (size_t)m->nfit * lb;
+    double *cs = w->rs + 4 * (size_t)m->D, *ct = cs + 2 * (size_t)m->nfit * la, *er = ct + 2 * (size_t)m->nfit * lb;
     double *ei = er + SER_PAD32(2 * (size_t)m->rs_hmax + 1);
     series_powers(wrap01(s), SER_PAD32(2 * (size_t)hs + 1), er, ei);
     double tp = EQ7_TWO_PI, o[3];
     for (int f = 0; f < m->nfit; f++) {
-        const double *sr = cs + (size_t)f * 2 * la, *tr = ct + (size_t)f * 6 * lb;
-        series_sums(sr, sr + la, NULL, NULL, 0, er, ei, na, o);
+        const double *sr = cs + (size_t)f * 2 * la, *tr = ct + (size_t)f * 2 * lb;
+        series_sums(sr, sr + la, er, ei, na, o);
         S[f] = o[0], S1[f] = tp * o[1], S2[f] = -tp * tp * o[2];
-        /* d/ds of u(k/K - s) is -u'(k/K - s) */
-        series_sums(tr, tr + lb, tr + 2 * lb, tr + 4 * lb, lb, er, ei, nbb, o);
-        T[f] = o[0], T1[f] = -o[1], T2[f] = o[2];
+        series_sums(tr, tr + lb, er, ei, nbb, o);
+        T[f] = o[0], T1[f] = tp * o[1], T2[f] = -tp * tp * o[2];
     }
 }

@@ -201,12 +201,11 @@ struct rec_matcher {
     double *dftc, *dfts;                /* [K * K] cos, sin of 2 pi q k / K ([k K + q]) */
     double *nyqs, *nyqc;                /* [nb * (K + 1)] sin, cos of pi nfine k / K (continuous) */
     /* the refinement's series (eq7_series.c), continuous bulbs: f(x) = Re sum A_h e^{2 pi i h x},
-     * h <= rs_h (the Nyquist term as harmonic nfine / 2), and f^2, (f^2)', (f^2)'' = Re sum B_g
-     * e^{2 pi i g x}, g <= 2 rs_h; per band the real parts, then the imaginary parts, each zero
-     * padded to 8 */
+     * h <= rs_h (the Nyquist term as harmonic nfine / 2), and f^2 = Re sum B_g e^{2 pi i g x},
+     * g <= 2 rs_h; per band the real parts, then the imaginary parts, each zero padded to 8 */
     int *rs_h;                          /* [nb] */
     int rs_hmax;                        /* their largest */
-    double **rs_a, **rs_b;              /* [nb] -> A ([band][re, im]), B ([band][3][re, im]) */
+    double **rs_a, **rs_b;              /* [nb] -> A ([band][re, im]), B ([band][re, im]) */
     /* the pixel path's Fourier screen (eq7_pixscreen.c: fourier and the one-score path) */
     int fs_on;                          /* REC_FS_ON: rec_match_pixels uses it; _OFF: the matcher
                                          * has none (one SGEMM of every template); _ALL (tests):
