@@ -89,12 +89,14 @@ GS_VECTOR_LOOP static double harmonic_sum(const double *a, const double *y, int 
 }
 
 double rec_eq7_harmonic_extent(const double *a, const double *tail, const double *y, const double *ya, int bands,
-                               size_t np, size_t K, double *c0)
+                               size_t np, size_t K, double *c0, double *z, double *tail_sum)
 {
     double c = 0.0;
     for (int band = 0; band < bands; band++) c += a[(size_t)band * 2 * np] * y[(size_t)band * 2 * np];
     *c0 = c;
-    return harmonic_sum(a, y, bands, np, NULL) + gs_dot(tail, ya, (size_t)bands * K);
+    double t = gs_dot(tail, ya, (size_t)bands * K);
+    if (tail_sum) *tail_sum = t;
+    return harmonic_sum(a, y, bands, np, z) + t;
 }
 
 void rec_eq7_harmonic_row(const rec_matcher *m, const double complex *V, size_t ldv, double *y, double *ya)
@@ -146,9 +148,8 @@ gs_status rec_eq7_bulbscreen_setup(rec_matcher *m)
 }
 
 /* Brightness f of bulb b against the light's rows (rec_eq7_bulb_bounds' harmonic rows in
- * w->bs_y): the constant terms of S and T (signed), their tails' magnitudes, the sums of their
- * magnitudes (constant, harmonics, tails), and S <= sb, T >= tb at every cell (tb <= 0: no
- * bound). Rounding: the FFT's and these sums', far inside 1e-9 of the magnitudes' sums. */
+ * w->bs_y): its terms (rec_eq7_bulb_terms), its cross-spectra C, C' into w->bs_z. Rounding: the
+ * FFT's and these sums', far inside 1e-9 of the magnitudes' sums. */
 static void bulb_terms(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, size_t b, int f,
                        rec_eq7_bulb_terms *t)
 {
@@ -156,19 +157,30 @@ static void bulb_terms(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep
     size_t lt = bands * K, nf = (size_t)m->nfit, b0 = nf == 1 ? 0 : (size_t)f, nbf = nf == 1 ? bands : 1;
     size_t ka = b0 * 2 * np, kt = b0 * K;
     const double *yx = w->bs_y, *yw = yx + la, *xa = yw + la, *wa = xa + lt;
-    const double *as = m->bs_a + b * la + ka, *at = m->bs_b + b * la + ka;
-    t->tail_s = gs_dot(m->bs_at + b * lt + kt, xa + kt, nbf * K);
-    t->tail_t = gs_dot(m->bs_bt + b * lt + kt, wa + kt, nbf * K);
-    double *z = w->bs_z + (b * nf + (size_t)f) * 4 * np;   /* (C and C': rec_eq7_bulb_tighten) */
-    t->es = harmonic_sum(as, yx + ka, (int)nbf, np, z) + t->tail_s;
-    t->et = harmonic_sum(at, yw + ka, (int)nbf, np, z + 2 * np) + t->tail_t;
-    t->cs = z[0], t->ct = z[2 * np];   /* (the constant terms: real) */
+    double *z = w->bs_z + (b * nf + (size_t)f) * 4 * np;
+    t->es = rec_eq7_harmonic_extent(m->bs_a + b * la + ka, m->bs_at + b * lt + kt, yx + ka, xa + kt, (int)nbf, np, K,
+                                    &t->cs, z, &t->tail_s);
+    t->et = rec_eq7_harmonic_extent(m->bs_b + b * la + ka, m->bs_bt + b * lt + kt, yw + ka, wa + kt, (int)nbf, np, K,
+                                    &t->ct, z + 2 * np, &t->tail_t);
     t->sb = t->es - fabs(t->cs) + t->cs + 1e-9 * t->es;
     t->tb = t->ct - (t->et - fabs(t->ct)) - 1e-9 * t->et;
-    if (p->full[f]) {
-        double tw = p->wmin[f] * m->bs_t2[b * nf + (size_t)f] * (1.0 - 1e-12);
-        t->tb = tw > t->tb ? tw : t->tb;
+    t->tw = p->full[f] ? p->wmin[f] * m->bs_t2[b * nf + (size_t)f] * (1.0 - 1e-12) : 0.0;
+    t->tb = t->tw > t->tb ? t->tw : t->tb;
+}
+
+/* Over the brightnesses with a usable sample: u = -sum_f log(tb_f)/2 and g_f = sb_f^2/tb_f (0 where
+ * sb_f <= 0: S <= 0 adds nothing, free_bounds); 0 where some tb_f is not positive (no bound). */
+static int terms_sums(const rec_eq7_bulb_terms *t, const rec_eq7_prep *p, int nf, double *u, double *g)
+{
+    *u = 0.0;
+    for (int f = 0; f < nf; f++) {
+        g[f] = 0.0;
+        if (!(p->wmin[f] > 0.0)) continue;   /* no usable sample: no brightness */
+        if (!(t[f].tb > 0.0) || !(t[f].sb <= 1e300)) return 0;
+        *u -= 0.5 * log(t[f].tb);
+        g[f] = t[f].sb > 0.0 ? t[f].sb * (t[f].sb / t[f].tb) : 0.0;
     }
+    return 1;
 }
 
 /* The bound on L from each brightness's bounds u = -sum_f log(tb_f)/2 and g >= sum_f S_f^2/T_f
@@ -189,17 +201,13 @@ void rec_eq7_bulb_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pr
     rec_eq7_harmonic_row(m, X, nh, yx, xa);
     rec_eq7_harmonic_row(m, W, nh, yw, wa);
     for (size_t b = 0; b < nb; b++) {
-        double u = 0.0, g = 0.0;
-        int none = 0;   /* no bound: the bulb is opened */
-        for (int f = 0; f < m->nfit && !none; f++) {
-            if (!(p->wmin[f] > 0.0)) continue;   /* no usable sample: no brightness */
-            rec_eq7_bulb_terms *t = w->bs_t + b * (size_t)m->nfit + (size_t)f;
-            bulb_terms(m, w, p, b, f, t);
-            none = !(t->tb > 0.0) || !(t->sb <= 1e300);
-            u -= 0.5 * log(t->tb);
-            g += t->sb > 0.0 ? t->sb * (t->sb / t->tb) : 0.0;   /* (S <= 0 adds nothing: free_bounds) */
-        }
-        U[b] = none ? INFINITY : bound_of(u, g, Sxx);
+        rec_eq7_bulb_terms *t = w->bs_t + b * (size_t)m->nfit;
+        double u, g[GS_MAX_BANDS], gs = 0.0;
+        for (int f = 0; f < m->nfit; f++)
+            if (p->wmin[f] > 0.0) bulb_terms(m, w, p, b, f, &t[f]);
+        int ok = terms_sums(t, p, m->nfit, &u, g);
+        for (int f = 0; f < m->nfit; f++) gs += g[f];
+        U[b] = ok ? bound_of(u, gs, Sxx) : INFINITY;   /* (no bound: the bulb is opened) */
     }
 }
 
@@ -207,19 +215,18 @@ void rec_eq7_bulb_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pr
  * S - mu T is itself a trigonometric sum, of the cross-spectra C - mu C', so
  *   S^2/T <= max_{mu >= 0} A(mu),   A(mu) = 4 mu h(mu),
  *   h(mu) = C_0 + tail_S - mu (C'_0 - tail_T) + phi(mu),   phi(mu) = sum_{0 < n <= K/2} f_n |C_n - mu C'_n|
- * (the tails' harmonics by the triangle inequality), and with every sample, A(mu) <= 4 mu (sb - mu
- * w_min |t|^2) too. phi, a sum of norms of affine functions, is convex, so on [mu_a, mu_c] h is
- * at most its chord and A at most a quadratic whose maximum is exact: a branch and bound over mu
- * in [0, sb/(2 tb)] (each cell's best mu, S/(2T), lies there) until the bound is below stop, or
- * cannot get there (a value of the bound function itself reaches it), or is within 1e-6 of those
- * values. S
- * and T peak at different cells with unequal weights; this bound couples them there, where sb and
- * tb alone cannot. */
+ * (the tails' harmonics by the triangle inequality; rounding: 1e-9 (es + mu et)), and with every
+ * sample A(mu) <= 4 mu (sb - mu w_min |t|^2) too. phi, a sum of norms of affine functions, is
+ * convex, so on [mu_a, mu_c] h is at most its chord and A at most a quadratic whose maximum is
+ * exact: a branch and bound over mu in [0, sb/(2 tb)] (each cell's best mu, S/(2T), lies there),
+ * at most BS_INTERVALS intervals. S and T peak at different cells with unequal weights; this
+ * bound couples them there, where sb and tb alone cannot. A sum beyond DBL_MAX (+inf, NaN) gives
+ * +inf: no coupled bound. */
 typedef struct {
     const double *zr, *zi, *tr, *ti;   /* C_n and C'_n, n < np */
-    double c0, slope, e0, e1;   /* h(mu) = c0 - mu slope + phi(mu) + 1e-9 (e0 + mu e1) */
     size_t np;
-    double sb, tw;              /* the bound 4 mu (sb - mu tw) (tw 0: none) */
+    double c0, slope, e0, e1;          /* h(mu) = c0 - mu slope + phi(mu) + 1e-9 (e0 + mu e1) */
+    double sb, tw;                     /* the bound 4 mu (sb - mu tw) (tw 0: none) */
 } bs_coupled;
 
 GS_VECTOR_LOOP static double coupled_h(const bs_coupled *c, double mu)
@@ -242,12 +249,14 @@ static double quad_max(double p, double q, double a, double b)
     return v;
 }
 
+/* the bound function min(A, 4 mu (sb - mu tw)) at mu (h = h(mu)) */
 static double coupled_at(const bs_coupled *c, double mu, double h)
 {
     double a = 4.0 * mu * h, b = c->tw > 0.0 ? 4.0 * mu * (c->sb - mu * c->tw) : INFINITY;
     return a < b ? a : b;
 }
 
+/* its bound over [a, b] from h's chord, at least 0 (NaN: +inf) */
 static double coupled_interval(const bs_coupled *c, double a, double b, double ha, double hb)
 {
     double q = (hb - ha) / (b - a), v = quad_max(ha - q * a, q, a, b);
@@ -255,27 +264,30 @@ static double coupled_interval(const bs_coupled *c, double a, double b, double h
         double vw = quad_max(c->sb, -c->tw, a, b);
         v = vw < v ? vw : v;
     }
-    return v > 0.0 ? v : 0.0;
+    return v > 0.0 ? v : v <= 0.0 ? 0.0 : INFINITY;
 }
 
 #define BS_INTERVALS 48
-static double coupled_gain(const bs_coupled *c, double mu_n, double stop)
+double rec_eq7_coupled_gain(const double *z, size_t np, const rec_eq7_bulb_terms *t, double stop)
 {
+    bs_coupled c = {.zr = z, .zi = z + np, .tr = z + 2 * np, .ti = z + 3 * np, .np = np,
+                    .c0 = t->cs + t->tail_s, .slope = t->ct - t->tail_t, .e0 = t->es, .e1 = t->et,
+                    .sb = t->sb, .tw = t->tw};
     double ia[BS_INTERVALS], ib[BS_INTERVALS], ha[BS_INTERVALS], hb[BS_INTERVALS], up[BS_INTERVALS];
     int n = 1;
-    ia[0] = 0.0, ib[0] = mu_n, ha[0] = coupled_h(c, 0.0), hb[0] = coupled_h(c, mu_n);
-    up[0] = coupled_interval(c, ia[0], ib[0], ha[0], hb[0]);
-    double lo = coupled_at(c, mu_n, hb[0]) > 0.0 ? coupled_at(c, mu_n, hb[0]) : 0.0;
+    ia[0] = 0.0, ib[0] = 0.5 * t->sb / t->tb, ha[0] = coupled_h(&c, 0.0), hb[0] = coupled_h(&c, ib[0]);
+    up[0] = coupled_interval(&c, ia[0], ib[0], ha[0], hb[0]);
+    double lo = coupled_at(&c, ib[0], hb[0]) > 0.0 ? coupled_at(&c, ib[0], hb[0]) : 0.0;
     for (;;) {
         int i = 0;
         for (int k = 1; k < n; k++) i = up[k] > up[i] ? k : i;
         if (up[i] < stop || lo >= stop || up[i] - lo <= 1e-6 * up[i] || n == BS_INTERVALS) return up[i];
-        double mid = 0.5 * (ia[i] + ib[i]), hm = coupled_h(c, mid), v = coupled_at(c, mid, hm);
+        double mid = 0.5 * (ia[i] + ib[i]), hm = coupled_h(&c, mid), v = coupled_at(&c, mid, hm);
         lo = v > lo ? v : lo;
         ia[n] = mid, ib[n] = ib[i], ha[n] = hm, hb[n] = hb[i];
         ib[i] = mid, hb[i] = hm;
-        up[i] = coupled_interval(c, ia[i], ib[i], ha[i], hb[i]);
-        up[n] = coupled_interval(c, ia[n], ib[n], ha[n], hb[n]);
+        up[i] = coupled_interval(&c, ia[i], ib[i], ha[i], hb[i]);
+        up[n] = coupled_interval(&c, ia[n], ib[n], ha[n], hb[n]);
         n++;
     }
 }
@@ -286,27 +298,15 @@ double rec_eq7_bulb_tighten(const rec_matcher *m, rec_eq7_work *w, const rec_eq7
     size_t np = rec_eq7_harmonics_np(m);
     int nf = m->nfit;
     const rec_eq7_bulb_terms *t = w->bs_t + b * (size_t)nf;
-    double u = 0.0, g[GS_MAX_BANDS], gs = 0.0;
-    if (!(w->bub[b] < INFINITY)) return w->bub[b];
-    for (int f = 0; f < nf; f++) {
-        g[f] = 0.0;
-        if (!(p->wmin[f] > 0.0)) continue;
-        u -= 0.5 * log(t[f].tb);
-        g[f] = t[f].sb > 0.0 ? t[f].sb * (t[f].sb / t[f].tb) : 0.0;
-        gs += g[f];
-    }
-    /* sum_f g_f below this gives a bound below th (the margin: bound_of's rounding's) */
-    double gth = Sxx + 2.0 * (th - u) - 1e-6 * (1.0 + fabs(th) + fabs(u) + Sxx);
+    double u, g[GS_MAX_BANDS], gs = 0.0;
+    if (!(w->bub[b] < INFINITY) || !terms_sums(t, p, nf, &u, g)) return w->bub[b];
+    for (int f = 0; f < nf; f++) gs += g[f];
+    /* sum_f g_f below gth gives a bound below th (the margin: bound_of's rounding's); th = -inf:
+     * no such sum, each brightness's bound as tight as it gets (stop NaN) */
+    double gth = th > -INFINITY ? Sxx + 2.0 * (th - u) - 1e-6 * (1.0 + fabs(th) + fabs(u) + Sxx) : NAN;
     for (int f = 0; f < nf; f++) {
         if (!(p->wmin[f] > 0.0) || !(t[f].sb > 0.0)) continue;
-        const double *z = w->bs_z + (b * (size_t)nf + (size_t)f) * 4 * np;
-        bs_coupled c = {.zr = z, .zi = z + np, .tr = z + 2 * np, .ti = z + 3 * np, .np = np};
-        c.c0 = t[f].cs + t[f].tail_s;
-        c.slope = t[f].ct - t[f].tail_t;
-        c.e0 = t[f].es, c.e1 = t[f].et;
-        c.sb = t[f].sb;
-        c.tw = p->full[f] ? p->wmin[f] * m->bs_t2[b * (size_t)nf + (size_t)f] * (1.0 - 1e-12) : 0.0;
-        double gc = coupled_gain(&c, 0.5 * t[f].sb / t[f].tb, gth - (gs - g[f]));
+        double gc = rec_eq7_coupled_gain(w->bs_z + (b * (size_t)nf + (size_t)f) * 4 * np, np, &t[f], gth - (gs - g[f]));
         if (gc < g[f]) gs -= g[f] - gc, g[f] = gc;
     }
     double v = bound_of(u, gs, Sxx);

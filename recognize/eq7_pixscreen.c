@@ -239,7 +239,7 @@ void rec_eq7_pixscreen(const rec_matcher *m, rec_pixscreen_work *sw, const float
         double bmax = -INFINITY;
         for (size_t b = 0; b < nb; b++) {
             double c0, e = rec_eq7_harmonic_extent(m->fs_a + b * (size_t)bands * 2 * np, m->fs_tail + b * (size_t)bands * K,
-                                                   sw->yx, sw->xa, bands, np, K, &c0);
+                                                   sw->yx, sw->xa, bands, np, K, &c0, NULL, NULL);
             /* the constant term with its sign; at least 0 (the bound of a value <= 0 scaled by
              * 1/min |t| would not be one) */
             double bd = fmax(e - fabs(c0) + c0 + 1e-9 * e, 0.0) + serr;

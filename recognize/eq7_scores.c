@@ -767,10 +767,10 @@ static void bulb_bounds(screen *sc)
 /* Exact: the best bound's template; for each continuous bulb its best (bulb_best; with the
  * screen of bulbs, only the bulb of the largest bound, the next by coupled bound, and those whose
  * coupled bound reaches within CUT_PIXEL of the best L so far, largest first: the others' cells
- * are all below the cut, and stay -inf); every template whose bound is within CUT_PIXEL of the best computed L (the
- * posterior's mass; in one pass, its threshold only rises); the runner-up (the two best
- * discrete templates: the best bound of the rest while it beats the second rank); with the
- * nested tests their first templates. */
+ * are all below the cut, and stay -inf); every template whose bound is within CUT_PIXEL of the
+ * best computed L (the posterior's mass; in one pass, its threshold only rises); the runner-up
+ * (the two best discrete templates: the best bound of the rest while it beats the second rank);
+ * with the nested tests their first templates. */
 double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx)
 {
     size_t M = m->M;

@@ -11,16 +11,18 @@
  * per shift one pass over 3H + 2 terms (the bands of one brightness summed into one series), not
  * the template's harmonic fold and three K x K inverse DFTs per band. The derivatives come from
  * the same terms times (2 pi h)^i. B is tabulated per bulb by an FFT of f^2 sampled at N > 4H
- * points (2H harmonics: no aliasing) in long double: its rounding, some 1e-19 of f^2's largest
- * value per harmonic, stays far below the sums' 1e-11 when T'' multiplies it by g^2 (up to 10^6;
- * in double it did not). */
+ * points (2H harmonics: no aliasing) in long double, x86-64's 64-bit mantissa: its rounding, some
+ * 1e-19 of f^2's largest value per harmonic, stays below the sums' 1e-11 when T'' multiplies it
+ * by g^2 (up to 10^6; in double it did not: so neither under valgrind, whose x87 is double). */
 #include "recognize/internal.h"
 
 #include <fftw3.h>
+#include <float.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
+_Static_assert(LDBL_MANT_DIG >= 64, "the refinement's tables need a long double of 64 bits of mantissa or more");
 #define SER_LANES 8
 #define SER_PAD(n) (((n) + SER_LANES - 1) / SER_LANES * SER_LANES)
 #define SER_PAD32(n) (((n) + 31) / 32 * 32)

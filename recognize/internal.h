@@ -312,10 +312,11 @@ typedef struct {
 } rec_eq7_prep;
 
 /* A continuous bulb's brightness f against a light (eq7_bulbscreen.c): the constant terms of its
- * sums S and T (signed), their tails' magnitudes, the sums of their magnitudes, and S <= sb,
- * T >= tb at every cell */
+ * sums S and T (signed), their tails' magnitudes, the sums of their magnitudes (constant,
+ * harmonics, tails), S <= sb and T >= tb at every cell (tb <= 0: no bound), and tw = w_min
+ * min |t|^2 (0 when a sample is dropped), part of tb */
 typedef struct {
-    double cs, ct, tail_s, tail_t, es, et, sb, tb;
+    double cs, ct, tail_s, tail_t, es, et, sb, tb, tw;
 } rec_eq7_bulb_terms;
 
 /* Scratch for one light or pixel, or a block of lights (rec_eq7_work_alloc_rows). */
@@ -458,15 +459,20 @@ void rec_eq7_harmonic_table(const rec_matcher *m, const double complex *hat, siz
                             double *tail);
 void rec_eq7_harmonic_row(const rec_matcher *m, const double complex *V, size_t ldv, double *y, double *ya);
 /* sum_n |sum_band a_n y_n| over np harmonics plus the tail's sum_band tail_q |y_q| (ya, [bands][K]):
- * the sum of a trigonometric sum's magnitudes; its constant term (real) into *c0 */
+ * the sum of a trigonometric sum's magnitudes; its constant term (real) into *c0, the complex
+ * sums into z (re, im blocks of np) and the tail's sum into *tail_sum unless NULL */
 double rec_eq7_harmonic_extent(const double *a, const double *tail, const double *y, const double *ya, int bands,
-                               size_t np, size_t K, double *c0);
+                               size_t np, size_t K, double *c0, double *z, double *tail_sum);
 gs_status rec_eq7_bulbscreen_setup(rec_matcher *m);
 void rec_eq7_bulb_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx, double *U);
 /* Bulb b's coupled bound (after rec_eq7_bulb_bounds, at most its bound w->bub[b]): refined until
- * it is below th or cannot get there (th = -inf: as tight as it gets) */
+ * it is below th or cannot get there (th = -inf: as tight as it gets). rec_eq7_coupled_gain: one
+ * brightness's bound on S^2/T over the cells from its terms and cross-spectra z (C then C', re and
+ * im blocks of np each), refined until below stop or it cannot get there (stop NaN: as tight as it
+ * gets: within 1e-6 of the bound function's largest value found, or 48 intervals). */
 double rec_eq7_bulb_tighten(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx, size_t b,
                             double th);
+double rec_eq7_coupled_gain(const double *z, size_t np, const rec_eq7_bulb_terms *t, double stop);
 /* Tables (rec_matcher_new; fs_on when m->fourier, every bulb continuous, not m->bandpath). */
 gs_status rec_eq7_pixscreen_setup(rec_matcher *m);
 gs_status rec_eq7_pixscreen_alloc(const rec_matcher *m, size_t B, rec_pixscreen_work *sw);

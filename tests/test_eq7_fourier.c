@@ -413,17 +413,74 @@ TEST(eq7_screen_bounds_hold_with_dropped_samples)
     gs_delight_free(d);
 }
 
+/* The coupled bound's search over mu (eq7_bulbscreen.c, rec_eq7_coupled_gain) against its own
+ * function on a grid of 10,001 mu: at least the grid's largest value (a bound), and within 1e-4
+ * of it when refined as far as it goes (the chords close in), or below a stop it proves. Random
+ * cross-spectra (np 8 and 16), signed constants and tails, T's bound from its harmonics or from
+ * w_min |t|^2 alone (h then rises with mu) or both. */
+TEST(eq7_coupled_gain_bounds_its_function)
+{
+    uint64_t rs = 4242;
+    int checked = 0, proved = 0, rising = 0;
+    for (int trial = 0; trial < 1500; trial++) {
+        size_t np = trial % 2 ? 16 : 8;
+        double z[64], sum_s = 0.0, sum_t = 0.0;
+        for (size_t n = 0; n < 4 * np; n++) z[n] = gs_splitmix_normal(&rs) * (n >= 2 * np ? 0.3 : 1.0);
+        z[np] = z[3 * np] = 0.0;   /* the constant terms: real */
+        for (size_t n = 1; n < np; n++) {
+            sum_s += hypot(z[n], z[np + n]);
+            sum_t += hypot(z[2 * np + n], z[3 * np + n]);
+        }
+        rec_eq7_bulb_terms t;
+        t.tail_s = fabs(gs_splitmix_normal(&rs));
+        t.tail_t = 0.3 * fabs(gs_splitmix_normal(&rs));
+        t.cs = z[0] = 3.0 * gs_splitmix_normal(&rs);
+        /* T's constant: its harmonic bound positive, or not (then only w_min |t|^2 bounds it) */
+        int mode = trial % 3;
+        t.ct = z[2 * np] = (mode == 1 ? 0.5 : 1.5 + gs_splitmix_uniform(&rs)) * (sum_t + t.tail_t);
+        t.es = fabs(t.cs) + sum_s + t.tail_s;
+        t.et = fabs(t.ct) + sum_t + t.tail_t;
+        t.sb = t.es - fabs(t.cs) + t.cs + 1e-9 * t.es;
+        t.tb = t.ct - (t.et - fabs(t.ct)) - 1e-9 * t.et;
+        t.tw = mode == 0 ? 0.0 : (0.2 + gs_splitmix_uniform(&rs)) * t.ct;
+        t.tb = t.tw > t.tb ? t.tw : t.tb;
+        if (!(t.sb > 0.0) || !(t.tb > 0.0)) continue;
+        rising += mode == 1;
+        /* the function searched: min(4 mu h(mu), 4 mu (sb - mu tw)) on [0, sb / (2 tb)] */
+        double best = 0.0, mu_n = 0.5 * t.sb / t.tb;
+        for (int i = 0; i <= 10000; i++) {
+            double mu = mu_n * i / 10000.0, h = t.cs + t.tail_s - mu * (t.ct - t.tail_t) + 1e-9 * (t.es + mu * t.et);
+            for (size_t n = 1; n < np; n++) h += hypot(z[n] - mu * z[2 * np + n], z[np + n] - mu * z[3 * np + n]);
+            double v = 4.0 * mu * h, vw = t.tw > 0.0 ? 4.0 * mu * (t.sb - mu * t.tw) : INFINITY;
+            v = vw < v ? vw : v;
+            best = v > best ? v : best;
+        }
+        double tight = rec_eq7_coupled_gain(z, np, &t, NAN), stop = 1.5 * best + 1e-300;
+        double early = rec_eq7_coupled_gain(z, np, &t, stop);
+        CHECK_MSG(tight >= best * (1.0 - 1e-12) && early >= best * (1.0 - 1e-12),
+                  "trial %d: bound %.17g (stopped at %g: %.17g) below the function's %.17g", trial, tight, stop, early, best);
+        CHECK_MSG(tight <= best * (1.0 + 1e-4) + 1e-300, "trial %d: bound %.17g, function's largest %.17g", trial, tight, best);
+        CHECK_MSG(early < stop, "trial %d: bound %.17g not below %.17g (tight %.17g)", trial, early, stop, tight);
+        proved += early > tight;
+        checked++;
+    }
+    printf("    %d searches (%d with h rising), %d stopped early below their stop\n", checked, rising, proved);
+    CHECK(checked > 750 && rising > 250 && proved > 100);
+}
+
 /* The screen of bulbs (eq7_bulbscreen.c): every continuous bulb's bound, open or closed, is at
  * least the exact L of each of its grid cells (from its grids, computed here for every bulb).
  * Lights: noise alone, its negative (a mean below zero: the signed constant term), dim, bright,
  * 1e6 sigma, a run of dropped samples, a whole band dropped, sigmas over 3 decades, a positive
- * and a negative offset; equal sigmas otherwise (where w_min |t|^2 is T's bound); K = 4 to 26,
- * both databases, one brightness and free band gains. (Noise and lights below zero close no
- * bulb, every one within the cut, but their bounds are checked all the same.) */
+ * and a negative offset, bright with sigmas over 3x (the coupled bound's case), 1e128 with
+ * sigmas over 10 decades (sums beyond DBL_MAX: no coupled bound); equal sigmas otherwise (where
+ * w_min |t|^2 is T's bound); K = 4 to 26, both databases, one brightness and free band gains.
+ * (Noise and lights below zero close no bulb, every one within the cut, but their bounds are
+ * checked all the same.) */
 TEST(eq7_bulb_bounds_hold)
 {
     static const int Ks[] = {4, 8, 13, 26};
-    enum { KINDS = 11 };
+    enum { KINDS = 12 };
     uint64_t rs = 12345;
     gs_delight *d = eq7fx_make_db(50, 3, 1, 0), *g = gs_delight_new();
     CHECK_OK(gs_delight_generate(g, 300));
@@ -440,15 +497,16 @@ TEST(eq7_bulb_bounds_hold)
                 double *first = malloc(sizeof *first * m->nb), *tight = malloc(sizeof *tight * m->nb);
                 rec_eq7_work w;
                 CHECK_OK(rec_eq7_work_alloc(m, &w));
-                for (int i = 0; i < 44; i++) {
+                for (int i = 0; i < 48; i++) {
                     int kind = i % KINDS;
-                    double a = kind <= 1 ? 0.0 : kind == 3 || kind == 10 ? 3000.0 : kind == 9 ? 1e6 : 30.0;
+                    double a = kind <= 1 ? 0.0 : kind == 3 || kind == 10 ? 3000.0 : kind == 9 ? 1e6 : kind == 11 ? 1e128 : 30.0;
                     eq7fx_render(rec_matcher_bulb(m, gs_splitmix64(&rs) % m->nb), gs_splitmix_uniform(&rs), K, a, 1.0,
                                  &rs, x, sg);
                     for (size_t q = 0; q < D; q++) {
                         x[q] = kind == 1 ? -x[q] - 0.5 : kind == 7 ? x[q] + 50.0 : kind == 8 ? x[q] - 50.0 - 0.2 * a : x[q];
                         if (kind == 6) sg[q] *= pow(10.0, 3.0 * gs_splitmix_uniform(&rs));
                         if (kind == 10) sg[q] *= 0.5 + gs_splitmix_uniform(&rs);   /* (the noise as drawn: 1) */
+                        if (kind == 11) sg[q] *= pow(10.0, 10.0 * gs_splitmix_uniform(&rs));   /* sums beyond DBL_MAX */
                     }
                     int run = kind == 4 ? 1 + (int)(gs_splitmix64(&rs) % (uint64_t)(K - 1)) : 0, k0 = (int)(gs_splitmix64(&rs) % (uint64_t)K);
                     for (int band = 0; band < 3; band++)
