@@ -169,7 +169,8 @@ static void bulb_terms(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep
 }
 
 /* Over the brightnesses with a usable sample: u = -sum_f log(tb_f)/2 and g_f = sb_f^2/tb_f (0 where
- * sb_f <= 0: S <= 0 adds nothing, free_bounds); 0 where some tb_f is not positive (no bound). */
+ * sb_f <= 0: S <= 0 adds nothing, free_bounds); 0 (no bound) where some tb_f is not positive or
+ * sb_f is beyond 1e300 or NaN. */
 static int terms_sums(const rec_eq7_bulb_terms *t, const rec_eq7_prep *p, int nf, double *u, double *g)
 {
     *u = 0.0;
@@ -220,8 +221,8 @@ void rec_eq7_bulb_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pr
  * convex, so on [mu_a, mu_c] h is at most its chord and A at most a quadratic whose maximum is
  * exact: a branch and bound over mu in [0, sb/(2 tb)] (each cell's best mu, S/(2T), lies there),
  * at most BS_INTERVALS intervals. S and T peak at different cells with unequal weights; this
- * bound couples them there, where sb and tb alone cannot. A sum beyond DBL_MAX (+inf, NaN) gives
- * +inf: no coupled bound. */
+ * bound couples them there, where sb and tb alone cannot. Where h overflows (+inf, NaN) only
+ * 4 mu (sb - mu tw) bounds, or nothing (+inf) without it. */
 typedef struct {
     const double *zr, *zi, *tr, *ti;   /* C_n and C'_n, n < np */
     size_t np;
@@ -243,7 +244,7 @@ static double quad_max(double p, double q, double a, double b)
     double v = 4.0 * a * (p + q * a), vb = 4.0 * b * (p + q * b);
     v = vb > v ? vb : v;
     if (q < 0.0) {
-        double x = -p / (2.0 * q);
+        double x = -0.5 * (p / q);   /* (not p / (2 q): 2 q may overflow) */
         if (x > a && x < b) v = 4.0 * x * (p + q * x) > v ? 4.0 * x * (p + q * x) : v;
     }
     return v;
@@ -262,7 +263,7 @@ static double coupled_interval(const bs_coupled *c, double a, double b, double h
     double q = (hb - ha) / (b - a), v = quad_max(ha - q * a, q, a, b);
     if (c->tw > 0.0) {
         double vw = quad_max(c->sb, -c->tw, a, b);
-        v = vw < v ? vw : v;
+        v = vw < v || v != v ? vw : v;
     }
     return v > 0.0 ? v : v <= 0.0 ? 0.0 : INFINITY;
 }
@@ -277,7 +278,8 @@ double rec_eq7_coupled_gain(const double *z, size_t np, const rec_eq7_bulb_terms
     int n = 1;
     ia[0] = 0.0, ib[0] = 0.5 * t->sb / t->tb, ha[0] = coupled_h(&c, 0.0), hb[0] = coupled_h(&c, ib[0]);
     up[0] = coupled_interval(&c, ia[0], ib[0], ha[0], hb[0]);
-    double lo = coupled_at(&c, ib[0], hb[0]) > 0.0 ? coupled_at(&c, ib[0], hb[0]) : 0.0;
+    double lo = coupled_at(&c, ib[0], hb[0]);
+    lo = lo > 0.0 ? lo : 0.0;
     for (;;) {
         int i = 0;
         for (int k = 1; k < n; k++) i = up[k] > up[i] ? k : i;
@@ -302,8 +304,8 @@ double rec_eq7_bulb_tighten(const rec_matcher *m, rec_eq7_work *w, const rec_eq7
     if (!(w->bub[b] < INFINITY) || !terms_sums(t, p, nf, &u, g)) return w->bub[b];
     for (int f = 0; f < nf; f++) gs += g[f];
     /* sum_f g_f below gth gives a bound below th (the margin: bound_of's rounding's); th = -inf:
-     * no such sum, each brightness's bound as tight as it gets (stop NaN) */
-    double gth = th > -INFINITY ? Sxx + 2.0 * (th - u) - 1e-6 * (1.0 + fabs(th) + fabs(u) + Sxx) : NAN;
+     * each brightness's bound as tight as it gets (stop NaN); +inf: its first chord */
+    double gth = isfinite(th) ? Sxx + 2.0 * (th - u) - 1e-6 * (1.0 + fabs(th) + fabs(u) + Sxx) : th > 0.0 ? th : NAN;
     for (int f = 0; f < nf; f++) {
         if (!(p->wmin[f] > 0.0) || !(t[f].sb > 0.0)) continue;
         double gc = rec_eq7_coupled_gain(w->bs_z + (b * (size_t)nf + (size_t)f) * 4 * np, np, &t[f], gth - (gs - g[f]));

@@ -416,16 +416,20 @@ TEST(eq7_screen_bounds_hold_with_dropped_samples)
 /* The coupled bound's search over mu (eq7_bulbscreen.c, rec_eq7_coupled_gain) against its own
  * function on a grid of 10,001 mu: at least the grid's largest value (a bound), and within 1e-4
  * of it when refined as far as it goes (the chords close in), or below a stop it proves. Random
- * cross-spectra (np 8 and 16), signed constants and tails, T's bound from its harmonics or from
- * w_min |t|^2 alone (h then rises with mu) or both. */
+ * cross-spectra (np 8 and 16; one in 10 beyond DBL_MAX once squared, one in 15 with T's
+ * constant near DBL_MAX), signed constants and tails, T's bound from its harmonics or from
+ * w_min |t|^2 alone (h then rises with mu) or both. Where h overflows only the bound's
+ * validity is checked (its w_min |t|^2 term alone, or +inf). */
 TEST(eq7_coupled_gain_bounds_its_function)
 {
     uint64_t rs = 4242;
-    int checked = 0, proved = 0, rising = 0;
+    int checked = 0, proved = 0, rising = 0, overflowed = 0;
     for (int trial = 0; trial < 1500; trial++) {
         size_t np = trial % 2 ? 16 : 8;
         double z[64], sum_s = 0.0, sum_t = 0.0;
-        for (size_t n = 0; n < 4 * np; n++) z[n] = gs_splitmix_normal(&rs) * (n >= 2 * np ? 0.3 : 1.0);
+        /* (one trial in 10 beyond DBL_MAX once squared: h overflows, only w_min |t|^2 bounds) */
+        double scale = trial % 10 == 9 ? 1e160 : 1.0;
+        for (size_t n = 0; n < 4 * np; n++) z[n] = scale * gs_splitmix_normal(&rs) * (n >= 2 * np ? 0.3 : 1.0);
         z[np] = z[3 * np] = 0.0;   /* the constant terms: real */
         for (size_t n = 1; n < np; n++) {
             sum_s += hypot(z[n], z[np + n]);
@@ -438,6 +442,7 @@ TEST(eq7_coupled_gain_bounds_its_function)
         /* T's constant: its harmonic bound positive, or not (then only w_min |t|^2 bounds it) */
         int mode = trial % 3;
         t.ct = z[2 * np] = (mode == 1 ? 0.5 : 1.5 + gs_splitmix_uniform(&rs)) * (sum_t + t.tail_t);
+        if (trial % 10 == 4 && mode != 1) t.ct = z[2 * np] = (0.5 + 0.3 * gs_splitmix_uniform(&rs)) * 1e308;   /* (T's constant near DBL_MAX) */
         t.es = fabs(t.cs) + sum_s + t.tail_s;
         t.et = fabs(t.ct) + sum_t + t.tail_t;
         t.sb = t.es - fabs(t.cs) + t.cs + 1e-9 * t.es;
@@ -459,13 +464,17 @@ TEST(eq7_coupled_gain_bounds_its_function)
         double early = rec_eq7_coupled_gain(z, np, &t, stop);
         CHECK_MSG(tight >= best * (1.0 - 1e-12) && early >= best * (1.0 - 1e-12),
                   "trial %d: bound %.17g (stopped at %g: %.17g) below the function's %.17g", trial, tight, stop, early, best);
-        CHECK_MSG(tight <= best * (1.0 + 1e-4) + 1e-300, "trial %d: bound %.17g, function's largest %.17g", trial, tight, best);
-        CHECK_MSG(early < stop, "trial %d: bound %.17g not below %.17g (tight %.17g)", trial, early, stop, tight);
+        if (scale == 1.0) {   /* (where h overflows, its tw bound alone: no closer) */
+            CHECK_MSG(tight <= best * (1.0 + 1e-4) + 1e-300, "trial %d: bound %.17g, function's largest %.17g", trial, tight, best);
+            CHECK_MSG(early < stop, "trial %d: bound %.17g not below %.17g (tight %.17g)", trial, early, stop, tight);
+        }
         proved += early > tight;
+        overflowed += scale > 1.0 && isfinite(tight);
         checked++;
     }
-    printf("    %d searches (%d with h rising), %d stopped early below their stop\n", checked, rising, proved);
-    CHECK(checked > 750 && rising > 250 && proved > 100);
+    printf("    %d searches (%d with h rising), %d stopped early below their stop, %d finite where h overflows\n",
+           checked, rising, proved, overflowed);
+    CHECK(checked > 750 && rising > 250 && proved > 100 && overflowed > 50);
 }
 
 /* The screen of bulbs (eq7_bulbscreen.c): every continuous bulb's bound, open or closed, is at
@@ -484,7 +493,7 @@ TEST(eq7_bulb_bounds_hold)
     uint64_t rs = 12345;
     gs_delight *d = eq7fx_make_db(50, 3, 1, 0), *g = gs_delight_new();
     CHECK_OK(gs_delight_generate(g, 300));
-    long checked = 0, closed[KINDS] = {0}, tighter[KINDS] = {0}, bulbs[KINDS] = {0};
+    long checked = 0, closed[KINDS] = {0}, tighter[KINDS] = {0}, refined[KINDS] = {0}, bulbs[KINDS] = {0};
     for (int db = 0; db < 2; db++)
         for (int bm = 0; bm < 2; bm++)
             for (size_t ki = 0; ki < sizeof Ks / sizeof *Ks; ki++) {
@@ -523,9 +532,11 @@ TEST(eq7_bulb_bounds_hold)
                         double screened = w.bub[b];
                         w.bub[b] = first[b];
                         tight[b] = rec_eq7_bulb_tighten(m, &w, &w.prep[0], Sxx, b, -INFINITY);
+                        double chord = rec_eq7_bulb_tighten(m, &w, &w.prep[0], Sxx, b, INFINITY);
                         w.bub[b] = screened;
-                        CHECK(tight[b] <= first[b]);
+                        CHECK(tight[b] <= chord && chord <= first[b]);
                         tighter[kind] += tight[b] < first[b] - 1.0;
+                        refined[kind] += tight[b] < chord - 1.0;
                         bulbs[kind]++;
                     }
                     for (size_t b = 0; b < m->nb; b++) {
@@ -547,11 +558,12 @@ TEST(eq7_bulb_bounds_hold)
     long nclosed = 0;
     printf("    %ld cells checked against their bulbs' bounds; bulbs left closed per kind of light:", checked);
     for (int k = 0; k < KINDS; k++) printf(" %ld", closed[k]), nclosed += closed[k];
-    printf("\n    coupled bounds more than 1 nat below the first, per kind:");
-    for (int k = 0; k < KINDS; k++) printf(" %ld/%ld", tighter[k], bulbs[k]);
+    printf("\n    coupled bounds more than 1 nat below the first (and below the first chord), per kind:");
+    for (int k = 0; k < KINDS; k++) printf(" %ld/%ld (%ld)", tighter[k], bulbs[k], refined[k]);
     printf("\n");
     CHECK(nclosed > 1000);
     CHECK(tighter[10] > bulbs[10] / 4);   /* weights unequal: the coupled bound is the tighter */
+    CHECK(refined[10] > bulbs[10] / 8);   /* and refined beyond its first chord */
     gs_delight_free(g);
     gs_delight_free(d);
 }
