@@ -105,7 +105,7 @@ void rec_eq7_refine_peak(const rec_matcher *m, rec_eq7_work *w, size_t b, size_t
         double un = u + step;
         if (!(un > lo && un < hi)) un = 0.5 * (lo + hi);
         /* 2e-9 deg of phase, and 1e-4 of the peak's std (chi2 within 1e-8 of its least) */
-        double tol = e.d2 > 0.0 && 1e-4 * sqrt(2.0 / e.d2) < 1e-11 ? 1e-4 * sqrt(2.0 / e.d2) : 1e-11;
+        double tol = e.d2 > 0.0 ? fmin(1e-4 * sqrt(2.0 / e.d2), 1e-11) : 1e-11;
         if (fabs(un - u) < tol || hi - lo < 1e-11 || it == 59) break;
         u = un;
     }

@@ -748,6 +748,16 @@ static void open_bulb(screen *sc, size_t b)
     bulb_best(sc, b, sc->m->M);
 }
 
+/* w->border[i0..n) sorted by the bulbs' bounds w->bub, largest first (insertion: nb is small) */
+static void border_sort(rec_eq7_work *w, size_t i0, size_t n)
+{
+    for (size_t i = i0 + 1; i < n; i++) {
+        size_t b = w->border[i], k = i;
+        for (; k > i0 && w->bub[w->border[k - 1]] < w->bub[b]; k--) w->border[k] = w->border[k - 1];
+        w->border[k] = b;
+    }
+}
+
 /* The screen of bulbs (every bulb continuous): each bulb's bound (eq7_bulbscreen.c), the bulbs
  * sorted by it in w->border (largest first); no grid open yet. */
 static void bulb_bounds(screen *sc)
@@ -757,11 +767,8 @@ static void bulb_bounds(screen *sc)
     rec_eq7_light_dfts(m, w);
     rec_eq7_bulb_bounds(m, w, sc->p, sc->Sxx, w->bub);
     memset(w->open, 0, m->nb);
-    for (size_t b = 0; b < m->nb; b++) {
-        size_t i = b;
-        for (; i > 0 && w->bub[w->border[i - 1]] < w->bub[b]; i--) w->border[i] = w->border[i - 1];
-        w->border[i] = b;
-    }
+    for (size_t b = 0; b < m->nb; b++) w->border[b] = b;
+    border_sort(w, 0, m->nb);
 }
 
 /* Exact: the best bound's template; for each continuous bulb its best (bulb_best; with the
@@ -795,11 +802,7 @@ double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep 
         size_t n = 1;
         for (; n < m->nb && w->bub[w->border[n]] >= th0; n++)
             w->bub[w->border[n]] = rec_eq7_bulb_tighten(m, w, p, Sxx, w->border[n], th0);
-        for (size_t i = 2; i < n; i++)
-            for (size_t k = i; k > 1 && w->bub[w->border[k - 1]] < w->bub[w->border[k]]; k--) {
-                size_t t = w->border[k];
-                w->border[k] = w->border[k - 1], w->border[k - 1] = t;
-            }
+        border_sort(w, 1, n);
         for (size_t i = 1; i < m->nb; i++) {
             size_t b = w->border[i];
             double th = sc.Lmax - CUT_PIXEL;

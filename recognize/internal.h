@@ -467,10 +467,10 @@ gs_status rec_eq7_bulbscreen_setup(rec_matcher *m);
 void rec_eq7_bulb_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx, double *U);
 /* Bulb b's coupled bound (after rec_eq7_bulb_bounds, at most its bound w->bub[b]): refined until
  * it is below th or cannot get there (th = -inf: as tight as it gets; +inf: the first chord of
- * each brightness). rec_eq7_coupled_gain: one
- * brightness's bound on S^2/T over the cells from its terms and cross-spectra z (C then C', re and
- * im blocks of np each), refined until below stop or it cannot get there (stop NaN: as tight as it
- * gets: within 1e-6 of the bound function's largest value found, or 48 intervals). */
+ * each brightness). rec_eq7_coupled_gain: one brightness's bound on S^2/T over the cells from its
+ * terms and cross-spectra z (C then C', re and im blocks of np each), refined until below stop or
+ * it cannot get there (stop NaN: as tight as it gets: within 1e-6 of the bound function's largest
+ * value found, or 48 intervals). */
 double rec_eq7_bulb_tighten(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx, size_t b,
                             double th);
 double rec_eq7_coupled_gain(const double *z, size_t np, const rec_eq7_bulb_terms *t, double stop);
