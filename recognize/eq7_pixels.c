@@ -204,6 +204,7 @@ typedef struct {
     double *xd;      /* [D] one row in double */
     rec_pixscreen_work fs;   /* the Fourier screen's (m->fs_on) */
     unsigned char *keep;     /* [B] rows it keeps */
+    int rest;                /* blocks still to go without the prefilter */
 } pix_work;
 
 static void pix_free(pix_work *p)
@@ -568,117 +569,158 @@ static void pixel_row_band(const rec_matcher *m, pix_work *pw, const float *xr, 
     if (conf_out) *conf_out = (float)dec.conf;
 }
 
+/* A part's scratch for blocks of up to B rows. */
+static gs_status pix_alloc(const rec_matcher *m, size_t B, pix_work *pw)
+{
+    size_t D = (size_t)m->D, Mp = m->Mp, R = (size_t)m->pr;
+    gs_status st = rec_eq7_work_alloc(m, &pw->w);
+    if (st != GS_OK) return st;
+    size_t nsc = m->bandpath ? (size_t)m->bands : 1;   /* score blocks: one per band */
+    pw->sc = malloc(sizeof *pw->sc * B * Mp * nsc);
+    pw->xs = malloc(sizeof *pw->xs * B * D);
+    pw->rows = malloc(sizeof *pw->rows * B);
+    pw->y = malloc(sizeof *pw->y * B * (R ? R : 1));
+    pw->sh = m->fs_on ? NULL : malloc(sizeof *pw->sh * B * Mp);   /* (no prefilter behind the Fourier screen) */
+    pw->ub = calloc(Mp, sizeof *pw->ub);   /* (read whole by the LANES-wide tests) */
+    pw->zz = malloc(sizeof *pw->zz * m->M);
+    pw->gg = malloc(sizeof *pw->gg * m->M);
+    pw->xd = malloc(sizeof *pw->xd * D);
+    pw->keep = malloc(B);
+    st = rec_eq7_pixscreen_alloc(m, B, &pw->fs);
+    if (st != GS_OK) return st;
+    if (!pw->keep || !pw->sc || !pw->xs || !pw->rows || !pw->y || (!m->fs_on && !pw->sh) || !pw->ub || !pw->zz ||
+        !pw->gg || !pw->xd)
+        return gs_fail(GS_ENOMEM, "Eq. 7 pixels: cannot allocate a %zu x %zu score block", B, Mp);
+    return GS_OK;
+}
+
+/* The rows [r0, r0 + nr) of rec_match_pixels with the part's scratch pw. */
+static void pix_block(const rec_matcher *m, pix_work *pw, const float *x, const float *noise_sigma, size_t r0,
+                      size_t nr, int *bulb, float *phase_deg, float *confidence)
+{
+    size_t D = (size_t)m->D, Mp = m->Mp, R = (size_t)m->pr;
+    const double min_snr = m->o.min_snr;
+    const float *xb = x + r0 * D;
+    for (size_t i = 0; i < nr; i++) {
+        bulb[r0 + i] = -1;
+        if (phase_deg) phase_deg[r0 + i] = 0.0f;
+        if (confidence) confidence[r0 + i] = 0.0f;
+    }
+    /* Prefilter (when the templates are close to an R-dimensional subspace E): with
+     * y = E x, x_perp = x - E^T y and t_j = E^T c_j + r_j, |r_j| = rho_j,
+     *   x . t_j <= c_j . y + rho_j |x_perp|,
+     * so a row whose bound stays below min_snr sigma is dim for every template (exactly as
+     * the full test would find) and needs no full scores. It pays only where it rejects rows:
+     * after a block where it passed more than 3/4 of them (an all-lit region) the part's next
+     * PIX_PREFILTER_REST blocks go without it (the same answers: a row it rejects is dim for
+     * every template). */
+    size_t ns = 0;
+    int prefilter = R && pw->rest == 0 && !m->fs_on;
+    pw->rest -= pw->rest > 0;
+    if (prefilter) {
+        cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)nr, (int)R, (int)D, 1.0f, xb,
+                    (int)D, m->pe, (int)D, 0.0f, pw->y, (int)R);
+        cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)nr, (int)Mp, (int)R, 1.0f, pw->y,
+                    (int)R, m->pc, (int)R, 0.0f, pw->sh, (int)Mp);
+    }
+    for (size_t i = 0; i < nr; i++) {
+        double sg = noise_sigma[r0 + i];
+        if (!(sg > 0.0) || !isfinite(sg)) continue;
+        if (prefilter) {
+            const float *xr = xb + i * D;
+            double ss = rec_pix_sumsq(xr, D), yy = 0.0;
+            for (size_t q = 0; q < R; q++) yy += (double)pw->y[i * R + q] * pw->y[i * R + q];
+            /* |x_perp| from |x|^2 - |y|^2, plus the rounding of both (an upper bound) */
+            float xp = (float)sqrt((ss > yy ? ss - yy : 0.0) + 1e-6 * ss);
+            float bound = row_bound_perp(pw->sh + i * Mp, m->prho, xp, Mp);
+            /* slack for the float scores of the prefilter */
+            if (!((double)bound + 1e-5 * sqrt(ss) >= min_snr * sg) || !isfinite(ss)) continue;
+        }
+        pw->rows[ns++] = r0 + i;
+    }
+    if (prefilter && 4 * ns > 3 * nr) pw->rest = PIX_PREFILTER_REST;
+    if (ns == 0) return;
+    const float *xs = xb;
+    if (ns < nr) {
+        for (size_t k = 0; k < ns; k++)
+            memcpy(pw->xs + k * D, x + pw->rows[k] * D, sizeof *pw->xs * D);
+        xs = pw->xs;
+    }
+    if (m->bandpath) {
+        /* per-band scores x_b . u_jb: one SGEMM of K columns per band, scores of row k at
+         * sc[k * bands * Mp + b * Mp + j] */
+        size_t K = (size_t)m->K, nsc = (size_t)m->bands, ld = nsc * Mp;
+        for (size_t band = 0; band < nsc; band++)
+            cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)ns, (int)Mp, (int)K, 1.0f,
+                        xs + band * K, (int)D, m->tbnf + band * K, (int)D, 0.0f, pw->sc + band * Mp,
+                        (int)ld);
+        for (size_t k = 0; k < ns; k++) {
+            size_t r = pw->rows[k];
+            pixel_row_band(m, pw, xs + k * D, pw->sc + k * ld, noise_sigma[r], &bulb[r],
+                           phase_deg ? &phase_deg[r] : NULL, confidence ? &confidence[r] : NULL);
+        }
+        return;
+    }
+    if (m->fs_on) {
+        rec_eq7_pixscreen(m, &pw->fs, xs, ns, noise_sigma, pw->rows, pw->sc, pw->keep);
+    } else {
+        cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)ns, (int)Mp, (int)D, 1.0f, xs,
+                    (int)D, m->tn, (int)D, 0.0f, pw->sc, (int)Mp);
+        memset(pw->keep, 1, ns);
+    }
+    for (size_t k = 0; k < ns; k++) {
+        size_t r = pw->rows[k];
+        if (!pw->keep[k]) continue;
+        pixel_row(m, pw, xs + k * D, pw->sc + k * Mp, noise_sigma[r], &bulb[r],
+                  phase_deg ? &phase_deg[r] : NULL, confidence ? &confidence[r] : NULL);
+    }
+}
+
+/* rec_match_pixels over threads: blocks of B rows taken in turn, one scratch per part. */
+typedef struct {
+    const rec_matcher *m;
+    const float *x, *noise_sigma;
+    size_t P, B;
+    int *bulb;
+    float *phase_deg, *confidence;
+    pix_work *pw;   /* [threads] */
+} pix_job;
+
+static gs_status pix_part(void *ctx, int part, size_t begin, size_t end)
+{
+    pix_job *j = ctx;
+    pix_work *pw = &j->pw[part];
+    if (!pw->ub) {
+        gs_status st = pix_alloc(j->m, j->B, pw);
+        if (st != GS_OK) return st;
+    }
+    for (size_t blk = begin; blk < end; blk++) {
+        size_t r0 = blk * j->B, nr = j->P - r0 < j->B ? j->P - r0 : j->B;
+        pix_block(j->m, pw, j->x, j->noise_sigma, r0, nr, j->bulb, j->phase_deg, j->confidence);
+    }
+    return GS_OK;
+}
+
 gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *noise_sigma,
                            size_t P, int *bulb, float *phase_deg, float *confidence)
 {
     if (!m || (P > 0 && (!x || !noise_sigma || !bulb)))
         return gs_fail(GS_EINVAL, "Eq. 7 pixels: matcher, x, noise_sigma and bulb must not be NULL");
     if (P == 0) return GS_OK;
-    size_t D = (size_t)m->D, Mp = m->Mp, R = (size_t)m->pr;
-    size_t B = P < PIX_BLOCK ? P : PIX_BLOCK;
-    pix_work pw;
-    memset(&pw, 0, sizeof pw);
-    gs_status st = rec_eq7_work_alloc(m, &pw.w);
-    if (st != GS_OK) return st;
-    size_t nsc = m->bandpath ? (size_t)m->bands : 1;   /* score blocks: one per band */
-    pw.sc = malloc(sizeof *pw.sc * B * Mp * nsc);
-    pw.xs = malloc(sizeof *pw.xs * B * D);
-    pw.rows = malloc(sizeof *pw.rows * B);
-    pw.y = malloc(sizeof *pw.y * B * (R ? R : 1));
-    pw.sh = malloc(sizeof *pw.sh * B * Mp);
-    pw.ub = calloc(Mp, sizeof *pw.ub);   /* (read whole by the LANES-wide tests) */
-    pw.zz = malloc(sizeof *pw.zz * m->M);
-    pw.gg = malloc(sizeof *pw.gg * m->M);
-    pw.xd = malloc(sizeof *pw.xd * D);
-    pw.keep = malloc(B);
-    st = rec_eq7_pixscreen_alloc(m, B, &pw.fs);
-    if (st != GS_OK) {
-        pix_free(&pw);
-        return st;
-    }
-    if (!pw.keep || !pw.sc || !pw.xs || !pw.rows || !pw.y || !pw.sh || !pw.ub || !pw.zz || !pw.gg || !pw.xd) {
-        pix_free(&pw);
-        return gs_fail(GS_ENOMEM, "Eq. 7 pixels: cannot allocate a %zu x %zu score block", B, Mp);
-    }
-    const double min_snr = m->o.min_snr;
-    /* The prefilter pays only where it rejects rows: after a block where it passed more than
-     * 3/4 of them (an all-lit region) the next PIX_PREFILTER_REST blocks go without it (the
-     * same answers: a row it rejects is dim for every template) */
-    int rest = 0;
-    for (size_t r0 = 0; r0 < P; r0 += B) {
-        size_t nr = P - r0 < B ? P - r0 : B;
-        const float *xb = x + r0 * D;
-        for (size_t i = 0; i < nr; i++) {
-            bulb[r0 + i] = -1;
-            if (phase_deg) phase_deg[r0 + i] = 0.0f;
-            if (confidence) confidence[r0 + i] = 0.0f;
-        }
-        /* Prefilter (when the templates are close to an R-dimensional subspace E): with
-         * y = E x, x_perp = x - E^T y and t_j = E^T c_j + r_j, |r_j| = rho_j,
-         *   x . t_j <= c_j . y + rho_j |x_perp|,
-         * so a row whose bound stays below min_snr sigma is dim for every template (exactly as
-         * the full test would find) and needs no full scores. */
-        size_t ns = 0;
-        int prefilter = R && rest == 0 && !m->fs_on;
-        rest -= rest > 0;
-        if (prefilter) {
-            cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)nr, (int)R, (int)D, 1.0f, xb,
-                        (int)D, m->pe, (int)D, 0.0f, pw.y, (int)R);
-            cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)nr, (int)Mp, (int)R, 1.0f, pw.y,
-                        (int)R, m->pc, (int)R, 0.0f, pw.sh, (int)Mp);
-        }
-        for (size_t i = 0; i < nr; i++) {
-            double sg = noise_sigma[r0 + i];
-            if (!(sg > 0.0) || !isfinite(sg)) continue;
-            if (prefilter) {
-                const float *xr = xb + i * D;
-                double ss = rec_pix_sumsq(xr, D), yy = 0.0;
-                for (size_t q = 0; q < R; q++) yy += (double)pw.y[i * R + q] * pw.y[i * R + q];
-                /* |x_perp| from |x|^2 - |y|^2, plus the rounding of both (an upper bound) */
-                float xp = (float)sqrt((ss > yy ? ss - yy : 0.0) + 1e-6 * ss);
-                float bound = row_bound_perp(pw.sh + i * Mp, m->prho, xp, Mp);
-                /* slack for the float scores of the prefilter */
-                if (!((double)bound + 1e-5 * sqrt(ss) >= min_snr * sg) || !isfinite(ss)) continue;
-            }
-            pw.rows[ns++] = r0 + i;
-        }
-        if (prefilter && 4 * ns > 3 * nr) rest = PIX_PREFILTER_REST;
-        if (ns == 0) continue;
-        const float *xs = xb;
-        if (ns < nr) {
-            for (size_t k = 0; k < ns; k++)
-                memcpy(pw.xs + k * D, x + pw.rows[k] * D, sizeof *pw.xs * D);
-            xs = pw.xs;
-        }
-        if (m->bandpath) {
-            /* per-band scores x_b . u_jb: one SGEMM of K columns per band, scores of row k at
-             * sc[k * bands * Mp + b * Mp + j] */
-            size_t K = (size_t)m->K, ld = nsc * Mp;
-            for (size_t band = 0; band < nsc; band++)
-                cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)ns, (int)Mp, (int)K, 1.0f,
-                            xs + band * K, (int)D, m->tbnf + band * K, (int)D, 0.0f, pw.sc + band * Mp,
-                            (int)ld);
-            for (size_t k = 0; k < ns; k++) {
-                size_t r = pw.rows[k];
-                pixel_row_band(m, &pw, xs + k * D, pw.sc + k * ld, noise_sigma[r], &bulb[r],
-                               phase_deg ? &phase_deg[r] : NULL, confidence ? &confidence[r] : NULL);
-            }
-            continue;
-        }
-        if (m->fs_on) {
-            rec_eq7_pixscreen(m, &pw.fs, xs, ns, noise_sigma, pw.rows, pw.sc, pw.keep);
-        } else {
-            cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)ns, (int)Mp, (int)D, 1.0f, xs,
-                        (int)D, m->tn, (int)D, 0.0f, pw.sc, (int)Mp);
-            memset(pw.keep, 1, ns);
-        }
-        for (size_t k = 0; k < ns; k++) {
-            size_t r = pw.rows[k];
-            if (!pw.keep[k]) continue;
-            pixel_row(m, &pw, xs + k * D, pw.sc + k * Mp, noise_sigma[r], &bulb[r],
-                      phase_deg ? &phase_deg[r] : NULL, confidence ? &confidence[r] : NULL);
-        }
-    }
-    pix_free(&pw);
-    return GS_OK;
+    size_t B = P < PIX_BLOCK ? P : PIX_BLOCK, nblk = (P + B - 1) / B;
+    int threads = gs_threads_resolve(m->o.threads);
+    if ((size_t)threads > nblk) threads = (int)nblk;
+    pix_job j = {m, x, noise_sigma, P, B, bulb, phase_deg, confidence, calloc((size_t)threads, sizeof *j.pw)};
+    if (!j.pw) return gs_fail(GS_ENOMEM, "Eq. 7 pixels: cannot allocate scratch for %d threads", threads);
+    /* On several threads OpenBLAS runs single-threaded for the call: a block's small SGEMMs
+     * gain nothing from its threads, and its threaded SGEMMs called from two threads at once
+     * contend (0.55x of one thread measured, docs/recognition.md). The rows are independent:
+     * the same answers on any number of threads. */
+    int blas = threads > 1 ? openblas_get_num_threads() : 1;
+    if (blas > 1) openblas_set_num_threads(1);
+    gs_status st = gs_parallel_chunks(threads, nblk, 1, pix_part, &j);
+    if (blas > 1) openblas_set_num_threads(blas);
+    for (int t = 0; t < threads; t++) pix_free(&j.pw[t]);
+    free(j.pw);
+    return st;
 }

@@ -164,7 +164,8 @@ double rec_centroid_bias_px(double psf_sigma_px);
  * the light's relative excess noise (scintillation): model_error when it is a number, else
  * measured per capture by rec_match_catalog (docs/recognition.md, "Noise").
  * Thread safety: a matcher is read-only after rec_matcher_new; rec_match_* may run on several
- * threads with the same matcher (rec_match_pixels calls OpenBLAS, whose own threading applies;
+ * threads with the same matcher (rec_match_pixels calls OpenBLAS: on one thread its own
+ * threading applies, on several it is set to one thread for the call, process-wide;
  * rec_matcher_new plans FFTs, so do not create matchers concurrently with other FFTW planners). */
 typedef enum {
     REC_PHASES_3,            /* {0, 120, 240} deg (default) */
@@ -214,9 +215,9 @@ typedef struct {
                               * second template, a smooth deformation, a bulb not in DELIGHT): 1
                               * (default), or 0 for Eq. 7 alone (never BLEND nor UNKNOWN by shape,
                               * p_other = p_blend = 0, other_prior and blend_prior unused) */
-    int threads;             /* threads of rec_match_catalog, >= 0; 0 = the online CPUs (0). The
-                              * lights are independent: the answers are the same bits on any
-                              * number */
+    int threads;             /* threads of rec_match_catalog and rec_match_pixels, >= 0; 0 = the
+                              * online CPUs (0). The lights and rows are independent: the answers
+                              * are the same bits on any number */
 } rec_eq7_opts;
 typedef enum {
     REC_BANDS_CHROMA = 0,    /* one brightness times Q_beta (the paper's Eq. 7) */
@@ -355,7 +356,8 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
  * scores, exact Newton refinement for bright rows). bulb is -1, phase 0 and confidence 0 for
  * rows with a non-finite value or a sigma that is not finite and > 0, and for dim (min_snr) or
  * unknown (unknown_p at dof = bands * K - 2, with band gains bands * K - bands - 1) rows.
- * phase_deg and confidence may be NULL.
+ * phase_deg and confidence may be NULL. The blocks go over rec_eq7_opts.threads threads (the
+ * same answers on any number).
  * docs/recognition.md gives the throughput (one core: ~3-5 Mpixel/s for 1 Mpixel RGB K = 26
  * with three phases when most pixels are dark). */
 gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *noise_sigma,

@@ -908,6 +908,35 @@ lights:
         config cc = {26, 3, 0, 1, 0, 0.0, quick ? 30 : 200, 0, 1, ti ? nt : 1, 0};
         light_row(all, &cc, &failed);
     }
+    if (nt > 1) {
+        printf("\n## The paper's model on %d threads\n\n"
+               "Rows of the tables above, now with rec_eq7_opts.threads = %d (rec_match_pixels: blocks of "
+               "512 rows taken in turn, OpenBLAS single-threaded; rec_match_catalog: lights in chunks; "
+               "the answers are the same bits as on one thread: tests/test_eq7_pixels.c, "
+               "test_eq7_model.c). Seconds are wall-clock time; *reference* and *SGEMM only* stay on one "
+               "thread.\n\n", nt, nt);
+        if (!lights_only) {
+            pixel_header(0);
+            for (size_t li = 0; li < 3; li++) {
+                if (quick && li != 1) continue;
+                config cf = {26, 3, 0, 0, (size_t)1 << (quick ? 16 : 20), lits[li], 0, 0, 0, nt, 0};
+                pixel_row(all, &cf, &failed);
+            }
+            for (size_t li = 0; li < 3; li++) {
+                if (quick && li != 1) continue;
+                config cf = {26, 3, 0, 1, (size_t)1 << (quick ? 10 : 14), lits[li], 0, 0, 0, nt, 0};
+                pixel_row(all, &cf, &failed);
+            }
+            printf("\n");
+        }
+        printf("| K | bands | bulbs | templates | lights | seconds | lights/s | reference lights/s | "
+               "speed-up | agree | correct | peak RSS MiB |\n");
+        printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+        for (int ci = 0; ci < 2; ci++) {
+            config cf = {26, 3, 0, ci, 0, 0.0, ci ? (quick ? 50 : 300) : L0, 0, 0, nt, 0};
+            light_row(all, &cf, &failed);
+        }
+    }
 done:
     printf("\nTotal %.0f s.\n", gs_clock_s(CLOCK_MONOTONIC) - t_start);
     gs_delight_free(all);

@@ -220,6 +220,70 @@ TEST(eq7_pixels_prefilter_rest_same_answers_as_block_by_block)
     gs_delight_free(d);
 }
 
+/* rec_match_pixels splits its blocks of rows over rec_eq7_opts.threads: 1, 2 and 3 threads give
+ * every row the same bits (bulb, phase, confidence) for the paper's model with three phases (the
+ * prefilter, resting after the bright runs on each thread), the survey's defaults (the band path)
+ * and continuous phases (the Fourier screen); rows bright, dim, dark and broken, in runs of a
+ * block and a half, and a last block shorter than the others. */
+TEST(eq7_pixels_threads_bit_identical_to_one_thread)
+{
+    gs_delight *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(d, 1024));
+    eq7fx_ttab tb;
+    eq7fx_ttab_init(&tb, d, 50, 3, 26, eq7fx_p3, 3);
+    size_t n = 6 * PIX_BLOCK + 77, run = 3 * PIX_BLOCK / 2;
+    eq7fx_rows px[3];
+    for (int t = 0; t < 3; t++) eq7fx_rows_alloc(&px[t], n);
+    for (int model = 0; model < 3; model++) {
+        rec_matcher *m[3] = {NULL, NULL, NULL};
+        for (int t = 0; t < 3; t++) {
+            rec_eq7_opts o;
+            rec_eq7_opts_default(&o);
+            o.phases = model == 2 ? REC_PHASES_CONTINUOUS : REC_PHASES_3;
+            if (model != 1) {   /* the paper's model */
+                o.band_gains = 0;
+                o.model_error = 0.0;
+                o.other_prior = o.blend_prior = o.flat_share = 0.0;
+            }
+            o.threads = t + 1;
+            CHECK_OK(rec_matcher_new(d, 50, 3, 26, &o, &m[t]));
+        }
+        if (!m[0] || !m[1] || !m[2]) break;
+        size_t nb = rec_matcher_bulb_count(m[0]);
+        double x[78], sg[78];
+        uint64_t rs = 59;
+        for (size_t i = 0; i < n; i++) {
+            int lit_run = (i / run) % 2 == 0;
+            double a = lit_run ? 5.0 + 50.0 * gs_splitmix_uniform(&rs)
+                               : (i % 3 == 0) ? 0.0 : 0.5 + 1.5 * gs_splitmix_uniform(&rs);
+            eq7fx_render_t(eq7fx_ttab_row(&tb, (int)(i % nb), (int)(i / nb) % 3), 78, a, 1.0, &rs, x, sg);
+            for (int t = 0; t < 3; t++) {
+                for (int k = 0; k < 78; k++) px[t].x[i * 78 + k] = (float)x[k];
+                px[t].sigma[i] = 1.0f;
+                if (i % 97 == 1) px[t].x[i * 78 + i % 78] = NAN;
+                if (i % 89 == 3) px[t].sigma[i] = 0.0f;
+            }
+        }
+        for (int t = 0; t < 3; t++)
+            CHECK_OK(rec_match_pixels(m[t], px[t].x, px[t].sigma, n, px[t].bulb, px[t].phase, px[t].conf));
+        int answered = 0;
+        for (size_t i = 0; i < n; i++) answered += px[0].bulb[i] >= 0;
+        CHECK_MSG(answered > (int)n / 3, "model %d: %d of %zu rows answered", model, answered, n);
+        for (int t = 1; t < 3; t++) {
+            int differ = 0;
+            for (size_t i = 0; i < n; i++)
+                differ += px[t].bulb[i] != px[0].bulb[i] || memcmp(&px[t].phase[i], &px[0].phase[i], sizeof(float)) ||
+                          memcmp(&px[t].conf[i], &px[0].conf[i], sizeof(float));
+            CHECK_MSG(differ == 0, "model %d, %d threads: %d of %zu rows differ from one thread", model, t + 1,
+                      differ, n);
+        }
+        for (int t = 0; t < 3; t++) rec_matcher_free(m[t]);
+    }
+    for (int t = 0; t < 3; t++) eq7fx_rows_free(&px[t]);
+    free(tb.t);
+    gs_delight_free(d);
+}
+
 /* Rows of every brightness, including just around the dim threshold (z ~ 3), through the
  * generated DELIGHT (150 templates, where the dark-row prefilter is active): every row as
  * rec_match_light says. */
