@@ -204,6 +204,7 @@ typedef struct {
     double *xd;      /* [D] one row in double */
     rec_pixscreen_work fs;   /* the Fourier screen's (m->fs_on) */
     unsigned char *keep;     /* [B] rows it keeps */
+    size_t *range;           /* [2 nb] a row's ranges of scored templates (rec_eq7_pixscreen_ranges) */
     int rest;                /* blocks still to go without the prefilter */
 } pix_work;
 
@@ -221,26 +222,47 @@ static void pix_free(pix_work *p)
     free(p->xd);
     rec_eq7_pixscreen_free(&p->fs);
     free(p->keep);
+    free(p->range);
 }
 
-/* The answer for one surviving row: x row xr, its full float scores srow, noise sigma sg. */
+/* The answer for one surviving row: x row xr, its float scores srow over the nrange ranges of
+ * templates range ([lo, hi) pairs, multiples of LANES; the others are not read), noise sigma sg. */
 static void pixel_row(const rec_matcher *m, pix_work *pw, const float *xr, const float *srow,
-                      double sg, int *bulb_out, float *phase_out, float *conf_out)
+                      const size_t *range, size_t nrange, double sg, int *bulb_out, float *phase_out,
+                      float *conf_out)
 {
-    size_t D = (size_t)m->D, M = m->M, Mp = m->Mp;
+    size_t D = (size_t)m->D, M = m->M;
     rec_eq7_work *w = &pw->w;
     double *zz = pw->zz, *xd = pw->xd;
     float *ub = pw->ub;
     const double min_snr = m->o.min_snr;
     /* early out: every template too dim; a row with a NaN has NaN scores and stops here too */
-    float smax = row_max(srow, Mp);
+    float smax = -INFINITY;
+    for (size_t i = 0; i < nrange; i++) {
+        float v = row_max(srow + range[2 * i], range[2 * i + 1] - range[2 * i]);
+        smax = v > smax || isnan(v) ? v : smax;
+    }
     if (!((double)smax >= min_snr * sg) || !(smax > 0.0f)) return;
     double ss = rec_pix_sumsq(xr, D);
     if (!isfinite(ss)) return;
     double inv = 1.0 / sg, Sxx = ss * inv * inv;
-    /* bounds U_j >= L_j + Sxx/2 (log Phi <= 0) from the float scores */
-    float umax = row_bounds(srow, m->lnf, (float)(0.5 * inv * inv), ub, Mp);
-    size_t ju = first_equal(ub, M, umax);
+    /* bounds U_j >= L_j + Sxx/2 (log Phi <= 0) from the float scores; the first largest */
+    float umax = -FLT_MAX;
+    for (size_t i = 0; i < nrange; i++) {
+        size_t lo = range[2 * i];
+        float v = row_bounds(srow + lo, m->lnf + lo, (float)(0.5 * inv * inv), ub + lo, range[2 * i + 1] - lo);
+        umax = v > umax ? v : umax;
+    }
+    size_t ju = M - 1;
+    for (size_t i = 0; i < nrange; i++) {
+        size_t lo = range[2 * i], hi = range[2 * i + 1] < M ? range[2 * i + 1] : M;
+        if (lo >= hi) continue;
+        size_t j = lo + first_equal(ub + lo, hi - lo, umax);
+        if (ub[j] == umax) {
+            ju = j;
+            break;
+        }
+    }
     /* error of z^2/2 from the float scores (float dot products, templates rounded to float,
      * the float bound itself): at most 8.9e-7 Sxx measured over 3e7 scores of the generated
      * DELIGHT (K = 26, RGB); FLOAT_ERR allows twice that. Above 1e-3 nats the candidates are
@@ -251,7 +273,14 @@ static void pixel_row(const rec_matcher *m, pix_work *pw, const float *xr, const
     double zu = exact ? gs_dot(xd, m->tnd + ju * D, D) * inv : srow[ju] * inv;
     /* candidates: the templates whose bound reaches within CUT_PIXEL of a template's L */
     double thr = pix_L(m, ju, zu, Sxx) + 0.5 * Sxx - CUT_PIXEL - 2.0 * err;
-    w->ncand = at_least(ub, M, nextafterf((float)(thr - err), -INFINITY), err, thr, w->cand);
+    w->ncand = 0;
+    for (size_t i = 0; i < nrange; i++) {
+        size_t lo = range[2 * i], hi = range[2 * i + 1] < M ? range[2 * i + 1] : M;
+        if (lo >= hi) continue;
+        size_t *c = w->cand + w->ncand, n = at_least(ub + lo, hi - lo, nextafterf((float)(thr - err), -INFINITY), err, thr, c);
+        for (size_t q = 0; q < n; q++) c[q] += lo;
+        w->ncand += n;
+    }
     for (size_t ci = 0; ci < w->ncand; ci++) w->mark[w->cand[ci]] = 1;
     if (exact && w->ncand > M / 4) {   /* many: one matrix-vector product for all templates */
         cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, (int)D, inv, m->tnd, (int)D, xd, 1, 0.0, zz, 1);
@@ -586,9 +615,10 @@ static gs_status pix_alloc(const rec_matcher *m, size_t B, pix_work *pw)
     pw->gg = malloc(sizeof *pw->gg * m->M);
     pw->xd = malloc(sizeof *pw->xd * D);
     pw->keep = malloc(B);
+    pw->range = malloc(sizeof *pw->range * 2 * m->nb);
     st = rec_eq7_pixscreen_alloc(m, B, &pw->fs);
     if (st != GS_OK) return st;
-    if (!pw->keep || !pw->sc || !pw->xs || !pw->rows || !pw->y || (!m->fs_on && !pw->sh) || !pw->ub || !pw->zz ||
+    if (!pw->keep || !pw->range || !pw->sc || !pw->xs || !pw->rows || !pw->y || (!m->fs_on && !pw->sh) || !pw->ub || !pw->zz ||
         !pw->gg || !pw->xd)
         return gs_fail(GS_ENOMEM, "Eq. 7 pixels: cannot allocate a %zu x %zu score block", B, Mp);
     return GS_OK;
@@ -668,11 +698,13 @@ static void pix_block(const rec_matcher *m, pix_work *pw, const float *x, const 
                     (int)D, m->tn, (int)D, 0.0f, pw->sc, (int)Mp);
         memset(pw->keep, 1, ns);
     }
+    size_t all[2] = {0, Mp};
     for (size_t k = 0; k < ns; k++) {
         size_t r = pw->rows[k];
         if (!pw->keep[k]) continue;
-        pixel_row(m, pw, xs + k * D, pw->sc + k * Mp, noise_sigma[r], &bulb[r],
-                  phase_deg ? &phase_deg[r] : NULL, confidence ? &confidence[r] : NULL);
+        size_t nrange = m->fs_on ? rec_eq7_pixscreen_ranges(m, &pw->fs, k, pw->range) : 1;
+        pixel_row(m, pw, xs + k * D, pw->sc + k * Mp, m->fs_on ? pw->range : all, nrange, noise_sigma[r],
+                  &bulb[r], phase_deg ? &phase_deg[r] : NULL, confidence ? &confidence[r] : NULL);
     }
 }
 

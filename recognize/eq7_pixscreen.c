@@ -20,8 +20,10 @@
  *     least that much (log Phi(z) >= -log 2 for the best bound's z >= 0), so every candidate is
  *     among them, and so is the best bound; every bulb if a score within the rounding of 0 may
  *     hold that bound (log Phi has no floor below 0), or if U overflows.
- * A bulb left out gets scores 0: its U = -log |t_j| stays below its true U, so it is neither a
- * candidate nor the best bound, and 0 is not above any score that decides. The scores come from
+ * A bulb left out is not read (pixel_row reads the ranges of the scored bulbs, widened to whole
+ * vectors, where the others' scores are 0): as if its scores were 0, its U = -log |t_j| would
+ * stay below its true U, so it is neither a candidate nor the best bound, and 0 is not above any
+ * score that decides. The scores come from
  * bulb_scores, whose every score is one chain of multiply-adds in sample order; the answers are
  * those of that kernel on every bulb (REC_FS_ALL), bit for bit (tests/test_eq7_pixels.c).
  * (SGEMM's scores differ from it in the last bits: its kernels depend on the shapes.) */
@@ -291,11 +293,37 @@ void rec_eq7_pixscreen(const rec_matcher *m, rec_pixscreen_work *sw, const float
         }
         score_wanted(m, sw, xs, ns, sc);
     }
-    for (size_t k = 0; k < ns; k++) {   /* the bulbs left out (and the padding): scores 0 */
+    for (size_t k = 0; k < ns; k++) {   /* 0 where the ranges reach the bulbs left out, and the padding */
         if (!keep[k]) continue;
-        memset(sc + k * Mp + m->M, 0, sizeof *sc * (Mp - m->M));
-        for (size_t b = 0; b < nb; b++)
-            if (sw->state[k * nb + b] != ST_DONE)
-                memset(sc + k * Mp + m->first[b], 0, sizeof *sc * m->count[b]);
+        float *o = sc + k * Mp;
+        memset(o + m->M, 0, sizeof *o * (Mp - m->M));
+        for (size_t b = 0; b < nb; b++) {
+            if (sw->state[k * nb + b] == ST_DONE) continue;
+            size_t lo = m->first[b], hi = lo + m->count[b];
+            size_t a = lo + (LANES - lo % LANES) % LANES, z = hi - hi % LANES;   /* whole vectors inside */
+            if (a >= z) {
+                memset(o + lo, 0, sizeof *o * (hi - lo));
+            } else {
+                memset(o + lo, 0, sizeof *o * (a - lo));
+                memset(o + z, 0, sizeof *o * (hi - z));
+            }
+        }
     }
+}
+
+size_t rec_eq7_pixscreen_ranges(const rec_matcher *m, const rec_pixscreen_work *sw, size_t k, size_t *range)
+{
+    size_t n = 0, nb = m->nb;
+    for (size_t b = 0; b < nb; b++) {
+        if (sw->state[k * nb + b] != ST_DONE) continue;
+        size_t lo = m->first[b] / LANES * LANES, hi = (m->first[b] + m->count[b] + LANES - 1) / LANES * LANES;
+        if (n > 0 && lo <= range[2 * n - 1]) {
+            range[2 * n - 1] = hi;
+        } else {
+            range[2 * n] = lo;
+            range[2 * n + 1] = hi;
+            n++;
+        }
+    }
+    return n;
 }

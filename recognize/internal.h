@@ -479,10 +479,15 @@ gs_status rec_eq7_pixscreen_setup(rec_matcher *m);
 gs_status rec_eq7_pixscreen_alloc(const rec_matcher *m, size_t B, rec_pixscreen_work *sw);
 void rec_eq7_pixscreen_free(rec_pixscreen_work *sw);
 /* The float scores sc[k * Mp + j] of the ns rows xs (rows[k]: their index into noise_sigma)
- * for every template that can matter, 0 for the others; keep[k] = 0 for a row pixel_row would
- * answer nothing (dim, or not finite). */
+ * for every template that can matter; keep[k] = 0 for a row pixel_row would answer nothing
+ * (dim, or not finite). A row's other scores are 0 where rec_eq7_pixscreen_ranges' ranges
+ * reach them, else undefined. */
 void rec_eq7_pixscreen(const rec_matcher *m, rec_pixscreen_work *sw, const float *xs, size_t ns,
                        const float *noise_sigma, const size_t *rows, float *sc, unsigned char *keep);
+/* Row k's ranges of templates pixel_row reads, as pairs [lo, hi) in rising order: the scored
+ * bulbs' templates widened to multiples of LANES (within Mp), adjacent ones merged. Returns
+ * their number (at most nb). */
+size_t rec_eq7_pixscreen_ranges(const rec_matcher *m, const rec_pixscreen_work *sw, size_t k, size_t *range);
 
 /* eq7_matcher.c: the window means of continuous bulb b at shift s (and their first two
  * derivatives when dt, d2t are not NULL; acc is scratch of REC_TEMPLATE_ACC K); log Phi from the

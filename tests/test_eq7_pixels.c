@@ -380,6 +380,60 @@ static void screen_block_checks(rec_matcher *m, const float *x, const float *sg,
     free(state);
 }
 
+/* What pixel_row reads behind the screen, on the first PIX_BLOCK rows of x with a valid sigma (score buffer filled
+ * with NaN first): each kept row's ranges (rec_eq7_pixscreen_ranges) are whole vectors in rising
+ * order within Mp, hold every template of the bulbs it scored (their scores written), and 0 at
+ * every other template and the padding they reach. */
+static void screen_ranges_checks(rec_matcher *m, const float *x, const float *sg, size_t n)
+{
+    size_t D = (size_t)m->D, nb = m->nb, Mp = m->Mp, rows[PIX_BLOCK], ns = 0;
+    float *xs = malloc(sizeof *xs * PIX_BLOCK * D), *sc = malloc(sizeof *sc * PIX_BLOCK * Mp);
+    size_t *range = malloc(sizeof *range * 2 * nb);
+    unsigned char keep[PIX_BLOCK], *scored = malloc(Mp);
+    rec_pixscreen_work sw;
+    CHECK_OK(rec_eq7_pixscreen_alloc(m, PIX_BLOCK, &sw));
+    for (size_t i = 0; i < PIX_BLOCK * Mp; i++) sc[i] = NAN;
+    for (size_t i = 0; i < n && ns < PIX_BLOCK; i++) {   /* rows as rec_match_pixels passes them */
+        if (!(sg[i] > 0.0f) || !isfinite(sg[i])) continue;
+        memcpy(xs + ns * D, x + i * D, sizeof *xs * D);
+        rows[ns++] = i;
+    }
+    rec_eq7_pixscreen(m, &sw, xs, ns, sg, rows, sc, keep);
+    int bad = 0, kept = 0, partial = 0;
+    for (size_t k = 0; k < ns; k++) {
+        if (!keep[k]) continue;
+        kept++;
+        memset(scored, 0, Mp);
+        size_t nr = rec_eq7_pixscreen_ranges(m, &sw, k, range), reached = 0, nscored = 0;
+        for (size_t b = 0; b < nb; b++)
+            if (sw.state[k * nb + b] == 2) {   /* ST_DONE */
+                memset(scored + m->first[b], 1, m->count[b]);
+                nscored += m->count[b];
+            }
+        partial += nscored < m->M;
+        for (size_t i = 0; i < nr; i++) {
+            size_t lo = range[2 * i], hi = range[2 * i + 1];
+            if (lo % LANES || hi % LANES || hi <= lo || hi > Mp || (i > 0 && lo <= range[2 * i - 1])) {
+                if (bad++ < 5) printf("    row %zu: range [%zu, %zu) of Mp %zu\n", k, lo, hi, Mp);
+                continue;
+            }
+            for (size_t j = lo; j < hi; j++) {
+                reached += scored[j];
+                int ok = scored[j] ? !isnan(sc[k * Mp + j]) : sc[k * Mp + j] == 0.0f;
+                if (!ok && bad++ < 5) printf("    row %zu: template %zu (scored %d) reads %g\n", k, j, scored[j], sc[k * Mp + j]);
+            }
+        }
+        if (reached != nscored && bad++ < 5) printf("    row %zu: %zu of %zu scored templates in its ranges\n", k, reached, nscored);
+    }
+    CHECK_MSG(bad == 0, "K = %d: %d faults in the ranges pixel_row reads", m->K, bad);
+    CHECK_MSG(kept > 0 && partial > 0, "K = %d: %d rows kept, %d with bulbs left out", m->K, kept, partial);
+    rec_eq7_pixscreen_free(&sw);
+    free(xs);
+    free(sc);
+    free(range);
+    free(scored);
+}
+
 /* The Fourier screen of continuous grids (recognize/eq7_pixscreen.c) gives full scores only to
  * the bulbs that can matter: every row gets the bits it gets with the screen's kernel on every
  * bulb (REC_FS_ALL): dark rows, dim ones around the threshold, lit and bright ones (the exact
@@ -393,7 +447,8 @@ static void screen_block_checks(rec_matcher *m, const float *x, const float *sg,
  * within 1 deg (dim rows' parabolas), confidences within 5e-3. And the screen itself on one
  * block of the K = 26 rows: every bulb's bound is at least its largest float and double score,
  * and it leaves out most dark rows and most (lit row, bulb) pairs (else the first part could
- * pass with a screen that scores everything). A discrete matcher with a shape-only bulb
+ * pass with a screen that scores everything). In every case, what pixel_row reads of a block's
+ * scores (screen_ranges_checks). A discrete matcher with a shape-only bulb
  * (searched over every shift) keeps its dark-row prefilter and has no screen. */
 TEST(eq7_pixels_fourier_screen_same_answers_as_every_score)
 {
@@ -491,6 +546,7 @@ TEST(eq7_pixels_fourier_screen_same_answers_as_every_score)
             CHECK_MSG(other == 0 && dph < 1.0 && dcf < 5e-3, "against SGEMM: %d bulbs, %g deg, %g", other, dph, dcf);
             screen_block_checks(m, x, sg, n);
         }
+        screen_ranges_checks(m, x, sg, n);
         rec_matcher_free(m);
         free(x);
         free(sg);
