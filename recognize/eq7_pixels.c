@@ -285,9 +285,10 @@ static void pixel_row(const rec_matcher *m, pix_work *pw, const float *xr, const
     if (exact && w->ncand > M / 4) {   /* many: one matrix-vector product for all templates */
         cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, (int)D, inv, m->tnd, (int)D, xd, 1, 0.0, zz, 1);
     } else {
-        for (size_t ci = 0; ci < w->ncand; ci++) {
-            size_t j = w->cand[ci];
-            zz[j] = exact ? gs_dot(xd, m->tnd + j * D, D) * inv : srow[j] * inv;
+        if (exact) {
+            gs_dot_rows(xd, m->tnd, D, D, w->cand, w->ncand, inv, zz);
+        } else {
+            for (size_t ci = 0; ci < w->ncand; ci++) zz[w->cand[ci]] = srow[w->cand[ci]] * inv;
         }
     }
     double Lmax = -INFINITY;

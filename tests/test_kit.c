@@ -297,6 +297,37 @@ TEST(kit_numeric_median_and_wraps)
     CHECK(gs_wrap180(180) == -180 && gs_wrap180(-181) == 179 && gs_wrap180(359) == -1);
 }
 
+/* gs_dot against a long double sum (within its rounding), and gs_dot_rows against gs_dot bit for
+ * bit: lengths 0 to 80 (tails of 0 to 7 after the 8-wide part), counts not a multiple of 4,
+ * indices out of order and repeated, a scale. */
+TEST(kit_numeric_dot_rows_same_bits_as_dot)
+{
+    uint64_t rs = 5;
+    double x[80], t[40 * 80], out[40], ref[40];
+    for (size_t i = 0; i < 80; i++) x[i] = gs_splitmix_normal(&rs) * exp(4.0 * gs_splitmix_normal(&rs));
+    for (size_t i = 0; i < 40 * 80; i++) t[i] = gs_splitmix_normal(&rs);
+    int differ = 0, far = 0;
+    for (size_t n = 0; n <= 80; n++)
+        for (size_t count = 0; count <= 11; count++) {
+            size_t idx[11];
+            for (size_t i = 0; i < count; i++) idx[i] = (size_t)(gs_splitmix_uniform(&rs) * 40.0) % 40;
+            if (count > 2) idx[count - 1] = idx[0];
+            for (size_t i = 0; i < count; i++) {
+                ref[idx[i]] = gs_dot(x, t + idx[i] * 80, n) * 0.37;
+                long double s = 0.0L, a = 0.0L;
+                for (size_t k = 0; k < n; k++) {
+                    s += (long double)x[k] * t[idx[i] * 80 + k];
+                    a += fabsl((long double)x[k] * t[idx[i] * 80 + k]);
+                }
+                far += fabsl((long double)gs_dot(x, t + idx[i] * 80, n) - s) > 1e-14L * a;
+            }
+            gs_dot_rows(x, t, 80, n, idx, count, 0.37, out);
+            for (size_t i = 0; i < count; i++) differ += memcmp(&out[idx[i]], &ref[idx[i]], sizeof *out) != 0;
+        }
+    CHECK_MSG(differ == 0, "%d dot products differ from gs_dot", differ);
+    CHECK_MSG(far == 0, "%d dot products off their sum", far);
+}
+
 /* A failure's detail is one line whatever its parts hold: a library's message ending in a
  * newline (OpenCV's), a file name with a newline or ESC in it. */
 TEST(kit_status_detail_is_one_line)

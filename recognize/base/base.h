@@ -282,6 +282,10 @@ double gs_log_phi(double z);
 #endif
 /* sum_i x_i t_i in eight interleaved partial sums (in clones, GS_VECTOR_LOOP: the same sums). */
 double gs_dot(const double *x, const double *t, size_t n);
+/* out[j] = gs_dot(x, t + j ld, n) * scale for the count indices j of idx (the same bits as
+ * gs_dot, four rows at a time). */
+void gs_dot_rows(const double *x, const double *t, size_t ld, size_t n, const size_t *idx, size_t count,
+                 double scale, double *out);
 /* An angle in degrees wrapped to [0, 360) and to [-180, 180). */
 double gs_wrap360(double a_deg);
 double gs_wrap180(double a_deg);

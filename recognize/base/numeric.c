@@ -123,6 +123,12 @@ float gs_median_f(float *v, size_t n)
 
 /* (the eight partial sums as one vector: gcc's vectorizer made a poor loop of the array form) */
 typedef double dot_v8 __attribute__((vector_size(8 * sizeof(double))));
+/* The reduction of gs_dot's eight partial sums. */
+static inline double dot_sum(dot_v8 a)
+{
+    return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
+}
+
 GS_VECTOR_CLONES
 double gs_dot(const double *x, const double *t, size_t n)
 {
@@ -135,5 +141,42 @@ double gs_dot(const double *x, const double *t, size_t n)
         a += xv * tv;
     }
     for (; i < n; i++) a[0] += x[i] * t[i];
-    return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
+    return dot_sum(a);
+}
+
+
+GS_VECTOR_CLONES
+void gs_dot_rows(const double *x, const double *t, size_t ld, size_t n, const size_t *idx, size_t count,
+                 double scale, double *out)
+{
+    size_t i = 0;
+    for (; i + 4 <= count; i += 4) {   /* four independent chains: gs_dot's operations on each */
+        const double *t0 = t + idx[i] * ld, *t1 = t + idx[i + 1] * ld, *t2 = t + idx[i + 2] * ld,
+                     *t3 = t + idx[i + 3] * ld;
+        dot_v8 a0 = {0}, a1 = {0}, a2 = {0}, a3 = {0};
+        size_t k = 0;
+        for (; k + 8 <= n; k += 8) {
+            dot_v8 xv, v0, v1, v2, v3;
+            memcpy(&xv, x + k, sizeof xv);
+            memcpy(&v0, t0 + k, sizeof v0);
+            memcpy(&v1, t1 + k, sizeof v1);
+            memcpy(&v2, t2 + k, sizeof v2);
+            memcpy(&v3, t3 + k, sizeof v3);
+            a0 += xv * v0;
+            a1 += xv * v1;
+            a2 += xv * v2;
+            a3 += xv * v3;
+        }
+        for (; k < n; k++) {
+            a0[0] += x[k] * t0[k];
+            a1[0] += x[k] * t1[k];
+            a2[0] += x[k] * t2[k];
+            a3[0] += x[k] * t3[k];
+        }
+        out[idx[i]] = dot_sum(a0) * scale;
+        out[idx[i + 1]] = dot_sum(a1) * scale;
+        out[idx[i + 2]] = dot_sum(a2) * scale;
+        out[idx[i + 3]] = dot_sum(a3) * scale;
+    }
+    for (; i < count; i++) out[idx[i]] = gs_dot(x, t + idx[i] * ld, n) * scale;
 }
