@@ -837,13 +837,3 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
     return GS_OK;
 }
 
-/* log Phi(z) from the matcher's table (error < 4e-5), for the pixel path. */
-double rec_eq7_log_phi_fast(const rec_matcher *m, double z)
-{
-    if (z >= LOGPHI_ZMAX) return 0.0;
-    if (z <= -LOGPHI_ZMAX) return gs_log_phi(z);
-    double u = (z + LOGPHI_ZMAX) * LOGPHI_STEPS;
-    int i = (int)u;
-    double f = u - i;
-    return m->logphi_tab[i] + f * (m->logphi_tab[i + 1] - m->logphi_tab[i]);
-}

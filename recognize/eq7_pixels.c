@@ -96,13 +96,15 @@ GS_VECTOR_LOOP static float row_bound_perp(const float *sh, const float *rho, fl
 static void continuous_peaks(const rec_matcher *m, rec_eq7_work *w)
 {
     for (size_t b = 0; b < m->nb; b++) w->has_peak[b] = 0;
+    double *best = w->peak_L;   /* (the peak cell's L until the refinement sets peak_L) */
     for (size_t ci = 0; ci < w->ncand; ci++) {
         size_t j = w->cand[ci];
         size_t b = (size_t)m->tbulb[j];
         if (!m->cont[b]) continue;
-        if (!w->has_peak[b] || w->L[j] > w->L[w->peak_cell[b]]) {
+        if (!w->has_peak[b] || w->L[j] > best[b]) {
             w->has_peak[b] = 1;
             w->peak_cell[b] = j;
+            best[b] = w->L[j];
         }
     }
 }

@@ -490,12 +490,21 @@ void rec_eq7_pixscreen(const rec_matcher *m, rec_pixscreen_work *sw, const float
 size_t rec_eq7_pixscreen_ranges(const rec_matcher *m, const rec_pixscreen_work *sw, size_t k, size_t *range);
 
 /* eq7_matcher.c: the window means of continuous bulb b at shift s (and their first two
- * derivatives when dt, d2t are not NULL; acc is scratch of REC_TEMPLATE_ACC K); log Phi from the
- * table. */
+ * derivatives when dt, d2t are not NULL; acc is scratch of REC_TEMPLATE_ACC K). */
 #define REC_TEMPLATE_ACC 6
 void rec_eq7_template_at(const rec_matcher *m, size_t b, double s, double *t, double *dt,
                          double *d2t, double complex *acc);
-double rec_eq7_log_phi_fast(const rec_matcher *m, double z);
+/* log Phi(z) from the matcher's table (error < 4e-5), for the pixel path (inline: it takes it
+ * for every candidate of a row, all 10,400 grid cells for a dim row with continuous phases). */
+static inline double rec_eq7_log_phi_fast(const rec_matcher *m, double z)
+{
+    if (z >= LOGPHI_ZMAX) return 0.0;
+    if (z <= -LOGPHI_ZMAX) return gs_log_phi(z);
+    double u = (z + LOGPHI_ZMAX) * LOGPHI_STEPS;
+    int i = (int)u;
+    double f = u - i;
+    return m->logphi_tab[i] + f * (m->logphi_tab[i + 1] - m->logphi_tab[i]);
+}
 /* eq7_series.c: continuous bulb b's sums S_f, T_f per brightness f and their first two
  * derivatives at any shift s from Fourier series (the tables of rec_eq7_series_setup; freed by
  * rec_eq7_series_free): rec_eq7_series_row takes the K-point DFTs of the row's w->wx and w->w
