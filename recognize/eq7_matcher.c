@@ -269,52 +269,54 @@ GS_VECTOR_LOOP static void inverse_dft(const double *restrict c, const double *r
 
 /* Exact template of continuous bulb b at shift s and its first two derivatives in s (any of
  * dt, d2t may be NULL). acc is scratch of REC_TEMPLATE_ACC * K complex values. The harmonics are
- * folded into K bins (harmonic h into h mod K, times e^{-2 pi i h s}), then one inverse DFT per
- * series; the
- * Nyquist term sin(pi n (k/K - s)) from the tabulated sin and cos of pi n k / K (m->nyqs, nyqc). */
+ * folded into K bins per band (harmonic h into h mod K, times e^{-2 pi i h s}, the factor shared
+ * by the bands), then one inverse DFT per series; the Nyquist term sin(pi n (k/K - s)) from the
+ * tabulated sin and cos of pi n k / K (m->nyqs, nyqc). */
 void rec_eq7_template_at(const rec_matcher *m, size_t b, double s, double *t, double *dt,
                          double *d2t, double complex *acc)
 {
-    int K = m->K, H = m->H[b], n = m->nfine[b], deriv = dt || d2t;
+    int K = m->K, H = m->H[b], n = m->nfine[b], deriv = dt || d2t, bands = m->bands;
     s = wrap01(s);
-    double complex *A0 = acc, *A1 = acc + K, *A2 = acc + 2 * K;
     double complex base = cexp(-I * EQ7_TWO_PI * s), pw[32];
     pw[0] = 1.0;
     for (int i = 1; i < 32; i++) pw[i] = pw[i - 1] * base;
     double pn = M_PI * n, sB = sin(pn * s), cB = cos(pn * s);
     const double *ns = m->nyqs + b * (size_t)(K + 1), *nc = m->nyqc + b * (size_t)(K + 1);
-    /* split real and imaginary parts of the bins, for the DFT's products (after the bins) */
-    double *re = (double *)(acc + 3 * K), *im = re + 3 * K;
-    for (int band = 0; band < m->bands; band++) {
-        const double complex *F = m->F[b] + (size_t)band * (size_t)(H + 1);
-        for (int r = 0; r < K; r++) A0[r] = A1[r] = A2[r] = 0.0;
-        /* harmonic h's term F_h e^{-2 pi i h s}: e from cexp every 32 harmonics, times powers of
-         * base within (independent products, then added to the bins in the order of h) */
-        int r = 0;
-        for (int h0 = 0; h0 <= H; h0 += 32) {
-            double complex e0 = h0 ? cexp(-I * EQ7_TWO_PI * fmod((double)h0 * s, 1.0)) : 1.0, g[32];
-            int hn = H + 1 - h0 < 32 ? H + 1 - h0 : 32;
-            for (int i = 0; i < hn; i++) g[i] = F[h0 + i] * (e0 * pw[i]);
-            for (int i = h0 ? 0 : 1; i < hn; i++) {
-                if (++r == K) r = 0;
+    /* the bins: band's series q at acc[(3 band + q) K]; then the split real and imaginary parts
+     * of one band's, for the DFT's products */
+    double *re = (double *)(acc + 3 * GS_MAX_BANDS * K), *im = re + 3 * K;
+    for (int r = 0; r < 3 * bands * K; r++) acc[r] = 0.0;
+    /* harmonic h's term F_h e^{-2 pi i h s}: e from cexp every 32 harmonics, times powers of
+     * base within (independent products, then added to the bins in the order of h) */
+    for (int h0 = 0; h0 <= H; h0 += 32) {
+        double complex e0 = h0 ? cexp(-I * EQ7_TWO_PI * fmod((double)h0 * s, 1.0)) : 1.0, eh[32], g[32];
+        int hn = H + 1 - h0 < 32 ? H + 1 - h0 : 32, i0 = h0 ? 0 : 1;
+        for (int i = 0; i < hn; i++) eh[i] = e0 * pw[i];
+        for (int band = 0; band < bands; band++) {
+            const double complex *F = m->F[b] + (size_t)band * (size_t)(H + 1);
+            double complex *A0 = acc + 3 * band * K, *A1 = A0 + K, *A2 = A1 + K;
+            for (int i = 0; i < hn; i++) g[i] = F[h0 + i] * eh[i];
+            int r = (h0 + i0) % K;
+            for (int i = i0; i < hn; i++) {
                 A0[r] += g[i];
                 if (deriv) {
                     double w = EQ7_TWO_PI * (h0 + i);
                     A1[r] += g[i] * (-I * w);
                     A2[r] += g[i] * (-w * w);
                 }
+                if (++r == K) r = 0;
             }
         }
-        for (int q = 0; q < K; q++) {
-            re[q] = creal(A0[q]), im[q] = cimag(A0[q]);
-            re[K + q] = creal(A1[q]), im[K + q] = cimag(A1[q]);
-            re[2 * K + q] = creal(A2[q]), im[2 * K + q] = cimag(A2[q]);
-        }
+    }
+    for (int band = 0; band < bands; band++) {
+        const double complex *F = m->F[b] + (size_t)band * (size_t)(H + 1);
+        const double complex *A = acc + 3 * band * K;
+        for (int q = 0; q < 3 * K; q++) re[q] = creal(A[q]), im[q] = cimag(A[q]);
         size_t d0 = (size_t)band * (size_t)K;
         inverse_dft(m->dftc, m->dfts, K, re, im, creal(F[0]), t + d0);
         if (dt) inverse_dft(m->dftc, m->dfts, K, re + K, im + K, 0.0, dt + d0);
         if (d2t) inverse_dft(m->dftc, m->dfts, K, re + 2 * K, im + 2 * K, 0.0, d2t + d0);
-        double nq = m->nyq[b * (size_t)m->bands + (size_t)band];
+        double nq = m->nyq[b * (size_t)bands + (size_t)band];
         if (nq == 0.0) continue;
         for (int k = 0; k < K; k++) {
             /* sin and cos of pi n (k/K - s) and of pi n ((k + 1)/K - s) */

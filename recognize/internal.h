@@ -491,7 +491,7 @@ size_t rec_eq7_pixscreen_ranges(const rec_matcher *m, const rec_pixscreen_work *
 
 /* eq7_matcher.c: the window means of continuous bulb b at shift s (and their first two
  * derivatives when dt, d2t are not NULL; acc is scratch of REC_TEMPLATE_ACC K). */
-#define REC_TEMPLATE_ACC 6
+#define REC_TEMPLATE_ACC (3 * GS_MAX_BANDS + 3)
 void rec_eq7_template_at(const rec_matcher *m, size_t b, double s, double *t, double *dt,
                          double *d2t, double complex *acc);
 /* log Phi(z) from the matcher's table (error < 4e-5), for the pixel path (inline: it takes it
