@@ -665,6 +665,7 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
     m->lnf = malloc(sizeof *m->lnf * m->Mp);
     m->tnd = malloc(sizeof *m->tnd * M * D);
     m->lognorm = malloc(sizeof *m->lognorm * M);
+    m->tnorm = malloc(sizeof *m->tnorm * M);
     m->cellw = malloc(sizeof *m->cellw * M);
     m->logcellw = malloc(sizeof *m->logcellw * M);
     m->shift = malloc(sizeof *m->shift * M);
@@ -681,7 +682,7 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
     m->bib2 = malloc(sizeof *m->bib2 * m->Mp * (size_t)bands);
     double *raw = malloc(sizeof *raw * D);
     double complex *acc = malloc(sizeof *acc * REC_TEMPLATE_ACC * (size_t)K);
-    if (!m->t || !m->tsq || !m->tn || !m->lnf || !m->tnd || !m->lognorm || !m->cellw || !m->logcellw || !m->shift || !m->tphase ||
+    if (!m->t || !m->tsq || !m->tn || !m->lnf || !m->tnd || !m->lognorm || !m->tnorm || !m->cellw || !m->logcellw || !m->shift || !m->tphase ||
         !m->tbulb || !m->tcell || !m->bnorm || !m->lbnorm || !m->blog || !m->tbn || !m->tbnf || !m->blnf || !m->bib || !m->bib2 || !raw ||
         !acc) {
         free(raw);
@@ -794,6 +795,7 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
                 }
             }
             m->lognorm[j] = 0.5 * log(n2);
+            m->tnorm[j] = exp(m->lognorm[j]);
             m->logcellw[j] = log(m->cellw[j]);
             m->shift[j] = sh;
             m->tphase[j] = ph;

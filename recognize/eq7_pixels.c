@@ -207,6 +207,7 @@ typedef struct {
     rec_pixscreen_work fs;   /* the Fourier screen's (m->fs_on) */
     unsigned char *keep;     /* [B] rows it keeps */
     size_t *range;           /* [2 nb] a row's ranges of scored templates (rec_eq7_pixscreen_ranges) */
+    double *gd;              /* [G] a bulb's grid of dots (exact_scores) */
     int rest;                /* blocks still to go without the prefilter */
 } pix_work;
 
@@ -225,6 +226,33 @@ static void pix_free(pix_work *p)
     rec_eq7_pixscreen_free(&p->fs);
     free(p->keep);
     free(p->range);
+    free(p->gd);
+}
+
+/* zz[j] = x . t_j / (|t_j| sigma) in double (inv = 1 / sigma) for the n candidates (rising
+ * order): a run of at least GRID_RUN cells of a continuous bulb from its grid's dots (m->fourier:
+ * the row's band DFTs once, then one G-point inverse FFT per bulb, exact but for rounding), the
+ * others four at a time. */
+#define GRID_RUN 32
+static void exact_scores(const rec_matcher *m, pix_work *pw, const double *xd, double inv, const size_t *cand,
+                         size_t n, double *zz)
+{
+    rec_eq7_work *w = &pw->w;
+    int dfts = 0;
+    for (size_t i = 0; i < n;) {
+        int b = m->tbulb[cand[i]];
+        size_t e = i + 1;
+        while (e < n && m->tbulb[cand[e]] == b) e++;
+        if (m->fourier && m->cont[b] && e - i >= GRID_RUN) {
+            if (!dfts) rec_eq7_band_dfts(m, xd, w->spec_v);
+            dfts = 1;
+            rec_eq7_grid_dots(m, w, (size_t)b, 0, w->spec_v, pw->gd);
+            for (size_t q = i; q < e; q++) zz[cand[q]] = pw->gd[m->tcell[cand[q]]] / m->tnorm[cand[q]] * inv;
+        } else {
+            gs_dot_rows(xd, m->tnd, (size_t)m->D, (size_t)m->D, cand + i, e - i, inv, zz);
+        }
+        i = e;
+    }
 }
 
 /* The answer for one surviving row: x row xr, its float scores srow over the nrange ranges of
@@ -288,7 +316,7 @@ static void pixel_row(const rec_matcher *m, pix_work *pw, const float *xr, const
         cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, (int)D, inv, m->tnd, (int)D, xd, 1, 0.0, zz, 1);
     } else {
         if (exact) {
-            gs_dot_rows(xd, m->tnd, D, D, w->cand, w->ncand, inv, zz);
+            exact_scores(m, pw, xd, inv, w->cand, w->ncand, zz);
         } else {
             for (size_t ci = 0; ci < w->ncand; ci++) zz[w->cand[ci]] = srow[w->cand[ci]] * inv;
         }
@@ -619,9 +647,10 @@ static gs_status pix_alloc(const rec_matcher *m, size_t B, pix_work *pw)
     pw->xd = malloc(sizeof *pw->xd * D);
     pw->keep = malloc(B);
     pw->range = malloc(sizeof *pw->range * 2 * m->nb);
+    pw->gd = malloc(sizeof *pw->gd * (size_t)(m->G > 0 ? m->G : 1));
     st = rec_eq7_pixscreen_alloc(m, B, &pw->fs);
     if (st != GS_OK) return st;
-    if (!pw->keep || !pw->range || !pw->sc || !pw->xs || !pw->rows || !pw->y || (!m->fs_on && !pw->sh) || !pw->ub || !pw->zz ||
+    if (!pw->keep || !pw->range || !pw->gd || !pw->sc || !pw->xs || !pw->rows || !pw->y || (!m->fs_on && !pw->sh) || !pw->ub || !pw->zz ||
         !pw->gg || !pw->xd)
         return gs_fail(GS_ENOMEM, "Eq. 7 pixels: cannot allocate a %zu x %zu score block", B, Mp);
     return GS_OK;

@@ -21,23 +21,20 @@
  * light of few samples scores many templates exactly, each from its double sums. */
 #define FSUMS_MIN_D 64
 
-/* The float sums' transposed templates and their norms (m->fsums). */
+/* The float sums' transposed templates (m->fsums). */
 static gs_status float_setup(rec_matcher *m)
 {
     size_t D = (size_t)m->D, M = m->M;
     m->ldtrf = (M + SUMS_COLS_F - 1) / SUMS_COLS_F * SUMS_COLS_F + SUMS_COLS_F;
     m->ttrf = calloc(D * m->ldtrf, sizeof *m->ttrf);
     m->tsqtrf = calloc(D * m->ldtrf, sizeof *m->tsqtrf);
-    m->tnorm = malloc(M * sizeof *m->tnorm);
-    if (!m->ttrf || !m->tsqtrf || !m->tnorm)
+    if (!m->ttrf || !m->tsqtrf)
         return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate %zu templates", M);
-    for (size_t j = 0; j < M; j++) {
+    for (size_t j = 0; j < M; j++)
         for (size_t d = 0; d < D; d++) {
             m->ttrf[d * m->ldtrf + j] = (float)m->t[j * D + d];
             m->tsqtrf[d * m->ldtrf + j] = (float)m->tsq[j * D + d];
         }
-        m->tnorm[j] = exp(m->lognorm[j]);
-    }
     return GS_OK;
 }
 

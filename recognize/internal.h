@@ -172,12 +172,12 @@ struct rec_matcher {
     /* and in float, when the block's sums go in float first (fsums: one brightness, no reddening,
      * no nested tests, discrete phases only): every template's score bounded from them with
      * their error bound, the double sums taken only for the templates scored exactly
-     * (rec_eq7_exact_sums); ldtrf = M rounded up to SUMS_COLS_F, plus SUMS_COLS_F; tnorm [M] |t|
-     * (exp lognorm: the bound's factor per template, without an exp per light) */
+     * (rec_eq7_exact_sums); ldtrf = M rounded up to SUMS_COLS_F, plus SUMS_COLS_F */
     int fsums;
     size_t ldtrf;
     float *ttrf, *tsqtrf;
-    double *tnorm;
+    double *tnorm;                      /* [M] |t| as exp(lognorm) (the float sums' bound, the
+                                         * pixel path's exact scores from a grid: no exp per row) */
     double *shift;                      /* [M] cycles */
     double *tphase;                     /* [M] grid phase, deg (0 for GS_REF_NONE bulbs) */
     int *tbulb, *tcell;                 /* [M] bulb, index among the bulb's templates */
