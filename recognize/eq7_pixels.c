@@ -207,7 +207,7 @@ typedef struct {
     rec_pixscreen_work fs;   /* the Fourier screen's (m->fs_on) */
     unsigned char *keep;     /* [B] rows it keeps */
     size_t *range;           /* [2 nb] a row's ranges of scored templates (rec_eq7_pixscreen_ranges) */
-    double *gd;              /* [G] a bulb's grid of dots (exact_scores) */
+    double *gd;              /* [G] a bulb's grid of dots (rec_eq7_exact_z) */
     int rest;                /* blocks still to go without the prefilter */
 } pix_work;
 
@@ -229,15 +229,10 @@ static void pix_free(pix_work *p)
     free(p->gd);
 }
 
-/* zz[j] = x . t_j / (|t_j| sigma) in double (inv = 1 / sigma) for the n candidates (rising
- * order): a run of at least GRID_RUN cells of a continuous bulb from its grid's dots (m->fourier:
- * the row's band DFTs once, then one G-point inverse FFT per bulb, exact but for rounding), the
- * others four at a time. */
 #define GRID_RUN 32
-static void exact_scores(const rec_matcher *m, pix_work *pw, const double *xd, double inv, const size_t *cand,
-                         size_t n, double *zz)
+void rec_eq7_exact_z(const rec_matcher *m, rec_eq7_work *w, double *gd, const double *xd, double inv,
+                     const size_t *cand, size_t n, double *zz)
 {
-    rec_eq7_work *w = &pw->w;
     int dfts = 0;
     for (size_t i = 0; i < n;) {
         int b = m->tbulb[cand[i]];
@@ -246,8 +241,8 @@ static void exact_scores(const rec_matcher *m, pix_work *pw, const double *xd, d
         if (m->fourier && m->cont[b] && e - i >= GRID_RUN) {
             if (!dfts) rec_eq7_band_dfts(m, xd, w->spec_v);
             dfts = 1;
-            rec_eq7_grid_dots(m, w, (size_t)b, 0, w->spec_v, pw->gd);
-            for (size_t q = i; q < e; q++) zz[cand[q]] = pw->gd[m->tcell[cand[q]]] / m->tnorm[cand[q]] * inv;
+            rec_eq7_grid_dots(m, w, (size_t)b, 0, w->spec_v, gd);
+            for (size_t q = i; q < e; q++) zz[cand[q]] = gd[m->tcell[cand[q]]] / m->tnorm[cand[q]] * inv;
         } else {
             gs_dot_rows(xd, m->tnd, (size_t)m->D, (size_t)m->D, cand + i, e - i, inv, zz);
         }
@@ -316,7 +311,7 @@ static void pixel_row(const rec_matcher *m, pix_work *pw, const float *xr, const
         cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, (int)D, inv, m->tnd, (int)D, xd, 1, 0.0, zz, 1);
     } else {
         if (exact) {
-            exact_scores(m, pw, xd, inv, w->cand, w->ncand, zz);
+            rec_eq7_exact_z(m, w, pw->gd, xd, inv, w->cand, w->ncand, zz);
         } else {
             for (size_t ci = 0; ci < w->ncand; ci++) zz[w->cand[ci]] = srow[w->cand[ci]] * inv;
         }

@@ -426,6 +426,14 @@ typedef struct {
     size_t runner_tmpl;
 } rec_eq7_decision;
 
+/* eq7_pixels.c: zz[j] = x . t_j / (|t_j| sigma) in double (inv = 1 / sigma, xd the row) for the
+ * n candidates cand (rising order), the pixel path's exact rescoring: a run of at least 32 cells
+ * of a continuous bulb from its grid's dots (m->fourier: the row's band DFTs once into
+ * w->spec_v, then one G-point inverse FFT per bulb into gd [G], exact but for rounding), the
+ * others four at a time (gs_dot_rows). */
+void rec_eq7_exact_z(const rec_matcher *m, rec_eq7_work *w, double *gd, const double *xd, double inv,
+                     const size_t *cand, size_t n, double *zz);
+
 /* eq7_pixscreen.c: the pixel path's Fourier screen for continuous bulbs (rec_matcher.fs_on). */
 enum { REC_FS_OFF = 0, REC_FS_ON = 1, REC_FS_ALL = 2 };
 /* Per row of a block: */

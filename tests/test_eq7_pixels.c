@@ -380,6 +380,62 @@ static void screen_block_checks(rec_matcher *m, const float *x, const float *sg,
     free(state);
 }
 
+/* The pixel path's exact rescoring (rec_eq7_exact_z) against long double dot products with the
+ * templates: continuous grids (RGB at K = 26 and 13, photodiode at K = 8; runs of whole bulbs and
+ * of 72 cells with a gap through the grid's inverse FFT, of 31 and 3 cells four at a time) and a
+ * discrete matcher, rows of noise and of a template, 1e-2 to 1e6: within 1e-12 of |x| / sigma. */
+TEST(eq7_pixels_exact_scores_equal_dot_products)
+{
+    gs_delight *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(d, 1024));
+    static const struct { int bands, K; rec_phase_set ps; } cases[] = {
+        {3, 26, REC_PHASES_CONTINUOUS}, {3, 13, REC_PHASES_CONTINUOUS}, {1, 8, REC_PHASES_CONTINUOUS}, {3, 26, REC_PHASES_3}};
+    uint64_t rs = 211;
+    for (size_t ci = 0; ci < sizeof cases / sizeof *cases; ci++) {
+        rec_matcher *m = eq7fx_new_matcher(d, 50, cases[ci].bands, cases[ci].K, cases[ci].ps);
+        if (!m) continue;
+        size_t D = (size_t)m->D, M = m->M, n = 0, *cand = malloc(sizeof *cand * M);
+        double *xd = malloc(sizeof *xd * D), *zz = malloc(sizeof *zz * M), *gd = malloc(sizeof *gd * (size_t)(m->G > 0 ? m->G : 1));
+        rec_eq7_work w;
+        CHECK_OK(rec_eq7_work_alloc(m, &w));
+        /* bulb 0 whole, bulb 1's cells 0..39 and 50..81 (one run), bulb 2's 0..30, bulb 3's 5..7,
+         * the last bulb whole */
+        size_t nb = m->nb, lo[5] = {0, 0, 50, 0, 5}, hi[5] = {M, 40, 82, 31, 8}, bu[5] = {0, 1, 1, 2, 3};
+        for (int r = 0; r < 6; r++) {
+            size_t b = r < 5 ? bu[r] : nb - 1;
+            size_t a = r < 5 ? lo[r] : 0, e = r < 5 ? hi[r] : M;
+            for (size_t c = a; c < e && c < m->count[b]; c++) cand[n++] = m->first[b] + c;
+        }
+        int far = 0;
+        for (int trial = 0; trial < 20; trial++) {
+            double scale = pow(10.0, 8.0 * gs_splitmix_uniform(&rs) - 2.0), xx = 0.0, inv = 1.0 / (0.5 + gs_splitmix_uniform(&rs));
+            for (size_t q = 0; q < D; q++) {
+                xd[q] = scale * (gs_splitmix_normal(&rs) + (trial % 2 ? m->t[(n / 2) * D + q] : 0.0));
+                xx += xd[q] * xd[q];
+            }
+            for (size_t i = 0; i < n; i++) zz[cand[i]] = NAN;
+            rec_eq7_exact_z(m, &w, gd, xd, inv, cand, n, zz);
+            for (size_t i = 0; i < n; i++) {
+                size_t j = cand[i];
+                long double s = 0.0L;
+                for (size_t q = 0; q < D; q++) s += (long double)xd[q] * m->t[j * D + q];
+                double ref = (double)(s / sqrtl((long double)exp(2.0 * m->lognorm[j])) * inv);
+                if (!(fabs(zz[j] - ref) <= 1e-12 * sqrt(xx) * inv) && far++ < 5)
+                    printf("    K = %d, %d bands, template %zu (bulb %d, cell %d): %.17g, dot product %.17g\n", m->K,
+                           m->bands, j, m->tbulb[j], m->tcell[j], zz[j], ref);
+            }
+        }
+        CHECK_MSG(far == 0, "K = %d, %d bands: %d exact scores off their dot products", m->K, m->bands, far);
+        rec_eq7_work_free(&w);
+        free(cand);
+        free(xd);
+        free(zz);
+        free(gd);
+        rec_matcher_free(m);
+    }
+    gs_delight_free(d);
+}
+
 /* What pixel_row reads behind the screen, on the first PIX_BLOCK rows of x with a valid sigma (score buffer filled
  * with NaN first): each kept row's ranges (rec_eq7_pixscreen_ranges) are whole vectors in rising
  * order within Mp, hold every template of the bulbs it scored (their scores written), and 0 at
