@@ -275,7 +275,7 @@ void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_
     /* pairs: discrete (bulb, phase) templates; continuous voltage bulbs (bulb, +-30 deg around
      * the peak); shape-only bulbs as a whole */
     pair_c best = {-INFINITY, -1, 0, 0.0}, second = {-INFINITY, -1, 0, 0.0};
-    for (size_t i = 0; i < w->ncand; i++) {
+    for (size_t i = 0; i < w->ncand && (size_t)m->ncont < nb; i++) {
         size_t j = w->cand[i];
         int b = m->tbulb[j];
         if (m->cont[b]) continue;
@@ -322,14 +322,16 @@ void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_
     }
     if (m->bulbs[bb].ref != GS_REF_NONE) {
         double pc = 0.0;
-        for (size_t i = 0; i < w->ncand; i++) {
-            size_t j = w->cand[i];
-            int b = m->tbulb[j];
-            if (m->bulbs[b].ref == GS_REF_NONE) continue;
-            if (m->cont[bb]) {
-                if (circ_dist(m->shift[j], dec->shift) <= PHASE_WINDOW) pc += w->mass[j];
-            } else if (m->tcell[j] == m->tcell[dec->tmpl]) {
-                pc += w->mass[j];
+        for (size_t i = 0; i < w->ncand;) {   /* by runs of one bulb's candidates */
+            int b = m->tbulb[w->cand[i]], none = m->bulbs[b].ref == GS_REF_NONE;
+            for (; i < w->ncand && m->tbulb[w->cand[i]] == b; i++) {
+                size_t j = w->cand[i];
+                if (none) continue;
+                if (m->cont[bb]) {
+                    if (circ_dist(m->shift[j], dec->shift) <= PHASE_WINDOW) pc += w->mass[j];
+                } else if (m->tcell[j] == m->tcell[dec->tmpl]) {
+                    pc += w->mass[j];
+                }
             }
         }
         dec->phase_conf = pc / Z;
