@@ -773,8 +773,8 @@ gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *no
     if (!j.pw) return gs_fail(GS_ENOMEM, "Eq. 7 pixels: cannot allocate scratch for %d threads", threads);
     /* On several threads OpenBLAS runs single-threaded for the call: a block's small SGEMMs
      * gain nothing from its threads, and its threaded SGEMMs called from two threads at once
-     * contend (0.55x of one thread measured, docs/recognition.md). The rows are independent:
-     * the same answers on any number of threads. */
+     * contend (docs/recognition.md). The rows are independent: the same answers on any number
+     * of threads. */
     int blas = threads > 1 ? openblas_get_num_threads() : 1;
     if (blas > 1) openblas_set_num_threads(1);
     gs_status st = gs_parallel_chunks(threads, nblk, 1, pix_part, &j);
