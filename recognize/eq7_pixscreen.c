@@ -305,14 +305,11 @@ void rec_eq7_pixscreen(const rec_matcher *m, rec_pixscreen_work *sw, const float
         memset(o + m->M, 0, sizeof *o * (Mp - m->M));
         for (size_t b = 0; b < nb; b++) {
             if (sw->state[k * nb + b] == ST_DONE) continue;
+            /* its first and last partial vectors (a grid of G >= 96 cells holds whole ones) */
             size_t lo = m->first[b], hi = lo + m->count[b];
-            size_t a = lo + (LANES - lo % LANES) % LANES, z = hi - hi % LANES;   /* whole vectors inside */
-            if (a >= z) {
-                memset(o + lo, 0, sizeof *o * (hi - lo));
-            } else {
-                memset(o + lo, 0, sizeof *o * (a - lo));
-                memset(o + z, 0, sizeof *o * (hi - z));
-            }
+            size_t a = lo + (LANES - lo % LANES) % LANES, z = hi - hi % LANES;
+            memset(o + lo, 0, sizeof *o * (a - lo));
+            memset(o + z, 0, sizeof *o * (hi - z));
         }
     }
 }

@@ -192,7 +192,8 @@ struct rec_matcher {
     int fourier;
     double complex *ahat, *bhat;        /* [nb * bands * (G/2 + 1)] */
     int exhaustive;                     /* 1: neither the Fourier form, the block sums' kernel
-                                         * nor the screen (eq7_sums.c, eq7_scores.c): every
+                                         * nor the screen of the light path (eq7_sums.c,
+                                         * eq7_scores.c; the pixel path ignores it): every
                                          * template's sums as matrix-vector products and its
                                          * exact L (the tests' slow path); 0 from rec_matcher_new */
     void *c2r;                          /* fftw_plan: G-point complex-to-real, on FFTW-aligned arrays

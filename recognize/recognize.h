@@ -357,7 +357,7 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
  * rows with a non-finite value or a sigma that is not finite and > 0, and for dim (min_snr) or
  * unknown (unknown_p at dof = bands * K - 2, with band gains bands * K - bands - 1) rows.
  * phase_deg and confidence may be NULL. The blocks go over rec_eq7_opts.threads threads (the
- * same answers on any number).
+ * same answers on any number; each thread holds a block of 512 rows x templates float scores).
  * docs/recognition.md gives the throughput (one core: ~3-5 Mpixel/s for 1 Mpixel RGB K = 26
  * with three phases when most pixels are dark). */
 gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *noise_sigma,

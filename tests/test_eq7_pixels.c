@@ -7,6 +7,7 @@
 #include "tests/fixtures.h"
 #include "tests/test.h"
 
+#include <cblas.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -224,7 +225,8 @@ TEST(eq7_pixels_prefilter_rest_same_answers_as_block_by_block)
  * every row the same bits (bulb, phase, confidence) for the paper's model with three phases (the
  * prefilter, resting after the bright runs on each thread), the survey's defaults (the band path)
  * and continuous phases (the Fourier screen); rows bright, dim, dark and broken, in runs of a
- * block and a half, and a last block shorter than the others. */
+ * block and a half, and a last block shorter than the others. OpenBLAS's threads are as before
+ * each call (set to one within a call on several). */
 TEST(eq7_pixels_threads_bit_identical_to_one_thread)
 {
     gs_delight *d = gs_delight_new();
@@ -264,8 +266,13 @@ TEST(eq7_pixels_threads_bit_identical_to_one_thread)
                 if (i % 89 == 3) px[t].sigma[i] = 0.0f;
             }
         }
-        for (int t = 0; t < 3; t++)
+        int blas = openblas_get_num_threads();
+        openblas_set_num_threads(2);   /* (restored by every call on several threads) */
+        for (int t = 0; t < 3; t++) {
             CHECK_OK(rec_match_pixels(m[t], px[t].x, px[t].sigma, n, px[t].bulb, px[t].phase, px[t].conf));
+            CHECK_MSG(openblas_get_num_threads() == 2, "%d threads: OpenBLAS left on %d", t + 1, openblas_get_num_threads());
+        }
+        openblas_set_num_threads(blas);
         int answered = 0;
         for (size_t i = 0; i < n; i++) answered += px[0].bulb[i] >= 0;
         CHECK_MSG(answered > (int)n / 3, "model %d: %d of %zu rows answered", model, answered, n);

@@ -124,8 +124,9 @@ float gs_median_f(float *v, size_t n)
 /* (the eight partial sums as one vector: gcc's vectorizer made a poor loop of the array form) */
 typedef double dot_v8 __attribute__((vector_size(8 * sizeof(double))));
 /* The reduction of gs_dot's eight partial sums. */
-static inline double dot_sum(dot_v8 a)
+static inline double dot_sum(const dot_v8 *v)
 {
+    const double *a = (const double *)v;
     return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
 }
 
@@ -141,7 +142,7 @@ double gs_dot(const double *x, const double *t, size_t n)
         a += xv * tv;
     }
     for (; i < n; i++) a[0] += x[i] * t[i];
-    return dot_sum(a);
+    return dot_sum(&a);
 }
 
 
@@ -173,10 +174,10 @@ void gs_dot_rows(const double *x, const double *t, size_t ld, size_t n, const si
             a2[0] += x[k] * t2[k];
             a3[0] += x[k] * t3[k];
         }
-        out[idx[i]] = dot_sum(a0) * scale;
-        out[idx[i + 1]] = dot_sum(a1) * scale;
-        out[idx[i + 2]] = dot_sum(a2) * scale;
-        out[idx[i + 3]] = dot_sum(a3) * scale;
+        out[idx[i]] = dot_sum(&a0) * scale;
+        out[idx[i + 1]] = dot_sum(&a1) * scale;
+        out[idx[i + 2]] = dot_sum(&a2) * scale;
+        out[idx[i + 3]] = dot_sum(&a3) * scale;
     }
     for (; i < count; i++) out[idx[i]] = gs_dot(x, t + idx[i] * ld, n) * scale;
 }
