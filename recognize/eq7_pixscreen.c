@@ -230,18 +230,12 @@ void rec_eq7_pixscreen(const rec_matcher *m, rec_pixscreen_work *sw, const float
         r->smax = -INFINITY;
         r->umax = -INFINITY;
         r->nmax = -INFINITY;
-        /* the row's DFT, X_q = sum_k x_k e^{-2 pi i q k / K} ((re, im) pairs; of a real row, q <=
-         * K/2 and X_{K-q} = conj X_q), and at harmonics 0..n_kept (X_{n mod K}) */
+        /* the row's DFT, X_q = sum_k x_k e^{-2 pi i q k / K} ((re, im) pairs), and at harmonics
+         * 0..n_kept (X_{n mod K}) */
         double *y = sw->y;
         for (size_t d = 0; d < D; d++) sw->xd[d] = xs[k * D + d];
-        for (int band = 0; band < bands; band++) {
-            double *yb = y + (size_t)band * 2 * K;
-            rec_eq7_dft(sw->xd + (size_t)band * K, m->dftc, m->dfts, K, K / 2 + 1, yb);
-            for (size_t q = K / 2 + 1; q < K; q++) {
-                yb[2 * q] = yb[2 * (K - q)];
-                yb[2 * q + 1] = -yb[2 * (K - q) + 1];
-            }
-        }
+        for (int band = 0; band < bands; band++)
+            rec_eq7_dft(sw->xd + (size_t)band * K, m->dftc, m->dfts, K, y + (size_t)band * 2 * K);
         rec_eq7_harmonic_row(m, (const double complex *)y, K, sw->yx, sw->xa);
         /* slack: the float score's rounding */
         double bmax = -INFINITY;

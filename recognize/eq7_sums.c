@@ -213,13 +213,13 @@ static void sums_kernel_f(const float *a, size_t lda, size_t nq, const float *tt
 }
 
 GS_VECTOR_LOOP void rec_eq7_dft(const double *restrict v, const double *restrict c, const double *restrict s,
-                                size_t K, size_t nq, double *restrict x)
+                                size_t K, double *restrict x)
 {
-    for (size_t r = 0; r < 2 * nq; r++) x[r] = 0.0;
+    for (size_t r = 0; r < 2 * K; r++) x[r] = 0.0;
     for (size_t k = 0; k < K; k++) {
         double vk = v[k];
         const double *ck = c + k * K, *sk = s + k * K;
-        for (size_t r = 0; r < nq; r++) {
+        for (size_t r = 0; r < K; r++) {
             x[2 * r] += vk * ck[r];
             x[2 * r + 1] -= vk * sk[r];
         }
@@ -233,7 +233,7 @@ void rec_eq7_band_dfts(const rec_matcher *m, const double *v, double complex *X)
     size_t K = (size_t)m->K, nh = (size_t)m->G / 2 + 1;
     for (int band = 0; band < m->bands; band++) {
         double complex *Xb = X + (size_t)band * nh;
-        rec_eq7_dft(v + (size_t)band * K, m->dftc, m->dfts, K, K, (double *)Xb);
+        rec_eq7_dft(v + (size_t)band * K, m->dftc, m->dfts, K, (double *)Xb);
         for (size_t r = K; r < nh; r++) Xb[r] = Xb[r - K];
     }
 }

@@ -534,9 +534,9 @@ void rec_eq7_grid_sums(const rec_matcher *m, rec_eq7_work *w, size_t b);
 /* The same for any D values v: their band DFTs (X: bands * (G/2 + 1), e.g. w->spec_v), then
  * sum_d v_d t_j[d] of brightness f over bulb b's grid into dst (G values). */
 void rec_eq7_band_dfts(const rec_matcher *m, const double *v, double complex *X);
-/* The K-point DFT of v, x[q] = sum_k v_k e^{-2 pi i q k / K} as (re, im) pairs, q < nq <= K,
- * from the tables c, s (m->dftc, dfts: [k K + q]); the sums over k in order, every q at once. */
-void rec_eq7_dft(const double *v, const double *c, const double *s, size_t K, size_t nq, double *x);
+/* The K-point DFT of v, x[q] = sum_k v_k e^{-2 pi i q k / K} as (re, im) pairs, q < K, from the
+ * tables c, s (m->dftc, dfts: [k K + q]); the sums over k in order, every q at once. */
+void rec_eq7_dft(const double *v, const double *c, const double *s, size_t K, double *x);
 void rec_eq7_grid_dots(const rec_matcher *m, rec_eq7_work *w, size_t b, int f, const double complex *X, double *dst);
 /* eq7_decide.c: scratch for one light or pixel (rec_eq7_work_alloc), or a block of rows lights
  * (the light path's); rec_eq7_work_row points w, wx, xs, S and T at light q's rows; and the

@@ -175,7 +175,7 @@ typedef struct {
     int side;               /* capture row: a side x side capture through rec_pixel_maps_compute */
     int defaults;           /* lights or pixels row: 1 rec_eq7_opts_default (the survey's options); 2 the
                              * paper's model with the nested-model tests */
-    int threads;            /* lights row: rec_match_catalog's threads (0: one) */
+    int threads;            /* rec_eq7_opts.threads of the row (0: one) */
     int numpy;              /* pixels row: also time survey/bench_eq7_numpy.py (--numpy) */
 } config;
 
@@ -714,6 +714,13 @@ static void pixel_header(int numpy)
     printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|%s\n", numpy ? "---|---|---|" : "");
 }
 
+static void light_header(void)
+{
+    printf("| K | bands | bulbs | templates | lights | seconds | lights/s | reference lights/s | "
+           "speed-up | agree | correct | peak RSS MiB |\n");
+    printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+}
+
 static int bench_recognize(int argc, char **argv)
 {
     static const struct option longs[] = {{"quick", no_argument, 0, 'q'},
@@ -848,9 +855,7 @@ lights:
     printf("Each light: a random template at a mean sample of 1000, per-sample noise std uniform in "
            "50..150 (so the weights differ by up to 9x within a light), %d lights per row; "
            "*correct*: lights answered with their true bulb and phase.\n\n", quick ? 1000 : 20000);
-    printf("| K | bands | bulbs | templates | lights | seconds | lights/s | reference lights/s | "
-           "speed-up | agree | correct | peak RSS MiB |\n");
-    printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    light_header();
     size_t L0 = quick ? 1000 : 20000;
     for (size_t ki = 0; ki < 3; ki++)
         for (size_t bi = 0; bi < 2; bi++)
@@ -866,9 +871,7 @@ lights:
     printf("\n### Time against the number of lights\n\nK = 26, RGB, whole database, the paper's model, "
            "one thread: the same lights as above, 10^3 to 10^%d of them (10^6: one run, not the "
            "best of %d).\n\n", quick ? 4 : 6, REPS);
-    printf("| K | bands | bulbs | templates | lights | seconds | lights/s | reference lights/s | "
-           "speed-up | agree | correct | peak RSS MiB |\n");
-    printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    light_header();
     for (size_t n = 1000; n <= (quick ? 10000u : LIGHTS_ONE_RUN); n *= 10) {
         config cf = {26, 3, 0, 0, 0, 0.0, n, 0, 0, 0, 0};
         light_row(all, &cf, &failed);
@@ -883,9 +886,7 @@ lights:
            "(rec_eq7_opts.nested_tests: a second template against the best fit and the next 15 by "
            "score, a smooth deformation, a bulb not in DELIGHT; docs/recognition.md), one "
            "thread.\n\n");
-    printf("| K | bands | bulbs | templates | lights | seconds | lights/s | reference lights/s | "
-           "speed-up | agree | correct | peak RSS MiB |\n");
-    printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    light_header();
     for (int ci = 0; ci < 2; ci++) {
         config cf = {26, 3, 0, ci, 0, 0.0, ci ? (quick ? 50 : 300) : (quick ? 1000 : 20000), 0, 2, 1, 0};
         light_row(all, &cf, &failed);
@@ -897,9 +898,7 @@ lights:
            "the blend and shape tests; then on the online CPUs (rec_eq7_opts.threads: the answers "
            "are the same bits, tests/test_eq7_model.c). *agree* compares with the triple loop of the "
            "paper's model, so it measures the models' difference too.\n\n", nt);
-    printf("| K | bands | bulbs | templates | lights | seconds | lights/s | reference lights/s | "
-           "speed-up | agree | correct | peak RSS MiB |\n");
-    printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    light_header();
     for (int ti = 0; ti < 2; ti++) {
         if (ti == 1 && nt == 1) break;
         printf("| %s |||||||||||\n", ti ? "**threads: the online CPUs**" : "**threads: 1**");
@@ -930,9 +929,7 @@ lights:
             }
             printf("\n");
         }
-        printf("| K | bands | bulbs | templates | lights | seconds | lights/s | reference lights/s | "
-               "speed-up | agree | correct | peak RSS MiB |\n");
-        printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+        light_header();
         for (int ci = 0; ci < 2; ci++) {
             config cf = {26, 3, 0, ci, 0, 0.0, ci ? (quick ? 200 : 3000) : L0, 0, 0, nt, 0};
             light_row(all, &cf, &failed);
