@@ -88,15 +88,13 @@ GS_VECTOR_LOOP static double harmonic_sum(const double *a, const double *y, int 
     return ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
 }
 
-double rec_eq7_harmonic_extent(const double *a, const double *tail, const double *y, const double *ya, int bands,
-                               size_t np, size_t K, double *c0, double *z, double *tail_sum)
+double rec_eq7_harmonic_extent(const double *a, const double *y, int bands, size_t np, double tail_sum, double *c0,
+                               double *z)
 {
     double c = 0.0;
     for (int band = 0; band < bands; band++) c += a[(size_t)band * 2 * np] * y[(size_t)band * 2 * np];
     *c0 = c;
-    double t = gs_dot(tail, ya, (size_t)bands * K);
-    if (tail_sum) *tail_sum = t;
-    return harmonic_sum(a, y, bands, np, z) + t;
+    return harmonic_sum(a, y, bands, np, z) + tail_sum;
 }
 
 void rec_eq7_harmonic_row(const rec_matcher *m, const double complex *V, size_t ldv, double *y, double *ya)
@@ -153,15 +151,15 @@ gs_status rec_eq7_bulbscreen_setup(rec_matcher *m)
 static void bulb_terms(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, size_t b, int f,
                        rec_eq7_bulb_terms *t)
 {
-    size_t bands = (size_t)m->bands, K = (size_t)m->K, np = rec_eq7_harmonics_np(m), la = bands * 2 * np;
-    size_t lt = bands * K, nf = (size_t)m->nfit, b0 = nf == 1 ? 0 : (size_t)f, nbf = nf == 1 ? bands : 1;
-    size_t ka = b0 * 2 * np, kt = b0 * K;
-    const double *yx = w->bs_y, *yw = yx + la, *xa = yw + la, *wa = xa + lt;
+    size_t bands = (size_t)m->bands, np = rec_eq7_harmonics_np(m), la = bands * 2 * np;
+    size_t nf = (size_t)m->nfit, b0 = nf == 1 ? 0 : (size_t)f, nbf = nf == 1 ? bands : 1;
+    size_t ka = b0 * 2 * np;
+    const double *yx = w->bs_y, *yw = yx + la;
     double *z = w->bs_z + (b * nf + (size_t)f) * 4 * np;
-    t->es = rec_eq7_harmonic_extent(m->bs_a + b * la + ka, m->bs_at + b * lt + kt, yx + ka, xa + kt, (int)nbf, np, K,
-                                    &t->cs, z, &t->tail_s);
-    t->et = rec_eq7_harmonic_extent(m->bs_b + b * la + ka, m->bs_bt + b * lt + kt, yw + ka, wa + kt, (int)nbf, np, K,
-                                    &t->ct, z + 2 * np, &t->tail_t);
+    t->tail_s = w->bs_tail[(size_t)f * 2 * m->nb + b];
+    t->tail_t = w->bs_tail[((size_t)f * 2 + 1) * m->nb + b];
+    t->es = rec_eq7_harmonic_extent(m->bs_a + b * la + ka, yx + ka, (int)nbf, np, t->tail_s, &t->cs, z);
+    t->et = rec_eq7_harmonic_extent(m->bs_b + b * la + ka, yw + ka, (int)nbf, np, t->tail_t, &t->ct, z + 2 * np);
     t->sb = t->es - fabs(t->cs) + t->cs + 1e-9 * t->es;
     t->tb = t->ct - (t->et - fabs(t->ct)) - 1e-9 * t->et;
     t->tw = p->full[f] ? p->wmin[f] * m->bs_t2[b * nf + (size_t)f] * (1.0 - 1e-12) : 0.0;
@@ -201,6 +199,12 @@ void rec_eq7_bulb_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pr
     double *yx = w->bs_y, *yw = yx + la, *xa = yw + la, *wa = xa + lt;
     rec_eq7_harmonic_row(m, X, nh, yx, xa);
     rec_eq7_harmonic_row(m, W, nh, yw, wa);
+    for (int f = 0; f < m->nfit; f++) {   /* every bulb's tail sums, of S and of T */
+        if (!(p->wmin[f] > 0.0)) continue;
+        size_t kt = m->nfit == 1 ? 0 : (size_t)f * m->K, n = m->nfit == 1 ? lt : (size_t)m->K;
+        gs_dot_rows(xa + kt, m->bs_at + kt, lt, n, NULL, nb, 1.0, w->bs_tail + (size_t)f * 2 * nb);
+        gs_dot_rows(wa + kt, m->bs_bt + kt, lt, n, NULL, nb, 1.0, w->bs_tail + ((size_t)f * 2 + 1) * nb);
+    }
     for (size_t b = 0; b < nb; b++) {
         rec_eq7_bulb_terms *t = w->bs_t + b * (size_t)m->nfit;
         double u, g[GS_MAX_BANDS], gs = 0.0;

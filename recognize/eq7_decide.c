@@ -71,6 +71,7 @@ void rec_eq7_work_free(rec_eq7_work *w)
     free(w->bs_y);
     free(w->bs_t);
     free(w->bs_z);
+    free(w->bs_tail);
     memset(w, 0, sizeof *w);
 }
 
@@ -152,7 +153,8 @@ gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t 
     w->bs_y = bs ? malloc(sizeof *w->bs_y * (4 * (size_t)m->bands * rec_eq7_harmonics_np(m) + 2 * D)) : NULL;
     w->bs_z = bs ? malloc(sizeof *w->bs_z * nb * (size_t)m->nfit * 4 * rec_eq7_harmonics_np(m)) : NULL;
     w->bs_t = bs ? malloc(sizeof *w->bs_t * nb * (size_t)m->nfit) : NULL;
-    part_bad = part_bad || (bs && (!w->bub || !w->open || !w->border || !w->bs_y || !w->bs_t || !w->bs_z));
+    w->bs_tail = bs ? malloc(sizeof *w->bs_tail * 2 * nb * (size_t)m->nfit) : NULL;
+    part_bad = part_bad || (bs && (!w->bub || !w->open || !w->border || !w->bs_y || !w->bs_t || !w->bs_z || !w->bs_tail));
     if (!w->L || !w->mass || !w->cand || !w->mark || !w->bmass || !w->wmass || !w->has_peak ||
         !w->peak_s || !w->peak_L || !w->peak_sig || !w->peak_z || !w->peak_gain || !w->peak_cell || !w->S_all ||
         !w->T_all || !w->w_all || !w->wx_all || !w->xs_all || !w->prep || !w->U || !w->done || !w->tight || !w->tmp || !w->tt || !w->dt ||
@@ -189,17 +191,27 @@ void rec_eq7_add_cand(const rec_matcher *m, rec_eq7_work *w, size_t j)
 }
 
 /* Every template the screen made exact (w->done), in order; eight flags at a time where none is set. */
-void rec_eq7_add_done(const rec_matcher *m, rec_eq7_work *w)
+/* rec_eq7_add_cand of every done template in [j, j1), in order: 8 flags at a time. */
+static void add_done_range(const rec_matcher *m, rec_eq7_work *w, size_t j, size_t j1)
 {
-    size_t j = 0;
-    for (; j + 8 <= m->M; j += 8) {
+    for (; j + 8 <= j1; j += 8) {
         uint64_t any;
         memcpy(&any, w->done + j, sizeof any);
         for (size_t i = j; any && i < j + 8; i++)
             if (w->done[i]) rec_eq7_add_cand(m, w, i);
     }
-    for (; j < m->M; j++)
+    for (; j < j1; j++)
         if (w->done[j]) rec_eq7_add_cand(m, w, j);
+}
+
+void rec_eq7_add_done(const rec_matcher *m, rec_eq7_work *w)
+{
+    if (!rec_eq7_bulb_screen(m)) {
+        add_done_range(m, w, 0, m->M);
+        return;
+    }
+    for (size_t b = 0; b < m->nb; b++)   /* the screen of bulbs scores only open bulbs' cells */
+        if (w->open[b]) add_done_range(m, w, m->first[b], m->first[b] + m->count[b]);
 }
 
 /* A pair candidate for the best / runner-up: log of its mass relative to exp(Lmax). */

@@ -267,6 +267,31 @@ GS_VECTOR_LOOP static void inverse_dft(const double *restrict c, const double *r
         for (int k = 0; k < K; k++) v[k] += re[q] * c[q * K + k] - im[q] * sn[q * K + k];
 }
 
+/* g = f e, n complex values as (re, im) pairs (REC_CX4_MUL). */
+GS_VECTOR_LOOP static void cmul(const double *restrict f, const double *restrict e, int n, double *restrict g)
+{
+    int i = 0;
+    for (; i + 4 <= n; i += 4) {
+        rec_cx4 p;
+        REC_CX4_MUL(p, f + 2 * i, e + 2 * i);
+        memcpy(g + 2 * i, &p, sizeof p);
+    }
+    for (int q = i; q < n; q++) g[2 * q] = f[2 * q] * e[2 * q] - f[2 * q + 1] * e[2 * q + 1];
+    for (int q = i; q < n; q++) g[2 * q + 1] = f[2 * q] * e[2 * q + 1] + f[2 * q + 1] * e[2 * q];
+}
+
+/* A[(r + i) mod K] += g[i] for i < n, in the order of i (r < K): runs of consecutive bins. */
+GS_VECTOR_LOOP static void fold_add(double complex *restrict A, int K, int r, const double complex *restrict g, int n)
+{
+    while (n > 0) {
+        int len = K - r < n ? K - r : n;
+        for (int i = 0; i < len; i++) A[r + i] += g[i];
+        g += len;
+        n -= len;
+        r = 0;
+    }
+}
+
 /* Exact template of continuous bulb b at shift s and its first two derivatives in s (any of
  * dt, d2t may be NULL). acc is scratch of REC_TEMPLATE_ACC * K complex values. The harmonics are
  * folded into K bins per band (harmonic h into h mod K, times e^{-2 pi i h s}, the factor shared
@@ -295,16 +320,18 @@ void rec_eq7_template_at(const rec_matcher *m, size_t b, double s, double *t, do
         for (int band = 0; band < bands; band++) {
             const double complex *F = m->F[b] + (size_t)band * (size_t)(H + 1);
             double complex *A0 = acc + 3 * band * K, *A1 = A0 + K, *A2 = A1 + K;
-            for (int i = 0; i < hn; i++) g[i] = F[h0 + i] * eh[i];
+            cmul((const double *)(F + h0), (const double *)eh, hn, (double *)g);
             int r = (h0 + i0) % K;
-            for (int i = i0; i < hn; i++) {
-                A0[r] += g[i];
-                if (deriv) {
+            fold_add(A0, K, r, g + i0, hn - i0);
+            if (deriv) {
+                double complex g1[32], g2[32];
+                for (int i = i0; i < hn; i++) {
                     double w = EQ7_TWO_PI * (h0 + i);
-                    A1[r] += g[i] * (-I * w);
-                    A2[r] += g[i] * (-w * w);
+                    g1[i] = g[i] * (-I * w);
+                    g2[i] = g[i] * (-w * w);
                 }
-                if (++r == K) r = 0;
+                fold_add(A1, K, r, g1 + i0, hn - i0);
+                fold_add(A2, K, r, g2 + i0, hn - i0);
             }
         }
     }

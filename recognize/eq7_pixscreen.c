@@ -81,11 +81,12 @@ gs_status rec_eq7_pixscreen_alloc(const rec_matcher *m, size_t B, rec_pixscreen_
     sw->yx = malloc(sizeof *sw->yx * (size_t)m->bands * 2 * rec_eq7_harmonics_np(m));
     sw->xa = malloc(sizeof *sw->xa * (size_t)m->bands * (size_t)m->K);
     sw->xd = malloc(sizeof *sw->xd * (size_t)m->D);
+    sw->tail = malloc(sizeof *sw->tail * nb);
     gmax = (gmax + LANES - 1) / LANES * LANES;
     sw->xg = malloc(sizeof *sw->xg * (B + 3) * (size_t)m->D);
     sw->og = malloc(sizeof *sw->og * (B + 3) * gmax);
     sw->idx = malloc(sizeof *sw->idx * B);
-    if (!sw->bound || !sw->state || !sw->row || !sw->y || !sw->yx || !sw->xa || !sw->xd || !sw->xg || !sw->og || !sw->idx) {
+    if (!sw->bound || !sw->state || !sw->row || !sw->y || !sw->yx || !sw->xa || !sw->xd || !sw->tail || !sw->xg || !sw->og || !sw->idx) {
         rec_eq7_pixscreen_free(sw);
         return gs_fail(GS_ENOMEM, "Eq. 7 pixels: cannot allocate the Fourier screen for %zu rows", B);
     }
@@ -101,6 +102,7 @@ void rec_eq7_pixscreen_free(rec_pixscreen_work *sw)
     free(sw->yx);
     free(sw->xa);
     free(sw->xd);
+    free(sw->tail);
     free(sw->xg);
     free(sw->og);
     free(sw->idx);
@@ -237,11 +239,12 @@ void rec_eq7_pixscreen(const rec_matcher *m, rec_pixscreen_work *sw, const float
         for (int band = 0; band < bands; band++)
             rec_eq7_dft(sw->xd + (size_t)band * K, m->dftc, m->dfts, K, y + (size_t)band * 2 * K);
         rec_eq7_harmonic_row(m, (const double complex *)y, K, sw->yx, sw->xa);
+        gs_dot_rows(sw->xa, m->fs_tail, (size_t)bands * K, (size_t)bands * K, NULL, nb, 1.0, sw->tail);
         /* slack: the float score's rounding */
         double bmax = -INFINITY;
         for (size_t b = 0; b < nb; b++) {
-            double c0, e = rec_eq7_harmonic_extent(m->fs_a + b * (size_t)bands * 2 * np, m->fs_tail + b * (size_t)bands * K,
-                                                   sw->yx, sw->xa, bands, np, K, &c0, NULL, NULL);
+            double c0, e = rec_eq7_harmonic_extent(m->fs_a + b * (size_t)bands * 2 * np, sw->yx, bands, np, sw->tail[b],
+                                                   &c0, NULL);
             /* the constant term with its sign; at least 0 (the bound of a value <= 0 scaled by
              * 1/min |t| would not be one) */
             double bd = fmax(e - fabs(c0) + c0 + 1e-9 * e, 0.0) + serr;

@@ -758,8 +758,8 @@ static void border_sort(rec_eq7_work *w, size_t i0, size_t n)
     }
 }
 
-/* The screen of bulbs (every bulb continuous): each bulb's bound (eq7_bulbscreen.c), the bulbs
- * sorted by it in w->border (largest first); no grid open yet. */
+/* The screen of bulbs (every bulb continuous): each bulb's bound (eq7_bulbscreen.c); no grid
+ * open yet. */
 static void bulb_bounds(screen *sc)
 {
     const rec_matcher *m = sc->m;
@@ -767,8 +767,22 @@ static void bulb_bounds(screen *sc)
     rec_eq7_light_dfts(m, w);
     rec_eq7_bulb_bounds(m, w, sc->p, sc->Sxx, w->bub);
     memset(w->open, 0, m->nb);
-    for (size_t b = 0; b < m->nb; b++) w->border[b] = b;
-    border_sort(w, 0, m->nb);
+}
+
+/* w->border[1..n): the bulbs other than b0 whose bound reaches th, largest first, ties in index
+ * order (the order a sort of every bulb would give them, without sorting those below the cut);
+ * when there is none, w->border[1] is the largest of the others. Returns n. */
+static size_t border_within(rec_eq7_work *w, size_t nb, size_t b0, double th)
+{
+    size_t n = 1, top = nb;
+    for (size_t b = 0; b < nb; b++) {
+        if (b == b0) continue;
+        if (w->bub[b] >= th) w->border[n++] = b;
+        if (top == nb || w->bub[b] > w->bub[top]) top = b;
+    }
+    if (n == 1 && top < nb) w->border[1] = top;
+    border_sort(w, 1, n);
+    return n;
 }
 
 /* Exact: the best bound's template; for each continuous bulb its best (bulb_best; with the
@@ -796,12 +810,12 @@ double rec_eq7_screen(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep 
     if (rec_eq7_bulb_screen(m)) {
         bulb_bounds(&sc);
         /* (two at least: a runner-up bulb exists whenever the database has one) */
+        w->border[0] = rec_eq7_argmax(w->bub, m->nb);
         open_bulb(&sc, w->border[0]);
         /* the others within the cut by their first bounds: their coupled bounds, largest first */
         double th0 = sc.Lmax - CUT_PIXEL;
-        size_t n = 1;
-        for (; n < m->nb && w->bub[w->border[n]] >= th0; n++)
-            w->bub[w->border[n]] = rec_eq7_bulb_tighten(m, w, p, Sxx, w->border[n], th0);
+        size_t n = border_within(w, m->nb, w->border[0], th0);
+        for (size_t i = 1; i < n; i++) w->bub[w->border[i]] = rec_eq7_bulb_tighten(m, w, p, Sxx, w->border[i], th0);
         border_sort(w, 1, n);
         for (size_t i = 1; i < m->nb; i++) {
             size_t b = w->border[i];

@@ -246,14 +246,19 @@ void rec_eq7_light_dfts(const rec_matcher *m, rec_eq7_work *w)
     rec_eq7_band_dfts(m, w->w, w->spec + nh + bn);
 }
 
-/* z[r] += a[r] x[r], complex (re, im pairs), r < n. */
+/* z[r] += a[r] x[r], complex (re, im pairs), r < n (REC_CX4_MUL). */
 GS_VECTOR_LOOP static void cross_add(const double *restrict a, const double *restrict x, size_t n, double *restrict z)
 {
-    for (size_t r = 0; r < n; r++) {
-        double ar = a[2 * r], ai = a[2 * r + 1], xr = x[2 * r], xi = x[2 * r + 1];
-        z[2 * r] += ar * xr - ai * xi;
-        z[2 * r + 1] += ar * xi + ai * xr;
+    size_t r = 0;
+    for (; r + 4 <= n; r += 4) {
+        rec_cx4 p, zv;
+        REC_CX4_MUL(p, a + 2 * r, x + 2 * r);
+        REC_VLOAD(zv, z + 2 * r);
+        zv += p;
+        memcpy(z + 2 * r, &zv, sizeof zv);
     }
+    for (size_t q = r; q < n; q++) z[2 * q] += a[2 * q] * x[2 * q] - a[2 * q + 1] * x[2 * q + 1];
+    for (size_t q = r; q < n; q++) z[2 * q + 1] += a[2 * q] * x[2 * q + 1] + a[2 * q + 1] * x[2 * q];
 }
 
 /* One grid of sums of continuous bulb b for brightness f into dst (G values): the inverse FFT of

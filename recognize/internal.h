@@ -135,6 +135,21 @@ static inline double rec_pix_float_err(double Sxx)
  * macros: a function returning a vector would take the ABI of the widest one) */
 #define REC_VLOAD(v, p) memcpy(&(v), (p), sizeof(v))
 #define REC_VSELECT(T, IT, m, a, b) ((T)(((IT)(a) & (m)) | ((IT)(b) & ~(m))))
+/* p = four complex products a x ((re, im) pairs, 8 doubles from the pointers a and x): re =
+ * ar xr - ai xi, im = ai xr + ar xi, the operations of C's product under -fcx-limited-range.
+ * Written as scalar code, such a pair is fused into vfmaddsub by gcc 12's AVX-512 vectorizer
+ * (though -std=c11 turns contraction off), and the clones' sums differ; so the vectors, or
+ * the two parts in two loops. */
+typedef double rec_cx4 __attribute__((vector_size(8 * sizeof(double))));
+#define REC_CX4_MUL(p, a, x)                                                                        \
+    do {                                                                                            \
+        rec_cx4 a_, x_, s_ = {-1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0};                          \
+        REC_VLOAD(a_, a);                                                                           \
+        REC_VLOAD(x_, x);                                                                           \
+        (p) = a_ * __builtin_shufflevector(x_, x_, 0, 0, 2, 2, 4, 4, 6, 6) +                        \
+              s_ * (__builtin_shufflevector(a_, a_, 1, 0, 3, 2, 5, 4, 7, 6) *                       \
+                    __builtin_shufflevector(x_, x_, 1, 1, 3, 3, 5, 5, 7, 7));                       \
+    } while (0)
 #define LOGPHI_ZMAX 12.0
 #define LOGPHI_STEPS 32   /* table points per unit of z */
 
@@ -373,6 +388,7 @@ typedef struct {
     double *bs_y;                          /* [4 bands rec_eq7_harmonics_np + 2 D] */
     rec_eq7_bulb_terms *bs_t;              /* [nb nfit] each bulb's terms */
     double *bs_z;                          /* [nb nfit 4 rec_eq7_harmonics_np] its C_n, C'_n */
+    double *bs_tail;                       /* [nfit][S, T][nb] its tails' sums */
     double complex *spec_v;                /* [(G/2 + 1) bands] the band DFTs of other values
                                             * (the nested tests' cross sums, rec_eq7_grid_dots) */
     /* the reddened model: the light's log prior per tau (has_tau_prior; else uniform) and, when
@@ -453,6 +469,7 @@ typedef struct {
     double *y;              /* [bands * 2K] its DFT ((re, im) pairs) */
     double *yx;             /* [bands * 2 np] one row's, at the kept harmonics */
     double *xa;             /* [bands * K] its magnitudes */
+    double *tail;           /* [nb] each bulb's tail sum with them */
     float *xg, *og;         /* [(B + 3) * D] gathered rows, [(B + 3) * max count] their scores */
     size_t *idx;            /* [B] their rows */
 } rec_pixscreen_work;
@@ -467,11 +484,12 @@ size_t rec_eq7_harmonics_np(const rec_matcher *m);
 void rec_eq7_harmonic_table(const rec_matcher *m, const double complex *hat, size_t b, double scale, double *a,
                             double *tail);
 void rec_eq7_harmonic_row(const rec_matcher *m, const double complex *V, size_t ldv, double *y, double *ya);
-/* sum_n |sum_band a_n y_n| over np harmonics plus the tail's sum_band tail_q |y_q| (ya, [bands][K]):
+/* sum_n |sum_band a_n y_n| over np harmonics plus tail_sum, the tail's sum_band tail_q |y_q|
+ * (gs_dot of the bulb's tail and the row's ya, [bands][K]; gs_dot_rows for every bulb at once):
  * the sum of a trigonometric sum's magnitudes; its constant term (real) into *c0, the complex
- * sums into z (re, im blocks of np) and the tail's sum into *tail_sum unless NULL */
-double rec_eq7_harmonic_extent(const double *a, const double *tail, const double *y, const double *ya, int bands,
-                               size_t np, size_t K, double *c0, double *z, double *tail_sum);
+ * sums into z (re, im blocks of np) unless NULL */
+double rec_eq7_harmonic_extent(const double *a, const double *y, int bands, size_t np, double tail_sum, double *c0,
+                               double *z);
 gs_status rec_eq7_bulbscreen_setup(rec_matcher *m);
 void rec_eq7_bulb_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep *p, double Sxx, double *U);
 /* Bulb b's coupled bound (after rec_eq7_bulb_bounds, at most its bound w->bub[b]): refined until

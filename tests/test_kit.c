@@ -323,6 +323,12 @@ TEST(kit_numeric_dot_rows_same_bits_as_dot)
             }
             gs_dot_rows(x, t, 80, n, idx, count, 0.37, out);
             for (size_t i = 0; i < count; i++) differ += memcmp(&out[idx[i]], &ref[idx[i]], sizeof *out) != 0;
+            /* without idx: the rows 0..count-1 */
+            gs_dot_rows(x, t, 80, n, NULL, count, 0.37, out);
+            for (size_t i = 0; i < count; i++) {
+                double r = gs_dot(x, t + i * 80, n) * 0.37;
+                differ += memcmp(&out[i], &r, sizeof r) != 0;
+            }
         }
     CHECK_MSG(differ == 0, "%d dot products differ from gs_dot", differ);
     CHECK_MSG(far == 0, "%d dot products off their sum", far);

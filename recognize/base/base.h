@@ -282,8 +282,8 @@ double gs_log_phi(double z);
 #endif
 /* sum_i x_i t_i in eight interleaved partial sums (in clones, GS_VECTOR_LOOP: the same sums). */
 double gs_dot(const double *x, const double *t, size_t n);
-/* out[j] = gs_dot(x, t + j ld, n) * scale for the count indices j of idx (the same bits as
- * gs_dot, four rows at a time). */
+/* out[j] = gs_dot(x, t + j ld, n) * scale for the count indices j of idx, or j < count when idx
+ * is NULL (the same bits as gs_dot, four rows at a time). */
 void gs_dot_rows(const double *x, const double *t, size_t ld, size_t n, const size_t *idx, size_t count,
                  double scale, double *out);
 /* An angle in degrees wrapped to [0, 360) and to [-180, 180). */

@@ -152,8 +152,9 @@ void gs_dot_rows(const double *x, const double *t, size_t ld, size_t n, const si
 {
     size_t i = 0;
     for (; i + 4 <= count; i += 4) {   /* four independent chains: gs_dot's operations on each */
-        const double *t0 = t + idx[i] * ld, *t1 = t + idx[i + 1] * ld, *t2 = t + idx[i + 2] * ld,
-                     *t3 = t + idx[i + 3] * ld;
+        size_t r0 = idx ? idx[i] : i, r1 = idx ? idx[i + 1] : i + 1, r2 = idx ? idx[i + 2] : i + 2,
+               r3 = idx ? idx[i + 3] : i + 3;
+        const double *t0 = t + r0 * ld, *t1 = t + r1 * ld, *t2 = t + r2 * ld, *t3 = t + r3 * ld;
         dot_v8 a0 = {0}, a1 = {0}, a2 = {0}, a3 = {0};
         size_t k = 0;
         for (; k + 8 <= n; k += 8) {
@@ -174,10 +175,13 @@ void gs_dot_rows(const double *x, const double *t, size_t ld, size_t n, const si
             a2[0] += x[k] * t2[k];
             a3[0] += x[k] * t3[k];
         }
-        out[idx[i]] = dot_sum(&a0) * scale;
-        out[idx[i + 1]] = dot_sum(&a1) * scale;
-        out[idx[i + 2]] = dot_sum(&a2) * scale;
-        out[idx[i + 3]] = dot_sum(&a3) * scale;
+        out[r0] = dot_sum(&a0) * scale;
+        out[r1] = dot_sum(&a1) * scale;
+        out[r2] = dot_sum(&a2) * scale;
+        out[r3] = dot_sum(&a3) * scale;
     }
-    for (; i < count; i++) out[idx[i]] = gs_dot(x, t + idx[i] * ld, n) * scale;
+    for (; i < count; i++) {
+        size_t r = idx ? idx[i] : i;
+        out[r] = gs_dot(x, t + r * ld, n) * scale;
+    }
 }
