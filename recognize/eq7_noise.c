@@ -113,10 +113,28 @@ static void keep_fit(const rec_eq7_work *w, size_t i, const light_fits *fit)
     }
 }
 
+/* Each part's (thread's) scratch, allocated on its first chunk and kept for every chunk and
+ * pass of one rec_match_catalog. */
+typedef struct {
+    rec_eq7_work w[GS_MAX_THREADS];
+    size_t *light[GS_MAX_THREADS];
+    size_t cap[GS_MAX_THREADS];   /* lights per block; 0: not allocated yet */
+} catalog_scratch;
+
+static void catalog_scratch_free(catalog_scratch *cs)
+{
+    for (int q = 0; cs && q < GS_MAX_THREADS; q++) {
+        if (cs->cap[q]) rec_eq7_work_free(&cs->w[q]);
+        free(cs->light[q]);
+    }
+    free(cs);
+}
+
 /* One pass of rec_match_catalog over a range of lights, each part with its own scratch:
  * pass 1 (fe NULL: every light with fe1), pass 2 (the lights with fe[i] > 0), the last pass
  * (last: every light with fe[i], or fe1 when fe is NULL, under the population's priors). */
 typedef struct {
+    catalog_scratch *scratch;
     const rec_matcher *m;
     const rec_catalog *cat;
     rec_match *out;
@@ -138,17 +156,24 @@ typedef struct {
 
 static gs_status catalog_part(void *ctx, int part, size_t i0, size_t i1)
 {
-    (void)part;
     const catalog_pass *p = ctx;
     const rec_matcher *m = p->m;
     const rec_catalog *cat = p->cat;
-    size_t D = (size_t)m->D, cap = ((size_t)1 << 20) / (16 * (size_t)m->nfit * m->M);
-    cap = cap < 1 ? 1 : cap > CATALOG_BLOCK ? CATALOG_BLOCK : cap;
-    if (cap > i1 - i0) cap = i1 - i0;
-    rec_eq7_work w;
-    gs_status s = rec_eq7_work_alloc_rows(m, &w, cap);
-    size_t *light = s == GS_OK ? malloc(cap * sizeof *light) : NULL;
-    if (s == GS_OK && !light) s = gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", cap);
+    size_t D = (size_t)m->D, cap = p->scratch->cap[part];
+    gs_status s = GS_OK;
+    if (!cap) {   /* this part's first chunk */
+        cap = ((size_t)1 << 20) / (16 * (size_t)m->nfit * m->M);
+        cap = cap < 1 ? 1 : cap > CATALOG_BLOCK ? CATALOG_BLOCK : cap;
+        if (cap > i1 - i0) cap = i1 - i0;
+        if ((s = rec_eq7_work_alloc_rows(m, &p->scratch->w[part], cap)) != GS_OK) return s;
+        if (!(p->scratch->light[part] = malloc(cap * sizeof *p->scratch->light[part]))) {
+            rec_eq7_work_free(&p->scratch->w[part]);
+            return gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", cap);
+        }
+        p->scratch->cap[part] = cap;
+    }
+    rec_eq7_work w = p->scratch->w[part];   /* (its arrays; the pass's settings below) */
+    size_t *light = p->scratch->light[part];
     w.collect_tau = p->keep && p->keep->tll;
     w.want_flat = p->keep && p->keep->flat;
     w.has_tau_prior = p->last && p->logprior;
@@ -186,8 +211,6 @@ static gs_status catalog_part(void *ctx, int part, size_t i0, size_t i1)
             if (s == GS_OK && p->keep) keep_fit(&w, l, p->keep);
         }
     }
-    free(light);
-    rec_eq7_work_free(&w);
     return s;
 }
 
@@ -345,7 +368,9 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
     if (flat_measured && (!fit.flat || !fit.flat_var || !flat_i)) s = gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", n);
     int population = fit.tll || fit.lbf;
     /* pass 1: the camera noise (or the fixed model error); the lights on the matcher's threads */
-    catalog_pass pass = {m, cat, out, ex, NULL, rep.median_model_error, population || flat_measured ? &fit : NULL,
+    catalog_scratch *scratch = calloc(1, sizeof *scratch);
+    if (!scratch) s = gs_fail(GS_ENOMEM, "Eq. 7: out of memory for the lights' scratch");
+    catalog_pass pass = {scratch, m, cat, out, ex, NULL, rep.median_model_error, population || flat_measured ? &fit : NULL,
                          0, NULL, 0.0, NAN, rep.flat_share, NULL};
     if (s == GS_OK) s = gs_parallel_chunks(m->o.threads, n, 0, catalog_part, &pass);
     if (s != GS_OK) goto done;
@@ -399,6 +424,7 @@ population:
     }
     if (noise && s == GS_OK) *noise = rep;
 done:
+    catalog_scratch_free(scratch);
     free(fit.tll), free(fit.bulb), free(fit.S), free(fit.T), free(fit.z), free(fit.lbf);
     free(fit.flat), free(fit.flat_var), free(flat_i);
     free(fe);

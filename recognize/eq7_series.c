@@ -129,19 +129,39 @@ size_t rec_eq7_series_work_size(const rec_matcher *m)
     return 4 * (size_t)m->D + (size_t)m->nfit * (2 * la + 2 * lb) + 2 * SER_PAD32(2 * (size_t)m->rs_hmax + 1);
 }
 
-/* c += a X_{h mod K} over h < n (complex, split parts): one band's terms of a series, in rows
- * of K harmonics (h = h0 + r, X_r). */
-GS_VECTOR_LOOP static void series_products(const double *restrict ar, const double *restrict ai,
-                                           const double *restrict xr, const double *restrict xi, int K, size_t n,
-                                           double *restrict cr, double *restrict ci)
+/* c = sum_q a_q X_q,(h mod K) over h < n (complex, split parts; a_q at a + q lda, X_q at x + q K),
+ * added from 0 in the order of q: the bands of one brightness's series, in rows of K harmonics
+ * (h = h0 + r, X_r); nq a constant where it is inlined, for the vectorizer. */
+static inline __attribute__((always_inline)) void series_rows(const double *restrict ar, const double *restrict ai,
+                                                              size_t lda, const double *restrict xr,
+                                                              const double *restrict xi, size_t K, int nq, size_t n,
+                                                              double *restrict cr, double *restrict ci)
 {
-    for (size_t h0 = 0; h0 < n; h0 += (size_t)K) {
-        size_t nr = n - h0 < (size_t)K ? n - h0 : (size_t)K;
+    for (size_t h0 = 0; h0 < n; h0 += K) {
+        size_t nr = n - h0 < K ? n - h0 : K;
         for (size_t r = 0; r < nr; r++) {
-            cr[h0 + r] += ar[h0 + r] * xr[r] - ai[h0 + r] * xi[r];
-            ci[h0 + r] += ar[h0 + r] * xi[r] + ai[h0 + r] * xr[r];
+            double sr = 0.0, si = 0.0;
+            for (int q = 0; q < nq; q++) {
+                double a = ar[(size_t)q * lda + h0 + r], b = ai[(size_t)q * lda + h0 + r];
+                double u = xr[(size_t)q * K + r], v = xi[(size_t)q * K + r];
+                sr += a * u - b * v;
+                si += a * v + b * u;
+            }
+            cr[h0 + r] = sr;
+            ci[h0 + r] = si;
         }
     }
+}
+
+/* series_rows, then 0 in c's padding up to npad (what series_sums reads). */
+GS_VECTOR_LOOP static void series_products(const double *restrict ar, const double *restrict ai, size_t lda,
+                                           const double *restrict xr, const double *restrict xi, int K, int nq,
+                                           size_t n, size_t npad, double *restrict cr, double *restrict ci)
+{
+    if (nq == 3) series_rows(ar, ai, lda, xr, xi, (size_t)K, 3, n, cr, ci);
+    else if (nq == 1) series_rows(ar, ai, lda, xr, xi, (size_t)K, 1, n, cr, ci);
+    else series_rows(ar, ai, lda, xr, xi, (size_t)K, nq, n, cr, ci);
+    for (size_t h = n; h < npad; h++) cr[h] = ci[h] = 0.0;
 }
 
 void rec_eq7_series_row(const rec_matcher *m, rec_eq7_work *w, int have_dfts)
@@ -168,15 +188,13 @@ void rec_eq7_series_bulb(const rec_matcher *m, rec_eq7_work *w, size_t b)
     size_t lab = SER_PAD((size_t)hs + 1), lbb = SER_PAD(2 * (size_t)hs + 1);
     const double *xr = w->rs, *xi = xr + m->D, *vr = xi + m->D, *vi = vr + m->D;
     double *cs = w->rs + 4 * (size_t)m->D, *ct = cs + 2 * (size_t)nf * la;
-    for (size_t i = 0; i < 2 * (size_t)nf; i++) memset(cs + i * la, 0, sizeof *cs * lab);   /* what b's sums read */
-    for (size_t i = 0; i < 2 * (size_t)nf; i++) memset(ct + i * lb, 0, sizeof *ct * lbb);
-    for (int band = 0; band < bands; band++) {
-        int f = nf == 1 ? 0 : band;
-        size_t o = (size_t)band * (size_t)K;
-        const double *ar = m->rs_a[b] + (size_t)band * 2 * lab, *br = m->rs_b[b] + (size_t)band * 2 * lbb;
+    for (int f = 0; f < nf; f++) {   /* the bands of brightness f */
+        int q0 = nf == 1 ? 0 : f, nq = nf == 1 ? bands : 1;
+        size_t o = (size_t)q0 * (size_t)K;
+        const double *ar = m->rs_a[b] + (size_t)q0 * 2 * lab, *br = m->rs_b[b] + (size_t)q0 * 2 * lbb;
         double *sr = cs + (size_t)f * 2 * la, *tr = ct + (size_t)f * 2 * lb;
-        series_products(ar, ar + lab, xr + o, xi + o, K, (size_t)hs + 1, sr, sr + la);
-        series_products(br, br + lbb, vr + o, vi + o, K, 2 * (size_t)hs + 1, tr, tr + lb);
+        series_products(ar, ar + lab, 2 * lab, xr + o, xi + o, K, nq, (size_t)hs + 1, lab, sr, sr + la);
+        series_products(br, br + lbb, 2 * lbb, vr + o, vi + o, K, nq, 2 * (size_t)hs + 1, lbb, tr, tr + lb);
     }
 }
 

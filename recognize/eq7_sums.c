@@ -246,19 +246,30 @@ void rec_eq7_light_dfts(const rec_matcher *m, rec_eq7_work *w)
     rec_eq7_band_dfts(m, w->w, w->spec + nh + bn);
 }
 
-/* z[r] += a[r] x[r], complex (re, im pairs), r < n (REC_CX4_MUL). */
-GS_VECTOR_LOOP static void cross_add(const double *restrict a, const double *restrict x, size_t n, double *restrict z)
+/* z[r] = sum_q a_q[r] x_q[r] over nq arrays (a_q at a + q ld, x_q at x + q ld), complex (re, im
+ * pairs), r < n, added from 0 in the order of q (REC_CX4_MUL). */
+GS_VECTOR_LOOP static void cross_sum(const double *restrict a, const double *restrict x, size_t ld, int nq, size_t n,
+                                     double *restrict z)
 {
     size_t r = 0;
     for (; r + 4 <= n; r += 4) {
-        rec_cx4 p, zv;
-        REC_CX4_MUL(p, a + 2 * r, x + 2 * r);
-        REC_VLOAD(zv, z + 2 * r);
-        zv += p;
+        rec_cx4 p, zv = {0};
+        for (int q = 0; q < nq; q++) {
+            REC_CX4_MUL(p, a + (size_t)q * ld + 2 * r, x + (size_t)q * ld + 2 * r);
+            zv += p;
+        }
         memcpy(z + 2 * r, &zv, sizeof zv);
     }
-    for (size_t q = r; q < n; q++) z[2 * q] += a[2 * q] * x[2 * q] - a[2 * q + 1] * x[2 * q + 1];
-    for (size_t q = r; q < n; q++) z[2 * q + 1] += a[2 * q] * x[2 * q + 1] + a[2 * q + 1] * x[2 * q];
+    for (size_t c = r; c < n; c++) {
+        double s = 0.0;
+        for (int q = 0; q < nq; q++) s += a[q * ld + 2 * c] * x[q * ld + 2 * c] - a[q * ld + 2 * c + 1] * x[q * ld + 2 * c + 1];
+        z[2 * c] = s;
+    }
+    for (size_t c = r; c < n; c++) {
+        double s = 0.0;
+        for (int q = 0; q < nq; q++) s += a[q * ld + 2 * c] * x[q * ld + 2 * c + 1] + a[q * ld + 2 * c + 1] * x[q * ld + 2 * c];
+        z[2 * c + 1] = s;
+    }
 }
 
 /* One grid of sums of continuous bulb b for brightness f into dst (G values): the inverse FFT of
@@ -269,10 +280,8 @@ static void grid_corr(const rec_matcher *m, rec_eq7_work *w, size_t b, int f, co
 {
     size_t nh = (size_t)m->G / 2 + 1;
     int nf = m->nfit, b0 = nf == 1 ? 0 : f, b1 = nf == 1 ? m->bands : f + 1;
-    memset(w->spec, 0, sizeof *w->spec * nh);
-    for (int band = b0; band < b1; band++)
-        cross_add((const double *)(hat + (b * (size_t)m->bands + (size_t)band) * nh),
-                  (const double *)(X + (size_t)band * nh), nh, (double *)w->spec);
+    cross_sum((const double *)(hat + (b * (size_t)m->bands + (size_t)b0) * nh), (const double *)(X + (size_t)b0 * nh),
+              2 * nh, b1 - b0, nh, (double *)w->spec);
     fftw_execute_dft_c2r((fftw_plan)m->c2r, (fftw_complex *)w->spec, w->grid);
     memcpy(dst, w->grid, sizeof *dst * (size_t)m->G);
 }
