@@ -207,12 +207,12 @@ void rec_eq7_bulb_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pr
     }
     for (size_t b = 0; b < nb; b++) {
         rec_eq7_bulb_terms *t = w->bs_t + b * (size_t)m->nfit;
-        double u, g[GS_MAX_BANDS], gs = 0.0;
+        double *ug = w->bs_ug + b * (1 + (size_t)m->nfit), gs = 0.0;   /* (for rec_eq7_bulb_tighten) */
         for (int f = 0; f < m->nfit; f++)
             if (p->wmin[f] > 0.0) bulb_terms(m, w, p, b, f, &t[f]);
-        int ok = terms_sums(t, p, m->nfit, &u, g);
-        for (int f = 0; f < m->nfit; f++) gs += g[f];
-        U[b] = ok ? bound_of(u, gs, Sxx) : INFINITY;   /* (no bound: the bulb is opened) */
+        int ok = terms_sums(t, p, m->nfit, ug, ug + 1);
+        for (int f = 0; f < m->nfit; f++) gs += ug[1 + f];
+        U[b] = ok ? bound_of(ug[0], gs, Sxx) : INFINITY;   /* (no bound: the bulb is opened) */
     }
 }
 
@@ -304,9 +304,10 @@ double rec_eq7_bulb_tighten(const rec_matcher *m, rec_eq7_work *w, const rec_eq7
     size_t np = rec_eq7_harmonics_np(m);
     int nf = m->nfit;
     const rec_eq7_bulb_terms *t = w->bs_t + b * (size_t)nf;
-    double u, g[GS_MAX_BANDS], gs = 0.0;
-    if (!(w->bub[b] < INFINITY) || !terms_sums(t, p, nf, &u, g)) return w->bub[b];
-    for (int f = 0; f < nf; f++) gs += g[f];
+    if (!(w->bub[b] < INFINITY)) return w->bub[b];   /* (no bound: terms_sums failed) */
+    const double *ug = w->bs_ug + b * (1 + (size_t)nf);   /* rec_eq7_bulb_bounds' */
+    double u = ug[0], g[GS_MAX_BANDS], gs = 0.0;
+    for (int f = 0; f < nf; f++) gs += g[f] = ug[1 + f];
     /* sum_f g_f below gth gives a bound below th (the margin: bound_of's rounding's); th = -inf:
      * each brightness's bound as tight as it gets (stop NaN); +inf: its first chord */
     double gth = isfinite(th) ? Sxx + 2.0 * (th - u) - 1e-6 * (1.0 + fabs(th) + fabs(u) + Sxx) : th > 0.0 ? th : NAN;

@@ -72,6 +72,7 @@ void rec_eq7_work_free(rec_eq7_work *w)
     free(w->bs_t);
     free(w->bs_z);
     free(w->bs_tail);
+    free(w->bs_ug);
     memset(w, 0, sizeof *w);
 }
 
@@ -154,7 +155,8 @@ gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t 
     w->bs_z = bs ? malloc(sizeof *w->bs_z * nb * (size_t)m->nfit * 4 * rec_eq7_harmonics_np(m)) : NULL;
     w->bs_t = bs ? malloc(sizeof *w->bs_t * nb * (size_t)m->nfit) : NULL;
     w->bs_tail = bs ? malloc(sizeof *w->bs_tail * 2 * nb * (size_t)m->nfit) : NULL;
-    part_bad = part_bad || (bs && (!w->bub || !w->open || !w->border || !w->bs_y || !w->bs_t || !w->bs_z || !w->bs_tail));
+    w->bs_ug = bs ? malloc(sizeof *w->bs_ug * nb * (1 + (size_t)m->nfit)) : NULL;
+    part_bad = part_bad || (bs && (!w->bub || !w->open || !w->border || !w->bs_y || !w->bs_t || !w->bs_z || !w->bs_tail || !w->bs_ug));
     if (!w->L || !w->mass || !w->cand || !w->mark || !w->bmass || !w->wmass || !w->has_peak ||
         !w->peak_s || !w->peak_L || !w->peak_sig || !w->peak_z || !w->peak_gain || !w->peak_cell || !w->S_all ||
         !w->T_all || !w->w_all || !w->wx_all || !w->xs_all || !w->prep || !w->U || !w->done || !w->tight || !w->tmp || !w->tt || !w->dt ||

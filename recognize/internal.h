@@ -389,6 +389,7 @@ typedef struct {
     rec_eq7_bulb_terms *bs_t;              /* [nb nfit] each bulb's terms */
     double *bs_z;                          /* [nb nfit 4 rec_eq7_harmonics_np] its C_n, C'_n */
     double *bs_tail;                       /* [nfit][S, T][nb] its tails' sums */
+    double *bs_ug;                         /* [nb][1 + nfit] its bound's u and g_f */
     double complex *spec_v;                /* [(G/2 + 1) bands] the band DFTs of other values
                                             * (the nested tests' cross sums, rec_eq7_grid_dots) */
     /* the reddened model: the light's log prior per tau (has_tau_prior; else uniform) and, when
