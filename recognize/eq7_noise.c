@@ -10,6 +10,8 @@
  * and in log brightness: the excess is a smooth property of the atmosphere along the lines of
  * sight, not of one lamp. var(e^2_j) is the expected one at the capture's typical excess (not
  * the light's own estimate, which would favour the lights whose noise happened to be low).
+ * Over more than NOISE_MAX_REFS references, each light's median takes a sample of them
+ * stratified in e^2 (every k-th), so that this step stays linear in the lights.
  * Pass 2 fits again the lights whose excess is not zero; the last pass (eq7_population.c) every
  * light under what the population tells of tau, the band tolerance and bulbs not in DELIGHT.
  * The lights of each pass run on the matcher's threads, in chunks taken in turn (their costs are
@@ -27,6 +29,10 @@
 #define KERNEL_DECADES 1.0
 /* A light whose kernel weights amount to fewer than this many lights uses the global median. */
 #define NOISE_MIN_EFFECTIVE 3.0
+/* The lights' kernel medians take at most this many references (every k-th by excess: a sample
+ * stratified in e2), so that their cost stays linear in the lights (with every pair, 6 of the
+ * 14 s of 32,000 lights). */
+#define NOISE_MAX_REFS 2048
 
 typedef struct {
     const rec_eq7_excess *ex;
@@ -406,7 +412,11 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
         for (size_t j = 0; j < nr; j++) ref[j].wt = excess_weight(ref[j].ex, m->bands, global);
         global = weighted_median(ref, nr, (size_t)-1, 0, 0, 1, 1, 0, wk, &neff);
     }
-    excess_pass ep = {ref, nr, cat, out, hy, fe};
+    /* the lights' references: all, or every k-th by e2, the middle of each stratum (the
+     * kernel's weights and the scan of the median keep the order) */
+    size_t k = (nr + NOISE_MAX_REFS - 1) / NOISE_MAX_REFS, ns = 0;
+    for (size_t j = k / 2; j < nr; j += k) ref[ns++] = ref[j];
+    excess_pass ep = {ref, ns, cat, out, hy, fe};
     if ((s = gs_parallel_chunks(m->o.threads, n, 0, excess_part, &ep)) != GS_OK) goto done;
     rep.source = REC_NOISE_POPULATION;
     rep.lights_used = nr;

@@ -191,6 +191,97 @@ TEST(eq7_scintillation_multiplicative_noise)
     gs_delight_free(d);
 }
 
+typedef struct {
+    double e2, w;
+} excess_w;
+
+static int cmp_excess_w(const void *a, const void *b)
+{
+    double x = ((const excess_w *)a)->e2, y = ((const excess_w *)b)->e2;
+    return (x > y) - (x < y);
+}
+
+/* The kernel median of the true excesses e_j^2 over the other lights j, weights exp(-dy^2/2) in
+ * rows of a third of the height (the lights alike in brightness and noise): what the capture's
+ * estimate of light i's excess tends to (eq7_noise.c), its square root. */
+static double smoothed_excess(const double *e, const double *y, size_t n, size_t i, double hy)
+{
+    excess_w *v = malloc(sizeof *v * n);
+    double sum = 0.0;
+    size_t m = 0;
+    for (size_t j = 0; j < n; j++) {
+        if (j == i) continue;
+        double dy = (y[j] - y[i]) / hy;
+        v[m] = (excess_w){e[j] * e[j], exp(-0.5 * dy * dy)};
+        sum += v[m++].w;
+    }
+    qsort(v, m, sizeof *v, cmp_excess_w);
+    double acc = 0.0, med = v[m - 1].e2;
+    for (size_t a = 0; a < m; a++) {
+        acc += v[a].w;
+        if (acc >= 0.5 * sum) {
+            med = v[a].e2;
+            break;
+        }
+    }
+    free(v);
+    return sqrt(med);
+}
+
+/* The excess noise of each light follows the capture's: here it grows with the image row (from
+ * 2 % at the top to 5 % at the bottom, as a longer path through the air would), over more lights
+ * than a light's kernel median takes (eq7_noise.c, NOISE_MAX_REFS: a sample stratified in e2).
+ * Each light's excess against the kernel median of the true ones (smoothed_excess, the estimate's
+ * limit: the kernel is a third of the image high), for every 20th light and in the top and
+ * bottom fifths. A sample of the lowest excesses, or no kernel, would not match. */
+TEST(eq7_excess_follows_the_rows_over_many_lights)
+{
+    gs_delight *d = eq7fx_make_db(50, 3, 0, 0);
+    rec_matcher *m = new_matcher_default(d, 3, REC_PHASES_3);
+    const double g[3] = {1.0, 0.85, 0.7};
+    size_t n = 6000;
+    rec_catalog cat = {.count = n, .bands = 3, .K = 26, .width = 640, .height = 480};
+    cat.signal = malloc(sizeof *cat.signal * n * 78);
+    cat.sigma = malloc(sizeof *cat.sigma * n * 78);
+    cat.y_px = malloc(sizeof *cat.y_px * n);
+    rec_match *r = malloc(sizeof *r * n);
+    double *truth = malloc(sizeof *truth * n);
+    uint64_t rs = 43;
+    for (size_t i = 0; i < n; i++) {
+        double a = 1000.0;
+        cat.y_px[i] = 480.0 * gs_splitmix_uniform(&rs);
+        truth[i] = 0.02 + 0.03 * cat.y_px[i] / 480.0;
+        render_fx(rec_matcher_bulb(m, i % 4), gs_phase_to_shift(eq7fx_p3[(i / 4) % 3]), a, g, truth[i], a / 3 / 100,
+                  &rs, cat.signal + i * 78, cat.sigma + i * 78);
+    }
+    rec_noise_report nr;
+    CHECK_OK(rec_match_catalog(m, &cat, r, &nr));
+    CHECK(nr.source == REC_NOISE_POPULATION && nr.lights_used > n / 2);
+    size_t close = 0, checked = 0, top = 0, bottom = 0;
+    double est[2] = {0.0, 0.0}, lim[2] = {0.0, 0.0};
+    for (size_t i = 0; i < n; i += 20) {
+        double s = smoothed_excess(truth, cat.y_px, n, i, 480.0 / 3.0);
+        close += fabs(r[i].model_error - s) <= 0.1 * s;
+        checked++;
+        int q = cat.y_px[i] < 96.0 ? 0 : cat.y_px[i] >= 384.0 ? 1 : -1;
+        if (q < 0) continue;
+        est[q] += r[i].model_error;
+        lim[q] += s;
+        q ? bottom++ : top++;
+    }
+    printf("    excess 2-5 %% by row, %zu lights (%zu references): %zu of %zu within 10 %% of the kernel "
+           "median of the truth; mean %.4f (%.4f) in the top fifth, %.4f (%.4f) in the bottom fifth\n",
+           n, nr.lights_used, close, checked, est[0] / top, lim[0] / top, est[1] / bottom, lim[1] / bottom);
+    CHECK_MSG(close >= checked * 95 / 100, "%zu of %zu lights' excess within 10 %%", close, checked);
+    CHECK_NEAR(est[0] / top, lim[0] / top, 0.07 * lim[0] / top);
+    CHECK_NEAR(est[1] / bottom, lim[1] / bottom, 0.07 * lim[1] / bottom);
+    free(truth);
+    free(r);
+    rec_catalog_release(&cat);
+    rec_matcher_free(m);
+    gs_delight_free(d);
+}
+
 TEST(eq7_unknown_bulb_still_unknown_with_model_error)
 {
     /* A bulb not in the database (another waveform) at a per-sample SNR of 30-300 is UNKNOWN
