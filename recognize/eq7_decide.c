@@ -277,13 +277,17 @@ void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_
     memset(w->bmass, 0, sizeof *w->bmass * nb);   /* (a bulb may have no candidate) */
     memset(w->wmass, 0, sizeof *w->wmass * nb);
     double Z = 0.0;
-    for (size_t i = 0; i < w->ncand; i++) {
-        size_t j = w->cand[i];
-        Z += w->mass[j];
-        w->bmass[m->tbulb[j]] += w->mass[j];
-        int b = m->tbulb[j];
-        if (m->cont[b] && w->has_peak[b] && circ_dist(m->shift[j], w->peak_s[b]) <= PHASE_WINDOW)
-            w->wmass[b] += w->mass[j];
+    for (size_t i = 0; i < w->ncand;) {   /* by runs of one bulb's candidates */
+        int b = m->tbulb[w->cand[i]], win = m->cont[b] && w->has_peak[b];
+        double ps = win ? w->peak_s[b] : 0.0, bm = w->bmass[b], wm = w->wmass[b];
+        for (; i < w->ncand && m->tbulb[w->cand[i]] == b; i++) {
+            double mj = w->mass[w->cand[i]];
+            Z += mj;
+            bm += mj;
+            if (win && circ_dist(m->shift[w->cand[i]], ps) <= PHASE_WINDOW) wm += mj;
+        }
+        w->bmass[b] = bm;
+        w->wmass[b] = wm;
     }
     if (!(Z > 0.0) || !isfinite(Z)) goto done;
     /* pairs: discrete (bulb, phase) templates; continuous voltage bulbs (bulb, +-30 deg around
@@ -304,13 +308,18 @@ void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_
     }
     if (best.bulb < 0) goto done;
     int bb = best.bulb;
+    /* a continuous winner's window: whether each grid cell (shift c/G, as the matcher's) lies
+     * within it, once (w->tmp: free after masses) */
+    unsigned char *inw = (unsigned char *)w->tmp;
+    if (m->cont[bb])
+        for (int c = 0; c < m->G; c++) inw[c] = circ_dist((double)c / m->G, best.shift) <= PHASE_WINDOW;
     /* a continuous voltage winner's mass outside its window is a runner-up candidate */
     if (m->cont[bb] && m->bulbs[bb].ref != GS_REF_NONE) {
         double out_mass = 0.0, top = -INFINITY;
         size_t jt = 0;
         for (size_t i = 0; i < w->ncand; i++) {
             size_t j = w->cand[i];
-            if (m->tbulb[j] != bb || circ_dist(m->shift[j], best.shift) <= PHASE_WINDOW) continue;
+            if (m->tbulb[j] != bb || inw[m->tcell[j]]) continue;
             out_mass += w->mass[j];
             if (w->L[j] > top) {
                 top = w->L[j];
@@ -342,7 +351,8 @@ void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_
                 size_t j = w->cand[i];
                 if (none) continue;
                 if (m->cont[bb]) {
-                    if (circ_dist(m->shift[j], dec->shift) <= PHASE_WINDOW) pc += w->mass[j];
+                    if (m->cont[b] ? inw[m->tcell[j]] : circ_dist(m->shift[j], dec->shift) <= PHASE_WINDOW)
+                        pc += w->mass[j];
                 } else if (m->tcell[j] == m->tcell[dec->tmpl]) {
                     pc += w->mass[j];
                 }

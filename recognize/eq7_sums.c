@@ -215,13 +215,22 @@ static void sums_kernel_f(const float *a, size_t lda, size_t nq, const float *tt
 GS_VECTOR_LOOP void rec_eq7_dft(const double *restrict v, const double *restrict c, const double *restrict s,
                                 size_t K, double *restrict x)
 {
-    for (size_t r = 0; r < 2 * K; r++) x[r] = 0.0;
-    for (size_t k = 0; k < K; k++) {
-        double vk = v[k];
-        const double *ck = c + k * K, *sk = s + k * K;
-        for (size_t r = 0; r < K; r++) {
-            x[2 * r] += vk * ck[r];
-            x[2 * r + 1] -= vk * sk[r];
+    enum { TILE = 64 };   /* bins summed in split parts, then stored as pairs */
+    for (size_t r0 = 0; r0 < K; r0 += TILE) {
+        size_t nr = K - r0 < TILE ? K - r0 : TILE;
+        double re[TILE], im[TILE];
+        for (size_t r = 0; r < nr; r++) re[r] = im[r] = 0.0;
+        for (size_t k = 0; k < K; k++) {
+            double vk = v[k];
+            const double *ck = c + k * K + r0, *sk = s + k * K + r0;
+            for (size_t r = 0; r < nr; r++) {
+                re[r] += vk * ck[r];
+                im[r] -= vk * sk[r];
+            }
+        }
+        for (size_t r = 0; r < nr; r++) {
+            x[2 * (r0 + r)] = re[r];
+            x[2 * (r0 + r) + 1] = im[r];
         }
     }
 }
