@@ -65,8 +65,8 @@ TEST(eq7_cx4_mul_is_the_complex_product)
             v[q] = u < 0.05 ? (u < 0.025 ? 0.0 : -0.0) : u < 0.1 ? 1e-310 * gs_splitmix_normal(&rs)
                                                                  : gs_splitmix_normal(&rs) * exp(20.0 * gs_splitmix_normal(&rs));
         }
-        a[i] = CMPLX(v[0], v[1]);
-        x[i] = CMPLX(v[2], v[3]);
+        memcpy(&a[i], v, sizeof a[i]);   /* (a complex is its real and imaginary parts in order; */
+        memcpy(&x[i], v + 2, sizeof x[i]);   /* clang has no CMPLX) */
     }
     cx4_products((const double *)a, (const double *)x, N, (double *)p);
     int differ = 0;
