@@ -192,7 +192,6 @@ void rec_eq7_add_cand(const rec_matcher *m, rec_eq7_work *w, size_t j)
     }
 }
 
-/* Every template the screen made exact (w->done), in order; eight flags at a time where none is set. */
 /* rec_eq7_add_cand of every done template in [j, j1), in order: 8 flags at a time. */
 static void add_done_range(const rec_matcher *m, rec_eq7_work *w, size_t j, size_t j1)
 {
@@ -206,6 +205,7 @@ static void add_done_range(const rec_matcher *m, rec_eq7_work *w, size_t j, size
         if (w->done[j]) rec_eq7_add_cand(m, w, j);
 }
 
+/* Every template the screen made exact (w->done), in order. */
 void rec_eq7_add_done(const rec_matcher *m, rec_eq7_work *w)
 {
     if (!rec_eq7_bulb_screen(m)) {

@@ -267,17 +267,23 @@ GS_VECTOR_LOOP static void inverse_dft(const double *restrict c, const double *r
         for (int k = 0; k < K; k++) v[k] += re[q] * c[q * K + k] - im[q] * sn[q * K + k];
 }
 
-/* g = f e, n complex values as (re, im) pairs (REC_CX4_MUL). */
+/* g = f e, n complex values as (re, im) pairs (REC_CX4_MUL; the last group of fewer than four
+ * from zero-padded copies). */
 GS_VECTOR_LOOP static void cmul(const double *restrict f, const double *restrict e, int n, double *restrict g)
 {
-    int i = 0;
-    for (; i + 4 <= n; i += 4) {
+    for (int i = 0; i < n; i += 4) {
         rec_cx4 p;
-        REC_CX4_MUL(p, f + 2 * i, e + 2 * i);
-        memcpy(g + 2 * i, &p, sizeof p);
+        if (i + 4 <= n) {
+            REC_CX4_MUL(p, f + 2 * i, e + 2 * i);
+            memcpy(g + 2 * i, &p, sizeof p);
+            continue;
+        }
+        double fa[8] = {0}, ea[8] = {0};
+        memcpy(fa, f + 2 * i, sizeof *fa * 2 * (size_t)(n - i));
+        memcpy(ea, e + 2 * i, sizeof *ea * 2 * (size_t)(n - i));
+        REC_CX4_MUL(p, fa, ea);
+        memcpy(g + 2 * i, &p, sizeof *g * 2 * (size_t)(n - i));
     }
-    for (int q = i; q < n; q++) g[2 * q] = f[2 * q] * e[2 * q] - f[2 * q + 1] * e[2 * q + 1];
-    for (int q = i; q < n; q++) g[2 * q + 1] = f[2 * q] * e[2 * q + 1] + f[2 * q + 1] * e[2 * q];
 }
 
 /* A[(r + i) mod K] += g[i] for i < n, in the order of i (r < K): runs of consecutive bins. */

@@ -170,7 +170,7 @@ static gs_status catalog_part(void *ctx, int part, size_t i0, size_t i1)
     if (!cap) {   /* this part's first chunk */
         cap = ((size_t)1 << 20) / (16 * (size_t)m->nfit * m->M);
         cap = cap < 1 ? 1 : cap > CATALOG_BLOCK ? CATALOG_BLOCK : cap;
-        if (cap > i1 - i0) cap = i1 - i0;
+        if (cap > cat->count) cap = cat->count;
         if ((s = rec_eq7_work_alloc_rows(m, &p->scratch->w[part], cap)) != GS_OK) return s;
         if (!(p->scratch->light[part] = malloc(cap * sizeof *p->scratch->light[part]))) {
             rec_eq7_work_free(&p->scratch->w[part]);
@@ -178,15 +178,15 @@ static gs_status catalog_part(void *ctx, int part, size_t i0, size_t i1)
         }
         p->scratch->cap[part] = cap;
     }
-    rec_eq7_work w = p->scratch->w[part];   /* (its arrays; the pass's settings below) */
+    rec_eq7_work *w = &p->scratch->w[part];   /* (the pass's settings below) */
     size_t *light = p->scratch->light[part];
-    w.collect_tau = p->keep && p->keep->tll;
-    w.want_flat = p->keep && p->keep->flat;
-    w.has_tau_prior = p->last && p->logprior;
-    w.chroma_tol = p->last ? p->tol : 0.0;
-    w.has_other_prior = p->last && isfinite(p->other);
-    w.other_prior = w.has_other_prior ? p->other : 0.0;
-    w.flat = p->flat;
+    w->collect_tau = p->keep && p->keep->tll;
+    w->want_flat = p->keep && p->keep->flat;
+    w->has_tau_prior = p->last && p->logprior;
+    w->chroma_tol = p->last ? p->tol : 0.0;
+    w->has_other_prior = p->last && isfinite(p->other);
+    w->other_prior = w->has_other_prior ? p->other : 0.0;
+    w->flat = p->flat;
     int first = !p->fe && !p->last;   /* pass 1 answers every light */
     for (size_t i = i0; i < i1 && s == GS_OK;) {
         /* a block of the lights this pass matches, one row each; those without a usable sample
@@ -200,21 +200,21 @@ static gs_status catalog_part(void *ctx, int part, size_t i0, size_t i1)
                 continue;
             }
             if (!first && (no_signal || !(p->last || fe > 0.0))) continue;
-            if (p->flat_i) w.flat = p->flat_i[i];
-            if (rec_eq7_light_prepare(m, &w, n, cat->signal + i * D, cat->sigma + i * D, fe, &p->out[i])) {
+            if (p->flat_i) w->flat = p->flat_i[i];
+            if (rec_eq7_light_prepare(m, w, n, cat->signal + i * D, cat->sigma + i * D, fe, &p->out[i])) {
                 light[n++] = i;
                 continue;
             }
             if (p->ex && first) p->ex[i].valid = 0;
-            if (p->keep) keep_fit(&w, i, p->keep);   /* (none: prepare said so) */
+            if (p->keep) keep_fit(w, i, p->keep);   /* (none: prepare said so) */
         }
-        rec_eq7_block_sums(m, &w, n);
+        rec_eq7_block_sums(m, w, n);
         for (size_t q = 0; q < n && s == GS_OK; q++) {
             size_t l = light[q];
             double fe = p->fe ? p->fe[l] : p->fe1;
-            if (w.has_tau_prior) memcpy(w.tau_logprior, p->logprior + l * REC_TAU_N, sizeof w.tau_logprior);
-            s = rec_eq7_light_finish(m, &w, q, cat->sigma + l * D, fe, &p->out[l], p->ex && first ? &p->ex[l] : NULL);
-            if (s == GS_OK && p->keep) keep_fit(&w, l, p->keep);
+            if (w->has_tau_prior) memcpy(w->tau_logprior, p->logprior + l * REC_TAU_N, sizeof w->tau_logprior);
+            s = rec_eq7_light_finish(m, w, q, cat->sigma + l * D, fe, &p->out[l], p->ex && first ? &p->ex[l] : NULL);
+            if (s == GS_OK && p->keep) keep_fit(w, l, p->keep);
         }
     }
     return s;
@@ -228,6 +228,8 @@ typedef struct {
     const rec_match *out;
     double hy;
     double *fe;
+    size_t k;        /* the references are every k-th of all (NOISE_MAX_REFS) */
+    double global;   /* all references' weighted median */
 } excess_pass;
 
 static gs_status excess_part(void *ctx, int part, size_t i0, size_t i1)
@@ -240,7 +242,11 @@ static gs_status excess_part(void *ctx, int part, size_t i0, size_t i1)
         double lb = log10(p->out[i].brightness > 0.0 ? p->out[i].brightness : 1e-300);
         double e2 = weighted_median(p->ref, p->nr, i, p->cat->y_px ? p->cat->y_px[i] : 0.0, lb, p->hy,
                                     KERNEL_DECADES, 1, wk, &neff);
-        if (neff < NOISE_MIN_EFFECTIVE) e2 = weighted_median(p->ref, p->nr, i, 0, 0, 1, 1, 0, wk, &neff);
+        /* (over a sample, its own effective count says whether its median can be trusted, and
+         * the fallback is the global median of all references: one light left out of thousands
+         * would not move it) */
+        if (neff < NOISE_MIN_EFFECTIVE)
+            e2 = p->k == 1 ? weighted_median(p->ref, p->nr, i, 0, 0, 1, 1, 0, wk, &neff) : p->global;
         p->fe[i] = sqrt(e2);
     }
     free(wk);
@@ -416,7 +422,7 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
      * kernel's weights and the scan of the median keep the order) */
     size_t k = (nr + NOISE_MAX_REFS - 1) / NOISE_MAX_REFS, ns = 0;
     for (size_t j = k / 2; j < nr; j += k) ref[ns++] = ref[j];
-    excess_pass ep = {ref, ns, cat, out, hy, fe};
+    excess_pass ep = {ref, ns, cat, out, hy, fe, k, global};
     if ((s = gs_parallel_chunks(m->o.threads, n, 0, excess_part, &ep)) != GS_OK) goto done;
     rep.source = REC_NOISE_POPULATION;
     rep.lights_used = nr;

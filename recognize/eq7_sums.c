@@ -188,7 +188,7 @@ SUMS_KERNEL(sums_kernel_f512, float, 16, SUMS_COLS_F, target("avx512f"))
 SUMS_KERNEL(sums_kernel_f256, float, 8, SUMS_COLS_F, target("avx2,fma"))
 SUMS_KERNEL(sums_kernel_fplain, float, 8, SUMS_COLS_F, )
 #ifdef __clang__
-#pragma clang fp contract(on)
+#pragma clang fp contract(off)   /* (the build's -ffp-contract=off for the rest of the file) */
 #endif
 
 #define SUMS_PICK(k, ...)                                                                           \
@@ -256,28 +256,27 @@ void rec_eq7_light_dfts(const rec_matcher *m, rec_eq7_work *w)
 }
 
 /* z[r] = sum_q a_q[r] x_q[r] over nq arrays (a_q at a + q ld, x_q at x + q ld), complex (re, im
- * pairs), r < n, added from 0 in the order of q (REC_CX4_MUL). */
+ * pairs), r < n, added from 0 in the order of q (REC_CX4_MUL; the last group of fewer than four
+ * from zero-padded copies). */
 GS_VECTOR_LOOP static void cross_sum(const double *restrict a, const double *restrict x, size_t ld, int nq, size_t n,
                                      double *restrict z)
 {
-    size_t r = 0;
-    for (; r + 4 <= n; r += 4) {
+    for (size_t r = 0; r < n; r += 4) {
+        size_t c = n - r < 4 ? n - r : 4;
         rec_cx4 p, zv = {0};
         for (int q = 0; q < nq; q++) {
-            REC_CX4_MUL(p, a + (size_t)q * ld + 2 * r, x + (size_t)q * ld + 2 * r);
+            const double *aq = a + (size_t)q * ld + 2 * r, *xq = x + (size_t)q * ld + 2 * r;
+            if (c == 4) {
+                REC_CX4_MUL(p, aq, xq);
+            } else {
+                double ab[8] = {0}, xb[8] = {0};
+                memcpy(ab, aq, sizeof *ab * 2 * c);
+                memcpy(xb, xq, sizeof *xb * 2 * c);
+                REC_CX4_MUL(p, ab, xb);
+            }
             zv += p;
         }
-        memcpy(z + 2 * r, &zv, sizeof zv);
-    }
-    for (size_t c = r; c < n; c++) {
-        double s = 0.0;
-        for (int q = 0; q < nq; q++) s += a[q * ld + 2 * c] * x[q * ld + 2 * c] - a[q * ld + 2 * c + 1] * x[q * ld + 2 * c + 1];
-        z[2 * c] = s;
-    }
-    for (size_t c = r; c < n; c++) {
-        double s = 0.0;
-        for (int q = 0; q < nq; q++) s += a[q * ld + 2 * c] * x[q * ld + 2 * c + 1] + a[q * ld + 2 * c + 1] * x[q * ld + 2 * c];
-        z[2 * c + 1] = s;
+        memcpy(z + 2 * r, &zv, sizeof *z * 2 * c);
     }
 }
 

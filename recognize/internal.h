@@ -138,8 +138,8 @@ static inline double rec_pix_float_err(double Sxx)
 /* p = four complex products a x ((re, im) pairs, 8 doubles from the pointers a and x): re =
  * ar xr - ai xi, im = ai xr + ar xi, the operations of C's product under -fcx-limited-range.
  * Written as scalar code, such a pair is fused into vfmaddsub by gcc 12's AVX-512 vectorizer
- * (though -std=c11 turns contraction off), and the clones' sums differ; so the vectors, or
- * the two parts in two loops. */
+ * (despite -ffp-contract=off), and the clones' sums differ; so the vectors, a group of fewer
+ * than four from zero-padded copies. */
 typedef double rec_cx4 __attribute__((vector_size(8 * sizeof(double))));
 #define REC_CX4_MUL(p, a, x)                                                                        \
     do {                                                                                            \
@@ -381,7 +381,8 @@ typedef struct {
                                             * (rec_eq7_grid_sums) */
     double *grid;                          /* [G] its inverse */
     /* the light path's screen of continuous bulbs (m->bs_on): each bulb's bound, whether its
-     * grids are computed (open), the bulbs by bound; the light's harmonics (eq7_bulbscreen.c) */
+     * grids are computed (open), the bulbs by bound (border[0], then those within the cut, or
+     * the runner-up: rec_eq7_screen); the light's harmonics (eq7_bulbscreen.c) */
     double *bub;                           /* [nb] */
     unsigned char *open;                   /* [nb] */
     size_t *border;                        /* [nb] */
