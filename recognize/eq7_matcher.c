@@ -271,19 +271,18 @@ GS_VECTOR_LOOP static void inverse_dft(const double *restrict c, const double *r
  * from zero-padded copies). */
 GS_VECTOR_LOOP static void cmul(const double *restrict f, const double *restrict e, int n, double *restrict g)
 {
-    for (int i = 0; i < n; i += 4) {
-        rec_cx4 p;
-        if (i + 4 <= n) {
-            REC_CX4_MUL(p, f + 2 * i, e + 2 * i);
-            memcpy(g + 2 * i, &p, sizeof p);
-            continue;
-        }
-        double fa[8] = {0}, ea[8] = {0};
-        memcpy(fa, f + 2 * i, sizeof *fa * 2 * (size_t)(n - i));
-        memcpy(ea, e + 2 * i, sizeof *ea * 2 * (size_t)(n - i));
-        REC_CX4_MUL(p, fa, ea);
-        memcpy(g + 2 * i, &p, sizeof *g * 2 * (size_t)(n - i));
+    int i = 0;
+    rec_cx4 p;
+    for (; i + 4 <= n; i += 4) {
+        REC_CX4_MUL(p, f + 2 * i, e + 2 * i);
+        memcpy(g + 2 * i, &p, sizeof p);
     }
+    if (i == n) return;
+    double fa[8] = {0}, ea[8] = {0};
+    memcpy(fa, f + 2 * i, sizeof *fa * 2 * (size_t)(n - i));
+    memcpy(ea, e + 2 * i, sizeof *ea * 2 * (size_t)(n - i));
+    REC_CX4_MUL(p, fa, ea);
+    memcpy(g + 2 * i, &p, sizeof *g * 2 * (size_t)(n - i));
 }
 
 /* A[(r + i) mod K] += g[i] for i < n, in the order of i (r < K): runs of consecutive bins. */

@@ -25,7 +25,6 @@
 _Static_assert(LDBL_MANT_DIG >= 64, "the refinement's tables need a long double of 64 bits of mantissa or more");
 #define SER_LANES 8
 #define SER_PAD(n) (((n) + SER_LANES - 1) / SER_LANES * SER_LANES)
-#define SER_PAD32(n) (((n) + 31) / 32 * 32)
 typedef double ser_vd __attribute__((vector_size(SER_LANES * sizeof(double))));
 
 void rec_eq7_series_free(rec_matcher *m)
@@ -125,8 +124,8 @@ size_t rec_eq7_series_work_size(const rec_matcher *m)
 {
     if (!m->ncont) return 0;
     size_t la = SER_PAD((size_t)m->rs_hmax + 1), lb = SER_PAD(2 * (size_t)m->rs_hmax + 1);
-    /* the row's DFTs (4 bands K), the products (nfit (2 la + 2 lb)), the powers (2 le) */
-    return 4 * (size_t)m->D + (size_t)m->nfit * (2 * la + 2 * lb) + 2 * SER_PAD32(2 * (size_t)m->rs_hmax + 1);
+    /* the row's DFTs (4 bands K), the products (nfit (2 la + 2 lb)) */
+    return 4 * (size_t)m->D + (size_t)m->nfit * (2 * la + 2 * lb);
 }
 
 /* c = sum_q a_q X_q,(h mod K) over h < n (complex, split parts; a_q at a + q lda, X_q at x + q K),
@@ -153,7 +152,7 @@ static inline __attribute__((always_inline)) void series_rows(const double *rest
     }
 }
 
-/* series_rows, then 0 in c's padding up to npad (what series_sums reads). */
+/* series_rows, then 0 in c's padding up to npad (what series_eval reads). */
 GS_VECTOR_LOOP static void series_products(const double *restrict ar, const double *restrict ai, size_t lda,
                                            const double *restrict xr, const double *restrict xi, int K, int nq,
                                            size_t n, size_t npad, double *restrict cr, double *restrict ci)
@@ -198,50 +197,68 @@ void rec_eq7_series_bulb(const rec_matcher *m, rec_eq7_work *w, size_t b)
     }
 }
 
-/* e^{-2 pi i g s}, g < n (n a multiple of 32): blocks of 32 powers of e^{-2 pi i s} times the
- * blocks' own, each from cexp every 8 blocks (relative error some 100 eps). */
-GS_VECTOR_LOOP static void series_powers(double s, size_t n, double *er, double *ei)
+/* sum_g Re(c_g e_g), sum_g g Im(c_g e_g), sum_g g^2 Re(c_g e_g) of one series over h .. h + 8:
+ * its SER_LANES partial sums acc[0..2] (lanes in a fixed order). */
+#define SER_ACC(acc, cr, ci, h, c, d, g)                                                            \
+    do {                                                                                            \
+        ser_vd a_, b_;                                                                              \
+        memcpy(&a_, (cr) + (h), sizeof a_);                                                         \
+        memcpy(&b_, (ci) + (h), sizeof b_);                                                         \
+        ser_vd re_ = a_ * (c) - b_ * (d);                                                           \
+        (acc)[0] += re_;                                                                            \
+        (acc)[1] += (g) * (a_ * (d) + b_ * (c));                                                    \
+        (acc)[2] += (g) * (g) * re_;                                                                \
+    } while (0)
+
+/* Every brightness's S series (na terms, at cs + f 2 la: real parts, then imaginary) and T series
+ * (nbb terms, at ct + f 2 lb) at shift s, with their derivatives' sums (SER_ACC) into
+ * o[f][S, T][3]. The powers e_g = e^{-2 pi i g s} block by block as they are needed: 32 powers of
+ * e^{-2 pi i s} times each block's own, from cexp every 8 blocks (relative error some 100 eps).
+ * nf a constant where it is inlined: the sums stay in registers. */
+static inline __attribute__((always_inline)) void series_eval_n(double s, const double *cs, size_t la,
+                                                                const double *ct, size_t lb, int nf, size_t na,
+                                                                size_t nbb, double (*o)[2][3])
 {
-    double pr[32], pi[32];
+    ser_vd pr[4], pi[4], acc[GS_MAX_BANDS][2][3];
     double complex e1 = cexp(-I * EQ7_TWO_PI * s), p = 1.0;
     for (int i = 0; i < 32; i++) {
-        pr[i] = creal(p), pi[i] = cimag(p);
+        pr[i / SER_LANES][i % SER_LANES] = creal(p), pi[i / SER_LANES][i % SER_LANES] = cimag(p);
         p *= e1;
     }
+    for (int f = 0; f < nf; f++)
+        for (int st = 0; st < 2; st++)
+            for (int k = 0; k < 3; k++)
+                for (int l = 0; l < SER_LANES; l++) acc[f][st][k][l] = 0.0;
     double complex e32 = cexp(-I * EQ7_TWO_PI * fmod(32.0 * s, 1.0)), q = 1.0;
-    for (size_t j = 0; j * 32 < n; j++) {
+    ser_vd g = {0, 1, 2, 3, 4, 5, 6, 7}, step;   /* the lanes' g, exact integers */
+    for (int l = 0; l < SER_LANES; l++) step[l] = SER_LANES;
+    for (size_t j = 0; j * 32 < nbb; j++) {
         if (j % 8 == 0 && j) q = cexp(-I * EQ7_TWO_PI * fmod((double)(32 * j) * s, 1.0));
         double qr = creal(q), qi = cimag(q);
-        for (int i = 0; i < 32; i++) {
-            er[32 * j + (size_t)i] = qr * pr[i] - qi * pi[i];
-            ei[32 * j + (size_t)i] = qr * pi[i] + qi * pr[i];
+        for (size_t v = 0; v < 4 && 32 * j + SER_LANES * v < nbb; v++, g += step) {
+            size_t h = 32 * j + SER_LANES * v;
+            ser_vd c = qr * pr[v] - qi * pi[v], d = qr * pi[v] + qi * pr[v];
+            for (int f = 0; f < nf; f++) {
+                const double *sr = cs + (size_t)f * 2 * la, *tr = ct + (size_t)f * 2 * lb;
+                if (h < na) SER_ACC(acc[f][0], sr, sr + la, h, c, d, g);
+                SER_ACC(acc[f][1], tr, tr + lb, h, c, d, g);
+            }
         }
         q *= e32;
     }
+    for (int f = 0; f < nf; f++)
+        for (int st = 0; st < 2; st++)
+            for (int k = 0; k < 3; k++) {
+                o[f][st][k] = 0.0;
+                for (int l = 0; l < SER_LANES; l++) o[f][st][k] += acc[f][st][k][l];
+            }
 }
 
-/* Over g < n (a multiple of SER_LANES), in SER_LANES interleaved partial sums taken in a fixed
- * order: out = sum Re(c_g e_g), sum g Im(c_g e_g), sum g^2 Re(c_g e_g) (a series and its
- * derivatives). */
-GS_VECTOR_CLONES static void series_sums(const double *cr, const double *ci, const double *er, const double *ei,
-                                         size_t n, double out[3])
+GS_VECTOR_CLONES static void series_eval(double s, const double *cs, size_t la, const double *ct, size_t lb, int nf,
+                                         size_t na, size_t nbb, double (*o)[2][3])
 {
-    ser_vd s0 = {0}, s1 = {0}, s2 = {0}, g = {0, 1, 2, 3, 4, 5, 6, 7}, step;
-    for (int i = 0; i < SER_LANES; i++) step[i] = SER_LANES;
-    for (size_t h = 0; h < n; h += SER_LANES) {
-        ser_vd a, b, c, d;
-        memcpy(&a, cr + h, sizeof a);
-        memcpy(&b, ci + h, sizeof b);
-        memcpy(&c, er + h, sizeof c);
-        memcpy(&d, ei + h, sizeof d);
-        ser_vd re = a * c - b * d;
-        s0 += re;
-        s1 += g * (a * d + b * c);
-        s2 += g * g * re;
-        g += step;
-    }
-    out[0] = out[1] = out[2] = 0.0;
-    for (int i = 0; i < SER_LANES; i++) out[0] += s0[i], out[1] += s1[i], out[2] += s2[i];
+    if (nf == 1) series_eval_n(s, cs, la, ct, lb, 1, na, nbb, o);
+    else series_eval_n(s, cs, la, ct, lb, nf, na, nbb, o);
 }
 
 void rec_eq7_series_at(const rec_matcher *m, rec_eq7_work *w, size_t b, double s, double *S, double *S1,
@@ -249,16 +266,11 @@ void rec_eq7_series_at(const rec_matcher *m, rec_eq7_work *w, size_t b, double s
 {
     int hs = m->rs_h[b];
     size_t la = SER_PAD((size_t)m->rs_hmax + 1), lb = SER_PAD(2 * (size_t)m->rs_hmax + 1);
-    size_t na = SER_PAD((size_t)hs + 1), nbb = SER_PAD(2 * (size_t)hs + 1);
-    double *cs = w->rs + 4 * (size_t)m->D, *ct = cs + 2 * (size_t)m->nfit * la, *er = ct + 2 * (size_t)m->nfit * lb;
-    double *ei = er + SER_PAD32(2 * (size_t)m->rs_hmax + 1);
-    series_powers(wrap01(s), SER_PAD32(2 * (size_t)hs + 1), er, ei);
-    double tp = EQ7_TWO_PI, o[3];
+    double *cs = w->rs + 4 * (size_t)m->D, *ct = cs + 2 * (size_t)m->nfit * la, tp = EQ7_TWO_PI;
+    double o[GS_MAX_BANDS][2][3];
+    series_eval(wrap01(s), cs, la, ct, lb, m->nfit, SER_PAD((size_t)hs + 1), SER_PAD(2 * (size_t)hs + 1), o);
     for (int f = 0; f < m->nfit; f++) {
-        const double *sr = cs + (size_t)f * 2 * la, *tr = ct + (size_t)f * 2 * lb;
-        series_sums(sr, sr + la, er, ei, na, o);
-        S[f] = o[0], S1[f] = tp * o[1], S2[f] = -tp * tp * o[2];
-        series_sums(tr, tr + lb, er, ei, nbb, o);
-        T[f] = o[0], T1[f] = tp * o[1], T2[f] = -tp * tp * o[2];
+        S[f] = o[f][0][0], S1[f] = tp * o[f][0][1], S2[f] = -tp * tp * o[f][0][2];
+        T[f] = o[f][1][0], T1[f] = tp * o[f][1][1], T2[f] = -tp * tp * o[f][1][2];
     }
 }

@@ -261,23 +261,26 @@ void rec_eq7_light_dfts(const rec_matcher *m, rec_eq7_work *w)
 GS_VECTOR_LOOP static void cross_sum(const double *restrict a, const double *restrict x, size_t ld, int nq, size_t n,
                                      double *restrict z)
 {
-    for (size_t r = 0; r < n; r += 4) {
-        size_t c = n - r < 4 ? n - r : 4;
-        rec_cx4 p, zv = {0};
+    size_t r = 0;
+    rec_cx4 p, zv;
+    for (; r + 4 <= n; r += 4) {
+        zv = (rec_cx4){0};
         for (int q = 0; q < nq; q++) {
-            const double *aq = a + (size_t)q * ld + 2 * r, *xq = x + (size_t)q * ld + 2 * r;
-            if (c == 4) {
-                REC_CX4_MUL(p, aq, xq);
-            } else {
-                double ab[8] = {0}, xb[8] = {0};
-                memcpy(ab, aq, sizeof *ab * 2 * c);
-                memcpy(xb, xq, sizeof *xb * 2 * c);
-                REC_CX4_MUL(p, ab, xb);
-            }
+            REC_CX4_MUL(p, a + (size_t)q * ld + 2 * r, x + (size_t)q * ld + 2 * r);
             zv += p;
         }
-        memcpy(z + 2 * r, &zv, sizeof *z * 2 * c);
+        memcpy(z + 2 * r, &zv, sizeof zv);
     }
+    if (r == n) return;
+    zv = (rec_cx4){0};
+    for (int q = 0; q < nq; q++) {
+        double ab[8] = {0}, xb[8] = {0};
+        memcpy(ab, a + (size_t)q * ld + 2 * r, sizeof *ab * 2 * (n - r));
+        memcpy(xb, x + (size_t)q * ld + 2 * r, sizeof *xb * 2 * (n - r));
+        REC_CX4_MUL(p, ab, xb);
+        zv += p;
+    }
+    memcpy(z + 2 * r, &zv, sizeof *z * 2 * (n - r));
 }
 
 /* One grid of sums of continuous bulb b for brightness f into dst (G values): the inverse FFT of
