@@ -166,17 +166,24 @@ static void bulb_terms(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep
     t->tb = t->tw > t->tb ? t->tw : t->tb;
 }
 
-/* Over the brightnesses with a usable sample: u = -sum_f log(tb_f)/2 and g_f = sb_f^2/tb_f (0 where
+/* lt[i] = log(tb) of the n terms t[i] (1 where tb <= 0: not used), in the clones' vector log. */
+GS_VECTOR_LOOP static void terms_logs(const rec_eq7_bulb_terms *t, size_t n, double *lt)
+{
+    for (size_t i = 0; i < n; i++) lt[i] = log(t[i].tb > 0.0 ? t[i].tb : 1.0);
+}
+
+/* Over the brightnesses with a usable sample (lt: log(tb_f), terms_logs): u = -sum_f log(tb_f)/2 and g_f = sb_f^2/tb_f (0 where
  * sb_f <= 0: S <= 0 adds nothing, free_bounds); 0 (no bound) where some tb_f is not positive or
  * sb_f is beyond 1e300 or NaN. */
-static int terms_sums(const rec_eq7_bulb_terms *t, const rec_eq7_prep *p, int nf, double *u, double *g)
+static int terms_sums(const rec_eq7_bulb_terms *t, const rec_eq7_prep *p, int nf, const double *lt, double *u,
+                      double *g)
 {
     *u = 0.0;
     for (int f = 0; f < nf; f++) {
         g[f] = 0.0;
         if (!(p->wmin[f] > 0.0)) continue;   /* no usable sample: no brightness */
         if (!(t[f].tb > 0.0) || !(t[f].sb <= 1e300)) return 0;
-        *u -= 0.5 * log(t[f].tb);
+        *u -= 0.5 * lt[f];
         g[f] = t[f].sb > 0.0 ? t[f].sb * (t[f].sb / t[f].tb) : 0.0;
     }
     return 1;
@@ -205,12 +212,18 @@ void rec_eq7_bulb_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pr
         gs_dot_rows(xa + kt, m->bs_at + kt, lt, n, NULL, nb, 1.0, w->bs_tail + (size_t)f * 2 * nb);
         gs_dot_rows(wa + kt, m->bs_bt + kt, lt, n, NULL, nb, 1.0, w->bs_tail + ((size_t)f * 2 + 1) * nb);
     }
+    for (size_t b = 0; b < nb; b++)
+        for (int f = 0; f < m->nfit; f++) {
+            rec_eq7_bulb_terms *t = &w->bs_t[b * (size_t)m->nfit + (size_t)f];
+            if (p->wmin[f] > 0.0) bulb_terms(m, w, p, b, f, t);
+            else t->tb = 0.0;   /* (no brightness: terms_sums passes it over) */
+        }
+    double *logs = w->bs_tail;   /* (free: the tails' sums are in the terms now) */
+    terms_logs(w->bs_t, nb * (size_t)m->nfit, logs);
     for (size_t b = 0; b < nb; b++) {
         rec_eq7_bulb_terms *t = w->bs_t + b * (size_t)m->nfit;
         double *ug = w->bs_ug + b * (1 + (size_t)m->nfit), gs = 0.0;   /* (for rec_eq7_bulb_tighten) */
-        for (int f = 0; f < m->nfit; f++)
-            if (p->wmin[f] > 0.0) bulb_terms(m, w, p, b, f, &t[f]);
-        int ok = terms_sums(t, p, m->nfit, ug, ug + 1);
+        int ok = terms_sums(t, p, m->nfit, logs + b * (size_t)m->nfit, ug, ug + 1);
         for (int f = 0; f < m->nfit; f++) gs += ug[1 + f];
         U[b] = ok ? bound_of(ug[0], gs, Sxx) : INFINITY;   /* (no bound: the bulb is opened) */
     }

@@ -313,19 +313,31 @@ void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_
     unsigned char *inw = (unsigned char *)w->tmp;
     if (m->cont[bb])
         for (int c = 0; c < m->G; c++) inw[c] = circ_dist((double)c / m->G, best.shift) <= PHASE_WINDOW;
-    /* a continuous voltage winner's mass outside its window is a runner-up candidate */
-    if (m->cont[bb] && m->bulbs[bb].ref != GS_REF_NONE) {
-        double out_mass = 0.0, top = -INFINITY;
-        size_t jt = 0;
-        for (size_t i = 0; i < w->ncand; i++) {
+    /* one pass over the candidates (by runs of one bulb's): the phase confidence's mass (the
+     * voltage-referenced bulbs' within the winner's window, or at its cell), and a continuous
+     * voltage winner's mass outside its window, a runner-up candidate */
+    int volt = m->bulbs[bb].ref != GS_REF_NONE;
+    double pc = 0.0, out_mass = 0.0, top = -INFINITY;
+    size_t jt = 0;
+    for (size_t i = 0; volt && i < w->ncand;) {
+        int b = m->tbulb[w->cand[i]], none = m->bulbs[b].ref == GS_REF_NONE;
+        for (; i < w->ncand && m->tbulb[w->cand[i]] == b; i++) {
             size_t j = w->cand[i];
-            if (m->tbulb[j] != bb || inw[m->tcell[j]]) continue;
-            out_mass += w->mass[j];
-            if (w->L[j] > top) {
-                top = w->L[j];
-                jt = j;
+            if (none) continue;
+            if (!m->cont[bb]) {
+                if (m->tcell[j] == m->tcell[best.tmpl]) pc += w->mass[j];
+            } else if (m->cont[b] ? inw[m->tcell[j]] : circ_dist(m->shift[j], best.shift) <= PHASE_WINDOW) {
+                pc += w->mass[j];
+            } else if (b == bb) {
+                out_mass += w->mass[j];
+                if (w->L[j] > top) {
+                    top = w->L[j];
+                    jt = j;
+                }
             }
         }
+    }
+    if (volt && m->cont[bb]) {
         double lmo = log_mass(out_mass, top - Lmax + log(cell));
         if (top > -INFINITY && (second.bulb < 0 || lmo > second.lm)) {
             pair_c c = {lmo, bb, jt, m->shift[jt]};
@@ -343,23 +355,7 @@ void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_
         dec->runner_shift = second.shift;
         dec->runner_conf = exp(second.lm) / Z;
     }
-    if (m->bulbs[bb].ref != GS_REF_NONE) {
-        double pc = 0.0;
-        for (size_t i = 0; i < w->ncand;) {   /* by runs of one bulb's candidates */
-            int b = m->tbulb[w->cand[i]], none = m->bulbs[b].ref == GS_REF_NONE;
-            for (; i < w->ncand && m->tbulb[w->cand[i]] == b; i++) {
-                size_t j = w->cand[i];
-                if (none) continue;
-                if (m->cont[bb]) {
-                    if (m->cont[b] ? inw[m->tcell[j]] : circ_dist(m->shift[j], dec->shift) <= PHASE_WINDOW)
-                        pc += w->mass[j];
-                } else if (m->tcell[j] == m->tcell[dec->tmpl]) {
-                    pc += w->mass[j];
-                }
-            }
-        }
-        dec->phase_conf = pc / Z;
-    }
+    if (volt) dec->phase_conf = pc / Z;
     if (dec->conf > 1.0) dec->conf = 1.0;
     if (dec->bulb_conf > 1.0) dec->bulb_conf = 1.0;
     if (dec->phase_conf > 1.0) dec->phase_conf = 1.0;
