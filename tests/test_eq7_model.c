@@ -25,6 +25,18 @@ static rec_matcher *new_matcher_default(const gs_delight *d, int bands, rec_phas
     return m;
 }
 
+/* A 640 x 480 catalog of n RGB K = 26 lights: its signal, sigma and rows allocated (the rest
+ * NULL; rec_catalog_release frees it). */
+static rec_catalog catalog_rgb26(size_t n)
+{
+    rec_catalog cat = {.count = n, .bands = 3, .K = 26, .width = 640, .height = 480};
+    cat.signal = malloc(sizeof *cat.signal * n * 78);
+    cat.sigma = malloc(sizeof *cat.sigma * n * 78);
+    cat.y_px = malloc(sizeof *cat.y_px * n);
+    CHECK(cat.signal && cat.sigma && cat.y_px);
+    return cat;
+}
+
 /* A light of bulb b at shift s: per-band gains g[band] (extinction reddening), a per-window
  * log-normal multiplicative factor of log-std scint (the same for every band: scintillation is
  * one random flux per frame), then Gaussian noise of std sigma. */
@@ -114,10 +126,7 @@ TEST(eq7_scintillation_multiplicative_noise)
     CHECK_OK(rec_matcher_new(d, 50, 3, 26, &o0, &m0));
     const double g[3] = {1.0, 0.85, 0.7};
     size_t n = 400;
-    rec_catalog cat = {.count = n, .bands = 3, .K = 26, .width = 640, .height = 480};
-    cat.signal = malloc(sizeof *cat.signal * n * 78);
-    cat.sigma = malloc(sizeof *cat.sigma * n * 78);
-    cat.y_px = malloc(sizeof *cat.y_px * n);
+    rec_catalog cat = catalog_rgb26(n);
     rec_match *r = malloc(sizeof *r * n), *r0 = malloc(sizeof *r0 * n);
     uint64_t rs = 41;
     for (size_t i = 0; i < n; i++) {
@@ -240,10 +249,7 @@ TEST(eq7_excess_follows_the_rows_over_many_lights)
     rec_matcher *m = new_matcher_default(d, 3, REC_PHASES_3);
     const double g[3] = {1.0, 0.85, 0.7};
     size_t n = 6000;
-    rec_catalog cat = {.count = n, .bands = 3, .K = 26, .width = 640, .height = 480};
-    cat.signal = malloc(sizeof *cat.signal * n * 78);
-    cat.sigma = malloc(sizeof *cat.sigma * n * 78);
-    cat.y_px = malloc(sizeof *cat.y_px * n);
+    rec_catalog cat = catalog_rgb26(n);
     rec_match *r = malloc(sizeof *r * n);
     double *truth = malloc(sizeof *truth * n);
     uint64_t rs = 43;
@@ -396,10 +402,7 @@ TEST(eq7_band_tolerance_and_reddening_prior_measured)
     gs_delight *d = eq7fx_make_db(50, 3, 0, 0);
     rec_matcher *m = new_matcher_default(d, 3, REC_PHASES_3);
     size_t n = 400;
-    rec_catalog cat = {.count = n, .bands = 3, .K = 26, .width = 640, .height = 480};
-    cat.signal = malloc(sizeof *cat.signal * n * 78);
-    cat.sigma = malloc(sizeof *cat.sigma * n * 78);
-    cat.y_px = malloc(sizeof *cat.y_px * n);
+    rec_catalog cat = catalog_rgb26(n);
     rec_match *r = malloc(sizeof *r * n);
     const double spread[2] = {0.04, 0.0};
     for (int t = 0; t < 2; t++) {
@@ -445,10 +448,7 @@ TEST(eq7_catalog_threads_bit_identical_to_one_thread)
     gs_delight *d = eq7fx_make_db(50, 3, 0, 0);
     const double g[3] = {1.0, 0.85, 0.7};
     size_t n = 40;
-    rec_catalog cat = {.count = n, .bands = 3, .K = 26, .width = 640, .height = 480};
-    cat.signal = malloc(sizeof *cat.signal * n * 78);
-    cat.sigma = malloc(sizeof *cat.sigma * n * 78);
-    cat.y_px = malloc(sizeof *cat.y_px * n);
+    rec_catalog cat = catalog_rgb26(n);
     unsigned *flags = calloc(n, sizeof *flags);
     rec_match *r[3];
     rec_noise_report nr[3];
@@ -565,10 +565,7 @@ TEST(eq7_flat_share_measured_and_subtracted)
     o.flat_share = 0.02;
     CHECK_OK(rec_matcher_new(d, 50, 3, 26, &o, &m_fix));
     size_t n = 240;
-    rec_catalog cat = {.count = n, .bands = 3, .K = 26, .width = 640, .height = 480};
-    cat.signal = malloc(sizeof *cat.signal * n * 78);
-    cat.sigma = malloc(sizeof *cat.sigma * n * 78);
-    cat.y_px = malloc(sizeof *cat.y_px * n);
+    rec_catalog cat = catalog_rgb26(n);
     rec_match *r = malloc(sizeof *r * n), *r_off = malloc(sizeof *r_off * n), *r_fix = malloc(sizeof *r_fix * n);
     uint64_t rs = 73;
     render_flat_catalog(m, &cat, n, 0.02, 0.006, 2000.0, &rs);
