@@ -319,7 +319,7 @@ void rec_eq7_template_at(const rec_matcher *m, size_t b, double s, double *t, do
     /* harmonic h's term F_h e^{-2 pi i h s}: e from cexp every 32 harmonics, times powers of
      * base within (independent products, then added to the bins in the order of h) */
     for (int h0 = 0; h0 <= H; h0 += 32) {
-        double complex e0 = h0 ? cexp(-I * EQ7_TWO_PI * fmod((double)h0 * s, 1.0)) : 1.0, eh[32], g[32];
+        double complex e0 = h0 ? cexp(-I * EQ7_TWO_PI * frac1((double)h0 * s)) : 1.0, eh[32], g[32];
         int hn = H + 1 - h0 < 32 ? H + 1 - h0 : 32, i0 = h0 ? 0 : 1;
         for (int i = 0; i < hn; i++) eh[i] = e0 * pw[i];
         for (int band = 0; band < bands; band++) {

@@ -229,11 +229,11 @@ static inline __attribute__((always_inline)) void series_eval_n(double s, const 
         for (int st = 0; st < 2; st++)
             for (int k = 0; k < 3; k++)
                 for (int l = 0; l < SER_LANES; l++) acc[f][st][k][l] = 0.0;
-    double complex e32 = cexp(-I * EQ7_TWO_PI * fmod(32.0 * s, 1.0)), q = 1.0;
+    double complex e32 = cexp(-I * EQ7_TWO_PI * frac1(32.0 * s)), q = 1.0;
     ser_vd g = {0, 1, 2, 3, 4, 5, 6, 7}, step;   /* the lanes' g, exact integers */
     for (int l = 0; l < SER_LANES; l++) step[l] = SER_LANES;
     for (size_t j = 0; j * 32 < nbb; j++) {
-        if (j % 8 == 0 && j) q = cexp(-I * EQ7_TWO_PI * fmod((double)(32 * j) * s, 1.0));
+        if (j % 8 == 0 && j) q = cexp(-I * EQ7_TWO_PI * frac1((double)(32 * j) * s));
         double qr = creal(q), qi = cimag(q);
         for (size_t v = 0; v < 4 && 32 * j + SER_LANES * v < nbb; v++, g += step) {
             size_t h = 32 * j + SER_LANES * v;

@@ -307,6 +307,14 @@ static inline double circ_dist(double a, double b)
     return d > 0.5 ? 1.0 - d : d;
 }
 
+/* fmod(x, 1.0) of a finite x, exactly (x - trunc(x) is representable; the sign of x, as fmod's,
+ * for a zero result), without fmod's cost: the phase factors' arguments in the continuous
+ * templates and series. */
+static inline double frac1(double x)
+{
+    return copysign(x - trunc(x), x);
+}
+
 static inline double wrap01(double s)
 {
     if (s >= 0.0 && s < 1.0) return s;

@@ -77,6 +77,31 @@ TEST(eq7_cx4_mul_is_the_complex_product)
     CHECK_MSG(differ == 0, "%d of %d products differ from C's", differ, (int)N);
 }
 
+/* frac1 (the continuous templates' and series' phase arguments) is fmod(x, 1.0) bit for bit:
+ * random bit patterns of every exponent, shifts times harmonics as the series make them, and
+ * zeros, integers, halves, huge and subnormal values of both signs. */
+TEST(eq7_frac1_is_fmod)
+{
+    static const double special[] = {0.0, -0.0, 1.0, -1.0, 2.5, -2.5, 1e300, -1e300, 0x1p52, 0x1p53 + 2.0,
+                                     3e-310, -3e-310, 0.999999999999, -0.999999999999};
+    int differ = 0;
+    for (size_t i = 0; i < sizeof special / sizeof *special; i++) {
+        double a = fmod(special[i], 1.0), b = frac1(special[i]);
+        differ += memcmp(&a, &b, sizeof a) != 0;
+    }
+    uint64_t rs = 31;
+    for (int i = 0; i < 1000000; i++) {
+        uint64_t u = gs_splitmix64(&rs);
+        double x, y = (double)(i % 1024) * gs_splitmix_uniform(&rs);
+        memcpy(&x, &u, sizeof x);
+        if (!isfinite(x)) continue;
+        double a = fmod(x, 1.0), b = frac1(x), c = fmod(y, 1.0), d = frac1(y);
+        differ += memcmp(&a, &b, sizeof a) != 0;
+        differ += memcmp(&c, &d, sizeof c) != 0;
+    }
+    CHECK_MSG(differ == 0, "%d values differ from fmod's", differ);
+}
+
 /* The sums of every grid template from the FFT against sum_d over the templates themselves,
  * for random positive weights, and any values' sums with the grids (rec_eq7_grid_dots, the
  * nested tests' cross sums): within 1e-12 of sum |w x t| (the rounding of either). */
