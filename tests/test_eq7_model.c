@@ -248,7 +248,7 @@ TEST(eq7_excess_follows_the_rows_over_many_lights)
     gs_delight *d = eq7fx_make_db(50, 3, 0, 0);
     rec_matcher *m = new_matcher_default(d, 3, REC_PHASES_3);
     const double g[3] = {1.0, 0.85, 0.7};
-    size_t n = 6000;
+    size_t n = 9000;
     rec_catalog cat = catalog_rgb26(n);
     rec_match *r = malloc(sizeof *r * n);
     double *truth = malloc(sizeof *truth * n);
