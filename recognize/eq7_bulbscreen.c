@@ -156,8 +156,8 @@ static void bulb_terms(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_prep
     size_t ka = b0 * 2 * np;
     const double *yx = w->bs_y, *yw = yx + la;
     double *z = w->bs_z + (b * nf + (size_t)f) * 4 * np;
-    t->tail_s = w->bs_tail[(size_t)f * 2 * m->nb + b];
-    t->tail_t = w->bs_tail[((size_t)f * 2 + 1) * m->nb + b];
+    t->tail_s = w->bs_tmp[(size_t)f * 2 * m->nb + b];
+    t->tail_t = w->bs_tmp[((size_t)f * 2 + 1) * m->nb + b];
     t->es = rec_eq7_harmonic_extent(m->bs_a + b * la + ka, yx + ka, (int)nbf, np, t->tail_s, &t->cs, z);
     t->et = rec_eq7_harmonic_extent(m->bs_b + b * la + ka, yw + ka, (int)nbf, np, t->tail_t, &t->ct, z + 2 * np);
     t->sb = t->es - fabs(t->cs) + t->cs + 1e-9 * t->es;
@@ -209,8 +209,8 @@ void rec_eq7_bulb_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pr
     for (int f = 0; f < m->nfit; f++) {   /* every bulb's tail sums, of S and of T */
         if (!(p->wmin[f] > 0.0)) continue;
         size_t kt = m->nfit == 1 ? 0 : (size_t)f * m->K, n = m->nfit == 1 ? lt : (size_t)m->K;
-        gs_dot_rows(xa + kt, m->bs_at + kt, lt, n, NULL, nb, 1.0, w->bs_tail + (size_t)f * 2 * nb);
-        gs_dot_rows(wa + kt, m->bs_bt + kt, lt, n, NULL, nb, 1.0, w->bs_tail + ((size_t)f * 2 + 1) * nb);
+        gs_dot_rows(xa + kt, m->bs_at + kt, lt, n, NULL, nb, 1.0, w->bs_tmp + (size_t)f * 2 * nb);
+        gs_dot_rows(wa + kt, m->bs_bt + kt, lt, n, NULL, nb, 1.0, w->bs_tmp + ((size_t)f * 2 + 1) * nb);
     }
     for (size_t b = 0; b < nb; b++)
         for (int f = 0; f < m->nfit; f++) {
@@ -218,7 +218,7 @@ void rec_eq7_bulb_bounds(const rec_matcher *m, rec_eq7_work *w, const rec_eq7_pr
             if (p->wmin[f] > 0.0) bulb_terms(m, w, p, b, f, t);
             else t->tb = 0.0;   /* (no brightness: terms_sums passes it over) */
         }
-    double *logs = w->bs_tail;   /* (free: the tails' sums are in the terms now) */
+    double *logs = w->bs_tmp;   /* (the tails' sums are in the terms now) */
     terms_logs(w->bs_t, nb * (size_t)m->nfit, logs);
     for (size_t b = 0; b < nb; b++) {
         rec_eq7_bulb_terms *t = w->bs_t + b * (size_t)m->nfit;

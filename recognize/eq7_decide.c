@@ -71,7 +71,7 @@ void rec_eq7_work_free(rec_eq7_work *w)
     free(w->bs_y);
     free(w->bs_t);
     free(w->bs_z);
-    free(w->bs_tail);
+    free(w->bs_tmp);
     free(w->bs_ug);
     memset(w, 0, sizeof *w);
 }
@@ -154,9 +154,9 @@ gs_status rec_eq7_work_alloc_rows(const rec_matcher *m, rec_eq7_work *w, size_t 
     w->bs_y = bs ? malloc(sizeof *w->bs_y * (4 * (size_t)m->bands * rec_eq7_harmonics_np(m) + 2 * D)) : NULL;
     w->bs_z = bs ? malloc(sizeof *w->bs_z * nb * (size_t)m->nfit * 4 * rec_eq7_harmonics_np(m)) : NULL;
     w->bs_t = bs ? malloc(sizeof *w->bs_t * nb * (size_t)m->nfit) : NULL;
-    w->bs_tail = bs ? malloc(sizeof *w->bs_tail * 2 * nb * (size_t)m->nfit) : NULL;
+    w->bs_tmp = bs ? malloc(sizeof *w->bs_tmp * 2 * nb * (size_t)m->nfit) : NULL;
     w->bs_ug = bs ? malloc(sizeof *w->bs_ug * nb * (1 + (size_t)m->nfit)) : NULL;
-    part_bad = part_bad || (bs && (!w->bub || !w->open || !w->border || !w->bs_y || !w->bs_t || !w->bs_z || !w->bs_tail || !w->bs_ug));
+    part_bad = part_bad || (bs && (!w->bub || !w->open || !w->border || !w->bs_y || !w->bs_t || !w->bs_z || !w->bs_tmp || !w->bs_ug));
     if (!w->L || !w->mass || !w->cand || !w->mark || !w->bmass || !w->wmass || !w->has_peak ||
         !w->peak_s || !w->peak_L || !w->peak_sig || !w->peak_z || !w->peak_gain || !w->peak_cell || !w->S_all ||
         !w->T_all || !w->w_all || !w->wx_all || !w->xs_all || !w->prep || !w->U || !w->done || !w->tight || !w->tmp || !w->tt || !w->dt ||
@@ -308,15 +308,14 @@ void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_
     }
     if (best.bulb < 0) goto done;
     int bb = best.bulb;
-    /* a continuous winner's window: whether each grid cell (shift c/G, as the matcher's) lies
-     * within it, once (w->tmp: free after masses) */
-    unsigned char *inw = (unsigned char *)w->tmp;
-    if (m->cont[bb])
-        for (int c = 0; c < m->G; c++) inw[c] = circ_dist((double)c / m->G, best.shift) <= PHASE_WINDOW;
     /* one pass over the candidates (by runs of one bulb's): the phase confidence's mass (the
      * voltage-referenced bulbs' within the winner's window, or at its cell), and a continuous
-     * voltage winner's mass outside its window, a runner-up candidate */
+     * voltage winner's mass outside its window, a runner-up candidate; the window: whether each
+     * grid cell (shift c/G, as the matcher's) lies within it, once (w->tmp: free after masses) */
     int volt = m->bulbs[bb].ref != GS_REF_NONE;
+    unsigned char *inw = (unsigned char *)w->tmp;
+    if (volt && m->cont[bb])
+        for (int c = 0; c < m->G; c++) inw[c] = circ_dist((double)c / m->G, best.shift) <= PHASE_WINDOW;
     double pc = 0.0, out_mass = 0.0, top = -INFINITY;
     size_t jt = 0;
     for (size_t i = 0; volt && i < w->ncand;) {

@@ -267,24 +267,6 @@ GS_VECTOR_LOOP static void inverse_dft(const double *restrict c, const double *r
         for (int k = 0; k < K; k++) v[k] += re[q] * c[q * K + k] - im[q] * sn[q * K + k];
 }
 
-/* g = f e, n complex values as (re, im) pairs (REC_CX4_MUL; the last group of fewer than four
- * from zero-padded copies). */
-GS_VECTOR_LOOP static void cmul(const double *restrict f, const double *restrict e, int n, double *restrict g)
-{
-    int i = 0;
-    rec_cx4 p;
-    for (; i + 4 <= n; i += 4) {
-        REC_CX4_MUL(p, f + 2 * i, e + 2 * i);
-        memcpy(g + 2 * i, &p, sizeof p);
-    }
-    if (i == n) return;
-    double fa[8] = {0}, ea[8] = {0};
-    memcpy(fa, f + 2 * i, sizeof *fa * 2 * (size_t)(n - i));
-    memcpy(ea, e + 2 * i, sizeof *ea * 2 * (size_t)(n - i));
-    REC_CX4_MUL(p, fa, ea);
-    memcpy(g + 2 * i, &p, sizeof *g * 2 * (size_t)(n - i));
-}
-
 /* A[(r + i) mod K] += g[i] for i < n, in the order of i (r < K): runs of consecutive bins. */
 GS_VECTOR_LOOP static void fold_add(double complex *restrict A, int K, int r, const double complex *restrict g, int n)
 {
@@ -325,7 +307,8 @@ void rec_eq7_template_at(const rec_matcher *m, size_t b, double s, double *t, do
         for (int band = 0; band < bands; band++) {
             const double complex *F = m->F[b] + (size_t)band * (size_t)(H + 1);
             double complex *A0 = acc + 3 * band * K, *A1 = A0 + K, *A2 = A1 + K;
-            cmul((const double *)(F + h0), (const double *)eh, hn, (double *)g);
+            /* (0 + F e: the sign of a zero term is lost in the bins' sums alike) */
+            rec_eq7_cross_sum((const double *)(F + h0), (const double *)eh, 0, 1, (size_t)hn, (double *)g);
             int r = (h0 + i0) % K;
             fold_add(A0, K, r, g + i0, hn - i0);
             if (deriv) {

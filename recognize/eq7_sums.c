@@ -255,11 +255,8 @@ void rec_eq7_light_dfts(const rec_matcher *m, rec_eq7_work *w)
     rec_eq7_band_dfts(m, w->w, w->spec + nh + bn);
 }
 
-/* z[r] = sum_q a_q[r] x_q[r] over nq arrays (a_q at a + q ld, x_q at x + q ld), complex (re, im
- * pairs), r < n, added from 0 in the order of q (REC_CX4_MUL; the last group of fewer than four
- * from zero-padded copies). */
-GS_VECTOR_LOOP static void cross_sum(const double *restrict a, const double *restrict x, size_t ld, int nq, size_t n,
-                                     double *restrict z)
+GS_VECTOR_LOOP void rec_eq7_cross_sum(const double *restrict a, const double *restrict x, size_t ld, int nq, size_t n,
+                                      double *restrict z)
 {
     size_t r = 0;
     rec_cx4 p, zv;
@@ -291,8 +288,8 @@ static void grid_corr(const rec_matcher *m, rec_eq7_work *w, size_t b, int f, co
 {
     size_t nh = (size_t)m->G / 2 + 1;
     int nf = m->nfit, b0 = nf == 1 ? 0 : f, b1 = nf == 1 ? m->bands : f + 1;
-    cross_sum((const double *)(hat + (b * (size_t)m->bands + (size_t)b0) * nh), (const double *)(X + (size_t)b0 * nh),
-              2 * nh, b1 - b0, nh, (double *)w->spec);
+    rec_eq7_cross_sum((const double *)(hat + (b * (size_t)m->bands + (size_t)b0) * nh),
+                      (const double *)(X + (size_t)b0 * nh), 2 * nh, b1 - b0, nh, (double *)w->spec);
     fftw_execute_dft_c2r((fftw_plan)m->c2r, (fftw_complex *)w->spec, w->grid);
     memcpy(dst, w->grid, sizeof *dst * (size_t)m->G);
 }

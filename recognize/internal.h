@@ -397,7 +397,8 @@ typedef struct {
     double *bs_y;                          /* [4 bands rec_eq7_harmonics_np + 2 D] */
     rec_eq7_bulb_terms *bs_t;              /* [nb nfit] each bulb's terms */
     double *bs_z;                          /* [nb nfit 4 rec_eq7_harmonics_np] its C_n, C'_n */
-    double *bs_tail;                       /* [nfit][S, T][nb] its tails' sums */
+    double *bs_tmp;                        /* [nfit][S, T][nb] its tails' sums, then (once the
+                                            * terms hold them) [nb][nfit] its log(tb_f) */
     double *bs_ug;                         /* [nb][1 + nfit] its bound's u and g_f */
     double complex *spec_v;                /* [(G/2 + 1) bands] the band DFTs of other values
                                             * (the nested tests' cross sums, rec_eq7_grid_dots) */
@@ -565,6 +566,11 @@ void rec_eq7_band_dfts(const rec_matcher *m, const double *v, double complex *X)
 /* The K-point DFT of v, x[q] = sum_k v_k e^{-2 pi i q k / K} as (re, im) pairs, q < K, from the
  * tables c, s (m->dftc, dfts: [k K + q]); the sums over k in order, every q at once. */
 void rec_eq7_dft(const double *v, const double *c, const double *s, size_t K, double *x);
+/* z[r] = sum_q a_q[r] x_q[r] over nq arrays (a_q at a + q ld, x_q at x + q ld, in doubles),
+ * complex ((re, im) pairs), r < n, added from 0 in the order of q (REC_CX4_MUL; the last group
+ * of fewer than four from zero-padded copies): the grids' cross-spectra (nq bands) and the
+ * continuous template's harmonic terms (nq = 1). */
+void rec_eq7_cross_sum(const double *a, const double *x, size_t ld, int nq, size_t n, double *z);
 void rec_eq7_grid_dots(const rec_matcher *m, rec_eq7_work *w, size_t b, int f, const double complex *X, double *dst);
 /* eq7_decide.c: scratch for one light or pixel (rec_eq7_work_alloc), or a block of rows lights
  * (the light path's); rec_eq7_work_row points w, wx, xs, S and T at light q's rows; and the
