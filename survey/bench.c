@@ -87,13 +87,15 @@ static void ref_free(ref_templates *r)
     free(r->phase);
 }
 
-static gs_status ref_build(const rec_matcher *m, int K, ref_templates *r)
+/* Templates at nshift shifts per cycle: 3 = the phases 0/120/240 (the discrete search), else the
+ * grid of shifts c / nshift (the continuous search's grid, before its refinement). */
+static gs_status ref_build(const rec_matcher *m, int K, int nshift, ref_templates *r)
 {
     memset(r, 0, sizeof *r);
     size_t nb = rec_matcher_bulb_count(m);
     int bands = rec_matcher_bulb(m, 0)->brf.bands;
     r->D = bands * K;
-    r->M = 3 * nb;
+    r->M = (size_t)nshift * nb;
     r->t = malloc(sizeof *r->t * r->M * (size_t)r->D);
     r->norm = malloc(sizeof *r->norm * r->M);
     r->bulb = malloc(sizeof *r->bulb * r->M);
@@ -109,10 +111,11 @@ static gs_status ref_build(const rec_matcher *m, int K, ref_templates *r)
             return gs_fail(GS_EINVAL, "bench: bulb %s is not voltage-referenced: the reference "
                            "search covers 0/120/240 only", bb->id);
         }
-        for (int p = 0; p < 3; p++) {
-            size_t j = 3 * b + (size_t)p;
+        for (int p = 0; p < nshift; p++) {
+            size_t j = (size_t)nshift * b + (size_t)p;
             double *t = r->t + j * (size_t)r->D;
-            gs_status st = gs_brf_integrate(&bb->brf, gs_phase_to_shift(120.0 * p), K, t);
+            double s = nshift == 3 ? gs_phase_to_shift(120.0 * p) : (double)p / nshift;
+            gs_status st = gs_brf_integrate(&bb->brf, s, K, t);
             if (st != GS_OK) {
                 ref_free(r);
                 return st;
@@ -125,7 +128,7 @@ static gs_status ref_build(const rec_matcher *m, int K, ref_templates *r)
                 }
             r->norm[j] = sqrt(n2);
             r->bulb[j] = (int)b;
-            r->phase[j] = 120.0 * p;
+            r->phase[j] = nshift == 3 ? 120.0 * p : gs_shift_to_phase(s);
         }
     }
     return GS_OK;
@@ -195,6 +198,25 @@ typedef struct {
     double numpy_rate, numpy_agree;   /* the NumPy search: pixels/s, rows answered as here */
     long maxrss_kib;
 } result;
+
+/* The reference search's shifts per cycle: the matcher's grid, G = max(8K, 96), with continuous
+ * phases (eq7_matcher.c), else 0/120/240. */
+static int ref_shifts(const config *c)
+{
+    return !c->continuous ? 3 : 8 * c->K > 96 ? 8 * c->K : 96;
+}
+
+/* Whether the reference's answer (bulb b, phase) is the fast path's (fb, fphase): the same phase
+ * (within 1e-3 deg) on 0/120/240; with continuous phases the same shift within one grid cell
+ * (180 / G deg: the matcher refines its best cell to within a cell of it; a shift fixes the
+ * phase modulo 180 deg). */
+static int ref_agrees(const config *c, int b, double phase, int fb, double fphase)
+{
+    if (b != fb) return 0;
+    if (b < 0) return 1;
+    if (!c->continuous) return fabs(phase - fphase) < 1e-3;
+    return fabs(remainder(phase - fphase, 180.0)) <= 180.0 / ref_shifts(c) + 1e-9;
+}
 
 /* A DELIGHT with `count` of d's entries for 50 Hz and this band count, spread evenly over them
  * (the entries come grouped by technology). count 0 = all. */
@@ -299,12 +321,16 @@ static gs_status run_pixels(const config *c, rec_matcher *m, result *res)
     float *x = malloc(sizeof *x * P * D), *sg = malloc(sizeof *sg * P), *pool = malloc(sizeof *pool * POOL);
     int *truth = malloc(sizeof *truth * P), *bulb = malloc(sizeof *bulb * P);
     float *ph = malloc(sizeof *ph * P), *cf = malloc(sizeof *cf * P);
-    ref_templates r;
+    /* r: the lit rows' templates (0/120/240); g: the reference's (r, or the continuous grid) */
+    ref_templates r, rg;
     memset(&r, 0, sizeof r);
+    memset(&rg, 0, sizeof rg);
+    const ref_templates *g = c->continuous ? &rg : &r;
     gs_status st = GS_OK;
     if (!x || !sg || !pool || !truth || !bulb || !ph || !cf)
         st = gs_fail(GS_ENOMEM, "bench: cannot allocate %zu pixels", P);
-    if (st == GS_OK) st = ref_build(m, c->K, &r);
+    if (st == GS_OK) st = ref_build(m, c->K, 3, &r);
+    if (st == GS_OK && c->continuous) st = ref_build(m, c->K, ref_shifts(c), &rg);
     if (st == GS_OK) {
         uint64_t rs = 12345;
         for (size_t i = 0; i < POOL; i++) pool[i] = (float)gs_splitmix_normal(&rs);
@@ -327,13 +353,14 @@ static gs_status run_pixels(const config *c, rec_matcher *m, result *res)
         res->rate = (double)P / res->seconds;
         res->templates = r.M;
     }
-    if (st == GS_OK && !c->continuous) {
-        /* the floor of any matrix-product implementation: the scores alone, one SGEMM per block
-         * of 4096 rows, no decision */
-        size_t B = 4096, M = r.M;
+    if (st == GS_OK) {
+        /* the floor of any matrix-product implementation: the scores alone (of every grid
+         * template with continuous phases), one SGEMM per block of 4096 rows (512 of the
+         * continuous grids: the block of scores as rec_match_pixels's), no decision */
+        size_t B = c->continuous ? 512 : 4096, M = g->M;
         float *tf = malloc(sizeof *tf * M * D), *sc = malloc(sizeof *sc * B * M);
         if (tf && sc) {
-            for (size_t i = 0; i < M * D; i++) tf[i] = (float)r.t[i];
+            for (size_t i = 0; i < M * D; i++) tf[i] = (float)g->t[i];
             double best = INFINITY;
             for (int rep = 0; rep < REPS; rep++) {
                 double t0 = gs_clock_s(CLOCK_MONOTONIC);
@@ -349,7 +376,7 @@ static gs_status run_pixels(const config *c, rec_matcher *m, result *res)
         free(tf);
         free(sc);
     }
-    if (st == GS_OK && !c->continuous) {
+    if (st == GS_OK) {
         size_t nref = P < REF_ROWS_MAX ? P : REF_ROWS_MAX, same = 0;
         double *w = malloc(sizeof *w * D);
         if (!w) st = gs_fail(GS_ENOMEM, "bench: cannot allocate weights");
@@ -359,8 +386,8 @@ static gs_status run_pixels(const config *c, rec_matcher *m, result *res)
         for (size_t p = 0; w && p < nref; p++) {
             int b;
             double phase;
-            ref_search(&r, x + p * D, w, eo.min_snr, thr, &b, &phase);
-            same += b == bulb[p] && (b < 0 || fabs(phase - ph[p]) < 1e-3);
+            ref_search(g, x + p * D, w, eo.min_snr, thr, &b, &phase);
+            same += ref_agrees(c, b, phase, bulb[p], ph[p]);
         }
         res->ref_seconds = gs_clock_s(CLOCK_MONOTONIC) - t0;
         res->ref_rows = nref;
@@ -371,7 +398,7 @@ static gs_status run_pixels(const config *c, rec_matcher *m, result *res)
          * band gains (unknown at dof D - bands - 1, as the matcher's) */
         int free_gains = c->defaults == 1 && c->bands > 1;
         double np_thr = free_gains ? gs_chi2_isf(eo.unknown_p, (int)D - c->bands - 1) : thr;
-        if (st == GS_OK && c->numpy && numpy_script)
+        if (st == GS_OK && c->numpy && numpy_script && !c->continuous)
             st = run_numpy(&r, x, P, eo.min_snr, np_thr, free_gains, c->bands, bulb, ph, res);
     }
     if (st == GS_OK) {
@@ -386,6 +413,7 @@ static gs_status run_pixels(const config *c, rec_matcher *m, result *res)
         res->lit_correct = lit ? (double)right / (double)lit : NAN;
     }
     ref_free(&r);
+    ref_free(&rg);
     free(x); free(sg); free(pool); free(truth); free(bulb); free(ph); free(cf);
     return st;
 }
@@ -412,13 +440,16 @@ static gs_status run_lights(const config *c, rec_matcher *m, result *res)
     int *truth = malloc(sizeof *truth * N);
     float *xf = malloc(sizeof *xf * D);
     double *w = malloc(sizeof *w * D);
-    ref_templates r;
+    ref_templates r, rg;   /* as in run_pixels */
     memset(&r, 0, sizeof r);
+    memset(&rg, 0, sizeof rg);
+    const ref_templates *g = c->continuous ? &rg : &r;
     gs_status st = GS_OK;
     if (!cat.x_px || !cat.y_px || !cat.area_px || !cat.peak_dn || !cat.saturated_px ||
         !cat.flags || !cat.signal || !cat.sigma || !mt || !truth || !xf || !w)
         st = gs_fail(GS_ENOMEM, "bench: cannot allocate %zu lights", N);
-    if (st == GS_OK) st = ref_build(m, c->K, &r);
+    if (st == GS_OK) st = ref_build(m, c->K, 3, &r);
+    if (st == GS_OK && c->continuous) st = ref_build(m, c->K, ref_shifts(c), &rg);
     if (st == GS_OK) {
         uint64_t rs = 777;
         for (size_t i = 0; i < N; i++) {
@@ -441,7 +472,7 @@ static gs_status run_lights(const config *c, rec_matcher *m, result *res)
         res->rate = (double)N / res->seconds;
         res->templates = r.M;
     }
-    if (st == GS_OK && !c->continuous) {
+    if (st == GS_OK) {
         size_t nref = N < REF_ROWS_MAX ? N : REF_ROWS_MAX, same = 0;
         double thr = gs_chi2_isf(eo.unknown_p, (int)D - 2);
         double t0 = gs_clock_s(CLOCK_MONOTONIC);
@@ -452,9 +483,8 @@ static gs_status run_lights(const config *c, rec_matcher *m, result *res)
             }
             int b;
             double phase;
-            ref_search(&r, xf, w, eo.min_snr, thr, &b, &phase);
-            int fast_b = mt[i].bulb >= 0 ? mt[i].bulb : -1;
-            same += b == fast_b && (b < 0 || fabs(phase - mt[i].phase_deg) < 1e-3);
+            ref_search(g, xf, w, eo.min_snr, thr, &b, &phase);
+            same += ref_agrees(c, b, phase, mt[i].bulb >= 0 ? mt[i].bulb : -1, mt[i].phase_deg);
         }
         res->ref_seconds = gs_clock_s(CLOCK_MONOTONIC) - t0;
         res->ref_rows = nref;
@@ -471,6 +501,7 @@ static gs_status run_lights(const config *c, rec_matcher *m, result *res)
         res->lit_correct = (double)right / (double)N;
     }
     ref_free(&r);
+    ref_free(&rg);
     rec_catalog_release(&cat);
     free(mt); free(truth); free(xf); free(w);
     return st;
@@ -497,7 +528,7 @@ static gs_status run_capture(const config *c, rec_matcher *m, result *res)
     memset(&r, 0, sizeof r);
     float *pool = malloc(sizeof *pool * POOL);
     gs_status st = pool ? gs_capture_alloc(&cap) : gs_fail(GS_ENOMEM, "bench: capture");
-    if (st == GS_OK) st = ref_build(m, c->K, &r);
+    if (st == GS_OK) st = ref_build(m, c->K, 3, &r);
     if (st == GS_OK) {
         const double cycles = 50.0, sky = 0.5;
         size_t np = (size_t)c->side * (size_t)c->side, D = (size_t)r.D;
@@ -876,8 +907,12 @@ lights:
         config cf = {26, 3, 0, 0, 0, 0.0, n, 0, 0, 0, 0};
         light_row(all, &cf, &failed);
     }
-    printf("\n*continuous* rows search every phase (a grid of max(8K, 96) shifts per cycle, refined); "
-           "their templates column counts those grid shifts and there is no triple-loop reference. "
+    printf("\n*continuous* rows search every phase (a grid of G = max(8K, 96) shifts per cycle, refined); "
+           "their templates column counts those grid shifts. Their *reference* is the same triple "
+           "loop over every template of that grid (the search before its refinement), their *SGEMM "
+           "only* the scores of every grid template (blocks of 512 rows, as rec_match_pixels'), and "
+           "*agree* counts the same bulb with the same shift within one grid cell (180/G deg; the "
+           "refinement stays within a cell of the best one), or no answer from both. "
            "Per pixel they go through the Fourier screen (docs/recognition.md, \"Continuous phases: "
            "the Fourier screen\"): only the grids of the bulbs it cannot rule out are scored.\n");
     int nt = gs_threads_resolve(0);
