@@ -192,6 +192,14 @@ void rec_eq7_add_cand(const rec_matcher *m, rec_eq7_work *w, size_t j)
     }
 }
 
+/* mark[j] = v for every candidate j (the count and list in locals: a byte store may alias them). */
+void rec_eq7_mark_cands(rec_eq7_work *w, unsigned char v)
+{
+    unsigned char *mark = w->mark;
+    const size_t *cand = w->cand, n = w->ncand;
+    for (size_t i = 0; i < n; i++) mark[cand[i]] = v;
+}
+
 /* rec_eq7_add_cand of every done template in [j, j1), in order: 8 flags at a time. */
 static void add_done_range(const rec_matcher *m, rec_eq7_work *w, size_t j, size_t j1)
 {
@@ -284,7 +292,7 @@ void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_
             double mj = w->mass[w->cand[i]];
             Z += mj;
             bm += mj;
-            if (win && circ_dist(m->shift[w->cand[i]], ps) <= PHASE_WINDOW) wm += mj;
+            if (win) wm += circ_dist(m->shift[w->cand[i]], ps) <= PHASE_WINDOW ? mj : 0.0;   /* (a select) */
         }
         w->bmass[b] = bm;
         w->wmass[b] = wm;
@@ -360,6 +368,6 @@ void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_
     if (dec->phase_conf > 1.0) dec->phase_conf = 1.0;
     if (dec->runner_conf > 1.0) dec->runner_conf = 1.0;
 done:
-    for (size_t i = 0; i < w->ncand; i++) w->mark[w->cand[i]] = 0;
+    rec_eq7_mark_cands(w, 0);
     w->ncand = 0;
 }

@@ -95,23 +95,27 @@ GS_VECTOR_LOOP static float row_bound_perp(const float *sh, const float *rho, fl
  * (w->peak_cell, w->has_peak), where the sub-cell refinement starts. */
 static void continuous_peaks(const rec_matcher *m, rec_eq7_work *w)
 {
-    for (size_t b = 0; b < m->nb; b++) w->has_peak[b] = 0;
-    double *best = w->peak_L;   /* (the peak cell's L until the refinement sets peak_L) */
-    for (size_t ci = 0; ci < w->ncand; ci++) {
-        size_t j = w->cand[ci];
-        size_t b = (size_t)m->tbulb[j];
-        if (!m->cont[b]) continue;
-        if (!w->has_peak[b] || w->L[j] > best[b]) {
+    const size_t *cand = w->cand, n = w->ncand;
+    const double *L = w->L;
+    memset(w->has_peak, 0, m->nb);
+    for (size_t i = 0; i < n;) {   /* by runs of one bulb's candidates (in the order of j) */
+        size_t b = (size_t)m->tbulb[cand[i]], e = i + 1;
+        while (e < n && (size_t)m->tbulb[cand[e]] == b) e++;
+        if (m->cont[b]) {
+            size_t jb = cand[i];   /* the first largest L of the run */
+            for (size_t q = i + 1; q < e; q++)
+                if (L[cand[q]] > L[jb]) jb = cand[q];
             w->has_peak[b] = 1;
-            w->peak_cell[b] = j;
-            best[b] = w->L[j];
+            w->peak_cell[b] = jb;
+            w->peak_L[b] = L[jb];   /* (the peak cell's L until the refinement sets it) */
         }
+        i = e;
     }
 }
 
 /* Pixel log likelihood (as rec_eq7_loglik() with T = |t|^2 / sigma^2, up to a row constant) from the
  * normalised score z = x.t/(|t| sigma); Sxx = |x|^2 / sigma^2. */
-static double pix_L(const rec_matcher *m, size_t j, double z, double Sxx)
+static inline double pix_L(const rec_matcher *m, size_t j, double z, double Sxx)
 {
     return -0.5 * (Sxx - z * z) - m->lognorm[j] + rec_eq7_log_phi_fast(m, z);
 }
@@ -167,10 +171,11 @@ GS_VECTOR_LOOP static size_t first_equal(const float *u, size_t n, float v)
     return j;
 }
 
-/* The indices j < n with (double)u[j] + err >= thr into out, in order; returns their number.
- * (u[j] >= lo, lo a float just below thr - err, is the vectorized pre-test; u holds n rounded
- * up to a multiple of LANES floats.) */
-GS_VECTOR_LOOP static size_t at_least(const float *u, size_t n, float lo, double err, double thr, size_t *out)
+/* The indices j0 + j, j < n, with (double)u[j] + err >= thr into out, in order; returns their
+ * number. (u[j] >= lo, lo a float just below thr - err, is the vectorized pre-test; u holds n
+ * rounded up to a multiple of LANES floats.) */
+GS_VECTOR_LOOP static size_t at_least(const float *u, size_t n, size_t j0, float lo, double err, double thr,
+                                      size_t *out)
 {
     size_t k = 0;
     for (size_t j = 0; j < n; j += LANES) {
@@ -181,7 +186,7 @@ GS_VECTOR_LOOP static size_t at_least(const float *u, size_t n, float lo, double
         PIX_ANY(m, any);
         if (!any) continue;
         for (size_t q = j; q < j + LANES && q < n; q++)
-            if ((double)u[q] + err >= thr) out[k++] = q;
+            if ((double)u[q] + err >= thr) out[k++] = j0 + q;
     }
     return k;
 }
@@ -302,25 +307,25 @@ static void pixel_row(const rec_matcher *m, pix_work *pw, const float *xr, const
     for (size_t i = 0; i < nrange; i++) {
         size_t lo = range[2 * i], hi = range[2 * i + 1] < M ? range[2 * i + 1] : M;
         if (lo >= hi) continue;
-        size_t *c = w->cand + w->ncand, n = at_least(ub + lo, hi - lo, nextafterf((float)(thr - err), -INFINITY), err, thr, c);
-        for (size_t q = 0; q < n; q++) c[q] += lo;
-        w->ncand += n;
+        w->ncand += at_least(ub + lo, hi - lo, lo, nextafterf((float)(thr - err), -INFINITY), err, thr,
+                             w->cand + w->ncand);
     }
-    for (size_t ci = 0; ci < w->ncand; ci++) w->mark[w->cand[ci]] = 1;
-    if (exact && w->ncand > M / 4) {   /* many: one matrix-vector product for all templates */
+    rec_eq7_mark_cands(w, 1);
+    const size_t *cand = w->cand, ncand = w->ncand;
+    if (exact && ncand > M / 4) {   /* many: one matrix-vector product for all templates */
         cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, (int)D, inv, m->tnd, (int)D, xd, 1, 0.0, zz, 1);
     } else {
         if (exact) {
-            rec_eq7_exact_z(m, w, pw->gd, xd, inv, w->cand, w->ncand, zz);
+            rec_eq7_exact_z(m, w, pw->gd, xd, inv, cand, ncand, zz);
         } else {
-            for (size_t ci = 0; ci < w->ncand; ci++) zz[w->cand[ci]] = srow[w->cand[ci]] * inv;
+            for (size_t ci = 0; ci < ncand; ci++) zz[cand[ci]] = srow[cand[ci]] * inv;
         }
     }
-    double Lmax = -INFINITY;
-    for (size_t ci = 0; ci < w->ncand; ci++) {
-        size_t j = w->cand[ci];
-        w->L[j] = pix_L(m, j, zz[j], Sxx);
-        if (w->L[j] > Lmax) Lmax = w->L[j];
+    double Lmax = -INFINITY, *L = w->L;
+    for (size_t ci = 0; ci < ncand; ci++) {
+        size_t j = cand[ci];
+        L[j] = pix_L(m, j, zz[j], Sxx);
+        if (L[j] > Lmax) Lmax = L[j];
     }
     /* continuous bulbs: refine around their best candidate cell */
     if (m->ncont) {
@@ -517,8 +522,8 @@ static void pixel_row_band(const rec_matcher *m, pix_work *pw, const float *xr, 
     }
     double g0, s0;
     double thr = band_terms(m, ju, p, var, Sxx, &g0, &s0) + 0.5 * Sxx - CUT_PIXEL - 2.0 * err;
-    w->ncand = at_least(ub, M, nextafterf((float)(thr - err), -INFINITY), err, thr, w->cand);
-    for (size_t ci = 0; ci < w->ncand; ci++) w->mark[w->cand[ci]] = 1;
+    w->ncand = at_least(ub, M, 0, nextafterf((float)(thr - err), -INFINITY), err, thr, w->cand);
+    rec_eq7_mark_cands(w, 1);
     double Lmax = -INFINITY;
     for (size_t ci = 0; ci < w->ncand; ci++) {
         size_t j = w->cand[ci];

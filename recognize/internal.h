@@ -582,6 +582,7 @@ void rec_eq7_work_free(rec_eq7_work *w);
 double rec_eq7_report_phase(const rec_matcher *m, int b, size_t j, double s);
 void rec_eq7_add_cand(const rec_matcher *m, rec_eq7_work *w, size_t j);
 void rec_eq7_add_done(const rec_matcher *m, rec_eq7_work *w);
+void rec_eq7_mark_cands(rec_eq7_work *w, unsigned char v);
 void rec_eq7_decide(const rec_matcher *m, rec_eq7_work *w, double Lmax, rec_eq7_decision *dec);
 /* eq7_scores.c: the log likelihood of one scale; eq7_light.c: Newton refinement of continuous
  * bulb b's peak from grid cell j0 (after rec_eq7_series_row of the row's weights). */
