@@ -305,8 +305,8 @@ void rec_eq7_pixscreen(const rec_matcher *m, rec_pixscreen_work *sw, const float
             /* its first and last partial vectors (a grid of G >= 96 cells holds whole ones) */
             size_t lo = m->first[b], hi = lo + m->count[b];
             size_t a = lo + (LANES - lo % LANES) % LANES, z = hi - hi % LANES;
-            memset(o + lo, 0, sizeof *o * (a - lo));
-            memset(o + z, 0, sizeof *o * (hi - z));
+            if (a > lo) memset(o + lo, 0, sizeof *o * (a - lo));   /* (none when the grids fill */
+            if (hi > z) memset(o + z, 0, sizeof *o * (hi - z));    /* whole vectors: G = 208) */
         }
     }
 }
