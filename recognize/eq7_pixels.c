@@ -312,7 +312,11 @@ static void pixel_row(const rec_matcher *m, pix_work *pw, const float *xr, const
     }
     rec_eq7_mark_cands(w, 1);
     const size_t *cand = w->cand, ncand = w->ncand;
-    if (exact && ncand > M / 4) {   /* many: one matrix-vector product for all templates */
+    /* many: one matrix-vector product for all templates; for Fourier grids only beyond Sxx =
+     * 1e12, where the chi-square Sxx - z^2 would lose its units to a grid's rounding (its
+     * inverse FFT's, ~1e-15 of z): below, a bulb's grid from its cross-spectrum
+     * (rec_eq7_exact_z) costs a third of its rows of the product */
+    if (exact && ncand > M / 4 && (!m->fs_on || !(Sxx < 1e12))) {
         cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, (int)D, inv, m->tnd, (int)D, xd, 1, 0.0, zz, 1);
     } else {
         if (exact) {
