@@ -690,15 +690,16 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
     m->bnorm = malloc(sizeof *m->bnorm * M * (size_t)bands);
     m->lbnorm = malloc(sizeof *m->lbnorm * M * (size_t)bands);
     m->blog = malloc(sizeof *m->blog * M);
-    m->tbn = malloc(sizeof *m->tbn * M * D);
-    m->tbnf = calloc(m->Mp * D, sizeof *m->tbnf);
+    /* (the per-band unit templates: the band path's only, 10 MB of a continuous DELIGHT) */
+    m->tbn = m->bandpath ? malloc(sizeof *m->tbn * M * D) : NULL;
+    m->tbnf = m->bandpath ? calloc(m->Mp * D, sizeof *m->tbnf) : NULL;
     m->blnf = malloc(sizeof *m->blnf * m->Mp);
     m->bib = malloc(sizeof *m->bib * m->Mp * (size_t)bands);
     m->bib2 = malloc(sizeof *m->bib2 * m->Mp * (size_t)bands);
     double *raw = malloc(sizeof *raw * D);
     double complex *acc = malloc(sizeof *acc * REC_TEMPLATE_ACC * (size_t)K);
     if (!m->t || !m->tsq || !m->tn || !m->lnf || !m->tnd || !m->lognorm || !m->tnorm || !m->cellw || !m->logcellw || !m->shift || !m->tphase ||
-        !m->tbulb || !m->tcell || !m->bnorm || !m->lbnorm || !m->blog || !m->tbn || !m->tbnf || !m->blnf || !m->bib || !m->bib2 || !raw ||
+        !m->tbulb || !m->tcell || !m->bnorm || !m->lbnorm || !m->blog || (m->bandpath && (!m->tbn || !m->tbnf)) || !m->blnf || !m->bib || !m->bib2 || !raw ||
         !acc) {
         free(raw);
         free(acc);
@@ -793,8 +794,10 @@ gs_status rec_matcher_new(const gs_delight *d, int grid_hz, int bands, int K,
                 m->blog[j] += log(bn);
                 for (int k = 0; k < K; k++) {
                     size_t dd = (size_t)band * (size_t)K + (size_t)k;
-                    m->tbn[j * D + dd] = raw[dd] / bn;
-                    m->tbnf[j * D + dd] = (float)m->tbn[j * D + dd];
+                    if (m->bandpath) {
+                        m->tbn[j * D + dd] = raw[dd] / bn;
+                        m->tbnf[j * D + dd] = (float)m->tbn[j * D + dd];
+                    }
                     vv += raw[dd] * raw[dd] / (nb2 * nb2);
                 }
             }

@@ -257,7 +257,7 @@ struct rec_matcher {
     double *bnorm;                      /* [M * bands] |t_j| over band b's K values */
     double *lbnorm;                     /* [M * bands] its log */
     double *blog;                       /* [M] sum over bands of log |t_jb| */
-    double *tbn;                        /* [M * D] templates, each band of unit norm */
+    double *tbn;                        /* [M * D] templates, each band of unit norm (bandpath only) */
     float *tbnf;                        /* [Mp * D] the same in float, zero padded */
     float *blnf;                        /* [Mp] blog as float, 1e30 for padding */
     float *bib, *bib2;                  /* [bands * Mp] 1/|t_jb|, 1/|t_jb|^2 (padding 0, 1) */
