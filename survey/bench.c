@@ -2,7 +2,7 @@
  *   bench recognize [--quick]  Eq. 7 throughput (paper Sec. 4): rec_match_pixels in pixels/s and
  *                              rec_match_catalog in lights/s against K, bands, database size and
  *                              pixel count, next to a plain triple-loop reference of the same
- *                              search written here (independent of recognize/eq7.c), with the
+ *                              search written here (independent of recognize/eq7_*.c), with the
  *                              agreement of the two and each configuration's peak memory.
  *   bench db ...               the survey database (survey/bench_db.c).
  *   bench pg ...               SQLite vs the shared PostGIS database (survey/bench_pg.c).
@@ -199,6 +199,14 @@ typedef struct {
     long maxrss_kib;
 } result;
 
+/* The process's peak resident set so far, KiB. */
+static long peak_rss_kib(void)
+{
+    struct rusage ru;
+    getrusage(RUSAGE_SELF, &ru);
+    return ru.ru_maxrss;
+}
+
 /* The reference search's shifts per cycle: the matcher's grid, G = max(8K, 96), with continuous
  * phases (eq7_matcher.c), else 0/120/240. */
 static int ref_shifts(const config *c)
@@ -350,6 +358,7 @@ static gs_status run_pixels(const config *c, rec_matcher *m, result *res)
             st = rec_match_pixels(m, x, sg, P, bulb, ph, cf);
             res->seconds = fmin(res->seconds, gs_clock_s(CLOCK_MONOTONIC) - t0);
         }
+        res->maxrss_kib = peak_rss_kib();   /* (before the references' templates and scores) */
         res->rate = (double)P / res->seconds;
         res->templates = r.M;
     }
@@ -469,6 +478,7 @@ static gs_status run_lights(const config *c, rec_matcher *m, result *res)
             st = rec_match_catalog(m, &cat, mt, NULL);
             res->seconds = fmin(res->seconds, gs_clock_s(CLOCK_MONOTONIC) - t0);
         }
+        res->maxrss_kib = peak_rss_kib();
         res->rate = (double)N / res->seconds;
         res->templates = r.M;
     }
@@ -624,9 +634,7 @@ static void run_config(const gs_delight *all, const config *c, result *res)
             r.templates = (size_t)got * (size_t)(8 * c->K > 96 ? 8 * c->K : 96);
         r.ok = st == GS_OK;
         if (!r.ok) snprintf(r.detail, sizeof r.detail, "%s: %s", gs_strerror(st), gs_detail());
-        struct rusage ru;
-        getrusage(RUSAGE_SELF, &ru);
-        r.maxrss_kib = ru.ru_maxrss;
+        if (!r.maxrss_kib) r.maxrss_kib = peak_rss_kib();   /* (a capture row: its whole run) */
         rec_matcher_free(m);
         gs_delight_free(d);
         ssize_t wr = write(fd[1], &r, sizeof r);
@@ -808,10 +816,11 @@ static int bench_recognize(int argc, char **argv)
            "data: a lit row/light is a random template at a mean sample of %.0f noise sigmas "
            "plus Gaussian noise. *reference* is a plain triple loop (rows x templates x values, "
            "double precision) of the same search written in survey/bench.c, independent of "
-           "recognize/eq7.c, timed on the first min(rows, %d) rows; *agree* is the fraction of "
+           "recognize/eq7_*.c, timed on the first min(rows, %d) rows; *agree* is the fraction of "
            "those rows where both give the same answer (bulb and phase, or no answer). Peak RSS is "
-           "getrusage ru_maxrss of the process running that row (inputs included: 4 bytes x "
-           "values x pixels). Times are the best of %d runs. *SGEMM only* times the score matrix alone (rows x templates, one "
+           "getrusage ru_maxrss of the process running that row, read after the timed runs (inputs "
+           "included: 4 bytes x values x pixels; the reference's templates and the SGEMM's scores "
+           "come after). Times are the best of %d runs. *SGEMM only* times the score matrix alone (rows x templates, one "
            "cblas_sgemm per 4096 rows, no decision): the floor of a matrix-product "
            "implementation on this machine. *lit correct*: lit rows answered with their true "
            "bulb and phase.\n\n", SNR, REF_ROWS_MAX, REPS);
