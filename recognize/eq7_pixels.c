@@ -236,14 +236,14 @@ static void pix_free(pix_work *p)
 
 #define GRID_RUN 32
 void rec_eq7_exact_z(const rec_matcher *m, rec_eq7_work *w, double *gd, const double *xd, double inv,
-                     const size_t *cand, size_t n, double *zz)
+                     const size_t *cand, size_t n, int grids, double *zz)
 {
     int dfts = 0;
     for (size_t i = 0; i < n;) {
         int b = m->tbulb[cand[i]];
         size_t e = i + 1;
         while (e < n && m->tbulb[cand[e]] == b) e++;
-        if (m->fourier && m->cont[b] && e - i >= GRID_RUN) {
+        if (grids && m->fourier && m->cont[b] && e - i >= GRID_RUN) {
             if (!dfts) rec_eq7_band_dfts(m, xd, w->spec_v);
             dfts = 1;
             rec_eq7_grid_dots(m, w, (size_t)b, 0, w->spec_v, gd);
@@ -312,15 +312,16 @@ static void pixel_row(const rec_matcher *m, pix_work *pw, const float *xr, const
     }
     rec_eq7_mark_cands(w, 1);
     const size_t *cand = w->cand, ncand = w->ncand;
-    /* many: one matrix-vector product for all templates; for Fourier grids only beyond Sxx =
-     * 1e12, where the chi-square Sxx - z^2 would lose its units to a grid's rounding (its
-     * inverse FFT's, ~1e-15 of z): below, a bulb's grid from its cross-spectrum
-     * (rec_eq7_exact_z) costs a third of its rows of the product */
-    if (exact && ncand > M / 4 && (!m->fs_on || !(Sxx < 1e12))) {
+    /* the grids' dots only below Sxx = 1e12: beyond, the chi-square Sxx - z^2 would lose its
+     * units to their rounding (the inverse FFT's, ~1e-15 of |x| / sigma). Many candidates: one
+     * matrix-vector product with every template, but behind the Fourier screen (below 1e12)
+     * each bulb's grid from its cross-spectrum, a third of the cost */
+    int grids = Sxx < 1e12;
+    if (exact && ncand > M / 4 && !(m->fs_on && grids)) {
         cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)M, (int)D, inv, m->tnd, (int)D, xd, 1, 0.0, zz, 1);
     } else {
         if (exact) {
-            rec_eq7_exact_z(m, w, pw->gd, xd, inv, cand, ncand, zz);
+            rec_eq7_exact_z(m, w, pw->gd, xd, inv, cand, ncand, grids, zz);
         } else {
             for (size_t ci = 0; ci < ncand; ci++) zz[cand[ci]] = srow[cand[ci]] * inv;
         }

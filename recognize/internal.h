@@ -258,7 +258,7 @@ struct rec_matcher {
     double *lbnorm;                     /* [M * bands] its log */
     double *blog;                       /* [M] sum over bands of log |t_jb| */
     double *tbn;                        /* [M * D] templates, each band of unit norm (bandpath only) */
-    float *tbnf;                        /* [Mp * D] the same in float, zero padded */
+    float *tbnf;                        /* [Mp * D] the same in float, zero padded (bandpath only) */
     float *blnf;                        /* [Mp] blog as float, 1e30 for padding */
     float *bib, *bib2;                  /* [bands * Mp] 1/|t_jb|, 1/|t_jb|^2 (padding 0, 1) */
     double logphi_tab[2 * (int)LOGPHI_ZMAX * LOGPHI_STEPS + 2];
@@ -455,12 +455,12 @@ typedef struct {
 } rec_eq7_decision;
 
 /* eq7_pixels.c: zz[j] = x . t_j / (|t_j| sigma) in double (inv = 1 / sigma, xd the row) for the
- * n candidates cand (rising order), the pixel path's exact rescoring: a run of at least 32 cells
- * of a continuous bulb from its grid's dots (m->fourier: the row's band DFTs once into
- * w->spec_v, then one G-point inverse FFT per bulb into gd [G], exact but for rounding), the
- * others four at a time (gs_dot_rows). */
+ * n candidates cand (rising order), the pixel path's exact rescoring: with grids, a run of at
+ * least 32 cells of a continuous bulb from its grid's dots (m->fourier: the row's band DFTs once
+ * into w->spec_v, then one G-point inverse FFT per bulb into gd [G], exact but for rounding,
+ * ~1e-15 of |x| / sigma), the others four at a time (gs_dot_rows). */
 void rec_eq7_exact_z(const rec_matcher *m, rec_eq7_work *w, double *gd, const double *xd, double inv,
-                     const size_t *cand, size_t n, double *zz);
+                     const size_t *cand, size_t n, int grids, double *zz);
 
 /* eq7_pixscreen.c: the pixel path's Fourier screen for continuous bulbs (rec_matcher.fs_on). */
 enum { REC_FS_OFF = 0, REC_FS_ON = 1, REC_FS_ALL = 2 };

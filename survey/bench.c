@@ -217,13 +217,13 @@ static int ref_shifts(const config *c)
 /* Whether the reference's answer (bulb b, phase) is the fast path's (fb, fphase): the same phase
  * (within 1e-3 deg) on 0/120/240; with continuous phases the same shift within one grid cell
  * (180 / G deg: the matcher refines its best cell to within a cell of it; a shift fixes the
- * phase modulo 180 deg). */
+ * phase modulo 180 deg), plus 1e-3 deg for the pixel path's float phases. */
 static int ref_agrees(const config *c, int b, double phase, int fb, double fphase)
 {
     if (b != fb) return 0;
     if (b < 0) return 1;
     if (!c->continuous) return fabs(phase - fphase) < 1e-3;
-    return fabs(remainder(phase - fphase, 180.0)) <= 180.0 / ref_shifts(c) + 1e-9;
+    return fabs(remainder(phase - fphase, 180.0)) <= 180.0 / ref_shifts(c) + 1e-3;
 }
 
 /* A DELIGHT with `count` of d's entries for 50 Hz and this band count, spread evenly over them
@@ -338,7 +338,6 @@ static gs_status run_pixels(const config *c, rec_matcher *m, result *res)
     if (!x || !sg || !pool || !truth || !bulb || !ph || !cf)
         st = gs_fail(GS_ENOMEM, "bench: cannot allocate %zu pixels", P);
     if (st == GS_OK) st = ref_build(m, c->K, 3, &r);
-    if (st == GS_OK && c->continuous) st = ref_build(m, c->K, ref_shifts(c), &rg);
     if (st == GS_OK) {
         uint64_t rs = 12345;
         for (size_t i = 0; i < POOL; i++) pool[i] = (float)gs_splitmix_normal(&rs);
@@ -358,10 +357,11 @@ static gs_status run_pixels(const config *c, rec_matcher *m, result *res)
             st = rec_match_pixels(m, x, sg, P, bulb, ph, cf);
             res->seconds = fmin(res->seconds, gs_clock_s(CLOCK_MONOTONIC) - t0);
         }
-        res->maxrss_kib = peak_rss_kib();   /* (before the references' templates and scores) */
+        res->maxrss_kib = peak_rss_kib();   /* (before the grid reference's templates and scores) */
         res->rate = (double)P / res->seconds;
         res->templates = r.M;
     }
+    if (st == GS_OK && c->continuous) st = ref_build(m, c->K, ref_shifts(c), &rg);
     if (st == GS_OK) {
         /* the floor of any matrix-product implementation: the scores alone (of every grid
          * template with continuous phases), one SGEMM per block of 4096 rows (512 of the
@@ -458,7 +458,6 @@ static gs_status run_lights(const config *c, rec_matcher *m, result *res)
         !cat.flags || !cat.signal || !cat.sigma || !mt || !truth || !xf || !w)
         st = gs_fail(GS_ENOMEM, "bench: cannot allocate %zu lights", N);
     if (st == GS_OK) st = ref_build(m, c->K, 3, &r);
-    if (st == GS_OK && c->continuous) st = ref_build(m, c->K, ref_shifts(c), &rg);
     if (st == GS_OK) {
         uint64_t rs = 777;
         for (size_t i = 0; i < N; i++) {
@@ -482,6 +481,7 @@ static gs_status run_lights(const config *c, rec_matcher *m, result *res)
         res->rate = (double)N / res->seconds;
         res->templates = r.M;
     }
+    if (st == GS_OK && c->continuous) st = ref_build(m, c->K, ref_shifts(c), &rg);
     if (st == GS_OK) {
         size_t nref = N < REF_ROWS_MAX ? N : REF_ROWS_MAX, same = 0;
         double thr = gs_chi2_isf(eo.unknown_p, (int)D - 2);
@@ -819,8 +819,8 @@ static int bench_recognize(int argc, char **argv)
            "recognize/eq7_*.c, timed on the first min(rows, %d) rows; *agree* is the fraction of "
            "those rows where both give the same answer (bulb and phase, or no answer). Peak RSS is "
            "getrusage ru_maxrss of the process running that row, read after the timed runs (inputs "
-           "included: 4 bytes x values x pixels; the reference's templates and the SGEMM's scores "
-           "come after). Times are the best of %d runs. *SGEMM only* times the score matrix alone (rows x templates, one "
+           "included: 4 bytes x values x pixels; the continuous rows' grid reference and the SGEMM's "
+           "scores come after). Times are the best of %d runs. *SGEMM only* times the score matrix alone (rows x templates, one "
            "cblas_sgemm per 4096 rows, no decision): the floor of a matrix-product "
            "implementation on this machine. *lit correct*: lit rows answered with their true "
            "bulb and phase.\n\n", SNR, REF_ROWS_MAX, REPS);

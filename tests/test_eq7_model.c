@@ -242,16 +242,18 @@ static double smoothed_excess(const double *e, const double *y, size_t n, size_t
  * than a light's kernel median takes (eq7_noise.c, NOISE_MAX_REFS: a sample stratified in e2).
  * Each light's excess against the kernel median of the true ones (smoothed_excess, the estimate's
  * limit: the kernel is a third of the image high), for every 20th light and in the top and
- * bottom fifths. A sample of the lowest excesses, or no kernel, would not match. Three lights five
- * decades brighter than the others have kernel weights on each other only (an effective count
- * near 2): their excess is the fallback, over a sample the global median of all references
- * (the report's median_model_error, the same bits), not a median of the sample nor of the two. */
+ * bottom fifths. A sample of the lowest excesses, or no kernel, would not match. Four identical
+ * lights five decades brighter than the others have kernel weights on each other only: their e2
+ * are equal, so the sample (every second reference by e2 here) holds two of them and each sees
+ * one or two others (an effective count near 2); their excess is the fallback, over a sample the
+ * global median of all references (the report's median_model_error, the same bits), not a
+ * median of the sample nor of the others. */
 TEST(eq7_excess_follows_the_rows_over_many_lights)
 {
     gs_delight *d = eq7fx_make_db(50, 3, 0, 0);
     rec_matcher *m = new_matcher_default(d, 3, REC_PHASES_3);
     const double g[3] = {1.0, 0.85, 0.7};
-    size_t n = 9003, bright = 9000;   /* lights from `bright` on: 1e8, the others 1000 */
+    size_t n = 9004, bright = 9000;   /* lights from `bright` on: 1e8 (copies of one), the others 1000 */
     rec_catalog cat = catalog_rgb26(n);
     rec_match *r = malloc(sizeof *r * n);
     double *truth = malloc(sizeof *truth * n);
@@ -262,6 +264,12 @@ TEST(eq7_excess_follows_the_rows_over_many_lights)
         truth[i] = 0.02 + 0.03 * cat.y_px[i] / 480.0;
         render_fx(rec_matcher_bulb(m, i % 4), gs_phase_to_shift(eq7fx_p3[(i / 4) % 3]), a, g, truth[i], a / 3 / 100,
                   &rs, cat.signal + i * 78, cat.sigma + i * 78);
+    }
+    for (size_t i = bright + 1; i < n; i++) {   /* the bright lights: copies of the first */
+        cat.y_px[i] = cat.y_px[bright];
+        truth[i] = truth[bright];
+        memcpy(cat.signal + i * 78, cat.signal + bright * 78, sizeof *cat.signal * 78);
+        memcpy(cat.sigma + i * 78, cat.sigma + bright * 78, sizeof *cat.sigma * 78);
     }
     rec_noise_report nr;
     CHECK_OK(rec_match_catalog(m, &cat, r, &nr));

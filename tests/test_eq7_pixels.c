@@ -389,7 +389,8 @@ static void screen_block_checks(rec_matcher *m, const float *x, const float *sg,
 
 /* The pixel path's exact rescoring (rec_eq7_exact_z) against long double dot products with the
  * templates: continuous grids (RGB at K = 26 and 13, photodiode at K = 8; runs of whole bulbs and
- * of 72 cells with a gap through the grid's inverse FFT, of 31 and 3 cells four at a time) and a
+ * of 72 cells with a gap through the grid's inverse FFT, of 31 and 3 cells four at a time; and
+ * without grids, every run four at a time, as beyond Sxx = 1e12) and a
  * discrete matcher, rows of noise and of a template, 1e-2 to 1e6: within 1e-12 of |x| / sigma. */
 TEST(eq7_pixels_exact_scores_equal_dot_products)
 {
@@ -420,16 +421,18 @@ TEST(eq7_pixels_exact_scores_equal_dot_products)
                 xd[q] = scale * (gs_splitmix_normal(&rs) + (trial % 2 ? m->t[(n / 2) * D + q] : 0.0));
                 xx += xd[q] * xd[q];
             }
-            for (size_t i = 0; i < n; i++) zz[cand[i]] = NAN;
-            rec_eq7_exact_z(m, &w, gd, xd, inv, cand, n, zz);
-            for (size_t i = 0; i < n; i++) {
-                size_t j = cand[i];
-                long double s = 0.0L;
-                for (size_t q = 0; q < D; q++) s += (long double)xd[q] * m->t[j * D + q];
-                double ref = (double)(s / sqrtl((long double)exp(2.0 * m->lognorm[j])) * inv);
-                if (!(fabs(zz[j] - ref) <= 1e-12 * sqrt(xx) * inv) && far++ < 5)
-                    printf("    K = %d, %d bands, template %zu (bulb %d, cell %d): %.17g, dot product %.17g\n", m->K,
-                           m->bands, j, m->tbulb[j], m->tcell[j], zz[j], ref);
+            for (int grids = 1; grids >= 0; grids--) {   /* (0: every run four at a time) */
+                for (size_t i = 0; i < n; i++) zz[cand[i]] = NAN;
+                rec_eq7_exact_z(m, &w, gd, xd, inv, cand, n, grids, zz);
+                for (size_t i = 0; i < n; i++) {
+                    size_t j = cand[i];
+                    long double s = 0.0L;
+                    for (size_t q = 0; q < D; q++) s += (long double)xd[q] * m->t[j * D + q];
+                    double ref = (double)(s / sqrtl((long double)exp(2.0 * m->lognorm[j])) * inv);
+                    if (!(fabs(zz[j] - ref) <= 1e-12 * sqrt(xx) * inv) && far++ < 5)
+                        printf("    K = %d, %d bands, grids %d, template %zu (bulb %d, cell %d): %.17g, dot product "
+                               "%.17g\n", m->K, m->bands, grids, j, m->tbulb[j], m->tcell[j], zz[j], ref);
+                }
             }
         }
         CHECK_MSG(far == 0, "K = %d, %d bands: %d exact scores off their dot products", m->K, m->bands, far);
