@@ -69,10 +69,12 @@ static void bench_eq7_opts(rec_eq7_opts *eo)
 /* ------------------------------------------------------------------ the reference */
 
 /* Templates of Eq. 7, built here from the bulbs: t[d] = Q_b(band) * (the BRF delayed by the
- * phase's shift, averaged over window k) (Eq. 5), d = band * K + k, for the phases 0/120/240. */
+ * phase's shift, averaged over window k) (Eq. 5), d = band * K + k, for the phases 0/120/240 or a
+ * grid of shifts. */
 typedef struct {
     size_t M;
     int D;
+    int nshift;         /* shifts per bulb (ref_build) */
     double *t;          /* [M * D] */
     double *norm;       /* [M] |t| */
     int *bulb;          /* [M] */
@@ -95,6 +97,7 @@ static gs_status ref_build(const rec_matcher *m, int K, int nshift, ref_template
     size_t nb = rec_matcher_bulb_count(m);
     int bands = rec_matcher_bulb(m, 0)->brf.bands;
     r->D = bands * K;
+    r->nshift = nshift;
     r->M = (size_t)nshift * nb;
     r->t = malloc(sizeof *r->t * r->M * (size_t)r->D);
     r->norm = malloc(sizeof *r->norm * r->M);
@@ -207,28 +210,28 @@ static long peak_rss_kib(void)
     return ru.ru_maxrss;
 }
 
-/* The reference search's shifts per cycle: the matcher's grid, G = max(8K, 96), with continuous
- * phases (eq7_matcher.c), else 0/120/240. */
-static int ref_shifts(const config *c)
+/* The continuous matcher's grid of shifts per cycle (its templates per bulb: every bulb here is
+ * voltage-referenced), the reference's search with continuous phases. */
+static int grid_shifts(const rec_matcher *m)
 {
-    return !c->continuous ? 3 : 8 * c->K > 96 ? 8 * c->K : 96;
+    return (int)(rec_matcher_template_count(m) / rec_matcher_bulb_count(m));
 }
 
-/* Whether the reference's answer (bulb b, phase) is the fast path's (fb, fphase): the same phase
- * (within 1e-3 deg) on 0/120/240; with continuous phases the same shift within one grid cell
- * (180 / G deg: the matcher refines its best cell to within a cell of it; a shift fixes the
- * phase modulo 180 deg), plus 1e-3 deg for the pixel path's float phases. */
-static int ref_agrees(const config *c, int b, double phase, int fb, double fphase)
+/* Whether the reference's answer (bulb b, phase) from the templates g is the fast path's (fb,
+ * fphase): the same phase (within 1e-3 deg) on 0/120/240; on a grid of G shifts the same shift
+ * within one cell (180 / G deg: the matcher refines its best cell to within a cell of it; a shift
+ * fixes the phase modulo 180 deg), plus 1e-3 deg for the pixel path's float phases. */
+static int ref_agrees(const ref_templates *g, int b, double phase, int fb, double fphase)
 {
     if (b != fb) return 0;
     if (b < 0) return 1;
-    if (!c->continuous) return fabs(phase - fphase) < 1e-3;
-    return fabs(remainder(phase - fphase, 180.0)) <= 180.0 / ref_shifts(c) + 1e-3;
+    if (g->nshift == 3) return fabs(phase - fphase) < 1e-3;
+    return fabs(remainder(phase - fphase, 180.0)) <= 180.0 / g->nshift + 1e-3;
 }
 
 /* A DELIGHT with `count` of d's entries for 50 Hz and this band count, spread evenly over them
  * (the entries come grouped by technology). count 0 = all. */
-static gs_status subset(const gs_delight *d, int bands, int count, gs_delight **out, int *got)
+static gs_status subset(const gs_delight *d, int bands, int count, gs_delight **out)
 {
     const char *sensor = bands == 3 ? "rgb" : "photodiode";
     size_t n = 0;
@@ -253,7 +256,6 @@ static gs_status subset(const gs_delight *d, int bands, int count, gs_delight **
         added++;
     }
     *out = s;
-    *got = (int)added;
     return GS_OK;
 }
 
@@ -361,7 +363,7 @@ static gs_status run_pixels(const config *c, rec_matcher *m, result *res)
         res->rate = (double)P / res->seconds;
         res->templates = r.M;
     }
-    if (st == GS_OK && c->continuous) st = ref_build(m, c->K, ref_shifts(c), &rg);
+    if (st == GS_OK && c->continuous) st = ref_build(m, c->K, grid_shifts(m), &rg);
     if (st == GS_OK) {
         /* the floor of any matrix-product implementation: the scores alone (of every grid
          * template with continuous phases), one SGEMM per block of 4096 rows (512 of the
@@ -396,7 +398,7 @@ static gs_status run_pixels(const config *c, rec_matcher *m, result *res)
             int b;
             double phase;
             ref_search(g, x + p * D, w, eo.min_snr, thr, &b, &phase);
-            same += ref_agrees(c, b, phase, bulb[p], ph[p]);
+            same += ref_agrees(g, b, phase, bulb[p], ph[p]);
         }
         res->ref_seconds = gs_clock_s(CLOCK_MONOTONIC) - t0;
         res->ref_rows = nref;
@@ -481,7 +483,7 @@ static gs_status run_lights(const config *c, rec_matcher *m, result *res)
         res->rate = (double)N / res->seconds;
         res->templates = r.M;
     }
-    if (st == GS_OK && c->continuous) st = ref_build(m, c->K, ref_shifts(c), &rg);
+    if (st == GS_OK && c->continuous) st = ref_build(m, c->K, grid_shifts(m), &rg);
     if (st == GS_OK) {
         size_t nref = N < REF_ROWS_MAX ? N : REF_ROWS_MAX, same = 0;
         double thr = gs_chi2_isf(eo.unknown_p, (int)D - 2);
@@ -494,7 +496,7 @@ static gs_status run_lights(const config *c, rec_matcher *m, result *res)
             int b;
             double phase;
             ref_search(g, xf, w, eo.min_snr, thr, &b, &phase);
-            same += ref_agrees(c, b, phase, mt[i].bulb >= 0 ? mt[i].bulb : -1, mt[i].phase_deg);
+            same += ref_agrees(g, b, phase, mt[i].bulb >= 0 ? mt[i].bulb : -1, mt[i].phase_deg);
         }
         res->ref_seconds = gs_clock_s(CLOCK_MONOTONIC) - t0;
         res->ref_rows = nref;
@@ -619,8 +621,7 @@ static void run_config(const gs_delight *all, const config *c, result *res)
         openblas_set_num_threads(1);
         gs_delight *d = NULL;
         rec_matcher *m = NULL;
-        int got = 0;
-        gs_status st = subset(all, c->bands, c->bulbs, &d, &got);
+        gs_status st = subset(all, c->bands, c->bulbs, &d);
         rec_eq7_opts eo;
         bench_eq7_opts(&eo);
         if (c->defaults == 1) rec_eq7_opts_default(&eo);
@@ -630,8 +631,7 @@ static void run_config(const gs_delight *all, const config *c, result *res)
         if (st == GS_OK) st = rec_matcher_new(d, 50, c->bands, c->K, &eo, &m);
         if (st == GS_OK)
             st = c->side ? run_capture(c, m, &r) : c->pixels ? run_pixels(c, m, &r) : run_lights(c, m, &r);
-        if (c->continuous && st == GS_OK)   /* one template per grid shift and bulb */
-            r.templates = (size_t)got * (size_t)(8 * c->K > 96 ? 8 * c->K : 96);
+        if (c->continuous && st == GS_OK) r.templates = rec_matcher_template_count(m);   /* the grids' */
         r.ok = st == GS_OK;
         if (!r.ok) snprintf(r.detail, sizeof r.detail, "%s: %s", gs_strerror(st), gs_detail());
         if (!r.maxrss_kib) r.maxrss_kib = peak_rss_kib();   /* (a capture row: its whole run) */
