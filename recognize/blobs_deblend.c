@@ -150,15 +150,15 @@ static gs_status add_light(rec_blob_state *s, unsigned flags, int *index)
 static gs_status component_lists(const rec_blob_state *s, int **start_out, int **pix_out)
 {
     int *start = calloc((size_t)s->ncomp + 2, sizeof *start);
-    int *pix = malloc(sizeof(int) * (s->N ? s->N : 1));
-    if (!start || !pix) {
-        free(start);
-        free(pix);
-        return gs_fail(GS_ENOMEM, "blobs: cannot list the components' pixels");
-    }
+    if (!start) return gs_fail(GS_ENOMEM, "blobs: cannot list the components' pixels");
     for (size_t p = 0; p < s->N; p++)
         if (s->comp[p]) start[s->comp[p] + 1]++;
     for (int l = 1; l <= s->ncomp + 1; l++) start[l] += start[l - 1];
+    int *pix = malloc(sizeof(int) * (start[s->ncomp + 1] ? (size_t)start[s->ncomp + 1] : 1));
+    if (!pix) {
+        free(start);
+        return gs_fail(GS_ENOMEM, "blobs: cannot list the components' pixels");
+    }
     int *fill = malloc(sizeof(int) * ((size_t)s->ncomp + 1));
     if (!fill) {
         free(start);

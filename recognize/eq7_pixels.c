@@ -731,8 +731,12 @@ static void pix_block(const rec_matcher *m, pix_work *pw, const float *x, const 
     if (m->fs_on) {
         rec_eq7_pixscreen(m, &pw->fs, xs, ns, noise_sigma, pw->rows, pw->sc, pw->keep);
     } else {
-        cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)ns, (int)Mp, (int)D, 1.0f, xs,
-                    (int)D, m->tn, (int)D, 0.0f, pw->sc, (int)Mp);
+        if (m->tn)
+            cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)ns, (int)Mp, (int)D, 1.0f, xs,
+                        (int)D, m->tn, (int)D, 0.0f, pw->sc, (int)Mp);
+        else   /* a screen's matcher with the screen off (the tests): its transposed templates */
+            cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, (int)ns, (int)Mp, (int)D, 1.0f, xs,
+                        (int)D, m->fs_tt, (int)m->fs_ldt, 0.0f, pw->sc, (int)Mp);
         memset(pw->keep, 1, ns);
     }
     size_t all[2] = {0, Mp};
@@ -776,7 +780,15 @@ gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *no
     if (!m || (P > 0 && (!x || !noise_sigma || !bulb)))
         return gs_fail(GS_EINVAL, "Eq. 7 pixels: matcher, x, noise_sigma and bulb must not be NULL");
     if (P == 0) return GS_OK;
-    size_t B = P < PIX_BLOCK ? P : PIX_BLOCK, nblk = (P + B - 1) / B;
+    /* PIX_BLOCK rows a block, fewer (down to 64: the band path's SGEMMs want rows) where the
+     * scores of all templates would pass PIX_BLOCK_BYTES (a continuous DELIGHT: 10,400 a row at
+     * K = 26, three times that per band; the rows are independent, so the answers do not depend
+     * on B) */
+    size_t row_bytes = sizeof(float) * m->Mp * (m->bandpath ? (size_t)m->bands : 1);
+    size_t B = PIX_BLOCK_BYTES / row_bytes;
+    B = B > PIX_BLOCK ? PIX_BLOCK : B < 64 ? 64 : B;
+    B = P < B ? P : B;
+    size_t nblk = (P + B - 1) / B;
     int threads = gs_threads_resolve(m->o.threads);
     if ((size_t)threads > nblk) threads = (int)nblk;
     pix_job j = {m, x, noise_sigma, P, B, bulb, phase_deg, confidence, calloc((size_t)threads, sizeof *j.pw)};

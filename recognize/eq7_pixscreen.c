@@ -64,6 +64,8 @@ gs_status rec_eq7_pixscreen_setup(rec_matcher *m)
     if (!m->fs_tt) return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate the pixel Fourier screen");
     for (size_t j = 0; j < m->M; j++)
         for (size_t d = 0; d < (size_t)m->D; d++) m->fs_tt[d * m->fs_ldt + j] = m->tn[j * (size_t)m->D + d];
+    free(m->tn);   /* (the transposed copy serves the tests' SGEMM too: rec_match_pixels) */
+    m->tn = NULL;
     m->fs_on = REC_FS_ON;
     return GS_OK;
 }

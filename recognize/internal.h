@@ -125,6 +125,7 @@ static inline double rec_pix_float_err(double Sxx)
 }
 #define PHASE_WINDOW 0.16666666666666666  /* +-30 deg of phase = +-1/6 cycle of shift */
 #define PIX_BLOCK 512    /* rows per SGEMM block (its band scores stay in L2) */
+#define PIX_BLOCK_BYTES (4u << 20)   /* at most, for a block's float scores (continuous grids) */
 #define PIX_PREFILTER_REST 7   /* blocks without the prefilter after one it hardly filtered */
 #define SUMS_ROWS 8       /* the light path's sums: lights and templates of one tile (eq7_sums.c) */
 #define SUMS_COLS 16
@@ -167,7 +168,8 @@ struct rec_matcher {
     double *t;                          /* [M * D] templates */
     double *tsq;                        /* [M * D] squared templates */
     size_t Mp;                          /* M rounded up to a multiple of LANES */
-    float *tn;                          /* [Mp * D] templates / |t| (pixels), zero padded */
+    float *tn;                          /* [Mp * D] templates / |t| (pixels), zero padded; NULL
+                                         * behind the Fourier screen (fs_tt holds them) */
     float *lnf;                         /* [Mp] log |t| as float, 1e30 for padding */
     double *tnd;                        /* [M * D] templates / |t| in double */
     int pr;                             /* prefilter dimension R (0: no prefilter) */

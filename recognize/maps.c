@@ -14,7 +14,7 @@
 
 #define BG_BOX 64            /* background mesh box side, pixels (SExtractor's default) */
 #define BG_SAMPLES 256       /* at most this many pixels per box enter its median */
-#define MAP_BLOCK 16384      /* mapped pixels per rec_match_pixels call */
+#define MAP_BLOCK 4096       /* mapped pixels per rec_match_pixels call */
 #define PASS1_TILE 4096      /* pixels whose sums stay in cache while the frames stream by */
 #define MAP_TARGET_PX 640    /* the map is scaled up to about this many pixels on its long side */
 #define MAP_MAX_SCALE 16
@@ -187,11 +187,9 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
     pm->brightness = calloc(np, sizeof *pm->brightness);
     pm->snr = calloc(np, sizeof *pm->snr);
     double *inv_cycles = malloc(sizeof *inv_cycles * (size_t)K);
-    double *var_sum = calloc(np, sizeof *var_sum);
     if (!pm->state || !pm->bulb || !pm->phase_deg || !pm->confidence || !pm->brightness ||
-        !pm->snr || !inv_cycles || !var_sum) {
+        !pm->snr || !inv_cycles) {
         free(inv_cycles);
-        free(var_sum);
         rec_pixel_maps_release(pm);
         return gs_fail(GS_ENOMEM, "maps: cannot allocate maps of %dx%d pixels", W, H);
     }
@@ -202,22 +200,36 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
     st = mesh_build(cap, inv_cycles, &bg);
     if (st != GS_OK) {
         free(inv_cycles);
-        free(var_sum);
         rec_pixel_maps_release(pm);
         return st;
     }
 
-    /* pass 1: brightness B (sum over bands of the mean over k), its noise, saturation. Streams
-     * the raw samples once in memory order; the background is linear in its mesh nodes, so its
-     * contribution to B is one interpolation of the nodes summed over frames and bands. */
-    double *sum = calloc(np, sizeof *sum);
+    /* pass 1: brightness B (sum over bands of the mean over k), its noise, saturation, the SNR
+     * and the threshold. Streams the raw samples once in memory order, in tiles of pixels whose
+     * sums stay in cache while the K frames stream by; the background is linear in its mesh
+     * nodes, so its contribution to B is one interpolation of the nodes summed over frames and
+     * bands. Without HDR maps and shot noise every pixel has the same variance, and the black
+     * level comes off as one constant: the inner loop only adds integers. */
+    const gs_noise nz = gs_capture_noise(cap);
+    const double v0 = nz.read_var_dn2, inv_gain = nz.inv_gain, black = nz.black_dn;
+    const int fast = !cap->halvings && inv_gain == 0.0;
+    double csum = 0.0, c2sum = 0.0;
+    for (int k = 0; k < K; k++) {
+        csum += inv_cycles[k];
+        c2sum += inv_cycles[k] * inv_cycles[k];
+    }
+    const double var_fast = bands * v0 * c2sum;
+    /* the RMS noise of a sample of each pixel (only where it varies) */
+    float *px_sigma = fast ? NULL : malloc(sizeof *px_sigma * np);
     float *bg_mean = malloc(sizeof *bg_mean * (size_t)bg.g.nx * (size_t)bg.g.ny);
-    if (!sum || !bg_mean) {
-        free(sum);
+    double *sum = malloc(sizeof *sum * PASS1_TILE), *var = malloc(sizeof *var * PASS1_TILE);
+    if (!bg_mean || !sum || !var || (!fast && !px_sigma)) {
+        free(px_sigma);
         free(bg_mean);
+        free(sum);
+        free(var);
         mesh_free(&bg);
         free(inv_cycles);
-        free(var_sum);
         rec_pixel_maps_release(pm);
         return gs_fail(GS_ENOMEM, "maps: cannot allocate maps of %dx%d pixels", W, H);
     }
@@ -229,20 +241,12 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
             bg_mean[q] = (float)(acc / K);
         }
     }
-    const gs_noise nz = gs_capture_noise(cap);
-    const double v0 = nz.read_var_dn2, inv_gain = nz.inv_gain, black = nz.black_dn;
     const unsigned sat_dn = cap->saturation_dn > 65535.0 ? 65536u : (unsigned)ceil(cap->saturation_dn);
-    /* Without HDR maps and shot noise every pixel has the same variance, and the black level
-     * comes off as one constant: the inner loop only adds integers. Tiles of pixels keep the
-     * accumulators in cache while the K frames stream by. */
-    const int fast = !cap->halvings && inv_gain == 0.0;
-    double csum = 0.0, c2sum = 0.0;
-    for (int k = 0; k < K; k++) {
-        csum += inv_cycles[k];
-        c2sum += inv_cycles[k] * inv_cycles[k];
-    }
+    size_t mapped = 0, to_match = 0;
     for (size_t p0 = 0; p0 < np; p0 += PASS1_TILE) {
         size_t n = np - p0 < PASS1_TILE ? np - p0 : PASS1_TILE;
+        memset(sum, 0, sizeof *sum * n);
+        memset(var, 0, sizeof *var * n);
         for (int k = 0; k < K; k++) {
             const unsigned short *rk = cap->raw + ((size_t)k * np + p0) * (size_t)bands;
             const double c = inv_cycles[k];
@@ -254,7 +258,7 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
                         acc += r;
                         mx = r > mx ? r : mx;
                     }
-                    sum[p0 + i] += c * (double)acc;
+                    sum[i] += c * (double)acc;
                     if (mx >= sat_dn) pm->state[p0 + i] = REC_PIX_SATURATED;
                 }
                 continue;
@@ -272,46 +276,51 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
                     if (e > 0.0) e_pos += e;
                 }
                 if (mx >= sat_dn) pm->state[p0 + i] = REC_PIX_SATURATED;
-                sum[p0 + i] += e_sum * ci;
-                var_sum[p0 + i] += (bands * v0 + e_pos * inv_gain) * ci * ci;
+                sum[i] += e_sum * ci;
+                var[i] += (bands * v0 + e_pos * inv_gain) * ci * ci;
+            }
+        }
+        for (size_t i = 0; i < n; i++) {
+            size_t p = p0 + i;
+            int x = (int)(p % (size_t)W), y = (int)(p / (size_t)W);
+            if (fast) sum[i] -= bands * black * csum;
+            /* the background of the summed nodes */
+            pm->brightness[p] = (float)(sum[i] / K - rec_mesh_at_f(&bg.g, bg_mean, x, y));
+            double v = fast ? var_fast : var[i];
+            if (px_sigma) px_sigma[p] = (float)sqrt(v / (double)D);
+            if (pm->state[p] == REC_PIX_SATURATED) {
+                mapped++;
+                continue;
+            }
+            double sd = sqrt(v) / K;
+            pm->snr[p] = sd > 0.0 ? (float)(pm->brightness[p] / sd) : 0.0f;
+            if (pm->snr[p] > o->threshold_sigma) {
+                pm->state[p] = REC_PIX_NO_ANSWER;   /* until matched */
+                mapped++;
+                to_match++;
             }
         }
     }
-    if (fast)
-        for (size_t p = 0; p < np; p++) {
-            sum[p] -= bands * black * csum;
-            var_sum[p] = bands * v0 * c2sum;
-        }
-    for (int y = 0; y < H; y++)
-        for (int x = 0; x < W; x++) {
-            size_t p = (size_t)y * (size_t)W + (size_t)x;
-            /* the background of the summed nodes */
-            pm->brightness[p] = (float)(sum[p] / K - rec_mesh_at_f(&bg.g, bg_mean, x, y));
-        }
     free(sum);
+    free(var);
     free(bg_mean);
-    size_t mapped = 0;
-    for (size_t p = 0; p < np; p++) {
-        if (pm->state[p] == REC_PIX_SATURATED) {
-            mapped++;
-            continue;
-        }
-        double sd = sqrt(var_sum[p]) / K;
-        pm->snr[p] = sd > 0.0 ? (float)(pm->brightness[p] / sd) : 0.0f;
-        if (pm->snr[p] > o->threshold_sigma) {
-            pm->state[p] = REC_PIX_NO_ANSWER;   /* until matched */
-            mapped++;
-        }
-    }
     pm->mapped = mapped;
+    /* the noise of each pixel to match, in the order pass 2 takes them */
+    float *row_sigma = malloc(sizeof *row_sigma * (to_match ? to_match : 1));
+    if (!row_sigma) st = gs_fail(GS_ENOMEM, "maps: cannot allocate the noise of %zu pixels", to_match);
+    const float sigma_fast = (float)sqrt(var_fast / (double)D);
+    for (size_t p = 0, r = 0; p < np && row_sigma; p++)
+        if (pm->state[p] == REC_PIX_NO_ANSWER) row_sigma[r++] = px_sigma ? px_sigma[p] : sigma_fast;
+    free(px_sigma);
 
     /* pass 2: Eq. 7 on the mapped, unsaturated pixels, in blocks */
     size_t cap_rows = MAP_BLOCK;
     size_t *idx = malloc(sizeof *idx * cap_rows);
-    float *xb = malloc(sizeof *xb * cap_rows * D), *sg = malloc(sizeof *sg * cap_rows);
+    float *xb = malloc(sizeof *xb * cap_rows * D);
     float *ph = malloc(sizeof *ph * cap_rows), *cf = malloc(sizeof *cf * cap_rows);
     int *bb = malloc(sizeof *bb * cap_rows);
-    if (!idx || !xb || !sg || !ph || !cf || !bb) st = gs_fail(GS_ENOMEM, "maps: cannot allocate a block of %zu pixels", cap_rows);
+    if (st == GS_OK && (!idx || !xb || !ph || !cf || !bb))
+        st = gs_fail(GS_ENOMEM, "maps: cannot allocate a block of %zu pixels", cap_rows);
     size_t done = 0, p = 0;
     while (st == GS_OK) {
         size_t n = 0;
@@ -327,9 +336,8 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
                     xb[r * D + (size_t)band * (size_t)K + (size_t)k] =
                         (float)(v - mesh_at(&bg, (size_t)k * (size_t)bands + (size_t)band, x, y));
                 }
-            sg[r] = (float)sqrt(var_sum[q] / (double)D);   /* RMS noise of the row's samples */
         }
-        st = rec_match_pixels(m, xb, sg, n, bb, ph, cf);
+        st = rec_match_pixels(m, xb, row_sigma + done, n, bb, ph, cf);
         for (size_t r = 0; r < n && st == GS_OK; r++) {
             size_t q = idx[r];
             if (bb[r] < 0) continue;
@@ -344,13 +352,12 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
     }
     free(idx);
     free(xb);
-    free(sg);
+    free(row_sigma);
     free(ph);
     free(cf);
     free(bb);
     mesh_free(&bg);
     free(inv_cycles);
-    free(var_sum);
     if (st != GS_OK) rec_pixel_maps_release(pm);
     return st;
 }

@@ -196,18 +196,36 @@ typedef struct {
     double sgemm_rate;             /* pixels/s of the SGEMM alone (scores of every template) */
     size_t mapped, matched;        /* capture row: pixels above the threshold, with a bulb */
     double blob_seconds;           /* capture row: rec_blobs_extract */
+    long blob_maxrss_kib;          /* (its peak from the resident set before it; -1: not apart) */
     size_t blobs;                  /* capture row: lights it found */
     double lit_correct;            /* lit rows with the true bulb and phase (fast path) */
     double numpy_rate, numpy_agree;   /* the NumPy search: pixels/s, rows answered as here */
     long maxrss_kib;
 } result;
 
-/* The process's peak resident set so far, KiB. */
+/* The process's peak resident set so far, KiB: VmHWM, which peak_rss_reset can lower
+ * (getrusage's ru_maxrss where /proc is not there). */
 static long peak_rss_kib(void)
 {
+    long kib = -1;
+    char line[256];
+    FILE *f = fopen("/proc/self/status", "r");
+    while (f && kib < 0 && fgets(line, sizeof line, f))
+        if (!strncmp(line, "VmHWM:", 6)) kib = atol(line + 6);
+    if (f) fclose(f);
+    if (kib >= 0) return kib;
     struct rusage ru;
     getrusage(RUSAGE_SELF, &ru);
     return ru.ru_maxrss;
+}
+
+/* Lower the peak to the resident set now (Linux: clear_refs 5); 0 if it cannot. */
+static int peak_rss_reset(void)
+{
+    FILE *f = fopen("/proc/self/clear_refs", "w");
+    if (!f) return 0;
+    int ok = fputs("5", f) >= 0;
+    return fclose(f) == 0 && ok;
 }
 
 /* The continuous matcher's grid of shifts per cycle (its templates per bulb: every bulb here is
@@ -572,6 +590,8 @@ static gs_status run_capture(const config *c, rec_matcher *m, result *res)
                     }
                 }
         }
+        free(pool);   /* (before the timed runs: not in their peak) */
+        pool = NULL;
         res->seconds = INFINITY;
         for (int rep = 0; rep < REPS && st == GS_OK; rep++) {
             rec_pixel_maps pm;
@@ -583,9 +603,11 @@ static gs_status run_capture(const config *c, rec_matcher *m, result *res)
             rec_pixel_maps_release(&pm);
         }
         res->rate = (double)np / res->seconds;
+        res->maxrss_kib = peak_rss_kib();   /* (the maps', as recognize --maps runs them) */
         res->templates = r.M;
         /* the same capture through the blob extractor (the per-light path's first stage) */
         res->blob_seconds = INFINITY;
+        res->blob_maxrss_kib = peak_rss_reset() ? 0 : -1;
         for (int rep = 0; rep < REPS && st == GS_OK; rep++) {
             rec_blob_opts bo;
             rec_blob_opts_default(&bo);
@@ -596,6 +618,7 @@ static gs_status run_capture(const config *c, rec_matcher *m, result *res)
             res->blobs = cat.count;
             rec_catalog_release(&cat);
         }
+        if (res->blob_maxrss_kib == 0) res->blob_maxrss_kib = peak_rss_kib();
     }
     ref_free(&r);
     free(pool);
@@ -634,7 +657,6 @@ static void run_config(const gs_delight *all, const config *c, result *res)
         if (c->continuous && st == GS_OK) r.templates = rec_matcher_template_count(m);   /* the grids' */
         r.ok = st == GS_OK;
         if (!r.ok) snprintf(r.detail, sizeof r.detail, "%s: %s", gs_strerror(st), gs_detail());
-        if (!r.maxrss_kib) r.maxrss_kib = peak_rss_kib();   /* (a capture row: its whole run) */
         rec_matcher_free(m);
         gs_delight_free(d);
         ssize_t wr = write(fd[1], &r, sizeof r);
@@ -733,17 +755,19 @@ static void capture_row(const gs_delight *all, const config *c, int *failed)
     result r;
     run_config(all, c, &r);
     if (!r.ok) {
-        printf("| %dx%d%s | %zu | failed: %s | | | | | | |\n", c->side, c->side, c->continuous ? " (continuous)" : "",
+        printf("| %dx%d%s | %zu | failed: %s | | | | | | | |\n", c->side, c->side, c->continuous ? " (continuous)" : "",
                c->lights, r.detail);
         (*failed)++;
         return;
     }
     double np = (double)c->side * c->side;
     double stack_mib = np * c->K * c->bands * 2.0 / (1024.0 * 1024.0);   /* 16-bit raw frames */
-    printf("| %dx%d%s | %zu | %zu (%.1f %%) | %zu | %.3f | **%.2f** | %.3f | %zu | %.0f | %.0f | %.2f |\n", c->side,
+    char blob_rss[32] = "-";
+    if (r.blob_maxrss_kib > 0) snprintf(blob_rss, sizeof blob_rss, "%.0f", r.blob_maxrss_kib / 1024.0);
+    printf("| %dx%d%s | %zu | %zu (%.1f %%) | %zu | %.3f | **%.2f** | %.0f | %.0f | %.2f | %.3f | %zu | %s |\n", c->side,
            c->side, c->continuous ? " (continuous)" : "", c->lights, r.mapped, 100.0 * (double)r.mapped / np, r.matched, r.seconds,
-           r.rate / 1e6, r.blob_seconds, r.blobs, r.maxrss_kib / 1024.0, stack_mib,
-           r.maxrss_kib / 1024.0 / stack_mib);
+           r.rate / 1e6, r.maxrss_kib / 1024.0, stack_mib, r.maxrss_kib / 1024.0 / stack_mib, r.blob_seconds, r.blobs,
+           blob_rss);
     fflush(stdout);
 }
 
@@ -879,13 +903,16 @@ captures:
            "Gaussian lights (PSF sigma 1.3 px) of random templates over a sky with read noise; "
            "the maps compute a background mesh, threshold every pixel at 5 sigma and run "
            "rec_match_pixels on the pixels above it only. Mpixel/s counts every pixel of the "
-           "capture. *blobs*: the same capture through rec_blobs_extract (default options), the "
-           "first stage of the per-light path, and the lights it found. *frame stack*: the capture's "
-           "16-bit raw frames (side^2 x K x bands x 2 bytes); peak RSS includes them, the rendering "
-           "and both passes.\n\n");
+           "capture. *frame stack*: the capture's 16-bit raw frames (side^2 x K x bands x 2 bytes); "
+           "*peak RSS*: the process's (VmHWM) after the maps' timed runs, as `recognize --maps` "
+           "runs them: the frame stack, the matcher and both passes. *blobs*: the same capture "
+           "through rec_blobs_extract (default options), the first stage of the per-light path, "
+           "the lights it found and its own peak (the high-water mark lowered to the resident "
+           "set before it: /proc/self/clear_refs; the frame stack and the row's matcher stay "
+           "resident).\n\n");
     printf("| capture | lights | pixels above threshold | with a bulb | seconds | capture Mpixel/s | "
-           "blobs seconds | blobs found | peak RSS MiB | frame stack MiB | peak / stack |\n"
-           "|---|---|---|---|---|---|---|---|---|---|---|\n");
+           "peak RSS MiB | frame stack MiB | peak / stack | blobs seconds | blobs found | blobs peak RSS MiB |\n"
+           "|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     static const size_t nlights[] = {200, 2000, 20000};
     for (size_t li = 0; li < 3; li++) {
         if (quick && li == 2) continue;
