@@ -7,7 +7,7 @@
  *   bench db ...               the survey database (survey/bench_db.c).
  *   bench pg ...               SQLite vs the shared PostGIS database (survey/bench_pg.c).
  * One core: OpenBLAS runs single-threaded (openblas_set_num_threads(1)). Each configuration runs
- * in a child process so that its getrusage ru_maxrss is its own peak. */
+ * in a child process so that its peak resident set (VmHWM) is its own. */
 #include "survey/internal.h"
 
 #include <cblas.h>
@@ -842,7 +842,7 @@ static int bench_recognize(int argc, char **argv)
            "double precision) of the same search written in survey/bench.c, independent of "
            "recognize/eq7_*.c, timed on the first min(rows, %d) rows; *agree* is the fraction of "
            "those rows where both give the same answer (bulb and phase, or no answer). Peak RSS is "
-           "getrusage ru_maxrss of the process running that row, read after the timed runs (inputs "
+           "the peak resident set (VmHWM) of the process running that row, read after the timed runs (inputs "
            "included: 4 bytes x values x pixels; the continuous rows' grid reference and the SGEMM's "
            "scores come after). Times are the best of %d runs. *SGEMM only* times the score matrix alone (rows x templates, one "
            "cblas_sgemm per 4096 rows, no decision): the floor of a matrix-product "
