@@ -781,9 +781,9 @@ gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *no
         return gs_fail(GS_EINVAL, "Eq. 7 pixels: matcher, x, noise_sigma and bulb must not be NULL");
     if (P == 0) return GS_OK;
     /* PIX_BLOCK rows a block, fewer (down to 64: the band path's SGEMMs want rows) where the
-     * scores of all templates would pass PIX_BLOCK_BYTES (a continuous DELIGHT: 10,400 a row at
-     * K = 26, three times that per band; the rows are independent, so the answers do not depend
-     * on B) */
+     * scores of all templates would pass PIX_BLOCK_BYTES (a continuous DELIGHT: 10,400 a row
+     * at K = 26, three times that with per-band scores; the rows are independent, so the
+     * answers do not depend on B) */
     size_t row_bytes = sizeof(float) * m->Mp * (m->bandpath ? (size_t)m->bands : 1);
     size_t B = PIX_BLOCK_BYTES / row_bytes;
     B = B > PIX_BLOCK ? PIX_BLOCK : B < 64 ? 64 : B;

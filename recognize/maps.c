@@ -53,6 +53,12 @@ int rec_map_scale(int width, int height)
 
 /* Sample (k, y, x, band) of the capture as per-cycle DN (docs/formats.md), NaN when saturated.
  * Reads cap->raw directly (the hot loop). */
+/* The RMS noise of one of a pixel's D samples, from the variance of its brightness sum. */
+static inline float row_noise(double var_sum, size_t D)
+{
+    return (float)sqrt(var_sum / (double)D);
+}
+
 static inline double sample_value(const gs_capture *cap, const double *inv_cycles, size_t k,
                                   size_t pix, int band)
 {
@@ -219,12 +225,13 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
         c2sum += inv_cycles[k] * inv_cycles[k];
     }
     const double var_fast = bands * v0 * c2sum;
-    /* the RMS noise of a sample of each pixel (only where it varies) */
-    float *px_sigma = fast ? NULL : malloc(sizeof *px_sigma * np);
+    /* the RMS noise of a sample of each pixel to match, in the order pass 2 takes them (where
+     * it varies; else one value) */
+    float *row_sigma = fast ? NULL : malloc(sizeof *row_sigma * np);
     float *bg_mean = malloc(sizeof *bg_mean * (size_t)bg.g.nx * (size_t)bg.g.ny);
-    double *sum = malloc(sizeof *sum * PASS1_TILE), *var = malloc(sizeof *var * PASS1_TILE);
-    if (!bg_mean || !sum || !var || (!fast && !px_sigma)) {
-        free(px_sigma);
+    double *sum = malloc(sizeof *sum * PASS1_TILE), *var = fast ? NULL : malloc(sizeof *var * PASS1_TILE);
+    if (!bg_mean || !sum || (!fast && (!var || !row_sigma))) {
+        free(row_sigma);
         free(bg_mean);
         free(sum);
         free(var);
@@ -246,7 +253,7 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
     for (size_t p0 = 0; p0 < np; p0 += PASS1_TILE) {
         size_t n = np - p0 < PASS1_TILE ? np - p0 : PASS1_TILE;
         memset(sum, 0, sizeof *sum * n);
-        memset(var, 0, sizeof *var * n);
+        if (var) memset(var, 0, sizeof *var * n);
         for (int k = 0; k < K; k++) {
             const unsigned short *rk = cap->raw + ((size_t)k * np + p0) * (size_t)bands;
             const double c = inv_cycles[k];
@@ -287,7 +294,6 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
             /* the background of the summed nodes */
             pm->brightness[p] = (float)(sum[i] / K - rec_mesh_at_f(&bg.g, bg_mean, x, y));
             double v = fast ? var_fast : var[i];
-            if (px_sigma) px_sigma[p] = (float)sqrt(v / (double)D);
             if (pm->state[p] == REC_PIX_SATURATED) {
                 mapped++;
                 continue;
@@ -297,6 +303,7 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
             if (pm->snr[p] > o->threshold_sigma) {
                 pm->state[p] = REC_PIX_NO_ANSWER;   /* until matched */
                 mapped++;
+                if (row_sigma) row_sigma[to_match] = row_noise(v, D);
                 to_match++;
             }
         }
@@ -305,22 +312,21 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
     free(var);
     free(bg_mean);
     pm->mapped = mapped;
-    /* the noise of each pixel to match, in the order pass 2 takes them */
-    float *row_sigma = malloc(sizeof *row_sigma * (to_match ? to_match : 1));
-    if (!row_sigma) st = gs_fail(GS_ENOMEM, "maps: cannot allocate the noise of %zu pixels", to_match);
-    const float sigma_fast = (float)sqrt(var_fast / (double)D);
-    for (size_t p = 0, r = 0; p < np && row_sigma; p++)
-        if (pm->state[p] == REC_PIX_NO_ANSWER) row_sigma[r++] = px_sigma ? px_sigma[p] : sigma_fast;
-    free(px_sigma);
+    if (row_sigma && to_match) {   /* (the rest goes back before the matcher's blocks come) */
+        float *shrunk = realloc(row_sigma, sizeof *row_sigma * to_match);
+        if (shrunk) row_sigma = shrunk;
+    }
 
     /* pass 2: Eq. 7 on the mapped, unsaturated pixels, in blocks */
     size_t cap_rows = MAP_BLOCK;
     size_t *idx = malloc(sizeof *idx * cap_rows);
     float *xb = malloc(sizeof *xb * cap_rows * D);
     float *ph = malloc(sizeof *ph * cap_rows), *cf = malloc(sizeof *cf * cap_rows);
+    float *sg = row_sigma ? NULL : malloc(sizeof *sg * cap_rows);   /* (every pixel's) */
     int *bb = malloc(sizeof *bb * cap_rows);
-    if (st == GS_OK && (!idx || !xb || !ph || !cf || !bb))
+    if (!idx || !xb || !ph || !cf || !bb || (!row_sigma && !sg))
         st = gs_fail(GS_ENOMEM, "maps: cannot allocate a block of %zu pixels", cap_rows);
+    for (size_t r = 0; sg && r < cap_rows; r++) sg[r] = row_noise(var_fast, D);
     size_t done = 0, p = 0;
     while (st == GS_OK) {
         size_t n = 0;
@@ -337,7 +343,7 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
                         (float)(v - mesh_at(&bg, (size_t)k * (size_t)bands + (size_t)band, x, y));
                 }
         }
-        st = rec_match_pixels(m, xb, row_sigma + done, n, bb, ph, cf);
+        st = rec_match_pixels(m, xb, row_sigma ? row_sigma + done : sg, n, bb, ph, cf);
         for (size_t r = 0; r < n && st == GS_OK; r++) {
             size_t q = idx[r];
             if (bb[r] < 0) continue;
@@ -353,6 +359,7 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
     free(idx);
     free(xb);
     free(row_sigma);
+    free(sg);
     free(ph);
     free(cf);
     free(bb);

@@ -345,7 +345,7 @@ const char *rec_noise_source_name(rec_noise_source s);
 gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_match *out,
                             rec_noise_report *noise);
 
-/* Eq. 7 per pixel, as matrix products (OpenBLAS SGEMMs per block of 512 rows; a rigorous
+/* Eq. 7 per pixel, as matrix products (OpenBLAS SGEMMs per block of rows; a rigorous
  * prefilter first sets aside rows that are dim for every template, where it finds some): x holds P rows of
  * bands * K values, noise_sigma one std per row (uniform over the row; the model error adds per
  * band, as for one light). With band gains or a model error (3 bands) the scores are per band:
@@ -357,7 +357,8 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
  * rows with a non-finite value or a sigma that is not finite and > 0, and for dim (min_snr) or
  * unknown (unknown_p at dof = bands * K - 2, with band gains bands * K - bands - 1) rows.
  * phase_deg and confidence may be NULL. The blocks go over rec_eq7_opts.threads threads (the
- * same answers on any number; each thread holds a block of 512 rows x templates float scores).
+ * same answers on any number; each thread holds a block of float scores: 512 rows x the
+ * templates, fewer rows (down to 64) where that would pass 4 MiB, as with continuous phases).
  * docs/recognition.md gives the throughput (one core: ~3-5 Mpixel/s for 1 Mpixel RGB K = 26
  * with three phases when most pixels are dark). */
 gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *noise_sigma,
@@ -378,7 +379,7 @@ gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *no
  * capture's noise model (docs/formats.md), per sample. A pixel is mapped when B exceeds
  * threshold_sigma times the std of B; a pixel with a saturated sample in any frame or band is
  * REC_PIX_SATURATED and not matched (Eq. 17). Mapped pixels go through rec_match_pixels (Eq. 7
- * as SGEMM blocks, 16384 pixels per call) with one noise std per pixel, the RMS over its samples
+ * as SGEMM blocks, 4096 pixels per call) with one noise std per pixel, the RMS over its samples
  * (exact when the read noise dominates). Cost: one pass over the samples (integer sums when the
  * capture has no HDR maps and no shot-noise gain), the mesh medians, and rec_match_pixels on the
  * mapped pixels only: a 1024 x 1024, K = 26, RGB capture with 5 % of its pixels lit takes about
@@ -422,8 +423,9 @@ typedef struct {
  * options m was built with (NULL = defaults): the maps keep its phase set and ambiguous_conf for
  * drawing. o NULL = defaults. *pm is overwritten (not freed); on failure it is zeroed.
  * GS_EINVAL for a capture that breaks docs/formats.md, a matcher of other bands, or a bad
- * threshold; GS_ENOMEM. Memory besides the capture: 21 bytes per pixel kept, 16 more while it
- * runs, and a block of 16384 x bands x K floats. */
+ * threshold; GS_ENOMEM. Memory besides the capture and the matcher: 21 bytes per pixel kept,
+ * with HDR maps or shot noise 4 more while it runs, 4 per pixel to match, a block of 4096 x bands
+ * x K floats and rec_match_pixels' scores. */
 gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
                                  const rec_eq7_opts *eq7, const rec_map_opts *o,
                                  rec_pixel_maps *pm);

@@ -593,6 +593,7 @@ static gs_status run_capture(const config *c, rec_matcher *m, result *res)
         free(pool);   /* (before the timed runs: not in their peak) */
         pool = NULL;
         res->seconds = INFINITY;
+        peak_rss_reset();   /* (the maps' peak from what is resident now: the frames, the matcher) */
         for (int rep = 0; rep < REPS && st == GS_OK; rep++) {
             rec_pixel_maps pm;
             double t0 = gs_clock_s(CLOCK_MONOTONIC);
@@ -755,7 +756,7 @@ static void capture_row(const gs_delight *all, const config *c, int *failed)
     result r;
     run_config(all, c, &r);
     if (!r.ok) {
-        printf("| %dx%d%s | %zu | failed: %s | | | | | | | |\n", c->side, c->side, c->continuous ? " (continuous)" : "",
+        printf("| %dx%d%s | %zu | failed: %s | | | | | | | | | |\n", c->side, c->side, c->continuous ? " (continuous)" : "",
                c->lights, r.detail);
         (*failed)++;
         return;
