@@ -29,11 +29,7 @@
 #define KERNEL_DECADES 1.0
 /* A light whose kernel weights amount to fewer than this many lights uses the global median. */
 #define NOISE_MIN_EFFECTIVE 3.0
-/* The lights' kernel medians take at most this many references (every k-th by excess: a sample
- * stratified in e2), so that their cost stays linear in the lights (with every pair, 6 of the
- * 14 s of 32,000 lights). Not fewer: a sample of a third of the demo's ~5,000 references left
- * 13 more of its lights unknown (a noisier excess). */
-#define NOISE_MAX_REFS 8192
+/* (The lights' kernel medians take at most NOISE_MAX_REFS references: internal.h.) */
 
 typedef struct {
     const rec_eq7_excess *ex;

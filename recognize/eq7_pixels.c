@@ -634,14 +634,19 @@ static void pixel_row_band(const rec_matcher *m, pix_work *pw, const float *xr, 
     if (conf_out) *conf_out = (float)dec.conf;
 }
 
+/* A row's float scores in a block: one per template, with band gains one per band. */
+static size_t pix_row_scores(const rec_matcher *m)
+{
+    return m->Mp * (m->bandpath ? (size_t)m->bands : 1);
+}
+
 /* A part's scratch for blocks of up to B rows. */
 static gs_status pix_alloc(const rec_matcher *m, size_t B, pix_work *pw)
 {
     size_t D = (size_t)m->D, Mp = m->Mp, R = (size_t)m->pr;
     gs_status st = rec_eq7_work_alloc(m, &pw->w);
     if (st != GS_OK) return st;
-    size_t nsc = m->bandpath ? (size_t)m->bands : 1;   /* score blocks: one per band */
-    pw->sc = malloc(sizeof *pw->sc * B * Mp * nsc);
+    pw->sc = malloc(sizeof *pw->sc * B * pix_row_scores(m));
     pw->xs = malloc(sizeof *pw->xs * B * D);
     pw->rows = malloc(sizeof *pw->rows * B);
     pw->y = malloc(sizeof *pw->y * B * (R ? R : 1));
@@ -784,8 +789,7 @@ gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *no
      * scores of all templates would pass PIX_BLOCK_BYTES (a continuous DELIGHT: 10,400 a row
      * at K = 26, three times that with per-band scores; the rows are independent, so the
      * answers do not depend on B) */
-    size_t row_bytes = sizeof(float) * m->Mp * (m->bandpath ? (size_t)m->bands : 1);
-    size_t B = PIX_BLOCK_BYTES / row_bytes;
+    size_t B = PIX_BLOCK_BYTES / (sizeof(float) * pix_row_scores(m));
     B = B > PIX_BLOCK ? PIX_BLOCK : B < 64 ? 64 : B;
     B = P < B ? P : B;
     size_t nblk = (P + B - 1) / B;

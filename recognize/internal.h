@@ -126,6 +126,11 @@ static inline double rec_pix_float_err(double Sxx)
 #define PHASE_WINDOW 0.16666666666666666  /* +-30 deg of phase = +-1/6 cycle of shift */
 #define PIX_BLOCK 512    /* rows per SGEMM block (its band scores stay in L2) */
 #define PIX_BLOCK_BYTES (4u << 20)   /* at most, for a block's float scores (continuous grids) */
+/* The lights' kernel medians of the excess take at most this many references (every k-th by
+ * excess: a sample stratified in e2; eq7_noise.c), so that their cost stays linear in the lights
+ * (with every pair, 6 of the 14 s of 32,000 lights). Not fewer: a sample of a third of the demo's
+ * ~5,000 references left 13 more of its lights unknown (a noisier excess). */
+#define NOISE_MAX_REFS 8192
 #define PIX_PREFILTER_REST 7   /* blocks without the prefilter after one it hardly filtered */
 #define SUMS_ROWS 8       /* the light path's sums: lights and templates of one tile (eq7_sums.c) */
 #define SUMS_COLS 16

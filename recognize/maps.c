@@ -51,14 +51,14 @@ int rec_map_scale(int width, int height)
 
 /* ------------------------------------------------------------ background mesh */
 
-/* Sample (k, y, x, band) of the capture as per-cycle DN (docs/formats.md), NaN when saturated.
- * Reads cap->raw directly (the hot loop). */
 /* The RMS noise of one of a pixel's D samples, from the variance of its brightness sum. */
 static inline float row_noise(double var_sum, size_t D)
 {
     return (float)sqrt(var_sum / (double)D);
 }
 
+/* Sample (k, y, x, band) of the capture as per-cycle DN (docs/formats.md), NaN when saturated.
+ * Reads cap->raw directly (the hot loop). */
 static inline double sample_value(const gs_capture *cap, const double *inv_cycles, size_t k,
                                   size_t pix, int band)
 {

@@ -424,8 +424,8 @@ typedef struct {
  * drawing. o NULL = defaults. *pm is overwritten (not freed); on failure it is zeroed.
  * GS_EINVAL for a capture that breaks docs/formats.md, a matcher of other bands, or a bad
  * threshold; GS_ENOMEM. Memory besides the capture and the matcher: 21 bytes per pixel kept,
- * with HDR maps or shot noise 4 more while it runs, 4 per pixel to match, a block of 4096 x bands
- * x K floats and rec_match_pixels' scores. */
+ * with HDR maps or shot noise 4 more while it runs (then 4 per pixel to match), a block of 4096 x
+ * bands x K floats and rec_match_pixels' scores. */
 gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
                                  const rec_eq7_opts *eq7, const rec_map_opts *o,
                                  rec_pixel_maps *pm);

@@ -196,7 +196,7 @@ typedef struct {
     double sgemm_rate;             /* pixels/s of the SGEMM alone (scores of every template) */
     size_t mapped, matched;        /* capture row: pixels above the threshold, with a bulb */
     double blob_seconds;           /* capture row: rec_blobs_extract */
-    long blob_maxrss_kib;          /* (its peak from the resident set before it; -1: not apart) */
+    long blob_maxrss_kib;          /* (its peak from the resident set before it; -1: cannot tell) */
     size_t blobs;                  /* capture row: lights it found */
     double lit_correct;            /* lit rows with the true bulb and phase (fast path) */
     double numpy_rate, numpy_agree;   /* the NumPy search: pixels/s, rows answered as here */
@@ -326,7 +326,7 @@ static gs_status run_numpy(const ref_templates *r, const float *x, size_t P, dou
         size_t same = 0;
         for (size_t p = 0; p < P; p++) {
             int b = ans[p] >= 0 ? r->bulb[ans[p]] : -1;
-            same += b == bulb[p] && (b < 0 || fabs(r->phase[ans[p]] - ph[p]) < 1e-3);
+            same += ref_agrees(r, b, b >= 0 ? r->phase[ans[p]] : 0.0, bulb[p], ph[p]);
         }
         res->numpy_rate = (double)P / sec;
         res->numpy_agree = (double)same / (double)P;
@@ -385,7 +385,7 @@ static gs_status run_pixels(const config *c, rec_matcher *m, result *res)
     if (st == GS_OK) {
         /* the floor of any matrix-product implementation: the scores alone (of every grid
          * template with continuous phases), one SGEMM per block of 4096 rows (512 of the
-         * continuous grids: the block of scores as rec_match_pixels's), no decision */
+         * continuous grids: 21 MB of scores), no decision */
         size_t B = c->continuous ? 512 : 4096, M = g->M;
         float *tf = malloc(sizeof *tf * M * D), *sc = malloc(sizeof *sc * B * M);
         if (tf && sc) {
@@ -593,7 +593,9 @@ static gs_status run_capture(const config *c, rec_matcher *m, result *res)
         free(pool);   /* (before the timed runs: not in their peak) */
         pool = NULL;
         res->seconds = INFINITY;
-        peak_rss_reset();   /* (the maps' peak from what is resident now: the frames, the matcher) */
+        /* the maps' peak from what is resident now (the frames, the matcher); without
+         * clear_refs the row's peak so far, the rendering's included */
+        peak_rss_reset();
         for (int rep = 0; rep < REPS && st == GS_OK; rep++) {
             rec_pixel_maps pm;
             double t0 = gs_clock_s(CLOCK_MONOTONIC);
@@ -608,7 +610,7 @@ static gs_status run_capture(const config *c, rec_matcher *m, result *res)
         res->templates = r.M;
         /* the same capture through the blob extractor (the per-light path's first stage) */
         res->blob_seconds = INFINITY;
-        res->blob_maxrss_kib = peak_rss_reset() ? 0 : -1;
+        int apart = peak_rss_reset();
         for (int rep = 0; rep < REPS && st == GS_OK; rep++) {
             rec_blob_opts bo;
             rec_blob_opts_default(&bo);
@@ -619,7 +621,7 @@ static gs_status run_capture(const config *c, rec_matcher *m, result *res)
             res->blobs = cat.count;
             rec_catalog_release(&cat);
         }
-        if (res->blob_maxrss_kib == 0) res->blob_maxrss_kib = peak_rss_kib();
+        res->blob_maxrss_kib = apart ? peak_rss_kib() : -1;
     }
     ref_free(&r);
     free(pool);
@@ -955,7 +957,7 @@ lights:
     printf("\n*continuous* rows search every phase (a grid of G = max(8K, 96) shifts per cycle, refined); "
            "their templates column counts those grid shifts. Their *reference* is the same triple "
            "loop over every template of that grid (the search before its refinement), their *SGEMM "
-           "only* the scores of every grid template (blocks of 512 rows, as rec_match_pixels'), and "
+           "only* the scores of every grid template (blocks of 512 rows), and "
            "*agree* counts the same bulb with the same shift within one grid cell (180/G deg; the "
            "refinement stays within a cell of the best one), or no answer from both. "
            "Per pixel they go through the Fourier screen (docs/recognition.md, \"Continuous phases: "
@@ -995,7 +997,7 @@ lights:
     if (nt > 1) {
         printf("\n## The paper's model on %d threads\n\n"
                "Rows of the tables above, now with rec_eq7_opts.threads = %d (rec_match_pixels: blocks of "
-               "512 rows taken in turn, OpenBLAS single-threaded; rec_match_catalog: lights in chunks; "
+               "rows taken in turn, OpenBLAS single-threaded; rec_match_catalog: lights in chunks; "
                "the answers are the same bits as on one thread: tests/test_eq7_pixels.c, "
                "test_eq7_model.c). Seconds are wall-clock time; *reference* and *SGEMM only* stay on one "
                "thread. Per light with continuous phases %d lights (%d above: two threads take the "

@@ -1,6 +1,7 @@
 /* test_eq7_model.c - Eq. 7's default model beyond the paper (recognize/eq7.c): one brightness
  * per band (extinction reddening) and a model error (scintillation), against the paper's single
  * brightness times Q_beta; a bulb not in the database stays unknown; pixels agree with lights. */
+#include "recognize/internal.h"
 #include "recognize/recognize.h"
 #include "tests/eq7_fixture.h"
 #include "tests/fixtures.h"
@@ -274,6 +275,7 @@ TEST(eq7_excess_follows_the_rows_over_many_lights)
     rec_noise_report nr;
     CHECK_OK(rec_match_catalog(m, &cat, r, &nr));
     CHECK(nr.source == REC_NOISE_POPULATION && nr.lights_used > n / 2);
+    CHECK_MSG(nr.lights_used > NOISE_MAX_REFS, "%zu references: the medians' sample not taken", nr.lights_used);
     size_t close = 0, checked = 0, top = 0, bottom = 0;
     double est[2] = {0.0, 0.0}, lim[2] = {0.0, 0.0};
     for (size_t i = 0; i < n; i += 20) {

@@ -224,8 +224,9 @@ TEST(eq7_pixels_prefilter_rest_same_answers_as_block_by_block)
 /* rec_match_pixels splits its blocks of rows over rec_eq7_opts.threads: 1, 2 and 3 threads give
  * every row the same bits (bulb, phase, confidence) for the paper's model with three phases (the
  * prefilter, resting after the bright runs on each thread), the survey's defaults (the band path)
- * and continuous phases (the Fourier screen); rows bright, dim, dark and broken, in runs of a
- * block and a half, and a last block shorter than the others. OpenBLAS's threads are as before
+ * and continuous phases (the Fourier screen); rows bright, dim, dark and broken, in runs of
+ * 1.5 PIX_BLOCK rows (a block and a half with three phases; continuous matchers' blocks are
+ * smaller, PIX_BLOCK_BYTES of scores), and a last block shorter than the others. OpenBLAS's threads are as before
  * each call (set to one within a call on several). */
 TEST(eq7_pixels_threads_bit_identical_to_one_thread)
 {
