@@ -233,6 +233,24 @@ gs_status srv_db_capture_done(srv_db *db, int64_t survey_id, const char *key, in
     return s == GS_ENOTFOUND ? GS_OK : s;
 }
 
+gs_status srv_db_capture_survey(srv_db *db, const char *key, int64_t *survey_id, char name[64])
+{
+    if (!db || !key || !survey_id || !name) return gs_fail(GS_EINVAL, "srv_db_capture_survey: NULL argument");
+    sqlite3_stmt *q;
+    gs_status s = srv_dbi_stmt(db, ST_FIND_CAPTURE, &q);
+    if (s != GS_OK) return s;
+    sqlite3_bind_text(q, 1, key, -1, SQLITE_STATIC);
+    int rc = sqlite3_step(q);
+    if (rc == SQLITE_ROW) {
+        *survey_id = sqlite3_column_int64(q, 0);
+        const unsigned char *t = sqlite3_column_text(q, 1);
+        snprintf(name, 64, "%s", t ? (const char *)t : "");
+    }
+    sqlite3_reset(q);
+    if (rc == SQLITE_DONE) return gs_fail(GS_ENOTFOUND, "%s: no capture %s", db->path, key);
+    return rc == SQLITE_ROW ? GS_OK : srv_dbi_fail(db, "looking up a capture's survey");
+}
+
 gs_status srv_db_insert_capture(srv_db *db, const srv_capture_row *r, size_t n_lights,
                                 size_t n_frames, size_t n_frequency, int64_t *id)
 {
