@@ -61,8 +61,13 @@ static gs_status truth_number(const gs_json *doc, json_t *o, const char *key, si
                            "a finite number or null", out);
 }
 
-/* The in-image lights of truth_path into *out (allocated); *total counts every light. */
-static gs_status read_truth(const char *path, ev_light **out, size_t *count, long *total)
+/* The capture's dimensions a truth file names, in the captures table's order. */
+static const char *const truth_dims[5] = {"grid_hz", "K", "bands", "width", "height"};
+
+/* The in-image lights of truth_path into *out (allocated); *total counts every light; dims the
+ * capture's dimensions (truth_dims, -1 when absent). */
+static gs_status read_truth(const char *path, ev_light **out, size_t *count, long *total,
+                            long long dims[5])
 {
     *out = NULL;
     *count = 0;
@@ -83,6 +88,9 @@ static gs_status read_truth(const char *path, ev_light **out, size_t *count, lon
         s = gs_json_fail(doc, GS_EFORMAT, "lights", "expected an array");
         goto done;
     }
+    for (int d = 0; d < 5; d++)
+        if ((s = gs_json_get_int(doc, root, "", truth_dims[d], 0, -1, 1, 1 << 30, NULL, &dims[d])) != GS_OK)
+            goto done;
     size_t total_n = json_array_size(arr);
     v = calloc(total_n ? total_n : 1, sizeof *v);
     if (!v) {
@@ -199,6 +207,32 @@ static gs_status find_capture(srv_db *db, const char *truth_path, const srv_eval
                        o->survey ? " in survey " : "", o->survey ? o->survey : "");
     return gs_fail(GS_ENOTFOUND, "%s: no capture%s%s to evaluate", srv_db_path(db),
                    o->survey ? " in survey " : "", o->survey ? o->survey : "");
+}
+
+/* The truth's dimensions against the capture's: a truth file of another capture is refused. */
+static gs_status check_dims(srv_db *db, const char *truth_path, const srv_eval_report *r,
+                            const long long dims[5])
+{
+    static const char sql[] = "SELECT grid_hz, K, bands, width_px, height_px FROM captures WHERE id = ?1";
+    sqlite3 *h = srv_db_sqlite(db);
+    sqlite3_stmt *q = NULL;
+    if (sqlite3_prepare_v2(h, sql, -1, &q, NULL) != SQLITE_OK)
+        return gs_fail(GS_ESQL, "%s: %s", srv_db_path(db), sqlite3_errmsg(h));
+    sqlite3_bind_int64(q, 1, r->capture_id);
+    gs_status s = GS_OK;
+    if (sqlite3_step(q) != SQLITE_ROW) {
+        s = gs_fail(GS_ESQL, "%s: %s", srv_db_path(db), sqlite3_errmsg(h));
+    } else {
+        for (int d = 0; d < 5 && s == GS_OK; d++) {
+            long long c = sqlite3_column_int64(q, d);
+            if (dims[d] >= 0 && dims[d] != c)
+                s = gs_fail(GS_EINVAL, "%s: %s %lld: expected %lld, the capture's (survey %s, key "
+                            "%.19s...): a truth file of another capture?", truth_path, truth_dims[d],
+                            dims[d], c, r->survey, r->capture_key);
+        }
+    }
+    sqlite3_finalize(q);
+    return s;
 }
 
 static gs_status read_stored(srv_db *db, int64_t capture_id, ev_light **out, size_t *count)
@@ -446,8 +480,10 @@ gs_status srv_evaluate(srv_db *db, const char *truth_path, const srv_eval_opts *
     ev_light *tr = NULL, *st = NULL;
     size_t nt = 0, ns = 0;
     double *err = NULL;
-    gs_status s = read_truth(truth_path, &tr, &nt, &r->truth_lights);
+    long long dims[5];
+    gs_status s = read_truth(truth_path, &tr, &nt, &r->truth_lights, dims);
     if (s == GS_OK) s = find_capture(db, truth_path, o, r);
+    if (s == GS_OK) s = check_dims(db, truth_path, r, dims);
     if (s == GS_OK) s = read_stored(db, r->capture_id, &st, &ns);
     if (s == GS_OK) s = match(st, ns, tr, nt, o->match_px, &r->matched);
     if (s == GS_OK && !(err = malloc((ns ? ns : 1) * sizeof *err)))

@@ -312,6 +312,16 @@ TEST(pipeline_lab_end_to_end_matches_truth)
     CHECK(json_integer_value(json_object_get(json_object_get(ev, "detection"), "count")) == 8);
     CHECK(json_integer_value(json_object_get(json_object_get(ev, "phase"), "count")) == 8);
     json_decref(ev);
+    /* a truth file of another capture (here: another width, in another directory, so the only
+     * capture is the candidate) is refused, naming the field */
+    json_t *tj = json_load_file(truth, 0, &err);
+    long long w = json_integer_value(json_object_get(tj, "width"));
+    CHECK(w > 0 && json_object_set_new(tj, "width", json_integer(w + 1)) == 0);
+    CHECK(mkdir(fx_tmp("other"), 0777) == 0 && json_dump_file(tj, fx_tmp("other/truth.json"), 0) == 0);
+    json_decref(tj);
+    rc = sh("%s evaluate --db %s --truth %s", test_bin(), db, fx_tmp("other/truth.json"));
+    CHECK_MSG(rc != 0 && strstr(out, "truth.json: width ") && strstr(out, "a truth file of another capture"),
+              "%d: %s", rc, out);
     /* another survey named on purpose stores it again (docs/pipeline.md: to redo a capture) */
     rc = sh("%s run %s --db %s --survey redo", test_bin(), cap, db);
     CHECK_MSG(rc == 0 && strstr(out, "stored as capture"), "--survey redo: %d: %s", rc, out);
