@@ -140,7 +140,7 @@ static gs_status draw_map(void *ctx, unsigned char *rgb)
     char lab[64];
     if (L >= 1000.0) snprintf(lab, sizeof lab, "%g km", L / 1000.0);
     else snprintf(lab, sizeof lab, "%g m", L);
-    plptex(x0 + 0.5 * L, y0 + 0.02 * span, 1.0, 0.0, 0.5, lab);
+    plptex(x0 + 0.5 * L, y0 + 0.035 * span, 1.0, 0.0, 0.5, lab);   /* (the text is centred on its y) */
 
     /* north arrow, top right */
     double ax = hx - 0.06 * span, ay0 = hy - 0.17 * span, ay1 = hy - 0.08 * span;
@@ -151,7 +151,7 @@ static gs_status draw_map(void *ctx, unsigned char *rgb)
     PLFLT hy3[3] = {ay1 - 0.03 * span, ay1 - 0.03 * span, ay1 + 0.005 * span};
     plfill(3, hx3, hy3);
     plschr(0, 1.3);
-    plptex(ax, ay1 + 0.02 * span, 1.0, 0.0, 0.5, "N");
+    plptex(ax, ay1 + 0.04 * span, 1.0, 0.0, 0.5, "N");
     plschr(0, 1.0);
 
     /* legend */
