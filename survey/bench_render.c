@@ -78,8 +78,7 @@ int srv_bench_render(int argc, char **argv)
                 return 2;
             }
         } else if (argv[i][0] == '-') {
-            fputs(render_usage, stderr);
-            return 2;
+            return srv_usage_error("bench render", "unknown option or missing value: '%s'", argv[i]);
         } else {
             path = argv[i];
         }

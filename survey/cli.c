@@ -8,10 +8,12 @@
 #include <getopt.h>
 #include <jansson.h>
 #include <plplot.h>
+#include <stdarg.h>
 #include <sndfile.h>
 #include <spng.h>
 #include <sqlite3.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <tiffio.h>
 
@@ -76,10 +78,24 @@ static int find_command(const char *name)
     return -1;
 }
 
+/* The memory budget from what (--max-memory or GS_MAX_MEMORY) and its text: 0, or 2 after a
+ * one-line usage error. */
+static int set_max_memory(const char *what, const char *text)
+{
+    size_t bytes;
+    if (gs_mem_parse(what, text, &bytes) != GS_OK) {
+        fprintf(stderr, "gridsurvey: %s (see gridsurvey --help)\n", gs_detail());
+        return 2;
+    }
+    gs_mem_budget_set(bytes);
+    return 0;
+}
+
 /* Take the global --max-memory SIZE (or --max-memory=SIZE) out of argv, wherever it is before
- * a "--". Returns 0, or 2 after a one-line usage error. */
+ * a "--"; without it, $GS_MAX_MEMORY when set. Returns 0, or 2 after a one-line usage error. */
 static int take_max_memory(int *argc, char **argv)
 {
+    int given = 0;
     for (int i = 1; i < *argc && strcmp(argv[i], "--"); i++) {
         const char *v = NULL;
         int used = 0;
@@ -95,17 +111,14 @@ static int take_max_memory(int *argc, char **argv)
             used = 1;
         }
         if (!used) continue;
-        size_t bytes;
-        if (gs_mem_parse(v, &bytes) != GS_OK) {
-            fprintf(stderr, "gridsurvey: %s (see gridsurvey --help)\n", gs_detail());
-            return 2;
-        }
-        gs_mem_budget_set(bytes);
+        if (set_max_memory("--max-memory", v)) return 2;
+        given = 1;
         for (int j = i; j + used <= *argc; j++) argv[j] = argv[j + used];   /* with the NULL */
         *argc -= used;
         i--;
     }
-    return 0;
+    const char *env = getenv("GS_MAX_MEMORY");
+    return !given && env && *env ? set_max_memory("GS_MAX_MEMORY", env) : 0;
 }
 
 int srv_main(int argc, char **argv)
@@ -132,18 +145,25 @@ int srv_main(int argc, char **argv)
     return c < 0 ? 2 : commands[c].run(argc - 1, argv + 1);
 }
 
+int srv_usage_error(const char *cmd, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    fprintf(stderr, "gridsurvey %s: ", cmd);
+    vfprintf(stderr, fmt, ap);
+    fprintf(stderr, " (see gridsurvey help %s)\n", cmd);
+    va_end(ap);
+    return 2;
+}
+
 int srv_usage_hint(const char *cmd, char **argv)
 {
-    fprintf(stderr, "gridsurvey %s: unknown option or missing value: '%s' (see gridsurvey help %s)\n", cmd,
-            optind > 1 ? argv[optind - 1] : "", cmd);
-    return 2;
+    return srv_usage_error(cmd, "unknown option or missing value: '%s'", optind > 1 ? argv[optind - 1] : "");
 }
 
 int srv_out_dir_hint(const char *cmd)
 {
-    fprintf(stderr, "gridsurvey %s: -o names an output file; this command writes a directory: "
-                    "--out-dir DIR (see gridsurvey help %s)\n", cmd, cmd);
-    return 2;
+    return srv_usage_error(cmd, "-o names an output file; this command writes a directory: --out-dir DIR");
 }
 
 int srv_error(gs_status s)

@@ -26,6 +26,9 @@ static const char capture_usage[] =
     "  common:    [--hdr | --no-hdr] [--max-rounds N] [--max-saturated N]\n"
     "             [--stop-after N] [--force] [--progress | --no-progress | -q]\n"
     "\n"
+    "An option of another backend than --backend's is a usage error (sim and replay take the\n"
+    "camera and the ACam's numbers from the scene or the capture).\n"
+    "\n"
     "Frames go to CAPDIR as they are acquired; running the same command again resumes an\n"
     "interrupted capture (acquisition.json) and re-acquires only missing or damaged frames.\n"
     "The hardware backend needs a DMD mask loader for HDR (not available from this command).\n"
@@ -35,6 +38,11 @@ static const char capture_usage[] =
     "  gridsurvey capture --backend replay --from build/lab --out-dir build/lab-copy\n"
     "  gridsurvey capture --backend hardware --camera 0 --serial /dev/ttyACM0 --width 1920 \\\n"
     "                     --height 1080 --bands 3 --grid 50 --out-dir night-01\n";
+
+/* The backends, and the options (their getopt values below) that only each of them uses. */
+enum { SIM, REPLAY, HARDWARE, BACKENDS };
+static const char *const backends[BACKENDS] = {"sim", "replay", "hardware"};
+static const char *const backend_opts[BACKENDS] = {"sS", "F", "cITgzutWHBGKCMfalnr"};
 
 static int num_arg(const char *opt, const char *arg, double lo, double hi, double *out)
 {
@@ -70,14 +78,17 @@ int srv_cmd_capture(int argc, char **argv)
         {"help", no_argument, 0, 'h'},          {0, 0, 0, 0},
     };
     const char *backend = NULL, *out = NULL, *scene = NULL, *from = NULL;
+    const char *given[BACKENDS] = {NULL};   /* each backend's first option given, by name */
     double seed = -1, v;
     cap_hw_config hw;
     cap_hw_config_default(&hw);
     cap_loop_opts lo;
     cap_loop_opts_default(&lo);
     optind = 1;
-    int c;
-    while ((c = getopt_long(argc, argv, "o:hq", longs, NULL)) != -1) {
+    int c, li = 0;
+    while ((c = getopt_long(argc, argv, "o:hq", longs, &li)) != -1) {
+        for (int b = 0; b < BACKENDS; b++)
+            if (!given[b] && strchr(backend_opts[b], c)) given[b] = longs[li].name;
         switch (c) {
         case 'b': backend = optarg; break;
         case 'O': out = optarg; break;
@@ -117,20 +128,20 @@ int srv_cmd_capture(int argc, char **argv)
         default: return srv_usage_hint("capture", argv);
         }
     }
-    if (optind < argc || !backend || !out) {
-        fprintf(stderr, "gridsurvey capture: --backend and --out-dir are required%s%s\n%s",
-                optind < argc ? "; unexpected argument " : "", optind < argc ? argv[optind] : "",
-                capture_usage);
-        return 2;
-    }
+    if (optind < argc) return srv_usage_error("capture", "unexpected argument '%s'", argv[optind]);
+    if (!backend || !out) return srv_usage_error("capture", "--backend and --out-dir are required");
+    int which = 0;
+    while (which < BACKENDS && strcmp(backend, backends[which])) which++;
+    if (which == BACKENDS)
+        return srv_usage_error("capture", "--backend '%s': expected sim, replay or hardware", backend);
+    for (int b = 0; b < BACKENDS; b++)
+        if (given[b] && b != which)
+            return srv_usage_error("capture", "--%s is an option of the %s backend, not of --backend %s",
+                                   given[b], backends[b], backend);
     cap_backend *be = NULL;
     gs_status s;
-    int is_sim = 0;
-    if (!strcmp(backend, "sim")) {
-        if (!scene) {
-            fprintf(stderr, "gridsurvey capture: --backend sim needs --scene\n");
-            return 2;
-        }
+    if (which == SIM) {
+        if (!scene) return srv_usage_error("capture", "--backend sim needs --scene");
         cap_scene sc;
         s = cap_scene_read(scene, &sc);
         if (s == GS_OK && seed >= 0) {
@@ -139,33 +150,21 @@ int srv_cmd_capture(int argc, char **argv)
         }
         if (s == GS_OK) s = cap_backend_sim_new(&sc, NULL, &be);
         cap_scene_release(&sc);
-        is_sim = 1;
-    } else if (!strcmp(backend, "replay")) {
-        if (!from) {
-            fprintf(stderr, "gridsurvey capture: --backend replay needs --from CAPDIR\n");
-            return 2;
-        }
+    } else if (which == REPLAY) {
+        if (!from) return srv_usage_error("capture", "--backend replay needs --from CAPDIR");
         s = cap_backend_replay_new(from, &be);
-    } else if (!strcmp(backend, "hardware")) {
-        if (!hw.camera || !hw.serial || !hw.width || !hw.height) {
-            fprintf(stderr, "gridsurvey capture: --backend hardware needs --camera, --serial, "
-                            "--width and --height\n");
-            return 2;
-        }
-        if (lo.hdr == 1) {
-            fprintf(stderr, "gridsurvey capture: --hdr: the hardware backend needs a DMD mask "
-                            "loader, which this command does not have\n");
-            return 2;
-        }
-        s = cap_backend_hardware_new(&hw, &be);
     } else {
-        fprintf(stderr, "gridsurvey capture: --backend '%s': expected sim, replay or hardware\n", backend);
-        return 2;
+        if (!hw.camera || !hw.serial || !hw.width || !hw.height)
+            return srv_usage_error("capture", "--backend hardware needs --camera, --serial, --width and --height");
+        if (lo.hdr == 1)
+            return srv_usage_error("capture", "--hdr: the hardware backend needs a DMD mask loader, "
+                                   "which this command does not have");
+        s = cap_backend_hardware_new(&hw, &be);
     }
     if (s != GS_OK) return srv_error(s);
     cap_loop_report rep;
     s = cap_loop_run(be, out, &lo, &rep);
-    if (s == GS_OK && is_sim) s = cap_sim_write_truth(cap_backend_sim_handle(be), out);
+    if (s == GS_OK && which == SIM) s = cap_sim_write_truth(cap_backend_sim_handle(be), out);
     if (s == GS_OK)
         printf("capture (%s): %s: %s, %d frames acquired, %d kept, %ld acquisitions, %.2f s\n",
                backend, out, rep.complete ? "complete" : "partial", rep.frames_acquired,

@@ -222,13 +222,13 @@ int srv_cmd_compare(int argc, char **argv)
             }
             break;
         case 'h': fputs(compare_usage, stdout); return 0;
-        default: fputs(compare_usage, stderr); return 2;
+        default: return srv_usage_hint("compare", argv);
         }
     }
-    if (optind < argc || !path || nsv != 2) {
-        fprintf(stderr, "gridsurvey compare: expected --db DB --survey A --survey B\n%s", compare_usage);
-        return 2;
-    }
+    if (optind < argc) return srv_usage_error("compare", "unexpected argument '%s'", argv[optind]);
+    if (!path) return srv_usage_error("compare", "--db DB is required");
+    if (nsv != 2)
+        return srv_usage_error("compare", "%sexpected --survey A --survey B", nsv ? "--survey given once: " : "");
     if (by || clip || !isnan(so.bbox[0]) || so.min_phase_confidence > 0.0) return compare_shares(path, sv, &so, by, clip, csv);
     srv_db *db;
     gs_status s = srv_db_open(path, SRV_DB_READ, &db);

@@ -256,7 +256,6 @@ static gs_status add_recording(gs_delight *d, const void *arg)
 
 static int cmd_plot(const gs_delight *d, const delight_opts *o)
 {
-    if (!o->out) return srv_error(gs_fail(GS_EINVAL, "delight plot: -o FILE.png is required"));
     enum { MAX_PLOT = 15 };
     const gs_bulb *pick[MAX_PLOT];
     size_t count = 0;
@@ -312,18 +311,17 @@ int srv_cmd_delight(int argc, char **argv)
     char **pos = argv + 1 + optind;
 
     if (!strcmp(sub, "import")) {
-        if (!o.db || npos < 1)
-            return srv_error(gs_fail(GS_EINVAL, "delight import: expected FILE.csv... and --delight DB"));
+        if (!o.db || npos < 1) return srv_usage_error("delight import", "expected FILE.csv... and --delight DB");
         csv_list l = {pos, npos};
         return modify_db(o.db, add_csvs, &l);
     }
     if (!strcmp(sub, "add")) {
         if (!o.db || !o.recording)
-            return srv_error(gs_fail(GS_EINVAL, "delight add: expected --from-recording FILE and --delight DB"));
+            return srv_usage_error("delight add", "expected --from-recording FILE and --delight DB");
         return modify_db(o.db, add_recording, &o);
     }
     if (!strcmp(sub, "generate")) {
-        if (!o.out) return srv_error(gs_fail(GS_EINVAL, "delight generate: -o DB is required"));
+        if (!o.out) return srv_usage_error("delight generate", "-o DB is required");
         gs_delight *d = gs_delight_new();
         gs_status s = d ? gs_delight_generate(d, o.n) : gs_fail(GS_ENOMEM, "out of memory");
         if (s == GS_OK) s = gs_delight_save(d, o.out);
@@ -336,7 +334,8 @@ int srv_cmd_delight(int argc, char **argv)
                         "import, add, plot or generate\n", sub);
         return 2;
     }
-    if (is_show && npos != 1) return srv_error(gs_fail(GS_EINVAL, "delight show: expected one bulb id"));
+    if (is_show && npos != 1) return srv_usage_error("delight show", "expected one bulb id");
+    if (!strcmp(sub, "plot") && !o.out) return srv_usage_error("delight plot", "-o FILE.png is required");
     gs_delight *d = NULL;
     gs_status s = open_delight(&o, &d);
     if (s != GS_OK) return srv_error(s);

@@ -65,14 +65,6 @@ static const char run_usage[] =
     "Exit status: 0 done, 1 failure (one line on\n"
     "stderr; bad input changes nothing on disk), 2 usage error.\n";
 
-static int usage_error(const char *fmt, const char *arg)
-{
-    fputs("gridsurvey run: ", stderr);
-    fprintf(stderr, fmt, arg);
-    fputs(" (see gridsurvey run --help)\n", stderr);
-    return 2;
-}
-
 static void tty_progress(void *ctx, srv_stage stage, const char *detail)
 {
     (void)ctx;
@@ -286,35 +278,35 @@ int srv_cmd_run(int argc, char **argv)
         case 'H':
             o.light_height_m = strtod(optarg, &end);
             if (!*optarg || *end || !isfinite(o.light_height_m))
-                return usage_error("--light-height-m '%s': expected a height in metres", optarg);
+                return srv_usage_error("run", "--light-height-m '%s': expected a height in metres", optarg);
             break;
         case 'G':
             o.light_height_sigma_m = strtod(optarg, &end);
             if (!*optarg || *end || !(o.light_height_sigma_m >= 0.0))
-                return usage_error("--light-height-sigma-m '%s': expected metres >= 0", optarg);
+                return srv_usage_error("run", "--light-height-sigma-m '%s': expected metres >= 0", optarg);
             break;
         case 'u':
             o.eq7.unknown_p = strtod(optarg, &end);
             if (!*optarg || *end || !(o.eq7.unknown_p >= 0.0 && o.eq7.unknown_p < 1.0))
-                return usage_error("--unknown-p '%s': expected a p-value in [0, 1)", optarg);
+                return srv_usage_error("run", "--unknown-p '%s': expected a p-value in [0, 1)", optarg);
             break;
         case 'p':
             if (!strcmp(optarg, "3")) o.eq7.phases = REC_PHASES_3;
             else if (!strcmp(optarg, "6")) o.eq7.phases = REC_PHASES_6;
             else if (!strcmp(optarg, "continuous")) o.eq7.phases = REC_PHASES_CONTINUOUS;
-            else return usage_error("--phases '%s': expected 3, 6 or continuous", optarg);
+            else return srv_usage_error("run", "--phases '%s': expected 3, 6 or continuous", optarg);
             break;
         case 'h': fputs(run_usage, stdout); return 0;
-        case ':': return usage_error("option '%s' needs a value", argv[optind - 1]);
-        default: return usage_error("unknown option '%s'", argv[optind - 1]);
+        case ':': return srv_usage_error("run", "option '%s' needs a value", argv[optind - 1]);
+        default: return srv_usage_error("run", "unknown option '%s'", argv[optind - 1]);
         }
     }
-    if (argc - optind < 1) return usage_error("%s", "expected a scene file or a capture directory");
+    if (argc - optind < 1) return srv_usage_error("run", "expected a scene file or a capture directory");
     int n_inputs = argc - optind;
     if (n_inputs > 1 && (o.capture_dir || o.station_path))
-        return usage_error("%s", "--capture-dir and --station take one input (each input has its own "
-                           "capture directory and station)");
-    if (!o.db_path) return usage_error("%s", "--db is required");
+        return srv_usage_error("run", "--capture-dir and --station take one input (each input has its own "
+                               "capture directory and station)");
+    if (!o.db_path) return srv_usage_error("run", "--db is required");
     /* --out-dir is checked before anything is written; the default, the database's directory, is
      * checked by opening the database */
     char out_dir[4096];

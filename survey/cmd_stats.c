@@ -268,7 +268,7 @@ int srv_cmd_stats(int argc, char **argv)
         switch (c) {
         case 'd': path = optarg; break;
         case 'p': conninfo = optarg; break;
-        case 'o': output = optarg; break;
+        case 'o': output = strcmp(optarg, "-") ? optarg : NULL; break;   /* -: stdout, as without -o */
         case 'S': o.survey = optarg; break;
         case 'b':
             if (srv_stats_parse_by(optarg, &o) != GS_OK) {
@@ -341,7 +341,7 @@ int srv_cmd_stats(int argc, char **argv)
         if (db) srv_db_close(db);
     }
     if (s == GS_OK && fmt == FMT_CSV) {
-        /* the file replaced atomically ("-" or no -o: stdout); the areas' geometry when the
+        /* the file replaced atomically (no -o: stdout); the areas' geometry when the
          * groups are the areas */
         gs_atomic a;
         const srv_areas *wkt = o.by == SRV_BY_FEATURE && !o.n_then ? areas : NULL;

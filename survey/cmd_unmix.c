@@ -178,11 +178,8 @@ int srv_cmd_unmix(int argc, char **argv)
         default: return srv_usage_hint("unmix", argv);
         }
     }
-    if (optind + 1 != argc || !sources || !out) {
-        fprintf(stderr, "gridsurvey unmix: expected one CAPDIR, --sources FILE|auto and --out-dir DIR\n%s",
-                unmix_usage);
-        return 2;
-    }
+    if (optind + 1 != argc || !sources || !out)
+        return srv_usage_error("unmix", "expected one CAPDIR, --sources FILE|auto and --out-dir DIR");
     uo.refine = (int)refine;
     const char *capdir = argv[optind];
     gs_capture cap;

@@ -110,6 +110,9 @@ int srv_stats_by_survey(const srv_stats_opts *o);
 
 /* Where a command's confirmation line goes: stderr when its output is "-" (stdout). */
 FILE *srv_note_stream(const char *out);
+/* A usage error of command cmd ("delight plot" for a subcommand): the one line "gridsurvey CMD:
+ * MESSAGE (see gridsurvey help CMD)" on stderr; returns 2. */
+int srv_usage_error(const char *cmd, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 /* getopt's '?' in command cmd (getopt itself prints nothing: srv_main sets opterr = 0): the one
  * line naming the option (argv[optind - 1]) and the hint; returns 2. */
 int srv_usage_hint(const char *cmd, char **argv);

@@ -2,6 +2,7 @@
  * interrupted capture (stopped after N frames, killed, or with a damaged frame) resumes to the
  * same files as an uninterrupted run; another configuration is refused; replay round trip. */
 #include "tests/test.h"
+#include "tests/fixtures.h"
 #include "capture/capture.h"
 #include "recognize/recognize.h"
 
@@ -255,6 +256,36 @@ TEST(capture_replay_roundtrip)
     char e[1100];
     snprintf(e, sizeof e, "%s/e", tmp);
     CHECK_MSG(same_capture(a, e, 1), "capture --backend sim differs from the loop");
+}
+
+/* An option of another backend than --backend's is a usage error naming it and its backend,
+ * before anything is written (--K with sim was ignored: the scene's K was captured). */
+TEST(capture_cli_options_of_another_backend_refused)
+{
+    char scene[1024], o[1024], out[4096];
+    snprintf(scene, sizeof scene, "%s/other.json", test_tmpdir());
+    snprintf(o, sizeof o, "%s/other-out", test_tmpdir());
+    write_small(scene, 3);
+    static const struct {
+        const char *args, *option, *backend;
+    } cases[] = {
+        {"--backend sim --scene %s --out-dir %s --K 7", "--K", "hardware"},
+        {"--backend sim --scene %s --out-dir %s --camera 3 --serial /dev/x", "--camera", "hardware"},
+        {"--backend replay --from %s --out-dir %s --seed 4", "--seed", "sim"},
+        {"--backend hardware --camera %s --out-dir %s --serial /dev/x --width 8 --height 8 --from x",
+         "--from", "replay"},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
+        char args[3000];
+        snprintf(args, sizeof args, cases[i].args, scene, o);
+        CHECK_MSG(fx_run(out, sizeof out, "%s capture %s", test_bin(), args) == 2 &&
+                  fx_count_lines(out) == 1 && strstr(out, cases[i].option) && strstr(out, cases[i].backend),
+                  "%s: %s", args, out);
+        CHECK(!fx_exists(o));
+    }
+    /* a missing required option: one line too, not the whole usage */
+    CHECK(fx_run(out, sizeof out, "%s capture --backend sim --scene %s", test_bin(), scene) == 2);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "--out-dir"), "%s", out);
 }
 
 /* ------------------------------------------------------------------ grid frequency per frame */

@@ -118,4 +118,16 @@ TEST(cli_bad_input_one_line_errors)
     CHECK(run("%s delight frobnicate", NULL, NULL) == 2);
     CHECK(run("%s frobnicate", NULL, NULL) == 2);
     CHECK(run("%s delight list --grid 55", NULL, NULL) == 2);
+    /* a missing option or argument is a usage error (exit 2, not 1 with "invalid argument") */
+    static const struct {
+        const char *cmd, *names;
+    } usage[] = {
+        {"%s delight plot --ids hps-150w", "-o FILE.png"}, {"%s delight generate", "-o DB"},
+        {"%s delight show", "bulb id"},                     {"%s delight import x.csv", "--delight DB"},
+        {"%s delight add --delight x.sqlite", "--from-recording"},
+    };
+    for (size_t i = 0; i < sizeof usage / sizeof *usage; i++)
+        CHECK_MSG(run(usage[i].cmd, NULL, NULL) == 2 && fx_count_lines(out) == 1 &&
+                  strstr(out, usage[i].names) && strstr(out, "see gridsurvey help delight"),
+                  "%s: %s", usage[i].cmd, out);
 }

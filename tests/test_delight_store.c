@@ -360,7 +360,7 @@ TEST(delight_sqlite_rejects_other_files)
     CHECK(gs_delight_load(d, text) == GS_EFORMAT);
     CHECK(strstr(gs_detail(), text) && strstr(gs_detail(), "DELIGHT"));
     /* a missing file */
-    CHECK(gs_delight_load(d, fx_tmp("missing.sqlite")) == GS_EIO);
+    CHECK(gs_delight_load(d, fx_tmp("missing.sqlite")) == GS_ENOTFOUND);
     CHECK(gs_delight_count(d) == before);
     gs_delight_free(d);
 }

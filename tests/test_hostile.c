@@ -76,6 +76,12 @@ TEST(output_dash_is_stdout_not_a_file_named_dash)
     CHECK(data && n > 20000 && !memcmp(data, "\x89PNG\r\n\x1a\n", 8));
     free(data);
     CHECK(!fx_exists(fx_tmp("-")));
+    /* stats' -o F.csv as well (it was refused: "expected a NAME.csv file") */
+    const char *db = fx_tmp("dash.sqlite");
+    CHECK(run("%s db init --db %s", db, NULL, NULL) == 0);
+    snprintf(cmd, sizeof cmd, "cd %s && %s stats --db %s --format csv -o -", test_tmpdir(), bin, db);
+    CHECK_MSG(test_run(cmd, out, sizeof out) == 0 && !strncmp(out, "group,lat_deg,", 14), "%s", out);
+    CHECK(!fx_exists(fx_tmp("-")) && !fx_exists(fx_tmp("-.csvt")));
 }
 
 TEST(output_symlink_target_replaced_link_kept)
@@ -288,6 +294,21 @@ TEST(capture_memory_budget_checked_before_allocating)
     CHECK(gs_capture_read(declared_capture("zero", 64, "zero"), &c) == GS_EINVAL &&
           strstr(gs_detail(), "character device") && strstr(gs_detail(), "frames[0].file"));
     CHECK(c.raw == NULL);
+}
+
+/* GS_MAX_MEMORY gets the checks and the one-line usage error of --max-memory (a bad value was
+ * ignored: the default budget applied); --max-memory, when given, is used instead. */
+TEST(memory_budget_env_checked_like_the_option)
+{
+    const char *dir = declared_capture("envhuge", 32768, "file");
+    CHECK(run("GS_MAX_MEMORY=garbage %s recognize %s", dir, NULL, NULL) == 2);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "GS_MAX_MEMORY 'garbage': expected a size"), "%s", out);
+    CHECK(run("GS_MAX_MEMORY=-5 %s recognize %s", dir, NULL, NULL) == 2);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "GS_MAX_MEMORY '-5'"), "%s", out);
+    CHECK(run("GS_MAX_MEMORY=4G %s recognize %s", dir, NULL, NULL) == 1);
+    CHECK_MSG(strstr(out, "memory budget of 4096.0 MiB"), "%s", out);
+    CHECK(run("GS_MAX_MEMORY=garbage %s --max-memory 2G recognize %s", dir, NULL, NULL) == 1);
+    CHECK_MSG(strstr(out, "memory budget of 2048.0 MiB"), "%s", out);
 }
 
 TEST(capture_frame_larger_than_any_png_refused)
@@ -570,15 +591,16 @@ TEST(unmix_memory_budget_checked_before_allocating)
 TEST(memory_size_parse)
 {
     size_t b = 0;
-    CHECK_OK(gs_mem_parse("4G", &b));
+    CHECK_OK(gs_mem_parse("--max-memory", "4G", &b));
     CHECK(b == (size_t)4 << 30);
-    CHECK_OK(gs_mem_parse("1.5GiB", &b));
+    CHECK_OK(gs_mem_parse("--max-memory", "1.5GiB", &b));
     CHECK(b == (size_t)3 << 29);
-    CHECK_OK(gs_mem_parse("1048576", &b));
+    CHECK_OK(gs_mem_parse("--max-memory", "1048576", &b));
     CHECK(b == 1048576);
-    CHECK(gs_mem_parse("100K", &b) == GS_EINVAL);   /* below 1M */
-    CHECK(gs_mem_parse("4X", &b) == GS_EINVAL);
-    CHECK(gs_mem_parse("nan", &b) == GS_EINVAL);
+    CHECK(gs_mem_parse("--max-memory", "100K", &b) == GS_EINVAL);   /* below 1M */
+    CHECK(gs_mem_parse("--max-memory", "4X", &b) == GS_EINVAL);
+    CHECK(gs_mem_parse("GS_MAX_MEMORY", "nan", &b) == GS_EINVAL);
+    CHECK(!strncmp(gs_detail(), "GS_MAX_MEMORY 'nan': ", 21));
     CHECK(gs_mem_budget() > 0);
 }
 
@@ -623,6 +645,27 @@ TEST(cli_version_and_help_command)
     CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "expected a capture directory"), "%s", out);
     CHECK(run("%s export --db x.sqlite", NULL, NULL, NULL) == 2);
     CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "see gridsurvey help export"), "%s", out);
+}
+
+/* A missing required option or argument is the one-line usage error too, never the whole usage
+ * (compare, capture and unmix printed their --help after the line, compare and bench render
+ * for an unknown option). */
+TEST(cli_usage_errors_one_line_not_the_usage)
+{
+    static const struct {
+        const char *cmd, *names;
+    } cases[] = {
+        {"%s compare --db x.sqlite --survey metro", "--survey"},
+        {"%s compare --db x.sqlite --survey a --survey b --frobnicate", "'--frobnicate'"},
+        {"%s capture --backend replay --from x", "--out-dir"},
+        {"%s unmix x --out-dir y", "--sources"},
+        {"%s bench render --frames", "'--frames'"},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
+        CHECK(run(cases[i].cmd, NULL, NULL, NULL) == 2);
+        CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, cases[i].names) && strstr(out, "see gridsurvey help"),
+                  "%s: %s", cases[i].cmd, out);
+    }
 }
 
 TEST(recording_header_run_in_empty_middle_field)

@@ -77,10 +77,11 @@ gs_status gs_dir_ensure(const char *dir);
 
 /* The memory budget (recognize/base/kit_mem.c): gs_mem_check fails with GS_ELIMIT, "WHAT need
  * N MiB: more than the memory budget of B MiB ...", when bytes exceed it; call it before an
- * allocation an input's declared size decides. Default half the physical RAM (and at most half
- * of RLIMIT_AS), else GS_MAX_MEMORY, else what gs_mem_budget_set gave (0: the default).
- * gs_mem_parse reads "4G", "512M", "1.5G", "1048576" (K, M, G, T: powers of 1024; >= 1M). */
-gs_status gs_mem_parse(const char *text, size_t *bytes);
+ * allocation an input's declared size decides. What gs_mem_budget_set gave (the CLI's
+ * --max-memory or GS_MAX_MEMORY), else (0) half the physical RAM (and at most half of
+ * RLIMIT_AS). gs_mem_parse reads "4G", "512M", "1.5G", "1048576" (K, M, G, T: powers of 1024;
+ * >= 1M); GS_EINVAL "WHAT 'TEXT': expected a size ..." otherwise (what: the option or variable). */
+gs_status gs_mem_parse(const char *what, const char *text, size_t *bytes);
 void gs_mem_budget_set(size_t bytes);
 size_t gs_mem_budget(void);
 gs_status gs_mem_check(double bytes, const char *what);
@@ -512,7 +513,8 @@ gs_status gs_delight_generate(gs_delight *d, int n);
  * delight_brf_bands). save replaces the file's DELIGHT tables in one transaction (a new file is
  * built under a temporary name and renamed into place) and refuses a file whose user_version
  * belongs to another schema; load appends the file's bulbs to d, and on
- * any error (GS_EFORMAT for a file that is not a DELIGHT database) adds nothing. */
+ * any error (GS_ENOTFOUND for a missing file, GS_EFORMAT for a file that is not a DELIGHT
+ * database) adds nothing. */
 #define GS_DELIGHT_SCHEMA_VERSION 1
 gs_status gs_delight_save(const gs_delight *d, const char *path);
 gs_status gs_delight_load(gs_delight *d, const char *path);

@@ -314,12 +314,13 @@ gs_status gs_delight_open(const char *path, gs_delight **out)
 
 gs_status gs_delight_load(gs_delight *d, const char *path)
 {
+    gs_status s = gs_input_check(path);   /* SQLite opens by name: a missing file is not found */
+    if (s != GS_OK) return s;
     sqlite3 *db = NULL;
     sqlite3_stmt *meta = NULL, *bulbs = NULL, *bands = NULL;
     gs_delight *tmp = gs_delight_new();
     gs_bulb b = {0};
     int version = 0;
-    gs_status s = GS_OK;
     if (!tmp) return gs_fail(GS_ENOMEM, "%s: cannot allocate a DELIGHT database", path);
     if (sqlite3_open_v2(path, &db, SQLITE_OPEN_READONLY, NULL) != SQLITE_OK) {
         s = sql_fail(db, path, "open");

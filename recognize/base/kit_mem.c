@@ -1,7 +1,7 @@
 /* kit_mem.c - the format kit's memory budget: the most a command may allocate for one input's
  * pixels and working images, checked before the allocation so that a small file that declares a
  * huge image fails with one line instead of exhausting the machine. Default: half the physical
- * RAM, and no more than RLIMIT_AS; `--max-memory SIZE` (survey/cli.c) or GS_MAX_MEMORY sets it. */
+ * RAM, and no more than RLIMIT_AS; `--max-memory SIZE` or GS_MAX_MEMORY (survey/cli.c) sets it. */
 #include "recognize/base/base.h"
 
 #include <math.h>
@@ -12,7 +12,7 @@
 
 static size_t budget_bytes;   /* 0: the default */
 
-gs_status gs_mem_parse(const char *text, size_t *bytes)
+gs_status gs_mem_parse(const char *what, const char *text, size_t *bytes)
 {
     char *end = NULL;
     double v = text && *text ? strtod(text, &end) : NAN;
@@ -28,8 +28,8 @@ gs_status gs_mem_parse(const char *text, size_t *bytes)
     }
     v *= unit;
     if (!(v >= 1048576.0 && v <= 0x1p62))
-        return gs_fail(GS_EINVAL, "--max-memory '%s': expected a size of at least 1M, in bytes or "
-                       "with a suffix K, M, G or T (powers of 1024), e.g. 4G", text ? text : "");
+        return gs_fail(GS_EINVAL, "%s '%s': expected a size of at least 1M, in bytes or with a "
+                       "suffix K, M, G or T (powers of 1024), e.g. 4G", what, text ? text : "");
     *bytes = (size_t)v;
     return GS_OK;
 }
@@ -42,9 +42,6 @@ void gs_mem_budget_set(size_t bytes)
 size_t gs_mem_budget(void)
 {
     if (budget_bytes) return budget_bytes;
-    size_t from_env;
-    const char *env = getenv("GS_MAX_MEMORY");
-    if (env && *env && gs_mem_parse(env, &from_env) == GS_OK) return from_env;
     long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGESIZE);
     double b = pages > 0 && page > 0 ? 0.5 * (double)pages * (double)page : 0x1p32;
     struct rlimit rl;
