@@ -128,6 +128,28 @@ static int matches(const gs_bulb *b, const delight_opts *o)
     return (!o->grid_hz || b->grid_hz == o->grid_hz) && (!o->sensor || !strcmp(b->sensor, o->sensor));
 }
 
+/* 1 if one of the first n entries of d was measured with sensor. */
+static int has_sensor(const gs_delight *d, size_t n, const char *sensor)
+{
+    for (size_t i = 0; i < n; i++)
+        if (!strcmp(gs_delight_get(d, i)->sensor, sensor)) return 1;
+    return 0;
+}
+
+/* The usage error of a --sensor that d lacks, listing the sensors d has: returns 2. */
+static int sensor_hint(const gs_delight *d, const char *sensor)
+{
+    char names[512] = "";
+    for (size_t i = 0; i < gs_delight_count(d); i++) {
+        const char *s = gs_delight_get(d, i)->sensor;
+        size_t u = strlen(names);
+        if (!has_sensor(d, i, s)) snprintf(names + u, sizeof names - u, "%s%s", u ? ", " : "", s);
+    }
+    fprintf(stderr, "gridsurvey delight: --sensor '%s': expected a sensor of the database: %s\n", sensor,
+            *names ? names : "none (it is empty)");
+    return 2;
+}
+
 static int cmd_list(const gs_delight *d, const delight_opts *o)
 {
     printf("%-22s %-22s %4s %-10s %-8s %7s  %-28s %s\n", "bulb_id", "type", "Hz", "sensor", "ref",
@@ -339,7 +361,8 @@ int srv_cmd_delight(int argc, char **argv)
     gs_delight *d = NULL;
     gs_status s = open_delight(&o, &d);
     if (s != GS_OK) return srv_error(s);
-    if (!strcmp(sub, "list")) rc = cmd_list(d, &o);
+    if (o.sensor && !has_sensor(d, gs_delight_count(d), o.sensor)) rc = sensor_hint(d, o.sensor);
+    else if (!strcmp(sub, "list")) rc = cmd_list(d, &o);
     else if (is_show) rc = cmd_show(d, &o, pos[0]);
     else if (!strcmp(sub, "export")) rc = cmd_export(d, &o);
     else rc = cmd_plot(d, &o);

@@ -130,4 +130,10 @@ TEST(cli_bad_input_one_line_errors)
         CHECK_MSG(run(usage[i].cmd, NULL, NULL) == 2 && fx_count_lines(out) == 1 &&
                   strstr(out, usage[i].names) && strstr(out, "see gridsurvey help delight"),
                   "%s: %s", usage[i].cmd, out);
+    /* an unknown --sensor is a usage error naming the database's sensors, not an empty answer */
+    CHECK(run("%s delight list --sensor foo", NULL, NULL) == 2);
+    CHECK(fx_count_lines(out) == 1 && strstr(out, "--sensor 'foo'") && strstr(out, "photodiode") && strstr(out, "rgb"));
+    CHECK(run("%s delight show hps-70w --sensor foo", NULL, NULL) == 2);
+    CHECK(fx_count_lines(out) == 1 && strstr(out, "--sensor 'foo'"));
+    CHECK(run("%s delight show hps-70w --sensor rgb", NULL, NULL) == 0 && strstr(out, "sensor rgb"));
 }
