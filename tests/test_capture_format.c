@@ -501,6 +501,14 @@ TEST(capture_format_truncated_png)
     expect_error(dir, GS_EFORMAT, (const char *[]){"frame_002.png: not a PNG", NULL});
     fx_write_file(fx_path(dir, "frame_002.png"), "", 0);
     expect_error(dir, GS_EFORMAT, (const char *[]){"frame_002.png: not a PNG", NULL});
+    /* a file without the signature is not a PNG whatever its size (8-32 bytes are shorter than
+     * the signature and IHDR that the decoder reads at once); the signature cut short is */
+    fx_write_file(fx_path(dir, "frame_002.png"), "garbage\n", 8);
+    expect_error(dir, GS_EFORMAT, (const char *[]){"frame_002.png: not a PNG file (no PNG signature)", NULL});
+    fx_write_file(fx_path(dir, "frame_002.png"), "not a PNG file, 31 bytes long.\n", 31);
+    expect_error(dir, GS_EFORMAT, (const char *[]){"frame_002.png: not a PNG file (no PNG signature)", NULL});
+    fx_write_file(fx_path(dir, "frame_002.png"), b, 20);
+    expect_error(dir, GS_EFORMAT, (const char *[]){"frame_002.png: truncated PNG", NULL});
     /* a corrupted byte inside the compressed data (libspng finds the broken deflate stream
      * before the chunk's CRC) */
     b[n / 2] ^= 0x40;

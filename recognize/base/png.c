@@ -26,8 +26,6 @@ static const char *color_name(int t)
 static gs_status png_error(int err, const char *name, size_t size, const char *ref)
 {
     switch (err) {
-    case SPNG_ESIGNATURE:
-        return gs_fail(GS_EFORMAT, "%s: not a PNG file (no PNG signature)%s", name, ref);
     case SPNG_IO_EOF:
     case SPNG_EOF:
     case SPNG_EIDAT_TOO_SHORT:
@@ -53,6 +51,10 @@ gs_status gs_png_decode(const unsigned char *buf, size_t size, const char *name,
     if (size < 8)
         return gs_fail(GS_EFORMAT, "%s: not a PNG file (shorter than the 8-byte signature)%s",
                        name, ref);
+    /* here, not by libspng: it reads the signature and IHDR (33 bytes) at once, so a shorter
+     * file that is no PNG would be called truncated */
+    if (memcmp(buf, "\x89PNG\r\n\x1a\n", 8))
+        return gs_fail(GS_EFORMAT, "%s: not a PNG file (no PNG signature)%s", name, ref);
     spng_ctx *ctx = spng_ctx_new(0);
     if (!ctx) return gs_fail(GS_ENOMEM, "%s: cannot create a PNG decoder", name);
     gs_status st = GS_OK;
