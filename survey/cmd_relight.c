@@ -16,10 +16,11 @@ static const char relight_usage[] =
     "Relights the sources that `gridsurvey unmix` wrote to DIR (sources.json, source_NN.tiff):\n"
     "I = T [A Q B]^relight (paper Eq. 20). Each --set changes source N (00, 01, ...): gain:A\n"
     "amplifies it (0 switches it off), bulb:ID gives it another DELIGHT bulb's chromaticity\n"
-    "and BRF (or \"daylight\"), phase:DEG another grid phase. Sources not named keep gain 1,\n"
-    "their bulb and phase and the BRF refined by unmix. Writes CAPDIR as a capture directory\n"
-    "(16-bit frames with HDR maps where the result exceeds the sensor; pixels without a value\n"
-    "saturated) of the input capture's numbers, and CAPDIR/preview.png (the mean image).\n"
+    "and BRF (or \"daylight\"), phase:DEG another grid phase; each key at most once per source.\n"
+    "Sources not named keep gain 1, their bulb and phase and the BRF refined by unmix. Writes\n"
+    "CAPDIR as a capture directory (16-bit frames with HDR maps where the result exceeds the\n"
+    "sensor; pixels without a value saturated) of the input capture's numbers, and\n"
+    "CAPDIR/preview.png (the mean image).\n"
     "\n"
     "  --set N=...        a source's change (repeatable)\n"
     "  --out-dir CAPDIR   the capture directory to write\n"
@@ -36,8 +37,9 @@ static const char relight_usage[] =
     "\n"
     "Exit status: 0 done, 1 failure (one line on stderr), 2 usage error.\n";
 
-/* "N=gain:A,bulb:ID,phase:DEG" into set[N]. */
-static int parse_set(const char *arg, int S, rec_relight_set *set)
+/* "N=gain:A,bulb:ID,phase:DEG" into set[N]; given[N] holds the keys (bits 1 gain, 2 bulb, 4 phase)
+ * that earlier --set gave source N: each key once per source. */
+static int parse_set(const char *arg, int S, rec_relight_set *set, unsigned *given)
 {
     char buf[256];
     snprintf(buf, sizeof buf, "%s", arg);
@@ -50,29 +52,37 @@ static int parse_set(const char *arg, int S, rec_relight_set *set)
         return 0;
     }
     rec_relight_set *r = &set[n];
-    for (char *tok = strtok(eq + 1, ","); tok; tok = strtok(NULL, ",")) {
+    /* items split at every comma: an empty one (no change at all, a stray comma) is an error */
+    for (char *tok = eq + 1, *next; tok; tok = next) {
+        if ((next = strchr(tok, ','))) *next++ = '\0';
         char *colon = strchr(tok, ':');
         if (!colon) goto bad;
         *colon = '\0';
         const char *val = colon + 1;
-        if (!strcmp(tok, "gain")) {
+        unsigned key = !strcmp(tok, "gain") ? 1 : !strcmp(tok, "bulb") ? 2 : !strcmp(tok, "phase") ? 4 : 0;
+        if (!key) goto bad;
+        if (given[n] & key) {
+            fprintf(stderr, "gridsurvey relight: --set '%s': source %ld: %s given twice: expected each of "
+                    "gain, bulb and phase at most once per source\n", arg, n, tok);
+            return 0;
+        }
+        given[n] |= key;
+        if (key == 1) {
             r->gain = strtod(val, &end);
             if (!*val || *end || !(r->gain >= 0) || !isfinite(r->gain)) goto bad;
-        } else if (!strcmp(tok, "bulb")) {
+        } else if (key == 2) {
             if (!*val || strlen(val) >= sizeof r->bulb) goto bad;
             snprintf(r->bulb, sizeof r->bulb, "%s", val);
-        } else if (!strcmp(tok, "phase")) {
+        } else {
             r->phase_deg = strtod(val, &end);
             if (!*val || *end || !isfinite(r->phase_deg)) goto bad;
             r->set_phase = 1;
-        } else {
-            goto bad;
         }
     }
     return 1;
 bad:
-    fprintf(stderr, "gridsurvey relight: --set '%s': expected N=gain:A[,bulb:ID][,phase:DEG] (A a "
-            "number >= 0, DEG a number)\n", arg);
+    fprintf(stderr, "gridsurvey relight: --set '%s': source %ld: expected N=gain:A[,bulb:ID][,phase:DEG] "
+            "(A a number >= 0, DEG a number)\n", arg, n);
     return 0;
 }
 
@@ -125,10 +135,11 @@ int srv_cmd_relight(int argc, char **argv)
     }
     if (st != GS_OK) return srv_error(st);
     rec_relight_set set[REC_MAX_SOURCES];
+    unsigned given[REC_MAX_SOURCES] = {0};
     memset(set, 0, sizeof set);
     for (int s = 0; s < src.S; s++) set[s].gain = 1;
     for (int i = 0; i < nsets; i++)
-        if (!parse_set(sets[i], src.S, set)) {
+        if (!parse_set(sets[i], src.S, set, given)) {
             rec_sources_release(&src);
             free(files);
             return 2;

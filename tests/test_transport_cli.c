@@ -140,6 +140,17 @@ TEST(transport_cli_bad_input_one_line_errors)
     CHECK(rc == 2 && fx_contains(out, "--set '1=gain:-2'"));
     rc = fx_run(out, sizeof out, "%s relight '%s' --set 5=gain:1 --out-dir '%s' 2>&1", test_bin(), dir, fx_tmp("r"));
     CHECK(rc == 2 && fx_contains(out, "N from 0 to 2"));
+    /* no change, or a key given twice (in one --set or two): which value is meant is unknown */
+    rc = fx_run(out, sizeof out, "%s relight '%s' --set 0= --out-dir '%s' 2>&1", test_bin(), dir, fx_tmp("r"));
+    CHECK_MSG(rc == 2 && fx_contains(out, "--set '0=': source 0: expected") && fx_count_lines(out) == 1, "%s", out);
+    rc = fx_run(out, sizeof out, "%s relight '%s' --set 0=gain:2, --out-dir '%s' 2>&1", test_bin(), dir, fx_tmp("r"));
+    CHECK_MSG(rc == 2 && fx_contains(out, "--set '0=gain:2,': source 0: expected"), "%s", out);
+    rc = fx_run(out, sizeof out, "%s relight '%s' --set 0=gain:2,gain:3 --out-dir '%s' 2>&1", test_bin(), dir, fx_tmp("r"));
+    CHECK_MSG(rc == 2 && fx_contains(out, "--set '0=gain:2,gain:3': source 0: gain given twice") &&
+              fx_count_lines(out) == 1, "%s", out);
+    rc = fx_run(out, sizeof out, "%s relight '%s' --set 1=phase:0 --set 1=bulb:cfl-23w,phase:120 --out-dir '%s' 2>&1",
+                test_bin(), dir, fx_tmp("r"));
+    CHECK_MSG(rc == 2 && fx_contains(out, "--set '1=bulb:cfl-23w,phase:120': source 1: phase given twice"), "%s", out);
     rc = fx_run(out, sizeof out, "%s relight '%s' --set 0=bulb:none --out-dir '%s' 2>&1", test_bin(), dir, fx_tmp("r"));
     CHECK(rc == 1 && fx_contains(out, "bulb 'none'"));
 }
