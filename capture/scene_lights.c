@@ -470,14 +470,75 @@ static gs_status parse_street_grid(const cap_pctx *c, const cap_scene *sc, json_
     return GS_OK;
 }
 
+/* ------------------------------------------------------------------ unique ids */
+
+typedef struct {
+    const char *id;
+    size_t n;   /* the light's index */
+} light_id;
+
+static int cmp_light_id(const void *a, const void *b)
+{
+    const light_id *x = a, *y = b;
+    int c = strcmp(x->id, y->id);
+    return c ? c : (x->n > y->n) - (x->n < y->n);
+}
+
+/* The item of lights that gives light n (first[i]: the index of item i's first light). */
+static size_t item_of(const size_t *first, size_t n)
+{
+    size_t i = 0;
+    while (first[i + 1] <= n) i++;
+    return i;
+}
+
+static int is_block(json_t *lights, size_t i)
+{
+    return json_object_get(json_array_get(lights, i), "type") != NULL;
+}
+
+/* Light ids are unique in a scene (--drop-light, truth.json and the evaluation name a light by
+ * its id): the first light whose id an earlier one has is refused, at its item of lights (the
+ * id of an inline light, or the block that gives it). */
+static gs_status check_unique_ids(const cap_pctx *c, json_t *lights, const light_vec *lv, const size_t *first)
+{
+    if (lv->n < 2) return GS_OK;
+    light_id *r = malloc(lv->n * sizeof *r);
+    if (!r) return gs_fail(GS_ENOMEM, "scene: out of memory for light ids");
+    for (size_t k = 0; k < lv->n; k++) r[k] = (light_id){lv->v[k].id, k};
+    qsort(r, lv->n, sizeof *r, cmp_light_id);
+    size_t dup = SIZE_MAX, twin = 0;
+    for (size_t k = 1, run = 0; k < lv->n; k++) {
+        if (strcmp(r[k].id, r[run].id)) {
+            run = k;
+        } else if (r[k].n < dup) {
+            dup = r[k].n;
+            twin = r[run].n;
+        }
+    }
+    free(r);
+    if (dup == SIZE_MAX) return GS_OK;
+    size_t i = item_of(first, dup), j = item_of(first, twin);
+    char p[64], which[64] = "", other[80];
+    snprintf(p, sizeof p, "lights[%zu]%s", i, is_block(lights, i) ? "" : ".id");
+    if (is_block(lights, i)) snprintf(which, sizeof which, "light %zu's id ", dup - first[i]);
+    if (is_block(lights, j)) snprintf(other, sizeof other, "light %zu of lights[%zu]", twin - first[j], j);
+    else snprintf(other, sizeof other, "lights[%zu]", j);
+    return cap_scene_bad(c, GS_EFORMAT, p, "%s\"%s\" is already the id of %s: expected an id that no "
+                         "other light of the scene has", which, lv->v[dup].id, other);
+}
+
 gs_status cap_scene_parse_lights(const cap_pctx *c, cap_scene *sc, json_t *lights)
 {
     if (!json_is_array(lights))
         return cap_scene_bad(c, GS_EFORMAT, "lights", "expected an array of lights and light sources "
                    "(required; [] for none)");
     light_vec lv = {NULL, 0, 0};
+    size_t *first = malloc((json_array_size(lights) + 1) * sizeof *first);
+    if (!first) return gs_fail(GS_ENOMEM, "scene: out of memory for lights");
     gs_status s = GS_OK;
     for (size_t i = 0; i < json_array_size(lights) && s == GS_OK; i++) {
+        first[i] = lv.n;
         char p[64];
         snprintf(p, sizeof p, "lights[%zu]", i);
         json_t *o = json_array_get(lights, i);
@@ -503,6 +564,9 @@ gs_status cap_scene_parse_lights(const cap_pctx *c, cap_scene *sc, json_t *light
         for (size_t j = 0; j < lv.n; j++)
             if (!lv.v[j].line) lv.v[j].line = gs_json_line(c->doc, p);
     }
+    first[json_array_size(lights)] = lv.n;
+    if (s == GS_OK) s = check_unique_ids(c, lights, &lv, first);
+    free(first);
     if (s != GS_OK) {
         free(lv.v);
         return s;

@@ -47,6 +47,11 @@ TEST(scene_parse_errors_name_file_line_field)
                  "field lights[0].lumens: a light given in lumens needs its distance", GS_EFORMAT);
     expect_error(" \"lights\": [{\"bulb\": \"hps-150w\", \"lat_deg\": 32, \"lon_deg\": 35, \"height_m\": 10, \"lumens\": 5}]}\n",
                  "field lights[0].lat_deg: a geographic light needs camera.station", GS_EFORMAT);
+    /* a light id given twice: --drop-light and truth.json name a light by its id */
+    expect_error(" \"lights\": [\n  {\"id\": \"a\", \"bulb\": \"hps-150w\", \"x_px\": 1, \"y_px\": 2, \"flux_e_per_cycle\": 5},\n"
+                 "  {\"id\": \"b\", \"bulb\": \"hps-150w\", \"x_px\": 3, \"y_px\": 2, \"flux_e_per_cycle\": 5},\n"
+                 "  {\"id\": \"a\", \"bulb\": \"hps-150w\", \"x_px\": 5, \"y_px\": 2, \"flux_e_per_cycle\": 5}]}\n",
+                 "bad.json:9: field lights[2].id: \"a\" is already the id of lights[0]: expected", GS_EFORMAT);
     /* effects */
     expect_error(" \"lights\": [],\n \"effects\": {\"shot_nois\": {}}}\n",
                  "bad.json:7: field effects.shot_nois: unknown effect; expected one of: frequency_wander", GS_EFORMAT);
@@ -139,6 +144,30 @@ TEST(scene_geojson_lights_projected_with_gis)
     CHECK(cap_scene_parse(scene, "geo.json", test_tmpdir(), &sc) == GS_EFORMAT);
     CHECK_MSG(strstr(gs_detail(), "lights.geojson:3: field features[0].properties.bulb"), "%s", gs_detail());
     cap_scene_release(&sc);
+    /* ids given twice: by an inline light and a feature, by two features */
+    const char *feature = " {\"type\": \"Feature\", \"geometry\": {\"type\": \"Point\", \"coordinates\": [35.03, 32.82, 25]},\n"
+                          "  \"properties\": {\"id\": \"%s\", \"lumens\": 15000}}";
+    static const struct {
+        const char *id2, *want;
+    } dups[] = {
+        {"x", "geo.json:9: field lights[1].id: \"x\" is already the id of light 1 of lights[0]: expected"},
+        {"a", "geo.json:7: field lights[0]: light 1's id \"a\" is already the id of light 0 of lights[0]: expected"},
+    };
+    for (int i = 0; i < 2; i++) {
+        f = fopen(gj, "w");
+        fputs("{\"type\": \"FeatureCollection\", \"features\": [\n", f);
+        fprintf(f, feature, "a");
+        fputs(",\n", f);
+        fprintf(f, feature, dups[i].id2);
+        fputs("]}\n", f);
+        fclose(f);
+        snprintf(scene, sizeof scene, "%s", body);
+        p = strstr(scene, "}}]}\n");
+        if (p) strcpy(p, "}},\n {\"id\": \"x\", \"bulb\": \"hps-150w\", \"x_px\": 1, \"y_px\": 2, \"flux_e_per_cycle\": 5}]}\n");
+        CHECK(cap_scene_parse(scene, "geo.json", test_tmpdir(), &sc) == GS_EFORMAT);
+        CHECK_MSG(strstr(gs_detail(), dups[i].want), "%s", gs_detail());
+        cap_scene_release(&sc);
+    }
 }
 
 TEST(scene_builtin_lab_and_metro)
