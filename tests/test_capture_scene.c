@@ -55,6 +55,10 @@ TEST(scene_parse_errors_name_file_line_field)
     /* effects */
     expect_error(" \"lights\": [],\n \"effects\": {\"shot_nois\": {}}}\n",
                  "bad.json:7: field effects.shot_nois: unknown effect; expected one of: frequency_wander", GS_EFORMAT);
+    /* an effect without parameters names the keys it still takes */
+    expect_error(" \"lights\": [],\n \"effects\": {\"shot_noise\": {\"foo\": 1}}}\n",
+                 "bad.json:7: field effects.shot_noise.foo: unknown field; expected one of: comment, description, "
+                 "or an extension named x_...", GS_EFORMAT);
     expect_error(" \"lights\": [],\n \"effects\": {\n  \"psf\": {\"sigma_px\": -1}}}\n",
                  "bad.json:8: field effects.psf.sigma_px: expected a number from 0.05 to 50 (got -1)", GS_EFORMAT);
     expect_error(" \"lights\": [],\n \"effects\": {\"free_running_drift\": {}}}\n",

@@ -80,6 +80,11 @@ TEST(kit_json_unknown_key_rule)
     gs_json_free(j);
     j = doc_of("{\"a\": 1, \"comment\": \"c\", \"x_ext\": {\"anything\": 1}}");
     if (j) CHECK_OK(gs_json_check_keys(j, gs_json_root(j), "", allowed));
+    /* an object without keys of its own: the message lists the ones it takes all the same */
+    static const char *const none[] = {NULL};
+    if (j) CHECK(gs_json_check_keys(j, gs_json_root(j), "", none) == GS_EFORMAT);
+    CHECK_MSG(strstr(gs_detail(), "t.json:1: field a: unknown field; expected one of: comment, description, or an "
+                                  "extension named x_..."), "%s", gs_detail());
     gs_json_free(j);
 }
 

@@ -145,8 +145,8 @@ gs_status gs_json_fail(const gs_json *j, gs_status s, const char *path, const ch
 void gs_json_path(char *out, size_t cap, const char *parent, const char *key);
 /* 1 for the keys every format ignores ("comment", "description", "x_..."). */
 int gs_json_key_is_extension(const char *key);
-/* GS_EFORMAT naming the first key of obj (at path) that is neither allowed (NULL-terminated)
- * nor an extension, with the list of allowed keys. */
+/* GS_EFORMAT naming the first key of obj (at path) that is neither allowed (NULL-terminated,
+ * maybe empty) nor an extension, with the list of allowed keys and the extensions. */
 gs_status gs_json_check_keys(const gs_json *j, json_t *obj, const char *path,
                              const char *const *allowed);
 /* Typed getters for member key of obj at path (obj NULL or not an object: absent). Absent and

@@ -306,8 +306,10 @@ gs_status gs_json_check_keys(const gs_json *j, json_t *obj, const char *path,
             size_t u = strlen(list);
             snprintf(list + u, sizeof list - u, "%s%s", a == allowed ? "" : ", ", *a);
         }
-        return gs_json_fail(j, GS_EFORMAT, p, "unknown field; expected one of: %s (or comment, "
-                            "description, or an extension named x_...)", list);
+        /* the extensions after the allowed keys, or alone when there are none */
+        return gs_json_fail(j, GS_EFORMAT, p, "unknown field; expected one of: %s%scomment, "
+                            "description, or an extension named x_...%s", list, *allowed ? " (or " : "",
+                            *allowed ? ")" : "");
     }
     return GS_OK;
 }
