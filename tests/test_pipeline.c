@@ -367,9 +367,13 @@ TEST(pipeline_geographic_scene_locates_lights)
     /* a capture directory with a station needs the lights' height */
     rc = sh("%s run %s --db %s --survey other", test_bin(), fx_tmp("geo-capture"), db);
     CHECK_MSG(rc == 1 && fx_count_lines(out) == 1 && strstr(out, "--light-height-m"), "%d: %s", rc, out);
+    /* the scene's capture, already in survey geo; another survey named on purpose stores it */
     rc = sh("%s run %s --db %s --light-height-m 10", test_bin(), fx_tmp("geo-capture"), db);
+    CHECK_MSG(rc == 0 && strstr(out, "already in"), "%d: %s", rc, out);
+    CHECK(query_long(db, "SELECT count(*) FROM captures") == 1);
+    rc = sh("%s run %s --db %s --survey other --light-height-m 10", test_bin(), fx_tmp("geo-capture"), db);
     CHECK_MSG(rc == 0, "%d: %s", rc, out);
-    CHECK(query_long(db, "SELECT count(*) FROM captures") == 2);   /* survey geo-capture */
+    CHECK(query_long(db, "SELECT count(*) FROM captures") == 2);
 }
 
 /* ------------------------------------------------------------------ SIGKILL and resume */
