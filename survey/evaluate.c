@@ -209,7 +209,8 @@ static gs_status find_capture(srv_db *db, const char *truth_path, const srv_eval
                    o->survey ? " in survey " : "", o->survey ? o->survey : "");
 }
 
-/* The truth's dimensions against the capture's: a truth file of another capture is refused. */
+/* The truth's dimensions against those the capture records: a truth file of another capture is
+ * refused. */
 static gs_status check_dims(srv_db *db, const char *truth_path, const srv_eval_report *r,
                             const long long dims[5])
 {
@@ -225,7 +226,7 @@ static gs_status check_dims(srv_db *db, const char *truth_path, const srv_eval_r
     } else {
         for (int d = 0; d < 5 && s == GS_OK; d++) {
             long long c = sqlite3_column_int64(q, d);
-            if (dims[d] >= 0 && dims[d] != c)
+            if (dims[d] >= 0 && c > 0 && dims[d] != c)   /* (0: not recorded, as bench accuracy's subsets) */
                 s = gs_fail(GS_EINVAL, "%s: %s %lld: expected %lld, the capture's (survey %s, key "
                             "%.19s...): a truth file of another capture?", truth_path, truth_dims[d],
                             dims[d], c, r->survey, r->capture_key);
