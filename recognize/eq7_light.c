@@ -450,6 +450,7 @@ int rec_eq7_light_prepare(const rec_matcher *m, rec_eq7_work *w, size_t q, const
         int n = prep_band(xc + o, sc + o, ok + o, K, ic1, ic2, &sum2, &sum1);
         mu2[band] = (n > 0 && sum2 > 0.0 && isfinite(sum2)) ? sum2 / n : 0.0;
         double flat = w->flat > 0.0 && n > 0 ? w->flat / (1.0 + w->flat) * sum1 / n : 0.0;
+        p->flat[band] = flat;
         int nb = prep_weights(xc + o, sc + o, ok + o, K, ic1, ic2, fe * fe * mu2[band], flat, w->w + o,
                               w->wx + o, w->xs + o, &Sxx, &p->wmin[m->nfit == 1 ? 0 : band], &bad);
         used += nb;
@@ -574,6 +575,10 @@ gs_status rec_eq7_light_finish(const rec_matcher *m, rec_eq7_work *w, size_t q, 
     if (nf == 1) npar = 2;
     memset(out, 0, sizeof *out);
     out->brightness = a_sum * c;
+    for (int b = 0; b < m->bands; b++) {
+        out->band_brightness[b] = (nf == 1 ? a_f[0] * m->bulbs[bb].chroma[b] : a_f[b]) * c;
+        out->band_flat[b] = p->flat[b] * c;
+    }
     out->chi2 = chi2;
     out->dof = used > npar ? used - npar : 0;
     /* chi2 ~ phi chi2(dof / phi) with a correlated excess (excess_correlation) */

@@ -86,6 +86,15 @@ gs_status rec_blob_photometry(rec_blob_state *s, const int *area, rec_catalog *c
 extern const unsigned char rec_bulb_palette[20][3];
 #define REC_DEG "\xc2\xb0"
 
+/* plot.c: the signal plot's template of light mt, its best bulb b, in band at the n times u
+ * (cycles): the fit's model of the light's samples divided by its brightness, (band_flat +
+ * band_brightness c(u)) / brightness, c(u) the mean of b's BRF (mean 1) delayed by shift cycles
+ * over a window of 1/K centred at u: at the window centres (k + 1/2)/K exactly Eq. 5's template
+ * values (a Nyquist component, which the built-in DELIGHT does not have, is left out). C holds
+ * b->brf.n / 2 + 1 values of scratch. */
+gs_status rec_plot_template(const gs_bulb *b, const rec_match *mt, double shift, int K, int band,
+                            const double *u, size_t n, double *c, _Complex double *C);
+
 /* OpenCV shim (recognize/opencv_shim.cpp), the only C++ in recognize/: plain C functions over
  * OpenCV 4 (core, imgproc, imgcodecs).
  * Every OpenCV or C++ exception is caught at this boundary and returned as a gs_status with a
@@ -340,6 +349,7 @@ typedef struct {
     double mu2[GS_MAX_BANDS];   /* the band levels of the excess noise, units of c */
     double wmin[GS_MAX_BANDS];  /* the smallest weight of each brightness's samples (0: none) */
     int full[GS_MAX_BANDS];     /* every sample of the brightness has a weight (none dropped) */
+    double flat[GS_MAX_BANDS];  /* the flat part subtracted from each band's samples, units of c */
 } rec_eq7_prep;
 
 /* A continuous bulb's brightness f against a light (eq7_bulbscreen.c): the constant terms of its

@@ -143,32 +143,26 @@ gs_status rec_plot_brfs(const gs_bulb *const *bulbs, size_t count, const char *p
 #define CURVE_N 200
 #define MAX_SIGNAL_LIGHTS 16
 
-/* Window-mean curve of bulb b delayed by shift cycles, for band: c(u) = the mean of the delayed,
- * chromaticity-scaled BRF over a window of 1/K centred at u, at u = j / (CURVE_N - 1), from the
- * BRF's Fourier series (each harmonic h times sinc(h / K)); exactly the template value (Eq. 5) at
- * the window centres u = (k + 1/2) / K (a Nyquist component, which the built-in DELIGHT does not
- * have, is left out). C holds n/2 + 1 values of scratch. */
-static gs_status template_curve(const gs_bulb *b, double shift, int K, int band, double *u,
-                                double *c, double complex *C)
+gs_status rec_plot_template(const gs_bulb *b, const rec_match *mt, double shift, int K, int band,
+                            const double *u, size_t n, double *c, double complex *C)
 {
-    int n = b->brf.n;
-    gs_status st = gs_brf_spectrum(b->brf.v + (size_t)band * (size_t)n, n, C);
+    int nb = b->brf.n;
+    gs_status st = gs_brf_spectrum(b->brf.v + (size_t)band * (size_t)nb, nb, C);
     if (st != GS_OK) return st;
     const double pi = 3.14159265358979323846;
-    for (int h = 1; h < n / 2; h++) {
+    for (int h = 1; h < nb / 2; h++) {
         double a = pi * h / K;
         C[h] *= 2.0 * sin(a) / a;
     }
-    for (int j = 0; j < CURVE_N; j++) {
-        u[j] = (double)j / (CURVE_N - 1);
+    for (size_t j = 0; j < n; j++) {
         double turns = fmod(u[j] - shift, 1.0);
         double complex z = cexp(I * 2.0 * pi * turns), zh = 1.0;
         double acc = creal(C[0]);
-        for (int h = 1; h < n / 2; h++) {
+        for (int h = 1; h < nb / 2; h++) {
             zh *= z;
             acc += creal(C[h] * zh);
         }
-        c[j] = b->chroma[band] * acc / n;
+        c[j] = (mt->band_flat[band] + mt->band_brightness[band] * acc / nb) / mt->brightness;
     }
     return GS_OK;
 }
@@ -190,7 +184,7 @@ static const char *const symbols[8] = {"\xe2\x97\x8f", "\xe2\x96\xa0", "\xe2\x96
                                        "\xe2\x9c\x9a", "\xe2\x9c\x96"};
 
 /* What the signal plot's drawing needs: the lights (rank[0..nl)), their colours, the y range,
- * and scratch curves (u, cv, tmp: template_curve's; px, py, lo, hi: K points). */
+ * and scratch curves (u: the curves' times, cv, tmp: rec_plot_template's; px, py, lo, hi: K points). */
 typedef struct {
     const rec_matcher *m;
     const rec_catalog *cat;
@@ -274,7 +268,7 @@ static gs_status draw_signals(void *ctx, unsigned char *unused)
                 double sh = gs_phase_to_shift(mt->phase_deg);
                 if (panel == 1 && !phase_known) continue;
                 /* the template (panel 0: at the light's phase; panel 1: at phase 0) */
-                st = template_curve(b, panel ? 0.0 : sh, K, band, u, cv, tmp);
+                st = rec_plot_template(b, mt, panel ? 0.0 : sh, K, band, u, CURVE_N, cv, tmp);
                 if (st != GS_OK) break;
                 plcol0(colour[l] % 20 + 2);
                 plwidth(panel ? 1.0 : 2.0);
@@ -390,6 +384,7 @@ gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const r
         gs_atomic_abort(&out);
         return gs_fail(GS_ENOMEM, "signal plot: cannot allocate curves");
     }
+    for (int j = 0; j < CURVE_N; j++) u[j] = (double)j / (CURVE_N - 1);
     /* y range over every drawn value */
     double ymax = 0.0;
     for (size_t l = 0; l < nl; l++) {
@@ -404,7 +399,7 @@ gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const r
     for (size_t l = 0; l < nl && st == GS_OK; l++) {
         const gs_bulb *b = rec_matcher_bulb(m, (size_t)match[rank[l].light].bulb);
         for (int band = 0; band < bands && st == GS_OK; band++) {
-            st = template_curve(b, 0.0, K, band, u, cv, tmp);
+            st = rec_plot_template(b, &match[rank[l].light], 0.0, K, band, u, CURVE_N, cv, tmp);
             for (int j = 0; j < CURVE_N && st == GS_OK; j++)
                 if (cv[j] > ymax) ymax = cv[j];
         }

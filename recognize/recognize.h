@@ -256,6 +256,12 @@ typedef struct {
                                * (Delta chi2 = 1), at most 51.96 (uniform); discrete: 0 */
     double brightness;        /* fitted sum over bands of the mean per-cycle flux (a* >= 0; with
                                * band gains sum_b a_b*, each >= 0) */
+    double band_brightness[GS_MAX_BANDS];   /* the fit's share of it in each band (a* Q_beta(b),
+                               * or a_b* with band gains): the fit's model of band b's samples is
+                               * band_flat[b] + band_brightness[b] t_b, t_b the best bulb's BRF
+                               * window means (mean 1) at the fitted phase */
+    double band_flat[GS_MAX_BANDS];   /* the flat part subtracted from band b's samples before
+                               * the fit (rec_eq7_opts.flat_share; 0 without) */
     double chi2;              /* weighted residual of the best fit, sum w (x - a* t)^2 (w with
                                * the model error) */
     int dof;                  /* usable samples - 2 (scale and phase); with band gains usable
@@ -460,9 +466,10 @@ gs_status rec_map_write_confidence_png(const rec_pixel_maps *pm, const char *pat
 /* Fig. 3 as one PNG (PLplot, cairo PNG driver; 1500 x 620 pixels for 1 band, 1500 x 1500 for 3):
  * one row of two panels per band. Left: each drawn light's measured signal divided by its fitted
  * brightness (match[i].brightness), signal / brightness at the window centres (k + 1/2)/K with
- * error bars sigma / brightness, and its best template's curve: the chromaticity-scaled BRF of the
- * best bulb at the recognised phase, averaged over a window of Delta/K centred at each time (so
- * the curve passes through the template values of Eq. 7 at the window centres). Right: the same
+ * error bars sigma / brightness, and the fit's model over the brightness: the best bulb's BRF at
+ * the recognised phase, averaged over a window of Delta/K centred at each time, times the band's
+ * band_brightness, plus its band_flat (so the curve passes through the fit's values at the window
+ * centres; internal.h: rec_plot_template). Right: the same
  * samples shifted by minus the light's phase shift (onto grid phase 0), over the phase-0 curves
  * (lights without a voltage-referenced phase are left out). Colours by bulb (as the paper's
  * figure), one symbol per light; a legend names each light (catalog index), its bulb and phase.

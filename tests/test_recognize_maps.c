@@ -285,3 +285,58 @@ TEST(maps_saturated_core_white_and_bad_arguments)
     rec_matcher_free(m);
     gs_delight_free(d);
 }
+
+/* ------------------------------------------------------------ the signal plot (Fig. 3) */
+
+static int matcher_bulb_index(const rec_matcher *m, const char *id)
+{
+    for (size_t i = 0; i < rec_matcher_bulb_count(m); i++)
+        if (!strcmp(rec_matcher_bulb(m, i)->id, id)) return (int)i;
+    return -1;
+}
+
+TEST(signals_template_is_the_fits_model)
+{
+    /* A noise-free mh-250w light reddened by extinction (optical depth 0.4 at 650/550/450 nm,
+     * Angstrom exponent 1.3: its bands' shares are not the chromaticity's) with a flat share of
+     * 5 % of its flicker, x_b = g_b (t_b + 0.05), fitted under the default (reddened) band model:
+     * the plotted template times the brightness passes through its samples at the window centres. */
+    gs_delight *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(d, 512));
+    rec_eq7_opts o;
+    rec_eq7_opts_default(&o);
+    o.flat_share = 0.05;
+    rec_matcher *m = NULL;
+    CHECK_OK(rec_matcher_new(d, 50, 3, 13, &o, &m));
+    int bi = m ? matcher_bulb_index(m, "mh-250w") : -1;
+    CHECK(bi >= 0);
+    if (bi >= 0) {
+        enum { K = 13 };
+        const gs_bulb *b = rec_matcher_bulb(m, (size_t)bi);
+        static const double lambda_nm[3] = {650.0, 550.0, 450.0};
+        double t[3 * K], x[3 * K], sg[3 * K], u[K], c[K], g[3];
+        CHECK_OK(gs_brf_integrate(&b->brf, gs_phase_to_shift(120.0), K, t));
+        for (int band = 0; band < 3; band++) {
+            g[band] = 500.0 * b->chroma[band] * exp(-0.4 * (pow(lambda_nm[band] / 550.0, -1.3) - 1.0));
+            for (int k = 0; k < K; k++) {
+                x[band * K + k] = g[band] * (t[band * K + k] + 0.05);
+                sg[band * K + k] = 1e-3 * g[band];
+            }
+        }
+        rec_match mt;
+        CHECK_OK(rec_match_light(m, x, sg, &mt));
+        CHECK_MSG(mt.bulb == bi && fabs(mt.phase_deg - 120.0) < 1e-9, "bulb %d phase %g", mt.bulb, mt.phase_deg);
+        double complex *C = malloc(sizeof *C * (size_t)(b->brf.n / 2 + 1));
+        for (int k = 0; k < K; k++) u[k] = (k + 0.5) / K;
+        for (int band = 0; band < 3 && C; band++) {
+            CHECK_OK(rec_plot_template(b, &mt, gs_phase_to_shift(mt.phase_deg), K, band, u, K, c, C));
+            for (int k = 0; k < K; k++)
+                CHECK_MSG(fabs(c[k] * mt.brightness - x[band * K + k]) < 1e-4 * g[band],
+                          "band %d window %d: template %g x brightness %g, sample %g", band, k, c[k],
+                          mt.brightness, x[band * K + k]);
+        }
+        free(C);
+    }
+    rec_matcher_free(m);
+    gs_delight_free(d);
+}
