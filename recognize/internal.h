@@ -81,8 +81,7 @@ gs_status rec_blob_apertures(rec_blob_state *s, int *area);
 gs_status rec_blob_photometry(rec_blob_state *s, const int *area, rec_catalog *cat);
 /* ================================================================= end of blobs */
 
-/* The bulb colours of the bulb map (maps_draw.c) and the signal plots (plot.c), in rank order,
- * and the degree sign in UTF-8. */
+/* The bulb colours of the bulb map (maps_draw.c), in rank order, and the degree sign in UTF-8. */
 extern const unsigned char rec_bulb_palette[20][3];
 #define REC_DEG "\xc2\xb0"
 
@@ -94,6 +93,21 @@ extern const unsigned char rec_bulb_palette[20][3];
  * b->brf.n / 2 + 1 values of scratch. */
 gs_status rec_plot_template(const gs_bulb *b, const rec_match *mt, double shift, int K, int band,
                             const double *u, size_t n, double *c, _Complex double *C);
+/* plot.c: a light of the signal plot, its catalog index, colour and symbol (0-based). */
+typedef struct {
+    size_t light;
+    int colour, symbol;
+} rec_signal_pick;
+#define REC_SIGNAL_SYMBOLS 8
+/* The lights the signal plot draws, pick[0..*n), *n <= max: of the recognised lights with a
+ * confident bulb (bulb >= 0 without REC_MATCH_BULB_AMBIGUOUS, brightness > 0, a finite noise
+ * sum > 0), the bulbs ranked by how many they have (most first, then by index), at most max;
+ * each bulb's best light (a known phase before none, then the highest SNR, sum(signal) /
+ * sqrt(sum(sigma^2))), then each bulb's second best, ... (at most REC_SIGNAL_SYMBOLS a bulb),
+ * until max; in order of colour, then symbol. colour: the bulb's rank; symbol: the light's rank
+ * within its bulb (no two lights share both). GS_ENOMEM. */
+gs_status rec_signal_lights(const rec_matcher *m, const rec_catalog *cat, const rec_match *match,
+                            size_t max, rec_signal_pick *pick, size_t *n);
 
 /* OpenCV shim (recognize/opencv_shim.cpp), the only C++ in recognize/: plain C functions over
  * OpenCV 4 (core, imgproc, imgcodecs).

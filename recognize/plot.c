@@ -142,6 +142,7 @@ gs_status rec_plot_brfs(const gs_bulb *const *bulbs, size_t count, const char *p
 
 #define CURVE_N 200
 #define MAX_SIGNAL_LIGHTS 16
+_Static_assert(MAX_SIGNAL_LIGHTS <= PALETTE_N, "a colour per drawn bulb");
 
 gs_status rec_plot_template(const gs_bulb *b, const rec_match *mt, double shift, int K, int band,
                             const double *u, size_t n, double *c, double complex *C)
@@ -168,34 +169,94 @@ gs_status rec_plot_template(const gs_bulb *b, const rec_match *mt, double shift,
 }
 
 typedef struct {
-    size_t light;
+    size_t light, count;   /* count: its bulb's eligible lights */
+    int bulb, phase;       /* phase: 1 when known */
     double snr;
 } light_rank;
 
+/* By bulb (most lights first, then index), then best first (a known phase, then SNR). */
 static int cmp_rank(const void *a, const void *b)
 {
     const light_rank *x = a, *y = b;
+    if (x->count != y->count) return x->count < y->count ? 1 : -1;
+    if (x->bulb != y->bulb) return x->bulb < y->bulb ? -1 : 1;
+    if (x->phase != y->phase) return x->phase < y->phase ? 1 : -1;
     if (x->snr != y->snr) return x->snr < y->snr ? 1 : -1;
     return x->light < y->light ? -1 : x->light > y->light;
 }
 
-static const char *const symbols[8] = {"\xe2\x97\x8f", "\xe2\x96\xa0", "\xe2\x96\xb2",
-                                       "\xe2\x97\x86", "\xe2\x96\xbc", "\xe2\x98\x85",
-                                       "\xe2\x9c\x9a", "\xe2\x9c\x96"};
+static int cmp_pick(const void *a, const void *b)
+{
+    const rec_signal_pick *x = a, *y = b;
+    return x->colour != y->colour ? x->colour - y->colour : x->symbol - y->symbol;
+}
 
-/* What the signal plot's drawing needs: the lights (rank[0..nl)), their colours, the y range,
- * and scratch curves (u: the curves' times, cv, tmp: rec_plot_template's; px, py, lo, hi: K points). */
+gs_status rec_signal_lights(const rec_matcher *m, const rec_catalog *cat, const rec_match *match,
+                            size_t max, rec_signal_pick *pick, size_t *n)
+{
+    *n = 0;
+    size_t nb = rec_matcher_bulb_count(m), na = 0, D = (size_t)cat->bands * (size_t)cat->K;
+    light_rank *all = calloc(cat->count ? cat->count : 1, sizeof *all);
+    size_t *count = calloc(nb ? nb : 1, sizeof *count);
+    if (!all || !count) {
+        free(all);
+        free(count);
+        return gs_fail(GS_ENOMEM, "signal plot: cannot rank %zu lights", cat->count);
+    }
+    for (size_t i = 0; i < cat->count; i++) {
+        const rec_match *mt = &match[i];
+        if (mt->bulb < 0 || (size_t)mt->bulb >= nb || (mt->flags & REC_MATCH_BULB_AMBIGUOUS) ||
+            !(mt->brightness > 0.0))
+            continue;
+        double s = 0.0, v = 0.0;
+        for (size_t d = 0; d < D; d++) {
+            s += cat->signal[i * D + d];
+            v += cat->sigma[i * D + d] * cat->sigma[i * D + d];
+        }
+        if (!(v > 0.0) || !isfinite(v)) continue;
+        all[na] = (light_rank){i, 0, mt->bulb,
+                               rec_matcher_bulb(m, (size_t)mt->bulb)->ref == GS_REF_VOLTAGE &&
+                                   !(mt->flags & REC_MATCH_PHASE_AMBIGUOUS),
+                               s / sqrt(v)};
+        count[mt->bulb]++;
+        na++;
+    }
+    for (size_t i = 0; i < na; i++) all[i].count = count[all[i].bulb];
+    qsort(all, na, sizeof *all, cmp_rank);
+    /* each bulb's lights are a run of all: the runs' r-th lights, round by round */
+    size_t runs = 0;
+    for (size_t i = 0; i < na; i++) runs += i == 0 || all[i].bulb != all[i - 1].bulb;
+    if (runs > max) runs = max;
+    for (int r = 0; r < REC_SIGNAL_SYMBOLS && *n < max; r++) {
+        size_t start = 0;
+        for (size_t g = 0; g < runs && *n < max; g++) {
+            if ((size_t)r < all[start].count)
+                pick[(*n)++] = (rec_signal_pick){all[start + (size_t)r].light, (int)g, r};
+            start += all[start].count;
+        }
+    }
+    qsort(pick, *n, sizeof *pick, cmp_pick);
+    free(all);
+    free(count);
+    return GS_OK;
+}
+
+static const char *const symbols[REC_SIGNAL_SYMBOLS] = {
+    "\xe2\x97\x8f", "\xe2\x96\xa0", "\xe2\x96\xb2", "\xe2\x97\x86",
+    "\xe2\x96\xbc", "\xe2\x98\x85", "\xe2\x9c\x9a", "\xe2\x9c\x96"};
+
+/* What the signal plot's drawing needs: the lights (pick[0..nl)), the y range, and scratch
+ * curves (u: the curves' times, cv, tmp: rec_plot_template's; px, py, lo, hi: K points). */
 typedef struct {
     const rec_matcher *m;
     const rec_catalog *cat;
     const rec_match *match;
-    const light_rank *rank;
+    const rec_signal_pick *pick;
     size_t nl;
     int K, bands;
     size_t D;
     const char *title, *file;   /* PLplot writes file by name */
     double ymax;
-    const int *colour;
     double *u, *cv;
     double complex *tmp;
     double *px, *py, *lo, *hi;
@@ -209,25 +270,25 @@ static gs_status draw_signals(void *ctx, unsigned char *unused)
     const rec_matcher *m = sp->m;
     const rec_catalog *cat = sp->cat;
     const rec_match *match = sp->match;
-    const light_rank *rank = sp->rank;
+    const rec_signal_pick *pick = sp->pick;
     size_t nl = sp->nl, D = sp->D;
     int K = sp->K, bands = sp->bands;
     const char *title = sp->title;
     double ymax = sp->ymax, *u = sp->u, *cv = sp->cv, *px = sp->px, *py = sp->py, *lo = sp->lo,
            *hi = sp->hi;
     double complex *tmp = sp->tmp;
-    const int *colour = sp->colour;
     gs_status st = GS_OK;
     plsdev("pngcairo");
     plsfnam(sp->file);
     char geom[32];
     snprintf(geom, sizeof geom, "1500x%d", bands == 1 ? 620 : 1500);
     plsetopt("geometry", geom);
-    plscmap0n(24);
+    plscmap0n(PALETTE_N + 2);
     plscol0(0, 255, 255, 255);
     plscol0(1, 0, 0, 0);
-    for (int c = 0; c < 20; c++)
-        plscol0(c + 2, rec_bulb_palette[c][0] * 4 / 5, rec_bulb_palette[c][1] * 4 / 5, rec_bulb_palette[c][2] * 4 / 5);
+    for (int c = 0; c < PALETTE_N; c++)   /* colour c: the palette from its second entry, black last */
+        plscol0(c + 2, palette[(c + 1) % PALETTE_N][0], palette[(c + 1) % PALETTE_N][1],
+                palette[(c + 1) % PALETTE_N][2]);
     plsexit(gs_isolated_exit);   /* plexit: its reason the last line, the child ended */
     plinit();
     pladv(0);
@@ -242,7 +303,7 @@ static gs_status draw_signals(void *ctx, unsigned char *unused)
     for (int band = 0; band < bands && st == GS_OK; band++) {
         double y1 = top - band * (row_h + gap), y0 = y1 - row_h;
         for (int panel = 0; panel < 2 && st == GS_OK; panel++) {
-            plvpor(panel ? 0.45 : 0.07, panel ? 0.76 : 0.38, y0, y1);
+            plvpor(panel ? 0.44 : 0.07, panel ? 0.74 : 0.37, y0, y1);
             plwind(0.0, 1.0, 0.0, ymax);
             plcol0(1);
             plwidth(1.0);
@@ -251,7 +312,7 @@ static gs_status draw_signals(void *ctx, unsigned char *unused)
             char lab[300];
             const char *bn = bands == 1 ? "monochrome" : band_name[band];
             if (panel == 0)
-                snprintf(lab, sizeof lab, "%s: measured/brightness, best template", bn);
+                snprintf(lab, sizeof lab, "%s: measured/brightness and the fit", bn);
             else
                 snprintf(lab, sizeof lab, "%s: shifted to grid phase 0", bn);
             pllab("time in the flicker cycle, t / #gD", "normalised signal", lab);
@@ -261,7 +322,7 @@ static gs_status draw_signals(void *ctx, unsigned char *unused)
                 plschr(0, 0.6);
             }
             for (size_t l = 0; l < nl && st == GS_OK; l++) {
-                size_t i = rank[l].light;
+                size_t i = pick[l].light;
                 const rec_match *mt = &match[i];
                 const gs_bulb *b = rec_matcher_bulb(m, (size_t)mt->bulb);
                 int phase_known = b->ref == GS_REF_VOLTAGE && !(mt->flags & REC_MATCH_PHASE_AMBIGUOUS);
@@ -270,7 +331,7 @@ static gs_status draw_signals(void *ctx, unsigned char *unused)
                 /* the template (panel 0: at the light's phase; panel 1: at phase 0) */
                 st = rec_plot_template(b, mt, panel ? 0.0 : sh, K, band, u, CURVE_N, cv, tmp);
                 if (st != GS_OK) break;
-                plcol0(colour[l] % 20 + 2);
+                plcol0(pick[l].colour + 2);
                 plwidth(panel ? 1.0 : 2.0);
                 plline(CURVE_N, u, cv);
                 /* the measured samples at the window centres (panel 1: minus the shift) */
@@ -287,7 +348,7 @@ static gs_status draw_signals(void *ctx, unsigned char *unused)
                 plwidth(1.0);
                 plerry(K, px, lo, hi);
                 plschr(0, 0.45);
-                plstring(K, px, py, symbols[l % 8]);
+                plstring(K, px, py, symbols[pick[l].symbol]);
                 plschr(0, 0.6);
             }
         }
@@ -295,29 +356,29 @@ static gs_status draw_signals(void *ctx, unsigned char *unused)
         /* legend, right of the first row */
         if (band == 0) {
             for (size_t l = 0; l < nl; l++) {
-                const rec_match *mt = &match[rank[l].light];
+                const rec_match *mt = &match[pick[l].light];
                 const gs_bulb *b = rec_matcher_bulb(m, (size_t)mt->bulb);
                 if (b->ref == GS_REF_VOLTAGE && !(mt->flags & REC_MATCH_PHASE_AMBIGUOUS))
-                    snprintf(text[l], sizeof text[l], "light %zu: %s, %.0f" REC_DEG, rank[l].light, b->id,
+                    snprintf(text[l], sizeof text[l], "light %zu: %s, %.0f" REC_DEG, pick[l].light, b->id,
                              mt->phase_deg);
                 else
-                    snprintf(text[l], sizeof text[l], "light %zu: %s, phase ?", rank[l].light, b->id);
+                    snprintf(text[l], sizeof text[l], "light %zu: %s, phase ?", pick[l].light, b->id);
                 labels[l] = text[l];
-                syms[l] = symbols[l % 8];
+                syms[l] = symbols[pick[l].symbol];
                 opts[l] = PL_LEGEND_LINE | PL_LEGEND_SYMBOL;
-                colors[l] = colour[l] % 20 + 2;
+                colors[l] = pick[l].colour + 2;
                 styles[l] = 1;
                 widths[l] = 2.0;
                 scales[l] = 0.5;
                 numbers[l] = 2;
             }
-            plvpor(0.78, 0.998, y0, y1);
+            plvpor(0.75, 0.998, y0, y1);
             plwind(0.0, 1.0, 0.0, 1.0);
             if (nl) {
                 PLFLT lw, lh;
                 pllegend(&lw, &lh, PL_LEGEND_BACKGROUND | PL_LEGEND_BOUNDING_BOX,
                          PL_POSITION_LEFT | PL_POSITION_INSIDE | PL_POSITION_TOP, 0.0, 0.0,
-                         0.05, 0, 1, 1, (PLINT)nl, 1, (PLINT)nl, opts, 0.6, 0.45, 2.0, 0.0, colors,
+                         0.05, 0, 1, 1, (PLINT)nl, 1, (PLINT)nl, opts, 0.6, 0.4, 2.0, 0.0, colors,
                          (const char *const *)labels, NULL, NULL, NULL, NULL, colors, styles,
                          widths, colors, scales, numbers, (const char *const *)syms);
             } else {
@@ -346,27 +407,10 @@ gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const r
                        first ? first->brf.bands : 0);
     if (bands < 1 || bands > GS_MAX_BANDS) bands = first ? first->brf.bands : 1;
     if (K < 2) K = 2;
-    /* the lights to draw: recognised, highest SNR first */
-    light_rank rank[MAX_SIGNAL_LIGHTS];
-    size_t nl = 0;
-    light_rank *all = calloc(cat->count ? cat->count : 1, sizeof *all);
-    if (!all) return gs_fail(GS_ENOMEM, "signal plot: cannot rank %zu lights", cat->count);
-    size_t na = 0;
-    size_t D = (size_t)bands * (size_t)K;
-    for (size_t i = 0; i < cat->count; i++) {
-        if (match[i].bulb < 0 || !(match[i].brightness > 0.0)) continue;
-        double s = 0.0, v = 0.0;
-        for (size_t d = 0; d < D; d++) {
-            s += cat->signal[i * D + d];
-            v += cat->sigma[i * D + d] * cat->sigma[i * D + d];
-        }
-        if (!(v > 0.0) || !isfinite(v)) continue;
-        all[na].light = i;
-        all[na++].snr = s / sqrt(v);
-    }
-    qsort(all, na, sizeof *all, cmp_rank);
-    for (size_t i = 0; i < na && nl < (size_t)max_lights; i++) rank[nl++] = all[i];
-    free(all);
+    size_t D = (size_t)bands * (size_t)K, nl = 0;
+    rec_signal_pick pick[MAX_SIGNAL_LIGHTS];
+    gs_status pst = rec_signal_lights(m, cat, match, (size_t)max_lights, pick, &nl);
+    if (pst != GS_OK) return pst;
 
     gs_atomic out;   /* PLplot writes by name (and exits the process on open failures) */
     gs_status ost = gs_atomic_open(&out, png_path, 0);
@@ -388,7 +432,7 @@ gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const r
     /* y range over every drawn value */
     double ymax = 0.0;
     for (size_t l = 0; l < nl; l++) {
-        size_t i = rank[l].light;
+        size_t i = pick[l].light;
         double a = match[i].brightness;
         for (size_t d = 0; d < D; d++) {
             double y = (cat->signal[i * D + d] + cat->sigma[i * D + d]) / a;
@@ -397,9 +441,9 @@ gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const r
     }
     gs_status st = GS_OK;
     for (size_t l = 0; l < nl && st == GS_OK; l++) {
-        const gs_bulb *b = rec_matcher_bulb(m, (size_t)match[rank[l].light].bulb);
+        const gs_bulb *b = rec_matcher_bulb(m, (size_t)match[pick[l].light].bulb);
         for (int band = 0; band < bands && st == GS_OK; band++) {
-            st = rec_plot_template(b, &match[rank[l].light], 0.0, K, band, u, CURVE_N, cv, tmp);
+            st = rec_plot_template(b, &match[pick[l].light], 0.0, K, band, u, CURVE_N, cv, tmp);
             for (int j = 0; j < CURVE_N && st == GS_OK; j++)
                 if (cv[j] > ymax) ymax = cv[j];
         }
@@ -408,21 +452,8 @@ gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const r
     if (bands == 3 && ymax < 0.6) ymax = 0.6;
     if (bands == 1 && ymax < 1.5) ymax = 1.5;
 
-    /* colours: one per distinct bulb (as the paper's Fig. 3) */
-    int bulb_of_colour[MAX_SIGNAL_LIGHTS], ncol = 0, colour[MAX_SIGNAL_LIGHTS];
-    for (size_t l = 0; l < nl; l++) {
-        int bb = match[rank[l].light].bulb, c = -1;
-        for (int k = 0; k < ncol; k++)
-            if (bulb_of_colour[k] == bb) c = k;
-        if (c < 0) {
-            c = ncol;
-            bulb_of_colour[ncol++] = bb;
-        }
-        colour[l] = c;
-    }
-
-    signal_plot sp = {m, cat, match, rank, nl, K, bands, D, title, out.tmp, ymax, colour,
-                      u, cv, tmp, px, py, lo, hi};
+    signal_plot sp = {m, cat, match, pick, nl, K, bands, D, title, out.tmp, ymax, u, cv, tmp,
+                      px, py, lo, hi};
     if (st == GS_OK) st = gs_isolated(png_path, NULL, 0, draw_signals, &sp);
     free(u); free(cv); free(tmp); free(px); free(py); free(lo); free(hi);
     if (st == GS_OK) return gs_atomic_commit(&out);

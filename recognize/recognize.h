@@ -471,10 +471,12 @@ gs_status rec_map_write_confidence_png(const rec_pixel_maps *pm, const char *pat
  * band_brightness, plus its band_flat (so the curve passes through the fit's values at the window
  * centres; internal.h: rec_plot_template). Right: the same
  * samples shifted by minus the light's phase shift (onto grid phase 0), over the phase-0 curves
- * (lights without a voltage-referenced phase are left out). Colours by bulb (as the paper's
- * figure), one symbol per light; a legend names each light (catalog index), its bulb and phase.
- * Drawn: the recognised lights (bulb >= 0), at most max_lights (1..16) of them, highest
- * sum(signal) / sqrt(sum(sigma^2)) first; with none, empty axes and a note. cat and match are
+ * (lights without a voltage-referenced phase are left out). Drawn: at most max_lights (1..16)
+ * recognised lights with a confident bulb, one per bulb first (the bulbs with the most such
+ * lights, each's best: a known phase, then the highest sum(signal) / sqrt(sum(sigma^2))), then
+ * each bulb's second best, ... (internal.h: rec_signal_lights); with none, empty axes and a note.
+ * A colour per bulb (as the paper's figure), a symbol per light of the bulb, so no two lights
+ * share both; a legend names each light (catalog index), its bulb and phase. cat and match are
  * rec_match_catalog's input and output for m. GS_EIO when png_path cannot be written, GS_EINVAL
  * for bad arguments or bands that differ from m's. Not thread-safe (PLplot). */
 gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const rec_match *match,

@@ -340,3 +340,62 @@ TEST(signals_template_is_the_fits_model)
     rec_matcher_free(m);
     gs_delight_free(d);
 }
+
+TEST(signals_lights_one_per_bulb_first)
+{
+    /* 14 lights, K = 4 mono, sigma 1, SNR = 2 x their level: bulb 5 has the five brightest
+     * lights, bulb 2 three, bulb 7 two (one of them bulb-ambiguous, which is never drawn) and
+     * bulb 1 one; light 13 has no answer. By count: 5, 2, then 1 and 7 (one light each, by index). */
+    static const int bulb[14] = {5, 5, 5, 5, 5, 2, 2, 2, 7, 7, 1, 2, 5, -1};
+    static const double level[14] = {90, 80, 70, 60, 50, 40, 30, 20, 45, 15, 10, 25, 55, 100};
+    enum { N = 14, K = 4 };
+    double signal[N * K], sigma[N * K];
+    rec_match match[N];
+    memset(match, 0, sizeof match);
+    for (int i = 0; i < N; i++) {
+        for (int k = 0; k < K; k++) signal[i * K + k] = level[i], sigma[i * K + k] = 1.0;
+        match[i].bulb = bulb[i];
+        match[i].brightness = level[i];
+        match[i].flags = i == 8 ? REC_MATCH_BULB_AMBIGUOUS : 0u;
+    }
+    rec_catalog cat;
+    memset(&cat, 0, sizeof cat);
+    cat.count = N, cat.bands = 1, cat.K = K, cat.signal = signal, cat.sigma = sigma;
+    gs_delight *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(d, 512));
+    rec_matcher *m = NULL;
+    CHECK_OK(rec_matcher_new(d, 50, 1, K, NULL, &m));
+    for (size_t max = 1; max <= 16 && m; max++) {
+        rec_signal_pick pick[16];
+        size_t n = 99;
+        CHECK_OK(rec_signal_lights(m, &cat, match, max, pick, &n));
+        /* the eligible lights: 12 (not 8, not 13) */
+        CHECK_MSG(n == (max < 12 ? max : 12), "max %zu: %zu lights", max, n);
+        int first_of[4] = {-1, -1, -1, -1};   /* the best light of colour 0..3 */
+        static const int want_bulb[4] = {5, 2, 1, 7}, want_first[4] = {0, 5, 10, 9};
+        for (size_t a = 0; a < n && a < 16; a++) {
+            const rec_signal_pick *p = &pick[a];
+            CHECK_MSG(p->light != 8 && p->light != 13, "max %zu: light %zu drawn", max, p->light);
+            CHECK(p->colour >= 0 && p->colour < 4 && p->symbol >= 0 && p->symbol < REC_SIGNAL_SYMBOLS);
+            if (p->colour < 0 || p->colour >= 4) continue;
+            CHECK_MSG(bulb[p->light] == want_bulb[p->colour], "max %zu: colour %d is bulb %d", max, p->colour,
+                      bulb[p->light]);
+            if (p->symbol == 0) first_of[p->colour] = (int)p->light;
+            for (size_t b = 0; b < a; b++) {
+                CHECK_MSG(pick[b].light != p->light, "max %zu: light %zu twice", max, p->light);
+                CHECK_MSG(pick[b].colour != p->colour || pick[b].symbol != p->symbol,
+                          "max %zu: lights %zu and %zu share colour %d and symbol %d", max, pick[b].light,
+                          p->light, p->colour, p->symbol);
+                /* ordered by colour, then symbol; within a bulb by SNR */
+                CHECK(pick[b].colour < p->colour || (pick[b].colour == p->colour && pick[b].symbol < p->symbol &&
+                                                     level[pick[b].light] > level[p->light]));
+            }
+        }
+        /* every bulb drawn (up to max) with its best light */
+        for (int c = 0; c < 4; c++)
+            CHECK_MSG(first_of[c] == ((size_t)c < max ? want_first[c] : -1), "max %zu: colour %d's first light %d",
+                      max, c, first_of[c]);
+    }
+    rec_matcher_free(m);
+    gs_delight_free(d);
+}
