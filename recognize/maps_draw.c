@@ -220,7 +220,7 @@ static void map_px(canvas *c, int s, int x, int y, const unsigned char col[3])
     fill_rect(c, s * x, s * y, s, s, col);
 }
 
-/* Legend items in columns of col_w pixels: swatches of 16 px and their labels. */
+/* Legend items in columns: swatches of 16 px and their labels. */
 typedef struct {
     unsigned char rgb[3];
     char text[120];
@@ -230,19 +230,29 @@ typedef struct {
 #define LEGEND_TOP 8
 #define TITLE_H 26
 #define TEXT_MM 3.4
+#define CHAR_PX 7.5   /* a label character's width at TEXT_MM, at most (digits: ~7) */
 
-static int legend_rows(int width, int col_w, size_t n)
+/* The columns' width: at least 320 px, and the longest label's with a margin. */
+static int legend_col_w(const key_item *items, size_t n)
 {
-    int cols = width / col_w;
+    int w = 320;
+    for (size_t i = 0; i < n; i++) {
+        int need = 24 + (int)ceil(CHAR_PX * (double)strlen(items[i].text)) + 24;
+        if (need > w) w = need;
+    }
+    return w;
+}
+
+static int legend_rows(int width, const key_item *items, size_t n)
+{
+    int cols = width / legend_col_w(items, n);
     if (cols < 1) cols = 1;
     return (int)((n + (size_t)cols - 1) / (size_t)cols);
 }
 
-static gs_status draw_items(canvas *c, int y0, int col_w, const key_item *items, size_t n)
+static gs_status draw_items(canvas *c, int y0, const key_item *items, size_t n)
 {
-    int cols = c->w / col_w;
-    if (cols < 1) cols = 1;
-    int rows = legend_rows(c->w, col_w, n);
+    int col_w = legend_col_w(items, n), rows = legend_rows(c->w, items, n);
     for (size_t i = 0; i < n; i++) {
         int col = (int)(i / (size_t)rows), row = (int)(i % (size_t)rows);
         int x = 12 + col * col_w, y = y0 + row * ROW_H;
@@ -280,11 +290,10 @@ gs_status rec_map_write_phase_png(const rec_pixel_maps *pm, const char *path)
     memcpy(items[n].rgb, dark_col, 3);
     snprintf(items[n++].text, sizeof items[0].text, "below %g sigma", pm->threshold_sigma);
 
-    int col_w = 320;
     int probe_w = rec_map_scale(pm->width, pm->height) * pm->width;
     if (probe_w < MAP_MIN_WIDTH) probe_w = MAP_MIN_WIDTH;
     int bar_h = pm->phases == REC_PHASES_CONTINUOUS ? 16 + 22 : 0;
-    int legend_h = LEGEND_TOP + TITLE_H + bar_h + legend_rows(probe_w, col_w, n) * ROW_H + 8;
+    int legend_h = LEGEND_TOP + TITLE_H + bar_h + legend_rows(probe_w, items, n) * ROW_H + 8;
     canvas c;
     int s;
     gs_status st = canvas_new(&c, pm, legend_h, &s);
@@ -324,7 +333,7 @@ gs_status rec_map_write_phase_png(const rec_pixel_maps *pm, const char *path)
         }
         y0 += bar_h;
     }
-    if (st == GS_OK) st = draw_items(&c, y0, col_w, items, n);
+    if (st == GS_OK) st = draw_items(&c, y0, items, n);
     if (st == GS_OK) st = canvas_write(&c, path);
     canvas_free(&c);
     return st;
@@ -332,43 +341,61 @@ gs_status rec_map_write_phase_png(const rec_pixel_maps *pm, const char *path)
 
 /* ------------------------------------------------------------ bulb map */
 
-typedef struct {
-    int bulb;
-    size_t pixels;
-} bulb_count;
+_Static_assert(REC_BULB_LEGEND_MAX <= REC_BULB_OTHER_COLOUR && REC_BULB_OTHER_COLOUR < 20,
+               "the listed bulbs' colours are not the other's");
 
-static int cmp_bulb_count(const void *a, const void *b)
+size_t rec_bulb_legend(const size_t *px, size_t nb, size_t *listed, int *colour, size_t *other_bulbs,
+                       size_t *other_px)
 {
-    const bulb_count *x = a, *y = b;
-    if (x->pixels != y->pixels) return x->pixels < y->pixels ? 1 : -1;
-    return x->bulb - y->bulb;
+    size_t total = 0, n = 0;
+    for (size_t b = 0; b < nb; b++) {
+        total += px[b];
+        colour[b] = px[b] ? REC_BULB_OTHER_COLOUR : -1;
+    }
+    while (n < REC_BULB_LEGEND_MAX) {   /* the commonest unlisted bulb, while it has its share */
+        size_t best = nb;
+        for (size_t b = 0; b < nb; b++)
+            if (colour[b] == REC_BULB_OTHER_COLOUR && (best == nb || px[b] > px[best])) best = b;
+        if (best == nb || (double)px[best] < REC_BULB_LEGEND_SHARE * (double)total) break;
+        colour[best] = (int)n;
+        listed[n++] = best;
+    }
+    *other_bulbs = *other_px = 0;
+    for (size_t b = 0; b < nb; b++)
+        if (colour[b] == REC_BULB_OTHER_COLOUR) {
+            (*other_bulbs)++;
+            *other_px += px[b];
+        }
+    return n;
 }
 
 gs_status rec_map_write_bulb_png(const rec_pixel_maps *pm, const rec_matcher *m, const char *path)
 {
     if (!pm || !pm->state || !m || !path) return gs_fail(GS_EINVAL, "bulb map: no maps, matcher or path");
     size_t nb = rec_matcher_bulb_count(m), np = (size_t)pm->width * (size_t)pm->height;
-    bulb_count *cnt = calloc(nb ? nb : 1, sizeof *cnt);
-    key_item *items = calloc(nb + 3, sizeof *items);
+    size_t *px = calloc(nb ? nb : 1, sizeof *px), *listed = calloc(nb ? nb : 1, sizeof *listed);
     int *colour = calloc(nb ? nb : 1, sizeof *colour);
-    if (!cnt || !items || !colour) {
-        free(cnt);
-        free(items);
+    key_item *items = calloc(nb + 4, sizeof *items);
+    if (!px || !listed || !colour || !items) {
+        free(px);
+        free(listed);
         free(colour);
+        free(items);
         return gs_fail(GS_ENOMEM, "bulb map: cannot allocate the legend");
     }
-    for (size_t b = 0; b < nb; b++) cnt[b].bulb = (int)b;
     for (size_t p = 0; p < np; p++)
-        if (pm->state[p] == REC_PIX_MATCHED && pm->bulb[p] >= 0 && (size_t)pm->bulb[p] < nb)
-            cnt[pm->bulb[p]].pixels++;
-    qsort(cnt, nb, sizeof *cnt, cmp_bulb_count);
-    size_t n = 0;
-    for (size_t i = 0; i < nb && cnt[i].pixels; i++) {
-        const gs_bulb *b = rec_matcher_bulb(m, (size_t)cnt[i].bulb);
-        colour[cnt[i].bulb] = (int)(i % 20);   /* by rank: the 20 commonest bulbs differ */
-        memcpy(items[n].rgb, rec_bulb_palette[colour[cnt[i].bulb]], 3);
-        snprintf(items[n++].text, sizeof items[0].text, "%s (%s), %zu px", b->id,
-                 gs_tech_name(b->type), cnt[i].pixels);
+        if (pm->state[p] == REC_PIX_MATCHED && pm->bulb[p] >= 0 && (size_t)pm->bulb[p] < nb) px[pm->bulb[p]]++;
+    size_t other_bulbs, other_px, n = 0, nl = rec_bulb_legend(px, nb, listed, colour, &other_bulbs, &other_px);
+    for (size_t i = 0; i < nl; i++) {
+        const gs_bulb *b = rec_matcher_bulb(m, listed[i]);
+        memcpy(items[n].rgb, rec_bulb_palette[colour[listed[i]]], 3);
+        snprintf(items[n++].text, sizeof items[0].text, "%s (%s), %zu px", b->id, gs_tech_name(b->type),
+                 px[listed[i]]);
+    }
+    if (other_bulbs) {
+        memcpy(items[n].rgb, rec_bulb_palette[REC_BULB_OTHER_COLOUR], 3);
+        snprintf(items[n++].text, sizeof items[0].text, "other (%zu bulb%s, %zu px)", other_bulbs,
+                 other_bulbs == 1 ? "" : "s", other_px);
     }
     memcpy(items[n].rgb, grey_col, 3);
     snprintf(items[n++].text, sizeof items[0].text, "unknown, dim or bad input");
@@ -377,10 +404,9 @@ gs_status rec_map_write_bulb_png(const rec_pixel_maps *pm, const rec_matcher *m,
     memcpy(items[n].rgb, dark_col, 3);
     snprintf(items[n++].text, sizeof items[0].text, "below %g sigma", pm->threshold_sigma);
 
-    int col_w = 320;
     int probe_w = rec_map_scale(pm->width, pm->height) * pm->width;
     if (probe_w < MAP_MIN_WIDTH) probe_w = MAP_MIN_WIDTH;
-    int legend_h = LEGEND_TOP + TITLE_H + legend_rows(probe_w, col_w, n) * ROW_H + 8;
+    int legend_h = LEGEND_TOP + TITLE_H + legend_rows(probe_w, items, n) * ROW_H + 8;
     canvas c;
     int s;
     gs_status st = canvas_new(&c, pm, legend_h, &s);
@@ -401,12 +427,13 @@ gs_status rec_map_write_bulb_png(const rec_pixel_maps *pm, const rec_matcher *m,
     int y0 = s * pm->height + LEGEND_TOP;
     if (st == GS_OK)
         st = add_label(&c, 12, y0 + 10, 3.8, "bulb per pixel (Eq. 7 over DELIGHT; brightness = signal)");
-    if (st == GS_OK) st = draw_items(&c, y0 + TITLE_H, col_w, items, n);
+    if (st == GS_OK) st = draw_items(&c, y0 + TITLE_H, items, n);
     if (st == GS_OK) st = canvas_write(&c, path);
     if (c.rgb) canvas_free(&c);
-    free(cnt);
-    free(items);
+    free(px);
+    free(listed);
     free(colour);
+    free(items);
     return st;
 }
 
@@ -422,10 +449,10 @@ gs_status rec_map_write_confidence_png(const rec_pixel_maps *pm, const char *pat
     snprintf(items[1].text, sizeof items[1].text, "saturated");
     memcpy(items[2].rgb, dark_col, 3);
     snprintf(items[2].text, sizeof items[2].text, "below %g sigma", pm->threshold_sigma);
-    int col_w = 320, bar_h = 16 + 22;
+    int bar_h = 16 + 22;
     int probe_w = rec_map_scale(pm->width, pm->height) * pm->width;
     if (probe_w < MAP_MIN_WIDTH) probe_w = MAP_MIN_WIDTH;
-    int legend_h = LEGEND_TOP + TITLE_H + bar_h + legend_rows(probe_w, col_w, 3) * ROW_H + 8;
+    int legend_h = LEGEND_TOP + TITLE_H + bar_h + legend_rows(probe_w, items, 3) * ROW_H + 8;
     canvas c;
     int s;
     gs_status st = canvas_new(&c, pm, legend_h, &s);
@@ -456,7 +483,7 @@ gs_status rec_map_write_confidence_png(const rec_pixel_maps *pm, const char *pat
         if (st == GS_OK && t == 4) c.labels[c.nlabels - 1].just = 1.0;
     }
     y0 += bar_h;
-    if (st == GS_OK) st = draw_items(&c, y0, col_w, items, 3);
+    if (st == GS_OK) st = draw_items(&c, y0, items, 3);
     if (st == GS_OK) st = canvas_write(&c, path);
     canvas_free(&c);
     return st;

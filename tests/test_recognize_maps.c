@@ -1,7 +1,8 @@
 /* test_recognize_maps.c - the maps of `gridsurvey recognize --maps` (Fig. 1): valid PNGs with
  * the documented scale, phase hues, bulb colours and the confidence scale on rendered captures
  * (tests/recognize_fixture.h), an empty scene, and in process the per-pixel pass's fast and
- * general paths, a saturated core and bad arguments. */
+ * general paths, a saturated core and bad arguments; the bulb map's legend and the signal plot's
+ * (Fig. 3) lights and template curves. */
 #include "recognize/recognize.h"
 #include "recognize/internal.h"
 #include "tests/fixtures.h"
@@ -398,4 +399,57 @@ TEST(signals_lights_one_per_bulb_first)
     }
     rec_matcher_free(m);
     gs_delight_free(d);
+}
+
+/* ------------------------------------------------------------ the bulb map's legend */
+
+TEST(maps_bulb_legend_top_bulbs_and_other)
+{
+    /* 40 bulbs: 25 with pixels (two large, a tail down to 1 px, a tie), 15 without */
+    enum { NB = 40 };
+    size_t px[NB] = {0}, listed[NB], total = 0, with = 0;
+    int colour[NB];
+    for (int b = 0; b < 25; b++) px[(b * 7) % NB] = b == 0 ? 20000 : b == 1 ? 9000 : (size_t)(2400 / b);
+    px[33] = px[(3 * 7) % NB];   /* a tie with bulb 21's 800 px */
+    for (int b = 0; b < NB; b++) total += px[b], with += px[b] > 0;
+    size_t other_bulbs = 99, other_px = 99;
+    size_t n = rec_bulb_legend(px, NB, listed, colour, &other_bulbs, &other_px);
+    CHECK_MSG(n >= 2 && n <= REC_BULB_LEGEND_MAX, "%zu bulbs listed", n);
+    /* the counts add up: the listed bulbs and "other" cover every bulb with pixels */
+    size_t listed_px = 0;
+    for (size_t i = 0; i < n && i < NB; i++) listed_px += px[listed[i]];
+    CHECK_MSG(n + other_bulbs == with && listed_px + other_px == total, "%zu + %zu bulbs of %zu, %zu + %zu px of %zu",
+              n, other_bulbs, with, listed_px, other_px, total);
+    for (size_t i = 0; i < n && i < NB; i++) {
+        size_t b = listed[i];
+        CHECK_MSG(px[b] >= REC_BULB_LEGEND_SHARE * (double)total, "bulb %zu listed with %zu px", b, px[b]);
+        CHECK(colour[b] == (int)i);
+        if (i) CHECK(px[listed[i - 1]] > px[b] || (px[listed[i - 1]] == px[b] && listed[i - 1] < b));
+        /* distinct colours within the legend, "other" one of its own */
+        const unsigned char *c = rec_bulb_palette[colour[b] >= 0 && colour[b] < 20 ? colour[b] : 0];
+        CHECK(memcmp(c, rec_bulb_palette[REC_BULB_OTHER_COLOUR], 3) != 0);
+        for (size_t j = 0; j < i; j++)
+            CHECK_MSG(memcmp(c, rec_bulb_palette[colour[listed[j]]], 3) != 0, "bulbs %zu and %zu share a colour", b,
+                      listed[j]);
+    }
+    /* an unlisted bulb: "other" (fewer pixels than every listed one, or below the share) or none */
+    for (size_t b = 0; b < NB; b++) {
+        int is_listed = 0;
+        for (size_t i = 0; i < n && i < NB; i++) is_listed |= listed[i] == b;
+        if (is_listed) continue;
+        CHECK_MSG(colour[b] == (px[b] ? REC_BULB_OTHER_COLOUR : -1), "bulb %zu (%zu px): colour %d", b, px[b], colour[b]);
+        if (px[b] && n)
+            CHECK(px[b] < REC_BULB_LEGEND_SHARE * (double)total ||
+                  (n == REC_BULB_LEGEND_MAX && px[b] <= px[listed[n - 1]]));
+    }
+    /* 20 bulbs of 5 % each: the first REC_BULB_LEGEND_MAX by index listed, the rest "other" */
+    size_t even[20];
+    for (int b = 0; b < 20; b++) even[b] = 100;
+    CHECK(rec_bulb_legend(even, 20, listed, colour, &other_bulbs, &other_px) == REC_BULB_LEGEND_MAX &&
+          listed[REC_BULB_LEGEND_MAX - 1] == REC_BULB_LEGEND_MAX - 1 && other_bulbs == 20 - REC_BULB_LEGEND_MAX &&
+          other_px == 100 * (20 - REC_BULB_LEGEND_MAX) && colour[19] == REC_BULB_OTHER_COLOUR);
+    /* every pixel one bulb: listed alone */
+    size_t one[3] = {0, 5, 0};
+    CHECK(rec_bulb_legend(one, 3, listed, colour, &other_bulbs, &other_px) == 1 && listed[0] == 1 &&
+          other_bulbs == 0 && other_px == 0 && colour[0] == -1 && colour[1] == 0);
 }
