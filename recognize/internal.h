@@ -84,11 +84,11 @@ gs_status rec_blob_photometry(rec_blob_state *s, const int *area, rec_catalog *c
 /* The bulb colours of the bulb map (maps_draw.c), in rank order, and the degree sign in UTF-8. */
 extern const unsigned char rec_bulb_palette[20][3];
 #define REC_BULB_LEGEND_MAX 12        /* bulbs named in the bulb map's legend, at most */
-#define REC_BULB_LEGEND_SHARE 0.01    /* each with at least this share of the matched pixels */
+#define REC_BULB_LEGEND_SHARE 0.01    /* each with at least this share of the pixels */
 #define REC_BULB_OTHER_COLOUR 18      /* the palette entry of the legend's "other" */
-/* maps_draw.c: the bulb map's legend from each bulb's matched pixels px[0..nb): listed[0..n),
+/* maps_draw.c: the bulb map's legend from each bulb's coloured pixels px[0..nb): listed[0..n),
  * n returned, the bulbs named in it, most pixels first (then by index): those with at least
- * REC_BULB_LEGEND_SHARE of the matched pixels, at most REC_BULB_LEGEND_MAX; colour[b] bulb b's
+ * REC_BULB_LEGEND_SHARE of all px, at most REC_BULB_LEGEND_MAX; colour[b] bulb b's
  * rec_bulb_palette entry: a listed bulb's rank (distinct), REC_BULB_OTHER_COLOUR for the other
  * bulbs with pixels (*other_bulbs of them, *other_px pixels: the legend's "other"), -1 for a
  * bulb without. */

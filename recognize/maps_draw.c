@@ -375,16 +375,17 @@ gs_status rec_map_write_bulb_png(const rec_pixel_maps *pm, const rec_matcher *m,
     size_t nb = rec_matcher_bulb_count(m), np = (size_t)pm->width * (size_t)pm->height;
     size_t *px = calloc(nb ? nb : 1, sizeof *px), *listed = calloc(nb ? nb : 1, sizeof *listed);
     int *colour = calloc(nb ? nb : 1, sizeof *colour);
-    key_item *items = calloc(nb + 4, sizeof *items);
-    if (!px || !listed || !colour || !items) {
+    key_item items[REC_BULB_LEGEND_MAX + 4];   /* the bulbs, other and three states */
+    if (!px || !listed || !colour) {
         free(px);
         free(listed);
         free(colour);
-        free(items);
         return gs_fail(GS_ENOMEM, "bulb map: cannot allocate the legend");
     }
-    for (size_t p = 0; p < np; p++)
-        if (pm->state[p] == REC_PIX_MATCHED && pm->bulb[p] >= 0 && (size_t)pm->bulb[p] < nb) px[pm->bulb[p]]++;
+    for (size_t p = 0; p < np; p++)   /* the confident pixels: the coloured ones */
+        if (pm->state[p] == REC_PIX_MATCHED && pm->confidence[p] >= pm->ambiguous_conf && pm->bulb[p] >= 0 &&
+            (size_t)pm->bulb[p] < nb)
+            px[pm->bulb[p]]++;
     size_t other_bulbs, other_px, n = 0, nl = rec_bulb_legend(px, nb, listed, colour, &other_bulbs, &other_px);
     for (size_t i = 0; i < nl; i++) {
         const gs_bulb *b = rec_matcher_bulb(m, listed[i]);
@@ -398,7 +399,8 @@ gs_status rec_map_write_bulb_png(const rec_pixel_maps *pm, const rec_matcher *m,
                  other_bulbs == 1 ? "" : "s", other_px);
     }
     memcpy(items[n].rgb, grey_col, 3);
-    snprintf(items[n++].text, sizeof items[0].text, "unknown, dim or bad input");
+    snprintf(items[n++].text, sizeof items[0].text, "ambiguous (conf. < %.2g), unknown, dim or bad input",
+             pm->ambiguous_conf);
     memcpy(items[n].rgb, white_col, 3);
     snprintf(items[n++].text, sizeof items[0].text, "saturated");
     memcpy(items[n].rgb, dark_col, 3);
@@ -418,9 +420,10 @@ gs_status rec_map_write_bulb_png(const rec_pixel_maps *pm, const rec_matcher *m,
             unsigned char col[3];
             double v = vscale_at(&vs, pm->snr[p]);
             if (pm->state[p] == REC_PIX_SATURATED) memcpy(col, white_col, 3);
-            else if (pm->state[p] == REC_PIX_MATCHED)
+            else if (pm->state[p] == REC_PIX_MATCHED && pm->confidence[p] >= pm->ambiguous_conf)
                 for (int k = 0; k < 3; k++) col[k] = (unsigned char)lround(v * rec_bulb_palette[colour[pm->bulb[p]]][k]);
-            else if (pm->state[p] == REC_PIX_NO_ANSWER) hsv_rgb(0.0, 0.0, 0.5 * v, col);
+            else if (pm->state[p] == REC_PIX_MATCHED || pm->state[p] == REC_PIX_NO_ANSWER)
+                hsv_rgb(0.0, 0.0, 0.5 * v, col);   /* ambiguous or no answer */
             else continue;
             map_px(&c, s, x, y, col);
         }
@@ -433,7 +436,6 @@ gs_status rec_map_write_bulb_png(const rec_pixel_maps *pm, const rec_matcher *m,
     free(px);
     free(listed);
     free(colour);
-    free(items);
     return st;
 }
 

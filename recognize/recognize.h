@@ -451,9 +451,10 @@ void rec_pixel_maps_release(rec_pixel_maps *pm);
  *   that is not above the threshold). A matched pixel whose confidence is below ambiguous_conf
  *   is ambiguous: grey. Legend: a swatch per phase of the set (continuous: a hue bar with ticks
  *   every 60 deg), ambiguous/unknown, saturated, below threshold.
- * - Bulb map: the bulbs present, ranked by pixel count, take the colours of a fixed 20-colour
- *   palette in that order (cycled beyond 20), times V; the legend lists them (id, technology,
- *   pixel count), most pixels first.
+ * - Bulb map: a colour per bulb, times V; ambiguous pixels grey as in the phase map. The legend
+ *   names the bulbs with at least 1 % of the coloured pixels, at most 12, most pixels first (id,
+ *   technology, pixel count), each in a colour of its own; the other bulbs share one colour
+ *   ("other": how many, their pixels) (internal.h: rec_bulb_legend).
  * - Confidence map: confidence on a viridis-like scale (0 dark violet .. 1 yellow), flat; the
  *   legend is a colour bar with ticks every 0.25.
  * GS_EIO when path cannot be written (nothing is left behind), GS_ELIMIT beyond 65535 pixels a

@@ -453,3 +453,43 @@ TEST(maps_bulb_legend_top_bulbs_and_other)
     CHECK(rec_bulb_legend(one, 3, listed, colour, &other_bulbs, &other_px) == 1 && listed[0] == 1 &&
           other_bulbs == 0 && other_px == 0 && colour[0] == -1 && colour[1] == 0);
 }
+
+TEST(maps_bulb_map_greys_ambiguous_pixels)
+{
+    /* As the phase map: a matched pixel below the ambiguity threshold is grey, a confident one in
+     * its bulb's colour (the legend counts those). Every second matched pixel made ambiguous. */
+    gs_delight *d = NULL;
+    gs_capture cap;
+    rec_matcher *m = mem_setup(&d, &cap);
+    rec_pixel_maps pm;
+    CHECK_OK(rec_pixel_maps_compute(&cap, m, NULL, NULL, &pm));
+    size_t np = (size_t)cap.width * (size_t)cap.height, nm = 0;
+    for (size_t p = 0; p < np && pm.state; p++)
+        if (pm.state[p] == REC_PIX_MATCHED && nm++ % 2) pm.confidence[p] = (float)(0.5 * pm.ambiguous_conf);
+    CHECK_MSG(nm >= 8, "%zu matched pixels", nm);
+    if (nm >= 8) {
+        const char *path = fx_tmp("bulb.png");
+        CHECK_OK(rec_map_write_bulb_png(&pm, m, path));
+        int w = 0, h = 0, s = rec_map_scale(cap.width, cap.height);
+        unsigned char *px = recfx_read_png(path, &w, &h);
+        size_t grey = 0, coloured = 0;
+        for (int y = 0; y < cap.height && px; y++)
+            for (int x = 0; x < cap.width; x++) {
+                size_t p = (size_t)y * (size_t)cap.width + (size_t)x;
+                if (pm.state[p] != REC_PIX_MATCHED) continue;
+                const unsigned char *c = recfx_map_at(px, w, s, x, y);
+                int is_grey = c[0] == c[1] && c[1] == c[2];
+                int ambiguous = pm.confidence[p] < pm.ambiguous_conf;
+                CHECK_MSG(is_grey == ambiguous, "pixel (%d, %d), confidence %g: (%d, %d, %d)", x, y,
+                          pm.confidence[p], c[0], c[1], c[2]);
+                grey += is_grey;
+                coloured += !is_grey;
+            }
+        CHECK(grey > 0 && coloured > 0);
+        free(px);
+    }
+    rec_pixel_maps_release(&pm);
+    gs_capture_release(&cap);
+    rec_matcher_free(m);
+    gs_delight_free(d);
+}
