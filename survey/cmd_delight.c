@@ -261,8 +261,16 @@ static gs_status add_recording(gs_delight *d, const void *arg)
     else if (!b.grid_hz && !o->grid_hz)
         s = gs_fail(GS_EINVAL, "%s: flicker at %.2f Hz is not locked to a 50/60 Hz grid: "
                     "expected --grid 50|60 to file it", o->recording, info.flicker_hz);
-    else if (!b.grid_hz)
+    else if (!b.grid_hz) {
         b.grid_hz = o->grid_hz;
+        /* Filed, but say so: its BRF spans one cycle of its own flicker, not a grid half-cycle. */
+        if (isfinite(info.flicker_hz))
+            fprintf(stderr, "gridsurvey delight add: warning: %s: flicker at %.2f Hz is not twice the "
+                    "%d Hz grid (%d Hz +-3 %%): a wrong --grid, or a lamp with its own driver "
+                    "frequency (PWM); filed as reference unlocked, its BRF one %.2f Hz cycle, never "
+                    "used by Eq. 7\n", o->recording, info.flicker_hz, b.grid_hz, 2 * b.grid_hz,
+                    info.flicker_hz);
+    }
     if (s == GS_OK && o->type) s = gs_tech_parse(o->type, &b.type);
     if (s == GS_OK) s = gs_delight_add(d, &b);
     if (s == GS_OK)

@@ -1,10 +1,12 @@
 /* test_cli_delight.c - `gridsurvey delight` end to end: the built-in database's coverage through
- * `export`, export -> import -> export identity, `add` of a real recording, `plot` writing a
- * real PNG, --help everywhere, and bad input as one-line errors with a non-zero exit. */
+ * `export`, export -> import -> export identity, `add` of a real recording and of an unlocked
+ * one (a one-line warning), `plot` writing a real PNG, --help everywhere, and bad input as
+ * one-line errors with a non-zero exit. */
 #include "recognize/recognize.h"
 #include "tests/fixtures.h"
 #include "tests/test.h"
 
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -77,6 +79,27 @@ TEST(cli_delight_add_real_recording)
     CHECK(strstr(out, "reference none") != NULL);
     CHECK(run("%s delight list --delight %s", db, NULL) == 0);
     CHECK(strstr(out, "feit-60w") && strstr(out, "incandescent") && strstr(out, "1 entries"));
+}
+
+/* A 500 Hz driver filed with --grid 50: the percent flicker of 1 + 0.5 sin^2 (20 %, a rate of
+ * 100 kHz: 200 samples a cycle) and a one-line warning that its flicker is not at twice the grid. */
+TEST(cli_delight_add_unlocked_warns_and_keeps_percent_flicker)
+{
+    const char *rec = fx_tmp("driver500.csv"), *db = fx_tmp("u.sqlite");
+    FILE *f = fopen(rec, "w");
+    CHECK(f != NULL);
+    if (!f) return;
+    for (int i = 0; i < 20000; i++)
+        fprintf(f, "%.9g,%.12g\n", i * 1e-5, 1 + 0.5 * pow(sin(M_PI * 500 * i * 1e-5), 2));
+    fclose(f);
+    CHECK(run("%s delight add --from-recording %s --grid 50 --delight %s", rec, db) == 0);
+    CHECK_MSG(strstr(out, "percent flicker 20.0, reference unlocked") != NULL, "%s", out);
+    /* the warning is one line of its own */
+    const char *w = strstr(out, "warning: ");
+    const char *hit = strstr(out, "driver500.csv: flicker at 500.00 Hz is not twice the 50 Hz grid");
+    CHECK_MSG(w && hit && hit < strchr(w, '\n') && fx_count_lines(out) == 2, "%s", out);
+    CHECK(run("%s delight show driver500 --delight %s", db, NULL) == 0);
+    CHECK_MSG(strstr(out, "reference unlocked") && strstr(out, "percent flicker 20.00"), "%s", out);
 }
 
 TEST(cli_delight_plot_writes_png)

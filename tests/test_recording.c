@@ -1,7 +1,9 @@
 /* test_recording.c - measured bulbs from photodiode recordings (paper Sec. 3, Fig. 2): the real
  * beautiful-flicker files reproduce their listed percent flicker; synthetic recordings with a
- * voltage column give the analytic BRF at the right phase; scope file variants (BOM, metadata,
- * a header running into the first sample, CRLF, a space in the name) parse identically. */
+ * voltage column give the analytic BRF at the right phase, noise-free ones without it their
+ * closed-form percent flicker at any frequency and sample rate; scope file variants (BOM,
+ * metadata, a header running into the first sample, CRLF, a space in the name) parse
+ * identically. */
 #include "recognize/base/internal.h"
 #include "tests/fixtures.h"
 #include "tests/test.h"
@@ -172,6 +174,60 @@ TEST(recording_pwm_is_unlocked)
     CHECK_NEAR(info.flicker_hz, 1030.0, 1.0);
     CHECK_NEAR(info.percent_flicker, 100.0, 1e-9);
     gs_bulb_release(&b);
+}
+
+/* Analytic oracle: waveforms whose percent flicker and BRF are known in closed form, at flicker
+ * frequencies locked (100, 120 Hz) and not (200 Hz-1 kHz), sampled at rates that divide the
+ * period (100 kHz, 48 kHz: the samples sit at a few phases) and rates that do not (44.1 kHz,
+ * 12,345 Hz), noise-free. shape 0: 1 + m sin^2(pi phi), PF m / (2 + m); shape 1:
+ * 1 + a cos(2 pi phi) + b cos(4 pi phi) with 4 b < a (extremes at phi = 0, 1/2), PF a / (1 + b). */
+static double oracle_at(int shape, double phi)
+{
+    return shape ? 1 + 0.6 * cos(2 * M_PI * phi) + 0.1 * cos(4 * M_PI * phi)
+                 : 1 + 0.5 * pow(sin(M_PI * phi), 2);
+}
+
+TEST(recording_percent_flicker_analytic_oracle)
+{
+    static const struct {
+        double flicker_hz, rate_hz, duration_s;
+        int shape;
+    } cases[] = {
+        {100, 100e3, 0.2, 0},  {200, 100e3, 0.2, 0},  {500, 100e3, 0.2, 0},  {1000, 100e3, 0.2, 0},
+        {120, 48e3, 0.1, 1},   {1000, 48e3, 0.05, 1}, {500, 44.1e3, 0.2, 1}, {137.3, 12345, 0.2, 0},
+        {1030, 12345, 0.05, 1},
+    };
+    for (size_t c = 0; c < sizeof cases / sizeof *cases; c++) {
+        const char *p = fx_tmp("oracle.csv");
+        FILE *f = fopen(p, "w");
+        CHECK(f != NULL);
+        if (!f) return;
+        size_t n = (size_t)(cases[c].duration_s * cases[c].rate_hz);
+        for (size_t i = 0; i < n; i++) {
+            double t = (double)i / cases[c].rate_hz;
+            fprintf(f, "%.9g,%.12g\n", t, oracle_at(cases[c].shape, cases[c].flicker_hz * t));
+        }
+        fclose(f);
+        gs_bulb b;
+        gs_recording_info info;
+        gs_status s = gs_recording_to_bulb(p, 0, 1024, &b, &info);
+        CHECK_MSG(s == GS_OK, "case %zu: %s", c, gs_detail());
+        if (s != GS_OK) continue;
+        double pf = cases[c].shape ? 100 * 0.6 / 1.1 : 100 * 0.5 / 2.5;
+        double mean = cases[c].shape ? 1.0 : 1.25;
+        CHECK_MSG(fabs(info.flicker_hz - cases[c].flicker_hz) < 1e-6 * cases[c].flicker_hz,
+                  "case %zu: flicker %.9g Hz", c, info.flicker_hz);
+        CHECK_MSG(fabs(info.percent_flicker - pf) < 0.05, "case %zu (%g Hz at %g Hz): percent flicker "
+                  "%.4f, expected %.4f", c, cases[c].flicker_hz, cases[c].rate_hz, info.percent_flicker, pf);
+        /* time zero is the first sample: the BRF is the waveform over its mean */
+        double err = 0;
+        for (int j = 0; j < 1024; j++)
+            err = fmax(err, fabs(b.brf.v[j] - oracle_at(cases[c].shape, j / 1024.0) / mean));
+        CHECK_MSG(err < 1e-3, "case %zu: BRF max error %g", c, err);
+        int locked = cases[c].flicker_hz == 100 || cases[c].flicker_hz == 120;
+        CHECK(b.ref == (locked ? GS_REF_NONE : GS_REF_UNLOCKED));
+        gs_bulb_release(&b);
+    }
 }
 
 TEST(recording_flat_lamp_has_no_frequency)

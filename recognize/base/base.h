@@ -532,11 +532,12 @@ gs_status gs_delight_import_csv(gs_delight *d, const char *path);
 
 /* ------------------------------------------------- measured bulbs (delight add) */
 
-/* A photodiode recording turned into a BRF: the flicker period is found from the data, cycles
- * are folded and averaged into n bins and normalised. With a voltage column (1-based column
- * index > 0), time zero is the voltage's first negative-to-positive crossing and the BRF is
- * GS_REF_VOLTAGE; without, GS_REF_NONE (shape only). A flicker frequency that is not twice a
- * 50/60 Hz grid (+-3 %) gives GS_REF_UNLOCKED (e.g. PWM). */
+/* A photodiode recording turned into a BRF: the flicker period is found from the data, its
+ * whole cycles are folded (each harmonic summed at the samples' exact phases, at any sample
+ * rate) into n samples and normalised. With a voltage column (1-based column index > 0), time
+ * zero is the voltage's first negative-to-positive crossing and the BRF is GS_REF_VOLTAGE;
+ * without, GS_REF_NONE (shape only). A flicker frequency that is not twice a 50/60 Hz grid
+ * (+-3 %) gives GS_REF_UNLOCKED (e.g. PWM). */
 typedef struct {
     size_t samples;            /* rows read */
     double sample_rate_hz;
@@ -548,8 +549,8 @@ typedef struct {
 /* Reads `time,value[,voltage...]` CSV as oscilloscopes write it: UTF-8 BOM, `Key:value,`
  * metadata lines, a header that may run into the first sample, CRLF; uniform time steps.
  * Without a voltage column time zero is the first sample. The BRF keeps the harmonics that
- * stand above the fold's noise (band-limited); a waveform dipping below 0 (scope offset) is
- * raised to a minimum of 0. A lamp without flicker above the noise gets a flat BRF and
+ * its sample phases tell apart and that stand above the fold's noise (band-limited); a
+ * waveform dipping below 0 (scope offset) is raised to a minimum of 0. A lamp without flicker above the noise gets a flat BRF and
  * flicker_hz NaN. Fills *out (id and name from the file name; type unknown: the caller's to set
  * afterwards; grid_hz 0 when the recording cannot tell, i.e. unlocked without a voltage column:
  * set it before gs_delight_add) and *info unless NULL. */

@@ -5,9 +5,11 @@
  * Steps: read `time,value[,voltage]` rows as oscilloscopes write them; find the flicker
  * fundamental from the Hann-windowed spectrum (coarse), refined by phase dispersion
  * minimisation (Stellingwerf 1978: the frequency whose fold leaves the least within-bin
- * variance; exact for any waveform shape and for partial cycles); with a voltage column, fit a
- * sine to the voltage (as the paper's Fig. 2) for the grid frequency and time zero; fold every
- * sample into n phase bins and average; keep the harmonics that stand above the fold's noise
+ * variance; any waveform shape, partial cycles) and a least-squares fit of the first harmonics
+ * (smooth in f where the samples sit at a few phases); with a voltage column, fit a sine to the
+ * voltage (as the paper's Fig. 2) for the grid frequency and time zero; over the recording's
+ * whole cycles, sum each harmonic over the samples at their exact phases, up to the harmonics
+ * the phases tell apart, and keep those that stand above the fold's noise and aliasing
  * (band-limited BRF, brf.c); normalise to mean 1. */
 #include "recognize/base/internal.h"
 
@@ -31,6 +33,12 @@ static const double two_pi = 6.283185307179586476925286766559;
 /* A subharmonic with at least 10 % of the peak's power is the true fundamental. */
 #define SUBHARMONIC_POWER 0.1
 #define PDM_BINS 64
+/* The least-squares fit of harmonics 1-3 refines the frequency within +-1/(4 T) of phase
+ * dispersion's: that is flat, and can be off by about 1/8 cycle over the recording T (8 samples a
+ * cycle at least), when the sample rate is a multiple of f and the samples sit at a few phases. */
+#define REFINE_HARMONICS 3
+/* Harmonics h and h + d are told apart when the samples' phases alias them by at most 1 %. */
+#define ALIAS_MAX 0.01
 
 /* ------------------------------------------------------------------ reading */
 
@@ -224,35 +232,44 @@ static double dispersion(const double *x, size_t N, double dt, double f)
     return d;
 }
 
-/* Residual sum of squares of the least-squares fit x ~ c + a cos(2 pi f t) + b sin(2 pi f t);
- * a, b and c out unless NULL (t = i dt). */
-static double sine_fit(const double *x, size_t N, double dt, double f, double *a, double *b, double *c)
+/* Residual sum of squares of the least-squares fit x ~ c + sum_{h=1..H} a_h cos(2 pi h f t) +
+ * b_h sin(2 pi h f t) (t = i dt, H <= REFINE_HARMONICS); c, a_1 and b_1 out unless NULL. */
+static double harmonic_fit(const double *x, size_t N, double dt, double f, int H, double *a, double *b,
+                           double *c)
 {
-    double M[3][4] = {{0}}, xx = 0;
+    enum { P = 2 * REFINE_HARMONICS + 1 };
+    int p = 2 * H + 1;
+    double M[P][P + 1] = {{0}}, xx = 0;
     for (size_t i = 0; i < N; i++) {
-        double w = two_pi * fmod(f * (double)i * dt, 1.0), r[3] = {1.0, cos(w), sin(w)};
-        for (int j = 0; j < 3; j++) {
-            for (int k = 0; k < 3; k++) M[j][k] += r[j] * r[k];
-            M[j][3] += r[j] * x[i];
+        double w = two_pi * phase_of(i, dt, 0.0, f), r[P] = {1.0, cos(w), sin(w)};
+        for (int h = 2; h <= H; h++) {   /* cos and sin of h w by the angle sum */
+            r[2 * h - 1] = r[2 * h - 3] * r[1] - r[2 * h - 2] * r[2];
+            r[2 * h] = r[2 * h - 2] * r[1] + r[2 * h - 3] * r[2];
+        }
+        for (int j = 0; j < p; j++) {
+            for (int k = 0; k < p; k++) M[j][k] += r[j] * r[k];
+            M[j][p] += r[j] * x[i];
         }
         xx += x[i] * x[i];
     }
-    double rhs[3] = {M[0][3], M[1][3], M[2][3]};
-    for (int p = 0; p < 3; p++)   /* Gaussian elimination; M is symmetric positive definite */
-        for (int r = p + 1; r < 3; r++) {
-            double m = M[r][p] / M[p][p];
-            for (int k = p; k < 4; k++) M[r][k] -= m * M[p][k];
+    double rhs[P];
+    for (int j = 0; j < p; j++) rhs[j] = M[j][p];
+    for (int q = 0; q < p; q++)   /* Gaussian elimination; M is symmetric positive definite */
+        for (int r = q + 1; r < p; r++) {
+            double m = M[r][q] / M[q][q];
+            for (int k = q; k <= p; k++) M[r][k] -= m * M[q][k];
         }
-    double sol[3];
-    for (int r = 2; r >= 0; r--) {
-        double acc = M[r][3];
-        for (int k = r + 1; k < 3; k++) acc -= M[r][k] * sol[k];
+    double sol[P], fit = 0;
+    for (int r = p - 1; r >= 0; r--) {
+        double acc = M[r][p];
+        for (int k = r + 1; k < p; k++) acc -= M[r][k] * sol[k];
         sol[r] = acc / M[r][r];
+        fit += sol[r] * rhs[r];
     }
     if (c) *c = sol[0];
     if (a) *a = sol[1];
     if (b) *b = sol[2];
-    return xx - sol[0] * rhs[0] - sol[1] * rhs[1] - sol[2] * rhs[2];   /* x'x - beta'X'x */
+    return xx - fit;   /* x'x - beta'X'x */
 }
 
 /* Golden-section minimum of cost over [lo, hi]. */
@@ -276,7 +293,12 @@ static double golden_min(double (*cost)(const double *, size_t, double, double),
 
 static double sine_cost(const double *x, size_t N, double dt, double f)
 {
-    return sine_fit(x, N, dt, f, NULL, NULL, NULL);
+    return harmonic_fit(x, N, dt, f, 1, NULL, NULL, NULL);
+}
+
+static double harmonics_cost(const double *x, size_t N, double dt, double f)
+{
+    return harmonic_fit(x, N, dt, f, REFINE_HARMONICS, NULL, NULL, NULL);
 }
 
 /* The nominal grid (50 or 60) whose frequency times mult is within LOCK_TOLERANCE of f, or 0. */
@@ -294,14 +316,28 @@ static int bin_of(size_t i, double dt, double t_ref, double f, int n)
     return (int)floor(phase_of(i, dt, t_ref, f) * n + 0.5) % n;   /* bins centred on j/n */
 }
 
-/* Fold x at f_fold with time zero t_ref (s from sample 0) into n bins and average each bin;
- * write the band-limited average to out[0..n) and the harmonics kept to *harmonics.
- * The harmonic coefficients are sums over the samples at their exact phases, each weighted by
- * 1/(samples in its bin): the DFT of the bin means without the bins' jitter and box-car
- * attenuation, and unbiased by partial cycles. */
+/* |mean of e^(2 pi i d phase)| over the first N samples at frequency f: the weight with which
+ * harmonic h + d leaks into the sum of harmonic h (1 when the phases cannot tell them apart,
+ * as at a sample rate d times f; about 1/N when the phases spread evenly). A geometric series:
+ * each sample advances d f dt cycles. */
+static double alias_weight(size_t N, double dt, double f, int d)
+{
+    double s = sin(M_PI * d * f * dt);
+    return fabs(s) * (double)N < 1e-6 ? 1.0 : fabs(sin(M_PI * (double)N * d * f * dt) / s) / (double)N;
+}
+
+/* Fold x at f_fold with time zero t_ref (s from sample 0) into n bins; write the band-limited
+ * waveform to out[0..n) and the harmonics kept to *harmonics. Only the samples spanning the
+ * recording's whole cycles are used, so that each harmonic is a plain sum over the samples at
+ * their exact phases: no partial cycle biases it, and it holds whether or not the sample rate
+ * divides the period. (Weighting each sample by 1/(samples in its bin) does not: at a rate that
+ * divides the period the samples sit at a few phases, a phase that straddles two bins counts
+ * twice, and the harmonics leak into each other.) The bins give the noise only. */
 static gs_status fold(const char *path, const double *x, size_t N, double dt, double f_fold,
                       double t_ref, int n, double *out, int *harmonics)
 {
+    double whole = floor((double)N * dt * f_fold);
+    if (whole >= 1) N = (size_t)llround(whole / (f_fold * dt));
     double *mean = calloc((size_t)n, sizeof *mean), *cnt = calloc((size_t)n, sizeof *cnt);
     double complex *C = calloc((size_t)(n / 2 + 1), sizeof *C);
     if (!mean || !cnt || !C) {
@@ -310,41 +346,49 @@ static gs_status fold(const char *path, const double *x, size_t N, double dt, do
         free(C);
         return gs_fail(GS_ENOMEM, "%s: cannot fold into %d bins", path, n);
     }
+    double dc = 0, rss = 0;
     for (size_t i = 0; i < N; i++) {
         int b = bin_of(i, dt, t_ref, f_fold, n);
         mean[b] += x[i];
         cnt[b] += 1;
+        dc += x[i] / (double)N;
     }
     int filled = 0;
-    double inv_cnt = 0, rss = 0;
     for (int j = 0; j < n; j++)
         if (cnt[j] > 0) {
             mean[j] /= cnt[j];
             filled++;
-            inv_cnt += 1.0 / cnt[j];
         }
-    /* C_0 from the bin means; the other sums use x minus that mean, so that the bins' phase
-     * jitter does not leak the (large) mean into the harmonics. */
-    double dc = 0;
-    for (int j = 0; j < n; j++) dc += mean[j] / filled;
+    /* The harmonics sum x minus its mean, so that rounding does not leak the (large) mean. */
     C[0] = dc * n;
-    int h_max = filled / 2 - 1, H = 0;
+    /* Harmonics up to h_max, none of which aliases into another by more than ALIAS_MAX. */
+    int h_max = 0;
+    double leak = 0;
+    for (int d = 1; d <= n - 2; d++) {
+        double a = alias_weight(N, dt, f_fold, d);
+        if (a > ALIAS_MAX) break;
+        leak = fmax(leak, a);
+        h_max = d / 2;
+    }
+    int H = 0;
     for (size_t i = 0; i < N; i++) {
         int b = bin_of(i, dt, t_ref, f_fold, n);
         rss += (x[i] - mean[b]) * (x[i] - mean[b]);
-        double w = (x[i] - dc) / cnt[b] * n / filled;
+        double w = (x[i] - dc) * n / (double)N;
         double complex e = cexp(-I * two_pi * phase_of(i, dt, t_ref, f_fold)), z = 1.0;
         for (int h = 1; h <= h_max; h++) {
             z *= e;
             C[h] += w * z;
         }
     }
-    /* Noise of a harmonic's amplitude 2|C_h|/n: each quadrature has variance
-     * (2 sigma^2 / filled^2) sum_j 1/c_j, sigma^2 the within-bin variance. Harmonics are kept up
-     * to the last one above HARMONIC_SNR noise scales (or above rounding, for noise-free data). */
+    /* Noise of a harmonic's amplitude 2|C_h|/n: each quadrature has variance 2 sigma^2 / N,
+     * sigma^2 the within-bin variance. Harmonics are kept up to the last one above
+     * HARMONIC_SNR noise scales (or above rounding, for noise-free data). */
     double dof = (double)N - filled;
-    double scale = dof > 0 ? sqrt(2.0 * rss / dof * inv_cnt) / filled : 0.0;
-    double floor_amp = fmax(HARMONIC_SNR * scale, 1e-12 * fabs(creal(C[0])) / n);
+    double scale = dof > 0 ? sqrt(2.0 * rss / dof / (double)N) : 0.0;
+    double top = 0;
+    for (int h = 1; h <= h_max; h++) top = fmax(top, 2.0 * cabs(C[h]) / n);
+    double floor_amp = fmax(fmax(HARMONIC_SNR * scale, leak * top), 1e-12 * fabs(creal(C[0])) / n);
     for (int h = 1; h <= h_max && h - H <= HARMONIC_GAP; h++)
         if (2.0 * cabs(C[h]) / n > floor_amp) H = h;
     /* The trigonometric polynomial of harmonics 0..H at t = j/n (no Nyquist term). */
@@ -414,6 +458,7 @@ gs_status gs_recording_to_bulb(const char *path, int voltage_column, int n, gs_b
     double f_coarse, f;
     if ((st = spectral_peak(path, s.x, N, dt, f_lo, f_hi, &f_coarse)) != GS_OK) goto done;
     f = golden_min(dispersion, s.x, N, dt, fmax(f_coarse - 1.0 / T, 0.5 * f_coarse), f_coarse + 1.0 / T);
+    f = golden_min(harmonics_cost, s.x, N, dt, f - 0.25 / T, f + 0.25 / T);
 
     /* Reference: a sine fitted to the outlet voltage gives the grid frequency and, at its first
      * negative-to-positive crossing, time zero (paper Fig. 2). */
@@ -436,7 +481,7 @@ gs_status gs_recording_to_bulb(const char *path, int voltage_column, int n, gs_b
         }
         if (grid == voltage_grid) {
             double a, b;
-            sine_fit(s.volt, N, dt, fv, &a, &b, NULL);
+            harmonic_fit(s.volt, N, dt, fv, 1, &a, &b, NULL);
             /* a cos w + b sin w = R sin(w + phi), phi = atan2(a, b): rising zero at w = -phi. */
             double cyc = -atan2(a, b) / two_pi;
             t_ref = (cyc - floor(cyc)) / fv;
