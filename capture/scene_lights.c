@@ -256,6 +256,12 @@ static gs_status parse_geojson(const cap_pctx *c, cap_scene *sc, json_t *blk, co
         }
         snprintf(q, sizeof q, "%s.properties", fp);
         json_t *pid = json_object_get(props, "id");
+        if (json_is_string(pid) && strlen(json_string_value(pid)) >= sizeof l.id) {
+            char q2[200];
+            snprintf(q2, sizeof q2, "%s.id", q);
+            s = cap_scene_bad(&g, GS_EFORMAT, q2, "expected an id shorter than %zu bytes", sizeof l.id);
+            goto done;
+        }
         if (json_is_string(pid)) snprintf(l.id, sizeof l.id, "%s", json_string_value(pid));
         else if (json_is_integer(pid)) snprintf(l.id, sizeof l.id, "%lld", (long long)json_integer_value(pid));
         else snprintf(l.id, sizeof l.id, "G%zu", lv->n);

@@ -92,10 +92,9 @@ static int set_max_memory(const char *what, const char *text)
 }
 
 /* Take the global --max-memory SIZE (or --max-memory=SIZE) out of argv, wherever it is before
- * a "--"; without it, $GS_MAX_MEMORY when set. Returns 0, or 2 after a one-line usage error. */
-static int take_max_memory(int *argc, char **argv)
+ * a "--" (*given = 1). Returns 0, or 2 after a one-line usage error. */
+static int take_max_memory(int *argc, char **argv, int *given)
 {
-    int given = 0;
     for (int i = 1; i < *argc && strcmp(argv[i], "--"); i++) {
         const char *v = NULL;
         int used = 0;
@@ -112,19 +111,19 @@ static int take_max_memory(int *argc, char **argv)
         }
         if (!used) continue;
         if (set_max_memory("--max-memory", v)) return 2;
-        given = 1;
+        *given = 1;
         for (int j = i; j + used <= *argc; j++) argv[j] = argv[j + used];   /* with the NULL */
         *argc -= used;
         i--;
     }
-    const char *env = getenv("GS_MAX_MEMORY");
-    return !given && env && *env ? set_max_memory("GS_MAX_MEMORY", env) : 0;
+    return 0;
 }
 
 int srv_main(int argc, char **argv)
 {
     opterr = 0;   /* the commands say what is wrong in one line of their own */
-    if (take_max_memory(&argc, argv)) return 2;
+    int given = 0;
+    if (take_max_memory(&argc, argv, &given)) return 2;
     if (argc < 2) {
         usage(stderr);
         return 2;
@@ -142,7 +141,11 @@ int srv_main(int argc, char **argv)
         return commands[c].run(argc > 3 ? 3 : 2, args);
     }
     int c = find_command(argv[1]);
-    return c < 0 ? 2 : commands[c].run(argc - 1, argv + 1);
+    if (c < 0) return 2;
+    /* without --max-memory, $GS_MAX_MEMORY, checked here: a bad value does not stop the help */
+    const char *env = getenv("GS_MAX_MEMORY");
+    if (!given && env && *env && set_max_memory("GS_MAX_MEMORY", env)) return 2;
+    return commands[c].run(argc - 1, argv + 1);
 }
 
 int srv_usage_error(const char *cmd, const char *fmt, ...)

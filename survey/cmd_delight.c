@@ -145,9 +145,8 @@ static int sensor_hint(const gs_delight *d, const char *sensor)
         size_t u = strlen(names);
         if (!has_sensor(d, i, s)) snprintf(names + u, sizeof names - u, "%s%s", u ? ", " : "", s);
     }
-    fprintf(stderr, "gridsurvey delight: --sensor '%s': expected a sensor of the database: %s\n", sensor,
-            *names ? names : "none (it is empty)");
-    return 2;
+    return srv_usage_error("delight", "--sensor '%s': expected a sensor of the database: %s", sensor,
+                           *names ? names : "none (it is empty)");
 }
 
 static int cmd_list(const gs_delight *d, const delight_opts *o)
@@ -261,16 +260,8 @@ static gs_status add_recording(gs_delight *d, const void *arg)
     else if (!b.grid_hz && !o->grid_hz)
         s = gs_fail(GS_EINVAL, "%s: flicker at %.2f Hz is not locked to a 50/60 Hz grid: "
                     "expected --grid 50|60 to file it", o->recording, info.flicker_hz);
-    else if (!b.grid_hz) {
+    else if (!b.grid_hz)
         b.grid_hz = o->grid_hz;
-        /* Filed, but say so: its BRF spans one cycle of its own flicker, not a grid half-cycle. */
-        if (isfinite(info.flicker_hz))
-            fprintf(stderr, "gridsurvey delight add: warning: %s: flicker at %.2f Hz is not twice the "
-                    "%d Hz grid (%d Hz +-3 %%): a wrong --grid, or a lamp with its own driver "
-                    "frequency (PWM); filed as reference unlocked, its BRF one %.2f Hz cycle, never "
-                    "used by Eq. 7\n", o->recording, info.flicker_hz, b.grid_hz, 2 * b.grid_hz,
-                    info.flicker_hz);
-    }
     if (s == GS_OK && o->type) s = gs_tech_parse(o->type, &b.type);
     if (s == GS_OK) s = gs_delight_add(d, &b);
     if (s == GS_OK)
@@ -280,6 +271,14 @@ static gs_status add_recording(gs_delight *d, const void *arg)
                isfinite(info.flicker_hz) ? "flicker" : "no flicker found, nominal",
                isfinite(info.flicker_hz) ? info.flicker_hz : 2.0 * b.grid_hz, info.cycles,
                b.grid_hz, info.percent_flicker, gs_ref_name(b.ref));
+    /* filed, but say so (with --grid, or a voltage column's grid): its BRF spans one cycle of its
+     * own flicker, not a grid half-cycle */
+    if (s == GS_OK && b.ref == GS_REF_UNLOCKED && isfinite(info.flicker_hz))
+        fprintf(stderr, "gridsurvey delight add: warning: %s: flicker at %.2f Hz is not twice the "
+                "%d Hz grid (%d Hz +-3 %%): a wrong --grid or voltage column, or a lamp with its own "
+                "driver frequency (PWM); filed as reference unlocked, its BRF one %.2f Hz cycle, "
+                "never used by Eq. 7\n", o->recording, info.flicker_hz, b.grid_hz, 2 * b.grid_hz,
+                info.flicker_hz);
     gs_bulb_release(&b);
     return s;
 }

@@ -47,8 +47,8 @@ static int parse_set(const char *arg, int S, rec_relight_set *set, unsigned *giv
     char *end;
     long n = strtol(buf, &end, 10);
     if (!eq || end != eq || end == buf || n < 0 || n >= S) {
-        fprintf(stderr, "gridsurvey relight: --set '%s': expected N=gain:A[,bulb:ID][,phase:DEG] "
-                "with N from 0 to %d\n", arg, S - 1);
+        srv_usage_error("relight", "--set '%s': expected N=gain:A[,bulb:ID][,phase:DEG] with N from 0 "
+                        "to %d", arg, S - 1);
         return 0;
     }
     rec_relight_set *r = &set[n];
@@ -62,8 +62,8 @@ static int parse_set(const char *arg, int S, rec_relight_set *set, unsigned *giv
         unsigned key = !strcmp(tok, "gain") ? 1 : !strcmp(tok, "bulb") ? 2 : !strcmp(tok, "phase") ? 4 : 0;
         if (!key) goto bad;
         if (given[n] & key) {
-            fprintf(stderr, "gridsurvey relight: --set '%s': source %ld: %s given twice: expected each of "
-                    "gain, bulb and phase at most once per source\n", arg, n, tok);
+            srv_usage_error("relight", "--set '%s': source %ld: %s given twice: expected each of gain, "
+                            "bulb and phase at most once per source", arg, n, tok);
             return 0;
         }
         given[n] |= key;
@@ -81,8 +81,8 @@ static int parse_set(const char *arg, int S, rec_relight_set *set, unsigned *giv
     }
     return 1;
 bad:
-    fprintf(stderr, "gridsurvey relight: --set '%s': source %ld: expected N=gain:A[,bulb:ID][,phase:DEG] "
-            "(A a number >= 0, DEG a number)\n", arg, n);
+    srv_usage_error("relight", "--set '%s': source %ld: expected N=gain:A[,bulb:ID][,phase:DEG] (A a "
+                    "number >= 0, DEG a number)", arg, n);
     return 0;
 }
 
@@ -102,8 +102,7 @@ int srv_cmd_relight(int argc, char **argv)
         switch (c) {
         case 's':
             if (nsets == 64) {
-                fprintf(stderr, "gridsurvey relight: at most 64 --set\n");
-                return 2;
+                return srv_usage_error("relight", "at most 64 --set");
             }
             sets[nsets++] = optarg;
             break;
@@ -116,8 +115,7 @@ int srv_cmd_relight(int argc, char **argv)
         }
     }
     if (optind + 1 != argc || !out) {
-        fprintf(stderr, "gridsurvey relight: expected one DIR and --out-dir CAPDIR (see gridsurvey help relight)\n");
-        return 2;
+        return srv_usage_error("relight", "expected one DIR and --out-dir CAPDIR");
     }
     const char *dir = argv[optind];
     char path[4096];

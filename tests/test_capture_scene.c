@@ -172,6 +172,20 @@ TEST(scene_geojson_lights_projected_with_gis)
         CHECK_MSG(strstr(gs_detail(), dups[i].want), "%s", gs_detail());
         cap_scene_release(&sc);
     }
+    /* an id too long is refused, not cut (two cut alike were refused as one id given twice) */
+    char longid[64];
+    memset(longid, 'L', 59);
+    longid[59] = '\0';
+    f = fopen(gj, "w");
+    fputs("{\"type\": \"FeatureCollection\", \"features\": [\n", f);
+    fprintf(f, feature, longid);
+    fputs("]}\n", f);
+    fclose(f);
+    snprintf(scene, sizeof scene, "%s", body);
+    CHECK(cap_scene_parse(scene, "geo.json", test_tmpdir(), &sc) == GS_EFORMAT);
+    CHECK_MSG(strstr(gs_detail(), "field features[0].properties.id: expected an id shorter than 48 bytes"),
+              "%s", gs_detail());
+    cap_scene_release(&sc);
 }
 
 TEST(scene_builtin_lab_and_metro)

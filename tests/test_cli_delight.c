@@ -146,7 +146,7 @@ TEST(cli_bad_input_one_line_errors)
         const char *cmd, *names;
     } usage[] = {
         {"%s delight plot --ids hps-150w", "-o FILE.png"}, {"%s delight generate", "-o DB"},
-        {"%s delight show", "bulb id"},                     {"%s delight import x.csv", "--delight DB"},
+        {"%s delight show", "bulb id"},                     {"env -u GRIDSURVEY_DELIGHT %s delight import x.csv", "--delight DB"},
         {"%s delight add --delight x.sqlite", "--from-recording"},
     };
     for (size_t i = 0; i < sizeof usage / sizeof *usage; i++)

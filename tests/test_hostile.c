@@ -309,6 +309,10 @@ TEST(memory_budget_env_checked_like_the_option)
     CHECK_MSG(strstr(out, "memory budget of 4096.0 MiB"), "%s", out);
     CHECK(run("GS_MAX_MEMORY=garbage %s --max-memory 2G recognize %s", dir, NULL, NULL) == 1);
     CHECK_MSG(strstr(out, "memory budget of 2048.0 MiB"), "%s", out);
+    /* the help and version still answer */
+    CHECK(run("GS_MAX_MEMORY=garbage %s --help", "", NULL, NULL) == 0);
+    CHECK(run("GS_MAX_MEMORY=garbage %s --version", "", NULL, NULL) == 0);
+    CHECK(run("GS_MAX_MEMORY=garbage %s help recognize", "", NULL, NULL) == 0);
 }
 
 TEST(capture_frame_larger_than_any_png_refused)

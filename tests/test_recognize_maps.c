@@ -344,9 +344,11 @@ TEST(signals_template_is_the_fits_model)
 
 TEST(signals_lights_one_per_bulb_first)
 {
-    /* 14 lights, K = 4 mono, sigma 1, SNR = 2 x their level: bulb 5 has the five brightest
-     * lights, bulb 2 three, bulb 7 two (one of them bulb-ambiguous, which is never drawn) and
-     * bulb 1 one; light 13 has no answer. By count: 5, 2, then 1 and 7 (one light each, by index). */
+    /* 14 lights, K = 4 mono, sigma 1, SNR = 2 x their level: bulb 5 has six lights (the five
+     * brightest and light 12; the brightest, light 0, with an ambiguous phase: drawn after the
+     * others of its bulb), bulb 2 four, bulb 7 two (one of them bulb-ambiguous, which is never
+     * drawn) and bulb 1 one; light 13 has no answer. By count: 5, 2, then 1 and 7 (one light
+     * each, by index). */
     static const int bulb[14] = {5, 5, 5, 5, 5, 2, 2, 2, 7, 7, 1, 2, 5, -1};
     static const double level[14] = {90, 80, 70, 60, 50, 40, 30, 20, 45, 15, 10, 25, 55, 100};
     enum { N = 14, K = 4 };
@@ -357,7 +359,7 @@ TEST(signals_lights_one_per_bulb_first)
         for (int k = 0; k < K; k++) signal[i * K + k] = level[i], sigma[i * K + k] = 1.0;
         match[i].bulb = bulb[i];
         match[i].brightness = level[i];
-        match[i].flags = i == 8 ? REC_MATCH_BULB_AMBIGUOUS : 0u;
+        match[i].flags = i == 8 ? REC_MATCH_BULB_AMBIGUOUS : i == 0 ? REC_MATCH_PHASE_AMBIGUOUS : 0u;
     }
     rec_catalog cat;
     memset(&cat, 0, sizeof cat);
@@ -366,6 +368,11 @@ TEST(signals_lights_one_per_bulb_first)
     CHECK_OK(gs_delight_generate(d, 512));
     rec_matcher *m = NULL;
     CHECK_OK(rec_matcher_new(d, 50, 1, K, NULL, &m));
+    /* a light's phase is known when its bulb is voltage-referenced and its phase not ambiguous */
+    int known[14];
+    for (int i = 0; i < N && m; i++)
+        known[i] = bulb[i] >= 0 && rec_matcher_bulb(m, (size_t)bulb[i])->ref == GS_REF_VOLTAGE && i != 0;
+    CHECK(m && rec_matcher_bulb(m, 5)->ref == GS_REF_VOLTAGE);   /* (light 0's ambiguity matters) */
     for (size_t max = 1; max <= 16 && m; max++) {
         rec_signal_pick pick[16];
         size_t n = 99;
@@ -373,7 +380,7 @@ TEST(signals_lights_one_per_bulb_first)
         /* the eligible lights: 12 (not 8, not 13) */
         CHECK_MSG(n == (max < 12 ? max : 12), "max %zu: %zu lights", max, n);
         int first_of[4] = {-1, -1, -1, -1};   /* the best light of colour 0..3 */
-        static const int want_bulb[4] = {5, 2, 1, 7}, want_first[4] = {0, 5, 10, 9};
+        static const int want_bulb[4] = {5, 2, 1, 7}, want_first[4] = {1, 5, 10, 9};
         for (size_t a = 0; a < n && a < 16; a++) {
             const rec_signal_pick *p = &pick[a];
             CHECK_MSG(p->light != 8 && p->light != 13, "max %zu: light %zu drawn", max, p->light);
@@ -387,9 +394,11 @@ TEST(signals_lights_one_per_bulb_first)
                 CHECK_MSG(pick[b].colour != p->colour || pick[b].symbol != p->symbol,
                           "max %zu: lights %zu and %zu share colour %d and symbol %d", max, pick[b].light,
                           p->light, p->colour, p->symbol);
-                /* ordered by colour, then symbol; within a bulb by SNR */
-                CHECK(pick[b].colour < p->colour || (pick[b].colour == p->colour && pick[b].symbol < p->symbol &&
-                                                     level[pick[b].light] > level[p->light]));
+                /* ordered by colour, then symbol; within a bulb a known phase first, then by SNR */
+                size_t u = pick[b].light, v = p->light;
+                CHECK(pick[b].colour < p->colour ||
+                      (pick[b].colour == p->colour && pick[b].symbol < p->symbol &&
+                       (known[u] > known[v] || (known[u] == known[v] && level[u] > level[v]))));
             }
         }
         /* every bulb drawn (up to max) with its best light */
