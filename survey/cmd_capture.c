@@ -49,7 +49,7 @@ static int num_arg(const char *opt, const char *arg, double lo, double hi, doubl
     char *end;
     double v = strtod(arg, &end);
     if (!*arg || *end || !isfinite(v) || v < lo || v > hi) {
-        fprintf(stderr, "gridsurvey capture: %s '%s': expected a number from %g to %g\n", opt, arg, lo, hi);
+        srv_usage_error("capture", "%s '%s': expected a number from %g to %g", opt, arg, lo, hi);
         return 0;
     }
     *out = v;

@@ -77,29 +77,25 @@ static int parse_opts(int argc, char **argv, delight_opts *o)
         case 'g':
             o->grid_hz = (int)strtol(optarg, &end, 10);
             if (*end || (o->grid_hz != 50 && o->grid_hz != 60)) {
-                fprintf(stderr, "gridsurvey delight: --grid '%s': expected 50 or 60\n", optarg);
-                return 2;
+                return srv_usage_error("delight", "--grid '%s': expected 50 or 60", optarg);
             }
             break;
         case 'v':
             o->voltage_column = (int)strtol(optarg, &end, 10);
             if (*end || o->voltage_column < 2) {
-                fprintf(stderr, "gridsurvey delight: --voltage-column '%s': expected a column number >= 2\n", optarg);
-                return 2;
+                return srv_usage_error("delight", "--voltage-column '%s': expected a column number >= 2", optarg);
             }
             break;
         case 'n':
             o->n = (int)strtol(optarg, &end, 10);
             if (*end || o->n < 256 || o->n % 2) {
-                fprintf(stderr, "gridsurvey delight: --n '%s': expected an even number >= 256\n", optarg);
-                return 2;
+                return srv_usage_error("delight", "--n '%s': expected an even number >= 256", optarg);
             }
             break;
         case 'w':
             o->watts = strtod(optarg, &end);
             if (*end || !(o->watts > 0)) {
-                fprintf(stderr, "gridsurvey delight: --watts '%s': expected a power in W > 0\n", optarg);
-                return 2;
+                return srv_usage_error("delight", "--watts '%s': expected a power in W > 0", optarg);
             }
             break;
         case 'h': fputs(delight_usage, stdout); return 0;
@@ -359,9 +355,8 @@ int srv_cmd_delight(int argc, char **argv)
     }
     int is_show = !strcmp(sub, "show");
     if (strcmp(sub, "list") && !is_show && strcmp(sub, "export") && strcmp(sub, "plot")) {
-        fprintf(stderr, "gridsurvey delight: '%s' is not a subcommand: expected list, show, export, "
-                        "import, add, plot or generate\n", sub);
-        return 2;
+        return srv_usage_error("delight", "'%s' is not a subcommand: expected list, show, export, import, "
+                               "add, plot or generate", sub);
     }
     if (is_show && npos != 1) return srv_usage_error("delight show", "expected one bulb id");
     if (!strcmp(sub, "plot") && !o.out) return srv_usage_error("delight plot", "-o FILE.png is required");
