@@ -11,10 +11,10 @@
 #include <stdio.h>
 #include <stdlib.h>
 
-/* A qualitative palette (Okabe-Ito, then darker variants) on PLplot's colour map 0. */
+/* A qualitative palette (Okabe-Ito, then other distinct hues) on PLplot's colour map 0. */
 static const unsigned char palette[][3] = {
     {0, 0, 0},     {230, 159, 0}, {86, 180, 233}, {0, 158, 115}, {170, 150, 0}, {0, 114, 178},
-    {213, 94, 0},  {204, 121, 167}, {120, 120, 120}, {150, 90, 0}, {30, 90, 140}, {0, 90, 60},
+    {213, 94, 0},  {204, 121, 167}, {120, 120, 120}, {80, 40, 120}, {150, 210, 0}, {0, 90, 60},
     {140, 40, 90}, {90, 90, 200},   {200, 60, 60},  {60, 160, 60},
 };
 #define PALETTE_N ((int)(sizeof palette / sizeof *palette))
@@ -303,7 +303,7 @@ static gs_status draw_signals(void *ctx, unsigned char *unused)
     for (int band = 0; band < bands && st == GS_OK; band++) {
         double y1 = top - band * (row_h + gap), y0 = y1 - row_h;
         for (int panel = 0; panel < 2 && st == GS_OK; panel++) {
-            plvpor(panel ? 0.44 : 0.07, panel ? 0.74 : 0.37, y0, y1);
+            plvpor(panel ? 0.435 : 0.07, panel ? 0.73 : 0.37, y0, y1);
             plwind(0.0, 1.0, 0.0, ymax);
             plcol0(1);
             plwidth(1.0);
@@ -372,7 +372,7 @@ static gs_status draw_signals(void *ctx, unsigned char *unused)
                 scales[l] = 0.5;
                 numbers[l] = 2;
             }
-            plvpor(0.75, 0.998, y0, y1);
+            plvpor(0.755, 0.998, y0, y1);   /* (clear of the right panel's last tick label) */
             plwind(0.0, 1.0, 0.0, 1.0);
             if (nl) {
                 PLFLT lw, lh;

@@ -72,7 +72,12 @@ static int parse_opts(int argc, char **argv, delight_opts *o)
         case 'r': o->recording = optarg; break;
         case 'I': o->id = optarg; break;
         case 'N': o->name = optarg; break;
-        case 't': o->type = optarg; break;
+        case 't': {
+            gs_tech t;
+            if (gs_tech_parse(optarg, &t) != GS_OK) return srv_usage_error("delight", "--type: %s", gs_detail());
+            o->type = optarg;
+            break;
+        }
         case 's': o->sensor = optarg; break;
         case 'g':
             o->grid_hz = (int)strtol(optarg, &end, 10);

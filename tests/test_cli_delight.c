@@ -153,6 +153,9 @@ TEST(cli_bad_input_one_line_errors)
         CHECK_MSG(run(usage[i].cmd, NULL, NULL) == 2 && fx_count_lines(out) == 1 &&
                   strstr(out, usage[i].names) && strstr(out, "see gridsurvey help delight"),
                   "%s: %s", usage[i].cmd, out);
+    /* an unknown --type is a usage error before any work (it was "not found" after the recording) */
+    CHECK(run("%s delight add --from-recording none.csv --type led --delight x.sqlite", NULL, NULL) == 2);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "--type: technology 'led': expected one of"), "%s", out);
     /* an unknown --sensor is a usage error naming the database's sensors, not an empty answer */
     CHECK(run("%s delight list --sensor foo", NULL, NULL) == 2);
     CHECK(fx_count_lines(out) == 1 && strstr(out, "--sensor 'foo'") && strstr(out, "photodiode") && strstr(out, "rgb"));
