@@ -16,11 +16,11 @@ static const char relight_usage[] =
     "Relights the sources that `gridsurvey unmix` wrote to DIR (sources.json, source_NN.tiff):\n"
     "I = T [A Q B]^relight (paper Eq. 20). Each --set changes source N (00, 01, ...): gain:A\n"
     "amplifies it (0 switches it off), bulb:ID gives it another DELIGHT bulb's chromaticity\n"
-    "and BRF (or \"daylight\"), phase:DEG another grid phase; each key at most once per source.\n"
-    "Sources not named keep gain 1, their bulb and phase and the BRF refined by unmix. Writes\n"
-    "CAPDIR as a capture directory (16-bit frames with HDR maps where the result exceeds the\n"
-    "sensor; pixels without a value saturated) of the input capture's numbers, and\n"
-    "CAPDIR/preview.png (the mean image).\n"
+    "and BRF (or \"daylight\"), phase:DEG another grid phase (modulo 360); each key at most\n"
+    "once per source. Sources not named keep gain 1, their bulb and phase and the BRF refined\n"
+    "by unmix. Writes CAPDIR as a capture directory (16-bit frames with HDR maps where the\n"
+    "result exceeds the sensor; pixels without a value saturated) of the input capture's\n"
+    "numbers, and CAPDIR/preview.png (the mean image).\n"
     "\n"
     "  --set N=...        a source's change (repeatable)\n"
     "  --out-dir CAPDIR   the capture directory to write\n"
@@ -76,6 +76,8 @@ static int parse_set(const char *arg, int S, rec_relight_set *set, unsigned *giv
         } else {
             r->phase_deg = strtod(val, &end);
             if (!*val || *end || !isfinite(r->phase_deg)) goto bad;
+            r->phase_deg = fmod(r->phase_deg, 360.0);   /* 400 is 40 deg, -120 is 240 */
+            if (r->phase_deg < 0.0) r->phase_deg += 360.0;
             r->set_phase = 1;
         }
     }

@@ -67,8 +67,9 @@ TEST(unmix_relight_cli_float_tiffs_gdal_and_a_capture_recognize_reads)
     CHECK(json_array_size(json_object_get(s1, "chromaticity")) == 3);
     CHECK(json_array_size(json_array_get(json_object_get(s1, "brf"), 2)) == 26);
     json_decref(j);
-    /* relight: one source off, another bulb and phase for the first; recognize reads it back */
-    rc = fx_run(out, sizeof out, "%s relight '%s' --set 1=gain:0 --set 0=gain:2,bulb:hps-70w,phase:240 "
+    /* relight: one source off, another bulb and phase for the first (-120 deg: 240); recognize
+     * reads it back */
+    rc = fx_run(out, sizeof out, "%s relight '%s' --set 1=gain:0 --set 0=gain:2,bulb:hps-70w,phase:-120 "
                 "--out-dir '%s' 2>&1", test_bin(), dir, rel);
     CHECK_MSG(rc == 0, "relight: %s", out);
     CHECK(fx_contains(out, "00 hps-70w@240 x2") && fx_contains(out, "01 cfl-23w@120 x0"));
