@@ -164,8 +164,10 @@ static int cmd_list(const gs_delight *d, const delight_opts *o)
             snprintf(pf + used, sizeof pf - used, "%s%.1f", band ? " / " : "",
                      gs_brf_percent_flicker(&b->brf, band));
         }
-        printf("%-22s %-22s %4d %-10s %-8s %7.1f  %-28s %s\n", b->id, gs_tech_name(b->type),
-               b->grid_hz, b->sensor, gs_ref_name(b->ref), b->watts, pf, b->name);
+        char watts[32] = "-";   /* (0: not given) */
+        if (b->watts > 0) snprintf(watts, sizeof watts, "%.1f", b->watts);
+        printf("%-22s %-22s %4d %-10s %-8s %7s  %-28s %s\n", b->id, gs_tech_name(b->type), b->grid_hz,
+               b->sensor, gs_ref_name(b->ref), watts, pf, b->name);
         shown++;
     }
     int techs[GS_TECH_COUNT] = {0}, n_tech = 0;
@@ -183,9 +185,10 @@ static int cmd_show(const gs_delight *d, const delight_opts *o, const char *id)
     for (size_t i = 0; i < gs_delight_count(d); i++) {
         const gs_bulb *b = gs_delight_get(d, i);
         if (strcmp(b->id, id) || !matches(b, o)) continue;
-        printf("%s: %s, %s, %.1f W, %d Hz, sensor %s, reference %s, %d samples per cycle\n", b->id,
-               b->name, gs_tech_name(b->type), b->watts, b->grid_hz, b->sensor,
-               gs_ref_name(b->ref), b->brf.n);
+        char watts[32] = "power not given";
+        if (b->watts > 0) snprintf(watts, sizeof watts, "%.1f W", b->watts);
+        printf("%s: %s, %s, %s, %d Hz, sensor %s, reference %s, %d samples per cycle\n", b->id, b->name,
+               gs_tech_name(b->type), watts, b->grid_hz, b->sensor, gs_ref_name(b->ref), b->brf.n);
         enum { K = 26 };
         double w[GS_MAX_BANDS * K];
         gs_status s = gs_brf_integrate(&b->brf, 0.0, K, w);

@@ -100,6 +100,10 @@ TEST(cli_delight_add_unlocked_warns_and_keeps_percent_flicker)
     CHECK_MSG(w && hit && hit < strchr(w, '\n') && fx_count_lines(out) == 2, "%s", out);
     CHECK(run("%s delight show driver500 --delight %s", db, NULL) == 0);
     CHECK_MSG(strstr(out, "reference unlocked") && strstr(out, "percent flicker 20.00"), "%s", out);
+    /* no --watts: the power is not given, not 0 W */
+    CHECK_MSG(strstr(out, ", power not given, 50 Hz"), "%s", out);
+    CHECK(run("%s delight list --delight %s", db, NULL) == 0);
+    CHECK_MSG(strstr(out, " unlocked       -  20.0 "), "%s", out);   /* (ref, then watts in 7) */
 }
 
 TEST(cli_delight_plot_writes_png)
