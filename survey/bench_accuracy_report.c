@@ -160,7 +160,7 @@ void srv_acc_plot_accuracy(const char *path, const srv_acc_point *pts, size_t np
 }
 
 /* Calibration: per scene, accuracy of the stored lights against their reported confidence
- * (bins pooled over the main grid), with the diagonal. */
+ * (bins pooled over every point of the scene, the variants included), with the diagonal. */
 void srv_acc_plot_calibration(const char *path, const srv_acc_point *pts, size_t np)
 {
     plsdev("pngcairo");
@@ -347,7 +347,11 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
                "K; HDR on, locked, phases 0/120/240. The variants (HDR off, free running, continuous phases) are "
                "table rows on metro_clear at K = 26.\n\n"
                "![calibration](%s/calibration.png)\n\nAccuracy of the answered lights against their reported "
-               "confidence, pooled over every point of each scene; the dashed line is perfect calibration.\n\n",
+               "confidence, pooled over every point of each scene, the variants included: free-running points, "
+               "whose phases drift without the AC lock, are far from the diagonal and bend their scene's curve "
+               "(their ECE is in the table); the dashed line is perfect calibration. These captures are the "
+               "project's own simulator's; calibration on a renderer the simulator does not share is in "
+               "docs/recognition.md (\"Measured\", the independent renderer).\n\n",
             leaf, leaf);
 
     /* the recommendation, from the metro curves */
@@ -385,6 +389,13 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
                    "yield (truth lights found with the right bulb and phase) is within 2 points of the best "
                    "of the sweep (%.1f %% at K = %d, C = %d, %.0f s).\n\n",
                 srv_acc_scene_names[rs], 100 * best->ev.all_correct_rate, best->K, best->C, best->capture_s);
+        /* the sampling noise of a yield over the window's truth lights */
+        double nt = (double)rec->ev.truth_in_image, y = rec->ev.all_correct_rate;
+        if (nt > 0)
+            fprintf(f, "Sampling noise: with %.0f truth lights one light is %.2f points, and the binomial "
+                       "standard error of a yield y is sqrt(y (1 - y) / %.0f), %.1f points at the default's "
+                       "below: differences of a point or so between settings are within it.\n\n",
+                    nt, 100 / nt, nt, 100 * sqrt(y * (1 - y) / nt));
         fprintf(f, "**Default for a city survey: K = %d, C = %d** (%ld acquisitions, %.0f s per capture): %.1f %% of "
                    "the lights in view found with the right bulb and phase, %.1f %% of the detected ones right, "
                    "detection %.1f %%, location error %.1f m median / %.1f m at the 95th percentile, "
