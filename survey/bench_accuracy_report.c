@@ -57,6 +57,29 @@ gs_status srv_acc_write_csv(const char *path, const srv_acc_point *pts, size_t n
     return GS_OK;
 }
 
+/* A point of the main grid (HDR on, locked, phases 0/120/240), not a variant. */
+static int main_grid(const srv_acc_point *p)
+{
+    return p->ok && p->hdr && p->locked && !p->continuous;
+}
+
+/* Scene hard's reliability bins pooled over its main grid: lights matched, their summed
+ * confidence and how many are right (bulb and phase), per bin. */
+static void pooled_bins(const srv_acc_point *pts, size_t np, int hard, double n[NBINS], double c[NBINS],
+                        double r[NBINS])
+{
+    for (int b = 0; b < NBINS; b++) n[b] = c[b] = r[b] = 0;
+    for (size_t i = 0; i < np; i++) {
+        const srv_acc_point *p = &pts[i];
+        if (!main_grid(p) || p->hard != hard) continue;
+        for (int b = 0; b < NBINS; b++) {
+            n[b] += p->bin_n[b];
+            c[b] += p->bin_conf[b];
+            r[b] += p->bin_right[b];
+        }
+    }
+}
+
 /* The accuracy figure: per scene, right bulb and phase among detected lights (solid: the
  * pipeline; dashed: the oracle on its subset) and the detection rate, against capture seconds
  * (log), one curve per K. Curves use the main grid (HDR, locked, 3 phases). */
@@ -104,7 +127,7 @@ void srv_acc_plot_accuracy(const char *path, const srv_acc_point *pts, size_t np
                 double xo[64];
                 for (size_t i = 0; i < np && m < 64; i++) {
                     const srv_acc_point *p = &pts[i];
-                    if (!p->ok || p->hard != hard || p->K != Ks[ki] || !p->hdr || !p->locked || p->continuous) continue;
+                    if (!main_grid(p) || p->hard != hard || p->K != Ks[ki]) continue;
                     double acc = p->ev.matched ? (double)p->ev.all_correct / (double)p->ev.matched : NAN;
                     double y = panel ? p->ev.detection_rate : acc;
                     if (isfinite(y)) {
@@ -160,7 +183,8 @@ void srv_acc_plot_accuracy(const char *path, const srv_acc_point *pts, size_t np
 }
 
 /* Calibration: per scene, accuracy of the stored lights against their reported confidence
- * (bins pooled over every point of the scene, the variants included), with the diagonal. */
+ * (bins pooled over the scene's main grid: pooled_bins) with 95 % Wilson intervals, and the
+ * diagonal. */
 void srv_acc_plot_calibration(const char *path, const srv_acc_point *pts, size_t np)
 {
     plsdev("pngcairo");
@@ -186,27 +210,24 @@ void srv_acc_plot_calibration(const char *path, const srv_acc_point *pts, size_t
     plline(2, dx, dy);
     pllsty(1);
     for (int hard = 0; hard < 3; hard++) {
-        double n[NBINS] = {0}, c[NBINS] = {0}, r[NBINS] = {0};
-        for (size_t i = 0; i < np; i++) {
-            const srv_acc_point *p = &pts[i];
-            if (!p->ok || p->hard != hard) continue;
-            for (int b = 0; b < NBINS; b++) {
-                n[b] += p->bin_n[b];
-                c[b] += p->bin_conf[b];
-                r[b] += p->bin_right[b];
-            }
-        }
-        double xs[NBINS], ys[NBINS];
+        double n[NBINS], c[NBINS], r[NBINS];
+        pooled_bins(pts, np, hard, n, c, r);
+        double xs[NBINS], ys[NBINS], lo[NBINS], hi[NBINS];
         int m = 0;
         for (int b = 0; b < NBINS; b++)
             if (n[b] > 0) {
                 xs[m] = c[b] / n[b];
-                ys[m++] = r[b] / n[b];
+                ys[m] = srv_wilson(lround(r[b]), lround(n[b]), SRV_Z95, &lo[m], &hi[m]);
+                m++;
             }
         plcol0(2 + hard);
         plwidth(2.0);
         if (m > 1) plline(m, xs, ys);
-        if (m > 0) plpoin(m, xs, ys, 17);
+        if (m > 0) {
+            plpoin(m, xs, ys, 17);
+            plwidth(1.0);
+            plerry(m, xs, lo, hi);   /* a bin of few lights says little: its 95 % interval */
+        }
     }
     const char *labels[3] = {"metro", "metro_hard", "metro_clear"};
     PLINT opts[3] = {PL_LEGEND_LINE, PL_LEGEND_LINE, PL_LEGEND_LINE}, colors[3] = {2, 3, 4}, styles[3] = {1, 1, 1};
@@ -225,9 +246,7 @@ static double right_of_detected(const srv_acc_point *p)
 static const srv_acc_point *find_pt(const srv_acc_point *pts, size_t np, int hard, int K, int C)
 {
     for (size_t i = 0; i < np; i++)
-        if (pts[i].ok && pts[i].hard == hard && pts[i].K == K && pts[i].C == C && pts[i].hdr &&
-            pts[i].locked && !pts[i].continuous)
-            return &pts[i];
+        if (main_grid(&pts[i]) && pts[i].hard == hard && pts[i].K == K && pts[i].C == C) return &pts[i];
     return NULL;
 }
 
@@ -347,12 +366,27 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
                "K; HDR on, locked, phases 0/120/240. The variants (HDR off, free running, continuous phases) are "
                "table rows on metro_clear at K = 26.\n\n"
                "![calibration](%s/calibration.png)\n\nAccuracy of the answered lights against their reported "
-               "confidence, pooled over every point of each scene, the variants included: free-running points, "
-               "whose phases drift without the AC lock, are far from the diagonal and bend their scene's curve "
-               "(their ECE is in the table); the dashed line is perfect calibration. These captures are the "
-               "project's own simulator's; calibration on a renderer the simulator does not share is in "
-               "docs/recognition.md (\"Measured\", the independent renderer).\n\n",
+               "confidence, pooled over each scene's main grid (HDR on, locked, 3 phases; the variants' ECE is "
+               "in the table: free-running points, whose phases drift without the AC lock, are far from the "
+               "diagonal); the dashed line is perfect calibration. These captures are the project's own "
+               "simulator's; calibration on a renderer the simulator does not share is in "
+               "docs/recognition.md (\"Measured\", the independent renderer). The plot's bins, with the 95 %% "
+               "Wilson interval of their share right (the plot's bars):\n\n"
+               "| scene | confidence | lights | mean confidence | right | 95 %% interval |\n"
+               "|---|---|---:|---:|---:|---|\n",
             leaf, leaf);
+    for (int hard = 0; hard < 3; hard++) {
+        double n[NBINS], c[NBINS], r[NBINS];
+        pooled_bins(pts, np, hard, n, c, r);
+        for (int b = 0; b < NBINS; b++)
+            if (n[b] > 0) {
+                double lo, hi, y = srv_wilson(lround(r[b]), lround(n[b]), SRV_Z95, &lo, &hi);
+                fprintf(f, "| %s | [%.2f, %.2f%s | %.0f | %.3f | %.3f | %.3f-%.3f |\n", srv_acc_scene_names[hard],
+                        srv_acc_bin_edges[b], fmin(srv_acc_bin_edges[b + 1], 1.0), b + 1 < NBINS ? ")" : "]",
+                        n[b], c[b] / n[b], y, lo, hi);
+            }
+    }
+    fprintf(f, "\n");
 
     /* the recommendation, from the metro curves */
     fprintf(f, "## Recommendation\n\n");
@@ -363,14 +397,14 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
         best = NULL;
         for (size_t i = 0; i < np; i++) {
             const srv_acc_point *p = &pts[i];
-            if (!p->ok || p->hard != rs || !p->hdr || !p->locked || p->continuous || !isfinite(p->ev.all_correct_rate)) continue;
+            if (!main_grid(p) || p->hard != rs || !isfinite(p->ev.all_correct_rate)) continue;
             if (!best || p->ev.all_correct_rate > best->ev.all_correct_rate) best = p;
         }
     }
     if (best) {
         for (size_t i = 0; i < np; i++) {
             const srv_acc_point *p = &pts[i];
-            if (!p->ok || p->hard != rs || !p->hdr || !p->locked || p->continuous || !isfinite(p->ev.all_correct_rate)) continue;
+            if (!main_grid(p) || p->hard != rs || !isfinite(p->ev.all_correct_rate)) continue;
             if (p->ev.all_correct_rate >= best->ev.all_correct_rate - 0.02 && (!rec || p->capture_s < rec->capture_s)) rec = p;
         }
     }
