@@ -157,6 +157,12 @@ const gs_bulb *rec_matcher_bulb(const rec_matcher *m, size_t i)
     return (m && i < m->nb) ? &m->bulbs[i] : NULL;
 }
 
+int rec_match_phase_known(const rec_matcher *m, const rec_match *mt)
+{
+    const gs_bulb *b = mt->bulb >= 0 ? rec_matcher_bulb(m, (size_t)mt->bulb) : NULL;
+    return b && b->ref == GS_REF_VOLTAGE && !(mt->flags & REC_MATCH_PHASE_AMBIGUOUS);
+}
+
 static gs_status check_opts(const rec_eq7_opts *o)
 {
     if (o->phases != REC_PHASES_3 && o->phases != REC_PHASES_6 && o->phases != REC_PHASES_CONTINUOUS)

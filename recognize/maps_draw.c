@@ -373,12 +373,11 @@ gs_status rec_map_write_bulb_png(const rec_pixel_maps *pm, const rec_matcher *m,
 {
     if (!pm || !pm->state || !m || !path) return gs_fail(GS_EINVAL, "bulb map: no maps, matcher or path");
     size_t nb = rec_matcher_bulb_count(m), np = (size_t)pm->width * (size_t)pm->height;
-    size_t *px = calloc(nb ? nb : 1, sizeof *px), *listed = calloc(nb ? nb : 1, sizeof *listed);
+    size_t *px = calloc(nb ? nb : 1, sizeof *px), listed[REC_BULB_LEGEND_MAX];
     int *colour = calloc(nb ? nb : 1, sizeof *colour);
     key_item items[REC_BULB_LEGEND_MAX + 4];   /* the bulbs, other and three states */
-    if (!px || !listed || !colour) {
+    if (!px || !colour) {
         free(px);
-        free(listed);
         free(colour);
         return gs_fail(GS_ENOMEM, "bulb map: cannot allocate the legend");
     }
@@ -434,7 +433,6 @@ gs_status rec_map_write_bulb_png(const rec_pixel_maps *pm, const rec_matcher *m,
     if (st == GS_OK) st = canvas_write(&c, path);
     if (c.rgb) canvas_free(&c);
     free(px);
-    free(listed);
     free(colour);
     return st;
 }

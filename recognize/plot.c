@@ -214,10 +214,7 @@ gs_status rec_signal_lights(const rec_matcher *m, const rec_catalog *cat, const 
             v += cat->sigma[i * D + d] * cat->sigma[i * D + d];
         }
         if (!(v > 0.0) || !isfinite(v)) continue;
-        all[na] = (light_rank){i, 0, mt->bulb,
-                               rec_matcher_bulb(m, (size_t)mt->bulb)->ref == GS_REF_VOLTAGE &&
-                                   !(mt->flags & REC_MATCH_PHASE_AMBIGUOUS),
-                               s / sqrt(v)};
+        all[na] = (light_rank){i, 0, mt->bulb, rec_match_phase_known(m, mt), s / sqrt(v)};
         count[mt->bulb]++;
         na++;
     }
@@ -325,7 +322,7 @@ static gs_status draw_signals(void *ctx, unsigned char *unused)
                 size_t i = pick[l].light;
                 const rec_match *mt = &match[i];
                 const gs_bulb *b = rec_matcher_bulb(m, (size_t)mt->bulb);
-                int phase_known = b->ref == GS_REF_VOLTAGE && !(mt->flags & REC_MATCH_PHASE_AMBIGUOUS);
+                int phase_known = rec_match_phase_known(m, mt);
                 double sh = gs_phase_to_shift(mt->phase_deg);
                 if (panel == 1 && !phase_known) continue;
                 /* the template (panel 0: at the light's phase; panel 1: at phase 0) */
@@ -358,7 +355,7 @@ static gs_status draw_signals(void *ctx, unsigned char *unused)
             for (size_t l = 0; l < nl; l++) {
                 const rec_match *mt = &match[pick[l].light];
                 const gs_bulb *b = rec_matcher_bulb(m, (size_t)mt->bulb);
-                if (b->ref == GS_REF_VOLTAGE && !(mt->flags & REC_MATCH_PHASE_AMBIGUOUS))
+                if (rec_match_phase_known(m, mt))
                     snprintf(text[l], sizeof text[l], "light %zu: %s, %.0f" REC_DEG, pick[l].light, b->id,
                              mt->phase_deg);
                 else

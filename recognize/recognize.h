@@ -300,6 +300,8 @@ void rec_matcher_free(rec_matcher *m);
 size_t rec_matcher_bulb_count(const rec_matcher *m);
 /* Borrowed: the i-th candidate bulb (a copy owned by the matcher), NULL if out of range. */
 const gs_bulb *rec_matcher_bulb(const rec_matcher *m, size_t i);
+/* 1 when match mt (of m) reports a phase: a voltage-referenced bulb won, not PHASE_AMBIGUOUS. */
+int rec_match_phase_known(const rec_matcher *m, const rec_match *mt);
 /* The templates of Eq. 7: count, and template j's bands * K values (borrowed, [band * K + k],
  * NULL when j is out of range) with the index of its bulb and its BRF shift in cycles (either
  * may be NULL). */

@@ -74,8 +74,7 @@ int srv_bench_render(int argc, char **argv)
         }
         if (!strcmp(argv[i], "--frames") && i + 1 < argc) {
             if (sscanf(argv[++i], "%d", &frames) != 1 || frames < 1 || frames > 1000) {
-                fprintf(stderr, "gridsurvey bench render: --frames '%s': expected 1..1000\n", argv[i]);
-                return 2;
+                return srv_usage_error("bench render", "--frames '%s': expected 1..1000", argv[i]);
             }
         } else if (argv[i][0] == '-') {
             return srv_usage_error("bench render", "unknown option or missing value: '%s'", argv[i]);

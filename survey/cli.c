@@ -7,6 +7,7 @@
 #include <fftw3.h>
 #include <getopt.h>
 #include <jansson.h>
+#include <math.h>
 #include <plplot.h>
 #include <stdarg.h>
 #include <sndfile.h>
@@ -178,4 +179,16 @@ int srv_error(gs_status s)
 FILE *srv_note_stream(const char *out)
 {
     return out && !strcmp(out, "-") ? stderr : stdout;
+}
+
+int srv_num_arg(const char *cmd, const char *opt, const char *arg, double lo, double hi, double *out)
+{
+    char *end;
+    double v = strtod(arg, &end);
+    if (!*arg || *end || !isfinite(v) || v < lo || v > hi) {
+        srv_usage_error(cmd, "%s '%s': expected a number from %g to %g", opt, arg, lo, hi);
+        return 0;
+    }
+    *out = v;
+    return 1;
 }

@@ -44,18 +44,6 @@ enum { SIM, REPLAY, HARDWARE, BACKENDS };
 static const char *const backends[BACKENDS] = {"sim", "replay", "hardware"};
 static const char *const backend_opts[BACKENDS] = {"sS", "F", "cITgzutWHBGKCMfalnr"};
 
-static int num_arg(const char *opt, const char *arg, double lo, double hi, double *out)
-{
-    char *end;
-    double v = strtod(arg, &end);
-    if (!*arg || *end || !isfinite(v) || v < lo || v > hi) {
-        srv_usage_error("capture", "%s '%s': expected a number from %g to %g", opt, arg, lo, hi);
-        return 0;
-    }
-    *out = v;
-    return 1;
-}
-
 int srv_cmd_capture(int argc, char **argv)
 {
     static const struct option longs[] = {
@@ -106,24 +94,24 @@ int srv_cmd_capture(int argc, char **argv)
         case 'p': lo.progress = 1; break;
         case 'P':
         case 'q': lo.progress = 0; break;
-        case 'S': if (!num_arg("--seed", optarg, 0, 2147483647.0, &seed)) return 2; break;
-        case 'z': if (!num_arg("--zc-line", optarg, 0, 1023, &v)) return 2; hw.zc_line = (int)v; break;
-        case 'u': if (!num_arg("--shutter-line", optarg, 0, 1023, &v)) return 2; hw.shutter_line = (int)v; break;
-        case 't': if (!num_arg("--trigger-line", optarg, 0, 1023, &v)) return 2; hw.trigger_line = (int)v; break;
-        case 'W': if (!num_arg("--width", optarg, 1, 32768, &v)) return 2; hw.width = (int)v; break;
-        case 'H': if (!num_arg("--height", optarg, 1, 32768, &v)) return 2; hw.height = (int)v; break;
-        case 'B': if (!num_arg("--bands", optarg, 1, 3, &v)) return 2; hw.bands = (int)v; break;
-        case 'G': if (!num_arg("--grid", optarg, 50, 60, &v)) return 2; hw.grid_hz = (int)v; break;
-        case 'K': if (!num_arg("--K", optarg, 2, 1024, &v)) return 2; hw.K = (int)v; break;
-        case 'C': if (!num_arg("--cycles", optarg, 1, 1e6, &v)) return 2; hw.cycles = (long)v; break;
-        case 'M': if (!num_arg("--masks", optarg, 2, 1000, &v)) return 2; hw.masks = (int)v; break;
-        case 'a': if (!num_arg("--saturation", optarg, 1, 65536, &hw.saturation_dn)) return 2; break;
-        case 'l': if (!num_arg("--black-level", optarg, 0, 65535, &hw.black_level_dn)) return 2; break;
-        case 'n': if (!num_arg("--gain", optarg, 0, 1e6, &hw.gain_e_per_dn)) return 2; break;
-        case 'r': if (!num_arg("--read-noise", optarg, 0, 1e6, &hw.read_noise_dn)) return 2; break;
-        case 'R': if (!num_arg("--max-rounds", optarg, 0, 16, &v)) return 2; lo.hdr_max_rounds = (int)v; break;
-        case 'm': if (!num_arg("--max-saturated", optarg, 0, 1e9, &v)) return 2; lo.hdr_max_saturated_px = (int)v; break;
-        case 'A': if (!num_arg("--stop-after", optarg, 1, 1 << 20, &v)) return 2; lo.stop_after = (int)v; break;
+        case 'S': if (!srv_num_arg("capture", "--seed", optarg, 0, 2147483647.0, &seed)) return 2; break;
+        case 'z': if (!srv_num_arg("capture", "--zc-line", optarg, 0, 1023, &v)) return 2; hw.zc_line = (int)v; break;
+        case 'u': if (!srv_num_arg("capture", "--shutter-line", optarg, 0, 1023, &v)) return 2; hw.shutter_line = (int)v; break;
+        case 't': if (!srv_num_arg("capture", "--trigger-line", optarg, 0, 1023, &v)) return 2; hw.trigger_line = (int)v; break;
+        case 'W': if (!srv_num_arg("capture", "--width", optarg, 1, 32768, &v)) return 2; hw.width = (int)v; break;
+        case 'H': if (!srv_num_arg("capture", "--height", optarg, 1, 32768, &v)) return 2; hw.height = (int)v; break;
+        case 'B': if (!srv_num_arg("capture", "--bands", optarg, 1, 3, &v)) return 2; hw.bands = (int)v; break;
+        case 'G': if (!srv_num_arg("capture", "--grid", optarg, 50, 60, &v)) return 2; hw.grid_hz = (int)v; break;
+        case 'K': if (!srv_num_arg("capture", "--K", optarg, 2, 1024, &v)) return 2; hw.K = (int)v; break;
+        case 'C': if (!srv_num_arg("capture", "--cycles", optarg, 1, 1e6, &v)) return 2; hw.cycles = (long)v; break;
+        case 'M': if (!srv_num_arg("capture", "--masks", optarg, 2, 1000, &v)) return 2; hw.masks = (int)v; break;
+        case 'a': if (!srv_num_arg("capture", "--saturation", optarg, 1, 65536, &hw.saturation_dn)) return 2; break;
+        case 'l': if (!srv_num_arg("capture", "--black-level", optarg, 0, 65535, &hw.black_level_dn)) return 2; break;
+        case 'n': if (!srv_num_arg("capture", "--gain", optarg, 0, 1e6, &hw.gain_e_per_dn)) return 2; break;
+        case 'r': if (!srv_num_arg("capture", "--read-noise", optarg, 0, 1e6, &hw.read_noise_dn)) return 2; break;
+        case 'R': if (!srv_num_arg("capture", "--max-rounds", optarg, 0, 16, &v)) return 2; lo.hdr_max_rounds = (int)v; break;
+        case 'm': if (!srv_num_arg("capture", "--max-saturated", optarg, 0, 1e9, &v)) return 2; lo.hdr_max_saturated_px = (int)v; break;
+        case 'A': if (!srv_num_arg("capture", "--stop-after", optarg, 1, 1 << 20, &v)) return 2; lo.stop_after = (int)v; break;
         case 'h': fputs(capture_usage, stdout); return 0;
         default: return srv_usage_hint("capture", argv);
         }

@@ -93,8 +93,7 @@ static int compare_shares(const char *path, const char *const sv[2], srv_stats_o
                           const char *clip, int csv)
 {
     if (!by) {
-        fprintf(stderr, "gridsurvey compare: --clip, --bbox and --min-phase-confidence need --by\n");
-        return 2;
+        return srv_usage_error("compare", "--clip, --bbox and --min-phase-confidence need --by");
     }
     int by_feature = so->by == SRV_BY_FEATURE, by_survey = so->by == SRV_BY_SURVEY;
     for (int i = 0; i < so->n_then; i++) {
@@ -102,12 +101,10 @@ static int compare_shares(const char *path, const char *const sv[2], srv_stats_o
         by_survey |= so->then[i] == SRV_BY_SURVEY;
     }
     if (by_survey) {
-        fprintf(stderr, "gridsurvey compare: --by survey: the two surveys are the comparison\n");
-        return 2;
+        return srv_usage_error("compare", "--by survey: the two surveys are the comparison");
     }
     if (by_feature && !clip) {
-        fprintf(stderr, "gridsurvey compare: --by feature:%s needs --clip AREAS.geojson\n", so->feature_field);
-        return 2;
+        return srv_usage_error("compare", "--by feature:%s needs --clip AREAS.geojson", so->feature_field);
     }
     srv_areas *areas = NULL;
     gs_status s = clip ? srv_areas_load(clip, by_feature ? so->feature_field : NULL, &areas) : GS_OK;
@@ -180,45 +177,39 @@ int srv_cmd_compare(int argc, char **argv)
         case 'd': path = optarg; break;
         case 'S':
             if (nsv == 2) {
-                fprintf(stderr, "gridsurvey compare: --survey given more than twice\n");
-                return 2;
+                return srv_usage_error("compare", "--survey given more than twice");
             }
             sv[nsv++] = optarg;
             break;
         case 'p':
             min_p = strtod(optarg, &end);
             if (!*optarg || *end || !(min_p >= 0.0 && min_p <= 1.0)) {
-                fprintf(stderr, "gridsurvey compare: --min-p '%s': expected a probability in [0, 1]\n", optarg);
-                return 2;
+                return srv_usage_error("compare", "--min-p '%s': expected a probability in [0, 1]", optarg);
             }
             break;
         case 'f':
             if (!strcmp(optarg, "table")) csv = 0;
             else if (!strcmp(optarg, "csv")) csv = 1;
             else {
-                fprintf(stderr, "gridsurvey compare: --format '%s': expected table or csv\n", optarg);
-                return 2;
+                return srv_usage_error("compare", "--format '%s': expected table or csv", optarg);
             }
             break;
         case 'b':
             if (srv_stats_parse_by(optarg, &so) != GS_OK) {
-                fprintf(stderr, "gridsurvey compare: %s\n", gs_detail());
-                return 2;
+                return srv_usage_error("compare", "%s", gs_detail());
             }
             by = 1;
             break;
         case 'C': clip = optarg; break;
         case 'B':
             if (srv_parse_bbox(optarg, so.bbox) != GS_OK) {
-                fprintf(stderr, "gridsurvey compare: %s\n", gs_detail());
-                return 2;
+                return srv_usage_error("compare", "%s", gs_detail());
             }
             break;
         case 'c':
             so.min_phase_confidence = strtod(optarg, &end);
             if (!*optarg || *end || !(so.min_phase_confidence >= 0.0 && so.min_phase_confidence <= 1.0)) {
-                fprintf(stderr, "gridsurvey compare: --min-phase-confidence '%s': expected a number in [0, 1]\n", optarg);
-                return 2;
+                return srv_usage_error("compare", "--min-phase-confidence '%s': expected a number in [0, 1]", optarg);
             }
             break;
         case 'h': fputs(compare_usage, stdout); return 0;

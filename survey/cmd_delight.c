@@ -40,8 +40,9 @@ static const char delight_usage[] =
     "  gridsurvey delight generate -o delight.sqlite\n";
 
 typedef struct {
-    const char *db, *out, *ids, *recording, *id, *name, *type, *sensor;
-    int grid_hz, voltage_column, n;
+    const char *db, *out, *ids, *recording, *id, *name, *sensor;
+    int grid_hz, voltage_column, n, has_type;
+    gs_tech type;   /* --type, when has_type */
     double watts;
 } delight_opts;
 
@@ -72,12 +73,10 @@ static int parse_opts(int argc, char **argv, delight_opts *o)
         case 'r': o->recording = optarg; break;
         case 'I': o->id = optarg; break;
         case 'N': o->name = optarg; break;
-        case 't': {
-            gs_tech t;
-            if (gs_tech_parse(optarg, &t) != GS_OK) return srv_usage_error("delight", "--type: %s", gs_detail());
-            o->type = optarg;
+        case 't':
+            if (gs_tech_parse(optarg, &o->type) != GS_OK) return srv_usage_error("delight", "--type: %s", gs_detail());
+            o->has_type = 1;
             break;
-        }
         case 's': o->sensor = optarg; break;
         case 'g':
             o->grid_hz = (int)strtol(optarg, &end, 10);
@@ -266,7 +265,7 @@ static gs_status add_recording(gs_delight *d, const void *arg)
                     "expected --grid 50|60 to file it", o->recording, info.flicker_hz);
     else if (!b.grid_hz)
         b.grid_hz = o->grid_hz;
-    if (s == GS_OK && o->type) s = gs_tech_parse(o->type, &b.type);
+    if (o->has_type) b.type = o->type;
     if (s == GS_OK) s = gs_delight_add(d, &b);
     if (s == GS_OK)
         printf("added %s: %zu samples at %.0f Hz, %s %.2f Hz over %.1f cycles, grid %d Hz, "

@@ -270,13 +270,6 @@ static const char *phases_name(rec_phase_set p)
     return p == REC_PHASES_6 ? "6" : p == REC_PHASES_CONTINUOUS ? "continuous" : "3";
 }
 
-/* The phase is reported when a voltage-referenced bulb won without PHASE_AMBIGUOUS. */
-static int phase_known(const rec_matcher *m, const rec_match *mt)
-{
-    const gs_bulb *b = mt->bulb >= 0 ? rec_matcher_bulb(m, (size_t)mt->bulb) : NULL;
-    return b && b->ref == GS_REF_VOLTAGE && !(mt->flags & REC_MATCH_PHASE_AMBIGUOUS);
-}
-
 static void print_table(const recognize_opts *o, const gs_capture *cap, const rec_matcher *m,
                         const rec_catalog *cat, const rec_match *mt, const rec_noise_report *noise)
 {
@@ -312,7 +305,7 @@ static void print_table(const recognize_opts *o, const gs_capture *cap, const re
         const gs_bulb *b = r->bulb >= 0 ? rec_matcher_bulb(m, (size_t)r->bulb) : NULL;
         const gs_bulb *rb = r->runner_bulb >= 0 ? rec_matcher_bulb(m, (size_t)r->runner_bulb) : NULL;
         char phase[32] = "-", runner[64] = "-", flags[160] = "", chi[32];
-        if (phase_known(m, r)) {
+        if (rec_match_phase_known(m, r)) {
             snprintf(phase, sizeof phase, "%.1f +- %.1f", r->phase_deg, r->phase_sigma_deg);
             with_phase++;
         }
@@ -344,7 +337,7 @@ static json_t *light_json(const rec_matcher *m, const rec_catalog *cat, const re
 {
     const gs_bulb *b = r->bulb >= 0 ? rec_matcher_bulb(m, (size_t)r->bulb) : NULL;
     const gs_bulb *rb = r->runner_bulb >= 0 ? rec_matcher_bulb(m, (size_t)r->runner_bulb) : NULL;
-    int ph = phase_known(m, r);
+    int ph = rec_match_phase_known(m, r);
     json_t *l = json_object();
     json_object_set_new(l, "id", json_integer((json_int_t)i));
     json_object_set_new(l, "x", jreal(cat->x_px[i]));
@@ -455,7 +448,7 @@ static gs_status print_json(const recognize_opts *o, const gs_capture *cap, cons
     json_t *lights = json_array();
     for (size_t i = 0; i < cat->count; i++) {
         with_bulb += mt[i].bulb >= 0;
-        with_phase += (size_t)phase_known(m, &mt[i]);
+        with_phase += (size_t)rec_match_phase_known(m, &mt[i]);
         json_array_append_new(lights, light_json(m, cat, &mt[i], i));
     }
     json_t *s = json_object();

@@ -76,8 +76,7 @@ static int parse_set(const char *arg, int S, rec_relight_set *set, unsigned *giv
         } else {
             r->phase_deg = strtod(val, &end);
             if (!*val || *end || !isfinite(r->phase_deg)) goto bad;
-            r->phase_deg = fmod(r->phase_deg, 360.0);   /* 400 is 40 deg, -120 is 240 */
-            if (r->phase_deg < 0.0) r->phase_deg += 360.0;
+            r->phase_deg = gs_wrap360(r->phase_deg);   /* 400 is 40 deg, -120 is 240 */
             r->set_phase = 1;
         }
     }

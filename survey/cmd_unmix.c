@@ -46,18 +46,6 @@ static const char unmix_usage[] =
     "\n"
     "Exit status: 0 done, 1 failure or ill-posed (one line on stderr), 2 usage error.\n";
 
-static int parse_num(const char *what, const char *arg, double lo, double hi, double *out)
-{
-    char *end;
-    double v = strtod(arg, &end);
-    if (!*arg || *end || !(v >= lo && v <= hi)) {
-        fprintf(stderr, "gridsurvey unmix: %s '%s': expected a number from %g to %g\n", what, arg, lo, hi);
-        return 0;
-    }
-    *out = v;
-    return 1;
-}
-
 /* Each source's error against the truth, the denoising of the rendered sequence. */
 static void print_truth(const char *capdir, const gs_capture *cap, const rec_sources *src,
                         const rec_unmix_result *r, const gs_delight *d, int render)
@@ -161,18 +149,18 @@ int srv_cmd_unmix(int argc, char **argv)
         case 'r': render = 1; break;
         case 'd': db = optarg; break;
         case 'f':
-            if (!parse_num("--refine", optarg, 0, 20, &refine) || refine != floor(refine)) return 2;
+            if (!srv_num_arg("unmix", "--refine", optarg, 0, 20, &refine) || refine != floor(refine)) return 2;
             break;
         case 'e':
-            if (!parse_num("--max-error", optarg, 1e-9, 1e9, &uo.max_error)) return 2;
+            if (!srv_num_arg("unmix", "--max-error", optarg, 1e-9, 1e9, &uo.max_error)) return 2;
             break;
         case 'm':
-            if (!parse_num("--max-sources", optarg, 1, REC_MAX_SOURCES, &max_sources) ||
+            if (!srv_num_arg("unmix", "--max-sources", optarg, 1, REC_MAX_SOURCES, &max_sources) ||
                 max_sources != floor(max_sources))
                 return 2;
             break;
         case 'p':
-            if (!parse_num("--min-pixels", optarg, 1, 1e9, &min_px) || min_px != floor(min_px)) return 2;
+            if (!srv_num_arg("unmix", "--min-pixels", optarg, 1, 1e9, &min_px) || min_px != floor(min_px)) return 2;
             break;
         case 'h': fputs(unmix_usage, stdout); return 0;
         default: return srv_usage_hint("unmix", argv);

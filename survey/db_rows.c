@@ -240,6 +240,7 @@ gs_status srv_db_capture_survey(srv_db *db, const char *key, int64_t *survey_id,
     gs_status s = srv_dbi_stmt(db, ST_FIND_CAPTURE, &q);
     if (s != GS_OK) return s;
     sqlite3_bind_text(q, 1, key, -1, SQLITE_STATIC);
+    sqlite3_bind_text(q, 2, name, -1, SQLITE_TRANSIENT);   /* (name is overwritten below) */
     int rc = sqlite3_step(q);
     if (rc == SQLITE_ROW) {
         *survey_id = sqlite3_column_int64(q, 0);

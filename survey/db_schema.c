@@ -296,5 +296,5 @@ const char *const srv_db_stmt_sql[ST_COUNT] = {
                     "sigma_hz) VALUES (?1, ?2, ?3, ?4, ?5, ?6) ON CONFLICT DO NOTHING",
     [ST_DEL_CAPTURE] = "DELETE FROM captures WHERE survey_id = ?1 AND capture_key = ?2",
     [ST_FIND_CAPTURE] = "SELECT s.id, s.name FROM captures c JOIN surveys s ON s.id = c.survey_id "
-                        "WHERE c.capture_key = ?1 ORDER BY c.id LIMIT 1",
+                        "WHERE c.capture_key = ?1 ORDER BY s.name = ?2 DESC, c.id LIMIT 1",
 };

@@ -418,21 +418,22 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
     if (s != GS_OK) goto done;
     int64_t survey_id = 0;
     int is_done = 0;
-    s = srv_db_find_survey(db, r->survey, &survey_id);
-    if (s == GS_OK) s = srv_db_capture_done(db, survey_id, r->key, &is_done);
-    /* without --survey, a survey of another default name counts too: a scene run names its
-     * survey after the scene, a run on its capture directory after the directory */
-    if ((s == GS_OK || s == GS_ENOTFOUND) && !is_done && !o->survey) {
+    if (o->survey) {   /* the named survey's */
+        s = srv_db_find_survey(db, r->survey, &survey_id);
+        if (s == GS_OK) s = srv_db_capture_done(db, survey_id, r->key, &is_done);
+    } else {
+        /* any survey's (its default name's first): a scene run names its survey after the
+         * scene, a run on its capture directory after the directory */
         s = srv_db_capture_survey(db, r->key, &survey_id, r->survey);
         is_done = s == GS_OK;
     }
+    if (s != GS_OK && s != GS_ENOTFOUND) goto done;
     if (is_done) {
         r->skipped = 1;
         r->survey_id = survey_id;
         s = committed_counts(db, survey_id, r);
         goto done;
     }
-    if (s != GS_OK && s != GS_ENOTFOUND) goto done;
 
     /* 7. extract and match */
     stage(o, SRV_STAGE_BLOBS, "extracting lights");

@@ -219,8 +219,8 @@ typedef struct {
 
 /* The resumable ingest: 1 in *done if the capture (survey_id, key) is committed. */
 gs_status srv_db_capture_done(srv_db *db, int64_t survey_id, const char *key, int *done);
-/* The survey (id and name) of the first committed capture with this key in any survey;
- * GS_ENOTFOUND when none holds it. */
+/* The survey of a committed capture with this key in any survey: the one named name when it
+ * holds it, else the first (name and *survey_id set); GS_ENOTFOUND when none holds it. */
 gs_status srv_db_capture_survey(srv_db *db, const char *key, int64_t *survey_id, char name[64]);
 /* Insert a whole capture in one transaction (its own, or a SAVEPOINT inside the caller's), or
  * nothing: if (survey_id, key) is already present nothing is written and *skipped = 1
