@@ -14,7 +14,7 @@
 
 #define BG_BOX 64            /* background mesh box side, pixels (SExtractor's default) */
 #define BG_SAMPLES 256       /* at most this many pixels per box enter its median */
-#define MAP_BLOCK 4096       /* mapped pixels per rec_match_pixels call */
+#define MAP_BLOCK 4096       /* mapped pixels per rec_match_pixels call and thread */
 #define PASS1_TILE 4096      /* pixels whose sums stay in cache while the frames stream by */
 #define MAP_TARGET_PX 640    /* the map is scaled up to about this many pixels on its long side */
 #define MAP_MAX_SCALE 16
@@ -318,7 +318,7 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
     }
 
     /* pass 2: Eq. 7 on the mapped, unsaturated pixels, in blocks */
-    size_t cap_rows = MAP_BLOCK;
+    size_t cap_rows = MAP_BLOCK * (size_t)gs_threads_resolve(m->o.threads);   /* (rows are independent) */
     size_t *idx = malloc(sizeof *idx * cap_rows);
     float *xb = malloc(sizeof *xb * cap_rows * D);
     float *ph = malloc(sizeof *ph * cap_rows), *cf = malloc(sizeof *cf * cap_rows);

@@ -197,6 +197,7 @@ typedef struct {
     size_t mapped, matched;        /* capture row: pixels above the threshold, with a bulb */
     double blob_seconds;           /* capture row: rec_blobs_extract */
     long blob_maxrss_kib;          /* (its peak from the resident set before it; -1: cannot tell) */
+    int maps_peak_apart;           /* capture row: maxrss_kib is the maps' own (not the rendering's) */
     size_t blobs;                  /* capture row: lights it found */
     double lit_correct;            /* lit rows with the true bulb and phase (fast path) */
     double numpy_rate, numpy_agree;   /* the NumPy search: pixels/s, rows answered as here */
@@ -594,8 +595,8 @@ static gs_status run_capture(const config *c, rec_matcher *m, result *res)
         pool = NULL;
         res->seconds = INFINITY;
         /* the maps' peak from what is resident now (the frames, the matcher); without
-         * clear_refs the row's peak so far, the rendering's included */
-        peak_rss_reset();
+         * clear_refs the row's peak so far, the rendering's included (and the table says so) */
+        res->maps_peak_apart = peak_rss_reset();
         for (int rep = 0; rep < REPS && st == GS_OK; rep++) {
             rec_pixel_maps pm;
             double t0 = gs_clock_s(CLOCK_MONOTONIC);
@@ -765,11 +766,12 @@ static void capture_row(const gs_delight *all, const config *c, int *failed)
     }
     double np = (double)c->side * c->side;
     double stack_mib = np * c->K * c->bands * 2.0 / (1024.0 * 1024.0);   /* 16-bit raw frames */
-    char blob_rss[32] = "-";
+    char blob_rss[32] = "-", rss[48];
+    snprintf(rss, sizeof rss, "%.0f%s", r.maxrss_kib / 1024.0, r.maps_peak_apart ? "" : " (with the rendering)");
     if (r.blob_maxrss_kib > 0) snprintf(blob_rss, sizeof blob_rss, "%.0f", r.blob_maxrss_kib / 1024.0);
-    printf("| %dx%d%s | %zu | %zu (%.1f %%) | %zu | %.3f | **%.2f** | %.0f | %.0f | %.2f | %.3f | %zu | %s |\n", c->side,
+    printf("| %dx%d%s | %zu | %zu (%.1f %%) | %zu | %.3f | **%.2f** | %s | %.0f | %.2f | %.3f | %zu | %s |\n", c->side,
            c->side, c->continuous ? " (continuous)" : "", c->lights, r.mapped, 100.0 * (double)r.mapped / np, r.matched, r.seconds,
-           r.rate / 1e6, r.maxrss_kib / 1024.0, stack_mib, r.maxrss_kib / 1024.0 / stack_mib, r.blob_seconds, r.blobs,
+           r.rate / 1e6, rss, stack_mib, r.maxrss_kib / 1024.0 / stack_mib, r.blob_seconds, r.blobs,
            blob_rss);
     fflush(stdout);
 }

@@ -152,9 +152,10 @@ done:
 
 /* ------------------------------------------------------------------ the capture */
 
-/* Which capture the truth describes (see srv_eval_opts). */
+/* Which capture the truth describes (see srv_eval_opts), and its recorded grid_hz, K, bands,
+ * width and height (cap_dims, the order of truth_dims). */
 static gs_status find_capture(srv_db *db, const char *truth_path, const srv_eval_opts *o,
-                              srv_eval_report *r)
+                              srv_eval_report *r, long long cap_dims[5])
 {
     sqlite3 *h = srv_db_sqlite(db);
     if (o->survey) {
@@ -166,7 +167,8 @@ static gs_status find_capture(srv_db *db, const char *truth_path, const srv_eval
     gs_path_dir(truth_path, dir, sizeof dir);
     const char *path = realpath(dir, abs_dir) ? abs_dir : dir;
     static const char base[] =
-        "SELECT c.id, s.name, c.capture_key FROM captures c JOIN surveys s ON s.id = c.survey_id "
+        "SELECT c.id, s.name, c.capture_key, c.grid_hz, c.K, c.bands, c.width_px, c.height_px "
+        "FROM captures c JOIN surveys s ON s.id = c.survey_id "
         "WHERE (?1 IS NULL OR s.name = ?1) ";
     const char *const where[3] = {"AND c.capture_key = ?2 ORDER BY c.id", "AND c.path = ?2 ORDER BY c.id",
                                   "ORDER BY c.id"};
@@ -188,6 +190,7 @@ static gs_status find_capture(srv_db *db, const char *truth_path, const srv_eval
                 r->capture_id = sqlite3_column_int64(q, 0);
                 snprintf(r->survey, sizeof r->survey, "%s", (const char *)sqlite3_column_text(q, 1));
                 snprintf(r->capture_key, sizeof r->capture_key, "%s", (const char *)sqlite3_column_text(q, 2));
+                for (int d = 0; d < 5; d++) cap_dims[d] = sqlite3_column_int64(q, 3 + d);
             }
             size_t used = strlen(list);
             if (found < 4)
@@ -211,29 +214,15 @@ static gs_status find_capture(srv_db *db, const char *truth_path, const srv_eval
 
 /* The truth's dimensions against those the capture records: a truth file of another capture is
  * refused. */
-static gs_status check_dims(srv_db *db, const char *truth_path, const srv_eval_report *r,
-                            const long long dims[5])
+static gs_status check_dims(const char *truth_path, const srv_eval_report *r, const long long dims[5],
+                            const long long cap_dims[5])
 {
-    static const char sql[] = "SELECT grid_hz, K, bands, width_px, height_px FROM captures WHERE id = ?1";
-    sqlite3 *h = srv_db_sqlite(db);
-    sqlite3_stmt *q = NULL;
-    if (sqlite3_prepare_v2(h, sql, -1, &q, NULL) != SQLITE_OK)
-        return gs_fail(GS_ESQL, "%s: %s", srv_db_path(db), sqlite3_errmsg(h));
-    sqlite3_bind_int64(q, 1, r->capture_id);
-    gs_status s = GS_OK;
-    if (sqlite3_step(q) != SQLITE_ROW) {
-        s = gs_fail(GS_ESQL, "%s: %s", srv_db_path(db), sqlite3_errmsg(h));
-    } else {
-        for (int d = 0; d < 5 && s == GS_OK; d++) {
-            long long c = sqlite3_column_int64(q, d);
-            if (dims[d] >= 0 && c > 0 && dims[d] != c)   /* (0: not recorded, as bench accuracy's subsets) */
-                s = gs_fail(GS_EINVAL, "%s: %s %lld: expected %lld, the capture's (survey %s, key "
-                            "%.19s...): a truth file of another capture?", truth_path, truth_dims[d],
-                            dims[d], c, r->survey, r->capture_key);
-        }
-    }
-    sqlite3_finalize(q);
-    return s;
+    for (int d = 0; d < 5; d++)
+        if (dims[d] >= 0 && cap_dims[d] > 0 && dims[d] != cap_dims[d])   /* (0: not recorded, as bench accuracy's subsets) */
+            return gs_fail(GS_EINVAL, "%s: %s %lld: expected %lld, the capture's (survey %s, key "
+                           "%.19s...): a truth file of another capture?", truth_path, truth_dims[d],
+                           dims[d], cap_dims[d], r->survey, r->capture_key);
+    return GS_OK;
 }
 
 static gs_status read_stored(srv_db *db, int64_t capture_id, ev_light **out, size_t *count)
@@ -483,8 +472,9 @@ gs_status srv_evaluate(srv_db *db, const char *truth_path, const srv_eval_opts *
     double *err = NULL;
     long long dims[5];
     gs_status s = read_truth(truth_path, &tr, &nt, &r->truth_lights, dims);
-    if (s == GS_OK) s = find_capture(db, truth_path, o, r);
-    if (s == GS_OK) s = check_dims(db, truth_path, r, dims);
+    long long cap_dims[5];
+    if (s == GS_OK) s = find_capture(db, truth_path, o, r, cap_dims);
+    if (s == GS_OK) s = check_dims(truth_path, r, dims, cap_dims);
     if (s == GS_OK) s = read_stored(db, r->capture_id, &st, &ns);
     if (s == GS_OK) s = match(st, ns, tr, nt, o->match_px, &r->matched);
     if (s == GS_OK && !(err = malloc((ns ? ns : 1) * sizeof *err)))
