@@ -166,6 +166,52 @@ gs_status srv_db_read_lights(srv_db *db, const srv_export_opts *o, gis_light **l
     return GS_OK;
 }
 
+gs_status srv_db_read_stations(srv_db *db, const char *survey, gis_camera **cams, size_t *count)
+{
+    static const char sql[] =
+        "SELECT st.lat_deg, st.lon_deg, st.height_m, st.heading_deg, st.pitch_deg, st.roll_deg, "
+        "st.focal_px, st.cx_px, st.cy_px, st.k1, st.k2, st.width_px, st.height_px, st.refraction_k "
+        "FROM stations st JOIN surveys s ON s.id = st.survey_id WHERE ?1 IS NULL OR s.name = ?1 ORDER BY st.id";
+    *cams = NULL;
+    *count = 0;
+    sqlite3 *h = srv_db_sqlite(db);
+    sqlite3_stmt *q = NULL;
+    if (sqlite3_prepare_v2(h, sql, -1, &q, NULL) != SQLITE_OK)
+        return gs_fail(GS_ESQL, "%s: stations query: %s", srv_db_path(db), sqlite3_errmsg(h));
+    if (survey) sqlite3_bind_text(q, 1, survey, -1, SQLITE_STATIC);
+    gis_camera *v = NULL;
+    size_t n = 0;
+    gs_status s = GS_OK;
+    int rc;
+    while ((rc = sqlite3_step(q)) == SQLITE_ROW) {
+        gis_camera *nv = realloc(v, (n + 1) * sizeof *nv);
+        if (!nv) {
+            s = gs_fail(GS_ENOMEM, "%s: out of memory for %zu stations", srv_db_path(db), n + 1);
+            break;
+        }
+        v = nv;
+        gis_camera *c = &v[n];
+        memset(c, 0, sizeof *c);
+        double *f[11] = {&c->lat_deg, &c->lon_deg, &c->height_m, &c->heading_deg, &c->pitch_deg, &c->roll_deg,
+                         &c->focal_px, &c->cx_px, &c->cy_px, &c->k1, &c->k2};
+        for (int k = 0; k < 11; k++) *f[k] = col_real(q, k);
+        c->width_px = sqlite3_column_int(q, 11);
+        c->height_px = sqlite3_column_int(q, 12);
+        c->refraction_k = sqlite3_column_double(q, 13);
+        /* a station stored without a full pose (no camera) is not drawn */
+        n += isfinite(c->lat_deg) && isfinite(c->lon_deg) && gis_camera_check(c) == GS_OK;
+    }
+    if (s == GS_OK && rc != SQLITE_DONE) s = gs_fail(GS_ESQL, "%s: stations query: %s", srv_db_path(db), sqlite3_errmsg(h));
+    sqlite3_finalize(q);
+    if (s != GS_OK) {
+        free(v);
+        return s;
+    }
+    *cams = v;
+    *count = n;
+    return GS_OK;
+}
+
 static int parse_bbox(const char *text, double b[4])
 {
     const char *p = text;

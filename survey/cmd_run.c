@@ -153,20 +153,25 @@ static gs_status write_outputs(srv_db *db, const srv_run_report *r, const char *
     snprintf(path, sizeof path, "%s/%s.geojson", out_dir, name);
     s = gis_export(lights, n, GIS_FORMAT_GEOJSON, path);
     if (s == GS_OK) printf("\nwrote %s (%zu lights, %zu located)\n", path, n, located);
-    if (s == GS_OK && (located > 0 || r->has_station)) {
+    /* every station of the survey (a second station's run maps the first's detections too) */
+    gis_camera *cams = NULL;
+    size_t n_cams = 0;
+    if (s == GS_OK) s = srv_db_read_stations(db, r->survey, &cams, &n_cams);
+    if (s == GS_OK && (located > 0 || n_cams > 0)) {
         char title[160];
-        snprintf(title, sizeof title, "gridsurvey: survey %s, %zu located lights by phase", r->survey, located);
+        snprintf(title, sizeof title, "gridsurvey: survey %s, %zu located detections by phase", r->survey, located);
         gis_map_opts mo;
         gis_map_opts_default(&mo);
         mo.title = title;
-        mo.stations = r->has_station ? &r->station.cam : NULL;
-        mo.n_stations = r->has_station ? 1 : 0;
+        mo.stations = cams;
+        mo.n_stations = n_cams;
         snprintf(path, sizeof path, "%s/%s-map.png", out_dir, name);
         s = gis_map_png(lights, n, &mo, path);
         if (s == GS_OK) printf("wrote %s\n", path);
     } else if (s == GS_OK) {
         printf("map: none (no located light and no station: the capture has no \"station\"; see --station)\n");
     }
+    free(cams);
     free(lights);
     return s;
 }

@@ -482,6 +482,9 @@ void srv_export_opts_default(srv_export_opts *o);
  * ordered by id. *lights is allocated (free()). */
 gs_status srv_db_read_lights(srv_db *db, const srv_export_opts *o, gis_light **lights,
                              size_t *count);
+/* The cameras of a survey's stations (every survey's when survey is NULL) with a full pose,
+ * in the order they were stored; *cams is allocated (free()). */
+gs_status srv_db_read_stations(srv_db *db, const char *survey, gis_camera **cams, size_t *count);
 
 /* =====================================================================================
  * Synthetic surveys and the database benchmark (survey/bench_db.c; developer tools)

@@ -494,6 +494,11 @@ TEST(stats_cli_haifa_example)
     CHECK(run("%s stats --db %s", path, NULL, NULL) == 0);
     CHECK(strstr(out, "| all | 1000 | 0 | 0 | 0 | 1000 | 33.4 % [30.5, 36.4] (334) | 36.3 % [33.4, 39.3] (363) | "
                       "30.3 % [27.5, 33.2] (303) | 5.40 | 0.0671 | 0.091 |") != NULL);
+    /* the footnote names the threshold only when one is given: every light (0.99) below 0.995 */
+    CHECK(strstr(out, "below: none (no --min-phase-confidence); ") != NULL);
+    CHECK(run("%s stats --db %s --min-phase-confidence 0.995", path, NULL, NULL) == 0);
+    CHECK(strstr(out, "| all | 1000 | 1000 | 0 | 0 | 0 |") != NULL &&
+          strstr(out, "below: phase confidence < 0.995 (left out); ") != NULL);
     CHECK(run("%s stats --db %s --format json --by technology", path, NULL, NULL) == 0);
     json_error_t err;
     json_t *root = json_loads(out, 0, &err);

@@ -187,6 +187,21 @@ TEST(two_stations_triangulate_within_their_ellipses)
     if (getenv("GS_TEST_VERBOSE")) printf("    worst error: triangulated %.4f m, one station %.3f m\n", worst, one_max);
     CHECK_MSG(one_max > 10.0 && worst < 0.1 * one_max, "worst error: triangulated %.3f m, one station %.3f m",
               worst, one_max);
+    /* the survey's map draws both stations: their stored cameras, as the scenes placed them */
+    gis_camera *cams = NULL;
+    size_t nc = 0;
+    CHECK_OK(srv_db_read_stations(d, "town", &cams, &nc));
+    CHECK_MSG(nc == 2, "%zu stations", nc);
+    for (size_t k = 0; k < nc && nc == 2; k++) {
+        double east_m = k == 0 ? 300.0 : -300.0;
+        CHECK_NEAR(cams[k].lat_deg, LAT0, 1e-9);
+        CHECK_NEAR(cams[k].lon_deg, LON0 + east_m / 93400.0, 1e-9);
+        CHECK_NEAR(cams[k].heading_deg, k == 0 ? 360.0 - h : h, 1e-3);
+        CHECK_NEAR(cams[k].focal_px, 800.0, 1e-9);
+    }
+    free(cams);
+    CHECK_OK(srv_db_read_stations(d, "no such survey", &cams, &nc));
+    CHECK(nc == 0 && cams == NULL);
     free(t);
     sqlite3_close(hq);
     srv_db_close(d);
