@@ -29,8 +29,9 @@ static const char run_usage[] =
     "survey's phase balance, writes DIR/SURVEY.geojson and DIR/SURVEY-map.png, and when the\n"
     "capture directory holds the simulator's truth.json, prints the evaluation against it.\n"
     "Several inputs (e.g. two stations of one area) are run in turn, each its own capture and\n"
-    "station; then the light sites seen from two stations are triangulated (gis_triangulate)\n"
-    "and listed with their 1-sigma ellipses.\n"
+    "station; each survey's balance, files and evaluations follow its last input; then the\n"
+    "light sites seen from two stations are triangulated (gis_triangulate) and listed with\n"
+    "their 1-sigma ellipses.\n"
     "\n"
     "Examples:\n"
     "  gridsurvey run build/lab --db build/lab.sqlite   # build/lab: gridsurvey help simulate\n"
@@ -176,14 +177,13 @@ static gs_status write_outputs(srv_db *db, const srv_run_report *r, const char *
     return s;
 }
 
-/* One input: srv_run, its lines, the survey's balance, GeoJSON, map and evaluation. */
-static gs_status run_one(const srv_run_opts *op, const char *out_dir, int64_t *capture_id)
+/* One input: srv_run and its lines. */
+static gs_status run_one(const srv_run_opts *op, srv_run_report *rep)
 {
     const srv_run_opts o = *op;
     srv_run_report r;
     gs_status s = srv_run(&o, &r);
     if (s != GS_OK) return s;
-    *capture_id = r.capture_id;
     printf("run: survey %s, capture %s (key %.19s...)", r.survey, r.capture_dir, r.key);
     if (r.scene) printf(": %d frames acquired, %d kept from an earlier run", r.frames_acquired, r.frames_kept);
     printf("\n");
@@ -203,21 +203,35 @@ static gs_status run_one(const srv_run_opts *op, const char *out_dir, int64_t *c
             if (r.seconds[k] > 0.0) printf(" %s %.2f", srv_stage_name((srv_stage)k), r.seconds[k]);
         printf("\n");
     }
+    *rep = r;
+    return GS_OK;
+}
 
+/* After the inputs, once per survey (after its last input): its balance, GeoJSON and map, then
+ * the evaluation of each of its captures that has a truth.json. */
+static gs_status report_surveys(const char *db_path, const srv_run_report *reps, int n, const char *out_dir)
+{
     srv_db *db = NULL;
-    s = srv_db_open(o.db_path, SRV_DB_READ, &db);
-    if (s == GS_OK) s = print_balance(db, r.survey);
-    if (s == GS_OK) s = write_outputs(db, &r, out_dir);
-    if (s == GS_OK && r.truth_path[0]) {
-        srv_eval_opts eo;
-        srv_eval_opts_default(&eo);
-        eo.survey = r.survey;
-        eo.capture_key = r.key;
-        srv_eval_report er;
-        s = srv_evaluate(db, r.truth_path, &eo, &er);
-        if (s == GS_OK) {
-            printf("\n");
-            s = srv_eval_print(&er, r.truth_path, 0, stdout);
+    gs_status s = srv_db_open(db_path, SRV_DB_READ, &db);
+    for (int i = 0; i < n && s == GS_OK; i++) {
+        int later = 0;
+        for (int j = i + 1; j < n; j++) later |= !strcmp(reps[j].survey, reps[i].survey);
+        if (later) continue;
+        s = print_balance(db, reps[i].survey);
+        if (s == GS_OK) s = write_outputs(db, &reps[i], out_dir);
+        for (int j = 0; j <= i && s == GS_OK; j++) {
+            const srv_run_report *r = &reps[j];
+            if (strcmp(r->survey, reps[i].survey) || !r->truth_path[0]) continue;
+            srv_eval_opts eo;
+            srv_eval_opts_default(&eo);
+            eo.survey = r->survey;
+            eo.capture_key = r->key;
+            srv_eval_report er;
+            s = srv_evaluate(db, r->truth_path, &eo, &er);
+            if (s == GS_OK) {
+                printf("\n");
+                s = srv_eval_print(&er, r->truth_path, 0, stdout);
+            }
         }
     }
     srv_db_close(db);
@@ -326,12 +340,16 @@ int srv_cmd_run(int argc, char **argv)
         o.capture_progress = 1;
     }
     int64_t *captures = calloc((size_t)n_inputs, sizeof *captures);
-    if (!captures) return srv_error(gs_fail(GS_ENOMEM, "run: out of memory"));
+    srv_run_report *reps = calloc((size_t)n_inputs, sizeof *reps);
+    if (!captures || !reps) s = gs_fail(GS_ENOMEM, "run: out of memory");
     for (int i = 0; i < n_inputs && s == GS_OK; i++) {
         o.input = argv[optind + i];
-        s = run_one(&o, out_dir, &captures[i]);
+        s = run_one(&o, &reps[i]);
+        if (s == GS_OK) captures[i] = reps[i].capture_id;
     }
+    if (s == GS_OK) s = report_surveys(o.db_path, reps, n_inputs, out_dir);
     if (s == GS_OK && n_inputs > 1) s = print_triangulated(o.db_path, captures, (size_t)n_inputs);
+    free(reps);
     free(captures);
     if (s == GS_OK && fflush(stdout) != 0) s = gs_fail(GS_EIO, "stdout: write failed");
     return s == GS_OK ? 0 : srv_error(s);

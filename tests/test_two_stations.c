@@ -126,6 +126,16 @@ TEST(two_stations_triangulate_within_their_ellipses)
     int rc = sh("%s run %s %s --survey town --db %s", test_bin(), east, west, db);
     CHECK_MSG(rc == 0, "run: %d: %s", rc, out);
     if (rc != 0) return;
+    /* one survey of two inputs: its balance and map once, after both; each capture's evaluation */
+    int balances = 0, maps = 0, evals = 0;
+    for (const char *p = out; (p = strstr(p, "Phase balance of survey town")); p++) balances++;
+    for (const char *p = out; (p = strstr(p, "town-map.png")); p++) maps++;
+    for (const char *p = out; (p = strstr(p, "\nEvaluation against ")); p++) evals++;
+    const char *last_run = strstr(strstr(out, "run: survey town") + 1, "run: survey town");
+    CHECK_MSG(balances == 1 && maps == 1 && evals == 2 && last_run &&
+                  strstr(out, "Phase balance of survey town") > last_run,
+              "%d balance tables, %d maps, %d evaluations, the table %s the second input:\n%s", balances, maps,
+              evals, last_run && strstr(out, "Phase balance of survey town") > last_run ? "after" : "before", out);
     const char *two = strstr(out, "\nTwo stations");
     CHECK_MSG(two && strstr(two, "16 light sites seen from two stations, 16 triangulated, 0 flagged"), "%s", out);
     if (two && getenv("GS_TEST_VERBOSE")) fputs(two, stdout);
