@@ -9,13 +9,15 @@
  *                  between acquisitions, Delta = 1/(2 f);
  *   compute time   of recognition and georeferencing (srv_run's blobs + match + locate stages);
  *   accuracy       detection, bulb, phase, location error against the simulator's truth;
- *   calibration    the stored lights binned by reported confidence, each bin stored as its own
- *                  capture in the point's database and scored by srv_evaluate;
+ *   calibration    the stored lights binned by reported confidence (and those with a phase by
+ *                  phase confidence), each bin stored as its own capture in the point's database
+ *                  and scored by srv_evaluate;
  *   the oracle     rec_ml_oracle (the exact Poisson-Gaussian maximum-likelihood decision) on the
  *                  same lights' extracted signals with the camera's noise model, stored as a
  *                  capture and scored by srv_evaluate, next to the pipeline's answers for the
  *                  same lights.
- * Writes DIR/accuracy.csv, DIR/accuracy_vs_time.png, DIR/calibration.png and the Markdown
+ * Writes DIR/accuracy.csv, DIR/calibration.csv (every point's reliability bins),
+ * DIR/accuracy_vs_time.png, DIR/calibration.png and the Markdown
  * report DIR.md (docs/accuracy.md for --out-dir docs/accuracy). Deterministic for the scene's seed
  * except the compute times. */
 #define _XOPEN_SOURCE 700   /* nftw */
@@ -218,6 +220,46 @@ gs_status srv_acc_eval_subset(srv_db *db, int64_t survey_id, const char *key, co
     return srv_evaluate(db, truth, &eo, ev);
 }
 
+/* Reliability bins of the point's lights (rows and their answers mt, n of them; sub scratch of n
+ * rows): by confidence the lights with a bulb, right = bulb and phase (phase = 0); by
+ * phase_confidence the lights stored with a phase, right = the phase (phase = 1). Each bin is
+ * stored as its own capture and scored by srv_evaluate. */
+static gs_status calibrate(srv_db *db, const srv_run_report *rr, const rec_match *mt, const srv_light_row *rows,
+                           size_t n, int phase, srv_light_row *sub, srv_acc_bins *out)
+{
+    double ece_num = 0, ece_den = 0;
+    memset(out, 0, sizeof *out);
+    for (int b = 0; b < NBINS; b++) {
+        size_t k = 0;
+        double conf = 0;
+        for (size_t i = 0; i < n; i++) {
+            double c = phase ? rows[i].phase_confidence : mt[i].confidence;
+            int answered = phase ? isfinite(rows[i].phase_deg) : mt[i].bulb >= 0;
+            if (!answered || !(c >= srv_acc_bin_edges[b] && c < srv_acc_bin_edges[b + 1])) continue;
+            sub[k] = rows[i];
+            sub[k].index = (int)k;
+            conf += c;
+            k++;
+        }
+        if (!k) continue;
+        char key[64];
+        snprintf(key, sizeof key, "%scalibration-bin-%d", phase ? "phase-" : "", b);
+        srv_eval_report ev;
+        gs_status s = srv_acc_eval_subset(db, rr->survey_id, key, sub, k, rr->truth_path, &ev);
+        if (s != GS_OK) return s;
+        /* the bin's matched lights; its mean confidence over all of its lights */
+        out->n[b] = (double)ev.matched;
+        out->conf[b] = conf / (double)k * (double)ev.matched;
+        out->right[b] = (double)(phase ? ev.phase_correct : ev.all_correct);
+        if (ev.matched) {
+            ece_num += fabs(out->right[b] - out->conf[b]);
+            ece_den += (double)ev.matched;
+        }
+    }
+    out->ece = ece_den > 0 ? ece_num / ece_den : NAN;
+    return GS_OK;
+}
+
 #define ORACLE_PHASES_MAX 12
 
 static gs_status run_point(const char *base, const srv_acc_crop *cr, const char *work, int n_oracle,
@@ -303,33 +345,10 @@ static gs_status run_point(const char *base, const srv_acc_crop *cr, const char 
         p->snr_p90 = i0 + 1 < n ? snr[i0] + (pos - (double)i0) * (snr[i0 + 1] - snr[i0]) : snr[n - 1];
     }
 
-    /* calibration: the answered lights by reported confidence, one capture per bin */
-    double ece_num = 0, ece_den = 0;
-    for (int b = 0; b < NBINS; b++) {
-        size_t k = 0;
-        double conf = 0;
-        for (size_t i = 0; i < n; i++) {
-            if (mt[i].bulb < 0 || !(mt[i].confidence >= srv_acc_bin_edges[b] && mt[i].confidence < srv_acc_bin_edges[b + 1])) continue;
-            sub[k] = rows[i];
-            sub[k].index = (int)k;
-            conf += mt[i].confidence;
-            k++;
-        }
-        if (!k) continue;
-        char key[64];
-        snprintf(key, sizeof key, "calibration-bin-%d", b);
-        srv_eval_report ev;
-        if ((s = srv_acc_eval_subset(db, rr.survey_id, key, sub, k, rr.truth_path, &ev)) != GS_OK) goto done;
-        /* the bin's matched lights; its mean confidence over all of its lights */
-        p->bin_n[b] = (double)ev.matched;
-        p->bin_conf[b] = conf / (double)k * (double)ev.matched;
-        p->bin_right[b] = (double)ev.all_correct;
-        if (ev.matched) {
-            ece_num += fabs((double)ev.all_correct - p->bin_conf[b]);
-            ece_den += (double)ev.matched;
-        }
-    }
-    p->ece = ece_den > 0 ? ece_num / ece_den : NAN;
+    /* calibration: the answered lights by confidence, the lights with a phase by phase confidence */
+    if ((s = calibrate(db, &rr, mt, rows, n, 0, sub, &p->cal)) != GS_OK ||
+        (s = calibrate(db, &rr, mt, rows, n, 1, sub, &p->phase_cal)) != GS_OK)
+        goto done;
 
     /* the oracle on a subset of the same lights (bench_oracle.c) */
     s = srv_acc_oracle(db, &rr, &j, rows, transformer, n_oracle, sub, p);
@@ -349,7 +368,7 @@ static const char acc_usage[] =
     "Sweeps the ACam acquisition (cycles per frame C, windows K, HDR, locked / free running, Eq. 7\n"
     "phase set) on a window of the metro scene and a hard variant, runs the survey pipeline on each\n"
     "point and scores it against the simulator's truth, next to the maximum-likelihood oracle.\n"
-    "Writes DIR/accuracy.csv, DIR/accuracy_vs_time.png, DIR/calibration.png and DIR.md\n"
+    "Writes DIR/accuracy.csv, DIR/calibration.csv, DIR/accuracy_vs_time.png, DIR/calibration.png and DIR.md\n"
     "(default DIR: build/accuracy). --quick: a few points on a small window (seconds).\n"
     "--scene: the base scene (capture/scenes/metro.json). --keep: keep the work directory.\n"
     "\n"
@@ -440,6 +459,10 @@ int srv_bench_accuracy(int argc, char **argv)
     char path[4400];
     snprintf(path, sizeof path, "%s/accuracy.csv", out);
     s = srv_acc_write_csv(path, pts, np);
+    if (s == GS_OK) {
+        snprintf(path, sizeof path, "%s/calibration.csv", out);
+        s = srv_acc_write_bins_csv(path, pts, np);
+    }
     if (s == GS_OK) {
         snprintf(path, sizeof path, "%s/accuracy_vs_time.png", out);
         srv_acc_plot_accuracy(path, pts, np, Ks, nK);

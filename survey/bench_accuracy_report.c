@@ -40,17 +40,40 @@ gs_status srv_acc_write_csv(const char *path, const srv_acc_point *pts, size_t n
     fprintf(f, "scene,K,C,hdr,locked,phases,acquisitions,exposure_s,readout_s,capture_s,compute_s,"
                "truth_lights,stored,matched,detection_rate,false_rate,bulb_accuracy,phase_accuracy,"
                "right_rate,bulb_unknown_rate,loc_median_m,loc_p95_m,snr_p90,ece,oracle_lights,"
-               "pipeline_on_oracle_lights,oracle_accuracy\n");
+               "pipeline_on_oracle_lights,oracle_accuracy,phase_ece\n");
     for (size_t i = 0; i < np; i++) {
         const srv_acc_point *p = &pts[i];
         if (!p->ok) continue;
         fprintf(f, "%s,%d,%d,%d,%d,%s,%ld,%.2f,%.2f,%.2f,%.3f,%ld,%ld,%ld,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,"
-                   "%.2f,%.2f,%.2f,%.4f,%ld,%.4f,%.4f\n",
+                   "%.2f,%.2f,%.2f,%.4f,%ld,%.4f,%.4f,%.4f\n",
                 srv_acc_scene_names[p->hard], p->K, p->C, p->hdr, p->locked, srv_acc_ph_name(p), p->acquisitions,
                 p->exposure_s, p->readout_s, p->capture_s, p->compute_s, p->ev.truth_in_image, p->ev.stored,
                 p->ev.matched, p->ev.detection_rate, p->ev.false_rate, p->ev.bulb_accuracy,
                 p->ev.phase_accuracy, p->ev.all_correct_rate, p->ev.bulb_unknown_rate, p->ev.loc_median_m,
-                p->ev.loc_p95_m, p->snr_p90, p->ece, p->oracle_n, p->ours_sub, p->oracle_sub);
+                p->ev.loc_p95_m, p->snr_p90, p->cal.ece, p->oracle_n, p->ours_sub, p->oracle_sub, p->phase_cal.ece);
+    }
+    int bad = ferror(f);
+    if (fclose(f) != 0 || bad) return gs_fail(GS_EIO, "%s: write failed", path);
+    return GS_OK;
+}
+
+gs_status srv_acc_write_bins_csv(const char *path, const srv_acc_point *pts, size_t np)
+{
+    FILE *f = fopen(path, "w");
+    if (!f) return gs_fail(GS_EIO, "%s: cannot write: %s", path, strerror(errno));
+    fprintf(f, "scene,K,C,hdr,locked,phases,confidence_of,bin_lo,bin_hi,lights,mean_confidence,right\n");
+    for (size_t i = 0; i < np; i++) {
+        const srv_acc_point *p = &pts[i];
+        if (!p->ok) continue;
+        for (int kind = 0; kind < 2; kind++) {
+            const srv_acc_bins *c = kind ? &p->phase_cal : &p->cal;
+            for (int b = 0; b < NBINS; b++)
+                if (c->n[b] > 0)
+                    fprintf(f, "%s,%d,%d,%d,%d,%s,%s,%.2f,%.2f,%.0f,%.6f,%.0f\n", srv_acc_scene_names[p->hard], p->K,
+                            p->C, p->hdr, p->locked, srv_acc_ph_name(p), kind ? "phase" : "pair",
+                            srv_acc_bin_edges[b], fmin(srv_acc_bin_edges[b + 1], 1.0), c->n[b], c->conf[b] / c->n[b],
+                            c->right[b]);
+        }
     }
     int bad = ferror(f);
     if (fclose(f) != 0 || bad) return gs_fail(GS_EIO, "%s: write failed", path);
@@ -64,18 +87,20 @@ static int main_grid(const srv_acc_point *p)
 }
 
 /* Scene hard's reliability bins pooled over its main grid: lights matched, their summed
- * confidence and how many are right (bulb and phase), per bin. */
-static void pooled_bins(const srv_acc_point *pts, size_t np, int hard, double n[NBINS], double c[NBINS],
+ * confidence and how many are right, per bin; of the pair's confidence (phase = 0) or the
+ * phase's (1). */
+static void pooled_bins(const srv_acc_point *pts, size_t np, int hard, int phase, double n[NBINS], double c[NBINS],
                         double r[NBINS])
 {
     for (int b = 0; b < NBINS; b++) n[b] = c[b] = r[b] = 0;
     for (size_t i = 0; i < np; i++) {
         const srv_acc_point *p = &pts[i];
         if (!main_grid(p) || p->hard != hard) continue;
+        const srv_acc_bins *cal = phase ? &p->phase_cal : &p->cal;
         for (int b = 0; b < NBINS; b++) {
-            n[b] += p->bin_n[b];
-            c[b] += p->bin_conf[b];
-            r[b] += p->bin_right[b];
+            n[b] += cal->n[b];
+            c[b] += cal->conf[b];
+            r[b] += cal->right[b];
         }
     }
 }
@@ -184,12 +209,12 @@ void srv_acc_plot_accuracy(const char *path, const srv_acc_point *pts, size_t np
 
 /* Calibration: per scene, accuracy of the stored lights against their reported confidence
  * (bins pooled over the scene's main grid: pooled_bins) with 95 % Wilson intervals, and the
- * diagonal. */
+ * diagonal; left the pair's confidence (right bulb and phase), right the phase's (right phase). */
 void srv_acc_plot_calibration(const char *path, const srv_acc_point *pts, size_t np)
 {
     plsdev("pngcairo");
     plsfnam(path);
-    plsetopt("geometry", "800x700");
+    plsetopt("geometry", "1400x700");
     plscmap0n(8);
     plscol0(0, 255, 255, 255);
     plscol0(1, 0, 0, 0);
@@ -197,44 +222,49 @@ void srv_acc_plot_calibration(const char *path, const srv_acc_point *pts, size_t
     plscol0(3, 214, 39, 40);
     plscol0(4, 44, 160, 44);
     plscol0(5, 150, 150, 150);
-    plstar(1, 1);
-    pladv(0);
-    plvpor(0.12, 0.95, 0.12, 0.90);
-    plwind(0, 1, 0, 1);
-    plcol0(1);
-    plbox("bcnstg", 0.2, 2, "bcnstvg", 0.2, 2);
-    pllab("reported confidence (bin mean)", "right bulb and phase", "calibration: stored lights by confidence");
-    double dx[2] = {0, 1}, dy[2] = {0, 1};
-    plcol0(5);
-    pllsty(2);
-    plline(2, dx, dy);
-    pllsty(1);
-    for (int hard = 0; hard < 3; hard++) {
-        double n[NBINS], c[NBINS], r[NBINS];
-        pooled_bins(pts, np, hard, n, c, r);
-        double xs[NBINS], ys[NBINS], lo[NBINS], hi[NBINS];
-        int m = 0;
-        for (int b = 0; b < NBINS; b++)
-            if (n[b] > 0) {
-                xs[m] = c[b] / n[b];
-                ys[m] = srv_wilson(lround(r[b]), lround(n[b]), SRV_Z95, &lo[m], &hi[m]);
-                m++;
+    plstar(2, 1);
+    static const char *const ylab[2] = {"right bulb and phase", "right phase"},
+                             *const title[2] = {"lights with a bulb by confidence",
+                                                "lights with a phase by phase confidence"};
+    for (int phase = 0; phase < 2; phase++) {
+        pladv(phase + 1);
+        plvpor(0.17, 0.93, 0.12, 0.90);
+        plwind(0, 1, 0, 1);
+        plcol0(1);
+        plbox("bcnstg", 0.2, 2, "bcnstvg", 0.2, 2);
+        pllab("reported confidence (bin mean)", ylab[phase], title[phase]);
+        double dx[2] = {0, 1}, dy[2] = {0, 1};
+        plcol0(5);
+        pllsty(2);
+        plline(2, dx, dy);
+        pllsty(1);
+        for (int hard = 0; hard < 3; hard++) {
+            double n[NBINS], c[NBINS], r[NBINS];
+            pooled_bins(pts, np, hard, phase, n, c, r);
+            double xs[NBINS], ys[NBINS], lo[NBINS], hi[NBINS];
+            int m = 0;
+            for (int b = 0; b < NBINS; b++)
+                if (n[b] > 0) {
+                    xs[m] = c[b] / n[b];
+                    ys[m] = srv_wilson(lround(r[b]), lround(n[b]), SRV_Z95, &lo[m], &hi[m]);
+                    m++;
+                }
+            plcol0(2 + hard);
+            plwidth(2.0);
+            if (m > 1) plline(m, xs, ys);
+            if (m > 0) {
+                plpoin(m, xs, ys, 17);
+                plwidth(1.0);
+                plerry(m, xs, lo, hi);   /* a bin of few lights says little: its 95 % interval */
             }
-        plcol0(2 + hard);
-        plwidth(2.0);
-        if (m > 1) plline(m, xs, ys);
-        if (m > 0) {
-            plpoin(m, xs, ys, 17);
-            plwidth(1.0);
-            plerry(m, xs, lo, hi);   /* a bin of few lights says little: its 95 % interval */
         }
+        const char *labels[3] = {"metro", "metro_hard", "metro_clear"};
+        PLINT opts[3] = {PL_LEGEND_LINE, PL_LEGEND_LINE, PL_LEGEND_LINE}, colors[3] = {2, 3, 4}, styles[3] = {1, 1, 1};
+        PLFLT widths[3] = {2, 2, 2}, lw, lh;
+        pllegend(&lw, &lh, PL_LEGEND_BACKGROUND | PL_LEGEND_BOUNDING_BOX, PL_POSITION_TOP | PL_POSITION_LEFT | PL_POSITION_INSIDE,
+                 0.03, 0.03, 0.1, 0, 1, 1, 3, 1, 3, opts, 0.8, 0.6, 2.0, 0.0, colors, labels, NULL, NULL, NULL, NULL,
+                 colors, styles, widths, NULL, NULL, NULL, NULL);
     }
-    const char *labels[3] = {"metro", "metro_hard", "metro_clear"};
-    PLINT opts[3] = {PL_LEGEND_LINE, PL_LEGEND_LINE, PL_LEGEND_LINE}, colors[3] = {2, 3, 4}, styles[3] = {1, 1, 1};
-    PLFLT widths[3] = {2, 2, 2}, lw, lh;
-    pllegend(&lw, &lh, PL_LEGEND_BACKGROUND | PL_LEGEND_BOUNDING_BOX, PL_POSITION_TOP | PL_POSITION_LEFT | PL_POSITION_INSIDE,
-             0.03, 0.03, 0.1, 0, 1, 1, 3, 1, 3, opts, 0.8, 0.6, 2.0, 0.0, colors, labels, NULL, NULL, NULL, NULL,
-             colors, styles, widths, NULL, NULL, NULL, NULL);
     plend();
 }
 
@@ -308,7 +338,9 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
                "- **SNR90**: the 90th percentile of the detected lights' SNR (sum of signal / sqrt(sum of "
                "sigma^2)).\n"
                "- **ECE**: expected calibration error of the reported confidence (answered lights in the "
-               "bins %s; each bin is stored as its own capture and scored by `srv_evaluate`).\n"
+               "bins %s; each bin is stored as its own capture and scored by `srv_evaluate`); **phase ECE** "
+               "the same of the phase confidence over the lights stored with a phase (what `stats "
+               "--min-phase-confidence` filters on), right = the phase.\n"
                "- **oracle**: `rec_ml_oracle` (recognize/ml_oracle.c: the exact Poisson-Gaussian "
                "maximum-likelihood decision, brute force over every bulb at the six phases 0/120/240 and "
                "+30 deg, the truth's phase set) on the extracted signals of up to %d unflagged lights "
@@ -325,12 +357,12 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
             "[0, 0.5), [0.5, 0.8), [0.8, 0.95), [0.95, 0.99), [0.99, 1]", quick ? 8 : 40);
     fprintf(f, "## Table\n\n");
     fprintf(f, "| scene | K | C | HDR | lock | phases | A | capture s | compute s | det. | false | bulb | phase | "
-               "unkn. | right/det. | right/all | loc. m (med / p95) | SNR90 | ECE | oracle lights | pipeline | oracle | gap |\n");
-    fprintf(f, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+               "unkn. | right/det. | right/all | loc. m (med / p95) | SNR90 | ECE | phase ECE | oracle lights | pipeline | oracle | gap |\n");
+    fprintf(f, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (size_t i = 0; i < np; i++) {
         const srv_acc_point *p = &pts[i];
         if (!p->ok) {
-            fprintf(f, "| %s | %d | %d | %s | %s | %s | failed: %s ||||||||||||||||\n", srv_acc_scene_names[p->hard],
+            fprintf(f, "| %s | %d | %d | %s | %s | %s | failed: %s |||||||||||||||||\n", srv_acc_scene_names[p->hard],
                     p->K, p->C, p->hdr ? "on" : "off", p->locked ? "locked" : "free", srv_acc_ph_name(p), p->err);
             continue;
         }
@@ -345,15 +377,16 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
         fmt_num(b[7], 32, p->ev.loc_median_m, "%.1f");
         fmt_num(b[8], 32, p->ev.loc_p95_m, "%.1f");
         fmt_num(b[9], 32, p->snr_p90, "%.0f");
-        fmt_num(b[10], 32, p->ece, "%.3f");
+        fmt_num(b[10], 32, p->cal.ece, "%.3f");
+        fmt_num(b[14], 32, p->phase_cal.ece, "%.3f");
         fmt_num(b[11], 32, 100 * p->ours_sub, "%.1f %%");
         fmt_num(b[12], 32, 100 * p->oracle_sub, "%.1f %%");
         fmt_num(b[13], 32, 100 * (p->oracle_sub - p->ours_sub), "%+.1f");
         fprintf(f, "| %s | %d | %d | %s | %s | %s | %ld | %.1f | %.2f | %s | %s | %s | %s | %s | %s | %s | %s / %s | %s | %s | "
-                   "%ld | %s | %s | %s |\n",
+                   "%s | %ld | %s | %s | %s |\n",
                 srv_acc_scene_names[p->hard], p->K, p->C, p->hdr ? "on" : "off", p->locked ? "locked" : "free",
                 srv_acc_ph_name(p), p->acquisitions, p->capture_s, p->compute_s, b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7],
-                b[8], b[9], b[10], p->oracle_n, b[11], b[12], b[13]);
+                b[8], b[9], b[10], b[14], p->oracle_n, b[11], b[12], b[13]);
     }
     long truth = 0;
     for (size_t i = 0; i < np; i++)
@@ -372,21 +405,22 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
                "simulator's; calibration on a renderer the simulator does not share is in "
                "docs/recognition.md (\"Measured\", the independent renderer). The plot's bins, with the 95 %% "
                "Wilson interval of their share right (the plot's bars):\n\n"
-               "| scene | confidence | lights | mean confidence | right | 95 %% interval |\n"
-               "|---|---|---:|---:|---:|---|\n",
+               "| scene | confidence of | bin | lights | mean confidence | right | 95 %% interval |\n"
+               "|---|---|---|---:|---:|---:|---|\n",
             leaf, leaf);
-    for (int hard = 0; hard < 3; hard++) {
-        double n[NBINS], c[NBINS], r[NBINS];
-        pooled_bins(pts, np, hard, n, c, r);
-        for (int b = 0; b < NBINS; b++)
-            if (n[b] > 0) {
-                double lo, hi, y = srv_wilson(lround(r[b]), lround(n[b]), SRV_Z95, &lo, &hi);
-                fprintf(f, "| %s | [%.2f, %.2f%s | %.0f | %.3f | %.3f | %.3f-%.3f |\n", srv_acc_scene_names[hard],
-                        srv_acc_bin_edges[b], fmin(srv_acc_bin_edges[b + 1], 1.0), b + 1 < NBINS ? ")" : "]",
-                        n[b], c[b] / n[b], y, lo, hi);
-            }
-    }
-    fprintf(f, "\n");
+    for (int phase = 0; phase < 2; phase++)
+        for (int hard = 0; hard < 3; hard++) {
+            double n[NBINS], c[NBINS], r[NBINS];
+            pooled_bins(pts, np, hard, phase, n, c, r);
+            for (int b = 0; b < NBINS; b++)
+                if (n[b] > 0) {
+                    double lo, hi, y = srv_wilson(lround(r[b]), lround(n[b]), SRV_Z95, &lo, &hi);
+                    fprintf(f, "| %s | %s | [%.2f, %.2f%s | %.0f | %.3f | %.3f | %.3f-%.3f |\n", srv_acc_scene_names[hard],
+                            phase ? "phase" : "bulb and phase", srv_acc_bin_edges[b], fmin(srv_acc_bin_edges[b + 1], 1.0),
+                            b + 1 < NBINS ? ")" : "]", n[b], c[b] / n[b], y, lo, hi);
+                }
+        }
+    fprintf(f, "\nEvery point's bins: [%s/calibration.csv](%s/calibration.csv).\n\n", leaf, leaf);
 
     /* the recommendation, from the metro curves */
     fprintf(f, "## Recommendation\n\n");

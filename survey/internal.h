@@ -208,6 +208,14 @@ int srv_pgi_retryable(const PGresult *r);
 #define NBINS 5
 extern const double srv_acc_bin_edges[NBINS + 1];
 
+/* Reliability bins of one reported confidence: lights matched to the truth, the sum of their
+ * confidences and how many are right, per bin of srv_acc_bin_edges; ece the expected
+ * calibration error (NaN: no light). */
+typedef struct {
+    double n[NBINS], conf[NBINS], right[NBINS];
+    double ece;
+} srv_acc_bins;
+
 typedef struct {
     /* the setting */
     int hard, K, C, hdr, locked, continuous;   /* hard: 0 metro, 1 metro_hard, 2 metro_clear */
@@ -220,8 +228,8 @@ typedef struct {
     double compute_s, sim_s;
     srv_eval_report ev;
     double snr_p90;
-    double bin_n[NBINS], bin_conf[NBINS], bin_right[NBINS];
-    double ece;
+    srv_acc_bins cal;         /* the answered lights by confidence, right = bulb and phase */
+    srv_acc_bins phase_cal;   /* the lights with a phase by phase_confidence, right = the phase */
     long oracle_n;                 /* lights of the oracle subset matched to the truth */
     double ours_sub, oracle_sub;   /* right bulb and phase / matched, on that subset */
 } srv_acc_point;
@@ -235,6 +243,8 @@ typedef struct {
  * plots (PNG), and the Markdown page. */
 const char *srv_acc_ph_name(const srv_acc_point *p);
 gs_status srv_acc_write_csv(const char *path, const srv_acc_point *pts, size_t np);
+/* The reliability bins of every point (pair and phase), one row per non-empty bin. */
+gs_status srv_acc_write_bins_csv(const char *path, const srv_acc_point *pts, size_t np);
 void srv_acc_plot_accuracy(const char *path, const srv_acc_point *pts, size_t np, const int *Ks, int nK);
 void srv_acc_plot_calibration(const char *path, const srv_acc_point *pts, size_t np);
 gs_status srv_acc_write_doc(const char *path, const char *out, const char *base, const srv_acc_crop *cr, int quick, const srv_acc_point *pts, size_t np, double wall, const int *Ks, int nK);

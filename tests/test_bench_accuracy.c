@@ -1,6 +1,7 @@
 /* test_bench_accuracy.c - `gridsurvey bench accuracy --quick` (survey/bench_accuracy.c): the
  * sweep runs and its numbers are consistent. No timing asserts. */
 #include "tests/test.h"
+#include "recognize/recognize.h"
 
 #include <stdio.h>
 #include <stdlib.h>
@@ -12,8 +13,9 @@ typedef struct {
     long acq;
     double exposure, readout, capture, compute;
     double rates[8];   /* detection, false, bulb, phase, right, unknown, pipeline subset, oracle */
-    double snr, ece;
+    double snr, ece, phase_ece;
     long oracle_n;
+    double cal_num[2], cal_den[2];   /* from calibration.csv: sum |right - confidence|, lights */
 } row;
 
 static int file_size_ok(const char *path, const char *magic)
@@ -57,8 +59,8 @@ TEST(bench_accuracy_quick_consistent)
         char *fld[32];
         int nf = 0;
         for (char *t = strtok(line, ",\n"); t && nf < 32; t = strtok(NULL, ",\n")) fld[nf++] = t;
-        CHECK_MSG(nf == 27, "CSV row with %d fields", nf);
-        if (nf != 27) continue;
+        CHECK_MSG(nf == 28, "CSV row with %d fields", nf);
+        if (nf != 28) continue;
         row *r = &rows[n++];
         snprintf(r->scene, sizeof r->scene, "%s", fld[0]);
         r->K = atoi(fld[1]);
@@ -76,8 +78,51 @@ TEST(bench_accuracy_quick_consistent)
         r->snr = num(fld[22]);
         r->ece = num(fld[23]);
         r->oracle_n = atol(fld[24]);
+        r->phase_ece = num(fld[27]);
+        r->cal_num[0] = r->cal_num[1] = r->cal_den[0] = r->cal_den[1] = 0;
     }
     fclose(f);
+    /* every point's reliability bins: in range, a stored phase only at or above the ambiguity
+     * threshold, and the ECE columns recomputed from them */
+    rec_eq7_opts eo;
+    rec_eq7_opts_default(&eo);
+    snprintf(path, sizeof path, "%s/calibration.csv", out);
+    f = fopen(path, "r");
+    CHECK_MSG(f != NULL, "%s: missing", path);
+    if (!f) return;
+    CHECK(fgets(line, sizeof line, f) && !strncmp(line, "scene,K,C,hdr,locked,phases,confidence_of,", 42));
+    int bins = 0;
+    while (fgets(line, sizeof line, f)) {
+        char *fld[16];
+        int nf = 0;
+        for (char *t = strtok(line, ",\n"); t && nf < 16; t = strtok(NULL, ",\n")) fld[nf++] = t;
+        CHECK_MSG(nf == 12, "calibration row with %d fields", nf);
+        if (nf != 12) continue;
+        int phase = !strcmp(fld[6], "phase");
+        double lo = num(fld[7]), hi = num(fld[8]), lights = num(fld[9]), mean = num(fld[10]), right = num(fld[11]);
+        CHECK_MSG(lights >= 1 && right >= 0 && right <= lights && mean >= lo && mean <= hi,
+                  "%s K=%s C=%s %s bin [%g, %g]: %g lights, mean %g, %g right", fld[0], fld[1], fld[2], fld[6], lo,
+                  hi, lights, mean, right);
+        if (phase) CHECK_MSG(lo >= eo.ambiguous_conf - 1e-9, "a stored phase in the bin [%g, %g)", lo, hi);
+        bins++;
+        for (int i = 0; i < n; i++) {
+            row *r = &rows[i];
+            if (strcmp(r->scene, fld[0]) || r->K != atoi(fld[1]) || r->C != atoi(fld[2]) || r->hdr != atoi(fld[3]) ||
+                r->locked != atoi(fld[4]) || strcmp(r->phases, fld[5]))
+                continue;
+            r->cal_num[phase] += fabs(right - mean * lights);
+            r->cal_den[phase] += lights;
+        }
+    }
+    fclose(f);
+    CHECK(bins >= n);
+    for (int i = 0; i < n; i++) {
+        row *r = &rows[i];
+        double ece[2] = {r->ece, r->phase_ece};
+        for (int k = 0; k < 2; k++)
+            if (r->cal_den[k] > 0) CHECK_NEAR(ece[k], r->cal_num[k] / r->cal_den[k], 2e-4);
+            else CHECK(isnan(ece[k]));
+    }
     CHECK_MSG(n >= 4, "%d rows", n);
     const double delta = 0.01, readout_cycles = 10;   /* 50 Hz; the scene's readout_cycles */
     for (int i = 0; i < n; i++) {
