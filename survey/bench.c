@@ -825,7 +825,7 @@ static int bench_recognize(int argc, char **argv)
     }
     gs_delight *all = NULL;
     gs_status st = gs_delight_open(NULL, &all);
-    if (st != GS_OK) return srv_error(st);
+    if (st != GS_OK) return srv_error("bench recognize", st);
     int failed = 0;
     static const int Ks[] = {8, 13, 26}, bandss[] = {1, 3}, bulbss[] = {10, 25, 0};
     double t_start = gs_clock_s(CLOCK_MONOTONIC);

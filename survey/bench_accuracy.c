@@ -405,11 +405,11 @@ int srv_bench_accuracy(int argc, char **argv)
     openblas_set_num_threads(1);
     double t_start = gs_clock_s(CLOCK_MONOTONIC);
     gs_status s = mkdir_p(out);
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) return srv_error("bench accuracy", s);
     char work[4096];
     const char *tmp = getenv("TMPDIR");
     snprintf(work, sizeof work, "%s/gs-accuracy-XXXXXX", tmp && *tmp ? tmp : "/tmp");
-    if (!mkdtemp(work)) return srv_error(gs_fail(GS_EIO, "%s: cannot create: %s", work, strerror(errno)));
+    if (!mkdtemp(work)) return srv_error("bench accuracy", gs_fail(GS_EIO, "%s: cannot create: %s", work, strerror(errno)));
 
     /* the sweep: the main grid (HDR, locked, 3 phases) over K and C on both scenes, then the
      * variants at K = 26 on metro */
@@ -420,7 +420,7 @@ int srv_bench_accuracy(int argc, char **argv)
     int nK = quick ? 1 : 3, nC = quick ? 2 : 6;
     size_t cap_pts = 128, np = 0;
     srv_acc_point *pts = calloc(cap_pts, sizeof *pts);
-    if (!pts) return srv_error(gs_fail(GS_ENOMEM, "out of memory"));
+    if (!pts) return srv_error("bench accuracy", gs_fail(GS_ENOMEM, "out of memory"));
     for (int hard = 0; hard < (quick ? 1 : 3); hard++)
         for (int ki = 0; ki < nK; ki++)
             for (int ci = 0; ci < nC; ci++)
@@ -438,7 +438,7 @@ int srv_bench_accuracy(int argc, char **argv)
     gs_delight *dl = NULL;
     if ((s = gs_delight_open(NULL, &dl)) != GS_OK) {
         free(pts);
-        return srv_error(s);
+        return srv_error("bench accuracy", s);
     }
     int failed = 0;
     for (size_t i = 0; i < np; i++) {
@@ -477,7 +477,7 @@ int srv_bench_accuracy(int argc, char **argv)
     if (!keep) rm_rf(work);
     else fprintf(stderr, "bench accuracy: work directory kept: %s\n", work);
     free(pts);
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) return srv_error("bench accuracy", s);
     fprintf(stderr, "bench accuracy: %zu points (%d failed) in %.0f s\n", np, failed, gs_clock_s(CLOCK_MONOTONIC) - t_start);
     return failed ? 1 : 0;
 }

@@ -75,7 +75,7 @@ int srv_bench_blobs(int argc, char **argv)
     }
     gs_capture cap;
     gs_status st = gs_capture_read(dir, &cap);
-    if (st != GS_OK) return srv_error(st);
+    if (st != GS_OK) return srv_error("bench blobs", st);
     int nt = gs_threads_resolve(0);
     printf("# Blob extraction time (`gridsurvey bench blobs`)\n\n"
            "Capture `%s`: %d x %d pixels, %d bands, K = %d; the best of %d runs of rec_blobs_extract "
@@ -88,5 +88,5 @@ int srv_bench_blobs(int argc, char **argv)
         if (st == GS_OK && nt > 1) st = blobs_row(&cap, fit, nt, reps);
     }
     gs_capture_release(&cap);
-    return st == GS_OK ? 0 : srv_error(st);
+    return st == GS_OK ? 0 : srv_error("bench blobs", st);
 }

@@ -313,7 +313,7 @@ int srv_bench_db(int argc, char **argv)
     snprintf(path, sizeof path, "%s/bench.sqlite", dir);
     srv_db *db;
     gs_status s = srv_db_open(path, SRV_DB_CREATE, &db);
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) return srv_error("bench db", s);
     srv_synth_opts o;
     srv_synth_opts_default(&o);
     o.survey = "bench";
@@ -387,6 +387,6 @@ int srv_bench_db(int argc, char **argv)
         }
         if (*tmp) rmdir(tmp);
     }
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) return srv_error("bench db", s);
     return 0;
 }

@@ -148,6 +148,6 @@ int srv_bench_pg(int argc, char **argv)
         }
         rmdir(tmp);
     }
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) return srv_error("bench pg", s);
     return 0;
 }

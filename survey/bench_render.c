@@ -86,7 +86,7 @@ int srv_bench_render(int argc, char **argv)
     gs_status s = cap_scene_read(path, &sc);
     if (s != GS_OK) {
         cap_scene_release(&sc);
-        return srv_error(s);
+        return srv_error("bench render", s);
     }
     int nt = gs_threads_resolve(0);
     printf("# Simulator render time (`gridsurvey bench render`)\n\n"
@@ -113,5 +113,5 @@ int srv_bench_render(int argc, char **argv)
     if (s == GS_OK) s = srv_render_time(&sc, ~0u, frames, nt, &all_n);
     if (s == GS_OK) print_row("all listed", &none, &all, &all_n);
     cap_scene_release(&sc);
-    return s == GS_OK ? 0 : srv_error(s);
+    return s == GS_OK ? 0 : srv_error("bench render", s);
 }

@@ -98,7 +98,7 @@ int srv_bench_transport(int argc, char **argv)
     if (st == GS_OK) st = rec_sources_build(d, bench_sources, 5, 50, 3, 26, &src, NULL);
     if (st != GS_OK) {
         gs_delight_free(d);
-        return srv_error(st);
+        return srv_error("bench transport", st);
     }
     printf("# Light-transport unmixing time (`gridsurvey bench transport%s`)\n\n", quick ? " --quick" : "");
     printf("`rec_unmix` (paper Sec. 5.1: Eq. 16 per pixel and band with rec_nnls, Eq. 18, Eq. 16 "
@@ -144,5 +144,5 @@ int srv_bench_transport(int argc, char **argv)
     printf("\nTarget (issue 14): a 1-megapixel RGB K = 26 capture with S = 5 in under 10 s on one core.\n");
     rec_sources_release(&src);
     gs_delight_free(d);
-    return st == GS_OK ? 0 : srv_error(st);
+    return st == GS_OK ? 0 : srv_error("bench transport", st);
 }

@@ -170,9 +170,13 @@ int srv_out_dir_hint(const char *cmd)
     return srv_usage_error(cmd, "-o names an output file; this command writes a directory: --out-dir DIR");
 }
 
-int srv_error(gs_status s)
+int srv_error(const char *cmd, gs_status s)
 {
-    fprintf(stderr, "gridsurvey: %s: %s\n", gs_strerror(s), gs_detail());
+    /* the module's own "CMD: " (relight.c's "relight: source 00: ...") is the command's name */
+    const char *d = gs_detail();
+    size_t n = strlen(cmd);
+    if (!strncmp(d, cmd, n) && d[n] == ':' && d[n + 1] == ' ') d += n + 2;
+    fprintf(stderr, "gridsurvey %s: %s\n", cmd, *d ? d : gs_strerror(s));
     return 1;
 }
 

@@ -149,7 +149,7 @@ int srv_cmd_capture(int argc, char **argv)
                                    "which this command does not have");
         s = cap_backend_hardware_new(&hw, &be);
     }
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) return srv_error("capture", s);
     cap_loop_report rep;
     s = cap_loop_run(be, out, &lo, &rep);
     if (s == GS_OK && which == SIM) s = cap_sim_write_truth(cap_backend_sim_handle(be), out);
@@ -158,5 +158,5 @@ int srv_cmd_capture(int argc, char **argv)
                backend, out, rep.complete ? "complete" : "partial", rep.frames_acquired,
                rep.frames_kept, rep.acquisitions, rep.seconds);
     cap_backend_free(be);
-    return s == GS_OK ? 0 : srv_error(s);
+    return s == GS_OK ? 0 : srv_error("capture", s);
 }

@@ -116,7 +116,7 @@ static int compare_shares(const char *path, const char *const sv[2], srv_stats_o
     if (s == GS_OK) s = srv_compare_shares(db, so, sv[0], sv[1], &v, &n);
     srv_db_close(db);
     srv_areas_free(areas);
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) return srv_error("compare", s);
     static const char *const ph[3] = {"0", "120", "240"};
     if (csv) {
         printf("group,n_a,n_b");
@@ -223,13 +223,13 @@ int srv_cmd_compare(int argc, char **argv)
     if (by || clip || !isnan(so.bbox[0]) || so.min_phase_confidence > 0.0) return compare_shares(path, sv, &so, by, clip, csv);
     srv_db *db;
     gs_status s = srv_db_open(path, SRV_DB_READ, &db);
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) return srv_error("compare", s);
     srv_change *v = NULL;
     size_t n = 0;
     srv_compare_totals t;
     s = srv_compare(db, sv[0], sv[1], min_p, &v, &n, &t);
     srv_db_close(db);
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) return srv_error("compare", s);
     char k[64], a[160], b[160], pp[32], pb[32];
     if (csv) {
         printf("site,lat_deg,lon_deg,x_px,y_px,change,a_bulb,a_phase_deg,a_bulb_confidence,"

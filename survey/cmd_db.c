@@ -60,6 +60,8 @@ int srv_cmd_db(int argc, char **argv)
                 "ingest-synthetic\n", sub);
         return 2;
     }
+    char cmd[24];   /* "db SUB" in an error */
+    snprintf(cmd, sizeof cmd, "db %s", sub);
     static const struct option longs[] = {
         {"db", required_argument, 0, 'd'},       {"survey", required_argument, 0, 'S'},
         {"captures", required_argument, 0, 'c'}, {"lights", required_argument, 0, 'l'},
@@ -126,7 +128,7 @@ int srv_cmd_db(int argc, char **argv)
     }
     srv_db *db;
     gs_status s = srv_db_open(path, which == 1 ? SRV_DB_WRITE : which == 2 ? SRV_DB_READ : which == 0 ? SRV_DB_INIT : SRV_DB_CREATE, &db);
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) return srv_error(cmd, s);
     int rc = 0;
     if (which == 0 || which == 1) {
         long created = 0, joined = 0;
@@ -154,6 +156,6 @@ int srv_cmd_db(int argc, char **argv)
             printf("%s: added %zu captures (%zu lights each)\n", path, added, so.lights_per_capture);
     }
     srv_db_close(db);
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) return srv_error(cmd, s);
     return rc;
 }

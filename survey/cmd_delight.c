@@ -191,7 +191,7 @@ static int cmd_show(const gs_delight *d, const delight_opts *o, const char *id)
         enum { K = 26 };
         double w[GS_MAX_BANDS * K];
         gs_status s = gs_brf_integrate(&b->brf, 0.0, K, w);
-        if (s != GS_OK) return srv_error(s);
+        if (s != GS_OK) return srv_error("delight show", s);
         for (int band = 0; band < b->brf.bands; band++) {
             printf("  band %d: chromaticity %.4f, percent flicker %.2f, K=26 windows:", band,
                    b->chroma[band], gs_brf_percent_flicker(&b->brf, band));
@@ -200,7 +200,7 @@ static int cmd_show(const gs_delight *d, const delight_opts *o, const char *id)
         }
         shown++;
     }
-    if (!shown) return srv_error(gs_fail(GS_ENOTFOUND, "bulb '%s': no such entry in the database", id));
+    if (!shown) return srv_error("delight show", gs_fail(GS_ENOTFOUND, "bulb '%s': no such entry in the database", id));
     return 0;
 }
 
@@ -211,16 +211,18 @@ static int cmd_export(const gs_delight *d, const delight_opts *o)
     if (s == GS_OK) s = gs_delight_export_csv(d, a.f);
     if (s == GS_OK) s = gs_atomic_commit(&a);
     else gs_atomic_abort(&a);
-    return s == GS_OK ? 0 : srv_error(s);
+    return s == GS_OK ? 0 : srv_error("delight export", s);
 }
 
-/* Load DB if it exists (else start empty), let add() change it, save it back. Only a path that
- * does not exist starts empty: a database that cannot be opened (out of memory, out of file
- * descriptors, no permission) is an error, never replaced by the new bulbs alone. */
-static int modify_db(const char *db, gs_status (*add)(gs_delight *, const void *), const void *arg)
+/* Load DB if it exists (else start empty), let add() change it, save it back; cmd names the
+ * command in an error. Only a path that does not exist starts empty: a database that cannot be
+ * opened (out of memory, out of file descriptors, no permission) is an error, never replaced by
+ * the new bulbs alone. */
+static int modify_db(const char *cmd, const char *db, gs_status (*add)(gs_delight *, const void *),
+                     const void *arg)
 {
     gs_delight *d = gs_delight_new();
-    if (!d) return srv_error(gs_fail(GS_ENOMEM, "cannot allocate the DELIGHT database"));
+    if (!d) return srv_error(cmd, gs_fail(GS_ENOMEM, "cannot allocate the DELIGHT database"));
     struct stat st;
     gs_status s = GS_OK;
     if (stat(db, &st) == 0) s = gs_delight_load(d, db);
@@ -229,7 +231,7 @@ static int modify_db(const char *db, gs_status (*add)(gs_delight *, const void *
     if (s == GS_OK) s = add(d, arg);
     if (s == GS_OK) s = gs_delight_save(d, db);
     gs_delight_free(d);
-    return s == GS_OK ? 0 : srv_error(s);
+    return s == GS_OK ? 0 : srv_error(cmd, s);
 }
 
 typedef struct {
@@ -293,7 +295,7 @@ static int cmd_plot(const gs_delight *d, const delight_opts *o)
     size_t count = 0;
     if (o->ids) {
         char *list = strdup(o->ids), *save = NULL;
-        if (!list) return srv_error(gs_fail(GS_ENOMEM, "delight plot: out of memory"));
+        if (!list) return srv_error("delight plot", gs_fail(GS_ENOMEM, "out of memory"));
         for (char *tok = strtok_r(list, ",", &save); tok; tok = strtok_r(NULL, ",", &save)) {
             const gs_bulb *b = NULL;
             for (size_t i = 0; i < gs_delight_count(d) && !b; i++) {
@@ -302,10 +304,10 @@ static int cmd_plot(const gs_delight *d, const delight_opts *o)
             }
             if (!b || count == MAX_PLOT) {
                 /* the message formats tok, which lives in list: free it after */
-                gs_status e = b ? gs_fail(GS_ELIMIT, "delight plot: at most %d bulbs", MAX_PLOT)
-                                : gs_fail(GS_ENOTFOUND, "delight plot: --ids: bulb '%s' not in the database", tok);
+                gs_status e = b ? gs_fail(GS_ELIMIT, "--ids: at most %d bulbs", MAX_PLOT)
+                                : gs_fail(GS_ENOTFOUND, "--ids: bulb '%s' not in the database", tok);
                 free(list);
-                return srv_error(e);
+                return srv_error("delight plot", e);
             }
             pick[count++] = b;
         }
@@ -320,11 +322,11 @@ static int cmd_plot(const gs_delight *d, const delight_opts *o)
             pick[count++] = b;
         }
     }
-    if (!count) return srv_error(gs_fail(GS_ENOTFOUND, "delight plot: no bulb matches"));
+    if (!count) return srv_error("delight plot", gs_fail(GS_ENOTFOUND, "no bulb matches"));
     char title[128];
     snprintf(title, sizeof title, "DELIGHT BRFs, %d Hz grid", pick[0]->grid_hz);
     gs_status s = rec_plot_brfs(pick, count, o->out, title);
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) return srv_error("delight plot", s);
     fprintf(srv_note_stream(o->out), "wrote %s (%zu bulbs)\n", o->out, count);
     return 0;
 }
@@ -345,12 +347,12 @@ int srv_cmd_delight(int argc, char **argv)
     if (!strcmp(sub, "import")) {
         if (!o.db || npos < 1) return srv_usage_error("delight import", "expected FILE.csv... and --delight DB");
         csv_list l = {pos, npos};
-        return modify_db(o.db, add_csvs, &l);
+        return modify_db("delight import", o.db, add_csvs, &l);
     }
     if (!strcmp(sub, "add")) {
         if (!o.db || !o.recording)
             return srv_usage_error("delight add", "expected --from-recording FILE and --delight DB");
-        return modify_db(o.db, add_recording, &o);
+        return modify_db("delight add", o.db, add_recording, &o);
     }
     if (!strcmp(sub, "generate")) {
         if (!o.out) return srv_usage_error("delight generate", "-o DB is required");
@@ -358,7 +360,7 @@ int srv_cmd_delight(int argc, char **argv)
         gs_status s = d ? gs_delight_generate(d, o.n) : gs_fail(GS_ENOMEM, "out of memory");
         if (s == GS_OK) s = gs_delight_save(d, o.out);
         gs_delight_free(d);
-        return s == GS_OK ? 0 : srv_error(s);
+        return s == GS_OK ? 0 : srv_error("delight generate", s);
     }
     int is_show = !strcmp(sub, "show");
     if (strcmp(sub, "list") && !is_show && strcmp(sub, "export") && strcmp(sub, "plot")) {
@@ -369,7 +371,11 @@ int srv_cmd_delight(int argc, char **argv)
     if (!strcmp(sub, "plot") && !o.out) return srv_usage_error("delight plot", "-o FILE.png is required");
     gs_delight *d = NULL;
     gs_status s = open_delight(&o, &d);
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) {
+        char cmd[16];   /* sub is one of the four above */
+        snprintf(cmd, sizeof cmd, "delight %s", sub);
+        return srv_error(cmd, s);
+    }
     if (o.sensor && !has_sensor(d, gs_delight_count(d), o.sensor)) rc = sensor_hint(d, o.sensor);
     else if (!strcmp(sub, "list")) rc = cmd_list(d, &o);
     else if (is_show) rc = cmd_show(d, &o, pos[0]);

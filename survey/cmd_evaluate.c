@@ -88,11 +88,11 @@ int srv_cmd_evaluate(int argc, char **argv)
     }
     srv_db *db = NULL;
     gs_status s = srv_db_open(path, SRV_DB_READ, &db);
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) return srv_error("evaluate", s);
     srv_eval_report r;
     s = srv_evaluate(db, truth, &o, &r);
     srv_db_close(db);
     if (s == GS_OK) s = srv_eval_print(&r, truth, json, stdout);
     if (s == GS_OK && fflush(stdout) != 0) s = gs_fail(GS_EIO, "stdout: write failed");
-    return s == GS_OK ? 0 : srv_error(s);
+    return s == GS_OK ? 0 : srv_error("evaluate", s);
 }

@@ -313,12 +313,12 @@ int srv_cmd_export(int argc, char **argv)
         return 2;
     }
     srv_db *db;
-    if ((s = srv_db_open(path, SRV_DB_READ, &db)) != GS_OK) return srv_error(s);
+    if ((s = srv_db_open(path, SRV_DB_READ, &db)) != GS_OK) return srv_error("export", s);
     if (o.survey) {
         int64_t id;
         if ((s = srv_db_find_survey(db, o.survey, &id)) != GS_OK) {
             srv_db_close(db);
-            return srv_error(s);
+            return srv_error("export", s);
         }
     }
     gis_light *lights = NULL;
@@ -329,7 +329,7 @@ int srv_cmd_export(int argc, char **argv)
         s = fmt == GIS_FORMAT_GEOJSON ? gis_export_geojson_decimals(lights, n, out, decimals)
                                       : gis_export(lights, n, fmt, out);
     free(lights);
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) return srv_error("export", s);
     fprintf(srv_note_stream(out), "exported %zu lights -> %s\n", n, out);
     return 0;
 }

@@ -192,20 +192,20 @@ int srv_cmd_locate(int argc, char **argv)
     }
     gis_format fmt;
     gs_status s = format ? gis_format_parse(format, &fmt) : gis_format_from_path(out, &fmt);
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) return srv_error("locate", s);
 
     gis_station st;
     s = gis_station_read(station_path, &st);
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) return srv_error("locate", s);
     if (refraction && st.cam.refraction_k == 0.0) st.cam.refraction_k = GIS_REFRACTION_K_STANDARD;
     pixel_row *rows;
     size_t n;
     s = read_pixels(pixels_path, &rows, &n);
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) return srv_error("locate", s);
     gis_light *lights = calloc(n ? n : 1, sizeof *lights);
     if (!lights) {
         free(rows);
-        return srv_error(gs_fail(GS_ENOMEM, "locate: out of memory for %zu lights", n));
+        return srv_error("locate", gs_fail(GS_ENOMEM, "out of memory for %zu lights", n));
     }
     size_t nloc = 0, nflag = 0;
     for (size_t i = 0; i < n && s == GS_OK; i++) {
@@ -241,7 +241,7 @@ int srv_cmd_locate(int argc, char **argv)
     }
     free(rows);
     free(lights);
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) return srv_error("locate", s);
     fprintf(srv_note_stream(out), "located %zu of %zu lights (%zu flagged) -> %s\n", nloc, n, nflag, out);
     return 0;
 }

@@ -84,7 +84,7 @@ int srv_cmd_push(int argc, char **argv)
     }
     srv_push_report r;
     gs_status s = srv_pg_push(path, conninfo, &o, &r);
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) return srv_error("push", s);
     fprintf(stderr, "push: %s: %zu captures (%zu new, %zu lights), %zu light sites (%zu written)%s",
             path, r.captures, r.captures_pushed, r.lights_pushed, r.sites, r.sites_written,
             r.retries ? "" : "\n");

@@ -551,5 +551,5 @@ int srv_cmd_recognize(int argc, char **argv)
         if (fflush(stdout) != 0 && st == GS_OK) st = gs_fail(GS_EIO, "stdout: write failed");
     }
     srv_job_release(&j);
-    return st == GS_OK ? 0 : srv_error(st);
+    return st == GS_OK ? 0 : srv_error("recognize", st);
 }

@@ -132,7 +132,7 @@ int srv_cmd_relight(int argc, char **argv)
         rec_sources_release(&src);
         free(files);
     }
-    if (st != GS_OK) return srv_error(st);
+    if (st != GS_OK) return srv_error("relight", st);
     rec_relight_set set[REC_MAX_SOURCES];
     unsigned given[REC_MAX_SOURCES] = {0};
     memset(set, 0, sizeof set);
@@ -211,5 +211,5 @@ int srv_cmd_relight(int argc, char **argv)
     gs_capture_release(&rc);
     gs_capture_release(&other);
     rec_sources_release(&src);
-    return st == GS_OK ? 0 : srv_error(st);
+    return st == GS_OK ? 0 : srv_error("relight", st);
 }

@@ -334,14 +334,14 @@ int srv_cmd_run(int argc, char **argv)
     if (out) snprintf(out_dir, sizeof out_dir, "%s", out);
     else gs_path_dir(o.db_path, out_dir, sizeof out_dir);
     gs_status s = out ? check_out_dir(out_dir) : GS_OK;
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) return srv_error("run", s);
     if (progress) {
         o.progress = tty_progress;
         o.capture_progress = 1;
     }
     int64_t *captures = calloc((size_t)n_inputs, sizeof *captures);
     srv_run_report *reps = calloc((size_t)n_inputs, sizeof *reps);
-    if (!captures || !reps) s = gs_fail(GS_ENOMEM, "run: out of memory");
+    if (!captures || !reps) s = gs_fail(GS_ENOMEM, "out of memory");
     for (int i = 0; i < n_inputs && s == GS_OK; i++) {
         o.input = argv[optind + i];
         s = run_one(&o, &reps[i]);
@@ -352,5 +352,5 @@ int srv_cmd_run(int argc, char **argv)
     free(reps);
     free(captures);
     if (s == GS_OK && fflush(stdout) != 0) s = gs_fail(GS_EIO, "stdout: write failed");
-    return s == GS_OK ? 0 : srv_error(s);
+    return s == GS_OK ? 0 : srv_error("run", s);
 }

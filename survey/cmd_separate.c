@@ -101,5 +101,5 @@ int srv_cmd_separate(int argc, char **argv)
     }
     rec_separation_release(&sep);
     gs_capture_release(&cap);
-    return st == GS_OK ? 0 : srv_error(st);
+    return st == GS_OK ? 0 : srv_error("separate", st);
 }

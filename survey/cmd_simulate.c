@@ -117,7 +117,7 @@ int srv_cmd_simulate(int argc, char **argv)
     gs_status s = cap_scene_read(argv[optind], &sc);
     if (s != GS_OK) {
         cap_scene_release(&sc);
-        return srv_error(s);
+        return srv_error("simulate", s);
     }
     for (int i = 0; i < ndrop; i++) {
         size_t j = 0;
@@ -147,7 +147,7 @@ int srv_cmd_simulate(int argc, char **argv)
     size_t in_image = 0;
     for (size_t i = 0; i < sc.n_lights; i++) in_image += sc.lights[i].in_image != 0;
     cap_scene_release(&sc);
-    if (s != GS_OK) return srv_error(s);
+    if (s != GS_OK) return srv_error("simulate", s);
     cap_sim *sim = cap_backend_sim_handle(be);
     cap_loop_report rep;
     s = cap_loop_run(be, out, &lo, &rep);
@@ -162,5 +162,5 @@ int srv_cmd_simulate(int argc, char **argv)
         if (stats) print_stats(sim);
     }
     cap_backend_free(be);
-    return s == GS_OK ? 0 : srv_error(s);
+    return s == GS_OK ? 0 : srv_error("simulate", s);
 }

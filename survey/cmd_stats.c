@@ -328,7 +328,7 @@ int srv_cmd_stats(int argc, char **argv)
     srv_areas *areas = NULL;
     gs_status s;
     if (clip && (s = srv_areas_load(clip, by_feature ? o.feature_field : NULL, &areas)) != GS_OK)
-        return srv_error(s);
+        return srv_error("stats", s);
     o.areas = areas;
     srv_phase_stats *g = NULL;
     size_t n = 0;
@@ -358,7 +358,7 @@ int srv_cmd_stats(int argc, char **argv)
     srv_areas_free(areas);
     if (s != GS_OK) {
         free(g);
-        return srv_error(s);
+        return srv_error("stats", s);
     }
     int rc = 0;
     if (fmt == FMT_TABLE) srv_stats_print_table(g, n, &o, ungrouped);

@@ -299,5 +299,5 @@ int srv_cmd_unmix(int argc, char **argv)
     rec_sources_release(&src);
     gs_delight_free(d);
     gs_capture_release(&cap);
-    return st == GS_OK ? 0 : srv_error(st);
+    return st == GS_OK ? 0 : srv_error("unmix", st);
 }

@@ -121,8 +121,10 @@ int srv_usage_hint(const char *cmd, char **argv);
 /* The one-line usage error of -o given to a command that writes a directory (-o is always a
  * file; directories are --out-dir DIR, docs/reliability.md "Command-line habits"): returns 2. */
 int srv_out_dir_hint(const char *cmd);
-/* Print "gridsurvey: STATUS: DETAIL" on stderr and return 1. */
-int srv_error(gs_status s);
+/* A failure of command cmd ("delight plot" for a subcommand): the one line "gridsurvey CMD:
+ * DETAIL" (gs_detail() without a leading "CMD: " of its own; gs_strerror(s) when there is no
+ * detail) on stderr; returns 1. */
+int srv_error(const char *cmd, gs_status s);
 
 /* An evaluation (survey/evaluate.c) as Markdown tables or a gridsurvey-evaluation/1 JSON
  * document (json != 0) on f. GS_EIO when f cannot be written. */

@@ -404,7 +404,7 @@ static point_result try_point(const sweep_refs *rf, const char *work, size_t k, 
             snprintf(why, sizeof why, "succeeded but its output is not complete: %s",
                      strcmp(dba, rf->db_ref) ? first_difference(rf->db_ref, dba) : first_difference(rf->files_ref, fa));
     } else {
-        int one_line = rc == 1 && fx_count_lines(out) == 1 && !strncmp(out, "gridsurvey: ", 12);
+        int one_line = rc == 1 && fx_count_lines(out) == 1 && !strncmp(out, "gridsurvey ", 11);
         int db_ok = !strcmp(dba, rf->db_before) || !strcmp(dba, rf->db_ref);
         int ok = one_line && db_ok && files_each_before_or_ref(rf->files_before, rf->files_ref, fa, why, sizeof why);
         if (!one_line) snprintf(why, sizeof why, "exit %d, not one line on stderr", rc);
@@ -893,7 +893,7 @@ TEST(map_drawing_crash_fails_in_one_line)
                       "%s, %s at drawing %d: exit %d: %s", cmds[c].name, how, at, rc, out);
             if (!strcmp(how, "exit"))
                 CHECK_MSG(strstr(out, "(exit status 1): plinit: out of memory\n"), "%s: %s", cmds[c].name, out);
-            if (what && c > 0 && t < 4) {   /* the file it names: "gridsurvey: STATUS: FILE: the drawing ..." */
+            if (what && c > 0 && t < 4) {   /* the file it names: "gridsurvey CMD: FILE: the drawing ..." */
                 const char *p = what;
                 while (p > out && p[-1] != ' ') p--;
                 snprintf(named[t], sizeof named[t], "%.*s", (int)(what - p), p);

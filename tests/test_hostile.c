@@ -672,6 +672,24 @@ TEST(cli_usage_errors_one_line_not_the_usage)
     }
 }
 
+TEST(cli_failures_name_the_command_and_the_file_not_a_status_word)
+{
+    /* a library's error was "gridsurvey: not found: DETAIL" (its status word first, the command
+     * unnamed); now the one line "gridsurvey CMD: DETAIL", DETAIL naming the file and field */
+    const char *nodir = fx_tmp("no-such-capture"), *scene = fx_tmp("no-format.json");
+    fx_write_text(scene, "{\"camera\": 3}\n");
+    char want[3][1024];
+    snprintf(want[0], sizeof want[0], "gridsurvey recognize: %s/capture.json: cannot open: ", nodir);
+    snprintf(want[1], sizeof want[1], "gridsurvey run: %s:1: field format: expected a string", scene);
+    snprintf(want[2], sizeof want[2], "gridsurvey delight plot: --ids: bulb 'no-such-bulb-16' not in the database");
+    CHECK(run("%s recognize %s", nodir, NULL, NULL) == 1);
+    CHECK_MSG(fx_count_lines(out) == 1 && !strncmp(out, want[0], strlen(want[0])), "%s", out);
+    CHECK(run("%s run %s --db %s", scene, fx_tmp("no-format.sqlite"), NULL) == 1);
+    CHECK_MSG(fx_count_lines(out) == 1 && !strncmp(out, want[1], strlen(want[1])), "%s", out);
+    CHECK(run("%s delight plot --ids no-such-bulb-16 -o %s", fx_tmp("none.png"), NULL, NULL) == 1);
+    CHECK_MSG(fx_count_lines(out) == 1 && !strncmp(out, want[2], strlen(want[2])), "%s", out);
+}
+
 TEST(recording_header_run_in_empty_middle_field)
 {
     /* found by `make fuzz` (fuzz_recording): a first row of 2k-1 fields whose middle one is

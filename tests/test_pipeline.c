@@ -693,7 +693,7 @@ TEST(pipeline_bad_input_changes_nothing)
     for (size_t i = 0; i < n_cases; i++) {
         rc = sh("cd %s && %s run %s", dir, bin, cases[i].args);
         CHECK_MSG(rc == 1 && fx_count_lines(out) == 1 && strstr(out, cases[i].expect) &&
-                  strstr(out, "gridsurvey: "),
+                  !strncmp(out, "gridsurvey run: ", 16),
                   "run %s: exit %d, output: %s", cases[i].args, rc, out);
     }
     /* usage errors: exit 2 */

@@ -340,7 +340,7 @@ TEST(recognize_cli_bad_inputs_one_line_errors)
     CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "transformer"), "%s", out);
     /* a DELIGHT file that is missing or not a database */
     CHECK(run1(good, "--delight /nonexistent/delight.sqlite") == 1);
-    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "not found: /nonexistent/delight.sqlite"), "%s", out);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "gridsurvey recognize: /nonexistent/delight.sqlite"), "%s", out);
     CHECK(run1(good, "--delight tests/test.h") == 1);
     CHECK_MSG(fx_count_lines(out) == 1, "%s", out);
     /* a DELIGHT without an entry for the capture's grid frequency (only 60 Hz rows) */

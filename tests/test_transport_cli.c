@@ -152,8 +152,10 @@ TEST(transport_cli_bad_input_one_line_errors)
     rc = fx_run(out, sizeof out, "%s relight '%s' --set 1=phase:0 --set 1=bulb:cfl-23w,phase:120 --out-dir '%s' 2>&1",
                 test_bin(), dir, fx_tmp("r"));
     CHECK_MSG(rc == 2 && fx_contains(out, "--set '1=bulb:cfl-23w,phase:120': source 1: phase given twice"), "%s", out);
+    /* the library's error as the command's one line, without a status word or a second "relight:" */
     rc = fx_run(out, sizeof out, "%s relight '%s' --set 0=bulb:none --out-dir '%s' 2>&1", test_bin(), dir, fx_tmp("r"));
-    CHECK(rc == 1 && fx_contains(out, "bulb 'none'"));
+    CHECK_MSG(rc == 1 && !strncmp(out, "gridsurvey relight: source 00: bulb 'none': expected a DELIGHT bulb id", 70) &&
+              fx_count_lines(out) == 1, "%s", out);
 }
 
 TEST(separate_cli_writes_float_tiffs_and_compares_with_the_truth)
