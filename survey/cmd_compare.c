@@ -147,10 +147,7 @@ static int compare_shares(const char *path, const char *const sv[2], srv_stats_o
         }
     }
     free(v);
-    if (fflush(stdout) != 0 || ferror(stdout)) {
-        fprintf(stderr, "gridsurvey compare: cannot write the output\n");
-        return 1;
-    }
+    if (fflush(stdout) != 0 || ferror(stdout)) return srv_error("compare", gs_fail(GS_EIO, "stdout: write failed"));
     return 0;
 }
 
@@ -279,9 +276,6 @@ int srv_cmd_compare(int argc, char **argv)
                t.both, t.unchanged, ph, bu, ap, va, min_p);
     }
     free(v);
-    if (fflush(stdout) != 0 || ferror(stdout)) {
-        fprintf(stderr, "gridsurvey compare: cannot write the output\n");
-        return 1;
-    }
+    if (fflush(stdout) != 0 || ferror(stdout)) return srv_error("compare", gs_fail(GS_EIO, "stdout: write failed"));
     return 0;
 }

@@ -30,12 +30,13 @@ static const char db_usage[] =
     "  gridsurvey db check --db city.sqlite\n"
     "  gridsurvey db ingest-synthetic --db synthetic.sqlite --captures 10 --lights 1000\n";
 
-static int parse_size(const char *opt, const char *text, size_t lo, size_t hi, size_t *v)
+/* An integer option of command cmd in [lo, hi] into *v: 1, or 0 after srv_usage_error. */
+static int parse_size(const char *cmd, const char *opt, const char *text, size_t lo, size_t hi, size_t *v)
 {
     char *end;
     unsigned long long x = strtoull(text, &end, 10);
     if (!*text || *end || *text == '-' || x < lo || x > hi) {
-        fprintf(stderr, "gridsurvey db: %s '%s': expected an integer in [%zu, %zu]\n", opt, text, lo, hi);
+        srv_usage_error(cmd, "%s '%s': expected an integer from %zu to %zu", opt, text, lo, hi);
         return 0;
     }
     *v = (size_t)x;
@@ -55,11 +56,9 @@ int srv_cmd_db(int argc, char **argv)
     }
     int which = !strcmp(sub, "init") ? 0 : !strcmp(sub, "migrate") ? 1 : !strcmp(sub, "check") ? 2
               : !strcmp(sub, "ingest-synthetic") ? 3 : -1;
-    if (which < 0) {
-        fprintf(stderr, "gridsurvey db: '%s' is not a subcommand: expected init, migrate, check or "
-                "ingest-synthetic\n", sub);
-        return 2;
-    }
+    if (which < 0)
+        return srv_usage_error("db", "'%s' is not a subcommand: expected init, migrate, check or "
+                               "ingest-synthetic", sub);
     char cmd[24];   /* "db SUB" in an error */
     snprintf(cmd, sizeof cmd, "db %s", sub);
     static const struct option longs[] = {
@@ -74,58 +73,41 @@ int srv_cmd_db(int argc, char **argv)
     srv_synth_opts_default(&so);
     optind = 1;
     int c;
-    char *end;
     size_t v;
     while ((c = getopt_long(argc - 1, argv + 1, "h", longs, NULL)) != -1) {
-        if (which != 3 && c != 'd' && c != 'h' && c != '?') {
-            fprintf(stderr, "gridsurvey db %s: only --db is accepted\n", sub);
-            return 2;
-        }
+        if (which != 3 && c != 'd' && c != 'h' && c != '?') return srv_usage_error(cmd, "only --db is accepted");
         switch (c) {
         case 'd': path = optarg; break;
         case 'S': so.survey = optarg; break;
         case 'c':
-            if (!parse_size("--captures", optarg, 0, 100000000, &so.captures)) return 2;
+            if (!parse_size(cmd, "--captures", optarg, 0, 100000000, &so.captures)) return 2;
             break;
         case 'l':
-            if (!parse_size("--lights", optarg, 0, 1000000, &so.lights_per_capture)) return 2;
+            if (!parse_size(cmd, "--lights", optarg, 0, 1000000, &so.lights_per_capture)) return 2;
             break;
         case 'b':
-            if (!parse_size("--batch", optarg, 1, 1000000, &so.batch)) return 2;
+            if (!parse_size(cmd, "--batch", optarg, 1, 1000000, &so.batch)) return 2;
             break;
         case 's':
-            if (!parse_size("--seed", optarg, 0, (size_t)-1, &v)) return 2;
+            if (!parse_size(cmd, "--seed", optarg, 0, (size_t)-1, &v)) return 2;
             so.seed = v;
             break;
         case 'w':
             if (sscanf(optarg, "%lf,%lf,%lf", &so.phase_weights[0], &so.phase_weights[1],
                        &so.phase_weights[2]) != 3 || !(so.phase_weights[0] >= 0) ||
                 !(so.phase_weights[1] >= 0) || !(so.phase_weights[2] >= 0) ||
-                !(so.phase_weights[0] + so.phase_weights[1] + so.phase_weights[2] > 0)) {
-                fprintf(stderr, "gridsurvey db: --weights '%s': expected W0,W120,W240 >= 0 with a "
-                        "positive sum\n", optarg);
-                return 2;
-            }
+                !(so.phase_weights[0] + so.phase_weights[1] + so.phase_weights[2] > 0))
+                return srv_usage_error(cmd, "--weights '%s': expected W0,W120,W240 >= 0 with a positive sum", optarg);
             break;
         case 'a':
-            so.ambiguous_fraction = strtod(optarg, &end);
-            if (!*optarg || *end || !(so.ambiguous_fraction >= 0.0 && so.ambiguous_fraction <= 1.0)) {
-                fprintf(stderr, "gridsurvey db: --ambiguous '%s': expected a fraction in [0, 1]\n", optarg);
-                return 2;
-            }
+            if (!srv_num_arg(cmd, "--ambiguous", optarg, 0.0, 1.0, &so.ambiguous_fraction)) return 2;
             break;
         case 'h': fputs(db_usage, stdout); return 0;
-        default: return srv_usage_hint("db", argv);
+        default: return srv_usage_hint(cmd, argv + 1);
         }
     }
-    if (optind < argc - 1) {
-        fprintf(stderr, "gridsurvey db %s: unexpected argument '%s'\n", sub, argv[optind + 1]);
-        return 2;
-    }
-    if (!path) {
-        fprintf(stderr, "gridsurvey db %s: --db is required\n", sub);
-        return 2;
-    }
+    if (optind < argc - 1) return srv_usage_error(cmd, "unexpected argument '%s'", argv[optind + 1]);
+    if (!path) return srv_usage_error(cmd, "--db is required");
     srv_db *db;
     gs_status s = srv_db_open(path, which == 1 ? SRV_DB_WRITE : which == 2 ? SRV_DB_READ : which == 0 ? SRV_DB_INIT : SRV_DB_CREATE, &db);
     if (s != GS_OK) return srv_error(cmd, s);

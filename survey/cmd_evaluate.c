@@ -56,36 +56,22 @@ int srv_cmd_evaluate(int argc, char **argv)
         case 'm':
             o.match_px = strtod(optarg, &end);
             if (!*optarg || *end || !(o.match_px > 0.0 && o.match_px <= SRV_MATCH_PX_MAX)) {
-                fprintf(stderr, "gridsurvey evaluate: --match-px '%s': expected a radius > 0 and <= %g "
-                        "pixels (see gridsurvey evaluate --help)\n", optarg, SRV_MATCH_PX_MAX);
-                return 2;
+                return srv_usage_error("evaluate", "--match-px '%s': expected a radius > 0 and <= %g pixels",
+                                       optarg, SRV_MATCH_PX_MAX);
             }
             break;
         case 'f':
             if (!strcmp(optarg, "table")) json = 0;
             else if (!strcmp(optarg, "json")) json = 1;
-            else {
-                fprintf(stderr, "gridsurvey evaluate: --format '%s': expected table or json\n", optarg);
-                return 2;
-            }
+            else return srv_usage_error("evaluate", "--format '%s': expected table or json", optarg);
             break;
         case 'h': fputs(evaluate_usage, stdout); return 0;
-        case ':':
-            fprintf(stderr, "gridsurvey evaluate: option '%s' needs a value (see gridsurvey evaluate --help)\n",
-                    argv[optind - 1]);
-            return 2;
-        default:
-            fprintf(stderr, "gridsurvey evaluate: unknown option '%s' (see gridsurvey evaluate --help)\n",
-                    argv[optind - 1]);
-            return 2;
+        case ':': return srv_usage_error("evaluate", "option '%s' needs a value", argv[optind - 1]);
+        default: return srv_usage_error("evaluate", "unknown option '%s'", argv[optind - 1]);
         }
     }
-    if (optind < argc || !path || !truth) {
-        fprintf(stderr, "gridsurvey evaluate: %s%s (see gridsurvey evaluate --help)\n",
-                optind < argc ? "unexpected argument " : "--db and --truth are required",
-                optind < argc ? argv[optind] : "");
-        return 2;
-    }
+    if (optind < argc) return srv_usage_error("evaluate", "unexpected argument '%s'", argv[optind]);
+    if (!path || !truth) return srv_usage_error("evaluate", "--db and --truth are required");
     srv_db *db = NULL;
     gs_status s = srv_db_open(path, SRV_DB_READ, &db);
     if (s != GS_OK) return srv_error("evaluate", s);

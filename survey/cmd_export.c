@@ -248,10 +248,8 @@ int srv_cmd_export(int argc, char **argv)
         case 'f': format = optarg; break;
         case 'P': {
             long v = strtol(optarg, &end, 10);
-            if (!*optarg || *end || v < 0 || v > 15) {
-                fprintf(stderr, "gridsurvey export: --precision '%s': expected 0 to 15 decimals\n", optarg);
-                return 2;
-            }
+            if (!*optarg || *end || v < 0 || v > 15)
+                return srv_usage_error("export", "--precision '%s': expected 0 to 15 decimals", optarg);
             decimals = (int)v;
             break;
         }
@@ -259,11 +257,9 @@ int srv_cmd_export(int argc, char **argv)
         case 't':
             if (strcmp(optarg, "none")) {
                 gs_tech t;
-                if (gs_tech_parse(optarg, &t) != GS_OK) {
-                    fprintf(stderr, "gridsurvey export: --technology '%s': expected a technology "
-                            "name (sodium_hp, led_linear, cfl, ...) or none\n", optarg);
-                    return 2;
-                }
+                if (gs_tech_parse(optarg, &t) != GS_OK)
+                    return srv_usage_error("export", "--technology '%s': expected a technology name "
+                                           "(sodium_hp, led_linear, cfl, ...) or none", optarg);
             }
             o.technology = optarg;
             break;
@@ -273,45 +269,27 @@ int srv_cmd_export(int argc, char **argv)
             else if (!strcmp(optarg, "240")) o.phase = 2;
             else if (!strcmp(optarg, "other")) o.phase = 3;
             else if (!strcmp(optarg, "unknown")) o.phase = -1;
-            else {
-                fprintf(stderr, "gridsurvey export: --phase '%s': expected 0, 120, 240, other or unknown\n", optarg);
-                return 2;
-            }
+            else return srv_usage_error("export", "--phase '%s': expected 0, 120, 240, other or unknown", optarg);
             break;
         case 'b':
             if (!parse_bbox(optarg, o.bbox) || o.bbox[1] > o.bbox[3] || fabs(o.bbox[1]) > 90.0 ||
-                fabs(o.bbox[3]) > 90.0 || fabs(o.bbox[0]) > 180.0 || fabs(o.bbox[2]) > 180.0) {
-                fprintf(stderr, "gridsurvey export: --bbox '%s': expected MINLON,MINLAT,MAXLON,MAXLAT "
-                        "in degrees with MINLAT <= MAXLAT\n", optarg);
-                return 2;
-            }
+                fabs(o.bbox[3]) > 90.0 || fabs(o.bbox[0]) > 180.0 || fabs(o.bbox[2]) > 180.0)
+                return srv_usage_error("export", "--bbox '%s': expected MINLON,MINLAT,MAXLON,MAXLAT in "
+                                       "degrees with MINLAT <= MAXLAT", optarg);
             o.use_bbox = 1;
             break;
         case 'c':
-            o.min_confidence = strtod(optarg, &end);
-            if (!*optarg || *end || !(o.min_confidence >= 0.0 && o.min_confidence <= 1.0)) {
-                fprintf(stderr, "gridsurvey export: --min-confidence '%s': expected a number in [0, 1]\n", optarg);
-                return 2;
-            }
+            if (!srv_num_arg("export", "--min-confidence", optarg, 0.0, 1.0, &o.min_confidence)) return 2;
             break;
         case 'h': fputs(export_usage, stdout); return 0;
         default: return srv_usage_hint("export", argv);
         }
     }
-    if (optind < argc) {
-        fprintf(stderr, "gridsurvey export: unexpected argument '%s' (see gridsurvey help export)\n", argv[optind]);
-        return 2;
-    }
-    if (!path || !out) {
-        fprintf(stderr, "gridsurvey export: --db and -o are required (see gridsurvey help export)\n");
-        return 2;
-    }
+    if (optind < argc) return srv_usage_error("export", "unexpected argument '%s'", argv[optind]);
+    if (!path || !out) return srv_usage_error("export", "--db and -o are required");
     gis_format fmt;
     gs_status s = format ? gis_format_parse(format, &fmt) : gis_format_from_path(out, &fmt);
-    if (s != GS_OK) {
-        fprintf(stderr, "gridsurvey export: %s\n", gs_detail());
-        return 2;
-    }
+    if (s != GS_OK) return srv_usage_error("export", "%s", gs_detail());
     srv_db *db;
     if ((s = srv_db_open(path, SRV_DB_READ, &db)) != GS_OK) return srv_error("export", s);
     if (o.survey) {

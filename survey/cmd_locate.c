@@ -160,36 +160,23 @@ int srv_cmd_locate(int argc, char **argv)
         case 'S': survey = optarg; break;
         case 'r': refraction = 1; break;
         case 'H':
-            height_m = strtod(optarg, &end);
-            if (!*optarg || *end || !isfinite(height_m) || height_m < GIS_MIN_HEIGHT_M || height_m > GIS_MAX_HEIGHT_M) {
-                fprintf(stderr, "gridsurvey locate: --light-height-m '%s': expected metres in [%g, %g]\n",
-                        optarg, GIS_MIN_HEIGHT_M, GIS_MAX_HEIGHT_M);
+            if (!srv_num_arg("locate", "--light-height-m", optarg, GIS_MIN_HEIGHT_M, GIS_MAX_HEIGHT_M, &height_m))
                 return 2;
-            }
             break;
         case 'R':
             lo.max_error_ratio = strtod(optarg, &end);
-            if (!*optarg || *end || !(lo.max_error_ratio > 0.0) || !isfinite(lo.max_error_ratio)) {
-                fprintf(stderr, "gridsurvey locate: --max-error-ratio '%s': expected a number > 0\n", optarg);
-                return 2;
-            }
+            if (!*optarg || *end || !(lo.max_error_ratio > 0.0) || !isfinite(lo.max_error_ratio))
+                return srv_usage_error("locate", "--max-error-ratio '%s': expected a number > 0", optarg);
             break;
         case 'h': fputs(locate_usage, stdout); return 0;
         default: return srv_usage_hint("locate", argv);
         }
     }
-    if (optind < argc) {
-        fprintf(stderr, "gridsurvey locate: unexpected argument '%s' (see gridsurvey help locate)\n", argv[optind]);
-        return 2;
-    }
-    if (!station_path || !pixels_path || !out) {
-        fprintf(stderr, "gridsurvey locate: --station, --pixels and -o are required (see gridsurvey help locate)\n");
-        return 2;
-    }
-    if (survey && strlen(survey) >= GIS_TEXT_MAX) {
-        fprintf(stderr, "gridsurvey locate: --survey: at most %d bytes\n", GIS_TEXT_MAX - 1);
-        return 2;
-    }
+    if (optind < argc) return srv_usage_error("locate", "unexpected argument '%s'", argv[optind]);
+    if (!station_path || !pixels_path || !out)
+        return srv_usage_error("locate", "--station, --pixels and -o are required");
+    if (survey && strlen(survey) >= GIS_TEXT_MAX)
+        return srv_usage_error("locate", "--survey: at most %d bytes", GIS_TEXT_MAX - 1);
     gis_format fmt;
     gs_status s = format ? gis_format_parse(format, &fmt) : gis_format_from_path(out, &fmt);
     if (s != GS_OK) return srv_error("locate", s);

@@ -57,10 +57,8 @@ int srv_cmd_push(int argc, char **argv)
         case 'f': o.areas_field = optarg; break;
         case 'b': {
             unsigned long long v = strtoull(optarg, &end, 10);
-            if (!*optarg || *end || *optarg == '-' || v < 1 || v > 100000000) {
-                fprintf(stderr, "gridsurvey push: --batch '%s': expected an integer in [1, 1e8]\n", optarg);
-                return 2;
-            }
+            if (!*optarg || *end || *optarg == '-' || v < 1 || v > 100000000)
+                return srv_usage_error("push", "--batch '%s': expected an integer from 1 to 1e8", optarg);
             o.batch_lights = (size_t)v;
             break;
         }
@@ -70,18 +68,9 @@ int srv_cmd_push(int argc, char **argv)
         default: return srv_usage_hint("push", argv);
         }
     }
-    if (optind < argc) {
-        fprintf(stderr, "gridsurvey push: unexpected argument '%s' (see gridsurvey help push)\n", argv[optind]);
-        return 2;
-    }
-    if (!path || !conninfo) {
-        fprintf(stderr, "gridsurvey push: --db and --pg are required (see gridsurvey help push)\n");
-        return 2;
-    }
-    if (!o.areas != !o.areas_field) {
-        fprintf(stderr, "gridsurvey push: --areas and --field go together\n");
-        return 2;
-    }
+    if (optind < argc) return srv_usage_error("push", "unexpected argument '%s'", argv[optind]);
+    if (!path || !conninfo) return srv_usage_error("push", "--db and --pg are required");
+    if (!o.areas != !o.areas_field) return srv_usage_error("push", "--areas and --field go together");
     srv_push_report r;
     gs_status s = srv_pg_push(path, conninfo, &o, &r);
     if (s != GS_OK) return srv_error("push", s);

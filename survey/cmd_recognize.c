@@ -109,14 +109,6 @@ static void map_progress(void *ctx, double fraction)
     progress("per-pixel Eq. 7: %3.0f %% of the lit pixels", 100.0 * fraction);
 }
 
-static int usage_error(const char *fmt, const char *arg)
-{
-    fputs("gridsurvey recognize: ", stderr);
-    fprintf(stderr, fmt, arg);
-    fputs(" (see gridsurvey recognize --help)\n", stderr);
-    return 2;
-}
-
 /* Returns -1 to go on, else the exit status. */
 /* "auto" (NaN: measured from the capture) or a number in [0, hi) into *v; 0 when neither. */
 static int auto_or_share(const char *arg, double hi, double *v)
@@ -167,7 +159,7 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
         switch (c) {
         case 'f':
             if (!strcmp(optarg, "json") || !strcmp(optarg, "table")) o->json = !strcmp(optarg, "json");
-            else return usage_error("--format '%s': expected table or json", optarg);
+            else return srv_usage_error("recognize", "--format '%s': expected table or json", optarg);
             break;
         case 'P': o->progress = 1; break;
         case 'q': o->progress = 0; break;
@@ -177,62 +169,62 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
             if (!strcmp(optarg, "3")) o->eq7.phases = REC_PHASES_3;
             else if (!strcmp(optarg, "6")) o->eq7.phases = REC_PHASES_6;
             else if (!strcmp(optarg, "continuous")) o->eq7.phases = REC_PHASES_CONTINUOUS;
-            else return usage_error("--phases '%s': expected 3, 6 or continuous", optarg);
+            else return srv_usage_error("recognize", "--phases '%s': expected 3, 6 or continuous", optarg);
             break;
         case 't':
             o->eq7.transformer_deg = strtod(optarg, &end);
             if (end == optarg || *end || !isfinite(o->eq7.transformer_deg))
-                return usage_error("--transformer-deg '%s': expected a finite angle in degrees", optarg);
+                return srv_usage_error("recognize", "--transformer-deg '%s': expected a finite angle in degrees", optarg);
             break;
         case 'c':
             o->eq7.ambiguous_conf = strtod(optarg, &end);
             if (end == optarg || *end || !(o->eq7.ambiguous_conf >= 0.0 && o->eq7.ambiguous_conf <= 1.0))
-                return usage_error("--ambiguous-below '%s': expected a number from 0 to 1", optarg);
+                return srv_usage_error("recognize", "--ambiguous-below '%s': expected a number from 0 to 1", optarg);
             break;
         case 'g':
             if (!strcmp(optarg, "reddened")) o->eq7.band_gains = REC_BANDS_REDDENED;
             else if (!strcmp(optarg, "free")) o->eq7.band_gains = REC_BANDS_FREE;
             else if (!strcmp(optarg, "chroma")) o->eq7.band_gains = REC_BANDS_CHROMA;
-            else return usage_error("--band-model '%s': expected reddened, free or chroma", optarg);
+            else return srv_usage_error("recognize", "--band-model '%s': expected reddened, free or chroma", optarg);
             break;
         case 'T':
             o->eq7.chroma_tolerance = strtod(optarg, &end);
             if (end == optarg || *end || !(o->eq7.chroma_tolerance >= 0.001 && o->eq7.chroma_tolerance <= 1.0))
-                return usage_error("--chroma-tolerance '%s': expected a fraction from 0.001 to 1", optarg);
+                return srv_usage_error("recognize", "--chroma-tolerance '%s': expected a fraction from 0.001 to 1", optarg);
             break;
         case 'e':
             if (!auto_or_share(optarg, 1.0, &o->eq7.model_error))
-                return usage_error("--model-error '%s': expected auto or a fraction from 0 to below 1", optarg);
+                return srv_usage_error("recognize", "--model-error '%s': expected auto or a fraction from 0 to below 1", optarg);
             break;
         case 'O':
             if (!auto_or_share(optarg, 1.0, &o->eq7.other_prior))
-                return usage_error("--other-prior '%s': expected auto or a probability from 0 to below 1", optarg);
+                return srv_usage_error("recognize", "--other-prior '%s': expected auto or a probability from 0 to below 1", optarg);
             break;
         case 'F':
             if (!auto_or_share(optarg, 0.5, &o->eq7.flat_share))
-                return usage_error("--flat-share '%s': expected auto or a share from 0 to below 0.5", optarg);
+                return srv_usage_error("recognize", "--flat-share '%s': expected auto or a share from 0 to below 0.5", optarg);
             break;
         case 'B':
             o->eq7.blend_prior = strtod(optarg, &end);
             if (end == optarg || *end || !(o->eq7.blend_prior >= 0.0 && o->eq7.blend_prior < 1.0))
-                return usage_error("--blend-prior '%s': expected a probability from 0 to below 1", optarg);
+                return srv_usage_error("recognize", "--blend-prior '%s': expected a probability from 0 to below 1", optarg);
             break;
         case 'N':
             if (!strcmp(optarg, "on") || !strcmp(optarg, "off")) o->eq7.nested_tests = !strcmp(optarg, "on");
-            else return usage_error("--nested-tests '%s': expected on or off", optarg);
+            else return srv_usage_error("recognize", "--nested-tests '%s': expected on or off", optarg);
             break;
         case 's':
             o->threshold = strtod(optarg, &end);
             if (end == optarg || *end || !(o->threshold > 0.0) || !isfinite(o->threshold))
-                return usage_error("--threshold '%s': expected a number of noise sigmas > 0", optarg);
+                return srv_usage_error("recognize", "--threshold '%s': expected a number of noise sigmas > 0", optarg);
             break;
         case 'h': fputs(recognize_usage, stdout); return 0;
-        case ':': return usage_error("option '%s' needs a value", argv[optind - 1]);
-        default: return usage_error("unknown option '%s'", argv[optind - 1]);
+        case ':': return srv_usage_error("recognize", "option '%s' needs a value", argv[optind - 1]);
+        default: return srv_usage_error("recognize", "unknown option '%s'", argv[optind - 1]);
         }
     }
     if (argc - optind != 1)
-        return usage_error("%s", argc - optind < 1 ? "expected a capture directory"
+        return srv_usage_error("recognize", "%s", argc - optind < 1 ? "expected a capture directory"
                                                    : "expected exactly one capture directory");
     o->capdir = argv[optind];
     return -1;

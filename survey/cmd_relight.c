@@ -124,8 +124,7 @@ int srv_cmd_relight(int argc, char **argv)
     rec_capture_meta meta;
     char(*files)[GS_PATH_MAX] = NULL;
     if (!gs_path_join(path, sizeof path, dir, "sources.json")) {
-        fprintf(stderr, "gridsurvey relight: %s: path too long\n", dir);
-        return 2;
+        return srv_usage_error("relight", "DIR '%s': path too long", dir);
     }
     gs_status st = rec_sources_read(path, &src, &meta, &files);
     if (st == GS_OK && (st = rec_relight_budget(path, &meta, src.S)) != GS_OK) {

@@ -44,10 +44,7 @@ int srv_cmd_separate(int argc, char **argv)
         default: return srv_usage_hint("separate", argv);
         }
     }
-    if (optind + 1 != argc || !out) {
-        fprintf(stderr, "gridsurvey separate: expected one CAPDIR and --out-dir DIR (see gridsurvey help separate)\n");
-        return 2;
-    }
+    if (optind + 1 != argc || !out) return srv_usage_error("separate", "expected one CAPDIR and --out-dir DIR");
     const char *capdir = argv[optind];
     gs_capture cap;
     rec_separation sep = {0};

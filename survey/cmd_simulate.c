@@ -39,12 +39,13 @@ static const char simulate_usage[] =
     "  gridsurvey simulate capture/scenes/lab.json --out-dir build/lab\n"
     "  gridsurvey simulate capture/scenes/lab.json --out-dir build/lab-no-mh70 --drop-light mh70\n";
 
-static int parse_long(const char *what, const char *arg, long lo, long hi, long *out)
+/* An integer option in [lo, hi] into *out: 1, or 0 after srv_usage_error. */
+static int parse_long(const char *opt, const char *arg, long lo, long hi, long *out)
 {
     char *end;
     long v = strtol(arg, &end, 10);
     if (!*arg || *end || v < lo || v > hi) {
-        fprintf(stderr, "gridsurvey: %s '%s': expected an integer from %ld to %ld\n", what, arg, lo, hi);
+        srv_usage_error("simulate", "%s '%s': expected an integer from %ld to %ld", opt, arg, lo, hi);
         return 0;
     }
     *out = v;
@@ -92,27 +93,21 @@ int srv_cmd_simulate(int argc, char **argv)
         case 'q': lo.progress = 0; break;
         case 't': stats = 1; break;
         case 'x':
-            if (ndrop == 64) {
-                fprintf(stderr, "gridsurvey simulate: at most 64 --drop-light\n");
-                return 2;
-            }
+            if (ndrop == 64) return srv_usage_error("simulate", "at most 64 --drop-light");
             drop[ndrop++] = optarg;
             break;
         case 's':
-            if (!parse_long("simulate --seed", optarg, 0, 0x7fffffffL, &seed)) return 2;
+            if (!parse_long("--seed", optarg, 0, 0x7fffffffL, &seed)) return 2;
             break;
         case 'S':
-            if (!parse_long("simulate --stop-after", optarg, 1, 1 << 20, &stop)) return 2;
+            if (!parse_long("--stop-after", optarg, 1, 1 << 20, &stop)) return 2;
             lo.stop_after = (int)stop;
             break;
         case 'h': fputs(simulate_usage, stdout); return 0;
         default: return srv_usage_hint("simulate", argv);
         }
     }
-    if (optind + 1 != argc || !out) {
-        fprintf(stderr, "gridsurvey simulate: expected one SCENE.json and --out-dir CAPDIR (see gridsurvey help simulate)\n");
-        return 2;
-    }
+    if (optind + 1 != argc || !out) return srv_usage_error("simulate", "expected one SCENE.json and --out-dir CAPDIR");
     cap_scene sc;
     gs_status s = cap_scene_read(argv[optind], &sc);
     if (s != GS_OK) {
@@ -123,9 +118,8 @@ int srv_cmd_simulate(int argc, char **argv)
         size_t j = 0;
         while (j < sc.n_lights && strcmp(sc.lights[j].id, drop[i])) j++;
         if (j == sc.n_lights) {
-            fprintf(stderr, "gridsurvey simulate: --drop-light %s: the scene has no light with this id\n", drop[i]);
             cap_scene_release(&sc);
-            return 2;
+            return srv_usage_error("simulate", "--drop-light %s: %s has no light with this id", drop[i], argv[optind]);
         }
         memmove(&sc.lights[j], &sc.lights[j + 1], (sc.n_lights - j - 1) * sizeof *sc.lights);
         sc.n_lights--;
@@ -137,8 +131,7 @@ int srv_cmd_simulate(int argc, char **argv)
     if (delight) {
         if (strlen(delight) >= sizeof sc.delight) {
             cap_scene_release(&sc);
-            fprintf(stderr, "gridsurvey simulate: --delight: path too long\n");
-            return 2;
+            return srv_usage_error("simulate", "--delight: path too long (at most %zu bytes)", sizeof sc.delight - 1);
         }
         snprintf(sc.delight, sizeof sc.delight, "%s", delight);
     }

@@ -266,7 +266,6 @@ int srv_cmd_stats(int argc, char **argv)
     out_format fmt = FMT_TABLE;
     optind = 1;
     int c;
-    char *end;
     while ((c = getopt_long(argc, argv, "ho:", longs, NULL)) != -1) {
         switch (c) {
         case 'd': path = optarg; break;
@@ -274,57 +273,34 @@ int srv_cmd_stats(int argc, char **argv)
         case 'o': output = strcmp(optarg, "-") ? optarg : NULL; break;   /* -: stdout, as without -o */
         case 'S': o.survey = optarg; break;
         case 'b':
-            if (srv_stats_parse_by(optarg, &o) != GS_OK) {
-                fprintf(stderr, "gridsurvey stats: %s\n", gs_detail());
-                return 2;
-            }
+            if (srv_stats_parse_by(optarg, &o) != GS_OK) return srv_usage_error("stats", "%s", gs_detail());
             break;
         case 'c':
-            o.min_phase_confidence = strtod(optarg, &end);
-            if (!*optarg || *end || !(o.min_phase_confidence >= 0.0 && o.min_phase_confidence <= 1.0)) {
-                fprintf(stderr, "gridsurvey stats: --min-phase-confidence '%s': expected a number in [0, 1]\n", optarg);
-                return 2;
-            }
+            if (!srv_num_arg("stats", "--min-phase-confidence", optarg, 0.0, 1.0, &o.min_phase_confidence)) return 2;
             break;
         case 'f':
             if (!strcmp(optarg, "table")) fmt = FMT_TABLE;
             else if (!strcmp(optarg, "json")) fmt = FMT_JSON;
             else if (!strcmp(optarg, "csv")) fmt = FMT_CSV;
-            else {
-                fprintf(stderr, "gridsurvey stats: --format '%s': expected table, json or csv\n", optarg);
-                return 2;
-            }
+            else return srv_usage_error("stats", "--format '%s': expected table, json or csv", optarg);
             break;
         case 'D': o.detections = 1; break;
         case 'C': clip = optarg; break;
         case 'B':
-            if (srv_parse_bbox(optarg, o.bbox) != GS_OK) {
-                fprintf(stderr, "gridsurvey stats: %s\n", gs_detail());
-                return 2;
-            }
+            if (srv_parse_bbox(optarg, o.bbox) != GS_OK) return srv_usage_error("stats", "%s", gs_detail());
             break;
         case 'h': fputs(stats_usage, stdout); return 0;
         default: return srv_usage_hint("stats", argv);
         }
     }
-    if (optind < argc) {
-        fprintf(stderr, "gridsurvey stats: unexpected argument '%s' (see gridsurvey help stats)\n", argv[optind]);
-        return 2;
-    }
-    if (!path == !conninfo) {
-        fprintf(stderr, "gridsurvey stats: expected one of --db and --pg (see gridsurvey help stats)\n");
-        return 2;
-    }
-    if (output && (fmt != FMT_CSV || strlen(output) < 5 || strcmp(output + strlen(output) - 4, ".csv"))) {
-        fprintf(stderr, "gridsurvey stats: -o '%s': expected a NAME.csv file and --format csv\n", output);
-        return 2;
-    }
+    if (optind < argc) return srv_usage_error("stats", "unexpected argument '%s'", argv[optind]);
+    if (!path == !conninfo) return srv_usage_error("stats", "expected one of --db and --pg");
+    if (output && (fmt != FMT_CSV || strlen(output) < 5 || strcmp(output + strlen(output) - 4, ".csv")))
+        return srv_usage_error("stats", "-o '%s': expected a NAME.csv file and --format csv", output);
     int by_feature = o.by == SRV_BY_FEATURE;
     for (int i = 0; i < o.n_then; i++) by_feature |= o.then[i] == SRV_BY_FEATURE;
-    if (by_feature && !clip) {
-        fprintf(stderr, "gridsurvey stats: --by feature:%s needs --clip AREAS.geojson\n", o.feature_field);
-        return 2;
-    }
+    if (by_feature && !clip)
+        return srv_usage_error("stats", "--by feature:%s needs --clip AREAS.geojson", o.feature_field);
     srv_areas *areas = NULL;
     gs_status s;
     if (clip && (s = srv_areas_load(clip, by_feature ? o.feature_field : NULL, &areas)) != GS_OK)
@@ -364,9 +340,7 @@ int srv_cmd_stats(int argc, char **argv)
     if (fmt == FMT_TABLE) srv_stats_print_table(g, n, &o, ungrouped);
     else if (fmt == FMT_JSON) rc = print_json(g, n, &o, path ? path : "postgresql", ungrouped);
     free(g);
-    if (rc != 0 || fflush(stdout) != 0 || ferror(stdout)) {
-        fprintf(stderr, "gridsurvey stats: cannot write the output\n");
-        return 1;
-    }
+    if (rc != 0 || fflush(stdout) != 0 || ferror(stdout))
+        return srv_error("stats", gs_fail(GS_EIO, "stdout: write failed"));
     return 0;
 }

@@ -672,6 +672,49 @@ TEST(cli_usage_errors_one_line_not_the_usage)
     }
 }
 
+TEST(cli_usage_errors_of_each_command_one_line_with_the_hint)
+{
+    /* these printed their own line (no hint, or another one, or the wrong option: db's named
+     * its subcommand) instead of srv_usage_error's; each is a value or option on the command
+     * line, refused before any file is read or written (but the scene --drop-light names) */
+    static const struct {
+        const char *cmd, *help, *names;
+    } cases[] = {
+        {"%s db check --frobnicate", "db check", "'--frobnicate'"},
+        {"%s db ingest-synthetic --db x.sqlite --captures abc", "db ingest-synthetic", "--captures 'abc'"},
+        {"%s db frobnicate", "db", "'frobnicate' is not a subcommand"},
+        {"%s evaluate --db x.sqlite", "evaluate", "--truth"},
+        {"%s export --db x.sqlite -o y.csv --phase 90", "export", "--phase '90'"},
+        {"%s export --db x.sqlite -o y.xyz", "export", "y.xyz"},
+        {"%s locate --station s.json --pixels p.csv -o o.csv --light-height-m abc", "locate", "--light-height-m 'abc'"},
+        {"%s push --db x.sqlite --pg dbname=x --areas a.geojson", "push", "--field"},
+        {"%s recognize --phases 5 x", "recognize", "--phases '5'"},
+        {"%s separate", "separate", "CAPDIR"},
+        {"%s simulate capture/scenes/window.json --out-dir x --seed -1", "simulate", "--seed '-1'"},
+        {"%s simulate capture/scenes/window.json --out-dir x --drop-light nope", "simulate", "--drop-light nope"},
+        {"%s stats --db x.sqlite --by nope", "stats", "--by 'nope'"},
+        {"%s stats --db x.sqlite --format xml", "stats", "--format 'xml'"},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
+        char line_start[64], hint[64];
+        snprintf(line_start, sizeof line_start, "gridsurvey %s: ", cases[i].help);
+        snprintf(hint, sizeof hint, " (see gridsurvey help %s)\n", cases[i].help);
+        CHECK(run(cases[i].cmd, NULL, NULL, NULL) == 2);
+        CHECK_MSG(fx_count_lines(out) == 1 && !strncmp(out, line_start, strlen(line_start)) &&
+                  strstr(out, cases[i].names) && strstr(out, hint), "%s: %s", cases[i].cmd, out);
+    }
+    CHECK(!fx_exists("x"));
+}
+
+TEST(cli_write_failure_of_stdout_names_it)
+{
+    /* stats (and compare) said "cannot write the output" without naming it */
+    const char *db = fx_tmp("empty.sqlite");
+    CHECK(run("%s db init --db %s", db, NULL, NULL) == 0);
+    CHECK(run("%s stats --db %s > /dev/full", db, NULL, NULL) == 1);
+    CHECK_MSG(fx_count_lines(out) == 1 && !strcmp(out, "gridsurvey stats: stdout: write failed\n"), "%s", out);
+}
+
 TEST(cli_failures_name_the_command_and_the_file_not_a_status_word)
 {
     /* a library's error was "gridsurvey: not found: DETAIL" (its status word first, the command
