@@ -81,11 +81,12 @@ gs_status rec_blob_apertures(rec_blob_state *s, int *area);
 gs_status rec_blob_photometry(rec_blob_state *s, const int *area, rec_catalog *cat);
 /* ================================================================= end of blobs */
 
-/* The bulb colours of the bulb map (maps_draw.c), in rank order, and the degree sign in UTF-8. */
-extern const unsigned char rec_bulb_palette[20][3];
 #define REC_BULB_LEGEND_MAX 12        /* bulbs named in the bulb map's legend, at most */
 #define REC_BULB_LEGEND_SHARE 0.01    /* each with at least this share of the pixels */
-#define REC_BULB_OTHER_COLOUR 18      /* the palette entry of the legend's "other" */
+#define REC_BULB_OTHER_COLOUR REC_BULB_LEGEND_MAX   /* the palette entry of the legend's "other" */
+/* The bulb colours of the bulb map (maps_draw.c): the listed bulbs' in rank order, then the
+ * other's; and the degree sign in UTF-8. */
+extern const unsigned char rec_bulb_palette[REC_BULB_OTHER_COLOUR + 1][3];
 /* maps_draw.c: the bulb map's legend from each bulb's coloured pixels px[0..nb): listed[0..n),
  * n returned, the bulbs named in it, most pixels first (then by index): those with at least
  * REC_BULB_LEGEND_SHARE of all px, at most REC_BULB_LEGEND_MAX; colour[b] bulb b's

@@ -14,12 +14,15 @@
 #define MAP_MIN_WIDTH 480    /* the legend needs this much width */
 #define V_MIN 0.35           /* HSV value of the faintest mapped pixel */
 
-const unsigned char rec_bulb_palette[20][3] = {
+/* Distinct colours for the listed bulbs (Tableau 20's first twelve), then a dark one for the
+ * other bulbs; every entry used (rec_bulb_legend). */
+const unsigned char rec_bulb_palette[][3] = {
     {31, 119, 180},  {255, 127, 14},  {44, 160, 44},   {214, 39, 40},   {148, 103, 189},
     {140, 86, 75},   {227, 119, 194}, {188, 189, 34},  {23, 190, 207},  {174, 199, 232},
-    {255, 187, 120}, {152, 223, 138}, {255, 152, 150}, {197, 176, 213}, {196, 156, 148},
-    {247, 182, 210}, {219, 219, 141}, {158, 218, 229}, {0, 90, 60},     {120, 60, 0},
+    {255, 187, 120}, {152, 223, 138}, {0, 90, 60},
 };
+_Static_assert(sizeof rec_bulb_palette / sizeof *rec_bulb_palette == REC_BULB_LEGEND_MAX + 1,
+               "a colour per listed bulb and the other's, none unused");
 
 /* ------------------------------------------------------------ canvas and legend */
 
@@ -154,8 +157,6 @@ static void conf_rgb(double t, unsigned char out[3])
     double f = u - i;
     for (int c = 0; c < 3; c++) out[c] = (unsigned char)lround(cp[i][c] + f * (cp[i + 1][c] - cp[i][c]));
 }
-
-/* 20 distinct colours for bulbs (Tableau 20 without its greys, plus two dark ones). */
 
 /* The HSV value of a mapped pixel from its SNR: V_MIN at the threshold, 1 at the 99th percentile
  * of the mapped pixels. */
@@ -340,9 +341,6 @@ gs_status rec_map_write_phase_png(const rec_pixel_maps *pm, const char *path)
 }
 
 /* ------------------------------------------------------------ bulb map */
-
-_Static_assert(REC_BULB_LEGEND_MAX <= REC_BULB_OTHER_COLOUR && REC_BULB_OTHER_COLOUR < 20,
-               "the listed bulbs' colours are not the other's");
 
 size_t rec_bulb_legend(const size_t *px, size_t nb, size_t *listed, int *colour, size_t *other_bulbs,
                        size_t *other_px)

@@ -435,7 +435,7 @@ TEST(maps_bulb_legend_top_bulbs_and_other)
         CHECK(colour[b] == (int)i);
         if (i) CHECK(px[listed[i - 1]] > px[b] || (px[listed[i - 1]] == px[b] && listed[i - 1] < b));
         /* distinct colours within the legend, "other" one of its own */
-        const unsigned char *c = rec_bulb_palette[colour[b] >= 0 && colour[b] < 20 ? colour[b] : 0];
+        const unsigned char *c = rec_bulb_palette[colour[b] >= 0 && colour[b] <= REC_BULB_OTHER_COLOUR ? colour[b] : 0];
         CHECK(memcmp(c, rec_bulb_palette[REC_BULB_OTHER_COLOUR], 3) != 0);
         for (size_t j = 0; j < i; j++)
             CHECK_MSG(memcmp(c, rec_bulb_palette[colour[listed[j]]], 3) != 0, "bulbs %zu and %zu share a colour", b,
