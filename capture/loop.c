@@ -339,7 +339,7 @@ static gs_status record_frame(frame_write *w, uint64_t fp, int K, const gs_captu
     if (s != GS_OK) return s;
     rep->frames_acquired++;
     if (progress)
-        fprintf(stderr, "\rcapture: frame %d/%d acquired (%d pass%s, %zu saturated px)  %.1f s   ", k + 1, K,
+        fprintf(stderr, "\rcapture: frame %d/%d written (%d pass%s, %zu saturated px)  %.1f s   ", k + 1, K,
                 w->passes, w->passes > 1 ? "es" : "", w->n_sat, gs_clock_s(CLOCK_MONOTONIC) - t_start);
     return GS_OK;
 }
