@@ -312,7 +312,9 @@ static gs_status draw_signals(void *ctx, unsigned char *unused)
                 snprintf(lab, sizeof lab, "%s: measured/brightness and the fit", bn);
             else
                 snprintf(lab, sizeof lab, "%s: shifted to grid phase 0", bn);
-            pllab("time in the flicker cycle, t / #gD", "normalised signal", lab);
+            /* (the right panel shares the left's y axis: a label of its own would sit on the
+             * gap's tick labels) */
+            pllab("time in the flicker cycle, t / #gD", panel == 0 ? "normalised signal" : "", lab);
             if (band == 0 && panel == 0 && title && *title) {
                 plschr(0, 0.75);
                 plmtex("t", 3.2, 0.0, 0.0, title);
