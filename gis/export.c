@@ -92,7 +92,8 @@ static gs_status check_lights(const gis_light *lights, size_t n)
                    {l->bulb_id, sizeof l->bulb_id, "bulb"},
                    {l->technology, sizeof l->technology, "technology"},
                    {l->survey, sizeof l->survey, "survey"},
-                   {l->time_utc, sizeof l->time_utc, "time"}};
+                   {l->time_utc, sizeof l->time_utc, "time"},
+                   {l->site, sizeof l->site, "site"}};
         for (size_t k = 0; k < sizeof str / sizeof *str; k++)
             if (!memchr(str[k].s, '\0', str[k].size) || !gs_text_clean(str[k].s))
                 return gs_fail(GS_EINVAL, "export: light %zu: %s: expected NUL-terminated UTF-8 "
@@ -126,6 +127,7 @@ static const attr attrs[] = {
     {"time", A_TEXT, "string"},        {"height_m", A_REAL, "double"},
     {"err_major_m", A_REAL, "double"}, {"err_minor_m", A_REAL, "double"},
     {"err_azimuth_deg", A_REAL, "double"}, {"flags", A_TEXT, "string"},
+    {"site", A_TEXT, "string"},
 };
 #define N_ATTRS (sizeof attrs / sizeof *attrs)
 
@@ -140,6 +142,7 @@ static const char *attr_text(const gis_light *l, size_t k, char *buf, size_t siz
     case 5: s = l->survey; break;
     case 6: s = l->time_utc; break;
     case 11: s = gis_flags_str(l->flags, buf, size); break;
+    case 12: s = l->site; break;
     default: break;
     }
     return s && *s ? s : NULL;
@@ -453,7 +456,7 @@ static const char gpkg_schema[] =
     "(srs_id) REFERENCES gpkg_spatial_ref_sys (srs_id));\n"
     "CREATE TABLE lights (fid INTEGER PRIMARY KEY AUTOINCREMENT NOT NULL, geom POINT, "
     "id TEXT, bulb TEXT, technology TEXT, phase REAL, confidence REAL, survey TEXT, time DATETIME, "
-    "height_m REAL, err_major_m REAL, err_minor_m REAL, err_azimuth_deg REAL, flags TEXT);\n"
+    "height_m REAL, err_major_m REAL, err_minor_m REAL, err_azimuth_deg REAL, flags TEXT, site TEXT);\n"
     "INSERT INTO gpkg_geometry_columns VALUES ('lights', 'geom', 'POINT', 4326, 0, 0);\n"
     /* the R*Tree spatial index extension (GeoPackage 1.3 Annex F.3), filled directly below */
     "CREATE TABLE gpkg_extensions (table_name TEXT, column_name TEXT, extension_name TEXT NOT NULL, "
@@ -564,7 +567,7 @@ gs_status gis_export_gpkg(const gis_light *lights, size_t n, const char *path)
     if (sqlite3_prepare_v2(db,
                            "INSERT INTO lights (geom, id, bulb, technology, phase, confidence, "
                            "survey, time, height_m, err_major_m, err_minor_m, err_azimuth_deg, "
-                           "flags) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                           "flags, site) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
                            -1, &st, NULL) != SQLITE_OK)
         goto sql_error;
     char buf[128];

@@ -257,6 +257,8 @@ typedef struct {
     char survey[GIS_TEXT_MAX];       /* survey name, "" if none */
     char time_utc[40];               /* ISO 8601 UTC, "" if unknown */
     unsigned flags;                  /* GIS_FIX_* */
+    char site[GIS_TEXT_MAX];         /* the physical light it is a detection of (a survey
+                                        database's light site id), "" if none */
 } gis_light;
 
 /* Empty strings, NaN numbers, no flags. */
@@ -274,7 +276,7 @@ gs_status gis_format_from_path(const char *path, gis_format *f);
  * on failure path is untouched and no temporary file is left. Strings must not hold control
  * characters (GS_EINVAL). Every light is written; unlocated ones without a geometry.
  * Attributes (all formats): id, bulb, technology, phase (deg), confidence, survey, time,
- * height_m, err_major_m, err_minor_m, err_azimuth_deg, flags.
+ * height_m, err_major_m, err_minor_m, err_azimuth_deg, flags, site.
  *  GeoJSON: RFC 7946 FeatureCollection, [lon, lat, height] positions, null unknowns.
  *  KML 2.2: Placemarks (clampToGround lon,lat; the ellipsoidal height is an attribute, since
  *           KML altitudes are above sea level), coloured by phase, ExtendedData attributes.

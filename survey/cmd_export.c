@@ -17,9 +17,10 @@ static const char export_usage[] =
     "                         [--bbox MINLON,MINLAT,MAXLON,MAXLAT] [--min-confidence X]\n"
     "                         [--precision D]\n"
     "\n"
-    "Writes the lights of a survey database with their bulb, technology, phase, confidence,\n"
-    "position and error ellipse (docs/gis.md has each format). Lights without a position are\n"
-    "written without a geometry unless --bbox is given.\n"
+    "Writes the lights of a survey database, one feature per detection, with their bulb,\n"
+    "technology, phase, confidence, position, error ellipse and light site (the physical light\n"
+    "that stats counts once: its detections share it; docs/gis.md has each format). Lights\n"
+    "without a position are written without a geometry unless --bbox is given.\n"
     "\n"
     "  --db DB             the survey database (read-only)\n"
     "  -o FILE             output file (replaced atomically)\n"
@@ -49,7 +50,8 @@ void srv_export_opts_default(srv_export_opts *o)
 
 static const char select_sql[] =
     "SELECT l.id, s.name, c.utc, l.bulb_id, l.technology, l.phase_deg, l.confidence, loc.lat_deg, "
-    "loc.lon_deg, loc.height_m, loc.semi_major_m, loc.semi_minor_m, loc.azimuth_deg, loc.flags ";
+    "loc.lon_deg, loc.height_m, loc.semi_major_m, loc.semi_minor_m, loc.azimuth_deg, loc.flags, "
+    "(SELECT sd.site_id FROM site_detections sd WHERE sd.light_id = l.id) ";
 static const char plain_from[] =
     "FROM lights l JOIN captures c ON c.id = l.capture_id JOIN surveys s ON s.id = c.survey_id "
     "LEFT JOIN locations loc ON loc.light_id = l.id WHERE 1 ";
@@ -153,6 +155,8 @@ gs_status srv_db_read_lights(srv_db *db, const srv_export_opts *o, gis_light **l
         l->ellipse.semi_minor_m = col_real(q, 11);
         l->ellipse.azimuth_deg = col_real(q, 12);
         l->flags = (unsigned)sqlite3_column_int64(q, 13);
+        if (sqlite3_column_type(q, 14) != SQLITE_NULL)
+            snprintf(l->site, sizeof l->site, "%lld", (long long)sqlite3_column_int64(q, 14));
     }
     if (s == GS_OK && rc != SQLITE_DONE)
         s = gs_fail(GS_ESQL, "%s: export query: %s", srv_db_path(db), sqlite3_errmsg(h));

@@ -94,6 +94,16 @@ TEST(export_all_formats_read_back)
     sqlite3 *h = raw_open(gpkg);
     CHECK(survey_fx_query_long(h, "SELECT count(*) FROM lights") == 100);
     CHECK(survey_fx_query_long(h, "SELECT count(*) FROM lights WHERE geom IS NULL") == 2 * (50 / SRV_SYNTH_UNLOCATED_EVERY));
+    /* each detection's site, as the survey database's site_detections has it */
+    char sql[4400];
+    snprintf(sql, sizeof sql, "ATTACH '%s' AS src", path);
+    CHECK(sqlite3_exec(h, sql, NULL, NULL, NULL) == SQLITE_OK);
+    long sited = survey_fx_query_long(h, "SELECT count(*) FROM src.site_detections");
+    CHECK_MSG(sited > 0 && survey_fx_query_long(h, "SELECT count(*) FROM lights WHERE site IS NOT NULL") == sited,
+              "%ld detections with a site", sited);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM lights g LEFT JOIN src.site_detections sd ON "
+                                  "sd.light_id = CAST(g.id AS INTEGER) WHERE coalesce(g.site, '') != "
+                                  "coalesce(CAST(sd.site_id AS TEXT), '')") == 0);
     sqlite3_close(h);
     CHECK(run("%s export --db %s -o %s", path, kml, NULL) == 0);
     char *text = fx_read_file(kml, NULL);
