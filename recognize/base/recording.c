@@ -311,9 +311,9 @@ static int nominal_grid(double f, double mult)
 
 /* --------------------------------------------------------------- folding */
 
-static int bin_of(size_t i, double dt, double t_ref, double f, int n)
+static int bin_of(double phase, int n)
 {
-    return (int)floor(phase_of(i, dt, t_ref, f) * n + 0.5) % n;   /* bins centred on j/n */
+    return (int)floor(phase * n + 0.5) % n;   /* bins centred on j/n */
 }
 
 /* |mean of e^(2 pi i d phase)| over the first N samples at frequency f: the weight with which
@@ -332,7 +332,8 @@ static double alias_weight(size_t N, double dt, double f, int d)
  * their exact phases: no partial cycle biases it, and it holds whether or not the sample rate
  * divides the period. (Weighting each sample by 1/(samples in its bin) does not: at a rate that
  * divides the period the samples sit at a few phases, a phase that straddles two bins counts
- * twice, and the harmonics leak into each other.) The bins give the noise only. */
+ * twice, and the harmonics leak into each other.) The bins give the noise only. Each sample's
+ * phase is computed once (the fmod in phase_of is a good part of the fold's time). */
 static gs_status fold(const char *path, const double *x, size_t N, double dt, double f_fold,
                       double t_ref, int n, double *out, int *harmonics)
 {
@@ -340,15 +341,18 @@ static gs_status fold(const char *path, const double *x, size_t N, double dt, do
     if (whole >= 1) N = (size_t)llround(whole / (f_fold * dt));
     double *mean = calloc((size_t)n, sizeof *mean), *cnt = calloc((size_t)n, sizeof *cnt);
     double complex *C = calloc((size_t)(n / 2 + 1), sizeof *C);
-    if (!mean || !cnt || !C) {
+    double *phase = malloc(N * sizeof *phase);
+    if (!mean || !cnt || !C || !phase) {
         free(mean);
         free(cnt);
         free(C);
-        return gs_fail(GS_ENOMEM, "%s: cannot fold into %d bins", path, n);
+        free(phase);
+        return gs_fail(GS_ENOMEM, "%s: cannot fold %zu samples into %d bins", path, N, n);
     }
     double dc = 0, rss = 0;
     for (size_t i = 0; i < N; i++) {
-        int b = bin_of(i, dt, t_ref, f_fold, n);
+        phase[i] = phase_of(i, dt, t_ref, f_fold);
+        int b = bin_of(phase[i], n);
         mean[b] += x[i];
         cnt[b] += 1;
         dc += x[i] / (double)N;
@@ -372,10 +376,10 @@ static gs_status fold(const char *path, const double *x, size_t N, double dt, do
     }
     int H = 0;
     for (size_t i = 0; i < N; i++) {
-        int b = bin_of(i, dt, t_ref, f_fold, n);
-        rss += (x[i] - mean[b]) * (x[i] - mean[b]);
+        double r = x[i] - mean[bin_of(phase[i], n)];
+        rss += r * r;
         double w = (x[i] - dc) * n / (double)N;
-        double complex e = cexp(-I * two_pi * phase_of(i, dt, t_ref, f_fold)), z = 1.0;
+        double complex e = cexp(-I * two_pi * phase[i]), z = 1.0;
         for (int h = 1; h <= h_max; h++) {
             z *= e;
             C[h] += w * z;
@@ -404,6 +408,7 @@ static gs_status fold(const char *path, const double *x, size_t N, double dt, do
     free(mean);
     free(cnt);
     free(C);
+    free(phase);
     if (filled < 4)
         return gs_fail(GS_EFORMAT, "%s: %d of %d phase bins hold samples: expected at least 4",
                        path, filled, n);
