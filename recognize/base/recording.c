@@ -14,6 +14,7 @@
 #include "recognize/base/internal.h"
 
 #include <complex.h>
+#include <lapacke.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -233,39 +234,31 @@ static double dispersion(const double *x, size_t N, double dt, double f)
 }
 
 /* Residual sum of squares of the least-squares fit x ~ c + sum_{h=1..H} a_h cos(2 pi h f t) +
- * b_h sin(2 pi h f t) (t = i dt, H <= REFINE_HARMONICS); c, a_1 and b_1 out unless NULL. */
+ * b_h sin(2 pi h f t) (t = i dt, H <= REFINE_HARMONICS); c, a_1 and b_1 out unless NULL. The
+ * normal equations are symmetric positive definite: only their upper triangle is summed, and
+ * solved by Cholesky (LAPACK dposv). HUGE_VAL when they are singular (never the minimum). */
 static double harmonic_fit(const double *x, size_t N, double dt, double f, int H, double *a, double *b,
                            double *c)
 {
     enum { P = 2 * REFINE_HARMONICS + 1 };
     int p = 2 * H + 1;
-    double M[P][P + 1] = {{0}}, xx = 0;
+    double A[P * P] = {0}, rhs[P] = {0}, xx = 0;   /* A column-major: A[j + k P], j <= k */
     for (size_t i = 0; i < N; i++) {
         double w = two_pi * phase_of(i, dt, 0.0, f), r[P] = {1.0, cos(w), sin(w)};
         for (int h = 2; h <= H; h++) {   /* cos and sin of h w by the angle sum */
             r[2 * h - 1] = r[2 * h - 3] * r[1] - r[2 * h - 2] * r[2];
             r[2 * h] = r[2 * h - 2] * r[1] + r[2 * h - 3] * r[2];
         }
-        for (int j = 0; j < p; j++) {
-            for (int k = 0; k < p; k++) M[j][k] += r[j] * r[k];
-            M[j][p] += r[j] * x[i];
+        for (int k = 0; k < p; k++) {
+            for (int j = 0; j <= k; j++) A[j + k * P] += r[j] * r[k];
+            rhs[k] += r[k] * x[i];
         }
         xx += x[i] * x[i];
     }
-    double rhs[P];
-    for (int j = 0; j < p; j++) rhs[j] = M[j][p];
-    for (int q = 0; q < p; q++)   /* Gaussian elimination; M is symmetric positive definite */
-        for (int r = q + 1; r < p; r++) {
-            double m = M[r][q] / M[q][q];
-            for (int k = q; k <= p; k++) M[r][k] -= m * M[q][k];
-        }
     double sol[P], fit = 0;
-    for (int r = p - 1; r >= 0; r--) {
-        double acc = M[r][p];
-        for (int k = r + 1; k < p; k++) acc -= M[r][k] * sol[k];
-        sol[r] = acc / M[r][r];
-        fit += sol[r] * rhs[r];
-    }
+    memcpy(sol, rhs, sizeof sol);
+    if (LAPACKE_dposv(LAPACK_COL_MAJOR, 'U', p, 1, A, P, sol, p) != 0) return HUGE_VAL;
+    for (int k = 0; k < p; k++) fit += sol[k] * rhs[k];
     if (c) *c = sol[0];
     if (a) *a = sol[1];
     if (b) *b = sol[2];
@@ -485,7 +478,7 @@ gs_status gs_recording_to_bulb(const char *path, int voltage_column, int n, gs_b
             goto done;
         }
         if (grid == voltage_grid) {
-            double a, b;
+            double a = 0, b = 0;   /* (left 0 by a singular fit) */
             harmonic_fit(s.volt, N, dt, fv, 1, &a, &b, NULL);
             /* a cos w + b sin w = R sin(w + phi), phi = atan2(a, b): rising zero at w = -phi. */
             double cyc = -atan2(a, b) / two_pi;
