@@ -179,8 +179,10 @@ TEST(recording_pwm_is_unlocked)
 /* Analytic oracle: waveforms whose percent flicker and BRF are known in closed form, at flicker
  * frequencies locked (100, 120 Hz) and not (200 Hz-1 kHz), sampled at rates that divide the
  * period (100 kHz, 48 kHz: the samples sit at a few phases) and rates that do not (44.1 kHz,
- * 12,345 Hz), noise-free. shape 0: 1 + m sin^2(pi phi), PF m / (2 + m); shape 1:
- * 1 + a cos(2 pi phi) + b cos(4 pi phi) with 4 b < a (extremes at phi = 0, 1/2), PF a / (1 + b). */
+ * 12,345 Hz), over 2.5 to 240 cycles, noise-free; the frequency within the search's stopping
+ * tolerance, 1e-5 cycles over the recording (docs/delight.md). shape 0: 1 + m sin^2(pi phi),
+ * PF m / (2 + m); shape 1: 1 + a cos(2 pi phi) + b cos(4 pi phi) with 4 b < a (extremes at
+ * phi = 0, 1/2), PF a / (1 + b). */
 static double oracle_at(int shape, double phi)
 {
     return shape ? 1 + 0.6 * cos(2 * M_PI * phi) + 0.1 * cos(4 * M_PI * phi)
@@ -195,7 +197,7 @@ TEST(recording_percent_flicker_analytic_oracle)
     } cases[] = {
         {100, 100e3, 0.2, 0},  {200, 100e3, 0.2, 0},  {500, 100e3, 0.2, 0},  {1000, 100e3, 0.2, 0},
         {120, 48e3, 0.1, 1},   {1000, 48e3, 0.05, 1}, {500, 44.1e3, 0.2, 1}, {137.3, 12345, 0.2, 0},
-        {1030, 12345, 0.05, 1},
+        {1030, 12345, 0.05, 1}, {120, 5000, 2.0, 1},   /* 240 cycles */
     };
     for (size_t c = 0; c < sizeof cases / sizeof *cases; c++) {
         const char *p = fx_tmp("oracle.csv");
@@ -217,6 +219,8 @@ TEST(recording_percent_flicker_analytic_oracle)
         double mean = cases[c].shape ? 1.0 : 1.25;
         CHECK_MSG(fabs(info.flicker_hz - cases[c].flicker_hz) < 1e-6 * cases[c].flicker_hz,
                   "case %zu: flicker %.9g Hz", c, info.flicker_hz);
+        double drift = fabs(info.flicker_hz - cases[c].flicker_hz) * cases[c].duration_s;
+        CHECK_MSG(drift <= 1e-5, "case %zu: flicker off by %.3g cycles over the recording", c, drift);
         CHECK_MSG(fabs(info.percent_flicker - pf) < 0.05, "case %zu (%g Hz at %g Hz): percent flicker "
                   "%.4f, expected %.4f", c, cases[c].flicker_hz, cases[c].rate_hz, info.percent_flicker, pf);
         /* time zero is the first sample: the BRF is the waveform over its mean */
