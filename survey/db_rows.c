@@ -267,6 +267,9 @@ gs_status srv_db_insert_capture(srv_db *db, const srv_capture_row *r, size_t n_l
         return gs_fail(GS_EINVAL, "%s: capture %s: grid_hz %d, K %d, bands %d, locked %d: expected "
                        "50/60, >= 2, 1/3 and 0/1 (0 or -1 for unknown)", db->path, r->key,
                        r->grid_hz, r->K, r->bands, r->locked);
+    if (r->candidate_bulbs < 0)
+        return gs_fail(GS_EINVAL, "%s: capture %s: candidate_bulbs %ld: expected >= 1 (0 for unknown)",
+                       db->path, r->key, r->candidate_bulbs);
     sqlite3_stmt *q;
     char now[32];
     srv_dbi_utc_now(now);
@@ -290,6 +293,7 @@ gs_status srv_db_insert_capture(srv_db *db, const srv_capture_row *r, size_t n_l
     sqlite3_bind_int64(q, 16, (sqlite3_int64)n_frames);
     sqlite3_bind_int64(q, 17, (sqlite3_int64)n_frequency);
     sqlite3_bind_text(q, 18, now, -1, SQLITE_TRANSIENT);
+    srv_dbi_bind_int_or_null(q, 19, r->candidate_bulbs, 0);
     if ((s = srv_dbi_step_returning(db, q, id, &inserted, "inserting a capture")) != GS_OK || inserted) return s;
     if ((s = srv_dbi_stmt(db, ST_GET_CAPTURE, &q)) != GS_OK) return s;
     sqlite3_bind_int64(q, 1, r->survey_id);

@@ -250,11 +250,20 @@ static const char *const migration_4[] = {
     SHARES_BALANCE_SQL("site_phase_counts", "site_phase_shares", "site_phase_balance"),
     NULL};
 
+/* Version 5: the bulbs each capture's recognition was matched against (its grid's and bands'
+ * DELIGHT entries, rec_matcher_bulb_count), the M of a detection's bulb posterior in sites.c
+ * (docs/survey-db.md "Light sites"); NULL for captures stored before, which fall back to
+ * delight_versions.bulbs. */
+static const char *const migration_5[] = {
+    "ALTER TABLE captures ADD COLUMN candidate_bulbs INTEGER CHECK (candidate_bulbs > 0);\n",
+    NULL};
+
 const srv_db_migration srv_db_migrations[SRV_DB_MIGRATIONS] = {
     {"tables, R*Tree and triggers", migration_1},
     {"phase-balance views", migration_2},
     {"light sites", migration_3},
     {"site phase-balance views", migration_4},
+    {"candidate bulbs of each capture", migration_5},
 };
 
 /* ------------------------------------------------------------------ statements */
@@ -276,8 +285,8 @@ const char *const srv_db_stmt_sql[ST_COUNT] = {
     [ST_ADD_CAPTURE] = "INSERT INTO captures(survey_id, station_id, delight_id, capture_key, path, "
                        "utc, grid_hz, K, bands, width_px, height_px, locked, mean_frequency_hz, "
                        "sigma_frequency_hz, light_count, frame_count, frequency_count, "
-                       "ingested_utc) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, "
-                       "?13, ?14, ?15, ?16, ?17, ?18) ON CONFLICT DO NOTHING",
+                       "ingested_utc, candidate_bulbs) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, "
+                       "?10, ?11, ?12, ?13, ?14, ?15, ?16, ?17, ?18, ?19) ON CONFLICT DO NOTHING",
     [ST_GET_CAPTURE] = "SELECT id FROM captures WHERE survey_id = ?1 AND capture_key = ?2",
     [ST_ADD_FRAME] = "INSERT INTO frames(capture_id, k, file, cycles, hdr_map) "
                      "VALUES (?1, ?2, ?3, ?4, ?5) ON CONFLICT DO NOTHING",

@@ -184,8 +184,12 @@ gs_status srv_dbi_auto_end(srv_db *db, int began, gs_status s);
 /* Associate one capture's new detections (sites.c; called inside its transaction). */
 gs_status srv_dbi_associate_capture(srv_db *db, int64_t capture_id, long *created, long *joined);
 /* Fill o from the 8 columns bulb_id, technology, phase_deg, phase_sigma_deg, confidence,
- * bulb_confidence, phase_confidence, DELIGHT bulbs starting at column first. */
+ * bulb_confidence, phase_confidence, SRV_SQL_BULB_LABELS starting at column first. */
 void srv_site_obs_from_row(sqlite3_stmt *q, int first, srv_site_obs *o);
+/* A detection's bulb label count M (srv_site_obs.bulbs) in SQL over its capture c and DELIGHT
+ * version dv (SQLite and PostgreSQL): the candidates its recognition used, or for a capture
+ * stored before schema 5 (NULL) all of the DELIGHT's entries. */
+#define SRV_SQL_BULB_LABELS "coalesce(c.candidate_bulbs, dv.bulbs)"
 /* ====================================================================== end of the database */
 
 /* ============================ the shared PostGIS database (pg*.c), shared between its files */

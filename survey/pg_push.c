@@ -267,10 +267,10 @@ static const char station_get[] = "SELECT id FROM stations WHERE survey_id = $1 
 
 #define CAPTURE_COLS "survey_id, station_id, delight_id, capture_key, path, utc, grid_hz, K, " \
     "bands, width_px, height_px, locked, mean_frequency_hz, sigma_frequency_hz, light_count, " \
-    "frame_count, frequency_count, ingested_utc"
+    "frame_count, frequency_count, ingested_utc, candidate_bulbs"
 static const char capture_ins[] =
     "INSERT INTO captures(" CAPTURE_COLS ") VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, "
-    "$11, $12, $13, $14, $15, $16, $17, $18) ON CONFLICT DO NOTHING RETURNING id";
+    "$11, $12, $13, $14, $15, $16, $17, $18, $19) ON CONFLICT DO NOTHING RETURNING id";
 static const char capture_get[] = "SELECT id FROM captures WHERE survey_id = $1 AND capture_key = $2";
 
 #define LIGHT_COLS "light_index, x_px, y_px, area_px, peak_dn, saturated_px, blob_flags, " \
@@ -412,12 +412,12 @@ static gs_status push_captures(push_ctx *x, void *arg)
     x->capture.n = b->mapped;   /* a retried batch maps its captures again */
     sqlite3_reset(b->list);
     sqlite3_bind_int64(b->list, 1, b->first_id);
-    const id_map *maps[19] = {&x->survey, &x->station, &x->delight};
+    const id_map *maps[20] = {&x->survey, &x->station, &x->delight};
     int rc;
     gs_status s = GS_OK;
     size_t in_batch = 0;
     while (s == GS_OK && (rc = sqlite3_step(b->list)) == SQLITE_ROW) {
-        int64_t lite_id = sqlite3_column_int64(b->list, 18);
+        int64_t lite_id = sqlite3_column_int64(b->list, 19);
         if (in_batch >= b->limit) {   /* the next batch starts here */
             b->next_id = lite_id;
             b->more = 1;
@@ -426,7 +426,7 @@ static gs_status push_captures(push_ctx *x, void *arg)
         int64_t id;
         int ins;
         static const int key[] = {0, 3};
-        s = get_or_add(x, b->list, maps, 18, capture_ins, capture_get, key, 2, &id, &ins, "pushing a capture");
+        s = get_or_add(x, b->list, maps, 19, capture_ins, capture_get, key, 2, &id, &ins, "pushing a capture");
         if (s == GS_OK) s = map_put(&x->capture, lite_id, id);
         in_batch += (size_t)sqlite3_column_int64(b->list, 14) + 1;
         if (s != GS_OK || !ins) continue;

@@ -252,12 +252,19 @@ static const char *const pg_migration_2[] = {
     "ORDER BY c.iy, c.ix $$;\n",
     NULL};
 
+/* Version 3: the SQLite schema's version 5, captures.candidate_bulbs (NULL for captures pushed
+ * before, like the SQLite rows stored before). */
+static const char *const pg_migration_3[] = {
+    "ALTER TABLE captures ADD COLUMN candidate_bulbs integer CHECK (candidate_bulbs > 0);\n",
+    NULL};
+
 static const struct {
     const char *name;
     const char *const *sql;
 } pg_migrations[SRV_PG_SCHEMA_VERSION] = {
     {"tables", pg_migration_1},
     {"statistics views", pg_migration_2},
+    {"candidate bulbs of each capture", pg_migration_3},
 };
 
 /* ------------------------------------------------------------------ helpers */

@@ -15,7 +15,7 @@ static const char pg_scan_sql[] =
     "DECLARE scan NO SCROLL CURSOR FOR "
     "SELECT CASE WHEN $2::boolean THEN -l.id ELSE coalesce(sd.site_id, -l.id) END, s.name, "
     "l.bulb_id, l.technology, l.phase_deg, l.phase_sigma_deg, l.confidence, l.bulb_confidence, "
-    "l.phase_confidence, dv.bulbs, "
+    "l.phase_confidence, " SRV_SQL_BULB_LABELS ", "
     "CASE WHEN $2::boolean THEN loc.lat_deg ELSE coalesce(ls.lat_deg, loc.lat_deg) END, "
     "CASE WHEN $2::boolean THEN loc.lon_deg ELSE coalesce(ls.lon_deg, loc.lon_deg) END "
     "FROM lights l JOIN captures c ON c.id = l.capture_id JOIN surveys s ON s.id = c.survey_id "

@@ -288,7 +288,7 @@ static const char dets_sql[] =
     "printf('%.7f,%.7f,%.2f,%.3f,%.3f,%.3f,%.2f', st.lat_deg, st.lon_deg, st.height_m, "
     "st.heading_deg, st.pitch_deg, st.roll_deg, st.focal_px) END, "
     "l.bulb_id, l.technology, l.phase_deg, l.phase_sigma_deg, l.confidence, l.bulb_confidence, "
-    "l.phase_confidence, dv.bulbs "
+    "l.phase_confidence, " SRV_SQL_BULB_LABELS " "
     "FROM lights l JOIN captures c ON c.id = l.capture_id LEFT JOIN stations st ON st.id = c.station_id "
     "LEFT JOIN locations loc ON loc.light_id = l.id LEFT JOIN delight_versions dv ON dv.id = c.delight_id "
     "WHERE l.capture_id = ?1 AND NOT EXISTS (SELECT 1 FROM site_detections sd WHERE sd.light_id = l.id) "
@@ -301,7 +301,7 @@ static const char px_cand_sql[] =
     "SELECT s.id, s.x_px, s.y_px FROM light_sites s WHERE s.pose_key = ?1 AND s.x_px BETWEEN ?2 AND ?3";
 static const char site_obs_sql[] =
     "SELECT l.bulb_id, l.technology, l.phase_deg, l.phase_sigma_deg, l.confidence, l.bulb_confidence, "
-    "l.phase_confidence, dv.bulbs, loc.lat_deg, loc.lon_deg, loc.height_m, loc.semi_major_m, "
+    "l.phase_confidence, " SRV_SQL_BULB_LABELS ", loc.lat_deg, loc.lon_deg, loc.height_m, loc.semi_major_m, "
     "loc.semi_minor_m, loc.azimuth_deg, l.x_px, l.y_px FROM site_detections sd "
     "JOIN lights l ON l.id = sd.light_id JOIN captures c ON c.id = l.capture_id "
     "LEFT JOIN delight_versions dv ON dv.id = c.delight_id LEFT JOIN locations loc ON loc.light_id = l.id "
@@ -680,13 +680,14 @@ static double p_same(int same_winner, double ca, double cb, double M)
 
 static const char compare_sql[] =
     "SELECT sd.site_id, s.name = ?2, l.bulb_id, l.technology, l.phase_deg, l.phase_sigma_deg, "
-    "l.confidence, l.bulb_confidence, l.phase_confidence, dv.bulbs, ls.lat_deg, ls.lon_deg, "
+    "l.confidence, l.bulb_confidence, l.phase_confidence, " SRV_SQL_BULB_LABELS ", ls.lat_deg, ls.lon_deg, "
     "ls.x_px, ls.y_px FROM site_detections sd JOIN lights l ON l.id = sd.light_id "
     "JOIN captures c ON c.id = l.capture_id JOIN surveys s ON s.id = c.survey_id "
     "JOIN light_sites ls ON ls.id = sd.site_id LEFT JOIN delight_versions dv ON dv.id = c.delight_id "
     "WHERE s.name IN (?1, ?2) ORDER BY sd.site_id, l.id";
 
-/* The labels' count M of a side (DELIGHT entries; 3 or 12 phases, see srv_site_combine). */
+/* The bulb labels' count M of a side (its detections' candidate bulbs, the largest; see
+ * srv_site_combine). */
 static double bulb_labels(const srv_site_obs *o, size_t n)
 {
     double M = 2.0;

@@ -274,6 +274,7 @@ gs_status srv_job_store(srv_job *j, srv_db *db, const srv_store_opts *o, int64_t
     cd.capture.locked = cap->locked ? 1 : 0;
     cd.capture.mean_frequency_hz = f_mean;
     cd.capture.sigma_frequency_hz = n_freq >= 2 ? sqrt(f_sum2 / (double)(n_freq - 1)) : NAN;
+    cd.capture.candidate_bulbs = j->matcher ? (long)rec_matcher_bulb_count(j->matcher) : 0;
     cd.frames = frames;
     cd.n_frames = (size_t)K;
     cd.frequency = n_freq ? freq : NULL;

@@ -45,7 +45,7 @@ int srv_main(int argc, char **argv);
  * SQL NULL. Non-finite doubles (NaN, +-Inf) store NULL.
  * ===================================================================================== */
 
-#define SRV_DB_SCHEMA_VERSION 4
+#define SRV_DB_SCHEMA_VERSION 5
 #define SRV_DB_APPLICATION_ID 0x47534442   /* 'GSDB' (GeoPackage uses 'GPKG' = 0x47504B47) */
 #define SRV_DB_FORMAT "gridsurvey-survey"
 /* Written to migrations.generator and delight_versions.generator. */
@@ -128,6 +128,9 @@ typedef struct {
     int grid_hz, K, bands, width_px, height_px;   /* 0 = unknown */
     int locked;                /* 1, 0, or -1 = unknown */
     double mean_frequency_hz, sigma_frequency_hz;
+    long candidate_bulbs;      /* the bulbs its recognition was matched against (the DELIGHT
+                                * entries of its grid and bands, rec_matcher_bulb_count); 0 =
+                                * unknown */
 } srv_capture_row;
 
 typedef struct {
@@ -283,7 +286,8 @@ typedef struct {
     char technology[24];
     double phase_deg, phase_sigma_deg;   /* NaN = unknown */
     double confidence, bulb_confidence, phase_confidence;
-    long bulbs;                /* DELIGHT entries of its capture (0 = unknown) */
+    long bulbs;                /* candidate bulbs of its capture's recognition (captures.
+                                * candidate_bulbs, else its DELIGHT's entries; 0 = unknown) */
 } srv_site_obs;
 /* A site's combined recognition. */
 typedef struct {
@@ -293,8 +297,9 @@ typedef struct {
     long detections;
 } srv_site_value;
 /* The product of the detections' posteriors (uniform prior): each detection puts its
- * confidence on its label and spreads the rest evenly over the M - 1 other labels (M = the
- * DELIGHT entries for bulbs; 3 phases when every phase is within 20 deg of 0/120/240, else the
+ * confidence on its label and spreads the rest evenly over the M - 1 other labels (M for
+ * bulbs = the largest of the detections' srv_site_obs.bulbs, the candidates their recognition
+ * was matched against; 3 phases when every phase is within 20 deg of 0/120/240, else the
  * twelve multiples of 30 deg); the winner's normalised product. The phase is the
  * inverse-variance circular mean of the winning label's phases, its sigma
  * 1 / sqrt(sum sigma_i^-2). One detection is returned unchanged; unknown phases and bulbs
@@ -443,7 +448,7 @@ gs_status srv_stats_compute_pg(const char *conninfo, const srv_stats_opts *o, sr
  * once (unique keys, ON CONFLICT, retried deadlocks).
  * ===================================================================================== */
 
-#define SRV_PG_SCHEMA_VERSION 2
+#define SRV_PG_SCHEMA_VERSION 3
 #define SRV_PG_FORMAT "gridsurvey-survey-pg"
 typedef struct {
     size_t batch_lights;       /* lights per transaction, whole captures (20000) */

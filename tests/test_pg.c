@@ -96,6 +96,27 @@ static void two_surveys(const char *db)
     survey_fx_synth(db, &o);
 }
 
+/* The bulb labels of the site posteriors (docs/survey-db.md "Light sites"): a DELIGHT version
+ * of 200 entries for every capture, survey alpha's captures matched against 7 candidates, beta's
+ * stored without the count (NULL: the 200 entries), so that stats over alpha, beta and both
+ * combine with different M; the sites recomputed with them (as if ingested so). */
+static void set_bulb_labels(const char *db)
+{
+    sqlite3 *h;
+    CHECK(sqlite3_open_v2(db, &h, SQLITE_OPEN_READWRITE, NULL) == SQLITE_OK);
+    CHECK(sqlite3_exec(h, "INSERT INTO delight_versions(sha256, generator, source, bulbs, added_utc) "
+                          "VALUES (printf('%064d', 0), 'g', 'built-in', 200, 'then');"
+                          "UPDATE captures SET delight_id = 1, candidate_bulbs = CASE WHEN survey_id = "
+                          "(SELECT id FROM surveys WHERE name = 'alpha') THEN 7 END;"
+                          "UPDATE light_sites SET stale = 1", NULL, NULL, NULL) == SQLITE_OK);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM captures WHERE candidate_bulbs = 7") == 10);
+    sqlite3_close(h);
+    srv_db *w = NULL;
+    CHECK_OK(srv_db_open(db, SRV_DB_WRITE, &w));
+    if (w) CHECK_OK(srv_db_associate(w, NULL, NULL));
+    srv_db_close(w);
+}
+
 static double col(const PGresult *r, int i, const char *name)
 {
     int j = PQfnumber(r, name);
@@ -227,6 +248,7 @@ TEST_TIMEOUT(pg_push_then_stats_equal_sqlite, 600)
     snprintf(db, sizeof db, "%s/a.sqlite", test_tmpdir());
     snprintf(feeders, sizeof feeders, "%s/feeders.geojson", test_tmpdir());
     two_surveys(db);
+    set_bulb_labels(db);
     write_feeders(feeders);
     /* nothing pushed yet: a reader refuses (and creates nothing) */
     char cmd[1024];
@@ -239,6 +261,9 @@ TEST_TIMEOUT(pg_push_then_stats_equal_sqlite, 600)
     check_counts_equal(db, c);
     CHECK(incomplete_captures(c) == 0);
     CHECK(pg_fx_long(c, "SELECT count(*) FROM gridsurvey.areas") == 2);
+    CHECK(pg_fx_long(c, "SELECT count(*) FROM gridsurvey.captures c JOIN gridsurvey.surveys s ON "
+                        "s.id = c.survey_id WHERE s.name = 'alpha' AND c.candidate_bulbs = 7") == 10 &&
+          pg_fx_long(c, "SELECT count(*) FROM gridsurvey.captures WHERE candidate_bulbs IS NULL") == 6);
     /* positions as PostGIS points */
     CHECK(pg_fx_long(c, "SELECT count(*) FROM gridsurvey.locations WHERE geom IS NOT NULL AND "
                         "ST_X(geom) = lon_deg AND ST_Y(geom) = lat_deg") ==

@@ -217,6 +217,91 @@ TEST(sites_combine_posterior_product)
     CHECK_NEAR(v.phase_confidence, p0 / (p0 + 2 * pother), 1e-12);
 }
 
+/* The bulb labels M of a detection are the bulbs its recognition was matched against
+ * (captures.candidate_bulbs: the DELIGHT entries of its grid and bands), not every entry of the
+ * DELIGHT version (a grid engineer's trial: 200 entries, 50 candidates of a 50 Hz RGB capture).
+ * Two nights (surveys june, july) of three pixel sites, bulb confidences 0.527 and 0.605:
+ * site x = 100 the same bulb both nights, x = 200 another bulb the second night, both in
+ * captures recorded with 50 candidates; x = 300 the same bulb in captures stored without the
+ * count (NULL), which fall back to the DELIGHT's 200 entries. Oracle: the documented posterior
+ * product and P(bulb differs) written out with M = 50 (and 200). */
+TEST(sites_bulb_labels_are_the_candidates)
+{
+    const char *path = fx_tmp("cand.sqlite");
+    int64_t sid[2];
+    srv_db *db = survey_fx_create(path, "june", &sid[0]);
+    if (!db) return;
+    srv_survey_row july = {"july", NULL, NULL, NULL, 50};
+    CHECK_OK(srv_db_add_survey(db, &july, &sid[1]));
+    srv_delight_row dv = {.source = "built-in", .bulbs = 200};
+    memset(dv.sha256, 'a', 64);
+    int64_t did = 0;
+    CHECK_OK(srv_db_add_delight(db, &dv, &did));
+    const double cb[2] = {0.527, 0.605};
+    for (int night_i = 0; night_i < 2; night_i++)
+        for (int counted = 0; counted < 2; counted++) {
+            srv_light_row l[2];
+            size_t n = 0;
+            if (counted) {
+                l[n] = survey_fx_light((int)n, 100.0, 50.0, 0.0, 0.9);
+                l[n++].bulb_id = "led-a";
+                l[n] = survey_fx_light((int)n, 200.0, 50.0, 0.0, 0.9);
+                l[n++].bulb_id = night_i ? "hps-b" : "led-a";
+            } else {
+                l[n] = survey_fx_light((int)n, 300.0, 50.0, 0.0, 0.9);
+                l[n++].bulb_id = "led-a";
+            }
+            for (size_t i = 0; i < n; i++) {
+                l[i].technology = "led_linear";
+                l[i].bulb_confidence = cb[night_i];
+            }
+            char key[32];
+            snprintf(key, sizeof key, "n%d-%s", night_i + 1, counted ? "counted" : "old");
+            srv_capture_data cd = survey_fx_capture(sid[night_i], key, l, NULL, n);
+            cd.capture.delight_id = did;
+            cd.capture.grid_hz = 50;
+            cd.capture.bands = 3;
+            cd.capture.candidate_bulbs = counted ? 50 : 0;
+            CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
+        }
+    sqlite3 *h = srv_db_sqlite(db);
+    CHECK(SQ(h, "SELECT count(*) FROM captures WHERE candidate_bulbs = 50") == 2 &&
+          SQ(h, "SELECT count(*) FROM captures WHERE candidate_bulbs IS NULL") == 2);
+    CHECK(SQ(h, "SELECT count(*) FROM light_sites WHERE detections = 2") == 3);
+    /* the same bulb on both nights: c1 c2 / (c1 c2 + (M - 1) r1 r2), r = (1 - c) / (M - 1) */
+    const double Ms[2] = {50.0, 200.0}, xs[2] = {100.0, 300.0};
+    for (int k = 0; k < 2; k++) {
+        double M = Ms[k], r1 = (1.0 - cb[0]) / (M - 1.0), r2 = (1.0 - cb[1]) / (M - 1.0);
+        double want = cb[0] * cb[1] / (cb[0] * cb[1] + (M - 1.0) * r1 * r2);
+        char sql[160];
+        snprintf(sql, sizeof sql, "SELECT bulb_confidence FROM light_sites WHERE x_px = %.1f", xs[k]);
+        double got = strtod(survey_fx_query_text(h, sql), NULL);   /* 15 digits or more */
+        CHECK_MSG(fabs(got - want) < 1e-12, "site x %.0f: bulb confidence %.6f, M = %.0f gives %.6f", xs[k],
+                  got, M, want);
+    }
+    /* compare: P(bulb differs) = 1 - [c_A r_B + c_B r_A + (M - 2) r_A r_B] with M = 50, the
+     * trial's 0.9862 (M = 200 gave 0.9966) */
+    srv_change *ch = NULL;
+    size_t nch = 0;
+    srv_compare_totals t;
+    CHECK_OK(srv_compare(db, "june", "july", 0.9, &ch, &nch, &t));
+    double M = 50.0, ra = (1.0 - cb[0]) / (M - 1.0), rb = (1.0 - cb[1]) / (M - 1.0);
+    double want = 1.0 - (cb[0] * rb + cb[1] * ra + (M - 2.0) * ra * rb);
+    CHECK(fabs(want - 0.9862) < 5e-5);
+    CHECK_MSG(nch == 1 && ch[0].kinds == SRV_CHANGE_BULB && fabs(ch[0].x_px - 200.0) < 1e-9,
+              "%zu changes", nch);
+    if (nch == 1)
+        CHECK_MSG(fabs(ch[0].p_bulb_change - want) < 1e-12, "P(bulb differs) %.6f, M = 50 gives %.6f",
+                  ch[0].p_bulb_change, want);
+    free(ch);
+    /* a negative count is refused, naming the field */
+    srv_light_row l0 = survey_fx_light(0, 1.0, 1.0, 0.0, 0.9);
+    srv_capture_data bad = survey_fx_capture(sid[0], "bad", &l0, NULL, 1);
+    bad.capture.candidate_bulbs = -1;
+    CHECK(srv_db_add_capture(db, &bad, NULL, NULL) == GS_EINVAL && strstr(gs_detail(), "candidate_bulbs"));
+    srv_db_close(db);
+}
+
 /* Two nights of the lab scene through `gridsurvey run` (no station: lights associated by
  * pixel, the captures counting as one fixed camera): 8 sites, not 16; n = 8 in stats. */
 TEST(sites_lab_two_nights_cli)
@@ -237,6 +322,20 @@ TEST(sites_lab_two_nights_cli)
     sqlite3 *h = NULL;
     CHECK(sqlite3_open_v2(db, &h, SQLITE_OPEN_READONLY, NULL) == SQLITE_OK);
     CHECK(SQ(h, "SELECT count(*) FROM captures") == 2 && SQ(h, "SELECT count(*) FROM lights") == 16);
+    /* each capture records its candidate bulbs: the built-in DELIGHT's entries of its grid and
+     * band count that are locked to the mains (counted here), fewer than all the entries */
+    gs_delight *d = NULL;
+    CHECK_OK(gs_delight_open(NULL, &d));
+    long grid = SQ(h, "SELECT max(grid_hz) FROM captures"), bands = SQ(h, "SELECT max(bands) FROM captures"), nb = 0;
+    for (size_t i = 0; d && i < gs_delight_count(d); i++) {
+        const gs_bulb *b = gs_delight_get(d, i);
+        nb += b->grid_hz == grid && b->brf.bands == bands && b->ref != GS_REF_UNLOCKED;
+    }
+    char sql[160];
+    snprintf(sql, sizeof sql, "SELECT count(*) FROM captures WHERE candidate_bulbs = %ld", nb);
+    CHECK_MSG(SQ(h, sql) == 2 && nb > 0 && nb < (long)gs_delight_count(d), "%ld of %zu entries", nb,
+              d ? gs_delight_count(d) : 0);
+    gs_delight_free(d);
     CHECK(SQ(h, "SELECT count(*) FROM light_sites") == 8);
     CHECK(SQ(h, "SELECT count(*) FROM light_sites WHERE detections = 2") == 8);
     /* each site's two detections are the same light: the same bulb and phase both nights */

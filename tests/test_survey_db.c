@@ -142,14 +142,64 @@ TEST(survey_db_migrates_from_v1)
     CHECK_OK(srv_db_open(path, SRV_DB_READ, &db));
     if (!db) return;
     h = srv_db_sqlite(db);
-    CHECK(survey_fx_query_long(h, "PRAGMA user_version") == 4);
-    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM migrations") == 4);
-    CHECK(survey_fx_query_long(h, "SELECT group_concat(version) = '1,2,3,4' FROM (SELECT version FROM migrations ORDER BY version)") == 1);
+    CHECK(survey_fx_query_long(h, "PRAGMA user_version") == SRV_DB_SCHEMA_VERSION);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM migrations") == SRV_DB_SCHEMA_VERSION);
+    CHECK(survey_fx_query_long(h, "SELECT group_concat(version) = '1,2,3,4,5' FROM (SELECT version FROM migrations ORDER BY version)") == 1);
     CHECK(survey_fx_query_long(h, "SELECT n120 FROM phase_counts WHERE grouping = 'all'") == 1);
     CHECK(survey_fx_query_long(h, "SELECT n120 FROM site_phase_counts WHERE grouping = 'all'") == 1);
     /* migrate associated the old light with a new site of its own */
     CHECK(survey_fx_query_long(h, "SELECT count(*) FROM light_sites WHERE phase_deg = 120 AND detections = 1") == 1);
     CHECK(survey_fx_query_long(h, "SELECT count(*) FROM site_detections") == 1);
+    srv_db_close(db);
+}
+
+/* Version 4 -> 5 (captures.candidate_bulbs): the captures stored before keep NULL and their
+ * site's bulb posterior falls back to the DELIGHT's entry count (docs/survey-db.md "Light
+ * sites"): two detections of one light, bulb confidences 0.6 and 0.7, a DELIGHT of 200
+ * entries, against c1 c2 / (c1 c2 + (M - 1) r1 r2) with M = 200; a capture stored after the
+ * migration records its count. */
+TEST(survey_db_migrates_candidate_bulbs)
+{
+    const char *path = fx_tmp("v4.sqlite");
+    CHECK_OK(srv_db_create_at_version(path, 4));
+    sqlite3 *h = NULL;
+    CHECK(sqlite3_open_v2(path, &h, SQLITE_OPEN_READWRITE, NULL) == SQLITE_OK);
+    CHECK(sqlite3_exec(h, "INSERT INTO surveys(name, created_utc) VALUES ('old', 'then');"
+                          "INSERT INTO delight_versions(sha256, generator, source, bulbs, added_utc) "
+                          "VALUES (printf('%064d', 0), 'g', 'built-in', 200, 'then');"
+                          "INSERT INTO captures(survey_id, delight_id, capture_key, light_count, frame_count, "
+                          "frequency_count, ingested_utc) VALUES (1, 1, 'c1', 1, 0, 0, 'then'), "
+                          "(1, 1, 'c2', 1, 0, 0, 'then');"
+                          "INSERT INTO lights(capture_id, light_index, x_px, y_px, bulb_id, technology, "
+                          "confidence, bulb_confidence, phase_confidence) VALUES "
+                          "(1, 0, 5, 6, 'hps-70w', 'sodium_hp', 0.6, 0.6, 0), "
+                          "(2, 0, 5, 6, 'hps-70w', 'sodium_hp', 0.7, 0.7, 0)", NULL, NULL, NULL) == SQLITE_OK);
+    sqlite3_close(h);
+    CHECK(run("%s db migrate --db %s", path, NULL, NULL) == 0);
+    CHECK(run("%s db check --db %s", path, NULL, NULL) == 0 && strstr(out, ": ok"));
+    srv_db *db = NULL;
+    CHECK_OK(srv_db_open(path, SRV_DB_WRITE, &db));
+    if (!db) return;
+    h = srv_db_sqlite(db);
+    CHECK(survey_fx_query_long(h, "SELECT max(version) FROM migrations") == 5);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM captures WHERE candidate_bulbs IS NULL") == 2);
+    const double M = 200.0, r1 = 0.4 / (M - 1.0), r2 = 0.3 / (M - 1.0);
+    double want = 0.42 / (0.42 + (M - 1.0) * r1 * r2);
+    double got = strtod(survey_fx_query_text(h, "SELECT bulb_confidence FROM light_sites WHERE detections = 2"), NULL);
+    CHECK_MSG(fabs(got - want) < 1e-12, "bulb confidence %.15f, M = 200 gives %.15f", got, want);
+    srv_light_row l;
+    srv_light_row_init(&l);
+    l.x_px = l.y_px = 1.0;
+    srv_capture_data cd;
+    memset(&cd, 0, sizeof cd);
+    srv_capture_row_init(&cd.capture);
+    cd.capture.survey_id = 1;
+    cd.capture.key = "c3";
+    cd.capture.candidate_bulbs = 50;
+    cd.lights = &l;
+    cd.n_lights = 1;
+    CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
+    CHECK(survey_fx_query_long(h, "SELECT candidate_bulbs FROM captures WHERE capture_key = 'c3'") == 50);
     srv_db_close(db);
 }
 
