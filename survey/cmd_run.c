@@ -202,6 +202,9 @@ static gs_status run_one(const srv_run_opts *op, srv_run_report *rep)
         for (int k = 0; k < SRV_STAGE_COUNT; k++)
             if (r.seconds[k] > 0.0) printf(" %s %.2f", srv_stage_name((srv_stage)k), r.seconds[k]);
         printf("\n");
+        if (r.also_in[0])
+            printf("run: note: survey %s holds the same capture: a light site joining both counts its "
+                   "detections twice as evidence (delete one to redo it: docs/pipeline.md)\n", r.also_in);
     }
     *rep = r;
     return GS_OK;

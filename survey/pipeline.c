@@ -418,9 +418,16 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
     if (s != GS_OK) goto done;
     int64_t survey_id = 0;
     int is_done = 0;
-    if (o->survey) {   /* the named survey's */
+    if (o->survey) {   /* the named survey's; another survey's copy is said (r->also_in) */
         s = srv_db_find_survey(db, r->survey, &survey_id);
         if (s == GS_OK) s = srv_db_capture_done(db, survey_id, r->key, &is_done);
+        int64_t other_id;
+        char other[64];
+        if ((s == GS_OK || s == GS_ENOTFOUND) && !is_done) {
+            gs_status so = srv_db_capture_survey(db, r->key, &other_id, other);
+            if (so == GS_OK) snprintf(r->also_in, sizeof r->also_in, "%s", other);
+            else if (so != GS_ENOTFOUND) s = so;
+        }
     } else {
         /* any survey's (its default name's first): a scene run names its survey after the
          * scene, a run on its capture directory after the directory */

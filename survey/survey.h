@@ -711,6 +711,8 @@ typedef struct {
     char truth_path[4096];           /* CAPDIR/truth.json when present, else "" */
     int scene;                       /* 1: the input was a scene */
     int skipped;                     /* 1: the capture was already committed: nothing written */
+    char also_in[64];                /* stored under a named --survey while another survey of the
+                                      * database holds the same capture: that survey ("" if none) */
     int frames_acquired, frames_kept;   /* scene input: this run's acquisition loop */
     size_t lights;                   /* lights of the capture (as stored) */
     size_t with_bulb, with_phase;    /* ... with a recognised bulb, with a phase */

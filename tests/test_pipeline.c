@@ -326,6 +326,8 @@ TEST(pipeline_lab_end_to_end_matches_truth)
     rc = sh("%s run %s --db %s --survey redo", test_bin(), cap, db);
     CHECK_MSG(rc == 0 && strstr(out, "stored as capture"), "--survey redo: %d: %s", rc, out);
     CHECK(query_long(db, "SELECT count(*) FROM captures") == 2);
+    /* ... and says which survey holds it already (its sites would count it twice) */
+    CHECK_MSG(strstr(out, "run: note: survey lab holds the same capture") != NULL, "%s", out);
 }
 
 /* A scene of geographic lights seen from a station: located at the scene's median height,
