@@ -56,7 +56,7 @@ static int label_product(char (*labels)[GS_ID_MAX + 8], const double *c, const l
         *post = c[0];
         return 0;
     }
-    if (mmax < (double)nl + 1.0) mmax = (double)nl + 1.0;
+    if (mmax < (double)nl) mmax = (double)nl;   /* at least the labels named (all of them may be) */
     for (size_t k = 0; k < nl; k++) logs[k] = 0.0;
     for (size_t i = 0; i < n; i++) {
         double ci = fmin(fmax(c[i], 1e-12), 1.0 - 1e-12);

@@ -420,3 +420,63 @@ TEST(sites_compare_rephased_and_replaced)
     rc = fx_run(out, sizeof out, "%s compare --db %s --survey before --survey nope 2>&1", test_bin(), db);
     CHECK_MSG(rc == 1 && strstr(out, "nope"), "%d: %s", rc, out);
 }
+
+/* srv_site_combine where its label sets have edges, against the product written out (the
+ * leftover (1 - c) / (M - 1) on each of the M - 1 other labels, normalised over all M):
+ * all three phases named (M = 3: no fourth label), bulbs of DELIGHTs of 10 and 20 entries (both
+ * over the larger), a pair's labels (M = bulbs x 3), six-phase labels (the nearest multiple of
+ * 30 deg: 29 and 31 are one label), and an exact phase (sigma 0) outweighing any other. */
+TEST(sites_combine_label_edges)
+{
+    srv_site_obs o[3];
+    srv_site_value v;
+    memset(o, 0, sizeof o);
+    const double pc[3] = {0.9, 0.8, 0.7};
+    for (int i = 0; i < 3; i++) {
+        o[i].phase_deg = 120.0 * i;
+        o[i].phase_sigma_deg = 2.0;
+        o[i].phase_confidence = pc[i];
+    }
+    srv_site_combine(o, 3, &v);
+    double p0 = 0.9 * 0.1 * 0.15, p120 = 0.05 * 0.8 * 0.15, p240 = 0.05 * 0.1 * 0.7;
+    CHECK(v.phase_deg == 0.0 && v.phase_sigma_deg == 2.0);
+    CHECK_NEAR(v.phase_confidence, p0 / (p0 + p120 + p240), 1e-12);
+    /* bulbs a (0.6 of 10) and b (0.7 of 20): both spread over 20 */
+    memset(o, 0, sizeof o);
+    snprintf(o[0].bulb_id, sizeof o[0].bulb_id, "a");
+    snprintf(o[1].bulb_id, sizeof o[1].bulb_id, "b");
+    o[0].bulb_confidence = 0.6;
+    o[1].bulb_confidence = 0.7;
+    o[0].bulbs = 10;
+    o[1].bulbs = 20;
+    o[0].phase_deg = o[1].phase_deg = NAN;
+    srv_site_combine(o, 2, &v);
+    double qa = 0.6 * (0.3 / 19), qb = (0.4 / 19) * 0.7, qo = (0.4 / 19) * (0.3 / 19);
+    CHECK(!strcmp(v.bulb_id, "b"));
+    CHECK_NEAR(v.bulb_confidence, qb / (qa + qb + 18 * qo), 1e-12);
+    /* the pair (a, 0 deg) twice at 0.5, a of 10 bulbs: 30 pairs */
+    memset(o, 0, sizeof o);
+    for (int i = 0; i < 2; i++) {
+        snprintf(o[i].bulb_id, sizeof o[i].bulb_id, "a");
+        o[i].bulbs = 10;
+        o[i].phase_deg = 0.0;
+        o[i].phase_sigma_deg = 2.0;
+        o[i].confidence = o[i].bulb_confidence = o[i].phase_confidence = 0.5;
+    }
+    srv_site_combine(o, 2, &v);
+    CHECK_NEAR(v.confidence, 0.25 / (0.25 + 29 * (0.5 / 29) * (0.5 / 29)), 1e-12);
+    /* 29 and 31 deg (other: twelve labels) are the label 30; their mean 30 */
+    o[0].phase_deg = 29.0;
+    o[1].phase_deg = 31.0;
+    o[0].phase_confidence = 0.9;
+    o[1].phase_confidence = 0.8;
+    srv_site_combine(o, 2, &v);
+    CHECK_NEAR(v.phase_deg, 30.0, 1e-12);
+    CHECK_NEAR(v.phase_confidence, 0.72 / (0.72 + 11 * (0.1 / 11) * (0.2 / 11)), 1e-12);
+    /* an exact phase (sigma 0) and a measured one of the same class: the exact one */
+    o[0].phase_deg = 0.0;
+    o[0].phase_sigma_deg = 0.0;
+    o[1].phase_deg = 10.0;
+    srv_site_combine(o, 2, &v);
+    CHECK(v.phase_deg == 0.0 && v.phase_sigma_deg == 0.0);
+}
