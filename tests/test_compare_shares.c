@@ -126,3 +126,51 @@ TEST(compare_shares_two_proportion_oracle)
     rc = fx_run(out, sizeof out, "%s compare --db %s --survey A --survey B --by survey", test_bin(), path);
     CHECK_MSG(rc == 2, "%d: %s", rc, out);
 }
+
+/* Unequal survey sizes and a phase neither survey has (hand-computed): area w, A 10/0/20 of 30,
+ * B 30/0/30 of 60. 0 deg: pooled 40/90 = 4/9, se = sqrt(4/9 x 5/9 x (1/30 + 1/60)) = 1/9,
+ * z = (1/2 - 1/3) / (1/9) = 1.5, P = erfc(1.5 / sqrt 2) = 0.13361440253771617 (Python's
+ * math.erfc); 240 deg: z = -1.5, the same P; 120 deg: no lights, no test. Homogeneity over the
+ * two phases present (1 dof): expected 40/3, 50/3 (A) and 80/3, 100/3 (B), chi2 = 2.25 = z^2,
+ * P = erfc(sqrt(2.25 / 2)), the same P. */
+TEST(compare_shares_unequal_sizes_one_dof)
+{
+    const char *path = fx_tmp("shares2.sqlite"), *geo = fx_tmp("feeders2.geojson");
+    fx_write_text(geo, areas_json);
+    int64_t a_id, b_id;
+    srv_db *db = survey_fx_create(path, "A", &a_id);
+    if (!db) return;
+    srv_survey_row sb = {.name = "B", .grid_hz = 50};
+    CHECK_OK(srv_db_add_survey(db, &sb, &b_id));
+    static const int ca[3][3] = {{10, 0, 20}, {0, 0, 0}, {0, 0, 0}};
+    static const int cb[3][3] = {{30, 0, 30}, {0, 0, 0}, {0, 0, 0}};
+    add_survey(db, a_id, "cap-a", ca, 0.0);
+    add_survey(db, b_id, "cap-b", cb, 10.0);
+    srv_areas *areas = NULL;
+    CHECK_OK(srv_areas_load(geo, "feeder", &areas));
+    srv_stats_opts o;
+    srv_stats_opts_default(&o);
+    CHECK_OK(srv_stats_parse_by("feature:feeder", &o));
+    o.areas = areas;
+    srv_share_change *v = NULL;
+    size_t n = 0;
+    CHECK_OK(srv_compare_shares(db, &o, "A", "B", &v, &n));
+    CHECK(n == 1 && v && !strcmp(v[0].group, "w"));
+    if (n == 1 && v) {
+        const double P = 0.13361440253771617;
+        CHECK(v[0].total_a == 30 && v[0].total_b == 60);
+        CHECK_NEAR(v[0].share_a[2], 2.0 / 3.0, 1e-15);
+        CHECK_NEAR(v[0].share_b[2], 0.5, 1e-15);
+        CHECK_NEAR(v[0].z[0], 1.5, 1e-12);
+        CHECK_NEAR(v[0].p[0], P, 1e-12);
+        CHECK(isnan(v[0].z[1]) && isnan(v[0].p[1]));
+        CHECK_NEAR(v[0].z[2], -1.5, 1e-12);
+        CHECK_NEAR(v[0].p[2], P, 1e-12);
+        CHECK(v[0].dof == 1);
+        CHECK_NEAR(v[0].chi2, 2.25, 1e-12);
+        CHECK_NEAR(v[0].p_value, P, 1e-12);
+    }
+    free(v);
+    srv_areas_free(areas);
+    srv_db_close(db);
+}
