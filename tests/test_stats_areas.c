@@ -320,3 +320,32 @@ TEST(stats_combined_groupings_and_six_phases)
     rc = fx_run(out, sizeof out, "%s stats --db %s --format csv", test_bin(), fx_tmp("six.sqlite"));
     CHECK_MSG(rc == 0 && strstr(out, ",n30,n150,n270\n") && strstr(out, ",2,2,2\n"), "%s", out);
 }
+
+/* srv_areas_find and srv_areas_wkt on a square's edges (docs: a feature covers its boundary),
+ * a longitude given 360 deg over, labels of numbers and booleans as JSON writes them, and a
+ * vertex of nine decimals written back to nine decimals. */
+TEST(stats_areas_boundary_labels_and_wkt_digits)
+{
+    const char *path = fx_tmp("edges.geojson");
+    fx_write_text(path, "{\"type\": \"FeatureCollection\", \"features\": ["
+                  "{\"type\": \"Feature\", \"properties\": {\"f\": 1234567.5}, \"geometry\": {\"type\": \"Polygon\", "
+                  "\"coordinates\": [[[35.0, 32.8], [35.01, 32.8], [35.01, 32.81], [35.0, 32.81], [35.0, 32.8]]]}}, "
+                  "{\"type\": \"Feature\", \"properties\": {\"f\": true}, \"geometry\": {\"type\": \"Polygon\", "
+                  "\"coordinates\": [[[36.0, 32.8], [36.123456789, 32.8], [36.0, 32.9], [36.0, 32.8]]]}}]}\n");
+    srv_areas *a = NULL;
+    CHECK_OK(srv_areas_load(path, "f", &a));
+    if (!a) return;
+    CHECK(!strcmp(srv_areas_label(a, 0), "1234567.5") && !strcmp(srv_areas_label(a, 1), "true"));
+    CHECK(srv_areas_find(a, 32.805, 35.005) == 0);
+    CHECK(srv_areas_find(a, 32.81, 35.005) == 0);    /* north edge */
+    CHECK(srv_areas_find(a, 32.805, 35.01) == 0);    /* east edge */
+    CHECK(srv_areas_find(a, 32.81, 35.01) == 0);     /* north-east corner */
+    CHECK(srv_areas_find(a, 32.8, 35.0) == 0);       /* south-west corner */
+    CHECK(srv_areas_find(a, 32.805, 35.0100001) == -1);
+    CHECK(srv_areas_find(a, 32.805, 395.005) == 0);  /* 35.005 + 360 */
+    char *wkt = NULL;
+    CHECK_OK(srv_areas_wkt(a, "true", &wkt));
+    CHECK_MSG(wkt && strstr(wkt, "36.123456789 32.8"), "%s", wkt ? wkt : "(null)");
+    free(wkt);
+    srv_areas_free(a);
+}
