@@ -61,29 +61,42 @@ static void add_survey(srv_db *db, int64_t sid, const char *key, const int count
     CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
 }
 
-TEST(compare_shares_two_proportion_oracle)
+/* Surveys A and B with the counts ca, cb (areas x phases) in a database at path, the feeders
+ * at geo, and srv_compare_shares by feeder into *v, *n; the database stays open (NULL if it
+ * could not be made), its options in *o and areas in *areas. */
+static srv_db *compare_by_feeder(const char *path, const char *geo, const int ca[3][3], const int cb[3][3],
+                                 srv_stats_opts *o, srv_areas **areas, srv_share_change **v, size_t *n)
 {
-    const char *path = fx_tmp("shares.sqlite"), *geo = fx_tmp("feeders.geojson");
     fx_write_text(geo, areas_json);
     int64_t a_id, b_id;
     srv_db *db = survey_fx_create(path, "A", &a_id);
-    if (!db) return;
+    if (!db) return NULL;
     srv_survey_row sb = {.name = "B", .grid_hz = 50};
     CHECK_OK(srv_db_add_survey(db, &sb, &b_id));
-    static const int ca[3][3] = {{30, 30, 40}, {10, 10, 10}, {5, 0, 0}};
-    static const int cb[3][3] = {{20, 30, 50}, {10, 10, 10}, {0, 0, 0}};
     add_survey(db, a_id, "cap-a", ca, 0.0);
     add_survey(db, b_id, "cap-b", cb, 10.0);
+    *areas = NULL;
+    CHECK_OK(srv_areas_load(geo, "feeder", areas));
+    srv_stats_opts_default(o);
+    CHECK_OK(srv_stats_parse_by("feature:feeder", o));
+    o->areas = *areas;
+    *v = NULL;
+    *n = 0;
+    CHECK_OK(srv_compare_shares(db, o, "A", "B", v, n));
+    return db;
+}
 
-    srv_areas *areas = NULL;
-    CHECK_OK(srv_areas_load(geo, "feeder", &areas));
+TEST(compare_shares_two_proportion_oracle)
+{
+    const char *path = fx_tmp("shares.sqlite"), *geo = fx_tmp("feeders.geojson");
+    static const int ca[3][3] = {{30, 30, 40}, {10, 10, 10}, {5, 0, 0}};
+    static const int cb[3][3] = {{20, 30, 50}, {10, 10, 10}, {0, 0, 0}};
     srv_stats_opts o;
-    srv_stats_opts_default(&o);
-    CHECK_OK(srv_stats_parse_by("feature:feeder", &o));
-    o.areas = areas;
-    srv_share_change *v = NULL;
-    size_t n = 0;
-    CHECK_OK(srv_compare_shares(db, &o, "A", "B", &v, &n));
+    srv_areas *areas;
+    srv_share_change *v;
+    size_t n;
+    srv_db *db = compare_by_feeder(path, geo, ca, cb, &o, &areas, &v, &n);
+    if (!db) return;
     CHECK(n == 3);
     const srv_share_change *w = NULL, *e = NULL, *nn = NULL;
     for (size_t i = 0; i < n; i++) {
@@ -136,25 +149,14 @@ TEST(compare_shares_two_proportion_oracle)
 TEST(compare_shares_unequal_sizes_one_dof)
 {
     const char *path = fx_tmp("shares2.sqlite"), *geo = fx_tmp("feeders2.geojson");
-    fx_write_text(geo, areas_json);
-    int64_t a_id, b_id;
-    srv_db *db = survey_fx_create(path, "A", &a_id);
-    if (!db) return;
-    srv_survey_row sb = {.name = "B", .grid_hz = 50};
-    CHECK_OK(srv_db_add_survey(db, &sb, &b_id));
     static const int ca[3][3] = {{10, 0, 20}, {0, 0, 0}, {0, 0, 0}};
     static const int cb[3][3] = {{30, 0, 30}, {0, 0, 0}, {0, 0, 0}};
-    add_survey(db, a_id, "cap-a", ca, 0.0);
-    add_survey(db, b_id, "cap-b", cb, 10.0);
-    srv_areas *areas = NULL;
-    CHECK_OK(srv_areas_load(geo, "feeder", &areas));
     srv_stats_opts o;
-    srv_stats_opts_default(&o);
-    CHECK_OK(srv_stats_parse_by("feature:feeder", &o));
-    o.areas = areas;
-    srv_share_change *v = NULL;
-    size_t n = 0;
-    CHECK_OK(srv_compare_shares(db, &o, "A", "B", &v, &n));
+    srv_areas *areas;
+    srv_share_change *v;
+    size_t n;
+    srv_db *db = compare_by_feeder(path, geo, ca, cb, &o, &areas, &v, &n);
+    if (!db) return;
     CHECK(n == 1 && v && !strcmp(v[0].group, "w"));
     if (n == 1 && v) {
         const double P = 0.13361440253771617;
