@@ -224,7 +224,9 @@ static gs_status report_surveys(const char *db_path, const srv_run_report *reps,
         if (s == GS_OK) s = write_outputs(db, &reps[i], out_dir);
         for (int j = 0; j <= i && s == GS_OK; j++) {
             const srv_run_report *r = &reps[j];
-            if (strcmp(r->survey, reps[i].survey) || !r->truth_path[0]) continue;
+            int again = 0;   /* (the same capture given twice is evaluated once) */
+            for (int k = 0; k < j; k++) again |= !strcmp(reps[k].survey, r->survey) && !strcmp(reps[k].key, r->key);
+            if (again || strcmp(r->survey, reps[i].survey) || !r->truth_path[0]) continue;
             srv_eval_opts eo;
             srv_eval_opts_default(&eo);
             eo.survey = r->survey;
@@ -345,12 +347,21 @@ int srv_cmd_run(int argc, char **argv)
     int64_t *captures = calloc((size_t)n_inputs, sizeof *captures);
     srv_run_report *reps = calloc((size_t)n_inputs, sizeof *reps);
     if (!captures || !reps) s = gs_fail(GS_ENOMEM, "out of memory");
-    for (int i = 0; i < n_inputs && s == GS_OK; i++) {
-        o.input = argv[optind + i];
-        s = run_one(&o, &reps[i]);
-        if (s == GS_OK) captures[i] = reps[i].capture_id;
+    int done = 0;
+    for (; done < n_inputs && s == GS_OK; done++) {
+        o.input = argv[optind + done];
+        s = run_one(&o, &reps[done]);
+        if (s == GS_OK) captures[done] = reps[done].capture_id;
     }
-    if (s == GS_OK) s = report_surveys(o.db_path, reps, n_inputs, out_dir);
+    /* the surveys of the inputs that were stored are reported even when a later one failed */
+    int ok_inputs = s == GS_OK ? n_inputs : done - 1;
+    if (ok_inputs > 0) {
+        char failed[1024];
+        snprintf(failed, sizeof failed, "%s", s == GS_OK ? "" : gs_detail());
+        gs_status sr = report_surveys(o.db_path, reps, ok_inputs, out_dir);
+        if (s == GS_OK) s = sr;
+        else s = gs_fail(s, "%s", failed);   /* (the input's error, not the report's) */
+    }
     if (s == GS_OK && n_inputs > 1) s = print_triangulated(o.db_path, captures, (size_t)n_inputs);
     free(reps);
     free(captures);

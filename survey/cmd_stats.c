@@ -119,7 +119,7 @@ void srv_stats_print_table(const srv_phase_stats *g, size_t n, const srv_stats_o
     if (o->min_phase_confidence > 0.0)
         printf("below: phase confidence < %g (left out); ", o->min_phase_confidence);
     else
-        printf("below: none (no --min-phase-confidence); ");
+        printf("below: none (no phase-confidence threshold); ");
     printf("unknown: ambiguous or unrecognized phase; other: a phase not within 20 deg of 0/120/240%s.",
            six ? " nor 15 deg of 30/150/270 (the six-phase columns, counts outside the shares)" : "");
     if (ungrouped > 0) printf(" %ld lights without a position are in no cell.", ungrouped);

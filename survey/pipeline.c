@@ -422,7 +422,7 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
         s = srv_db_find_survey(db, r->survey, &survey_id);
         if (s == GS_OK) s = srv_db_capture_done(db, survey_id, r->key, &is_done);
         int64_t other_id;
-        char other[64];
+        char other[64] = "";   /* (no preferred name: any other survey's) */
         if ((s == GS_OK || s == GS_ENOTFOUND) && !is_done) {
             gs_status so = srv_db_capture_survey(db, r->key, &other_id, other);
             if (so == GS_OK) snprintf(r->also_in, sizeof r->also_in, "%s", other);

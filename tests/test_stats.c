@@ -495,7 +495,7 @@ TEST(stats_cli_haifa_example)
     CHECK(strstr(out, "| all | 1000 | 0 | 0 | 0 | 1000 | 33.4 % [30.5, 36.4] (334) | 36.3 % [33.4, 39.3] (363) | "
                       "30.3 % [27.5, 33.2] (303) | 5.40 | 0.0671 | 0.091 |") != NULL);
     /* the footnote names the threshold only when one is given: every light (0.99) below 0.995 */
-    CHECK(strstr(out, "below: none (no --min-phase-confidence); ") != NULL);
+    CHECK(strstr(out, "below: none (no phase-confidence threshold); ") != NULL);
     CHECK(run("%s stats --db %s --min-phase-confidence 0.995", path, NULL, NULL) == 0);
     CHECK(strstr(out, "| all | 1000 | 1000 | 0 | 0 | 0 |") != NULL &&
           strstr(out, "below: phase confidence < 0.995 (left out); ") != NULL);

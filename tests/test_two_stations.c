@@ -136,6 +136,20 @@ TEST(two_stations_triangulate_within_their_ellipses)
                   strstr(out, "Phase balance of survey town") > last_run,
               "%d balance tables, %d maps, %d evaluations, the table %s the second input:\n%s", balances, maps,
               evals, last_run && strstr(out, "Phase balance of survey town") > last_run ? "after" : "before", out);
+    /* the same capture given twice is evaluated once; a failing later input still gets the
+     * earlier inputs' survey reported, then its own one-line error */
+    rc = sh("%s run %s %s --survey town --db %s", test_bin(), east, east, db);
+    evals = 0;
+    for (const char *p = out; (p = strstr(p, "\nEvaluation against ")); p++) evals++;
+    CHECK_MSG(rc == 0 && evals == 1, "%d, %d evaluations: %s", rc, evals, out);
+    char missing[2100];
+    snprintf(missing, sizeof missing, "%s", fx_tmp("no-such-scene.json"));
+    rc = sh("%s run %s %s --survey town --db %s", test_bin(), east, missing, db);
+    CHECK_MSG(rc == 1 && strstr(out, "Phase balance of survey town") && strstr(out, "gridsurvey run: ") &&
+                  strstr(out, "no-such-scene.json"),
+              "%d: %s", rc, out);
+    rc = sh("%s run %s %s --survey town --db %s", test_bin(), east, west, db);   /* (the output below) */
+    CHECK(rc == 0);
     const char *two = strstr(out, "\nTwo stations");
     CHECK_MSG(two && strstr(two, "16 light sites seen from two stations, 16 triangulated, 0 flagged"), "%s", out);
     if (two && getenv("GS_TEST_VERBOSE")) fputs(two, stdout);
