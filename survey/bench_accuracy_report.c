@@ -40,17 +40,18 @@ gs_status srv_acc_write_csv(const char *path, const srv_acc_point *pts, size_t n
     fprintf(f, "scene,K,C,hdr,locked,phases,acquisitions,exposure_s,readout_s,capture_s,compute_s,"
                "truth_lights,stored,matched,detection_rate,false_rate,bulb_accuracy,phase_accuracy,"
                "right_rate,bulb_unknown_rate,loc_median_m,loc_p95_m,snr_p90,ece,oracle_lights,"
-               "pipeline_on_oracle_lights,oracle_accuracy,phase_ece\n");
+               "pipeline_on_oracle_lights,oracle_accuracy,phase_ece,phase_answered\n");
     for (size_t i = 0; i < np; i++) {
         const srv_acc_point *p = &pts[i];
         if (!p->ok) continue;
         fprintf(f, "%s,%d,%d,%d,%d,%s,%ld,%.2f,%.2f,%.2f,%.3f,%ld,%ld,%ld,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,"
-                   "%.2f,%.2f,%.2f,%.4f,%ld,%.4f,%.4f,%.4f\n",
+                   "%.2f,%.2f,%.2f,%.4f,%ld,%.4f,%.4f,%.4f,%ld\n",
                 srv_acc_scene_names[p->hard], p->K, p->C, p->hdr, p->locked, srv_acc_ph_name(p), p->acquisitions,
                 p->exposure_s, p->readout_s, p->capture_s, p->compute_s, p->ev.truth_in_image, p->ev.stored,
                 p->ev.matched, p->ev.detection_rate, p->ev.false_rate, p->ev.bulb_accuracy,
                 p->ev.phase_accuracy, p->ev.all_correct_rate, p->ev.bulb_unknown_rate, p->ev.loc_median_m,
-                p->ev.loc_p95_m, p->snr_p90, p->cal.ece, p->oracle_n, p->ours_sub, p->oracle_sub, p->phase_cal.ece);
+                p->ev.loc_p95_m, p->snr_p90, p->cal.ece, p->oracle_n, p->ours_sub, p->oracle_sub, p->phase_cal.ece,
+                p->ev.phase_answered);
     }
     int bad = ferror(f);
     if (fclose(f) != 0 || bad) return gs_fail(GS_EIO, "%s: write failed", path);
@@ -61,7 +62,8 @@ gs_status srv_acc_write_bins_csv(const char *path, const srv_acc_point *pts, siz
 {
     FILE *f = fopen(path, "w");
     if (!f) return gs_fail(GS_EIO, "%s: cannot write: %s", path, strerror(errno));
-    fprintf(f, "scene,K,C,hdr,locked,phases,confidence_of,bin_lo,bin_hi,lights,mean_confidence,right\n");
+    fprintf(f, "scene,K,C,hdr,locked,phases,confidence_of,bin_lo,bin_hi,matched_lights,mean_confidence,"
+               "right_lights\n");
     for (size_t i = 0; i < np; i++) {
         const srv_acc_point *p = &pts[i];
         if (!p->ok) continue;
@@ -70,7 +72,7 @@ gs_status srv_acc_write_bins_csv(const char *path, const srv_acc_point *pts, siz
             for (int b = 0; b < NBINS; b++)
                 if (c->n[b] > 0)
                     fprintf(f, "%s,%d,%d,%d,%d,%s,%s,%.2f,%.2f,%.0f,%.6f,%.0f\n", srv_acc_scene_names[p->hard], p->K,
-                            p->C, p->hdr, p->locked, srv_acc_ph_name(p), kind ? "phase" : "pair",
+                            p->C, p->hdr, p->locked, srv_acc_ph_name(p), kind ? "phase" : "bulb_and_phase",
                             srv_acc_bin_edges[b], fmin(srv_acc_bin_edges[b + 1], 1.0), c->n[b], c->conf[b] / c->n[b],
                             c->right[b]);
         }
@@ -224,8 +226,8 @@ void srv_acc_plot_calibration(const char *path, const srv_acc_point *pts, size_t
     plscol0(5, 150, 150, 150);
     plstar(2, 1);
     static const char *const ylab[2] = {"right bulb and phase", "right phase"},
-                             *const title[2] = {"lights with a bulb by confidence",
-                                                "lights with a phase by phase confidence"};
+                             *const title[2] = {"bulb and phase: lights with a bulb by confidence",
+                                                "phase: lights with a phase by phase confidence"};
     for (int phase = 0; phase < 2; phase++) {
         pladv(phase + 1);
         plvpor(0.17, 0.93, 0.12, 0.90);
@@ -420,7 +422,11 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
                             b + 1 < NBINS ? ")" : "]", n[b], c[b] / n[b], y, lo, hi);
                 }
         }
-    fprintf(f, "\nEvery point's bins: [%s/calibration.csv](%s/calibration.csv).\n\n", leaf, leaf);
+    fprintf(f, "\nEvery point's bins: [%s/calibration.csv](%s/calibration.csv) (per point and kind, "
+               "`confidence_of` bulb_and_phase or phase: the bin [bin_lo, bin_hi), the last closed, its "
+               "lights matched to the truth, the mean confidence of all of its lights and how many of the "
+               "matched are right).\n\n",
+            leaf, leaf);
 
     /* the recommendation, from the metro curves */
     fprintf(f, "## Recommendation\n\n");

@@ -14,8 +14,9 @@ typedef struct {
     double exposure, readout, capture, compute;
     double rates[8];   /* detection, false, bulb, phase, right, unknown, pipeline subset, oracle */
     double snr, ece, phase_ece;
-    long oracle_n;
+    long oracle_n, truth_lights, phase_answered;
     double cal_num[2], cal_den[2];   /* from calibration.csv: sum |right - confidence|, lights */
+    double bin_lights[2], bin_right[2];   /* ... and the sums of its bins' lights and right ones */
 } row;
 
 static int file_size_ok(const char *path, const char *magic)
@@ -59,8 +60,8 @@ TEST(bench_accuracy_quick_consistent)
         char *fld[32];
         int nf = 0;
         for (char *t = strtok(line, ",\n"); t && nf < 32; t = strtok(NULL, ",\n")) fld[nf++] = t;
-        CHECK_MSG(nf == 28, "CSV row with %d fields", nf);
-        if (nf != 28) continue;
+        CHECK_MSG(nf == 29, "CSV row with %d fields", nf);
+        if (nf != 29) continue;
         row *r = &rows[n++];
         snprintf(r->scene, sizeof r->scene, "%s", fld[0]);
         r->K = atoi(fld[1]);
@@ -79,6 +80,9 @@ TEST(bench_accuracy_quick_consistent)
         r->ece = num(fld[23]);
         r->oracle_n = atol(fld[24]);
         r->phase_ece = num(fld[27]);
+        r->phase_answered = atol(fld[28]);
+        r->truth_lights = atol(fld[11]);
+        r->bin_lights[0] = r->bin_lights[1] = r->bin_right[0] = r->bin_right[1] = 0;
         r->cal_num[0] = r->cal_num[1] = r->cal_den[0] = r->cal_den[1] = 0;
     }
     fclose(f);
@@ -90,7 +94,9 @@ TEST(bench_accuracy_quick_consistent)
     f = fopen(path, "r");
     CHECK_MSG(f != NULL, "%s: missing", path);
     if (!f) return;
-    CHECK(fgets(line, sizeof line, f) && !strncmp(line, "scene,K,C,hdr,locked,phases,confidence_of,", 42));
+    CHECK(fgets(line, sizeof line, f) &&
+          !strcmp(line, "scene,K,C,hdr,locked,phases,confidence_of,bin_lo,bin_hi,matched_lights,mean_confidence,"
+                        "right_lights\n"));
     int bins = 0;
     while (fgets(line, sizeof line, f)) {
         char *fld[16];
@@ -112,6 +118,8 @@ TEST(bench_accuracy_quick_consistent)
                 continue;
             r->cal_num[phase] += fabs(right - mean * lights);
             r->cal_den[phase] += lights;
+            r->bin_lights[phase] += lights;
+            r->bin_right[phase] += right;
         }
     }
     fclose(f);
@@ -122,6 +130,18 @@ TEST(bench_accuracy_quick_consistent)
         for (int k = 0; k < 2; k++)
             if (r->cal_den[k] > 0) CHECK_NEAR(ece[k], r->cal_num[k] / r->cal_den[k], 2e-4);
             else CHECK(isnan(ece[k]));
+        /* the bins partition the answers the whole capture's evaluation scored (each bin is
+         * scored on its own: its one-to-one matching may differ by a light): the phase bins
+         * hold its phases and their right ones (phase accuracy x phases), the pair bins its
+         * right bulb and phase (right/all x truth lights) */
+        double tol = 1.0;   /* (a light: the quick points' sums are exact) */
+        CHECK_MSG(fabs(r->bin_lights[1] - (double)r->phase_answered) <= tol &&
+                      fabs(r->bin_right[1] - r->rates[3] * (double)r->phase_answered) <= tol &&
+                      fabs(r->bin_right[0] - r->rates[4] * (double)r->truth_lights) <= tol,
+                  "%s K=%d C=%d: phase bins %g lights, %g right (capture: %ld phases, %.0f right); pair bins "
+                  "%g right (capture %.0f)", r->scene, r->K, r->C, r->bin_lights[1], r->bin_right[1],
+                  r->phase_answered, r->rates[3] * (double)r->phase_answered, r->bin_right[0],
+                  r->rates[4] * (double)r->truth_lights);
     }
     CHECK_MSG(n >= 4, "%d rows", n);
     const double delta = 0.01, readout_cycles = 10;   /* 50 Hz; the scene's readout_cycles */
