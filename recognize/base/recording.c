@@ -488,8 +488,12 @@ gs_status gs_recording_to_bulb(const char *path, int voltage_column, int n, gs_b
             goto done;
         }
         if (grid == voltage_grid) {
-            double a = 0, b = 0;   /* (left 0 by a singular fit) */
-            harmonic_fit(s.volt, N, dt, fv, 1, &a, &b, NULL);
+            double a = 0, b = 0;
+            if (harmonic_fit(s.volt, N, dt, fv, 1, &a, &b, NULL) == HUGE_VAL) {
+                st = gs_fail(GS_ENUMERIC, "%s: field voltage (column %d): the %.4g Hz sine cannot be "
+                             "fitted: expected samples spread over its cycle", path, voltage_column, fv);
+                goto done;
+            }
             /* a cos w + b sin w = R sin(w + phi), phi = atan2(a, b): rising zero at w = -phi. */
             double cyc = -atan2(a, b) / two_pi;
             t_ref = (cyc - floor(cyc)) / fv;
