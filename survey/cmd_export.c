@@ -66,10 +66,6 @@ static const char filters[] =
     "AND (?1 IS NULL OR s.name = ?1) AND (?2 IS NULL OR coalesce(l.technology, 'none') = ?2) "
     "AND l.confidence >= ?3 ORDER BY l.id";
 
-static double col_real(sqlite3_stmt *q, int i)
-{
-    return sqlite3_column_type(q, i) == SQLITE_NULL ? NAN : sqlite3_column_double(q, i);
-}
 
 static void col_text(sqlite3_stmt *q, int i, char *dst, size_t size)
 {
@@ -126,7 +122,7 @@ gs_status srv_db_read_lights(srv_db *db, const srv_export_opts *o, gis_light **l
     gs_status s = GS_OK;
     int rc;
     while ((rc = sqlite3_step(q)) == SQLITE_ROW) {
-        double phase = col_real(q, 5), lat = col_real(q, 7), lon = col_real(q, 8);
+        double phase = srv_dbi_col_real(q, 5), lat = srv_dbi_col_real(q, 7), lon = srv_dbi_col_real(q, 8);
         if (o->phase != -2 && gs_phase_class(phase) != o->phase) continue;
         if (o->use_bbox && !in_bbox(o, lat, lon)) continue;
         if (n == cap) {
@@ -147,13 +143,13 @@ gs_status srv_db_read_lights(srv_db *db, const srv_export_opts *o, gis_light **l
         col_text(q, 3, l->bulb_id, sizeof l->bulb_id);
         col_text(q, 4, l->technology, sizeof l->technology);
         l->phase_deg = phase;
-        l->confidence = col_real(q, 6);
+        l->confidence = srv_dbi_col_real(q, 6);
         l->lat_deg = lat;
         l->lon_deg = lon;
-        l->height_m = col_real(q, 9);
-        l->ellipse.semi_major_m = col_real(q, 10);
-        l->ellipse.semi_minor_m = col_real(q, 11);
-        l->ellipse.azimuth_deg = col_real(q, 12);
+        l->height_m = srv_dbi_col_real(q, 9);
+        l->ellipse.semi_major_m = srv_dbi_col_real(q, 10);
+        l->ellipse.semi_minor_m = srv_dbi_col_real(q, 11);
+        l->ellipse.azimuth_deg = srv_dbi_col_real(q, 12);
         l->flags = (unsigned)sqlite3_column_int64(q, 13);
         if (sqlite3_column_type(q, 14) != SQLITE_NULL)
             snprintf(l->site, sizeof l->site, "%lld", (long long)sqlite3_column_int64(q, 14));
@@ -173,8 +169,7 @@ gs_status srv_db_read_lights(srv_db *db, const srv_export_opts *o, gis_light **l
 gs_status srv_db_read_stations(srv_db *db, const char *survey, gis_camera **cams, size_t *count)
 {
     static const char sql[] =
-        "SELECT st.lat_deg, st.lon_deg, st.height_m, st.heading_deg, st.pitch_deg, st.roll_deg, "
-        "st.focal_px, st.cx_px, st.cy_px, st.k1, st.k2, st.width_px, st.height_px, st.refraction_k "
+        "SELECT " SRV_SQL_CAMERA_COLS("st") ", st.width_px, st.height_px "
         "FROM stations st JOIN surveys s ON s.id = st.survey_id WHERE ?1 IS NULL OR s.name = ?1 ORDER BY st.id";
     *cams = NULL;
     *count = 0;
@@ -195,13 +190,9 @@ gs_status srv_db_read_stations(srv_db *db, const char *survey, gis_camera **cams
         }
         v = nv;
         gis_camera *c = &v[n];
-        memset(c, 0, sizeof *c);
-        double *f[11] = {&c->lat_deg, &c->lon_deg, &c->height_m, &c->heading_deg, &c->pitch_deg, &c->roll_deg,
-                         &c->focal_px, &c->cx_px, &c->cy_px, &c->k1, &c->k2};
-        for (int k = 0; k < 11; k++) *f[k] = col_real(q, k);
-        c->width_px = sqlite3_column_int(q, 11);
-        c->height_px = sqlite3_column_int(q, 12);
-        c->refraction_k = sqlite3_column_double(q, 13);
+        srv_dbi_col_camera(q, 0, c);
+        c->width_px = sqlite3_column_int(q, 12);
+        c->height_px = sqlite3_column_int(q, 13);
         /* a station stored without a full pose (no camera) is not drawn */
         n += isfinite(c->lat_deg) && isfinite(c->lon_deg) && gis_camera_check(c) == GS_OK;
     }

@@ -99,6 +99,22 @@ void srv_dbi_bind_real(sqlite3_stmt *q, int i, double v)
     else sqlite3_bind_null(q, i);
 }
 
+double srv_dbi_col_real(sqlite3_stmt *q, int i)
+{
+    return sqlite3_column_type(q, i) == SQLITE_NULL ? NAN : sqlite3_column_double(q, i);
+}
+
+void srv_dbi_col_camera(sqlite3_stmt *q, int first, gis_camera *c)
+{
+    memset(c, 0, sizeof *c);
+    double *v[12] = {&c->lat_deg, &c->lon_deg, &c->height_m, &c->heading_deg, &c->pitch_deg, &c->roll_deg,
+                     &c->focal_px, &c->cx_px, &c->cy_px, &c->k1, &c->k2, &c->refraction_k};
+    for (int k = 0; k < 12; k++) {
+        *v[k] = srv_dbi_col_real(q, first + k);
+        if (k >= 9 && isnan(*v[k])) *v[k] = 0.0;   /* no distortion, no refraction */
+    }
+}
+
 void srv_dbi_bind_text(sqlite3_stmt *q, int i, const char *s)
 {
     if (s && *s) sqlite3_bind_text(q, i, s, -1, SQLITE_STATIC);

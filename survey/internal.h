@@ -172,6 +172,14 @@ void srv_dbi_utc_now(char buf[32]);
 gs_status srv_dbi_exec(srv_db *db, const char *sql, const char *what);
 gs_status srv_dbi_stmt(srv_db *db, int which, sqlite3_stmt **out);
 void srv_dbi_bind_real(sqlite3_stmt *q, int i, double v);
+/* Column i as a double, NaN when NULL. */
+double srv_dbi_col_real(sqlite3_stmt *q, int i);
+/* A station's camera from its stored columns, SRV_SQL_CAMERA_COLS from column first on (NULL
+ * numbers NaN; NULL distortion and refraction 0, none); the image size is not read (0). */
+#define SRV_SQL_CAMERA_COLS(st)                                                                   \
+    st ".lat_deg, " st ".lon_deg, " st ".height_m, " st ".heading_deg, " st ".pitch_deg, " st     \
+    ".roll_deg, " st ".focal_px, " st ".cx_px, " st ".cy_px, " st ".k1, " st ".k2, " st ".refraction_k"
+void srv_dbi_col_camera(sqlite3_stmt *q, int first, gis_camera *c);
 void srv_dbi_bind_text(sqlite3_stmt *q, int i, const char *s);
 void srv_dbi_bind_int_or_null(sqlite3_stmt *q, int i, int64_t v, int64_t none);
 gs_status srv_dbi_step_returning(srv_db *db, sqlite3_stmt *q, int64_t *id, int *inserted, const char *what);

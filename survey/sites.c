@@ -270,10 +270,6 @@ static int cmp_pairs(const void *a, const void *b)
     return x->site < y->site ? -1 : x->site > y->site;
 }
 
-static double col(sqlite3_stmt *q, int i)
-{
-    return sqlite3_column_type(q, i) == SQLITE_NULL ? NAN : sqlite3_column_double(q, i);
-}
 
 static gs_status prep(srv_db *db, const char *sql, sqlite3_stmt **q)
 {
@@ -324,8 +320,8 @@ void srv_site_obs_from_row(sqlite3_stmt *q, int first, srv_site_obs *o)
     const char *t = (const char *)sqlite3_column_text(q, first + 1);
     snprintf(o->bulb_id, sizeof o->bulb_id, "%s", b ? b : "");
     snprintf(o->technology, sizeof o->technology, "%s", t ? t : "");
-    o->phase_deg = col(q, first + 2);
-    o->phase_sigma_deg = col(q, first + 3);
+    o->phase_deg = srv_dbi_col_real(q, first + 2);
+    o->phase_sigma_deg = srv_dbi_col_real(q, first + 3);
     o->confidence = sqlite3_column_double(q, first + 4);
     o->bulb_confidence = sqlite3_column_double(q, first + 5);
     o->phase_confidence = sqlite3_column_double(q, first + 6);
@@ -371,8 +367,8 @@ static gs_status refresh_site(srv_db *db, sqlite3_stmt *qo, sqlite3_stmt *qu, in
     while ((rc = sqlite3_step(qo)) == SQLITE_ROW) {
         if ((s = grow(&o, &cap, n + 1, sizeof *o)) != GS_OK) break;
         srv_site_obs_from_row(qo, 0, &o[n++]);
-        double lat = col(qo, 8), lon = col(qo, 9), h = col(qo, 10), a = col(qo, 11), b = col(qo, 12),
-               az = col(qo, 13);
+        double lat = srv_dbi_col_real(qo, 8), lon = srv_dbi_col_real(qo, 9), h = srv_dbi_col_real(qo, 10), a = srv_dbi_col_real(qo, 11), b = srv_dbi_col_real(qo, 12),
+               az = srv_dbi_col_real(qo, 13);
         sx += sqlite3_column_double(qo, 14);
         sy += sqlite3_column_double(qo, 15);
         if (isfinite(h)) {
@@ -478,10 +474,10 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
         x->light_id = sqlite3_column_int64(qd, 0);
         x->x_px = sqlite3_column_double(qd, 1);
         x->y_px = sqlite3_column_double(qd, 2);
-        x->lat = col(qd, 3);
-        x->lon = col(qd, 4);
-        x->height = col(qd, 5);
-        double a = col(qd, 6), b = col(qd, 7), az = col(qd, 8);
+        x->lat = srv_dbi_col_real(qd, 3);
+        x->lon = srv_dbi_col_real(qd, 4);
+        x->height = srv_dbi_col_real(qd, 5);
+        double a = srv_dbi_col_real(qd, 6), b = srv_dbi_col_real(qd, 7), az = srv_dbi_col_real(qd, 8);
         x->located = isfinite(x->lat) && a > 0.0 && isfinite(a) && b > 0.0 && isfinite(b);
         if (x->located) ellipse_cov(a, b, isfinite(az) ? az : 0.0, x->C);
         x->a = a;
@@ -501,7 +497,7 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
              "ORDER BY site_id", (long long)cid);
     if ((s = collect_ids(db, held_sql, &held, &capheld, &nheld)) != GS_OK) goto done;
     double amax = 0.0;
-    if ((rc = sqlite3_step(qm)) == SQLITE_ROW) amax = fmax(col(qm, 0), 0.0);
+    if ((rc = sqlite3_step(qm)) == SQLITE_ROW) amax = fmax(srv_dbi_col_real(qm, 0), 0.0);
     else if (rc != SQLITE_DONE) {   /* (SQLite may have rolled the transaction back) */
         s = srv_dbi_fail(db, "reading the widest site ellipse");
         goto done;
@@ -531,7 +527,7 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
         while ((rc = sqlite3_step(q)) == SQLITE_ROW) {
             double d2;
             if (x->located) {
-                double lat = col(q, 1), lon = col(q, 2), a = col(q, 3), b = col(q, 4), az = col(q, 5), C[3];
+                double lat = srv_dbi_col_real(q, 1), lon = srv_dbi_col_real(q, 2), a = srv_dbi_col_real(q, 3), b = srv_dbi_col_real(q, 4), az = srv_dbi_col_real(q, 5), C[3];
                 if (!(a > 0.0) || !(b > 0.0)) continue;
                 ellipse_cov(a, b, isfinite(az) ? az : 0.0, C);
                 for (int j = 0; j < 3; j++) C[j] += x->C[j];
@@ -773,10 +769,10 @@ gs_status srv_compare(srv_db *db, const char *survey_a, const char *survey_b, do
         if (!na && !nb) {
             memset(&cur, 0, sizeof cur);
             cur.site_id = site;
-            cur.lat_deg = col(q, 10);
-            cur.lon_deg = col(q, 11);
-            cur.x_px = col(q, 12);
-            cur.y_px = col(q, 13);
+            cur.lat_deg = srv_dbi_col_real(q, 10);
+            cur.lon_deg = srv_dbi_col_real(q, 11);
+            cur.x_px = srv_dbi_col_real(q, 12);
+            cur.y_px = srv_dbi_col_real(q, 13);
         }
         int in_b = sqlite3_column_int(q, 1);
         if (in_b && nb < SRV_SITE_MAX_OBS) srv_site_obs_from_row(q, 2, &ob[nb++]);

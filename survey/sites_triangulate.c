@@ -14,18 +14,11 @@
 
 #define DEG (M_PI / 180.0)
 
-static double col(sqlite3_stmt *q, int i)
-{
-    return sqlite3_column_type(q, i) == SQLITE_NULL ? NAN : sqlite3_column_double(q, i);
-}
-
 /* The located detections of the given captures, one site after the other, stations in
  * capture order. */
 static const char dets_sql[] =
     "SELECT sd.site_id, l.id, c.station_id, st.name, l.x_px, l.y_px, loc.lat_deg, loc.lon_deg, "
-    "loc.semi_major_m, loc.semi_minor_m, loc.azimuth_deg, st.lat_deg, st.lon_deg, st.height_m, "
-    "st.heading_deg, st.pitch_deg, st.roll_deg, st.focal_px, st.cx_px, st.cy_px, st.k1, st.k2, "
-    "st.refraction_k FROM site_detections sd JOIN lights l ON l.id = sd.light_id "
+    "loc.semi_major_m, loc.semi_minor_m, loc.azimuth_deg, " SRV_SQL_CAMERA_COLS("st") " FROM site_detections sd JOIN lights l ON l.id = sd.light_id "
     "JOIN captures c ON c.id = sd.capture_id JOIN stations st ON st.id = c.station_id "
     "JOIN locations loc ON loc.light_id = l.id "
     "WHERE sd.capture_id IN (SELECT value FROM json_each(?1)) AND loc.lat_deg IS NOT NULL "
@@ -46,15 +39,9 @@ static void read_det(sqlite3_stmt *q, det *d)
     d->station = sqlite3_column_int64(q, 2);
     const unsigned char *nm = sqlite3_column_text(q, 3);
     snprintf(d->name, sizeof d->name, "%s", nm ? (const char *)nm : "");
-    d->x = col(q, 4), d->y = col(q, 5), d->lat = col(q, 6), d->lon = col(q, 7);
-    d->a = col(q, 8), d->b = col(q, 9), d->az = col(q, 10);
-    gis_camera *c = &d->cam;
-    c->lat_deg = col(q, 11), c->lon_deg = col(q, 12), c->height_m = col(q, 13);
-    c->heading_deg = col(q, 14), c->pitch_deg = col(q, 15), c->roll_deg = col(q, 16);
-    c->focal_px = col(q, 17), c->cx_px = col(q, 18), c->cy_px = col(q, 19);
-    c->k1 = isnan(col(q, 20)) ? 0.0 : col(q, 20);
-    c->k2 = isnan(col(q, 21)) ? 0.0 : col(q, 21);
-    c->refraction_k = isnan(col(q, 22)) ? 0.0 : col(q, 22);
+    double *f[7] = {&d->x, &d->y, &d->lat, &d->lon, &d->a, &d->b, &d->az};
+    for (int k = 0; k < 7; k++) *f[k] = srv_dbi_col_real(q, 4 + k);
+    srv_dbi_col_camera(q, 11, &d->cam);
 }
 
 /* The detection's bearing from its station and that bearing's 1-sigma, degrees. */

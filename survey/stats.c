@@ -289,10 +289,6 @@ static const char scan_sql[] =
 static const char order_site_sql[] = "ORDER BY 1, l.id";
 static const char order_survey_sql[] = "ORDER BY 2, 1, l.id";
 
-static double column_real(sqlite3_stmt *q, int i)
-{
-    return sqlite3_column_type(q, i) == SQLITE_NULL ? NAN : sqlite3_column_double(q, i);
-}
 
 /* A stored position (columns col, col + 1) is NULL (not located) or numbers in range: a
  * tampered database with text or out-of-range coordinates is refused rather than fed to floor()
@@ -385,8 +381,8 @@ static gs_status lite_next(void *ctx, srv_stats_row *row, int *got)
                                            sqlite3_errmsg(sqlite3_db_handle(x->q)));
     row->id = sqlite3_column_int64(x->q, 0);
     row->survey = (const char *)sqlite3_column_text(x->q, 1);
-    row->lat = column_real(x->q, 10);
-    row->lon = column_real(x->q, 11);
+    row->lat = srv_dbi_col_real(x->q, 10);
+    row->lon = srv_dbi_col_real(x->q, 11);
     srv_site_obs_from_row(x->q, 2, &row->obs);
     return check_position(x->q, 10, x->path, row->lat, row->lon);
 }
