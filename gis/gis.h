@@ -138,6 +138,9 @@ const char *gis_flags_str(unsigned flags, char *buf, size_t size);
 typedef struct {
     double max_error_ratio;  /* GIS_FIX_GRAZING when semi_major > ratio * range (0.25) */
     double sigma_height_m;   /* 1-sigma of the light's height (the height prior), >= 0 (0) */
+    double pixel_cov_px2[3]; /* a pixel covariance (xx, xy, yy), px^2, added to sigma_px^2 I: e.g.
+                                a deblended light's from its PSF fit, correlated and unequal in
+                                x and y; positive semi-definite (0, 0, 0) */
 } gis_locate_opts;
 void gis_locate_opts_default(gis_locate_opts *o);
 

@@ -18,6 +18,7 @@ void gis_locate_opts_default(gis_locate_opts *o)
 {
     o->max_error_ratio = 0.25;
     o->sigma_height_m = 0.0;
+    o->pixel_cov_px2[0] = o->pixel_cov_px2[1] = o->pixel_cov_px2[2] = 0.0;
 }
 
 const char *gis_flags_str(unsigned flags, char *buf, size_t size)
@@ -239,6 +240,11 @@ gs_status gis_locate(const gis_camera *cam, double x_px, double y_px, double sig
         return gs_fail(GS_EINVAL, "locate: max_error_ratio = %g: expected > 0", o->max_error_ratio);
     if (!(o->sigma_height_m >= 0.0) || !isfinite(o->sigma_height_m))
         return gs_fail(GS_EINVAL, "locate: sigma_height_m = %g: expected a finite value >= 0", o->sigma_height_m);
+    const double *pc = o->pixel_cov_px2;
+    if (!(pc[0] >= 0.0 && pc[2] >= 0.0 && isfinite(pc[0]) && isfinite(pc[1]) && isfinite(pc[2]) &&
+          pc[1] * pc[1] <= pc[0] * pc[2] * (1.0 + 1e-9)))
+        return gs_fail(GS_EINVAL, "locate: pixel covariance (%g, %g, %g) px^2: expected a positive "
+                       "semi-definite (xx, xy, yy)", pc[0], pc[1], pc[2]);
 
     if (gis_pixel_bearing(cam, x_px, y_px, &out->bearing_deg, &out->elevation_deg) != GS_OK) {
         out->flags |= GIS_FIX_BAD_PIXEL;   /* beyond the distortion model's field */
@@ -267,13 +273,15 @@ gs_status gis_locate(const gis_camera *cam, double x_px, double y_px, double sig
      * the heading/pitch/roll parametrisation, and stay defined at pitch +-90 deg, where the
      * angles themselves lock. The light's height (the prior's sigma) moves the surface the
      * sight line meets. Each parameter is also moved by +-1 sigma: when that sight line misses
-     * the surface the ellipse is unbounded. */
-    const double sig[6] = {sigma_px, sigma_px, cam->sigma_heading_deg, cam->sigma_pitch_deg,
+     * the surface the ellipse is unbounded. The pixel's x and y have the covariance
+     * sigma_px^2 I + pixel_cov_px2: their terms, with the cross term Cxy (Jx Jy^T + Jy Jx^T). */
+    const double var_x = sigma_px * sigma_px + pc[0], var_y = sigma_px * sigma_px + pc[2];
+    const double sig[6] = {sqrt(var_x), sqrt(var_y), cam->sigma_heading_deg, cam->sigma_pitch_deg,
                            cam->sigma_roll_deg, o->sigma_height_m};
     const double step[6] = {1e-3, 1e-3, 1e-5, 1e-5, 1e-5, 1e-3};
     const double up[3] = {0.0, 0.0, 1.0};
     const double pitch_axis[3] = {cos(cam->heading_deg * GIS_DEG), -sin(cam->heading_deg * GIS_DEG), 0.0};
-    double cee = 0.0, cen = 0.0, cnn = 0.0;
+    double cee = 0.0, cen = 0.0, cnn = 0.0, jpx[2][2] = {{0.0, 0.0}, {0.0, 0.0}};
     int unbounded = 0;
     for (int j = 0; j < 6 && !unbounded; j++) {
         if (sig[j] == 0.0) continue;
@@ -308,12 +316,18 @@ gs_status gis_locate(const gis_camera *cam, double x_px, double y_px, double sig
             if (pass == 0 && !unbounded) {
                 double je = (en[0][0] - en[1][0]) / (2.0 * step[j]);
                 double jn = (en[0][1] - en[1][1]) / (2.0 * step[j]);
-                double v = sig[j] * sig[j];
+                double v = j == 0 ? var_x : j == 1 ? var_y : sig[j] * sig[j];
                 cee += v * je * je;
                 cen += v * je * jn;
                 cnn += v * jn * jn;
+                if (j < 2) jpx[j][0] = je, jpx[j][1] = jn;
             }
         }
+    }
+    if (pc[1] != 0.0) {
+        cee += 2.0 * pc[1] * jpx[0][0] * jpx[1][0];
+        cen += pc[1] * (jpx[0][0] * jpx[1][1] + jpx[1][0] * jpx[0][1]);
+        cnn += 2.0 * pc[1] * jpx[0][1] * jpx[1][1];
     }
     if (unbounded) {
         out->ellipse.semi_major_m = out->ellipse.semi_minor_m = INFINITY;

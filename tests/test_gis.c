@@ -545,6 +545,62 @@ TEST(gis_locate_ellipse_height_prior_analytic)
     CHECK(gis_locate(&cam, cam.cx_px, cam.cy_px, 0.0, 0.0, &o, &fx) == GS_EINVAL);
 }
 
+TEST(gis_locate_ellipse_pixel_covariance_monte_carlo)
+{
+    /* A correlated, unequal pixel covariance (a deblended light's, gis_locate_opts.pixel_cov_px2)
+     * on a grazing sight line (200 m up, 5 km away: one pixel of y is ~30 m along the line): the
+     * ellipse's covariance against the Monte-Carlo oracle of the forward model itself, 20,000
+     * pixels drawn from N(0, sigma_px^2 I + C) and each located; the share inside the 95 %
+     * ellipse is 95 %. Without the cross term, or with sigma_px alone, it is far off. */
+    gis_camera cam = gisfx_base_camera();
+    cam.height_m = 200.0;
+    cam.focal_px = 4000.0;
+    cam.heading_deg = 30.0;
+    cam.pitch_deg = -atan(170.0 / 5000.0) / D2R;
+    gis_locate_opts o;
+    gis_locate_opts_default(&o);
+    const double sp = 0.02, cxx = 0.09, cxy = -0.05, cyy = 0.04;   /* px, px^2 */
+    o.pixel_cov_px2[0] = cxx, o.pixel_cov_px2[1] = cxy, o.pixel_cov_px2[2] = cyy;
+    const double x0 = cam.cx_px + 150.0, y0 = cam.cy_px + 20.0;
+    gis_fix fx;
+    CHECK_OK(gis_locate(&cam, x0, y0, sp, 29.0, &o, &fx));
+    CHECK(isfinite(fx.lat_deg) && fx.ellipse.semi_major_m > 5.0);
+    /* the oracle: draws by the Cholesky factor of the total covariance */
+    const double a = sp * sp + cxx, b = cxy, c = sp * sp + cyy;
+    const double l11 = sqrt(a), l21 = b / l11, l22 = sqrt(c - l21 * l21);
+    gs_rng r;
+    gs_rng_init(&r, 7, 0, 0, 1);
+    const int n = 20000;
+    double see = 0, sen = 0, snn = 0;
+    double *en = malloc(sizeof(double) * 2 * n);
+    for (int i = 0; i < n; i++) {
+        double z1 = gs_rng_normal(&r), z2 = gs_rng_normal(&r);
+        gis_fix f;
+        CHECK_OK(gis_locate(&cam, x0 + l11 * z1, y0 + l21 * z1 + l22 * z2, 0.0, 29.0, NULL, &f));
+        double d, azi;
+        CHECK_OK(gis_geodesic_inverse(fx.lat_deg, fx.lon_deg, f.lat_deg, f.lon_deg, &d, &azi, NULL));
+        en[2 * i] = d * sin(azi * D2R);
+        en[2 * i + 1] = d * cos(azi * D2R);
+        see += en[2 * i] * en[2 * i], sen += en[2 * i] * en[2 * i + 1], snn += en[2 * i + 1] * en[2 * i + 1];
+    }
+    gis_ellipse mc = gis_ellipse_from_cov(see / n, sen / n, snn / n);
+    CHECK_NEAR(fx.ellipse.semi_major_m, mc.semi_major_m, 0.03 * mc.semi_major_m);
+    CHECK_NEAR(fx.ellipse.semi_minor_m, mc.semi_minor_m, 0.03 * mc.semi_minor_m);
+    CHECK_NEAR(fx.ellipse.azimuth_deg, mc.azimuth_deg, 1.0);
+    /* the share inside the stored 95 % ellipse (first order: the line is straight over +-3 sigma) */
+    const double t = fx.ellipse.azimuth_deg * D2R, A = fx.ellipse.semi_major_m, B = fx.ellipse.semi_minor_m;
+    int in = 0;
+    for (int i = 0; i < n; i++) {
+        double u = en[2 * i] * sin(t) + en[2 * i + 1] * cos(t), v = en[2 * i] * cos(t) - en[2 * i + 1] * sin(t);
+        in += (u * u) / (A * A) + (v * v) / (B * B) <= -2.0 * log(0.05);
+    }
+    free(en);
+    CHECK_MSG(fabs((double)in / n - 0.95) < 0.01, "%d of %d inside the 95 %% ellipse", in, n);
+    /* not positive semi-definite: refused */
+    o.pixel_cov_px2[1] = 0.07;
+    CHECK(gis_locate(&cam, x0, y0, sp, 29.0, &o, &fx) == GS_EINVAL);
+}
+
 /* -------------------------------------------------------------- station files */
 
 TEST(gis_station_parse_errors_name_line_and_field)
