@@ -62,13 +62,14 @@ void rec_catalog_release(rec_catalog *cat)
     free(cat->peak_dn);
     free(cat->saturated_px);
     free(cat->flags);
+    free(cat->pos_cov_px2);
     free(cat->signal);
     free(cat->sigma);
     free(cat->labels);
     memset(cat, 0, sizeof *cat);
 }
 
-static int cmp_double(const void *a, const void *b)
+int rec_cmp_double(const void *a, const void *b)
 {
     double x = *(const double *)a, y = *(const double *)b;
     return (x > y) - (x < y);
@@ -114,7 +115,7 @@ static void mesh_median3(double *g, int nx, int ny, double *tmp)
                     if (ej != jj && ny > 1) fx += fe - tmp[rj * nx + ei];
                     v[n++] = fx;
                 }
-            qsort(v, (size_t)n, sizeof *v, cmp_double);
+            qsort(v, (size_t)n, sizeof *v, rec_cmp_double);
             g[j * nx + i] = v[n / 2];
         }
 }

@@ -173,6 +173,44 @@ static void psf_1d_d(int lo, int n, double c, double sigma, double *g, double *d
     }
 }
 
+/* For band b of the fit that fit_eval last evaluated (its P, F and Ainv), with S templates T
+ * (S x n, template c belonging to source c / 3): f->perp and f->wperp the templates with the
+ * part the fluxes absorb removed (per band, the weighted projection on the span of the P_q:
+ * perp_c = T_c - P^T A^-1 (P W T_c)) and that times w_pb; f->wP the N sources' w_pb h_q(p),
+ * h_q = sum_k R_p,bk F_q,bk for the residual R; FF_qt = sum_k F_q,bk F_t,bk. */
+static void band_projection(fit_data *f, int N, int b, const double *T, int S, double *FF)
+{
+    const int n = f->n, K = f->K, BK = f->BK;
+    const double *A = f->Ainv + (size_t)b * N * N;
+    double *wb = f->wb, *wPb = f->wPb, *perp = f->perp, *wperp = f->wperp, *wh = f->wP;
+    for (int p = 0; p < n; p++) wb[p] = f->w[p * f->B + b];
+    for (int q = 0; q < N; q++)
+        for (int p = 0; p < n; p++) wPb[q * n + p] = wb[p] * f->P[q * n + p];
+    for (int c = 0; c < S; c++) {
+        double pr[FIT_MAX_SOURCES];
+        for (int q = 0; q < N; q++) pr[q] = gs_dot(wPb + q * n, T + c * n, n);
+        double *pc = perp + c * n;
+        memcpy(pc, T + c * n, sizeof(double) * (size_t)n);
+        for (int q = 0; q < N; q++) {
+            double v = 0;
+            for (int t = 0; t < N; t++) v += A[q * N + t] * pr[t];
+            for (int p = 0; p < n; p++) pc[p] -= v * f->P[q * n + p];
+        }
+        for (int p = 0; p < n; p++) wperp[c * n + p] = wb[p] * pc[p];
+    }
+    for (int q = 0; q < N; q++)
+        for (int t = q; t < N; t++)
+            FF[q * N + t] = FF[t * N + q] = gs_dot(f->F + q * BK + b * K, f->F + t * BK + b * K, K);
+    /* h_q = sum_k (D_pk - sum_t P_t(p) F_tk) F_qk = sum_k D_pk F_qk - sum_t P_t(p) FF_tq */
+    for (int q = 0; q < N; q++) {
+        double *h = wh + q * n;
+        for (int p = 0; p < n; p++) h[p] = gs_dot(f->D + (size_t)p * BK + b * K, f->F + q * BK + b * K, K);
+        for (int t = 0; t < N; t++)
+            for (int p = 0; p < n; p++) h[p] -= FF[t * N + q] * f->P[t * n + p];
+        for (int p = 0; p < n; p++) h[p] *= wb[p];
+    }
+}
+
 /* The gradient g and the Gauss-Newton matrix H of chi2 over the m = 2 N + 1 parameters (x_q,
  * y_q, then sigma) at the point fit_eval last evaluated (its P, F and Ainv): the variable
  * projection of Golub & Pereyra (1973), Kaufman's (1975) form. With M_pd = sum_q P_q(p) F_qd
@@ -183,7 +221,7 @@ static void psf_1d_d(int lo, int n, double c, double sigma, double *g, double *d
  * the sums over the K frames separate. */
 static void fit_gradient(fit_data *f, int N, const double *pos, double *g, double *H)
 {
-    const int n = f->n, B = f->B, K = f->K, BK = f->BK, m = 2 * N + 1, S = 3 * N;
+    const int n = f->n, B = f->B, m = 2 * N + 1, S = 3 * N;
     const double sigma = pos[2 * N];
     double *dP = f->dP, *perp = f->perp;   /* [3 N n]: d/dx_q, d/dy_q, d/dsigma of P_q */
     double *wh = f->wP;                     /* [N n] scratch (fit_eval's, set again there) */
@@ -205,43 +243,13 @@ static void fit_gradient(fit_data *f, int N, const double *pos, double *g, doubl
     }
     /* the parameter of derivative column c = 3 q + j: x_q, y_q or sigma */
 #define PARAM_OF(c) ((c) % 3 == 2 ? 2 * N : 2 * ((c) / 3) + (c) % 3)
-    double *wb = f->wb, *wPb = f->wPb, *wperp = f->wperp;   /* [n], [N n], [3 N n] */
     for (int b = 0; b < B; b++) {
-        const double *A = f->Ainv + (size_t)b * N * N;
-        for (int p = 0; p < n; p++) wb[p] = f->w[p * B + b];
-        for (int q = 0; q < N; q++)
-            for (int p = 0; p < n; p++) wPb[q * n + p] = wb[p] * f->P[q * n + p];
-        /* perp_c = dP_c - P^T A^-1 (P W dP_c) */
-        for (int c = 0; c < S; c++) {
-            double pr[FIT_MAX_SOURCES];
-            for (int q = 0; q < N; q++) pr[q] = gs_dot(wPb + q * n, dP + c * n, n);
-            double *pc = perp + c * n;
-            memcpy(pc, dP + c * n, sizeof(double) * (size_t)n);
-            for (int q = 0; q < N; q++) {
-                double v = 0;
-                for (int t = 0; t < N; t++) v += A[q * N + t] * pr[t];
-                for (int p = 0; p < n; p++) pc[p] -= v * f->P[q * n + p];
-            }
-            for (int p = 0; p < n; p++) wperp[c * n + p] = wb[p] * pc[p];
-        }
-        /* FF_qt = sum_k F_q,bk F_t,bk */
         double FF[FIT_MAX_SOURCES * FIT_MAX_SOURCES];
-        for (int q = 0; q < N; q++)
-            for (int t = q; t < N; t++)
-                FF[q * N + t] = FF[t * N + q] = gs_dot(f->F + q * BK + b * K, f->F + t * BK + b * K, K);
-        /* w_pb h_q(p), h_q = sum_k (D_pk - sum_t P_t(p) F_tk) F_qk
-         *                 = sum_k D_pk F_qk - sum_t P_t(p) FF_tq */
-        for (int q = 0; q < N; q++) {
-            double *h = wh + q * n;
-            for (int p = 0; p < n; p++) h[p] = gs_dot(f->D + (size_t)p * BK + b * K, f->F + q * BK + b * K, K);
-            for (int t = 0; t < N; t++)
-                for (int p = 0; p < n; p++) h[p] -= FF[t * N + q] * f->P[t * n + p];
-            for (int p = 0; p < n; p++) h[p] *= wb[p];
-        }
+        band_projection(f, N, b, dP, S, FF);
         for (int c = 0; c < S; c++) g[PARAM_OF(c)] -= 2 * gs_dot(dP + c * n, wh + (c / 3) * n, n);
         for (int c = 0; c < S; c++)
             for (int e = c; e < S; e++) {
-                const double a = 2 * FF[(c / 3) * N + e / 3] * gs_dot(wperp + c * n, perp + e * n, n);
+                const double a = 2 * FF[(c / 3) * N + e / 3] * gs_dot(f->wperp + c * n, perp + e * n, n);
                 const int i = PARAM_OF(c), j = PARAM_OF(e);
                 H[i * m + j] += a;
                 if (c != e) H[j * m + i] += a;
@@ -531,6 +539,8 @@ static double rank1_z(const fit_data *f, double *u, double *v)
 typedef struct {
     int comp;             /* component label */
     double x, y, psf;     /* position, the component's fitted PSF sigma */
+    double cov[3];        /* the position's covariance (xx, xy, yy), px^2 (fit_position_cov) */
+    double mom[3];        /* its light's second moment in excess of the fit's PSF (fit_excess_moments) */
     double *sig, *sgm;    /* BK each (one allocation) */
 } fit_light;
 
@@ -540,7 +550,8 @@ typedef struct {
     size_t n, cap;
 } fit_list;
 
-static gs_status push_light(fit_list *L, int comp, double x, double y, double psf, int BK, double **sig)
+static gs_status push_light(fit_list *L, int comp, double x, double y, double psf, const double cov[3],
+                            const double mom[3], int BK, double **sig)
 {
     if (L->n == L->cap) {
         size_t nc = L->cap ? 2 * L->cap : 64;
@@ -551,9 +562,102 @@ static gs_status push_light(fit_list *L, int comp, double x, double y, double ps
     }
     double *m = malloc(sizeof(double) * (size_t)BK * 2);
     if (!m) return gs_fail(GS_ENOMEM, "blobs: cannot hold a fitted light");
-    L->v[L->n++] = (fit_light){comp, x, y, psf, m, m + BK};
+    L->v[L->n++] = (fit_light){comp, x, y, psf, {cov[0], cov[1], cov[2]}, {mom[0], mom[1], mom[2]}, m, m + BK};
     *sig = m;
     return GS_OK;
+}
+
+/* The second derivative of psf_1d's shares by the centre c: with u the pixel edge's offset from
+ * c, d^2 erf(u kappa) / dc^2 = -4 kappa^3 u exp(-u^2 kappa^2) / sqrt(pi). */
+static void psf_1d_d2(int lo, int n, double c, double sigma, double *d2)
+{
+    const double k = 1.0 / (sqrt(2.0) * sigma), a = -4.0 * k * k * k / sqrt(M_PI);
+    double u = lo - 0.5 - c, h0 = a * u * exp(-u * u * k * k);
+    for (int i = 0; i < n; i++) {
+        u = lo + i + 0.5 - c;
+        const double h = a * u * exp(-u * u * k * k);
+        d2[i] = 0.5 * (h - h0);
+        h0 = h;
+    }
+}
+
+/* Each source's light in excess of one point: a source that is two or more unresolved lights
+ * (centroid c, shares w_i at offsets delta_i, sum w_i delta_i = 0) images as
+ * sum_i w_i P(p; c + delta_i) = P(p; c) + (1/2) sum_ab M_ab d_a d_b P(p; c) to second order,
+ * M = sum_i w_i delta_i delta_i^T the intensity-weighted second moment of the lights about the
+ * centroid. M of every source by linear least squares on the fit's residual (the templates
+ * F_qd (1/2) d_a d_b P_q, each with the part that the fluxes absorb removed, as fit_gradient
+ * does); mh[3 q ..] = (xx, xy, yy). A light of the blend is at offset delta_j from the centroid,
+ * and for the brightest delta_j delta_j^T <= M. 0 when singular. */
+static int fit_excess_moments(fit_data *f, int N, const double *pos, double *mh)
+{
+    enum { MAXM = 3 * FIT_MAX_SOURCES };
+    const int n = f->n, B = f->B, S = 3 * N;
+    const double sigma = pos[2 * N];
+    double *T = f->dP, *perp = f->perp, *wh = f->wP;
+    double *gx = f->gx, *gy = f->gy, *dx = f->gx + f->bw + 1, *dy = f->gy + f->bh + 1;
+    double *sx = dx + f->bw + 1, *sy = dy + f->bh + 1;
+    for (int q = 0; q < N; q++) {
+        psf_1d_d(f->bx0, f->bw, pos[2 * q], sigma, gx, dx, sx);
+        psf_1d_d(f->by0, f->bh, pos[2 * q + 1], sigma, gy, dy, sy);
+        psf_1d_d2(f->bx0, f->bw, pos[2 * q], sigma, sx);
+        psf_1d_d2(f->by0, f->bh, pos[2 * q + 1], sigma, sy);
+        for (int p = 0; p < n; p++) {
+            const int ix = f->x[p] - f->bx0, iy = f->y[p] - f->by0;
+            T[(3 * q) * n + p] = 0.5 * sx[ix] * gy[iy];
+            T[(3 * q + 1) * n + p] = dx[ix] * dy[iy];   /* 2 M_xy (1/2) d_x d_y P */
+            T[(3 * q + 2) * n + p] = 0.5 * gx[ix] * sy[iy];
+        }
+    }
+    double G[MAXM * MAXM], r[MAXM];
+    for (int i = 0; i < S; i++) {
+        r[i] = 0;
+        for (int j = 0; j < S; j++) G[i * S + j] = 0;
+    }
+    for (int b = 0; b < B; b++) {
+        double FF[FIT_MAX_SOURCES * FIT_MAX_SOURCES];
+        band_projection(f, N, b, T, S, FF);
+        for (int c = 0; c < S; c++) {
+            r[c] += gs_dot(perp + c * n, wh + (c / 3) * n, n);
+            for (int e = 0; e < S; e++) G[c * S + e] += FF[(c / 3) * N + e / 3] * gs_dot(f->wperp + c * n, perp + e * n, n);
+        }
+    }
+    if (LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', S, G, S) != 0 || LAPACKE_dpotri(LAPACK_COL_MAJOR, 'L', S, G, S) != 0)
+        return 0;
+    for (int c = 0; c < S; c++)
+        for (int e = c + 1; e < S; e++) G[e * S + c] = G[c * S + e];   /* (lower: G[col * S + row]) */
+    for (int c = 0; c < S; c++) {
+        double v = 0;
+        for (int e = 0; e < S; e++) v += G[c * S + e] * r[e];
+        mh[c] = c % 3 == 1 ? 0.5 * v : v;   /* the xy template carries 2 M_xy */
+    }
+    return 1;
+}
+
+/* The covariance of the N sources' positions of the fit at pos (fit_eval evaluated there, its
+ * chi2 given): the inverse Fisher matrix of the least-squares fit, 2 H^-1 with H fit_gradient's
+ * Gauss-Newton matrix of chi2 (the fluxes and the PSF sigma profiled out: H is over the
+ * positions and sigma, each derivative with the part the fluxes absorb removed), scaled by
+ * chi2 / dof when the fit is worse than its noise model (Birge's ratio: a misfit, e.g. an
+ * undetected neighbour, widens it). Two sources closer than about 2 PSF sigmas trade flux for
+ * position, and this grows far beyond one light's sqrt(2) s / SNR. cov[3 q ..] = (xx, xy, yy)
+ * of source q; NaN when H is singular. */
+static void fit_position_cov(fit_data *f, int N, const double *pos, double chi2, double *cov)
+{
+    enum { MAXD = 2 * FIT_MAX_SOURCES + 1 };
+    const int m = 2 * N + 1;
+    double g[MAXD], H[MAXD * MAXD];
+    fit_gradient(f, N, pos, g, H);
+    const double dof = (double)f->n * f->BK - (double)N * f->BK - m;
+    const double scale = 2.0 * (dof > 0 && chi2 > dof ? chi2 / dof : 1.0);
+    /* H is symmetric: its row-major storage is its column-major one */
+    int ok = LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', m, H, m) == 0 && LAPACKE_dpotri(LAPACK_COL_MAJOR, 'L', m, H, m) == 0;
+    for (int q = 0; q < N; q++) {
+        const int i = 2 * q;   /* the lower triangle (column-major): H[col * m + row], row >= col */
+        cov[3 * q] = ok ? scale * H[i * m + i] : NAN;
+        cov[3 * q + 1] = ok ? scale * H[i * m + i + 1] : NAN;
+        cov[3 * q + 2] = ok ? scale * H[(i + 1) * m + i + 1] : NAN;
+    }
 }
 
 /* The N sources of the fit at pos as lights of L: each source's fluxes and their noise under
@@ -563,10 +667,13 @@ static gs_status push_light(fit_list *L, int comp, double x, double y, double ps
 static gs_status emit_fit(fit_data *f, int comp, int N, const double *pos, fit_list *L)
 {
     const int n = f->n, B = f->B, K = f->K, BK = f->BK;
-    fit_eval(f, N, pos);
+    double cov[3 * FIT_MAX_SOURCES], mom[3 * FIT_MAX_SOURCES];
+    fit_position_cov(f, N, pos, fit_eval(f, N, pos), cov);
+    if (!fit_excess_moments(f, N, pos, mom))
+        for (int i = 0; i < 3 * N; i++) mom[i] = NAN;
     for (int q = 0; q < N; q++) {
         double *sig = NULL;
-        gs_status st = push_light(L, comp, pos[2 * q], pos[2 * q + 1], pos[2 * N], BK, &sig);
+        gs_status st = push_light(L, comp, pos[2 * q], pos[2 * q + 1], pos[2 * N], cov + 3 * q, mom + 3 * q, BK, &sig);
         if (st != GS_OK) return st;
         double *sgm = sig + BK;
         for (int b = 0; b < B; b++) {
@@ -588,6 +695,46 @@ static gs_status emit_fit(fit_data *f, int comp, int N, const double *pos, fit_l
                 sgm[d] = sqrt(v);
             }
         }
+    }
+    return GS_OK;
+}
+
+/* The positive part of the symmetric 2 x 2 matrix m = (xx, xy, yy), in place: its eigenvalues
+ * l1 >= l2, with l2 < 0 < l1 it is l1 (m - l2 I) / (l1 - l2) (the projection on l1's
+ * eigenvector), with l1 <= 0 zero. */
+static void positive_part(double m[3])
+{
+    const double t = 0.5 * (m[0] + m[2]), d = hypot(0.5 * (m[0] - m[2]), m[1]), l1 = t + d, l2 = t - d;
+    if (l2 >= 0.0) return;
+    if (!(l1 > 0.0)) {
+        m[0] = m[1] = m[2] = 0.0;
+        return;
+    }
+    const double k = l1 / (l1 - l2);
+    m[0] = k * (m[0] - l2);
+    m[1] = k * m[1];
+    m[2] = k * (m[2] - l2);
+}
+
+/* The position covariance of each fitted light (rec_catalog.pos_cov_px2): the fit's own
+ * (fit_position_cov) plus the positive part of its light's second moment in excess of one
+ * light's PSF, M + (sigma^2 - sigma_1^2) I: the fit's shared PSF sigma widens for a component
+ * whose sources are unresolved blends, so the excess is taken against sigma_1, the median of the
+ * capture's fitted sigmas (most components hold single lights). NaN where either is unknown. */
+static gs_status fitted_position_cov(const fit_list *L, double *cov)
+{
+    double *sg = malloc(sizeof(double) * (L->n ? L->n : 1));
+    if (!sg) return gs_fail(GS_ENOMEM, "blobs: cannot hold %zu fitted sigmas", L->n);
+    for (size_t i = 0; i < L->n; i++) sg[i] = L->v[i].psf;
+    qsort(sg, L->n, sizeof *sg, rec_cmp_double);
+    const double s1 = L->n % 2 ? sg[L->n / 2] : 0.5 * (sg[L->n / 2 - 1] + sg[L->n / 2]);
+    free(sg);
+    for (size_t i = 0; i < L->n; i++) {
+        const fit_light *fl = &L->v[i];
+        const double ds = fl->psf * fl->psf - s1 * s1;
+        double m[3] = {fl->mom[0] + ds, fl->mom[1], fl->mom[2] + ds};
+        positive_part(m);
+        for (int c = 0; c < 3; c++) cov[3 * i + c] = fl->cov[c] + m[c];
     }
     return GS_OK;
 }
@@ -937,6 +1084,7 @@ gs_status rec_blob_psf_fit(rec_blob_state *s, rec_catalog *cat)
     memset(&out, 0, sizeof out);
     fit_order *ord = NULL;
     int *newid = NULL;
+    double *fit_cov = NULL;
     fit_groups_job *job = NULL;
     if (!comp_of || !unit_of || !ap_start || !fp_start || !fill || !lt_start || !lt_list || !replaced || !first_new) {
         st = gs_fail(GS_ENOMEM, "blobs: cannot allocate the PSF fit");
@@ -1007,6 +1155,12 @@ gs_status rec_blob_psf_fit(rec_blob_state *s, rec_catalog *cat)
         memset(Lp, 0, sizeof *Lp);
     }
     if (st != GS_OK || L.n == 0) goto done;
+    fit_cov = malloc(sizeof(double) * 3 * L.n);   /* by fitted light, reordered below */
+    if (!fit_cov) {
+        st = gs_fail(GS_ENOMEM, "blobs: cannot hold %zu position covariances", L.n);
+        goto done;
+    }
+    if ((st = fitted_position_cov(&L, fit_cov)) != GS_OK) goto done;
     /* (the groups' pixel lists are done with: not beside the new catalog) */
     free(ap_pix);
     free(fp_pix);
@@ -1053,11 +1207,12 @@ gs_status rec_blob_psf_fit(rec_blob_state *s, rec_catalog *cat)
     out.peak_dn = calloc(m, sizeof(double));
     out.saturated_px = calloc(m, sizeof(int));
     out.flags = calloc(m, sizeof(unsigned));
+    out.pos_cov_px2 = malloc(sizeof(double) * 3 * m);
     out.signal = malloc(sizeof(double) * m * (size_t)BK);
     out.sigma = malloc(sizeof(double) * m * (size_t)BK);
     if (cat->labels) out.labels = malloc(sizeof(int) * s->N);
     if (!out.x_px || !out.y_px || !out.area_px || !out.peak_dn || !out.saturated_px || !out.flags ||
-        !out.signal || !out.sigma || (cat->labels && !out.labels)) {
+        !out.pos_cov_px2 || !out.signal || !out.sigma || (cat->labels && !out.labels)) {
         st = gs_fail(GS_ENOMEM, "blobs: cannot hold a catalog of %zu lights", m);
         goto done;
     }
@@ -1070,6 +1225,8 @@ gs_status rec_blob_psf_fit(rec_blob_state *s, rec_catalog *cat)
             out.peak_dn[j] = cat->peak_dn[id];
             out.saturated_px[j] = cat->saturated_px[id];
             out.flags[j] = cat->flags[id];
+            for (int c = 0; c < 3; c++)
+                out.pos_cov_px2[3 * j + c] = cat->pos_cov_px2 ? cat->pos_cov_px2[3 * (size_t)id + c] : NAN;
             memcpy(out.signal + j * BK, cat->signal + (size_t)id * BK, sizeof(double) * (size_t)BK);
             memcpy(out.sigma + j * BK, cat->sigma + (size_t)id * BK, sizeof(double) * (size_t)BK);
         } else {
@@ -1077,6 +1234,7 @@ gs_status rec_blob_psf_fit(rec_blob_state *s, rec_catalog *cat)
             out.x_px[j] = fl->x;
             out.y_px[j] = fl->y;
             out.flags[j] = REC_BLOB_DEBLENDED | REC_BLOB_PSF_FIT;
+            memcpy(out.pos_cov_px2 + 3 * j, fit_cov + 3 * (id - (int)n), sizeof(double) * 3);
             memcpy(out.signal + j * BK, fl->sig, sizeof(double) * (size_t)BK);
             memcpy(out.sigma + j * BK, fl->sgm, sizeof(double) * (size_t)BK);
         }
@@ -1125,5 +1283,6 @@ done:
     free(job);
     free(ord);
     free(newid);
+    free(fit_cov);
     return st;
 }

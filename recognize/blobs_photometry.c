@@ -198,12 +198,6 @@ double rec_psf_share(int x, int y, double xc, double yc, double sigma)
     return fx * fy;
 }
 
-static int cmp_dbl(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
 /* The capture's PSF sigma (7.): the median of sqrt(r2 / 2) (the aperture's second moment on
  * M - background) over its brightest clean lights (no flag, footprint >= 9 px), at most
  * PSF_LIGHTS of them; 1 px when there is none. Clamped to [0.3, 8] px. */
@@ -227,7 +221,7 @@ static double capture_psf_sigma(const rec_catalog *cat, const double *r2, const 
     }
     if (m == 0) return 1.0;
     for (int q = 0; q < m; q++) sg[q] = sqrt(r2[idx[q]] / 2);
-    qsort(sg, (size_t)m, sizeof *sg, cmp_dbl);
+    qsort(sg, (size_t)m, sizeof *sg, rec_cmp_double);
     double med = (m & 1) ? sg[m / 2] : 0.5 * (sg[m / 2 - 1] + sg[m / 2]);
     return med < 0.3 ? 0.3 : med > 8 ? 8 : med;
 }

@@ -123,6 +123,9 @@ typedef struct {
     double *peak_dn;          /* brightest raw sample of the footprint, DN as stored */
     int *saturated_px;        /* aperture pixels saturated in at least one frame */
     unsigned *flags;          /* REC_BLOB_* */
+    double *pos_cov_px2;      /* 3 per light, (xx, xy, yy): the position's covariance from the
+                               * PSF fit (9.: REC_BLOB_PSF_FIT lights), NaN for the others; NULL
+                               * when the fit replaced no light */
     double *signal, *sigma;
     int width, height;        /* of the capture */
     int *labels;              /* opts.labels: width * height, the light owning each aperture

@@ -43,6 +43,7 @@ void srv_light_row_init(srv_light_row *r)
     r->phase_deg = r->phase_fit_deg = r->phase_sigma_deg = NAN;
     r->confidence = r->bulb_confidence = r->phase_confidence = NAN;
     r->runner_phase_deg = r->runner_confidence = NAN;
+    r->pos_cov_px2[0] = r->pos_cov_px2[1] = r->pos_cov_px2[2] = NAN;
 }
 
 void srv_location_row_init(srv_location_row *r)
@@ -63,6 +64,7 @@ void srv_light_from_catalog(srv_light_row *r, const rec_catalog *cat, size_t i)
     r->peak_dn = cat->peak_dn ? cat->peak_dn[i] : NAN;
     r->saturated_px = cat->saturated_px ? cat->saturated_px[i] : -1;
     r->blob_flags = cat->flags ? cat->flags[i] : 0;
+    for (int c = 0; c < 3; c++) r->pos_cov_px2[c] = cat->pos_cov_px2 ? cat->pos_cov_px2[3 * i + c] : NAN;
     double sum = 0.0, var = 0.0;
     size_t m = (size_t)cat->bands * (size_t)cat->K;
     for (size_t j = 0; cat->signal && cat->sigma && j < m; j++) {

@@ -189,6 +189,12 @@ gs_status srv_job_locate(srv_job *j, const gis_station *st, double height_m, dou
         double c = srv_centroid_sigma_px(j->lights[i].snr, j->lights[i].blob_flags, crowded[i],
                                          st->psf_sigma_px, floor_px);
         double sig = isfinite(c) ? hypot(c, st->sigma_px) : st->sigma_px;
+        /* a light of the PSF fit: its noise and its blend are in the fit's covariance (correlated,
+         * larger across a blend), the window's bias floor and the station's sigma beside it */
+        const double *pc = j->lights[i].pos_cov_px2;
+        int fit = (j->lights[i].blob_flags & REC_BLOB_PSF_FIT) && isfinite(pc[0]) && isfinite(pc[1]) && isfinite(pc[2]);
+        for (int k = 0; k < 3; k++) lo.pixel_cov_px2[k] = fit ? pc[k] : 0.0;
+        if (fit) sig = hypot(floor_px, st->sigma_px);
         gs_status s = gis_locate(&st->cam, j->lights[i].x_px, j->lights[i].y_px, sig, height_m, &lo, &fx);
         if (s != GS_OK) {
             free(crowded);

@@ -160,6 +160,8 @@ typedef struct {
     double runner_phase_deg, runner_confidence;
     unsigned blob_flags;       /* REC_BLOB_* */
     unsigned match_flags;      /* REC_MATCH_* */
+    double pos_cov_px2[3];     /* the PSF fit's position covariance (rec_catalog.pos_cov_px2;
+                                * NaN = none); for the ellipses, not stored */
 } srv_light_row;
 
 typedef enum {
@@ -625,7 +627,8 @@ gs_status srv_job_extract(srv_job *j, const rec_blob_opts *bo);
 gs_status srv_job_match(srv_job *j);
 /* Free the capture's pixels (the later stages need only its metadata). */
 void srv_job_drop_pixels(srv_job *j);
-/* A light's 1-sigma centroid error per image axis, px (docs/gis.md, "Calibrated ellipses"):
+/* A light's 1-sigma centroid error per image axis, px (docs/gis.md, "Calibrated ellipses"),
+ * for a light without the PSF fit's covariance (srv_light_row.pos_cov_px2; srv_job_locate):
  * sqrt((sqrt(2) s / snr)^2 + floor_px^2 + c^2), floor_px the centroid's pixel-sampling bias
  * (rec_centroid_bias_px), s = sqrt(psf_sigma_px^2 + 1/12) the
  * pixel-integrated PSF sigma, snr the light's (srv_light_row.snr), c the crowding term: 0.012 s
