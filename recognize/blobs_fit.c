@@ -775,7 +775,8 @@ static gs_status spatial_split(fit_data *f, int comp, const int *fp, int nfp, co
         }
     double one[3] = {start[0], start[1], f->s->psf_sigma}, two[5];
     double c1 = fit_positions(&g, 1, one);
-    if (!(wh_z(c1, (double)n * B - B - 3) > SPLIT_SCREEN_Z)) return GS_OK;   /* one source fits */
+    /* one source fits, or none can be fitted (singular: its fluxes are not all set) */
+    if (!(c1 < HUGE_VAL) || !(wh_z(c1, (double)n * B - B - 3) > SPLIT_SCREEN_Z)) return GS_OK;
     int i = best_new_source(&g, 1, one, fp, nfp, R);
     if (i < 0) return GS_OK;
     two[0] = one[0];
@@ -869,6 +870,7 @@ static gs_status fit_component(fit_data *f, int comp, const int *ap, int nap, co
     memcpy(pos, start, sizeof(double) * (size_t)(2 * N));
     pos[2 * N] = s->psf_sigma;
     double chi2 = fit_positions(f, N, pos);
+    if (!(chi2 < HUGE_VAL)) return GS_OK;   /* no fit (singular): keep step 5's lights */
     if (N >= 2 && !fit_ok(f, N, pos, -INFINITY)) return GS_OK;   /* keep step 5's lights */
     while (N < FIT_MAX_SOURCES) {
         int i = best_new_source(f, N, pos, fp, nfp, R);
