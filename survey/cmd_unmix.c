@@ -222,13 +222,14 @@ int srv_cmd_unmix(int argc, char **argv)
         st = rec_unmix(&cap, &src, &uo, &r);
         if (st != GS_OK && r.ill_posed) {
             /* every source's predicted error, on the error's one line */
-            char errs[512] = "";
+            char errs[1024] = "";
             for (int s = 0; s < src.S; s++) {
                 size_t u = strlen(errs);
                 if (isfinite(r.predicted_error[s]) && r.predicted_error[s] > 0)
-                    snprintf(errs + u, sizeof errs - u, "%s%02d %.3g", u ? ", " : "", s, r.predicted_error[s]);
+                    snprintf(errs + u, sizeof errs - u, "%s%02d %s at %g deg %.3g", u ? ", " : "", s,
+                             src.bulb[s], src.phase_deg[s], r.predicted_error[s]);
             }
-            if (*errs) gs_fail(st, "%s (predicted error of source %s)", gs_detail(), errs);
+            if (*errs) gs_fail(st, "%s (predicted error of each source: %s)", gs_detail(), errs);
         }
     }
     size_t P = (size_t)cap.width * cap.height, nimg = P * (size_t)cap.bands;

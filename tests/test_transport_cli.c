@@ -120,7 +120,8 @@ TEST(transport_cli_bad_input_one_line_errors)
     CHECK_MSG(rc == 1 && fx_contains(out, "ill-posed") && !fx_exists(fx_path(fx_tmp("ill"), "sources.json")), "%s", out);
     /* one line, with every source's predicted error (they were lines of their own before it) */
     CHECK_MSG(fx_count_lines(out) == 1 && !strncmp(out, "gridsurvey unmix: ill-posed", 27) &&
-              fx_contains(out, "(predicted error of source 00 "), "%s", out);
+              fx_contains(out, "(predicted error of each source: 00 inc-a60-25w-230v at 0 deg ") &&
+              fx_contains(out, ", 01 inc-a60-40w-230v at 0 deg "), "%s", out);
     /* simulate --drop-light: an id the scene lacks is a usage error; a real one renders without it */
     CHECK(fx_run(out, sizeof out, "%s simulate capture/scenes/window.json --out-dir '%s' --drop-light nope 2>&1",
                  test_bin(), fx_tmp("w")) == 2 && fx_contains(out, "no light with this id"));
