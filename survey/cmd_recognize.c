@@ -177,9 +177,7 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
                 return srv_usage_error("recognize", "--transformer-deg '%s': expected a finite angle in degrees", optarg);
             break;
         case 'c':
-            o->eq7.ambiguous_conf = strtod(optarg, &end);
-            if (end == optarg || *end || !(o->eq7.ambiguous_conf >= 0.0 && o->eq7.ambiguous_conf <= 1.0))
-                return srv_usage_error("recognize", "--ambiguous-below '%s': expected a number from 0 to 1", optarg);
+            if (!srv_num_arg("recognize", "--ambiguous-below", optarg, 0.0, 1.0, &o->eq7.ambiguous_conf)) return 2;
             break;
         case 'g':
             if (!strcmp(optarg, "reddened")) o->eq7.band_gains = REC_BANDS_REDDENED;
@@ -188,9 +186,7 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
             else return srv_usage_error("recognize", "--band-model '%s': expected reddened, free or chroma", optarg);
             break;
         case 'T':
-            o->eq7.chroma_tolerance = strtod(optarg, &end);
-            if (end == optarg || *end || !(o->eq7.chroma_tolerance >= 0.001 && o->eq7.chroma_tolerance <= 1.0))
-                return srv_usage_error("recognize", "--chroma-tolerance '%s': expected a fraction from 0.001 to 1", optarg);
+            if (!srv_num_arg("recognize", "--chroma-tolerance", optarg, 0.001, 1.0, &o->eq7.chroma_tolerance)) return 2;
             break;
         case 'e':
             if (!auto_or_share(optarg, 1.0, &o->eq7.model_error))
