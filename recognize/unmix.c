@@ -132,11 +132,14 @@ static int spd_inverse(const double *G, int n, double *Gi)
 }
 
 /* The sources of a pixel that its usable samples determine (Eq. 17 may have discarded what
- * measured one). *fit: the largest set on which G is positive definite (dropping, while it is
- * singular, the source least observed relative to all K samples); all of them stay in the fit,
- * so the others are not biased by a missing one. Returned: those of *fit whose variance (G^-1)_ss
- * is at most max_inflation times their variance from all K samples (Gfull^-1)_ss; the others
- * are fitted but have no value. */
+ * measured one). When G of every source is positive definite, all of them stay in the fit, so
+ * the others are not biased by a poorly measured one; returned: those whose variance (G^-1)_ss
+ * is at most max_inflation times their variance from all K samples (Gfull^-1)_ss (the others
+ * are fitted but have no value), *fit every source. When it is singular (fewer usable samples
+ * than sources, or samples that cannot tell two apart), no source has a value: a fit without
+ * one of them would give its light to the others. *fit is then the largest set on which G is
+ * positive definite (dropping, while it is singular, the source least observed relative to all
+ * K samples), for the pixel's model, and 0 is returned. */
 static unsigned determined(const double *G, const double *Gfull, int S, double max_inflation,
                            unsigned *fit)
 {
@@ -154,6 +157,7 @@ static unsigned determined(const double *G, const double *Gfull, int S, double m
         if (!spd_inverse(Gf, m, Gfi)) break;
         if (spd_inverse(Ga, m, Gi)) {
             *fit = act;
+            if (m < S) return 0;   /* a source left out: the others carry its light */
             unsigned det = act;
             for (int i = 0; i < m; i++)
                 if (!(Gi[i * m + i] <= max_inflation * Gfi[i * m + i])) det &= ~(1u << idx[i]);

@@ -614,6 +614,57 @@ TEST(eq17_all_saturated_pixels_get_no_value_partial_ones_are_recovered)
     gs_delight_free(d);
 }
 
+/* K = 9 with five sources: a pixel saturated in five or more frames has fewer usable samples
+ * than sources. None of them may get a value (a fit without one of them gives its light to the
+ * others: the given values were 2-12x off), and the values of partly saturated pixels are as
+ * good as those of complete ones (the truth: the simulator's tau Q). */
+TEST(eq17_fewer_usable_samples_than_sources_no_value_given)
+{
+    gs_delight *d = builtin();
+    trfx_opts o = {0};
+    o.K = 9;
+    o.hdr_rounds = 1;
+    o.shade = 0.3;
+    rec_source_spec sp[5];
+    specs_of(lab5, 5, sp);
+    gs_capture cap;
+    rec_sources src;
+    rec_unmix_result r;
+    const char *dir = fx_tmp("k7_saturated");
+    CHECK_OK(unmix_scene(dir, &o, lab5, 5, sp, 5, 1, d, &cap, &src, &r));
+    if (!r.tq) return;
+    size_t P = (size_t)cap.width * cap.height, few = 0, given_few = 0;
+    float *truth[5];
+    for (int s = 0; s < 5; s++) truth[s] = trfx_truth(dir, src.bulb[s], src.phase_deg[s]);
+    double e2[2] = {0, 0}, t2[2] = {0, 0};   /* complete pixels, partly saturated ones */
+    for (size_t p = 0; p < P && truth[4]; p++) {
+        int y = (int)(p / (size_t)cap.width), x = (int)(p % (size_t)cap.width), usable = 0;
+        for (int k = 0; k < cap.K; k++)
+            usable += isfinite(gs_capture_value(&cap, k, y, x, 0)) && isfinite(gs_capture_value(&cap, k, y, x, 1)) &&
+                      isfinite(gs_capture_value(&cap, k, y, x, 2));
+        few += usable > 0 && usable < 5;
+        for (int s = 0; s < 5; s++)
+            for (int b = 0; b < 3; b++) {
+                float v = r.tq[((size_t)s * P + p) * 3 + b];
+                if (!isfinite(v)) continue;
+                given_few += usable < 5;
+                double t = truth[s][p * 3 + b];
+                e2[usable < cap.K] += (v - t) * (v - t);
+                t2[usable < cap.K] += t * t;
+            }
+    }
+    double err[2] = {sqrt(e2[0] / t2[0]), t2[1] > 0 ? sqrt(e2[1] / t2[1]) : 0};
+    printf("    %zu pixels with 1-4 usable samples of %d (values given: %zu); relative error %.3f in "
+           "complete pixels, %.3f in partly saturated ones\n", few, cap.K, given_few, err[0], err[1]);
+    CHECK(few > 0 && given_few == 0);
+    CHECK_MSG(err[1] <= 2.0 * err[0], "partly saturated pixels: error %.3f, complete ones %.3f", err[1], err[0]);
+    for (int s = 0; s < 5; s++) free(truth[s]);
+    rec_unmix_release(&r);
+    rec_sources_release(&src);
+    gs_capture_release(&cap);
+    gs_delight_free(d);
+}
+
 TEST(near_flat_brf_source_unmixed_within_1_25x_of_the_oracle)
 {
     gs_delight *d = builtin();
