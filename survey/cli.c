@@ -4,6 +4,8 @@
 #include "recognize/recognize.h"
 #include "version.h"   /* GS_GIT_COMMIT, written by the Makefile into $(BUILD) */
 
+#include <ctype.h>
+#include <errno.h>
 #include <fftw3.h>
 #include <getopt.h>
 #include <jansson.h>
@@ -191,6 +193,22 @@ int srv_num_arg(const char *cmd, const char *opt, const char *arg, double lo, do
     double v = strtod(arg, &end);
     if (!*arg || *end || !isfinite(v) || v < lo || v > hi) {
         srv_usage_error(cmd, "%s '%s': expected a number from %g to %g", opt, arg, lo, hi);
+        return 0;
+    }
+    *out = v;
+    return 1;
+}
+
+int srv_int_arg(const char *cmd, const char *opt, const char *arg, unsigned long long lo, unsigned long long hi,
+                unsigned long long *out)
+{
+    /* digits only: strtoull takes " -1" as 2^64 - 1 */
+    int digit = isdigit((unsigned char)*arg) != 0;
+    char *end = NULL;
+    errno = 0;
+    unsigned long long v = digit ? strtoull(arg, &end, 10) : 0;
+    if (!digit || *end || errno == ERANGE || v < lo || v > hi) {
+        srv_usage_error(cmd, "%s '%s': expected an integer from %llu to %llu", opt, arg, lo, hi);
         return 0;
     }
     *out = v;

@@ -3,6 +3,7 @@
 #include "survey/internal.h"
 
 #include <getopt.h>
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -30,15 +31,11 @@ static const char db_usage[] =
     "  gridsurvey db check --db city.sqlite\n"
     "  gridsurvey db ingest-synthetic --db synthetic.sqlite --captures 10 --lights 1000\n";
 
-/* An integer option of command cmd in [lo, hi] into *v: 1, or 0 after srv_usage_error. */
+/* srv_int_arg into a size_t. */
 static int parse_size(const char *cmd, const char *opt, const char *text, size_t lo, size_t hi, size_t *v)
 {
-    char *end;
-    unsigned long long x = strtoull(text, &end, 10);
-    if (!*text || *end || *text == '-' || x < lo || x > hi) {
-        srv_usage_error(cmd, "%s '%s': expected an integer from %zu to %zu", opt, text, lo, hi);
-        return 0;
-    }
+    unsigned long long x;
+    if (!srv_int_arg(cmd, opt, text, lo, hi, &x)) return 0;
     *v = (size_t)x;
     return 1;
 }
@@ -73,7 +70,6 @@ int srv_cmd_db(int argc, char **argv)
     srv_synth_opts_default(&so);
     optind = 1;
     int c;
-    size_t v;
     while ((c = getopt_long(argc - 1, argv + 1, "h", longs, NULL)) != -1) {
         if (which != 3 && c != 'd' && c != 'h' && c != '?') return srv_usage_error(cmd, "only --db is accepted");
         switch (c) {
@@ -89,8 +85,7 @@ int srv_cmd_db(int argc, char **argv)
             if (!parse_size(cmd, "--batch", optarg, 1, 1000000, &so.batch)) return 2;
             break;
         case 's':
-            if (!parse_size(cmd, "--seed", optarg, 0, (size_t)-1, &v)) return 2;
-            so.seed = v;
+            if (!srv_int_arg(cmd, "--seed", optarg, 0, ULLONG_MAX, &so.seed)) return 2;
             break;
         case 'w':
             if (sscanf(optarg, "%lf,%lf,%lf", &so.phase_weights[0], &so.phase_weights[1],

@@ -4,6 +4,7 @@
 
 #include <errno.h>
 #include <getopt.h>
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -65,6 +66,7 @@ static int parse_opts(int argc, char **argv, delight_opts *o)
     optind = 1;
     int c;
     char *end;
+    unsigned long long v;
     while ((c = getopt_long(argc, argv, "o:h", longs, NULL)) != -1) {
         switch (c) {
         case 'd': o->db = optarg; break;
@@ -79,22 +81,18 @@ static int parse_opts(int argc, char **argv, delight_opts *o)
             break;
         case 's': o->sensor = optarg; break;
         case 'g':
-            o->grid_hz = (int)strtol(optarg, &end, 10);
-            if (*end || (o->grid_hz != 50 && o->grid_hz != 60)) {
-                return srv_usage_error("delight", "--grid '%s': expected 50 or 60", optarg);
-            }
+            o->grid_hz = !strcmp(optarg, "50") ? 50 : !strcmp(optarg, "60") ? 60 : 0;
+            if (!o->grid_hz) return srv_usage_error("delight", "--grid '%s': expected 50 or 60", optarg);
             break;
         case 'v':
-            o->voltage_column = (int)strtol(optarg, &end, 10);
-            if (*end || o->voltage_column < 2) {
-                return srv_usage_error("delight", "--voltage-column '%s': expected a column number >= 2", optarg);
-            }
+            if (!srv_int_arg("delight", "--voltage-column", optarg, 2, INT_MAX, &v)) return 2;
+            o->voltage_column = (int)v;
             break;
         case 'n':
-            o->n = (int)strtol(optarg, &end, 10);
-            if (*end || o->n < 256 || o->n % 2) {
-                return srv_usage_error("delight", "--n '%s': expected an even number >= 256", optarg);
-            }
+            /* 2^20: gs_delight_generate's and the BRF's largest n */
+            if (!srv_int_arg("delight", "--n", optarg, 256, 1 << 20, &v)) return 2;
+            if (v % 2) return srv_usage_error("delight", "--n '%s': expected an even number", optarg);
+            o->n = (int)v;
             break;
         case 'w':
             o->watts = strtod(optarg, &end);

@@ -235,16 +235,14 @@ int srv_cmd_export(int argc, char **argv)
     srv_export_opts_default(&o);
     optind = 1;
     int c;
-    char *end;
     while ((c = getopt_long(argc, argv, "o:h", longs, NULL)) != -1) {
         switch (c) {
         case 'd': path = optarg; break;
         case 'o': out = optarg; break;
         case 'f': format = optarg; break;
         case 'P': {
-            long v = strtol(optarg, &end, 10);
-            if (!*optarg || *end || v < 0 || v > 15)
-                return srv_usage_error("export", "--precision '%s': expected 0 to 15 decimals", optarg);
+            unsigned long long v;
+            if (!srv_int_arg("export", "--precision", optarg, 0, 15, &v)) return 2;
             decimals = (int)v;
             break;
         }

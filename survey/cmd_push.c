@@ -48,7 +48,6 @@ int srv_cmd_push(int argc, char **argv)
     o.progress = isatty(2);
     optind = 1;
     int c;
-    char *end;
     while ((c = getopt_long(argc, argv, "hq", longs, NULL)) != -1) {
         switch (c) {
         case 'd': path = optarg; break;
@@ -56,9 +55,8 @@ int srv_cmd_push(int argc, char **argv)
         case 'a': o.areas = optarg; break;
         case 'f': o.areas_field = optarg; break;
         case 'b': {
-            unsigned long long v = strtoull(optarg, &end, 10);
-            if (!*optarg || *end || *optarg == '-' || v < 1 || v > 100000000)
-                return srv_usage_error("push", "--batch '%s': expected an integer from 1 to 1e8", optarg);
+            unsigned long long v;
+            if (!srv_int_arg("push", "--batch", optarg, 1, 100000000, &v)) return 2;
             o.batch_lights = (size_t)v;
             break;
         }

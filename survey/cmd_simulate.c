@@ -39,19 +39,6 @@ static const char simulate_usage[] =
     "  gridsurvey simulate capture/scenes/lab.json --out-dir build/lab\n"
     "  gridsurvey simulate capture/scenes/lab.json --out-dir build/lab-no-mh70 --drop-light mh70\n";
 
-/* An integer option in [lo, hi] into *out: 1, or 0 after srv_usage_error. */
-static int parse_long(const char *opt, const char *arg, long lo, long hi, long *out)
-{
-    char *end;
-    long v = strtol(arg, &end, 10);
-    if (!*arg || *end || v < lo || v > hi) {
-        srv_usage_error("simulate", "%s '%s': expected an integer from %ld to %ld", opt, arg, lo, hi);
-        return 0;
-    }
-    *out = v;
-    return 1;
-}
-
 static void print_stats(cap_sim *sim)
 {
     printf("%-20s %10s %14s %10s\n", "stage", "calls", "items", "seconds");
@@ -76,7 +63,8 @@ int srv_cmd_simulate(int argc, char **argv)
     const char *out = NULL, *delight = NULL;
     const char *drop[64];
     int ndrop = 0;
-    long seed = -1, stop = 0;
+    unsigned long long seed = 0, stop = 0;
+    int seed_given = 0;
     int stats = 0;
     cap_loop_opts lo;
     cap_loop_opts_default(&lo);
@@ -97,10 +85,11 @@ int srv_cmd_simulate(int argc, char **argv)
             drop[ndrop++] = optarg;
             break;
         case 's':
-            if (!parse_long("--seed", optarg, 0, 0x7fffffffL, &seed)) return 2;
+            if (!srv_int_arg("simulate", "--seed", optarg, 0, 0x7fffffff, &seed)) return 2;
+            seed_given = 1;
             break;
         case 'S':
-            if (!parse_long("--stop-after", optarg, 1, 1 << 20, &stop)) return 2;
+            if (!srv_int_arg("simulate", "--stop-after", optarg, 1, 1 << 20, &stop)) return 2;
             lo.stop_after = (int)stop;
             break;
         case 'h': fputs(simulate_usage, stdout); return 0;
@@ -124,8 +113,8 @@ int srv_cmd_simulate(int argc, char **argv)
         memmove(&sc.lights[j], &sc.lights[j + 1], (sc.n_lights - j - 1) * sizeof *sc.lights);
         sc.n_lights--;
     }
-    if (seed >= 0) {
-        sc.seed = (unsigned long long)seed;
+    if (seed_given) {
+        sc.seed = seed;
         sc.freq.seed = sc.seed;
     }
     if (delight) {

@@ -115,6 +115,10 @@ FILE *srv_note_stream(const char *out);
 int srv_usage_error(const char *cmd, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 /* A number option of cmd in [lo, hi] into *out: 1, or 0 after srv_usage_error. */
 int srv_num_arg(const char *cmd, const char *opt, const char *arg, double lo, double hi, double *out);
+/* An integer option of cmd in [lo, hi] (decimal digits only) into *out: 1, or 0 after
+ * srv_usage_error. */
+int srv_int_arg(const char *cmd, const char *opt, const char *arg, unsigned long long lo, unsigned long long hi,
+                unsigned long long *out);
 /* getopt's '?' in command cmd (getopt itself prints nothing: srv_main sets opterr = 0): the one
  * line naming the option (argv[optind - 1]) and the hint; returns 2. */
 int srv_usage_hint(const char *cmd, char **argv);

@@ -694,6 +694,11 @@ TEST(cli_usage_errors_of_each_command_one_line_with_the_hint)
         {"%s simulate capture/scenes/window.json --out-dir x --drop-light nope", "simulate", "--drop-light nope"},
         {"%s stats --db x.sqlite --by nope", "stats", "--by 'nope'"},
         {"%s stats --db x.sqlite --format xml", "stats", "--format 'xml'"},
+        /* integers parsed by hand: 2^32 + 256 read as 256 (an int cast), " -1" as 2^64 - 1
+         * (strtoull skips the space, the check for '-' looked at it) */
+        {"%s delight generate -o /nonexistent/x.db --n 4294967552", "delight", "--n '4294967552'"},
+        {"%s db ingest-synthetic --db /nonexistent/x.sqlite --seed ' -1'", "db ingest-synthetic", "--seed ' -1'"},
+        {"%s push --db /nonexistent/x.sqlite --pg dbname=x --batch ' 5'", "push", "--batch ' 5'"},
     };
     for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
         char line_start[64], hint[64];
