@@ -811,18 +811,12 @@ static int bench_recognize(int argc, char **argv)
             fputs(bench_usage, stdout);
             return 0;
         } else {
-            fprintf(stderr, "gridsurvey bench recognize: unknown option '%s' (see --help)\n", argv[optind - 1]);
-            return 2;
+            return srv_usage_hint("bench recognize", argv);
         }
     }
-    if (optind != argc) {
-        fprintf(stderr, "gridsurvey bench recognize: unexpected argument '%s' (see --help)\n", argv[optind]);
-        return 2;
-    }
-    if (lights_only && captures_only) {
-        fprintf(stderr, "gridsurvey bench recognize: --lights and --captures: expected one of them (see --help)\n");
-        return 2;
-    }
+    if (optind != argc) return srv_usage_error("bench recognize", "unexpected argument '%s'", argv[optind]);
+    if (lights_only && captures_only)
+        return srv_usage_error("bench recognize", "--lights and --captures: expected one of them");
     gs_delight *all = NULL;
     gs_status st = gs_delight_open(NULL, &all);
     if (st != GS_OK) return srv_error("bench recognize", st);
@@ -1044,6 +1038,6 @@ int srv_cmd_bench(int argc, char **argv)
     if (!strcmp(argv[1], "render")) return srv_bench_render(argc - 1, argv + 1);
     if (!strcmp(argv[1], "blobs")) return srv_bench_blobs(argc - 1, argv + 1);
     if (!strcmp(argv[1], "transport")) return srv_bench_transport(argc - 1, argv + 1);
-    fprintf(stderr, "gridsurvey bench: '%s' is not a benchmark: expected recognize, db, pg, render, blobs, accuracy or transport\n", argv[1]);
-    return 2;
+    return srv_usage_error("bench", "'%s' is not a benchmark: expected recognize, db, pg, render, blobs, accuracy "
+                           "or transport", argv[1]);
 }

@@ -394,14 +394,10 @@ int srv_bench_accuracy(int argc, char **argv)
             fputs(acc_usage, stdout);
             return 0;
         } else {
-            fprintf(stderr, "gridsurvey bench accuracy: bad option '%s' (see --help)\n", argv[optind - 1]);
-            return 2;
+            return srv_usage_hint("bench accuracy", argv);
         }
     }
-    if (optind != argc) {
-        fprintf(stderr, "gridsurvey bench accuracy: unexpected argument '%s' (see --help)\n", argv[optind]);
-        return 2;
-    }
+    if (optind != argc) return srv_usage_error("bench accuracy", "unexpected argument '%s'", argv[optind]);
     openblas_set_num_threads(1);
     double t_start = gs_clock_s(CLOCK_MONOTONIC);
     gs_status s = mkdir_p(out);

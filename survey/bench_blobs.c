@@ -51,28 +51,22 @@ int srv_bench_blobs(int argc, char **argv)
 {
     const char *dir = NULL;
     int reps = 3;
+    unsigned long long v;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) {
             fputs(blobs_usage, stdout);
             return 0;
         }
         if (!strcmp(argv[i], "--reps") && i + 1 < argc) {
-            if (sscanf(argv[++i], "%d", &reps) != 1 || reps < 1 || reps > 100) {
-                fprintf(stderr, "gridsurvey bench blobs: --reps '%s': expected 1..100\n", argv[i]);
-                return 2;
-            }
+            if (!srv_int_arg("bench blobs", "--reps", argv[++i], 1, 100, &v)) return 2;
+            reps = (int)v;
         } else if (argv[i][0] == '-' || dir) {
-            fprintf(stderr, "gridsurvey bench blobs: unexpected argument '%s' (see gridsurvey help bench blobs)\n",
-                    argv[i]);
-            return 2;
+            return srv_usage_error("bench blobs", "unexpected argument '%s'", argv[i]);
         } else {
             dir = argv[i];
         }
     }
-    if (!dir) {
-        fprintf(stderr, "gridsurvey bench blobs: expected a capture directory (see gridsurvey help bench blobs)\n");
-        return 2;
-    }
+    if (!dir) return srv_usage_error("bench blobs", "expected a capture directory");
     gs_capture cap;
     gs_status st = gs_capture_read(dir, &cap);
     if (st != GS_OK) return srv_error("bench blobs", st);

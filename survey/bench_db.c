@@ -280,34 +280,30 @@ int srv_bench_db(int argc, char **argv)
         {"help", no_argument, 0, 'h'}, {0, 0, 0, 0},
     };
     long max = 1000000;
+    unsigned long long v;
     int keep = 0;
     const char *dir = NULL;
     optind = 1;
     int c;
-    char *end;
     while ((c = getopt_long(argc, argv, "h", longs, NULL)) != -1) {
         switch (c) {
         case 'q': max = 10000; break;
         case 'm':
-            max = strtol(optarg, &end, 10);
-            if (*end || max < 10000 || max > 100000000) {
-                fprintf(stderr, "gridsurvey bench db: --max '%s': expected 10000 .. 1e8 lights\n", optarg);
-                return 2;
-            }
+            if (!srv_int_arg("bench db", "--max", optarg, 10000, 100000000, &v)) return 2;
+            max = (long)v;
             break;
         case 'd': dir = optarg; break;
         case 'k': keep = 1; break;
         case 'h': fputs(bench_usage, stdout); return 0;
-        default: return srv_usage_hint("bench", argv);
+        default: return srv_usage_hint("bench db", argv);
         }
     }
     char tmp[256] = "", path[4096];
     if (!dir) {
         snprintf(tmp, sizeof tmp, "/tmp/gridsurvey-bench-db.XXXXXX");
-        if (!mkdtemp(tmp)) {
-            fprintf(stderr, "gridsurvey bench db: cannot create a temporary directory: %s\n", strerror(errno));
-            return 1;
-        }
+        if (!mkdtemp(tmp))
+            return srv_error("bench db", gs_fail(GS_EIO, "%s: cannot create a temporary directory: %s", tmp,
+                                                 strerror(errno)));
         dir = tmp;
     }
     snprintf(path, sizeof path, "%s/bench.sqlite", dir);

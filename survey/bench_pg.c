@@ -36,17 +36,6 @@ static gs_status time_pg_query(PGconn *c, const char *sql, double *sec)
     return s;
 }
 
-static int parse_size(const char *opt, const char *text, long *v)
-{
-    char *end;
-    *v = strtol(text, &end, 10);
-    if (*end || *v < 10000 || *v > 100000000) {
-        fprintf(stderr, "gridsurvey bench pg: %s '%s': expected 10000 .. 1e8 lights\n", opt, text);
-        return 0;
-    }
-    return 1;
-}
-
 int srv_bench_pg(int argc, char **argv)
 {
     static const struct option longs[] = {
@@ -55,30 +44,33 @@ int srv_bench_pg(int argc, char **argv)
         {"help", no_argument, 0, 'h'},      {0, 0, 0, 0},
     };
     long min = 100000, max = 1000000;
+    unsigned long long v;
     const char *dir = NULL, *conninfo = NULL;
     optind = 1;
     int c;
     while ((c = getopt_long(argc, argv, "h", longs, NULL)) != -1) {
         switch (c) {
         case 'p': conninfo = optarg; break;
-        case 'n': if (!parse_size("--min", optarg, &min)) return 2; break;
-        case 'm': if (!parse_size("--max", optarg, &max)) return 2; break;
+        case 'n':
+            if (!srv_int_arg("bench pg", "--min", optarg, 10000, 100000000, &v)) return 2;
+            min = (long)v;
+            break;
+        case 'm':
+            if (!srv_int_arg("bench pg", "--max", optarg, 10000, 100000000, &v)) return 2;
+            max = (long)v;
+            break;
         case 'd': dir = optarg; break;
         case 'h': fputs(bench_pg_usage, stdout); return 0;
-        default: return srv_usage_hint("bench", argv);
+        default: return srv_usage_hint("bench pg", argv);
         }
     }
-    if (!conninfo) {
-        fprintf(stderr, "gridsurvey bench pg: --pg CONNINFO is required (see gridsurvey bench pg --help)\n");
-        return 2;
-    }
+    if (!conninfo) return srv_usage_error("bench pg", "--pg CONNINFO is required");
     char tmp[256] = "", path[4096];
     if (!dir) {
         snprintf(tmp, sizeof tmp, "/tmp/gridsurvey-bench-pg.XXXXXX");
-        if (!mkdtemp(tmp)) {
-            fprintf(stderr, "gridsurvey bench pg: cannot create a temporary directory: %s\n", strerror(errno));
-            return 1;
-        }
+        if (!mkdtemp(tmp))
+            return srv_error("bench pg", gs_fail(GS_EIO, "%s: cannot create a temporary directory: %s", tmp,
+                                                 strerror(errno)));
         dir = tmp;
     }
     snprintf(path, sizeof path, "%s/bench.sqlite", dir);

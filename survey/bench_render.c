@@ -67,15 +67,15 @@ int srv_bench_render(int argc, char **argv)
 {
     const char *path = "capture/scenes/metro.json";
     int frames = 3;
+    unsigned long long v;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) {
             fputs(render_usage, stdout);
             return 0;
         }
         if (!strcmp(argv[i], "--frames") && i + 1 < argc) {
-            if (sscanf(argv[++i], "%d", &frames) != 1 || frames < 1 || frames > 1000) {
-                return srv_usage_error("bench render", "--frames '%s': expected 1..1000", argv[i]);
-            }
+            if (!srv_int_arg("bench render", "--frames", argv[++i], 1, 1000, &v)) return 2;
+            frames = (int)v;
         } else if (argv[i][0] == '-') {
             return srv_usage_error("bench render", "unknown option or missing value: '%s'", argv[i]);
         } else {

@@ -86,11 +86,15 @@ static const char transport_usage[] =
 
 int srv_bench_transport(int argc, char **argv)
 {
-    int quick = argc > 1 && !strcmp(argv[1], "--quick");
-    if (argc > 1 && !quick) {
-        int help = !strcmp(argv[1], "--help");
-        fputs(transport_usage, help ? stdout : stderr);
-        return help ? 0 : 2;
+    int quick = 0;
+    for (int i = 1; i < argc; i++) {
+        if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) {
+            fputs(transport_usage, stdout);
+            return 0;
+        }
+        if (strcmp(argv[i], "--quick"))
+            return srv_usage_error("bench transport", "unexpected argument '%s': expected --quick", argv[i]);
+        quick = 1;
     }
     gs_delight *d = NULL;
     gs_status st = srv_tr_delight(NULL, &d);

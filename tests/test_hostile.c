@@ -694,8 +694,20 @@ TEST(cli_usage_errors_of_each_command_one_line_with_the_hint)
         {"%s simulate capture/scenes/window.json --out-dir x --drop-light nope", "simulate", "--drop-light nope"},
         {"%s stats --db x.sqlite --by nope", "stats", "--by 'nope'"},
         {"%s stats --db x.sqlite --format xml", "stats", "--format 'xml'"},
-        /* integers parsed by hand: 2^32 + 256 read as 256 (an int cast), " -1" as 2^64 - 1
-         * (strtoull skips the space, the check for '-' looked at it) */
+        /* bench's own lines: no hint, "(see --help)", or the hint of "bench" for a benchmark's */
+        {"%s bench frobnicate", "bench", "'frobnicate' is not a benchmark"},
+        {"%s bench recognize --frobnicate", "bench recognize", "'--frobnicate'"},
+        {"%s bench recognize --lights --captures", "bench recognize", "--lights and --captures"},
+        {"%s bench accuracy extra", "bench accuracy", "unexpected argument 'extra'"},
+        {"%s bench db --max 5", "bench db", "--max '5'"},
+        {"%s bench db --frobnicate", "bench db", "'--frobnicate'"},
+        {"%s bench pg --pg dbname=x --min 5", "bench pg", "--min '5'"},
+        {"%s bench pg", "bench pg", "--pg"},
+        {"%s bench transport --frobnicate", "bench transport", "'--frobnicate'"},
+        /* integers parsed by hand: "2x" read as 2 (sscanf), 2^32 + 256 as 256 (an int cast),
+         * " -1" as 2^64 - 1 (strtoull skips the space, the check for '-' looked at it) */
+        {"%s bench blobs /nonexistent/cap --reps 2x", "bench blobs", "--reps '2x'"},
+        {"%s bench render /nonexistent/scene.json --frames 2x", "bench render", "--frames '2x'"},
         {"%s delight generate -o /nonexistent/x.db --n 4294967552", "delight", "--n '4294967552'"},
         {"%s db ingest-synthetic --db /nonexistent/x.sqlite --seed ' -1'", "db ingest-synthetic", "--seed ' -1'"},
         {"%s push --db /nonexistent/x.sqlite --pg dbname=x --batch ' 5'", "push", "--batch ' 5'"},
