@@ -179,7 +179,7 @@ int srv_cmd_locate(int argc, char **argv)
         return srv_usage_error("locate", "--survey: at most %d bytes", GIS_TEXT_MAX - 1);
     gis_format fmt;
     gs_status s = format ? gis_format_parse(format, &fmt) : gis_format_from_path(out, &fmt);
-    if (s != GS_OK) return srv_error("locate", s);
+    if (s != GS_OK) return srv_usage_error("locate", "%s", gs_detail());
 
     gis_station st;
     s = gis_station_read(station_path, &st);

@@ -427,8 +427,9 @@ TEST(gis_cli_locate)
     rc = test_run(cmd, out, sizeof out);
     CHECK_MSG(rc == 1 && fx_contains(out, "station.json:4: field pitch_deg: pitch_deg = -95"), "%d: %s", rc, out);
     CHECK(fx_count_of(out, "\n") == 1);
+    /* an output format it cannot tell is a usage error, as export's */
     snprintf(cmd, sizeof cmd, "%s locate --station %s --pixels %s -o %s", test_bin(), st, px, fx_tmp("x.shp"));
-    CHECK(test_run(cmd, out, sizeof out) == 1 && fx_contains(out, "cannot tell the format"));
+    CHECK(test_run(cmd, out, sizeof out) == 2 && fx_contains(out, "cannot tell the format"));
 }
 
 /* Jansson's allocator failing at its n-th call (json_set_alloc_funcs). */

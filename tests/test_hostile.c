@@ -711,6 +711,9 @@ TEST(cli_usage_errors_of_each_command_one_line_with_the_hint)
         {"%s delight generate -o /nonexistent/x.db --n 4294967552", "delight", "--n '4294967552'"},
         {"%s db ingest-synthetic --db /nonexistent/x.sqlite --seed ' -1'", "db ingest-synthetic", "--seed ' -1'"},
         {"%s push --db /nonexistent/x.sqlite --pg dbname=x --batch ' 5'", "push", "--batch ' 5'"},
+        /* a format locate cannot tell is a usage error, as export's (it exited 1) */
+        {"%s locate --station s.json --pixels p.csv -o o.xyz", "locate", "o.xyz"},
+        {"%s locate --station s.json --pixels p.csv -o o.csv --format xml", "locate", "format 'xml'"},
     };
     for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
         char line_start[64], hint[64];
