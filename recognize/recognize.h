@@ -613,8 +613,9 @@ struct rec_unmix_result {
     double predicted_error[REC_MAX_SOURCES];   /* of each source from the noise (Eq. 16's
                                          * covariance): sqrt(sum var) / ||tau_s Q_s||_F over
                                          * the pixels with every sample usable */
-    double rms_residual;      /* weighted residual per usable sample of the last Eq. 16 (~1 when
-                               * the model fits to the noise) */
+    double rms_residual;      /* weighted residual of the last Eq. 16 per degree of freedom
+                               * (usable samples less the sources fitted; ~1 when the model fits
+                               * to the noise) */
     int ill_posed;            /* 1: rec_unmix returned GS_ENUMERIC for Fig. 10's reason */
 };
 void rec_unmix_release(rec_unmix_result *r);

@@ -54,7 +54,7 @@ typedef struct {
     double *Gc, *Gk, *hk, nacc[GS_MAX_BANDS];
     /* noise-propagated variance and signal per source (pass 0, pixels with every sample) */
     double var_sum[SMAX], sig_sum[SMAX];
-    double chi2, nsamp;
+    double chi2, dof;   /* the last Eq. 16's weighted residual and its degrees of freedom */
 } ux;
 
 /* The weight 1/var of a per-cycle value of a pixel at level mu (DN per cycle) that integrated
@@ -315,7 +315,7 @@ static gs_status eq16_pass(ux *u, rec_unmix_result *r, int pass, int accumulate)
     size_t P = (size_t)u->W * (size_t)u->H;
     const unsigned all = (1u << S) - 1;
     u->chi2 = 0;
-    u->nsamp = 0;
+    u->dof = 0;
     for (size_t p = 0; p < P; p++) {
         if (u->o->progress && (p & 65535) == 0)
             u->o->progress(u->o->progress_ctx, ((double)pass + (double)p / (double)P) /
@@ -390,15 +390,16 @@ static gs_status eq16_pass(ux *u, rec_unmix_result *r, int pass, int accumulate)
                 tq[s][b] = (float)tqv[s];
                 if (pass == 0 && n == K && act == all) u->sig_sum[s] += tqv[s] * tqv[s];
             }
-            /* residual of this fit */
+            /* residual of this fit, over the usable samples less the sources fitted */
             for (int k = 0; k < K; k++) {
                 if (!u->use[k]) continue;
                 double m = 0;
                 for (int s = 0; s < S; s++) m += A[k * S + s] * t[s];
                 double e = u->v[k * B + b] - m;
                 u->chi2 += wk[k] * e * e;
-                u->nsamp += 1;
+                u->dof += 1;
             }
+            u->dof -= __builtin_popcount(fit);
             /* and not near saturation (censor_dn) */
             if (!accumulate || act != all || !uniform || u->rawmax > u->censor_dn) continue;
             /* Eq. 18's normal equations (the model I_pk = sum_s tq_s B_sk) from the linear,
@@ -661,7 +662,7 @@ gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unm
         r->unknown_px += r->state[p] == REC_UNMIX_UNKNOWN;
         for (int s = 0; s < S; s++) r->unknown_values += !(u.act[p] >> s & 1u);
     }
-    r->rms_residual = u.nsamp > 0 ? sqrt(u.chi2 / u.nsamp) : NAN;
+    r->rms_residual = u.dof > 0 ? sqrt(u.chi2 / u.dof) : NAN;
     if (o_in->progress) o_in->progress(o_in->progress_ctx, 1.0);
 done:
     free(u.A);

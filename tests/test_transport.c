@@ -349,9 +349,13 @@ TEST_TIMEOUT(eq16_unmix_within_1_25x_of_weighted_least_squares_with_true_brfs, 6
     /* the hard parts are there: HDR-halved and saturated samples */
     size_t halved = 0, P = (size_t)cap.width * cap.height;
     for (size_t i = 0; cap.halvings && i < P * (size_t)cap.K; i++) halved += cap.halvings[i] > 0;
-    printf("    %zu halved samples, %zu pixels partly saturated, %zu without an answer\n", halved,
-           r.partial_px, r.unknown_px);
+    printf("    %zu halved samples, %zu pixels partly saturated, %zu without an answer; weighted rms "
+           "residual %.3f\n", halved, r.partial_px, r.unknown_px, r.rms_residual);
     CHECK(halved > 0 && r.partial_px > 0);
+    /* the right sources and noise model: chi2 per degree of freedom (samples less the sources
+     * fitted) is 1 up to its sampling noise and the BRFs' database-to-scene difference; per
+     * sample it would be sqrt((K - S) / K) = 0.90 */
+    CHECK_MSG(fabs(r.rms_residual - 1.0) < 0.05, "weighted rms residual %.3f", r.rms_residual);
     double oracle[5], ours[5];
     if (r.tq) {
         trfx_oracle_errors(dir, &cap, d, &src, &r, oracle, ours);
