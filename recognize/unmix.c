@@ -305,10 +305,10 @@ static void eq18_add(ux *u, int b, const double *G, const double *h, const doubl
     }
 }
 
-/* One pass of Eq. 16 over every pixel. pass 0: the weights from the pixel's mean usable value,
- * the sources each pixel determines and the predicted errors; later passes: the weights from the
- * previous fit. accumulate: collect Eq. 18's normal equations (pixels determining every
- * source). */
+/* One pass of Eq. 16 over every pixel, the weights from the pixel's mean usable value (every
+ * pass). pass 0 also finds the sources each pixel determines and the predicted errors; later
+ * passes fit the pixels pass 0 fitted, with the refined B. accumulate: collect Eq. 18's normal
+ * equations (pixels determining every source). */
 static gs_status eq16_pass(ux *u, rec_unmix_result *r, int pass, int accumulate)
 {
     int B = u->B, K = u->K, S = u->S;

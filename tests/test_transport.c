@@ -834,6 +834,10 @@ TEST_TIMEOUT(eq20_relight_source_off_matches_a_capture_without_it_within_5_perce
                 }
             }
         CHECK_MSG(worst <= 1e-4 * scale + 1e-4, "phase change: %.3g off (scale %.3g)", worst, scale);
+        /* its own phase given as itself + 360 deg is no change: the refined BRF stays */
+        set[2].phase_deg = src.phase_deg[2] + 360.0;
+        CHECK_OK(rec_relight(&src, r.tq, cap.width, cap.height, d, 50, set, f2));
+        CHECK(!memcmp(f2, fr, sizeof *f2 * n * (size_t)cap.K));
         free(f2);
         set[2].set_phase = 0;
         gs_capture_release(&rc);
