@@ -635,14 +635,18 @@ gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unm
             }
             if (!(worst <= o_in->max_error)) {
                 r->ill_posed = 1;
-                double cmax = 0;
+                double cmax = 0, all = 0;
                 for (int b = 0; b < B; b++)
                     if (r->cond[b] > cmax) cmax = r->cond[b];
+                for (int s = 0; s < S; s++) all += u.sig_sum[s];
+                /* its share of the fitted light tells a source without light (not in the scene,
+                 * or at another phase) from sources the data cannot tell apart */
                 st = gs_fail(GS_ENUMERIC, "ill-posed: source %02d (%s at %g deg) would be %.0f %% "
                              "noise (predicted relative error %.3g > %g; QB's condition number "
-                             "%.3g): the data do not support %d sources (paper Fig. 10)",
+                             "%.3g; its image holds %.2g %% of the fitted images' energy): the data do not support %d "
+                             "sources (paper Fig. 10)",
                              ws, src->bulb[ws], src->phase_deg[ws], 100 * worst, worst,
-                             o_in->max_error, cmax, S);
+                             o_in->max_error, cmax, all > 0 ? 100 * u.sig_sum[ws] / all : 0.0, S);
                 goto done;
             }
         }

@@ -551,6 +551,22 @@ TEST(fig10_more_sources_than_the_data_support_reported_ill_posed)
     CHECK(fx_contains(gs_detail(), "ill-posed") && fx_contains(gs_detail(), "noise"));
     printf("    two incandescent models at 0 deg: %s\n", gs_detail());
     CHECK(r.predicted_error[0] > 0.5 || r.predicted_error[1] > 0.5);
+    /* the message tells them from a source without light: a fair share of the fitted energy
+     * for the indistinct pair, next to none for a bulb the scene does not have */
+    const char *h = strstr(gs_detail(), "its image holds ");
+    double pair_share = h ? atof(h + 16) : -1;
+    CHECK_MSG(pair_share > 0.0 && pair_share < 100.0, "%s", gs_detail());
+    rec_unmix_release(&r);
+    rec_sources_release(&src);
+    rec_source_spec sp3[3] = {{"inc-a60-25w-230v", 0}, {"led-fil-4w-lin", 240}, {"hps-70w", 120}};
+    rec_unmix_opts uo;
+    rec_unmix_opts_default(&uo);
+    CHECK_OK(rec_sources_build(d, sp3, 3, 50, cap.bands, cap.K, &src, NULL));
+    CHECK(rec_unmix(&cap, &src, &uo, &r) == GS_ENUMERIC && r.ill_posed);
+    printf("    a bulb the scene does not have: %s\n", gs_detail());
+    h = strstr(gs_detail(), "source 02 (hps-70w") ? strstr(gs_detail(), "its image holds ") : NULL;
+    double share = h ? atof(h + 16) : -1;
+    CHECK_MSG(share >= 0.0 && share < 0.1 * pair_share, "%s (the pair's: %g %%)", gs_detail(), pair_share);
     rec_unmix_release(&r);
     rec_sources_release(&src);
     gs_capture_release(&cap);
