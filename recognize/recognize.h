@@ -616,6 +616,9 @@ struct rec_unmix_result {
     double rms_residual;      /* weighted residual of the last Eq. 16 per degree of freedom
                                * (usable samples less the sources fitted; ~1 when the model fits
                                * to the noise) */
+    float *residual;          /* [height * width]: the same of each pixel over its bands, where a
+                               * missing source or a wrong BRF shows (Fig. 10's crosstalk); NaN
+                               * without a fit or a degree of freedom */
     int ill_posed;            /* 1: rec_unmix returned GS_ENUMERIC for Fig. 10's reason */
 };
 void rec_unmix_release(rec_unmix_result *r);

@@ -26,6 +26,7 @@ void rec_unmix_release(rec_unmix_result *r)
     free(r->tq);
     free(r->b);
     free(r->state);
+    free(r->residual);
     memset(r, 0, sizeof *r);
 }
 
@@ -322,7 +323,9 @@ static gs_status eq16_pass(ux *u, rec_unmix_result *r, int pass, int accumulate)
                                                    (double)(u->o->refine + 1));
         float *tq[SMAX];
         for (int s = 0; s < S; s++) tq[s] = r->tq + ((size_t)s * P + p) * (size_t)B;
+        r->residual[p] = NAN;
         if (pass > 0 && !u->fit[p]) continue;
+        double chi2_p = 0, dof_p = 0;   /* the pixel's, over its bands */
         int uniform;
         int n = gather(u, p, &uniform);
         if (pass == 0) {
@@ -396,10 +399,10 @@ static gs_status eq16_pass(ux *u, rec_unmix_result *r, int pass, int accumulate)
                 double m = 0;
                 for (int s = 0; s < S; s++) m += A[k * S + s] * t[s];
                 double e = u->v[k * B + b] - m;
-                u->chi2 += wk[k] * e * e;
-                u->dof += 1;
+                chi2_p += wk[k] * e * e;
+                dof_p += 1;
             }
-            u->dof -= __builtin_popcount(fit);
+            dof_p -= __builtin_popcount(fit);
             /* and not near saturation (censor_dn) */
             if (!accumulate || act != all || !uniform || u->rawmax > u->censor_dn) continue;
             /* Eq. 18's normal equations (the model I_pk = sum_s tq_s B_sk) from the linear,
@@ -415,6 +418,9 @@ static gs_status eq16_pass(ux *u, rec_unmix_result *r, int pass, int accumulate)
             }
             u->nacc[b] += 1;
         }
+        u->chi2 += chi2_p;
+        u->dof += dof_p;
+        if (dof_p > 0) r->residual[p] = (float)sqrt(chi2_p / dof_p);
         if (!u->act[p]) r->state[p] = REC_UNMIX_UNKNOWN;
         for (int s = 0; s < S; s++)
             if (!(u->act[p] >> s & 1u))
@@ -598,8 +604,9 @@ gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unm
     r->b = malloc(sizeof *r->b * nb);
     r->tq = malloc(sizeof *r->tq * (size_t)S * P * B);
     r->state = calloc(P, 1);
+    r->residual = malloc(sizeof *r->residual * P);
     if (!u.A || !u.G0 || !u.G0inv || !u.v || !u.c || !u.use || !u.act || !u.fit || !u.Gc || !u.Gk || !u.kmax || !u.hk || !r->b ||
-        !r->tq || !r->state) {
+        !r->tq || !r->state || !r->residual) {
         st = gs_fail(GS_ENOMEM, "unmix: cannot hold %d source images of %d x %d x %d", S, W, H, B);
         goto done;
     }
@@ -683,7 +690,9 @@ done:
     free(u.hk);
     if (st != GS_OK) {
         free(r->tq);
+        free(r->residual);
         r->tq = NULL;
+        r->residual = NULL;
     }
     return st;
 }

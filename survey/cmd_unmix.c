@@ -20,7 +20,9 @@ static const char unmix_usage[] =
     "refined (Eq. 18) and Eq. 16 again. Sources of the same bulb and phase are one (Eq. 15).\n"
     "Writes DIR/sources.json (gridsurvey-sources/1), DIR/source_NN.tiff (32-bit float, tau_s Q_s\n"
     "in DN per flicker cycle, R G B in file order; NaN where no value can be given),\n"
-    "DIR/source_NN.png and DIR/mean.png (the input's mean image). docs/light-transport.md.\n"
+    "DIR/source_NN.png, DIR/mean.png (the input's mean image) and DIR/residual.tiff/.png (each\n"
+    "pixel's weighted rms residual per degree of freedom: ~1 where the sources explain it, above\n"
+    "where one is missing or its BRF wrong). docs/light-transport.md.\n"
     "\n"
     "  --sources FILE     {\"format\": \"gridsurvey-sources/1\", \"sources\": [{\"bulb\": ID,\n"
     "                     \"phase_deg\": P}, ...]} (bulb \"daylight\": a constant source)\n"
@@ -263,6 +265,12 @@ int srv_cmd_unmix(int argc, char **argv)
         char path[4096];
         gs_path_join(path, sizeof path, out, "mean.png");
         st = rec_write_image_png(path, buf, cap.width, cap.height, cap.bands, 0);
+        /* each pixel's weighted rms residual per degree of freedom: ~1 where the sources and
+         * their BRFs explain it, above where one is missing or wrong (white at 3 and beyond) */
+        gs_path_join(path, sizeof path, out, "residual.tiff");
+        if (st == GS_OK) st = gs_tiff_write_float(path, r.residual, cap.width, cap.height, 1, 1);
+        gs_path_join(path, sizeof path, out, "residual.png");
+        if (st == GS_OK) st = rec_write_image_png(path, r.residual, cap.width, cap.height, 1, 3.0);
     }
     if (st == GS_OK) {
         char path[4096];
