@@ -44,6 +44,14 @@ static void read_det(sqlite3_stmt *q, det *d)
     srv_dbi_col_camera(q, 11, &d->cam);
 }
 
+/* 1 when two stations stand within a millimetre (one roof stored under two names): no baseline. */
+static int same_place(const gis_camera *a, const gis_camera *b)
+{
+    double d, azi1, azi2;
+    return gis_geodesic_inverse(a->lat_deg, a->lon_deg, b->lat_deg, b->lon_deg, &d, &azi1, &azi2) == GS_OK &&
+           d < 1e-3;
+}
+
 /* The detection's bearing from its station and that bearing's 1-sigma, degrees. */
 static gs_status bearing_of(const det *d, gis_bearing *b)
 {
@@ -93,8 +101,8 @@ gs_status srv_triangulate_sites(srv_db *db, const int64_t *capture_ids, size_t n
             done_site = 0;
             continue;
         }
-        if (done_site || cur.station == first.station) continue;
-        done_site = 1;   /* the site's first two stations */
+        if (done_site || cur.station == first.station || same_place(&cur.cam, &first.cam)) continue;
+        done_site = 1;   /* the site's first two stations at two places */
         if (n == cap) {
             size_t nc = cap ? 2 * cap : 64;
             srv_tri_site *g = realloc(res, nc * sizeof *g);

@@ -44,18 +44,21 @@ TEST(two_stations_bearing_sigma_distortion_stations)
     if (!db) return;
     const gis_ellipse e[2] = {{100.0, 2.0, fmod(alpha[0] + 180.0, 180.0)},
                               {40.0, 3.0, fmod(alpha[1] + 180.0 + 30.0, 180.0)}};
-    static const char *const names[2] = {"sw", "se"};
-    int64_t stid[2], cid[3], light[3];
-    for (int k = 0; k < 2; k++) {
+    /* "sw-july": sw's roof stored again under another name (the same position): not a second
+     * station (a pair of them has no baseline to triangulate) */
+    static const char *const names[3] = {"sw", "se", "sw-july"};
+    static const int place[3] = {0, 1, 0};
+    int64_t stid[3], cid[3], light[3];
+    for (int k = 0; k < 3; k++) {
         srv_station_row r;
         srv_station_row_init(&r);
         r.survey_id = sid;
         r.name = names[k];
         gis_camera *c = &r.cam;
-        c->lat_deg = st[k][0];
-        c->lon_deg = st[k][1];
+        c->lat_deg = st[place[k]][0];
+        c->lon_deg = st[place[k]][1];
         c->height_m = 50.0;
-        c->heading_deg = st[k][2] - 20.0;
+        c->heading_deg = st[place[k]][2] - 20.0;
         c->pitch_deg = c->roll_deg = 0.0;
         c->sigma_heading_deg = c->sigma_pitch_deg = c->sigma_roll_deg = 0.0;
         c->focal_px = f;
@@ -66,11 +69,11 @@ TEST(two_stations_bearing_sigma_distortion_stations)
         r.sigma_px = 0.5;
         CHECK_OK(srv_db_add_station(db, &r, &stid[k]));
     }
-    /* captures in id order: sw, sw (another night), se */
-    static const int station_of[3] = {0, 0, 1};
+    /* captures in id order: sw, sw-july (another night from sw's roof), se */
+    static const int station_of[3] = {0, 2, 1};
     double s = 1.0 + k1 * (xn * xn + yn * yn);
     for (int c = 0; c < 3; c++) {
-        int k = station_of[c];
+        int k = place[station_of[c]];
         srv_light_row l = survey_fx_light(0, cx + f * xn * s, cy + f * yn * s, 0.0, 0.9);
         srv_location_row loc;
         srv_location_row_init(&loc);
@@ -83,7 +86,7 @@ TEST(two_stations_bearing_sigma_distortion_stations)
         char key[16];
         snprintf(key, sizeof key, "c%d", c);
         srv_capture_data cd = survey_fx_capture(sid, key, &l, &loc, 1);
-        cd.capture.station_id = stid[k];
+        cd.capture.station_id = stid[station_of[c]];
         CHECK_OK(srv_db_add_capture(db, &cd, &cid[c], NULL));
         char sql[96];
         snprintf(sql, sizeof sql, "SELECT id FROM lights WHERE capture_id = %lld", (long long)cid[c]);
