@@ -605,6 +605,9 @@ struct rec_unmix_result {
     int width, height, bands, S, K;
     float *tq;                /* [((s * height + y) * width + x) * bands + band]: tau_s Q_s, DN
                                * per cycle (>= 0), NaN where REC_UNMIX_UNKNOWN */
+    float *sigma;             /* [as tq]: the 1-sigma of each value from the noise (Eq. 16's
+                               * covariance of the unconstrained fit, of the last pass), NaN where
+                               * tq is */
     double *b;                /* [(s * bands + band) * K + k]: the refined B (Eq. 18), mean 1 */
     unsigned char *state;     /* [height * width] REC_UNMIX_* */
     size_t partial_px, unknown_px;

@@ -24,6 +24,7 @@ void rec_unmix_release(rec_unmix_result *r)
 {
     if (!r) return;
     free(r->tq);
+    free(r->sigma);
     free(r->b);
     free(r->state);
     free(r->residual);
@@ -321,8 +322,11 @@ static gs_status eq16_pass(ux *u, rec_unmix_result *r, int pass, int accumulate)
         if (u->o->progress && (p & 65535) == 0)
             u->o->progress(u->o->progress_ctx, ((double)pass + (double)p / (double)P) /
                                                    (double)(u->o->refine + 1));
-        float *tq[SMAX];
-        for (int s = 0; s < S; s++) tq[s] = r->tq + ((size_t)s * P + p) * (size_t)B;
+        float *tq[SMAX], *sq[SMAX];
+        for (int s = 0; s < S; s++) {
+            tq[s] = r->tq + ((size_t)s * P + p) * (size_t)B;
+            sq[s] = r->sigma + ((size_t)s * P + p) * (size_t)B;
+        }
         r->residual[p] = NAN;
         if (pass > 0 && !u->fit[p]) continue;
         double chi2_p = 0, dof_p = 0;   /* the pixel's, over its bands */
@@ -344,8 +348,9 @@ static gs_status eq16_pass(ux *u, rec_unmix_result *r, int pass, int accumulate)
         for (int b = 0; b < B && u->fit[p]; b++) {
             const double *A = u->A + (size_t)b * K * S;
             double mu = usable_mean(u, b);
-            double G[SMAX * SMAX], h[SMAX] = {0}, t[SMAX], tu[SMAX], w0 = 0;
+            double G[SMAX * SMAX], h[SMAX] = {0}, t[SMAX], tu[SMAX], w0 = 0, var[SMAX];
             double wk[1024];
+            for (int s = 0; s < S; s++) var[s] = NAN;
             unsigned act = u->act[p], fit = u->fit[p];
             if (uniform) {
                 w0 = weight(&u->nz, mu, u->c[0]);
@@ -364,19 +369,20 @@ static gs_status eq16_pass(ux *u, rec_unmix_result *r, int pass, int accumulate)
                     neg |= x < 0;
                 }
                 if (neg && !nnls_on(u->G0 + (size_t)b * S * S, h, S, all, t)) act = fit = 0;
+                for (int s = 0; s < S; s++) var[s] = Gi[s * S + s] / w0;
                 if (pass == 0)
                     for (int s = 0; s < S; s++) {
                         double q = u->src->q[s * B + b];
                         u->var_sum[s] += Gi[s * S + s] / w0 * q * q;
                     }
             } else {
-                double Gf[SMAX * SMAX];
+                double Gf[SMAX * SMAX], Gi[SMAX * SMAX];
                 build_normal(u, b, mu, G, Gf, h, wk);
-                if (pass == 0 && n == K && act == all) {
+                if (fit == all && spd_inverse(G, S, Gi)) {
+                    for (int s = 0; s < S; s++) var[s] = Gi[s * S + s];
                     /* every sample usable (HDR exposures differ): its noise counts towards
                      * what the data support */
-                    double Gi[SMAX * SMAX];
-                    if (spd_inverse(G, S, Gi))
+                    if (pass == 0 && n == K && act == all)
                         for (int s = 0; s < S; s++) {
                             double q = u->src->q[s * B + b];
                             u->var_sum[s] += Gi[s * S + s] * q * q;
@@ -391,6 +397,7 @@ static gs_status eq16_pass(ux *u, rec_unmix_result *r, int pass, int accumulate)
             for (int s = 0; s < S; s++) {
                 tqv[s] = t[s] * u->src->q[s * B + b];
                 tq[s][b] = (float)tqv[s];
+                sq[s][b] = (float)(sqrt(var[s]) * u->src->q[s * B + b]);
                 if (pass == 0 && n == K && act == all) u->sig_sum[s] += tqv[s] * tqv[s];
             }
             /* residual of this fit, over the usable samples less the sources fitted */
@@ -424,7 +431,7 @@ static gs_status eq16_pass(ux *u, rec_unmix_result *r, int pass, int accumulate)
         if (!u->act[p]) r->state[p] = REC_UNMIX_UNKNOWN;
         for (int s = 0; s < S; s++)
             if (!(u->act[p] >> s & 1u))
-                for (int b = 0; b < B; b++) tq[s][b] = NAN;
+                for (int b = 0; b < B; b++) tq[s][b] = sq[s][b] = NAN;
     }
     return GS_OK;
 }
@@ -506,8 +513,9 @@ static gs_status eq18(ux *u)
 }
 
 /* The bytes of a capture of P pixels x K frames x B bands (2 B per sample, 1 per HDR map
- * pixel), of S source images of 8 B (unmix) or 4 B (relight) per sample, of F frames of floats,
- * and the per-pixel rest, against the budget; what names them. */
+ * pixel), of S source images of 12 B (unmix, the values' and their sigmas' floats among them) or
+ * 4 B (relight) per sample, of F frames of floats, and the per-pixel rest, against the budget;
+ * what names them. */
 static gs_status transport_budget(const char *file, const char *cmd, int W, int H, int B, int K, int S,
                                   double source_bytes, int F)
 {
@@ -526,7 +534,7 @@ gs_status rec_unmix_budget(const char *capdir, const gs_capture *cap, int S, int
     char file[4200];
     snprintf(file, sizeof file, "%s/capture.json", capdir);
     /* the command's image buffer: one source's K frames (--render) or one image */
-    return transport_budget(file, "unmix", cap->width, cap->height, cap->bands, cap->K, S, 8.0,
+    return transport_budget(file, "unmix", cap->width, cap->height, cap->bands, cap->K, S, 12.0,
                             render ? cap->K : 1);
 }
 
@@ -603,10 +611,11 @@ gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unm
     u.hk = malloc(sizeof *u.hk * (size_t)B * K * S);
     r->b = malloc(sizeof *r->b * nb);
     r->tq = malloc(sizeof *r->tq * (size_t)S * P * B);
+    r->sigma = malloc(sizeof *r->sigma * (size_t)S * P * B);
     r->state = calloc(P, 1);
     r->residual = malloc(sizeof *r->residual * P);
     if (!u.A || !u.G0 || !u.G0inv || !u.v || !u.c || !u.use || !u.act || !u.fit || !u.Gc || !u.Gk || !u.kmax || !u.hk || !r->b ||
-        !r->tq || !r->state || !r->residual) {
+        !r->tq || !r->sigma || !r->state || !r->residual) {
         st = gs_fail(GS_ENOMEM, "unmix: cannot hold %d source images of %d x %d x %d", S, W, H, B);
         goto done;
     }
@@ -690,8 +699,10 @@ done:
     free(u.hk);
     if (st != GS_OK) {
         free(r->tq);
+        free(r->sigma);
         free(r->residual);
         r->tq = NULL;
+        r->sigma = NULL;
         r->residual = NULL;
     }
     return st;

@@ -20,6 +20,7 @@ static const char unmix_usage[] =
     "refined (Eq. 18) and Eq. 16 again. Sources of the same bulb and phase are one (Eq. 15).\n"
     "Writes DIR/sources.json (gridsurvey-sources/1), DIR/source_NN.tiff (32-bit float, tau_s Q_s\n"
     "in DN per flicker cycle, R G B in file order; NaN where no value can be given),\n"
+    "DIR/sigma_NN.tiff (each value's 1-sigma from the noise, as source_NN.tiff),\n"
     "DIR/source_NN.png, DIR/mean.png (the input's mean image) and DIR/residual.tiff/.png (each\n"
     "pixel's weighted rms residual per degree of freedom: ~1 where the sources explain it, above\n"
     "where one is missing or its BRF wrong). docs/light-transport.md.\n"
@@ -247,6 +248,10 @@ int srv_cmd_unmix(int argc, char **argv)
         rp[s] = NULL;
         if (!gs_path_join(path, sizeof path, out, files[s])) st = gs_fail(GS_EINVAL, "%s: path too long", out);
         if (st == GS_OK) st = gs_tiff_write_float(path, r.tq + (size_t)s * nimg, cap.width, cap.height, cap.bands, 1);
+        char name[32];
+        snprintf(name, sizeof name, "sigma_%02d.tiff", s);
+        gs_path_join(path, sizeof path, out, name);
+        if (st == GS_OK) st = gs_tiff_write_float(path, r.sigma + (size_t)s * nimg, cap.width, cap.height, cap.bands, 1);
         char png[32];
         snprintf(png, sizeof png, "source_%02d.png", s);
         gs_path_join(path, sizeof path, out, png);

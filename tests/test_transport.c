@@ -367,6 +367,23 @@ TEST_TIMEOUT(eq16_unmix_within_1_25x_of_weighted_least_squares_with_true_brfs, 6
             CHECK_MSG(ours[s] <= 1.25 * oracle[s], "source %d: %.4f vs the oracle's %.4f", s, ours[s], oracle[s]);
             CHECK(all < 0.5);
         }
+        /* each value's sigma against its error from the truth (the simulator's tau Q): rms of
+         * z = error / sigma over the complete pixels, 1 when the sigmas are right */
+        for (int s = 0; s < 5; s++) {
+            float *truth = trfx_truth(dir, src.bulb[s], src.phase_deg[s]);
+            double z2 = 0;
+            size_t nz = 0;
+            for (size_t p = 0; truth && p < P; p++)
+                for (int b = 0; b < 3 && r.state[p] == REC_UNMIX_OK; b++) {
+                    size_t i = ((size_t)s * P + p) * 3 + b;
+                    double z = (r.tq[i] - truth[p * 3 + b]) / r.sigma[i];
+                    if (isfinite(z) && r.tq[i] > 3 * r.sigma[i]) z2 += z * z, nz++;   /* (away from T >= 0) */
+                }
+            double rz = nz ? sqrt(z2 / (double)nz) : NAN;
+            printf("    source %d: rms error / sigma %.3f over %zu values\n", s, rz, nz);
+            CHECK_MSG(nz > 1000 && rz > 0.85 && rz < 1.2, "source %d: rms z %.3f over %zu values", s, rz, nz);
+            free(truth);
+        }
     }
     rec_unmix_release(&r);
     rec_sources_release(&src);
