@@ -146,7 +146,7 @@ demo-transport: deps
 	$(BIN) relight $(DT)/unmixed --set 4=gain:0 --out-dir $(DT)/relit-mh70-off --compare $(DT)/lab-without-mh70
 	$(BIN) simulate capture/scenes/window.json --out-dir $(DT)/window --no-progress
 	$(BIN) separate $(DT)/window --out-dir $(DT)/separated
-	@echo "pictures: $(DT)/unmixed/mean.png, source_NN.png, $(DT)/relit-*/preview.png, $(DT)/separated/*.png"
+	@echo "pictures: $(DT)/unmixed/mean.png, source_NN.png, residual.png, $(DT)/relit-*/preview.png, $(DT)/separated/*.png"
 # Performance tables, printed and kept in docs/: Eq. 7 throughput on one core
 # (survey/bench.c), the survey database's ingest and query times (survey/bench_db.c), and
 # SQLite vs PostGIS on a throw-away cluster (survey/bench_pg.c, tests/pg_cluster.sh).

@@ -52,6 +52,9 @@
 #define GIS_EARTH_RADIUS_M 6371008.8
 /* Longest sight line followed, metres: anything farther counts as missing the surface. */
 #define GIS_MAX_PATH_M 2.0e6
+/* Two stations closer than this have no baseline to triangulate from, metres. */
+#define GIS_MIN_BASELINE_M 1e-3
+
 /* Valid heights (station and lights), metres above the ellipsoid. */
 #define GIS_MIN_HEIGHT_M (-1.2e4)
 #define GIS_MAX_HEIGHT_M 1.0e5

@@ -117,7 +117,7 @@ gs_status gis_triangulate(const gis_bearing *a, const gis_bearing *b,
     double base, az_ab, az_ba;
     if (gis_gl_inverse(a->lat_deg, a->lon_deg, b->lat_deg, b->lon_deg, &base, &az_ab, &az_ba))
         return GS_ENUMERIC;
-    if (!(base > 1e-3))
+    if (!(base > GIS_MIN_BASELINE_M))
         return gs_fail(GS_EINVAL, "triangulate: the stations are %g m apart: expected distinct stations", base);
     if (base > 9.0e6)
         return gs_fail(GS_EINVAL, "triangulate: the stations are %.0f km apart: expected < 9000 km", base / 1e3);

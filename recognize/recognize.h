@@ -646,7 +646,7 @@ gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unm
  * inputs' declared sizes: unmix (after reading the capture; S sources, each source's K-frame
  * rendering when render), separate (after reading the capture) and relight (from a sources
  * file's declared capture, S sources). The bytes are the capture's samples and HDR maps, the
- * source images (8 B per source sample in unmix, 4 in relight), the rendered or relit frames
+ * source images (12 B per source sample in unmix: values and sigmas; 4 in relight), the rendered or relit frames
  * (4 B per sample), REC_TRANSPORT_BYTES_PER_PIXEL for the rest (per-pixel state, image
  * writing) and REC_TRANSPORT_BASE_BYTES (the DELIGHT database and its tables): upper bounds of
  * the peak resident memory above the binary's baseline measured in docs/reliability.md. */

@@ -23,7 +23,7 @@ gs_status rec_relight(const rec_sources *src, const float *tq, int width, int he
         }
         const char *bulb = r->bulb[0] ? r->bulb : src->bulb[s];
         double phase = r->set_phase ? r->phase_deg : src->phase_deg[s];
-        int same = !strcmp(bulb, src->bulb[s]) && (!r->set_phase || gs_wrap360(phase) == gs_wrap360(src->phase_deg[s]));
+        int same = !strcmp(bulb, src->bulb[s]) && (!r->set_phase || fabs(gs_wrap180(phase - src->phase_deg[s])) < 1e-9);
         double q[GS_MAX_BANDS];
         double *b = brf + (size_t)s * B * K;
         if (same) {

@@ -425,9 +425,11 @@ static gs_status eq16_pass(ux *u, rec_unmix_result *r, int pass, int accumulate)
             }
             u->nacc[b] += 1;
         }
-        u->chi2 += chi2_p;
-        u->dof += dof_p;
-        if (dof_p > 0) r->residual[p] = (float)sqrt(chi2_p / dof_p);
+        if (u->fit[p]) {   /* (a fit that failed in a later band has no residual) */
+            u->chi2 += chi2_p;
+            u->dof += dof_p;
+            if (dof_p > 0) r->residual[p] = (float)sqrt(chi2_p / dof_p);
+        }
         if (!u->act[p]) r->state[p] = REC_UNMIX_UNKNOWN;
         for (int s = 0; s < S; s++)
             if (!(u->act[p] >> s & 1u))

@@ -286,10 +286,10 @@ int srv_cmd_unmix(int argc, char **argv)
     }
     if (st == GS_OK) {
         printf("unmix: %s: %d sources, %dx%d x %d bands, K = %d; %zu pixels partly saturated, "
-               "%zu without an answer, %zu source values without one (a source the usable samples "
-               "do not determine); weighted rms residual %.3f; QB condition",
+               "%zu without an answer, %zu source values without one in the others (a source the "
+               "usable samples do not determine); weighted rms residual %.3f; QB condition",
                out, src.S, cap.width, cap.height, cap.bands, cap.K, r.partial_px, r.unknown_px,
-               r.unknown_values, r.rms_residual);
+               r.unknown_values - r.unknown_px * (size_t)src.S, r.rms_residual);
         for (int b = 0; b < cap.bands; b++) printf(" %.3g", r.cond[b]);
         printf("\n");
         for (int s = 0; s < src.S; s++) {

@@ -44,12 +44,12 @@ static void read_det(sqlite3_stmt *q, det *d)
     srv_dbi_col_camera(q, 11, &d->cam);
 }
 
-/* 1 when two stations stand within a millimetre (one roof stored under two names): no baseline. */
+/* 1 when two stations have no baseline (GIS_MIN_BASELINE_M: one roof stored under two names). */
 static int same_place(const gis_camera *a, const gis_camera *b)
 {
     double d, azi1, azi2;
-    return gis_geodesic_inverse(a->lat_deg, a->lon_deg, b->lat_deg, b->lon_deg, &d, &azi1, &azi2) == GS_OK &&
-           d < 1e-3;
+    return gis_geodesic_inverse(a->lat_deg, a->lon_deg, b->lat_deg, b->lon_deg, &d, &azi1, &azi2) != GS_OK ||
+           !(d > GIS_MIN_BASELINE_M);
 }
 
 /* The detection's bearing from its station and that bearing's 1-sigma, degrees. */
