@@ -713,6 +713,7 @@ static int cmp_float(const void *a, const void *b)
 
 static double residual_contrast(const rec_unmix_result *r, const float *truth, size_t P, double *median)
 {
+    *median = NAN;
     /* mean residual over the pixels with the most of that light (top tenth) over the least (bottom half) */
     float *t = malloc(sizeof *t * P), *res = malloc(sizeof *res * P);
     size_t n = 0;
@@ -766,7 +767,7 @@ TEST(unmix_residual_map_shows_a_source_missing_from_the_list)
     rec_unmix_opts_default(&uo);
     CHECK_OK(rec_sources_build(d, sp, 4, 50, cap.bands, cap.K, &src, NULL));   /* mh70 (the fifth) left out */
     CHECK_OK(rec_unmix(&cap, &src, &uo, &r));
-    double med_four, c_four = r.residual ? residual_contrast(&r, mh, P, &med_four) : 0;
+    double med_four = NAN, c_four = r.residual ? residual_contrast(&r, mh, P, &med_four) : 0;
     printf("    residual where mh70 lights most / least: %.2f with all five sources (median %.3f), %.2f "
            "with mh70 left out (median %.3f)\n", c_all, med_all, c_four, med_four);
     CHECK(fabs(med_all - 1.0) < 0.1 && c_all < 1.2);
