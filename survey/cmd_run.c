@@ -255,7 +255,8 @@ static gs_status print_triangulated(const char *db_path, const int64_t *captures
     if (s != GS_OK) return s;
     for (size_t i = 0; i < nt; i++) ok += isfinite(t[i].fix.lat_deg);
     printf("\nTwo stations (srv_triangulate_sites, gis_triangulate): %zu light sites seen from two "
-           "stations, %zu triangulated, %zu flagged (behind a station or near-parallel)\n\n", nt, ok, nt - ok);
+           "stations, %zu triangulated, %zu flagged (behind a station, near-parallel, or not "
+           "intersectable: the reason in flags)\n\n", nt, ok, nt - ok);
     if (nt) printf("| site | stations | lat_deg | lon_deg | semi-major m | semi-minor m | azimuth deg | angle deg | flags |\n"
                    "|---:|---|---:|---:|---:|---:|---:|---:|---|\n");
     for (size_t i = 0; i < nt; i++) {
@@ -264,7 +265,7 @@ static gs_status print_triangulated(const char *db_path, const int64_t *captures
         printf("| %lld | %s, %s | %.7f | %.7f | %.3f | %.3f | %.1f | %.1f | %s |\n", (long long)t[i].site_id,
                t[i].station[0], t[i].station[1], x->lat_deg, x->lon_deg, x->ellipse.semi_major_m,
                x->ellipse.semi_minor_m, x->ellipse.azimuth_deg, x->angle_deg,
-               gis_flags_str(x->flags, fl, sizeof fl));
+               t[i].error[0] ? t[i].error : gis_flags_str(x->flags, fl, sizeof fl));
     }
     free(t);
     return GS_OK;

@@ -118,13 +118,21 @@ gs_status srv_triangulate_sites(srv_db *db, const int64_t *capture_ids, size_t n
         t->site_id = first.site;
         const det *d[2] = {&first, &cur};
         gis_bearing bb[2];
-        for (int k = 0; k < 2 && s == GS_OK; k++) {
+        for (int k = 0; k < 2; k++) {
             t->light_id[k] = d[k]->light;
-            snprintf(t->station[k], sizeof t->station[k], "%s", d[k]->name);
+            snprintf(t->station[k], sizeof t->station[k], "%.63s", d[k]->name);
+        }
+        for (int k = 0; k < 2 && s == GS_OK; k++) {
             s = bearing_of(d[k], &bb[k]);
             t->sigma_bearing_deg[k] = bb[k].sigma_deg;
         }
         if (s == GS_OK) s = gis_triangulate(&bb[0], &bb[1], NULL, &t->fix);
+        if (s != GS_OK && s != GS_ENOMEM) {   /* this site only: kept, with the reason */
+            snprintf(t->error, sizeof t->error, "%s", gs_detail());
+            t->fix.lat_deg = t->fix.lon_deg = t->fix.angle_deg = NAN;
+            t->fix.ellipse.semi_major_m = t->fix.ellipse.semi_minor_m = t->fix.ellipse.azimuth_deg = NAN;
+            s = GS_OK;
+        }
         if (s == GS_OK) n++;
     }
     if (s == GS_OK && rc != SQLITE_DONE) s = srv_dbi_fail(db, "reading the two-station detections");

@@ -556,13 +556,15 @@ int srv_bench_db(int argc, char **argv);
  * first two, in capture order) intersected by gis_triangulate from the detections' pixel
  * bearings (the stations' stored cameras). A bearing's 1-sigma is the cross-range part of its
  * one-station ellipse over its distance. *out is malloc'd (free it); flagged intersections
- * (GIS_FIX_BEHIND, NEAR_PARALLEL) are kept with NaN positions. */
+ * (GIS_FIX_BEHIND, NEAR_PARALLEL) are kept with NaN positions, and so is a site that cannot be
+ * intersected at all (its error says why): one such site does not stop the others. */
 typedef struct {
     int64_t site_id;
     int64_t light_id[2];             /* the two detections */
     char station[2][64];             /* their stations' names */
     double sigma_bearing_deg[2];
     gis_intersection fix;            /* position, 1-sigma ellipse, angle, flags */
+    char error[160];                 /* why it could not be intersected ("" when fix says) */
 } srv_tri_site;
 gs_status srv_triangulate_sites(srv_db *db, const int64_t *capture_ids, size_t n_captures,
                                 srv_tri_site **out, size_t *n_out);

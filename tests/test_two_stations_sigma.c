@@ -115,5 +115,41 @@ TEST(two_stations_bearing_sigma_distortion_stations)
         }
     }
     free(t);
+    /* a site that cannot be intersected (light Q seen from sw and from a station 9,500 km
+     * away, which gis_triangulate refuses) is kept with its reason; the others are not lost */
+    srv_station_row far;
+    srv_station_row_init(&far);
+    far.survey_id = sid;
+    far.name = "far";
+    far.cam = (gis_camera){.lat_deg = -10.0, .lon_deg = 100.0, .height_m = 50.0, .heading_deg = 0.0,
+                           .focal_px = f, .cx_px = cx, .cy_px = cy};
+    int64_t far_id, cq[2];
+    CHECK_OK(srv_db_add_station(db, &far, &far_id));
+    for (int c = 0; c < 2; c++) {
+        srv_light_row l = survey_fx_light(0, cx, cy, 0.0, 0.9);
+        srv_location_row loc;
+        srv_location_row_init(&loc);
+        loc.method = SRV_LOC_ONE_STATION;
+        loc.lat_deg = P[0] + 0.05;
+        loc.lon_deg = P[1];
+        loc.height_m = 0.0;
+        loc.ellipse = e[0];
+        loc.range_m = 20000.0;
+        char key[16];
+        snprintf(key, sizeof key, "q%d", c);
+        srv_capture_data cd = survey_fx_capture(sid, key, &l, &loc, 1);
+        cd.capture.station_id = c ? far_id : stid[0];
+        CHECK_OK(srv_db_add_capture(db, &cd, &cq[c], NULL));
+    }
+    int64_t all[5] = {cid[0], cid[1], cid[2], cq[0], cq[1]};
+    CHECK_OK(srv_triangulate_sites(db, all, 5, &t, &n));
+    int fixed = 0, refused = 0;
+    for (size_t i = 0; i < n; i++) {
+        fixed += isfinite(t[i].fix.lat_deg) && !t[i].error[0];
+        refused += !isfinite(t[i].fix.lat_deg) && strstr(t[i].error, "km apart") != NULL;
+    }
+    CHECK_MSG(n == 2 && fixed == 1 && refused == 1, "%zu sites, %d intersected, %d refused (%s)", n, fixed, refused,
+              n == 2 ? t[1].error : "");
+    free(t);
     srv_db_close(db);
 }
