@@ -309,8 +309,8 @@ int srv_cmd_run(int argc, char **argv)
             break;
         case 'G':
             o.light_height_sigma_m = strtod(optarg, &end);
-            if (!*optarg || *end || !(o.light_height_sigma_m >= 0.0))
-                return srv_usage_error("run", "--light-height-sigma-m '%s': expected metres >= 0", optarg);
+            if (!*optarg || *end || !(o.light_height_sigma_m >= 0.0) || !isfinite(o.light_height_sigma_m))
+                return srv_usage_error("run", "--light-height-sigma-m '%s': expected finite metres >= 0", optarg);
             break;
         case 'u':
             o.eq7.unknown_p = strtod(optarg, &end);

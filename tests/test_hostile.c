@@ -689,6 +689,7 @@ TEST(cli_usage_errors_of_each_command_one_line_with_the_hint)
         {"%s locate --station s.json --pixels p.csv -o o.csv --light-height-m abc", "locate", "--light-height-m 'abc'"},
         {"%s push --db x.sqlite --pg dbname=x --areas a.geojson", "push", "--field"},
         {"%s recognize --phases 5 x", "recognize", "--phases '5'"},
+        {"%s run x.json --db x.sqlite --light-height-sigma-m inf", "run", "--light-height-sigma-m 'inf'"},
         {"%s separate", "separate", "CAPDIR"},
         {"%s simulate capture/scenes/window.json --out-dir x --seed -1", "simulate", "--seed '-1'"},
         {"%s simulate capture/scenes/window.json --out-dir x --drop-light nope", "simulate", "--drop-light nope"},
