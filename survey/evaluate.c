@@ -263,13 +263,13 @@ static gs_status read_stored(srv_db *db, int64_t capture_id, ev_light **out, siz
         snprintf(l->bulb, sizeof l->bulb, "%s", b ? b : "");
         const char *t = (const char *)sqlite3_column_text(q, 3);
         snprintf(l->tech, sizeof l->tech, "%s", t ? t : "");
-        l->phase_deg = sqlite3_column_type(q, 4) == SQLITE_NULL ? NAN : sqlite3_column_double(q, 4);
+        l->phase_deg = srv_dbi_col_real(q, 4);
         l->flags = (unsigned)sqlite3_column_int64(q, 5);
-        l->lat = sqlite3_column_type(q, 6) == SQLITE_NULL ? NAN : sqlite3_column_double(q, 6);
-        l->lon = sqlite3_column_type(q, 7) == SQLITE_NULL ? NAN : sqlite3_column_double(q, 7);
+        l->lat = srv_dbi_col_real(q, 6);
+        l->lon = srv_dbi_col_real(q, 7);
         double *e[3] = {&l->a_m, &l->b_m, &l->az_deg};
         for (int k = 0; k < 3; k++)
-            *e[k] = sqlite3_column_type(q, 8 + k) == SQLITE_NULL ? NAN : sqlite3_column_double(q, 8 + k);
+            *e[k] = srv_dbi_col_real(q, 8 + k);
     }
     if (s == GS_OK && rc != SQLITE_DONE) s = gs_fail(GS_ESQL, "%s: %s", srv_db_path(db), sqlite3_errmsg(h));
     sqlite3_finalize(q);

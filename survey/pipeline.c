@@ -216,7 +216,7 @@ static gs_status committed_counts(srv_db *db, int64_t survey_id, srv_run_report 
         r->with_bulb = (size_t)sqlite3_column_int64(q, 2);
         r->with_phase = (size_t)sqlite3_column_int64(q, 3);
         r->located = (size_t)sqlite3_column_int64(q, 4);
-        r->light_height_m = sqlite3_column_type(q, 5) == SQLITE_NULL ? NAN : sqlite3_column_double(q, 5);
+        r->light_height_m = srv_dbi_col_real(q, 5);
         if (!isfinite(r->light_height_m)) r->height_source[0] = '\0';
         else snprintf(r->height_source, sizeof r->height_source, "stored");
     } else if (rc != SQLITE_DONE) {
