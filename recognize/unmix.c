@@ -378,7 +378,10 @@ static gs_status eq16_pass(ux *u, rec_unmix_result *r, int pass, int accumulate)
             } else {
                 double Gf[SMAX * SMAX], Gi[SMAX * SMAX];
                 build_normal(u, b, mu, G, Gf, h, wk);
-                if (fit == all && spd_inverse(G, S, Gi)) {
+                /* the covariance where it is kept: the last pass's sigmas (the one that does not
+                 * accumulate Eq. 18) and pass 0's predicted errors */
+                int need = !accumulate || (pass == 0 && n == K && act == all);
+                if (need && fit == all && spd_inverse(G, S, Gi)) {
                     for (int s = 0; s < S; s++) var[s] = Gi[s * S + s];
                     /* every sample usable (HDR exposures differ): its noise counts towards
                      * what the data support */
