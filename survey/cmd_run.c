@@ -243,15 +243,19 @@ static gs_status report_surveys(const char *db_path, const srv_run_report *reps,
     return s;
 }
 
-/* Two stations: the sites seen from two stations of these captures, triangulated. */
-static gs_status print_triangulated(const char *db_path, const int64_t *captures, size_t n)
+/* Two stations: the sites seen from two stations of the inputs' captures, triangulated. */
+static gs_status print_triangulated(const char *db_path, const srv_run_report *reps, size_t n)
 {
     srv_db *db = NULL;
     srv_tri_site *t = NULL;
     size_t nt = 0, ok = 0;
+    int64_t *captures = malloc(n * sizeof *captures);
+    if (!captures) return gs_fail(GS_ENOMEM, "out of memory");
+    for (size_t i = 0; i < n; i++) captures[i] = reps[i].capture_id;
     gs_status s = srv_db_open(db_path, SRV_DB_READ, &db);
     if (s == GS_OK) s = srv_triangulate_sites(db, captures, n, &t, &nt);
     srv_db_close(db);
+    free(captures);
     if (s != GS_OK) return s;
     for (size_t i = 0; i < nt; i++) ok += isfinite(t[i].fix.lat_deg);
     printf("\nTwo stations (srv_triangulate_sites, gis_triangulate): %zu light sites seen from two "
@@ -345,14 +349,12 @@ int srv_cmd_run(int argc, char **argv)
         o.progress = tty_progress;
         o.capture_progress = 1;
     }
-    int64_t *captures = calloc((size_t)n_inputs, sizeof *captures);
     srv_run_report *reps = calloc((size_t)n_inputs, sizeof *reps);
-    if (!captures || !reps) s = gs_fail(GS_ENOMEM, "out of memory");
+    if (!reps) s = gs_fail(GS_ENOMEM, "out of memory");
     int done = 0;
     for (; done < n_inputs && s == GS_OK; done++) {
         o.input = argv[optind + done];
         s = run_one(&o, &reps[done]);
-        if (s == GS_OK) captures[done] = reps[done].capture_id;
     }
     /* the surveys of the inputs that were stored are reported even when a later one failed */
     int ok_inputs = s == GS_OK ? n_inputs : done - 1;
@@ -363,9 +365,8 @@ int srv_cmd_run(int argc, char **argv)
         if (s == GS_OK) s = sr;
         else s = gs_fail(s, "%s", failed);   /* (the input's error, not the report's) */
     }
-    if (s == GS_OK && n_inputs > 1) s = print_triangulated(o.db_path, captures, (size_t)n_inputs);
+    if (s == GS_OK && n_inputs > 1) s = print_triangulated(o.db_path, reps, (size_t)n_inputs);
     free(reps);
-    free(captures);
     if (s == GS_OK && fflush(stdout) != 0) s = gs_fail(GS_EIO, "stdout: write failed");
     return s == GS_OK ? 0 : srv_error("run", s);
 }
