@@ -69,12 +69,6 @@ void rec_catalog_release(rec_catalog *cat)
     memset(cat, 0, sizeof *cat);
 }
 
-int rec_cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
 /* Robust level of a box: the median after CLIP_ITER clips at CLIP_SIGMA (1.4826 MAD). */
 static float robust_level(float *v, float *tmp, size_t n)
 {
@@ -115,7 +109,7 @@ static void mesh_median3(double *g, int nx, int ny, double *tmp)
                     if (ej != jj && ny > 1) fx += fe - tmp[rj * nx + ei];
                     v[n++] = fx;
                 }
-            qsort(v, (size_t)n, sizeof *v, rec_cmp_double);
+            qsort(v, (size_t)n, sizeof *v, gs_cmp_double);
             g[j * nx + i] = v[n / 2];
         }
 }

@@ -221,7 +221,7 @@ static double capture_psf_sigma(const rec_catalog *cat, const double *r2, const 
     }
     if (m == 0) return 1.0;
     for (int q = 0; q < m; q++) sg[q] = sqrt(r2[idx[q]] / 2);
-    qsort(sg, (size_t)m, sizeof *sg, rec_cmp_double);
+    qsort(sg, (size_t)m, sizeof *sg, gs_cmp_double);
     double med = (m & 1) ? sg[m / 2] : 0.5 * (sg[m / 2 - 1] + sg[m / 2]);
     return med < 0.3 ? 0.3 : med > 8 ? 8 : med;
 }

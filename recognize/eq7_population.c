@@ -146,12 +146,6 @@ size_t rec_eq7_tau_prior(const double *tau_ll, const unsigned char *is_ref, cons
 #define TOL_HI 1.0
 #define CHI2_1_MEDIAN 0.45493642311957
 
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
 /* The median band misfit of the n references at tolerance tol (misfit falls as tol grows). */
 static double median_misfit(const rec_matcher *m, size_t n, const size_t *idx, const int *bulb,
                             const double *S, const double *T, double tol, double *scratch)
@@ -160,7 +154,7 @@ static double median_misfit(const rec_matcher *m, size_t n, const size_t *idx, c
         size_t i = idx[r];
         scratch[r] = rec_eq7_band_misfit(m, bulb[i], S + i * GS_MAX_BANDS, T + i * GS_MAX_BANDS, tol);
     }
-    qsort(scratch, n, sizeof *scratch, cmp_double);
+    qsort(scratch, n, sizeof *scratch, gs_cmp_double);
     return n % 2 ? scratch[n / 2] : 0.5 * (scratch[n / 2 - 1] + scratch[n / 2]);
 }
 

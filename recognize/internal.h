@@ -72,8 +72,6 @@ double rec_psf_share(int x, int y, double xc, double yc, double sigma);
 double rec_signal_z(const double *u1, const double *s1, const double *u2, const double *s2, int n);
 /* Step 9, the multi-source PSF fit over the K frames (blobs_fit.c): rewrites cat. */
 gs_status rec_blob_psf_fit(rec_blob_state *s, rec_catalog *cat);
-/* qsort's comparison of doubles, ascending. */
-int rec_cmp_double(const void *a, const void *b);
 /* Value of the per-frame background mesh of frame k, band b at (x, y) (blobs.c). */
 double rec_blob_frame_bg(const rec_blob_state *s, int k, int b, int x, int y);
 /* Step 5, deblending (blobs_deblend.c); steps 6-7, apertures and photometry

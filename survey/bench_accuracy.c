@@ -196,12 +196,6 @@ static gs_status read_acquisitions(const char *capdir, long *n)
 
 /* ------------------------------------------------------------------ one srv_acc_point */
 
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
 gs_status srv_acc_eval_subset(srv_db *db, int64_t survey_id, const char *key, const srv_light_row *rows,
                              size_t n, const char *truth, srv_eval_report *ev)
 {
@@ -339,7 +333,7 @@ static gs_status run_point(const char *base, const srv_acc_crop *cr, const char 
         goto done;
     }
     if (n) {
-        qsort(snr, n, sizeof *snr, cmp_double);
+        qsort(snr, n, sizeof *snr, gs_cmp_double);
         double pos = 0.9 * (double)(n - 1);
         size_t i0 = (size_t)floor(pos);
         p->snr_p90 = i0 + 1 < n ? snr[i0] + (pos - (double)i0) * (snr[i0 + 1] - snr[i0]) : snr[n - 1];

@@ -362,12 +362,6 @@ static gs_status match(ev_light *st, size_t ns, ev_light *tr, size_t nt, double 
     return s;
 }
 
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
 /* Linear interpolation between order statistics at position (n - 1) q of sorted v. */
 static double quantile(const double *v, size_t n, double q)
 {
@@ -522,7 +516,7 @@ gs_status srv_evaluate(srv_db *db, const char *truth_path, const srv_eval_opts *
         }
     }
     if (r->loc_pairs > 0) {
-        qsort(err, (size_t)r->loc_pairs, sizeof *err, cmp_double);
+        qsort(err, (size_t)r->loc_pairs, sizeof *err, gs_cmp_double);
         r->loc_median_m = quantile(err, (size_t)r->loc_pairs, 0.5);
         r->loc_p95_m = quantile(err, (size_t)r->loc_pairs, 0.95);
         r->loc_max_m = err[r->loc_pairs - 1];

@@ -277,7 +277,4 @@ gs_status srv_acc_oracle(srv_db *db, const srv_run_report *rr, const srv_job *j,
                          srv_light_row *sub, srv_acc_point *p);
 /* ====================================================================== end of bench accuracy */
 
-/* qsort comparison of doubles, ascending (survey/stages.c). */
-int srv_cmp_double(const void *a, const void *b);
-
 #endif

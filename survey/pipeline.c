@@ -154,7 +154,7 @@ static double scene_median_height(const cap_scene *sc, double *sd_m)
     for (size_t i = 0; i < n; i++) sum2 += (h[i] - sum / (double)n) * (h[i] - sum / (double)n);
     *sd_m = n > 1 ? sqrt(sum2 / (double)(n - 1)) : 0.0;
     if (n) {
-        qsort(h, n, sizeof *h, srv_cmp_double);
+        qsort(h, n, sizeof *h, gs_cmp_double);
         med = n % 2 ? h[n / 2] : 0.5 * (h[n / 2 - 1] + h[n / 2]);
     }
     free(h);

@@ -119,12 +119,6 @@ double srv_centroid_sigma_px(double snr, unsigned blob_flags, int crowded, doubl
     return sqrt(noise * noise + floor_px * floor_px + crowd * crowd);
 }
 
-int srv_cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
 gs_status srv_crowded_footprints(const srv_light_row *lights, size_t n, unsigned char *crowded)
 {
     memset(crowded, 0, n);
@@ -155,7 +149,7 @@ gs_status srv_crowded_footprints(const srv_light_row *lights, size_t n, unsigned
         k = 0;
         for (size_t i = 0; i < n; i++)
             if (use[i]) res[k++] = fabs(lights[i].area_px - a - b * log(lights[i].snr));
-        qsort(res, k, sizeof *res, srv_cmp_double);
+        qsort(res, k, sizeof *res, gs_cmp_double);
         sigma = 1.4826 * (k % 2 ? res[k / 2] : 0.5 * (res[k / 2 - 1] + res[k / 2]));
         if (!(sigma > 0)) sigma = 0.5;   /* integer areas on one line: half a pixel */
     }

@@ -290,6 +290,8 @@ void gs_dot_rows(const double *x, const double *t, size_t ld, size_t n, const si
 /* An angle in degrees wrapped to [0, 360) and to [-180, 180). */
 double gs_wrap360(double a_deg);
 double gs_wrap180(double a_deg);
+/* qsort's comparison of doubles, ascending. */
+int gs_cmp_double(const void *a, const void *b);
 /* The median of v[0..n) (n >= 1; v is reordered): quickselect, the upper median for even n. */
 float gs_median_f(float *v, size_t n);
 

@@ -96,6 +96,12 @@ double gs_wrap180(double a_deg)
     return gs_wrap360(a_deg + 180.0) - 180.0;
 }
 
+int gs_cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
 float gs_median_f(float *v, size_t n)
 {
     size_t k = n / 2, lo = 0, hi = n - 1;
