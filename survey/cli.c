@@ -187,16 +187,31 @@ FILE *srv_note_stream(const char *out)
     return out && !strcmp(out, "-") ? stderr : stdout;
 }
 
-int srv_num_arg(const char *cmd, const char *opt, const char *arg, double lo, double hi, double *out)
+int srv_num_arg_open(const char *cmd, const char *opt, const char *arg, double lo, double hi, int open, double *out)
 {
     char *end;
     double v = strtod(arg, &end);
-    if (!*arg || *end || !isfinite(v) || v < lo || v > hi) {
-        srv_usage_error(cmd, "%s '%s': expected a number from %g to %g", opt, arg, lo, hi);
-        return 0;
+    int in = (open & SRV_OPEN_LO ? v > lo : v >= lo) && (open & SRV_OPEN_HI ? v < hi : v <= hi);
+    if (*arg && !*end && isfinite(v) && in) {
+        *out = v;
+        return 1;
     }
-    *out = v;
-    return 1;
+    char range[96] = "";
+    if (!open && isfinite(lo) && isfinite(hi)) {
+        snprintf(range, sizeof range, " from %g to %g", lo, hi);
+    } else {
+        if (isfinite(lo)) snprintf(range, sizeof range, " %s %g", open & SRV_OPEN_LO ? ">" : ">=", lo);
+        if (isfinite(hi))
+            snprintf(range + strlen(range), sizeof range - strlen(range), "%s %s %g", isfinite(lo) ? " and" : "",
+                     open & SRV_OPEN_HI ? "<" : "<=", hi);
+    }
+    srv_usage_error(cmd, "%s '%s': expected a %snumber%s", opt, arg, *range ? "" : "finite ", range);
+    return 0;
+}
+
+int srv_num_arg(const char *cmd, const char *opt, const char *arg, double lo, double hi, double *out)
+{
+    return srv_num_arg_open(cmd, opt, arg, lo, hi, 0, out);
 }
 
 int srv_int_arg(const char *cmd, const char *opt, const char *arg, unsigned long long lo, unsigned long long hi,

@@ -168,7 +168,6 @@ int srv_cmd_compare(int argc, char **argv)
     double min_p = 0.9;
     optind = 1;
     int c;
-    char *end;
     while ((c = getopt_long(argc, argv, "h", longs, NULL)) != -1) {
         switch (c) {
         case 'd': path = optarg; break;
@@ -179,10 +178,7 @@ int srv_cmd_compare(int argc, char **argv)
             sv[nsv++] = optarg;
             break;
         case 'p':
-            min_p = strtod(optarg, &end);
-            if (!*optarg || *end || !(min_p >= 0.0 && min_p <= 1.0)) {
-                return srv_usage_error("compare", "--min-p '%s': expected a probability in [0, 1]", optarg);
-            }
+            if (!srv_num_arg("compare", "--min-p", optarg, 0.0, 1.0, &min_p)) return 2;
             break;
         case 'f':
             if (!strcmp(optarg, "table")) csv = 0;
@@ -204,10 +200,7 @@ int srv_cmd_compare(int argc, char **argv)
             }
             break;
         case 'c':
-            so.min_phase_confidence = strtod(optarg, &end);
-            if (!*optarg || *end || !(so.min_phase_confidence >= 0.0 && so.min_phase_confidence <= 1.0)) {
-                return srv_usage_error("compare", "--min-phase-confidence '%s': expected a number in [0, 1]", optarg);
-            }
+            if (!srv_num_arg("compare", "--min-phase-confidence", optarg, 0.0, 1.0, &so.min_phase_confidence)) return 2;
             break;
         case 'h': fputs(compare_usage, stdout); return 0;
         default: return srv_usage_hint("compare", argv);

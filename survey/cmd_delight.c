@@ -65,7 +65,6 @@ static int parse_opts(int argc, char **argv, delight_opts *o)
     o->n = GS_BRF_N_DEFAULT;
     optind = 1;
     int c;
-    char *end;
     unsigned long long v;
     while ((c = getopt_long(argc, argv, "o:h", longs, NULL)) != -1) {
         switch (c) {
@@ -95,10 +94,8 @@ static int parse_opts(int argc, char **argv, delight_opts *o)
             o->n = (int)v;
             break;
         case 'w':
-            o->watts = strtod(optarg, &end);
-            if (*end || !(o->watts > 0)) {
-                return srv_usage_error("delight", "--watts '%s': expected a power in W > 0", optarg);
-            }
+            if (!srv_num_arg_open("delight", "--watts", optarg, 0.0, GS_WATTS_MAX, SRV_OPEN_LO | SRV_OPEN_HI, &o->watts))
+                return 2;
             break;
         case 'h': fputs(delight_usage, stdout); return 0;
         default: return srv_usage_hint("delight", argv);

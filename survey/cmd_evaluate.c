@@ -47,18 +47,14 @@ int srv_cmd_evaluate(int argc, char **argv)
     srv_eval_opts_default(&o);
     optind = 1;
     int c;
-    char *end;
     while ((c = getopt_long(argc, argv, ":h", longs, NULL)) != -1) {
         switch (c) {
         case 'd': path = optarg; break;
         case 't': truth = optarg; break;
         case 'S': o.survey = optarg; break;
         case 'm':
-            o.match_px = strtod(optarg, &end);
-            if (!*optarg || *end || !(o.match_px > 0.0 && o.match_px <= SRV_MATCH_PX_MAX)) {
-                return srv_usage_error("evaluate", "--match-px '%s': expected a radius > 0 and <= %g pixels",
-                                       optarg, SRV_MATCH_PX_MAX);
-            }
+            if (!srv_num_arg_open("evaluate", "--match-px", optarg, 0.0, SRV_MATCH_PX_MAX, SRV_OPEN_LO, &o.match_px))
+                return 2;
             break;
         case 'f':
             if (!strcmp(optarg, "table")) json = 0;

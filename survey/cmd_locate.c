@@ -149,7 +149,6 @@ int srv_cmd_locate(int argc, char **argv)
     gis_locate_opts_default(&lo);
     optind = 1;
     int c;
-    char *end;
     while ((c = getopt_long(argc, argv, "o:h", longs, NULL)) != -1) {
         switch (c) {
         case 's': station_path = optarg; break;
@@ -164,9 +163,8 @@ int srv_cmd_locate(int argc, char **argv)
                 return 2;
             break;
         case 'R':
-            lo.max_error_ratio = strtod(optarg, &end);
-            if (!*optarg || *end || !(lo.max_error_ratio > 0.0) || !isfinite(lo.max_error_ratio))
-                return srv_usage_error("locate", "--max-error-ratio '%s': expected a number > 0", optarg);
+            if (!srv_num_arg_open("locate", "--max-error-ratio", optarg, 0.0, INFINITY, SRV_OPEN_LO, &lo.max_error_ratio))
+                return 2;
             break;
         case 'h': fputs(locate_usage, stdout); return 0;
         default: return srv_usage_hint("locate", argv);

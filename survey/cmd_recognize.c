@@ -154,7 +154,6 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
     if (o->db && !*o->db) o->db = NULL;
     optind = 1;
     int c;
-    char *end;
     while ((c = getopt_long(argc, argv, ":hq", longs, NULL)) != -1) {
         switch (c) {
         case 'f':
@@ -172,9 +171,8 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
             else return srv_usage_error("recognize", "--phases '%s': expected 3, 6 or continuous", optarg);
             break;
         case 't':
-            o->eq7.transformer_deg = strtod(optarg, &end);
-            if (end == optarg || *end || !isfinite(o->eq7.transformer_deg))
-                return srv_usage_error("recognize", "--transformer-deg '%s': expected a finite angle in degrees", optarg);
+            if (!srv_num_arg("recognize", "--transformer-deg", optarg, -INFINITY, INFINITY, &o->eq7.transformer_deg))
+                return 2;
             break;
         case 'c':
             if (!srv_num_arg("recognize", "--ambiguous-below", optarg, 0.0, 1.0, &o->eq7.ambiguous_conf)) return 2;
@@ -201,18 +199,15 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
                 return srv_usage_error("recognize", "--flat-share '%s': expected auto or a share from 0 to below 0.5", optarg);
             break;
         case 'B':
-            o->eq7.blend_prior = strtod(optarg, &end);
-            if (end == optarg || *end || !(o->eq7.blend_prior >= 0.0 && o->eq7.blend_prior < 1.0))
-                return srv_usage_error("recognize", "--blend-prior '%s': expected a probability from 0 to below 1", optarg);
+            if (!srv_num_arg_open("recognize", "--blend-prior", optarg, 0.0, 1.0, SRV_OPEN_HI, &o->eq7.blend_prior))
+                return 2;
             break;
         case 'N':
             if (!strcmp(optarg, "on") || !strcmp(optarg, "off")) o->eq7.nested_tests = !strcmp(optarg, "on");
             else return srv_usage_error("recognize", "--nested-tests '%s': expected on or off", optarg);
             break;
         case 's':
-            o->threshold = strtod(optarg, &end);
-            if (end == optarg || *end || !(o->threshold > 0.0) || !isfinite(o->threshold))
-                return srv_usage_error("recognize", "--threshold '%s': expected a number of noise sigmas > 0", optarg);
+            if (!srv_num_arg_open("recognize", "--threshold", optarg, 0.0, INFINITY, SRV_OPEN_LO, &o->threshold)) return 2;
             break;
         case 'h': fputs(recognize_usage, stdout); return 0;
         case ':': return srv_usage_error("recognize", "option '%s' needs a value", argv[optind - 1]);

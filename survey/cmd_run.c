@@ -294,7 +294,6 @@ int srv_cmd_run(int argc, char **argv)
     if (o.delight_path && !*o.delight_path) o.delight_path = NULL;
     optind = 1;
     int c;
-    char *end;
     while ((c = getopt_long(argc, argv, ":hqo:", longs, NULL)) != -1) {
         switch (c) {
         case 'd': o.db_path = optarg; break;
@@ -307,19 +306,13 @@ int srv_cmd_run(int argc, char **argv)
         case 'P': progress = 1; break;
         case 'q': progress = 0; break;
         case 'H':
-            o.light_height_m = strtod(optarg, &end);
-            if (!*optarg || *end || !isfinite(o.light_height_m))
-                return srv_usage_error("run", "--light-height-m '%s': expected a height in metres", optarg);
+            if (!srv_num_arg("run", "--light-height-m", optarg, -INFINITY, INFINITY, &o.light_height_m)) return 2;
             break;
         case 'G':
-            o.light_height_sigma_m = strtod(optarg, &end);
-            if (!*optarg || *end || !(o.light_height_sigma_m >= 0.0) || !isfinite(o.light_height_sigma_m))
-                return srv_usage_error("run", "--light-height-sigma-m '%s': expected finite metres >= 0", optarg);
+            if (!srv_num_arg("run", "--light-height-sigma-m", optarg, 0.0, INFINITY, &o.light_height_sigma_m)) return 2;
             break;
         case 'u':
-            o.eq7.unknown_p = strtod(optarg, &end);
-            if (!*optarg || *end || !(o.eq7.unknown_p >= 0.0 && o.eq7.unknown_p < 1.0))
-                return srv_usage_error("run", "--unknown-p '%s': expected a p-value in [0, 1)", optarg);
+            if (!srv_num_arg_open("run", "--unknown-p", optarg, 0.0, 1.0, SRV_OPEN_HI, &o.eq7.unknown_p)) return 2;
             break;
         case 'p':
             if (!strcmp(optarg, "3")) o.eq7.phases = REC_PHASES_3;

@@ -113,8 +113,12 @@ FILE *srv_note_stream(const char *out);
 /* A usage error of command cmd ("delight plot" for a subcommand): the one line "gridsurvey CMD:
  * MESSAGE (see gridsurvey help CMD)" on stderr; returns 2. */
 int srv_usage_error(const char *cmd, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-/* A number option of cmd in [lo, hi] into *out: 1, or 0 after srv_usage_error. */
+/* A finite number option of cmd in [lo, hi] into *out: 1, or 0 after srv_usage_error. */
 int srv_num_arg(const char *cmd, const char *opt, const char *arg, double lo, double hi, double *out);
+/* As srv_num_arg, a bound excluded by open (SRV_OPEN_LO, SRV_OPEN_HI); an infinite bound is no
+ * bound (the number stays finite). */
+enum { SRV_OPEN_LO = 1, SRV_OPEN_HI = 2 };
+int srv_num_arg_open(const char *cmd, const char *opt, const char *arg, double lo, double hi, int open, double *out);
 /* An integer option of cmd in [lo, hi] (decimal digits only) into *out: 1, or 0 after
  * srv_usage_error. */
 int srv_int_arg(const char *cmd, const char *opt, const char *arg, unsigned long long lo, unsigned long long hi,

@@ -712,6 +712,13 @@ TEST(cli_usage_errors_of_each_command_one_line_with_the_hint)
         {"%s delight generate -o /nonexistent/x.db --n 4294967552", "delight", "--n '4294967552'"},
         {"%s db ingest-synthetic --db /nonexistent/x.sqlite --seed ' -1'", "db ingest-synthetic", "--seed ' -1'"},
         {"%s push --db /nonexistent/x.sqlite --pg dbname=x --batch ' 5'", "push", "--batch ' 5'"},
+        /* numbers with an excluded bound (srv_num_arg_open): --watts inf was let through to the
+         * file (exit 1, the recording's error), 0 and 1 are outside these ranges */
+        {"%s delight add --from-recording /nonexistent/r.csv --watts inf --delight /nonexistent/x.db", "delight",
+         "--watts 'inf': expected a number > 0 and < 100000"},
+        {"%s recognize --blend-prior 1 x", "recognize", "--blend-prior '1': expected a number >= 0 and < 1"},
+        {"%s recognize --threshold 0 x", "recognize", "--threshold '0': expected a number > 0 ("},
+        {"%s recognize --transformer-deg nan x", "recognize", "--transformer-deg 'nan': expected a finite number"},
         /* a format locate cannot tell is a usage error, as export's (it exited 1) */
         {"%s locate --station s.json --pixels p.csv -o o.xyz", "locate", "o.xyz"},
         {"%s locate --station s.json --pixels p.csv -o o.csv --format xml", "locate", "format 'xml'"},

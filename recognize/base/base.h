@@ -477,12 +477,13 @@ const char *gs_ref_name(gs_ref r);   /* "voltage", "none", "unlocked" */
 #define GS_NAME_MAX 96
 #define GS_SENSOR_MAX 32
 
+#define GS_WATTS_MAX 1e5   /* a bulb's largest power, W (excluded) */
 /* One DELIGHT entry: one bulb measured at one grid frequency with one sensor. */
 typedef struct {
     char id[GS_ID_MAX];           /* bulb id, [A-Za-z0-9_.-]+; unique with grid_hz and sensor */
     gs_tech type;
     char name[GS_NAME_MAX];       /* human-readable; no control characters */
-    double watts;                  /* electrical power, W (> 0; 0 if unknown) */
+    double watts;                  /* electrical power, W (> 0 and < GS_WATTS_MAX; 0 if unknown) */
     int grid_hz;                   /* 50 or 60 */
     char sensor[GS_SENSOR_MAX];   /* "photodiode" (mono) or "rgb" (3 bands), or a user name */
     gs_ref ref;

@@ -115,8 +115,8 @@ gs_status gs_bulb_validate(const gs_bulb *b)
         if ((unsigned char)*c < 0x20 || *c == 0x7f)
             return gs_fail(GS_EINVAL, "bulb %s: name: expected no control character (line break, "
                            "tab, ...)", b->id);
-    if (!(b->watts >= 0.0 && b->watts < 1e5))
-        return gs_fail(GS_EINVAL, "bulb %s: watts=%g: expected 0 <= watts < 1e5", b->id, b->watts);
+    if (!(b->watts >= 0.0 && b->watts < GS_WATTS_MAX))
+        return gs_fail(GS_EINVAL, "bulb %s: watts=%g: expected 0 <= watts < %g", b->id, b->watts, GS_WATTS_MAX);
     if (b->grid_hz != 50 && b->grid_hz != 60)
         return gs_fail(GS_EINVAL, "bulb %s: grid_hz=%d: expected 50 or 60", b->id, b->grid_hz);
     if (!b->sensor[0] || strpbrk(b->sensor, ",/\n\r\""))
