@@ -559,7 +559,7 @@ static void check_real_mains(const char *name)
     CHECK(st.rejected * 1000 < st.periods);
     gs_wander w;
     CHECK_OK(gs_frequency_wander(t, c, 1.0, &w));
-    printf("    %s: %zu crossings, mean %.6f +- %.2g Hz, sigma %.2f mHz, step %.2f mHz, "
+    printf("    %s: %zu crossings, mean %.9f +- %.2g Hz, sigma %.2f mHz, step %.2f mHz, "
            "corr10 %.3f, corr60 %.3f\n", name, c, st.mean_hz, st.sigma_mean_hz, 1e3 * w.sigma_hz,
            1e3 * w.step_sigma_hz, w.corr_10s, w.corr_60s);
     CHECK_NEAR(w.mean_hz, st.mean_hz, 1e-3);

@@ -1,12 +1,13 @@
 /* ac.c - the AC model of the grid (paper Sec. 2.1, Eq. 1: f = 1/(2 Delta), Delta the time
  * between successive zero crossings): sub-sample zero crossings of a sampled mains voltage,
- * the grid frequency with a robust mean and an honest standard error, the slow frequency
- * wander of long recordings, and reading mains recordings with libsndfile.
+ * the grid frequency with a robust mean and its standard error for white timing errors, the
+ * slow frequency wander of long recordings, and reading mains recordings with libsndfile.
  *
  * Error model of the standard error: crossing times carry independent errors of one std
  * sigma_t (noise, quantisation). A mean of full periods telescopes, so only the crossings at
  * the ends of each run of accepted periods contribute; sigma_t is estimated from second
- * differences of full periods, which cancel the (slow) frequency wander. */
+ * differences of full periods, which cancel the (slow) frequency wander, and with it the
+ * interpolation error of the crossings, as slow: not in the standard error (base.h). */
 #include "recognize/base/base.h"
 
 #include <errno.h>
