@@ -110,7 +110,7 @@ static int family_of_tech(gs_tech t)
 
 /* The lights of eq7_real_recordings_out_of_database with other_prior: the counts (printed). */
 typedef struct {
-    int total, unknown, answers, conf_wrong;
+    int total, unknown, answers, confident, conf_wrong;
 } ood_counts;
 
 static ood_counts real_recordings_ood(gs_delight *d, double other_prior, int verbose)
@@ -123,7 +123,7 @@ static ood_counts real_recordings_ood(gs_delight *d, double other_prior, int ver
         {"Old_IKEA_LED.csv", 3}, {"Ecosmart_Candelabra_LED.csv", 3}, {"Soraa_Healthy.csv", 3},
         {"GE_Classic_LED.csv", 3},
     };
-    ood_counts n = {0, 0, 0, 0};
+    ood_counts n = {0, 0, 0, 0, 0};
     rec_eq7_opts o;
     rec_eq7_opts_default(&o);
     o.other_prior = other_prior;
@@ -155,6 +155,7 @@ static ood_counts real_recordings_ood(gs_delight *d, double other_prior, int ver
                 continue;
             }
             fa++;
+            n.confident += r.confidence > 0.9;
             int fam = family_of_tech(rec_matcher_bulb(m, (size_t)r.bulb)->type);
             if (fam != recs[f].family && r.confidence > 0.9) {
                 fw++;
@@ -171,8 +172,8 @@ static ood_counts real_recordings_ood(gs_delight *d, double other_prior, int ver
         n.conf_wrong += fw;
         gs_bulb_release(&b);
     }
-    printf("    other_prior %g: %d lights: %d without an answer, %d answered, %d confident of another "
-           "family\n", other_prior, n.total, n.unknown, n.answers, n.conf_wrong);
+    printf("    other_prior %g: %d lights: %d without an answer, %d answered, %d confident (> 0.9), %d "
+           "of them of another family\n", other_prior, n.total, n.unknown, n.answers, n.confident, n.conf_wrong);
     rec_matcher_free(m);
     return n;
 }
