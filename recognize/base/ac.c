@@ -1,13 +1,14 @@
 /* ac.c - the AC model of the grid (paper Sec. 2.1, Eq. 1: f = 1/(2 Delta), Delta the time
- * between successive zero crossings): sub-sample zero crossings of a sampled mains voltage,
- * the grid frequency with a robust mean and its standard error for white timing errors, the
- * slow frequency wander of long recordings, and reading mains recordings with libsndfile.
+ * between successive zero crossings): sub-sample zero crossings of a sampled mains voltage
+ * (a local least-squares fit of the fundamental and its 2nd and 3rd harmonics), the grid
+ * frequency with a robust mean and its standard error, the slow frequency wander of long
+ * recordings, and reading mains recordings with libsndfile.
  *
- * Error model of the standard error: crossing times carry independent errors of one std
- * sigma_t (noise, quantisation). A mean of full periods telescopes, so only the crossings at
- * the ends of each run of accepted periods contribute; sigma_t is estimated from second
- * differences of full periods, which cancel the (slow) frequency wander, and with it the
- * interpolation error of the crossings, as slow: not in the standard error (base.h). */
+ * Error model of the standard error: crossing times carry errors of one std sigma_t (noise,
+ * quantisation), correlated only between neighbours (their fits share samples). A mean of full
+ * periods telescopes, so only the crossings at the ends of each run of accepted periods
+ * contribute; sigma_t and the neighbours' covariance are estimated from second differences of
+ * full periods, which cancel the (slow) frequency wander. */
 #include "recognize/base/base.h"
 
 #include <errno.h>
@@ -48,6 +49,144 @@ static double crossing_index(const double *y, size_t n, size_t j, int dir)
     size_t m = j > 0 ? j - 1 : 0; /* nodes j-1..j+2, clamped inside the record */
     if (m > n - 4) m = n - 4;
     return (double)m + cubic_root(y + m, (double)(j - m), (double)(j - m) + 1.0, dir);
+}
+
+/* ------------------------------------------------- local fit of the fundamental */
+
+/* Harmonics of the local fit: the fundamental and 2-3 (a few % on real mains; 400 Hz sampling
+ * of 50 Hz resolves no more). */
+#define AC_FIT_HARMONICS 3
+/* Full periods either side whose median is a crossing's local period. */
+#define AC_PERIOD_SPAN 25
+
+/* Solves the symmetric positive definite m x m system A z = b in place (Cholesky, A's lower
+ * triangle overwritten, z in b); 0 if A is not positive definite. */
+static int spd_solve(double *A, double *b, int m)
+{
+    for (int j = 0; j < m; j++) {
+        double d = A[j * m + j];
+        for (int k = 0; k < j; k++) d -= A[j * m + k] * A[j * m + k];
+        if (!(d > 1e-12 * fabs(A[j * m + j]) && d > 0)) return 0;
+        A[j * m + j] = sqrt(d);
+        for (int i = j + 1; i < m; i++) {
+            double v = A[i * m + j];
+            for (int k = 0; k < j; k++) v -= A[i * m + k] * A[j * m + k];
+            A[i * m + j] = v / A[j * m + j];
+        }
+    }
+    for (int i = 0; i < m; i++) {
+        for (int k = 0; k < i; k++) b[i] -= A[i * m + k] * b[k];
+        b[i] /= A[i * m + i];
+    }
+    for (int i = m - 1; i >= 0; i--) {
+        for (int k = i + 1; k < m; k++) b[i] -= A[k * m + i] * b[k];
+        b[i] /= A[i * m + i];
+    }
+    return 1;
+}
+
+/* The crossing near sub-sample index u (direction dir) of the least-squares fit of a DC term
+ * and harmonics 1..H of the local period (samples) to the K ~ one period of samples around it,
+ * re-centred until it moves < 1e-9 samples: interpolation that the shape of a mains waveform
+ * does not bias, unlike a cubic through 4 samples. u itself when the period has too few
+ * samples or the fit has no crossing within a quarter period of u. */
+static double fit_crossing(const double *y, size_t n, double u, double period, int dir)
+{
+    int H = AC_FIT_HARMONICS;
+    while (H > 0 && 2.0 * H >= period) H--; /* below the Nyquist frequency */
+    long K = lround(period);
+    if (K < 2 * H + 2) K = 2 * H + 2;
+    if (H < 1 || (size_t)K > n) return u;
+    const int m = 2 * H + 1;
+    double w = 2 * M_PI / period, v = u;
+    for (int pass = 0; pass < 4; pass++) {
+        double i0 = ceil(v - 0.5 * (double)K);
+        if (i0 < 0) i0 = 0;
+        if (i0 > (double)(n - (size_t)K)) i0 = (double)(n - (size_t)K);
+        double A[(2 * AC_FIT_HARMONICS + 1) * (2 * AC_FIT_HARMONICS + 1)] = {0};
+        double c[2 * AC_FIT_HARMONICS + 1] = {0}, row[2 * AC_FIT_HARMONICS + 1];
+        for (long i = (long)i0; i < (long)i0 + K; i++) {
+            double th = w * ((double)i - v), c1 = cos(th), s1 = sin(th), ch = 1, sh = 0;
+            row[0] = 1;
+            for (int h = 1; h <= H; h++) { /* cos, sin of h th by angle addition */
+                double t = ch * c1 - sh * s1;
+                sh = sh * c1 + ch * s1;
+                ch = t;
+                row[2 * h - 1] = ch;
+                row[2 * h] = sh;
+            }
+            for (int a = 0; a < m; a++) {
+                c[a] += row[a] * y[i];
+                for (int b = 0; b <= a; b++) A[a * m + b] += row[a] * row[b];
+            }
+        }
+        for (int a = 0; a < m; a++)
+            for (int b = a + 1; b < m; b++) A[a * m + b] = A[b * m + a];
+        if (!spd_solve(A, c, m)) return u;
+        /* Newton on the fitted waveform from the window's centre crossing */
+        double d = 0, g = 1, dg = 0;
+        for (int it = 0; it < 30; it++) {
+            g = c[0];
+            dg = 0;
+            for (int h = 1; h <= H; h++) {
+                double ch = cos(h * w * d), sh = sin(h * w * d);
+                g += c[2 * h - 1] * ch + c[2 * h] * sh;
+                dg += h * w * (c[2 * h] * ch - c[2 * h - 1] * sh);
+            }
+            if (!(dir * dg > 0)) return u;
+            double step = g / dg;
+            d -= step;
+            if (fabs(d) > 0.25 * period) return u;
+            if (fabs(step) < 1e-12) break;
+        }
+        if (fabs(g) > 1e-9 * fabs(dg)) return u;
+        v += d;
+        if (fabs(v - u) > 0.25 * period) return u;
+        if (fabs(d) < 1e-9) break;
+    }
+    return v;
+}
+
+/* Median of v[0..n) (n > 0), using scratch[0..n). */
+static double median(const double *v, size_t n, double *scratch)
+{
+    memcpy(scratch, v, n * sizeof *v);
+    qsort(scratch, n, sizeof *scratch, gs_cmp_double);
+    return n % 2 ? scratch[n / 2] : 0.5 * (scratch[n / 2 - 1] + scratch[n / 2]);
+}
+
+/* Refits crossings u[0..c) (c >= 3) of y in place, in two passes: each crossing's local period
+ * is the median of the full periods u[i+2] - u[i] centred on it, up to AC_PERIOD_SPAN either
+ * side (robust to a missing or spurious crossing), first of the cubic crossings, then of the refitted ones, whose
+ * errors are ~100 times smaller (the fit's error grows with that of its period). */
+static gs_status refit_crossings(const double *y, size_t n, double *u, size_t c, int first_dir)
+{
+    size_t np = c - 2;
+    double *P = malloc(np * sizeof *P), *tmp = malloc((2 * AC_PERIOD_SPAN + 1) * sizeof *tmp);
+    double *u0 = malloc(c * sizeof *u0);
+    if (!P || !tmp || !u0) {
+        free(P);
+        free(tmp);
+        free(u0);
+        return gs_fail(GS_ENOMEM, "zero crossings: cannot allocate %zu crossings", c);
+    }
+    memcpy(u0, u, c * sizeof *u);
+    for (int pass = 0; pass < 2; pass++) {
+        for (size_t i = 0; i < np; i++) P[i] = u[i + 2] - u[i];
+        for (size_t k = 0; k < c; k++) {
+            /* periods P[k-1-h..k-1+h] centre on crossing k; h shrinks at the ends, where the
+             * frequency's trend would otherwise bias a one-sided median */
+            size_t h = k == 0 || k == c - 1 ? 0 : k - 1 < c - 2 - k ? k - 1 : c - 2 - k;
+            if (h > AC_PERIOD_SPAN) h = AC_PERIOD_SPAN;
+            size_t mid = k == 0 ? 0 : k == c - 1 ? np - 1 : k - 1;
+            double period = median(P + mid - h, 2 * h + 1, tmp);
+            u[k] = fit_crossing(y, n, u0[k], period, k % 2 ? -first_dir : first_dir);
+        }
+    }
+    free(P);
+    free(tmp);
+    free(u0);
+    return GS_OK;
 }
 
 gs_status gs_zero_crossings(const double *x, size_t n, double rate_hz, double hysteresis,
@@ -104,29 +243,24 @@ gs_status gs_zero_crossings(const double *x, size_t n, double rate_hz, double hy
         double u = crossing_index(y, n, first, s);
         if (last != first) u = 0.5 * (u + crossing_index(y, n, last, s));
         if (c == 0) *rising_first = s;
-        t[c++] = u / rate_hz;
+        t[c++] = u;
         state = s;
         since = k;
     }
+    gs_status st = c >= 3 ? refit_crossings(y, n, t, c, *rising_first) : GS_OK;
     free(y);
-    if (c == 0) {
+    if (st != GS_OK || c == 0) {
         free(t);
-        return GS_OK;
+        if (st != GS_OK) *rising_first = 0;
+        return st;
     }
+    for (size_t i = 0; i < c; i++) t[i] /= rate_hz;
     *t_s = t;
     *count = c;
     return GS_OK;
 }
 
 /* ------------------------------------------------------------ grid frequency */
-
-/* Median of v[0..n) (n > 0), using scratch[0..n). */
-static double median(const double *v, size_t n, double *scratch)
-{
-    memcpy(scratch, v, n * sizeof *v);
-    qsort(scratch, n, sizeof *scratch, gs_cmp_double);
-    return n % 2 ? scratch[n / 2] : 0.5 * (scratch[n / 2 - 1] + scratch[n / 2]);
-}
 
 /* Validates t[0..n) (finite, increasing, n >= 3) and computes the full-period frequencies
  * F[i] = 1/(t[i+2] - t[i]), i < n-2, their median and ok[i] = |F[i] - median| <= 5 robust
@@ -198,29 +332,50 @@ gs_status gs_grid_frequency(const double *t_s, size_t n, double *f_cycle_hz,
     for (size_t i = 0; i < np; i++)
         if (ok[i]) sum_ff += (F[i] - mean_f) * (F[i] - mean_f);
 
-    /* Crossing-time error sigma_t from second differences of accepted full periods:
-     * (t[i+4] - t[i+2]) - (t[i+2] - t[i]) has variance 6 sigma_t^2. */
-    double sd = 0, sdd = 0;
-    size_t nd = 0;
-    for (size_t i = 0; i + 2 < np; i++)
-        if (ok[i] && ok[i + 2]) {
-            double d = (t_s[i + 4] - t_s[i + 2]) - (t_s[i + 2] - t_s[i]);
-            sd += d;
-            sdd += d * d;
-            nd++;
+    /* Crossing-time errors: variance g0, and covariance g1 of neighbours (gs_zero_crossings'
+     * fits of neighbouring crossings share samples; further ones do not), from the second
+     * differences d_i = P_{i+2} - P_i = t_{i+4} - 2 t_{i+2} + t_i of accepted full periods:
+     * var d_i = 6 g0, cov(d_i, d_{i+1}) = 2 g1. */
+    double *d = malloc((np > 2 ? np - 2 : 1) * sizeof *d);
+    if (!d) {
+        free(F);
+        free(ok);
+        return gs_fail(GS_ENOMEM, "grid frequency: cannot allocate %zu periods", np);
+    }
+    double sd = 0, sdd = 0, sd1 = 0;
+    size_t nd = 0, nd1 = 0;
+    for (size_t i = 0; i + 2 < np; i++) {
+        d[i] = ok[i] && ok[i + 2] ? (t_s[i + 4] - t_s[i + 2]) - (t_s[i + 2] - t_s[i]) : NAN;
+        if (isnan(d[i])) continue;
+        sd += d[i];
+        nd++;
+    }
+    double dmean = nd ? sd / (double)nd : 0;
+    for (size_t i = 0; i + 2 < np; i++) {
+        if (isnan(d[i])) continue;
+        sdd += (d[i] - dmean) * (d[i] - dmean);
+        if (i + 3 < np && !isnan(d[i + 1])) {
+            sd1 += (d[i] - dmean) * (d[i + 1] - dmean);
+            nd1++;
         }
+    }
+    free(d);
     /* The mean period is sum_j c_j t_j / acc: c_j = (#accepted periods ending at j) - (#starting
-     * at j), non-zero only at the ends of runs, so var(mean_p) = sigma_t^2 sum c_j^2 / acc^2. */
-    double sum_c2 = 0;
+     * at j), non-zero only at the ends of runs, so
+     * var(mean_p) = (g0 sum c_j^2 + 2 g1 sum c_j c_{j+1}) / acc^2. */
+    double sum_c2 = 0, sum_c1 = 0;
+    int c_prev = 0;
     for (size_t j = 0; j < n; j++) {
         int cj = (j >= 2 && ok[j - 2]) - (j < np && ok[j]);
         sum_c2 += (double)(cj * cj);
+        sum_c1 += (double)(cj * c_prev);
+        c_prev = cj;
     }
     double sigma_mean = NAN;
-    if (nd >= 2) {
-        double var_d = (sdd - sd * sd / (double)nd) / (double)(nd - 1);
-        double sigma_t = sqrt(fmax(var_d, 0) / 6.0);
-        sigma_mean = sigma_t * sqrt(sum_c2) / (double)acc / (mean_p * mean_p);
+    if (nd >= 2 && nd1 >= 1) {
+        double g0 = sdd / (double)(nd - 1) / 6.0, g1 = sd1 / (double)nd1 / 2.0;
+        double var_sum = fmax(g0 * sum_c2 + 2.0 * g1 * sum_c1, 0);
+        sigma_mean = sqrt(var_sum) / (double)acc / (mean_p * mean_p);
     }
     stats->mean_hz = 1.0 / mean_p;
     stats->sigma_mean_hz = sigma_mean;

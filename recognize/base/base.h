@@ -323,11 +323,14 @@ double gs_clock_s(clockid_t id);
 
 /* ------------------------------------------------------------- AC (Eq. 1) */
 
-/* Zero crossings of a uniformly sampled waveform x[0..n) at rate_hz, both directions, with
- * sub-sample times from a local cubic through the 4 samples around each sign change (exact for
- * cubics; at most 1.3e-3 of a sample period on a clean 50 Hz sine sampled at 400 Hz, ~1e-2
- * with a few % of 3rd harmonic, which 4 samples cannot resolve). The mean of x is removed
- * first. hysteresis (in units of x, >= 0) is a Schmitt trigger: a crossing counts only once x
+/* Zero crossings of a uniformly sampled waveform x[0..n) at rate_hz, both directions. Each
+ * sign change is first located by a local cubic through its 4 samples (exact for cubics), then,
+ * when there are >= 3 crossings, refitted: a least-squares fit of a DC term and harmonics 1-3
+ * of the local period (the median full period around the crossing, up to 25 either side) to
+ * the ~one period of samples around it (at least 8), and the root of that fit. A cubic through
+ * 4 samples at 400 Hz is off by ~1e-2 sample periods with a few % of 3rd harmonic, an error
+ * that changes as slowly as the frequency; the fit's follows the noise. The mean of x is
+ * removed first. hysteresis (in units of x, >= 0) is a Schmitt trigger: a crossing counts only once x
  * has gone from below -hysteresis to above +hysteresis (or back), so noise-level sign changes
  * are rejected; when noise makes several sign changes in one transition, the crossing is the
  * midpoint of the first and last. Returns an allocated array of crossing times in seconds from
@@ -349,12 +352,13 @@ gs_status gs_zero_crossings(const double *x, size_t n, double rate_hz, double hy
  * the crossing times: the mean period telescopes to the crossings at the ends of each run of
  * accepted periods, and the crossing-time error is estimated from second differences
  * P_{i+2} - P_i, which cancel slow frequency wander. NaN when fewer than 2 such differences
- * exist (n < 7); std_hz is NaN for a single period. It leaves out gs_zero_crossings' cubic
- * interpolation error, which depends on where the samples fall and so changes as slowly as the
- * frequency (second differences cancel it too): on clean 16-bit recordings it dominates. On
- * shared/data/mains (400 Hz) mean_hz differs from the fundamental's phase advance
- * (tests/independent/mains_oracle.py) by -5.1e-6, -1.3e-6 and +7.9e-7 Hz: 47, 17 and 13
- * sigma_mean_hz (crossing offsets from the fundamental: 0.8-1.0 us white, 8-11 us slow). */
+ * exist (n < 7); std_hz is NaN for a single period. The errors of neighbouring crossings may
+ * correlate (gs_zero_crossings' fits share samples): their covariance, from successive second
+ * differences, is in the standard error. On sampled mains-like waves with 1-3 % 2nd and 3rd
+ * harmonics and noise, errors / sigma_mean_hz have an rms of 0.97-1.11 (0.64 with 16-bit
+ * quantisation alone; eq1_sampled_harmonics_honest_error); on shared/data/mains mean_hz is
+ * -1.9, 2.8 and -2.2 sigma_mean_hz from the fundamental's phase advance
+ * (tests/independent/mains_oracle.py; ac_real_mains_*). */
 typedef struct {
     double mean_hz;         /* robust mean frequency */
     double sigma_mean_hz;   /* standard error of mean_hz */
@@ -373,8 +377,7 @@ gs_status gs_grid_frequency(const double *t_s, size_t n, double *f_cycle_hz,
  * standard deviation of that series, the standard deviation of its window-to-window changes,
  * and its autocorrelation (Pearson correlation of the pairs w, w + lag) at lags of 10 s and
  * 60 s (rounded to whole windows). Needs crossings spanning at least 120 s (GS_EINVAL).
- * The crossings' interpolation error (gs_grid_frequency) adds to the window-to-window changes:
- * on shared/data/mains step_sigma_hz is 1.83 / 1.71 / 1.69 mHz where the fundamental's phase
+ * On shared/data/mains step_sigma_hz is 1.57 / 1.62 / 1.61 mHz where the fundamental's phase
  * gives 1.56 / 1.60 / 1.61 (tests/independent/mains_oracle.py; sigma and the correlations
  * agree within 0.01 mHz and 0.001). */
 typedef struct {
