@@ -12,6 +12,7 @@
 #include "recognize/base/base.h"
 
 #include <errno.h>
+#include <lapacke.h>
 #include <math.h>
 #include <sndfile.h>
 #include <stdint.h>
@@ -59,32 +60,6 @@ static double crossing_index(const double *y, size_t n, size_t j, int dir)
 /* Full periods either side whose median is a crossing's local period. */
 #define AC_PERIOD_SPAN 25
 
-/* Solves the symmetric positive definite m x m system A z = b in place (Cholesky, A's lower
- * triangle overwritten, z in b); 0 if A is not positive definite. */
-static int spd_solve(double *A, double *b, int m)
-{
-    for (int j = 0; j < m; j++) {
-        double d = A[j * m + j];
-        for (int k = 0; k < j; k++) d -= A[j * m + k] * A[j * m + k];
-        if (!(d > 1e-12 * fabs(A[j * m + j]) && d > 0)) return 0;
-        A[j * m + j] = sqrt(d);
-        for (int i = j + 1; i < m; i++) {
-            double v = A[i * m + j];
-            for (int k = 0; k < j; k++) v -= A[i * m + k] * A[j * m + k];
-            A[i * m + j] = v / A[j * m + j];
-        }
-    }
-    for (int i = 0; i < m; i++) {
-        for (int k = 0; k < i; k++) b[i] -= A[i * m + k] * b[k];
-        b[i] /= A[i * m + i];
-    }
-    for (int i = m - 1; i >= 0; i--) {
-        for (int k = i + 1; k < m; k++) b[i] -= A[k * m + i] * b[k];
-        b[i] /= A[i * m + i];
-    }
-    return 1;
-}
-
 /* The crossing near sub-sample index u (direction dir) of the least-squares fit of a DC term
  * and harmonics 1..H of the local period (samples) to the K ~ one period of samples around it,
  * re-centred until it moves < 1e-9 samples: interpolation that the shape of a mains waveform
@@ -120,9 +95,7 @@ static double fit_crossing(const double *y, size_t n, double u, double period, i
                 for (int b = 0; b <= a; b++) A[a * m + b] += row[a] * row[b];
             }
         }
-        for (int a = 0; a < m; a++)
-            for (int b = a + 1; b < m; b++) A[a * m + b] = A[b * m + a];
-        if (!spd_solve(A, c, m)) return u;
+        if (LAPACKE_dposv(LAPACK_ROW_MAJOR, 'L', m, 1, A, m, c, 1) != 0) return u;
         /* Newton on the fitted waveform from the window's centre crossing */
         double d = 0, g = 1, dg = 0;
         for (int it = 0; it < 30; it++) {
