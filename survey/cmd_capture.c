@@ -44,6 +44,21 @@ enum { SIM, REPLAY, HARDWARE, BACKENDS };
 static const char *const backends[BACKENDS] = {"sim", "replay", "hardware"};
 static const char *const backend_opts[BACKENDS] = {"sS", "F", "cITgzutWHBGKCMfalnr"};
 
+/* An option that takes one of two integers, a or b, written as such: 1 into *out, or 0 after the
+ * usage error naming it (--bands 2, --grid 55 or --grid 50.5). */
+static int choice_arg(const char *opt, const char *arg, int a, int b, int *out)
+{
+    char sa[16], sb[16];
+    snprintf(sa, sizeof sa, "%d", a);
+    snprintf(sb, sizeof sb, "%d", b);
+    if (strcmp(arg, sa) && strcmp(arg, sb)) {
+        srv_usage_error("capture", "%s '%s': expected %d or %d", opt, arg, a, b);
+        return 0;
+    }
+    *out = strcmp(arg, sa) ? b : a;
+    return 1;
+}
+
 int srv_cmd_capture(int argc, char **argv)
 {
     static const struct option longs[] = {
@@ -67,7 +82,8 @@ int srv_cmd_capture(int argc, char **argv)
     };
     const char *backend = NULL, *out = NULL, *scene = NULL, *from = NULL;
     const char *given[BACKENDS] = {NULL};   /* each backend's first option given, by name */
-    double seed = -1, v;
+    double seed = -1;
+    unsigned long long u;
     cap_hw_config hw;
     cap_hw_config_default(&hw);
     cap_loop_opts lo;
@@ -94,24 +110,24 @@ int srv_cmd_capture(int argc, char **argv)
         case 'p': lo.progress = 1; break;
         case 'P':
         case 'q': lo.progress = 0; break;
-        case 'S': if (!srv_num_arg("capture", "--seed", optarg, 0, 2147483647.0, &seed)) return 2; break;
-        case 'z': if (!srv_num_arg("capture", "--zc-line", optarg, 0, 1023, &v)) return 2; hw.zc_line = (int)v; break;
-        case 'u': if (!srv_num_arg("capture", "--shutter-line", optarg, 0, 1023, &v)) return 2; hw.shutter_line = (int)v; break;
-        case 't': if (!srv_num_arg("capture", "--trigger-line", optarg, 0, 1023, &v)) return 2; hw.trigger_line = (int)v; break;
-        case 'W': if (!srv_num_arg("capture", "--width", optarg, 1, 32768, &v)) return 2; hw.width = (int)v; break;
-        case 'H': if (!srv_num_arg("capture", "--height", optarg, 1, 32768, &v)) return 2; hw.height = (int)v; break;
-        case 'B': if (!srv_num_arg("capture", "--bands", optarg, 1, 3, &v)) return 2; hw.bands = (int)v; break;
-        case 'G': if (!srv_num_arg("capture", "--grid", optarg, 50, 60, &v)) return 2; hw.grid_hz = (int)v; break;
-        case 'K': if (!srv_num_arg("capture", "--K", optarg, 2, 1024, &v)) return 2; hw.K = (int)v; break;
-        case 'C': if (!srv_num_arg("capture", "--cycles", optarg, 1, 1e6, &v)) return 2; hw.cycles = (long)v; break;
-        case 'M': if (!srv_num_arg("capture", "--masks", optarg, 2, 1000, &v)) return 2; hw.masks = (int)v; break;
+        case 'S': if (!srv_int_arg("capture", "--seed", optarg, 0, 2147483647, &u)) return 2; seed = (double)u; break;
+        case 'z': if (!srv_int_arg("capture", "--zc-line", optarg, 0, 1023, &u)) return 2; hw.zc_line = (int)u; break;
+        case 'u': if (!srv_int_arg("capture", "--shutter-line", optarg, 0, 1023, &u)) return 2; hw.shutter_line = (int)u; break;
+        case 't': if (!srv_int_arg("capture", "--trigger-line", optarg, 0, 1023, &u)) return 2; hw.trigger_line = (int)u; break;
+        case 'W': if (!srv_int_arg("capture", "--width", optarg, 1, 32768, &u)) return 2; hw.width = (int)u; break;
+        case 'H': if (!srv_int_arg("capture", "--height", optarg, 1, 32768, &u)) return 2; hw.height = (int)u; break;
+        case 'B': if (!choice_arg("--bands", optarg, 1, 3, &hw.bands)) return 2; break;
+        case 'G': if (!choice_arg("--grid", optarg, 50, 60, &hw.grid_hz)) return 2; break;
+        case 'K': if (!srv_int_arg("capture", "--K", optarg, 2, 1024, &u)) return 2; hw.K = (int)u; break;
+        case 'C': if (!srv_int_arg("capture", "--cycles", optarg, 1, 1000000, &u)) return 2; hw.cycles = (long)u; break;
+        case 'M': if (!srv_int_arg("capture", "--masks", optarg, 2, 1000, &u)) return 2; hw.masks = (int)u; break;
         case 'a': if (!srv_num_arg("capture", "--saturation", optarg, 1, 65536, &hw.saturation_dn)) return 2; break;
         case 'l': if (!srv_num_arg("capture", "--black-level", optarg, 0, 65535, &hw.black_level_dn)) return 2; break;
         case 'n': if (!srv_num_arg("capture", "--gain", optarg, 0, 1e6, &hw.gain_e_per_dn)) return 2; break;
         case 'r': if (!srv_num_arg("capture", "--read-noise", optarg, 0, 1e6, &hw.read_noise_dn)) return 2; break;
-        case 'R': if (!srv_num_arg("capture", "--max-rounds", optarg, 0, 16, &v)) return 2; lo.hdr_max_rounds = (int)v; break;
-        case 'm': if (!srv_num_arg("capture", "--max-saturated", optarg, 0, 1e9, &v)) return 2; lo.hdr_max_saturated_px = (int)v; break;
-        case 'A': if (!srv_num_arg("capture", "--stop-after", optarg, 1, 1 << 20, &v)) return 2; lo.stop_after = (int)v; break;
+        case 'R': if (!srv_int_arg("capture", "--max-rounds", optarg, 0, 16, &u)) return 2; lo.hdr_max_rounds = (int)u; break;
+        case 'm': if (!srv_int_arg("capture", "--max-saturated", optarg, 0, 1000000000, &u)) return 2; lo.hdr_max_saturated_px = (int)u; break;
+        case 'A': if (!srv_int_arg("capture", "--stop-after", optarg, 1, 1048576, &u)) return 2; lo.stop_after = (int)u; break;
         case 'h': fputs(capture_usage, stdout); return 0;
         default: return srv_usage_hint("capture", argv);
         }

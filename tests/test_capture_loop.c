@@ -288,6 +288,35 @@ TEST(capture_cli_options_of_another_backend_refused)
     CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "--out-dir"), "%s", out);
 }
 
+/* The hardware backend's counts (K, C, M, sizes, lines, rounds) are integers and its grid and
+ * bands take two values each: anything else is a usage error naming the option and what it
+ * expects (--K 7.5 was truncated to K = 7 and --cycles 1.5 to C = 1, silently; --bands 2
+ * failed later in one message about the camera, size, bands and saturation together). */
+TEST(capture_cli_hardware_numbers_refused_by_name)
+{
+    char o[1024], out[4096];
+    snprintf(o, sizeof o, "%s/hwnum-out", test_tmpdir());
+    static const struct {
+        const char *opt, *value, *expected;
+    } cases[] = {
+        {"--K", "7.5", "integer"},        {"--cycles", "1.5", "integer"},
+        {"--masks", "4.5", "integer"},    {"--width", "8.5", "integer"},
+        {"--zc-line", "1.5", "integer"},  {"--max-rounds", "1.5", "integer"},
+        {"--max-saturated", "0.5", "integer"}, {"--stop-after", "1.5", "integer"},
+        {"--K", "1e1", "integer"},        {"--bands", "2", "1 or 3"},
+        {"--grid", "55", "50 or 60"},     {"--grid", "50.5", "50 or 60"},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
+        int rc = fx_run(out, sizeof out, "%s capture --backend hardware --camera 0 --serial "
+                        "/dev/null --width 8 --height 8 --out-dir %s %s %s", test_bin(), o,
+                        cases[i].opt, cases[i].value);
+        CHECK_MSG(rc == 2 && fx_count_lines(out) == 1 && strstr(out, cases[i].opt) &&
+                  strstr(out, cases[i].value) && strstr(out, cases[i].expected),
+                  "%s %s: rc %d: %s", cases[i].opt, cases[i].value, rc, out);
+        CHECK(!fx_exists(o));
+    }
+}
+
 /* ------------------------------------------------------------------ grid frequency per frame */
 
 /* Acquires the scene `text` into dir with the sim backend and reads the capture back into cap
