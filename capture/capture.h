@@ -573,7 +573,7 @@ typedef struct {
     int stop_after;               /* stop after acquiring this many frames (0: never) */
     int force;                    /* 1: ignore earlier progress and start again */
     int hdr;                      /* -1: the backend's default; 0 off; 1 on */
-    int hdr_max_rounds;           /* -1: the backend's default */
+    int hdr_max_rounds;           /* -1: the backend's default; above its max_halvings: GS_EINVAL */
     int hdr_max_saturated_px;     /* -1: the backend's default */
     int hdr_whole_passes;         /* 1: no probes, every HDR pass acquired whole (the same frames) */
 } cap_loop_opts;

@@ -364,6 +364,10 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
     if (hdr && info.max_halvings < 1)
         return gs_fail(GS_EINVAL, "%s backend: HDR needs masks that can be halved (this "
                        "configuration allows %d rounds)", cap_backend_name(b), info.max_halvings);
+    if (hdr && o.hdr_max_rounds > info.max_halvings)
+        return gs_fail(GS_EINVAL, "HDR rounds (--max-rounds %d): expected at most %d, the exact "
+                       "halvings of this %s configuration's masks and cycles (paper Sec. 6)",
+                       o.hdr_max_rounds, info.max_halvings, cap_backend_name(b));
     int rounds = o.hdr_max_rounds >= 0 ? o.hdr_max_rounds : info.hdr_max_rounds;
     if (rounds <= 0 || rounds > info.max_halvings) rounds = info.max_halvings;
     int max_sat = o.hdr_max_saturated_px >= 0 ? o.hdr_max_saturated_px : info.hdr_max_saturated_px;

@@ -317,6 +317,35 @@ TEST(capture_cli_hardware_numbers_refused_by_name)
     }
 }
 
+/* More HDR rounds than the masks allow is an error naming the option and the limit, before
+ * anything is written: M = 16 masks halve exactly 3 times (8 -> 4 -> 2 -> 1), paper Sec. 6
+ * (--max-rounds 9 ran with 3 rounds and exit 0). 3 rounds are accepted and no pixel of the
+ * capture is halved more often. */
+TEST(capture_cli_max_rounds_beyond_the_masks_refused)
+{
+    char scene[1024], o[1024], out[4096];
+    snprintf(scene, sizeof scene, "%s/rounds.json", test_tmpdir());
+    snprintf(o, sizeof o, "%s/rounds-out", test_tmpdir());
+    write_small(scene, 5);
+    int rc = fx_run(out, sizeof out, "%s capture --backend sim --scene %s --out-dir %s "
+                    "--max-rounds 4 -q", test_bin(), scene, o);
+    CHECK_MSG(rc == 1 && fx_count_lines(out) == 1 && strstr(out, "--max-rounds 4") &&
+              strstr(out, "at most 3"), "rc %d: %s", rc, out);
+    CHECK(!fx_exists(o));
+    rc = fx_run(out, sizeof out, "%s capture --backend sim --scene %s --out-dir %s "
+                "--max-rounds 3 -q", test_bin(), scene, o);
+    CHECK_MSG(rc == 0, "rc %d: %s", rc, out);
+    gs_capture cap;
+    memset(&cap, 0, sizeof cap);
+    CHECK_OK(gs_capture_read(o, &cap));
+    int hmax = 0;
+    size_t n = (size_t)cap.K * (size_t)cap.width * (size_t)cap.height;
+    for (size_t i = 0; cap.halvings && i < n; i++)
+        if (cap.halvings[i] > hmax) hmax = cap.halvings[i];
+    CHECK_MSG(hmax >= 1 && hmax <= 3, "largest halving count %d", hmax);
+    gs_capture_release(&cap);
+}
+
 /* ------------------------------------------------------------------ grid frequency per frame */
 
 /* Acquires the scene `text` into dir with the sim backend and reads the capture back into cap
