@@ -206,13 +206,19 @@ gs_status cap_backend_hardware_new(const cap_hw_config *c, cap_backend **out)
         if (c->serial_fd >= 0) close(c->serial_fd);
         return gs_fail(s, "hardware: %s", gs_detail());
     }
-    if (c->width < 1 || c->height < 1 || (c->bands != 1 && c->bands != 3) || !c->camera ||
-        !(c->saturation_dn > c->black_level_dn) || c->saturation_dn > 65536) {
+    if (!c->camera)
+        s = gs_fail(GS_EINVAL, "hardware: no camera source");
+    else if (c->width < 1 || c->height < 1)
+        s = gs_fail(GS_EINVAL, "hardware: camera size %dx%d: expected at least 1x1", c->width,
+                    c->height);
+    else if (c->bands != 1 && c->bands != 3)
+        s = gs_fail(GS_EINVAL, "hardware: %d bands: expected 1 or 3", c->bands);
+    else if (!(c->saturation_dn > c->black_level_dn) || c->saturation_dn > 65536)
+        s = gs_fail(GS_EINVAL, "hardware: saturation %g DN: expected above the black level %g DN "
+                    "and at most 65536", c->saturation_dn, c->black_level_dn);
+    if (s != GS_OK) {
         if (c->serial_fd >= 0) close(c->serial_fd);
-        return gs_fail(GS_EINVAL, "hardware: camera %s, %dx%d x %d bands, saturation %g: expected "
-                       "a camera source, a size, 1 or 3 bands and a saturation above the black "
-                       "level", c->camera ? c->camera : "(none)", c->width, c->height, c->bands,
-                       c->saturation_dn);
+        return s;
     }
     if (c->hdr && !c->load_masks) {
         if (c->serial_fd >= 0) close(c->serial_fd);

@@ -291,7 +291,8 @@ TEST(capture_cli_options_of_another_backend_refused)
 /* The hardware backend's counts (K, C, M, sizes, lines, rounds) are integers and its grid and
  * bands take two values each: anything else is a usage error naming the option and what it
  * expects (--K 7.5 was truncated to K = 7 and --cycles 1.5 to C = 1, silently; --bands 2
- * failed later in one message about the camera, size, bands and saturation together). */
+ * failed later in one message about the camera, size, bands and saturation together, which a
+ * saturation below the black level still gets). */
 TEST(capture_cli_hardware_numbers_refused_by_name)
 {
     char o[1024], out[4096];
@@ -315,6 +316,13 @@ TEST(capture_cli_hardware_numbers_refused_by_name)
                   "%s %s: rc %d: %s", cases[i].opt, cases[i].value, rc, out);
         CHECK(!fx_exists(o));
     }
+    /* two fields together: the message names both with their values */
+    int rc = fx_run(out, sizeof out, "%s capture --backend hardware --camera 0 --serial /dev/null "
+                    "--width 8 --height 8 --out-dir %s --saturation 100 --black-level 200",
+                    test_bin(), o);
+    CHECK_MSG(rc != 0 && fx_count_lines(out) == 1 && strstr(out, "saturation 100") &&
+              strstr(out, "black level 200") && !strstr(out, "bands"), "rc %d: %s", rc, out);
+    CHECK(!fx_exists(o));
 }
 
 /* More HDR rounds than the masks allow is an error naming the option and the limit, before
