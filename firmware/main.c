@@ -27,6 +27,7 @@
 #include <avr/io.h>
 #include <avr/sleep.h>
 #include <stdint.h>
+#include <util/delay.h>
 
 #include "avr_mcu_section.h"
 #include "firmware/proto.h"
@@ -128,6 +129,12 @@ static void apply(fw_action *a, rqueue *q)
     if (f & (FW_ACT_STOP_COMPARE | FW_ACT_TRIGGER_LOW)) GPIOR0 &= (uint8_t)~_BV(GP_LEVEL);
     if (f & FW_ACT_SHUTTER_ON) PORTB |= _BV(PIN_SHUT);
     if (f & FW_ACT_SHUTTER_OFF) PORTB &= (uint8_t)~_BV(PIN_SHUT);
+    if (f & FW_ACT_CLOSE_PULSE) { /* a stop inside a window: the DMD on to the zero mask */
+        _delay_us(FW_PULSE_TICKS / 2);
+        PORTB |= _BV(PIN_TRIG);
+        _delay_us(FW_PULSE_TICKS / 2);
+        PORTB &= (uint8_t)~_BV(PIN_TRIG);
+    }
     if (f & FW_ACT_STARTED) rq_push(q, REC_START, g_trk.grid_hz, a->log_ticks, 0);
     if (f & FW_ACT_LOG) rq_push(q, REC_LOG, 0, a->log_ticks, a->log_cycle);
     if (f & FW_ACT_DONE) rq_push(q, REC_DONE, 0, 0, g_ex.C);

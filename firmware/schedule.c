@@ -315,6 +315,7 @@ void fw_expo_crossing_fast(fw_expo *e, uint16_t now_ticks, fw_action *a)
     a->flags = 0;
     uint8_t st = e->state;
     if (st != FW_ST_ARMED && st != FW_ST_EXPOSING) return;
+    if (e->rise_at_crossing) e->rises_zc ^= 1u; /* the capture stub raised the trigger */
     if (st == FW_ST_ARMED) {
         e->state = FW_ST_EXPOSING;
         e->n = 0;
@@ -383,6 +384,7 @@ void fw_expo_compare(fw_expo *e, fw_action *a)
         return;
     }
     const fw_chain *c = &e->slot[e->cur];
+    e->rises_cmp ^= (uint8_t)((c->levels >> e->cur_i) & 1u); /* the level the stub just set */
     uint8_t i = (uint8_t)(e->cur_i + 1u);
     e->cur_i = i;
     if (i < c->count) {
@@ -433,5 +435,7 @@ void fw_expo_abort(fw_expo *e, uint8_t fault, fw_action *a)
     e->rise_at_crossing = 0;
     a->flags &= (uint16_t)~(FW_ACT_ARM_COMPARE | FW_ACT_SHUTTER_ON | FW_ACT_DONE);
     a->flags |= FW_ACT_STOP_COMPARE | FW_ACT_TRIGGER_LOW | FW_ACT_SHUTTER_OFF;
+    if (e->rises_zc ^ e->rises_cmp) a->flags |= FW_ACT_CLOSE_PULSE;
+    e->rises_zc = e->rises_cmp = 0;
     if (fault != FW_STOPPED) a->flags |= FW_ACT_FAULT;
 }

@@ -138,6 +138,10 @@ typedef struct {
     uint8_t plan, plan_ok;        /* locked: slot planned for the next cycle, and ready */
     uint8_t events_done, log_done;
     uint8_t rise_at_crossing;     /* raise the trigger at the next crossing (cycle start) */
+    /* rising trigger edges since the DMD last showed a zero mask, mod 2, counted where they are
+     * made: at crossings (fw_expo_crossing_fast) and at compare events (fw_expo_compare); each
+     * written by one interrupt only. Odd: the DMD shows a window's mask m_j (Eq. 23). */
+    uint8_t rises_zc, rises_cmp;
     uint32_t n;                   /* exposure cycle that started at the last crossing */
     uint32_t chain_cycle;         /* cycle whose events the running chain holds */
     uint32_t pending_cycle;
@@ -165,7 +169,10 @@ enum {
     FW_ACT_STARTED = 1u << 6,      /* the exposure began at this crossing */
     FW_ACT_DONE = 1u << 7,         /* the exposure completed */
     FW_ACT_FAULT = 1u << 8,        /* the exposure stopped with e->fault */
-    FW_ACT_ABORT = 1u << 9         /* call fw_expo_abort(abort_fault) with interrupts off */
+    FW_ACT_ABORT = 1u << 9,        /* call fw_expo_abort(abort_fault) with interrupts off */
+    FW_ACT_CLOSE_PULSE = 1u << 10  /* after the shutter: one more trigger pulse, so that the
+                                    * DMD steps from m_j to the zero mask after it (a stop
+                                    * inside a window) */
 };
 
 typedef struct {
@@ -215,7 +222,10 @@ void fw_expo_compare(fw_expo *e, fw_action *a);
 /* Declares the exposure done once its last events ran and its C half periods were logged.
  * Call with interrupts off after fw_expo_crossing_slow (fw_expo_compare calls it itself). */
 void fw_expo_finish(fw_expo *e, fw_action *a);
-/* Stops an exposure (FW_STOPPED from the host, FW_MISSING from the timeout, FW_LATE, ...). */
+/* Stops an exposure (FW_STOPPED from the host, FW_MISSING from the timeout, FW_LATE, ...). A stop
+ * after an odd number of rising edges (inside a window, or at a crossing that raised window 0)
+ * asks for FW_ACT_CLOSE_PULSE: the DMD then rests on a zero mask and the next exposure finds
+ * M = [m1 0 m2 0 ...] where it expects it. */
 void fw_expo_abort(fw_expo *e, uint8_t fault, fw_action *a);
 
 /* Offset of edge j (0..K) after the anchoring crossing for a predicted half period, locked mode:

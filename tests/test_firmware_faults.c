@@ -82,6 +82,54 @@ TEST(firmware_glitch_spurious_crossing)
     trace_free(&tr);
 }
 
+/* A fault while a window is open must not leave the DMD on a non-zero mask. The DMD steps to
+ * its next mask at each rising trigger edge through M = [m1 0 m2 0 ...] (Eq. 23): an exposure
+ * that stops after an odd number of rising edges leaves it exposing, and the next exposure
+ * (with the same masks loaded: no HDR) then starts on a zero mask where it expects m1, so it
+ * integrates everything but window k. A 200 us glitch inside window 7 of 20 of cycle 200
+ * (3.75 ms into it; window 7 is 3.5-4.0 ms), and one at 3 ms with k = 0 (window 0 rises at the
+ * crossing itself, so the glitch's own edge raises the trigger): the exposure stops with
+ * SPURIOUS, and the rising edges add up to an even number, each at least one 50 us pulse
+ * width after the one before (the DMD's mask is then a zero mask again). */
+TEST(firmware_fault_inside_a_window_leaves_the_dmd_on_a_zero_mask)
+{
+    static const struct {
+        int k;
+        double glitch_us;
+    } cases[] = {{7, 3750.0}, {0, 3000.0}};
+    trace tr;
+    if (trace_from_mains("data/mains/whu_002_ref.wav", 800, &tr) != 0) return;
+    for (size_t ci = 0; ci < sizeof cases / sizeof *cases; ci++) {
+        uint64_t *e = malloc((tr.n + 2) * sizeof *e);
+        if (!e) abort();
+        memcpy(e, tr.edges, 201 * sizeof *e);
+        e[201] = tr.edges[200] + (uint64_t)(cases[ci].glitch_us * CYCLES_PER_US);
+        e[202] = e[201] + 200 * 16;
+        memcpy(e + 203, tr.edges + 201, (tr.n - 201) * sizeof *e);
+        fwsim *s = fwsim_new(e, tr.n + 2, tr.rising_first);
+        if (!s) break;
+        long s0;
+        long n = expect_fault(s, 20, cases[ci].k, 500, "SPURIOUS", &s0);
+        if (n >= 0 && s0 >= 0) {
+            uint64_t gap = UINT64_MAX;
+            for (size_t i = 1; i < s->trig_rise.n; i++)
+                if (s->trig_rise.v[i] - s->trig_rise.v[i - 1] < gap)
+                    gap = s->trig_rise.v[i] - s->trig_rise.v[i - 1];
+            printf("    k=%d, glitch %.0f us into cycle %ld: %zu rising edges, closest two %.1f us "
+                   "apart\n", cases[ci].k, cases[ci].glitch_us, n, s->trig_rise.n,
+                   (double)gap / CYCLES_PER_US);
+            CHECK_MSG(s->trig_rise.n % 2 == 0, "k=%d: %zu rising edges: the DMD is left on m_j",
+                      cases[ci].k, s->trig_rise.n);
+            CHECK_MSG(gap >= 50 * 16, "k=%d: rising edges %.1f us apart", cases[ci].k,
+                      (double)gap / CYCLES_PER_US);
+        }
+        CHECK(s->bad_lines == 0);
+        fwsim_free(s);
+        free(e);
+    }
+    trace_free(&tr);
+}
+
 /* Crossing 200 is missing: detected 1/16 of a half period after it was due. */
 TEST(firmware_glitch_missing_crossing)
 {

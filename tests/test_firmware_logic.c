@@ -293,6 +293,12 @@ static void model_apply(model *m, const fw_action *a, uint32_t now)
         CHECK(a->log_cycle == m->log_n);
         m->log_n++;
     }
+    if (a->flags & FW_ACT_CLOSE_PULSE) { /* after the shutter, as apply() does */
+        m->shutter = 1; /* the only rise allowed with the shutter closed */
+        model_edge_at(m, now + FW_PULSE_TICKS, 1);
+        model_edge_at(m, now + 2 * FW_PULSE_TICKS, 0);
+        m->shutter = 0;
+    }
     if (a->flags & FW_ACT_DONE) m->done++;
     if (a->flags & FW_ACT_FAULT) m->fault = m->ex.fault;
     if (a->flags & FW_ACT_ARM_COMPARE) {
@@ -452,6 +458,51 @@ TEST(firmware_logic_free_running_follows_fixed_period)
     CHECK_MSG(worst <= 0.51, "free-running edge off by %.2f ticks", worst);
     model_free(&m);
     free(times);
+}
+
+/* The rising trigger edges of the model, mod 2 (1: the DMD left on a window's mask m_j). */
+static unsigned model_rises_odd(const model *m)
+{
+    unsigned r = 0;
+    for (size_t i = 0; i < m->n_edges; i++) r += m->edges[i].level;
+    return r % 2;
+}
+
+/* A spurious crossing inside window 3 of 10 (2000-tick half periods of 20000: window 3 is
+ * 6000-8000 ticks into the cycle) stops the exposure after an odd number of rising edges; the
+ * stop adds one pulse so that the DMD rests on a zero mask (Eq. 23). Outside a window (at
+ * 13000 ticks) and for the host's STOP before the first window, no pulse is added. */
+TEST(firmware_logic_stop_inside_a_window_closes_the_dmd)
+{
+    enum { N = 200 };
+    static const uint32_t glitch_at[] = {7000, 13000};
+    for (size_t g = 0; g < 2; g++) {
+        model m;
+        memset(&m, 0, sizeof m);
+        fw_tracker_reset(&m.trk);
+        uint32_t t = 5, pulse_from = 0;
+        for (size_t i = 0; i <= 80; i++, t += 20000) model_crossing(&m, t);
+        CHECK(fw_expo_configure(&m.ex, 10, 3, 100, FW_MODE_LOCKED) == FW_OK);
+        model_arm(&m, t - 20000 + 50);
+        for (size_t i = 81; i < N; i++, t += 20000) {
+            if (i == 131) {
+                model_run_compares(&m, t - 20000 + glitch_at[g]);
+                pulse_from = (uint32_t)m.n_edges;
+                model_crossing(&m, t - 20000 + glitch_at[g]);
+            }
+            model_crossing(&m, t);
+        }
+        model_run_compares(&m, t + 100000);
+        CHECK(m.fault == FW_SPURIOUS && m.trig == 0 && !m.shutter);
+        CHECK_MSG(model_rises_odd(&m) == 0, "glitch at %u: the DMD left on m_j", glitch_at[g]);
+        /* the added pulse: only after the shutter closed, and only inside a window */
+        size_t added = 0;
+        for (size_t i = pulse_from; i < m.n_edges; i++)
+            added += m.edges[i].level && m.edges[i].t > m.shutter_off;
+        CHECK_MSG(added == (g == 0), "glitch at %u: %zu pulses after the shutter", glitch_at[g],
+                  added);
+        model_free(&m);
+    }
 }
 
 TEST(firmware_logic_exposure_faults_stop_everything)
