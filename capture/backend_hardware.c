@@ -107,10 +107,18 @@ static gs_status hw_acquire(void *self, const cap_acquisition *a, unsigned char 
     if (c->load_masks && c->load_masks(c->load_masks_user, c->masks, halvings, c->width, c->height))
         return gs_fail(GS_EIO, "hardware: loading the DMD masks for frame %d pass %d failed",
                        a->k, a->pass);
-    /* 2. mains present: wait for a zero crossing */
+    /* 2. mains present: wait for a new zero crossing (the kernel queued every crossing since
+     * the last read, during the previous frame's readout: those are dropped first) */
     if (b->zc) {
+        struct timespec zero = {0, 0};
+        int w;
+        while ((w = gpiod_line_event_wait(b->zc, &zero)) == 1) {
+            struct gpiod_line_event old;
+            if (gpiod_line_event_read(b->zc, &old) != 0) return gpio_fail("event read", c->zc_line);
+        }
+        if (w < 0) return gpio_fail("event wait", c->zc_line);
         struct timespec to = {c->zc_timeout_ms / 1000, (long)(c->zc_timeout_ms % 1000) * 1000000L};
-        int w = gpiod_line_event_wait(b->zc, &to);
+        w = gpiod_line_event_wait(b->zc, &to);
         if (w < 0) return gpio_fail("event wait", c->zc_line);
         if (w == 0)
             return gs_fail(GS_EIO, "hardware: no mains zero crossing on gpio line %d within %d ms",

@@ -54,6 +54,12 @@ int fake_gpiod_load_events(const char *path, size_t b)
     return (int)n_events;
 }
 
+void fake_gpiod_queue_events(size_t n)
+{
+    if (pending_end < next_event) pending_end = next_event;
+    pending_end = pending_end + n < n_events ? pending_end + n : n_events;
+}
+
 size_t fake_gpiod_output_count(void)
 {
     return n_outputs;

@@ -11,6 +11,7 @@
 #include "capture/internal.h"
 
 #include <dlfcn.h>
+#include <math.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -214,6 +215,70 @@ TEST(capture_hardware_backend_with_fakes)
         CHECK(cap.locked == 1 && cap.utc[0] != '\0');
     }
     gs_capture_release(&cap);
+}
+
+/* The kernel queues every crossing of the GPIO line (libgpiod v1 edge events) between two
+ * acquisitions, while the frame is read out and written: the acquisition must wait for a new
+ * crossing, not take a queued one as the start of its exposure. Frame 0, then 3 crossings
+ * queued, then frame 1: frame 1 starts at the crossing after them (start_s against the event
+ * file's times), and its exposure's C crossings are the ones logged (stale: 2 crossings read
+ * and frame 1's start 3 half periods early). */
+TEST(capture_hardware_waits_for_a_new_crossing)
+{
+    const char *tmp = test_tmpdir();
+    char events[1024], log_path[1024];
+    snprintf(events, sizeof events, "%s/zc.events", tmp);
+    snprintf(log_path, sizeof log_path, "%s/controller.log", tmp);
+    size_t n_ev = 2 * (HW_C + 1) + 13;
+    CHECK(write_events(events, n_ev));
+    CHECK(fake_gpiod_load_events(events, HW_C + 1) == (int)n_ev);
+    /* the event file's times, as written */
+    double *ts = malloc(n_ev * sizeof *ts);
+    FILE *f = fopen(events, "r");
+    for (size_t i = 0; f && ts && i < n_ev; i++) {
+        long long sec, nsec;
+        int type;
+        if (fscanf(f, "%lld %lld %d", &sec, &nsec, &type) != 3) break;
+        ts[i] = (double)sec + 1e-9 * (double)nsec;
+    }
+    if (f) fclose(f);
+    const char *pattern = hw_fx_camera(2, HW_W, HW_H, hw_pixel);
+    int fd = -1;
+    pid_t child = start_controller(&fd, log_path);
+    CHECK(child > 0);
+    cap_hw_config hw;
+    hw_fx_config(&hw, pattern, fd, 2, HW_C, HW_W, HW_H);
+    cap_backend *be = NULL;
+    CHECK_OK(cap_backend_hardware_new(&hw, &be));
+    unsigned char *halv = calloc((size_t)HW_W * HW_H, 1);
+    unsigned short *raw = malloc(sizeof *raw * (size_t)HW_W * HW_H * 3);
+    for (int k = 0; be && ts && halv && raw && k < 2; k++) {
+        if (k == 1) fake_gpiod_queue_events(3);
+        cap_acquisition a = {k, 0, k, 0, 0};
+        CHECK_OK(cap_backend_acquire(be, &a, halv, raw, NULL));
+        cap_acq_timing tm;
+        cap_hw_log log;
+        CHECK_OK(cap_backend_timing(be, &tm));
+        CHECK_OK(cap_backend_hardware_log(be, &log));
+        size_t first = k == 0 ? 0 : (HW_C + 1) + 3; /* the crossing the exposure waited for */
+        double want = ts[first] - ts[0];
+        double mean = (ts[first + HW_C] - ts[first + 1]) / (HW_C - 1);
+        printf("    frame %d: start %.4f s (its crossing %.4f s), %zu crossings logged, mean "
+               "half period %.6f s (%.6f s)\n", k, tm.start_s, want, log.crossings,
+               log.mean_half_period_s, mean);
+        CHECK_MSG(fabs(tm.start_s - want) < 1e-6, "frame %d starts at %.6f s, its crossing at "
+                  "%.6f s", k, tm.start_s, want);
+        CHECK(log.crossings == HW_C);
+        CHECK_NEAR(log.mean_half_period_s, mean, 1e-9);
+    }
+    CHECK(fake_gpiod_events_left() == 10);
+    free(halv);
+    free(raw);
+    free(ts);
+    cap_backend_free(be);
+    int st = 0;
+    if (child > 0) waitpid(child, &st, 0);
+    CHECK(fake_gpiod_open_handles() == 0);
 }
 
 /* Acquiring frame 0 of W x HW_H with backend be (freed; NULL: nothing) fails with want and a
