@@ -193,6 +193,10 @@ static gs_status parse_acam(const cap_pctx *c, cap_scene *sc, json_t *root)
     else if (strcmp(per, "nominal"))
         return cap_scene_bad(c, GS_EFORMAT, "acam.free_running_period", "\"%s\": expected \"nominal\" or "
                    "\"measured\"", per);
+    if (sc->locked && json_object_get(a, "free_running_period"))
+        return cap_scene_bad(c, GS_EFORMAT, "acam.free_running_period", "\"%s\" is the period of a "
+                             "free-running ACam: expected acam.locked false (a locked one re-anchors "
+                             "every window at its crossing)", per);
     json_t *h = json_object_get(a, "hdr");
     if (json_is_boolean(h)) q->hdr = json_is_true(h);
     else if (json_is_object(h)) {

@@ -76,6 +76,14 @@ TEST(scene_parse_errors_name_file_line_field)
         CHECK(cap_scene_parse(t, "wander.json", ".", &sc) == GS_EFORMAT);
         CHECK_MSG(strstr(gs_detail(), "wander.json:3: field grid.frequency: a grid that deviates"), "%s", gs_detail());
         cap_scene_release(&sc);
+        /* a free-running period for a locked ACam (it re-anchors at every crossing) was ignored */
+        t = "{\"format\": \"gridsurvey-scene/1\",\n \"grid\": {\"nominal_hz\": 50},\n"
+            " \"camera\": {\"width_px\": 8, \"height_px\": 8},\n \"acam\": {\"K\": 4, \"cycles\": 8,\n"
+            "  \"free_running_period\": \"measured\"}, \"lights\": []}";
+        CHECK(cap_scene_parse(t, "frp.json", ".", &sc) == GS_EFORMAT);
+        CHECK_MSG(strstr(gs_detail(), "frp.json:5: field acam.free_running_period: ") &&
+                  strstr(gs_detail(), "acam.locked false"), "%s", gs_detail());
+        cap_scene_release(&sc);
         CHECK(cap_scene_read("/nonexistent/scene.json", &sc) == GS_ENOTFOUND);
         CHECK_MSG(strstr(gs_detail(), "/nonexistent/scene.json"), "%s", gs_detail());
         cap_scene_release(&sc);
