@@ -11,6 +11,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+#include <time.h>
 #include <unistd.h>
 
 /* ---------------------------------------------------------------- lights */
@@ -536,17 +537,29 @@ static char *gpkg_qml(void)
     return q;
 }
 
-/* An ISO 8601 UTC time ("YYYY-MM-DDTHH:MM:SS[.fff]Z") as GeoPackage's DATETIME text,
- * "YYYY-MM-DDTHH:MM:SS.SSSZ" (out: 64 bytes); 0 when t is not one. */
+/* An ISO 8601 time ("YYYY-MM-DDTHH:MM:SS[.fff]" then "Z" or a UTC offset "+hh:mm"/"-hh:mm") as
+ * GeoPackage's DATETIME text, in UTC: "YYYY-MM-DDTHH:MM:SS.SSSZ" (out: 64 bytes); 0 when t is
+ * not one. */
 static int gpkg_datetime(const char *t, char out[64])
 {
-    int y, mo, d, h, mi, n = 0;
+    int y, mo, d, h, mi, n = 0, oh = 0, om = 0, sign = 0;
     double sec;
     if (!t || sscanf(t, "%4d-%2d-%2dT%2d:%2d:%lf%n", &y, &mo, &d, &h, &mi, &sec, &n) != 6 ||
-        strcmp(t + n, "Z") || mo < 1 || mo > 12 || d < 1 || d > 31 || h > 23 || mi > 59 ||
-        !(sec >= 0.0 && sec < 61.0))
+        mo < 1 || mo > 12 || d < 1 || d > 31 || h > 23 || mi > 59 || !(sec >= 0.0 && sec < 61.0))
         return 0;
-    snprintf(out, 64, "%04d-%02d-%02dT%02d:%02d:%06.3fZ", y, mo, d, h, mi, floor(sec * 1000.0) / 1000.0);
+    const char *z = t + n;
+    if ((z[0] == '+' || z[0] == '-') && strlen(z) == 6 && z[3] == ':' &&
+        sscanf(z + 1, "%2d:%2d", &oh, &om) == 2 && oh >= 0 && oh <= 23 && om >= 0 && om <= 59)
+        sign = z[0] == '+' ? 1 : -1;
+    else if (strcmp(z, "Z"))
+        return 0;
+    double ms = floor(sec * 1000.0);
+    struct tm tm = {.tm_year = y - 1900, .tm_mon = mo - 1, .tm_mday = d, .tm_hour = h,
+                    .tm_min = mi - sign * (60 * oh + om), .tm_sec = (int)(ms / 1000.0)};
+    time_t utc = timegm(&tm);   /* normalises the shifted fields */
+    if (!gmtime_r(&utc, &tm)) return 0;
+    snprintf(out, 64, "%04d-%02d-%02dT%02d:%02d:%02d.%03dZ", tm.tm_year + 1900, tm.tm_mon + 1,
+             tm.tm_mday, tm.tm_hour, tm.tm_min, tm.tm_sec, (int)fmod(ms, 1000.0));
     return 1;
 }
 

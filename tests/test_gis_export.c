@@ -219,6 +219,42 @@ TEST(gis_export_gpkg_validates)
                                           "204,121,167,255 128,128,128,255"), "%d: %s", rc, out);
 }
 
+
+/* The GeoPackage's DATETIME column is UTC: a time with a UTC offset (valid ISO 8601, as a
+ * capture's utc or a station's time_utc may be) is converted, not stored NULL as it was while
+ * GeoJSON and CSV kept it. Oracle: GNU date -u on the same text. */
+TEST(gis_export_gpkg_time_offset_to_utc)
+{
+    static const char *const times[4] = {"2026-03-01T01:30:00.250+02:00", "2024-12-31T21:15:59-05:30",
+                                         "2024-02-28T23:59:59.999-00:01", "2024-05-01T21:30:00Z"};
+    gis_light l[4];
+    for (int i = 0; i < 4; i++) {
+        gis_light_init(&l[i]);
+        snprintf(l[i].id, sizeof l[i].id, "T%d", i);
+        l[i].lat_deg = 10.0;
+        l[i].lon_deg = 20.0 + i;
+        snprintf(l[i].time_utc, sizeof l[i].time_utc, "%s", times[i]);
+    }
+    const char *path = fx_tmp("times.gpkg");
+    CHECK(gis_export_gpkg(l, 4, path) == GS_OK);
+    sqlite3 *db;
+    CHECK(sqlite3_open_v2(path, &db, SQLITE_OPEN_READONLY, NULL) == SQLITE_OK);
+    for (int i = 0; i < 4; i++) {
+        char want[128] = "";
+        CHECK(fx_run(want, sizeof want, "date -u -d '%s' +%%Y-%%m-%%dT%%H:%%M:%%S.%%3NZ", times[i]) == 0);
+        want[strcspn(want, "\n")] = '\0';
+        sqlite3_stmt *st;
+        char q[96];
+        snprintf(q, sizeof q, "SELECT time FROM lights WHERE id = 'T%d'", i);
+        CHECK(sqlite3_prepare_v2(db, q, -1, &st, NULL) == SQLITE_OK);
+        CHECK(sqlite3_step(st) == SQLITE_ROW);
+        const char *got = (const char *)sqlite3_column_text(st, 0);
+        CHECK_MSG(got && !strcmp(got, want), "%s: stored %s, date -u says %s", times[i], got ? got : "NULL", want);
+        sqlite3_finalize(st);
+    }
+    sqlite3_close(db);
+}
+
 /* GeoJSON coordinates carry 7 decimals by default (1.1 cm), --precision otherwise. */
 TEST(gis_export_geojson_seven_decimals)
 {
