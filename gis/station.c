@@ -135,6 +135,11 @@ gs_status gis_station_parse(const char *json_text, const char *source, gis_stati
                              "missing; see docs/gis.md for the station fields)");
             goto done;
         }
+    if (st->time_utc[0] && !gs_capture_valid_utc(st->time_utc)) {
+        s = gs_json_fail(doc, GS_EFORMAT, "time_utc", "expected an ISO 8601 time like "
+                         "\"2017-07-21T22:05:00Z\" (YYYY-MM-DDThh:mm:ss[.f](Z|+hh:mm|-hh:mm))");
+        goto done;
+    }
     /* NaN = not given (JSON has no NaN): without a PSF, sigma_px is every light's pixel sigma
      * (1 px); with one, the calibration residual added to each light's centroid sigma (0) */
     if (isnan(st->sigma_px)) st->sigma_px = isnan(st->psf_sigma_px) ? 1.0 : 0.0;

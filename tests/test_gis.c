@@ -627,6 +627,9 @@ TEST(gis_station_parse_errors_name_line_and_field)
     snprintf(nopsf, sizeof nopsf, "%.*s}", (int)(strstr(psf, ", \"psf") - psf), psf);
     CHECK_OK(gis_station_parse(nopsf, "st.json", &st));
     CHECK(isnan(st.psf_sigma_px) && st.sigma_px == 1.0);
+    const char *offset = "{\"lat\": 45, \"lon\": 7, \"height\": 100, \"heading\": 10, \"pitch\": -5, \"focal_px\": 2000,"
+                         " \"cx\": 1, \"cy\": 1, \"time_utc\": \"2024-05-01T23:00:00.5+02:00\"}";
+    CHECK_OK(gis_station_parse(offset, "st.json", &st));
     const struct {
         const char *text, *expect;
         gs_status s;
@@ -642,6 +645,11 @@ TEST(gis_station_parse_errors_name_line_and_field)
         {"[1, 2]", "s.json:1: expected a JSON object", GS_EFORMAT},
         {"{\"lat\": 45, \"lon\": 7, \"height\": 100, \"heading\": 10, \"pitch\": -5,\n \"focal_px\": 2000, "
          "\"cx\": 1, \"cy\": 1,\n \"psf_sigma_px\": -1}", "s.json:3: field psf_sigma_px: expected a value from 0 to 50", GS_EFORMAT},
+        /* the acquisition time is copied to every light: not ISO 8601 is an error, as in a capture */
+        {"{\"lat\": 45, \"lon\": 7, \"height\": 100, \"heading\": 10, \"pitch\": -5,\n \"focal_px\": 2000, "
+         "\"cx\": 1, \"cy\": 1,\n \"time_utc\": \"yesterday\"}", "s.json:3: field time_utc: expected an ISO 8601 time", GS_EFORMAT},
+        {"{\"lat\": 45, \"lon\": 7, \"height\": 100, \"heading\": 10, \"pitch\": -5,\n \"focal_px\": 2000, "
+         "\"cx\": 1, \"cy\": 1,\n \"time_utc\": \"2024-05-01 21:00\"}", "s.json:3: field time_utc: expected an ISO 8601 time", GS_EFORMAT},
     };
     for (size_t i = 0; i < sizeof bad / sizeof *bad; i++) {
         gs_status s = gis_station_parse(bad[i].text, "s.json", &st);

@@ -709,6 +709,9 @@ static inline double gs_noise_raw_var(const gs_noise *n, double raw_dn)
 /* GS_OK if every field of cap except the pixels follows docs/formats.md (frames must be set),
  * else GS_EINVAL with the detail "WHO: field F: expected E". */
 gs_status gs_capture_check(const gs_capture *cap, const char *who);
+/* 1 if s is an ISO 8601 time as gs_capture.utc holds: YYYY-MM-DDThh:mm:ss[.f](Z|+hh:mm|-hh:mm),
+ * shorter than 40 bytes (also a station's time_utc, gis/station.c). */
+int gs_capture_valid_utc(const char *s);
 /* Free frames, pixels and station_json and zero the struct. Accepts NULL. */
 void gs_capture_release(gs_capture *cap);
 /* The per-cycle intensity of one pixel sample, in DN per flicker cycle: black level removed,

@@ -45,9 +45,8 @@ typedef struct {
  * entries, in k order). */
 int gs_capture_check_geometry(const gs_capture *c, gs_capture_problem *pr);
 int gs_capture_check_fields(const gs_capture *c, gs_capture_problem *pr);
-/* A frame or HDR-map file name; an ISO 8601 time (1 if valid). */
+/* A frame or HDR-map file name (1 if valid); gs_capture_valid_utc is public (base.h). */
 int gs_capture_valid_name(const char *s);
-int gs_capture_valid_utc(const char *s);
 
 /* ======================== DELIGHT models (delight_model.c, delight_lamps.c), shared between them */
 
