@@ -189,10 +189,10 @@ FILE *srv_note_stream(const char *out)
 
 int srv_num_arg_open(const char *cmd, const char *opt, const char *arg, double lo, double hi, int open, double *out)
 {
-    char *end;
-    double v = strtod(arg, &end);
-    int in = (open & SRV_OPEN_LO ? v > lo : v >= lo) && (open & SRV_OPEN_HI ? v < hi : v <= hi);
-    if (*arg && !*end && isfinite(v) && in) {
+    double v = NAN;
+    int in = gs_parse_number(arg, &v) && (open & SRV_OPEN_LO ? v > lo : v >= lo) &&
+             (open & SRV_OPEN_HI ? v < hi : v <= hi);
+    if (in) {
         *out = v;
         return 1;
     }

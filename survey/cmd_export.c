@@ -210,10 +210,9 @@ gs_status srv_db_read_stations(srv_db *db, const char *survey, gis_camera **cams
 static int parse_bbox(const char *text, double b[4])
 {
     const char *p = text;
-    char *end;
     for (int i = 0; i < 4; i++) {
-        b[i] = strtod(p, &end);
-        if (end == p || !isfinite(b[i]) || (i < 3 && *end != ',') || (i == 3 && *end)) return 0;
+        const char *end = gs_number_prefix(p, &b[i]);
+        if (!end || (i < 3 && *end != ',') || (i == 3 && *end)) return 0;
         p = end + 1;
     }
     return 1;

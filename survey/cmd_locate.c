@@ -52,10 +52,7 @@ typedef struct {
 static gs_status parse_number(const char *path, int line, const char *field, const char *text,
                               double *v)
 {
-    char *end;
-    errno = 0;
-    *v = strtod(text, &end);
-    if (!*text || *end || errno == ERANGE || !isfinite(*v))
+    if (!gs_parse_number(text, v))
         return gs_fail(GS_EFORMAT, "%s:%d: %s: expected a finite number, got '%s'", path, line, field, text);
     return GS_OK;
 }

@@ -109,7 +109,6 @@ static void map_progress(void *ctx, double fraction)
     progress("per-pixel Eq. 7: %3.0f %% of the lit pixels", 100.0 * fraction);
 }
 
-/* Returns -1 to go on, else the exit status. */
 /* "auto" (NaN: measured from the capture) or a number in [0, hi) into *v; 0 when neither. */
 static int auto_or_share(const char *arg, double hi, double *v)
 {
@@ -117,13 +116,13 @@ static int auto_or_share(const char *arg, double hi, double *v)
         *v = NAN;
         return 1;
     }
-    char *end;
-    double x = strtod(arg, &end);
-    if (end == arg || *end || !(x >= 0.0 && x < hi)) return 0;
+    double x;
+    if (!gs_parse_number(arg, &x) || !(x >= 0.0 && x < hi)) return 0;
     *v = x;
     return 1;
 }
 
+/* Returns -1 to go on, else the exit status. */
 static int parse_opts(int argc, char **argv, recognize_opts *o)
 {
     static const struct option longs[] = {

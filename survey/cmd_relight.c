@@ -68,14 +68,12 @@ static int parse_set(const char *arg, int S, rec_relight_set *set, unsigned *giv
         }
         given[n] |= key;
         if (key == 1) {
-            r->gain = strtod(val, &end);
-            if (!*val || *end || !(r->gain >= 0) || !isfinite(r->gain)) goto bad;
+            if (!gs_parse_number(val, &r->gain) || !(r->gain >= 0)) goto bad;
         } else if (key == 2) {
             if (!*val || strlen(val) >= sizeof r->bulb) goto bad;
             snprintf(r->bulb, sizeof r->bulb, "%s", val);
         } else {
-            r->phase_deg = strtod(val, &end);
-            if (!*val || *end || !isfinite(r->phase_deg)) goto bad;
+            if (!gs_parse_number(val, &r->phase_deg)) goto bad;
             r->phase_deg = gs_wrap360(r->phase_deg);   /* 400 is 40 deg, -120 is 240 */
             r->set_phase = 1;
         }

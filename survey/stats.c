@@ -85,13 +85,13 @@ void srv_stats_opts_default(srv_stats_opts *o)
 /* One grouping of a --by list. */
 static gs_status parse_part(const char *text, const char *part, srv_stats_opts *o, srv_group_by *by)
 {
-    char *end;
     if (!strcmp(part, "technology")) *by = SRV_BY_TECHNOLOGY;
     else if (!strcmp(part, "survey")) *by = SRV_BY_SURVEY;
     else if (!strcmp(part, "all")) *by = SRV_BY_ALL;
     else if (!strncmp(part, "cell:", 5)) {
-        double v = strtod(part + 5, &end);
-        if (end == part + 5 || (*end && strcmp(end, "m")) || !isfinite(v) || !(v >= 1.0) || v > 1e7)
+        double v = NAN;
+        const char *end = gs_number_prefix(part + 5, &v);
+        if (!end || (*end && strcmp(end, "m")) || !(v >= 1.0) || v > 1e7)
             return gs_fail(GS_EINVAL, "--by '%s': expected cell:SIZE_m with a cell side of 1 to 1e7 "
                            "metres", text);
         *by = SRV_BY_CELL;
@@ -107,16 +107,14 @@ static gs_status parse_part(const char *text, const char *part, srv_stats_opts *
 
 gs_status srv_stats_parse_by(const char *text, srv_stats_opts *o)
 {
-    char *end;
     if (!text) return gs_fail(GS_EINVAL, "--by: expected " BY_EXPECTED);
     o->n_then = 0;
     if (!strncmp(text, "radius:", 7)) {
         double v[3];
         const char *p = text + 7;
         for (int i = 0; i < 3; i++) {
-            v[i] = strtod(p, &end);
-            if (end == p || !isfinite(v[i]) || (i < 2 && *end != ',') ||
-                (i == 2 && *end && strcmp(end, "m")))
+            const char *end = gs_number_prefix(p, &v[i]);
+            if (!end || (i < 2 && *end != ',') || (i == 2 && *end && strcmp(end, "m")))
                 return gs_fail(GS_EINVAL, "--by '%s': expected radius:LAT,LON,R_m (degrees, degrees, "
                                "metres)", text);
             p = end + 1;

@@ -454,6 +454,9 @@ TEST(gis_cli_locate)
     snprintf(cmd, sizeof cmd, "%s locate --station %s --pixels %s -o %s", test_bin(), st, px, res);
     rc = test_run(cmd, out, sizeof out);
     CHECK_MSG(rc == 1 && fx_contains(out, "pixels.csv:3: x_px: expected a finite number, got '1e'"), "%d: %s", rc, out);
+    fx_write_text(px, "id,x_px,y_px\nA,1,2\nB,0x10,2\n");   /* (was read as 16) */
+    rc = test_run(cmd, out, sizeof out);
+    CHECK_MSG(rc == 1 && fx_contains(out, "pixels.csv:3: x_px: expected a finite number, got '0x10'"), "%d: %s", rc, out);
     fx_write_text(px, "id,x,y\nA,1,2\n");
     rc = test_run(cmd, out, sizeof out);
     CHECK_MSG(rc == 1 && fx_contains(out, "pixels.csv:1: header column 2 is 'x'"), "%d: %s", rc, out);

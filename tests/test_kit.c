@@ -302,6 +302,34 @@ TEST(kit_numeric_median_and_wraps)
     CHECK(gs_wrap180(180) == -180 && gs_wrap180(-181) == 179 && gs_wrap180(359) == -1);
 }
 
+/* One parser of decimal numbers (CSV fields, options, lists): the values written out, and what
+ * strtod alone took as numbers refused (hexadecimal: "0x10" was 16; inf, nan). */
+TEST(kit_numeric_decimal_numbers_only)
+{
+    static const struct {
+        const char *s;
+        int ok;
+        double v;
+    } cases[] = {
+        {"12.5", 1, 12.5}, {"-3e2", 1, -300.0}, {" 7", 1, 7.0}, {".5", 1, 0.5}, {"5.", 1, 5.0},
+        {"+.25e1", 1, 2.5}, {"1e-3", 1, 0.001}, {"0", 1, 0.0}, {"007", 1, 7.0},
+        {"0x10", 0, 0}, {"0X1p3", 0, 0}, {"-0x1", 0, 0}, {"inf", 0, 0}, {"-infinity", 0, 0}, {"nan", 0, 0},
+        {"NAN(1)", 0, 0}, {"1e400", 0, 0}, {"", 0, 0}, {".", 0, 0}, {"-", 0, 0}, {"e5", 0, 0},
+        {"1,2", 0, 0}, {"12 ", 0, 0}, {"1e", 0, 0},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
+        double v = -1.0;
+        int ok = gs_parse_number(cases[i].s, &v);
+        CHECK_MSG(ok == cases[i].ok && (!ok || v == cases[i].v), "'%s': %d %.17g", cases[i].s, ok, v);
+    }
+    double v = 0.0;
+    const char *end = gs_number_prefix("1.5,-2e1m", &v);
+    CHECK(end && *end == ',' && v == 1.5);
+    end = end ? gs_number_prefix(end + 1, &v) : NULL;
+    CHECK(end && !strcmp(end, "m") && v == -20.0);
+    CHECK(!gs_number_prefix("0x1,2", &v) && !gs_number_prefix(",2", &v));
+}
+
 /* gs_dot against a long double sum (within its rounding), and gs_dot_rows against gs_dot bit for
  * bit: lengths 0 to 80 (tails of 0 to 7 after the 8-wide part), counts not a multiple of 4,
  * indices out of order and repeated, a scale. */

@@ -290,6 +290,12 @@ void gs_dot_rows(const double *x, const double *t, size_t ld, size_t n, const si
 /* An angle in degrees wrapped to [0, 360) and to [-180, 180). */
 double gs_wrap360(double a_deg);
 double gs_wrap180(double a_deg);
+/* A decimal number at the start of s (leading blanks skipped, as strtod; a sign, digits, a
+ * point, an exponent): its value in *v and the character after it, or NULL when s does not
+ * start with one or it is not finite (hexadecimal, inf and nan are not decimal numbers). */
+const char *gs_number_prefix(const char *s, double *v);
+/* The whole of s is one finite decimal number (gs_number_prefix): 1 and *v, else 0. */
+int gs_parse_number(const char *s, double *v);
 /* qsort's comparison of doubles, ascending. */
 int gs_cmp_double(const void *a, const void *b);
 /* The median of v[0..n) (n >= 1; v is reordered): quickselect, the upper median for even n. */

@@ -402,14 +402,6 @@ gs_status gs_delight_export_csv(const gs_delight *d, FILE *out)
     return GS_OK;
 }
 
-static int parse_double(const char *s, double *v)
-{
-    char *end;
-    if (!*s) return 0;
-    *v = strtod(s, &end);
-    return *end == '\0' && isfinite(*v);
-}
-
 static int parse_int(const char *s, long lo, long hi, int *v)
 {
     char *end;
@@ -478,7 +470,7 @@ static gs_status import_row(csv_state *st, fields *fs, gs_delight *tmp)
     if (gs_tech_parse(f[1], &r.type) != GS_OK)
         return bad_field(st, "type", "a technology (incandescent, halogen, cfl, led_pwm, ..., unknown)");
     if (!copy_str(r.name, sizeof r.name, f[2])) return bad_field(st, "name", "at most 95 characters");
-    if (!parse_double(f[3], &r.watts)) return bad_field(st, "watts", "a finite number");
+    if (!gs_parse_number(f[3], &r.watts)) return bad_field(st, "watts", "a finite number");
     if (!parse_int(f[4], 50, 60, &r.grid_hz) || (r.grid_hz != 50 && r.grid_hz != 60))
         return bad_field(st, "grid_hz", "50 or 60");
     char *slash = strrchr(f[5], '/');
@@ -486,7 +478,7 @@ static gs_status import_row(csv_state *st, fields *fs, gs_delight *tmp)
     if (!slash || !*f[5] || !copy_str(r.sensor, sizeof r.sensor, f[5]) || !parse_ref(slash + 1, &r.ref))
         return bad_field(st, "sensor", "SENSOR/REF with REF voltage, none or unlocked");
     double chroma;
-    if (!parse_double(f[7], &chroma)) return bad_field(st, "chromaticity", "a finite number");
+    if (!gs_parse_number(f[7], &chroma)) return bad_field(st, "chromaticity", "a finite number");
     int n;
     if (!parse_int(f[8], 4, st->header_n, &n) || n % 2)
         return bad_field(st, "n", "an even sample count from 4 to the header's v columns");
@@ -529,7 +521,7 @@ static gs_status import_row(csv_state *st, fields *fs, gs_delight *tmp)
     st->b.chroma[st->next_band] = chroma;
     double *v = st->b.brf.v + (size_t)st->next_band * (size_t)n;
     for (int j = 0; j < n; j++)
-        if (!parse_double(f[CSV_FIXED + j], &v[j])) {
+        if (!gs_parse_number(f[CSV_FIXED + j], &v[j])) {
             char name[16];
             snprintf(name, sizeof name, "v%d", j);
             return bad_field(st, name, "a finite number");

@@ -14,8 +14,8 @@ static size_t budget_bytes;   /* 0: the default */
 
 gs_status gs_mem_parse(const char *what, const char *text, size_t *bytes)
 {
-    char *end = NULL;
-    double v = text && *text ? strtod(text, &end) : NAN;
+    double v = NAN;
+    const char *end = text ? gs_number_prefix(text, &v) : NULL;
     double unit = 1.0;
     if (end && *end) {
         static const char units[] = "KMGT";

@@ -3,7 +3,9 @@
  * with the brightness marginalised), and the quickselect median (background meshes). */
 #include "recognize/base/base.h"
 
+#include <ctype.h>
 #include <math.h>
+#include <stdlib.h>
 #include <string.h>
 
 #define LOG_SQRT_2PI 0.91893853320467274178032973640562
@@ -94,6 +96,29 @@ double gs_wrap360(double a_deg)
 double gs_wrap180(double a_deg)
 {
     return gs_wrap360(a_deg + 180.0) - 180.0;
+}
+
+const char *gs_number_prefix(const char *s, double *v)
+{
+    const char *p = s;
+    while (isspace((unsigned char)*p)) p++;
+    if (*p == '+' || *p == '-') p++;
+    if (!(isdigit((unsigned char)*p) || (*p == '.' && isdigit((unsigned char)p[1])))) return NULL;
+    if (p[0] == '0' && (p[1] == 'x' || p[1] == 'X')) return NULL;
+    char *end;
+    double x = strtod(s, &end);
+    if (end == s || !isfinite(x)) return NULL;
+    *v = x;
+    return end;
+}
+
+int gs_parse_number(const char *s, double *v)
+{
+    double x;
+    const char *end = gs_number_prefix(s, &x);
+    if (!end || *end) return 0;
+    *v = x;
+    return 1;
 }
 
 int gs_cmp_double(const void *a, const void *b)

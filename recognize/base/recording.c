@@ -59,17 +59,6 @@ typedef struct {
     size_t n, cap;
 } series;
 
-/* The whole of field s is one finite number. */
-static int number(const char *s, double *out)
-{
-    if (!*s) return 0;
-    char *stop;
-    double v = strtod(s, &stop);
-    if (*stop || !isfinite(v)) return 0;
-    *out = v;
-    return 1;
-}
-
 /* Parse one row of fields: column 1 time, 2 value, vcol voltage (0: none); other columns are
  * ignored, an empty last one (a trailing comma) too. Returns 0, or the 1-based column that is
  * missing or not a number. */
@@ -80,7 +69,7 @@ static int parse_row(char **f, size_t count, int vcol, double *t, double *x, dou
     for (size_t c = 0; c < count; c++) {
         int col = (int)c + 1;
         double *dst = col == 1 ? t : col == 2 ? x : col == vcol ? v : NULL;
-        if (dst && !number(f[c], dst) && !bad) bad = col;
+        if (dst && !gs_parse_number(f[c], dst) && !bad) bad = col;
     }
     int need = vcol > 2 ? vcol : 2;
     return bad ? bad : (int)count < need ? (int)count + 1 : 0;
@@ -96,7 +85,7 @@ static size_t header_run_in(char **f, size_t count)
     if (!*mid) return 0;   /* (an empty field: mid + 1 would be past its end; found by fuzz_recording) */
     for (char *s = mid + 1; *s; s++) {   /* longest numeric suffix, non-empty prefix */
         double v;
-        if (strchr("+-.0123456789", *s) && number(s, &v)) {
+        if (strchr("+-.0123456789", *s) && gs_parse_number(s, &v)) {
             memmove(mid, s, strlen(s) + 1);
             return count / 2;
         }
