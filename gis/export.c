@@ -209,8 +209,9 @@ static int dump_append(const char *bytes, size_t size, void *data)
 
 gs_status gis_export_geojson_decimals(const gis_light *lights, size_t n, const char *path, int decimals)
 {
-    if (decimals < 0 || decimals > 15)
-        return gs_fail(GS_EINVAL, "%s: %d coordinate decimals: expected 0 to 15", path, decimals);
+    if (decimals < 0 || decimals > GIS_GEOJSON_DECIMALS_MAX)
+        return gs_fail(GS_EINVAL, "%s: %d coordinate decimals: expected 0 to %d", path, decimals,
+                       GIS_GEOJSON_DECIMALS_MAX);
     gs_status s = check_lights(lights, n);
     if (s != GS_OK) return s;
     json_t *root = json_object(), *features = json_array();

@@ -289,9 +289,11 @@ gs_status gis_format_from_path(const char *path, gis_format *f);
  *  GeoPackage 1.3: table "lights", 2-D POINT geometry in EPSG:4326 (no spatial index).
  *  CSV: RFC 4180, header row, lat_deg/lon_deg columns, %.10f degrees. */
 gs_status gis_export_geojson(const gis_light *lights, size_t n, const char *path);
-/* GeoJSON with longitudes and latitudes rounded to `decimals` places (0..15; heights to 3):
- * gis_export_geojson uses GIS_GEOJSON_DECIMALS (7: 1.1 cm of latitude). */
+/* GeoJSON with longitudes and latitudes rounded to `decimals` places (0..GIS_GEOJSON_DECIMALS_MAX;
+ * heights to 3): gis_export_geojson uses GIS_GEOJSON_DECIMALS (7: 1.1 cm of latitude). The
+ * writer's 15 significant digits hold 12 decimals of a longitude of three integer digits. */
 #define GIS_GEOJSON_DECIMALS 7
+#define GIS_GEOJSON_DECIMALS_MAX 12
 gs_status gis_export_geojson_decimals(const gis_light *lights, size_t n, const char *path, int decimals);
 gs_status gis_export_kml(const gis_light *lights, size_t n, const char *path);
 gs_status gis_export_gpkg(const gis_light *lights, size_t n, const char *path);

@@ -32,7 +32,7 @@ static const char export_usage[] =
     "  --bbox A,B,C,D      only located lights with MINLON <= lon <= MAXLON and MINLAT <= lat\n"
     "                      <= MAXLAT, degrees (MINLON > MAXLON crosses the antimeridian)\n"
     "  --min-confidence X  only lights whose confidence (posterior of bulb and phase) is >= X\n"
-    "  --precision D       GeoJSON: longitudes and latitudes to D decimals, 0 to 15 (default 7,\n"
+    "  --precision D       GeoJSON: longitudes and latitudes to D decimals, 0 to 12 (default 7,\n"
     "                      1.1 cm; heights to the millimetre)\n"
     "  --help              this text\n"
     "\n"
@@ -241,7 +241,7 @@ int srv_cmd_export(int argc, char **argv)
         case 'f': format = optarg; break;
         case 'P': {
             unsigned long long v;
-            if (!srv_int_arg("export", "--precision", optarg, 0, 15, &v)) return 2;
+            if (!srv_int_arg("export", "--precision", optarg, 0, GIS_GEOJSON_DECIMALS_MAX, &v)) return 2;
             decimals = (int)v;
             break;
         }

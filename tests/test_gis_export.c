@@ -273,7 +273,13 @@ TEST(gis_export_geojson_seven_decimals)
     text = fx_read_file(path, NULL);
     CHECK_MSG(text && fx_contains(text, "40.101,") && fx_contains(text, "-75.2,"), "%s", text ? text : "");
     free(text);
-    CHECK(gis_export_geojson_decimals(l, n, path, 16) == GS_EINVAL);
+    /* 12 decimals of a three-digit longitude, written out in full (15 significant digits) */
+    l[0].lon_deg = -179.987654321012;
+    CHECK_OK(gis_export_geojson_decimals(l, n, path, 12));
+    text = fx_read_file(path, NULL);
+    CHECK_MSG(text && fx_contains(text, "-179.987654321012,"), "%s", text ? text : "");
+    free(text);
+    CHECK(gis_export_geojson_decimals(l, n, path, 13) == GS_EINVAL);   /* (13-15 printed 12) */
 }
 
 TEST(gis_export_csv_ogrinfo)
