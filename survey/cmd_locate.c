@@ -47,6 +47,7 @@ static const char locate_usage[] =
 typedef struct {
     char id[GIS_TEXT_MAX];
     double x_px, y_px, sigma_px;   /* sigma NaN = not given */
+    int line;
 } pixel_row;
 
 static gs_status parse_number(const char *path, int line, const char *field, const char *text,
@@ -92,10 +93,13 @@ static gs_status pixel_line(void *ctx, char **fld, size_t count, size_t line)
         pr->cap = nc;
     }
     pixel_row *r = &pr->rows[pr->count];
-    if (!*fld[0] || strlen(fld[0]) >= sizeof r->id || strchr(fld[0], '"'))
-        return gs_fail(GS_EFORMAT, "%s:%d: id: expected 1 to %zu characters without quotes", path,
-                       lineno, sizeof r->id - 1);
+    int ctrl = 0;
+    for (const char *c = fld[0]; *c; c++) ctrl |= (unsigned char)*c < 0x20 || *c == 0x7f;
+    if (!*fld[0] || strlen(fld[0]) >= sizeof r->id || strchr(fld[0], '"') || ctrl)
+        return gs_fail(GS_EFORMAT, "%s:%d: id: expected 1 to %zu characters without quotes or "
+                       "control characters", path, lineno, sizeof r->id - 1);
     strcpy(r->id, fld[0]);
+    r->line = lineno;
     r->sigma_px = NAN;
     gs_status s;
     if ((s = parse_number(path, lineno, "x_px", fld[1], &r->x_px)) != GS_OK ||
@@ -111,6 +115,35 @@ static gs_status pixel_line(void *ctx, char **fld, size_t count, size_t line)
     return GS_OK;
 }
 
+static int by_id_then_line(const void *a, const void *b)
+{
+    const pixel_row *p = *(const pixel_row *const *)a, *q = *(const pixel_row *const *)b;
+    int c = strcmp(p->id, q->id);
+    return c ? c : (p->line > q->line) - (p->line < q->line);
+}
+
+/* An id given twice: the one-line error at its second line. */
+static gs_status unique_ids(const char *path, const pixel_row *rows, size_t n)
+{
+    const pixel_row **by = malloc((n ? n : 1) * sizeof *by);
+    if (!by) return gs_fail(GS_ENOMEM, "%s: out of memory", path);
+    for (size_t i = 0; i < n; i++) by[i] = &rows[i];
+    qsort(by, n, sizeof *by, by_id_then_line);
+    const pixel_row *dup = NULL;
+    for (size_t i = 1; i < n; i++)
+        if (!strcmp(by[i - 1]->id, by[i]->id) && (!dup || by[i]->line < dup->line)) dup = by[i];
+    gs_status s = GS_OK;
+    if (dup)
+        for (size_t i = 0; i < n; i++)
+            if (!strcmp(rows[i].id, dup->id)) {
+                s = gs_fail(GS_EFORMAT, "%s:%d: id '%s': given on line %d already: expected each light's "
+                            "id once", path, dup->line, dup->id, rows[i].line);
+                break;
+            }
+    free(by);
+    return s;
+}
+
 static gs_status read_pixels(const char *path, pixel_row **rows, size_t *count)
 {
     pixel_reader pr = {.path = path};
@@ -118,6 +151,7 @@ static gs_status read_pixels(const char *path, pixel_row **rows, size_t *count)
     gs_status s = gs_csv_read(path, (size_t)256 << 20, pixel_line, &pr);
     if (s == GS_OK && !pr.header)
         s = gs_fail(GS_EFORMAT, "%s: no header line (id,x_px,y_px[,sigma_px])", path);
+    if (s == GS_OK) s = unique_ids(path, pr.rows, pr.count);
     if (s != GS_OK) {
         free(pr.rows);
         pr.rows = NULL;

@@ -463,6 +463,15 @@ TEST(gis_cli_locate)
     fx_write_text(px, "id,x_px,y_px\nA,1,2\nB,0x10,2\n");   /* (was read as 16) */
     rc = test_run(cmd, out, sizeof out);
     CHECK_MSG(rc == 1 && fx_contains(out, "pixels.csv:3: x_px: expected a finite number, got '0x10'"), "%d: %s", rc, out);
+    /* an id twice (two lights of one name in every export), a control character in one (the
+     * exporters refused it after the work) */
+    fx_write_text(px, "id,x_px,y_px\nB,1,2\nA,3,4\nC,5,6\nA,7,8\nB,9,9\n");
+    rc = test_run(cmd, out, sizeof out);
+    CHECK_MSG(rc == 1 && fx_count_lines(out) == 1 &&
+              fx_contains(out, "pixels.csv:5: id 'A': given on line 3 already"), "%d: %s", rc, out);
+    fx_write_text(px, "id,x_px,y_px\nA,1,2\nB\tC,3,4\n");
+    rc = test_run(cmd, out, sizeof out);
+    CHECK_MSG(rc == 1 && fx_contains(out, "pixels.csv:3: id: expected 1 to"), "%d: %s", rc, out);
     fx_write_text(px, "id,x,y\nA,1,2\n");
     rc = test_run(cmd, out, sizeof out);
     CHECK_MSG(rc == 1 && fx_contains(out, "pixels.csv:1: header column 2 is 'x'"), "%d: %s", rc, out);
