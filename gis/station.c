@@ -127,6 +127,9 @@ gs_status gis_station_parse(const char *json_text, const char *source, gis_stati
             memcpy(dst, &di, sizeof di);
         } else if ((s = gs_json_get_str(doc, root, "", key, 1, NULL, dst, f->size)) != GS_OK) {
             goto done;
+        } else if (!gs_text_clean(dst)) {   /* (every export refused it, after the work) */
+            s = gs_json_fail(doc, GS_EFORMAT, key, "expected text without control characters");
+            goto done;
         }
     }
     for (size_t i = 0; i < N_FIELDS; i++)

@@ -93,9 +93,7 @@ static gs_status pixel_line(void *ctx, char **fld, size_t count, size_t line)
         pr->cap = nc;
     }
     pixel_row *r = &pr->rows[pr->count];
-    int ctrl = 0;
-    for (const char *c = fld[0]; *c; c++) ctrl |= (unsigned char)*c < 0x20 || *c == 0x7f;
-    if (!*fld[0] || strlen(fld[0]) >= sizeof r->id || strchr(fld[0], '"') || ctrl)
+    if (!*fld[0] || strlen(fld[0]) >= sizeof r->id || strchr(fld[0], '"') || !gs_text_clean(fld[0]))
         return gs_fail(GS_EFORMAT, "%s:%d: id: expected 1 to %zu characters without quotes or "
                        "control characters", path, lineno, sizeof r->id - 1);
     strcpy(r->id, fld[0]);

@@ -650,6 +650,9 @@ TEST(gis_station_parse_errors_name_line_and_field)
          "\"cx\": 1, \"cy\": 1,\n \"time_utc\": \"yesterday\"}", "s.json:3: field time_utc: expected an ISO 8601 time", GS_EFORMAT},
         {"{\"lat\": 45, \"lon\": 7, \"height\": 100, \"heading\": 10, \"pitch\": -5,\n \"focal_px\": 2000, "
          "\"cx\": 1, \"cy\": 1,\n \"time_utc\": \"2024-05-01 21:00\"}", "s.json:3: field time_utc: expected an ISO 8601 time", GS_EFORMAT},
+        /* the id too is copied to every light, whose exports refused a control character */
+        {"{\"lat\": 45, \"lon\": 7, \"height\": 100, \"heading\": 10, \"pitch\": -5,\n \"focal_px\": 2000, "
+         "\"cx\": 1, \"cy\": 1,\n \"id\": \"a\\nb\"}", "s.json:3: field id: expected text without control characters", GS_EFORMAT},
     };
     for (size_t i = 0; i < sizeof bad / sizeof *bad; i++) {
         gs_status s = gis_station_parse(bad[i].text, "s.json", &st);
