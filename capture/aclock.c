@@ -50,10 +50,9 @@ static gs_status load_trace(cap_ac *ac, const cap_freq_config *f)
     s = gs_zero_crossings(x, n, rate, 0.1 * rms, &tc, &count, &rising_first);
     free(x);
     if (s != GS_OK) return gs_fail(s, "%s: %s", f->wav, gs_detail());
-    /* first rising crossing at or after start_s with a neighbour on each side */
+    /* first rising crossing at or after start_s */
     size_t i0 = 0;
-    while (i0 < count && (tc[i0] < f->start_s || i0 < 1 ||
-                          ((i0 % 2 == 0) != (rising_first > 0))))
+    while (i0 < count && (tc[i0] < f->start_s || ((i0 % 2 == 0) != (rising_first > 0))))
         i0++;
     if (count < 100 || i0 + 100 >= count) {
         free(tc);
@@ -61,21 +60,16 @@ static gs_status load_trace(cap_ac *ac, const cap_freq_config *f)
                        "recording of at least 1 s after the start", f->wav,
                        count > i0 ? count - i0 : 0, f->start_s);
     }
-    long m = (long)(count - i0 - 1);
+    long m = (long)(count - i0);
     s = grow(ac, m);
     if (s != GS_OK) {
         free(tc);
         return s;
     }
-    /* (t[i-1] + 2 t[i] + t[i+1]) / 4 removes the alternation of rising and falling crossings
-     * that a DC offset or even harmonics cause, keeping the true period wander */
-    double t0 = 0;
-    for (long c = 0; c < m; c++) {
-        size_t i = i0 + (size_t)c;
-        double ts = 0.25 * (tc[i - 1] + 2.0 * tc[i] + tc[i + 1]);
-        if (c == 0) t0 = ts;
-        ac->t[c] = ts - t0;
-    }
+    /* the crossings as the ACam's detector sees them (the firmware's tests inject these):
+     * rising and falling ones alternate by the recording's even harmonics, which the locked
+     * prediction Delta_{n-2} follows */
+    for (long c = 0; c < m; c++) ac->t[c] = tc[i0 + (size_t)c] - tc[i0];
     free(tc);
     ac->n = m;
     double hz = (double)(m - 1) / (2.0 * ac->t[m - 1]);
@@ -259,10 +253,15 @@ gs_status cap_ac_windows(cap_ac *ac, const cap_window_config *w, cap_windows *ou
         if (w->mode == CAP_LOCKED) {
             double tg, tp;
             if ((s = cap_ac_time(ac, g, &tg)) != GS_OK) goto fail;
+            /* the firmware's prediction (firmware/schedule.c, plan_locked with
+             * fw_tracker_predict_next): Delta_{g-2}, the half period of the same polarity one
+             * AC period earlier */
             double pred = ac->nominal_half_s;
             if (g >= 2) {
-                if ((s = cap_ac_time(ac, g - 2, &tp)) != GS_OK) goto fail;
-                pred = 0.5 * (tg - tp);
+                double tq;
+                if ((s = cap_ac_time(ac, g - 2, &tp)) != GS_OK || (s = cap_ac_time(ac, g - 1, &tq)) != GS_OK)
+                    goto fail;
+                pred = tq - tp;
             } else if (g == 1) {
                 if ((s = cap_ac_time(ac, 0, &tp)) != GS_OK) goto fail;
                 pred = tg - tp;
