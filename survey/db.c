@@ -13,12 +13,14 @@
 #include "survey/internal.h"
 
 #include <errno.h>
+#include <fcntl.h>
 #include <math.h>
 #include <sqlite3.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
@@ -370,6 +372,26 @@ static void remove_created(const char *path)
     }
 }
 
+/* Renames the new database a into place unless another process made path meanwhile (*raced =
+ * 1, a removed): the creators in a directory take turns under an flock of it, so one never
+ * replaces the file another has opened and written (its commits were lost, or its -wal read
+ * against another file). */
+static gs_status commit_new(gs_atomic *a, const char *path, int *raced)
+{
+    char dir[4096];
+    const char *slash = strrchr(path, '/');
+    snprintf(dir, sizeof dir, "%.*s", slash ? (int)(slash - path) + (slash == path) : 1, slash ? path : ".");
+    int fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (fd >= 0) flock(fd, LOCK_EX);   /* (without it, as before: rename) */
+    struct stat st;
+    *raced = lstat(path, &st) == 0;
+    gs_status s = GS_OK;
+    if (*raced) gs_atomic_abort(a);
+    else s = gs_atomic_commit(a);
+    if (fd >= 0) close(fd);
+    return s;
+}
+
 static gs_status open_at(const char *path, srv_db_mode mode, int target, srv_db **out)
 {
     *out = NULL;
@@ -409,9 +431,11 @@ static gs_status open_at(const char *path, srv_db_mode mode, int target, srv_db 
         if (s == GS_OK && lstat(wal, &ws) == 0)
             s = gs_fail(GS_EIO, "%s: cannot create the survey database: writing it failed (a full "
                         "disk or an I/O error)", path);
-        if (s == GS_OK) s = gs_atomic_commit(&a);
+        int raced = 0;
+        if (s == GS_OK) s = commit_new(&a, path, &raced);
         else gs_atomic_abort(&a);
         if (s != GS_OK) return s;
+        if (raced) return open_at(path, mode, target, out);   /* another process's, now */
         if ((s = open_at(path, SRV_DB_WRITE, target, out)) != GS_OK) {
             remove_created(path);
             return s;
@@ -440,6 +464,8 @@ static gs_status open_at(const char *path, srv_db_mode mode, int target, srv_db 
             s = sql_fail(db->db, path, "open");
         goto fail;
     }
+    /* (before the first read: a writer leaving or entering WAL mode locks the file a moment) */
+    sqlite3_busy_timeout(db->db, 10000);
     if (st.st_size > 0 && (s = identify(db->db, path, &kind, &version)) != GS_OK) goto fail;
     /* one rule for every command: only `db init` makes an empty file a survey database */
     if (kind == KIND_EMPTY && mode != SRV_DB_INIT) {
@@ -461,7 +487,6 @@ static gs_status open_at(const char *path, srv_db_mode mode, int target, srv_db 
     }
     sqlite3_extended_result_codes(db->db, 0);
     sqlite3_commit_hook(db->db, refuse_stray_commit, db);
-    sqlite3_busy_timeout(db->db, 10000);
     /* 64 MiB of page cache: the R*Tree and index inserts of a 1e6-light survey touch pages all
      * over the file (docs/survey-db.md, "Scale") */
     if ((s = srv_dbi_exec(db, "PRAGMA foreign_keys = ON; PRAGMA cache_size = -65536", "setting pragmas")) != GS_OK)
@@ -515,14 +540,35 @@ gs_status srv_db_create_at_version(const char *path, int version)
     return s;
 }
 
+/* For srv_db_close_discard: 1 when no other connection has the file open (leaving WAL mode
+ * needs the only one) and no survey is stored in it (by another run, closed since), the file
+ * then held under an exclusive lock until closed, so that nobody begins to use it before it is
+ * removed (one that opened it already cannot write to it once it is: SQLite refuses a write to
+ * a moved file outside WAL mode); else 0: the file stays. */
+static int unused_by_others(srv_db *db)
+{
+    if (db->in_txn) sqlite3_exec(db->db, "ROLLBACK", NULL, NULL, NULL);
+    db->in_txn = 0;
+    sqlite3_busy_timeout(db->db, 0);
+    sqlite3_stmt *q = NULL;
+    int ok = sqlite3_prepare_v2(db->db, "PRAGMA journal_mode = DELETE", -1, &q, NULL) == SQLITE_OK &&
+             sqlite3_step(q) == SQLITE_ROW && !strcmp((const char *)sqlite3_column_text(q, 0), "delete");
+    sqlite3_finalize(q);
+    if (!ok) return 0;
+    db->wal = 0;
+    if (sqlite3_exec(db->db, "BEGIN EXCLUSIVE", NULL, NULL, NULL) != SQLITE_OK) return 0;
+    db->in_txn = 1;   /* (srv_db_close rolls it back) */
+    ok = sqlite3_prepare_v2(db->db, "SELECT count(*) FROM surveys", -1, &q, NULL) == SQLITE_OK &&
+         sqlite3_step(q) == SQLITE_ROW && sqlite3_column_int64(q, 0) == 0;
+    sqlite3_finalize(q);
+    return ok;
+}
+
 void srv_db_close_discard(srv_db *db)
 {
     if (!db) return;
-    int created = db->created;
-    char *path = created ? strdup(db->path) : NULL;
+    if (db->created && db->db && unused_by_others(db)) remove_created(db->path);
     srv_db_close(db);
-    if (path) remove_created(path);
-    free(path);
 }
 
 void srv_db_close(srv_db *db)

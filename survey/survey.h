@@ -67,13 +67,15 @@ typedef enum {
  * that is not a directory, no permission; a read-only file opened for writing), GS_EFORMAT (not
  * a survey database, or a newer / older schema as above; an empty file unless SRV_DB_INIT),
  * GS_ESQL. A new file is created complete under a temporary name and renamed into place, so a
- * killed creation leaves no file under path. On any error nothing is left on disk that was not
+ * killed creation leaves no file under path; never over a file another process made meanwhile
+ * (that one is opened). On any error nothing is left on disk that was not
  * there before (a file created by this call is removed). */
 gs_status srv_db_open(const char *path, srv_db_mode mode, srv_db **out);
 /* Roll back an open transaction, finalize statements, close. Accepts NULL. */
 void srv_db_close(srv_db *db);
 /* srv_db_close, then remove the file if this handle created it (a failed job leaves no new
- * database behind). Accepts NULL. */
+ * database behind), unless another connection has it open or a survey is stored in it (another
+ * process's run). Accepts NULL. */
 void srv_db_close_discard(srv_db *db);
 /* The path given to srv_db_open (borrowed). */
 const char *srv_db_path(const srv_db *db);

@@ -814,3 +814,79 @@ TEST(survey_db_rows_from_recognition)
     rec_matcher_free(mt);
     gs_delight_free(d);
 }
+
+/* The survey names stored in path, read through a raw connection ("" when none or no file). */
+static void stored_surveys(const char *path, char *names, size_t size)
+{
+    names[0] = '\0';
+    sqlite3 *h = NULL;
+    sqlite3_stmt *q = NULL;
+    if (fx_exists(path) && sqlite3_open_v2(path, &h, SQLITE_OPEN_READONLY, NULL) == SQLITE_OK &&
+        sqlite3_prepare_v2(h, "SELECT name FROM surveys ORDER BY name", -1, &q, NULL) == SQLITE_OK)
+        while (sqlite3_step(q) == SQLITE_ROW) {
+            size_t n = strlen(names);
+            snprintf(names + n, size - n, "%s;", (const char *)sqlite3_column_text(q, 0));
+        }
+    sqlite3_finalize(q);
+    sqlite3_close(h);
+}
+
+/* A failed run removes the database it created (srv_db_close_discard), but not one that another
+ * process has used meanwhile: concurrent runs into a new file had the failed one delete the
+ * file that the others had committed to (their captures lost, exit 1 on a missing database). */
+TEST(survey_db_discard_keeps_a_database_another_run_used)
+{
+    const char *path = fx_tmp("discard.sqlite");
+    char names[256];
+    srv_survey_row june = {.name = "june"}, july = {.name = "july"};
+    int64_t id;
+    /* another run stored a survey and closed: the file stays, with it */
+    srv_db *a = NULL, *b = NULL;
+    CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &a));
+    CHECK_OK(srv_db_open(path, SRV_DB_WRITE, &b));
+    CHECK_OK(srv_db_add_survey(b, &june, &id));
+    srv_db_close(b);
+    srv_db_close_discard(a);
+    stored_surveys(path, names, sizeof names);
+    CHECK_MSG(!strcmp(names, "june;"), "stored after the discard: '%s'", names);
+    remove(path);
+    /* another run has it open, yet to store: the file stays, and its later commit is kept */
+    CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &a));
+    CHECK_OK(srv_db_open(path, SRV_DB_WRITE, &b));
+    srv_db_close_discard(a);
+    CHECK_OK(srv_db_add_survey(b, &july, &id));
+    srv_db_close(b);
+    stored_surveys(path, names, sizeof names);
+    CHECK_MSG(!strcmp(names, "july;"), "stored after the discard: '%s'", names);
+    CHECK_OK(srv_db_open(path, SRV_DB_READ, &b));
+    srv_db_report r;
+    CHECK_OK(srv_db_check(b, &r));
+    CHECK(r.integrity_ok);
+    srv_db_close(b);
+    remove(path);
+    /* alone, unused: removed with its sidecars, as before */
+    CHECK_OK(srv_db_open(path, SRV_DB_CREATE, &a));
+    srv_db_close_discard(a);
+    CHECK(!fx_exists(path) && sidecars(path) == 0);
+}
+
+/* Six processes store a survey each into one database that none of them finds: each creation
+ * renamed its new file over the one another process had created and written (surveys lost with
+ * exit 0, or "disk I/O error" from a -wal of another file), and a process that opened the file
+ * while another switched its journal failed at once ("reading the header: database is locked",
+ * before the busy timeout was set). Now every process exits 0 and all six surveys are there. */
+TEST(survey_db_concurrent_creators_keep_every_survey)
+{
+    const char *path = fx_tmp("creators.sqlite");
+    char cmd[4096], names[256];
+    for (int trial = 0; trial < 5; trial++) {
+        remove(path);
+        snprintf(cmd, sizeof cmd, "for i in 1 2 3 4 5 6; do (%%s db ingest-synthetic --db %%s --survey s$i "
+                 "--captures 1 --lights 3 > /dev/null || echo \"s$i failed\") & done; wait");
+        CHECK(run(cmd, path, NULL, NULL) == 0);
+        CHECK_MSG(out[0] == '\0', "trial %d: %s", trial, out);
+        stored_surveys(path, names, sizeof names);
+        CHECK_MSG(!strcmp(names, "s1;s2;s3;s4;s5;s6;"), "trial %d: surveys '%s'", trial, names);
+    }
+    CHECK(run("%s db check --db %s", path, NULL, NULL) == 0);
+}
