@@ -258,8 +258,8 @@ gs_status cap_scene_parse(const char *text, const char *source, const char *base
         (s = gs_json_get_str(c.doc, root, "", "utc", 0, "", sc->utc, sizeof sc->utc)) != GS_OK)
         goto done;
     sc->seed = (unsigned long long)seed;
-    if (sc->utc[0] && (strlen(sc->utc) < 20 || sc->utc[4] != '-' || sc->utc[10] != 'T')) {
-        s = cap_scene_bad(&c, GS_EFORMAT, "utc", "\"%s\": expected ISO 8601 YYYY-MM-DDThh:mm:ssZ", sc->utc);
+    if (sc->utc[0] && !gs_capture_valid_utc(sc->utc)) {
+        s = cap_scene_bad(&c, GS_EFORMAT, "utc", "\"%s\": expected " GS_CAPTURE_EXP_UTC, sc->utc);
         goto done;
     }
     if (json_object_get(root, "delight")) {

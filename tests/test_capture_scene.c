@@ -233,3 +233,35 @@ TEST(scene_builtin_lab_and_metro)
     cap_scene_release(&sc);
     gs_delight_free(d);
 }
+
+/* The scene's utc is written to capture.json, so it follows capture.json's rule (docs/formats.md):
+ * "2017-13-45T99:00:00Z" passed the scene's looser check, the whole capture was rendered, and
+ * writing capture.json failed, naming the output file, with the frames left on disk. */
+TEST(scene_utc_checked_by_the_capture_format_rule)
+{
+    static const char *const bad[] = {"2017-13-45T99:00:00Z", "2017-07-21T21:30:00", "2017-07-21T21:30:00Q",
+                                      "2017-07-21T25:30:00+02:00", "2017-07-21T21:30:00.Z"};
+    static const char *const good[] = {"2017-07-21T21:30:00Z", "2017-07-21T21:30:00.25+02:00"};
+    char rest[256];
+    for (size_t i = 0; i < sizeof bad / sizeof *bad; i++) {
+        snprintf(rest, sizeof rest, " \"utc\": \"%s\",\n \"lights\": []}\n", bad[i]);
+        expect_error(rest, "bad.json:6: field utc: ", GS_EFORMAT);
+    }
+    for (size_t i = 0; i < sizeof good / sizeof *good; i++) {
+        char text[4096];
+        snprintf(text, sizeof text, "%s \"utc\": \"%s\",\n \"lights\": []}\n", head, good[i]);
+        cap_scene sc;
+        CHECK_MSG(cap_scene_parse(text, "good.json", test_tmpdir(), &sc) == GS_OK, "%s: %s", good[i], gs_detail());
+        cap_scene_release(&sc);
+    }
+    /* the command refuses it in one line naming the scene, before anything is rendered */
+    char text[4096], out[4096];
+    snprintf(text, sizeof text, "%s \"utc\": \"%s\",\n \"lights\": []}\n", head, bad[0]);
+    const char *scene = fx_tmp("badutc.json"), *dir = fx_tmp("badutc-capture");
+    FILE *f = fopen(scene, "w");
+    fputs(text, f);
+    fclose(f);
+    CHECK(fx_run_bin(out, sizeof out, "%s simulate %s --out-dir %s -q", scene, dir, NULL) == 1);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "badutc.json:6: field utc:"), "%s", out);
+    CHECK(!fx_exists(dir));
+}

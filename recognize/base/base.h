@@ -672,6 +672,11 @@ typedef struct {
  * frame PNG that is truncated, not 16-bit, of the wrong colour type or size (the detail names
  * the file and the capture.json line that names it). */
 gs_status gs_capture_read(const char *dir, gs_capture *cap);
+/* capture.json's utc (docs/formats.md), 1 if valid: ISO 8601 YYYY-MM-DDThh:mm:ss[.f+](Z|+hh:mm|
+ * -hh:mm), shorter than 40 bytes; a scene's utc, written there, and a station's time_utc
+ * (gis/station.c) are checked with it. */
+int gs_capture_valid_utc(const char *s);
+#define GS_CAPTURE_EXP_UTC "an ISO 8601 time like \"2017-07-21T22:05:00Z\" (at most 39 characters)"
 /* Before allocating, gs_capture_read also checks that every named file is a regular file no
  * larger than a PNG of the declared size, and that the samples plus the working images of
  * recognition (these bytes per pixel and per sample, upper bounds of the peak resident memory
@@ -715,9 +720,6 @@ static inline double gs_noise_raw_var(const gs_noise *n, double raw_dn)
 /* GS_OK if every field of cap except the pixels follows docs/formats.md (frames must be set),
  * else GS_EINVAL with the detail "WHO: field F: expected E". */
 gs_status gs_capture_check(const gs_capture *cap, const char *who);
-/* 1 if s is an ISO 8601 time as gs_capture.utc holds: YYYY-MM-DDThh:mm:ss[.f](Z|+hh:mm|-hh:mm),
- * shorter than 40 bytes (also a station's time_utc, gis/station.c). */
-int gs_capture_valid_utc(const char *s);
 /* Free frames, pixels and station_json and zero the struct. Accepts NULL. */
 void gs_capture_release(gs_capture *cap);
 /* The per-cycle intensity of one pixel sample, in DN per flicker cycle: black level removed,

@@ -28,7 +28,6 @@ gs_status gs_bulb_validate(const gs_bulb *b);
 #define GS_CAPTURE_EXP_SIDE "an integer from 1 to 32768"
 #define GS_CAPTURE_EXP_NONNEG "a finite number >= 0"
 #define GS_CAPTURE_EXP_LOCKED "true or false"
-#define GS_CAPTURE_EXP_UTC "an ISO 8601 time like \"2017-07-21T22:05:00Z\" (at most 39 characters)"
 #define GS_CAPTURE_EXP_FILE "a file name of letters, digits, '.', '_' or '-' that ends in \".png\", does not " \
                  "start with '.' and has at most 255 characters"
 #define GS_CAPTURE_EXP_CYCLES "a finite number > 0"
@@ -45,7 +44,7 @@ typedef struct {
  * entries, in k order). */
 int gs_capture_check_geometry(const gs_capture *c, gs_capture_problem *pr);
 int gs_capture_check_fields(const gs_capture *c, gs_capture_problem *pr);
-/* A frame or HDR-map file name (1 if valid); gs_capture_valid_utc is public (base.h). */
+/* A frame or HDR-map file name (1 if valid). */
 int gs_capture_valid_name(const char *s);
 
 /* ======================== DELIGHT models (delight_model.c, delight_lamps.c), shared between them */
