@@ -423,6 +423,13 @@ static gs_status open_at(const char *path, srv_db_mode mode, int target, srv_db 
         srv_db *fresh = NULL;
         s = open_at(a.tmp, SRV_DB_INIT, target, &fresh);
         srv_db_close(fresh);
+        size_t tl = strlen(a.tmp);
+        if (s != GS_OK && !strncmp(gs_detail(), a.tmp, tl) && !strncmp(gs_detail() + tl, ": ", 2)) {
+            /* (named as the file the user gave, not the temporary one it is built in) */
+            char msg[512];
+            snprintf(msg, sizeof msg, "%s", gs_detail() + tl + 2);
+            s = gs_fail(s, "%s: cannot create the survey database: %s", path, msg);
+        }
         /* closing folds the write-ahead log into the file; if that failed (a full disk, an I/O
          * error), the file alone is not the database: nothing is renamed into place */
         char wal[sizeof a.tmp + 8];

@@ -759,6 +759,8 @@ TEST(db_init_write_failure_leaves_no_file)
         } else {
             CHECK_MSG(rc == 1 && fx_count_lines(out) == 1, "write %ld of %ld: %d: %s", n, total, rc, out);
             CHECK_MSG(!files[0], "write %ld of %ld: failed and left: %s", n, total, files);
+            /* the file the user named, not the temporary one it is built in */
+            CHECK_MSG(strstr(out, "survey.sqlite") && !strstr(out, ".tmp."), "write %ld of %ld: %s", n, total, out);
         }
         free(files);
     }
