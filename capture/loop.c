@@ -11,12 +11,14 @@
 
 #include <dirent.h>
 #include <errno.h>
+#include <fcntl.h>
 #include <jansson.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
@@ -382,6 +384,7 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
 
     gs_capture cap;
     memset(&cap, 0, sizeof cap);
+    int lock_fd = -1, made_dir = 0;
     frame_write wr[2];   /* the frame being acquired and the one being written, in turn */
     memset(wr, 0, sizeof wr);
     int cur = 0;   /* the slot of the frame being acquired */
@@ -420,6 +423,19 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
         fs[k].index = -1;
         fs[k].old_index = -1;
         fs[k].grid_hz_measured = fs[k].start_s = NAN;
+    }
+    /* one writer at a time (the lock goes with the process, killed or not): another's
+     * temporaries are not stale, and each reads, then rewrites, acquisition.json */
+    struct stat dsb;
+    made_dir = stat(dir, &dsb) != 0;
+    if ((s = gs_dir_ensure(dir)) != GS_OK) goto done;
+    lock_fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (lock_fd < 0 || flock(lock_fd, LOCK_EX | LOCK_NB) != 0) {
+        s = errno == EWOULDBLOCK
+                ? gs_fail(GS_EIO, "%s: another process is acquiring into this capture directory: "
+                          "wait for it to end, or give another directory", dir)
+                : gs_fail(GS_EIO, "%s: cannot lock the capture directory: %s", dir, strerror(errno));
+        goto done;
     }
     /* resume */
     remove_stale_temporaries(dir);
@@ -595,5 +611,7 @@ done:
     }
     free(fs);
     gs_capture_release(&cap);
+    if (lock_fd >= 0) close(lock_fd);
+    if (made_dir && s != GS_OK) rmdir(dir);   /* (only if nothing was written to it) */
     return s;
 }

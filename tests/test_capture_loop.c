@@ -458,3 +458,30 @@ TEST(capture_records_grid_frequency_per_frame)
     free(tc);
     gs_capture_release(&cap);
 }
+
+/* Two acquisitions into one capture directory at once: the second took the first's temporary
+ * files for a killed run's and removed them, so either failed with "frame_000.png: cannot
+ * replace it: No such file or directory", or both went on writing frames and acquisition.json
+ * (a hardware capture's frames from two acquisitions). Now the directory is locked while a
+ * process acquires into it (released when it ends, killed or not): the second fails in one line
+ * naming it, the first completes the capture made alone, byte for byte. */
+TEST(capture_directory_one_writer_at_a_time)
+{
+    char cmd[16384], out[8192], bin[2048], lab[2048];
+    const char *tmp = test_tmpdir();
+    if (!realpath(test_bin(), bin)) snprintf(bin, sizeof bin, "%s", test_bin());
+    CHECK(realpath("capture/scenes/lab.json", lab) != NULL);
+    snprintf(cmd, sizeof cmd,
+             "cd %s && %s simulate %s --out-dir alone -q >/dev/null && "
+             "(%s simulate %s --out-dir shared -q >/dev/null 2>first.err & pid=$!; "
+             " while [ ! -e shared/acquisition.json ]; do sleep 0.005; done; "
+             " if [ -f shared/capture.json ]; then echo finished-early; fi; "
+             " %s simulate %s --out-dir shared -q >/dev/null 2>second.err; echo \"second $?\"; "
+             " wait $pid; echo \"first $?\"); cat first.err second.err; diff -r alone shared && echo SAME",
+             tmp, bin, lab, bin, lab, bin, lab);
+    int rc = test_run(cmd, out, sizeof out);
+    printf("    %s", out);
+    CHECK_MSG(rc == 0 && !strstr(out, "finished-early"), "rc %d: %s", rc, out);
+    CHECK_MSG(strstr(out, "second 1\nfirst 0\n") && strstr(out, "shared: another process is acquiring into "
+              "this capture directory") && fx_count_lines(out) == 4 && strstr(out, "SAME"), "%s", out);
+}
