@@ -30,8 +30,8 @@ static gs_status png_error(int err, const char *name, size_t size, const char *r
     case SPNG_EOF:
     case SPNG_EIDAT_TOO_SHORT:
     case SPNG_ECHUNK_SIZE:
-        return gs_fail(GS_EFORMAT, "%s: truncated PNG: the file ends at byte %zu before the IEND "
-                       "chunk (%s)%s", name, size, spng_strerror(err), ref);
+        return gs_fail(GS_EFORMAT, "%s: truncated PNG: the file ends at byte %zu before the end of "
+                       "the IEND chunk (%s)%s", name, size, spng_strerror(err), ref);
     case SPNG_ECHUNK_CRC:
         return gs_fail(GS_EFORMAT, "%s: corrupt PNG: chunk data fails its CRC%s", name, ref);
     case SPNG_EIDAT_STREAM:
@@ -40,6 +40,17 @@ static gs_status png_error(int err, const char *name, size_t size, const char *r
                        "(%s)%s", name, spng_strerror(err), ref);
     }
     return gs_fail(GS_EFORMAT, "%s: corrupt PNG: %s%s", name, spng_strerror(err), ref);
+}
+
+/* Whether the file holds IEND whole: libspng takes an IEND whose CRC is cut short for a whole
+ * one (and checks the CRC when it is there), so a file missing its last 1-4 bytes read as
+ * complete. The last IEND header (length 0, "IEND") must be followed by its 4 CRC bytes. */
+static int iend_whole(const unsigned char *buf, size_t size)
+{
+    static const unsigned char head[8] = {0, 0, 0, 0, 'I', 'E', 'N', 'D'};
+    for (size_t i = size >= 8 ? size - 8 + 1 : 0; i-- > 0;)
+        if (!memcmp(buf + i, head, sizeof head)) return size - i >= 12;
+    return 0;
 }
 
 gs_status gs_png_decode(const unsigned char *buf, size_t size, const char *name, const char *ref,
@@ -89,6 +100,7 @@ gs_status gs_png_decode(const unsigned char *buf, size_t size, const char *name,
     if (!err && len != need) err = SPNG_EINTERNAL;
     if (!err) err = spng_decode_image(ctx, out, need, SPNG_FMT_PNG, 0);
     if (!err) err = spng_decode_chunks(ctx);   /* the chunks after IDAT, through IEND */
+    if (!err && !iend_whole(buf, size)) err = SPNG_EOF;
     if (err) st = png_error(err, name, size, ref);
 done:
     spng_ctx_free(ctx);
