@@ -149,6 +149,29 @@ TEST(kit_csv_quotes_bom_crlf_and_lines)
     CHECK(gs_csv_read(path, 10, keep_row, &r) == GS_ELIMIT);
 }
 
+/* A NUL byte is no CSV text: "12<NUL>0.5" was read as the field "12" (its C string), so a
+ * corrupted pixel list or recording was read with a wrong value and exit 0. Every CSV reader
+ * now refuses it in one line naming the file and the line. */
+TEST(kit_csv_nul_byte_refused_with_its_line)
+{
+    const char *path = fx_tmp("nul.csv");
+    fx_write_file(path, "id,x_px,y_px\nl1,12\0\060.5,300\n", 27);
+    csv_rows r;
+    memset(&r, 0, sizeof r);
+    CHECK(gs_csv_read(path, 0, keep_row, &r) == GS_EFORMAT);
+    CHECK_MSG(strstr(gs_detail(), "nul.csv:2: ") && strstr(gs_detail(), "NUL byte"), "%s", gs_detail());
+    /* the command: one line, non-zero exit, no output */
+    const char *st = fx_tmp("st.json");
+    fx_write_text(st, "{\"format\": \"gridsurvey-station/1\", \"lat_deg\": 40.0, \"lon_deg\": -75.0,\n"
+                      " \"height_m\": 120.0, \"heading_deg\": 30, \"pitch_deg\": -5, \"roll_deg\": 1,\n"
+                      " \"focal_px\": 2000, \"cx_px\": 959.5, \"cy_px\": 539.5}\n");
+    const char *located = fx_tmp("located.csv");
+    char out[4096];
+    CHECK(fx_run_bin(out, sizeof out, "%s locate --station %s --pixels %s -o %s", st, path, located) == 1);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "nul.csv:2: "), "%s", out);
+    CHECK(!fx_exists(located));
+}
+
 /* A DELIGHT name may hold commas and quotes (quoted on export, read back exactly). */
 TEST(kit_csv_delight_name_with_commas_round_trips)
 {

@@ -194,7 +194,8 @@ void gs_json_real(char *buf, size_t cap, double v);
  * breaks; a UTF-8 byte-order mark is skipped; blank lines are skipped; spaces around unquoted
  * fields are trimmed), calling fn once per row with its NUL-terminated fields (borrowed for the
  * call; fn may modify them) and the line the row ends on. The first status that is not GS_OK
- * (fn's, or GS_EFORMAT "PATH:LINE: CSV syntax: ...", GS_ENOTFOUND, GS_EIO, GS_ELIMIT beyond
+ * (fn's, or GS_EFORMAT "PATH:LINE: CSV syntax: ..." or "PATH:LINE: a NUL byte: expected CSV
+ * text", before any row), GS_ENOTFOUND, GS_EIO, GS_ELIMIT beyond
  * max_bytes, 0: GS_FILE_MAX_DEFAULT) stops the reading and is returned. */
 typedef gs_status (*gs_csv_row_fn)(void *ctx, char **fields, size_t count, size_t line);
 gs_status gs_csv_read(const char *path, size_t max_bytes, gs_csv_row_fn fn, void *ctx);

@@ -1,7 +1,7 @@
 /* kit_csv.c - the format kit's CSV (RFC 4180 through libcsv): rows of NUL-terminated fields
  * with the line number each row ends on, quoted fields (commas, quotes, line breaks inside),
- * a UTF-8 byte-order mark skipped, CRLF or LF, blank lines skipped; and the writing of one
- * field, quoted only when it has to be. */
+ * a UTF-8 byte-order mark skipped, CRLF or LF, blank lines skipped, a NUL byte refused; and
+ * the writing of one field, quoted only when it has to be. */
 #include "recognize/base/base.h"
 
 #include <csv.h>
@@ -65,6 +65,14 @@ gs_status gs_csv_read(const char *path, size_t max_bytes, gs_csv_row_fn fn, void
     size_t size;
     gs_status st = gs_file_read(path, max_bytes, &text, &size);
     if (st != GS_OK) return st;
+    /* a field is a C string: a NUL byte would end it early ("12<NUL>0.5" read as 12) */
+    const char *nul = memchr(text, '\0', size);
+    if (nul) {
+        size_t line = 1;
+        for (const char *c = text; c < nul; c++) line += *c == '\n';
+        free(text);
+        return gs_fail(GS_EFORMAT, "%s:%zu: a NUL byte: expected CSV text", path, line);
+    }
     struct csv_parser p;
     if (csv_init(&p, CSV_APPEND_NULL) != 0) {
         free(text);
