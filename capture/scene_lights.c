@@ -374,6 +374,11 @@ static gs_status parse_street_grid(const cap_pctx *c, const cap_scene *sc, json_
         (s = gs_json_get_num(c->doc, b, path, "lumens_spread", 0, 0.1, 0, 1, NULL, &spread)) != GS_OK ||
         (s = gs_json_get_bool(c->doc, b, path, "only_in_image", 0, 1, &only)) != GS_OK)
         return s;
+    if (rmin >= rmax) {   /* (no light would be in range) */
+        char rp[560];
+        snprintf(rp, sizeof rp, "%s.min_range_m", path);
+        return cap_scene_bad(c, GS_EFORMAT, rp, "%g: expected below max_range_m = %g", rmin, rmax);
+    }
     if (json_object_get(b, "phases_deg")) {
         if ((s = gs_json_get_num_array(c->doc, b, path, "phases_deg", 0, 12, -360, 360, phases, &n_phases)) != GS_OK)
             return s;

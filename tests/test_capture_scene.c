@@ -265,3 +265,33 @@ TEST(scene_utc_checked_by_the_capture_format_rule)
     CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "badutc.json:6: field utc:"), "%s", out);
     CHECK(!fx_exists(dir));
 }
+
+/* A street grid whose min_range_m is not below its max_range_m keeps no light: it was read
+ * without a word (a scene of no lights from that block); now refused naming both fields. */
+TEST(scene_street_grid_ranges_must_leave_a_band)
+{
+    const char *geo =
+        "{\"format\": \"gridsurvey-scene/1\",\n"
+        " \"grid\": {\"nominal_hz\": 50},\n"
+        " \"camera\": {\"width_px\": 64, \"height_px\": 48, \"station\": {\"lat_deg\": 32.79, \"lon_deg\": 34.99, \"height_m\": 470},\n"
+        "   \"pose\": {\"heading_deg\": 52, \"pitch_deg\": -7}, \"intrinsics\": {\"focal_px\": 100}, \"sensor\": {\"bands\": 3}},\n"
+        " \"acam\": {\"K\": 10, \"cycles\": 40},\n"
+        " \"lights\": [{\"type\": \"street_grid\", \"center\": {\"lat_deg\": 32.823, \"lon_deg\": 35.04},\n"
+        "   \"size_m\": [400, 400], \"street_spacing_m\": 100, \"light_spacing_m\": 40,\n"
+        "   \"min_range_m\": %s, \"max_range_m\": 8000,\n"
+        "   \"technologies\": [{\"bulb\": \"hps-150w\", \"weight\": 1, \"lumens\": 15000}]}]}\n";
+    char text[4096];
+    cap_scene sc;
+    snprintf(text, sizeof text, geo, "9000");
+    CHECK(cap_scene_parse(text, "grid.json", test_tmpdir(), &sc) == GS_EFORMAT);
+    CHECK_MSG(strstr(gs_detail(), "grid.json:8: field lights[0].min_range_m: 9000: expected below "
+                     "max_range_m = 8000"), "%s", gs_detail());
+    cap_scene_release(&sc);
+    snprintf(text, sizeof text, geo, "8000");
+    CHECK(cap_scene_parse(text, "grid.json", test_tmpdir(), &sc) == GS_EFORMAT);
+    cap_scene_release(&sc);
+    snprintf(text, sizeof text, geo, "2000");
+    CHECK_MSG(cap_scene_parse(text, "grid.json", test_tmpdir(), &sc) == GS_OK, "%s", gs_detail());
+    CHECK(sc.n_lights > 0);
+    cap_scene_release(&sc);
+}
