@@ -132,7 +132,10 @@ int srv_main(int argc, char **argv)
         return 2;
     }
     if (!strcmp(argv[1], "--version") || !strcmp(argv[1], "version")) return version();
-    if (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h") || (!strcmp(argv[1], "help") && argc < 3)) {
+    /* (help is a command too: `help --help` and `help help` are its usage) */
+    int help_help = !strcmp(argv[1], "help") &&
+                    (argc < 3 || !strcmp(argv[2], "--help") || !strcmp(argv[2], "-h") || !strcmp(argv[2], "help"));
+    if (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h") || help_help) {
         usage(stdout);
         return 0;
     }

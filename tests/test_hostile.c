@@ -637,6 +637,15 @@ TEST(cli_version_and_help_command)
     CHECK(run("%s help stats", NULL, NULL, NULL) == 0);
     CHECK(!strcmp(help, out));
     CHECK(run("%s help nosuchcommand", NULL, NULL, NULL) == 2);
+    /* help is a command too: its --help (and help help) is the usage, as `gridsurvey help` */
+    CHECK(run("%s help", NULL, NULL, NULL) == 0);
+    memcpy(help, out, sizeof out);
+    CHECK(run("%s help --help", NULL, NULL, NULL) == 0);
+    CHECK_MSG(!strcmp(help, out), "%s", out);
+    CHECK(run("%s help help", NULL, NULL, NULL) == 0);
+    CHECK_MSG(!strcmp(help, out), "%s", out);
+    CHECK(run("%s help -h", NULL, NULL, NULL) == 0);
+    CHECK_MSG(!strcmp(help, out), "%s", out);
     /* a usage error: one line with what is wrong and a hint; not the whole usage, nor getopt's
      * own line */
     CHECK(run("%s stats --frobnicate", NULL, NULL, NULL) == 2);
