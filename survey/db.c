@@ -643,12 +643,31 @@ gs_status srv_db_check(srv_db *db, srv_db_report *r)
     if (!db || !r) return gs_fail(GS_EINVAL, "srv_db_check: NULL argument");
     memset(r, 0, sizeof *r);
     sqlite3_stmt *q = NULL;
-    if (sqlite3_prepare_v2(db->db, "PRAGMA integrity_check", -1, &q, NULL) != SQLITE_OK)
-        return srv_dbi_fail(db, "integrity_check");
+    /* SQLite does not parse the CHECK constraints of a database opened read-only, so its
+     * integrity_check there passes a row that breaks one: a handle opened read-only checks
+     * through a second connection, read-write but query_only (its own when the file itself
+     * cannot be written) */
+    sqlite3 *rw = NULL;
+    if (db->readonly) {
+        int ok = sqlite3_open_v2(db->path, &rw, SQLITE_OPEN_READWRITE | SQLITE_OPEN_NOMUTEX, NULL) ==
+                 SQLITE_OK && sqlite3_db_readonly(rw, "main") == 0;
+        sqlite3_busy_timeout(rw, 10000);
+        if (!ok || sqlite3_exec(rw, "PRAGMA query_only = 1", NULL, NULL, NULL) != SQLITE_OK) {
+            sqlite3_close(rw);
+            rw = NULL;
+        }
+    }
+    sqlite3 *h = rw ? rw : db->db;
+    if (sqlite3_prepare_v2(h, "PRAGMA integrity_check", -1, &q, NULL) != SQLITE_OK) {
+        gs_status s = sql_fail(h, db->path, "integrity_check");
+        sqlite3_close(rw);
+        return s;
+    }
     int rc = sqlite3_step(q);
     const char *res = rc == SQLITE_ROW ? (const char *)sqlite3_column_text(q, 0) : NULL;
     r->integrity_ok = res && !strcmp(res, "ok");
     sqlite3_finalize(q);
+    sqlite3_close(rw);
     static const char *const rtrees[] = {"SELECT rtreecheck('locations_rtree')",
                                          "SELECT rtreecheck('light_sites_rtree')"};
     for (int i = 0; i < 2; i++) {

@@ -890,3 +890,29 @@ TEST(survey_db_concurrent_creators_keep_every_survey)
     }
     CHECK(run("%s db check --db %s", path, NULL, NULL) == 0);
 }
+
+/* A row that breaks a CHECK constraint (written by another program with ignore_check_constraints)
+ * is an integrity failure of `db check`: SQLite does not parse the CHECK constraints of a
+ * database opened read-only, so integrity_check on db check's read-only connection said ok
+ * (exit 0) where the sqlite3 shell, read-write, lists "CHECK constraint failed in captures". */
+TEST(survey_db_check_finds_rows_breaking_check_constraints)
+{
+    const char *path = fx_tmp("checks.sqlite");
+    CHECK(run("%s db ingest-synthetic --db %s --captures 2 --lights 5", path, NULL, NULL) == 0);
+    CHECK(run("%s db check --db %s", path, NULL, NULL) == 0);
+    sqlite3 *h = NULL;
+    CHECK(sqlite3_open(path, &h) == SQLITE_OK);
+    CHECK(sqlite3_exec(h, "PRAGMA ignore_check_constraints = 1; UPDATE captures SET K = 0 WHERE id = 1",
+                       NULL, NULL, NULL) == SQLITE_OK);
+    /* the oracle: SQLite's own check on a read-write connection */
+    sqlite3_stmt *q = NULL;
+    CHECK(sqlite3_exec(h, "PRAGMA ignore_check_constraints = 0", NULL, NULL, NULL) == SQLITE_OK);
+    CHECK(sqlite3_prepare_v2(h, "PRAGMA integrity_check", -1, &q, NULL) == SQLITE_OK && sqlite3_step(q) == SQLITE_ROW);
+    CHECK_MSG(!strcmp((const char *)sqlite3_column_text(q, 0), "CHECK constraint failed in captures"), "%s",
+              (const char *)sqlite3_column_text(q, 0));
+    sqlite3_finalize(q);
+    sqlite3_close(h);
+    CHECK(run("%s db check --db %s", path, NULL, NULL) == 1);
+    CHECK_MSG(strstr(out, "integrity FAILED"), "%s", out);
+    CHECK(sidecars(path) == 0);   /* (the check writes nothing) */
+}
