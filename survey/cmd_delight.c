@@ -3,13 +3,16 @@
 #include "survey/internal.h"
 
 #include <errno.h>
+#include <fcntl.h>
 #include <getopt.h>
 #include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/file.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 static const char delight_usage[] =
     "usage: gridsurvey delight SUBCOMMAND [OPTIONS]\n"
@@ -212,20 +215,30 @@ static int cmd_export(const gs_delight *d, const delight_opts *o)
 /* Load DB if it exists (else start empty), let add() change it, save it back; cmd names the
  * command in an error. Only a path that does not exist starts empty: a database that cannot be
  * opened (out of memory, out of file descriptors, no permission) is an error, never replaced by
- * the new bulbs alone. */
+ * the new bulbs alone. Processes that modify one database take turns (an flock of the file from
+ * the load to the save; a new file made by another meanwhile is loaded and added to instead), so
+ * none saves over bulbs another added after its load. */
 static int modify_db(const char *cmd, const char *db, gs_status (*add)(gs_delight *, const void *),
                      const void *arg)
 {
-    gs_delight *d = gs_delight_new();
-    if (!d) return srv_error(cmd, gs_fail(GS_ENOMEM, "cannot allocate the DELIGHT database"));
-    struct stat st;
     gs_status s = GS_OK;
-    if (stat(db, &st) == 0) s = gs_delight_load(d, db);
-    else if (errno != ENOENT)
-        s = gs_fail(GS_EIO, "%s: cannot open the DELIGHT database: %s", db, strerror(errno));
-    if (s == GS_OK) s = add(d, arg);
-    if (s == GS_OK) s = gs_delight_save(d, db);
-    gs_delight_free(d);
+    for (int raced = 1; raced && s == GS_OK;) {
+        raced = 0;
+        gs_delight *d = gs_delight_new();
+        if (!d) return srv_error(cmd, gs_fail(GS_ENOMEM, "cannot allocate the DELIGHT database"));
+        struct stat st;
+        int exists = stat(db, &st) == 0, fd = -1;
+        if (exists) {
+            if (S_ISREG(st.st_mode) && (fd = open(db, O_RDONLY | O_CLOEXEC)) >= 0) flock(fd, LOCK_EX);
+            s = gs_delight_load(d, db);   /* (which refuses what is not a regular file) */
+        } else if (errno != ENOENT) {
+            s = gs_fail(GS_EIO, "%s: cannot open the DELIGHT database: %s", db, strerror(errno));
+        }
+        if (s == GS_OK) s = add(d, arg);
+        if (s == GS_OK) s = exists ? gs_delight_save(d, db) : gs_delight_save_new(d, db, &raced);
+        if (fd >= 0) close(fd);
+        gs_delight_free(d);
+    }
     return s == GS_OK ? 0 : srv_error(cmd, s);
 }
 

@@ -13,14 +13,12 @@
 #include "survey/internal.h"
 
 #include <errno.h>
-#include <fcntl.h>
 #include <math.h>
 #include <sqlite3.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/file.h>
 #include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
@@ -372,26 +370,6 @@ static void remove_created(const char *path)
     }
 }
 
-/* Renames the new database a into place unless another process made path meanwhile (*raced =
- * 1, a removed): the creators in a directory take turns under an flock of it, so one never
- * replaces the file another has opened and written (its commits were lost, or its -wal read
- * against another file). */
-static gs_status commit_new(gs_atomic *a, const char *path, int *raced)
-{
-    char dir[4096];
-    const char *slash = strrchr(path, '/');
-    snprintf(dir, sizeof dir, "%.*s", slash ? (int)(slash - path) + (slash == path) : 1, slash ? path : ".");
-    int fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-    if (fd >= 0) flock(fd, LOCK_EX);   /* (without it, as before: rename) */
-    struct stat st;
-    *raced = lstat(path, &st) == 0;
-    gs_status s = GS_OK;
-    if (*raced) gs_atomic_abort(a);
-    else s = gs_atomic_commit(a);
-    if (fd >= 0) close(fd);
-    return s;
-}
-
 static gs_status open_at(const char *path, srv_db_mode mode, int target, srv_db **out)
 {
     *out = NULL;
@@ -439,7 +417,7 @@ static gs_status open_at(const char *path, srv_db_mode mode, int target, srv_db 
             s = gs_fail(GS_EIO, "%s: cannot create the survey database: writing it failed (a full "
                         "disk or an I/O error)", path);
         int raced = 0;
-        if (s == GS_OK) s = commit_new(&a, path, &raced);
+        if (s == GS_OK) s = gs_atomic_commit_new(&a, &raced);
         else gs_atomic_abort(&a);
         if (s != GS_OK) return s;
         if (raced) return open_at(path, mode, target, out);   /* another process's, now */

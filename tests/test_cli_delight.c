@@ -167,3 +167,31 @@ TEST(cli_bad_input_one_line_errors)
     CHECK(fx_count_lines(out) == 1 && strstr(out, "--sensor 'foo'"));
     CHECK(run("%s delight show hps-70w --sensor rgb", NULL, NULL) == 0 && strstr(out, "sensor rgb"));
 }
+
+/* Four `delight import`s at once of one bulb each, into a new file and into an existing one:
+ * each new file was renamed over the one another process had built (its bulbs lost, exit 0),
+ * and a process that found the file busy failed at once ("database is locked", no busy
+ * timeout). Now each exits 0 and the database holds every imported row (the union of the CSVs,
+ * compared sorted). */
+TEST(cli_delight_concurrent_imports_keep_every_bulb)
+{
+    const char *dir = fx_tmp("concurrent");
+    char bin[2048], cmd[8192];
+    if (!realpath(test_bin(), bin)) snprintf(bin, sizeof bin, "%s", test_bin());
+    snprintf(cmd, sizeof cmd, "mkdir -p %s && cd %s && %s delight export -o all.csv && "
+             "for i in 1 2 3 4; do id=$(awk -F, 'NR > 1 {print $1}' all.csv | uniq | sed -n ${i}p); "
+             "(head -1 all.csv; awk -F, -v id=$id 'NR > 1 && $1 == id' all.csv) > one$i.csv; done && "
+             "tail -q -n +2 one1.csv one2.csv one3.csv one4.csv | sort > want.txt", dir, dir, bin);
+    CHECK(test_run(cmd, out, sizeof out) == 0);
+    for (int trial = 0; trial < 8; trial++) {
+        int existing = trial >= 4;   /* one1's bulb imported first, the others at once */
+        snprintf(cmd, sizeof cmd, "cd %s && rm -f d.sqlite && %s%s%s"
+                 "for i in %s; do (%s delight import one$i.csv --delight d.sqlite > /dev/null || "
+                 "echo \"one$i failed\") & done; wait; "
+                 "%s delight export --delight d.sqlite -o - 2>/dev/null | tail -n +2 | sort | cmp - want.txt",
+                 dir, existing ? bin : "", existing ? " delight import one1.csv --delight d.sqlite > /dev/null" : "",
+                 existing ? " && " : "", existing ? "2 3 4" : "1 2 3 4", bin, bin);
+        int rc = test_run(cmd, out, sizeof out);
+        CHECK_MSG(rc == 0 && !out[0], "trial %d (%s file): %d: %s", trial, existing ? "existing" : "new", rc, out);
+    }
+}

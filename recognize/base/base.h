@@ -103,6 +103,10 @@ typedef struct {
 gs_status gs_atomic_open(gs_atomic *a, const char *path, int want_stream);
 gs_status gs_atomic_commit(gs_atomic *a);
 void gs_atomic_abort(gs_atomic *a);
+/* gs_atomic_commit of a new file, unless another process made path meanwhile: then *raced = 1,
+ * a is removed, GS_OK. The creators of a path take turns under an flock of its directory, so
+ * none replaces a file another has already opened and written. */
+gs_status gs_atomic_commit_new(gs_atomic *a, int *raced);
 /* data[0..size) as path, atomically. */
 gs_status gs_file_write_atomic(const char *path, const void *data, size_t size);
 
@@ -539,7 +543,12 @@ gs_status gs_delight_generate(gs_delight *d, int n);
  * database) adds nothing. */
 #define GS_DELIGHT_SCHEMA_VERSION 1
 gs_status gs_delight_save(const gs_delight *d, const char *path);
+/* save into a new file only: when another process made path meanwhile, *raced = 1 and nothing
+ * is written (GS_OK), for a caller that must then read that file first (gs_atomic_commit_new). */
+gs_status gs_delight_save_new(const gs_delight *d, const char *path, int *raced);
 gs_status gs_delight_load(gs_delight *d, const char *path);
+/* Both wait up to GS_DELIGHT_BUSY_MS for another process's transaction on the file. */
+#define GS_DELIGHT_BUSY_MS 10000
 /* A new DELIGHT into *out (gs_delight_free; NULL on error): the file at path, or the built-in
  * database (gs_delight_generate, GS_BRF_N_DEFAULT samples) when path is NULL. */
 gs_status gs_delight_open(const char *path, gs_delight **out);

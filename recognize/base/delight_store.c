@@ -156,6 +156,7 @@ static gs_status save_at(const gs_delight *d, const char *file, const char *path
         s = sql_fail(db, path, "open");
         goto done;
     }
+    sqlite3_busy_timeout(db, GS_DELIGHT_BUSY_MS);   /* another process's import: wait for it */
     if ((s = user_version(db, path, &version)) != GS_OK) goto done;
     if (version != 0 && version != GS_DELIGHT_SCHEMA_VERSION) {
         s = gs_fail(GS_EFORMAT, "%s: schema version %d: expected a new file or a DELIGHT database "
@@ -236,19 +237,29 @@ done:
     return s;
 }
 
-/* An existing database gets the new rows in one transaction; a new one is built complete under
- * a temporary name and renamed into place (gs_atomic_*), so a failure (a full disk, an I/O error)
- * leaves no half-made file under path (#16, fault injection). */
+/* A new file is built complete under a temporary name and renamed into place (gs_atomic_*), so
+ * a failure (a full disk, an I/O error) leaves no half-made file under path (#16, fault
+ * injection); never over one another process made meanwhile (*raced = 1, nothing written). */
+gs_status gs_delight_save_new(const gs_delight *d, const char *path, int *raced)
+{
+    *raced = 0;
+    gs_atomic a;
+    gs_status s = gs_atomic_open(&a, path, 0);
+    if (s != GS_OK) return s;
+    if ((s = save_at(d, a.tmp, path)) == GS_OK) return gs_atomic_commit_new(&a, raced);
+    gs_atomic_abort(&a);
+    return s;
+}
+
+/* An existing database gets its tables replaced in one transaction, a new one
+ * gs_delight_save_new. */
 gs_status gs_delight_save(const gs_delight *d, const char *path)
 {
     struct stat st;
     if (lstat(path, &st) == 0 || errno != ENOENT) return save_at(d, path, path);
-    gs_atomic a;
-    gs_status s = gs_atomic_open(&a, path, 0);
-    if (s != GS_OK) return s;
-    if ((s = save_at(d, a.tmp, path)) == GS_OK) return gs_atomic_commit(&a);
-    gs_atomic_abort(&a);
-    return s;
+    int raced;
+    gs_status s = gs_delight_save_new(d, path, &raced);
+    return s == GS_OK && raced ? save_at(d, path, path) : s;
 }
 
 /* The BRF bands of bulb b (id, grid_hz, sensor, bands and n set) from the band query q. */
@@ -326,6 +337,7 @@ gs_status gs_delight_load(gs_delight *d, const char *path)
         s = sql_fail(db, path, "open");
         goto done;
     }
+    sqlite3_busy_timeout(db, GS_DELIGHT_BUSY_MS);
     if ((s = user_version(db, path, &version)) != GS_OK) goto done;
     const char *format = NULL;
     if (version == GS_DELIGHT_SCHEMA_VERSION &&

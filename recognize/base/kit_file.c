@@ -12,6 +12,7 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -395,6 +396,23 @@ gs_status gs_atomic_commit(gs_atomic *a)
     }
     a->tmp[0] = '\0';
     return GS_OK;
+}
+
+gs_status gs_atomic_commit_new(gs_atomic *a, int *raced)
+{
+    char dir[sizeof a->path];
+    const char *slash = strrchr(a->path, '/');
+    if (slash) snprintf(dir, sizeof dir, "%.*s", slash == a->path ? 1 : (int)(slash - a->path), a->path);
+    else snprintf(dir, sizeof dir, ".");
+    int fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (fd >= 0) flock(fd, LOCK_EX);   /* (without it, as gs_atomic_commit) */
+    struct stat st;
+    *raced = lstat(a->path, &st) == 0;
+    gs_status s = GS_OK;
+    if (*raced) gs_atomic_abort(a);
+    else s = gs_atomic_commit(a);
+    if (fd >= 0) close(fd);
+    return s;
 }
 
 gs_status gs_file_write_atomic(const char *path, const void *data, size_t size)
