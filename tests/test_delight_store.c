@@ -253,6 +253,16 @@ TEST(delight_csv_inconsistent_entry_and_duplicates)
     CHECK(strstr(gs_detail(), q) && strstr(gs_detail(), "already"));
     CHECK(gs_delight_count(d) == 1);
     CHECK(gs_delight_import_csv(d, fx_tmp("missing.csv")) == GS_ENOTFOUND);
+    /* a missing band names the bulb, and a file that ends before it says so ("field band:
+     * expected B" alone, at a line past the end, read like a typo in a band column) */
+    fx_write_text(p, HDR RED GREEN);
+    CHECK(gs_delight_import_csv(d, p) == GS_EFORMAT);
+    CHECK_MSG(strstr(gs_detail(), ":4: field band: expected B, the next band of bulb b: the file ends "
+                     "before it"), "%s", gs_detail());
+    fx_write_text(p, HDR RED GREEN RED);
+    CHECK(gs_delight_import_csv(d, p) == GS_EFORMAT);
+    CHECK_MSG(strstr(gs_detail(), ":4: field band: expected B, the next band of bulb b (found R)"),
+              "%s", gs_detail());
     gs_delight_free(d);
 }
 

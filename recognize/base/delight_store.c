@@ -522,8 +522,12 @@ static gs_status import_row(csv_state *st, fields *fs, gs_delight *tmp)
         st->first_line = st->line;
     } else {
         const gs_bulb *b = &st->b;
-        if (strcmp(f[6], band_name(b->brf.bands, st->next_band)) != 0)
-            return bad_field(st, "band", band_name(b->brf.bands, st->next_band));
+        if (strcmp(f[6], band_name(b->brf.bands, st->next_band)) != 0) {
+            char msg[160];
+            snprintf(msg, sizeof msg, "%s, the next band of bulb %.40s (found %.20s)",
+                     band_name(b->brf.bands, st->next_band), b->id, f[6]);
+            return bad_field(st, "band", msg);
+        }
         if (r.type != b->type) return bad_field(st, "type", "the same type in every band of a bulb");
         if (strcmp(r.name, b->name) != 0) return bad_field(st, "name", "the same name in every band");
         if (r.watts != b->watts) return bad_field(st, "watts", "the same watts in every band");
@@ -564,8 +568,11 @@ gs_status gs_delight_import_csv(gs_delight *d, const char *path)
         s = gs_fail(GS_EFORMAT, "%s:1: field bulb_id: expected the header bulb_id,type,name,watts,"
                     "grid_hz,sensor,band,chromaticity,n,v0,... (the file is empty)", path);
     if (s == GS_OK && st.active) {
+        char msg[160];
+        snprintf(msg, sizeof msg, "%s, the next band of bulb %.40s: the file ends before it",
+                 band_name(st.b.brf.bands, st.next_band), st.b.id);
         st.line++;
-        s = bad_field(&st, "band", band_name(st.b.brf.bands, st.next_band));
+        s = bad_field(&st, "band", msg);
     }
     if (s == GS_OK) s = append_all(d, tmp, path);
     gs_bulb_release(&st.b);
