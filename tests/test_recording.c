@@ -347,4 +347,10 @@ TEST(recording_rejects_bad_input)
     fclose(f);
     CHECK(gs_recording_to_bulb(p, 3, 64, &b, NULL) == GS_EFORMAT);
     CHECK(strstr(gs_detail(), "field voltage") != NULL);
+    /* values whose sums overflow: the mean is infinite, not "not positive" as it was told */
+    f = fopen(p, "w");
+    for (int i = 0; i < 1000; i++) fprintf(f, "%.6f,%s\n", i * 1e-5, i % 7 ? "1e308" : "0.5");
+    fclose(f);
+    CHECK(gs_recording_to_bulb(p, 0, 64, &b, NULL) == GS_ENUMERIC);
+    CHECK_MSG(strstr(gs_detail(), p) && strstr(gs_detail(), "not a finite number"), "%s", gs_detail());
 }

@@ -503,8 +503,13 @@ gs_status gs_recording_to_bulb(const char *path, int voltage_column, int n, gs_b
     if (lo < 0)
         for (int j = 0; j < n; j++) brf.v[j] -= lo;
     if (gs_brf_normalize(&brf, NULL) != GS_OK) {
-        st = gs_fail(GS_ENUMERIC, "%s: field value: mean light level is not positive: expected a "
-                     "lit photodiode", path);
+        double sum = 0;
+        for (int j = 0; j < n; j++) sum += brf.v[j];
+        st = isfinite(sum) ? gs_fail(GS_ENUMERIC, "%s: field value: mean light level is not positive: "
+                                     "expected a lit photodiode", path)
+                           : gs_fail(GS_ENUMERIC, "%s: field value: mean light level is not a finite "
+                                     "number (the values' sums overflow): expected a photodiode's "
+                                     "readings", path);
         goto done;
     }
     if (harmonics == 0) {
