@@ -17,7 +17,6 @@
 #include <unistd.h>
 
 #define LINK_LINE_MAX 200       /* longer than any firmware line (firmware/proto.h: 128) */
-#define LINK_LOCK_WAIT_MS 2000  /* START retries while ERR NOLOCK: 64 half periods = 0.64 s */
 #define LINK_LOCK_RETRY_MS 50
 
 struct cap_link {
@@ -354,7 +353,7 @@ gs_status cap_link_expose(cap_link *l, const cap_link_config *c, cap_exposure_lo
     if (!log->half_period_s) return gs_fail(GS_ENOMEM, "acam link: out of memory");
 
     /* START, waiting for the lock if the firmware has just seen a disturbance */
-    double lock_deadline = now_ms() + LINK_LOCK_WAIT_MS;
+    double lock_deadline = now_ms() + CAP_LINK_LOCK_WAIT_MS;   /* (64 half periods = 0.64 s) */
     char reply[LINK_LINE_MAX], code[16];
     for (;;) {
         code[0] = '\0';

@@ -284,7 +284,7 @@ gs_status cap_backend_hardware_new(const cap_hw_config *c, cap_backend **out)
     /* the camera, its exposure spanning the C cycles */
     if ((s = cap_vio_open(b->camera, c->camera_images, &b->cam)) != GS_OK) goto fail;
     double actual;
-    double exposure = (double)c->cycles / (2.0 * c->grid_hz) + c->exposure_margin_s;
+    double exposure = cap_hw_exposure_s(c->cycles, c->grid_hz, c->exposure_margin_s);
     if ((s = cap_vio_set_exposure(b->cam, exposure, &actual)) != GS_OK) goto fail;
     time_t now = time(NULL);
     struct tm tmv;
@@ -298,6 +298,12 @@ gs_status cap_backend_hardware_new(const cap_hw_config *c, cap_backend **out)
 fail:
     hw_free(b);
     return s;
+}
+
+double cap_hw_exposure_s(long cycles, int grid_hz, double margin_s)
+{
+    /* (1e-4 over: the firmware's longest period, in whole ticks, is a little longer) */
+    return CAP_LINK_LOCK_WAIT_MS / 1000.0 + 1.0001 * (double)cycles / (2.0 * (grid_hz - CAP_GRID_BAND_HZ)) + margin_s;
 }
 
 gs_status cap_backend_hardware_log(cap_backend *be, cap_hw_log *log)

@@ -529,7 +529,7 @@ gs_status cap_backend_replay_new(const char *dir, cap_backend **out);
 typedef struct {
     const char *camera;           /* VideoCapture source (device index, path) */
     int camera_images;            /* 1: camera is an image-sequence pattern (CAP_IMAGES) */
-    double exposure_margin_s;     /* camera exposure = C half periods + this (0.05) */
+    double exposure_margin_s;     /* added to the camera's exposure (cap_hw_exposure_s; 0.05) */
     const char *serial;           /* controller tty; NULL: use serial_fd */
     int serial_fd;                /* an open descriptor (the link owns it), -1: none */
     int link_timeout_ms;          /* per-line timeout of the link (1000) */
@@ -550,6 +550,14 @@ typedef struct {
 } cap_hw_config;
 void cap_hw_config_default(cap_hw_config *c);
 gs_status cap_backend_hardware_new(const cap_hw_config *c, cap_backend **out);
+/* The controller's START is retried while it reports NOLOCK, up to this long (capture/acam_link.c). */
+#define CAP_LINK_LOCK_WAIT_MS 2000
+/* The grid frequencies the controller accepts: nominal +- this (firmware/schedule.h; outside,
+ * its FREQ fault ends the exposure). */
+#define CAP_GRID_BAND_HZ 3.0
+/* The camera exposure that spans the shutter's opening: the wait for the controller's lock,
+ * C half periods at the lowest grid frequency the controller accepts, and the margin. */
+double cap_hw_exposure_s(long cycles, int grid_hz, double margin_s);
 
 /* Per-acquisition log of the hardware backend (for tests and diagnostics). */
 typedef struct {

@@ -9,6 +9,7 @@
 #include "tests/hw_fixture.h"
 #include "capture/capture.h"
 #include "capture/internal.h"
+#include "firmware/schedule.h"
 
 #include <dlfcn.h>
 #include <math.h>
@@ -294,6 +295,28 @@ static void expect_acquire_fails(cap_backend *be, int W, gs_status want, const c
     free(raw);
     free(halv);
     cap_backend_free(be);
+}
+
+/* The camera's exposure spans the shutter's opening: the controller's lock (START retried up to
+ * its wait) and C half periods at the slowest grid the firmware accepts (its longest full period
+ * in ticks of 8 CPU cycles at 16 MHz), without a needless second. It was C / (2 f_nominal) +
+ * 0.05 s: C = 1500 at 49.8 Hz already lasts 15.060 s, 0.01 s more. */
+TEST(capture_hardware_exposure_spans_the_slowest_grid)
+{
+    static const long cycles[] = {1, 64, 512, 1500, 100000};
+    const struct {
+        int hz;
+        unsigned max_ticks;
+    } grids[] = {{50, FW_P50_MAX_TICKS}, {60, FW_P60_MAX_TICKS}};
+    for (size_t g = 0; g < 2; g++)
+        for (size_t i = 0; i < sizeof cycles / sizeof *cycles; i++) {
+            double tick_s = FW_TICK_CYCLES / 16e6, half_s = 0.5 * grids[g].max_ticks * tick_s;
+            double need = 2.0 + (double)cycles[i] * half_s, e = cap_hw_exposure_s(cycles[i], grids[g].hz, 0.05);
+            CHECK_MSG(e >= need + 0.05 && e <= need + 0.05 + 2e-4 * need, "%d Hz, C = %ld: %.6f s for %.6f s",
+                      grids[g].hz, cycles[i], e, need);
+        }
+    double at_49_8 = 1500 / (2 * 49.8);
+    CHECK(cap_hw_exposure_s(1500, 50, 0.05) > at_49_8 + 2.0);
 }
 
 TEST(capture_hardware_backend_failures)
