@@ -75,15 +75,17 @@ static void tty_progress(void *ctx, srv_stage stage, const char *detail)
     fflush(stderr);
 }
 
-/* A file-name-safe copy of a survey name. */
+/* A survey name as a file name: letters, digits, '-', '_' and a '.' not first as they are, every
+ * other byte as %XX, so that two names never share a file ('a/b' is a%2Fb, 'a_b' stays);
+ * size >= 3 x the name's bytes + 1 (a name has at most 63). */
 static void safe_name(const char *name, char *buf, size_t size)
 {
     size_t n = 0;
-    for (const char *p = name; *p && n + 1 < size; p++) {
+    for (const char *p = name; *p && n + 4 <= size; p++) {
         unsigned char ch = (unsigned char)*p;
         int ok = (ch >= 'a' && ch <= 'z') || (ch >= 'A' && ch <= 'Z') || (ch >= '0' && ch <= '9') ||
                  ch == '-' || ch == '_' || (ch == '.' && n > 0);
-        buf[n++] = ok ? (char)ch : '_';
+        n += ok ? (size_t)snprintf(buf + n, size - n, "%c", ch) : (size_t)snprintf(buf + n, size - n, "%%%02X", ch);
     }
     buf[n] = '\0';
     if (!n) snprintf(buf, size, "survey");
@@ -149,7 +151,7 @@ static gs_status write_outputs(srv_db *db, const srv_run_report *r, const char *
     gs_status s = srv_db_read_lights(db, &eo, &lights, &n);
     if (s != GS_OK) return s;
     for (size_t i = 0; i < n; i++) located += isfinite(lights[i].lat_deg);
-    char name[128], path[4400];
+    char name[3 * 64 + 1], path[4400];
     safe_name(r->survey, name, sizeof name);
     snprintf(path, sizeof path, "%s/%s.geojson", out_dir, name);
     s = gis_export(lights, n, GIS_FORMAT_GEOJSON, path);

@@ -376,6 +376,18 @@ TEST(pipeline_geographic_scene_locates_lights)
     rc = sh("%s run %s --db %s --survey other --light-height-m 10", test_bin(), fx_tmp("geo-capture"), db);
     CHECK_MSG(rc == 0, "%d: %s", rc, out);
     CHECK(query_long(db, "SELECT count(*) FROM captures") == 2);
+    /* two surveys whose names differ only by a character a file name cannot hold write two
+     * files (both were a_b.geojson: the second overwrote the first's) */
+    const char *od = fx_tmp("named");
+    for (int k = 0; k < 2; k++) {
+        rc = sh("%s run %s --db %s --survey %s --light-height-m 10 --out-dir %s", test_bin(), fx_tmp("geo-capture"),
+                db, k ? "a_b" : "a/b", od);
+        CHECK_MSG(rc == 0, "%d: %s", rc, out);
+    }
+    char p1[4096], p2[4096];
+    snprintf(p1, sizeof p1, "%s/a%%2Fb.geojson", od);
+    snprintf(p2, sizeof p2, "%s/a_b.geojson", od);
+    CHECK(fx_exists(p1) && fx_exists(p2));
 }
 
 /* ------------------------------------------------------------------ SIGKILL and resume */
