@@ -891,6 +891,26 @@ TEST(survey_db_concurrent_creators_keep_every_survey)
     CHECK(run("%s db check --db %s", path, NULL, NULL) == 0);
 }
 
+/* A database path that is a symlink to nothing is written through (its target made), as
+ * before the creators took turns: their race check took the link itself for another's file,
+ * failed and left the target empty (0 bytes). Likewise `delight import` into such a link. */
+TEST(survey_db_and_delight_through_a_symlink_to_nothing)
+{
+    const char *link = fx_tmp("link.sqlite"), *target = fx_tmp("target.sqlite");
+    remove(link);
+    remove(target);
+    CHECK(symlink("target.sqlite", link) == 0);
+    CHECK_MSG(run("%s db ingest-synthetic --db %s --survey s --captures 1 --lights 3", link, NULL, NULL) == 0, "%s", out);
+    CHECK_MSG(run("%s db check --db %s", target, NULL, NULL) == 0 && strstr(out, "1 surveys"), "%s", out);
+    const char *dlink = fx_tmp("dlink.db"), *dtarget = fx_tmp("dtarget.db"), *csv = fx_tmp("one.csv");
+    remove(dlink);
+    remove(dtarget);
+    CHECK(symlink("dtarget.db", dlink) == 0);
+    CHECK(run("%s delight export -o %s", csv, NULL, NULL) == 0);
+    CHECK_MSG(run("%s delight import %s --delight %s", csv, dlink, NULL) == 0, "%s", out);
+    CHECK_MSG(run("%s delight list --delight %s", dtarget, NULL, NULL) == 0 && strlen(out) > 100, "%s", out);
+}
+
 /* A row that breaks a CHECK constraint (written by another program with ignore_check_constraints)
  * is an integrity failure of `db check`: SQLite does not parse the CHECK constraints of a
  * database opened read-only, so integrity_check on db check's read-only connection said ok

@@ -104,7 +104,7 @@ gs_status gs_atomic_open(gs_atomic *a, const char *path, int want_stream);
 gs_status gs_atomic_commit(gs_atomic *a);
 void gs_atomic_abort(gs_atomic *a);
 /* gs_atomic_commit of a new file, unless another process made path meanwhile: then *raced = 1,
- * a is removed, GS_OK. The creators of a path take turns under an flock of its directory, so
+ * a is removed, GS_OK (a write-through target, e.g. a symlink to nothing, is committed). The creators of a path take turns under an flock of its directory, so
  * none replaces a file another has already opened and written. */
 gs_status gs_atomic_commit_new(gs_atomic *a, int *raced);
 /* data[0..size) as path, atomically. */

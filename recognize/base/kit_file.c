@@ -400,6 +400,8 @@ gs_status gs_atomic_commit(gs_atomic *a)
 
 gs_status gs_atomic_commit_new(gs_atomic *a, int *raced)
 {
+    *raced = 0;
+    if (a->direct) return gs_atomic_commit(a);   /* written through (a symlink to nothing): no new file */
     char dir[sizeof a->path];
     const char *slash = strrchr(a->path, '/');
     if (slash) snprintf(dir, sizeof dir, "%.*s", slash == a->path ? 1 : (int)(slash - a->path), a->path);
