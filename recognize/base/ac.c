@@ -59,6 +59,8 @@ static double crossing_index(const double *y, size_t n, size_t j, int dir)
 #define AC_FIT_HARMONICS 3
 /* Full periods either side whose median is a crossing's local period. */
 #define AC_PERIOD_SPAN 25
+/* Pairs of successive second differences below which the crossings' covariance is taken as 0. */
+#define AC_COV_MIN_PAIRS 30
 
 /* The crossing near sub-sample index u (direction dir) of the least-squares fit of a DC term
  * and harmonics 1..H of the local period (samples) to the K ~ one period of samples around it,
@@ -345,8 +347,13 @@ gs_status gs_grid_frequency(const double *t_s, size_t n, double *f_cycle_hz,
         c_prev = cj;
     }
     double sigma_mean = NAN;
-    if (nd >= 2 && nd1 >= 1) {
-        double g0 = sdd / (double)(nd - 1) / 6.0, g1 = sd1 / (double)nd1 / 2.0;
+    if (nd >= 2) {
+        /* the covariance from at least AC_COV_MIN_PAIRS pairs (from fewer it is mostly noise, and
+         * a negative one cancelled the variance: a standard error of 0), its correlation not below
+         * -1/2 (the least a tridiagonal covariance of any length allows); above +1/2 it stands in
+         * for correlations reaching further (the crossings' slow residual on real mains) */
+        double g0 = sdd / (double)(nd - 1) / 6.0, g1 = nd1 >= AC_COV_MIN_PAIRS ? sd1 / (double)nd1 / 2.0 : 0.0;
+        g1 = fmax(-0.5 * g0, g1);
         double var_sum = fmax(g0 * sum_c2 + 2.0 * g1 * sum_c1, 0);
         sigma_mean = sqrt(var_sum) / (double)acc / (mean_p * mean_p);
     }

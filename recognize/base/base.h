@@ -343,8 +343,8 @@ double gs_clock_s(clockid_t id);
  * that changes as slowly as the frequency; the fit's follows the noise. The mean of x is
  * removed first. hysteresis (in units of x, >= 0) is a Schmitt trigger: a crossing counts only once x
  * has gone from below -hysteresis to above +hysteresis (or back), so noise-level sign changes
- * are rejected; when noise makes several sign changes in one transition, the crossing is the
- * midpoint of the first and last. Returns an allocated array of crossing times in seconds from
+ * are rejected; when noise makes several sign changes in one transition, the cubic's crossing is
+ * the midpoint of the first and last (where the refit starts). Returns an allocated array of crossing times in seconds from
  * sample 0 (free(); NULL when there are none) and its length in *count; *rising_first is the
  * direction of the first crossing (+1 rising, -1 falling, 0 if none; they alternate).
  * A constant signal has no crossings (GS_OK, count 0). Non-finite samples are GS_ENUMERIC
@@ -363,9 +363,10 @@ gs_status gs_zero_crossings(const double *x, size_t n, double rate_hz, double hy
  * the crossing times: the mean period telescopes to the crossings at the ends of each run of
  * accepted periods, and the crossing-time error is estimated from second differences
  * P_{i+2} - P_i, which cancel slow frequency wander. NaN when fewer than 2 such differences
- * exist (n < 7); std_hz is NaN for a single period. The errors of neighbouring crossings may
+ * exist (n < 6, or periods rejected); std_hz is NaN for a single period. The errors of neighbouring crossings may
  * correlate (gs_zero_crossings' fits share samples): their covariance, from successive second
- * differences, is in the standard error. On sampled mains-like waves with 1-3 % 2nd and 3rd
+ * differences (from at least 30 pairs, else 0; the correlation not below -1/2), is in the
+ * standard error. On sampled mains-like waves with 1-3 % 2nd and 3rd
  * harmonics and noise, errors / sigma_mean_hz have an rms of 0.97-1.11 (0.64 with 16-bit
  * quantisation alone; eq1_sampled_harmonics_honest_error); on shared/data/mains mean_hz is
  * -1.9, 2.8 and -2.2 sigma_mean_hz from the fundamental's phase advance
