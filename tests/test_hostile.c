@@ -289,6 +289,11 @@ TEST(capture_memory_budget_checked_before_allocating)
     CHECK(run("%s --max-memory 4G recognize %s", dir, NULL, NULL) == 1);
     CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "memory budget"), "%s", out);
     CHECK(run("%s recognize %s --max-memory=lots", dir, NULL, NULL) == 2);
+    /* a trailing blank was read as the unit 'T' past the letters: "4 " as 4 PiB (review) */
+    size_t bytes = 0;
+    CHECK(gs_mem_parse("--max-memory", "4 ", &bytes) == GS_EINVAL && bytes == 0);
+    CHECK(gs_mem_parse("--max-memory", "4G ", &bytes) == GS_EINVAL);
+    CHECK(gs_mem_parse("--max-memory", "4GiB", &bytes) == GS_OK && bytes == ((size_t)4 << 30));
     /* a frame that is a FIFO blocked forever, a symlink to /dev/zero was read until malloc failed */
     CHECK(gs_capture_read(declared_capture("fifo", 64, "fifo"), &c) == GS_EINVAL && strstr(gs_detail(), "FIFO"));
     CHECK(gs_capture_read(declared_capture("zero", 64, "zero"), &c) == GS_EINVAL &&

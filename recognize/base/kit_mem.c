@@ -4,6 +4,7 @@
  * RAM, and no more than RLIMIT_AS; `--max-memory SIZE` or GS_MAX_MEMORY (survey/cli.c) sets it. */
 #include "recognize/base/base.h"
 
+#include <ctype.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -19,7 +20,8 @@ gs_status gs_mem_parse(const char *what, const char *text, size_t *bytes)
     double unit = 1.0;
     if (end && *end) {
         static const char units[] = "KMGT";
-        const char *u = strchr(units, end[0] & ~0x20);
+        /* (a letter only: ' ' & ~0x20 is the terminator, which strchr finds) */
+        const char *u = isalpha((unsigned char)end[0]) ? strchr(units, end[0] & ~0x20) : NULL;
         if (u && (!end[1] || ((end[1] | 0x20) == 'i' && (end[2] | 0x20) == 'b' && !end[3]) ||
                   ((end[1] | 0x20) == 'b' && !end[2])))
             unit = ldexp(1.0, 10 * (int)(u - units + 1));
