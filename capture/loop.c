@@ -426,11 +426,12 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
     }
     /* one writer at a time (the lock goes with the process, killed or not): another's
      * temporaries are not stale, and each reads, then rewrites, acquisition.json */
-    struct stat dsb;
-    made_dir = stat(dir, &dsb) != 0;
-    if ((s = gs_dir_ensure(dir)) != GS_OK) goto done;
+    /* (made by this process: its own mkdir succeeded; another's, made meanwhile, is not removed) */
+    made_dir = mkdir(dir, 0777) == 0;
+    if (!made_dir && (s = gs_dir_ensure(dir)) != GS_OK) goto done;
     lock_fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
     if (lock_fd < 0 || flock(lock_fd, LOCK_EX | LOCK_NB) != 0) {
+        made_dir = 0;   /* (the writer holding it may not have written yet) */
         s = errno == EWOULDBLOCK
                 ? gs_fail(GS_EIO, "%s: another process is acquiring into this capture directory: "
                           "wait for it to end, or give another directory", dir)
