@@ -360,9 +360,11 @@ static gs_status migrate(srv_db *db, int target)
     }
 }
 
+/* The database file and its sidecars, the file last: once it is gone another creator may make a
+ * new one at path, whose own -wal and -shm must not be the ones removed here. */
 static void remove_created(const char *path)
 {
-    static const char *const suffix[] = {"", "-wal", "-shm", "-journal"};
+    static const char *const suffix[] = {"-wal", "-shm", "-journal", ""};
     char p[4096];
     for (size_t i = 0; i < sizeof suffix / sizeof *suffix; i++) {
         snprintf(p, sizeof p, "%s%s", path, suffix[i]);
