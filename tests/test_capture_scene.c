@@ -239,9 +239,12 @@ TEST(scene_builtin_lab_and_metro)
  * writing capture.json failed, naming the output file, with the frames left on disk. */
 TEST(scene_utc_checked_by_the_capture_format_rule)
 {
+    /* days a month does not have (a GeoPackage's time moved them to the next month: review) */
     static const char *const bad[] = {"2017-13-45T99:00:00Z", "2017-07-21T21:30:00", "2017-07-21T21:30:00Q",
-                                      "2017-07-21T25:30:00+02:00", "2017-07-21T21:30:00.Z"};
-    static const char *const good[] = {"2017-07-21T21:30:00Z", "2017-07-21T21:30:00.25+02:00"};
+                                      "2017-07-21T25:30:00+02:00", "2017-07-21T21:30:00.Z", "2024-02-31T12:00:00Z",
+                                      "2023-02-29T12:00:00Z", "1900-02-29T12:00:00Z", "2017-04-31T00:00:00Z"};
+    static const char *const good[] = {"2017-07-21T21:30:00Z", "2017-07-21T21:30:00.25+02:00", "2024-02-29T12:00:00Z",
+                                       "2000-02-29T12:00:00Z", "2017-12-31T23:59:60Z"};
     char rest[256];
     for (size_t i = 0; i < sizeof bad / sizeof *bad; i++) {
         snprintf(rest, sizeof rest, " \"utc\": \"%s\",\n \"lights\": []}\n", bad[i]);

@@ -36,13 +36,17 @@ static int digits(const char *s, int count, int lo, int hi, int *out)
     return 1;
 }
 
-/* ISO 8601 date-time: YYYY-MM-DDThh:mm:ss[.f+](Z|+hh:mm|-hh:mm), shorter than 40 bytes. */
+/* ISO 8601 date-time: YYYY-MM-DDThh:mm:ss[.f+](Z|+hh:mm|-hh:mm), shorter than 40 bytes, a day
+ * that its month has (a second of 60, a leap second, is ISO's). */
 int gs_capture_valid_utc(const char *s)
 {
     size_t n = strnlen(s, 40);
     if (n >= 40 || n < 20) return 0;
-    if (!digits(s, 4, 0, 9999, NULL) || s[4] != '-' || !digits(s + 5, 2, 1, 12, NULL) ||
-        s[7] != '-' || !digits(s + 8, 2, 1, 31, NULL) || s[10] != 'T' ||
+    int y = 0, mo = 0, d = 0;
+    static const int days[12] = {31, 29, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31};
+    if (!digits(s, 4, 0, 9999, &y) || s[4] != '-' || !digits(s + 5, 2, 1, 12, &mo) ||
+        s[7] != '-' || !digits(s + 8, 2, 1, 31, &d) || d > days[mo - 1] ||
+        (mo == 2 && d == 29 && !(y % 4 == 0 && (y % 100 != 0 || y % 400 == 0))) || s[10] != 'T' ||
         !digits(s + 11, 2, 0, 23, NULL) || s[13] != ':' || !digits(s + 14, 2, 0, 59, NULL) ||
         s[16] != ':' || !digits(s + 17, 2, 0, 60, NULL))
         return 0;
