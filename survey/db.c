@@ -631,7 +631,7 @@ gs_status srv_db_check(srv_db *db, srv_db_report *r)
     if (db->readonly) {
         int ok = sqlite3_open_v2(db->path, &rw, SQLITE_OPEN_READWRITE | SQLITE_OPEN_NOMUTEX, NULL) ==
                  SQLITE_OK && sqlite3_db_readonly(rw, "main") == 0;
-        sqlite3_busy_timeout(rw, 10000);
+        if (ok) sqlite3_busy_timeout(rw, 10000);
         if (!ok || sqlite3_exec(rw, "PRAGMA query_only = 1", NULL, NULL, NULL) != SQLITE_OK) {
             sqlite3_close(rw);
             rw = NULL;
