@@ -263,6 +263,11 @@ TEST(delight_csv_inconsistent_entry_and_duplicates)
     CHECK(gs_delight_import_csv(d, p) == GS_EFORMAT);
     CHECK_MSG(strstr(gs_detail(), ":4: field band: expected B, the next band of bulb b (found R)"),
               "%s", gs_detail());
+    /* a header with samples alone (a file cut short after it) made an empty database, exit 0 */
+    fx_write_text(p, HDR);
+    CHECK(gs_delight_import_csv(d, p) == GS_EFORMAT);
+    CHECK_MSG(strstr(gs_detail(), ":2: no bulb after a header of 4 samples"), "%s", gs_detail());
+    CHECK(gs_delight_count(d) == 1);
     gs_delight_free(d);
 }
 

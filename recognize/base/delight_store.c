@@ -574,6 +574,11 @@ gs_status gs_delight_import_csv(gs_delight *d, const char *path)
         st.line++;
         s = bad_field(&st, "band", msg);
     }
+    /* a header with sample columns but no row is a file cut short (it made an empty database);
+     * an empty database's export is the header without them */
+    if (s == GS_OK && gs_delight_count(tmp) == 0 && st.header_n > 0)
+        s = gs_fail(GS_EFORMAT, "%s:%zu: no bulb after a header of %d samples: expected its entries (a "
+                    "file cut short?)", path, st.line + 1, st.header_n);
     if (s == GS_OK) s = append_all(d, tmp, path);
     gs_bulb_release(&st.b);
     gs_delight_free(tmp);
