@@ -123,8 +123,9 @@ int srv_cmd_db(int argc, char **argv)
             printf("%ld light sites, %ld lights without a site, %ld stale sites, %ld site R*Tree "
                    "mismatches\n", r.sites, r.unassociated, r.stale_sites, r.site_rtree_mismatch);
             printf("integrity %s, %ld foreign-key violations, %ld R*Tree mismatches, %ld incomplete "
-                   "captures: %s\n", r.integrity_ok ? "ok" : "FAILED", r.fk_violations,
-                   r.rtree_mismatch, r.incomplete_captures, srv_db_report_ok(&r) ? "ok" : "FAILED");
+                   "captures, %ld numbers stored as text: %s\n", r.integrity_ok ? "ok" : "FAILED",
+                   r.fk_violations, r.rtree_mismatch, r.incomplete_captures, r.wrong_types,
+                   srv_db_report_ok(&r) ? "ok" : "FAILED");
             rc = srv_db_report_ok(&r) ? 0 : 1;
         }
     } else {

@@ -618,6 +618,45 @@ static gs_status count(srv_db *db, const char *sql, long *v)
     return GS_OK;
 }
 
+/* Values of the declared REAL and INTEGER columns of every ordinary table that are text or
+ * blobs: SQLite stores them (type affinity converts only what reads as a number), no CHECK
+ * says otherwise for most columns, and the readers take such a value as 0. One count query per
+ * table, its columns from pragma_table_info. */
+static gs_status wrong_types(srv_db *db, long *n)
+{
+    *n = 0;
+    sqlite3_stmt *t = NULL;
+    if (sqlite3_prepare_v2(db->db, "SELECT name FROM sqlite_schema WHERE type = 'table' AND name NOT LIKE "
+                           "'sqlite_%' AND sql NOT LIKE 'CREATE VIRTUAL%' AND name NOT LIKE '%_rtree_%'",
+                           -1, &t, NULL) != SQLITE_OK)
+        return srv_dbi_fail(db, "check");
+    gs_status s = GS_OK;
+    while (s == GS_OK && sqlite3_step(t) == SQLITE_ROW) {
+        const char *table = (const char *)sqlite3_column_text(t, 0);
+        char *cols = sqlite3_mprintf("SELECT group_concat(printf('typeof(\"%%w\") NOT IN (''null'', ''integer''%%s)', "
+                                     "name, CASE WHEN upper(type) = 'REAL' THEN ', ''real''' ELSE '' END), ' OR ') "
+                                     "FROM pragma_table_info(%Q) WHERE upper(type) IN ('REAL', 'INTEGER')", table);
+        sqlite3_stmt *c = NULL;
+        if (!cols || sqlite3_prepare_v2(db->db, cols, -1, &c, NULL) != SQLITE_OK) {
+            sqlite3_free(cols);
+            s = cols ? srv_dbi_fail(db, "check") : gs_fail(GS_ENOMEM, "%s: check: out of memory", db->path);
+            break;
+        }
+        sqlite3_free(cols);
+        const char *where = sqlite3_step(c) == SQLITE_ROW ? (const char *)sqlite3_column_text(c, 0) : NULL;
+        if (where) {
+            char *sql = sqlite3_mprintf("SELECT count(*) FROM \"%w\" WHERE %s", table, where);
+            long v = 0;
+            s = sql ? count(db, sql, &v) : gs_fail(GS_ENOMEM, "%s: check: out of memory", db->path);
+            sqlite3_free(sql);
+            *n += v;
+        }
+        sqlite3_finalize(c);
+    }
+    sqlite3_finalize(t);
+    return s;
+}
+
 gs_status srv_db_check(srv_db *db, srv_db_report *r)
 {
     if (!db || !r) return gs_fail(GS_EINVAL, "srv_db_check: NULL argument");
@@ -685,7 +724,8 @@ gs_status srv_db_check(srv_db *db, srv_db_report *r)
                        "(SELECT count(*) FROM site_detections sd WHERE sd.site_id = s.id)",
                    &r->stale_sites)) != GS_OK ||
         (s = count(db, "SELECT (SELECT count(*) FROM light_sites WHERE lat_deg IS NOT NULL AND "
-                       "pose_key IS NULL) - (SELECT count(*) FROM light_sites_rtree)", &r->site_rtree_mismatch)) != GS_OK)
+                       "pose_key IS NULL) - (SELECT count(*) FROM light_sites_rtree)", &r->site_rtree_mismatch)) != GS_OK ||
+        (s = wrong_types(db, &r->wrong_types)) != GS_OK)
         return s;
     r->rtree_mismatch = a + b;
     return GS_OK;
@@ -695,5 +735,5 @@ int srv_db_report_ok(const srv_db_report *r)
 {
     return r && r->integrity_ok && r->fk_violations == 0 && r->rtree_rows == r->located &&
            r->rtree_mismatch == 0 && r->incomplete_captures == 0 && r->unassociated == 0 &&
-           r->stale_sites == 0 && r->site_rtree_mismatch == 0;
+           r->stale_sites == 0 && r->site_rtree_mismatch == 0 && r->wrong_types == 0;
 }

@@ -263,6 +263,7 @@ typedef struct {
     long unassociated;         /* lights without a site (srv_db_associate fixes them) */
     long stale_sites;          /* sites marked stale or whose detection count is off */
     long site_rtree_mismatch;  /* located sites minus light_sites_rtree entries */
+    long wrong_types;          /* values of a REAL or INTEGER column that are text or blobs */
 } srv_db_report;
 gs_status srv_db_check(srv_db *db, srv_db_report *r);
 /* 1 when every check passed. */

@@ -935,4 +935,18 @@ TEST(survey_db_check_finds_rows_breaking_check_constraints)
     CHECK(run("%s db check --db %s", path, NULL, NULL) == 1);
     CHECK_MSG(strstr(out, "integrity FAILED"), "%s", out);
     CHECK(sidecars(path) == 0);   /* (the check writes nothing) */
+    /* text in REAL and INTEGER columns that no CHECK guards (stats and exports read it as 0):
+     * 'abc' as a light's x_px and a frame count, counted by typeof, the oracle */
+    const char *typed = fx_tmp("types.sqlite");
+    CHECK(run("%s db ingest-synthetic --db %s --captures 2 --lights 5", typed, NULL, NULL) == 0);
+    CHECK(sqlite3_open(typed, &h) == SQLITE_OK);
+    CHECK(sqlite3_exec(h, "UPDATE lights SET x_px = 'abc' WHERE id = 1; UPDATE lights SET peak_dn = x'00' WHERE id = 2",
+                       NULL, NULL, NULL) == SQLITE_OK);
+    CHECK(sqlite3_prepare_v2(h, "SELECT count(*) FROM lights WHERE typeof(x_px) = 'text' OR typeof(peak_dn) = 'blob'",
+                             -1, &q, NULL) == SQLITE_OK && sqlite3_step(q) == SQLITE_ROW);
+    CHECK(sqlite3_column_int(q, 0) == 2);
+    sqlite3_finalize(q);
+    sqlite3_close(h);
+    CHECK(run("%s db check --db %s", typed, NULL, NULL) == 1);
+    CHECK_MSG(strstr(out, "integrity ok") && strstr(out, "2 numbers stored as text: FAILED"), "%s", out);
 }
