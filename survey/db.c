@@ -479,13 +479,22 @@ static gs_status open_at(const char *path, srv_db_mode mode, int target, srv_db 
     if ((s = srv_dbi_exec(db, "PRAGMA foreign_keys = ON; PRAGMA cache_size = -65536", "setting pragmas")) != GS_OK)
         goto fail;
     if (!db->readonly) {
-        sqlite3_stmt *q = NULL;
-        const char *jm = NULL;
-        if (sqlite3_prepare_v2(db->db, "PRAGMA journal_mode = WAL", -1, &q, NULL) == SQLITE_OK &&
-            sqlite3_step(q) == SQLITE_ROW)
-            jm = (const char *)sqlite3_column_text(q, 0);
-        int wal = jm && !strcmp(jm, "wal");
-        sqlite3_finalize(q);
+        /* two openers of a new file switch it at once: the one holding its shared lock while the
+         * other waits for the exclusive one gets SQLITE_BUSY at once, without the busy handler
+         * (SQLite's deadlock rule), so it tries again, up to the busy timeout */
+        int wal = 0, busy = 1;
+        double until = gs_clock_s(CLOCK_MONOTONIC) + 10.0;
+        while (!wal && busy) {
+            sqlite3_stmt *q = NULL;
+            int rc = sqlite3_prepare_v2(db->db, "PRAGMA journal_mode = WAL", -1, &q, NULL);
+            if (rc == SQLITE_OK) rc = sqlite3_step(q);
+            const char *jm = rc == SQLITE_ROW ? (const char *)sqlite3_column_text(q, 0) : NULL;
+            wal = jm && !strcmp(jm, "wal");
+            busy = !wal && (sqlite3_errcode(db->db) == SQLITE_BUSY || rc == SQLITE_BUSY) &&
+                   gs_clock_s(CLOCK_MONOTONIC) < until;
+            sqlite3_finalize(q);
+            if (busy) nanosleep(&(struct timespec){0, 10000000L}, NULL);
+        }
         if (!wal) {
             s = srv_dbi_fail(db, "switching to WAL");
             goto fail;
