@@ -801,10 +801,9 @@ gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *no
      * gain nothing from its threads, and its threaded SGEMMs called from two threads at once
      * contend (docs/recognition.md). The rows are independent: the same answers on any number
      * of threads. */
-    int blas = threads > 1 ? openblas_get_num_threads() : 1;
-    if (blas > 1) openblas_set_num_threads(1);
+    int blas = threads > 1 ? gs_blas_serial() : 1;
     gs_status st = gs_parallel_chunks(threads, nblk, 1, pix_part, &j);
-    if (blas > 1) openblas_set_num_threads(blas);
+    gs_blas_restore(blas);
     for (int t = 0; t < threads; t++) pix_free(&j.pw[t]);
     free(j.pw);
     return st;

@@ -309,6 +309,11 @@ float gs_median_f(float *v, size_t n);
 /* ------------------------------------------------------------------ threads */
 
 #define GS_MAX_THREADS 64
+/* OpenBLAS single-threaded while the program's own threads call it with small problems (its
+ * threads gain nothing there and spin beside ours: the PSF fit's factorizations, a block of
+ * pixels' SGEMMs): returns the thread count before, for gs_blas_restore. */
+int gs_blas_serial(void);
+void gs_blas_restore(int before);
 /* threads > 0 as given, <= 0: the online CPUs; at most GS_MAX_THREADS. */
 int gs_threads_resolve(int threads);
 /* Part `part` of an index range: [begin, end). */

@@ -3,6 +3,7 @@
  * with the brightness marginalised), and the quickselect median (background meshes). */
 #include "recognize/base/base.h"
 
+#include <cblas.h>
 #include <ctype.h>
 #include <math.h>
 #include <stdlib.h>
@@ -119,6 +120,18 @@ int gs_parse_number(const char *s, double *v)
     if (!end || *end) return 0;
     *v = x;
     return 1;
+}
+
+int gs_blas_serial(void)
+{
+    int n = openblas_get_num_threads();
+    if (n > 1) openblas_set_num_threads(1);
+    return n;
+}
+
+void gs_blas_restore(int before)
+{
+    if (before > 1) openblas_set_num_threads(before);
 }
 
 int gs_cmp_double(const void *a, const void *b)
