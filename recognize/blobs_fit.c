@@ -726,8 +726,7 @@ static gs_status fitted_position_cov(const fit_list *L, double *cov)
     double *sg = malloc(sizeof(double) * (L->n ? L->n : 1));
     if (!sg) return gs_fail(GS_ENOMEM, "blobs: cannot hold %zu fitted sigmas", L->n);
     for (size_t i = 0; i < L->n; i++) sg[i] = L->v[i].psf;
-    qsort(sg, L->n, sizeof *sg, gs_cmp_double);
-    const double s1 = L->n % 2 ? sg[L->n / 2] : 0.5 * (sg[L->n / 2 - 1] + sg[L->n / 2]);
+    const double s1 = gs_median_d(sg, L->n);
     free(sg);
     for (size_t i = 0; i < L->n; i++) {
         const fit_light *fl = &L->v[i];

@@ -154,8 +154,7 @@ static double median_misfit(const rec_matcher *m, size_t n, const size_t *idx, c
         size_t i = idx[r];
         scratch[r] = rec_eq7_band_misfit(m, bulb[i], S + i * GS_MAX_BANDS, T + i * GS_MAX_BANDS, tol);
     }
-    qsort(scratch, n, sizeof *scratch, gs_cmp_double);
-    return n % 2 ? scratch[n / 2] : 0.5 * (scratch[n / 2 - 1] + scratch[n / 2]);
+    return gs_median_d(scratch, n);
 }
 
 double rec_eq7_chroma_tolerance(const rec_matcher *m, size_t n, const int *bulb, const double *S,

@@ -149,14 +149,11 @@ static double scene_median_height(const cap_scene *sc, double *sd_m)
     if (!h) return NAN;
     for (size_t i = 0; i < sc->n_lights; i++)
         if (sc->lights[i].geographic && isfinite(sc->lights[i].height_m)) h[n++] = sc->lights[i].height_m;
-    double med = NAN, sum = 0, sum2 = 0;
+    double sum = 0, sum2 = 0;
     for (size_t i = 0; i < n; i++) sum += h[i];
     for (size_t i = 0; i < n; i++) sum2 += (h[i] - sum / (double)n) * (h[i] - sum / (double)n);
     *sd_m = n > 1 ? sqrt(sum2 / (double)(n - 1)) : 0.0;
-    if (n) {
-        qsort(h, n, sizeof *h, gs_cmp_double);
-        med = n % 2 ? h[n / 2] : 0.5 * (h[n / 2 - 1] + h[n / 2]);
-    }
+    double med = gs_median_d(h, n);   /* (NaN without a geographic light) */
     free(h);
     return med;
 }

@@ -149,8 +149,7 @@ gs_status srv_crowded_footprints(const srv_light_row *lights, size_t n, unsigned
         k = 0;
         for (size_t i = 0; i < n; i++)
             if (use[i]) res[k++] = fabs(lights[i].area_px - a - b * log(lights[i].snr));
-        qsort(res, k, sizeof *res, gs_cmp_double);
-        sigma = 1.4826 * (k % 2 ? res[k / 2] : 0.5 * (res[k / 2 - 1] + res[k / 2]));
+        sigma = 1.4826 * gs_median_d(res, k);
         if (!(sigma > 0)) sigma = 0.5;   /* integer areas on one line: half a pixel */
     }
     for (size_t i = 0; i < n; i++)

@@ -320,7 +320,14 @@ TEST(kit_numeric_median_and_wraps)
                 w[k - 1] = t;
             }
         CHECK(gs_median_f(v, n) == w[n / 2]);
+        /* the double one: the mean of the middle two for even n */
+        double dv[64];
+        for (size_t i = 0; i < n; i++) dv[i] = v[i];
+        double want = n % 2 ? w[n / 2] : 0.5 * ((double)w[n / 2 - 1] + (double)w[n / 2]);
+        CHECK(gs_median_d(dv, n) == want);
     }
+    double two[2] = {3.0, 1.0};
+    CHECK(gs_median_d(two, 2) == 2.0 && isnan(gs_median_d(two, 0)));
     CHECK(gs_wrap360(-1e-17) == 0.0 && gs_wrap360(725) == 5 && gs_wrap360(-90) == 270);
     CHECK(gs_wrap180(180) == -180 && gs_wrap180(-181) == 179 && gs_wrap180(359) == -1);
 }

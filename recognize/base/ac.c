@@ -122,14 +122,6 @@ static double fit_crossing(const double *y, size_t n, double u, double period, i
     return v;
 }
 
-/* Median of v[0..n) (n > 0), using scratch[0..n). */
-static double median(const double *v, size_t n, double *scratch)
-{
-    memcpy(scratch, v, n * sizeof *v);
-    qsort(scratch, n, sizeof *scratch, gs_cmp_double);
-    return n % 2 ? scratch[n / 2] : 0.5 * (scratch[n / 2 - 1] + scratch[n / 2]);
-}
-
 /* Refits crossings u[0..c) (c >= 3) of y in place, in two passes: each crossing's local period
  * is the median of the full periods u[i+2] - u[i] centred on it, up to AC_PERIOD_SPAN either
  * side (robust to a missing or spurious crossing), first of the cubic crossings, then of the refitted ones, whose
@@ -154,7 +146,8 @@ static gs_status refit_crossings(const double *y, size_t n, double *u, size_t c,
             size_t h = k == 0 || k == c - 1 ? 0 : k - 1 < c - 2 - k ? k - 1 : c - 2 - k;
             if (h > AC_PERIOD_SPAN) h = AC_PERIOD_SPAN;
             size_t mid = k == 0 ? 0 : k == c - 1 ? np - 1 : k - 1;
-            double period = median(P + mid - h, 2 * h + 1, tmp);
+            memcpy(tmp, P + mid - h, (2 * h + 1) * sizeof *tmp);
+            double period = gs_median_d(tmp, 2 * h + 1);
             u[k] = fit_crossing(y, n, u0[k], period, k % 2 ? -first_dir : first_dir);
         }
     }
@@ -267,9 +260,10 @@ static gs_status full_periods(const char *who, const double *t, size_t n, double
         return gs_fail(GS_ENOMEM, "%s: cannot allocate %zu periods", who, np);
     }
     for (size_t i = 0; i < np; i++) F[i] = 1.0 / (t[i + 2] - t[i]);
-    double med = median(F, np, tmp);
+    memcpy(tmp, F, np * sizeof *tmp);
+    double med = gs_median_d(tmp, np);
     for (size_t i = 0; i < np; i++) tmp[i] = fabs(F[i] - med);
-    double mad = median(tmp, np, tmp);
+    double mad = gs_median_d(tmp, np);
     double tol = fmax(5 * 1.4826 * mad, 1e-9 * med);
     for (size_t i = 0; i < np; i++) ok[i] = fabs(F[i] - med) <= tol;
     free(tmp);

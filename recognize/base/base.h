@@ -305,6 +305,9 @@ int gs_parse_number(const char *s, double *v);
 int gs_cmp_double(const void *a, const void *b);
 /* The median of v[0..n) (n >= 1; v is reordered): quickselect, the upper median for even n. */
 float gs_median_f(float *v, size_t n);
+/* The median of v[0..n) (v sorted in place), the mean of the middle two for even n; NaN for
+ * n = 0. */
+double gs_median_d(double *v, size_t n);
 
 /* ------------------------------------------------------------------ threads */
 

@@ -140,6 +140,13 @@ int gs_cmp_double(const void *a, const void *b)
     return (x > y) - (x < y);
 }
 
+double gs_median_d(double *v, size_t n)
+{
+    if (n == 0) return NAN;
+    qsort(v, n, sizeof *v, gs_cmp_double);
+    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
 float gs_median_f(float *v, size_t n)
 {
     size_t k = n / 2, lo = 0, hi = n - 1;
