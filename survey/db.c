@@ -635,12 +635,13 @@ static gs_status wrong_types(srv_db *db, long *n)
 {
     *n = 0;
     sqlite3_stmt *t = NULL;
-    if (sqlite3_prepare_v2(db->db, "SELECT name FROM sqlite_schema WHERE type = 'table' AND name NOT LIKE "
-                           "'sqlite_%' AND sql NOT LIKE 'CREATE VIRTUAL%' AND name NOT LIKE '%_rtree_%'",
+    if (sqlite3_prepare_v2(db->db, "SELECT name FROM sqlite_schema WHERE type = 'table' AND name NOT GLOB "
+                           "'sqlite_*' AND sql NOT GLOB 'CREATE VIRTUAL*' AND name NOT GLOB '*_rtree_*'",
                            -1, &t, NULL) != SQLITE_OK)
         return srv_dbi_fail(db, "check");
     gs_status s = GS_OK;
-    while (s == GS_OK && sqlite3_step(t) == SQLITE_ROW) {
+    int rc = SQLITE_DONE;
+    while (s == GS_OK && (rc = sqlite3_step(t)) == SQLITE_ROW) {
         const char *table = (const char *)sqlite3_column_text(t, 0);
         char *cols = sqlite3_mprintf("SELECT group_concat(printf('typeof(\"%%w\") NOT IN (''null'', ''integer''%%s)', "
                                      "name, CASE WHEN upper(type) = 'REAL' THEN ', ''real''' ELSE '' END), ' OR ') "
@@ -662,6 +663,7 @@ static gs_status wrong_types(srv_db *db, long *n)
         }
         sqlite3_finalize(c);
     }
+    if (s == GS_OK && rc != SQLITE_DONE) s = srv_dbi_fail(db, "check");
     sqlite3_finalize(t);
     return s;
 }
