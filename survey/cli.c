@@ -217,6 +217,19 @@ int srv_num_arg(const char *cmd, const char *opt, const char *arg, double lo, do
     return srv_num_arg_open(cmd, opt, arg, lo, hi, 0, out);
 }
 
+int srv_choice_arg(const char *cmd, const char *opt, const char *arg, int a, int b, int *out)
+{
+    char sa[16], sb[16];
+    snprintf(sa, sizeof sa, "%d", a);
+    snprintf(sb, sizeof sb, "%d", b);
+    if (strcmp(arg, sa) && strcmp(arg, sb)) {
+        srv_usage_error(cmd, "%s '%s': expected %d or %d", opt, arg, a, b);
+        return 0;
+    }
+    *out = strcmp(arg, sa) ? b : a;
+    return 1;
+}
+
 int srv_int_arg(const char *cmd, const char *opt, const char *arg, unsigned long long lo, unsigned long long hi,
                 unsigned long long *out)
 {

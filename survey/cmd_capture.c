@@ -44,21 +44,6 @@ enum { SIM, REPLAY, HARDWARE, BACKENDS };
 static const char *const backends[BACKENDS] = {"sim", "replay", "hardware"};
 static const char *const backend_opts[BACKENDS] = {"sS", "F", "cITgzutWHBGKCMfalnr"};
 
-/* An option that takes one of two integers, a or b, written as such: 1 into *out, or 0 after the
- * usage error naming it (--bands 2, --grid 55 or --grid 50.5). */
-static int choice_arg(const char *opt, const char *arg, int a, int b, int *out)
-{
-    char sa[16], sb[16];
-    snprintf(sa, sizeof sa, "%d", a);
-    snprintf(sb, sizeof sb, "%d", b);
-    if (strcmp(arg, sa) && strcmp(arg, sb)) {
-        srv_usage_error("capture", "%s '%s': expected %d or %d", opt, arg, a, b);
-        return 0;
-    }
-    *out = strcmp(arg, sa) ? b : a;
-    return 1;
-}
-
 int srv_cmd_capture(int argc, char **argv)
 {
     static const struct option longs[] = {
@@ -116,8 +101,8 @@ int srv_cmd_capture(int argc, char **argv)
         case 't': if (!srv_int_arg("capture", "--trigger-line", optarg, 0, 1023, &u)) return 2; hw.trigger_line = (int)u; break;
         case 'W': if (!srv_int_arg("capture", "--width", optarg, 1, 32768, &u)) return 2; hw.width = (int)u; break;
         case 'H': if (!srv_int_arg("capture", "--height", optarg, 1, 32768, &u)) return 2; hw.height = (int)u; break;
-        case 'B': if (!choice_arg("--bands", optarg, 1, 3, &hw.bands)) return 2; break;
-        case 'G': if (!choice_arg("--grid", optarg, 50, 60, &hw.grid_hz)) return 2; break;
+        case 'B': if (!srv_choice_arg("capture", "--bands", optarg, 1, 3, &hw.bands)) return 2; break;
+        case 'G': if (!srv_choice_arg("capture", "--grid", optarg, 50, 60, &hw.grid_hz)) return 2; break;
         case 'K': if (!srv_int_arg("capture", "--K", optarg, 2, 1024, &u)) return 2; hw.K = (int)u; break;
         case 'C': if (!srv_int_arg("capture", "--cycles", optarg, 1, 1000000, &u)) return 2; hw.cycles = (long)u; break;
         case 'M': if (!srv_int_arg("capture", "--masks", optarg, 2, 1000, &u)) return 2; hw.masks = (int)u; break;

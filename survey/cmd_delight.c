@@ -83,8 +83,7 @@ static int parse_opts(int argc, char **argv, delight_opts *o)
             break;
         case 's': o->sensor = optarg; break;
         case 'g':
-            o->grid_hz = !strcmp(optarg, "50") ? 50 : !strcmp(optarg, "60") ? 60 : 0;
-            if (!o->grid_hz) return srv_usage_error("delight", "--grid '%s': expected 50 or 60", optarg);
+            if (!srv_choice_arg("delight", "--grid", optarg, 50, 60, &o->grid_hz)) return 2;
             break;
         case 'v':
             if (!srv_int_arg("delight", "--voltage-column", optarg, 2, INT_MAX, &v)) return 2;

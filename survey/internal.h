@@ -123,6 +123,9 @@ int srv_num_arg_open(const char *cmd, const char *opt, const char *arg, double l
  * srv_usage_error. */
 int srv_int_arg(const char *cmd, const char *opt, const char *arg, unsigned long long lo, unsigned long long hi,
                 unsigned long long *out);
+/* An option of cmd that is one of two integers, a or b, written as such (not 50.5, not 2): 1
+ * into *out, or 0 after srv_usage_error. */
+int srv_choice_arg(const char *cmd, const char *opt, const char *arg, int a, int b, int *out);
 /* getopt's '?' in command cmd (getopt itself prints nothing: srv_main sets opterr = 0): the one
  * line naming the option (argv[optind - 1]) and the hint; returns 2. */
 int srv_usage_hint(const char *cmd, char **argv);
