@@ -367,8 +367,8 @@ static gs_status refresh_site(srv_db *db, sqlite3_stmt *qo, sqlite3_stmt *qu, in
     while ((rc = sqlite3_step(qo)) == SQLITE_ROW) {
         if ((s = grow(&o, &cap, n + 1, sizeof *o)) != GS_OK) break;
         srv_site_obs_from_row(qo, 0, &o[n++]);
-        double lat = srv_dbi_col_real(qo, 8), lon = srv_dbi_col_real(qo, 9), h = srv_dbi_col_real(qo, 10), a = srv_dbi_col_real(qo, 11), b = srv_dbi_col_real(qo, 12),
-               az = srv_dbi_col_real(qo, 13);
+        double lat = srv_dbi_col_real(qo, 8), lon = srv_dbi_col_real(qo, 9), h = srv_dbi_col_real(qo, 10);
+        double a = srv_dbi_col_real(qo, 11), b = srv_dbi_col_real(qo, 12), az = srv_dbi_col_real(qo, 13);
         sx += sqlite3_column_double(qo, 14);
         sy += sqlite3_column_double(qo, 15);
         if (isfinite(h)) {
@@ -527,7 +527,8 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
         while ((rc = sqlite3_step(q)) == SQLITE_ROW) {
             double d2;
             if (x->located) {
-                double lat = srv_dbi_col_real(q, 1), lon = srv_dbi_col_real(q, 2), a = srv_dbi_col_real(q, 3), b = srv_dbi_col_real(q, 4), az = srv_dbi_col_real(q, 5), C[3];
+                double lat = srv_dbi_col_real(q, 1), lon = srv_dbi_col_real(q, 2), C[3];
+                double a = srv_dbi_col_real(q, 3), b = srv_dbi_col_real(q, 4), az = srv_dbi_col_real(q, 5);
                 if (!(a > 0.0) || !(b > 0.0)) continue;
                 ellipse_cov(a, b, isfinite(az) ? az : 0.0, C);
                 for (int j = 0; j < 3; j++) C[j] += x->C[j];
