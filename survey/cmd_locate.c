@@ -127,17 +127,19 @@ static gs_status unique_ids(const char *path, const pixel_row *rows, size_t n)
     if (!by) return gs_fail(GS_ENOMEM, "%s: out of memory", path);
     for (size_t i = 0; i < n; i++) by[i] = &rows[i];
     qsort(by, n, sizeof *by, by_id_then_line);
-    const pixel_row *dup = NULL;
-    for (size_t i = 1; i < n; i++)
-        if (!strcmp(by[i - 1]->id, by[i]->id) && (!dup || by[i]->line < dup->line)) dup = by[i];
-    gs_status s = GS_OK;
-    if (dup)
-        for (size_t i = 0; i < n; i++)
-            if (!strcmp(rows[i].id, dup->id)) {
-                s = gs_fail(GS_EFORMAT, "%s:%d: id '%s': given on line %d already: expected each light's "
-                            "id once", path, dup->line, dup->id, rows[i].line);
-                break;
-            }
+    /* the earliest repeat, and the first line of its id (its run's first, by line) */
+    const pixel_row *dup = NULL, *first = NULL;
+    for (size_t i = 1, run = 0; i < n; i++) {
+        if (strcmp(by[run]->id, by[i]->id)) {
+            run = i;
+        } else if (!dup || by[i]->line < dup->line) {
+            dup = by[i];
+            first = by[run];
+        }
+    }
+    gs_status s = dup ? gs_fail(GS_EFORMAT, "%s:%d: id '%s': given on line %d already: expected each light's "
+                                "id once", path, dup->line, dup->id, first->line)
+                      : GS_OK;
     free(by);
     return s;
 }
