@@ -538,22 +538,18 @@ static char *gpkg_qml(void)
     return q;
 }
 
-/* An ISO 8601 time ("YYYY-MM-DDTHH:MM:SS[.fff]" then "Z" or a UTC offset "+hh:mm"/"-hh:mm") as
- * GeoPackage's DATETIME text, in UTC: "YYYY-MM-DDTHH:MM:SS.SSSZ" (out: 64 bytes); 0 when t is
- * not one. */
+/* An ISO 8601 time as a capture's utc holds it (gs_capture_valid_utc: "YYYY-MM-DDTHH:MM:SS[.f]"
+ * then "Z" or a UTC offset "+hh:mm"/"-hh:mm") as GeoPackage's DATETIME text, in UTC:
+ * "YYYY-MM-DDTHH:MM:SS.SSSZ" (out: 64 bytes); 0 when t is not one. */
 static int gpkg_datetime(const char *t, char out[64])
 {
-    int y, mo, d, h, mi, n = 0, oh = 0, om = 0, sign = 0;
+    int y, mo, d, h, mi, n = 0, oh = 0, om = 0;
     double sec;
-    if (!t || sscanf(t, "%4d-%2d-%2dT%2d:%2d:%lf%n", &y, &mo, &d, &h, &mi, &sec, &n) != 6 ||
-        mo < 1 || mo > 12 || d < 1 || d > 31 || h > 23 || mi > 59 || !(sec >= 0.0 && sec < 61.0))
+    if (!t || !gs_capture_valid_utc(t) || sscanf(t, "%4d-%2d-%2dT%2d:%2d:%lf%n", &y, &mo, &d, &h, &mi, &sec, &n) != 6)
         return 0;
     const char *z = t + n;
-    if ((z[0] == '+' || z[0] == '-') && strlen(z) == 6 && z[3] == ':' &&
-        sscanf(z + 1, "%2d:%2d", &oh, &om) == 2 && oh >= 0 && oh <= 23 && om >= 0 && om <= 59)
-        sign = z[0] == '+' ? 1 : -1;
-    else if (strcmp(z, "Z"))
-        return 0;
+    int sign = z[0] == '+' ? 1 : z[0] == '-' ? -1 : 0;
+    if (sign && sscanf(z + 1, "%2d:%2d", &oh, &om) != 2) return 0;
     double ms = floor(sec * 1000.0);
     struct tm tm = {.tm_year = y - 1900, .tm_mon = mo - 1, .tm_mday = d, .tm_hour = h,
                     .tm_min = mi - sign * (60 * oh + om), .tm_sec = (int)(ms / 1000.0)};

@@ -139,8 +139,7 @@ gs_status gis_station_parse(const char *json_text, const char *source, gis_stati
             goto done;
         }
     if (st->time_utc[0] && !gs_capture_valid_utc(st->time_utc)) {
-        s = gs_json_fail(doc, GS_EFORMAT, "time_utc", "expected an ISO 8601 time like "
-                         "\"2017-07-21T22:05:00Z\" (YYYY-MM-DDThh:mm:ss[.f](Z|+hh:mm|-hh:mm))");
+        s = gs_json_fail(doc, GS_EFORMAT, "time_utc", "expected " GS_CAPTURE_EXP_UTC);
         goto done;
     }
     /* NaN = not given (JSON has no NaN): without a PSF, sigma_px is every light's pixel sigma
