@@ -311,12 +311,12 @@ TEST(capture_hardware_exposure_spans_the_slowest_grid)
     for (size_t g = 0; g < 2; g++)
         for (size_t i = 0; i < sizeof cycles / sizeof *cycles; i++) {
             double tick_s = FW_TICK_CYCLES / 16e6, half_s = 0.5 * grids[g].max_ticks * tick_s;
-            double need = 2.0 + (double)cycles[i] * half_s, e = cap_hw_exposure_s(cycles[i], grids[g].hz, 0.05);
+            double need = CAP_LINK_LOCK_WAIT_MS / 1000.0 + (double)cycles[i] * half_s, e = cap_hw_exposure_s(cycles[i], grids[g].hz, 0.05);
             CHECK_MSG(e >= need + 0.05 && e <= need + 0.05 + 2e-4 * need, "%d Hz, C = %ld: %.6f s for %.6f s",
                       grids[g].hz, cycles[i], e, need);
         }
     double at_49_8 = 1500 / (2 * 49.8);
-    CHECK(cap_hw_exposure_s(1500, 50, 0.05) > at_49_8 + 2.0);
+    CHECK(cap_hw_exposure_s(1500, 50, 0.05) > at_49_8 + CAP_LINK_LOCK_WAIT_MS / 1000.0);
 }
 
 TEST(capture_hardware_backend_failures)
