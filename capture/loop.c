@@ -10,15 +10,12 @@
 #include "capture/internal.h"
 
 #include <dirent.h>
-#include <errno.h>
-#include <fcntl.h>
 #include <jansson.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/file.h>
 #include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
@@ -348,6 +345,42 @@ static gs_status record_frame(frame_write *w, uint64_t fp, int K, const gs_captu
 
 /* ------------------------------------------------------------------ the loop */
 
+/* The resume state of dir (nothing with force): each frame's, the acquisitions so far, the
+ * frames kept (rep->frames_kept), and *complete when every frame is kept and capture.json is
+ * written. */
+static gs_status resume_state(const char *dir, uint64_t fp, int K, int force, gs_capture *cap, frame_state *fs,
+                              cap_loop_report *rep, long *acquisitions, int *complete)
+{
+    int done = 0, found = 0;
+    *complete = 0;
+    *acquisitions = 0;
+    if (!force) {
+        gs_status s = read_progress(dir, fp, K, cap, fs, acquisitions, &done, &found);
+        if (s != GS_OK) return s;
+    }
+    if (!found) {
+        for (int k = 0; k < K; k++) {
+            memset(&fs[k], 0, sizeof fs[k]);
+            fs[k].index = fs[k].old_index = -1;
+            fs[k].grid_hz_measured = fs[k].start_s = NAN;
+        }
+        *acquisitions = 0;
+    }
+    rep->frames_kept = 0;
+    for (int k = 0; k < K; k++)
+        if (fs[k].done) {
+            cap->frames[k].cycles = fs[k].cycles;
+            cap->frames[k].grid_hz_measured = fs[k].grid_hz_measured;
+            cap->frames[k].start_s = fs[k].start_s;
+            rep->frames_kept++;
+        }
+    char path[CAP_PATH_MAX + 32];
+    struct stat sb;
+    snprintf(path, sizeof path, "%s/capture.json", dir);
+    *complete = found && done && rep->frames_kept == K && stat(path, &sb) == 0;
+    return GS_OK;
+}
+
 gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_in,
                        cap_loop_report *rep)
 {
@@ -424,52 +457,27 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
         fs[k].old_index = -1;
         fs[k].grid_hz_measured = fs[k].start_s = NAN;
     }
-    /* one writer at a time (the lock goes with the process, killed or not): another's
-     * temporaries are not stale, and each reads, then rewrites, acquisition.json */
     /* (made by this process: its own mkdir succeeded; another's, made meanwhile, is not removed) */
     made_dir = mkdir(dir, 0777) == 0;
     if (!made_dir && (s = gs_dir_ensure(dir)) != GS_OK) goto done;
-    lock_fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-    if (lock_fd < 0 || flock(lock_fd, LOCK_EX | LOCK_NB) != 0) {
-        made_dir = 0;   /* (the writer holding it may not have written yet) */
-        s = errno == EWOULDBLOCK
-                ? gs_fail(GS_EIO, "%s: another process is acquiring into this capture directory: "
-                          "wait for it to end, or give another directory", dir)
-                : gs_fail(GS_EIO, "%s: cannot lock the capture directory: %s", dir, strerror(errno));
-        goto done;
-    }
-    /* resume */
-    remove_stale_temporaries(dir);
+    /* a complete capture is found under the directory's shared lock, as its readers hold it; one
+     * to acquire into under the exclusive one, one writer at a time (the lock goes with the
+     * process, killed or not): another's temporaries are not stale, and each reads, then
+     * rewrites, acquisition.json. The progress is read again once it is held. */
     long acquisitions = 0;
-    int complete = 0, found = 0;
-    if (!o.force) {
-        s = read_progress(dir, fp, K, &cap, fs, &acquisitions, &complete, &found);
-        if (s != GS_OK) goto done;
-    }
-    if (!found) {
-        for (int k = 0; k < K; k++) {
-            memset(&fs[k], 0, sizeof fs[k]);
-            fs[k].index = fs[k].old_index = -1;
-            fs[k].grid_hz_measured = fs[k].start_s = NAN;
+    for (int writer = 0; writer < 2; writer++) {
+        gs_capture_unlock(lock_fd);
+        if ((s = gs_capture_lock(dir, writer, &lock_fd)) != GS_OK) {
+            made_dir = 0;   /* (the writer holding it, or a reader, may not be done) */
+            goto done;
         }
-        acquisitions = 0;
-    }
-    for (int k = 0; k < K; k++)
-        if (fs[k].done) {
-            cap.frames[k].cycles = fs[k].cycles;
-            cap.frames[k].grid_hz_measured = fs[k].grid_hz_measured;
-            cap.frames[k].start_s = fs[k].start_s;
-            rep->frames_kept++;
-        }
-    if (found && complete && rep->frames_kept == K) {
-        char path[CAP_PATH_MAX + 32];
-        struct stat sb;
-        snprintf(path, sizeof path, "%s/capture.json", dir);
-        if (stat(path, &sb) == 0) {
+        if (writer) remove_stale_temporaries(dir);
+        int complete = 0;
+        if ((s = resume_state(dir, fp, K, o.force, &cap, fs, rep, &acquisitions, &complete)) != GS_OK) goto done;
+        if (complete) {
             rep->complete = 1;
             rep->acquisitions = acquisitions;
             if (progress) fprintf(stderr, "capture: %s is complete (%d frames); nothing to do\n", dir, K);
-            s = GS_OK;
             goto done;
         }
     }
@@ -612,7 +620,7 @@ done:
     }
     free(fs);
     gs_capture_release(&cap);
-    if (lock_fd >= 0) close(lock_fd);
+    gs_capture_unlock(lock_fd);
     if (made_dir && s != GS_OK) rmdir(dir);   /* (only if nothing was written to it) */
     return s;
 }

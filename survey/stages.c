@@ -19,6 +19,7 @@ void srv_job_release(srv_job *j)
     gs_delight_free(j->delight_owned);
     rec_catalog_release(&j->cat);
     gs_capture_release(&j->cap);
+    if (j->cap_locked) gs_capture_unlock(j->cap_lock_fd);
     memset(j, 0, sizeof *j);
 }
 
@@ -42,6 +43,11 @@ gs_status srv_job_acquire(cap_backend *be, const char *capdir, int progress, int
 gs_status srv_job_read(srv_job *j, const char *capdir)
 {
     gs_capture_release(&j->cap);
+    if (j->cap_locked) gs_capture_unlock(j->cap_lock_fd);
+    j->cap_locked = 0;
+    gs_status s = gs_capture_lock(capdir, 0, &j->cap_lock_fd);
+    if (s != GS_OK) return s;
+    j->cap_locked = 1;
     return gs_capture_read(capdir, &j->cap);
 }
 

@@ -601,6 +601,7 @@ gs_status srv_parse_bbox(const char *text, double bbox[4]);
  * srv_job_release frees whatever the stages built (accepts NULL and a zeroed job). */
 typedef struct {
     gs_capture cap;              /* srv_job_read (or the caller's) */
+    int cap_locked, cap_lock_fd; /* srv_job_read: the directory's shared lock (gs_capture_lock) */
     const gs_delight *delight;   /* srv_job_matcher: the DELIGHT the matcher was built from */
     gs_delight *delight_owned;   /* ... when the job loaded or generated it */
     const char *delight_path;    /* borrowed; NULL = built-in */
@@ -619,7 +620,9 @@ void srv_job_release(srv_job *j);
 struct cap_backend;
 gs_status srv_job_acquire(struct cap_backend *be, const char *capdir, int progress,
                           int *frames_acquired, int *frames_kept);
-/* read: the capture directory into j->cap. */
+/* read: the capture directory into j->cap, under its shared lock (gs_capture_lock), held until
+ * srv_job_release: no other process acquires into it while the job's stages (and `run`'s content
+ * key of its files) use it. */
 gs_status srv_job_read(srv_job *j, const char *capdir);
 /* DELIGHT (the caller's d, borrowed until srv_job_release; else the file delight_path; else the
  * built-in database) and its Eq. 7 templates for a capture of grid_hz, bands and K; nothing when

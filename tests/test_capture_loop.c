@@ -489,3 +489,39 @@ TEST(capture_directory_one_writer_at_a_time)
     CHECK_MSG(rc == 0 && strstr(out, "second 1\n0\nafter 0\n") && strstr(out, "shared: another process is acquiring into "
               "this capture directory") && fx_count_lines(out) == 5 && strstr(out, "SAME"), "rc %d: %s", rc, out);
 }
+
+/* A reader of a capture directory took no lock: `recognize` or `run` could read frames of two
+ * acquisitions while another process re-acquired into it (each frame file is replaced whole,
+ * but not all at once), and `run`'s content key could hash files other than those it read. Now
+ * readers take the directory's lock shared: with a writer holding it (flock(1) standing for
+ * one), `recognize` fails in one line naming the directory; with a reader holding it shared, a
+ * `simulate` that finds the capture complete has nothing to do and succeeds, but an acquisition
+ * into it fails, naming the directory, and writes nothing; once free, both work. */
+TEST(capture_directory_not_read_while_acquired)
+{
+    char cmd[32768], out[8192], bin[2048], lab[2048];
+    const char *tmp = test_tmpdir();
+    if (!realpath(test_bin(), bin)) snprintf(bin, sizeof bin, "%s", test_bin());
+    CHECK(realpath("capture/scenes/lab.json", lab) != NULL);
+    snprintf(cmd, sizeof cmd,
+             "cd %s && %s simulate %s --out-dir rd -q >/dev/null && cp -r rd before && mkfifo rel1 rel2 && "
+             "(flock -x rd sh -c 'touch held1; read x < rel1' >/dev/null 2>&1 & pid=$!; "
+             " while [ ! -e held1 ]; do sleep 0.005; done; "
+             " %s recognize rd >/dev/null 2>r.err; echo \"read $?\"; echo > rel1; wait $pid; "
+             " %s recognize rd >/dev/null 2>&1; echo \"read after $?\"); "
+             "(flock -s rd sh -c 'touch held2; read x < rel2' >/dev/null 2>&1 & pid=$!; "
+             " while [ ! -e held2 ]; do sleep 0.005; done; "
+             " %s simulate %s --out-dir rd -q >/dev/null 2>&1; echo \"complete $?\"; "
+             " %s simulate %s --out-dir rd --force -q >/dev/null 2>w.err; echo \"write $?\"; "
+             " diff -r before rd >/dev/null && echo UNTOUCHED; echo > rel2; wait $pid; "
+             " %s simulate %s --out-dir rd --force -q >/dev/null 2>&1; echo \"write after $?\"); "
+             "cat r.err w.err",
+             tmp, bin, lab, bin, bin, bin, lab, bin, lab, bin, lab);
+    int rc = test_run(cmd, out, sizeof out);
+    printf("    %s", out);
+    CHECK_MSG(rc == 0 && strstr(out, "read 1\nread after 0\ncomplete 0\nwrite 1\nUNTOUCHED\nwrite after 0\n"), "rc %d: %s",
+              rc, out);
+    CHECK_MSG(strstr(out, "rd: another process is acquiring into this capture directory: wait for it to end\n") &&
+              strstr(out, "rd: another process is acquiring into this capture directory or reading it: wait "
+                     "for it to end, or give another directory\n") && fx_count_lines(out) == 8, "%s", out);
+}

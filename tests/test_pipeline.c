@@ -724,3 +724,18 @@ TEST(pipeline_bad_input_changes_nothing)
     free(db_bytes);
     free(db_after);
 }
+
+/* srv_job_read holds the shared lock until srv_job_release (`run` hashes the files it read for
+ * its content key after reading them): meanwhile a writer's exclusive lock (flock(1) -n) is
+ * refused, afterwards taken. */
+TEST(capture_job_holds_the_read_lock_until_release)
+{
+    const char *dir = fx_tmp("job-lock");
+    CHECK(sh("%s simulate capture/scenes/lab.json --out-dir %s -q", test_bin(), dir) == 0);
+    srv_job j;
+    memset(&j, 0, sizeof j);
+    CHECK_OK(srv_job_read(&j, dir));
+    CHECK(sh("flock -n -x %s true; echo $?", dir) == 0 && !strcmp(out, "1\n"));
+    srv_job_release(&j);
+    CHECK(sh("flock -n -x %s true; echo $?", dir) == 0 && !strcmp(out, "0\n"));
+}

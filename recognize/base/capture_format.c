@@ -13,10 +13,14 @@
  * produces a directory that the reader rejects, and replaces each file atomically. */
 #include "recognize/base/internal.h"
 
+#include <errno.h>
+#include <fcntl.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/file.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #define CAPTURE_JSON "capture.json"
 #define PATH_BUF 1024
@@ -296,14 +300,48 @@ static gs_status read_frames(void *ctx, int part, size_t k0, size_t k1)
     return st;
 }
 
+gs_status gs_capture_lock(const char *dir, int exclusive, int *fd)
+{
+    *fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (*fd >= 0 && flock(*fd, (exclusive ? LOCK_EX : LOCK_SH) | LOCK_NB) == 0) return GS_OK;
+    int e = errno;
+    gs_capture_unlock(*fd);
+    *fd = -1;
+    if (e == EWOULDBLOCK)
+        return gs_fail(GS_EIO, "%s: another process is acquiring into this capture directory%s: wait "
+                       "for it to end%s", dir, exclusive ? " or reading it" : "",
+                       exclusive ? ", or give another directory" : "");
+    if (!exclusive) return GS_OK;   /* (a reader of a directory it cannot open, or without locks) */
+    return gs_fail(GS_EIO, "%s: cannot lock the capture directory: %s", dir, strerror(e));
+}
+
+void gs_capture_unlock(int fd)
+{
+    if (fd >= 0) close(fd);
+}
+
+static gs_status read_locked(const char *dir, gs_capture *cap);
+
 gs_status gs_capture_read(const char *dir, gs_capture *cap)
 {
     if (!dir || !cap) return gs_fail(GS_EINVAL, "gs_capture_read: NULL argument");
     memset(cap, 0, sizeof *cap);
     struct stat sb;
-    if (stat(dir, &sb) == 0 && !S_ISDIR(sb.st_mode))
+    int there = stat(dir, &sb) == 0;
+    if (there && !S_ISDIR(sb.st_mode))
         return gs_fail(GS_EINVAL, "%s: not a directory: expected a capture directory (a scene file? "
                        "gridsurvey simulate SCENE --out-dir DIR renders one; docs/formats.md)", dir);
+    /* (a directory that is not there is capture.json's "not found", below) */
+    int fd = -1;
+    gs_status st = there ? gs_capture_lock(dir, 0, &fd) : GS_OK;
+    if (st != GS_OK) return st;
+    st = read_locked(dir, cap);
+    gs_capture_unlock(fd);
+    return st;
+}
+
+static gs_status read_locked(const char *dir, gs_capture *cap)
+{
     reader r;
     memset(&r, 0, sizeof r);
     char json_path[PATH_BUF];
