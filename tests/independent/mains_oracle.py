@@ -12,6 +12,15 @@ order). On synthetic 400 Hz recordings with a wandering frequency, a 3rd harmoni
 drifts and 16-bit quantisation it recovers the exact mean within 1.1e-7 Hz (six records).
 
     /usr/bin/python3 tests/independent/mains_oracle.py ../shared/data/mains/whu_00*_ref.wav
+
+With --frames FIRST STEP C K it prints instead, for acquisitions k = 0..K-1 spanning the C half
+periods from crossing FIRST + k STEP of the recording (crossing 0 its first rising one, as
+docs/scene.md's trace timeline), each one's start (s after acquisition 0's) and mean frequency
+C / (2 (t_end - t_start)) (Eq. 1), on crossings of the fundamental: each crossing found by sign
+change, then moved to where the fitted fundamental's phase crosses (its offset from the
+waveform's own crossing, through the harmonics, cancels between crossings of one polarity).
+
+    /usr/bin/python3 tests/independent/mains_oracle.py --frames 64 310 300 4 whu_001_ref.wav
 """
 import sys, wave
 import numpy as np
@@ -42,7 +51,30 @@ def fundamental_phase(x, rate, t0, half_s=0.1, f_start=50.0):
     return np.arctan2(-b, a)
 
 
+def frames(first, step, cycles, count, path):
+    x, rate = read_wav(path)
+    s = np.signbit(x)
+    j = np.nonzero(s[1:] != s[:-1])[0]
+    tc = (j + x[j] / (x[j] - x[j + 1])) / rate
+    rising = ~s[j + 1]
+    i0 = int(np.argmax(rising))
+    f0 = (len(tc) - 1) / (2 * (tc[-1] - tc[0]))
+
+    def crossing(i):   # the fundamental's: phase -pi/2 rising, +pi/2 falling (a cos(w u + phi))
+        i += i0
+        d = (-np.pi / 2 if rising[i] else np.pi / 2) - fundamental_phase(x, rate, tc[i], f_start=f0)
+        return tc[i] + ((d + np.pi) % (2 * np.pi) - np.pi) / (2 * np.pi * f0)
+
+    t_first = crossing(first)
+    for k in range(count):
+        t0, t1 = crossing(first + k * step), crossing(first + k * step + cycles)
+        print(f"frame {k} {t0 - t_first:.9f} {cycles / (2 * (t1 - t0)):.9f}")
+
+
 def main():
+    if len(sys.argv) == 7 and sys.argv[1] == '--frames':
+        frames(*(int(a) for a in sys.argv[2:6]), sys.argv[6])
+        return
     for path in sys.argv[1:]:
         x, rate = read_wav(path)
         s = np.signbit(x)
