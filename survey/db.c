@@ -29,7 +29,8 @@
 static gs_status sql_fail(sqlite3 *db, const char *path, const char *what)
 {
     int code = db ? sqlite3_errcode(db) : SQLITE_NOMEM;
-    const char *msg = db ? sqlite3_errmsg(db) : "out of memory";
+    char buf[512];
+    const char *msg = gs_sqlite_errmsg(db, buf, sizeof buf);
     if (code == SQLITE_NOMEM) return gs_fail(GS_ENOMEM, "%s: %s: out of memory", path, what);
     if (code == SQLITE_READONLY)
         return gs_fail(GS_EIO, "%s: %s: the database is read-only (%s)", path, what, msg);

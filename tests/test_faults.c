@@ -911,3 +911,31 @@ TEST(map_drawing_crash_fails_in_one_line)
         free(ref);
     }
 }
+
+/* A nearly full disk could fail as "disk I/O error": SQLite reports a write that failed with
+ * ENOSPC while it maps its WAL index as an I/O error, which says nothing of the disk. The
+ * system's error is now named behind SQLite's. The first 12 writes of a new survey database's
+ * ingest fail in turn with ENOSPC: every failure is one line, and each I/O error among them
+ * (there are some) ends "(No space left on device)"; one EIO reads "(Input/output error)". */
+TEST(survey_db_full_disk_names_the_system_error)
+{
+    const scenario sc = {"full-disk", 0, "%s db ingest-synthetic --db s.sqlite --survey s --captures 2 --lights 50",
+                         "s.sqlite", setup_empty, NULL};
+    char work[1100];
+    snprintf(work, sizeof work, "%s/full", fx_tmp("fault-work"));
+    long calls[N_CLASSES];
+    int fired, io_errors = 0;
+    for (long n = 1; n <= 12; n++) {
+        const fault_kind k = {"write", "ENOSPC"};
+        int rc = run_injected(&sc, work, &k, n, calls, &fired);
+        if (rc == 0) continue;
+        CHECK_MSG(rc == 1 && fx_count_lines(out) == 1, "write %ld: %d: %s", n, rc, out);
+        if (!strstr(out, "disk I/O error")) continue;
+        io_errors++;
+        CHECK_MSG(strstr(out, "disk I/O error (No space left on device)"), "write %ld: %s", n, out);
+    }
+    CHECK_MSG(io_errors > 0, "no write failed as an I/O error");
+    const fault_kind k = {"write", "EIO"};
+    CHECK(run_injected(&sc, work, &k, 1, calls, &fired) == 1 && fired);
+    CHECK_MSG(fx_count_lines(out) == 1 && strstr(out, "disk I/O error (Input/output error)"), "%s", out);
+}

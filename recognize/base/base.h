@@ -558,6 +558,11 @@ gs_status gs_delight_save_new(const gs_delight *d, const char *path, int *raced)
 gs_status gs_delight_load(gs_delight *d, const char *path);
 /* Both wait up to GS_DELIGHT_BUSY_MS for another process's transaction on the file. */
 #define GS_DELIGHT_BUSY_MS 10000
+/* SQLite's message for db's last failure into buf, with the system's error behind an I/O or
+ * full-disk one ("disk I/O error (No space left on device)": a nearly full disk can fail as
+ * either); "out of memory" for a NULL db. Returns buf. (The survey database's messages too.) */
+struct sqlite3;
+const char *gs_sqlite_errmsg(struct sqlite3 *db, char *buf, size_t size);
 /* A new DELIGHT into *out (gs_delight_free; NULL on error): the file at path, or the built-in
  * database (gs_delight_generate, GS_BRF_N_DEFAULT samples) when path is NULL. */
 gs_status gs_delight_open(const char *path, gs_delight **out);

@@ -102,10 +102,25 @@ static const char *const schema_sql =
     "  ON DELETE CASCADE);"
     "INSERT INTO delight_meta VALUES ('format', '" FORMAT_NAME "');";
 
+const char *gs_sqlite_errmsg(sqlite3 *db, char *buf, size_t size)
+{
+    if (!db) {
+        snprintf(buf, size, "out of memory");
+        return buf;
+    }
+    int code = sqlite3_errcode(db) & 0xff, sys = sqlite3_system_errno(db);
+    if ((code == SQLITE_IOERR || code == SQLITE_FULL || code == SQLITE_CANTOPEN) && sys > 0)
+        snprintf(buf, size, "%s (%s)", sqlite3_errmsg(db), strerror(sys));
+    else
+        snprintf(buf, size, "%s", sqlite3_errmsg(db));
+    return buf;
+}
+
 static gs_status sql_fail(sqlite3 *db, const char *path, const char *what)
 {
     int code = db ? sqlite3_errcode(db) : SQLITE_NOMEM;
-    const char *msg = db ? sqlite3_errmsg(db) : "out of memory";
+    char buf[512];
+    const char *msg = gs_sqlite_errmsg(db, buf, sizeof buf);
     if (code == SQLITE_NOTADB)
         return gs_fail(GS_EFORMAT, "%s: not a DELIGHT database: expected an SQLite file with format "
                        "'%s', schema version %d (%s)", path, FORMAT_NAME, GS_DELIGHT_SCHEMA_VERSION, msg);
