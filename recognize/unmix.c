@@ -261,6 +261,30 @@ static void build_normal(const ux *u, int b, double mu, double *G, double *Gf, d
         }
 }
 
+/* Eq. 16's noise variance of each unconstrained t_s of band b: the covariance
+ * Gi (sum_k wk^2 var_k a_k a_k^T) Gi, var_k the noise model's at sample k's fitted level (sum_s
+ * a_ks t_s: a flickering source moves it far from the pixel's mean, at which the weights wk were
+ * taken), over the usable samples (wk > 0). Gi is the inverse of the weighted normal matrix. */
+static void eq16_variance(const ux *u, int b, const double *Gi, const double *wk, const double *t,
+                          double *var)
+{
+    int S = u->S, K = u->K;
+    const double *A = u->A + (size_t)b * K * S;
+    for (int s = 0; s < S; s++) var[s] = 0;
+    for (int k = 0; k < K; k++) {
+        if (!(wk[k] > 0)) continue;
+        const double *a = A + (size_t)k * S;
+        double m = 0;
+        for (int s = 0; s < S; s++) m += a[s] * t[s];
+        double f = wk[k] * wk[k] / weight(&u->nz, m, u->c[k]);
+        for (int i = 0; i < S; i++) {
+            double r = 0;   /* (Gi a_k)_i */
+            for (int j = 0; j < S; j++) r += Gi[i * S + j] * a[j];
+            var[i] += f * r * r;
+        }
+    }
+}
+
 /* x = argmin over x >= 0 on the sources of mask act (others 0) of x^T G x / 2 - h^T x. */
 static int nnls_on(const double *G, const double *h, int S, unsigned act, double *x)
 {
@@ -349,7 +373,8 @@ static gs_status eq16_pass(ux *u, rec_unmix_result *r, int pass, int accumulate)
             const double *A = u->A + (size_t)b * K * S;
             double mu = usable_mean(u, b);
             double G[SMAX * SMAX], h[SMAX] = {0}, t[SMAX], tu[SMAX], w0 = 0, var[SMAX];
-            double wk[1024];
+            double wk[1024], Gw[SMAX * SMAX];   /* Gw: the weighted normal matrix's inverse */
+            int have_gw = 0;
             for (int s = 0; s < S; s++) var[s] = NAN;
             unsigned act = u->act[p], fit = u->fit[p];
             if (uniform) {
@@ -369,26 +394,27 @@ static gs_status eq16_pass(ux *u, rec_unmix_result *r, int pass, int accumulate)
                     neg |= x < 0;
                 }
                 if (neg && !nnls_on(u->G0 + (size_t)b * S * S, h, S, all, t)) act = fit = 0;
-                for (int s = 0; s < S; s++) var[s] = Gi[s * S + s] / w0;
+                for (int i = 0; i < S * S; i++) Gw[i] = Gi[i] / w0;
+                have_gw = 1;
                 if (pass == 0)
                     for (int s = 0; s < S; s++) {
                         double q = u->src->q[s * B + b];
                         u->var_sum[s] += Gi[s * S + s] / w0 * q * q;
                     }
             } else {
-                double Gf[SMAX * SMAX], Gi[SMAX * SMAX];
+                double Gf[SMAX * SMAX];
                 build_normal(u, b, mu, G, Gf, h, wk);
                 /* the covariance where it is kept: the last pass's sigmas (the one that does not
                  * accumulate Eq. 18) and pass 0's predicted errors */
                 int need = !accumulate || (pass == 0 && n == K && act == all);
-                if (need && fit == all && spd_inverse(G, S, Gi)) {
-                    for (int s = 0; s < S; s++) var[s] = Gi[s * S + s];
+                if (need && fit == all && spd_inverse(G, S, Gw)) {
+                    have_gw = 1;
                     /* every sample usable (HDR exposures differ): its noise counts towards
                      * what the data support */
                     if (pass == 0 && n == K && act == all)
                         for (int s = 0; s < S; s++) {
                             double q = u->src->q[s * B + b];
-                            u->var_sum[s] += Gi[s * S + s] * q * q;
+                            u->var_sum[s] += Gw[s * S + s] * q * q;
                         }
                 }
                 if (!nnls_on(G, h, S, fit, t)) act = fit = 0;
@@ -396,6 +422,7 @@ static gs_status eq16_pass(ux *u, rec_unmix_result *r, int pass, int accumulate)
             }
             if (!fit) u->act[p] = u->fit[p] = 0;
             if (!u->fit[p]) break;
+            if (have_gw && !accumulate) eq16_variance(u, b, Gw, wk, t, var);
             double tqv[SMAX];
             for (int s = 0; s < S; s++) {
                 tqv[s] = t[s] * u->src->q[s * B + b];

@@ -1,0 +1,91 @@
+/* test_transport_sigma.c - the 1-sigma rec_unmix reports with each value (sigma_NN.tiff) against
+ * a Monte Carlo spread: every pixel of a synthetic capture has the same true tau Q, so the spread
+ * of the unmixed values over the pixels is the estimator's noise (paper Sec. 5.1, Eqs. 16-17). */
+#include "tests/test.h"
+#include "recognize/recognize.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+/* A W x W, K = 26, monochrome capture (C = 256, gain 1 e/DN, read noise 2 DN, saturation sat)
+ * of the sources specs lit at tq (DN per cycle) in every pixel, the noise Gaussian at each
+ * sample's expected level; unmixed (refine 0). For each source the ratio of its values' spread
+ * over the pixels with a value to the rms of their reported sigmas. */
+static void spread_over_sigma(const rec_source_spec *specs, int S, const double *tq, double sat,
+                              double *ratio)
+{
+    enum { W = 64, K = 26 };
+    gs_delight *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(d, GS_BRF_N_DEFAULT));
+    rec_sources src;
+    CHECK_OK(rec_sources_build(d, specs, S, 50, 1, K, &src, NULL));
+    gs_capture cap;
+    memset(&cap, 0, sizeof cap);
+    cap.grid_hz = 50;
+    cap.K = K;
+    cap.bands = 1;
+    cap.width = cap.height = W;
+    cap.saturation_dn = sat;
+    cap.gain_e_per_dn = 1;
+    cap.read_noise_dn = 2;
+    cap.locked = 1;
+    CHECK_OK(gs_capture_alloc(&cap));
+    gs_rng rng;
+    gs_rng_init(&rng, 7, 0, 0, 0);
+    for (int k = 0; k < K; k++) {
+        cap.frames[k].cycles = 256;
+        double mu = 0;   /* Eq. 13: I = T Q B */
+        for (int s = 0; s < S; s++) mu += tq[s] * src.b[(size_t)s * K + k] * 256;
+        for (int p = 0; p < W * W; p++) {
+            double raw = floor(mu + gs_rng_normal(&rng) * sqrt(4 + mu) + 0.5);
+            cap.raw[(size_t)k * W * W + p] = (unsigned short)(raw < 0 ? 0 : raw > 65535 ? 65535 : raw);
+        }
+    }
+    rec_unmix_opts o;
+    rec_unmix_opts_default(&o);
+    o.refine = 0;
+    o.max_error = INFINITY;   /* (no pixel of the saturated case is complete: no predicted error) */
+    rec_unmix_result r;
+    CHECK_OK(rec_unmix(&cap, &src, &o, &r));
+    for (int s = 0; s < S; s++) ratio[s] = NAN;
+    for (int s = 0; s < S && r.tq; s++) {
+        double e2 = 0, e = 0, v2 = 0, n = 0;
+        for (int p = 0; p < W * W; p++) {
+            double x = r.tq[(size_t)s * W * W + p], sg = r.sigma[(size_t)s * W * W + p];
+            if (!isfinite(x)) continue;
+            e += x - tq[s];
+            e2 += (x - tq[s]) * (x - tq[s]);
+            v2 += sg * sg;
+            n++;
+        }
+        ratio[s] = n > 100 ? sqrt((e2 - e * e / n) / v2) : NAN;
+        printf("    source %d %-18s tq %g, saturation %g: spread %.4g over %.0f pixels, reported "
+               "sigma %.4g (ratio %.3f)\n", s, src.bulb[s], tq[s], sat, sqrt((e2 - e * e / n) / n), n,
+               sqrt(v2 / n), ratio[s]);
+    }
+    rec_unmix_release(&r);
+    rec_sources_release(&src);
+    gs_capture_release(&cap);
+    gs_delight_free(d);
+}
+
+/* The noise of a shot-noise-limited sample follows its level, which a deeply flickering source
+ * moves far from the pixel's mean: the LED filament (dark for 15 of 26 windows) alone reported
+ * 1/1.58 of its spread, and 1/1.5 where its peak saturates (the usable samples' mean level is
+ * low), the weaker sources beside it up to 2.4 times their spread. */
+TEST(eq16_sigma_matches_the_monte_carlo_spread_with_shot_noise_and_saturation)
+{
+    rec_source_spec led[1] = {{"led-fil-4w-lin", 240}};
+    double ratio[3], tq1[1] = {5};
+    spread_over_sigma(led, 1, tq1, 65536, ratio);
+    CHECK_MSG(fabs(ratio[0] - 1) < 0.06, "led alone: spread / sigma %.3f", ratio[0]);
+    rec_source_spec three[3] = {{"inc-a60-25w-230v", 0}, {"cfl-23w", 120}, {"led-fil-4w-lin", 240}};
+    double tq3[3] = {1, 1, 5};
+    for (int sat = 0; sat < 2; sat++) {
+        spread_over_sigma(three, 3, tq3, sat ? 3000 : 65536, ratio);
+        for (int s = 0; s < 3; s++)
+            CHECK_MSG(fabs(ratio[s] - 1) < 0.06, "source %d, saturation %d: spread / sigma %.3f", s,
+                      sat ? 3000 : 65536, ratio[s]);
+    }
+}
