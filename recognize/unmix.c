@@ -396,39 +396,34 @@ static gs_status eq16_pass(ux *u, rec_unmix_result *r, int pass, int accumulate)
                 if (neg && !nnls_on(u->G0 + (size_t)b * S * S, h, S, all, t)) act = fit = 0;
                 for (int i = 0; i < S * S; i++) Gw[i] = Gi[i] / w0;
                 have_gw = 1;
-                if (pass == 0)
-                    for (int s = 0; s < S; s++) {
-                        double q = u->src->q[s * B + b];
-                        u->var_sum[s] += Gi[s * S + s] / w0 * q * q;
-                    }
             } else {
                 double Gf[SMAX * SMAX];
                 build_normal(u, b, mu, G, Gf, h, wk);
                 /* the covariance where it is kept: the last pass's sigmas (the one that does not
                  * accumulate Eq. 18) and pass 0's predicted errors */
                 int need = !accumulate || (pass == 0 && n == K && act == all);
-                if (need && fit == all && spd_inverse(G, S, Gw)) {
-                    have_gw = 1;
-                    /* every sample usable (HDR exposures differ): its noise counts towards
-                     * what the data support */
-                    if (pass == 0 && n == K && act == all)
-                        for (int s = 0; s < S; s++) {
-                            double q = u->src->q[s * B + b];
-                            u->var_sum[s] += Gw[s * S + s] * q * q;
-                        }
-                }
+                if (need && fit == all && spd_inverse(G, S, Gw)) have_gw = 1;
                 if (!nnls_on(G, h, S, fit, t)) act = fit = 0;
                 if (accumulate && act == all) eq18_add(u, b, G, h, wk);
             }
             if (!fit) u->act[p] = u->fit[p] = 0;
             if (!u->fit[p]) break;
-            if (have_gw && !accumulate) eq16_variance(u, b, Gw, wk, t, var);
+            /* the pixels with every sample usable (HDR exposures may differ): their noise
+             * counts towards what the data support (the predicted errors) */
+            int complete = pass == 0 && n == K && act == all;
+            if (have_gw && (!accumulate || complete)) {
+                eq16_variance(u, b, Gw, wk, t, var);
+                for (int s = 0; s < S && complete; s++) {
+                    double q = u->src->q[s * B + b];
+                    u->var_sum[s] += var[s] * q * q;
+                }
+            }
             double tqv[SMAX];
             for (int s = 0; s < S; s++) {
                 tqv[s] = t[s] * u->src->q[s * B + b];
                 tq[s][b] = (float)tqv[s];
                 sq[s][b] = (float)(sqrt(var[s]) * u->src->q[s * B + b]);
-                if (pass == 0 && n == K && act == all) u->sig_sum[s] += tqv[s] * tqv[s];
+                if (complete) u->sig_sum[s] += tqv[s] * tqv[s];
             }
             /* residual of this fit, over the usable samples less the sources fitted */
             for (int k = 0; k < K; k++) {

@@ -11,9 +11,10 @@
 /* A W x W, K = 26, monochrome capture (C = 256, gain 1 e/DN, read noise 2 DN, saturation sat)
  * of the sources specs lit at tq (DN per cycle) in every pixel, the noise Gaussian at each
  * sample's expected level; unmixed (refine 0). For each source the ratio of its values' spread
- * over the pixels with a value to the rms of their reported sigmas. */
+ * over the pixels with a value to the rms of their reported sigmas, and of its relative error
+ * (rms over the pixels / tq) to its predicted error (NaN where none is predicted). */
 static void spread_over_sigma(const rec_source_spec *specs, int S, const double *tq, double sat,
-                              double *ratio)
+                              double *ratio, double *pred_ratio)
 {
     enum { W = 64, K = 26 };
     gs_delight *d = gs_delight_new();
@@ -48,7 +49,7 @@ static void spread_over_sigma(const rec_source_spec *specs, int S, const double 
     o.max_error = INFINITY;   /* (no pixel of the saturated case is complete: no predicted error) */
     rec_unmix_result r;
     CHECK_OK(rec_unmix(&cap, &src, &o, &r));
-    for (int s = 0; s < S; s++) ratio[s] = NAN;
+    for (int s = 0; s < S; s++) ratio[s] = pred_ratio[s] = NAN;
     for (int s = 0; s < S && r.tq; s++) {
         double e2 = 0, e = 0, v2 = 0, n = 0;
         for (int p = 0; p < W * W; p++) {
@@ -60,9 +61,11 @@ static void spread_over_sigma(const rec_source_spec *specs, int S, const double 
             n++;
         }
         ratio[s] = n > 100 ? sqrt((e2 - e * e / n) / v2) : NAN;
+        pred_ratio[s] = n > 100 ? sqrt(e2 / n) / tq[s] / r.predicted_error[s] : NAN;
         printf("    source %d %-18s tq %g, saturation %g: spread %.4g over %.0f pixels, reported "
-               "sigma %.4g (ratio %.3f)\n", s, src.bulb[s], tq[s], sat, sqrt((e2 - e * e / n) / n), n,
-               sqrt(v2 / n), ratio[s]);
+               "sigma %.4g (ratio %.3f); relative error %.4g, predicted %.4g (ratio %.3f)\n", s,
+               src.bulb[s], tq[s], sat, sqrt((e2 - e * e / n) / n), n, sqrt(v2 / n), ratio[s],
+               sqrt(e2 / n) / tq[s], r.predicted_error[s], pred_ratio[s]);
     }
     rec_unmix_release(&r);
     rec_sources_release(&src);
@@ -72,20 +75,24 @@ static void spread_over_sigma(const rec_source_spec *specs, int S, const double 
 
 /* The noise of a shot-noise-limited sample follows its level, which a deeply flickering source
  * moves far from the pixel's mean: the LED filament (dark for 15 of 26 windows) alone reported
- * 1/1.58 of its spread, and 1/1.5 where its peak saturates (the usable samples' mean level is
- * low), the weaker sources beside it up to 2.4 times their spread. */
+ * 1/1.58 of its spread, and 1/1.64 where its peak saturates (the usable samples' mean level is
+ * low), the weaker sources beside it up to 1.55 times their spread. The predicted errors (Fig.
+ * 10's test) are the same noise over the complete pixels. */
 TEST(eq16_sigma_matches_the_monte_carlo_spread_with_shot_noise_and_saturation)
 {
     rec_source_spec led[1] = {{"led-fil-4w-lin", 240}};
-    double ratio[3], tq1[1] = {5};
-    spread_over_sigma(led, 1, tq1, 65536, ratio);
+    double ratio[3], pred[3], tq1[1] = {5};
+    spread_over_sigma(led, 1, tq1, 65536, ratio, pred);
     CHECK_MSG(fabs(ratio[0] - 1) < 0.06, "led alone: spread / sigma %.3f", ratio[0]);
+    CHECK_MSG(fabs(pred[0] - 1) < 0.06, "led alone: error / predicted %.3f", pred[0]);
     rec_source_spec three[3] = {{"inc-a60-25w-230v", 0}, {"cfl-23w", 120}, {"led-fil-4w-lin", 240}};
     double tq3[3] = {1, 1, 5};
     for (int sat = 0; sat < 2; sat++) {
-        spread_over_sigma(three, 3, tq3, sat ? 3000 : 65536, ratio);
-        for (int s = 0; s < 3; s++)
+        spread_over_sigma(three, 3, tq3, sat ? 3000 : 65536, ratio, pred);
+        for (int s = 0; s < 3; s++) {
             CHECK_MSG(fabs(ratio[s] - 1) < 0.06, "source %d, saturation %d: spread / sigma %.3f", s,
                       sat ? 3000 : 65536, ratio[s]);
+            CHECK_MSG(sat || fabs(pred[s] - 1) < 0.06, "source %d: error / predicted %.3f", s, pred[s]);
+        }
     }
 }
