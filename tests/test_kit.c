@@ -330,6 +330,18 @@ TEST(kit_numeric_median_and_wraps)
     CHECK(gs_median_d(two, 2) == 2.0 && isnan(gs_median_d(two, 0)));
     CHECK(gs_wrap360(-1e-17) == 0.0 && gs_wrap360(725) == 5 && gs_wrap360(-90) == 270);
     CHECK(gs_wrap180(180) == -180 && gs_wrap180(-181) == 179 && gs_wrap180(359) == -1);
+    /* exact: a longitude already in [-180, 180) comes back unchanged (x + 180 - 180 moved 35.02 to
+     * 35.02000000000001, off an area's edge), another one is x - 360 k to the bit (k/1024 degrees
+     * plus multiples of 360 are exact doubles) */
+    for (int i = 0; i < 100000; i++) {
+        double x = -180.0 + 360.0 * (i + 0.5) / 100000.0 + 1e-9 * (i % 7);
+        CHECK_MSG(gs_wrap180(x) == x, "gs_wrap180(%.17g) = %.17g", x, gs_wrap180(x));
+    }
+    for (int k = -3; k <= 3; k++)
+        for (int j = -180 * 1024; j < 180 * 1024; j += 97) {
+            double x = j / 1024.0;
+            CHECK(gs_wrap180(x + 360.0 * k) == x);
+        }
 }
 
 /* One parser of decimal numbers (CSV fields, options, lists): the values written out, and what

@@ -349,3 +349,36 @@ TEST(stats_areas_boundary_labels_and_wkt_digits)
     free(wkt);
     srv_areas_free(a);
 }
+
+/* A light exactly on an area's edge or vertex is in it, whatever the edge's longitude: the point
+ * used to go through gs_wrap180, whose (x + 180) - 180 moved an in-range longitude by an ulp
+ * (35.02 became 35.02000000000001, outside a square whose east edge is 35.02; 35.01 happened to
+ * round inwards). Oracle: the documented rule (a feature covers its boundary), for squares whose
+ * east edges are the longitudes 35.001 ... 35.099 and -35.099 ... -35.001. */
+TEST(stats_areas_boundary_at_any_longitude)
+{
+    const char *path = fx_tmp("edges_sweep.geojson");
+    for (int sign = -1; sign <= 1; sign += 2)
+        for (int k = 1; k < 100; k++) {
+            double e = sign * (35.0 + k / 1000.0), w = e - 0.01;
+            char text[512];
+            snprintf(text, sizeof text, "{\"type\": \"FeatureCollection\", \"features\": [{\"type\": \"Feature\", "
+                     "\"properties\": {}, \"geometry\": {\"type\": \"Polygon\", \"coordinates\": [[[%.3f, 32.8], "
+                     "[%.3f, 32.8], [%.3f, 32.81], [%.3f, 32.81], [%.3f, 32.8]]]}}]}\n", w, e, e, w, w);
+            fx_write_text(path, text);
+            srv_areas *a = NULL;
+            CHECK_OK(srv_areas_load(path, NULL, &a));
+            if (!a) return;
+            double lon_e, lon_w;
+            char num[32];
+            snprintf(num, sizeof num, "%.3f", e);
+            lon_e = strtod(num, NULL);   /* the edge's longitude exactly as the file holds it */
+            snprintf(num, sizeof num, "%.3f", w);
+            lon_w = strtod(num, NULL);
+            CHECK_MSG(srv_areas_find(a, 32.805, lon_e) == 0, "east edge %.17g", lon_e);
+            CHECK_MSG(srv_areas_find(a, 32.81, lon_e) == 0, "north-east corner %.17g", lon_e);
+            CHECK_MSG(srv_areas_find(a, 32.8, lon_w) == 0, "south-west corner %.17g", lon_w);
+            CHECK_MSG(srv_areas_find(a, 32.805, lon_w) == 0, "west edge %.17g", lon_w);
+            srv_areas_free(a);
+        }
+}

@@ -94,9 +94,15 @@ double gs_wrap360(double a_deg)
     return r >= 360.0 ? 0.0 : r;   /* fmod of tiny negatives can round to 360 */
 }
 
+/* Exact: fmod is exact, and r -+ 360 with |r| in [180, 360) is exact (Sterbenz), so a longitude
+ * already in [-180, 180) comes back unchanged ((x + 180) - 180 moved 35.02 by an ulp, off the
+ * edge of an area that covers it: stats --clip). */
 double gs_wrap180(double a_deg)
 {
-    return gs_wrap360(a_deg + 180.0) - 180.0;
+    double r = fmod(a_deg, 360.0);
+    if (r >= 180.0) r -= 360.0;
+    else if (r < -180.0) r += 360.0;
+    return r;
 }
 
 const char *gs_number_prefix(const char *s, double *v)
