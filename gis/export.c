@@ -2,6 +2,7 @@
  * (OGC 12-128r18) and CSV (RFC 4180), each written atomically (gs_atomic). */
 #include "gis/internal.h"
 
+#include <ctype.h>
 #include <errno.h>
 #include <jansson.h>
 #include <math.h>
@@ -543,20 +544,26 @@ static char *gpkg_qml(void)
  * "YYYY-MM-DDTHH:MM:SS.SSSZ" (out: 64 bytes); 0 when t is not one. */
 static int gpkg_datetime(const char *t, char out[64])
 {
-    int y, mo, d, h, mi, n = 0, oh = 0, om = 0;
-    double sec;
-    if (!t || !gs_capture_valid_utc(t) || sscanf(t, "%4d-%2d-%2dT%2d:%2d:%lf%n", &y, &mo, &d, &h, &mi, &sec, &n) != 6)
+    int y, mo, d, h, mi, sec, n = 0, oh = 0, om = 0, ms = 0;
+    if (!t || !gs_capture_valid_utc(t) || sscanf(t, "%4d-%2d-%2dT%2d:%2d:%2d%n", &y, &mo, &d, &h, &mi, &sec, &n) != 6)
         return 0;
     const char *z = t + n;
+    /* the milliseconds: the fraction's first three digits, from the text (the double 1.005 is
+     * 1.00499..., and floor(1000 x) made .005 s .004 s) */
+    if (*z == '.') {
+        int k = 0;
+        for (z++; isdigit((unsigned char)*z); z++, k++)
+            if (k < 3) ms = 10 * ms + (*z - '0');
+        for (; k < 3; k++) ms *= 10;
+    }
     int sign = z[0] == '+' ? 1 : z[0] == '-' ? -1 : 0;
     if (sign && sscanf(z + 1, "%2d:%2d", &oh, &om) != 2) return 0;
-    double ms = floor(sec * 1000.0);
     struct tm tm = {.tm_year = y - 1900, .tm_mon = mo - 1, .tm_mday = d, .tm_hour = h,
-                    .tm_min = mi - sign * (60 * oh + om), .tm_sec = (int)(ms / 1000.0)};
+                    .tm_min = mi - sign * (60 * oh + om), .tm_sec = sec};
     time_t utc = timegm(&tm);   /* normalises the shifted fields */
     if (!gmtime_r(&utc, &tm)) return 0;
     snprintf(out, 64, "%04d-%02d-%02dT%02d:%02d:%02d.%03dZ", tm.tm_year + 1900, tm.tm_mon + 1,
-             tm.tm_mday, tm.tm_hour, tm.tm_min, tm.tm_sec, (int)fmod(ms, 1000.0));
+             tm.tm_mday, tm.tm_hour, tm.tm_min, tm.tm_sec, ms);
     return 1;
 }
 

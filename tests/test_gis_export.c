@@ -255,6 +255,42 @@ TEST(gis_export_gpkg_time_offset_to_utc)
     sqlite3_close(db);
 }
 
+/* A UTC time with milliseconds is stored with those milliseconds, every one of 0..999 at each
+ * second of a minute: they were floor(seconds x 1000) of the parsed seconds, and 01.005 s is the
+ * double 1.00499999..., stored as .004 (372 of the 60000 were a millisecond early). Oracle: the
+ * text itself (already UTC, already three decimals). */
+TEST(gis_export_gpkg_time_keeps_its_milliseconds)
+{
+    enum { N = 60 * 1000 };
+    gis_light *l = calloc(N, sizeof *l);
+    if (!l) return;
+    for (int i = 0; i < N; i++) {
+        gis_light_init(&l[i]);
+        snprintf(l[i].id, sizeof l[i].id, "%d", i);
+        snprintf(l[i].time_utc, sizeof l[i].time_utc, "2024-05-01T21:30:%02d.%03dZ", i / 1000, i % 1000);
+    }
+    const char *path = fx_tmp("ms.gpkg");
+    CHECK(gis_export_gpkg(l, N, path) == GS_OK);
+    sqlite3 *db;
+    sqlite3_stmt *st;
+    CHECK(sqlite3_open_v2(path, &db, SQLITE_OPEN_READONLY, NULL) == SQLITE_OK);
+    CHECK(sqlite3_prepare_v2(db, "SELECT id, time FROM lights ORDER BY fid", -1, &st, NULL) == SQLITE_OK);
+    int rows = 0, wrong = 0;
+    while (sqlite3_step(st) == SQLITE_ROW) {
+        int i = atoi((const char *)sqlite3_column_text(st, 0));
+        const char *got = (const char *)sqlite3_column_text(st, 1);
+        rows++;
+        if (i < 0 || i >= N || !got || strcmp(got, l[i].time_utc)) {
+            if (!wrong) CHECK_MSG(0, "%s stored as %s", i >= 0 && i < N ? l[i].time_utc : "?", got ? got : "NULL");
+            wrong++;
+        }
+    }
+    CHECK_MSG(rows == N && wrong == 0, "%d rows, %d times changed", rows, wrong);
+    sqlite3_finalize(st);
+    sqlite3_close(db);
+    free(l);
+}
+
 /* GeoJSON coordinates carry 7 decimals by default (1.1 cm), --precision otherwise. */
 TEST(gis_export_geojson_seven_decimals)
 {
