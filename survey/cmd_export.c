@@ -73,13 +73,6 @@ static void col_text(sqlite3_stmt *q, int i, char *dst, size_t size)
     snprintf(dst, size, "%s", t ? t : "");
 }
 
-static int in_bbox(const srv_export_opts *o, double lat, double lon)
-{
-    if (!(lat >= o->bbox[1] && lat <= o->bbox[3])) return 0;
-    if (o->bbox[0] <= o->bbox[2]) return lon >= o->bbox[0] && lon <= o->bbox[2];
-    return lon >= o->bbox[0] || lon <= o->bbox[2];
-}
-
 gs_status srv_db_read_lights(srv_db *db, const srv_export_opts *o, gis_light **lights,
                              size_t *count)
 {
@@ -111,7 +104,8 @@ gs_status srv_db_read_lights(srv_db *db, const srv_export_opts *o, gis_light **l
     if (o->technology) sqlite3_bind_text(q, 2, o->technology, -1, SQLITE_STATIC);
     sqlite3_bind_double(q, 3, o->min_confidence);
     if (o->use_bbox) {
-        int wraps = o->bbox[0] > o->bbox[2];
+        /* the R*Tree over every longitude when the box crosses or reaches 180 deg (stored -180) */
+        int wraps = o->bbox[0] > o->bbox[2] || o->bbox[2] >= 180.0;
         sqlite3_bind_double(q, 4, wraps ? -180.0 : o->bbox[0]);
         sqlite3_bind_double(q, 5, wraps ? 180.0 : o->bbox[2]);
         sqlite3_bind_double(q, 6, o->bbox[1]);
@@ -124,7 +118,7 @@ gs_status srv_db_read_lights(srv_db *db, const srv_export_opts *o, gis_light **l
     while ((rc = sqlite3_step(q)) == SQLITE_ROW) {
         double phase = srv_dbi_col_real(q, 5), lat = srv_dbi_col_real(q, 7), lon = srv_dbi_col_real(q, 8);
         if (o->phase != -2 && gs_phase_class(phase) != o->phase) continue;
-        if (o->use_bbox && !in_bbox(o, lat, lon)) continue;
+        if (o->use_bbox && !srv_bbox_contains(o->bbox, lat, lon)) continue;
         if (n == cap) {
             size_t nc = cap ? 2 * cap : 256;
             gis_light *nv = realloc(v, nc * sizeof *nv);

@@ -321,7 +321,7 @@ static gs_status intern(group_set *names, const char *name, int *index)
     return s;
 }
 
-static int in_bbox(const double b[4], double lat, double lon)
+int srv_bbox_contains(const double b[4], double lat, double lon)
 {
     if (!(lat >= b[1] && lat <= b[3])) return 0;
     double x = gs_wrap180(lon), lo = gs_wrap180(b[0]), hi = gs_wrap180(b[2]);
@@ -455,7 +455,7 @@ gs_status srv_stats_run(const srv_stats_opts *o, srv_stats_next next, void *ctx,
             }
             if (keep && o->by == SRV_BY_RADIUS)
                 keep = haversine_m(o->lat_deg, o->lon_deg, r.lat, r.lon) <= o->radius_m;
-            if (keep && has_bbox) keep = in_bbox(o->bbox, r.lat, r.lon);
+            if (keep && has_bbox) keep = srv_bbox_contains(o->bbox, r.lat, r.lon);
             if (keep && o->areas) keep = (r.feature = srv_areas_find(o->areas, r.lat, r.lon)) >= 0;
             if (keep) {
                 if ((s = intern(&names, *v.technology ? v.technology : "none", &r.tech)) != GS_OK ||

@@ -595,6 +595,10 @@ gs_status srv_compare_shares(srv_db *db, const srv_stats_opts *o, const char *su
 void srv_share_change_finish(srv_share_change *c);
 /* "MINLON,MINLAT,MAXLON,MAXLAT" into bbox (GS_EINVAL naming the text otherwise). */
 gs_status srv_parse_bbox(const char *text, double bbox[4]);
+/* Whether (lat, lon) is in the box MINLON,MINLAT,MAXLON,MAXLAT (edges included; longitudes
+ * compared wrapped to [-180, 180), so MAXLON 180 holds the meridian stored as -180 and
+ * MINLON > MAXLON crosses the antimeridian): stats --bbox and export --bbox. */
+int srv_bbox_contains(const double bbox[4], double lat_deg, double lon_deg);
 
 /* The stages (survey/stages.c), each usable on its own: `run`, `recognize` and `bench
  * accuracy` call them. A job holds one capture through the stages; zero it first;
