@@ -148,16 +148,20 @@ const char *srv_areas_label(const srv_areas *a, size_t i)
 int srv_areas_find(const srv_areas *a, double lat_deg, double lon_deg)
 {
     if (!a || !isfinite(lat_deg) || !isfinite(lon_deg)) return -1;
-    double lon = gs_wrap180(lon_deg);
-    GEOSGeometry *p = NULL;
+    /* the 180 deg meridian is stored as -180 (gs_wrap180), and a polygon may draw it at +180 */
+    double lon[2] = {gs_wrap180(lon_deg), 180.0};
+    int nlon = lon[0] == -180.0 ? 2 : 1;
+    GEOSGeometry *p[2] = {NULL, NULL};
     int found = -1;
-    for (size_t i = 0; i < a->n && found < 0; i++) {
-        if (lon < a->box[i][0] || lon > a->box[i][2] || lat_deg < a->box[i][1] || lat_deg > a->box[i][3])
-            continue;
-        if (!p && !(p = GEOSGeom_createPointFromXY_r(a->ctx, lon, lat_deg))) return -1;
-        if (GEOSPreparedCovers_r(a->ctx, a->prep[i], p) == 1) found = (int)i;
-    }
-    if (p) GEOSGeom_destroy_r(a->ctx, p);
+    for (size_t i = 0; i < a->n && found < 0; i++)
+        for (int q = 0; q < nlon && found < 0; q++) {
+            if (lon[q] < a->box[i][0] || lon[q] > a->box[i][2] || lat_deg < a->box[i][1] || lat_deg > a->box[i][3])
+                continue;
+            if (!p[q] && !(p[q] = GEOSGeom_createPointFromXY_r(a->ctx, lon[q], lat_deg))) break;
+            if (GEOSPreparedCovers_r(a->ctx, a->prep[i], p[q]) == 1) found = (int)i;
+        }
+    for (int q = 0; q < 2; q++)
+        if (p[q]) GEOSGeom_destroy_r(a->ctx, p[q]);
     return found;
 }
 

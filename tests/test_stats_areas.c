@@ -382,3 +382,38 @@ TEST(stats_areas_boundary_at_any_longitude)
             srv_areas_free(a);
         }
 }
+
+/* A light on the 180 deg meridian is stored at longitude -180 (gs_wrap180), but a polygon that
+ * only reaches the meridian from the west draws it at +180: it did not cover the light (its
+ * bounding box stops at +180). Now -180 is also tried as +180. Two squares, one each side of
+ * the meridian, each with the meridian as an edge; lights at -180 and +180 and one degree away:
+ * on the meridian the first square in the file holds it, whichever side it lies on. */
+TEST(stats_areas_hold_the_180_meridian_from_either_side)
+{
+    const char *path = fx_tmp("meridian.geojson");
+    fx_write_text(path, "{\"type\": \"FeatureCollection\", \"features\": ["
+                        "{\"type\": \"Feature\", \"properties\": {\"name\": \"west\"}, \"geometry\": {\"type\": \"Polygon\", "
+                        "\"coordinates\": [[[179, -17], [180, -17], [180, -16], [179, -16], [179, -17]]]}},"
+                        "{\"type\": \"Feature\", \"properties\": {\"name\": \"east\"}, \"geometry\": {\"type\": \"Polygon\", "
+                        "\"coordinates\": [[[-180, -17], [-179, -17], [-179, -16], [-180, -16], [-180, -17]]]}}]}\n");
+    srv_areas *a = NULL;
+    CHECK_OK(srv_areas_load(path, NULL, &a));
+    if (!a) return;
+    CHECK(srv_areas_find(a, -16.5, 180.0) == 0);
+    CHECK(srv_areas_find(a, -16.5, -180.0) == 0);
+    CHECK(srv_areas_find(a, -16.5, 540.0) == 0);
+    CHECK(srv_areas_find(a, -16.5, 179.5) == 0);
+    CHECK(srv_areas_find(a, -16.5, -179.5) == 1);
+    CHECK(srv_areas_find(a, -16.5, 178.5) == -1);
+    CHECK(srv_areas_find(a, -15.5, 180.0) == -1);
+    srv_areas_free(a);
+    /* the east square alone: the meridian is its edge at -180 */
+    fx_write_text(path, "{\"type\": \"FeatureCollection\", \"features\": ["
+                        "{\"type\": \"Feature\", \"properties\": {\"name\": \"east\"}, \"geometry\": {\"type\": \"Polygon\", "
+                        "\"coordinates\": [[[-180, -17], [-179, -17], [-179, -16], [-180, -16], [-180, -17]]]}}]}\n");
+    CHECK_OK(srv_areas_load(path, NULL, &a));
+    if (!a) return;
+    CHECK(srv_areas_find(a, -16.5, 180.0) == 0);
+    CHECK(srv_areas_find(a, -16.5, -180.0) == 0);
+    srv_areas_free(a);
+}
