@@ -54,8 +54,10 @@ typedef struct {
     /* Eq. 18 accumulators: [band][S x S] of the pixels with every sample usable and the same
      * exposure, [band][k][S x S] of the others, [band][k][S], pixels accumulated per band */
     double *Gc, *Gk, *hk, nacc[GS_MAX_BANDS];
-    /* noise-propagated variance and signal per source (pass 0, pixels with every sample) */
-    double var_sum[SMAX], sig_sum[SMAX];
+    /* noise-propagated variance and signal per source (pass 0), [0] of the pixels with every
+     * sample usable, [1] of those with some saturated (the predicted errors' when there is no
+     * complete pixel) */
+    double var_sum[2][SMAX], sig_sum[2][SMAX];
     double chi2, dof;   /* the last Eq. 16's weighted residual and its degrees of freedom */
 } ux;
 
@@ -401,21 +403,22 @@ static gs_status eq16_pass(ux *u, rec_unmix_result *r, int pass, int accumulate)
                 build_normal(u, b, mu, G, Gf, h, wk);
                 /* the covariance where it is kept: the last pass's sigmas (the one that does not
                  * accumulate Eq. 18) and pass 0's predicted errors */
-                int need = !accumulate || (pass == 0 && n == K && act == all);
+                int need = !accumulate || (pass == 0 && act == all);
                 if (need && fit == all && spd_inverse(G, S, Gw)) have_gw = 1;
                 if (!nnls_on(G, h, S, fit, t)) act = fit = 0;
                 if (accumulate && act == all) eq18_add(u, b, G, h, wk);
             }
             if (!fit) u->act[p] = u->fit[p] = 0;
             if (!u->fit[p]) break;
-            /* the pixels with every sample usable (HDR exposures may differ): their noise
-             * counts towards what the data support (the predicted errors) */
-            int complete = pass == 0 && n == K && act == all;
-            if (have_gw && (!accumulate || complete)) {
+            /* the pixels determining every source: their noise counts towards what the data
+             * support (the predicted errors), those with every sample usable (HDR exposures may
+             * differ) apart from the partly saturated */
+            int given = pass == 0 && act == all, part = n < K;
+            if (have_gw && (!accumulate || given)) {
                 eq16_variance(u, b, Gw, wk, t, var);
-                for (int s = 0; s < S && complete; s++) {
+                for (int s = 0; s < S && given; s++) {
                     double q = u->src->q[s * B + b];
-                    u->var_sum[s] += var[s] * q * q;
+                    u->var_sum[part][s] += var[s] * q * q;
                 }
             }
             double tqv[SMAX];
@@ -423,7 +426,7 @@ static gs_status eq16_pass(ux *u, rec_unmix_result *r, int pass, int accumulate)
                 tqv[s] = t[s] * u->src->q[s * B + b];
                 tq[s][b] = (float)tqv[s];
                 sq[s][b] = (float)(sqrt(var[s]) * u->src->q[s * B + b]);
-                if (complete) u->sig_sum[s] += tqv[s] * tqv[s];
+                if (given) u->sig_sum[part][s] += tqv[s] * tqv[s];
             }
             /* residual of this fit, over the usable samples less the sources fitted */
             for (int k = 0; k < K; k++) {
@@ -667,10 +670,13 @@ gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unm
         }
         if ((st = eq16_pass(&u, r, pass, acc)) != GS_OK) goto done;
         if (pass == 0) {
-            double worst = 0;
-            int ws = 0;
+            double worst = 0, all = 0;
+            int ws = 0, part = 1;   /* the complete pixels', or without one the partly saturated */
+            for (int s = 0; s < S; s++) part &= !(u.sig_sum[0][s] > 0);
+            const double *var_sum = u.var_sum[part], *sig_sum = u.sig_sum[part];
             for (int s = 0; s < S; s++) {
-                r->predicted_error[s] = u.sig_sum[s] > 0 ? sqrt(u.var_sum[s] / u.sig_sum[s]) : INFINITY;
+                all += sig_sum[s];
+                r->predicted_error[s] = sig_sum[s] > 0 ? sqrt(var_sum[s] / sig_sum[s]) : INFINITY;
                 if (!(r->predicted_error[s] <= worst)) {
                     worst = r->predicted_error[s];
                     ws = s;
@@ -678,10 +684,9 @@ gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unm
             }
             if (!(worst <= o_in->max_error)) {
                 r->ill_posed = 1;
-                double cmax = 0, all = 0;
+                double cmax = 0;
                 for (int b = 0; b < B; b++)
                     if (r->cond[b] > cmax) cmax = r->cond[b];
-                for (int s = 0; s < S; s++) all += u.sig_sum[s];
                 /* its share of the fitted light tells a source without light (not in the scene,
                  * or at another phase) from sources the data cannot tell apart */
                 st = gs_fail(GS_ENUMERIC, "ill-posed: source %02d (%s at %g deg) would be %.0f %% "
@@ -689,7 +694,7 @@ gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unm
                              "%.3g; its image holds %.2g %% of the fitted images' energy): the data do not support %d "
                              "sources (paper Fig. 10)",
                              ws, src->bulb[ws], src->phase_deg[ws], 100 * worst, worst,
-                             o_in->max_error, cmax, all > 0 ? 100 * u.sig_sum[ws] / all : 0.0, S);
+                             o_in->max_error, cmax, all > 0 ? 100 * sig_sum[ws] / all : 0.0, S);
                 goto done;
             }
         }
