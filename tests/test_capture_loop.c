@@ -479,6 +479,15 @@ TEST(capture_records_grid_frequency_per_frame)
     gs_capture_release(&cap);
 }
 
+/* The binary's and the lab scene's absolute paths (for commands run in the test's directory,
+ * which it returns). */
+static const char *lab_paths(char bin[2048], char lab[2048])
+{
+    if (!realpath(test_bin(), bin)) snprintf(bin, 2048, "%s", test_bin());
+    CHECK(realpath("capture/scenes/lab.json", lab) != NULL);
+    return test_tmpdir();
+}
+
 /* Two acquisitions into one capture directory at once: the second took the first's temporary
  * files for a killed run's and removed them, so either failed with "frame_000.png: cannot
  * replace it: No such file or directory", or both went on writing frames and acquisition.json
@@ -492,9 +501,7 @@ TEST(capture_directory_one_writer_at_a_time)
      * loop refuses in one line and leaves the directory alone; once it is free, the capture is
      * the same as one made alone */
     char cmd[16384], out[8192], bin[2048], lab[2048];
-    const char *tmp = test_tmpdir();
-    if (!realpath(test_bin(), bin)) snprintf(bin, sizeof bin, "%s", test_bin());
-    CHECK(realpath("capture/scenes/lab.json", lab) != NULL);
+    const char *tmp = lab_paths(bin, lab);
     snprintf(cmd, sizeof cmd,
              "cd %s && %s simulate %s --out-dir alone -q >/dev/null && mkdir shared && mkfifo release && "
              "(flock shared sh -c 'touch held; read x < release' >/dev/null 2>&1 & pid=$!; "
@@ -520,9 +527,7 @@ TEST(capture_directory_one_writer_at_a_time)
 TEST(capture_directory_not_read_while_acquired)
 {
     char cmd[32768], out[8192], bin[2048], lab[2048];
-    const char *tmp = test_tmpdir();
-    if (!realpath(test_bin(), bin)) snprintf(bin, sizeof bin, "%s", test_bin());
-    CHECK(realpath("capture/scenes/lab.json", lab) != NULL);
+    const char *tmp = lab_paths(bin, lab);
     snprintf(cmd, sizeof cmd,
              "cd %s && %s simulate %s --out-dir rd -q >/dev/null && cp -r rd before && mkfifo rel1 rel2 && "
              "(flock -x rd sh -c 'touch held1; read x < rel1' >/dev/null 2>&1 & pid=$!; "
