@@ -118,7 +118,8 @@ void rec_matcher_free(rec_matcher *m)
     free(m->fs_a);
     free(m->fs_tail);
     free(m->fs_lnfmin);
-    free(m->fs_tt);
+    free(m->fs_off);
+    free(m->fs_tb);
     free(m->bs_a);
     free(m->bs_b);
     free(m->bs_at);

@@ -736,12 +736,8 @@ static void pix_block(const rec_matcher *m, pix_work *pw, const float *x, const 
     if (m->fs_on) {
         rec_eq7_pixscreen(m, &pw->fs, xs, ns, noise_sigma, pw->rows, pw->sc, pw->keep);
     } else {
-        if (m->tn)
-            cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)ns, (int)Mp, (int)D, 1.0f, xs,
-                        (int)D, m->tn, (int)D, 0.0f, pw->sc, (int)Mp);
-        else   /* a screen's matcher with the screen off (the tests): its transposed templates */
-            cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, (int)ns, (int)Mp, (int)D, 1.0f, xs,
-                        (int)D, m->fs_tt, (int)m->fs_ldt, 0.0f, pw->sc, (int)Mp);
+        cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)ns, (int)Mp, (int)D, 1.0f, xs, (int)D,
+                    m->tn, (int)D, 0.0f, pw->sc, (int)Mp);
         memset(pw->keep, 1, ns);
     }
     size_t all[2] = {0, Mp};

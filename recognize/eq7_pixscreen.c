@@ -59,13 +59,18 @@ gs_status rec_eq7_pixscreen_setup(rec_matcher *m)
     for (size_t b = 0; b < nb; b++)
         rec_eq7_harmonic_table(m, m->ahat, b, exp(-m->fs_lnfmin[b]), m->fs_a + b * (size_t)bands * 2 * np,
                                m->fs_tail + b * (size_t)bands * (size_t)K);
-    m->fs_ldt = m->Mp + LANES;
-    m->fs_tt = calloc((size_t)m->D * m->fs_ldt, sizeof *m->fs_tt);
-    if (!m->fs_tt) return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate the pixel Fourier screen");
-    for (size_t j = 0; j < m->M; j++)
-        for (size_t d = 0; d < (size_t)m->D; d++) m->fs_tt[d * m->fs_ldt + j] = m->tn[j * (size_t)m->D + d];
-    free(m->tn);   /* (the transposed copy serves the tests' SGEMM too: rec_match_pixels) */
-    m->tn = NULL;
+    size_t D = (size_t)m->D, all = 0;
+    m->fs_off = malloc(sizeof *m->fs_off * nb);
+    for (size_t b = 0; m->fs_off && b < nb; b++) {
+        m->fs_off[b] = all;
+        all += (m->count[b] + LANES - 1) / LANES * D * LANES;
+    }
+    m->fs_tb = calloc(all ? all : 1, sizeof *m->fs_tb);
+    if (!m->fs_off || !m->fs_tb) return gs_fail(GS_ENOMEM, "Eq. 7 matcher: cannot allocate the pixel Fourier screen");
+    for (size_t b = 0; b < nb; b++)
+        for (size_t c = 0; c < m->count[b]; c++)
+            for (size_t d = 0; d < D; d++)
+                m->fs_tb[m->fs_off[b] + (c / LANES * D + d) * LANES + c % LANES] = m->tn[(m->first[b] + c) * D + d];
     m->fs_on = REC_FS_ON;
     return GS_OK;
 }
@@ -111,23 +116,24 @@ void rec_eq7_pixscreen_free(rec_pixscreen_work *sw)
     memset(sw, 0, sizeof *sw);
 }
 
-/* out[r * ldo + c] = x_r . t_(f0 + c) for the n rows of x (a multiple of 4; ld D) and the cnt
- * templates from f0, from the transposed unit templates tt (ld ldt, LANES columns past any
- * range): vectors of LANES templates times 4 rows, each score one chain of multiply-adds over d
+/* out[r * ldo + c] = x_r . t_c for the n rows of x (a multiple of 4; ld D) and a bulb's cnt
+ * unit templates tb (its blocks in fs_tb: read in order, which the prefetcher follows; with every
+ * block's D vectors a stride apart, as a transposed matrix had them, each load missed the
+ * cache): vectors of LANES templates times 4 rows, each score one chain of multiply-adds over d
  * in order, so a row's scores do not depend on the rows that share its call (the screen's
  * answers are those of every bulb scored by this kernel, bit for bit). */
 typedef float scr_vf __attribute__((vector_size(LANES * sizeof(float))));
 typedef int scr_vi __attribute__((vector_size(LANES * sizeof(int))));
-GS_VECTOR_LOOP static void bulb_scores(const float *tt, size_t ldt, size_t D, const float *x, size_t n, size_t f0,
-                                       size_t cnt, float *out, size_t ldo)
+GS_VECTOR_LOOP static void bulb_scores(const float *tb, size_t D, const float *x, size_t n, size_t cnt, float *out,
+                                       size_t ldo)
 {
     for (size_t c = 0; c < cnt; c += LANES)
         for (size_t r = 0; r < n; r += 4) {
-            const float *x0 = x + r * D, *x1 = x0 + D, *x2 = x1 + D, *x3 = x2 + D;
+            const float *x0 = x + r * D, *x1 = x0 + D, *x2 = x1 + D, *x3 = x2 + D, *tc = tb + c * D;
             scr_vf a0 = {0}, a1 = {0}, a2 = {0}, a3 = {0};
             for (size_t d = 0; d < D; d++) {
                 scr_vf t;
-                REC_VLOAD(t, tt + d * ldt + f0 + c);
+                REC_VLOAD(t, tc + d * LANES);
                 a0 += x0[d] * t;
                 a1 += x1[d] * t;
                 a2 += x2[d] * t;
@@ -195,7 +201,7 @@ static void score_wanted(const rec_matcher *m, rec_pixscreen_work *sw, const flo
         if (n == 0) continue;
         size_t n4 = (n + 3) / 4 * 4, ldo = (cnt + LANES - 1) / LANES * LANES;
         memset(sw->xg + n * D, 0, sizeof *sw->xg * (n4 - n) * D);
-        bulb_scores(m->fs_tt, m->fs_ldt, D, sw->xg, n4, f0, cnt, sw->og, ldo);
+        bulb_scores(m->fs_tb + m->fs_off[b], D, sw->xg, n4, cnt, sw->og, ldo);
         for (size_t i = 0; i < n; i++) {
             size_t k = sw->idx[i];
             rec_pixscreen_row *r = &sw->row[k];

@@ -208,8 +208,7 @@ struct rec_matcher {
     double *t;                          /* [M * D] templates */
     double *tsq;                        /* [M * D] squared templates */
     size_t Mp;                          /* M rounded up to a multiple of LANES */
-    float *tn;                          /* [Mp * D] templates / |t| (pixels), zero padded; NULL
-                                         * behind the Fourier screen (fs_tt holds them) */
+    float *tn;                          /* [Mp * D] templates / |t| (pixels), zero padded */
     float *lnf;                         /* [Mp] log |t| as float, 1e30 for padding */
     double *tnd;                        /* [M * D] templates / |t| in double */
     int pr;                             /* prefilter dimension R (0: no prefilter) */
@@ -279,8 +278,10 @@ struct rec_matcher {
      * [nfit] the least |t|^2 of its cells over each brightness's samples */
     int bs_on;
     double *bs_a, *bs_b, *bs_at, *bs_bt, *bs_t2;
-    size_t fs_ldt;                      /* Mp + LANES */
-    float *fs_tt;                       /* [D * fs_ldt] the unit templates tn transposed */
+    size_t *fs_off;                     /* [nb] where each bulb's blocks start in fs_tb */
+    float *fs_tb;                       /* the unit templates tn of each bulb in blocks of LANES
+                                         * templates, [block][D][LANES] (zero past its last):
+                                         * the screen's kernel reads them in order */
     double *harm;                       /* [2 REC_SHAPE_H K] the shape test's columns within a
                                          * band: cos, sin of 2 pi h k / K, h = 1..REC_SHAPE_H
                                          * ([(2 (h - 1) + q) K + k], q = 1 sin; eq7_nested.c) */
