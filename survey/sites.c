@@ -506,48 +506,64 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
     /* candidate pairs */
     for (size_t i = 0; i < nd; i++) {
         detection *x = &d[i];
-        sqlite3_stmt *q;
+        sqlite3_stmt *q = x->located ? qg : qp;
+        /* the located gate box's longitudes: one range, or two across the antimeridian (the
+         * sites are stored in [-180, 180)) */
+        double lon_range[2][2] = {{0.0, 0.0}, {0.0, 0.0}}, dlat = 0.0;
+        int nranges = 1;
         if (x->located) {
-            q = qg;
-            double r = sqrt(SRV_SITE_GATE_D2) * (x->a + amax) * 1.01;
-            double k = GIS_EARTH_RADIUS_M * DEG, dlat = r / k;
-            double cl = cos(fmin(fabs(x->lat) + dlat, 89.9) * DEG), dlon = r / (k * cl);
-            sqlite3_reset(q);
-            sqlite3_bind_double(q, 1, x->lat - dlat);
-            sqlite3_bind_double(q, 2, x->lat + dlat);
-            sqlite3_bind_double(q, 3, x->lon - dlon);
-            sqlite3_bind_double(q, 4, x->lon + dlon);
-        } else {
-            q = qp;
-            sqlite3_reset(q);
-            sqlite3_bind_text(q, 1, x->pose, -1, SQLITE_STATIC);
-            sqlite3_bind_double(q, 2, x->x_px - SRV_SITE_GATE_PX);
-            sqlite3_bind_double(q, 3, x->x_px + SRV_SITE_GATE_PX);
-        }
-        while ((rc = sqlite3_step(q)) == SQLITE_ROW) {
-            double d2;
-            if (x->located) {
-                double lat = srv_dbi_col_real(q, 1), lon = srv_dbi_col_real(q, 2), C[3];
-                double a = srv_dbi_col_real(q, 3), b = srv_dbi_col_real(q, 4), az = srv_dbi_col_real(q, 5);
-                if (!(a > 0.0) || !(b > 0.0)) continue;
-                ellipse_cov(a, b, isfinite(az) ? az : 0.0, C);
-                for (int j = 0; j < 3; j++) C[j] += x->C[j];
-                double k = GIS_EARTH_RADIUS_M * DEG;
-                d2 = maha2(k * cos(x->lat * DEG) * gs_wrap180(x->lon - lon), k * (x->lat - lat), C);
-                if (!(d2 < SRV_SITE_GATE_D2)) continue;
-            } else {
-                double dx = x->x_px - sqlite3_column_double(q, 1), dy = x->y_px - sqlite3_column_double(q, 2);
-                d2 = dx * dx + dy * dy;
-                if (!(d2 <= SRV_SITE_GATE_PX * SRV_SITE_GATE_PX)) continue;
+            double r = sqrt(SRV_SITE_GATE_D2) * (x->a + amax) * 1.01, k = GIS_EARTH_RADIUS_M * DEG;
+            dlat = r / k;
+            double cl = cos(fmin(fabs(x->lat) + dlat, 89.9) * DEG), dlon = fmin(r / (k * cl), 180.0);
+            lon_range[0][0] = x->lon - dlon;
+            lon_range[0][1] = x->lon + dlon;
+            if (lon_range[0][0] < -180.0) {
+                lon_range[1][0] = lon_range[0][0] + 360.0;
+                lon_range[1][1] = 180.0;
+                nranges = 2;
+            } else if (lon_range[0][1] >= 180.0) {
+                lon_range[1][0] = -180.0;
+                lon_range[1][1] = lon_range[0][1] - 360.0;
+                nranges = 2;
             }
-            int64_t sid = sqlite3_column_int64(q, 0);
-            if (nheld && bsearch(&sid, held, nheld, sizeof *held, cmp_ids)) continue;   /* has one */
-            if ((s = grow(&p, &capp, np + 1, sizeof *p)) != GS_OK) goto done;
-            p[np++] = (pair){d2, i, sid};
         }
-        if (rc != SQLITE_DONE) {
-            s = srv_dbi_fail(db, "looking up light sites");
-            goto done;
+        for (int g = 0; g < nranges; g++) {
+            sqlite3_reset(q);
+            if (x->located) {
+                sqlite3_bind_double(q, 1, x->lat - dlat);
+                sqlite3_bind_double(q, 2, x->lat + dlat);
+                sqlite3_bind_double(q, 3, lon_range[g][0]);
+                sqlite3_bind_double(q, 4, lon_range[g][1]);
+            } else {
+                sqlite3_bind_text(q, 1, x->pose, -1, SQLITE_STATIC);
+                sqlite3_bind_double(q, 2, x->x_px - SRV_SITE_GATE_PX);
+                sqlite3_bind_double(q, 3, x->x_px + SRV_SITE_GATE_PX);
+            }
+            while ((rc = sqlite3_step(q)) == SQLITE_ROW) {
+                double d2;
+                if (x->located) {
+                    double lat = srv_dbi_col_real(q, 1), lon = srv_dbi_col_real(q, 2), C[3];
+                    double a = srv_dbi_col_real(q, 3), b = srv_dbi_col_real(q, 4), az = srv_dbi_col_real(q, 5);
+                    if (!(a > 0.0) || !(b > 0.0)) continue;
+                    ellipse_cov(a, b, isfinite(az) ? az : 0.0, C);
+                    for (int j = 0; j < 3; j++) C[j] += x->C[j];
+                    double k = GIS_EARTH_RADIUS_M * DEG;
+                    d2 = maha2(k * cos(x->lat * DEG) * gs_wrap180(x->lon - lon), k * (x->lat - lat), C);
+                    if (!(d2 < SRV_SITE_GATE_D2)) continue;
+                } else {
+                    double dx = x->x_px - sqlite3_column_double(q, 1), dy = x->y_px - sqlite3_column_double(q, 2);
+                    d2 = dx * dx + dy * dy;
+                    if (!(d2 <= SRV_SITE_GATE_PX * SRV_SITE_GATE_PX)) continue;
+                }
+                int64_t sid = sqlite3_column_int64(q, 0);
+                if (nheld && bsearch(&sid, held, nheld, sizeof *held, cmp_ids)) continue;   /* has one */
+                if ((s = grow(&p, &capp, np + 1, sizeof *p)) != GS_OK) goto done;
+                p[np++] = (pair){d2, i, sid};
+            }
+            if (rc != SQLITE_DONE) {
+                s = srv_dbi_fail(db, "looking up light sites");
+                goto done;
+            }
         }
     }
     /* greedy assignment by increasing d2; a site takes one detection of the capture */

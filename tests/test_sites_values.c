@@ -259,3 +259,46 @@ TEST(sites_compare_phase_change_probabilities)
     free(ch);
     srv_db_close(db);
 }
+
+/* One light on the 180 deg meridian (17 deg south, Fiji's longitude) detected on two nights
+ * 0.2 m west and 0.2 m east of it (2 m circles): stored at +179.999998 and -179.999998, 0.4 m
+ * apart, so d2 = 0.16 / (4 + 4) = 0.02 and one site at the meridian with axes 2 / sqrt(2); a
+ * second light 3 m west, detected on the same nights 0.2 m either side of it, is the control
+ * that never crosses the meridian. The candidate box of the first night's site ran from
+ * 179.99998 to 180.00002 and missed the site stored at -179.999998: two sites of one light. */
+TEST(sites_one_light_across_the_antimeridian)
+{
+    const double lat0 = -17.0, lon0 = 180.0;
+    int64_t sid;
+    srv_db *db = survey_fx_create(fx_tmp("antimeridian.sqlite"), "s", &sid);
+    if (!db) return;
+    sqlite3 *h = srv_db_sqlite(db);
+    for (int k = 0; k < 2; k++) {
+        double side = k ? 0.2 : -0.2;
+        srv_light_row l[2];
+        srv_location_row loc[2];
+        l[0] = located(0, lat0, lon0, side, 0.0, 2.0, 2.0, 0.0, 10.0, &loc[0]);
+        l[1] = located(1, lat0, lon0, -3.0 + side, 0.0, 2.0, 2.0, 0.0, 10.0, &loc[1]);
+        srv_capture_data cd = survey_fx_capture(sid, k ? "n2" : "n1", l, loc, 2);
+        CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
+    }
+    CHECK(SQ(h, "SELECT count(*) FROM locations WHERE lon_deg < 0") == 1);   /* both sides stored */
+    long sites = SQ(h, "SELECT count(*) FROM light_sites");
+    CHECK_MSG(sites == 2 && SQ(h, "SELECT count(*) FROM light_sites WHERE detections = 2") == 2,
+              "%ld sites (expected 2 of 2 detections each)", sites);
+    const char *d2_of = "SELECT sd.d2 FROM site_detections sd JOIN lights l ON l.id = sd.light_id "
+                        "JOIN captures c ON c.id = l.capture_id WHERE c.capture_key = 'n2' AND l.light_index = %lld";
+    for (long long i = 0; i < 2; i++) {
+        double d2 = query_real(h, d2_of, i);
+        CHECK_MSG(fabs(d2 - 0.02) < 1e-9, "light %lld: d2 %.12g, expected 0.02", i, d2);
+    }
+    /* the site of the first light: at the meridian (+-180), axes 2 / sqrt(2) */
+    double lon = query_real(h, "SELECT lon_deg FROM light_sites WHERE abs(lon_deg) > 179.99999 AND %lld", 1);
+    double lat = query_real(h, "SELECT lat_deg FROM light_sites WHERE abs(lon_deg) > 179.99999 AND %lld", 1);
+    double east = (180.0 - fabs(lon)) * M_PER_DEG * cos(lat0 * D2R);
+    CHECK_MSG(fabs(east) < 1e-6 && fabs(lat - lat0) * M_PER_DEG < 1e-6, "site at %.9f, %.9f: %.3g m from the "
+              "meridian", lat, lon, east);
+    double a = query_real(h, "SELECT semi_major_m FROM light_sites WHERE abs(lon_deg) > 179.99999 AND %lld", 1);
+    CHECK_MSG(fabs(a - sqrt(2.0)) < 1e-9, "axis %.12g, expected sqrt(2)", a);
+    srv_db_close(db);
+}
