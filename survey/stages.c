@@ -155,8 +155,9 @@ gs_status srv_crowded_footprints(const srv_light_row *lights, size_t n, unsigned
         k = 0;
         for (size_t i = 0; i < n; i++)
             if (use[i]) res[k++] = fabs(lights[i].area_px - a - b * log(lights[i].snr));
-        sigma = 1.4826 * gs_median_d(res, k);
-        if (!(sigma > 0)) sigma = 0.5;   /* integer areas on one line: half a pixel */
+        /* at least half a pixel: areas are whole pixels, so a robust sigma below their rounding
+         * (a line through equal SNRs fits that rounding) is no measure of a light's spread */
+        sigma = fmax(1.4826 * gs_median_d(res, k), 0.5);
     }
     for (size_t i = 0; i < n; i++)
         crowded[i] = lights[i].snr > 0 && isfinite(lights[i].snr) &&

@@ -652,8 +652,8 @@ double srv_centroid_sigma_px(double snr, unsigned blob_flags, int crowded, doubl
 /* Marks crowded[i] = 1 for the lights whose footprint is too large for one light of their SNR:
  * area_px more than 4 robust sigmas above the capture's line area = a + b ln(snr), fitted by
  * least squares to its plain lights (no REC_BLOB_* flag) with those beyond 3 robust sigmas
- * (1.4826 MAD) dropped, three rounds: a neighbour merged into the footprint undetected. All 0
- * with fewer than 10 plain lights. GS_ENOMEM (all 0) when out of memory. */
+ * (1.4826 MAD, at least 0.5 px: areas are whole pixels) dropped, three rounds: a neighbour
+ * merged into the footprint undetected. All 0 with fewer than 10 plain lights. GS_ENOMEM (all 0) when out of memory. */
 gs_status srv_crowded_footprints(const srv_light_row *lights, size_t n, unsigned char *crowded);
 /* locate: every row from one station at the lights' height (gis_locate) with its 1-sigma
  * (sigma_height_m >= 0). Each light's pixel sigma: with the station's psf_sigma_px, its

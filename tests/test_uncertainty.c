@@ -122,3 +122,33 @@ TEST(uncertainty_ellipse_coverage_grazing_blends)
         "   \"max_range_m\": 4000, \"district_m\": 400, \"transformer_fraction\": 0, \"lumens_spread\": 0.3,\n"
         SCENE_TECHNOLOGIES SCENE_EFFECTS("0.9"), 250, 0);
 }
+
+/* The crowding rule on integer areas: the 16 isolated lights (44 px apart, PSF sigma 1 px; the
+ * truth of test_two_stations.c's east capture) of one capture, their SNRs and areas as
+ * measured: equal SNRs within 0.2 %, areas 30-33 px. None has a neighbour in its footprint, so
+ * none is crowded; the same capture with one light's area 20 px larger (a merged neighbour, the
+ * 19-39 px of docs/gis.md) flags that light. The fit over 0.2 % of ln SNR put a slope of 212
+ * px through the rounding of the areas, its robust sigma 0.16 px (below the 0.29 px of rounding
+ * to whole pixels), and flagged the light of 33 px, 0.92 px above the line: its ellipse was 750x
+ * wider across the sight line than its neighbours'. */
+TEST(uncertainty_crowded_footprints_integer_areas)
+{
+    static const double snr_area[16][2] = {
+        {2237.118606, 32}, {2233.972039, 32}, {2234.112108, 32}, {2236.484768, 30}, {2234.396807, 32},
+        {2234.513950, 32}, {2235.685170, 32}, {2233.915249, 31}, {2235.517220, 33}, {2233.709580, 32},
+        {2235.204315, 32}, {2234.778105, 30}, {2235.936703, 32}, {2234.773484, 32}, {2232.958000, 32},
+        {2233.275473, 32}};
+    srv_light_row l[16];
+    unsigned char crowded[16];
+    for (int merged = 0; merged < 2; merged++) {
+        for (int i = 0; i < 16; i++) {
+            srv_light_row_init(&l[i]);
+            l[i].snr = snr_area[i][0];
+            l[i].area_px = (int)snr_area[i][1] + (merged && i == 5 ? 20 : 0);
+        }
+        CHECK_OK(srv_crowded_footprints(l, 16, crowded));
+        for (int i = 0; i < 16; i++)
+            CHECK_MSG(crowded[i] == (merged && i == 5), "%s: light %d (area %d px) crowded %d",
+                      merged ? "light 5 with a merged neighbour" : "isolated lights", i, l[i].area_px, crowded[i]);
+    }
+}
