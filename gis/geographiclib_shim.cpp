@@ -5,6 +5,7 @@ extern "C" {
 #include "gis/internal.h"
 }
 
+#include <GeographicLib/Constants.hpp>
 #include <GeographicLib/Geocentric.hpp>
 #include <GeographicLib/Geodesic.hpp>
 #include <GeographicLib/Gnomonic.hpp>
@@ -164,6 +165,16 @@ extern "C" double gis_chord_m(double lat1_deg, double lon1_deg, double h1_m, dou
         return NAN;
     return std::sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) +
                      (a[2] - b[2]) * (a[2] - b[2]));
+}
+
+// The public metres per degree (gis.h): WGS84's radii of curvature at lat_deg.
+extern "C" void gis_metres_per_deg(double lat_deg, double *north_m, double *east_m)
+{
+    const double f = GeographicLib::Constants::WGS84_f(), e2 = f * (2.0 - f), deg = M_PI / 180.0;
+    const double s = std::sin(lat_deg * deg), w = 1.0 - e2 * s * s;
+    const double N = GeographicLib::Constants::WGS84_a() / std::sqrt(w);
+    *north_m = N * (1.0 - e2) / w * deg;
+    *east_m = N * std::cos(lat_deg * deg) * deg;
 }
 
 // The public geodesic distance (gis.h): argument checks, then gis_gl_inverse.

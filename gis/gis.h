@@ -220,6 +220,10 @@ gs_status gis_triangulate(const gis_bearing *a, const gis_bearing *b,
  * non-finite coordinate, GS_EINVAL for a latitude outside [-90, 90]. */
 gs_status gis_geodesic_inverse(double lat1_deg, double lon1_deg, double lat2_deg, double lon2_deg,
                                double *s12_m, double *azi1_deg, double *azi2_deg);
+/* Metres per degree of latitude (*north_m, the meridional radius of curvature M x pi/180) and
+ * of longitude (*east_m, N cos(lat) x pi/180, N the prime vertical's) at lat_deg on WGS84: the
+ * local east/north metres of small offsets, those of gis_locate's ellipses. */
+void gis_metres_per_deg(double lat_deg, double *north_m, double *east_m);
 /* The straight-line (chord) distance, metres, between two points given by WGS84 latitude,
  * longitude (degrees) and ellipsoidal height (metres), through GeographicLib's Geocentric; NaN
  * for a latitude outside [-90, 90] or a non-finite input. */

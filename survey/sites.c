@@ -8,7 +8,7 @@
  * - a located detection (position and finite 1-sigma ellipse, covariance C_d) is a candidate
  *   of a located site (position x_s, covariance C_s) when the Mahalanobis distance
  *   d2 = dx^T (C_d + C_s)^-1 dx < SRV_SITE_GATE_D2 (the 0.999 quantile of chi2 with 2 dof), dx in
- *   local east/north metres;
+ *   local east/north metres (WGS84, gis_metres_per_deg);
  * - any other detection is a candidate of a pixel site of the same camera pose (the station's
  *   position, orientation and focal length; captures without a station count as one unknown,
  *   fixed camera) within SRV_SITE_GATE_PX pixels (d2 = distance^2 in px^2);
@@ -358,7 +358,7 @@ static gs_status refresh_site(srv_db *db, sqlite3_stmt *qo, sqlite3_stmt *qu, in
 {
     srv_site_obs *o = NULL;
     size_t n = 0, cap = 0;
-    double I[3] = {0, 0, 0}, ie = 0.0, in = 0.0, lat0 = NAN, lon0 = NAN, sx = 0, sy = 0, sh = 0;
+    double I[3] = {0, 0, 0}, ie = 0.0, in = 0.0, lat0 = NAN, lon0 = NAN, kx = NAN, ky = NAN, sx = 0, sy = 0, sh = 0;
     long nh = 0, nloc = 0;
     int rc;
     gs_status s = GS_OK;
@@ -376,15 +376,16 @@ static gs_status refresh_site(srv_db *db, sqlite3_stmt *qo, sqlite3_stmt *qu, in
             nh++;
         }
         if (!isfinite(lat) || !(a > 0.0) || !isfinite(a) || !(b > 0.0) || !isfinite(b)) continue;
-        if (isnan(lat0)) {
+        if (isnan(lat0)) {   /* the local metres (WGS84, those of the ellipses) at the first */
             lat0 = lat;
             lon0 = lon;
+            gis_metres_per_deg(lat0, &ky, &kx);
         }
-        double C[3], k = GIS_EARTH_RADIUS_M * DEG;
+        double C[3];
         ellipse_cov(a, b, isfinite(az) ? az : 0.0, C);
         double det = C[0] * C[2] - C[1] * C[1];
         double Ii[3] = {C[2] / det, -C[1] / det, C[0] / det};
-        double x = k * cos(lat0 * DEG) * gs_wrap180(lon - lon0), y = k * (lat - lat0);
+        double x = kx * gs_wrap180(lon - lon0), y = ky * (lat - lat0);
         for (int j = 0; j < 3; j++) I[j] += Ii[j];
         ie += Ii[0] * x + Ii[1] * y;
         in += Ii[1] * x + Ii[2] * y;
@@ -398,9 +399,9 @@ static gs_status refresh_site(srv_db *db, sqlite3_stmt *qo, sqlite3_stmt *qu, in
         if (nloc) {
             double det = I[0] * I[2] - I[1] * I[1];
             double C[3] = {I[2] / det, -I[1] / det, I[0] / det};
-            double x = C[0] * ie + C[1] * in, y = C[1] * ie + C[2] * in, k = GIS_EARTH_RADIUS_M * DEG;
-            lat = lat0 + y / k;
-            lon = gs_wrap180(lon0 + x / (k * cos(lat0 * DEG)));
+            double x = C[0] * ie + C[1] * in, y = C[1] * ie + C[2] * in;
+            lat = lat0 + y / ky;
+            lon = gs_wrap180(lon0 + x / kx);
             cov_ellipse(C, &a, &b, &az);
         }
         sqlite3_reset(qu);
@@ -512,9 +513,11 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
         double lon_range[2][2] = {{0.0, 0.0}, {0.0, 0.0}}, dlat = 0.0;
         int nranges = 1;
         if (x->located) {
-            double r = sqrt(SRV_SITE_GATE_D2) * (x->a + amax) * 1.01, k = GIS_EARTH_RADIUS_M * DEG;
-            dlat = r / k;
-            double cl = cos(fmin(fabs(x->lat) + dlat, 89.9) * DEG), dlon = fmin(r / (k * cl), 180.0);
+            double r = sqrt(SRV_SITE_GATE_D2) * (x->a + amax) * 1.01, ky, kx;
+            gis_metres_per_deg(0.0, &ky, &kx);   /* the shortest metres per degree of latitude */
+            dlat = r / ky;
+            gis_metres_per_deg(fmin(fabs(x->lat) + dlat, 89.9), &ky, &kx);
+            double dlon = fmin(r / kx, 180.0);
             lon_range[0][0] = x->lon - dlon;
             lon_range[0][1] = x->lon + dlon;
             if (lon_range[0][0] < -180.0) {
@@ -547,8 +550,9 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
                     if (!(a > 0.0) || !(b > 0.0)) continue;
                     ellipse_cov(a, b, isfinite(az) ? az : 0.0, C);
                     for (int j = 0; j < 3; j++) C[j] += x->C[j];
-                    double k = GIS_EARTH_RADIUS_M * DEG;
-                    d2 = maha2(k * cos(x->lat * DEG) * gs_wrap180(x->lon - lon), k * (x->lat - lat), C);
+                    double ky, kx;
+                    gis_metres_per_deg(x->lat, &ky, &kx);
+                    d2 = maha2(kx * gs_wrap180(x->lon - lon), ky * (x->lat - lat), C);
                     if (!(d2 < SRV_SITE_GATE_D2)) continue;
                 } else {
                     double dx = x->x_px - sqlite3_column_double(q, 1), dy = x->y_px - sqlite3_column_double(q, 2);

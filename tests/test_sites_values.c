@@ -19,7 +19,15 @@
 #include <string.h>
 
 #define SQ(h, sql) survey_fx_query_long(h, sql)
-#define M_PER_DEG (GIS_EARTH_RADIUS_M * D2R)   /* the association's local metres */
+/* Local metres per degree north (*n) and east (*e) at lat: WGS84's radii of curvature M and
+ * N cos(lat), written out (the metres of the stored ellipses). */
+static void m_per_deg(double lat, double *n, double *e)
+{
+    const double a = 6378137.0, f = 1.0 / 298.257223563, e2 = f * (2.0 - f);
+    const double w = 1.0 - e2 * sin(lat * D2R) * sin(lat * D2R), N = a / sqrt(w);
+    *n = N * (1.0 - e2) / w * D2R;
+    *e = N * cos(lat * D2R) * D2R;
+}
 
 /* A located light east_m, north_m from (lat0, lon0) with a circular (a = b) or elliptic
  * ellipse, its location row in *loc. */
@@ -29,8 +37,10 @@ static srv_light_row located(int i, double lat0, double lon0, double east_m, dou
     srv_light_row l = survey_fx_light(i, 20.0 * i, 10.0, 0.0, 0.9);
     srv_location_row_init(loc);
     loc->method = SRV_LOC_ONE_STATION;
-    loc->lat_deg = lat0 + north_m / M_PER_DEG;
-    loc->lon_deg = lon0 + east_m / (M_PER_DEG * cos(lat0 * D2R));
+    double kn, ke;
+    m_per_deg(lat0, &kn, &ke);
+    loc->lat_deg = lat0 + north_m / kn;
+    loc->lon_deg = lon0 + east_m / ke;
     loc->height_m = height_m;
     loc->ellipse = (gis_ellipse){a, b, az};
     return l;
@@ -96,7 +106,8 @@ TEST(sites_association_distance_box_one_per_capture)
     double d2[3] = {query_real(h, d2_of, 0), query_real(h, d2_of, 1), query_real(h, d2_of, 2)};
     CHECK_MSG(fabs(d2[0] - 9.0 / 8.0) < 1e-9, "D0: d2 %.12g, expected 1.125", d2[0]);
     CHECK_MSG(isnan(d2[1]), "D0b: d2 %.12g, expected NULL (a site of its own)", d2[1]);
-    CHECK_MSG(fabs(d2[2] - 3600.0 / 10001.0) < 1e-9, "D2: d2 %.12g, expected %.12g", d2[2], 3600.0 / 10001.0);
+    /* (60 m placed in the metres of 60 deg N, 1 km south: M differs by 1.6e-6 there, d2 by 3e-6) */
+    CHECK_MSG(fabs(d2[2] - 3600.0 / 10001.0) < 2e-6, "D2: d2 %.12g, expected %.12g", d2[2], 3600.0 / 10001.0);
     /* a light of c2 stored after its association, 1 m west of L0: within the gate of L0's site
      * (d2 = 2.5^2 / (2 + 4), the site now at 1.5 m east with a 1.41 m circle) and of D0b's
      * (26 / 8), but both hold a detection of c2, so it founds a site */
@@ -168,8 +179,10 @@ TEST(sites_combined_ellipse_azimuth_and_height)
     CHECK_MSG(fabs(got_az - az) < 1e-7, "azimuth %.9f, expected %.9f", got_az, az);
     CHECK_MSG(sqlite3_column_type(q, 3) != SQLITE_NULL && fabs(sqlite3_column_double(q, 3) - 10.0) < 1e-12,
               "height %s, expected 10 (the one detection with a height)", sqlite3_column_text(q, 3));
-    CHECK_NEAR((sqlite3_column_double(q, 4) - lat0) * M_PER_DEG, x_n, 1e-6);
-    CHECK_NEAR((sqlite3_column_double(q, 5) - lon0) * M_PER_DEG * cos(lat0 * D2R), x_e, 1e-6);
+    double kn, ke;
+    m_per_deg(lat0, &kn, &ke);
+    CHECK_NEAR((sqlite3_column_double(q, 4) - lat0) * kn, x_n, 1e-6);
+    CHECK_NEAR((sqlite3_column_double(q, 5) - lon0) * ke, x_e, 1e-6);
     sqlite3_finalize(q);
     CHECK_MSG(SQ(h, "SELECT count(*) FROM light_sites WHERE lat_deg IS NULL AND height_m IS NULL") == 1,
               "the pixel site's height: %s", survey_fx_query_text(h, "SELECT quote(height_m) FROM light_sites "
@@ -295,10 +308,51 @@ TEST(sites_one_light_across_the_antimeridian)
     /* the site of the first light: at the meridian (+-180), axes 2 / sqrt(2) */
     double lon = query_real(h, "SELECT lon_deg FROM light_sites WHERE abs(lon_deg) > 179.99999 AND %lld", 1);
     double lat = query_real(h, "SELECT lat_deg FROM light_sites WHERE abs(lon_deg) > 179.99999 AND %lld", 1);
-    double east = (180.0 - fabs(lon)) * M_PER_DEG * cos(lat0 * D2R);
-    CHECK_MSG(fabs(east) < 1e-6 && fabs(lat - lat0) * M_PER_DEG < 1e-6, "site at %.9f, %.9f: %.3g m from the "
+    double kn, ke;
+    m_per_deg(lat0, &kn, &ke);
+    double east = (180.0 - fabs(lon)) * ke;
+    CHECK_MSG(fabs(east) < 1e-6 && fabs(lat - lat0) * kn < 1e-6, "site at %.9f, %.9f: %.3g m from the "
               "meridian", lat, lon, east);
     double a = query_real(h, "SELECT semi_major_m FROM light_sites WHERE abs(lon_deg) > 179.99999 AND %lld", 1);
     CHECK_MSG(fabs(a - sqrt(2.0)) < 1e-9, "axis %.12g, expected sqrt(2)", a);
+    srv_db_close(db);
+}
+
+/* Two stations' detections of one light at 45 deg N, each 1 mm wide across its sight line and
+ * 15 m long along it (a one-station location at a wrong height), 15 m and 12 m from the light
+ * along sight lines at azimuths 30 and 150 deg: the site is their crossing, the light. The
+ * offsets are placed here in WGS84 local metres (m_per_deg), as gis_locate's ellipses are. The site's metres were those
+ * of the mean sphere, 0.3 % short north-south and 0.2 % east-west at 45 deg: the lines crossed
+ * 3.9 cm from the light, 30-50 sigma of the site's 1.4 x 0.8 mm ellipse. */
+TEST(sites_two_sight_lines_cross_at_the_light)
+{
+    const double lat0 = 45.0, lon0 = 7.0;
+    double kn, ke;
+    m_per_deg(lat0, &kn, &ke);
+    int64_t sid;
+    srv_db *db = survey_fx_create(fx_tmp("crossing.sqlite"), "s", &sid);
+    if (!db) return;
+    sqlite3 *h = srv_db_sqlite(db);
+    const double az[2] = {30.0, 150.0}, along[2] = {15.0, -12.0};
+    for (int k = 0; k < 2; k++) {
+        srv_light_row l = survey_fx_light(0, 100.0, 100.0, 0.0, 0.9);
+        srv_location_row loc;
+        srv_location_row_init(&loc);
+        loc.method = SRV_LOC_ONE_STATION;
+        loc.lat_deg = lat0 + along[k] * cos(az[k] * D2R) / kn;
+        loc.lon_deg = lon0 + along[k] * sin(az[k] * D2R) / ke;
+        loc.height_m = 10.0;
+        loc.ellipse = (gis_ellipse){15.0, 0.001, az[k]};
+        srv_capture_data cd = survey_fx_capture(sid, k ? "west" : "east", &l, &loc, 1);
+        CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
+    }
+    CHECK(SQ(h, "SELECT count(*) FROM light_sites") == 1);
+    double lat = query_real(h, "SELECT lat_deg FROM light_sites WHERE id = %lld", 1);
+    double lon = query_real(h, "SELECT lon_deg FROM light_sites WHERE id = %lld", 1);
+    double a = query_real(h, "SELECT semi_major_m FROM light_sites WHERE id = %lld", 1);
+    double b = query_real(h, "SELECT semi_minor_m FROM light_sites WHERE id = %lld", 1);
+    double de = (lon - lon0) * ke, dn = (lat - lat0) * kn;
+    CHECK_MSG(hypot(de, dn) < 1e-4 && b > 5e-4 && a < 2e-3, "site %.3f mm east, %.3f mm north of the light, "
+              "ellipse %.3f x %.3f mm", 1e3 * de, 1e3 * dn, 1e3 * a, 1e3 * b);
     srv_db_close(db);
 }
