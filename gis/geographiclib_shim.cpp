@@ -5,7 +5,7 @@ extern "C" {
 #include "gis/internal.h"
 }
 
-#include <GeographicLib/Constants.hpp>
+#include <GeographicLib/Ellipsoid.hpp>
 #include <GeographicLib/Geocentric.hpp>
 #include <GeographicLib/Geodesic.hpp>
 #include <GeographicLib/Gnomonic.hpp>
@@ -170,11 +170,10 @@ extern "C" double gis_chord_m(double lat1_deg, double lon1_deg, double h1_m, dou
 // The public metres per degree (gis.h): WGS84's radii of curvature at lat_deg.
 extern "C" void gis_metres_per_deg(double lat_deg, double *north_m, double *east_m)
 {
-    const double f = GeographicLib::Constants::WGS84_f(), e2 = f * (2.0 - f), deg = M_PI / 180.0;
-    const double s = std::sin(lat_deg * deg), w = 1.0 - e2 * s * s;
-    const double N = GeographicLib::Constants::WGS84_a() / std::sqrt(w);
-    *north_m = N * (1.0 - e2) / w * deg;
-    *east_m = N * std::cos(lat_deg * deg) * deg;
+    const GeographicLib::Ellipsoid &e = GeographicLib::Ellipsoid::WGS84();
+    const double deg = GeographicLib::Math::degree();
+    *north_m = e.MeridionalCurvatureRadius(lat_deg) * deg;
+    *east_m = e.CircleRadius(lat_deg) * deg;
 }
 
 // The public geodesic distance (gis.h): argument checks, then gis_gl_inverse.
