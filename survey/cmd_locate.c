@@ -27,7 +27,8 @@ static const char locate_usage[] =
     "                   width_px, height_px, sigma_px, sigma_heading_deg, sigma_pitch_deg,\n"
     "                   sigma_roll_deg, refraction_k, id, time_utc]  (docs/gis.md)\n"
     "  --pixels FILE    CSV with header id,x_px,y_px[,sigma_px]; image x right, y down, pixel\n"
-    "                   centres at integers; sigma_px defaults to the station's (else 1)\n"
+    "                   centres at integers; sigma_px defaults to the station's (else 1),\n"
+    "                   and is required when the station gives psf_sigma_px\n"
     "  --light-height-m H  the lights' height above the WGS84 ellipsoid, metres (default 0;\n"
     "                   note that ellipsoidal heights differ from heights above sea level by\n"
     "                   the geoid undulation, up to +-100 m)\n"
@@ -226,6 +227,14 @@ int srv_cmd_locate(int argc, char **argv)
     size_t nloc = 0, nflag = 0;
     for (size_t i = 0; i < n && s == GS_OK; i++) {
         gis_fix fx;
+        /* with psf_sigma_px, the station's sigma_px is only the calibration residual: the
+         * light's centroid sigma (from its SNR, docs/gis.md) must come from the CSV */
+        if (isnan(rows[i].sigma_px) && !isnan(st.psf_sigma_px)) {
+            s = gs_fail(GS_EFORMAT, "%s:%d: sigma_px: not given, and %s has psf_sigma_px (its "
+                        "sigma_px is only the calibration residual): expected a sigma_px column, "
+                        "each light's centroid sigma in px", pixels_path, rows[i].line, station_path);
+            break;
+        }
         double sig = isnan(rows[i].sigma_px) ? st.sigma_px : rows[i].sigma_px;
         s = gis_locate(&st.cam, rows[i].x_px, rows[i].y_px, sig, height_m, &lo, &fx);
         if (s != GS_OK) {

@@ -522,6 +522,45 @@ TEST(gis_cli_locate)
     CHECK(test_run(cmd, out, sizeof out) == 2 && fx_contains(out, "cannot tell the format"));
 }
 
+/* A station with psf_sigma_px (as every capture.json's own, which `gridsurvey run` uses) has a
+ * sigma_px that is only the calibration residual (0 when not given): each light's centroid
+ * sigma comes from its SNR, which a pixels CSV does not have. Without a sigma_px column,
+ * locate wrote every error ellipse as 0 m; now it asks for the column, naming the file, line
+ * and field, and writes nothing. With the column, the ellipse is the library's at that sigma. */
+TEST(gis_cli_locate_with_a_psf_station_needs_each_light_sigma)
+{
+    char st[1024], px[1024], res[1024], cmd[4096];
+    snprintf(st, sizeof st, "%s", fx_tmp("psf-station.json"));
+    snprintf(px, sizeof px, "%s", fx_tmp("psf-pixels.csv"));
+    snprintf(res, sizeof res, "%s", fx_tmp("psf-out.geojson"));
+    fx_write_text(st, "{\"lat_deg\": 32.794, \"lon_deg\": 34.99, \"height_m\": 470.0,\n"
+                   " \"heading_deg\": 52, \"pitch_deg\": -7.2, \"focal_px\": 4000, \"cx_px\": 799.5,\n"
+                   " \"cy_px\": 449.5, \"psf_sigma_px\": 0.8}\n");
+    fx_write_text(px, "id,x_px,y_px\nA,800,500\n");
+    snprintf(cmd, sizeof cmd, "%s locate --station %s --pixels %s --light-height-m 30 -o %s",
+             test_bin(), st, px, res);
+    int rc = test_run(cmd, out, sizeof out);
+    CHECK_MSG(rc == 1 && fx_count_lines(out) == 1 && fx_contains(out, "psf-pixels.csv:2: sigma_px:") &&
+              fx_contains(out, "psf_sigma_px"), "%d: %s", rc, out);
+    CHECK(!fx_exists(res));
+    fx_write_text(px, "id,x_px,y_px,sigma_px\nA,800,500,0.25\n");
+    rc = test_run(cmd, out, sizeof out);
+    CHECK_MSG(rc == 0, "%d: %s", rc, out);
+    gis_station s;
+    CHECK_OK(gis_station_read(st, &s));
+    gis_fix fx;
+    CHECK_OK(gis_locate(&s.cam, 800, 500, 0.25, 30.0, NULL, &fx));
+    CHECK(fx.ellipse.semi_major_m > 0.0);
+    json_error_t e;
+    json_t *root = json_load_file(res, 0, &e);
+    CHECK(root != NULL);
+    if (root) {
+        json_t *pr = json_object_get(json_array_get(json_object_get(root, "features"), 0), "properties");
+        CHECK_NEAR(json_real_value(json_object_get(pr, "err_major_m")), fx.ellipse.semi_major_m, 1e-9);
+        json_decref(root);
+    }
+}
+
 /* Jansson's allocator failing at its n-th call (json_set_alloc_funcs). */
 static long jansson_calls, jansson_fail_at;
 static void *jansson_failing_malloc(size_t n)
