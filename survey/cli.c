@@ -40,7 +40,7 @@ static const struct {
     {"unmix", srv_cmd_unmix, "light transport: unmix a capture into one image per source (Eqs. 16-19)"},
     {"relight", srv_cmd_relight, "relight unmixed sources: gain, off, other bulb or phase (Eq. 20)"},
     {"separate", srv_cmd_separate, "separate a window's reflection from the daylit scene behind it (Sec. 5.3)"},
-    {"bench", srv_cmd_bench, "performance tables: bench recognize (Eq. 7 throughput), bench db"},
+    {"bench", srv_cmd_bench, "performance tables: recognize (Eq. 7), db, pg, render, blobs, accuracy, transport"},
 };
 
 static void usage(FILE *f)

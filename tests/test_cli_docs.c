@@ -452,6 +452,45 @@ TEST(every_help_has_an_example_of_its_command_with_its_own_flags)
     cached_helps_free();
 }
 
+/* Whether WORD is in TEXT (up to LEN bytes) as a whole word (not inside a longer name). */
+static int has_whole_word(const char *text, size_t len, const char *word)
+{
+    size_t wl = strlen(word);
+    for (const char *p = text; p + wl <= text + len; p++)
+        if (!strncmp(p, word, wl) && (p == text || !(isalnum((unsigned char)p[-1]) || p[-1] == '-')) &&
+            !(isalnum((unsigned char)p[wl]) || p[wl] == '-'))
+            return 1;
+    return 0;
+}
+
+/* The summary `gridsurvey --help` gives a command with subcommands names every subcommand its
+ * own help lists: bench's named only recognize and db of its seven. */
+TEST(top_help_summaries_name_every_subcommand)
+{
+    static char top[65536];
+    CHECK(fx_run_bin(top, sizeof top, "%s --help%s%s%s", NULL, NULL, NULL) == 0);
+    words cmds, subs;
+    help_commands(top, &cmds);
+    int with_subs = 0;
+    for (int c = 0; c < cmds.n; c++) {
+        help_subcommands(cmds.w[c], cached_help(cmds.w[c], NULL), &subs);
+        if (!subs.n) continue;
+        with_subs++;
+        char head[WORD_LEN + 4];
+        snprintf(head, sizeof head, "\n  %s ", cmds.w[c]);
+        const char *line = strstr(top, head);
+        CHECK_MSG(line != NULL, "gridsurvey --help: no line for %s", cmds.w[c]);
+        if (!line) continue;
+        line += strlen(head);
+        size_t len = strcspn(line, "\n");
+        for (int s = 0; s < subs.n; s++)
+            CHECK_MSG(has_whole_word(line, len, subs.w[s]), "gridsurvey --help: the %s line '%.*s' "
+                      "does not name its subcommand %s", cmds.w[c], (int)len, line, subs.w[s]);
+    }
+    CHECK_MSG(with_subs >= 3, "%d commands with subcommands (db, delight, bench)", with_subs);
+    cached_helps_free();
+}
+
 /* The words that follow FLAG (e.g. "-o") in a help's usage and options, each checked for containing "DIR" as
  * want_dir says: -o is always a file, --out-dir always a directory. Returns the count. */
 static int placeholders_after(const char *text, const char *flag, int want_dir, const char *where)
