@@ -491,6 +491,34 @@ TEST(top_help_summaries_name_every_subcommand)
     cached_helps_free();
 }
 
+/* capture's --help lists its common options in a synopsis; each has a line of its own that
+ * says what it does (--max-rounds 0 means as many rounds as the masks allow, not none). */
+TEST(capture_help_describes_its_common_options)
+{
+    const char *help = cached_help("capture", NULL);
+    const char *common = strstr(help, "common:");
+    CHECK(common != NULL);
+    if (!common) return;
+    words fl;
+    char syn[512];   /* the synopsis: up to the blank line */
+    const char *end = strstr(common, "\n\n");
+    snprintf(syn, sizeof syn, "%.*s", end ? (int)(end - common) : 0, common);
+    help_flags(syn, &fl);
+    CHECK_MSG(fl.n >= 8, "%d flags in '%s'", fl.n, syn);
+    for (int f = 0; f < fl.n; f++) {
+        if (!strcmp(fl.w[f], "--progress") || !strcmp(fl.w[f], "--no-progress") || !strcmp(fl.w[f], "-q"))
+            continue;   /* one meaning in every command (progress_flags_mean_the_same_in_every_command) */
+        /* an option line: "  --a, --b  text", the flag in its first column */
+        int described = 0;
+        for (const char *p = strstr(help, "\n  -"); p && !described; p = strstr(p + 1, "\n  -")) {
+            const char *col = p + 3, *gap = strstr(col, "  ");
+            described = has_whole_word(col, gap ? (size_t)(gap - col) : 0, fl.w[f]);
+        }
+        CHECK_MSG(described, "gridsurvey capture --help: %s has no line describing it", fl.w[f]);
+    }
+    cached_helps_free();
+}
+
 /* The words that follow FLAG (e.g. "-o") in a help's usage and options, each checked for containing "DIR" as
  * want_dir says: -o is always a file, --out-dir always a directory. Returns the count. */
 static int placeholders_after(const char *text, const char *flag, int want_dir, const char *where)
