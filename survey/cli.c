@@ -190,6 +190,18 @@ FILE *srv_note_stream(const char *out)
     return out && !strcmp(out, "-") ? stderr : stdout;
 }
 
+/* The unit an option's name ends with (--light-height-m: " m"), "" for none: its range's. */
+static const char *opt_unit(const char *opt)
+{
+    static const char *const units[][2] = {{"-m", " m"}, {"-px", " px"}, {"-deg", " deg"}, {"-hz", " Hz"}, {"-s", " s"}};
+    size_t n = strlen(opt);
+    for (size_t i = 0; i < sizeof units / sizeof *units; i++) {
+        size_t k = strlen(units[i][0]);
+        if (n > k && !strcmp(opt + n - k, units[i][0])) return units[i][1];
+    }
+    return "";
+}
+
 int srv_num_arg_open(const char *cmd, const char *opt, const char *arg, double lo, double hi, int open, double *out)
 {
     double v = NAN;
@@ -208,7 +220,8 @@ int srv_num_arg_open(const char *cmd, const char *opt, const char *arg, double l
             snprintf(range + strlen(range), sizeof range - strlen(range), "%s %s %g", isfinite(lo) ? " and" : "",
                      open & SRV_OPEN_HI ? "<" : "<=", hi);
     }
-    srv_usage_error(cmd, "%s '%s': expected a %snumber%s", opt, arg, *range ? "" : "finite ", range);
+    srv_usage_error(cmd, "%s '%s': expected a %snumber%s%s", opt, arg, *range ? "" : "finite ", range,
+                    *range ? opt_unit(opt) : "");
     return 0;
 }
 

@@ -733,6 +733,11 @@ TEST(cli_usage_errors_of_each_command_one_line_with_the_hint)
         {"%s recognize --blend-prior 1 x", "recognize", "--blend-prior '1': expected a number >= 0 and < 1"},
         {"%s recognize --threshold 0 x", "recognize", "--threshold '0': expected a number > 0 ("},
         {"%s recognize --transformer-deg nan x", "recognize", "--transformer-deg 'nan': expected a finite number"},
+        /* the unit the option's name ends with, after its range */
+        {"%s locate --light-height-m abc --station s.json --pixels p.csv", "locate",
+         "--light-height-m 'abc': expected a number from -12000 to 100000 m ("},
+        {"%s evaluate x --db x.sqlite --match-px 0", "evaluate", "--match-px '0': expected a number > 0 and <= "},
+        {"%s run x --db x.sqlite --light-height-sigma-m -1", "run", "--light-height-sigma-m '-1': expected a number >= 0 m ("},
         /* a format locate cannot tell is a usage error, as export's (it exited 1) */
         {"%s locate --station s.json --pixels p.csv -o o.xyz", "locate", "o.xyz"},
         {"%s locate --station s.json --pixels p.csv -o o.csv --format xml", "locate", "format 'xml'"},
@@ -764,7 +769,7 @@ TEST(cli_failures_name_the_command_and_the_file_not_a_status_word)
     const char *nodir = fx_tmp("no-such-capture"), *scene = fx_tmp("no-format.json");
     fx_write_text(scene, "{\"camera\": 3}\n");
     char want[3][1024];
-    snprintf(want[0], sizeof want[0], "gridsurvey recognize: %s/capture.json: cannot open: ", nodir);
+    snprintf(want[0], sizeof want[0], "gridsurvey recognize: %s: no such directory: expected a capture directory", nodir);
     snprintf(want[1], sizeof want[1], "gridsurvey run: %s:1: field format: expected a string", scene);
     snprintf(want[2], sizeof want[2], "gridsurvey delight plot: --ids: bulb 'no-such-bulb-16' not in the database");
     CHECK(run("%s recognize %s", nodir, NULL, NULL) == 1);

@@ -331,7 +331,9 @@ gs_status gs_capture_read(const char *dir, gs_capture *cap)
     if (there && !S_ISDIR(sb.st_mode))
         return gs_fail(GS_EINVAL, "%s: not a directory: expected a capture directory (a scene file? "
                        "gridsurvey simulate SCENE --out-dir DIR renders one; docs/formats.md)", dir);
-    /* (a directory that is not there is capture.json's "not found", below) */
+    if (!there && errno == ENOENT)
+        return gs_fail(GS_ENOTFOUND, "%s: no such directory: expected a capture directory (gridsurvey "
+                       "simulate SCENE --out-dir DIR renders one; docs/formats.md)", dir);
     int fd = -1;
     gs_status st = there ? gs_capture_lock(dir, 0, &fd) : GS_OK;
     if (st != GS_OK) return st;
