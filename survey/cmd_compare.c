@@ -72,7 +72,7 @@ static void fmt_p(char *buf, size_t size, double p)
     else snprintf(buf, size, "%.4f", p);
 }
 
-/* A share's cell: "33.3 % -> 40.0 % (+6.7, z 1.02, P 0.3077)". */
+/* A share's cell: "33.3 % -> 40.0 % (+6.7 pp, z 1.02, P 0.3077)" (pp: percentage points). */
 static void share_cell(const srv_share_change *c, int i, char *buf, size_t size)
 {
     if (isnan(c->share_a[i]) || isnan(c->share_b[i])) {
@@ -84,7 +84,7 @@ static void share_cell(const srv_share_change *c, int i, char *buf, size_t size)
     }
     char zp[48] = "";
     if (!isnan(c->z[i])) snprintf(zp, sizeof zp, ", z %.2f, P %.4f", c->z[i], c->p[i]);
-    snprintf(buf, size, "%.1f %% -> %.1f %% (%+.1f%s)", 100.0 * c->share_a[i], 100.0 * c->share_b[i],
+    snprintf(buf, size, "%.1f %% -> %.1f %% (%+.1f pp%s)", 100.0 * c->share_a[i], 100.0 * c->share_b[i],
              100.0 * (c->share_b[i] - c->share_a[i]), zp);
 }
 

@@ -130,9 +130,9 @@ TEST(compare_shares_two_proportion_oracle)
 
     int rc = fx_run(out, sizeof out, "%s compare --db %s --survey A --survey B --by feature:feeder --clip %s",
                     test_bin(), path, geo);
-    CHECK_MSG(rc == 0 && strstr(out, "| w | 100 | 100 | 30.0 % -> 20.0 % (-10.0, z -1.63, P 0.1025) | "
-                                      "30.0 % -> 30.0 % (+0.0, z 0.00, P 1.0000) | 40.0 % -> 50.0 % "
-                                      "(+10.0, z 1.42, P 0.1552) | 3.11 | 0.2111 |"), "%d: %s", rc, out);
+    CHECK_MSG(rc == 0 && strstr(out, "| w | 100 | 100 | 30.0 % -> 20.0 % (-10.0 pp, z -1.63, P 0.1025) | "
+                                      "30.0 % -> 30.0 % (+0.0 pp, z 0.00, P 1.0000) | 40.0 % -> 50.0 % "
+                                      "(+10.0 pp, z 1.42, P 0.1552) | 3.11 | 0.2111 |"), "%d: %s", rc, out);
     CHECK_MSG(strstr(out, "| n | 5 | 0 | 100.0 % -> - | 0.0 % -> - | 0.0 % -> - | - | - |"), "%s", out);
     rc = fx_run(out, sizeof out, "%s compare --db %s --survey A --survey B --by feature:feeder", test_bin(), path);
     CHECK_MSG(rc == 2 && strstr(out, "needs --clip"), "%d: %s", rc, out);
