@@ -6,6 +6,7 @@
 #include "survey/internal.h"
 
 #include <math.h>
+#include <sqlite3.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -56,6 +57,31 @@ static srv_share_change *find(srv_share_change *v, size_t n, const char *group)
     return NULL;
 }
 
+/* One cell grid for both surveys (each selection's own centre put the same index on different
+ * ground): centred on their located lights. */
+static gs_status joint_origin(srv_db *db, const char *a, const char *b, double origin[2])
+{
+    static const char sql[] =
+        "SELECT loc.lat_deg, loc.lon_deg FROM locations loc JOIN lights l ON l.id = loc.light_id "
+        "JOIN captures c ON c.id = l.capture_id JOIN surveys s ON s.id = c.survey_id "
+        "WHERE s.name IN (?1, ?2) AND loc.lat_deg IS NOT NULL AND loc.lon_deg IS NOT NULL";
+    sqlite3 *h = srv_db_sqlite(db);
+    sqlite3_stmt *q = NULL;
+    if (sqlite3_prepare_v2(h, sql, -1, &q, NULL) != SQLITE_OK) return srv_dbi_fail(db, "compare: positions");
+    sqlite3_bind_text(q, 1, a, -1, SQLITE_STATIC);
+    sqlite3_bind_text(q, 2, b, -1, SQLITE_STATIC);
+    srv_centre c = {0};
+    int rc;
+    while ((rc = sqlite3_step(q)) == SQLITE_ROW) {
+        double lat = sqlite3_column_double(q, 0), lon = sqlite3_column_double(q, 1);
+        if (isfinite(lat) && isfinite(lon)) srv_centre_add(&c, lat, lon);
+    }
+    gs_status s = rc == SQLITE_DONE ? GS_OK : srv_dbi_fail(db, "compare: positions");
+    sqlite3_finalize(q);
+    srv_centre_get(&c, &origin[0], &origin[1]);
+    return s;
+}
+
 gs_status srv_compare_shares(srv_db *db, const srv_stats_opts *o, const char *survey_a,
                              const char *survey_b, srv_share_change **out, size_t *count)
 {
@@ -64,11 +90,16 @@ gs_status srv_compare_shares(srv_db *db, const srv_stats_opts *o, const char *su
     srv_phase_stats *g[2] = {NULL, NULL};
     size_t ng[2] = {0, 0};
     const char *sv[2] = {survey_a, survey_b};
+    double origin[2] = {o->cell_origin_deg[0], o->cell_origin_deg[1]};
     gs_status s = GS_OK;
+    if (isfinite(o->cell_m) && !(isfinite(origin[0]) && isfinite(origin[1])))
+        s = joint_origin(db, survey_a, survey_b, origin);
     for (int k = 0; k < 2 && s == GS_OK; k++) {
         int64_t id;
         srv_stats_opts ok = *o;
         ok.survey = sv[k];
+        ok.cell_origin_deg[0] = origin[0];
+        ok.cell_origin_deg[1] = origin[1];
         if ((s = srv_db_find_survey(db, sv[k], &id)) == GS_OK) s = srv_stats_compute(db, &ok, &g[k], &ng[k], NULL);
     }
     srv_share_change *v = s == GS_OK ? calloc(ng[0] + ng[1] + 1, sizeof *v) : NULL;

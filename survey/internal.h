@@ -107,6 +107,14 @@ typedef gs_status (*srv_stats_next)(void *ctx, srv_stats_row *row, int *got);
 gs_status srv_stats_run(const srv_stats_opts *o, srv_stats_next next, void *ctx,
                         srv_phase_stats **groups, size_t *count, long *ungrouped);
 int srv_stats_by_survey(const srv_stats_opts *o);
+/* The centre of points, a cell grid's origin (stats.c): the mean latitude and the circular mean
+ * longitude (NaN without a point). Zero it, add each point, get. */
+typedef struct {
+    double slat, ssin, scos;
+    size_t n;
+} srv_centre;
+void srv_centre_add(srv_centre *c, double lat_deg, double lon_deg);
+void srv_centre_get(const srv_centre *c, double *lat_deg, double *lon_deg);
 
 /* Where a command's confirmation line goes: stderr when its output is "-" (stdout). */
 FILE *srv_note_stream(const char *out);

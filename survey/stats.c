@@ -70,12 +70,27 @@ void srv_phase_stats_finish(srv_phase_stats *g)
     if (e < 5.0) g->flags |= SRV_STATS_FEW;
 }
 
+void srv_centre_add(srv_centre *c, double lat_deg, double lon_deg)
+{
+    c->slat += lat_deg;
+    c->ssin += sin(lon_deg * DEG);
+    c->scos += cos(lon_deg * DEG);
+    c->n++;
+}
+
+void srv_centre_get(const srv_centre *c, double *lat_deg, double *lon_deg)
+{
+    *lat_deg = c->n ? c->slat / (double)c->n : NAN;
+    *lon_deg = c->n ? atan2(c->ssin, c->scos) / DEG : NAN;
+}
+
 void srv_stats_opts_default(srv_stats_opts *o)
 {
     memset(o, 0, sizeof *o);
     o->by = SRV_BY_ALL;
     o->cell_m = o->lat_deg = o->lon_deg = o->radius_m = NAN;
     for (int i = 0; i < 4; i++) o->bbox[i] = NAN;
+    o->cell_origin_deg[0] = o->cell_origin_deg[1] = NAN;
     o->min_phase_confidence = 0.0;
 }
 
@@ -486,14 +501,14 @@ gs_status srv_stats_run(const srv_stats_opts *o, srv_stats_next next, void *ctx,
     /* pass 2: the groups (cells need the selection's centre first) */
     double lat0 = 0.0, lon0 = 0.0, kx = 0.0, ky = GIS_EARTH_RADIUS_M * DEG;
     if (uses(o, SRV_BY_CELL) && nrows) {
-        double slat = 0.0, ssin = 0.0, scos = 0.0;
-        for (size_t i = 0; i < nrows; i++) {
-            slat += rows[i].lat;
-            ssin += sin(rows[i].lon * DEG);
-            scos += cos(rows[i].lon * DEG);
+        if (isfinite(o->cell_origin_deg[0]) && isfinite(o->cell_origin_deg[1])) {
+            lat0 = o->cell_origin_deg[0];
+            lon0 = o->cell_origin_deg[1];
+        } else {
+            srv_centre c = {0};
+            for (size_t i = 0; i < nrows; i++) srv_centre_add(&c, rows[i].lat, rows[i].lon);
+            srv_centre_get(&c, &lat0, &lon0);
         }
-        lat0 = slat / (double)nrows;
-        lon0 = atan2(ssin, scos) / DEG;
         kx = GIS_EARTH_RADIUS_M * cos(lat0 * DEG) * DEG;
     }
     for (size_t i = 0; i < nrows; i++) {

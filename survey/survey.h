@@ -381,6 +381,8 @@ typedef struct {
     srv_group_by then[SRV_BY_MAX - 1];   /* the others of a combination (n_then of them) */
     int n_then;
     double cell_m;             /* SRV_BY_CELL: cell side, metres (> 0) */
+    double cell_origin_deg[2]; /* SRV_BY_CELL: the grid's origin, latitude and longitude (NaN:
+                                * the selection's centre; `compare` gives both surveys one) */
     double lat_deg, lon_deg;   /* SRV_BY_RADIUS: centre */
     double radius_m;           /* SRV_BY_RADIUS: > 0, spherical distance (see stats.c) */
     double min_phase_confidence;    /* lights with phase_confidence below it are excluded (0) */

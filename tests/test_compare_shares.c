@@ -40,8 +40,8 @@ static const char areas_json[] =
 static void add_survey(srv_db *db, int64_t sid, const char *key, const int counts[3][3], double offset_m)
 {
     static const double lon0[3] = {35.0005, 35.0205, 35.0005}, lat0[3] = {32.8005, 32.8005, 32.8205};
-    srv_light_row l[160];
-    srv_location_row loc[160];
+    srv_light_row l[200];
+    srv_location_row loc[200];
     int k = 0;
     double ky = 1.0 / 111000.0, kx = ky / cos(32.8 * M_PI / 180.0);
     for (int a = 0; a < 3; a++)
@@ -174,5 +174,47 @@ TEST(compare_shares_unequal_sizes_one_dof)
     }
     free(v);
     srv_areas_free(areas);
+    srv_db_close(db);
+}
+
+/* compare --by cell ran each survey's statistics on a grid centred on its own lights, so one
+ * cell index meant different ground in the two: B, the same lights as A plus 60 more 2 km north,
+ * had its grid 0.7 km north of A's, and the cells of the lights both surveys share compared
+ * different lights. Now both are on one grid: every cell holding A's lights holds B's same
+ * lights (its counts equal, phase by phase), and B's 60 northern lights are in cells of their
+ * own. */
+TEST(compare_by_cell_one_grid_for_both_surveys)
+{
+    const char *path = fx_tmp("cells.sqlite");
+    static const int ca[3][3] = {{30, 30, 40}, {10, 10, 10}, {0, 0, 0}};
+    static const int cb[3][3] = {{30, 30, 40}, {10, 10, 10}, {60, 0, 0}};
+    int64_t a_id, b_id;
+    srv_db *db = survey_fx_create(path, "A", &a_id);
+    if (!db) return;
+    srv_survey_row sb = {.name = "B", .grid_hz = 50};
+    CHECK_OK(srv_db_add_survey(db, &sb, &b_id));
+    add_survey(db, a_id, "cap-a", ca, 0.0);
+    add_survey(db, b_id, "cap-b", cb, 0.0);
+    srv_stats_opts o;
+    srv_stats_opts_default(&o);
+    o.detections = 1;
+    CHECK_OK(srv_stats_parse_by("cell:500", &o));
+    srv_share_change *v = NULL;
+    size_t n = 0;
+    CHECK_OK(srv_compare_shares(db, &o, "A", "B", &v, &n));
+    long shared = 0, b_only = 0;
+    for (size_t i = 0; i < n; i++) {
+        if (v[i].total_a == 0) {
+            b_only += v[i].total_b;
+            continue;
+        }
+        for (int p = 0; p < 3; p++)
+            CHECK_MSG(v[i].n_a[p] == v[i].n_b[p], "cell %s phase %d: A %ld, B %ld", v[i].group, 120 * p,
+                      v[i].n_a[p], v[i].n_b[p]);
+        shared += v[i].total_a;
+    }
+    CHECK_MSG(shared == 130 && b_only == 60, "A's lights in cells with B's: %ld of 130; B's alone: %ld of 60", shared,
+              b_only);
+    free(v);
     srv_db_close(db);
 }
