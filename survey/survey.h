@@ -46,7 +46,7 @@ int srv_main(int argc, char **argv);
  * ===================================================================================== */
 
 #define SRV_DB_SCHEMA_VERSION 5
-#define SRV_DB_APPLICATION_ID 0x47534442   /* 'GSDB' (GeoPackage uses 'GPKG' = 0x47504B47) */
+#define SRV_DB_APPLICATION_ID GS_SURVEY_DB_APPLICATION_ID   /* 'GSDB' (GeoPackage uses 'GPKG' = 0x47504B47) */
 #define SRV_DB_FORMAT "gridsurvey-survey"
 /* Written to migrations.generator and delight_versions.generator. */
 #define SRV_GENERATOR "gridsurvey 0.1"

@@ -353,7 +353,16 @@ TEST(delight_sqlite_rejects_other_files)
     sqlite3_close(db);
     CHECK(gs_delight_load(d, other) == GS_EFORMAT);
     CHECK(strstr(gs_detail(), other) && strstr(gs_detail(), "gridsurvey-delight") &&
-          !strchr(gs_detail(), '\n'));
+          !strchr(gs_detail(), '\n') && !strstr(gs_detail(), "survey database"));
+    /* a survey database (its application_id) given for a DELIGHT one is named so */
+    const char *survey = fx_tmp("survey-as-delight.sqlite");
+    CHECK(sqlite3_open(survey, &db) == SQLITE_OK);
+    CHECK(sqlite3_exec(db, "CREATE TABLE surveys(id INTEGER); PRAGMA user_version = 5; PRAGMA application_id = "
+                       "1196639298", NULL, NULL, NULL) == SQLITE_OK);
+    sqlite3_close(db);
+    CHECK(gs_delight_load(d, survey) == GS_EFORMAT);
+    CHECK_MSG(strstr(gs_detail(), survey) && strstr(gs_detail(), "a survey database, which goes with --db"), "%s",
+              gs_detail());
     /* ... and save refuses to overwrite it */
     CHECK(gs_delight_save(d, other) == GS_EFORMAT);
     CHECK(strstr(gs_detail(), other) != NULL);

@@ -556,6 +556,9 @@ gs_status gs_delight_save(const gs_delight *d, const char *path);
  * is written (GS_OK), for a caller that must then read that file first (gs_atomic_commit_new). */
 gs_status gs_delight_save_new(const gs_delight *d, const char *path, int *raced);
 gs_status gs_delight_load(gs_delight *d, const char *path);
+/* The survey database's SQLite application_id ('GSDB', survey/survey.h): load names such a
+ * file as one when it is given for a DELIGHT database. */
+#define GS_SURVEY_DB_APPLICATION_ID 0x47534442
 /* Both wait up to GS_DELIGHT_BUSY_MS for another process's transaction on the file. */
 #define GS_DELIGHT_BUSY_MS 10000
 /* SQLite's message for db's last failure into buf, with the system's error behind an I/O or

@@ -361,9 +361,14 @@ gs_status gs_delight_load(gs_delight *d, const char *path)
         sqlite3_step(meta) == SQLITE_ROW)
         format = (const char *)sqlite3_column_text(meta, 0);
     if (!format || strcmp(format, FORMAT_NAME) != 0) {
+        sqlite3_stmt *q = NULL;
+        int app = sqlite3_prepare_v2(db, "PRAGMA application_id", -1, &q, NULL) == SQLITE_OK &&
+                          sqlite3_step(q) == SQLITE_ROW ? sqlite3_column_int(q, 0) : 0;
+        sqlite3_finalize(q);
         s = gs_fail(GS_EFORMAT, "%s: not a DELIGHT database: expected format '%s' with schema version "
-                    "%d (found user_version %d, format '%s')", path, FORMAT_NAME,
-                    GS_DELIGHT_SCHEMA_VERSION, version, format ? format : "none");
+                    "%d (found user_version %d, format '%s'%s)", path, FORMAT_NAME,
+                    GS_DELIGHT_SCHEMA_VERSION, version, format ? format : "none",
+                    (unsigned)app == GS_SURVEY_DB_APPLICATION_ID ? ": a survey database, which goes with --db" : "");
         goto done;
     }
     if (sqlite3_prepare_v2(db, "SELECT bulb_id, grid_hz, sensor, ref, type, name, watts, bands, n "
