@@ -76,6 +76,17 @@ gs_status gis_format_from_path(const char *path, gis_format *f)
                    ".json, .kml, .gpkg or .csv (or give the format)", path ? path : "");
 }
 
+gs_status gis_format_choose(const char *name, const char *path, gis_format *f)
+{
+    if (!name) return gis_format_from_path(path, f);
+    gis_format by_path;
+    gs_status s = gis_format_parse(name, f);
+    if (s == GS_OK && gis_format_from_path(path, &by_path) == GS_OK && by_path != *f)
+        s = gs_fail(GS_EINVAL, "--format %s but %s's extension is another format's: name the file for "
+                    "the format, or leave --format out", name, path);
+    return s;
+}
+
 static int located(const gis_light *l)
 {
     return isfinite(l->lat_deg) && isfinite(l->lon_deg);

@@ -281,6 +281,10 @@ typedef enum { GIS_FORMAT_GEOJSON, GIS_FORMAT_KML, GIS_FORMAT_GPKG, GIS_FORMAT_C
 gs_status gis_format_parse(const char *name, gis_format *f);
 /* The format implied by a path's extension (.geojson/.json, .kml, .gpkg, .csv). */
 gs_status gis_format_from_path(const char *path, gis_format *f);
+/* An output's format: name's (--format) when given, else the path's extension's; GS_EINVAL when
+ * the two name different formats (GeoJSON written to x.kml). A path without a known extension
+ * takes any name. */
+gs_status gis_format_choose(const char *name, const char *path, gis_format *f);
 
 /* Each writer replaces path atomically (a temporary file in the same directory, then rename):
  * on failure path is untouched and no temporary file is left. Strings must not hold control

@@ -24,7 +24,8 @@ static const char export_usage[] =
     "\n"
     "  --db DB             the survey database (read-only)\n"
     "  -o FILE             output file (replaced atomically)\n"
-    "  --format F          geojson, kml, gpkg or csv (default: from the -o extension)\n"
+    "  --format F          geojson, kml, gpkg or csv (default: from the -o extension; it\n"
+    "                      must not be another format's extension)\n"
     "  --survey NAME       only this survey\n"
     "  --technology TECH   only this technology (sodium_hp, led_linear, ...; none = no bulb)\n"
     "  --phase P           only lights on phase 0, 120 or 240 (within 20 deg), another phase\n"
@@ -274,7 +275,7 @@ int srv_cmd_export(int argc, char **argv)
     if (optind < argc) return srv_usage_error("export", "unexpected argument '%s'", argv[optind]);
     if (!path || !out) return srv_usage_error("export", "--db and -o are required");
     gis_format fmt;
-    gs_status s = format ? gis_format_parse(format, &fmt) : gis_format_from_path(out, &fmt);
+    gs_status s = gis_format_choose(format, out, &fmt);
     if (s != GS_OK) return srv_usage_error("export", "%s", gs_detail());
     srv_db *db;
     if ((s = srv_db_open(path, SRV_DB_READ, &db)) != GS_OK) return srv_error("export", s);

@@ -32,7 +32,8 @@ static const char locate_usage[] =
     "  --light-height-m H  the lights' height above the WGS84 ellipsoid, metres (default 0;\n"
     "                   note that ellipsoidal heights differ from heights above sea level by\n"
     "                   the geoid undulation, up to +-100 m)\n"
-    "  --format F       geojson, kml, gpkg or csv (default: from the -o extension)\n"
+    "  --format F       geojson, kml, gpkg or csv (default: from the -o extension; it must\n"
+    "                   not be another format's extension)\n"
     "  -o FILE          output file (replaced atomically)\n"
     "  --map FILE.png   also draw a map of the located lights\n"
     "  --survey NAME    the survey the lights belong to (stored with every light)\n"
@@ -208,7 +209,7 @@ int srv_cmd_locate(int argc, char **argv)
     if (survey && strlen(survey) >= GIS_TEXT_MAX)
         return srv_usage_error("locate", "--survey: at most %d bytes", GIS_TEXT_MAX - 1);
     gis_format fmt;
-    gs_status s = format ? gis_format_parse(format, &fmt) : gis_format_from_path(out, &fmt);
+    gs_status s = gis_format_choose(format, out, &fmt);
     if (s != GS_OK) return srv_usage_error("locate", "%s", gs_detail());
 
     gis_station st;

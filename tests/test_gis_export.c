@@ -520,6 +520,21 @@ TEST(gis_cli_locate)
     /* an output format it cannot tell is a usage error, as export's */
     snprintf(cmd, sizeof cmd, "%s locate --station %s --pixels %s -o %s", test_bin(), st, px, fx_tmp("x.shp"));
     CHECK(test_run(cmd, out, sizeof out) == 2 && fx_contains(out, "cannot tell the format"));
+    /* --format against the extension of another format: GeoJSON was written to x.kml; a name
+     * without a known extension takes any format, and .json is GeoJSON's */
+    fx_write_text(st, "{\"lat_deg\": 40.0, \"lon_deg\": -75.0,\n \"height_m\": 120.0,\n \"heading_deg\": 30,\n"
+                   " \"pitch_deg\": -10, \"focal_px\": 2000, \"cx_px\": 959.5, \"cy_px\": 539.5}\n");
+    snprintf(cmd, sizeof cmd, "%s locate --station %s --pixels %s -o %s --format geojson", test_bin(), st, px,
+             fx_tmp("x.kml"));
+    rc = test_run(cmd, out, sizeof out);
+    CHECK_MSG(rc == 2 && fx_count_lines(out) == 1 && fx_contains(out, "--format geojson but ") &&
+              fx_contains(out, "x.kml's extension is another format's") && !fx_exists(fx_tmp("x.kml")), "%d: %s", rc, out);
+    snprintf(cmd, sizeof cmd, "%s locate --station %s --pixels %s -o %s --format geojson", test_bin(), st, px,
+             fx_tmp("x.json"));
+    CHECK(test_run(cmd, out, sizeof out) == 0 && fx_exists(fx_tmp("x.json")));
+    snprintf(cmd, sizeof cmd, "%s locate --station %s --pixels %s -o %s --format csv", test_bin(), st, px,
+             fx_tmp("x.out"));
+    CHECK(test_run(cmd, out, sizeof out) == 0 && fx_exists(fx_tmp("x.out")));
 }
 
 /* A station with psf_sigma_px (as every capture.json's own, which `gridsurvey run` uses) has a
