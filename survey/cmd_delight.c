@@ -276,13 +276,15 @@ static gs_status add_recording(gs_delight *d, const void *arg)
         b.grid_hz = o->grid_hz;
     if (o->has_type) b.type = o->type;
     if (s == GS_OK) s = gs_delight_add(d, &b);
+    /* no flicker found: the cycles of the nominal 2 x grid over the recording's duration */
+    int found = isfinite(info.flicker_hz);
+    double flicker_hz = found ? info.flicker_hz : 2.0 * b.grid_hz;
+    double cycles = found ? info.cycles : (double)info.samples / info.sample_rate_hz * flicker_hz;
     if (s == GS_OK)
         printf("added %s: %zu samples at %.0f Hz, %s %.2f Hz over %.1f cycles, grid %d Hz, "
                "percent flicker %.1f, reference %s\n",
-               b.id, info.samples, info.sample_rate_hz,
-               isfinite(info.flicker_hz) ? "flicker" : "no flicker found, nominal",
-               isfinite(info.flicker_hz) ? info.flicker_hz : 2.0 * b.grid_hz, info.cycles,
-               b.grid_hz, info.percent_flicker, gs_ref_name(b.ref));
+               b.id, info.samples, info.sample_rate_hz, found ? "flicker" : "no flicker found, nominal",
+               flicker_hz, cycles, b.grid_hz, info.percent_flicker, gs_ref_name(b.ref));
     /* filed, but say so (with --grid, or a voltage column's grid): its BRF spans one cycle of its
      * own flicker, not a grid half-cycle */
     if (s == GS_OK && b.ref == GS_REF_UNLOCKED && isfinite(info.flicker_hz))

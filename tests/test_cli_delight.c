@@ -106,6 +106,22 @@ TEST(cli_delight_add_unlocked_warns_and_keeps_percent_flicker)
     CHECK_MSG(strstr(out, " unlocked       -  20.0 "), "%s", out);   /* (ref, then watts in 7) */
 }
 
+
+/* A lamp without flicker (0.5 s of a constant at 10 kHz) filed with --grid 50: `add` names the
+ * nominal 100 Hz and the cycles the recording spans at it, 0.5 s x 100 Hz = 50 (it printed
+ * "over nan cycles": the measured flicker frequency, NaN, times the duration). */
+TEST(cli_delight_add_flat_recording_counts_nominal_cycles)
+{
+    const char *rec = fx_tmp("flat.csv"), *db = fx_tmp("flat.sqlite");
+    FILE *f = fopen(rec, "w");
+    CHECK(f != NULL);
+    if (!f) return;
+    for (int i = 0; i < 5000; i++) fprintf(f, "%.9g,0.25\n", i * 1e-4);
+    fclose(f);
+    CHECK(run("%s delight add --from-recording %s --grid 50 --delight %s", rec, db) == 0);
+    CHECK_MSG(strstr(out, "no flicker found, nominal 100.00 Hz over 50.0 cycles, grid 50 Hz, "
+                          "percent flicker 0.0, reference none") != NULL, "%s", out);
+}
 TEST(cli_delight_plot_writes_png)
 {
     const char *png = fx_tmp("brf.png");
