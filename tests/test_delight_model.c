@@ -251,7 +251,7 @@ static const struct {
     {GS_TECH_HALOGEN, "0v", 0, 5, 10, "mains 5-10 % [D/L]"},   /* -120v, -230v */
     {GS_TECH_FLUORESCENT_MAGNETIC, "-halo", 0, 25, 40, "25-40 % halophosphate [L]"},
     {GS_TECH_FLUORESCENT_MAGNETIC, "-tri", 0, 15, 25, "15-25 % triphosphor [L]"},
-    {GS_TECH_CFL, "cfl-15w-m", 50, 8.8, 9.0, "8.9 % measured [M]"},
+    {GS_TECH_CFL, "cfl-15w-m", 60, 8.8, 9.0, "8.9 % measured [M] (data/flicker/CFL.csv: 60 Hz mains)"},
     {GS_TECH_MERCURY, "-clear", 0, 50, 65, "50-65 % clear [L]"},
     {GS_TECH_MERCURY, "-coated", 0, 35, 45, "35-45 % coated [L]"},
 };

@@ -100,7 +100,7 @@ static const bulb_spec bulbs[] = {
     {"fle-t5-28w", "Fluorescent T5 28 W electronic ballast", GS_TECH_FLUORESCENT_ELECTRONIC, 28, 0, 50, 2.5, 7.5, V_TRI, 0},
     {"fle-t5-54w", "Fluorescent T5HO 54 W electronic ballast", GS_TECH_FLUORESCENT_ELECTRONIC, 54, 0, 50, 2.5, 7.5, V_TRI, 0},
     /* CFL: 5-30 % [L], 8.9 % measured [M] */
-    {"cfl-15w-m", "CFL spiral 15 W (8.9 % as measured)", GS_TECH_CFL, 15, 0, 50, 8.9, 8.9, V_TRI, 0},
+    {"cfl-15w-m", "CFL spiral 15 W (8.9 % as measured)", GS_TECH_CFL, 15, 0, 60, 8.9, 8.9, V_TRI, 0},
     {"cfl-11w", "CFL stick 11 W", GS_TECH_CFL, 11, 0, 50, 14.0, 22.0, V_TRI, 0},
     {"cfl-20w", "CFL spiral 20 W", GS_TECH_CFL, 20, 0, 60, 7.0, 14.0, V_TRI, 0},
     {"cfl-23w", "CFL spiral 23 W", GS_TECH_CFL, 23, 0, 60, 14.0, 22.0, V_TRI, 0},
