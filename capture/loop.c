@@ -469,6 +469,8 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
         gs_capture_unlock(lock_fd);
         if ((s = gs_capture_lock(dir, writer, &lock_fd)) != GS_OK) {
             made_dir = 0;   /* (the writer holding it, or a reader, may not be done) */
+            if (!writer)    /* (the shared lock's refusal is a reader's; a writer may go elsewhere) */
+                s = gs_fail(s, "%s, or give another directory", gs_detail());
             goto done;
         }
         if (writer) remove_stale_temporaries(dir);
