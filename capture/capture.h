@@ -457,7 +457,9 @@ gs_status cap_sim_stage(const cap_sim *s, size_t i, cap_stage_info *info);
 unsigned long long cap_sim_effect_calls(const cap_sim *s, cap_effect e);
 
 /* truth.json (CAP_TRUTH_FORMAT): every light (id, pixel, in_image, lat/lon/height when
- * geographic, distance, bulb id, technology, phase, flux) and the non-AC distractors. */
+ * geographic, distance, bulb id, technology, phase, flux) and the non-AC distractors; written
+ * under the directory's shared lock (gs_capture_lock: it fails in one line while another
+ * process acquires into the directory). */
 gs_status cap_sim_write_truth(const cap_sim *s, const char *dir);
 
 

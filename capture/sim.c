@@ -712,7 +712,7 @@ static json_t *jnum(double v)
     return isfinite(v) ? json_real(v) : json_null();
 }
 
-gs_status cap_sim_write_truth(const cap_sim *s, const char *dir)
+static gs_status write_truth(const cap_sim *s, const char *dir)
 {
     const cap_scene *sc = &s->sc;
     json_t *root = json_object(), *lights = json_array();
@@ -845,6 +845,19 @@ gs_status cap_sim_write_truth(const cap_sim *s, const char *dir)
     withnl[len + 1] = '\0';
     gs_status st = cap_write_in(dir, "truth.json", withnl, len + 1);
     free(withnl);
+    return st;
+}
+
+/* (under the directory's shared lock: a writer, which takes it exclusive, took the truth's
+ * temporaries for a killed run's and removed them when it came after the acquisition loop had
+ * released the lock) */
+gs_status cap_sim_write_truth(const cap_sim *s, const char *dir)
+{
+    int fd;
+    gs_status st = gs_capture_lock(dir, 0, &fd);
+    if (st != GS_OK) return st;
+    st = write_truth(s, dir);
+    gs_capture_unlock(fd);
     return st;
 }
 

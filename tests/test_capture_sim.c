@@ -9,12 +9,15 @@
 #include "survey/internal.h"
 
 #include <errno.h>
+#include <fcntl.h>
 #include <jansson.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/file.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 static gs_delight *delight(void)
 {
@@ -720,5 +723,39 @@ TEST(sim_halved_pixels_match_unhalved_on_real_mains)
             cap_sim_free(s);
             cap_scene_release(&sc);
         }
+    gs_delight_free(d);
+}
+
+/* truth.json was written after the acquisition loop released the directory's lock: a writer
+ * that took the lock meanwhile removed the truth's temporary file as a killed run's, and the
+ * rename failed. It is now written under the shared lock, which keeps writers out: while a
+ * writer holds the directory (here this process, through an open file description of its own)
+ * the write fails in one line naming it and leaves nothing; once free, it writes truth.json. */
+TEST(sim_truth_written_under_the_directory_lock)
+{
+    gs_delight *d = delight();
+    CHECK(d != NULL);
+    cap_scene sc;
+    CHECK_OK(cap_scene_parse(exact_scene, "exact.json", ".", &sc));
+    cap_sim *s = NULL;
+    CHECK_OK(cap_sim_new(&sc, d, &s));
+    const char *dir = fx_tmp("truth-lock");
+    CHECK(mkdir(dir, 0777) == 0);
+    int fd = open(dir, O_RDONLY | O_DIRECTORY);
+    CHECK(fd >= 0 && flock(fd, LOCK_EX) == 0);
+    if (s) {
+        CHECK(cap_sim_write_truth(s, dir) == GS_EIO);
+        CHECK_MSG(strstr(gs_detail(), dir) && strstr(gs_detail(), "another process"), "%s", gs_detail());
+        char cmd[2048], out[256];
+        snprintf(cmd, sizeof cmd, "ls -A %s | wc -l", dir);
+        CHECK(test_run(cmd, out, sizeof out) == 0 && !strcmp(out, "0\n"));
+        close(fd);
+        CHECK_OK(cap_sim_write_truth(s, dir));
+        char path[1100];
+        snprintf(path, sizeof path, "%s/truth.json", dir);
+        CHECK(fx_exists(path));
+    }
+    cap_sim_free(s);
+    cap_scene_release(&sc);
     gs_delight_free(d);
 }

@@ -330,6 +330,8 @@ TEST(kit_numeric_median_and_wraps)
     CHECK(gs_median_d(two, 2) == 2.0 && isnan(gs_median_d(two, 0)));
     CHECK(gs_wrap360(-1e-17) == 0.0 && gs_wrap360(725) == 5 && gs_wrap360(-90) == 270);
     CHECK(gs_wrap180(180) == -180 && gs_wrap180(-181) == 179 && gs_wrap180(359) == -1);
+    /* zero without a sign (an export printed "-0.0000000000" for -0 and -360) */
+    CHECK(!signbit(gs_wrap180(-0.0)) && !signbit(gs_wrap180(-360.0)) && !signbit(gs_wrap180(-720.0)));
     /* exact: a longitude already in [-180, 180) comes back unchanged (x + 180 - 180 moved 35.02 to
      * 35.02000000000001, off an area's edge), another one is x - 360 k to the bit (k/1024 degrees
      * plus multiples of 360 are exact doubles) */

@@ -102,7 +102,7 @@ double gs_wrap180(double a_deg)
     double r = fmod(a_deg, 360.0);
     if (r >= 180.0) r -= 360.0;
     else if (r < -180.0) r += 360.0;
-    return r;
+    return r + 0.0;   /* (-0.0, of -0 or -360 k, as +0: exports would print "-0.0") */
 }
 
 const char *gs_number_prefix(const char *s, double *v)
