@@ -670,13 +670,15 @@ gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unm
         }
         if ((st = eq16_pass(&u, r, pass, acc)) != GS_OK) goto done;
         if (pass == 0) {
-            double worst = 0, all = 0;
-            int ws = 0, part = 1;   /* the complete pixels', or without one the partly saturated */
-            for (int s = 0; s < S; s++) part &= !(u.sig_sum[0][s] > 0);
-            const double *var_sum = u.var_sum[part], *sig_sum = u.sig_sum[part];
+            double worst = 0, all = 0, sig[SMAX];
+            int ws = 0;
             for (int s = 0; s < S; s++) {
-                all += sig_sum[s];
-                r->predicted_error[s] = sig_sum[s] > 0 ? sqrt(var_sum[s] / sig_sum[s]) : INFINITY;
+                /* over the pixels with every sample usable, or the partly saturated ones where
+                 * they hold most of the source's light */
+                int part = u.sig_sum[1][s] > u.sig_sum[0][s];
+                sig[s] = u.sig_sum[0][s] + u.sig_sum[1][s];
+                all += sig[s];
+                r->predicted_error[s] = u.sig_sum[part][s] > 0 ? sqrt(u.var_sum[part][s] / u.sig_sum[part][s]) : INFINITY;
                 if (!(r->predicted_error[s] <= worst)) {
                     worst = r->predicted_error[s];
                     ws = s;
@@ -694,7 +696,7 @@ gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unm
                              "%.3g; its image holds %.2g %% of the fitted images' energy): the data do not support %d "
                              "sources (paper Fig. 10)",
                              ws, src->bulb[ws], src->phase_deg[ws], 100 * worst, worst,
-                             o_in->max_error, cmax, all > 0 ? 100 * sig_sum[ws] / all : 0.0, S);
+                             o_in->max_error, cmax, all > 0 ? 100 * sig[ws] / all : 0.0, S);
                 goto done;
             }
         }
