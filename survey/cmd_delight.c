@@ -285,6 +285,13 @@ static gs_status add_recording(gs_delight *d, const void *arg)
                "percent flicker %.1f, reference %s\n",
                b.id, info.samples, info.sample_rate_hz, found ? "flicker" : "no flicker found, nominal",
                flicker_hz, cycles, b.grid_hz, info.percent_flicker, gs_ref_name(b.ref));
+    /* filed, but say so: a light clipped at the top of the recorder's range (the flat top reads
+     * as less flicker than the lamp's) */
+    if (s == GS_OK && info.clipped_share > 0.01 && info.percent_flicker > 1.0)
+        fprintf(stderr, "gridsurvey delight add: warning: %s: %.1f %% of the samples sit at the "
+                "recording's largest value, in runs: a clipped light? its percent flicker (%.1f) then "
+                "reads low; record it within the instrument's range\n", o->recording,
+                100.0 * info.clipped_share, info.percent_flicker);
     /* filed, but say so (with --grid, or a voltage column's grid): its BRF spans one cycle of its
      * own flicker, not a grid half-cycle */
     if (s == GS_OK && b.ref == GS_REF_UNLOCKED && isfinite(info.flicker_hz))

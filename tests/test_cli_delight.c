@@ -7,6 +7,7 @@
 #include "tests/test.h"
 
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -122,6 +123,38 @@ TEST(cli_delight_add_flat_recording_counts_nominal_cycles)
     CHECK_MSG(strstr(out, "no flicker found, nominal 100.00 Hz over 50.0 cycles, grid 50 Hz, "
                           "percent flicker 0.0, reference none") != NULL, "%s", out);
 }
+/* A light clipped at the top of the recorder's range (a 100 Hz flicker of 19 % percent flicker,
+ * its upper third cut flat: 13.5 %) was filed without a word; now a warning names the file
+ * and the share of samples at its largest value. The same wave unclipped, with noise, and the
+ * shared/data/flicker recordings (well under 1 % there) file without one. */
+TEST(cli_delight_add_warns_of_a_clipped_recording)
+{
+    const char *rec = fx_tmp("clipped.csv");
+    for (int clip = 1; clip >= 0; clip--) {
+        const char *db = fx_tmp(clip ? "clipped.sqlite" : "unclipped.sqlite");
+        FILE *f = fopen(rec, "w");
+        CHECK(f != NULL);
+        if (!f) return;
+        uint64_t rs = 5;
+        for (int i = 0; i < 20000; i++) {
+            double v = 1.0 + 0.19 * cos(2 * M_PI * 100.0 * i * 1e-4);
+            if (clip) v = fmin(v, 1.1);
+            else v += 1e-3 * gs_splitmix_normal(&rs);
+            fprintf(f, "%.9g,%.6f\n", i * 1e-4, v);
+        }
+        fclose(f);
+        CHECK(run("%s delight add --from-recording %s --grid 50 --delight %s", rec, db) == 0);
+        CHECK_MSG(!strstr(out, "warning") == !clip, "clip %d: %s", clip, out);
+        CHECK_MSG(!clip || (strstr(out, "clipped.csv: ") && strstr(out, " % of the samples sit at the recording's "
+                                                                    "largest value, in runs: a clipped light?")),
+                  "%s", out);
+    }
+    char path[1200];
+    snprintf(path, sizeof path, "%s", test_shared_path("data/flicker/CFL.csv"));
+    CHECK(run("%s delight add --from-recording %s --delight %s", path, fx_tmp("cfl.sqlite")) == 0);
+    CHECK_MSG(!strstr(out, "warning"), "%s", out);
+}
+
 TEST(cli_delight_plot_writes_png)
 {
     const char *png = fx_tmp("brf.png");

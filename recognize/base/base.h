@@ -593,6 +593,9 @@ typedef struct {
     double cycles;             /* flicker cycles covered by the recording */
     double percent_flicker;    /* of the folded, averaged waveform */
     int grid_hz;               /* 50 or 60 inferred from flicker_hz, 0 if unlocked */
+    double clipped_share;      /* samples at the recording's largest value next to another there:
+                                * a clipped light (its flicker then reads low); real recordings
+                                * hold well under 1 % */
 } gs_recording_info;
 /* Reads `time,value[,voltage...]` CSV as oscilloscopes write it: UTF-8 BOM, `Key:value,`
  * metadata lines, a header that may run into the first sample, CRLF; uniform time steps.

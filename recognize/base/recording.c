@@ -535,6 +535,12 @@ gs_status gs_recording_to_bulb(const char *path, int voltage_column, int n, gs_b
         info->cycles = T * f_fold;
         info->percent_flicker = gs_brf_percent_flicker(&out->brf, 0);
         info->grid_hz = grid;
+        double top = s.x[0];
+        for (size_t i = 1; i < N; i++) top = fmax(top, s.x[i]);
+        size_t at_top = 0;
+        for (size_t i = 0; i < N; i++)
+            at_top += s.x[i] == top && ((i > 0 && s.x[i - 1] == top) || (i + 1 < N && s.x[i + 1] == top));
+        info->clipped_share = (double)at_top / (double)N;
     }
 done:
     gs_brf_release(&brf);
