@@ -94,6 +94,18 @@ static void phase_label(double phase_deg, int three, char *out, size_t size)
     else snprintf(out, size, "%d", ((int)lround(phase_deg / 30.0) % 12) * 30);
 }
 
+/* Whether every known phase of the detections is within 20 deg of 0/120/240 (the site's phase
+ * labels are then those three classes, else the twelve multiples of 30 deg). */
+static int phases_three(const srv_site_obs *o, size_t n)
+{
+    for (size_t i = 0; i < n; i++) {
+        if (isnan(o[i].phase_deg)) continue;
+        int cl = gs_phase_class(o[i].phase_deg);
+        if (cl < 0 || cl == 3) return 0;
+    }
+    return 1;
+}
+
 void srv_site_combine(const srv_site_obs *o, size_t n, srv_site_value *v)
 {
     memset(v, 0, sizeof *v);
@@ -115,12 +127,7 @@ void srv_site_combine(const srv_site_obs *o, size_t n, srv_site_value *v)
     double c[SRV_SITE_MAX_OBS];
     long M[SRV_SITE_MAX_OBS];
     size_t map[SRV_SITE_MAX_OBS], m = 0;
-    int three = 1;
-    for (size_t i = 0; i < n; i++) {
-        if (isnan(o[i].phase_deg)) continue;
-        int cl = gs_phase_class(o[i].phase_deg);
-        if (cl < 0 || cl == 3) three = 0;
-    }
+    int three = phases_three(o, n);
     long mphase = three ? 3 : 12;   /* 0/120/240, else the multiples of 30 deg */
     /* bulb */
     for (size_t i = 0; i < n; i++)
@@ -695,6 +702,26 @@ static double p_same(int same_winner, double ca, double cb, double M)
     return ca * rb + cb * ra + (M - 2.0) * ra * rb;
 }
 
+/* P(two phase posteriors name the same label), over the twelve multiples of 30 deg: each side
+ * its winner's label w with c and the rest spread evenly over the other labels of its own set,
+ * the classes 0/120/240 (labels 0, 4, 8) when three, else all twelve (as srv_site_combine:
+ * a night with a transformer-phase detection has twelve, the other may have three). */
+static double p_label(int l, int w, double c, int three)
+{
+    if (three && l % 4) return 0.0;
+    return l == w ? c : (1.0 - c) / (three ? 2.0 : 11.0);
+}
+
+static double p_same_phase(const srv_site_value *a, int three_a, const srv_site_value *b, int three_b)
+{
+    int wa = (int)lround(gs_wrap360(a->phase_deg) / 30.0) % 12, wb = (int)lround(gs_wrap360(b->phase_deg) / 30.0) % 12;
+    if (three_a) wa = 4 * gs_phase_class(a->phase_deg);
+    if (three_b) wb = 4 * gs_phase_class(b->phase_deg);
+    double p = 0.0;
+    for (int l = 0; l < 12; l++) p += p_label(l, wa, a->phase_confidence, three_a) * p_label(l, wb, b->phase_confidence, three_b);
+    return p;
+}
+
 static const char compare_sql[] =
     "SELECT sd.site_id, s.name = ?2, l.bulb_id, l.technology, l.phase_deg, l.phase_sigma_deg, "
     "l.confidence, l.bulb_confidence, l.phase_confidence, " SRV_SQL_BULB_LABELS ", ls.lat_deg, ls.lon_deg, "
@@ -731,7 +758,7 @@ static void judge(srv_change *c, const srv_site_obs *oa, size_t na, const srv_si
         int three = ka >= 0 && ka < 3 && kb >= 0 && kb < 3;
         int same = three ? ka == kb
                          : (int)lround(c->a.phase_deg / 30.0) % 12 == (int)lround(c->b.phase_deg / 30.0) % 12;
-        c->p_phase_change = 1.0 - p_same(same, c->a.phase_confidence, c->b.phase_confidence, three ? 3.0 : 12.0);
+        c->p_phase_change = 1.0 - p_same_phase(&c->a, phases_three(oa, na), &c->b, phases_three(ob, nb));
         if (!same && c->p_phase_change >= min_p) c->kinds |= SRV_CHANGE_PHASE;
     }
     if (c->a.bulb_id[0] && c->b.bulb_id[0]) {

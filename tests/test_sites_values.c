@@ -210,9 +210,12 @@ static void posterior(const double *phase, const double *c, int n, int twelve, d
     for (int l = 0; l < M; l++) P[l] /= z;
 }
 
-/* Four pixel sites seen twice in survey a and once in survey b (phase confidences c), against
+/* Five pixel sites seen twice in survey a and once in survey b (phase confidences c), against
  * P(phase differs) = 1 - sum_l P_a(l) P_b(l): the same winner (0 deg; 150 deg of twelve),
- * reported for their bulb change, and different winners (0 vs 120; 30 vs 90 of twelve). At
+ * reported for their bulb change, and different winners (0 vs 120; 30 vs 90 of twelve; 0 of
+ * three in a vs 150 of twelve in b, each side's posterior over its own labels: a's three classes
+ * are the labels 0, 120, 240 of b's twelve; it spread a's three-class confidence over twelve:
+ * 0.951 for 0.964). At
  * --min-p 0.5 the same winner is no phase change although P >= 0.5. */
 TEST(sites_compare_phase_change_probabilities)
 {
@@ -221,16 +224,17 @@ TEST(sites_compare_phase_change_probabilities)
     if (!db) return;
     srv_survey_row sb = {"b", NULL, NULL, NULL, 50};
     CHECK_OK(srv_db_add_survey(db, &sb, &sid[1]));
-    enum { NS = 4 };
+    enum { NS = 5 };
     static const struct {
         double x, phase[3], c[3];   /* a1, a2, b1 */
         const char *bulb_b;
-        int twelve;
+        int twelve_a, twelve_b;
     } S[NS] = {
-        {100, {0, 0, 0}, {0.6, 0.7, 0.5}, "q", 0},
-        {200, {0, 0, 120}, {0.8, 0.6, 0.9}, "p", 0},
-        {300, {29, 31, 90}, {0.9, 0.8, 0.7}, "p", 1},
-        {400, {150, 150, 151}, {0.6, 0.5, 0.4}, "q", 1},
+        {100, {0, 0, 0}, {0.6, 0.7, 0.5}, "q", 0, 0},
+        {200, {0, 0, 120}, {0.8, 0.6, 0.9}, "p", 0, 0},
+        {300, {29, 31, 90}, {0.9, 0.8, 0.7}, "p", 1, 1},
+        {400, {150, 150, 151}, {0.6, 0.5, 0.4}, "q", 1, 1},
+        {500, {0, 0, 150}, {0.6, 0.5, 0.6}, "p", 0, 1},
     };
     static const char *const keys[3] = {"a1", "a2", "b1"};
     for (int k = 0; k < 3; k++) {
@@ -260,9 +264,13 @@ TEST(sites_compare_phase_change_probabilities)
             continue;
         }
         double Pa[12], Pb[12], same = 0.0;
-        posterior(S[i].phase, S[i].c, 2, S[i].twelve, Pa);
-        posterior(S[i].phase + 2, S[i].c + 2, 1, S[i].twelve, Pb);
-        for (int l = 0; l < (S[i].twelve ? 12 : 3); l++) same += Pa[l] * Pb[l];
+        posterior(S[i].phase, S[i].c, 2, S[i].twelve_a, Pa);
+        posterior(S[i].phase + 2, S[i].c + 2, 1, S[i].twelve_b, Pb);
+        for (int l = 0; l < 12; l++) {   /* (three classes: the labels 0, 4, 8 of the twelve) */
+            double pa = S[i].twelve_a ? Pa[l] : l % 4 ? 0.0 : Pa[l / 4];
+            double pb = S[i].twelve_b ? Pb[l] : l % 4 ? 0.0 : Pb[l / 4];
+            same += pa * pb;
+        }
         CHECK_MSG(fabs(ch[j].p_phase_change - (1.0 - same)) < 1e-12, "site x %.0f: P(phase differs) %.15f, "
                   "expected %.15f", S[i].x, ch[j].p_phase_change, 1.0 - same);
         unsigned want = strcmp(S[i].bulb_b, "p") ? SRV_CHANGE_BULB : SRV_CHANGE_PHASE;
