@@ -23,7 +23,8 @@ gs_status rec_relight(const rec_sources *src, const float *tq, int width, int he
         }
         const char *bulb = r->bulb[0] ? r->bulb : src->bulb[s];
         double phase = r->set_phase ? r->phase_deg : src->phase_deg[s];
-        int same = !strcmp(bulb, src->bulb[s]) && (!r->set_phase || fabs(gs_wrap180(phase - src->phase_deg[s])) < 1e-9);
+        /* (a phase and that phase + 180 deg are one flicker: its BRF is the half AC cycle's) */
+        int same = !strcmp(bulb, src->bulb[s]) && (!r->set_phase || fabs(remainder(phase - src->phase_deg[s], 180.0)) < 1e-9);
         double q[GS_MAX_BANDS];
         double *b = brf + (size_t)s * B * K;
         if (same) {
