@@ -118,14 +118,18 @@ static int compare_shares(const char *path, const char *const sv[2], srv_stats_o
     srv_areas_free(areas);
     if (s != GS_OK) return srv_error("compare", s);
     static const char *const ph[3] = {"0", "120", "240"};
+    int cells = 0;
+    for (size_t k = 0; k < n; k++) cells |= !isnan(v[k].lat_deg);
     if (csv) {
-        printf("group,n_a,n_b");
+        printf("group,lat_deg,lon_deg,n_a,n_b");
         for (int i = 0; i < 3; i++)
             printf(",n%s_a,n%s_b,share%s_a,share%s_b,z%s,p%s", ph[i], ph[i], ph[i], ph[i], ph[i], ph[i]);
         printf(",chi2,dof,p_value\n");
         for (size_t k = 0; k < n; k++) {
             const srv_share_change *c = &v[k];
-            printf("\"%s\",%ld,%ld", c->group, c->total_a, c->total_b);
+            printf("\"%s\",", c->group);
+            isnan(c->lat_deg) ? printf(",,") : printf("%.8f,%.8f,", c->lat_deg, c->lon_deg);
+            printf("%ld,%ld", c->total_a, c->total_b);
             for (int i = 0; i < 3; i++) {
                 printf(",%ld,%ld", c->n_a[i], c->n_b[i]);
                 double x[4] = {c->share_a[i], c->share_b[i], c->z[i], c->p[i]};
@@ -136,13 +140,17 @@ static int compare_shares(const char *path, const char *const sv[2], srv_stats_o
         }
     } else {
         printf("Phase shares of %s -> %s (two-proportion z test of each change; chi-square test of "
-               "homogeneity of the split):\n\n| group | n %s | n %s | 0 deg | 120 deg | 240 deg | chi2 | P |\n"
-               "|---|---:|---:|---|---|---|---:|---:|\n", sv[0], sv[1], sv[0], sv[1]);
+               "homogeneity of the split):\n\n| group |%s n %s | n %s | 0 deg | 120 deg | 240 deg | chi2 | P |\n"
+               "|---|%s---:|---:|---|---|---|---:|---:|\n", sv[0], sv[1], cells ? " lat, lon |" : "", sv[0], sv[1],
+               cells ? "---|" : "");
         for (size_t k = 0; k < n; k++) {
             const srv_share_change *c = &v[k];
             char cell[3][128];
             for (int i = 0; i < 3; i++) share_cell(c, i, cell[i], sizeof cell[i]);
-            printf("| %s | %ld | %ld | %s | %s | %s | ", c->group, c->total_a, c->total_b, cell[0], cell[1], cell[2]);
+            char ll[64] = "";
+            if (cells) snprintf(ll, sizeof ll, " %.6f, %.6f |", c->lat_deg, c->lon_deg);
+            printf("| %s |%s %ld | %ld | %s | %s | %s | ", c->group, ll, c->total_a, c->total_b, cell[0], cell[1],
+                   cell[2]);
             isnan(c->chi2) ? printf("- | - |\n") : printf("%.2f | %.4f |\n", c->chi2, c->p_value);
         }
     }

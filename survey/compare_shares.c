@@ -111,6 +111,8 @@ gs_status srv_compare_shares(srv_db *db, const srv_stats_opts *o, const char *su
             if (!c) {
                 c = &v[n++];
                 snprintf(c->group, sizeof c->group, "%s", g[k][i].group);
+                c->lat_deg = g[k][i].lat_deg;
+                c->lon_deg = g[k][i].lon_deg;
             }
             long *dst = k ? c->n_b : c->n_a;
             for (int p = 0; p < 3; p++) dst[p] = g[k][i].n[p];

@@ -204,10 +204,17 @@ TEST(compare_by_cell_one_grid_for_both_surveys)
     CHECK_OK(srv_compare_shares(db, &o, "A", "B", &v, &n));
     long shared = 0, b_only = 0;
     for (size_t i = 0; i < n; i++) {
+        /* each cell's centre: within half a cell (250 m, 0.0023 deg of latitude, 0.0027 of
+         * longitude) of its lights, the shared ones in w and e (lat 32.8005-32.8100, lon
+         * 35.0005-35.0300), B's own in n (lat 32.8205 and up) */
+        double lat = v[i].lat_deg, lon = v[i].lon_deg;
+        CHECK_MSG(lon > 35.0005 - 0.0027 && lon < 35.03 + 0.0027, "cell %s: lon %.6f", v[i].group, lon);
         if (v[i].total_a == 0) {
+            CHECK_MSG(lat > 32.8205 - 0.0023, "cell %s: lat %.6f", v[i].group, lat);
             b_only += v[i].total_b;
             continue;
         }
+        CHECK_MSG(lat > 32.8005 - 0.0023 && lat < 32.81 + 0.0023, "cell %s: lat %.6f", v[i].group, lat);
         for (int p = 0; p < 3; p++)
             CHECK_MSG(v[i].n_a[p] == v[i].n_b[p], "cell %s phase %d: A %ld, B %ld", v[i].group, 120 * p,
                       v[i].n_a[p], v[i].n_b[p]);
@@ -217,4 +224,11 @@ TEST(compare_by_cell_one_grid_for_both_surveys)
               b_only);
     free(v);
     srv_db_close(db);
+    /* the CLI gives the centres: the table's lat, lon column and the CSV's lat_deg, lon_deg */
+    int rc = fx_run(out, sizeof out, "%s compare --db %s --survey A --survey B --by cell:500", test_bin(),
+                    path);
+    CHECK_MSG(rc == 0 && strstr(out, "| group | lat, lon | n A | n B |") && strstr(out, "| 32.8"), "%d: %s", rc, out);
+    rc = fx_run(out, sizeof out, "%s compare --db %s --survey A --survey B --by cell:500 --format csv",
+                test_bin(), path);
+    CHECK_MSG(rc == 0 && !strncmp(out, "group,lat_deg,lon_deg,n_a,n_b,", 30) && strstr(out, ",32.8"), "%d: %s", rc, out);
 }
