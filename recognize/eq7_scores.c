@@ -213,8 +213,9 @@ double rec_eq7_loglik_red(const rec_matcher *m, const rec_eq7_work *w, int bulb,
                 fit->z = z > 0.0 ? z : 0.0;
                 for (int b = 0; b < nb; b++) {
                     double sb = tol * fit->a * c[b];
-                    /* posterior mean of a_b: data a_b (weight T_b) and prior a c_b (1/s_b^2) */
-                    fit->band[b] = T[b] > 0.0 ? (sb > 0.0 ? (T[b] * ah[b] + fit->a * c[b] / (sb * sb)) /
+                    /* posterior mean of a_b: data a_b (weight T_b) and prior a c_b (1/s_b^2);
+                     * the prior's alone where 1/s_b^2 overflows (a light ~1e-160 of its noise) */
+                    fit->band[b] = T[b] > 0.0 ? (1.0 / (sb * sb) < INFINITY ? (T[b] * ah[b] + fit->a * c[b] / (sb * sb)) /
                                                               (T[b] + 1.0 / (sb * sb))
                                                           : fit->a * c[b])
                                               : 0.0;

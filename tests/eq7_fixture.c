@@ -212,7 +212,11 @@ int eq7fx_all_finite(const rec_match *r)
            isfinite(r->bulb_confidence) && isfinite(r->phase_confidence) &&
            isfinite(r->runner_phase_deg) && isfinite(r->runner_confidence) && r->dof >= 0 &&
            r->confidence >= 0 && r->confidence <= 1 && r->bulb_confidence <= 1 &&
-           r->phase_confidence <= 1 && r->phase_deg >= 0 && r->phase_deg < 360;
+           r->phase_confidence <= 1 && r->phase_deg >= 0 && r->phase_deg < 360 &&
+           isfinite(r->band_brightness[0] + r->band_brightness[1] + r->band_brightness[2]) &&
+           isfinite(r->band_flat[0] + r->band_flat[1] + r->band_flat[2]) && isfinite(r->model_error) &&
+           isfinite(r->shape_p_value) && isfinite(r->p_other) && isfinite(r->blend_p_value) &&
+           isfinite(r->p_blend);
 }
 
 rec_matcher *eq7fx_new_matcher(const gs_delight *d, int grid_hz, int bands, int K,

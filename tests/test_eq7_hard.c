@@ -225,6 +225,27 @@ TEST(eq7_nan_inf_negative_input)
                   "negative light: bulb %d flags %u", r.bulb, r.flags);
         rec_matcher_free(mr);
     }
+    /* a light 1e-160 of its noise under the reddened model (K = 7): the prior's std of each band's
+     * gain, tol a c_b, squares below DBL_MIN and its precision 1/s_b^2 overflows; the band
+     * brightnesses were inf/inf = NaN. Dim, every field finite, the bands' posterior means the
+     * prior's a c_b (zero here) */
+    {
+        rec_eq7_opts o;
+        rec_eq7_opts_default(&o);
+        o.model_error = 0.0;
+        rec_matcher *mr = NULL;
+        CHECK_OK(rec_matcher_new(d, 50, 3, 7, &o, &mr));
+        double xs[21], ss[21];
+        eq7fx_render(rec_matcher_bulb(mr, 2), gs_phase_to_shift(240), 7, 1.0, 0.0, &rs, xs, ss);
+        double lo[] = {1e-160, 1e-200, 1e-300};
+        for (size_t i = 0; i < 3; i++) {
+            for (int k = 0; k < 21; k++) ss[k] = 1.0 / lo[i];
+            CHECK_OK(rec_match_light(mr, xs, ss, &r));
+            CHECK_MSG(eq7fx_all_finite(&r) && r.bulb == -1 && (r.flags & REC_MATCH_DIM),
+                      "signal %g of sigma: bulb %d flags %u brightness %g", lo[i], r.bulb, r.flags, r.brightness);
+        }
+        rec_matcher_free(mr);
+    }
     /* a sigma spread too wide for doubles: flagged, still finite */
     eq7fx_render(rec_matcher_bulb(m, 3), 0.0, 26, 1.0, 0.0, &rs, x, sg);
     for (int k = 0; k < 78; k++) sg[k] = k == 0 ? 1e300 : 1e-300;
