@@ -8,6 +8,10 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* The least share of the winner's template energy (sum t^2) on the usable samples for an
+ * answer (eq7_few_usable_samples_never_confidently_wrong) */
+#define SHOWN_SHARE_MIN 0.05
+
 /* ------------------------------------------------------------ one light */
 
 /* chi2(s) of continuous bulb b with the scale(s) profiled (a >= 0), and its derivatives. */
@@ -659,7 +663,17 @@ gs_status rec_eq7_light_finish(const rec_matcher *m, rec_eq7_work *w, size_t q, 
     if (out->phase_confidence < m->o.ambiguous_conf) flags |= REC_MATCH_PHASE_AMBIGUOUS;
     if (out->dof > 0 && out->p_value < m->o.unknown_p) flags |= REC_MATCH_UNKNOWN;
     if (snr < m->o.min_snr) flags |= REC_MATCH_DIM;
-    if (flags & (REC_MATCH_UNKNOWN | REC_MATCH_DIM | REC_MATCH_BLEND)) {
+    /* a winner that holds almost none of its template's energy on the usable samples (the others
+     * saturated: sigma = +inf) fits them with any brightness, and the flat prior's -log(T)/2
+     * favours it (docs/recognition.md "Dropped samples and the brightness prior"): the data do not
+     * show its light, so no answer */
+    double t_used = 0.0, t_all = 0.0;
+    for (size_t d = 0; d < D; d++) {
+        t_all += tb[d] * tb[d];
+        if (w->w[d] > 0.0) t_used += tb[d] * tb[d];
+    }
+    int unseen = t_used < SHOWN_SHARE_MIN * t_all;
+    if ((flags & (REC_MATCH_UNKNOWN | REC_MATCH_DIM | REC_MATCH_BLEND)) || unseen) {
         /* no answer; the best fit within the database moves to the runner-up fields */
         out->runner_bulb = out->bulb;
         out->runner_phase_deg = out->phase_deg;

@@ -247,7 +247,9 @@ enum {
  *   discrete phase set; for REC_PHASES_CONTINUOUS (bulb, the +-30 deg of phase around the
  *   bulb's best phase); a GS_REF_NONE (shape-only) bulb is one pair whatever its shift, and
  *   when it wins phase_deg = 0, phase_confidence = 0 and PHASE_AMBIGUOUS is set.
- * - bulb = -1: BAD_INPUT without usable samples (every number 0), or DIM or UNKNOWN: then the
+ * - bulb = -1: BAD_INPUT without usable samples (every number 0), or DIM or UNKNOWN, or a best
+ *   fit whose template holds under 5 % of its energy on the usable samples (the light unseen
+ *   where it was dropped; BULB_ and PHASE_AMBIGUOUS): then the
  *   best fit within the database is in runner_bulb / runner_phase_deg / runner_confidence
  *   (its posterior if the light were in the database), and brightness, chi2, dof, p_value
  *   describe that fit; confidence, bulb_confidence and phase_confidence are 0. */
