@@ -285,7 +285,9 @@ gs_status cap_backend_hardware_new(const cap_hw_config *c, cap_backend **out)
     if ((s = cap_vio_open(b->camera, c->camera_images, &b->cam)) != GS_OK) goto fail;
     double actual;
     double exposure = cap_hw_exposure_s(c->cycles, c->grid_hz, c->exposure_margin_s);
-    if ((s = cap_vio_set_exposure(b->cam, exposure, &actual)) != GS_OK) goto fail;
+    if ((s = cap_vio_set_exposure(b->cam, exposure, &actual)) != GS_OK ||
+        (s = cap_hw_exposure_check(b->camera, exposure, actual)) != GS_OK)
+        goto fail;
     time_t now = time(NULL);
     struct tm tmv;
     gmtime_r(&now, &tmv);
@@ -298,6 +300,14 @@ gs_status cap_backend_hardware_new(const cap_hw_config *c, cap_backend **out)
 fail:
     hw_free(b);
     return s;
+}
+
+gs_status cap_hw_exposure_check(const char *camera, double asked_s, double actual_s)
+{
+    if (!isfinite(actual_s) || fabs(actual_s - asked_s) <= 0.02 * asked_s) return GS_OK;
+    return gs_fail(GS_ELIMIT, "camera %s: exposure %.4g s asked, it set %.4g s: outside its range (the "
+                   "frame must span the lock wait and C cycles: fewer cycles, or a camera with longer "
+                   "exposures)", camera, asked_s, actual_s);
 }
 
 double cap_hw_exposure_s(long cycles, int grid_hz, double margin_s)

@@ -103,9 +103,14 @@ extern "C" {
 #endif
 gs_status cap_vio_open(const char *source, int images, cap_vio **out);
 void cap_vio_close(cap_vio *v);
-/* Sets CAP_PROP_EXPOSURE (the backend's unit: seconds for most V4L2 drivers through OpenCV's
- * mapping) and reads it back into *actual (NaN when the backend has no exposure control). */
-gs_status cap_vio_set_exposure(cap_vio *v, double exposure, double *actual);
+/* Sets the exposure, exposure_s seconds, through CAP_PROP_EXPOSURE in the backend's unit, and
+ * reads it back into *actual_s: for V4L2 (OpenCV passes the value to V4L2's
+ * exposure_time_absolute, in 100 us: 5 s was 0.5 ms) both in seconds; a backend of unknown unit
+ * gets the seconds as they are, *actual_s NaN (not read back). */
+gs_status cap_vio_set_exposure(cap_vio *v, double exposure_s, double *actual_s);
+/* The backend's CAP_PROP_EXPOSURE units in one second (OpenCV's backend name: V4L2 1e4), NaN
+ * when unknown. */
+double cap_vio_units_per_s(const char *backend);
 /* Grabs the next frame as width x height x bands 16-bit samples (R, G, B order for 3 bands; an
  * 8-bit camera is scaled by 257). GS_EIO when no frame comes, GS_EFORMAT for another size or
  * channel count. */
@@ -121,6 +126,7 @@ typedef struct {
     void (*close)(cap_vio *);
     gs_status (*set_exposure)(cap_vio *, double, double *);
     gs_status (*read)(cap_vio *, int, int, int, unsigned short *);
+    const char *(*backend)(cap_vio *);
 } cap_vio_api;
 gs_status cap_vio_plugin_load(const char *bin_dir, cap_vio_api *api);
 /* The plugin's entry points, one for each of the above. */
@@ -128,6 +134,8 @@ gs_status cap_vio_plugin_open(const char *source, int images, cap_vio **out);
 void cap_vio_plugin_close(cap_vio *v);
 gs_status cap_vio_plugin_set_exposure(cap_vio *v, double exposure, double *actual);
 gs_status cap_vio_plugin_read(cap_vio *v, int width, int height, int bands, unsigned short *out);
+/* OpenCV's name of the camera's backend (VideoCapture::getBackendName; "" if it has none). */
+const char *cap_vio_plugin_backend(cap_vio *v);
 #ifdef __cplusplus
 }
 #endif

@@ -5,6 +5,7 @@
 
 #include <dlfcn.h>
 #include <limits.h>
+#include <math.h>
 #include <stdio.h>
 #include <string.h>
 #include <unistd.h>
@@ -34,7 +35,8 @@ gs_status cap_vio_plugin_load(const char *bin_dir, cap_vio_api *out)
     *(void **)&a.close = dlsym(h, "cap_vio_plugin_close");
     *(void **)&a.set_exposure = dlsym(h, "cap_vio_plugin_set_exposure");
     *(void **)&a.read = dlsym(h, "cap_vio_plugin_read");
-    if (!a.open || !a.close || !a.set_exposure || !a.read) {
+    *(void **)&a.backend = dlsym(h, "cap_vio_plugin_backend");
+    if (!a.open || !a.close || !a.set_exposure || !a.read || !a.backend) {
         dlclose(h);
         return gs_fail(GS_EIO, "camera: the OpenCV camera plugin lacks its entry points "
                        "(cap_vio_plugin_*): rebuild it with the binary");
@@ -69,9 +71,17 @@ void cap_vio_close(cap_vio *v)
     if (v && api.close) api.close(v);
 }
 
-gs_status cap_vio_set_exposure(cap_vio *v, double exposure, double *actual)
+double cap_vio_units_per_s(const char *backend)
 {
-    return api.set_exposure(v, exposure, actual);
+    return backend && !strcmp(backend, "V4L2") ? 1e4 : NAN;
+}
+
+gs_status cap_vio_set_exposure(cap_vio *v, double exposure_s, double *actual_s)
+{
+    double per = cap_vio_units_per_s(api.backend(v)), raw = NAN;
+    gs_status s = api.set_exposure(v, isfinite(per) ? exposure_s * per : exposure_s, &raw);
+    *actual_s = isfinite(per) ? raw / per : NAN;
+    return s;
 }
 
 gs_status cap_vio_read(cap_vio *v, int width, int height, int bands, unsigned short *out)

@@ -319,6 +319,23 @@ TEST(capture_hardware_exposure_spans_the_slowest_grid)
     CHECK(cap_hw_exposure_s(1500, 50, 0.05) > at_49_8 + CAP_LINK_LOCK_WAIT_MS / 1000.0);
 }
 
+/* The exposure went to OpenCV's CAP_PROP_EXPOSURE in seconds whatever the backend: V4L2 passes
+ * it to exposure_time_absolute, in 100 us, so an ACam's 5.3 s was 0.53 ms, and the value read
+ * back was never looked at. Now V4L2 gets 1e4 units a second (others, of unknown unit, the
+ * seconds as before, not read back), and an exposure read back more than 2 % off the one asked
+ * (a camera that clamps it to its range) fails in one line naming both. */
+TEST(capture_hardware_exposure_in_the_backends_unit_and_read_back)
+{
+    CHECK(cap_vio_units_per_s("V4L2") == 1e4);
+    CHECK(isnan(cap_vio_units_per_s("CV_IMAGES")) && isnan(cap_vio_units_per_s("")) && isnan(cap_vio_units_per_s(NULL)));
+    CHECK_OK(cap_hw_exposure_check("/dev/video0", 5.3, 5.3));
+    CHECK_OK(cap_hw_exposure_check("/dev/video0", 5.3, 5.3 * 1.019));
+    CHECK_OK(cap_hw_exposure_check("/dev/video0", 5.3, NAN));   /* not read back */
+    CHECK(cap_hw_exposure_check("/dev/video0", 5.3, 0.5) == GS_ELIMIT);
+    CHECK_MSG(strstr(gs_detail(), "camera /dev/video0: exposure 5.3 s asked, it set 0.5 s: outside its range") &&
+              !strchr(gs_detail(), '\n'), "%s", gs_detail());
+}
+
 TEST(capture_hardware_backend_failures)
 {
     const char *tmp = test_tmpdir();
@@ -400,6 +417,9 @@ TEST(capture_camera_plugin_installed_layout_and_load_errors)
                         bad += raw[((size_t)y * HW_W + (size_t)x) * 3 + (size_t)b] != hw_pixel(0, x, y, b);
             CHECK_MSG(bad == 0, "%zu samples of frame 0 differ from the camera's", bad);
             CHECK(api.read(v, HW_W + 1, HW_H, 3, raw) == GS_EFORMAT);
+            /* its backend's name: an image sequence's, whose exposure unit is unknown */
+            const char *be = api.backend(v);
+            CHECK_MSG(be && *be && isnan(cap_vio_units_per_s(be)), "backend '%s'", be ? be : "(null)");
         }
         free(raw);
         if (v) api.close(v);

@@ -13,6 +13,7 @@
 #include <cstring>
 #include <exception>
 #include <new>
+#include <string>
 
 extern "C" {
 #include "capture/internal.h"
@@ -20,6 +21,7 @@ extern "C" {
 
 struct cap_vio {
     cv::VideoCapture cap;
+    std::string backend;   /* getBackendName(), kept for cap_vio_plugin_backend */
 };
 
 static gs_status fail_exception(const char *what, const std::exception &e)
@@ -44,6 +46,10 @@ extern "C" gs_status cap_vio_plugin_open(const char *source, int images, cap_vio
             delete v;
             return gs_fail(GS_EIO, "camera %s: OpenCV VideoCapture cannot open it%s", source,
                            images ? " as an image sequence (CAP_IMAGES)" : "");
+        }
+        try {
+            v->backend = v->cap.getBackendName();
+        } catch (const cv::Exception &) {   /* (a capture without a backend name) */
         }
         *out = v;
         return GS_OK;
@@ -75,6 +81,11 @@ extern "C" gs_status cap_vio_plugin_set_exposure(cap_vio *v, double exposure, do
     } catch (...) {
         return gs_fail(GS_EIO, "camera: unknown C++ exception");
     }
+}
+
+extern "C" const char *cap_vio_plugin_backend(cap_vio *v)
+{
+    return v->backend.c_str();
 }
 
 extern "C" gs_status cap_vio_plugin_read(cap_vio *v, int width, int height, int bands,
