@@ -72,8 +72,9 @@ gs_status cap_fx_extinction(cap_sim *s, cap_render *r)
 
 double cap_scintillation_index(const cap_effects *fx, double aperture_mm, double L)
 {
+    if (!(L > 0)) return 0.0;   /* distance unknown: the light is skipped (docs/scene.md) */
     if (fx->scint.sigma2 >= 0) return fx->scint.sigma2;
-    if (!(L > 0) || !(fx->scint.cn2 > 0)) return 0.0;
+    if (!(fx->scint.cn2 > 0)) return 0.0;
     double lambda = fx->scint.wavelength_nm * 1e-9, k = 2.0 * M_PI / lambda;
     /* spherical-wave Rytov variance (Andrews and Phillips, Laser Beam Propagation through
      * Random Media, 2nd ed., SPIE 2005, Eq. 8.xx): beta0^2 = 0.5 Cn^2 k^(7/6) L^(11/6) */

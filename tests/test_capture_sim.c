@@ -759,3 +759,47 @@ TEST(sim_truth_written_under_the_directory_lock)
     cap_scene_release(&sc);
     gs_delight_free(d);
 }
+
+/* A pixel light without distance_m (0, unknown) is skipped by scintillation (docs/scene.md),
+ * even when the scene gives the intensity variance: its frames are those of the scene without
+ * scintillation, bit for bit, and truth.json gives it no scintillation; a light with a distance
+ * beside it scintillates. (It used to get the given variance, with a cycle-to-cycle correlation
+ * from a made-up 1 m Fresnel scale.) */
+TEST(sim_scintillation_skips_a_light_without_distance)
+{
+    static const char *fmt =
+        "{\"format\": \"gridsurvey-scene/1\", \"seed\": 9, \"grid\": {\"nominal_hz\": 50},\n"
+        " \"camera\": {\"width_px\": 8, \"height_px\": 4, \"sensor\": {\"bands\": 1}},\n"
+        " \"acam\": {\"K\": 4, \"cycles\": 16},\n"
+        " \"lights\": [{\"bulb\": \"hps-150w\", \"x_px\": 1, \"y_px\": 1, \"flux_e_per_cycle\": 900},\n"
+        "            {\"bulb\": \"hps-150w\", \"x_px\": 5, \"y_px\": 2, \"distance_m\": 1000, \"flux_e_per_cycle\": 900}],\n"
+        " \"effects\": {%s}}\n";
+    const char *fx[2] = {"", "\"scintillation\": {\"intensity_variance\": 0.5}"};
+    gs_delight *d = delight();
+    double dn[2][4][8 * 4];
+    cap_sim *s[2] = {NULL, NULL};
+    cap_scene sc[2];
+    for (int i = 0; i < 2; i++) {
+        char text[2048];
+        snprintf(text, sizeof text, fmt, fx[i]);
+        CHECK_OK(cap_scene_parse(text, "scint.json", ".", &sc[i]));
+        CHECK_OK(cap_sim_new(&sc[i], d, &s[i]));
+        for (int k = 0; s[i] && k < 4; k++) CHECK_OK(cap_sim_render(s[i], k, 0, k, NULL, NULL, dn[i][k]));
+    }
+    if (s[0] && s[1]) {
+        int same = 1, moved = 0;
+        for (int k = 0; k < 4; k++) {
+            same &= dn[1][k][1 * 8 + 1] == dn[0][k][1 * 8 + 1];
+            moved += fabs(dn[1][k][2 * 8 + 5] / dn[0][k][2 * 8 + 5] - 1) > 1e-6;
+        }
+        CHECK_MSG(same, "the light without a distance scintillated: frame 0 %g, without the effect %g",
+                  dn[1][0][1 * 8 + 1], dn[0][0][1 * 8 + 1]);
+        CHECK(moved == 4);
+        CHECK(s[1]->scint_s2[0] == 0 && s[1]->scint_s2[1] > 0);
+    }
+    for (int i = 0; i < 2; i++) {
+        cap_sim_free(s[i]);
+        cap_scene_release(&sc[i]);
+    }
+    gs_delight_free(d);
+}
