@@ -154,7 +154,7 @@ static gs_status shade_footprints(cap_sim *s)
 {
     double R = s->sc.fx.transport.shade_radius_px, f = s->sc.fx.transport.shade_transmission;
     int r = (int)ceil(R);
-    size_t per = (size_t)(2 * r + 1) * (size_t)(2 * r + 1), total = s->fp_n;
+    size_t per = (size_t)(2 * r + 2) * (size_t)(2 * r + 2), total = s->fp_n;   /* the disk's box */
     if (!total)
         for (size_t l = 0; l < s->n; l++) total += (size_t)s->fp[l].w * (size_t)s->fp[l].h;
     double *w = malloc(sizeof *w * (total + s->n * per + 1));
@@ -176,21 +176,22 @@ static gs_status shade_footprints(cap_sim *s)
         int xb = x0 + n > s->W ? s->W : x0 + n, yb = y0 + n > s->H ? s->H : y0 + n;
         memset(fp, 0, sizeof *fp);
         if (xb <= xa || yb <= ya) continue;
-        /* the disk's area in each pixel from a 4 x 4 grid of sub-samples */
+        /* the disk's area in each pixel from a 4 x 4 grid of sub-samples; the whole disk's
+         * (off the image too) carries the transmission: on the samples it is not pi R^2 */
         double sum = 0;
         size_t start = off;
-        for (int y = ya; y < yb; y++)
-            for (int x = xa; x < xb; x++) {
+        for (int y = y0; y < y0 + n; y++)
+            for (int x = x0; x < x0 + n; x++) {
                 int in = 0;
                 for (int j = 0; j < 4; j++)
                     for (int i = 0; i < 4; i++) {
                         double dx = x - 0.375 + 0.25 * i - cx, dy = y - 0.375 + 0.25 * j - cy;
                         in += dx * dx + dy * dy <= R * R;
                     }
-                w[off++] = in / 16.0;
                 sum += in / 16.0;
+                if (x >= xa && x < xb && y >= ya && y < yb) w[off++] = in / 16.0;
             }
-        for (size_t i = start; i < off; i++) w[i] *= sum > 0 ? f / (M_PI * R * R) : 0.0;
+        for (size_t i = start; i < off; i++) w[i] *= sum > 0 ? f / sum : 0.0;
         *fp = (cap_footprint){xa, ya, xb - xa, yb - ya, start};
     }
     free(s->fp_w);

@@ -1043,3 +1043,59 @@ TEST(sec53_separation_ncc_at_least_0_97_with_the_true_components)
     rec_separation_release(&sep);
     gs_capture_release(&cap);
 }
+
+/* A lamp shade is a uniform disk carrying `transmission` of its light's flux (docs/scene.md):
+ * with black walls (albedo 0: no transport) every frame holds exactly transmission x the frame
+ * of the same light without the effect (flux conservation), for small and large disks anywhere
+ * on the pixel grid. The disk's area came from 4 x 4 sub-samples per pixel but was divided by
+ * pi R^2: a shade carried 0.955 of its transmission at R = 0.5 px, 1.035 at 1 and 2 px, 1.010 at
+ * 4 px (capture/scenes/lab_transport.json); and a lone light's disk overran its weights' array
+ * (sized for a (2r+1)^2 box, the disk's is (2r+2)^2: this test crashed). */
+TEST(sim_lamp_shade_carries_its_transmission)
+{
+    static const char *fmt =
+        "{\"format\": \"gridsurvey-scene/1\", \"grid\": {\"nominal_hz\": 50},\n"
+        " \"camera\": {\"width_px\": 24, \"height_px\": 20, \"sensor\": {\"bands\": 1}},\n"
+        " \"acam\": {\"K\": 4, \"cycles\": 8},\n"
+        " \"lights\": [{\"bulb\": \"hps-150w\", \"x_px\": %g, \"y_px\": %g, \"distance_m\": 2, \"flux_e_per_cycle\": 1000}],\n"
+        " \"effects\": {%s}}\n";
+    const double radius[] = {0.5, 1, 2, 2.7, 4};
+    /* the last: at x = 0.3 a disk of R = 2 px has the circular segment beyond the image's edge
+     * (x = -0.5, 0.8 px from its centre) off the sensor: 1 - (4 acos(0.4) - 0.8 sqrt(3.36)) /
+     * (4 pi) = 0.7477 of its flux reaches the image */
+    const double pos[][2] = {{11, 9}, {11.3, 9.8}, {12.5, 10.5}, {0.3, 10}};
+    gs_delight *d = builtin();
+    double worst = 1, edge = 0;
+    for (size_t i = 0; i < sizeof radius / sizeof *radius; i++)
+        for (size_t j = 0; j < sizeof pos / sizeof *pos; j++) {
+            if (j == 3 && radius[i] != 2) continue;
+            double sum[2] = {0, 0};
+            for (int e = 0; e < 2; e++) {
+                char fx[256], text[1024];
+                snprintf(fx, sizeof fx, "\"light_transport\": {\"room\": {\"width_m\": 6, \"height_m\": 4, "
+                         "\"depth_m\": 8, \"albedo\": 0}, \"lamp_shade\": {\"radius_px\": %g, \"transmission\": 0.5}}",
+                         radius[i]);
+                snprintf(text, sizeof text, fmt, pos[j][0], pos[j][1], e ? fx : "");
+                cap_scene sc;
+                CHECK_OK(cap_scene_parse(text, "shade.json", ".", &sc));
+                cap_sim *s = NULL;
+                CHECK_OK(cap_sim_new(&sc, d, &s));
+                double dn[24 * 20];
+                for (int k = 0; s && k < 4; k++) {
+                    CHECK_OK(cap_sim_render(s, k, 0, k, NULL, NULL, dn));
+                    for (int p = 0; p < 24 * 20; p++) sum[e] += dn[p];
+                }
+                cap_sim_free(s);
+                cap_scene_release(&sc);
+            }
+            double r = sum[1] / (0.5 * sum[0]);
+            if (j == 3) edge = r;
+            else if (fabs(r - 1) > fabs(worst - 1)) worst = r;
+        }
+    double edge_want = 1 - (4 * acos(0.4) - 0.8 * sqrt(3.36)) / (4 * M_PI);
+    printf("    lamp shades, R 0.5 to 4 px: flux carried / transmission, worst %.12f; a disk cut by "
+           "the image's edge %.4f (its area on the image %.4f)\n", worst, edge, edge_want);
+    CHECK(fabs(worst - 1) < 1e-12);
+    CHECK_NEAR(edge, edge_want, 0.02);
+    gs_delight_free(d);
+}
