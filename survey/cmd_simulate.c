@@ -137,10 +137,15 @@ int srv_cmd_simulate(int argc, char **argv)
     if (s == GS_OK) s = cap_sim_write_truth(sim, out);
     if (s == GS_OK) {
         const cap_scene *ss = cap_sim_scene(sim);
-        printf("simulate: %s: %s %d frames (%d rendered, %d kept), %zu lights in the image, "
-               "%ld acquisitions, %.2f s\n", out, rep.complete ? "wrote" : "partial: ",
-               ss->acam.K, rep.frames_acquired, rep.frames_kept, in_image, rep.acquisitions,
-               rep.seconds);
+        if (rep.complete)
+            printf("simulate: %s: wrote %d frames (%d rendered, %d kept), %zu lights in the image, "
+                   "%ld acquisitions, %.2f s\n", out, ss->acam.K, rep.frames_acquired, rep.frames_kept,
+                   in_image, rep.acquisitions, rep.seconds);
+        else
+            printf("simulate: %s: stopped with %d of %d frames (%d rendered, %d kept): the same command "
+                   "resumes; %zu lights in the image, %ld acquisitions, %.2f s\n", out,
+                   rep.frames_acquired + rep.frames_kept, ss->acam.K, rep.frames_acquired, rep.frames_kept,
+                   in_image, rep.acquisitions, rep.seconds);
         if (stats) print_stats(sim);
     }
     cap_backend_free(be);

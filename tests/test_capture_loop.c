@@ -555,3 +555,18 @@ TEST(capture_directory_not_read_while_acquired)
               strstr(out, "rd: another process is acquiring into this capture directory or reading it: wait "
                      "for it to end, or give another directory\n") && fx_count_lines(out) == 8, "%s", out);
 }
+
+/* simulate --stop-after printed "partial:  26 frames (5 rendered, 0 kept)", as if 26 frames had
+ * been written; now it says how many of them it has and that the same command resumes, and the
+ * resumed run counts the frames it kept. */
+TEST(simulate_stop_after_says_how_far_it_got)
+{
+    char cmd[16384], out[4096], bin[2048], lab[2048];
+    const char *tmp = lab_paths(bin, lab);
+    snprintf(cmd, sizeof cmd, "cd %s && %s simulate %s --out-dir stop -q --stop-after 3 && %s simulate %s --out-dir stop -q",
+             tmp, bin, lab, bin, lab);
+    int rc = test_run(cmd, out, sizeof out);
+    CHECK_MSG(rc == 0 && strstr(out, "simulate: stop: stopped with 3 of 26 frames (3 rendered, 0 kept): the same command "
+                                     "resumes; ") &&
+              strstr(out, "simulate: stop: wrote 26 frames (23 rendered, 3 kept), "), "%d: %s", rc, out);
+}
