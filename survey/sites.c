@@ -712,11 +712,16 @@ static double p_label(int l, int w, double c, int three)
     return l == w ? c : (1.0 - c) / (three ? 2.0 : 11.0);
 }
 
+/* The winning phase's label of the twelve: its class's (0, 4, 8) when three, else its multiple
+ * of 30 deg (phase_label's). */
+static int phase_winner(const srv_site_value *v, int three)
+{
+    return three ? 4 * gs_phase_class(v->phase_deg) : (int)lround(gs_wrap360(v->phase_deg) / 30.0) % 12;
+}
+
 static double p_same_phase(const srv_site_value *a, int three_a, const srv_site_value *b, int three_b)
 {
-    int wa = (int)lround(gs_wrap360(a->phase_deg) / 30.0) % 12, wb = (int)lround(gs_wrap360(b->phase_deg) / 30.0) % 12;
-    if (three_a) wa = 4 * gs_phase_class(a->phase_deg);
-    if (three_b) wb = 4 * gs_phase_class(b->phase_deg);
+    int wa = phase_winner(a, three_a), wb = phase_winner(b, three_b);
     double p = 0.0;
     for (int l = 0; l < 12; l++) p += p_label(l, wa, a->phase_confidence, three_a) * p_label(l, wb, b->phase_confidence, three_b);
     return p;
@@ -754,11 +759,11 @@ static void judge(srv_change *c, const srv_site_obs *oa, size_t na, const srv_si
         return;
     }
     if (!isnan(c->a.phase_deg) && !isnan(c->b.phase_deg)) {
-        int ka = gs_phase_class(c->a.phase_deg), kb = gs_phase_class(c->b.phase_deg);
-        int three = ka >= 0 && ka < 3 && kb >= 0 && kb < 3;
-        int same = three ? ka == kb
-                         : (int)lround(c->a.phase_deg / 30.0) % 12 == (int)lround(c->b.phase_deg / 30.0) % 12;
-        c->p_phase_change = 1.0 - p_same_phase(&c->a, phases_three(oa, na), &c->b, phases_three(ob, nb));
+        /* each side's winner on its own labels (a phase of 18 deg is the class 0 of three, but
+         * 30 deg of twelve) */
+        int three_a = phases_three(oa, na), three_b = phases_three(ob, nb);
+        int same = phase_winner(&c->a, three_a) == phase_winner(&c->b, three_b);
+        c->p_phase_change = 1.0 - p_same_phase(&c->a, three_a, &c->b, three_b);
         if (!same && c->p_phase_change >= min_p) c->kinds |= SRV_CHANGE_PHASE;
     }
     if (c->a.bulb_id[0] && c->b.bulb_id[0]) {

@@ -210,12 +210,14 @@ static void posterior(const double *phase, const double *c, int n, int twelve, d
     for (int l = 0; l < M; l++) P[l] /= z;
 }
 
-/* Five pixel sites seen twice in survey a and once in survey b (phase confidences c), against
+/* Six pixel sites seen twice in survey a and once in survey b (phase confidences c), against
  * P(phase differs) = 1 - sum_l P_a(l) P_b(l): the same winner (0 deg; 150 deg of twelve),
  * reported for their bulb change, and different winners (0 vs 120; 30 vs 90 of twelve; 0 of
  * three in a vs 150 of twelve in b, each side's posterior over its own labels: a's three classes
  * are the labels 0, 120, 240 of b's twelve; it spread a's three-class confidence over twelve:
- * 0.951 for 0.964). At
+ * 0.951 for 0.964; 30 of twelve in a, its phase 18 deg, vs 0 of three in b: different labels,
+ * a phase change, although 18 deg is in the class 0: it was judged the same winner, no change
+ * at P 0.99; a's 150 deg at confidence 1/12 says nothing, so its posterior is the other's). At
  * --min-p 0.5 the same winner is no phase change although P >= 0.5. */
 TEST(sites_compare_phase_change_probabilities)
 {
@@ -224,7 +226,7 @@ TEST(sites_compare_phase_change_probabilities)
     if (!db) return;
     srv_survey_row sb = {"b", NULL, NULL, NULL, 50};
     CHECK_OK(srv_db_add_survey(db, &sb, &sid[1]));
-    enum { NS = 5 };
+    enum { NS = 6 };
     static const struct {
         double x, phase[3], c[3];   /* a1, a2, b1 */
         const char *bulb_b;
@@ -235,6 +237,7 @@ TEST(sites_compare_phase_change_probabilities)
         {300, {29, 31, 90}, {0.9, 0.8, 0.7}, "p", 1, 1},
         {400, {150, 150, 151}, {0.6, 0.5, 0.4}, "q", 1, 1},
         {500, {0, 0, 150}, {0.6, 0.5, 0.6}, "p", 0, 1},
+        {600, {18, 150, 0}, {0.9, 1.0 / 12.0, 0.9}, "p", 1, 0},
     };
     static const char *const keys[3] = {"a1", "a2", "b1"};
     for (int k = 0; k < 3; k++) {
