@@ -140,7 +140,7 @@ void srv_acc_plot_accuracy(const char *path, const srv_acc_point *pts, size_t np
         for (int panel = 0; panel < 2; panel++) {
             pladv(0);
             plvpor(0.16, 0.95, 0.14, 0.88);
-            plwind(lx0, lx1, 0.0, 1.0);
+            plwind(lx0, lx1, 0.0, 1.03);   /* (headroom: a perfect point sits at 1) */
             plcol0(1);
             plwidth(1.0);
             plbox("bcnstlg", 0, 0, "bcnstvg", 0.2, 2);
@@ -148,6 +148,7 @@ void srv_acc_plot_accuracy(const char *path, const srv_acc_point *pts, size_t np
             snprintf(top, sizeof top, "%s: %s", srv_acc_scene_names[hard],
                      panel ? "detection rate" : "right bulb and phase (of detected)");
             pllab("capture time, s (ACam: A (C + R) #gD)", panel ? "detected / in image" : "accuracy", top);
+            int drawn[3] = {0}, oracle_drawn = 0;   /* the legend names only these */
             for (int ki = 0; ki < nK; ki++) {
                 double xs[64], ys[64], yo[64];
                 int m = 0, mo = 0;
@@ -176,6 +177,8 @@ void srv_acc_plot_accuracy(const char *path, const srv_acc_point *pts, size_t np
                     plline(mo, xo, yo);
                     pllsty(1);
                 }
+                if (ki < 3) drawn[ki] = m > 0;
+                oracle_drawn |= mo > 1;
             }
             /* legend */
             const char *labels[4];
@@ -184,6 +187,7 @@ void srv_acc_plot_accuracy(const char *path, const srv_acc_point *pts, size_t np
             PLFLT widths[4];
             int nl = 0;
             for (int ki = 0; ki < nK && nl < 3; ki++) {
+                if (!drawn[ki]) continue;
                 snprintf(text[nl], sizeof text[nl], "K = %d", Ks[ki]);
                 labels[nl] = text[nl];
                 opts[nl] = PL_LEGEND_LINE;
@@ -192,7 +196,7 @@ void srv_acc_plot_accuracy(const char *path, const srv_acc_point *pts, size_t np
                 widths[nl] = 2.0;
                 nl++;
             }
-            if (!panel) {
+            if (oracle_drawn) {
                 snprintf(text[nl], sizeof text[nl], "ML oracle (dashed)");
                 labels[nl] = text[nl];
                 opts[nl] = PL_LEGEND_LINE;
@@ -202,9 +206,14 @@ void srv_acc_plot_accuracy(const char *path, const srv_acc_point *pts, size_t np
                 nl++;
             }
             PLFLT lw, lh;
-            pllegend(&lw, &lh, PL_LEGEND_BACKGROUND | PL_LEGEND_BOUNDING_BOX, PL_POSITION_BOTTOM | PL_POSITION_RIGHT | PL_POSITION_INSIDE,
-                     0.02, 0.03, 0.1, 0, 1, 1, nl, 1, nl, opts, 0.8, 0.6, 2.0, 0.0, colors, (const char *const *)labels,
-                     NULL, NULL, NULL, NULL, colors, styles, widths, NULL, NULL, NULL, NULL);
+            plcol0(1);
+            if (nl)
+                pllegend(&lw, &lh, PL_LEGEND_BACKGROUND | PL_LEGEND_BOUNDING_BOX,
+                         PL_POSITION_BOTTOM | PL_POSITION_RIGHT | PL_POSITION_INSIDE, 0.02, 0.03, 0.1, 0, 1, 1, nl,
+                         1, nl, opts, 0.8, 0.6, 2.0, 0.0, colors, (const char *const *)labels, NULL, NULL, NULL,
+                         NULL, colors, styles, widths, NULL, NULL, NULL, NULL);
+            else
+                plptex(0.5 * (lx0 + lx1), 0.5, 1.0, 0.0, 0.5, "no point of this scene in the sweep");
         }
     plend();
 }
@@ -231,15 +240,22 @@ void srv_acc_plot_calibration(const char *path, const srv_acc_point *pts, size_t
     for (int phase = 0; phase < 2; phase++) {
         pladv(phase + 1);
         plvpor(0.17, 0.93, 0.12, 0.90);
-        plwind(0, 1, 0, 1);
+        plwind(0, 1.03, 0, 1.03);   /* (headroom: the well-calibrated bins sit at 1, 1) */
         plcol0(1);
         plbox("bcnstg", 0.2, 2, "bcnstvg", 0.2, 2);
-        pllab("reported confidence (bin mean)", ylab[phase], title[phase]);
+        pllab("reported confidence (bin mean)", ylab[phase], "");
+        plschr(0, 0.8);   /* the title fits its half of the picture */
+        plmtex("t", 2.0, 0.5, 0.5, title[phase]);
+        plschr(0, 1.0);
         double dx[2] = {0, 1}, dy[2] = {0, 1};
         plcol0(5);
         pllsty(2);
         plline(2, dx, dy);
         pllsty(1);
+        const char *labels[3];
+        PLINT opts[3], colors[3], styles[3];
+        PLFLT widths[3], lw, lh;
+        int nl = 0;   /* the legend names the scenes drawn */
         for (int hard = 0; hard < 3; hard++) {
             double n[NBINS], c[NBINS], r[NBINS];
             pooled_bins(pts, np, hard, phase, n, c, r);
@@ -258,14 +274,21 @@ void srv_acc_plot_calibration(const char *path, const srv_acc_point *pts, size_t
                 plpoin(m, xs, ys, 17);
                 plwidth(1.0);
                 plerry(m, xs, lo, hi);   /* a bin of few lights says little: its 95 % interval */
+                labels[nl] = srv_acc_scene_names[hard];
+                opts[nl] = PL_LEGEND_LINE;
+                colors[nl] = 2 + hard;
+                styles[nl] = 1;
+                widths[nl++] = 2.0;
             }
         }
-        const char *labels[3] = {"metro", "metro_hard", "metro_clear"};
-        PLINT opts[3] = {PL_LEGEND_LINE, PL_LEGEND_LINE, PL_LEGEND_LINE}, colors[3] = {2, 3, 4}, styles[3] = {1, 1, 1};
-        PLFLT widths[3] = {2, 2, 2}, lw, lh;
-        pllegend(&lw, &lh, PL_LEGEND_BACKGROUND | PL_LEGEND_BOUNDING_BOX, PL_POSITION_TOP | PL_POSITION_LEFT | PL_POSITION_INSIDE,
-                 0.03, 0.03, 0.1, 0, 1, 1, 3, 1, 3, opts, 0.8, 0.6, 2.0, 0.0, colors, labels, NULL, NULL, NULL, NULL,
-                 colors, styles, widths, NULL, NULL, NULL, NULL);
+        plcol0(1);
+        if (nl)
+            pllegend(&lw, &lh, PL_LEGEND_BACKGROUND | PL_LEGEND_BOUNDING_BOX,
+                     PL_POSITION_TOP | PL_POSITION_LEFT | PL_POSITION_INSIDE, 0.03, 0.03, 0.1, 0, 1, 1, nl, 1, nl,
+                     opts, 0.8, 0.6, 2.0, 0.0, colors, labels, NULL, NULL, NULL, NULL, colors, styles, widths,
+                     NULL, NULL, NULL, NULL);
+        else
+            plptex(0.5, 0.5, 1.0, 0.0, 0.5, "no answered light in the sweep");
     }
     plend();
 }

@@ -2,6 +2,9 @@
  * sweep runs and its numbers are consistent. No timing asserts. */
 #include "tests/test.h"
 #include "recognize/recognize.h"
+#include "survey/internal.h"
+
+#include <math.h>
 
 #include <stdio.h>
 #include <stdlib.h>
@@ -176,4 +179,125 @@ TEST(bench_accuracy_quick_consistent)
                       q->snr, q->C);
         }
     }
+}
+
+/* ------------------------------------------------ the plots, read back (Python, PIL + NumPy) */
+
+
+/* A main-grid point of scene hard whose right rate, detection rate and oracle are all y, with
+ * every light in its top confidence bin (both kinds). */
+static srv_acc_point plot_point(int hard, int K, int C, double y)
+{
+    srv_acc_point p;
+    memset(&p, 0, sizeof p);
+    p.hard = hard;
+    p.K = K;
+    p.C = C;
+    p.hdr = p.locked = p.ok = 1;
+    p.capture_s = 0.01 * K * C;
+    p.ev.matched = 100;
+    p.ev.all_correct = lround(100 * y);
+    p.ev.detection_rate = y;
+    p.oracle_sub = y;
+    p.cal.n[NBINS - 1] = p.phase_cal.n[NBINS - 1] = 100;
+    p.cal.conf[NBINS - 1] = p.phase_cal.conf[NBINS - 1] = 100 * y;
+    p.cal.right[NBINS - 1] = p.phase_cal.right[NBINS - 1] = lround(100 * y);
+    return p;
+}
+
+/* Pixels of colour r,g,b (within 8 per channel) in the picture's cell (col, prow) of a cols x rows
+ * grid of panels, within its fractions [x0, x1) x [y0, y1); -1 when the reader fails. */
+static long colour_in(const char *png, int cols, int rows, int col, int prow, double x0, double x1,
+                      double y0, double y1, int r, int g, int b)
+{
+    char cmd[2048], out[256];
+    snprintf(cmd, sizeof cmd,
+             "/usr/bin/python3 -c \"import numpy as np; from PIL import Image\n"
+             "im = np.asarray(Image.open('%s').convert('RGB')).astype(int)\n"
+             "h, w = im.shape[0] // %d, im.shape[1] // %d\n"
+             "c = im[%d * h:%d * h, %d * w:%d * w]\n"
+             "c = c[int(%g * h):int(%g * h), int(%g * w):int(%g * w)]\n"
+             "print('px', int((np.abs(c - (%d, %d, %d)).max(axis=2) <= 8).sum()))\"",
+             png, rows, cols, prow, prow + 1, col, col + 1, y0, y1, x0, x1, r, g, b);
+    if (test_run(cmd, out, sizeof out) != 0) return -1;
+    const char *p = strstr(out, "px ");
+    return p ? atol(p + 3) : -1;
+}
+
+static long colour_px(const char *png, int cols, int rows, int col, int prow, int r, int g, int b)
+{
+    return colour_in(png, cols, rows, col, prow, 0, 1, 0, 1, r, g, b);
+}
+
+TEST(bench_accuracy_plots_show_perfect_points_and_only_drawn_curves)
+{
+    static const int Ks[2] = {8, 13};
+    char at1[1100], at09[1100], cal1[1100], cal09[1100];
+    snprintf(at1, sizeof at1, "%s/acc1.png", test_tmpdir());
+    snprintf(at09, sizeof at09, "%s/acc09.png", test_tmpdir());
+    snprintf(cal1, sizeof cal1, "%s/cal1.png", test_tmpdir());
+    snprintf(cal09, sizeof cal09, "%s/cal09.png", test_tmpdir());
+    /* metro at K = 8 only; the same curves at 1 (a perfect run) and at 0.9 */
+    srv_acc_point p1[3] = {plot_point(0, 8, 32, 1.0), plot_point(0, 8, 64, 1.0), plot_point(2, 8, 64, 1.0)};
+    srv_acc_point p09[3] = {plot_point(0, 8, 32, 0.9), plot_point(0, 8, 64, 0.9), plot_point(2, 8, 64, 0.9)};
+    srv_acc_plot_accuracy(at1, p1, 3, Ks, 2);
+    srv_acc_plot_accuracy(at09, p09, 3, Ks, 2);
+    srv_acc_plot_calibration(cal1, p1, 2);
+    srv_acc_plot_calibration(cal09, p09, 2);
+    /* a curve at 1 (the top of the scale) shows as much of itself as the same curve at 0.9:
+     * neither hidden under the frame nor clipped by it (K = 8's blue; calibration: metro's) */
+    for (int panel = 0; panel < 2; panel++) {
+        /* (the curves' part of the panel: the accuracy legends are at the bottom, the
+         * calibration legends on the left) */
+        long n1 = colour_in(at1, 2, 3, panel, 0, 0, 1, 0, 0.5, 31, 119, 180),
+             n09 = colour_in(at09, 2, 3, panel, 0, 0, 1, 0, 0.5, 31, 119, 180);
+        CHECK_MSG(n1 > 0 && n1 >= 0.9 * n09, "accuracy panel %d: %ld blue px at 1, %ld at 0.9", panel, n1, n09);
+        /* metro_clear's single point: a marker */
+        n1 = colour_in(at1, 2, 3, panel, 2, 0, 1, 0, 0.5, 31, 119, 180);
+        n09 = colour_in(at09, 2, 3, panel, 2, 0, 1, 0, 0.5, 31, 119, 180);
+        CHECK_MSG(n1 > 0 && n1 >= 0.9 * n09, "accuracy panel %d, one point: %ld blue px at 1, %ld at 0.9", panel,
+                  n1, n09);
+        n1 = colour_in(cal1, 2, 1, panel, 0, 0.6, 1, 0, 1, 31, 119, 180);
+        n09 = colour_in(cal09, 2, 1, panel, 0, 0.6, 1, 0, 1, 31, 119, 180);
+        CHECK_MSG(n1 > 0 && n1 >= 0.9 * n09, "calibration panel %d: %ld blue px at 1, %ld at 0.9", panel, n1, n09);
+    }
+    /* the legends name only what is drawn: no K = 13 (orange) anywhere, and the scene without
+     * points (metro_hard) has no K = 8 entry either; calibration: no metro_hard (red) */
+    for (int prow = 0; prow < 3; prow++)
+        for (int panel = 0; panel < 2; panel++) {
+            CHECK_MSG(colour_px(at1, 2, 3, panel, prow, 255, 127, 14) == 0, "row %d panel %d: K = 13 named", prow,
+                      panel);
+            if (prow == 1) {
+                long n = colour_px(at1, 2, 3, panel, prow, 31, 119, 180);
+                CHECK_MSG(n == 0, "row %d panel %d: %ld px of K = 8 without its points", prow, panel, n);
+            }
+        }
+    for (int panel = 0; panel < 2; panel++) {
+        CHECK(colour_px(cal1, 2, 1, panel, 0, 214, 39, 40) == 0);
+    }
+}
+
+/* The calibration titles fit their panels: no ink in the title band at the panels' outer
+ * columns (the middle of the picture, its right edge), where a clipped title is cut. */
+TEST(bench_accuracy_calibration_titles_fit)
+{
+    char png[1100], cmd[2048], out[256];
+    snprintf(png, sizeof png, "%s/cal_titles.png", test_tmpdir());
+    srv_acc_point p = plot_point(0, 8, 32, 0.9);
+    srv_acc_plot_calibration(png, &p, 1);
+    snprintf(cmd, sizeof cmd,
+             "/usr/bin/python3 -c \"import numpy as np; from PIL import Image\n"
+             "im = np.asarray(Image.open('%s').convert('RGB')).astype(int)\n"
+             "h, w = im.shape[:2]\n"
+             "band = im[:int(0.08 * h)].sum(axis=2) < 384\n"
+             "print('ink', int(band.any(axis=0).sum()), int(band[:, w // 2 - 6:w // 2 + 6].sum()), "
+             "int(band[:, w - 6:].sum()), int(band[:, :6].sum()))\"",
+             png);
+    CHECK(test_run(cmd, out, sizeof out) == 0);
+    long cols = 0, mid = -1, right = -1, left = -1;
+    const char *q = strstr(out, "ink ");
+    CHECK_MSG(q && sscanf(q, "ink %ld %ld %ld %ld", &cols, &mid, &right, &left) == 4, "%s", out);
+    CHECK_MSG(cols > 200, "no title ink: %s", out);   /* the titles are there */
+    CHECK_MSG(mid == 0 && right == 0 && left == 0, "title ink at a panel's edge (middle %ld, right %ld, left %ld)",
+              mid, right, left);
 }
