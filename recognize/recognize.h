@@ -713,8 +713,8 @@ double rec_mutual_information(const float *x, const float *y, size_t n, int bins
  * (unknown) magenta. white <= 0: rec_png_white. Atomic write. */
 gs_status rec_write_image_png(const char *path, const float *img, int width, int height,
                               int bands, double white);
-/* The 99.5th percentile of the finite samples (of at most 65536 evenly spaced ones), 1 if not
- * positive: the white of a picture. */
+/* The 99.5th percentile of the finite samples (every band of evenly spaced pixels, at most
+ * about 65536 samples), 1 if not positive: the white of a picture. */
 double rec_png_white(const float *img, int width, int height, int bands);
 
 /* ---------------------------------------------- maximum-likelihood oracle (recognize/ml_oracle.c) */

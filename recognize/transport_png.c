@@ -14,11 +14,14 @@ static int cmp_float(const void *a, const void *b)
 
 double rec_png_white(const float *img, int width, int height, int bands)
 {
-    size_t n = (size_t)width * (size_t)height * (size_t)bands, m = 0, step = n / 65536 + 1;
-    float *v = malloc(sizeof *v * (n / step + 1));
+    /* every band of evenly spaced pixels (a stride over the interleaved samples that is a
+     * multiple of bands would read one band only) */
+    size_t P = (size_t)width * (size_t)height, m = 0, step = P * (size_t)bands / 65536 + 1;
+    float *v = malloc(sizeof *v * (P / step + 1) * (size_t)bands);
     if (!v) return NAN;
-    for (size_t i = 0; i < n; i += step)
-        if (isfinite(img[i])) v[m++] = img[i];
+    for (size_t p = 0; p < P; p += step)
+        for (int c = 0; c < bands; c++)
+            if (isfinite(img[p * (size_t)bands + (size_t)c])) v[m++] = img[p * (size_t)bands + (size_t)c];
     double w = NAN;
     if (m) {
         qsort(v, m, sizeof *v, cmp_float);
