@@ -561,8 +561,8 @@ gs_status cap_backend_hardware_new(const cap_hw_config *c, cap_backend **out);
  * C half periods at the lowest grid frequency the controller accepts, and the margin. */
 double cap_hw_exposure_s(long cycles, int grid_hz, double margin_s);
 /* The exposure the camera reports back (actual_s, NaN: not read back) against the one asked:
- * GS_ELIMIT in one line naming both when they differ by more than 2 % (the camera clamped it to
- * its range: its frames would not span the C cycles). */
+ * GS_ELIMIT in one line naming both when it is more than 2 % shorter (the camera clamped it to
+ * its range: its frames would not span the C cycles; a longer one still does). */
 gs_status cap_hw_exposure_check(const char *camera, double asked_s, double actual_s);
 
 /* Per-acquisition log of the hardware backend (for tests and diagnostics). */

@@ -585,7 +585,8 @@ gs_status srv_triangulate_sites(srv_db *db, const int64_t *capture_ids, size_t n
  * independent samples of the area's lights. GS_ENOTFOUND naming a survey that does not exist. */
 typedef struct {
     char group[296];
-    double lat_deg, lon_deg;   /* a cell's centre (on the grid both surveys share), else NaN */
+    double lat_deg, lon_deg;   /* a cell's centre (on the grid both surveys share), the circle's
+                                * with SRV_BY_RADIUS, else NaN */
     long n_a[3], total_a, n_b[3], total_b;   /* 0/120/240 counts and their sums */
     double share_a[3], share_b[3];
     double z[3], p[3];
