@@ -1,5 +1,6 @@
 /* fixtures.c - helpers shared by the test files; the contract is in tests/fixtures.h. */
 #include "tests/fixtures.h"
+#include "capture/capture.h"
 
 #include "tests/test.h"
 
@@ -150,4 +151,15 @@ int fx_lock(const char *path)
     CHECK_MSG(ok, "%s: cannot lock", path);
     if (!ok && fd >= 0) close(fd);
     return ok ? fd : -1;
+}
+
+struct cap_ac *fx_mains_ac(const char *data_path, int grid_hz)
+{
+    cap_freq_config f;
+    memset(&f, 0, sizeof f);
+    f.model = CAP_FREQ_TRACE;
+    snprintf(f.wav, sizeof f.wav, "%s", test_shared_path(data_path));
+    cap_ac *ac = NULL;
+    CHECK_OK(cap_ac_new(&f, grid_hz, &ac));
+    return ac;
 }

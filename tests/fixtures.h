@@ -21,6 +21,11 @@ int fx_exists(const char *path);
  * descriptor to close() to release it, or -1 (a failed check). For what the tests of one
  * runner, running at once, make once and share. */
 int fx_lock(const char *path);
+/* The grid of a real mains recording under shared/ (data_path, e.g. "data/mains/whu_001_ref.wav")
+ * as the scene's trace model gives it at grid_hz: a cap_ac (cap_ac_free), NULL after a failed
+ * check. */
+struct cap_ac;
+struct cap_ac *fx_mains_ac(const char *data_path, int grid_hz);
 /* Writes n bytes (or the text without its NUL) to path, replacing it. */
 void fx_write_file(const char *path, const void *data, size_t n);
 void fx_write_text(const char *path, const char *text);

@@ -201,12 +201,7 @@ static void run_lock(cap_ac *ac, const gs_brf *b, int K, long C, cap_lock_mode m
 
 TEST(acam_lock_vs_free_running_real_mains_fig9)
 {
-    cap_freq_config f;
-    memset(&f, 0, sizeof f);
-    f.model = CAP_FREQ_TRACE;
-    snprintf(f.wav, sizeof f.wav, "%s", test_shared_path("data/mains/whu_001_ref.wav"));
-    cap_ac *ac = NULL;
-    CHECK_OK(cap_ac_new(&f, 50, &ac));
+    cap_ac *ac = fx_mains_ac("data/mains/whu_001_ref.wav", 50);
     if (!ac) return;
     gs_delight *d = gs_delight_new();
     CHECK_OK(gs_delight_generate(d, GS_BRF_N_DEFAULT));
@@ -250,7 +245,7 @@ TEST(acam_lock_vs_free_running_real_mains_fig9)
                  " \"acam\": {\"K\": 26, \"cycles\": 1500, \"locked\": %s},\n"
                  " \"lights\": [{\"bulb\": \"led-a19-9w-lin2\", \"x_px\": 1, \"y_px\": 1, \"flux_e_per_cycle\": 26000}],\n"
                  " \"effects\": {\"frequency_wander\": {}}}\n",
-                 f.wav, locked ? "true" : "false");
+                 test_shared_path("data/mains/whu_001_ref.wav"), locked ? "true" : "false");
         cap_scene sc;
         CHECK_OK(cap_scene_parse(text, "fig9.json", ".", &sc));
         cap_sim *s = NULL;

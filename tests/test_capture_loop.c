@@ -479,6 +479,14 @@ TEST(capture_records_grid_frequency_per_frame)
     gs_capture_release(&cap);
 }
 
+/* Shell fragments of the lock tests: another process holding the capture directory dir's lock
+ * (util-linux flock(1), the same flock(2) the loop takes; how: -x or -s) until RELEASE_LOCK(n),
+ * through the fifo reln (mkfifo it first): no race with the commands run meanwhile. */
+#define HOLD_LOCK(how, dir, n)                                                                    \
+    "(flock " how " " dir " sh -c 'touch held" n "; read x < rel" n "' >/dev/null 2>&1 & pid=$!; " \
+    " while [ ! -e held" n " ]; do sleep 0.005; done; "
+#define RELEASE_LOCK(n) "echo > rel" n "; wait $pid; "
+
 /* The binary's and the lab scene's absolute paths (for commands run in the test's directory,
  * which it returns). */
 static const char *lab_paths(char bin[2048], char lab[2048])
@@ -504,11 +512,10 @@ TEST(capture_directory_one_writer_at_a_time)
     char cmd[16384], out[8192], bin[2048], lab[2048];
     const char *tmp = lab_paths(bin, lab);
     snprintf(cmd, sizeof cmd,
-             "cd %s && %s simulate %s --out-dir alone -q >/dev/null && mkdir shared && mkfifo release && "
-             "(flock shared sh -c 'touch held; read x < release' >/dev/null 2>&1 & pid=$!; "
-             " while [ ! -e held ]; do sleep 0.005; done; "
+             "cd %s && %s simulate %s --out-dir alone -q >/dev/null && mkdir shared && mkfifo rel0 && "
+             HOLD_LOCK("-x", "shared", "0")
              " %s simulate %s --out-dir shared -q >/dev/null 2>second.err; echo \"second $?\"; "
-             " ls shared | wc -l; echo > release; wait $pid; "
+             " ls shared | wc -l; " RELEASE_LOCK("0")
              " %s simulate %s --out-dir shared -q >/dev/null; echo \"after $?\"); "
              "cat second.err; diff -r alone shared && echo SAME",
              tmp, bin, lab, bin, lab, bin, lab);
@@ -535,15 +542,13 @@ TEST(capture_directory_not_read_while_acquired)
     const char *tmp = lab_paths(bin, lab);
     snprintf(cmd, sizeof cmd,
              "cd %s && %s simulate %s --out-dir rd -q >/dev/null && cp -r rd before && mkfifo rel1 rel2 && "
-             "(flock -x rd sh -c 'touch held1; read x < rel1' >/dev/null 2>&1 & pid=$!; "
-             " while [ ! -e held1 ]; do sleep 0.005; done; "
-             " %s recognize rd >/dev/null 2>r.err; echo \"read $?\"; echo > rel1; wait $pid; "
+             HOLD_LOCK("-x", "rd", "1")
+             " %s recognize rd >/dev/null 2>r.err; echo \"read $?\"; " RELEASE_LOCK("1")
              " %s recognize rd >/dev/null 2>&1; echo \"read after $?\"); "
-             "(flock -s rd sh -c 'touch held2; read x < rel2' >/dev/null 2>&1 & pid=$!; "
-             " while [ ! -e held2 ]; do sleep 0.005; done; "
+             HOLD_LOCK("-s", "rd", "2")
              " %s simulate %s --out-dir rd -q >/dev/null 2>&1; echo \"complete $?\"; "
              " %s simulate %s --out-dir rd --force -q >/dev/null 2>w.err; echo \"write $?\"; "
-             " diff -r before rd >/dev/null && echo UNTOUCHED; echo > rel2; wait $pid; "
+             " diff -r before rd >/dev/null && echo UNTOUCHED; " RELEASE_LOCK("2")
              " %s simulate %s --out-dir rd --force -q >/dev/null 2>&1; echo \"write after $?\"); "
              "cat r.err w.err",
              tmp, bin, lab, bin, bin, bin, lab, bin, lab, bin, lab);

@@ -29,6 +29,16 @@ static gs_delight *delight(void)
     return d;
 }
 
+/* The simulator of the scene text (name: the file name its messages give) into *sc, NULL after
+ * a failed check; the caller frees both (cap_sim_free, cap_scene_release). */
+static cap_sim *sim_of(const char *text, const char *name, const gs_delight *d, cap_scene *sc)
+{
+    CHECK_OK(cap_scene_parse(text, name, ".", sc));
+    cap_sim *s = NULL;
+    CHECK_OK(cap_sim_new(sc, d, &s));
+    return s;
+}
+
 /* ------------------------------------------------------------ brute-force Eq. 5 */
 
 /* The BRF band as its trigonometric polynomial (naive DFT, no FFTW), evaluated at any t. */
@@ -100,9 +110,7 @@ TEST(sim_no_effects_is_exact_eq5_vs_brute_force)
     gs_delight *d = delight();
     CHECK(d != NULL);
     cap_scene sc;
-    CHECK_OK(cap_scene_parse(exact_scene, "exact.json", ".", &sc));
-    cap_sim *s = NULL;
-    CHECK_OK(cap_sim_new(&sc, d, &s));
+    cap_sim *s = sim_of(exact_scene, "exact.json", d, &sc);
     if (!s) return;
     int W = 40, H = 30, B = 3, K = 13;
     size_t n = (size_t)W * H * B;
@@ -297,9 +305,7 @@ static void render_on(const gs_delight *d, const char *text, int threads, double
                       unsigned short *raw, unsigned long long *items, size_t *n_stages)
 {
     cap_scene sc;
-    CHECK_OK(cap_scene_parse(text, "threads.json", ".", &sc));
-    cap_sim *s = NULL;
-    CHECK_OK(cap_sim_new(&sc, d, &s));
+    cap_sim *s = sim_of(text, "threads.json", d, &sc);
     if (!s) {
         cap_scene_release(&sc);
         return;
@@ -476,9 +482,7 @@ TEST(sim_effect_physics_matches_bulbs_md)
     gs_delight *d = delight();
     char *text = scene_with(1u << CAP_FX_EXTINCTION);
     cap_scene sc;
-    CHECK_OK(cap_scene_parse(text, "ext.json", ".", &sc));
-    cap_sim *s = NULL;
-    CHECK_OK(cap_sim_new(&sc, d, &s));
+    cap_sim *s = sim_of(text, "ext.json", d, &sc);
     if (s) {
         CHECK_NEAR(s->trans[0 * 3 + 1], exp(-beta * 3), 1e-12);          /* 3 km, 550 nm */
         CHECK_NEAR(s->trans[1 * 3 + 1], exp(-beta * 5), 1e-12);          /* 5 km */
@@ -557,9 +561,7 @@ TEST(sim_shot_noise_is_poisson_at_every_level)
                      " \"effects\": {\"ambient\": {\"e_per_px_cycle\": %.17g}%s}}\n",
                      W, H, level_e[i] / 4.0, noisy ? ", \"shot_noise\": {}" : "");
             cap_scene sc;
-            CHECK_OK(cap_scene_parse(text, "shot.json", ".", &sc));
-            cap_sim *s = NULL;
-            CHECK_OK(cap_sim_new(&sc, d, &s));
+            cap_sim *s = sim_of(text, "shot.json", d, &sc);
             if (s) {
                 CHECK_OK(cap_sim_render(s, 0, 0, 0, NULL, raw, dn));
                 double sum = 0, sum2 = 0;
@@ -639,9 +641,7 @@ TEST(sim_truth_resolvability_groups_and_hidden)
         " \"effects\": {\"psf\": {\"sigma_px\": 1.0}}}\n";
     gs_delight *d = delight();
     cap_scene sc;
-    CHECK_OK(cap_scene_parse(text, "resolve.json", ".", &sc));
-    cap_sim *s = NULL;
-    CHECK_OK(cap_sim_new(&sc, d, &s));
+    cap_sim *s = sim_of(text, "resolve.json", d, &sc);
     const char *dir = fx_tmp("resolve");
     CHECK(mkdir(dir, 0755) == 0 || errno == EEXIST);
     if (s) CHECK_OK(cap_sim_write_truth(s, dir));
@@ -695,9 +695,7 @@ TEST(sim_halved_pixels_match_unhalved_on_real_mains)
                      " \"effects\": {\"frequency_wander\": {}}}\n",
                      test_shared_path(wavs[wi]), bulbs[bi], bulbs[bi]);
             cap_scene sc;
-            CHECK_OK(cap_scene_parse(text, "mains.json", ".", &sc));
-            cap_sim *s = NULL;
-            CHECK_OK(cap_sim_new(&sc, d, &s));
+            cap_sim *s = sim_of(text, "mains.json", d, &sc);
             if (!s) {
                 cap_scene_release(&sc);
                 continue;
@@ -736,9 +734,7 @@ TEST(sim_truth_written_under_the_directory_lock)
     gs_delight *d = delight();
     CHECK(d != NULL);
     cap_scene sc;
-    CHECK_OK(cap_scene_parse(exact_scene, "exact.json", ".", &sc));
-    cap_sim *s = NULL;
-    CHECK_OK(cap_sim_new(&sc, d, &s));
+    cap_sim *s = sim_of(exact_scene, "exact.json", d, &sc);
     const char *dir = fx_tmp("truth-lock");
     CHECK(mkdir(dir, 0777) == 0);
     int fd = open(dir, O_RDONLY | O_DIRECTORY);
@@ -782,8 +778,7 @@ TEST(sim_scintillation_skips_a_light_without_distance)
     for (int i = 0; i < 2; i++) {
         char text[2048];
         snprintf(text, sizeof text, fmt, fx[i]);
-        CHECK_OK(cap_scene_parse(text, "scint.json", ".", &sc[i]));
-        CHECK_OK(cap_sim_new(&sc[i], d, &s[i]));
+        s[i] = sim_of(text, "scint.json", d, &sc[i]);
         for (int k = 0; s[i] && k < 4; k++) CHECK_OK(cap_sim_render(s[i], k, 0, k, NULL, NULL, dn[i][k]));
     }
     if (s[0] && s[1]) {

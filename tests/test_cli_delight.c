@@ -144,7 +144,12 @@ TEST(cli_delight_add_warns_of_a_clipped_recording)
         }
         fclose(f);
         CHECK(run("%s delight add --from-recording %s --grid 50 --delight %s", rec, db) == 0);
+        printf("    %s", out);
         CHECK_MSG(!strstr(out, "warning") == !clip, "clip %d: %s", clip, out);
+        /* the flicker: 19 %, and clipped it reads low */
+        const char *pf = strstr(out, "percent flicker ");
+        double v = pf ? strtod(pf + 16, NULL) : NAN;
+        CHECK_MSG(clip ? v < 17.0 : fabs(v - 19.0) < 0.5, "clip %d: percent flicker %g", clip, v);
         CHECK_MSG(!clip || (strstr(out, "clipped.csv: ") && strstr(out, " % of the samples sit at the recording's "
                                                                     "largest value, in runs: a clipped light?")),
                   "%s", out);

@@ -14,6 +14,7 @@
  * Free running: edge - (t_0 + n Delta_0 + j Delta_0 / K), Delta_0 = (t_{-1} - t_{-65}) / 64. */
 #include "capture/capture.h"
 #include "tests/firmware_fixture.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 #include <math.h>
@@ -172,12 +173,7 @@ TEST(firmware_and_simulated_lock_place_windows_alike)
     locked_result r;
     fwsim_free(locked_exposure(&tr, K, k, C, 0, NULL, "whu_001 K=26 k=25", &r));
     trace_free(&tr);
-    cap_freq_config f;
-    memset(&f, 0, sizeof f);
-    f.model = CAP_FREQ_TRACE;
-    snprintf(f.wav, sizeof f.wav, "%s", test_shared_path("data/mains/whu_001_ref.wav"));
-    cap_ac *ac = NULL;
-    CHECK_OK(cap_ac_new(&f, 50, &ac));
+    cap_ac *ac = fx_mains_ac("data/mains/whu_001_ref.wav", 50);
     if (!ac || r.cycles == 0) {
         cap_ac_free(ac);
         return;
