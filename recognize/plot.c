@@ -32,7 +32,7 @@ typedef struct {
     const char *file;   /* PLplot writes it by name */
     const char *title;
     int bands;
-    double ymax;
+    double ymin, ymax;
     double *x, *y;
 } brf_plot;
 
@@ -44,7 +44,7 @@ static gs_status draw_brfs(void *ctx, unsigned char *unused)
     const gs_bulb *const *bulbs = bp->bulbs;
     size_t count = bp->count;
     int bands = bp->bands;
-    double ymax = bp->ymax, *x = bp->x, *y = bp->y;
+    double ymin = bp->ymin, ymax = bp->ymax, *x = bp->x, *y = bp->y;
     const char *title = bp->title;
     plsdev("pngcairo");
     plsfnam(bp->file);
@@ -61,7 +61,7 @@ static gs_status draw_brfs(void *ctx, unsigned char *unused)
     for (int band = 0; band < bands; band++) {
         pladv(0);
         plvpor(0.11, 0.60, 0.12, 0.88);
-        plwind(0.0, 1.0, 0.0, ymax);
+        plwind(0.0, 1.0, ymin, ymax);
         plcol0(1);
         plwidth(1.0);
         plbox("bcnstg", 0.1, 0, "bcnstvg", 0, 0);
@@ -112,15 +112,21 @@ gs_status rec_plot_brfs(const gs_bulb *const *bulbs, size_t count, const char *p
     gs_status ost = gs_atomic_open(&out, png_path, 0);
     if (ost != GS_OK) return ost;
 
-    double ymax = 0.0;
+    /* y: 0 (a dark sample) to at least 1.5, 5 % of the span beyond both, so a sample at 0 or
+     * at the maximum is drawn inside the frame, not on it */
+    double ymin = 0.0, ymax = 1.5;
     int nmax = 0;
     for (size_t i = 0; i < count; i++) {
         const gs_brf *b = &bulbs[i]->brf;
-        for (int j = 0; j < b->n * b->bands; j++)
+        for (int j = 0; j < b->n * b->bands; j++) {
+            if (b->v[j] < ymin) ymin = b->v[j];
             if (b->v[j] > ymax) ymax = b->v[j];
+        }
         if (b->n > nmax) nmax = b->n;
     }
-    ymax = ymax < 1.5 ? 1.5 : ymax * 1.08;
+    double pad = 0.05 * (ymax - ymin);
+    ymin -= pad;
+    ymax += pad;
     double *x = malloc(sizeof *x * (size_t)(nmax + 1)), *y = malloc(sizeof *y * (size_t)(nmax + 1));
     if (!x || !y) {
         free(x);
@@ -129,7 +135,7 @@ gs_status rec_plot_brfs(const gs_bulb *const *bulbs, size_t count, const char *p
         return gs_fail(GS_ENOMEM, "plot: cannot allocate %d points", nmax);
     }
 
-    brf_plot bp = {bulbs, count, out.tmp, title, bands, ymax, x, y};
+    brf_plot bp = {bulbs, count, out.tmp, title, bands, ymin, ymax, x, y};
     gs_status st = gs_isolated(png_path, NULL, 0, draw_brfs, &bp);
     free(x);
     free(y);

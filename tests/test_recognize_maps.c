@@ -502,3 +502,47 @@ TEST(maps_bulb_map_greys_ambiguous_pixels)
     rec_matcher_free(m);
     gs_delight_free(d);
 }
+
+/* The BRF plot (rec_plot_brfs, `delight plot`): a bulb dark for half its cycle (value 0) and at
+ * 2 the other half draws both levels inside the frame, clear of its lines: the frame is the
+ * highest and lowest row inked across most of the picture, each level the row its colour
+ * fills along most of half the plot. */
+TEST(brf_plot_zero_and_peak_inside_the_frame)
+{
+    gs_bulb b;
+    memset(&b, 0, sizeof b);
+    snprintf(b.id, sizeof b.id, "dark-half");
+    b.type = GS_TECH_LED_PWM;
+    b.grid_hz = 50;
+    CHECK_OK(gs_brf_init(&b.brf, 64, 1));
+    for (int j = 0; j < 64; j++) b.brf.v[j] = j >= 16 && j < 48 ? 0.0 : 2.0;   /* mean 1 */
+    const gs_bulb *list[1] = {&b};
+    const char *path = fx_tmp("brf_zero.png");
+    CHECK_OK(rec_plot_brfs(list, 1, path, "dark half"));
+    gs_bulb_release(&b);
+    int w = 0, h = 0;
+    unsigned char *px = recfx_read_png(path, &w, &h);
+    if (!px) return;
+    int top = -1, bottom = -1, zero = -1, peak = -1;
+    for (int y = 0; y < h; y++) {
+        int ink = 0, mine = 0;   /* mine: the first bulb's colour, (230, 159, 0) */
+        for (int x = 0; x < w; x++) {
+            const unsigned char *p = px + 3 * ((size_t)y * (size_t)w + (size_t)x);
+            ink += p[0] < 200 || p[1] < 200 || p[2] < 200;
+            mine += abs(p[0] - 230) < 40 && abs(p[1] - 159) < 40 && p[2] < 60;
+        }
+        if (ink > 2 * w / 5) {
+            if (top < 0) top = y;
+            bottom = y;
+        }
+        if (mine > w / 8) {   /* half of the plot, ~ w / 4 wide */
+            if (peak < 0) peak = y;
+            zero = y;
+        }
+    }
+    free(px);
+    CHECK_MSG(top >= 0 && peak >= 0 && bottom - top > h / 2, "frame rows %d..%d, curve rows %d..%d", top, bottom,
+              peak, zero);
+    CHECK_MSG(zero < bottom - 3, "the zero level (row %d) on the frame's bottom (row %d)", zero, bottom);
+    CHECK_MSG(peak > top + 3, "the peak level (row %d) on the frame's top (row %d)", peak, top);
+}
