@@ -304,6 +304,22 @@ static gs_status add_recording(gs_delight *d, const void *arg)
     return s;
 }
 
+void srv_delight_plot_title(const gs_bulb *const *bulbs, size_t count, char *title, size_t size)
+{
+    size_t len = (size_t)snprintf(title, size, "DELIGHT BRFs, ");
+    int n = 0;
+    for (int prev = INT_MIN;; n++) {   /* the next grid above prev */
+        int next = INT_MAX;
+        for (size_t i = 0; i < count; i++)
+            if (bulbs[i]->grid_hz > prev && bulbs[i]->grid_hz < next) next = bulbs[i]->grid_hz;
+        if (next == INT_MAX) break;
+        if (len < size)
+            len += (size_t)snprintf(title + len, size - len, "%s%d", n ? " and " : "", next);
+        prev = next;
+    }
+    if (len < size) snprintf(title + len, size - len, " Hz grid%s", n > 1 ? "s" : "");
+}
+
 static int cmd_plot(const gs_delight *d, const delight_opts *o)
 {
     enum { MAX_PLOT = 15 };
@@ -340,7 +356,7 @@ static int cmd_plot(const gs_delight *d, const delight_opts *o)
     }
     if (!count) return srv_error("delight plot", gs_fail(GS_ENOTFOUND, "no bulb matches"));
     char title[128];
-    snprintf(title, sizeof title, "DELIGHT BRFs, %d Hz grid", pick[0]->grid_hz);
+    srv_delight_plot_title(pick, count, title, sizeof title);
     gs_status s = rec_plot_brfs(pick, count, o->out, title);
     if (s != GS_OK) return srv_error("delight plot", s);
     fprintf(srv_note_stream(o->out), "wrote %s (%zu bulbs)\n", o->out, count);

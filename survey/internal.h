@@ -11,6 +11,9 @@
 
 /* Subcommands: argv[0] is the command name; return the exit status. */
 int srv_cmd_delight(int argc, char **argv);
+/* `delight plot`'s title: "DELIGHT BRFs, " and the grids of bulbs[0..count) (count >= 1), each
+ * once, ascending: "50 Hz grid", "50 and 60 Hz grids" (each bulb's own is in the legend). */
+void srv_delight_plot_title(const gs_bulb *const *bulbs, size_t count, char *title, size_t size);
 int srv_cmd_locate(int argc, char **argv);
 int srv_cmd_simulate(int argc, char **argv);
 int srv_cmd_capture(int argc, char **argv);

@@ -3,6 +3,7 @@
  * one (a one-line warning), `plot` writing a real PNG, --help everywhere, and bad input as
  * one-line errors with a non-zero exit. */
 #include "recognize/recognize.h"
+#include "survey/internal.h"
 #include "tests/fixtures.h"
 #include "tests/test.h"
 
@@ -247,5 +248,25 @@ TEST(cli_delight_concurrent_imports_keep_every_bulb)
                  existing ? " && " : "", existing ? "2 3 4" : "1 2 3 4", bin, bin);
         int rc = test_run(cmd, out, sizeof out);
         CHECK_MSG(rc == 0 && !out[0], "trial %d (%s file): %d: %s", trial, existing ? "existing" : "new", rc, out);
+    }
+}
+
+/* `delight plot`'s title names the grid of every plotted bulb: bulbs of 60, 50 and 60 Hz (as
+ * `--ids` may pick from a database) give both grids, once each; bulbs of one grid give it. */
+TEST(cli_delight_plot_title_names_every_grid)
+{
+    static const int grids[2][3] = {{60, 50, 60}, {60, 60, 60}};
+    for (int c = 0; c < 2; c++) {
+        gs_bulb b[3];
+        const gs_bulb *list[3];
+        memset(b, 0, sizeof b);
+        for (int i = 0; i < 3; i++) {
+            b[i].grid_hz = grids[c][i];
+            list[i] = &b[i];
+        }
+        char title[128];
+        srv_delight_plot_title(list, 3, title, sizeof title);
+        CHECK_MSG(!strcmp(title, c ? "DELIGHT BRFs, 60 Hz grid" : "DELIGHT BRFs, 50 and 60 Hz grids"), "%s",
+                  title);
     }
 }
