@@ -48,7 +48,7 @@ gs_status srv_job_read(srv_job *j, const char *capdir)
     gs_status s = gs_capture_lock(capdir, 0, &j->cap_lock_fd);
     if (s != GS_OK) return s;
     j->cap_locked = 1;
-    return gs_capture_read(capdir, &j->cap);
+    return gs_capture_read_held(capdir, &j->cap);
 }
 
 gs_status srv_job_matcher(srv_job *j, const gs_delight *d, const char *delight_path, int grid_hz,

@@ -628,9 +628,9 @@ void srv_job_release(srv_job *j);
 struct cap_backend;
 gs_status srv_job_acquire(struct cap_backend *be, const char *capdir, int progress,
                           int *frames_acquired, int *frames_kept);
-/* read: the capture directory into j->cap, under its shared lock (gs_capture_lock), held until
- * srv_job_release: no other process acquires into it while the job's stages (and `run`'s content
- * key of its files) use it. */
+/* read: the capture directory into j->cap, under its shared lock (gs_capture_lock; the read,
+ * gs_capture_read_held, takes no second one), held until srv_job_release: no other process
+ * acquires into it while the job's stages (and `run`'s content key of its files) use it. */
 gs_status srv_job_read(srv_job *j, const char *capdir);
 /* DELIGHT (the caller's d, borrowed until srv_job_release; else the file delight_path; else the
  * built-in database) and its Eq. 7 templates for a capture of grid_hz, bands and K; nothing when

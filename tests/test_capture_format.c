@@ -9,9 +9,11 @@
 #include "tests/test.h"
 
 #include <dirent.h>
+#include <fcntl.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -122,6 +124,32 @@ TEST(capture_format_round_trip_rgb_hdr)
     gs_capture_release(&b);
     CHECK(b.raw == NULL && b.frames == NULL && b.station_json == NULL);
     gs_capture_release(NULL);
+}
+
+/* gs_capture_read takes the directory's lock shared itself; gs_capture_read_held, for a caller
+ * that holds it (srv_job_read), takes none. While a writer holds the directory (here this
+ * process, through an open file description of its own, as flock(1) -x would), the first refuses
+ * in one line naming it and leaves the capture zeroed; the second reads what was written, bit for
+ * bit, as the first does once the directory is free. */
+TEST(capture_read_held_takes_no_second_lock)
+{
+    gs_capture a, b;
+    make_capture(&a, 3, 3, 5, 4, 1);
+    const char *dir = subdir("held");
+    write_capture(dir, &a);
+    int fd = open(dir, O_RDONLY | O_DIRECTORY);
+    CHECK(fd >= 0 && flock(fd, LOCK_EX) == 0);
+    CHECK(gs_capture_read(dir, &b) == GS_EIO);
+    CHECK_MSG(strstr(gs_detail(), dir) && strstr(gs_detail(), "another process is acquiring"), "%s", gs_detail());
+    CHECK(!b.frames && !b.raw && !b.halvings && b.K == 0);
+    CHECK_OK(gs_capture_read_held(dir, &b));
+    check_same(&a, &b);
+    gs_capture_release(&b);
+    close(fd);
+    CHECK_OK(gs_capture_read(dir, &b));
+    check_same(&a, &b);
+    gs_capture_release(&b);
+    gs_capture_release(&a);
 }
 
 TEST(capture_format_round_trip_mono_defaults)

@@ -739,3 +739,18 @@ TEST(capture_job_holds_the_read_lock_until_release)
     srv_job_release(&j);
     CHECK(sh("flock -n -x %s true; echo $?", dir) == 0 && !strcmp(out, "0\n"));
 }
+
+/* A survey job locked its capture directory twice: srv_job_read took the shared lock, then
+ * gs_capture_read took one of its own (one more open and flock(2) of the directory per read).
+ * It now reads under the job's lock (gs_capture_read_held): `recognize`, through srv_job_read,
+ * locks the directory once, shared, as strace(1) sees its system calls. */
+TEST(capture_job_locks_its_directory_once)
+{
+    const char *dir = fx_tmp("job-lock-once");
+    CHECK(sh("%s simulate capture/scenes/lab.json --out-dir %s -q", test_bin(), dir) == 0);
+    int rc = sh("strace -f -qq -e trace=flock -o %s.trace %s recognize %s >/dev/null && grep -o 'flock(.*' %s.trace | tr -s ' '",
+                dir, test_bin(), dir, dir);
+    printf("    %s", out);
+    CHECK_MSG(rc == 0 && fx_count_lines(out) == 1 && strstr(out, ", LOCK_SH|LOCK_NB) = 0\n"),
+              "exit %d (strace(1) is needed), the flock calls of recognize:\n%s", rc, out);
+}

@@ -702,14 +702,18 @@ typedef struct {
  * frame PNG that is truncated, not 16-bit, of the wrong colour type or size (the detail names
  * the file and the capture.json line that names it). */
 gs_status gs_capture_read(const char *dir, gs_capture *cap);
+/* The same read, without taking the directory's lock: for a caller that holds it already (one
+ * open and flock(2) less per read; srv_job_read, which holds it until the job ends). */
+gs_status gs_capture_read_held(const char *dir, gs_capture *cap);
 /* The capture directory's lock, an flock(2) of the directory (released by gs_capture_unlock, or
  * when the process ends, killed or not): exclusive for its one writer (capture/'s acquisition
- * loop), shared for readers (gs_capture_read takes one itself; hold one across a read and
- * anything else that reads the files, as `run` does through its content key), so that no capture
- * is read while another process acquires into it. It does not wait: held by another, it fails
- * (GS_EIO) in one line naming dir; *fd is the lock's descriptor, -1 on failure. A shared lock
- * that cannot be taken for another reason (a directory without read permission, a file system
- * without locks) is GS_OK with *fd = -1: the reader goes on unlocked. */
+ * loop), shared for readers (gs_capture_read takes one itself; hold one across a read, with
+ * gs_capture_read_held, and anything else that reads the files, as `run` does through its
+ * content key), so that no capture is read while another process acquires into it. It does not
+ * wait: held by another, it fails (GS_EIO) in one line naming dir; *fd is the lock's
+ * descriptor, -1 on failure. A shared lock that cannot be taken for another reason (a directory
+ * without read permission, a file system without locks) is GS_OK with *fd = -1: the reader goes
+ * on unlocked. */
 gs_status gs_capture_lock(const char *dir, int exclusive, int *fd);
 void gs_capture_unlock(int fd);
 /* capture.json's utc (docs/formats.md), 1 if valid: ISO 8601 YYYY-MM-DDThh:mm:ss[.f+](Z|+hh:mm|

@@ -324,6 +324,16 @@ static gs_status read_locked(const char *dir, gs_capture *cap);
 
 gs_status gs_capture_read(const char *dir, gs_capture *cap)
 {
+    int fd = -1;
+    gs_status st = dir && cap ? gs_capture_lock(dir, 0, &fd) : GS_OK;
+    if (st == GS_OK) st = gs_capture_read_held(dir, cap);
+    else memset(cap, 0, sizeof *cap);
+    gs_capture_unlock(fd);
+    return st;
+}
+
+gs_status gs_capture_read_held(const char *dir, gs_capture *cap)
+{
     if (!dir || !cap) return gs_fail(GS_EINVAL, "gs_capture_read: NULL argument");
     memset(cap, 0, sizeof *cap);
     struct stat sb;
@@ -334,12 +344,7 @@ gs_status gs_capture_read(const char *dir, gs_capture *cap)
     if (!there && errno == ENOENT)
         return gs_fail(GS_ENOTFOUND, "%s: no such directory: expected a capture directory (gridsurvey "
                        "simulate SCENE --out-dir DIR renders one; docs/formats.md)", dir);
-    int fd = -1;
-    gs_status st = there ? gs_capture_lock(dir, 0, &fd) : GS_OK;
-    if (st != GS_OK) return st;
-    st = read_locked(dir, cap);
-    gs_capture_unlock(fd);
-    return st;
+    return read_locked(dir, cap);
 }
 
 static gs_status read_locked(const char *dir, gs_capture *cap)
