@@ -107,10 +107,54 @@ static void pooled_bins(const srv_acc_point *pts, size_t np, int hard, int phase
     }
 }
 
+void srv_acc_rate_axis(const double *v, size_t n, double *lo, double *hi, double *tick)
+{
+    double vmin = INFINITY;
+    for (size_t i = 0; i < n; i++)
+        if (v[i] < vmin) vmin = v[i];   /* (a NaN compares false: skipped) */
+    double bottom = isfinite(vmin) ? floor(vmin * 10.0 + 1e-9) / 10.0 : 0.0;   /* (0.7 stays 0.7) */
+    if (bottom < 0.5) bottom = 0.0;
+    if (bottom > 0.9) bottom = 0.9;
+    double span = 1.0 - bottom, pad = 0.03 * span;
+    *lo = bottom - pad;
+    *hi = 1.0 + pad;
+    static const double steps[] = {0.2, 0.1, 0.05, 0.02};
+    *tick = steps[3];
+    for (int i = 0; i < 3; i++)
+        if (span / steps[i] > 3.999) {
+            *tick = steps[i];
+            break;
+        }
+}
+
 /* The accuracy figure: per scene, right bulb and phase among detected lights (solid: the
  * pipeline; dashed: the oracle on its subset) and the detection rate, against capture seconds
  * (log), one curve per K. Curves use the main grid (HDR, locked, 3 phases). */
 static const int kcolor[3] = {2, 3, 4};
+#define CURVE_MAX 64
+
+/* The points of scene hard's curve at K in the accuracy figure's panel (0: right of detected,
+ * 1: detection rate): the pipeline's (xs, ys: log10 capture s, rate; *m of them) and, panel 0,
+ * the oracle's (xo, yo; *mo). */
+static void curve_points(const srv_acc_point *pts, size_t np, int hard, int panel, int K, double *xs, double *ys,
+                         int *m, double *xo, double *yo, int *mo)
+{
+    *m = *mo = 0;
+    for (size_t i = 0; i < np && *m < CURVE_MAX && *mo < CURVE_MAX; i++) {
+        const srv_acc_point *p = &pts[i];
+        if (!main_grid(p) || p->hard != hard || p->K != K) continue;
+        double acc = p->ev.matched ? (double)p->ev.all_correct / (double)p->ev.matched : NAN;
+        double y = panel ? p->ev.detection_rate : acc;
+        if (isfinite(y)) {
+            xs[*m] = log10(p->capture_s);
+            ys[(*m)++] = y;
+        }
+        if (!panel && isfinite(p->oracle_sub)) {
+            xo[*mo] = log10(p->capture_s);
+            yo[(*mo)++] = p->oracle_sub;
+        }
+    }
+}
 
 void srv_acc_plot_accuracy(const char *path, const srv_acc_point *pts, size_t np, const int *Ks, int nK)
 {
@@ -136,37 +180,36 @@ void srv_acc_plot_accuracy(const char *path, const srv_acc_point *pts, size_t np
         tmax = 10;
     }
     double lx0 = floor(log10(tmin)) - 0.05, lx1 = ceil(log10(tmax)) + 0.05;
+    /* each column's rate axis, shared by its scenes, over every value it draws */
+    double ylo[2], yhi[2], ytick[2];
+    for (int panel = 0; panel < 2; panel++) {
+        double ymin = INFINITY, xs[CURVE_MAX], ys[CURVE_MAX], xo[CURVE_MAX], yo[CURVE_MAX];
+        for (int hard = 0; hard < 3; hard++)
+            for (int ki = 0; ki < nK; ki++) {
+                int m, mo;
+                curve_points(pts, np, hard, panel, Ks[ki], xs, ys, &m, xo, yo, &mo);
+                for (int j = 0; j < m; j++) ymin = fmin(ymin, ys[j]);
+                for (int j = 0; mo > 1 && j < mo; j++) ymin = fmin(ymin, yo[j]);   /* (drawn: a line) */
+            }
+        srv_acc_rate_axis(&ymin, 1, &ylo[panel], &yhi[panel], &ytick[panel]);
+    }
     for (int hard = 0; hard < 3; hard++)
         for (int panel = 0; panel < 2; panel++) {
             pladv(0);
             plvpor(0.16, 0.95, 0.14, 0.88);
-            plwind(lx0, lx1, 0.0, 1.03);   /* (headroom: a perfect point sits at 1) */
+            plwind(lx0, lx1, ylo[panel], yhi[panel]);
             plcol0(1);
             plwidth(1.0);
-            plbox("bcnstlg", 0, 0, "bcnstvg", 0.2, 2);
+            plbox("bcnstlg", 0, 0, "bcnstvg", ytick[panel], 2);
             char top[128];
             snprintf(top, sizeof top, "%s: %s", srv_acc_scene_names[hard],
                      panel ? "detection rate" : "right bulb and phase (of detected)");
             pllab("capture time, s (ACam: A (C + R) #gD)", panel ? "detected / in image" : "accuracy", top);
             int drawn[3] = {0}, oracle_drawn = 0;   /* the legend names only these */
             for (int ki = 0; ki < nK; ki++) {
-                double xs[64], ys[64], yo[64];
-                int m = 0, mo = 0;
-                double xo[64];
-                for (size_t i = 0; i < np && m < 64; i++) {
-                    const srv_acc_point *p = &pts[i];
-                    if (!main_grid(p) || p->hard != hard || p->K != Ks[ki]) continue;
-                    double acc = p->ev.matched ? (double)p->ev.all_correct / (double)p->ev.matched : NAN;
-                    double y = panel ? p->ev.detection_rate : acc;
-                    if (isfinite(y)) {
-                        xs[m] = log10(p->capture_s);
-                        ys[m++] = y;
-                    }
-                    if (!panel && isfinite(p->oracle_sub)) {
-                        xo[mo] = log10(p->capture_s);
-                        yo[mo++] = p->oracle_sub;
-                    }
-                }
+                double xs[CURVE_MAX], ys[CURVE_MAX], xo[CURVE_MAX], yo[CURVE_MAX];
+                int m, mo;
+                curve_points(pts, np, hard, panel, Ks[ki], xs, ys, &m, xo, yo, &mo);
                 plcol0(kcolor[ki % 3]);
                 plwidth(2.0);
                 pllsty(1);
@@ -213,7 +256,8 @@ void srv_acc_plot_accuracy(const char *path, const srv_acc_point *pts, size_t np
                          1, nl, opts, 0.8, 0.6, 2.0, 0.0, colors, (const char *const *)labels, NULL, NULL, NULL,
                          NULL, colors, styles, widths, NULL, NULL, NULL, NULL);
             else
-                plptex(0.5 * (lx0 + lx1), 0.5, 1.0, 0.0, 0.5, "no point of this scene in the sweep");
+                plptex(0.5 * (lx0 + lx1), 0.5 * (ylo[panel] + yhi[panel]), 1.0, 0.0, 0.5,
+                       "no point of this scene in the sweep");
         }
     plend();
 }
@@ -240,9 +284,12 @@ void srv_acc_plot_calibration(const char *path, const srv_acc_point *pts, size_t
     for (int phase = 0; phase < 2; phase++) {
         pladv(phase + 1);
         plvpor(0.17, 0.93, 0.12, 0.90);
-        plwind(0, 1.03, 0, 1.03);   /* (headroom: the well-calibrated bins sit at 1, 1) */
+        /* x and y share the whole scale, so the diagonal is perfect calibration; bins span it */
+        double a0, a1, tick;
+        srv_acc_rate_axis(NULL, 0, &a0, &a1, &tick);
+        plwind(a0, a1, a0, a1);
         plcol0(1);
-        plbox("bcnstg", 0.2, 2, "bcnstvg", 0.2, 2);
+        plbox("bcnstg", tick, 2, "bcnstvg", tick, 2);
         pllab("reported confidence (bin mean)", ylab[phase], "");
         plschr(0, 0.8);   /* the title fits its half of the picture */
         plmtex("t", 2.0, 0.5, 0.5, title[phase]);
@@ -422,11 +469,15 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
                "Left: detected lights with the right bulb and phase (solid, the pipeline, every detected light) "
                "and the maximum-likelihood oracle on its subset (dashed); right: detection rate. One curve per "
                "K; HDR on, locked, phases 0/120/240. The variants (HDR off, free running, continuous phases) are "
-               "table rows on metro_clear at K = 26.\n\n"
+               "table rows on metro_clear at K = 26. Each column's rate axis, shared by its scenes, runs from "
+               "the lowest value drawn rounded down to a tenth (from 0 when that is below 0.5) to 1, with 3 %% "
+               "of its span beyond both ends, so a point at either end is drawn inside the frame.\n\n"
                "![calibration](%s/calibration.png)\n\nAccuracy of the answered lights against their reported "
                "confidence, pooled over each scene's main grid (HDR on, locked, 3 phases; the variants' ECE is "
                "in the table: free-running points, whose phases drift without the AC lock, are far from the "
-               "diagonal); the dashed line is perfect calibration. These captures are the project's own "
+               "diagonal); the dashed line is perfect calibration. Both axes run over the whole scale, 0 to 1 "
+               "with 3 %% beyond both ends, so the diagonal is at 45 degrees and a bin at 0 or 1 is inside the "
+               "frame. These captures are the project's own "
                "simulator's; calibration on a renderer the simulator does not share is in "
                "docs/recognition.md (\"Measured\", the independent renderer). The plot's bins, with the 95 %% "
                "Wilson interval of their share right (the plot's bars):\n\n"

@@ -281,6 +281,11 @@ const char *srv_acc_ph_name(const srv_acc_point *p);
 gs_status srv_acc_write_csv(const char *path, const srv_acc_point *pts, size_t np);
 /* The reliability bins of every point (pair and phase), one row per non-empty bin. */
 gs_status srv_acc_write_bins_csv(const char *path, const srv_acc_point *pts, size_t np);
+/* A rate axis over v[0..n) (rates in [0, 1]; NaN skipped): from the smallest rounded down to a
+ * tenth (0 when that is below 0.5, or no value; at most 0.9) to 1, which stays in view, and 3 %
+ * of that span beyond both ends, so a value at either end is drawn inside the frame, not on it;
+ * *tick the major tick step, the largest of 0.2, 0.1, 0.05, 0.02 giving at least 4 ticks. */
+void srv_acc_rate_axis(const double *v, size_t n, double *lo, double *hi, double *tick);
 void srv_acc_plot_accuracy(const char *path, const srv_acc_point *pts, size_t np, const int *Ks, int nK);
 void srv_acc_plot_calibration(const char *path, const srv_acc_point *pts, size_t np);
 gs_status srv_acc_write_doc(const char *path, const char *out, const char *base, const srv_acc_crop *cr, int quick, const srv_acc_point *pts, size_t np, double wall, const int *Ks, int nK);

@@ -1,5 +1,6 @@
 /* test_bench_accuracy.c - `gridsurvey bench accuracy --quick` (survey/bench_accuracy.c): the
  * sweep runs and its numbers are consistent. No timing asserts. */
+#include "tests/recognize_fixture.h"
 #include "tests/test.h"
 #include "recognize/recognize.h"
 #include "survey/internal.h"
@@ -300,4 +301,92 @@ TEST(bench_accuracy_calibration_titles_fit)
     CHECK_MSG(cols > 200, "no title ink: %s", out);   /* the titles are there */
     CHECK_MSG(mid == 0 && right == 0 && left == 0, "title ink at a panel's edge (middle %ld, right %ld, left %ld)",
               mid, right, left);
+}
+
+/* The rate axis (srv_acc_rate_axis) covers every value and 1 with room inside the frame at both
+ * ends, starts at 0 only when a value is below 0.5, and otherwise shows the data, not the empty
+ * scale below them; its ticks are a few, on a 1-2-5 step. */
+TEST(bench_accuracy_rate_axis_fits_the_data)
+{
+    static const double sets[][4] = {
+        {0.75, 0.98, 1.0, 0.93}, {0.99, 0.995, 0.992, 0.99}, {1, 1, 1, 1},   {0.3, 1, 0.9, 0.8},
+        {0.0, 0.5, 1, 1},        {0.51, 0.6, NAN, 0.7},       {0.7, 0.7, 0.7, 0.7}, {NAN, NAN, NAN, NAN}};
+    for (size_t s = 0; s < sizeof sets / sizeof *sets; s++) {
+        double vmin = INFINITY, lo, hi, tick;
+        for (int i = 0; i < 4; i++) vmin = fmin(vmin, sets[s][i]);   /* (fmin skips a NaN) */
+        srv_acc_rate_axis(sets[s], 4, &lo, &hi, &tick);
+        if (isinf(vmin)) vmin = 0.0;   /* no value: the whole scale */
+        double span = hi - lo, room = 0.02 * span;   /* a few pixels of the panel's ~320 */
+        CHECK_MSG(lo < vmin - room && hi > 1.0 + room, "set %zu: [%g, %g] over %g..1", s, lo, hi, vmin);
+        if (vmin > 0.5)
+            CHECK_MSG(lo > 0.4 && 1.0 - vmin >= 0.25 * (hi - lo) - 0.03,
+                      "set %zu: [%g, %g]: the data (%g..1) squeezed", s, lo, hi, vmin);
+        else
+            CHECK_MSG(lo < 0.0 && lo > -0.1, "set %zu: [%g, %g]: 0 not in view", s, lo, hi);
+        double ticks = span / tick;
+        CHECK_MSG(ticks >= 4 && ticks <= 12 && (fabs(tick - 0.2) < 1e-12 || fabs(tick - 0.1) < 1e-12 ||
+                                                 fabs(tick - 0.05) < 1e-12 || fabs(tick - 0.02) < 1e-12),
+                  "set %zu: [%g, %g] ticked every %g", s, lo, hi, tick);
+    }
+    double lo, hi, tick;   /* no value: the whole scale, as calibration's axes */
+    srv_acc_rate_axis(NULL, 0, &lo, &hi, &tick);
+    CHECK_MSG(lo < 0.0 && lo > -0.1 && hi > 1.0 && hi < 1.1, "[%g, %g]", lo, hi);
+}
+
+/* The frame's rows (the first and last inked across most of the panel) and the lowest row of
+ * colour r,g,b among the panel's left half (the accuracy legends are at the right, the
+ * calibration's at the left: right = 1 reads the right half) in cell (col, prow) of a cols x
+ * rows picture; 0 when the picture cannot be read. */
+static int frame_and_lowest(const char *png, int cols, int rows, int col, int prow, int right, int r, int g, int b,
+                            int *top, int *bottom, int *lowest)
+{
+    int w = 0, h = 0;
+    unsigned char *px = recfx_read_png(png, &w, &h);
+    if (!px) return 0;
+    int cw = w / cols, ch = h / rows, x0 = col * cw, y0 = prow * ch;
+    *top = *bottom = *lowest = -1;
+    for (int y = y0; y < y0 + ch; y++) {
+        int ink = 0, mine = 0;
+        for (int x = x0; x < x0 + cw; x++) {
+            const unsigned char *p = px + 3 * ((size_t)y * (size_t)w + (size_t)x);
+            ink += p[0] < 200 || p[1] < 200 || p[2] < 200;
+            int half = x >= x0 + cw / 2;
+            mine += half == right && abs(p[0] - r) <= 8 && abs(p[1] - g) <= 8 && abs(p[2] - b) <= 8;
+        }
+        if (ink > cw / 2) {
+            if (*top < 0) *top = y - y0;
+            *bottom = y - y0;
+        }
+        if (mine) *lowest = y - y0;
+    }
+    free(px);
+    return 1;
+}
+
+/* The accuracy plot's rate axes come from the data: curves at 0.8 (accuracy and detection) are
+ * drawn low in their panels, inside the frame, not squeezed against 1 over an empty scale; a
+ * calibration bin none of whose lights is right (at 0) is inside the frame too. */
+TEST(bench_accuracy_plots_axes_from_the_data)
+{
+    static const int Ks[1] = {8};
+    char acc[1100], cal[1100];
+    snprintf(acc, sizeof acc, "%s/acc08.png", test_tmpdir());
+    snprintf(cal, sizeof cal, "%s/cal0.png", test_tmpdir());
+    srv_acc_point p[2] = {plot_point(0, 8, 32, 0.8), plot_point(0, 8, 64, 0.8)};
+    srv_acc_plot_accuracy(acc, p, 2, Ks, 1);
+    for (int panel = 0; panel < 2; panel++) {
+        int top, bottom, lowest;
+        if (!frame_and_lowest(acc, 2, 3, panel, 0, 0, 31, 119, 180, &top, &bottom, &lowest)) return;
+        CHECK_MSG(top >= 0 && bottom - top > 100 && lowest > 0, "panel %d: frame %d..%d, curve to %d", panel, top,
+                  bottom, lowest);
+        double up = (double)(bottom - lowest) / (bottom - top);   /* 0.8 over [0, 1.03]: 0.78 */
+        CHECK_MSG(lowest < bottom - 2 && up < 0.25, "panel %d: 0.8 drawn at %.2f of the frame's height (row %d of %d..%d)",
+                  panel, up, lowest, top, bottom);
+    }
+    p[0].cal.right[NBINS - 1] = 0;   /* metro's one bin: confidence 0.8, none right */
+    srv_acc_plot_calibration(cal, p, 1);
+    int top, bottom, lowest;
+    if (!frame_and_lowest(cal, 2, 1, 0, 0, 1, 31, 119, 180, &top, &bottom, &lowest)) return;
+    CHECK_MSG(top >= 0 && lowest > 0 && lowest < bottom - 2, "calibration: the bin at 0 reaches row %d, frame %d..%d",
+              lowest, top, bottom);
 }
