@@ -1,5 +1,6 @@
 /* test_bench_accuracy.c - `gridsurvey bench accuracy --quick` (survey/bench_accuracy.c): the
- * sweep runs and its numbers are consistent. No timing asserts. */
+ * sweep runs and its numbers are consistent; its plots read back (points at 0 and 1 inside the
+ * frame, rate axes from the data, legends of the drawn curves). No timing asserts. */
 #include "tests/recognize_fixture.h"
 #include "tests/test.h"
 #include "recognize/recognize.h"

@@ -1,7 +1,7 @@
 /* test_cli_delight.c - `gridsurvey delight` end to end: the built-in database's coverage through
  * `export`, export -> import -> export identity, `add` of a real recording and of an unlocked
- * one (a one-line warning), `plot` writing a real PNG, --help everywhere, and bad input as
- * one-line errors with a non-zero exit. */
+ * one (a one-line warning), `plot` writing a real PNG titled with every plotted bulb's grid,
+ * --help everywhere, and bad input as one-line errors with a non-zero exit. */
 #include "recognize/recognize.h"
 #include "survey/internal.h"
 #include "tests/fixtures.h"

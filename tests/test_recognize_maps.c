@@ -2,7 +2,7 @@
  * the documented scale, phase hues, bulb colours and the confidence scale on rendered captures
  * (tests/recognize_fixture.h), an empty scene, and in process the per-pixel pass's fast and
  * general paths, a saturated core and bad arguments; the bulb map's legend and the signal plot's
- * (Fig. 3) lights and template curves. */
+ * (Fig. 3) lights and template curves; the BRF plot's (Fig. 2) levels inside its frame. */
 #include "recognize/recognize.h"
 #include "recognize/internal.h"
 #include "tests/fixtures.h"
