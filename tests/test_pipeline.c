@@ -15,6 +15,7 @@
 #include "tests/survey_fixture.h"
 #include "tests/test.h"
 
+#include <dirent.h>
 #include <fcntl.h>
 #include <jansson.h>
 #include <math.h>
@@ -393,20 +394,56 @@ TEST(pipeline_geographic_scene_locates_lights)
 /* ------------------------------------------------------------------ SIGKILL and resume */
 
 /* The child's progress callback: reports each stage on a pipe, and stops itself (SIGSTOP) at
- * the point the parent chose, so the parent's kill lands where it is meant to. */
+ * the point the parent chose, so the parent's kill lands where it is meant to; continued, it
+ * stops again at the next stage's first report, so that a kill meant for that stage lands
+ * there at the latest, however slow the parent is. */
 typedef struct {
     int fd;
     int stop_stage;            /* -1: never */
     const char *stop_detail;   /* prefix of the detail to stop at ("" = any) */
+    int stopped;               /* stopped there already */
 } child_ctx;
 
 static void pipe_progress(void *ctx, srv_stage stage, const char *detail)
 {
-    const child_ctx *c = ctx;
+    child_ctx *c = ctx;
     char b = (char)('0' + (int)stage);
     if (write(c->fd, &b, 1) != 1) _exit(7);
-    if ((int)stage == c->stop_stage && !strncmp(detail, c->stop_detail, strlen(c->stop_detail)))
+    if (c->stopped ? (int)stage != c->stop_stage
+                   : (int)stage == c->stop_stage && !strncmp(detail, c->stop_detail, strlen(c->stop_detail))) {
+        c->stopped = 1;
         raise(SIGSTOP);
+    }
+}
+
+/* The frames (frame_*.png) in dir. */
+static int frames_in(const char *dir)
+{
+    DIR *d = opendir(dir);
+    int n = 0;
+    for (struct dirent *e; d && (e = readdir(d));) {
+        size_t len = strlen(e->d_name);
+        n += !strncmp(e->d_name, "frame_", 6) && len > 4 && !strcmp(e->d_name + len - 4, ".png");
+    }
+    if (d) closedir(d);
+    return n;
+}
+
+/* Waits, the child continued in the capture, until it has written n more frames into cap, then
+ * for u of its own time per frame: a kill then lands during the capture whatever the load, with
+ * frames left to acquire (n is a fraction of them). 0 then, or when it stopped meanwhile (at the
+ * next stage); 1 if it ended (*status). */
+static int wait_frames(pid_t pid, const char *cap, int n, double u, int *status)
+{
+    int base = frames_in(cap);
+    double t0 = gs_clock_s(CLOCK_MONOTONIC);
+    while (frames_in(cap) < base + n) {
+        pid_t w = waitpid(pid, status, WNOHANG | WUNTRACED);
+        if (w == pid) return !WIFSTOPPED(*status);
+        usleep(500);
+    }
+    usleep((useconds_t)(u * (gs_clock_s(CLOCK_MONOTONIC) - t0) / n * 1e6));
+    return 0;
 }
 
 static void run_child(const char *scene, const char *db, const char *capdir, child_ctx *c)
@@ -456,12 +493,17 @@ static int check_after_kill(const char *db, int kill_no)
 /* SIGKILL `run` 8 times at increasing points: at start-up; three times during the acquisition
  * (which resumes, so each kill lands further into it); at the start of blob extraction and
  * during Eq. 7; and twice in the database write: right before the capture's transaction and
- * shortly after it began (which may be after its commit). The child stops itself at the chosen stage (its progress callback),
- * the parent resumes it and kills it after a random delay scaled by that stage's duration in an
- * uninterrupted reference run, so the kills land where intended on any machine, loaded or
- * under ASan. After each kill the database is consistent; a final run through the CLI resumes
- * and yields exactly the reference's rows and capture files (the same content key); one more
- * run adds nothing. */
+ * shortly after it began (which may be after its commit). The child stops itself at the chosen
+ * stage (its progress callback), the parent resumes it and kills it after a random delay: in
+ * the capture, once a random number of frames more are on disk and a random part of the
+ * child's own time per frame; elsewhere, scaled by that stage's duration in an uninterrupted
+ * reference run, the child stopping itself at the next stage if it gets there first. So the
+ * kills land where intended on any machine, loaded or under ASan: the capture's used to be
+ * timed by the reference's too, and a reference slowed by load (2 to 3 x, measured on a loaded
+ * 2-core machine) let the child finish the capture, even the run, before the kill (failing
+ * "kills during the capture: 1" or "no kill during the database write"). After each kill the
+ * database is consistent; a final run through the CLI resumes and yields exactly the
+ * reference's rows and capture files (the same content key); one more run adds nothing. */
 TEST(pipeline_sigkill_resumes_to_same_content)
 {
     char scene[1024], ref_db[1024], db[1024], ref_cap[1024], cap[1024];
@@ -483,7 +525,8 @@ TEST(pipeline_sigkill_resumes_to_same_content)
         int stage;            /* where the child stops; -1: it does not */
         const char *detail;   /* ... at the call whose detail starts so */
         double lo, hi;        /* then the kill after a delay uniform in [lo, hi] x the stage's
-                               * reference duration (start-up: seconds) */
+                               * reference duration (start-up: seconds; the capture: after
+                               * floor([lo, hi] x K) frames more, see wait_frames) */
     } plan[8] = {
         {-1, "", 0.001, 0.003},
         {SRV_STAGE_CAPTURE, "", 0.1, 0.2}, {SRV_STAGE_CAPTURE, "", 0.15, 0.25},
@@ -501,7 +544,7 @@ TEST(pipeline_sigkill_resumes_to_same_content)
         double span = plan[k].stage < 0 ? 1.0
                       : plan[k].stage == SRV_STAGE_STORE ? store_tx_s : ref.seconds[plan[k].stage];
         double wait_s = (plan[k].lo + u * (plan[k].hi - plan[k].lo)) * span;
-        child_ctx cc = {-1, plan[k].stage, plan[k].detail};
+        child_ctx cc = {-1, plan[k].stage, plan[k].detail, 0};
         int fd;
         pid_t pid = fx_fork_pipe(&fd);
         if (pid == 0) {
@@ -520,8 +563,14 @@ TEST(pipeline_sigkill_resumes_to_same_content)
             /* a zero delay kills it where it stopped; otherwise it runs on for wait_s */
             if (!gone && plan[k].hi > 0.0) kill(pid, SIGCONT);
         }
-        if (!gone) {
+        if (!gone && plan[k].stage == SRV_STAGE_CAPTURE) {
+            int more = (int)((plan[k].lo + u * (plan[k].hi - plan[k].lo)) * frames_in(ref_cap));
+            rng = rng * 6364136223846793005ull + 1442695040888963407ull;
+            gone = wait_frames(pid, cap, more > 1 ? more : 1, (double)(rng >> 11) / 9007199254740992.0, &status);
+        } else if (!gone) {
             usleep((useconds_t)(wait_s * 1e6));
+        }
+        if (!gone) {
             kill(pid, SIGKILL);
             waitpid(pid, &status, 0);
         }
