@@ -19,6 +19,14 @@ static const unsigned char palette[][3] = {
 };
 #define PALETTE_N ((int)(sizeof palette / sizeof *palette))
 
+/* 5 % of the span beyond both ends, so values at the ends are drawn inside the frame */
+static void pad_range(double *ymin, double *ymax)
+{
+    double pad = 0.05 * (*ymax - *ymin);
+    *ymin -= pad;
+    *ymax += pad;
+}
+
 static const char *band_label(int bands, int band)
 {
     static const char *const rgb[3] = {"red band", "green band", "blue band"};
@@ -124,9 +132,7 @@ gs_status rec_plot_brfs(const gs_bulb *const *bulbs, size_t count, const char *p
         }
         if (b->n > nmax) nmax = b->n;
     }
-    double pad = 0.05 * (ymax - ymin);
-    ymin -= pad;
-    ymax += pad;
+    pad_range(&ymin, &ymax);
     double *x = malloc(sizeof *x * (size_t)(nmax + 1)), *y = malloc(sizeof *y * (size_t)(nmax + 1));
     if (!x || !y) {
         free(x);
@@ -259,7 +265,7 @@ typedef struct {
     int K, bands;
     size_t D;
     const char *title, *file;   /* PLplot writes file by name */
-    double ymax;
+    double ymin, ymax;
     double *u, *cv;
     double complex *tmp;
     double *px, *py, *lo, *hi;
@@ -277,7 +283,7 @@ static gs_status draw_signals(void *ctx, unsigned char *unused)
     size_t nl = sp->nl, D = sp->D;
     int K = sp->K, bands = sp->bands;
     const char *title = sp->title;
-    double ymax = sp->ymax, *u = sp->u, *cv = sp->cv, *px = sp->px, *py = sp->py, *lo = sp->lo,
+    double ymin = sp->ymin, ymax = sp->ymax, *u = sp->u, *cv = sp->cv, *px = sp->px, *py = sp->py, *lo = sp->lo,
            *hi = sp->hi;
     double complex *tmp = sp->tmp;
     gs_status st = GS_OK;
@@ -307,7 +313,7 @@ static gs_status draw_signals(void *ctx, unsigned char *unused)
         double y1 = top - band * (row_h + gap), y0 = y1 - row_h;
         for (int panel = 0; panel < 2 && st == GS_OK; panel++) {
             plvpor(panel ? 0.435 : 0.07, panel ? 0.73 : 0.37, y0, y1);
-            plwind(0.0, 1.0, 0.0, ymax);
+            plwind(0.0, 1.0, ymin, ymax);
             plcol0(1);
             plwidth(1.0);
             plschr(0, 0.6);
@@ -434,14 +440,17 @@ gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const r
         return gs_fail(GS_ENOMEM, "signal plot: cannot allocate curves");
     }
     for (int j = 0; j < CURVE_N; j++) u[j] = (double)j / (CURVE_N - 1);
-    /* y range over every drawn value */
-    double ymax = 0.0;
+    /* y range over every drawn value: the error bars' ends (below 0 for a dim sample), the
+     * templates, 0 */
+    double ymin = 0.0, ymax = 0.0;
     for (size_t l = 0; l < nl; l++) {
         size_t i = pick[l].light;
         double a = match[i].brightness;
         for (size_t d = 0; d < D; d++) {
-            double y = (cat->signal[i * D + d] + cat->sigma[i * D + d]) / a;
-            if (y > ymax) ymax = y;
+            double lo_y = (cat->signal[i * D + d] - cat->sigma[i * D + d]) / a,
+                   hi_y = (cat->signal[i * D + d] + cat->sigma[i * D + d]) / a;
+            if (lo_y < ymin) ymin = lo_y;
+            if (hi_y > ymax) ymax = hi_y;
         }
     }
     gs_status st = GS_OK;
@@ -449,15 +458,17 @@ gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const r
         const gs_bulb *b = rec_matcher_bulb(m, (size_t)match[pick[l].light].bulb);
         for (int band = 0; band < bands && st == GS_OK; band++) {
             st = rec_plot_template(b, &match[pick[l].light], 0.0, K, band, u, CURVE_N, cv, tmp);
-            for (int j = 0; j < CURVE_N && st == GS_OK; j++)
+            for (int j = 0; j < CURVE_N && st == GS_OK; j++) {
+                if (cv[j] < ymin) ymin = cv[j];
                 if (cv[j] > ymax) ymax = cv[j];
+            }
         }
     }
-    ymax = ymax > 0.0 ? ymax * 1.08 : 1.0;
     if (bands == 3 && ymax < 0.6) ymax = 0.6;
     if (bands == 1 && ymax < 1.5) ymax = 1.5;
+    pad_range(&ymin, &ymax);
 
-    signal_plot sp = {m, cat, match, pick, nl, K, bands, D, title, out.tmp, ymax, u, cv, tmp,
+    signal_plot sp = {m, cat, match, pick, nl, K, bands, D, title, out.tmp, ymin, ymax, u, cv, tmp,
                       px, py, lo, hi};
     if (st == GS_OK) st = gs_isolated(png_path, NULL, 0, draw_signals, &sp);
     free(u); free(cv); free(tmp); free(px); free(py); free(lo); free(hi);

@@ -503,10 +503,40 @@ TEST(maps_bulb_map_greys_ambiguous_pixels)
     gs_delight_free(d);
 }
 
+/* A plot's rows (PNG at path): the frame's top and bottom, the highest and lowest rows inked
+ * across 2/5 of the width; the first and last rows holding more than fill x the width in pixels
+ * of the first curve's colour (230, 159, 0). 0, or -1 if the PNG does not read. */
+static int plot_rows(const char *path, double fill, int *top, int *bottom, int *first, int *last)
+{
+    int w = 0, h = 0;
+    unsigned char *px = recfx_read_png(path, &w, &h);
+    if (!px) return -1;
+    *top = *bottom = *first = *last = -1;
+    for (int y = 0; y < h; y++) {
+        int ink = 0, mine = 0;
+        for (int x = 0; x < w; x++) {
+            const unsigned char *p = px + 3 * ((size_t)y * (size_t)w + (size_t)x);
+            ink += p[0] < 200 || p[1] < 200 || p[2] < 200;
+            mine += abs(p[0] - 230) < 40 && abs(p[1] - 159) < 40 && p[2] < 60;
+        }
+        if (ink > 2 * w / 5) {
+            if (*top < 0) *top = y;
+            *bottom = y;
+        }
+        if (mine > fill * w) {
+            if (*first < 0) *first = y;
+            *last = y;
+        }
+    }
+    free(px);
+    CHECK_MSG(*top >= 0 && *first >= 0 && *bottom - *top > h / 3, "frame rows %d..%d, curve rows %d..%d", *top,
+              *bottom, *first, *last);
+    return 0;
+}
+
 /* The BRF plot (rec_plot_brfs, `delight plot`): a bulb dark for half its cycle (value 0) and at
- * 2 the other half draws both levels inside the frame, clear of its lines: the frame is the
- * highest and lowest row inked across most of the picture, each level the row its colour
- * fills along most of half the plot. */
+ * 2 the other half draws both levels inside the frame, clear of its lines: each level is the
+ * row its colour fills along most of half the plot (~ w / 4 wide). */
 TEST(brf_plot_zero_and_peak_inside_the_frame)
 {
     gs_bulb b;
@@ -520,29 +550,34 @@ TEST(brf_plot_zero_and_peak_inside_the_frame)
     const char *path = fx_tmp("brf_zero.png");
     CHECK_OK(rec_plot_brfs(list, 1, path, "dark half"));
     gs_bulb_release(&b);
-    int w = 0, h = 0;
-    unsigned char *px = recfx_read_png(path, &w, &h);
-    if (!px) return;
-    int top = -1, bottom = -1, zero = -1, peak = -1;
-    for (int y = 0; y < h; y++) {
-        int ink = 0, mine = 0;   /* mine: the first bulb's colour, (230, 159, 0) */
-        for (int x = 0; x < w; x++) {
-            const unsigned char *p = px + 3 * ((size_t)y * (size_t)w + (size_t)x);
-            ink += p[0] < 200 || p[1] < 200 || p[2] < 200;
-            mine += abs(p[0] - 230) < 40 && abs(p[1] - 159) < 40 && p[2] < 60;
-        }
-        if (ink > 2 * w / 5) {
-            if (top < 0) top = y;
-            bottom = y;
-        }
-        if (mine > w / 8) {   /* half of the plot, ~ w / 4 wide */
-            if (peak < 0) peak = y;
-            zero = y;
-        }
-    }
-    free(px);
-    CHECK_MSG(top >= 0 && peak >= 0 && bottom - top > h / 2, "frame rows %d..%d, curve rows %d..%d", top, bottom,
-              peak, zero);
+    int top, bottom, peak, zero;
+    if (plot_rows(path, 1.0 / 8, &top, &bottom, &peak, &zero)) return;
     CHECK_MSG(zero < bottom - 3, "the zero level (row %d) on the frame's bottom (row %d)", zero, bottom);
     CHECK_MSG(peak > top + 3, "the peak level (row %d) on the frame's top (row %d)", peak, top);
+}
+
+/* The signal plot (rec_plot_signals, Fig. 3): a dim sample's error bar reaching below 0 is drawn
+ * whole, inside the frame (the axis used to start at 0, cutting it at the frame's bottom). One
+ * mono light, K = 4, samples 1, 1, 0, 1 of sigma 0.3: the bar of the third spans -0.3..0.3. */
+TEST(signal_plot_error_bar_below_zero_inside_the_frame)
+{
+    enum { K = 4 };
+    double signal[K] = {1.0, 1.0, 0.0, 1.0}, sigma[K] = {0.3, 0.3, 0.3, 0.3};
+    rec_match match;
+    memset(&match, 0, sizeof match);
+    match.brightness = 1.0;
+    rec_catalog cat;
+    memset(&cat, 0, sizeof cat);
+    cat.count = 1, cat.bands = 1, cat.K = K, cat.signal = signal, cat.sigma = sigma;
+    gs_delight *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(d, 512));
+    rec_matcher *m = NULL;
+    CHECK_OK(rec_matcher_new(d, 50, 1, K, NULL, &m));
+    const char *path = fx_tmp("signal_below_zero.png");
+    if (m) CHECK_OK(rec_plot_signals(m, &cat, &match, 1, path, "dim sample"));
+    rec_matcher_free(m);
+    gs_delight_free(d);
+    int top, bottom, first, last;
+    if (!m || plot_rows(path, 0, &top, &bottom, &first, &last)) return;
+    CHECK_MSG(last < bottom - 3, "the error bar's lowest row %d on the frame's bottom (row %d)", last, bottom);
 }
