@@ -471,6 +471,17 @@ static gs_status push_sites(push_ctx *x, void *arg)
     return res(x, PQexec(x->c, det_upsert), PGRES_COMMAND_OK, "upserting site detections");
 }
 
+/* The sites left without detections (*(size_t *)arg of them): a site the file merged into another
+ * (sites.c), whose detections the upserts moved. A site commits with its detections, so no
+ * other push's site is ever empty. */
+static gs_status drop_empty_sites(push_ctx *x, void *arg)
+{
+    PGresult *r = PQexec(x->c, "DELETE FROM light_sites s WHERE NOT EXISTS "
+                               "(SELECT 1 FROM site_detections d WHERE d.site_id = s.id)");
+    if (PQresultStatus(r) == PGRES_COMMAND_OK) *(size_t *)arg = strtoull(PQcmdTuples(r), NULL, 10);
+    return res(x, r, PGRES_COMMAND_OK, "deleting merged light sites");
+}
+
 /* ------------------------------------------------------------------ areas */
 
 typedef struct {
@@ -588,6 +599,9 @@ gs_status srv_pg_push(const char *db_path, const char *conninfo, const srv_push_
         if (!sb.n) break;
         r->sites_written += sb.written;
     }
+    size_t dropped = 0;
+    if ((s = in_txn(&x, drop_empty_sites, &dropped, r)) != GS_OK) goto done;
+    r->sites_written += dropped;
     if (o->areas) s = load_areas(&x, o, r);
 done:
     sqlite3_finalize(cb.list);

@@ -467,7 +467,7 @@ void srv_push_opts_default(srv_push_opts *o);
 typedef struct {
     size_t captures, captures_pushed;   /* in the file; newly pushed */
     size_t lights_pushed;
-    size_t sites, sites_written;        /* in the file; inserted or changed */
+    size_t sites, sites_written;        /* in the file; inserted, changed or deleted (merged) */
     size_t areas;
     int retries;                        /* transactions retried after a deadlock */
 } srv_push_report;
