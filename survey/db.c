@@ -262,9 +262,9 @@ static int query_int(sqlite3 *db, const char *sql, int *v)
 static const char *expected_text(void)
 {
     return "expected a gridsurvey survey database (SQLite, application_id 0x47534442 'GSDB', "
-           "schema version 1.." "5" ")";
+           "schema version 1.." "6" ")";
 }
-_Static_assert(SRV_DB_SCHEMA_VERSION == 5, "update expected_text()");
+_Static_assert(SRV_DB_SCHEMA_VERSION == 6, "update expected_text()");
 
 /* The 16-byte header of an existing file: SQLite's, or a one-line error. */
 static gs_status check_header(const char *path)
@@ -733,7 +733,8 @@ gs_status srv_db_check(srv_db *db, srv_db_report *r)
         (s = count(db, "SELECT count(*) FROM lights l WHERE NOT EXISTS (SELECT 1 FROM "
                        "site_detections sd WHERE sd.light_id = l.id)", &r->unassociated)) != GS_OK ||
         (s = count(db, "SELECT count(*) FROM light_sites s WHERE stale = 1 OR detections != "
-                       "(SELECT count(*) FROM site_detections sd WHERE sd.site_id = s.id)",
+                       "(SELECT count(*) FROM site_detections sd WHERE sd.site_id = s.id) OR detections != "
+                       "(SELECT coalesce(sum(detections), 0) FROM site_views v WHERE v.site_id = s.id)",
                    &r->stale_sites)) != GS_OK ||
         (s = count(db, "SELECT (SELECT count(*) FROM light_sites WHERE lat_deg IS NOT NULL AND "
                        "pose_key IS NULL) - (SELECT count(*) FROM light_sites_rtree)", &r->site_rtree_mismatch)) != GS_OK ||

@@ -258,12 +258,26 @@ static const char *const migration_5[] = {
     "ALTER TABLE captures ADD COLUMN candidate_bulbs INTEGER CHECK (candidate_bulbs > 0);\n",
     NULL};
 
+/* Version 6: each site's views (docs/survey-db.md "Light sites"): per camera pose that saw it,
+ * its detections' mean pixel, so that a detection of that pose and pixel finds the site whether
+ * or not the site or the detection is located (sites.c); filled for the sites already stored. */
+static const char *const migration_6[] = {
+    "CREATE TABLE site_views(\n"
+    "  site_id INTEGER NOT NULL REFERENCES light_sites(id) ON DELETE CASCADE,\n"
+    "  pose_key TEXT NOT NULL, x_px REAL NOT NULL, y_px REAL NOT NULL,\n"
+    "  detections INTEGER NOT NULL CHECK (detections > 0),\n"
+    "  PRIMARY KEY (site_id, pose_key)) WITHOUT ROWID;\n"
+    "CREATE INDEX site_views_pose ON site_views(pose_key, x_px, y_px);\n",
+    SRV_SQL_SITE_VIEWS("") ";\n",
+    NULL};
+
 const srv_db_migration srv_db_migrations[SRV_DB_MIGRATIONS] = {
     {"tables, R*Tree and triggers", migration_1},
     {"phase-balance views", migration_2},
     {"light sites", migration_3},
     {"site phase-balance views", migration_4},
     {"candidate bulbs of each capture", migration_5},
+    {"site views: the pose and pixel of each site", migration_6},
 };
 
 /* ------------------------------------------------------------------ statements */

@@ -220,6 +220,20 @@ void srv_site_obs_from_row(sqlite3_stmt *q, int first, srv_site_obs *o);
  * version dv (SQLite and PostgreSQL): the candidates its recognition used, or for a capture
  * stored before schema 5 (NULL) all of the DELIGHT's entries. */
 #define SRV_SQL_BULB_LABELS "coalesce(c.candidate_bulbs, dv.bulbs)"
+/* The camera pose key of a capture's station st (LEFT JOINed): its position, orientation and
+ * focal length as text, 'none' without a station (one fixed, unknown camera). Stored in
+ * light_sites.pose_key and site_views.pose_key: never change it (docs/survey-db.md). */
+#define SRV_SQL_POSE_KEY(st)                                                                       \
+    "CASE WHEN " st ".id IS NULL THEN 'none' ELSE printf('%.7f,%.7f,%.2f,%.3f,%.3f,%.3f,%.2f', " st \
+    ".lat_deg, " st ".lon_deg, " st ".height_m, " st ".heading_deg, " st ".pitch_deg, " st            \
+    ".roll_deg, " st ".focal_px) END"
+/* The rows of site_views (schema 6) of the sites whose detections sd pass `where`: per site and
+ * camera pose, its detections' mean pixel and count (sites.c; migration 6 fills them). */
+#define SRV_SQL_SITE_VIEWS(where)                                                                  \
+    "INSERT INTO site_views(site_id, pose_key, x_px, y_px, detections) SELECT sd.site_id, "      \
+    SRV_SQL_POSE_KEY("st") ", avg(l.x_px), avg(l.y_px), count(*) FROM site_detections sd "       \
+    "JOIN lights l ON l.id = sd.light_id JOIN captures c ON c.id = sd.capture_id "                \
+    "LEFT JOIN stations st ON st.id = c.station_id " where " GROUP BY 1, 2"
 /* ====================================================================== end of the database */
 
 /* ============================ the shared PostGIS database (pg*.c), shared between its files */

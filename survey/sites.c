@@ -9,11 +9,16 @@
  *   of a located site (position x_s, covariance C_s) when the Mahalanobis distance
  *   d2 = dx^T (C_d + C_s)^-1 dx < SRV_SITE_GATE_D2 (the 0.999 quantile of chi2 with 2 dof), dx in
  *   local east/north metres (WGS84, gis_metres_per_deg);
- * - any other detection is a candidate of a pixel site of the same camera pose (the station's
- *   position, orientation and focal length; captures without a station count as one unknown,
- *   fixed camera) within SRV_SITE_GATE_PX pixels (d2 = distance^2 in px^2);
- * - candidate pairs are assigned greedily by increasing d2, each site taking at most one
- *   detection of a capture; the unassigned detections found new sites.
+ * - every site keeps, per camera pose that saw it (the station's position, orientation and
+ *   focal length; captures without a station count as one unknown, fixed camera), its
+ *   detections' mean pixel (site_views); any other detection is a candidate of the sites seen
+ *   from its pose within SRV_SITE_GATE_PX pixels (d2 = distance^2 in px^2), located or not, and
+ *   a located detection of the pixel sites (no location) of its pose, which it upgrades;
+ * - candidate pairs are assigned greedily, by position first, then by pixel, each by
+ *   increasing d2, each site taking at most one detection of a capture; a located detection
+ *   that joined a site by position merges into it the nearest pixel site of its pose and pixel
+ *   that no detection of the capture took, unless the two share a capture; the unassigned
+ *   detections found new sites.
  * A site's columns are then recomputed from all of its detections: its position is the
  * information-weighted mean (sum C_i^-1)^-1 sum C_i^-1 x_i with that covariance's ellipse, and
  * its bulb, phase and (bulb, phase) posteriors are products over the detections
@@ -261,17 +266,22 @@ typedef struct {
     srv_site_obs obs;      /* its recognition (a new site's combined answer) */
     int64_t site;          /* assigned site, 0 = none yet */
     double d2;
+    int by_pixel, merged;  /* joined by pose and pixel; merged a pixel site into its own */
 } detection;
 
+/* A candidate (detection, site): by position (Mahalanobis d2) or by pose and pixel (px^2),
+ * which come second; whether the site is located. */
 typedef struct {
     double d2;
     size_t det;
     int64_t site;
+    int by_pixel, site_located;
 } pair;
 
 static int cmp_pairs(const void *a, const void *b)
 {
     const pair *x = a, *y = b;
+    if (x->by_pixel != y->by_pixel) return x->by_pixel - y->by_pixel;
     if (x->d2 != y->d2) return x->d2 < y->d2 ? -1 : 1;
     if (x->det != y->det) return x->det < y->det ? -1 : 1;
     return x->site < y->site ? -1 : x->site > y->site;
@@ -287,9 +297,7 @@ static gs_status prep(srv_db *db, const char *sql, sqlite3_stmt **q)
 
 static const char dets_sql[] =
     "SELECT l.id, l.x_px, l.y_px, loc.lat_deg, loc.lon_deg, loc.height_m, loc.semi_major_m, "
-    "loc.semi_minor_m, loc.azimuth_deg, CASE WHEN st.id IS NULL THEN 'none' ELSE "
-    "printf('%.7f,%.7f,%.2f,%.3f,%.3f,%.3f,%.2f', st.lat_deg, st.lon_deg, st.height_m, "
-    "st.heading_deg, st.pitch_deg, st.roll_deg, st.focal_px) END, "
+    "loc.semi_minor_m, loc.azimuth_deg, " SRV_SQL_POSE_KEY("st") ", "
     "l.bulb_id, l.technology, l.phase_deg, l.phase_sigma_deg, l.confidence, l.bulb_confidence, "
     "l.phase_confidence, " SRV_SQL_BULB_LABELS " "
     "FROM lights l JOIN captures c ON c.id = l.capture_id LEFT JOIN stations st ON st.id = c.station_id "
@@ -300,15 +308,22 @@ static const char geo_cand_sql[] =
     "SELECT s.id, s.lat_deg, s.lon_deg, s.semi_major_m, s.semi_minor_m, s.azimuth_deg "
     "FROM light_sites_rtree r CROSS JOIN light_sites s ON s.id = r.id "
     "WHERE r.max_lat >= ?1 AND r.min_lat <= ?2 AND r.max_lon >= ?3 AND r.min_lon <= ?4";
+/* the sites seen from a pose within a pixel box (site_views), whether each is located; the
+ * pixel sites of a pose in a pixel column */
+static const char view_cand_sql[] =
+    "SELECT v.site_id, v.x_px, v.y_px, s.pose_key IS NULL FROM site_views v JOIN light_sites s ON s.id = v.site_id "
+    "WHERE v.pose_key = ?1 AND v.x_px BETWEEN ?2 AND ?3 AND v.y_px BETWEEN ?4 AND ?5";
 static const char px_cand_sql[] =
-    "SELECT s.id, s.x_px, s.y_px FROM light_sites s WHERE s.pose_key = ?1 AND s.x_px BETWEEN ?2 AND ?3";
+    "SELECT s.id, s.x_px, s.y_px, 0 FROM light_sites s WHERE s.pose_key = ?1 AND s.x_px BETWEEN ?2 AND ?3";
 static const char site_obs_sql[] =
     "SELECT l.bulb_id, l.technology, l.phase_deg, l.phase_sigma_deg, l.confidence, l.bulb_confidence, "
     "l.phase_confidence, " SRV_SQL_BULB_LABELS ", loc.lat_deg, loc.lon_deg, loc.height_m, loc.semi_major_m, "
-    "loc.semi_minor_m, loc.azimuth_deg, l.x_px, l.y_px FROM site_detections sd "
+    "loc.semi_minor_m, loc.azimuth_deg, l.x_px, l.y_px, " SRV_SQL_POSE_KEY("st") " FROM site_detections sd "
     "JOIN lights l ON l.id = sd.light_id JOIN captures c ON c.id = l.capture_id "
     "LEFT JOIN delight_versions dv ON dv.id = c.delight_id LEFT JOIN locations loc ON loc.light_id = l.id "
-    "WHERE sd.site_id = ?1 ORDER BY sd.light_id";
+    "LEFT JOIN stations st ON st.id = c.station_id WHERE sd.site_id = ?1 ORDER BY sd.light_id";
+static const char views_del_sql[] = "DELETE FROM site_views WHERE site_id = ?1";
+static const char views_sql[] = SRV_SQL_SITE_VIEWS("WHERE sd.site_id = ?1");
 
 static const char new_site_sql[] =
     "INSERT INTO light_sites(lat_deg, lon_deg, height_m, semi_major_m, semi_minor_m, azimuth_deg, "
@@ -319,7 +334,7 @@ static const char site_update_sql[] =
     "UPDATE light_sites SET lat_deg = ?1, lon_deg = ?2, height_m = ?3, semi_major_m = ?4, "
     "semi_minor_m = ?5, azimuth_deg = ?6, x_px = ?7, y_px = ?8, detections = ?9, captures = ?9, "
     "bulb_id = ?10, technology = ?11, phase_deg = ?12, phase_sigma_deg = ?13, confidence = ?14, "
-    "bulb_confidence = ?15, phase_confidence = ?16, stale = 0 WHERE id = ?17";
+    "bulb_confidence = ?15, phase_confidence = ?16, pose_key = ?18, stale = 0 WHERE id = ?17";
 
 void srv_site_obs_from_row(sqlite3_stmt *q, int first, srv_site_obs *o)
 {
@@ -360,13 +375,52 @@ static void bind_value(sqlite3_stmt *q, const srv_site_value *v)
     sqlite3_bind_double(q, 16, fmin(fmax(v->phase_confidence, 0.0), 1.0));
 }
 
-/* Recompute a site's columns from its detections. */
-static gs_status refresh_site(srv_db *db, sqlite3_stmt *qo, sqlite3_stmt *qu, int64_t site)
+/* The statements that keep a site: its detections (site_obs_sql), its update, its views'
+ * deletion and insertion. */
+typedef struct {
+    sqlite3_stmt *obs, *update, *views_del, *views;
+} site_stmts;
+
+static gs_status prep_site_stmts(srv_db *db, site_stmts *q)
 {
+    gs_status s;
+    if ((s = prep(db, site_obs_sql, &q->obs)) != GS_OK || (s = prep(db, site_update_sql, &q->update)) != GS_OK ||
+        (s = prep(db, views_del_sql, &q->views_del)) != GS_OK)
+        return s;
+    return prep(db, views_sql, &q->views);
+}
+
+static void finalize_site_stmts(site_stmts *q)
+{
+    sqlite3_finalize(q->obs);
+    sqlite3_finalize(q->update);
+    sqlite3_finalize(q->views_del);
+    sqlite3_finalize(q->views);
+}
+
+/* A site's views (site_views) recomputed from its detections. */
+static gs_status refresh_views(srv_db *db, const site_stmts *q, int64_t site)
+{
+    gs_status s;
+    sqlite3_reset(q->views_del);
+    sqlite3_bind_int64(q->views_del, 1, site);
+    if ((s = srv_dbi_step_done(db, q->views_del, "updating a light site's views")) != GS_OK) return s;
+    sqlite3_reset(q->views);
+    sqlite3_bind_int64(q->views, 1, site);
+    return srv_dbi_step_done(db, q->views, "updating a light site's views");
+}
+
+/* Recompute a site's columns and views from its detections: located (pose_key NULL, in the
+ * R*Tree) when one of them is, else a pixel site of its first detection's pose. */
+static gs_status refresh_site(srv_db *db, const site_stmts *st, int64_t site)
+{
+    sqlite3_stmt *qo = st->obs, *qu = st->update;
     srv_site_obs *o = NULL;
     size_t n = 0, cap = 0;
+    char pose[200] = "";
     double I[3] = {0, 0, 0}, ie = 0.0, in = 0.0, lat0 = NAN, lon0 = NAN, kx = NAN, ky = NAN, sx = 0, sy = 0, sh = 0;
-    long nh = 0, nloc = 0;
+    double shl = 0.0;   /* the heights of the located detections */
+    long nh = 0, nhl = 0, nloc = 0;
     int rc;
     gs_status s = GS_OK;
     sqlite3_reset(qo);
@@ -374,6 +428,7 @@ static gs_status refresh_site(srv_db *db, sqlite3_stmt *qo, sqlite3_stmt *qu, in
     while ((rc = sqlite3_step(qo)) == SQLITE_ROW) {
         if ((s = grow(&o, &cap, n + 1, sizeof *o)) != GS_OK) break;
         srv_site_obs_from_row(qo, 0, &o[n++]);
+        if (n == 1) snprintf(pose, sizeof pose, "%s", (const char *)sqlite3_column_text(qo, 16));
         double lat = srv_dbi_col_real(qo, 8), lon = srv_dbi_col_real(qo, 9), h = srv_dbi_col_real(qo, 10);
         double a = srv_dbi_col_real(qo, 11), b = srv_dbi_col_real(qo, 12), az = srv_dbi_col_real(qo, 13);
         sx += sqlite3_column_double(qo, 14);
@@ -383,6 +438,10 @@ static gs_status refresh_site(srv_db *db, sqlite3_stmt *qo, sqlite3_stmt *qu, in
             nh++;
         }
         if (!isfinite(lat) || !(a > 0.0) || !isfinite(a) || !(b > 0.0) || !isfinite(b)) continue;
+        if (isfinite(h)) {
+            shl += h;
+            nhl++;
+        }
         if (isnan(lat0)) {   /* the local metres (WGS84, those of the ellipses) at the first */
             lat0 = lat;
             lon0 = lon;
@@ -415,7 +474,8 @@ static gs_status refresh_site(srv_db *db, sqlite3_stmt *qo, sqlite3_stmt *qu, in
         sqlite3_clear_bindings(qu);
         srv_dbi_bind_real(qu, 1, lat);
         srv_dbi_bind_real(qu, 2, lon);
-        srv_dbi_bind_real(qu, 3, nh ? sh / (double)nh : NAN);
+        /* the height, like the position, of the located detections when there are any */
+        srv_dbi_bind_real(qu, 3, nloc ? (nhl ? shl / (double)nhl : NAN) : nh ? sh / (double)nh : NAN);
         srv_dbi_bind_real(qu, 4, a);
         srv_dbi_bind_real(qu, 5, b);
         srv_dbi_bind_real(qu, 6, az);
@@ -424,7 +484,9 @@ static gs_status refresh_site(srv_db *db, sqlite3_stmt *qo, sqlite3_stmt *qu, in
         sqlite3_bind_int64(qu, 9, (sqlite3_int64)n);
         bind_value(qu, &v);
         sqlite3_bind_int64(qu, 17, site);
+        if (!nloc) sqlite3_bind_text(qu, 18, pose, -1, SQLITE_TRANSIENT);
         s = srv_dbi_step_done(db, qu, "updating a light site");
+        if (s == GS_OK) s = refresh_views(db, st, site);
     }
     free(o);
     return s;
@@ -451,12 +513,132 @@ static gs_status collect_ids(srv_db *db, const char *sql, int64_t **ids, size_t 
     return s;
 }
 
+/* The candidate pairs of located detection d[i]: the located sites within the gate
+ * d2 = dx^T (C_d + C_s)^-1 dx < SRV_SITE_GATE_D2, preselected by the site R*Tree in a box of
+ * half-width sqrt(gate) (a_d + amax), amax the widest site ellipse; sites in held (they hold a
+ * detection of the capture) are skipped. */
+static gs_status geo_candidates(srv_db *db, sqlite3_stmt *q, const detection *d, size_t i, double amax,
+                                const int64_t *held, size_t nheld, pair **p, size_t *capp, size_t *np)
+{
+    const detection *x = &d[i];
+    /* the gate box's longitudes: one range, or two across the antimeridian (the sites are
+     * stored in [-180, 180)) */
+    double lon_range[2][2] = {{0.0, 0.0}, {0.0, 0.0}}, dlat;
+    int nranges = 1, rc;
+    double r = sqrt(SRV_SITE_GATE_D2) * (x->a + amax) * 1.01, ky, kx;
+    gis_metres_per_deg(0.0, &ky, &kx);   /* the shortest metres per degree of latitude */
+    dlat = r / ky;
+    gis_metres_per_deg(fmin(fabs(x->lat) + dlat, 89.9), &ky, &kx);
+    double dlon = fmin(r / kx, 180.0);
+    lon_range[0][0] = x->lon - dlon;
+    lon_range[0][1] = x->lon + dlon;
+    if (lon_range[0][0] < -180.0) {
+        lon_range[1][0] = lon_range[0][0] + 360.0;
+        lon_range[1][1] = 180.0;
+        nranges = 2;
+    } else if (lon_range[0][1] >= 180.0) {
+        lon_range[1][0] = -180.0;
+        lon_range[1][1] = lon_range[0][1] - 360.0;
+        nranges = 2;
+    }
+    for (int g = 0; g < nranges; g++) {
+        sqlite3_reset(q);
+        sqlite3_bind_double(q, 1, x->lat - dlat);
+        sqlite3_bind_double(q, 2, x->lat + dlat);
+        sqlite3_bind_double(q, 3, lon_range[g][0]);
+        sqlite3_bind_double(q, 4, lon_range[g][1]);
+        while ((rc = sqlite3_step(q)) == SQLITE_ROW) {
+            double lat = srv_dbi_col_real(q, 1), lon = srv_dbi_col_real(q, 2), C[3];
+            double a = srv_dbi_col_real(q, 3), b = srv_dbi_col_real(q, 4), az = srv_dbi_col_real(q, 5);
+            if (!(a > 0.0) || !(b > 0.0)) continue;
+            ellipse_cov(a, b, isfinite(az) ? az : 0.0, C);
+            for (int j = 0; j < 3; j++) C[j] += x->C[j];
+            gis_metres_per_deg(x->lat, &ky, &kx);
+            double d2 = maha2(kx * gs_wrap180(x->lon - lon), ky * (x->lat - lat), C);
+            if (!(d2 < SRV_SITE_GATE_D2)) continue;
+            int64_t sid = sqlite3_column_int64(q, 0);
+            if (nheld && bsearch(&sid, held, nheld, sizeof *held, cmp_ids)) continue;   /* has one */
+            gs_status s = grow(p, capp, *np + 1, sizeof **p);
+            if (s != GS_OK) return s;
+            (*p)[(*np)++] = (pair){d2, i, sid, 0, 1};
+        }
+        if (rc != SQLITE_DONE) return srv_dbi_fail(db, "looking up light sites");
+    }
+    return GS_OK;
+}
+
+/* The candidate pairs of detection d[i] by pose and pixel, d2 in px^2 within
+ * SRV_SITE_GATE_PX: for a detection without a location, the sites seen from its camera pose
+ * (qv: site_views, their detections' mean pixel from that pose); for a located one, the sites
+ * without a location (qp: pixel sites of its pose; it meets the located ones by position).
+ * Sites in held are skipped. */
+static gs_status pixel_candidates(srv_db *db, sqlite3_stmt *qv, sqlite3_stmt *qp, const detection *d, size_t i,
+                                  const int64_t *held, size_t nheld, pair **p, size_t *capp, size_t *np)
+{
+    const detection *x = &d[i];
+    sqlite3_stmt *q = x->located ? qp : qv;
+    int rc;
+    sqlite3_reset(q);
+    sqlite3_bind_text(q, 1, x->pose, -1, SQLITE_STATIC);
+    sqlite3_bind_double(q, 2, x->x_px - SRV_SITE_GATE_PX);
+    sqlite3_bind_double(q, 3, x->x_px + SRV_SITE_GATE_PX);
+    if (!x->located) {
+        sqlite3_bind_double(q, 4, x->y_px - SRV_SITE_GATE_PX);
+        sqlite3_bind_double(q, 5, x->y_px + SRV_SITE_GATE_PX);
+    }
+    while ((rc = sqlite3_step(q)) == SQLITE_ROW) {
+        int located = sqlite3_column_int(q, 3);
+        double dx = x->x_px - sqlite3_column_double(q, 1), dy = x->y_px - sqlite3_column_double(q, 2);
+        double d2 = dx * dx + dy * dy;
+        if (!(d2 <= SRV_SITE_GATE_PX * SRV_SITE_GATE_PX)) continue;
+        int64_t sid = sqlite3_column_int64(q, 0);
+        if (nheld && bsearch(&sid, held, nheld, sizeof *held, cmp_ids)) continue;   /* has one */
+        gs_status s = grow(p, capp, *np + 1, sizeof **p);
+        if (s != GS_OK) return s;
+        (*p)[(*np)++] = (pair){d2, i, sid, 1, located};
+    }
+    return rc == SQLITE_DONE ? GS_OK : srv_dbi_fail(db, "looking up light sites");
+}
+
+/* The statements of merge_sites: shared captures, moving detections, deleting a site. */
+static gs_status prep_merge(srv_db *db, sqlite3_stmt *q[3])
+{
+    gs_status s;
+    if ((s = prep(db, "SELECT count(*) FROM site_detections a JOIN site_detections b ON b.site_id = ?2 "
+                      "AND b.capture_id = a.capture_id WHERE a.site_id = ?1", &q[0])) != GS_OK ||
+        (s = prep(db, "UPDATE site_detections SET site_id = ?2 WHERE site_id = ?1", &q[1])) != GS_OK)
+        return s;
+    return prep(db, "DELETE FROM light_sites WHERE id = ?1", &q[2]);
+}
+
+/* Site `from`'s detections moved to site `into` and `from` deleted (its views with it), when
+ * the two share no capture (*merged = 1); the caller refreshes `into`. */
+static gs_status merge_sites(srv_db *db, sqlite3_stmt *q[3], int64_t into, int64_t from, int *merged)
+{
+    gs_status s;
+    *merged = 0;
+    sqlite3_reset(q[0]);
+    sqlite3_bind_int64(q[0], 1, from);
+    sqlite3_bind_int64(q[0], 2, into);
+    if (sqlite3_step(q[0]) != SQLITE_ROW) return srv_dbi_fail(db, "merging light sites");
+    if (sqlite3_column_int64(q[0], 0) > 0) return GS_OK;   /* two lights of one capture */
+    for (int k = 1; k < 3; k++) {
+        sqlite3_reset(q[k]);
+        sqlite3_bind_int64(q[k], 1, from);
+        if (k == 1) sqlite3_bind_int64(q[k], 2, into);
+        if ((s = srv_dbi_step_done(db, q[k], "merging light sites")) != GS_OK) return s;
+    }
+    *merged = 1;
+    return GS_OK;
+}
+
 /* Associate the not yet associated detections of one capture. */
 static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long *joined)
 {
     sqlite3 *h = srv_db_sqlite(db);
-    sqlite3_stmt *qd = NULL, *qg = NULL, *qp = NULL, *qi = NULL, *qa = NULL, *qo = NULL, *qu = NULL,
-                 *qm = NULL;
+    sqlite3_stmt *qd = NULL, *qg = NULL, *qv = NULL, *qp = NULL, *qi = NULL, *qa = NULL, *qm = NULL, *qw = NULL,
+                 *qx[3] = {NULL, NULL, NULL};
+    site_stmts st = {NULL, NULL, NULL, NULL};
     detection *d = NULL;
     pair *p = NULL;
     size_t nd = 0, capd = 0, np = 0, capp = 0;
@@ -466,12 +648,13 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
     gs_status s = GS_OK;
     int rc;
     if ((s = prep(db, dets_sql, &qd)) != GS_OK || (s = prep(db, geo_cand_sql, &qg)) != GS_OK ||
-        (s = prep(db, px_cand_sql, &qp)) != GS_OK ||
+        (s = prep(db, view_cand_sql, &qv)) != GS_OK || (s = prep(db, px_cand_sql, &qp)) != GS_OK ||
         (s = prep(db, new_site_sql, &qi)) != GS_OK ||
         (s = prep(db, "INSERT INTO site_detections(light_id, site_id, capture_id, d2) VALUES "
                       "(?1, ?2, ?3, ?4)", &qa)) != GS_OK ||
-        (s = prep(db, site_obs_sql, &qo)) != GS_OK ||
-        (s = prep(db, site_update_sql, &qu)) != GS_OK ||
+        (s = prep_site_stmts(db, &st)) != GS_OK || (s = prep_merge(db, qx)) != GS_OK ||
+        (s = prep(db, "INSERT INTO site_views(site_id, pose_key, x_px, y_px, detections) VALUES "
+                      "(?1, ?2, ?3, ?4, 1)", &qw)) != GS_OK ||
         (s = prep(db, "SELECT max(semi_major_m) FROM light_sites WHERE pose_key IS NULL", &qm)) != GS_OK)
         goto done;
     sqlite3_bind_int64(qd, 1, cid);
@@ -512,72 +695,13 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
     }
     if (isnan(amax)) amax = 0.0;
     /* candidate pairs */
-    for (size_t i = 0; i < nd; i++) {
-        detection *x = &d[i];
-        sqlite3_stmt *q = x->located ? qg : qp;
-        /* the located gate box's longitudes: one range, or two across the antimeridian (the
-         * sites are stored in [-180, 180)) */
-        double lon_range[2][2] = {{0.0, 0.0}, {0.0, 0.0}}, dlat = 0.0;
-        int nranges = 1;
-        if (x->located) {
-            double r = sqrt(SRV_SITE_GATE_D2) * (x->a + amax) * 1.01, ky, kx;
-            gis_metres_per_deg(0.0, &ky, &kx);   /* the shortest metres per degree of latitude */
-            dlat = r / ky;
-            gis_metres_per_deg(fmin(fabs(x->lat) + dlat, 89.9), &ky, &kx);
-            double dlon = fmin(r / kx, 180.0);
-            lon_range[0][0] = x->lon - dlon;
-            lon_range[0][1] = x->lon + dlon;
-            if (lon_range[0][0] < -180.0) {
-                lon_range[1][0] = lon_range[0][0] + 360.0;
-                lon_range[1][1] = 180.0;
-                nranges = 2;
-            } else if (lon_range[0][1] >= 180.0) {
-                lon_range[1][0] = -180.0;
-                lon_range[1][1] = lon_range[0][1] - 360.0;
-                nranges = 2;
-            }
-        }
-        for (int g = 0; g < nranges; g++) {
-            sqlite3_reset(q);
-            if (x->located) {
-                sqlite3_bind_double(q, 1, x->lat - dlat);
-                sqlite3_bind_double(q, 2, x->lat + dlat);
-                sqlite3_bind_double(q, 3, lon_range[g][0]);
-                sqlite3_bind_double(q, 4, lon_range[g][1]);
-            } else {
-                sqlite3_bind_text(q, 1, x->pose, -1, SQLITE_STATIC);
-                sqlite3_bind_double(q, 2, x->x_px - SRV_SITE_GATE_PX);
-                sqlite3_bind_double(q, 3, x->x_px + SRV_SITE_GATE_PX);
-            }
-            while ((rc = sqlite3_step(q)) == SQLITE_ROW) {
-                double d2;
-                if (x->located) {
-                    double lat = srv_dbi_col_real(q, 1), lon = srv_dbi_col_real(q, 2), C[3];
-                    double a = srv_dbi_col_real(q, 3), b = srv_dbi_col_real(q, 4), az = srv_dbi_col_real(q, 5);
-                    if (!(a > 0.0) || !(b > 0.0)) continue;
-                    ellipse_cov(a, b, isfinite(az) ? az : 0.0, C);
-                    for (int j = 0; j < 3; j++) C[j] += x->C[j];
-                    double ky, kx;
-                    gis_metres_per_deg(x->lat, &ky, &kx);
-                    d2 = maha2(kx * gs_wrap180(x->lon - lon), ky * (x->lat - lat), C);
-                    if (!(d2 < SRV_SITE_GATE_D2)) continue;
-                } else {
-                    double dx = x->x_px - sqlite3_column_double(q, 1), dy = x->y_px - sqlite3_column_double(q, 2);
-                    d2 = dx * dx + dy * dy;
-                    if (!(d2 <= SRV_SITE_GATE_PX * SRV_SITE_GATE_PX)) continue;
-                }
-                int64_t sid = sqlite3_column_int64(q, 0);
-                if (nheld && bsearch(&sid, held, nheld, sizeof *held, cmp_ids)) continue;   /* has one */
-                if ((s = grow(&p, &capp, np + 1, sizeof *p)) != GS_OK) goto done;
-                p[np++] = (pair){d2, i, sid};
-            }
-            if (rc != SQLITE_DONE) {
-                s = srv_dbi_fail(db, "looking up light sites");
-                goto done;
-            }
-        }
+    for (size_t i = 0; i < nd && s == GS_OK; i++) {
+        if (d[i].located) s = geo_candidates(db, qg, d, i, amax, held, nheld, &p, &capp, &np);
+        if (s == GS_OK) s = pixel_candidates(db, qv, qp, d, i, held, nheld, &p, &capp, &np);
     }
-    /* greedy assignment by increasing d2; a site takes one detection of the capture */
+    if (s != GS_OK) goto done;
+    /* greedy assignment, by position first, then by pixel, each by increasing d2; a site takes
+     * one detection of the capture */
     if (np) {   /* (qsort of a NULL array, even empty, is undefined) */
         qsort(p, np, sizeof *p, cmp_pairs);
         if ((s = grow(&taken, &ntaken, np, sizeof *taken)) != GS_OK) goto done;
@@ -596,7 +720,21 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
         flag[ti] = 1;
         d[p[k].det].site = p[k].site;
         d[p[k].det].d2 = p[k].d2;
+        d[p[k].det].by_pixel = p[k].by_pixel;
         (*joined)++;
+    }
+    /* a located detection that joined a site by position merges the nearest pixel site of its
+     * pose and pixel that no detection of this capture took (one light, seen unlocated from
+     * here and located from elsewhere), unless the two sites share a capture */
+    for (size_t k = 0; k < np; k++) {
+        detection *x = &d[p[k].det];
+        const int64_t *t = bsearch(&p[k].site, taken, np, sizeof *taken, cmp_ids);
+        size_t ti = (size_t)(t - taken);
+        if (!p[k].by_pixel || p[k].site_located || !x->site || x->by_pixel || x->merged || flag[ti]) continue;
+        int merged = 0;
+        if ((s = merge_sites(db, qx, x->site, p[k].site, &merged)) != GS_OK) goto done;
+        flag[ti] = (char)merged;
+        x->merged = merged;
     }
     touched = malloc(nd * sizeof *touched);
     if (!touched) {
@@ -637,18 +775,28 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
         sqlite3_bind_int64(qa, 3, cid);
         srv_dbi_bind_real(qa, 4, x->d2);
         if ((s = srv_dbi_step_done(db, qa, "associating a detection")) != GS_OK) goto done;
+        if (!touched[i]) {   /* a new site's view: its detection's pose and pixel */
+            sqlite3_reset(qw);
+            sqlite3_bind_int64(qw, 1, x->site);
+            sqlite3_bind_text(qw, 2, x->pose, -1, SQLITE_STATIC);
+            sqlite3_bind_double(qw, 3, x->x_px);
+            sqlite3_bind_double(qw, 4, x->y_px);
+            if ((s = srv_dbi_step_done(db, qw, "adding a light site's view")) != GS_OK) goto done;
+        }
     }
     for (size_t i = 0; i < nd && s == GS_OK; i++)
-        if (touched[i]) s = refresh_site(db, qo, qu, touched[i]);
+        if (touched[i]) s = refresh_site(db, &st, touched[i]);
 done:
     sqlite3_finalize(qd);
     sqlite3_finalize(qg);
+    sqlite3_finalize(qv);
     sqlite3_finalize(qp);
     sqlite3_finalize(qi);
     sqlite3_finalize(qa);
-    sqlite3_finalize(qo);
-    sqlite3_finalize(qu);
     sqlite3_finalize(qm);
+    sqlite3_finalize(qw);
+    finalize_site_stmts(&st);
+    for (int k = 0; k < 3; k++) sqlite3_finalize(qx[k]);
     free(d);
     free(p);
     free(touched);
@@ -673,7 +821,7 @@ gs_status srv_db_associate(srv_db *db, long *created, long *joined)
     int began;
     gs_status s = srv_dbi_auto_begin(db, &began);
     if (s != GS_OK) return s;
-    sqlite3_stmt *qo = NULL, *qu = NULL;
+    site_stmts st = {NULL, NULL, NULL, NULL};
     int64_t *ids = NULL;
     size_t n = 0, cap = 0;
     s = collect_ids(db, "SELECT DISTINCT l.capture_id FROM lights l WHERE NOT EXISTS (SELECT 1 FROM "
@@ -682,11 +830,9 @@ gs_status srv_db_associate(srv_db *db, long *created, long *joined)
     for (size_t i = 0; i < n && s == GS_OK; i++) s = associate_capture(db, ids[i], created, joined);
     /* sites left stale by deleted detections */
     if (s == GS_OK) s = collect_ids(db, "SELECT id FROM light_sites WHERE stale = 1", &ids, &cap, &n);
-    if (s == GS_OK && n && (s = prep(db, site_obs_sql, &qo)) == GS_OK &&
-        (s = prep(db, site_update_sql, &qu)) == GS_OK)
-        for (size_t i = 0; i < n && s == GS_OK; i++) s = refresh_site(db, qo, qu, ids[i]);
-    sqlite3_finalize(qo);
-    sqlite3_finalize(qu);
+    if (s == GS_OK && n && (s = prep_site_stmts(db, &st)) == GS_OK)
+        for (size_t i = 0; i < n && s == GS_OK; i++) s = refresh_site(db, &st, ids[i]);
+    finalize_site_stmts(&st);
     free(ids);
     return srv_dbi_auto_end(db, began, s);
 }

@@ -45,7 +45,7 @@ int srv_main(int argc, char **argv);
  * SQL NULL. Non-finite doubles (NaN, +-Inf) store NULL.
  * ===================================================================================== */
 
-#define SRV_DB_SCHEMA_VERSION 5
+#define SRV_DB_SCHEMA_VERSION 6
 #define SRV_DB_APPLICATION_ID GS_SURVEY_DB_APPLICATION_ID   /* 'GSDB' (GeoPackage uses 'GPKG' = 0x47504B47) */
 #define SRV_DB_FORMAT "gridsurvey-survey"
 /* Written to migrations.generator and delight_versions.generator. */
@@ -261,7 +261,7 @@ typedef struct {
     long surveys, captures, lights, locations, frequency_rows;
     long sites;                /* light_sites rows */
     long unassociated;         /* lights without a site (srv_db_associate fixes them) */
-    long stale_sites;          /* sites marked stale or whose detection count is off */
+    long stale_sites;          /* sites marked stale or whose detection or view count is off */
     long site_rtree_mismatch;  /* located sites minus light_sites_rtree entries */
     long wrong_types;          /* values of a REAL or INTEGER column that are text or blobs */
 } srv_db_report;
@@ -272,8 +272,9 @@ int srv_db_report_ok(const srv_db_report *r);
 /* --- light identity (survey/sites.c; docs/survey-db.md, "Light sites"). Each stored light
  * (a detection) belongs to one light site (a physical light): srv_db_add_capture associates a
  * new capture's lights in its transaction, by position within the combined error ellipse
- * (Mahalanobis d2 < SRV_SITE_GATE_D2) or, without a bounded location, by pixel within
- * SRV_SITE_GATE_PX of a site seen from the same camera pose; otherwise a new site. */
+ * (Mahalanobis d2 < SRV_SITE_GATE_D2) or by pixel within SRV_SITE_GATE_PX of a site seen from
+ * the same camera pose (a detection without a bounded location: any such site; a located one:
+ * a site without a location, which it upgrades or merges into its own); otherwise a new site. */
 #define SRV_SITE_GATE_D2 13.815510557964274   /* chi2 quantile 0.999 at 2 dof: -2 ln(0.001) */
 #define SRV_SITE_GATE_PX 3.0
 #define SRV_CHI2_2DOF_95 5.991464547107979    /* -2 ln(0.05): the 95 % ellipse of a 2-D normal */

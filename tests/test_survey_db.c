@@ -144,7 +144,7 @@ TEST(survey_db_migrates_from_v1)
     h = srv_db_sqlite(db);
     CHECK(survey_fx_query_long(h, "PRAGMA user_version") == SRV_DB_SCHEMA_VERSION);
     CHECK(survey_fx_query_long(h, "SELECT count(*) FROM migrations") == SRV_DB_SCHEMA_VERSION);
-    CHECK(survey_fx_query_long(h, "SELECT group_concat(version) = '1,2,3,4,5' FROM (SELECT version FROM migrations ORDER BY version)") == 1);
+    CHECK(survey_fx_query_long(h, "SELECT group_concat(version) = '1,2,3,4,5,6' FROM (SELECT version FROM migrations ORDER BY version)") == 1);
     CHECK(survey_fx_query_long(h, "SELECT n120 FROM phase_counts WHERE grouping = 'all'") == 1);
     CHECK(survey_fx_query_long(h, "SELECT n120 FROM site_phase_counts WHERE grouping = 'all'") == 1);
     /* migrate associated the old light with a new site of its own */
@@ -181,7 +181,7 @@ TEST(survey_db_migrates_candidate_bulbs)
     CHECK_OK(srv_db_open(path, SRV_DB_WRITE, &db));
     if (!db) return;
     h = srv_db_sqlite(db);
-    CHECK(survey_fx_query_long(h, "SELECT max(version) FROM migrations") == 5);
+    CHECK(survey_fx_query_long(h, "SELECT max(version) FROM migrations") == SRV_DB_SCHEMA_VERSION);
     CHECK(survey_fx_query_long(h, "SELECT count(*) FROM captures WHERE candidate_bulbs IS NULL") == 2);
     const double M = 200.0, r1 = 0.4 / (M - 1.0), r2 = 0.3 / (M - 1.0);
     double want = 0.42 / (0.42 + (M - 1.0) * r1 * r2);
@@ -201,6 +201,82 @@ TEST(survey_db_migrates_candidate_bulbs)
     CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
     CHECK(survey_fx_query_long(h, "SELECT candidate_bulbs FROM captures WHERE capture_key = 'c3'") == 50);
     srv_db_close(db);
+}
+
+/* Version 5 -> 6 (site_views): a file associated before, one light located by a june capture
+ * and seen unlocated from the same roof in july, is two sites there (a located and a pixel
+ * site; a third, distant light a pixel site too). The migration gives each site its view:
+ * the roof's pose key (written out here with C's printf) and its detection's pixel; the file
+ * checks ok; a located capture from that roof at that pixel joins the located site by
+ * position and merges the pixel site into it: one site of three detections, its view their
+ * mean pixel. */
+TEST(survey_db_migrates_site_views)
+{
+    const char *path = fx_tmp("v5.sqlite");
+    CHECK_OK(srv_db_create_at_version(path, 5));
+    sqlite3 *h = NULL;
+    CHECK(sqlite3_open_v2(path, &h, SQLITE_OPEN_READWRITE, NULL) == SQLITE_OK);
+    CHECK(sqlite3_exec(h, "INSERT INTO surveys(name, created_utc) VALUES ('june', 'then'), ('july', 'then');"
+                          "INSERT INTO stations(survey_id, name, lat_deg, lon_deg, height_m, heading_deg, "
+                          "pitch_deg, roll_deg, focal_px) VALUES (1, 'roof', 32.8, 35.0, 10, 90, -2, 0, 2000), "
+                          "(2, 'roof', 32.8, 35.0, 10, 90, -2, 0, 2000);"
+                          "INSERT INTO captures(survey_id, station_id, capture_key, light_count, frame_count, "
+                          "frequency_count, ingested_utc) VALUES (1, 1, 'c1', 1, 0, 0, 'then'), "
+                          "(2, 2, 'c2', 2, 0, 0, 'then');"
+                          "INSERT INTO lights(capture_id, light_index, x_px, y_px, confidence, bulb_confidence, "
+                          "phase_confidence) VALUES (1, 0, 500.25, 300.5, 0, 0, 0), (2, 0, 501, 299.75, 0, 0, 0), "
+                          "(2, 1, 900, 300, 0, 0, 0);"
+                          "INSERT INTO locations(light_id, method, lat_deg, lon_deg, semi_major_m, semi_minor_m, "
+                          "azimuth_deg) VALUES (1, 'one_station', 32.801, 35.002, 1, 1, 0);"
+                          "INSERT INTO light_sites(lat_deg, lon_deg, semi_major_m, semi_minor_m, azimuth_deg, "
+                          "pose_key, x_px, y_px, detections, captures) VALUES "
+                          "(32.801, 35.002, 1, 1, 0, NULL, 500.25, 300.5, 1, 1), "
+                          "(NULL, NULL, NULL, NULL, NULL, '32.8000000,35.0000000,10.00,90.000,-2.000,0.000,2000.00', "
+                          "501, 299.75, 1, 1), "
+                          "(NULL, NULL, NULL, NULL, NULL, '32.8000000,35.0000000,10.00,90.000,-2.000,0.000,2000.00', "
+                          "900, 300, 1, 1);"
+                          "INSERT INTO site_detections(light_id, site_id, capture_id) VALUES (1, 1, 1), (2, 2, 2), "
+                          "(3, 3, 2)", NULL, NULL, NULL) == SQLITE_OK);
+    sqlite3_close(h);
+    CHECK(run("%s db migrate --db %s", path, NULL, NULL) == 0);
+    CHECK(run("%s db check --db %s", path, NULL, NULL) == 0 && strstr(out, ": ok"));
+    srv_db *db = NULL;
+    CHECK_OK(srv_db_open(path, SRV_DB_WRITE, &db));
+    if (!db) return;
+    h = srv_db_sqlite(db);
+    char key[96], want[512];
+    snprintf(key, sizeof key, "%.7f,%.7f,%.2f,%.3f,%.3f,%.3f,%.2f", 32.8, 35.0, 10.0, 90.0, -2.0, 0.0, 2000.0);
+    snprintf(want, sizeof want, "1 %s 500.25 300.5 1|2 %s 501.0 299.75 1|3 %s 900.0 300.0 1", key, key, key);
+    const char *got = survey_fx_query_text(h, "SELECT group_concat(site_id || ' ' || pose_key || ' ' || x_px || ' ' "
+                                              "|| y_px || ' ' || detections, '|') FROM (SELECT * FROM site_views "
+                                              "ORDER BY site_id)");
+    CHECK_MSG(!strcmp(got, want), "site_views: %s\nexpected:   %s", got, want);
+    /* a located june detection from the roof, 0.5 m north of site 1, at the july pixel */
+    srv_light_row l;
+    srv_light_row_init(&l);
+    l.x_px = 500.5;
+    l.y_px = 300.25;
+    l.confidence = l.bulb_confidence = l.phase_confidence = 0.0;
+    srv_location_row loc;
+    srv_location_row_init(&loc);
+    loc.method = SRV_LOC_ONE_STATION;
+    double kn, ke;
+    gis_metres_per_deg(32.801, &kn, &ke);
+    loc.lat_deg = 32.801 + 0.5 / kn;
+    loc.lon_deg = 35.002;
+    loc.ellipse = (gis_ellipse){1.0, 1.0, 0.0};
+    srv_capture_data cd = survey_fx_capture(1, "c3", &l, &loc, 1);
+    cd.capture.station_id = 1;
+    CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM light_sites") == 2);
+    CHECK(survey_fx_query_long(h, "SELECT detections FROM light_sites WHERE id = 1") == 3);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM site_views") == 2);
+    double mx = (500.25 + 501.0 + 500.5) / 3.0, my = (300.5 + 299.75 + 300.25) / 3.0;
+    double vx = strtod(survey_fx_query_text(h, "SELECT x_px FROM site_views WHERE site_id = 1"), NULL);
+    double vy = strtod(survey_fx_query_text(h, "SELECT y_px FROM site_views WHERE site_id = 1"), NULL);
+    CHECK_MSG(fabs(vx - mx) < 1e-9 && fabs(vy - my) < 1e-9, "view (%.12g, %.12g), mean (%.12g, %.12g)", vx, vy, mx, my);
+    srv_db_close(db);
+    CHECK(run("%s db check --db %s", path, NULL, NULL) == 0 && strstr(out, ": ok"));
 }
 
 TEST(survey_db_refuses_newer_schema)
