@@ -2,7 +2,7 @@
  * is the exact Eq. 5 integral through the masks (checked against brute-force numerical
  * integration of the BRF's trigonometric polynomial); an effect the scene does not list is never
  * executed (pipeline list and the effects' own call counters); the HDR loop recovers saturated
- * lights; the effects' physics numbers (shared/BULBS.md); determinism. */
+ * lights, its samples near full well the truncated normal; the effects' physics numbers (shared/BULBS.md); determinism. */
 #include "tests/fixtures.h"
 #include "tests/test.h"
 #include "capture/sim.h"
@@ -668,6 +668,106 @@ TEST(sim_truth_resolvability_groups_and_hidden)
     cap_scene_release(&sc);
     gs_delight_free(d);
 }
+
+/* The known bias near full well (docs/capture.md), against the analytic truncated normal. Every
+ * HDR pass acquires the whole frame again, its halvings decided by the passes before (draws
+ * independent of its own), and a sample that saturates is stored as such: so a stored sample of
+ * a pixel halved h times, at mean mu_k with noise sigma_k, a_k = (T - mu_k) / sigma_k below the
+ * level T (raw < saturation: T = saturation - 0.5 before the ADC's rounding), is a Gaussian draw
+ * truncated at T, of mean mu_k - sigma_k phi(a_k) / Phi(a_k). (Whether the loop stopped because
+ * no pixel saturated or because its rounds ran out, the condition on sample k is its own.)
+ * 12,288 lights, one per pixel (no PSF), an incandescent lamp's flux spread so that the brightest
+ * sample lies 0.5..3.5 sigma below the level, and a tenth of them far below (no bias: the oracle's
+ * own check). */
+TEST(sim_hdr_bias_near_full_well_is_the_truncated_normal)
+{
+    enum { W = 128, H = 96, K = 8, C = 256, NB = 6 };
+    const double gain = 5.0, read_e = 3.0, black = 64.0, full_well = 20000.0;
+    gs_delight *d = delight();
+    const gs_bulb *b = d ? gs_delight_find(d, "inc-a19-60w-120v", 50, 1) : NULL;
+    size_t cap_len = 160 * (size_t)W * H + 4096, len = 0;
+    char *text = malloc(cap_len);
+    double *flux = malloc(sizeof *flux * W * H), i_k[K], imax = 0;
+    CHECK(b && text && flux);
+    if (!b || !text || !flux) {
+        free(text);
+        free(flux);
+        gs_delight_free(d);
+        return;
+    }
+    CHECK_OK(gs_brf_integrate(&b->brf, gs_phase_to_shift(0.0), K, i_k));
+    for (int k = 0; k < K; k++) imax = i_k[k] > imax ? i_k[k] : imax;
+    /* the level in electrons, about: black + full well / gain - 4 read sigmas, in DN */
+    double level_e = full_well - 4.0 * read_e, r2 = read_e * read_e;
+    len += (size_t)snprintf(text + len, cap_len - len,
+        "{\"format\": \"gridsurvey-scene/1\", \"seed\": 23, \"grid\": {\"nominal_hz\": 50},\n"
+        " \"camera\": {\"width_px\": %d, \"height_px\": %d, \"sensor\": {\"bands\": 1, \"bit_depth\": 12,"
+        " \"full_well_e\": %g, \"read_noise_e\": %g, \"gain_e_per_dn\": %g, \"black_level_dn\": %g}},\n"
+        " \"acam\": {\"K\": %d, \"cycles\": %d, \"masks\": 64, \"hdr\": {\"enabled\": true, \"max_saturated_px\": 0}},\n"
+        " \"effects\": {\"shot_noise\": {}, \"saturation\": {}, \"read_noise\": {}, \"adc\": {}},\n"
+        " \"lights\": [", W, H, full_well, read_e, gain, black, K, C);
+    for (int p = 0; p < W * H; p++) {
+        /* the brightest sample's electrons mu, a sigmas below the level: mu + a sqrt(mu + r^2) */
+        double a = p % 10 == 9 ? 40.0 : 0.5 + 3.0 * (p * 0.6180339887 - floor(p * 0.6180339887));
+        double mu = level_e + a * a / 2.0 - a * sqrt(a * a / 4.0 + level_e + r2);
+        flux[p] = mu / (imax / K * C);
+        len += (size_t)snprintf(text + len, cap_len - len,
+                                "%s{\"id\": \"l%d\", \"bulb\": \"inc-a19-60w-120v\", \"phase_deg\": 0, \"x_px\": %d.0,"
+                                " \"y_px\": %d.0, \"flux_e_per_cycle\": %.6f}", p ? ",\n" : "", p, p % W, p / W, flux[p]);
+    }
+    snprintf(text + len, cap_len - len, "]}\n");
+    cap_scene sc;
+    CHECK_OK(cap_scene_parse(text, "bias.json", ".", &sc));
+    free(text);
+    cap_backend *be = NULL;
+    CHECK_OK(cap_backend_sim_new(&sc, NULL, &be));
+    cap_loop_opts o;
+    cap_loop_opts_default(&o);
+    o.progress = 0;
+    cap_loop_report rep;
+    gs_capture cap;
+    memset(&cap, 0, sizeof cap);
+    if (be) CHECK_OK(cap_loop_run(be, fx_tmp("hdr_bias"), &o, &rep));
+    if (be) CHECK_OK(gs_capture_read(fx_tmp("hdr_bias"), &cap));
+    /* per bin of a_k (below -1 and -1..0, 0..1, 1..2, 2..3, 3..10, far): the errors' sum in the
+     * stored pass's sigmas, measured and predicted */
+    double got[NB] = {0}, want[NB] = {0};
+    long n[NB] = {0}, halved = 0, saturated = 0;
+    for (size_t q = 0; cap.raw && q < (size_t)K * W * H; q++) {
+        int k = (int)(q / (W * H)), p = (int)(q % (W * H)), h = cap.halvings[q];
+        double e = flux[p] * i_k[k] / K * C / ldexp(1.0, h), sg = sqrt(e + r2) / gain;
+        double a = (cap.saturation_dn - 0.5 - black - e / gain) / sg;
+        double v = gs_capture_value(&cap, k, p / W, p % W, 0);
+        halved += h > 0;
+        if (!isfinite(v)) {   /* saturated: not a sample */
+            saturated++;
+            continue;
+        }
+        int bin = a < 0.0 ? 0 : a < 3.0 ? 1 + (int)a : a < 10.0 ? 4 : 5;
+        double Phi = 0.5 * erfc(-a / sqrt(2.0)), phi = exp(-0.5 * a * a) / sqrt(2.0 * M_PI);
+        got[bin] += (v * C / ldexp(1.0, h) - e / gain) / sg;
+        want[bin] += -phi / Phi;
+        n[bin]++;
+    }
+    printf("    %d passes, %ld of %d samples halved, %ld saturated; mean error in sigmas by the sample's "
+           "distance a below the level:\n", rep.max_passes, halved, K * W * H, saturated);
+    static const char *const name[NB] = {"< 0", "0..1", "1..2", "2..3", "3..10", "far"};
+    for (int i = 0; i < NB; i++) {
+        if (!n[i]) continue;
+        /* the truncated normal's variance is below 1: 1 / sqrt(n) bounds the standard error */
+        double se = 1.0 / sqrt((double)n[i]), g = got[i] / (double)n[i], w = want[i] / (double)n[i];
+        printf("    a %-6s %6ld samples: measured %+.4f +- %.4f, truncated normal %+.4f\n", name[i], n[i], g, se, w);
+        CHECK_MSG(fabs(g - w) < 4.0 * se, "a %s: measured %+.4f, predicted %+.4f (se %.4f)", name[i], g, w, se);
+    }
+    CHECK_MSG(n[1] > 300 && n[2] > 2000 && n[5] > 4000, "bins too thin: %ld %ld %ld", n[1], n[2], n[5]);
+    CHECK(n[1] && got[1] / (double)n[1] < -0.2);   /* the bias is there, measured */
+    gs_capture_release(&cap);
+    cap_backend_free(be);
+    cap_scene_release(&sc);
+    free(flux);
+    gs_delight_free(d);
+}
+
 
 /* A pixel halved h times keeps the cycles of pairs j with j mod 2^h = 0 (Sec. 6): all of one
  * mains polarity, whose half periods on a real recording differ from the other's by 10-30 us.
