@@ -66,8 +66,8 @@ typedef struct {
     int bx0, by0, bw, bh; /* the fit pixels' bounding box */
     double *gx, *gy;      /* [3 (bw + 1)], [3 (bh + 1)] scratch: the PSF's 1-D shares, derivatives */
     double *mean;         /* [3 n B] scratch of spatial_split */
-    double *dP, *perp;    /* [3 FIT_MAX_SOURCES n] scratch of fit_gradient */
-    double *wb, *wPb, *wperp;   /* [n], [FIT_MAX_SOURCES n], [3 FIT_MAX_SOURCES n] its too */
+    double *dP, *perp;    /* [6 FIT_MAX_SOURCES n] scratch of fit_gradient (3 N n), fit_moment_shift */
+    double *wb, *wPb, *wperp;   /* [n], [FIT_MAX_SOURCES n], [6 FIT_MAX_SOURCES n] theirs too */
 } fit_data;
 
 /* The shares of a pixel-integrated 1-D Gaussian (centre c, sigma) in pixels lo .. lo + n - 1:
@@ -211,20 +211,12 @@ static void band_projection(fit_data *f, int N, int b, const double *T, int S, d
     }
 }
 
-/* The gradient g and the Gauss-Newton matrix H of chi2 over the m = 2 N + 1 parameters (x_q,
- * y_q, then sigma) at the point fit_eval last evaluated (its P, F and Ainv): the variable
- * projection of Golub & Pereyra (1973), Kaufman's (1975) form. With M_pd = sum_q P_q(p) F_qd
- * and F at its optimum, d chi2 / d theta_i = -2 sum_pd w_pb r_pd dM_pd / d theta_i (r = D - M);
- * H_ij = 2 sum_pd w_pb (dM / d theta_i)_perp (dM / d theta_j)_perp, where _perp removes the part
- * that the fluxes absorb (per band, the weighted projection on the span of the P_q). Each
- * dM / d theta_i is a sum over sources of dP_q(p) F_qd, so its projection is that of the dP_q:
- * the sums over the K frames separate. */
-static void fit_gradient(fit_data *f, int N, const double *pos, double *g, double *H)
+/* The derivatives of the N sources' P_q at pos (sigma pos[2 N]) over the fit pixels:
+ * dP[(3 q + j) n + p], j = 0, 1, 2 for d/dx_q, d/dy_q, d/dsigma. */
+static void derivative_templates(fit_data *f, int N, const double *pos, double *dP)
 {
-    const int n = f->n, B = f->B, m = 2 * N + 1, S = 3 * N;
+    const int n = f->n;
     const double sigma = pos[2 * N];
-    double *dP = f->dP, *perp = f->perp;   /* [3 N n]: d/dx_q, d/dy_q, d/dsigma of P_q */
-    double *wh = f->wP;                     /* [N n] scratch (fit_eval's, set again there) */
     double *gx = f->gx, *gy = f->gy, *dx = f->gx + f->bw + 1, *dy = f->gy + f->bh + 1;
     double *sx = dx + f->bw + 1, *sy = dy + f->bh + 1;
     for (int q = 0; q < N; q++) {
@@ -237,6 +229,22 @@ static void fit_gradient(fit_data *f, int N, const double *pos, double *g, doubl
             dP[(3 * q + 2) * n + p] = sx[ix] * gy[iy] + gx[ix] * sy[iy];
         }
     }
+}
+
+/* The gradient g and the Gauss-Newton matrix H of chi2 over the m = 2 N + 1 parameters (x_q,
+ * y_q, then sigma) at the point fit_eval last evaluated (its P, F and Ainv): the variable
+ * projection of Golub & Pereyra (1973), Kaufman's (1975) form. With M_pd = sum_q P_q(p) F_qd
+ * and F at its optimum, d chi2 / d theta_i = -2 sum_pd w_pb r_pd dM_pd / d theta_i (r = D - M);
+ * H_ij = 2 sum_pd w_pb (dM / d theta_i)_perp (dM / d theta_j)_perp, where _perp removes the part
+ * that the fluxes absorb (per band, the weighted projection on the span of the P_q). Each
+ * dM / d theta_i is a sum over sources of dP_q(p) F_qd, so its projection is that of the dP_q:
+ * the sums over the K frames separate. */
+static void fit_gradient(fit_data *f, int N, const double *pos, double *g, double *H)
+{
+    const int n = f->n, B = f->B, m = 2 * N + 1, S = 3 * N;
+    double *dP = f->dP, *perp = f->perp;   /* [3 N n]: d/dx_q, d/dy_q, d/dsigma of P_q */
+    double *wh = f->wP;                     /* [N n] scratch (fit_eval's, set again there) */
+    derivative_templates(f, N, pos, dP);
     for (int i = 0; i < m; i++) {
         g[i] = 0;
         for (int j = 0; j < m; j++) H[i * m + j] = 0;
@@ -581,20 +589,12 @@ static void psf_1d_d2(int lo, int n, double c, double sigma, double *d2)
     }
 }
 
-/* Each source's light in excess of one point: a source that is two or more unresolved lights
- * (centroid c, shares w_i at offsets delta_i, sum w_i delta_i = 0) images as
- * sum_i w_i P(p; c + delta_i) = P(p; c) + (1/2) sum_ab M_ab d_a d_b P(p; c) to second order,
- * M = sum_i w_i delta_i delta_i^T the intensity-weighted second moment of the lights about the
- * centroid. M of every source by linear least squares on the fit's residual (the templates
- * F_qd (1/2) d_a d_b P_q, each with the part that the fluxes absorb removed, as fit_gradient
- * does); mh[3 q ..] = (xx, xy, yy). A light of the blend is at offset delta_j from the centroid,
- * and for the brightest delta_j delta_j^T <= M. 0 when singular. */
-static int fit_excess_moments(fit_data *f, int N, const double *pos, double *mh)
+/* The N sources' second-moment templates at pos (sigma pos[2 N]) over the fit pixels:
+ * T[(3 q + j) n + p] = (1/2) d_x^2 P_q, d_x d_y P_q (it carries 2 M_xy), (1/2) d_y^2 P_q. */
+static void moment_templates(fit_data *f, int N, const double *pos, double *T)
 {
-    enum { MAXM = 3 * FIT_MAX_SOURCES };
-    const int n = f->n, B = f->B, S = 3 * N;
+    const int n = f->n;
     const double sigma = pos[2 * N];
-    double *T = f->dP, *perp = f->perp, *wh = f->wP;
     double *gx = f->gx, *gy = f->gy, *dx = f->gx + f->bw + 1, *dy = f->gy + f->bh + 1;
     double *sx = dx + f->bw + 1, *sy = dy + f->bh + 1;
     for (int q = 0; q < N; q++) {
@@ -609,6 +609,22 @@ static int fit_excess_moments(fit_data *f, int N, const double *pos, double *mh)
             T[(3 * q + 2) * n + p] = 0.5 * gx[ix] * sy[iy];
         }
     }
+}
+
+/* Each source's light in excess of one point: a source that is two or more unresolved lights
+ * (centroid c, shares w_i at offsets delta_i, sum w_i delta_i = 0) images as
+ * sum_i w_i P(p; c + delta_i) = P(p; c) + (1/2) sum_ab M_ab d_a d_b P(p; c) to second order,
+ * M = sum_i w_i delta_i delta_i^T the intensity-weighted second moment of the lights about the
+ * centroid. M of every source by linear least squares on the fit's residual (the templates
+ * F_qd (1/2) d_a d_b P_q, each with the part that the fluxes absorb removed, as fit_gradient
+ * does); mh[3 q ..] = (xx, xy, yy). A light of the blend is at offset delta_j from the centroid,
+ * and for the brightest delta_j delta_j^T <= M. 0 when singular. */
+static int fit_excess_moments(fit_data *f, int N, const double *pos, double *mh)
+{
+    enum { MAXM = 3 * FIT_MAX_SOURCES };
+    const int n = f->n, B = f->B, S = 3 * N;
+    double *T = f->dP, *perp = f->perp, *wh = f->wP;
+    moment_templates(f, N, pos, T);
     double G[MAXM * MAXM], r[MAXM];
     for (int i = 0; i < S; i++) {
         r[i] = 0;
@@ -631,6 +647,55 @@ static int fit_excess_moments(fit_data *f, int N, const double *pos, double *mh)
         for (int e = 0; e < S; e++) v += G[c * S + e] * r[e];
         mh[c] = c % 3 == 1 ? 0.5 * v : v;   /* the xy template carries 2 M_xy */
     }
+    return 1;
+}
+
+/* The positions' pull by the light the fit does not model: the Gauss-Newton step, from the fit
+ * at pos (fit_eval evaluated there), of the model whose sources each have their second moment
+ * free as well (fit_excess_moments' templates F_qd (1/2) d_a d_b P_q; the PSF sigma not, as the
+ * moments' traces span it: dP / dsigma = sigma (d_xx + d_yy) P), the fluxes profiled out as in
+ * fit_gradient. By Frisch-Waugh-Lovell the step is the positions' change when the residual's
+ * moment structure (an unresolved blend's width, of the source or of a neighbour) is fitted
+ * jointly with them: to first order the bias that light puts on the fitted positions. Each
+ * moment has the prior precision 1 / s^4 (s^2 = sigma^2 + 1/12, the pixel-integrated PSF's
+ * variance; lights of a blend lie within 2 s, so M <= s^2), which keeps the step finite where
+ * sources nearly coincide. shift[2 q ..] = (dx, dy); 0 when its normal matrix is singular. */
+static int fit_moment_shift(fit_data *f, int N, const double *pos, double *shift)
+{
+    enum { MAXZ = 5 * FIT_MAX_SOURCES };
+    const int n = f->n, B = f->B, S = 3 * N, Z = 2 * N + S;
+    const double s2 = pos[2 * N] * pos[2 * N] + 1.0 / 12.0;
+    double *X = f->dP;   /* [2 S n]: derivative_templates (sigma's unused), moment_templates */
+    derivative_templates(f, N, pos, X);
+    moment_templates(f, N, pos, X + (size_t)S * n);
+    /* parameter of template c: x_q, y_q (c < S, c % 3 < 2), then the 3 N moments */
+#define PARAM_OF(c) ((c) < S ? 2 * ((c) / 3) + (c) % 3 : 2 * N + (c) - S)
+#define USED(c) ((c) >= S || (c) % 3 != 2)
+    double G[MAXZ * MAXZ], r[MAXZ];
+    for (int i = 0; i < Z; i++) {
+        r[i] = 0;
+        for (int j = 0; j < Z; j++) G[i * Z + j] = 0;
+    }
+    for (int b = 0; b < B; b++) {
+        double FF[FIT_MAX_SOURCES * FIT_MAX_SOURCES];
+        band_projection(f, N, b, X, 2 * S, FF);
+        for (int c = 0; c < 2 * S; c++) {
+            if (!USED(c)) continue;
+            const int sc = (c % S) / 3;
+            r[PARAM_OF(c)] += gs_dot(f->perp + c * n, f->wP + sc * n, n);
+            for (int e = 0; e < 2 * S; e++)
+                if (USED(e))
+                    G[PARAM_OF(c) * Z + PARAM_OF(e)] +=
+                        FF[sc * N + (e % S) / 3] * gs_dot(f->wperp + c * n, f->perp + e * n, n);
+        }
+    }
+#undef USED
+#undef PARAM_OF
+    for (int c = 0; c < S; c++)   /* the prior; the xy template's coefficient is 2 M_xy */
+        G[(2 * N + c) * Z + 2 * N + c] += 1.0 / ((c % 3 == 1 ? 4.0 : 1.0) * s2 * s2);
+    /* G is symmetric: its row-major storage is its column-major one */
+    if (LAPACKE_dposv(LAPACK_COL_MAJOR, 'L', Z, 1, G, Z, r, Z) != 0) return 0;
+    memcpy(shift, r, sizeof(double) * (size_t)(2 * N));
     return 1;
 }
 
@@ -667,10 +732,18 @@ static void fit_position_cov(fit_data *f, int N, const double *pos, double chi2,
 static gs_status emit_fit(fit_data *f, int comp, int N, const double *pos, fit_list *L)
 {
     const int n = f->n, B = f->B, K = f->K, BK = f->BK;
-    double cov[3 * FIT_MAX_SOURCES], mom[3 * FIT_MAX_SOURCES];
+    double cov[3 * FIT_MAX_SOURCES], mom[3 * FIT_MAX_SOURCES], sh[2 * FIT_MAX_SOURCES];
     fit_position_cov(f, N, pos, fit_eval(f, N, pos), cov);
     if (!fit_excess_moments(f, N, pos, mom))
         for (int i = 0; i < 3 * N; i++) mom[i] = NAN;
+    /* the unmodelled light's pull: its size, not its sign (the moments are noisy), into the
+     * covariance */
+    else if (fit_moment_shift(f, N, pos, sh))
+        for (int q = 0; q < N; q++) {
+            cov[3 * q] += sh[2 * q] * sh[2 * q];
+            cov[3 * q + 1] += sh[2 * q] * sh[2 * q + 1];
+            cov[3 * q + 2] += sh[2 * q + 1] * sh[2 * q + 1];
+        }
     for (int q = 0; q < N; q++) {
         double *sig = NULL;
         gs_status st = push_light(L, comp, pos[2 * q], pos[2 * q + 1], pos[2 * N], cov + 3 * q, mom + 3 * q, BK, &sig);
@@ -717,10 +790,11 @@ static void positive_part(double m[3])
 }
 
 /* The position covariance of each fitted light (rec_catalog.pos_cov_px2): the fit's own
- * (fit_position_cov) plus the positive part of its light's second moment in excess of one
- * light's PSF, M + (sigma^2 - sigma_1^2) I: the fit's shared PSF sigma widens for a component
- * whose sources are unresolved blends, so the excess is taken against sigma_1, the median of the
- * capture's fitted sigmas (most components hold single lights). NaN where either is unknown. */
+ * (fit_position_cov, with the unmodelled light's pull: emit_fit) plus the positive part of its
+ * light's second moment in excess of one light's PSF, M + (sigma^2 - sigma_1^2) I: the fit's
+ * shared PSF sigma widens for a component whose sources are unresolved blends, so the excess is
+ * taken against sigma_1, the median of the capture's fitted sigmas (most components hold single
+ * lights). NaN where either is unknown. */
 static gs_status fitted_position_cov(const fit_list *L, double *cov)
 {
     double *sg = malloc(sizeof(double) * (L->n ? L->n : 1));
@@ -996,11 +1070,11 @@ static int fit_data_alloc(fit_data *f, const rec_blob_state *s, double **R)
     f->wP = malloc(sizeof(double) * FIT_MAX_PX * FIT_MAX_SOURCES);
     f->gx = malloc(sizeof(double) * 3 * (FIT_MAX_PX + 1));   /* the shares and two derivatives */
     f->gy = malloc(sizeof(double) * 3 * (FIT_MAX_PX + 1));
-    f->dP = malloc(sizeof(double) * 3 * FIT_MAX_SOURCES * FIT_MAX_PX);
-    f->perp = malloc(sizeof(double) * 3 * FIT_MAX_SOURCES * FIT_MAX_PX);
+    f->dP = malloc(sizeof(double) * 6 * FIT_MAX_SOURCES * FIT_MAX_PX);
+    f->perp = malloc(sizeof(double) * 6 * FIT_MAX_SOURCES * FIT_MAX_PX);
     f->wb = malloc(sizeof(double) * FIT_MAX_PX);
     f->wPb = malloc(sizeof(double) * FIT_MAX_SOURCES * FIT_MAX_PX);
-    f->wperp = malloc(sizeof(double) * 3 * FIT_MAX_SOURCES * FIT_MAX_PX);
+    f->wperp = malloc(sizeof(double) * 6 * FIT_MAX_SOURCES * FIT_MAX_PX);
     f->mean = malloc(sizeof(double) * 3 * FIT_MAX_PX * (size_t)B);
     *R = malloc(sizeof(double) * FIT_MAX_PX * (size_t)BK);
     return f->x && f->y && f->D && f->V && f->w && f->P && f->F && f->Ainv && f->num && f->Dt && f->wP &&
