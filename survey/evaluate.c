@@ -30,6 +30,7 @@ typedef struct {
     double lat, lon;            /* NaN = none */
     double a_m, b_m, az_deg;    /* stored: the 1-sigma ellipse (NaN = none or unbounded) */
     unsigned flags;             /* stored: match_flags */
+    unsigned blob_flags;        /* stored: REC_BLOB_* */
     int resolvable;             /* truth: resolvable (1 when the truth does not say) */
     long group;                 /* truth: blend group, -1 none */
     int partner;                /* index of the matched light on the other side, -1 */
@@ -229,7 +230,7 @@ static gs_status read_stored(srv_db *db, int64_t capture_id, ev_light **out, siz
 {
     static const char sql[] =
         "SELECT l.x_px, l.y_px, l.bulb_id, l.technology, l.phase_deg, l.match_flags, loc.lat_deg, "
-        "loc.lon_deg, loc.semi_major_m, loc.semi_minor_m, loc.azimuth_deg FROM lights l "
+        "loc.lon_deg, loc.semi_major_m, loc.semi_minor_m, loc.azimuth_deg, l.blob_flags FROM lights l "
         "LEFT JOIN locations loc ON loc.light_id = l.id "
         "WHERE l.capture_id = ?1 ORDER BY l.light_index";
     sqlite3 *h = srv_db_sqlite(db);
@@ -270,6 +271,7 @@ static gs_status read_stored(srv_db *db, int64_t capture_id, ev_light **out, siz
         double *e[3] = {&l->a_m, &l->b_m, &l->az_deg};
         for (int k = 0; k < 3; k++)
             *e[k] = srv_dbi_col_real(q, 8 + k);
+        l->blob_flags = (unsigned)sqlite3_column_int64(q, 11);
     }
     if (s == GS_OK && rc != SQLITE_DONE) s = gs_fail(GS_ESQL, "%s: %s", srv_db_path(db), sqlite3_errmsg(h));
     sqlite3_finalize(q);
@@ -510,6 +512,14 @@ gs_status srv_evaluate(srv_db *db, const char *truth_path, const srv_eval_opts *
                                               d * sin(azi * M_PI / 180.0), d * cos(azi * M_PI / 180.0));
                 r->ellipse_pairs++;
                 r->ellipse_in95 += d2 <= SRV_CHI2_2DOF_95;
+                int ec = t->group >= 0                     ? SRV_ELLIPSE_BLEND_GROUP
+                         : !a->blob_flags                  ? SRV_ELLIPSE_PLAIN
+                         : a->blob_flags & REC_BLOB_PSF_FIT ? SRV_ELLIPSE_PSF_FIT
+                                                            : -1;
+                if (ec >= 0) {
+                    r->ellipse_class_pairs[ec]++;
+                    r->ellipse_class_in95[ec] += d2 <= SRV_CHI2_2DOF_95;
+                }
             }
         } else if (!isfinite(a->lat)) {
             r->loc_unlocated++;
@@ -575,6 +585,10 @@ static json_t *jrate(double v, long k, long n)
 }
 
 static const char *const class_names[SRV_EVAL_PHASE_CLASSES] = {"0", "120", "240", "other", "none"};
+/* the ellipse classes (SRV_ELLIPSE_*): JSON keys and table rows */
+static const char *const ellipse_keys[SRV_ELLIPSE_CLASSES] = {"plain", "psf_fit", "blend_group"};
+static const char *const ellipse_rows[SRV_ELLIPSE_CLASSES] = {
+    "plain lights (no blob flag)", "PSF-fit lights outside blend groups", "lights in blend groups"};
 
 gs_status srv_eval_print(const srv_eval_report *r, const char *truth_path, int json, FILE *f)
 {
@@ -630,6 +644,12 @@ gs_status srv_eval_print(const srv_eval_report *r, const char *truth_path, int j
         json_object_set_new(loc, "max_m", jnum(r->loc_max_m));
         json_object_set_new(loc, "ellipse_pairs", json_integer(r->ellipse_pairs));
         json_object_set_new(loc, "ellipse95_coverage", jnum(r->ellipse_coverage95));
+        json_t *byc = json_object();
+        for (int c = 0; c < SRV_ELLIPSE_CLASSES; c++)
+            json_object_set_new(byc, ellipse_keys[c],
+                                jrate(rate(r->ellipse_class_in95[c], r->ellipse_class_pairs[c]),
+                                      r->ellipse_class_in95[c], r->ellipse_class_pairs[c]));
+        json_object_set_new(loc, "ellipse95_by_class", byc);
         json_object_set_new(root, "location_error", loc);
         int rc = json_dumpf(root, f, JSON_INDENT(2) | JSON_PRESERVE_ORDER | JSON_REAL_PRECISION(10));
         json_decref(root);
@@ -665,6 +685,11 @@ gs_status srv_eval_print(const srv_eval_report *r, const char *truth_path, int j
             fprintf(f, "| 95 %% ellipse coverage | %s %% | %ld of %ld truth lights inside their stored "
                     "95 %% error ellipse (calibrated: 95 %%) |\n", pct_text(r->ellipse_coverage95, b, sizeof b),
                     r->ellipse_in95, r->ellipse_pairs);
+        for (int c = 0; c < SRV_ELLIPSE_CLASSES; c++)
+            if (r->ellipse_class_pairs[c] > 0)
+                fprintf(f, "| 95 %% ellipse coverage, %s | %s %% | %ld of %ld |\n", ellipse_rows[c],
+                        pct_text(rate(r->ellipse_class_in95[c], r->ellipse_class_pairs[c]), b, sizeof b),
+                        r->ellipse_class_in95[c], r->ellipse_class_pairs[c]);
     } else {
         fprintf(f, "| location error | - | no located matched light with a true position (%ld not located) |\n",
                 r->loc_unlocated);

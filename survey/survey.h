@@ -771,6 +771,10 @@ void srv_eval_opts_default(srv_eval_opts *o);
 /* Phase classes of the confusion matrix: 0, 120, 240 deg (within GS_PHASE_TOL_DEG), another
  * phase, and (stored side only) none = ambiguous or unknown. */
 #define SRV_EVAL_PHASE_CLASSES 5
+/* Classes of the 95 % ellipse coverage (srv_eval_report.ellipse_class_*): plain lights (no blob
+ * flag), lights of the PSF fit (REC_BLOB_PSF_FIT) outside the truth's blend groups, and every
+ * light in a blend group; other lights (deblended, saturated, ...) in none. */
+enum { SRV_ELLIPSE_PLAIN, SRV_ELLIPSE_PSF_FIT, SRV_ELLIPSE_BLEND_GROUP, SRV_ELLIPSE_CLASSES };
 
 typedef struct {
     char survey[64];
@@ -812,6 +816,8 @@ typedef struct {
     long ellipse_pairs;          /* loc_pairs whose stored ellipse is bounded */
     long ellipse_in95;           /* ... whose truth is inside the stored 95 % ellipse */
     double ellipse_coverage95;   /* ellipse_in95 / ellipse_pairs (a calibrated ellipse: 0.95) */
+    long ellipse_class_pairs[SRV_ELLIPSE_CLASSES];   /* ellipse_pairs by class (SRV_ELLIPSE_*) */
+    long ellipse_class_in95[SRV_ELLIPSE_CLASSES];    /* ... inside their 95 % ellipse */
     double loc_median_m, loc_p95_m, loc_max_m;  /* geodesic distance stored -> truth over the
                                   * loc_pairs (percentiles interpolated linearly between order
                                   * statistics, position (n - 1) q); NaN when loc_pairs = 0 */

@@ -56,7 +56,7 @@ TEST(evaluate_hand_made_db_known_answers)
     snprintf(text, sizeof text,
              "{\"format\": \"gridsurvey-truth/1\", \"scene\": \"hand\", \"lights\": [\n"
              "{\"id\": \"T0\", \"x_px\": %g, \"y_px\": %g, \"in_image\": true, \"lat_deg\": %.2f, \"lon_deg\": 35.0, \"bulb\": \"bulbA\", \"technology\": \"incandescent\", \"phase_deg\": 0.0},\n"
-             "{\"id\": \"T1\", \"x_px\": %g, \"y_px\": %g, \"in_image\": true, \"lat_deg\": %.2f, \"lon_deg\": 35.0, \"bulb\": \"bulbB\", \"technology\": \"cfl\", \"phase_deg\": 120.0},\n"
+             "{\"id\": \"T1\", \"x_px\": %g, \"y_px\": %g, \"in_image\": true, \"lat_deg\": %.2f, \"lon_deg\": 35.0, \"bulb\": \"bulbB\", \"technology\": \"cfl\", \"phase_deg\": 120.0, \"blend_group\": 0},\n"
              "{\"id\": \"T2\", \"x_px\": %g, \"y_px\": %g, \"in_image\": true, \"lat_deg\": %.2f, \"lon_deg\": 35.0, \"bulb\": \"bulbC\", \"technology\": \"sodium_hp\", \"phase_deg\": 240.0},\n"
              "{\"id\": \"T3\", \"x_px\": %g, \"y_px\": %g, \"in_image\": true, \"lat_deg\": %.2f, \"lon_deg\": 35.0, \"bulb\": \"bulbC\", \"technology\": \"sodium_hp\", \"phase_deg\": 30.0},\n"
              "{\"id\": \"T4\", \"x_px\": %g, \"y_px\": %g, \"in_image\": true, \"bulb\": \"bulbA\", \"technology\": \"incandescent\", \"phase_deg\": 0.0},\n"
@@ -94,6 +94,7 @@ TEST(evaluate_hand_made_db_known_answers)
         L[i].bulb_id = S[i].bulb;
         L[i].technology = S[i].tech;
         L[i].match_flags = i == 2 ? REC_MATCH_BULB_AMBIGUOUS : 0;
+        L[i].blob_flags = i == 1 || i == 2 ? REC_BLOB_PSF_FIT : 0;
         srv_location_row_init(&loc[i]);
         loc[i].method = S[i].loc ? SRV_LOC_ONE_STATION : SRV_LOC_NONE;
         if (S[i].loc == 2) {
@@ -159,6 +160,11 @@ TEST(evaluate_hand_made_db_known_answers)
     CHECK_NEAR(r.loc_max_m, 20.0, 1e-6);
     CHECK(r.ellipse_pairs == 3 && r.ellipse_in95 == 2);
     CHECK_NEAR(r.ellipse_coverage95, 2.0 / 3.0, 1e-15);
+    /* by class: S0 plain (inside), S1 of the PSF fit (outside), S2 of the PSF fit but its T1 in
+     * a blend group (inside) */
+    CHECK(r.ellipse_class_pairs[SRV_ELLIPSE_PLAIN] == 1 && r.ellipse_class_in95[SRV_ELLIPSE_PLAIN] == 1);
+    CHECK(r.ellipse_class_pairs[SRV_ELLIPSE_PSF_FIT] == 1 && r.ellipse_class_in95[SRV_ELLIPSE_PSF_FIT] == 0);
+    CHECK(r.ellipse_class_pairs[SRV_ELLIPSE_BLEND_GROUP] == 1 && r.ellipse_class_in95[SRV_ELLIPSE_BLEND_GROUP] == 1);
     /* R = 3 takes in S3 -> T2: right bulb and phase; its location row is unlocated */
     o.match_px = 3.0;
     CHECK_OK(srv_evaluate(h, truth, &o, &r));
@@ -194,6 +200,9 @@ TEST(evaluate_hand_made_db_known_answers)
     CHECK(strstr(out, "| location error, median | 10.00 m |") != NULL);
     CHECK(strstr(out, "| location error, 95th percentile | 19.00 m |") != NULL);
     CHECK(strstr(out, "| 95 % ellipse coverage | 66.7 % | 2 of 3 truth lights") != NULL);
+    CHECK(strstr(out, "| 95 % ellipse coverage, plain lights (no blob flag) | 100.0 % | 1 of 1 |") != NULL);
+    CHECK(strstr(out, "| 95 % ellipse coverage, PSF-fit lights outside blend groups | 0.0 % | 0 of 1 |") != NULL);
+    CHECK(strstr(out, "| 95 % ellipse coverage, lights in blend groups | 100.0 % | 1 of 1 |") != NULL);
     CHECK(strstr(out, "| 240 | 0 | 0 | 0 | 1 | 0 |") != NULL);
     rc = sh("%s evaluate --db %s --truth %s --match-px 3 --format json", test_bin(), db, truth);
     json_error_t err;
@@ -203,6 +212,10 @@ TEST(evaluate_hand_made_db_known_answers)
     CHECK(json_integer_value(json_object_get(j, "matched")) == 5);
     CHECK_NEAR(json_number_value(json_object_get(json_object_get(j, "detection"), "rate")), 5.0 / 6.0, 1e-9);
     CHECK_NEAR(json_number_value(json_object_get(json_object_get(j, "location_error"), "p95_m")), 19.0, 1e-6);
+    json_t *byc = json_object_get(json_object_get(j, "location_error"), "ellipse95_by_class");
+    CHECK(json_integer_value(json_object_get(json_object_get(byc, "psf_fit"), "of")) == 1 &&
+          json_integer_value(json_object_get(json_object_get(byc, "psf_fit"), "count")) == 0 &&
+          json_integer_value(json_object_get(json_object_get(byc, "blend_group"), "count")) == 1);
     CHECK(json_integer_value(json_object_get(json_object_get(json_object_get(j, "phase_confusion"), "other"),
                                              "none")) == 1);
     json_decref(j);
