@@ -119,6 +119,20 @@ srv_capture_data survey_fx_capture(int64_t survey_id, const char *key, srv_light
     return cd;
 }
 
+srv_phase_stats survey_fx_stats_all(srv_db *db, int detections)
+{
+    srv_stats_opts o;
+    srv_stats_opts_default(&o);
+    o.detections = detections;
+    srv_phase_stats *g = NULL, r;
+    size_t n = 0;
+    memset(&r, 0, sizeof r);
+    CHECK_OK(srv_stats_compute(db, &o, &g, &n, NULL));
+    if (n == 1) r = g[0];
+    free(g);
+    return r;
+}
+
 /* ------------------------------------------------------------------ the small lab scene */
 
 static const struct lab_light {

@@ -40,6 +40,9 @@ srv_light_row survey_fx_sodium_light(int i, double phase_deg);
  * pointers are borrowed; add it with srv_db_add_capture. */
 srv_capture_data survey_fx_capture(int64_t survey_id, const char *key, srv_light_row *lights,
                                    srv_location_row *locations, size_t n);
+/* The whole database's phase statistics, one group (srv_stats_compute with the default options:
+ * light sites; detections 1: every detection); zeros if not one group. */
+srv_phase_stats survey_fx_stats_all(srv_db *db, int detections);
 
 /* The lab scene's eight lights (capture/scenes/lab.json): bulbs, phases and the noise seed,
  * which a test may change (another night: another seed; a rephased or replaced light). */

@@ -72,20 +72,6 @@ static void night(srv_db *db, int64_t sid, const char *key, const truth_light *t
     CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
 }
 
-static srv_phase_stats all_stats(srv_db *db, int detections)
-{
-    srv_stats_opts o;
-    srv_stats_opts_default(&o);
-    o.detections = detections;
-    srv_phase_stats *g = NULL, r;
-    size_t n = 0;
-    memset(&r, 0, sizeof r);
-    CHECK_OK(srv_stats_compute(db, &o, &g, &n, NULL));
-    if (n == 1) r = g[0];
-    free(g);
-    return r;
-}
-
 TEST(sites_two_nights_same_count_narrower)
 {
     const char *path = fx_tmp("sites.sqlite");
@@ -98,7 +84,7 @@ TEST(sites_two_nights_same_count_narrower)
     night(db, sid, "night1", t, 1, 0.9, o1);
     sqlite3 *h = srv_db_sqlite(db);
     CHECK(SQ(h, "SELECT count(*) FROM light_sites") == NL);
-    srv_phase_stats one = all_stats(db, 0);
+    srv_phase_stats one = survey_fx_stats_all(db, 0);
     night(db, sid, "night2", t, 2, 0.9, o2);
     /* the same number of sites, each with one detection per night, from one truth light */
     CHECK(SQ(h, "SELECT count(*) FROM light_sites") == NL);
@@ -120,7 +106,7 @@ TEST(sites_two_nights_same_count_narrower)
     CHECK(pairs == NL);
     /* statistics count sites: the same n and the same Wilson intervals as one night (two
      * nights do not make twice the lights), and the detections are still there on request */
-    srv_phase_stats two = all_stats(db, 0), det = all_stats(db, 1);
+    srv_phase_stats two = survey_fx_stats_all(db, 0), det = survey_fx_stats_all(db, 1);
     CHECK(two.lights == NL && two.total == NL && one.total == NL && det.lights == 2 * NL);
     for (int k = 0; k < 3; k++) {
         CHECK(two.n[k] == one.n[k] && two.n[k] == NL / 3);

@@ -199,19 +199,6 @@ static long check_partition(sqlite3 *h, int orders[NCAP][NL], const char *label)
     return SQ(h, "SELECT count(*) FROM light_sites");
 }
 
-static srv_phase_stats site_stats(srv_db *db)
-{
-    srv_stats_opts o;
-    srv_stats_opts_default(&o);
-    srv_phase_stats *g = NULL, r;
-    size_t n = 0;
-    memset(&r, 0, sizeof r);
-    CHECK_OK(srv_stats_compute(db, &o, &g, &n, NULL));
-    if (n == 1) r = g[0];
-    free(g);
-    return r;
-}
-
 /* NL lights, each located in june from P and from Q and seen unlocated in july from both: NL
  * sites (3 NL - 3 before: june's located sites and one pixel site per roof for july),
  * whatever the order the four captures are associated in (all 24, each as it is added and by
@@ -246,7 +233,7 @@ TEST(sites_located_and_unlocated_nights_one_site)
         long sites = check_partition(h, orders, label);
         CHECK_MSG(sites == NL, "%s: %ld sites for %d lights", label, sites, NL);
         CHECK(SQ(h, "SELECT count(*) FROM light_sites WHERE lat_deg IS NULL OR pose_key IS NOT NULL") == 1);
-        srv_phase_stats st = site_stats(db);
+        srv_phase_stats st = survey_fx_stats_all(db, 0);
         CHECK_MSG(st.lights == NL, "%s: stats counts %ld lights", label, (long)st.lights);
         /* positions: the located detections' combination, the unlocated ones carry none */
         sqlite3_stmt *q = NULL;
