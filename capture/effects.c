@@ -237,7 +237,17 @@ gs_status cap_fx_prepare_skyglow(cap_sim *s)
     return GS_OK;
 }
 
-/* Rows [ya, yb) of every light's halo, the lights in scene order. */
+/* The halo kernel at offset (i, j) from its corner, 0 outside it. */
+static double glow_at(const cap_sim *s, int n, int i, int j)
+{
+    return i >= 0 && i < n && j >= 0 && j < n ? s->glow_k[i * n + j] : 0.0;
+}
+
+/* Rows [ya, yb) of every light's halo, the lights in scene order. The kernel is centred on the
+ * light's own position, not on its pixel: spread bilinearly over the four pixel centres around
+ * it (pixel i's centre at coordinate i), which keeps its flux and puts its centroid exactly at
+ * the light (a halo centred on the nearest pixel pulled the light's centroid by up to half a
+ * pixel times the halo's fraction). */
 static gs_status skyglow_rows(void *ctx, int part, size_t ya, size_t yb)
 {
     cap_par *par = ctx;
@@ -250,11 +260,12 @@ static gs_status skyglow_rows(void *ctx, int part, size_t ya, size_t yb)
     double g[CAP_MAX_LEVELS * GS_MAX_BANDS];
     for (size_t l = 0; l < s->n; l++) {
         const cap_light *li = &s->sc.lights[l];
-        double cx = floor(li->x_px + 0.5), cy = floor(li->y_px + 0.5);
-        if (!isfinite(cx) || !isfinite(cy) || cx < -R || cy < -R || cx >= s->W + R || cy >= s->H + R)
+        double bx = floor(li->x_px), by = floor(li->y_px);
+        if (!isfinite(bx) || !isfinite(by) || bx < -R - 1 || by < -R - 1 || bx >= s->W + R || by >= s->H + R)
             continue;
-        int x0 = (int)cx - R, y0 = (int)cy - R;
-        int y_lo = y0 < (int)ya ? (int)ya : y0, y_hi = y0 + n < (int)yb ? y0 + n : (int)yb;
+        double fx = li->x_px - bx, fy = li->y_px - by;
+        int x0 = (int)bx - R, y0 = (int)by - R;   /* the support: n + 1 pixels from x0, y0 */
+        int y_lo = y0 < (int)ya ? (int)ya : y0, y_hi = y0 + n + 1 < (int)yb ? y0 + n + 1 : (int)yb;
         if (y_lo >= y_hi) continue;
         for (int h = 0; h < L; h++)
             for (int b = 0; b < B; b++) {
@@ -271,9 +282,11 @@ static gs_status skyglow_rows(void *ctx, int part, size_t ya, size_t yb)
                 g[h * B + b] = frac * v;
             }
         for (int y = y_lo; y < y_hi; y++)
-            for (int x = x0 < 0 ? 0 : x0; x < x0 + n && x < s->W; x++) {
+            for (int x = x0 < 0 ? 0 : x0; x < x0 + n + 1 && x < s->W; x++) {
                 size_t p = (size_t)y * (size_t)s->W + (size_t)x;
-                double k = s->glow_k[(y - y0) * n + (x - x0)];
+                int i = y - y0, j = x - x0;
+                double k = (1.0 - fy) * ((1.0 - fx) * glow_at(s, n, i, j) + fx * glow_at(s, n, i, j - 1)) +
+                           fy * ((1.0 - fx) * glow_at(s, n, i - 1, j) + fx * glow_at(s, n, i - 1, j - 1));
                 int h = r->halv ? r->halv[p] : 0;
                 for (int b = 0; b < B; b++) s->img[p * (size_t)B + (size_t)b] += k * g[h * B + b];
                 items++;

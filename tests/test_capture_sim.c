@@ -178,6 +178,51 @@ TEST(sim_no_effects_is_exact_eq5_vs_brute_force)
     gs_delight_free(d);
 }
 
+/* ------------------------------------------------------------ skyglow */
+
+/* A light's halo is centred on the light, not on its pixel: the frame with the skyglow minus
+ * the frame without it (the halo alone) has its centroid at the light's position, to rounding,
+ * for lights at several sub-pixel offsets (it sat on the nearest pixel centre: 0.3 and 0.4 px
+ * off for the first). */
+TEST(sim_skyglow_halo_centred_on_the_light)
+{
+    static const double pos[][2] = {{30.3, 25.6}, {30.5, 25.5}, {29.9, 26.2}, {31.0, 24.0}};
+    gs_delight *d = delight();
+    for (size_t t = 0; t < sizeof pos / sizeof *pos; t++) {
+        double *dn[2] = {malloc(sizeof(double) * 64 * 48), malloc(sizeof(double) * 64 * 48)};
+        for (int with = 0; with < 2; with++) {
+            char text[1024];
+            snprintf(text, sizeof text,
+                     "{\"format\": \"gridsurvey-scene/1\", \"seed\": 5, \"grid\": {\"nominal_hz\": 50},\n"
+                     " \"camera\": {\"width_px\": 64, \"height_px\": 48, \"sensor\": {\"bands\": 1}},\n"
+                     " \"acam\": {\"K\": 8, \"cycles\": 40},\n"
+                     " \"lights\": [{\"bulb\": \"hps-150w\", \"x_px\": %.3f, \"y_px\": %.3f, \"flux_e_per_cycle\": 900}],\n"
+                     " \"effects\": {%s}}\n",
+                     pos[t][0], pos[t][1], with ? "\"skyglow\": {\"fraction\": 0.05, \"scale_px\": 2}" : "");
+            cap_scene sc;
+            cap_sim *s = sim_of(text, "glow.json", d, &sc);
+            if (s && dn[with]) CHECK_OK(cap_sim_render(s, 3, 0, 0, NULL, NULL, dn[with]));
+            cap_sim_free(s);
+            cap_scene_release(&sc);
+        }
+        double sum = 0, sx = 0, sy = 0;
+        for (int y = 0; dn[0] && dn[1] && y < 48; y++)
+            for (int x = 0; x < 64; x++) {
+                double h = dn[1][y * 64 + x] - dn[0][y * 64 + x];
+                sum += h;
+                sx += h * x;
+                sy += h * y;
+            }
+        CHECK_MSG(sum > 0, "light at (%g, %g): no halo", pos[t][0], pos[t][1]);
+        if (sum > 0)
+            CHECK_MSG(fabs(sx / sum - pos[t][0]) < 1e-9 && fabs(sy / sum - pos[t][1]) < 1e-9,
+                      "light at (%g, %g): halo centroid (%.6f, %.6f)", pos[t][0], pos[t][1], sx / sum, sy / sum);
+        free(dn[0]);
+        free(dn[1]);
+    }
+    gs_delight_free(d);
+}
+
 /* ------------------------------------------------------------ disabled effects */
 
 /* Parameters that make each effect valid on its own. */
