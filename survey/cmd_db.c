@@ -108,12 +108,12 @@ int srv_cmd_db(int argc, char **argv)
     if (s != GS_OK) return srv_error(cmd, s);
     int rc = 0;
     if (which == 0 || which == 1) {
-        long created = 0, joined = 0;
-        if (which == 1) s = srv_db_associate(db, &created, &joined);
+        long created = 0, joined = 0, merged = 0;
+        if (which == 1) s = srv_db_associate(db, &created, &joined, &merged);
         printf("%s: survey database, schema version %d\n", path, SRV_DB_SCHEMA_VERSION);
         if (which == 1 && s == GS_OK)
-            printf("%s: %ld lights associated: %ld new light sites, %ld joined existing ones\n", path,
-                   created + joined, created, joined);
+            printf("%s: %ld lights associated: %ld new light sites, %ld joined existing ones; %ld sites "
+                   "merged into others\n", path, created + joined, created, joined, merged);
     } else if (which == 2) {
         srv_db_report r;
         if ((s = srv_db_check(db, &r)) == GS_OK) {

@@ -489,8 +489,8 @@ gs_status srv_db_add_capture(srv_db *db, const srv_capture_data *c, int64_t *cap
     } else if (s == GS_OK) {
         s = srv_db_insert_capture(db, &c->capture, c->n_lights, c->n_frames, c->n_frequency, &cid);
         if (s == GS_OK) s = capture_rows(db, c, cid);
-        long created = 0, joined = 0;
-        if (s == GS_OK) s = srv_dbi_associate_capture(db, cid, &created, &joined);
+        long created = 0, joined = 0, merged = 0;
+        if (s == GS_OK) s = srv_dbi_associate_capture(db, cid, &created, &joined, &merged);
     }
     if (s == GS_OK) {
         s = own ? srv_db_commit(db) : srv_dbi_exec(db, "RELEASE srv_capture", "release");

@@ -212,7 +212,7 @@ gs_status srv_dbi_need_txn(srv_db *db, const char *what);
 gs_status srv_dbi_auto_begin(srv_db *db, int *began);
 gs_status srv_dbi_auto_end(srv_db *db, int began, gs_status s);
 /* Associate one capture's new detections (sites.c; called inside its transaction). */
-gs_status srv_dbi_associate_capture(srv_db *db, int64_t capture_id, long *created, long *joined);
+gs_status srv_dbi_associate_capture(srv_db *db, int64_t capture_id, long *created, long *joined, long *merged);
 /* Fill o from the 8 columns bulb_id, technology, phase_deg, phase_sigma_deg, confidence,
  * bulb_confidence, phase_confidence, SRV_SQL_BULB_LABELS starting at column first. */
 void srv_site_obs_from_row(sqlite3_stmt *q, int first, srv_site_obs *o);

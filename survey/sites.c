@@ -633,7 +633,7 @@ static gs_status merge_sites(srv_db *db, sqlite3_stmt *q[3], int64_t into, int64
 }
 
 /* Associate the not yet associated detections of one capture. */
-static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long *joined)
+static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long *joined, long *merged_sites)
 {
     sqlite3 *h = srv_db_sqlite(db);
     sqlite3_stmt *qd = NULL, *qg = NULL, *qv = NULL, *qp = NULL, *qi = NULL, *qa = NULL, *qm = NULL, *qw = NULL,
@@ -735,6 +735,7 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
         if ((s = merge_sites(db, qx, x->site, p[k].site, &merged)) != GS_OK) goto done;
         flag[ti] = (char)merged;
         x->merged = merged;
+        *merged_sites += merged;
     }
     touched = malloc(nd * sizeof *touched);
     if (!touched) {
@@ -806,18 +807,19 @@ done:
     return s;
 }
 
-gs_status srv_dbi_associate_capture(srv_db *db, int64_t capture_id, long *created, long *joined)
+gs_status srv_dbi_associate_capture(srv_db *db, int64_t capture_id, long *created, long *joined, long *merged)
 {
-    return associate_capture(db, capture_id, created, joined);
+    return associate_capture(db, capture_id, created, joined, merged);
 }
 
-gs_status srv_db_associate(srv_db *db, long *created, long *joined)
+gs_status srv_db_associate(srv_db *db, long *created, long *joined, long *merged)
 {
     if (!db) return gs_fail(GS_EINVAL, "srv_db_associate: NULL database");
-    long c0 = 0, j0 = 0;
+    long c0 = 0, j0 = 0, m0 = 0;
     if (!created) created = &c0;
     if (!joined) joined = &j0;
-    *created = *joined = 0;
+    if (!merged) merged = &m0;
+    *created = *joined = *merged = 0;
     int began;
     gs_status s = srv_dbi_auto_begin(db, &began);
     if (s != GS_OK) return s;
@@ -827,7 +829,7 @@ gs_status srv_db_associate(srv_db *db, long *created, long *joined)
     s = collect_ids(db, "SELECT DISTINCT l.capture_id FROM lights l WHERE NOT EXISTS (SELECT 1 FROM "
                         "site_detections sd WHERE sd.light_id = l.id) ORDER BY l.capture_id",
                     &ids, &cap, &n);
-    for (size_t i = 0; i < n && s == GS_OK; i++) s = associate_capture(db, ids[i], created, joined);
+    for (size_t i = 0; i < n && s == GS_OK; i++) s = associate_capture(db, ids[i], created, joined, merged);
     /* sites left stale by deleted detections */
     if (s == GS_OK) s = collect_ids(db, "SELECT id FROM light_sites WHERE stale = 1", &ids, &cap, &n);
     if (s == GS_OK && n && (s = prep_site_stmts(db, &st)) == GS_OK)

@@ -283,8 +283,11 @@ int srv_db_report_ok(const srv_db_report *r);
 double srv_ellipse_maha2(double a_m, double b_m, double az_deg, double east_m, double north_m);
 #define SRV_SITE_MAX_OBS 64                   /* detections combined per site (the first ones) */
 /* Associate every detection not yet associated (captures in id order) and refresh the sites
- * left stale by deletions; its own transaction when the caller has none. Counts optional. */
-gs_status srv_db_associate(srv_db *db, long *created, long *joined);
+ * left stale by deletions; its own transaction when the caller has none. Counts optional: the
+ * detections that founded a site, those that joined one, and the sites merged into another
+ * (one light seen unlocated and then located from the same pose: survey/sites.c), so the
+ * sites grew by created - merged. */
+gs_status srv_db_associate(srv_db *db, long *created, long *joined, long *merged);
 
 /* One detection's recognition, as srv_site_combine reads it. */
 typedef struct {

@@ -113,7 +113,7 @@ static void set_bulb_labels(const char *db)
     sqlite3_close(h);
     srv_db *w = NULL;
     CHECK_OK(srv_db_open(db, SRV_DB_WRITE, &w));
-    if (w) CHECK_OK(srv_db_associate(w, NULL, NULL));
+    if (w) CHECK_OK(srv_db_associate(w, NULL, NULL, NULL));
     srv_db_close(w);
 }
 

@@ -147,12 +147,12 @@ TEST(sites_two_nights_same_count_narrower)
      * nothing; deleting a night leaves every site with one detection, refreshed */
     night(db, sid, "night2", t, 2, 0.9, o2);
     long created = -1, joined = -1;
-    CHECK_OK(srv_db_associate(db, &created, &joined));
+    CHECK_OK(srv_db_associate(db, &created, &joined, NULL));
     CHECK(created == 0 && joined == 0 && SQ(h, "SELECT count(*) FROM light_sites") == NL);
     int deleted = 0;
     CHECK_OK(srv_db_delete_capture(db, sid, "night1", &deleted));
     CHECK(deleted && SQ(h, "SELECT count(*) FROM light_sites WHERE stale = 1") == NL);
-    CHECK_OK(srv_db_associate(db, &created, &joined));
+    CHECK_OK(srv_db_associate(db, &created, &joined, NULL));
     CHECK(SQ(h, "SELECT count(*) FROM light_sites WHERE stale = 0 AND detections = 1 AND "
                 "abs(phase_confidence - 0.9) < 1e-12") == NL);
     srv_db_report r;

@@ -118,7 +118,7 @@ TEST(sites_association_distance_box_one_per_capture)
     CHECK_OK(srv_db_insert_location(db, lid, &loc[0]));
     CHECK_OK(srv_db_commit(db));
     long created = -1, joined = -1;
-    CHECK_OK(srv_db_associate(db, &created, &joined));
+    CHECK_OK(srv_db_associate(db, &created, &joined, NULL));
     CHECK_MSG(created == 1 && joined == 0, "created %ld, joined %ld", created, joined);
     snprintf(sql, sizeof sql, "SELECT s.detections FROM site_detections sd JOIN light_sites s ON s.id = "
              "sd.site_id WHERE sd.light_id = %lld AND sd.d2 IS NULL", (long long)lid);
