@@ -299,33 +299,64 @@ static gs_status match_with_population(const rec_matcher *m, catalog_pass *pass,
 /* The flat share from pass 1's answers: the capture's (rep) and each light's flat_i. Unknown
  * lights and blends count (a flat share is what makes a bright light unknown, or better fitted by
  * two phases of its bulb, whose sum flickers less), so do the PSF fit's sources; the weighted
- * median is robust to the minority of true blends. Not lights cut by the border or saturated.
- * The lights' shares differ (how much of a halo the photometry takes depends on the light): each
- * light's is its own estimate shrunk to the capture's under the prior N(phi0, spread^2) (the
+ * median is robust to the minority of true blends. The capture's: not lights cut by the border
+ * or saturated. The lights' shares differ (how much of a halo the photometry takes depends on the
+ * light): each light's is its own estimate shrunk under the prior N(phi0, spread^2) (the
  * posterior mean), kept within FLAT_PRIOR_Z spreads of phi0 so that a blend's or an unknown
- * bulb's misfit cannot hide in it; phi0 for a light without an estimate. */
+ * bulb's misfit cannot hide in it; phi0 for a light without an estimate. phi0 and spread are
+ * those of the lights measured alike (flat_kind) when theirs is significant, else the capture's. */
 #define FLAT_PRIOR_Z 3.0
-static gs_status measure_flat(const rec_catalog *cat, const rec_match *out, const light_fits *fit,
-                              double *flat_i, rec_noise_report *rep)
+/* Photometry kinds that take different shares of a halo: the aperture's or the PSF fit's, with
+ * or without pixels saturated in some frame (a fit on the ring around a saturated core
+ * extrapolates the ring's halo into the core). On metro_clear at K = 26, C = 1024 the kinds' shares
+ * are 0.011 (aperture), 0.020 (PSF fit), 0.014 (aperture, saturated) and 0.038 (PSF fit,
+ * saturated); held within 3 spreads of the capture's (0.0124 + 3 x 0.0031), the brightest HPS
+ * lights were unknown (docs/recognition.md, "Per photometry kind"). */
+#define FLAT_KINDS 4
+static int flat_kind(const rec_catalog *cat, size_t i)
 {
-    size_t n = cat->count;
-    const unsigned disturbed = REC_BLOB_EDGE | REC_BLOB_SATURATED | REC_BLOB_NO_SIGNAL;
+    const unsigned f = cat->flags ? cat->flags[i] : 0u;
+    return (f & REC_BLOB_PSF_FIT ? 1 : 0) + (f & REC_BLOB_SATURATED ? 2 : 0);
+}
+
+/* Light i is a reference of the flat share: an answer that is not dim or bad, nothing of flags
+ * cut. */
+static int flat_ref_light(const rec_catalog *cat, const rec_match *out, size_t i, unsigned cut)
+{
+    return !(cat->flags && (cat->flags[i] & cut)) && !(out[i].flags & (REC_MATCH_DIM | REC_MATCH_BAD_INPUT));
+}
+
+static gs_status measure_flat(const rec_catalog *cat, const rec_match *out, const light_fits *fit,
+                              double *flat_i, rec_noise_report *rep, int *any)
+{
+    size_t n = cat->count, used;
+    const unsigned cut = REC_BLOB_EDGE | REC_BLOB_NO_SIGNAL;
     unsigned char *is_ref = malloc(n);
     if (!is_ref) return gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", n);
-    for (size_t i = 0; i < n; i++)
-        is_ref[i] = !(cat->flags && (cat->flags[i] & disturbed)) && !(out[i].flags & (REC_MATCH_DIM | REC_MATCH_BAD_INPUT));
-    double share, spread;
+    for (size_t i = 0; i < n; i++) is_ref[i] = flat_ref_light(cat, out, i, cut | REC_BLOB_SATURATED);
+    double share, spread, kshare[FLAT_KINDS], kspread[FLAT_KINDS];
     gs_status s = rec_eq7_flat_share(fit->flat, fit->flat_var, is_ref, n, &share, &spread, &rep->flat_lights);
-    free(is_ref);
     rep->flat_share = isfinite(share) ? share : 0.0;
     rep->flat_spread = isfinite(share) ? spread : 0.0;
     if (!isfinite(share)) rep->flat_lights = 0;
+    *any = rep->flat_share > 0.0;
+    for (int k = 0; k < FLAT_KINDS && s == GS_OK; k++) {
+        for (size_t i = 0; i < n; i++) is_ref[i] = flat_kind(cat, i) == k && flat_ref_light(cat, out, i, cut);
+        s = rec_eq7_flat_share(fit->flat, fit->flat_var, is_ref, n, &kshare[k], &kspread[k], &used);
+        if (kshare[k] > 0.0) *any = 1;
+        else {
+            kshare[k] = rep->flat_share;
+            kspread[k] = rep->flat_spread;
+        }
+    }
+    free(is_ref);
     for (size_t i = 0; i < n && s == GS_OK; i++) {
-        double phi0 = rep->flat_share, t2 = rep->flat_spread * rep->flat_spread, v = fit->flat_var[i];
+        const int k = flat_kind(cat, i);
+        double phi0 = kshare[k], t2 = kspread[k] * kspread[k], v = fit->flat_var[i];
         double f = phi0;
         if (phi0 > 0.0 && t2 > 0.0 && v > 0.0 && isfinite(v) && isfinite(fit->flat[i])) {
             f = (fit->flat[i] / v + phi0 / t2) / (1.0 / v + 1.0 / t2);
-            double lo = phi0 - FLAT_PRIOR_Z * rep->flat_spread, hi = phi0 + FLAT_PRIOR_Z * rep->flat_spread;
+            double lo = phi0 - FLAT_PRIOR_Z * kspread[k], hi = phi0 + FLAT_PRIOR_Z * kspread[k];
             f = f < lo ? lo : f > hi ? hi : f;
         }
         flat_i[i] = f < 0.0 ? 0.0 : f > REC_FLAT_MAX ? REC_FLAT_MAX : f;
@@ -385,8 +416,9 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
     if (s != GS_OK) goto done;
     /* the flat share measured on pass 1's answers; when there is one, pass 1 again without it,
      * so that neither the excess noise nor the last pass's priors absorb its misfit */
-    if (flat_measured && (s = measure_flat(cat, out, &fit, flat_i, &rep)) != GS_OK) goto done;
-    if (rep.flat_share > 0.0 && flat_measured) {
+    int any_flat = 0;
+    if (flat_measured && (s = measure_flat(cat, out, &fit, flat_i, &rep, &any_flat)) != GS_OK) goto done;
+    if (any_flat) {
         pass.flat_i = flat_i;
         if ((s = gs_parallel_chunks(m->o.threads, n, 0, catalog_part, &pass)) != GS_OK) goto done;
     }

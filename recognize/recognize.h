@@ -350,7 +350,8 @@ typedef struct {
                                    * options') */
     size_t flat_lights;           /* flat_share NaN: the references it was measured on (0: none) */
     double flat_share;            /* the flat share subtracted (measured: the capture's phi0, each
-                                   * light's shrunk to it; or the options') */
+                                   * light's shrunk to it or to its photometry kind's; or the
+                                   * options') */
     double flat_spread;           /* measured: the spread of the lights' shares about phi0 */
 } rec_noise_report;
 /* "camera", "fixed", "population". */
