@@ -308,13 +308,10 @@ static const char geo_cand_sql[] =
     "SELECT s.id, s.lat_deg, s.lon_deg, s.semi_major_m, s.semi_minor_m, s.azimuth_deg "
     "FROM light_sites_rtree r CROSS JOIN light_sites s ON s.id = r.id "
     "WHERE r.max_lat >= ?1 AND r.min_lat <= ?2 AND r.max_lon >= ?3 AND r.min_lon <= ?4";
-/* the sites seen from a pose within a pixel box (site_views), whether each is located; the
- * pixel sites of a pose in a pixel column */
+/* the sites seen from a pose within a pixel box (site_views), whether each is located */
 static const char view_cand_sql[] =
     "SELECT v.site_id, v.x_px, v.y_px, s.pose_key IS NULL FROM site_views v JOIN light_sites s ON s.id = v.site_id "
     "WHERE v.pose_key = ?1 AND v.x_px BETWEEN ?2 AND ?3 AND v.y_px BETWEEN ?4 AND ?5";
-static const char px_cand_sql[] =
-    "SELECT s.id, s.x_px, s.y_px, 0 FROM light_sites s WHERE s.pose_key = ?1 AND s.x_px BETWEEN ?2 AND ?3";
 static const char site_obs_sql[] =
     "SELECT l.bulb_id, l.technology, l.phase_deg, l.phase_sigma_deg, l.confidence, l.bulb_confidence, "
     "l.phase_confidence, " SRV_SQL_BULB_LABELS ", loc.lat_deg, loc.lon_deg, loc.height_m, loc.semi_major_m, "
@@ -568,26 +565,24 @@ static gs_status geo_candidates(srv_db *db, sqlite3_stmt *q, const detection *d,
 }
 
 /* The candidate pairs of detection d[i] by pose and pixel, d2 in px^2 within
- * SRV_SITE_GATE_PX: for a detection without a location, the sites seen from its camera pose
- * (qv: site_views, their detections' mean pixel from that pose); for a located one, the sites
- * without a location (qp: pixel sites of its pose; it meets the located ones by position).
- * Sites in held are skipped. */
-static gs_status pixel_candidates(srv_db *db, sqlite3_stmt *qv, sqlite3_stmt *qp, const detection *d, size_t i,
+ * SRV_SITE_GATE_PX: the sites seen from its camera pose (q: site_views, their detections' mean
+ * pixel from that pose); for a located detection only those without a location (it meets the
+ * located ones by position). A pixel site's view of the pose, not light_sites' pixel: a site
+ * that lost its located detections holds those of several poses. Sites in held are skipped. */
+static gs_status pixel_candidates(srv_db *db, sqlite3_stmt *q, const detection *d, size_t i,
                                   const int64_t *held, size_t nheld, pair **p, size_t *capp, size_t *np)
 {
     const detection *x = &d[i];
-    sqlite3_stmt *q = x->located ? qp : qv;
     int rc;
     sqlite3_reset(q);
     sqlite3_bind_text(q, 1, x->pose, -1, SQLITE_STATIC);
     sqlite3_bind_double(q, 2, x->x_px - SRV_SITE_GATE_PX);
     sqlite3_bind_double(q, 3, x->x_px + SRV_SITE_GATE_PX);
-    if (!x->located) {
-        sqlite3_bind_double(q, 4, x->y_px - SRV_SITE_GATE_PX);
-        sqlite3_bind_double(q, 5, x->y_px + SRV_SITE_GATE_PX);
-    }
+    sqlite3_bind_double(q, 4, x->y_px - SRV_SITE_GATE_PX);
+    sqlite3_bind_double(q, 5, x->y_px + SRV_SITE_GATE_PX);
     while ((rc = sqlite3_step(q)) == SQLITE_ROW) {
         int located = sqlite3_column_int(q, 3);
+        if (located && x->located) continue;
         double dx = x->x_px - sqlite3_column_double(q, 1), dy = x->y_px - sqlite3_column_double(q, 2);
         double d2 = dx * dx + dy * dy;
         if (!(d2 <= SRV_SITE_GATE_PX * SRV_SITE_GATE_PX)) continue;
@@ -636,7 +631,7 @@ static gs_status merge_sites(srv_db *db, sqlite3_stmt *q[3], int64_t into, int64
 static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long *joined, long *merged_sites)
 {
     sqlite3 *h = srv_db_sqlite(db);
-    sqlite3_stmt *qd = NULL, *qg = NULL, *qv = NULL, *qp = NULL, *qi = NULL, *qa = NULL, *qm = NULL, *qw = NULL,
+    sqlite3_stmt *qd = NULL, *qg = NULL, *qv = NULL, *qi = NULL, *qa = NULL, *qm = NULL, *qw = NULL,
                  *qx[3] = {NULL, NULL, NULL};
     site_stmts st = {NULL, NULL, NULL, NULL};
     detection *d = NULL;
@@ -648,7 +643,7 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
     gs_status s = GS_OK;
     int rc;
     if ((s = prep(db, dets_sql, &qd)) != GS_OK || (s = prep(db, geo_cand_sql, &qg)) != GS_OK ||
-        (s = prep(db, view_cand_sql, &qv)) != GS_OK || (s = prep(db, px_cand_sql, &qp)) != GS_OK ||
+        (s = prep(db, view_cand_sql, &qv)) != GS_OK ||
         (s = prep(db, new_site_sql, &qi)) != GS_OK ||
         (s = prep(db, "INSERT INTO site_detections(light_id, site_id, capture_id, d2) VALUES "
                       "(?1, ?2, ?3, ?4)", &qa)) != GS_OK ||
@@ -697,7 +692,7 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
     /* candidate pairs */
     for (size_t i = 0; i < nd && s == GS_OK; i++) {
         if (d[i].located) s = geo_candidates(db, qg, d, i, amax, held, nheld, &p, &capp, &np);
-        if (s == GS_OK) s = pixel_candidates(db, qv, qp, d, i, held, nheld, &p, &capp, &np);
+        if (s == GS_OK) s = pixel_candidates(db, qv, d, i, held, nheld, &p, &capp, &np);
     }
     if (s != GS_OK) goto done;
     /* greedy assignment, by position first, then by pixel, each by increasing d2; a site takes
@@ -791,7 +786,6 @@ done:
     sqlite3_finalize(qd);
     sqlite3_finalize(qg);
     sqlite3_finalize(qv);
-    sqlite3_finalize(qp);
     sqlite3_finalize(qi);
     sqlite3_finalize(qa);
     sqlite3_finalize(qm);

@@ -290,3 +290,41 @@ TEST(sites_located_and_unlocated_nights_one_site)
     }
     CHECK(count == 48);
 }
+
+/* A located site whose located detections are deleted becomes a pixel site of its first
+ * detection's pose, its light_sites pixel the mean over both roofs' july detections (a pixel of
+ * neither pose); its views stay per pose. Storing the june captures again must rejoin every light
+ * (the truth's partition, NL sites): each located detection finds its pixel site through the view
+ * of its own pose. Before, a located detection looked at light_sites' pixel of the site's first
+ * pose only, missed every such site and june's two located detections founded a second site
+ * per light. */
+TEST(sites_pixel_site_of_two_poses_found_by_its_views)
+{
+    truth_light t[NL];
+    make_truth(t);
+    int64_t survey[2], station[2][2];
+    srv_db *db = create("poses_deleted.sqlite", survey, station);
+    if (!db) return;
+    int orders[NCAP][NL];
+    for (int c = 0; c < NCAP; c++) add_capture(db, survey, station, c, t, orders[c], 0);
+    sqlite3 *h = srv_db_sqlite(db);
+    CHECK(check_partition(h, orders, "stored") == NL);
+    int deleted = 0;
+    CHECK_OK(srv_db_delete_capture(db, survey[0], cap_key[0], &deleted));
+    CHECK(deleted == 1);
+    CHECK_OK(srv_db_delete_capture(db, survey[0], cap_key[2], &deleted));
+    CHECK(deleted == 1);
+    CHECK_OK(srv_db_associate(db, NULL, NULL, NULL));
+    /* every site a pixel site now; the NL - 2 seen from both roofs in july hold two poses */
+    CHECK(SQ(h, "SELECT count(*) FROM light_sites WHERE pose_key IS NULL") == 0);
+    CHECK(SQ(h, "SELECT count(*) FROM (SELECT site_id FROM site_views GROUP BY site_id HAVING count(*) = 2)") ==
+          NL - 2);
+    add_capture(db, survey, station, 0, t, orders[0], 0);
+    add_capture(db, survey, station, 2, t, orders[2], 0);
+    long sites = check_partition(h, orders, "june stored again");
+    CHECK_MSG(sites == NL, "%ld sites for %d lights", sites, NL);
+    srv_db_report r;
+    CHECK_OK(srv_db_check(db, &r));
+    CHECK(srv_db_report_ok(&r) && r.unassociated == 0);
+    srv_db_close(db);
+}
