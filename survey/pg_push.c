@@ -328,7 +328,17 @@ static const char stage_sql[] =
     "captures integer, bulb_id text, technology text, phase_deg float8, phase_sigma_deg float8, "
     "confidence float8, bulb_confidence float8, phase_confidence float8) ON COMMIT DELETE ROWS;\n"
     "CREATE TEMP TABLE stage_detections(capture_id bigint, light_index integer, "
-    "origin_capture_id bigint, origin_light_index integer, d2 float8) ON COMMIT DELETE ROWS";
+    "origin_capture_id bigint, origin_light_index integer, d2 float8) ON COMMIT DELETE ROWS;\n"
+    "CREATE TEMP TABLE stage_moved(site_id bigint) ON COMMIT DELETE ROWS";
+/* the sites the staged detections belong to before their upsert, and those of them the upsert
+ * left without detections (a site the file merged into another: sites.c), deleted in the same
+ * transaction, so no push, killed or not, leaves an empty site */
+static const char moved_sql[] =
+    "INSERT INTO stage_moved SELECT t.site_id FROM site_detections t JOIN stage_detections d "
+    "ON t.capture_id = d.capture_id AND t.light_index = d.light_index";
+static const char drop_emptied_sql[] =
+    "DELETE FROM light_sites s WHERE s.id IN (SELECT site_id FROM stage_moved) "
+    "AND NOT EXISTS (SELECT 1 FROM site_detections d WHERE d.site_id = s.id)";
 static const char site_upsert[] =
     "INSERT INTO light_sites AS t (origin_capture_id, origin_light_index, " SITE_COLS ") "
     "SELECT origin_capture_id, origin_light_index, " SITE_COLS " FROM stage_sites ORDER BY seq "
@@ -467,18 +477,12 @@ static gs_status push_sites(push_ctx *x, void *arg)
     if ((s = res(x, r, PGRES_COMMAND_OK, "upserting light sites")) != GS_OK) return s;
     sqlite3_bind_int64(b->dets, 1, b->after);
     sqlite3_bind_int64(b->dets, 2, b->last);
-    if ((s = copy_rows(x, "COPY stage_detections FROM STDIN", NULL, b->dets, dmaps, NULL)) != GS_OK) return s;
-    return res(x, PQexec(x->c, det_upsert), PGRES_COMMAND_OK, "upserting site detections");
-}
-
-/* The sites left without detections (*(size_t *)arg of them): a site the file merged into another
- * (sites.c), whose detections the upserts moved. A site commits with its detections, so no
- * other push's site is ever empty. */
-static gs_status drop_empty_sites(push_ctx *x, void *arg)
-{
-    PGresult *r = PQexec(x->c, "DELETE FROM light_sites s WHERE NOT EXISTS "
-                               "(SELECT 1 FROM site_detections d WHERE d.site_id = s.id)");
-    if (PQresultStatus(r) == PGRES_COMMAND_OK) *(size_t *)arg = strtoull(PQcmdTuples(r), NULL, 10);
+    if ((s = copy_rows(x, "COPY stage_detections FROM STDIN", NULL, b->dets, dmaps, NULL)) != GS_OK ||
+        (s = res(x, PQexec(x->c, moved_sql), PGRES_COMMAND_OK, "upserting site detections")) != GS_OK ||
+        (s = res(x, PQexec(x->c, det_upsert), PGRES_COMMAND_OK, "upserting site detections")) != GS_OK)
+        return s;
+    r = PQexec(x->c, drop_emptied_sql);
+    if (PQresultStatus(r) == PGRES_COMMAND_OK) b->written += strtoull(PQcmdTuples(r), NULL, 10);
     return res(x, r, PGRES_COMMAND_OK, "deleting merged light sites");
 }
 
@@ -599,9 +603,6 @@ gs_status srv_pg_push(const char *db_path, const char *conninfo, const srv_push_
         if (!sb.n) break;
         r->sites_written += sb.written;
     }
-    size_t dropped = 0;
-    if ((s = in_txn(&x, drop_empty_sites, &dropped, r)) != GS_OK) goto done;
-    r->sites_written += dropped;
     if (o->areas) s = load_areas(&x, o, r);
 done:
     sqlite3_finalize(cb.list);
