@@ -17,7 +17,7 @@
  * - candidate pairs are assigned greedily, by position first, then by pixel, each by
  *   increasing d2, each site taking at most one detection of a capture; a located detection
  *   that joined a site by position merges into it the nearest pixel site of its pose and pixel
- *   that no detection of the capture took, unless the two share a capture; the unassigned
+ *   that no detection of the capture took and that shares no capture with it; the unassigned
  *   detections found new sites.
  * A site's columns are then recomputed from all of its detections: its position is the
  * information-weighted mean (sum C_i^-1)^-1 sum C_i^-1 x_i with that covariance's ellipse, and

@@ -324,8 +324,9 @@ static gs_status read_locked(const char *dir, gs_capture *cap);
 
 gs_status gs_capture_read(const char *dir, gs_capture *cap)
 {
+    if (!dir || !cap) return gs_fail(GS_EINVAL, "gs_capture_read: NULL argument");
     int fd = -1;
-    gs_status st = dir && cap ? gs_capture_lock(dir, 0, &fd) : GS_OK;
+    gs_status st = gs_capture_lock(dir, 0, &fd);
     if (st == GS_OK) st = gs_capture_read_held(dir, cap);
     else memset(cap, 0, sizeof *cap);
     gs_capture_unlock(fd);
@@ -334,7 +335,7 @@ gs_status gs_capture_read(const char *dir, gs_capture *cap)
 
 gs_status gs_capture_read_held(const char *dir, gs_capture *cap)
 {
-    if (!dir || !cap) return gs_fail(GS_EINVAL, "gs_capture_read: NULL argument");
+    if (!dir || !cap) return gs_fail(GS_EINVAL, "gs_capture_read_held: NULL argument");
     memset(cap, 0, sizeof *cap);
     struct stat sb;
     int there = stat(dir, &sb) == 0;
