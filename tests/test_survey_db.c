@@ -28,6 +28,17 @@ static int run(const char *fmt, const char *a, const char *b, const char *c)
     return fx_run_bin(out, sizeof out, fmt, a, b, c);
 }
 
+/* The file at path after `db migrate` (and `db check`: ok), opened for writing; NULL if it does
+ * not open. */
+static srv_db *migrated(const char *path)
+{
+    CHECK(run("%s db migrate --db %s", path, NULL, NULL) == 0);
+    CHECK(run("%s db check --db %s", path, NULL, NULL) == 0 && strstr(out, ": ok"));
+    srv_db *db = NULL;
+    CHECK_OK(srv_db_open(path, SRV_DB_WRITE, &db));
+    return db;
+}
+
 static int sidecars(const char *path)
 {
     static const char *const suffix[] = {"-wal", "-shm", "-journal"};
@@ -175,10 +186,7 @@ TEST(survey_db_migrates_candidate_bulbs)
                           "(1, 0, 5, 6, 'hps-70w', 'sodium_hp', 0.6, 0.6, 0), "
                           "(2, 0, 5, 6, 'hps-70w', 'sodium_hp', 0.7, 0.7, 0)", NULL, NULL, NULL) == SQLITE_OK);
     sqlite3_close(h);
-    CHECK(run("%s db migrate --db %s", path, NULL, NULL) == 0);
-    CHECK(run("%s db check --db %s", path, NULL, NULL) == 0 && strstr(out, ": ok"));
-    srv_db *db = NULL;
-    CHECK_OK(srv_db_open(path, SRV_DB_WRITE, &db));
+    srv_db *db = migrated(path);
     if (!db) return;
     h = srv_db_sqlite(db);
     CHECK(survey_fx_query_long(h, "SELECT max(version) FROM migrations") == SRV_DB_SCHEMA_VERSION);
@@ -238,10 +246,7 @@ TEST(survey_db_migrates_site_views)
                           "INSERT INTO site_detections(light_id, site_id, capture_id) VALUES (1, 1, 1), (2, 2, 2), "
                           "(3, 3, 2)", NULL, NULL, NULL) == SQLITE_OK);
     sqlite3_close(h);
-    CHECK(run("%s db migrate --db %s", path, NULL, NULL) == 0);
-    CHECK(run("%s db check --db %s", path, NULL, NULL) == 0 && strstr(out, ": ok"));
-    srv_db *db = NULL;
-    CHECK_OK(srv_db_open(path, SRV_DB_WRITE, &db));
+    srv_db *db = migrated(path);
     if (!db) return;
     h = srv_db_sqlite(db);
     char key[96], want[512];
