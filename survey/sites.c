@@ -262,7 +262,6 @@ typedef struct {
     int64_t light_id;
     double x_px, y_px, lat, lon, height, a, C[3];
     int located;
-    char pose[200];
     srv_site_obs obs;      /* its recognition (a new site's combined answer) */
     int64_t site;          /* assigned site, 0 = none yet */
     double d2;
@@ -414,7 +413,7 @@ static gs_status refresh_site(srv_db *db, const site_stmts *st, int64_t site)
     sqlite3_stmt *qo = st->obs, *qu = st->update;
     srv_site_obs *o = NULL;
     size_t n = 0, cap = 0;
-    char pose[200] = "";
+    char *pose = NULL;   /* the first detection's (a key as long as its station's numbers) */
     double I[3] = {0, 0, 0}, ie = 0.0, in = 0.0, lat0 = NAN, lon0 = NAN, kx = NAN, ky = NAN, sx = 0, sy = 0, sh = 0;
     double shl = 0.0;   /* the heights of the located detections */
     long nh = 0, nhl = 0, nloc = 0;
@@ -425,7 +424,10 @@ static gs_status refresh_site(srv_db *db, const site_stmts *st, int64_t site)
     while ((rc = sqlite3_step(qo)) == SQLITE_ROW) {
         if ((s = grow(&o, &cap, n + 1, sizeof *o)) != GS_OK) break;
         srv_site_obs_from_row(qo, 0, &o[n++]);
-        if (n == 1) snprintf(pose, sizeof pose, "%s", (const char *)sqlite3_column_text(qo, 16));
+        if (n == 1 && !(pose = strdup((const char *)sqlite3_column_text(qo, 16)))) {
+            s = gs_fail(GS_ENOMEM, "light sites: out of memory");
+            break;
+        }
         double lat = srv_dbi_col_real(qo, 8), lon = srv_dbi_col_real(qo, 9), h = srv_dbi_col_real(qo, 10);
         double a = srv_dbi_col_real(qo, 11), b = srv_dbi_col_real(qo, 12), az = srv_dbi_col_real(qo, 13);
         sx += sqlite3_column_double(qo, 14);
@@ -486,6 +488,7 @@ static gs_status refresh_site(srv_db *db, const site_stmts *st, int64_t site)
         if (s == GS_OK) s = refresh_views(db, st, site);
     }
     free(o);
+    free(pose);
     return s;
 }
 
@@ -569,13 +572,13 @@ static gs_status geo_candidates(srv_db *db, sqlite3_stmt *q, const detection *d,
  * pixel from that pose); for a located detection only those without a location (it meets the
  * located ones by position). A pixel site's view of the pose, not light_sites' pixel: a site
  * that lost its located detections holds those of several poses. Sites in held are skipped. */
-static gs_status pixel_candidates(srv_db *db, sqlite3_stmt *q, const detection *d, size_t i,
+static gs_status pixel_candidates(srv_db *db, sqlite3_stmt *q, const char *pose, const detection *d, size_t i,
                                   const int64_t *held, size_t nheld, pair **p, size_t *capp, size_t *np)
 {
     const detection *x = &d[i];
     int rc;
     sqlite3_reset(q);
-    sqlite3_bind_text(q, 1, x->pose, -1, SQLITE_STATIC);
+    sqlite3_bind_text(q, 1, pose, -1, SQLITE_STATIC);
     sqlite3_bind_double(q, 2, x->x_px - SRV_SITE_GATE_PX);
     sqlite3_bind_double(q, 3, x->x_px + SRV_SITE_GATE_PX);
     sqlite3_bind_double(q, 4, x->y_px - SRV_SITE_GATE_PX);
@@ -639,7 +642,7 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
     size_t nd = 0, capd = 0, np = 0, capp = 0;
     int64_t *touched = NULL, *taken = NULL, *held = NULL;
     size_t ntaken = 0, nheld = 0, capheld = 0;
-    char *flag = NULL;
+    char *flag = NULL, *pose = NULL;   /* the capture's camera pose key (one per capture) */
     gs_status s = GS_OK;
     int rc;
     if ((s = prep(db, dets_sql, &qd)) != GS_OK || (s = prep(db, geo_cand_sql, &qg)) != GS_OK ||
@@ -668,7 +671,10 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
         if (x->located) ellipse_cov(a, b, isfinite(az) ? az : 0.0, x->C);
         x->a = a;
         const char *pk = (const char *)sqlite3_column_text(qd, 9);
-        snprintf(x->pose, sizeof x->pose, "%s", pk ? pk : "none");
+        if (!pose && !(pose = strdup(pk ? pk : "none"))) {
+            s = gs_fail(GS_ENOMEM, "light sites: out of memory");
+            goto done;
+        }
         srv_site_obs_from_row(qd, 10, &x->obs);
     }
     if (rc != SQLITE_DONE) {
@@ -692,7 +698,7 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
     /* candidate pairs */
     for (size_t i = 0; i < nd && s == GS_OK; i++) {
         if (d[i].located) s = geo_candidates(db, qg, d, i, amax, held, nheld, &p, &capp, &np);
-        if (s == GS_OK) s = pixel_candidates(db, qv, d, i, held, nheld, &p, &capp, &np);
+        if (s == GS_OK) s = pixel_candidates(db, qv, pose, d, i, held, nheld, &p, &capp, &np);
     }
     if (s != GS_OK) goto done;
     /* greedy assignment, by position first, then by pixel, each by increasing d2; a site takes
@@ -752,7 +758,7 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
                 srv_dbi_bind_real(qi, 5, b);
                 srv_dbi_bind_real(qi, 6, az);
             } else {
-                sqlite3_bind_text(qi, 7, x->pose, -1, SQLITE_STATIC);
+                sqlite3_bind_text(qi, 7, pose, -1, SQLITE_STATIC);
             }
             srv_dbi_bind_real(qi, 3, x->height);
             sqlite3_bind_double(qi, 8, x->x_px);
@@ -774,7 +780,7 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
         if (!touched[i]) {   /* a new site's view: its detection's pose and pixel */
             sqlite3_reset(qw);
             sqlite3_bind_int64(qw, 1, x->site);
-            sqlite3_bind_text(qw, 2, x->pose, -1, SQLITE_STATIC);
+            sqlite3_bind_text(qw, 2, pose, -1, SQLITE_STATIC);
             sqlite3_bind_double(qw, 3, x->x_px);
             sqlite3_bind_double(qw, 4, x->y_px);
             if ((s = srv_dbi_step_done(db, qw, "adding a light site's view")) != GS_OK) goto done;
@@ -798,6 +804,7 @@ done:
     free(taken);
     free(flag);
     free(held);
+    free(pose);
     return s;
 }
 

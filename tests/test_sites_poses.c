@@ -3,7 +3,9 @@
  * the site or the detection is located, so the site count is the light count in any order of
  * the captures. Oracles: the generating truth (which light each detection came from), the
  * information-weighted mean of two circular position errors written out, and every order of
- * the captures associated from scratch (their partitions must all be the truth's). */
+ * the captures associated from scratch (their partitions must all be the truth's). A pose key
+ * longer than any fixed buffer is not cut. */
+#include "survey/internal.h"
 #include "survey/survey.h"
 #include "tests/fixtures.h"
 #include "tests/survey_fixture.h"
@@ -326,5 +328,44 @@ TEST(sites_pixel_site_of_two_poses_found_by_its_views)
     srv_db_report r;
     CHECK_OK(srv_db_check(db, &r));
     CHECK(srv_db_report_ok(&r) && r.unassociated == 0);
+    srv_db_close(db);
+}
+
+/* A camera pose's key holds its station's numbers as printed (survey/internal.h,
+ * SRV_SQL_POSE_KEY): a roll of 1e250 deg (valid: gis_camera_check wraps angles) makes it 270
+ * characters. Three nights of 12 unlocated lights from that roof are 12 sites of 3 detections:
+ * the association kept a 200-byte copy of the key, so once a site's views were written again
+ * from SQL (the full key) the third night's lookups (the cut copy) missed them, founding 12
+ * more sites. */
+TEST(sites_long_pose_key_not_cut)
+{
+    enum { N = 12 };
+    int64_t survey = 0, station = 0;
+    srv_db *db = survey_fx_create(fx_tmp("longpose.sqlite"), "nights", &survey);
+    if (!db) return;
+    srv_station_row r;
+    srv_station_row_init(&r);
+    r.survey_id = survey;
+    r.name = "roof";
+    r.cam = roof(0);
+    r.cam.roll_deg = 1e250;
+    CHECK_OK(srv_db_add_station(db, &r, &station));
+    sqlite3 *h = srv_db_sqlite(db);
+    CHECK_MSG(SQ(h, "SELECT length(" SRV_SQL_POSE_KEY("st") ") FROM stations st") > 250, "a short key");
+    uint64_t rng = 3;
+    for (int night = 0; night < 3; night++) {
+        srv_light_row l[N];
+        for (int k = 0; k < N; k++)
+            l[k] = survey_fx_light(k, 100.0 + 40.0 * k + 0.3 * gs_splitmix_normal(&rng),
+                                   500.0 + 0.3 * gs_splitmix_normal(&rng), 0.0, 0.9);
+        char key[16];
+        snprintf(key, sizeof key, "night%d", night);
+        srv_capture_data cd = survey_fx_capture(survey, key, l, NULL, N);
+        cd.capture.station_id = station;
+        CHECK_OK(srv_db_add_capture(db, &cd, NULL, NULL));
+    }
+    CHECK_MSG(SQ(h, "SELECT count(*) FROM light_sites") == N && SQ(h, "SELECT min(detections) FROM light_sites") == 3,
+              "%ld sites, the least of %ld detections", SQ(h, "SELECT count(*) FROM light_sites"),
+              SQ(h, "SELECT min(detections) FROM light_sites"));
     srv_db_close(db);
 }
