@@ -358,7 +358,7 @@ TEST(sites_long_pose_key_not_cut)
         for (int k = 0; k < N; k++)
             l[k] = survey_fx_light(k, 100.0 + 40.0 * k + 0.3 * gs_splitmix_normal(&rng),
                                    500.0 + 0.3 * gs_splitmix_normal(&rng), 0.0, 0.9);
-        char key[16];
+        char key[24];
         snprintf(key, sizeof key, "night%d", night);
         srv_capture_data cd = survey_fx_capture(survey, key, l, NULL, N);
         cd.capture.station_id = station;
