@@ -775,8 +775,9 @@ void srv_eval_opts_default(srv_eval_opts *o);
  * phase, and (stored side only) none = ambiguous or unknown. */
 #define SRV_EVAL_PHASE_CLASSES 5
 /* Classes of the 95 % ellipse coverage (srv_eval_report.ellipse_class_*): plain lights (no blob
- * flag), lights of the PSF fit (REC_BLOB_PSF_FIT) outside the truth's blend groups, and every
- * light in a blend group; other lights (deblended, saturated, ...) in none. */
+ * flag), lights of the PSF fit (REC_BLOB_PSF_FIT, whatever their other flags) outside the
+ * truth's blend groups, and every light in a blend group; the other flagged lights (deblended,
+ * saturated, ... without the PSF fit) in none. */
 enum { SRV_ELLIPSE_PLAIN, SRV_ELLIPSE_PSF_FIT, SRV_ELLIPSE_BLEND_GROUP, SRV_ELLIPSE_CLASSES };
 
 typedef struct {
