@@ -209,6 +209,25 @@ static gs_status phase_at(cap_ac *ac, double t, long *hint, double *phase)
     return GS_OK;
 }
 
+gs_status cap_ac_window_period(cap_ac *ac, const cap_window_config *w, double *half_period_s)
+{
+    *half_period_s = NAN;
+    if (w->mode != CAP_FREE_RUNNING) return GS_OK;
+    double P = ac->nominal_half_s;
+    if (w->free_period_measured) {
+        long back = w->first_cycle < 64 ? w->first_cycle : 64;
+        if (back > 0) {
+            double t_first, tb;
+            gs_status s = cap_ac_time(ac, w->first_cycle, &t_first);
+            if (s == GS_OK) s = cap_ac_time(ac, w->first_cycle - back, &tb);
+            if (s != GS_OK) return s;
+            P = (t_first - tb) / (double)back;
+        }
+    }
+    *half_period_s = P * (1.0 + 1e-6 * w->clock_ppm);
+    return GS_OK;
+}
+
 gs_status cap_ac_windows(cap_ac *ac, const cap_window_config *w, cap_windows *out)
 {
     memset(out, 0, sizeof *out);
@@ -233,19 +252,10 @@ gs_status cap_ac_windows(cap_ac *ac, const cap_window_config *w, cap_windows *ou
     gs_rng_init(&rng, w->jitter_seed, CAP_TAG_JITTER, (uint64_t)w->first_cycle, (uint64_t)w->k);
     double K = w->K;
     gs_status s = GS_OK;
-    double t_first, P = ac->nominal_half_s;
-    if ((s = cap_ac_time(ac, w->first_cycle, &t_first)) != GS_OK) goto fail;
-    if (w->mode == CAP_FREE_RUNNING) {
-        if (w->free_period_measured) {
-            long back = w->first_cycle < 64 ? w->first_cycle : 64;
-            if (back > 0) {
-                double tb;
-                if ((s = cap_ac_time(ac, w->first_cycle - back, &tb)) != GS_OK) goto fail;
-                P = (t_first - tb) / (double)back;
-            }
-        }
-        P *= 1.0 + 1e-6 * w->clock_ppm;
-    }
+    double t_first, P;
+    if ((s = cap_ac_time(ac, w->first_cycle, &t_first)) != GS_OK ||
+        (s = cap_ac_window_period(ac, w, &P)) != GS_OK)
+        goto fail;
     long hint = w->first_cycle;
     for (long c = 0; c < w->cycles; c++) {
         long g = w->first_cycle + c;

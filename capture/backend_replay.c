@@ -61,6 +61,7 @@ static gs_status replay_timing(void *self, cap_acq_timing *t)
     if (b->last_k < 0) return GS_OK;
     t->grid_hz_measured = b->cap.frames[b->last_k].grid_hz_measured;
     t->start_s = b->cap.frames[b->last_k].start_s;
+    t->window_half_period_s = b->cap.frames[b->last_k].window_half_period_s;
     return GS_OK;
 }
 

@@ -229,6 +229,8 @@ typedef struct {
 } cap_windows;
 
 gs_status cap_ac_windows(cap_ac *ac, const cap_window_config *w, cap_windows *out);
+/* The fixed half period that free-running windows are timed with (s), NaN when locked. */
+gs_status cap_ac_window_period(cap_ac *ac, const cap_window_config *w, double *half_period_s);
 void cap_windows_release(cap_windows *w);
 
 /* Temporal blur of an exposure's windows relative to the ideal windows
@@ -438,6 +440,9 @@ gs_status cap_sim_render_hdr(cap_sim *s, int k, int pass, long index, const unsi
  * nominal half periods) of the crossings that start and end the C cycles of acquisition index:
  * crossings first_cycle and first_cycle + C. Index 0 starts the capture. */
 gs_status cap_sim_exposure_span(cap_sim *s, long index, double *t_start_s, double *t_end_s);
+/* The half period the free-running windows of acquisition index are timed with (s, on that
+ * timeline; cap_ac_window_period), NaN when the ACam is locked. */
+gs_status cap_sim_window_period(cap_sim *s, long index, double *half_period_s);
 /* The capture-level numbers of the simulated camera. */
 double cap_sim_saturation_dn(const cap_sim *s);
 double cap_sim_read_noise_dn(const cap_sim *s);
@@ -507,6 +512,8 @@ gs_status cap_backend_acquire(cap_backend *b, const cap_acquisition *a, unsigned
 typedef struct {
     double grid_hz_measured;      /* mean grid frequency during the exposure, Hz */
     double start_s;               /* its start, s from the capture's first exposure (index 0) */
+    double window_half_period_s;  /* free running: the fixed period of its windows, in the clock
+                                   * of grid_hz_measured (NaN: locked or unknown) */
     int probed;                   /* it was a probe (cap_acquisition.probe) */
 } cap_acq_timing;
 /* After cap_backend_acquire: sim from its timeline (C / (2 (t_end - t_start)) between the

@@ -75,6 +75,7 @@ gs_status cap_backend_timing(cap_backend *b, cap_acq_timing *t)
 {
     t->grid_hz_measured = NAN;
     t->start_s = NAN;
+    t->window_half_period_s = NAN;
     t->probed = 0;
     return b->ops->timing ? b->ops->timing(b->self, t) : GS_OK;
 }
@@ -98,7 +99,7 @@ typedef struct {
     long old_index;            /* listed but damaged: the index to acquire it at again (or -1) */
     int passes;
     double cycles;
-    double grid_hz_measured, start_s;   /* NaN: unknown */
+    double grid_hz_measured, start_s, window_half_period_s;   /* NaN: unknown */
     long bytes, hdr_bytes;
     uint64_t fnv, hdr_fnv;
 } frame_state;
@@ -143,6 +144,9 @@ static gs_status write_progress(const char *dir, uint64_t fp, long acquisitions,
                                   fs[k].grid_hz_measured);
         if (isfinite(fs[k].start_s))
             u += (size_t)snprintf(t + u, cap_n - u, ", \"start_s\": %.17g", fs[k].start_s);
+        if (isfinite(fs[k].window_half_period_s))
+            u += (size_t)snprintf(t + u, cap_n - u, ", \"window_half_period_s\": %.17g",
+                                  fs[k].window_half_period_s);
         if (cap->frames[k].hdr_map[0])
             u += (size_t)snprintf(t + u, cap_n - u,
                                   ", \"hdr_map\": \"%s\", \"hdr_bytes\": %ld, \"hdr_fnv\": \"%016llx\"",
@@ -206,6 +210,8 @@ static gs_status read_progress(const char *dir, uint64_t fp, int K, const gs_cap
         e->grid_hz_measured = json_is_number(jt) ? json_number_value(jt) : NAN;
         jt = json_object_get(o, "start_s");
         e->start_s = json_is_number(jt) ? json_number_value(jt) : NAN;
+        jt = json_object_get(o, "window_half_period_s");
+        e->window_half_period_s = json_is_number(jt) ? json_number_value(jt) : NAN;
         long bytes = (long)json_integer_value(json_object_get(o, "bytes"));
         const char *fnv = json_string_value(json_object_get(o, "fnv"));
         const char *file = json_string_value(json_object_get(o, "file"));
@@ -330,6 +336,7 @@ static gs_status record_frame(frame_write *w, uint64_t fp, int K, const gs_captu
     fs[k].cycles = cap->frames[k].cycles;
     fs[k].grid_hz_measured = cap->frames[k].grid_hz_measured;
     fs[k].start_s = cap->frames[k].start_s;
+    fs[k].window_half_period_s = cap->frames[k].window_half_period_s;
     fs[k].bytes = w->bytes;
     fs[k].fnv = w->fnv;
     fs[k].hdr_bytes = w->hdr_bytes;
@@ -362,7 +369,7 @@ static gs_status resume_state(const char *dir, uint64_t fp, int K, int force, gs
         for (int k = 0; k < K; k++) {
             memset(&fs[k], 0, sizeof fs[k]);
             fs[k].index = fs[k].old_index = -1;
-            fs[k].grid_hz_measured = fs[k].start_s = NAN;
+            fs[k].grid_hz_measured = fs[k].start_s = fs[k].window_half_period_s = NAN;
         }
         *acquisitions = 0;
     }
@@ -372,6 +379,7 @@ static gs_status resume_state(const char *dir, uint64_t fp, int K, int force, gs
             cap->frames[k].cycles = fs[k].cycles;
             cap->frames[k].grid_hz_measured = fs[k].grid_hz_measured;
             cap->frames[k].start_s = fs[k].start_s;
+            cap->frames[k].window_half_period_s = fs[k].window_half_period_s;
             rep->frames_kept++;
         }
     char path[CAP_PATH_MAX + 32];
@@ -452,10 +460,11 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
         cap.frames[k].cycles = (double)info.cycles;
         cap.frames[k].grid_hz_measured = NAN;
         cap.frames[k].start_s = NAN;
+        cap.frames[k].window_half_period_s = NAN;
         if (maps) snprintf(cap.frames[k].hdr_map, GS_PATH_MAX, "hdr_%03d.png", k);
         fs[k].index = -1;
         fs[k].old_index = -1;
-        fs[k].grid_hz_measured = fs[k].start_s = NAN;
+        fs[k].grid_hz_measured = fs[k].start_s = fs[k].window_half_period_s = NAN;
     }
     /* (made by this process: its own mkdir succeeded; another's, made meanwhile, is not removed) */
     made_dir = mkdir(dir, 0777) == 0;
@@ -574,6 +583,10 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
             isfinite(tm.grid_hz_measured) && tm.grid_hz_measured >= 45 && tm.grid_hz_measured <= 65
                 ? tm.grid_hz_measured : NAN;
         cap.frames[k].start_s = isfinite(tm.start_s) && tm.start_s >= 0 ? tm.start_s : NAN;
+        cap.frames[k].window_half_period_s =
+            !info.locked && isfinite(tm.window_half_period_s) && tm.window_half_period_s >= 1.0 / 130 &&
+                    tm.window_half_period_s <= 1.0 / 90
+                ? tm.window_half_period_s : NAN;
         frame_write *w = &wr[cur];
         w->frames[0] = cap.frames[k];
         w->frames[1] = cap.frames[k];

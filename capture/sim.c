@@ -549,6 +549,22 @@ gs_status cap_sim_exposure_span(cap_sim *s, long index, double *t_start_s, doubl
     return st;
 }
 
+gs_status cap_sim_window_period(cap_sim *s, long index, double *half_period_s)
+{
+    *half_period_s = NAN;
+    if (index < 0) return gs_fail(GS_EINVAL, "window period: index %ld", index);
+    if (s->sc.locked) return GS_OK;
+    if (!s->ac) {   /* no timing effect: every period nominal */
+        *half_period_s = s->half_s;
+        return GS_OK;
+    }
+    /* the windows' configuration as cap_sim_render and the free-running drift effect set it */
+    cap_window_config w = {.K = s->K, .cycles = s->C, .first_cycle = first_cycle_of(s, index),
+                           .mode = CAP_FREE_RUNNING, .free_period_measured = s->sc.free_period_measured,
+                           .clock_ppm = has(s, CAP_FX_FREE_RUNNING_DRIFT) ? s->sc.fx.drift.clock_ppm : 0.0};
+    return cap_ac_window_period(s->ac, &w, half_period_s);
+}
+
 /* The electrons a sample's mean may have and still certainly not read the saturation level
  * (cap_sim_render_probe), or NaN when no bound is tight enough: it needs n = (sat_dn - 0.5 -
  * black - 40 read sigmas) x gain electrons; with shot noise, a mean lam <= n/2 reaches n with

@@ -364,8 +364,8 @@ static gs_status measure_flat(const rec_catalog *cat, const rec_match *out, cons
     return s;
 }
 
-gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_match *out,
-                            rec_noise_report *noise)
+static gs_status match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_match *out,
+                               rec_noise_report *noise)
 {
     if (!m || !cat) return gs_fail(GS_EINVAL, "Eq. 7: matcher and catalog must not be NULL");
     rec_noise_report rep = {isfinite(m->o.model_error) ? REC_NOISE_FIXED : REC_NOISE_CAMERA, 0,
@@ -476,5 +476,25 @@ done:
     free(wk);
     free(ref);
     free(ex);
+    return s;
+}
+
+gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_match *out,
+                            rec_noise_report *noise)
+{
+    size_t dropped = 0, K = cat ? (size_t)cat->K : 0, D = cat ? (size_t)cat->bands * K : 0;
+    for (size_t k = 0; cat && cat->window_drift && k < K; k++) dropped += !(cat->window_drift[k] <= REC_MAX_DRIFT_WINDOWS);
+    if (!dropped || !cat->count || !cat->sigma) return match_catalog(m, cat, out, noise);
+    /* frames whose windows smeared across the flicker: their samples dropped (sigma = +inf) */
+    rec_catalog kept = *cat;
+    double *sigma = malloc(sizeof *sigma * cat->count * D);
+    if (!sigma) return gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", cat->count);
+    memcpy(sigma, cat->sigma, sizeof *sigma * cat->count * D);
+    for (size_t d = 0; d < cat->count * D; d++)
+        if (!(cat->window_drift[d % K] <= REC_MAX_DRIFT_WINDOWS)) sigma[d] = INFINITY;
+    kept.sigma = sigma;
+    gs_status s = match_catalog(m, &kept, out, noise);
+    free(sigma);
+    for (size_t i = 0; s == GS_OK && i < cat->count; i++) out[i].flags |= REC_MATCH_DRIFT;
     return s;
 }

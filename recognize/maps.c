@@ -328,6 +328,9 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
         st = gs_fail(GS_ENOMEM, "maps: cannot allocate a block of %zu pixels", cap_rows);
     for (size_t r = 0; sg && r < cap_rows; r++) sg[r] = row_noise(var_fast, D);
     size_t done = 0, p = 0;
+    /* a frame whose windows smeared across the flicker: no pixel answered (the rows have one
+     * sigma each, so its samples cannot be left out as rec_match_catalog does) */
+    if (!(gs_capture_window_drift(cap, NULL) <= REC_MAX_DRIFT_WINDOWS)) p = np;
     while (st == GS_OK) {
         size_t n = 0;
         for (; p < np && n < cap_rows; p++)

@@ -128,6 +128,11 @@ typedef struct {
                                * when the fit replaced no light */
     double *signal, *sigma;
     int width, height;        /* of the capture */
+    double *window_drift;     /* K values, or NULL for a locked capture (every one 0): how far
+                               * frame k's exposure windows moved across the flicker cycle, in
+                               * windows (gs_capture_frame_drift; NaN: free running without the
+                               * timing to tell); rec_match_catalog drops the frames beyond
+                               * REC_MAX_DRIFT_WINDOWS (REC_MATCH_DRIFT) */
     int *labels;              /* opts.labels: width * height, the light owning each aperture
                                * pixel, -1 elsewhere; else NULL */
 } rec_catalog;
@@ -237,10 +242,19 @@ enum {
     REC_MATCH_DIM = 1u << 3,              /* brightness below min_snr of its std (bulb -1) */
     REC_MATCH_BAD_INPUT = 1u << 4,        /* some sample non-finite / sigma <= 0 (dropped), or
                                            * no usable sample at all (bulb -1) */
-    REC_MATCH_BLEND = 1u << 5             /* two templates explain the light better than one
+    REC_MATCH_BLEND = 1u << 5,            /* two templates explain the light better than one
                                            * (two lights in one aperture): blend_* hold them
                                            * (bulb -1) */
+    REC_MATCH_DRIFT = 1u << 6             /* frames of the capture were left out: their windows
+                                           * drifted over the exposure by more than
+                                           * REC_MAX_DRIFT_WINDOWS, or by an unknown amount
+                                           * (rec_catalog.window_drift); the answer is the other
+                                           * frames' (every frame left out: BAD_INPUT, bulb -1) */
 };
+/* Free running, a frame whose windows smear over at most this many windows is still a sample of
+ * Eq. 5's window k; beyond, its samples follow no template and Eq. 7's answers were wrong and
+ * confident (docs/recognition.md, "Free-running captures"). */
+#define REC_MAX_DRIFT_WINDOWS 0.5
 
 /* The answer for one light. No field is ever NaN or infinite.
  * - bulb >= 0: the best (bulb, phase) pair by posterior. Pairs are (bulb, phase) for a
@@ -401,7 +415,9 @@ gs_status rec_match_pixels(const rec_matcher *m, const float *x, const float *no
 enum {
     REC_PIX_DARK = 0,       /* B below the threshold: not matched */
     REC_PIX_MATCHED,        /* matched: bulb >= 0 */
-    REC_PIX_NO_ANSWER,      /* above the threshold, but dim, unknown or bad input (bulb -1) */
+    REC_PIX_NO_ANSWER,      /* above the threshold, but dim, unknown or bad input, or every
+                             * pixel of a capture with a frame whose windows drifted beyond
+                             * REC_MAX_DRIFT_WINDOWS (bulb -1) */
     REC_PIX_SATURATED       /* some sample saturated: not matched */
 };
 

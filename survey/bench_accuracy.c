@@ -308,6 +308,9 @@ static gs_status run_point(const char *base, const srv_acc_crop *cr, const char 
     if ((s = srv_job_read(&j, capdir)) != GS_OK ||
         (s = srv_job_extract(&j, &bo)) != GS_OK)
         goto done;
+    p->window_drift = gs_capture_window_drift(&j.cap, NULL);
+    p->frames_kept = 0;
+    for (int k = 0; k < j.cap.K; k++) p->frames_kept += gs_capture_frame_drift(&j.cap, k) <= REC_MAX_DRIFT_WINDOWS;
     if (j.cat.count != rr.lights) {
         s = gs_fail(GS_ENUMERIC, "%s: %zu lights extracted again, the pipeline stored %zu", capdir,
                     j.cat.count, rr.lights);
@@ -417,9 +420,10 @@ int srv_bench_accuracy(int argc, char **argv)
                 if (hard != 1 || Ks[ki] != 13)   /* metro_hard: K = 8 and 26 only (time) */
                     pts[np++] = (srv_acc_point){.hard = hard, .K = Ks[ki], .C = Cs[ci], .hdr = 1, .locked = 1};
     if (!quick) {
-        static const int Cv[] = {128, 512};
+        /* (free running also at C = 32 and 64, where its windows move about half a window) */
+        static const int Cv[] = {32, 64, 128, 512};
         for (int v = 0; v < 3; v++)
-            for (int ci = 0; ci < 2; ci++)
+            for (int ci = v == 1 ? 0 : 2; ci < 4; ci++)
                 pts[np++] = (srv_acc_point){.hard = 2, .K = 26, .C = Cv[ci], .hdr = v != 0, .locked = v != 1, .continuous = v == 2};
     } else {
         pts[np++] = (srv_acc_point){.hard = 2, .K = 8, .C = 64, .hdr = 1, .locked = 1};

@@ -40,18 +40,18 @@ gs_status srv_acc_write_csv(const char *path, const srv_acc_point *pts, size_t n
     fprintf(f, "scene,K,C,hdr,locked,phases,acquisitions,exposure_s,readout_s,capture_s,compute_s,"
                "truth_lights,stored,matched,detection_rate,false_rate,bulb_accuracy,phase_accuracy,"
                "right_rate,bulb_unknown_rate,loc_median_m,loc_p95_m,snr_p90,ece,oracle_lights,"
-               "pipeline_on_oracle_lights,oracle_accuracy,phase_ece,phase_answered\n");
+               "pipeline_on_oracle_lights,oracle_accuracy,phase_ece,phase_answered,window_drift,frames_kept\n");
     for (size_t i = 0; i < np; i++) {
         const srv_acc_point *p = &pts[i];
         if (!p->ok) continue;
         fprintf(f, "%s,%d,%d,%d,%d,%s,%ld,%.2f,%.2f,%.2f,%.3f,%ld,%ld,%ld,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,"
-                   "%.2f,%.2f,%.2f,%.4f,%ld,%.4f,%.4f,%.4f,%ld\n",
+                   "%.2f,%.2f,%.2f,%.4f,%ld,%.4f,%.4f,%.4f,%ld,%.4f,%d\n",
                 srv_acc_scene_names[p->hard], p->K, p->C, p->hdr, p->locked, srv_acc_ph_name(p), p->acquisitions,
                 p->exposure_s, p->readout_s, p->capture_s, p->compute_s, p->ev.truth_in_image, p->ev.stored,
                 p->ev.matched, p->ev.detection_rate, p->ev.false_rate, p->ev.bulb_accuracy,
                 p->ev.phase_accuracy, p->ev.all_correct_rate, p->ev.bulb_unknown_rate, p->ev.loc_median_m,
                 p->ev.loc_p95_m, p->snr_p90, p->cal.ece, p->oracle_n, p->ours_sub, p->oracle_sub, p->phase_cal.ece,
-                p->ev.phase_answered);
+                p->ev.phase_answered, p->window_drift, p->frames_kept);
     }
     int bad = ferror(f);
     if (fclose(f) != 0 || bad) return gs_fail(GS_EIO, "%s: write failed", path);
@@ -397,6 +397,11 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
                "and their HDR repeats, counted by the acquisition loop), C cycles per frame, R = 10 readout "
                "cycles between acquisitions (the scene's `readout_cycles`), Delta = 1/(2 x 50 Hz) = 10 ms. "
                "The 64 cycles the controller needs to lock before the first frame are not counted.\n"
+               "- **lock**: AC-locked, or free running: the frames Eq. 7 kept of the K, those whose windows "
+               "moved at most 0.5 windows across the flicker cycle over the exposure (`gs_capture_frame_drift` "
+               "from capture.json's `window_half_period_s` and `grid_hz_measured`; the others' samples are "
+               "left out, `REC_MATCH_DRIFT`, docs/recognition.md \"Free-running captures\"), and in "
+               "parentheses the largest drift, in windows.\n"
                "- **compute s**: wall time of recognition and georeferencing (the pipeline's blobs, Eq. 7 "
                "and locate stages), measured, one core.\n"
                "- **det.**: detected lights / truth lights in the window; **false**: stored lights without a "
@@ -425,7 +430,8 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
                "reddened by the truth's `transmission`) and its scintillation (the truth's "
                "`scintillation_log_var` and `scintillation_rho` give each frame's relative flux "
                "variance over its C cycles; such frames are Gaussian with the Poisson-Gaussian "
-               "variances plus that variance, common to the bands), so it is a ceiling.\n\n",
+               "variances plus that variance, common to the bands), so it is a ceiling; except free running: "
+               "it takes every frame's windows as regular (Eq. 5), as Eq. 7 does, and keeps every frame.\n\n",
             "[0, 0.5), [0.5, 0.8), [0.8, 0.95), [0.95, 0.99), [0.99, 1]", quick ? 8 : 40);
     fprintf(f, "## Table\n\n");
     fprintf(f, "| scene | K | C | HDR | lock | phases | A | capture s | compute s | det. | false | bulb | phase | "
@@ -438,7 +444,9 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
                     p->K, p->C, p->hdr ? "on" : "off", p->locked ? "locked" : "free", srv_acc_ph_name(p), p->err);
             continue;
         }
-        char b[16][32];
+        char b[17][32];
+        if (p->locked) snprintf(b[15], 32, "locked");
+        else snprintf(b[15], 32, "free: %d of %d (%.2f)", p->frames_kept, p->K, p->window_drift);
         fmt_num(b[0], 32, 100 * p->ev.detection_rate, "%.1f %%");
         fmt_num(b[1], 32, 100 * p->ev.false_rate, "%.1f %%");
         fmt_num(b[2], 32, 100 * p->ev.bulb_accuracy, "%.1f %%");
@@ -456,7 +464,7 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
         fmt_num(b[13], 32, 100 * (p->oracle_sub - p->ours_sub), "%+.1f");
         fprintf(f, "| %s | %d | %d | %s | %s | %s | %ld | %.1f | %.2f | %s | %s | %s | %s | %s | %s | %s | %s / %s | %s | %s | "
                    "%s | %ld | %s | %s | %s |\n",
-                srv_acc_scene_names[p->hard], p->K, p->C, p->hdr ? "on" : "off", p->locked ? "locked" : "free",
+                srv_acc_scene_names[p->hard], p->K, p->C, p->hdr ? "on" : "off", b[15],
                 srv_acc_ph_name(p), p->acquisitions, p->capture_s, p->compute_s, b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7],
                 b[8], b[9], b[10], b[14], p->oracle_n, b[11], b[12], b[13]);
     }
@@ -474,8 +482,8 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
                "of its span beyond both ends, so a point at either end is drawn inside the frame.\n\n"
                "![calibration](%s/calibration.png)\n\nAccuracy of the answered lights against their reported "
                "confidence, pooled over each scene's main grid (HDR on, locked, 3 phases; the variants' ECE is "
-               "in the table: free-running points, whose phases drift without the AC lock, are far from the "
-               "diagonal); the dashed line is perfect calibration. Both axes run over the whole scale, 0 to 1 "
+               "in the table: free-running points answer only while their windows drift less than half a "
+               "window); the dashed line is perfect calibration. Both axes run over the whole scale, 0 to 1 "
                "with 3 %% beyond both ends, so the diagonal is at 45 degrees and a bin at 0 or 1 is inside the "
                "frame. These captures are the project's own "
                "simulator's; calibration on a renderer the simulator does not share is in "

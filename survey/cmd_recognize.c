@@ -239,6 +239,7 @@ static const struct {
     {REC_MATCH_DIM, 1, "dim"},
     {REC_MATCH_BAD_INPUT, 1, "bad_input"},
     {REC_MATCH_BLEND, 1, "blend"},
+    {REC_MATCH_DRIFT, 1, "drift"},
 };
 #define N_FLAGS (sizeof flag_names / sizeof *flag_names)
 
@@ -255,10 +256,12 @@ static const char *phases_name(rec_phase_set p)
 static void print_table(const recognize_opts *o, const gs_capture *cap, const rec_matcher *m,
                         const rec_catalog *cat, const rec_match *mt, const rec_noise_report *noise)
 {
+    char drift[256];
+    srv_drift_note(cap, drift, sizeof drift);
     printf("capture %s: %d Hz grid, K = %d, %d band%s, %dx%d pixels%s; DELIGHT %s (%zu candidate "
            "bulbs); phases %s\n",
            o->capdir, cap->grid_hz, cap->K, cap->bands, cap->bands == 1 ? "" : "s", cap->width,
-           cap->height, cap->locked ? "" : " (NOT AC-locked: phases are meaningless)",
+           cap->height, drift,
            o->db ? o->db : "built-in", rec_matcher_bulb_count(m),
            o->eq7.phases == REC_PHASES_3 ? "0/120/240 deg"
            : o->eq7.phases == REC_PHASES_6 ? "0/120/240 deg and + transformer" : "continuous");
@@ -393,6 +396,8 @@ static gs_status print_json(const recognize_opts *o, const gs_capture *cap, cons
     json_object_set_new(c, "width", json_integer(cap->width));
     json_object_set_new(c, "height", json_integer(cap->height));
     json_object_set_new(c, "locked", json_boolean(cap->locked));
+    double drift = gs_capture_window_drift(cap, NULL);
+    json_object_set_new(c, "window_drift", isfinite(drift) ? json_real(drift) : json_null());
     json_object_set_new(c, "utc", cap->utc[0] ? json_string(cap->utc) : json_null());
     json_t *station = cap->station_json ? json_loads(cap->station_json, 0, NULL) : NULL;
     json_object_set_new(c, "station", station ? station : json_null());

@@ -197,6 +197,7 @@ static gs_status run_one(const srv_run_opts *op, srv_run_report *rep)
     else if (!r.has_station)
         printf(" (no station: stored without a location)");
     printf("\n");
+    if (r.drift_note[0]) printf("run: note: %s\n", r.drift_note + 2);
     if (r.skipped) {
         printf("run: already in %s (capture id %lld): nothing stored\n", o.db_path, (long long)r.capture_id);
     } else {

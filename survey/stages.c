@@ -6,6 +6,7 @@
 #include "capture/capture.h"
 
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -96,6 +97,32 @@ gs_status srv_job_match(srv_job *j)
         j->with_phase += isfinite(j->lights[i].phase_deg);
     }
     return GS_OK;
+}
+
+void srv_drift_note(const gs_capture *cap, char *buf, size_t n)
+{
+    int out = 0, unknown = 0, worst_k = -1;
+    double worst = -1.0;
+    for (int k = 0; k < cap->K; k++) {
+        double d = gs_capture_frame_drift(cap, k);
+        out += !(d <= REC_MAX_DRIFT_WINDOWS);
+        unknown += isnan(d);
+        if (d > worst) worst = d, worst_k = k;
+    }
+    if (cap->locked) {
+        snprintf(buf, n, "%s", "");
+    } else if (!out) {
+        snprintf(buf, n, "; free running: the windows drifted at most %.2f windows over an exposure (frame %d)",
+                 worst, worst_k);
+    } else {
+        int u = snprintf(buf, n, "; free running: %d of %d frames left out (flag drift): their windows drifted over "
+                         "%.1f windows", out, cap->K, REC_MAX_DRIFT_WINDOWS);
+        if (u > 0 && (size_t)u < n && out > unknown)
+            u += snprintf(buf + u, n - (size_t)u, " (the most %.2f, frame %d)", worst, worst_k);
+        if (u > 0 && (size_t)u < n && unknown)
+            snprintf(buf + u, n - (size_t)u, "%s by an unknown amount (%d without window_half_period_s or "
+                     "grid_hz_measured)", out > unknown ? " or" : "", unknown);
+    }
 }
 
 void srv_job_drop_pixels(srv_job *j)

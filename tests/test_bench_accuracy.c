@@ -65,8 +65,8 @@ TEST(bench_accuracy_quick_consistent)
         char *fld[32];
         int nf = 0;
         for (char *t = strtok(line, ",\n"); t && nf < 32; t = strtok(NULL, ",\n")) fld[nf++] = t;
-        CHECK_MSG(nf == 29, "CSV row with %d fields", nf);
-        if (nf != 29) continue;
+        CHECK_MSG(nf == 31, "CSV row with %d fields", nf);
+        if (nf != 31) continue;
         row *r = &rows[n++];
         snprintf(r->scene, sizeof r->scene, "%s", fld[0]);
         r->K = atoi(fld[1]);
@@ -86,6 +86,8 @@ TEST(bench_accuracy_quick_consistent)
         r->oracle_n = atol(fld[24]);
         r->phase_ece = num(fld[27]);
         r->phase_answered = atol(fld[28]);
+        /* a locked capture's windows do not drift: every frame kept */
+        CHECK(!r->locked || (num(fld[29]) == 0.0 && atoi(fld[30]) == r->K));
         r->truth_lights = atol(fld[11]);
         r->bin_lights[0] = r->bin_lights[1] = r->bin_right[0] = r->bin_right[1] = 0;
         r->cal_num[0] = r->cal_num[1] = r->cal_den[0] = r->cal_den[1] = 0;

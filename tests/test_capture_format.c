@@ -87,6 +87,8 @@ static void check_same(const gs_capture *a, const gs_capture *b)
               (isnan(a->frames[k].grid_hz_measured) && isnan(b->frames[k].grid_hz_measured)));
         CHECK(a->frames[k].start_s == b->frames[k].start_s ||
               (isnan(a->frames[k].start_s) && isnan(b->frames[k].start_s)));
+        CHECK(a->frames[k].window_half_period_s == b->frames[k].window_half_period_s ||
+              (isnan(a->frames[k].window_half_period_s) && isnan(b->frames[k].window_half_period_s)));
     }
     size_t n = (size_t)a->K * a->width * a->height;
     CHECK(memcmp(a->raw, b->raw, n * a->bands * sizeof *a->raw) == 0);
@@ -425,8 +427,9 @@ TEST(capture_format_field_errors)
     gs_capture_release(&c);
 }
 
-/* The optional per-frame "grid_hz_measured" and "start_s": absent = NaN, exact round trip,
- * out-of-range values refused by the reader (naming file, line and field) and the writer. */
+/* The optional per-frame "grid_hz_measured", "start_s" and "window_half_period_s" (free running
+ * only): absent = NaN, exact round trip, out-of-range values refused by the reader (naming file,
+ * line and field) and the writer. */
 TEST(capture_format_grid_frequency_fields)
 {
     const char *dir = subdir("freq");
@@ -438,17 +441,20 @@ TEST(capture_format_grid_frequency_fields)
     a.frames[2].grid_hz_measured = 59.99;
     a.frames[2].start_s = 6.1953800000000001;
     a.frames[3].start_s = 9.25;               /* a start without a frequency */
+    for (int k = 0; k < 4; k++) CHECK(isnan(a.frames[k].window_half_period_s));
+    a.frames[0].window_half_period_s = 0.0099932623456789012;   /* (a free-running capture) */
     write_capture(dir, &a);
     const char *path = fx_path(dir, "capture.json");
     char *text = fx_read_file(path, NULL);
     CHECK(text && strstr(text, "\"grid_hz_measured\": 50.0366866179697") &&
-          strstr(text, "\"start_s\": 0"));
+          strstr(text, "\"start_s\": 0") && strstr(text, "\"window_half_period_s\": 0.00999326234567890"));
     free(text);
     CHECK_OK(gs_capture_read(dir, &b));
     check_same(&a, &b);
     CHECK(b.frames[0].grid_hz_measured == 50.036686617969742 && b.frames[2].start_s == 6.1953800000000001);
     CHECK(isnan(b.frames[1].grid_hz_measured) && isnan(b.frames[1].start_s));
     CHECK(isnan(b.frames[3].grid_hz_measured) && b.frames[3].start_s == 9.25);
+    CHECK(b.frames[0].window_half_period_s == 0.0099932623456789012 && isnan(b.frames[1].window_half_period_s));
     gs_capture_release(&b);
     /* the writer validates too */
     a.frames[1].grid_hz_measured = 70;
@@ -458,6 +464,15 @@ TEST(capture_format_grid_frequency_fields)
     a.frames[1].start_s = -0.5;
     CHECK(gs_capture_write_json(dir, &a) == GS_EINVAL);
     CHECK(strstr(gs_detail(), "field frames[1].start_s") != NULL);
+    a.frames[1].start_s = NAN;
+    a.frames[1].window_half_period_s = 0.02;    /* 25 Hz */
+    CHECK(gs_capture_write_json(dir, &a) == GS_EINVAL);
+    CHECK(strstr(gs_detail(), "field frames[1].window_half_period_s") != NULL);
+    a.frames[1].window_half_period_s = NAN;
+    a.locked = 1;                               /* locked windows have no period of their own */
+    CHECK(gs_capture_write_json(dir, &a) == GS_EINVAL);
+    CHECK(strstr(gs_detail(), "field frames[0].window_half_period_s: expected a finite number from 1/130 "
+                              "to 1/90 (s), only when locked is false") != NULL);
     gs_capture_release(&a);
 
     /* a capture without them (the small one) reads NaN */
@@ -480,6 +495,9 @@ TEST(capture_format_grid_frequency_fields)
          "capture.json:11: field frames[1].grid_hz_measured"},
         {"    {\"file\": \"frame_001.png\", \"k\": 1, \"cycles\": 100, \"start_s\": -1},",
          "capture.json:11: field frames[1].start_s: expected a finite number >= 0"},
+        {"    {\"file\": \"frame_001.png\", \"k\": 1, \"cycles\": 100, \"window_half_period_s\": 0.01},",
+         "capture.json:11: field frames[1].window_half_period_s: expected a finite number from 1/130 to "
+         "1/90 (s), only when locked is false"},
     };
     for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
         char name[32];

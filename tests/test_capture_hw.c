@@ -66,7 +66,7 @@ static void fake_controller(int fd, const char *log_path)
             else send_line(fd, "ERR SYNTAX");
         } else if (!strcmp(line, "START")) {
             send_line(fd, "OK START");
-            send_line(fd, "EV START grid=50 half_ns=10000000");
+            send_line(fd, "EV START grid=50 half_ns=9999000");   /* (free running: its period) */
             for (long i = 0; i < C; i++) {
                 char d[64];
                 snprintf(d, sizeof d, "D %ld %ld", i, 10000000L + (i % 2 ? 1500L : -1500L));
@@ -136,6 +136,22 @@ static pid_t start_controller(int *fd, const char *log_path)
     return pid;
 }
 
+/* The fakes of a K-frame capture: the GPIO line's crossings (a real mains recording's, as the
+ * event file events, and 10 more), the camera's frames and the controller (its child process,
+ * returned; its log in log_path), and *hw configured for them (saturation 65535). */
+static pid_t start_fakes(const char *events, const char *log_path, cap_hw_config *hw)
+{
+    CHECK(write_events(events, HW_K * (HW_C + 1) + 10));
+    CHECK(fake_gpiod_load_events(events, HW_C + 1) == HW_K * (HW_C + 1) + 10);
+    const char *pattern = hw_fx_camera(HW_K, HW_W, HW_H, hw_pixel);
+    int fd = -1;
+    pid_t child = start_controller(&fd, log_path);
+    CHECK(child > 0);
+    hw_fx_config(hw, pattern, fd, HW_K, HW_C, HW_W, HW_H);
+    hw->saturation_dn = 65535;
+    return child;
+}
+
 TEST(capture_hardware_backend_with_fakes)
 {
     const char *tmp = test_tmpdir();
@@ -143,16 +159,8 @@ TEST(capture_hardware_backend_with_fakes)
     snprintf(events, sizeof events, "%s/zc.events", tmp);
     snprintf(log_path, sizeof log_path, "%s/controller.log", tmp);
     snprintf(out, sizeof out, "%s/capture", tmp);
-    CHECK(write_events(events, HW_K * (HW_C + 1) + 10));
-    CHECK(fake_gpiod_load_events(events, HW_C + 1) == HW_K * (HW_C + 1) + 10);
-    const char *pattern = hw_fx_camera(HW_K, HW_W, HW_H, hw_pixel);
-    int fd = -1;
-    pid_t child = start_controller(&fd, log_path);
-    CHECK(child > 0);
-
     cap_hw_config hw;
-    hw_fx_config(&hw, pattern, fd, HW_K, HW_C, HW_W, HW_H);
-    hw.saturation_dn = 65535;
+    pid_t child = start_fakes(events, log_path, &hw);
     hw.load_masks = load_masks;
     cap_backend *be = NULL;
     CHECK_OK(cap_backend_hardware_new(&hw, &be));
@@ -279,6 +287,44 @@ TEST(capture_hardware_waits_for_a_new_crossing)
     cap_backend_free(be);
     int st = 0;
     if (child > 0) waitpid(child, &st, 0);
+    CHECK(fake_gpiod_open_handles() == 0);
+}
+
+/* Free running, the controller times the windows with the half period it measured before the
+ * start (EV START half_ns, the fake's 9.999 ms): the backend reports it for capture.json's
+ * window_half_period_s, in the clock of the per-cycle log its grid_hz_measured comes from;
+ * locked, no period (NaN). */
+TEST(capture_hardware_reports_the_free_running_period)
+{
+    const char *tmp = test_tmpdir();
+    char events[1024], log_path[1024], out[1100];
+    snprintf(events, sizeof events, "%s/zc.events", tmp);
+    snprintf(log_path, sizeof log_path, "%s/controller.log", tmp);
+    for (int locked = 0; locked < 2; locked++) {
+        cap_hw_config hw;
+        pid_t child = start_fakes(events, log_path, &hw);
+        hw.locked = locked;
+        cap_backend *be = NULL;
+        CHECK_OK(cap_backend_hardware_new(&hw, &be));
+        snprintf(out, sizeof out, "%s/capture_%d", tmp, locked);
+        cap_loop_opts o;
+        cap_loop_opts_default(&o);
+        o.progress = 0;
+        if (be) CHECK_OK(cap_loop_run(be, out, &o, NULL));
+        cap_backend_free(be);
+        int st = 0;
+        if (child > 0) waitpid(child, &st, 0);
+        gs_capture cap;
+        CHECK_OK(gs_capture_read(out, &cap));
+        for (int k = 0; cap.frames && k < cap.K; k++) {
+            CHECK_NEAR(cap.frames[k].grid_hz_measured, 50.0, 1e-9);   /* the log's mean: 10 ms */
+            if (locked) CHECK(isnan(cap.frames[k].window_half_period_s));
+            else CHECK_NEAR(cap.frames[k].window_half_period_s, 0.009999, 1e-15);
+        }
+        /* K C |2 P f - 1| windows: 1e-4 per cycle */
+        if (cap.frames) CHECK_NEAR(gs_capture_window_drift(&cap, NULL), locked ? 0.0 : HW_K * HW_C * 1e-4, 1e-9);
+        gs_capture_release(&cap);
+    }
     CHECK(fake_gpiod_open_handles() == 0);
 }
 

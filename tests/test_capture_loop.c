@@ -34,6 +34,33 @@ static void write_small(const char *path, int seed)
     fclose(f);
 }
 
+/* The small scene free running with the measured period: its capture.json has every frame's
+ * window_half_period_s, which acquisition.json carries over a resume and replay copies. */
+static void write_small_free(const char *path, int seed)
+{
+    char text[4096];
+    snprintf(text, sizeof text, small_scene, seed);
+    const char *hdr = "\"hdr\": true}";
+    char *at = strstr(text, hdr);
+    CHECK_MSG(at != NULL, "the small scene has no %s", hdr);
+    FILE *f = fopen(path, "w");
+    if (at) fprintf(f, "%.*s\"hdr\": true, \"locked\": false, \"free_running_period\": \"measured\"}%s",
+                    (int)(at - text), text, at + strlen(hdr));
+    fclose(f);
+}
+
+/* Every frame of dir/capture.json has a window_half_period_s. */
+static int has_window_periods(const char *dir)
+{
+    gs_capture cap;
+    memset(&cap, 0, sizeof cap);
+    if (gs_capture_read(dir, &cap) != GS_OK) return 0;
+    int ok = !cap.locked;
+    for (int k = 0; k < cap.K; k++) ok &= cap.frames[k].window_half_period_s > 0;
+    gs_capture_release(&cap);
+    return ok;
+}
+
 /* The small scene without shot noise and saturation: its first noise stage is to_dn. */
 static void write_small_without_shot_noise(const char *path, int seed)
 {
@@ -198,7 +225,7 @@ TEST(capture_resume_after_kill_cli)
     if (!realpath(test_bin(), bin)) snprintf(bin, sizeof bin, "%s", test_bin());
     char scene[1024];
     snprintf(scene, sizeof scene, "%s/small.json", tmp);
-    write_small(scene, 5);
+    write_small_free(scene, 5);
     /* kill -9 as soon as the first frame is recorded, then resume */
     snprintf(cmd, sizeof cmd,
              "cd %s && %s simulate small.json --out-dir full --no-progress >/dev/null && "
@@ -213,6 +240,9 @@ TEST(capture_resume_after_kill_cli)
     printf("    %s", out);
     CHECK_MSG(rc == 0 && strstr(out, "SAME"), "rc %d: %s", rc, out);
     CHECK(strstr(out, "kept") != NULL);
+    char dir[1100];
+    snprintf(dir, sizeof dir, "%s/killed", tmp);
+    CHECK(has_window_periods(dir));
 }
 
 TEST(capture_replay_roundtrip)
@@ -222,7 +252,7 @@ TEST(capture_replay_roundtrip)
     snprintf(scene, sizeof scene, "%s/small.json", tmp);
     snprintf(a, sizeof a, "%s/a", tmp);
     snprintf(c, sizeof c, "%s/c", tmp);
-    write_small(scene, 9);
+    write_small_free(scene, 9);
     cap_loop_report r;
     CHECK_OK(run(scene, a, 0, 0, &r));
     cap_backend *be = NULL;
@@ -242,6 +272,7 @@ TEST(capture_replay_roundtrip)
     CHECK_OK(cap_loop_run(be, c, &o, &r));
     CHECK(r.complete && r.frames_kept == 4);
     CHECK_MSG(same_capture(a, c, 0), "a replayed capture differs from its source");
+    CHECK(has_window_periods(c));
     cap_backend_free(be);
     /* the CLI route */
     char cmd[4096], out[2048];
@@ -386,6 +417,26 @@ static const char *freq_scene =
     " \"lights\": [{\"bulb\": \"hps-150w\", \"x_px\": 3, \"y_px\": 3, \"flux_e_per_cycle\": 5000}],\n"
     " \"effects\": {%s}}\n";
 
+/* The crossings of the mains recording wav (malloc'd, *count of them; NULL and a test failure
+ * when it cannot be read), and in *i0 the first rising one: crossing 0 of the trace timeline as
+ * docs/scene.md defines it, each time the crossing's own. */
+static double *trace_crossings(const char *wav, size_t *count, size_t *i0)
+{
+    double *x = NULL, *tc = NULL, rate = 0, mean = 0, rms = 0;
+    size_t n = 0;
+    int rising_first = 0;
+    *count = *i0 = 0;
+    CHECK_OK(gs_mains_read(wav, &x, &n, &rate));
+    for (size_t i = 0; i < n; i++) mean += x[i];
+    mean /= n ? (double)n : 1.0;
+    for (size_t i = 0; i < n; i++) rms += (x[i] - mean) * (x[i] - mean);
+    rms = n ? sqrt(rms / (double)n) : 0;
+    CHECK_OK(gs_zero_crossings(x, n, rate, 0.1 * rms, &tc, count, &rising_first));
+    free(x);
+    while (*i0 < *count && (*i0 % 2 == 0) != (rising_first > 0)) (*i0)++;
+    return tc;
+}
+
 /* capture.json carries each exposure's mean grid frequency and start: the frequency model's
  * exactly for a constant grid, and for a real mains recording C / (2 (t_end - t_start)) of the
  * recording's own crossings (Eq. 1): the simulator's, from gs_mains_read + gs_zero_crossings, to
@@ -424,20 +475,8 @@ TEST(capture_records_grid_frequency_per_frame)
     long step = 0;
     CHECK_OK(run_text(text, dir, &step, &cap));
     if (!cap.frames) return;
-    /* the recording's crossings as docs/scene.md defines the trace timeline: crossing 0 is the
-     * first rising crossing, each time the crossing's own */
-    double *x = NULL, *tc = NULL, rate = 0, mean = 0, rms = 0;
-    size_t n = 0, count = 0;
-    int rising_first = 0;
-    CHECK_OK(gs_mains_read(wav_path, &x, &n, &rate));
-    for (size_t i = 0; i < n; i++) mean += x[i];
-    mean /= n ? (double)n : 1.0;
-    for (size_t i = 0; i < n; i++) rms += (x[i] - mean) * (x[i] - mean);
-    rms = n ? sqrt(rms / (double)n) : 0;
-    CHECK_OK(gs_zero_crossings(x, n, rate, 0.1 * rms, &tc, &count, &rising_first));
-    free(x);
-    size_t i0 = 0;
-    while (i0 < count && (i0 % 2 == 0) != (rising_first > 0)) i0++;
+    size_t count = 0, i0 = 0;
+    double *tc = trace_crossings(wav_path, &count, &i0);
     double worst = 0, t_first = 0;
     for (int k = 0; k < cap.K && tc; k++) {
         size_t c0 = i0 + 64 + (size_t)(k * step), c1 = c0 + (size_t)C;
@@ -477,6 +516,89 @@ TEST(capture_records_grid_frequency_per_frame)
         if (p) p++;
     }
     gs_capture_release(&cap);
+}
+
+/* Reference phase of time t on the crossings tc (crossing index + fraction of its half period,
+ * as docs/scene.md defines the timeline), by bisection. */
+static double crossing_phase(const double *tc, size_t count, double t)
+{
+    size_t lo = 0, hi = count - 1;
+    while (hi - lo > 1) {
+        size_t mid = (lo + hi) / 2;
+        if (tc[mid] <= t) lo = mid;
+        else hi = mid;
+    }
+    return (double)lo + (t - tc[lo]) / (tc[lo + 1] - tc[lo]);
+}
+
+/* Free running, capture.json records each exposure's window period: the nominal one, or the
+ * mean of the 64 half periods before the exposure (the firmware's), here recomputed from a real
+ * mains recording's own crossings. The drift it implies (gs_capture_window_drift: K C |2 P f - 1|
+ * windows) is the windows' true motion over the exposure, the reference phase of window k's
+ * start after C periods P against at the first (the oracle, on the same crossings), within
+ * 1 % + 0.002 windows. Locked
+ * captures record no period and drift 0; a free-running one without it drifts by NaN. */
+TEST(capture_records_free_running_window_period)
+{
+    const char *tmp = test_tmpdir();
+    const char *wav = test_shared_path("data/mains/whu_001_ref.wav");
+    char text[2048], dir[1024], freq[1200];
+    snprintf(freq, sizeof freq, "{\"model\": \"trace\", \"wav\": \"%s\"}", wav);
+    const int C = 300;
+    size_t count = 0, i0 = 0;
+    double *tc = trace_crossings(wav, &count, &i0);
+    static const char *const acam[3] = {"\"locked\": false, \"free_running_period\": \"measured\"",
+                                        "\"locked\": false", "\"locked\": true"};
+    for (int v = 0; v < 3 && tc; v++) {
+        snprintf(text, sizeof text,
+                 "{\"format\": \"gridsurvey-scene/1\", \"seed\": 3,\n"
+                 " \"grid\": {\"nominal_hz\": 50, \"frequency\": %s},\n"
+                 " \"camera\": {\"width_px\": 8, \"height_px\": 8, \"sensor\": {\"bands\": 1}},\n"
+                 " \"acam\": {\"K\": 4, \"cycles\": %d, %s},\n"
+                 " \"lights\": [{\"bulb\": \"hps-150w\", \"x_px\": 3, \"y_px\": 3, \"flux_e_per_cycle\": 5000}],\n"
+                 " \"effects\": {\"frequency_wander\": {}}}\n", freq, C, acam[v]);
+        snprintf(dir, sizeof dir, "%s/window_period_%d", tmp, v);
+        long step = 0;
+        gs_capture cap;
+        CHECK_OK(run_text(text, dir, &step, &cap));
+        if (!cap.frames) continue;
+        int frame = -2;
+        double drift = gs_capture_window_drift(&cap, &frame), worst = 0;
+        if (v == 2) {
+            for (int k = 0; k < cap.K; k++) CHECK(isnan(cap.frames[k].window_half_period_s));
+            CHECK(drift == 0.0);
+            gs_capture_release(&cap);
+            continue;
+        }
+        int worst_k = -1;
+        for (int k = 0; k < cap.K; k++) {
+            size_t c0 = i0 + 64 + (size_t)(k * step);
+            CHECK(c0 + (size_t)C + 2 < count);
+            if (c0 + (size_t)C + 2 >= count) break;
+            double P = v == 0 ? (tc[c0] - tc[c0 - 64]) / 64.0 : 0.01;
+            CHECK_NEAR(cap.frames[k].window_half_period_s, P, 1e-12);
+            /* the oracle: where window k starts after C periods, against where it started */
+            double t0 = tc[c0] + k * P / cap.K;
+            double moved = (crossing_phase(tc, count, t0 + C * P) - (double)(c0 + (size_t)C)) -
+                           (crossing_phase(tc, count, t0) - (double)c0);
+            double want = cap.K * fabs(moved);
+            double got = cap.K * cap.frames[k].cycles *
+                         fabs(2.0 * cap.frames[k].window_half_period_s * cap.frames[k].grid_hz_measured - 1.0);
+            printf("    %s period, frame %d: P %.9f s, drift %.4f windows (oracle %.4f)\n",
+                   v == 0 ? "measured" : "nominal", k, cap.frames[k].window_half_period_s, got, want);
+            /* (the mean half period against the one the window ends in: 0.1 % of the drift and
+             * 1e-3 windows; the decision is at 0.5) */
+            CHECK_NEAR(got, want, 0.01 * want + 2e-3);
+            if (got > worst) worst = got, worst_k = k;
+        }
+        CHECK_NEAR(drift, worst, 1e-12);
+        CHECK(frame == worst_k);
+        /* without the period, how far the windows went is unknown */
+        cap.frames[2].window_half_period_s = NAN;
+        CHECK(isnan(gs_capture_window_drift(&cap, &frame)) && frame == 2);
+        gs_capture_release(&cap);
+    }
+    free(tc);
 }
 
 /* Shell fragments of the lock tests: another process holding the capture directory dir's lock

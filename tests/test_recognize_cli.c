@@ -293,6 +293,134 @@ TEST(recognize_cli_delight_subset_unknown)
     unsetenv("GRIDSURVEY_DELIGHT");
 }
 
+/* A copy of scene A's capture (the independent renderer's, its windows ideal) declared free
+ * running, each frame's windows timed with P = 10 ms at a grid frequency that moves them
+ * drift windows over the exposure, odd_drift for every fifth frame (k = 0, 5, ...; NaN: without
+ * the timing fields); with corrupt, those frames hold frame 1's pixels. No station. */
+static void free_running_copy(const char *src, const char *name, double drift, double odd_drift, int corrupt,
+                              char *dir, size_t n)
+{
+    snprintf(dir, n, "%s/free_%s", test_tmpdir(), name);
+    char o[1024];
+    CHECK_MSG(fx_run(o, sizeof o, "rm -rf %s && cp -r %s %s", dir, src, dir) == 0, "%s", o);
+    char path[1100];
+    snprintf(path, sizeof path, "%s/capture.json", dir);
+    json_error_t err;
+    json_t *root = json_load_file(path, 0, &err);
+    CHECK_MSG(root != NULL, "%s: %s", path, err.text);
+    if (!root) return;
+    json_object_set_new(root, "locked", json_false());
+    json_object_del(root, "station");   /* (the renderer's carries a field `run` does not take) */
+    int K = (int)json_integer_value(json_object_get(root, "K"));
+    json_t *frames = json_object_get(root, "frames"), *f;
+    const char *one = json_string_value(json_object_get(json_array_get(frames, 1), "file"));
+    size_t i;
+    json_array_foreach(frames, i, f) {
+        int k = (int)json_integer_value(json_object_get(f, "k"));
+        double C = json_number_value(json_object_get(f, "cycles")), d = k % 5 ? drift : odd_drift;
+        if (!isnan(d)) {
+            json_object_set_new(f, "window_half_period_s", json_real(0.01));
+            json_object_set_new(f, "grid_hz_measured", json_real((1.0 + d / (K * C)) / (2.0 * 0.01)));
+        }
+        if (corrupt && k % 5 == 0)
+            CHECK(fx_run(o, sizeof o, "cp %s/%s %s/%s", dir, one, dir,
+                         json_string_value(json_object_get(f, "file"))) == 0);
+    }
+    CHECK(json_dump_file(root, path, JSON_INDENT(2)) == 0);
+    json_decref(root);
+}
+
+/* Free running, a frame whose windows moved more than half a window over its exposure is not a
+ * sample of Eq. 5's window k (a smeared capture's answers were confident and wrong,
+ * docs/recognition.md "Free-running captures"): rec_match_catalog leaves its samples out, and
+ * the lights are answered from the other frames (flag drift). Here six of the 26 frames are
+ * overwritten with frame 1: left out, the answers are the locked capture's; kept (drifting less
+ * than half a window), the same pixels change them. With every frame out, or capture.json
+ * without the timing, no light is answered; the maps (one noise per pixel row, no sample left
+ * out) answer no pixel once a frame is out. */
+TEST(recognize_cli_free_running_drift_leaves_frames_out)
+{
+    const char *src = recfx_render(&recfx_scene_a);
+    const char *dbp = recfx_cached_delight();
+    json_t *locked = recfx_recognize_ok(src, 1);
+    if (!locked) return;
+    CHECK(json_real_value(json_object_get(json_object_get(locked, "capture"), "window_drift")) == 0.0);
+    gs_delight *d = NULL;
+    CHECK_OK(gs_delight_open(dbp, &d));
+    rec_matcher *m = NULL;
+    size_t matched_locked = 0;
+    static const struct {
+        const char *name;
+        double drift, odd_drift;
+        int corrupt, answers, same, out;   /* out: frames left out */
+        const char *note;
+    } cases[] = {
+        {"small", 0.45, 0.45, 0, 1, 1, 0, "free running: the windows drifted at most 0.45 windows over an exposure"},
+        {"some_out", 0.45, 0.55, 1, 1, 1, 6, "6 of 26 frames left out (flag drift): their windows drifted over "
+                                              "0.5 windows (the most 0.55, frame 0)"},
+        {"some_kept", 0.45, 0.45, 1, 1, 0, 0, "drifted at most 0.45"},
+        {"all_out", 0.55, 0.55, 0, 0, 0, 26, "26 of 26 frames left out"},
+        {"unknown", NAN, NAN, 0, 0, 0, 26, "26 of 26 frames left out (flag drift): their windows drifted over 0.5 "
+                                            "windows by an unknown amount (26 without window_half_period_s or "
+                                            "grid_hz_measured)"},
+    };
+    for (int v = -1; v < 5 && d; v++) {
+        char dir[1024];
+        if (v >= 0)
+            free_running_copy(src, cases[v].name, cases[v].drift, cases[v].odd_drift, cases[v].corrupt, dir, sizeof dir);
+        else snprintf(dir, sizeof dir, "%s", src);
+        /* the maps: every lit pixel answered while no frame is out, else none */
+        gs_capture cap;
+        CHECK_OK(gs_capture_read(dir, &cap));
+        if (!m) CHECK_OK(rec_matcher_new(d, cap.grid_hz, cap.bands, cap.K, NULL, &m));
+        rec_pixel_maps pm;
+        CHECK_OK(rec_pixel_maps_compute(&cap, m, NULL, NULL, &pm));
+        if (v < 0) matched_locked = pm.matched;
+        else if (!cases[v].corrupt || cases[v].out)
+            CHECK_MSG(pm.matched == (cases[v].out ? 0 : matched_locked), "%s: %zu pixels matched (locked %zu)",
+                      cases[v].name, pm.matched, matched_locked);
+        rec_pixel_maps_release(&pm);
+        gs_capture_release(&cap);
+        if (v < 0) continue;
+        json_t *root = recfx_recognize_ok(dir, 1);
+        if (!root) continue;
+        json_t *wd = json_object_get(json_object_get(root, "capture"), "window_drift");
+        CHECK(isnan(cases[v].drift) ? json_is_null(wd) : fabs(json_real_value(wd) - fmax(cases[v].drift, cases[v].odd_drift)) < 1e-9);
+        int changed = 0;
+        for (int i = 0; i < recfx_scene_a.count; i++) {
+            json_t *l = recfx_light_near(root, recfx_lights_a[i].x, recfx_lights_a[i].y);
+            json_t *l0 = recfx_light_near(locked, recfx_lights_a[i].x, recfx_lights_a[i].y);
+            CHECK(l && l0);
+            if (!l || !l0) continue;
+            const char *want = json_string_value(json_object_get(l0, "bulb"));
+            const char *bulb = json_string_value(json_object_get(l, "bulb"));
+            CHECK(want && !strcmp(want, recfx_lights_a[i].bulb));
+            CHECK_MSG(recfx_has_flag(l, "drift") == (cases[v].out > 0), "%s: light %s flags", cases[v].name, want);
+            int same = bulb && want && !strcmp(bulb, want) &&
+                       json_equal(json_object_get(l, "phase_deg"), json_object_get(l0, "phase_deg"));
+            changed += !same;
+            if (cases[v].same) CHECK_MSG(same, "%s: light %s answered %s", cases[v].name, want, bulb ? bulb : "null");
+            if (!cases[v].answers)
+                CHECK_MSG(!bulb && recfx_has_flag(l, "bad_input") && json_number_value(json_object_get(l, "confidence")) == 0.0,
+                          "%s: light %s answered %s", cases[v].name, want, bulb ? bulb : "null");
+        }
+        /* (the overwritten frames, kept, change answers: the case above is not vacuous) */
+        if (cases[v].answers && !cases[v].same) CHECK_MSG(changed > 0, "%s: no answer changed", cases[v].name);
+        json_decref(root);
+        /* the table says why */
+        CHECK(fx_run(out, sizeof out, "%s recognize %s", test_bin(), dir) == 0);
+        CHECK_MSG(strstr(out, cases[v].note), "%s: %s", cases[v].name, out);
+        if (v == 1) {   /* and so does `run`, storing the same answers */
+            CHECK(fx_run(out, sizeof out, "%s run %s --db %s/free.sqlite", test_bin(), dir, test_tmpdir()) == 0);
+            CHECK_MSG(strstr(out, "run: note: free running: 6 of 26 frames left out") &&
+                          strstr(out, "lights, 6 with a bulb, 6 with a phase"), "%s", out);
+        }
+    }
+    rec_matcher_free(m);
+    gs_delight_free(d);
+    json_decref(locked);
+}
+
 static int run1(const char *args, const char *extra)
 {
     char cmd[4096];

@@ -666,6 +666,10 @@ typedef struct {
                                    * unknown; file field "grid_hz_measured", optional) */
     double start_s;               /* the exposure's start, s from the capture's first exposure,
                                    * >= 0 (NaN: unknown; file field "start_s", optional) */
+    double window_half_period_s;  /* free running: the fixed period the windows were timed with,
+                                   * in the clock grid_hz_measured was measured with, 1/130 to
+                                   * 1/90 s (NaN: unknown, or locked; file field
+                                   * "window_half_period_s", optional, only with locked false) */
 } gs_frame_info;
 
 typedef struct {
@@ -702,6 +706,14 @@ typedef struct {
  * frame PNG that is truncated, not 16-bit, of the wrong colour type or size (the detail names
  * the file and the capture.json line that names it). */
 gs_status gs_capture_read(const char *dir, gs_capture *cap);
+/* How far the exposure windows of frame k moved across the flicker cycle over its exposure, in
+ * windows (1/K cycle): 0 for an AC-locked capture (its windows re-anchor at every crossing);
+ * free running, K C |2 P f - 1| from the frame's window_half_period_s P and grid_hz_measured f,
+ * NaN when it lacks either. */
+double gs_capture_frame_drift(const gs_capture *cap, int k);
+/* The largest over the frames (*frame, may be NULL: which one; -1 when K is 0), NaN when a frame's
+ * is (*frame: the first such). */
+double gs_capture_window_drift(const gs_capture *cap, int *frame);
 /* The same read, without taking the directory's lock: for a caller that holds it already (one
  * open and flock(2) less per read; srv_job_read, which holds it until the job ends). */
 gs_status gs_capture_read_held(const char *dir, gs_capture *cap);
@@ -732,7 +744,7 @@ int gs_capture_valid_utc(const char *s);
 gs_status gs_capture_budget(const char *source, int width, int height, int bands, int K, int hdr_maps);
 /* For a zeroed capture whose K, bands, width and height are set (GS_EINVAL otherwise, or if
  * frames, raw or halvings are already set): allocate frames (file "frame_NNN.png", k, cycles 0:
- * set them, hdr_map "", grid_hz_measured and start_s NaN) and zeroed raw pixels. */
+ * set them, hdr_map "", grid_hz_measured, start_s and window_half_period_s NaN) and zeroed raw pixels. */
 gs_status gs_capture_alloc(gs_capture *cap);
 /* After gs_capture_alloc: allocate zeroed halvings and name every frame's map "hdr_NNN.png"
  * (unless already named). */

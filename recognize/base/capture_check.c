@@ -115,6 +115,11 @@ int gs_capture_check_fields(const gs_capture *c, gs_capture_problem *pr)
         snprintf(field, sizeof field, "frames[%d].start_s", k);
         if (!isnan(f->start_s) && !(isfinite(f->start_s) && f->start_s >= 0))
             return set_problem(pr, field, GS_CAPTURE_EXP_START);
+        snprintf(field, sizeof field, "frames[%d].window_half_period_s", k);
+        if (!isnan(f->window_half_period_s) &&
+            !(!c->locked && isfinite(f->window_half_period_s) &&
+              f->window_half_period_s >= 1.0 / 130 && f->window_half_period_s <= 1.0 / 90))
+            return set_problem(pr, field, GS_CAPTURE_EXP_WINDOW_PERIOD);
         snprintf(field, sizeof field, "frames[%d].file", k);
         if (!gs_capture_valid_name(f->file)) return set_problem(pr, field, GS_CAPTURE_EXP_FILE);
         snprintf(field, sizeof field, "frames[%d].hdr_map", k);
@@ -147,4 +152,33 @@ gs_status gs_capture_check(const gs_capture *cap, const char *who)
     if (!gs_capture_check_fields(cap, &pr))
         return gs_fail(GS_EINVAL, "%s: field %s: expected %s", who, pr.field, pr.expect);
     return GS_OK;
+}
+
+/* Free running, window k starts at k P / K + c P after the exposure's first crossing, so over
+ * its C cycles it moves by C (P / Delta - 1) cycles against the flicker, Delta = 1 / (2 f) the
+ * exposure's mean half period: K C |2 P f - 1| windows. */
+double gs_capture_frame_drift(const gs_capture *cap, int k)
+{
+    if (cap->locked) return 0.0;
+    const gs_frame_info *f = &cap->frames[k];
+    double d = (double)cap->K * f->cycles * fabs(2.0 * f->window_half_period_s * f->grid_hz_measured - 1.0);
+    return isfinite(d) ? d : NAN;
+}
+
+double gs_capture_window_drift(const gs_capture *cap, int *frame)
+{
+    if (frame) *frame = -1;
+    double worst = 0.0;
+    for (int k = 0; k < cap->K; k++) {
+        double d = gs_capture_frame_drift(cap, k);
+        if (isnan(d)) {
+            if (frame) *frame = k;
+            return NAN;
+        }
+        if (d > worst || (frame && *frame < 0)) {
+            worst = d;
+            if (frame) *frame = k;
+        }
+    }
+    return worst;
 }

@@ -83,7 +83,7 @@ static const char *const top_keys[] = {
     "format", "grid_hz", "K", "bands", "width", "height", "saturation", "black_level",
     "gain_e_per_dn", "read_noise_dn", "locked", "utc", "station", "frames", NULL};
 static const char *const frame_keys[] = {"file", "k", "cycles", "hdr_map", "grid_hz_measured",
-                                         "start_s", NULL};
+                                         "start_s", "window_half_period_s", NULL};
 
 /* One frame object (array position i) into cap->frames[k], k its own field. */
 static gs_status parse_frame(reader *r, json_t *f, int i, gs_capture *cap)
@@ -116,7 +116,9 @@ static gs_status parse_frame(reader *r, json_t *f, int i, gs_capture *cap)
         (st = get_file_name(r, f, path, "hdr_map", 0, info.hdr_map)) != GS_OK ||
         (st = get_number(r, f, path, "grid_hz_measured", 0, NAN, GS_CAPTURE_EXP_HZ_MEASURED,
                          &info.grid_hz_measured)) != GS_OK ||
-        (st = get_number(r, f, path, "start_s", 0, NAN, GS_CAPTURE_EXP_START, &info.start_s)) != GS_OK)
+        (st = get_number(r, f, path, "start_s", 0, NAN, GS_CAPTURE_EXP_START, &info.start_s)) != GS_OK ||
+        (st = get_number(r, f, path, "window_half_period_s", 0, NAN, GS_CAPTURE_EXP_WINDOW_PERIOD,
+                         &info.window_half_period_s)) != GS_OK)
         return st;
     cap->frames[k] = info;
     return GS_OK;
@@ -416,6 +418,7 @@ gs_status gs_capture_alloc(gs_capture *cap)
         cap->frames[k].k = k;
         cap->frames[k].grid_hz_measured = NAN;
         cap->frames[k].start_s = NAN;
+        cap->frames[k].window_half_period_s = NAN;
     }
     return GS_OK;
 }
@@ -576,6 +579,10 @@ gs_status gs_capture_write_json(const char *dir, const gs_capture *cap)
         if (!isnan(f->start_s)) {
             gs_json_real(num, sizeof num, f->start_s);
             gs_text_printf(&t, ", \"start_s\": %s", num);
+        }
+        if (!isnan(f->window_half_period_s)) {
+            gs_json_real(num, sizeof num, f->window_half_period_s);
+            gs_text_printf(&t, ", \"window_half_period_s\": %s", num);
         }
         gs_text_printf(&t, "}%s\n", k + 1 < cap->K ? "," : "");
     }
