@@ -306,13 +306,12 @@ static gs_status match_with_population(const rec_matcher *m, catalog_pass *pass,
  * bulb's misfit cannot hide in it; phi0 for a light without an estimate. phi0 and spread are
  * those of the lights measured alike (flat_kind) when theirs is significant, else the capture's. */
 #define FLAT_PRIOR_Z 3.0
-/* Photometry kinds that take different shares of a halo: the aperture's or the PSF fit's, with
- * or without pixels saturated in some frame (a fit on the ring around a saturated core
- * extrapolates the ring's halo into the core). On metro_clear at K = 26, C = 1024 the kinds' shares
+/* Photometry kinds that take different shares of a halo (REC_FLAT_KINDS): the aperture's or the
+ * PSF fit's, with or without pixels saturated in some frame (a fit on the ring around a saturated
+ * core extrapolates the ring's halo into the core). On metro_clear at K = 26, C = 1024 the kinds' shares
  * are 0.011 (aperture), 0.020 (PSF fit), 0.014 (aperture, saturated) and 0.038 (PSF fit,
  * saturated); held within 3 spreads of the capture's (0.0124 + 3 x 0.0031), the brightest HPS
  * lights were unknown (docs/recognition.md, "Per photometry kind"). */
-#define FLAT_KINDS 4
 static int flat_kind(const rec_catalog *cat, size_t i)
 {
     const unsigned f = cat->flags ? cat->flags[i] : 0u;
@@ -334,15 +333,16 @@ static gs_status measure_flat(const rec_catalog *cat, const rec_match *out, cons
     unsigned char *is_ref = malloc(n);
     if (!is_ref) return gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", n);
     for (size_t i = 0; i < n; i++) is_ref[i] = flat_ref_light(cat, out, i, cut | REC_BLOB_SATURATED);
-    double share, spread, kshare[FLAT_KINDS], kspread[FLAT_KINDS];
+    double share, spread, *kshare = rep->flat_kind_share, kspread[REC_FLAT_KINDS];
     gs_status s = rec_eq7_flat_share(fit->flat, fit->flat_var, is_ref, n, &share, &spread, &rep->flat_lights);
     rep->flat_share = isfinite(share) ? share : 0.0;
     rep->flat_spread = isfinite(share) ? spread : 0.0;
     if (!isfinite(share)) rep->flat_lights = 0;
     *any = rep->flat_share > 0.0;
-    for (int k = 0; k < FLAT_KINDS && s == GS_OK; k++) {
+    for (int k = 0; k < REC_FLAT_KINDS && s == GS_OK; k++) {
         for (size_t i = 0; i < n; i++) is_ref[i] = flat_kind(cat, i) == k && flat_ref_light(cat, out, i, cut);
         s = rec_eq7_flat_share(fit->flat, fit->flat_var, is_ref, n, &kshare[k], &kspread[k], &used);
+        rep->flat_kind_lights[k] = kshare[k] > 0.0 ? used : 0;
         if (kshare[k] > 0.0) *any = 1;
         else {
             kshare[k] = rep->flat_share;
@@ -371,7 +371,8 @@ static gs_status match_catalog(const rec_matcher *m, const rec_catalog *cat, rec
     rec_noise_report rep = {isfinite(m->o.model_error) ? REC_NOISE_FIXED : REC_NOISE_CAMERA, 0,
                             isfinite(m->o.model_error) ? m->o.model_error : 0.0, 0, m->o.chroma_tolerance, 0,
                             isnan(m->o.other_prior) ? 0.0 : m->o.other_prior, 0,
-                            isnan(m->o.flat_share) ? 0.0 : m->o.flat_share, 0.0};
+                            isnan(m->o.flat_share) ? 0.0 : m->o.flat_share, 0.0, {0}, {0}};
+    for (int k = 0; k < REC_FLAT_KINDS; k++) rep.flat_kind_share[k] = rep.flat_share;
     if (noise) *noise = rep;
     if (cat->count == 0) return GS_OK;
     if (!out || !cat->signal || !cat->sigma)

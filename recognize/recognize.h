@@ -351,6 +351,11 @@ typedef enum {
     REC_NOISE_FIXED,         /* the options' model_error for every light */
     REC_NOISE_POPULATION     /* measured from the capture's other lights */
 } rec_noise_source;
+/* The lights' photometry kinds of the flat share: the aperture's or the PSF fit's
+ * (REC_BLOB_PSF_FIT), with pixels saturated in some frame or not (REC_BLOB_SATURATED), which
+ * take different shares of a halo: kind (psf_fit) + 2 (saturated). */
+#define REC_FLAT_KINDS 4
+#define REC_FLAT_KIND_NAMES {"aperture", "psf_fit", "aperture_saturated", "psf_fit_saturated"}
 typedef struct {
     rec_noise_source source;
     size_t lights_used;           /* lights the measurement used */
@@ -367,6 +372,11 @@ typedef struct {
                                    * light's shrunk to it or to its photometry kind's; or the
                                    * options') */
     double flat_spread;           /* measured: the spread of the lights' shares about phi0 */
+    /* measured, per photometry kind (REC_FLAT_KIND_NAMES): the share its lights were shrunk to,
+     * its own when significant (from kind_lights[k] of its lights), else the capture's
+     * (kind_lights[k] 0) */
+    double flat_kind_share[REC_FLAT_KINDS];
+    size_t flat_kind_lights[REC_FLAT_KINDS];
 } rec_noise_report;
 /* "camera", "fixed", "population". */
 const char *rec_noise_source_name(rec_noise_source s);

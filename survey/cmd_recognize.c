@@ -280,6 +280,10 @@ static void print_table(const recognize_opts *o, const gs_capture *cap, const re
         printf("; bulbs not in DELIGHT: %.1f %% (from %zu lights)", 100.0 * noise->other_prior, noise->other_lights);
     if (noise->flat_share > 0.0)
         printf("; flat share %.4f%s", noise->flat_share, noise->flat_lights ? " (measured, each light's within its spread)" : "");
+    static const char *const kinds[REC_FLAT_KINDS] = REC_FLAT_KIND_NAMES;
+    for (int k = 0; k < REC_FLAT_KINDS; k++)
+        if (noise->flat_kind_lights[k])
+            printf("; %s %.4f (from %zu lights)", kinds[k], noise->flat_kind_share[k], noise->flat_kind_lights[k]);
     printf("\n");
     printf("%4s %8s %8s %5s  %-22s %-22s %15s %6s  %-28s %9s %9s  %s\n", "id", "x", "y", "area",
            "bulb", "technology", "phase (deg)", "conf", "runner-up (conf)", "chi2/dof", "p-value",
@@ -428,6 +432,15 @@ static gs_status print_json(const recognize_opts *o, const gs_capture *cap, cons
     json_object_set_new(nz, "flat_share", jreal(noise->flat_share));
     json_object_set_new(nz, "flat_spread", jreal(noise->flat_spread));
     json_object_set_new(nz, "flat_lights", json_integer((json_int_t)noise->flat_lights));
+    static const char *const kinds[REC_FLAT_KINDS] = REC_FLAT_KIND_NAMES;
+    json_t *fk = json_object();
+    for (int k = 0; k < REC_FLAT_KINDS; k++) {
+        json_t *e = json_object();
+        json_object_set_new(e, "share", jreal(noise->flat_kind_share[k]));
+        json_object_set_new(e, "lights", json_integer((json_int_t)noise->flat_kind_lights[k]));
+        json_object_set_new(fk, kinds[k], e);
+    }
+    json_object_set_new(nz, "flat_kinds", fk);
     json_object_set_new(nz, "other_lights", json_integer((json_int_t)noise->other_lights));
     json_object_set_new(r, "noise", nz);
     json_object_set_new(root, "recognition", r);

@@ -262,9 +262,9 @@ static int query_int(sqlite3 *db, const char *sql, int *v)
 static const char *expected_text(void)
 {
     return "expected a gridsurvey survey database (SQLite, application_id 0x47534442 'GSDB', "
-           "schema version 1.." "6" ")";
+           "schema version 1.." "7" ")";
 }
-_Static_assert(SRV_DB_SCHEMA_VERSION == 6, "update expected_text()");
+_Static_assert(SRV_DB_SCHEMA_VERSION == 7, "update expected_text()");
 
 /* The 16-byte header of an existing file: SQLite's, or a one-line error. */
 static gs_status check_header(const char *path)

@@ -271,6 +271,12 @@ static const char *const migration_6[] = {
     SRV_SQL_SITE_VIEWS("") ";\n",
     NULL};
 
+/* Version 7: light_sites(pose_key, x_px) dropped: since version 6 the association finds a
+ * site by pose and pixel in site_views (sites.c), and each site written kept it up to date. */
+static const char *const migration_7[] = {
+    "DROP INDEX light_sites_pose;\n",
+    NULL};
+
 const srv_db_migration srv_db_migrations[SRV_DB_MIGRATIONS] = {
     {"tables, R*Tree and triggers", migration_1},
     {"phase-balance views", migration_2},
@@ -278,6 +284,7 @@ const srv_db_migration srv_db_migrations[SRV_DB_MIGRATIONS] = {
     {"site phase-balance views", migration_4},
     {"candidate bulbs of each capture", migration_5},
     {"site views: the pose and pixel of each site", migration_6},
+    {"pose index of light_sites dropped (site_views has it)", migration_7},
 };
 
 /* ------------------------------------------------------------------ statements */

@@ -724,9 +724,10 @@ static gs_status associate_capture(srv_db *db, int64_t cid, long *created, long 
         d[p[k].det].by_pixel = p[k].by_pixel;
         (*joined)++;
     }
-    /* a located detection that joined a site by position merges the nearest pixel site of its
-     * pose and pixel that no detection of this capture took (one light, seen unlocated from
-     * here and located from elsewhere), unless the two sites share a capture */
+    /* a located detection that joined a site by position merges into it the nearest pixel site
+     * of its pose and pixel that no detection of this capture took and that shares no capture
+     * with it (one light, seen unlocated from here and located from elsewhere): the pairs in
+     * order of d2, a pixel site sharing a capture passed over */
     for (size_t k = 0; k < np; k++) {
         detection *x = &d[p[k].det];
         const int64_t *t = bsearch(&p[k].site, taken, np, sizeof *taken, cmp_ids);

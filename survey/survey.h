@@ -45,7 +45,7 @@ int srv_main(int argc, char **argv);
  * SQL NULL. Non-finite doubles (NaN, +-Inf) store NULL.
  * ===================================================================================== */
 
-#define SRV_DB_SCHEMA_VERSION 6
+#define SRV_DB_SCHEMA_VERSION 7
 #define SRV_DB_APPLICATION_ID GS_SURVEY_DB_APPLICATION_ID   /* 'GSDB' (GeoPackage uses 'GPKG' = 0x47504B47) */
 #define SRV_DB_FORMAT "gridsurvey-survey"
 /* Written to migrations.generator and delight_versions.generator. */

@@ -601,6 +601,8 @@ TEST(eq7_flat_share_measured_and_subtracted)
     CHECK_NEAR(nr.flat_share, 0.02, 0.004);
     CHECK_NEAR(nr.flat_spread, 0.006, 0.003);
     CHECK(nr_fix.flat_share == 0.02 && nr_fix.flat_lights == 0);
+    for (int k = 0; k < REC_FLAT_KINDS; k++)   /* (a fixed share: every kind's) */
+        CHECK(nr_fix.flat_kind_share[k] == 0.02 && nr_fix.flat_kind_lights[k] == 0);
     CHECK_MSG(unknown_off > (int)n / 10 && right_off < (int)n * 6 / 10, "without the flat share: %d right, %d unknown",
               right_off, unknown_off);
     CHECK_MSG(right >= (int)n * 95 / 100, "measured: %d of %zu right", right, n);
@@ -665,6 +667,15 @@ TEST(eq7_flat_share_per_photometry_kind)
            right_ap, n_ap, unknown_ap, right_ring, n - n_ap, unknown_ring, right_one, unknown_one, nr.flat_share,
            nr.flat_spread);
     CHECK_NEAR(nr.flat_share, 0.012, 0.003);
+    /* the report: each kind's share from its own lights; the kinds without lights the capture's */
+    printf("    kinds: aperture %.4f from %zu, saturated PSF fits %.4f from %zu\n", nr.flat_kind_share[0],
+           nr.flat_kind_lights[0], nr.flat_kind_share[3], nr.flat_kind_lights[3]);
+    CHECK_NEAR(nr.flat_kind_share[0], 0.012, 0.003);
+    CHECK_NEAR(nr.flat_kind_share[3], 0.04, 0.006);
+    CHECK(nr.flat_kind_lights[0] > n_ap / 2 && nr.flat_kind_lights[0] <= n_ap);
+    CHECK(nr.flat_kind_lights[3] > (n - n_ap) / 2 && nr.flat_kind_lights[3] <= n - n_ap);
+    CHECK(nr.flat_kind_lights[1] == 0 && nr.flat_kind_lights[2] == 0);
+    CHECK(nr.flat_kind_share[1] == nr.flat_share && nr.flat_kind_share[2] == nr.flat_share);
     CHECK_MSG(right_ap >= (int)n_ap * 95 / 100, "aperture lights: %d of %zu right", right_ap, n_ap);
     CHECK_MSG(right_ring >= (int)(n - n_ap) * 95 / 100, "saturated PSF fits: %d of %zu right", right_ring, n - n_ap);
     CHECK_MSG(unknown_one > (int)(n - n_ap) / 2, "one population: %d of %zu unknown", unknown_one, n - n_ap);

@@ -155,7 +155,8 @@ TEST(survey_db_migrates_from_v1)
     h = srv_db_sqlite(db);
     CHECK(survey_fx_query_long(h, "PRAGMA user_version") == SRV_DB_SCHEMA_VERSION);
     CHECK(survey_fx_query_long(h, "SELECT count(*) FROM migrations") == SRV_DB_SCHEMA_VERSION);
-    CHECK(survey_fx_query_long(h, "SELECT group_concat(version) = '1,2,3,4,5,6' FROM (SELECT version FROM migrations ORDER BY version)") == 1);
+    CHECK(survey_fx_query_long(h, "SELECT group_concat(version) = '1,2,3,4,5,6,7' FROM (SELECT version FROM migrations ORDER BY version)") == 1);
+    CHECK(survey_fx_query_long(h, "SELECT count(*) FROM sqlite_master WHERE name = 'light_sites_pose'") == 0);
     CHECK(survey_fx_query_long(h, "SELECT n120 FROM phase_counts WHERE grouping = 'all'") == 1);
     CHECK(survey_fx_query_long(h, "SELECT n120 FROM site_phase_counts WHERE grouping = 'all'") == 1);
     /* migrate associated the old light with a new site of its own */
