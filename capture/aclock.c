@@ -213,7 +213,9 @@ gs_status cap_ac_window_period(cap_ac *ac, const cap_window_config *w, double *h
 {
     *half_period_s = NAN;
     if (w->mode != CAP_FREE_RUNNING) return GS_OK;
-    double P = ac->nominal_half_s;
+    /* nominal: a fixed count of the controller's clock ticks, off by its error; measured: timed
+     * with the clock it was measured with, so the error cancels */
+    double P = ac->nominal_half_s * (1.0 + 1e-6 * w->clock_ppm);
     if (w->free_period_measured) {
         long back = w->first_cycle < 64 ? w->first_cycle : 64;
         if (back > 0) {
@@ -224,8 +226,22 @@ gs_status cap_ac_window_period(cap_ac *ac, const cap_window_config *w, double *h
             P = (t_first - tb) / (double)back;
         }
     }
-    *half_period_s = P * (1.0 + 1e-6 * w->clock_ppm);
+    *half_period_s = P;
     return GS_OK;
+}
+
+double cap_window_drift(const double *delta, long cycles, double P, int K)
+{
+    double elapsed = 0.0, lo = 0.0, hi = 0.0;
+    for (long c = 0; c < cycles; c++) {
+        if (c % 2 == 0) {
+            double off = ((double)c * P - elapsed) / delta[c];
+            lo = off < lo ? off : lo;
+            hi = off > hi ? off : hi;
+        }
+        elapsed += delta[c];
+    }
+    return (double)K * (hi - lo);
 }
 
 gs_status cap_ac_windows(cap_ac *ac, const cap_window_config *w, cap_windows *out)

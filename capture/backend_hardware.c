@@ -101,6 +101,7 @@ static gs_status hw_acquire(void *self, const cap_acquisition *a, unsigned char 
     b->log.mean_half_period_s = NAN;
     b->log.link_mean_half_period_s = NAN;
     b->timing.grid_hz_measured = b->timing.start_s = b->timing.window_half_period_s = NAN;
+    b->timing.window_drift_windows = NAN;
     struct timespec t_open;
     clock_gettime(CLOCK_MONOTONIC, &t_open);
     /* 1. the DMD's masks: the HDR loop's halvings are the rows of M */
@@ -140,7 +141,11 @@ static gs_status hw_acquire(void *self, const cap_acquisition *a, unsigned char 
         b->log.link_cycles = elog.cycles;
         b->log.link_mean_half_period_s = elog.cycles ? sum / (double)elog.cycles : NAN;
         /* free running, the windows follow the period measured before the start (Delta_0) */
-        if (!c->locked) b->timing.window_half_period_s = elog.start_half_period_s;
+        if (!c->locked) {
+            b->timing.window_half_period_s = elog.start_half_period_s;
+            b->timing.window_drift_windows =
+                cap_window_drift(elog.half_period_s, (long)elog.cycles, elog.start_half_period_s, c->K);
+        }
     }
     cap_exposure_log_release(&elog);
     if (s != GS_OK) return gs_fail(s, "hardware: frame %d: %s", a->k, gs_detail());
@@ -243,6 +248,7 @@ gs_status cap_backend_hardware_new(const cap_hw_config *c, cap_backend **out)
     b->cfg = *c;
     b->origin_s = NAN;
     b->timing.grid_hz_measured = b->timing.start_s = b->timing.window_half_period_s = NAN;
+    b->timing.window_drift_windows = NAN;
     snprintf(b->camera, sizeof b->camera, "%s", c->camera);
     b->cfg.camera = b->camera;
     if (c->serial) snprintf(b->serial, sizeof b->serial, "%s", c->serial);

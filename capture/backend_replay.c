@@ -62,6 +62,7 @@ static gs_status replay_timing(void *self, cap_acq_timing *t)
     t->grid_hz_measured = b->cap.frames[b->last_k].grid_hz_measured;
     t->start_s = b->cap.frames[b->last_k].start_s;
     t->window_half_period_s = b->cap.frames[b->last_k].window_half_period_s;
+    t->window_drift_windows = b->cap.frames[b->last_k].window_drift_windows;
     return GS_OK;
 }
 

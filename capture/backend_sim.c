@@ -51,6 +51,7 @@ static gs_status sim_acquire(void *self, const cap_acquisition *a, unsigned char
 {
     sim_backend *b = self;
     b->timing.grid_hz_measured = b->timing.start_s = b->timing.window_half_period_s = NAN;
+    b->timing.window_drift_windows = NAN;
     b->timing.probed = 0;
     if (cycles) *cycles = (double)b->sim->C;
     gs_status st = cap_sim_render_hdr(b->sim, a->k, a->pass, a->index, halvings, raw, a->probe,
@@ -61,7 +62,8 @@ static gs_status sim_acquire(void *self, const cap_acquisition *a, unsigned char
     double t0, t1, origin, unused;
     if ((st = cap_sim_exposure_span(b->sim, a->index, &t0, &t1)) != GS_OK ||
         (st = cap_sim_exposure_span(b->sim, 0, &origin, &unused)) != GS_OK ||
-        (st = cap_sim_window_period(b->sim, a->index, &b->timing.window_half_period_s)) != GS_OK)
+        (st = cap_sim_window_timing(b->sim, a->index, &b->timing.window_half_period_s,
+                                    &b->timing.window_drift_windows)) != GS_OK)
         return st;
     if (t1 > t0) b->timing.grid_hz_measured = (double)b->sim->C / (2.0 * (t1 - t0));
     b->timing.start_s = t0 - origin;

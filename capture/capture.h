@@ -214,7 +214,9 @@ typedef struct {
                                * two); CAP_FREE_RUNNING: a fixed period from the first one */
     int free_period_measured; /* free running: 1 = the mean half period of the 64 cycles before
                                * the start (as the firmware does), 0 = nominal 1/(2 grid_hz) */
-    double clock_ppm;         /* free running: the controller clock's error (parts per million) */
+    double clock_ppm;         /* free running: the controller clock's error (parts per million),
+                               * which moves a nominal period (a measured one is timed with the
+                               * clock it was measured with: the error cancels) */
     double jitter_us;         /* std of each window edge (DMD switching), us (0: none) */
     unsigned long long jitter_seed;
 } cap_window_config;
@@ -231,6 +233,12 @@ typedef struct {
 gs_status cap_ac_windows(cap_ac *ac, const cap_window_config *w, cap_windows *out);
 /* The fixed half period that free-running windows are timed with (s), NaN when locked. */
 gs_status cap_ac_window_period(cap_ac *ac, const cap_window_config *w, double *half_period_s);
+/* How far free-running windows of period P (s) move across the flicker cycle during an
+ * exposure of cycles half periods delta[0..cycles) (s, in P's clock): the range over the cycles
+ * c of the window's offset from its cycle's crossing, (c P - sum_{i<c} delta_i) / delta_c
+ * cycles, times K: in windows. Only even c (crossings of one polarity: a zero-crossing
+ * detector's asymmetry alternates the half periods). */
+double cap_window_drift(const double *delta, long cycles, double P, int K);
 void cap_windows_release(cap_windows *w);
 
 /* Temporal blur of an exposure's windows relative to the ideal windows
@@ -441,8 +449,9 @@ gs_status cap_sim_render_hdr(cap_sim *s, int k, int pass, long index, const unsi
  * crossings first_cycle and first_cycle + C. Index 0 starts the capture. */
 gs_status cap_sim_exposure_span(cap_sim *s, long index, double *t_start_s, double *t_end_s);
 /* The half period the free-running windows of acquisition index are timed with (s, on that
- * timeline; cap_ac_window_period), NaN when the ACam is locked. */
-gs_status cap_sim_window_period(cap_sim *s, long index, double *half_period_s);
+ * timeline; cap_ac_window_period) and how far they move during its exposure (cap_window_drift
+ * of the timeline's half periods), NaN both when the ACam is locked. */
+gs_status cap_sim_window_timing(cap_sim *s, long index, double *half_period_s, double *drift_windows);
 /* The capture-level numbers of the simulated camera. */
 double cap_sim_saturation_dn(const cap_sim *s);
 double cap_sim_read_noise_dn(const cap_sim *s);
@@ -514,6 +523,9 @@ typedef struct {
     double start_s;               /* its start, s from the capture's first exposure (index 0) */
     double window_half_period_s;  /* free running: the fixed period of its windows, in the clock
                                    * of grid_hz_measured (NaN: locked or unknown) */
+    double window_drift_windows;  /* free running: the range of the windows' offset from each
+                                   * cycle's crossing over the exposure, in windows
+                                   * (cap_window_drift; NaN: locked or unknown) */
     int probed;                   /* it was a probe (cap_acquisition.probe) */
 } cap_acq_timing;
 /* After cap_backend_acquire: sim from its timeline (C / (2 (t_end - t_start)) between the

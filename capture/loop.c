@@ -13,6 +13,7 @@
 #include <jansson.h>
 #include <math.h>
 #include <pthread.h>
+#include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -75,7 +76,7 @@ gs_status cap_backend_timing(cap_backend *b, cap_acq_timing *t)
 {
     t->grid_hz_measured = NAN;
     t->start_s = NAN;
-    t->window_half_period_s = NAN;
+    t->window_half_period_s = t->window_drift_windows = NAN;
     t->probed = 0;
     return b->ops->timing ? b->ops->timing(b->self, t) : GS_OK;
 }
@@ -98,11 +99,43 @@ typedef struct {
     long index;                /* its first acquisition */
     long old_index;            /* listed but damaged: the index to acquire it at again (or -1) */
     int passes;
-    double cycles;
-    double grid_hz_measured, start_s, window_half_period_s;   /* NaN: unknown */
+    gs_frame_info f;           /* its cycles and timing (copy_timing; the names are cap's) */
     long bytes, hdr_bytes;
     uint64_t fnv, hdr_fnv;
 } frame_state;
+
+/* A frame's optional timing numbers (gs_frame_info, docs/formats.md; NaN: unknown), as
+ * acquisition.json carries them over a resume. */
+static const struct {
+    const char *name;
+    size_t offset;
+} timing_fields[] = {
+    {"grid_hz_measured", offsetof(gs_frame_info, grid_hz_measured)},
+    {"start_s", offsetof(gs_frame_info, start_s)},
+    {"window_half_period_s", offsetof(gs_frame_info, window_half_period_s)},
+    {"window_drift_windows", offsetof(gs_frame_info, window_drift_windows)},
+};
+#define N_TIMING (sizeof timing_fields / sizeof *timing_fields)
+static double *timing(gs_frame_info *f, size_t i)
+{
+    return (double *)((char *)f + timing_fields[i].offset);
+}
+static double timing_of(const gs_frame_info *f, size_t i)
+{
+    return *(const double *)((const char *)f + timing_fields[i].offset);
+}
+
+/* dst's cycles and timing numbers from src's (its file names kept). */
+static void copy_timing(gs_frame_info *dst, const gs_frame_info *src)
+{
+    dst->cycles = src->cycles;
+    for (size_t i = 0; i < N_TIMING; i++) *timing(dst, i) = timing_of(src, i);
+}
+
+static void timing_unknown(gs_frame_info *f)
+{
+    for (size_t i = 0; i < N_TIMING; i++) *timing(f, i) = NAN;
+}
 
 /* Size and checksum of dir/name; -1 bytes when it cannot be read. */
 static void file_sum(const char *dir, const char *name, long *bytes, uint64_t *fnv)
@@ -122,7 +155,7 @@ static gs_status write_progress(const char *dir, uint64_t fp, long acquisitions,
                                 const gs_capture *cap, const frame_state *fs, int complete)
 {
     /* plain text, one frame a line, deterministic */
-    size_t cap_n = 512 + (size_t)K * 512;
+    size_t cap_n = 512 + (size_t)K * 640;
     char *t = malloc(cap_n);
     if (!t) return gs_fail(GS_ENOMEM, "progress: out of memory");
     size_t u = 0;
@@ -137,16 +170,12 @@ static gs_status write_progress(const char *dir, uint64_t fp, long acquisitions,
         u += (size_t)snprintf(t + u, cap_n - u,
                               "%s\n    {\"k\": %d, \"index\": %ld, \"passes\": %d, \"cycles\": %.17g, "
                               "\"file\": \"%s\", \"bytes\": %ld, \"fnv\": \"%016llx\"",
-                              first ? "" : ",", k, fs[k].index, fs[k].passes, fs[k].cycles,
+                              first ? "" : ",", k, fs[k].index, fs[k].passes, fs[k].f.cycles,
                               cap->frames[k].file, fs[k].bytes, (unsigned long long)fs[k].fnv);
-        if (isfinite(fs[k].grid_hz_measured))
-            u += (size_t)snprintf(t + u, cap_n - u, ", \"grid_hz_measured\": %.17g",
-                                  fs[k].grid_hz_measured);
-        if (isfinite(fs[k].start_s))
-            u += (size_t)snprintf(t + u, cap_n - u, ", \"start_s\": %.17g", fs[k].start_s);
-        if (isfinite(fs[k].window_half_period_s))
-            u += (size_t)snprintf(t + u, cap_n - u, ", \"window_half_period_s\": %.17g",
-                                  fs[k].window_half_period_s);
+        for (size_t i = 0; i < N_TIMING; i++)
+            if (isfinite(timing_of(&fs[k].f, i)))
+                u += (size_t)snprintf(t + u, cap_n - u, ", \"%s\": %.17g", timing_fields[i].name,
+                                      timing_of(&fs[k].f, i));
         if (cap->frames[k].hdr_map[0])
             u += (size_t)snprintf(t + u, cap_n - u,
                                   ", \"hdr_map\": \"%s\", \"hdr_bytes\": %ld, \"hdr_fnv\": \"%016llx\"",
@@ -205,13 +234,11 @@ static gs_status read_progress(const char *dir, uint64_t fp, int K, const gs_cap
         frame_state *e = &fs[k];
         e->index = (long)json_integer_value(json_object_get(o, "index"));
         e->passes = (int)json_integer_value(json_object_get(o, "passes"));
-        e->cycles = json_number_value(json_object_get(o, "cycles"));
-        json_t *jt = json_object_get(o, "grid_hz_measured");
-        e->grid_hz_measured = json_is_number(jt) ? json_number_value(jt) : NAN;
-        jt = json_object_get(o, "start_s");
-        e->start_s = json_is_number(jt) ? json_number_value(jt) : NAN;
-        jt = json_object_get(o, "window_half_period_s");
-        e->window_half_period_s = json_is_number(jt) ? json_number_value(jt) : NAN;
+        e->f.cycles = json_number_value(json_object_get(o, "cycles"));
+        for (size_t t = 0; t < N_TIMING; t++) {
+            json_t *jt = json_object_get(o, timing_fields[t].name);
+            *timing(&e->f, t) = json_is_number(jt) ? json_number_value(jt) : NAN;
+        }
         long bytes = (long)json_integer_value(json_object_get(o, "bytes"));
         const char *fnv = json_string_value(json_object_get(o, "fnv"));
         const char *file = json_string_value(json_object_get(o, "file"));
@@ -240,7 +267,7 @@ static gs_status read_progress(const char *dir, uint64_t fp, int K, const gs_cap
                 e->hdr_fnv = got;
             }
         }
-        e->done = ok && e->cycles > 0;
+        e->done = ok && e->f.cycles > 0;
         e->old_index = e->done || e->index < 0 ? -1 : e->index;
     }
     json_decref(root);
@@ -333,10 +360,7 @@ static gs_status record_frame(frame_write *w, uint64_t fp, int K, const gs_captu
     fs[k].done = 1;
     fs[k].index = w->index;
     fs[k].passes = w->passes;
-    fs[k].cycles = cap->frames[k].cycles;
-    fs[k].grid_hz_measured = cap->frames[k].grid_hz_measured;
-    fs[k].start_s = cap->frames[k].start_s;
-    fs[k].window_half_period_s = cap->frames[k].window_half_period_s;
+    copy_timing(&fs[k].f, &cap->frames[k]);
     fs[k].bytes = w->bytes;
     fs[k].fnv = w->fnv;
     fs[k].hdr_bytes = w->hdr_bytes;
@@ -369,17 +393,14 @@ static gs_status resume_state(const char *dir, uint64_t fp, int K, int force, gs
         for (int k = 0; k < K; k++) {
             memset(&fs[k], 0, sizeof fs[k]);
             fs[k].index = fs[k].old_index = -1;
-            fs[k].grid_hz_measured = fs[k].start_s = fs[k].window_half_period_s = NAN;
+            timing_unknown(&fs[k].f);
         }
         *acquisitions = 0;
     }
     rep->frames_kept = 0;
     for (int k = 0; k < K; k++)
         if (fs[k].done) {
-            cap->frames[k].cycles = fs[k].cycles;
-            cap->frames[k].grid_hz_measured = fs[k].grid_hz_measured;
-            cap->frames[k].start_s = fs[k].start_s;
-            cap->frames[k].window_half_period_s = fs[k].window_half_period_s;
+            copy_timing(&cap->frames[k], &fs[k].f);
             rep->frames_kept++;
         }
     char path[CAP_PATH_MAX + 32];
@@ -458,13 +479,11 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
         snprintf(cap.frames[k].file, GS_PATH_MAX, "frame_%03d.png", k);
         cap.frames[k].k = k;
         cap.frames[k].cycles = (double)info.cycles;
-        cap.frames[k].grid_hz_measured = NAN;
-        cap.frames[k].start_s = NAN;
-        cap.frames[k].window_half_period_s = NAN;
+        timing_unknown(&cap.frames[k]);
         if (maps) snprintf(cap.frames[k].hdr_map, GS_PATH_MAX, "hdr_%03d.png", k);
         fs[k].index = -1;
         fs[k].old_index = -1;
-        fs[k].grid_hz_measured = fs[k].start_s = fs[k].window_half_period_s = NAN;
+        timing_unknown(&fs[k].f);
     }
     /* (made by this process: its own mkdir succeeded; another's, made meanwhile, is not removed) */
     made_dir = mkdir(dir, 0777) == 0;
@@ -584,9 +603,12 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
                 ? tm.grid_hz_measured : NAN;
         cap.frames[k].start_s = isfinite(tm.start_s) && tm.start_s >= 0 ? tm.start_s : NAN;
         cap.frames[k].window_half_period_s =
-            !info.locked && isfinite(tm.window_half_period_s) && tm.window_half_period_s >= 1.0 / 130 &&
-                    tm.window_half_period_s <= 1.0 / 90
+            !info.locked && tm.window_half_period_s >= GS_WINDOW_HALF_PERIOD_MIN_S &&
+                    tm.window_half_period_s <= GS_WINDOW_HALF_PERIOD_MAX_S
                 ? tm.window_half_period_s : NAN;
+        cap.frames[k].window_drift_windows =
+            !info.locked && tm.window_drift_windows >= 0 && isfinite(tm.window_drift_windows)
+                ? tm.window_drift_windows : NAN;
         frame_write *w = &wr[cur];
         w->frames[0] = cap.frames[k];
         w->frames[1] = cap.frames[k];

@@ -549,20 +549,31 @@ gs_status cap_sim_exposure_span(cap_sim *s, long index, double *t_start_s, doubl
     return st;
 }
 
-gs_status cap_sim_window_period(cap_sim *s, long index, double *half_period_s)
+gs_status cap_sim_window_timing(cap_sim *s, long index, double *half_period_s, double *drift_windows)
 {
-    *half_period_s = NAN;
-    if (index < 0) return gs_fail(GS_EINVAL, "window period: index %ld", index);
+    *half_period_s = *drift_windows = NAN;
+    if (index < 0) return gs_fail(GS_EINVAL, "window timing: index %ld", index);
     if (s->sc.locked) return GS_OK;
     if (!s->ac) {   /* no timing effect: every period nominal */
         *half_period_s = s->half_s;
+        *drift_windows = 0.0;
         return GS_OK;
     }
     /* the windows' configuration as cap_sim_render and the free-running drift effect set it */
     cap_window_config w = {.K = s->K, .cycles = s->C, .first_cycle = first_cycle_of(s, index),
                            .mode = CAP_FREE_RUNNING, .free_period_measured = s->sc.free_period_measured,
                            .clock_ppm = has(s, CAP_FX_FREE_RUNNING_DRIFT) ? s->sc.fx.drift.clock_ppm : 0.0};
-    return cap_ac_window_period(s->ac, &w, half_period_s);
+    gs_status st = cap_ac_window_period(s->ac, &w, half_period_s);
+    double *delta = st == GS_OK ? malloc(sizeof *delta * (size_t)s->C) : NULL;
+    if (st == GS_OK && !delta) st = gs_fail(GS_ENOMEM, "window timing: out of memory");
+    double t0 = 0.0, t1;
+    for (long c = 0; st == GS_OK && c <= s->C; c++) {
+        if ((st = cap_ac_time(s->ac, w.first_cycle + c, &t1)) == GS_OK && c > 0) delta[c - 1] = t1 - t0;
+        t0 = t1;
+    }
+    if (st == GS_OK) *drift_windows = cap_window_drift(delta, s->C, *half_period_s, s->K);
+    free(delta);
+    return st;
 }
 
 /* The electrons a sample's mean may have and still certainly not read the saturation level

@@ -66,7 +66,7 @@ void rec_catalog_release(rec_catalog *cat)
     free(cat->signal);
     free(cat->sigma);
     free(cat->labels);
-    free(cat->window_drift);
+    free(cat->drift_windows);
     memset(cat, 0, sizeof *cat);
 }
 
@@ -504,11 +504,11 @@ gs_status rec_blobs_extract(const gs_capture *cap, const rec_blob_opts *o, rec_c
     if ((st = rec_blob_photometry(&s, area, cat)) != GS_OK) goto done;
     if ((st = rec_blob_psf_fit(&s, cat)) != GS_OK) goto done;
     if (!cap->locked) {
-        if (!(cat->window_drift = malloc(sizeof *cat->window_drift * (size_t)s.K))) {
+        if (!(cat->drift_windows = malloc(sizeof *cat->drift_windows * (size_t)s.K))) {
             st = gs_fail(GS_ENOMEM, "rec_blobs_extract: out of memory");
             goto done;
         }
-        for (int k = 0; k < s.K; k++) cat->window_drift[k] = gs_capture_frame_drift(cap, k);
+        for (int k = 0; k < s.K; k++) cat->drift_windows[k] = gs_capture_frame_drift(cap, k);
     }
 done:
     free(area);

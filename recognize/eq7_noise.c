@@ -484,7 +484,7 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
                             rec_noise_report *noise)
 {
     size_t dropped = 0, K = cat ? (size_t)cat->K : 0, D = cat ? (size_t)cat->bands * K : 0;
-    for (size_t k = 0; cat && cat->window_drift && k < K; k++) dropped += !(cat->window_drift[k] <= REC_MAX_DRIFT_WINDOWS);
+    for (size_t k = 0; cat && cat->drift_windows && k < K; k++) dropped += !rec_frame_kept(cat->drift_windows[k]);
     if (!dropped || !cat->count || !cat->sigma) return match_catalog(m, cat, out, noise);
     /* frames whose windows smeared across the flicker: their samples dropped (sigma = +inf) */
     rec_catalog kept = *cat;
@@ -492,7 +492,7 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
     if (!sigma) return gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", cat->count);
     memcpy(sigma, cat->sigma, sizeof *sigma * cat->count * D);
     for (size_t d = 0; d < cat->count * D; d++)
-        if (!(cat->window_drift[d % K] <= REC_MAX_DRIFT_WINDOWS)) sigma[d] = INFINITY;
+        if (!rec_frame_kept(cat->drift_windows[d % K])) sigma[d] = INFINITY;
     kept.sigma = sigma;
     gs_status s = match_catalog(m, &kept, out, noise);
     free(sigma);

@@ -330,7 +330,10 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
     size_t done = 0, p = 0;
     /* a frame whose windows smeared across the flicker: no pixel answered (the rows have one
      * sigma each, so its samples cannot be left out as rec_match_catalog does) */
-    if (!(gs_capture_window_drift(cap, NULL) <= REC_MAX_DRIFT_WINDOWS)) p = np;
+    if (!rec_frame_kept(gs_capture_window_drift(cap, NULL))) {
+        p = np;
+        if (o->progress) o->progress(o->progress_ctx, 1.0);
+    }
     while (st == GS_OK) {
         size_t n = 0;
         for (; p < np && n < cap_rows; p++)

@@ -128,11 +128,11 @@ typedef struct {
                                * when the fit replaced no light */
     double *signal, *sigma;
     int width, height;        /* of the capture */
-    double *window_drift;     /* K values, or NULL for a locked capture (every one 0): how far
-                               * frame k's exposure windows moved across the flicker cycle, in
-                               * windows (gs_capture_frame_drift; NaN: free running without the
-                               * timing to tell); rec_match_catalog drops the frames beyond
-                               * REC_MAX_DRIFT_WINDOWS (REC_MATCH_DRIFT) */
+    double *drift_windows;    /* K values (even with no light), or NULL for a locked capture
+                               * (every one 0): how far frame k's exposure windows moved across
+                               * the flicker cycle, in windows (gs_capture_frame_drift; NaN:
+                               * free running without the timing to tell); rec_match_catalog
+                               * leaves out the frames not rec_frame_kept (REC_MATCH_DRIFT) */
     int *labels;              /* opts.labels: width * height, the light owning each aperture
                                * pixel, -1 elsewhere; else NULL */
 } rec_catalog;
@@ -248,13 +248,19 @@ enum {
     REC_MATCH_DRIFT = 1u << 6             /* frames of the capture were left out: their windows
                                            * drifted over the exposure by more than
                                            * REC_MAX_DRIFT_WINDOWS, or by an unknown amount
-                                           * (rec_catalog.window_drift); the answer is the other
+                                           * (rec_catalog.drift_windows); the answer is the other
                                            * frames' (every frame left out: BAD_INPUT, bulb -1) */
 };
 /* Free running, a frame whose windows smear over at most this many windows is still a sample of
  * Eq. 5's window k; beyond, its samples follow no template and Eq. 7's answers were wrong and
  * confident (docs/recognition.md, "Free-running captures"). */
 #define REC_MAX_DRIFT_WINDOWS 0.5
+/* 1 when a frame whose windows drifted this much (gs_capture_frame_drift) is still a sample of
+ * Eq. 5's window: at most REC_MAX_DRIFT_WINDOWS (NaN, unknown: 0). */
+static inline int rec_frame_kept(double drift_windows)
+{
+    return drift_windows <= REC_MAX_DRIFT_WINDOWS;
+}
 
 /* The answer for one light. No field is ever NaN or infinite.
  * - bulb >= 0: the best (bulb, phase) pair by posterior. Pairs are (bulb, phase) for a
@@ -345,7 +351,8 @@ gs_status rec_match_light(const rec_matcher *m, const double *signal, const doub
  * precision times a kernel in image row and log brightness: a blend's or an unknown bulb's
  * misfit never raises its own noise), then the lights fitted again with it; out[i].model_error
  * is the e used. Fewer than 8 clean lights: the camera noise alone. noise (may be NULL) says
- * which. */
+ * which. A free-running frame whose windows drifted (cat->drift_windows, not rec_frame_kept)
+ * is left out of every light (its samples' sigma +inf) and every light flagged REC_MATCH_DRIFT. */
 typedef enum {
     REC_NOISE_CAMERA,        /* the camera's noise model only (no population to measure from) */
     REC_NOISE_FIXED,         /* the options' model_error for every light */
@@ -573,7 +580,8 @@ gs_status rec_sources_read_specs(const char *path, rec_source_spec **specs, int 
 /* `--sources auto` (Sec. 5.1 (a), (b)): sources from the pixels dominated by one source (bulbs
  * in view, nearby surfaces). Every pixel whose mean per-cycle value is at least min_snr noise
  * sigmas goes through Eq. 7 (rec_match_light with m, built for the capture; its per-cycle values
- * with the capture's noise model, saturated samples dropped; the brightest 20000 of them); a
+ * with the capture's noise model, saturated samples and drifted frames (rec_frame_kept)
+ * dropped; the brightest 20000 of them); a
  * pixel is dominated when its best template fits to chi2/dof <= 3 with a phase posterior >=
  * 0.99 (m should be built with unknown_p 0: the fit decides). Each (bulb, phase) dominating at
  * least min_px pixels is a source, most pixels first; one at the BRF shift of a source already
@@ -656,7 +664,8 @@ struct rec_unmix_result {
 void rec_unmix_release(rec_unmix_result *r);
 
 /* Unmix cap with the sources src (bands and K as cap's): Eq. 16 per pixel and band, weights of
- * Eq. 17 (a sample with any band saturated discarded; the others by their noise, the capture's
+ * Eq. 17 (a sample with any band saturated discarded, and every sample of a free-running frame
+ * whose windows drifted, rec_frame_kept; the others by their noise, the capture's
  * model at the pixel's level, so HDR-halved samples count with their exposure), T >= 0 by
  * rec_nnls; then `refine` rounds of Eq. 18 and Eq. 16 again. Eq. 18: each column of B by
  * rec_nnls over the pixels, from their linear Eq. 16 estimates with those estimates' noise
@@ -709,7 +718,8 @@ gs_status rec_relight(const rec_sources *src, const float *tq, int width, int he
 /* K frames of per-cycle values (rec_relight's layout) as a capture of meta's numbers: raw =
  * black + value * cycles / 2^h with each sample's pixel halved (HDR maps, h <= 16) just enough
  * to stay below the saturation; a NaN (or a value beyond 16 halvings) is written saturated, so
- * it reads back as no value. *cap is a complete capture (gs_capture_release it). */
+ * it reads back as no value. It is locked whatever meta's source was: its windows are regular
+ * (rec_catalog.drift_windows). *cap is a complete capture (gs_capture_release it). */
 gs_status rec_frames_to_capture(const rec_capture_meta *meta, const float *frames, gs_capture *cap);
 
 /* Semi-reflection separation (Sec. 5.3, Eqs. 21-22): a window shows a daylit scene (constant

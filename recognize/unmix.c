@@ -70,8 +70,10 @@ static double weight(const gs_noise *nz, double mu, double c)
     return 1.0 / var;
 }
 
-/* Samples of pixel p: values, effective cycles and usability (Eq. 17: no band saturated).
- * Returns the usable count; *uniform = 1 when every sample is usable with the same cycles. */
+/* Samples of pixel p: values, effective cycles and usability (Eq. 17: no band saturated; and
+ * the frame's windows kept, rec_frame_kept: a free-running frame smeared across the flicker
+ * follows no BRF). Returns the usable count; *uniform = 1 when every sample is usable with the
+ * same cycles. */
 static int gather(ux *u, size_t p, int *uniform)
 {
     const gs_capture *cap = u->cap;
@@ -82,7 +84,7 @@ static int gather(ux *u, size_t p, int *uniform)
         int h = cap->halvings ? cap->halvings[(size_t)k * plane + p] : 0;
         double c = cap->frames[k].cycles / (double)(1u << h);
         const unsigned short *raw = cap->raw + ((size_t)k * plane + p) * (size_t)B;
-        int ok = 1;
+        int ok = rec_frame_kept(gs_capture_frame_drift(cap, k));
         for (int b = 0; b < B; b++) {
             if (raw[b] >= cap->saturation_dn) ok = 0;
             u->v[k * B + b] = ((double)raw[b] - cap->black_level_dn) / c;

@@ -112,6 +112,8 @@ static gs_status write_scene(const char *base, const srv_acc_point *p, const srv
     jset(acam, "K", json_integer(p->K));
     jset(acam, "cycles", json_integer(p->C));
     jset(acam, "locked", json_boolean(p->locked));
+    /* free running as the firmware does it: the period measured over the 64 cycles before */
+    if (!p->locked) jset(acam, "free_running_period", json_string("measured"));
     if (!json_is_integer(json_object_get(acam, "masks"))) jset(acam, "masks", json_integer(64));
     json_t *hdr = json_object();
     jset(hdr, "enabled", json_boolean(p->hdr));
@@ -308,9 +310,9 @@ static gs_status run_point(const char *base, const srv_acc_crop *cr, const char 
     if ((s = srv_job_read(&j, capdir)) != GS_OK ||
         (s = srv_job_extract(&j, &bo)) != GS_OK)
         goto done;
-    p->window_drift = gs_capture_window_drift(&j.cap, NULL);
+    p->drift_windows = gs_capture_window_drift(&j.cap, NULL);
     p->frames_kept = 0;
-    for (int k = 0; k < j.cap.K; k++) p->frames_kept += gs_capture_frame_drift(&j.cap, k) <= REC_MAX_DRIFT_WINDOWS;
+    for (int k = 0; k < j.cap.K; k++) p->frames_kept += rec_frame_kept(gs_capture_frame_drift(&j.cap, k));
     if (j.cat.count != rr.lights) {
         s = gs_fail(GS_ENUMERIC, "%s: %zu lights extracted again, the pipeline stored %zu", capdir,
                     j.cat.count, rr.lights);
@@ -420,14 +422,17 @@ int srv_bench_accuracy(int argc, char **argv)
                 if (hard != 1 || Ks[ki] != 13)   /* metro_hard: K = 8 and 26 only (time) */
                     pts[np++] = (srv_acc_point){.hard = hard, .K = Ks[ki], .C = Cs[ci], .hdr = 1, .locked = 1};
     if (!quick) {
-        /* (free running also at C = 32 and 64, where its windows move about half a window) */
-        static const int Cv[] = {32, 64, 128, 512};
+        /* (free running at C = 128 to 1024: below, every frame's windows move under half a
+         * window, as locked; above, Eq. 7 leaves out more and more of the frames) */
+        static const int Cv[] = {128, 512}, Cfree[] = {128, 256, 512, 1024};
         for (int v = 0; v < 3; v++)
-            for (int ci = v == 1 ? 0 : 2; ci < 4; ci++)
-                pts[np++] = (srv_acc_point){.hard = 2, .K = 26, .C = Cv[ci], .hdr = v != 0, .locked = v != 1, .continuous = v == 2};
+            for (int ci = 0; ci < (v == 1 ? 4 : 2); ci++)
+                pts[np++] = (srv_acc_point){.hard = 2, .K = 26, .C = v == 1 ? Cfree[ci] : Cv[ci], .hdr = v != 0,
+                                            .locked = v != 1, .continuous = v == 2};
     } else {
         pts[np++] = (srv_acc_point){.hard = 2, .K = 8, .C = 64, .hdr = 1, .locked = 1};
         pts[np++] = (srv_acc_point){.K = 8, .C = 64, .hdr = 0, .locked = 1};
+        pts[np++] = (srv_acc_point){.K = 8, .C = 1024, .hdr = 1, .locked = 0};
     }
     gs_delight *dl = NULL;
     if ((s = gs_delight_open(NULL, &dl)) != GS_OK) {

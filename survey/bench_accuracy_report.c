@@ -40,7 +40,7 @@ gs_status srv_acc_write_csv(const char *path, const srv_acc_point *pts, size_t n
     fprintf(f, "scene,K,C,hdr,locked,phases,acquisitions,exposure_s,readout_s,capture_s,compute_s,"
                "truth_lights,stored,matched,detection_rate,false_rate,bulb_accuracy,phase_accuracy,"
                "right_rate,bulb_unknown_rate,loc_median_m,loc_p95_m,snr_p90,ece,oracle_lights,"
-               "pipeline_on_oracle_lights,oracle_accuracy,phase_ece,phase_answered,window_drift,frames_kept\n");
+               "pipeline_on_oracle_lights,oracle_accuracy,phase_ece,phase_answered,drift_windows,frames_kept\n");
     for (size_t i = 0; i < np; i++) {
         const srv_acc_point *p = &pts[i];
         if (!p->ok) continue;
@@ -51,7 +51,7 @@ gs_status srv_acc_write_csv(const char *path, const srv_acc_point *pts, size_t n
                 p->ev.matched, p->ev.detection_rate, p->ev.false_rate, p->ev.bulb_accuracy,
                 p->ev.phase_accuracy, p->ev.all_correct_rate, p->ev.bulb_unknown_rate, p->ev.loc_median_m,
                 p->ev.loc_p95_m, p->snr_p90, p->cal.ece, p->oracle_n, p->ours_sub, p->oracle_sub, p->phase_cal.ece,
-                p->ev.phase_answered, p->window_drift, p->frames_kept);
+                p->ev.phase_answered, p->drift_windows, p->frames_kept);
     }
     int bad = ferror(f);
     if (fclose(f) != 0 || bad) return gs_fail(GS_EIO, "%s: write failed", path);
@@ -397,9 +397,10 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
                "and their HDR repeats, counted by the acquisition loop), C cycles per frame, R = 10 readout "
                "cycles between acquisitions (the scene's `readout_cycles`), Delta = 1/(2 x 50 Hz) = 10 ms. "
                "The 64 cycles the controller needs to lock before the first frame are not counted.\n"
-               "- **lock**: AC-locked, or free running: the frames Eq. 7 kept of the K, those whose windows "
-               "moved at most 0.5 windows across the flicker cycle over the exposure (`gs_capture_frame_drift` "
-               "from capture.json's `window_half_period_s` and `grid_hz_measured`; the others' samples are "
+               "- **lock**: AC-locked, or free running (the windows timed with the half period measured "
+               "before each exposure, as the firmware does): the frames Eq. 7 kept of the K, those whose "
+               "windows moved at most 0.5 windows across the flicker cycle during the exposure "
+               "(`gs_capture_frame_drift`, capture.json's `window_drift_windows`; the others' samples are "
                "left out, `REC_MATCH_DRIFT`, docs/recognition.md \"Free-running captures\"), and in "
                "parentheses the largest drift, in windows.\n"
                "- **compute s**: wall time of recognition and georeferencing (the pipeline's blobs, Eq. 7 "
@@ -430,8 +431,9 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
                "reddened by the truth's `transmission`) and its scintillation (the truth's "
                "`scintillation_log_var` and `scintillation_rho` give each frame's relative flux "
                "variance over its C cycles; such frames are Gaussian with the Poisson-Gaussian "
-               "variances plus that variance, common to the bands), so it is a ceiling; except free running: "
-               "it takes every frame's windows as regular (Eq. 5), as Eq. 7 does, and keeps every frame.\n\n",
+               "variances plus that variance, common to the bands), so it is a ceiling; free running, it "
+               "leaves out the frames Eq. 7 leaves out and takes the others' windows as regular (Eq. 5), "
+               "as Eq. 7 does.\n\n",
             "[0, 0.5), [0.5, 0.8), [0.8, 0.95), [0.95, 0.99), [0.99, 1]", quick ? 8 : 40);
     fprintf(f, "## Table\n\n");
     fprintf(f, "| scene | K | C | HDR | lock | phases | A | capture s | compute s | det. | false | bulb | phase | "
@@ -446,7 +448,7 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
         }
         char b[17][32];
         if (p->locked) snprintf(b[15], 32, "locked");
-        else snprintf(b[15], 32, "free: %d of %d (%.2f)", p->frames_kept, p->K, p->window_drift);
+        else snprintf(b[15], 32, "free: %d of %d (%.2f)", p->frames_kept, p->K, p->drift_windows);
         fmt_num(b[0], 32, 100 * p->ev.detection_rate, "%.1f %%");
         fmt_num(b[1], 32, 100 * p->ev.false_rate, "%.1f %%");
         fmt_num(b[2], 32, 100 * p->ev.bulb_accuracy, "%.1f %%");
@@ -482,7 +484,7 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
                "of its span beyond both ends, so a point at either end is drawn inside the frame.\n\n"
                "![calibration](%s/calibration.png)\n\nAccuracy of the answered lights against their reported "
                "confidence, pooled over each scene's main grid (HDR on, locked, 3 phases; the variants' ECE is "
-               "in the table: free-running points answer only while their windows drift less than half a "
+               "in the table: free-running points leave out the frames whose windows drift over half a "
                "window); the dashed line is perfect calibration. Both axes run over the whole scale, 0 to 1 "
                "with 3 %% beyond both ends, so the diagonal is at 45 degrees and a bin at 0 or 1 is inside the "
                "frame. These captures are the project's own "

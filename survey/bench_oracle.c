@@ -164,6 +164,14 @@ gs_status srv_acc_oracle(srv_db *db, const srv_run_report *rr, const srv_job *j,
             fv[kk] = al ? frame_variance(al->s2, al->rho, lround(j->cap.frames[kk].cycles)) : 0.0;
             scint |= fv[kk] > 0.0;
         }
+        /* the frames Eq. 7 leaves out (free running, rec_frame_kept): 0 in the data and every
+         * template, a term the same for every candidate and brightness */
+        for (int kk = 0; j->cat.drift_windows && kk < K; kk++)
+            if (!rec_frame_kept(j->cat.drift_windows[kk]))
+                for (int d = kk; d < D; d += K) {
+                    x[d] = 0.0;
+                    for (int q = 0; q < M; q++) tl[(size_t)q * D + d] = 0.0;
+                }
         rec_pg_excess ex = {K, fv};
         int best = 0;
         if ((s = rec_ml_oracle(nz, 1, scint ? &ex : NULL, x, tl, M, D, &best, NULL)) != GS_OK) break;

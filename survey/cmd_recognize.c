@@ -401,7 +401,7 @@ static gs_status print_json(const recognize_opts *o, const gs_capture *cap, cons
     json_object_set_new(c, "height", json_integer(cap->height));
     json_object_set_new(c, "locked", json_boolean(cap->locked));
     double drift = gs_capture_window_drift(cap, NULL);
-    json_object_set_new(c, "window_drift", isfinite(drift) ? json_real(drift) : json_null());
+    json_object_set_new(c, "drift_windows", isfinite(drift) ? json_real(drift) : json_null());
     json_object_set_new(c, "utc", cap->utc[0] ? json_string(cap->utc) : json_null());
     json_t *station = cap->station_json ? json_loads(cap->station_json, 0, NULL) : NULL;
     json_object_set_new(c, "station", station ? station : json_null());

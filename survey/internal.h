@@ -278,7 +278,7 @@ typedef struct {
     double compute_s, sim_s;
     srv_eval_report ev;
     double snr_p90;
-    double window_drift;      /* gs_capture_window_drift of its capture, windows (0 locked) */
+    double drift_windows;     /* gs_capture_window_drift of its capture, windows (0 locked) */
     int frames_kept;          /* its frames that drifted at most REC_MAX_DRIFT_WINDOWS */
     srv_acc_bins cal;         /* the answered lights by confidence, right = bulb and phase */
     srv_acc_bins phase_cal;   /* the lights with a phase by phase_confidence, right = the phase */

@@ -105,7 +105,7 @@ void srv_drift_note(const gs_capture *cap, char *buf, size_t n)
     double worst = -1.0;
     for (int k = 0; k < cap->K; k++) {
         double d = gs_capture_frame_drift(cap, k);
-        out += !(d <= REC_MAX_DRIFT_WINDOWS);
+        out += !rec_frame_kept(d);
         unknown += isnan(d);
         if (d > worst) worst = d, worst_k = k;
     }
@@ -115,13 +115,13 @@ void srv_drift_note(const gs_capture *cap, char *buf, size_t n)
         snprintf(buf, n, "; free running: the windows drifted at most %.2f windows over an exposure (frame %d)",
                  worst, worst_k);
     } else {
-        int u = snprintf(buf, n, "; free running: %d of %d frames left out (flag drift): their windows drifted over "
-                         "%.1f windows", out, cap->K, REC_MAX_DRIFT_WINDOWS);
+        int u = snprintf(buf, n, "; free running: %d of %d frames left out (flag drift):", out, cap->K);
         if (u > 0 && (size_t)u < n && out > unknown)
-            u += snprintf(buf + u, n - (size_t)u, " (the most %.2f, frame %d)", worst, worst_k);
+            u += snprintf(buf + u, n - (size_t)u, " %d drifted over %.1f windows (the most %.2f, frame %d)%s",
+                          out - unknown, REC_MAX_DRIFT_WINDOWS, worst, worst_k, unknown ? "," : "");
         if (u > 0 && (size_t)u < n && unknown)
-            snprintf(buf + u, n - (size_t)u, "%s by an unknown amount (%d without window_half_period_s or "
-                     "grid_hz_measured)", out > unknown ? " or" : "", unknown);
+            snprintf(buf + u, n - (size_t)u, " %d without window_drift_windows, window_half_period_s or "
+                     "grid_hz_measured (drift unknown)", unknown);
     }
 }
 

@@ -443,11 +443,13 @@ TEST(capture_format_grid_frequency_fields)
     a.frames[3].start_s = 9.25;               /* a start without a frequency */
     for (int k = 0; k < 4; k++) CHECK(isnan(a.frames[k].window_half_period_s));
     a.frames[0].window_half_period_s = 0.0099932623456789012;   /* (a free-running capture) */
+    a.frames[2].window_drift_windows = 0.62;
     write_capture(dir, &a);
     const char *path = fx_path(dir, "capture.json");
     char *text = fx_read_file(path, NULL);
     CHECK(text && strstr(text, "\"grid_hz_measured\": 50.0366866179697") &&
-          strstr(text, "\"start_s\": 0") && strstr(text, "\"window_half_period_s\": 0.00999326234567890"));
+          strstr(text, "\"start_s\": 0") && strstr(text, "\"window_half_period_s\": 0.00999326234567890") &&
+          strstr(text, "\"window_drift_windows\": 0.62"));
     free(text);
     CHECK_OK(gs_capture_read(dir, &b));
     check_same(&a, &b);
@@ -455,6 +457,7 @@ TEST(capture_format_grid_frequency_fields)
     CHECK(isnan(b.frames[1].grid_hz_measured) && isnan(b.frames[1].start_s));
     CHECK(isnan(b.frames[3].grid_hz_measured) && b.frames[3].start_s == 9.25);
     CHECK(b.frames[0].window_half_period_s == 0.0099932623456789012 && isnan(b.frames[1].window_half_period_s));
+    CHECK(b.frames[2].window_drift_windows == 0.62 && isnan(b.frames[0].window_drift_windows));
     gs_capture_release(&b);
     /* the writer validates too */
     a.frames[1].grid_hz_measured = 70;
@@ -469,6 +472,11 @@ TEST(capture_format_grid_frequency_fields)
     CHECK(gs_capture_write_json(dir, &a) == GS_EINVAL);
     CHECK(strstr(gs_detail(), "field frames[1].window_half_period_s") != NULL);
     a.frames[1].window_half_period_s = NAN;
+    a.frames[3].window_drift_windows = -0.1;
+    CHECK(gs_capture_write_json(dir, &a) == GS_EINVAL);
+    CHECK(strstr(gs_detail(), "field frames[3].window_drift_windows: expected a finite number >= 0 (windows), "
+                              "only when locked is false") != NULL);
+    a.frames[3].window_drift_windows = NAN;
     a.locked = 1;                               /* locked windows have no period of their own */
     CHECK(gs_capture_write_json(dir, &a) == GS_EINVAL);
     CHECK(strstr(gs_detail(), "field frames[0].window_half_period_s: expected a finite number from 1/130 "
@@ -498,6 +506,9 @@ TEST(capture_format_grid_frequency_fields)
         {"    {\"file\": \"frame_001.png\", \"k\": 1, \"cycles\": 100, \"window_half_period_s\": 0.01},",
          "capture.json:11: field frames[1].window_half_period_s: expected a finite number from 1/130 to "
          "1/90 (s), only when locked is false"},
+        {"    {\"file\": \"frame_001.png\", \"k\": 1, \"cycles\": 100, \"window_drift_windows\": 0.2},",
+         "capture.json:11: field frames[1].window_drift_windows: expected a finite number >= 0 (windows), "
+         "only when locked is false"},
     };
     for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
         char name[32];

@@ -292,8 +292,8 @@ TEST(capture_hardware_waits_for_a_new_crossing)
 
 /* Free running, the controller times the windows with the half period it measured before the
  * start (EV START half_ns, the fake's 9.999 ms): the backend reports it for capture.json's
- * window_half_period_s, in the clock of the per-cycle log its grid_hz_measured comes from;
- * locked, no period (NaN). */
+ * window_half_period_s, in the clock of the per-cycle log its grid_hz_measured comes from, and
+ * from that log how far the windows moved (window_drift_windows); locked, neither (NaN). */
 TEST(capture_hardware_reports_the_free_running_period)
 {
     const char *tmp = test_tmpdir();
@@ -320,9 +320,17 @@ TEST(capture_hardware_reports_the_free_running_period)
             CHECK_NEAR(cap.frames[k].grid_hz_measured, 50.0, 1e-9);   /* the log's mean: 10 ms */
             if (locked) CHECK(isnan(cap.frames[k].window_half_period_s));
             else CHECK_NEAR(cap.frames[k].window_half_period_s, 0.009999, 1e-15);
+            /* the log's half periods alternate 10 ms -+ 1.5 us from cycle 0 (the detector's
+             * asymmetry): at the crossings of one polarity, even c, the windows are c (P - 10 ms)
+             * behind, over half periods of 9.9985 ms; the range to the last even c < C, in
+             * windows. (K C |2 P f - 1|, the net motion, is K C 1e-4.) */
+            double want = HW_K * (double)((HW_C - 1) / 2 * 2) * 1e-6 / 9.9985e-3;
+            if (locked) CHECK(isnan(cap.frames[k].window_drift_windows));
+            else CHECK_NEAR(cap.frames[k].window_drift_windows, want, 1e-9);
         }
-        /* K C |2 P f - 1| windows: 1e-4 per cycle */
-        if (cap.frames) CHECK_NEAR(gs_capture_window_drift(&cap, NULL), locked ? 0.0 : HW_K * HW_C * 1e-4, 1e-9);
+        if (cap.frames)
+            CHECK_NEAR(gs_capture_window_drift(&cap, NULL),
+                       locked ? 0.0 : HW_K * (double)((HW_C - 1) / 2 * 2) * 1e-6 / 9.9985e-3, 1e-9);
         gs_capture_release(&cap);
     }
     CHECK(fake_gpiod_open_handles() == 0);

@@ -35,7 +35,8 @@ static void write_small(const char *path, int seed)
 }
 
 /* The small scene free running with the measured period: its capture.json has every frame's
- * window_half_period_s, which acquisition.json carries over a resume and replay copies. */
+ * window_half_period_s and window_drift_windows, which acquisition.json carries over a resume
+ * and replay copies. */
 static void write_small_free(const char *path, int seed)
 {
     char text[4096];
@@ -49,14 +50,15 @@ static void write_small_free(const char *path, int seed)
     fclose(f);
 }
 
-/* Every frame of dir/capture.json has a window_half_period_s. */
+/* Every frame of dir/capture.json has a window_half_period_s and a window_drift_windows. */
 static int has_window_periods(const char *dir)
 {
     gs_capture cap;
     memset(&cap, 0, sizeof cap);
     if (gs_capture_read(dir, &cap) != GS_OK) return 0;
     int ok = !cap.locked;
-    for (int k = 0; k < cap.K; k++) ok &= cap.frames[k].window_half_period_s > 0;
+    for (int k = 0; k < cap.K; k++)
+        ok &= cap.frames[k].window_half_period_s > 0 && cap.frames[k].window_drift_windows >= 0;
     gs_capture_release(&cap);
     return ok;
 }
@@ -537,7 +539,8 @@ static double crossing_phase(const double *tc, size_t count, double t)
  * windows) is the windows' true motion over the exposure, the reference phase of window k's
  * start after C periods P against at the first (the oracle, on the same crossings), within
  * 1 % + 0.002 windows. Locked
- * captures record no period and drift 0; a free-running one without it drifts by NaN. */
+ * captures record no period and drift 0; a free-running one without it drifts by NaN. A
+ * controller clock's error moves a nominal period, not a measured one (constant grid). */
 TEST(capture_records_free_running_window_period)
 {
     const char *tmp = test_tmpdir();
@@ -565,7 +568,8 @@ TEST(capture_records_free_running_window_period)
         int frame = -2;
         double drift = gs_capture_window_drift(&cap, &frame), worst = 0;
         if (v == 2) {
-            for (int k = 0; k < cap.K; k++) CHECK(isnan(cap.frames[k].window_half_period_s));
+            for (int k = 0; k < cap.K; k++)
+                CHECK(isnan(cap.frames[k].window_half_period_s) && isnan(cap.frames[k].window_drift_windows));
             CHECK(drift == 0.0);
             gs_capture_release(&cap);
             continue;
@@ -589,16 +593,53 @@ TEST(capture_records_free_running_window_period)
             /* (the mean half period against the one the window ends in: 0.1 % of the drift and
              * 1e-3 windows; the decision is at 0.5) */
             CHECK_NEAR(got, want, 0.01 * want + 2e-3);
-            if (got > worst) worst = got, worst_k = k;
+            /* the recorded range of the offset: the same crossings' at every even cycle */
+            double lo = 0, hi = 0;
+            for (int c = 0; c < C; c += 2) {
+                double off = (c * P - (tc[c0 + (size_t)c] - tc[c0])) / (tc[c0 + (size_t)c + 1] - tc[c0 + (size_t)c]);
+                lo = fmin(lo, off);
+                hi = fmax(hi, off);
+            }
+            double range = cap.K * (hi - lo);
+            printf("      range %.4f windows (oracle %.4f)\n", cap.frames[k].window_drift_windows, range);
+            CHECK_NEAR(cap.frames[k].window_drift_windows, range, 1e-9);
+            CHECK(range >= got * (C - 2) / C - 2e-3);   /* (it holds the net motion, to cycle C - 2) */
+            if (range > worst) worst = range, worst_k = k;
         }
         CHECK_NEAR(drift, worst, 1e-12);
         CHECK(frame == worst_k);
-        /* without the period, how far the windows went is unknown */
+        /* without the range, the net motion from the period; without either, unknown */
+        cap.frames[2].window_drift_windows = NAN;
+        CHECK(gs_capture_frame_drift(&cap, 2) == cap.K * cap.frames[2].cycles *
+                                                     fabs(2.0 * cap.frames[2].window_half_period_s *
+                                                          cap.frames[2].grid_hz_measured - 1.0));
         cap.frames[2].window_half_period_s = NAN;
         CHECK(isnan(gs_capture_window_drift(&cap, &frame)) && frame == 2);
         gs_capture_release(&cap);
     }
     free(tc);
+    /* a constant 50 Hz grid and a controller clock 200 ppm fast: a nominal period is off by it,
+     * K C 2e-4 windows; a measured one, timed with the same clock, not at all */
+    for (int measured = 0; measured < 2; measured++) {
+        snprintf(text, sizeof text,
+                 "{\"format\": \"gridsurvey-scene/1\", \"seed\": 3,\n"
+                 " \"grid\": {\"nominal_hz\": 50, \"frequency\": {\"model\": \"constant\"}},\n"
+                 " \"camera\": {\"width_px\": 8, \"height_px\": 8, \"sensor\": {\"bands\": 1}},\n"
+                 " \"acam\": {\"K\": 4, \"cycles\": %d, \"locked\": false, \"free_running_period\": \"%s\"},\n"
+                 " \"lights\": [{\"bulb\": \"hps-150w\", \"x_px\": 3, \"y_px\": 3, \"flux_e_per_cycle\": 5000}],\n"
+                 " \"effects\": {\"frequency_wander\": {}, \"free_running_drift\": {\"clock_ppm\": 200}}}\n",
+                 C, measured ? "measured" : "nominal");
+        snprintf(dir, sizeof dir, "%s/window_period_ppm_%d", tmp, measured);
+        long step = 0;
+        gs_capture cap;
+        CHECK_OK(run_text(text, dir, &step, &cap));
+        for (int k = 0; cap.frames && k < cap.K; k++) {
+            CHECK_NEAR(cap.frames[k].window_half_period_s, measured ? 0.01 : 0.01 * (1 + 2e-4), 1e-15);
+            /* (to the last even cycle, C - 2: see cap_window_drift) */
+            CHECK_NEAR(gs_capture_frame_drift(&cap, k), measured ? 0.0 : cap.K * (C - 2) * 2e-4, 1e-9);
+        }
+        gs_capture_release(&cap);
+    }
 }
 
 /* Shell fragments of the lock tests: another process holding the capture directory dir's lock

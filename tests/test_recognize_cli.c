@@ -295,8 +295,9 @@ TEST(recognize_cli_delight_subset_unknown)
 
 /* A copy of scene A's capture (the independent renderer's, its windows ideal) declared free
  * running, each frame's windows timed with P = 10 ms at a grid frequency that moves them
- * drift windows over the exposure, odd_drift for every fifth frame (k = 0, 5, ...; NaN: without
- * the timing fields); with corrupt, those frames hold frame 1's pixels. No station. */
+ * drift windows over the exposure (NaN: without the timing fields); every fifth frame (k = 0,
+ * 5, ...) with odd_drift recorded as its range (window_drift_windows) when it differs; with
+ * corrupt, those frames hold frame 1's pixels. No station. */
 static void free_running_copy(const char *src, const char *name, double drift, double odd_drift, int corrupt,
                               char *dir, size_t n)
 {
@@ -317,11 +318,13 @@ static void free_running_copy(const char *src, const char *name, double drift, d
     size_t i;
     json_array_foreach(frames, i, f) {
         int k = (int)json_integer_value(json_object_get(f, "k"));
-        double C = json_number_value(json_object_get(f, "cycles")), d = k % 5 ? drift : odd_drift;
-        if (!isnan(d)) {
+        double C = json_number_value(json_object_get(f, "cycles"));
+        if (!isnan(drift)) {
             json_object_set_new(f, "window_half_period_s", json_real(0.01));
-            json_object_set_new(f, "grid_hz_measured", json_real((1.0 + d / (K * C)) / (2.0 * 0.01)));
+            json_object_set_new(f, "grid_hz_measured", json_real((1.0 + drift / (K * C)) / (2.0 * 0.01)));
         }
+        if (k % 5 == 0 && !isnan(odd_drift) && odd_drift != drift)
+            json_object_set_new(f, "window_drift_windows", json_real(odd_drift));
         if (corrupt && k % 5 == 0)
             CHECK(fx_run(o, sizeof o, "cp %s/%s %s/%s", dir, one, dir,
                          json_string_value(json_object_get(f, "file"))) == 0);
@@ -344,7 +347,7 @@ TEST(recognize_cli_free_running_drift_leaves_frames_out)
     const char *dbp = recfx_cached_delight();
     json_t *locked = recfx_recognize_ok(src, 1);
     if (!locked) return;
-    CHECK(json_real_value(json_object_get(json_object_get(locked, "capture"), "window_drift")) == 0.0);
+    CHECK(json_real_value(json_object_get(json_object_get(locked, "capture"), "drift_windows")) == 0.0);
     gs_delight *d = NULL;
     CHECK_OK(gs_delight_open(dbp, &d));
     rec_matcher *m = NULL;
@@ -356,13 +359,13 @@ TEST(recognize_cli_free_running_drift_leaves_frames_out)
         const char *note;
     } cases[] = {
         {"small", 0.45, 0.45, 0, 1, 1, 0, "free running: the windows drifted at most 0.45 windows over an exposure"},
-        {"some_out", 0.45, 0.55, 1, 1, 1, 6, "6 of 26 frames left out (flag drift): their windows drifted over "
-                                              "0.5 windows (the most 0.55, frame 0)"},
+        {"some_out", 0.45, 0.55, 1, 1, 1, 6, "6 of 26 frames left out (flag drift): 6 drifted over 0.5 windows "
+                                              "(the most 0.55, frame 0)"},
         {"some_kept", 0.45, 0.45, 1, 1, 0, 0, "drifted at most 0.45"},
         {"all_out", 0.55, 0.55, 0, 0, 0, 26, "26 of 26 frames left out"},
-        {"unknown", NAN, NAN, 0, 0, 0, 26, "26 of 26 frames left out (flag drift): their windows drifted over 0.5 "
-                                            "windows by an unknown amount (26 without window_half_period_s or "
-                                            "grid_hz_measured)"},
+        {"unknown", NAN, NAN, 0, 0, 0, 26, "26 of 26 frames left out (flag drift): 26 without "
+                                            "window_drift_windows, window_half_period_s or grid_hz_measured "
+                                            "(drift unknown)"},
     };
     for (int v = -1; v < 5 && d; v++) {
         char dir[1024];
@@ -384,7 +387,7 @@ TEST(recognize_cli_free_running_drift_leaves_frames_out)
         if (v < 0) continue;
         json_t *root = recfx_recognize_ok(dir, 1);
         if (!root) continue;
-        json_t *wd = json_object_get(json_object_get(root, "capture"), "window_drift");
+        json_t *wd = json_object_get(json_object_get(root, "capture"), "drift_windows");
         CHECK(isnan(cases[v].drift) ? json_is_null(wd) : fabs(json_real_value(wd) - fmax(cases[v].drift, cases[v].odd_drift)) < 1e-9);
         int changed = 0;
         for (int i = 0; i < recfx_scene_a.count; i++) {

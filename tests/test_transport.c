@@ -598,6 +598,109 @@ TEST(eq15_same_bulb_and_phase_merged_not_split)
     gs_delight_free(d);
 }
 
+/* Declares cap free running, every frame's windows drifting `drift` windows over the exposure
+ * (P = 10 ms, grid_hz_measured to match), frame k5's `drift5`; and gives frame k5 frame src's
+ * pixels. */
+static void drift_frames(gs_capture *cap, double drift, double drift5, int k5, int src)
+{
+    cap->locked = 0;
+    for (int k = 0; k < cap->K; k++) {
+        double d = k == k5 ? drift5 : drift;
+        cap->frames[k].window_half_period_s = 0.01;
+        cap->frames[k].grid_hz_measured = (1.0 + d / (cap->K * cap->frames[k].cycles)) / (2.0 * 0.01);
+    }
+    size_t n = (size_t)cap->width * (size_t)cap->height * (size_t)cap->bands;
+    memcpy(cap->raw + (size_t)k5 * n, cap->raw + (size_t)src * n, n * sizeof *cap->raw);
+    if (cap->halvings) {
+        size_t np = (size_t)cap->width * (size_t)cap->height;
+        memcpy(cap->halvings + (size_t)k5 * np, cap->halvings + (size_t)src * np, np);
+    }
+}
+
+/* A free-running frame whose windows drifted over half a window follows no BRF (docs/
+ * recognition.md "Free-running captures"): Eq. 17 discards its samples, so unmixing (Eq. 16,
+ * 18) and `--sources auto` do not depend on what it holds (frame 5 given frame 0's or frame 1's
+ * pixels: the same bits), and stay near the locked capture's (the same auto sources, in order);
+ * kept (drifting 0.45), the same pixels change them. */
+TEST(eq17_drifted_frames_discarded_by_unmix_and_auto_sources)
+{
+    gs_delight *d = builtin();
+    static const trfx_lamp l[] = {
+        {"a", "inc-a60-25w-230v", 0, 11.2, 8.9, 3.8, 6e6},
+        {"b", "cfl-23w", 120, 46.5, 27.2, 3.0, 4e6},
+        {"c", "led-fil-4w-lin", 240, 32.0, 4.9, 4.5, 5e6},
+    };
+    rec_source_spec s3[3];
+    specs_of(l, 3, s3);
+    trfx_opts o = {0};
+    gs_capture cap;
+    rec_sources src;
+    rec_unmix_result r0;
+    const char *dir = fx_tmp("drift");
+    CHECK_OK(unmix_scene(dir, &o, l, 3, s3, 3, 1, d, &cap, &src, &r0));
+    rec_eq7_opts eo;
+    rec_eq7_opts_default(&eo);
+    eo.unknown_p = 0.0;
+    rec_matcher *m = NULL;
+    CHECK_OK(rec_matcher_new(d, 50, cap.bands, cap.K, &eo, &m));
+    rec_unmix_opts uo;
+    rec_unmix_opts_default(&uo);
+    size_t n = (size_t)cap.width * cap.height * cap.bands * (size_t)src.S;
+    rec_unmix_result r[3];
+    rec_source_spec *auto_sp[3] = {NULL, NULL, NULL};
+    int n_auto[3] = {0, 0, 0};
+    for (int v = 0; v < 3 && m; v++) {
+        gs_capture c;
+        CHECK_OK(gs_capture_read(dir, &c));
+        drift_frames(&c, 0.45, v < 2 ? 0.55 : 0.45, 5, v == 1);
+        CHECK_OK(rec_unmix(&c, &src, &uo, &r[v]));
+        CHECK_OK(rec_sources_auto(&c, m, 20.0, 20, 8, &auto_sp[v], &n_auto[v], NULL, NULL));
+        gs_capture_release(&c);
+    }
+    rec_source_spec *auto0 = NULL;
+    int n0 = 0;
+    if (m) CHECK_OK(rec_sources_auto(&cap, m, 20.0, 20, 8, &auto0, &n0, NULL, NULL));
+    printf("    locked: %d auto sources:", n0);
+    for (int i = 0; i < n0; i++) printf(" %s@%g", auto0[i].bulb, auto0[i].phase_deg);
+    printf("\n");
+    for (int v = 0; v < 3; v++) {
+        printf("    case %d: %d auto sources:", v, n_auto[v]);
+        for (int i = 0; i < n_auto[v]; i++) printf(" %s@%g", auto_sp[v][i].bulb, auto_sp[v][i].phase_deg);
+        printf("\n");
+    }
+    if (m && r[0].tq && r[1].tq && r[2].tq && r0.tq) {
+        CHECK(memcmp(r[0].tq, r[1].tq, n * sizeof *r[0].tq) == 0);
+        /* the sources auto finds: the locked capture's, in its order, frame 5 left out; not kept */
+        int same[3] = {1, 1, 1};
+        for (int v = 0; v < 3; v++) {
+            same[v] = n_auto[v] == n0;
+            for (int i = 0; same[v] && i < n0; i++)
+                same[v] = !strcmp(auto_sp[v][i].bulb, auto0[i].bulb) && auto_sp[v][i].phase_deg == auto0[i].phase_deg;
+        }
+        CHECK(n0 >= 2 && same[0] && same[1] && !same[2]);
+        double e_out = 0, e_in = 0, norm = 0;
+        for (size_t i = 0; i < n; i++) {
+            if (!isfinite(r0.tq[i]) || !isfinite(r[0].tq[i]) || !isfinite(r[2].tq[i])) continue;
+            e_out += (r[0].tq[i] - r0.tq[i]) * (r[0].tq[i] - r0.tq[i]);
+            e_in += (r[2].tq[i] - r0.tq[i]) * (r[2].tq[i] - r0.tq[i]);
+            norm += r0.tq[i] * r0.tq[i];
+        }
+        printf("    against the locked capture's unmixing: frame 5 left out %.4f, kept %.4f (relative rms)\n",
+               sqrt(e_out / norm), sqrt(e_in / norm));
+        CHECK(sqrt(e_out / norm) < 0.05 && sqrt(e_in / norm) > 3 * sqrt(e_out / norm));
+    }
+    for (int v = 0; v < 3; v++) {
+        rec_unmix_release(&r[v]);
+        free(auto_sp[v]);
+    }
+    free(auto0);
+    rec_matcher_free(m);
+    rec_unmix_release(&r0);
+    rec_sources_release(&src);
+    gs_capture_release(&cap);
+    gs_delight_free(d);
+}
+
 TEST(fig10_more_sources_than_the_data_support_reported_ill_posed)
 {
     gs_delight *d = builtin();

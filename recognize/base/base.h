@@ -654,6 +654,9 @@ gs_status gs_tiff_read_float(const char *path, int *width, int *height, int *ban
  * gs_capture_write_frame for every k and gs_capture_write_json last. Or gs_capture_read.
  * Either way gs_capture_release frees everything (it accepts NULL and a zeroed struct). */
 #define GS_CAPTURE_FORMAT "gridsurvey-capture/1"
+/* The half periods of grids of 45 to 65 Hz (Eq. 1), what window_half_period_s may hold. */
+#define GS_WINDOW_HALF_PERIOD_MIN_S (1.0 / 130.0)
+#define GS_WINDOW_HALF_PERIOD_MAX_S (1.0 / 90.0)
 #define GS_PATH_MAX 256
 #define GS_MAX_HALVINGS 16
 
@@ -667,9 +670,16 @@ typedef struct {
     double start_s;               /* the exposure's start, s from the capture's first exposure,
                                    * >= 0 (NaN: unknown; file field "start_s", optional) */
     double window_half_period_s;  /* free running: the fixed period the windows were timed with,
-                                   * in the clock grid_hz_measured was measured with, 1/130 to
-                                   * 1/90 s (NaN: unknown, or locked; file field
-                                   * "window_half_period_s", optional, only with locked false) */
+                                   * in the clock grid_hz_measured was measured with,
+                                   * GS_WINDOW_HALF_PERIOD_MIN_S..MAX_S (NaN: unknown, or locked;
+                                   * file field "window_half_period_s", optional, only with
+                                   * locked false) */
+    double window_drift_windows;  /* free running: how far the windows moved across the flicker
+                                   * cycle during the exposure, the range of their offset from
+                                   * each cycle's crossing over the C cycles, in windows (1/K
+                                   * cycle), from the per-cycle crossings, >= 0 (NaN: unknown, or
+                                   * locked; file field "window_drift_windows", optional, only
+                                   * with locked false) */
 } gs_frame_info;
 
 typedef struct {
@@ -707,9 +717,11 @@ typedef struct {
  * the file and the capture.json line that names it). */
 gs_status gs_capture_read(const char *dir, gs_capture *cap);
 /* How far the exposure windows of frame k moved across the flicker cycle over its exposure, in
- * windows (1/K cycle): 0 for an AC-locked capture (its windows re-anchor at every crossing);
- * free running, K C |2 P f - 1| from the frame's window_half_period_s P and grid_hz_measured f,
- * NaN when it lacks either. */
+ * windows (1/K cycle; against Eq. 5's): 0 for an AC-locked capture (its windows re-anchor at
+ * every crossing); free running, the frame's window_drift_windows, else K C |2 P f - 1| from
+ * its window_half_period_s P and grid_hz_measured f (Eq. 1: f = 1 / (2 Delta)), the net motion
+ * from the first cycle to the last (a grid wandering within the exposure can take the windows
+ * further and back: a lower bound); NaN when it lacks them. */
 double gs_capture_frame_drift(const gs_capture *cap, int k);
 /* The largest over the frames (*frame, may be NULL: which one; -1 when K is 0), NaN when a frame's
  * is (*frame: the first such). */
@@ -744,7 +756,7 @@ int gs_capture_valid_utc(const char *s);
 gs_status gs_capture_budget(const char *source, int width, int height, int bands, int K, int hdr_maps);
 /* For a zeroed capture whose K, bands, width and height are set (GS_EINVAL otherwise, or if
  * frames, raw or halvings are already set): allocate frames (file "frame_NNN.png", k, cycles 0:
- * set them, hdr_map "", grid_hz_measured, start_s and window_half_period_s NaN) and zeroed raw pixels. */
+ * set them, hdr_map "", the timing fields NaN) and zeroed raw pixels. */
 gs_status gs_capture_alloc(gs_capture *cap);
 /* After gs_capture_alloc: allocate zeroed halvings and name every frame's map "hdr_NNN.png"
  * (unless already named). */

@@ -118,8 +118,13 @@ int gs_capture_check_fields(const gs_capture *c, gs_capture_problem *pr)
         snprintf(field, sizeof field, "frames[%d].window_half_period_s", k);
         if (!isnan(f->window_half_period_s) &&
             !(!c->locked && isfinite(f->window_half_period_s) &&
-              f->window_half_period_s >= 1.0 / 130 && f->window_half_period_s <= 1.0 / 90))
+              f->window_half_period_s >= GS_WINDOW_HALF_PERIOD_MIN_S &&
+              f->window_half_period_s <= GS_WINDOW_HALF_PERIOD_MAX_S))
             return set_problem(pr, field, GS_CAPTURE_EXP_WINDOW_PERIOD);
+        snprintf(field, sizeof field, "frames[%d].window_drift_windows", k);
+        if (!isnan(f->window_drift_windows) &&
+            !(!c->locked && isfinite(f->window_drift_windows) && f->window_drift_windows >= 0))
+            return set_problem(pr, field, GS_CAPTURE_EXP_WINDOW_DRIFT);
         snprintf(field, sizeof field, "frames[%d].file", k);
         if (!gs_capture_valid_name(f->file)) return set_problem(pr, field, GS_CAPTURE_EXP_FILE);
         snprintf(field, sizeof field, "frames[%d].hdr_map", k);
@@ -155,12 +160,14 @@ gs_status gs_capture_check(const gs_capture *cap, const char *who)
 }
 
 /* Free running, window k starts at k P / K + c P after the exposure's first crossing, so over
- * its C cycles it moves by C (P / Delta - 1) cycles against the flicker, Delta = 1 / (2 f) the
- * exposure's mean half period: K C |2 P f - 1| windows. */
+ * its C cycles it moves by C (P / Delta - 1) cycles against the flicker (against Eq. 5's window
+ * [k/K, (k+1)/K) of every cycle), Delta = 1 / (2 f) the exposure's mean half period (Eq. 1):
+ * K C |2 P f - 1| windows, the net motion; the recorded range when there is one. */
 double gs_capture_frame_drift(const gs_capture *cap, int k)
 {
     if (cap->locked) return 0.0;
     const gs_frame_info *f = &cap->frames[k];
+    if (f->window_drift_windows >= 0.0) return f->window_drift_windows;
     double d = (double)cap->K * f->cycles * fabs(2.0 * f->window_half_period_s * f->grid_hz_measured - 1.0);
     return isfinite(d) ? d : NAN;
 }

@@ -83,7 +83,7 @@ static const char *const top_keys[] = {
     "format", "grid_hz", "K", "bands", "width", "height", "saturation", "black_level",
     "gain_e_per_dn", "read_noise_dn", "locked", "utc", "station", "frames", NULL};
 static const char *const frame_keys[] = {"file", "k", "cycles", "hdr_map", "grid_hz_measured",
-                                         "start_s", "window_half_period_s", NULL};
+                                         "start_s", "window_half_period_s", "window_drift_windows", NULL};
 
 /* One frame object (array position i) into cap->frames[k], k its own field. */
 static gs_status parse_frame(reader *r, json_t *f, int i, gs_capture *cap)
@@ -118,7 +118,9 @@ static gs_status parse_frame(reader *r, json_t *f, int i, gs_capture *cap)
                          &info.grid_hz_measured)) != GS_OK ||
         (st = get_number(r, f, path, "start_s", 0, NAN, GS_CAPTURE_EXP_START, &info.start_s)) != GS_OK ||
         (st = get_number(r, f, path, "window_half_period_s", 0, NAN, GS_CAPTURE_EXP_WINDOW_PERIOD,
-                         &info.window_half_period_s)) != GS_OK)
+                         &info.window_half_period_s)) != GS_OK ||
+        (st = get_number(r, f, path, "window_drift_windows", 0, NAN, GS_CAPTURE_EXP_WINDOW_DRIFT,
+                         &info.window_drift_windows)) != GS_OK)
         return st;
     cap->frames[k] = info;
     return GS_OK;
@@ -418,7 +420,7 @@ gs_status gs_capture_alloc(gs_capture *cap)
         cap->frames[k].k = k;
         cap->frames[k].grid_hz_measured = NAN;
         cap->frames[k].start_s = NAN;
-        cap->frames[k].window_half_period_s = NAN;
+        cap->frames[k].window_half_period_s = cap->frames[k].window_drift_windows = NAN;
     }
     return GS_OK;
 }
@@ -583,6 +585,10 @@ gs_status gs_capture_write_json(const char *dir, const gs_capture *cap)
         if (!isnan(f->window_half_period_s)) {
             gs_json_real(num, sizeof num, f->window_half_period_s);
             gs_text_printf(&t, ", \"window_half_period_s\": %s", num);
+        }
+        if (!isnan(f->window_drift_windows)) {
+            gs_json_real(num, sizeof num, f->window_drift_windows);
+            gs_text_printf(&t, ", \"window_drift_windows\": %s", num);
         }
         gs_text_printf(&t, "}%s\n", k + 1 < cap->K ? "," : "");
     }
