@@ -233,13 +233,13 @@ gs_status cap_ac_window_period(cap_ac *ac, const cap_window_config *w, double *h
 double cap_window_drift(const double *delta, long cycles, double P, int K)
 {
     double elapsed = 0.0, lo = 0.0, hi = 0.0;
-    for (long c = 0; c < cycles; c++) {
-        if (c % 2 == 0) {
-            double off = ((double)c * P - elapsed) / delta[c];
+    for (long c = 0; c <= cycles; c++) {
+        if (c % 2 == 0 || c == cycles) {
+            double off = ((double)c * P - elapsed) / delta[c < cycles ? c : cycles - 1];
             lo = off < lo ? off : lo;
             hi = off > hi ? off : hi;
         }
-        elapsed += delta[c];
+        if (c < cycles) elapsed += delta[c];
     }
     return (double)K * (hi - lo);
 }

@@ -236,8 +236,9 @@ gs_status cap_ac_window_period(cap_ac *ac, const cap_window_config *w, double *h
 /* How far free-running windows of period P (s) move across the flicker cycle during an
  * exposure of cycles half periods delta[0..cycles) (s, in P's clock): the range over the cycles
  * c of the window's offset from its cycle's crossing, (c P - sum_{i<c} delta_i) / delta_c
- * cycles, times K: in windows. Only even c (crossings of one polarity: a zero-crossing
- * detector's asymmetry alternates the half periods). */
+ * cycles, times K: in windows. At even c (crossings of one polarity: a zero-crossing detector's
+ * asymmetry alternates the half periods) and the exposure's end, c = cycles (over delta of the
+ * last cycle; an odd end is off by the asymmetry), so it holds the net motion. */
 double cap_window_drift(const double *delta, long cycles, double P, int K);
 void cap_windows_release(cap_windows *w);
 

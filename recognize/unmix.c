@@ -693,12 +693,18 @@ gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unm
                     if (r->cond[b] > cmax) cmax = r->cond[b];
                 /* its share of the fitted light tells a source without light (not in the scene,
                  * or at another phase) from sources the data cannot tell apart */
-                st = gs_fail(GS_ENUMERIC, "ill-posed: source %02d (%s at %g deg) would be %.0f %% "
+                int out = 0;
+                for (int k = 0; k < K; k++) out += !rec_frame_kept(gs_capture_frame_drift(cap, k));
+                char why[160] = "";
+                if (out)
+                    snprintf(why, sizeof why, "; %d of %d frames left out, their windows drifted (free running, "
+                             "docs/recognition.md)", out, K);
+                st = gs_fail(GS_ENUMERIC, "ill-posed: source %02d (%s at %g deg) would be %.3g %% "
                              "noise (predicted relative error %.3g > %g; QB's condition number "
-                             "%.3g; its image holds %.2g %% of the fitted images' energy): the data do not support %d "
+                             "%.3g; its image holds %.2g %% of the fitted images' energy%s): the data do not support %d "
                              "sources (paper Fig. 10)",
                              ws, src->bulb[ws], src->phase_deg[ws], 100 * worst, worst,
-                             o_in->max_error, cmax, all > 0 ? 100 * sig[ws] / all : 0.0, S);
+                             o_in->max_error, cmax, all > 0 ? 100 * sig[ws] / all : 0.0, why, S);
                 goto done;
             }
         }

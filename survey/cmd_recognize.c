@@ -24,6 +24,9 @@ static const char recognize_usage[] =
     "Recognizes the bulb type and electric-grid phase of every light in a capture directory\n"
     "(docs/formats.md, gridsurvey-capture/1): lights as blobs with per-frame photometry, then\n"
     "the paper's Eq. 7 against DELIGHT. Prints a table, or JSON (docs/recognize-cli.md).\n"
+    "A free-running capture (locked false) is matched without the frames whose windows drifted\n"
+    "over half a window during the exposure (flag drift; the header says how many; the maps\n"
+    "then answer no pixel).\n"
     "\n"
     "  --format F              table (default) or json (a gridsurvey-lights/1 document)\n"
     "  --phases 3|6|continuous candidate grid phases: 3 = 0/120/240 deg (default); 6 = those\n"
@@ -402,6 +405,9 @@ static gs_status print_json(const recognize_opts *o, const gs_capture *cap, cons
     json_object_set_new(c, "locked", json_boolean(cap->locked));
     double drift = gs_capture_window_drift(cap, NULL);
     json_object_set_new(c, "drift_windows", isfinite(drift) ? json_real(drift) : json_null());
+    int out = 0;
+    for (int k = 0; k < cap->K; k++) out += !rec_frame_kept(gs_capture_frame_drift(cap, k));
+    json_object_set_new(c, "frames_left_out", json_integer(out));
     json_object_set_new(c, "utc", cap->utc[0] ? json_string(cap->utc) : json_null());
     json_t *station = cap->station_json ? json_loads(cap->station_json, 0, NULL) : NULL;
     json_object_set_new(c, "station", station ? station : json_null());
@@ -491,6 +497,10 @@ static gs_status write_maps(const recognize_opts *o, const gs_capture *cap, cons
     progress("per-pixel Eq. 7 ...");
     gs_status st = rec_pixel_maps_compute(cap, m, &o->eq7, &mo, &pm);
     if (st != GS_OK) return st;
+    if (!rec_frame_kept(gs_capture_window_drift(cap, NULL)))
+        fprintf(stderr, "gridsurvey recognize: note: the maps answer no pixel: frames of this free-running "
+                        "capture are left out (their windows drifted), which a pixel's one noise level cannot "
+                        "do (docs/recognition.md, \"Free-running captures\")\n");
     progress("drawing maps ...");
     snprintf(path, sizeof path, "%s/phase_map.png", o->maps);
     st = rec_map_write_phase_png(&pm, path);

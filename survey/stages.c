@@ -112,16 +112,16 @@ void srv_drift_note(const gs_capture *cap, char *buf, size_t n)
     if (cap->locked) {
         snprintf(buf, n, "%s", "");
     } else if (!out) {
-        snprintf(buf, n, "; free running: the windows drifted at most %.2f windows over an exposure (frame %d)",
+        snprintf(buf, n, "; free running: the windows drifted at most %.4g windows over an exposure (frame %d)",
                  worst, worst_k);
     } else {
         int u = snprintf(buf, n, "; free running: %d of %d frames left out (flag drift):", out, cap->K);
         if (u > 0 && (size_t)u < n && out > unknown)
-            u += snprintf(buf + u, n - (size_t)u, " %d drifted over %.1f windows (the most %.2f, frame %d)%s",
+            u += snprintf(buf + u, n - (size_t)u, " %d drifted over %.1f windows (the most %.4g, frame %d)%s",
                           out - unknown, REC_MAX_DRIFT_WINDOWS, worst, worst_k, unknown ? "," : "");
         if (u > 0 && (size_t)u < n && unknown)
-            snprintf(buf + u, n - (size_t)u, " %d without window_drift_windows, window_half_period_s or "
-                     "grid_hz_measured (drift unknown)", unknown);
+            snprintf(buf + u, n - (size_t)u, " %d without the timing to tell (window_drift_windows, or "
+                     "window_half_period_s and grid_hz_measured)", unknown);
     }
 }
 

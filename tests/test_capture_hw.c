@@ -322,15 +322,15 @@ TEST(capture_hardware_reports_the_free_running_period)
             else CHECK_NEAR(cap.frames[k].window_half_period_s, 0.009999, 1e-15);
             /* the log's half periods alternate 10 ms -+ 1.5 us from cycle 0 (the detector's
              * asymmetry): at the crossings of one polarity, even c, the windows are c (P - 10 ms)
-             * behind, over half periods of 9.9985 ms; the range to the last even c < C, in
-             * windows. (K C |2 P f - 1|, the net motion, is K C 1e-4.) */
-            double want = HW_K * (double)((HW_C - 1) / 2 * 2) * 1e-6 / 9.9985e-3;
+             * behind, over half periods of 9.9985 ms; at the end, c = C (even), over the last
+             * cycle's 10.0015 ms. (K C |2 P f - 1|, the net motion, is K C 1e-4.) */
+            double want = HW_K * fmax((HW_C - 2) * 1e-6 / 9.9985e-3, HW_C * 1e-6 / 10.0015e-3);
             if (locked) CHECK(isnan(cap.frames[k].window_drift_windows));
             else CHECK_NEAR(cap.frames[k].window_drift_windows, want, 1e-9);
         }
         if (cap.frames)
             CHECK_NEAR(gs_capture_window_drift(&cap, NULL),
-                       locked ? 0.0 : HW_K * (double)((HW_C - 1) / 2 * 2) * 1e-6 / 9.9985e-3, 1e-9);
+                       locked ? 0.0 : HW_K * fmax((HW_C - 2) * 1e-6 / 9.9985e-3, HW_C * 1e-6 / 10.0015e-3), 1e-9);
         gs_capture_release(&cap);
     }
     CHECK(fake_gpiod_open_handles() == 0);
