@@ -480,19 +480,40 @@ done:
     return s;
 }
 
+/* A free-running capture's samples (cat->drift_windows): a frame beyond REC_MAX_DRIFT_WINDOWS
+ * left out (sigma = +inf); a kept frame k whose windows moved d_k windows is Eq. 5's window
+ * shifted by up to d_k / 2 windows on average (the smear's mean), so its samples' noise gets
+ * d_k / 2 times the light's steepest step between adjacent kept windows in the band added in
+ * quadrature (a bound of the template's change, from the light's own samples). */
+static void drift_sigma(const rec_catalog *cat, size_t i, double *sigma)
+{
+    size_t K = (size_t)cat->K;
+    const double *dr = cat->drift_windows;
+    for (int band = 0; band < cat->bands; band++) {
+        size_t o = (i * (size_t)cat->bands + (size_t)band) * K;
+        const double *x = cat->signal + o;
+        double step = 0.0;
+        for (size_t k = 0; k < K; k++) {
+            size_t k2 = (k + 1) % K;
+            if (rec_frame_kept(dr[k]) && rec_frame_kept(dr[k2]) && isfinite(x[k]) && isfinite(x[k2]))
+                step = fmax(step, fabs(x[k2] - x[k]));
+        }
+        for (size_t k = 0; k < K; k++)
+            sigma[o + k] = !rec_frame_kept(dr[k]) ? INFINITY : hypot(sigma[o + k], 0.5 * dr[k] * step);
+    }
+}
+
 gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_match *out,
                             rec_noise_report *noise)
 {
-    size_t dropped = 0, K = cat ? (size_t)cat->K : 0, D = cat ? (size_t)cat->bands * K : 0;
-    for (size_t k = 0; cat && cat->drift_windows && k < K; k++) dropped += !rec_frame_kept(cat->drift_windows[k]);
-    if (!dropped || !cat->count || !cat->sigma) return match_catalog(m, cat, out, noise);
-    /* frames whose windows smeared across the flicker: their samples dropped (sigma = +inf) */
+    size_t drifted = 0, K = cat ? (size_t)cat->K : 0, D = cat ? (size_t)cat->bands * K : 0;
+    for (size_t k = 0; cat && cat->drift_windows && k < K; k++) drifted += !(cat->drift_windows[k] == 0.0);
+    if (!drifted || !cat->count || !cat->sigma || !cat->signal) return match_catalog(m, cat, out, noise);
     rec_catalog kept = *cat;
     double *sigma = malloc(sizeof *sigma * cat->count * D);
     if (!sigma) return gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", cat->count);
     memcpy(sigma, cat->sigma, sizeof *sigma * cat->count * D);
-    for (size_t d = 0; d < cat->count * D; d++)
-        if (!rec_frame_kept(cat->drift_windows[d % K])) sigma[d] = INFINITY;
+    for (size_t i = 0; i < cat->count; i++) drift_sigma(cat, i, sigma);
     kept.sigma = sigma;
     gs_status s = match_catalog(m, &kept, out, noise);
     free(sigma);

@@ -132,7 +132,8 @@ typedef struct {
                                * (every one 0): how far frame k's exposure windows moved across
                                * the flicker cycle, in windows (gs_capture_frame_drift; NaN:
                                * free running without the timing to tell); rec_match_catalog
-                               * leaves out the frames not rec_frame_kept (REC_MATCH_DRIFT) */
+                               * leaves out the frames not rec_frame_kept and raises the others'
+                               * noise by their smear (REC_MATCH_DRIFT) */
     int *labels;              /* opts.labels: width * height, the light owning each aperture
                                * pixel, -1 elsewhere; else NULL */
 } rec_catalog;
@@ -245,11 +246,12 @@ enum {
     REC_MATCH_BLEND = 1u << 5,            /* two templates explain the light better than one
                                            * (two lights in one aperture): blend_* hold them
                                            * (bulb -1) */
-    REC_MATCH_DRIFT = 1u << 6             /* frames of the capture were left out: their windows
-                                           * drifted over the exposure by more than
-                                           * REC_MAX_DRIFT_WINDOWS, or by an unknown amount
-                                           * (rec_catalog.drift_windows); the answer is the other
-                                           * frames' (every frame left out: BAD_INPUT, bulb -1) */
+    REC_MATCH_DRIFT = 1u << 6             /* the capture's windows drifted during the exposures
+                                           * (free running, rec_catalog.drift_windows): frames
+                                           * beyond REC_MAX_DRIFT_WINDOWS, or by an unknown
+                                           * amount, left out, the others' noise raised by their
+                                           * smear; the answer is theirs (every frame left out:
+                                           * BAD_INPUT, bulb -1) */
 };
 /* Free running, a frame whose windows smear over at most this many windows is still a sample of
  * Eq. 5's window k; beyond, its samples follow no template and Eq. 7's answers were wrong and
@@ -351,8 +353,11 @@ gs_status rec_match_light(const rec_matcher *m, const double *signal, const doub
  * precision times a kernel in image row and log brightness: a blend's or an unknown bulb's
  * misfit never raises its own noise), then the lights fitted again with it; out[i].model_error
  * is the e used. Fewer than 8 clean lights: the camera noise alone. noise (may be NULL) says
- * which. A free-running frame whose windows drifted (cat->drift_windows, not rec_frame_kept)
- * is left out of every light (its samples' sigma +inf) and every light flagged REC_MATCH_DRIFT. */
+ * which. Free running (cat->drift_windows, any frame's not 0), a frame not rec_frame_kept is left
+ * out of every light (its samples' sigma +inf), and a kept frame k that drifted d_k windows
+ * gets d_k / 2 times the light's steepest step between adjacent kept windows of the band added
+ * to its samples' sigma in quadrature (the smear's mean shift of the window, bounded by the
+ * light's own samples); every light is flagged REC_MATCH_DRIFT. */
 typedef enum {
     REC_NOISE_CAMERA,        /* the camera's noise model only (no population to measure from) */
     REC_NOISE_FIXED,         /* the options' model_error for every light */

@@ -399,7 +399,7 @@ TEST(recognize_cli_free_running_drift_leaves_frames_out)
             const char *want = json_string_value(json_object_get(l0, "bulb"));
             const char *bulb = json_string_value(json_object_get(l, "bulb"));
             CHECK(want && !strcmp(want, recfx_lights_a[i].bulb));
-            CHECK_MSG(recfx_has_flag(l, "drift") == (cases[v].out > 0), "%s: light %s flags", cases[v].name, want);
+            CHECK_MSG(recfx_has_flag(l, "drift"), "%s: light %s flags", cases[v].name, want);
             int same = bulb && want && !strcmp(bulb, want) &&
                        json_equal(json_object_get(l, "phase_deg"), json_object_get(l0, "phase_deg"));
             changed += !same;
@@ -426,6 +426,48 @@ TEST(recognize_cli_free_running_drift_leaves_frames_out)
     rec_matcher_free(m);
     gs_delight_free(d);
     json_decref(locked);
+}
+
+/* The lab scene (eight bright lamps, a few metres away) free running with the firmware's
+ * measured period over a wandering grid: at C = 64 its windows move up to 0.09 windows, at
+ * C = 256 five frames over half a window. Leaving those out and raising the kept frames' noise
+ * by their smear (rec_match_catalog), every lamp gets the truth's bulb and phase, as locked; with
+ * Eq. 5's windows taken as exact, the brightest failed the fit (7 and 4 of 8 answered). */
+TEST(recognize_free_running_lab_answered_as_locked)
+{
+    static const int Cs[2] = {64, 256};
+    for (int i = 0; i < 2; i++) {
+        char scene[1024], dir[1024], db[1024], text[16384];
+        snprintf(scene, sizeof scene, "%s/lab_free_%d.json", test_tmpdir(), Cs[i]);
+        snprintf(dir, sizeof dir, "%s/lab_free_%d", test_tmpdir(), Cs[i]);
+        snprintf(db, sizeof db, "%s/lab_free_%d.sqlite", test_tmpdir(), Cs[i]);
+        json_error_t err;
+        json_t *sc = json_load_file("capture/scenes/lab.json", 0, &err);
+        CHECK_MSG(sc != NULL, "lab.json: %s", err.text);
+        if (!sc) return;
+        json_t *acam = json_object_get(sc, "acam");
+        json_object_set_new(acam, "cycles", json_integer(Cs[i]));
+        json_object_set_new(acam, "locked", json_false());
+        json_object_set_new(acam, "free_running_period", json_string("measured"));
+        json_t *freq = json_object();
+        json_object_set_new(freq, "model", json_string("random_walk"));
+        json_object_set_new(json_object_get(sc, "grid"), "frequency", freq);
+        json_object_set_new(json_object_get(sc, "effects"), "frequency_wander", json_object());
+        CHECK(json_dump_file(sc, scene, 0) == 0);
+        json_decref(sc);
+        CHECK_MSG(fx_run(text, sizeof text, "%s run %s --db %s --capture-dir %s --no-progress && %s evaluate --db %s "
+                         "--truth %s/truth.json --format json", test_bin(), scene, db, dir, test_bin(), db, dir) == 0,
+                  "%s", text);
+        const char *js = strstr(text, "{\n  \"format\": \"gridsurvey-evaluation/1\"");
+        json_t *ev = js ? json_loads(js, 0, &err) : NULL;
+        CHECK_MSG(ev != NULL, "%s", text);
+        if (!ev) continue;
+        long right = (long)json_integer_value(json_object_get(json_object_get(ev, "bulb_and_phase"), "count"));
+        printf("    C = %d: %ld of 8 lamps with the right bulb and phase; %s\n", Cs[i], right,
+               strstr(text, "run: note: free running") ? "noted" : "no note");
+        CHECK(right == 8 && strstr(text, "run: note: free running"));
+        json_decref(ev);
+    }
 }
 
 static int run1(const char *args, const char *extra)
