@@ -480,6 +480,17 @@ done:
     return s;
 }
 
+int rec_frames_left_out(const gs_capture *cap, unsigned char *kept)
+{
+    int out = 0;
+    for (int k = 0; k < cap->K; k++) {
+        int keep = rec_frame_kept(gs_capture_frame_drift(cap, k));
+        if (kept) kept[k] = (unsigned char)keep;
+        out += !keep;
+    }
+    return out;
+}
+
 /* A free-running capture's samples (cat->drift_windows): a frame beyond REC_MAX_DRIFT_WINDOWS
  * left out (sigma = +inf); a kept frame k whose windows moved d_k windows is Eq. 5's window
  * shifted by up to d_k / 2 windows on average (the smear's mean), so its samples' noise gets

@@ -263,6 +263,9 @@ static inline int rec_frame_kept(double drift_windows)
 {
     return drift_windows <= REC_MAX_DRIFT_WINDOWS;
 }
+/* The frames of cap that are not rec_frame_kept (gs_capture_frame_drift); kept (may be NULL)
+ * gets K flags, 1 for a kept frame. */
+int rec_frames_left_out(const gs_capture *cap, unsigned char *kept);
 
 /* The answer for one light. No field is ever NaN or infinite.
  * - bulb >= 0: the best (bulb, phase) pair by posterior. Pairs are (bulb, phase) for a

@@ -171,7 +171,9 @@ gs_status rec_sources_auto(const gs_capture *cap, const rec_matcher *m, double m
     rec_source_spec *out = calloc((size_t)max_sources, sizeof *out);
     cand = malloc(sizeof *cand * (P ? P : 1));
     tpl = malloc(sizeof *tpl * D * (size_t)(max_sources + 1));
-    if (!x || !sg || !v || !out || !cand || !tpl) {
+    unsigned char *kept = malloc((size_t)K);   /* (as rec_match_catalog) */
+    if (kept) rec_frames_left_out(cap, kept);
+    if (!x || !sg || !v || !out || !cand || !tpl || !kept) {
         st = gs_fail(GS_ENOMEM, "sources auto: out of memory");
         goto done;
     }
@@ -204,12 +206,11 @@ gs_status rec_sources_auto(const gs_capture *cap, const rec_matcher *m, double m
         for (int k = 0; k < K; k++) {
             int h = cap->halvings ? cap->halvings[(size_t)k * P + p] : 0;
             double c = cap->frames[k].cycles / (double)(1u << h);
-            int kept = rec_frame_kept(gs_capture_frame_drift(cap, k));   /* (as rec_match_catalog) */
             for (int b = 0; b < B; b++) {
                 unsigned short raw = cap->raw[((size_t)k * P + p) * B + b];
                 size_t d = (size_t)b * K + k;
                 x[d] = ((double)raw - cap->black_level_dn) / c;
-                sg[d] = raw >= cap->saturation_dn || !kept ? INFINITY : sqrt(gs_noise_raw_var(&nz, raw)) / c;
+                sg[d] = raw >= cap->saturation_dn || !kept[k] ? INFINITY : sqrt(gs_noise_raw_var(&nz, raw)) / c;
             }
         }
         ntested++;
@@ -279,6 +280,7 @@ done:
     free(v);
     free(x);
     free(sg);
+    free(kept);
     return st;
 }
 

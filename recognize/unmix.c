@@ -46,6 +46,8 @@ typedef struct {
     double *v;        /* [k * B + band] per-cycle values */
     double *c;        /* [k] effective cycles cycles_k / 2^h */
     unsigned char *use;
+    unsigned char *kept;  /* [k] the frame kept (rec_frames_left_out), once per capture */
+    int left_out;         /* frames not kept */
     unsigned short *act;  /* [P] the sources each pixel determines (bit s): given a value */
     unsigned short *fit;  /* [P] the sources in its fit (a superset) */
     double rawmax;        /* the pixel's largest raw sample */
@@ -84,7 +86,7 @@ static int gather(ux *u, size_t p, int *uniform)
         int h = cap->halvings ? cap->halvings[(size_t)k * plane + p] : 0;
         double c = cap->frames[k].cycles / (double)(1u << h);
         const unsigned short *raw = cap->raw + ((size_t)k * plane + p) * (size_t)B;
-        int ok = rec_frame_kept(gs_capture_frame_drift(cap, k));
+        int ok = u->kept[k];
         for (int b = 0; b < B; b++) {
             if (raw[b] >= cap->saturation_dn) ok = 0;
             u->v[k * B + b] = ((double)raw[b] - cap->black_level_dn) / c;
@@ -632,6 +634,7 @@ gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unm
     u.v = malloc(sizeof *u.v * (size_t)K * B);
     u.c = malloc(sizeof *u.c * (size_t)K);
     u.use = malloc((size_t)K);
+    u.kept = malloc((size_t)K);
     u.act = calloc(P, sizeof *u.act);
     u.fit = calloc(P, sizeof *u.fit);
     u.Gc = malloc(sizeof *u.Gc * (size_t)B * S * S);
@@ -646,13 +649,14 @@ gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unm
     r->sigma = malloc(sizeof *r->sigma * (size_t)S * P * B);
     r->state = calloc(P, 1);
     r->residual = malloc(sizeof *r->residual * P);
-    if (!u.A || !u.G0 || !u.G0inv || !u.v || !u.c || !u.use || !u.act || !u.fit || !u.Gc || !u.Gk || !u.kmax || !u.hk || !r->b ||
+    if (!u.A || !u.G0 || !u.G0inv || !u.v || !u.c || !u.use || !u.kept || !u.act || !u.fit || !u.Gc || !u.Gk || !u.kmax || !u.hk || !r->b ||
         !r->tq || !r->sigma || !r->state || !r->residual) {
         st = gs_fail(GS_ENOMEM, "unmix: cannot hold %d source images of %d x %d x %d", S, W, H, B);
         goto done;
     }
     memcpy(r->b, src->b, sizeof *r->b * nb);
     u.bcur = r->b;
+    u.left_out = rec_frames_left_out(cap, u.kept);
     int rank;
     if ((st = setup_design(&u, r->cond, &rank)) != GS_OK) goto done;
     if (S > K || rank < S) {
@@ -693,12 +697,10 @@ gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unm
                     if (r->cond[b] > cmax) cmax = r->cond[b];
                 /* its share of the fitted light tells a source without light (not in the scene,
                  * or at another phase) from sources the data cannot tell apart */
-                int out = 0;
-                for (int k = 0; k < K; k++) out += !rec_frame_kept(gs_capture_frame_drift(cap, k));
                 char why[160] = "";
-                if (out)
+                if (u.left_out)
                     snprintf(why, sizeof why, "; %d of %d frames left out, their windows drifted (free running, "
-                             "docs/recognition.md)", out, K);
+                             "docs/recognition.md)", u.left_out, K);
                 st = gs_fail(GS_ENUMERIC, "ill-posed: source %02d (%s at %g deg) would be %.3g %% "
                              "noise (predicted relative error %.3g > %g; QB's condition number "
                              "%.3g; its image holds %.2g %% of the fitted images' energy%s): the data do not support %d "
@@ -733,6 +735,7 @@ done:
     free(u.v);
     free(u.c);
     free(u.use);
+    free(u.kept);
     free(u.act);
     free(u.fit);
     free(u.Gc);

@@ -311,8 +311,7 @@ static gs_status run_point(const char *base, const srv_acc_crop *cr, const char 
         (s = srv_job_extract(&j, &bo)) != GS_OK)
         goto done;
     p->drift_windows = gs_capture_window_drift(&j.cap, NULL);
-    p->frames_kept = 0;
-    for (int k = 0; k < j.cap.K; k++) p->frames_kept += rec_frame_kept(gs_capture_frame_drift(&j.cap, k));
+    p->frames_kept = j.cap.K - rec_frames_left_out(&j.cap, NULL);
     if (j.cat.count != rr.lights) {
         s = gs_fail(GS_ENUMERIC, "%s: %zu lights extracted again, the pipeline stored %zu", capdir,
                     j.cat.count, rr.lights);

@@ -405,9 +405,7 @@ static gs_status print_json(const recognize_opts *o, const gs_capture *cap, cons
     json_object_set_new(c, "locked", json_boolean(cap->locked));
     double drift = gs_capture_window_drift(cap, NULL);
     json_object_set_new(c, "drift_windows", isfinite(drift) ? json_real(drift) : json_null());
-    int out = 0;
-    for (int k = 0; k < cap->K; k++) out += !rec_frame_kept(gs_capture_frame_drift(cap, k));
-    json_object_set_new(c, "frames_left_out", json_integer(out));
+    json_object_set_new(c, "frames_left_out", json_integer(rec_frames_left_out(cap, NULL)));
     json_object_set_new(c, "utc", cap->utc[0] ? json_string(cap->utc) : json_null());
     json_t *station = cap->station_json ? json_loads(cap->station_json, 0, NULL) : NULL;
     json_object_set_new(c, "station", station ? station : json_null());

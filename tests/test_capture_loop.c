@@ -34,20 +34,25 @@ static void write_small(const char *path, int seed)
     fclose(f);
 }
 
+/* The small scene with its text cut replaced by insert. */
+static void write_small_edited(const char *path, int seed, const char *cut, const char *insert)
+{
+    char text[4096];
+    snprintf(text, sizeof text, small_scene, seed);
+    char *at = strstr(text, cut);
+    CHECK_MSG(at != NULL, "the small scene has no %s", cut);
+    FILE *f = fopen(path, "w");
+    if (at) fprintf(f, "%.*s%s%s", (int)(at - text), text, insert, at + strlen(cut));
+    fclose(f);
+}
+
 /* The small scene free running with the measured period: its capture.json has every frame's
  * window_half_period_s and window_drift_windows, which acquisition.json carries over a resume
  * and replay copies. */
 static void write_small_free(const char *path, int seed)
 {
-    char text[4096];
-    snprintf(text, sizeof text, small_scene, seed);
-    const char *hdr = "\"hdr\": true}";
-    char *at = strstr(text, hdr);
-    CHECK_MSG(at != NULL, "the small scene has no %s", hdr);
-    FILE *f = fopen(path, "w");
-    if (at) fprintf(f, "%.*s\"hdr\": true, \"locked\": false, \"free_running_period\": \"measured\"}%s",
-                    (int)(at - text), text, at + strlen(hdr));
-    fclose(f);
+    write_small_edited(path, seed, "\"hdr\": true}",
+                       "\"hdr\": true, \"locked\": false, \"free_running_period\": \"measured\"}");
 }
 
 /* Every frame of dir/capture.json has a window_half_period_s and a window_drift_windows. */
@@ -66,15 +71,7 @@ static int has_window_periods(const char *dir)
 /* The small scene without shot noise and saturation: its first noise stage is to_dn. */
 static void write_small_without_shot_noise(const char *path, int seed)
 {
-    char text[4096];
-    snprintf(text, sizeof text, small_scene, seed);
-    const char *cut = "\"shot_noise\": {}, \"saturation\": {}, ";
-    char *at = strstr(text, cut);
-    CHECK_MSG(at != NULL, "the small scene has no %s", cut);
-    if (at) memmove(at, at + strlen(cut), strlen(at + strlen(cut)) + 1);
-    FILE *f = fopen(path, "w");
-    fputs(text, f);
-    fclose(f);
+    write_small_edited(path, seed, "\"shot_noise\": {}, \"saturation\": {}, ", "");
 }
 
 /* 1 if dir_a/name and dir_b/name have the same bytes. */
