@@ -165,6 +165,7 @@ bench: $(BIN)
 	$(BIN) bench blobs $(BUILD)/bench-metro > docs/bench-blobs.md.tmp
 	mv docs/bench-blobs.md.tmp docs/bench-blobs.md
 	$(BIN) bench accuracy --out-dir docs/accuracy
+	$(BIN) bench accuracy --drift-sweep --out-dir docs/accuracy-drift
 	$(BIN) bench transport > docs/bench-transport.md.tmp
 	mv docs/bench-transport.md.tmp docs/bench-transport.md
 	@cat docs/bench-recognize.md docs/bench-db.md docs/bench-pg.md docs/bench-render.md docs/bench-blobs.md docs/bench-transport.md

@@ -6,7 +6,7 @@ PKGS="gcc g++ make pkg-config sqlite3 libsqlite3-dev libfftw3-dev libsndfile1-de
 libspng-dev nettle-dev liblapacke-dev libcsv-dev libtiff-dev
 libplplot-dev plplot-driver-cairo libopenblas-dev libopencv-dev libgeographiclib-dev
 geographiclib-tools groff-base libgpiod-dev gcc-avr avr-libc simavr libsimavr-dev libelf-dev gdal-bin
-python3-gdal python3-numpy python3-opencv clang libclang-rt-14-dev libgeos-dev
+python3-gdal python3-numpy python3-pil python3-opencv clang libclang-rt-14-dev libgeos-dev
 libpq-dev postgresql postgresql-15-postgis-3 strace"
 # one dpkg-query for all of them (it runs before every build and demo)
 # shellcheck disable=SC2086

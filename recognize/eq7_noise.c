@@ -480,23 +480,23 @@ done:
     return s;
 }
 
-int rec_frames_left_out(const gs_capture *cap, unsigned char *kept)
+int rec_frames_left_out(const gs_capture *cap, double max_drift_windows, unsigned char *kept)
 {
     int out = 0;
     for (int k = 0; k < cap->K; k++) {
-        int keep = rec_frame_kept(gs_capture_frame_drift(cap, k));
+        int keep = rec_frame_kept(gs_capture_frame_drift(cap, k), max_drift_windows);
         if (kept) kept[k] = (unsigned char)keep;
         out += !keep;
     }
     return out;
 }
 
-/* A free-running capture's samples (cat->drift_windows): a frame beyond REC_MAX_DRIFT_WINDOWS
+/* A free-running capture's samples (cat->drift_windows): a frame beyond max_drift_windows
  * left out (sigma = +inf); a kept frame k whose windows moved d_k windows is Eq. 5's window
  * shifted by up to d_k / 2 windows on average (the smear's mean), so its samples' noise gets
  * d_k / 2 times the light's steepest step between adjacent kept windows in the band added in
  * quadrature (a bound of the template's change, from the light's own samples). */
-static void drift_sigma(const rec_catalog *cat, size_t i, double *sigma)
+static void drift_sigma(const rec_catalog *cat, double max_drift_windows, size_t i, double *sigma)
 {
     size_t K = (size_t)cat->K;
     const double *dr = cat->drift_windows;
@@ -506,11 +506,13 @@ static void drift_sigma(const rec_catalog *cat, size_t i, double *sigma)
         double step = 0.0;
         for (size_t k = 0; k < K; k++) {
             size_t k2 = (k + 1) % K;
-            if (rec_frame_kept(dr[k]) && rec_frame_kept(dr[k2]) && isfinite(x[k]) && isfinite(x[k2]))
+            if (rec_frame_kept(dr[k], max_drift_windows) && rec_frame_kept(dr[k2], max_drift_windows) &&
+                isfinite(x[k]) && isfinite(x[k2]))
                 step = fmax(step, fabs(x[k2] - x[k]));
         }
         for (size_t k = 0; k < K; k++)
-            sigma[o + k] = !rec_frame_kept(dr[k]) ? INFINITY : hypot(sigma[o + k], 0.5 * dr[k] * step);
+            sigma[o + k] = !rec_frame_kept(dr[k], max_drift_windows) ? INFINITY
+                                                                      : hypot(sigma[o + k], 0.5 * dr[k] * step);
     }
 }
 
@@ -524,7 +526,7 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
     double *sigma = malloc(sizeof *sigma * cat->count * D);
     if (!sigma) return gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", cat->count);
     memcpy(sigma, cat->sigma, sizeof *sigma * cat->count * D);
-    for (size_t i = 0; i < cat->count; i++) drift_sigma(cat, i, sigma);
+    for (size_t i = 0; i < cat->count; i++) drift_sigma(cat, m->o.max_drift_windows, i, sigma);
     kept.sigma = sigma;
     gs_status s = match_catalog(m, &kept, out, noise);
     free(sigma);

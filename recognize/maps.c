@@ -329,8 +329,9 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
     for (size_t r = 0; sg && r < cap_rows; r++) sg[r] = row_noise(var_fast, D);
     size_t done = 0, p = 0;
     /* a frame whose windows smeared across the flicker: no pixel answered (the rows have one
-     * sigma each, so its samples cannot be left out as rec_match_catalog does) */
-    if (!rec_frame_kept(gs_capture_window_drift(cap, NULL))) {
+     * sigma each, so its samples can neither be left out nor have their noise raised as
+     * rec_match_catalog does: not beyond REC_MAX_DRIFT_WINDOWS whatever the option) */
+    if (!rec_frame_kept(gs_capture_window_drift(cap, NULL), fmin(m->o.max_drift_windows, REC_MAX_DRIFT_WINDOWS))) {
         p = np;
         if (o->progress) o->progress(o->progress_ctx, 1.0);
     }

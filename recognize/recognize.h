@@ -226,7 +226,14 @@ typedef struct {
                               * p_other = p_blend = 0, other_prior and blend_prior unused) */
     int threads;             /* threads of rec_match_catalog and rec_match_pixels, >= 0; 0 = the
                               * online CPUs (0). The lights and rows are independent: the answers
-                              * are the same bits on any number */
+                              * are the same on any number (rec_match_catalog's the same bits;
+                              * rec_match_pixels' confidences within OpenBLAS's SGEMM rounding) */
+    double max_drift_windows;   /* free running: a frame whose windows moved more than this many
+                              * windows during its exposure (gs_capture_frame_drift) is left out
+                              * of rec_match_catalog and rec_sources_auto; the maps answer no
+                              * pixel once a frame is over it or over REC_MAX_DRIFT_WINDOWS (they
+                              * cannot raise a smeared frame's noise); [0, inf]
+                              * (REC_MAX_DRIFT_WINDOWS) */
 } rec_eq7_opts;
 typedef enum {
     REC_BANDS_CHROMA = 0,    /* one brightness times Q_beta (the paper's Eq. 7) */
@@ -248,24 +255,26 @@ enum {
                                            * (bulb -1) */
     REC_MATCH_DRIFT = 1u << 6             /* the capture's windows drifted during the exposures
                                            * (free running, rec_catalog.drift_windows): frames
-                                           * beyond REC_MAX_DRIFT_WINDOWS, or by an unknown
+                                           * beyond rec_eq7_opts.max_drift_windows, or by an unknown
                                            * amount, left out, the others' noise raised by their
                                            * smear; the answer is theirs (every frame left out:
                                            * BAD_INPUT, bulb -1) */
 };
 /* Free running, a frame whose windows smear over at most this many windows is still a sample of
  * Eq. 5's window k; beyond, its samples follow no template and Eq. 7's answers were wrong and
- * confident (docs/recognition.md, "Free-running captures"). */
+ * confident (docs/recognition.md, "Free-running captures"; `gridsurvey bench accuracy
+ * --drift-sweep` measures others): the default of rec_eq7_opts.max_drift_windows and
+ * rec_unmix_opts.max_drift_windows. */
 #define REC_MAX_DRIFT_WINDOWS 0.5
 /* 1 when a frame whose windows drifted this much (gs_capture_frame_drift) is still a sample of
- * Eq. 5's window: at most REC_MAX_DRIFT_WINDOWS (NaN, unknown: 0). */
-static inline int rec_frame_kept(double drift_windows)
+ * Eq. 5's window: at most max_drift_windows (NaN, unknown: 0). */
+static inline int rec_frame_kept(double drift_windows, double max_drift_windows)
 {
-    return drift_windows <= REC_MAX_DRIFT_WINDOWS;
+    return drift_windows <= max_drift_windows;
 }
-/* The frames of cap that are not rec_frame_kept (gs_capture_frame_drift); kept (may be NULL)
- * gets K flags, 1 for a kept frame. */
-int rec_frames_left_out(const gs_capture *cap, unsigned char *kept);
+/* The frames of cap that are not rec_frame_kept (gs_capture_frame_drift) at max_drift_windows;
+ * kept (may be NULL) gets K flags, 1 for a kept frame. */
+int rec_frames_left_out(const gs_capture *cap, double max_drift_windows, unsigned char *kept);
 
 /* The answer for one light. No field is ever NaN or infinite.
  * - bulb >= 0: the best (bulb, phase) pair by posterior. Pairs are (bulb, phase) for a
@@ -442,7 +451,8 @@ enum {
     REC_PIX_MATCHED,        /* matched: bulb >= 0 */
     REC_PIX_NO_ANSWER,      /* above the threshold, but dim, unknown or bad input, or every
                              * pixel of a capture with a frame whose windows drifted beyond
-                             * REC_MAX_DRIFT_WINDOWS (bulb -1) */
+                             * min(rec_eq7_opts.max_drift_windows, REC_MAX_DRIFT_WINDOWS): the
+                             * pixel path cannot raise a smeared frame's noise (bulb -1) */
     REC_PIX_SATURATED       /* some sample saturated: not matched */
 };
 
@@ -634,6 +644,8 @@ typedef struct {
     double brf_sigma;     /* Eq. 18's freedom: B is the maximum a posteriori under a Gaussian
                            * prior of this std per window mean about the database's B (0.05:
                            * BRFs of one model agree to a few %), > 0 */
+    double max_drift_windows;   /* free running: the frames left out (rec_frame_kept), [0, inf]
+                           * (REC_MAX_DRIFT_WINDOWS, as Eq. 7) */
     void (*progress)(void *ctx, double fraction);   /* NULL = none */
     void *progress_ctx;
 } rec_unmix_opts;

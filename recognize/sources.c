@@ -2,6 +2,7 @@
  * list of (bulb, phase), merging inseparable ones (Eq. 15); the lights in view as sources
  * (Sec. 5.1 (a), (b): blobs, then Eq. 7); the gridsurvey-sources/1 file. */
 #include "recognize/recognize.h"
+#include "recognize/internal.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -172,7 +173,7 @@ gs_status rec_sources_auto(const gs_capture *cap, const rec_matcher *m, double m
     cand = malloc(sizeof *cand * (P ? P : 1));
     tpl = malloc(sizeof *tpl * D * (size_t)(max_sources + 1));
     unsigned char *kept = malloc((size_t)K);   /* (as rec_match_catalog) */
-    if (kept) rec_frames_left_out(cap, kept);
+    if (kept) rec_frames_left_out(cap, m->o.max_drift_windows, kept);
     if (!x || !sg || !v || !out || !cand || !tpl || !kept) {
         st = gs_fail(GS_ENOMEM, "sources auto: out of memory");
         goto done;

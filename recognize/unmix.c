@@ -18,6 +18,7 @@ void rec_unmix_opts_default(rec_unmix_opts *o)
     o->max_error = 0.5;
     o->max_inflation = 10;
     o->brf_sigma = 0.05;
+    o->max_drift_windows = REC_MAX_DRIFT_WINDOWS;
 }
 
 void rec_unmix_release(rec_unmix_result *r)
@@ -605,10 +606,11 @@ gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unm
                        "bands and K = %d: expected 1..%d sources of the capture's bands and K",
                        src->S, src->bands, src->K, cap->bands, cap->K, SMAX);
     if (o_in->refine < 0 || o_in->refine > 20 || !(o_in->max_error > 0) || !(o_in->max_inflation > 1) ||
-        !(o_in->brf_sigma > 0) || !isfinite(o_in->brf_sigma))
+        !(o_in->brf_sigma > 0) || !isfinite(o_in->brf_sigma) || !(o_in->max_drift_windows >= 0))
         return gs_fail(GS_EINVAL, "unmix: refine %d (expected 0..20), max_error %g (> 0), "
-                       "max_inflation %g (> 1), brf_sigma %g (> 0)", o_in->refine, o_in->max_error,
-                       o_in->max_inflation, o_in->brf_sigma);
+                       "max_inflation %g (> 1), brf_sigma %g (> 0), max_drift_windows %g (>= 0)",
+                       o_in->refine, o_in->max_error, o_in->max_inflation, o_in->brf_sigma,
+                       o_in->max_drift_windows);
     int W = cap->width, H = cap->height, B = cap->bands, K = cap->K, S = src->S;
     size_t P = (size_t)W * (size_t)H;
     ux u;
@@ -656,7 +658,7 @@ gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unm
     }
     memcpy(r->b, src->b, sizeof *r->b * nb);
     u.bcur = r->b;
-    u.left_out = rec_frames_left_out(cap, u.kept);
+    u.left_out = rec_frames_left_out(cap, o_in->max_drift_windows, u.kept);
     int rank;
     if ((st = setup_design(&u, r->cond, &rank)) != GS_OK) goto done;
     if (S > K || rank < S) {
@@ -699,8 +701,8 @@ gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unm
                  * or at another phase) from sources the data cannot tell apart */
                 char why[160] = "";
                 if (u.left_out)
-                    snprintf(why, sizeof why, "; %d of %d frames left out, their windows drifted (free running, "
-                             "docs/recognition.md)", u.left_out, K);
+                    snprintf(why, sizeof why, "; %d of %d frames left out, their windows drifted over %g windows "
+                             "(free running, --max-drift-windows)", u.left_out, K, o_in->max_drift_windows);
                 st = gs_fail(GS_ENUMERIC, "ill-posed: source %02d (%s at %g deg) would be %.3g %% "
                              "noise (predicted relative error %.3g > %g; QB's condition number "
                              "%.3g; its image holds %.2g %% of the fitted images' energy%s): the data do not support %d "

@@ -994,7 +994,7 @@ lights:
         printf("\n## The paper's model on %d threads\n\n"
                "Rows of the tables above, now with rec_eq7_opts.threads = %d (rec_match_pixels: blocks of "
                "rows taken in turn, OpenBLAS single-threaded; rec_match_catalog: lights in chunks; "
-               "the answers are the same bits as on one thread: tests/test_eq7_pixels.c, "
+               "the answers are the same as on one thread: tests/test_eq7_pixels.c, "
                "test_eq7_model.c). Seconds are wall-clock time; *reference* and *SGEMM only* stay on one "
                "thread. Per light with continuous phases %d lights (%d above: two threads take the "
                "lights in chunks).\n\n",

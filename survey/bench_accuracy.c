@@ -112,8 +112,9 @@ static gs_status write_scene(const char *base, const srv_acc_point *p, const srv
     jset(acam, "K", json_integer(p->K));
     jset(acam, "cycles", json_integer(p->C));
     jset(acam, "locked", json_boolean(p->locked));
-    /* free running as the firmware does it: the period measured over the 64 cycles before */
-    if (!p->locked) jset(acam, "free_running_period", json_string("measured"));
+    /* free running as the firmware does it: the period measured over the 64 cycles before (or
+     * the nominal one, a mode the firmware does not have: --drift-sweep) */
+    if (!p->locked) jset(acam, "free_running_period", json_string(p->nominal_period ? "nominal" : "measured"));
     if (!json_is_integer(json_object_get(acam, "masks"))) jset(acam, "masks", json_integer(64));
     json_t *hdr = json_object();
     jset(hdr, "enabled", json_boolean(p->hdr));
@@ -262,8 +263,9 @@ static gs_status run_point(const char *base, const srv_acc_crop *cr, const char 
                            const gs_delight *dl, srv_acc_point *p)
 {
     char dir[4096], scene[4200], dbp[4200], capdir[4200];   /* paths stay below 4096 */
-    int len = snprintf(dir, sizeof dir, "%s/%s-K%d-C%d-%s-%s-%s", work, srv_acc_scene_names[p->hard], p->K, p->C,
-                       p->hdr ? "hdr" : "nohdr", p->locked ? "locked" : "free", p->continuous ? "cont" : "ph3");
+    int len = snprintf(dir, sizeof dir, "%s/%s-K%d-C%d-%s-%s-%s-%g", work, srv_acc_scene_names[p->hard], p->K, p->C,
+                       p->hdr ? "hdr" : "nohdr", p->locked ? "locked" : p->nominal_period ? "free-nominal" : "free",
+                       p->continuous ? "cont" : "ph3", p->max_drift_windows);
     if (len < 0 || (size_t)len >= sizeof dir - 32) return gs_fail(GS_EINVAL, "%s: work directory path too long", work);
     rm_rf(dir);
     gs_status s = mkdir_p(dir);
@@ -282,6 +284,7 @@ static gs_status run_point(const char *base, const srv_acc_crop *cr, const char 
     ro.db_path = dbp;
     ro.capture_dir = capdir;
     if (p->continuous) ro.eq7.phases = REC_PHASES_CONTINUOUS;
+    ro.eq7.max_drift_windows = p->max_drift_windows;
     srv_run_report rr;
     if ((s = srv_run(&ro, &rr)) != GS_OK) return s;
     p->sim_s = rr.seconds[SRV_STAGE_CAPTURE];
@@ -311,7 +314,7 @@ static gs_status run_point(const char *base, const srv_acc_crop *cr, const char 
         (s = srv_job_extract(&j, &bo)) != GS_OK)
         goto done;
     p->drift_windows = gs_capture_window_drift(&j.cap, NULL);
-    p->frames_kept = j.cap.K - rec_frames_left_out(&j.cap, NULL);
+    p->frames_kept = j.cap.K - rec_frames_left_out(&j.cap, ro.eq7.max_drift_windows, NULL);
     if (j.cat.count != rr.lights) {
         s = gs_fail(GS_ENUMERIC, "%s: %zu lights extracted again, the pipeline stored %zu", capdir,
                     j.cat.count, rr.lights);
@@ -349,7 +352,7 @@ static gs_status run_point(const char *base, const srv_acc_crop *cr, const char 
         goto done;
 
     /* the oracle on a subset of the same lights (bench_oracle.c) */
-    s = srv_acc_oracle(db, &rr, &j, rows, transformer, n_oracle, sub, p);
+    s = srv_acc_oracle(db, &rr, &j, rows, transformer, ro.eq7.max_drift_windows, n_oracle, sub, p);
 done:
     free(snr);
     free(sub);
@@ -361,7 +364,7 @@ done:
 /* ------------------------------------------------------------------ main */
 
 static const char acc_usage[] =
-    "usage: gridsurvey bench accuracy [--quick] [--out-dir DIR] [--scene FILE] [--keep]\n"
+    "usage: gridsurvey bench accuracy [--quick] [--drift-sweep] [--out-dir DIR] [--scene FILE] [--keep]\n"
     "\n"
     "Sweeps the ACam acquisition (cycles per frame C, windows K, HDR, locked / free running, Eq. 7\n"
     "phase set) on a window of the metro scene and a hard variant, runs the survey pipeline on each\n"
@@ -369,18 +372,24 @@ static const char acc_usage[] =
     "Writes DIR/accuracy.csv, DIR/calibration.csv, DIR/accuracy_vs_time.png, DIR/calibration.png and DIR.md\n"
     "(default DIR: build/accuracy). --quick: a few points on a small window (seconds).\n"
     "--scene: the base scene (capture/scenes/metro.json). --keep: keep the work directory.\n"
+    "--drift-sweep: instead, free running on metro_clear at K = 26, C = 64..1024, the period\n"
+    "measured or nominal, Eq. 7's --max-drift-windows 0.25, 0.5, 1 and none (--quick: K = 8,\n"
+    "C = 1024, 0.25 and none); writes DIR/accuracy.csv and DIR.md (default DIR:\n"
+    "build/accuracy-drift).\n"
     "\n"
     "Examples:\n"
     "  gridsurvey bench accuracy --quick --out-dir build/accuracy-quick\n"
-    "  gridsurvey bench accuracy --out-dir docs/accuracy   # docs/accuracy.md (make bench)\n";
+    "  gridsurvey bench accuracy --out-dir docs/accuracy   # docs/accuracy.md (make bench)\n"
+    "  gridsurvey bench accuracy --drift-sweep --out-dir docs/accuracy-drift   # (make bench)\n";
 
 int srv_bench_accuracy(int argc, char **argv)
 {
     static const struct option longs[] = {{"quick", no_argument, 0, 'q'}, {"out-dir", required_argument, 0, 'O'},
                                           {"scene", required_argument, 0, 's'}, {"keep", no_argument, 0, 'k'},
+                                          {"drift-sweep", no_argument, 0, 'D'},
                                           {"help", no_argument, 0, 'h'}, {0, 0, 0, 0}};
-    int quick = 0, keep = 0, c;
-    const char *out = "build/accuracy", *base = "capture/scenes/metro.json";
+    int quick = 0, keep = 0, drift_sweep = 0, c;
+    const char *out = NULL, *base = "capture/scenes/metro.json";
     optind = 1;
     while ((c = getopt_long(argc, argv, "ho:", longs, NULL)) != -1) {
         if (c == 'q') quick = 1;
@@ -388,6 +397,7 @@ int srv_bench_accuracy(int argc, char **argv)
         else if (c == 'o') return srv_out_dir_hint("bench accuracy");
         else if (c == 's') base = optarg;
         else if (c == 'k') keep = 1;
+        else if (c == 'D') drift_sweep = 1;
         else if (c == 'h') {
             fputs(acc_usage, stdout);
             return 0;
@@ -396,6 +406,7 @@ int srv_bench_accuracy(int argc, char **argv)
         }
     }
     if (optind != argc) return srv_usage_error("bench accuracy", "unexpected argument '%s'", argv[optind]);
+    if (!out) out = drift_sweep ? "build/accuracy-drift" : "build/accuracy";
     openblas_set_num_threads(1);
     double t_start = gs_clock_s(CLOCK_MONOTONIC);
     gs_status s = mkdir_p(out);
@@ -415,12 +426,24 @@ int srv_bench_accuracy(int argc, char **argv)
     size_t cap_pts = 128, np = 0;
     srv_acc_point *pts = calloc(cap_pts, sizeof *pts);
     if (!pts) return srv_error("bench accuracy", gs_fail(GS_ENOMEM, "out of memory"));
-    for (int hard = 0; hard < (quick ? 1 : 3); hard++)
+    for (int hard = 0; hard < (quick ? 1 : 3) && !drift_sweep; hard++)
         for (int ki = 0; ki < nK; ki++)
             for (int ci = 0; ci < nC; ci++)
                 if (hard != 1 || Ks[ki] != 13)   /* metro_hard: K = 8 and 26 only (time) */
                     pts[np++] = (srv_acc_point){.hard = hard, .K = Ks[ki], .C = Cs[ci], .hdr = 1, .locked = 1};
-    if (!quick) {
+    if (drift_sweep) {
+        /* free running: the period measured or nominal, Eq. 7's threshold (docs/recognition.md) */
+        static const int Csw[] = {64, 128, 256, 512, 1024}, Cq[] = {1024};
+        static const double Tsw[] = {0.25, REC_MAX_DRIFT_WINDOWS, 1.0, INFINITY}, Tq[] = {0.25, INFINITY};
+        const int *Cd = quick ? Cq : Csw;
+        const double *Td = quick ? Tq : Tsw;
+        int nCd = quick ? 1 : 5, nTd = quick ? 2 : 4;
+        for (int nominal = 0; nominal < 2; nominal++)
+            for (int ci = 0; ci < nCd; ci++)
+                for (int ti = 0; ti < nTd; ti++)
+                    pts[np++] = (srv_acc_point){.hard = 2, .K = quick ? 8 : 26, .C = Cd[ci], .hdr = 1, .locked = 0,
+                                                .nominal_period = nominal, .max_drift_windows = Td[ti]};
+    } else if (!quick) {
         /* (free running at C = 128 to 1024: below, every frame's windows move under half a
          * window, as locked; above, Eq. 7 leaves out more and more of the frames) */
         static const int Cv[] = {128, 512}, Cfree[] = {128, 256, 512, 1024};
@@ -433,6 +456,7 @@ int srv_bench_accuracy(int argc, char **argv)
         pts[np++] = (srv_acc_point){.K = 8, .C = 64, .hdr = 0, .locked = 1};
         pts[np++] = (srv_acc_point){.K = 8, .C = 1024, .hdr = 1, .locked = 0};
     }
+    for (size_t i = 0; i < np && !drift_sweep; i++) pts[i].max_drift_windows = REC_MAX_DRIFT_WINDOWS;
     gs_delight *dl = NULL;
     if ((s = gs_delight_open(NULL, &dl)) != GS_OK) {
         free(pts);
@@ -448,8 +472,9 @@ int srv_bench_accuracy(int argc, char **argv)
             snprintf(p->err, sizeof p->err, "%s: %s", gs_strerror(s), gs_detail());
             failed++;
         }
-        fprintf(stderr, "bench accuracy: %s K=%d C=%d hdr=%d locked=%d phases=%s: %s (%.1f s)\n",
-                srv_acc_scene_names[p->hard], p->K, p->C, p->hdr, p->locked, srv_acc_ph_name(p),
+        fprintf(stderr, "bench accuracy: %s K=%d C=%d hdr=%d %s phases=%s max drift %g: %s (%.1f s)\n",
+                srv_acc_scene_names[p->hard], p->K, p->C, p->hdr, srv_acc_period_name(p), srv_acc_ph_name(p),
+                p->max_drift_windows,
                 p->ok ? "ok" : p->err, gs_clock_s(CLOCK_MONOTONIC) - t0);
         if (!keep) rm_rf(work), mkdir(work, 0700);
     }
@@ -457,19 +482,21 @@ int srv_bench_accuracy(int argc, char **argv)
     char path[4400];
     snprintf(path, sizeof path, "%s/accuracy.csv", out);
     s = srv_acc_write_csv(path, pts, np);
-    if (s == GS_OK) {
+    char doc[4400];
+    size_t len = strlen(out);
+    while (len > 1 && out[len - 1] == '/') len--;
+    snprintf(doc, sizeof doc, "%.*s.md", (int)len, out);
+    if (s == GS_OK && drift_sweep) {
+        s = srv_acc_write_drift_doc(doc, out, base, &cr, quick, pts, np, gs_clock_s(CLOCK_MONOTONIC) - t_start);
+    } else if (s == GS_OK) {
         snprintf(path, sizeof path, "%s/calibration.csv", out);
         s = srv_acc_write_bins_csv(path, pts, np);
     }
-    if (s == GS_OK) {
+    if (s == GS_OK && !drift_sweep) {
         snprintf(path, sizeof path, "%s/accuracy_vs_time.png", out);
         srv_acc_plot_accuracy(path, pts, np, Ks, nK);
         snprintf(path, sizeof path, "%s/calibration.png", out);
         srv_acc_plot_calibration(path, pts, np);
-        char doc[4400];
-        size_t len = strlen(out);
-        while (len > 1 && out[len - 1] == '/') len--;
-        snprintf(doc, sizeof doc, "%.*s.md", (int)len, out);
         s = srv_acc_write_doc(doc, out, base, &cr, quick, pts, np, gs_clock_s(CLOCK_MONOTONIC) - t_start, Ks, nK);
     }
     if (!keep) rm_rf(work);

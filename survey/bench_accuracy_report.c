@@ -33,6 +33,18 @@ static void fmt_num(char *b, size_t n, double v, const char *f)
     else snprintf(b, n, "-");
 }
 
+const char *srv_acc_period_name(const srv_acc_point *p)
+{
+    return p->locked ? "locked" : p->nominal_period ? "nominal" : "measured";
+}
+
+const char *srv_acc_threshold_name(const srv_acc_point *p, char *buf, size_t n)
+{
+    if (isfinite(p->max_drift_windows)) snprintf(buf, n, "%g", p->max_drift_windows);
+    else snprintf(buf, n, "none");
+    return buf;
+}
+
 gs_status srv_acc_write_csv(const char *path, const srv_acc_point *pts, size_t np)
 {
     FILE *f = fopen(path, "w");
@@ -40,18 +52,21 @@ gs_status srv_acc_write_csv(const char *path, const srv_acc_point *pts, size_t n
     fprintf(f, "scene,K,C,hdr,locked,phases,acquisitions,exposure_s,readout_s,capture_s,compute_s,"
                "truth_lights,stored,matched,detection_rate,false_rate,bulb_accuracy,phase_accuracy,"
                "right_rate,bulb_unknown_rate,loc_median_m,loc_p95_m,snr_p90,ece,oracle_lights,"
-               "pipeline_on_oracle_lights,oracle_accuracy,phase_ece,phase_answered,drift_windows,frames_kept\n");
+               "pipeline_on_oracle_lights,oracle_accuracy,phase_ece,phase_answered,drift_windows,frames_kept,"
+               "free_period,max_drift_windows\n");
     for (size_t i = 0; i < np; i++) {
         const srv_acc_point *p = &pts[i];
+        char thr[32];
         if (!p->ok) continue;
         fprintf(f, "%s,%d,%d,%d,%d,%s,%ld,%.2f,%.2f,%.2f,%.3f,%ld,%ld,%ld,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,"
-                   "%.2f,%.2f,%.2f,%.4f,%ld,%.4f,%.4f,%.4f,%ld,%.4f,%d\n",
+                   "%.2f,%.2f,%.2f,%.4f,%ld,%.4f,%.4f,%.4f,%ld,%.4f,%d,%s,%s\n",
                 srv_acc_scene_names[p->hard], p->K, p->C, p->hdr, p->locked, srv_acc_ph_name(p), p->acquisitions,
                 p->exposure_s, p->readout_s, p->capture_s, p->compute_s, p->ev.truth_in_image, p->ev.stored,
                 p->ev.matched, p->ev.detection_rate, p->ev.false_rate, p->ev.bulb_accuracy,
                 p->ev.phase_accuracy, p->ev.all_correct_rate, p->ev.bulb_unknown_rate, p->ev.loc_median_m,
                 p->ev.loc_p95_m, p->snr_p90, p->cal.ece, p->oracle_n, p->ours_sub, p->oracle_sub, p->phase_cal.ece,
-                p->ev.phase_answered, p->drift_windows, p->frames_kept);
+                p->ev.phase_answered, p->drift_windows, p->frames_kept, srv_acc_period_name(p),
+                srv_acc_threshold_name(p, thr, sizeof thr));
     }
     int bad = ferror(f);
     if (fclose(f) != 0 || bad) return gs_fail(GS_EIO, "%s: write failed", path);
@@ -399,7 +414,7 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
                "The 64 cycles the controller needs to lock before the first frame are not counted.\n"
                "- **lock**: AC-locked, or free running (the windows timed with the half period measured "
                "before each exposure, as the firmware does): the frames Eq. 7 kept of the K, those whose "
-               "windows moved at most 0.5 windows across the flicker cycle during the exposure "
+               "windows moved at most %g windows across the flicker cycle during the exposure "
                "(`gs_capture_frame_drift`, capture.json's `window_drift_windows`; the others' samples are "
                "left out, `REC_MATCH_DRIFT`, docs/recognition.md \"Free-running captures\"), and in "
                "parentheses the largest drift, in windows.\n"
@@ -434,7 +449,7 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
                "variances plus that variance, common to the bands), so it is a ceiling; free running, it "
                "leaves out the frames Eq. 7 leaves out and takes the others' windows as regular (Eq. 5), "
                "as Eq. 7 does.\n\n",
-            "[0, 0.5), [0.5, 0.8), [0.8, 0.95), [0.95, 0.99), [0.99, 1]", quick ? 8 : 40);
+            REC_MAX_DRIFT_WINDOWS, "[0, 0.5), [0.5, 0.8), [0.8, 0.95), [0.95, 0.99), [0.99, 1]", quick ? 8 : 40);
     fprintf(f, "## Table\n\n");
     fprintf(f, "| scene | K | C | HDR | lock | phases | A | capture s | compute s | det. | false | bulb | phase | "
                "unkn. | right/det. | right/all | loc. m (med / p95) | SNR90 | ECE | phase ECE | oracle lights | pipeline | oracle | gap |\n");
@@ -584,3 +599,62 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
     return GS_OK;
 }
 
+
+gs_status srv_acc_write_drift_doc(const char *path, const char *out, const char *base, const srv_acc_crop *cr,
+                                  int quick, const srv_acc_point *pts, size_t np, double wall)
+{
+    FILE *f = fopen(path, "w");
+    if (!f) return gs_fail(GS_EIO, "%s: cannot write: %s", path, strerror(errno));
+    const char *leaf = strrchr(out, '/') ? strrchr(out, '/') + 1 : out;
+    const char *q = quick ? " --quick" : "";
+    fprintf(f, "# Free running: which frames Eq. 7 keeps (`gridsurvey bench accuracy --drift-sweep%s`)\n\n"
+               "Generated by `gridsurvey bench accuracy --drift-sweep%s --out-dir %s` (survey/bench_accuracy.c), "
+               "which wrote this file and `%s/accuracy.csv` (the columns of docs/accuracy.md's, with "
+               "`free_period` and `max_drift_windows`). Every number is deterministic given the scene's seed "
+               "except the times; this run took %.0f s of wall time.\n\n",
+            q, q, out, leaf, wall);
+    fprintf(f, "Scene `%s` without extinction and scintillation (metro_clear), through a %d x %d window (pixels "
+               "%d..%d x %d..%d), HDR on, phases 0/120/240, the ACam free running: each frame's windows timed "
+               "with a fixed half period P from the start of its exposure, so they move across the flicker "
+               "over its C cycles (capture.json's `window_drift_windows`, docs/capture.md). **period**: P "
+               "measured over the 64 cycles before each exposure, as the firmware does, or the grid's "
+               "nominal one (a mode the firmware does not have: it shows a larger drift). **threshold**: "
+               "`rec_eq7_opts.max_drift_windows` (`recognize --max-drift-windows`; the default is %g): a frame "
+               "whose windows moved further is left out of Eq. 7, the others' noise is raised by their "
+               "smear (docs/recognition.md, \"Free-running captures\"); *none* keeps every frame. **kept**: "
+               "the frames kept of the K, and in parentheses the largest drift, in windows. The other "
+               "columns are docs/accuracy.md's: *bulb* and *phase* the accuracy of the answers given, *unkn.* "
+               "the detected lights without a bulb, *right/det.* the detected lights with the right bulb and "
+               "phase, ECE of the reported confidence, and the maximum-likelihood oracle on its subset "
+               "(survey/bench_oracle.c), which leaves out the same frames but takes the kept ones' windows "
+               "as regular (Eq. 5) without raising their noise: with drifted frames kept it is no "
+               "ceiling (a negative gap). Discussed in docs/recognition.md, \"Free-running captures\".\n\n",
+            base, cr->w, cr->h, cr->x0, cr->x0 + cr->w - 1, cr->y0, cr->y0 + cr->h - 1, REC_MAX_DRIFT_WINDOWS);
+    fprintf(f, "| period | K | C | threshold | kept | capture s | det. | bulb | phase | unkn. | right/det. | ECE | "
+               "oracle lights | pipeline | oracle | gap |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    for (size_t i = 0; i < np; i++) {
+        const srv_acc_point *p = &pts[i];
+        char thr[32], b[12][40];
+        srv_acc_threshold_name(p, thr, sizeof thr);
+        if (!p->ok) {
+            fprintf(f, "| %s | %d | %d | %s | failed: %s ||||||||||||\n", srv_acc_period_name(p), p->K, p->C, thr, p->err);
+            continue;
+        }
+        snprintf(b[0], 40, "%d of %d (%.2f)", p->frames_kept, p->K, p->drift_windows);
+        fmt_num(b[1], 40, 100 * p->ev.detection_rate, "%.1f %%");
+        fmt_num(b[2], 40, 100 * p->ev.bulb_accuracy, "%.1f %%");
+        fmt_num(b[3], 40, 100 * p->ev.phase_accuracy, "%.1f %%");
+        fmt_num(b[4], 40, 100 * p->ev.bulb_unknown_rate, "%.1f %%");
+        fmt_num(b[5], 40, 100 * right_of_detected(p), "%.1f %%");
+        fmt_num(b[6], 40, p->cal.ece, "%.3f");
+        fmt_num(b[7], 40, 100 * p->ours_sub, "%.1f %%");
+        fmt_num(b[8], 40, 100 * p->oracle_sub, "%.1f %%");
+        fmt_num(b[9], 40, 100 * (p->oracle_sub - p->ours_sub), "%+.1f");
+        fprintf(f, "| %s | %d | %d | %s | %s | %.1f | %s | %s | %s | %s | %s | %s | %ld | %s | %s | %s |\n",
+                srv_acc_period_name(p), p->K, p->C, thr, b[0], p->capture_s, b[1], b[2], b[3], b[4], b[5], b[6],
+                p->oracle_n, b[7], b[8], b[9]);
+    }
+    int bad = ferror(f);
+    if (fclose(f) != 0 || bad) return gs_fail(GS_EIO, "%s: write failed", path);
+    return GS_OK;
+}

@@ -81,7 +81,7 @@ static const atmo_light *nearest(const atmo_light *a, size_t n, double x, double
 }
 
 gs_status srv_acc_oracle(srv_db *db, const srv_run_report *rr, const srv_job *j,
-                         const srv_light_row *rows, double transformer, int n_oracle,
+                         const srv_light_row *rows, double transformer, double max_drift_windows, int n_oracle,
                          srv_light_row *sub, srv_acc_point *p)
 {
     p->ours_sub = p->oracle_sub = NAN;
@@ -167,7 +167,7 @@ gs_status srv_acc_oracle(srv_db *db, const srv_run_report *rr, const srv_job *j,
         /* the frames Eq. 7 leaves out (free running, rec_frame_kept): 0 in the data and every
          * template, a term the same for every candidate and brightness */
         for (int kk = 0; j->cat.drift_windows && kk < K; kk++)
-            if (!rec_frame_kept(j->cat.drift_windows[kk]))
+            if (!rec_frame_kept(j->cat.drift_windows[kk], max_drift_windows))
                 for (int d = kk; d < D; d += K) {
                     x[d] = 0.0;
                     for (int q = 0; q < M; q++) tl[(size_t)q * D + d] = 0.0;

@@ -230,6 +230,17 @@ int srv_num_arg(const char *cmd, const char *opt, const char *arg, double lo, do
     return srv_num_arg_open(cmd, opt, arg, lo, hi, 0, out);
 }
 
+int srv_drift_arg(const char *cmd, const char *arg, double *out)
+{
+    if (!strcmp(arg, "none")) {
+        *out = INFINITY;
+        return 1;
+    }
+    if (gs_parse_number(arg, out) && *out >= 0) return 1;
+    srv_usage_error(cmd, "--max-drift-windows '%s': expected a number >= 0 or none", arg);
+    return 0;
+}
+
 int srv_choice_arg(const char *cmd, const char *opt, const char *arg, int a, int b, int *out)
 {
     char sa[16], sb[16];

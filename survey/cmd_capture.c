@@ -37,6 +37,7 @@ static const char capture_usage[] =
     "                     capture.json records it and how far the windows moved\n"
     "                     (window_half_period_s, window_drift_windows), and recognition leaves\n"
     "                     out the frames whose windows moved over half a window\n"
+    "                     (recognize --max-drift-windows)\n"
     "  --stop-after N     stop after acquiring N frames (run again to resume)\n"
     "  --force            start again even if CAPDIR holds an acquisition of another\n"
     "                     configuration\n"

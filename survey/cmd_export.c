@@ -295,6 +295,6 @@ int srv_cmd_export(int argc, char **argv)
                                       : gis_export(lights, n, fmt, out);
     free(lights);
     if (s != GS_OK) return srv_error("export", s);
-    fprintf(srv_note_stream(out), "exported %zu lights -> %s\n", n, out);
+    fprintf(srv_note_stream(out), "exported %zu light%s -> %s\n", n, n == 1 ? "" : "s", out);
     return 0;
 }

@@ -25,8 +25,8 @@ static const char recognize_usage[] =
     "(docs/formats.md, gridsurvey-capture/1): lights as blobs with per-frame photometry, then\n"
     "the paper's Eq. 7 against DELIGHT. Prints a table, or JSON (docs/recognize-cli.md).\n"
     "A free-running capture (locked false) is matched without the frames whose windows drifted\n"
-    "over half a window during the exposure (flag drift; the header says how many; the maps\n"
-    "then answer no pixel).\n"
+    "over --max-drift-windows during the exposure (flag drift; the header says how many;\n"
+    "the maps then answer no pixel).\n"
     "\n"
     "  --format F              table (default) or json (a gridsurvey-lights/1 document)\n"
     "  --phases 3|6|continuous candidate grid phases: 3 = 0/120/240 deg (default); 6 = those\n"
@@ -58,10 +58,12 @@ static const char recognize_usage[] =
     "                          a bulb not in DELIGHT (default on); off: Eq. 7 alone (with\n"
     "                          --band-model chroma --model-error 0 --other-prior 0\n"
     "                          --flat-share 0, exactly the paper's)\n"
+    "  --max-drift-windows W   free running: the most a kept frame's windows moved, >= 0 or\n"
+    "                          none (all of known drift; default 0.5)\n"
     "  --threshold S           detection threshold of lights and mapped pixels, noise sigmas > 0\n"
     "                          (default 5)\n"
     "  --delight DB            the DELIGHT SQLite file (default: $GRIDSURVEY_DELIGHT, else the\n"
-    "                          built-in database generated from the lamp models)\n"
+    "                          built-in database from the lamp models)\n"
     "  --maps DIR              also write DIR/phase_map.png, bulb_map.png, confidence_map.png\n"
     "                          (per-pixel Eq. 7, paper Fig. 1) and signals.png (Fig. 3)\n"
     "  --progress              progress on stderr (default: when stderr is a terminal)\n"
@@ -141,6 +143,7 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
         {"flat-share", required_argument, 0, 'F'},
         {"blend-prior", required_argument, 0, 'B'},
         {"nested-tests", required_argument, 0, 'N'},
+        {"max-drift-windows", required_argument, 0, 'W'},
         {"delight", required_argument, 0, 'd'},
         {"maps", required_argument, 0, 'm'},
         {"progress", no_argument, 0, 'P'},
@@ -208,6 +211,9 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
             if (!strcmp(optarg, "on") || !strcmp(optarg, "off")) o->eq7.nested_tests = !strcmp(optarg, "on");
             else return srv_usage_error("recognize", "--nested-tests '%s': expected on or off", optarg);
             break;
+        case 'W':
+            if (!srv_drift_arg("recognize", optarg, &o->eq7.max_drift_windows)) return 2;
+            break;
         case 's':
             if (!srv_num_arg_open("recognize", "--threshold", optarg, 0.0, INFINITY, SRV_OPEN_LO, &o->threshold)) return 2;
             break;
@@ -251,6 +257,14 @@ static int has_flag(size_t f, unsigned blob_flags, const rec_match *mt)
     return (flag_names[f].match ? mt->flags : blob_flags) & flag_names[f].bit;
 }
 
+/* A phase in [0, 360) as printed with this many decimals: 0 where it would read 360 (359.97
+ * with one decimal). */
+static double shown_deg(double deg, int decimals)
+{
+    double scale = pow(10.0, decimals);
+    return round(deg * scale) / scale >= 360.0 ? 0.0 : deg;
+}
+
 static const char *phases_name(rec_phase_set p)
 {
     return p == REC_PHASES_6 ? "6" : p == REC_PHASES_CONTINUOUS ? "continuous" : "3";
@@ -260,7 +274,7 @@ static void print_table(const recognize_opts *o, const gs_capture *cap, const re
                         const rec_catalog *cat, const rec_match *mt, const rec_noise_report *noise)
 {
     char drift[256];
-    srv_drift_note(cap, drift, sizeof drift);
+    srv_drift_note(cap, o->eq7.max_drift_windows, drift, sizeof drift);
     printf("capture %s: %d Hz grid, K = %d, %d band%s, %dx%d pixels%s; DELIGHT %s (%zu candidate "
            "bulbs); phases %s\n",
            o->capdir, cap->grid_hz, cap->K, cap->bands, cap->bands == 1 ? "" : "s", cap->width,
@@ -298,12 +312,12 @@ static void print_table(const recognize_opts *o, const gs_capture *cap, const re
         const gs_bulb *rb = r->runner_bulb >= 0 ? rec_matcher_bulb(m, (size_t)r->runner_bulb) : NULL;
         char phase[32] = "-", runner[64] = "-", flags[160] = "", chi[32];
         if (rec_match_phase_known(m, r)) {
-            snprintf(phase, sizeof phase, "%.1f +- %.1f", r->phase_deg, r->phase_sigma_deg);
+            snprintf(phase, sizeof phase, "%.1f +- %.1f", shown_deg(r->phase_deg, 1), r->phase_sigma_deg);
             with_phase++;
         }
         if (b) with_bulb++;
         if (rb)
-            snprintf(runner, sizeof runner, "%s @ %.0f (%.3f)", rb->id, r->runner_phase_deg,
+            snprintf(runner, sizeof runner, "%s @ %.0f (%.3f)", rb->id, shown_deg(r->runner_phase_deg, 0),
                      r->runner_confidence);
         for (size_t f = 0; f < N_FLAGS; f++)
             if (has_flag(f, cat->flags[i], r)) {
@@ -316,7 +330,8 @@ static void print_table(const recognize_opts *o, const gs_capture *cap, const re
                b ? gs_tech_name(b->type) : "-", phase, r->confidence, runner, chi, r->p_value,
                *flags ? flags : "-");
     }
-    printf("%zu lights: %zu with a bulb, %zu with a phase\n", cat->count, with_bulb, with_phase);
+    printf("%zu light%s: %zu with a bulb, %zu with a phase\n", cat->count, cat->count == 1 ? "" : "s", with_bulb,
+           with_phase);
 }
 
 /* json_real that never holds NaN/Inf (the library's fields are finite; this is a guard). */
@@ -405,7 +420,7 @@ static gs_status print_json(const recognize_opts *o, const gs_capture *cap, cons
     json_object_set_new(c, "locked", json_boolean(cap->locked));
     double drift = gs_capture_window_drift(cap, NULL);
     json_object_set_new(c, "drift_windows", isfinite(drift) ? json_real(drift) : json_null());
-    json_object_set_new(c, "frames_left_out", json_integer(rec_frames_left_out(cap, NULL)));
+    json_object_set_new(c, "frames_left_out", json_integer(rec_frames_left_out(cap, o->eq7.max_drift_windows, NULL)));
     json_object_set_new(c, "utc", cap->utc[0] ? json_string(cap->utc) : json_null());
     json_t *station = cap->station_json ? json_loads(cap->station_json, 0, NULL) : NULL;
     json_object_set_new(c, "station", station ? station : json_null());
@@ -418,6 +433,7 @@ static gs_status print_json(const recognize_opts *o, const gs_capture *cap, cons
     json_object_set_new(r, "min_confidence", jreal(o->eq7.ambiguous_conf));
     json_object_set_new(r, "unknown_p", jreal(o->eq7.unknown_p));
     json_object_set_new(r, "min_snr", jreal(o->eq7.min_snr));
+    json_object_set_new(r, "max_drift_windows", jreal(o->eq7.max_drift_windows));
     json_object_set_new(r, "threshold_sigma", jreal(o->threshold));
     json_object_set_new(r, "band_model", json_string(cap->bands > 1 ? band_model_name(o->eq7.band_gains) : "mono"));
     json_object_set_new(r, "chroma_tolerance", jreal(o->eq7.chroma_tolerance));
@@ -495,7 +511,7 @@ static gs_status write_maps(const recognize_opts *o, const gs_capture *cap, cons
     progress("per-pixel Eq. 7 ...");
     gs_status st = rec_pixel_maps_compute(cap, m, &o->eq7, &mo, &pm);
     if (st != GS_OK) return st;
-    if (!rec_frame_kept(gs_capture_window_drift(cap, NULL)))
+    if (!rec_frame_kept(gs_capture_window_drift(cap, NULL), fmin(o->eq7.max_drift_windows, REC_MAX_DRIFT_WINDOWS)))
         fprintf(stderr, "gridsurvey recognize: note: the maps answer no pixel: frames of this free-running "
                         "capture are left out (their windows drifted), which a pixel's one noise level cannot "
                         "do (docs/recognition.md, \"Free-running captures\")\n");

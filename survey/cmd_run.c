@@ -18,6 +18,7 @@ static const char run_usage[] =
     "                      [--survey NAME]\n"
     "                      [--capture-dir DIR] [--light-height-m H] [--light-height-sigma-m S]\n"
     "                      [--phases 3|6|continuous] [--unknown-p P] [--delight DB]\n"
+    "                      [--max-drift-windows W]\n"
     "                      [--out-dir DIR] [--progress | --no-progress | -q]\n"
     "\n"
     "The whole job on one capture: a scene (gridsurvey-scene/1) is acquired by the simulator\n"
@@ -58,6 +59,11 @@ static const char run_usage[] =
     "  --unknown-p P        Eq. 7's goodness-of-fit gate: a light whose best fit has a chi-square\n"
     "                       p-value below P gets no bulb (unknown), in [0, 1); 0 turns the gate\n"
     "                       off (default 0.001)\n"
+    "  --max-drift-windows W\n"
+    "                       free running: Eq. 7 leaves out the frames whose windows moved\n"
+    "                       over W windows during the exposure, >= 0 or none (keep every frame\n"
+    "                       of known drift; default 0.5). A capture already in the survey keeps\n"
+    "                       its answers: run it into another --survey\n"
     "  --delight DB         DELIGHT SQLite file (default: $GRIDSURVEY_DELIGHT, else the scene's,\n"
     "                       else the built-in database)\n"
     "  --out-dir DIR        where the GeoJSON and the map go (default: the database's directory)\n"
@@ -155,7 +161,7 @@ static gs_status write_outputs(srv_db *db, const srv_run_report *r, const char *
     safe_name(r->survey, name, sizeof name);
     snprintf(path, sizeof path, "%s/%s.geojson", out_dir, name);
     s = gis_export(lights, n, GIS_FORMAT_GEOJSON, path);
-    if (s == GS_OK) printf("\nwrote %s (%zu lights, %zu located)\n", path, n, located);
+    if (s == GS_OK) printf("\nwrote %s (%zu light%s, %zu located)\n", path, n, n == 1 ? "" : "s", located);
     /* every station of the survey (a second station's run maps the first's detections too) */
     gis_camera *cams = NULL;
     size_t n_cams = 0;
@@ -189,8 +195,8 @@ static gs_status run_one(const srv_run_opts *op, srv_run_report *rep)
     printf("run: survey %s, capture %s (key %.19s...)", r.survey, r.capture_dir, r.key);
     if (r.scene) printf(": %d frames acquired, %d kept from an earlier run", r.frames_acquired, r.frames_kept);
     printf("\n");
-    printf("run: %zu lights, %zu with a bulb, %zu with a phase, %zu located", r.lights, r.with_bulb,
-           r.with_phase, r.located);
+    printf("run: %zu light%s, %zu with a bulb, %zu with a phase, %zu located", r.lights, r.lights == 1 ? "" : "s",
+           r.with_bulb, r.with_phase, r.located);
     if (isfinite(r.light_height_m))
         printf(" at %.2f m above the ellipsoid (%s), height sigma %.2f m", r.light_height_m,
                r.height_source, r.light_height_sigma_m);
@@ -287,6 +293,7 @@ int srv_cmd_run(int argc, char **argv)
         {"delight", required_argument, 0, 'D'},     {"out-dir", required_argument, 0, 'O'},
         {"unknown-p", required_argument, 0, 'u'},   {"light-height-sigma-m", required_argument, 0, 'G'},
         {"progress", no_argument, 0, 'P'},          {"no-progress", no_argument, 0, 'q'},
+        {"max-drift-windows", required_argument, 0, 'W'},
         {"help", no_argument, 0, 'h'},              {0, 0, 0, 0},
     };
     srv_run_opts o;
@@ -322,6 +329,9 @@ int srv_cmd_run(int argc, char **argv)
             else if (!strcmp(optarg, "6")) o.eq7.phases = REC_PHASES_6;
             else if (!strcmp(optarg, "continuous")) o.eq7.phases = REC_PHASES_CONTINUOUS;
             else return srv_usage_error("run", "--phases '%s': expected 3, 6 or continuous", optarg);
+            break;
+        case 'W':
+            if (!srv_drift_arg("run", optarg, &o.eq7.max_drift_windows)) return 2;
             break;
         case 'h': fputs(run_usage, stdout); return 0;
         case ':': return srv_usage_error("run", "option '%s' needs a value", argv[optind - 1]);

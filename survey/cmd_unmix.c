@@ -38,8 +38,12 @@ static const char unmix_usage[] =
     "  --max-sources N    with auto: at most N sources, 1..16 (default 8)\n"
     "  --min-pixels N     with auto: a source must dominate at least N pixels (default 3)\n"
     "  --delight DB       DELIGHT SQLite file (default: $GRIDSURVEY_DELIGHT, else built-in)\n"
+    "  --max-drift-windows W\n"
+    "                     free running: the frames whose windows moved over W windows\n"
+    "                     during the exposure are left out, >= 0 or none (default 0.5)\n"
+    "  --progress         progress on stderr (default: when stderr is a terminal)\n"
+    "  -q, --no-progress  no progress\n"
     "  --help             this text\n"
-    "\n"
     "\n"
     "Examples:\n"
     "  gridsurvey simulate capture/scenes/lab_transport.json --out-dir build/lab-transport\n"
@@ -48,6 +52,15 @@ static const char unmix_usage[] =
     "  gridsurvey unmix build/lab-transport --sources auto --out-dir build/unmixed-auto\n"
     "\n"
     "Exit status: 0 done, 1 failure or ill-posed (one line on stderr), 2 usage error.\n";
+
+/* Eq. 16's passes over the pixels, on one terminal line. */
+static void unmix_progress(void *ctx, double fraction)
+{
+    (void)ctx;
+    fprintf(stderr, "\r\033[Kgridsurvey unmix: %3.0f %%", 100.0 * fraction);
+    if (fraction >= 1.0) fputs("\r\033[K", stderr);
+    fflush(stderr);
+}
 
 /* Each source's error against the truth, the denoising of the rendered sequence. */
 static void print_truth(const char *capdir, const gs_capture *cap, const rec_sources *src,
@@ -134,17 +147,18 @@ int srv_cmd_unmix(int argc, char **argv)
         {"render", no_argument, 0, 'r'},        {"refine", required_argument, 0, 'f'},
         {"max-error", required_argument, 0, 'e'}, {"max-sources", required_argument, 0, 'm'},
         {"delight", required_argument, 0, 'd'}, {"min-pixels", required_argument, 0, 'p'},
-        {"help", no_argument, 0, 'h'},
+        {"max-drift-windows", required_argument, 0, 'W'}, {"progress", no_argument, 0, 'P'},
+        {"no-progress", no_argument, 0, 'q'},   {"help", no_argument, 0, 'h'},
         {0, 0, 0, 0},
     };
     const char *sources = NULL, *out = NULL, *db = NULL;
-    int render = 0;
+    int render = 0, progress = isatty(2);
     double refine = 1, max_sources = 8, min_px = 3;
     rec_unmix_opts uo;
     rec_unmix_opts_default(&uo);
     optind = 1;
     int c;
-    while ((c = getopt_long(argc, argv, "o:h", longs, NULL)) != -1) {
+    while ((c = getopt_long(argc, argv, "o:hq", longs, NULL)) != -1) {
         switch (c) {
         case 's': sources = optarg; break;
         case 'O': out = optarg; break;
@@ -165,6 +179,11 @@ int srv_cmd_unmix(int argc, char **argv)
         case 'p':
             if (!srv_num_arg("unmix", "--min-pixels", optarg, 1, 1e9, &min_px) || min_px != floor(min_px)) return 2;
             break;
+        case 'W':
+            if (!srv_drift_arg("unmix", optarg, &uo.max_drift_windows)) return 2;
+            break;
+        case 'P': progress = 1; break;
+        case 'q': progress = 0; break;
         case 'h': fputs(unmix_usage, stdout); return 0;
         default: return srv_usage_hint("unmix", argv);
         }
@@ -172,6 +191,7 @@ int srv_cmd_unmix(int argc, char **argv)
     if (optind + 1 != argc || !sources || !out)
         return srv_usage_error("unmix", "expected one CAPDIR, --sources FILE|auto and --out-dir DIR");
     uo.refine = (int)refine;
+    if (progress) uo.progress = unmix_progress;
     const char *capdir = argv[optind];
     gs_capture cap;
     gs_delight *d = NULL;
@@ -189,6 +209,7 @@ int srv_cmd_unmix(int argc, char **argv)
         rec_eq7_opts eo;
         rec_eq7_opts_default(&eo);
         eo.band_gains = 0;       /* the paper's Eq. 7: Q_beta is part of the source */
+        eo.max_drift_windows = uo.max_drift_windows;
         eo.unknown_p = 0;        /* dominance is judged by the fit (rec_sources_auto) */
         eo.model_error = 0.04;   /* one pixel's fit: a fixed 4 % for the BRF's and the others'
                                   * light (rec_sources_auto's chi-square bound assumes it) */

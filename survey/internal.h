@@ -130,6 +130,9 @@ int srv_num_arg(const char *cmd, const char *opt, const char *arg, double lo, do
  * bound (the number stays finite). */
 enum { SRV_OPEN_LO = 1, SRV_OPEN_HI = 2 };
 int srv_num_arg_open(const char *cmd, const char *opt, const char *arg, double lo, double hi, int open, double *out);
+/* --max-drift-windows of cmd: a number >= 0, or "none" (+inf: no frame left out for its drift),
+ * into *out (rec_eq7_opts.max_drift_windows): 1, or 0 after srv_usage_error. */
+int srv_drift_arg(const char *cmd, const char *arg, double *out);
 /* An integer option of cmd in [lo, hi] (decimal digits only) into *out: 1, or 0 after
  * srv_usage_error. */
 int srv_int_arg(const char *cmd, const char *opt, const char *arg, unsigned long long lo, unsigned long long hi,
@@ -269,6 +272,9 @@ typedef struct {
 typedef struct {
     /* the setting */
     int hard, K, C, hdr, locked, continuous;   /* hard: 0 metro, 1 metro_hard, 2 metro_clear */
+    int nominal_period;       /* free running with the scene's nominal half period (0: measured
+                               * before each exposure, as the firmware does) */
+    double max_drift_windows; /* rec_eq7_opts.max_drift_windows of its Eq. 7 (+inf: none) */
     /* results */
     int ok;
     char err[512];
@@ -279,7 +285,7 @@ typedef struct {
     srv_eval_report ev;
     double snr_p90;
     double drift_windows;     /* gs_capture_window_drift of its capture, windows (0 locked) */
-    int frames_kept;          /* its frames that drifted at most REC_MAX_DRIFT_WINDOWS */
+    int frames_kept;          /* its frames that drifted at most max_drift_windows */
     srv_acc_bins cal;         /* the answered lights by confidence, right = bulb and phase */
     srv_acc_bins phase_cal;   /* the lights with a phase by phase_confidence, right = the phase */
     long oracle_n;                 /* lights of the oracle subset matched to the truth */
@@ -294,6 +300,10 @@ typedef struct {
 /* The report (bench_accuracy_report.c): the points as CSV, the accuracy-vs-time and calibration
  * plots (PNG), and the Markdown page. */
 const char *srv_acc_ph_name(const srv_acc_point *p);
+/* The point's window period: "locked", or free running "measured" or "nominal". */
+const char *srv_acc_period_name(const srv_acc_point *p);
+/* Its max_drift_windows as recognize --max-drift-windows takes it ("none" for +inf), in buf. */
+const char *srv_acc_threshold_name(const srv_acc_point *p, char *buf, size_t n);
 gs_status srv_acc_write_csv(const char *path, const srv_acc_point *pts, size_t np);
 /* The reliability bins of every point (pair and phase), one row per non-empty bin. */
 gs_status srv_acc_write_bins_csv(const char *path, const srv_acc_point *pts, size_t np);
@@ -304,6 +314,9 @@ gs_status srv_acc_write_bins_csv(const char *path, const srv_acc_point *pts, siz
 void srv_acc_rate_axis(const double *v, size_t n, double *lo, double *hi, double *tick);
 void srv_acc_plot_accuracy(const char *path, const srv_acc_point *pts, size_t np, const int *Ks, int nK);
 void srv_acc_plot_calibration(const char *path, const srv_acc_point *pts, size_t np);
+/* The --drift-sweep page: free-running points by period, C and Eq. 7's drift threshold. */
+gs_status srv_acc_write_drift_doc(const char *path, const char *out, const char *base, const srv_acc_crop *cr,
+                                  int quick, const srv_acc_point *pts, size_t np, double wall);
 gs_status srv_acc_write_doc(const char *path, const char *out, const char *base, const srv_acc_crop *cr, int quick, const srv_acc_point *pts, size_t np, double wall, const int *Ks, int nK);
 /* Store rows[0..n) as a capture of the point's survey under key, and evaluate that capture
  * (bench_accuracy.c). */
@@ -312,7 +325,7 @@ gs_status srv_acc_eval_subset(srv_db *db, int64_t survey_id, const char *key, co
 /* The oracle's ceiling on up to n_oracle unflagged lights of job j (bench_oracle.c): fills
  * p->oracle_n, ours_sub, oracle_sub (NaN without a subset); sub is scratch of j's light count. */
 gs_status srv_acc_oracle(srv_db *db, const srv_run_report *rr, const srv_job *j,
-                         const srv_light_row *rows, double transformer, int n_oracle,
+                         const srv_light_row *rows, double transformer, double max_drift_windows, int n_oracle,
                          srv_light_row *sub, srv_acc_point *p);
 /* ====================================================================== end of bench accuracy */
 

@@ -455,7 +455,7 @@ gs_status srv_run(const srv_run_opts *o, srv_run_report *r)
         goto done;
     r->lights = j.cat.count;
     r->with_bulb = j.with_bulb;
-    srv_drift_note(&j.cap, r->drift_note, sizeof r->drift_note);
+    srv_drift_note(&j.cap, o->eq7.max_drift_windows, r->drift_note, sizeof r->drift_note);
     r->with_phase = j.with_phase;
     srv_job_drop_pixels(&j);   /* not needed by the rest */
     r->seconds[SRV_STAGE_MATCH] = gs_clock_s(CLOCK_MONOTONIC) - t0;

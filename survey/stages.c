@@ -99,13 +99,13 @@ gs_status srv_job_match(srv_job *j)
     return GS_OK;
 }
 
-void srv_drift_note(const gs_capture *cap, char *buf, size_t n)
+void srv_drift_note(const gs_capture *cap, double max_drift_windows, char *buf, size_t n)
 {
     int out = 0, unknown = 0, worst_k = -1;
     double worst = -1.0;
     for (int k = 0; k < cap->K; k++) {
         double d = gs_capture_frame_drift(cap, k);
-        out += !rec_frame_kept(d);
+        out += !rec_frame_kept(d, max_drift_windows);
         unknown += isnan(d);
         if (d > worst) worst = d, worst_k = k;
     }
@@ -117,8 +117,8 @@ void srv_drift_note(const gs_capture *cap, char *buf, size_t n)
     } else {
         int u = snprintf(buf, n, "; free running: %d of %d frames left out (flag drift):", out, cap->K);
         if (u > 0 && (size_t)u < n && out > unknown)
-            u += snprintf(buf + u, n - (size_t)u, " %d drifted over %.1f windows (the most %.4g, frame %d)%s",
-                          out - unknown, REC_MAX_DRIFT_WINDOWS, worst, worst_k, unknown ? "," : "");
+            u += snprintf(buf + u, n - (size_t)u, " %d drifted over %.4g windows (the most %.4g, frame %d)%s",
+                          out - unknown, max_drift_windows, worst, worst_k, unknown ? "," : "");
         if (u > 0 && (size_t)u < n && unknown)
             snprintf(buf + u, n - (size_t)u, " %d without the timing to tell (window_drift_windows, or "
                      "window_half_period_s and grid_hz_measured)", unknown);

@@ -649,8 +649,9 @@ gs_status srv_job_match(srv_job *j);
 void srv_job_drop_pixels(srv_job *j);
 /* What the frames' window drift (gs_capture_frame_drift) means for a capture's answers, for the
  * commands' output: "" when locked; else "; free running: ..." with the largest drift and its
- * frame, or the frames rec_match_catalog leaves out (REC_MAX_DRIFT_WINDOWS, REC_MATCH_DRIFT). */
-void srv_drift_note(const gs_capture *cap, char *buf, size_t n);
+ * frame, or the frames rec_match_catalog leaves out at max_drift_windows (rec_eq7_opts,
+ * REC_MATCH_DRIFT). */
+void srv_drift_note(const gs_capture *cap, double max_drift_windows, char *buf, size_t n);
 /* A light's 1-sigma centroid error per image axis, px (docs/gis.md, "Calibrated ellipses"),
  * for a light without the PSF fit's covariance (srv_light_row.pos_cov_px2; srv_job_locate):
  * sqrt((sqrt(2) s / snr)^2 + floor_px^2 + c^2), floor_px the centroid's pixel-sampling bias

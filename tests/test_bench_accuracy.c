@@ -64,11 +64,11 @@ TEST(bench_accuracy_quick_consistent)
     CHECK(fgets(line, sizeof line, f) && !strncmp(line, "scene,K,C,", 10));
     int free_rows = 0;
     while (n < 32 && fgets(line, sizeof line, f)) {
-        char *fld[32];
+        char *fld[40];
         int nf = 0;
-        for (char *t = strtok(line, ",\n"); t && nf < 32; t = strtok(NULL, ",\n")) fld[nf++] = t;
-        CHECK_MSG(nf == 31, "CSV row with %d fields", nf);
-        if (nf != 31) continue;
+        for (char *t = strtok(line, ",\n"); t && nf < 40; t = strtok(NULL, ",\n")) fld[nf++] = t;
+        CHECK_MSG(nf == 33, "CSV row with %d fields", nf);
+        if (nf != 33) continue;
         row *r = &rows[n++];
         snprintf(r->scene, sizeof r->scene, "%s", fld[0]);
         r->K = atoi(fld[1]);
@@ -92,6 +92,8 @@ TEST(bench_accuracy_quick_consistent)
          * (K = 8, C = 1024) drift more than half a window in some frame, which Eq. 7 leaves out */
         if (r->locked) CHECK(num(fld[29]) == 0.0 && atoi(fld[30]) == r->K);
         else CHECK(num(fld[29]) > 0.5 && atoi(fld[30]) >= 1 && atoi(fld[30]) < r->K);
+        /* (free running as the firmware does it, Eq. 7's default threshold) */
+        CHECK(!strcmp(fld[31], r->locked ? "locked" : "measured") && num(fld[32]) == REC_MAX_DRIFT_WINDOWS);
         free_rows += !r->locked;
         r->truth_lights = atol(fld[11]);
         r->bin_lights[0] = r->bin_lights[1] = r->bin_right[0] = r->bin_right[1] = 0;
@@ -193,6 +195,60 @@ TEST(bench_accuracy_quick_consistent)
                       q->snr, q->C);
         }
     }
+}
+
+/* `bench accuracy --drift-sweep --quick`: one free-running capture per period (measured before
+ * each exposure, nominal) recognised at Eq. 7's thresholds 0.25 and none. The same capture for
+ * both thresholds (the same drift); none keeps every frame, 0.25 leaves out some (the largest
+ * drift is beyond it); the nominal period drifts further than the measured one; the page lists
+ * every point. */
+TEST(bench_accuracy_drift_sweep_quick)
+{
+    char out[2048], cmd[4096], log[8192];
+    snprintf(out, sizeof out, "%s/drift", test_tmpdir());
+    snprintf(cmd, sizeof cmd, "%s bench accuracy --drift-sweep --quick --out-dir %s", test_bin(), out);
+    int rc = test_run(cmd, log, sizeof log);
+    CHECK_MSG(rc == 0, "%s -> %d:\n%s", cmd, rc, log);
+    char path[2200], line[4096];
+    snprintf(path, sizeof path, "%s/accuracy.csv", out);
+    FILE *f = fopen(path, "r");
+    CHECK_MSG(f != NULL, "%s: missing", path);
+    if (!f) return;
+    CHECK(fgets(line, sizeof line, f) && strstr(line, ",drift_windows,frames_kept,free_period,max_drift_windows\n"));
+    double drift[2][2] = {{NAN, NAN}, {NAN, NAN}}, unknown[2][2] = {{NAN, NAN}, {NAN, NAN}};   /* [nominal][none] */
+    int kept[2][2] = {{-1, -1}, {-1, -1}}, n = 0;
+    while (fgets(line, sizeof line, f)) {
+        char *fld[40];
+        int nf = 0;
+        for (char *t = strtok(line, ",\n"); t && nf < 40; t = strtok(NULL, ",\n")) fld[nf++] = t;
+        CHECK_MSG(nf == 33, "CSV row with %d fields", nf);
+        if (nf != 33) continue;
+        CHECK(!strcmp(fld[0], "metro_clear") && atoi(fld[1]) == 8 && atoi(fld[2]) == 1024 && atoi(fld[4]) == 0);
+        int nominal = !strcmp(fld[31], "nominal"), none = !strcmp(fld[32], "none");
+        CHECK(nominal || !strcmp(fld[31], "measured"));
+        CHECK(none || num(fld[32]) == 0.25);
+        drift[nominal][none] = num(fld[29]);
+        kept[nominal][none] = atoi(fld[30]);
+        unknown[nominal][none] = num(fld[19]);
+        n++;
+    }
+    fclose(f);
+    CHECK(n == 4);
+    for (int nominal = 0; nominal < 2; nominal++) {
+        CHECK_MSG(drift[nominal][0] == drift[nominal][1] && drift[nominal][0] > 0.25,
+                  "period %d: drift %g and %g", nominal, drift[nominal][0], drift[nominal][1]);
+        CHECK_MSG(kept[nominal][1] == 8 && kept[nominal][0] >= 0 && kept[nominal][0] < 8,
+                  "period %d: %d frames kept at 0.25, %d at none", nominal, kept[nominal][0], kept[nominal][1]);
+    }
+    CHECK(drift[1][0] > drift[0][0]);
+    /* the threshold reaches the pipeline's Eq. 7: with the nominal period's one frame or none
+     * kept at 0.25, more lights go unknown than with every frame kept */
+    CHECK_MSG(unknown[1][0] > unknown[1][1], "nominal: unknown %g at 0.25, %g at none", unknown[1][0], unknown[1][1]);
+    snprintf(path, sizeof path, "%s.md", out);
+    char *md = fx_read_file(path, NULL);
+    CHECK(md && strstr(md, "| measured | 8 | 1024 | 0.25 | ") && strstr(md, "| measured | 8 | 1024 | none | 8 of 8 (") &&
+          strstr(md, "| nominal | 8 | 1024 | 0.25 | ") && strstr(md, "| nominal | 8 | 1024 | none | 8 of 8 ("));
+    free(md);
 }
 
 /* ------------------------------------------------ the plots, read back (Python, PIL + NumPy) */

@@ -340,7 +340,8 @@ static void free_running_copy(const char *src, const char *name, double drift, d
  * overwritten with frame 1: left out, the answers are the locked capture's; kept (drifting less
  * than half a window), the same pixels change them. With every frame out, or capture.json
  * without the timing, no light is answered; the maps (one noise per pixel row, no sample left
- * out) answer no pixel once a frame is out. */
+ * out) answer no pixel once a frame is out. --max-drift-windows moves the threshold (none:
+ * every frame with a known drift kept), for the maps too. */
 TEST(recognize_cli_free_running_drift_leaves_frames_out)
 {
     const char *src = recfx_render(&recfx_scene_a);
@@ -357,17 +358,22 @@ TEST(recognize_cli_free_running_drift_leaves_frames_out)
         double drift, odd_drift;
         int corrupt, answers, same, out;   /* out: frames left out */
         const char *note;
+        double max;                         /* --max-drift-windows (0: the default) */
     } cases[] = {
-        {"small", 0.45, 0.45, 0, 1, 1, 0, "free running: the windows drifted at most 0.45 windows over an exposure"},
+        {"small", 0.45, 0.45, 0, 1, 1, 0, "free running: the windows drifted at most 0.45 windows over an exposure", 0},
         {"some_out", 0.45, 0.55, 1, 1, 1, 6, "6 of 26 frames left out (flag drift): 6 drifted over 0.5 windows "
-                                              "(the most 0.55, frame 0)"},
-        {"some_kept", 0.45, 0.45, 1, 1, 0, 0, "drifted at most 0.45"},
-        {"all_out", 0.55, 0.55, 0, 0, 0, 26, "26 of 26 frames left out"},
+                                              "(the most 0.55, frame 0)", 0},
+        {"some_kept", 0.45, 0.45, 1, 1, 0, 0, "drifted at most 0.45", 0},
+        {"all_out", 0.55, 0.55, 0, 0, 0, 26, "26 of 26 frames left out", 0},
         {"unknown", NAN, NAN, 0, 0, 0, 26, "26 of 26 frames left out (flag drift): 26 without the timing to "
                                             "tell (window_drift_windows, or window_half_period_s and "
-                                            "grid_hz_measured)"},
+                                            "grid_hz_measured)", 0},
+        {"keeps_at_0.6", 0.45, 0.55, 1, 1, 0, 0, "drifted at most 0.55 windows over an exposure (frame 0)", 0.6},
+        {"drops_at_0.4", 0.45, 0.45, 0, 0, 0, 26, "26 of 26 frames left out (flag drift): 26 drifted over 0.4 windows", 0.4},
+        {"keeps_at_none", 3.0, 3.0, 0, 1, 1, 0, "drifted at most 3 windows", INFINITY},
     };
-    for (int v = -1; v < 5 && d; v++) {
+    int nc = (int)(sizeof cases / sizeof *cases);
+    for (int v = -1; v < nc && d; v++) {
         char dir[1024];
         if (v >= 0)
             free_running_copy(src, cases[v].name, cases[v].drift, cases[v].odd_drift, cases[v].corrupt, dir, sizeof dir);
@@ -376,17 +382,34 @@ TEST(recognize_cli_free_running_drift_leaves_frames_out)
         gs_capture cap;
         CHECK_OK(gs_capture_read(dir, &cap));
         if (!m) CHECK_OK(rec_matcher_new(d, cap.grid_hz, cap.bands, cap.K, NULL, &m));
+        double max = v >= 0 && cases[v].max ? cases[v].max : REC_MAX_DRIFT_WINDOWS;
+        rec_eq7_opts eo;
+        rec_eq7_opts_default(&eo);
+        eo.max_drift_windows = max;
+        rec_matcher *mv = NULL;
+        if (max != REC_MAX_DRIFT_WINDOWS) CHECK_OK(rec_matcher_new(d, cap.grid_hz, cap.bands, cap.K, &eo, &mv));
         rec_pixel_maps pm;
-        CHECK_OK(rec_pixel_maps_compute(&cap, m, NULL, NULL, &pm));
+        CHECK_OK(rec_pixel_maps_compute(&cap, mv ? mv : m, NULL, NULL, &pm));
+        rec_matcher_free(mv);
+        /* (the maps: no pixel once a frame drifted over the threshold or over
+         * REC_MAX_DRIFT_WINDOWS, whose smear they cannot model) */
+        int maps_none = v >= 0 && (cases[v].out || !(fmax(cases[v].drift, cases[v].odd_drift) <= REC_MAX_DRIFT_WINDOWS));
         if (v < 0) matched_locked = pm.matched;
-        else if (!cases[v].corrupt || cases[v].out)
-            CHECK_MSG(pm.matched == (cases[v].out ? 0 : matched_locked), "%s: %zu pixels matched (locked %zu)",
+        else if (!cases[v].corrupt || maps_none)
+            CHECK_MSG(pm.matched == (maps_none ? 0 : matched_locked), "%s: %zu pixels matched (locked %zu)",
                       cases[v].name, pm.matched, matched_locked);
+        else CHECK_MSG(pm.matched > 0, "%s: no pixel matched", cases[v].name);
         rec_pixel_maps_release(&pm);
         gs_capture_release(&cap);
         if (v < 0) continue;
-        json_t *root = recfx_recognize_ok(dir, 1);
+        char args[1200];
+        if (cases[v].max && isinf(cases[v].max)) snprintf(args, sizeof args, "%s --max-drift-windows none", dir);
+        else if (cases[v].max) snprintf(args, sizeof args, "%s --max-drift-windows %g", dir, cases[v].max);
+        else snprintf(args, sizeof args, "%s", dir);
+        json_t *root = recfx_recognize_ok(args, 1);
         if (!root) continue;
+        json_t *mx = json_object_get(json_object_get(root, "recognition"), "max_drift_windows");
+        CHECK_MSG(isinf(max) ? json_is_null(mx) : json_real_value(mx) == max, "%s: max_drift_windows", cases[v].name);
         json_t *wd = json_object_get(json_object_get(root, "capture"), "drift_windows");
         CHECK(json_integer_value(json_object_get(json_object_get(root, "capture"), "frames_left_out")) == cases[v].out);
         CHECK(isnan(cases[v].drift) ? json_is_null(wd) : fabs(json_real_value(wd) - fmax(cases[v].drift, cases[v].odd_drift)) < 1e-9);
@@ -412,7 +435,7 @@ TEST(recognize_cli_free_running_drift_leaves_frames_out)
         if (cases[v].answers && !cases[v].same) CHECK_MSG(changed > 0, "%s: no answer changed", cases[v].name);
         json_decref(root);
         /* the table says why */
-        CHECK(fx_run(out, sizeof out, "%s recognize %s", test_bin(), dir) == 0);
+        CHECK(fx_run(out, sizeof out, "%s recognize %s", test_bin(), args) == 0);
         CHECK_MSG(strstr(out, cases[v].note), "%s: %s", cases[v].name, out);
         if (v == 1) {   /* the maps say why they are empty; `run` says it too, storing the same answers */
             CHECK(fx_run(out, sizeof out, "%s recognize %s --maps %s/maps_out", test_bin(), dir, test_tmpdir()) == 0);
@@ -421,6 +444,12 @@ TEST(recognize_cli_free_running_drift_leaves_frames_out)
             CHECK(fx_run(out, sizeof out, "%s run %s --db %s/free.sqlite", test_bin(), dir, test_tmpdir()) == 0);
             CHECK_MSG(strstr(out, "run: note: free running: 6 of 26 frames left out") &&
                           strstr(out, "lights, 6 with a bulb, 6 with a phase"), "%s", out);
+            /* run's threshold: nothing left out at 0.6 (another survey database: a stored
+             * capture keeps its answers) */
+            CHECK(fx_run(out, sizeof out, "%s run %s --db %s/free06.sqlite --max-drift-windows 0.6", test_bin(), dir,
+                         test_tmpdir()) == 0);
+            CHECK_MSG(strstr(out, "run: note: free running: the windows drifted at most 0.55 windows") &&
+                          !strstr(out, "left out"), "%s", out);
         }
     }
     rec_matcher_free(m);

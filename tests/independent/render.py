@@ -132,32 +132,103 @@ def candidate_bulbs(bulbs, grid_hz, nbands):
 # Eq. 5: window means of a delayed periodic BRF
 # --------------------------------------------------------------------------------------------
 
-def window_means(brf, K, shift):
-    """Mean of B(t - shift) over each window [k/K, (k+1)/K) of a cycle (Eq. 5).
-
-    brf: (bands, n) samples at t = j/n cycles, read as the trigonometric polynomial through them
-    (DFT coefficients c_m, |m| < n/2; an even-n Nyquist term is split symmetrically, i.e. read as
-    a cosine).  shift: cycles (positive = delayed), scalar or 1-D array of S shifts.
-    Returns (bands, K) for a scalar shift, else (S, bands, K)."""
+def harmonics(brf):
+    """DFT coefficients c (bands, M) and integer harmonics m (M) of B(t) = sum_m c_m exp(2 pi i m t),
+    brf (bands, n) samples at t = j/n cycles read as the trigonometric polynomial through them
+    (|m| < n/2; an even-n Nyquist term split symmetrically, i.e. read as a cosine)."""
     brf = np.atleast_2d(np.asarray(brf, float))
     n = brf.shape[1]
-    c = np.fft.fft(brf, axis=1) / n                       # B(t) = sum_m c_m exp(2 pi i m t)
+    c = np.fft.fft(brf, axis=1) / n
     m = np.fft.fftfreq(n, 1.0 / n)                        # integer harmonics, -n/2 .. n/2-1
     if n % 2 == 0:                                        # Nyquist: cos(pi n t) read as a cosine
         c[:, n // 2] *= 0.5
         c = np.concatenate([c, c[:, n // 2:n // 2 + 1]], axis=1)
         m = np.concatenate([m, [n / 2]])
-    k = np.arange(K)
-    # mean over [k/K, (k+1)/K) of exp(2 pi i m t) = exp(2 pi i m k/K) * (exp(2 pi i m/K) - 1) / (2 pi i m/K)
+    return c, m
+
+
+def interval_means(m, a, b):
+    """Mean of exp(2 pi i m u) over u in [a, b] (cycles), for harmonics m (M) and intervals a, b
+    (arrays of one shape S): (S..., M)."""
+    a, b = np.asarray(a, float)[..., None], np.asarray(b, float)[..., None]
+    x = 2j * np.pi * m * (b - a)
     with np.errstate(invalid="ignore", divide="ignore"):
-        x = 2j * np.pi * m / K
-        win = np.where(m == 0, 1.0, (np.exp(x) - 1.0) / np.where(m == 0, 1.0, x))
-    E = np.exp(2j * np.pi * np.outer(m, k) / K) * win[:, None]        # (M, K)
+        r = np.where(m == 0, 1.0, (np.exp(x) - 1.0) / np.where(m == 0, 1.0, x))
+    return np.exp(2j * np.pi * m * a) * r
+
+
+def window_means(brf, K, shift, frame_factors=None):
+    """Mean of B(t - shift) over each window [k/K, (k+1)/K) of a cycle (Eq. 5).
+
+    brf: (bands, n) samples (see harmonics).  shift: cycles (positive = delayed), scalar or 1-D
+    array of S shifts.  frame_factors: None (Eq. 5's regular windows) or (M, K), each frame's
+    mean over its exposure of its windows' interval_means (free running: free_running_factors).
+    Returns (bands, K) for a scalar shift, else (S, bands, K)."""
+    c, m = harmonics(brf)
+    if frame_factors is None:
+        k = np.arange(K)
+        E = interval_means(m, k / K, (k + 1) / K).T                  # (M, K)
+    else:
+        E = frame_factors
     shifts = np.atleast_1d(np.asarray(shift, float))
     D = np.exp(-2j * np.pi * np.outer(shifts, m))                      # delay ramp (S, M)
     # out[s, b, k] = sum_m c[b, m] D[s, m] E[m, k]
     out = np.einsum("bm,sm,mk->sbk", c, D, E).real
     return out[0] if np.ndim(shift) == 0 else out
+
+
+# --------------------------------------------------------------------------------------------
+# Free running (paper Sec. 6; docs/formats.md window_half_period_s, window_drift_windows): the
+# windows are timed with a fixed period P from the exposure's first crossing, on a real grid
+# --------------------------------------------------------------------------------------------
+
+MAINS_DIR = "/work/shared/data/mains"
+
+
+def mains_crossings(name):
+    """Zero crossings (s) of a mains WAV (shared/data/mains, 16-bit mono): each sign change of
+    the waveform, linearly interpolated.  Crossing i is the start of flicker cycle i."""
+    from mains_oracle import read_wav
+    path = name if os.path.exists(name) else os.path.join(MAINS_DIR, name if name.endswith(".wav") else name + ".wav")
+    if not os.path.exists(path):
+        raise SystemExit(f"--free-running {name!r}: no such file (looked in {MAINS_DIR})")
+    x, rate = read_wav(path)
+    s = np.signbit(x)
+    j = np.nonzero(s[1:] != s[:-1])[0]
+    return (j + x[j] / (x[j] - x[j + 1])) / rate, os.path.basename(path)
+
+
+def free_running_frames(tc, m, K, C, readout, period, first=64):
+    """The K frames of a free-running capture on the grid whose crossings are tc: frame k starts
+    at crossing s_k = first + k (C + readout); its window k opens at t0 + c P + k P / K for
+    c = 0..C-1 and stays open P / K, P the nominal half period (period 'nominal', 1/(2 f) of
+    the grid's nominal f, given as a number) or the mean of the 64 half periods before s_k
+    ('measured', as the firmware does).  The flicker cycle u(t) runs linearly from crossing to
+    crossing (u(tc[i]) = i).  Returns the factors (M, K) for window_means (each frame's mean over
+    its C windows of interval_means) and per frame (P, the mean frequency C / (2 (t_C - t_0)),
+    the range over even c and c = C of the window's offset c - (u(t0 + c P) - s_k), in windows).
+    (Each window's mean is taken uniformly in u: a window that straddles a crossing, where the
+    slope of u changes by the half periods' ratio, ~1e-3, is off by less than that.)"""
+    n = len(tc)
+    idx = np.arange(n, dtype=float)
+    F = np.empty((len(m), K), complex)
+    meta = []
+    cyc = np.arange(C + 1)
+    for k in range(K):
+        s0 = first + k * (C + readout)
+        if s0 + C + 1 >= n or s0 < 64:
+            raise SystemExit(f"free running: the recording has {n} crossings, frame {k} needs {s0 + C + 2}")
+        t0 = tc[s0]
+        P = (tc[s0] - tc[s0 - 64]) / 64 if period == "measured" else float(period)
+        ta = t0 + cyc[:C] * P + k * P / K
+        ua, ub = np.interp(ta, tc, idx) - s0, np.interp(ta + P / K, tc, idx) - s0
+        F[:, k] = interval_means(m, ua, ub).mean(axis=0)
+        # the offset at the crossings of one polarity (even c) and the exposure's end, as
+        # docs/formats.md defines window_drift_windows
+        c1 = cyc[(cyc % 2 == 0) | (cyc == C)]
+        off = c1 - (np.interp(t0 + c1 * P, tc, idx) - s0)
+        meta.append((P, C / (2 * (tc[s0 + C] - t0)), K * float(off.max() - off.min())))
+    return F, meta
 
 
 def window_means_trapezoid(brf, K, shift, sub=4096):
@@ -417,6 +488,14 @@ def main(argv=None):
                     help="real recording (name in shared/data/flicker, e.g. Old_IKEA_LED, or a path) "
                          "for out-of-database lights")
     ap.add_argument("--ood-count", type=int, default=0, help="number of out-of-database lights")
+    ap.add_argument("--free-running", default="",
+                    help="free-running windows on the grid of this mains recording (name in "
+                         "shared/data/mains, e.g. whu_001_ref, or a path); default: AC-locked")
+    ap.add_argument("--free-period", default="measured",
+                    help="free running: the windows' half period P, 'measured' (the mean of the 64 "
+                         "half periods before each exposure, as the firmware does) or 'nominal'")
+    ap.add_argument("--readout-cycles", type=int, default=10,
+                    help="free running: flicker cycles between one exposure's end and the next's start")
     ap.add_argument("--png-level", type=int, default=1, help="zlib level of the PNGs")
     ap.add_argument("--selftest", action="store_true",
                     help="check the window integrals against a trapezoid rule and exit")
@@ -509,6 +588,26 @@ def main(argv=None):
                       recording_technology=desc, recording_flicker_hz=ood_f,
                       recording_percent_flicker=ood_pf)
 
+    # ---- free running: each frame's windows on the recording's grid ----------------------------
+    factors, free_meta, mains_name = {}, None, None   # factors: per BRF length n
+    if a.free_running:
+        if a.free_period not in ("measured", "nominal"):
+            ap.error("--free-period: expected measured or nominal")
+        if a.cycles != int(a.cycles) or a.cycles < 1:
+            ap.error("--free-running needs a whole number of --cycles")
+        tc, mains_name = mains_crossings(a.free_running)
+        period = a.free_period if a.free_period == "measured" else 1.0 / (2.0 * a.grid_hz)
+
+    def frame_factors(brf):
+        nonlocal free_meta
+        n = np.shape(brf)[-1]
+        if not a.free_running:
+            return None
+        if n not in factors:
+            factors[n], free_meta = free_running_frames(tc, harmonics(np.ones((1, n)))[1], K, int(a.cycles),
+                                                        a.readout_cycles, period)
+        return factors[n]
+
     # ---- per-light mean electrons per frame and band (Eqs. 5-6) ------------------------------
     by_id = {b.id: b for b in cands}
     L = len(lights)
@@ -522,7 +621,7 @@ def main(argv=None):
             brf, Q = bulb.brf, bulb.chroma
         # (B, K), Eq. 5; a band-limited BRF may dip to ~-1e-9 in a dark gap (linear LED
         # drivers): a flux cannot be negative, so such window means are clipped to 0
-        b = np.maximum(window_means(brf, K, d["shift_cycles"]), 0.0)
+        b = np.maximum(window_means(brf, K, d["shift_cycles"], frame_factors(brf)), 0.0)
         mean_e[i] = (d["budget_e"] * (ext * Q)[:, None] * b / K).T     # Eq. 6 with the budget
         d["flux_e"] = float(mean_e[i].sum())                           # after extinction
         d["chromaticity"] = [float(q) for q in Q]
@@ -557,11 +656,15 @@ def main(argv=None):
             img[:, :, bnd] = np.clip(np.rint(raw), 0, sat_clip)
         fn = f"frame_{k:03d}.png"
         write_png16(os.path.join(a.outdir, fn), (img[:, :, 0] if B == 1 else img).astype(np.uint16), a.png_level)
-        frames.append({"file": fn, "k": k, "cycles": a.cycles})
+        fr = {"file": fn, "k": k, "cycles": a.cycles}
+        if free_meta is not None:
+            fr.update(window_half_period_s=free_meta[k][0], grid_hz_measured=free_meta[k][1],
+                      window_drift_windows=free_meta[k][2])
+        frames.append(fr)
 
     cap = {"format": "gridsurvey-capture/1", "grid_hz": a.grid_hz, "K": K, "bands": B,
            "width": W, "height": H, "saturation": a.saturation, "black_level": a.black_level,
-           "gain_e_per_dn": a.gain, "read_noise_dn": a.read_noise, "locked": True,
+           "gain_e_per_dn": a.gain, "read_noise_dn": a.read_noise, "locked": free_meta is None,
            "x_generator": "tests/independent/render.py", "frames": frames}
     with open(os.path.join(a.outdir, "capture.json"), "w") as f:
         json.dump(cap, f, indent=1)
@@ -589,6 +692,10 @@ def main(argv=None):
         "extinction": [float(g) for g in ext],
         "lights": lights,
     }
+    if free_meta is not None:
+        truth["free_running"] = {"mains": mains_name, "period": a.free_period,
+                                 "frames": [{"k": k, "window_half_period_s": p, "grid_hz_measured": f,
+                                             "window_drift_windows": d} for k, (p, f, d) in enumerate(free_meta)]}
     if ood_brf is not None:
         truth["ood_brf"] = [float(v) for v in ood_brf]
     with open(os.path.join(a.outdir, "truth.json"), "w") as f:
@@ -615,7 +722,38 @@ def selftest(bulbs):
     mean_err = float(abs(window_means(bulbs[0].brf, 26, 0.37).mean(axis=1) - 1).max())
     print(f"DFT vs trapezoid (linear interp): max |diff| {worst:.2e}; cosine vs closed form "
           f"{err_cos:.2e}; |mean - 1| {mean_err:.2e}")
-    ok = worst < 2e-3 and err_cos < 1e-12 and mean_err < 1e-9
+    # free running on an ideal grid: P = Delta gives Eq. 5's windows, no drift; a grid slower by
+    # eps slips the windows c eps cycles by cycle c (range K C eps / (1 + eps)), each cycle's
+    # window mean of the cosine in closed form, averaged over the C cycles
+    _, m = harmonics(np.ones((1, n)))
+    tc = np.arange(14000) * 0.01
+    F, meta = free_running_frames(tc, m, K, 512, 10, 0.01, first=64)
+    err_locked = float(np.abs(window_means(cosb, K, s, F) - window_means(cosb, K, s)).max())
+    eps, C = 2e-4, 100
+    tc = np.arange(3000) * 0.01 * (1 + eps)
+    F, meta2 = free_running_frames(tc, m, K, C, 10, 0.01, first=64)
+    c = np.arange(C)[:, None]
+    ua, ub = (c * 0.01 + k * 0.01 / K) / (0.01 * (1 + eps)) - c, (c * 0.01 + (k + 1) * 0.01 / K) / (0.01 * (1 + eps)) - c
+    slip = 1 + 0.5 * ((np.sin(2 * np.pi * (ub - s)) - np.sin(2 * np.pi * (ua - s))) / (2 * np.pi * (ub - ua))).mean(axis=0)
+    err_slip = float(np.abs(window_means(cosb, K, s, F)[0] - slip).max())
+    err_range = max(abs(x[2] - K * C * eps / (1 + eps)) for x in meta2)
+    # unequal half periods (the polarities 20 us apart) and a wandering grid, the period measured:
+    # the drift range against docs/formats.md's formula (c P - (t_c - t_0)) / Delta_c, even c and C
+    rng = np.random.default_rng(3)
+    half = 0.01 + np.where(np.arange(20000) % 2 == 0, 1e-5, -1e-5) + np.cumsum(rng.normal(0, 2e-8, 20000))
+    tc = np.concatenate([[0.0], np.cumsum(half)])
+    F, meta3 = free_running_frames(tc, m, K, 300, 10, "measured", first=64)
+    err_formula = 0.0
+    for k, (P, f, d) in enumerate(meta3):
+        s0 = 64 + k * 310
+        offs = [(c * P - (tc[s0 + c] - tc[s0])) / (tc[s0 + min(c, 299) + 1] - tc[s0 + min(c, 299)])
+                for c in range(0, 301) if c % 2 == 0 or c == 300]
+        err_formula = max(err_formula, abs(d - K * (max(offs) - min(offs))))
+    print(f"free running: ideal grid vs Eq. 5 {err_locked:.2e} (drift {max(x[2] for x in meta):.1e}); slipping "
+          f"grid vs closed form {err_slip:.2e}, drift range error {err_range:.2e} windows; measured period on "
+          f"unequal half periods: range vs the formula {err_formula:.2e} windows")
+    ok = (worst < 2e-3 and err_cos < 1e-12 and mean_err < 1e-9 and err_locked < 1e-9 and err_slip < 1e-9 and
+          err_range < 1e-6 and max(x[2] for x in meta) < 1e-9 and err_formula < 1e-3)
     print("selftest", "ok" if ok else "FAILED")
     return 0 if ok else 1
 

@@ -21,6 +21,8 @@ CONFIGS = [  # label, render options
     ("mono K=13 60 Hz", ["--bands", "1", "-K", "13", "--grid-hz", "60"]),
 ]
 LEVELS = [1000, 3000, 10000, 40000]
+FREE_LEVELS, FREE_PERIODS, FREE_CYCLES = [10000, 100000], ["measured", "nominal"], [128, 512, 1024]
+FREE_THRESHOLDS, FREE_MAINS = ["0.5", "1", "none"], "whu_001_ref"
 
 
 def run(cmd, log):
@@ -35,7 +37,7 @@ def main():
     ap.add_argument("--out", default="/tmp/indep-figs")
     ap.add_argument("--lights", type=int, default=600)
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--only", default="", help="comma list of parts: levels,blends,ood,continuous")
+    ap.add_argument("--only", default="", help="comma list of parts: levels,blends,ood,continuous,free")
     ap.add_argument("--tables-only", action="store_true", help="rewrite OUT/results.md from OUT/results.json")
     ap.add_argument("--variants", default="default,mc0,me0,bgoff,bgoff_me0,open",
                     help="levels: comma list of recognize variants (default = with the oracle; mc0 "
@@ -52,7 +54,7 @@ def main():
     csv = os.path.join(a.out, "delight.csv")
     log = []
     run([a.bin, "delight", "export", "-o", csv], log)
-    parts = set(a.only.split(",")) if a.only else {"levels", "blends", "ood", "continuous"}
+    parts = set(a.only.split(",")) if a.only else {"levels", "blends", "ood", "continuous", "free"}
     R = lambda *x: [PY, os.path.join(HERE, "render.py")] + list(x) + ["--delight-csv", csv]
     S = lambda cap, js, *x: [PY, os.path.join(HERE, "score.py"), cap, "--delight-csv", csv, "--bin", a.bin,
                              "--jobs", str(a.jobs), "--json", js] + list(x)
@@ -108,6 +110,29 @@ def main():
                 run(S(cap, js, "--phases", "continuous", "--oracle-max", "200"), log)
                 results[f"cont/{ci}/{e}"] = json.load(open(js))
                 results[f"cont/{ci}/{e}"]["config"] = label
+    if "free" in parts:
+        # free running on a real grid (whu_001_ref's crossings), the period measured or nominal,
+        # against the same lights locked; recognize at three drift thresholds
+        rgb = CONFIGS[1][1]
+        for e in FREE_LEVELS:
+            cap = os.path.join(a.out, f"free_locked_{e}")
+            run(R(cap, *rgb, "--lights", str(a.lights), "--electrons", str(e), "--seed", "51"), log)
+            js = cap + ".json"
+            run(S(cap, js, "--no-oracle"), log)
+            results[f"free/locked/{e}"] = json.load(open(js))
+            for period in FREE_PERIODS:
+                for C in FREE_CYCLES:
+                    cap = os.path.join(a.out, f"free_{period}_{C}_{e}")
+                    run(R(cap, *rgb, "--lights", str(a.lights), "--electrons", str(e), "--seed", "51", "-C", str(C),
+                          "--free-running", FREE_MAINS, "--free-period", period), log)
+                    drift = [f["window_drift_windows"] for f in json.load(open(os.path.join(cap, "capture.json")))["frames"]]
+                    for t in FREE_THRESHOLDS:
+                        js = cap + f".{t}.json"
+                        run(S(cap, js, "--no-oracle", "--max-drift-windows", t), log)
+                        x = json.load(open(js))
+                        x["drift_max"] = max(drift)
+                        x["frames_out"] = sum(d > float(t) for d in drift) if t != "none" else 0
+                        results[f"free/{period}/{C}/{e}/{t}"] = x
     results["_commands"] = log
     results["_wall_s"] = time.time() - t0
     prev = {}
@@ -226,6 +251,32 @@ def tables(r):
                       f"{p(o.get('pair_acc'))} | {p(o.get('bulb_acc'))} | {p(x['bulb_acc'])} | "
                       f"{x['phase_err_rms_deg']:.2f} | {x['phase_z_rms']:.2f} | {p(x['ece_pair'], 0)} | "
                       f"{p(o.get('ece_pair'), 0)} | {x['median_chi2_dof']:.2f} |")
+        w("")
+    if any(k.startswith("free/") for k in r):
+        w(f"### Free running on a real grid ({FREE_MAINS}'s crossings), RGB K=26 50 Hz\n")
+        w("Each frame's windows timed with a fixed half period P from its first crossing (`render.py --free-running`: "
+          "P measured over the 64 half periods before each exposure, as the firmware does, or the nominal 10 ms), "
+          "scored at `recognize --max-drift-windows` 0.5 (default), 1 and none; *largest drift* the frames' largest "
+          "`window_drift_windows` (windows), *out* the frames over the threshold. *locked*: the same lights AC-locked. "
+          "Columns as above.\n")
+        w("| period | C | e-/light | largest drift | threshold | out of 26 | pair | answered | acc. answered | ECE pair | conf. wrong b / t / p |")
+        w("|---|---|---|---|---|---|---|---|---|---|---|")
+        for e in FREE_LEVELS:
+            x = r.get(f"free/locked/{e}")
+            if x:
+                cw = x["confident_wrong"]
+                w(f"| locked | - | {e:,} | 0 | - | 0 | {p(x['pair_acc'])} | {p(x['answered_share'])} | "
+                  f"{p(x['answered_acc'])} | {p(x['ece_pair'], 0)} | {p(cw['bulb'])} / {p(cw['technology'])} / {p(cw['phase'])} |")
+            for period in FREE_PERIODS:
+                for C in FREE_CYCLES:
+                    for t in FREE_THRESHOLDS:
+                        x = r.get(f"free/{period}/{C}/{e}/{t}")
+                        if not x:
+                            continue
+                        cw = x["confident_wrong"]
+                        w(f"| {period} | {C} | {e:,} | {x['drift_max']:.2f} | {t} | {x['frames_out']} | {p(x['pair_acc'])} | "
+                          f"{p(x['answered_share'])} | {p(x['answered_acc'])} | {p(x['ece_pair'], 0)} | "
+                          f"{p(cw['bulb'])} / {p(cw['technology'])} / {p(cw['phase'])} |")
         w("")
     return "\n".join(out) + "\n"
 

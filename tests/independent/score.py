@@ -708,7 +708,9 @@ def main(argv=None):
             res["phase_err_rms_deg"] = float(np.sqrt(np.nanmean(R("perr")[R("bulb_ok")] ** 2)))
 
     # ---- oracle ---------------------------------------------------------------------------
-    if not a.no_oracle:
+    if not a.no_oracle and truth.get("free_running"):
+        print("  (no oracle: its templates are Eq. 5's regular windows, not this free-running capture's)")
+    elif not a.no_oracle:
         allidx = [i for i, t in enumerate(tl) if cls(t) == "isolated"]
         if a.oracle_max:
             allidx = allidx[:a.oracle_max]
