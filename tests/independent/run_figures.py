@@ -157,6 +157,13 @@ def p(x, pct=True):
     return f"{100 * x:.1f}" if pct else f"{x:.3f}"
 
 
+def answer_cells(x):
+    """pair | answered | acc. answered | ECE pair | conf. wrong b / t / p of one scored run."""
+    cw = x["confident_wrong"]
+    return (f"{p(x['pair_acc'])} | {p(x['answered_share'])} | {p(x['answered_acc'])} | {p(x['ece_pair'], 0)} | "
+            f"{p(cw['bulb'])} / {p(cw['technology'])} / {p(cw['phase'])}")
+
+
 def tables(r):
     out = []
     w = out.append
@@ -190,11 +197,8 @@ def tables(r):
             for ci, (label, _) in enumerate(CONFIGS):
                 for e in LEVELS:
                     x = r.get(f"{ci}/{e}/open")
-                    if not x:
-                        continue
-                    cw = x["confident_wrong"]
-                    w(f"| {label} | {e:,} | {p(x['pair_acc'])} | {p(x['answered_share'])} | {p(x['answered_acc'])} | "
-                      f"{p(x['ece_pair'], 0)} | {p(cw['bulb'])} / {p(cw['technology'])} / {p(cw['phase'])} |")
+                    if x:
+                        w(f"| {label} | {e:,} | {answer_cells(x)} |")
             w("")
         w("### The same captures with `--ambiguous-below 0`, `--model-error 0` and (RGB) `--band-model chroma`\n")
         w("| config | e-/light | mc0: answered | mc0: acc. answered | mc0: conf. wrong b / t / p | me0: pair | me0: answered | me0: acc. answered | me0: median chi2/dof | me0: ECE pair | bg off: pair | bg off: answered | bg off+me0: pair | bg off+me0: median chi2/dof |")
@@ -264,19 +268,13 @@ def tables(r):
         for e in FREE_LEVELS:
             x = r.get(f"free/locked/{e}")
             if x:
-                cw = x["confident_wrong"]
-                w(f"| locked | - | {e:,} | 0 | - | 0 | {p(x['pair_acc'])} | {p(x['answered_share'])} | "
-                  f"{p(x['answered_acc'])} | {p(x['ece_pair'], 0)} | {p(cw['bulb'])} / {p(cw['technology'])} / {p(cw['phase'])} |")
+                w(f"| locked | - | {e:,} | 0 | - | 0 | {answer_cells(x)} |")
             for period in FREE_PERIODS:
                 for C in FREE_CYCLES:
                     for t in FREE_THRESHOLDS:
                         x = r.get(f"free/{period}/{C}/{e}/{t}")
-                        if not x:
-                            continue
-                        cw = x["confident_wrong"]
-                        w(f"| {period} | {C} | {e:,} | {x['drift_max']:.2f} | {t} | {x['frames_out']} | {p(x['pair_acc'])} | "
-                          f"{p(x['answered_share'])} | {p(x['answered_acc'])} | {p(x['ece_pair'], 0)} | "
-                          f"{p(cw['bulb'])} / {p(cw['technology'])} / {p(cw['phase'])} |")
+                        if x:
+                            w(f"| {period} | {C} | {e:,} | {x['drift_max']:.2f} | {t} | {x['frames_out']} | {answer_cells(x)} |")
         w("")
     return "\n".join(out) + "\n"
 
