@@ -193,6 +193,28 @@ TEST(recognize_cli_mono_60hz_table)
     }
 }
 
+/* One light is "1 light", not "1 lights": recognize's summary, run's and export's lines. */
+TEST(recognize_cli_one_light_singular)
+{
+    static const recfx_light one[] = {{30.4, 22.7, 400, "hps-150w", 120}};
+    static const recfx_scene scene = {"one", 60, 22, 1, 64, 48, 19, one, 1};
+    recfx_cached_delight();
+    const char *dir = recfx_render(&scene);
+    CHECK(fx_run(out, sizeof out, "%s recognize %s", test_bin(), dir) == 0);
+    CHECK_MSG(strstr(out, "\n1 light: 1 with a bulb, 1 with a phase\n"), "%s", out);
+    /* (run: a copy without the renderer's station, whose fields are not a gridsurvey-station/1) */
+    char copy[1024], path[1100];
+    snprintf(copy, sizeof copy, "%s/one", test_tmpdir());
+    CHECK(fx_run(out, sizeof out, "rm -rf %s && cp -r %s %s", copy, dir, copy) == 0);
+    snprintf(path, sizeof path, "%s/capture.json", copy);
+    json_t *root = json_load_file(path, 0, NULL);
+    CHECK(root && json_object_del(root, "station") == 0 && json_dump_file(root, path, JSON_INDENT(1)) == 0);
+    json_decref(root);
+    CHECK(fx_run(out, sizeof out, "%s run %s --db %s/one.sqlite --no-progress && %s export --db %s/one.sqlite -o %s/one.csv",
+                 test_bin(), copy, test_tmpdir(), test_bin(), test_tmpdir(), test_tmpdir()) == 0);
+    CHECK_MSG(strstr(out, "run: 1 light, 1 with a bulb, 1 with a phase") && strstr(out, "exported 1 light ->"), "%s", out);
+}
+
 TEST(recognize_cli_continuous_phase_within_sigma)
 {
     json_t *root = recfx_recognize_scene(&recfx_scene_c, "--phases continuous", 1, 0);
