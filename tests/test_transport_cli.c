@@ -49,6 +49,14 @@ TEST(unmix_relight_cli_float_tiffs_gdal_and_a_capture_recognize_reads)
     CHECK_MSG(rc == 0, "unmix: %s", out);
     CHECK(fx_contains(out, "relative error"));   /* the capture has a truth */
     CHECK(fx_contains(out, "denoising"));
+    CHECK(!fx_contains(out, "gridsurvey unmix:"));   /* no progress: stderr is not a terminal */
+    /* progress on stderr when asked; -q after it wins */
+    CHECK(fx_run(out, sizeof out, "%s unmix '%s' --sources '%s' --out-dir '%s' --progress 2>&1 >/dev/null", test_bin(), cap,
+                 src, fx_tmp("progress")) == 0);
+    CHECK_MSG(fx_contains(out, "gridsurvey unmix: 100 %"), "%s", out);
+    CHECK(fx_run(out, sizeof out, "%s unmix '%s' --sources '%s' --out-dir '%s' --progress -q 2>&1 >/dev/null", test_bin(),
+                 cap, src, fx_tmp("quiet")) == 0);
+    CHECK_MSG(!fx_contains(out, "gridsurvey unmix:"), "%s", out);
     /* GDAL reads each source as three Float32 bands, and the rendered sequence as K pages */
     CHECK(fx_run(out, sizeof out, "gdalinfo '%s/source_02.tiff' 2>&1", dir) == 0);
     CHECK(fx_count_of(out, "Type=Float32") == 3 && fx_contains(out, "Size is 64, 48"));
