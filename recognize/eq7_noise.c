@@ -491,12 +491,12 @@ int rec_frames_left_out(const gs_capture *cap, double max_drift_windows, unsigne
     return out;
 }
 
-/* A free-running capture's samples (cat->drift_windows): a frame beyond max_drift_windows
- * left out (sigma = +inf); a kept frame k whose windows moved d_k windows is Eq. 5's window
- * shifted by up to d_k / 2 windows on average (the smear's mean), so its samples' noise gets
- * d_k / 2 times the light's steepest step between adjacent kept windows in the band added in
- * quadrature (a bound of the template's change, from the light's own samples). */
-static void drift_sigma(const rec_catalog *cat, double max_drift_windows, size_t i, double *sigma)
+/* A free-running capture's samples (cat->drift_windows, kept[k]: rec_frame_kept): a frame not
+ * kept is left out (sigma = +inf); a kept frame k whose windows moved d_k windows is Eq. 5's
+ * window shifted by up to d_k / 2 windows on average (the smear's mean), so its samples' noise
+ * gets d_k / 2 times the light's steepest step between adjacent kept windows in the band added
+ * in quadrature (a bound of the template's change, from the light's own samples). */
+static void drift_sigma(const rec_catalog *cat, const unsigned char *kept, size_t i, double *sigma)
 {
     size_t K = (size_t)cat->K;
     const double *dr = cat->drift_windows;
@@ -506,13 +506,9 @@ static void drift_sigma(const rec_catalog *cat, double max_drift_windows, size_t
         double step = 0.0;
         for (size_t k = 0; k < K; k++) {
             size_t k2 = (k + 1) % K;
-            if (rec_frame_kept(dr[k], max_drift_windows) && rec_frame_kept(dr[k2], max_drift_windows) &&
-                isfinite(x[k]) && isfinite(x[k2]))
-                step = fmax(step, fabs(x[k2] - x[k]));
+            if (kept[k] && kept[k2] && isfinite(x[k]) && isfinite(x[k2])) step = fmax(step, fabs(x[k2] - x[k]));
         }
-        for (size_t k = 0; k < K; k++)
-            sigma[o + k] = !rec_frame_kept(dr[k], max_drift_windows) ? INFINITY
-                                                                      : hypot(sigma[o + k], 0.5 * dr[k] * step);
+        for (size_t k = 0; k < K; k++) sigma[o + k] = kept[k] ? hypot(sigma[o + k], 0.5 * dr[k] * step) : INFINITY;
     }
 }
 
@@ -524,12 +520,17 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
     if (!drifted || !cat->count || !cat->sigma || !cat->signal) return match_catalog(m, cat, out, noise);
     rec_catalog kept = *cat;
     double *sigma = malloc(sizeof *sigma * cat->count * D);
-    if (!sigma) return gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", cat->count);
+    unsigned char *frame_kept = malloc(K);
+    if (!sigma || !frame_kept) {
+        free(sigma), free(frame_kept);
+        return gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", cat->count);
+    }
+    for (size_t k = 0; k < K; k++) frame_kept[k] = (unsigned char)rec_frame_kept(cat->drift_windows[k], m->o.max_drift_windows);
     memcpy(sigma, cat->sigma, sizeof *sigma * cat->count * D);
-    for (size_t i = 0; i < cat->count; i++) drift_sigma(cat, m->o.max_drift_windows, i, sigma);
+    for (size_t i = 0; i < cat->count; i++) drift_sigma(cat, frame_kept, i, sigma);
     kept.sigma = sigma;
     gs_status s = match_catalog(m, &kept, out, noise);
-    free(sigma);
+    free(sigma), free(frame_kept);
     for (size_t i = 0; s == GS_OK && i < cat->count; i++) out[i].flags |= REC_MATCH_DRIFT;
     return s;
 }

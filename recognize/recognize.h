@@ -475,6 +475,8 @@ typedef struct {
     double threshold_sigma;
     size_t mapped;            /* pixels not REC_PIX_DARK */
     size_t matched;           /* REC_PIX_MATCHED pixels */
+    int drift_unanswered;     /* 1: no pixel answered because a frame's windows drifted beyond
+                               * min(rec_eq7_opts.max_drift_windows, REC_MAX_DRIFT_WINDOWS) */
     unsigned char *state;     /* REC_PIX_* */
     int *bulb;                /* index into the matcher's bulbs; -1 unless REC_PIX_MATCHED */
     float *phase_deg;         /* grid phase in [0, 360) (0 for a GS_REF_NONE bulb); 0 unless

@@ -96,15 +96,17 @@ gs_status srv_acc_oracle(srv_db *db, const srv_run_report *rr, const srv_job *j,
     double *tab = malloc(sizeof *tab * nb * 6 * (size_t)D), *tl = malloc(sizeof *tl * nb * 6 * (size_t)D);
     double *x = calloc((size_t)D, sizeof *x), *fv = calloc((size_t)K, sizeof *fv), *tp = malloc(sizeof *tp * nb * 6);
     int *tb = malloc(sizeof *tb * nb * 6), *npix = calloc(n ? n : 1, sizeof *npix);
+    unsigned char *kept = malloc((size_t)K);
     rec_pg_noise *nz = calloc((size_t)D, sizeof *nz);
     srv_light_row *orc = NULL;
     atmo_light *atmo = NULL;
     size_t natmo = 0;
     gs_status s = GS_OK;
-    if (!tab || !tl || !x || !fv || !tp || !tb || !npix || !nz) {
+    if (!tab || !tl || !x || !fv || !tp || !tb || !npix || !kept || !nz) {
         s = gs_fail(GS_ENOMEM, "bench accuracy: out of memory for the oracle");
         goto done;
     }
+    rec_frames_left_out(&j->cap, max_drift_windows, kept);
     for (size_t b = 0; b < nb && s == GS_OK; b++) {
         const gs_bulb *bu = rec_matcher_bulb(m, b);
         if (bu->ref != GS_REF_VOLTAGE) continue;
@@ -166,8 +168,8 @@ gs_status srv_acc_oracle(srv_db *db, const srv_run_report *rr, const srv_job *j,
         }
         /* the frames Eq. 7 leaves out (free running, rec_frame_kept): 0 in the data and every
          * template, a term the same for every candidate and brightness */
-        for (int kk = 0; j->cat.drift_windows && kk < K; kk++)
-            if (!rec_frame_kept(j->cat.drift_windows[kk], max_drift_windows))
+        for (int kk = 0; kk < K; kk++)
+            if (!kept[kk])
                 for (int d = kk; d < D; d += K) {
                     x[d] = 0.0;
                     for (int q = 0; q < M; q++) tl[(size_t)q * D + d] = 0.0;
@@ -203,6 +205,7 @@ done:
     free(atmo);
     free(orc);
     free(nz);
+    free(kept);
     free(npix);
     free(tb);
     free(tp);

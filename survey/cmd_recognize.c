@@ -511,7 +511,7 @@ static gs_status write_maps(const recognize_opts *o, const gs_capture *cap, cons
     progress("per-pixel Eq. 7 ...");
     gs_status st = rec_pixel_maps_compute(cap, m, &o->eq7, &mo, &pm);
     if (st != GS_OK) return st;
-    if (!rec_frame_kept(gs_capture_window_drift(cap, NULL), fmin(o->eq7.max_drift_windows, REC_MAX_DRIFT_WINDOWS)))
+    if (pm.drift_unanswered)
         fprintf(stderr, "gridsurvey recognize: note: the maps answer no pixel: frames of this free-running "
                         "capture are left out (their windows drifted), which a pixel's one noise level cannot "
                         "do (docs/recognition.md, \"Free-running captures\")\n");

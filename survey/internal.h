@@ -281,7 +281,7 @@ typedef struct {
     long acquisitions;
     double delta_s, readout_cycles;
     double exposure_s, readout_s, capture_s;
-    double compute_s, sim_s;
+    double compute_s;
     srv_eval_report ev;
     double snr_p90;
     double drift_windows;     /* gs_capture_window_drift of its capture, windows (0 locked) */

@@ -101,11 +101,10 @@ gs_status srv_job_match(srv_job *j)
 
 void srv_drift_note(const gs_capture *cap, double max_drift_windows, char *buf, size_t n)
 {
-    int out = 0, unknown = 0, worst_k = -1;
+    int out = rec_frames_left_out(cap, max_drift_windows, NULL), unknown = 0, worst_k = -1;
     double worst = -1.0;
     for (int k = 0; k < cap->K; k++) {
         double d = gs_capture_frame_drift(cap, k);
-        out += !rec_frame_kept(d, max_drift_windows);
         unknown += isnan(d);
         if (d > worst) worst = d, worst_k = k;
     }

@@ -40,6 +40,37 @@ static double num(const char *s)
     return strcmp(s, "nan") ? atof(s) : NAN;
 }
 
+#define CSV_FIELDS 33   /* accuracy.csv's */
+
+/* The CSV file OUT/name (`bench accuracy --out-dir OUT`), its header read into line (NULL:
+ * missing, which fails the test). */
+static FILE *csv_open(const char *out, const char *name, char *line, size_t size)
+{
+    char path[2200];
+    snprintf(path, sizeof path, "%s/%s", out, name);
+    FILE *f = fopen(path, "r");
+    CHECK_MSG(f != NULL, "%s: missing", path);
+    line[0] = '\0';
+    if (f) CHECK_MSG(fgets(line, (int)size, f) != NULL, "%s: empty", path);
+    return f;
+}
+
+/* The next row of f split at its commas into fld; a row of other than nf fields (at most
+ * CSV_FIELDS) fails the test and is skipped. 0 at the end. */
+static int csv_row(FILE *f, char *line, size_t size, char *fld[CSV_FIELDS], int nf)
+{
+    while (fgets(line, (int)size, f)) {
+        char *all[CSV_FIELDS + 8];
+        int got = 0;
+        for (char *t = strtok(line, ",\n"); t && got < CSV_FIELDS + 8; t = strtok(NULL, ",\n")) all[got++] = t;
+        CHECK_MSG(got == nf, "CSV row with %d fields, not %d", got, nf);
+        if (got != nf) continue;
+        memcpy(fld, all, sizeof *fld * (size_t)nf);
+        return 1;
+    }
+    return 0;
+}
+
 TEST(bench_accuracy_quick_consistent)
 {
     char out[2048], cmd[4096], log[8192];
@@ -54,21 +85,14 @@ TEST(bench_accuracy_quick_consistent)
     CHECK_MSG(file_size_ok(path, "\x89PNG"), "%s: not a PNG", path);
     snprintf(path, sizeof path, "%s.md", out);
     CHECK_MSG(file_size_ok(path, "# What"), "%s: no report", path);
-    snprintf(path, sizeof path, "%s/accuracy.csv", out);
-    FILE *f = fopen(path, "r");
-    CHECK_MSG(f != NULL, "%s: missing", path);
+    char line[4096], *fld[CSV_FIELDS];
+    FILE *f = csv_open(out, "accuracy.csv", line, sizeof line);
     if (!f) return;
-    char line[4096];
     row rows[32];
     int n = 0;
-    CHECK(fgets(line, sizeof line, f) && !strncmp(line, "scene,K,C,", 10));
+    CHECK(!strncmp(line, "scene,K,C,", 10));
     int free_rows = 0;
-    while (n < 32 && fgets(line, sizeof line, f)) {
-        char *fld[40];
-        int nf = 0;
-        for (char *t = strtok(line, ",\n"); t && nf < 40; t = strtok(NULL, ",\n")) fld[nf++] = t;
-        CHECK_MSG(nf == 33, "CSV row with %d fields", nf);
-        if (nf != 33) continue;
+    while (n < 32 && csv_row(f, line, sizeof line, fld, CSV_FIELDS)) {
         row *r = &rows[n++];
         snprintf(r->scene, sizeof r->scene, "%s", fld[0]);
         r->K = atoi(fld[1]);
@@ -109,20 +133,12 @@ TEST(bench_accuracy_quick_consistent)
      * threshold, and the ECE columns recomputed from them */
     rec_eq7_opts eo;
     rec_eq7_opts_default(&eo);
-    snprintf(path, sizeof path, "%s/calibration.csv", out);
-    f = fopen(path, "r");
-    CHECK_MSG(f != NULL, "%s: missing", path);
+    f = csv_open(out, "calibration.csv", line, sizeof line);
     if (!f) return;
-    CHECK(fgets(line, sizeof line, f) &&
-          !strcmp(line, "scene,K,C,hdr,locked,phases,confidence_of,bin_lo,bin_hi,matched_lights,mean_confidence,"
+    CHECK(!strcmp(line, "scene,K,C,hdr,locked,phases,confidence_of,bin_lo,bin_hi,matched_lights,mean_confidence,"
                         "right_lights\n"));
     int bins = 0;
-    while (fgets(line, sizeof line, f)) {
-        char *fld[16];
-        int nf = 0;
-        for (char *t = strtok(line, ",\n"); t && nf < 16; t = strtok(NULL, ",\n")) fld[nf++] = t;
-        CHECK_MSG(nf == 12, "calibration row with %d fields", nf);
-        if (nf != 12) continue;
+    while (csv_row(f, line, sizeof line, fld, 12)) {
         int phase = !strcmp(fld[6], "phase");
         double lo = num(fld[7]), hi = num(fld[8]), lights = num(fld[9]), mean = num(fld[10]), right = num(fld[11]);
         CHECK_MSG(lights >= 1 && right >= 0 && right <= lights && mean >= lo && mean <= hi,
@@ -209,20 +225,13 @@ TEST(bench_accuracy_drift_sweep_quick)
     snprintf(cmd, sizeof cmd, "%s bench accuracy --drift-sweep --quick --out-dir %s", test_bin(), out);
     int rc = test_run(cmd, log, sizeof log);
     CHECK_MSG(rc == 0, "%s -> %d:\n%s", cmd, rc, log);
-    char path[2200], line[4096];
-    snprintf(path, sizeof path, "%s/accuracy.csv", out);
-    FILE *f = fopen(path, "r");
-    CHECK_MSG(f != NULL, "%s: missing", path);
+    char path[2200], line[4096], *fld[CSV_FIELDS];
+    FILE *f = csv_open(out, "accuracy.csv", line, sizeof line);
     if (!f) return;
-    CHECK(fgets(line, sizeof line, f) && strstr(line, ",drift_windows,frames_kept,free_period,max_drift_windows\n"));
+    CHECK(strstr(line, ",drift_windows,frames_kept,free_period,max_drift_windows\n"));
     double drift[2][2] = {{NAN, NAN}, {NAN, NAN}}, unknown[2][2] = {{NAN, NAN}, {NAN, NAN}};   /* [nominal][none] */
     int kept[2][2] = {{-1, -1}, {-1, -1}}, n = 0;
-    while (fgets(line, sizeof line, f)) {
-        char *fld[40];
-        int nf = 0;
-        for (char *t = strtok(line, ",\n"); t && nf < 40; t = strtok(NULL, ",\n")) fld[nf++] = t;
-        CHECK_MSG(nf == 33, "CSV row with %d fields", nf);
-        if (nf != 33) continue;
+    while (csv_row(f, line, sizeof line, fld, CSV_FIELDS)) {
         CHECK(!strcmp(fld[0], "metro_clear") && atoi(fld[1]) == 8 && atoi(fld[2]) == 1024 && atoi(fld[4]) == 0);
         int nominal = !strcmp(fld[31], "nominal"), none = !strcmp(fld[32], "none");
         CHECK(nominal || !strcmp(fld[31], "measured"));

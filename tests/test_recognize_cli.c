@@ -416,6 +416,8 @@ TEST(recognize_cli_free_running_drift_leaves_frames_out)
         /* (the maps: no pixel once a frame drifted over the threshold or over
          * REC_MAX_DRIFT_WINDOWS, whose smear they cannot model) */
         int maps_none = v >= 0 && (cases[v].out || !(fmax(cases[v].drift, cases[v].odd_drift) <= REC_MAX_DRIFT_WINDOWS));
+        CHECK_MSG(pm.drift_unanswered == maps_none, "%s: drift_unanswered %d", v >= 0 ? cases[v].name : "locked",
+                  pm.drift_unanswered);
         if (v < 0) matched_locked = pm.matched;
         else if (!cases[v].corrupt || maps_none)
             CHECK_MSG(pm.matched == (maps_none ? 0 : matched_locked), "%s: %zu pixels matched (locked %zu)",

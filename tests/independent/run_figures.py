@@ -125,12 +125,17 @@ def main():
                     cap = os.path.join(a.out, f"free_{period}_{C}_{e}")
                     run(R(cap, *rgb, "--lights", str(a.lights), "--electrons", str(e), "--seed", "51", "-C", str(C),
                           "--free-running", FREE_MAINS, "--free-period", period), log)
-                    drift = [f["window_drift_windows"] for f in json.load(open(os.path.join(cap, "capture.json")))["frames"]]
+                    cj = json.load(open(os.path.join(cap, "capture.json")))
+                    frames = cj["frames"]
+                    drift = [f["window_drift_windows"] for f in frames]
+                    # each frame's net motion over its exposure, K C (2 P f - 1) windows (signed)
+                    net = [cj["K"] * f["cycles"] * (2 * f["window_half_period_s"] * f["grid_hz_measured"] - 1) for f in frames]
                     for t in FREE_THRESHOLDS:
                         js = cap + f".{t}.json"
                         run(S(cap, js, "--no-oracle", "--max-drift-windows", t), log)
                         x = json.load(open(js))
                         x["drift_max"] = max(drift)
+                        x["net"] = [min(net), max(net), sum(v > 0 for v in net)]
                         x["frames_out"] = sum(d > float(t) for d in drift) if t != "none" else 0
                         results[f"free/{period}/{C}/{e}/{t}"] = x
     results["_commands"] = log
@@ -261,20 +266,23 @@ def tables(r):
         w("Each frame's windows timed with a fixed half period P from its first crossing (`render.py --free-running`: "
           "P measured over the 64 half periods before each exposure, as the firmware does, or the nominal 10 ms), "
           "scored at `recognize --max-drift-windows` 0.5 (default), 1 and none; *largest drift* the frames' largest "
-          "`window_drift_windows` (windows), *out* the frames over the threshold. *locked*: the same lights AC-locked. "
-          "Columns as above.\n")
-        w("| period | C | e-/light | largest drift | threshold | out of 26 | pair | answered | acc. answered | ECE pair | conf. wrong b / t / p |")
-        w("|---|---|---|---|---|---|---|---|---|---|---|")
+          "`window_drift_windows` (windows), *net* the frames' signed net motions over their exposures, "
+          "K C (2 P f - 1) windows from capture.json (the least and the most, and how many frames moved forward), "
+          "*out* the frames over the threshold. *locked*: the same lights AC-locked. Columns as above.\n")
+        w("| period | C | e-/light | largest drift | net (frames > 0) | threshold | out of 26 | pair | answered | acc. answered | ECE pair | conf. wrong b / t / p |")
+        w("|---|---|---|---|---|---|---|---|---|---|---|---|")
         for e in FREE_LEVELS:
             x = r.get(f"free/locked/{e}")
             if x:
-                w(f"| locked | - | {e:,} | 0 | - | 0 | {answer_cells(x)} |")
+                w(f"| locked | - | {e:,} | 0 | 0 | - | 0 | {answer_cells(x)} |")
             for period in FREE_PERIODS:
                 for C in FREE_CYCLES:
                     for t in FREE_THRESHOLDS:
                         x = r.get(f"free/{period}/{C}/{e}/{t}")
                         if x:
-                            w(f"| {period} | {C} | {e:,} | {x['drift_max']:.2f} | {t} | {x['frames_out']} | {answer_cells(x)} |")
+                            n = x.get("net")
+                            nc = f"{n[0]:+.2f} .. {n[1]:+.2f} ({n[2]})" if n else "-"
+                            w(f"| {period} | {C} | {e:,} | {x['drift_max']:.2f} | {nc} | {t} | {x['frames_out']} | {answer_cells(x)} |")
         w("")
     return "\n".join(out) + "\n"
 
