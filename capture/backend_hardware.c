@@ -70,6 +70,7 @@ static gs_status hw_info(void *self, cap_acq_info *info)
     info->gain_e_per_dn = c->gain_e_per_dn;
     info->read_noise_dn = c->read_noise_dn;
     info->locked = c->locked;
+    info->window_period = c->locked ? GS_PERIOD_UNKNOWN : GS_PERIOD_MEASURED;   /* (the firmware's Delta_0) */
     snprintf(info->utc, sizeof info->utc, "%s", b->utc);
     info->fingerprint = b->fingerprint;
     return GS_OK;

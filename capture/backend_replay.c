@@ -30,6 +30,7 @@ static gs_status replay_info(void *self, cap_acq_info *info)
     info->gain_e_per_dn = c->gain_e_per_dn;
     info->read_noise_dn = c->read_noise_dn;
     info->locked = c->locked;
+    info->window_period = c->window_period;
     snprintf(info->utc, sizeof info->utc, "%s", c->utc);
     info->station_json = c->station_json;
     info->fingerprint = b->fingerprint;

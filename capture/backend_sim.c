@@ -34,6 +34,7 @@ static gs_status sim_info(void *self, cap_acq_info *info)
     info->gain_e_per_dn = (s->fx >> CAP_FX_SHOT_NOISE) & 1u ? sc->gain_e_per_dn : 0.0;
     info->read_noise_dn = s->read_dn;
     info->locked = sc->locked;
+    info->window_period = sc->locked ? GS_PERIOD_UNKNOWN : sc->free_period_measured ? GS_PERIOD_MEASURED : GS_PERIOD_NOMINAL;
     snprintf(info->utc, sizeof info->utc, "%s", sc->utc);
     info->station_json = b->station_json;
     /* the scene text (and its GeoJSON files), the seed and the DELIGHT file */

@@ -491,6 +491,7 @@ typedef struct {
     int hdr_max_rounds, hdr_max_saturated_px;
     double saturation_dn, black_level_dn, gain_e_per_dn, read_noise_dn;
     int locked;
+    int window_period;            /* free running: GS_PERIOD_* (capture.json window_period) */
     char utc[40];
     const char *station_json;     /* borrowed (NULL: none) */
     uint64_t fingerprint;         /* identity of the configuration (resume refuses others) */

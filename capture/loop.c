@@ -460,6 +460,7 @@ gs_status cap_loop_run(cap_backend *b, const char *dir, const cap_loop_opts *o_i
     cap.gain_e_per_dn = info.gain_e_per_dn;
     cap.read_noise_dn = info.read_noise_dn;
     cap.locked = info.locked;
+    cap.window_period = info.window_period;
     snprintf(cap.utc, sizeof cap.utc, "%s", info.utc);
     for (int i = 0; i < 2; i++) {
         wr[i].raw = malloc(nraw * sizeof *wr[i].raw);

@@ -509,6 +509,7 @@ gs_status rec_blobs_extract(const gs_capture *cap, const rec_blob_opts *o, rec_c
             goto done;
         }
         for (int k = 0; k < s.K; k++) cat->drift_windows[k] = gs_capture_frame_drift(cap, k);
+        cat->window_period = cap->window_period;
     }
 done:
     free(area);

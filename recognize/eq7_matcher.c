@@ -61,7 +61,7 @@ void rec_eq7_opts_default(rec_eq7_opts *o)
     o->blend_prior = 0.1;
     o->nested_tests = 1;
     o->threads = 0;
-    o->max_drift_windows = REC_MAX_DRIFT_WINDOWS;
+    o->max_drift_windows = REC_DRIFT_AUTO;
 }
 
 void rec_matcher_free(rec_matcher *m)
@@ -201,8 +201,8 @@ static gs_status check_opts(const rec_eq7_opts *o)
     if (o->threads < 0)
         return gs_fail(GS_EINVAL, "Eq. 7 options: threads=%d: expected >= 0 (0: the online CPUs)",
                        o->threads);
-    if (!(o->max_drift_windows >= 0.0))
-        return gs_fail(GS_EINVAL, "Eq. 7 options: max_drift_windows=%g: expected [0, inf]",
+    if (!(o->max_drift_windows >= 0.0 || o->max_drift_windows == REC_DRIFT_AUTO))
+        return gs_fail(GS_EINVAL, "Eq. 7 options: max_drift_windows=%g: expected [0, inf] or REC_DRIFT_AUTO (-1)",
                        o->max_drift_windows);
     return GS_OK;
 }

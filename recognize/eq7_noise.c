@@ -483,8 +483,9 @@ done:
 int rec_frames_left_out(const gs_capture *cap, double max_drift_windows, unsigned char *kept)
 {
     int out = 0;
+    double limit = rec_drift_limit(max_drift_windows, cap->window_period);
     for (int k = 0; k < cap->K; k++) {
-        int keep = rec_frame_kept(gs_capture_frame_drift(cap, k), max_drift_windows);
+        int keep = rec_frame_kept(gs_capture_frame_drift(cap, k), limit);
         if (kept) kept[k] = (unsigned char)keep;
         out += !keep;
     }
@@ -525,7 +526,8 @@ gs_status rec_match_catalog(const rec_matcher *m, const rec_catalog *cat, rec_ma
         free(sigma), free(frame_kept);
         return gs_fail(GS_ENOMEM, "Eq. 7: out of memory for %zu lights", cat->count);
     }
-    for (size_t k = 0; k < K; k++) frame_kept[k] = (unsigned char)rec_frame_kept(cat->drift_windows[k], m->o.max_drift_windows);
+    double limit = rec_drift_limit(m->o.max_drift_windows, cat->window_period);
+    for (size_t k = 0; k < K; k++) frame_kept[k] = (unsigned char)rec_frame_kept(cat->drift_windows[k], limit);
     memcpy(sigma, cat->sigma, sizeof *sigma * cat->count * D);
     for (size_t i = 0; i < cat->count; i++) drift_sigma(cat, frame_kept, i, sigma);
     kept.sigma = sigma;

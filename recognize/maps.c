@@ -332,7 +332,8 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
      * sigma each, so its samples can neither be left out nor have their noise raised as
      * rec_match_catalog does: not beyond REC_MAX_DRIFT_WINDOWS whatever the option) */
     pm->drift_unanswered = !rec_frame_kept(gs_capture_window_drift(cap, NULL),
-                                           fmin(m->o.max_drift_windows, REC_MAX_DRIFT_WINDOWS));
+                                           fmin(rec_drift_limit(m->o.max_drift_windows, cap->window_period),
+                                                REC_MAX_DRIFT_WINDOWS));
     if (pm->drift_unanswered) {
         p = np;
         if (o->progress) o->progress(o->progress_ctx, 1.0);

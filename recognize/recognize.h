@@ -12,6 +12,7 @@
 
 #include "recognize/base/base.h"
 
+#include <math.h>
 #include <stddef.h>
 #include <stdio.h>
 
@@ -134,6 +135,7 @@ typedef struct {
                                * free running without the timing to tell); rec_match_catalog
                                * leaves out the frames not rec_frame_kept and raises the others'
                                * noise by their smear (REC_MATCH_DRIFT) */
+    int window_period;        /* the capture's (GS_PERIOD_*: rec_drift_limit) */
     int *labels;              /* opts.labels: width * height, the light owning each aperture
                                * pixel, -1 elsewhere; else NULL */
 } rec_catalog;
@@ -232,8 +234,8 @@ typedef struct {
                               * windows during its exposure (gs_capture_frame_drift) is left out
                               * of rec_match_catalog and rec_sources_auto; the maps answer no
                               * pixel once a frame is over it or over REC_MAX_DRIFT_WINDOWS (they
-                              * cannot raise a smeared frame's noise); [0, inf]
-                              * (REC_MAX_DRIFT_WINDOWS) */
+                              * cannot raise a smeared frame's noise); [0, inf] or
+                              * REC_DRIFT_AUTO (rec_drift_limit) (REC_DRIFT_AUTO) */
 } rec_eq7_opts;
 typedef enum {
     REC_BANDS_CHROMA = 0,    /* one brightness times Q_beta (the paper's Eq. 7) */
@@ -263,17 +265,30 @@ enum {
 /* Free running, a frame whose windows smear over at most this many windows is still a sample of
  * Eq. 5's window k; beyond, its samples follow no template and Eq. 7's answers were wrong and
  * confident (docs/recognition.md, "Free-running captures"; `gridsurvey bench accuracy
- * --drift-sweep` measures others): the default of rec_eq7_opts.max_drift_windows and
- * rec_unmix_opts.max_drift_windows. */
+ * --drift-sweep` measures others): REC_DRIFT_AUTO's threshold unless the period was measured. */
 #define REC_MAX_DRIFT_WINDOWS 0.5
+/* The default of rec_eq7_opts.max_drift_windows (rec_unmix_opts.max_drift_windows takes it
+ * too): the threshold follows how the capture's windows were timed (rec_drift_limit). */
+#define REC_DRIFT_AUTO (-1.0)
+/* The threshold max_drift_windows means for a capture timed window_period (GS_PERIOD_*): itself,
+ * or for REC_DRIFT_AUTO +inf (every frame of known drift kept) when the period was measured
+ * before each exposure, as the firmware does (the frames move with the grid's wander, both ways,
+ * which their raised noise covers), else REC_MAX_DRIFT_WINDOWS (a nominal period slips every
+ * frame the same way, which it does not: docs/recognition.md, "Free-running captures"). */
+static inline double rec_drift_limit(double max_drift_windows, int window_period)
+{
+    if (max_drift_windows != REC_DRIFT_AUTO) return max_drift_windows;
+    return window_period == GS_PERIOD_MEASURED ? INFINITY : REC_MAX_DRIFT_WINDOWS;
+}
 /* 1 when a frame whose windows drifted this much (gs_capture_frame_drift) is still a sample of
  * Eq. 5's window: at most max_drift_windows (NaN, unknown: 0). */
 static inline int rec_frame_kept(double drift_windows, double max_drift_windows)
 {
     return drift_windows <= max_drift_windows;
 }
-/* The frames of cap that are not rec_frame_kept (gs_capture_frame_drift) at max_drift_windows;
- * kept (may be NULL) gets K flags, 1 for a kept frame. */
+/* The frames of cap that are not rec_frame_kept (gs_capture_frame_drift) at
+ * rec_drift_limit(max_drift_windows, cap->window_period); kept (may be NULL) gets K flags, 1 for
+ * a kept frame. */
 int rec_frames_left_out(const gs_capture *cap, double max_drift_windows, unsigned char *kept);
 
 /* The answer for one light. No field is ever NaN or infinite.
@@ -451,7 +466,8 @@ enum {
     REC_PIX_MATCHED,        /* matched: bulb >= 0 */
     REC_PIX_NO_ANSWER,      /* above the threshold, but dim, unknown or bad input, or every
                              * pixel of a capture with a frame whose windows drifted beyond
-                             * min(rec_eq7_opts.max_drift_windows, REC_MAX_DRIFT_WINDOWS): the
+                             * min(rec_drift_limit(rec_eq7_opts.max_drift_windows, its
+                             * window_period), REC_MAX_DRIFT_WINDOWS): the
                              * pixel path cannot raise a smeared frame's noise (bulb -1) */
     REC_PIX_SATURATED       /* some sample saturated: not matched */
 };
@@ -476,7 +492,7 @@ typedef struct {
     size_t mapped;            /* pixels not REC_PIX_DARK */
     size_t matched;           /* REC_PIX_MATCHED pixels */
     int drift_unanswered;     /* 1: no pixel answered because a frame's windows drifted beyond
-                               * min(rec_eq7_opts.max_drift_windows, REC_MAX_DRIFT_WINDOWS) */
+                               * min(rec_drift_limit(...), REC_MAX_DRIFT_WINDOWS) (REC_PIX_*) */
     unsigned char *state;     /* REC_PIX_* */
     int *bulb;                /* index into the matcher's bulbs; -1 unless REC_PIX_MATCHED */
     float *phase_deg;         /* grid phase in [0, 360) (0 for a GS_REF_NONE bulb); 0 unless
@@ -647,7 +663,9 @@ typedef struct {
                            * prior of this std per window mean about the database's B (0.05:
                            * BRFs of one model agree to a few %), > 0 */
     double max_drift_windows;   /* free running: the frames left out (rec_frame_kept), [0, inf]
-                           * (REC_MAX_DRIFT_WINDOWS, as Eq. 7) */
+                           * or REC_DRIFT_AUTO (rec_drift_limit); the kept frames' noise is not
+                           * raised by their smear as Eq. 7's is, so not auto by default
+                           * (REC_MAX_DRIFT_WINDOWS) */
     void (*progress)(void *ctx, double fraction);   /* NULL = none */
     void *progress_ctx;
 } rec_unmix_opts;

@@ -18,7 +18,7 @@ void rec_unmix_opts_default(rec_unmix_opts *o)
     o->max_error = 0.5;
     o->max_inflation = 10;
     o->brf_sigma = 0.05;
-    o->max_drift_windows = REC_MAX_DRIFT_WINDOWS;
+    o->max_drift_windows = REC_MAX_DRIFT_WINDOWS;   /* (not auto: the kept frames' noise is not raised) */
 }
 
 void rec_unmix_release(rec_unmix_result *r)
@@ -606,9 +606,11 @@ gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unm
                        "bands and K = %d: expected 1..%d sources of the capture's bands and K",
                        src->S, src->bands, src->K, cap->bands, cap->K, SMAX);
     if (o_in->refine < 0 || o_in->refine > 20 || !(o_in->max_error > 0) || !(o_in->max_inflation > 1) ||
-        !(o_in->brf_sigma > 0) || !isfinite(o_in->brf_sigma) || !(o_in->max_drift_windows >= 0))
+        !(o_in->brf_sigma > 0) || !isfinite(o_in->brf_sigma) ||
+        !(o_in->max_drift_windows >= 0 || o_in->max_drift_windows == REC_DRIFT_AUTO))
         return gs_fail(GS_EINVAL, "unmix: refine %d (expected 0..20), max_error %g (> 0), "
-                       "max_inflation %g (> 1), brf_sigma %g (> 0), max_drift_windows %g (>= 0)",
+                       "max_inflation %g (> 1), brf_sigma %g (> 0), max_drift_windows %g (>= 0 or "
+                       "REC_DRIFT_AUTO, -1)",
                        o_in->refine, o_in->max_error, o_in->max_inflation, o_in->brf_sigma,
                        o_in->max_drift_windows);
     int W = cap->width, H = cap->height, B = cap->bands, K = cap->K, S = src->S;
@@ -702,7 +704,8 @@ gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unm
                 char why[160] = "";
                 if (u.left_out)
                     snprintf(why, sizeof why, "; %d of %d frames left out, their windows drifted over %g windows "
-                             "(free running, --max-drift-windows)", u.left_out, K, o_in->max_drift_windows);
+                             "(free running, --max-drift-windows)", u.left_out, K,
+                             rec_drift_limit(o_in->max_drift_windows, cap->window_period));
                 st = gs_fail(GS_ENUMERIC, "ill-posed: source %02d (%s at %g deg) would be %.3g %% "
                              "noise (predicted relative error %.3g > %g; QB's condition number "
                              "%.3g; its image holds %.2g %% of the fitted images' energy%s): the data do not support %d "

@@ -271,10 +271,10 @@ static gs_status run_point(const char *base, const srv_acc_crop *cr, const char 
                            const gs_delight *dl, int reuse, srv_acc_point *p, char capdir[4200],
                            double height_m[2])
 {
-    char dir[4096], scene[4200], dbp[4200];   /* paths stay below 4096 */
-    int len = snprintf(dir, sizeof dir, "%s/%s-K%d-C%d-%s-%s-%s-%g", work, srv_acc_scene_names[p->hard], p->K, p->C,
+    char dir[4096], scene[4200], dbp[4200], thr[32];   /* paths stay below 4096 */
+    int len = snprintf(dir, sizeof dir, "%s/%s-K%d-C%d-%s-%s-%s-%s", work, srv_acc_scene_names[p->hard], p->K, p->C,
                        p->hdr ? "hdr" : "nohdr", p->locked ? "locked" : p->nominal_period ? "free-nominal" : "free",
-                       p->continuous ? "cont" : "ph3", p->max_drift_windows);
+                       p->continuous ? "cont" : "ph3", srv_acc_threshold_name(p, thr, sizeof thr));
     if (len < 0 || (size_t)len >= sizeof dir - 32) return gs_fail(GS_EINVAL, "%s: work directory path too long", work);
     rm_rf(dir);
     gs_status s = mkdir_p(dir);
@@ -454,8 +454,8 @@ int srv_bench_accuracy(int argc, char **argv)
                     pts[np++] = (srv_acc_point){.hard = 2, .K = quick ? 8 : 26, .C = Cd[ci], .hdr = 1, .locked = 0,
                                                 .nominal_period = nominal, .max_drift_windows = Td[ti]};
     } else if (!quick) {
-        /* (free running at C = 128 to 1024: below, every frame's windows move under half a
-         * window, as locked; above, Eq. 7 leaves out more and more of the frames) */
+        /* (free running at C = 128 to 1024, the period measured: the windows move up to
+         * several windows, and Eq. 7's default keeps every frame, raising its noise) */
         static const int Cv[] = {128, 512}, Cfree[] = {128, 256, 512, 1024};
         for (int v = 0; v < 3; v++)
             for (int ci = 0; ci < (v == 1 ? 4 : 2); ci++)
@@ -466,7 +466,7 @@ int srv_bench_accuracy(int argc, char **argv)
         pts[np++] = (srv_acc_point){.K = 8, .C = 64, .hdr = 0, .locked = 1};
         pts[np++] = (srv_acc_point){.K = 8, .C = 1024, .hdr = 1, .locked = 0};
     }
-    for (size_t i = 0; i < np && !drift_sweep; i++) pts[i].max_drift_windows = REC_MAX_DRIFT_WINDOWS;
+    for (size_t i = 0; i < np && !drift_sweep; i++) pts[i].max_drift_windows = REC_DRIFT_AUTO;
     gs_delight *dl = NULL;
     if ((s = gs_delight_open(NULL, &dl)) != GS_OK) {
         free(pts);
@@ -487,9 +487,10 @@ int srv_bench_accuracy(int argc, char **argv)
             snprintf(p->err, sizeof p->err, "%s: %s", gs_strerror(s), gs_detail());
             failed++;
         }
-        fprintf(stderr, "bench accuracy: %s K=%d C=%d hdr=%d %s phases=%s max drift %g: %s (%.1f s)\n",
+        char thr[32];
+        fprintf(stderr, "bench accuracy: %s K=%d C=%d hdr=%d %s phases=%s max drift %s: %s (%.1f s)\n",
                 srv_acc_scene_names[p->hard], p->K, p->C, p->hdr, srv_acc_period_name(p), srv_acc_ph_name(p),
-                p->max_drift_windows,
+                srv_acc_threshold_name(p, thr, sizeof thr),
                 p->ok ? "ok" : p->err, gs_clock_s(CLOCK_MONOTONIC) - t0);
         if (!keep && !(i + 1 < np && p->ok && same_setting(p, &pts[i + 1]))) rm_rf(work), mkdir(work, 0700);
     }

@@ -40,7 +40,8 @@ const char *srv_acc_period_name(const srv_acc_point *p)
 
 const char *srv_acc_threshold_name(const srv_acc_point *p, char *buf, size_t n)
 {
-    if (isfinite(p->max_drift_windows)) snprintf(buf, n, "%g", p->max_drift_windows);
+    if (p->max_drift_windows == REC_DRIFT_AUTO) snprintf(buf, n, "auto");
+    else if (isfinite(p->max_drift_windows)) snprintf(buf, n, "%g", p->max_drift_windows);
     else snprintf(buf, n, "none");
     return buf;
 }
@@ -413,11 +414,13 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
                "cycles between acquisitions (the scene's `readout_cycles`), Delta = 1/(2 x 50 Hz) = 10 ms. "
                "The 64 cycles the controller needs to lock before the first frame are not counted.\n"
                "- **lock**: AC-locked, or free running (the windows timed with the half period measured "
-               "before each exposure, as the firmware does): the frames Eq. 7 kept of the K, those whose "
-               "windows moved at most %g windows across the flicker cycle during the exposure "
-               "(`gs_capture_frame_drift`, capture.json's `window_drift_windows`; the others' samples are "
-               "left out, `REC_MATCH_DRIFT`, docs/recognition.md \"Free-running captures\"), and in "
-               "parentheses the largest drift, in windows.\n"
+               "before each exposure, as the firmware does, capture.json's `window_period` `measured`): "
+               "the frames Eq. 7 kept of the K at its default threshold (`--max-drift-windows auto`: every "
+               "frame of known drift for a measured period, else those whose windows moved at most %g "
+               "windows across the flicker cycle during the exposure, `gs_capture_frame_drift`, "
+               "capture.json's `window_drift_windows`; docs/recognition.md \"Free-running captures\"; "
+               "docs/accuracy-drift.md measures other thresholds), and in parentheses the largest drift, "
+               "in windows.\n"
                "- **compute s**: wall time of recognition and georeferencing (the pipeline's blobs, Eq. 7 "
                "and locate stages), measured, one core.\n"
                "- **det.**: detected lights / truth lights in the window; **false**: stored lights without a "
@@ -446,9 +449,10 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
                "reddened by the truth's `transmission`) and its scintillation (the truth's "
                "`scintillation_log_var` and `scintillation_rho` give each frame's relative flux "
                "variance over its C cycles; such frames are Gaussian with the Poisson-Gaussian "
-               "variances plus that variance, common to the bands), so it is a ceiling; free running, it "
-               "leaves out the frames Eq. 7 leaves out and takes the others' windows as regular (Eq. 5), "
-               "as Eq. 7 does.\n\n",
+               "variances plus that variance, common to the bands), so it is a ceiling when locked; free "
+               "running, it leaves out the frames Eq. 7 leaves out and takes the others' windows as regular "
+               "(Eq. 5) without raising their noise by their smear as Eq. 7 does: with drifted frames kept "
+               "it is no ceiling (a negative gap).\n\n",
             REC_MAX_DRIFT_WINDOWS, "[0, 0.5), [0.5, 0.8), [0.8, 0.95), [0.95, 0.99), [0.99, 1]", quick ? 8 : 40);
     fprintf(f, "## Table\n\n");
     fprintf(f, "| scene | K | C | HDR | lock | phases | A | capture s | compute s | det. | false | bulb | phase | "
@@ -499,8 +503,7 @@ gs_status srv_acc_write_doc(const char *path, const char *out, const char *base,
                "of its span beyond both ends, so a point at either end is drawn inside the frame.\n\n"
                "![calibration](%s/calibration.png)\n\nAccuracy of the answered lights against their reported "
                "confidence, pooled over each scene's main grid (HDR on, locked, 3 phases; the variants' ECE is "
-               "in the table: free-running points leave out the frames whose windows drift over half a "
-               "window); the dashed line is perfect calibration. Both axes run over the whole scale, 0 to 1 "
+               "in the table); the dashed line is perfect calibration. Both axes run over the whole scale, 0 to 1 "
                "with 3 %% beyond both ends, so the diagonal is at 45 degrees and a bin at 0 or 1 is inside the "
                "frame. These captures are the project's own "
                "simulator's; calibration on a renderer the simulator does not share is in "
@@ -621,9 +624,11 @@ gs_status srv_acc_write_drift_doc(const char *path, const char *out, const char 
                "over its C cycles (capture.json's `window_drift_windows`, docs/capture.md). **period**: P "
                "measured over the 64 cycles before each exposure, as the firmware does, or the grid's "
                "nominal one (a mode the firmware does not have: it shows a larger drift). **threshold**: "
-               "`rec_eq7_opts.max_drift_windows` (`recognize --max-drift-windows`; the default is %g): a frame "
-               "whose windows moved further is left out of Eq. 7, the others' noise is raised by their "
-               "smear (docs/recognition.md, \"Free-running captures\"); *none* keeps every frame. **kept**: "
+               "`rec_eq7_opts.max_drift_windows` (`recognize --max-drift-windows`): a frame whose windows "
+               "moved further is left out of Eq. 7, the others' noise is raised by their smear "
+               "(docs/recognition.md, \"Free-running captures\"); *none* keeps every frame. The default, "
+               "`auto`, is none when the period was measured (capture.json's `window_period`) and %g when "
+               "it was nominal: the rows of that threshold are what the default gives. **kept**: "
                "the frames kept of the K, and in parentheses the largest drift, in windows. The other "
                "columns are docs/accuracy.md's: *bulb* and *phase* the accuracy of the answers given, *unkn.* "
                "the detected lights without a bulb, *right/det.* the detected lights with the right bulb and "

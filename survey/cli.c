@@ -232,12 +232,12 @@ int srv_num_arg(const char *cmd, const char *opt, const char *arg, double lo, do
 
 int srv_drift_arg(const char *cmd, const char *arg, double *out)
 {
-    if (!strcmp(arg, "none")) {
-        *out = INFINITY;
+    if (!strcmp(arg, "none") || !strcmp(arg, "auto")) {
+        *out = arg[0] == 'n' ? INFINITY : REC_DRIFT_AUTO;
         return 1;
     }
     if (gs_parse_number(arg, out) && *out >= 0) return 1;
-    srv_usage_error(cmd, "--max-drift-windows '%s': expected a number >= 0 or none", arg);
+    srv_usage_error(cmd, "--max-drift-windows '%s': expected a number >= 0, none or auto", arg);
     return 0;
 }
 

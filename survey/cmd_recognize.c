@@ -24,9 +24,8 @@ static const char recognize_usage[] =
     "Recognizes the bulb type and electric-grid phase of every light in a capture directory\n"
     "(docs/formats.md, gridsurvey-capture/1): lights as blobs with per-frame photometry, then\n"
     "the paper's Eq. 7 against DELIGHT. Prints a table, or JSON (docs/recognize-cli.md).\n"
-    "A free-running capture (locked false) is matched without the frames whose windows drifted\n"
-    "over --max-drift-windows during the exposure (flag drift; the header says how many;\n"
-    "the maps then answer no pixel).\n"
+    "Free running (locked false), frames whose windows drifted over --max-drift-windows are\n"
+    "left out (flag drift; the header says how many); the maps stop at half a window.\n"
     "\n"
     "  --format F              table (default) or json (a gridsurvey-lights/1 document)\n"
     "  --phases 3|6|continuous candidate grid phases: 3 = 0/120/240 deg (default); 6 = those\n"
@@ -58,8 +57,9 @@ static const char recognize_usage[] =
     "                          a bulb not in DELIGHT (default on); off: Eq. 7 alone (with\n"
     "                          --band-model chroma --model-error 0 --other-prior 0\n"
     "                          --flat-share 0, exactly the paper's)\n"
-    "  --max-drift-windows W   free running: the most a kept frame's windows moved, >= 0 or\n"
-    "                          none (all of known drift; default 0.5)\n"
+    "  --max-drift-windows W   free running: the most a kept frame's windows moved, >= 0, none\n"
+    "                          (all of known drift) or auto (default: none if the period was\n"
+    "                          measured, else 0.5)\n"
     "  --threshold S           detection threshold of lights and mapped pixels, noise sigmas > 0\n"
     "                          (default 5)\n"
     "  --delight DB            the DELIGHT SQLite file (default: $GRIDSURVEY_DELIGHT, else the\n"
@@ -68,7 +68,9 @@ static const char recognize_usage[] =
     "                          (per-pixel Eq. 7, paper Fig. 1) and signals.png (Fig. 3)\n"
     "  --progress              progress on stderr (default: when stderr is a terminal)\n"
     "  -q, --no-progress       no progress\n"
-    "  --help                  this text\n"
+    "  --help                  this text\n";
+/* (two strings: one would exceed the 4095 characters C99 promises) */
+static const char recognize_examples[] =
     "\n"
     "Examples (build/lab: see gridsurvey help simulate):\n"
     "  gridsurvey recognize build/lab --maps build/lab-maps\n"
@@ -217,7 +219,7 @@ static int parse_opts(int argc, char **argv, recognize_opts *o)
         case 's':
             if (!srv_num_arg_open("recognize", "--threshold", optarg, 0.0, INFINITY, SRV_OPEN_LO, &o->threshold)) return 2;
             break;
-        case 'h': fputs(recognize_usage, stdout); return 0;
+        case 'h': fputs(recognize_usage, stdout), fputs(recognize_examples, stdout); return 0;
         case ':': return srv_usage_error("recognize", "option '%s' needs a value", argv[optind - 1]);
         default: return srv_usage_error("recognize", "unknown option '%s'", argv[optind - 1]);
         }
@@ -418,6 +420,8 @@ static gs_status print_json(const recognize_opts *o, const gs_capture *cap, cons
     json_object_set_new(c, "width", json_integer(cap->width));
     json_object_set_new(c, "height", json_integer(cap->height));
     json_object_set_new(c, "locked", json_boolean(cap->locked));
+    const char *period = gs_period_name(cap->window_period);
+    json_object_set_new(c, "window_period", period ? json_string(period) : json_null());
     double drift = gs_capture_window_drift(cap, NULL);
     json_object_set_new(c, "drift_windows", isfinite(drift) ? json_real(drift) : json_null());
     json_object_set_new(c, "frames_left_out", json_integer(rec_frames_left_out(cap, o->eq7.max_drift_windows, NULL)));
@@ -433,7 +437,8 @@ static gs_status print_json(const recognize_opts *o, const gs_capture *cap, cons
     json_object_set_new(r, "min_confidence", jreal(o->eq7.ambiguous_conf));
     json_object_set_new(r, "unknown_p", jreal(o->eq7.unknown_p));
     json_object_set_new(r, "min_snr", jreal(o->eq7.min_snr));
-    json_object_set_new(r, "max_drift_windows", jreal(o->eq7.max_drift_windows));
+    json_object_set_new(r, "max_drift_windows", jreal(rec_drift_limit(o->eq7.max_drift_windows, cap->window_period)));
+    json_object_set_new(r, "max_drift_windows_auto", json_boolean(o->eq7.max_drift_windows == REC_DRIFT_AUTO));
     json_object_set_new(r, "threshold_sigma", jreal(o->threshold));
     json_object_set_new(r, "band_model", json_string(cap->bands > 1 ? band_model_name(o->eq7.band_gains) : "mono"));
     json_object_set_new(r, "chroma_tolerance", jreal(o->eq7.chroma_tolerance));
@@ -512,9 +517,10 @@ static gs_status write_maps(const recognize_opts *o, const gs_capture *cap, cons
     gs_status st = rec_pixel_maps_compute(cap, m, &o->eq7, &mo, &pm);
     if (st != GS_OK) return st;
     if (pm.drift_unanswered)
-        fprintf(stderr, "gridsurvey recognize: note: the maps answer no pixel: frames of this free-running "
-                        "capture are left out (their windows drifted), which a pixel's one noise level cannot "
-                        "do (docs/recognition.md, \"Free-running captures\")\n");
+        fprintf(stderr, "gridsurvey recognize: note: the maps answer no pixel: a frame's windows drifted over "
+                        "%g windows in this free-running capture, which a pixel's one noise level cannot model "
+                        "(docs/recognition.md, \"Free-running captures\")\n",
+                fmin(rec_drift_limit(o->eq7.max_drift_windows, cap->window_period), REC_MAX_DRIFT_WINDOWS));
     progress("drawing maps ...");
     snprintf(path, sizeof path, "%s/phase_map.png", o->maps);
     st = rec_map_write_phase_png(&pm, path);

@@ -274,7 +274,8 @@ typedef struct {
     int hard, K, C, hdr, locked, continuous;   /* hard: 0 metro, 1 metro_hard, 2 metro_clear */
     int nominal_period;       /* free running with the scene's nominal half period (0: measured
                                * before each exposure, as the firmware does) */
-    double max_drift_windows; /* rec_eq7_opts.max_drift_windows of its Eq. 7 (+inf: none) */
+    double max_drift_windows; /* rec_eq7_opts.max_drift_windows of its Eq. 7 (+inf: none;
+                               * REC_DRIFT_AUTO: the default) */
     /* results */
     int ok;
     char err[512];
@@ -302,7 +303,7 @@ typedef struct {
 const char *srv_acc_ph_name(const srv_acc_point *p);
 /* The point's window period: "locked", or free running "measured" or "nominal". */
 const char *srv_acc_period_name(const srv_acc_point *p);
-/* Its max_drift_windows as recognize --max-drift-windows takes it ("none" for +inf), in buf. */
+/* Its max_drift_windows as recognize --max-drift-windows takes it ("none" for +inf, "auto"), in buf. */
 const char *srv_acc_threshold_name(const srv_acc_point *p, char *buf, size_t n);
 gs_status srv_acc_write_csv(const char *path, const srv_acc_point *pts, size_t np);
 /* The reliability bins of every point (pair and phase), one row per non-empty bin. */

@@ -102,7 +102,7 @@ gs_status srv_job_match(srv_job *j)
 void srv_drift_note(const gs_capture *cap, double max_drift_windows, char *buf, size_t n)
 {
     int out = rec_frames_left_out(cap, max_drift_windows, NULL), unknown = 0, worst_k = -1;
-    double worst = -1.0;
+    double worst = -1.0, limit = rec_drift_limit(max_drift_windows, cap->window_period);
     for (int k = 0; k < cap->K; k++) {
         double d = gs_capture_frame_drift(cap, k);
         unknown += isnan(d);
@@ -111,13 +111,14 @@ void srv_drift_note(const gs_capture *cap, double max_drift_windows, char *buf, 
     if (cap->locked) {
         snprintf(buf, n, "%s", "");
     } else if (!out) {
-        snprintf(buf, n, "; free running: the windows drifted at most %.4g windows over an exposure (frame %d)",
-                 worst, worst_k);
+        snprintf(buf, n, "; free running: the windows drifted at most %.4g windows over an exposure (frame %d)%s",
+                 worst, worst_k, max_drift_windows == REC_DRIFT_AUTO && isinf(limit)
+                                     ? ", every frame kept: the period was measured (--max-drift-windows auto)" : "");
     } else {
         int u = snprintf(buf, n, "; free running: %d of %d frames left out (flag drift):", out, cap->K);
         if (u > 0 && (size_t)u < n && out > unknown)
             u += snprintf(buf + u, n - (size_t)u, " %d drifted over %.4g windows (the most %.4g, frame %d)%s",
-                          out - unknown, max_drift_windows, worst, worst_k, unknown ? "," : "");
+                          out - unknown, limit, worst, worst_k, unknown ? "," : "");
         if (u > 0 && (size_t)u < n && unknown)
             snprintf(buf + u, n - (size_t)u, " %d without the timing to tell (window_drift_windows, or "
                      "window_half_period_s and grid_hz_measured)", unknown);

@@ -113,11 +113,12 @@ TEST(bench_accuracy_quick_consistent)
         r->phase_ece = num(fld[27]);
         r->phase_answered = atol(fld[28]);
         /* a locked capture's windows do not drift: every frame kept; the free-running point's
-         * (K = 8, C = 1024) drift more than half a window in some frame, which Eq. 7 leaves out */
+         * (K = 8, C = 1024) drift more than half a window in some frame, which Eq. 7's default
+         * (auto) keeps: the period was measured */
         if (r->locked) CHECK(num(fld[29]) == 0.0 && atoi(fld[30]) == r->K);
-        else CHECK(num(fld[29]) > 0.5 && atoi(fld[30]) >= 1 && atoi(fld[30]) < r->K);
+        else CHECK(num(fld[29]) > 0.5 && atoi(fld[30]) == r->K);
         /* (free running as the firmware does it, Eq. 7's default threshold) */
-        CHECK(!strcmp(fld[31], r->locked ? "locked" : "measured") && num(fld[32]) == REC_MAX_DRIFT_WINDOWS);
+        CHECK(!strcmp(fld[31], r->locked ? "locked" : "measured") && !strcmp(fld[32], "auto"));
         free_rows += !r->locked;
         r->truth_lights = atol(fld[11]);
         r->bin_lights[0] = r->bin_lights[1] = r->bin_right[0] = r->bin_right[1] = 0;
@@ -215,16 +216,26 @@ TEST(bench_accuracy_quick_consistent)
 
 /* `bench accuracy --drift-sweep --quick`: one free-running capture per period (measured before
  * each exposure, nominal) recognised at Eq. 7's thresholds 0.25 and none. The same capture for
- * both thresholds (the same drift); none keeps every frame, 0.25 leaves out some (the largest
- * drift is beyond it); the nominal period drifts further than the measured one; the page lists
- * every point. */
+ * both thresholds (simulated once: the second threshold's work directory (--keep) has none of
+ * its own; the same drift); none keeps every frame, 0.25 leaves out some (the largest drift is
+ * beyond it); the nominal period drifts further than the measured one; the page lists every
+ * point. */
 TEST(bench_accuracy_drift_sweep_quick)
 {
     char out[2048], cmd[4096], log[8192];
     snprintf(out, sizeof out, "%s/drift", test_tmpdir());
-    snprintf(cmd, sizeof cmd, "%s bench accuracy --drift-sweep --quick --out-dir %s", test_bin(), out);
+    snprintf(cmd, sizeof cmd, "mkdir -p %s/work && TMPDIR=%s/work %s bench accuracy --drift-sweep --quick --keep --out-dir %s",
+             test_tmpdir(), test_tmpdir(), test_bin(), out);
     int rc = test_run(cmd, log, sizeof log);
     CHECK_MSG(rc == 0, "%s -> %d:\n%s", cmd, rc, log);
+    for (int nominal = 0; nominal < 2; nominal++) {
+        const char *p = nominal ? "free-nominal" : "free";
+        snprintf(cmd, sizeof cmd, "cd %s/work/gs-accuracy-* && test -f metro_clear-K8-C1024-hdr-%s-ph3-0.25/capture/capture.json "
+                 "&& test -f metro_clear-K8-C1024-hdr-%s-ph3-none/survey.sqlite && test ! -e metro_clear-K8-C1024-hdr-%s-ph3-none/capture",
+                 test_tmpdir(), p, p, p);
+        rc = test_run(cmd, log, sizeof log);
+        CHECK_MSG(rc == 0, "%s: the second threshold simulated its own capture, or the first none:\n%s", p, log);
+    }
     char path[2200], line[4096], *fld[CSV_FIELDS];
     FILE *f = csv_open(out, "accuracy.csv", line, sizeof line);
     if (!f) return;

@@ -74,7 +74,7 @@ static void check_same(const gs_capture *a, const gs_capture *b)
     CHECK(a->width == b->width && a->height == b->height);
     CHECK(a->saturation_dn == b->saturation_dn && a->black_level_dn == b->black_level_dn);
     CHECK(a->gain_e_per_dn == b->gain_e_per_dn && a->read_noise_dn == b->read_noise_dn);
-    CHECK(a->locked == b->locked && strcmp(a->utc, b->utc) == 0);
+    CHECK(a->locked == b->locked && a->window_period == b->window_period && strcmp(a->utc, b->utc) == 0);
     CHECK((a->station_json == NULL) == (b->station_json == NULL));
     if (a->station_json && b->station_json) CHECK(strcmp(a->station_json, b->station_json) == 0);
     for (int k = 0; k < a->K && k < b->K; k++) {
@@ -428,7 +428,8 @@ TEST(capture_format_field_errors)
 }
 
 /* The optional per-frame "grid_hz_measured", "start_s" and "window_half_period_s" (free running
- * only): absent = NaN, exact round trip, out-of-range values refused by the reader (naming file,
+ * only), and the capture's "window_period" (free running only): absent = NaN or
+ * GS_PERIOD_UNKNOWN, exact round trip, out-of-range values refused by the reader (naming file,
  * line and field) and the writer. */
 TEST(capture_format_grid_frequency_fields)
 {
@@ -444,10 +445,19 @@ TEST(capture_format_grid_frequency_fields)
     for (int k = 0; k < 4; k++) CHECK(isnan(a.frames[k].window_half_period_s));
     a.frames[0].window_half_period_s = 0.0099932623456789012;   /* (a free-running capture) */
     a.frames[2].window_drift_windows = 0.62;
+    CHECK(a.window_period == GS_PERIOD_UNKNOWN);
+    for (int wp = GS_PERIOD_MEASURED; wp <= GS_PERIOD_NOMINAL; wp++) {   /* (each, read back) */
+        a.window_period = wp;
+        write_capture(dir, &a);
+        CHECK_OK(gs_capture_read(dir, &b));
+        check_same(&a, &b);
+        gs_capture_release(&b);
+    }
     write_capture(dir, &a);
     const char *path = fx_path(dir, "capture.json");
     char *text = fx_read_file(path, NULL);
-    CHECK(text && strstr(text, "\"grid_hz_measured\": 50.0366866179697") &&
+    CHECK(text && strstr(text, "\"window_period\": \"nominal\",") &&
+          strstr(text, "\"grid_hz_measured\": 50.0366866179697") &&
           strstr(text, "\"start_s\": 0") && strstr(text, "\"window_half_period_s\": 0.00999326234567890") &&
           strstr(text, "\"window_drift_windows\": 0.62"));
     free(text);
@@ -477,6 +487,11 @@ TEST(capture_format_grid_frequency_fields)
     CHECK(strstr(gs_detail(), "field frames[3].window_drift_windows: expected a finite number >= 0 (windows), "
                               "only when locked is false") != NULL);
     a.frames[3].window_drift_windows = NAN;
+    a.window_period = 3;
+    CHECK(gs_capture_write_json(dir, &a) == GS_EINVAL);
+    CHECK(strstr(gs_detail(), "field window_period: expected \"measured\" or \"nominal\", only when locked is "
+                              "false") != NULL);
+    a.window_period = GS_PERIOD_UNKNOWN;
     a.locked = 1;                               /* locked windows have no period of their own */
     CHECK(gs_capture_write_json(dir, &a) == GS_EINVAL);
     CHECK(strstr(gs_detail(), "field frames[0].window_half_period_s: expected a finite number from 1/130 "
@@ -487,6 +502,11 @@ TEST(capture_format_grid_frequency_fields)
     gs_capture c;
     CHECK_OK(gs_capture_read(small_capture("freq_absent", 0, NULL), &c));
     for (int k = 0; k < c.K; k++) CHECK(isnan(c.frames[k].grid_hz_measured) && isnan(c.frames[k].start_s));
+    CHECK(c.window_period == GS_PERIOD_UNKNOWN);
+    gs_capture_release(&c);
+    CHECK_OK(gs_capture_read(small_capture("period_ok", 8, "  \"saturation\": 4095, \"locked\": false, "
+                                            "\"window_period\": \"measured\","), &c));
+    CHECK(c.window_period == GS_PERIOD_MEASURED);
     gs_capture_release(&c);
     CHECK_OK(gs_capture_read(small_capture("freq_ok", 11, "    {\"file\": \"frame_001.png\", \"k\": 1, "
                                             "\"cycles\": 100, \"grid_hz_measured\": 45, \"start_s\": 2},"), &c));
@@ -509,11 +529,17 @@ TEST(capture_format_grid_frequency_fields)
         {"    {\"file\": \"frame_001.png\", \"k\": 1, \"cycles\": 100, \"window_drift_windows\": 0.2},",
          "capture.json:11: field frames[1].window_drift_windows: expected a finite number >= 0 (windows), "
          "only when locked is false"},
+        {"  \"saturation\": 4095, \"window_period\": \"measured\",",   /* (locked) */
+         "field window_period: expected \"measured\" or \"nominal\", only when locked is false"},
+        {"  \"saturation\": 4095, \"locked\": false, \"window_period\": \"guessed\",",
+         "capture.json:8: field window_period: expected \"measured\" or \"nominal\", only when locked is false"},
+        {"  \"saturation\": 4095, \"locked\": false, \"window_period\": 1,",
+         "capture.json:8: field window_period: expected \"measured\" or \"nominal\""},
     };
     for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
         char name[32];
         snprintf(name, sizeof name, "freq_bad%zu", i);
-        expect_error(small_capture(name, 11, cases[i].text), GS_EFORMAT,
+        expect_error(small_capture(name, strncmp(cases[i].text, "  \"sat", 6) ? 11 : 8, cases[i].text), GS_EFORMAT,
                      (const char *[]){cases[i].want, NULL});
     }
 }

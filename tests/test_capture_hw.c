@@ -316,6 +316,7 @@ TEST(capture_hardware_reports_the_free_running_period)
         if (child > 0) waitpid(child, &st, 0);
         gs_capture cap;
         CHECK_OK(gs_capture_read(out, &cap));
+        CHECK(cap.window_period == (locked ? GS_PERIOD_UNKNOWN : GS_PERIOD_MEASURED));   /* (the firmware's) */
         for (int k = 0; cap.frames && k < cap.K; k++) {
             CHECK_NEAR(cap.frames[k].grid_hz_measured, 50.0, 1e-9);   /* the log's mean: 10 ms */
             if (locked) CHECK(isnan(cap.frames[k].window_half_period_s));

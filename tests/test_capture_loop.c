@@ -55,13 +55,14 @@ static void write_small_free(const char *path, int seed)
                        "\"hdr\": true, \"locked\": false, \"free_running_period\": \"measured\"}");
 }
 
-/* Every frame of dir/capture.json has a window_half_period_s and a window_drift_windows. */
+/* Every frame of dir/capture.json has a window_half_period_s and a window_drift_windows, and
+ * its window_period is write_small_free's, measured. */
 static int has_window_periods(const char *dir)
 {
     gs_capture cap;
     memset(&cap, 0, sizeof cap);
     if (gs_capture_read(dir, &cap) != GS_OK) return 0;
-    int ok = !cap.locked;
+    int ok = !cap.locked && cap.window_period == GS_PERIOD_MEASURED;
     for (int k = 0; k < cap.K; k++)
         ok &= cap.frames[k].window_half_period_s > 0 && cap.frames[k].window_drift_windows >= 0;
     gs_capture_release(&cap);
@@ -537,7 +538,8 @@ static double crossing_phase(const double *tc, size_t count, double t)
  * start after C periods P against at the first (the oracle, on the same crossings), within
  * 1 % + 0.002 windows. Locked
  * captures record no period and drift 0; a free-running one without it drifts by NaN. A
- * controller clock's error moves a nominal period, not a measured one (constant grid). */
+ * controller clock's error moves a nominal period, not a measured one (constant grid).
+ * capture.json's window_period says which (none locked). */
 TEST(capture_records_free_running_window_period)
 {
     const char *tmp = test_tmpdir();
@@ -564,6 +566,8 @@ TEST(capture_records_free_running_window_period)
         if (!cap.frames) continue;
         int frame = -2;
         double drift = gs_capture_window_drift(&cap, &frame), worst = 0;
+        CHECK_MSG(cap.window_period == (v == 0 ? GS_PERIOD_MEASURED : v == 1 ? GS_PERIOD_NOMINAL : GS_PERIOD_UNKNOWN),
+                  "variant %d: window_period %d", v, cap.window_period);
         if (v == 2) {
             for (int k = 0; k < cap.K; k++)
                 CHECK(isnan(cap.frames[k].window_half_period_s) && isnan(cap.frames[k].window_drift_windows));

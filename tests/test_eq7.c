@@ -239,11 +239,15 @@ TEST(eq7_matcher_arguments)
     o.phases = (rec_phase_set)7;
     CHECK(rec_matcher_new(d, 50, 3, 26, &o, &m) == GS_EINVAL);
     rec_eq7_opts_default(&o);
-    CHECK(o.max_drift_windows == REC_MAX_DRIFT_WINDOWS);
+    CHECK(o.max_drift_windows == REC_DRIFT_AUTO);
     o.max_drift_windows = -0.1;
     CHECK(rec_matcher_new(d, 50, 3, 26, &o, &m) == GS_EINVAL);
     o.max_drift_windows = NAN;
     CHECK(rec_matcher_new(d, 50, 3, 26, &o, &m) == GS_EINVAL);
+    o.max_drift_windows = INFINITY;   /* (none) */
+    CHECK_OK(rec_matcher_new(d, 50, 3, 26, &o, &m));
+    rec_matcher_free(m);
+    m = NULL;
     /* unlocked entries are never candidates */
     gs_bulb b;
     eq7fx_make_bulb(&b, "pwm", SHAPE_FLAT, 50, 3, GS_REF_UNLOCKED, eq7fx_chroma[0], 64);

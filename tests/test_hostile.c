@@ -732,10 +732,10 @@ TEST(cli_usage_errors_of_each_command_one_line_with_the_hint)
          "--watts 'inf': expected a number > 0 and < 100000"},
         {"%s recognize --blend-prior 1 x", "recognize", "--blend-prior '1': expected a number >= 0 and < 1"},
         {"%s recognize --threshold 0 x", "recognize", "--threshold '0': expected a number > 0 ("},
-        {"%s recognize --max-drift-windows -1 x", "recognize", "--max-drift-windows '-1': expected a number >= 0 or none"},
-        {"%s run x --db x.sqlite --max-drift-windows inf", "run", "--max-drift-windows 'inf': expected a number >= 0 or none"},
+        {"%s recognize --max-drift-windows -1 x", "recognize", "--max-drift-windows '-1': expected a number >= 0, none or auto"},
+        {"%s run x --db x.sqlite --max-drift-windows inf", "run", "--max-drift-windows 'inf': expected a number >= 0, none or auto"},
         {"%s unmix x --sources auto --out-dir o --max-drift-windows nan", "unmix",
-         "--max-drift-windows 'nan': expected a number >= 0 or none"},
+         "--max-drift-windows 'nan': expected a number >= 0, none or auto"},
         {"%s recognize --transformer-deg nan x", "recognize", "--transformer-deg 'nan': expected a finite number"},
         /* the unit the option's name ends with, after its range */
         {"%s locate --light-height-m abc --station s.json --pixels p.csv", "locate",

@@ -321,7 +321,7 @@ TEST(recognize_cli_delight_subset_unknown)
  * 5, ...) with odd_drift recorded as its range (window_drift_windows) when it differs; with
  * corrupt, those frames hold frame 1's pixels. No station. */
 static void free_running_copy(const char *src, const char *name, double drift, double odd_drift, int corrupt,
-                              char *dir, size_t n)
+                              const char *period, char *dir, size_t n)
 {
     snprintf(dir, n, "%s/free_%s", test_tmpdir(), name);
     char o[1024];
@@ -333,6 +333,7 @@ static void free_running_copy(const char *src, const char *name, double drift, d
     CHECK_MSG(root != NULL, "%s: %s", path, err.text);
     if (!root) return;
     json_object_set_new(root, "locked", json_false());
+    if (period) json_object_set_new(root, "window_period", json_string(period));
     json_object_del(root, "station");   /* (the renderer's carries a field `run` does not take) */
     int K = (int)json_integer_value(json_object_get(root, "K"));
     json_t *frames = json_object_get(root, "frames"), *f;
@@ -363,7 +364,9 @@ static void free_running_copy(const char *src, const char *name, double drift, d
  * than half a window), the same pixels change them. With every frame out, or capture.json
  * without the timing, no light is answered; the maps (one noise per pixel row, no sample left
  * out) answer no pixel once a frame is out. --max-drift-windows moves the threshold (none:
- * every frame with a known drift kept), for the maps too. */
+ * every frame with a known drift kept), for the maps too. Its default, auto, keeps every frame
+ * when capture.json's window_period is "measured" (the maps still stop at half a window), and
+ * is 0.5 when it is "nominal" or absent. */
 TEST(recognize_cli_free_running_drift_leaves_frames_out)
 {
     const char *src = recfx_render(&recfx_scene_a);
@@ -380,36 +383,51 @@ TEST(recognize_cli_free_running_drift_leaves_frames_out)
         double drift, odd_drift;
         int corrupt, answers, same, out;   /* out: frames left out */
         const char *note;
-        double max;                         /* --max-drift-windows (0: the default) */
+        double max;                         /* --max-drift-windows (0: the default, auto;
+                                             * REC_DRIFT_AUTO: auto given) */
+        const char *period;                 /* capture.json's window_period (NULL: absent) */
     } cases[] = {
-        {"small", 0.45, 0.45, 0, 1, 1, 0, "free running: the windows drifted at most 0.45 windows over an exposure", 0},
+        {"small", 0.45, 0.45, 0, 1, 1, 0, "free running: the windows drifted at most 0.45 windows over an exposure", 0, NULL},
         {"some_out", 0.45, 0.55, 1, 1, 1, 6, "6 of 26 frames left out (flag drift): 6 drifted over 0.5 windows "
-                                              "(the most 0.55, frame 0)", 0},
-        {"some_kept", 0.45, 0.45, 1, 1, 0, 0, "drifted at most 0.45", 0},
-        {"all_out", 0.55, 0.55, 0, 0, 0, 26, "26 of 26 frames left out", 0},
+                                              "(the most 0.55, frame 0)", 0, NULL},
+        {"some_kept", 0.45, 0.45, 1, 1, 0, 0, "drifted at most 0.45", 0, NULL},
+        {"all_out", 0.55, 0.55, 0, 0, 0, 26, "26 of 26 frames left out", 0, NULL},
         {"unknown", NAN, NAN, 0, 0, 0, 26, "26 of 26 frames left out (flag drift): 26 without the timing to "
                                             "tell (window_drift_windows, or window_half_period_s and "
-                                            "grid_hz_measured)", 0},
-        {"keeps_at_0.6", 0.45, 0.55, 1, 1, 0, 0, "drifted at most 0.55 windows over an exposure (frame 0)", 0.6},
-        {"drops_at_0.4", 0.45, 0.45, 0, 0, 0, 26, "26 of 26 frames left out (flag drift): 26 drifted over 0.4 windows", 0.4},
-        {"keeps_at_none", 3.0, 3.0, 0, 1, 1, 0, "drifted at most 3 windows", INFINITY},
+                                            "grid_hz_measured)", 0, NULL},
+        {"keeps_at_0.6", 0.45, 0.55, 1, 1, 0, 0, "drifted at most 0.55 windows over an exposure (frame 0)", 0.6, NULL},
+        {"drops_at_0.4", 0.45, 0.45, 0, 0, 0, 26, "26 of 26 frames left out (flag drift): 26 drifted over 0.4 windows", 0.4, NULL},
+        {"keeps_at_none", 3.0, 3.0, 0, 1, 1, 0, "drifted at most 3 windows", INFINITY, NULL},
+        {"measured_keeps", 3.0, 3.0, 0, 1, 1, 0, "drifted at most 3 windows over an exposure (frame 0), every frame "
+                                                 "kept: the period was measured (--max-drift-windows auto)", 0, "measured"},
+        {"measured_some_kept", 0.45, 0.55, 1, 1, 0, 0, "drifted at most 0.55 windows over an exposure (frame 0), "
+                                                       "every frame kept", 0, "measured"},
+        {"measured_at_0.5", 0.45, 0.55, 1, 1, 1, 6, "6 of 26 frames left out (flag drift): 6 drifted over 0.5 windows",
+         0.5, "measured"},
+        {"nominal_some_out", 0.45, 0.55, 1, 1, 1, 6, "6 of 26 frames left out (flag drift): 6 drifted over 0.5 windows",
+         REC_DRIFT_AUTO, "nominal"},
     };
     int nc = (int)(sizeof cases / sizeof *cases);
     for (int v = -1; v < nc && d; v++) {
         char dir[1024];
         if (v >= 0)
-            free_running_copy(src, cases[v].name, cases[v].drift, cases[v].odd_drift, cases[v].corrupt, dir, sizeof dir);
+            free_running_copy(src, cases[v].name, cases[v].drift, cases[v].odd_drift, cases[v].corrupt, cases[v].period,
+                              dir, sizeof dir);
         else snprintf(dir, sizeof dir, "%s", src);
         /* the maps: every lit pixel answered while no frame is out, else none */
         gs_capture cap;
         CHECK_OK(gs_capture_read(dir, &cap));
         if (!m) CHECK_OK(rec_matcher_new(d, cap.grid_hz, cap.bands, cap.K, NULL, &m));
-        double max = v >= 0 && cases[v].max ? cases[v].max : REC_MAX_DRIFT_WINDOWS;
+        double opt = v >= 0 && cases[v].max ? cases[v].max : REC_DRIFT_AUTO;
+        int measured = v >= 0 && cases[v].period && !strcmp(cases[v].period, "measured");
+        CHECK(cap.window_period == (v < 0 || !cases[v].period ? GS_PERIOD_UNKNOWN
+                                    : measured                ? GS_PERIOD_MEASURED : GS_PERIOD_NOMINAL));
+        double max = opt == REC_DRIFT_AUTO ? (measured ? INFINITY : REC_MAX_DRIFT_WINDOWS) : opt;   /* (what auto means) */
         rec_eq7_opts eo;
         rec_eq7_opts_default(&eo);
-        eo.max_drift_windows = max;
+        eo.max_drift_windows = opt;
         rec_matcher *mv = NULL;
-        if (max != REC_MAX_DRIFT_WINDOWS) CHECK_OK(rec_matcher_new(d, cap.grid_hz, cap.bands, cap.K, &eo, &mv));
+        if (opt != REC_DRIFT_AUTO) CHECK_OK(rec_matcher_new(d, cap.grid_hz, cap.bands, cap.K, &eo, &mv));
         rec_pixel_maps pm;
         CHECK_OK(rec_pixel_maps_compute(&cap, mv ? mv : m, NULL, NULL, &pm));
         rec_matcher_free(mv);
@@ -428,12 +446,18 @@ TEST(recognize_cli_free_running_drift_leaves_frames_out)
         if (v < 0) continue;
         char args[1200];
         if (cases[v].max && isinf(cases[v].max)) snprintf(args, sizeof args, "%s --max-drift-windows none", dir);
+        else if (cases[v].max == REC_DRIFT_AUTO) snprintf(args, sizeof args, "%s --max-drift-windows auto", dir);
         else if (cases[v].max) snprintf(args, sizeof args, "%s --max-drift-windows %g", dir, cases[v].max);
         else snprintf(args, sizeof args, "%s", dir);
         json_t *root = recfx_recognize_ok(args, 1);
         if (!root) continue;
         json_t *mx = json_object_get(json_object_get(root, "recognition"), "max_drift_windows");
         CHECK_MSG(isinf(max) ? json_is_null(mx) : json_real_value(mx) == max, "%s: max_drift_windows", cases[v].name);
+        CHECK(json_is_true(json_object_get(json_object_get(root, "recognition"), "max_drift_windows_auto")) ==
+              (opt == REC_DRIFT_AUTO));
+        json_t *wp = json_object_get(json_object_get(root, "capture"), "window_period");
+        CHECK_MSG(cases[v].period ? json_is_string(wp) && !strcmp(json_string_value(wp), cases[v].period) : json_is_null(wp),
+                  "%s: window_period", cases[v].name);
         json_t *wd = json_object_get(json_object_get(root, "capture"), "drift_windows");
         CHECK(json_integer_value(json_object_get(json_object_get(root, "capture"), "frames_left_out")) == cases[v].out);
         CHECK(isnan(cases[v].drift) ? json_is_null(wd) : fabs(json_real_value(wd) - fmax(cases[v].drift, cases[v].odd_drift)) < 1e-9);
@@ -461,9 +485,15 @@ TEST(recognize_cli_free_running_drift_leaves_frames_out)
         /* the table says why */
         CHECK(fx_run(out, sizeof out, "%s recognize %s", test_bin(), args) == 0);
         CHECK_MSG(strstr(out, cases[v].note), "%s: %s", cases[v].name, out);
+        if (!strcmp(cases[v].name, "measured_keeps")) {   /* every frame kept, the maps still empty: why */
+            CHECK(fx_run(out, sizeof out, "%s recognize %s --maps %s/maps_measured", test_bin(), dir, test_tmpdir()) == 0);
+            CHECK_MSG(strstr(out, "every frame kept: the period was measured") &&
+                          strstr(out, "note: the maps answer no pixel: a frame's windows drifted over 0.5 windows"),
+                      "%s", out);
+        }
         if (v == 1) {   /* the maps say why they are empty; `run` says it too, storing the same answers */
             CHECK(fx_run(out, sizeof out, "%s recognize %s --maps %s/maps_out", test_bin(), dir, test_tmpdir()) == 0);
-            CHECK_MSG(strstr(out, "note: the maps answer no pixel: frames of this free-running capture are left out"),
+            CHECK_MSG(strstr(out, "note: the maps answer no pixel: a frame's windows drifted over 0.5 windows"),
                       "%s", out);
             CHECK(fx_run(out, sizeof out, "%s run %s --db %s/free.sqlite", test_bin(), dir, test_tmpdir()) == 0);
             CHECK_MSG(strstr(out, "run: note: free running: 6 of 26 frames left out") &&

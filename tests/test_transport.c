@@ -623,7 +623,9 @@ static void drift_frames(gs_capture *cap, double drift, double drift5, int k5, i
  * pixels: the same bits), and stay near the locked capture's (the same auto sources, in order);
  * kept (drifting 0.45), the same pixels change them. With the threshold at 0.6
  * (rec_unmix_opts and rec_eq7_opts.max_drift_windows) the frame drifting 0.55 is kept: the same
- * bits as the one drifting 0.45 (neither raises a kept frame's noise). */
+ * bits as the one drifting 0.45 (neither raises a kept frame's noise), and so it is at
+ * REC_DRIFT_AUTO when capture.json's window_period is measured; unmixing's default is not auto
+ * but 0.5. */
 TEST(eq17_drifted_frames_discarded_by_unmix_and_auto_sources)
 {
     gs_delight *d = builtin();
@@ -647,19 +649,21 @@ TEST(eq17_drifted_frames_discarded_by_unmix_and_auto_sources)
     CHECK_OK(rec_matcher_new(d, 50, cap.bands, cap.K, &eo, &m));
     rec_unmix_opts uo;
     rec_unmix_opts_default(&uo);
+    CHECK(uo.max_drift_windows == REC_MAX_DRIFT_WINDOWS && eo.max_drift_windows == REC_DRIFT_AUTO);
     size_t n = (size_t)cap.width * cap.height * cap.bands * (size_t)src.S;
-    rec_unmix_result r[4];
-    rec_source_spec *auto_sp[4] = {NULL, NULL, NULL, NULL};
-    int n_auto[4] = {0, 0, 0, 0};
+    rec_unmix_result r[5];
+    rec_source_spec *auto_sp[5] = {NULL, NULL, NULL, NULL, NULL};
+    int n_auto[5] = {0, 0, 0, 0, 0};
     rec_matcher *m6 = NULL;   /* (threshold 0.6) */
     eo.max_drift_windows = 0.6;
     CHECK_OK(rec_matcher_new(d, 50, cap.bands, cap.K, &eo, &m6));
-    for (int v = 0; v < 4 && m && m6; v++) {
+    for (int v = 0; v < 5 && m && m6; v++) {
         gs_capture c;
         CHECK_OK(gs_capture_read(dir, &c));
         drift_frames(&c, 0.45, v != 2 ? 0.55 : 0.45, 5, v == 1);
         rec_unmix_opts uv = uo;
         if (v == 3) uv.max_drift_windows = 0.6;
+        if (v == 4) c.window_period = GS_PERIOD_MEASURED, uv.max_drift_windows = REC_DRIFT_AUTO;   /* (m: auto) */
         CHECK_OK(rec_unmix(&c, &src, &uv, &r[v]));
         CHECK_OK(rec_sources_auto(&c, v == 3 ? m6 : m, 20.0, 20, 8, &auto_sp[v], &n_auto[v], NULL, NULL));
         gs_capture_release(&c);
@@ -675,12 +679,14 @@ TEST(eq17_drifted_frames_discarded_by_unmix_and_auto_sources)
         for (int i = 0; i < n_auto[v]; i++) printf(" %s@%g", auto_sp[v][i].bulb, auto_sp[v][i].phase_deg);
         printf("\n");
     }
-    if (m && m6 && r[0].tq && r[1].tq && r[2].tq && r[3].tq && r0.tq) {
+    if (m && m6 && r[0].tq && r[1].tq && r[2].tq && r[3].tq && r[4].tq && r0.tq) {
         CHECK(memcmp(r[0].tq, r[1].tq, n * sizeof *r[0].tq) == 0);
-        CHECK(memcmp(r[3].tq, r[2].tq, n * sizeof *r[2].tq) == 0);
-        CHECK(n_auto[3] == n_auto[2]);
-        for (int i = 0; i < n_auto[3] && i < n_auto[2]; i++)
-            CHECK(!strcmp(auto_sp[3][i].bulb, auto_sp[2][i].bulb) && auto_sp[3][i].phase_deg == auto_sp[2][i].phase_deg);
+        for (int v = 3; v < 5; v++) {
+            CHECK_MSG(memcmp(r[v].tq, r[2].tq, n * sizeof *r[2].tq) == 0, "case %d", v);
+            CHECK(n_auto[v] == n_auto[2]);
+            for (int i = 0; i < n_auto[v] && i < n_auto[2]; i++)
+                CHECK(!strcmp(auto_sp[v][i].bulb, auto_sp[2][i].bulb) && auto_sp[v][i].phase_deg == auto_sp[2][i].phase_deg);
+        }
         /* the sources auto finds: the locked capture's, in its order, frame 5 left out; not kept */
         int same[3] = {1, 1, 1};
         for (int v = 0; v < 3; v++) {
@@ -701,11 +707,11 @@ TEST(eq17_drifted_frames_discarded_by_unmix_and_auto_sources)
         CHECK(sqrt(e_out / norm) < 0.05 && sqrt(e_in / norm) > 3 * sqrt(e_out / norm));
     }
     rec_unmix_opts bad = uo;
-    bad.max_drift_windows = -1;
+    bad.max_drift_windows = -0.5;   /* (-1 is REC_DRIFT_AUTO) */
     rec_unmix_result rb;
     CHECK(rec_unmix(&cap, &src, &bad, &rb) == GS_EINVAL);
     rec_unmix_release(&rb);
-    for (int v = 0; v < 4; v++) {
+    for (int v = 0; v < 5; v++) {
         rec_unmix_release(&r[v]);
         free(auto_sp[v]);
     }

@@ -660,6 +660,17 @@ gs_status gs_tiff_read_float(const char *path, int *width, int *height, int *ban
 #define GS_PATH_MAX 256
 #define GS_MAX_HALVINGS 16
 
+/* How a free-running capture's windows were timed (gs_capture.window_period). */
+enum {
+    GS_PERIOD_UNKNOWN = 0,   /* locked, or the capture does not say */
+    GS_PERIOD_MEASURED,      /* the mean half period of the cycles before each exposure, as the
+                              * firmware does: the windows move only with the grid's wander */
+    GS_PERIOD_NOMINAL        /* the grid's nominal half period: the windows slip the same way
+                              * in every frame */
+};
+/* "measured", "nominal", or NULL for GS_PERIOD_UNKNOWN (and any other value). */
+const char *gs_period_name(int window_period);
+
 typedef struct {
     char file[GS_PATH_MAX];      /* frame PNG in the directory: [A-Za-z0-9._-]+ ending ".png" */
     int k;                        /* window index 0..K-1: [k Delta/K, (k+1) Delta/K) */
@@ -695,6 +706,10 @@ typedef struct {
     double read_noise_dn;         /* read noise std per sample and frame, DN, >= 0 (file
                                    * default 1) */
     int locked;                   /* 1 if AC-locked, else 0 (file default 1) */
+    int window_period;            /* free running: how the windows' fixed period was chosen,
+                                   * GS_PERIOD_* (file field "window_period": "measured" or
+                                   * "nominal", optional, only with locked false; absent:
+                                   * GS_PERIOD_UNKNOWN) */
     char utc[40];                 /* acquisition time, ISO 8601 (YYYY-MM-DDThh:mm:ss[.f](Z|+hh:mm)),
                                    * "" if unknown */
     gs_frame_info *frames;       /* K entries, frames[k].k == k (owned, malloc) */

@@ -98,6 +98,8 @@ int gs_capture_check_fields(const gs_capture *c, gs_capture_problem *pr)
     if (!(isfinite(c->read_noise_dn) && c->read_noise_dn >= 0))
         return set_problem(pr, "read_noise_dn", GS_CAPTURE_EXP_NONNEG);
     if (c->locked != 0 && c->locked != 1) return set_problem(pr, "locked", GS_CAPTURE_EXP_LOCKED);
+    if (c->window_period != GS_PERIOD_UNKNOWN && !(gs_period_name(c->window_period) && !c->locked))
+        return set_problem(pr, "window_period", GS_CAPTURE_EXP_PERIOD_SOURCE);
     if (memchr(c->utc, '\0', sizeof c->utc) == NULL || (c->utc[0] && !gs_capture_valid_utc(c->utc)))
         return set_problem(pr, "utc", GS_CAPTURE_EXP_UTC);
     for (int k = 0; k < c->K; k++) {
@@ -157,6 +159,11 @@ gs_status gs_capture_check(const gs_capture *cap, const char *who)
     if (!gs_capture_check_fields(cap, &pr))
         return gs_fail(GS_EINVAL, "%s: field %s: expected %s", who, pr.field, pr.expect);
     return GS_OK;
+}
+
+const char *gs_period_name(int window_period)
+{
+    return window_period == GS_PERIOD_MEASURED ? "measured" : window_period == GS_PERIOD_NOMINAL ? "nominal" : NULL;
 }
 
 /* Free running, window k starts at k P / K + c P after the exposure's first crossing, so over

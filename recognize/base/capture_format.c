@@ -81,7 +81,7 @@ static gs_status get_file_name(const reader *r, json_t *obj, const char *path, c
 
 static const char *const top_keys[] = {
     "format", "grid_hz", "K", "bands", "width", "height", "saturation", "black_level",
-    "gain_e_per_dn", "read_noise_dn", "locked", "utc", "station", "frames", NULL};
+    "gain_e_per_dn", "read_noise_dn", "locked", "window_period", "utc", "station", "frames", NULL};
 static const char *const frame_keys[] = {"file", "k", "cycles", "hdr_map", "grid_hz_measured",
                                          "start_s", "window_half_period_s", "window_drift_windows", NULL};
 
@@ -154,7 +154,14 @@ static gs_status parse_capture(reader *r, gs_capture *cap)
                          &cap->read_noise_dn)) ||
         (st = gs_json_get_bool(r->doc, root, "", "locked", 0, 1, &cap->locked)))
         return st;
-    json_t *v = json_object_get(root, "utc");
+    json_t *v = json_object_get(root, "window_period");
+    if (v) {   /* (only with locked false: gs_capture_check_fields) */
+        const char *name = json_string_value(v);
+        for (int p = GS_PERIOD_MEASURED; name && p <= GS_PERIOD_NOMINAL && !cap->window_period; p++)
+            if (!strcmp(name, gs_period_name(p))) cap->window_period = p;
+        if (!cap->window_period) return bad_field(r, "window_period", GS_CAPTURE_EXP_PERIOD_SOURCE);
+    }
+    v = json_object_get(root, "utc");
     if (v) {
         if (!json_is_string(v) || !gs_capture_valid_utc(json_string_value(v)))
             return bad_field(r, "utc", GS_CAPTURE_EXP_UTC);
@@ -557,6 +564,8 @@ gs_status gs_capture_write_json(const char *dir, const gs_capture *cap)
     gs_json_real(num, sizeof num, cap->read_noise_dn);
     gs_text_printf(&t, "  \"read_noise_dn\": %s,\n", num);
     gs_text_printf(&t, "  \"locked\": %s,\n", cap->locked ? "true" : "false");
+    if (gs_period_name(cap->window_period))
+        gs_text_printf(&t, "  \"window_period\": \"%s\",\n", gs_period_name(cap->window_period));
     if (cap->utc[0]) {
         gs_text_printf(&t, "  \"utc\": ");
         gs_text_json_string(&t, cap->utc);

@@ -666,6 +666,8 @@ def main(argv=None):
            "width": W, "height": H, "saturation": a.saturation, "black_level": a.black_level,
            "gain_e_per_dn": a.gain, "read_noise_dn": a.read_noise, "locked": free_meta is None,
            "x_generator": "tests/independent/render.py", "frames": frames}
+    if free_meta is not None:   # how the windows' period was chosen (docs/formats.md)
+        cap["window_period"] = a.free_period
     with open(os.path.join(a.outdir, "capture.json"), "w") as f:
         json.dump(cap, f, indent=1)
         f.write("\n")

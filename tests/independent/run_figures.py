@@ -265,7 +265,8 @@ def tables(r):
         w(f"### Free running on a real grid ({FREE_MAINS}'s crossings), RGB K=26 50 Hz\n")
         w("Each frame's windows timed with a fixed half period P from its first crossing (`render.py --free-running`: "
           "P measured over the 64 half periods before each exposure, as the firmware does, or the nominal 10 ms), "
-          "scored at `recognize --max-drift-windows` 0.5 (default), 1 and none; *largest drift* the frames' largest "
+          "scored at `recognize --max-drift-windows` 0.5, 1 and none (the default, auto, is none for the measured period and 0.5 "
+          "for the nominal one: render.py writes capture.json's `window_period`); *largest drift* the frames' largest "
           "`window_drift_windows` (windows), *net* the frames' signed net motions over their exposures, "
           "K C (2 P f - 1) windows from capture.json (the least and the most, and how many frames moved forward), "
           "*out* the frames over the threshold. *locked*: the same lights AC-locked. Columns as above.\n")
