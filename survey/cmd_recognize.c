@@ -275,7 +275,7 @@ static const char *phases_name(rec_phase_set p)
 static void print_table(const recognize_opts *o, const gs_capture *cap, const rec_matcher *m,
                         const rec_catalog *cat, const rec_match *mt, const rec_noise_report *noise)
 {
-    char drift[256];
+    char drift[384];
     srv_drift_note(cap, o->eq7.max_drift_windows, drift, sizeof drift);
     printf("capture %s: %d Hz grid, K = %d, %d band%s, %dx%d pixels%s; DELIGHT %s (%zu candidate "
            "bulbs); phases %s\n",

@@ -120,8 +120,11 @@ void srv_drift_note(const gs_capture *cap, double max_drift_windows, char *buf, 
             u += snprintf(buf + u, n - (size_t)u, " %d drifted over %.4g windows (the most %.4g, frame %d)%s",
                           out - unknown, limit, worst, worst_k, unknown ? "," : "");
         if (u > 0 && (size_t)u < n && unknown)
-            snprintf(buf + u, n - (size_t)u, " %d without the timing to tell (window_drift_windows, or "
-                     "window_half_period_s and grid_hz_measured)", unknown);
+            u += snprintf(buf + u, n - (size_t)u, " %d without the timing to tell (window_drift_windows, or "
+                          "window_half_period_s and grid_hz_measured)", unknown);
+        if (u > 0 && (size_t)u < n && max_drift_windows == REC_DRIFT_AUTO && gs_period_name(cap->window_period))
+            snprintf(buf + u, n - (size_t)u, " (--max-drift-windows auto, the period %s)",
+                     gs_period_name(cap->window_period));
     }
 }
 

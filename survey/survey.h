@@ -650,7 +650,8 @@ void srv_job_drop_pixels(srv_job *j);
 /* What the frames' window drift (gs_capture_frame_drift) means for a capture's answers, for the
  * commands' output: "" when locked; else "; free running: ..." with the largest drift and its
  * frame, or the frames rec_match_catalog leaves out at max_drift_windows (rec_eq7_opts,
- * REC_MATCH_DRIFT). */
+ * REC_MATCH_DRIFT; auto: rec_drift_limit, and the period it followed). At most 300 characters:
+ * n = 384 holds it. */
 void srv_drift_note(const gs_capture *cap, double max_drift_windows, char *buf, size_t n);
 /* A light's 1-sigma centroid error per image axis, px (docs/gis.md, "Calibrated ellipses"),
  * for a light without the PSF fit's covariance (srv_light_row.pos_cov_px2; srv_job_locate):
@@ -744,7 +745,7 @@ typedef struct {
     int frames_acquired, frames_kept;   /* scene input: this run's acquisition loop */
     size_t lights;                   /* lights of the capture (as stored) */
     size_t with_bulb, with_phase;    /* ... with a recognised bulb, with a phase */
-    char drift_note[256];            /* srv_drift_note of the capture ("" when locked) */
+    char drift_note[384];            /* srv_drift_note of the capture ("" when locked) */
     size_t located;                  /* ... with a position */
     int has_station;                 /* a station was used */
     gis_station station;             /* that station (when has_station) */

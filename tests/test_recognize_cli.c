@@ -404,7 +404,8 @@ TEST(recognize_cli_free_running_drift_leaves_frames_out)
                                                        "every frame kept", 0, "measured"},
         {"measured_at_0.5", 0.45, 0.55, 1, 1, 1, 6, "6 of 26 frames left out (flag drift): 6 drifted over 0.5 windows",
          0.5, "measured"},
-        {"nominal_some_out", 0.45, 0.55, 1, 1, 1, 6, "6 of 26 frames left out (flag drift): 6 drifted over 0.5 windows",
+        {"nominal_some_out", 0.45, 0.55, 1, 1, 1, 6, "6 of 26 frames left out (flag drift): 6 drifted over 0.5 windows "
+                                                     "(the most 0.55, frame 0) (--max-drift-windows auto, the period nominal)",
          REC_DRIFT_AUTO, "nominal"},
     };
     int nc = (int)(sizeof cases / sizeof *cases);
