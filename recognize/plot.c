@@ -272,6 +272,14 @@ typedef struct {
 } signal_plot;
 
 /* The signal plot (in a child process: gs_isolated). */
+/* 1 when rec_match_catalog used frame k of cat: locked, or free running and not left out
+ * (rec_frame_kept at m's threshold). */
+static int frame_used(const rec_matcher *m, const rec_catalog *cat, int k)
+{
+    return !cat->drift_windows ||
+           rec_frame_kept(cat->drift_windows[k], rec_drift_limit(m->o.max_drift_windows, cat->window_period));
+}
+
 static gs_status draw_signals(void *ctx, unsigned char *unused)
 {
     (void)unused;
@@ -345,21 +353,25 @@ static gs_status draw_signals(void *ctx, unsigned char *unused)
                 plcol0(pick[l].colour + 2);
                 plwidth(panel ? 1.0 : 2.0);
                 plline(CURVE_N, u, cv);
-                /* the measured samples at the window centres (panel 1: minus the shift) */
+                /* the measured samples at the window centres (panel 1: minus the shift), of the
+                 * frames the match used */
                 double a = mt->brightness;
+                int n = 0;
                 for (int k = 0; k < K; k++) {
+                    if (!frame_used(m, cat, k)) continue;
                     double t = (k + 0.5) / K - (panel ? sh : 0.0);
                     t -= floor(t);
                     size_t d = i * D + (size_t)band * (size_t)K + (size_t)k;
-                    px[k] = t;
-                    py[k] = cat->signal[d] / a;
-                    lo[k] = (cat->signal[d] - cat->sigma[d]) / a;
-                    hi[k] = (cat->signal[d] + cat->sigma[d]) / a;
+                    px[n] = t;
+                    py[n] = cat->signal[d] / a;
+                    lo[n] = (cat->signal[d] - cat->sigma[d]) / a;
+                    hi[n] = (cat->signal[d] + cat->sigma[d]) / a;
+                    n++;
                 }
                 plwidth(1.0);
-                plerry(K, px, lo, hi);
+                plerry(n, px, lo, hi);
                 plschr(0, 0.45);
-                plstring(K, px, py, symbols[pick[l].symbol]);
+                plstring(n, px, py, symbols[pick[l].symbol]);
                 plschr(0, 0.6);
             }
         }
@@ -447,6 +459,7 @@ gs_status rec_plot_signals(const rec_matcher *m, const rec_catalog *cat, const r
         size_t i = pick[l].light;
         double a = match[i].brightness;
         for (size_t d = 0; d < D; d++) {
+            if (!frame_used(m, cat, (int)(d % (size_t)K))) continue;
             double lo_y = (cat->signal[i * D + d] - cat->sigma[i * D + d]) / a,
                    hi_y = (cat->signal[i * D + d] + cat->sigma[i * D + d]) / a;
             if (lo_y < ymin) ymin = lo_y;

@@ -544,7 +544,8 @@ gs_status rec_map_write_confidence_png(const rec_pixel_maps *pm, const char *pat
 /* Fig. 3 as one PNG (PLplot, cairo PNG driver; 1500 x 620 pixels for 1 band, 1500 x 1500 for 3):
  * one row of two panels per band. Left: each drawn light's measured signal divided by its fitted
  * brightness (match[i].brightness), signal / brightness at the window centres (k + 1/2)/K with
- * error bars sigma / brightness, and the fit's model over the brightness: the best bulb's BRF at
+ * error bars sigma / brightness (the frames the match used: free running, not those left out), and
+ * the fit's model over the brightness: the best bulb's BRF at
  * the recognised phase, averaged over a window of Delta/K centred at each time, times the band's
  * band_brightness, plus its band_flat (so the curve passes through the fit's values at the window
  * centres; internal.h: rec_plot_template). Right: the same

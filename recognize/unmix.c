@@ -702,10 +702,16 @@ gs_status rec_unmix(const gs_capture *cap, const rec_sources *src, const rec_unm
                 /* its share of the fitted light tells a source without light (not in the scene,
                  * or at another phase) from sources the data cannot tell apart */
                 char why[160] = "";
+                double kept_drift = 0.0;   /* (the largest of the frames kept) */
+                for (int k = 0; k < K; k++)
+                    if (u.kept[k]) kept_drift = fmax(kept_drift, gs_capture_frame_drift(cap, k));
                 if (u.left_out)
                     snprintf(why, sizeof why, "; %d of %d frames left out, their windows drifted over %g windows "
                              "(free running, --max-drift-windows)", u.left_out, K,
                              rec_drift_limit(o_in->max_drift_windows, cap->window_period));
+                else if (kept_drift > 0.0)
+                    snprintf(why, sizeof why, "; free running, the frames' windows drifted up to %.3g windows, "
+                             "their noise not raised (--max-drift-windows)", kept_drift);
                 st = gs_fail(GS_ENUMERIC, "ill-posed: source %02d (%s at %g deg) would be %.3g %% "
                              "noise (predicted relative error %.3g > %g; QB's condition number "
                              "%.3g; its image holds %.2g %% of the fitted images' energy%s): the data do not support %d "

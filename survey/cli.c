@@ -236,7 +236,10 @@ int srv_drift_arg(const char *cmd, const char *arg, double *out)
         *out = arg[0] == 'n' ? INFINITY : REC_DRIFT_AUTO;
         return 1;
     }
-    if (gs_parse_number(arg, out) && *out >= 0) return 1;
+    if (gs_parse_number(arg, out) && *out >= 0) {
+        *out += 0.0;   /* (-0 is 0) */
+        return 1;
+    }
     srv_usage_error(cmd, "--max-drift-windows '%s': expected a number >= 0, none or auto", arg);
     return 0;
 }

@@ -206,7 +206,8 @@ static gs_status run_one(const srv_run_opts *op, srv_run_report *rep)
     printf("\n");
     if (r.drift_note[0]) printf("run: note: %s\n", r.drift_note + 2);
     if (r.skipped) {
-        printf("run: already in %s (capture id %lld): nothing stored\n", o.db_path, (long long)r.capture_id);
+        printf("run: already in %s (capture id %lld): nothing stored; the counts above are its stored answers "
+               "(other options apply to another --survey or database)\n", o.db_path, (long long)r.capture_id);
     } else {
         printf("run: stored as capture %lld in %s; seconds:", (long long)r.capture_id, o.db_path);
         for (int k = 0; k < SRV_STAGE_COUNT; k++)

@@ -122,9 +122,10 @@ void srv_drift_note(const gs_capture *cap, double max_drift_windows, char *buf, 
         if (u > 0 && (size_t)u < n && unknown)
             u += snprintf(buf + u, n - (size_t)u, " %d without the timing to tell (window_drift_windows, or "
                           "window_half_period_s and grid_hz_measured)", unknown);
-        if (u > 0 && (size_t)u < n && max_drift_windows == REC_DRIFT_AUTO && gs_period_name(cap->window_period))
+        if (u > 0 && (size_t)u < n && max_drift_windows == REC_DRIFT_AUTO)
             snprintf(buf + u, n - (size_t)u, " (--max-drift-windows auto, the period %s)",
-                     gs_period_name(cap->window_period));
+                     gs_period_name(cap->window_period) ? gs_period_name(cap->window_period)
+                                                        : "not recorded: capture.json has no window_period");
     }
 }
 

@@ -532,9 +532,9 @@ TEST(capture_format_grid_frequency_fields)
         {"  \"saturation\": 4095, \"window_period\": \"measured\",",   /* (locked) */
          "field window_period: expected \"measured\" or \"nominal\", only when locked is false"},
         {"  \"saturation\": 4095, \"locked\": false, \"window_period\": \"guessed\",",
-         "capture.json:8: field window_period: expected \"measured\" or \"nominal\", only when locked is false"},
+         "capture.json:8: field window_period: expected \"measured\" or \"nominal\", not \"guessed\""},
         {"  \"saturation\": 4095, \"locked\": false, \"window_period\": 1,",
-         "capture.json:8: field window_period: expected \"measured\" or \"nominal\""},
+         "capture.json:8: field window_period: expected \"measured\" or \"nominal\" (a string)"},
     };
     for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
         char name[32];

@@ -389,7 +389,8 @@ TEST(recognize_cli_free_running_drift_leaves_frames_out)
     } cases[] = {
         {"small", 0.45, 0.45, 0, 1, 1, 0, "free running: the windows drifted at most 0.45 windows over an exposure", 0, NULL},
         {"some_out", 0.45, 0.55, 1, 1, 1, 6, "6 of 26 frames left out (flag drift): 6 drifted over 0.5 windows "
-                                              "(the most 0.55, frame 0)", 0, NULL},
+                                              "(the most 0.55, frame 0) (--max-drift-windows auto, the period not "
+                                              "recorded: capture.json has no window_period)", 0, NULL},
         {"some_kept", 0.45, 0.45, 1, 1, 0, 0, "drifted at most 0.45", 0, NULL},
         {"all_out", 0.55, 0.55, 0, 0, 0, 26, "26 of 26 frames left out", 0, NULL},
         {"unknown", NAN, NAN, 0, 0, 0, 26, "26 of 26 frames left out (flag drift): 26 without the timing to "
@@ -505,6 +506,9 @@ TEST(recognize_cli_free_running_drift_leaves_frames_out)
                          test_tmpdir()) == 0);
             CHECK_MSG(strstr(out, "run: note: free running: the windows drifted at most 0.55 windows") &&
                           !strstr(out, "left out"), "%s", out);
+            /* -0 is 0 (not "-0 windows") */
+            CHECK(fx_run(out, sizeof out, "%s recognize %s --max-drift-windows -0", test_bin(), dir) == 0);
+            CHECK_MSG(strstr(out, "26 drifted over 0 windows") && !strstr(out, "-0"), "%s", out);
         }
     }
     rec_matcher_free(m);

@@ -581,3 +581,42 @@ TEST(signal_plot_error_bar_below_zero_inside_the_frame)
     if (!m || plot_rows(path, 0, &top, &bottom, &first, &last)) return;
     CHECK_MSG(last < bottom - 3, "the error bar's lowest row %d on the frame's bottom (row %d)", last, bottom);
 }
+
+/* The signal plot draws only the samples rec_match_catalog used: a free-running frame left out
+ * (its windows drifted 0.9 windows, over the 0.5 of a capture without window_period) holding
+ * 40 times the light's level gives the same PNG as the same frame holding its level; locked,
+ * the same frame is drawn (a different PNG: the comparison can fail). */
+TEST(signal_plot_leaves_out_the_frames_left_out)
+{
+    enum { K = 4 };
+    double drift[K] = {0.2, 0.9, 0.2, 0.2}, sigma[K] = {0.1, 0.1, 0.1, 0.1};
+    double quiet[K] = {1.0, 1.0, 0.5, 1.0}, loud[K] = {1.0, 40.0, 0.5, 1.0};
+    rec_match match;
+    memset(&match, 0, sizeof match);
+    match.brightness = 1.0;
+    gs_delight *d = gs_delight_new();
+    CHECK_OK(gs_delight_generate(d, 512));
+    rec_matcher *m = NULL;
+    CHECK_OK(rec_matcher_new(d, 50, 1, K, NULL, &m));
+    char *png[3] = {NULL, NULL, NULL};
+    size_t len[3] = {0, 0, 0};
+    for (int v = 0; v < 3 && m; v++) {   /* free quiet, free loud, locked loud */
+        rec_catalog cat;
+        memset(&cat, 0, sizeof cat);
+        cat.count = 1, cat.bands = 1, cat.K = K, cat.signal = v ? loud : quiet, cat.sigma = sigma;
+        cat.drift_windows = v < 2 ? drift : NULL;
+        char name[64];
+        snprintf(name, sizeof name, "signal_left_out_%d.png", v);
+        const char *path = fx_tmp(name);
+        CHECK_OK(rec_plot_signals(m, &cat, &match, 1, path, "left out"));
+        png[v] = fx_read_file(path, &len[v]);
+    }
+    CHECK(png[0] && png[1] && png[2]);
+    if (png[0] && png[1] && png[2]) {
+        CHECK_MSG(len[0] == len[1] && !memcmp(png[0], png[1], len[0]), "the left-out frame changed the plot");
+        CHECK_MSG(len[1] != len[2] || memcmp(png[1], png[2], len[1]), "locked, the loud frame did not change it");
+    }
+    for (int v = 0; v < 3; v++) free(png[v]);
+    rec_matcher_free(m);
+    gs_delight_free(d);
+}

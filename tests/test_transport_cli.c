@@ -130,6 +130,26 @@ TEST(transport_cli_bad_input_one_line_errors)
     CHECK_MSG(fx_count_lines(out) == 1 && !strncmp(out, "gridsurvey unmix: ill-posed", 27) &&
               fx_contains(out, "(predicted error of each source: 00 inc-a60-25w-230v at 0 deg ") &&
               fx_contains(out, ", 01 inc-a60-40w-230v at 0 deg "), "%s", out);
+    /* the same capture free running, every frame's windows drifted 0.3 windows and kept: the
+     * error says so, and still ends with the last source's error (the line is not cut) */
+    char path[1100];
+    const char *fr = fx_tmp("free");
+    CHECK(fx_run(out, sizeof out, "rm -rf '%s' && cp -r '%s' '%s'", fr, cap, fr) == 0);
+    snprintf(path, sizeof path, "%s/capture.json", fr);
+    json_t *cj = json_load_file(path, 0, NULL);
+    CHECK(cj != NULL);
+    if (cj) {
+        json_object_set_new(cj, "locked", json_false());
+        size_t i;
+        json_t *fj;
+        json_array_foreach(json_object_get(cj, "frames"), i, fj) json_object_set_new(fj, "window_drift_windows", json_real(0.3));
+        CHECK(json_dump_file(cj, path, JSON_INDENT(1)) == 0);
+        json_decref(cj);
+    }
+    rc = fx_run(out, sizeof out, "%s unmix '%s' --sources '%s' --out-dir '%s' 2>&1", test_bin(), fr, f, fx_tmp("ill2"));
+    CHECK_MSG(rc == 1 && fx_count_lines(out) == 1 &&
+              fx_contains(out, "; free running, the frames' windows drifted up to 0.3 windows, their noise not raised") &&
+              fx_contains(out, ", 03 led-fil-4w-lin at 240 deg "), "%s", out);
     /* simulate --drop-light: an id the scene lacks is a usage error; a real one renders without it */
     CHECK(fx_run(out, sizeof out, "%s simulate capture/scenes/window.json --out-dir '%s' --drop-light nope 2>&1",
                  test_bin(), fx_tmp("w")) == 2 && fx_contains(out, "no light with this id"));

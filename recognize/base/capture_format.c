@@ -159,7 +159,10 @@ static gs_status parse_capture(reader *r, gs_capture *cap)
         const char *name = json_string_value(v);
         for (int p = GS_PERIOD_MEASURED; name && p <= GS_PERIOD_NOMINAL && !cap->window_period; p++)
             if (!strcmp(name, gs_period_name(p))) cap->window_period = p;
-        if (!cap->window_period) return bad_field(r, "window_period", GS_CAPTURE_EXP_PERIOD_SOURCE);
+        if (!cap->window_period && name)
+            return gs_json_fail(r->doc, GS_EFORMAT, "window_period", "expected " GS_CAPTURE_EXP_PERIOD_NAME
+                                ", not \"%.40s\"", name);
+        if (!cap->window_period) return bad_field(r, "window_period", GS_CAPTURE_EXP_PERIOD_NAME " (a string)");
     }
     v = json_object_get(root, "utc");
     if (v) {

@@ -35,7 +35,8 @@ gs_status gs_bulb_validate(const gs_bulb *b);
 #define GS_CAPTURE_EXP_START "a finite number >= 0 (s)"
 #define GS_CAPTURE_EXP_WINDOW_PERIOD "a finite number from 1/130 to 1/90 (s), only when locked is false"
 #define GS_CAPTURE_EXP_WINDOW_DRIFT "a finite number >= 0 (windows), only when locked is false"
-#define GS_CAPTURE_EXP_PERIOD_SOURCE "\"measured\" or \"nominal\", only when locked is false"
+#define GS_CAPTURE_EXP_PERIOD_NAME "\"measured\" or \"nominal\""
+#define GS_CAPTURE_EXP_PERIOD_SOURCE GS_CAPTURE_EXP_PERIOD_NAME ", only when locked is false"
 
 /* One problem of a capture: the field (e.g. "frames[3].cycles") and the expected value. */
 typedef struct {

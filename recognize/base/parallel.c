@@ -40,7 +40,7 @@ typedef struct {
     size_t begin, end;   /* without a queue */
     chunk_queue *q;      /* NULL: [begin, end) */
     gs_status st;
-    char detail[512];   /* gs_detail() of a failing part (thread-local on its thread) */
+    char detail[1024];   /* gs_detail() of a failing part (thread-local on its thread) */
 } part_job;
 
 static void run_part(part_job *j)
