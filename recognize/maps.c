@@ -331,9 +331,8 @@ gs_status rec_pixel_maps_compute(const gs_capture *cap, const rec_matcher *m,
     /* a frame whose windows smeared across the flicker: no pixel answered (the rows have one
      * sigma each, so its samples can neither be left out nor have their noise raised as
      * rec_match_catalog does: not beyond REC_MAX_DRIFT_WINDOWS whatever the option) */
-    pm->drift_unanswered = !rec_frame_kept(gs_capture_window_drift(cap, NULL),
-                                           fmin(rec_drift_limit(m->o.max_drift_windows, cap->window_period),
-                                                REC_MAX_DRIFT_WINDOWS));
+    pm->drift_limit_windows = fmin(rec_drift_limit(m->o.max_drift_windows, cap->window_period), REC_MAX_DRIFT_WINDOWS);
+    pm->drift_unanswered = !rec_frame_kept(gs_capture_window_drift(cap, NULL), pm->drift_limit_windows);
     if (pm->drift_unanswered) {
         p = np;
         if (o->progress) o->progress(o->progress_ctx, 1.0);

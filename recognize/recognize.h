@@ -491,8 +491,10 @@ typedef struct {
     double threshold_sigma;
     size_t mapped;            /* pixels not REC_PIX_DARK */
     size_t matched;           /* REC_PIX_MATCHED pixels */
+    double drift_limit_windows;   /* min(rec_drift_limit(...), REC_MAX_DRIFT_WINDOWS): the most a
+                               * frame's windows may drift for the maps to answer */
     int drift_unanswered;     /* 1: no pixel answered because a frame's windows drifted beyond
-                               * min(rec_drift_limit(...), REC_MAX_DRIFT_WINDOWS) (REC_PIX_*) */
+                               * drift_limit_windows (REC_PIX_*) */
     unsigned char *state;     /* REC_PIX_* */
     int *bulb;                /* index into the matcher's bulbs; -1 unless REC_PIX_MATCHED */
     float *phase_deg;         /* grid phase in [0, 360) (0 for a GS_REF_NONE bulb); 0 unless

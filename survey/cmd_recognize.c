@@ -520,7 +520,7 @@ static gs_status write_maps(const recognize_opts *o, const gs_capture *cap, cons
         fprintf(stderr, "gridsurvey recognize: note: the maps answer no pixel: a frame's windows drifted over "
                         "%g windows in this free-running capture, which a pixel's one noise level cannot model "
                         "(docs/recognition.md, \"Free-running captures\")\n",
-                fmin(rec_drift_limit(o->eq7.max_drift_windows, cap->window_period), REC_MAX_DRIFT_WINDOWS));
+                pm.drift_limit_windows);
     progress("drawing maps ...");
     snprintf(path, sizeof path, "%s/phase_map.png", o->maps);
     st = rec_map_write_phase_png(&pm, path);

@@ -438,6 +438,7 @@ TEST(recognize_cli_free_running_drift_leaves_frames_out)
         int maps_none = v >= 0 && (cases[v].out || !(fmax(cases[v].drift, cases[v].odd_drift) <= REC_MAX_DRIFT_WINDOWS));
         CHECK_MSG(pm.drift_unanswered == maps_none, "%s: drift_unanswered %d", v >= 0 ? cases[v].name : "locked",
                   pm.drift_unanswered);
+        CHECK(pm.drift_limit_windows == fmin(max, REC_MAX_DRIFT_WINDOWS));
         if (v < 0) matched_locked = pm.matched;
         else if (!cases[v].corrupt || maps_none)
             CHECK_MSG(pm.matched == (maps_none ? 0 : matched_locked), "%s: %zu pixels matched (locked %zu)",
